@@ -1,0 +1,237 @@
+"""Physically-based model of the negative-stiffness device (``shared/docs/device-model.md``).
+
+A bushing of mass m slides on a vertical guide; two rigid rods of length L hinge on it and on the tips
+of the two arms of a U-shaped frame. Each arm is a cantilever leaf spring (free length l, width b,
+thickness h, Young's modulus E) of tip stiffness k_f = 3 E I / l^3, I = b h^3 / 12, whose tip moves
+along a line inclined by the frame angle alpha. With s the tip travel along that line (s = 0 at
+z = 0, s = -D0 for an unloaded arm), the fixed rod length gives
+
+    s(z) = -B + sqrt(B^2 - z^2),   B = L cos(alpha) - z sin(alpha)
+
+and the potential of the two arms plus gravity, and the restoring force, are
+
+    U(z) = k_f (s + D0)^2 - k_f D0^2 + m g z,     K(z) = dU/dz = 2 k_f (s + D0) s'(z) + m g.
+
+The Taylor expansion at z = 0 gives the cubic of the seed's Eq. (2):
+k1 = 2 D0 k_f / (L cos a), k2 = -3 D0 k_f tan(a) / (L^2 cos a), k3 = k_f / (L^2 cos^2 a), k0 = m g.
+The exact K(z) departs from any cubic over the full stroke (the model-form gap the suite shows).
+
+The geometry exists only while B^2 > z^2, i.e. for
+-L cos a / (1 - sin a) < z < L cos a / (1 + sin a); outside it ``GeometryError`` is raised.
+
+Calibration (see ``experiments/calibration.py`` and the report): the fixed geometry below and the
+as-built E, alpha, m put the rig's device at the seed's headline figures (Table 1 and Figure 4).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, replace
+from typing import Any, Mapping
+
+import numpy as np
+
+from .constants import G
+from .equation import Equilibria, Model, UnderlyingLinear, find_equilibria, normalise_extra, shared_param_rows
+from .equation import extra_force, stiffness_extra_force, stiffness_extra_potential
+
+
+class GeometryError(ValueError):
+    """A displacement outside the range where the rod-frame geometry has a solution."""
+
+
+@dataclass(frozen=True)
+class Device:
+    """Geometry, material and mass of the device, with its damping and extra effects.
+
+    Parameters (SI units)
+    ----------
+    E : Young's modulus of the frame [Pa]
+    alpha_deg : frame angle [deg]
+    m : moving mass [kg]
+    L : rod length [m]; l, b, h : arm free length, width, thickness [m]
+    D0 : arm pre-compression at z = 0 [m]
+    c, c_nl : viscous [N s/m] and quadratic [N s^2/m^2] damping of the guide
+    extra : named extra effects (``models.equation``)
+    """
+
+    E: float
+    alpha_deg: float
+    m: float
+    L: float
+    l: float  # noqa: E741 - the arm's free length, as in device-model.md
+    b: float
+    h: float
+    D0: float
+    c: float = 0.0
+    c_nl: float = 0.0
+    extra: Mapping[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self):
+        for name in ("E", "m", "L", "l", "b", "h", "D0"):
+            v = float(getattr(self, name))
+            if not (math.isfinite(v) and v > 0):
+                raise ValueError(f"device parameter {name} must be positive and finite, got {v}")
+        if not (math.isfinite(self.alpha_deg) and -60 < self.alpha_deg < 60):
+            raise ValueError(f"frame angle alpha_deg must lie in (-60, 60) degrees, got {self.alpha_deg}")
+        object.__setattr__(self, "extra", normalise_extra(self.extra))
+
+    # --- derived constants ---------------------------------------------------------------------
+    @property
+    def alpha(self) -> float:
+        """Frame angle [rad]."""
+        return math.radians(self.alpha_deg)
+
+    @property
+    def k_f(self) -> float:
+        """Tip stiffness of one arm, 3 E I / l^3 with I = b h^3 / 12 [N/m]."""
+        return 3 * self.E * (self.b * self.h**3 / 12) / self.l**3
+
+    def stroke_limits(self) -> tuple[float, float]:
+        """Open interval of z [m] in which the geometry has a solution (B^2 > z^2)."""
+        ca, sa = math.cos(self.alpha), math.sin(self.alpha)
+        return -self.L * ca / (1 - sa), self.L * ca / (1 + sa)
+
+    def with_(self, **changes) -> "Device":
+        """A copy with some parameters changed (``dataclasses.replace``)."""
+        return replace(self, **changes)
+
+    # --- exact geometry ------------------------------------------------------------------------
+    def _check_stroke(self, z: np.ndarray) -> None:
+        lo, hi = self.stroke_limits()
+        bad = (z <= lo) | (z >= hi) | ~np.isfinite(z)
+        if np.any(bad):
+            zb = float(np.asarray(z)[bad].flat[0])
+            raise GeometryError(f"z = {zb * 1e3:.2f} mm is outside the device's stroke "
+                                f"({lo * 1e3:.1f} mm, {hi * 1e3:.1f} mm): the rods cannot reach it")
+
+    def _s_derivs(self, z):
+        """s(z), s'(z), s''(z) of the rod-frame geometry."""
+        z = np.asarray(z, float)
+        self._check_stroke(z)
+        ca, sa = math.cos(self.alpha), math.sin(self.alpha)
+        B = self.L * ca - z * sa
+        R = np.sqrt(B * B - z * z)
+        s = R - B
+        q = B * sa + z
+        s1 = sa - q / R
+        s2 = -(ca * ca * R * R + q * q) / R**3
+        return s, s1, s2
+
+    def restoring_force(self, z, include_extra: bool = True):
+        """Exact K(z) = 2 k_f (s + D0) s' + m g [N], plus the displacement-only extra effects."""
+        s, s1, _ = self._s_derivs(z)
+        k = 2 * self.k_f * (s + self.D0) * s1 + self.m * G
+        return k + stiffness_extra_force(self.extra, z) if include_extra else k
+
+    def stiffness(self, z, include_extra: bool = True):
+        """dK/dz = 2 k_f (s'^2 + (s + D0) s'') [N/m]."""
+        s, s1, s2 = self._s_derivs(z)
+        ks = 2 * self.k_f * (s1 * s1 + (s + self.D0) * s2)
+        if include_extra and self.extra:
+            hz = 1e-7
+            ks = ks + (stiffness_extra_force(self.extra, np.asarray(z) + hz)
+                       - stiffness_extra_force(self.extra, np.asarray(z) - hz)) / (2 * hz)
+        return ks
+
+    def potential(self, z, include_extra: bool = True):
+        """U(z) = k_f ((s + D0)^2 - D0^2) + m g z [J], zero at z = 0."""
+        z = np.asarray(z, float)
+        s, _, _ = self._s_derivs(z)
+        u = self.k_f * ((s + self.D0) ** 2 - self.D0**2) + self.m * G * z
+        return u + stiffness_extra_potential(self.extra, z) if include_extra else u
+
+    def damping_force(self, zdot):
+        """c z' + c_nl z'|z'| [N]."""
+        zdot = np.asarray(zdot, float)
+        return self.c * zdot + self.c_nl * zdot * np.abs(zdot)
+
+    def total_force(self, z, zdot):
+        """D(z') + K(z) + extra(z, z') [N]."""
+        return self.damping_force(zdot) + self.restoring_force(z, include_extra=False) + extra_force(self.extra, z, zdot)
+
+    # --- equilibria, wells, features -----------------------------------------------------------
+    def equilibria(self) -> Equilibria:
+        """Stable-unstable-stable equilibria of the exact K(z) inside the stroke."""
+        lo, hi = self.stroke_limits()
+        span = hi - lo
+        return find_equilibria(self.restoring_force, self.stiffness, lo + 1e-4 * span, hi - 1e-4 * span)
+
+    def uls(self, well: str) -> UnderlyingLinear:
+        """Underlying-linear system around the ``"minus"`` or ``"plus"`` well (exact K'(z*))."""
+        zs = self.equilibria().well(well)
+        k1t = float(self.stiffness(zs))
+        _, _, k2t, k3t = self.taylor(zs)
+        return UnderlyingLinear(zs, k1t, k2t, k3t, math.sqrt(k1t / self.m) / (2 * math.pi),
+                                self.c / (2 * math.sqrt(k1t * self.m)))
+
+    def features(self) -> dict[str, float]:
+        """The GA's features (seed Eq. 9): well frequencies [Hz] and stable equilibria [m]."""
+        eq = self.equilibria()
+        ks = self.stiffness(np.array([eq.z_minus, eq.z_plus]))
+        f = np.sqrt(ks / self.m) / (2 * math.pi)
+        return {"f_minus": float(f[0]), "f_plus": float(f[1]), "z_minus": eq.z_minus, "z_plus": eq.z_plus}
+
+    # --- cubic approximations -------------------------------------------------------------------
+    def taylor(self, z_ref: float = 0.0, h: float = 2e-4) -> tuple[float, float, float, float]:
+        """Taylor coefficients (K, K', K''/2, K'''/6) of the exact K about ``z_ref``.
+
+        K' is analytic; K'' and K''' come from central differences of the analytic K'
+        (step ``h`` [m]; relative error O((h/L)^2)).
+        """
+        ks = self.stiffness(np.array([z_ref - h, z_ref, z_ref + h]), include_extra=False)
+        return (float(self.restoring_force(z_ref, include_extra=False)), float(ks[1]),
+                float((ks[2] - ks[0]) / (2 * h) / 2), float((ks[2] - 2 * ks[1] + ks[0]) / h**2 / 6))
+
+    def taylor_cubic(self) -> Model:
+        """The seed's Eq. (2) cubic from the closed-form Taylor expansion at z = 0."""
+        ca, ta = math.cos(self.alpha), math.tan(self.alpha)
+        kf, L, D0 = self.k_f, self.L, self.D0
+        return Model(m=self.m, k0=self.m * G, k1=2 * D0 * kf / (L * ca), k2=-3 * D0 * kf * ta / (L**2 * ca),
+                     k3=kf / (L**2 * ca**2), c=self.c, c_nl=self.c_nl, extra=self.extra)
+
+    def lsq_cubic(self, z_lo: float = -0.030, z_hi: float = 0.030, n: int = 601) -> Model:
+        """Least-squares cubic (k0 fixed to m g) of the exact K over [z_lo, z_hi] [m]."""
+        z = np.linspace(z_lo, z_hi, n)
+        r = self.restoring_force(z, include_extra=False) - self.m * G
+        A = np.column_stack([z**3, z**2, -z])
+        (k3, k2, k1), *_ = np.linalg.lstsq(A, r, rcond=None)
+        return Model(m=self.m, k0=self.m * G, k1=k1, k2=k2, k3=k3, c=self.c, c_nl=self.c_nl, extra=self.extra)
+
+    # --- serialisation and simulator interface --------------------------------------------------
+    def to_dict(self) -> dict[str, Any]:
+        extra = {k: (dict(v) if isinstance(v, Mapping) else v) for k, v in self.extra.items()}
+        return {"E": self.E, "alpha_deg": self.alpha_deg, "m": self.m, "L": self.L, "l": self.l, "b": self.b,
+                "h": self.h, "D0": self.D0, "c": self.c, "c_nl": self.c_nl, "extra": extra}
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any]) -> "Device":
+        return cls(**{k: d[k] for k in ("E", "alpha_deg", "m", "L", "l", "b", "h", "D0")},
+                   c=d.get("c", 0.0), c_nl=d.get("c_nl", 0.0), extra=d.get("extra") or {})
+
+    kind = "device"
+
+    def kernel_params(self) -> np.ndarray:
+        """Parameter vector for the geometric simulator kernel: rows 1-5 = k_f, L, alpha, D0, g."""
+        p = shared_param_rows(self.m, self.c, self.c_nl, self.extra)
+        p[1:6] = self.k_f, self.L, self.alpha, self.D0, G
+        return p
+
+
+GEOMETRY = {"L": 0.060, "l": 0.094, "b": 0.020, "h": 0.0012, "D0": 0.0059}
+"""Fixed geometry of the rig's device [m] (rods, arms, pre-compression); calibrated once so that the
+as-built device reproduces the seed's Table 1 and z_plus (``experiments/calibration.py``)."""
+
+NOMINAL = Device(E=206e9, alpha_deg=8.0, m=0.200, c=0.0, c_nl=0.0, **GEOMETRY)
+"""The design drawings: catalogue steel, the designed frame angle, the designed moving mass."""
+
+AS_BUILT = Device(E=197e9, alpha_deg=6.9, m=0.212, c=1.5, c_nl=0.5, **GEOMETRY)
+"""The device the virtual rig simulates (the truth): E 4.4 % below catalogue, the frame 1.1 deg
+flatter than drawn, the mass heavier by the fasteners (E/m 10 % below the design's).
+
+Features: 11.45 Hz / 9.20 Hz well frequencies, wells at -28.7 / +22.8 mm (seed: 11.41 / 9.19 Hz,
+z_plus = 23 mm). Damping (c = 1.5 N s/m, c_nl = 0.5 N s^2/m^2, dissipative at every speed) puts
+the 9 Hz period-doubling cascade where the seed saw it (P2 at 14.5-15, P4 at 15.5, cross-well chaos
+from 16 m/s^2, starting from z_plus) at the cost of ULS damping ratios of 4.9 % / 6.1 % instead of
+the seed's 11 % / 20 %: with viscous plus positive quadratic damping, this geometry cannot have
+both (at the seed's ratios the cascade moves to about 21 m/s^2). The report says so."""

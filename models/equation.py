@@ -1,0 +1,330 @@
+"""Equation of motion of the negative-stiffness oscillator (seed paper, Eqs. 1-7).
+
+    m z'' + D(z') + K(z) + extra(z, z') = -m b''      (base excitation)
+                                        =  f(t)       (force-driven rig)
+
+    K(z) = k3 z^3 + k2 z^2 - k1 z + k0                (Eq. 2; k1 enters with a minus sign)
+    U(z) = k3 z^4/4 + k2 z^3/3 - k1 z^2/2 + k0 z      (Eq. 3)
+    D(z') = c z' + c_nl z'|z'|
+
+Around a stable equilibrium z*, x = z - z* (Eq. 5) gives the shifted restoring force (Eq. 7)
+
+    K(x + z*) = k3 x^3 + k2~ x^2 + k1~ x,   k2~ = k2 + 3 k3 z*,   k1~ = 3 k3 z*^2 + 2 k2 z* - k1,
+
+whose linear part is the underlying-linear system (ULS) of that well, with natural frequency
+omega = sqrt(k1~ / m) (Eq. 4).
+
+Extra effects (the discrepancy catalogue of the contract) are named terms added to the force:
+
+=====================  ===============================================  ==================
+name                   force added to the left-hand side                value (units)
+=====================  ===============================================  ==================
+coulomb_friction       F tanh(z'/v_s), v_s = COULOMB_VELOCITY_SCALE     F [N]
+quadratic_damping      q z'|z'|  (adds to c_nl)                         q [N s^2/m^2]
+cubic_damping          d z'^3                                           d [N s^3/m^3]
+quadratic_stiffness    a z^2     (adds to k2)                           a [N/m^2]
+cubic_stiffness        a z^3     (adds to k3)                           a [N/m^3]
+quartic_stiffness      a z^4                                            a [N/m^4]
+quintic_stiffness      a z^5                                            a [N/m^5]
+end_stop               k (z - z_s) beyond the stop at z_s, on z_s's     {"k": N/m, "z": m}
+                       side (one-sided contact beyond a gap)
+=====================  ===============================================  ==================
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from types import MappingProxyType
+from typing import Any, Mapping
+
+import numpy as np
+
+from .constants import G
+
+COULOMB_VELOCITY_SCALE = 1e-3
+"""Velocity [m/s] over which the Coulomb friction force changes sign (tanh smoothing)."""
+
+EFFECTS = (
+    "coulomb_friction",
+    "quadratic_damping",
+    "cubic_damping",
+    "quadratic_stiffness",
+    "cubic_stiffness",
+    "quartic_stiffness",
+    "quintic_stiffness",
+    "end_stop",
+)
+"""Names of the extra effects a model may carry in its ``extra`` mapping."""
+
+# Layout of the parameter vector the simulator kernels read (one column per batch member).
+# Rows 0..6 differ between the polynomial and the geometric restoring force (see ``device``);
+# rows 7..16 are the damping and extra effects, shared by both.
+P_M, P_C, P_CNL, P_COULOMB, P_CUBIC_DAMP = 0, 7, 8, 9, 10
+P_QUAD_STIFF, P_CUBIC_STIFF, P_QUARTIC, P_QUINTIC, P_STOP_K, P_STOP_Z = 11, 12, 13, 14, 15, 16
+N_PARAMS = 17
+
+
+def _check_finite(name: str, value: float) -> float:
+    value = float(value)
+    if not math.isfinite(value):
+        raise ValueError(f"model parameter {name} is not finite ({value})")
+    return value
+
+
+def normalise_extra(extra: Mapping[str, Any] | None) -> Mapping[str, Any]:
+    """Validate an ``extra`` mapping and return it read-only (scalars as float, end_stop as dict)."""
+    out: dict[str, Any] = {}
+    for name, value in dict(extra or {}).items():
+        if name not in EFFECTS:
+            raise ValueError(f"unknown extra effect {name!r}; known: {', '.join(EFFECTS)}")
+        if name == "end_stop":
+            if not isinstance(value, Mapping) or set(value) != {"k", "z"}:
+                raise ValueError('extra effect end_stop takes {"k": stiffness N/m, "z": stop position m}')
+            k, z = _check_finite("end_stop.k", value["k"]), _check_finite("end_stop.z", value["z"])
+            if k < 0 or z == 0:
+                raise ValueError("end_stop needs k >= 0 and a stop position z != 0")
+            out[name] = MappingProxyType({"k": k, "z": z})
+        else:
+            out[name] = _check_finite(name, value)
+    return MappingProxyType(out)
+
+
+def extra_force(extra: Mapping[str, Any], z, zdot):
+    """Force of the extra effects [N] at displacement ``z`` [m] and velocity ``zdot`` [m/s]."""
+    z, zdot = np.asarray(z, float), np.asarray(zdot, float)
+    f = np.zeros(np.broadcast(z, zdot).shape)
+    f = f + extra.get("coulomb_friction", 0.0) * np.tanh(zdot / COULOMB_VELOCITY_SCALE)
+    f = f + extra.get("quadratic_damping", 0.0) * zdot * np.abs(zdot)
+    f = f + extra.get("cubic_damping", 0.0) * zdot**3
+    return f + stiffness_extra_force(extra, z)
+
+
+def stiffness_extra_force(extra: Mapping[str, Any], z):
+    """The displacement-only part of the extra effects [N] (it belongs to the restoring force)."""
+    z = np.asarray(z, float)
+    f = (extra.get("quadratic_stiffness", 0.0) * z**2 + extra.get("cubic_stiffness", 0.0) * z**3
+         + extra.get("quartic_stiffness", 0.0) * z**4 + extra.get("quintic_stiffness", 0.0) * z**5)
+    stop = extra.get("end_stop")
+    if stop:
+        beyond = (z - stop["z"]) * np.sign(stop["z"])
+        f = f + stop["k"] * np.where(beyond > 0, z - stop["z"], 0.0)
+    return f
+
+
+def stiffness_extra_potential(extra: Mapping[str, Any], z):
+    """Potential energy [J] of the displacement-only extra effects, zero at z = 0."""
+    z = np.asarray(z, float)
+    u = (extra.get("quadratic_stiffness", 0.0) * z**3 / 3 + extra.get("cubic_stiffness", 0.0) * z**4 / 4
+         + extra.get("quartic_stiffness", 0.0) * z**5 / 5 + extra.get("quintic_stiffness", 0.0) * z**6 / 6)
+    stop = extra.get("end_stop")
+    if stop:
+        beyond = (z - stop["z"]) * np.sign(stop["z"])
+        u = u + 0.5 * stop["k"] * np.where(beyond > 0, (z - stop["z"]) ** 2, 0.0)
+    return u
+
+
+def shared_param_rows(m: float, c: float, c_nl: float, extra: Mapping[str, Any]) -> np.ndarray:
+    """Fill the rows of the kernel parameter vector that both restoring-force kinds share."""
+    p = np.zeros(N_PARAMS)
+    p[P_M] = m
+    p[P_C] = c
+    p[P_CNL] = c_nl + extra.get("quadratic_damping", 0.0)
+    p[P_COULOMB] = extra.get("coulomb_friction", 0.0)
+    p[P_CUBIC_DAMP] = extra.get("cubic_damping", 0.0)
+    p[P_QUAD_STIFF] = extra.get("quadratic_stiffness", 0.0)
+    p[P_CUBIC_STIFF] = extra.get("cubic_stiffness", 0.0)
+    p[P_QUARTIC] = extra.get("quartic_stiffness", 0.0)
+    p[P_QUINTIC] = extra.get("quintic_stiffness", 0.0)
+    stop = extra.get("end_stop")
+    if stop:
+        p[P_STOP_K], p[P_STOP_Z] = stop["k"], stop["z"]
+    return p
+
+
+@dataclass(frozen=True)
+class Equilibria:
+    """Equilibrium positions [m]: stable ``z_minus`` < unstable ``z_0`` < stable ``z_plus``.
+
+    A single-well system has only ``z_plus``; the others are None.
+    """
+
+    z_minus: float | None
+    z_0: float | None
+    z_plus: float
+
+    def as_dict(self) -> dict[str, float | None]:
+        return {"z_minus": self.z_minus, "z_0": self.z_0, "z_plus": self.z_plus}
+
+    def well(self, name: str) -> float:
+        """Position of the stable equilibrium ``"minus"`` or ``"plus"``."""
+        z = {"minus": self.z_minus, "plus": self.z_plus}[name]
+        if z is None:
+            raise ValueError(f"the system has no {name} well (single-well)")
+        return z
+
+
+@dataclass(frozen=True)
+class UnderlyingLinear:
+    """Underlying-linear system (ULS) around a stable equilibrium (seed Eqs. 4-7)."""
+
+    z_ref: float
+    """Reference position z* [m]."""
+    k1_tilde: float
+    """Linear stiffness at the well, K'(z*) [N/m]."""
+    k2_tilde: float
+    """Quadratic coefficient in the shifted frame, k2 + 3 k3 z* [N/m^2]."""
+    k3: float
+    """Cubic coefficient (frame-independent) [N/m^3]."""
+    f_hz: float
+    """Undamped natural frequency sqrt(k1~/m)/(2 pi) [Hz]."""
+    zeta: float
+    """Viscous damping ratio c / (2 sqrt(k1~ m)) [-]."""
+
+
+def find_equilibria(force, stiffness, z_lo: float, z_hi: float, n_grid: int = 4001) -> Equilibria:
+    """Equilibria of a scalar restoring force on [z_lo, z_hi] by sign changes and Brent's method."""
+    from scipy.optimize import brentq
+
+    grid = np.linspace(z_lo, z_hi, n_grid)
+    f = force(grid)
+    roots = []
+    for i in np.flatnonzero(np.sign(f[:-1]) * np.sign(f[1:]) <= 0):
+        if f[i] == 0.0:
+            roots.append(grid[i])
+        elif f[i + 1] != 0.0:
+            roots.append(brentq(force, grid[i], grid[i + 1], xtol=1e-15, rtol=1e-14))
+    roots = sorted(set(float(r) for r in roots))
+    stable = [r for r in roots if stiffness(r) > 0]
+    unstable = [r for r in roots if stiffness(r) <= 0]
+    if len(stable) == 2 and len(unstable) == 1 and stable[0] < unstable[0] < stable[1]:
+        return Equilibria(stable[0], unstable[0], stable[1])
+    if len(stable) == 1 and not unstable:
+        return Equilibria(None, None, stable[0])
+    raise ValueError(f"restoring force has equilibria {roots} (stable: {stable}); "
+                     "expected one stable, or stable-unstable-stable")
+
+
+@dataclass(frozen=True)
+class Model:
+    """Polynomial (z-frame) model of the contract's model JSON.
+
+    Parameters
+    ----------
+    m : mass [kg] (1 for mass-normalised coefficients)
+    k1, k2, k3 : restoring-force coefficients [N/m, N/m^2, N/m^3]
+    c : viscous damping [N s/m]; c_nl : quadratic damping [N s^2/m^2]
+    k0 : constant force [N]; defaults to ``m * G`` (gravity)
+    extra : named extra effects (see the module docstring)
+    """
+
+    m: float
+    k1: float
+    k2: float
+    k3: float
+    c: float = 0.0
+    c_nl: float = 0.0
+    k0: float | None = None
+    extra: Mapping[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self):
+        for name in ("m", "k1", "k2", "k3", "c", "c_nl"):
+            object.__setattr__(self, name, _check_finite(name, getattr(self, name)))
+        if self.m <= 0:
+            raise ValueError(f"model mass m must be positive, got {self.m}")
+        k0 = self.m * G if self.k0 is None else _check_finite("k0", self.k0)
+        object.__setattr__(self, "k0", k0)
+        object.__setattr__(self, "extra", normalise_extra(self.extra))
+
+    # --- forces and energy -------------------------------------------------------------------
+    def restoring_force(self, z, include_extra: bool = True):
+        """K(z) [N] (Eq. 2), plus the displacement-only extra effects when ``include_extra``."""
+        z = np.asarray(z, float)
+        k = ((self.k3 * z + self.k2) * z - self.k1) * z + self.k0
+        return k + stiffness_extra_force(self.extra, z) if include_extra else k
+
+    def stiffness(self, z, include_extra: bool = True):
+        """dK/dz [N/m]."""
+        z = np.asarray(z, float)
+        ks = (3 * self.k3 * z + 2 * self.k2) * z - self.k1
+        if include_extra and self.extra:
+            h = 1e-7
+            ks = ks + (stiffness_extra_force(self.extra, z + h) - stiffness_extra_force(self.extra, z - h)) / (2 * h)
+        return ks
+
+    def potential(self, z, include_extra: bool = True):
+        """U(z) [J] (Eq. 3), zero at z = 0."""
+        z = np.asarray(z, float)
+        u = (((self.k3 / 4 * z + self.k2 / 3) * z - self.k1 / 2) * z + self.k0) * z
+        return u + stiffness_extra_potential(self.extra, z) if include_extra else u
+
+    def damping_force(self, zdot):
+        """D(z') = c z' + c_nl z'|z'| [N] (without the velocity-dependent extra effects)."""
+        zdot = np.asarray(zdot, float)
+        return self.c * zdot + self.c_nl * zdot * np.abs(zdot)
+
+    def total_force(self, z, zdot):
+        """D(z') + K(z) + extra(z, z') [N]: everything on the left-hand side but inertia."""
+        return self.damping_force(zdot) + self.restoring_force(z, include_extra=False) + extra_force(self.extra, z, zdot)
+
+    # --- equilibria and linearisation ---------------------------------------------------------
+    def equilibria(self) -> Equilibria:
+        """Equilibria of K(z) (with the stiffness extra effects), sorted and classified."""
+        if self.k3 <= 0 and not self.extra:
+            raise ValueError("k3 must be positive (hardening) for a bounded double- or single-well model")
+        # Cauchy bound of the cubic's roots, widened for the extra terms
+        bound = 1 + max(abs(self.k2), abs(self.k1), abs(self.k0)) / abs(self.k3 or 1.0)
+        if not self.extra:
+            roots = np.roots([self.k3, self.k2, -self.k1, self.k0])
+            real = np.sort(roots[np.abs(roots.imag) <= 1e-9 * np.maximum(1, np.abs(roots))].real)
+            bound = 1.01 * np.max(np.abs(real)) + 1e-6
+        return find_equilibria(self.restoring_force, self.stiffness, -bound, bound)
+
+    def uls(self, well: str) -> UnderlyingLinear:
+        """Underlying-linear system around the ``"minus"`` or ``"plus"`` well (Eqs. 4-7)."""
+        zs = self.equilibria().well(well)
+        k1t = float(self.stiffness(zs))
+        k2t = self.k2 + 3 * self.k3 * zs
+        return UnderlyingLinear(zs, k1t, k2t, self.k3, math.sqrt(k1t / self.m) / (2 * math.pi),
+                                self.c / (2 * math.sqrt(k1t * self.m)))
+
+    @staticmethod
+    def from_shifted(z_ref: float, k1_tilde: float, k2_tilde: float, k3: float, **kw) -> "Model":
+        """Back-transform shifted-frame coefficients (Eq. 7) to the z frame.
+
+        k2 = k2~ - 3 k3 z*, and k1 from k1~ = 3 k3 z*^2 + 2 k2 z* - k1. ``k0`` is then fixed by the
+        equilibrium condition K(z*) = 0 unless given.
+        """
+        k2 = k2_tilde - 3 * k3 * z_ref
+        k1 = 3 * k3 * z_ref**2 + 2 * k2 * z_ref - k1_tilde
+        if "k0" not in kw or kw["k0"] is None:
+            kw["k0"] = -((k3 * z_ref + k2) * z_ref - k1) * z_ref
+        return Model(k1=k1, k2=k2, k3=k3, **kw)
+
+    # --- serialisation -----------------------------------------------------------------------
+    def to_dict(self) -> dict[str, Any]:
+        """The contract's model JSON fields."""
+        extra = {k: (dict(v) if isinstance(v, Mapping) else v) for k, v in self.extra.items()}
+        return {"m": self.m, "k0": self.k0, "k1": self.k1, "k2": self.k2, "k3": self.k3,
+                "c": self.c, "c_nl": self.c_nl, "extra": extra}
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any]) -> "Model":
+        """Build from the contract's model JSON (``k0`` defaults to ``m*g``; ``extra`` to none)."""
+        missing = [k for k in ("m", "k1", "k2", "k3") if k not in d]
+        if missing:
+            raise ValueError(f"model lacks {', '.join(missing)}")
+        unknown = set(d) - {"m", "k0", "k1", "k2", "k3", "c", "c_nl", "extra"}
+        if unknown:
+            raise ValueError(f"model has unknown fields {', '.join(sorted(unknown))}")
+        return cls(m=d["m"], k1=d["k1"], k2=d["k2"], k3=d["k3"], c=d.get("c", 0.0), c_nl=d.get("c_nl", 0.0),
+                   k0=d.get("k0"), extra=d.get("extra") or {})
+
+    # --- simulator interface -----------------------------------------------------------------
+    kind = "polynomial"
+
+    def kernel_params(self) -> np.ndarray:
+        """Parameter vector for the simulator kernel (rows as in the module's P_* layout)."""
+        p = shared_param_rows(self.m, self.c, self.c_nl, self.extra)
+        p[1:5] = self.k0, self.k1, self.k2, self.k3
+        return p

@@ -1,0 +1,318 @@
+"""Virtual test rig: the seed's shaking-table campaign on a device whose truth is known.
+
+What the laboratory of the seed paper (section 3) measures, and how this rig reproduces it:
+
+* the table moves the frame's base by b(t); the true table motion is band-limited (no content
+  below ``Sensors.table_min_hz``), and its acceleration b'' is what drives the device;
+* the device (the as-built ``Device`` with its exact geometric K(z), or a polynomial ``Model`` when
+  the coefficients must exist exactly) is simulated at ``oversample`` times the output rate, with the
+  suite's one input convention (linear interpolation between the fine samples);
+* an accelerometer measures b'' (white noise, a small DC bias); a laser vibrometer measures the
+  absolute displacement y = z + b (white noise);
+* a delta-sigma acquisition front end low-passes every channel with the same linear-phase FIR
+  anti-aliasing filter (delay compensated) and decimates to ``fs``;
+* as in the seed, the base displacement is not measured: it is the double integral of the measured
+  acceleration, high-passed after each integration (``Sensors.highpass_hz``) so that the bias does
+  not make it run away; it drifts and is imperfect at low frequency, and z = y - b_est inherits that;
+* settling time is discarded; the mass is weighed on a scale (``weigh_resolution``).
+
+Everything random draws from ``numpy.random.SeedSequence(seed)``, split into independent streams
+for the excitation and for each sensor: the same seed gives the same record, bit for bit.
+Every record carries its truth (system, effects, sensors, excitation, seed), written beside it.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import math
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any, Sequence
+
+import numpy as np
+from scipy import signal
+from scipy.integrate import cumulative_trapezoid
+
+from negstiff.files import atomic_path, write_text
+
+from .device import AS_BUILT, Device
+from .equation import Model
+from .simulator import simulate_batch
+
+
+TAIL_S = 4.0
+"""Seconds acquired after the last record and discarded, as the settling time is before it: the
+double integration's end effects stay out of the records."""
+
+
+class RigError(ValueError):
+    """The rig cannot produce the requested record (bad settings, or the device left its stroke)."""
+
+
+@dataclass(frozen=True)
+class Sensors:
+    """The measurement chain's imperfections (SI units; noise as rms at the output rate)."""
+
+    laser_noise: float = 30e-6
+    """Laser vibrometer displacement noise [m rms] (about 1 % of an in-well response)."""
+    acc_noise: float = 0.03
+    """Accelerometer noise [m/s^2 rms]."""
+    acc_bias: float = 0.02
+    """Accelerometer DC bias [m/s^2]; double integration turns it into drift of b_est."""
+    highpass_hz: float = 0.5
+    """Corner of the zero-phase high-pass applied after each integration of the acceleration [Hz]."""
+    table_min_hz: float = 0.5
+    """The table's true motion has no content below this frequency [Hz]."""
+
+    @classmethod
+    def noiseless(cls) -> "Sensors":
+        """Perfect sensors (no noise, no bias): for checks that need the exact response."""
+        return cls(laser_noise=0.0, acc_noise=0.0, acc_bias=0.0)
+
+
+@dataclass
+class RigRecord:
+    """One measured record: columns at ``fs``, metadata lines, and the truth behind it.
+
+    ``columns`` holds ``t, base_acc, y, base_disp, z`` (the contract's names). ``true`` holds the
+    noise-free ``z``, ``z_dot``, ``base_acc`` and ``base_disp`` at the same samples (never written
+    to the measurement file: a lab does not have them; tests and reports use them as the truth).
+    """
+
+    fs: float
+    columns: dict[str, np.ndarray]
+    meta: dict[str, Any]
+    truth: dict[str, Any]
+    true: dict[str, np.ndarray] = field(repr=False, default_factory=dict)
+
+    COLUMNS = ("t", "base_acc", "y", "base_disp", "z")
+
+    def write(self, path: str | Path) -> Path:
+        """Write the record (CSV, or NPZ by suffix) and ``<stem>.truth.json`` beside it, atomically."""
+        path = Path(path)
+        truth_path = path.with_name(path.stem + ".truth.json")
+        meta = dict(self.meta, truth=truth_path.name)
+        if path.suffix.lower() == ".npz":
+            with atomic_path(path) as tmp:
+                with open(tmp, "wb") as fh:
+                    np.savez(fh, fs=self.fs, **{k: self.columns[k] for k in self.COLUMNS},
+                             meta=json.dumps(meta))
+        elif path.suffix.lower() == ".csv":
+            buf = io.StringIO()
+            for k, v in meta.items():
+                buf.write(f"# {k}: {v}\n")
+            data = np.column_stack([self.columns[k] for k in self.COLUMNS])
+            np.savetxt(buf, data, delimiter=",", fmt="%.10g", header=",".join(self.COLUMNS), comments="")
+            write_text(path, buf.getvalue())
+        else:
+            raise RigError(f"{path}: the rig writes .csv or .npz records")
+        write_text(truth_path, json.dumps(self.truth, indent=2) + "\n")
+        return path
+
+
+def system_from_dict(d: dict[str, Any]) -> Device | Model:
+    """Rebuild the truth's system (``{"kind": "device"|"polynomial", "parameters": {...}}``)."""
+    return Device.from_dict(d["parameters"]) if d["kind"] == "device" else Model.from_dict(d["parameters"])
+
+
+def table_motion(acc_target: np.ndarray, fs: float, min_hz: float) -> tuple[np.ndarray, np.ndarray]:
+    """Consistent true table displacement b [m] and acceleration b'' [m/s^2] from a target b''.
+
+    The target is projected on frequencies >= ``min_hz`` (a shaker has no DC stroke) and integrated
+    twice in the frequency domain, so b'' is exactly the second derivative of b.
+    """
+    n = acc_target.size
+    spec = np.fft.rfft(acc_target)
+    f = np.fft.rfftfreq(n, 1 / fs)
+    spec[f < min_hz] = 0.0
+    w = 2 * np.pi * f
+    disp_spec = np.zeros_like(spec)
+    disp_spec[f >= min_hz] = -spec[f >= min_hz] / w[f >= min_hz] ** 2
+    return np.fft.irfft(disp_spec, n), np.fft.irfft(spec, n)
+
+
+def integrate_twice(acc: np.ndarray, fs: float, highpass_hz: float) -> np.ndarray:
+    """Base displacement from measured acceleration as a lab computes it: trapezoidal integration
+    twice, each followed by a zero-phase 2nd-order Butterworth high-pass at ``highpass_hz``."""
+    sos = signal.butter(2, highpass_hz, "highpass", fs=fs, output="sos")
+    vel = signal.sosfiltfilt(sos, cumulative_trapezoid(acc, dx=1 / fs, initial=0.0))
+    return signal.sosfiltfilt(sos, cumulative_trapezoid(vel, dx=1 / fs, initial=0.0))
+
+
+def _smooth_steps(levels: Sequence[float], step_samples: int, ramp_samples: int) -> np.ndarray:
+    """Piecewise-constant envelope with raised-cosine transitions of ``ramp_samples`` (starts at 0)."""
+    env = np.repeat(np.asarray(levels, float), step_samples)
+    prev = np.concatenate([[0.0], np.asarray(levels, float)[:-1]])
+    ramp = 0.5 - 0.5 * np.cos(np.pi * np.arange(ramp_samples) / ramp_samples)
+    for i, (a0, a1) in enumerate(zip(prev, levels)):
+        s = i * step_samples
+        env[s:s + ramp_samples] = a0 + (a1 - a0) * ramp
+    return env
+
+
+class Rig:
+    """The virtual shaking table with a device on it.
+
+    Parameters
+    ----------
+    system : the truth: a ``Device`` (default: ``AS_BUILT``, exact geometry) or a polynomial ``Model``
+    effects : hidden extra effects added to the truth (contract names, e.g. ``{"coulomb_friction": 0.05}``)
+    sensors : measurement-chain imperfections
+    fs : output sampling rate [Hz] (the seed's 512 Hz)
+    oversample : simulation and acquisition rate = ``oversample * fs``
+    seed : root of every random draw
+    weigh_resolution : resolution of the scale that weighs the moving mass [kg] (None: not weighed)
+    """
+
+    def __init__(self, system: Device | Model = AS_BUILT, *, effects: dict[str, Any] | None = None,
+                 sensors: Sensors = Sensors(), fs: float = 512.0, oversample: int = 4, seed: int = 0,
+                 weigh_resolution: float | None = 1e-4):
+        if effects:
+            system = type(system).from_dict({**system.to_dict(), "extra": {**dict(system.extra), **effects}}) \
+                if isinstance(system, Model) else system.with_(extra={**dict(system.extra), **effects})
+        if not (fs > 0 and math.isfinite(fs)):
+            raise RigError(f"sampling rate must be positive, got {fs}")
+        if int(oversample) < 1:
+            raise RigError("oversample must be >= 1")
+        self.system = system
+        self.sensors = sensors
+        self.fs = float(fs)
+        self.oversample = int(oversample)
+        self.seed = int(seed)
+        self.weigh_resolution = weigh_resolution
+        self.equilibria = system.equilibria()
+
+    # --- excitations -------------------------------------------------------------------------
+    def random(self, duration: float = 300.0, rms: float = 14.0, band: tuple[float, float] = (2.0, 40.0),
+               settle: float = 5.0) -> RigRecord:
+        """Band-limited Gaussian random base excitation (flat spectrum over ``band`` [Hz]).
+
+        ``rms`` [m/s^2] of the table acceleration; the first ``settle`` seconds are discarded.
+        Starts at rest in the positive well. The default level drives the as-built device across
+        the wells a few times a minute while the true model's free run stays predictable (about 5 %
+        over 12 s); above about 17 m/s^2 the crossings become chaotic and no model, not even the
+        truth, can follow a long free run (see the calibration report).
+        """
+        if duration <= 0 or rms <= 0 or not (0 < band[0] < band[1] < self.fs / 2):
+            raise RigError(f"random excitation needs duration > 0, rms > 0 and 0 < band < fs/2; got "
+                           f"{duration}, {rms}, {band}")
+        fsim = self.fs * self.oversample
+        n = int(round((duration + settle + TAIL_S) * self.fs)) * self.oversample
+        exc_rng, sens_rng = self._streams()
+        spec = np.fft.rfft(exc_rng.standard_normal(n))
+        f = np.fft.rfftfreq(n, 1 / fsim)
+        spec[(f < band[0]) | (f > band[1])] = 0.0
+        acc = np.fft.irfft(spec, n)
+        acc *= rms / acc.std()
+        excitation = {"type": "random", "duration_s": duration, "rms_m_s2": rms, "band_hz": list(band),
+                      "settle_s": settle}
+        return self._run([acc], ["plus"], [settle], [duration], excitation, sens_rng)[0]
+
+    def harmonic(self, freq: float = 9.0, amplitude: float = 5.0, start: str = "plus",
+                 settle_periods: int = 100, record_periods: int = 100) -> RigRecord:
+        """Steady-state response to b'' = A sin(2 pi f t) [m/s^2], starting at rest in ``start`` well."""
+        return self.sweep(freq, [amplitude], start, settle_periods, record_periods)[0]
+
+    def sweep(self, freq: float, amplitudes: Sequence[float], start: str = "plus", settle_periods: int = 100,
+              record_periods: int = 100) -> list[RigRecord]:
+        """Step the harmonic amplitude through ``amplitudes`` without stopping the table, as a lab
+        does (up or down by their order); one record per step, its settling time discarded."""
+        return self.sweeps(freq, [amplitudes], [start], settle_periods, record_periods)[0]
+
+    def sweeps(self, freq: float, amplitude_lists: Sequence[Sequence[float]], starts: Sequence[str],
+               settle_periods: int = 100, record_periods: int = 100) -> list[list[RigRecord]]:
+        """Several stepped sweeps (each from its own starting well) in one batched simulation."""
+        if not (0 < freq < self.fs / 4):
+            raise RigError(f"forcing frequency must lie in (0, fs/4) = (0, {self.fs / 4:g}) Hz, got {freq}")
+        if len(amplitude_lists) != len(starts) or not all(len(a) for a in amplitude_lists):
+            raise RigError("each sweep needs a starting well and at least one amplitude")
+        if settle_periods < 1 or record_periods < 2:
+            raise RigError("need at least 1 settling and 2 recorded periods per step")
+        fsim = self.fs * self.oversample
+        period = 1.0 / freq
+        step_s = (settle_periods + record_periods) * period
+        step_n = int(round(step_s * self.fs)) * self.oversample
+        ramp_n = int(round(2 * period * fsim))
+        exc_rng, sens_rng = self._streams()
+        phase = exc_rng.uniform(0, 2 * np.pi)
+        accs, settles, durations = [], [], []
+        for amps in amplitude_lists:
+            if any(not (a >= 0 and math.isfinite(a)) for a in amps):
+                raise RigError(f"harmonic amplitudes must be finite and >= 0, got {list(amps)}")
+            env = np.pad(_smooth_steps(amps, step_n, ramp_n), (0, int(TAIL_S * fsim)), mode="edge")
+            t = np.arange(env.size) / fsim
+            accs.append(env * np.sin(2 * np.pi * freq * t + phase))
+            settles.append([i * step_n / fsim + settle_periods * period for i in range(len(amps))])
+            durations.append(record_periods * period)
+        excitation = {"type": "harmonic", "freq_hz": freq, "settle_periods": settle_periods,
+                      "record_periods": record_periods, "phase_rad": phase}
+        return self._run(accs, list(starts), settles, durations, excitation, sens_rng,
+                         amplitude_lists=[list(map(float, a)) for a in amplitude_lists])
+
+    # --- the measurement chain ---------------------------------------------------------------
+    def _streams(self) -> tuple[np.random.Generator, np.random.Generator]:
+        exc, sens = np.random.SeedSequence(self.seed).spawn(2)
+        return np.random.default_rng(exc), np.random.default_rng(sens)
+
+    def _run(self, accs, starts, settles, durations, excitation, sens_rng, amplitude_lists=None):
+        """Simulate every excitation in one batch, then measure and cut the records."""
+        fsim = self.fs * self.oversample
+        s = self.sensors
+        n = max(a.size for a in accs)
+        motions = [table_motion(np.pad(a, (0, n - a.size)), fsim, s.table_min_hz) for a in accs]
+        x0 = []
+        for st in starts:
+            if st not in ("plus", "minus"):
+                raise RigError(f"starting well must be 'plus' or 'minus', got {st!r}")
+            x0.append([self.equilibria.well(st), 0.0])
+        kind = self.system.kind
+        params = np.repeat(self.system.kernel_params()[:, None], len(accs), axis=1)
+        sim = simulate_batch(params, kind, np.array([m[1] for m in motions]), 1 / fsim, np.array(x0),
+                             input_index=np.arange(len(accs)), store_velocity=True)
+        if sim.diverged.any():
+            raise RigError(f"the device did not survive the excitation: {sim.describe_failures()}; "
+                           "lower the excitation level")
+        q = self.oversample
+        out = []
+        for i, ((b_true, acc_true), st) in enumerate(zip(motions, starts)):
+            acc_meas = acc_true + s.acc_bias + s.acc_noise * math.sqrt(q) * sens_rng.standard_normal(n)
+            y_meas = sim.z[i] + b_true + s.laser_noise * math.sqrt(q) * sens_rng.standard_normal(n)
+            chans = {"base_acc": acc_meas, "y": y_meas, "z_true": sim.z[i], "z_dot_true": sim.z_dot[i],
+                     "acc_true": acc_true, "b_true": b_true}
+            if q > 1:  # delta-sigma front end: linear-phase FIR anti-aliasing, delay compensated
+                chans = {k: signal.decimate(v, q, ftype="fir", zero_phase=True) for k, v in chans.items()}
+            b_est = integrate_twice(chans["base_acc"], self.fs, s.highpass_hz)
+            sweep_out = []
+            for j, t0 in enumerate(np.atleast_1d(settles[i])):
+                k0 = int(round(t0 * self.fs))
+                k1 = k0 + int(round(durations[i] * self.fs))
+                sl = slice(k0, k1)
+                cols = {"t": np.arange(k1 - k0) / self.fs, "base_acc": chans["base_acc"][sl], "y": chans["y"][sl],
+                        "base_disp": b_est[sl], "z": chans["y"][sl] - b_est[sl]}
+                true = {"z": chans["z_true"][sl], "z_dot": chans["z_dot_true"][sl],
+                        "base_acc": chans["acc_true"][sl], "base_disp": chans["b_true"][sl]}
+                exc = dict(excitation, start_well=st, record_start_s=k0 / self.fs)
+                if amplitude_lists is not None:
+                    exc["amplitude_m_s2"] = amplitude_lists[i][j]
+                    exc["step"] = j
+                sweep_out.append(self._record(cols, true, exc))
+            out.append(sweep_out)
+        return out if amplitude_lists is not None else [r[0] for r in out]
+
+    def _record(self, cols, true, excitation) -> RigRecord:
+        meta = {"fs": f"{self.fs:g}", "units": "SI (s, m/s^2, m)",
+                "source": f"negstiff virtual rig ({excitation['type']}, seed {self.seed})"}
+        if self.weigh_resolution:
+            meta["mass"] = f"{round(self.system.m / self.weigh_resolution) * self.weigh_resolution:.6g}"
+        if excitation["type"] == "harmonic":
+            meta["forcing_hz"] = f"{excitation['freq_hz']:g}"
+            meta["amplitude_m_s2"] = f"{excitation['amplitude_m_s2']:g}"
+        eq = self.equilibria
+        truth = {"system": {"kind": self.system.kind, "parameters": self.system.to_dict()},
+                 "effects": {k: (dict(v) if isinstance(v, dict) else v) for k, v in self.system.extra.items()},
+                 "equilibria": eq.as_dict(), "sensors": asdict(self.sensors), "fs": self.fs,
+                 "oversample": self.oversample, "seed": self.seed, "excitation": excitation}
+        if isinstance(self.system, Device):
+            truth["features"] = self.system.features()
+        return RigRecord(self.fs, cols, meta, truth, true)
