@@ -13,7 +13,12 @@ and the potential of the two arms plus gravity, and the restoring force, are
     U(z) = k_f (s + D0)^2 - k_f D0^2 + m g z,     K(z) = dU/dz = 2 k_f (s + D0) s'(z) + m g.
 
 The Taylor expansion at z = 0 gives the cubic of the seed's Eq. (2):
-k1 = 2 D0 k_f / (L cos a), k2 = -3 D0 k_f tan(a) / (L^2 cos a), k3 = k_f / (L^2 cos^2 a), k0 = m g.
+k1 = 2 D0 k_f / (L cos a), k2 = -3 D0 k_f tan(a) / (L^2 cos a), k0 = m g, and
+
+    k3 = k_f (L cos a - D0 (1 + 4 sin^2 a)) / (L^3 cos^3 a)
+
+(derived symbolically; device-model.md gives the leading term k_f / (L^2 cos^2 a), which drops the
+D0/L correction, 14 % for this device).
 The exact K(z) departs from any cubic over the full stroke (the model-form gap the suite shows).
 
 The geometry exists only while B^2 > z^2, i.e. for
@@ -188,7 +193,7 @@ class Device:
         ca, ta = math.cos(self.alpha), math.tan(self.alpha)
         kf, L, D0 = self.k_f, self.L, self.D0
         return Model(m=self.m, k0=self.m * G, k1=2 * D0 * kf / (L * ca), k2=-3 * D0 * kf * ta / (L**2 * ca),
-                     k3=kf / (L**2 * ca**2), c=self.c, c_nl=self.c_nl, extra=self.extra)
+                     k3=kf * (L * ca - D0 * (1 + 4 * math.sin(self.alpha) ** 2)) / (L**3 * ca**3), c=self.c, c_nl=self.c_nl, extra=self.extra)
 
     def lsq_cubic(self, z_lo: float = -0.030, z_hi: float = 0.030, n: int = 601) -> Model:
         """Least-squares cubic (k0 fixed to m g) of the exact K over [z_lo, z_hi] [m]."""

@@ -89,10 +89,13 @@ class RigRecord:
     COLUMNS = ("t", "base_acc", "y", "base_disp", "z")
 
     def write(self, path: str | Path) -> Path:
-        """Write the record (CSV, or NPZ by suffix) and ``<stem>.truth.json`` beside it, atomically."""
+        """Write the record (CSV, or NPZ by suffix) and ``<stem>.truth.json`` beside it, atomically.
+
+        The record itself does not name its truth file, so the same seed gives the same bytes
+        whatever the file is called."""
         path = Path(path)
         truth_path = path.with_name(path.stem + ".truth.json")
-        meta = dict(self.meta, truth=truth_path.name)
+        meta = self.meta
         if path.suffix.lower() == ".npz":
             with atomic_path(path) as tmp:
                 with open(tmp, "wb") as fh:

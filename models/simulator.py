@@ -33,11 +33,14 @@ from .equation import (COULOMB_VELOCITY_SCALE, N_PARAMS, P_C, P_CNL, P_COULOMB, 
 KIND_POLYNOMIAL, KIND_DEVICE = 0, 1
 KINDS = {"polynomial": KIND_POLYNOMIAL, "device": KIND_DEVICE}
 STATUS_OK, STATUS_DIVERGED, STATUS_GEOMETRY = 0, 1, 2
-STATUS_TEXT = {STATUS_DIVERGED: "diverged (|z| beyond the limit or non-finite)",
+STATUS_TEXT = {STATUS_DIVERGED: "diverged (|z| or |z_dot| beyond its limit, or non-finite)",
                STATUS_GEOMETRY: "left the device's stroke (the rods cannot reach that z)"}
 DEFAULT_SUBSTEPS = 2
 DEFAULT_Z_LIMIT = 1.0
 """Displacement [m] beyond which a simulation is declared diverged."""
+DEFAULT_V_LIMIT = 100.0
+"""Speed [m/s] beyond which a simulation is declared diverged. It also catches the spurious bounded
+orbits RK4 can settle into when a growing response is no longer resolved by the step (omega h ~ 1)."""
 
 
 _JIT = {"cache": True, "nogil": True, "error_model": "numpy"}  # numpy error model: no zero-division
@@ -80,7 +83,8 @@ def _member(p, b, kind):
 
 
 @numba.njit(inline="always", **_JIT)
-def _integrate(kind, coulomb, p, gain, u, uidx, dt, nsub, z0, v0, z_limit, out_z, out_v, store_v, status, fail_step):
+def _integrate(kind, coulomb, p, gain, u, uidx, dt, nsub, z0, v0, z_limit, v_limit,
+               out_z, out_v, store_v, status, fail_step):
     """RK4 over the N samples of each member's input row ``u[uidx[b]]``; outputs time-major."""
     nb = p.shape[1]
     n = u.shape[1]
@@ -122,7 +126,7 @@ def _integrate(kind, coulomb, p, gain, u, uidx, dt, nsub, z0, v0, z_limit, out_z
                 z[b] = zb + h / 6.0 * (vb + 2.0 * v2 + 2.0 * v3 + v4)
                 v[b] = vb + h / 6.0 * (a1 + 2.0 * a2 + 2.0 * a3 + a4)
         for b in range(nb):
-            if alive[b] and not (abs(z[b]) < z_limit and abs(v[b]) < 1e6):
+            if alive[b] and not (abs(z[b]) < z_limit and abs(v[b]) < v_limit):
                 alive[b] = False
                 fail_step[b] = k + 1
                 status[b] = STATUS_GEOMETRY if (kind == KIND_DEVICE and not math.isfinite(z[b])) else STATUS_DIVERGED
@@ -138,23 +142,31 @@ def _integrate(kind, coulomb, p, gain, u, uidx, dt, nsub, z0, v0, z_limit, out_z
 # One compiled kernel per (restoring-force kind, Coulomb friction present): the flags are constants
 # inside each, so the batch loop has no data-dependent branches.
 @numba.njit(**_JIT)
-def _kernel_poly(p, gain, u, uidx, dt, nsub, z0, v0, z_limit, out_z, out_v, store_v, status, fail_step):
-    return _integrate(KIND_POLYNOMIAL, False, p, gain, u, uidx, dt, nsub, z0, v0, z_limit, out_z, out_v, store_v, status, fail_step)
+def _kernel_poly(p, gain, u, uidx, dt, nsub, z0, v0, z_limit, v_limit,
+                 out_z, out_v, store_v, status, fail_step):
+    return _integrate(KIND_POLYNOMIAL, False, p, gain, u, uidx, dt, nsub, z0, v0, z_limit, v_limit,
+                      out_z, out_v, store_v, status, fail_step)
 
 
 @numba.njit(**_JIT)
-def _kernel_poly_coulomb(p, gain, u, uidx, dt, nsub, z0, v0, z_limit, out_z, out_v, store_v, status, fail_step):
-    return _integrate(KIND_POLYNOMIAL, True, p, gain, u, uidx, dt, nsub, z0, v0, z_limit, out_z, out_v, store_v, status, fail_step)
+def _kernel_poly_coulomb(p, gain, u, uidx, dt, nsub, z0, v0, z_limit, v_limit,
+                         out_z, out_v, store_v, status, fail_step):
+    return _integrate(KIND_POLYNOMIAL, True, p, gain, u, uidx, dt, nsub, z0, v0, z_limit, v_limit,
+                      out_z, out_v, store_v, status, fail_step)
 
 
 @numba.njit(**_JIT)
-def _kernel_device(p, gain, u, uidx, dt, nsub, z0, v0, z_limit, out_z, out_v, store_v, status, fail_step):
-    return _integrate(KIND_DEVICE, False, p, gain, u, uidx, dt, nsub, z0, v0, z_limit, out_z, out_v, store_v, status, fail_step)
+def _kernel_device(p, gain, u, uidx, dt, nsub, z0, v0, z_limit, v_limit,
+                   out_z, out_v, store_v, status, fail_step):
+    return _integrate(KIND_DEVICE, False, p, gain, u, uidx, dt, nsub, z0, v0, z_limit, v_limit,
+                      out_z, out_v, store_v, status, fail_step)
 
 
 @numba.njit(**_JIT)
-def _kernel_device_coulomb(p, gain, u, uidx, dt, nsub, z0, v0, z_limit, out_z, out_v, store_v, status, fail_step):
-    return _integrate(KIND_DEVICE, True, p, gain, u, uidx, dt, nsub, z0, v0, z_limit, out_z, out_v, store_v, status, fail_step)
+def _kernel_device_coulomb(p, gain, u, uidx, dt, nsub, z0, v0, z_limit, v_limit,
+                           out_z, out_v, store_v, status, fail_step):
+    return _integrate(KIND_DEVICE, True, p, gain, u, uidx, dt, nsub, z0, v0, z_limit, v_limit,
+                      out_z, out_v, store_v, status, fail_step)
 
 
 _KERNELS = {(KIND_POLYNOMIAL, False): _kernel_poly, (KIND_POLYNOMIAL, True): _kernel_poly_coulomb,
@@ -204,7 +216,8 @@ def input_gain(input_kind: str, masses: np.ndarray) -> np.ndarray:
 def simulate_batch(params: np.ndarray, kind: str, u: np.ndarray, dt: float, x0: np.ndarray, *,
                    input_kind: str = "base_acc", input_index: np.ndarray | None = None,
                    substeps: int = DEFAULT_SUBSTEPS, store_velocity: bool = False,
-                   z_limit: float = DEFAULT_Z_LIMIT, threads: int | None = None) -> SimulationResult:
+                   z_limit: float = DEFAULT_Z_LIMIT, v_limit: float = DEFAULT_V_LIMIT,
+                   threads: int | None = None) -> SimulationResult:
     """Integrate B parameter sets at once.
 
     Parameters
@@ -219,7 +232,7 @@ def simulate_batch(params: np.ndarray, kind: str, u: np.ndarray, dt: float, x0: 
     input_index : (B,) row of ``u`` for each member (default: row 0 for all)
     substeps : RK4 steps per sample interval
     store_velocity : also return z_dot
-    z_limit : |z| [m] beyond which a member is declared diverged
+    z_limit, v_limit : |z| [m] and |z_dot| [m/s] beyond which a member is declared diverged
     threads : worker threads over batch chunks (default: the machine's cores, at most 1 per 64 members)
     """
     p = np.asarray(params, dtype=np.float64)
@@ -267,7 +280,7 @@ def simulate_batch(params: np.ndarray, kind: str, u: np.ndarray, dt: float, x0: 
         oz = np.empty((n, c.size))
         ov = np.empty((n, c.size)) if store_velocity else np.empty((1, c.size))
         kernel(np.ascontiguousarray(p[:, sl]), gain[sl], u2, uidx[sl], float(dt), int(substeps),
-               z0[sl], v0[sl], float(z_limit), oz, ov, store_velocity, status[sl], fail[sl])
+               z0[sl], v0[sl], float(z_limit), float(v_limit), oz, ov, store_velocity, status[sl], fail[sl])
         return oz, ov
 
     if len(chunks) == 1:
@@ -286,7 +299,7 @@ def simulate_batch(params: np.ndarray, kind: str, u: np.ndarray, dt: float, x0: 
 
 def simulate(system, u: np.ndarray, dt: float, *, z0: float | None = None, v0: float = 0.0,
              input_kind: str = "base_acc", substeps: int = DEFAULT_SUBSTEPS,
-             z_limit: float = DEFAULT_Z_LIMIT) -> SimulationResult:
+             z_limit: float = DEFAULT_Z_LIMIT, v_limit: float = DEFAULT_V_LIMIT) -> SimulationResult:
     """Simulate one ``Model`` or ``Device`` under the sampled input ``u`` (N,), interval ``dt`` [s].
 
     The initial state defaults to rest at the positive well. Returns z and z_dot of shape (N,)
@@ -295,4 +308,5 @@ def simulate(system, u: np.ndarray, dt: float, *, z0: float | None = None, v0: f
     if z0 is None:
         z0 = system.equilibria().z_plus
     return simulate_batch(system.kernel_params(), system.kind, u, dt, np.array([z0, v0]),
-                          input_kind=input_kind, substeps=substeps, store_velocity=True, z_limit=z_limit)
+                          input_kind=input_kind, substeps=substeps, store_velocity=True, z_limit=z_limit,
+                          v_limit=v_limit)

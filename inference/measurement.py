@@ -1,0 +1,289 @@
+"""Measurement files of the contract (``shared/docs/contract.md``): CSV, NPZ and MAT.
+
+A measurement is one uniformly sampled record with exactly one input column (``base_acc`` [m/s^2]
+or ``force`` [N]), the output ``z`` [m], and a time base (``t`` [s], or ``fs`` [Hz] from the
+metadata or the caller). Foreign files are read through a column map (``force=V1,z=V2``; an entry
+may scale, ``base_acc=X1*9.81``). Every problem raises ``MeasurementError`` with one line naming the
+file, the column or row, and what is wrong. Input files are only read.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import re
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+INPUTS = ("base_acc", "force")
+OPTIONAL = ("z_dot", "y", "base_disp")
+KNOWN = ("t", *INPUTS, "z", *OPTIONAL)
+
+
+class MeasurementError(ValueError):
+    """Bad measurement input; the message is one line naming the file and the problem."""
+
+
+@dataclass(frozen=True)
+class Measurement:
+    """One uniformly sampled record (SI units).
+
+    Attributes
+    ----------
+    fs : sampling rate [Hz]
+    input_name : ``"base_acc"`` or ``"force"``
+    u : the input column, (N,)
+    z : relative displacement [m], (N,)
+    z_dot, y, base_disp : optional columns, (N,) or None
+    mass : moving mass [kg] from the metadata or the caller, or None (mass-normalised)
+    meta : the file's metadata (``# key: value`` lines) as strings
+    source : where it came from (for messages)
+    t0 : time of the first sample [s]
+    """
+
+    fs: float
+    input_name: str
+    u: np.ndarray
+    z: np.ndarray
+    z_dot: np.ndarray | None = None
+    y: np.ndarray | None = None
+    base_disp: np.ndarray | None = None
+    mass: float | None = None
+    meta: dict[str, str] = field(default_factory=dict)
+    source: str = "<memory>"
+    t0: float = 0.0
+
+    @property
+    def n(self) -> int:
+        return self.z.size
+
+    @property
+    def dt(self) -> float:
+        return 1.0 / self.fs
+
+    @property
+    def t(self) -> np.ndarray:
+        return self.t0 + np.arange(self.n) / self.fs
+
+    @property
+    def duration(self) -> float:
+        return self.n / self.fs
+
+    def segment(self, start: int, stop: int) -> "Measurement":
+        """Samples [start, stop) as a new measurement (time base kept)."""
+        sl = slice(start, stop)
+        opt = {k: (None if getattr(self, k) is None else getattr(self, k)[sl]) for k in OPTIONAL}
+        return replace(self, u=self.u[sl], z=self.z[sl], t0=self.t0 + start / self.fs, **opt)
+
+    def require(self, n_min: int, what: str) -> None:
+        """Raise ``MeasurementError`` unless the record has at least ``n_min`` samples for ``what``."""
+        if self.n < n_min:
+            raise MeasurementError(f"{self.source}: too few samples for {what}: {self.n} "
+                                   f"({self.duration:.3g} s), need at least {n_min}")
+
+    def with_mass(self, mass: float | None) -> "Measurement":
+        """The same record with the mass given by the caller (overrides the metadata)."""
+        if mass is None:
+            return self
+        if not (mass > 0 and math.isfinite(mass)):
+            raise MeasurementError(f"{self.source}: mass must be positive, got {mass}")
+        return replace(self, mass=float(mass))
+
+
+_MAP_ENTRY = re.compile(r"^\s*(\w+)\s*=\s*([^*]+?)\s*(?:\*\s*([-+0-9.eE]+))?\s*$")
+
+
+def parse_column_map(text: str | None) -> dict[str, tuple[str, float]]:
+    """Parse ``name=SOURCE[*scale],...`` into ``{name: (SOURCE, scale)}``."""
+    if not text:
+        return {}
+    out: dict[str, tuple[str, float]] = {}
+    for entry in text.split(","):
+        m = _MAP_ENTRY.match(entry)
+        if not m:
+            raise MeasurementError(f"column map entry {entry!r} is not of the form name=COLUMN or name=COLUMN*scale")
+        name, src, scale = m.group(1), m.group(2).strip().strip('"'), m.group(3)
+        if name not in KNOWN:
+            raise MeasurementError(f"column map names {name!r}, which is not a measurement column "
+                                   f"({', '.join(KNOWN)})")
+        try:
+            factor = 1.0 if scale is None else float(scale)
+        except ValueError:
+            raise MeasurementError(f"column map entry {entry!r}: scale {scale!r} is not a number") from None
+        out[name] = (src, factor)
+    return out
+
+
+def _read_csv(path: Path) -> tuple[dict[str, np.ndarray], dict[str, str]]:
+    try:
+        lines = path.read_text().splitlines()
+    except UnicodeDecodeError:
+        raise MeasurementError(f"{path}: unreadable file (not text; a CSV is expected)") from None
+    meta: dict[str, str] = {}
+    i = 0
+    while i < len(lines) and (lines[i].startswith("#") or not lines[i].strip()):
+        if ":" in lines[i]:
+            k, v = lines[i][1:].split(":", 1)
+            meta[k.strip()] = v.strip()
+        i += 1
+    if i >= len(lines):
+        raise MeasurementError(f"{path}: no header line (and no data)")
+    names = [c.strip().strip('"').strip() for c in lines[i].split(",")]
+    header_line = i + 1
+    body = lines[i + 1:]
+    while body and not body[-1].strip():
+        body.pop()
+    if not body:
+        raise MeasurementError(f"{path}: no data rows after the header")
+    use = [j for j, c in enumerate(names) if c]  # trailing commas make unnamed empty columns
+    try:
+        data = np.loadtxt(body, delimiter=",", usecols=use, ndmin=2, dtype=float)
+    except ValueError:
+        for r, line in enumerate(body):
+            parts = line.split(",")
+            try:
+                [float(parts[j]) for j in use]
+            except (ValueError, IndexError):
+                raise MeasurementError(f"{path}: row {r + 1} (line {header_line + r + 1}) is not numeric "
+                                       f"in every column: {line[:60]!r}") from None
+        raise MeasurementError(f"{path}: rows are not all numeric") from None
+    return {names[j]: data[:, k] for k, j in enumerate(use)}, meta
+
+
+def _read_npz(path: Path) -> tuple[dict[str, np.ndarray], dict[str, str]]:
+    with np.load(path, allow_pickle=False) as f:
+        arrays = {k: np.asarray(f[k]) for k in f.files}
+    meta: dict[str, str] = {}
+    if "meta" in arrays:
+        try:
+            meta = {k: str(v) for k, v in json.loads(str(arrays.pop("meta"))).items()}
+        except (ValueError, AttributeError):
+            raise MeasurementError(f"{path}: the 'meta' entry is not a JSON object") from None
+    if "fs" in arrays and arrays["fs"].size == 1:
+        meta.setdefault("fs", str(float(arrays.pop("fs"))))
+    return {k: v.ravel().astype(float) for k, v in arrays.items() if v.ndim >= 1 and v.size > 1}, meta
+
+
+def _read_mat(path: Path) -> tuple[dict[str, np.ndarray], dict[str, str]]:
+    from scipy.io import loadmat
+
+    try:
+        raw = loadmat(path)
+    except NotImplementedError:
+        raise MeasurementError(f"{path}: MATLAB v7.3 (HDF5) files are not supported; save with -v7") from None
+    meta: dict[str, str] = {}
+    cols: dict[str, np.ndarray] = {}
+    for k, v in raw.items():
+        if k.startswith("__") or not isinstance(v, np.ndarray) or v.dtype.kind not in "fiu":
+            continue
+        if v.size == 1:
+            meta[k] = str(float(v.ravel()[0]))
+        elif min(v.shape) == 1:
+            cols[k] = v.ravel().astype(float)
+    return cols, meta
+
+
+READERS = {".csv": _read_csv, ".txt": _read_csv, ".npz": _read_npz, ".mat": _read_mat}
+
+
+def load(path: str | Path, columns: str | dict | None = None, fs: float | None = None,
+         mass: float | None = None) -> Measurement:
+    """Read a measurement file.
+
+    Parameters
+    ----------
+    path : a .csv, .npz or .mat file
+    columns : column map (``"force=V1,z=V2"`` or its parsed dict) for foreign files
+    fs : sampling rate [Hz], for files without ``t`` (overrides the metadata's ``fs``)
+    mass : moving mass [kg] (overrides the metadata's ``mass``)
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise MeasurementError(f"{path}: no such file")
+    reader = READERS.get(path.suffix.lower())
+    if reader is None:
+        raise MeasurementError(f"{path}: unknown file type {path.suffix!r} (use .csv, .npz or .mat)")
+    try:
+        raw, meta = reader(path)
+    except MeasurementError:
+        raise
+    except Exception as exc:  # any parser failure is an unreadable file, said in one line
+        raise MeasurementError(f"{path}: unreadable file ({type(exc).__name__}: {exc})".splitlines()[0]) from None
+    cmap = parse_column_map(columns) if isinstance(columns, (str, type(None))) else dict(columns)
+    cols: dict[str, np.ndarray] = {}
+    if cmap:
+        for name, (src, scale) in cmap.items():
+            if src not in raw:
+                raise MeasurementError(f"{path}: column map refers to {src!r}, which is not in the file "
+                                       f"(columns: {', '.join(raw) or 'none'})")
+            cols[name] = raw[src] * scale
+        for name in KNOWN:  # unmapped contract columns present in the file still count
+            if name in raw and name not in cols and all(src != name for src, _ in cmap.values()):
+                cols[name] = raw[name]
+    else:
+        cols = {k: v for k, v in raw.items() if k in KNOWN}
+    inputs = [k for k in INPUTS if k in cols]
+    if len(inputs) != 1:
+        what = "no input column" if not inputs else "two input columns"
+        raise MeasurementError(f"{path}: {what}; exactly one of base_acc, force is needed "
+                               f"(columns: {', '.join(raw) or 'none'}; map foreign names with --columns)")
+    if "z" not in cols:
+        raise MeasurementError(f"{path}: missing column z (columns: {', '.join(raw) or 'none'}; "
+                               "map foreign names with --columns)")
+    n = cols["z"].size
+    for k, v in cols.items():
+        if v.size != n:
+            raise MeasurementError(f"{path}: column {k} has {v.size} samples, z has {n}")
+        bad = np.flatnonzero(~np.isfinite(v))
+        if bad.size:
+            raise MeasurementError(f"{path}: column {k} is NaN or inf at row {bad[0] + 1}")
+    fs_meta = meta.get("fs")
+    if fs is None and fs_meta is not None:
+        try:
+            fs = float(fs_meta)
+        except ValueError:
+            raise MeasurementError(f"{path}: metadata fs = {fs_meta!r} is not a number") from None
+    t0 = 0.0
+    if "t" in cols:
+        t = cols["t"]
+        if n < 2:
+            raise MeasurementError(f"{path}: too few samples ({n}) to define a sampling rate")
+        d = np.diff(t)
+        if np.any(d <= 0):
+            r = int(np.flatnonzero(d <= 0)[0]) + 2
+            raise MeasurementError(f"{path}: column t is not increasing at row {r}")
+        dt = (t[-1] - t[0]) / (n - 1)
+        dev = np.abs(d - dt)
+        if np.any(dev > 1e-3 * dt):
+            r = int(np.argmax(dev > 1e-3 * dt)) + 2
+            raise MeasurementError(f"{path}: column t is not uniformly sampled at row {r} "
+                                   f"(step {d[r - 2]:.6g} s, mean {dt:.6g} s)")
+        if fs is not None and abs(fs * dt - 1) > 1e-3:
+            raise MeasurementError(f"{path}: fs = {fs:g} Hz disagrees with column t (1/dt = {1 / dt:.6g} Hz)")
+        fs, t0 = 1.0 / dt, float(t[0])
+    if fs is None:
+        raise MeasurementError(f"{path}: no time base: give a column t, '# fs: ...' metadata or --fs")
+    if not (fs > 0 and math.isfinite(fs)):
+        raise MeasurementError(f"{path}: sampling rate must be positive, got {fs}")
+    if mass is None and "mass" in meta:
+        try:
+            mass = float(meta["mass"])
+        except ValueError:
+            raise MeasurementError(f"{path}: metadata mass = {meta['mass']!r} is not a number") from None
+    rec = Measurement(fs=float(fs), input_name=inputs[0], u=cols[inputs[0]], z=cols["z"],
+                      z_dot=cols.get("z_dot"), y=cols.get("y"), base_disp=cols.get("base_disp"),
+                      meta=meta, source=str(path), t0=t0)
+    return rec.with_mass(mass)
+
+
+def from_arrays(u: np.ndarray, z: np.ndarray, fs: float, input_name: str = "base_acc", **kw: Any) -> Measurement:
+    """Build a measurement in memory (validated like a file)."""
+    if input_name not in INPUTS:
+        raise MeasurementError(f"input must be one of {INPUTS}, got {input_name!r}")
+    u, z = np.asarray(u, float), np.asarray(z, float)
+    if u.shape != z.shape or u.ndim != 1:
+        raise MeasurementError("input and z must be 1-D arrays of the same length")
+    return Measurement(fs=float(fs), input_name=input_name, u=u, z=z, **kw)

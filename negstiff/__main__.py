@@ -1,0 +1,5 @@
+import sys
+
+from negstiff.cli import main
+
+sys.exit(main())

@@ -1,0 +1,260 @@
+"""The ``negstiff`` command line: a thin shell over ``negstiff.models``, ``negstiff.inference`` and
+``negstiff.experiments`` (``shared/docs/contract.md`` is its specification).
+
+Exit codes: 0 success, 2 bad input (one line on stderr, no output written).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+from typing import Any, Sequence
+
+import numpy as np
+
+EPILOG_RIG = """examples:
+  negstiff rig random -o rec.csv --seed 1            300 s cross-well random record of the as-built device
+  negstiff rig random --model m.json -o rec.csv      ... of a polynomial model instead (coefficients known exactly)
+  negstiff rig random --effect coulomb_friction=0.05 -o rec.csv   with a hidden extra effect
+  negstiff rig harmonic --freq 9 --amplitude 15 -o h.csv          steady-state harmonic response
+  negstiff rig campaign --amplitudes 4:30:0.5 --start both --direction both -o campaign/
+Every record is written with <name>.truth.json beside it (the truth behind the record)."""
+
+
+class InputError(Exception):
+    """Bad input found by the CLI itself (exit 2)."""
+
+
+def _bad_input_types() -> tuple[type[BaseException], ...]:
+    from negstiff.inference.measurement import MeasurementError
+    from negstiff.models.rig import RigError
+
+    return (InputError, MeasurementError, RigError, ValueError, FileNotFoundError, json.JSONDecodeError)
+
+
+def _progress(args) -> bool:
+    return not getattr(args, "quiet", False)
+
+
+def _parse_effects(items: Sequence[str] | None) -> dict[str, Any]:
+    """``NAME=VALUE`` (``end_stop=k:2e4,z:0.035``) into an extra-effects mapping."""
+    out: dict[str, Any] = {}
+    for item in items or []:
+        if "=" not in item:
+            raise InputError(f"--effect {item!r}: expected NAME=VALUE (e.g. coulomb_friction=0.05)")
+        name, value = item.split("=", 1)
+        try:
+            if ":" in value:
+                out[name] = {k: float(v) for k, v in (kv.split(":", 1) for kv in value.split(","))}
+            else:
+                out[name] = float(value)
+        except ValueError:
+            raise InputError(f"--effect {item!r}: the value is not a number (end_stop takes k:N/m,z:m)") from None
+    return out
+
+
+def _parse_amplitudes(text: str) -> list[float]:
+    """``4:30:0.5`` (start:stop:step, stop included) or ``5,10,15``."""
+    try:
+        if ":" in text:
+            a, b, s = (float(x) for x in text.split(":"))
+            if s <= 0 or b < a:
+                raise ValueError
+            return list(np.round(np.arange(a, b + s / 2, s), 10))
+        return [float(x) for x in text.split(",")]
+    except ValueError:
+        raise InputError(f"--amplitudes {text!r}: use start:stop:step (e.g. 4:30:0.5) or a list 5,10,15") from None
+
+
+def load_system(path: str | Path):
+    """A model JSON (polynomial, contract fields) or a device JSON (geometry fields E, alpha_deg, ...)."""
+    from negstiff.models import Device, Model
+
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(f"{path}: no such file")
+    try:
+        d = json.loads(path.read_text())
+    except json.JSONDecodeError as exc:
+        raise InputError(f"{path}: not valid JSON ({exc.msg} at line {exc.lineno})") from None
+    if isinstance(d, dict) and isinstance(d.get("model"), dict):  # an identify result holds a model
+        d = d["model"]
+    if not isinstance(d, dict):
+        raise InputError(f"{path}: a model file is a JSON object")
+    try:
+        return Device.from_dict(d) if "E" in d else Model.from_dict(d)
+    except (KeyError, TypeError, ValueError) as exc:
+        raise InputError(f"{path}: {exc}") from None
+
+
+def _make_rig(args):
+    from negstiff.models.device import AS_BUILT
+    from negstiff.models.rig import Rig, Sensors
+
+    system = load_system(args.model) if args.model else AS_BUILT
+    sensors = Sensors.noiseless() if args.noise_free else Sensors()
+    return Rig(system, effects=_parse_effects(args.effect), sensors=sensors, fs=args.fs, seed=args.seed)
+
+
+def cmd_rig(args) -> int:
+    rig = _make_rig(args)
+    out = Path(args.out)
+    if args.mode == "random":
+        rec = rig.random(duration=args.duration, rms=args.rms, band=tuple(args.band))
+        rec.write(out)
+        _say(args, f"wrote {out} ({rec.columns['z'].size} samples at {rig.fs:g} Hz) and its truth")
+    elif args.mode == "harmonic":
+        rec = rig.harmonic(args.freq, args.amplitude, args.start, args.settle_periods, args.periods)
+        rec.write(out)
+        _say(args, f"wrote {out} ({args.periods} periods at {args.freq:g} Hz, {args.amplitude:g} m/s^2) and its truth")
+    else:
+        write_campaign(rig, args)
+    return 0
+
+
+def write_campaign(rig, args) -> None:
+    """Stepped sweeps up and/or down from either well, one batched run, written as one folder."""
+    from negstiff.files import atomic_dir
+
+    amps = _parse_amplitudes(args.amplitudes)
+    starts = ["plus", "minus"] if args.start == "both" else [args.start]
+    dirs = ["up", "down"] if args.direction == "both" else [args.direction]
+    plans = [(s, d) for s in starts for d in dirs]
+    lists = [amps if d == "up" else amps[::-1] for _, d in plans]
+    _say(args, f"campaign: {len(plans)} sweep(s) x {len(amps)} amplitudes at {args.freq:g} Hz, one batched run")
+    sweeps = rig.sweeps(args.freq, lists, [s for s, _ in plans], args.settle_periods, args.periods)
+    index = []
+    with atomic_dir(args.out) as tmp:
+        for (start, direction), recs in zip(plans, sweeps):
+            for rec in recs:
+                amp = rec.truth["excitation"]["amplitude_m_s2"]
+                name = f"{start}_{direction}_{rec.truth['excitation']['step']:03d}_{amp:g}.csv"
+                rec.write(tmp / name)
+                index.append({"file": name, "start_well": start, "direction": direction,
+                              "amplitude_m_s2": amp, "forcing_hz": args.freq})
+        (tmp / "index.json").write_text(json.dumps({"records": index}, indent=1) + "\n")
+    _say(args, f"wrote {len(index)} records to {args.out}/ (index.json lists them)")
+
+
+def initial_state_from_record(z: np.ndarray, fs: float) -> tuple[float, float]:
+    """Initial [z, z_dot] from the first samples of a measured z: a quadratic fitted to the first
+    9 samples (noise-robust slope), evaluated at t = 0."""
+    k = min(9, z.size)
+    t = np.arange(k) / fs
+    c = np.polyfit(t, z[:k], 2 if k >= 3 else 1)
+    return float(np.polyval(c, 0.0)), float(np.polyval(np.polyder(c), 0.0))
+
+
+def cmd_simulate(args) -> int:
+    from negstiff.files import atomic_path
+    from negstiff.inference.measurement import load
+    from negstiff.models import simulate
+
+    system = load_system(args.model)
+    rec = load(args.input, columns=args.columns, fs=args.fs)
+    rec.require(2, "a simulation")
+    z0, v0 = (initial_state_from_record(rec.z, rec.fs) if rec.z is not None else (None, 0.0))
+    if args.z0 is not None:
+        z0 = args.z0
+    if args.v0 is not None:
+        v0 = args.v0
+    res = simulate(system, rec.u, rec.dt, z0=z0, v0=v0, input_kind=rec.input_name, substeps=args.substeps)
+    if res.diverged[0]:
+        raise InputError(f"simulation of {args.model} under {args.input} failed: {res.describe_failures()}")
+    data = np.column_stack([rec.t, rec.u, res.z[0], res.z_dot[0]])
+    with atomic_path(args.out) as tmp:
+        np.savetxt(tmp, data, delimiter=",", fmt="%.10g", header=f"t,{rec.input_name},z,z_dot", comments="")
+    _say(args, f"wrote {args.out} ({rec.n} samples)")
+    return 0
+
+
+def cmd_reproduce(args) -> int:
+    from negstiff.experiments.reproduce import reproduce
+
+    reproduce(Path(args.out), fast=args.fast, seed=args.seed, progress=_progress(args))
+    return 0
+
+
+def _say(args, text: str) -> None:
+    if _progress(args):
+        print(text, file=sys.stderr)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    common = argparse.ArgumentParser(add_help=False)
+    common.add_argument("--seed", type=int, default=0, help="seed of every random draw (same seed, same numbers)")
+    common.add_argument("--quiet", action="store_true", help="no progress on stderr")
+
+    p = argparse.ArgumentParser(
+        prog="negstiff",
+        description="Identify, update and quantify the uncertainty of nonlinear (bistable, negative-stiffness) "
+                    "oscillators from shaker-table records. Units are SI; see 'negstiff COMMAND --help'.")
+    from negstiff import __version__
+    p.add_argument("--version", action="version", version=f"negstiff {__version__}")
+    sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
+
+    rig = sub.add_parser("rig", parents=[common], help="virtual test rig: records as the seed's laboratory measures them",
+                         description="Virtual shaking table with the as-built device (exact geometry) or a model on it. "
+                                     "Records: t, base_acc (accelerometer), y (laser), base_disp (double-integrated), "
+                                     "z = y - base_disp.",
+                         epilog=EPILOG_RIG, formatter_class=argparse.RawDescriptionHelpFormatter)
+    rig.add_argument("mode", choices=["random", "harmonic", "campaign"])
+    rig.add_argument("-o", "--out", required=True, help="record file (.csv or .npz); for campaign, a folder")
+    rig.add_argument("--model", help="drive a model JSON (polynomial truth) or device JSON instead of the as-built device")
+    rig.add_argument("--effect", action="append", metavar="NAME=VALUE",
+                     help="hidden extra effect (coulomb_friction, quadratic_damping, cubic_damping, quartic_stiffness, "
+                          "quintic_stiffness, end_stop=k:N/m,z:m, ...); repeatable")
+    rig.add_argument("--fs", type=float, default=512.0, help="sampling rate [Hz] (default 512)")
+    rig.add_argument("--noise-free", action="store_true", help="perfect sensors (no noise, no bias)")
+    g = rig.add_argument_group("random")
+    g.add_argument("--duration", type=float, default=300.0, help="record length [s] (default 300)")
+    g.add_argument("--rms", type=float, default=14.0, help="table acceleration rms [m/s^2] (default 14: cross-well)")
+    g.add_argument("--band", type=float, nargs=2, default=[2.0, 40.0], metavar=("LO", "HI"),
+                   help="excitation band [Hz] (default 2 40)")
+    g = rig.add_argument_group("harmonic and campaign")
+    g.add_argument("--freq", type=float, default=9.0, help="forcing frequency [Hz] (default 9)")
+    g.add_argument("--amplitude", type=float, default=5.0, help="table acceleration amplitude [m/s^2] (harmonic)")
+    g.add_argument("--amplitudes", default="4:30:0.5", help="campaign amplitudes start:stop:step or a list (default 4:30:0.5)")
+    g.add_argument("--start", default="plus", choices=["plus", "minus", "both"], help="starting well (default plus)")
+    g.add_argument("--direction", default="up", choices=["up", "down", "both"], help="campaign sweep direction")
+    g.add_argument("--settle-periods", type=int, default=100, help="forcing periods discarded per step (default 100)")
+    g.add_argument("--periods", type=int, default=100, help="forcing periods recorded per step (default 100)")
+    rig.set_defaults(func=cmd_rig)
+
+    sim = sub.add_parser("simulate", parents=[common], help="integrate a model under a record's input",
+                         description="Integrate MODEL.json (contract model file, or a device JSON) under INPUT's input "
+                                     "column. Initial state: from INPUT's first z samples if present, else rest at z_plus.")
+    sim.add_argument("model", help="model JSON")
+    sim.add_argument("input", help="measurement file whose input column drives the model")
+    sim.add_argument("-o", "--out", required=True, help="output CSV: t,<input>,z,z_dot")
+    sim.add_argument("--z0", type=float, help="initial z [m]")
+    sim.add_argument("--v0", type=float, help="initial z_dot [m/s]")
+    sim.add_argument("--columns", help="column map for foreign files, e.g. force=V1,z=V2 (a map entry may scale: X*9.81)")
+    sim.add_argument("--fs", type=float, help="sampling rate [Hz] for files without t")
+    sim.add_argument("--substeps", type=int, default=2, help="RK4 steps per sample interval (default 2)")
+    sim.set_defaults(func=cmd_simulate)
+
+    rep = sub.add_parser("reproduce", parents=[common], help="the whole study, end to end, as one report",
+                         description="Run the seed paper's study on the virtual rig and write index.md, index.html and "
+                                     "results.json.")
+    rep.add_argument("-o", "--out", default="reports/paper", help="report folder (default reports/paper)")
+    rep.add_argument("--fast", action="store_true", help="a quick reduced run (minutes)")
+    rep.set_defaults(func=cmd_reproduce)
+    return p
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return args.func(args)
+    except _bad_input_types() as exc:
+        msg = " ".join(str(exc).split()) or type(exc).__name__
+        print(f"negstiff {args.command}: error: {msg}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())
