@@ -188,11 +188,11 @@ class Rig:
 
     # --- excitations -------------------------------------------------------------------------
     def random(self, duration: float = 300.0, rms: float = 14.0, band: tuple[float, float] = (2.0, 40.0),
-               settle: float = 5.0) -> RigRecord:
+               settle: float = 5.0, start: str = "plus") -> RigRecord:
         """Band-limited Gaussian random base excitation (flat spectrum over ``band`` [Hz]).
 
         ``rms`` [m/s^2] of the table acceleration; the first ``settle`` seconds are discarded.
-        Starts at rest in the positive well. The default level drives the as-built device across
+        Starts at rest in the ``start`` well. The default level drives the as-built device across
         the wells a few times a minute while the true model's free run stays predictable (about 5 %
         over 12 s); above about 17 m/s^2 the crossings become chaotic and no model, not even the
         truth, can follow a long free run (see the calibration report).
@@ -210,7 +210,7 @@ class Rig:
         acc *= rms / acc.std()
         excitation = {"type": "random", "duration_s": duration, "rms_m_s2": rms, "band_hz": list(band),
                       "settle_s": settle}
-        return self._run([acc], ["plus"], [settle], [duration], excitation, sens_rng)[0]
+        return self._run([acc], [start], [settle], [duration], excitation, sens_rng)[0]
 
     def harmonic(self, freq: float = 9.0, amplitude: float = 5.0, start: str = "plus",
                  settle_periods: int = 100, record_periods: int = 100) -> RigRecord:

@@ -102,7 +102,8 @@ def cmd_rig(args) -> int:
     rig = _make_rig(args)
     out = Path(args.out)
     if args.mode == "random":
-        rec = rig.random(duration=args.duration, rms=args.rms, band=tuple(args.band))
+        rec = rig.random(duration=args.duration, rms=args.rms, band=tuple(args.band),
+                         start="plus" if args.start == "both" else args.start)
         rec.write(out)
         _say(args, f"wrote {out} ({rec.columns['z'].size} samples at {rig.fs:g} Hz) and its truth")
     elif args.mode == "harmonic":

@@ -1,0 +1,97 @@
+"""The command line of contract.md: exit codes, one-line errors, no partial outputs."""
+
+import json
+
+import numpy as np
+import pytest
+
+from negstiff.cli import main
+
+MODEL = {"m": 0.2, "k1": 426.0, "k2": -3060.0, "k3": 7.77e5, "c": 3.5, "c_nl": 1.0}
+
+
+@pytest.fixture(scope="module")
+def workdir(tmp_path_factory):
+    d = tmp_path_factory.mktemp("cli")
+    assert main(["rig", "random", "-o", str(d / "rec.csv"), "--duration", "10", "--seed", "1", "--quiet"]) == 0
+    (d / "model.json").write_text(json.dumps(MODEL))
+    return d
+
+
+def test_rig_and_simulate_write_the_contract_files(workdir):
+    out = workdir / "sim.csv"
+    assert main(["simulate", str(workdir / "model.json"), str(workdir / "rec.csv"), "-o", str(out), "--quiet"]) == 0
+    header = out.read_text().splitlines()[0]
+    assert header == "t,base_acc,z,z_dot"
+    data = np.loadtxt(out, delimiter=",", skiprows=1)
+    assert data.shape == (5120, 4) and np.all(np.isfinite(data))
+    assert (workdir / "rec.truth.json").exists()
+
+
+def test_harmonic_and_campaign(workdir):
+    assert main(["rig", "harmonic", "-o", str(workdir / "h.npz"), "--amplitude", "3", "--periods", "20",
+                 "--settle-periods", "20", "--quiet"]) == 0
+    camp = workdir / "camp"
+    assert main(["rig", "campaign", "-o", str(camp), "--amplitudes", "2,4", "--start", "both", "--direction", "both",
+                 "--periods", "8", "--settle-periods", "10", "--quiet"]) == 0
+    index = json.loads((camp / "index.json").read_text())["records"]
+    assert len(index) == 8 and all((camp / r["file"]).exists() for r in index)
+
+
+def _bad(workdir, name, text):
+    p = workdir / name
+    p.write_text(text)
+    return p
+
+
+@pytest.mark.parametrize("case", ["missing_column", "nan_row", "nonuniform_t", "nonincreasing_t", "too_few",
+                                  "unknown_map_column", "unreadable", "bad_model", "unknown_effect", "no_file"])
+def test_bad_input_exits_2_with_one_line_and_no_output(workdir, capsys, case):
+    model, rec = workdir / "model.json", workdir / "rec.csv"
+    extra = []
+    if case == "missing_column":
+        rec = _bad(workdir, "b1.csv", "t,base_acc\n0,1\n0.1,2\n")
+    elif case == "nan_row":
+        rec = _bad(workdir, "b2.csv", "t,base_acc,z\n0,1,0.02\n0.1,nan,0.02\n0.2,1,0.02\n")
+    elif case == "nonuniform_t":
+        rec = _bad(workdir, "b3.csv", "t,base_acc,z\n0,1,0.02\n0.1,1,0.02\n0.3,1,0.02\n")
+    elif case == "nonincreasing_t":
+        rec = _bad(workdir, "b4.csv", "t,base_acc,z\n0,1,0.02\n0.1,1,0.02\n0.1,1,0.02\n")
+    elif case == "too_few":
+        rec = _bad(workdir, "b5.csv", "# fs: 10\nbase_acc,z\n1,0.02\n")
+    elif case == "unknown_map_column":
+        extra = ["--columns", "base_acc=nope,z=z"]
+    elif case == "unreadable":
+        rec = workdir / "b7.csv"
+        rec.write_bytes(b"\xff\xfe\x00garbage")
+    elif case == "bad_model":
+        model = _bad(workdir, "bad_model.json", '{"m": 0.2, "k1": 1')
+    elif case == "no_file":
+        rec = workdir / "does_not_exist.csv"
+    out = workdir / f"out_{case}.csv"
+    if case == "unknown_effect":
+        args = ["rig", "random", "-o", str(out), "--duration", "2", "--effect", "warp_drive=1"]
+    else:
+        args = ["simulate", str(model), str(rec), "-o", str(out), *extra]
+    assert main(args) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "error" in err[0] and "Traceback" not in err[0]
+    assert not out.exists()
+
+
+def test_reproduce_fast_writes_a_complete_report(tmp_path):
+    out = tmp_path / "paper"
+    assert main(["reproduce", "--fast", "-o", str(out), "--quiet"]) == 0
+    for f in ("index.md", "index.html", "results.json"):
+        assert (out / f).stat().st_size > 0
+    md = (out / "index.md").read_text()
+    import re
+
+    figs = re.findall(r"\]\(([^)]+\.png)\)", md)
+    assert figs, "the report has figures"
+    for f in figs:
+        data = (out / f).read_bytes()
+        assert data[:8] == b"\x89PNG\r\n\x1a\n" and len(data) > 1000
+    assert md.count("data:image/png") == 0 and (out / "index.html").read_text().count("data:image/png") == len(figs)
+    results = json.loads((out / "results.json").read_text())
+    assert results["simulator"]["max_abs_dz_m"] < 1e-7
