@@ -1,0 +1,279 @@
+"""Nonlinear subspace identification (NSI) in the time domain, around either stable well.
+
+Marchesiello & Garibaldi (2008), MSSP 22:81-101 ("A time domain approach for identifying nonlinear
+vibrating structures by subspace methods"); the reference-position shift of the seed paper (Eqs. 5-7);
+``shared/docs/algorithms.md`` part A (a reconstruction verified numerically, followed here).
+
+The nonlinear terms act as feedback forces on the underlying-linear system (ULS). Around the
+reference z* (x = z - z*), per unit mass,
+
+    x'' + (c/m) x' + (k1~/m) x = u - sum_j (c_j/m) g_j(x, x'),   u = -b'' (base) or f/m (force)
+
+with the basis g = [x^2, x^3, x'|x'|] (seed Eq. 7 for the polynomial, the seed's damping model for
+x'|x'|) and a constant K(z*)/m that vanishes when z* is the equilibrium. Every channel is made zero
+mean, so the subspace step sees only the dynamics; the constant then follows from the time average
+of the equation of motion (mean z'' = mean z' = 0 over a long record). A constant input channel, the
+alternative of algorithms.md A.7, is poorly determined (|Im/Re| ~ 0.4 noise-free) and leaks into
+k2~ through the mean of x^2 (+12 % measured), so it is not used. The extended input
+[u, -g_1, ..., -g_J] (each channel scaled to unit std, A.2.8) goes through a generic LTI subspace
+step (``subspace``), whose
+extended FRF H_e(omega) = [H, c_1 H, ..., c_J H] gives c_j = mean over a band around resonance of
+Re(H_e,j / H_e,0) (A.4), with |Im/Re| as the quality index. The ULS's natural frequency and damping
+come from the physical pole of A_c (seed Table 1). The well z* is found from the data: first the
+modes of the displacement histogram, then the identified polynomial's own root (one more pass there).
+
+Velocity for x'|x'|: a Savitzky-Golay derivative (cubic, window ~ fs/70 samples: flat to ~1/10 of the
+sampling rate, far above the 2-40 Hz motion, and it averages the sensor noise down). The polynomial
+bases use the same Savitzky-Golay smoothed displacement (errors-in-variables, A.8).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from scipy import signal
+
+from negstiff.models import Model, simulate
+
+from . import subspace
+from .measurement import Measurement, MeasurementError
+
+BASIS_NAMES = ("x2", "x3", "vabsv")
+"""Nonlinear basis: x^2, x^3, x'|x'| (their coefficients are k2~, k3, c_nl)."""
+
+
+class NSIError(MeasurementError):
+    """The record cannot be identified (too short, not enough excitation, no physical pole)."""
+
+
+def velocity_window(fs: float) -> int:
+    """Savitzky-Golay window [samples] for the velocity: odd, about fs/70, at least 7."""
+    w = max(7, int(round(fs / 70)))
+    return w + 1 - w % 2
+
+
+def smooth_and_differentiate(z: np.ndarray, fs: float) -> tuple[np.ndarray, np.ndarray]:
+    """Savitzky-Golay smoothed displacement and velocity (cubic fit over ``velocity_window``)."""
+    w = velocity_window(fs)
+    return (signal.savgol_filter(z, w, 3, deriv=0),
+            signal.savgol_filter(z, w, 3, deriv=1, delta=1.0 / fs))
+
+
+def well_guesses(rec: Measurement) -> tuple[float | None, float]:
+    """First guesses of the stable wells from the data: the stable roots of a cubic restoring force
+    fitted by equation error (least squares of u = z'' + a z' + b z'|z'| + K(z)/m on Savitzky-Golay
+    derivatives over a window of ~fs/25 samples). Biased by derivative noise, but good to a few
+    percent of the well spacing, which is all NSI needs: it refines each well from its own fit.
+    Returns (z_minus, z_plus) of a double well, (None, z_plus) of a single well."""
+    w = max(9, int(round(rec.fs / 25)))
+    w += 1 - w % 2
+    z = signal.savgol_filter(rec.z, w, 3)
+    v = signal.savgol_filter(rec.z, w, 3, deriv=1, delta=rec.dt)
+    a = signal.savgol_filter(rec.z, w, 3, deriv=2, delta=rec.dt)
+    lin = -rec.u if rec.input_name == "base_acc" else rec.u
+    X = np.column_stack([v, v * np.abs(v), np.ones_like(z), z, z**2, z**3])
+    theta = np.linalg.lstsq(X, lin - a, rcond=None)[0]
+    poly = theta[:1:-1]  # K/m coefficients, highest power first
+    roots = np.roots(poly)
+    real = np.sort(roots[np.abs(roots.imag) < 1e-9 * max(1.0, np.abs(roots).max())].real)
+    dpoly = np.polyder(poly)
+    stable = [r for r in real if np.polyval(dpoly, r) > 0 and z.min() <= r <= z.max()]
+    if len(stable) >= 2:
+        return float(stable[0]), float(stable[-1])
+    if len(stable) == 1:
+        return None, float(stable[0])
+    raise NSIError(f"{rec.source}: no stable equilibrium found inside the measured range of z "
+                   "(is z the relative displacement, and is the input column right?)")
+
+
+@dataclass(frozen=True)
+class WellFit:
+    """NSI around one reference well (per unit mass unless ``mass`` scales it later)."""
+
+    z_ref: float
+    f_hz: float
+    zeta: float
+    coefficients: dict[str, float]
+    """Per unit mass, shifted frame at z_ref: k1_tilde, k2_tilde, k3, c, c_nl; and the last pass's
+    constant (K/m at its reference) and shift to the root, which show how well z_ref converged."""
+    quality: dict[str, float]
+    """|Im/Re| of each nonlinear coefficient over the averaging band."""
+    band_hz: tuple[float, float]
+    singular_values: list[float]
+    frf: dict[str, Any]
+
+
+def physical_pole(ss: subspace.StateSpace) -> complex:
+    """The pole of the ULS: among underdamped stable poles (0 < zeta < 0.7), the one with the
+    largest modal contribution |residue / Re(lambda)| to the linear input column (Marchesiello,
+    Fasana & Garibaldi 2016; algorithms.md A.5). For order 2 it is the only pair."""
+    lam, psi = np.linalg.eig(ss.A)
+    left = np.linalg.inv(psi)
+    best, score = None, -1.0
+    for r, lr in enumerate(lam):
+        if lr.imag <= 0:
+            continue
+        zeta = -lr.real / abs(lr)
+        if not 0 < zeta < 0.7:
+            continue
+        res = abs((ss.C @ psi[:, r])[0] * (left[r] @ ss.B[:, 0]))
+        s = res / abs(lr.real)
+        if s > score:
+            best, score = lr, s
+    if best is None:
+        raise NSIError("no stable underdamped pole was identified (no physical mode in the data)")
+    return complex(best)
+
+
+class NSI:
+    """Time-domain NSI around both wells (scikit-learn style: configure, ``fit``, read ``*_``).
+
+    Parameters
+    ----------
+    order : state dimension of the ULS model (2 for a single-degree-of-freedom device)
+    block_rows : block rows i of the Hankel matrices
+    band : (lo, hi) as fractions of the well frequency over which Re(c_j) is averaged
+    validation_fraction : held-out tail for the free-run validation (contract: last 20 %)
+    passes : identification passes per well (the second runs at the refined z*)
+    """
+
+    def __init__(self, order: int = 2, block_rows: int = 20, band: tuple[float, float] = (0.6, 1.6),
+                 validation_fraction: float = 0.2, passes: int = 2):
+        self.order = order
+        self.block_rows = block_rows
+        self.band = band
+        self.validation_fraction = validation_fraction
+        self.passes = passes
+
+    # --- one well ----------------------------------------------------------------------------
+    def _extended_input(self, rec: Measurement, zs: np.ndarray, v: np.ndarray, z_ref: float):
+        x = zs - z_ref
+        lin = -rec.u if rec.input_name == "base_acc" else rec.u
+        chans = np.column_stack([lin, -x**2, -x**3, -v * np.abs(v)])
+        means = chans.mean(axis=0)
+        scale = chans.std(axis=0)
+        if np.any(scale == 0):
+            raise NSIError(f"{rec.source}: not enough excitation: the input or a basis function is constant")
+        w = (chans - means) / scale
+        if np.linalg.cond(np.corrcoef(w.T)) > 1e8:
+            raise NSIError(f"{rec.source}: not enough excitation: the basis functions are collinear (the record "
+                           "does not reach the nonlinear range)")
+        return x, w, scale, means
+
+    def fit_well(self, rec: Measurement, zs: np.ndarray, v: np.ndarray, z_ref: float) -> WellFit:
+        """Identify the ULS and the nonlinear coefficients around ``z_ref``.
+
+        Each pass identifies about the current reference z_g, then moves the reference to the
+        identified restoring force's stable root r nearest z_g. The reported ULS (f, zeta) is the
+        last pass's pole; the shifted coefficients are the last pass's cubic re-expanded exactly at
+        r (seed Eq. 7), so that K(z*) = 0 there.
+        """
+        for _ in range(self.passes):
+            x, w, scale, means = self._extended_input(rec, zs, v, z_ref)
+            y = x - x.mean()
+            ys = y.std()
+            try:
+                ss = subspace.identify(w, (y / ys)[:, None], rec.dt, self.order, self.block_rows)
+            except (ValueError, np.linalg.LinAlgError) as exc:
+                raise NSIError(f"{rec.source}: subspace step failed ({exc})") from None
+            lam = physical_pole(ss)
+            wn, zeta = abs(lam), -lam.real / abs(lam)
+            fn = wn / (2 * math.pi)
+            band = (self.band[0] * fn, self.band[1] * fn)
+            freqs = np.linspace(band[0], band[1], 64)
+            he = ss.frf(freqs)[:, 0, :]
+            ratio = he[:, 1:] / he[:, :1] * (scale[0] / scale[1:])
+            coef = ratio.real.mean(axis=0)
+            quality = np.abs(ratio.imag).mean(axis=0) / np.maximum(np.abs(coef), 1e-300)
+            c = dict(zip(BASIS_NAMES, coef))
+            # time-averaged equation of motion (channels hold -g_j): the constant K(z_g)/m
+            c["const"] = (means[0] - wn**2 * x.mean() - 2 * zeta * wn * v.mean()
+                          + sum(c[k] * means[j + 1] for j, k in enumerate(BASIS_NAMES)))
+            # restoring force about z_g, per unit mass: const + wn^2 x + c2 x^2 + c3 x^3
+            roots = np.roots([c["x3"], c["x2"], wn**2, c["const"]])
+            real = roots[np.abs(roots.imag) < 1e-9 * max(1.0, np.abs(roots).max())].real
+            stable = [r for r in real if 3 * c["x3"] * r**2 + 2 * c["x2"] * r + wn**2 > 0]
+            if not stable:
+                raise NSIError(f"{rec.source}: the identified restoring force has no stable equilibrium near "
+                               f"z = {z_ref * 1e3:.2f} mm")
+            r = min(stable, key=abs)
+            z_ref = z_ref + r
+        coefficients = {"k1_tilde": wn**2 + 2 * c["x2"] * r + 3 * c["x3"] * r**2, "k2_tilde": c["x2"] + 3 * c["x3"] * r,
+                        "k3": c["x3"], "c": 2 * zeta * wn, "c_nl": c["vabsv"], "const_residual": c["const"],
+                        "shift_last_pass": r}
+        h0 = he[:, 0] * ys / scale[0]
+        return WellFit(z_ref, fn, zeta, coefficients, dict(zip(BASIS_NAMES, quality)), band,
+                       list(ss.singular_values[:8]), {"f_hz": freqs, "H": h0, "ratio": ratio})
+
+    def fit(self, rec: Measurement) -> "NSI":
+        """Identify from ``rec``: both wells (or the single well), z-frame model, validation."""
+        rec.require(max(2000, 40 * self.block_rows), "NSI")
+        n_id = int(round(rec.n * (1 - self.validation_fraction)))
+        ident = rec.segment(0, n_id)
+        zs, v = smooth_and_differentiate(ident.z, ident.fs)
+        z_minus, z_plus = well_guesses(ident)
+        wells = {"plus": self.fit_well(ident, zs, v, z_plus)}
+        if z_minus is not None:
+            wells["minus"] = self.fit_well(ident, zs, v, z_minus)
+        self.wells_ = wells
+        mass = rec.mass if rec.mass is not None else 1.0
+        self.mass_normalised_ = rec.mass is None
+        models = [self._z_frame(w, mass) for w in wells.values()]
+        mean = {k: float(np.mean([getattr(mm, k) for mm in models])) for k in ("k1", "k2", "k3", "c", "c_nl", "k0")}
+        self.model_ = Model(m=mass, **mean)
+        self.models_by_well_ = {name: mm for name, mm in zip(wells, models)}
+        self.equilibria_ = self.model_.equilibria()
+        self.modal_ = {name: {"f_hz": w.f_hz, "zeta": w.zeta} for name, w in wells.items()}
+        self.modal_.setdefault("minus", {"f_hz": None, "zeta": None})
+        self.g_estimate_ = self.model_.k0 / mass if rec.input_name == "base_acc" else None
+        self.validation_ = validate(self.model_, rec, n_id)
+        self.settings_ = {"order": self.order, "block_rows": self.block_rows, "band_fraction": list(self.band),
+                          "passes": self.passes, "velocity": f"Savitzky-Golay, cubic, {velocity_window(rec.fs)} samples",
+                          "basis": list(BASIS_NAMES), "identification_samples": n_id}
+        return self
+
+    @staticmethod
+    def _z_frame(w: WellFit, mass: float) -> Model:
+        """Back-transform a well's shifted coefficients to the z frame (seed Eq. 7), scaled by mass."""
+        c = w.coefficients
+        m = Model.from_shifted(w.z_ref, c["k1_tilde"] * mass, c["k2_tilde"] * mass, c["k3"] * mass, m=mass,
+                               c=c["c"] * mass, c_nl=c["c_nl"] * mass)
+        return m
+
+    def result(self) -> dict[str, Any]:
+        """The contract's identify JSON (plus NSI details)."""
+        return {"method": "nsi", "model": self.model_.to_dict(), "mass_normalised": self.mass_normalised_,
+                "equilibria": self.equilibria_.as_dict(), "modal": self.modal_,
+                "validation": {k: v for k, v in self.validation_.items() if not isinstance(v, np.ndarray)},
+                "wells": {name: {"z_ref": w.z_ref, "f_hz": w.f_hz, "zeta": w.zeta, "coefficients": w.coefficients,
+                                 "quality_im_over_re": w.quality, "band_hz": list(w.band_hz),
+                                 "singular_values": w.singular_values,
+                                 "z_frame_model": self.models_by_well_[name].to_dict()}
+                          for name, w in self.wells_.items()},
+                "g_estimate": self.g_estimate_, "settings": self.settings_}
+
+
+def validate(model: Model, rec: Measurement, start: int) -> dict[str, Any]:
+    """Free-run simulation of ``model`` with the measured input over samples [start, N), from the
+    measured state at ``start`` (Savitzky-Golay z, z'); contract: rms_percent = 100 rms(dz)/rms(z)."""
+    tail = rec.segment(start, rec.n)
+    if tail.n < 10:
+        raise MeasurementError(f"{rec.source}: too few samples for the validation segment ({tail.n})")
+    zs, v = smooth_and_differentiate(rec.z, rec.fs)
+    sim = simulate(model, tail.u, tail.dt, z0=float(zs[start]), v0=float(v[start]), input_kind=tail.input_name)
+    z_sim = sim.z[0]
+    out: dict[str, Any] = {"segment": [float(tail.t0), float(tail.t0 + tail.duration)],
+                           "diverged": bool(sim.diverged[0])}
+    if sim.diverged[0]:
+        out.update(rms_percent=float("inf"), residual_mean=float("nan"), residual_std=float("nan"),
+                   warning=f"free run diverged: {sim.describe_failures()}")
+        return out
+    r = z_sim - tail.z
+    out.update(rms_percent=float(100 * np.sqrt(np.mean(r**2)) / np.sqrt(np.mean(tail.z**2))),
+               residual_mean=float(r.mean()), residual_std=float(r.std()), z_sim=z_sim, z_meas=tail.z, t=tail.t)
+    return out
+
+

@@ -1,0 +1,145 @@
+"""Generic LTI subspace identification (PO-MOESP) for the NSI estimator.
+
+Van Overschee & De Moor (1996), "Subspace Identification for Linear Systems"; Verhaegen (1994),
+"Identification of the deterministic part of MIMO state space models given in innovations form from
+input-output data" (PO-MOESP). Notation of ``shared/docs/algorithms.md`` A.2:
+
+1. Block Hankel matrices of i block rows for the inputs (m channels) and outputs (l channels):
+   U_p, U_f, Y_p, Y_f; W_p = [U_p; Y_p].
+2. LQ factor of H = [U_f; W_p; Y_f] / sqrt(j), computed as the R of an economy QR of H^T, accumulated
+   over column chunks of H (memory O(chunk * rows), never the big projections; Gandino &
+   Marchesiello 2010 use the same idea). The j columns are never held at once.
+3. PO-MOESP: SVD of L32, the block of L that couples Y_f to the past after U_f is removed;
+   extended observability Gamma = U_1 S_1^(1/2).
+4. A, C from the shift invariance of Gamma; (x0, B, D) by linear least squares on the output equation
+   y_k = C A^k x0 + sum_t C A^(k-1-t) B u_t + D u_k (A.2.6b).
+5. Continuous time (A.3): A_c = logm(A)/dt, B_c = (A - I)^-1 A_c B (inverse zero-order hold).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import linalg, signal
+
+
+@dataclass(frozen=True)
+class StateSpace:
+    """A continuous-time state-space model x' = A x + B u, y = C x + D u."""
+
+    A: np.ndarray
+    B: np.ndarray
+    C: np.ndarray
+    D: np.ndarray
+    singular_values: np.ndarray
+
+    def frf(self, freqs_hz: np.ndarray) -> np.ndarray:
+        """H(omega) = D + C (i omega I - A)^-1 B, shape (F, l, m)."""
+        n = self.A.shape[0]
+        s = 2j * np.pi * np.asarray(freqs_hz)
+        out = np.empty((s.size, self.C.shape[0], self.B.shape[1]), complex)
+        for k, sk in enumerate(s):
+            out[k] = self.D + self.C @ np.linalg.solve(sk * np.eye(n) - self.A, self.B)
+        return out
+
+    def poles(self) -> np.ndarray:
+        return np.linalg.eigvals(self.A)
+
+
+def _hankel_block(x: np.ndarray, start: int, rows: int, cols: int) -> np.ndarray:
+    """Rows ``start .. start+rows-1`` of the block Hankel matrix of x (N, ch): shape (rows*ch, cols)."""
+    n_ch = x.shape[1]
+    out = np.empty((rows * n_ch, cols))
+    for r in range(rows):
+        out[r * n_ch:(r + 1) * n_ch] = x[start + r:start + r + cols].T
+    return out
+
+
+def lq_factor(u: np.ndarray, y: np.ndarray, i: int, chunk: int = 8192) -> np.ndarray:
+    """Lower-triangular L of the LQ factorisation of H = [U_f; U_p; Y_p; Y_f] / sqrt(j).
+
+    The rows of H^T are processed in chunks; R is updated by QR of [R; chunk]. Memory is
+    O(chunk * 2i(m+l)), independent of the record length squared.
+    """
+    n = u.shape[0]
+    j = n - 2 * i + 1
+    if j < 2 * i * (u.shape[1] + y.shape[1]):
+        raise ValueError(f"record too short for {i} block rows: {n} samples")
+    r = None
+    for c0 in range(0, j, chunk):
+        cols = min(chunk, j - c0)
+        blocks = [_hankel_block(u[c0:], i, i, cols), _hankel_block(u[c0:], 0, i, cols),
+                  _hankel_block(y[c0:], 0, i, cols), _hankel_block(y[c0:], i, i, cols)]
+        ht = np.vstack(blocks).T
+        stacked = ht if r is None else np.vstack([r, ht])
+        r = linalg.qr(stacked, mode="r", overwrite_a=True, check_finite=False)[0]
+        r = r[:stacked.shape[1]]
+    return r.T / np.sqrt(j)
+
+
+def po_moesp(u: np.ndarray, y: np.ndarray, i: int, order: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Discrete A, C and the singular values from PO-MOESP with ``i`` block rows."""
+    m, l_out = u.shape[1], y.shape[1]
+    L = lq_factor(u, y, i)
+    a, b = i * m, i * m + i * (m + l_out)
+    l32 = L[b:, a:b]
+    uu, s, _ = np.linalg.svd(l32, full_matrices=False)
+    if order > s.size:
+        raise ValueError(f"order {order} exceeds the {s.size} available singular values")
+    gamma = uu[:, :order] * np.sqrt(s[:order])
+    C = gamma[:l_out]
+    A = np.linalg.lstsq(gamma[:-l_out], gamma[l_out:], rcond=None)[0]
+    return A, C, s
+
+
+def estimate_bd(A: np.ndarray, C: np.ndarray, u: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(x0, B, D) by linear least squares on the output equation (algorithms.md A.2.6b)."""
+    n, m, l_out = A.shape[0], u.shape[1], y.shape[1]
+    N = u.shape[0]
+    cols = []
+    # x0 regressors: C A^k e_s
+    x = np.eye(n)
+    resp = np.empty((N, l_out, n))
+    for k in range(N):
+        resp[k] = C @ x
+        x = A @ x
+    cols += [resp[:, :, s] for s in range(n)]
+    # B regressors: response to input channel q through state s (B = e_s e_q^T), zero initial state,
+    # filtered as transfer functions (lfilter runs in C; dlsim loops in Python)
+    for q in range(m):
+        for s in range(n):
+            Bq = np.zeros((n, 1))
+            Bq[s] = 1.0
+            yy = np.empty((N, l_out))
+            for o in range(l_out):
+                num, den = signal.ss2tf(A, Bq, C[o:o + 1], np.zeros((1, 1)))
+                yy[:, o] = signal.lfilter(num[0], den, u[:, q])
+            cols.append(yy)
+    # D regressors
+    for q in range(m):
+        for o in range(l_out):
+            d = np.zeros((N, l_out))
+            d[:, o] = u[:, q]
+            cols.append(d)
+    Phi = np.stack([c.reshape(-1) for c in cols], axis=1)
+    theta = np.linalg.lstsq(Phi, y.reshape(-1), rcond=None)[0]
+    x0 = theta[:n]
+    B = theta[n:n + n * m].reshape(m, n).T
+    D = theta[n + n * m:].reshape(m, l_out).T
+    return x0, B, D
+
+
+def to_continuous(A: np.ndarray, B: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
+    """Inverse zero-order hold: A_c = logm(A)/dt, B_c = (A - I)^-1 A_c B."""
+    Ac = linalg.logm(A).real / dt
+    Bc = np.linalg.solve(A - np.eye(A.shape[0]), Ac @ B)
+    return Ac, Bc
+
+
+def identify(u: np.ndarray, y: np.ndarray, dt: float, order: int, block_rows: int) -> StateSpace:
+    """Continuous-time state space from input (N, m) and output (N, l) samples."""
+    A, C, s = po_moesp(u, y, block_rows, order)
+    _, B, D = estimate_bd(A, C, u, y)
+    Ac, Bc = to_continuous(A, B, dt)
+    return StateSpace(Ac, Bc, C, D, s)
