@@ -76,8 +76,11 @@ def build_c_rk4():
     d = Path(tempfile.mkdtemp(prefix="negstiff-bench-"))
     (d / "rk4.c").write_text(C_RK4)
     lib = d / "rk4.so"
-    subprocess.run([cc, "-O3", "-march=native", "-shared", "-fPIC", "-o", str(lib), str(d / "rk4.c"), "-lm"],
-                   check=True, capture_output=True)
+    subprocess.run(
+        [cc, "-O3", "-march=native", "-shared", "-fPIC", "-o", str(lib), str(d / "rk4.c"), "-lm"],
+        check=True,
+        capture_output=True,
+    )
     f = ctypes.CDLL(str(lib)).rk4
     dp = ctypes.POINTER(ctypes.c_double)
     f.argtypes = [dp, dp, ctypes.c_long, ctypes.c_double, ctypes.c_int, ctypes.c_double, ctypes.c_double, dp]
@@ -98,14 +101,18 @@ def solve_ivp_run(model, u, dt, z0, v0):
     def rhs(tt, x):
         w = -np.interp(tt, t, u)
         z, v = x
-        return [v, w - (((model.k3 * z + model.k2) * z - model.k1) * z + model.k0 + v * (model.c + model.c_nl * abs(v)))
-                / model.m]
+        return [
+            v,
+            w
+            - (((model.k3 * z + model.k2) * z - model.k1) * z + model.k0 + v * (model.c + model.c_nl * abs(v)))
+            / model.m,
+        ]
 
     return solve_ivp(rhs, (0, t[-1]), [z0, v0], t_eval=t, method="RK45", rtol=1e-8, atol=1e-10).y[0]
 
 
 def simulator_benchmark(quick: bool = False) -> tuple[list[list[str]], dict]:
-    fs, dt = 512.0, 1 / 512.0
+    dt = 1 / 512.0
     duration = 60.0 if quick else 300.0
     model = AS_BUILT.lsq_cubic()  # same polynomial law for every method
     cross = Rig(model, seed=11).random(duration=duration)  # the default cross-well random record
@@ -128,22 +135,56 @@ def simulator_benchmark(quick: bool = False) -> tuple[list[list[str]], dict]:
     t_dev, _ = _median_time(lambda: simulate(AS_BUILT, u_cross, dt), 5)
     t_ivp, _ = _median_time(lambda: solve_ivp_run(model, u_cross, dt, zp, 0.0), 1)
     err_ivp = rel_err(solve_ivp_run(model, u_in, dt, zp, 0.0))
-    res["single"] = {"numba_s": t_ours, "numba_device_s": t_dev, "solve_ivp_s": t_ivp, "numba_rel_err": err_ours,
-                     "solve_ivp_rel_err": err_ivp, "speedup_vs_solve_ivp": t_ivp / t_ours}
-    rows.append([f"one {duration:g} s record, polynomial K", "negstiff (numba RK4, 2 substeps)", f"{t_ours * 1e3:.1f} ms",
-                 f"{t_ivp / t_ours:.0f}x", f"{err_ours:.1e}"])
-    rows.append([f"one {duration:g} s record, exact geometric K", "negstiff (numba RK4, 2 substeps)",
-                 f"{t_dev * 1e3:.1f} ms", f"{t_ivp / t_dev:.0f}x", "-"])
-    rows.append([f"one {duration:g} s record, polynomial K", "solve_ivp RK45 rtol 1e-8 (baseline)", f"{t_ivp:.1f} s", "1x",
-                 f"{err_ivp:.1e}"])
+    res["single"] = {
+        "numba_s": t_ours,
+        "numba_device_s": t_dev,
+        "solve_ivp_s": t_ivp,
+        "numba_rel_err": err_ours,
+        "solve_ivp_rel_err": err_ivp,
+        "speedup_vs_solve_ivp": t_ivp / t_ours,
+    }
+    rows.append(
+        [
+            f"one {duration:g} s record, polynomial K",
+            "negstiff (numba RK4, 2 substeps)",
+            f"{t_ours * 1e3:.1f} ms",
+            f"{t_ivp / t_ours:.0f}x",
+            f"{err_ours:.1e}",
+        ]
+    )
+    rows.append(
+        [
+            f"one {duration:g} s record, exact geometric K",
+            "negstiff (numba RK4, 2 substeps)",
+            f"{t_dev * 1e3:.1f} ms",
+            f"{t_ivp / t_dev:.0f}x",
+            "-",
+        ]
+    )
+    rows.append(
+        [
+            f"one {duration:g} s record, polynomial K",
+            "solve_ivp RK45 rtol 1e-8 (baseline)",
+            f"{t_ivp:.1f} s",
+            "1x",
+            f"{err_ivp:.1e}",
+        ]
+    )
     if c_rk4 is not None:
         for nsub in (4, 2):
             c_rk4(model, u_cross[:100], dt, nsub, zp, 0.0)
             t_c, _ = _median_time(lambda: c_rk4(model, u_cross, dt, nsub, zp, 0.0), 5)
             err_c = rel_err(c_rk4(model, u_in, dt, nsub, zp, 0.0))
             res[f"c_rk4_{nsub}"] = {"s": t_c, "rel_err": err_c}
-            rows.append([f"one {duration:g} s record, polynomial K", f"plain C RK4 loop, gcc -O3, {nsub} substeps",
-                         f"{t_c * 1e3:.1f} ms", f"{t_ivp / t_c:.0f}x", f"{err_c:.1e}"])
+            rows.append(
+                [
+                    f"one {duration:g} s record, polynomial K",
+                    f"plain C RK4 loop, gcc -O3, {nsub} substeps",
+                    f"{t_c * 1e3:.1f} ms",
+                    f"{t_ivp / t_c:.0f}x",
+                    f"{err_c:.1e}",
+                ]
+            )
 
     nb = 64 if quick else 256
     rng = np.random.default_rng(0)
@@ -154,13 +195,35 @@ def simulator_benchmark(quick: bool = False) -> tuple[list[list[str]], dict]:
     x0 = np.array([zp, 0.0])
     simulate_batch(P[:, :4], "polynomial", u_cross[:100], dt, x0)
     t_b, _ = _median_time(lambda: simulate_batch(P, "polynomial", u_cross, dt, x0), 3)
-    t_bd, _ = _median_time(lambda: simulate_batch(Pd, "device", u_cross, dt, np.array([AS_BUILT.equilibria().z_plus, 0])), 3)
-    res["batch"] = {"members": nb, "polynomial_s": t_b, "device_s": t_bd, "per_record_s": t_b / nb,
-                    "speedup_per_record_vs_solve_ivp": t_ivp / (t_b / nb), "threads": os.cpu_count()}
-    rows.append([f"batch of {nb} records (+-2 % parameters), polynomial K", f"negstiff batch, {os.cpu_count()} threads",
-                 f"{t_b:.2f} s ({t_b / nb * 1e3:.2f} ms/record)", f"{t_ivp / (t_b / nb):.0f}x per record", "same kernel"])
-    rows.append([f"batch of {nb} records (+-2 % parameters), exact K", f"negstiff batch, {os.cpu_count()} threads",
-                 f"{t_bd:.2f} s ({t_bd / nb * 1e3:.2f} ms/record)", f"{t_ivp / (t_bd / nb):.0f}x per record", "-"])
+    t_bd, _ = _median_time(
+        lambda: simulate_batch(Pd, "device", u_cross, dt, np.array([AS_BUILT.equilibria().z_plus, 0])), 3
+    )
+    res["batch"] = {
+        "members": nb,
+        "polynomial_s": t_b,
+        "device_s": t_bd,
+        "per_record_s": t_b / nb,
+        "speedup_per_record_vs_solve_ivp": t_ivp / (t_b / nb),
+        "threads": os.cpu_count(),
+    }
+    rows.append(
+        [
+            f"batch of {nb} records (+-2 % parameters), polynomial K",
+            f"negstiff batch, {os.cpu_count()} threads",
+            f"{t_b:.2f} s ({t_b / nb * 1e3:.2f} ms/record)",
+            f"{t_ivp / (t_b / nb):.0f}x per record",
+            "same kernel",
+        ]
+    )
+    rows.append(
+        [
+            f"batch of {nb} records (+-2 % parameters), exact K",
+            f"negstiff batch, {os.cpu_count()} threads",
+            f"{t_bd:.2f} s ({t_bd / nb * 1e3:.2f} ms/record)",
+            f"{t_ivp / (t_bd / nb):.0f}x per record",
+            "-",
+        ]
+    )
     return rows, res
 
 
@@ -172,27 +235,39 @@ def main(argv=None) -> int:
     print("simulator benchmark (solve_ivp takes a while)...", file=sys.stderr)
     rows, res = simulator_benchmark(a.quick)
     s = res["single"]
-    lines = ["# negstiff benchmarks", "",
-             f"Machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores, Python "
-             f"{platform.python_version()}, numpy {np.__version__}. Written by `python -m negstiff.experiments.benchmarks`"
-             f"{' --quick' if a.quick else ''}; every ratio is against the baseline measured in the same run.", "",
-             "## Simulator (issue 2)", "",
-             "Record: the rig's default cross-well random excitation (300 s at 512 Hz, 153,600 samples) driving the "
-             "least-squares cubic of the as-built device. Accuracy: rms error of z relative to rms(z), on an in-well "
-             "record of the same length, against RK4 at 32 substeps per sample.", "",
-             "| case | method | wall time | speed-up vs solve_ivp | accuracy (rel. rms) |", "|---|---|---|---|---|"]
+    lines = [
+        "# negstiff benchmarks",
+        "",
+        f"Machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores, Python "
+        f"{platform.python_version()}, numpy {np.__version__}. Written by `python -m negstiff.experiments.benchmarks`"
+        f"{' --quick' if a.quick else ''}; every ratio is against the baseline measured in the same run.",
+        "",
+        "## Simulator (issue 2)",
+        "",
+        "Record: the rig's default cross-well random excitation (300 s at 512 Hz, 153,600 samples) driving the "
+        "least-squares cubic of the as-built device. Accuracy: rms error of z relative to rms(z), on an in-well "
+        "record of the same length, against RK4 at 32 substeps per sample.",
+        "",
+        "| case | method | wall time | speed-up vs solve_ivp | accuracy (rel. rms) |",
+        "|---|---|---|---|---|",
+    ]
     lines += ["| " + " | ".join(r) + " |" for r in rows]
     b = res["batch"]
-    lines += ["", f"Targets (issue 2): at least 1000x faster than solve_ivp for one record (measured "
-              f"{s['speedup_vs_solve_ivp']:.0f}x), 2500x per record in the batch (measured "
-              f"{b['speedup_per_record_vs_solve_ivp']:.0f}x), at equal or better accuracy (measured "
-              f"{s['numba_rel_err']:.1e} against solve_ivp's {s['solve_ivp_rel_err']:.1e})."]
+    lines += [
+        "",
+        f"Targets (issue 2): at least 1000x faster than solve_ivp for one record (measured "
+        f"{s['speedup_vs_solve_ivp']:.0f}x), 2500x per record in the batch (measured "
+        f"{b['speedup_per_record_vs_solve_ivp']:.0f}x), at equal or better accuracy (measured "
+        f"{s['numba_rel_err']:.1e} against solve_ivp's {s['solve_ivp_rel_err']:.1e}).",
+    ]
     if "c_rk4_2" in res:
         ratio = s["numba_s"] / res["c_rk4_2"]["s"]
-        lines += [f"The single-record path takes {ratio:.2f}x the time of the plain C loop at the same 2 substeps "
-                  "(the C loop has no batch, no divergence checks and no velocity output); the batch path "
-                  f"amortises to {b['per_record_s'] * 1e3:.2f} ms per record, "
-                  f"{res['c_rk4_2']['s'] / b['per_record_s']:.1f}x faster than one C loop per record."]
+        lines += [
+            f"The single-record path takes {ratio:.2f}x the time of the plain C loop at the same 2 substeps "
+            "(the C loop has no batch, no divergence checks and no velocity output); the batch path "
+            f"amortises to {b['per_record_s'] * 1e3:.2f} ms per record, "
+            f"{res['c_rk4_2']['s'] / b['per_record_s']:.1f}x faster than one C loop per record."
+        ]
     write_text(a.out, "\n".join(lines) + "\n")
     print("\n".join(lines))
     return 0

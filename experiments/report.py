@@ -89,12 +89,14 @@ class Report:
             s = re.sub(r"`(.+?)`", r"<code>\1</code>", s)
             return re.sub(r"\*(.+?)\*", r"<i>\1</i>", s)
 
-        parts = [f"<!DOCTYPE html><html><head><meta charset='utf-8'><title>{html.escape(self.title)}</title>",
-                 "<style>body{font-family:sans-serif;max-width:60em;margin:2em auto;line-height:1.45}"
-                 "table{border-collapse:collapse}td,th{border:1px solid #bbb;padding:2px 8px;text-align:right}"
-                 "th{background:#eee}img{max-width:100%}figcaption{font-style:italic;color:#444}"
-                 ".warn{background:#fee;border-left:4px solid #c00;padding:4px 8px}</style></head><body>",
-                 f"<h1>{html.escape(self.title)}</h1>"]
+        parts = [
+            f"<!DOCTYPE html><html><head><meta charset='utf-8'><title>{html.escape(self.title)}</title>",
+            "<style>body{font-family:sans-serif;max-width:60em;margin:2em auto;line-height:1.45}"
+            "table{border-collapse:collapse}td,th{border:1px solid #bbb;padding:2px 8px;text-align:right}"
+            "th{background:#eee}img{max-width:100%}figcaption{font-style:italic;color:#444}"
+            ".warn{background:#fee;border-left:4px solid #c00;padding:4px 8px}</style></head><body>",
+            f"<h1>{html.escape(self.title)}</h1>",
+        ]
         for kind, b in self.blocks:
             if kind == "h":
                 parts.append(f"<h{b[0]}>{inline(b[1])}</h{b[0]}>")
@@ -109,8 +111,10 @@ class Report:
                 parts.append("</table>")
             elif kind == "fig":
                 data = base64.b64encode(self.figures[b[0]]).decode()
-                parts.append(f"<figure><img alt='{html.escape(b[1])}' src='data:image/png;base64,{data}'>"
-                             f"<figcaption>{inline(b[1])}</figcaption></figure>")
+                parts.append(
+                    f"<figure><img alt='{html.escape(b[1])}' src='data:image/png;base64,{data}'>"
+                    f"<figcaption>{inline(b[1])}</figcaption></figure>"
+                )
         parts.append("</body></html>")
         return "\n".join(parts)
 

@@ -47,8 +47,12 @@ def simulator_accuracy(duration: float = 10.0, fs: float = 512.0, amplitude: flo
         return [x[1], -np.interp(tt, t, u) - float(AS_BUILT.total_force(x[0], x[1])) / AS_BUILT.m]
 
     ref = solve_ivp(rhs, (0, t[-1]), [zp, 0.0], t_eval=t, method="DOP853", rtol=1e-10, atol=1e-13).y[0]
-    return {"max_abs_dz_m": float(np.max(np.abs(ours - ref))), "response_peak_to_peak_m": float(np.ptp(ref)),
-            "duration_s": duration, "reference": "solve_ivp DOP853 rtol 1e-10"}
+    return {
+        "max_abs_dz_m": float(np.max(np.abs(ours - ref))),
+        "response_peak_to_peak_m": float(np.ptp(ref)),
+        "duration_s": duration,
+        "reference": "solve_ivp DOP853 rtol 1e-10",
+    }
 
 
 def rig_section(rep: Report, results: dict[str, Any], fast: bool, seed: int) -> None:
@@ -62,22 +66,31 @@ def rig_section(rep: Report, results: dict[str, Any], fast: bool, seed: int) -> 
     # the true model's own free-run error over the held-out tail: the floor any identified model faces
     sim = simulate(AS_BUILT, rec.columns["base_acc"][k0:], 1 / rec.fs, z0=zt[k0], v0=rec.true["z_dot"][k0])
     floor = 100 * np.sqrt(np.mean((sim.z[0] - z[k0:]) ** 2)) / np.sqrt(np.mean(z[k0:] ** 2))
-    r = {"duration_s": duration, "rms_m_s2": rec.truth["excitation"]["rms_m_s2"], "crossings": crossings,
-         "crossings_per_min": crossings / duration * 60,
-         "z_error_std_m": float(np.std(z - zt)), "base_disp_error_std_m": float(np.std(rec.columns["base_disp"]
-                                                                                   - rec.true["base_disp"])),
-         "true_model_floor_rms_percent": float(floor), "sensors": rec.truth["sensors"]}
+    r = {
+        "duration_s": duration,
+        "rms_m_s2": rec.truth["excitation"]["rms_m_s2"],
+        "crossings": crossings,
+        "crossings_per_min": crossings / duration * 60,
+        "z_error_std_m": float(np.std(z - zt)),
+        "base_disp_error_std_m": float(np.std(rec.columns["base_disp"] - rec.true["base_disp"])),
+        "true_model_floor_rms_percent": float(floor),
+        "sensors": rec.truth["sensors"],
+    }
     results["rig"] = r
     rep.heading("2. The virtual test rig")
-    rep.text(f"A {duration:g} s band-limited random record (2-40 Hz, {fmt(r['rms_m_s2'])} m/s^2 rms) of the as-built "
-             f"device, measured as the seed's lab did: laser for y, accelerometer for the table, base displacement by "
-             f"double integration (high-passed), z = y - b. The device crossed between the wells {crossings} times "
-             f"({fmt(r['crossings_per_min'], 3)} per minute). The measured z differs from the true z by "
-             f"{fmt(r['z_error_std_m'] * 1e6, 3)} um rms, mostly the low-frequency error of the integrated base "
-             f"displacement ({fmt(r['base_disp_error_std_m'] * 1e6, 3)} um rms) on top of the laser noise.")
-    rep.text(f"Floor: the TRUE model, fed the measured input and started from the true state, reproduces the last 20 % "
-             f"of the record with rms error {fmt(floor, 3)} % of rms(z). No identified model can be expected to beat "
-             "this on the same record; every validation figure in this report should be read against it.")
+    rep.text(
+        f"A {duration:g} s band-limited random record (2-40 Hz, {fmt(r['rms_m_s2'])} m/s^2 rms) of the as-built "
+        f"device, measured as the seed's lab did: laser for y, accelerometer for the table, base displacement by "
+        f"double integration (high-passed), z = y - b. The device crossed between the wells {crossings} times "
+        f"({fmt(r['crossings_per_min'], 3)} per minute). The measured z differs from the true z by "
+        f"{fmt(r['z_error_std_m'] * 1e6, 3)} um rms, mostly the low-frequency error of the integrated base "
+        f"displacement ({fmt(r['base_disp_error_std_m'] * 1e6, 3)} um rms) on top of the laser noise."
+    )
+    rep.text(
+        f"Floor: the TRUE model, fed the measured input and started from the true state, reproduces the last 20 % "
+        f"of the record with rms error {fmt(floor, 3)} % of rms(z). No identified model can be expected to beat "
+        "this on the same record; every validation figure in this report should be read against it."
+    )
     t = rec.columns["t"]
     fig, ax = plt.subplots(2, 1, figsize=(10, 5), sharex=True)
     ax[0].plot(t, rec.columns["base_acc"], lw=0.4)
@@ -87,8 +100,12 @@ def rig_section(rep: Report, results: dict[str, Any], fast: bool, seed: int) -> 
         ax[1].axhline(zz * 1e3, color="0.5", lw=0.8, ls="--")
         ax[1].text(t[-1], zz * 1e3, " " + lab, va="center", fontsize=8)
     ax[1].set(xlabel="t [s]", ylabel="z [mm]")
-    rep.figure("rig_random", fig, "A random cross-well rig record: table acceleration and relative displacement, "
-               "with the equilibria of the as-built device.")
+    rep.figure(
+        "rig_random",
+        fig,
+        "A random cross-well rig record: table acceleration and relative displacement, "
+        "with the equilibria of the as-built device.",
+    )
     f, pz = signal.welch(z, rec.fs, nperseg=4096)
     _, pe = signal.welch(z - zt, rec.fs, nperseg=4096)
     fig, ax = plt.subplots(figsize=(7, 3.5))
@@ -103,10 +120,12 @@ def simulator_section(rep: Report, results: dict[str, Any]) -> None:
     acc = simulator_accuracy()
     results["simulator"] = acc
     rep.heading("3. Simulator accuracy")
-    rep.text(f"Against solve_ivp (DOP853, rtol 1e-10) on a {acc['duration_s']:g} s in-well 9 Hz response of the "
-             f"as-built device (peak-to-peak {fmt(acc['response_peak_to_peak_m'] * 1e3, 3)} mm), the numba RK4 "
-             f"simulator at its default settings (2 substeps per sample) differs by at most "
-             f"{fmt(acc['max_abs_dz_m'])} m (target: below 1e-7 m). Speed is measured in reports/benchmarks.md.")
+    rep.text(
+        f"Against solve_ivp (DOP853, rtol 1e-10) on a {acc['duration_s']:g} s in-well 9 Hz response of the "
+        f"as-built device (peak-to-peak {fmt(acc['response_peak_to_peak_m'] * 1e3, 3)} mm), the numba RK4 "
+        f"simulator at its default settings (2 substeps per sample) differs by at most "
+        f"{fmt(acc['max_abs_dz_m'])} m (target: below 1e-7 m). Speed is measured in reports/benchmarks.md."
+    )
 
 
 def reproduce(out: Path, fast: bool = False, seed: int = 0, progress: bool = True) -> Path:
@@ -119,9 +138,11 @@ def reproduce(out: Path, fast: bool = False, seed: int = 0, progress: bool = Tru
 
     rep = Report("negstiff: nonlinear dynamics of a negative-stiffness oscillator, reproduced on a virtual rig")
     results: dict[str, Any] = {"negstiff_version": __version__, "fast": fast, "seed": seed}
-    rep.text("This report reruns the study of Anastasio, Fasana, Garibaldi and Marchesiello (EURODYN 2020) on a "
-             "virtual shaking table whose truth is known, and sets the seed's numbers beside ours and the truth's. "
-             + ("This is a reduced (--fast) run." if fast else ""))
+    rep.text(
+        "This report reruns the study of Anastasio, Fasana, Garibaldi and Marchesiello (EURODYN 2020) on a "
+        "virtual shaking table whose truth is known, and sets the seed's numbers beside ours and the truth's. "
+        + ("This is a reduced (--fast) run." if fast else "")
+    )
     say("device and calibration")
     device_section(rep, results)
     say("virtual rig record")
@@ -139,4 +160,3 @@ def reproduce(out: Path, fast: bool = False, seed: int = 0, progress: bool = Tru
     rep.write(out, results)
     say("done")
     return out
-

@@ -81,8 +81,9 @@ class Measurement:
     def require(self, n_min: int, what: str) -> None:
         """Raise ``MeasurementError`` unless the record has at least ``n_min`` samples for ``what``."""
         if self.n < n_min:
-            raise MeasurementError(f"{self.source}: too few samples for {what}: {self.n} "
-                                   f"({self.duration:.3g} s), need at least {n_min}")
+            raise MeasurementError(
+                f"{self.source}: too few samples for {what}: {self.n} ({self.duration:.3g} s), need at least {n_min}"
+            )
 
     def with_mass(self, mass: float | None) -> "Measurement":
         """The same record with the mass given by the caller (overrides the metadata)."""
@@ -107,8 +108,7 @@ def parse_column_map(text: str | None) -> dict[str, tuple[str, float]]:
             raise MeasurementError(f"column map entry {entry!r} is not of the form name=COLUMN or name=COLUMN*scale")
         name, src, scale = m.group(1), m.group(2).strip().strip('"'), m.group(3)
         if name not in KNOWN:
-            raise MeasurementError(f"column map names {name!r}, which is not a measurement column "
-                                   f"({', '.join(KNOWN)})")
+            raise MeasurementError(f"column map names {name!r}, which is not a measurement column ({', '.join(KNOWN)})")
         try:
             factor = 1.0 if scale is None else float(scale)
         except ValueError:
@@ -133,7 +133,7 @@ def _read_csv(path: Path) -> tuple[dict[str, np.ndarray], dict[str, str]]:
         raise MeasurementError(f"{path}: no header line (and no data)")
     names = [c.strip().strip('"').strip() for c in lines[i].split(",")]
     header_line = i + 1
-    body = lines[i + 1:]
+    body = lines[i + 1 :]
     while body and not body[-1].strip():
         body.pop()
     if not body:
@@ -147,8 +147,9 @@ def _read_csv(path: Path) -> tuple[dict[str, np.ndarray], dict[str, str]]:
             try:
                 [float(parts[j]) for j in use]
             except (ValueError, IndexError):
-                raise MeasurementError(f"{path}: row {r + 1} (line {header_line + r + 1}) is not numeric "
-                                       f"in every column: {line[:60]!r}") from None
+                raise MeasurementError(
+                    f"{path}: row {r + 1} (line {header_line + r + 1}) is not numeric in every column: {line[:60]!r}"
+                ) from None
         raise MeasurementError(f"{path}: rows are not all numeric") from None
     return {names[j]: data[:, k] for k, j in enumerate(use)}, meta
 
@@ -189,8 +190,9 @@ def _read_mat(path: Path) -> tuple[dict[str, np.ndarray], dict[str, str]]:
 READERS = {".csv": _read_csv, ".txt": _read_csv, ".npz": _read_npz, ".mat": _read_mat}
 
 
-def load(path: str | Path, columns: str | dict | None = None, fs: float | None = None,
-         mass: float | None = None) -> Measurement:
+def load(
+    path: str | Path, columns: str | dict | None = None, fs: float | None = None, mass: float | None = None
+) -> Measurement:
     """Read a measurement file.
 
     Parameters
@@ -217,8 +219,10 @@ def load(path: str | Path, columns: str | dict | None = None, fs: float | None =
     if cmap:
         for name, (src, scale) in cmap.items():
             if src not in raw:
-                raise MeasurementError(f"{path}: column map refers to {src!r}, which is not in the file "
-                                       f"(columns: {', '.join(raw) or 'none'})")
+                raise MeasurementError(
+                    f"{path}: column map refers to {src!r}, which is not in the file "
+                    f"(columns: {', '.join(raw) or 'none'})"
+                )
             cols[name] = raw[src] * scale
         for name in KNOWN:  # unmapped contract columns present in the file still count
             if name in raw and name not in cols and all(src != name for src, _ in cmap.values()):
@@ -228,11 +232,14 @@ def load(path: str | Path, columns: str | dict | None = None, fs: float | None =
     inputs = [k for k in INPUTS if k in cols]
     if len(inputs) != 1:
         what = "no input column" if not inputs else "two input columns"
-        raise MeasurementError(f"{path}: {what}; exactly one of base_acc, force is needed "
-                               f"(columns: {', '.join(raw) or 'none'}; map foreign names with --columns)")
+        raise MeasurementError(
+            f"{path}: {what}; exactly one of base_acc, force is needed "
+            f"(columns: {', '.join(raw) or 'none'}; map foreign names with --columns)"
+        )
     if "z" not in cols:
-        raise MeasurementError(f"{path}: missing column z (columns: {', '.join(raw) or 'none'}; "
-                               "map foreign names with --columns)")
+        raise MeasurementError(
+            f"{path}: missing column z (columns: {', '.join(raw) or 'none'}; map foreign names with --columns)"
+        )
     n = cols["z"].size
     for k, v in cols.items():
         if v.size != n:
@@ -259,8 +266,9 @@ def load(path: str | Path, columns: str | dict | None = None, fs: float | None =
         dev = np.abs(d - dt)
         if np.any(dev > 1e-3 * dt):
             r = int(np.argmax(dev > 1e-3 * dt)) + 2
-            raise MeasurementError(f"{path}: column t is not uniformly sampled at row {r} "
-                                   f"(step {d[r - 2]:.6g} s, mean {dt:.6g} s)")
+            raise MeasurementError(
+                f"{path}: column t is not uniformly sampled at row {r} (step {d[r - 2]:.6g} s, mean {dt:.6g} s)"
+            )
         if fs is not None and abs(fs * dt - 1) > 1e-3:
             raise MeasurementError(f"{path}: fs = {fs:g} Hz disagrees with column t (1/dt = {1 / dt:.6g} Hz)")
         fs, t0 = 1.0 / dt, float(t[0])
@@ -273,9 +281,18 @@ def load(path: str | Path, columns: str | dict | None = None, fs: float | None =
             mass = float(meta["mass"])
         except ValueError:
             raise MeasurementError(f"{path}: metadata mass = {meta['mass']!r} is not a number") from None
-    rec = Measurement(fs=float(fs), input_name=inputs[0], u=cols[inputs[0]], z=cols["z"],
-                      z_dot=cols.get("z_dot"), y=cols.get("y"), base_disp=cols.get("base_disp"),
-                      meta=meta, source=str(path), t0=t0)
+    rec = Measurement(
+        fs=float(fs),
+        input_name=inputs[0],
+        u=cols[inputs[0]],
+        z=cols["z"],
+        z_dot=cols.get("z_dot"),
+        y=cols.get("y"),
+        base_disp=cols.get("base_disp"),
+        meta=meta,
+        source=str(path),
+        t0=t0,
+    )
     return rec.with_mass(mass)
 
 

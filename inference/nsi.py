@@ -58,8 +58,7 @@ def velocity_window(fs: float) -> int:
 def smooth_and_differentiate(z: np.ndarray, fs: float) -> tuple[np.ndarray, np.ndarray]:
     """Savitzky-Golay smoothed displacement and velocity (cubic fit over ``velocity_window``)."""
     w = velocity_window(fs)
-    return (signal.savgol_filter(z, w, 3, deriv=0),
-            signal.savgol_filter(z, w, 3, deriv=1, delta=1.0 / fs))
+    return (signal.savgol_filter(z, w, 3, deriv=0), signal.savgol_filter(z, w, 3, deriv=1, delta=1.0 / fs))
 
 
 def well_guesses(rec: Measurement) -> tuple[float | None, float]:
@@ -85,8 +84,10 @@ def well_guesses(rec: Measurement) -> tuple[float | None, float]:
         return float(stable[0]), float(stable[-1])
     if len(stable) == 1:
         return None, float(stable[0])
-    raise NSIError(f"{rec.source}: no stable equilibrium found inside the measured range of z "
-                   "(is z the relative displacement, and is the input column right?)")
+    raise NSIError(
+        f"{rec.source}: no stable equilibrium found inside the measured range of z "
+        "(is z the relative displacement, and is the input column right?)"
+    )
 
 
 @dataclass(frozen=True)
@@ -140,8 +141,14 @@ class NSI:
     passes : identification passes per well (the second runs at the refined z*)
     """
 
-    def __init__(self, order: int = 2, block_rows: int = 20, band: tuple[float, float] = (0.6, 1.6),
-                 validation_fraction: float = 0.2, passes: int = 2):
+    def __init__(
+        self,
+        order: int = 2,
+        block_rows: int = 20,
+        band: tuple[float, float] = (0.6, 1.6),
+        validation_fraction: float = 0.2,
+        passes: int = 2,
+    ):
         self.order = order
         self.block_rows = block_rows
         self.band = band
@@ -152,15 +159,17 @@ class NSI:
     def _extended_input(self, rec: Measurement, zs: np.ndarray, v: np.ndarray, z_ref: float):
         x = zs - z_ref
         lin = -rec.u if rec.input_name == "base_acc" else rec.u
-        chans = np.column_stack([lin, -x**2, -x**3, -v * np.abs(v)])
+        chans = np.column_stack([lin, -(x**2), -(x**3), -v * np.abs(v)])
         means = chans.mean(axis=0)
         scale = chans.std(axis=0)
         if np.any(scale == 0):
             raise NSIError(f"{rec.source}: not enough excitation: the input or a basis function is constant")
         w = (chans - means) / scale
         if np.linalg.cond(np.corrcoef(w.T)) > 1e8:
-            raise NSIError(f"{rec.source}: not enough excitation: the basis functions are collinear (the record "
-                           "does not reach the nonlinear range)")
+            raise NSIError(
+                f"{rec.source}: not enough excitation: the basis functions are collinear (the record "
+                "does not reach the nonlinear range)"
+            )
         return x, w, scale, means
 
     def fit_well(self, rec: Measurement, zs: np.ndarray, v: np.ndarray, z_ref: float) -> WellFit:
@@ -190,23 +199,43 @@ class NSI:
             quality = np.abs(ratio.imag).mean(axis=0) / np.maximum(np.abs(coef), 1e-300)
             c = dict(zip(BASIS_NAMES, coef))
             # time-averaged equation of motion (channels hold -g_j): the constant K(z_g)/m
-            c["const"] = (means[0] - wn**2 * x.mean() - 2 * zeta * wn * v.mean()
-                          + sum(c[k] * means[j + 1] for j, k in enumerate(BASIS_NAMES)))
+            c["const"] = (
+                means[0]
+                - wn**2 * x.mean()
+                - 2 * zeta * wn * v.mean()
+                + sum(c[k] * means[j + 1] for j, k in enumerate(BASIS_NAMES))
+            )
             # restoring force about z_g, per unit mass: const + wn^2 x + c2 x^2 + c3 x^3
             roots = np.roots([c["x3"], c["x2"], wn**2, c["const"]])
             real = roots[np.abs(roots.imag) < 1e-9 * max(1.0, np.abs(roots).max())].real
             stable = [r for r in real if 3 * c["x3"] * r**2 + 2 * c["x2"] * r + wn**2 > 0]
             if not stable:
-                raise NSIError(f"{rec.source}: the identified restoring force has no stable equilibrium near "
-                               f"z = {z_ref * 1e3:.2f} mm")
+                raise NSIError(
+                    f"{rec.source}: the identified restoring force has no stable equilibrium near "
+                    f"z = {z_ref * 1e3:.2f} mm"
+                )
             r = min(stable, key=abs)
             z_ref = z_ref + r
-        coefficients = {"k1_tilde": wn**2 + 2 * c["x2"] * r + 3 * c["x3"] * r**2, "k2_tilde": c["x2"] + 3 * c["x3"] * r,
-                        "k3": c["x3"], "c": 2 * zeta * wn, "c_nl": c["vabsv"], "const_residual": c["const"],
-                        "shift_last_pass": r}
+        coefficients = {
+            "k1_tilde": wn**2 + 2 * c["x2"] * r + 3 * c["x3"] * r**2,
+            "k2_tilde": c["x2"] + 3 * c["x3"] * r,
+            "k3": c["x3"],
+            "c": 2 * zeta * wn,
+            "c_nl": c["vabsv"],
+            "const_residual": c["const"],
+            "shift_last_pass": r,
+        }
         h0 = he[:, 0] * ys / scale[0]
-        return WellFit(z_ref, fn, zeta, coefficients, dict(zip(BASIS_NAMES, quality)), band,
-                       list(ss.singular_values[:8]), {"f_hz": freqs, "H": h0, "ratio": ratio})
+        return WellFit(
+            z_ref,
+            fn,
+            zeta,
+            coefficients,
+            dict(zip(BASIS_NAMES, quality)),
+            band,
+            list(ss.singular_values[:8]),
+            {"f_hz": freqs, "H": h0, "ratio": ratio},
+        )
 
     def fit(self, rec: Measurement) -> "NSI":
         """Identify from ``rec``: both wells (or the single well), z-frame model, validation."""
@@ -230,30 +259,57 @@ class NSI:
         self.modal_.setdefault("minus", {"f_hz": None, "zeta": None})
         self.g_estimate_ = self.model_.k0 / mass if rec.input_name == "base_acc" else None
         self.validation_ = validate(self.model_, rec, n_id)
-        self.settings_ = {"order": self.order, "block_rows": self.block_rows, "band_fraction": list(self.band),
-                          "passes": self.passes, "velocity": f"Savitzky-Golay, cubic, {velocity_window(rec.fs)} samples",
-                          "basis": list(BASIS_NAMES), "identification_samples": n_id}
+        self.settings_ = {
+            "order": self.order,
+            "block_rows": self.block_rows,
+            "band_fraction": list(self.band),
+            "passes": self.passes,
+            "velocity": f"Savitzky-Golay, cubic, {velocity_window(rec.fs)} samples",
+            "basis": list(BASIS_NAMES),
+            "identification_samples": n_id,
+        }
         return self
 
     @staticmethod
     def _z_frame(w: WellFit, mass: float) -> Model:
         """Back-transform a well's shifted coefficients to the z frame (seed Eq. 7), scaled by mass."""
         c = w.coefficients
-        m = Model.from_shifted(w.z_ref, c["k1_tilde"] * mass, c["k2_tilde"] * mass, c["k3"] * mass, m=mass,
-                               c=c["c"] * mass, c_nl=c["c_nl"] * mass)
+        m = Model.from_shifted(
+            w.z_ref,
+            c["k1_tilde"] * mass,
+            c["k2_tilde"] * mass,
+            c["k3"] * mass,
+            m=mass,
+            c=c["c"] * mass,
+            c_nl=c["c_nl"] * mass,
+        )
         return m
 
     def result(self) -> dict[str, Any]:
         """The contract's identify JSON (plus NSI details)."""
-        return {"method": "nsi", "model": self.model_.to_dict(), "mass_normalised": self.mass_normalised_,
-                "equilibria": self.equilibria_.as_dict(), "modal": self.modal_,
-                "validation": {k: v for k, v in self.validation_.items() if not isinstance(v, np.ndarray)},
-                "wells": {name: {"z_ref": w.z_ref, "f_hz": w.f_hz, "zeta": w.zeta, "coefficients": w.coefficients,
-                                 "quality_im_over_re": w.quality, "band_hz": list(w.band_hz),
-                                 "singular_values": w.singular_values,
-                                 "z_frame_model": self.models_by_well_[name].to_dict()}
-                          for name, w in self.wells_.items()},
-                "g_estimate": self.g_estimate_, "settings": self.settings_}
+        return {
+            "method": "nsi",
+            "model": self.model_.to_dict(),
+            "mass_normalised": self.mass_normalised_,
+            "equilibria": self.equilibria_.as_dict(),
+            "modal": self.modal_,
+            "validation": {k: v for k, v in self.validation_.items() if not isinstance(v, np.ndarray)},
+            "wells": {
+                name: {
+                    "z_ref": w.z_ref,
+                    "f_hz": w.f_hz,
+                    "zeta": w.zeta,
+                    "coefficients": w.coefficients,
+                    "quality_im_over_re": w.quality,
+                    "band_hz": list(w.band_hz),
+                    "singular_values": w.singular_values,
+                    "z_frame_model": self.models_by_well_[name].to_dict(),
+                }
+                for name, w in self.wells_.items()
+            },
+            "g_estimate": self.g_estimate_,
+            "settings": self.settings_,
+        }
 
 
 def validate(model: Model, rec: Measurement, start: int) -> dict[str, Any]:
@@ -265,15 +321,25 @@ def validate(model: Model, rec: Measurement, start: int) -> dict[str, Any]:
     zs, v = smooth_and_differentiate(rec.z, rec.fs)
     sim = simulate(model, tail.u, tail.dt, z0=float(zs[start]), v0=float(v[start]), input_kind=tail.input_name)
     z_sim = sim.z[0]
-    out: dict[str, Any] = {"segment": [float(tail.t0), float(tail.t0 + tail.duration)],
-                           "diverged": bool(sim.diverged[0])}
+    out: dict[str, Any] = {
+        "segment": [float(tail.t0), float(tail.t0 + tail.duration)],
+        "diverged": bool(sim.diverged[0]),
+    }
     if sim.diverged[0]:
-        out.update(rms_percent=float("inf"), residual_mean=float("nan"), residual_std=float("nan"),
-                   warning=f"free run diverged: {sim.describe_failures()}")
+        out.update(
+            rms_percent=float("inf"),
+            residual_mean=float("nan"),
+            residual_std=float("nan"),
+            warning=f"free run diverged: {sim.describe_failures()}",
+        )
         return out
     r = z_sim - tail.z
-    out.update(rms_percent=float(100 * np.sqrt(np.mean(r**2)) / np.sqrt(np.mean(tail.z**2))),
-               residual_mean=float(r.mean()), residual_std=float(r.std()), z_sim=z_sim, z_meas=tail.z, t=tail.t)
+    out.update(
+        rms_percent=float(100 * np.sqrt(np.mean(r**2)) / np.sqrt(np.mean(tail.z**2))),
+        residual_mean=float(r.mean()),
+        residual_std=float(r.std()),
+        z_sim=z_sim,
+        z_meas=tail.z,
+        t=tail.t,
+    )
     return out
-
-

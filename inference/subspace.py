@@ -52,7 +52,7 @@ def _hankel_block(x: np.ndarray, start: int, rows: int, cols: int) -> np.ndarray
     n_ch = x.shape[1]
     out = np.empty((rows * n_ch, cols))
     for r in range(rows):
-        out[r * n_ch:(r + 1) * n_ch] = x[start + r:start + r + cols].T
+        out[r * n_ch : (r + 1) * n_ch] = x[start + r : start + r + cols].T
     return out
 
 
@@ -69,12 +69,16 @@ def lq_factor(u: np.ndarray, y: np.ndarray, i: int, chunk: int = 8192) -> np.nda
     r = None
     for c0 in range(0, j, chunk):
         cols = min(chunk, j - c0)
-        blocks = [_hankel_block(u[c0:], i, i, cols), _hankel_block(u[c0:], 0, i, cols),
-                  _hankel_block(y[c0:], 0, i, cols), _hankel_block(y[c0:], i, i, cols)]
+        blocks = [
+            _hankel_block(u[c0:], i, i, cols),
+            _hankel_block(u[c0:], 0, i, cols),
+            _hankel_block(y[c0:], 0, i, cols),
+            _hankel_block(y[c0:], i, i, cols),
+        ]
         ht = np.vstack(blocks).T
         stacked = ht if r is None else np.vstack([r, ht])
         r = linalg.qr(stacked, mode="r", overwrite_a=True, check_finite=False)[0]
-        r = r[:stacked.shape[1]]
+        r = r[: stacked.shape[1]]
     return r.T / np.sqrt(j)
 
 
@@ -93,7 +97,9 @@ def po_moesp(u: np.ndarray, y: np.ndarray, i: int, order: int) -> tuple[np.ndarr
     return A, C, s
 
 
-def estimate_bd(A: np.ndarray, C: np.ndarray, u: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def estimate_bd(
+    A: np.ndarray, C: np.ndarray, u: np.ndarray, y: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(x0, B, D) by linear least squares on the output equation (algorithms.md A.2.6b)."""
     n, m, l_out = A.shape[0], u.shape[1], y.shape[1]
     N = u.shape[0]
@@ -113,7 +119,7 @@ def estimate_bd(A: np.ndarray, C: np.ndarray, u: np.ndarray, y: np.ndarray) -> t
             Bq[s] = 1.0
             yy = np.empty((N, l_out))
             for o in range(l_out):
-                num, den = signal.ss2tf(A, Bq, C[o:o + 1], np.zeros((1, 1)))
+                num, den = signal.ss2tf(A, Bq, C[o : o + 1], np.zeros((1, 1)))
                 yy[:, o] = signal.lfilter(num[0], den, u[:, q])
             cols.append(yy)
     # D regressors
@@ -125,8 +131,8 @@ def estimate_bd(A: np.ndarray, C: np.ndarray, u: np.ndarray, y: np.ndarray) -> t
     Phi = np.stack([c.reshape(-1) for c in cols], axis=1)
     theta = np.linalg.lstsq(Phi, y.reshape(-1), rcond=None)[0]
     x0 = theta[:n]
-    B = theta[n:n + n * m].reshape(m, n).T
-    D = theta[n + n * m:].reshape(m, l_out).T
+    B = theta[n : n + n * m].reshape(m, n).T
+    D = theta[n + n * m :].reshape(m, l_out).T
     return x0, B, D
 
 

@@ -37,8 +37,17 @@ from typing import Any, Mapping
 import numpy as np
 
 from .constants import G
-from .equation import Equilibria, Model, UnderlyingLinear, find_equilibria, normalise_extra, shared_param_rows
-from .equation import extra_force, stiffness_extra_force, stiffness_extra_potential
+from .equation import (
+    Equilibria,
+    Model,
+    UnderlyingLinear,
+    extra_force,
+    find_equilibria,
+    normalise_extra,
+    shared_param_rows,
+    stiffness_extra_force,
+    stiffness_extra_potential,
+)
 
 
 class GeometryError(ValueError):
@@ -107,8 +116,10 @@ class Device:
         bad = (z <= lo) | (z >= hi) | ~np.isfinite(z)
         if np.any(bad):
             zb = float(np.asarray(z)[bad].flat[0])
-            raise GeometryError(f"z = {zb * 1e3:.2f} mm is outside the device's stroke "
-                                f"({lo * 1e3:.1f} mm, {hi * 1e3:.1f} mm): the rods cannot reach it")
+            raise GeometryError(
+                f"z = {zb * 1e3:.2f} mm is outside the device's stroke "
+                f"({lo * 1e3:.1f} mm, {hi * 1e3:.1f} mm): the rods cannot reach it"
+            )
 
     def _s_derivs(self, z):
         """s(z), s'(z), s''(z) of the rod-frame geometry."""
@@ -135,8 +146,10 @@ class Device:
         ks = 2 * self.k_f * (s1 * s1 + (s + self.D0) * s2)
         if include_extra and self.extra:
             hz = 1e-7
-            ks = ks + (stiffness_extra_force(self.extra, np.asarray(z) + hz)
-                       - stiffness_extra_force(self.extra, np.asarray(z) - hz)) / (2 * hz)
+            ks = ks + (
+                stiffness_extra_force(self.extra, np.asarray(z) + hz)
+                - stiffness_extra_force(self.extra, np.asarray(z) - hz)
+            ) / (2 * hz)
         return ks
 
     def potential(self, z, include_extra: bool = True):
@@ -153,7 +166,9 @@ class Device:
 
     def total_force(self, z, zdot):
         """D(z') + K(z) + extra(z, z') [N]."""
-        return self.damping_force(zdot) + self.restoring_force(z, include_extra=False) + extra_force(self.extra, z, zdot)
+        return (
+            self.damping_force(zdot) + self.restoring_force(z, include_extra=False) + extra_force(self.extra, z, zdot)
+        )
 
     # --- equilibria, wells, features -----------------------------------------------------------
     def equilibria(self) -> Equilibria:
@@ -167,8 +182,9 @@ class Device:
         zs = self.equilibria().well(well)
         k1t = float(self.stiffness(zs))
         _, _, k2t, k3t = self.taylor(zs)
-        return UnderlyingLinear(zs, k1t, k2t, k3t, math.sqrt(k1t / self.m) / (2 * math.pi),
-                                self.c / (2 * math.sqrt(k1t * self.m)))
+        return UnderlyingLinear(
+            zs, k1t, k2t, k3t, math.sqrt(k1t / self.m) / (2 * math.pi), self.c / (2 * math.sqrt(k1t * self.m))
+        )
 
     def features(self) -> dict[str, float]:
         """The GA's features (seed Eq. 9): well frequencies [Hz] and stable equilibria [m]."""
@@ -185,15 +201,27 @@ class Device:
         (step ``h`` [m]; relative error O((h/L)^2)).
         """
         ks = self.stiffness(np.array([z_ref - h, z_ref, z_ref + h]), include_extra=False)
-        return (float(self.restoring_force(z_ref, include_extra=False)), float(ks[1]),
-                float((ks[2] - ks[0]) / (2 * h) / 2), float((ks[2] - 2 * ks[1] + ks[0]) / h**2 / 6))
+        return (
+            float(self.restoring_force(z_ref, include_extra=False)),
+            float(ks[1]),
+            float((ks[2] - ks[0]) / (2 * h) / 2),
+            float((ks[2] - 2 * ks[1] + ks[0]) / h**2 / 6),
+        )
 
     def taylor_cubic(self) -> Model:
         """The seed's Eq. (2) cubic from the closed-form Taylor expansion at z = 0."""
         ca, ta = math.cos(self.alpha), math.tan(self.alpha)
         kf, L, D0 = self.k_f, self.L, self.D0
-        return Model(m=self.m, k0=self.m * G, k1=2 * D0 * kf / (L * ca), k2=-3 * D0 * kf * ta / (L**2 * ca),
-                     k3=kf * (L * ca - D0 * (1 + 4 * math.sin(self.alpha) ** 2)) / (L**3 * ca**3), c=self.c, c_nl=self.c_nl, extra=self.extra)
+        return Model(
+            m=self.m,
+            k0=self.m * G,
+            k1=2 * D0 * kf / (L * ca),
+            k2=-3 * D0 * kf * ta / (L**2 * ca),
+            k3=kf * (L * ca - D0 * (1 + 4 * math.sin(self.alpha) ** 2)) / (L**3 * ca**3),
+            c=self.c,
+            c_nl=self.c_nl,
+            extra=self.extra,
+        )
 
     def lsq_cubic(self, z_lo: float = -0.030, z_hi: float = 0.030, n: int = 601) -> Model:
         """Least-squares cubic (k0 fixed to m g) of the exact K over [z_lo, z_hi] [m]."""
@@ -206,13 +234,28 @@ class Device:
     # --- serialisation and simulator interface --------------------------------------------------
     def to_dict(self) -> dict[str, Any]:
         extra = {k: (dict(v) if isinstance(v, Mapping) else v) for k, v in self.extra.items()}
-        return {"E": self.E, "alpha_deg": self.alpha_deg, "m": self.m, "L": self.L, "l": self.l, "b": self.b,
-                "h": self.h, "D0": self.D0, "c": self.c, "c_nl": self.c_nl, "extra": extra}
+        return {
+            "E": self.E,
+            "alpha_deg": self.alpha_deg,
+            "m": self.m,
+            "L": self.L,
+            "l": self.l,
+            "b": self.b,
+            "h": self.h,
+            "D0": self.D0,
+            "c": self.c,
+            "c_nl": self.c_nl,
+            "extra": extra,
+        }
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> "Device":
-        return cls(**{k: d[k] for k in ("E", "alpha_deg", "m", "L", "l", "b", "h", "D0")},
-                   c=d.get("c", 0.0), c_nl=d.get("c_nl", 0.0), extra=d.get("extra") or {})
+        return cls(
+            **{k: d[k] for k in ("E", "alpha_deg", "m", "L", "l", "b", "h", "D0")},
+            c=d.get("c", 0.0),
+            c_nl=d.get("c_nl", 0.0),
+            extra=d.get("extra") or {},
+        )
 
     kind = "device"
 

@@ -103,8 +103,12 @@ def extra_force(extra: Mapping[str, Any], z, zdot):
 def stiffness_extra_force(extra: Mapping[str, Any], z):
     """The displacement-only part of the extra effects [N] (it belongs to the restoring force)."""
     z = np.asarray(z, float)
-    f = (extra.get("quadratic_stiffness", 0.0) * z**2 + extra.get("cubic_stiffness", 0.0) * z**3
-         + extra.get("quartic_stiffness", 0.0) * z**4 + extra.get("quintic_stiffness", 0.0) * z**5)
+    f = (
+        extra.get("quadratic_stiffness", 0.0) * z**2
+        + extra.get("cubic_stiffness", 0.0) * z**3
+        + extra.get("quartic_stiffness", 0.0) * z**4
+        + extra.get("quintic_stiffness", 0.0) * z**5
+    )
     stop = extra.get("end_stop")
     if stop:
         beyond = (z - stop["z"]) * np.sign(stop["z"])
@@ -115,8 +119,12 @@ def stiffness_extra_force(extra: Mapping[str, Any], z):
 def stiffness_extra_potential(extra: Mapping[str, Any], z):
     """Potential energy [J] of the displacement-only extra effects, zero at z = 0."""
     z = np.asarray(z, float)
-    u = (extra.get("quadratic_stiffness", 0.0) * z**3 / 3 + extra.get("cubic_stiffness", 0.0) * z**4 / 4
-         + extra.get("quartic_stiffness", 0.0) * z**5 / 5 + extra.get("quintic_stiffness", 0.0) * z**6 / 6)
+    u = (
+        extra.get("quadratic_stiffness", 0.0) * z**3 / 3
+        + extra.get("cubic_stiffness", 0.0) * z**4 / 4
+        + extra.get("quartic_stiffness", 0.0) * z**5 / 5
+        + extra.get("quintic_stiffness", 0.0) * z**6 / 6
+    )
     stop = extra.get("end_stop")
     if stop:
         beyond = (z - stop["z"]) * np.sign(stop["z"])
@@ -201,8 +209,9 @@ def find_equilibria(force, stiffness, z_lo: float, z_hi: float, n_grid: int = 40
         return Equilibria(stable[0], unstable[0], stable[1])
     if len(stable) == 1 and not unstable:
         return Equilibria(None, None, stable[0])
-    raise ValueError(f"restoring force has equilibria {roots} (stable: {stable}); "
-                     "expected one stable, or stable-unstable-stable")
+    raise ValueError(
+        f"restoring force has equilibria {roots} (stable: {stable}); expected one stable, or stable-unstable-stable"
+    )
 
 
 @dataclass(frozen=True)
@@ -265,7 +274,9 @@ class Model:
 
     def total_force(self, z, zdot):
         """D(z') + K(z) + extra(z, z') [N]: everything on the left-hand side but inertia."""
-        return self.damping_force(zdot) + self.restoring_force(z, include_extra=False) + extra_force(self.extra, z, zdot)
+        return (
+            self.damping_force(zdot) + self.restoring_force(z, include_extra=False) + extra_force(self.extra, z, zdot)
+        )
 
     # --- equilibria and linearisation ---------------------------------------------------------
     def equilibria(self) -> Equilibria:
@@ -285,8 +296,9 @@ class Model:
         zs = self.equilibria().well(well)
         k1t = float(self.stiffness(zs))
         k2t = self.k2 + 3 * self.k3 * zs
-        return UnderlyingLinear(zs, k1t, k2t, self.k3, math.sqrt(k1t / self.m) / (2 * math.pi),
-                                self.c / (2 * math.sqrt(k1t * self.m)))
+        return UnderlyingLinear(
+            zs, k1t, k2t, self.k3, math.sqrt(k1t / self.m) / (2 * math.pi), self.c / (2 * math.sqrt(k1t * self.m))
+        )
 
     @staticmethod
     def from_shifted(z_ref: float, k1_tilde: float, k2_tilde: float, k3: float, **kw) -> "Model":
@@ -305,8 +317,16 @@ class Model:
     def to_dict(self) -> dict[str, Any]:
         """The contract's model JSON fields."""
         extra = {k: (dict(v) if isinstance(v, Mapping) else v) for k, v in self.extra.items()}
-        return {"m": self.m, "k0": self.k0, "k1": self.k1, "k2": self.k2, "k3": self.k3,
-                "c": self.c, "c_nl": self.c_nl, "extra": extra}
+        return {
+            "m": self.m,
+            "k0": self.k0,
+            "k1": self.k1,
+            "k2": self.k2,
+            "k3": self.k3,
+            "c": self.c,
+            "c_nl": self.c_nl,
+            "extra": extra,
+        }
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> "Model":
@@ -317,8 +337,16 @@ class Model:
         unknown = set(d) - {"m", "k0", "k1", "k2", "k3", "c", "c_nl", "extra"}
         if unknown:
             raise ValueError(f"model has unknown fields {', '.join(sorted(unknown))}")
-        return cls(m=d["m"], k1=d["k1"], k2=d["k2"], k3=d["k3"], c=d.get("c", 0.0), c_nl=d.get("c_nl", 0.0),
-                   k0=d.get("k0"), extra=d.get("extra") or {})
+        return cls(
+            m=d["m"],
+            k1=d["k1"],
+            k2=d["k2"],
+            k3=d["k3"],
+            c=d.get("c", 0.0),
+            c_nl=d.get("c_nl", 0.0),
+            k0=d.get("k0"),
+            extra=d.get("extra") or {},
+        )
 
     # --- simulator interface -----------------------------------------------------------------
     kind = "polynomial"

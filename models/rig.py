@@ -40,7 +40,6 @@ from .device import AS_BUILT, Device
 from .equation import Model
 from .simulator import simulate_batch
 
-
 TAIL_S = 4.0
 """Seconds acquired after the last record and discarded, as the settling time is before it: the
 double integration's end effects stay out of the records."""
@@ -110,8 +109,7 @@ class RigRecord:
         if path.suffix.lower() == ".npz":
             with atomic_path(path) as tmp:
                 with open(tmp, "wb") as fh:
-                    np.savez(fh, fs=self.fs, **{k: self.columns[k] for k in self.COLUMNS},
-                             meta=json.dumps(meta))
+                    np.savez(fh, fs=self.fs, **{k: self.columns[k] for k in self.COLUMNS}, meta=json.dumps(meta))
         elif path.suffix.lower() == ".csv":
             buf = io.StringIO()
             for k, v in meta.items():
@@ -173,7 +171,7 @@ def _smooth_steps(levels: Sequence[float], step_samples: int, ramp_samples: int)
     ramp = 0.5 - 0.5 * np.cos(np.pi * np.arange(ramp_samples) / ramp_samples)
     for i, (a0, a1) in enumerate(zip(prev, levels)):
         s = i * step_samples
-        env[s:s + ramp_samples] = a0 + (a1 - a0) * ramp
+        env[s : s + ramp_samples] = a0 + (a1 - a0) * ramp
     return env
 
 
@@ -191,12 +189,23 @@ class Rig:
     weigh_resolution : resolution of the scale that weighs the moving mass [kg] (None: not weighed)
     """
 
-    def __init__(self, system: Device | Model = AS_BUILT, *, effects: dict[str, Any] | None = None,
-                 sensors: Sensors = Sensors(), fs: float = 512.0, oversample: int = 4, seed: int = 0,
-                 weigh_resolution: float | None = 1e-4):
+    def __init__(
+        self,
+        system: Device | Model = AS_BUILT,
+        *,
+        effects: dict[str, Any] | None = None,
+        sensors: Sensors = Sensors(),
+        fs: float = 512.0,
+        oversample: int = 4,
+        seed: int = 0,
+        weigh_resolution: float | None = 1e-4,
+    ):
         if effects:
-            system = type(system).from_dict({**system.to_dict(), "extra": {**dict(system.extra), **effects}}) \
-                if isinstance(system, Model) else system.with_(extra={**dict(system.extra), **effects})
+            system = (
+                type(system).from_dict({**system.to_dict(), "extra": {**dict(system.extra), **effects}})
+                if isinstance(system, Model)
+                else system.with_(extra={**dict(system.extra), **effects})
+            )
         if not (fs > 0 and math.isfinite(fs)):
             raise RigError(f"sampling rate must be positive, got {fs}")
         if int(oversample) < 1:
@@ -210,8 +219,14 @@ class Rig:
         self.equilibria = system.equilibria()
 
     # --- excitations -------------------------------------------------------------------------
-    def random(self, duration: float = 300.0, rms: float = 14.0, band: tuple[float, float] = (2.0, 40.0),
-               settle: float = 5.0, start: str = "plus") -> RigRecord:
+    def random(
+        self,
+        duration: float = 300.0,
+        rms: float = 14.0,
+        band: tuple[float, float] = (2.0, 40.0),
+        settle: float = 5.0,
+        start: str = "plus",
+    ) -> RigRecord:
         """Band-limited Gaussian random base excitation (flat spectrum over ``band`` [Hz]).
 
         ``rms`` [m/s^2] of the table acceleration; the first ``settle`` seconds are discarded.
@@ -221,8 +236,9 @@ class Rig:
         truth, can follow a long free run (see the calibration report).
         """
         if duration <= 0 or rms <= 0 or not (0 < band[0] < band[1] < self.fs / 2):
-            raise RigError(f"random excitation needs duration > 0, rms > 0 and 0 < band < fs/2; got "
-                           f"{duration}, {rms}, {band}")
+            raise RigError(
+                f"random excitation needs duration > 0, rms > 0 and 0 < band < fs/2; got {duration}, {rms}, {band}"
+            )
         fsim = self.fs * self.oversample
         n = int(round((duration + settle + TAIL_S) * self.fs)) * self.oversample
         exc_rng, sens_rng = self._streams()
@@ -231,23 +247,46 @@ class Rig:
         spec[(f < band[0]) | (f > band[1])] = 0.0
         acc = np.fft.irfft(spec, n)
         acc *= rms / acc.std()
-        excitation = {"type": "random", "duration_s": duration, "rms_m_s2": rms, "band_hz": list(band),
-                      "settle_s": settle}
+        excitation = {
+            "type": "random",
+            "duration_s": duration,
+            "rms_m_s2": rms,
+            "band_hz": list(band),
+            "settle_s": settle,
+        }
         return self._run([acc], [start], [settle], [duration], excitation, sens_rng)[0]
 
-    def harmonic(self, freq: float = 9.0, amplitude: float = 5.0, start: str = "plus",
-                 settle_periods: int = 100, record_periods: int = 100) -> RigRecord:
+    def harmonic(
+        self,
+        freq: float = 9.0,
+        amplitude: float = 5.0,
+        start: str = "plus",
+        settle_periods: int = 100,
+        record_periods: int = 100,
+    ) -> RigRecord:
         """Steady-state response to b'' = A sin(2 pi f t) [m/s^2], starting at rest in ``start`` well."""
         return self.sweep(freq, [amplitude], start, settle_periods, record_periods)[0]
 
-    def sweep(self, freq: float, amplitudes: Sequence[float], start: str = "plus", settle_periods: int = 100,
-              record_periods: int = 100) -> list[RigRecord]:
+    def sweep(
+        self,
+        freq: float,
+        amplitudes: Sequence[float],
+        start: str = "plus",
+        settle_periods: int = 100,
+        record_periods: int = 100,
+    ) -> list[RigRecord]:
         """Step the harmonic amplitude through ``amplitudes`` without stopping the table, as a lab
         does (up or down by their order); one record per step, its settling time discarded."""
         return self.sweeps(freq, [amplitudes], [start], settle_periods, record_periods)[0]
 
-    def sweeps(self, freq: float, amplitude_lists: Sequence[Sequence[float]], starts: Sequence[str],
-               settle_periods: int = 100, record_periods: int = 100) -> list[list[RigRecord]]:
+    def sweeps(
+        self,
+        freq: float,
+        amplitude_lists: Sequence[Sequence[float]],
+        starts: Sequence[str],
+        settle_periods: int = 100,
+        record_periods: int = 100,
+    ) -> list[list[RigRecord]]:
         """Several stepped sweeps (each from its own starting well) in one batched simulation."""
         if not (0 < freq < self.fs / 4):
             raise RigError(f"forcing frequency must lie in (0, fs/4) = (0, {self.fs / 4:g}) Hz, got {freq}")
@@ -271,10 +310,22 @@ class Rig:
             accs.append(env * np.sin(2 * np.pi * freq * t + phase))
             settles.append([i * step_n / fsim + settle_periods * period for i in range(len(amps))])
             durations.append(record_periods * period)
-        excitation = {"type": "harmonic", "freq_hz": freq, "settle_periods": settle_periods,
-                      "record_periods": record_periods, "phase_rad": phase}
-        return self._run(accs, list(starts), settles, durations, excitation, sens_rng,
-                         amplitude_lists=[list(map(float, a)) for a in amplitude_lists])
+        excitation = {
+            "type": "harmonic",
+            "freq_hz": freq,
+            "settle_periods": settle_periods,
+            "record_periods": record_periods,
+            "phase_rad": phase,
+        }
+        return self._run(
+            accs,
+            list(starts),
+            settles,
+            durations,
+            excitation,
+            sens_rng,
+            amplitude_lists=[list(map(float, a)) for a in amplitude_lists],
+        )
 
     # --- the measurement chain ---------------------------------------------------------------
     def _streams(self) -> tuple[np.random.Generator, np.random.Generator]:
@@ -294,18 +345,32 @@ class Rig:
             x0.append([self.equilibria.well(st), 0.0])
         kind = self.system.kind
         params = np.repeat(self.system.kernel_params()[:, None], len(accs), axis=1)
-        sim = simulate_batch(params, kind, np.array([m[1] for m in motions]), 1 / fsim, np.array(x0),
-                             input_index=np.arange(len(accs)), store_velocity=True)
+        sim = simulate_batch(
+            params,
+            kind,
+            np.array([m[1] for m in motions]),
+            1 / fsim,
+            np.array(x0),
+            input_index=np.arange(len(accs)),
+            store_velocity=True,
+        )
         if sim.diverged.any():
-            raise RigError(f"the device did not survive the excitation: {sim.describe_failures()}; "
-                           "lower the excitation level")
+            raise RigError(
+                f"the device did not survive the excitation: {sim.describe_failures()}; lower the excitation level"
+            )
         q = self.oversample
         out = []
         for i, ((b_true, acc_true), st) in enumerate(zip(motions, starts)):
             acc_meas = acc_true + s.acc_bias + s.acc_noise * math.sqrt(q) * sens_rng.standard_normal(n)
             y_meas = sim.z[i] + b_true + s.laser_noise * math.sqrt(q) * sens_rng.standard_normal(n)
-            chans = {"base_acc": acc_meas, "y": y_meas, "z_true": sim.z[i], "z_dot_true": sim.z_dot[i],
-                     "acc_true": acc_true, "b_true": b_true}
+            chans = {
+                "base_acc": acc_meas,
+                "y": y_meas,
+                "z_true": sim.z[i],
+                "z_dot_true": sim.z_dot[i],
+                "acc_true": acc_true,
+                "b_true": b_true,
+            }
             if q > 1:  # delta-sigma front end: linear-phase FIR anti-aliasing, delay compensated
                 chans = {k: signal.decimate(v, q, ftype="fir", zero_phase=True) for k, v in chans.items()}
             b_est = integrate_twice(chans["base_acc"], self.fs, s.highpass_hz, s.integration)
@@ -314,10 +379,19 @@ class Rig:
                 k0 = int(round(t0 * self.fs))
                 k1 = k0 + int(round(durations[i] * self.fs))
                 sl = slice(k0, k1)
-                cols = {"t": np.arange(k1 - k0) / self.fs, "base_acc": chans["base_acc"][sl], "y": chans["y"][sl],
-                        "base_disp": b_est[sl], "z": chans["y"][sl] - b_est[sl]}
-                true = {"z": chans["z_true"][sl], "z_dot": chans["z_dot_true"][sl],
-                        "base_acc": chans["acc_true"][sl], "base_disp": chans["b_true"][sl]}
+                cols = {
+                    "t": np.arange(k1 - k0) / self.fs,
+                    "base_acc": chans["base_acc"][sl],
+                    "y": chans["y"][sl],
+                    "base_disp": b_est[sl],
+                    "z": chans["y"][sl] - b_est[sl],
+                }
+                true = {
+                    "z": chans["z_true"][sl],
+                    "z_dot": chans["z_dot_true"][sl],
+                    "base_acc": chans["acc_true"][sl],
+                    "base_disp": chans["b_true"][sl],
+                }
                 exc = dict(excitation, start_well=st, record_start_s=k0 / self.fs)
                 if amplitude_lists is not None:
                     exc["amplitude_m_s2"] = amplitude_lists[i][j]
@@ -327,18 +401,27 @@ class Rig:
         return out if amplitude_lists is not None else [r[0] for r in out]
 
     def _record(self, cols, true, excitation) -> RigRecord:
-        meta = {"fs": f"{self.fs:g}", "units": "SI (s, m/s^2, m)",
-                "source": f"negstiff virtual rig ({excitation['type']}, seed {self.seed})"}
+        meta = {
+            "fs": f"{self.fs:g}",
+            "units": "SI (s, m/s^2, m)",
+            "source": f"negstiff virtual rig ({excitation['type']}, seed {self.seed})",
+        }
         if self.weigh_resolution:
             meta["mass"] = f"{round(self.system.m / self.weigh_resolution) * self.weigh_resolution:.6g}"
         if excitation["type"] == "harmonic":
             meta["forcing_hz"] = f"{excitation['freq_hz']:g}"
             meta["amplitude_m_s2"] = f"{excitation['amplitude_m_s2']:g}"
         eq = self.equilibria
-        truth = {"system": {"kind": self.system.kind, "parameters": self.system.to_dict()},
-                 "effects": {k: (dict(v) if isinstance(v, dict) else v) for k, v in self.system.extra.items()},
-                 "equilibria": eq.as_dict(), "sensors": asdict(self.sensors), "fs": self.fs,
-                 "oversample": self.oversample, "seed": self.seed, "excitation": excitation}
+        truth = {
+            "system": {"kind": self.system.kind, "parameters": self.system.to_dict()},
+            "effects": {k: (dict(v) if isinstance(v, dict) else v) for k, v in self.system.extra.items()},
+            "equilibria": eq.as_dict(),
+            "sensors": asdict(self.sensors),
+            "fs": self.fs,
+            "oversample": self.oversample,
+            "seed": self.seed,
+            "excitation": excitation,
+        }
         if isinstance(self.system, Device):
             truth["features"] = self.system.features()
         return RigRecord(self.fs, cols, meta, truth, true)

@@ -27,14 +27,29 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
-from .equation import (COULOMB_VELOCITY_SCALE, N_PARAMS, P_C, P_CNL, P_COULOMB, P_CUBIC_DAMP, P_CUBIC_STIFF,
-                       P_M, P_QUAD_STIFF, P_QUARTIC, P_QUINTIC, P_STOP_K, P_STOP_Z)
+from .equation import (
+    COULOMB_VELOCITY_SCALE,
+    N_PARAMS,
+    P_C,
+    P_CNL,
+    P_COULOMB,
+    P_CUBIC_DAMP,
+    P_CUBIC_STIFF,
+    P_M,
+    P_QUAD_STIFF,
+    P_QUARTIC,
+    P_QUINTIC,
+    P_STOP_K,
+    P_STOP_Z,
+)
 
 KIND_POLYNOMIAL, KIND_DEVICE = 0, 1
 KINDS = {"polynomial": KIND_POLYNOMIAL, "device": KIND_DEVICE}
 STATUS_OK, STATUS_DIVERGED, STATUS_GEOMETRY = 0, 1, 2
-STATUS_TEXT = {STATUS_DIVERGED: "diverged (|z| or |z_dot| beyond its limit, or non-finite)",
-               STATUS_GEOMETRY: "left the device's stroke (the rods cannot reach that z)"}
+STATUS_TEXT = {
+    STATUS_DIVERGED: "diverged (|z| or |z_dot| beyond its limit, or non-finite)",
+    STATUS_GEOMETRY: "left the device's stroke (the rods cannot reach that z)",
+}
 DEFAULT_SUBSTEPS = 2
 DEFAULT_Z_LIMIT = 1.0
 """Displacement [m] beyond which a simulation is declared diverged."""
@@ -75,16 +90,34 @@ def _force(kind, coulomb, z, v, q):
 @numba.njit(inline="always", **_JIT)
 def _member(p, b, kind):
     """Parameter tuple of member b, with the device's angle rows turned into L cos(a), sin(a)."""
-    q = (p[0, b], p[1, b], p[2, b], p[3, b], p[4, b], p[5, b], p[6, b], p[7, b], p[8, b], p[9, b],
-         p[10, b], p[11, b], p[12, b], p[13, b], p[14, b], p[15, b], p[16, b])
+    q = (
+        p[0, b],
+        p[1, b],
+        p[2, b],
+        p[3, b],
+        p[4, b],
+        p[5, b],
+        p[6, b],
+        p[7, b],
+        p[8, b],
+        p[9, b],
+        p[10, b],
+        p[11, b],
+        p[12, b],
+        p[13, b],
+        p[14, b],
+        p[15, b],
+        p[16, b],
+    )
     if kind == KIND_DEVICE:
         q = (q[0], q[1], q[2] * math.cos(q[3]), math.sin(q[3])) + q[4:]
     return q
 
 
 @numba.njit(inline="always", **_JIT)
-def _integrate(kind, coulomb, p, gain, u, uidx, dt, nsub, z0, v0, z_limit, v_limit,
-               out_z, out_v, store_v, status, fail_step):
+def _integrate(
+    kind, coulomb, p, gain, u, uidx, dt, nsub, z0, v0, z_limit, v_limit, out_z, out_v, store_v, status, fail_step
+):
     """RK4 over the N samples of each member's input row ``u[uidx[b]]``; outputs time-major."""
     nb = p.shape[1]
     n = u.shape[1]
@@ -142,35 +175,107 @@ def _integrate(kind, coulomb, p, gain, u, uidx, dt, nsub, z0, v0, z_limit, v_lim
 # One compiled kernel per (restoring-force kind, Coulomb friction present): the flags are constants
 # inside each, so the batch loop has no data-dependent branches.
 @numba.njit(**_JIT)
-def _kernel_poly(p, gain, u, uidx, dt, nsub, z0, v0, z_limit, v_limit,
-                 out_z, out_v, store_v, status, fail_step):
-    return _integrate(KIND_POLYNOMIAL, False, p, gain, u, uidx, dt, nsub, z0, v0, z_limit, v_limit,
-                      out_z, out_v, store_v, status, fail_step)
+def _kernel_poly(p, gain, u, uidx, dt, nsub, z0, v0, z_limit, v_limit, out_z, out_v, store_v, status, fail_step):
+    return _integrate(
+        KIND_POLYNOMIAL,
+        False,
+        p,
+        gain,
+        u,
+        uidx,
+        dt,
+        nsub,
+        z0,
+        v0,
+        z_limit,
+        v_limit,
+        out_z,
+        out_v,
+        store_v,
+        status,
+        fail_step,
+    )
 
 
 @numba.njit(**_JIT)
-def _kernel_poly_coulomb(p, gain, u, uidx, dt, nsub, z0, v0, z_limit, v_limit,
-                         out_z, out_v, store_v, status, fail_step):
-    return _integrate(KIND_POLYNOMIAL, True, p, gain, u, uidx, dt, nsub, z0, v0, z_limit, v_limit,
-                      out_z, out_v, store_v, status, fail_step)
+def _kernel_poly_coulomb(
+    p, gain, u, uidx, dt, nsub, z0, v0, z_limit, v_limit, out_z, out_v, store_v, status, fail_step
+):
+    return _integrate(
+        KIND_POLYNOMIAL,
+        True,
+        p,
+        gain,
+        u,
+        uidx,
+        dt,
+        nsub,
+        z0,
+        v0,
+        z_limit,
+        v_limit,
+        out_z,
+        out_v,
+        store_v,
+        status,
+        fail_step,
+    )
 
 
 @numba.njit(**_JIT)
-def _kernel_device(p, gain, u, uidx, dt, nsub, z0, v0, z_limit, v_limit,
-                   out_z, out_v, store_v, status, fail_step):
-    return _integrate(KIND_DEVICE, False, p, gain, u, uidx, dt, nsub, z0, v0, z_limit, v_limit,
-                      out_z, out_v, store_v, status, fail_step)
+def _kernel_device(p, gain, u, uidx, dt, nsub, z0, v0, z_limit, v_limit, out_z, out_v, store_v, status, fail_step):
+    return _integrate(
+        KIND_DEVICE,
+        False,
+        p,
+        gain,
+        u,
+        uidx,
+        dt,
+        nsub,
+        z0,
+        v0,
+        z_limit,
+        v_limit,
+        out_z,
+        out_v,
+        store_v,
+        status,
+        fail_step,
+    )
 
 
 @numba.njit(**_JIT)
-def _kernel_device_coulomb(p, gain, u, uidx, dt, nsub, z0, v0, z_limit, v_limit,
-                           out_z, out_v, store_v, status, fail_step):
-    return _integrate(KIND_DEVICE, True, p, gain, u, uidx, dt, nsub, z0, v0, z_limit, v_limit,
-                      out_z, out_v, store_v, status, fail_step)
+def _kernel_device_coulomb(
+    p, gain, u, uidx, dt, nsub, z0, v0, z_limit, v_limit, out_z, out_v, store_v, status, fail_step
+):
+    return _integrate(
+        KIND_DEVICE,
+        True,
+        p,
+        gain,
+        u,
+        uidx,
+        dt,
+        nsub,
+        z0,
+        v0,
+        z_limit,
+        v_limit,
+        out_z,
+        out_v,
+        store_v,
+        status,
+        fail_step,
+    )
 
 
-_KERNELS = {(KIND_POLYNOMIAL, False): _kernel_poly, (KIND_POLYNOMIAL, True): _kernel_poly_coulomb,
-            (KIND_DEVICE, False): _kernel_device, (KIND_DEVICE, True): _kernel_device_coulomb}
+_KERNELS = {
+    (KIND_POLYNOMIAL, False): _kernel_poly,
+    (KIND_POLYNOMIAL, True): _kernel_poly_coulomb,
+    (KIND_DEVICE, False): _kernel_device,
+    (KIND_DEVICE, True): _kernel_device_coulomb,
+}
 
 
 @dataclass(frozen=True)
@@ -199,7 +304,9 @@ class SimulationResult:
     def describe_failures(self, limit: int = 3) -> str:
         """One line naming the failed members, what happened and when."""
         bad = np.flatnonzero(self.diverged)
-        parts = [f"member {b}: {STATUS_TEXT[int(self.status[b])]} at t = {self.fail_time[b]:.3f} s" for b in bad[:limit]]
+        parts = [
+            f"member {b}: {STATUS_TEXT[int(self.status[b])]} at t = {self.fail_time[b]:.3f} s" for b in bad[:limit]
+        ]
         more = f" (+{bad.size - limit} more)" if bad.size > limit else ""
         return "; ".join(parts) + more
 
@@ -213,11 +320,21 @@ def input_gain(input_kind: str, masses: np.ndarray) -> np.ndarray:
     raise ValueError(f"input kind must be 'base_acc' or 'force', got {input_kind!r}")
 
 
-def simulate_batch(params: np.ndarray, kind: str, u: np.ndarray, dt: float, x0: np.ndarray, *,
-                   input_kind: str = "base_acc", input_index: np.ndarray | None = None,
-                   substeps: int = DEFAULT_SUBSTEPS, store_velocity: bool = False,
-                   z_limit: float = DEFAULT_Z_LIMIT, v_limit: float = DEFAULT_V_LIMIT,
-                   threads: int | None = None) -> SimulationResult:
+def simulate_batch(
+    params: np.ndarray,
+    kind: str,
+    u: np.ndarray,
+    dt: float,
+    x0: np.ndarray,
+    *,
+    input_kind: str = "base_acc",
+    input_index: np.ndarray | None = None,
+    substeps: int = DEFAULT_SUBSTEPS,
+    store_velocity: bool = False,
+    z_limit: float = DEFAULT_Z_LIMIT,
+    v_limit: float = DEFAULT_V_LIMIT,
+    threads: int | None = None,
+) -> SimulationResult:
     """Integrate B parameter sets at once.
 
     Parameters
@@ -279,8 +396,23 @@ def simulate_batch(params: np.ndarray, kind: str, u: np.ndarray, dt: float, x0: 
         sl = slice(c[0], c[-1] + 1)
         oz = np.empty((n, c.size))
         ov = np.empty((n, c.size)) if store_velocity else np.empty((1, c.size))
-        kernel(np.ascontiguousarray(p[:, sl]), gain[sl], u2, uidx[sl], float(dt), int(substeps),
-               z0[sl], v0[sl], float(z_limit), float(v_limit), oz, ov, store_velocity, status[sl], fail[sl])
+        kernel(
+            np.ascontiguousarray(p[:, sl]),
+            gain[sl],
+            u2,
+            uidx[sl],
+            float(dt),
+            int(substeps),
+            z0[sl],
+            v0[sl],
+            float(z_limit),
+            float(v_limit),
+            oz,
+            ov,
+            store_velocity,
+            status[sl],
+            fail[sl],
+        )
         return oz, ov
 
     if len(chunks) == 1:
@@ -297,9 +429,18 @@ def simulate_batch(params: np.ndarray, kind: str, u: np.ndarray, dt: float, x0: 
     return SimulationResult(t, out_z.T, None if out_v is None else out_v.T, status, fail_time)
 
 
-def simulate(system, u: np.ndarray, dt: float, *, z0: float | None = None, v0: float = 0.0,
-             input_kind: str = "base_acc", substeps: int = DEFAULT_SUBSTEPS,
-             z_limit: float = DEFAULT_Z_LIMIT, v_limit: float = DEFAULT_V_LIMIT) -> SimulationResult:
+def simulate(
+    system,
+    u: np.ndarray,
+    dt: float,
+    *,
+    z0: float | None = None,
+    v0: float = 0.0,
+    input_kind: str = "base_acc",
+    substeps: int = DEFAULT_SUBSTEPS,
+    z_limit: float = DEFAULT_Z_LIMIT,
+    v_limit: float = DEFAULT_V_LIMIT,
+) -> SimulationResult:
     """Simulate one ``Model`` or ``Device`` under the sampled input ``u`` (N,), interval ``dt`` [s].
 
     The initial state defaults to rest at the positive well. Returns z and z_dot of shape (N,)
@@ -307,6 +448,15 @@ def simulate(system, u: np.ndarray, dt: float, *, z0: float | None = None, v0: f
     """
     if z0 is None:
         z0 = system.equilibria().z_plus
-    return simulate_batch(system.kernel_params(), system.kind, u, dt, np.array([z0, v0]),
-                          input_kind=input_kind, substeps=substeps, store_velocity=True, z_limit=z_limit,
-                          v_limit=v_limit)
+    return simulate_batch(
+        system.kernel_params(),
+        system.kind,
+        u,
+        dt,
+        np.array([z0, v0]),
+        input_kind=input_kind,
+        substeps=substeps,
+        store_velocity=True,
+        z_limit=z_limit,
+        v_limit=v_limit,
+    )

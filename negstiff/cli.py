@@ -102,8 +102,12 @@ def cmd_rig(args) -> int:
     rig = _make_rig(args)
     out = Path(args.out)
     if args.mode == "random":
-        rec = rig.random(duration=args.duration, rms=args.rms, band=tuple(args.band),
-                         start="plus" if args.start == "both" else args.start)
+        rec = rig.random(
+            duration=args.duration,
+            rms=args.rms,
+            band=tuple(args.band),
+            start="plus" if args.start == "both" else args.start,
+        )
         rec.write(out)
         _say(args, f"wrote {out} ({rec.columns['z'].size} samples at {rig.fs:g} Hz) and its truth")
     elif args.mode == "harmonic":
@@ -133,8 +137,15 @@ def write_campaign(rig, args) -> None:
                 amp = rec.truth["excitation"]["amplitude_m_s2"]
                 name = f"{start}_{direction}_{rec.truth['excitation']['step']:03d}_{amp:g}.csv"
                 rec.write(tmp / name)
-                index.append({"file": name, "start_well": start, "direction": direction,
-                              "amplitude_m_s2": amp, "forcing_hz": args.freq})
+                index.append(
+                    {
+                        "file": name,
+                        "start_well": start,
+                        "direction": direction,
+                        "amplitude_m_s2": amp,
+                        "forcing_hz": args.freq,
+                    }
+                )
         (tmp / "index.json").write_text(json.dumps({"records": index}, indent=1) + "\n")
     _say(args, f"wrote {len(index)} records to {args.out}/ (index.json lists them)")
 
@@ -156,7 +167,7 @@ def cmd_simulate(args) -> int:
     system = load_system(args.model)
     rec = load(args.input, columns=args.columns, fs=args.fs)
     rec.require(2, "a simulation")
-    z0, v0 = (initial_state_from_record(rec.z, rec.fs) if rec.z is not None else (None, 0.0))
+    z0, v0 = initial_state_from_record(rec.z, rec.fs) if rec.z is not None else (None, 0.0)
     if args.z0 is not None:
         z0 = args.z0
     if args.v0 is not None:
@@ -191,55 +202,85 @@ def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog="negstiff",
         description="Identify, update and quantify the uncertainty of nonlinear (bistable, negative-stiffness) "
-                    "oscillators from shaker-table records. Units are SI; see 'negstiff COMMAND --help'.")
+        "oscillators from shaker-table records. Units are SI; see 'negstiff COMMAND --help'.",
+    )
     from negstiff import __version__
+
     p.add_argument("--version", action="version", version=f"negstiff {__version__}")
     sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
-    rig = sub.add_parser("rig", parents=[common], help="virtual test rig: records as the seed's laboratory measures them",
-                         description="Virtual shaking table with the as-built device (exact geometry) or a model on it. "
-                                     "Records: t, base_acc (accelerometer), y (laser), base_disp (double-integrated), "
-                                     "z = y - base_disp.",
-                         epilog=EPILOG_RIG, formatter_class=argparse.RawDescriptionHelpFormatter)
+    rig = sub.add_parser(
+        "rig",
+        parents=[common],
+        help="virtual test rig: records as the seed's laboratory measures them",
+        description="Virtual shaking table with the as-built device (exact geometry) or a model on it. "
+        "Records: t, base_acc (accelerometer), y (laser), base_disp (double-integrated), "
+        "z = y - base_disp.",
+        epilog=EPILOG_RIG,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
     rig.add_argument("mode", choices=["random", "harmonic", "campaign"])
     rig.add_argument("-o", "--out", required=True, help="record file (.csv or .npz); for campaign, a folder")
-    rig.add_argument("--model", help="drive a model JSON (polynomial truth) or device JSON instead of the as-built device")
-    rig.add_argument("--effect", action="append", metavar="NAME=VALUE",
-                     help="hidden extra effect (coulomb_friction, quadratic_damping, cubic_damping, quartic_stiffness, "
-                          "quintic_stiffness, end_stop=k:N/m,z:m, ...); repeatable")
+    rig.add_argument(
+        "--model", help="drive a model JSON (polynomial truth) or device JSON instead of the as-built device"
+    )
+    rig.add_argument(
+        "--effect",
+        action="append",
+        metavar="NAME=VALUE",
+        help="hidden extra effect (coulomb_friction, quadratic_damping, cubic_damping, quartic_stiffness, "
+        "quintic_stiffness, end_stop=k:N/m,z:m, ...); repeatable",
+    )
     rig.add_argument("--fs", type=float, default=512.0, help="sampling rate [Hz] (default 512)")
     rig.add_argument("--noise-free", action="store_true", help="perfect sensors (no noise, no bias)")
     g = rig.add_argument_group("random")
     g.add_argument("--duration", type=float, default=300.0, help="record length [s] (default 300)")
     g.add_argument("--rms", type=float, default=14.0, help="table acceleration rms [m/s^2] (default 14: cross-well)")
-    g.add_argument("--band", type=float, nargs=2, default=[2.0, 40.0], metavar=("LO", "HI"),
-                   help="excitation band [Hz] (default 2 40)")
+    g.add_argument(
+        "--band",
+        type=float,
+        nargs=2,
+        default=[2.0, 40.0],
+        metavar=("LO", "HI"),
+        help="excitation band [Hz] (default 2 40)",
+    )
     g = rig.add_argument_group("harmonic and campaign")
     g.add_argument("--freq", type=float, default=9.0, help="forcing frequency [Hz] (default 9)")
     g.add_argument("--amplitude", type=float, default=5.0, help="table acceleration amplitude [m/s^2] (harmonic)")
-    g.add_argument("--amplitudes", default="4:30:0.5", help="campaign amplitudes start:stop:step or a list (default 4:30:0.5)")
+    g.add_argument(
+        "--amplitudes", default="4:30:0.5", help="campaign amplitudes start:stop:step or a list (default 4:30:0.5)"
+    )
     g.add_argument("--start", default="plus", choices=["plus", "minus", "both"], help="starting well (default plus)")
     g.add_argument("--direction", default="up", choices=["up", "down", "both"], help="campaign sweep direction")
     g.add_argument("--settle-periods", type=int, default=100, help="forcing periods discarded per step (default 100)")
     g.add_argument("--periods", type=int, default=100, help="forcing periods recorded per step (default 100)")
     rig.set_defaults(func=cmd_rig)
 
-    sim = sub.add_parser("simulate", parents=[common], help="integrate a model under a record's input",
-                         description="Integrate MODEL.json (contract model file, or a device JSON) under INPUT's input "
-                                     "column. Initial state: from INPUT's first z samples if present, else rest at z_plus.")
+    sim = sub.add_parser(
+        "simulate",
+        parents=[common],
+        help="integrate a model under a record's input",
+        description="Integrate MODEL.json (contract model file, or a device JSON) under INPUT's input "
+        "column. Initial state: from INPUT's first z samples if present, else rest at z_plus.",
+    )
     sim.add_argument("model", help="model JSON")
     sim.add_argument("input", help="measurement file whose input column drives the model")
     sim.add_argument("-o", "--out", required=True, help="output CSV: t,<input>,z,z_dot")
     sim.add_argument("--z0", type=float, help="initial z [m]")
     sim.add_argument("--v0", type=float, help="initial z_dot [m/s]")
-    sim.add_argument("--columns", help="column map for foreign files, e.g. force=V1,z=V2 (a map entry may scale: X*9.81)")
+    sim.add_argument(
+        "--columns", help="column map for foreign files, e.g. force=V1,z=V2 (a map entry may scale: X*9.81)"
+    )
     sim.add_argument("--fs", type=float, help="sampling rate [Hz] for files without t")
     sim.add_argument("--substeps", type=int, default=2, help="RK4 steps per sample interval (default 2)")
     sim.set_defaults(func=cmd_simulate)
 
-    rep = sub.add_parser("reproduce", parents=[common], help="the whole study, end to end, as one report",
-                         description="Run the seed paper's study on the virtual rig and write index.md, index.html and "
-                                     "results.json.")
+    rep = sub.add_parser(
+        "reproduce",
+        parents=[common],
+        help="the whole study, end to end, as one report",
+        description="Run the seed paper's study on the virtual rig and write index.md, index.html and results.json.",
+    )
     rep.add_argument("-o", "--out", default="reports/paper", help="report folder (default reports/paper)")
     rep.add_argument("--fast", action="store_true", help="a quick reduced run (minutes)")
     rep.set_defaults(func=cmd_reproduce)

@@ -29,11 +29,47 @@ def test_rig_and_simulate_write_the_contract_files(workdir):
 
 
 def test_harmonic_and_campaign(workdir):
-    assert main(["rig", "harmonic", "-o", str(workdir / "h.npz"), "--amplitude", "3", "--periods", "20",
-                 "--settle-periods", "20", "--quiet"]) == 0
+    assert (
+        main(
+            [
+                "rig",
+                "harmonic",
+                "-o",
+                str(workdir / "h.npz"),
+                "--amplitude",
+                "3",
+                "--periods",
+                "20",
+                "--settle-periods",
+                "20",
+                "--quiet",
+            ]
+        )
+        == 0
+    )
     camp = workdir / "camp"
-    assert main(["rig", "campaign", "-o", str(camp), "--amplitudes", "2,4", "--start", "both", "--direction", "both",
-                 "--periods", "8", "--settle-periods", "10", "--quiet"]) == 0
+    assert (
+        main(
+            [
+                "rig",
+                "campaign",
+                "-o",
+                str(camp),
+                "--amplitudes",
+                "2,4",
+                "--start",
+                "both",
+                "--direction",
+                "both",
+                "--periods",
+                "8",
+                "--settle-periods",
+                "10",
+                "--quiet",
+            ]
+        )
+        == 0
+    )
     index = json.loads((camp / "index.json").read_text())["records"]
     assert len(index) == 8 and all((camp / r["file"]).exists() for r in index)
 
@@ -44,8 +80,21 @@ def _bad(workdir, name, text):
     return p
 
 
-@pytest.mark.parametrize("case", ["missing_column", "nan_row", "nonuniform_t", "nonincreasing_t", "too_few",
-                                  "unknown_map_column", "unreadable", "bad_model", "unknown_effect", "no_file"])
+@pytest.mark.parametrize(
+    "case",
+    [
+        "missing_column",
+        "nan_row",
+        "nonuniform_t",
+        "nonincreasing_t",
+        "too_few",
+        "unknown_map_column",
+        "unreadable",
+        "bad_model",
+        "unknown_effect",
+        "no_file",
+    ],
+)
 def test_bad_input_exits_2_with_one_line_and_no_output(workdir, capsys, case):
     model, rec = workdir / "model.json", workdir / "rec.csv"
     extra = []

@@ -75,5 +75,7 @@ def test_least_squares_cubic_departs_from_taylor_model_form_gap():
     z = np.linspace(-0.03, 0.03, 301)
     exact = AS_BUILT.restoring_force(z)
     # the least-squares cubic fits the exact force over the stroke better than the Taylor cubic
-    assert np.sqrt(np.mean((lsq.restoring_force(z) - exact) ** 2)) < np.sqrt(np.mean((tay.restoring_force(z) - exact) ** 2))
+    assert np.sqrt(np.mean((lsq.restoring_force(z) - exact) ** 2)) < np.sqrt(
+        np.mean((tay.restoring_force(z) - exact) ** 2)
+    )
     assert abs(lsq.k3 / tay.k3 - 1) > 0.2, "the two cubics differ by more than 20 % in k3 (device-model.md)"

@@ -37,8 +37,9 @@ def test_shifted_coefficients_follow_eq7_and_back_transform(cubic_model):
 
 def test_potential_is_the_integral_of_the_restoring_force(cubic_model):
     z = np.linspace(-0.03, 0.03, 2001)
-    u_num = np.concatenate([[0], np.cumsum(0.5 * (cubic_model.restoring_force(z[1:]) + cubic_model.restoring_force(z[:-1]))
-                                           * np.diff(z))])
+    u_num = np.concatenate(
+        [[0], np.cumsum(0.5 * (cubic_model.restoring_force(z[1:]) + cubic_model.restoring_force(z[:-1])) * np.diff(z))]
+    )
     u = cubic_model.potential(z) - cubic_model.potential(z[0])
     assert np.max(np.abs(u - u_num)) < 1e-6 * np.ptp(u)
 
@@ -50,12 +51,15 @@ def test_model_json_round_trip_and_defaults():
     assert Model.from_dict(m2.to_dict()) == m2
 
 
-@pytest.mark.parametrize("bad, message", [
-    ({"m": 0.2, "k1": 1, "k2": 0}, "lacks k3"),
-    ({"m": -1, "k1": 1, "k2": 0, "k3": 1}, "positive"),
-    ({"m": 1, "k1": 1, "k2": 0, "k3": 1, "extra": {"magic": 1}}, "unknown extra effect"),
-    ({"m": 1, "k1": 1, "k2": 0, "k3": 1, "bogus": 1}, "unknown fields"),
-])
+@pytest.mark.parametrize(
+    "bad, message",
+    [
+        ({"m": 0.2, "k1": 1, "k2": 0}, "lacks k3"),
+        ({"m": -1, "k1": 1, "k2": 0, "k3": 1}, "positive"),
+        ({"m": 1, "k1": 1, "k2": 0, "k3": 1, "extra": {"magic": 1}}, "unknown extra effect"),
+        ({"m": 1, "k1": 1, "k2": 0, "k3": 1, "bogus": 1}, "unknown fields"),
+    ],
+)
 def test_bad_models_are_refused_with_a_clear_message(bad, message):
     with pytest.raises(ValueError, match=message):
         Model.from_dict(bad)
@@ -63,8 +67,14 @@ def test_bad_models_are_refused_with_a_clear_message(bad, message):
 
 def test_extra_effects_add_their_forces():
     base = Model(m=1.0, k1=100.0, k2=0.0, k3=1e5, k0=0.0)
-    fx = Model(m=1.0, k1=100.0, k2=0.0, k3=1e5, k0=0.0,
-               extra={"quartic_stiffness": 2e6, "cubic_damping": 3.0, "end_stop": {"k": 1e4, "z": 0.02}})
+    fx = Model(
+        m=1.0,
+        k1=100.0,
+        k2=0.0,
+        k3=1e5,
+        k0=0.0,
+        extra={"quartic_stiffness": 2e6, "cubic_damping": 3.0, "end_stop": {"k": 1e4, "z": 0.02}},
+    )
     z, v = np.array([0.01, 0.03]), np.array([0.5, -0.5])
     diff = fx.total_force(z, v) - base.total_force(z, v)
     expected = 2e6 * z**4 + 3.0 * v**3 + np.array([0.0, 1e4 * 0.01])

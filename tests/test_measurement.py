@@ -37,20 +37,23 @@ def test_silverbox_loads_with_a_column_map(fname, request):
     assert m.n == 131072 and m.input_name == "force" and m.mass is None
 
 
-@pytest.mark.parametrize("text, kwargs, message", [
-    ("t,base_acc\n0,1\n0.1,2\n", {}, "missing column z"),
-    ("t,z\n0,1\n0.1,2\n", {}, "no input column"),
-    ("t,base_acc,force,z\n0,1,1,1\n0.1,2,2,2\n", {}, "two input columns"),
-    ("t,base_acc,z\n0,1,1\n0.1,nan,2\n0.2,1,1\n", {}, "base_acc is NaN or inf at row 2"),
-    ("t,base_acc,z\n0,1,1\n0.1,1,inf\n", {}, "z is NaN or inf at row 2"),
-    ("t,base_acc,z\n0,1,1\n0.2,1,1\n0.1,1,1\n", {}, "not increasing at row 3"),
-    ("t,base_acc,z\n0,1,1\n0.1,1,1\n0.25,1,1\n0.3,1,1\n", {}, "not uniformly sampled at row 3"),
-    ("base_acc,z\n1,1\n2,2\n", {}, "no time base"),
-    ("t,base_acc,z\n0,1,1\n0.1,x,1\n", {}, "row 2 .* is not numeric"),
-    ("a,b\n1,2\n", {"columns": "force=a,z=c", "fs": 10.0}, "refers to 'c'"),
-    ("a,b\n1,2\n", {"columns": "forse=a,z=b", "fs": 10.0}, "not a measurement column"),
-    ("t,base_acc,z\n", {}, "no data rows"),
-])
+@pytest.mark.parametrize(
+    "text, kwargs, message",
+    [
+        ("t,base_acc\n0,1\n0.1,2\n", {}, "missing column z"),
+        ("t,z\n0,1\n0.1,2\n", {}, "no input column"),
+        ("t,base_acc,force,z\n0,1,1,1\n0.1,2,2,2\n", {}, "two input columns"),
+        ("t,base_acc,z\n0,1,1\n0.1,nan,2\n0.2,1,1\n", {}, "base_acc is NaN or inf at row 2"),
+        ("t,base_acc,z\n0,1,1\n0.1,1,inf\n", {}, "z is NaN or inf at row 2"),
+        ("t,base_acc,z\n0,1,1\n0.2,1,1\n0.1,1,1\n", {}, "not increasing at row 3"),
+        ("t,base_acc,z\n0,1,1\n0.1,1,1\n0.25,1,1\n0.3,1,1\n", {}, "not uniformly sampled at row 3"),
+        ("base_acc,z\n1,1\n2,2\n", {}, "no time base"),
+        ("t,base_acc,z\n0,1,1\n0.1,x,1\n", {}, "row 2 .* is not numeric"),
+        ("a,b\n1,2\n", {"columns": "force=a,z=c", "fs": 10.0}, "refers to 'c'"),
+        ("a,b\n1,2\n", {"columns": "forse=a,z=b", "fs": 10.0}, "not a measurement column"),
+        ("t,base_acc,z\n", {}, "no data rows"),
+    ],
+)
 def test_bad_files_give_one_clear_line(tmp_path, text, kwargs, message):
     p = _write(tmp_path, text)
     with pytest.raises(MeasurementError, match=message) as exc:
@@ -63,8 +66,12 @@ def test_unreadable_files(tmp_path):
     (tmp_path / "bin.csv").write_bytes(b"\x89PNG\x00\xff\xfe")
     (tmp_path / "bad.mat").write_bytes(b"not a mat file at all")
     (tmp_path / "x.xlsx").write_text("")
-    for name, msg in (("bin.csv", "unreadable"), ("bad.mat", "unreadable"), ("x.xlsx", "unknown file type"),
-                      ("missing.csv", "no such file")):
+    for name, msg in (
+        ("bin.csv", "unreadable"),
+        ("bad.mat", "unreadable"),
+        ("x.xlsx", "unknown file type"),
+        ("missing.csv", "no such file"),
+    ):
         with pytest.raises(MeasurementError, match=msg):
             load(tmp_path / name)
 

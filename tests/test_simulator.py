@@ -20,8 +20,10 @@ def _energy_drift(system, well, dz, substeps):
     return np.max(np.abs(e - e[0])) / e[0]
 
 
-@pytest.mark.parametrize("system, well", [(Model(m=0.2, k1=426.0, k2=-3060.0, k3=7.77e5), "plus"),
-                                          (AS_BUILT.with_(c=0.0, c_nl=0.0), "minus")])
+@pytest.mark.parametrize(
+    "system, well",
+    [(Model(m=0.2, k1=426.0, k2=-3060.0, k3=7.77e5), "plus"), (AS_BUILT.with_(c=0.0, c_nl=0.0), "minus")],
+)
 def test_energy_is_conserved_without_damping_or_forcing(system, well):
     # On an oscillator RK4 multiplies the energy by |R(i w h)|^2 = 1 - (w h)^6 / 72 per step, so the
     # drift per unit time is O(h^5): below 1e-6 over 100 periods at 4 substeps per sample
@@ -80,7 +82,7 @@ def test_divergence_is_detected_and_reported():
     m = Model(m=0.2, k1=426.0, k2=-3060.0, k3=7.77e5, c=-3.0)
     r = simulate(m, np.zeros(int(60 * FS)), 1 / FS, z0=m.equilibria().z_plus + 0.001)
     assert r.status[0] == STATUS_DIVERGED and np.isfinite(r.fail_time[0])
-    assert np.all(np.isnan(r.z[0][int(r.fail_time[0] * FS):]))
+    assert np.all(np.isnan(r.z[0][int(r.fail_time[0] * FS) :]))
     assert "diverged" in r.describe_failures()
 
 
@@ -91,10 +93,14 @@ def test_leaving_the_device_stroke_is_detected():
     assert "stroke" in r.describe_failures()
 
 
-@pytest.mark.parametrize("kw, message", [
-    ({"dt": -1.0}, "positive"), ({"u": np.array([0.0, np.nan, 1.0])}, "NaN"), ({"substeps": 0}, "substeps")])
+@pytest.mark.parametrize(
+    "kw, message",
+    [({"dt": -1.0}, "positive"), ({"u": np.array([0.0, np.nan, 1.0])}, "NaN"), ({"substeps": 0}, "substeps")],
+)
 def test_bad_simulation_arguments_are_refused(kw, message):
     m = Model(m=0.2, k1=426.0, k2=-3060.0, k3=7.77e5)
     args = {"u": np.zeros(10), "dt": 1 / FS, "substeps": 2, **kw}
     with pytest.raises(ValueError, match=message):
-        simulate_batch(m.kernel_params(), "polynomial", args["u"], args["dt"], np.array([0.02, 0]), substeps=args["substeps"])
+        simulate_batch(
+            m.kernel_params(), "polynomial", args["u"], args["dt"], np.array([0.02, 0]), substeps=args["substeps"]
+        )
