@@ -2,7 +2,7 @@
 (simulator, virtual test rig). ``models`` never imports ``inference``."""
 
 from .constants import G
-from .device import AS_BUILT, NOMINAL, Device, GeometryError
+from .device import AS_BUILT, NOMINAL, SEED_LIKE_CROSS_WELL_RMS, SEED_LIKE_CUBIC, Device, GeometryError
 from .equation import EFFECTS, Model
 from .simulator import SimulationResult, simulate, simulate_batch
 
@@ -11,6 +11,8 @@ __all__ = [
     "EFFECTS",
     "G",
     "NOMINAL",
+    "SEED_LIKE_CROSS_WELL_RMS",
+    "SEED_LIKE_CUBIC",
     "Device",
     "GeometryError",
     "Model",
