@@ -12,9 +12,9 @@ reference z* (x = z - z*), per unit mass,
 with the basis g = [x^2, x^3, x'|x'|] (seed Eq. 7 for the polynomial, the seed's damping model for
 x'|x'|) and a constant K(z*)/m that vanishes when z* is the equilibrium. Every channel is made zero
 mean, so the subspace step sees only the dynamics; the constant then follows from the time average
-of the equation of motion (mean z'' = mean z' = 0 over a long record). A constant input channel, the
-alternative of algorithms.md A.7, is poorly determined (|Im/Re| ~ 0.4 noise-free) and leaks into
-k2~ through the mean of x^2 (+12 % measured), so it is not used. The extended input
+of the equation of motion (with the record's mean velocity and acceleration, both near zero). A
+constant input channel, the alternative of algorithms.md A.7, is poorly determined (|Im/Re| ~ 0.4
+noise-free) and leaks into k2~ through the mean of x^2 (+12 % measured), so it is not used. The extended input
 [u, -g_1, ..., -g_J] (each channel scaled to unit std, A.2.8) goes through a generic LTI subspace
 step (``subspace``), whose
 extended FRF H_e(omega) = [H, c_1 H, ..., c_J H] gives c_j = mean over a band around resonance of
@@ -49,28 +49,39 @@ class NSIError(MeasurementError):
     """The record cannot be identified (too short, not enough excitation, no physical pole)."""
 
 
-def velocity_window(z: np.ndarray, fs: float) -> int:
-    """Savitzky-Golay window [samples] fitted to the data: the widest odd window (5..51, cubic)
-    whose gain stays within 0.1 % of 1 up to twice the frequency below which 99.5 % of the
-    velocity's power lies. Wide enough to average sensor noise, narrow enough not to bend the
-    response (a fixed window of fs/70 cut the Silverbox's 68 Hz response by several percent)."""
-    d = np.diff(z - z.mean())
-    f, p = signal.welch(d, fs, nperseg=min(4096, d.size))
+def velocity_window(z: np.ndarray, fs: float) -> tuple[int, int]:
+    """Savitzky-Golay (window, polynomial order) fitted to the data: the widest window whose gain
+    stays within 0.1 % of 1 up to twice the frequency below which 99.9 % of the displacement's power
+    lies (the displacement's, not the velocity's: differencing whitens the sensor noise, which would
+    fake a wide band exactly when smoothing is needed),
+    trying cubic fits first, then quintic, then septic. Wide enough to average sensor noise, narrow
+    enough not to bend the response (a fixed fs/70 window cut the Silverbox's response by several %).
+    (0, 0) means no window passes: no smoothing, and the velocity by spectral differentiation."""
+    f, p = signal.welch(z - z.mean(), fs, nperseg=min(4096, z.size))
     cum = np.cumsum(p) / np.sum(p)
-    f_band = 2 * f[np.searchsorted(cum, 0.995)]
-    best = 5
-    for w in range(5, 53, 2):
-        h = np.abs(signal.freqz(signal.savgol_coeffs(w, 3), worN=[f_band], fs=fs)[1][0])
-        if abs(h - 1) > 1e-3:
-            break
-        best = w
-    return best
+    f_band = min(2 * f[np.searchsorted(cum, 0.999)], 0.45 * fs)
+    for order in (3, 5, 7):
+        best = None
+        for w in range(order + 2, 53, 2):  # odd windows (order is odd)
+            h = np.abs(signal.freqz(signal.savgol_coeffs(w, order), worN=[f_band], fs=fs)[1][0])
+            if abs(h - 1) > 1e-3:
+                break
+            best = w
+        if best is not None:
+            return best, order
+    return 0, 0
 
 
 def smooth_and_differentiate(z: np.ndarray, fs: float) -> tuple[np.ndarray, np.ndarray]:
-    """Savitzky-Golay smoothed displacement and velocity (cubic, ``velocity_window`` samples)."""
-    w = velocity_window(z, fs)
-    return (signal.savgol_filter(z, w, 3, deriv=0), signal.savgol_filter(z, w, 3, deriv=1, delta=1.0 / fs))
+    """Savitzky-Golay smoothed displacement and velocity (``velocity_window``), or, when the data's
+    band leaves no room for smoothing, z itself and its spectral derivative."""
+    w, order = velocity_window(z, fs)
+    if w:
+        return (signal.savgol_filter(z, w, order), signal.savgol_filter(z, w, order, deriv=1, delta=1.0 / fs))
+    zm = z.mean()
+    spec = np.fft.rfft(z - zm)
+    v = np.fft.irfft(2j * np.pi * np.fft.rfftfreq(z.size, 1 / fs) * spec, z.size)
+    return z.copy(), v
 
 
 def well_guesses(rec: Measurement) -> tuple[float | None, float]:
@@ -223,6 +234,7 @@ class NSI:
                 gain * means[0]
                 - wn**2 * x.mean()
                 - 2 * zeta * wn * v.mean()
+                - (v[-1] - v[0]) / (v.size * rec.dt)  # mean acceleration over the record
                 + sum(c[k] * means[j + 1] for j, k in enumerate(BASIS_NAMES))
             )
             # restoring force about z_g, per unit mass: const + wn^2 x + c2 x^2 + c3 x^3
@@ -300,7 +312,7 @@ class NSI:
             "block_rows": self.block_rows,
             "band_fraction": list(self.band),
             "passes": self.passes,
-            "velocity": f"Savitzky-Golay, cubic, {velocity_window(ident.z, rec.fs)} samples",
+            "velocity": "Savitzky-Golay (window, order) = {}".format(velocity_window(ident.z, rec.fs)),
             "basis": list(BASIS_NAMES),
             "identification_samples": n_id,
         }
