@@ -24,10 +24,10 @@ from negstiff.models.simulator import reference_solution
 from .calibration import device_section
 from .nsi_study import nsi_section
 from .report import Report, fmt
+from .updating_study import updating_section
 
 PENDING = [
     ("Bifurcation map, phase portraits, Lyapunov exponent, Poincare sections (seed Figures 4-7)", 3),
-    ("GA model updating: Figures 10-11", 5),
     ("SINDy equation discovery", 6),
     ("Bayesian posteriors with emcee", 7),
     ("Discrepancy workflow", 8),
@@ -149,6 +149,8 @@ def reproduce(out: Path, fast: bool = False, seed: int = 0, progress: bool = Tru
     simulator_section(rep, results)
     say("NSI around both wells")
     nsi_section(rep, results, fast, seed)
+    say("GA model updating")
+    updating_section(rep, results, fast, seed)
     rep.heading("Not yet in this report")
     rep.text("These sections of the study are not implemented yet; each is tracked as an issue:")
     rep.table(["section", "issue"], [[s, f"#{i}"] for s, i in PENDING])

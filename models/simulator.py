@@ -173,101 +173,28 @@ def _integrate(
 
 
 # One compiled kernel per (restoring-force kind, Coulomb friction present): the flags are constants
-# inside each, so the batch loop has no data-dependent branches.
+# inside each, so the batch loop has no data-dependent branches. (A factory of closures would
+# repeat less, but numba's on-disk cache cannot tell such closures apart.)
+# fmt: off
 @numba.njit(**_JIT)
-def _kernel_poly(p, gain, u, uidx, dt, nsub, z0, v0, z_limit, v_limit, out_z, out_v, store_v, status, fail_step):
-    return _integrate(
-        KIND_POLYNOMIAL,
-        False,
-        p,
-        gain,
-        u,
-        uidx,
-        dt,
-        nsub,
-        z0,
-        v0,
-        z_limit,
-        v_limit,
-        out_z,
-        out_v,
-        store_v,
-        status,
-        fail_step,
-    )
+def _kernel_poly(p, gain, u, uidx, dt, nsub, z0, v0, zl, vl, oz, ov, sv, st, fs):
+    return _integrate(KIND_POLYNOMIAL, False, p, gain, u, uidx, dt, nsub, z0, v0, zl, vl, oz, ov, sv, st, fs)
 
 
 @numba.njit(**_JIT)
-def _kernel_poly_coulomb(
-    p, gain, u, uidx, dt, nsub, z0, v0, z_limit, v_limit, out_z, out_v, store_v, status, fail_step
-):
-    return _integrate(
-        KIND_POLYNOMIAL,
-        True,
-        p,
-        gain,
-        u,
-        uidx,
-        dt,
-        nsub,
-        z0,
-        v0,
-        z_limit,
-        v_limit,
-        out_z,
-        out_v,
-        store_v,
-        status,
-        fail_step,
-    )
+def _kernel_poly_coulomb(p, gain, u, uidx, dt, nsub, z0, v0, zl, vl, oz, ov, sv, st, fs):
+    return _integrate(KIND_POLYNOMIAL, True, p, gain, u, uidx, dt, nsub, z0, v0, zl, vl, oz, ov, sv, st, fs)
 
 
 @numba.njit(**_JIT)
-def _kernel_device(p, gain, u, uidx, dt, nsub, z0, v0, z_limit, v_limit, out_z, out_v, store_v, status, fail_step):
-    return _integrate(
-        KIND_DEVICE,
-        False,
-        p,
-        gain,
-        u,
-        uidx,
-        dt,
-        nsub,
-        z0,
-        v0,
-        z_limit,
-        v_limit,
-        out_z,
-        out_v,
-        store_v,
-        status,
-        fail_step,
-    )
+def _kernel_device(p, gain, u, uidx, dt, nsub, z0, v0, zl, vl, oz, ov, sv, st, fs):
+    return _integrate(KIND_DEVICE, False, p, gain, u, uidx, dt, nsub, z0, v0, zl, vl, oz, ov, sv, st, fs)
 
 
 @numba.njit(**_JIT)
-def _kernel_device_coulomb(
-    p, gain, u, uidx, dt, nsub, z0, v0, z_limit, v_limit, out_z, out_v, store_v, status, fail_step
-):
-    return _integrate(
-        KIND_DEVICE,
-        True,
-        p,
-        gain,
-        u,
-        uidx,
-        dt,
-        nsub,
-        z0,
-        v0,
-        z_limit,
-        v_limit,
-        out_z,
-        out_v,
-        store_v,
-        status,
-        fail_step,
-    )
+def _kernel_device_coulomb(p, gain, u, uidx, dt, nsub, z0, v0, zl, vl, oz, ov, sv, st, fs):
+    return _integrate(KIND_DEVICE, True, p, gain, u, uidx, dt, nsub, z0, v0, zl, vl, oz, ov, sv, st, fs)
+# fmt: on
 
 
 _KERNELS = {

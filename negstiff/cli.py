@@ -29,9 +29,10 @@ class InputError(Exception):
 
 def _bad_input_types() -> tuple[type[BaseException], ...]:
     from negstiff.inference.measurement import MeasurementError
+    from negstiff.inference.updating import UpdatingError
     from negstiff.models.rig import RigError
 
-    return (InputError, MeasurementError, RigError, ValueError, FileNotFoundError, json.JSONDecodeError)
+    return (InputError, MeasurementError, RigError, UpdatingError, ValueError, FileNotFoundError, json.JSONDecodeError)
 
 
 def _progress(args) -> bool:
@@ -224,6 +225,31 @@ def cmd_identify(args) -> int:
     return 0
 
 
+def cmd_update(args) -> int:
+    from tqdm import tqdm
+
+    from negstiff.inference.updating import GAUpdater, load_targets
+
+    targets = load_targets(args.targets)
+    bar = tqdm(total=args.generations, desc="GA", unit="gen", disable=not _progress(args), file=sys.stderr)
+
+    def progress(gen: int, best: float) -> None:
+        bar.update(1)
+        bar.set_postfix(best=f"{best:.3f} %")
+
+    ga = GAUpdater(pop_size=args.pop_size, generations=args.generations, fixed_mass=args.fix_mass, seed=args.seed)
+    ga.fit(targets, progress=progress)
+    bar.close()
+    write_json(args.out, ga.result())
+    d = ga.device_
+    _say(
+        args,
+        f"wrote {args.out}: E = {d.E / 1e9:.2f} GPa, alpha = {d.alpha_deg:.2f} deg, m = {d.m * 1e3:.1f} g, "
+        f"fitness {ga.fitness_:.3f} % (seed Eq. 9)",
+    )
+    return 0
+
+
 def cmd_reproduce(args) -> int:
     from negstiff.experiments.reproduce import reproduce
 
@@ -298,9 +324,16 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--periods", type=int, default=100, help="forcing periods recorded per step (default 100)")
     rig.set_defaults(func=cmd_rig)
 
+    # options of every command that reads a measurement file
+    data_opts = argparse.ArgumentParser(add_help=False)
+    data_opts.add_argument(
+        "--columns", help="column map for foreign files, e.g. force=V1,z=V2 (a map entry may scale: X*9.81)"
+    )
+    data_opts.add_argument("--fs", type=float, help="sampling rate [Hz] for files without t")
+
     sim = sub.add_parser(
         "simulate",
-        parents=[common],
+        parents=[common, data_opts],
         help="integrate a model under a record's input",
         description="Integrate MODEL.json (contract model file, or a device JSON) under INPUT's input "
         "column. Initial state: from INPUT's first z samples if present, else rest at z_plus.",
@@ -310,16 +343,12 @@ def build_parser() -> argparse.ArgumentParser:
     sim.add_argument("-o", "--out", required=True, help="output CSV: t,<input>,z,z_dot")
     sim.add_argument("--z0", type=float, help="initial z [m]")
     sim.add_argument("--v0", type=float, help="initial z_dot [m/s]")
-    sim.add_argument(
-        "--columns", help="column map for foreign files, e.g. force=V1,z=V2 (a map entry may scale: X*9.81)"
-    )
-    sim.add_argument("--fs", type=float, help="sampling rate [Hz] for files without t")
     sim.add_argument("--substeps", type=int, default=2, help="RK4 steps per sample interval (default 2)")
     sim.set_defaults(func=cmd_simulate)
 
     idf = sub.add_parser(
         "identify",
-        parents=[common],
+        parents=[common, data_opts],
         help="identify K and D (and modal parameters) from a record",
         description="Nonlinear subspace identification around both stable wells (seed section 4): modal parameters "
         "of each underlying-linear system, the z-frame cubic restoring force and damping, and a free-run "
@@ -329,11 +358,25 @@ def build_parser() -> argparse.ArgumentParser:
     idf.add_argument("data", help="measurement file")
     idf.add_argument("-o", "--out", required=True, help="result JSON")
     idf.add_argument("--mass", type=float, help="moving mass [kg] (default: the file's metadata; else per unit mass)")
-    idf.add_argument("--columns", help="column map for foreign files, e.g. force=V1,z=V2")
-    idf.add_argument("--fs", type=float, help="sampling rate [Hz] for files without t")
     idf.add_argument("--order", type=int, default=2, help="NSI model order (default 2: one mode)")
     idf.add_argument("--block-rows", type=int, default=30, help="block rows of the Hankel matrices (default 30)")
     idf.set_defaults(func=cmd_identify)
+
+    upd = sub.add_parser(
+        "update",
+        parents=[common],
+        help="GA model updating of the device's E, frame angle and mass",
+        description="Update the physical device (E, alpha, m, from the nominal design) with a genetic algorithm so "
+        "that its well frequencies and equilibria match TARGETS (seed section 4.1, Eq. 9). TARGETS is an "
+        "'identify' result or a JSON with f_minus, f_plus [Hz], z_minus, z_plus [m]. The features depend on E "
+        "and m only through E/m: with the mass free the result is one point of a ridge; --fix-mass pins E.",
+    )
+    upd.add_argument("targets", help="identify result JSON or targets JSON")
+    upd.add_argument("-o", "--out", required=True, help="result JSON")
+    upd.add_argument("--fix-mass", type=float, help="weighed moving mass [kg]: update E and alpha only")
+    upd.add_argument("--generations", type=int, default=120, help="GA generations (default 120)")
+    upd.add_argument("--pop-size", type=int, default=60, help="GA population (default 60)")
+    upd.set_defaults(func=cmd_update)
 
     rep = sub.add_parser(
         "reproduce",

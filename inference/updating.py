@@ -1,0 +1,207 @@
+"""Model updating of the physical device with a genetic algorithm (seed section 4.1, Eq. 9).
+
+The fitness compares the device's features (the two well frequencies and stable equilibria) with an
+estimate (an ``identify`` result, or a targets JSON):
+
+    eps_w = RMS{ 100 |w-_MOD - w-_EST| / w-_EST , 100 |w+_MOD - w+_EST| / w+_EST }
+    eps_z = RMS{ 100 |z-_MOD - z-_EST| / |z-_EST| , 100 |z+_MOD - z+_EST| / |z+_EST| }
+    eps   = eps_w + eps_z                                                     [%]
+
+The evolution is pymoo's GA (Blank & Deb 2020): tournament selection, simulated binary crossover and
+polynomial mutation (Deb 2001, the seed's ref. [18]), elitist survival, seeded. The parameters are the
+frame's Young's modulus E, the frame angle alpha and the moving mass m, within bounds around the
+nominal design; the rest of the geometry is fixed.
+
+Identifiability (device-model.md): the features depend on E and m only through E/m, so with m free
+the GA returns one point of a ridge; weighing m (``fixed_mass``) pins E.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Mapping
+
+import numpy as np
+
+from negstiff.models import NOMINAL, Device
+
+FEATURES = ("f_minus", "f_plus", "z_minus", "z_plus")
+PENALTY = 1e3
+"""Fitness [%] of a parameter set whose device has no double well."""
+
+
+class UpdatingError(ValueError):
+    """Bad targets or settings for model updating."""
+
+
+def fitness(model: Mapping[str, float], estimate: Mapping[str, float]) -> float:
+    """Seed Eq. 9 [%] between two feature sets (frequencies in Hz or rad/s alike, equilibria in m)."""
+    ew = math.sqrt(np.mean([(100 * (model[k] - estimate[k]) / estimate[k]) ** 2 for k in ("f_minus", "f_plus")]))
+    ez = math.sqrt(np.mean([(100 * (model[k] - estimate[k]) / abs(estimate[k])) ** 2 for k in ("z_minus", "z_plus")]))
+    return ew + ez
+
+
+def targets_from(data: Mapping[str, Any], source: str = "targets") -> dict[str, float]:
+    """Features from an ``identify`` result (modal + equilibria) or a flat targets mapping."""
+    try:
+        if "modal" in data and "equilibria" in data:
+            t = {
+                "f_minus": data["modal"]["minus"]["f_hz"],
+                "f_plus": data["modal"]["plus"]["f_hz"],
+                "z_minus": data["equilibria"]["z_minus"],
+                "z_plus": data["equilibria"]["z_plus"],
+            }
+        else:
+            t = {k: data[k] for k in FEATURES}
+    except (KeyError, TypeError):
+        raise UpdatingError(
+            f"{source}: needs an identify result (modal, equilibria) or the keys {', '.join(FEATURES)}"
+        ) from None
+    bad = [k for k, v in t.items() if v is None or not math.isfinite(float(v))]
+    if bad:
+        raise UpdatingError(
+            f"{source}: no value for {', '.join(bad)} (a single-well record cannot update a double-well device)"
+        )
+    t = {k: float(v) for k, v in t.items()}
+    if not (t["z_minus"] < 0 < t["z_plus"]) or min(t["f_minus"], t["f_plus"]) <= 0:
+        raise UpdatingError(f"{source}: targets need z_minus < 0 < z_plus and positive frequencies, got {t}")
+    return t
+
+
+def load_targets(path: str | Path) -> dict[str, float]:
+    path = Path(path)
+    if not path.is_file():
+        raise UpdatingError(f"{path}: no such file")
+    try:
+        data = json.loads(path.read_text())
+    except json.JSONDecodeError as exc:
+        raise UpdatingError(f"{path}: not valid JSON ({exc.msg} at line {exc.lineno})") from None
+    return targets_from(data, str(path))
+
+
+@dataclass(frozen=True)
+class Bounds:
+    """Search box around the nominal design: relative for E and m, absolute degrees for alpha."""
+
+    E_rel: float = 0.25
+    alpha_deg: float = 5.0
+    m_rel: float = 0.25
+
+
+class GAUpdater:
+    """Update E, alpha and m of a device to match identified features (configure, ``fit``, read ``*_``).
+
+    Parameters
+    ----------
+    start : the nominal design the search is centred on
+    pop_size, generations : GA size
+    fixed_mass : weighed mass [kg]; when given, only E and alpha are updated
+    seed : the GA's random seed (same seed, same result)
+    """
+
+    def __init__(
+        self,
+        start: Device = NOMINAL,
+        pop_size: int = 60,
+        generations: int = 120,
+        bounds: Bounds = Bounds(),
+        fixed_mass: float | None = None,
+        seed: int = 0,
+    ):
+        if pop_size < 4 or generations < 1:
+            raise UpdatingError("the GA needs pop_size >= 4 and generations >= 1")
+        if fixed_mass is not None and not (fixed_mass > 0 and math.isfinite(fixed_mass)):
+            raise UpdatingError(f"fixed mass must be positive, got {fixed_mass}")
+        self.start, self.pop_size, self.generations = start, pop_size, generations
+        self.bounds, self.fixed_mass, self.seed = bounds, fixed_mass, seed
+
+    def _device(self, x: np.ndarray) -> Device:
+        m = self.fixed_mass if self.fixed_mass is not None else x[2]
+        return self.start.with_(E=x[0], alpha_deg=x[1], m=m)
+
+    def features_of(self, x: np.ndarray) -> dict[str, float] | None:
+        try:
+            return self._device(x).features()
+        except ValueError:
+            return None
+
+    def fit(self, targets: Mapping[str, float], progress=None) -> "GAUpdater":
+        """Run the GA against ``targets`` (``f_minus, f_plus`` [Hz], ``z_minus, z_plus`` [m])."""
+        from pymoo.algorithms.soo.nonconvex.ga import GA
+        from pymoo.core.callback import Callback
+        from pymoo.core.problem import Problem
+        from pymoo.operators.crossover.sbx import SBX
+        from pymoo.operators.mutation.pm import PM
+        from pymoo.optimize import minimize
+
+        targets = targets_from(targets)
+        s, b = self.start, self.bounds
+        xl = [s.E * (1 - b.E_rel), s.alpha_deg - b.alpha_deg]
+        xu = [s.E * (1 + b.E_rel), s.alpha_deg + b.alpha_deg]
+        if self.fixed_mass is None:
+            xl.append(s.m * (1 - b.m_rel))
+            xu.append(s.m * (1 + b.m_rel))
+        updater = self
+
+        class DeviceProblem(Problem):
+            def __init__(self):
+                super().__init__(n_var=len(xl), n_obj=1, xl=np.array(xl), xu=np.array(xu))
+
+            def _evaluate(self, X, out, *args, **kwargs):
+                f = []
+                for x in X:
+                    feats = updater.features_of(x)
+                    f.append(PENALTY if feats is None else fitness(feats, targets))
+                out["F"] = np.array(f)[:, None]
+
+        history: list[dict[str, float]] = []
+
+        class Record(Callback):
+            def notify(self, algorithm):
+                F = algorithm.pop.get("F")[:, 0]
+                ok = F < PENALTY
+                history.append(
+                    {"best": float(algorithm.opt.get("F")[0, 0]), "mean": float(F[ok].mean()) if ok.any() else PENALTY}
+                )
+                if progress is not None:
+                    progress(len(history), history[-1]["best"])
+
+        alg = GA(
+            pop_size=self.pop_size, crossover=SBX(prob=0.9, eta=15), mutation=PM(eta=20), eliminate_duplicates=True
+        )
+        res = minimize(
+            DeviceProblem(), alg, ("n_gen", self.generations), seed=self.seed, callback=Record(), verbose=False
+        )
+        x = np.atleast_1d(res.X)
+        self.device_ = self._device(x)
+        self.features_ = self.device_.features()
+        self.fitness_ = float(fitness(self.features_, targets))
+        self.history_ = history
+        self.targets_ = targets
+        return self
+
+    def result(self) -> dict[str, Any]:
+        """The contract's update JSON (plus features, targets, E/m and settings)."""
+        d = self.device_
+        return {
+            "E": d.E,
+            "alpha_deg": d.alpha_deg,
+            "m": d.m,
+            "fitness_percent": self.fitness_,
+            "generations": self.history_,
+            "E_over_m": d.E / d.m,
+            "features": self.features_,
+            "targets": self.targets_,
+            "mass_fixed": self.fixed_mass is not None,
+            "start": {"E": self.start.E, "alpha_deg": self.start.alpha_deg, "m": self.start.m},
+            "settings": {
+                "pop_size": self.pop_size,
+                "generations": self.generations,
+                "seed": self.seed,
+                "bounds": vars(self.bounds),
+                "algorithm": "pymoo GA, SBX(0.9, 15), PM(20), elitist",
+            },
+        }
