@@ -299,6 +299,39 @@ def nsi_benchmark(quick: bool = False) -> tuple[list[list[str]], dict]:
     return rows, res
 
 
+def bifurcation_benchmark(quick: bool = False) -> tuple[list[list[str]], dict]:
+    """The 9 Hz bifurcation map's simulations: all sweeps in one batched rig run against the same
+    records simulated one by one (each step started afresh from its well, the same simulated time)."""
+    n_amp = 25 if quick else 100
+    amps = list(np.linspace(4.0, 26.0, n_amp))
+    rig = Rig(seed=31)
+    settle, record = 60, 64
+    plans = [(s, d) for s in ("plus", "minus") for d in ("up", "down")]
+    lists = [amps if d == "up" else amps[::-1] for _, d in plans]
+    rig.sweeps(9.0, [amps[:2]], ["plus"], 5, 5)  # warm-up
+    t_batch, _ = _median_time(lambda: rig.sweeps(9.0, lists, [s for s, _ in plans], settle, record), 1)
+
+    def one_by_one():
+        for s_, _ in plans:
+            for a in amps:
+                rig.harmonic(9.0, a, s_, settle, record)
+
+    t_one, _ = _median_time(one_by_one, 1)
+    n_rec = len(plans) * n_amp
+    res = {"records": n_rec, "batched_s": t_batch, "one_by_one_s": t_one, "speedup": t_one / t_batch}
+    rows = [
+        [
+            f"bifurcation map: {n_amp} amplitudes x 2 wells x 2 directions ({n_rec} records, {settle}+{record} "
+            "periods each)",
+            "negstiff: all sweeps in one batched rig run",
+            f"{t_batch:.1f} s",
+            f"{t_one / t_batch:.1f}x",
+        ],
+        ["same records", "one rig run per record (baseline)", f"{t_one:.1f} s", "1x"],
+    ]
+    return rows, res
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("-o", "--out", default="reports/benchmarks.md")
@@ -353,6 +386,19 @@ def main(argv=None) -> int:
         "|---|---|---|---|---|",
     ]
     lines += ["| " + " | ".join(r) + " |" for r in nrows]
+    print("bifurcation-map benchmark...", file=sys.stderr)
+    brows, bres = bifurcation_benchmark(a.quick)
+    lines += [
+        "",
+        "## Bifurcation map (issue 3)",
+        "",
+        "Wall time of producing the records (simulation, sensor chain, anti-aliasing, integration), before "
+        "the periodicity analysis.",
+        "",
+        "| case | method | wall time | vs baseline |",
+        "|---|---|---|---|",
+    ]
+    lines += ["| " + " | ".join(r) + " |" for r in brows]
     write_text(a.out, "\n".join(lines) + "\n")
     print("\n".join(lines))
     return 0

@@ -22,12 +22,12 @@ from negstiff.models.rig import Rig
 from negstiff.models.simulator import reference_solution
 
 from .calibration import device_section
+from .characterization import characterization_section
 from .nsi_study import nsi_section
 from .report import Report, fmt
 from .updating_study import updating_section
 
 PENDING = [
-    ("Bifurcation map, phase portraits, Lyapunov exponent, Poincare sections (seed Figures 4-7)", 3),
     ("SINDy equation discovery", 6),
     ("Bayesian posteriors with emcee", 7),
     ("Discrepancy workflow", 8),
@@ -151,6 +151,8 @@ def reproduce(out: Path, fast: bool = False, seed: int = 0, progress: bool = Tru
     nsi_section(rep, results, fast, seed)
     say("GA model updating")
     updating_section(rep, results, fast, seed)
+    say("dynamics characterisation")
+    characterization_section(rep, results, fast, seed)
     rep.heading("Not yet in this report")
     rep.text("These sections of the study are not implemented yet; each is tracked as an issue:")
     rep.table(["section", "issue"], [[s, f"#{i}"] for s, i in PENDING])

@@ -7,7 +7,8 @@
   Savitzky-Golay smoothed signal) at t_n = t_phi + n T.
 * Period detection: for p in (1, 2, 3, 4, 5, 6, 8, 16), the residual r(p) = rms_n |P_(n+p) - P_n| of
   the Poincare points P = (z / std z, z' / std z') scaled by the whole response's spread; the answer is
-  the smallest p with r(p) < tol (and r(2p) < tol when 2p is tested), else ``None`` (chaotic or
+  the smallest p with r(p) < tol (and r(2p) < 2 tol when 2p is tested), after removing a slow
+  quadratic trend from the points (drift of the integrated base displacement), else ``None`` (chaotic or
   quasi-periodic). The tolerance follows the noise: the sensor noise, estimated from the record, is
   propagated through the smoothing and the derivative to a Poincare point, and tol = max(0.02,
   4 sqrt(2) x that).
@@ -61,10 +62,7 @@ def poincare(rec: Measurement, f_hz: float, phases_deg=(0.0,)) -> Poincare:
         )
     t = rec.t - rec.t0
     amp, phi = forcing_phase(rec.u, t, f_hz)
-    from .nsi import smooth_and_differentiate
-
-    zs, _ = smooth_and_differentiate(rec.z, rec.fs)
-    spline = CubicSpline(t, zs)
+    spline = CubicSpline(t, bandlimited(rec.z, rec.fs, f_hz))
     t_first = (-phi / (2 * np.pi)) % 1.0 * period  # first upward zero crossing of the input's sinusoid
     zk, vk = [], []
     for ph in phases_deg:
@@ -74,6 +72,19 @@ def poincare(rec: Measurement, f_hz: float, phases_deg=(0.0,)) -> Poincare:
         vk.append(spline(tn, 1))
     n = min(len(a) for a in zk)
     return Poincare(np.asarray(phases_deg, float), np.array([a[:n] for a in zk]), np.array([a[:n] for a in vk]), amp)
+
+
+def band_edge(fs: float, f_hz: float) -> float:
+    """Upper frequency [Hz] kept for Poincare analysis: 8 forcing harmonics, at most 0.4 fs."""
+    return min(0.4 * fs, 8 * f_hz)
+
+
+def bandlimited(z: np.ndarray, fs: float, f_hz: float) -> np.ndarray:
+    """z low-passed (zero-phase, 4th-order Butterworth) at ``band_edge``: the same filter on every
+    forcing cycle cannot create or destroy a periodicity, and it keeps broadband sensor noise out of
+    the differentiated Poincare coordinate."""
+    sos = signal.butter(4, band_edge(fs, f_hz), fs=fs, output="sos")
+    return signal.sosfiltfilt(sos, z)
 
 
 def noise_level(z: np.ndarray, fs: float) -> float:
@@ -95,7 +106,8 @@ def detect_period(points: np.ndarray, tol: float) -> tuple[int | None, dict[int,
             break
         r[p] = float(np.sqrt(np.mean(np.sum((points[p:] - points[:-p]) ** 2, axis=1))))
     for p, rp in r.items():
-        if rp < tol and (2 * p not in r or r[2 * p] < tol):
+        # slow drift left in the points grows with the lag: the consistency check at 2p gets 2 tol
+        if rp < tol and (2 * p not in r or r[2 * p] < 2 * tol):
             return p, r
     return None, r
 
@@ -106,23 +118,24 @@ def periodicity(rec: Measurement, f_hz: float, wells: tuple | None = None) -> di
     ``wells``: (z_minus, z_0, z_plus) or (z_minus, z_plus) when known (a lab measures the two rest
     positions; z_0 comes from a model), else None.
     """
-    from .nsi import smooth_and_differentiate, velocity_window
-
     pc = poincare(rec, f_hz, (0.0,))
     z0, v0 = pc.z[0], pc.z_dot[0]
-    zs, vs = smooth_and_differentiate(rec.z, rec.fs)
+    spline = CubicSpline(rec.t - rec.t0, bandlimited(rec.z, rec.fs, f_hz))
+    zs, vs = spline(rec.t - rec.t0), spline(rec.t - rec.t0, 1)
     # scales: the whole response's spread, so a period-1 orbit (Poincare points equal up to noise)
     # gives r(p) ~ noise / response, not ~ 1
     scale_z, scale_v = max(zs.std(), 1e-15), max(vs.std(), 1e-15)
     pts = np.column_stack([z0 / scale_z, v0 / scale_v])
-    # noise of a Poincare point, propagated through the smoothing and the derivative
+    # a slow trend (the integrated base displacement drifts) is no periodicity: remove a quadratic in n
+    n_idx = np.arange(pts.shape[0])
+    for k in range(2):
+        pts[:, k] -= np.polyval(np.polyfit(n_idx, pts[:, k], 2), n_idx) - pts[:, k].mean()
+    # noise of a Poincare point: white sensor noise through the band limit fc (gain sqrt(2 fc / fs))
+    # and its derivative (gain 2 pi fc sqrt(2 fc / (3 fs)))
     noise = noise_level(rec.z, rec.fs)
-    w, order = velocity_window(rec.z, rec.fs)
-    if w:
-        gz = math.sqrt(np.sum(signal.savgol_coeffs(w, order) ** 2))
-        gv = math.sqrt(np.sum(signal.savgol_coeffs(w, order, deriv=1, delta=1 / rec.fs) ** 2))
-    else:
-        gz, gv = 1.0, math.pi * rec.fs / math.sqrt(3)  # spectral derivative of white noise
+    fc = band_edge(rec.fs, f_hz)
+    gz = math.sqrt(2 * fc / rec.fs)
+    gv = 2 * math.pi * fc * math.sqrt(2 * fc / (3 * rec.fs))
     point_noise = math.hypot(noise * gz / scale_z, noise * gv / scale_v)
     # r(p) of a truly periodic record is sqrt(2) x the point noise; 4x that, and at least 2 %
     tol = max(0.02, 4 * math.sqrt(2) * point_noise)
@@ -146,14 +159,24 @@ def periodicity(rec: Measurement, f_hz: float, wells: tuple | None = None) -> di
 
 
 def classify_regime(z: np.ndarray, wells: tuple | None) -> str:
-    """``in-well-minus``, ``in-well-plus`` or ``cross-well``: cross-well when z spends more than 1 % of
-    the record on each side of the barrier, z_0 if known, else the wells' midpoint; without wells, the
-    side of the motion's median."""
+    """``in-well-minus``, ``in-well-plus`` or ``cross-well``.
+
+    With the barrier z_0 known (``wells`` = (z_minus, z_0, z_plus), e.g. from a model): cross-well when
+    z spends more than 1 % of the record on each side of it. With only the two rest positions (what a
+    lab measures): cross-well when z enters both wells' neighbourhoods, within 35 % of the well spacing
+    of each (the wells' midpoint is no barrier for an asymmetric device: a large in-well orbit of the
+    stiff well passes it). Without wells: the side of the motion's median.
+    """
     if wells is None or wells[0] is None or wells[-1] is None:
         return "in-well-plus" if np.median(z) >= 0 else "in-well-minus"
     zm, zp = wells[0], wells[-1]
-    mid = wells[1] if len(wells) == 3 and wells[1] is not None else 0.5 * (zm + zp)
-    below, above = np.mean(z < mid), np.mean(z > mid)
-    if below > 0.01 and above > 0.01:
+    if len(wells) == 3 and wells[1] is not None:
+        below, above = np.mean(z < wells[1]), np.mean(z > wells[1])
+        if below > 0.01 and above > 0.01:
+            return "cross-well"
+        return "in-well-plus" if above > below else "in-well-minus"
+    near = 0.35 * (zp - zm)
+    in_minus, in_plus = np.mean(np.abs(z - zm) < near), np.mean(np.abs(z - zp) < near)
+    if in_minus > 0.01 and in_plus > 0.01:
         return "cross-well"
-    return "in-well-plus" if above > below else "in-well-minus"
+    return "in-well-plus" if in_plus > in_minus else "in-well-minus"

@@ -406,6 +406,11 @@ class Rig:
             "units": "SI (s, m/s^2, m)",
             "source": f"negstiff virtual rig ({excitation['type']}, seed {self.seed})",
         }
+        # the rest positions, measured with the laser before the test (0.01 mm resolution)
+        eq = self.equilibria
+        for name in ("z_minus", "z_plus"):
+            if getattr(eq, name) is not None:
+                meta[f"{name}_rest"] = f"{round(getattr(eq, name), 5):.5f}"
         if self.weigh_resolution:
             meta["mass"] = f"{round(self.system.m / self.weigh_resolution) * self.weigh_resolution:.6g}"
         if excitation["type"] == "harmonic":

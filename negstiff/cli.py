@@ -225,6 +225,43 @@ def cmd_identify(args) -> int:
     return 0
 
 
+def cmd_characterize(args) -> int:
+    from negstiff.experiments.characterization import characterize
+    from negstiff.inference.measurement import load
+    from negstiff.inference.nsi import well_guesses
+
+    rec = load(args.data, columns=args.columns, fs=args.fs)
+    if args.signal != "z":
+        col = getattr(rec, args.signal, None)
+        if col is None:
+            raise InputError(f"{args.data}: no column {args.signal!r} to analyse (choose z, y, z_dot or base_disp)")
+        rec = rec.__class__(**{**rec.__dict__, "z": col})
+    if args.wells:
+        try:
+            wells = tuple(float(x) for x in args.wells.split(","))
+        except ValueError:
+            raise InputError(f"--wells {args.wells!r}: give z_minus,z_plus or z_minus,z_0,z_plus in m") from None
+    elif "z_minus_rest" in rec.meta and "z_plus_rest" in rec.meta:
+        wells = (float(rec.meta["z_minus_rest"]), float(rec.meta["z_plus_rest"]))
+    else:
+        try:
+            wells = well_guesses(rec)
+        except ValueError:
+            wells = None
+    _say(args, f"characterize: {rec.n} samples at {rec.fs:g} Hz, forcing {args.forcing_hz:g} Hz")
+    r = characterize(rec, args.forcing_hz, wells)
+    r.pop("poincare_z")
+    r["wells_used"] = wells
+    write_json(args.out, r)
+    lle = r["lle"]
+    _say(
+        args,
+        f"wrote {args.out}: period {r['period']}, {r['regime']}, LLE {lle['value']:.2f} 1/s (Wolf), "
+        f"{'chaotic' if r['chaotic'] else 'not chaotic'}",
+    )
+    return 0
+
+
 def cmd_update(args) -> int:
     from tqdm import tqdm
 
@@ -361,6 +398,26 @@ def build_parser() -> argparse.ArgumentParser:
     idf.add_argument("--order", type=int, default=2, help="NSI model order (default 2: one mode)")
     idf.add_argument("--block-rows", type=int, default=30, help="block rows of the Hankel matrices (default 30)")
     idf.set_defaults(func=cmd_identify)
+
+    chz = sub.add_parser(
+        "characterize",
+        parents=[common, data_opts],
+        help="periodicity, regime, Lyapunov exponent of a harmonic-forced record",
+        description="Periodicity analysis of a steady-state record forced at --forcing-hz (phase-synchronous Poincare "
+        "samples from the measured input's phase), the regime (in-well around either well, or cross-well), the "
+        "amplitude of each branch and the largest Lyapunov exponent (Wolf 1985, embedding from the data; "
+        "Rosenstein beside it).",
+    )
+    chz.add_argument("data", help="measurement file")
+    chz.add_argument("--forcing-hz", type=float, required=True, help="forcing frequency [Hz]")
+    chz.add_argument("--signal", default="z", choices=["z", "y", "z_dot", "base_disp"], help="column to analyse")
+    chz.add_argument(
+        "--wells",
+        help="z_minus,z_plus (or z_minus,z_0,z_plus) [m]; default: the file's rest positions, "
+        "else estimated from the data",
+    )
+    chz.add_argument("-o", "--out", required=True, help="result JSON")
+    chz.set_defaults(func=cmd_characterize)
 
     upd = sub.add_parser(
         "update",
