@@ -19,6 +19,7 @@ import numpy as np
 
 from negstiff.inference.lyapunov import largest_lyapunov
 from negstiff.inference.measurement import Measurement, from_arrays
+from negstiff.inference.nsi import smooth_and_differentiate
 from negstiff.inference.periodicity import noise_level, periodicity, poincare
 from negstiff.models import AS_BUILT
 from negstiff.models.rig import Rig, RigRecord
@@ -149,7 +150,7 @@ def characterization_section(rep: Report, results: dict[str, Any], fast: bool, s
         b = lyapunov_benettin(
             AS_BUILT,
             rec.true["base_acc"],
-            rec.dt if hasattr(rec, "dt") else 1 / rec.fs,
+            1 / rec.fs,
             rec.true["z"][0],
             rec.true["z_dot"][0],
             transient_s=5.0,
@@ -159,8 +160,6 @@ def characterization_section(rep: Report, results: dict[str, Any], fast: bool, s
         )
         n = int(2.0 * rec.fs)
         t = rec.columns["t"][:n]
-        from negstiff.inference.nsi import smooth_and_differentiate
-
         zs, v = smooth_and_differentiate(m.z, m.fs)
         axes[0, k].plot(t, 1e3 * m.z[:n], lw=0.7)
         axes[0, k].set(title=f"{label}: {amp:g} m/s^2", xlabel="t [s]")
@@ -168,7 +167,7 @@ def characterization_section(rep: Report, results: dict[str, Any], fast: bool, s
         axes[1, k].set(xlabel="z [mm]")
         if label == "cross-well":
             res["lle_case"] = {"wolf": c["lle"], "benettin": b["value"]}
-            chaotic_rec, chaotic_m = rec, m
+            chaotic_m = m
     axes[0, 0].set_ylabel("z [mm]")
     axes[1, 0].set_ylabel("z' [m/s]")
     rep.figure(
@@ -233,7 +232,6 @@ def characterization_section(rep: Report, results: dict[str, Any], fast: bool, s
         "Figure 7 (seed): Poincare sections of the cross-well record; (a) the polar "
         "attractor surface (angle: forcing phase, radius: z, tilt: z'), (b-d) sections at 0, 170, 320 deg.",
     )
-    del chaotic_rec
 
 
 def main(argv=None) -> int:

@@ -7,6 +7,7 @@ Exit codes: 0 success, 2 bad input (one line on stderr, no output written).
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import sys
 from pathlib import Path
@@ -235,7 +236,7 @@ def cmd_characterize(args) -> int:
         col = getattr(rec, args.signal, None)
         if col is None:
             raise InputError(f"{args.data}: no column {args.signal!r} to analyse (choose z, y, z_dot or base_disp)")
-        rec = rec.__class__(**{**rec.__dict__, "z": col})
+        rec = dataclasses.replace(rec, z=col)
     if args.wells:
         try:
             wells = tuple(float(x) for x in args.wells.split(","))
