@@ -136,14 +136,13 @@ def table_motion(acc_target: np.ndarray, fs: float, min_hz: float) -> tuple[np.n
     twice in the frequency domain, so b'' is exactly the second derivative of b.
     """
     n = acc_target.size
-    nf = sp_fft.next_fast_len(n, real=True)  # zero-padded to a fast length; lengths with large primes
-    spec = sp_fft.rfft(acc_target, nf)  # made the FFTs dominate a bifurcation sweep's cost
-    f = sp_fft.rfftfreq(nf, 1 / fs)
+    spec = np.fft.rfft(acc_target)
+    f = np.fft.rfftfreq(n, 1 / fs)
     spec[f < min_hz] = 0.0
     w = 2 * np.pi * f
     disp_spec = np.zeros_like(spec)
     disp_spec[f >= min_hz] = -spec[f >= min_hz] / w[f >= min_hz] ** 2
-    return sp_fft.irfft(disp_spec, nf)[:n], sp_fft.irfft(spec, nf)[:n]
+    return np.fft.irfft(disp_spec, n), np.fft.irfft(spec, n)
 
 
 def integrate_twice(acc: np.ndarray, fs: float, highpass_hz: float, method: str = "fft") -> np.ndarray:
@@ -155,16 +154,15 @@ def integrate_twice(acc: np.ndarray, fs: float, highpass_hz: float, method: str 
     if method != "fft":
         raise RigError(f"integration must be 'fft' or 'time', got {method!r}")
     n = acc.size
-    nf = sp_fft.next_fast_len(n, real=True)
-    spec = sp_fft.rfft(acc - acc.mean(), nf)
-    f = sp_fft.rfftfreq(nf, 1 / fs)
+    spec = np.fft.rfft(acc - acc.mean())
+    f = np.fft.rfftfreq(n, 1 / fs)
     gain = np.zeros_like(f)
     band = f >= highpass_hz
     gain[band] = -1.0 / (2 * np.pi * f[band]) ** 2
     taper = (f >= highpass_hz / 2) & ~band
     ft = f[taper]
     gain[taper] = -0.5 * (1 - np.cos(np.pi * (ft / (highpass_hz / 2) - 1))) / (2 * np.pi * ft) ** 2
-    return sp_fft.irfft(spec * gain, nf)[:n]
+    return np.fft.irfft(spec * gain, n)
 
 
 def _smooth_steps(levels: Sequence[float], step_samples: int, ramp_samples: int) -> np.ndarray:
@@ -243,7 +241,13 @@ class Rig:
                 f"random excitation needs duration > 0, rms > 0 and 0 < band < fs/2; got {duration}, {rms}, {band}"
             )
         fsim = self.fs * self.oversample
-        n = int(round((duration + settle + TAIL_S) * self.fs)) * self.oversample
+        # a fast FFT length (the extra samples lengthen the discarded tail): the table motion and the
+        # integration are FFTs of the whole acquisition, slow for lengths with large prime factors
+        n = sp_fft.next_fast_len(int(round((duration + settle + TAIL_S) * self.fs)) * self.oversample, real=True)
+        n -= n % self.oversample
+        while n < int(round((duration + settle + TAIL_S) * self.fs)) * self.oversample:
+            n = sp_fft.next_fast_len(n + self.oversample, real=True)
+            n -= n % self.oversample
         exc_rng, sens_rng = self._streams()
         spec = np.fft.rfft(exc_rng.standard_normal(n))
         f = np.fft.rfftfreq(n, 1 / fsim)
@@ -308,7 +312,9 @@ class Rig:
         for amps in amplitude_lists:
             if any(not (a >= 0 and math.isfinite(a)) for a in amps):
                 raise RigError(f"harmonic amplitudes must be finite and >= 0, got {list(amps)}")
-            env = np.pad(_smooth_steps(amps, step_n, ramp_n), (0, int(TAIL_S * fsim)), mode="edge")
+            env = _smooth_steps(amps, step_n, ramp_n)
+            n_fast = sp_fft.next_fast_len(env.size + int(TAIL_S * fsim), real=True)  # see random()
+            env = np.pad(env, (0, n_fast - env.size), mode="edge")
             t = np.arange(env.size) / fsim
             accs.append(env * np.sin(2 * np.pi * freq * t + phase))
             settles.append([i * step_n / fsim + settle_periods * period for i in range(len(amps))])

@@ -60,7 +60,7 @@ def test_chunked_lq_equals_the_direct_factorisation():
 
 @pytest.fixture(scope="module")
 def seed_like_noise_free():
-    rec = Rig(SEED_LIKE_CUBIC, sensors=Sensors.noiseless(), seed=1).random(duration=150, rms=SEED_LIKE_CROSS_WELL_RMS)
+    rec = Rig(SEED_LIKE_CUBIC, sensors=Sensors.noiseless(), seed=1).random(duration=300, rms=SEED_LIKE_CROSS_WELL_RMS)
     return from_arrays(rec.columns["base_acc"], rec.columns["z"], 512.0, mass=SEED_LIKE_CUBIC.m, source="rig")
 
 
