@@ -9,7 +9,6 @@ one batched simulation.
 
 from __future__ import annotations
 
-import argparse
 import sys
 import time
 from typing import Any
@@ -26,7 +25,7 @@ from negstiff.models.rig import Rig, RigRecord
 from negstiff.models.simulator import lyapunov_benettin
 
 from . import seed
-from .report import Report, fmt
+from .report import Report, fmt, run_study
 
 CHAOS_THRESHOLD = 0.05
 """A Wolf exponent counts as significantly positive above this many nats per radian of forcing
@@ -235,17 +234,13 @@ def characterization_section(rep: Report, results: dict[str, Any], fast: bool, s
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("-o", "--out", default="reports/characterization")
-    ap.add_argument("--fast", action="store_true")
-    ap.add_argument("--seed", type=int, default=0)
-    a = ap.parse_args(argv)
-    rep = Report("negstiff: dynamics of the negative-stiffness oscillator at 9 Hz")
-    results: dict[str, Any] = {}
-    characterization_section(rep, results, a.fast, a.seed)
-    rep.write(a.out, results)
-    print(f"wrote {a.out}", file=sys.stderr)
-    return 0
+    return run_study(
+        characterization_section,
+        "negstiff: dynamics of the negative-stiffness oscillator at 9 Hz",
+        "reports/characterization",
+        __doc__,
+        argv,
+    )
 
 
 if __name__ == "__main__":

@@ -8,7 +8,6 @@ on the as-built device (exact geometry) the section shows the cubic's model-form
 
 from __future__ import annotations
 
-import argparse
 import sys
 import time
 from pathlib import Path
@@ -24,7 +23,7 @@ from negstiff.models import AS_BUILT, SEED_LIKE_CROSS_WELL_RMS, SEED_LIKE_CUBIC,
 from negstiff.models.rig import Rig, RigRecord, Sensors
 
 from . import seed
-from .report import Report, fmt
+from .report import Report, fmt, run_study
 
 
 def find_silverbox() -> Path | None:
@@ -433,17 +432,13 @@ def nsi_section(rep: Report, results: dict[str, Any], fast: bool, seed_: int = 0
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("-o", "--out", default="reports/nsi")
-    ap.add_argument("--fast", action="store_true")
-    ap.add_argument("--seed", type=int, default=0)
-    a = ap.parse_args(argv)
-    rep = Report("negstiff: nonlinear subspace identification of the negative-stiffness oscillator")
-    results: dict[str, Any] = {}
-    nsi_section(rep, results, a.fast, a.seed)
-    rep.write(a.out, results)
-    print(f"wrote {a.out}", file=sys.stderr)
-    return 0
+    return run_study(
+        nsi_section,
+        "negstiff: nonlinear subspace identification of the negative-stiffness oscillator",
+        "reports/nsi",
+        __doc__,
+        argv,
+    )
 
 
 if __name__ == "__main__":

@@ -137,3 +137,21 @@ def _json_default(o: Any) -> Any:
     if isinstance(o, np.ndarray):
         return o.tolist()
     raise TypeError(f"not JSON serialisable: {type(o).__name__}")
+
+
+def run_study(section, title: str, default_out: str, doc: str | None, argv=None) -> int:
+    """Command-line entry of a standalone study: ``section(rep, results, fast, seed)`` into a report folder."""
+    import argparse
+    import sys
+
+    ap = argparse.ArgumentParser(description=doc, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("-o", "--out", default=default_out)
+    ap.add_argument("--fast", action="store_true", help="a quick reduced run")
+    ap.add_argument("--seed", type=int, default=0)
+    a = ap.parse_args(argv)
+    rep = Report(title)
+    results: dict[str, Any] = {}
+    section(rep, results, a.fast, a.seed)
+    rep.write(a.out, results)
+    print(f"wrote {a.out}", file=sys.stderr)
+    return 0

@@ -5,7 +5,6 @@ python -m negstiff.experiments.updating_study [-o reports/updating] [--fast]
 
 from __future__ import annotations
 
-import argparse
 import sys
 from typing import Any
 
@@ -19,7 +18,7 @@ from negstiff.models.rig import Rig
 
 from . import seed
 from .nsi_study import as_measurement
-from .report import Report, fmt
+from .report import Report, fmt, run_study
 
 
 def _errors(d, truth=AS_BUILT) -> dict[str, float]:
@@ -186,17 +185,9 @@ def updating_section(rep: Report, results: dict[str, Any], fast: bool, seed_: in
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("-o", "--out", default="reports/updating")
-    ap.add_argument("--fast", action="store_true")
-    ap.add_argument("--seed", type=int, default=0)
-    a = ap.parse_args(argv)
-    rep = Report("negstiff: model updating of the negative-stiffness device")
-    results: dict[str, Any] = {}
-    updating_section(rep, results, a.fast, a.seed)
-    rep.write(a.out, results)
-    print(f"wrote {a.out}", file=sys.stderr)
-    return 0
+    return run_study(
+        updating_section, "negstiff: model updating of the negative-stiffness device", "reports/updating", __doc__, argv
+    )
 
 
 if __name__ == "__main__":

@@ -18,7 +18,6 @@ the GA returns one point of a ridge; weighing m (``fixed_mass``) pins E.
 
 from __future__ import annotations
 
-import json
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -72,13 +71,12 @@ def targets_from(data: Mapping[str, Any], source: str = "targets") -> dict[str, 
 
 
 def load_targets(path: str | Path) -> dict[str, float]:
-    path = Path(path)
-    if not path.is_file():
-        raise UpdatingError(f"{path}: no such file")
+    from negstiff.files import read_json
+
     try:
-        data = json.loads(path.read_text())
-    except json.JSONDecodeError as exc:
-        raise UpdatingError(f"{path}: not valid JSON ({exc.msg} at line {exc.lineno})") from None
+        data = read_json(path)
+    except ValueError as exc:
+        raise UpdatingError(str(exc)) from None
     return targets_from(data, str(path))
 
 

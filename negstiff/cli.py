@@ -72,15 +72,14 @@ def _parse_amplitudes(text: str) -> list[float]:
 
 def load_system(path: str | Path):
     """A model JSON (polynomial, contract fields) or a device JSON (geometry fields E, alpha_deg, ...)."""
+    from negstiff.files import read_json
     from negstiff.models import Device, Model
 
     path = Path(path)
-    if not path.is_file():
-        raise InputError(f"{path}: no such file")
     try:
-        d = json.loads(path.read_text())
-    except json.JSONDecodeError as exc:
-        raise InputError(f"{path}: not valid JSON ({exc.msg} at line {exc.lineno})") from None
+        d = read_json(path)
+    except ValueError as exc:
+        raise InputError(str(exc)) from None
     if isinstance(d, dict) and isinstance(d.get("model"), dict):  # an identify result holds a model
         d = d["model"]
     if not isinstance(d, dict):
