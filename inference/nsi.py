@@ -428,17 +428,19 @@ def validate(model: Model, rec: Measurement, start: int, window_s: float = 2.0) 
             z_meas=tail.z,
             t=tail.t,
         )
-    out.update(restarted_free_runs(model, rec, start, window_s))
+    out.update(restarted_free_runs(model, rec, start, window_s, zs, v))
     return out
 
 
-def restarted_free_runs(model: Model, rec: Measurement, start: int, window_s: float) -> dict[str, Any]:
-    """Free runs of ``window_s`` seconds over [start, N), each restarted from the measured state."""
+def restarted_free_runs(
+    model: Model, rec: Measurement, start: int, window_s: float, zs: np.ndarray, v: np.ndarray
+) -> dict[str, Any]:
+    """Free runs of ``window_s`` seconds over [start, N), each restarted from the measured state
+    (``zs``, ``v``: the record's smoothed displacement and velocity)."""
     w = int(round(window_s * rec.fs))
     n_win = (rec.n - start) // w
     if n_win < 1:
         return {}
-    zs, v = smooth_and_differentiate(rec.z, rec.fs)
     starts = start + w * np.arange(n_win)
     U = np.stack([rec.u[k : k + w] for k in starts])
     P = np.repeat(model.kernel_params()[:, None], n_win, axis=1)

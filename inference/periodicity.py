@@ -50,11 +50,21 @@ class Poincare:
     forcing_amplitude: float
 
 
-def poincare(rec: Measurement, f_hz: float, phases_deg=(0.0,)) -> Poincare:
-    """Poincare sections at the forcing phases ``phases_deg`` (0 = the input's upward zero crossing)."""
+@dataclass(frozen=True)
+class _Synchronous:
+    """A record's band-limited z as a cubic spline of time, with the forcing's phase from the input."""
+
+    spline: CubicSpline
+    t_first: float
+    period: float
+    n_cycles: int
+    t_end: float
+    forcing_amplitude: float
+
+
+def _synchronous(rec: Measurement, f_hz: float) -> _Synchronous:
     if not (0 < f_hz < rec.fs / 4):
         raise MeasurementError(f"{rec.source}: forcing frequency {f_hz} Hz must lie in (0, fs/4)")
-    period = 1.0 / f_hz
     n_cycles = int(rec.duration * f_hz) - 2
     if n_cycles < 8:
         raise MeasurementError(
@@ -62,16 +72,30 @@ def poincare(rec: Measurement, f_hz: float, phases_deg=(0.0,)) -> Poincare:
         )
     t = rec.t - rec.t0
     amp, phi = forcing_phase(rec.u, t, f_hz)
-    spline = CubicSpline(t, bandlimited(rec.z, rec.fs, f_hz))
+    period = 1.0 / f_hz
     t_first = (-phi / (2 * np.pi)) % 1.0 * period  # first upward zero crossing of the input's sinusoid
+    return _Synchronous(CubicSpline(t, bandlimited(rec.z, rec.fs, f_hz)), t_first, period, n_cycles, t[-1], amp)
+
+
+def _sections(sync: _Synchronous, phases_deg) -> Poincare:
     zk, vk = [], []
     for ph in phases_deg:
-        tn = t_first + (ph / 360.0) * period + period * np.arange(n_cycles)
-        tn = tn[tn <= t[-1]]
-        zk.append(spline(tn))
-        vk.append(spline(tn, 1))
+        tn = sync.t_first + (ph / 360.0) * sync.period + sync.period * np.arange(sync.n_cycles)
+        tn = tn[tn <= sync.t_end]
+        zk.append(sync.spline(tn))
+        vk.append(sync.spline(tn, 1))
     n = min(len(a) for a in zk)
-    return Poincare(np.asarray(phases_deg, float), np.array([a[:n] for a in zk]), np.array([a[:n] for a in vk]), amp)
+    return Poincare(
+        np.asarray(phases_deg, float),
+        np.array([a[:n] for a in zk]),
+        np.array([a[:n] for a in vk]),
+        sync.forcing_amplitude,
+    )
+
+
+def poincare(rec: Measurement, f_hz: float, phases_deg=(0.0,)) -> Poincare:
+    """Poincare sections at the forcing phases ``phases_deg`` (0 = the input's upward zero crossing)."""
+    return _sections(_synchronous(rec, f_hz), phases_deg)
 
 
 def band_edge(fs: float, f_hz: float) -> float:
@@ -118,10 +142,10 @@ def periodicity(rec: Measurement, f_hz: float, wells: tuple | None = None) -> di
     ``wells``: (z_minus, z_0, z_plus) or (z_minus, z_plus) when known (a lab measures the two rest
     positions; z_0 comes from a model), else None.
     """
-    pc = poincare(rec, f_hz, (0.0,))
+    sync = _synchronous(rec, f_hz)
+    pc = _sections(sync, (0.0,))
     z0, v0 = pc.z[0], pc.z_dot[0]
-    spline = CubicSpline(rec.t - rec.t0, bandlimited(rec.z, rec.fs, f_hz))
-    zs, vs = spline(rec.t - rec.t0), spline(rec.t - rec.t0, 1)
+    zs, vs = sync.spline(rec.t - rec.t0), sync.spline(rec.t - rec.t0, 1)
     # scales: the whole response's spread, so a period-1 orbit (Poincare points equal up to noise)
     # gives r(p) ~ noise / response, not ~ 1
     scale_z, scale_v = max(zs.std(), 1e-15), max(vs.std(), 1e-15)
