@@ -39,6 +39,7 @@ from scipy import signal
 from negstiff.models import Model, simulate, simulate_batch
 
 from . import subspace
+from .derivatives import state_derivatives
 from .measurement import Measurement, MeasurementError
 
 BASIS_NAMES = ("x2", "x3", "vabsv")
@@ -399,12 +400,14 @@ def validate(model: Model, rec: Measurement, start: int, window_s: float = 2.0) 
     (Savitzky-Golay z, z'), 100 rms(z_sim - z) / rms(z). Over cross-well records this long run
     diverges even for the true model once the motion is chaotic (device-model.md), so
     ``restarted_rms_percent`` adds free runs of ``window_s`` restarted from the measured state at the
-    start of each window (all windows in one batched simulation): a gap chaos cannot fake.
+    start of each window (z, z' from the Savitzky-Golay window of least predicted velocity error; all
+    windows in one batched simulation): a gap chaos cannot fake.
     """
     tail = rec.segment(start, rec.n)
     if tail.n < 10:
         raise MeasurementError(f"{rec.source}: too few samples for the validation segment ({tail.n})")
-    zs, v = smooth_and_differentiate(rec.z, rec.fs)
+    # the measured states free runs start from: the least-error velocity (derivatives.py)
+    zs, v, _, _ = state_derivatives(rec.z, rec.fs, purpose="state")
     sim = simulate(model, tail.u, tail.dt, z0=float(zs[start]), v0=float(v[start]), input_kind=tail.input_name)
     z_sim = sim.z[0]
     out: dict[str, Any] = {
@@ -455,12 +458,20 @@ def restarted_free_runs(
     )
     meas = np.stack([rec.z[k : k + w] for k in starts])
     ok = ~res.diverged
+    window_ms = np.full(n_win, np.nan)  # per-window mean square error (nan: diverged), an array: not in JSON
+    window_ms[ok] = np.mean((res.z[ok] - meas[ok]) ** 2, axis=1)
     if not ok.any():
-        return {"restarted_rms_percent": float("inf"), "restart_window_s": window_s, "restart_windows": int(n_win)}
+        return {
+            "restarted_rms_percent": float("inf"),
+            "restart_window_s": window_s,
+            "restart_windows": int(n_win),
+            "window_ms": window_ms,
+        }
     err = res.z[ok] - meas[ok]
     return {
         "restarted_rms_percent": float(100 * np.sqrt(np.mean(err**2)) / np.sqrt(np.mean(meas[ok] ** 2))),
         "restart_window_s": window_s,
         "restart_windows": int(n_win),
         "restart_diverged": int((~ok).sum()),
+        "window_ms": window_ms,
     }

@@ -206,15 +206,25 @@ def _finite(o):
 
 def cmd_identify(args) -> int:
     from negstiff.inference.measurement import load
-    from negstiff.inference.nsi import NSI
 
     rec = load(args.data, columns=args.columns, fs=args.fs, mass=args.mass)
     _say(args, f"identify {args.method}: {rec.n} samples at {rec.fs:g} Hz, input {rec.input_name}")
-    est = NSI(order=args.order, block_rows=args.block_rows).fit(rec)
+    if args.method == "nsi":
+        from negstiff.inference.nsi import NSI
+
+        est = NSI(order=args.order, block_rows=args.block_rows).fit(rec)
+    else:
+        from negstiff.inference.sindy import SINDy
+
+        est = SINDy(n_models=args.ensemble, seed=args.seed).fit(rec)
     result = est.result()
     v = result["validation"]
     if v.get("diverged"):
         _say(args, f"WARNING: {v['warning']}")
+    for w in result.get("warnings", []):
+        _say(args, f"WARNING: {w}")
+    if args.method == "sindy":
+        _say(args, f"selected terms: {', '.join(result['selected_terms'])}")
     write_json(args.out, result)
     wells = ", ".join(
         f"{w}: {m['f_hz']:.3f} Hz, zeta {100 * m['zeta']:.1f} %"
@@ -387,16 +397,19 @@ def build_parser() -> argparse.ArgumentParser:
         "identify",
         parents=[common, data_opts],
         help="identify K and D (and modal parameters) from a record",
-        description="Nonlinear subspace identification around both stable wells (seed section 4): modal parameters "
-        "of each underlying-linear system, the z-frame cubic restoring force and damping, and a free-run "
-        "validation over the held-out last 20 %%.",
+        description="nsi: nonlinear subspace identification around both stable wells (seed section 4): modal "
+        "parameters of each underlying-linear system, the z-frame cubic restoring force and damping. sindy: weak-form "
+        "sparse regression over 1, z..z^5, z', z'|z'|, z'^3, sgn(z') with the input's coefficient fixed by physics, "
+        "terms selected by held-out residual, ensemble inclusion probabilities. Both: equilibria, modal parameters "
+        "and a free-run validation over the held-out last 20 %%.",
     )
-    idf.add_argument("method", choices=["nsi"], help="identification method")
+    idf.add_argument("method", choices=["nsi", "sindy"], help="identification method")
     idf.add_argument("data", help="measurement file")
     idf.add_argument("-o", "--out", required=True, help="result JSON")
     idf.add_argument("--mass", type=float, help="moving mass [kg] (default: the file's metadata; else per unit mass)")
     idf.add_argument("--order", type=int, default=2, help="NSI model order (default 2: one mode)")
-    idf.add_argument("--block-rows", type=int, default=30, help="block rows of the Hankel matrices (default 30)")
+    idf.add_argument("--block-rows", type=int, default=30, help="NSI: block rows of the Hankel matrices (default 30)")
+    idf.add_argument("--ensemble", type=int, default=50, help="SINDy: bagged models of the ensemble (default 50)")
     idf.set_defaults(func=cmd_identify)
 
     chz = sub.add_parser(
