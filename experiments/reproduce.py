@@ -25,10 +25,10 @@ from .calibration import device_section
 from .characterization import characterization_section
 from .nsi_study import nsi_section
 from .report import Report, fmt
+from .sindy_study import sindy_section
 from .updating_study import updating_section
 
 PENDING = [
-    ("SINDy equation discovery", 6),
     ("Bayesian posteriors with emcee", 7),
     ("Discrepancy workflow", 8),
 ]
@@ -153,6 +153,8 @@ def reproduce(out: Path, fast: bool = False, seed: int = 0, progress: bool = Tru
     updating_section(rep, results, fast, seed)
     say("dynamics characterisation")
     characterization_section(rep, results, fast, seed)
+    say("SINDy equation discovery")
+    sindy_section(rep, results, fast, seed)
     rep.heading("Not yet in this report")
     rep.text("These sections of the study are not implemented yet; each is tracked as an issue:")
     rep.table(["section", "issue"], [[s, f"#{i}"] for s, i in PENDING])

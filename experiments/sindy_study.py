@@ -1,0 +1,301 @@
+"""SINDy study: equation discovery on the virtual rig (polynomial truth, a hidden friction force, the
+as-built device's exact geometry) and on the Silverbox, beside NSI on the same records.
+
+    python -m negstiff.experiments.sindy_study [-o reports/sindy] [--fast]
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import sys
+import time
+from typing import Any
+
+import matplotlib.pyplot as plt
+import numpy as np
+from scipy import signal
+
+from negstiff.inference.derivatives import state_derivatives
+from negstiff.inference.measurement import load
+from negstiff.inference.nsi import NSI
+from negstiff.inference.sindy import TERM_FIELDS, TERMS, SINDy
+from negstiff.models import AS_BUILT, SEED_LIKE_CROSS_WELL_RMS, SEED_LIKE_CUBIC, Model, simulate
+from negstiff.models.rig import Rig
+
+from .nsi_study import SILVERBOX_PUBLISHED_MV, as_measurement, find_silverbox, pct, true_floor
+from .report import Report, fmt, run_study
+
+HIDDEN_FRICTION_N = 0.1
+"""Coulomb friction hidden in the rig for the ensemble check [N] (5 % of the device's weight)."""
+
+
+def _coefficient_rows(est: SINDy, truth: Model | None, nsi: NSI | None) -> list[list[Any]]:
+    rows = []
+    for term in TERMS:
+        field, _ = TERM_FIELDS[term]
+        base = field in ("k0", "k1", "k2", "k3", "c", "c_nl")
+        val = getattr(est.model_, field) if base else est.model_.extra.get(field, 0.0)
+        tru = None if truth is None else (getattr(truth, field) if base else truth.extra.get(field, 0.0))
+        nv = getattr(nsi.model_, field) if (nsi is not None and base) else None
+        ens = est.ensemble_[term]
+        rows.append(
+            [
+                term,
+                field,
+                "yes" if term in est.selected_ else "no",
+                ens["inclusion_probability"],
+                val,
+                "" if tru is None else tru,
+                "" if (tru in (None, 0.0) or val == 0.0) else pct(val, tru),
+                ens["sd"],
+                "" if nv is None else nv,
+            ]
+        )
+    return rows
+
+
+COEF_HEADER = ["term", "field", "selected", "inclusion prob.", "SINDy", "truth", "error", "ensemble sd", "NSI"]
+
+
+def _summary(est: SINDy, elapsed: float) -> dict[str, Any]:
+    r = est.result()
+    r["elapsed_s"] = elapsed
+    return r
+
+
+def polynomial_part(rep: Report, res: dict[str, Any], duration: float, seed_: int) -> None:
+    truth = SEED_LIKE_CUBIC
+    rec = Rig(truth, seed=seed_).random(duration=duration, rms=SEED_LIKE_CROSS_WELL_RMS)
+    m = as_measurement(rec)
+    t0 = time.perf_counter()
+    est = SINDy(seed=seed_).fit(m)
+    elapsed = time.perf_counter() - t0
+    nsi = NSI().fit(m)
+    r = _summary(est, elapsed)
+    r["truth"] = truth.to_dict()
+    r["nsi_model"] = nsi.model_.to_dict()
+    r["errors_percent"] = {
+        k: 100 * (getattr(est.model_, k) / getattr(truth, k) - 1) for k in ("k0", "k1", "k2", "k3", "c", "c_nl")
+    }
+    res["polynomial_truth"] = r
+    rep.heading("The discovered equation (polynomial truth, default sensor noise)", 3)
+    exact = est.selected_ == ["1", "z", "z^2", "z^3", "v", "v|v|"]
+    rep.text(
+        f"The same {duration:g} s cross-well record as the NSI section (seed {seed_}). SINDy saw z and the base "
+        f"acceleration only, and took {elapsed:.1f} s ({est.settings_['form']}; derivatives for the "
+        f"library: {est.settings_['derivatives']}). Selected terms: **{', '.join(est.selected_)}**"
+        + (" - exactly the truth's." if exact else " - NOT the truth's terms (1, z, z^2, z^3, v, v|v|).")
+        + " The input's coefficient is fixed at -1 (base excitation) by the constrained optimiser; mass "
+        f"{fmt(est.model_.m, 4)} kg (weighed)."
+    )
+    if not exact:
+        rep.warning("SINDy did not select exactly the truth's terms on this record.")
+    rep.table(COEF_HEADER, _coefficient_rows(est, truth, nsi))
+    rep.text(
+        "Inclusion probabilities are the share of 50 bagged SR3 fits (pysindy EnsembleOptimizer, 60 % of the test "
+        "functions each, at the selected sparsity weight) that keep a term; the ensemble sd is their coefficient "
+        "spread. The truth's k2 sits ~2 % above every estimate on rig records, noise or not: the acquisition chain's "
+        "anti-aliasing filter removes the response's harmonics above ~200 Hz, whose products feed the even part of "
+        "the restoring force (measured on a clean simulation decimated with and without the filter)."
+    )
+    rep.heading("Selection path", 4)
+    rep.table(
+        ["terms", "held-out weak residual [%]", "restarted free runs [%]", "selected"],
+        [
+            [", ".join(p["terms"]), p["heldout_residual_percent"], p["free_run_percent"], p.get("selected", "")]
+            for p in est.path_
+        ],
+    )
+    rep.text(
+        "Each support of the L0 path is refitted on the first 60 % of the record and scored on the next 20 %; the "
+        "sparsest within one standard error (or 10 %) of the best held-out residual wins. The restarted 2 s free "
+        "runs are shown, not used: over cross-well motion they amplify small coefficient errors (chaos)."
+    )
+    _force_figure(rep, truth, est, nsi, m)
+    _validation_figure(rep, est, nsi)
+
+
+def _force_figure(rep: Report, truth: Model, est: SINDy, nsi: NSI, m) -> None:
+    eq = truth.equilibria()
+    z = np.linspace(eq.z_minus - 0.012, eq.z_plus + 0.012, 300)
+    v = np.linspace(-1.5, 1.5, 300)
+    fig, ax = plt.subplots(1, 2, figsize=(10, 3.6))
+    ax[0].plot(1e3 * z, truth.restoring_force(z), "k-", lw=2, label="truth")
+    ax[0].plot(1e3 * z, est.model_.restoring_force(z), "r--", label="SINDy")
+    ax[0].plot(1e3 * z, nsi.model_.restoring_force(z), "C0:", label="NSI")
+    ax[0].set(xlabel="z [mm]", ylabel="K(z) [N]", title="restoring force")
+    ax[1].plot(v, truth.damping_force(v), "k-", lw=2, label="truth")
+    ax[1].plot(v, est.model_.damping_force(v) + _extra_damping(est.model_, v), "r--", label="SINDy")
+    ax[1].plot(v, nsi.model_.damping_force(v), "C0:", label="NSI")
+    ax[1].set(xlabel="z' [m/s]", ylabel="D(z') [N]", title="damping force")
+    for a in ax:
+        a.legend(fontsize=8)
+        a.grid(alpha=0.3)
+    rep.figure("sindy_forces", fig, "Restoring and damping forces: truth, SINDy and NSI from the same record.")
+
+
+def _extra_damping(model: Model, v: np.ndarray) -> np.ndarray:
+    from negstiff.models.equation import extra_force, stiffness_extra_force
+
+    return extra_force(model.extra, np.zeros_like(v), v) - stiffness_extra_force(model.extra, np.zeros_like(v))
+
+
+def _validation_figure(rep: Report, est: SINDy, nsi: NSI) -> None:
+    v, vn = est.validation_, nsi.validation_
+    if "z_sim" not in v:
+        rep.warning("The SINDy model's held-out free run diverged; no validation figure.")
+        return
+    t = v["t"]
+    fig, ax = plt.subplots(1, 2, figsize=(11, 3.6))
+    sl = slice(0, min(t.size, int(4 * 512)))
+    ax[0].plot(t[sl], 1e3 * v["z_meas"][sl], "k-", lw=1.5, label="measured")
+    ax[0].plot(t[sl], 1e3 * v["z_sim"][sl], "r--", lw=1, label="SINDy free run")
+    ax[0].set(xlabel="t [s]", ylabel="z [mm]", title="held-out segment (first 4 s)")
+    fs = 1 / (t[1] - t[0])
+    for y, style, lab in ((v["z_meas"], "k-", "measured"), (v["z_meas"] - v["z_sim"], "r-", "SINDy residual")):
+        f, p = signal.welch(y - y.mean(), fs, nperseg=2048)
+        ax[1].semilogy(f, p, style, lw=1, label=lab)
+    if "z_sim" in vn:
+        f, p = signal.welch(vn["z_meas"] - vn["z_sim"], fs, nperseg=2048)
+        ax[1].semilogy(f, p, "C0:", lw=1, label="NSI residual")
+    ax[1].set(xlabel="f [Hz]", ylabel="PSD [m^2/Hz]", xlim=(0, 80), title="residual PSD")
+    for a in ax:
+        a.legend(fontsize=8)
+    rep.figure(
+        "sindy_validation",
+        fig,
+        f"Free-run validation over the held-out last 20 %: SINDy {fmt(v['rms_percent'], 3)} % rms "
+        f"(NSI {fmt(vn['rms_percent'], 3)} %); restarted 2 s runs {fmt(v.get('restarted_rms_percent'), 3)} %.",
+    )
+
+
+def friction_part(rep: Report, res: dict[str, Any], duration: float, seed_: int) -> None:
+    truth = SEED_LIKE_CUBIC
+    rec = Rig(truth, effects={"coulomb_friction": HIDDEN_FRICTION_N}, seed=seed_).random(
+        duration=duration, rms=SEED_LIKE_CROSS_WELL_RMS
+    )
+    m = as_measurement(rec)
+    t0 = time.perf_counter()
+    est = SINDy(seed=seed_).fit(m)
+    r = _summary(est, time.perf_counter() - t0)
+    r["hidden"] = {"coulomb_friction": HIDDEN_FRICTION_N}
+    res["hidden_friction"] = r
+    ens = est.ensemble_
+    spurious = {t: e["inclusion_probability"] for t, e in ens.items() if t in ("z^4", "z^5", "v^3")}
+    found = est.model_.extra.get("coulomb_friction", 0.0)
+    rep.heading(f"A hidden effect: {HIDDEN_FRICTION_N:g} N of Coulomb friction", 3)
+    ok = ens["sgn(v)"]["inclusion_probability"] > 0.9 and max(spurious.values()) < 0.5
+    rep.text(
+        f"The rig hid {HIDDEN_FRICTION_N:g} N of Coulomb friction (5 % of the device's weight) in a {duration:g} s "
+        f"record; SINDy was not told. Selected: **{', '.join(est.selected_)}**; sgn(v) in "
+        f"{fmt(100 * ens['sgn(v)']['inclusion_probability'], 3)} % of the bagged models, the friction force "
+        f"{fmt(found, 3)} N ({pct(found, HIDDEN_FRICTION_N)} against the hidden {HIDDEN_FRICTION_N:g} N); terms the "
+        f"truth lacks: {', '.join(f'{t} {fmt(p, 2)}' for t, p in spurious.items())}. "
+        "The library's sgn(v) is erf(v / (sqrt(2) s_n)), the expected sign of the true velocity given the estimated "
+        "one (s_n its predicted noise): with a plain sign, or with a finite-difference z'' that smears the force's "
+        "jump, 30-40 % of the friction went unexplained (measured while building this)."
+    )
+    if not ok:
+        rep.warning("The ensemble did not single out the hidden friction cleanly on this record.")
+    rep.table(
+        COEF_HEADER,
+        _coefficient_rows(est, dataclasses.replace(truth, extra={"coulomb_friction": HIDDEN_FRICTION_N}), None),
+    )
+
+
+def as_built_part(rep: Report, res: dict[str, Any], duration: float, seed_: int) -> None:
+    rec = Rig(AS_BUILT, seed=seed_).random(duration=duration)
+    m = as_measurement(rec)
+    est = SINDy(seed=seed_).fit(m)
+    r = _summary(est, 0.0)
+    r["truth_features"] = AS_BUILT.features()
+    floor = true_floor(AS_BUILT, m, est.settings_["identification_samples"])
+    r["truth_floor_rms_percent"] = floor
+    res["as_built"] = r
+    rep.heading("The as-built device (exact geometric restoring force)", 3)
+    rows = []
+    for w in ("minus", "plus"):
+        uls = AS_BUILT.uls(w)
+        rows.append([f"z_{w}", est.modal_[w]["f_hz"], uls.f_hz, pct(est.modal_[w]["f_hz"], uls.f_hz)])
+    higher = [t for t in est.selected_ if t in ("z^4", "z^5")]
+    rep.text(
+        f"No polynomial truth exists here. SINDy selects **{', '.join(est.selected_)}**"
+        + (
+            f": the higher-order stiffness terms {', '.join(higher)} are how it reports the cubic's model-form gap."
+            if higher
+            else "."
+        )
+        + f" Held-out free run: {fmt(est.validation_['rms_percent'], 3)} % (restarted 2 s runs "
+        f"{fmt(est.validation_.get('restarted_rms_percent'), 3)} %), against the exact model's own floor of "
+        f"{fmt(floor, 3)} % on the same record (one long cross-well free run diverges even for the truth)."
+    )
+    rep.table(["well", "f SINDy [Hz]", "f exact K'(z*) [Hz]", "error"], rows)
+    eq = AS_BUILT.equilibria()
+    z = np.linspace(eq.z_minus - 0.012, eq.z_plus + 0.012, 300)
+    fig, ax = plt.subplots(figsize=(6, 3.6))
+    ax.plot(1e3 * z, AS_BUILT.restoring_force(z), "k-", lw=2, label="exact geometry (truth)")
+    ax.plot(1e3 * z, est.model_.restoring_force(z), "r--", label="SINDy")
+    ax.plot(1e3 * z, AS_BUILT.lsq_cubic().restoring_force(z), "C2:", label="least-squares cubic of the truth")
+    ax.set(xlabel="z [mm]", ylabel="K [N]")
+    ax.legend(fontsize=8)
+    ax.grid(alpha=0.3)
+    rep.figure("sindy_as_built", fig, "As-built device: exact restoring force, SINDy's polynomial, the best cubic.")
+
+
+def silverbox_part(rep: Report, res: dict[str, Any]) -> None:
+    rep.heading("Real data: the Silverbox", 3)
+    path = find_silverbox()
+    if path is None:
+        rep.warning("Silverbox data not found (set NEGSTIFF_SILVERBOX to SNLS80mV.mat); section skipped.")
+        res["silverbox"] = None
+        return
+    m = load(path, columns="force=V1,z=V2", fs=610.35)
+    est = SINDy().fit(m.segment(40650, 105712))
+    test = m.segment(105712, 127400)
+    zs, v, _, _ = state_derivatives(test.z, test.fs, purpose="state")
+    k0 = 49
+    z = simulate(est.model_, test.u[k0:], test.dt, z0=zs[k0], v0=v[k0], input_kind="force").z[0]
+    rms_mv = float(1e3 * np.sqrt(np.mean((z[1:] - test.z[k0 + 1 :]) ** 2)))
+    r = est.result()
+    r.update(test_rms_mv=rms_mv, published_mv=SILVERBOX_PUBLISHED_MV)
+    res["silverbox"] = r
+    mm = est.model_
+    rep.text(
+        f"Training multisines (samples 40650-105712; force input, mass unknown, so the input's coefficient is "
+        f"learned and m = {fmt(mm.m, 3)}). Selected: **{', '.join(est.selected_)}**; cubic hardening "
+        f"k3/m = {fmt(mm.k3 / mm.m, 3)} 1/(V^2 s^2) "
+        f"(inclusion {fmt(est.ensemble_['z^3']['inclusion_probability'], 2)}). "
+        f"Free-run RMS error on the multisine test segment (105712-127400, the first 50 outputs initialise the "
+        f"state): **{fmt(rms_mv, 3)} mV**."
+    )
+    rep.table(
+        ["model", "test RMS error [mV]"],
+        [["negstiff SINDy (weak form)", rms_mv]] + [[k, v] for k, v in SILVERBOX_PUBLISHED_MV.items()],
+    )
+
+
+def sindy_section(rep: Report, results: dict[str, Any], fast: bool, seed_: int = 0) -> None:
+    """The SINDy section; numbers go into ``results["sindy"]``."""
+    res: dict[str, Any] = {}
+    results["sindy"] = res
+    duration = 120.0 if fast else 300.0
+    rep.heading("SINDy: equation discovery from the records")
+    polynomial_part(rep, res, duration, seed_ + 1)
+    friction_part(rep, res, duration, seed_ + 4)
+    if not fast:
+        as_built_part(rep, res, duration, seed_ + 2)
+    silverbox_part(rep, res)
+
+
+def main(argv=None) -> int:
+    return run_study(
+        sindy_section,
+        "negstiff: equation discovery with SINDy",
+        "reports/sindy",
+        __doc__,
+        argv,
+    )
+
+
+if __name__ == "__main__":
+    sys.exit(main())
