@@ -436,3 +436,20 @@ class SINDy:
             "path": [{k: v for k, v in p.items() if k not in ("block_ms", "support")} for p in self.path_],
             "settings": self.settings_,
         }
+
+
+def weak_least_squares(rec: Measurement, terms, gain: float | None = None) -> Model:
+    """The weak-form least-squares model of a fixed set of library ``terms`` over the whole record (no
+    selection, no ensemble): the deterministic start point of the posterior and the discrepancy
+    workflow's refits. The input's coefficient is fixed as in ``SINDy`` (or learned without a mass)."""
+    est = SINDy()
+    zs, v, _, deriv = state_derivatives(rec.z, rec.fs)
+    _Noise.velocity = deriv["velocity_noise_std"] if np.isfinite(deriv["velocity_noise_std"]) else 0.0
+    est.half_, _ = test_function_half_width(rec.z, rec.fs)
+    g = est._gain(rec) if gain is None else gain
+    unknown = set(terms) - set(TERMS)
+    if unknown:
+        raise ValueError(f"unknown library terms {sorted(unknown)}; choose among {TERMS}")
+    support = tuple(t in terms for t in TERMS)
+    phys = est._fit_once(est._design(rec, zs, v), 0.0, g, support=support)
+    return SINDy.model_from(phys, est._mass(rec, g, phys)[0])
