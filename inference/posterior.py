@@ -437,10 +437,10 @@ class Posterior:
         if self.model == "device" and self.mass_prior == "free":
             free[2] = False
         x_scale = np.maximum(np.abs(theta), 1e-6)
-        nr = win.n_windows * win.length
         cov = np.zeros((theta.size, theta.size))
         try:
-            c_free = np.linalg.pinv(sol.jac[:nr].T @ sol.jac[:nr]) * sigma**2
+            # all rows: the data's and the Gaussian prior's (scaled so that SS / sigma^2 adds its term)
+            c_free = np.linalg.pinv(sol.jac.T @ sol.jac) * sigma**2
             cov[np.ix_(free, free)] = c_free * np.outer(x_scale[free], x_scale[free])
         except np.linalg.LinAlgError:
             pass
@@ -563,24 +563,36 @@ def sample_ensembles(
     chains, taus, warn, blobs = [], [], [], []
     pbar = _progress_bar(progress, n_ensembles * max_steps)
     for e in range(n_ensembles):
-        p0 = p0_scale * np.random.RandomState(seed + e).standard_normal((n_walkers, nd))
+        rs = np.random.RandomState(seed + e)
+        p0 = p0_scale * rs.standard_normal((n_walkers, nd))
+        # every walker must start where the posterior is positive (emcee's moves compare log probabilities)
+        for _ in range(50):
+            bad = ~np.isfinite(np.array([lp for lp, _ in log_prob(p0)]))
+            if not bad.any():
+                break
+            p0[bad] = 0.5 * p0_scale * rs.standard_normal((int(bad.sum()), nd))
+        else:
+            raise PosteriorError("no start point of positive posterior density near the MAP point")
         sampler = emcee.EnsembleSampler(n_walkers, nd, log_prob, vectorize=True, moves=moves)
         sampler.random_state = np.random.RandomState(seed + 1000 + e).get_state()
         state, steps, tau, burn = p0, 0, np.full(nd, np.inf), 0
         while steps < max_steps:
-            state = sampler.run_mcmc(state, min(chunk, max_steps - steps), progress=False)
+            with np.errstate(invalid="ignore", divide="ignore"):
+                state = sampler.run_mcmc(state, min(chunk, max_steps - steps), progress=False)
             steps = sampler.iteration
             if pbar is not None:
                 pbar.update(min(chunk, max_steps))
-            tau = sampler.get_autocorr_time(tol=0, quiet=True)
-            burn = int(min(steps // 2, max(2 * np.nanmax(tau), chunk)))
-            if steps >= min_steps and steps - burn >= tau_multiple * np.nanmax(tau):
+            with np.errstate(invalid="ignore", divide="ignore"), warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                tau = sampler.get_autocorr_time(tol=0, quiet=True)
+            t_max = float(np.max(tau)) if np.all(np.isfinite(tau)) else math.inf
+            burn = int(min(steps // 2, max(2 * t_max, chunk)))
+            if steps >= min_steps and steps - burn >= tau_multiple * t_max:
                 break
-        if not steps - burn >= tau_multiple * np.nanmax(tau):
+        if not steps - burn >= tau_multiple * t_max:
             warn.append(
                 f"ensemble {e}: not converged after {steps} steps: {steps - burn} kept steps < "
-                f"{tau_multiple:g} x tau = {tau_multiple * np.nanmax(tau):.0f} (emcee's rule); the numbers are "
-                "not reliable"
+                f"{tau_multiple:g} x tau = {tau_multiple * t_max:.0f} (emcee's rule); the numbers are not reliable"
             )
         acc = float(np.mean(sampler.acceptance_fraction))
         if acc < 0.05:

@@ -285,10 +285,15 @@ class Model:
             raise ValueError("k3 must be positive (hardening) for a bounded double- or single-well model")
         # Cauchy bound of the cubic's roots, widened for the extra terms
         bound = 1 + max(abs(self.k2), abs(self.k1), abs(self.k0)) / abs(self.k3 or 1.0)
-        if not self.extra:
-            roots = np.roots([self.k3, self.k2, -self.k1, self.k0])
-            real = np.sort(roots[np.abs(roots.imag) <= 1e-9 * np.maximum(1, np.abs(roots))].real)
+        roots = np.roots([self.k3, self.k2, -self.k1, self.k0]) if self.k3 > 0 else np.array([])
+        real = np.sort(roots[np.abs(roots.imag) <= 1e-9 * np.maximum(1, np.abs(roots))].real)
+        if real.size and not self.extra:
             bound = 1.01 * np.max(np.abs(real)) + 1e-6
+        elif real.size:
+            # a quartic or quintic term always has far roots of its own; the device's equilibria are the
+            # ones near the cubic's: search 3x as far out (a higher-order term's far roots lie beyond any
+            # stroke, e.g. -0.67 m for 1e6 z^4 on the rig's cubic)
+            bound = 3.0 * np.max(np.abs(real)) + 1e-6
         return find_equilibria(self.restoring_force, self.stiffness, -bound, bound)
 
     def uls(self, well: str) -> UnderlyingLinear:

@@ -75,8 +75,8 @@ def test_a_run_too_short_to_converge_is_reported_not_hidden():
 
 @pytest.fixture(scope="module")
 def rig_posterior():
-    # 12 s of a cross-well record at the rig's default noise, the weighed mass
-    r = Rig(SEED_LIKE_CUBIC, seed=11).random(duration=12, rms=SEED_LIKE_CROSS_WELL_RMS)
+    # 5 s of a cross-well record at the rig's default noise, the weighed mass
+    r = Rig(SEED_LIKE_CUBIC, seed=11).random(duration=5, rms=SEED_LIKE_CROSS_WELL_RMS)
     rec = from_arrays(r.columns["base_acc"], r.columns["z"], r.fs, mass=float(r.meta["mass"]), source="rig")
     return rec, Posterior(seed=2).fit(rec)
 

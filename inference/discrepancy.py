@@ -1,0 +1,430 @@
+"""Discrepancy workflow: find where the model and the data disagree, name the missing effect, add it,
+refit, and show the gap shrink (Kaheman et al. 2019 and Ebers et al. 2024, ecosystem.md 6: the known
+physics fixed, the mismatch sought as a sparse term from a physical catalogue).
+
+1. **Locate.** The baseline (cubic K and viscous c; linear K for a start from nothing) is fitted by
+   weak-form least squares (``sindy.weak_least_squares``: the input's coefficient fixed by physics).
+   Its weak residual, the equation error each test function sees, is mapped over the state (z, z'),
+   split by regime (in either well, crossing, near zero velocity, at large stroke), and its share in
+   each regime is compared with the regime's share of the record; restarted short free runs give the
+   gap in time and as a PSD. A long free run is never used: cross-well motion diverges even for the
+   true model (device-model.md).
+2. **Name.** Each catalogue effect (``CATALOGUE``) is added to the baseline in turn, refitted on the
+   first part of the data and scored on the held-out part by its weak residual (an equation error
+   that chaos cannot fake). ``none`` is the baseline itself. An effect is named only if it lowers the
+   held-out residual by more than max(one standard error of the paired per-block differences,
+   ``margin``) (the one-standard-error rule plus a practical margin, as in ``sindy``): otherwise the
+   answer is ``none``. Among effects that close to the best, the one with fewer parameters wins.
+3. **Add and refit.** The winner enters the model (its ``extra``; quadratic damping and quadratic or
+   cubic stiffness fold into c_nl, k2, k3), every parameter is refitted on all identification data,
+   and the gap is measured again on the held-out tail: restarted free runs (the median window's rms
+   error: a window whose run diverges near the barrier, chaos, would dominate a pooled rms), residual
+   PSD, maps.
+4. **Iterate** until ``none`` wins (at most ``max_effects``).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from scipy import signal
+
+from negstiff.models import Model
+
+from .derivatives import state_derivatives
+from .measurement import Measurement, MeasurementError
+from .nsi import restarted_free_runs
+from .sindy import TERMS, SINDy, _Noise, test_function_half_width
+
+CUBIC_BASELINE = ("1", "z", "z^2", "z^3", "v")
+LINEAR_BASELINE = ("1", "z", "v")
+
+CATALOGUE: dict[str, tuple[str, ...]] = {
+    "coulomb_friction": ("sgn(v)",),
+    "quadratic_damping": ("v|v|",),
+    "cubic_damping": ("v^3",),
+    "quartic_stiffness": ("z^4",),
+    "quintic_stiffness": ("z^5",),
+    "quadratic_stiffness": ("z^2",),
+    "cubic_stiffness": ("z^3",),
+    "end_stop": ("stop",),
+}
+"""Candidate effects and the library terms they add (``stop``: one-sided contact beyond a gap)."""
+
+EFFECT_OF_TERM = {terms[0]: name for name, terms in CATALOGUE.items()}
+
+
+@dataclass
+class Candidate:
+    effect: str
+    terms: tuple[str, ...]
+    stop: float | None = None
+    heldout_percent: float = math.inf
+    block_ms: np.ndarray | None = None
+    coefficients: np.ndarray | None = None
+    notes: dict[str, Any] = field(default_factory=dict)
+
+
+class DiscrepancyError(MeasurementError):
+    """The record cannot support the workflow (too short, no excitation)."""
+
+
+class Discrepancy:
+    """The workflow of the module docstring.
+
+    Parameters
+    ----------
+    baseline : library terms of the starting model (default: cubic K, viscous c)
+    validation_fraction : held-out tail on which the gap is measured before and after
+    selection_fraction : the part before the tail on which candidate effects are scored
+    margin : relative gain in held-out residual an effect must bring to be named
+    max_effects : iterations (effects added) at most
+    window_s : restarted free runs and residual blocks [s]
+    """
+
+    def __init__(
+        self,
+        baseline: tuple[str, ...] = CUBIC_BASELINE,
+        validation_fraction: float = 0.2,
+        selection_fraction: float = 0.2,
+        margin: float = 0.1,
+        max_effects: int = 3,
+        window_s: float = 2.0,
+    ):
+        self.baseline = tuple(baseline)
+        self.validation_fraction = validation_fraction
+        self.selection_fraction = selection_fraction
+        self.margin = margin
+        self.max_effects = max_effects
+        self.window_s = window_s
+
+    # --- the weak-form system with an optional end stop column -----------------------------------
+    def _systems(self, rec: Measurement):
+        est = SINDy()
+        n_id = int(round(rec.n * (1 - self.validation_fraction)))
+        n_fit = int(round(rec.n * (1 - self.validation_fraction - self.selection_fraction)))
+        ident = rec.segment(0, n_id)
+        zs, v, _, deriv = state_derivatives(ident.z, rec.fs)
+        _Noise.velocity = deriv["velocity_noise_std"] if np.isfinite(deriv["velocity_noise_std"]) else 0.0
+        est.half_, _ = test_function_half_width(ident.z, rec.fs)
+        self._est, self._zs, self._v = est, zs, v
+        self._gain = est._gain(rec)
+        self.n_id, self.n_fit = n_id, n_fit
+        return est
+
+    def _design(self, rec: Measurement, lo: int, hi: int, stop: float | None):
+        """Weak system over samples [lo, hi): the library's columns (and an end-stop column)."""
+        from .sindy import test_function, weak_project
+
+        est = self._est
+        seg = rec.segment(lo, hi)
+        sysd = est._design(seg, self._zs[lo:hi], self._v[lo:hi])
+        W = sysd["W"] * sysd["col"]
+        y = sysd["y"] * sysd["s_y"]
+        if stop is not None:
+            z = self._zs[lo:hi]
+            side = np.sign(stop)
+            col = np.where(side * (z - stop) > 0, z - stop, 0.0)
+            phi, _ = test_function(est.half_, rec.dt)
+            Ws = weak_project(col[:, None], phi, max(1, est.half_ // 2), rec.dt)[:, 0]
+            W = np.column_stack([W, Ws[: W.shape[0]]])
+        return W, y
+
+    def _fit(self, W: np.ndarray, y: np.ndarray, terms: tuple[str, ...], stop: bool) -> np.ndarray:
+        """Least squares on ``terms`` (+ the stop column), the input's coefficient fixed by physics."""
+        idx = [TERMS.index(t) for t in terms if t != "stop"]
+        cols = idx + ([W.shape[1] - 1] if stop else [])
+        target = y.copy()
+        n_lib = len(TERMS)
+        if self._gain is not None:
+            target = target - self._gain * W[:, n_lib]
+        else:
+            cols = cols + [n_lib]
+        A = W[:, cols]
+        scale = np.sqrt(np.mean(A**2, axis=0))  # rms, not std: the constant's column has none
+        scale[scale == 0] = 1.0
+        coef = np.linalg.lstsq(A / scale, target, rcond=None)[0] / scale
+        full = np.zeros(n_lib + 1 + int(stop))
+        full[cols] = coef
+        if self._gain is not None:
+            full[n_lib] = self._gain
+        return full
+
+    def _model(self, coef: np.ndarray, rec: Measurement, stop: float | None) -> Model:
+        est = self._est
+        phys = coef[: len(TERMS) + 1]
+        mass = est._mass(rec, self._gain, phys)[0]
+        model = SINDy.model_from(phys, mass)
+        if stop is not None:
+            k = -mass * float(coef[-1])
+            if k > 0:
+                model = Model(**{**model.to_dict(), "extra": {**dict(model.extra), "end_stop": {"k": k, "z": stop}}})
+        return model
+
+    def _score(self, rec: Measurement, cand: Candidate) -> Candidate:
+        W, y = self._design(rec, 0, self.n_fit, cand.stop)
+        coef = self._fit(W, y, cand.terms, cand.stop is not None)
+        Ws, ys = self._design(rec, self.n_fit, self.n_id, cand.stop)
+        r2 = (ys - Ws @ coef) ** 2
+        rows = max(1, int(round(self.window_s * rec.fs / max(1, self._est.half_ // 2))))
+        nb = r2.size // rows
+        if nb < 2:
+            raise DiscrepancyError(f"{rec.source}: too few samples for the discrepancy workflow's selection part")
+        cand.block_ms = r2[: nb * rows].reshape(nb, rows).mean(axis=1) / ys.var()
+        cand.heldout_percent = float(100 * np.sqrt(cand.block_ms.mean()))
+        cand.coefficients = coef
+        return cand
+
+    def _fit_stop(self, rec: Measurement, terms: tuple[str, ...]) -> float:
+        """The end stop's position (a nonlinear parameter) by least squares on the fitting part: a grid
+        over the outer 0.5-10 % of the stroke on either side, refined by a bounded scalar search."""
+        from scipy import optimize
+
+        def ss(zs: float) -> float:
+            W, y = self._design(rec, 0, self.n_fit, zs)
+            coef = self._fit(W, y, terms, True)
+            return float(np.sum((y - W @ coef) ** 2)) if coef[-1] < 0 else math.inf  # a stop pushes back
+
+        z = self._zs[: self.n_fit]
+        qs = (0.5, 1, 2, 3, 5, 7, 10)
+        grid = [float(np.percentile(z, q)) for q in qs] + [float(np.percentile(z, 100 - q)) for q in qs]
+        vals = [ss(g) for g in grid]
+        i = int(np.argmin(vals))
+        side = grid[:7] if i < 7 else grid[7:]
+        j = side.index(grid[i])
+        lo, hi = sorted((side[max(j - 1, 0)], side[min(j + 1, len(side) - 1)]))
+        if hi > lo:
+            r = optimize.minimize_scalar(ss, bounds=(lo, hi), method="bounded", options={"xatol": 1e-5})
+            if r.fun < vals[i]:
+                return float(r.x)
+        return grid[i]
+
+    # --- locate ------------------------------------------------------------------------------------
+    def locate(self, rec: Measurement, model_terms: tuple[str, ...], stop: float | None) -> dict[str, Any]:
+        """Where the current model's weak residual lives: by regime and over the state plane."""
+        from .sindy import test_function
+
+        W, y = self._design(rec, 0, self.n_id, stop)
+        coef = self._fit(W, y, model_terms, stop is not None)
+        r = y - W @ coef
+        est = self._est
+        stride = max(1, est.half_ // 2)
+        centres = np.arange(r.size) * stride + est.half_ * (1 + 3)  # the padded kernel's centre
+        centres = np.clip(centres, 0, self.n_id - 1)
+        _ = test_function
+        z, v = self._zs[centres], self._v[centres]
+        model = self._model(coef, rec, stop)
+        try:
+            eq = model.equilibria()
+            wells = (eq.z_minus, eq.z_0, eq.z_plus)
+        except ValueError:
+            wells = (None, None, None)
+        regimes = {}
+        v_rms = float(np.sqrt(np.mean(self._v**2)))
+        stroke = np.percentile(np.abs(self._zs - np.median(self._zs)), 90)
+        masks = {
+            "near zero velocity": np.abs(v) < 0.1 * v_rms,
+            "large stroke": np.abs(z - np.median(self._zs)) > stroke,
+        }
+        if wells[1] is not None:
+            zm, z0, zp = wells
+            masks["crossing the barrier"] = np.abs(z - z0) < 0.25 * (zp - zm) / 2
+            masks["in the minus well"] = (z < z0) & ~masks["crossing the barrier"]
+            masks["in the plus well"] = (z >= z0) & ~masks["crossing the barrier"]
+        total = float(np.sum(r**2))
+        for name, m in masks.items():
+            if m.any():
+                share_r = float(np.sum(r[m] ** 2) / total)
+                share_t = float(np.mean(m))
+                regimes[name] = {"residual_share": share_r, "time_share": share_t, "ratio": share_r / share_t}
+        worst = max(regimes.items(), key=lambda kv: kv[1]["ratio"]) if regimes else None
+        return {"regimes": regimes, "worst": worst[0] if worst else None, "z": z, "v": v, "r": r, "wells": wells}
+
+    # --- the workflow ------------------------------------------------------------------------------
+    def fit(self, rec: Measurement) -> "Discrepancy":
+        rec.require(4000, "the discrepancy workflow")
+        if rec.u.std() == 0 or np.ptp(rec.z) == 0:
+            raise DiscrepancyError(f"{rec.source}: not enough excitation: the input or the response is constant")
+        self._systems(rec)
+        terms = tuple(self.baseline)
+        stop: float | None = None
+        added: list[dict[str, Any]] = []
+        self.iterations_ = []
+        base_model = self._refit_model(rec, terms, stop)
+        self.baseline_model_ = base_model
+        self.gap_before_ = self._gap(rec, base_model)
+        self.locate_before_ = self.locate(rec, terms, stop)
+        for _ in range(self.max_effects):
+            none = self._score(rec, Candidate("none", terms, stop))
+            cands = [none]
+            for effect, extra_terms in CATALOGUE.items():
+                if effect == "end_stop":
+                    if stop is None:
+                        cands.append(self._score(rec, Candidate(effect, terms, self._fit_stop(rec, terms))))
+                    continue
+                if set(extra_terms) <= set(terms):
+                    continue
+                cands.append(self._score(rec, Candidate(effect, terms + extra_terms, stop)))
+            ranking = sorted(cands, key=lambda c: c.heldout_percent)
+            best = self._parsimonious(ranking)
+            d = none.block_ms - best.block_ms
+            se = d.std(ddof=1) / math.sqrt(d.size)
+            named = best.effect != "none" and d.mean() > max(se, self.margin * none.block_ms.mean())
+            self.iterations_.append(
+                {
+                    "ranking": [{"effect": c.effect, "score": c.heldout_percent} for c in ranking],
+                    "named": best.effect if named else "none",
+                    "gain_percent": float(100 * d.mean() / none.block_ms.mean()),
+                    "standard_error_percent": float(100 * se / none.block_ms.mean()),
+                }
+            )
+            if not named:
+                break
+            terms = best.terms
+            stop = best.stop
+            added.append({"effect": best.effect, "stop": best.stop})
+        self.effects_ = [a["effect"] for a in added]
+        self.terms_ = terms
+        self.stop_ = stop
+        self.model_ = self._as_extra(self._refit_model(rec, terms, stop), self.effects_)
+        self.gap_after_ = self._gap(rec, self.model_)
+        self.locate_after_ = self.locate(rec, terms, stop)
+        return self
+
+    def _parsimonious(self, ranking: list[Candidate]) -> Candidate:
+        """Among the effects within max(1 SE, margin) of the best held-out residual, the one with the
+        fewest parameters (the end stop has two: its stiffness and its position), then the lowest
+        residual: a two-parameter stop that beats z^5 by 4 % on the as-built device is not evidence of
+        a stop (measured)."""
+        top = ranking[0]
+        n_par = {"end_stop": 2, "none": 0}
+        ok = []
+        for c in ranking:
+            if c.effect == "none":
+                continue
+            d = c.block_ms - top.block_ms
+            se = d.std(ddof=1) / math.sqrt(d.size)
+            if d.mean() <= max(se, self.margin * top.block_ms.mean()):
+                ok.append(c)
+        if not ok:
+            return top
+        return min(ok, key=lambda c: (n_par.get(c.effect, 1), c.heldout_percent))
+
+    @staticmethod
+    def _as_extra(model: Model, effects: list[str]) -> Model:
+        """Named effects that fold into a base field (c_nl, k2, k3) move to ``extra`` under their name, so
+        the model file says what was added (the simulator adds them back to the same field)."""
+        folds = {"quadratic_damping": "c_nl", "quadratic_stiffness": "k2", "cubic_stiffness": "k3"}
+        d = model.to_dict()
+        extra = dict(d.get("extra") or {})
+        for e in effects:
+            if e in folds:
+                extra[e] = d[folds[e]]
+                d[folds[e]] = 0.0
+        d["extra"] = extra
+        return Model.from_dict(d)
+
+    def _refit_model(self, rec: Measurement, terms, stop) -> Model:
+        W, y = self._design(rec, 0, self.n_id, stop)
+        return self._model(self._fit(W, y, terms, stop is not None), rec, stop)
+
+    def _gap(self, rec: Measurement, model: Model) -> dict[str, Any]:
+        """Restarted free runs over the held-out tail (and their residual PSD)."""
+        zs, v, _, _ = state_derivatives(rec.z, rec.fs, purpose="state")
+        fr = restarted_free_runs(model, rec, self.n_id, self.window_s, zs, v)
+        out = {k: v for k, v in fr.items() if not isinstance(v, np.ndarray)}
+        ms = fr.get("window_ms")
+        if ms is not None:
+            ok = np.isfinite(ms)
+            # the median window: a single window that diverges near the barrier (chaos) cannot dominate
+            out["median_window_rms_um"] = float(1e6 * np.sqrt(np.median(ms[ok]))) if ok.any() else math.inf
+            tail = rec.z[self.n_id :]
+            out["median_window_percent"] = (
+                float(100 * np.sqrt(np.median(ms[ok])) / np.sqrt(np.mean(tail**2))) if ok.any() else math.inf
+            )
+        return out
+
+    def effect_size(self) -> dict[str, Any]:
+        """The named effects' values in the model file's units."""
+        out = {}
+        for e in self.effects_:
+            val = self.model_.extra.get(e)
+            out[e] = dict(val) if isinstance(val, dict) or hasattr(val, "keys") else val
+        return out
+
+    def where_text(self) -> str:
+        loc = self.locate_before_
+        if not loc["regimes"]:
+            return "no regime could be told apart"
+        parts = sorted(loc["regimes"].items(), key=lambda kv: -kv[1]["ratio"])
+        worst, w = parts[0]
+        if w["ratio"] < 1.5:
+            return (
+                "the baseline's equation error is spread evenly: no regime carries more than 1.5x its share of the "
+                f"record (largest: {worst}, {w['ratio']:.1f}x)"
+            )
+        txt = (
+            f"the baseline's equation error is concentrated {worst} ({100 * w['residual_share']:.0f} % of the squared "
+            f"residual in {100 * w['time_share']:.0f} % of the record, {w['ratio']:.1f}x its share)"
+        )
+        if len(parts) > 1:
+            n2, w2 = parts[1]
+            txt += f"; next {n2} ({w2['ratio']:.1f}x)"
+        return txt
+
+    def result(self) -> dict[str, Any]:
+        last = self.iterations_[0]
+        before = self.gap_before_.get("median_window_percent", math.inf)
+        after = self.gap_after_.get("median_window_percent", math.inf)
+        return {
+            "effect": self.effects_[0] if self.effects_ else "none",
+            "effects": self.effects_ or ["none"],
+            "ranking": last["ranking"],
+            "gap_before_percent": before,
+            "gap_after_percent": after,
+            "gap_pooled_percent": {
+                "before": self.gap_before_.get("restarted_rms_percent"),
+                "after": self.gap_after_.get("restarted_rms_percent"),
+            },
+            "gap_median_window_um": {
+                "before": self.gap_before_.get("median_window_rms_um"),
+                "after": self.gap_after_.get("median_window_rms_um"),
+            },
+            "where": self.where_text(),
+            "regimes_before": self.locate_before_["regimes"],
+            "regimes_after": self.locate_after_["regimes"],
+            "model": self.model_.to_dict(),
+            "baseline_model": self.baseline_model_.to_dict(),
+            "effect_size": self.effect_size(),
+            "iterations": self.iterations_,
+            "settings": {
+                "baseline_terms": list(self.baseline),
+                "score": "held-out weak residual (rms, % of the target) over samples "
+                f"[{self.n_fit}, {self.n_id}); named only above max(1 SE, {100 * self.margin:g} %)",
+                "gap": f"restarted {self.window_s:g} s free runs over the held-out tail [{self.n_id}, end): "
+                "the median window's rms error, % of rms(z) (pooled over all windows in gap_pooled_percent; one "
+                "window that diverges near the barrier, chaos, can dominate the pool)",
+            },
+        }
+
+
+def residual_psd(rec: Measurement, model: Model, start: int, window_s: float = 2.0):
+    """PSD of the restarted free runs' residual over [start, end): (f, P)."""
+    from negstiff.models import simulate_batch
+
+    zs, v, _, _ = state_derivatives(rec.z, rec.fs, purpose="state")
+    w = int(round(window_s * rec.fs))
+    starts = start + w * np.arange((rec.n - start) // w)
+    U = np.stack([rec.u[k : k + w] for k in starts])
+    P = np.repeat(model.kernel_params()[:, None], starts.size, axis=1)
+    res = simulate_batch(
+        P, model.kind, U, rec.dt, np.column_stack([zs[starts], v[starts]]),
+        input_kind=rec.input_name, input_index=np.arange(starts.size),
+    )  # fmt: skip
+    meas = np.stack([rec.z[k : k + w] for k in starts])
+    ok = ~res.diverged
+    f, p = signal.welch(meas[ok] - res.z[ok], rec.fs, nperseg=min(w, 512), axis=1)
+    return f, p.mean(axis=0)
