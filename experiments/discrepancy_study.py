@@ -1,0 +1,200 @@
+"""Discrepancy study (issue 8): the workflow on rig records with each hidden effect and with none, on
+the as-built device (model-form gap), and on the Silverbox from a linear start.
+
+    python -m negstiff.experiments.discrepancy_study [-o reports/discrepancy] [--fast]
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import sys
+from typing import Any
+
+import matplotlib.pyplot as plt
+import numpy as np
+
+from negstiff.inference.derivatives import state_derivatives
+from negstiff.inference.discrepancy import LINEAR_BASELINE, Discrepancy, residual_psd
+from negstiff.inference.measurement import load
+from negstiff.models import AS_BUILT, SEED_LIKE_CROSS_WELL_RMS, SEED_LIKE_CUBIC, simulate
+from negstiff.models.rig import Rig
+
+from .nsi_study import as_measurement, find_silverbox
+from .report import Report, fmt, run_study
+
+BASE = dataclasses.replace(SEED_LIKE_CUBIC, c_nl=0.0)
+HIDDEN = {
+    "none": None,
+    "coulomb_friction": 0.1,
+    "quadratic_damping": 0.5,
+    "cubic_damping": 0.3,
+    "quartic_stiffness": 2e6,
+    "quintic_stiffness": 1e8,
+    "end_stop": {"k": 2000.0, "z": -0.036},
+}
+
+
+def _size_text(v) -> str:
+    if isinstance(v, dict):
+        return f"k {fmt(v['k'], 3)} N/m at z {fmt(1e3 * v['z'], 3)} mm"
+    return fmt(v, 3)
+
+
+def hidden_part(rep: Report, res: dict[str, Any], duration: float, seeds: tuple[int, ...]) -> dict:
+    rows, out, keep = [], [], {}
+    for effect, size in HIDDEN.items():
+        for seed in seeds:
+            rec = Rig(BASE, effects={} if size is None else {effect: size}, seed=seed).random(
+                duration=duration, rms=SEED_LIKE_CROSS_WELL_RMS
+            )
+            m = as_measurement(rec)
+            d = Discrepancy().fit(m)
+            r = d.result()
+            found = r["effects"]
+            right = found == [effect] if effect != "none" else found == ["none"]
+            est = r["effect_size"].get(effect) if effect != "none" else None
+            rows.append(
+                [
+                    effect,
+                    seed,
+                    "" if size is None else _size_text(size),
+                    ", ".join(found),
+                    "" if est is None else _size_text(est),
+                    "yes" if right else "NO",
+                    r["gap_before_percent"],
+                    r["gap_after_percent"],
+                ]
+            )
+            out.append({"hidden": effect, "size": size, "seed": seed, "right": right, **r})
+            if seed == seeds[0]:
+                keep[effect] = (d, m)
+    res["hidden"] = out
+    n_right = sum(o["right"] for o in out)
+    rep.heading("Hidden effects on the rig", 3)
+    rep.text(
+        f"The rig's truth is the baseline's own form (cubic K, viscous c; the seed-like coefficients, no c_nl) "
+        f"plus one hidden effect of realistic size, or none; {duration:g} s cross-well records at default sensor "
+        f"noise, seeds {', '.join(map(str, seeds))}. The workflow saw only the measured columns. Named right in "
+        f"**{n_right} of {len(out)}** records. Gap: restarted 2 s free runs over the held-out last 20 %, the median "
+        "window's rms error in % of rms(z)."
+    )
+    rep.table(
+        ["hidden", "seed", "hidden size", "named", "estimated size", "right", "gap before [%]", "gap after [%]"], rows
+    )
+    if n_right < len(out):
+        rep.warning("the workflow named the wrong effect on some records (table).")
+    return keep
+
+
+def maps_figure(rep: Report, d: Discrepancy, effect: str) -> None:
+    lb, la = d.locate_before_, d.locate_after_
+    fig, ax = plt.subplots(1, 2, figsize=(10, 3.8), sharex=True, sharey=True)
+    lim = np.percentile(np.abs(lb["r"]), 99)
+    for a, loc, title in ((ax[0], lb, "baseline"), (ax[1], la, f"with {', '.join(d.effects_) or 'none'}")):
+        sc = a.scatter(1e3 * loc["z"], loc["v"], c=loc["r"], s=2, cmap="coolwarm", vmin=-lim, vmax=lim)
+        a.set(title=f"weak residual: {title}", xlabel="z [mm]")
+    ax[0].set_ylabel("z' [m/s]")
+    fig.colorbar(sc, ax=ax, label="residual [m/s^2 s]")
+    rep.figure(
+        f"discrepancy_map_{effect}",
+        fig,
+        f"Where the baseline and the data disagree (hidden {effect}): the equation error of each test function at "
+        "its state, before and after the named effect is added.",
+    )
+
+
+def psd_figure(rep: Report, d: Discrepancy, m, effect: str) -> None:
+    f, pb = residual_psd(m, d.baseline_model_, d.n_id)
+    _, pa = residual_psd(m, d.model_, d.n_id)
+    fig, ax = plt.subplots(figsize=(6, 3.4))
+    ax.semilogy(f, pb, "r-", label="baseline")
+    ax.semilogy(f, pa, "k-", label=f"with {', '.join(d.effects_)}")
+    ax.set(xlabel="f [Hz]", ylabel="PSD [m^2/Hz]", xlim=(0, 80), title="restarted free-run residual, held-out tail")
+    ax.legend(fontsize=8)
+    rep.figure(f"discrepancy_psd_{effect}", fig, f"Residual PSD before and after (hidden {effect}).")
+
+
+def device_part(rep: Report, res: dict[str, Any], duration: float, seed: int) -> None:
+    rec = Rig(AS_BUILT, seed=seed).random(duration=duration)
+    m = as_measurement(rec)
+    d = Discrepancy().fit(m)
+    r = d.result()
+    res["as_built"] = r
+    rep.heading("The device's own model-form gap (exact geometry against a cubic)", 3)
+    rep.text(
+        f"A {duration:g} s record of the as-built device (exact geometric K(z), c = {AS_BUILT.c:g}, c_nl = "
+        f"{AS_BUILT.c_nl:g}). Where: {r['where']}. Named in turn: **{', '.join(r['effects'])}**; held-out gap "
+        f"{fmt(r['gap_before_percent'], 3)} % -> {fmt(r['gap_after_percent'], 3)} %. The exact restoring force is "
+        "not a cubic: higher-order stiffness (or, on some records, a one-sided stiffening that fits as an end stop) "
+        "is the right answer, and the device's genuine quadratic damping (c_nl, left out of the baseline) comes next."
+    )
+    rep.table(
+        ["iteration", "named", "best three (held-out weak residual %)", "gain over none [%]"],
+        [
+            [
+                i + 1,
+                it["named"],
+                ", ".join(f"{x['effect']} {fmt(x['score'], 3)}" for x in it["ranking"][:3]),
+                it["gain_percent"],
+            ]
+            for i, it in enumerate(r["iterations"])
+        ],
+    )
+
+
+def silverbox_part(rep: Report, res: dict[str, Any]) -> None:
+    rep.heading("Real data: the Silverbox from a linear start", 3)
+    path = find_silverbox()
+    if path is None:
+        rep.warning("Silverbox data not found (set NEGSTIFF_SILVERBOX); section skipped.")
+        res["silverbox"] = None
+        return
+    m = load(path, columns="force=V1,z=V2", fs=610.35)
+    d = Discrepancy(baseline=LINEAR_BASELINE).fit(m.segment(40650, 105712))
+    test = m.segment(105712, 127400)
+    zs, v, _, _ = state_derivatives(test.z, test.fs, purpose="state")
+    k0 = 49
+
+    def rms_mv(model):
+        z = simulate(model, test.u[k0:], test.dt, z0=zs[k0], v0=v[k0], input_kind="force").z[0]
+        return float(1e3 * np.sqrt(np.mean((z[1:] - test.z[k0 + 1 :]) ** 2)))
+
+    before, after = rms_mv(d.baseline_model_), rms_mv(d.model_)
+    r = d.result()
+    r.update(test_rms_mv_before=before, test_rms_mv_after=after)
+    res["silverbox"] = r
+    rep.text(
+        f"Baseline: a linear oscillator (1, z, z'). The catalogue now also holds quadratic and cubic stiffness. "
+        f"Named in turn: **{', '.join(r['effects'])}**. Free-run RMS error on the multisine test segment: "
+        f"**{fmt(before, 3)} mV -> {fmt(after, 3)} mV** (published: polynomial NARX 7.7 mV, SUBNET 0.36 mV)."
+    )
+
+
+def discrepancy_section(rep: Report, results: dict[str, Any], fast: bool, seed_: int = 0) -> None:
+    res: dict[str, Any] = {}
+    results["discrepancy"] = res
+    rep.heading("Discrepancy workflow: find, name, add, refit")
+    rep.text(
+        "Locate: the baseline's weak-form equation error over the state and by regime. Name: each catalogue effect "
+        "added in turn, refitted and scored by its held-out weak residual; named only if it beats `none` by more "
+        "than one standard error and 10 %; among near-equal effects the one with fewer parameters. Add and refit, "
+        "repeat until `none` wins. The gap is measured by free runs restarted every 2 s from measured states: a long "
+        "free run of cross-well motion diverges even for the true model."
+    )
+    seeds = (seed_ + 1,) if fast else (seed_ + 1, seed_ + 2)
+    keep = hidden_part(rep, res, 120.0 if fast else 150.0, seeds)
+    for effect in ("coulomb_friction", "end_stop"):
+        if effect in keep:
+            d, m = keep[effect]
+            maps_figure(rep, d, effect)
+            psd_figure(rep, d, m, effect)
+    device_part(rep, res, 120.0, seed_ + 5)
+    silverbox_part(rep, res)
+
+
+def main(argv=None) -> int:
+    return run_study(discrepancy_section, "negstiff: the discrepancy workflow", "reports/discrepancy", __doc__, argv)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
