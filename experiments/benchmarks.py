@@ -332,6 +332,97 @@ def bifurcation_benchmark(quick: bool = False) -> tuple[list[list[str]], dict]:
     return rows, res
 
 
+def posterior_benchmark(quick: bool = False) -> tuple[list[list[str]], dict]:
+    """Effective samples per second: emcee with the batched (vectorised) likelihood against the same
+    sampler calling the same likelihood walker by walker (emcee's default, vectorize=False). With the
+    same seed both give the same chain (checked), so the ESS is the same and the ratio is the time's."""
+    import emcee
+
+    from negstiff.inference.measurement import from_arrays
+    from negstiff.inference.posterior import LogPosterior, Posterior, Windows
+    from negstiff.models import SEED_LIKE_CROSS_WELL_RMS, SEED_LIKE_CUBIC
+    from negstiff.models.rig import Rig
+
+    duration, steps = (5.0, 60) if quick else (10.0, 300)
+    r = Rig(SEED_LIKE_CUBIC, seed=3).random(duration=duration, rms=SEED_LIKE_CROSS_WELL_RMS)
+    rec = from_arrays(r.columns["base_acc"], r.columns["z"], r.fs, mass=float(r.meta["mass"]), source="bench")
+    post = Posterior(n_ensembles=1, max_steps=steps, min_steps=steps, chunk=steps, seed=0)
+    res = post.fit(rec)  # builds the whitened log posterior (MAP, Laplace) and runs the batched sampler once
+    lp: LogPosterior = post.logpost_
+    nd, nw = lp.q0.size, post.n_walkers
+    p0 = np.random.RandomState(0).standard_normal((nw, nd))
+    moves = [(emcee.moves.DEMove(), 0.8), (emcee.moves.DESnookerMove(), 0.2)]
+
+    def run(vectorize: bool):
+        fn = lp if vectorize else (lambda y: lp(np.atleast_2d(y))[0])
+        s = emcee.EnsembleSampler(nw, nd, fn, vectorize=vectorize, moves=moves)
+        s.random_state = np.random.RandomState(1).get_state()
+        t0 = time.perf_counter()
+        s.run_mcmc(p0, steps, progress=False)
+        return time.perf_counter() - t0, s
+
+    t_batch, sb = run(True)
+    t_loop, sl = run(False)
+    same = bool(np.allclose(sb.get_chain(), sl.get_chain()))
+
+    # the plainest baseline: one simulator call per walker and per window (no batch at all)
+    win = lp.win
+    orig = win.simulate
+
+    def one_by_one(params, kind, x0=None):
+        zs, div = [], []
+        for p in range(params.shape[1]):
+            for w in range(win.n_windows):
+                res_ = simulate_batch(
+                    params[:, p],
+                    kind,
+                    win.u[w],
+                    win.dt,
+                    (win.x0 if x0 is None else x0)[w],
+                    input_kind=win.input_kind,
+                    substeps=win.substeps,
+                    threads=1,
+                )
+                zs.append(res_.z[0])
+                div.append(res_.diverged[0])
+        P = params.shape[1]
+        return np.array(zs).reshape(P, win.n_windows, -1), np.array(div).reshape(P, -1).any(axis=1)
+
+    win.simulate = one_by_one
+    try:
+        t_plain, sp = run(False)
+    finally:
+        win.simulate = orig
+    same = same and bool(np.allclose(sb.get_chain(), sp.get_chain()))
+    tau = float(np.max(sb.get_autocorr_time(tol=0, quiet=True)))
+    ess = nw * steps / max(tau, 1.0)
+    _ = Windows, res
+    rows = [
+        [
+            f"{duration:g} s record, {nw} walkers, {steps} steps",
+            "a simulator call per walker and per window",
+            f"{t_plain:.2f} s",
+            f"{ess / t_plain:.1f}",
+            f"{t_plain / t_loop:.2f}x",
+        ],
+        [
+            "",
+            "per-walker loop (vectorize=False; the walker's windows batched)",
+            f"{t_loop:.2f} s",
+            f"{ess / t_loop:.1f}",
+            "1.0x",
+        ],
+        [
+            "",
+            "batched: all walkers x windows in one simulator call",
+            f"{t_batch:.2f} s",
+            f"{ess / t_batch:.1f}",
+            f"{t_loop / t_batch:.1f}x",
+        ],
+    ]
+    return rows, {"t_plain": t_plain, "t_loop": t_loop, "t_batch": t_batch, "tau": tau, "ess": ess, "same_chain": same}
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("-o", "--out", default="reports/benchmarks.md")
@@ -399,6 +490,36 @@ def main(argv=None) -> int:
         "|---|---|---|---|",
     ]
     lines += ["| " + " | ".join(r) + " |" for r in brows]
+    print("posterior benchmark...", file=sys.stderr)
+    prows, pres = posterior_benchmark(a.quick)
+    lines += [
+        "",
+        "## Posterior sampling (issue 7)",
+        "",
+        "Effective samples per second of emcee (DE moves, whitened coordinates) on the coefficient posterior: "
+        "the batched likelihood (every walker and every multiple-shooting window in one simulator call) against "
+        "the same likelihood called walker by walker. Same seed, same chain "
+        f"({'verified' if pres['same_chain'] else 'NOT identical'}), so the ESS ({pres['ess']:.0f} from "
+        f"tau = {pres['tau']:.1f} steps) is shared and the ratio is the time's. Target: at least 10x.",
+        "",
+        "| case | method | wall time | ESS per second | vs the per-walker loop |",
+        "|---|---|---|---|---|",
+    ]
+    lines += ["| " + " | ".join(r) + " |" for r in prows]
+    ratio = pres["t_loop"] / pres["t_batch"]
+    lines += [
+        "",
+        f"Against the per-walker loop the batched likelihood is {ratio:.1f}x faster: "
+        + ("the 10x target is met." if ratio >= 10 else "**the 10x target is not met.** ")
+        + (
+            ""
+            if ratio >= 10
+            else "A walker's own multiple-shooting windows already make a batch of "
+            "dozens of trajectories, which fills the SIMD lanes; batching the walkers as well adds the second core "
+            "and saves the Python per call, no more. Against one simulator call per trajectory (walker x window) "
+            f"the batch is {pres['t_plain'] / pres['t_batch']:.1f}x faster."
+        ),
+    ]
     write_text(a.out, "\n".join(lines) + "\n")
     print("\n".join(lines))
     return 0

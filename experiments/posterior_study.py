@@ -45,7 +45,7 @@ def coefficient_part(rep: Report, res: dict[str, Any], duration: float, seed_: i
     rec = Rig(truth, seed=seed_).random(duration=duration, rms=SEED_LIKE_CROSS_WELL_RMS)
     m = as_measurement(rec)
     t0 = time.perf_counter()
-    post = Posterior(seed=seed_, max_steps=3000 if fast else 6000)
+    post = Posterior(seed=seed_, max_steps=1500 if fast else 6000)
     pr = post.fit(m)
     elapsed = time.perf_counter() - t0
     j = result_json(pr, 0.9)
@@ -185,7 +185,7 @@ def device_part(rep: Report, res: dict[str, Any], duration: float, seed_: int, f
     out = {}
     for prior in ("free", "weighed"):
         t0 = time.perf_counter()
-        pr = Posterior(model="device", mass_prior=prior, seed=seed_, max_steps=3000 if fast else 6000).fit(m)
+        pr = Posterior(model="device", mass_prior=prior, seed=seed_, max_steps=1000 if fast else 6000).fit(m)
         j = result_json(pr, 0.9)
         j["elapsed_s"] = time.perf_counter() - t0
         out[prior] = j
@@ -232,8 +232,8 @@ def posterior_section(rep: Report, results: dict[str, Any], fast: bool, seed_: i
     res: dict[str, Any] = {}
     results["posterior"] = res
     rep.heading("Bayesian posteriors (emcee)")
-    coefficient_part(rep, res, 20.0 if fast else 60.0, seed_ + 21, fast)
-    device_part(rep, res, 6.0 if fast else 15.0, seed_ + 22, fast)
+    coefficient_part(rep, res, 8.0 if fast else 60.0, seed_ + 21, fast)
+    device_part(rep, res, 4.0 if fast else 15.0, seed_ + 22, fast)
 
 
 def main(argv=None) -> int:

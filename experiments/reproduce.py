@@ -23,15 +23,78 @@ from negstiff.models.simulator import reference_solution
 
 from .calibration import device_section
 from .characterization import characterization_section
+from .discrepancy_study import discrepancy_section
 from .nsi_study import nsi_section
+from .posterior_study import posterior_section
 from .report import Report, fmt
 from .sindy_study import sindy_section
 from .updating_study import updating_section
 
-PENDING = [
-    ("Bayesian posteriors with emcee", 7),
-    ("Discrepancy workflow", 8),
-]
+CACHE_ENV = "NEGSTIFF_CACHE"
+"""Environment variable naming the section cache folder (default ~/.cache/negstiff; "off" disables it)."""
+
+
+def _cache_dir() -> Path | None:
+    import os
+
+    v = os.environ.get(CACHE_ENV)
+    if v and v.lower() == "off":
+        return None
+    return Path(v) if v else Path.home() / ".cache" / "negstiff"
+
+
+def _source_hash() -> str:
+    """Hash of the package's source (models, inference, experiments): a code change invalidates the cache."""
+    import hashlib
+
+    here = Path(__file__).resolve().parent
+    h = hashlib.sha256()
+    for folder in (here, here.parent / "models", here.parent / "inference"):
+        for f in sorted(folder.glob("*.py")):
+            h.update(f.name.encode())
+            h.update(f.read_bytes())
+    return h.hexdigest()[:16]
+
+
+def cached_section(name: str, fn, rep: Report, results: dict[str, Any], fast: bool, seed: int, say) -> None:
+    """Run one report section, or replay it from the cache when its inputs (the section, --fast, the
+    seed and the package's source) are unchanged. A section's blocks, figures and results are stored
+    together (pickle, written atomically)."""
+    import hashlib
+    import pickle
+
+    cdir = _cache_dir()
+    key = hashlib.sha256(f"{name}|{fast}|{seed}|{__version__}|{_source_hash()}".encode()).hexdigest()[:24]
+    path = None if cdir is None else cdir / f"{name}-{key}.pkl"
+    if path is not None and path.is_file():
+        try:
+            blocks, figures, res = pickle.loads(path.read_bytes())
+            rep.blocks += blocks
+            rep.figures.update(figures)
+            results.update(res)
+            say(f"{name}: from the cache ({path})")
+            return
+        except Exception:  # noqa: BLE001 - a stale or broken cache entry is recomputed
+            pass
+    sub = Report(rep.title)
+    res: dict[str, Any] = {}
+    t0 = time.perf_counter()
+    fn(sub, res, fast, seed)
+    for v in res.values():
+        if isinstance(v, dict):
+            v.setdefault("section_elapsed_s", time.perf_counter() - t0)
+    rep.blocks += sub.blocks
+    rep.figures.update(sub.figures)
+    results.update(res)
+    if path is not None:
+        from negstiff.files import atomic_path
+
+        try:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            with atomic_path(path) as tmp:
+                tmp.write_bytes(pickle.dumps((sub.blocks, sub.figures, res)))
+        except OSError as exc:
+            say(f"{name}: could not write the cache ({exc})")
 
 
 def simulator_accuracy(duration: float = 10.0, fs: float = 512.0, amplitude: float = 3.0) -> dict[str, Any]:
@@ -147,18 +210,16 @@ def reproduce(out: Path, fast: bool = False, seed: int = 0, progress: bool = Tru
     rig_section(rep, results, fast, seed)
     say("simulator accuracy")
     simulator_section(rep, results)
-    say("NSI around both wells")
-    nsi_section(rep, results, fast, seed)
-    say("GA model updating")
-    updating_section(rep, results, fast, seed)
-    say("dynamics characterisation")
-    characterization_section(rep, results, fast, seed)
-    say("SINDy equation discovery")
-    sindy_section(rep, results, fast, seed)
-    rep.heading("Not yet in this report")
-    rep.text("These sections of the study are not implemented yet; each is tracked as an issue:")
-    rep.table(["section", "issue"], [[s, f"#{i}"] for s, i in PENDING])
-    results["pending_sections"] = [s for s, _ in PENDING]
+    for name, title, fn in (
+        ("nsi", "NSI around both wells", nsi_section),
+        ("updating", "GA model updating", updating_section),
+        ("characterization", "dynamics characterisation", characterization_section),
+        ("sindy", "SINDy equation discovery", sindy_section),
+        ("posterior", "Bayesian posteriors (emcee)", posterior_section),
+        ("discrepancy", "discrepancy workflow", discrepancy_section),
+    ):
+        say(title)
+        cached_section(name, fn, rep, results, fast, seed, say)
     elapsed = time.perf_counter() - t_start
     results["elapsed_s"] = elapsed
     rep.text(f"Run time: {elapsed:.1f} s ({'fast' if fast else 'full'} run, seed {seed}).")
