@@ -247,6 +247,7 @@ def cmd_posterior(args) -> int:
         model=args.model,
         mass_prior=args.mass_prior,
         window_s=args.window,
+        max_windows=args.max_windows,
         n_walkers=args.walkers,
         n_ensembles=args.ensembles,
         max_steps=args.max_steps,
@@ -484,6 +485,9 @@ def build_parser() -> argparse.ArgumentParser:
     pst.add_argument("--idata", help="save the arviz data (posterior, sample stats, log likelihood) as NetCDF")
     pst.add_argument("--duration", type=float, help="use only the first DURATION seconds of the record")
     pst.add_argument("--window", type=float, default=0.25, help="multiple-shooting window [s] (default 0.25)")
+    pst.add_argument(
+        "--max-windows", type=int, default=240, help="windows used at most, spread over the record (default 240)"
+    )
     pst.add_argument("--walkers", type=int, default=32, help="walkers per ensemble (default 32)")
     pst.add_argument("--ensembles", type=int, default=4, help="independent ensembles (default 4)")
     pst.add_argument("--max-steps", type=int, default=6000, help="step cap per ensemble (default 6000)")
