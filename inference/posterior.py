@@ -543,7 +543,9 @@ class Posterior:
             "observed_data": {"z": self.windows_.z},
             "constant_data": {"window_start_state": self.windows_.x0, "u": self.windows_.u},
         }
-        return az.from_dict(data)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # "more chains than draws": the walkers of all ensembles
+            return az.from_dict(data)
 
 
 def sample_ensembles(

@@ -128,7 +128,8 @@ def test_bad_input_exits_2_with_one_line_and_no_output(workdir, capsys, case):
     assert not out.exists()
 
 
-def test_reproduce_fast_writes_a_complete_report(tmp_path):
+def test_reproduce_fast_writes_a_complete_report(tmp_path, monkeypatch):
+    monkeypatch.setenv("NEGSTIFF_CACHE", str(tmp_path / "cache"))
     out = tmp_path / "paper"
     assert main(["reproduce", "--fast", "-o", str(out), "--quiet"]) == 0
     for f in ("index.md", "index.html", "results.json"):
@@ -144,3 +145,12 @@ def test_reproduce_fast_writes_a_complete_report(tmp_path):
     assert md.count("data:image/png") == 0 and (out / "index.html").read_text().count("data:image/png") == len(figs)
     results = json.loads((out / "results.json").read_text())
     assert results["simulator"]["max_abs_dz_m"] < 1e-7
+    for section in ("device", "nsi", "updating", "characterization", "sindy", "posterior", "discrepancy"):
+        assert section in results, f"the report lacks its {section} section"
+    assert "pending_sections" not in results
+    # a second run replays every expensive section from the cache, with the same numbers
+    out2 = tmp_path / "paper2"
+    assert main(["reproduce", "--fast", "-o", str(out2), "--quiet"]) == 0
+    again = json.loads((out2 / "results.json").read_text())
+    for section in ("posterior", "sindy", "discrepancy"):
+        assert json.dumps(again[section]) == json.dumps(results[section]), section
