@@ -184,15 +184,14 @@ def discrepancy_section(rep: Report, results: dict[str, Any], fast: bool, seed_:
         "free run of cross-well motion diverges even for the true model."
     )
     seeds = (seed_ + 1,) if fast else (seed_ + 1, seed_ + 2)
-    keep = hidden_part(
-        rep, res, 120.0 if fast else 150.0, seeds, ("none", "coulomb_friction", "end_stop") if fast else None
-    )
+    keep = hidden_part(rep, res, 120.0 if fast else 150.0, seeds, ("none", "coulomb_friction") if fast else None)
     for effect in ("coulomb_friction", "end_stop"):
         if effect in keep:
             d, m = keep[effect]
             maps_figure(rep, d, effect)
             psd_figure(rep, d, m, effect)
-    device_part(rep, res, 60.0 if fast else 120.0, seed_ + 5)
+    if not fast:
+        device_part(rep, res, 120.0, seed_ + 5)
     silverbox_part(rep, res)
 
 

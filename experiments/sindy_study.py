@@ -281,8 +281,8 @@ def sindy_section(rep: Report, results: dict[str, Any], fast: bool, seed_: int =
     duration = 120.0 if fast else 300.0
     rep.heading("SINDy: equation discovery from the records")
     polynomial_part(rep, res, duration, seed_ + 1)
-    friction_part(rep, res, duration, seed_ + 4)
     if not fast:
+        friction_part(rep, res, duration, seed_ + 4)
         as_built_part(rep, res, duration, seed_ + 2)
     silverbox_part(rep, res)
 

@@ -33,7 +33,7 @@ def _errors(d, truth=AS_BUILT) -> dict[str, float]:
 def updating_section(rep: Report, results: dict[str, Any], fast: bool, seed_: int = 0) -> None:
     res: dict[str, Any] = {}
     results["updating"] = res
-    gens = 50 if fast else 120
+    gens = 25 if fast else 120
     rep.heading("5. Model updating with a genetic algorithm (seed section 4.1)")
     rep.text(
         f"pymoo's GA (population 60, {gens} generations, SBX crossover and polynomial mutation as in Deb's book, "

@@ -28,7 +28,7 @@ STATED = {
 
 @pytest.fixture(scope="module")
 def record():
-    r = Rig(SEED_LIKE_CUBIC, seed=31).random(duration=300, rms=SEED_LIKE_CROSS_WELL_RMS)
+    r = Rig(SEED_LIKE_CUBIC, seed=31).random(duration=150, rms=SEED_LIKE_CROSS_WELL_RMS)
     return from_arrays(r.columns["base_acc"], r.columns["z"], r.fs, mass=float(r.meta["mass"]), source="rig")
 
 
