@@ -13,13 +13,12 @@ from typing import Any
 import matplotlib.pyplot as plt
 import numpy as np
 
-from negstiff.inference.derivatives import state_derivatives
 from negstiff.inference.discrepancy import LINEAR_BASELINE, Discrepancy, residual_psd
 from negstiff.inference.measurement import load
-from negstiff.models import AS_BUILT, SEED_LIKE_CROSS_WELL_RMS, SEED_LIKE_CUBIC, simulate
+from negstiff.models import AS_BUILT, SEED_LIKE_CROSS_WELL_RMS, SEED_LIKE_CUBIC
 from negstiff.models.rig import Rig
 
-from .nsi_study import as_measurement, find_silverbox
+from .nsi_study import SILVERBOX_TRAIN, as_measurement, find_silverbox, silverbox_test_error_mv
 from .report import Report, fmt, run_study
 
 BASE = dataclasses.replace(SEED_LIKE_CUBIC, c_nl=0.0)
@@ -152,16 +151,8 @@ def silverbox_part(rep: Report, res: dict[str, Any]) -> None:
         res["silverbox"] = None
         return
     m = load(path, columns="force=V1,z=V2", fs=610.35)
-    d = Discrepancy(baseline=LINEAR_BASELINE).fit(m.segment(40650, 105712))
-    test = m.segment(105712, 127400)
-    zs, v, _, _ = state_derivatives(test.z, test.fs, purpose="state")
-    k0 = 49
-
-    def rms_mv(model):
-        z = simulate(model, test.u[k0:], test.dt, z0=zs[k0], v0=v[k0], input_kind="force").z[0]
-        return float(1e3 * np.sqrt(np.mean((z[1:] - test.z[k0 + 1 :]) ** 2)))
-
-    before, after = rms_mv(d.baseline_model_), rms_mv(d.model_)
+    d = Discrepancy(baseline=LINEAR_BASELINE).fit(m.segment(*SILVERBOX_TRAIN))
+    before, after = silverbox_test_error_mv(d.baseline_model_, m), silverbox_test_error_mv(d.model_, m)
     r = d.result()
     r.update(test_rms_mv_before=before, test_rms_mv_after=after)
     res["silverbox"] = r

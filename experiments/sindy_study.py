@@ -15,14 +15,21 @@ import matplotlib.pyplot as plt
 import numpy as np
 from scipy import signal
 
-from negstiff.inference.derivatives import state_derivatives
 from negstiff.inference.measurement import load
 from negstiff.inference.nsi import NSI
 from negstiff.inference.sindy import TERM_FIELDS, TERMS, SINDy
-from negstiff.models import AS_BUILT, SEED_LIKE_CROSS_WELL_RMS, SEED_LIKE_CUBIC, Model, simulate
+from negstiff.models import AS_BUILT, SEED_LIKE_CROSS_WELL_RMS, SEED_LIKE_CUBIC, Model
 from negstiff.models.rig import Rig
 
-from .nsi_study import SILVERBOX_PUBLISHED_MV, as_measurement, find_silverbox, pct, true_floor
+from .nsi_study import (
+    SILVERBOX_PUBLISHED_MV,
+    SILVERBOX_TRAIN,
+    as_measurement,
+    find_silverbox,
+    pct,
+    silverbox_test_error_mv,
+    true_floor,
+)
 from .report import Report, fmt, run_study
 
 HIDDEN_FRICTION_N = 0.1
@@ -250,12 +257,8 @@ def silverbox_part(rep: Report, res: dict[str, Any]) -> None:
         res["silverbox"] = None
         return
     m = load(path, columns="force=V1,z=V2", fs=610.35)
-    est = SINDy().fit(m.segment(40650, 105712))
-    test = m.segment(105712, 127400)
-    zs, v, _, _ = state_derivatives(test.z, test.fs, purpose="state")
-    k0 = 49
-    z = simulate(est.model_, test.u[k0:], test.dt, z0=zs[k0], v0=v[k0], input_kind="force").z[0]
-    rms_mv = float(1e3 * np.sqrt(np.mean((z[1:] - test.z[k0 + 1 :]) ** 2)))
+    est = SINDy().fit(m.segment(*SILVERBOX_TRAIN))
+    rms_mv = silverbox_test_error_mv(est.model_, m)
     r = est.result()
     r.update(test_rms_mv=rms_mv, published_mv=SILVERBOX_PUBLISHED_MV)
     res["silverbox"] = r
