@@ -48,7 +48,7 @@ def coefficient_part(rep: Report, res: dict[str, Any], duration: float, seed_: i
     m_all = as_measurement(rec)
     m = m_all.segment(0, int(round(duration * m_all.fs)))
     t0 = time.perf_counter()
-    post = Posterior(seed=seed_, max_steps=600 if fast else 6000, n_ensembles=2 if fast else 4)
+    post = Posterior(seed=seed_, max_steps=600 if fast else 6000, n_ensembles=2 if fast else 4, max_windows=None)
     pr = post.fit(m)
     elapsed = time.perf_counter() - t0
     j = result_json(pr, 0.9)

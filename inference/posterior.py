@@ -325,7 +325,7 @@ class Posterior:
         c_nl, sigma with the exact geometric K(z))
     mass_prior : device model only: ``"free"`` or ``"weighed"`` (N(m_weighed, 2 %))
     window_s : multiple-shooting window length [s]
-    max_windows : at most this many windows, evenly spread over the record (240 x 0.25 s = 60 s of
+    max_windows : at most this many windows, evenly spread over the record (120 x 0.25 s = 30 s of
         data: a 300 s record's posterior would take five times as long and be no less biased by the
         model's floor; None: every window)
     n_walkers, n_ensembles : walkers per ensemble, independent ensembles
@@ -340,7 +340,7 @@ class Posterior:
         model: str = "coefficients",
         mass_prior: str = "weighed",
         window_s: float = 0.25,
-        max_windows: int | None = 240,
+        max_windows: int | None = 120,
         n_walkers: int = 16,
         n_ensembles: int = 4,
         tau_multiple: float = 50.0,
