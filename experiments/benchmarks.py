@@ -339,7 +339,7 @@ def posterior_benchmark(quick: bool = False) -> tuple[list[list[str]], dict]:
     import emcee
 
     from negstiff.inference.measurement import from_arrays
-    from negstiff.inference.posterior import LogPosterior, Posterior, Windows
+    from negstiff.inference.posterior import LogPosterior, Posterior
     from negstiff.models import SEED_LIKE_CROSS_WELL_RMS, SEED_LIKE_CUBIC
     from negstiff.models.rig import Rig
 
@@ -347,7 +347,7 @@ def posterior_benchmark(quick: bool = False) -> tuple[list[list[str]], dict]:
     r = Rig(SEED_LIKE_CUBIC, seed=3).random(duration=duration, rms=SEED_LIKE_CROSS_WELL_RMS)
     rec = from_arrays(r.columns["base_acc"], r.columns["z"], r.fs, mass=float(r.meta["mass"]), source="bench")
     post = Posterior(n_ensembles=1, max_steps=steps, min_steps=steps, chunk=steps, seed=0)
-    res = post.fit(rec)  # builds the whitened log posterior (MAP, Laplace) and runs the batched sampler once
+    post.fit(rec)  # builds the whitened log posterior (MAP, Laplace) and runs the batched sampler once
     lp: LogPosterior = post.logpost_
     nd, nw = lp.q0.size, post.n_walkers
     p0 = np.random.RandomState(0).standard_normal((nw, nd))
@@ -396,7 +396,6 @@ def posterior_benchmark(quick: bool = False) -> tuple[list[list[str]], dict]:
     same = same and bool(np.allclose(sb.get_chain(), sp.get_chain()))
     tau = float(np.max(sb.get_autocorr_time(tol=0, quiet=True)))
     ess = nw * steps / max(tau, 1.0)
-    _ = Windows, res
     rows = [
         [
             f"{duration:g} s record, {nw} walkers, {steps} steps",

@@ -37,7 +37,7 @@ from negstiff.models import Model
 from .derivatives import state_derivatives
 from .measurement import Measurement, MeasurementError
 from .nsi import restarted_free_runs
-from .sindy import TERMS, SINDy, _Noise, test_function_half_width
+from .sindy import TERMS, SINDy, test_function
 
 CUBIC_BASELINE = ("1", "z", "z^2", "z^3", "v")
 LINEAR_BASELINE = ("1", "z", "v")
@@ -107,17 +107,17 @@ class Discrepancy:
         n_id = int(round(rec.n * (1 - self.validation_fraction)))
         n_fit = int(round(rec.n * (1 - self.validation_fraction - self.selection_fraction)))
         ident = rec.segment(0, n_id)
-        zs, v, _, deriv = state_derivatives(ident.z, rec.fs)
-        _Noise.velocity = deriv["velocity_noise_std"] if np.isfinite(deriv["velocity_noise_std"]) else 0.0
-        est.half_, _ = test_function_half_width(ident.z, rec.fs)
+        zs, v, _, _ = est.prepare(ident.z, rec.fs)
         self._est, self._zs, self._v = est, zs, v
+        # the measured states the gap's free runs start from, whole record (before and after share them)
+        self._z0, self._v0, _, _ = state_derivatives(rec.z, rec.fs, purpose="state")
         self._gain = est._gain(rec)
         self.n_id, self.n_fit = n_id, n_fit
         return est
 
     def _design(self, rec: Measurement, lo: int, hi: int, stop: float | None):
         """Weak system over samples [lo, hi): the library's columns (and an end-stop column)."""
-        from .sindy import test_function, weak_project
+        from .sindy import weak_project
 
         est = self._est
         seg = rec.segment(lo, hi)
@@ -205,16 +205,13 @@ class Discrepancy:
     # --- locate ------------------------------------------------------------------------------------
     def locate(self, rec: Measurement, model_terms: tuple[str, ...], stop: float | None) -> dict[str, Any]:
         """Where the current model's weak residual lives: by regime and over the state plane."""
-        from .sindy import test_function
-
         W, y = self._design(rec, 0, self.n_id, stop)
         coef = self._fit(W, y, model_terms, stop is not None)
         r = y - W @ coef
         est = self._est
         stride = max(1, est.half_ // 2)
-        centres = np.arange(r.size) * stride + est.half_ * (1 + 3)  # the padded kernel's centre
-        centres = np.clip(centres, 0, self.n_id - 1)
-        _ = test_function
+        centre = test_function(est.half_, rec.dt)[0].size // 2  # row k's test function is centred there
+        centres = np.clip(np.arange(r.size) * stride + centre, 0, self.n_id - 1)
         z, v = self._zs[centres], self._v[centres]
         model = self._model(coef, rec, stop)
         try:
@@ -333,8 +330,7 @@ class Discrepancy:
 
     def _gap(self, rec: Measurement, model: Model) -> dict[str, Any]:
         """Restarted free runs over the held-out tail (and their residual PSD)."""
-        zs, v, _, _ = state_derivatives(rec.z, rec.fs, purpose="state")
-        fr = restarted_free_runs(model, rec, self.n_id, self.window_s, zs, v)
+        fr = restarted_free_runs(model, rec, self.n_id, self.window_s, self._z0, self._v0)
         out = {k: v for k, v in fr.items() if not isinstance(v, np.ndarray)}
         ms = fr.get("window_ms")
         if ms is not None:

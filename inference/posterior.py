@@ -277,9 +277,11 @@ class LogPosterior:
     def physical(self, y: np.ndarray) -> np.ndarray:
         return self.q0 + np.atleast_2d(y) @ self.scale.T
 
-    def loglik(self, q: np.ndarray, pointwise: bool = False) -> np.ndarray:
+    def loglik(self, q: np.ndarray, pointwise: bool = False, lp: np.ndarray | None = None) -> np.ndarray:
+        """Log likelihood (-inf outside the prior's support); ``lp``: the log prior, if already known."""
         theta, log_sigma = q[:, :-1], q[:, -1]
-        lp = self.par.log_prior(theta, log_sigma)
+        if lp is None:
+            lp = self.par.log_prior(theta, log_sigma)
         out = np.full((q.shape[0], self.win.n_windows) if pointwise else q.shape[0], -np.inf)
         ok = np.isfinite(lp)
         if ok.any():
@@ -296,8 +298,8 @@ class LogPosterior:
     def __call__(self, y: np.ndarray):
         self.calls += 1
         q = self.physical(y)
-        ll = self.loglik(q)
         lp = self.par.log_prior(q[:, :-1], q[:, -1])
+        ll = self.loglik(q, lp=lp)
         post = np.where(np.isfinite(ll), ll + lp, -np.inf)
         return list(zip(post, ll))
 

@@ -290,6 +290,15 @@ class SINDy:
             return 1.0 / phys[-1], "estimated from the input coefficient"
         return 1.0, "none (per unit mass)"
 
+    def prepare(self, z: np.ndarray, fs: float) -> tuple[np.ndarray, np.ndarray, dict, float]:
+        """What every weak-form fit of a record needs first: the smoothed z and z' for the library
+        (``derivatives.state_derivatives``), the velocity noise the library's sgn() uses, and the test
+        function's half-width (set on ``self.half_``). Returns (zs, v, derivative info, corner freq)."""
+        zs, v, _, deriv = state_derivatives(z, fs)
+        _Noise.velocity = deriv["velocity_noise_std"] if np.isfinite(deriv["velocity_noise_std"]) else 0.0
+        self.half_, f_c = test_function_half_width(z, fs)
+        return zs, v, deriv, f_c
+
     # --- the workflow ----------------------------------------------------------------------------
     def fit(self, rec: Measurement) -> "SINDy":
         rec.require(MIN_SAMPLES, "SINDy")
@@ -298,10 +307,8 @@ class SINDy:
         n_id = int(round(rec.n * (1 - self.validation_fraction)))
         n_fit = int(round(rec.n * (1 - self.validation_fraction - self.selection_fraction)))
         ident = rec.segment(0, n_id)
-        zs, v, _, deriv = state_derivatives(ident.z, rec.fs)
+        zs, v, deriv, f_c = self.prepare(ident.z, rec.fs)
         z0s, v0s, _, _ = state_derivatives(ident.z, rec.fs, purpose="state")  # where free runs start
-        _Noise.velocity = deriv["velocity_noise_std"] if np.isfinite(deriv["velocity_noise_std"]) else 0.0
-        self.half_, f_c = test_function_half_width(ident.z, rec.fs)
         gain = self._gain(rec)
 
         # 1. the sparsity path on the fitting part; 2. each support refitted there and scored by
@@ -443,9 +450,7 @@ def weak_least_squares(rec: Measurement, terms, gain: float | None = None) -> Mo
     selection, no ensemble): the deterministic start point of the posterior and the discrepancy
     workflow's refits. The input's coefficient is fixed as in ``SINDy`` (or learned without a mass)."""
     est = SINDy()
-    zs, v, _, deriv = state_derivatives(rec.z, rec.fs)
-    _Noise.velocity = deriv["velocity_noise_std"] if np.isfinite(deriv["velocity_noise_std"]) else 0.0
-    est.half_, _ = test_function_half_width(rec.z, rec.fs)
+    zs, v, _, _ = est.prepare(rec.z, rec.fs)
     g = est._gain(rec) if gain is None else gain
     unknown = set(terms) - set(TERMS)
     if unknown:
