@@ -68,7 +68,10 @@ def coefficient_part(rep: Report, res: dict[str, Any], duration: float, seed_: i
     rep.text(
         f"A {duration:g} s cross-well random record at the rig's default sensor noise, mass weighed "
         f"({fmt(m.mass, 4)} kg). Likelihood: {s['windows']} windows of {s['window_s']:g} s, each simulated from its "
-        f"measured (then profiled) start state, the input interpolated 4x (band-limited) for the simulation. "
+        f"measured (then profiled) start state ({len(s['windows_dropped'])} dropped: not matched from any nearby start "
+        f"state), the input pre-emphasised for the simulator's interpolation; curvature-adjusted by the windows' "
+        f"sandwich covariance (variance inflation {', '.join(fmt(v, 3) for v in s['variance_inflation'])} along the "
+        f"adjusted directions: the accelerometer's noise, in the model's input and in z, is not i.i.d.). "
         f"{s['ensembles']} independent ensembles of {s['walkers']} walkers, {s['kept_steps_per_ensemble']} kept steps "
         f"each (largest autocorrelation time {fmt(s['tau_max_steps'], 3)} steps), {s['likelihood_calls']} batched "
         f"likelihood calls, {elapsed:.0f} s."

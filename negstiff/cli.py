@@ -484,9 +484,9 @@ def build_parser() -> argparse.ArgumentParser:
     pst.add_argument("--mass-prior", choices=["weighed", "free"], default="weighed", help="device model: mass prior")
     pst.add_argument("--idata", help="save the arviz data (posterior, sample stats, log likelihood) as NetCDF")
     pst.add_argument("--duration", type=float, help="use only the first DURATION seconds of the record")
-    pst.add_argument("--window", type=float, default=0.25, help="multiple-shooting window [s] (default 0.25)")
+    pst.add_argument("--window", type=float, default=0.125, help="multiple-shooting window [s] (default 0.125)")
     pst.add_argument(
-        "--max-windows", type=int, default=120, help="windows used at most, spread over the record (default 120)"
+        "--max-windows", type=int, default=240, help="windows used at most, spread over the record (default 240)"
     )
     pst.add_argument("--walkers", type=int, default=32, help="walkers per ensemble (default 32)")
     pst.add_argument("--ensembles", type=int, default=4, help="independent ensembles (default 4)")
