@@ -27,17 +27,19 @@ from .report import Report, fmt, run_study
 COEFS = ("k1", "k2", "k3", "c", "c_nl")
 
 
-def _arviz_png(plot, *args, **kw) -> bytes | None:
-    """Render an arviz-plots figure to PNG bytes (None if the plot cannot be drawn)."""
+def _arviz_png(plot, *args, **kw) -> tuple[bytes | None, str]:
+    """Render an arviz-plots figure to PNG bytes: (png, "") or (None, why it could not be drawn)."""
     try:
         pc = plot(*args, backend="matplotlib", **kw)
+        viz = pc.viz
+        fig = viz["figure"] if "figure" in viz.data_vars else viz["chart"]  # arviz-plots >= 0.6 / before
         buf = io.BytesIO()
-        pc.viz["chart"].item().savefig(buf, format="png", dpi=90, bbox_inches="tight")
+        fig.item().savefig(buf, format="png", dpi=90, bbox_inches="tight")
         plt.close("all")
-        return buf.getvalue()
-    except Exception:  # noqa: BLE001 - a diagnostic figure must not sink the report
+        return buf.getvalue(), ""
+    except Exception as exc:  # noqa: BLE001 - a diagnostic figure must not sink the report, but is reported
         plt.close("all")
-        return None
+        return None, f"{plot.__name__} could not be drawn: {type(exc).__name__}: {exc}"
 
 
 def coefficient_part(rep: Report, res: dict[str, Any], duration: float, seed_: int, fast: bool) -> None:
@@ -109,14 +111,23 @@ def coefficient_part(rep: Report, res: dict[str, Any], duration: float, seed_: i
         f"{fmt(truth.k0, 5)} N (the rig's 0.02 m/s^2 accelerometer bias is -0.2 % of g)."
     )
     _forest(rep, j, truth, det)
-    png = _arviz_png(__import__("arviz").plot_trace_dist, pr.idata, var_names=list(COEFS))
-    if png:
-        rep.figures["posterior_trace.png"] = png
-        rep.blocks.append(("fig", ("posterior_trace.png", "Trace and marginal densities (arviz), all walkers.")))
-    png = _arviz_png(__import__("arviz").plot_pair, pr.idata, var_names=["k1", "k2", "k3", "c"])
-    if png:
-        rep.figures["posterior_pair.png"] = png
-        rep.blocks.append(("fig", ("posterior_pair.png", "Pair plot (arviz): the coefficients' correlations.")))
+    import arviz as az
+
+    for name, plot, names, caption in (
+        ("posterior_trace.png", az.plot_trace_dist, list(COEFS), "Trace and marginal densities (arviz), all walkers."),
+        (
+            "posterior_pair.png",
+            az.plot_pair,
+            ["k1", "k2", "k3", "c"],
+            "Pair plot (arviz): the coefficients' correlations.",
+        ),
+    ):
+        png, why = _arviz_png(plot, pr.idata, var_names=names)
+        if png:
+            rep.figures[name] = png
+            rep.blocks.append(("fig", (name, caption)))
+        else:
+            rep.warning(why)
     _predictive(rep, res, post, pr)
     rep.heading("What the data determine", 4)
     corr = j["correlation"]
