@@ -218,8 +218,9 @@ class Windows:
         r = self.z[None] - zsim
         if self.proj is None:
             return r
-        coef = np.einsum("wlk,pwl->pwk", self.proj, r)
-        return r - np.einsum("wlk,pwk->pwl", self.proj, coef)
+        rw = r.transpose(1, 0, 2)  # (W, P, L): one small matrix product per window (BLAS, not einsum)
+        coef = rw @ self.proj  # (W, P, 2)
+        return (rw - coef @ self.proj.transpose(0, 2, 1)).transpose(1, 0, 2)
 
     @property
     def dof(self) -> int:
@@ -564,7 +565,7 @@ class Posterior:
 
     def _map(self, par: Parametrisation, win: Windows, theta: np.ndarray):
         """MAP point of theta (sigma profiled) by least squares on the projected residuals, with the
-        parameters in ``par.fixed`` held; returns (theta, the least-squares solution, free mask)."""
+        parameters in ``par.fixed`` held; returns (theta, the least-squares solution)."""
         x_scale = np.maximum(np.abs(theta), 1e-6)
         free = np.ones(theta.size, bool)
         free[list(par.fixed)] = False

@@ -19,6 +19,7 @@ geometric device, a displacement the rods cannot reach) is stopped; its remainin
 
 from __future__ import annotations
 
+import functools
 import math
 import os
 from concurrent.futures import ThreadPoolExecutor
@@ -247,6 +248,13 @@ def input_gain(input_kind: str, masses: np.ndarray) -> np.ndarray:
     raise ValueError(f"input kind must be 'base_acc' or 'force', got {input_kind!r}")
 
 
+@functools.lru_cache(maxsize=4)
+def _pool(n: int) -> ThreadPoolExecutor:
+    """A thread pool kept for the process (threads started once, not per call: an MCMC run calls the
+    simulator tens of thousands of times, and starting the threads cost as much as a small batch)."""
+    return ThreadPoolExecutor(n, thread_name_prefix="negstiff-sim")
+
+
 def simulate_batch(
     params: np.ndarray,
     kind: str,
@@ -277,7 +285,8 @@ def simulate_batch(
     substeps : RK4 steps per sample interval
     store_velocity : also return z_dot
     z_limit, v_limit : |z| [m] and |z_dot| [m/s] beyond which a member is declared diverged
-    threads : worker threads over batch chunks (default: the machine's cores, at most 1 per 64 members)
+    threads : worker threads over batch chunks (default: the machine's cores, at most 1 per 64 members
+        and per 2e5 member-steps)
     """
     p = np.asarray(params, dtype=np.float64)
     if p.ndim == 1:
@@ -314,7 +323,10 @@ def simulate_batch(
     z0 = np.ascontiguousarray(x0[:, 0])
     v0 = np.ascontiguousarray(x0[:, 1])
     if threads is None:
-        threads = min(os.cpu_count() or 1, max(1, nb // 64))
+        # a thread pays for its hand-off (~0.2 ms) only with enough work: 64 members and ~2e5 member-steps
+        # each (an MCMC step's batch of 0.125 s windows ran slower on two threads than on one, measured)
+        work = nb * u2.shape[1] * int(substeps)
+        threads = min(os.cpu_count() or 1, max(1, nb // 64), max(1, work // 200_000))
     chunks = [c for c in np.array_split(np.arange(nb), max(1, int(threads))) if c.size]
     kernel = _KERNELS[(k, bool(np.any(p[P_COULOMB] != 0.0)))]
 
@@ -345,8 +357,7 @@ def simulate_batch(
     if len(chunks) == 1:
         parts = [run(chunks[0])]
     else:
-        with ThreadPoolExecutor(len(chunks)) as ex:
-            parts = list(ex.map(run, chunks))
+        parts = list(_pool(len(chunks)).map(run, chunks))
     out_z = parts[0][0] if len(parts) == 1 else np.hstack([q[0] for q in parts])
     out_v = None
     if store_velocity:
