@@ -514,8 +514,10 @@ def main(argv=None) -> int:
             ""
             if ratio >= 10
             else "A walker's own multiple-shooting windows already make a batch of "
-            "dozens of trajectories, which fills the SIMD lanes; batching the walkers as well adds the second core "
-            "and saves the Python per call, no more. Against one simulator call per trajectory (walker x window) "
+            "dozens of trajectories in one compiled call; batching the walkers as well saves the per-call Python "
+            "and numpy work (parameters, projection, sums), no more: the arithmetic is the same. (A step's batch is "
+            "too small for a second thread to pay for its hand-off.) Against one simulator call per trajectory "
+            "(walker x window) "
             f"the batch is {pres['t_plain'] / pres['t_batch']:.1f}x faster."
         ),
     ]
