@@ -209,7 +209,7 @@ class Windows:
         return int(bad.sum())
 
     def set_sensitivities(self, params: np.ndarray, kind: str) -> None:
-        """Orthonormal bases of each window's start-state sensitivities (finite differences) and drift."""
+        """Orthonormal bases of each window's start-state sensitivities (finite differences)."""
         _, S = self._state_sensitivities(params, kind)
         self.proj = np.linalg.qr(S)[0]
 
@@ -241,14 +241,27 @@ class Parametrisation:
     upper: np.ndarray
     gaussian: dict[int, tuple[float, float]] = field(default_factory=dict)  # index -> (mean, sd)
     description: list[str] = field(default_factory=list)
-    fixed: tuple[int, ...] = ()  # held at the start value by the point estimate (the likelihood ignores them)
-    fixed_sd: dict[int, float] = field(default_factory=dict)  # the sampler's scale for those (from their prior)
+    # parameters the likelihood does not see, held at the start value by the point estimate, and the
+    # sampler's scale for each (from its prior)
+    fixed_sd: dict[int, float] = field(default_factory=dict)
     # sampled coordinates phi (default: theta itself): the maps both ways, the log |d theta / d phi|, and
-    # phi -> the phi the likelihood is evaluated at (``fixed`` at the start value; the likelihood is the same)
+    # phi -> the phi the likelihood is evaluated at (the fixed ones at the start value; the same likelihood)
     to_physical: Callable[[np.ndarray], np.ndarray] | None = None
     to_sampled: Callable[[np.ndarray], np.ndarray] | None = None
     log_jacobian: Callable[[np.ndarray], np.ndarray] | None = None
     reduce: Callable[[np.ndarray], np.ndarray] | None = None
+
+    def __post_init__(self):
+        # a Gaussian prior enters the sampler's posterior, not the point estimate's least squares: it is
+        # for parameters the likelihood does not see (the weighed mass)
+        if not set(self.gaussian) <= set(self.fixed_sd):
+            raise ValueError("a Gaussian prior is supported only on a parameter held by the point estimate")
+
+    def free(self) -> np.ndarray:
+        """Mask of the parameters the likelihood sees (estimated by the point estimate)."""
+        mask = np.ones(len(self.names), bool)
+        mask[list(self.fixed_sd)] = False
+        return mask
 
     def physical(self, phi: np.ndarray) -> np.ndarray:
         return phi if self.to_physical is None else self.to_physical(phi)
@@ -363,7 +376,6 @@ def device_parametrisation(start: Device, mass_prior: tuple[float, float] | None
         upper,
         gauss,
         desc,
-        (2,),
         {2: s_m},
         to_physical,
         to_sampled,
@@ -565,12 +577,10 @@ class Posterior:
 
     def _map(self, par: Parametrisation, win: Windows, theta: np.ndarray):
         """MAP point of theta (sigma profiled) by least squares on the projected residuals, with the
-        parameters in ``par.fixed`` held; returns (theta, the least-squares solution)."""
+        parameters the likelihood does not see held; returns (theta, the least-squares solution)."""
         x_scale = np.maximum(np.abs(theta), 1e-6)
-        free = np.ones(theta.size, bool)
-        free[list(par.fixed)] = False
-        gauss = [(i, mu, sd) for i, (mu, sd) in par.gaussian.items() if free[i]]
-        n_rows = win.n_windows * win.length + len(gauss)
+        free = par.free()
+        n_rows = win.n_windows * win.length
 
         def resid(x):
             th = theta.copy()
@@ -580,12 +590,10 @@ class Posterior:
             zsim, div = win.simulate(par.to_params(th[None]), par.kind)
             if div[0]:
                 return np.full(n_rows, 1.0)
-            r = win.residuals(zsim)[0].ravel()
-            extra = [(th[i] - mu) / sd * math.sqrt(np.mean(r**2)) for i, mu, sd in gauss]
-            return np.concatenate([r, extra])
+            return win.residuals(zsim)[0].ravel()
 
         x0 = theta[free] / x_scale[free]
-        sol = optimize.least_squares(resid, x0, method="lm" if not gauss else "trf", x_scale="jac", max_nfev=400)
+        sol = optimize.least_squares(resid, x0, method="lm", x_scale="jac", max_nfev=400)
         th = theta.copy()
         th[free] = sol.x * x_scale[free]
         return th, sol
@@ -618,8 +626,7 @@ class Posterior:
         win.drop_unmatched(p_, par.kind, factor=DROP_FACTOR_AT_MAP)
         win.set_sensitivities(p_, par.kind)
         theta, sol = self._map(par, win, theta)
-        r = win.residuals(win.simulate(par.to_params(theta[None]), par.kind)[0])[0]
-        sigma = float(np.sqrt(np.sum(r**2) / win.dof))
+        sigma = float(np.sqrt(np.sum(sol.fun**2) / win.dof))  # sol.fun: the projected residuals at theta
         return par, win, theta, sol, sigma
 
     # --- the run --------------------------------------------------------------------------------
@@ -631,13 +638,9 @@ class Posterior:
         # works in coordinates whitened by its Cholesky factor, where the posterior is close to N(0, I)
         # (DE moves then decorrelate in ~10 steps). Along the device's E-m ridge, which the data do not
         # see, the scale is the mass prior's.
-        free = np.ones(theta.size, bool)
-        free[list(par.fixed)] = False
+        free = par.free()
         x_scale = np.maximum(np.abs(theta), 1e-6)
-        n_data = win.n_windows * win.length
-        A_x, V_x, inflation = curvature_adjustment(
-            sol.jac[:n_data], sol.fun[:n_data], win.n_windows, sigma, adjust=self.adjust
-        )
+        A_x, V_x, inflation = curvature_adjustment(sol.jac, sol.fun, win.n_windows, sigma, adjust=self.adjust)
         cov = np.zeros((theta.size, theta.size))
         cov[np.ix_(free, free)] = V_x * np.outer(x_scale[free], x_scale[free])
         for i, sd in par.fixed_sd.items():  # the likelihood does not see them: the prior's scale

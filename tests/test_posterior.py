@@ -214,3 +214,11 @@ def test_device_posterior_shows_the_e_m_ridge_and_weighing_pins_e(device_posteri
     sf, sw = free.summary["E"], weighed.summary["E"]
     assert sw["hdi_low"] <= AS_BUILT.E <= sw["hdi_high"]
     assert (sf["hdi_high"] - sf["hdi_low"]) >= 5 * (sw["hdi_high"] - sw["hdi_low"])
+
+
+def test_a_gaussian_prior_on_a_parameter_the_likelihood_sees_is_refused():
+    # the point estimate's least squares has no prior rows: a Gaussian prior belongs on a held parameter
+    from negstiff.inference.posterior import Parametrisation
+
+    with pytest.raises(ValueError, match="Gaussian prior"):
+        Parametrisation(("a",), "polynomial", lambda t: t, np.zeros(1), np.ones(1), gaussian={0: (0.5, 0.1)})
