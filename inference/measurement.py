@@ -20,7 +20,13 @@ import numpy as np
 
 INPUTS = ("base_acc", "force")
 OPTIONAL = ("z_dot", "y", "base_disp")
-KNOWN = ("t", *INPUTS, "z", *OPTIONAL)
+RESPONSE_ONLY = ("y_dot", "y_acc")
+"""Response columns a record may hold instead of z (``sensors.RESPONSES``): z is derived from them."""
+KNOWN = ("t", *INPUTS, "z", *OPTIONAL, *RESPONSE_ONLY)
+
+TIME_JITTER_FRACTION = 0.01
+"""A time column's samples may sit this fraction of a step off a uniform grid (or by their printed
+precision, whichever is larger) and still be uniform: lab exports round time."""
 
 
 class MeasurementError(ValueError):
@@ -36,18 +42,21 @@ class Measurement:
     fs : sampling rate [Hz]
     input_name : ``"base_acc"`` or ``"force"``
     u : the input column, (N,)
-    z : relative displacement [m], (N,)
+    z : relative displacement [m], (N,) (measured, or derived from the response sensor: ``info``;
+        None only for an input-only record read with ``response=False``)
     z_dot, y, base_disp : optional columns, (N,) or None
     mass : moving mass [kg] from the metadata or the caller, or None (mass-normalised)
     meta : the file's metadata (``# key: value`` lines) as strings
     source : where it came from (for messages)
     t0 : time of the first sample [s]
+    info : how the record was read: ``time`` (the time base, its jitter) and ``response`` (what was
+        measured, and how z was derived from it, with its estimated error); results carry it
     """
 
     fs: float
     input_name: str
     u: np.ndarray
-    z: np.ndarray
+    z: np.ndarray | None
     z_dot: np.ndarray | None = None
     y: np.ndarray | None = None
     base_disp: np.ndarray | None = None
@@ -55,10 +64,11 @@ class Measurement:
     meta: dict[str, str] = field(default_factory=dict)
     source: str = "<memory>"
     t0: float = 0.0
+    info: dict[str, Any] = field(default_factory=dict)
 
     @property
     def n(self) -> int:
-        return self.z.size
+        return self.u.size
 
     @property
     def dt(self) -> float:
@@ -75,8 +85,8 @@ class Measurement:
     def segment(self, start: int, stop: int) -> "Measurement":
         """Samples [start, stop) as a new measurement (time base kept)."""
         sl = slice(start, stop)
-        opt = {k: (None if getattr(self, k) is None else getattr(self, k)[sl]) for k in OPTIONAL}
-        return replace(self, u=self.u[sl], z=self.z[sl], t0=self.t0 + start / self.fs, **opt)
+        opt = {k: (None if getattr(self, k) is None else getattr(self, k)[sl]) for k in ("z", *OPTIONAL)}
+        return replace(self, u=self.u[sl], t0=self.t0 + start / self.fs, **opt)
 
     def require(self, n_min: int, what: str) -> None:
         """Raise ``MeasurementError`` unless the record has at least ``n_min`` samples for ``what``."""
@@ -151,7 +161,39 @@ def _read_csv(path: Path) -> tuple[dict[str, np.ndarray], dict[str, str]]:
                     f"{path}: row {r + 1} (line {header_line + r + 1}) is not numeric in every column: {line[:60]!r}"
                 ) from None
         raise MeasurementError(f"{path}: rows are not all numeric") from None
-    return {names[j]: data[:, k] for k, j in enumerate(use)}, meta
+    cols = {names[j]: data[:, k] for k, j in enumerate(use)}
+    if "t" in names:  # the printed precision of each time value (lab exports round time)
+        j = names.index("t")
+        cols[RESOLUTION] = printed_resolution([line.split(",")[j] for line in body], cols["t"])
+    return cols, meta
+
+
+RESOLUTION = "\0t_resolution"
+"""Key under which a reader returns the resolution [s] of each value of the time column."""
+
+
+def printed_resolution(tokens: list[str], values: np.ndarray) -> np.ndarray:
+    """The resolution of each printed value of a column, from the column's format as the tokens show it.
+
+    A fixed-decimals export ('%.5f') has one resolution, 10^-D; a significant-digits export ('%.9g')
+    has 10^(e - S + 1) for a value of magnitude 10^e. Trailing zeros are dropped by many writers, so
+    D and S are the largest seen in the column, and each value's resolution is the coarser of the two.
+    """
+    decimals, sig = 0, 1
+    for tok in tokens:
+        mant, _, exp = tok.strip().strip('"').lower().partition("e")
+        mant = mant.lstrip("+-")
+        whole, _, frac = mant.partition(".")
+        try:
+            e = int(exp) if exp else 0
+        except ValueError:
+            continue
+        decimals = max(decimals, len(frac) - e)
+        sig = max(sig, len((whole + frac).lstrip("0")) or 1)
+    with np.errstate(divide="ignore"):
+        mag = np.floor(np.log10(np.abs(values)))
+    mag[~np.isfinite(mag)] = -np.inf
+    return np.maximum(10.0 ** (-decimals), 10.0 ** (mag - sig + 1))
 
 
 def _read_npz(path: Path) -> tuple[dict[str, np.ndarray], dict[str, str]]:
@@ -165,7 +207,15 @@ def _read_npz(path: Path) -> tuple[dict[str, np.ndarray], dict[str, str]]:
             raise MeasurementError(f"{path}: the 'meta' entry is not a JSON object") from None
     if "fs" in arrays and arrays["fs"].size == 1:
         meta.setdefault("fs", str(float(arrays.pop("fs"))))
-    return {k: v.ravel().astype(float) for k, v in arrays.items() if v.ndim >= 1 and v.size > 1}, meta
+    cols = {k: v.ravel().astype(float) for k, v in arrays.items() if v.ndim >= 1 and v.size > 1}
+    return _with_binary_resolution(cols, arrays), meta
+
+
+def _with_binary_resolution(cols: dict[str, np.ndarray], stored: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """A time column stored in single (or half) precision is as uniform as its float spacing allows."""
+    if "t" in cols and stored["t"].dtype.kind == "f" and stored["t"].dtype.itemsize < 8:
+        cols[RESOLUTION] = np.spacing(np.abs(stored["t"].ravel())).astype(float)
+    return cols
 
 
 def _read_mat(path: Path) -> tuple[dict[str, np.ndarray], dict[str, str]]:
@@ -184,14 +234,18 @@ def _read_mat(path: Path) -> tuple[dict[str, np.ndarray], dict[str, str]]:
             meta[k] = str(float(v.ravel()[0]))
         elif min(v.shape) == 1:
             cols[k] = v.ravel().astype(float)
-    return cols, meta
+    return _with_binary_resolution(cols, raw), meta
 
 
 READERS = {".csv": _read_csv, ".txt": _read_csv, ".npz": _read_npz, ".mat": _read_mat}
 
 
 def load(
-    path: str | Path, columns: str | dict | None = None, fs: float | None = None, mass: float | None = None
+    path: str | Path,
+    columns: str | dict | None = None,
+    fs: float | None = None,
+    mass: float | None = None,
+    response: bool = True,
 ) -> Measurement:
     """Read a measurement file.
 
@@ -199,9 +253,16 @@ def load(
     ----------
     path : a .csv, .npz or .mat file
     columns : column map (``"force=V1,z=V2"`` or its parsed dict) for foreign files
-    fs : sampling rate [Hz], for files without ``t`` (overrides the metadata's ``fs``)
+    fs : sampling rate [Hz]; replaces the time column when given (the column then only sets t0)
     mass : moving mass [kg] (overrides the metadata's ``mass``)
+    response : False for an input-only record (``negstiff simulate``): no response column needed
+
+    The response is z, or z derived from z_dot, y (with the base's motion), y_dot or y_acc
+    (``sensors.derive``); what was done is in ``info["response"]``. A derived z whose constant is
+    unknown still has it unknown here: ``sensors.frame_offset`` estimates it from the physics.
     """
+    from negstiff.inference import sensors
+
     path = Path(path)
     if not path.is_file():
         raise MeasurementError(f"{path}: no such file")
@@ -214,6 +275,7 @@ def load(
         raise
     except Exception as exc:  # any parser failure is an unreadable file, said in one line
         raise MeasurementError(f"{path}: unreadable file ({type(exc).__name__}: {exc})".splitlines()[0]) from None
+    resolution = raw.pop(RESOLUTION, None)
     cmap = parse_column_map(columns) if isinstance(columns, (str, type(None))) else dict(columns)
     cols: dict[str, np.ndarray] = {}
     if cmap:
@@ -224,6 +286,8 @@ def load(
                     f"(columns: {', '.join(raw) or 'none'})"
                 )
             cols[name] = raw[src] * scale
+            if name == "t" and (src != "t" or scale != 1.0):
+                resolution = None  # the printed precision was read for a column named t only
         for name in KNOWN:  # unmapped contract columns present in the file still count
             if name in raw and name not in cols and all(src != name for src, _ in cmap.values()):
                 cols[name] = raw[name]
@@ -236,42 +300,43 @@ def load(
             f"{path}: {what}; exactly one of base_acc, force is needed "
             f"(columns: {', '.join(raw) or 'none'}; map foreign names with --columns)"
         )
-    if "z" not in cols:
-        raise MeasurementError(
-            f"{path}: missing column z (columns: {', '.join(raw) or 'none'}; map foreign names with --columns)"
-        )
-    n = cols["z"].size
+    n = cols[inputs[0]].size
+    if n < 2:
+        raise MeasurementError(f"{path}: too few samples ({n}) for a record")
     for k, v in cols.items():
         if v.size != n:
-            raise MeasurementError(f"{path}: column {k} has {v.size} samples, z has {n}")
+            raise MeasurementError(f"{path}: column {k} has {v.size} samples, {inputs[0]} has {n}")
         bad = np.flatnonzero(~np.isfinite(v))
         if bad.size:
             raise MeasurementError(f"{path}: column {k} is NaN or inf at row {bad[0] + 1}")
     fs_meta = meta.get("fs")
-    if fs is None and fs_meta is not None:
-        try:
-            fs = float(fs_meta)
-        except ValueError:
-            raise MeasurementError(f"{path}: metadata fs = {fs_meta!r} is not a number") from None
+    if fs is not None:
+        if not (fs > 0 and math.isfinite(fs)):
+            raise MeasurementError(f"{path}: sampling rate must be positive, got {fs}")
+        time_info = {"source": f"fs = {fs:g} Hz given by the caller" + (" (replaces column t)" if "t" in cols else "")}
+    else:
+        time_info = {"source": "metadata fs"}
+        if fs_meta is not None:
+            try:
+                fs = float(fs_meta)
+            except ValueError:
+                raise MeasurementError(f"{path}: metadata fs = {fs_meta!r} is not a number") from None
     t0 = 0.0
     if "t" in cols:
         t = cols["t"]
         if n < 2:
             raise MeasurementError(f"{path}: too few samples ({n}) to define a sampling rate")
-        d = np.diff(t)
-        if np.any(d <= 0):
-            r = int(np.flatnonzero(d <= 0)[0]) + 2
-            raise MeasurementError(f"{path}: column t is not increasing at row {r}")
-        dt = (t[-1] - t[0]) / (n - 1)
-        dev = np.abs(d - dt)
-        if np.any(dev > 1e-3 * dt):
-            r = int(np.argmax(dev > 1e-3 * dt)) + 2
-            raise MeasurementError(
-                f"{path}: column t is not uniformly sampled at row {r} (step {d[r - 2]:.6g} s, mean {dt:.6g} s)"
-            )
-        if fs is not None and abs(fs * dt - 1) > 1e-3:
-            raise MeasurementError(f"{path}: fs = {fs:g} Hz disagrees with column t (1/dt = {1 / dt:.6g} Hz)")
-        fs, t0 = 1.0 / dt, float(t[0])
+        if "caller" in time_info["source"]:
+            t0 = float(t[0])
+        else:
+            dt, jitter, res = time_base(t, resolution, path)
+            if fs is not None and abs(fs * dt - 1) > TIME_JITTER_FRACTION:
+                raise MeasurementError(
+                    f"{path}: fs = {fs:g} Hz disagrees with column t (1/dt = {1 / dt:.6g} Hz); "
+                    "--fs replaces the time column"
+                )
+            fs, t0 = 1.0 / dt, float(t[0])
+            time_info = {"source": "column t (mean step)", "jitter_s": jitter, "resolution_s": res}
     if fs is None:
         raise MeasurementError(f"{path}: no time base: give a column t, '# fs: ...' metadata or --fs")
     if not (fs > 0 and math.isfinite(fs)):
@@ -281,19 +346,65 @@ def load(
             mass = float(meta["mass"])
         except ValueError:
             raise MeasurementError(f"{path}: metadata mass = {meta['mass']!r} is not a number") from None
+    z, resp = None, {"measured": None}
+    if response or any(k in cols for k in sensors.RESPONSES):
+        z, resp = sensors.derive(cols, inputs[0], float(fs), str(path))
     rec = Measurement(
         fs=float(fs),
         input_name=inputs[0],
         u=cols[inputs[0]],
-        z=cols["z"],
+        z=z,
         z_dot=cols.get("z_dot"),
         y=cols.get("y"),
         base_disp=cols.get("base_disp"),
         meta=meta,
         source=str(path),
         t0=t0,
+        info={"time": time_info, "response": resp},
     )
     return rec.with_mass(mass)
+
+
+def time_base(t: np.ndarray, resolution: np.ndarray | None, path) -> tuple[float, float, float]:
+    """The step of a time column that is uniform within its printed precision (or 1 % of a step).
+
+    Returns (mean step [s], largest deviation from the uniform grid [s], coarsest printed
+    resolution [s]). A step that is not positive, or a gap, dropout or repeated block, raises
+    ``MeasurementError`` naming the first bad row (1-based data row).
+    """
+    n = t.size
+    d = np.diff(t)
+    if np.any(d <= 0):
+        r = int(np.flatnonzero(d <= 0)[0]) + 2
+        raise MeasurementError(f"{path}: column t is not increasing at row {r} (t = {t[r - 1]:.9g} s after {t[r - 2]:.9g} s)")
+    res = np.zeros(n) if resolution is None else np.asarray(resolution, float)
+    res = res + 4 * np.spacing(np.abs(t))  # the column's own floating-point resolution
+    # the typical step: the median of the printed steps, itself off by up to one printed unit
+    k = int(np.argsort(d)[d.size // 2])
+    step = float(d[k])
+    # a step may deviate by the rounding of its two ends (half a printed unit each) plus the median's own
+    # rounding, or by 1 % of a step from each end's grid position
+    tol_d = np.maximum(0.5 * (res[1:] + res[:-1]) + res[k : k + 2].max(), 2 * TIME_JITTER_FRACTION * step)
+    bad = np.flatnonzero(np.abs(d - step) > tol_d * (1 + 1e-9))
+    if bad.size:
+        r = int(bad[0]) + 2
+        raise MeasurementError(
+            f"{path}: column t is not uniformly sampled at row {r} (step {d[r - 2]:.6g} s, typical {step:.6g} s: "
+            "a gap, dropout or repeated block; only rounding of the printed time is tolerated)"
+        )
+    i = np.arange(n) - (n - 1) / 2  # the clock's step: least squares over every sample (rounding averages out)
+    dt = float(i @ (t - t.mean()) / (i @ i))
+    dev = np.abs(t - (t.mean() + dt * i))
+    # half a printed unit (or 1 % of a step), plus the fitted grid's own error (~ resolution / sqrt(n))
+    tol = np.maximum(0.5 * res, TIME_JITTER_FRACTION * dt) + 1e-3 * res.max() + 1e-12 * dt
+    slow = np.flatnonzero(dev > tol)
+    if slow.size:
+        r = int(slow[0]) + 1
+        raise MeasurementError(
+            f"{path}: column t is not uniformly sampled at row {r} (t = {t[r - 1]:.9g} s, {dev[r - 1]:.3g} s off "
+            f"the uniform grid of step {dt:.6g} s; the clock drifts)"
+        )
+    return float(dt), float(dev.max()), float(res.max())
 
 
 def from_arrays(u: np.ndarray, z: np.ndarray, fs: float, input_name: str = "base_acc", **kw: Any) -> Measurement:

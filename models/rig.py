@@ -158,6 +158,24 @@ def table_motion(acc_target: np.ndarray, fs: float, min_hz: float) -> tuple[np.n
     return np.fft.irfft(disp_spec, n), np.fft.irfft(spec, n)
 
 
+def integrate_fft(x: np.ndarray, fs: float, highpass_hz: float, order: int = 2) -> np.ndarray:
+    """Band-limited integral of ``order`` 1 or 2 of a sampled signal (a lab's route from an
+    accelerometer to velocity or displacement): exact 1/(i w)^order above ``highpass_hz``, a cosine
+    taper down to half of it, nothing below (a shaker has no DC stroke, and sensor noise integrated
+    grows as 1/f^order)."""
+    n = x.size
+    spec = np.fft.rfft(x - x.mean())
+    f = np.fft.rfftfreq(n, 1 / fs)
+    gain = np.zeros(f.size, dtype=complex if order % 2 else float)
+    band = f >= highpass_hz
+    gain[band] = 1.0 / (2j * np.pi * f[band]) ** order if order % 2 else -1.0 / (2 * np.pi * f[band]) ** order
+    taper = (f >= highpass_hz / 2) & ~band
+    ft = f[taper]
+    w = 0.5 * (1 - np.cos(np.pi * (ft / (highpass_hz / 2) - 1)))
+    gain[taper] = w / (2j * np.pi * ft) ** order if order % 2 else -w / (2 * np.pi * ft) ** order
+    return np.fft.irfft(spec * gain, n)
+
+
 def integrate_twice(acc: np.ndarray, fs: float, highpass_hz: float, method: str = "fft") -> np.ndarray:
     """Base displacement from measured acceleration as a lab computes it (``Sensors.integration``)."""
     if method == "time":
@@ -166,16 +184,7 @@ def integrate_twice(acc: np.ndarray, fs: float, highpass_hz: float, method: str 
         return signal.sosfiltfilt(sos, cumulative_trapezoid(vel, dx=1 / fs, initial=0.0))
     if method != "fft":
         raise RigError(f"integration must be 'fft' or 'time', got {method!r}")
-    n = acc.size
-    spec = np.fft.rfft(acc - acc.mean())
-    f = np.fft.rfftfreq(n, 1 / fs)
-    gain = np.zeros_like(f)
-    band = f >= highpass_hz
-    gain[band] = -1.0 / (2 * np.pi * f[band]) ** 2
-    taper = (f >= highpass_hz / 2) & ~band
-    ft = f[taper]
-    gain[taper] = -0.5 * (1 - np.cos(np.pi * (ft / (highpass_hz / 2) - 1))) / (2 * np.pi * ft) ** 2
-    return np.fft.irfft(spec * gain, n)
+    return integrate_fft(acc, fs, highpass_hz, order=2)
 
 
 def _smooth_steps(levels: Sequence[float], step_samples: int, ramp_samples: int) -> np.ndarray:

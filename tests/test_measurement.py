@@ -80,3 +80,67 @@ def test_too_few_samples_for_an_analysis(tmp_path):
     m = load(_write(tmp_path, "t,base_acc,z\n0,1,1\n0.1,1,1\n"))
     with pytest.raises(MeasurementError, match="too few samples for NSI: 2"):
         m.require(1000, "NSI")
+
+
+# --- lab exports: time columns rounded to their printed precision (issue: real 2048 Hz records) -----
+
+
+def _lab_csv(tmp_path, t_text, n, name="lab.csv"):
+    """A lab-style export written with plain numpy: time printed by the lab's format, a response."""
+    rng = np.random.default_rng(0)
+    u = rng.standard_normal(n)
+    z = 0.01 * rng.standard_normal(n)
+    lines = ["t,base_acc,z"] + [f"{tt},{uu:.6f},{zz:.8f}" for tt, uu, zz in zip(t_text, u, z)]
+    p = tmp_path / name
+    p.write_text("\n".join(lines) + "\n")
+    return p
+
+
+@pytest.mark.parametrize("fmt", ["%.9g", "%.5f", "%.6f"])
+def test_time_rounded_as_labs_export_it_is_uniform(tmp_path, fmt):
+    # Fact: a 2048 Hz clock printed with 9 significant digits or 5-6 fixed decimals deviates from its
+    # grid only by half a printed unit (at 120 s, %.9g keeps 1e-6 s: 0.2 % of the step; 5 decimals
+    # 5e-6 s: 1 % of it); the mean step is the clock's.
+    fs, n = 2048.0, 2048 * 120
+    t = np.arange(n) / fs
+    p = _lab_csv(tmp_path, [fmt % x for x in t], n)
+    m = load(p)
+    assert m.fs == pytest.approx(fs, rel=1e-9)
+    # ... plus the fitted grid's own error, ~resolution / sqrt(n) (n = 245760): far below 1e-3 of a unit
+    assert m.info["time"]["jitter_s"] <= 0.5 * m.info["time"]["resolution_s"] * (1 + 1e-3)
+
+
+def test_a_real_gap_is_named_at_its_row(tmp_path):
+    # Fact: 100 samples missing after row 1001 is a gap, not rounding; the first bad row is 1002.
+    fs = 2048.0
+    t = np.arange(5000) / fs
+    t = np.concatenate([t[:1001], t[1101:]])
+    p = _lab_csv(tmp_path, ["%.9g" % x for x in t], t.size)
+    with pytest.raises(MeasurementError, match=r"not uniformly sampled at row 1002 .*gap"):
+        load(p)
+
+
+def test_a_repeated_block_is_named_at_its_row(tmp_path):
+    t = np.arange(3000) / 512.0
+    t = np.concatenate([t[:2000], t[1900:2000], t[2000:]])  # the export wrote 100 rows twice
+    p = _lab_csv(tmp_path, ["%.6f" % x for x in t], t.size)
+    with pytest.raises(MeasurementError, match="not increasing at row 2001"):
+        load(p)
+
+
+def test_fs_replaces_a_broken_time_column(tmp_path):
+    t = np.arange(3000) / 512.0
+    t[1500:] += 0.1  # a clock jump the user knows about
+    p = _lab_csv(tmp_path, ["%.6f" % x for x in t], t.size)
+    with pytest.raises(MeasurementError, match="row 1501"):
+        load(p)
+    m = load(p, fs=512.0)
+    assert m.fs == 512.0 and "replaces column t" in m.info["time"]["source"]
+
+
+def test_an_input_only_record_loads_for_simulation(tmp_path):
+    p = _write(tmp_path, "t,base_acc\n0,1\n0.01,2\n0.02,3\n")
+    m = load(p, response=False)
+    assert m.z is None and m.n == 3
+    with pytest.raises(MeasurementError, match="missing column z"):
+        load(p)
