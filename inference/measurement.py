@@ -362,7 +362,7 @@ def load(
         t0=t0,
         info={"time": time_info, "response": resp},
     )
-    return rec.with_mass(mass)
+    return sensors.pin_frame(rec.with_mass(mass))
 
 
 def time_base(t: np.ndarray, resolution: np.ndarray | None, path) -> tuple[float, float, float]:

@@ -15,11 +15,10 @@ What is lost on the way is said, never hidden:
 
 * From a velocity, z is the integral of the measured signal (a quintic spline's antiderivative:
   a 40 Hz component sampled at 512 Hz is integrated within 1e-5, where the trapezoid rule errs by
-  2 %), so its only unknowns are the constant (the frame) and, if the sensor has a DC offset, a
-  ramp. The ramp is removed only where the record shows one: a stationary response has no trend,
-  so the least-squares slope of the integral is compared with its batch-means standard error and
-  removed when it exceeds 3 of them. The integrated sensor noise is a random walk; its size over the
-  record, sigma_v sqrt(T dt / 3), is reported.
+  2 %), so its only unknown is the constant (the frame). A trend of the integral far beyond its
+  batch-means standard error is reported (a sensor's DC offset would make one), not removed. The
+  integrated sensor noise is a random walk; its size over the record, sigma_v sqrt(T dt / 3), is
+  reported.
 * A base velocity or displacement from the base accelerometer is band-limited (``highpass_hz``): a
   shaker has no DC stroke, and accelerometer noise integrated grows without bound.
 * From an acceleration of the moving part, z needs two integrations: its content below
@@ -49,8 +48,8 @@ HIGHPASS_HZ = 1.0
 """Low-frequency limit of an integration of an accelerometer [Hz] (as the rig's base; below the
 excitation band of a shaker test)."""
 
-TREND_SIGMAS = 3.0
-"""A ramp in an integrated velocity is removed when its slope exceeds this many standard errors."""
+TREND_SIGMAS = 5.0
+"""A ramp in an integrated velocity is reported when its slope exceeds this many standard errors."""
 
 
 def integrate_exact(x: np.ndarray, fs: float) -> np.ndarray:
@@ -68,7 +67,7 @@ def _noise_rms(x: np.ndarray, fs: float) -> float:
     from negstiff.inference.derivatives import noise_floor
 
     try:
-        return float(noise_floor(x, fs)[0])
+        return float(math.sqrt(noise_floor(x, fs)[0]))
     except Exception:  # too short or too clean for a plateau: no estimate
         return float("nan")
 
@@ -89,24 +88,31 @@ def _trend(z: np.ndarray, fs: float, n_blocks: int = 10) -> tuple[float, float]:
 
 
 def velocity_to_z(v: np.ndarray, fs: float, what: str) -> tuple[np.ndarray, dict[str, Any]]:
-    """z (up to a constant) from a relative velocity; the ramp of a DC offset removed if significant."""
+    """z (up to a constant) from a relative velocity, and what the integral carries.
+
+    A vibrometer has no DC offset worth the name (a Doppler shift is zero at rest), and a bistable
+    device's z is not stationary over minutes (it may sit in one well for a long stretch: on a 300 s
+    rig record the true z's slope was 3.3 batch-means standard errors from zero), so a ramp is not
+    removed: one beyond ``TREND_SIGMAS`` standard errors is reported as a warning instead."""
     z = integrate_exact(v, fs)
     slope, se = _trend(z, fs)
-    t = np.arange(z.size) / fs
-    removed = bool(abs(slope) > TREND_SIGMAS * se)
-    if removed:
-        z = z - slope * (t - t.mean())
     sigma_v = _noise_rms(v, fs)
     walk = sigma_v * math.sqrt(z.size / fs / fs / 3) if np.isfinite(sigma_v) else float("nan")
     info = {
         "derived": f"z = integral of {what} (quintic spline antiderivative)",
-        "velocity_offset_m_s": slope if removed else 0.0,
-        "velocity_offset_se_m_s": se,
-        "velocity_offset_removed": removed,
+        "trend_m_s": slope,
+        "trend_se_m_s": se,
         "velocity_noise_m_s": sigma_v,
         "integration_error_m": walk,
         "z_constant_known": False,
+        "warnings": [],
     }
+    if abs(slope) > TREND_SIGMAS * se:
+        info["warnings"].append(
+            f"z integrated from {what.split()[0]} drifts by {1e3 * slope * z.size / fs:.3g} mm over the record "
+            f"({abs(slope) / se:.1f} standard errors): a DC offset of the velocity sensor ({slope:.3g} m/s)? "
+            "It is not removed; a long stay in one well looks the same"
+        )
     return z, info
 
 
@@ -180,31 +186,119 @@ def derive(cols: dict[str, np.ndarray], input_name: str, fs: float, source: str)
     }
 
 
-def frame_offset(rec) -> dict[str, Any]:
-    """The frame constant C that makes the record's z physical (z_true = z + C), from K(0) = m g.
+PIN_TERMS = ("1", "z", "z^2", "z^3", "z^4", "z^5", "v", "v|v|")
+"""Library of the frame fit: a quintic restoring force follows the exact device's K near its origin
+(the cubic's K(0) errs there: 0.7-1.7 mm of frame on as-built records, measured; 0.15-0.2 mm with
+the quintic)."""
 
-    A cubic restoring force and viscous plus quadratic damping are fitted by weak-form least squares
-    (``sindy.weak_least_squares``) in the record's own frame; its K_rec(x) = K_true(x + C), so the
-    physical origin x = -C solves K_rec(x) = k0 with k0 = m g (g per unit mass). A force-driven record
-    carries no weight in its equation (k0 is the force's offset): there the frame is not pinned.
 
-    Returns a dict with ``offset_m`` (C, or None), ``candidates_m`` (every real solution) and ``method``.
-    """
+def _crossings(x: np.ndarray, f: np.ndarray) -> np.ndarray:
+    """Zeros of a sampled function, by linear interpolation between the samples that bracket them."""
+    i = np.flatnonzero(np.diff(np.sign(f)) != 0)
+    return x[i] - f[i] * (x[i + 1] - x[i]) / (f[i + 1] - f[i])
+
+
+def _frame_anchors(rec) -> tuple[float, dict[str, float]]:
+    """In the record's own frame: the origin (where a quintic fitted to ``rec`` carries m g, between
+    its wells) and the stable wells, all searched over the stroke the record visited."""
     from negstiff.inference.sindy import weak_least_squares
 
+    model = weak_least_squares(rec, PIN_TERMS)
+    x = np.linspace(rec.z.min(), rec.z.max(), 4001)
+    K = model.restoring_force(x)
+    eq = _crossings(x, K)
+    stable = [e for e in eq if np.interp(e, x, np.gradient(K, x)) > 0]
+    wells = {"minus": stable[0], "plus": stable[-1]} if len(stable) >= 2 else {}
+    roots = _crossings(x, K - model.m * G)
+    if not roots.size:
+        raise ValueError("the fitted restoring force never carries the weight over the visited stroke")
+    mid = eq[len(eq) // 2] if eq.size else float(np.median(rec.z))
+    return float(roots[np.argmin(np.abs(roots - mid))]), wells
+
+
+def frame_offset(rec) -> dict[str, Any]:
+    """The frame constant C that makes a record's z physical (z_true = z + C).
+
+    Two anchors, the better one used:
+
+    * rest positions (``# z_minus_rest`` / ``# z_plus_rest`` metadata [m], measured statically
+      before the test): C = z_rest - x_well, with x_well the fitted model's wells in the record's
+      frame (well positions are what a record determines best);
+    * gravity: the restoring force at z = 0 (rods horizontal) carries the weight, K(0) = m g (g per
+      unit mass). A quintic restoring force with viscous and quadratic damping is fitted by weak-form
+      least squares (``sindy.weak_least_squares``) in the record's frame, where K_rec(x) =
+      K_true(x + C); the origin solves K_rec(x) = m g between the fitted wells (a negative-stiffness
+      device's origin is next to its unstable equilibrium). A force-driven record carries no weight
+      in its equation (k0 is the force's offset): there the frame is not pinned.
+
+    The uncertainty ``offset_se_m`` is the spread of the estimates from ``FRAME_PARTS`` parts of the
+    record, scaled to the whole (sd / sqrt(parts)). Returns a
+    dict with ``offset_m`` (None when not pinned), ``offset_se_m``, ``method``.
+    """
+    rest = {w: rec.meta.get(f"z_{w}_rest") for w in ("minus", "plus")}
+    try:
+        rest = {w: float(v) for w, v in rest.items() if v is not None}
+    except ValueError:
+        rest = {}
+    if rec.input_name != "base_acc" and not rest:
+        return {"offset_m": None, "method": "not pinned: a force-driven record carries no weight (k0 unknown)"}
+    try:
+        x, wells = _frame_anchors(rec)
+        edges = np.linspace(0, rec.n, FRAME_PARTS + 1).astype(int)
+        parts = [_frame_anchors(rec.segment(a, b)) for a, b in zip(edges[:-1], edges[1:])]
+    except Exception as exc:  # a record too short or too poor for the fit: said, not pinned
+        return {"offset_m": None, "method": f"not pinned: {' '.join(str(exc).split())}"}
+    anchored = [w for w in rest if w in wells and all(w in p[1] for p in parts)]
+    if anchored:
+        def offset(ws):
+            return float(np.mean([rest[w] - ws[w] for w in anchored]))
+
+        return {
+            "offset_m": offset(wells),
+            "offset_se_m": _se([offset(p[1]) for p in parts]),
+            "method": "the fitted wells put at the rest positions of the file's metadata ("
+            + ", ".join(f"z_{w}_rest = {rest[w]:g} m" for w in anchored) + ")",
+        }
     if rec.input_name != "base_acc":
         return {"offset_m": None, "method": "not pinned: a force-driven record carries no weight (k0 unknown)"}
-    model = weak_least_squares(rec, ("1", "z", "z^2", "z^3", "v", "v|v|"))
-    k0 = model.m * G
-    # K_rec(x) - k0 = k3 x^3 + k2 x^2 - k1 x + (k0_rec - k0)
-    roots = np.roots([model.k3, model.k2, -model.k1, model.k0 - k0])
-    real = np.sort(roots[np.abs(roots.imag) <= 1e-9 * np.abs(roots).max(initial=1.0)].real)
-    if real.size == 0:
-        return {"offset_m": None, "method": "not pinned: the fitted restoring force never carries the weight"}
-    x = real[len(real) // 2] if real.size == 3 else real[np.argmin(np.abs(real - np.median(rec.z)))]
     return {
-        "offset_m": float(-x),
-        "candidates_m": [float(-r) for r in real],
-        "method": "K(0) = m g: the frame in which the fitted cubic restoring force carries the weight at z = 0"
-        + (" (of three candidate origins, the one between the wells)" if real.size == 3 else ""),
+        "offset_m": -x,
+        "offset_se_m": _se([-p[0] for p in parts]),
+        "method": "K(0) = m g: the frame in which a quintic restoring force fitted to the record carries the "
+        "weight at z = 0, between the wells",
     }
+
+
+FRAME_SE_WARN_M = 2e-5
+"""A frame standard error above this [m] is warned about: on the seed's cubic (k2 / 3 k3 = 0.5 mm) 20 um moves
+k2 by 4 %."""
+
+FRAME_PARTS = 4
+"""Parts of the record whose separate frame estimates give the frame's standard error."""
+
+
+def _se(estimates: list[float]) -> float:
+    return float(np.std(estimates, ddof=1) / np.sqrt(len(estimates)))
+
+
+def pin_frame(rec):
+    """``rec`` with z in the physical frame when its constant was unknown (``frame_offset``), and the
+    offset, its uncertainty and the anchor in ``info["response"]``; otherwise ``rec`` itself."""
+    from dataclasses import replace
+
+    resp = rec.info.get("response", {})
+    if rec.z is None or resp.get("z_constant_known", True):
+        return rec
+    fo = frame_offset(rec)
+    resp = {**resp, "frame_offset_m": fo["offset_m"], "frame_offset_se_m": fo.get("offset_se_m"),
+            "frame": fo["method"]}
+    se = fo.get("offset_se_m") or 0.0
+    if fo["offset_m"] is None:
+        resp["warnings"] = [*resp.get("warnings", []), f"z's frame is unknown ({fo['method']}); the "
+                            "coefficients k0-k2 are in the record's own frame"]
+    elif se > FRAME_SE_WARN_M:
+        resp["warnings"] = [*resp.get("warnings", []), f"z's frame is uncertain: offset {1e3 * fo['offset_m']:.3f} "
+                            f"+- {1e3 * se:.3f} mm (the record visits one well little?); k2 and k1 inherit it "
+                            "(dk2 = 3 k3 dC)"]
+    z = rec.z if fo["offset_m"] is None else rec.z + fo["offset_m"]
+    return replace(rec, z=z, info={**rec.info, "response": resp})

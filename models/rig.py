@@ -38,6 +38,7 @@ from scipy.integrate import cumulative_trapezoid
 
 from negstiff.files import atomic_path, write_text
 
+from .constants import G
 from .device import AS_BUILT, Device
 from .equation import Model
 from .simulator import simulate_batch
@@ -76,18 +77,29 @@ class Sensors:
     true b) that biased the soft well's NSI frequency by ~3 %; see the report."""
     table_min_hz: float = 0.5
     """The table's true motion has no content below this frequency [Hz]."""
+    response: str = "displacement"
+    """The response sensor, as labs have them: ``"displacement"`` (the seed's laser on y, the base
+    double-integrated, z = y - b: columns y, base_disp, z), ``"velocity"`` (a laser Doppler
+    vibrometer on the moving part, relative to the base: z_dot), ``"absolute"`` (the laser's y alone:
+    the user derives the base), ``"accelerometer"`` (an accelerometer on the moving part: y_acc)."""
+    velocity_noise: float = 1e-4
+    """Vibrometer velocity noise [m/s rms] (~0.05 % of a cross-well response's velocity)."""
+    response_offset: float = 0.0
+    """DC offset of the response sensor, in its units (a laser zero away from the rods-horizontal
+    position [m], a vibrometer's offset [m/s], an accelerometer's bias [m/s^2])."""
 
     @classmethod
     def noiseless(cls) -> "Sensors":
         """Perfect sensors (no noise, no bias): for checks that need the exact response."""
-        return cls(laser_noise=0.0, acc_noise=0.0, acc_bias=0.0)
+        return cls(laser_noise=0.0, acc_noise=0.0, acc_bias=0.0, velocity_noise=0.0)
 
 
 @dataclass
 class RigRecord:
     """One measured record: columns at ``fs``, metadata lines, and the truth behind it.
 
-    ``columns`` holds ``t, base_acc, y, base_disp, z`` (the contract's names). ``true`` holds the
+    ``columns`` holds ``t, base_acc`` and the response sensor's columns (``Sensors.response``; the
+    seed's laser: ``y, base_disp, z``), by the contract's names. ``true`` holds the
     noise-free ``z``, ``z_dot``, ``base_acc`` and ``base_disp`` at the same samples (never written
     to the measurement file: a lab does not have them; tests and reports use them as the truth).
     """
@@ -98,26 +110,43 @@ class RigRecord:
     truth: dict[str, Any]
     true: dict[str, np.ndarray] = field(repr=False, default_factory=dict)
 
-    COLUMNS = ("t", "base_acc", "y", "base_disp", "z")
+    def export_columns(self, acc_unit: str = "m/s^2") -> dict[str, np.ndarray]:
+        """The columns as written: accelerations in g are named ``<name>_g`` (a lab's export; map
+        them back with ``--columns base_acc=base_acc_g*9.81``)."""
+        if acc_unit == "m/s^2":
+            return dict(self.columns)
+        if acc_unit != "g":
+            raise RigError(f"acceleration unit must be 'm/s^2' or 'g', got {acc_unit!r}")
+        return {(f"{k}_g" if k in ("base_acc", "y_acc") else k): (v / G if k in ("base_acc", "y_acc") else v)
+                for k, v in self.columns.items()}
 
-    def write(self, path: str | Path) -> Path:
+    def write(self, path: str | Path, time_decimals: int | None = None, acc_unit: str = "m/s^2") -> Path:
         """Write the record (CSV, or NPZ by suffix) and ``<stem>.truth.json`` beside it, atomically.
 
-        The record itself does not name its truth file, so the same seed gives the same bytes
-        whatever the file is called."""
+        ``time_decimals`` prints the CSV's time column with that many fixed decimals (a lab export);
+        ``acc_unit="g"`` writes accelerations in g. The record itself does not name its truth file, so
+        the same seed gives the same bytes whatever the file is called."""
         path = Path(path)
         truth_path = path.with_name(path.stem + ".truth.json")
-        meta = self.meta
+        meta = dict(self.meta)
+        cols = self.export_columns(acc_unit)
+        if acc_unit == "g":
+            meta["units"] = "s, g (accelerations), m, m/s"
         if path.suffix.lower() == ".npz":
             with atomic_path(path) as tmp:
                 with open(tmp, "wb") as fh:
-                    np.savez(fh, fs=self.fs, **{k: self.columns[k] for k in self.COLUMNS}, meta=json.dumps(meta))
+                    np.savez(fh, fs=self.fs, **cols, meta=json.dumps(meta))
         elif path.suffix.lower() == ".csv":
             buf = io.StringIO()
             for k, v in meta.items():
                 buf.write(f"# {k}: {v}\n")
-            data = np.column_stack([self.columns[k] for k in self.COLUMNS])
-            np.savetxt(buf, data, delimiter=",", fmt="%.10g", header=",".join(self.COLUMNS), comments="")
+            data = np.column_stack(list(cols.values()))
+            fmt = ["%.10g"] * len(cols)
+            if time_decimals is not None:
+                if not 0 <= time_decimals <= 12:
+                    raise RigError(f"time decimals must be 0..12, got {time_decimals}")
+                fmt[0] = f"%.{int(time_decimals)}f"
+            np.savetxt(buf, data, delimiter=",", fmt=fmt, header=",".join(cols), comments="")
             write_text(path, buf.getvalue())
         else:
             raise RigError(f"{path}: the rig writes .csv or .npz records")
@@ -394,9 +423,12 @@ class Rig:
         for i, ((b_true, acc_true), st) in enumerate(zip(motions, starts)):
             acc_meas = acc_true + s.acc_bias + s.acc_noise * math.sqrt(q) * sens_rng.standard_normal(n)
             y_meas = sim.z[i] + b_true + s.laser_noise * math.sqrt(q) * sens_rng.standard_normal(n)
+            if s.response in ("displacement", "absolute"):
+                y_meas = y_meas + s.response_offset  # the laser's zero away from the rods-horizontal position
             chans = {
                 "base_acc": acc_meas,
                 "y": y_meas,
+                **self._response_channels(sim.z_dot[i], acc_true, fsim, sens_rng),
                 "z_true": sim.z[i],
                 "z_dot_true": sim.z_dot[i],
                 "acc_true": acc_true,
@@ -411,13 +443,14 @@ class Rig:
                 k0 = int(round(t0 * self.fs))
                 k1 = k0 + int(round(durations[i] * self.fs))
                 sl = slice(k0, k1)
-                cols = {
-                    "t": np.arange(k1 - k0) / self.fs,
-                    "base_acc": chans["base_acc"][sl],
-                    "y": chans["y"][sl],
-                    "base_disp": b_est[sl],
-                    "z": chans["y"][sl] - b_est[sl],
-                }
+                cols = {"t": np.arange(k1 - k0) / self.fs, "base_acc": chans["base_acc"][sl]}
+                if s.response == "displacement":
+                    cols |= {"y": chans["y"][sl], "base_disp": b_est[sl], "z": chans["y"][sl] - b_est[sl]}
+                elif s.response == "absolute":
+                    cols["y"] = chans["y"][sl]
+                else:
+                    name = "z_dot" if s.response == "velocity" else "y_acc"
+                    cols[name] = chans[name][sl]
                 true = {
                     "z": chans["z_true"][sl],
                     "z_dot": chans["z_dot_true"][sl],
@@ -431,6 +464,23 @@ class Rig:
                 sweep_out.append(self._record(cols, true, exc))
             out.append(sweep_out)
         return out if amplitude_lists is not None else [r[0] for r in out]
+
+    def _response_channels(self, z_dot, acc_true, fsim, rng) -> dict[str, np.ndarray]:
+        """The vibrometer's relative velocity or the moving part's accelerometer, at the fine rate
+        (drawn after the seed's two sensors, so a displacement record is the same bit for bit)."""
+        s, q = self.sensors, self.oversample
+        if s.response == "velocity":
+            noise = s.velocity_noise * math.sqrt(q) * rng.standard_normal(z_dot.size)
+            return {"z_dot": z_dot + s.response_offset + noise}
+        if s.response == "accelerometer":
+            z_ddot = np.gradient(z_dot, 1 / fsim, edge_order=2)
+            noise = s.acc_noise * math.sqrt(q) * rng.standard_normal(z_dot.size)
+            return {"y_acc": z_ddot + acc_true + s.response_offset + noise}
+        if s.response not in ("displacement", "absolute"):
+            raise RigError(
+                f"response sensor must be displacement, velocity, absolute or accelerometer, got {s.response!r}"
+            )
+        return {}
 
     def _record(self, cols, true, excitation) -> RigRecord:
         meta = {
