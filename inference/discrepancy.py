@@ -172,7 +172,13 @@ class Discrepancy:
         rows = max(1, int(round(self.window_s * rec.fs / max(1, self._est.half_ // 2))))
         nb = r2.size // rows
         if nb < 2:
-            raise DiscrepancyError(f"{rec.source}: too few samples for the discrepancy workflow's selection part")
+            need = 2 * rows / max(1, r2.size) * rec.n  # samples of record that give two blocks
+            raise DiscrepancyError(
+                f"{rec.source}: too short for the discrepancy workflow: {rec.duration:.3g} s, at least about "
+                f"{need / rec.fs:.3g} s are needed (the part from {100 * self.n_fit / rec.n:.0f} to "
+                f"{100 * self.n_id / rec.n:.0f} % of the record scores each effect in {self.window_s:g} s blocks, "
+                "two at least)"
+            )
         cand.block_ms = r2[: nb * rows].reshape(nb, rows).mean(axis=1) / ys.var()
         cand.heldout_percent = float(100 * np.sqrt(cand.block_ms.mean()))
         cand.coefficients = coef
@@ -372,7 +378,7 @@ class Discrepancy:
         return txt
 
     def result(self) -> dict[str, Any]:
-        last = self.iterations_[0]
+        last = self.iterations_[0] if self.iterations_ else {"ranking": []}  # max_effects = 0: the baseline only
         before = self.gap_before_.get("median_window_percent", math.inf)
         after = self.gap_after_.get("median_window_percent", math.inf)
         return {

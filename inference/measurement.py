@@ -376,7 +376,9 @@ def time_base(t: np.ndarray, resolution: np.ndarray | None, path) -> tuple[float
     d = np.diff(t)
     if np.any(d <= 0):
         r = int(np.flatnonzero(d <= 0)[0]) + 2
-        raise MeasurementError(f"{path}: column t is not increasing at row {r} (t = {t[r - 1]:.9g} s after {t[r - 2]:.9g} s)")
+        raise MeasurementError(
+            f"{path}: column t is not increasing at row {r} (t = {t[r - 1]:.9g} s after {t[r - 2]:.9g} s)"
+        )
     res = np.zeros(n) if resolution is None else np.asarray(resolution, float)
     res = res + 4 * np.spacing(np.abs(t))  # the column's own floating-point resolution
     # the typical step: the median of the printed steps, itself off by up to one printed unit

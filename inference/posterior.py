@@ -704,7 +704,7 @@ class Posterior:
             "walkers": self.n_walkers,
             "ensembles": self.n_ensembles,
             "kept_steps_per_ensemble": int(n_keep),
-            "tau_max_steps": float(np.nanmax(tau_arr)),
+            "tau_max_steps": float(np.nanmax(tau_arr)) if np.isfinite(tau_arr).any() else None,
             "likelihood_calls": logpost.calls,
             "priors": par.description,
             "seed": self.seed,
@@ -712,7 +712,8 @@ class Posterior:
             "moves": "DEMove 0.8, DESnookerMove 0.2",
         }
         self.logpost_, self.par_, self.windows_ = logpost, par, win
-        res.thin = max(1, int(np.ceil(np.nanmax(tau_arr) / 2)))
+        tau_max = np.nanmax(tau_arr) if np.isfinite(tau_arr).any() else np.nan  # too short a chain: no tau
+        res.thin = max(1, int(np.ceil(tau_max / 2))) if np.isfinite(tau_max) else 1
         res.idata = self._idata(res, y, rec)
         return res
 
@@ -832,7 +833,8 @@ def summarise(samples: np.ndarray, names, tau: np.ndarray, hdi_prob: float) -> d
     out = {}
     for i, n in enumerate(names):
         x = samples[..., i].ravel()
-        t = float(np.nanmax(np.asarray(tau)[:, i]))
+        col = np.asarray(tau, float)[:, i]
+        t = float(np.nanmax(col)) if np.isfinite(col).any() else float("nan")
         emcee_ess = E * S * W / max(t, 1.0)
         lo, hi = (float(v) for v in hdi[n].values)
         out[n] = {

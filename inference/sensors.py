@@ -153,8 +153,11 @@ def derive(cols: dict[str, np.ndarray], input_name: str, fs: float, source: str)
                 "z_constant_known": True,
             }
         if not base_moves:
-            return cols["y"], {"measured": "y", "derived": "z = y (force input: the base does not move)",
-                               "z_constant_known": True}
+            return cols["y"], {
+                "measured": "y",
+                "derived": "z = y (force input: the base does not move)",
+                "z_constant_known": True,
+            }
         b = integrate_fft(cols["base_acc"], fs, HIGHPASS_HZ, order=2)
         return cols["y"] - b, {
             "measured": "y",
@@ -164,8 +167,9 @@ def derive(cols: dict[str, np.ndarray], input_name: str, fs: float, source: str)
     if measured == "y_dot":
         if base_moves:
             bv = integrate_fft(cols["base_acc"], fs, HIGHPASS_HZ, order=1)
-            z, info = velocity_to_z(cols["y_dot"] - bv, fs, f"y_dot - base velocity (base_acc integrated above "
-                                    f"{HIGHPASS_HZ:g} Hz)")
+            z, info = velocity_to_z(
+                cols["y_dot"] - bv, fs, f"y_dot - base velocity (base_acc integrated above {HIGHPASS_HZ:g} Hz)"
+            )
         else:
             z, info = velocity_to_z(cols["y_dot"], fs, "y_dot (force input: the base does not move)")
         return z, {"measured": "y_dot", **info}
@@ -250,6 +254,7 @@ def frame_offset(rec) -> dict[str, Any]:
         return {"offset_m": None, "method": f"not pinned: {' '.join(str(exc).split())}"}
     anchored = [w for w in rest if w in wells and all(w in p[1] for p in parts)]
     if anchored:
+
         def offset(ws):
             return float(np.mean([rest[w] - ws[w] for w in anchored]))
 
@@ -257,7 +262,8 @@ def frame_offset(rec) -> dict[str, Any]:
             "offset_m": offset(wells),
             "offset_se_m": _se([offset(p[1]) for p in parts]),
             "method": "the fitted wells put at the rest positions of the file's metadata ("
-            + ", ".join(f"z_{w}_rest = {rest[w]:g} m" for w in anchored) + ")",
+            + ", ".join(f"z_{w}_rest = {rest[w]:g} m" for w in anchored)
+            + ")",
         }
     if rec.input_name != "base_acc":
         return {"offset_m": None, "method": "not pinned: a force-driven record carries no weight (k0 unknown)"}
@@ -290,15 +296,19 @@ def pin_frame(rec):
     if rec.z is None or resp.get("z_constant_known", True):
         return rec
     fo = frame_offset(rec)
-    resp = {**resp, "frame_offset_m": fo["offset_m"], "frame_offset_se_m": fo.get("offset_se_m"),
-            "frame": fo["method"]}
+    resp = {**resp, "frame_offset_m": fo["offset_m"], "frame_offset_se_m": fo.get("offset_se_m"), "frame": fo["method"]}
     se = fo.get("offset_se_m") or 0.0
     if fo["offset_m"] is None:
-        resp["warnings"] = [*resp.get("warnings", []), f"z's frame is unknown ({fo['method']}); the "
-                            "coefficients k0-k2 are in the record's own frame"]
+        resp["warnings"] = [
+            *resp.get("warnings", []),
+            f"z's frame is unknown ({fo['method']}); the coefficients k0-k2 are in the record's own frame",
+        ]
     elif se > FRAME_SE_WARN_M:
-        resp["warnings"] = [*resp.get("warnings", []), f"z's frame is uncertain: offset {1e3 * fo['offset_m']:.3f} "
-                            f"+- {1e3 * se:.3f} mm (the record visits one well little?); k2 and k1 inherit it "
-                            "(dk2 = 3 k3 dC)"]
+        resp["warnings"] = [
+            *resp.get("warnings", []),
+            f"z's frame is uncertain: offset {1e3 * fo['offset_m']:.3f} "
+            f"+- {1e3 * se:.3f} mm (the record visits one well little?); k2 and k1 inherit it "
+            "(dk2 = 3 k3 dC)",
+        ]
     z = rec.z if fo["offset_m"] is None else rec.z + fo["offset_m"]
     return replace(rec, z=z, info={**rec.info, "response": resp})

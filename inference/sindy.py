@@ -319,7 +319,12 @@ class SINDy:
         rows = max(1, int(round(self.window_s * rec.fs / max(1, self.half_ // 2))))  # rows per block
         n_blocks = y_sel.size // rows
         if n_blocks < 2:
-            raise SINDyError(f"{rec.source}: too few samples for SINDy's selection part ({n_id - n_fit})")
+            need = 2 * rows / max(1, y_sel.size) * rec.n
+            raise SINDyError(
+                f"{rec.source}: too short for SINDy: {rec.duration:.3g} s, at least about {need / rec.fs:.3g} s are "
+                f"needed ({100 * self.selection_fraction:.0f} % of the record scores the candidate models in "
+                f"{self.window_s:g} s blocks, two at least)"
+            )
         supports: dict[tuple[bool, ...], list[float]] = {}
         for weight in self.weights:
             phys = self._fit_once(sys_fit, weight, gain)

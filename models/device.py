@@ -82,6 +82,10 @@ class Device:
     extra: Mapping[str, Any] = field(default_factory=dict)
 
     def __post_init__(self):
+        for name in ("E", "alpha_deg", "m", "L", "l", "b", "h", "D0", "c", "c_nl"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)):
+                raise ValueError(f"device parameter {name} must be a number, got {v!r}")
         for name in ("E", "m", "L", "l", "b", "h", "D0"):
             v = float(getattr(self, name))
             if not (math.isfinite(v) and v > 0):

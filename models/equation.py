@@ -66,6 +66,8 @@ N_PARAMS = 17
 
 
 def _check_finite(name: str, value: float) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
+        raise ValueError(f"model parameter {name} must be a number, got {value!r}")
     value = float(value)
     if not math.isfinite(value):
         raise ValueError(f"model parameter {name} is not finite ({value})")

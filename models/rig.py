@@ -117,8 +117,10 @@ class RigRecord:
             return dict(self.columns)
         if acc_unit != "g":
             raise RigError(f"acceleration unit must be 'm/s^2' or 'g', got {acc_unit!r}")
-        return {(f"{k}_g" if k in ("base_acc", "y_acc") else k): (v / G if k in ("base_acc", "y_acc") else v)
-                for k, v in self.columns.items()}
+        return {
+            (f"{k}_g" if k in ("base_acc", "y_acc") else k): (v / G if k in ("base_acc", "y_acc") else v)
+            for k, v in self.columns.items()
+        }
 
     def write(self, path: str | Path, time_decimals: int | None = None, acc_unit: str = "m/s^2") -> Path:
         """Write the record (CSV, or NPZ by suffix) and ``<stem>.truth.json`` beside it, atomically.

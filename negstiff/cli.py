@@ -10,6 +10,7 @@ import argparse
 import dataclasses
 import json
 import sys
+import warnings
 from pathlib import Path
 from typing import Any, Sequence
 
@@ -26,6 +27,38 @@ Every record is written with <name>.truth.json beside it (the truth behind the r
 
 class InputError(Exception):
     """Bad input found by the CLI itself (exit 2)."""
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse with the contract's error form: one line naming the option, exit 2 (no usage dump)."""
+
+    def error(self, message: str):
+        self.exit(2, f"{self.prog}: error: {' '.join(message.split())} (see {self.prog} --help)\n")
+
+
+def _number(kind, lo=None, hi=None, lo_open=False, what=""):
+    """An argparse type: a number of ``kind`` in [lo, hi] (open at lo with ``lo_open``)."""
+
+    def parse(text: str):
+        try:
+            v = kind(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{text!r} is not {'an integer' if kind is int else 'a number'}") from None
+        if kind is float and not np.isfinite(v):
+            raise argparse.ArgumentTypeError(f"{text!r} is not a finite number")
+        if lo is not None and (v < lo or (lo_open and v == lo)):
+            raise argparse.ArgumentTypeError(f"{text} is out of range: must be {'>' if lo_open else '>='} {lo:g}{what}")
+        if hi is not None and v > hi:
+            raise argparse.ArgumentTypeError(f"{text} is out of range: must be <= {hi:g}{what}")
+        return v
+
+    parse.__name__ = kind.__name__
+    return parse
+
+
+POSITIVE = _number(float, 0.0, lo_open=True)
+POSITIVE_INT = _number(int, 1)
+SEED = _number(int, 0, 2**32 - 1)
 
 
 def _bad_input_types() -> tuple[type[BaseException], ...]:
@@ -96,6 +129,7 @@ def _make_rig(args):
 
     system = load_system(args.model) if args.model else AS_BUILT
     sensors = Sensors.noiseless() if args.noise_free else Sensors()
+    sensors = dataclasses.replace(sensors, response=args.sensor, response_offset=args.response_offset)
     return Rig(system, effects=_parse_effects(args.effect), sensors=sensors, fs=args.fs, seed=args.seed)
 
 
@@ -109,15 +143,20 @@ def cmd_rig(args) -> int:
             band=tuple(args.band),
             start="plus" if args.start == "both" else args.start,
         )
-        rec.write(out)
-        _say(args, f"wrote {out} ({rec.columns['z'].size} samples at {rig.fs:g} Hz) and its truth")
+        rec.write(out, **_export(args))
+        _say(args, f"wrote {out} ({rec.columns['t'].size} samples at {rig.fs:g} Hz) and its truth")
     elif args.mode == "harmonic":
         rec = rig.harmonic(args.freq, args.amplitude, args.start, args.settle_periods, args.periods)
-        rec.write(out)
+        rec.write(out, **_export(args))
         _say(args, f"wrote {out} ({args.periods} periods at {args.freq:g} Hz, {args.amplitude:g} m/s^2) and its truth")
     else:
         write_campaign(rig, args)
     return 0
+
+
+def _export(args) -> dict[str, Any]:
+    """How the rig's file is written (a lab's export: time decimals, accelerations in g)."""
+    return {"time_decimals": args.time_decimals, "acc_unit": args.acc_unit}
 
 
 def write_campaign(rig, args) -> None:
@@ -137,7 +176,7 @@ def write_campaign(rig, args) -> None:
             for rec in recs:
                 amp = rec.truth["excitation"]["amplitude_m_s2"]
                 name = f"{start}_{direction}_{rec.truth['excitation']['step']:03d}_{amp:g}.csv"
-                rec.write(tmp / name)
+                rec.write(tmp / name, **_export(args))
                 index.append(
                     {
                         "file": name,
@@ -166,7 +205,7 @@ def cmd_simulate(args) -> int:
     from negstiff.models import simulate
 
     system = load_system(args.model)
-    rec = load(args.input, columns=args.columns, fs=args.fs)
+    rec = load(args.input, columns=args.columns, fs=args.fs, response=False)
     rec.require(2, "a simulation")
     z0, v0 = initial_state_from_record(rec.z, rec.fs) if rec.z is not None else (None, 0.0)
     if args.z0 is not None:
@@ -217,12 +256,11 @@ def cmd_identify(args) -> int:
         from negstiff.inference.sindy import SINDy
 
         est = SINDy(n_models=args.ensemble, seed=args.seed).fit(rec)
-    result = est.result()
+    result = _with_record(est.result(), rec, est.model_)
     v = result["validation"]
     if v.get("diverged"):
         _say(args, f"WARNING: {v['warning']}")
-    for w in result.get("warnings", []):
-        _say(args, f"WARNING: {w}")
+    _warn(args, result["warnings"])
     if args.method == "sindy":
         _say(args, f"selected terms: {', '.join(result['selected_terms'])}")
     write_json(args.out, result)
@@ -257,15 +295,14 @@ def cmd_posterior(args) -> int:
         progress=_progress(args),
     )
     res = post.fit(rec)
-    result = result_json(res, args.hdi_prob)
+    result = _with_record(result_json(res, args.hdi_prob), rec)
     if args.idata:
         from negstiff.files import atomic_path
 
         with atomic_path(args.idata) as tmp:
             res.idata.to_netcdf(tmp, engine="h5netcdf")
     write_json(args.out, result)
-    for w in res.warnings:
-        _say(args, f"WARNING: {w}")
+    _warn(args, result["warnings"])
     line = ", ".join(f"{n} {s['mean']:.4g} +- {s['sd']:.2g}" for n, s in result["parameters"].items())
     _say(args, f"wrote {args.out}: {line}")
     return 0
@@ -279,8 +316,9 @@ def cmd_discrepancy(args) -> int:
     _say(args, f"discrepancy: {rec.n} samples at {rec.fs:g} Hz, input {rec.input_name}, baseline {args.baseline}")
     base = CUBIC_BASELINE if args.baseline == "cubic" else LINEAR_BASELINE
     d = Discrepancy(baseline=base, max_effects=args.max_effects).fit(rec)
-    result = d.result()
+    result = _with_record(d.result(), rec, d.model_)
     write_json(args.out, result)
+    _warn(args, result["warnings"])
     _say(args, f"where: {result['where']}")
     _say(
         args,
@@ -317,7 +355,9 @@ def cmd_characterize(args) -> int:
     r = characterize(rec, args.forcing_hz, wells)
     r.pop("poincare_z")
     r["wells_used"] = wells
+    r = _with_record(r, rec)
     write_json(args.out, r)
+    _warn(args, r["warnings"])
     lle = r["lle"]
     _say(
         args,
@@ -364,12 +404,68 @@ def _say(args, text: str) -> None:
         print(text, file=sys.stderr)
 
 
+def _warn(args, warnings: Sequence[str]) -> None:
+    """Warnings are loud: on stderr even with --quiet (and in the result)."""
+    for w in warnings:
+        print(f"negstiff {args.command}: WARNING: {w}", file=sys.stderr)
+
+
+def _with_record(result: dict, rec, model=None) -> dict:
+    """A result with how its record was read (time base, response sensor, derived z) and every
+    warning about the record and the model (``inference.plausibility``)."""
+    from negstiff.inference.plausibility import collect
+
+    return {**result, "record": rec.info, "warnings": collect(rec, result, model)}
+
+
+INPUT_ARGS = ("data", "model", "input", "targets")
+OUTPUT_ARGS = ("out", "idata")
+
+
+def check_paths(args) -> None:
+    """Before any work: no output may be an input, and every output's folder must be writable."""
+    import os
+    import tempfile
+
+    inputs = {}
+    for name in INPUT_ARGS:
+        v = getattr(args, name, None)
+        if v:
+            inputs[Path(v).resolve()] = v
+    for name in OUTPUT_ARGS:
+        v = getattr(args, name, None)
+        if not v:
+            continue
+        out = Path(v).resolve()
+        targets = [out]
+        if args.command == "rig" and out.suffix:
+            targets.append(out.with_name(out.stem + ".truth.json"))
+        for t in targets:
+            if t in inputs:
+                raise InputError(
+                    f"--{name.replace('_', '-')} {v}: would overwrite the input {inputs[t]}; choose another path"
+                )
+        if out.is_dir() and not (args.command == "rig" and args.mode == "campaign"):
+            raise InputError(f"--{name} {v}: is a folder; give a file path")
+        parent = out if (args.command == "rig" and args.mode == "campaign") else out.parent
+        while not parent.exists() and parent != parent.parent:
+            parent = parent.parent
+        try:  # the one sure test of a folder's writability: write in it
+            if not parent.is_dir():
+                raise OSError
+            fd, probe = tempfile.mkstemp(prefix=".negstiff-probe.", dir=parent)
+            os.close(fd)
+            os.unlink(probe)
+        except OSError:
+            raise InputError(f"--{name} {v}: cannot write there ({parent} is not a writable folder)") from None
+
+
 def build_parser() -> argparse.ArgumentParser:
-    common = argparse.ArgumentParser(add_help=False)
-    common.add_argument("--seed", type=int, default=0, help="seed of every random draw (same seed, same numbers)")
+    common = _Parser(add_help=False)
+    common.add_argument("--seed", type=SEED, default=0, help="seed of every random draw (same seed, same numbers)")
     common.add_argument("--quiet", action="store_true", help="no progress on stderr")
 
-    p = argparse.ArgumentParser(
+    p = _Parser(
         prog="negstiff",
         description="Identify, update and quantify the uncertainty of nonlinear (bistable, negative-stiffness) "
         "oscillators from shaker-table records. Units are SI; see 'negstiff COMMAND --help'.",
@@ -401,37 +497,74 @@ def build_parser() -> argparse.ArgumentParser:
         help="hidden extra effect (coulomb_friction, quadratic_damping, cubic_damping, quartic_stiffness, "
         "quintic_stiffness, end_stop=k:N/m,z:m, ...); repeatable",
     )
-    rig.add_argument("--fs", type=float, default=512.0, help="sampling rate [Hz] (default 512)")
+    rig.add_argument("--fs", type=_number(float, 1.0, 1e6), default=512.0, help="sampling rate [Hz] (default 512)")
     rig.add_argument("--noise-free", action="store_true", help="perfect sensors (no noise, no bias)")
+    g = rig.add_argument_group("lab variants (records as other labs write them)")
+    g.add_argument(
+        "--sensor",
+        default="displacement",
+        choices=["displacement", "velocity", "absolute", "accelerometer"],
+        help="response sensor: displacement (the seed's laser and double-integrated base: y, base_disp, z), "
+        "velocity (a vibrometer relative to the base: z_dot), absolute (the laser's y only), accelerometer "
+        "(on the moving part: y_acc)",
+    )
+    g.add_argument(
+        "--response-offset",
+        type=_number(float),
+        default=0.0,
+        help="DC offset of the response sensor in its units (m, m/s or m/s^2; default 0)",
+    )
+    g.add_argument(
+        "--time-decimals", type=_number(int, 0, 12), help="print the time column with N fixed decimals (CSV)"
+    )
+    g.add_argument(
+        "--acc-unit",
+        default="m/s^2",
+        choices=["m/s^2", "g"],
+        help="write accelerations in g, as base_acc_g / y_acc_g (read back with --columns base_acc=base_acc_g*9.81)",
+    )
     g = rig.add_argument_group("random")
-    g.add_argument("--duration", type=float, default=300.0, help="record length [s] (default 300)")
-    g.add_argument("--rms", type=float, default=14.0, help="table acceleration rms [m/s^2] (default 14: cross-well)")
+    g.add_argument("--duration", type=_number(float, 1.0, 1e5), default=300.0, help="record length [s] (default 300)")
+    g.add_argument("--rms", type=POSITIVE, default=14.0, help="table acceleration rms [m/s^2] (default 14: cross-well)")
     g.add_argument(
         "--band",
-        type=float,
+        type=POSITIVE,
         nargs=2,
         default=[2.0, 40.0],
         metavar=("LO", "HI"),
         help="excitation band [Hz] (default 2 40)",
     )
     g = rig.add_argument_group("harmonic and campaign")
-    g.add_argument("--freq", type=float, default=9.0, help="forcing frequency [Hz] (default 9)")
-    g.add_argument("--amplitude", type=float, default=5.0, help="table acceleration amplitude [m/s^2] (harmonic)")
+    g.add_argument("--freq", type=POSITIVE, default=9.0, help="forcing frequency [Hz] (default 9)")
+    g.add_argument(
+        "--amplitude", type=_number(float, 0.0), default=5.0, help="table acceleration amplitude [m/s^2] (harmonic)"
+    )
     g.add_argument(
         "--amplitudes", default="4:30:0.5", help="campaign amplitudes start:stop:step or a list (default 4:30:0.5)"
     )
     g.add_argument("--start", default="plus", choices=["plus", "minus", "both"], help="starting well (default plus)")
     g.add_argument("--direction", default="up", choices=["up", "down", "both"], help="campaign sweep direction")
-    g.add_argument("--settle-periods", type=int, default=100, help="forcing periods discarded per step (default 100)")
-    g.add_argument("--periods", type=int, default=100, help="forcing periods recorded per step (default 100)")
+    g.add_argument(
+        "--settle-periods",
+        type=_number(int, 0, 10**6),
+        default=100,
+        help="forcing periods discarded per step (default 100)",
+    )
+    g.add_argument(
+        "--periods", type=_number(int, 1, 10**6), default=100, help="forcing periods recorded per step (default 100)"
+    )
     rig.set_defaults(func=cmd_rig)
 
     # options of every command that reads a measurement file
-    data_opts = argparse.ArgumentParser(add_help=False)
+    data_opts = _Parser(add_help=False)
     data_opts.add_argument(
         "--columns", help="column map for foreign files, e.g. force=V1,z=V2 (a map entry may scale: X*9.81)"
     )
-    data_opts.add_argument("--fs", type=float, help="sampling rate [Hz] for files without t")
+    data_opts.add_argument(
+        "--fs",
+        type=POSITIVE,
+        help="sampling rate [Hz]; replaces the file's time column (for files without t, or a broken one)",
+    )
 
     sim = sub.add_parser(
         "simulate",
@@ -443,9 +576,11 @@ def build_parser() -> argparse.ArgumentParser:
     sim.add_argument("model", help="model JSON")
     sim.add_argument("input", help="measurement file whose input column drives the model")
     sim.add_argument("-o", "--out", required=True, help="output CSV: t,<input>,z,z_dot")
-    sim.add_argument("--z0", type=float, help="initial z [m]")
-    sim.add_argument("--v0", type=float, help="initial z_dot [m/s]")
-    sim.add_argument("--substeps", type=int, default=2, help="RK4 steps per sample interval (default 2)")
+    sim.add_argument("--z0", type=_number(float), help="initial z [m]")
+    sim.add_argument("--v0", type=_number(float), help="initial z_dot [m/s]")
+    sim.add_argument(
+        "--substeps", type=_number(int, 1, 64), default=2, help="RK4 steps per sample interval (default 2)"
+    )
     sim.set_defaults(func=cmd_simulate)
 
     idf = sub.add_parser(
@@ -461,10 +596,24 @@ def build_parser() -> argparse.ArgumentParser:
     idf.add_argument("method", choices=["nsi", "sindy"], help="identification method")
     idf.add_argument("data", help="measurement file")
     idf.add_argument("-o", "--out", required=True, help="result JSON")
-    idf.add_argument("--mass", type=float, help="moving mass [kg] (default: the file's metadata; else per unit mass)")
-    idf.add_argument("--order", type=int, default=2, help="NSI model order (default 2: one mode)")
-    idf.add_argument("--block-rows", type=int, default=30, help="NSI: block rows of the Hankel matrices (default 30)")
-    idf.add_argument("--ensemble", type=int, default=50, help="SINDy: bagged models of the ensemble (default 50)")
+    idf.add_argument(
+        "--mass", type=POSITIVE, help="moving mass [kg] (default: the file's metadata; else per unit mass)"
+    )
+    idf.add_argument(
+        "--order",
+        type=_number(int, 2, 20, what=" (the state dimension: 2 per mode)"),
+        default=2,
+        help="NSI model order (default 2: one mode)",
+    )
+    idf.add_argument(
+        "--block-rows",
+        type=_number(int, 2, 500),
+        default=30,
+        help="NSI: block rows of the Hankel matrices (default 30)",
+    )
+    idf.add_argument(
+        "--ensemble", type=_number(int, 2, 10000), default=50, help="SINDy: bagged models of the ensemble (default 50)"
+    )
     idf.set_defaults(func=cmd_identify)
 
     pst = sub.add_parser(
@@ -480,19 +629,34 @@ def build_parser() -> argparse.ArgumentParser:
     )
     pst.add_argument("data", help="measurement file")
     pst.add_argument("-o", "--out", required=True, help="result JSON")
-    pst.add_argument("--mass", type=float, help="moving mass [kg] (default: the file's metadata)")
+    pst.add_argument("--mass", type=POSITIVE, help="moving mass [kg] (default: the file's metadata)")
     pst.add_argument("--model", choices=["coefficients", "device"], default="coefficients")
     pst.add_argument("--mass-prior", choices=["weighed", "free"], default="weighed", help="device model: mass prior")
     pst.add_argument("--idata", help="save the arviz data (posterior, sample stats, log likelihood) as NetCDF")
-    pst.add_argument("--duration", type=float, help="use only the first DURATION seconds of the record")
-    pst.add_argument("--window", type=float, default=0.125, help="multiple-shooting window [s] (default 0.125)")
+    pst.add_argument("--duration", type=POSITIVE, help="use only the first DURATION seconds of the record")
+    pst.add_argument("--window", type=POSITIVE, default=0.125, help="multiple-shooting window [s] (default 0.125)")
     pst.add_argument(
-        "--max-windows", type=int, default=240, help="windows used at most, spread over the record (default 240)"
+        "--max-windows",
+        type=_number(int, 4, 10**6),
+        default=240,
+        help="windows used at most, spread over the record (default 240)",
     )
-    pst.add_argument("--walkers", type=int, default=32, help="walkers per ensemble (default 32)")
-    pst.add_argument("--ensembles", type=int, default=4, help="independent ensembles (default 4)")
-    pst.add_argument("--max-steps", type=int, default=6000, help="step cap per ensemble (default 6000)")
-    pst.add_argument("--hdi-prob", type=float, default=0.9, help="credible-interval probability (default 0.9)")
+    pst.add_argument(
+        "--walkers",
+        type=_number(int, 16, 10**5, what=" (emcee: twice the 7 dimensions of the device model, at least)"),
+        default=32,
+        help="walkers per ensemble (default 32)",
+    )
+    pst.add_argument("--ensembles", type=_number(int, 1, 1000), default=4, help="independent ensembles (default 4)")
+    pst.add_argument(
+        "--max-steps", type=_number(int, 1, 10**7), default=6000, help="step cap per ensemble (default 6000)"
+    )
+    pst.add_argument(
+        "--hdi-prob",
+        type=_number(float, 0.0, 0.999, lo_open=True),
+        default=0.9,
+        help="credible-interval probability (default 0.9)",
+    )
     pst.add_argument(
         "--no-adjust",
         action="store_true",
@@ -513,9 +677,9 @@ def build_parser() -> argparse.ArgumentParser:
     )
     dsc.add_argument("data", help="measurement file")
     dsc.add_argument("-o", "--out", required=True, help="result JSON")
-    dsc.add_argument("--mass", type=float, help="moving mass [kg] (default: the file's metadata)")
+    dsc.add_argument("--mass", type=POSITIVE, help="moving mass [kg] (default: the file's metadata)")
     dsc.add_argument("--baseline", choices=["cubic", "linear"], default="cubic", help="starting model")
-    dsc.add_argument("--max-effects", type=int, default=3, help="effects added at most (default 3)")
+    dsc.add_argument("--max-effects", type=_number(int, 0, 20), default=3, help="effects added at most (default 3)")
     dsc.set_defaults(func=cmd_discrepancy)
 
     chz = sub.add_parser(
@@ -528,7 +692,7 @@ def build_parser() -> argparse.ArgumentParser:
         "Rosenstein beside it).",
     )
     chz.add_argument("data", help="measurement file")
-    chz.add_argument("--forcing-hz", type=float, required=True, help="forcing frequency [Hz]")
+    chz.add_argument("--forcing-hz", type=POSITIVE, required=True, help="forcing frequency [Hz]")
     chz.add_argument("--signal", default="z", choices=["z", "y", "z_dot", "base_disp"], help="column to analyse")
     chz.add_argument(
         "--wells",
@@ -549,9 +713,9 @@ def build_parser() -> argparse.ArgumentParser:
     )
     upd.add_argument("targets", help="identify result JSON or targets JSON")
     upd.add_argument("-o", "--out", required=True, help="result JSON")
-    upd.add_argument("--fix-mass", type=float, help="weighed moving mass [kg]: update E and alpha only")
-    upd.add_argument("--generations", type=int, default=120, help="GA generations (default 120)")
-    upd.add_argument("--pop-size", type=int, default=60, help="GA population (default 60)")
+    upd.add_argument("--fix-mass", type=POSITIVE, help="weighed moving mass [kg]: update E and alpha only")
+    upd.add_argument("--generations", type=_number(int, 1, 10**5), default=120, help="GA generations (default 120)")
+    upd.add_argument("--pop-size", type=_number(int, 4, 10**5), default=60, help="GA population (default 60)")
     upd.set_defaults(func=cmd_update)
 
     rep = sub.add_parser(
@@ -568,13 +732,27 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
-    args = parser.parse_args(argv)
     try:
-        return args.func(args)
+        args = parser.parse_args(argv)
+    except KeyboardInterrupt:
+        print("negstiff: interrupted", file=sys.stderr)
+        return 130
+    try:
+        check_paths(args)
+        with warnings.catch_warnings():
+            # the libraries' notices (arviz's dimension names, numpy's empty slices) are not the user's
+            # business; negstiff's own warnings are in the result and on stderr (``_warn``)
+            warnings.simplefilter("ignore")
+            return args.func(args)
     except _bad_input_types() as exc:
         msg = " ".join(str(exc).split()) or type(exc).__name__
         print(f"negstiff {args.command}: error: {msg}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt:
+        print(f"negstiff {args.command}: interrupted (nothing written)", file=sys.stderr)
+        return 130
+    except BrokenPipeError:
+        return 141
 
 
 if __name__ == "__main__":

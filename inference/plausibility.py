@@ -1,0 +1,101 @@
+"""Loud warnings for results a physicist would not believe: a record in mm, a z frame far from the
+rods-horizontal position (or physics that never carry the weight: wrong units), wells beyond the
+stroke the record visited.
+
+These never fail a command (the numbers may be right for an unusual device); they go into the
+result's ``warnings`` and onto stderr, each saying what looks wrong and what to check.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+STROKE_LIMIT_M = 1.0
+"""A shaker-table device's relative displacement stays far below this [m]; beyond it, the record is
+not in metres."""
+
+ACC_LIMIT_M_S2 = 2000.0
+"""Table accelerations beyond this rms [m/s^2] (200 g) are not in m/s^2."""
+
+FRAME_WARN_M = 2e-3
+"""A measured z whose zero sits this far [m] from where the record's physics carries the weight is
+warned about. The gravity estimate of the frame errs by ~0.2 mm on the exact device's records
+(model form, measured); a cubic's own k0 is no guide (NSI's cubic on as-built records puts m g at
+z = -3.6 mm, k0/m = 1.4-1.8 m/s^2: the exact K is not a cubic)."""
+
+
+def record_warnings(rec) -> list[str]:
+    """Unit checks of a record's columns (SI expected)."""
+    out = []
+    if rec.z is not None:
+        span = float(np.ptp(rec.z))
+        if span > STROKE_LIMIT_M:
+            out.append(
+                f"z spans {span:.3g} m: is the record in mm? negstiff reads SI units (m); scale the column in the map, "
+                "e.g. --columns z=COL*0.001"
+            )
+    if rec.input_name == "base_acc":
+        rms = float(np.std(rec.u))
+        if rms > ACC_LIMIT_M_S2:
+            out.append(f"base_acc has rms {rms:.3g} m/s^2 (over 200 g): is it in mm/s^2? negstiff reads m/s^2")
+    return out
+
+
+def frame_warnings(rec) -> list[str]:
+    """Is a measured z in the rods-horizontal frame? Where the record's own physics carries the weight
+    (``sensors.frame_offset`` by gravity, rest positions ignored) says how far its zero is from it."""
+    from dataclasses import replace
+
+    from negstiff.inference.sensors import frame_offset
+
+    if rec.z is None or rec.input_name != "base_acc" or not rec.info.get("response", {}).get("z_constant_known", True):
+        return []
+    fo = frame_offset(replace(rec, meta={k: v for k, v in rec.meta.items() if not k.endswith("_rest")}))
+    if fo["offset_m"] is None:
+        return [
+            f"the record's physics never carry the weight ({fo['method']}): are base_acc in m/s^2 and z in m, "
+            "and is the input the table's acceleration?"
+        ]
+    c, se = fo["offset_m"], fo.get("offset_se_m") or 0.0
+    if abs(c) > FRAME_WARN_M:  # the parts' spread (se) is said, not used: short parts may visit one well only
+        return [
+            f"z's zero seems {-1e3 * c:.3g} mm off the rods-horizontal position (+-{1e3 * se:.2g} mm): the record's "
+            f"physics carry the weight at z = {-1e3 * c:.3g} mm, not at z = 0 (a displacement sensor's offset?). "
+            f"The model is in the record's frame; shifting z by {1e3 * c:.3g} mm would put it in the physical one"
+        ]
+    return []
+
+
+def model_warnings(model, rec) -> list[str]:
+    """Wells of an identified model beyond the stroke the record visited are extrapolations."""
+    out: list[str] = []
+    if rec.z is None:
+        return out
+    lo, hi = float(rec.z.min()), float(rec.z.max())
+    span = hi - lo
+    try:
+        eq = model.equilibria()
+    except ValueError:
+        return out
+    for name in ("z_minus", "z_plus"):
+        z = getattr(eq, name)
+        if z is not None and not (lo - 0.5 * span <= z <= hi + 0.5 * span):
+            out.append(
+                f"the model's well {name} = {z:.4g} m lies beyond the stroke the record visited "
+                f"[{lo:.4g}, {hi:.4g}] m: an extrapolation"
+            )
+    return out
+
+
+def collect(rec, result: dict[str, Any] | None = None, model=None) -> list[str]:
+    """Every warning about a record (its derivation, its units, its frame) and about a result's model
+    (the frame is checked where a model was identified: a harmonic record cannot say it)."""
+    resp = rec.info.get("response", {}) if rec is not None else {}
+    out = list(resp.get("warnings", [])) + record_warnings(rec)
+    if model is not None:
+        out += frame_warnings(rec) + model_warnings(model, rec)
+    if result is not None:
+        out = list(result.get("warnings", [])) + [w for w in out if w not in result.get("warnings", [])]
+    return out
