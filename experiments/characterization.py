@@ -16,10 +16,11 @@ from typing import Any
 import matplotlib.pyplot as plt
 import numpy as np
 
+from negstiff.inference.characterize import characterize
 from negstiff.inference.lyapunov import largest_lyapunov
 from negstiff.inference.measurement import Measurement, from_arrays
 from negstiff.inference.nsi import smooth_and_differentiate
-from negstiff.inference.periodicity import noise_level, periodicity, poincare
+from negstiff.inference.periodicity import noise_level, poincare
 from negstiff.models import AS_BUILT
 from negstiff.models.rig import Rig, RigRecord
 from negstiff.models.simulator import lyapunov_benettin
@@ -27,35 +28,9 @@ from negstiff.models.simulator import lyapunov_benettin
 from . import seed
 from .report import Report, fmt, run_study
 
-CHAOS_THRESHOLD = 0.05
-"""A Wolf exponent counts as significantly positive above this many nats per radian of forcing
-(0.05 x 2 pi f: 2.8 1/s at 9 Hz; periodic rig records gave -0.6 to +0.04 1/s, chaotic ones 6.4)."""
-
 
 def record_measurement(rec: RigRecord) -> Measurement:
     return from_arrays(rec.columns["base_acc"], rec.columns["z"], rec.fs, source=rec.meta["source"])
-
-
-def characterize(m: Measurement, forcing_hz: float, wells=None, lle: bool = True) -> dict[str, Any]:
-    """Period, regime, amplitudes and the largest Lyapunov exponent of one harmonic-forced record."""
-    per = periodicity(m, forcing_hz, wells)
-    out = {k: per[k] for k in ("period", "regime", "amplitudes", "tolerance", "residuals", "noise_std")}
-    if lle:
-        w = largest_lyapunov(m.z, m.dt, forcing_hz=forcing_hz, noise=per["noise_std"])
-        out["lle"] = {
-            "value": w["value"],
-            "units": "1/s",
-            "method": "wolf",
-            "rosenstein": w["rosenstein"],
-            "embedding": {"m": w["m"], "tau_samples": w["tau"] * w["sample_step"]},
-            "evolv_samples": w["evolv"] * w["sample_step"],
-        }
-        significant = w["value"] > CHAOS_THRESHOLD * 2 * np.pi * forcing_hz
-    else:
-        significant = True
-    out["chaotic"] = bool(per["period"] is None and significant)
-    out["poincare_z"] = per["poincare_z"]
-    return out
 
 
 def bifurcation_map(rig: Rig, freq: float, amplitudes, settle_periods: int, record_periods: int) -> dict[str, Any]:

@@ -136,11 +136,15 @@ def detect_period(points: np.ndarray, tol: float) -> tuple[int | None, dict[int,
     return None, r
 
 
-def periodicity(rec: Measurement, f_hz: float, wells: tuple | None = None) -> dict[str, Any]:
+def periodicity(
+    rec: Measurement, f_hz: float, wells: tuple | None = None, noise: float | None = None, band_fs: float | None = None
+) -> dict[str, Any]:
     """Period, amplitudes per branch and regime of a steady-state harmonically forced record.
 
     ``wells``: (z_minus, z_0, z_plus) or (z_minus, z_plus) when known (a lab measures the two rest
-    positions; z_0 comes from a model), else None.
+    positions; z_0 comes from a model), else None. ``noise`` [m] and ``band_fs`` [Hz]: the sensor
+    noise and the sampling rate it was acquired at, for a record interpolated from a lower rate
+    (default: estimated from ``rec``, at ``rec.fs``).
     """
     sync = _synchronous(rec, f_hz)
     pc = _sections(sync, (0.0,))
@@ -156,10 +160,11 @@ def periodicity(rec: Measurement, f_hz: float, wells: tuple | None = None) -> di
         pts[:, k] -= np.polyval(np.polyfit(n_idx, pts[:, k], 2), n_idx) - pts[:, k].mean()
     # noise of a Poincare point: white sensor noise through the band limit fc (gain sqrt(2 fc / fs))
     # and its derivative (gain 2 pi fc sqrt(2 fc / (3 fs)))
-    noise = noise_level(rec.z, rec.fs)
-    fc = band_edge(rec.fs, f_hz)
-    gz = math.sqrt(2 * fc / rec.fs)
-    gv = 2 * math.pi * fc * math.sqrt(2 * fc / (3 * rec.fs))
+    noise = noise_level(rec.z, rec.fs) if noise is None else noise
+    band_fs = rec.fs if band_fs is None else band_fs
+    fc = min(band_edge(rec.fs, f_hz), band_fs / 2)
+    gz = math.sqrt(2 * fc / band_fs)
+    gv = 2 * math.pi * fc * math.sqrt(2 * fc / (3 * band_fs))
     point_noise = math.hypot(noise * gz / scale_z, noise * gv / scale_v)
     # r(p) of a truly periodic record is sqrt(2) x the point noise; 4x that, and at least 2 %
     tol = max(0.02, 4 * math.sqrt(2) * point_noise)

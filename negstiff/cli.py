@@ -329,7 +329,7 @@ def cmd_discrepancy(args) -> int:
 
 
 def cmd_characterize(args) -> int:
-    from negstiff.experiments.characterization import characterize
+    from negstiff.inference.characterize import characterize
     from negstiff.inference.measurement import load
     from negstiff.inference.nsi import well_guesses
 
@@ -342,6 +342,8 @@ def cmd_characterize(args) -> int:
     if args.wells:
         try:
             wells = tuple(float(x) for x in args.wells.split(","))
+            if len(wells) not in (2, 3) or not all(np.isfinite(wells)) or list(wells) != sorted(wells):
+                raise ValueError
         except ValueError:
             raise InputError(f"--wells {args.wells!r}: give z_minus,z_plus or z_minus,z_0,z_plus in m") from None
     elif "z_minus_rest" in rec.meta and "z_plus_rest" in rec.meta:
@@ -359,11 +361,14 @@ def cmd_characterize(args) -> int:
     write_json(args.out, r)
     _warn(args, r["warnings"])
     lle = r["lle"]
+    lle_txt = "not determinable" if lle["value"] is None else f"{lle['value']:.2f} +- {lle['sd']:.2g} 1/s (Wolf)"
     _say(
         args,
-        f"wrote {args.out}: period {r['period']}, {r['regime']}, LLE {lle['value']:.2f} 1/s (Wolf), "
+        f"wrote {args.out}: period {r['period']}, {r['regime']}, LLE {lle_txt}, "
         f"{'chaotic' if r['chaotic'] else 'not chaotic'}",
     )
+    for what, why in r["reasons"].items():
+        _say(args, f"{what}: {why}")
     return 0
 
 

@@ -7,7 +7,7 @@ import pytest
 from scipy.integrate import solve_ivp
 
 from negstiff.cli import main
-from negstiff.experiments.characterization import CHAOS_THRESHOLD, characterize
+from negstiff.inference.characterize import CHAOS_THRESHOLD, characterize
 from negstiff.inference.lyapunov import largest_lyapunov
 from negstiff.inference.measurement import MeasurementError, from_arrays
 from negstiff.inference.periodicity import periodicity
@@ -121,3 +121,76 @@ def test_characterize_command_and_a_record_too_short(tmp_path):
     assert r["period"] == 1 and r["regime"] == "in-well-plus"
     with pytest.raises(MeasurementError, match="too few"):
         periodicity(from_arrays(np.zeros(200), np.zeros(200), 512.0), 9.0)
+
+
+# --- records negstiff did not make (scipy's DOP853, a plain decimating DAQ) ---------------------------
+
+
+def _duffing_record(amplitudes, fs, duration, noise=30e-6, seed=0, sim_fs=None):
+    """A base-excited double-well Duffing (the seed-like cubic) forced at 9 Hz, integrated by scipy's
+    DOP853, the amplitude stepped through ``amplitudes`` (state carried, 120 cycles each), then
+    recorded for ``duration`` s: sampled at ``sim_fs`` and decimated to ``fs`` by scipy (an
+    anti-aliasing DAQ), with white laser noise. Returns the record and the true stroboscopic z."""
+    from scipy import signal as sps
+
+    from negstiff.models.device import SEED_LIKE_CUBIC as M
+
+    w = 2 * np.pi * F
+
+    def rhs(t, x, a):
+        z, v = x
+        return [
+            v,
+            -(M.c * v + M.c_nl * v * abs(v) + ((M.k3 * z + M.k2) * z - M.k1) * z + M.k0) / M.m - a * np.sin(w * t),
+        ]
+
+    x = [M.equilibria().z_plus, 0.0]
+    for a in amplitudes[:-1]:
+        x = solve_ivp(rhs, (0, 120 / F), x, args=(a,), method="DOP853", rtol=1e-9, atol=1e-12).y[:, -1]
+    a = amplitudes[-1]
+    sim_fs = sim_fs or fs
+    t = np.arange(int(round((duration + 120 / F) * sim_fs))) / sim_fs
+    sol = solve_ivp(rhs, (0, t[-1]), x, args=(a,), method="DOP853", rtol=1e-9, atol=1e-12, t_eval=t)
+    keep = t >= 120 / F  # settled
+    z, u = sol.y[0][keep], a * np.sin(w * t[keep])
+    strobe = solve_ivp(rhs, (0, 200 / F), x, args=(a,), method="DOP853", rtol=1e-9, atol=1e-12,
+                       t_eval=np.arange(120, 200) / F).y[0]  # fmt: skip
+    q = int(round(sim_fs / fs))
+    if q > 1:
+        z, u = sps.decimate(z, q, ftype="fir", zero_phase=True), sps.decimate(u, q, ftype="fir", zero_phase=True)
+    z = z + noise * np.random.default_rng(seed).standard_normal(z.size)
+    return from_arrays(u, z, fs), strobe
+
+
+def _true_period(strobe, tol=1e-6):
+    return next(p for p in (1, 2, 4, 8) if np.abs(strobe[p:] - strobe[:-p]).max() < tol)
+
+
+def test_a_period_2_record_from_another_integrator_is_period_2():
+    # Fact: stepped 13 -> 14 m/s^2 from z_plus, the seed-like cubic doubles at 9 Hz (its stroboscopic
+    # map, integrated here by DOP853, repeats every 2 cycles); 150 s at 512 Hz with 30 um noise.
+    rec, strobe = _duffing_record([13.0, 14.0], 512.0, 150.0)
+    assert _true_period(strobe) == 2
+    c = characterize(rec, F)
+    assert c["period"] == 2 and not c["chaotic"] and len(c["amplitudes"]) == 2
+    lle = c["lle"]
+    assert lle["value"] is None or not (lle["value"] > CHAOS_THRESHOLD * 2 * np.pi * F and lle["value"] > 3 * lle["sd"])
+
+
+def test_a_period_1_record_at_64_hz_is_period_1():
+    # Fact: a lab's 64 Hz acquisition (7.1 samples per 9 Hz cycle, 4096 samples) of a period-1 orbit
+    # (9 m/s^2): band-limited interpolation finds the period, and the exponent is not significantly
+    # positive (Wolf alone gave +0.08 1/s on such a record: the segments' spread must cover it).
+    rec, strobe = _duffing_record([9.0], 64.0, 4096 / 64.0, sim_fs=1024.0)
+    assert _true_period(strobe) == 1 and rec.n == 4096
+    c = characterize(rec, F)
+    assert c["period"] == 1 and not c["chaotic"], c["reasons"]
+    lle = c["lle"]
+    assert lle["value"] is None or not (lle["value"] > CHAOS_THRESHOLD * 2 * np.pi * F and lle["value"] > 3 * lle["sd"])
+
+
+def test_a_constant_response_is_reported_not_determinable():
+    t = np.arange(40 * 512) / 512
+    c = characterize(from_arrays(np.sin(2 * np.pi * F * t), np.full(t.size, 0.02), 512.0), F)
+    assert c["period"] is None and c["lle"]["value"] is None and not c["chaotic"]
+    assert "constant" in c["reasons"]["period"]
