@@ -349,6 +349,16 @@ def load(
     z, resp = None, {"measured": None}
     if response or any(k in cols for k in sensors.RESPONSES):
         z, resp = sensors.derive(cols, inputs[0], float(fs), str(path))
+        k = int(round(resp.get("trim_s", 0.0) * fs))
+        if k:
+            if n <= 4 * k:
+                raise MeasurementError(
+                    f"{path}: too few samples ({n}) to derive z from {resp['measured']}: the integral of an "
+                    f"accelerometer loses {resp['trim_s']:g} s at each end"
+                )
+            cols = {c: v[k:-k] for c, v in cols.items()}
+            z, t0 = z[k:-k], t0 + k / fs
+            resp["derived"] += f"; {resp['trim_s']:g} s cut at each end (the integral's end effects)"
     rec = Measurement(
         fs=float(fs),
         input_name=inputs[0],
