@@ -226,6 +226,8 @@ def _frame_anchors(rec) -> tuple[float, dict[str, float]]:
     K = model.restoring_force(x)
     eq = _crossings(x, K)
     stable = [e for e in eq if np.interp(e, x, np.gradient(K, x)) > 0]
+    if len(stable) == 1:  # an in-well record: one well, and no origin between wells to find
+        return float("nan"), {"one": stable[0]}
     wells = {"minus": stable[0], "plus": stable[-1]} if len(stable) >= 2 else {}
     roots = _crossings(x, K - model.m * G)
     if not roots.size:
@@ -243,8 +245,9 @@ def frame_offset(rec) -> dict[str, Any]:
     Two anchors, the better one used:
 
     * rest positions (``# z_minus_rest`` / ``# z_plus_rest`` metadata [m], measured statically
-      before the test): C = z_rest - x_well, with x_well the fitted model's wells in the record's
-      frame (well positions are what a record determines best);
+      before the test; ``# z_rest`` for the one well an in-well record stays in): C = z_rest -
+      x_well, with x_well the fitted model's wells in the record's frame (well positions are what a
+      record determines best); an in-well record can only be pinned this way;
     * gravity: the restoring force at z = 0 (rods horizontal) carries the weight, K(0) = m g (g per
       unit mass). A quintic restoring force with viscous and quadratic damping is fitted by weak-form
       least squares (``sindy.weak_least_squares``) in the record's frame, where K_rec(x) =
@@ -259,6 +262,8 @@ def frame_offset(rec) -> dict[str, Any]:
     rest = {w: rec.meta.get(f"z_{w}_rest") for w in ("minus", "plus")}
     try:
         rest = {w: float(v) for w, v in rest.items() if v is not None}
+        if "z_rest" in rec.meta:  # the rest position of the one well an in-well record stays in
+            rest["one"] = float(rec.meta["z_rest"])
     except ValueError:
         rest = {}
     if rec.input_name != "base_acc" and not rest:
@@ -277,6 +282,15 @@ def frame_offset(rec) -> dict[str, Any]:
                 parts.append(part)
     except Exception as exc:  # a record too short or too poor for the fit: said, not pinned
         return {"offset_m": None, "method": f"not pinned: {' '.join(str(exc).split())}"}
+    if "one" in wells:
+        if "one" not in rest and len(rest) == 1:
+            rest["one"] = next(iter(rest.values()))
+        if "one" not in rest:
+            return {
+                "offset_m": None,
+                "method": "not pinned: the record stays in one well (no origin between wells to find); give that "
+                "well's rest position as '# z_rest: VALUE' metadata [m]",
+            }
     anchored = [w for w in rest if w in wells]
     if anchored:
 
