@@ -9,7 +9,10 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
+import os
+import signal
 import sys
+import threading
 import warnings
 from pathlib import Path
 from typing import Any, Sequence
@@ -353,6 +356,10 @@ def cmd_characterize(args) -> int:
             wells = well_guesses(rec)
         except ValueError:
             wells = None
+    if not args.forcing_hz < rec.fs / 2:
+        raise InputError(
+            f"--forcing-hz {args.forcing_hz:g}: above the Nyquist frequency of {args.data} ({rec.fs / 2:g} Hz)"
+        )
     _say(args, f"characterize: {rec.n} samples at {rec.fs:g} Hz, forcing {args.forcing_hz:g} Hz")
     r = characterize(rec, args.forcing_hz, wells)
     r.pop("poincare_z")
@@ -735,6 +742,22 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
+def _interrupt_handler(command: str):
+    """Ctrl-C: one line, the outputs being written removed, exit 130 at once. (Raising
+    KeyboardInterrupt is not enough: emcee prints the traceback of any exception inside a
+    log-probability call before passing it on.)"""
+
+    def handler(signum, frame):
+        from negstiff.files import remove_pending
+
+        remove_pending()
+        sys.stderr.write(f"negstiff {command}: interrupted (nothing written)\n")
+        sys.stderr.flush()
+        os._exit(130)
+
+    return handler
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
     try:
@@ -742,6 +765,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("negstiff: interrupted", file=sys.stderr)
         return 130
+    if threading.current_thread() is threading.main_thread() and argv is None:  # the installed command
+        signal.signal(signal.SIGINT, _interrupt_handler(args.command))
     try:
         check_paths(args)
         with warnings.catch_warnings():

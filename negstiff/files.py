@@ -9,6 +9,18 @@ import tempfile
 from pathlib import Path
 
 
+_PENDING: set[Path] = set()
+"""Temporary files and folders being written now (``remove_pending`` deletes them on an interrupt)."""
+
+
+def remove_pending() -> None:
+    """Delete every temporary output still being written (an interrupted command leaves nothing)."""
+    for p in list(_PENDING):
+        with contextlib.suppress(OSError):
+            shutil.rmtree(p) if p.is_dir() else p.unlink()
+        _PENDING.discard(p)
+
+
 def _umask() -> int:
     mask = os.umask(0)
     os.umask(mask)
@@ -26,6 +38,7 @@ def atomic_path(path: str | os.PathLike):
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".part", dir=path.parent)
     os.close(fd)
     os.chmod(tmp, 0o666 & ~_umask())  # mkstemp makes 0600; give the file the usual permissions
+    _PENDING.add(Path(tmp))
     try:
         yield Path(tmp)
         os.replace(tmp, path)
@@ -33,6 +46,8 @@ def atomic_path(path: str | os.PathLike):
         with contextlib.suppress(FileNotFoundError):
             os.unlink(tmp)
         raise
+    finally:
+        _PENDING.discard(Path(tmp))
 
 
 def write_text(path: str | os.PathLike, text: str) -> Path:
@@ -49,6 +64,7 @@ def atomic_dir(path: str | os.PathLike):
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=f".{path.name}.", suffix=".part", dir=path.parent))
     os.chmod(tmp, 0o777 & ~_umask())
+    _PENDING.add(tmp)
     try:
         yield tmp
         if path.exists():
@@ -62,6 +78,8 @@ def atomic_dir(path: str | os.PathLike):
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise
+    finally:
+        _PENDING.discard(tmp)
 
 
 def read_json(path: str | os.PathLike):
