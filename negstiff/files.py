@@ -8,7 +8,6 @@ import shutil
 import tempfile
 from pathlib import Path
 
-
 _PENDING: set[Path] = set()
 """Temporary files and folders being written now (``remove_pending`` deletes them on an interrupt)."""
 

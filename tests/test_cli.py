@@ -156,3 +156,57 @@ def test_reproduce_fast_writes_a_complete_report(tmp_path, monkeypatch):
     again = json.loads((out2 / "results.json").read_text())
     for section in ("posterior", "sindy", "discrepancy"):
         assert json.dumps(again[section]) == json.dumps(results[section]), section
+
+
+def test_simulate_an_input_only_record_from_rest_at_z_plus(tmp_path):
+    # contract: without a z column the model starts at rest at its z_plus
+    from negstiff.models import Model
+
+    rec = tmp_path / "in.csv"
+    t = np.arange(512) / 512
+    rec.write_text("t,base_acc\n" + "".join(f"{a:.6f},{0.0:.1f}\n" for a in t))
+    out = tmp_path / "sim.csv"
+    assert main(["simulate", str(tmp_path / "m.json"), str(rec), "-o", str(out), "--quiet"]) == 2  # no model yet
+    (tmp_path / "m.json").write_text(json.dumps(MODEL))
+    assert main(["simulate", str(tmp_path / "m.json"), str(rec), "-o", str(out), "--quiet"]) == 0
+    z = np.loadtxt(out, delimiter=",", skiprows=1)[:, 2]
+    z_plus = Model.from_dict(MODEL).equilibria().z_plus
+    assert np.allclose(z, z_plus, atol=1e-9), "no input, at rest: it stays at z_plus"
+
+
+def _rewrite_z(src, dst, f):
+    lines = src.read_text().splitlines()
+    h = next(i for i, x in enumerate(lines) if x.startswith("t,"))
+    j = lines[h].split(",").index("z")
+    out = lines[: h + 1]
+    for row in lines[h + 1 :]:
+        p = row.split(",")
+        p[j] = repr(f(float(p[j])))
+        out.append(",".join(p))
+    dst.write_text("\n".join(out) + "\n")
+    return dst
+
+
+def test_implausible_records_are_warned_about_loudly(workdir, tmp_path, capsys):
+    # a laser zero 10 mm off the rods-horizontal position, and a record in mm: identified (exit 0),
+    # with a warning in the result and on stderr even under --quiet
+    src = tmp_path / "r.csv"
+    assert main(["rig", "random", "-o", str(src), "--duration", "40", "--seed", "3", "--quiet"]) == 0
+    for name, f, says in (("shift", lambda z: z + 0.01, "off the rods-horizontal"), ("mm", lambda z: 1e3 * z, "in mm")):
+        path = _rewrite_z(src, tmp_path / f"{name}.csv", f)
+        out = tmp_path / f"{name}.json"
+        assert main(["identify", "nsi", str(path), "-o", str(out), "--quiet"]) == 0
+        warnings = json.loads(out.read_text())["warnings"]
+        assert any(says in w for w in warnings), warnings
+        assert says in capsys.readouterr().err
+
+
+def test_a_short_record_is_refused_with_the_length_it_needs(workdir, capsys):
+    # 10 s is too short for SINDy's held-out selection: the message names the length needed, and that
+    # length is more than the record has (it did not contradict itself)
+    import re
+
+    assert main(["identify", "sindy", str(workdir / "rec.csv"), "-o", str(workdir / "s.json"), "--quiet"]) == 2
+    err = capsys.readouterr().err
+    need = float(re.search(r"at least about ([0-9.]+) s", err).group(1))
+    assert need > 10.0 and len(err.strip().splitlines()) == 1
