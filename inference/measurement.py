@@ -237,7 +237,24 @@ def _read_mat(path: Path) -> tuple[dict[str, np.ndarray], dict[str, str]]:
     return _with_binary_resolution(cols, raw), meta
 
 
-READERS = {".csv": _read_csv, ".txt": _read_csv, ".npz": _read_npz, ".mat": _read_mat}
+def _lab_reader(suffix: str):
+    """The lab formats' readers (``formats.py``) are imported only when such a file is read."""
+
+    def read(path: Path):
+        from negstiff.inference import formats
+
+        return formats.READERS[suffix](path)
+
+    return read
+
+
+READERS = {
+    ".csv": _read_csv,
+    ".txt": _read_csv,
+    ".npz": _read_npz,
+    ".mat": _read_mat,
+    **{s: _lab_reader(s) for s in (".uff", ".unv", ".tdms", ".lvm")},
+}
 
 
 def load(
@@ -268,7 +285,7 @@ def load(
         raise MeasurementError(f"{path}: no such file")
     reader = READERS.get(path.suffix.lower())
     if reader is None:
-        raise MeasurementError(f"{path}: unknown file type {path.suffix!r} (use .csv, .npz or .mat)")
+        raise MeasurementError(f"{path}: unknown file type {path.suffix!r} (use {', '.join(READERS)})")
     try:
         raw, meta = reader(path)
     except MeasurementError:
@@ -370,9 +387,33 @@ def load(
         meta=meta,
         source=str(path),
         t0=t0,
-        info={"time": time_info, "response": resp},
+        info={"time": time_info, "response": resp, **_channel_info(meta, cmap)},
     )
     return sensors.pin_frame(rec.with_mass(mass))
+
+
+UNIT_HINTS = {"g": ("m/s^2", 9.81), "mm": ("m", 1e-3), "mm/s": ("m/s", 1e-3), "mm/s^2": ("m/s^2", 1e-3),
+              "um": ("m", 1e-6), "in": ("m", 0.0254), "in/s": ("m/s", 0.0254), "mV": (None, None), "V": (None, None)}
+"""Units a lab file may label a channel with that are not the contract's SI units (and the factor)."""
+
+
+def _channel_info(meta: dict[str, str], cmap: dict) -> dict[str, Any]:
+    """The units and sensitivities the file states for the channels used (``formats``), with a
+    warning where a mapped channel's unit is not SI and the map does not scale it."""
+    chans = {k.split(":", 1)[1] for k in meta if k.startswith(("unit:", "sensitivity:"))}
+    if not chans:
+        return {}
+    out = {
+        c: {"unit": meta.get(f"unit:{c}"), "sensitivity": meta.get(f"sensitivity:{c}")} for c in sorted(chans)
+    }
+    warns = []
+    for name, (src, scale) in cmap.items():
+        unit = meta.get(f"unit:{src}")
+        if unit in UNIT_HINTS and scale == 1.0:
+            si, f = UNIT_HINTS[unit]
+            fix = f" (scale it: --columns {name}={src}*{f:g})" if f else ""
+            warns.append(f"channel {src} ({name}) is labelled {unit!r} in the file, not SI{fix}")
+    return {"channels": out, **({"warnings": warns} if warns else {})}
 
 
 def time_base(t: np.ndarray, resolution: np.ndarray | None, path) -> tuple[float, float, float]:

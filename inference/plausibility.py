@@ -93,7 +93,7 @@ def collect(rec, result: dict[str, Any] | None = None, model=None) -> list[str]:
     """Every warning about a record (its derivation, its units, its frame) and about a result's model
     (the frame is checked where a model was identified: a harmonic record cannot say it)."""
     resp = rec.info.get("response", {}) if rec is not None else {}
-    out = list(resp.get("warnings", [])) + record_warnings(rec)
+    out = list(rec.info.get("warnings", [])) + list(resp.get("warnings", [])) + record_warnings(rec)
     if model is not None:
         out += frame_warnings(rec) + model_warnings(model, rec)
     if result is not None:

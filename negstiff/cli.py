@@ -138,7 +138,7 @@ def _make_rig(args):
 
 def cmd_rig(args) -> int:
     rig = _make_rig(args)
-    out = Path(args.out)
+    out = _out_path(args) if args.mode != "campaign" else Path(args.out)
     if args.mode == "random":
         rec = rig.random(
             duration=args.duration,
@@ -162,6 +162,16 @@ def _export(args) -> dict[str, Any]:
     return {"time_decimals": args.time_decimals, "acc_unit": args.acc_unit}
 
 
+def _out_path(args) -> Path:
+    """The record's path; ``--format`` sets (or checks) its suffix."""
+    out = Path(args.out)
+    if args.format and out.suffix.lower().lstrip(".") != args.format:
+        if out.suffix and not (args.format == "uff" and out.suffix.lower() == ".unv"):
+            raise InputError(f"--format {args.format}: the output {out} has another suffix ({out.suffix})")
+        out = out.with_suffix(f".{args.format}")
+    return out
+
+
 def write_campaign(rig, args) -> None:
     """Stepped sweeps up and/or down from either well, one batched run, written as one folder."""
     from negstiff.files import atomic_dir
@@ -178,7 +188,7 @@ def write_campaign(rig, args) -> None:
         for (start, direction), recs in zip(plans, sweeps):
             for rec in recs:
                 amp = rec.truth["excitation"]["amplitude_m_s2"]
-                name = f"{start}_{direction}_{rec.truth['excitation']['step']:03d}_{amp:g}.csv"
+                name = f"{start}_{direction}_{rec.truth['excitation']['step']:03d}_{amp:g}.{args.format or 'csv'}"
                 rec.write(tmp / name, **_export(args))
                 index.append(
                     {
@@ -498,7 +508,9 @@ def build_parser() -> argparse.ArgumentParser:
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     rig.add_argument("mode", choices=["random", "harmonic", "campaign"])
-    rig.add_argument("-o", "--out", required=True, help="record file (.csv or .npz); for campaign, a folder")
+    rig.add_argument(
+        "-o", "--out", required=True, help="record file (.csv, .npz, .uff/.unv, .tdms); for campaign, a folder"
+    )
     rig.add_argument(
         "--model", help="drive a model JSON (polynomial truth) or device JSON instead of the as-built device"
     )
@@ -528,6 +540,12 @@ def build_parser() -> argparse.ArgumentParser:
     )
     g.add_argument(
         "--time-decimals", type=_number(int, 0, 12), help="print the time column with N fixed decimals (CSV)"
+    )
+    g.add_argument(
+        "--format",
+        choices=["csv", "npz", "uff", "tdms"],
+        help="file format (default: from the --out suffix; campaign records: csv); uff: Universal File type 58, "
+        "tdms: LabVIEW TDMS",
     )
     g.add_argument(
         "--acc-unit",
