@@ -102,9 +102,15 @@ def test_files_built_by_the_libraries_themselves_are_read(tmp_path):
     assert m.fs == 1024.0 and np.allclose(m.u, acc, rtol=1e-9) and np.allclose(m.z, disp, rtol=1e-9)
     tdms = tmp_path / "lab.tdms"
     with TdmsWriter(str(tdms)) as w:
-        props = {"wf_increment": 1 / 1024.0, "unit_string": "g"}
-        w.write_segment([RootObject(), GroupObject("Untitled"), ChannelObject("Untitled", "AI0", acc / 9.81, properties=props),
-                         ChannelObject("Untitled", "AI1", disp, properties={"wf_increment": 1 / 1024.0, "unit_string": "m"})])  # fmt: skip
+        step = 1 / 1024.0
+        w.write_segment(
+            [
+                RootObject(),
+                GroupObject("Untitled"),
+                ChannelObject("Untitled", "AI0", acc / 9.81, properties={"wf_increment": step, "unit_string": "g"}),
+                ChannelObject("Untitled", "AI1", disp, properties={"wf_increment": step, "unit_string": "m"}),
+            ]
+        )
     m = load(tdms, columns="base_acc=AI0*9.81,z=AI1")
     assert m.fs == pytest.approx(1024.0) and np.allclose(m.u, acc) and m.info["channels"]["AI0"]["unit"] == "g"
     unscaled = load(tdms, columns="base_acc=AI0,z=AI1")
