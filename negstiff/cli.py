@@ -260,6 +260,7 @@ def cmd_identify(args) -> int:
     from negstiff.inference.measurement import load
 
     rec = load(args.data, columns=args.columns, fs=args.fs, mass=args.mass)
+    frfs = read_frf_results(args.frf)
     _say(args, f"identify {args.method}: {rec.n} samples at {rec.fs:g} Hz, input {rec.input_name}")
     if args.method == "nsi":
         from negstiff.inference.nsi import NSI
@@ -270,6 +271,11 @@ def cmd_identify(args) -> int:
 
         est = SINDy(n_models=args.ensemble, seed=args.seed).fit(rec)
     result = _with_record(est.result(), rec, est.model_)
+    if args.frf:
+        result["frf_comparison"] = frf_comparison(result, frfs)
+        for c in result["frf_comparison"]:
+            _say(args, f"{c['well']} well: identified {c['identified_f_hz']:.4f} Hz, FRF {c['frf_f_hz']:.4f} Hz "
+                       f"({c['difference_percent']:+.2f} %)")  # fmt: skip
     v = result["validation"]
     if v.get("diverged"):
         _say(args, f"WARNING: {v['warning']}")
@@ -389,6 +395,115 @@ def cmd_characterize(args) -> int:
     return 0
 
 
+def _band(text: str | None) -> tuple[float, float] | None:
+    if text is None:
+        return None
+    try:
+        lo, hi = (float(x) for x in text.split(":"))
+        if not (0 <= lo < hi and np.isfinite(hi)):
+            raise ValueError
+    except ValueError:
+        raise InputError(f"--band {text!r}: give F1:F2 in Hz with 0 <= F1 < F2 (e.g. 2:40)") from None
+    return lo, hi
+
+
+def _frf_well(rec) -> str | None:
+    """The well a low-level record sits in: the rest position (metadata) nearest its mean z."""
+    rest = {}
+    for w in ("minus", "plus"):
+        try:
+            rest[w] = float(rec.meta[f"z_{w}_rest"])
+        except (KeyError, ValueError):
+            pass
+    if not rest or rec.z is None:
+        return None
+    return min(rest, key=lambda w: abs(rest[w] - float(np.mean(rec.z))))
+
+
+def cmd_frf(args) -> int:
+    from negstiff.files import atomic_path
+    from negstiff.inference.frf import frf
+    from negstiff.inference.measurement import load
+
+    band = _band(args.band)
+    rec = load(args.data, columns=args.columns, fs=args.fs)
+    if band is not None and band[1] > rec.fs / 2:
+        raise InputError(f"--band {args.band}: beyond the Nyquist frequency of {args.data} ({rec.fs / 2:g} Hz)")
+    _say(args, f"frf: {rec.n} samples at {rec.fs:g} Hz, input {rec.input_name}")
+    res = frf(rec, band=band, segment_s=args.segment)
+    curves = res.pop("_curves")
+    res["well"] = _frf_well(rec)
+    res = _with_record(res, rec)
+    if res["reason"]:
+        res["warnings"].append(res["reason"])
+    figure = Path(args.out).with_suffix(".png")
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    f = curves["f"]
+    sel = (f >= res["band"][0]) & (f <= res["band"][1])
+    fig, (a1, a2) = plt.subplots(2, 1, figsize=(8, 6), sharex=True, height_ratios=[3, 1])
+    a1.semilogy(f[sel], np.abs(curves["H1"][sel]), label="H1")
+    a1.semilogy(f[sel], np.abs(curves["H2"][sel]), "--", label="H2")
+    for p in res["peaks"]:
+        a1.axvline(p["f_hz"], color="0.6", lw=0.8)
+        a1.annotate(f"{p['f_hz']:.3f} Hz, zeta {100 * p['zeta']:.2f} %", (p["f_hz"], np.abs(curves["H1"][sel]).max()),
+                    fontsize=8, ha="left", va="top")  # fmt: skip
+    a1.set(ylabel=f"|z / {rec.input_name}|", title=f"FRF of {Path(args.data).name}")
+    a1.legend()
+    a2.plot(f[sel], curves["coherence"][sel])
+    a2.set(xlabel="frequency [Hz]", ylabel="coherence", ylim=(0, 1.05))
+    fig.tight_layout()
+    res["figure"] = figure.name
+    with atomic_path(figure) as tmp:
+        fig.savefig(tmp, format="png", dpi=110)
+    plt.close(fig)
+    write_json(args.out, res)
+    _warn(args, res["warnings"])
+    top = "no peak" if res["f_hz"] is None else f"{res['f_hz']:.4f} Hz, zeta {100 * res['zeta']:.2f} %"
+    _say(args, f"wrote {args.out} and {figure.name}: dominant peak {top}; {len(res['peaks'])} peak(s)")
+    return 0
+
+
+def read_frf_results(paths: Sequence[str] | None) -> list[tuple[str, float, str | None]]:
+    """(path, peak frequency [Hz], well) of each ``--frf`` result, checked before any work."""
+    from negstiff.files import read_json
+
+    out = []
+    for p in paths or []:
+        try:
+            r = read_json(p)
+            f_frf, well = r["f_hz"], r.get("well")
+        except (ValueError, KeyError, TypeError, AttributeError):
+            raise InputError(f"--frf {p}: not an frf result (needs f_hz)") from None
+        if not isinstance(f_frf, (int, float)) or isinstance(f_frf, bool):
+            raise InputError(f"--frf {p}: the FRF found no peak to compare with (f_hz is {f_frf!r})")
+        out.append((p, float(f_frf), well))
+    return out
+
+
+def frf_comparison(result: dict, frfs: list[tuple[str, float, str | None]]) -> list[dict]:
+    """Each well's identified underlying-linear frequency beside a low-level FRF's (``--frf``)."""
+    out = []
+    for p, f_frf, well in frfs:
+        modal = {w: m["f_hz"] for w, m in result["modal"].items() if m.get("f_hz")}
+        if well not in modal:  # no rest positions in the FRF's record: the nearest well frequency
+            well = min(modal, key=lambda w: abs(modal[w] - f_frf)) if modal else None
+        f_id = modal.get(well)
+        out.append(
+            {
+                "frf": str(p),
+                "well": well,
+                "frf_f_hz": f_frf,
+                "identified_f_hz": f_id,
+                "difference_percent": None if f_id is None else 100 * (f_id / f_frf - 1),
+            }
+        )
+    return out
+
+
 def cmd_update(args) -> int:
     from tqdm import tqdm
 
@@ -440,7 +555,7 @@ def _with_record(result: dict, rec, model=None) -> dict:
     return {**result, "record": rec.info, "warnings": collect(rec, result, model)}
 
 
-INPUT_ARGS = ("data", "model", "input", "targets")
+INPUT_ARGS = ("data", "model", "input", "targets", "frf")
 OUTPUT_ARGS = ("out", "idata")
 
 
@@ -452,8 +567,8 @@ def check_paths(args) -> None:
     inputs = {}
     for name in INPUT_ARGS:
         v = getattr(args, name, None)
-        if v:
-            inputs[Path(v).resolve()] = v
+        for item in v if isinstance(v, list) else [v] if v else []:
+            inputs[Path(item).resolve()] = item
     for name in OUTPUT_ARGS:
         v = getattr(args, name, None)
         if not v:
@@ -462,6 +577,8 @@ def check_paths(args) -> None:
         targets = [out]
         if args.command == "rig" and out.suffix:
             targets.append(out.with_name(out.stem + ".truth.json"))
+        if args.command == "frf":
+            targets.append(out.with_suffix(".png"))
         for t in targets:
             if t in inputs:
                 raise InputError(
@@ -644,7 +761,35 @@ def build_parser() -> argparse.ArgumentParser:
     idf.add_argument(
         "--ensemble", type=_number(int, 2, 10000), default=50, help="SINDy: bagged models of the ensemble (default 50)"
     )
+    idf.add_argument(
+        "--frf",
+        action="append",
+        metavar="R.json",
+        help="an frf result of a low-level test around a well: its peak beside the identified well frequency "
+        "(repeatable, one per well)",
+    )
     idf.set_defaults(func=cmd_identify)
+
+    frq = sub.add_parser(
+        "frf",
+        parents=[common, data_opts],
+        help="H1/H2 frequency response with coherence, modal fit of the peaks",
+        description="Frequency response of a (low-level) record from its input to z: H1 and H2 with the coherence "
+        "(Welch, Hann, 50 %% overlap), every resonance peak fitted by a single-degree-of-freedom receptance "
+        "(frequency, damping ratio). Around one well at low level, the peak is that well's underlying-linear "
+        "frequency: compare it with 'identify ... --frf R.json'. Writes R.json and R.png.",
+    )
+    frq.add_argument("data", help="measurement file")
+    frq.add_argument("-o", "--out", required=True, help="result JSON (the figure beside it, .png)")
+    frq.add_argument(
+        "--band", help="frequency band F1:F2 [Hz] (default: where the input's spectrum is within 20 dB of its peak)"
+    )
+    frq.add_argument(
+        "--segment",
+        type=_number(float, 0.5, 1e4),
+        help="Welch segment [s] (default 16 s, longer where a lightly damped peak needs finer bins)",
+    )
+    frq.set_defaults(func=cmd_frf)
 
     pst = sub.add_parser(
         "posterior",

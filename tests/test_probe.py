@@ -22,6 +22,7 @@ DATA_COMMANDS = {
     "posterior": lambda d, rec, out: ["posterior", str(rec), "-o", str(out)],
     "discrepancy": lambda d, rec, out: ["discrepancy", str(rec), "-o", str(out)],
     "characterize": lambda d, rec, out: ["characterize", str(rec), "--forcing-hz", "9", "-o", str(out)],
+    "frf": lambda d, rec, out: ["frf", str(rec), "-o", str(out)],
 }
 
 GOOD_ROWS = "".join(f"{i / 512:.6f},{np.sin(i / 9):.5f},{0.02 + 1e-3 * np.cos(i / 9):.6f}\n" for i in range(40))
@@ -224,6 +225,11 @@ def test_bad_model_and_target_files(workdir, capsys, problem, command, tmp_path)
         ["characterize", "REC", "--forcing-hz", "9", "--wells", "0.02,-0.03", "-o", "o.json"],
         ["characterize", "REC", "--forcing-hz", "400", "-o", "o.json"],
         ["characterize", "REC", "--forcing-hz", "9", "--signal", "z_dot", "-o", "o.json"],
+        ["frf", "REC", "--band", "40:2", "-o", "o.json"],
+        ["frf", "REC", "--band", "300:400", "-o", "o.json"],
+        ["frf", "REC", "--band", "a:b", "-o", "o.json"],
+        ["identify", "nsi", "REC", "--frf", "REC", "-o", "o.json"],
+        ["rig", "random", "-o", "o.csv", "--format", "tdms"],
     ],
 )
 def test_command_line_misuse(workdir, capsys, argv, tmp_path):
