@@ -190,8 +190,11 @@ def write_lab_format(path: Path, kind: str, cols: dict[str, np.ndarray], fs: flo
     x = np.arange(next(iter(chans.values())).size) / fs
     uff = pyuff.UFF(str(path))
     for i, (k, v) in enumerate(chans.items()):
-        zero = {f"{a}_{b}": 0 for a in ("orddenom", "z_axis") for b in ("spec_data_type", "len_unit_exp",
-                                                                           "force_unit_exp", "temp_unit_exp")}
+        zero = {
+            f"{a}_{b}": 0
+            for a in ("orddenom", "z_axis")
+            for b in ("spec_data_type", "len_unit_exp", "force_unit_exp", "temp_unit_exp")
+        }
         ds = pyuff.prepare_58(
             binary=0, id1=k, id2=str(meta.get("source", "")), func_type=1, rsp_node=i + 1, rsp_dir=3, ref_node=0,
             ref_dir=0, data=np.asarray(v, float), x=x, ord_data_type=4, num_pts=x.size, abscissa_spacing=1,
@@ -362,6 +365,58 @@ class Rig:
             "band_hz": list(band),
             "settle_s": settle,
         }
+        return self._run([acc], [start], [settle], [duration], excitation, sens_rng)[0]
+
+    def sine_sweep(
+        self,
+        f_start: float = 2.0,
+        f_stop: float = 40.0,
+        amplitude: float = 1.0,
+        duration: float = 120.0,
+        mode: str = "linear",
+        settle: float = 5.0,
+        start: str = "plus",
+    ) -> RigRecord:
+        """A swept sine of the table acceleration, ``amplitude`` [m/s^2] from ``f_start`` to ``f_stop``
+        [Hz] over ``duration`` s (``mode`` linear or logarithmic), by pyExSi's ``sine_sweep`` (SDyPy,
+        MIT); the settling time holds the start frequency, and the table motion is band-limited as
+        every excitation of the rig. A low-level sweep around one well is the lab's FRF test.
+
+        The random excitation stays the rig's own (an FFT of seeded white noise, band-limited exactly):
+        pyExSi's ``random_gaussian`` draws random phases under a prescribed PSD, a different signal
+        for the same seed, and every reference record and report of the suite is built on the rig's
+        draws; the two are the same process (a flat-spectrum band-limited Gaussian)."""
+        from pyExSi import sine_sweep
+
+        if not (0 < f_start < self.fs / 2 and 0 < f_stop < self.fs / 2) or amplitude < 0 or duration <= 0:
+            raise RigError("a sine sweep needs 0 < f_start, f_stop < fs/2, amplitude >= 0 and duration > 0")
+        if mode not in ("linear", "logarithmic"):
+            raise RigError(f"sweep mode must be 'linear' or 'logarithmic', got {mode!r}")
+        fsim = self.fs * self.oversample
+        n_settle, n_sweep = int(round(settle * fsim)), int(round(duration * fsim))
+        n = sp_fft.next_fast_len(n_settle + n_sweep + int(round(TAIL_S * fsim)), real=True)
+        t = np.arange(n) / fsim
+        acc = np.empty(n)
+        acc[:n_settle] = np.sin(2 * np.pi * f_start * t[:n_settle])
+        phi0 = 2 * np.pi * f_start * t[n_settle] if n_settle else 0.0
+        # the rate that reaches f_stop at the end of the record (Hz/s, or octaves/min for pyExSi's log mode);
+        # the discarded tail sweeps on a little beyond it
+        rate = (f_stop - f_start) / duration if mode == "linear" else math.log2(f_stop / f_start) / (duration / 60)
+        acc[n_settle:] = sine_sweep(
+            t[n_settle:] - t[n_settle], phi=phi0, freq_start=f_start, sweep_rate=rate, mode=mode
+        )
+        acc *= amplitude
+        excitation = {
+            "type": "sine_sweep",
+            "f_start_hz": f_start,
+            "f_stop_hz": f_stop,
+            "amplitude_m_s2": amplitude,
+            "duration_s": duration,
+            "mode": mode,
+            "settle_s": settle,
+            "generator": "pyExSi.sine_sweep",
+        }
+        _, sens_rng = self._streams()
         return self._run([acc], [start], [settle], [duration], excitation, sens_rng)[0]
 
     def harmonic(

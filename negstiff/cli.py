@@ -148,6 +148,14 @@ def cmd_rig(args) -> int:
         )
         rec.write(out, **_export(args))
         _say(args, f"wrote {out} ({rec.columns['t'].size} samples at {rig.fs:g} Hz) and its truth")
+    elif args.mode == "sweep":
+        rec = rig.sine_sweep(args.f_start, args.f_stop, args.amplitude, args.duration, args.sweep_mode,
+                             start="plus" if args.start == "both" else args.start)  # fmt: skip
+        rec.write(out, **_export(args))
+        _say(
+            args,
+            f"wrote {out} (sine sweep {args.f_start:g}-{args.f_stop:g} Hz, {args.amplitude:g} m/s^2) and its truth",
+        )
     elif args.mode == "harmonic":
         rec = rig.harmonic(args.freq, args.amplitude, args.start, args.settle_periods, args.periods)
         rec.write(out, **_export(args))
@@ -624,7 +632,7 @@ def build_parser() -> argparse.ArgumentParser:
         epilog=EPILOG_RIG,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    rig.add_argument("mode", choices=["random", "harmonic", "campaign"])
+    rig.add_argument("mode", choices=["random", "harmonic", "sweep", "campaign"])
     rig.add_argument(
         "-o", "--out", required=True, help="record file (.csv, .npz, .uff/.unv, .tdms); for campaign, a folder"
     )
@@ -681,6 +689,10 @@ def build_parser() -> argparse.ArgumentParser:
         metavar=("LO", "HI"),
         help="excitation band [Hz] (default 2 40)",
     )
+    g = rig.add_argument_group("sweep (a swept sine by pyExSi: --amplitude, --duration, --start too)")
+    g.add_argument("--f-start", type=POSITIVE, default=2.0, help="start frequency [Hz] (default 2)")
+    g.add_argument("--f-stop", type=POSITIVE, default=40.0, help="stop frequency [Hz] (default 40)")
+    g.add_argument("--sweep-mode", choices=["linear", "logarithmic"], default="linear", help="sweep law")
     g = rig.add_argument_group("harmonic and campaign")
     g.add_argument("--freq", type=POSITIVE, default=9.0, help="forcing frequency [Hz] (default 9)")
     g.add_argument(

@@ -87,6 +87,15 @@ def test_uff_and_tdms_records_load_to_the_csv_measurement(record):
             assert np.allclose(a, b, rtol=6e-10, atol=1e-15 + 6e-10 * np.abs(b).max())
         assert m.info["channels"]["base_acc"]["unit"] == "m/s^2" and m.info["channels"]["z"]["unit"] == "m"
     assert load(d / "r.tdms").mass == csv.mass, "the TDMS file keeps the record's metadata as properties"
+    # LVM: the same record as LabVIEW writes it (9 significant digits: the format's precision)
+    names = [k for k in rec.columns if k != "t"]
+    lvm = _write_lvm(
+        d / "r.lvm", names, np.column_stack([rec.columns[k] for k in names]), 1 / FS, ["m/s^2", "m", "m", "m"]
+    )
+    m = load(lvm, mass=csv.mass)
+    assert m.fs == pytest.approx(csv.fs, rel=1e-6) and m.n == csv.n
+    assert np.allclose(m.u, csv.u, rtol=1e-8, atol=1e-8 * np.abs(csv.u).max())
+    assert np.allclose(m.z, csv.z, rtol=1e-8, atol=1e-8 * np.abs(csv.z).max())
 
 
 def test_files_built_by_the_libraries_themselves_are_read(tmp_path):
@@ -166,14 +175,18 @@ def test_bad_lab_files_give_one_line_naming_the_channel_or_record(tmp_path, kind
     assert "\n" not in str(exc.value) and str(p) in str(exc.value)
 
 
-@pytest.mark.parametrize("suffix", ["uff", "tdms"])
+@pytest.mark.parametrize("suffix", ["uff", "tdms", "lvm"])
 def test_contract_commands_run_on_lab_formats(record, suffix, tmp_path):
     # every reading command on the record as a UFF and as a TDMS file (a CLI run, as a user would)
     rec, d = record
     path = d / f"r.{suffix}"
+    if suffix == "lvm":
+        names = [k for k in rec.columns if k != "t"]
+        data = np.column_stack([rec.columns[k] for k in names])
+        path = _write_lvm(tmp_path / "r.lvm", names, data, 1 / FS, ["m/s^2", "m", "m", "m"])
     model = tmp_path / "m.json"
     model.write_text(json.dumps(SEED_LIKE_CUBIC.to_dict()))
-    mass = ["--mass", "0.2"] if suffix == "uff" else []
+    mass = ["--mass", "0.2"] if suffix in ("uff", "lvm") else []
     runs = {
         "simulate": ["simulate", str(model), str(path), "-o", str(tmp_path / "s.csv")],
         "nsi": ["identify", "nsi", str(path), "-o", str(tmp_path / "n.json"), *mass],

@@ -53,3 +53,21 @@ def test_frf_around_each_well_gives_its_underlying_linear_system(well, tmp_path)
     assert main(["identify", "nsi", str(big), "-o", str(tmp_path / "n.json"), "--frf", str(out), "--quiet"]) == 0
     c = json.loads((tmp_path / "n.json").read_text())["frf_comparison"][0]
     assert c["well"] == well and abs(c["difference_percent"]) < 2.0
+
+
+def test_a_swept_sine_from_pyexsi_gives_the_same_well(tmp_path):
+    # the lab's other low-level test: a 0.5 m/s^2 linear sweep 2-40 Hz (pyExSi) around the stiff well
+    rec = tmp_path / "sweep.csv"
+    assert main(["rig", "sweep", "--model", str(_model(tmp_path)), "--amplitude", "0.5", "--duration", "120",
+                 "--start", "minus", "-o", str(rec), "--seed", "3", "--quiet"]) == 0  # fmt: skip
+    assert json.loads(rec.with_name("sweep.truth.json").read_text())["excitation"]["generator"] == "pyExSi.sine_sweep"
+    out = tmp_path / "f.json"
+    assert main(["frf", str(rec), "-o", str(out), "--quiet"]) == 0
+    r, uls = json.loads(out.read_text()), SEED_LIKE_CUBIC.uls("minus")
+    assert r["f_hz"] == pytest.approx(uls.f_hz, rel=0.005) and r["zeta"] == pytest.approx(uls.zeta, rel=0.10)
+
+
+def _model(tmp_path):
+    p = tmp_path / "truth.json"
+    p.write_text(json.dumps(SEED_LIKE_CUBIC.to_dict()))
+    return p
