@@ -208,8 +208,18 @@ def test_contract_commands_run_on_lab_formats(record, suffix, tmp_path):
         ],  # fmt: skip
         "discrepancy": ["discrepancy", str(path), "-o", str(tmp_path / "d.json"), "--max-effects", "1", *mass],
     }
+    runs["frf"] = ["frf", str(path), "-o", str(tmp_path / "f.json")]
+    harmonic = Rig(SEED_LIKE_CUBIC, seed=5).harmonic(9.0, 5.0, "plus", 20, 120)
+    if suffix == "lvm":
+        names = [k for k in harmonic.columns if k != "t"]
+        h = _write_lvm(tmp_path / "h.lvm", names, np.column_stack([harmonic.columns[k] for k in names]), 1 / FS,
+                       ["m/s^2", "m", "m", "m"])  # fmt: skip
+    else:
+        h = harmonic.write(tmp_path / f"h.{suffix}")
+    runs["characterize"] = ["characterize", str(h), "--forcing-hz", "9", "-o", str(tmp_path / "c.json")]
     for name, argv in runs.items():
         assert main([*argv, "--quiet"]) == 0, name
+    assert json.loads((tmp_path / "c.json").read_text())["period"] == 1
     r = json.loads((tmp_path / "n.json").read_text())
     for well in ("minus", "plus"):
         assert r["modal"][well]["f_hz"] == pytest.approx(SEED_LIKE_CUBIC.uls(well).f_hz, rel=0.02)
