@@ -268,48 +268,95 @@ def load(
 
     Parameters
     ----------
-    path : a .csv, .npz or .mat file
+    path : a .csv, .npz, .mat, .uff/.unv, .tdms or .lvm file
     columns : column map (``"force=V1,z=V2"`` or its parsed dict) for foreign files
     fs : sampling rate [Hz]; replaces the time column when given (the column then only sets t0)
     mass : moving mass [kg] (overrides the metadata's ``mass``)
     response : False for an input-only record (``negstiff simulate``): no response column needed
 
     The response is z, or z derived from z_dot, y (with the base's motion), y_dot or y_acc
-    (``sensors.derive``); what was done is in ``info["response"]``. A derived z whose constant is
-    unknown still has it unknown here: ``sensors.frame_offset`` estimates it from the physics.
+    (``sensors.derive``), its frame pinned by physics where its constant is unknown
+    (``sensors.pin_frame``); what was done is in ``info["response"]``.
     """
     from negstiff.inference import sensors
 
     path = Path(path)
+    raw, meta = _read(path)
+    resolution = raw.pop(RESOLUTION, None)
+    cmap = parse_column_map(columns) if isinstance(columns, (str, type(None))) else dict(columns)
+    cols = _mapped_columns(path, raw, cmap)
+    if any(name == "t" and (src != "t" or scale != 1.0) for name, (src, scale) in cmap.items()):
+        resolution = None  # the printed precision was read for a column named t only
+    input_name, n = _checked_input(path, raw, cols)
+    fs, t0, time_info = _time_base(path, cols, meta, fs, resolution)
+    if mass is None and "mass" in meta:
+        try:
+            mass = float(meta["mass"])
+        except ValueError:
+            raise MeasurementError(f"{path}: metadata mass = {meta['mass']!r} is not a number") from None
+    z, resp = None, {"measured": None}
+    if response or any(k in cols for k in sensors.RESPONSES):
+        z, resp = sensors.derive(cols, input_name, fs, str(path))
+        k = int(round(resp.get("trim_s", 0.0) * fs))
+        if k:
+            if n <= 4 * k:
+                raise MeasurementError(
+                    f"{path}: too few samples ({n}) to derive z from {resp['measured']}: the integral of an "
+                    f"accelerometer loses {resp['trim_s']:g} s at each end"
+                )
+            cols = {c: v[k:-k] for c, v in cols.items()}
+            z, t0 = z[k:-k], t0 + k / fs
+            resp["derived"] += f"; {resp['trim_s']:g} s cut at each end (the integral's end effects)"
+    rec = Measurement(
+        fs=fs,
+        input_name=input_name,
+        u=cols[input_name],
+        z=z,
+        z_dot=cols.get("z_dot"),
+        y=cols.get("y"),
+        base_disp=cols.get("base_disp"),
+        meta=meta,
+        source=str(path),
+        t0=t0,
+        info={"time": time_info, "response": resp, **_channel_info(meta, cmap)},
+    )
+    return sensors.pin_frame(rec.with_mass(mass))
+
+
+def _read(path: Path) -> tuple[dict[str, np.ndarray], dict[str, str]]:
+    """The file's columns and metadata by its reader; any parser failure is one line."""
     if not path.is_file():
         raise MeasurementError(f"{path}: no such file")
     reader = READERS.get(path.suffix.lower())
     if reader is None:
         raise MeasurementError(f"{path}: unknown file type {path.suffix!r} (use {', '.join(READERS)})")
     try:
-        raw, meta = reader(path)
+        return reader(path)
     except MeasurementError:
         raise
     except Exception as exc:  # any parser failure is an unreadable file, said in one line
         raise MeasurementError(f"{path}: unreadable file ({type(exc).__name__}: {exc})".splitlines()[0]) from None
-    resolution = raw.pop(RESOLUTION, None)
-    cmap = parse_column_map(columns) if isinstance(columns, (str, type(None))) else dict(columns)
+
+
+def _mapped_columns(path: Path, raw: dict[str, np.ndarray], cmap: dict) -> dict[str, np.ndarray]:
+    """The contract's columns: mapped (and scaled) from the file's, plus unmapped contract names."""
+    if not cmap:
+        return {k: v for k, v in raw.items() if k in KNOWN}
     cols: dict[str, np.ndarray] = {}
-    if cmap:
-        for name, (src, scale) in cmap.items():
-            if src not in raw:
-                raise MeasurementError(
-                    f"{path}: column map refers to {src!r}, which is not in the file "
-                    f"(columns: {', '.join(raw) or 'none'})"
-                )
-            cols[name] = raw[src] * scale
-            if name == "t" and (src != "t" or scale != 1.0):
-                resolution = None  # the printed precision was read for a column named t only
-        for name in KNOWN:  # unmapped contract columns present in the file still count
-            if name in raw and name not in cols and all(src != name for src, _ in cmap.values()):
-                cols[name] = raw[name]
-    else:
-        cols = {k: v for k, v in raw.items() if k in KNOWN}
+    for name, (src, scale) in cmap.items():
+        if src not in raw:
+            raise MeasurementError(
+                f"{path}: column map refers to {src!r}, which is not in the file (columns: {', '.join(raw) or 'none'})"
+            )
+        cols[name] = raw[src] * scale
+    for name in KNOWN:  # unmapped contract columns present in the file still count
+        if name in raw and name not in cols and all(src != name for src, _ in cmap.values()):
+            cols[name] = raw[name]
+    return cols
+
+
+def _checked_input(path: Path, raw: dict, cols: dict[str, np.ndarray]) -> tuple[str, int]:
+    """The one input column's name and the record's length; equal lengths, finite values."""
     inputs = [k for k in INPUTS if k in cols]
     if len(inputs) != 1:
         what = "no input column" if not inputs else "two input columns"
@@ -326,74 +373,53 @@ def load(
         bad = np.flatnonzero(~np.isfinite(v))
         if bad.size:
             raise MeasurementError(f"{path}: column {k} is NaN or inf at row {bad[0] + 1}")
-    fs_meta = meta.get("fs")
+    return inputs[0], n
+
+
+def _time_base(path: Path, cols: dict, meta: dict, fs: float | None, resolution) -> tuple[float, float, dict]:
+    """(fs [Hz], t0 [s], how it was found): the caller's fs (replacing any column t), else column t
+    (``time_base``: uniform within its printed precision), else the metadata's fs."""
     if fs is not None:
         if not (fs > 0 and math.isfinite(fs)):
             raise MeasurementError(f"{path}: sampling rate must be positive, got {fs}")
-        time_info = {"source": f"fs = {fs:g} Hz given by the caller" + (" (replaces column t)" if "t" in cols else "")}
-    else:
-        time_info = {"source": "metadata fs"}
-        if fs_meta is not None:
-            try:
-                fs = float(fs_meta)
-            except ValueError:
-                raise MeasurementError(f"{path}: metadata fs = {fs_meta!r} is not a number") from None
-    t0 = 0.0
+        source = f"fs = {fs:g} Hz given by the caller" + (" (replaces column t)" if "t" in cols else "")
+        return float(fs), float(cols["t"][0]) if "t" in cols else 0.0, {"source": source}
+    fs_meta = meta.get("fs")
+    if fs_meta is not None:
+        try:
+            fs = float(fs_meta)
+        except ValueError:
+            raise MeasurementError(f"{path}: metadata fs = {fs_meta!r} is not a number") from None
     if "t" in cols:
-        t = cols["t"]
-        if n < 2:
-            raise MeasurementError(f"{path}: too few samples ({n}) to define a sampling rate")
-        if "caller" in time_info["source"]:
-            t0 = float(t[0])
-        else:
-            dt, jitter, res = time_base(t, resolution, path)
-            if fs is not None and abs(fs * dt - 1) > TIME_JITTER_FRACTION:
-                raise MeasurementError(
-                    f"{path}: fs = {fs:g} Hz disagrees with column t (1/dt = {1 / dt:.6g} Hz); "
-                    "--fs replaces the time column"
-                )
-            fs, t0 = 1.0 / dt, float(t[0])
-            time_info = {"source": "column t (mean step)", "jitter_s": jitter, "resolution_s": res}
+        dt, jitter, res = time_base(cols["t"], resolution, path)
+        if fs is not None and abs(fs * dt - 1) > TIME_JITTER_FRACTION:
+            raise MeasurementError(
+                f"{path}: fs = {fs:g} Hz disagrees with column t (1/dt = {1 / dt:.6g} Hz); "
+                "--fs replaces the time column"
+            )
+        return (
+            1.0 / dt,
+            float(cols["t"][0]),
+            {"source": "column t (mean step)", "jitter_s": jitter, "resolution_s": res},
+        )
     if fs is None:
         raise MeasurementError(f"{path}: no time base: give a column t, '# fs: ...' metadata or --fs")
     if not (fs > 0 and math.isfinite(fs)):
         raise MeasurementError(f"{path}: sampling rate must be positive, got {fs}")
-    if mass is None and "mass" in meta:
-        try:
-            mass = float(meta["mass"])
-        except ValueError:
-            raise MeasurementError(f"{path}: metadata mass = {meta['mass']!r} is not a number") from None
-    z, resp = None, {"measured": None}
-    if response or any(k in cols for k in sensors.RESPONSES):
-        z, resp = sensors.derive(cols, inputs[0], float(fs), str(path))
-        k = int(round(resp.get("trim_s", 0.0) * fs))
-        if k:
-            if n <= 4 * k:
-                raise MeasurementError(
-                    f"{path}: too few samples ({n}) to derive z from {resp['measured']}: the integral of an "
-                    f"accelerometer loses {resp['trim_s']:g} s at each end"
-                )
-            cols = {c: v[k:-k] for c, v in cols.items()}
-            z, t0 = z[k:-k], t0 + k / fs
-            resp["derived"] += f"; {resp['trim_s']:g} s cut at each end (the integral's end effects)"
-    rec = Measurement(
-        fs=float(fs),
-        input_name=inputs[0],
-        u=cols[inputs[0]],
-        z=z,
-        z_dot=cols.get("z_dot"),
-        y=cols.get("y"),
-        base_disp=cols.get("base_disp"),
-        meta=meta,
-        source=str(path),
-        t0=t0,
-        info={"time": time_info, "response": resp, **_channel_info(meta, cmap)},
-    )
-    return sensors.pin_frame(rec.with_mass(mass))
+    return fs, 0.0, {"source": "metadata fs"}
 
 
-UNIT_HINTS = {"g": ("m/s^2", 9.81), "mm": ("m", 1e-3), "mm/s": ("m/s", 1e-3), "mm/s^2": ("m/s^2", 1e-3),
-              "um": ("m", 1e-6), "in": ("m", 0.0254), "in/s": ("m/s", 0.0254), "mV": (None, None), "V": (None, None)}
+UNIT_HINTS = {
+    "g": ("m/s^2", 9.81),
+    "mm": ("m", 1e-3),
+    "mm/s": ("m/s", 1e-3),
+    "mm/s^2": ("m/s^2", 1e-3),
+    "um": ("m", 1e-6),
+    "in": ("m", 0.0254),
+    "in/s": ("m/s", 0.0254),
+    "mV": (None, None),
+    "V": (None, None),
+}
 """Units a lab file may label a channel with that are not the contract's SI units (and the factor)."""
 
 
@@ -403,9 +429,7 @@ def _channel_info(meta: dict[str, str], cmap: dict) -> dict[str, Any]:
     chans = {k.split(":", 1)[1] for k in meta if k.startswith(("unit:", "sensitivity:"))}
     if not chans:
         return {}
-    out = {
-        c: {"unit": meta.get(f"unit:{c}"), "sensitivity": meta.get(f"sensitivity:{c}")} for c in sorted(chans)
-    }
+    out = {c: {"unit": meta.get(f"unit:{c}"), "sensitivity": meta.get(f"sensitivity:{c}")} for c in sorted(chans)}
     warns = []
     for name, (src, scale) in cmap.items():
         unit = meta.get(f"unit:{src}")

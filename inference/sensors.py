@@ -193,7 +193,9 @@ def derive(cols: dict[str, np.ndarray], input_name: str, fs: float, source: str)
         "an acceleration record; only in-well records are fully described",
         "trim_s": TRIM_S,
         "acceleration_noise_m_s2": sigma_a,
-        "integration_error_m": sigma_a / (2 * math.pi * HIGHPASS_HZ) ** 2 * math.sqrt(2 * HIGHPASS_HZ / fs)
+        # white noise of rms sigma_a over the band, integrated twice above f_hp:
+        # var = sigma_a^2 / (fs/2) * int_{f_hp} df / (2 pi f)^4 = sigma_a^2 (2 / (3 fs)) / ((2 pi)^4 f_hp^3)
+        "integration_error_m": sigma_a / (2 * math.pi * HIGHPASS_HZ) ** 2 * math.sqrt(2 * HIGHPASS_HZ / (3 * fs))
         if np.isfinite(sigma_a)
         else float("nan"),
         "z_constant_known": False,
