@@ -450,6 +450,16 @@ class SINDy:
         }
 
 
+def input_coefficient(rec: Measurement, terms=("1", "z", "z^2", "z^3", "z^4", "z^5", "v", "v|v|")) -> float:
+    """The input's coefficient in z'' as the record's own weak-form least squares learns it, unconstrained
+    (per unit mass): physics says -1 for a base acceleration in m/s^2 and 1/m for a force in N, so it
+    checks the input's units and the mass (``plausibility``)."""
+    est = SINDy()
+    zs, v, _, _ = est.prepare(rec.z, rec.fs)
+    support = tuple(t in terms for t in TERMS)
+    return float(est._fit_once(est._design(rec, zs, v), 0.0, None, support=support)[-1])
+
+
 def weak_least_squares(rec: Measurement, terms, gain: float | None = None) -> Model:
     """The weak-form least-squares model of a fixed set of library ``terms`` over the whole record (no
     selection, no ensemble): the deterministic start point of the posterior and the discrepancy

@@ -174,10 +174,10 @@ def test_simulate_an_input_only_record_from_rest_at_z_plus(tmp_path):
     assert np.allclose(z, z_plus, atol=1e-9), "no input, at rest: it stays at z_plus"
 
 
-def _rewrite_z(src, dst, f):
+def _rewrite_z(src, dst, f, column="z"):
     lines = src.read_text().splitlines()
     h = next(i for i, x in enumerate(lines) if x.startswith("t,"))
-    j = lines[h].split(",").index("z")
+    j = lines[h].split(",").index(column)
     out = lines[: h + 1]
     for row in lines[h + 1 :]:
         p = row.split(",")
@@ -188,12 +188,17 @@ def _rewrite_z(src, dst, f):
 
 
 def test_implausible_records_are_warned_about_loudly(workdir, tmp_path, capsys):
-    # a laser zero 10 mm off the rods-horizontal position, and a record in mm: identified (exit 0),
-    # with a warning in the result and on stderr even under --quiet
+    # a laser zero 10 mm off the rods-horizontal position, a record in mm, a table acceleration in g:
+    # identified (exit 0), with a warning in the result and on stderr even under --quiet
     src = tmp_path / "r.csv"
     assert main(["rig", "random", "-o", str(src), "--duration", "40", "--seed", "3", "--quiet"]) == 0
-    for name, f, says in (("shift", lambda z: z + 0.01, "off the rods-horizontal"), ("mm", lambda z: 1e3 * z, "in mm")):
-        path = _rewrite_z(src, tmp_path / f"{name}.csv", f)
+    cases = (
+        ("shift", "z", lambda z: z + 0.01, "off the rods-horizontal"),
+        ("mm", "z", lambda z: 1e3 * z, "in mm"),
+        ("g", "base_acc", lambda a: a / 9.81, "is base_acc in g"),
+    )
+    for name, col, f, says in cases:
+        path = _rewrite_z(src, tmp_path / f"{name}.csv", f, col)
         out = tmp_path / f"{name}.json"
         assert main(["identify", "nsi", str(path), "-o", str(out), "--quiet"]) == 0
         warnings = json.loads(out.read_text())["warnings"]
