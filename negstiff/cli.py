@@ -592,9 +592,10 @@ def check_paths(args) -> None:
                 raise InputError(
                     f"--{name.replace('_', '-')} {v}: would overwrite the input {inputs[t]}; choose another path"
                 )
-        if out.is_dir() and not (args.command == "rig" and args.mode == "campaign"):
+        folder_out = args.command == "reproduce" or (args.command == "rig" and args.mode == "campaign")
+        if out.is_dir() and not folder_out:
             raise InputError(f"--{name} {v}: is a folder; give a file path")
-        parent = out if (args.command == "rig" and args.mode == "campaign") else out.parent
+        parent = out if folder_out else out.parent
         while not parent.exists() and parent != parent.parent:
             parent = parent.parent
         try:  # the one sure test of a folder's writability: write in it

@@ -250,3 +250,12 @@ def test_ctrl_c_ends_with_one_line_and_exit_130(workdir, tmp_path):
     assert p.returncode == 130, err
     assert len(err.strip().splitlines()) == 1 and "interrupted" in err and "Traceback" not in err
     assert not out.exists()
+
+
+def test_folder_outputs_may_exist(tmp_path):
+    # reproduce and rig campaign write folders: an existing one is replaced (atomically), not refused
+    from negstiff.cli import check_paths
+
+    (tmp_path / "paper").mkdir()
+    for argv in (["reproduce", "-o", str(tmp_path / "paper")], ["rig", "campaign", "-o", str(tmp_path / "paper")]):
+        check_paths(build_parser().parse_args(argv))
