@@ -101,7 +101,7 @@ def _scales(model: Model, names, z_rms: float, v_rms: float) -> np.ndarray:
 def refine(
     model: Model,
     rec: Measurement,
-    windows_s: tuple[float, ...] = (0.05, 0.25, 1.0, 4.0),
+    windows_s: tuple[float, ...] = (0.05, 0.25, 1.0),
     max_windows: int = 240,
     free_mass: bool = False,
     max_nfev: int = 60,

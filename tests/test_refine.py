@@ -18,7 +18,8 @@ def test_refinement_returns_to_the_truth_from_a_perturbed_start():
     # Fact: started 5 % off in k1-k3 and 30 % off in c, c_nl, the simulation-error minimum of a
     # noise-free cross-well record is the truth: k1-k3 and c within 0.1 % (0.02 % measured); c_nl within
     # 3 % (it trades with c on 20 s, and the 512 Hz record's linearly interpolated input differs from
-    # the rig's 4x oversampled one by ~8 um of response: 1.6 % measured); the windows' error falls 100x
+    # the rig's 4x oversampled one by ~8 um of response: 1.6 % measured); the windows' error falls to
+    # that floor (7.7 um refined from the truth itself; 2.5x it allowed)
     truth = SEED_LIKE_CUBIC
     rec = Rig(truth, seed=6, sensors=Sensors.noiseless()).random(duration=20, rms=SEED_LIKE_CROSS_WELL_RMS)
     m = from_arrays(rec.columns["base_acc"], rec.columns["z"], rec.fs, mass=truth.m)
@@ -28,7 +29,7 @@ def test_refinement_returns_to_the_truth_from_a_perturbed_start():
     for k in ("k1", "k2", "k3", "c"):
         assert getattr(r.model, k) == pytest.approx(getattr(truth, k), rel=1e-3), k
     assert r.model.c_nl == pytest.approx(truth.c_nl, rel=0.03)
-    assert r.stages[-1]["rms_end_m"] < 1e-2 * r.stages[0]["rms_start_m"]
+    assert r.stages[-1]["rms_end_m"] < 2.5 * 7.7e-6 < 0.05 * r.stages[0]["rms_start_m"]
     assert r.initial_model == start
 
 
