@@ -1,5 +1,5 @@
 """Discrepancy study (issue 8): the workflow on rig records with each hidden effect and with none, on
-the as-built device (model-form gap), and on the Silverbox from a linear start.
+the as-built device (model-form gap); the Silverbox from a linear start is in ``silverbox.py``.
 
     python -m negstiff.experiments.discrepancy_study [-o reports/discrepancy] [--fast]
 """
@@ -13,12 +13,11 @@ from typing import Any
 import matplotlib.pyplot as plt
 import numpy as np
 
-from negstiff.inference.discrepancy import LINEAR_BASELINE, Discrepancy, residual_psd
-from negstiff.inference.measurement import load
+from negstiff.inference.discrepancy import Discrepancy, residual_psd
 from negstiff.models import AS_BUILT, SEED_LIKE_CROSS_WELL_RMS, SEED_LIKE_CUBIC
 from negstiff.models.rig import Rig
 
-from .nsi_study import SILVERBOX_TRAIN, as_measurement, find_silverbox, silverbox_test_error_mv
+from .nsi_study import as_measurement
 from .report import Report, fmt, run_study
 
 BASE = dataclasses.replace(SEED_LIKE_CUBIC, c_nl=0.0)
@@ -143,26 +142,6 @@ def device_part(rep: Report, res: dict[str, Any], duration: float, seed: int) ->
     )
 
 
-def silverbox_part(rep: Report, res: dict[str, Any]) -> None:
-    rep.heading("Real data: the Silverbox from a linear start", 3)
-    path = find_silverbox()
-    if path is None:
-        rep.warning("Silverbox data not found (set NEGSTIFF_SILVERBOX); section skipped.")
-        res["silverbox"] = None
-        return
-    m = load(path, columns="force=V1,z=V2", fs=610.35)
-    d = Discrepancy(baseline=LINEAR_BASELINE).fit(m.segment(*SILVERBOX_TRAIN))
-    before, after = silverbox_test_error_mv(d.baseline_model_, m), silverbox_test_error_mv(d.model_, m)
-    r = d.result()
-    r.update(test_rms_mv_before=before, test_rms_mv_after=after)
-    res["silverbox"] = r
-    rep.text(
-        f"Baseline: a linear oscillator (1, z, z'). The catalogue now also holds quadratic and cubic stiffness. "
-        f"Named in turn: **{', '.join(r['effects'])}**. Free-run RMS error on the multisine test segment: "
-        f"**{fmt(before, 3)} mV -> {fmt(after, 3)} mV** (published: polynomial NARX 7.7 mV, SUBNET 0.36 mV)."
-    )
-
-
 def discrepancy_section(rep: Report, results: dict[str, Any], fast: bool, seed_: int = 0) -> None:
     res: dict[str, Any] = {}
     results["discrepancy"] = res
@@ -183,7 +162,6 @@ def discrepancy_section(rep: Report, results: dict[str, Any], fast: bool, seed_:
             psd_figure(rep, d, m, effect)
     if not fast:
         device_part(rep, res, 120.0, seed_ + 5)
-    silverbox_part(rep, res)
 
 
 def main(argv=None) -> int:

@@ -1,4 +1,5 @@
-"""NSI study (seed section 4: Table 1, Eq. 8, Table 2, Figures 8-9) on the virtual rig and the Silverbox.
+"""NSI study (seed section 4: Table 1, Eq. 8, Table 2, Figures 8-9) on the virtual rig (the Silverbox:
+``experiments/silverbox.py``).
 
     python -m negstiff.experiments.nsi_study [-o reports/nsi] [--fast]
 
@@ -10,58 +11,19 @@ from __future__ import annotations
 
 import sys
 import time
-from pathlib import Path
 from typing import Any
 
 import matplotlib.pyplot as plt
 import numpy as np
 from scipy import signal
 
-from negstiff.inference.measurement import Measurement, from_arrays, load
+from negstiff.inference.measurement import Measurement, from_arrays
 from negstiff.inference.nsi import NSI, smooth_and_differentiate
 from negstiff.models import AS_BUILT, SEED_LIKE_CROSS_WELL_RMS, SEED_LIKE_CUBIC, Model, simulate
 from negstiff.models.rig import Rig, RigRecord, Sensors
 
 from . import seed
 from .report import Report, fmt, run_study
-
-
-def find_silverbox() -> Path | None:
-    """The Silverbox file: $NEGSTIFF_SILVERBOX, else shared/data/silverbox beside the checkout or the
-    working directory (the project keeps data in ../shared)."""
-    import os
-
-    env = os.environ.get("NEGSTIFF_SILVERBOX")
-    rel = Path("shared") / "data" / "silverbox" / "SNLS80mV.mat"
-    here = Path(__file__).resolve().parent.parent
-    for p in ([Path(env)] if env else []) + [here.parent / rel, Path.cwd().parent / rel, Path.cwd() / rel]:
-        if p.is_file():
-            return p
-    return None
-
-
-SILVERBOX_PUBLISHED_MV = {
-    "SUBNET neural state-space": 0.36,
-    "polynomial NARX (FROLS)": 7.7,
-    "grey-box Duffing ODE (other split)": 1.0,
-}
-
-
-SILVERBOX_TRAIN = (40650, 105712)
-SILVERBOX_TEST = (105712, 127400)
-
-
-def silverbox_test_error_mv(model: Model, m: Measurement) -> float:
-    """Free-run RMS error [mV] of ``model`` on the Silverbox multisine test segment, the benchmark's
-    protocol: the first 50 measured outputs may initialise the state (here the smoothed z and z' at
-    sample 49, ``derivatives.state_derivatives``)."""
-    from negstiff.inference.derivatives import state_derivatives
-
-    test = m.segment(*SILVERBOX_TEST)
-    zs, v, _, _ = state_derivatives(test.z, test.fs, purpose="state")
-    k0 = 49
-    z = simulate(model, test.u[k0:], test.dt, z0=zs[k0], v0=v[k0], input_kind="force").z[0]
-    return float(1e3 * np.sqrt(np.mean((z[1:] - test.z[k0 + 1 :]) ** 2)))
 
 
 def as_measurement(rec: RigRecord) -> Measurement:
@@ -397,38 +359,6 @@ def stabilization_part(rep: Report, res: dict[str, Any], est: NSI, m: Measuremen
     )
 
 
-def silverbox_part(rep: Report, res: dict[str, Any]) -> None:
-    rep.heading("Real data: the Silverbox", 3)
-    path = find_silverbox()
-    if path is None:
-        rep.warning("Silverbox data not found (set NEGSTIFF_SILVERBOX to SNLS80mV.mat); section skipped.")
-        res["silverbox"] = None
-        return
-    m = load(path, columns="force=V1,z=V2", fs=610.35)
-    est = NSI().fit(m.segment(*SILVERBOX_TRAIN))
-    rms_mv = silverbox_test_error_mv(est.model_, m)
-    mm = est.model_
-    res["silverbox"] = {
-        "test_rms_mv": rms_mv,
-        "f_hz": est.wells_["plus"].f_hz,
-        "zeta": est.wells_["plus"].zeta,
-        "model": mm.to_dict(),
-        "mass_source": est.mass_source_,
-        "published_mv": SILVERBOX_PUBLISHED_MV,
-    }
-    rep.text(
-        f"NSI on the training multisines (samples 40650-105712; force input, mass unknown, so the FRF level gives "
-        f"m = {fmt(mm.m, 3)}), single well at {fmt(est.wells_['plus'].f_hz, 4)} Hz, zeta "
-        f"{fmt(100 * est.wells_['plus'].zeta, 3)} %, hardening k3/m = {fmt(mm.k3 / mm.m, 3)} 1/(V^2 s^2). "
-        f"Free-run RMS error on the multisine test segment (105712-127400, first 50 outputs initialise the state): "
-        f"**{fmt(rms_mv, 3)} mV**."
-    )
-    rep.table(
-        ["model", "test RMS error [mV]"],
-        [["negstiff NSI (cubic + quadratic damping)", rms_mv]] + [[k, v] for k, v in SILVERBOX_PUBLISHED_MV.items()],
-    )
-
-
 def nsi_section(rep: Report, results: dict[str, Any], fast: bool, seed_: int = 0) -> None:
     """The NSI section (seed section 4) for the report; numbers go into ``results["nsi"]``."""
     res: dict[str, Any] = {}
@@ -441,7 +371,6 @@ def nsi_section(rep: Report, results: dict[str, Any], fast: bool, seed_: int = 0
         integration_sensitivity(rep, res, duration, seed_ + 3)
         rec = Rig(SEED_LIKE_CUBIC, seed=seed_ + 1).random(duration=duration, rms=SEED_LIKE_CROSS_WELL_RMS)
         stabilization_part(rep, res, est, as_measurement(rec))
-    silverbox_part(rep, res)
 
 
 def main(argv=None) -> int:

@@ -27,6 +27,7 @@ from .discrepancy_study import discrepancy_section
 from .nsi_study import nsi_section
 from .posterior_study import posterior_section
 from .report import Report, fmt
+from .silverbox import silverbox_section
 from .sindy_study import sindy_section
 from .updating_study import updating_section
 
@@ -217,6 +218,7 @@ def reproduce(out: Path, fast: bool = False, seed: int = 0, progress: bool = Tru
         ("sindy", "SINDy equation discovery", sindy_section),
         ("posterior", "Bayesian posteriors (emcee)", posterior_section),
         ("discrepancy", "discrepancy workflow", discrepancy_section),
+        ("silverbox", "Silverbox benchmark (real data)", silverbox_section),
     ):
         say(title)
         cached_section(name, fn, rep, results, fast, seed, say)

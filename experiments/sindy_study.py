@@ -1,5 +1,5 @@
 """SINDy study: equation discovery on the virtual rig (polynomial truth, a hidden friction force, the
-as-built device's exact geometry) and on the Silverbox, beside NSI on the same records.
+as-built device's exact geometry), beside NSI on the same records (the Silverbox: ``silverbox.py``).
 
     python -m negstiff.experiments.sindy_study [-o reports/sindy] [--fast]
 """
@@ -15,21 +15,12 @@ import matplotlib.pyplot as plt
 import numpy as np
 from scipy import signal
 
-from negstiff.inference.measurement import load
 from negstiff.inference.nsi import NSI
 from negstiff.inference.sindy import TERM_FIELDS, TERMS, SINDy
 from negstiff.models import AS_BUILT, SEED_LIKE_CROSS_WELL_RMS, SEED_LIKE_CUBIC, Model
 from negstiff.models.rig import Rig
 
-from .nsi_study import (
-    SILVERBOX_PUBLISHED_MV,
-    SILVERBOX_TRAIN,
-    as_measurement,
-    find_silverbox,
-    pct,
-    silverbox_test_error_mv,
-    true_floor,
-)
+from .nsi_study import as_measurement, pct, true_floor
 from .report import Report, fmt, run_study
 
 HIDDEN_FRICTION_N = 0.1
@@ -249,34 +240,6 @@ def as_built_part(rep: Report, res: dict[str, Any], duration: float, seed_: int)
     rep.figure("sindy_as_built", fig, "As-built device: exact restoring force, SINDy's polynomial, the best cubic.")
 
 
-def silverbox_part(rep: Report, res: dict[str, Any]) -> None:
-    rep.heading("Real data: the Silverbox", 3)
-    path = find_silverbox()
-    if path is None:
-        rep.warning("Silverbox data not found (set NEGSTIFF_SILVERBOX to SNLS80mV.mat); section skipped.")
-        res["silverbox"] = None
-        return
-    m = load(path, columns="force=V1,z=V2", fs=610.35)
-    est = SINDy().fit(m.segment(*SILVERBOX_TRAIN))
-    rms_mv = silverbox_test_error_mv(est.model_, m)
-    r = est.result()
-    r.update(test_rms_mv=rms_mv, published_mv=SILVERBOX_PUBLISHED_MV)
-    res["silverbox"] = r
-    mm = est.model_
-    rep.text(
-        f"Training multisines (samples 40650-105712; force input, mass unknown, so the input's coefficient is "
-        f"learned and m = {fmt(mm.m, 3)}). Selected: **{', '.join(est.selected_)}**; cubic hardening "
-        f"k3/m = {fmt(mm.k3 / mm.m, 3)} 1/(V^2 s^2) "
-        f"(inclusion {fmt(est.ensemble_['z^3']['inclusion_probability'], 2)}). "
-        f"Free-run RMS error on the multisine test segment (105712-127400, the first 50 outputs initialise the "
-        f"state): **{fmt(rms_mv, 3)} mV**."
-    )
-    rep.table(
-        ["model", "test RMS error [mV]"],
-        [["negstiff SINDy (weak form)", rms_mv]] + [[k, v] for k, v in SILVERBOX_PUBLISHED_MV.items()],
-    )
-
-
 def sindy_section(rep: Report, results: dict[str, Any], fast: bool, seed_: int = 0) -> None:
     """The SINDy section; numbers go into ``results["sindy"]``."""
     res: dict[str, Any] = {}
@@ -287,7 +250,6 @@ def sindy_section(rep: Report, results: dict[str, Any], fast: bool, seed_: int =
     if not fast:
         friction_part(rep, res, duration, seed_ + 4)
         as_built_part(rep, res, duration, seed_ + 2)
-    silverbox_part(rep, res)
 
 
 def main(argv=None) -> int:

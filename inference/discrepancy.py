@@ -30,14 +30,14 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-from scipy import signal
 
 from negstiff.models import Model
 
 from .derivatives import state_derivatives
 from .measurement import Measurement, MeasurementError
-from .nsi import restarted_free_runs
-from .sindy import TERMS, SINDy, test_function
+from .refine import refine_stage
+from .sindy import BASE_FIELDS, TERM_FIELDS, TERMS, SINDy, test_function
+from .validation import boundedness, residual_psd, restarted_free_runs, validate  # noqa: F401 (residual_psd: API)
 
 CUBIC_BASELINE = ("1", "z", "z^2", "z^3", "v")
 LINEAR_BASELINE = ("1", "z", "v")
@@ -68,6 +68,11 @@ class Candidate:
     notes: dict[str, Any] = field(default_factory=dict)
 
 
+def _held(terms) -> tuple[str, ...]:
+    """Base fields whose library term the model does not carry: refinement holds them at zero."""
+    return tuple(TERM_FIELDS[t][0] for t in TERMS if t not in terms and TERM_FIELDS[t][0] in BASE_FIELDS)
+
+
 class DiscrepancyError(MeasurementError):
     """The record cannot support the workflow (too short, no excitation)."""
 
@@ -93,7 +98,9 @@ class Discrepancy:
         margin: float = 0.1,
         max_effects: int = 3,
         window_s: float = 2.0,
+        refine: bool = True,
     ):
+        self.refine = refine
         self.baseline = tuple(baseline)
         self.validation_fraction = validation_fraction
         self.selection_fraction = selection_fraction
@@ -182,6 +189,16 @@ class Discrepancy:
         cand.block_ms = r2[: nb * rows].reshape(nb, rows).mean(axis=1) / ys.var()
         cand.heldout_percent = float(100 * np.sqrt(cand.block_ms.mean()))
         cand.coefficients = coef
+        if cand.effect != "none":
+            # the catalogue never names an effect whose fit opens an escape just past the stroke
+            try:
+                escape = boundedness(self._model(coef, rec, cand.stop), rec.segment(0, self.n_id), free_run=False)
+                escape = escape["escape_z"]
+            except ValueError:
+                escape = None
+            if escape is not None:
+                cand.notes["escape_z"] = escape
+                cand.heldout_percent = math.inf
         return cand
 
     def _fit_stop(self, rec: Measurement, terms: tuple[str, ...]) -> float:
@@ -258,6 +275,10 @@ class Discrepancy:
         self.iterations_ = []
         base_model = self._refit_model(rec, terms, stop)
         self.baseline_model_ = base_model
+        self.baseline_refinement_ = None
+        if self.refine:  # the gap a user sees is the best the baseline's form predicts, not its weak fit's
+            val = validate(base_model, rec, self.n_id)
+            base_model, _, self.baseline_refinement_ = refine_stage(base_model, rec, self.n_id, val, held=_held(terms))
         self.gap_before_ = self._gap(rec, base_model)
         self.locate_before_ = self.locate(rec, terms, stop)
         for _ in range(self.max_effects):
@@ -278,7 +299,7 @@ class Discrepancy:
             named = best.effect != "none" and d.mean() > max(se, self.margin * none.block_ms.mean())
             self.iterations_.append(
                 {
-                    "ranking": [{"effect": c.effect, "score": c.heldout_percent} for c in ranking],
+                    "ranking": [{"effect": c.effect, "score": c.heldout_percent, **c.notes} for c in ranking],
                     "named": best.effect if named else "none",
                     "gain_percent": float(100 * d.mean() / none.block_ms.mean()),
                     "standard_error_percent": float(100 * se / none.block_ms.mean()),
@@ -293,8 +314,16 @@ class Discrepancy:
         self.terms_ = terms
         self.stop_ = stop
         self.model_ = self._as_extra(self._refit_model(rec, terms, stop), self.effects_)
+        self.initial_model_, self.refinement_ = self.model_, None
+        if self.refine:
+            if not self.effects_:
+                self.model_, self.refinement_ = base_model, self.baseline_refinement_
+            else:
+                val = validate(self.model_, rec, self.n_id)
+                self.model_, _, self.refinement_ = refine_stage(self.model_, rec, self.n_id, val, held=_held(terms))
         self.gap_after_ = self._gap(rec, self.model_)
         self.locate_after_ = self.locate(rec, terms, stop)
+        self.bounded_ = boundedness(self.model_, rec.segment(0, self.n_id))
         return self
 
     def _parsimonious(self, ranking: list[Candidate]) -> Candidate:
@@ -306,7 +335,7 @@ class Discrepancy:
         n_par = {"end_stop": 2, "none": 0}
         ok = []
         for c in ranking:
-            if c.effect == "none":
+            if c.effect == "none" or not np.isfinite(c.heldout_percent):
                 continue
             d = c.block_ms - top.block_ms
             se = d.std(ddof=1) / math.sqrt(d.size)
@@ -399,6 +428,10 @@ class Discrepancy:
             "regimes_before": self.locate_before_["regimes"],
             "regimes_after": self.locate_after_["regimes"],
             "model": self.model_.to_dict(),
+            "initial_model": self.initial_model_.to_dict(),
+            "refinement": self.refinement_,
+            "bounded": self.bounded_,
+            "warnings": [] if self.bounded_["ok"] else [self.bounded_["warning"]],
             "baseline_model": self.baseline_model_.to_dict(),
             "effect_size": self.effect_size(),
             "iterations": self.iterations_,
@@ -411,22 +444,3 @@ class Discrepancy:
                 "window that diverges near the barrier, chaos, can dominate the pool)",
             },
         }
-
-
-def residual_psd(rec: Measurement, model: Model, start: int, window_s: float = 2.0):
-    """PSD of the restarted free runs' residual over [start, end): (f, P)."""
-    from negstiff.models import simulate_batch
-
-    zs, v, _, _ = state_derivatives(rec.z, rec.fs, purpose="state")
-    w = int(round(window_s * rec.fs))
-    starts = start + w * np.arange((rec.n - start) // w)
-    U = np.stack([rec.u[k : k + w] for k in starts])
-    P = np.repeat(model.kernel_params()[:, None], starts.size, axis=1)
-    res = simulate_batch(
-        P, model.kind, U, rec.dt, np.column_stack([zs[starts], v[starts]]),
-        input_kind=rec.input_name, input_index=np.arange(starts.size),
-    )  # fmt: skip
-    meas = np.stack([rec.z[k : k + w] for k in starts])
-    ok = ~res.diverged
-    f, p = signal.welch(meas[ok] - res.z[ok], rec.fs, nperseg=min(w, 512), axis=1)
-    return f, p.mean(axis=0)

@@ -462,6 +462,9 @@ def time_base(t: np.ndarray, resolution: np.ndarray | None, path) -> tuple[float
     # a step may deviate by the rounding of its two ends (half a printed unit each) plus the median's own
     # rounding, or by 1 % of a step from each end's grid position
     tol_d = np.maximum(0.5 * (res[1:] + res[:-1]) + res[k : k + 2].max(), 2 * TIME_JITTER_FRACTION * step)
+    # a step half a typical step off is a gap or a repeat whatever the printing: rounding explains it only
+    # where the column is printed too coarsely to show its own sampling (then --fs is the way)
+    tol_d = np.minimum(tol_d, 0.5 * step)
     bad = np.flatnonzero(np.abs(d - step) > tol_d * (1 + 1e-9))
     if bad.size:
         r = int(bad[0]) + 2

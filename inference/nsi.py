@@ -36,11 +36,12 @@ from typing import Any
 import numpy as np
 from scipy import signal
 
-from negstiff.models import Model, simulate, simulate_batch
+from negstiff.models import Model
 
 from . import subspace
-from .derivatives import state_derivatives
 from .measurement import Measurement, MeasurementError
+from .refine import refine_stage, stroke_quantiles
+from .validation import boundedness, restarted_free_runs, validate  # noqa: F401 (their home before validation.py)
 
 BASIS_NAMES = ("x2", "x3", "vabsv")
 """Nonlinear basis: x^2, x^3, x'|x'| (their coefficients are k2~, k3, c_nl)."""
@@ -173,12 +174,14 @@ class NSI:
         band: tuple[float, float] = (0.6, 1.6),
         validation_fraction: float = 0.2,
         passes: int = 2,
+        refine: bool = True,
     ):
         self.order = order
         self.block_rows = block_rows
         self.band = band
         self.validation_fraction = validation_fraction
         self.passes = passes
+        self.refine = refine
 
     # --- one well ----------------------------------------------------------------------------
     def _extended_input(self, rec: Measurement, zs: np.ndarray, v: np.ndarray, z_ref: float):
@@ -306,8 +309,17 @@ class NSI:
         self.equilibria_ = self.model_.equilibria()
         self.modal_ = {name: {"f_hz": w.f_hz, "zeta": w.zeta} for name, w in wells.items()}
         self.modal_.setdefault("minus", {"f_hz": None, "zeta": None})
-        self.g_estimate_ = self.model_.k0 / mass if rec.input_name == "base_acc" else None
+        self.stroke_ = stroke_quantiles(rec.z[:n_id])
         self.validation_ = validate(self.model_, rec, n_id)
+        self.initial_model_, self.refinement_ = self.model_, None
+        if self.refine:
+            self.model_, self.validation_, self.refinement_ = refine_stage(self.model_, rec, n_id, self.validation_)
+            self.equilibria_ = self.model_.equilibria()
+            if self.refinement_["applied"] and self.refinement_.get("free_mass"):
+                self.mass_source_ += ", refined by simulation error"
+        self.bounded_ = boundedness(self.model_, ident)
+        self.warnings_ = [] if self.bounded_["ok"] else [self.bounded_["warning"]]
+        self.g_estimate_ = self.model_.k0 / self.model_.m if rec.input_name == "base_acc" else None
         self.settings_ = {
             "order": self.order,
             "block_rows": self.block_rows,
@@ -371,6 +383,11 @@ class NSI:
             "mass_source": self.mass_source_,
             "input_gain": self.input_gain_,
             "model": self.model_.to_dict(),
+            "initial_model": self.initial_model_.to_dict(),
+            "stroke_quantiles_m": self.stroke_.tolist(),
+            "refinement": self.refinement_,
+            "bounded": self.bounded_,
+            "warnings": list(self.warnings_),
             "mass_normalised": self.mass_normalised_,
             "equilibria": self.equilibria_.as_dict(),
             "modal": self.modal_,
@@ -391,87 +408,3 @@ class NSI:
             "g_estimate": self.g_estimate_,
             "settings": self.settings_,
         }
-
-
-def validate(model: Model, rec: Measurement, start: int, window_s: float = 2.0) -> dict[str, Any]:
-    """Free-run validation of ``model`` with the measured input over samples [start, N).
-
-    ``rms_percent`` (the contract's): one free run from the measured state at ``start``
-    (Savitzky-Golay z, z'), 100 rms(z_sim - z) / rms(z). Over cross-well records this long run
-    diverges even for the true model once the motion is chaotic (device-model.md), so
-    ``restarted_rms_percent`` adds free runs of ``window_s`` restarted from the measured state at the
-    start of each window (z, z' from the Savitzky-Golay window of least predicted velocity error; all
-    windows in one batched simulation): a gap chaos cannot fake.
-    """
-    tail = rec.segment(start, rec.n)
-    if tail.n < 10:
-        raise MeasurementError(f"{rec.source}: too few samples for the validation segment ({tail.n})")
-    # the measured states free runs start from: the least-error velocity (derivatives.py)
-    zs, v, _, _ = state_derivatives(rec.z, rec.fs, purpose="state")
-    sim = simulate(model, tail.u, tail.dt, z0=float(zs[start]), v0=float(v[start]), input_kind=tail.input_name)
-    z_sim = sim.z[0]
-    out: dict[str, Any] = {
-        "segment": [float(tail.t0), float(tail.t0 + tail.duration)],
-        "diverged": bool(sim.diverged[0]),
-    }
-    if sim.diverged[0]:
-        out.update(
-            rms_percent=float("inf"),
-            residual_mean=float("nan"),
-            residual_std=float("nan"),
-            warning=f"free run diverged: {sim.describe_failures()}",
-        )
-    else:
-        r = z_sim - tail.z
-        out.update(
-            rms_percent=float(100 * np.sqrt(np.mean(r**2)) / np.sqrt(np.mean(tail.z**2))),
-            residual_mean=float(r.mean()),
-            residual_std=float(r.std()),
-            z_sim=z_sim,
-            z_meas=tail.z,
-            t=tail.t,
-        )
-    out.update(restarted_free_runs(model, rec, start, window_s, zs, v))
-    return out
-
-
-def restarted_free_runs(
-    model: Model, rec: Measurement, start: int, window_s: float, zs: np.ndarray, v: np.ndarray
-) -> dict[str, Any]:
-    """Free runs of ``window_s`` seconds over [start, N), each restarted from the measured state
-    (``zs``, ``v``: the record's smoothed displacement and velocity)."""
-    w = int(round(window_s * rec.fs))
-    n_win = (rec.n - start) // w
-    if n_win < 1:
-        return {}
-    starts = start + w * np.arange(n_win)
-    U = np.stack([rec.u[k : k + w] for k in starts])
-    P = np.repeat(model.kernel_params()[:, None], n_win, axis=1)
-    res = simulate_batch(
-        P,
-        model.kind,
-        U,
-        rec.dt,
-        np.column_stack([zs[starts], v[starts]]),
-        input_kind=rec.input_name,
-        input_index=np.arange(n_win),
-    )
-    meas = np.stack([rec.z[k : k + w] for k in starts])
-    ok = ~res.diverged
-    window_ms = np.full(n_win, np.nan)  # per-window mean square error (nan: diverged), an array: not in JSON
-    window_ms[ok] = np.mean((res.z[ok] - meas[ok]) ** 2, axis=1)
-    if not ok.any():
-        return {
-            "restarted_rms_percent": float("inf"),
-            "restart_window_s": window_s,
-            "restart_windows": int(n_win),
-            "window_ms": window_ms,
-        }
-    err = res.z[ok] - meas[ok]
-    return {
-        "restarted_rms_percent": float(100 * np.sqrt(np.mean(err**2)) / np.sqrt(np.mean(meas[ok] ** 2))),
-        "restart_window_s": window_s,
-        "restart_windows": int(n_win),
-        "restart_diverged": int((~ok).sum()),
-        "window_ms": window_ms,
-    }

@@ -515,6 +515,8 @@ class Posterior:
         docstring; default True); False: the Gaussian likelihood as it stands
     oversample : 1 (default): the input is pre-emphasised for the simulator's linear interpolation
         (``Windows.cut``); q > 1: interpolated (FFT, band-limited) to q x fs instead, q times the cost
+    start : coefficient posterior only: the model the MAP search starts from (an ``identify`` result's
+        refined model); default: weak-form least squares of the record
     """
 
     def __init__(
@@ -535,6 +537,7 @@ class Posterior:
         threads: int | None = None,
         seed: int = 0,
         progress: bool = False,
+        start: Model | None = None,
     ):
         if model not in ("coefficients", "device"):
             raise ValueError(f"model must be 'coefficients' or 'device', got {model!r}")
@@ -556,13 +559,24 @@ class Posterior:
         self.threads = threads
         self.seed = seed
         self.progress = progress
+        if start is not None and (model != "coefficients" or not isinstance(start, Model)):
+            raise ValueError("a start model is a polynomial model, for the coefficient posterior")
+        self.start = start
 
     # --- start point -------------------------------------------------------------------------------
     def _start(self, rec: Measurement, win: Windows) -> tuple[Parametrisation, np.ndarray]:
         if self.model == "coefficients":
             from .sindy import weak_least_squares
 
-            start = weak_least_squares(rec, ("1", "z", "z^2", "z^3", "v", "v|v|"))
+            if self.start is not None:  # an identified (output-error refined) model: the MAP search starts there
+                if rec.mass is not None and abs(self.start.m / rec.mass - 1) > 1e-6:
+                    raise PosteriorError(
+                        f"{rec.source}: the start model's mass ({self.start.m:g} kg) is not the record's "
+                        f"({rec.mass:g} kg)"
+                    )
+                start = self.start
+            else:
+                start = weak_least_squares(rec, ("1", "z", "z^2", "z^3", "v", "v|v|"))
             par = coefficient_parametrisation(start)
             theta = np.array([getattr(start, n) for n in par.names])
         else:

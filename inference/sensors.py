@@ -348,9 +348,12 @@ def pin_frame(rec):
     se = fo.get("offset_se_m")
     se = 0.0 if se is None else se
     if fo["offset_m"] is not None and not np.isfinite(se):
-        resp["warnings"] = [*resp.get("warnings", []), "z's frame uncertainty could not be estimated (no two "
-                            "parts of the record visit both wells); k2 and k1 inherit the frame's error "
-                            "(dk2 = 3 k3 dC)"]
+        resp["warnings"] = [
+            *resp.get("warnings", []),
+            "z's frame uncertainty could not be estimated (no two "
+            "parts of the record visit both wells); k2 and k1 inherit the frame's error "
+            "(dk2 = 3 k3 dC)",
+        ]
     elif fo["offset_m"] is None:
         resp["warnings"] = [
             *resp.get("warnings", []),

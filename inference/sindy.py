@@ -55,6 +55,8 @@ from negstiff.models.equation import COULOMB_VELOCITY_SCALE
 from .derivatives import noise_floor, state_derivatives
 from .measurement import Measurement, MeasurementError
 from .nsi import restarted_free_runs, validate
+from .refine import refine_stage, stroke_quantiles
+from .validation import boundedness
 
 TERMS = ("1", "z", "z^2", "z^3", "z^4", "z^5", "v", "v|v|", "v^3", "sgn(v)")
 """Library terms (the input u is appended last and never thresholded)."""
@@ -180,7 +182,9 @@ class SINDy:
         window_s: float = 2.0,
         margin: float = 0.1,
         seed: int = 0,
+        refine: bool = True,
     ):
+        self.refine = refine
         self.weights = tuple(float(w) for w in weights)
         self.n_models = n_models
         self.subset_fraction = subset_fraction
@@ -335,9 +339,11 @@ class SINDy:
             try:
                 model = self.model_from(phys, self._mass(rec, gain, phys)[0])
                 fr = restarted_free_runs(model, ident, n_fit, self.window_s, z0s, v0s)
+                # a support whose potential opens an escape just past the stroke is never selected
+                escape = boundedness(model, ident, free_run=False)["escape_z"]
             except (SINDyError, ValueError):
-                fr = {}
-            ok = fr.get("restart_diverged", 1) == 0
+                fr, escape = {}, None
+            ok = fr.get("restart_diverged", 1) == 0 and escape is None
             r2 = (y_sel - W_sel @ phys) ** 2
             block_ms = r2[: n_blocks * rows].reshape(n_blocks, rows).mean(axis=1) / y_sel.var()
             path.append(
@@ -349,6 +355,7 @@ class SINDy:
                     "weight": float(np.sqrt(min(weights) * max(weights))),
                     "heldout_residual_percent": float(100 * np.sqrt(block_ms.mean())),
                     "free_run_percent": fr["restarted_rms_percent"] if ok else math.inf,
+                    "escape_z": escape,
                     "block_ms": block_ms,
                 }
             )
@@ -379,6 +386,22 @@ class SINDy:
             for i, term in enumerate(TERMS)
         }
         self.warnings_ = []
+        self.stroke_ = stroke_quantiles(rec.z[:n_id])
+        self.validation_ = validate(self.model_, rec, n_id)
+        self.initial_model_, self.refinement_ = self.model_, None
+        if self.refine:
+            # the selection stands: unselected terms stay zero, the selected ones are refined
+            held = tuple(
+                TERM_FIELDS[t][0] for t in TERMS if t not in self.selected_ and TERM_FIELDS[t][0] in BASE_FIELDS
+            )
+            self.model_, self.validation_, self.refinement_ = refine_stage(
+                self.model_, rec, n_id, self.validation_, held=held
+            )
+            if self.refinement_["applied"] and self.refinement_.get("free_mass"):
+                self.mass_source_ += ", refined by simulation error"
+        self.bounded_ = boundedness(self.model_, ident)
+        if not self.bounded_["ok"]:
+            self.warnings_.append(self.bounded_["warning"])
         try:
             self.equilibria_ = self.model_.equilibria().as_dict()
         except ValueError as exc:
@@ -391,7 +414,6 @@ class SINDy:
                 self.modal_[well] = {"f_hz": uls.f_hz, "zeta": uls.zeta}
             except ValueError:
                 self.modal_[well] = {"f_hz": None, "zeta": None}
-        self.validation_ = validate(self.model_, rec, n_id)
         if self.validation_.get("diverged"):
             self.warnings_.append(self.validation_["warning"])
         self.settings_ = {
@@ -420,9 +442,14 @@ class SINDy:
         practical one: a term must explain more than the equation's consistency floor on a lab record
         (anti-aliasing filters and the input's interpolation between samples make even the true model's
         weak residual ~0.1 % of the target; on rig truth a z^5 term buys 3-5 % of that floor back,
-        measured, a systematic and hence statistically significant, but not physical, gain)."""
-        best = min(path, key=lambda p: p["heldout_residual_percent"])
-        for p in path:  # sorted by number of terms, then residual
+        measured, a systematic and hence statistically significant, but not physical, gain).
+
+        Only admissible candidates compete: those whose restarted free runs stay bounded and whose
+        potential opens no escape just past the stroke (``validation.boundedness``); a term that buys
+        equation error at the price of an unbounded model is not selected."""
+        admissible = [p for p in path if np.isfinite(p["free_run_percent"])] or path
+        best = min(admissible, key=lambda p: p["heldout_residual_percent"])
+        for p in admissible:  # sorted by number of terms, then residual
             d = p["block_ms"] - best["block_ms"]
             se = d.std(ddof=1) / math.sqrt(d.size)
             if d.mean() <= max(se, self.margin * best["block_ms"].mean()):
@@ -438,6 +465,10 @@ class SINDy:
             "mass_source": self.mass_source_,
             "input_gain": self.input_gain_,
             "model": self.model_.to_dict(),
+            "initial_model": self.initial_model_.to_dict(),
+            "stroke_quantiles_m": self.stroke_.tolist(),
+            "refinement": self.refinement_,
+            "bounded": self.bounded_,
             "mass_normalised": self.mass_normalised_,
             "equilibria": self.equilibria_,
             "warnings": self.warnings_,

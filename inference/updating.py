@@ -43,8 +43,47 @@ def fitness(model: Mapping[str, float], estimate: Mapping[str, float]) -> float:
     return ew + ez
 
 
-def targets_from(data: Mapping[str, Any], source: str = "targets") -> dict[str, float]:
-    """Features from an ``identify`` result (modal + equilibria) or a flat targets mapping."""
+STROKE_KEY = "stroke_quantiles_m"
+"""An identify result's quantiles of the z its identification part visited (the stroke and how often)."""
+
+
+def model_features(model) -> dict[str, float] | None:
+    """Eq. 9's features of a polynomial model: its stable equilibria and the frequencies of its
+    linearisation there (None without a double well)."""
+    try:
+        eq = model.equilibria()
+    except ValueError:
+        return None
+    if eq.z_minus is None:
+        return None
+    ks = np.asarray(model.stiffness(np.array([eq.z_minus, eq.z_plus])), float)
+    if np.any(ks <= 0):
+        return None
+    f = np.sqrt(ks / model.m) / (2 * math.pi)
+    return {"f_minus": float(f[0]), "f_plus": float(f[1]), "z_minus": eq.z_minus, "z_plus": eq.z_plus}
+
+
+def targets_from(data: Mapping[str, Any], source: str = "targets") -> dict[str, Any]:
+    """Features from an ``identify`` result or a flat targets mapping.
+
+    An identify result that carries its record's stroke (``stroke_quantiles_m``) gives the features of
+    its own model, the model (``model``) and the stroke (``stroke_z``): the updater then compares like
+    with like, the device's restoring force with the identified one over the states the record visited
+    (``GAUpdater``). Older results (no stroke) give the method's well frequencies and its model's
+    equilibria (the seed's way)."""
+    if isinstance(data, Mapping) and data.get(STROKE_KEY) is not None and "model" in data:
+        from negstiff.models import Model
+
+        try:
+            feats = model_features(Model.from_dict(data["model"]))
+            stroke = [float(x) for x in data[STROKE_KEY]]
+        except (ValueError, TypeError, KeyError) as exc:
+            raise UpdatingError(f"{source}: unreadable model or stroke: {exc}") from None
+        if feats is None:
+            raise UpdatingError(f"{source}: the identified model has no double well: nothing to update against")
+        if len(stroke) < 8 or not all(math.isfinite(x) for x in stroke):
+            raise UpdatingError(f"{source}: {STROKE_KEY} needs at least 8 finite values")
+        return {**feats, "stroke_z": stroke, "model": dict(data["model"])}
     try:
         if "modal" in data and "equilibria" in data:
             t = {
@@ -67,6 +106,8 @@ def targets_from(data: Mapping[str, Any], source: str = "targets") -> dict[str, 
     t = {k: float(v) for k, v in t.items()}
     if not (t["z_minus"] < 0 < t["z_plus"]) or min(t["f_minus"], t["f_plus"]) <= 0:
         raise UpdatingError(f"{source}: targets need z_minus < 0 < z_plus and positive frequencies, got {t}")
+    if isinstance(data, Mapping) and "stroke_z" in data and "model" in data:  # targets_from's own output
+        t |= {"stroke_z": list(data["stroke_z"]), "model": dict(data["model"])}
     return t
 
 
@@ -108,23 +149,38 @@ class GAUpdater:
         bounds: Bounds = Bounds(),
         fixed_mass: float | None = None,
         seed: int = 0,
+        compare: str = "auto",
     ):
         if pop_size < 4 or generations < 1:
             raise UpdatingError("the GA needs pop_size >= 4 and generations >= 1")
         if fixed_mass is not None and not (fixed_mass > 0 and math.isfinite(fixed_mass)):
             raise UpdatingError(f"fixed mass must be positive, got {fixed_mass}")
         self.start, self.pop_size, self.generations = start, pop_size, generations
-        self.bounds, self.fixed_mass, self.seed = bounds, fixed_mass, seed
+        if compare not in ("auto", "features", "restoring_force"):
+            raise UpdatingError(f"compare must be auto, features or restoring_force, got {compare!r}")
+        self.bounds, self.fixed_mass, self.seed, self.compare = bounds, fixed_mass, seed, compare
 
     def _device(self, x: np.ndarray) -> Device:
         m = self.fixed_mass if self.fixed_mass is not None else x[2]
         return self.start.with_(E=x[0], alpha_deg=x[1], m=m)
 
     def features_of(self, x: np.ndarray) -> dict[str, float] | None:
+        """The device's exact Eq. 9 features (None where it has no double well)."""
         try:
             return self._device(x).features()
         except ValueError:
             return None
+
+    def force_mismatch(self, x: np.ndarray, stroke: np.ndarray, k_id: np.ndarray) -> float:
+        """rms over the stroke's quantiles of the device's K/m less the identified K/m, % of the latter's
+        spread (``PENALTY`` where the device cannot reach the stroke or has no double well)."""
+        try:
+            d = self._device(x)
+            k = np.asarray(d.restoring_force(stroke, include_extra=False), float) / d.m
+            d.features()
+        except ValueError:
+            return PENALTY
+        return float(100 * np.sqrt(np.mean((k - k_id) ** 2)) / np.std(k_id))
 
     def fit(self, targets: Mapping[str, float], progress=None) -> "GAUpdater":
         """Run the GA against ``targets`` (``f_minus, f_plus`` [Hz], ``z_minus, z_plus`` [m])."""
@@ -136,6 +192,19 @@ class GAUpdater:
         from pymoo.optimize import minimize
 
         targets = targets_from(targets)
+        stroke = targets.pop("stroke_z", None)
+        model = targets.pop("model", None)
+        by_force = stroke is not None and model is not None and self.compare != "features"
+        if self.compare == "restoring_force" and not by_force:
+            raise UpdatingError(
+                "compare='restoring_force' needs an identify result with its stroke (stroke_quantiles_m)"
+            )
+        if by_force:
+            from negstiff.models import Model
+
+            stroke = np.asarray(stroke, float)
+            identified = Model.from_dict(model)
+            k_id = np.asarray(identified.restoring_force(stroke), float) / identified.m
         s, b = self.start, self.bounds
         xl = [s.E * (1 - b.E_rel), s.alpha_deg - b.alpha_deg]
         xu = [s.E * (1 + b.E_rel), s.alpha_deg + b.alpha_deg]
@@ -151,6 +220,9 @@ class GAUpdater:
             def _evaluate(self, X, out, *args, **kwargs):
                 f = []
                 for x in X:
+                    if by_force:
+                        f.append(updater.force_mismatch(x, stroke, k_id))
+                        continue
                     feats = updater.features_of(x)
                     f.append(PENALTY if feats is None else fitness(feats, targets))
                 out["F"] = np.array(f)[:, None]
@@ -175,8 +247,16 @@ class GAUpdater:
         )
         x = np.atleast_1d(res.X)
         self.device_ = self._device(x)
-        self.features_ = self.device_.features()
-        self.fitness_ = float(fitness(self.features_, targets))
+        self.compared_ = (
+            "the restoring force per unit mass over the quantiles of the record's stroke (identified model vs device)"
+            if by_force
+            else "exact device features (seed Eq. 9)"
+        )
+        self.features_ = self.features_of(x)
+        self.exact_features_ = self.features_
+        self.fitness_ = float(fitness(self.features_, targets))  # seed Eq. 9, reported in either case
+        self.objective_ = float(res.F[0]) if by_force else self.fitness_
+        self.stroke_ = stroke if by_force else None
         self.history_ = history
         self.targets_ = targets
         return self
@@ -189,9 +269,12 @@ class GAUpdater:
             "alpha_deg": d.alpha_deg,
             "m": d.m,
             "fitness_percent": self.fitness_,
+            "objective_percent": self.objective_,
             "generations": self.history_,
             "E_over_m": d.E / d.m,
             "features": self.features_,
+            "exact_features": self.exact_features_,
+            "compared": self.compared_,
             "targets": self.targets_,
             "mass_fixed": self.fixed_mass is not None,
             "start": {"E": self.start.E, "alpha_deg": self.start.alpha_deg, "m": self.start.m},

@@ -23,7 +23,6 @@ Every record carries its truth (system, effects, sensors, excitation, seed), wri
 
 from __future__ import annotations
 
-import functools
 import io
 import json
 import math
@@ -41,7 +40,7 @@ from negstiff.files import atomic_path, write_text
 from .constants import G
 from .device import AS_BUILT, Device
 from .equation import Model
-from .simulator import simulate_batch
+from .simulator import antialias_fir, simulate_batch
 
 TAIL_S = 4.0
 """Seconds acquired after the last record and discarded, as the settling time is before it: the
@@ -210,18 +209,6 @@ def write_lab_format(path: Path, kind: str, cols: dict[str, np.ndarray], fs: flo
 def system_from_dict(d: dict[str, Any]) -> Device | Model:
     """Rebuild the truth's system (``{"kind": "device"|"polynomial", "parameters": {...}}``)."""
     return Device.from_dict(d["parameters"]) if d["kind"] == "device" else Model.from_dict(d["parameters"])
-
-
-@functools.lru_cache(maxsize=8)
-def antialias_fir(q: int) -> np.ndarray:
-    """The acquisition's anti-aliasing filter for decimation by ``q``: linear phase, Kaiser window,
-    passband flat to 1e-5 up to 0.8 of the output Nyquist frequency, 100 dB down from it on (a
-    delta-sigma converter's digital filter is this flat: +-0.005 dB). scipy's default decimation FIR
-    (Hamming, 20 q + 1 taps) rippled by 0.1-0.3 % in the excitation band, an error the nonlinear
-    response turns into 0.07-0.7 % biases of k3, c and c_nl for any model fitted to the records
-    (measured with the posterior's forward model on noise-free records)."""
-    numtaps, beta = signal.kaiserord(100.0, 0.2 / q)
-    return signal.firwin(numtaps | 1, 0.9 / q, window=("kaiser", beta))
 
 
 def table_motion(acc_target: np.ndarray, fs: float, min_hz: float) -> tuple[np.ndarray, np.ndarray]:

@@ -103,7 +103,8 @@ def test_bad_input_exits_2_with_one_line_and_no_output(workdir, capsys, case):
     elif case == "nan_row":
         rec = _bad(workdir, "b2.csv", "t,base_acc,z\n0,1,0.02\n0.1,nan,0.02\n0.2,1,0.02\n")
     elif case == "nonuniform_t":
-        rec = _bad(workdir, "b3.csv", "t,base_acc,z\n0,1,0.02\n0.1,1,0.02\n0.3,1,0.02\n")
+        rows = "".join(f"{t:g},1,0.02\n" for t in (0, 0.1, 0.2, 0.3, 0.4, 0.5, 0.8, 0.9, 1.0, 1.1))  # gap at row 7
+        rec = _bad(workdir, "b3.csv", "t,base_acc,z\n" + rows)
     elif case == "nonincreasing_t":
         rec = _bad(workdir, "b4.csv", "t,base_acc,z\n0,1,0.02\n0.1,1,0.02\n0.1,1,0.02\n")
     elif case == "too_few":
@@ -147,7 +148,7 @@ def test_reproduce_fast_writes_a_complete_report(tmp_path, monkeypatch):
     assert md.count("data:image/png") == 0 and (out / "index.html").read_text().count("data:image/png") == len(figs)
     results = json.loads((out / "results.json").read_text())
     assert results["simulator"]["max_abs_dz_m"] < 1e-7
-    for section in ("device", "nsi", "updating", "characterization", "sindy", "posterior", "discrepancy"):
+    for section in ("device", "nsi", "updating", "characterization", "sindy", "posterior", "discrepancy", "silverbox"):
         assert section in results, f"the report lacks its {section} section"
     assert "pending_sections" not in results
     # a second run replays every expensive section from the cache, with the same numbers

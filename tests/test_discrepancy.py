@@ -4,13 +4,12 @@ data are generated here; the workflow sees only the measured columns."""
 
 import dataclasses
 
-import numpy as np
 import pytest
+from conftest import SILVERBOX_ARROW, SILVERBOX_TEST, SILVERBOX_TRAIN, silverbox_prediction_mv
 
-from negstiff.inference.derivatives import state_derivatives
 from negstiff.inference.discrepancy import LINEAR_BASELINE, Discrepancy
-from negstiff.inference.measurement import from_arrays, load
-from negstiff.models import AS_BUILT, SEED_LIKE_CROSS_WELL_RMS, SEED_LIKE_CUBIC, simulate
+from negstiff.inference.measurement import from_arrays
+from negstiff.models import AS_BUILT, SEED_LIKE_CROSS_WELL_RMS, SEED_LIKE_CUBIC
 from negstiff.models.rig import Rig
 
 BASE = dataclasses.replace(SEED_LIKE_CUBIC, c_nl=0.0)
@@ -66,20 +65,22 @@ def test_the_device_model_form_gap_points_at_higher_order_stiffness():
     assert res["gap_after_percent"] < res["gap_before_percent"] / 2
 
 
-def test_silverbox_from_a_linear_start_names_cubic_stiffness(request):
-    path = request.config.rootpath / "../shared/data/silverbox/SNLS80mV.mat"
-    if not path.exists():
-        pytest.skip("shared/ data not beside the repository")
-    m = load(path, columns="force=V1,z=V2", fs=610.35)
-    d = Discrepancy(baseline=LINEAR_BASELINE).fit(m.segment(40650, 105712))
+def test_silverbox_from_a_linear_start_names_cubic_stiffness(silverbox):
+    # real data, a known answer: from a linear baseline the workflow names the Silverbox's cubic
+    # stiffness first, and the named model predicts the multisine test far better than the linear one
+    d = Discrepancy(baseline=LINEAR_BASELINE).fit(silverbox.segment(*SILVERBOX_TRAIN))
     assert d.effects_[0] == "cubic_stiffness"
-    test = m.segment(105712, 127400)
-    zs, v, _, _ = state_derivatives(test.z, test.fs, purpose="state")
-    k0 = 49
-
-    def rms_mv(model):
-        z = simulate(model, test.u[k0:], test.dt, z0=zs[k0], v0=v[k0], input_kind="force").z[0]
-        return 1e3 * np.sqrt(np.mean((z[1:] - test.z[k0 + 1 :]) ** 2))
-
-    before, after = rms_mv(d.baseline_model_), rms_mv(d.model_)
+    before = silverbox_prediction_mv(d.baseline_model_, silverbox, SILVERBOX_TEST)
+    after = silverbox_prediction_mv(d.model_, silverbox, SILVERBOX_TEST)
     assert after < before / 2, (before, after)
+
+
+def test_silverbox_with_defaults_predicts_the_test_and_the_arrow(silverbox):
+    # The issue's acceptance for the discrepancy model (cubic baseline, refinement, defaults; trained on
+    # 40650-105712 only): multisine test <= 0.85 mV, the full arrow (its last third beyond the training
+    # amplitude) <= 1.0 mV; measured 0.24 and 0.31 mV. No catalogue effect beats the refined Duffing
+    # form on the held-out part (the study reports 'none'), and the model stays bounded.
+    d = Discrepancy().fit(silverbox.segment(*SILVERBOX_TRAIN))
+    assert silverbox_prediction_mv(d.model_, silverbox, SILVERBOX_TEST) <= 0.85
+    assert silverbox_prediction_mv(d.model_, silverbox, SILVERBOX_ARROW) <= 1.0
+    assert d.bounded_["ok"]

@@ -120,6 +120,17 @@ def test_a_real_gap_is_named_at_its_row(tmp_path):
         load(p)
 
 
+def test_a_gap_in_a_coarsely_printed_time_column_is_named_at_its_row(tmp_path):
+    # Fact: printed with one decimal at a 0.1 s step, rounding alone moves a step by up to a unit, as
+    # much as the step; a step of three steps is still a gap (it was reported as a drifting clock at
+    # row 1 when the rounding bound alone decided)
+    t = [0, 0.1, 0.2, 0.3, 0.4, 0.5, 0.8, 0.9, 1.0, 1.1]
+    p = tmp_path / "coarse.csv"
+    p.write_text("t,base_acc,z\n" + "".join(f"{x:g},1,0.02\n" for x in t))
+    with pytest.raises(MeasurementError, match=r"not uniformly sampled at row 7 .*gap"):
+        load(p)
+
+
 def test_a_repeated_block_is_named_at_its_row(tmp_path):
     t = np.arange(3000) / 512.0
     t = np.concatenate([t[:2000], t[1900:2000], t[2000:]])  # the export wrote 100 rows twice

@@ -222,3 +222,26 @@ def test_a_gaussian_prior_on_a_parameter_the_likelihood_sees_is_refused():
 
     with pytest.raises(ValueError, match="Gaussian prior"):
         Parametrisation(("a",), "polynomial", lambda t: t, np.zeros(1), np.ones(1), gaussian={0: (0.5, 0.1)})
+
+
+def test_posterior_starts_from_an_identified_model(tmp_path):
+    # The issue: the posterior starts from the refined point. `--start RESULT.json` seeds the MAP search
+    # with the identified model; the MAP is the likelihood's optimum, so it does not depend on where the
+    # search started: within 1 % of the default start's (weak least squares) in every coefficient, far
+    # inside the posterior's own spread. A device file or a device posterior with --start is refused.
+    r = Rig(SEED_LIKE_CUBIC, seed=12).random(duration=30, rms=SEED_LIKE_CROSS_WELL_RMS)
+    path = r.write(tmp_path / "rec.csv")
+    assert main(["identify", "sindy", str(path), "-o", str(tmp_path / "id.json"), "--quiet"]) == 0
+    runs = {}
+    for name, extra in (("default", []), ("start", ["--start", str(tmp_path / "id.json")])):
+        out = tmp_path / f"{name}.json"
+        args = ["posterior", str(path), "-o", str(out), "--duration", "6", "--max-steps", "60", "--quiet", *extra]
+        assert main(args) == 0
+        runs[name] = json.loads(out.read_text())
+    for k in ("k1", "k2", "k3", "c"):
+        a, b = runs["default"]["map"][k], runs["start"]["map"][k]
+        assert b == pytest.approx(a, rel=0.01), k
+    (tmp_path / "dev.json").write_text(json.dumps({"E": 197e9, "alpha_deg": 6.9}))
+    for bad in (["--start", str(tmp_path / "dev.json")], ["--model", "device", "--start", str(tmp_path / "id.json")]):
+        assert main(["posterior", str(path), "-o", str(tmp_path / "x.json"), "--quiet", *bad]) == 2
+        assert not (tmp_path / "x.json").exists()

@@ -2,11 +2,12 @@
 
 import numpy as np
 import pytest
+from conftest import SILVERBOX_TEST, silverbox_prediction_mv
 from scipy import signal
 
 from negstiff.cli import main
 from negstiff.inference.derivatives import derivative_window, state_derivatives
-from negstiff.inference.measurement import MeasurementError, from_arrays, load
+from negstiff.inference.measurement import MeasurementError, from_arrays
 from negstiff.inference.sindy import SINDy, SINDyError
 from negstiff.models import SEED_LIKE_CROSS_WELL_RMS, SEED_LIKE_CUBIC, simulate
 from negstiff.models.rig import Rig, Sensors
@@ -118,18 +119,12 @@ def test_short_or_unexcited_records_get_a_clear_error(tmp_path):
     assert not out.exists()
 
 
-def test_silverbox_finds_the_cubic_hardening_and_beats_the_narx_benchmark(request):
-    path = request.config.rootpath / "../shared/data/silverbox/SNLS80mV.mat"
-    if not path.exists():
-        pytest.skip("shared/ data not beside the repository")
-    m = load(path, columns="force=V1,z=V2", fs=610.35)
-    est = SINDy().fit(m.segment(40650, 105712))
+def test_silverbox_finds_the_cubic_hardening_and_predicts_the_test(silverbox, silverbox_fits):
+    # real data: SINDy with its defaults (trained on 40650-105712 only) selects the cubic hardening in
+    # every ensemble member and predicts the multisine test free-run within the 0.85 mV (0.24 mV
+    # measured; the published polynomial NARX reaches 0.64 mV); no selected term opens an escape
+    est = silverbox_fits["sindy"]
     assert "z^3" in est.selected_ and est.model_.k3 > 0, "Silverbox is a hardening Duffing oscillator"
     assert est.ensemble_["z^3"]["inclusion_probability"] == 1.0
-    test = m.segment(105712, 127400)
-    zs, v, _, _ = state_derivatives(test.z, test.fs, purpose="state")
-    k0 = 49  # the benchmark lets the first 50 measured outputs initialise the state
-    z = simulate(est.model_, test.u[k0:], test.dt, z0=zs[k0], v0=v[k0], input_kind="force").z[0]
-    rms_mv = 1e3 * np.sqrt(np.mean((z[1:] - test.z[k0 + 1 :]) ** 2))
-    # deterministic data and method: the published polynomial NARX (FROLS) reaches 7.7 mV
-    assert rms_mv < 7.7
+    assert silverbox_prediction_mv(est.model_, silverbox, SILVERBOX_TEST) <= 0.85
+    assert est.bounded_["ok"] and est.bounded_["over_stroke"]

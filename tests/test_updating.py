@@ -78,3 +78,27 @@ def test_update_command_writes_the_contract_keys_and_refuses_bad_targets(tmp_pat
     assert main(["update", str(bad), "-o", str(tmp_path / "x.json"), "--quiet"]) == 2
     assert len(capsys.readouterr().err.strip().splitlines()) == 1
     assert not (tmp_path / "x.json").exists()
+
+
+def test_ga_from_an_as_built_record_recovers_the_device():
+    # The issue's acceptance: from a 300 s as-built rig record (realistic sensor noise), the GA updated
+    # against the identified restoring force over the stroke the record visited puts alpha within
+    # 0.2 deg and E/m within 1 % (measured with SINDy's model, which selects z^4 and z^5 here: +0.11 deg,
+    # +0.42 %). Like with like: both sides are K(z)/m at the same states, so neither the polynomial's
+    # form nor where the record went biases the comparison the way Eq. 9's features did (9.44 deg).
+    # The seed's Eq. 9 fitness is still reported, and it is small at the recovered device.
+    from negstiff.inference.measurement import from_arrays
+    from negstiff.inference.sindy import SINDy
+    from negstiff.models.rig import Rig
+
+    rec = Rig(AS_BUILT, seed=2).random(duration=300.0)
+    m = from_arrays(rec.columns["base_acc"], rec.columns["z"], rec.fs, mass=float(rec.meta["mass"]))
+    targets = targets_from(SINDy().fit(m).result())
+    assert "stroke_z" in targets and "model" in targets
+    ga = GAUpdater(generations=120, seed=1).fit(targets)
+    d = ga.device_
+    assert ga.compared_.startswith("the restoring force")
+    assert d.alpha_deg == pytest.approx(AS_BUILT.alpha_deg, abs=0.2)
+    assert d.E / d.m == pytest.approx(AS_BUILT.E / AS_BUILT.m, rel=0.01)
+    assert ga.fitness_ < 2.0, "seed Eq. 9 against the identified model's features"
+    assert ga.result()["objective_percent"] == ga.objective_

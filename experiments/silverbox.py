@@ -1,0 +1,269 @@
+"""The Silverbox benchmark (Wigren & Schoukens 2013): every identification method on real data, judged
+by what it predicts.
+
+An electronic circuit realising a forced Duffing oscillator (force input V1, displacement output V2,
+610.35 Hz). The standard split: train on samples 40650-105712 (multisines), test on the multisine
+segment 105712-127400 and on the "arrow" (0-40575, filtered Gaussian noise of growing amplitude whose
+last third exceeds the training amplitude: extrapolation); the first 50 test samples initialise the
+state and are not scored. Each model is simulated free-run on the test input from the measured state.
+
+Computed first (``compute``, a ``SilverboxStudy``), rendered second (``render``).
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from negstiff.inference.derivatives import state_derivatives
+from negstiff.inference.measurement import Measurement, load
+from negstiff.inference.validation import free_run_rms, simulate_record
+from negstiff.models import Model, simulate
+
+from .report import Report, fmt, run_study
+
+TRAIN = (40650, 105712)
+TEST = (105712, 127400)
+ARROW = (0, 40575)
+ARROW_NO_EXTRAPOLATION = (100, 32100)
+SKIP = 50
+"""Test samples that initialise the state and are not scored (the benchmark's protocol)."""
+
+PUBLISHED_MV = {
+    "GP-NARX": 0.30,
+    "SUBNET neural state-space": 0.36,
+    "polynomial NARX": 0.64,
+    "LSTM": 1.5,
+    "linear model": 6.95,
+}
+"""Published multisine-test rms errors [mV] as the issue quotes them (Champneys et al. 2024, Tables 3-4,
+and the benchmark's site); not recomputed here."""
+OUTPUT_ERROR_DUFFING_MV = 0.91
+"""A five-parameter Duffing ODE fitted by free-run simulation error under linearly interpolated input
+(the issue's anchor, measured before this study existed; not recomputed here)."""
+
+
+def find_silverbox() -> Path | None:
+    """The Silverbox file: $NEGSTIFF_SILVERBOX, else shared/data/silverbox beside the checkout or the
+    working directory (the project keeps data in ../shared)."""
+    env = os.environ.get("NEGSTIFF_SILVERBOX")
+    rel = Path("shared") / "data" / "silverbox" / "SNLS80mV.mat"
+    here = Path(__file__).resolve().parent.parent
+    for p in ([Path(env)] if env else []) + [here.parent / rel, Path.cwd().parent / rel, Path.cwd() / rel]:
+        if p.is_file():
+            return p
+    return None
+
+
+def load_silverbox(path: Path) -> Measurement:
+    return load(path, columns="force=V1,z=V2", fs=610.35)
+
+
+def prediction_error_mv(model: Model, m: Measurement, part: tuple[int, int], linear: bool = False) -> float:
+    """Free-run rms error [mV] of ``model`` over ``part`` of the Silverbox record, started from the
+    measured (smoothed) state at the part's sample ``SKIP``, which is the first one scored; inf if it
+    diverges. ``linear``: the input drawn straight between samples (the convention before band-limited
+    stage inputs), for comparison."""
+    seg = m.segment(*part)
+    zs, v, _, _ = state_derivatives(seg.z, seg.fs, purpose="state")
+    scored = seg.segment(SKIP, seg.n)
+    x0 = (zs[SKIP], v[SKIP])
+    if not linear:
+        return 1e3 * free_run_rms(model, scored, x0=x0)
+    res = simulate(model, scored.u, seg.dt, z0=x0[0], v0=x0[1], input_kind="force", z_limit=10, v_limit=1e4)
+    if res.diverged[0]:
+        return float("inf")
+    return float(1e3 * np.sqrt(np.mean((res.z[0] - scored.z) ** 2)))
+
+
+@dataclass
+class MethodRow:
+    """One method on the benchmark: its equation-error model, the refined one, their errors [mV]."""
+
+    method: str
+    initial: dict[str, Any]
+    refined: dict[str, Any]
+    refinement_kept: bool
+    seconds: float
+    detail: dict[str, Any] = field(default_factory=dict)
+
+
+@dataclass
+class SilverboxStudy:
+    rows: list[MethodRow]
+    record: dict[str, Any]
+
+
+def _scores(model: Model, m: Measurement) -> dict[str, Any]:
+    return {
+        "test_mv": prediction_error_mv(model, m, TEST),
+        "arrow_mv": prediction_error_mv(model, m, ARROW),
+        "arrow_no_extrapolation_mv": prediction_error_mv(model, m, ARROW_NO_EXTRAPOLATION),
+        "model": model.to_dict(),
+    }
+
+
+def compute(m: Measurement, fast: bool = False) -> SilverboxStudy:
+    """Fit every method on the training part with its defaults (refinement included) and score the
+    equation-error and refined models on the three test parts (``fast``: without the discrepancy
+    workflow's linear start, the slowest row)."""
+    from negstiff.inference.discrepancy import LINEAR_BASELINE, Discrepancy
+    from negstiff.inference.nsi import NSI
+    from negstiff.inference.sindy import SINDy
+
+    train = m.segment(*TRAIN)
+    rows = []
+    fits = {
+        "NSI": lambda: NSI().fit(train),
+        "SINDy": lambda: SINDy().fit(train),
+        "discrepancy (cubic baseline, default)": lambda: Discrepancy().fit(train),
+        "discrepancy from a linear start": lambda: Discrepancy(baseline=LINEAR_BASELINE).fit(train),
+    }
+    if fast:
+        fits.pop("discrepancy from a linear start")
+    for name, fit in fits.items():
+        t0 = time.perf_counter()
+        est = fit()
+        seconds = time.perf_counter() - t0
+        initial = _scores(est.initial_model_, m)
+        initial["test_mv_linear_input"] = prediction_error_mv(est.initial_model_, m, TEST, linear=True)
+        refined = _scores(est.model_, m)
+        info = est.refinement_ or {}
+        detail: dict[str, Any] = {"refinement": {k: v for k, v in info.items() if k not in ("initial_model",)}}
+        if hasattr(est, "effects_"):
+            detail["effects"] = est.effects_ or ["none"]
+            detail["gap_percent"] = [est.gap_before_.get("median_window_percent"),
+                                     est.gap_after_.get("median_window_percent")]  # fmt: skip
+        if hasattr(est, "selected_"):
+            detail["selected_terms"] = est.selected_
+        rows.append(MethodRow(name, initial, refined, bool(info.get("applied")), seconds, detail))
+    return SilverboxStudy(rows, {"fs_hz": m.fs, "samples": m.n, "train": TRAIN, "test": TEST, "arrow": ARROW})
+
+
+def _figure(study: SilverboxStudy, m: Measurement):
+    import matplotlib.pyplot as plt
+    from scipy import signal
+
+    row = next(r for r in study.rows if r.method == "SINDy")
+    model = Model.from_dict(row.refined["model"])
+    seg = m.segment(*ARROW)
+    zs, v, _, _ = state_derivatives(seg.z, seg.fs, purpose="state")
+    sim = simulate_record(model, seg.segment(SKIP, seg.n), (zs[SKIP], v[SKIP]))
+    err = 1e3 * (sim.z[0] - seg.z[SKIP:])
+    t = seg.t[SKIP:]
+    fig, ax = plt.subplots(1, 2, figsize=(11, 3.6))
+    ax[0].plot(t, 1e3 * seg.z[SKIP:], color="0.75", lw=0.5, label="measured output")
+    ax[0].plot(t, 10 * err, color="C3", lw=0.5, label="prediction error x10")
+    ax[0].axvspan(t[ARROW_NO_EXTRAPOLATION[1] - SKIP], t[-1], color="C1", alpha=0.12, label="beyond training amplitude")
+    ax[0].set(xlabel="t [s]", ylabel="[mV]", title="Arrow: refined SINDy model, free run")
+    ax[0].legend(fontsize=7, loc="upper left")
+    test = m.segment(*TEST)
+    zt, vt, _, _ = state_derivatives(test.z, test.fs, purpose="state")
+    for r, c in ((row, "C0"),):
+        for which, ls in (("initial", "--"), ("refined", "-")):
+            mm = Model.from_dict(getattr(r, which)["model"])
+            s = simulate_record(mm, test.segment(SKIP, test.n), (zt[SKIP], vt[SKIP]))
+            f, p = signal.welch(1e3 * (s.z[0] - test.z[SKIP:]), test.fs, nperseg=2048)
+            ax[1].semilogy(f, p, ls, color=c, lw=0.8, label=f"{r.method} {which} model: error")
+    f, p = signal.welch(1e3 * test.z[SKIP:], test.fs, nperseg=2048)
+    ax[1].semilogy(f, p, color="0.6", lw=0.8, label="measured output")
+    ax[1].set(xlabel="f [Hz]", ylabel="PSD [mV^2/Hz]", title="Multisine test: error spectrum")
+    ax[1].legend(fontsize=7)
+    fig.tight_layout()
+    return fig
+
+
+def _span(values) -> str:
+    """'a-b' of a few numbers at 3 digits, or one number when they agree at that precision."""
+    v = list(values)
+    lo, hi = fmt(min(v), 3), fmt(max(v), 3)
+    return lo if lo == hi else f"{lo}-{hi}"
+
+
+def render(rep: Report, study: SilverboxStudy, m: Measurement) -> dict[str, Any]:
+    """Tables, a figure and the text; returns the results entry."""
+    rep.heading("Real data: the Silverbox benchmark", 2)
+    rep.text(
+        "Every method trained on samples 40650-105712 only, with its defaults (output-error refinement included), "
+        "then simulated free-run on the test inputs from the measured state; the first 50 samples of each test part "
+        "are not scored. Multisine test: 105712-127400. Arrow: 0-40575 (its last third exceeds the training "
+        "amplitude); arrow without extrapolation: 100-32100. The column 'linear input' is the same equation-error "
+        "model simulated with the input drawn straight between samples, the suite's convention before band-limited "
+        "stage inputs."
+    )
+    rep.table(
+        ["method", "equation-error model: test [mV], linear input", "test [mV]", "refined: test [mV]",
+         "arrow [mV]", "arrow without extrapolation [mV]", "refinement kept", "fit time [s]"],
+        [[r.method, r.initial["test_mv_linear_input"], r.initial["test_mv"], r.refined["test_mv"],
+          r.refined["arrow_mv"], r.refined["arrow_no_extrapolation_mv"], r.refinement_kept, r.seconds]
+         for r in study.rows],
+    )  # fmt: skip
+    rep.table(
+        ["published model (multisine test)", "rms error [mV]"],
+        [[k, v] for k, v in PUBLISHED_MV.items()] + [["output-error Duffing ODE, linear input (issue anchor)",
+                                                      OUTPUT_ERROR_DUFFING_MV]],
+    )  # fmt: skip
+    best = min(study.rows, key=lambda r: r.refined["test_mv"])
+    lin = [r.initial["test_mv_linear_input"] for r in study.rows]
+    bl = [r.initial["test_mv"] for r in study.rows]
+    disc = next(r for r in study.rows if r.method.startswith("discrepancy (cubic"))
+    rep.text(
+        f"What decided the prediction was not the identification but the input between samples. The record passed "
+        f"an anti-aliasing filter, so its input is band-limited; drawn straight between samples, its 60-200 Hz "
+        f"band (0.1-0.33 of the 610 Hz rate) loses up to 31 % of its amplitude (sinc^2), and the equation-error "
+        f"models predicted with {_span(lin)} mV error. With the input interpolated "
+        f"band-limited at every Runge-Kutta stage and the step refined to omega h <= 0.25, the same models predict "
+        f"with {_span(bl)} mV, and the output-error refinement brings every method to "
+        f"{_span(r.refined['test_mv'] for r in study.rows)} mV (best: {best.method}), below the best published "
+        f"model quoted ({fmt(PUBLISHED_MV['GP-NARX'], 2)} mV). The arrow's extrapolating last third is predicted too "
+        f"(full arrow {fmt(best.refined['arrow_mv'], 3)} mV, without its extrapolating part "
+        f"{fmt(best.refined['arrow_no_extrapolation_mv'], 3)} mV). The discrepancy workflow named "
+        f"**{', '.join(disc.detail.get('effects', ['none']))}** beyond the cubic Duffing form."
+    )
+    rep.figure(
+        "silverbox_prediction",
+        _figure(study, m),
+        "Left: the refined SINDy model's free-run prediction error (x10) on the arrow; shaded, the part beyond the "
+        "training amplitude. Right: spectrum of the multisine-test prediction error before (dashed) and after "
+        "refinement, against the output's.",
+    )
+    return {
+        "record": study.record,
+        "methods": {
+            r.method: {
+                "initial": r.initial,
+                "refined": r.refined,
+                "refinement_kept": r.refinement_kept,
+                "seconds": r.seconds,
+                **r.detail,
+            }
+            for r in study.rows
+        },  # fmt: skip
+        "published_mv": PUBLISHED_MV,
+    }
+
+
+def silverbox_section(rep: Report, results: dict[str, Any], fast: bool, seed_: int = 0) -> None:
+    """The Silverbox section of the report (deterministic: no seed; ``fast`` drops the linear start)."""
+    path = find_silverbox()
+    if path is None:
+        rep.heading("Real data: the Silverbox benchmark", 2)
+        rep.warning("Silverbox data not found (set NEGSTIFF_SILVERBOX to SNLS80mV.mat); section skipped.")
+        results["silverbox"] = None
+        return
+    m = load_silverbox(path)
+    results["silverbox"] = render(rep, compute(m, fast), m)
+
+
+def main(argv=None) -> int:
+    return run_study(silverbox_section, "negstiff: the Silverbox benchmark", "reports/silverbox", __doc__, argv)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
