@@ -363,7 +363,7 @@ def nsi_section(rep: Report, results: dict[str, Any], fast: bool, seed_: int = 0
     """The NSI section (seed section 4) for the report; numbers go into ``results["nsi"]``."""
     res: dict[str, Any] = {}
     results["nsi"] = res
-    duration = 120.0 if fast else 300.0
+    duration = 60.0 if fast else 300.0
     rep.heading("4. Nonlinear subspace identification (seed section 4)")
     est = polynomial_truth_part(rep, res, duration, seed_ + 1)
     as_built_part(rep, res, duration, seed_ + 2)

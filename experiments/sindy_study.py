@@ -244,7 +244,7 @@ def sindy_section(rep: Report, results: dict[str, Any], fast: bool, seed_: int =
     """The SINDy section; numbers go into ``results["sindy"]``."""
     res: dict[str, Any] = {}
     results["sindy"] = res
-    duration = 120.0 if fast else 300.0
+    duration = 60.0 if fast else 300.0
     rep.heading("SINDy: equation discovery from the records")
     polynomial_part(rep, res, duration, seed_ + 1)
     if not fast:

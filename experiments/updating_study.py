@@ -47,7 +47,7 @@ def updating_section(rep: Report, results: dict[str, Any], fast: bool, seed_: in
     res["exact_targets"] = ga_exact.result() | {"errors": _errors(ga_exact.device_)}
     # B: an as-built rig record, identified by NSI and by SINDy; the GA updated the seed's way (Eq. 9 on
     # the identified model's features) and like with like (the restoring force over the record's stroke)
-    rec = Rig(AS_BUILT, seed=seed_ + 2).random(duration=120.0 if fast else 300.0)
+    rec = Rig(AS_BUILT, seed=seed_ + 2).random(duration=60.0 if fast else 300.0)
     m = as_measurement(rec)
     mass = float(rec.meta["mass"])
     nsi, sindy = NSI().fit(m), SINDy().fit(m)
@@ -154,7 +154,7 @@ def updating_section(rep: Report, results: dict[str, Any], fast: bool, seed_: in
         "Figure 11 (seed): restoring force and potential, identified vs starting vs final; dotted: the as-built truth.",
     )
     # identifiability
-    seeds = (11, 12) if fast else (11, 12, 13, 14, 15)
+    seeds = (11,) if fast else (11, 12, 13, 14, 15)
     runs = [GAUpdater(generations=gens, seed=s).fit(exact).device_ for s in seeds]
     res["identifiability"] = [{"seed": s, "E": d.E, "m": d.m, "alpha_deg": d.alpha_deg} for s, d in zip(seeds, runs)]
     fig, ax = plt.subplots(figsize=(5.5, 4))

@@ -31,7 +31,7 @@ def _record(effects, seed, duration=120.0):
     return from_arrays(r.columns["base_acc"], r.columns["z"], r.fs, mass=float(r.meta["mass"]), source="rig")
 
 
-@pytest.mark.parametrize("seed", [1, 2])
+@pytest.mark.parametrize("seed", [1, pytest.param(2, marks=pytest.mark.slow)])  # seed 2: the replication, with -m slow
 @pytest.mark.parametrize("effect", sorted(HIDDEN))
 def test_a_hidden_effect_is_named_sized_and_its_gap_closed(effect, seed):
     d = Discrepancy().fit(_record({effect: HIDDEN[effect]}, seed))
@@ -48,7 +48,7 @@ def test_a_hidden_effect_is_named_sized_and_its_gap_closed(effect, seed):
     assert effect in r["model"]["extra"]
 
 
-@pytest.mark.parametrize("seed", [1, 2])
+@pytest.mark.parametrize("seed", [1, pytest.param(2, marks=pytest.mark.slow)])  # seed 2: the replication, with -m slow
 def test_nothing_missing_gives_none(seed):
     d = Discrepancy().fit(_record({}, seed))
     r = d.result()
