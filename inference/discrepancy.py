@@ -99,8 +99,10 @@ class Discrepancy:
         max_effects: int = 3,
         window_s: float = 2.0,
         refine: bool = True,
+        unnamed: bool = False,
     ):
         self.refine = refine
+        self.unnamed = unnamed
         self.baseline = tuple(baseline)
         self.validation_fraction = validation_fraction
         self.selection_fraction = selection_fraction
@@ -324,7 +326,27 @@ class Discrepancy:
         self.gap_after_ = self._gap(rec, self.model_)
         self.locate_after_ = self.locate(rec, terms, stop)
         self.bounded_ = boundedness(self.model_, rec.segment(0, self.n_id))
+        self.unnamed_ = self._unnamed(rec) if self.unnamed else None
         return self
+
+    def _unnamed(self, rec: Measurement) -> dict[str, Any]:
+        """What no catalogue effect names: a non-parametric force g(z, z', u) fitted by output error on the
+        identification part with the final model held (``hybrid.fit_hybrid``), its size, the held-out gap
+        with and without it (the same restarted windows), and how far the joint refit moved each physical
+        coefficient in its standard errors."""
+        from .hybrid import fit_hybrid
+
+        h = fit_hybrid(self.model_, rec.segment(0, self.n_id))
+        ident = rec.segment(0, self.n_id)
+        zs, vs, _, _ = state_derivatives(ident.z, ident.fs, purpose="state")
+        term = h.term(zs, vs, ident.u)
+        force = self.model_.restoring_force(zs)
+        return {
+            "term_rms": float(np.sqrt(np.mean(term**2))),
+            "term_percent_of_restoring_force": float(100 * np.sqrt(np.mean(term**2) / np.mean(force**2))),
+            "gap": h.restarted_gap(rec, self.n_id, self.window_s, self._z0, self._v0),
+            **h.to_json(),
+        }
 
     def _parsimonious(self, ranking: list[Candidate]) -> Candidate:
         """Among the effects within max(1 SE, margin) of the best held-out residual, the one with the
@@ -434,6 +456,7 @@ class Discrepancy:
             "warnings": [] if self.bounded_["ok"] else [self.bounded_["warning"]],
             "baseline_model": self.baseline_model_.to_dict(),
             "effect_size": self.effect_size(),
+            **({"unnamed": self.unnamed_} if getattr(self, "unnamed_", None) else {}),
             "iterations": self.iterations_,
             "settings": {
                 "baseline_terms": list(self.baseline),

@@ -374,12 +374,19 @@ def cmd_discrepancy(args) -> int:
     rec = load(args.data, columns=args.columns, fs=args.fs, mass=args.mass)
     _say(args, f"discrepancy: {rec.n} samples at {rec.fs:g} Hz, input {rec.input_name}, baseline {args.baseline}")
     base = CUBIC_BASELINE if args.baseline == "cubic" else LINEAR_BASELINE
-    d = Discrepancy(baseline=base, max_effects=args.max_effects, refine=not args.no_refine).fit(rec)
+    d = Discrepancy(baseline=base, max_effects=args.max_effects, refine=not args.no_refine, unnamed=args.unnamed)
+    d.fit(rec)
     result = _with_record(d.result(), rec, d.model_)
     _say_refinement(args, result.get("refinement"))
     write_json(args.out, result)
     _warn(args, result["warnings"])
     _say(args, f"where: {result['where']}")
+    un = result.get("unnamed")
+    if un:
+        g = un["gap"]
+        _say(args, f"unnamed: a non-parametric term of {un['term_percent_of_restoring_force']:.3g} % of the "
+                   f"restoring force; held-out gap {g.get('physics_median_window_percent', float('nan')):.3g} % -> "
+                   f"{g.get('hybrid_median_window_percent', float('nan')):.3g} % with it")  # fmt: skip
     _say(
         args,
         f"wrote {args.out}: named {', '.join(result['effects'])}; held-out gap (restarted free runs) "
@@ -927,6 +934,13 @@ def build_parser() -> argparse.ArgumentParser:
         action="store_true",
         help="skip the output-error refinement (the last stage: the model's simulation error minimised over the "
         "identification part; kept only if it predicts the held-out part at least as well)",
+    )
+    dsc.add_argument(
+        "--unnamed",
+        action="store_true",
+        help="also fit a non-parametric force g(z, z', u) to what no catalogue effect names (output error, the "
+        "final model held) and report its size, the held-out gap with it, and how far it would move the physical "
+        "coefficients (result key 'unnamed')",
     )
     dsc.set_defaults(func=cmd_discrepancy)
 

@@ -1,0 +1,350 @@
+"""A hybrid model: the physics plus a non-parametric discrepancy force, fitted by output error.
+
+The discrepancy catalogue can only name what it lists. What remains after the best physical model is
+quantified here by a smooth regressor of the missing force on the state and the input,
+
+    m z'' + D(z') + K(z) + g(z, z', u) = (input),
+    g(z, z', u) = sum_ij W_ij phi_i(z) psi_j(z') + sum_k a_k chi_k(u),
+
+with Gaussian bumps phi, psi, chi on even grids over the range the record visits (a tensor-product
+radial-basis network: smooth, local, linear in its weights). The weights are fitted by the simulation
+error on multiple-shooting windows with the physical part held (``refine``'s machinery: free start
+states, a sparse finite-difference Jacobian, start states fitted first), with a ridge penalty that
+keeps g at zero where the data do not ask for it. The physical coefficients are then refitted together
+with g: how far they move, in units of their own standard error, says whether g took over a physical
+term (it should not: the coefficients should stay within their uncertainty).
+
+Why written here: the term must live inside the Runge-Kutta loop of a free run (an output-error fit
+simulates it tens of thousands of times); a Gaussian process or scikit-learn regressor would be
+called per stage from Python. The kernel reuses the simulator's own physical force (``_force``), so
+the physics is exactly the physical model's.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import numba
+import numpy as np
+from scipy import optimize, sparse
+
+from negstiff.models import Model
+from negstiff.models.equation import P_COULOMB, P_M
+from negstiff.models.simulator import KINDS, _force, _member, input_gain, stage_input
+
+from .derivatives import state_derivatives
+from .measurement import Measurement, MeasurementError
+from .refine import _names, _scales, _with
+from .validation import divergence_limits, record_substeps, staged_windows
+
+_JIT = {"cache": True, "nogil": True, "error_model": "numpy"}
+
+
+@numba.njit(inline="always", **_JIT)
+def _term(z, v, u, w, a, zc, vc, uc, iz, iv, iu, bz, bv):
+    """g(z, z', u): the tensor-product bumps' weighted sum (bz, bv: scratch for the 1-D bumps)."""
+    for i in range(zc.size):
+        d = (z - zc[i]) * iz
+        bz[i] = math.exp(-0.5 * d * d)
+    for j in range(vc.size):
+        d = (v - vc[j]) * iv
+        bv[j] = math.exp(-0.5 * d * d)
+    g = 0.0
+    for i in range(zc.size):
+        s = 0.0
+        for j in range(vc.size):
+            s += w[i, j] * bv[j]
+        g += s * bz[i]
+    for k in range(uc.size):
+        d = (u - uc[k]) * iu
+        g += a[k] * math.exp(-0.5 * d * d)
+    return g
+
+
+@numba.njit(**_JIT)
+def _hybrid_integrate(kind, coulomb, p, gain, u, dt, nsub, z0, v0, w, a, zc, vc, uc, iz, iv, iu, zl, vl, oz, ov):
+    """RK4 of each window b from (z0[b], v0[b]) under its staged input row u[b] (2 nsub (N-1) + 1
+    stage values); one physical parameter column ``p`` for all. Diverged windows turn NaN."""
+    nb, n = oz.shape[1], oz.shape[0]
+    q = _member(p, 0, kind)
+    im = 1.0 / q[P_M]
+    h = dt / nsub
+    bz = np.empty(zc.size)
+    bv = np.empty(vc.size)
+    for b in range(nb):
+        z, v = z0[b], v0[b]
+        oz[0, b] = z
+        ov[0, b] = v
+        alive = True
+        for k in range(n - 1):
+            if alive:
+                for j in range(nsub):
+                    c = 2 * (k * nsub + j)
+                    ra, rm, rb = u[b, c], u[b, c + 1], u[b, c + 2]
+                    f1 = _force(kind, coulomb, z, v, q) + _term(z, v, ra, w, a, zc, vc, uc, iz, iv, iu, bz, bv)
+                    a1 = gain * ra - f1 * im
+                    z2 = z + 0.5 * h * v
+                    v2 = v + 0.5 * h * a1
+                    f2 = _force(kind, coulomb, z2, v2, q) + _term(z2, v2, rm, w, a, zc, vc, uc, iz, iv, iu, bz, bv)
+                    a2 = gain * rm - f2 * im
+                    z3 = z + 0.5 * h * v2
+                    v3 = v + 0.5 * h * a2
+                    f3 = _force(kind, coulomb, z3, v3, q) + _term(z3, v3, rm, w, a, zc, vc, uc, iz, iv, iu, bz, bv)
+                    a3 = gain * rm - f3 * im
+                    z4 = z + h * v3
+                    v4 = v + h * a3
+                    f4 = _force(kind, coulomb, z4, v4, q) + _term(z4, v4, rb, w, a, zc, vc, uc, iz, iv, iu, bz, bv)
+                    a4 = gain * rb - f4 * im
+                    z = z + h / 6.0 * (v + 2.0 * v2 + 2.0 * v3 + v4)
+                    v = v + h / 6.0 * (a1 + 2.0 * a2 + 2.0 * a3 + a4)
+                if not (abs(z) < zl and abs(v) < vl):
+                    alive = False
+            oz[k + 1, b] = z if alive else math.nan
+            ov[k + 1, b] = v if alive else math.nan
+    return 0
+
+
+@dataclass(frozen=True)
+class Basis:
+    """Centres and widths of the bumps: ``nz`` x ``nv`` over the (z, z') range the record visits (its
+    0.5-99.5 % quantiles), ``nu`` over the input's; widths equal to the grid spacing."""
+
+    zc: np.ndarray
+    vc: np.ndarray
+    uc: np.ndarray
+    wz: float
+    wv: float
+    wu: float
+
+    @classmethod
+    def over(cls, z: np.ndarray, v: np.ndarray, u: np.ndarray, nz: int = 7, nv: int = 5, nu: int = 5) -> Basis:
+        def grid(x, k):
+            lo, hi = np.quantile(x, [0.005, 0.995])
+            c = np.linspace(lo, hi, k) if k > 1 else np.array([0.5 * (lo + hi)])[:k]
+            return c, float((hi - lo) / max(k - 1, 1)) or 1.0
+
+        zc, wz = grid(z, nz)
+        vc, wv = grid(v, nv)
+        uc, wu = grid(u, nu) if nu else (np.empty(0), 1.0)
+        return cls(zc, vc, uc, wz, wv, wu)
+
+    @property
+    def size(self) -> int:
+        return self.zc.size * self.vc.size + self.uc.size
+
+    def split(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        k = self.zc.size * self.vc.size
+        return np.ascontiguousarray(theta[:k].reshape(self.zc.size, self.vc.size)), np.ascontiguousarray(theta[k:])
+
+    def evaluate(self, theta: np.ndarray, z, v, u=None) -> np.ndarray:
+        """g at the points (z, z', u) [N] (u None: the state part alone)."""
+        w, a = self.split(np.asarray(theta, float))
+        z, v = np.asarray(z, float), np.asarray(v, float)
+        bz = np.exp(-0.5 * ((z[..., None] - self.zc) / self.wz) ** 2)
+        bv = np.exp(-0.5 * ((v[..., None] - self.vc) / self.wv) ** 2)
+        g = np.einsum("...i,ij,...j->...", bz, w, bv)
+        if u is not None and self.uc.size:
+            g = g + np.exp(-0.5 * ((np.asarray(u, float)[..., None] - self.uc) / self.wu) ** 2) @ a
+        return g
+
+    def to_json(self) -> dict[str, Any]:
+        return {"z_centres": self.zc.tolist(), "v_centres": self.vc.tolist(), "u_centres": self.uc.tolist(),
+                "widths": [self.wz, self.wv, self.wu]}  # fmt: skip
+
+
+def simulate_hybrid(
+    model: Model, basis: Basis, theta, u_staged: np.ndarray, dt: float, x0: np.ndarray, substeps: int,
+    input_kind: str, z_limit: float, v_limit: float,
+) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+    """Free runs of physics + g from the start states ``x0`` (B, 2) under staged input rows (B, S);
+    returns z and z' (N, B), NaN after a divergence."""
+    u2 = np.atleast_2d(np.asarray(u_staged, float))
+    x0 = np.atleast_2d(np.asarray(x0, float))
+    p = model.kernel_params()[:, None]
+    n = (u2.shape[1] - 1) // (2 * substeps) + 1
+    oz, ov = np.empty((n, x0.shape[0])), np.empty((n, x0.shape[0]))
+    w, a = basis.split(np.asarray(theta, float))
+    _hybrid_integrate(
+        KINDS[model.kind], bool(p[P_COULOMB, 0] != 0.0), np.ascontiguousarray(p),
+        float(input_gain(input_kind, p[P_M])[0]),
+        np.ascontiguousarray(u2), float(dt), int(substeps), np.ascontiguousarray(x0[:, 0]),
+        np.ascontiguousarray(x0[:, 1]), w, a, basis.zc, basis.vc, basis.uc, 1.0 / basis.wz, 1.0 / basis.wv,
+        1.0 / basis.wu, float(z_limit), float(v_limit), oz, ov,
+    )  # fmt: skip
+    return oz, ov
+
+
+@dataclass
+class Hybrid:
+    """A fitted hybrid: the physical model, the discrepancy term's basis and weights [N], and the fit's
+    record (stages, the joint refit's coefficient shifts in standard errors)."""
+
+    model: Model
+    basis: Basis
+    theta: np.ndarray
+    info: dict[str, Any] = field(default_factory=dict)
+
+    def term(self, z, v, u=None) -> np.ndarray:
+        return self.basis.evaluate(self.theta, z, v, u)
+
+    def free_run(self, rec: Measurement, x0) -> np.ndarray:
+        """z of a free run over ``rec`` from ``x0`` (NaN after a divergence)."""
+        sub = record_substeps(self.model, rec)
+        zs, vs, _, _ = state_derivatives(rec.z, rec.fs, purpose="state")
+        us = stage_input(rec.u, sub)[None]
+        x = np.asarray(x0, float)[None]
+        oz, _ = simulate_hybrid(self.model, self.basis, self.theta, us, rec.dt, x, sub, rec.input_name,
+                                **divergence_limits(rec.z, vs))  # fmt: skip
+        return oz[:, 0]
+
+    def restarted_gap(self, rec: Measurement, start: int, window_s: float, zs, vs) -> dict[str, float]:
+        """The median restarted window's rms error over [start, N) (``validation.restarted_free_runs``'
+        windows and measured start states), % of rms(z), for the hybrid and for its physics alone (the
+        same windows with the term's weights at zero)."""
+        w = int(round(window_s * rec.fs))
+        n_win = (rec.n - start) // w
+        if n_win < 1:
+            return {}
+        starts = start + w * np.arange(n_win)
+        U, sub = staged_windows(self.model, rec, starts, w)
+        meas = np.stack([rec.z[k : k + w] for k in starts])
+        x0 = np.column_stack([zs[starts], vs[starts]])
+        scale = float(np.sqrt(np.mean(rec.z[start:] ** 2)))
+        out = {}
+        for name, theta in (("physics", np.zeros_like(self.theta)), ("hybrid", self.theta)):
+            oz, _ = simulate_hybrid(self.model, self.basis, theta, U, rec.dt, x0, sub, rec.input_name,
+                                    **divergence_limits(rec.z, vs))  # fmt: skip
+            ms = np.mean((oz.T - meas) ** 2, axis=1)
+            ok = np.isfinite(ms)
+            out[f"{name}_median_window_percent"] = (
+                float(100 * np.sqrt(np.median(ms[ok])) / scale) if ok.any() else math.inf
+            )
+        return out
+
+    def to_json(self) -> dict[str, Any]:
+        return {"model": self.model.to_dict(), "basis": self.basis.to_json(), "weights_N": self.theta.tolist(),
+                **self.info}  # fmt: skip
+
+
+def fit_hybrid(
+    model: Model,
+    rec: Measurement,
+    windows_s: tuple[float, ...] = (0.25, 1.0),
+    max_windows: int = 120,
+    ridge: float = 1e-2,
+    shape: tuple[int, int, int] = (7, 5, 5),
+    max_nfev: int = 40,
+) -> Hybrid:
+    """Fit the discrepancy term to ``rec`` (the identification part) with ``model``'s physics held, then
+    refit physics and term together and report how far each physical coefficient moved.
+
+    ``ridge``: the penalty on the weights, as a fraction of the residual a weight of the physical force's
+    size (|k1| z_rms) would cost on one window sample; ``shape``: bumps over z, z' and u.
+    """
+    if rec.z is None:
+        raise MeasurementError(f"{rec.source}: a hybrid model needs a response")
+    zs, vs, _, _ = state_derivatives(rec.z, rec.fs, purpose="state")
+    basis = Basis.over(zs, vs, rec.u, *shape)
+    limits = divergence_limits(rec.z, vs)
+    sub = record_substeps(model, rec)
+    us = stage_input(rec.u, sub)
+    r = 2 * sub
+    z_rms, v_rms = float(np.std(rec.z)), float(np.std(vs))
+    force = max(abs(model.k1) * z_rms, abs(model.c) * v_rms, 1e-300)
+    x_scale = np.array([max(np.abs(rec.z).max(), 1e-12), max(np.abs(vs).max(), 1e-12)])
+    names = _names(model, free_mass=False)
+    pscale = _scales(model, names, z_rms, v_rms)
+    d = {**model.to_dict(), **dict(model.extra)}
+    q0 = np.array([float(d[n]) for n in names]) / pscale
+    P = basis.size
+    theta = np.zeros(P)
+    stages = []
+
+    def windows(w_s):
+        length = min(rec.n, max(8, int(round(w_s * rec.fs))))
+        n_win = min(max_windows, max(1, rec.n // length))
+        starts = np.linspace(0, rec.n - length, n_win).astype(int)
+        meas = np.stack([rec.z[s : s + length] for s in starts])
+        u = np.stack([us[r * s : r * (s + length - 1) + 1] for s in starts])
+        return length, n_win, meas, u, np.column_stack([zs[starts], vs[starts]]) / x_scale
+
+    def sim(phys: Model, th, u, xs):
+        oz, _ = simulate_hybrid(phys, basis, th, u, rec.dt, xs * x_scale, sub, rec.input_name, **limits)
+        return oz.T
+
+    pen = math.sqrt(ridge) * z_rms  # a weight of size `force` costs ridge * z_rms^2 in the sum of squares
+
+    for w_s in windows_s:
+        length, n_win, meas, u, x0 = windows(w_s)
+        big = 10 * np.abs(meas).max()
+
+        def residual(t, phys=model):
+            th = t[:P] * force
+            z = sim(phys, th, u, t[P:].reshape(-1, 2))
+            e = np.where(np.isfinite(z), z - meas, big)
+            return np.concatenate([e.ravel(), pen * t[:P]])
+
+        pattern = sparse.lil_matrix((n_win * length + P, P + 2 * n_win), dtype=int)
+        pattern[: n_win * length, :P] = 1
+        pattern[n_win * length :, :P] = sparse.identity(P, dtype=int)
+        for w in range(n_win):
+            pattern[w * length : (w + 1) * length, P + 2 * w : P + 2 * w + 2] = 1
+        # the start states first, the term held (the measured states carry the smoothing's error)
+        st = optimize.least_squares(lambda xs: residual(np.concatenate([theta / force, xs])), x0.ravel(),
+                                    jac="2-point", jac_sparsity=pattern[:, P:].tocsr(), method="trf",
+                                    max_nfev=10, diff_step=1e-7)  # fmt: skip
+        t0 = np.concatenate([theta / force, st.x])
+        rms0 = float(np.sqrt(np.mean(st.fun[: n_win * length] ** 2)))
+        sol = optimize.least_squares(residual, t0, jac="2-point", jac_sparsity=pattern.tocsr(), method="trf",
+                                     max_nfev=max_nfev, diff_step=1e-7)  # fmt: skip
+        theta = sol.x[:P] * force
+        states = sol.x[P:]
+        stages.append({"window_s": length / rec.fs, "windows": int(n_win), "rms_start_m": rms0,
+                       "rms_end_m": float(np.sqrt(np.mean(sol.fun[: n_win * length] ** 2))),
+                       "evaluations": int(sol.nfev)})  # fmt: skip
+
+    # the joint refit: physics and term together, from the held fit, on the last stage's windows; the
+    # coefficients' standard errors from its Jacobian (the start states marginalised: a Schur
+    # complement), white residuals assumed (an underestimate where the residual is coloured)
+    p = len(names)
+
+    def joint(t):
+        phys = _with(model, names, t[:p] * pscale)
+        z = sim(phys, t[p : p + P] * force, u, t[p + P :].reshape(-1, 2))
+        e = np.where(np.isfinite(z), z - meas, big)
+        return np.concatenate([e.ravel(), pen * t[p : p + P]])
+
+    jp = sparse.lil_matrix((n_win * length + P, p + P + 2 * n_win), dtype=int)
+    jp[: n_win * length, : p + P] = 1
+    jp[n_win * length :, p : p + P] = sparse.identity(P, dtype=int)
+    for w in range(n_win):
+        jp[w * length : (w + 1) * length, p + P + 2 * w : p + P + 2 * w + 2] = 1
+    sol = optimize.least_squares(joint, np.concatenate([q0, theta / force, states]), jac="2-point",
+                                 jac_sparsity=jp.tocsr(), method="trf", max_nfev=max_nfev, diff_step=1e-7)  # fmt: skip
+    J = sparse.csr_matrix(sol.jac)
+    dof = max(1, n_win * length - sol.x.size)
+    s2 = float(np.sum(sol.fun[: n_win * length] ** 2) / dof)
+    try:
+        cov = s2 * np.linalg.inv((J.T @ J).toarray())
+        se = np.sqrt(np.clip(np.diag(cov)[:p], 0, None)) * pscale
+    except np.linalg.LinAlgError:
+        se = np.full(p, np.nan)
+    moved = (sol.x[:p] - q0) * pscale
+    shifts = {
+        n: {"held": float(q0[i] * pscale[i]), "joint": float(sol.x[i] * pscale[i]), "se": float(se[i]),
+            "shift_in_se": float(moved[i] / se[i]) if se[i] > 0 else None}
+        for i, n in enumerate(names)
+    }  # fmt: skip
+    info = {
+        "stages": stages,
+        "ridge": ridge,
+        "joint": {
+            "rms_end_m": float(np.sqrt(np.mean(sol.fun[: n_win * length] ** 2))),
+            "coefficients": shifts,
+            "model": _with(model, names, sol.x[:p] * pscale).to_dict(),
+            "weights_N": (sol.x[p : p + P] * force).tolist(),
+        },
+    }
+    return Hybrid(model, basis, theta, info)

@@ -1,0 +1,136 @@
+"""The hybrid model (physics + a non-parametric discrepancy force fitted by output error), on records
+negstiff did not make and on the Silverbox."""
+
+import functools
+
+import numpy as np
+import pytest
+from conftest import SILVERBOX_TEST, SILVERBOX_TRAIN
+
+from negstiff.inference.derivatives import state_derivatives
+from negstiff.inference.hybrid import fit_hybrid
+from negstiff.inference.measurement import from_arrays
+from negstiff.inference.refine import refine
+from negstiff.inference.validation import free_run_rms
+from negstiff.models import Model
+
+M, C, K, K3 = 0.5, 2.0, 2000.0, 2.0e7
+NOISE = 0.005
+FS, TRAIN_S, TEST_S = 200.0, 60.0, 30.0
+START = Model(m=M, k0=0.0, k1=-K, k2=0.0, k3=K3, c=C, c_nl=0.0)
+FAST = {"max_windows": 60, "shape": (6, 4, 3), "max_nfev": 15}
+
+
+@functools.lru_cache(maxsize=2)
+def _record(d2: float):
+    """A record negstiff did not make: a hardening Duffing oscillator (m 0.5 kg, 10 Hz, zeta 3.2 %, cubic
+    7 % of the linear force at rms z) with, for d2 > 0, a damping that grows with displacement,
+    d2 z^2 z' (in no catalogue; d2 = 1.5e5 adds half the viscous force at rms z), integrated by scipy's
+    DOP853 under a continuous multisine force (2-30 Hz), sampled at 200 Hz, z with 0.5 % rms white
+    noise. Returns the record, the noise-free states and the noise's rms [m]."""
+    from scipy.integrate import solve_ivp
+
+    rng = np.random.default_rng(11)
+    w = 2 * np.pi * np.arange(4, 61) * 0.5
+    ph = rng.uniform(0, 2 * np.pi, w.size)
+    a = 3.0 / np.sqrt(w.size)
+
+    def rhs(t, x):
+        z, v = x
+        return [v, (a * np.cos(w * t + ph).sum() - C * v - d2 * z * z * v - K * z - K3 * z**3) / M]
+
+    t = np.arange(int((TRAIN_S + TEST_S) * FS)) / FS
+    sol = solve_ivp(rhs, (0, t[-1]), [0.0, 0.0], t_eval=t, method="DOP853", rtol=1e-9, atol=1e-12)
+    noise = NOISE * np.std(sol.y[0])
+    z = sol.y[0] + noise * rng.standard_normal(t.size)
+    force = (a * np.cos(np.outer(t, w) + ph)).sum(axis=1)
+    return from_arrays(force, z, FS, input_name="force", mass=M, source="dop853"), sol.y, noise
+
+
+def _fit_and_score(d2):
+    rec, x, noise = _record(d2)
+    n = int(TRAIN_S * FS)
+    train, test = rec.segment(0, n), rec.segment(n, rec.n)
+    physics = refine(START, train, windows_s=(0.25, 1.0)).model
+    hyb = fit_hybrid(physics, train, **FAST)
+    zs, vs, _, _ = state_derivatives(test.z, test.fs, purpose="state")
+    scored = test.segment(50, test.n)
+    x0 = (zs[50], vs[50])
+    e_phys = free_run_rms(physics, scored, x0=x0)
+    e_hyb = float(np.sqrt(np.mean((hyb.free_run(scored, x0) - scored.z) ** 2)))
+    return physics, hyb, e_phys, e_hyb, x[:, n:], test.u, noise
+
+
+def test_the_term_finds_a_missing_displacement_dependent_damping():
+    # Fact: a Duffing model refined by output error cannot carry d2 z^2 z'. The term, fitted on the first
+    # 60 s with the physics held, must (a) bring the free-run error on the last 30 s down to the noise (a
+    # perfect model's error is the noise's rms; 15 % allowed for the fitted start and the weights' own
+    # noise), and (b) take the missing force's shape: over the states the test visits, the term plus
+    # what the refined physics moved from the true physics (its c, c_nl absorbed part of d2) is d2 z^2 z'
+    # within 25 % rms (measured 13 %).
+    d2 = 1.5e5
+    physics, hyb, e_phys, e_hyb, (z, v), u, noise = _fit_and_score(d2)
+    assert e_phys > 2 * noise, "the physics alone misses the effect"
+    assert e_hyb < 1.15 * noise, (e_hyb, noise, e_phys)
+    missing = d2 * z * z * v
+    moved = (
+        physics.k0 - (physics.k1 + K) * z + physics.k2 * z**2 + (physics.k3 - K3) * z**3
+        + (physics.c - C) * v + physics.c_nl * v * np.abs(v)
+    )  # fmt: skip
+    found = hyb.term(z, v, u) + moved
+    rel = np.sqrt(np.mean((found - missing) ** 2)) / np.sqrt(np.mean(missing**2))
+    assert rel < 0.25, rel
+    assert hyb.info["joint"]["coefficients"]["k3"]["se"] > 0
+
+
+def test_nothing_missing_leaves_the_term_at_the_noise_and_the_physics_put():
+    # Fact: when the physics is complete, the term can fit only noise: its rms force stays below a
+    # quarter of the noise-equivalent force (k times the noise's rms; measured 0.1), the prediction is
+    # not worse than the physics', and the joint refit moves no physical coefficient by more than 3 of
+    # its standard errors (measured < 0.1).
+    physics, hyb, e_phys, e_hyb, (z, v), u, noise = _fit_and_score(0.0)
+    assert np.sqrt(np.mean(hyb.term(z, v, u) ** 2)) < 0.25 * K * noise
+    assert e_hyb <= 1.02 * e_phys
+    for name, c in hyb.info["joint"]["coefficients"].items():
+        assert c["shift_in_se"] is not None and abs(c["shift_in_se"]) < 3, (name, c)
+
+
+@pytest.mark.slow
+def test_silverbox_hybrid_predicts_below_half_a_millivolt(silverbox, silverbox_fits):
+    # The issue's target: physics + term <= 0.5 mV on the multisine test, trained on the training part
+    # only; the physical model (refined SINDy) predicts at 0.24 mV, and the term must not make it worse.
+    from conftest import silverbox_prediction_mv
+
+    physics = silverbox_fits["sindy"].model_
+    hyb = fit_hybrid(physics, silverbox.segment(*SILVERBOX_TRAIN))
+    seg = silverbox.segment(*SILVERBOX_TEST)
+    zs, v, _, _ = state_derivatives(seg.z, seg.fs, purpose="state")
+    scored = seg.segment(50, seg.n)
+    mv = 1e3 * np.sqrt(np.mean((hyb.free_run(scored, (zs[50], v[50])) - scored.z) ** 2))
+    assert mv <= 0.5
+    assert mv <= 1.02 * silverbox_prediction_mv(physics, silverbox, SILVERBOX_TEST)
+
+
+def test_discrepancy_unnamed_reports_what_no_catalogue_effect_names(tmp_path):
+    # Through the command line, as a user would: the baseline alone (--max-effects 0, no refinement) on
+    # the record with displacement-dependent damping, --unnamed: the result carries the term, and the
+    # held-out gap with the term falls to the noise, from well above it for the physics alone (the same
+    # restarted windows).
+    import json
+
+    from negstiff.cli import main
+
+    rec, _, _ = _record(1.5e5)
+    rec = rec.segment(0, int(40 * FS))  # 40 s: the term is fitted on the first 24 s (the workflow's split)
+    path = tmp_path / "lab.csv"
+    np.savetxt(path, np.column_stack([rec.t, rec.u, rec.z]), delimiter=",", fmt="%.9g", header="t,force,z",
+               comments="")  # fmt: skip
+    out = tmp_path / "d.json"
+    argv = ["discrepancy", str(path), "--mass", str(M), "--max-effects", "0", "--no-refine", "--unnamed"]
+    assert main([*argv, "-o", str(out), "--quiet"]) == 0
+    un = json.loads(out.read_text())["unnamed"]
+    assert un["term_rms"] > 0 and set(un["joint"]["coefficients"]) >= {"k1", "k3", "c"}
+    # a complete model's restarted windows err by the noise (0.5 % of rms z); measured 8.8 % -> 0.57 %
+    gap = un["gap"]
+    assert gap["physics_median_window_percent"] > 4 * 100 * NOISE, gap
+    assert gap["hybrid_median_window_percent"] < 1.5 * 100 * NOISE, gap
