@@ -190,8 +190,14 @@ def simulator_section(rep: Report, results: dict[str, Any]) -> None:
     )
 
 
-def reproduce(out: Path, fast: bool = False, seed: int = 0, progress: bool = True) -> Path:
-    """Run the study and write the report folder ``out`` (atomically)."""
+SECTIONS = ("nsi", "updating", "characterization", "sindy", "posterior", "discrepancy", "silverbox")
+
+
+def reproduce(out: Path, fast: bool = False, seed: int = 0, progress: bool = True, sections=None) -> Path:
+    """Run the study and write the report folder ``out`` (atomically). ``sections``: run only these of
+    ``SECTIONS`` (the device, rig and simulator parts always run; the report says which were left out)."""
+    if sections is not None and not set(sections) <= set(SECTIONS):
+        raise ValueError(f"unknown sections {sorted(set(sections) - set(SECTIONS))}; known: {SECTIONS}")
     t_start = time.perf_counter()
 
     def say(msg: str) -> None:
@@ -220,8 +226,13 @@ def reproduce(out: Path, fast: bool = False, seed: int = 0, progress: bool = Tru
         ("discrepancy", "discrepancy workflow", discrepancy_section),
         ("silverbox", "Silverbox benchmark (real data)", silverbox_section),
     ):
+        if sections is not None and name not in sections:
+            continue
         say(title)
         cached_section(name, fn, rep, results, fast, seed, say)
+    if sections is not None:
+        results["sections_left_out"] = [n for n in SECTIONS if n not in sections]
+        rep.warning(f"A partial run: sections left out: {', '.join(results['sections_left_out']) or 'none'}.")
     elapsed = time.perf_counter() - t_start
     results["elapsed_s"] = elapsed
     rep.text(f"Run time: {elapsed:.1f} s ({'fast' if fast else 'full'} run, seed {seed}).")

@@ -131,15 +131,14 @@ def test_bad_input_exits_2_with_one_line_and_no_output(workdir, capsys, case):
     assert not out.exists()
 
 
-def test_reproduce_fast_writes_a_complete_report(tmp_path, monkeypatch):
-    monkeypatch.setenv("NEGSTIFF_CACHE", str(tmp_path / "cache"))
-    out = tmp_path / "paper"
-    assert main(["reproduce", "--fast", "-o", str(out), "--quiet"]) == 0
+def _check_report(out, sections):
+    """The report folder holds index.md, index.html, results.json and real PNG figures (linked, not
+    inlined into the markdown, inlined into the html), and every section asked for."""
+    import re
+
     for f in ("index.md", "index.html", "results.json"):
         assert (out / f).stat().st_size > 0
     md = (out / "index.md").read_text()
-    import re
-
     figs = re.findall(r"\]\(([^)]+\.png)\)", md)
     assert figs, "the report has figures"
     for f in figs:
@@ -148,15 +147,46 @@ def test_reproduce_fast_writes_a_complete_report(tmp_path, monkeypatch):
     assert md.count("data:image/png") == 0 and (out / "index.html").read_text().count("data:image/png") == len(figs)
     results = json.loads((out / "results.json").read_text())
     assert results["simulator"]["max_abs_dz_m"] < 1e-7
-    for section in ("device", "nsi", "updating", "characterization", "sindy", "posterior", "discrepancy", "silverbox"):
+    for section in ("device", *sections):
         assert section in results, f"the report lacks its {section} section"
     assert "pending_sections" not in results
+    return results
+
+
+@pytest.mark.slow  # two minutes: the default suite runs the machinery on two sections (below)
+def test_reproduce_fast_writes_a_complete_report(tmp_path, monkeypatch):
+    from negstiff.experiments.reproduce import SECTIONS
+
+    monkeypatch.setenv("NEGSTIFF_CACHE", str(tmp_path / "cache"))
+    out = tmp_path / "paper"
+    assert main(["reproduce", "--fast", "-o", str(out), "--quiet"]) == 0
+    results = _check_report(out, SECTIONS)
+    assert "sections_left_out" not in results
     # a second run replays every expensive section from the cache, with the same numbers
     out2 = tmp_path / "paper2"
     assert main(["reproduce", "--fast", "-o", str(out2), "--quiet"]) == 0
     again = json.loads((out2 / "results.json").read_text())
     for section in ("posterior", "sindy", "discrepancy"):
         assert json.dumps(again[section]) == json.dumps(results[section]), section
+
+
+def test_reproduce_machinery_on_two_sections(tmp_path, monkeypatch):
+    # The report's machinery (sections, figures, the html, results.json, the cache's replay with the
+    # same numbers) on the characterisation and NSI sections; every section: the slow test above.
+    from negstiff.experiments.reproduce import reproduce
+
+    monkeypatch.setenv("NEGSTIFF_CACHE", str(tmp_path / "cache"))
+    sections = ("characterization", "nsi")
+    results = _check_report(reproduce(tmp_path / "a", fast=True, progress=False, sections=sections), sections)
+    assert results["sections_left_out"] == ["updating", "sindy", "posterior", "discrepancy", "silverbox"]
+    assert any((tmp_path / "cache").iterdir()), "the sections were cached"
+    again = json.loads(
+        (reproduce(tmp_path / "b", fast=True, progress=False, sections=sections) / "results.json").read_text()
+    )
+    for section in sections:
+        assert json.dumps(again[section]) == json.dumps(results[section]), section
+    with pytest.raises(ValueError, match="unknown sections"):
+        reproduce(tmp_path / "c", fast=True, progress=False, sections=("nonsense",))
 
 
 def test_simulate_an_input_only_record_from_rest_at_z_plus(tmp_path):
