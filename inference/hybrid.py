@@ -37,7 +37,7 @@ from negstiff.models.simulator import KINDS, _force, _member, input_gain, stage_
 
 from .derivatives import state_derivatives
 from .measurement import Measurement, MeasurementError
-from .refine import _names, _scales, _with
+from .refine import _names, _scales, _with, shooting_sparsity
 from .validation import divergence_limits, record_substeps, staged_windows
 
 _JIT = {"cache": True, "nogil": True, "error_model": "numpy"}
@@ -323,18 +323,14 @@ def fit_hybrid(
             e = np.where(np.isfinite(z), z - meas, big)
             return np.concatenate([e.ravel(), pen * t[:P]])
 
-        pattern = sparse.lil_matrix((n_win * length + P, P + 2 * n_win), dtype=int)
-        pattern[: n_win * length, :P] = 1
-        pattern[n_win * length :, :P] = sparse.identity(P, dtype=int)
-        for w in range(n_win):
-            pattern[w * length : (w + 1) * length, P + 2 * w : P + 2 * w + 2] = 1
+        pattern = shooting_sparsity(n_win, length, P, penalty=(0, P))
         # the start states first, the term held (the measured states carry the smoothing's error)
         st = optimize.least_squares(lambda xs: residual(np.concatenate([N.T @ theta / force, xs])), x0.ravel(),
-                                    jac="2-point", jac_sparsity=pattern[:, P:].tocsr(), method="trf",
+                                    jac="2-point", jac_sparsity=pattern[:, P:], method="trf",
                                     max_nfev=10, diff_step=1e-7)  # fmt: skip
         t0 = np.concatenate([N.T @ theta / force, st.x])
         rms0 = float(np.sqrt(np.mean(st.fun[: n_win * length] ** 2)))
-        sol = optimize.least_squares(residual, t0, jac="2-point", jac_sparsity=pattern.tocsr(), method="trf",
+        sol = optimize.least_squares(residual, t0, jac="2-point", jac_sparsity=pattern, method="trf",
                                      max_nfev=max_nfev, diff_step=1e-7)  # fmt: skip
         theta = N @ sol.x[:P] * force
         states = sol.x[P:]
@@ -353,13 +349,9 @@ def fit_hybrid(
         e = np.where(np.isfinite(z), z - meas, big)
         return np.concatenate([e.ravel(), pen * t[p : p + P]])
 
-    jp = sparse.lil_matrix((n_win * length + P, p + P + 2 * n_win), dtype=int)
-    jp[: n_win * length, : p + P] = 1
-    jp[n_win * length :, p : p + P] = sparse.identity(P, dtype=int)
-    for w in range(n_win):
-        jp[w * length : (w + 1) * length, p + P + 2 * w : p + P + 2 * w + 2] = 1
+    jp = shooting_sparsity(n_win, length, p + P, penalty=(p, P))
     sol = optimize.least_squares(joint, np.concatenate([q0, N.T @ theta / force, states]), jac="2-point",
-                                 jac_sparsity=jp.tocsr(), method="trf", max_nfev=max_nfev, diff_step=1e-7)  # fmt: skip
+                                 jac_sparsity=jp, method="trf", max_nfev=max_nfev, diff_step=1e-7)  # fmt: skip
     J = sparse.csr_matrix(sol.jac)
     dof = max(1, n_win * length - sol.x.size)
     s2 = float(np.sum(sol.fun[: n_win * length] ** 2) / dof)

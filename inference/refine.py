@@ -129,6 +129,22 @@ def _scales(model: Model, names, z_rms: float, v_rms: float) -> np.ndarray:
     return np.asarray(out, float)
 
 
+def shooting_sparsity(n_win: int, length: int, dense: int, penalty: tuple[int, int] | None = None) -> sparse.csr_matrix:
+    """The Jacobian's sparsity for multiple shooting: ``dense`` leading parameter columns touch every
+    residual, each window's two start-state columns only its own ``length`` residuals; ``penalty``
+    (first column, count) appends one ridge row per penalised column. Built from blocks (a row-wise
+    ``lil_matrix`` cost 1.3 s per refinement of a 150 s record, measured)."""
+    rows = n_win * length
+    states = sparse.kron(sparse.identity(n_win, dtype=np.int8, format="csr"), np.ones((length, 2), np.int8))
+    out = sparse.hstack([sparse.csr_matrix(np.ones((rows, dense), dtype=np.int8)), states], format="csr")
+    if penalty is not None:
+        first, count = penalty
+        ridge = sparse.hstack([sparse.csr_matrix((count, first), dtype=np.int8), sparse.identity(count, np.int8),
+                               sparse.csr_matrix((count, out.shape[1] - first - count), dtype=np.int8)])  # fmt: skip
+        out = sparse.vstack([out, ridge], format="csr")
+    return out
+
+
 def refine(
     model: Model,
     rec: Measurement,
@@ -187,16 +203,13 @@ def refine(
             return r.ravel()
 
         theta0 = np.concatenate([q, (x0 / x_scale).ravel()])
-        pattern = sparse.lil_matrix((n_win * length, p + 2 * n_win), dtype=int)
-        pattern[:, :p] = 1
-        for w in range(n_win):
-            pattern[w * length : (w + 1) * length, p + 2 * w : p + 2 * w + 2] = 1
+        pattern = shooting_sparsity(n_win, length, p)
         if stages:
             # the start states alone first, the model held: the windows' best error at the current model
             # is what the predictability test compares (measured start states carry the smoothing's error)
             states = optimize.least_squares(
                 lambda xs: residual(np.concatenate([q, xs])), theta0[p:], jac="2-point",
-                jac_sparsity=pattern[:, p:].tocsr() if sparse_jacobian else None, method="trf", max_nfev=10,
+                jac_sparsity=pattern[:, p:] if sparse_jacobian else None, method="trf", max_nfev=10,
                 diff_step=1e-7,
             )  # fmt: skip
             theta0 = np.concatenate([q, states.x])
@@ -208,7 +221,7 @@ def refine(
             stages.append({"window_s": length / rec.fs, "windows": int(n_win), "rms_start_m": rms0, "skipped": reason})
             break
         sol = optimize.least_squares(
-            residual, theta0, jac="2-point", jac_sparsity=pattern.tocsr() if sparse_jacobian else None,
+            residual, theta0, jac="2-point", jac_sparsity=pattern if sparse_jacobian else None,
             method="trf", x_scale=1.0,
             max_nfev=max_nfev, diff_step=1e-7,
         )  # fmt: skip
