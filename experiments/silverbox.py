@@ -167,9 +167,9 @@ def hybrid_part(m: Measurement, rows: list[MethodRow]) -> dict[str, Any]:
     row = next(r for r in rows if r.method == "SINDy")
     physics = Model.from_dict(row.refined["model"])
     t0 = time.perf_counter()
-    h = fit_hybrid(physics, m.segment(*TRAIN))
-    seconds = time.perf_counter() - t0
     train = m.segment(*TRAIN)
+    h = fit_hybrid(physics, train)
+    seconds = time.perf_counter() - t0
     zs, vs, _, _ = state_derivatives(train.z, train.fs, purpose="state")
     term = h.term(zs, vs, train.u)
     restoring = physics.restoring_force(zs)
@@ -333,8 +333,7 @@ def _render_hybrid(rep: Report, h: dict[str, Any], m: Measurement) -> None:
            "The term explains a visible part of the error: its shape below says where to look for a physical "
            "effect.")
     )  # fmt: skip
-    b = h["basis"]
-    basis = Basis(np.array(b["z_centres"]), np.array(b["v_centres"]), np.array(b["u_centres"]), *b["widths"])
+    basis = Basis.from_json(h["basis"])
     theta = np.array(h["weights_N"])
     train = m.segment(*TRAIN)
     zs, vs, _, _ = state_derivatives(train.z, train.fs, purpose="state")
@@ -350,8 +349,7 @@ def _render_hybrid(rep: Report, h: dict[str, Any], m: Measurement) -> None:
     ax[0].set(xlabel="z [mV]", ylabel="z' [V/s]", title="Discrepancy force over the visited states")
     if basis.uc.size:
         ug = np.linspace(basis.uc[0], basis.uc[-1], 200)
-        _, a = basis.split(theta)
-        ax[1].plot(1e3 * ug, np.exp(-0.5 * ((ug[:, None] - basis.uc) / basis.wu) ** 2) @ a)
+        ax[1].plot(1e3 * ug, basis.input_part(theta, ug))
         ax[1].set(xlabel="input u [mV]", ylabel="g's input part [force units]", title="Discrepancy force's input part")
     fig.tight_layout()
     rep.figure(

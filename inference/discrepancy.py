@@ -336,8 +336,8 @@ class Discrepancy:
         coefficient in its standard errors."""
         from .hybrid import fit_hybrid
 
-        h = fit_hybrid(self.model_, rec.segment(0, self.n_id))
         ident = rec.segment(0, self.n_id)
+        h = fit_hybrid(self.model_, ident)
         zs, vs, _, _ = state_derivatives(ident.z, ident.fs, purpose="state")
         term = h.term(zs, vs, ident.u)
         force = self.model_.restoring_force(zs)

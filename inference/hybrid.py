@@ -33,14 +33,12 @@ from scipy import linalg, optimize, sparse
 
 from negstiff.models import Model
 from negstiff.models.equation import P_COULOMB, P_M
-from negstiff.models.simulator import KINDS, _force, _member, input_gain, stage_input
+from negstiff.models.simulator import _JIT, KINDS, _force, _member, input_gain, stage_input
 
 from .derivatives import state_derivatives
 from .measurement import Measurement, MeasurementError
 from .refine import _names, _scales, _with, shooting_sparsity
 from .validation import divergence_limits, record_substeps, staged_windows
-
-_JIT = {"cache": True, "nogil": True, "error_model": "numpy"}
 
 
 @numba.njit(inline="always", **_JIT)
@@ -139,23 +137,32 @@ class Basis:
         k = self.zc.size * self.vc.size
         return np.ascontiguousarray(theta[:k].reshape(self.zc.size, self.vc.size)), np.ascontiguousarray(theta[k:])
 
+    @staticmethod
+    def _bumps(x, centres: np.ndarray, width: float) -> np.ndarray:
+        """The 1-D bumps at the points ``x`` (any shape): shape x.shape + (centres,)."""
+        return np.exp(-0.5 * ((np.asarray(x, float)[..., None] - centres) / width) ** 2)
+
     def features(self, z, v, u) -> np.ndarray:
         """The bumps at the points (n,): an (n, size) matrix, g = features @ theta."""
-        bz = np.exp(-0.5 * ((np.asarray(z, float)[:, None] - self.zc) / self.wz) ** 2)
-        bv = np.exp(-0.5 * ((np.asarray(v, float)[:, None] - self.vc) / self.wv) ** 2)
-        bu = np.exp(-0.5 * ((np.asarray(u, float)[:, None] - self.uc) / self.wu) ** 2)
-        return np.column_stack([(bz[:, :, None] * bv[:, None, :]).reshape(len(bz), -1), bu])
+        bz, bv = self._bumps(z, self.zc, self.wz), self._bumps(v, self.vc, self.wv)
+        return np.column_stack(
+            [(bz[:, :, None] * bv[:, None, :]).reshape(len(bz), -1), self._bumps(u, self.uc, self.wu)]
+        )
 
     def evaluate(self, theta: np.ndarray, z, v, u=None) -> np.ndarray:
-        """g at the points (z, z', u) [N] (u None: the state part alone)."""
-        w, a = self.split(np.asarray(theta, float))
-        z, v = np.asarray(z, float), np.asarray(v, float)
-        bz = np.exp(-0.5 * ((z[..., None] - self.zc) / self.wz) ** 2)
-        bv = np.exp(-0.5 * ((v[..., None] - self.vc) / self.wv) ** 2)
-        g = np.einsum("...i,ij,...j->...", bz, w, bv)
-        if u is not None and self.uc.size:
-            g = g + np.exp(-0.5 * ((np.asarray(u, float)[..., None] - self.uc) / self.wu) ** 2) @ a
-        return g
+        """g at the points (z, z', u) [N], any shape (u None: the state part alone)."""
+        w, _ = self.split(np.asarray(theta, float))
+        g = np.einsum("...i,ij,...j->...", self._bumps(z, self.zc, self.wz), w, self._bumps(v, self.vc, self.wv))
+        return g if u is None else g + self.input_part(theta, u)
+
+    def input_part(self, theta: np.ndarray, u) -> np.ndarray:
+        """The part of g that depends on the input alone, at the inputs ``u`` [N]."""
+        _, a = self.split(np.asarray(theta, float))
+        return self._bumps(u, self.uc, self.wu) @ a
+
+    @classmethod
+    def from_json(cls, d: dict[str, Any]) -> Basis:
+        return cls(np.array(d["z_centres"]), np.array(d["v_centres"]), np.array(d["u_centres"]), *d["widths"])
 
     def to_json(self) -> dict[str, Any]:
         return {"z_centres": self.zc.tolist(), "v_centres": self.vc.tolist(), "u_centres": self.uc.tolist(),
@@ -220,10 +227,10 @@ class Hybrid:
         meas = np.stack([rec.z[k : k + w] for k in starts])
         x0 = np.column_stack([zs[starts], vs[starts]])
         scale = float(np.sqrt(np.mean(rec.z[start:] ** 2)))
+        limits = divergence_limits(rec.z, vs)
         out = {}
         for name, theta in (("physics", np.zeros_like(self.theta)), ("hybrid", self.theta)):
-            oz, _ = simulate_hybrid(self.model, self.basis, theta, U, rec.dt, x0, sub, rec.input_name,
-                                    **divergence_limits(rec.z, vs))  # fmt: skip
+            oz, _ = simulate_hybrid(self.model, self.basis, theta, U, rec.dt, x0, sub, rec.input_name, **limits)
             ms = np.mean((oz.T - meas) ** 2, axis=1)
             ok = np.isfinite(ms)
             out[f"{name}_median_window_percent"] = (
