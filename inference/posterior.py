@@ -516,7 +516,11 @@ class Posterior:
     oversample : 1 (default): the input is pre-emphasised for the simulator's linear interpolation
         (``Windows.cut``); q > 1: interpolated (FFT, band-limited) to q x fs instead, q times the cost
     start : coefficient posterior only: the model the MAP search starts from (an ``identify`` result's
-        refined model); default: weak-form least squares of the record
+        refined model); default: weak-form least squares of the record, refined by simulation error
+        (``refine_start``)
+    refine_start : without ``start``, refine the weak-form estimate by output error over the record
+        (``refine.refine``, the last stage of ``identify``) before the MAP search: the posterior then
+        starts from the same refined point an identification reports (default True)
     """
 
     def __init__(
@@ -538,6 +542,7 @@ class Posterior:
         seed: int = 0,
         progress: bool = False,
         start: Model | None = None,
+        refine_start: bool = True,
     ):
         if model not in ("coefficients", "device"):
             raise ValueError(f"model must be 'coefficients' or 'device', got {model!r}")
@@ -562,6 +567,8 @@ class Posterior:
         if start is not None and (model != "coefficients" or not isinstance(start, Model)):
             raise ValueError("a start model is a polynomial model, for the coefficient posterior")
         self.start = start
+        self.refine_start = refine_start
+        self.start_info_: dict[str, Any] = {}
 
     # --- start point -------------------------------------------------------------------------------
     def _start(self, rec: Measurement, win: Windows) -> tuple[Parametrisation, np.ndarray]:
@@ -575,8 +582,9 @@ class Posterior:
                         f"({rec.mass:g} kg)"
                     )
                 start = self.start
+                self.start_info_ = {"source": "given", "model": start.to_dict()}
             else:
-                start = weak_least_squares(rec, ("1", "z", "z^2", "z^3", "v", "v|v|"))
+                start = self._refined_start(rec, weak_least_squares(rec, ("1", "z", "z^2", "z^3", "v", "v|v|")))
             par = coefficient_parametrisation(start)
             theta = np.array([getattr(start, n) for n in par.names])
         else:
@@ -588,6 +596,37 @@ class Posterior:
             par = device_parametrisation(start, prior)
             theta = np.array([start.E, start.alpha_deg, start.m, start.c, start.c_nl, 0.0])
         return par, theta
+
+    def _refined_start(self, rec: Measurement, weak: Model) -> Model:
+        """The weak-form estimate refined by simulation error over the record (``refine.refine``; the mass
+        held: the coefficient posterior holds it too), kept only if it is bounded and predicts the record
+        at least as well; ``start_info_`` says which start was used and why."""
+        from .refine import refine
+        from .validation import boundedness
+
+        info: dict[str, Any] = {"source": "weak-form least squares", "initial_model": weak.to_dict()}
+        self.start_info_ = info
+        if not self.refine_start:
+            info["reason"] = "refinement switched off"
+            return weak
+        t0 = time.perf_counter()
+        try:
+            r = refine(weak, rec)
+        except (ValueError, MeasurementError) as exc:
+            info["reason"] = f"refinement failed, the weak-form estimate is the start: {exc}"
+            return weak
+        info["refinement"] = r.to_json()
+        info["seconds"] = time.perf_counter() - t0
+        bounded = boundedness(r.model, rec)
+        if not bounded["ok"]:
+            info["reason"] = f"refined model rejected: {bounded['warning']}"
+            return weak
+        stages = [s for s in r.stages if "rms_end_m" in s]
+        if stages and not stages[-1]["rms_end_m"] <= stages[-1]["rms_start_m"]:
+            info["reason"] = "refined model rejected: its simulation error did not fall"
+            return weak
+        info.update(source="output-error refinement of the weak-form estimate", model=r.model.to_dict())
+        return r.model
 
     def _map(self, par: Parametrisation, win: Windows, theta: np.ndarray):
         """MAP point of theta (sigma profiled) by least squares on the projected residuals, with the
@@ -724,6 +763,7 @@ class Posterior:
             "seed": self.seed,
             "elapsed_s": time.perf_counter() - t_start,
             "moves": "DEMove 0.8, DESnookerMove 0.2",
+            "start": self.start_info_ or {"source": "the device's nominal values"},
         }
         self.logpost_, self.par_, self.windows_ = logpost, par, win
         tau_max = np.nanmax(tau_arr) if np.isfinite(tau_arr).any() else np.nan  # too short a chain: no tau

@@ -352,6 +352,7 @@ def cmd_posterior(args) -> int:
         seed=args.seed,
         progress=_progress(args),
         start=start,
+        refine_start=not args.no_refine,
     )
     res = post.fit(rec)
     result = _with_record(result_json(res, args.hdi_prob), rec)
@@ -880,7 +881,13 @@ def build_parser() -> argparse.ArgumentParser:
     pst.add_argument(
         "--start",
         help="coefficients: an identify result (its refined model) or a model file the MAP search starts from "
-        "(default: weak-form least squares of the record)",
+        "(default: weak-form least squares of the record, refined by simulation error)",
+    )
+    pst.add_argument(
+        "--no-refine",
+        action="store_true",
+        help="coefficients without --start: start the MAP search from the weak-form estimate itself, not its "
+        "output-error refinement",
     )
     pst.add_argument("--duration", type=POSITIVE, help="use only the first DURATION seconds of the record")
     pst.add_argument("--window", type=POSITIVE, default=0.125, help="multiple-shooting window [s] (default 0.125)")

@@ -233,14 +233,27 @@ def test_posterior_starts_from_an_identified_model(tmp_path):
     path = r.write(tmp_path / "rec.csv")
     assert main(["identify", "sindy", str(path), "-o", str(tmp_path / "id.json"), "--quiet"]) == 0
     runs = {}
-    for name, extra in (("default", []), ("start", ["--start", str(tmp_path / "id.json")])):
+    plans = (("default", []), ("start", ["--start", str(tmp_path / "id.json")]), ("weak", ["--no-refine"]))
+    for name, extra in plans:
         out = tmp_path / f"{name}.json"
         args = ["posterior", str(path), "-o", str(out), "--duration", "6", "--max-steps", "60", "--quiet", *extra]
         assert main(args) == 0
         runs[name] = json.loads(out.read_text())
     for k in ("k1", "k2", "k3", "c"):
-        a, b = runs["default"]["map"][k], runs["start"]["map"][k]
+        a, b, w = runs["default"]["map"][k], runs["start"]["map"][k], runs["weak"]["map"][k]
         assert b == pytest.approx(a, rel=0.01), k
+        assert w == pytest.approx(a, rel=0.01), k
+    # By default the MAP search starts from the weak-form estimate refined by simulation error (the
+    # identify pipeline's last stage; --no-refine: the weak-form estimate itself). The refined start is
+    # an output-error estimate from the same 6 s of data: it lies within the posterior's own spread of
+    # the MAP point (3 sd per coefficient; the equation-error start need not).
+    info = runs["default"]["settings"]["start"]
+    assert info["source"].startswith("output-error refinement"), info
+    assert runs["weak"]["settings"]["start"]["source"] == "weak-form least squares"
+    assert runs["start"]["settings"]["start"]["source"] == "given"
+    for k in ("k1", "k2", "k3", "c"):
+        sd = runs["default"]["parameters"][k]["sd"]
+        assert abs(info["model"][k] - runs["default"]["map"][k]) < 3 * sd, (k, info["model"][k], sd)
     (tmp_path / "dev.json").write_text(json.dumps({"E": 197e9, "alpha_deg": 6.9}))
     for bad in (["--start", str(tmp_path / "dev.json")], ["--model", "device", "--start", str(tmp_path / "id.json")]):
         assert main(["posterior", str(path), "-o", str(tmp_path / "x.json"), "--quiet", *bad]) == 2
