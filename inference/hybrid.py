@@ -201,6 +201,16 @@ class Hybrid:
     theta: np.ndarray
     info: dict[str, Any] = field(default_factory=dict)
 
+    def held(self) -> Hybrid:
+        """The held fit: the physical model as it was given (its coefficients unchanged) plus the term
+        fitted with it held. It cannot undo a bend of the physics (the term is orthogonal to the
+        physics' own forces), so where the physics-only fit had bent a coefficient it predicts worse than
+        the joint fit; where term and physics trade (the Silverbox's cubic) it keeps the physics' own
+        estimate and, with the bumps vanishing beyond the training range, extrapolates as the physics."""
+        held = self.info["held"]
+        return Hybrid(Model.from_dict(held["model"]), self.basis, np.asarray(held["weights_N"], float),
+                      {"fit": "physics held", "joint": self.info.get("joint")})  # fmt: skip
+
     def term(self, z, v, u=None) -> np.ndarray:
         return self.basis.evaluate(self.theta, z, v, u)
 

@@ -47,15 +47,21 @@ def _record(d2: float):
     return from_arrays(force, z, FS, input_name="force", mass=M, source="dop853"), sol.y, noise
 
 
+def _scored_test(d2):
+    """The test part (the last 30 s, its first 50 samples not scored) and its measured start state."""
+    rec, _, _ = _record(d2)
+    test = rec.segment(int(TRAIN_S * FS), rec.n)
+    zs, vs, _, _ = state_derivatives(test.z, test.fs, purpose="state")
+    return test.segment(50, test.n), (zs[50], vs[50])
+
+
 def _fit_and_score(d2):
     rec, x, noise = _record(d2)
     n = int(TRAIN_S * FS)
     train, test = rec.segment(0, n), rec.segment(n, rec.n)
     physics = refine(START, train, windows_s=(0.25, 1.0)).model
     hyb = fit_hybrid(physics, train, **FAST)
-    zs, vs, _, _ = state_derivatives(test.z, test.fs, purpose="state")
-    scored = test.segment(50, test.n)
-    x0 = (zs[50], vs[50])
+    scored, x0 = _scored_test(d2)
     e_phys = free_run_rms(physics, scored, x0=x0)
     e_hyb = float(np.sqrt(np.mean((hyb.free_run(scored, x0) - scored.z) ** 2)))
     return physics, hyb, e_phys, e_hyb, x[:, n:], test.u, noise
@@ -72,6 +78,7 @@ def test_the_term_finds_a_missing_displacement_dependent_damping():
     # before the correlation-time inflation).
     d2 = 1.5e5
     physics, hyb, e_phys, e_hyb, (z, v), u, noise = _fit_and_score(d2)
+    physics_start = physics
     assert e_phys > 2 * noise, "the physics alone misses the effect"
     assert e_hyb < 1.15 * noise, (e_hyb, noise, e_phys)
     missing = d2 * z * z * v
@@ -84,6 +91,15 @@ def test_the_term_finds_a_missing_displacement_dependent_damping():
     rel = np.sqrt(np.mean((found - missing) ** 2)) / np.sqrt(np.mean(missing**2))
     assert rel < 0.25, rel
     assert abs(hyb.info["joint"]["coefficients"]["c"]["shift_in_se"]) > 3
+    # (d) the held fit (physics as given, the term alone fitted) removes part of the gap but not the
+    # bend: it gains at least half the noise's rms over the physics (measured 2.79 -> 2.05 noise) and
+    # stays above the joint fit
+    scored, x0 = _scored_test(d2)
+    e_held = float(np.sqrt(np.mean((hyb.held().free_run(scored, x0) - scored.z) ** 2)))
+    assert e_held < e_phys - 0.5 * noise, (e_held, e_phys, noise)
+    assert e_held > e_hyb
+    for k in ("k0", "k1", "k2", "k3", "c", "c_nl"):  # the held fit keeps the physics as given
+        assert getattr(hyb.held().model, k) == pytest.approx(getattr(physics_start, k), rel=1e-12, abs=1e-300)
 
 
 def test_nothing_missing_leaves_the_term_at_the_noise_and_the_physics_put():
@@ -94,6 +110,8 @@ def test_nothing_missing_leaves_the_term_at_the_noise_and_the_physics_put():
     physics, hyb, e_phys, e_hyb, (z, v), u, noise = _fit_and_score(0.0)
     assert np.sqrt(np.mean(hyb.term(z, v, u) ** 2)) < 0.25 * K * noise
     assert e_hyb <= 1.02 * e_phys
+    scored, x0 = _scored_test(0.0)
+    assert np.sqrt(np.mean((hyb.held().free_run(scored, x0) - scored.z) ** 2)) <= 1.02 * e_phys
     for name, c in hyb.info["joint"]["coefficients"].items():
         assert c["shift_in_se"] is not None and abs(c["shift_in_se"]) < 3, (name, c)
 
@@ -101,7 +119,8 @@ def test_nothing_missing_leaves_the_term_at_the_noise_and_the_physics_put():
 @pytest.mark.slow
 def test_silverbox_hybrid_predicts_below_half_a_millivolt(silverbox, silverbox_fits):
     # The issue's target: physics + term <= 0.5 mV on the multisine test, trained on the training part
-    # only; the physical model (refined SINDy) predicts at 0.24 mV, and the term must not make it worse.
+    # only; the physical model (refined SINDy) predicts at 0.24 mV, and the term must not make it worse,
+    # fitted jointly (measured 0.225 mV) or with the physics held (0.230 mV, its coefficients the physics').
     from conftest import silverbox_prediction_mv
 
     physics = silverbox_fits["sindy"].model_
@@ -109,9 +128,11 @@ def test_silverbox_hybrid_predicts_below_half_a_millivolt(silverbox, silverbox_f
     seg = silverbox.segment(*SILVERBOX_TEST)
     zs, v, _, _ = state_derivatives(seg.z, seg.fs, purpose="state")
     scored = seg.segment(50, seg.n)
-    mv = 1e3 * np.sqrt(np.mean((hyb.free_run(scored, (zs[50], v[50])) - scored.z) ** 2))
-    assert mv <= 0.5
-    assert mv <= 1.02 * silverbox_prediction_mv(physics, silverbox, SILVERBOX_TEST)
+    physics_mv = silverbox_prediction_mv(physics, silverbox, SILVERBOX_TEST)
+    for h in (hyb, hyb.held()):  # the joint fit, and the term with the physics held (coefficients as given)
+        mv = 1e3 * np.sqrt(np.mean((h.free_run(scored, (zs[50], v[50])) - scored.z) ** 2))
+        assert mv <= 0.5
+        assert mv <= 1.02 * physics_mv
 
 
 def test_discrepancy_unnamed_reports_what_no_catalogue_effect_names(tmp_path):
