@@ -3,7 +3,7 @@ refit, and show the gap shrink (Kaheman et al. 2019 and Ebers et al. 2024, ecosy
 physics fixed, the mismatch sought as a sparse term from a physical catalogue).
 
 1. **Locate.** The baseline (cubic K and viscous c; linear K for a start from nothing) is fitted by
-   weak-form least squares (``sindy.weak_least_squares``: the input's coefficient fixed by physics).
+   weak-form least squares (``weak.weak_least_squares``: the input's coefficient fixed by physics).
    Its weak residual, the equation error each test function sees, is mapped over the state (z, z'),
    split by regime (in either well, crossing, near zero velocity, at large stroke), and its share in
    each regime is compared with the regime's share of the record; restarted short free runs give the
@@ -36,8 +36,9 @@ from negstiff.models import Model
 from .derivatives import state_derivatives
 from .measurement import Measurement, MeasurementError
 from .refine import refine_stage
-from .sindy import BASE_FIELDS, TERM_FIELDS, TERMS, SINDy, test_function
+from .selection import block_rows, block_scores, compare, indistinguishable
 from .validation import boundedness, residual_psd, restarted_free_runs, validate  # noqa: F401 (residual_psd: API)
+from .weak import BASE_FIELDS, TERM_FIELDS, TERMS, WeakForm, known_input_gain, mass_of, model_from
 
 CUBIC_BASELINE = ("1", "z", "z^2", "z^3", "v")
 LINEAR_BASELINE = ("1", "z", "v")
@@ -111,34 +112,26 @@ class Discrepancy:
         self.window_s = window_s
 
     # --- the weak-form system with an optional end stop column -----------------------------------
-    def _systems(self, rec: Measurement):
-        est = SINDy()
+    def _systems(self, rec: Measurement) -> None:
         n_id = int(round(rec.n * (1 - self.validation_fraction)))
         n_fit = int(round(rec.n * (1 - self.validation_fraction - self.selection_fraction)))
         ident = rec.segment(0, n_id)
-        zs, v, _, _ = est.prepare(ident.z, rec.fs)
-        self._est, self._zs, self._v = est, zs, v
+        self._form = WeakForm.of(ident.z, rec.fs)
+        self._zs, self._v = self._form.zs, self._form.v
         # the measured states the gap's free runs start from, whole record (before and after share them)
         self._z0, self._v0, _, _ = state_derivatives(rec.z, rec.fs, purpose="state")
-        self._gain = est._gain(rec)
+        self._gain = known_input_gain(rec)
         self.n_id, self.n_fit = n_id, n_fit
-        return est
 
     def _design(self, rec: Measurement, lo: int, hi: int, stop: float | None):
         """Weak system over samples [lo, hi): the library's columns (and an end-stop column)."""
-        from .sindy import weak_project
-
-        est = self._est
-        seg = rec.segment(lo, hi)
-        sysd = est._design(seg, self._zs[lo:hi], self._v[lo:hi])
-        W = sysd["W"] * sysd["col"]
-        y = sysd["y"] * sysd["s_y"]
+        sysd = self._form.system(rec, lo, hi)
+        W, y = sysd.W_physical, sysd.y_physical
         if stop is not None:
             z = self._zs[lo:hi]
             side = np.sign(stop)
             col = np.where(side * (z - stop) > 0, z - stop, 0.0)
-            phi, _ = test_function(est.half_, rec.dt)
-            Ws = weak_project(col[:, None], phi, max(1, est.half_ // 2), rec.dt)[:, 0]
+            Ws = self._form.project(col[:, None], rec.dt)[:, 0]
             W = np.column_stack([W, Ws[: W.shape[0]]])
         return W, y
 
@@ -163,10 +156,9 @@ class Discrepancy:
         return full
 
     def _model(self, coef: np.ndarray, rec: Measurement, stop: float | None) -> Model:
-        est = self._est
         phys = coef[: len(TERMS) + 1]
-        mass = est._mass(rec, self._gain, phys)[0]
-        model = SINDy.model_from(phys, mass)
+        mass = mass_of(rec, self._gain, phys[-1])[0]
+        model = model_from(phys, mass)
         if stop is not None:
             k = -mass * float(coef[-1])
             if k > 0:
@@ -178,7 +170,7 @@ class Discrepancy:
         coef = self._fit(W, y, cand.terms, cand.stop is not None)
         Ws, ys = self._design(rec, self.n_fit, self.n_id, cand.stop)
         r2 = (ys - Ws @ coef) ** 2
-        rows = max(1, int(round(self.window_s * rec.fs / max(1, self._est.half_ // 2))))
+        rows = block_rows(self.window_s, rec.fs, self._form.stride)
         nb = r2.size // rows
         if nb < 2:
             need = 2 * rows / max(1, r2.size) * rec.n  # samples of record that give two blocks
@@ -188,7 +180,7 @@ class Discrepancy:
                 f"{100 * self.n_id / rec.n:.0f} % of the record scores each effect in {self.window_s:g} s blocks, "
                 "two at least)"
             )
-        cand.block_ms = r2[: nb * rows].reshape(nb, rows).mean(axis=1) / ys.var()
+        cand.block_ms = block_scores(r2, rows, ys.var())
         cand.heldout_percent = float(100 * np.sqrt(cand.block_ms.mean()))
         cand.coefficients = coef
         if cand.effect != "none":
@@ -233,10 +225,8 @@ class Discrepancy:
         W, y = self._design(rec, 0, self.n_id, stop)
         coef = self._fit(W, y, model_terms, stop is not None)
         r = y - W @ coef
-        est = self._est
-        stride = max(1, est.half_ // 2)
-        centre = test_function(est.half_, rec.dt)[0].size // 2  # row k's test function is centred there
-        centres = np.clip(np.arange(r.size) * stride + centre, 0, self.n_id - 1)
+        form = self._form
+        centres = np.clip(np.arange(r.size) * form.stride + form.centre(rec.dt), 0, self.n_id - 1)
         z, v = self._zs[centres], self._v[centres]
         model = self._model(coef, rec, stop)
         try:
@@ -296,15 +286,14 @@ class Discrepancy:
                 cands.append(self._score(rec, Candidate(effect, terms + extra_terms, stop)))
             ranking = sorted(cands, key=lambda c: c.heldout_percent)
             best = self._parsimonious(ranking)
-            d = none.block_ms - best.block_ms
-            se = d.std(ddof=1) / math.sqrt(d.size)
-            named = best.effect != "none" and d.mean() > max(se, self.margin * none.block_ms.mean())
+            gain = compare(none.block_ms, best.block_ms, self.margin, none.block_ms)
+            named = best.effect != "none" and gain.significant
             self.iterations_.append(
                 {
                     "ranking": [{"effect": c.effect, "score": c.heldout_percent, **c.notes} for c in ranking],
                     "named": best.effect if named else "none",
-                    "gain_percent": float(100 * d.mean() / none.block_ms.mean()),
-                    "standard_error_percent": float(100 * se / none.block_ms.mean()),
+                    "gain_percent": float(100 * gain.gain / none.block_ms.mean()),
+                    "standard_error_percent": float(100 * gain.se / none.block_ms.mean()),
                 }
             )
             if not named:
@@ -359,9 +348,7 @@ class Discrepancy:
         for c in ranking:
             if c.effect == "none" or not np.isfinite(c.heldout_percent):
                 continue
-            d = c.block_ms - top.block_ms
-            se = d.std(ddof=1) / math.sqrt(d.size)
-            if d.mean() <= max(se, self.margin * top.block_ms.mean()):
+            if indistinguishable(c.block_ms, top.block_ms, self.margin):
                 ok.append(c)
         if not ok:
             return top

@@ -42,6 +42,7 @@ from . import subspace
 from .measurement import Measurement, MeasurementError
 from .refine import refine_stage, stroke_quantiles
 from .validation import boundedness, restarted_free_runs, validate  # noqa: F401 (their home before validation.py)
+from .weak import known_input_gain, mass_of
 
 BASIS_NAMES = ("x2", "x3", "vabsv")
 """Nonlinear basis: x^2, x^3, x'|x'| (their coefficients are k2~, k3, c_nl)."""
@@ -293,13 +294,8 @@ class NSI:
             wells["minus"] = self.fit_well(ident, zs, v, z_minus)
         self.wells_ = wells
         gains = [w.coefficients["input_gain"] for w in wells.values()]
-        if rec.mass is not None:
-            mass, self.mass_source_ = rec.mass, "given"
-        elif rec.input_name == "force":
-            # a force record without a mass: the FRF level gives it (b = 1/m)
-            mass, self.mass_source_ = 1.0 / float(np.mean(gains)), "estimated from the FRF level"
-        else:
-            mass, self.mass_source_ = 1.0, "none (per unit mass)"
+        # the one mass rule (``weak.mass_of``): a force record without a mass gets it from the FRF level (b = 1/m)
+        mass, self.mass_source_ = mass_of(rec, known_input_gain(rec), float(np.mean(gains)), what="the FRF level")
         self.mass_normalised_ = self.mass_source_.startswith("none")
         self.input_gain_ = float(np.mean(gains))
         models = [self._z_frame(w, mass) for w in wells.values()]

@@ -76,8 +76,8 @@ acceleration in g gives 9.8."""
 
 def input_warnings(rec) -> list[str]:
     """Units and mass: the input's weight in the record's own dynamics against the physics' (-1 for a
-    base acceleration in m/s^2, 1/m for a force in N; ``sindy.input_coefficient``)."""
-    from negstiff.inference.sindy import input_coefficient
+    base acceleration in m/s^2, 1/m for a force in N; ``weak.input_coefficient``)."""
+    from negstiff.inference.weak import input_coefficient
 
     if rec.z is None or (rec.input_name == "force" and rec.mass is None):
         return []

@@ -573,7 +573,7 @@ class Posterior:
     # --- start point -------------------------------------------------------------------------------
     def _start(self, rec: Measurement, win: Windows) -> tuple[Parametrisation, np.ndarray]:
         if self.model == "coefficients":
-            from .sindy import weak_least_squares
+            from .weak import weak_least_squares
 
             if self.start is not None:  # an identified (output-error refined) model: the MAP search starts there
                 if rec.mass is not None and abs(self.start.m / rec.mass - 1) > 1e-6:

@@ -221,7 +221,7 @@ def _crossings(x: np.ndarray, f: np.ndarray) -> np.ndarray:
 def _frame_anchors(rec) -> tuple[float, dict[str, float]]:
     """In the record's own frame: the origin (where a quintic fitted to ``rec`` carries m g, between
     its wells) and the stable wells, all searched over the stroke the record visited."""
-    from negstiff.inference.sindy import weak_least_squares
+    from negstiff.inference.weak import weak_least_squares
 
     model = weak_least_squares(rec, PIN_TERMS)
     x = np.linspace(rec.z.min(), rec.z.max(), 4001)
@@ -252,7 +252,7 @@ def frame_offset(rec) -> dict[str, Any]:
       record determines best); an in-well record can only be pinned this way;
     * gravity: the restoring force at z = 0 (rods horizontal) carries the weight, K(0) = m g (g per
       unit mass). A quintic restoring force with viscous and quadratic damping is fitted by weak-form
-      least squares (``sindy.weak_least_squares``) in the record's frame, where K_rec(x) =
+      least squares (``weak.weak_least_squares``) in the record's frame, where K_rec(x) =
       K_true(x + C); the origin solves K_rec(x) = m g between the fitted wells (a negative-stiffness
       device's origin is next to its unstable equilibrium). A force-driven record carries no weight
       in its equation (k0 is the force's offset): there the frame is not pinned.
