@@ -1,0 +1,326 @@
+"""``Posterior``: the front door (module docstring of the package)."""
+
+from __future__ import annotations
+
+import math
+import time
+import warnings
+from typing import Any
+
+import numpy as np
+from scipy import optimize
+
+from negstiff.models import Model
+from negstiff.models.device import NOMINAL
+
+from ..measurement import Measurement, MeasurementError
+from .diagnostics import PosteriorResult, convergence_warnings, summarise
+from .likelihood import LogPosterior, curvature_adjustment
+from .parametrisation import Parametrisation, coefficient_parametrisation, device_parametrisation
+from .sampling import sample_ensembles
+from .windows import DROP_FACTOR_AT_MAP, PosteriorError, Windows
+
+
+class Posterior:
+    """emcee posterior of a record (module docstring).
+
+    Parameters
+    ----------
+    model : ``"coefficients"`` (k1-k3, c, c_nl, sigma; mass fixed) or ``"device"`` (E, alpha, m, c,
+        c_nl, sigma with the exact geometric K(z))
+    mass_prior : device model only: ``"free"`` or ``"weighed"`` (N(m_weighed, 2 %))
+    window_s : multiple-shooting window length [s]
+    max_windows : at most this many windows, evenly spread over the record (240 x 0.125 s = 30 s of
+        data: a 300 s record's posterior would take five times as long and be no less biased by the
+        model's floor; None: every window)
+    n_walkers, n_ensembles : walkers per ensemble, independent ensembles
+    tau_multiple, min_steps, max_steps, chunk : run length control (emcee docs' rule)
+    hdi_prob : credible-interval probability
+    adjust : curvature adjustment of the likelihood by the windows' sandwich covariance (module
+        docstring; default True); False: the Gaussian likelihood as it stands
+    oversample : 1 (default): the input is pre-emphasised for the simulator's linear interpolation
+        (``Windows.cut``); q > 1: interpolated (FFT, band-limited) to q x fs instead, q times the cost
+    start : coefficient posterior only: the model the MAP search starts from (an ``identify`` result's
+        refined model); default: weak-form least squares of the record, refined by simulation error
+        (``refine_start``)
+    refine_start : without ``start``, refine the weak-form estimate by output error over the record
+        (``refine.refine``, the last stage of ``identify``) before the MAP search: the posterior then
+        starts from the same refined point an identification reports (default True)
+    """
+
+    def __init__(
+        self,
+        model: str = "coefficients",
+        mass_prior: str = "weighed",
+        window_s: float = 0.125,
+        max_windows: int | None = 240,
+        n_walkers: int = 16,
+        n_ensembles: int = 4,
+        tau_multiple: float = 50.0,
+        min_steps: int = 500,
+        max_steps: int = 6000,
+        chunk: int = 250,
+        hdi_prob: float = 0.9,
+        oversample: int = 1,
+        adjust: bool = True,
+        threads: int | None = None,
+        seed: int = 0,
+        progress: bool = False,
+        start: Model | None = None,
+        refine_start: bool = True,
+    ):
+        if model not in ("coefficients", "device"):
+            raise ValueError(f"model must be 'coefficients' or 'device', got {model!r}")
+        if mass_prior not in ("free", "weighed"):
+            raise ValueError(f"mass_prior must be 'free' or 'weighed', got {mass_prior!r}")
+        self.model = model
+        self.mass_prior = mass_prior
+        self.window_s = window_s
+        self.max_windows = max_windows
+        self.n_walkers = n_walkers
+        self.n_ensembles = n_ensembles
+        self.tau_multiple = tau_multiple
+        self.min_steps = min_steps
+        self.max_steps = max_steps
+        self.chunk = chunk
+        self.hdi_prob = hdi_prob
+        self.oversample = oversample
+        self.adjust = adjust
+        self.threads = threads
+        self.seed = seed
+        self.progress = progress
+        if start is not None and (model != "coefficients" or not isinstance(start, Model)):
+            raise ValueError("a start model is a polynomial model, for the coefficient posterior")
+        self.start = start
+        self.refine_start = refine_start
+        self.start_info_: dict[str, Any] = {}
+
+    # --- start point -------------------------------------------------------------------------------
+    def _start(self, rec: Measurement, win: Windows) -> tuple[Parametrisation, np.ndarray]:
+        if self.model == "coefficients":
+            from ..weak import weak_least_squares
+
+            if self.start is not None:  # an identified (output-error refined) model: the MAP search starts there
+                if rec.mass is not None and abs(self.start.m / rec.mass - 1) > 1e-6:
+                    raise PosteriorError(
+                        f"{rec.source}: the start model's mass ({self.start.m:g} kg) is not the record's "
+                        f"({rec.mass:g} kg)"
+                    )
+                start = self.start
+                self.start_info_ = {"source": "given", "model": start.to_dict()}
+            else:
+                start = self._refined_start(rec, weak_least_squares(rec, ("1", "z", "z^2", "z^3", "v", "v|v|")))
+            par = coefficient_parametrisation(start)
+            theta = np.array([getattr(start, n) for n in par.names])
+        else:
+            if rec.mass is None and self.mass_prior == "weighed":
+                raise PosteriorError(f"{rec.source}: the device posterior with a weighed mass needs --mass or metadata")
+            m0 = rec.mass if rec.mass is not None else NOMINAL.m
+            prior = (m0, 0.02 * m0) if self.mass_prior == "weighed" else None
+            start = NOMINAL.with_(m=m0, c=1.0, c_nl=0.1)
+            par = device_parametrisation(start, prior)
+            theta = np.array([start.E, start.alpha_deg, start.m, start.c, start.c_nl, 0.0])
+        return par, theta
+
+    def _refined_start(self, rec: Measurement, weak: Model) -> Model:
+        """The weak-form estimate refined by simulation error over the record (``refine.refine``; the mass
+        held: the coefficient posterior holds it too), kept only if it is bounded and predicts the record
+        at least as well; ``start_info_`` says which start was used and why."""
+        from ..refine import refine
+        from ..validation import boundedness
+
+        info: dict[str, Any] = {"source": "weak-form least squares", "initial_model": weak.to_dict()}
+        self.start_info_ = info
+        if not self.refine_start:
+            info["reason"] = "refinement switched off"
+            return weak
+        t0 = time.perf_counter()
+        try:
+            r = refine(weak, rec)
+        except (ValueError, MeasurementError) as exc:
+            info["reason"] = f"refinement failed, the weak-form estimate is the start: {exc}"
+            return weak
+        info["refinement"] = r.to_json()
+        info["seconds"] = time.perf_counter() - t0
+        bounded = boundedness(r.model, rec)
+        if not bounded["ok"]:
+            info["reason"] = f"refined model rejected: {bounded['warning']}"
+            return weak
+        stages = [s for s in r.stages if "rms_end_m" in s]
+        if stages and not stages[-1]["rms_end_m"] <= stages[-1]["rms_start_m"]:
+            info["reason"] = "refined model rejected: its simulation error did not fall"
+            return weak
+        info.update(source="output-error refinement of the weak-form estimate", model=r.model.to_dict())
+        return r.model
+
+    def _map(self, par: Parametrisation, win: Windows, theta: np.ndarray):
+        """MAP point of theta (sigma profiled) by least squares on the projected residuals, with the
+        parameters the likelihood does not see held; returns (theta, the least-squares solution)."""
+        x_scale = np.maximum(np.abs(theta), 1e-6)
+        free = par.free()
+        n_rows = win.n_windows * win.length
+
+        def resid(x):
+            th = theta.copy()
+            th[free] = x * x_scale[free]
+            if np.any(th <= par.lower) or np.any(th >= par.upper):
+                return np.full(n_rows, 1.0)
+            zsim, div = win.simulate(par.to_params(th[None]), par.kind)
+            if div[0]:
+                return np.full(n_rows, 1.0)
+            return win.residuals(zsim)[0].ravel()
+
+        x0 = theta[free] / x_scale[free]
+        sol = optimize.least_squares(resid, x0, method="lm", x_scale="jac", max_nfev=400)
+        th = theta.copy()
+        th[free] = sol.x * x_scale[free]
+        return th, sol
+
+    def point_estimate(self, rec: Measurement):
+        """Windows, MAP point and noise model of a record: (parametrisation, windows, theta, the least
+        squares solution, sigma). The MAP point and the windows' start states are found alternately, each
+        a profile over the other. The device's mass is held at its start (weighed) value: the
+        likelihood depends on E/m, c/m, c_nl/m only (device-model.md), so the MAP point along the E-m
+        ridge is the prior's."""
+        win = Windows.cut(rec, self.window_s, self.max_windows, oversample=self.oversample)
+        win.threads = self.threads
+        par, theta = self._start(rec, win)
+        zsim, div = win.simulate(par.to_params(theta[None]), par.kind)
+        if div[0]:
+            raise PosteriorError(f"{rec.source}: the start model diverges on the record's windows")
+        for it in range(3):
+            p_ = par.to_params(theta[None])[:, 0]
+            win.refine_states(p_, par.kind)
+            win.drop_unmatched(p_, par.kind)
+            win.set_sensitivities(p_, par.kind)
+            theta, sol = self._map(par, win, theta)
+        # at the MAP point the model matches every window it can follow to the noise (rms within ~10 % of
+        # the median window's): a window 3x above the median is not followed (it turns back near the
+        # saddle); measured on the as-built device, one such window held 90 % of the score's variance.
+        # The least squares solution is then recomputed on the windows kept (the curvature adjustment
+        # reads its Jacobian window by window).
+        p_ = par.to_params(theta[None])[:, 0]
+        win.refine_states(p_, par.kind)
+        win.drop_unmatched(p_, par.kind, factor=DROP_FACTOR_AT_MAP)
+        win.set_sensitivities(p_, par.kind)
+        theta, sol = self._map(par, win, theta)
+        sigma = float(np.sqrt(np.sum(sol.fun**2) / win.dof))  # sol.fun: the projected residuals at theta
+        return par, win, theta, sol, sigma
+
+    # --- the run --------------------------------------------------------------------------------
+    def fit(self, rec: Measurement) -> PosteriorResult:
+
+        t_start = time.perf_counter()
+        par, win, theta, sol, sigma = self.point_estimate(rec)
+        # Laplace approximation at the MAP point, curvature-adjusted (``curvature_adjustment``): the sampler
+        # works in coordinates whitened by its Cholesky factor, where the posterior is close to N(0, I)
+        # (DE moves then decorrelate in ~10 steps). Along the device's E-m ridge, which the data do not
+        # see, the scale is the mass prior's.
+        free = par.free()
+        x_scale = np.maximum(np.abs(theta), 1e-6)
+        A_x, V_x, inflation = curvature_adjustment(sol.jac, sol.fun, win.n_windows, sigma, adjust=self.adjust)
+        cov = np.zeros((theta.size, theta.size))
+        cov[np.ix_(free, free)] = V_x * np.outer(x_scale[free], x_scale[free])
+        for i, sd in par.fixed_sd.items():  # the likelihood does not see them: the prior's scale
+            cov[i, i] = sd**2
+        for i in np.flatnonzero(~(np.diag(cov) > 0)):
+            cov[i, i] = (1e-3 * x_scale[i]) ** 2
+        try:
+            chol = np.linalg.cholesky(cov)
+        except np.linalg.LinAlgError:
+            chol = np.diag(np.sqrt(np.diag(cov)))
+        q0 = np.concatenate([theta, [math.log(sigma)]])
+        scale = np.zeros((q0.size, q0.size))
+        scale[:-1, :-1] = chol
+        scale[-1, -1] = 1.0 / math.sqrt(2 * win.dof)  # the sd of log sigma
+        A_theta = A_x * np.outer(x_scale[free], 1.0 / x_scale[free])
+        logpost = LogPosterior(par, win, q0, scale, (theta, A_theta, free) if self.adjust else None)
+
+        nd = q0.size
+        run = sample_ensembles(
+            logpost,
+            nd,
+            n_walkers=self.n_walkers,
+            n_ensembles=self.n_ensembles,
+            seed=self.seed,
+            tau_multiple=self.tau_multiple,
+            min_steps=self.min_steps,
+            max_steps=self.max_steps,
+            chunk=self.chunk,
+            progress=self.progress,
+        )
+        chains, taus, warn = run["chains"], run["tau"], run["warnings"]
+        n_keep = min(c.shape[0] for c in chains)
+        y = np.stack([c[-n_keep:] for c in chains])  # (E, S, W, nd)
+        q = logpost.unwhiten(y.reshape(-1, nd))
+        q[:, :-1] = par.physical(q[:, :-1])
+        q = q.reshape(y.shape)
+        q[..., -1] = np.exp(q[..., -1])
+        names = tuple(par.names) + ("sigma",)
+        tau_arr = np.array(taus)
+        res = PosteriorResult(
+            names=names,
+            samples=q,
+            summary={},
+            tau=tau_arr,
+            warnings=warn,
+            settings={},
+            map_point={n: float(v) for n, v in zip(names, np.concatenate([theta, [sigma]]))},
+        )
+        res.summary = summarise(res.samples, names, tau_arr, self.hdi_prob)
+        warn += convergence_warnings(res.summary, self.n_ensembles)
+        res.settings = {
+            "model": self.model,
+            "mass_prior": self.mass_prior if self.model == "device" else None,
+            "mass": rec.mass,
+            "window_s": self.window_s,
+            "windows": win.n_windows,
+            "curvature_adjustment": self.adjust,
+            "variance_inflation": [round(float(v), 3) for v in inflation],
+            "windows_dropped": [{"start_s": t, "rms_m": r} for t, r in win.dropped],
+            "samples_used": int(win.n_windows * win.length),
+            "walkers": self.n_walkers,
+            "ensembles": self.n_ensembles,
+            "kept_steps_per_ensemble": int(n_keep),
+            "tau_max_steps": float(np.nanmax(tau_arr)) if np.isfinite(tau_arr).any() else None,
+            "likelihood_calls": logpost.calls,
+            "priors": par.description,
+            "seed": self.seed,
+            "elapsed_s": time.perf_counter() - t_start,
+            "moves": "DEMove 0.8, DESnookerMove 0.2",
+            "start": self.start_info_ or {"source": "the device's nominal values"},
+        }
+        self.logpost_, self.par_, self.windows_ = logpost, par, win
+        tau_max = np.nanmax(tau_arr) if np.isfinite(tau_arr).any() else np.nan  # too short a chain: no tau
+        res.thin = max(1, int(np.ceil(tau_max / 2))) if np.isfinite(tau_max) else 1
+        res.idata = self._idata(res, y, rec)
+        return res
+
+    def _idata(self, res: PosteriorResult, y: np.ndarray, rec: Measurement):
+        """arviz DataTree: posterior (thinned; chain = ensemble x walker), sample stats, observed
+        data and pointwise (per-window) log likelihood."""
+        import arviz as az
+
+        E, S, W, d = res.samples.shape
+        th = res.thin
+        post = res.samples[:, ::th]  # (E, S', W, d)
+        Sp = post.shape[1]
+        chains = np.moveaxis(post, 2, 1).reshape(E * W, Sp, d)
+        q = np.moveaxis(y[:, ::th], 2, 1).reshape(E * W * Sp, d)
+        ll = np.concatenate(
+            [
+                self.logpost_.loglik(self.logpost_.unwhiten(q[i : i + 2048]), pointwise=True)
+                for i in range(0, q.shape[0], 2048)
+            ]
+        ).reshape(E * W, Sp, -1)
+        res.log_likelihood = ll
+        data = {
+            "posterior": {n: chains[..., i] for i, n in enumerate(res.names)},
+            "sample_stats": {"lp": ll.sum(axis=2)},
+            "log_likelihood": {"z": ll},
+            "observed_data": {"z": self.windows_.z},
+            "constant_data": {"window_start_state": self.windows_.x0, "u": self.windows_.u},
+        }
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # "more chains than draws": the walkers of all ensembles
+            return az.from_dict(data)

@@ -1,0 +1,94 @@
+"""The posterior's result: summaries (arviz), convergence warnings, the contract's JSON."""
+
+from __future__ import annotations
+
+import warnings
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+
+@dataclass
+class PosteriorResult:
+    names: tuple[str, ...]
+    samples: np.ndarray  # (ensembles, steps, walkers, d) physical, sigma (not log) last, after burn-in
+    summary: dict[str, dict[str, float]]
+    tau: np.ndarray  # (ensembles, d) integrated autocorrelation times [steps]
+    warnings: list[str]
+    settings: dict[str, Any]
+    map_point: dict[str, float]
+    log_likelihood: np.ndarray | None = None  # (ensembles*walkers, kept draws, windows), thinned
+    thin: int = 1
+    idata: Any = None
+
+
+def summarise(samples: np.ndarray, names, tau: np.ndarray, hdi_prob: float) -> dict[str, dict[str, float]]:
+    """Posterior summaries of ``samples`` (ensembles, steps, walkers, d): mean, sd, HDI, R-hat across
+    the ensembles (each one chain, draws in step order), bulk and tail ESS over all walkers (arviz,
+    capped by emcee's N / tau), tau."""
+    import arviz as az
+
+    E, S, W, d = samples.shape
+    across = az.from_dict({"posterior": {n: samples[..., i].reshape(E, S * W) for i, n in enumerate(names)}})
+    walkers = az.from_dict(
+        {"posterior": {n: np.moveaxis(samples[..., i], 2, 1).reshape(E * W, S) for i, n in enumerate(names)}}
+    )
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # "more chains than draws" notices for short toy runs
+        rhat = az.rhat(across, method="rank")
+        ess_b, ess_t = az.ess(walkers, method="bulk"), az.ess(walkers, method="tail")
+        hdi = az.hdi(across, prob=hdi_prob)
+    out = {}
+    for i, n in enumerate(names):
+        x = samples[..., i].ravel()
+        col = np.asarray(tau, float)[:, i]
+        t = float(np.nanmax(col)) if np.isfinite(col).any() else float("nan")
+        emcee_ess = E * S * W / max(t, 1.0)
+        lo, hi = (float(v) for v in hdi[n].values)
+        out[n] = {
+            "mean": float(x.mean()),
+            "sd": float(x.std(ddof=1)),
+            "hdi_low": lo,
+            "hdi_high": hi,
+            "r_hat": float(rhat[n].values),
+            "ess_bulk": float(min(ess_b[n].values, emcee_ess)),
+            "ess_tail": float(min(ess_t[n].values, emcee_ess)),
+            "tau_steps": t,
+        }
+    return out
+
+
+def convergence_warnings(summary: dict[str, dict[str, float]], n_ensembles: int) -> list[str]:
+    out = []
+    for n, s in summary.items():
+        if not s["r_hat"] < 1.01:
+            out.append(f"{n}: R-hat {s['r_hat']:.4f} >= 1.01 across the {n_ensembles} ensembles")
+        if not s["ess_bulk"] > 400:
+            out.append(f"{n}: bulk ESS {s['ess_bulk']:.0f} <= 400")
+    return out
+
+
+def result_json(res: PosteriorResult, hdi_prob: float) -> dict[str, Any]:
+    """The contract's posterior JSON (plus diagnostics)."""
+    params = {}
+    nuisance = {}
+    for n, s in res.summary.items():
+        key = "alpha_deg" if n == "alpha_deg" else n
+        (nuisance if n in ("k0", "g_offset") else params)[key] = s
+    return {
+        "hdi_prob": hdi_prob,
+        "parameters": params,
+        "nuisance_parameters": nuisance,
+        "map": res.map_point,
+        "correlation": _correlation(res),
+        "converged": not res.warnings,
+        "warnings": res.warnings,
+        "settings": res.settings,
+    }
+
+
+def _correlation(res: PosteriorResult) -> dict[str, dict[str, float]]:
+    x = res.samples.reshape(-1, res.samples.shape[-1])
+    c = np.corrcoef(x.T)
+    return {a: {b: float(c[i, j]) for j, b in enumerate(res.names)} for i, a in enumerate(res.names)}

@@ -1,0 +1,106 @@
+"""The curvature-adjusted multiple-shooting likelihood and the whitened log posterior emcee samples."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .parametrisation import Parametrisation
+from .windows import Windows
+
+
+def curvature_adjustment(J: np.ndarray, r: np.ndarray, n_windows: int, sigma: float, adjust: bool = True):
+    """Curvature adjustment of a misspecified likelihood by the windows' sandwich covariance.
+
+    ``J``, ``r``: the projected residuals' Jacobian (in the point estimate's scaled coordinates x) and
+    residuals at the MAP point, window after window. The Gaussian likelihood with i.i.d. noise is
+    wrong in a known way: the accelerometer's noise enters twice, through the model's input (a
+    response filtered by the device) and through z = y - b_est (the lab's double integration), both
+    correlated within a window. The windows are nearly independent of each other, so the spread of
+    their score vectors s_w = J_w^T r_w / sigma^2 measures the information the data really carry
+    (Godambe's sandwich V_s = H^-1 (sum_w s_w s_w^T) H^-1, H = J^T J / sigma^2, with the small-sample
+    factor W / (W - p)). The adjusted covariance V_a takes the sandwich's variance wherever it is
+    larger than the model's and never less (eigenvalues of H^1/2 V_s H^1/2 clipped at 1: below 1 is
+    the estimate's own noise), and the likelihood is evaluated at theta_hat + A (theta - theta_hat)
+    with A^T H A = V_a^-1 (Ribatet, Cooley & Davison 2012, "curvature adjustment"): the posterior's
+    spread becomes V_a, its shape elsewhere is the model's.
+
+    Measured (Laplace approximation, 40 records of 8 s, 0.125 s windows): rms z-score of the truth
+    1.33 / 1.16 / 1.28 / 1.29 / 1.27 for k1, k2, k3, c, c_nl unadjusted, 1.06 / 0.93 / 1.02 / 1.04 /
+    1.04 adjusted. (Whitening by the residuals' estimated autocorrelation instead made it worse,
+    1.7-1.9: the fitted start states remove the residual's slow part, and the estimate misses it.)
+
+    Returns (A, V_a, inflation): A and V_a in x coordinates, inflation the clipped eigenvalues (the
+    variance factors the adjustment applied, 1 where none)."""
+    p = J.shape[1]
+    H = J.T @ J / sigma**2
+    lam_h, U_h = np.linalg.eigh(H)
+    lam_h = np.maximum(lam_h, 1e-12 * lam_h.max())
+    H_half = (U_h * np.sqrt(lam_h)) @ U_h.T
+    H_inv_half = (U_h / np.sqrt(lam_h)) @ U_h.T
+    if not adjust or n_windows <= p + 1:
+        return np.eye(p), H_inv_half @ H_inv_half, np.ones(p)
+    scores = np.einsum("wlp,wl->wp", J.reshape(n_windows, -1, p), r.reshape(n_windows, -1)) / sigma**2
+    meat = scores.T @ scores * n_windows / (n_windows - p)
+    lam, U = np.linalg.eigh(H_inv_half @ meat @ H_inv_half)  # = H^1/2 V_s H^1/2
+    lam = np.maximum(lam, 1.0)
+    V = H_inv_half @ (U * lam) @ U.T @ H_inv_half
+    A = H_inv_half @ (U / np.sqrt(lam)) @ U.T @ H_half
+    return A, V, np.sort(lam)[::-1]
+
+
+# ------------------------------------------------------------------------------------------------
+# The posterior
+# ------------------------------------------------------------------------------------------------
+class LogPosterior:
+    """Vectorised log posterior in whitened coordinates y, q = q0 + C y (C: the Laplace approximation's
+    Cholesky factor), q = [theta, log sigma].
+
+    ``__call__`` returns one (log posterior, log likelihood) pair per walker (emcee's blob convention
+    with ``vectorize=True``)."""
+
+    def __init__(self, par: Parametrisation, win: Windows, q0: np.ndarray, scale: np.ndarray, adjust=None):
+        self.par, self.win, self.q0, self.scale = par, win, q0, scale
+        self.adjust = adjust  # (theta_hat, A, free): likelihood at theta_hat + A (theta - theta_hat) on ``free``
+        self.calls = 0
+
+    def likelihood_point(self, theta: np.ndarray) -> np.ndarray:
+        """The parameters the likelihood is evaluated at: ``theta`` reduced (device: to the reference
+        mass, which leaves the likelihood unchanged) and curvature-adjusted about the MAP point."""
+        if self.par.reduce is not None:
+            theta = self.par.reduce(theta)
+        if self.adjust is None:
+            return theta
+        th_hat, A, free = self.adjust
+        out = theta.copy()
+        out[:, free] = th_hat[free] + (theta[:, free] - th_hat[free]) @ A.T
+        return out
+
+    def unwhiten(self, y: np.ndarray) -> np.ndarray:
+        """Whitened coordinates y -> the sampled coordinates q = [phi, log sigma]."""
+        return self.q0 + np.atleast_2d(y) @ self.scale.T
+
+    def loglik(self, q: np.ndarray, pointwise: bool = False, lp: np.ndarray | None = None) -> np.ndarray:
+        """Log likelihood (-inf outside the prior's support); ``lp``: the log prior, if already known."""
+        theta, log_sigma = q[:, :-1], q[:, -1]
+        if lp is None:
+            lp = self.par.log_prior_sampled(theta, log_sigma)
+        out = np.full((q.shape[0], self.win.n_windows) if pointwise else q.shape[0], -np.inf)
+        ok = np.isfinite(lp)
+        if ok.any():
+            zsim, div = self.win.simulate(self.par.to_params(self.likelihood_point(theta[ok])), self.par.kind)
+            r = self.win.residuals(zsim)
+            ss = np.sum(r**2, axis=2)  # (P, W)
+            sig2 = np.exp(2 * log_sigma[ok])[:, None]
+            n_w = self.win.dof // self.win.n_windows
+            ll = -0.5 * n_w * np.log(2 * np.pi * sig2) - ss / (2 * sig2)
+            ll[div] = -np.inf
+            out[ok] = ll if pointwise else ll.sum(axis=1)
+        return out
+
+    def __call__(self, y: np.ndarray):
+        self.calls += 1
+        q = self.unwhiten(y)
+        lp = self.par.log_prior_sampled(q[:, :-1], q[:, -1])
+        ll = self.loglik(q, lp=lp)
+        post = np.where(np.isfinite(ll), ll + lp, -np.inf)
+        return list(zip(post, ll))
