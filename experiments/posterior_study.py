@@ -51,7 +51,7 @@ def coefficient_part(rep: Report, res: dict[str, Any], duration: float, seed_: i
     m = m_all.segment(0, int(round(duration * m_all.fs)))
     t0 = time.perf_counter()
     post = Posterior(seed=seed_, max_steps=600 if fast else 6000, n_ensembles=2 if fast else 4, max_windows=None)
-    pr = post.fit(m)
+    pr = post.fit(m).result_
     elapsed = time.perf_counter() - t0
     j = result_json(pr, 0.9)
     # deterministic estimates on the same record (NSI needs its 20 % tail for validation only)
@@ -204,7 +204,7 @@ def device_part(rep: Report, res: dict[str, Any], duration: float, seed_: int, f
         t0 = time.perf_counter()
         pr = Posterior(
             model="device", mass_prior=prior, seed=seed_, max_steps=400 if fast else 6000, n_ensembles=2 if fast else 4
-        ).fit(m)
+        ).fit(m).result_
         j = result_json(pr, 0.9)
         j["elapsed_s"] = time.perf_counter() - t0
         out[prior] = j

@@ -40,7 +40,7 @@ def one_record(seed: int, duration: float, max_steps: int, n_ensembles: int) -> 
     r = Rig(truth, seed=seed).random(duration=duration, rms=SEED_LIKE_CROSS_WELL_RMS)
     rec = from_arrays(r.columns["base_acc"], r.columns["z"], r.fs, mass=float(r.meta["mass"]), source=f"seed {seed}")
     t0 = time.perf_counter()
-    pr = Posterior(seed=seed, max_steps=max_steps, n_ensembles=n_ensembles, threads=1).fit(rec)
+    pr = Posterior(seed=seed, max_steps=max_steps, n_ensembles=n_ensembles, threads=1).fit(rec).result_
     j = result_json(pr, 0.9)
     flat = pr.samples.reshape(-1, pr.samples.shape[-1])
     pick = np.random.default_rng(seed).choice(flat.shape[0], RANK_DRAWS, replace=False)

@@ -34,6 +34,7 @@ import numpy as np
 from negstiff.models import Model
 
 from .derivatives import state_derivatives
+from .estimator import Estimator
 from .measurement import Measurement, MeasurementError
 from .refine import refine_stage
 from .selection import block_rows, block_scores, compare, indistinguishable
@@ -78,7 +79,7 @@ class DiscrepancyError(MeasurementError):
     """The record cannot support the workflow (too short, no excitation)."""
 
 
-class Discrepancy:
+class Discrepancy(Estimator):
     """The workflow of the module docstring.
 
     Parameters

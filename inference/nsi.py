@@ -39,6 +39,7 @@ from scipy import signal
 from negstiff.models import Model
 
 from . import subspace
+from .estimator import Estimator
 from .measurement import Measurement, MeasurementError
 from .refine import refine_stage, stroke_quantiles
 from .validation import boundedness, restarted_free_runs, validate  # noqa: F401 (their home before validation.py)
@@ -155,7 +156,7 @@ def physical_pole(ss: subspace.StateSpace) -> complex:
     return complex(best)
 
 
-class NSI:
+class NSI(Estimator):
     """Time-domain NSI around both wells (scikit-learn style: configure, ``fit``, read ``*_``).
 
     Parameters

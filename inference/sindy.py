@@ -34,6 +34,7 @@ from typing import Any
 import numpy as np
 
 from .derivatives import state_derivatives
+from .estimator import Estimator
 from .measurement import Measurement
 from .refine import refine_stage, stroke_quantiles
 from .selection import block_rows, block_scores, indistinguishable
@@ -60,7 +61,7 @@ class SINDyError(WeakFormError):
     """The record cannot be identified by SINDy (too short, no excitation, nothing selected)."""
 
 
-class SINDy:
+class SINDy(Estimator):
     """Weak-form SINDy identification of the second-order equation of motion (module docstring).
 
     Parameters

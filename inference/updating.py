@@ -27,6 +27,8 @@ import numpy as np
 
 from negstiff.models import NOMINAL, Device
 
+from .estimator import Estimator
+
 FEATURES = ("f_minus", "f_plus", "z_minus", "z_plus")
 PENALTY = 1e3
 """Fitness [%] of a parameter set whose device has no double well."""
@@ -130,7 +132,7 @@ class Bounds:
     m_rel: float = 0.25
 
 
-class GAUpdater:
+class GAUpdater(Estimator):
     """Update E, alpha and m of a device to match identified features (configure, ``fit``, read ``*_``).
 
     Parameters
@@ -151,14 +153,16 @@ class GAUpdater:
         seed: int = 0,
         compare: str = "auto",
     ):
-        if pop_size < 4 or generations < 1:
-            raise UpdatingError("the GA needs pop_size >= 4 and generations >= 1")
-        if fixed_mass is not None and not (fixed_mass > 0 and math.isfinite(fixed_mass)):
-            raise UpdatingError(f"fixed mass must be positive, got {fixed_mass}")
         self.start, self.pop_size, self.generations = start, pop_size, generations
-        if compare not in ("auto", "features", "restoring_force"):
-            raise UpdatingError(f"compare must be auto, features or restoring_force, got {compare!r}")
         self.bounds, self.fixed_mass, self.seed, self.compare = bounds, fixed_mass, seed, compare
+
+    def _validate(self) -> None:
+        if self.pop_size < 4 or self.generations < 1:
+            raise UpdatingError("the GA needs pop_size >= 4 and generations >= 1")
+        if self.fixed_mass is not None and not (self.fixed_mass > 0 and math.isfinite(self.fixed_mass)):
+            raise UpdatingError(f"fixed mass must be positive, got {self.fixed_mass}")
+        if self.compare not in ("auto", "features", "restoring_force"):
+            raise UpdatingError(f"compare must be auto, features or restoring_force, got {self.compare!r}")
 
     def _device(self, x: np.ndarray) -> Device:
         m = self.fixed_mass if self.fixed_mass is not None else x[2]
@@ -184,6 +188,7 @@ class GAUpdater:
 
     def fit(self, targets: Mapping[str, float], progress=None) -> "GAUpdater":
         """Run the GA against ``targets`` (``f_minus, f_plus`` [Hz], ``z_minus, z_plus`` [m])."""
+        self._validate()
         from pymoo.algorithms.soo.nonconvex.ga import GA
         from pymoo.core.callback import Callback
         from pymoo.core.problem import Problem

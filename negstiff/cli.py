@@ -354,7 +354,7 @@ def cmd_posterior(args) -> int:
         start=start,
         refine_start=not args.no_refine,
     )
-    res = post.fit(rec)
+    res = post.fit(rec).result_
     result = _with_record(result_json(res, args.hdi_prob), rec)
     if args.idata:
         from negstiff.files import atomic_path

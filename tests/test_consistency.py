@@ -36,7 +36,7 @@ def record():
 def estimates(record):
     nsi = NSI().fit(record)
     sindy = SINDy().fit(record)
-    post = Posterior(seed=1).fit(record.segment(0, int(5 * record.fs)))
+    post = Posterior(seed=1).fit(record.segment(0, int(5 * record.fs))).result_
     j = result_json(post, 0.9)
     return {"NSI": nsi, "SINDy": sindy, "posterior": j}
 

@@ -124,7 +124,7 @@ def rig_posterior():
     # 5 s of a cross-well record at the rig's default noise, the weighed mass
     r = Rig(SEED_LIKE_CUBIC, seed=11).random(duration=5, rms=SEED_LIKE_CROSS_WELL_RMS)
     rec = from_arrays(r.columns["base_acc"], r.columns["z"], r.fs, mass=float(r.meta["mass"]), source="rig")
-    return rec, Posterior(seed=2).fit(rec)
+    return rec, Posterior(seed=2).fit(rec).result_
 
 
 def test_coefficient_posterior_contains_the_truth(rig_posterior):
@@ -194,7 +194,7 @@ def device_posteriors():
 
     rec = as_measurement(Rig(AS_BUILT, seed=22).random(duration=4))
     return {
-        prior: Posterior(model="device", mass_prior=prior, seed=3, n_ensembles=2, max_steps=steps).fit(rec)
+        prior: Posterior(model="device", mass_prior=prior, seed=3, n_ensembles=2, max_steps=steps).fit(rec).result_
         for prior, steps in (("free", 5000), ("weighed", 3000))
     }
 

@@ -13,15 +13,16 @@ from scipy import optimize
 from negstiff.models import Model
 from negstiff.models.device import NOMINAL
 
+from ..estimator import Estimator
 from ..measurement import Measurement, MeasurementError
-from .diagnostics import PosteriorResult, convergence_warnings, summarise
+from .diagnostics import PosteriorResult, convergence_warnings, result_json, summarise
 from .likelihood import LogPosterior, curvature_adjustment
 from .parametrisation import Parametrisation, coefficient_parametrisation, device_parametrisation
 from .sampling import sample_ensembles
 from .windows import DROP_FACTOR_AT_MAP, PosteriorError, Windows
 
 
-class Posterior:
+class Posterior(Estimator):
     """emcee posterior of a record (module docstring).
 
     Parameters
@@ -69,10 +70,6 @@ class Posterior:
         start: Model | None = None,
         refine_start: bool = True,
     ):
-        if model not in ("coefficients", "device"):
-            raise ValueError(f"model must be 'coefficients' or 'device', got {model!r}")
-        if mass_prior not in ("free", "weighed"):
-            raise ValueError(f"mass_prior must be 'free' or 'weighed', got {mass_prior!r}")
         self.model = model
         self.mass_prior = mass_prior
         self.window_s = window_s
@@ -89,11 +86,21 @@ class Posterior:
         self.threads = threads
         self.seed = seed
         self.progress = progress
-        if start is not None and (model != "coefficients" or not isinstance(start, Model)):
-            raise ValueError("a start model is a polynomial model, for the coefficient posterior")
         self.start = start
         self.refine_start = refine_start
         self.start_info_: dict[str, Any] = {}
+
+    def _validate(self) -> None:
+        if self.model not in ("coefficients", "device"):
+            raise ValueError(f"model must be 'coefficients' or 'device', got {self.model!r}")
+        if self.mass_prior not in ("free", "weighed"):
+            raise ValueError(f"mass_prior must be 'free' or 'weighed', got {self.mass_prior!r}")
+        if self.start is not None and (self.model != "coefficients" or not isinstance(self.start, Model)):
+            raise ValueError("a start model is a polynomial model, for the coefficient posterior")
+
+    def result(self) -> dict[str, Any]:
+        """The contract's posterior JSON (``result_json`` of ``result_``)."""
+        return result_json(self.result_, self.hdi_prob)
 
     # --- start point -------------------------------------------------------------------------------
     def _start(self, rec: Measurement, win: Windows) -> tuple[Parametrisation, np.ndarray]:
@@ -182,6 +189,7 @@ class Posterior:
         a profile over the other. The device's mass is held at its start (weighed) value: the
         likelihood depends on E/m, c/m, c_nl/m only (device-model.md), so the MAP point along the E-m
         ridge is the prior's."""
+        self._validate()
         win = Windows.cut(rec, self.window_s, self.max_windows, oversample=self.oversample)
         win.threads = self.threads
         par, theta = self._start(rec, win)
@@ -208,7 +216,9 @@ class Posterior:
         return par, win, theta, sol, sigma
 
     # --- the run --------------------------------------------------------------------------------
-    def fit(self, rec: Measurement) -> PosteriorResult:
+    def fit(self, rec: Measurement) -> Posterior:
+        """Sample the posterior of ``rec``; the result is ``result_`` (a ``PosteriorResult``)."""
+        self._validate()
 
         t_start = time.perf_counter()
         par, win, theta, sol, sigma = self.point_estimate(rec)
@@ -294,7 +304,8 @@ class Posterior:
         tau_max = np.nanmax(tau_arr) if np.isfinite(tau_arr).any() else np.nan  # too short a chain: no tau
         res.thin = max(1, int(np.ceil(tau_max / 2))) if np.isfinite(tau_max) else 1
         res.idata = self._idata(res, y, rec)
-        return res
+        self.result_ = res
+        return self
 
     def _idata(self, res: PosteriorResult, y: np.ndarray, rec: Measurement):
         """arviz DataTree: posterior (thinned; chain = ensemble x walker), sample stats, observed
