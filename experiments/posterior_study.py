@@ -202,9 +202,17 @@ def device_part(rep: Report, res: dict[str, Any], duration: float, seed_: int, f
     out = {}
     for prior in ("free", "weighed"):
         t0 = time.perf_counter()
-        pr = Posterior(
-            model="device", mass_prior=prior, seed=seed_, max_steps=400 if fast else 6000, n_ensembles=2 if fast else 4
-        ).fit(m).result_
+        pr = (
+            Posterior(
+                model="device",
+                mass_prior=prior,
+                seed=seed_,
+                max_steps=400 if fast else 6000,
+                n_ensembles=2 if fast else 4,
+            )
+            .fit(m)
+            .result_
+        )
         j = result_json(pr, 0.9)
         j["elapsed_s"] = time.perf_counter() - t0
         out[prior] = j

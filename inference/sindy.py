@@ -1,11 +1,7 @@
 """Equation discovery with SINDy (Brunton, Proctor & Kutz 2016; pysindy 2.1): the restoring force, the
-damping and any extra term of the second-order equation of motion, from z and the input only.
-
-    z'' = theta . Theta(z, z', u),   Theta = [1, z, ..., z^5, z', z'|z'|, z'^3, sgn(z'), u]
-
-with sgn(z') = tanh(z' / v_s) at the Coulomb scale of the model (``COULOMB_VELOCITY_SCALE``), so
-every library term maps onto a model-file field (k0, k1, k2, k3, c, c_nl) or a named ``extra`` effect
-(quartic/quintic_stiffness, cubic_damping, coulomb_friction). The input's coefficient is fixed by
+damping and any extra term of the second-order equation of motion, from z and the input only, over
+the library of ``weak`` (z'' = theta . Theta(z, z', u), each term a model-file field or a named
+``extra`` effect). The input's coefficient is fixed by
 physics with pysindy's ``ConstrainedSR3`` (an equality constraint): -1 for base acceleration, 1/m for a
 force with a known mass; only a force record without a mass learns it (then m = 1/coefficient, as NSI
 does from its FRF level).
@@ -97,11 +93,6 @@ class SINDy(Estimator):
         self.margin = margin
         self.seed = seed
 
-    @staticmethod
-    def model_from(phys: np.ndarray, mass: float):
-        """Model file fields from physical z'' coefficients (per unit mass) and the mass (``weak.model_from``)."""
-        return model_from(phys, mass)
-
     # --- the workflow ----------------------------------------------------------------------------
     def fit(self, rec: Measurement) -> "SINDy":
         rec.require(MIN_SAMPLES, "SINDy")
@@ -111,7 +102,6 @@ class SINDy(Estimator):
         n_fit = int(round(rec.n * (1 - self.validation_fraction - self.selection_fraction)))
         ident = rec.segment(0, n_id)
         form = WeakForm.of(ident.z, rec.fs)
-        self.half_ = form.half
         z0s, v0s, _, _ = state_derivatives(ident.z, rec.fs, purpose="state")  # where free runs start
         gain = known_input_gain(rec)
 

@@ -187,8 +187,7 @@ class WeakForm:
     def system(self, rec: Measurement, lo: int = 0, hi: int | None = None) -> WeakSystem:
         """The weak-form system of the samples [lo, hi) of ``rec`` (the record this form was made of,
         or its first part)."""
-        hi = rec.n if hi is None else hi
-        seg = rec.segment(lo, hi) if (lo, hi) != (0, rec.n) else rec
+        seg = rec.segment(lo, rec.n if hi is None else hi)
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             F = library(self.velocity_noise).fit_transform(np.column_stack([self.v[lo:hi], self.zs[lo:hi], seg.u]))

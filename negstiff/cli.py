@@ -325,7 +325,7 @@ def _say_refinement(args, info: dict | None) -> None:
 
 def cmd_posterior(args) -> int:
     from negstiff.inference.measurement import load
-    from negstiff.inference.posterior import Posterior, result_json
+    from negstiff.inference.posterior import Posterior
     from negstiff.models import Model
 
     start = None
@@ -355,7 +355,7 @@ def cmd_posterior(args) -> int:
         refine_start=not args.no_refine,
     )
     res = post.fit(rec).result_
-    result = _with_record(result_json(res, args.hdi_prob), rec)
+    result = _with_record(post.result(), rec)
     if args.idata:
         from negstiff.files import atomic_path
 

@@ -88,7 +88,6 @@ class Posterior(Estimator):
         self.progress = progress
         self.start = start
         self.refine_start = refine_start
-        self.start_info_: dict[str, Any] = {}
 
     def _validate(self) -> None:
         if self.model not in ("coefficients", "device"):
@@ -127,6 +126,7 @@ class Posterior(Estimator):
             start = NOMINAL.with_(m=m0, c=1.0, c_nl=0.1)
             par = device_parametrisation(start, prior)
             theta = np.array([start.E, start.alpha_deg, start.m, start.c, start.c_nl, 0.0])
+            self.start_info_ = {"source": "the device's nominal values"}
         return par, theta
 
     def _refined_start(self, rec: Measurement, weak: Model) -> Model:
@@ -298,7 +298,7 @@ class Posterior(Estimator):
             "seed": self.seed,
             "elapsed_s": time.perf_counter() - t_start,
             "moves": "DEMove 0.8, DESnookerMove 0.2",
-            "start": self.start_info_ or {"source": "the device's nominal values"},
+            "start": self.start_info_,
         }
         self.logpost_, self.par_, self.windows_ = logpost, par, win
         tau_max = np.nanmax(tau_arr) if np.isfinite(tau_arr).any() else np.nan  # too short a chain: no tau
