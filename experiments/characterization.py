@@ -22,8 +22,8 @@ from negstiff.inference.measurement import Measurement, from_arrays
 from negstiff.inference.nsi import smooth_and_differentiate
 from negstiff.inference.periodicity import noise_level, poincare
 from negstiff.models import AS_BUILT
+from negstiff.models.reference import lyapunov_benettin
 from negstiff.models.rig import Rig, RigRecord
-from negstiff.models.simulator import lyapunov_benettin
 
 from . import seed
 from .report import Report, fmt, run_study

@@ -18,8 +18,8 @@ from scipy import signal
 
 from negstiff import __version__
 from negstiff.models import AS_BUILT, simulate
+from negstiff.models.reference import reference_solution
 from negstiff.models.rig import Rig
-from negstiff.models.simulator import reference_solution
 
 from .calibration import device_section
 from .characterization import characterization_section

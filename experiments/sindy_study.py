@@ -16,7 +16,7 @@ import numpy as np
 from scipy import signal
 
 from negstiff.inference.nsi import NSI
-from negstiff.inference.sindy import TERM_FIELDS, TERMS, SINDy
+from negstiff.inference.sindy import SINDy, term_fields
 from negstiff.models import AS_BUILT, SEED_LIKE_CROSS_WELL_RMS, SEED_LIKE_CUBIC, Model
 from negstiff.models.rig import Rig
 
@@ -29,8 +29,7 @@ HIDDEN_FRICTION_N = 0.1
 
 def _coefficient_rows(est: SINDy, truth: Model | None, nsi: NSI | None) -> list[list[Any]]:
     rows = []
-    for term in TERMS:
-        field, _ = TERM_FIELDS[term]
+    for term, (field, _) in term_fields().items():
         base = field in ("k0", "k1", "k2", "k3", "c", "c_nl")
         val = getattr(est.model_, field) if base else est.model_.extra.get(field, 0.0)
         tru = None if truth is None else (getattr(truth, field) if base else truth.extra.get(field, 0.0))
@@ -133,9 +132,9 @@ def _force_figure(rep: Report, truth: Model, est: SINDy, nsi: NSI, m) -> None:
 
 
 def _extra_damping(model: Model, v: np.ndarray) -> np.ndarray:
-    from negstiff.models.equation import extra_force, stiffness_extra_force
+    from negstiff.models import effects
 
-    return extra_force(model.extra, np.zeros_like(v), v) - stiffness_extra_force(model.extra, np.zeros_like(v))
+    return effects.force(model.extra, np.zeros_like(v), v) - effects.stiffness_force(model.extra, np.zeros_like(v))
 
 
 def _validation_figure(rep: Report, est: SINDy, nsi: NSI) -> None:

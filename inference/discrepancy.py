@@ -9,17 +9,18 @@ physics fixed, the mismatch sought as a sparse term from a physical catalogue).
    each regime is compared with the regime's share of the record; restarted short free runs give the
    gap in time and as a PSD. A long free run is never used: cross-well motion diverges even for the
    true model (device-model.md).
-2. **Name.** Each catalogue effect (``CATALOGUE``) is added to the baseline in turn, refitted on the
-   first part of the data and scored on the held-out part by its weak residual (an equation error
-   that chaos cannot fake). ``none`` is the baseline itself. An effect is named only if it lowers the
-   held-out residual by more than max(one standard error of the paired per-block differences,
-   ``margin``) (the one-standard-error rule plus a practical margin, as in ``sindy``): otherwise the
-   answer is ``none``. Among effects that close to the best, the one with fewer parameters wins.
-3. **Add and refit.** The winner enters the model (its ``extra``; quadratic damping and quadratic or
-   cubic stiffness fold into c_nl, k2, k3), every parameter is refitted on all identification data,
-   and the gap is measured again on the held-out tail: restarted free runs (the median window's rms
-   error: a window whose run diverges near the barrier, chaos, would dominate a pooled rms), residual
-   PSD, maps.
+2. **Name.** Each catalogue effect (``catalogue()``: every effect of ``models.effects``) is added to
+   the baseline in turn, refitted on the first part of the data and scored on the held-out part by
+   its weak residual (an equation error that chaos cannot fake). ``none`` is the baseline itself. An
+   effect is named only if it lowers the held-out residual by more than max(one standard error of the
+   paired per-block differences, ``margin``) (the one-standard-error rule plus a practical margin, as
+   in ``sindy``): otherwise the answer is ``none``. Among effects that close to the best, the one with
+   fewer parameters wins.
+3. **Add and refit.** The winner enters the model (its ``extra``; an effect whose term is a base
+   field's, such as z'|z'| or z^3, folds into that field), every parameter is refitted on all
+   identification data, and the gap is measured again on the held-out tail: restarted free runs (the
+   median window's rms error: a window whose run diverges near the barrier, chaos, would dominate a
+   pooled rms), residual PSD, maps.
 4. **Iterate** until ``none`` wins (at most ``max_effects``).
 """
 
@@ -31,7 +32,7 @@ from typing import Any
 
 import numpy as np
 
-from negstiff.models import Model
+from negstiff.models import Model, effects
 
 from .derivatives import state_derivatives
 from .estimator import Estimator
@@ -39,24 +40,22 @@ from .measurement import Measurement, MeasurementError
 from .refine import refine_stage
 from .selection import block_rows, block_scores, compare, indistinguishable
 from .validation import boundedness, residual_psd, restarted_free_runs, validate  # noqa: F401 (residual_psd: API)
-from .weak import BASE_FIELDS, TERM_FIELDS, TERMS, WeakForm, known_input_gain, mass_of, model_from
+from .weak import BASE_FIELDS, WeakForm, known_input_gain, mass_of, model_from, term_fields
+from .weak import terms as library_terms
 
 CUBIC_BASELINE = ("1", "z", "z^2", "z^3", "v")
 LINEAR_BASELINE = ("1", "z", "v")
 
-CATALOGUE: dict[str, tuple[str, ...]] = {
-    "coulomb_friction": ("sgn(v)",),
-    "quadratic_damping": ("v|v|",),
-    "cubic_damping": ("v^3",),
-    "quartic_stiffness": ("z^4",),
-    "quintic_stiffness": ("z^5",),
-    "quadratic_stiffness": ("z^2",),
-    "cubic_stiffness": ("z^3",),
-    "end_stop": ("stop",),
-}
-"""Candidate effects and the library terms they add (``stop``: one-sided contact beyond a gap)."""
 
-EFFECT_OF_TERM = {terms[0]: name for name, terms in CATALOGUE.items()}
+def catalogue() -> dict[str, tuple[str, ...]]:
+    """Candidate effects (the registry's, in its order) and the library terms each adds; an effect with a
+    positional law (the one-sided stop) adds none: its column is made at a searched position."""
+    return {e.name: (() if e.law.label is None else (e.law.label,)) for e in effects.REGISTRY}
+
+
+def _positional() -> effects.Effect | None:
+    """The registry's effect with a positional law (at most one: the kernel has one stop row)."""
+    return next((e for e in effects.REGISTRY if e.law.label is None), None)
 
 
 @dataclass
@@ -72,7 +71,8 @@ class Candidate:
 
 def _held(terms) -> tuple[str, ...]:
     """Base fields whose library term the model does not carry: refinement holds them at zero."""
-    return tuple(TERM_FIELDS[t][0] for t in TERMS if t not in terms and TERM_FIELDS[t][0] in BASE_FIELDS)
+    fields = term_fields()
+    return tuple(f for t, (f, _) in fields.items() if t not in terms and f in BASE_FIELDS)
 
 
 class DiscrepancyError(MeasurementError):
@@ -130,18 +130,17 @@ class Discrepancy(Estimator):
         W, y = sysd.W_physical, sysd.y_physical
         if stop is not None:
             z = self._zs[lo:hi]
-            side = np.sign(stop)
-            col = np.where(side * (z - stop) > 0, z - stop, 0.0)
+            col = _positional().law.column(z, stop)
             Ws = self._form.project(col[:, None], rec.dt)[:, 0]
             W = np.column_stack([W, Ws[: W.shape[0]]])
         return W, y
 
     def _fit(self, W: np.ndarray, y: np.ndarray, terms: tuple[str, ...], stop: bool) -> np.ndarray:
         """Least squares on ``terms`` (+ the stop column), the input's coefficient fixed by physics."""
-        idx = [TERMS.index(t) for t in terms if t != "stop"]
-        cols = idx + ([W.shape[1] - 1] if stop else [])
+        lib = library_terms()
+        cols = [lib.index(t) for t in terms] + ([W.shape[1] - 1] if stop else [])
         target = y.copy()
-        n_lib = len(TERMS)
+        n_lib = len(lib)
         if self._gain is not None:
             target = target - self._gain * W[:, n_lib]
         else:
@@ -157,13 +156,14 @@ class Discrepancy(Estimator):
         return full
 
     def _model(self, coef: np.ndarray, rec: Measurement, stop: float | None) -> Model:
-        phys = coef[: len(TERMS) + 1]
+        phys = coef[: len(library_terms()) + 1]
         mass = mass_of(rec, self._gain, phys[-1])[0]
         model = model_from(phys, mass)
         if stop is not None:
             k = -mass * float(coef[-1])
             if k > 0:
-                model = Model(**{**model.to_dict(), "extra": {**dict(model.extra), "end_stop": {"k": k, "z": stop}}})
+                extra = {**dict(model.extra), _positional().name: {"k": k, "z": stop}}
+                model = Model(**{**model.to_dict(), "extra": extra})
         return model
 
     def _score(self, rec: Measurement, cand: Candidate) -> Candidate:
@@ -277,8 +277,8 @@ class Discrepancy(Estimator):
         for _ in range(self.max_effects):
             none = self._score(rec, Candidate("none", terms, stop))
             cands = [none]
-            for effect, extra_terms in CATALOGUE.items():
-                if effect == "end_stop":
+            for effect, extra_terms in catalogue().items():
+                if not extra_terms:  # the positional effect: one at most
                     if stop is None:
                         cands.append(self._score(rec, Candidate(effect, terms, self._fit_stop(rec, terms))))
                     continue
@@ -344,7 +344,7 @@ class Discrepancy(Estimator):
         residual: a two-parameter stop that beats z^5 by 4 % on the as-built device is not evidence of
         a stop (measured)."""
         top = ranking[0]
-        n_par = {"end_stop": 2, "none": 0}
+        n_par = {"none": 0, **{e.name: e.n_values for e in effects.REGISTRY}}
         ok = []
         for c in ranking:
             if c.effect == "none" or not np.isfinite(c.heldout_percent):
@@ -353,16 +353,16 @@ class Discrepancy(Estimator):
                 ok.append(c)
         if not ok:
             return top
-        return min(ok, key=lambda c: (n_par.get(c.effect, 1), c.heldout_percent))
+        return min(ok, key=lambda c: (n_par[c.effect], c.heldout_percent))
 
     @staticmethod
-    def _as_extra(model: Model, effects: list[str]) -> Model:
+    def _as_extra(model: Model, named: list[str]) -> Model:
         """Named effects that fold into a base field (c_nl, k2, k3) move to ``extra`` under their name, so
         the model file says what was added (the simulator adds them back to the same field)."""
-        folds = {"quadratic_damping": "c_nl", "quadratic_stiffness": "k2", "cubic_stiffness": "k3"}
+        folds = {e.name: e.folds_into for e in effects.REGISTRY if e.folds_into}
         d = model.to_dict()
         extra = dict(d.get("extra") or {})
-        for e in effects:
+        for e in named:
             if e in folds:
                 extra[e] = d[folds[e]]
                 d[folds[e]] = 0.0

@@ -31,17 +31,17 @@ import numba
 import numpy as np
 from scipy import linalg, optimize, sparse
 
-from negstiff.models import Model
-from negstiff.models.equation import P_COULOMB, P_M
-from negstiff.models.simulator import _JIT, KINDS, _force, _member, input_gain, stage_input
+from negstiff.models import Model, effects
+from negstiff.models.kernel import JIT, KINDS, P_M, P_SIGN, force, member, monomials
+from negstiff.models.simulator import input_gain, stage_input
 
 from .derivatives import state_derivatives
 from .measurement import Measurement, MeasurementError
-from .refine import _names, _scales, _with, shooting_sparsity
+from .refine import parameter_names, parameter_scales, shooting_sparsity, with_values
 from .validation import divergence_limits, record_substeps, staged_windows
 
 
-@numba.njit(inline="always", **_JIT)
+@numba.njit(inline="always", **JIT)
 def _term(z, v, u, w, a, zc, vc, uc, iz, iv, iu, bz, bv):
     """g(z, z', u): the tensor-product bumps' weighted sum (bz, bv: scratch for the 1-D bumps)."""
     for i in range(zc.size):
@@ -62,12 +62,12 @@ def _term(z, v, u, w, a, zc, vc, uc, iz, iv, iu, bz, bv):
     return g
 
 
-@numba.njit(**_JIT)
-def _hybrid_integrate(kind, coulomb, p, gain, u, dt, nsub, z0, v0, w, a, zc, vc, uc, iz, iv, iu, zl, vl, oz, ov):
+@numba.njit(**JIT)
+def _hybrid_integrate(kind, coulomb, p, mono, gain, u, dt, nsub, z0, v0, w, a, zc, vc, uc, iz, iv, iu, zl, vl, oz, ov):
     """RK4 of each window b from (z0[b], v0[b]) under its staged input row u[b] (2 nsub (N-1) + 1
     stage values); one physical parameter column ``p`` for all. Diverged windows turn NaN."""
     nb, n = oz.shape[1], oz.shape[0]
-    q = _member(p, 0, kind)
+    q = member(p, 0, kind)
     im = 1.0 / q[P_M]
     h = dt / nsub
     bz = np.empty(zc.size)
@@ -82,19 +82,35 @@ def _hybrid_integrate(kind, coulomb, p, gain, u, dt, nsub, z0, v0, w, a, zc, vc,
                 for j in range(nsub):
                     c = 2 * (k * nsub + j)
                     ra, rm, rb = u[b, c], u[b, c + 1], u[b, c + 2]
-                    f1 = _force(kind, coulomb, z, v, q) + _term(z, v, ra, w, a, zc, vc, uc, iz, iv, iu, bz, bv)
+                    f1 = (
+                        force(kind, coulomb, z, v, q)
+                        + monomials(z, v, p, 0, mono)
+                        + _term(z, v, ra, w, a, zc, vc, uc, iz, iv, iu, bz, bv)
+                    )
                     a1 = gain * ra - f1 * im
                     z2 = z + 0.5 * h * v
                     v2 = v + 0.5 * h * a1
-                    f2 = _force(kind, coulomb, z2, v2, q) + _term(z2, v2, rm, w, a, zc, vc, uc, iz, iv, iu, bz, bv)
+                    f2 = (
+                        force(kind, coulomb, z2, v2, q)
+                        + monomials(z2, v2, p, 0, mono)
+                        + _term(z2, v2, rm, w, a, zc, vc, uc, iz, iv, iu, bz, bv)
+                    )
                     a2 = gain * rm - f2 * im
                     z3 = z + 0.5 * h * v2
                     v3 = v + 0.5 * h * a2
-                    f3 = _force(kind, coulomb, z3, v3, q) + _term(z3, v3, rm, w, a, zc, vc, uc, iz, iv, iu, bz, bv)
+                    f3 = (
+                        force(kind, coulomb, z3, v3, q)
+                        + monomials(z3, v3, p, 0, mono)
+                        + _term(z3, v3, rm, w, a, zc, vc, uc, iz, iv, iu, bz, bv)
+                    )
                     a3 = gain * rm - f3 * im
                     z4 = z + h * v3
                     v4 = v + h * a3
-                    f4 = _force(kind, coulomb, z4, v4, q) + _term(z4, v4, rb, w, a, zc, vc, uc, iz, iv, iu, bz, bv)
+                    f4 = (
+                        force(kind, coulomb, z4, v4, q)
+                        + monomials(z4, v4, p, 0, mono)
+                        + _term(z4, v4, rb, w, a, zc, vc, uc, iz, iv, iu, bz, bv)
+                    )
                     a4 = gain * rb - f4 * im
                     z = z + h / 6.0 * (v + 2.0 * v2 + 2.0 * v3 + v4)
                     v = v + h / 6.0 * (a1 + 2.0 * a2 + 2.0 * a3 + a4)
@@ -182,7 +198,7 @@ def simulate_hybrid(
     oz, ov = np.empty((n, x0.shape[0])), np.empty((n, x0.shape[0]))
     w, a = basis.split(np.asarray(theta, float))
     _hybrid_integrate(
-        KINDS[model.kind], bool(p[P_COULOMB, 0] != 0.0), np.ascontiguousarray(p),
+        KINDS[model.kind], bool(p[P_SIGN, 0] != 0.0), np.ascontiguousarray(p), effects.layout().monomials,
         float(input_gain(input_kind, p[P_M])[0]),
         np.ascontiguousarray(u2), float(dt), int(substeps), np.ascontiguousarray(x0[:, 0]),
         np.ascontiguousarray(x0[:, 1]), w, a, basis.zc, basis.vc, basis.uc, 1.0 / basis.wz, 1.0 / basis.wv,
@@ -297,8 +313,8 @@ def fit_hybrid(
     z_rms, v_rms = float(np.std(rec.z)), float(np.std(vs))
     force = max(abs(model.k1) * z_rms, abs(model.c) * v_rms, 1e-300)
     x_scale = np.array([max(np.abs(rec.z).max(), 1e-12), max(np.abs(vs).max(), 1e-12)])
-    names = _names(model, free_mass=False)
-    pscale = _scales(model, names, z_rms, v_rms)
+    names = parameter_names(model, free_mass=False)
+    pscale = parameter_scales(model, names, z_rms, v_rms)
     d = {**model.to_dict(), **dict(model.extra)}
     q0 = np.array([float(d[n]) for n in names]) / pscale
     # the term is kept orthogonal, over the states the record visits, to every force the physics can
@@ -361,7 +377,7 @@ def fit_hybrid(
     p = len(names)
 
     def joint(t):
-        phys = _with(model, names, t[:p] * pscale)
+        phys = with_values(model, names, t[:p] * pscale)
         z = sim(phys, N @ t[p : p + P] * force, u, t[p + P :].reshape(-1, 2))
         e = np.where(np.isfinite(z), z - meas, big)
         return np.concatenate([e.ravel(), pen * t[p : p + P]])
@@ -393,12 +409,12 @@ def fit_hybrid(
             "rms_end_m": float(np.sqrt(np.mean(sol.fun[: n_win * length] ** 2))),
             "residual_correlation_samples": tau,
             "coefficients": shifts,
-            "model": _with(model, names, sol.x[:p] * pscale).to_dict(),
+            "model": with_values(model, names, sol.x[:p] * pscale).to_dict(),
             "weights_N": (N @ sol.x[p : p + P] * force).tolist(),
         },
     }
     # the hybrid is the joint fit: with the term orthogonal to the physics' own forces, the physics
     # must move where its output-error fit had bent to cover the missing force (that bend is the shift)
-    joint_model = _with(model, names, sol.x[:p] * pscale)
+    joint_model = with_values(model, names, sol.x[:p] * pscale)
     info["held"] = {"model": model.to_dict(), "weights_N": theta.tolist(), "stages": info.pop("stages")}
     return Hybrid(joint_model, basis, N @ sol.x[p : p + P] * force, info)

@@ -34,7 +34,7 @@ from typing import Any
 import numpy as np
 from scipy import optimize, sparse
 
-from negstiff.models import Model, simulate_batch
+from negstiff.models import Model, effects, simulate_batch
 from negstiff.models.simulator import stage_input
 
 from .derivatives import state_derivatives
@@ -55,9 +55,10 @@ would trade the physics for diverging trajectories. Measured: on a 300 s cross-w
 as-built device the 0.25 s windows started 33x above the 0.05 s windows' error, and fitting 1 s windows
 moved k0 from 1.4 N to -0.8 N and k2 tenfold; on the Silverbox the growth was 2.8x and 1.7x."""
 
-SCALAR_EFFECTS = ("coulomb_friction", "quadratic_damping", "cubic_damping", "quadratic_stiffness",
-                  "cubic_stiffness", "quartic_stiffness", "quintic_stiffness")  # fmt: skip
-"""Named extra effects with one scalar coefficient, refined with the base coefficients."""
+
+def scalar_effects() -> tuple[str, ...]:
+    """Named extra effects with one scalar coefficient (the registry's), refined with the base coefficients."""
+    return tuple(e.name for e in effects.REGISTRY if e.scalar)
 
 
 @dataclass(frozen=True)
@@ -78,49 +79,38 @@ class Refinement:
         }
 
 
-FOLDED = {"quadratic_stiffness": "k2", "cubic_stiffness": "k3", "quadratic_damping": "c_nl"}
-"""Named effects that add to a base field: where a model names one, the named coefficient is refined
-and the base field is not (the two are the same term; refining both leaves a redundant direction)."""
-
-
-def _names(model: Model, free_mass: bool, held=()) -> tuple[str, ...]:
-    named = [e for e in SCALAR_EFFECTS if e in model.extra]
-    out = {FOLDED.get(e) for e in named} | set(held)
+def parameter_names(model: Model, free_mass: bool, held=()) -> tuple[str, ...]:
+    """The parameters refined: the base fields (but those ``held``), the model's named scalar effects and
+    the mass when free. A named effect that folds into a base field (``effects.Effect.folds_into``) is
+    refined and that field is not (the two are the same term; refining both leaves a redundant direction)."""
+    named = [e for e in scalar_effects() if e in model.extra]
+    out = {effects.get(e).folds_into for e in named} | set(held)
     base = [n for n in ("k0", "k1", "k2", "k3", "c", "c_nl") if n not in out]
     base += named
     return tuple(base + (["m"] if free_mass else []))
 
 
-def _with(model: Model, names, values) -> Model:
+def with_values(model: Model, names, values) -> Model:
+    """``model`` with the parameters ``names`` set to ``values``."""
     d = model.to_dict()
     extra = dict(d.pop("extra"))
+    scalar = scalar_effects()
     for n, v in zip(names, values):
-        if n in SCALAR_EFFECTS:
+        if n in scalar:
             extra[n] = v
         else:
             d[n] = v
     return Model.from_dict({**d, "extra": extra})
 
 
-EFFECT_POWERS = {
-    "coulomb_friction": ("v", 0),
-    "quadratic_damping": ("v", 2),
-    "cubic_damping": ("v", 3),
-    "quadratic_stiffness": ("z", 2),
-    "cubic_stiffness": ("z", 3),
-    "quartic_stiffness": ("z", 4),
-    "quintic_stiffness": ("z", 5),
-}
-
-
-def _scales(model: Model, names, z_rms: float, v_rms: float) -> np.ndarray:
+def parameter_scales(model: Model, names, z_rms: float, v_rms: float) -> np.ndarray:
     """Each parameter's scale: the coefficient that makes its force, at the record's rms state, the
     size of the linear restoring force there (|k1| z_rms); the start value where that is larger. A
     term that starts at zero (an effect to be tried) then moves as readily as the others."""
     d = {**model.to_dict(), **dict(model.extra)}
     force = max(abs(model.k1) * z_rms, abs(model.c) * v_rms, 1e-300)
     basis = {"k0": 1.0, "k1": z_rms, "k2": z_rms**2, "k3": z_rms**3, "c": v_rms, "c_nl": v_rms**2, "m": None}
-    basis |= {e: (v_rms if var == "v" else z_rms) ** k for e, (var, k) in EFFECT_POWERS.items()}
+    basis |= {e.name: e.law.scale(z_rms, v_rms) for e in effects.REGISTRY if e.scalar}
     out = []
     for n in names:
         b = basis.get(n)
@@ -171,9 +161,9 @@ def refine(
     """
     if rec.z is None:
         raise MeasurementError(f"{rec.source}: refinement needs a response")
-    names = _names(model, free_mass, held)
+    names = parameter_names(model, free_mass, held)
     zs, vs, _, _ = state_derivatives(rec.z, rec.fs, purpose="state")
-    scale = _scales(model, names, float(np.std(rec.z)), float(np.std(vs)))
+    scale = parameter_scales(model, names, float(np.std(rec.z)), float(np.std(vs)))
     d = {**model.to_dict(), **dict(model.extra)}
     q = np.array([float(d[n]) for n in names]) / scale
     limits = divergence_limits(rec.z, vs)
@@ -192,7 +182,7 @@ def refine(
         p = len(names)
 
         def residual(theta):
-            m = _with(model, names, theta[:p] * scale)
+            m = with_values(model, names, theta[:p] * scale)
             xs = theta[p:].reshape(-1, 2) * x_scale
             res = simulate_batch(
                 np.repeat(m.kernel_params()[:, None], n_win, axis=1), m.kind, u, rec.dt, xs,
@@ -226,7 +216,7 @@ def refine(
             max_nfev=max_nfev, diff_step=1e-7,
         )  # fmt: skip
         q = sol.x[:p]
-        current = _with(model, names, q * scale)
+        current = with_values(model, names, q * scale)
         stages.append(
             {
                 "window_s": length / rec.fs,

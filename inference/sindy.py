@@ -35,10 +35,8 @@ from .measurement import Measurement
 from .refine import refine_stage, stroke_quantiles
 from .selection import block_rows, block_scores, indistinguishable
 from .validation import boundedness, restarted_free_runs, validate
-from .weak import (  # noqa: F401 (TERMS, TERM_FIELDS, BASE_FIELDS, input_coefficient, weak_least_squares: API)
+from .weak import (  # noqa: F401 (input_coefficient, weak_least_squares: API)
     BASE_FIELDS,
-    TERM_FIELDS,
-    TERMS,
     Bagging,
     WeakForm,
     WeakFormError,
@@ -47,6 +45,8 @@ from .weak import (  # noqa: F401 (TERMS, TERM_FIELDS, BASE_FIELDS, input_coeffi
     known_input_gain,
     mass_of,
     model_from,
+    term_fields,
+    terms,
     weak_least_squares,
 )
 
@@ -119,10 +119,11 @@ class SINDy(Estimator):
                 f"needed ({100 * self.selection_fraction:.0f} % of the record scores the candidate models in "
                 f"{self.window_s:g} s blocks, two at least)"
             )
+        library, fields = terms(), term_fields()
         supports: dict[tuple[bool, ...], list[float]] = {}
         for weight in self.weights:
             phys = fit_support(sys_fit, gain, weight)
-            supports.setdefault(tuple(bool(c) for c in (phys[: len(TERMS)] != 0)), []).append(weight)
+            supports.setdefault(tuple(bool(c) for c in (phys[: len(library)] != 0)), []).append(weight)
         path = []
         for support, weights in supports.items():
             phys = fit_support(sys_fit, gain, support=support)
@@ -137,7 +138,7 @@ class SINDy(Estimator):
             block_ms = block_scores((y_sel - W_sel @ phys) ** 2, rows, y_sel.var())
             path.append(
                 {
-                    "terms": [t for t, on in zip(TERMS, support) if on],
+                    "terms": [t for t, on in zip(library, support) if on],
                     "n_terms": int(sum(support)),
                     "support": support,
                     # the geometric middle of the weights that give this support
@@ -169,11 +170,11 @@ class SINDy(Estimator):
         self.ensemble_ = {
             term: {
                 "inclusion_probability": float(np.mean(phys_ens[:, i] != 0)),
-                "median": float(TERM_FIELDS[term][1] * mass * np.median(phys_ens[:, i])),
+                "median": float(fields[term][1] * mass * np.median(phys_ens[:, i])),
                 "sd": float(mass * np.std(phys_ens[:, i])),
-                "field": TERM_FIELDS[term][0],
+                "field": fields[term][0],
             }
-            for i, term in enumerate(TERMS)
+            for i, term in enumerate(library)
         }
         self.warnings_ = []
         self.stroke_ = stroke_quantiles(rec.z[:n_id])
@@ -181,9 +182,7 @@ class SINDy(Estimator):
         self.initial_model_, self.refinement_ = self.model_, None
         if self.refine:
             # the selection stands: unselected terms stay zero, the selected ones are refined
-            held = tuple(
-                TERM_FIELDS[t][0] for t in TERMS if t not in self.selected_ and TERM_FIELDS[t][0] in BASE_FIELDS
-            )
+            held = tuple(fields[t][0] for t in library if t not in self.selected_ and fields[t][0] in BASE_FIELDS)
             self.model_, self.validation_, self.refinement_ = refine_stage(
                 self.model_, rec, n_id, self.validation_, held=held
             )
@@ -211,7 +210,7 @@ class SINDy(Estimator):
             "corner_frequency_hz": form.corner_hz,
             "derivatives": form.derivatives["method"],
             "sgn_noise_scale": form.velocity_noise,
-            "library": list(TERMS) + ["u"],
+            "library": list(library) + ["u"],
             "input_coefficient": "fixed by physics (ConstrainedSR3)" if gain is not None else "learned (no mass)",
             "selection": "sparsest support whose held-out weak residual (samples "
             f"[{n_fit}, {n_id}), blocks of {self.window_s:g} s) is within max(one standard error, "

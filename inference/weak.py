@@ -1,11 +1,12 @@
 """The weak (integral) form of the equation of motion, shared by SINDy, the discrepancy workflow, the
 posterior's start point and the plausibility checks.
 
-    z'' = theta . Theta(z, z', u),   Theta = [1, z, ..., z^5, z', z'|z'|, z'^3, sgn(z'), u]
+    z'' = theta . Theta(z, z', u),   Theta = [1, z, z^2, z^3, (effects' z terms), z', z'|z'|, (effects'), u]
 
-with sgn(z') = tanh(z' / v_s) at the Coulomb scale of the model (``COULOMB_VELOCITY_SCALE``), so
-every library term maps onto a model-file field (k0, k1, k2, k3, c, c_nl) or a named ``extra`` effect
-(quartic/quintic_stiffness, cubic_damping, coulomb_friction).
+one column per term of the effect registry (``models.effects.library_terms``): the base fields'
+terms and every registered effect with a column of its own (z^4, z^5, z'^3, sgn(z') with the
+default registry), so every coefficient maps onto a model-file field (k0..k3, c, c_nl) or a named
+``extra`` effect.
 
 Weak form (Messenger & Bortz 2021, hand-rolled as ecosystem.md 1 advises: pysindy 2.1's weak library
 fails with a targeted library). The equation is integrated against test functions
@@ -32,38 +33,32 @@ computed once); ``WeakForm.system`` projects a part of the record into a frozen 
 from __future__ import annotations
 
 import contextlib
-import math
 import warnings
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from scipy import signal, special
+from scipy import signal
 
-from negstiff.models import Model
-from negstiff.models.equation import COULOMB_VELOCITY_SCALE
+from negstiff.models import Model, effects
 
 from .derivatives import noise_floor, state_derivatives
 from .measurement import Measurement, MeasurementError
 
-TERMS = ("1", "z", "z^2", "z^3", "z^4", "z^5", "v", "v|v|", "v^3", "sgn(v)")
-"""Library terms (the input u is appended last and never thresholded)."""
+BASE_FIELDS = tuple(effects.BASE_TERMS)
+"""The model file's base fields (k0, k1, k2, k3, c, c_nl), each a library term."""
 
-# term -> (model field or extra effect, sign of the field relative to -m * coefficient)
-# z'' = -(K + D + extra)/m + input:  field = -m * coef, except k1 (K holds -k1 z): k1 = +m * coef.
-TERM_FIELDS = {
-    "1": ("k0", -1.0),
-    "z": ("k1", 1.0),
-    "z^2": ("k2", -1.0),
-    "z^3": ("k3", -1.0),
-    "z^4": ("quartic_stiffness", -1.0),
-    "z^5": ("quintic_stiffness", -1.0),
-    "v": ("c", -1.0),
-    "v|v|": ("c_nl", -1.0),
-    "v^3": ("cubic_damping", -1.0),
-    "sgn(v)": ("coulomb_friction", -1.0),
-}
-BASE_FIELDS = ("k0", "k1", "k2", "k3", "c", "c_nl")
+
+def terms() -> tuple[str, ...]:
+    """The library's terms (the effect registry's ``library_terms``; the input u is appended last and
+    never thresholded)."""
+    return tuple(t.label for t in effects.library_terms())
+
+
+def term_fields() -> dict[str, tuple[str, float]]:
+    """term -> (model field or extra effect, sign of the field relative to -m times the coefficient).
+    z'' = -(K + D + extra)/m + input: field = -m coef, except k1 (K holds -k1 z): k1 = +m coef."""
+    return {t.label: (t.field, t.sign) for t in effects.library_terms()}
 
 
 class WeakFormError(MeasurementError):
@@ -71,26 +66,22 @@ class WeakFormError(MeasurementError):
 
 
 def library(velocity_noise: float):
-    """pysindy library over the inputs [v, z, u] (pointwise, physical units); ``velocity_noise`` [m/s]
-    is the s_n of the smoothed sign function (module docstring)."""
+    """pysindy library over the inputs [v, z, u] (pointwise, physical units): one column per registry
+    term, evaluated by its law (``effects.library_terms``; ``velocity_noise`` [m/s] is the s_n of the
+    smoothed sign, module docstring), then the input."""
     import pysindy as ps
 
-    scale = math.sqrt(2) * max(velocity_noise, COULOMB_VELOCITY_SCALE)
+    def column(law):  # exactly two arguments: CustomLibrary counts them, and applies each function to
+        return lambda v, z: law.column(z, v, velocity_noise)  # the one pair (v, z) of its two inputs
 
-    # one argument only: CustomLibrary counts a function's arguments to combine inputs
-    def sgn(x):
-        return special.erf(x / scale)
+    def name(label):
+        return lambda v, z: label
 
+    lib = effects.library_terms()
+    funcs, names = [column(t.law) for t in lib], [name(t.label) for t in lib]
     return ps.GeneralizedLibrary(
-        [
-            ps.PolynomialLibrary(degree=5, include_bias=True),
-            ps.CustomLibrary(
-                [lambda x: x, lambda x: x * np.abs(x), lambda x: x**3, sgn],
-                [lambda s: s, lambda s: f"{s}|{s}|", lambda s: f"{s}^3", lambda s: f"sgn({s})"],
-            ),
-            ps.IdentityLibrary(),
-        ],
-        inputs_per_library=[[1], [0], [2]],
+        [ps.CustomLibrary(funcs, names), ps.IdentityLibrary()],
+        inputs_per_library=[[0, 1], [2]],
     )
 
 
@@ -282,7 +273,7 @@ def fit_support(
     ``support`` held at zero; with ``bagging`` the ensemble's, one row per model."""
     import pysindy as ps
 
-    n_feat = len(TERMS) + 1
+    n_feat = len(terms()) + 1
     rhs = None if gain is None else gain * system.col[-1] / system.s_y
     opt = _optimizer(weight, rhs, n_feat, support)
     W, y = system.W, system.y[:, None]
@@ -299,7 +290,7 @@ def fit_support(
             opt.fit(W, y)
             xi = np.asarray(opt.coef_)[0].copy()
     if support is not None:
-        xi[..., : len(TERMS)][..., ~np.array(support)] = 0.0  # the constraint holds them at ~1e-16
+        xi[..., : n_feat - 1][..., ~np.array(support)] = 0.0  # the constraint holds them at ~1e-16
     return xi * system.s_y / system.col
 
 
@@ -307,8 +298,9 @@ def model_from(phys: np.ndarray, mass: float) -> Model:
     """Model file fields from physical z'' coefficients (per unit mass) and the mass."""
     fields = {k: 0.0 for k in BASE_FIELDS}
     extra = {}
-    for term, coef in zip(TERMS, phys[: len(TERMS)]):
-        name, sign = TERM_FIELDS[term]
+    lib = effects.library_terms()
+    for t, coef in zip(lib, phys[: len(lib)]):
+        name, sign = t.field, t.sign
         val = sign * mass * float(coef)
         if name in fields:
             fields[name] = val
@@ -317,11 +309,12 @@ def model_from(phys: np.ndarray, mass: float) -> Model:
     return Model(m=mass, extra=extra, **fields)
 
 
-def support_of(terms) -> tuple[bool, ...]:
-    unknown = set(terms) - set(TERMS)
+def support_of(selected) -> tuple[bool, ...]:
+    known = terms()
+    unknown = set(selected) - set(known)
     if unknown:
-        raise ValueError(f"unknown library terms {sorted(unknown)}; choose among {TERMS}")
-    return tuple(t in terms for t in TERMS)
+        raise ValueError(f"unknown library terms {sorted(unknown)}; choose among {known}")
+    return tuple(t in selected for t in known)
 
 
 def input_coefficient(rec: Measurement, terms=("1", "z", "z^2", "z^3", "z^4", "z^5", "v", "v|v|")) -> float:

@@ -36,18 +36,9 @@ from typing import Any, Mapping
 
 import numpy as np
 
+from . import effects
 from .constants import G
-from .equation import (
-    Equilibria,
-    Model,
-    UnderlyingLinear,
-    extra_force,
-    find_equilibria,
-    normalise_extra,
-    shared_param_rows,
-    stiffness_extra_force,
-    stiffness_extra_potential,
-)
+from .equation import Equilibria, Model, UnderlyingLinear, find_equilibria
 
 
 class GeometryError(ValueError):
@@ -92,7 +83,7 @@ class Device:
                 raise ValueError(f"device parameter {name} must be positive and finite, got {v}")
         if not (math.isfinite(self.alpha_deg) and -60 < self.alpha_deg < 60):
             raise ValueError(f"frame angle alpha_deg must lie in (-60, 60) degrees, got {self.alpha_deg}")
-        object.__setattr__(self, "extra", normalise_extra(self.extra))
+        object.__setattr__(self, "extra", effects.normalise(self.extra))
 
     # --- derived constants ---------------------------------------------------------------------
     @property
@@ -142,7 +133,7 @@ class Device:
         """Exact K(z) = 2 k_f (s + D0) s' + m g [N], plus the displacement-only extra effects."""
         s, s1, _ = self._s_derivs(z)
         k = 2 * self.k_f * (s + self.D0) * s1 + self.m * G
-        return k + stiffness_extra_force(self.extra, z) if include_extra else k
+        return k + effects.stiffness_force(self.extra, z) if include_extra else k
 
     def stiffness(self, z, include_extra: bool = True):
         """dK/dz = 2 k_f (s'^2 + (s + D0) s'') [N/m]."""
@@ -151,8 +142,8 @@ class Device:
         if include_extra and self.extra:
             hz = 1e-7
             ks = ks + (
-                stiffness_extra_force(self.extra, np.asarray(z) + hz)
-                - stiffness_extra_force(self.extra, np.asarray(z) - hz)
+                effects.stiffness_force(self.extra, np.asarray(z) + hz)
+                - effects.stiffness_force(self.extra, np.asarray(z) - hz)
             ) / (2 * hz)
         return ks
 
@@ -161,7 +152,7 @@ class Device:
         z = np.asarray(z, float)
         s, _, _ = self._s_derivs(z)
         u = self.k_f * ((s + self.D0) ** 2 - self.D0**2) + self.m * G * z
-        return u + stiffness_extra_potential(self.extra, z) if include_extra else u
+        return u + effects.stiffness_potential(self.extra, z) if include_extra else u
 
     def damping_force(self, zdot):
         """c z' + c_nl z'|z'| [N]."""
@@ -171,7 +162,7 @@ class Device:
     def total_force(self, z, zdot):
         """D(z') + K(z) + extra(z, z') [N]."""
         return (
-            self.damping_force(zdot) + self.restoring_force(z, include_extra=False) + extra_force(self.extra, z, zdot)
+            self.damping_force(zdot) + self.restoring_force(z, include_extra=False) + effects.force(self.extra, z, zdot)
         )
 
     # --- equilibria, wells, features -----------------------------------------------------------
@@ -265,8 +256,9 @@ class Device:
 
     def kernel_params(self) -> np.ndarray:
         """Parameter vector for the geometric simulator kernel: rows 1-5 = k_f, L, alpha, D0, g."""
-        p = shared_param_rows(self.m, self.c, self.c_nl, self.extra)
-        p[1:6] = self.k_f, self.L, self.alpha, self.D0, G
+        p = effects.kernel_rows(self.m, self.c, self.c_nl, self.extra)
+        for name, row in effects.DEVICE_ROWS.items():
+            p[row] = G if name == "g" else getattr(self, name)
         return p
 
 

@@ -14,142 +14,21 @@ Around a stable equilibrium z*, x = z - z* (Eq. 5) gives the shifted restoring f
 whose linear part is the underlying-linear system (ULS) of that well, with natural frequency
 omega = sqrt(k1~ / m) (Eq. 4).
 
-Extra effects (the discrepancy catalogue of the contract) are named terms added to the force:
-
-=====================  ===============================================  ==================
-name                   force added to the left-hand side                value (units)
-=====================  ===============================================  ==================
-coulomb_friction       F tanh(z'/v_s), v_s = COULOMB_VELOCITY_SCALE     F [N]
-quadratic_damping      q z'|z'|  (adds to c_nl)                         q [N s^2/m^2]
-cubic_damping          d z'^3                                           d [N s^3/m^3]
-quadratic_stiffness    a z^2     (adds to k2)                           a [N/m^2]
-cubic_stiffness        a z^3     (adds to k3)                           a [N/m^3]
-quartic_stiffness      a z^4                                            a [N/m^4]
-quintic_stiffness      a z^5                                            a [N/m^5]
-end_stop               k (z - z_s) beyond the stop at z_s, on z_s's     {"k": N/m, "z": m}
-                       side (one-sided contact beyond a gap)
-=====================  ===============================================  ==================
+Extra effects are named terms added to the force, each an entry of the registry in
+``models.effects`` (the model file's ``extra`` mapping names them).
 """
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from types import MappingProxyType
 from typing import Any, Mapping
 
 import numpy as np
 
+from . import effects
 from .constants import G
-
-COULOMB_VELOCITY_SCALE = 1e-3
-"""Velocity [m/s] over which the Coulomb friction force changes sign (tanh smoothing)."""
-
-EFFECTS = (
-    "coulomb_friction",
-    "quadratic_damping",
-    "cubic_damping",
-    "quadratic_stiffness",
-    "cubic_stiffness",
-    "quartic_stiffness",
-    "quintic_stiffness",
-    "end_stop",
-)
-"""Names of the extra effects a model may carry in its ``extra`` mapping."""
-
-# Layout of the parameter vector the simulator kernels read (one column per batch member).
-# Rows 0..6 differ between the polynomial and the geometric restoring force (see ``device``);
-# rows 7..16 are the damping and extra effects, shared by both.
-P_M, P_C, P_CNL, P_COULOMB, P_CUBIC_DAMP = 0, 7, 8, 9, 10
-P_QUAD_STIFF, P_CUBIC_STIFF, P_QUARTIC, P_QUINTIC, P_STOP_K, P_STOP_Z = 11, 12, 13, 14, 15, 16
-N_PARAMS = 17
-
-
-def _check_finite(name: str, value: float) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
-        raise ValueError(f"model parameter {name} must be a number, got {value!r}")
-    value = float(value)
-    if not math.isfinite(value):
-        raise ValueError(f"model parameter {name} is not finite ({value})")
-    return value
-
-
-def normalise_extra(extra: Mapping[str, Any] | None) -> Mapping[str, Any]:
-    """Validate an ``extra`` mapping and return it read-only (scalars as float, end_stop as dict)."""
-    out: dict[str, Any] = {}
-    for name, value in dict(extra or {}).items():
-        if name not in EFFECTS:
-            raise ValueError(f"unknown extra effect {name!r}; known: {', '.join(EFFECTS)}")
-        if name == "end_stop":
-            if not isinstance(value, Mapping) or set(value) != {"k", "z"}:
-                raise ValueError('extra effect end_stop takes {"k": stiffness N/m, "z": stop position m}')
-            k, z = _check_finite("end_stop.k", value["k"]), _check_finite("end_stop.z", value["z"])
-            if k < 0 or z == 0:
-                raise ValueError("end_stop needs k >= 0 and a stop position z != 0")
-            out[name] = MappingProxyType({"k": k, "z": z})
-        else:
-            out[name] = _check_finite(name, value)
-    return MappingProxyType(out)
-
-
-def extra_force(extra: Mapping[str, Any], z, zdot):
-    """Force of the extra effects [N] at displacement ``z`` [m] and velocity ``zdot`` [m/s]."""
-    z, zdot = np.asarray(z, float), np.asarray(zdot, float)
-    f = np.zeros(np.broadcast(z, zdot).shape)
-    f = f + extra.get("coulomb_friction", 0.0) * np.tanh(zdot / COULOMB_VELOCITY_SCALE)
-    f = f + extra.get("quadratic_damping", 0.0) * zdot * np.abs(zdot)
-    f = f + extra.get("cubic_damping", 0.0) * zdot**3
-    return f + stiffness_extra_force(extra, z)
-
-
-def stiffness_extra_force(extra: Mapping[str, Any], z):
-    """The displacement-only part of the extra effects [N] (it belongs to the restoring force)."""
-    z = np.asarray(z, float)
-    f = (
-        extra.get("quadratic_stiffness", 0.0) * z**2
-        + extra.get("cubic_stiffness", 0.0) * z**3
-        + extra.get("quartic_stiffness", 0.0) * z**4
-        + extra.get("quintic_stiffness", 0.0) * z**5
-    )
-    stop = extra.get("end_stop")
-    if stop:
-        beyond = (z - stop["z"]) * np.sign(stop["z"])
-        f = f + stop["k"] * np.where(beyond > 0, z - stop["z"], 0.0)
-    return f
-
-
-def stiffness_extra_potential(extra: Mapping[str, Any], z):
-    """Potential energy [J] of the displacement-only extra effects, zero at z = 0."""
-    z = np.asarray(z, float)
-    u = (
-        extra.get("quadratic_stiffness", 0.0) * z**3 / 3
-        + extra.get("cubic_stiffness", 0.0) * z**4 / 4
-        + extra.get("quartic_stiffness", 0.0) * z**5 / 5
-        + extra.get("quintic_stiffness", 0.0) * z**6 / 6
-    )
-    stop = extra.get("end_stop")
-    if stop:
-        beyond = (z - stop["z"]) * np.sign(stop["z"])
-        u = u + 0.5 * stop["k"] * np.where(beyond > 0, (z - stop["z"]) ** 2, 0.0)
-    return u
-
-
-def shared_param_rows(m: float, c: float, c_nl: float, extra: Mapping[str, Any]) -> np.ndarray:
-    """Fill the rows of the kernel parameter vector that both restoring-force kinds share."""
-    p = np.zeros(N_PARAMS)
-    p[P_M] = m
-    p[P_C] = c
-    p[P_CNL] = c_nl + extra.get("quadratic_damping", 0.0)
-    p[P_COULOMB] = extra.get("coulomb_friction", 0.0)
-    p[P_CUBIC_DAMP] = extra.get("cubic_damping", 0.0)
-    p[P_QUAD_STIFF] = extra.get("quadratic_stiffness", 0.0)
-    p[P_CUBIC_STIFF] = extra.get("cubic_stiffness", 0.0)
-    p[P_QUARTIC] = extra.get("quartic_stiffness", 0.0)
-    p[P_QUINTIC] = extra.get("quintic_stiffness", 0.0)
-    stop = extra.get("end_stop")
-    if stop:
-        p[P_STOP_K], p[P_STOP_Z] = stop["k"], stop["z"]
-    return p
+from .effects import COULOMB_VELOCITY_SCALE, finite  # noqa: F401 (COULOMB_VELOCITY_SCALE: API)
 
 
 @dataclass(frozen=True)
@@ -240,19 +119,19 @@ class Model:
 
     def __post_init__(self):
         for name in ("m", "k1", "k2", "k3", "c", "c_nl"):
-            object.__setattr__(self, name, _check_finite(name, getattr(self, name)))
+            object.__setattr__(self, name, finite(name, getattr(self, name)))
         if self.m <= 0:
             raise ValueError(f"model mass m must be positive, got {self.m}")
-        k0 = self.m * G if self.k0 is None else _check_finite("k0", self.k0)
+        k0 = self.m * G if self.k0 is None else finite("k0", self.k0)
         object.__setattr__(self, "k0", k0)
-        object.__setattr__(self, "extra", normalise_extra(self.extra))
+        object.__setattr__(self, "extra", effects.normalise(self.extra))
 
     # --- forces and energy -------------------------------------------------------------------
     def restoring_force(self, z, include_extra: bool = True):
         """K(z) [N] (Eq. 2), plus the displacement-only extra effects when ``include_extra``."""
         z = np.asarray(z, float)
         k = ((self.k3 * z + self.k2) * z - self.k1) * z + self.k0
-        return k + stiffness_extra_force(self.extra, z) if include_extra else k
+        return k + effects.stiffness_force(self.extra, z) if include_extra else k
 
     def stiffness(self, z, include_extra: bool = True):
         """dK/dz [N/m]."""
@@ -260,14 +139,16 @@ class Model:
         ks = (3 * self.k3 * z + 2 * self.k2) * z - self.k1
         if include_extra and self.extra:
             h = 1e-7
-            ks = ks + (stiffness_extra_force(self.extra, z + h) - stiffness_extra_force(self.extra, z - h)) / (2 * h)
+            ks = ks + (effects.stiffness_force(self.extra, z + h) - effects.stiffness_force(self.extra, z - h)) / (
+                2 * h
+            )
         return ks
 
     def potential(self, z, include_extra: bool = True):
         """U(z) [J] (Eq. 3), zero at z = 0."""
         z = np.asarray(z, float)
         u = (((self.k3 / 4 * z + self.k2 / 3) * z - self.k1 / 2) * z + self.k0) * z
-        return u + stiffness_extra_potential(self.extra, z) if include_extra else u
+        return u + effects.stiffness_potential(self.extra, z) if include_extra else u
 
     def damping_force(self, zdot):
         """D(z') = c z' + c_nl z'|z'| [N] (without the velocity-dependent extra effects)."""
@@ -277,7 +158,7 @@ class Model:
     def total_force(self, z, zdot):
         """D(z') + K(z) + extra(z, z') [N]: everything on the left-hand side but inertia."""
         return (
-            self.damping_force(zdot) + self.restoring_force(z, include_extra=False) + extra_force(self.extra, z, zdot)
+            self.damping_force(zdot) + self.restoring_force(z, include_extra=False) + effects.force(self.extra, z, zdot)
         )
 
     # --- equilibria and linearisation ---------------------------------------------------------
@@ -359,7 +240,8 @@ class Model:
     kind = "polynomial"
 
     def kernel_params(self) -> np.ndarray:
-        """Parameter vector for the simulator kernel (rows as in the module's P_* layout)."""
-        p = shared_param_rows(self.m, self.c, self.c_nl, self.extra)
-        p[1:5] = self.k0, self.k1, self.k2, self.k3
+        """Parameter vector for the simulator kernel (rows 1-4: k0..k3; the others: ``effects.layout``)."""
+        p = effects.kernel_rows(self.m, self.c, self.c_nl, self.extra)
+        for name, row in effects.POLYNOMIAL_ROWS.items():
+            p[row] = getattr(self, name)
         return p

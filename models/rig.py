@@ -273,7 +273,7 @@ class Rig:
     Parameters
     ----------
     system : the truth: a ``Device`` (default: ``AS_BUILT``, exact geometry) or a polynomial ``Model``
-    effects : hidden extra effects added to the truth (contract names, e.g. ``{"coulomb_friction": 0.05}``)
+    effects : hidden extra effects added to the truth (``models.effects`` names and values)
     sensors : measurement-chain imperfections
     fs : output sampling rate [Hz] (the seed's 512 Hz)
     oversample : simulation and acquisition rate = ``oversample * fs``

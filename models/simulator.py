@@ -25,29 +25,12 @@ import os
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
-import numba
 import numpy as np
 from scipy import signal
 
-from .equation import (
-    COULOMB_VELOCITY_SCALE,
-    N_PARAMS,
-    P_C,
-    P_CNL,
-    P_COULOMB,
-    P_CUBIC_DAMP,
-    P_CUBIC_STIFF,
-    P_M,
-    P_QUAD_STIFF,
-    P_QUARTIC,
-    P_QUINTIC,
-    P_STOP_K,
-    P_STOP_Z,
-)
+from . import effects
+from .kernel import KINDS, P_M, STATUS_DIVERGED, STATUS_GEOMETRY, STATUS_OK, kernel
 
-KIND_POLYNOMIAL, KIND_DEVICE = 0, 1
-KINDS = {"polynomial": KIND_POLYNOMIAL, "device": KIND_DEVICE}
-STATUS_OK, STATUS_DIVERGED, STATUS_GEOMETRY = 0, 1, 2
 STATUS_TEXT = {
     STATUS_DIVERGED: "diverged (|z| or |z_dot| beyond its limit, or non-finite)",
     STATUS_GEOMETRY: "left the device's stroke (the rods cannot reach that z)",
@@ -58,172 +41,6 @@ DEFAULT_Z_LIMIT = 1.0
 DEFAULT_V_LIMIT = 100.0
 """Speed [m/s] beyond which a simulation is declared diverged. It also catches the spurious bounded
 orbits RK4 can settle into when a growing response is no longer resolved by the step (omega h ~ 1)."""
-
-
-_JIT = {"cache": True, "nogil": True, "error_model": "numpy"}  # numpy error model: no zero-division
-# branches in the loop, which is what lets LLVM vectorise over the batch (4x measured here).
-
-
-@numba.njit(inline="always", **_JIT)
-def _force(kind, coulomb, z, v, q):
-    """Total non-inertial force D + K + extra [N] for one member's parameter tuple ``q``.
-
-    polynomial: q[1..4] = k0, k1, k2, k3; device: q[1] = k_f, q[2] = L cos(alpha), q[3] = sin(alpha),
-    q[4] = D0, q[5] = g (exact rod-frame geometry; NaN where the rods cannot reach z). ``kind`` and
-    ``coulomb`` are compile-time constants in each specialised kernel, so their branches vanish.
-    """
-    if kind == KIND_POLYNOMIAL:
-        k = ((q[4] * z + q[3]) * z - q[2]) * z + q[1]
-    else:
-        bb = q[2] - z * q[3]
-        r2 = bb * bb - z * z
-        r = math.sqrt(r2) if (r2 > 0.0 and bb > 0.0) else math.nan
-        k = 2.0 * q[1] * (r - bb + q[4]) * (q[3] - (bb * q[3] + z) / r) + q[P_M] * q[5]
-    k += z * z * (q[P_QUAD_STIFF] + z * (q[P_CUBIC_STIFF] + z * (q[P_QUARTIC] + z * q[P_QUINTIC])))
-    # one-sided stop (branch-free): k_s max(z - z_s, 0) for z_s > 0, k_s min(z - z_s, 0) for z_s < 0
-    dz = z - q[P_STOP_Z]
-    k += 0.5 * q[P_STOP_K] * (dz + math.copysign(1.0, q[P_STOP_Z]) * abs(dz))
-    d = v * (q[P_C] + q[P_CNL] * abs(v) + q[P_CUBIC_DAMP] * v * v)
-    if coulomb:
-        d += q[P_COULOMB] * math.tanh(v / COULOMB_VELOCITY_SCALE)
-    return k + d
-
-
-@numba.njit(inline="always", **_JIT)
-def _member(p, b, kind):
-    """Parameter tuple of member b, with the device's angle rows turned into L cos(a), sin(a)."""
-    q = (
-        p[0, b],
-        p[1, b],
-        p[2, b],
-        p[3, b],
-        p[4, b],
-        p[5, b],
-        p[6, b],
-        p[7, b],
-        p[8, b],
-        p[9, b],
-        p[10, b],
-        p[11, b],
-        p[12, b],
-        p[13, b],
-        p[14, b],
-        p[15, b],
-        p[16, b],
-    )
-    if kind == KIND_DEVICE:
-        q = (q[0], q[1], q[2] * math.cos(q[3]), math.sin(q[3])) + q[4:]
-    return q
-
-
-@numba.njit(inline="always", **_JIT)
-def _integrate(
-    kind, coulomb, p, gain, u, uidx, dt, nsub, z0, v0, z_limit, v_limit, out_z, out_v, store_v, status, fail_step
-):
-    """RK4 over the N sample intervals of each member's input row ``u[uidx[b]]``; outputs time-major.
-
-    ``out_z.shape[0]`` is N + 1 output samples. The input row holds either the N + 1 samples (linearly
-    interpolated inside each interval) or, when it has 2 ``nsub`` N + 1 columns, the input at every
-    Runge-Kutta stage time (``stage_input``), read as it is."""
-    nb = p.shape[1]
-    n = out_z.shape[0]
-    staged = u.shape[1] != n
-    h = dt / nsub
-    z = z0.copy()
-    v = v0.copy()
-    ua = np.empty(nb)
-    ub = np.empty(nb)
-    wa = np.empty(nb)
-    wm = np.empty(nb)
-    wb = np.empty(nb)
-    alive = np.ones(nb, dtype=np.bool_)
-    for b in range(nb):
-        out_z[0, b] = z[b]
-        if store_v:
-            out_v[0, b] = v[b]
-    for k in range(n - 1):
-        if not staged:
-            for b in range(nb):  # gather the input once per sample, outside the vectorised loop
-                ua[b] = gain[b] * u[uidx[b], k]
-                ub[b] = gain[b] * u[uidx[b], k + 1]
-        for j in range(nsub):
-            if staged:  # the input at the step's start, midpoint and end
-                c = 2 * (k * nsub + j)
-                for b in range(nb):
-                    wa[b] = gain[b] * u[uidx[b], c]
-                    wm[b] = gain[b] * u[uidx[b], c + 1]
-                    wb[b] = gain[b] * u[uidx[b], c + 2]
-            else:
-                fa = j / nsub
-                fm = (j + 0.5) / nsub
-                fb = (j + 1.0) / nsub
-                for b in range(nb):
-                    du = ub[b] - ua[b]
-                    wa[b] = ua[b] + fa * du
-                    wm[b] = ua[b] + fm * du
-                    wb[b] = ua[b] + fb * du
-            for b in range(nb):
-                q = _member(p, b, kind)
-                im = 1.0 / q[P_M]
-                zb = z[b]
-                vb = v[b]
-                a1 = wa[b] - _force(kind, coulomb, zb, vb, q) * im
-                z2 = zb + 0.5 * h * vb
-                v2 = vb + 0.5 * h * a1
-                a2 = wm[b] - _force(kind, coulomb, z2, v2, q) * im
-                z3 = zb + 0.5 * h * v2
-                v3 = vb + 0.5 * h * a2
-                a3 = wm[b] - _force(kind, coulomb, z3, v3, q) * im
-                z4 = zb + h * v3
-                v4 = vb + h * a3
-                a4 = wb[b] - _force(kind, coulomb, z4, v4, q) * im
-                z[b] = zb + h / 6.0 * (vb + 2.0 * v2 + 2.0 * v3 + v4)
-                v[b] = vb + h / 6.0 * (a1 + 2.0 * a2 + 2.0 * a3 + a4)
-        for b in range(nb):
-            if alive[b] and not (abs(z[b]) < z_limit and abs(v[b]) < v_limit):
-                alive[b] = False
-                fail_step[b] = k + 1
-                status[b] = STATUS_GEOMETRY if (kind == KIND_DEVICE and not math.isfinite(z[b])) else STATUS_DIVERGED
-            if not alive[b]:
-                z[b] = math.nan
-                v[b] = math.nan
-            out_z[k + 1, b] = z[b]
-            if store_v:
-                out_v[k + 1, b] = v[b]
-    return 0
-
-
-# One compiled kernel per (restoring-force kind, Coulomb friction present): the flags are constants
-# inside each, so the batch loop has no data-dependent branches. (A factory of closures would
-# repeat less, but numba's on-disk cache cannot tell such closures apart.)
-# fmt: off
-@numba.njit(**_JIT)
-def _kernel_poly(p, gain, u, uidx, dt, nsub, z0, v0, zl, vl, oz, ov, sv, st, fs):
-    return _integrate(KIND_POLYNOMIAL, False, p, gain, u, uidx, dt, nsub, z0, v0, zl, vl, oz, ov, sv, st, fs)
-
-
-@numba.njit(**_JIT)
-def _kernel_poly_coulomb(p, gain, u, uidx, dt, nsub, z0, v0, zl, vl, oz, ov, sv, st, fs):
-    return _integrate(KIND_POLYNOMIAL, True, p, gain, u, uidx, dt, nsub, z0, v0, zl, vl, oz, ov, sv, st, fs)
-
-
-@numba.njit(**_JIT)
-def _kernel_device(p, gain, u, uidx, dt, nsub, z0, v0, zl, vl, oz, ov, sv, st, fs):
-    return _integrate(KIND_DEVICE, False, p, gain, u, uidx, dt, nsub, z0, v0, zl, vl, oz, ov, sv, st, fs)
-
-
-@numba.njit(**_JIT)
-def _kernel_device_coulomb(p, gain, u, uidx, dt, nsub, z0, v0, zl, vl, oz, ov, sv, st, fs):
-    return _integrate(KIND_DEVICE, True, p, gain, u, uidx, dt, nsub, z0, v0, zl, vl, oz, ov, sv, st, fs)
-# fmt: on
-
-
-_KERNELS = {
-    (KIND_POLYNOMIAL, False): _kernel_poly,
-    (KIND_POLYNOMIAL, True): _kernel_poly_coulomb,
-    (KIND_DEVICE, False): _kernel_device,
-    (KIND_DEVICE, True): _kernel_device_coulomb,
-}
 
 
 @dataclass(frozen=True)
@@ -345,8 +162,12 @@ def simulate_batch(
     p = np.asarray(params, dtype=np.float64)
     if p.ndim == 1:
         p = p[:, None]
-    if p.shape[0] != N_PARAMS:
-        raise ValueError(f"params must have {N_PARAMS} rows, got shape {p.shape}")
+    lay = effects.layout()
+    if p.shape[0] != lay.size:
+        raise ValueError(
+            f"params must have {lay.size} rows (the effect registry's layout), got shape {p.shape}: "
+            "kernel parameters made before an effect was registered?"
+        )
     nb = p.shape[1]
     if not np.all(np.isfinite(p)):
         raise ValueError("simulation parameters contain NaN or inf")
@@ -387,15 +208,16 @@ def simulate_batch(
         work = nb * n * int(substeps)
         threads = min(os.cpu_count() or 1, max(1, nb // 64), max(1, work // 200_000))
     chunks = [c for c in np.array_split(np.arange(nb), max(1, int(threads))) if c.size]
-    kernel = _KERNELS[(k, bool(np.any(p[P_COULOMB] != 0.0)))]
+    run_kernel = kernel(k, p, lay.monomials)
 
     def run(c):
         # each thread writes its own time-major block: shared rows would false-share cache lines
         sl = slice(c[0], c[-1] + 1)
         oz = np.empty((n, c.size))
         ov = np.empty((n, c.size)) if store_velocity else np.empty((1, c.size))
-        kernel(
+        run_kernel(
             np.ascontiguousarray(p[:, sl]),
+            lay.monomials,
             gain[sl],
             u2,
             uidx[sl],
@@ -457,146 +279,3 @@ def simulate(
         z_limit=z_limit,
         v_limit=v_limit,
     )
-
-
-def reference_solution(
-    system, u: np.ndarray, dt: float, z0: float, v0: float = 0.0, rtol: float = 1e-10, input_kind: str = "base_acc"
-) -> np.ndarray:
-    """z at the samples by scipy's adaptive DOP853 (``rtol``), with the same linearly
-    interpolated input: the independent reference the simulator is checked against.
-
-    The input has a kink at every sample, which an adaptive integrator at tight tolerance crawls
-    through; so each sample interval, where the input is smooth, is integrated on its own
-    (scipy's DOP853 stepper restarted from the previous end state) with a scalar right-hand side.
-    """
-    p = system.kernel_params()
-    m = p[P_M]
-    gain = -1.0 if input_kind == "base_acc" else 1.0 / m
-    u = np.asarray(u, float)
-    n = u.size
-    slope = np.diff(u, append=u[-1])
-    ul, sl = u.tolist(), slope.tolist()
-    ca, sa = math.cos(p[3]), math.sin(p[3])
-    q = p.tolist()
-
-    def force(z: float, v: float) -> float:
-        if system.kind == "polynomial":
-            k = ((q[4] * z + q[3]) * z - q[2]) * z + q[1]
-        else:
-            bb = q[2] * ca - z * sa
-            r = math.sqrt(bb * bb - z * z)
-            k = 2.0 * q[1] * (r - bb + q[4]) * (sa - (bb * sa + z) / r) + m * q[5]
-        k += z * z * (q[P_QUAD_STIFF] + z * (q[P_CUBIC_STIFF] + z * (q[P_QUARTIC] + z * q[P_QUINTIC])))
-        dz = z - q[P_STOP_Z]
-        k += 0.5 * q[P_STOP_K] * (dz + math.copysign(1.0, q[P_STOP_Z]) * abs(dz))
-        d = v * (q[P_C] + q[P_CNL] * abs(v) + q[P_CUBIC_DAMP] * v * v)
-        return k + d + q[P_COULOMB] * math.tanh(v / COULOMB_VELOCITY_SCALE)
-
-    from scipy.integrate import DOP853
-
-    out = np.empty(n)
-    out[0] = z0
-    state = [z0, v0]
-    for k in range(n - 1):
-        uk, sk = ul[k], sl[k]
-
-        def rhs(t: float, x, uk=uk, sk=sk):
-            return np.array((x[1], gain * (uk + sk * t / dt) - force(x[0], x[1]) / m))
-
-        solver = DOP853(rhs, 0.0, state, dt, rtol=rtol, atol=1e-13)
-        while solver.status == "running":
-            solver.step()
-        state = solver.y
-        out[k + 1] = state[0]
-    return out
-
-
-@numba.njit(cache=True, error_model="numpy")
-def _benettin(kind, p, gain, u, dt, nsub, z0, v0, renorm):
-    """RK4 of the state and one tangent vector; the tangent is renormalised every ``renorm`` samples
-    and its log growth accumulated (Benettin et al. 1980). Jacobian of the force by central
-    differences of the same force law the simulator integrates."""
-    q = _member(p, 0, kind)
-    im = 1.0 / q[P_M]
-    h = dt / nsub
-    z, v, dz, dv = z0, v0, 1.0, 0.0
-    n = u.shape[0]
-    logs = np.zeros((n - 1) // renorm)
-    acc = 0.0
-    k_out = 0
-    for k in range(n - 1):
-        u0 = gain * u[k]
-        du = gain * u[k + 1] - u0
-        for j in range(nsub):
-            st = np.empty((4, 4))
-            zz, vv, ddz, ddv = z, v, dz, dv
-            for s in range(4):
-                c = 0.0 if s == 0 else (0.5 if s < 3 else 1.0)
-                if s > 0:
-                    zz = z + c * h * st[s - 1, 0]
-                    vv = v + c * h * st[s - 1, 1]
-                    ddz = dz + c * h * st[s - 1, 2]
-                    ddv = dv + c * h * st[s - 1, 3]
-                frac = (j + c) / nsub
-                w = u0 + frac * du
-                f = _force(kind, False, zz, vv, q) + q[P_COULOMB] * math.tanh(vv / COULOMB_VELOCITY_SCALE)
-                ez = 1e-7 * max(1e-3, abs(zz))
-                ev = 1e-6 * max(1e-2, abs(vv))
-                fz = (_force(kind, False, zz + ez, vv, q) - _force(kind, False, zz - ez, vv, q)) / (2 * ez)
-                fv = (_force(kind, False, zz, vv + ev, q) - _force(kind, False, zz, vv - ev, q)) / (2 * ev)
-                fv += q[P_COULOMB] / COULOMB_VELOCITY_SCALE / math.cosh(vv / COULOMB_VELOCITY_SCALE) ** 2
-                st[s, 0] = vv
-                st[s, 1] = w - f * im
-                st[s, 2] = ddv
-                st[s, 3] = -(fz * ddz + fv * ddv) * im
-            z += h / 6.0 * (st[0, 0] + 2 * st[1, 0] + 2 * st[2, 0] + st[3, 0])
-            v += h / 6.0 * (st[0, 1] + 2 * st[1, 1] + 2 * st[2, 1] + st[3, 1])
-            dz += h / 6.0 * (st[0, 2] + 2 * st[1, 2] + 2 * st[2, 2] + st[3, 2])
-            dv += h / 6.0 * (st[0, 3] + 2 * st[1, 3] + 2 * st[2, 3] + st[3, 3])
-        if (k + 1) % renorm == 0:
-            norm = math.sqrt(dz * dz + dv * dv)
-            acc += math.log(norm)
-            dz /= norm
-            dv /= norm
-            logs[k_out] = acc
-            k_out += 1
-    return logs
-
-
-def lyapunov_benettin(
-    system,
-    u: np.ndarray,
-    dt: float,
-    z0: float,
-    v0: float = 0.0,
-    *,
-    input_kind: str = "base_acc",
-    substeps: int = 4,
-    renorm_every: int = 16,
-    transient_s: float = 10.0,
-) -> dict:
-    """Largest Lyapunov exponent [1/s] of ``system`` driven by ``u`` from the variational equations
-    (ground truth for the model). The tangent norm is measured in (z [m], z' [m/s]); the exponent does
-    not depend on that choice. The first ``transient_s`` seconds are discarded.
-
-    Returns ``{"value", "running"(t, estimate)}``."""
-    p = system.kernel_params()
-    gain = -1.0 if input_kind == "base_acc" else 1.0 / p[P_M]
-    logs = _benettin(
-        KINDS[system.kind],
-        np.ascontiguousarray(p[:, None]),
-        gain,
-        np.asarray(u, float),
-        float(dt),
-        int(substeps),
-        float(z0),
-        float(v0),
-        int(renorm_every),
-    )
-    t = (np.arange(logs.size) + 1) * renorm_every * dt
-    k0 = int(np.searchsorted(t, transient_s))
-    if logs.size - k0 < 2:
-        raise ValueError("record too short for a Lyapunov exponent after the transient")
-    lam = (logs[-1] - logs[k0]) / (t[-1] - t[k0])
-    running = (logs[k0:] - logs[k0]) / np.maximum(t[k0:] - t[k0], 1e-12)
-    return {"value": float(lam), "t": t[k0:], "running": running}

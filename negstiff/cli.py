@@ -19,6 +19,8 @@ from typing import Any, Sequence
 
 import numpy as np
 
+from negstiff.models import effects
+
 EPILOG_RIG = """examples:
   negstiff rig random -o rec.csv --seed 1            300 s cross-well random record of the as-built device
   negstiff rig random --model m.json -o rec.csv      ... of a polynomial model instead (coefficients known exactly)
@@ -77,7 +79,7 @@ def _progress(args) -> bool:
 
 
 def _parse_effects(items: Sequence[str] | None) -> dict[str, Any]:
-    """``NAME=VALUE`` (``end_stop=k:2e4,z:0.035``) into an extra-effects mapping."""
+    """``NAME=VALUE`` (a stop: ``NAME=k:2e4,z:0.035``) into an extra-effects mapping."""
     out: dict[str, Any] = {}
     for item in items or []:
         if "=" not in item:
@@ -89,7 +91,7 @@ def _parse_effects(items: Sequence[str] | None) -> dict[str, Any]:
             else:
                 out[name] = float(value)
         except ValueError:
-            raise InputError(f"--effect {item!r}: the value is not a number (end_stop takes k:N/m,z:m)") from None
+            raise InputError(f"--effect {item!r}: the value is not a number (or k:N/m,z:m for a stop)") from None
     return out
 
 
@@ -686,8 +688,7 @@ def build_parser() -> argparse.ArgumentParser:
         "--effect",
         action="append",
         metavar="NAME=VALUE",
-        help="hidden extra effect (coulomb_friction, quadratic_damping, cubic_damping, quartic_stiffness, "
-        "quintic_stiffness, end_stop=k:N/m,z:m, ...); repeatable",
+        help=f"hidden extra effect ({', '.join(e.help() for e in effects.REGISTRY)}); repeatable",
     )
     rig.add_argument("--fs", type=_number(float, 1.0, 1e6), default=512.0, help="sampling rate [Hz] (default 512)")
     rig.add_argument("--noise-free", action="store_true", help="perfect sensors (no noise, no bias)")
@@ -926,8 +927,7 @@ def build_parser() -> argparse.ArgumentParser:
         parents=[common, data_opts],
         help="find where model and data disagree, name the missing effect, add it, refit",
         description="Fits the baseline (cubic K, viscous c; or linear K), locates its equation error over the state "
-        "and the regimes, scores a catalogue of effects (coulomb_friction, quadratic_damping, cubic_damping, "
-        "quartic_stiffness, quintic_stiffness, quadratic_stiffness, cubic_stiffness, end_stop, none) by held-out "
+        f"and the regimes, scores a catalogue of effects ({', '.join(effects.names())}, none) by held-out "
         "weak residual, adds the winner, refits everything, repeats until none wins, and measures the held-out gap "
         "(restarted free runs) before and after.",
     )

@@ -12,8 +12,8 @@ from negstiff.inference.lyapunov import largest_lyapunov
 from negstiff.inference.measurement import MeasurementError, from_arrays
 from negstiff.inference.periodicity import periodicity
 from negstiff.models import AS_BUILT, Model
+from negstiff.models.reference import lyapunov_benettin
 from negstiff.models.rig import Rig
-from negstiff.models.simulator import lyapunov_benettin
 
 F, FS = 9.0, 500.0  # 500 / 9 is not an integer: the sampling must be phase-synchronous
 

@@ -4,7 +4,8 @@ import numpy as np
 import pytest
 
 from negstiff.models import AS_BUILT, Model, simulate, simulate_batch
-from negstiff.models.simulator import STATUS_DIVERGED, STATUS_GEOMETRY, reference_solution
+from negstiff.models.kernel import STATUS_DIVERGED, STATUS_GEOMETRY
+from negstiff.models.reference import reference_solution
 
 FS = 512.0
 

@@ -11,7 +11,7 @@ import numpy as np
 
 from negstiff.models import Model
 from negstiff.models.device import Device
-from negstiff.models.simulator import P_C, P_CNL, P_M
+from negstiff.models.effects import DEVICE_ROWS, POLYNOMIAL_ROWS, ROWS
 
 from .windows import SIGMA_BOUNDS
 
@@ -81,8 +81,8 @@ def coefficient_parametrisation(start: Model) -> Parametrisation:
 
     def to_params(theta: np.ndarray) -> np.ndarray:
         p = np.repeat(template[:, None], theta.shape[0], axis=1)
-        p[1], p[2], p[3], p[4] = theta[:, 5], theta[:, 0], theta[:, 1], theta[:, 2]
-        p[P_C], p[P_CNL] = theta[:, 3], theta[:, 4]
+        for i, name in enumerate(names):  # k1, k2, k3, c, c_nl, k0: each into its named row
+            p[POLYNOMIAL_ROWS.get(name) or ROWS[name]] = theta[:, i]
         return p
 
     desc = [
@@ -106,10 +106,11 @@ def device_parametrisation(start: Device, mass_prior: tuple[float, float] | None
 
     def to_params(theta: np.ndarray) -> np.ndarray:
         p = np.repeat(template[:, None], theta.shape[0], axis=1)
-        p[1] = kf_per_E * theta[:, 0]
-        p[3] = np.radians(theta[:, 1])
-        p[P_M], p[P_C], p[P_CNL] = theta[:, 2], theta[:, 3], theta[:, 4]
-        p[5] = template[5] + theta[:, 5]  # the static load's acceleration: g plus the nuisance offset
+        p[DEVICE_ROWS["k_f"]] = kf_per_E * theta[:, 0]
+        p[DEVICE_ROWS["alpha"]] = np.radians(theta[:, 1])
+        p[ROWS["m"]], p[ROWS["c"]], p[ROWS["c_nl"]] = theta[:, 2], theta[:, 3], theta[:, 4]
+        g = DEVICE_ROWS["g"]
+        p[g] = template[g] + theta[:, 5]  # the static load's acceleration: g plus the nuisance offset
         return p
 
     gauss = {} if mass_prior is None else {2: mass_prior}

@@ -1,0 +1,398 @@
+"""The extra effects: one registry every part of negstiff reads.
+
+An extra effect is a named force added to the left-hand side of the equation of motion,
+
+    m z'' + D(z') + K(z) + sum_e F_e(z, z') = -m b''   (or f(t)),
+
+and a model file carries it in its ``extra`` mapping under the effect's name. Each entry of
+``REGISTRY`` says what the force is (its *law*), in what units its value is, and nothing else: the
+model's force and potential (``models.equation``), the simulator's parameter rows (``kernel_rows``,
+``layout``), the SINDy library (``library_terms``), the discrepancy catalogue, the refinement's
+parameters and the CLI's help all derive from it. Adding an effect is one ``Effect(...)`` entry (a
+test registers one with ``registered``): a ``Monomial`` law is simulated, identified and named without
+touching any other file; only a new *kind* of law (beside monomials, the smoothed sign and the
+one-sided stop) needs a compiled kernel of its own.
+
+Three laws:
+
+* ``Monomial`` a |z|^p sgn(z)^s |z'|^q sgn(z')^r: every polynomial stiffness or damping term (z^4 is
+  p = 4, s = 0; z'^3 is q = 3, r = 1; a linear-in-|z| stiffness is p = 1, s = 0). A monomial that is
+  a base field's term (z^2: k2, z^3: k3, z'|z'|: c_nl) *folds* into it: the simulator adds the two,
+  the library has one column for both, and the refinement moves the named one only.
+* ``SmoothSign`` F tanh(z' / v_s): Coulomb friction, smoothed over v_s.
+* ``OneSidedStop`` k (z - z_s) beyond z_s, on z_s's side: contact beyond a gap; two values
+  (``{"k": N/m, "z": m}``), the position a nonlinear parameter the discrepancy workflow searches.
+
+The simulator's kernel evaluates the base force, a fixed set of monomial rows (z^2..z^5, z'^3), the
+sign and the stop row with no branch (fast: the batch loop vectorises); a monomial outside that set
+gets a row of its own after them and is summed by a loop compiled only into the kernels that need it
+(``layout``).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import functools
+import math
+from dataclasses import dataclass
+from types import MappingProxyType
+from typing import Any, Mapping
+
+import numpy as np
+
+COULOMB_VELOCITY_SCALE = 1e-3
+"""Velocity [m/s] over which a smoothed-sign (Coulomb) force changes sign (tanh smoothing)."""
+
+
+def _signed_power(x: np.ndarray, power: int, odd: bool) -> np.ndarray:
+    """|x|^power sgn(x)^odd as a product of factors (x x x ..., the way pysindy's PolynomialLibrary forms
+    its columns), with |x| for the factors where the parity needs it."""
+    if power == 0:
+        return np.ones_like(x)
+    base = x if odd == bool(power % 2) else np.abs(x)
+    out = base
+    for _ in range(power - 1):
+        out = out * base
+    if odd and not power % 2:
+        out = out * np.sign(x)
+    return out
+
+
+def _label(var: str, power: int, odd: bool) -> str:
+    if power == 0:
+        return ""
+    if odd == bool(power % 2):
+        return var if power == 1 else f"{var}^{power}"
+    if power == 1:
+        return f"|{var}|"
+    return f"{var}|{var}|" if power == 2 else (f"{var}|{var}|^{power - 1}" if odd else f"|{var}|^{power}")
+
+
+@dataclass(frozen=True)
+class Monomial:
+    """Force law a |z|^z_power sgn(z)^z_odd |z'|^v_power sgn(z')^v_odd (a [N per unit of the term])."""
+
+    z_power: int = 0
+    z_odd: bool = False
+    v_power: int = 0
+    v_odd: bool = False
+
+    def __post_init__(self):
+        for p, odd in ((self.z_power, self.z_odd), (self.v_power, self.v_odd)):
+            if not (isinstance(p, int) and 0 <= p <= 9):
+                raise ValueError(f"a monomial's powers are integers 0..9, got {p!r}")
+            if odd and p == 0:
+                raise ValueError("a bare sign is not a monomial (use SmoothSign)")
+
+    @property
+    def label(self) -> str:
+        """The library term's name (z^4, v^3, v|v|, |z|, z^2 v, ...)."""
+        zs, vs = _label("z", self.z_power, self.z_odd), _label("v", self.v_power, self.v_odd)
+        return " ".join(s for s in (zs, vs) if s) or "1"
+
+    @property
+    def displacement_only(self) -> bool:
+        return self.v_power == 0
+
+    def force(self, value: float, z, v):
+        z, v = np.asarray(z, float), np.asarray(v, float)
+        return value * _signed_power(z, self.z_power, self.z_odd) * _signed_power(v, self.v_power, self.v_odd)
+
+    def potential(self, value: float, z):
+        """int_0^z of the force (displacement-only laws): |z|^(p+1)/(p+1) times sgn(z) when the force is even."""
+        z = np.asarray(z, float)
+        p = self.z_power
+        return value * _signed_power(z, p + 1, not self.z_odd) / (p + 1)
+
+    def column(self, z, v, velocity_noise: float):
+        """The library column: the law at unit value."""
+        return self.force(1.0, z, v)
+
+    def scale(self, z_rms: float, v_rms: float) -> float:
+        """The term's size at the record's rms state (the refinement's parameter scale)."""
+        return z_rms**self.z_power * v_rms**self.v_power
+
+
+@dataclass(frozen=True)
+class SmoothSign:
+    """Force law F tanh(z' / v_s) (Coulomb friction; F [N], v_s = ``COULOMB_VELOCITY_SCALE``)."""
+
+    label = "sgn(v)"
+    displacement_only = False
+
+    def force(self, value: float, z, v):
+        return value * np.tanh(np.asarray(v, float) / COULOMB_VELOCITY_SCALE)
+
+    def column(self, z, v, velocity_noise: float):
+        """In the library, the expected sign of the true velocity given the estimated one,
+        erf(z' / (sqrt(2) s_n)), s_n the velocity noise (at least v_s): ``inference.weak``."""
+        from scipy import special
+
+        scale = math.sqrt(2) * max(velocity_noise, COULOMB_VELOCITY_SCALE)
+        return special.erf(np.asarray(v, float) / scale)
+
+    def scale(self, z_rms: float, v_rms: float) -> float:
+        return 1.0
+
+
+@dataclass(frozen=True)
+class OneSidedStop:
+    """Force law k (z - z_s) for z beyond z_s on z_s's side, zero before it (``{"k": N/m, "z": m}``)."""
+
+    label = None  # no fixed library column: z_s is a nonlinear parameter (searched, then one column)
+    displacement_only = True
+    fields = ("k", "z")
+
+    @staticmethod
+    def beyond(z, z_s: float):
+        return (np.asarray(z, float) - z_s) * np.sign(z_s) > 0
+
+    def force(self, value: Mapping[str, float], z, v=None):
+        z = np.asarray(z, float)
+        return value["k"] * np.where(self.beyond(z, value["z"]), z - value["z"], 0.0)
+
+    def potential(self, value: Mapping[str, float], z):
+        z = np.asarray(z, float)
+        return 0.5 * value["k"] * np.where(self.beyond(z, value["z"]), (z - value["z"]) ** 2, 0.0)
+
+    def column(self, z, z_s: float):
+        """The library column of a stop at z_s (unit stiffness)."""
+        return self.force({"k": 1.0, "z": z_s}, z)
+
+
+@dataclass(frozen=True)
+class Effect:
+    """One registry entry: the name a model file uses, the force law, the value's units."""
+
+    name: str
+    law: Monomial | SmoothSign | OneSidedStop
+    units: str
+
+    @property
+    def n_values(self) -> int:
+        return len(getattr(self.law, "fields", ())) or 1
+
+    @property
+    def scalar(self) -> bool:
+        return not hasattr(self.law, "fields")
+
+    @property
+    def folds_into(self) -> str | None:
+        """The base field whose term this effect's law is (k2, k3, c_nl), or None."""
+        return next((f for f, (law, _) in BASE_TERMS.items() if law == self.law), None)
+
+    def value(self, raw: Any) -> Any:
+        """Validate a model file's value: a finite number, or the stop's ``{"k", "z"}``."""
+        if self.scalar:
+            return finite(self.name, raw)
+        fields = self.law.fields
+        if not isinstance(raw, Mapping) or set(raw) != set(fields):
+            raise ValueError(f"extra effect {self.name} takes {{{', '.join(repr(f) for f in fields)}}} ({self.units})")
+        k, z = finite(f"{self.name}.k", raw["k"]), finite(f"{self.name}.z", raw["z"])
+        if k < 0 or z == 0:
+            raise ValueError(f"{self.name} needs k >= 0 and a stop position z != 0")
+        return MappingProxyType({"k": k, "z": z})
+
+    def help(self) -> str:
+        """``name`` or ``name=k:N/m,z:m`` for the CLI."""
+        if self.scalar:
+            return self.name
+        return f"{self.name}=" + ",".join(f"{f}:{u}" for f, u in zip(self.law.fields, self.units.split(", ")))
+
+
+def finite(name: str, value: Any) -> float:
+    """A model parameter as a finite float, or a one-line ValueError."""
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
+        raise ValueError(f"model parameter {name} must be a number, got {value!r}")
+    value = float(value)
+    if not math.isfinite(value):
+        raise ValueError(f"model parameter {name} is not finite ({value})")
+    return value
+
+
+BASE_TERMS: Mapping[str, tuple[Monomial, float]] = MappingProxyType(
+    {
+        "k0": (Monomial(), -1.0),
+        "k1": (Monomial(1, True), 1.0),
+        "k2": (Monomial(2), -1.0),
+        "k3": (Monomial(3, True), -1.0),
+        "c": (Monomial(0, False, 1, True), -1.0),
+        "c_nl": (Monomial(0, False, 2, True), -1.0),
+    }
+)
+"""The model file's base fields as library terms, and the sign of each field relative to -m times the
+term's coefficient in z'' (K holds -k1 z, so k1 = +m coefficient)."""
+
+REGISTRY: list[Effect] = [
+    Effect("coulomb_friction", SmoothSign(), "N"),
+    Effect("quadratic_damping", Monomial(0, False, 2, True), "N s^2/m^2"),
+    Effect("cubic_damping", Monomial(0, False, 3, True), "N s^3/m^3"),
+    Effect("quadratic_stiffness", Monomial(2), "N/m^2"),
+    Effect("cubic_stiffness", Monomial(3, True), "N/m^3"),
+    Effect("quartic_stiffness", Monomial(4), "N/m^4"),
+    Effect("quintic_stiffness", Monomial(5, True), "N/m^5"),
+    Effect("end_stop", OneSidedStop(), "N/m, m"),
+]
+"""The effects a model file may name, in the order the CLI lists them."""
+
+
+def names() -> tuple[str, ...]:
+    return tuple(e.name for e in REGISTRY)
+
+
+def get(name: str) -> Effect:
+    for e in REGISTRY:
+        if e.name == name:
+            return e
+    raise ValueError(f"unknown extra effect {name!r}; known: {', '.join(names())}")
+
+
+@contextlib.contextmanager
+def registered(*effects: Effect):
+    """Add effects to the registry for the duration of a ``with`` block (tests, experiments)."""
+    for e in effects:
+        if e.name in names():
+            raise ValueError(f"an effect named {e.name!r} is registered already")
+    REGISTRY.extend(effects)
+    try:
+        layout.cache_clear()
+        yield effects
+    finally:
+        for e in effects:
+            REGISTRY.remove(e)
+        layout.cache_clear()
+
+
+# --- forces and potentials of an ``extra`` mapping ---------------------------------------------------
+def normalise(extra: Mapping[str, Any] | None) -> Mapping[str, Any]:
+    """Validate an ``extra`` mapping and return it read-only (scalars as float, the stop as a mapping)."""
+    return MappingProxyType({name: get(name).value(value) for name, value in dict(extra or {}).items()})
+
+
+def force(extra: Mapping[str, Any], z, zdot):
+    """Force of the extra effects [N] at displacement ``z`` [m] and velocity ``zdot`` [m/s]."""
+    z, zdot = np.asarray(z, float), np.asarray(zdot, float)
+    f = np.zeros(np.broadcast(z, zdot).shape)
+    for e in REGISTRY:
+        if e.name in extra and not e.law.displacement_only:
+            f = f + e.law.force(extra[e.name], z, zdot)
+    return f + stiffness_force(extra, z)
+
+
+def stiffness_force(extra: Mapping[str, Any], z):
+    """The displacement-only part of the extra effects [N] (it belongs to the restoring force)."""
+    z = np.asarray(z, float)
+    f = np.zeros(z.shape)
+    for e in REGISTRY:
+        if e.name in extra and e.law.displacement_only:
+            f = f + e.law.force(extra[e.name], z, 0.0)
+    return f
+
+
+def stiffness_potential(extra: Mapping[str, Any], z):
+    """Potential energy [J] of the displacement-only extra effects, zero at z = 0."""
+    z = np.asarray(z, float)
+    u = np.zeros(z.shape)
+    for e in REGISTRY:
+        if e.name in extra and e.law.displacement_only:
+            u = u + e.law.potential(extra[e.name], z)
+    return u
+
+
+# --- the simulator's parameter layout ------------------------------------------------------------------
+ROWS: Mapping[str, int] = MappingProxyType(
+    {"m": 0, "c": 7, "c_nl": 8, "sign": 9, "v^3": 10, "z^2": 11, "z^3": 12, "z^4": 13, "z^5": 14, "stop_k": 15,
+     "stop_z": 16}
+)  # fmt: skip
+"""Named rows of the kernel parameter vector both restoring-force kinds share (rows 1-6 are the
+restoring force's own: k0..k3 for a polynomial, the geometry for the device). A monomial whose label
+names a row is evaluated there, branch-free."""
+N_FIXED = 17
+POLYNOMIAL_ROWS: Mapping[str, int] = MappingProxyType({"k0": 1, "k1": 2, "k2": 3, "k3": 4})
+"""The polynomial restoring force's rows [N, N/m, N/m^2, N/m^3]."""
+DEVICE_ROWS: Mapping[str, int] = MappingProxyType({"k_f": 1, "L": 2, "alpha": 3, "D0": 4, "g": 5})
+"""The device's rows: arm stiffness [N/m], rod length [m], frame angle [rad], pre-compression [m], g [m/s^2]."""
+
+
+@dataclass(frozen=True)
+class Layout:
+    """The kernel parameter vector: its size, the row each effect writes, and the extra monomial rows
+    (``monomials``: one (row, z_power, z_odd, v_power, v_odd) per effect with no fixed row)."""
+
+    size: int
+    rows: Mapping[str, tuple[int, ...]]
+    monomials: np.ndarray
+
+
+def _fixed_rows(e: Effect) -> tuple[int, ...] | None:
+    if isinstance(e.law, SmoothSign):
+        return (ROWS["sign"],)
+    if isinstance(e.law, OneSidedStop):
+        return ROWS["stop_k"], ROWS["stop_z"]
+    label = e.law.label
+    return (ROWS[label],) if label in ROWS else (ROWS[e.folds_into],) if e.folds_into in ROWS else None
+
+
+@functools.lru_cache(maxsize=1)
+def layout() -> Layout:
+    rows, mono = {}, []
+    used: dict[int, str] = {}
+    for e in REGISTRY:
+        fixed = _fixed_rows(e)
+        if fixed is None:
+            r = N_FIXED + len(mono)
+            law = e.law
+            mono.append((r, law.z_power, int(law.z_odd), law.v_power, int(law.v_odd)))
+            fixed = (r,)
+        elif not isinstance(e.law, Monomial):  # a monomial may share a row (it adds); a sign or stop may not
+            clash = [used[r] for r in fixed if r in used]
+            if clash:
+                raise ValueError(f"effects {clash[0]} and {e.name} both need the kernel's {type(e.law).__name__} row")
+        for r in fixed:
+            used.setdefault(r, e.name)
+        rows[e.name] = fixed
+    table = np.array(mono, dtype=np.int64).reshape(-1, 5)
+    return Layout(N_FIXED + len(mono), MappingProxyType(rows), table)
+
+
+def kernel_rows(m: float, c: float, c_nl: float, extra: Mapping[str, Any]) -> np.ndarray:
+    """The kernel parameter vector with the rows both restoring-force kinds share filled in (mass,
+    damping, every effect); the caller writes the restoring force's rows 1-6."""
+    lay = layout()
+    p = np.zeros(lay.size)
+    p[ROWS["m"]], p[ROWS["c"]], p[ROWS["c_nl"]] = m, c, c_nl
+    for name, value in extra.items():
+        rows = lay.rows[name]
+        if len(rows) == 1:
+            p[rows[0]] += value
+        else:
+            p[rows[0]], p[rows[1]] = value["k"], value["z"]
+    return p
+
+
+# --- the identification library ---------------------------------------------------------------------
+@dataclass(frozen=True)
+class Term:
+    """A library column: its label, the law it evaluates and what it maps to (a base field, with the
+    sign of the field relative to -m times the coefficient, or an effect, sign -1)."""
+
+    label: str
+    law: Monomial | SmoothSign
+    field: str
+    sign: float
+
+
+def library_terms() -> tuple[Term, ...]:
+    """The library: the base fields' terms and every effect with a column of its own; displacement
+    terms first (base, then effects by power), then velocity and mixed terms (base, monomials, then the
+    sign), so a term's position is stable when effects are added."""
+    base = [Term(law.label, law, f, s) for f, (law, s) in BASE_TERMS.items()]
+    own = [Term(e.law.label, e.law, e.name, -1.0) for e in REGISTRY if e.law.label is not None and e.folds_into is None]
+
+    def key(t: Term):
+        is_base = t.field in BASE_TERMS
+        group = 0 if t.law.displacement_only else 1
+        rank = (0, t.law.z_power, t.law.v_power) if isinstance(t.law, Monomial) else (1, 0, 0)
+        return (group, not is_base, rank if not is_base else (0, 0, 0))
+
+    return tuple(sorted(base + own, key=key))

@@ -1,0 +1,258 @@
+"""The compiled force law and Runge-Kutta loop of the simulator (numba), shared by the batched
+simulator (``simulator``), the variational equations (``reference``) and the hybrid model's free runs
+(``inference.hybrid``).
+
+A member's parameters are one column of the kernel parameter vector (``effects.layout``): rows 0-16
+are fixed (mass; the restoring force's rows 1-6, k0..k3 for a polynomial or the device's geometry;
+damping; the effects with a fixed row), rows from 17 on hold the registry's other monomials, whose
+powers ``mono`` gives (one row per monomial: row, z_power, z_odd, v_power, v_odd).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba
+import numpy as np
+
+from .effects import COULOMB_VELOCITY_SCALE, ROWS
+
+KIND_POLYNOMIAL, KIND_DEVICE = 0, 1
+KINDS = {"polynomial": KIND_POLYNOMIAL, "device": KIND_DEVICE}
+STATUS_OK, STATUS_DIVERGED, STATUS_GEOMETRY = 0, 1, 2
+P_M, P_C, P_CNL, P_SIGN, P_V3 = ROWS["m"], ROWS["c"], ROWS["c_nl"], ROWS["sign"], ROWS["v^3"]
+P_Z2, P_Z3, P_Z4, P_Z5 = ROWS["z^2"], ROWS["z^3"], ROWS["z^4"], ROWS["z^5"]
+P_STOP_K, P_STOP_Z = ROWS["stop_k"], ROWS["stop_z"]
+
+JIT = {"cache": True, "nogil": True, "error_model": "numpy"}  # numpy error model: no zero-division
+# branches in the loop, which is what lets LLVM vectorise over the batch (4x measured here).
+
+
+@numba.njit(inline="always", **JIT)
+def force(kind, coulomb, z, v, q):
+    """Total non-inertial force D + K + extra [N] for one member's parameter tuple ``q``.
+
+    polynomial: q[1..4] = k0, k1, k2, k3; device: q[1] = k_f, q[2] = L cos(alpha), q[3] = sin(alpha),
+    q[4] = D0, q[5] = g (exact rod-frame geometry; NaN where the rods cannot reach z). ``kind`` and
+    ``coulomb`` are compile-time constants in each specialised kernel, so their branches vanish.
+    """
+    if kind == KIND_POLYNOMIAL:
+        k = ((q[4] * z + q[3]) * z - q[2]) * z + q[1]
+    else:
+        bb = q[2] - z * q[3]
+        r2 = bb * bb - z * z
+        r = math.sqrt(r2) if (r2 > 0.0 and bb > 0.0) else math.nan
+        k = 2.0 * q[1] * (r - bb + q[4]) * (q[3] - (bb * q[3] + z) / r) + q[P_M] * q[5]
+    k += z * z * (q[P_Z2] + z * (q[P_Z3] + z * (q[P_Z4] + z * q[P_Z5])))
+    # one-sided stop (branch-free): k_s max(z - z_s, 0) for z_s > 0, k_s min(z - z_s, 0) for z_s < 0
+    dz = z - q[P_STOP_Z]
+    k += 0.5 * q[P_STOP_K] * (dz + math.copysign(1.0, q[P_STOP_Z]) * abs(dz))
+    d = v * (q[P_C] + q[P_CNL] * abs(v) + q[P_V3] * v * v)
+    if coulomb:
+        d += q[P_SIGN] * math.tanh(v / COULOMB_VELOCITY_SCALE)
+    return k + d
+
+
+@numba.njit(inline="always", **JIT)
+def monomials(z, v, p, b, mono):
+    """The registry's monomials without a fixed row: sum of p[row, b] |z|^zp sgn(z)^zo |v|^vp sgn(v)^vo."""
+    f = 0.0
+    az = abs(z)
+    av = abs(v)
+    for j in range(mono.shape[0]):
+        t = p[mono[j, 0], b]
+        for _ in range(mono[j, 1]):
+            t *= az
+        if mono[j, 2] and z < 0.0:
+            t = -t
+        for _ in range(mono[j, 3]):
+            t *= av
+        if mono[j, 4] and v < 0.0:
+            t = -t
+        f += t
+    return f
+
+
+@numba.njit(inline="always", **JIT)
+def total_force(kind, coulomb, generic, z, v, q, p, b, mono):
+    """``force`` plus, in the kernels compiled with ``generic``, the extra monomial rows."""
+    if generic:
+        return force(kind, coulomb, z, v, q) + monomials(z, v, p, b, mono)
+    return force(kind, coulomb, z, v, q)
+
+
+@numba.njit(inline="always", **JIT)
+def member(p, b, kind):
+    """Parameter tuple of member b, with the device's angle rows turned into L cos(a), sin(a)."""
+    q = (
+        p[0, b],
+        p[1, b],
+        p[2, b],
+        p[3, b],
+        p[4, b],
+        p[5, b],
+        p[6, b],
+        p[7, b],
+        p[8, b],
+        p[9, b],
+        p[10, b],
+        p[11, b],
+        p[12, b],
+        p[13, b],
+        p[14, b],
+        p[15, b],
+        p[16, b],
+    )
+    if kind == KIND_DEVICE:
+        q = (q[0], q[1], q[2] * math.cos(q[3]), math.sin(q[3])) + q[4:]
+    return q
+
+
+@numba.njit(inline="always", **JIT)
+def _integrate(
+    kind,
+    coulomb,
+    generic,
+    p,
+    mono,
+    gain,
+    u,
+    uidx,
+    dt,
+    nsub,
+    z0,
+    v0,
+    z_limit,
+    v_limit,
+    out_z,
+    out_v,
+    store_v,
+    status,
+    fail_step,
+):
+    """RK4 over the N sample intervals of each member's input row ``u[uidx[b]]``; outputs time-major.
+
+    ``out_z.shape[0]`` is N + 1 output samples. The input row holds either the N + 1 samples (linearly
+    interpolated inside each interval) or, when it has 2 ``nsub`` N + 1 columns, the input at every
+    Runge-Kutta stage time (``stage_input``), read as it is."""
+    nb = p.shape[1]
+    n = out_z.shape[0]
+    staged = u.shape[1] != n
+    h = dt / nsub
+    z = z0.copy()
+    v = v0.copy()
+    ua = np.empty(nb)
+    ub = np.empty(nb)
+    wa = np.empty(nb)
+    wm = np.empty(nb)
+    wb = np.empty(nb)
+    alive = np.ones(nb, dtype=np.bool_)
+    for b in range(nb):
+        out_z[0, b] = z[b]
+        if store_v:
+            out_v[0, b] = v[b]
+    for k in range(n - 1):
+        if not staged:
+            for b in range(nb):  # gather the input once per sample, outside the vectorised loop
+                ua[b] = gain[b] * u[uidx[b], k]
+                ub[b] = gain[b] * u[uidx[b], k + 1]
+        for j in range(nsub):
+            if staged:  # the input at the step's start, midpoint and end
+                c = 2 * (k * nsub + j)
+                for b in range(nb):
+                    wa[b] = gain[b] * u[uidx[b], c]
+                    wm[b] = gain[b] * u[uidx[b], c + 1]
+                    wb[b] = gain[b] * u[uidx[b], c + 2]
+            else:
+                fa = j / nsub
+                fm = (j + 0.5) / nsub
+                fb = (j + 1.0) / nsub
+                for b in range(nb):
+                    du = ub[b] - ua[b]
+                    wa[b] = ua[b] + fa * du
+                    wm[b] = ua[b] + fm * du
+                    wb[b] = ua[b] + fb * du
+            for b in range(nb):
+                q = member(p, b, kind)
+                im = 1.0 / q[P_M]
+                zb = z[b]
+                vb = v[b]
+                a1 = wa[b] - total_force(kind, coulomb, generic, zb, vb, q, p, b, mono) * im
+                z2 = zb + 0.5 * h * vb
+                v2 = vb + 0.5 * h * a1
+                a2 = wm[b] - total_force(kind, coulomb, generic, z2, v2, q, p, b, mono) * im
+                z3 = zb + 0.5 * h * v2
+                v3 = vb + 0.5 * h * a2
+                a3 = wm[b] - total_force(kind, coulomb, generic, z3, v3, q, p, b, mono) * im
+                z4 = zb + h * v3
+                v4 = vb + h * a3
+                a4 = wb[b] - total_force(kind, coulomb, generic, z4, v4, q, p, b, mono) * im
+                z[b] = zb + h / 6.0 * (vb + 2.0 * v2 + 2.0 * v3 + v4)
+                v[b] = vb + h / 6.0 * (a1 + 2.0 * a2 + 2.0 * a3 + a4)
+        for b in range(nb):
+            if alive[b] and not (abs(z[b]) < z_limit and abs(v[b]) < v_limit):
+                alive[b] = False
+                fail_step[b] = k + 1
+                status[b] = STATUS_GEOMETRY if (kind == KIND_DEVICE and not math.isfinite(z[b])) else STATUS_DIVERGED
+            if not alive[b]:
+                z[b] = math.nan
+                v[b] = math.nan
+            out_z[k + 1, b] = z[b]
+            if store_v:
+                out_v[k + 1, b] = v[b]
+    return 0
+
+
+# One compiled kernel per (restoring-force kind, smoothed sign present, extra monomials present): the
+# flags are constants inside each, so the batch loop has no data-dependent branches. (A factory of
+# closures would repeat less, but numba's on-disk cache cannot tell such closures apart.)
+# fmt: off
+@numba.njit(**JIT)
+def _kernel_poly(p, mono, gain, u, uidx, dt, nsub, z0, v0, zl, vl, oz, ov, sv, st, fs):
+    return _integrate(KIND_POLYNOMIAL, False, False, p, mono, gain, u, uidx, dt, nsub,
+                      z0, v0, zl, vl, oz, ov, sv, st, fs)
+
+
+@numba.njit(**JIT)
+def _kernel_poly_sign(p, mono, gain, u, uidx, dt, nsub, z0, v0, zl, vl, oz, ov, sv, st, fs):
+    return _integrate(KIND_POLYNOMIAL, True, False, p, mono, gain, u, uidx, dt, nsub,
+                      z0, v0, zl, vl, oz, ov, sv, st, fs)
+
+
+@numba.njit(**JIT)
+def _kernel_device(p, mono, gain, u, uidx, dt, nsub, z0, v0, zl, vl, oz, ov, sv, st, fs):
+    return _integrate(KIND_DEVICE, False, False, p, mono, gain, u, uidx, dt, nsub,
+                      z0, v0, zl, vl, oz, ov, sv, st, fs)
+
+
+@numba.njit(**JIT)
+def _kernel_device_sign(p, mono, gain, u, uidx, dt, nsub, z0, v0, zl, vl, oz, ov, sv, st, fs):
+    return _integrate(KIND_DEVICE, True, False, p, mono, gain, u, uidx, dt, nsub,
+                      z0, v0, zl, vl, oz, ov, sv, st, fs)
+
+
+@numba.njit(**JIT)
+def _kernel_poly_generic(p, mono, gain, u, uidx, dt, nsub, z0, v0, zl, vl, oz, ov, sv, st, fs):
+    return _integrate(KIND_POLYNOMIAL, True, True, p, mono, gain, u, uidx, dt, nsub,
+                      z0, v0, zl, vl, oz, ov, sv, st, fs)
+
+
+@numba.njit(**JIT)
+def _kernel_device_generic(p, mono, gain, u, uidx, dt, nsub, z0, v0, zl, vl, oz, ov, sv, st, fs):
+    return _integrate(KIND_DEVICE, True, True, p, mono, gain, u, uidx, dt, nsub,
+                      z0, v0, zl, vl, oz, ov, sv, st, fs)
+# fmt: on
+
+
+def kernel(kind: int, p: np.ndarray, mono: np.ndarray):
+    """The compiled kernel for a batch: its restoring-force kind, whether any member has a smoothed
+    sign, whether the registry has extra monomial rows (then one general kernel, sign included)."""
+    if mono.shape[0]:
+        return _kernel_poly_generic if kind == KIND_POLYNOMIAL else _kernel_device_generic
+    sign = bool(np.any(p[P_SIGN] != 0.0))
+    return {
+        (KIND_POLYNOMIAL, False): _kernel_poly,
+        (KIND_POLYNOMIAL, True): _kernel_poly_sign,
+        (KIND_DEVICE, False): _kernel_device,
+        (KIND_DEVICE, True): _kernel_device_sign,
+    }[(kind, sign)]
