@@ -14,101 +14,19 @@ nothing about the integrator). Timings are medians of repeats, after a warm-up (
 from __future__ import annotations
 
 import argparse
-import ctypes
 import os
 import platform
-import shutil
-import subprocess
 import sys
-import tempfile
 import time
-from pathlib import Path
 
 import numpy as np
-from scipy.integrate import solve_ivp
 
 from negstiff.files import write_text
 from negstiff.models import AS_BUILT, simulate, simulate_batch
+from negstiff.models.effects import DEVICE_ROWS, POLYNOMIAL_ROWS
 from negstiff.models.rig import Rig
 
-C_RK4 = r"""
-#include <math.h>
-/* Plain RK4 for m z'' + c z' + c_nl z'|z'| + k3 z^3 + k2 z^2 - k1 z + k0 = -m u,
-   u linearly interpolated between samples, nsub steps per sample. */
-static inline double acc(double z, double v, double w, const double *p) {
-    double m = p[0], k0 = p[1], k1 = p[2], k2 = p[3], k3 = p[4], c = p[5], cnl = p[6];
-    return w - (((k3 * z + k2) * z - k1) * z + k0 + v * (c + cnl * fabs(v))) / m;
-}
-void rk4(const double *p, const double *u, long n, double dt, int nsub, double z0, double v0, double *out) {
-    double z = z0, v = v0, h = dt / nsub;
-    out[0] = z;
-    for (long k = 0; k < n - 1; k++) {
-        double u0 = -u[k], du = -(u[k + 1] - u[k]);
-        for (int j = 0; j < nsub; j++) {
-            double wa = u0 + du * j / nsub, wm = u0 + du * (j + 0.5) / nsub, wb = u0 + du * (j + 1.0) / nsub;
-            double a1 = acc(z, v, wa, p);
-            double z2 = z + 0.5 * h * v, v2 = v + 0.5 * h * a1, a2 = acc(z2, v2, wm, p);
-            double z3 = z + 0.5 * h * v2, v3 = v + 0.5 * h * a2, a3 = acc(z3, v3, wm, p);
-            double z4 = z + h * v3, v4 = v + h * a3, a4 = acc(z4, v4, wb, p);
-            z += h / 6.0 * (v + 2 * v2 + 2 * v3 + v4);
-            v += h / 6.0 * (a1 + 2 * a2 + 2 * a3 + a4);
-        }
-        out[k + 1] = z;
-    }
-}
-"""
-
-
-def _median_time(fn, repeats: int) -> tuple[float, object]:
-    times, out = [], None
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        out = fn()
-        times.append(time.perf_counter() - t0)
-    return float(np.median(times)), out
-
-
-def build_c_rk4():
-    """Compile the C RK4 loop with the system compiler; None if there is none."""
-    cc = shutil.which("cc") or shutil.which("gcc")
-    if cc is None:
-        return None
-    d = Path(tempfile.mkdtemp(prefix="negstiff-bench-"))
-    (d / "rk4.c").write_text(C_RK4)
-    lib = d / "rk4.so"
-    subprocess.run(
-        [cc, "-O3", "-march=native", "-shared", "-fPIC", "-o", str(lib), str(d / "rk4.c"), "-lm"],
-        check=True,
-        capture_output=True,
-    )
-    f = ctypes.CDLL(str(lib)).rk4
-    dp = ctypes.POINTER(ctypes.c_double)
-    f.argtypes = [dp, dp, ctypes.c_long, ctypes.c_double, ctypes.c_int, ctypes.c_double, ctypes.c_double, dp]
-
-    def run(model, u, dt, nsub, z0, v0):
-        p = np.ascontiguousarray([model.m, model.k0, model.k1, model.k2, model.k3, model.c, model.c_nl])
-        u = np.ascontiguousarray(u, dtype=float)
-        out = np.empty(u.size)
-        f(p.ctypes.data_as(dp), u.ctypes.data_as(dp), u.size, dt, nsub, z0, v0, out.ctypes.data_as(dp))
-        return out
-
-    return run
-
-
-def solve_ivp_run(model, u, dt, z0, v0):
-    t = np.arange(u.size) * dt
-
-    def rhs(tt, x):
-        w = -np.interp(tt, t, u)
-        z, v = x
-        return [
-            v,
-            w
-            - (((model.k3 * z + model.k2) * z - model.k1) * z + model.k0 + v * (model.c + model.c_nl * abs(v)))
-            / model.m,
-        ]
-
-    return solve_ivp(rhs, (0, t[-1]), [z0, v0], t_eval=t, method="RK45", rtol=1e-8, atol=1e-10).y[0]
+from .baselines import build_c_rk4, median_time, solve_ivp_run
 
 
 def simulator_benchmark(quick: bool = False) -> tuple[list[list[str]], dict]:
@@ -130,10 +48,10 @@ def simulator_benchmark(quick: bool = False) -> tuple[list[list[str]], dict]:
         return float(np.sqrt(np.mean((z - ref) ** 2)) / scale)
 
     simulate(model, u_cross[:100], dt, z0=zp)  # warm-up: compile
-    t_ours, _ = _median_time(lambda: simulate(model, u_cross, dt, z0=zp), 5)
+    t_ours, _ = median_time(lambda: simulate(model, u_cross, dt, z0=zp), 5)
     err_ours = rel_err(simulate(model, u_in, dt, z0=zp).z[0])
-    t_dev, _ = _median_time(lambda: simulate(AS_BUILT, u_cross, dt), 5)
-    t_ivp, _ = _median_time(lambda: solve_ivp_run(model, u_cross, dt, zp, 0.0), 1)
+    t_dev, _ = median_time(lambda: simulate(AS_BUILT, u_cross, dt), 5)
+    t_ivp, _ = median_time(lambda: solve_ivp_run(model, u_cross, dt, zp, 0.0), 1)
     err_ivp = rel_err(solve_ivp_run(model, u_in, dt, zp, 0.0))
     res["single"] = {
         "numba_s": t_ours,
@@ -173,7 +91,7 @@ def simulator_benchmark(quick: bool = False) -> tuple[list[list[str]], dict]:
     if c_rk4 is not None:
         for nsub in (4, 2):
             c_rk4(model, u_cross[:100], dt, nsub, zp, 0.0)
-            t_c, _ = _median_time(lambda: c_rk4(model, u_cross, dt, nsub, zp, 0.0), 5)
+            t_c, _ = median_time(lambda: c_rk4(model, u_cross, dt, nsub, zp, 0.0), 5)
             err_c = rel_err(c_rk4(model, u_in, dt, nsub, zp, 0.0))
             res[f"c_rk4_{nsub}"] = {"s": t_c, "rel_err": err_c}
             rows.append(
@@ -186,19 +104,27 @@ def simulator_benchmark(quick: bool = False) -> tuple[list[list[str]], dict]:
                 ]
             )
 
+    batch_rows, res["batch"] = _batch_benchmark(model, u_cross, dt, zp, t_ivp, quick)
+    return rows + batch_rows, res
+
+
+def _batch_benchmark(model, u_cross: np.ndarray, dt: float, zp: float, t_ivp: float, quick: bool):
+    """A batch of records with +-2 % parameters, polynomial and exact K, per record against solve_ivp."""
+    rows = []
     nb = 64 if quick else 256
     rng = np.random.default_rng(0)
     P = np.repeat(model.kernel_params()[:, None], nb, axis=1)
-    P[2:5] *= 1 + 0.02 * rng.uniform(-1, 1, (3, nb))
+    k123 = [POLYNOMIAL_ROWS[k] for k in ("k1", "k2", "k3")]
+    P[k123] *= 1 + 0.02 * rng.uniform(-1, 1, (3, nb))
     Pd = np.repeat(AS_BUILT.kernel_params()[:, None], nb, axis=1)
-    Pd[1] *= 1 + 0.02 * rng.uniform(-1, 1, nb)
+    Pd[DEVICE_ROWS["k_f"]] *= 1 + 0.02 * rng.uniform(-1, 1, nb)
     x0 = np.array([zp, 0.0])
     simulate_batch(P[:, :4], "polynomial", u_cross[:100], dt, x0)
-    t_b, _ = _median_time(lambda: simulate_batch(P, "polynomial", u_cross, dt, x0), 3)
-    t_bd, _ = _median_time(
+    t_b, _ = median_time(lambda: simulate_batch(P, "polynomial", u_cross, dt, x0), 3)
+    t_bd, _ = median_time(
         lambda: simulate_batch(Pd, "device", u_cross, dt, np.array([AS_BUILT.equilibria().z_plus, 0])), 3
     )
-    res["batch"] = {
+    res = {
         "members": nb,
         "polynomial_s": t_b,
         "device_s": t_bd,
@@ -262,10 +188,10 @@ def nsi_benchmark(quick: bool = False) -> tuple[list[list[str]], dict]:
     def direct():
         j = n - 2 * i + 1
         blocks = [
-            subspace._hankel_block(u, i, i, j),
-            subspace._hankel_block(u, 0, i, j),
-            subspace._hankel_block(y, 0, i, j),
-            subspace._hankel_block(y, i, i, j),
+            subspace.hankel_block(u, i, i, j),
+            subspace.hankel_block(u, 0, i, j),
+            subspace.hankel_block(y, 0, i, j),
+            subspace.hankel_block(y, i, i, j),
         ]
         return linalg.qr(np.vstack(blocks).T, mode="r")[0]
 
@@ -309,14 +235,14 @@ def bifurcation_benchmark(quick: bool = False) -> tuple[list[list[str]], dict]:
     plans = [(s, d) for s in ("plus", "minus") for d in ("up", "down")]
     lists = [amps if d == "up" else amps[::-1] for _, d in plans]
     rig.sweeps(9.0, [amps[:2]], ["plus"], 5, 5)  # warm-up
-    t_batch, _ = _median_time(lambda: rig.sweeps(9.0, lists, [s for s, _ in plans], settle, record), 1)
+    t_batch, _ = median_time(lambda: rig.sweeps(9.0, lists, [s for s, _ in plans], settle, record), 1)
 
     def one_by_one():
         for s_, _ in plans:
             for a in amps:
                 rig.harmonic(9.0, a, s_, settle, record)
 
-    t_one, _ = _median_time(one_by_one, 1)
+    t_one, _ = median_time(one_by_one, 1)
     n_rec = len(plans) * n_amp
     res = {"records": n_rec, "batched_s": t_batch, "one_by_one_s": t_one, "speedup": t_one / t_batch}
     rows = [
@@ -453,8 +379,8 @@ def refinement_benchmark(quick: bool = False) -> tuple[list[list[str]], dict]:
         _, _, info = refine_stage(est.model_, m, n_id, est.validation_)
         t_stage = time.perf_counter() - t0
         ident = m.segment(0, n_id)
-        t_sparse, r_sparse = _median_time(lambda: refine(est.model_, ident, windows_s=(0.05,)), 1)
-        t_dense, r_dense = _median_time(lambda: refine(est.model_, ident, windows_s=(0.05,), sparse_jacobian=False), 1)
+        t_sparse, r_sparse = median_time(lambda: refine(est.model_, ident, windows_s=(0.05,)), 1)
+        t_dense, r_dense = median_time(lambda: refine(est.model_, ident, windows_s=(0.05,), sparse_jacobian=False), 1)
         same = abs(r_sparse.stages[0]["rms_end_m"] / r_dense.stages[0]["rms_end_m"] - 1)
         key = "silverbox" if "Silverbox" in label else "rig"
         res[key] = {"refine_stage_s": t_stage, "first_stage_sparse_s": t_sparse, "first_stage_dense_s": t_dense,
@@ -468,6 +394,37 @@ def refinement_benchmark(quick: bool = False) -> tuple[list[list[str]], dict]:
     return rows, res
 
 
+def continuation_benchmark(quick: bool = False) -> tuple[list[list[str]], dict]:
+    """A 9 Hz continuation from 2 to 30 m/s^2 (issue 16) against the brute-force route a user would take
+    instead: a stepped sweep in 0.1 m/s^2 steps with the state carried over (150 settling and 16 recorded
+    periods a step, one simulator call each), which finds only the stable orbits."""
+    from negstiff.models import SEED_LIKE_CUBIC
+    from negstiff.models.continuation import nfrc
+
+    rows, res = [], {}
+    for name, system in (("seed-like cubic", SEED_LIKE_CUBIC), ("as-built device (exact geometry)", AS_BUILT)):
+        for well in ("plus", "minus"):
+            nfrc(system, freq=9.0, amplitude=(2.0, 4.0), well=well)  # warm-up: compile
+            t, r = median_time(lambda: nfrc(system, freq=9.0, amplitude=(2.0, 30.0), well=well), 1 if quick else 3)
+            n_pts = sum(len(b["points"]) for b in r["branches"])
+            res[f"{name}, {well}"] = {"s": t, "points": n_pts, "branches": len(r["branches"])}
+            rows.append([f"9 Hz, 2-30 m/s^2, {name}, from z_{well}", "negstiff nfrc (shooting + arclength)",
+                         f"{t:.2f} s", f"{n_pts} orbits on {len(r['branches'])} branches"])  # fmt: skip
+    z0, v0, n = SEED_LIKE_CUBIC.equilibria().z_plus, 0.0, 128
+    amps = np.round(np.arange(2.0, 30.0, 0.1), 2)
+    t0 = time.perf_counter()
+    for a in amps:
+        dt = 1 / (9.0 * n)
+        tt = np.arange(n * 166 + 1) * dt
+        sim = simulate(SEED_LIKE_CUBIC, a * np.sin(2 * np.pi * 9.0 * tt), dt, z0=z0, v0=v0)
+        z0, v0 = sim.z[0][-1], sim.z_dot[0][-1]
+    t_bf = time.perf_counter() - t0
+    res["brute_force_s"] = t_bf
+    rows.append(["9 Hz, 2-30 m/s^2, seed-like cubic, from z_plus", "stepped sweep, 0.1 m/s^2 steps (baseline)",
+                 f"{t_bf:.2f} s", f"{amps.size} steps, stable orbits only"])  # fmt: skip
+    return rows, res
+
+
 def _section(title: str, intro: str, header: list[str], rows: list[list[str]]) -> list[str]:
     """A report section: heading, text, a table."""
     return ["", f"## {title}", "", intro, "", "| " + " | ".join(header) + " |", "|" + "---|" * len(header)] + [
@@ -475,20 +432,17 @@ def _section(title: str, intro: str, header: list[str], rows: list[list[str]]) -
     ]
 
 
-def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("-o", "--out", default="reports/benchmarks.md")
-    ap.add_argument("--quick", action="store_true", help="60 s records and a batch of 64 (a smoke run)")
-    a = ap.parse_args(argv)
+def _simulator_section(quick: bool) -> list[str]:
+    """The report's head and the simulator section (issue 2)."""
     print("simulator benchmark (solve_ivp takes a while)...", file=sys.stderr)
-    rows, res = simulator_benchmark(a.quick)
+    rows, res = simulator_benchmark(quick)
     s = res["single"]
     lines = [
         "# negstiff benchmarks",
         "",
         f"Machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores, Python "
         f"{platform.python_version()}, numpy {np.__version__}. Written by `python -m negstiff.experiments.benchmarks`"
-        f"{' --quick' if a.quick else ''}; every ratio is against the baseline measured in the same run.",
+        f"{' --quick' if quick else ''}; every ratio is against the baseline measured in the same run.",
         "",
         "## Simulator (issue 2)",
         "",
@@ -516,31 +470,14 @@ def main(argv=None) -> int:
             f"amortises to {b['per_record_s'] * 1e3:.2f} ms per record, "
             f"{res['c_rk4_2']['s'] / b['per_record_s']:.1f}x faster than one C loop per record."
         ]
-    print("NSI benchmark...", file=sys.stderr)
-    nrows, nres = nsi_benchmark(a.quick)
-    lines += _section(
-        "NSI (issue 4)",
-        (
-            "Peak memory is what Python allocates (tracemalloc) during the call. The chunked LQ never holds the "
-            "whole block-Hankel stack; its memory is set by the chunk, not by the record length."
-        ),
-        ["case", "method", "wall time", "peak memory", "vs baseline"],
-        nrows,
-    )
-    print("bifurcation-map benchmark...", file=sys.stderr)
-    brows, bres = bifurcation_benchmark(a.quick)
-    lines += _section(
-        "Bifurcation map (issue 3)",
-        (
-            "Wall time of producing the records (simulation, sensor chain, anti-aliasing, integration), before "
-            "the periodicity analysis."
-        ),
-        ["case", "method", "wall time", "vs baseline"],
-        brows,
-    )
+    return lines
+
+
+def _posterior_section(quick: bool) -> list[str]:
+    """Posterior sampling (issue 7): batched likelihood against the per-walker loop."""
     print("posterior benchmark...", file=sys.stderr)
-    prows, pres = posterior_benchmark(a.quick)
-    lines += _section(
+    prows, pres = posterior_benchmark(quick)
+    lines = _section(
         "Posterior sampling (issue 7)",
         (
             "Effective samples per second of emcee (DE moves, whitened coordinates) on the coefficient posterior: "
@@ -568,6 +505,52 @@ def main(argv=None) -> int:
             f"the batch is {pres['t_plain'] / pres['t_batch']:.1f}x faster."
         ),
     ]
+    return lines
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("-o", "--out", default="reports/benchmarks.md")
+    ap.add_argument("--quick", action="store_true", help="60 s records and a batch of 64 (a smoke run)")
+    a = ap.parse_args(argv)
+    lines = _simulator_section(a.quick)
+    print("NSI benchmark...", file=sys.stderr)
+    nrows, nres = nsi_benchmark(a.quick)
+    lines += _section(
+        "NSI (issue 4)",
+        (
+            "Peak memory is what Python allocates (tracemalloc) during the call. The chunked LQ never holds the "
+            "whole block-Hankel stack; its memory is set by the chunk, not by the record length."
+        ),
+        ["case", "method", "wall time", "peak memory", "vs baseline"],
+        nrows,
+    )
+    print("bifurcation-map benchmark...", file=sys.stderr)
+    brows, bres = bifurcation_benchmark(a.quick)
+    lines += _section(
+        "Bifurcation map (issue 3)",
+        (
+            "Wall time of producing the records (simulation, sensor chain, anti-aliasing, integration), before "
+            "the periodicity analysis."
+        ),
+        ["case", "method", "wall time", "vs baseline"],
+        brows,
+    )
+    lines += _posterior_section(a.quick)
+    print("continuation benchmark...", file=sys.stderr)
+    crows, cres = continuation_benchmark(a.quick)
+    lines += _section(
+        "Continuation (issue 16)",
+        (
+            "`negstiff nfrc` at 9 Hz from 2 to 30 m/s^2 (doubled branches followed to period 4), against the "
+            "stepped sweep a user would simulate instead. Target: under 30 s on 2 cores."
+        ),
+        ["case", "method", "wall time", "what it gives"],
+        crows,
+    )
+    slowest = max(v["s"] for k, v in cres.items() if k != "brute_force_s")
+    lines += ["", f"The slowest continuation took {slowest:.1f} s: the 30 s target is "
+              + ("met." if slowest < 30 else "**not met**.")]  # fmt: skip
     print("refinement benchmark...", file=sys.stderr)
     rrows, rres = refinement_benchmark(a.quick)
     lines += _section(

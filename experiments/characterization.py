@@ -17,9 +17,9 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 from negstiff.inference.characterize import characterize
+from negstiff.inference.derivatives import smooth_and_differentiate
 from negstiff.inference.lyapunov import largest_lyapunov
-from negstiff.inference.measurement import Measurement, from_arrays
-from negstiff.inference.nsi import smooth_and_differentiate
+from negstiff.inference.measurement import Measurement
 from negstiff.inference.periodicity import noise_level, poincare
 from negstiff.models import AS_BUILT
 from negstiff.models.reference import lyapunov_benettin
@@ -30,7 +30,7 @@ from .report import Report, fmt, run_study
 
 
 def record_measurement(rec: RigRecord) -> Measurement:
-    return from_arrays(rec.columns["base_acc"], rec.columns["z"], rec.fs, source=rec.meta["source"])
+    return Measurement.from_rig(rec, weighed=False)
 
 
 def bifurcation_map(rig: Rig, freq: float, amplitudes, settle_periods: int, record_periods: int) -> dict[str, Any]:
@@ -67,11 +67,19 @@ def bifurcation_map(rig: Rig, freq: float, amplitudes, settle_periods: int, reco
 
 
 def characterization_section(rep: Report, results: dict[str, Any], fast: bool, seed_: int = 0) -> None:
+    """The seed's section 3 on rig records: the 9 Hz bifurcation map (Figure 4), phase portraits and
+    Lyapunov exponents of four regimes (Figures 5-6), Poincare sections of the cross-well one (Figure 7)."""
     res: dict[str, Any] = {}
     results["characterization"] = res
     rig = Rig(seed=seed_ + 5)
-    amps = np.round(np.arange(4.0, 26.01, 0.5 if fast else 0.2), 3)
     rep.heading("6. Dynamics: bifurcation map, phase portraits, Lyapunov exponent, Poincare sections (seed section 3)")
+    _bifurcation_part(rep, res, rig, fast)
+    chaotic = _portraits_and_lle_part(rep, res, rig, fast)
+    _poincare_part(rep, chaotic)
+
+
+def _bifurcation_part(rep: Report, res: dict[str, Any], rig: Rig, fast: bool) -> None:
+    amps = np.round(np.arange(4.0, 26.01, 0.5 if fast else 0.2), 3)
     bm = bifurcation_map(rig, 9.0, amps, 40 if fast else 60, 48 if fast else 64)
     res["bifurcation_map"] = {k: v for k, v in bm.items() if k != "points"} | {
         "points": [{k: v for k, v in p.items() if k != "poincare_z"} for p in bm["points"]]
@@ -112,6 +120,10 @@ def characterization_section(rep: Report, results: dict[str, Any], fast: bool, s
         + f". The seed saw period doublings near {seed.CASCADE_M_S2[0]:g}-{seed.CASCADE_M_S2[1]:g} m/s^2 "
         "from the positive well and cross-well chaos above them."
     )
+
+
+def _portraits_and_lle_part(rep: Report, res: dict[str, Any], rig: Rig, fast: bool):
+    """Figures 5 and 6 and the exponents' table; returns the cross-well record's measurement."""
     # phase portraits (Figure 5) and the LLE (Figure 6)
     cases = [(5.0, "period-1"), (14.8, "period-2"), (15.4, "period-4"), (17.0, "cross-well")]
     recs = rig.sweeps(9.0, [[a] for a, _ in cases], ["plus"] * len(cases), 100, 300 if fast else 900)
@@ -186,6 +198,10 @@ def characterization_section(rep: Report, results: dict[str, Any], fast: bool, s
         "the ground truth. Rosenstein's (nolds) is shown as a cross-check; on these records it is the least "
         "reliable of the three (it fits a divergence curve whose linear region is short at this sampling rate)."
     )
+    return chaotic_m
+
+
+def _poincare_part(rep: Report, chaotic_m) -> None:
     # Poincare sections (Figure 7)
     phases = np.arange(0, 360, 30.0)
     pc = poincare(chaotic_m, 9.0, phases)

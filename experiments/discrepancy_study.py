@@ -14,10 +14,10 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 from negstiff.inference.discrepancy import Discrepancy, residual_psd
+from negstiff.inference.measurement import Measurement
 from negstiff.models import AS_BUILT, SEED_LIKE_CROSS_WELL_RMS, SEED_LIKE_CUBIC
 from negstiff.models.rig import Rig
 
-from .nsi_study import as_measurement
 from .report import Report, fmt, run_study
 
 BASE = dataclasses.replace(SEED_LIKE_CUBIC, c_nl=0.0)
@@ -47,7 +47,7 @@ def hidden_part(rep: Report, res: dict[str, Any], duration: float, seeds: tuple[
             rec = Rig(BASE, effects={} if size is None else {effect: size}, seed=seed).random(
                 duration=duration, rms=SEED_LIKE_CROSS_WELL_RMS
             )
-            m = as_measurement(rec)
+            m = Measurement.from_rig(rec)
             d = Discrepancy().fit(m)
             r = d.result()
             found = r["effects"]
@@ -116,7 +116,7 @@ def psd_figure(rep: Report, d: Discrepancy, m, effect: str) -> None:
 
 def device_part(rep: Report, res: dict[str, Any], duration: float, seed: int) -> None:
     rec = Rig(AS_BUILT, seed=seed).random(duration=duration)
-    m = as_measurement(rec)
+    m = Measurement.from_rig(rec)
     d = Discrepancy().fit(m)
     r = d.result()
     res["as_built"] = r

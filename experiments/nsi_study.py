@@ -11,53 +11,78 @@ from __future__ import annotations
 
 import sys
 import time
+from dataclasses import dataclass
 from typing import Any
 
 import matplotlib.pyplot as plt
 import numpy as np
 from scipy import signal
 
-from negstiff.inference.measurement import Measurement, from_arrays
-from negstiff.inference.nsi import NSI, smooth_and_differentiate
-from negstiff.models import AS_BUILT, SEED_LIKE_CROSS_WELL_RMS, SEED_LIKE_CUBIC, Model, simulate
-from negstiff.models.rig import Rig, RigRecord, Sensors
+from negstiff.inference.measurement import Measurement
+from negstiff.inference.nsi import NSI
+from negstiff.inference.validation import validate
+from negstiff.models import AS_BUILT, SEED_LIKE_CROSS_WELL_RMS, SEED_LIKE_CUBIC, Model
+from negstiff.models.rig import Rig, Sensors
 
 from . import seed
 from .report import Report, fmt, run_study
 
 
-def as_measurement(rec: RigRecord) -> Measurement:
-    return from_arrays(
-        rec.columns["base_acc"], rec.columns["z"], rec.fs, mass=float(rec.meta["mass"]), source=rec.meta["source"]
-    )
-
-
 def true_floor(truth, m: Measurement, start: int) -> float:
-    """The TRUE model's own held-out free-run error on the measured record (the contract's metric)."""
-    zs, v = smooth_and_differentiate(m.z, m.fs)
-    r = simulate(truth, m.u[start:], m.dt, z0=float(zs[start]), v0=float(v[start])).z[0]
-    return float(100 * np.sqrt(np.mean((r - m.z[start:]) ** 2)) / np.sqrt(np.mean(m.z[start:] ** 2)))
+    """The TRUE model's own held-out free-run error on the measured record (the contract's metric), by
+    the validation every identified model goes through (``validation.validate``: the same start state,
+    the same input route), so the floor and the models' errors compare."""
+    return float(validate(truth, m, start)["rms_percent"])
 
 
 def pct(a: float, b: float) -> str:
     return f"{100 * (a / b - 1):+.2f} %"
 
 
-def polynomial_truth_part(rep: Report, res: dict[str, Any], duration: float, seed_: int) -> NSI:
+@dataclass(frozen=True)
+class PolynomialTruthPart:
+    """What the polynomial-truth part measured: NSI's fit of a cross-well rig record of the polynomial
+    truth, the true model's own free-run floor on the same held-out data, the record's well crossings."""
+
+    truth: Model
+    measurement: Measurement
+    est: NSI
+    floor: float
+    crossings: int
+    elapsed: float
+    duration: float
+
+    def result(self) -> dict[str, Any]:
+        r = self.est.result()
+        r.update(truth=self.truth.to_dict(), truth_floor_rms_percent=self.floor, record_s=self.duration,
+                 crossings=self.crossings, elapsed_s=self.elapsed)  # fmt: skip
+        return r
+
+
+def compute_polynomial_truth(duration: float, seed_: int) -> PolynomialTruthPart:
     truth = SEED_LIKE_CUBIC
     rec = Rig(truth, seed=seed_).random(duration=duration, rms=SEED_LIKE_CROSS_WELL_RMS)
-    m = as_measurement(rec)
+    m = Measurement.from_rig(rec)
     t0 = time.perf_counter()
     est = NSI().fit(m)
     elapsed = time.perf_counter() - t0
-    n_id = est.settings_["identification_samples"]
-    floor = true_floor(truth, m, n_id)
+    floor = true_floor(truth, m, est.settings_["identification_samples"])
     crossings = int(np.count_nonzero(np.diff(np.sign(rec.true["z"] - truth.equilibria().z_0))))
-    r = est.result()
-    r.update(
-        truth=truth.to_dict(), truth_floor_rms_percent=floor, record_s=duration, crossings=crossings, elapsed_s=elapsed
-    )
-    res["polynomial_truth"] = r
+    return PolynomialTruthPart(truth, m, est, floor, crossings, elapsed, duration)
+
+
+def polynomial_truth_part(rep: Report, res: dict[str, Any], duration: float, seed_: int) -> NSI:
+    """Compute, then render: the modal and coefficient tables, the validation, the forces."""
+    part = compute_polynomial_truth(duration, seed_)
+    res["polynomial_truth"] = part.result()
+    _render_modal_tables(rep, part)
+    _render_validation(rep, part)
+    _render_forces(rep, part)
+    return part.est
+
+
+def _render_modal_tables(rep: Report, part: PolynomialTruthPart) -> None:
+    truth, est, duration, crossings, elapsed = part.truth, part.est, part.duration, part.crossings, part.elapsed
     rep.heading("Table 1: modal parameters of the two underlying-linear systems", 3)
     rep.text(
         f"A {duration:g} s cross-well random record ({fmt(SEED_LIKE_CROSS_WELL_RMS)} m/s^2 rms, 2-40 Hz, "
@@ -153,7 +178,10 @@ def polynomial_truth_part(rep: Report, res: dict[str, Any], duration: float, see
         "estimate says the cubic-viscous-quadratic model is missing something (friction in the guide, the "
         "model-form gap of the stiffness) that the damping term absorbs, not that the guide is active."
     )
-    v = est.validation_
+
+
+def _render_validation(rep: Report, part: PolynomialTruthPart) -> None:
+    v, floor, m = part.est.validation_, part.floor, part.measurement
     rep.heading("Table 2 and Figure 8: validation over the held-out last 20 %", 3)
     rep.table(
         ["", "residual mean [mm]", "residual std [mm]", "rms_percent", "2 s restarted rms_percent"],
@@ -192,6 +220,10 @@ def polynomial_truth_part(rep: Report, res: dict[str, Any], duration: float, see
             "Figure 8 (seed): free-run validation of the NSI model over the held-out "
             "segment, in time and as PSD (black: measured; red: residual).",
         )
+
+
+def _render_forces(rep: Report, part: PolynomialTruthPart) -> None:
+    truth, mm = part.truth, part.est.model_
     rep.heading("Figure 9: restoring force, potential and damping force", 3)
     eq = truth.equilibria()
     z = np.linspace(eq.z_minus - 0.015, eq.z_plus + 0.015, 300)
@@ -219,12 +251,11 @@ def polynomial_truth_part(rep: Report, res: dict[str, Any], duration: float, see
         "around above 0.7 m/s. (The seed's Eq. 8 cubic, placed about either well, dwarfs these curves; its "
         "coefficients are in the Eq. 8 table.)",
     )
-    return est
 
 
 def as_built_part(rep: Report, res: dict[str, Any], duration: float, seed_: int) -> None:
     rec = Rig(AS_BUILT, seed=seed_).random(duration=duration)
-    m = as_measurement(rec)
+    m = Measurement.from_rig(rec)
     est = NSI().fit(m)
     floor = true_floor(AS_BUILT, m, est.settings_["identification_samples"])
     r = est.result()
@@ -286,7 +317,7 @@ def integration_sensitivity(rep: Report, res: dict[str, Any], duration: float, s
         rec = Rig(SEED_LIKE_CUBIC, sensors=Sensors(integration=method), seed=seed_).random(
             duration=duration, rms=SEED_LIKE_CROSS_WELL_RMS
         )
-        est = NSI().fit(as_measurement(rec))
+        est = NSI().fit(Measurement.from_rig(rec))
         out[method] = {
             "base_disp_error_um": 1e6 * float(np.std(rec.columns["base_disp"] - rec.true["base_disp"])),
             "f_error_percent": {w: 100 * (est.wells_[w].f_hz / SEED_LIKE_CUBIC.uls(w).f_hz - 1) for w in est.wells_},
@@ -370,7 +401,7 @@ def nsi_section(rep: Report, results: dict[str, Any], fast: bool, seed_: int = 0
     if not fast:
         integration_sensitivity(rep, res, duration, seed_ + 3)
         rec = Rig(SEED_LIKE_CUBIC, seed=seed_ + 1).random(duration=duration, rms=SEED_LIKE_CROSS_WELL_RMS)
-        stabilization_part(rep, res, est, as_measurement(rec))
+        stabilization_part(rep, res, est, Measurement.from_rig(rec))
 
 
 def main(argv=None) -> int:

@@ -15,13 +15,13 @@ from typing import Any
 import matplotlib.pyplot as plt
 import numpy as np
 
+from negstiff.inference.measurement import Measurement
 from negstiff.inference.nsi import NSI
 from negstiff.inference.posterior import Posterior, result_json
 from negstiff.inference.sindy import SINDy
 from negstiff.models import AS_BUILT, SEED_LIKE_CROSS_WELL_RMS, SEED_LIKE_CUBIC
 from negstiff.models.rig import Rig
 
-from .nsi_study import as_measurement
 from .report import Report, fmt, run_study
 
 COEFS = ("k1", "k2", "k3", "c", "c_nl")
@@ -47,7 +47,7 @@ def coefficient_part(rep: Report, res: dict[str, Any], duration: float, seed_: i
     # one record: the posterior on its first ``duration`` seconds, NSI and SINDy on all of it (their
     # selection and validation parts need a minute or more)
     rec = Rig(truth, seed=seed_).random(duration=max(duration, 60.0), rms=SEED_LIKE_CROSS_WELL_RMS)
-    m_all = as_measurement(rec)
+    m_all = Measurement.from_rig(rec)
     m = m_all.segment(0, int(round(duration * m_all.fs)))
     t0 = time.perf_counter()
     post = Posterior(seed=seed_, max_steps=600 if fast else 6000, n_ensembles=2 if fast else 4, max_windows=None)
@@ -197,7 +197,7 @@ def _predictive(rep: Report, res: dict, post: Posterior, pr) -> None:
 
 def device_part(rep: Report, res: dict[str, Any], duration: float, seed_: int, fast: bool) -> None:
     rec = Rig(AS_BUILT, seed=seed_).random(duration=duration)
-    m = as_measurement(rec)
+    m = Measurement.from_rig(rec)
     truth = {"E": AS_BUILT.E, "alpha_deg": AS_BUILT.alpha_deg, "m": AS_BUILT.m, "c": AS_BUILT.c, "c_nl": AS_BUILT.c_nl}
     out = {}
     for prior in ("free", "weighed"):

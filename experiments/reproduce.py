@@ -24,6 +24,7 @@ from negstiff.models.rig import Rig
 from .calibration import device_section
 from .characterization import characterization_section
 from .discrepancy_study import discrepancy_section
+from .nfrc import continuation_section
 from .nsi_study import nsi_section
 from .posterior_study import posterior_section
 from .report import Report, fmt
@@ -190,7 +191,7 @@ def simulator_section(rep: Report, results: dict[str, Any]) -> None:
     )
 
 
-SECTIONS = ("nsi", "updating", "characterization", "sindy", "posterior", "discrepancy", "silverbox")
+SECTIONS = ("nsi", "updating", "characterization", "sindy", "posterior", "discrepancy", "silverbox", "continuation")
 
 
 def reproduce(out: Path, fast: bool = False, seed: int = 0, progress: bool = True, sections=None) -> Path:
@@ -225,6 +226,7 @@ def reproduce(out: Path, fast: bool = False, seed: int = 0, progress: bool = Tru
         ("posterior", "Bayesian posteriors (emcee)", posterior_section),
         ("discrepancy", "discrepancy workflow", discrepancy_section),
         ("silverbox", "Silverbox benchmark (real data)", silverbox_section),
+        ("continuation", "continuation against the bifurcation map", continuation_section),
     ):
         if sections is not None and name not in sections:
             continue

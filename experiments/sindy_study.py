@@ -15,12 +15,13 @@ import matplotlib.pyplot as plt
 import numpy as np
 from scipy import signal
 
+from negstiff.inference.measurement import Measurement
 from negstiff.inference.nsi import NSI
 from negstiff.inference.sindy import SINDy, term_fields
 from negstiff.models import AS_BUILT, SEED_LIKE_CROSS_WELL_RMS, SEED_LIKE_CUBIC, Model
 from negstiff.models.rig import Rig
 
-from .nsi_study import as_measurement, pct, true_floor
+from .nsi_study import pct, true_floor
 from .report import Report, fmt, run_study
 
 HIDDEN_FRICTION_N = 0.1
@@ -63,7 +64,7 @@ def _summary(est: SINDy, elapsed: float) -> dict[str, Any]:
 def polynomial_part(rep: Report, res: dict[str, Any], duration: float, seed_: int) -> None:
     truth = SEED_LIKE_CUBIC
     rec = Rig(truth, seed=seed_).random(duration=duration, rms=SEED_LIKE_CROSS_WELL_RMS)
-    m = as_measurement(rec)
+    m = Measurement.from_rig(rec)
     t0 = time.perf_counter()
     est = SINDy(seed=seed_).fit(m)
     elapsed = time.perf_counter() - t0
@@ -171,7 +172,7 @@ def friction_part(rep: Report, res: dict[str, Any], duration: float, seed_: int)
     rec = Rig(truth, effects={"coulomb_friction": HIDDEN_FRICTION_N}, seed=seed_).random(
         duration=duration, rms=SEED_LIKE_CROSS_WELL_RMS
     )
-    m = as_measurement(rec)
+    m = Measurement.from_rig(rec)
     t0 = time.perf_counter()
     est = SINDy(seed=seed_).fit(m)
     r = _summary(est, time.perf_counter() - t0)
@@ -202,7 +203,7 @@ def friction_part(rep: Report, res: dict[str, Any], duration: float, seed_: int)
 
 def as_built_part(rep: Report, res: dict[str, Any], duration: float, seed_: int) -> None:
     rec = Rig(AS_BUILT, seed=seed_).random(duration=duration)
-    m = as_measurement(rec)
+    m = Measurement.from_rig(rec)
     est = SINDy(seed=seed_).fit(m)
     r = _summary(est, 0.0)
     r["truth_features"] = AS_BUILT.features()

@@ -6,19 +6,20 @@ python -m negstiff.experiments.updating_study [-o reports/updating] [--fast]
 from __future__ import annotations
 
 import sys
+from dataclasses import dataclass
 from typing import Any
 
 import matplotlib.pyplot as plt
 import numpy as np
 
+from negstiff.inference.measurement import Measurement
 from negstiff.inference.nsi import NSI
 from negstiff.inference.sindy import SINDy
 from negstiff.inference.updating import GAUpdater, fitness, targets_from
-from negstiff.models import AS_BUILT, NOMINAL
+from negstiff.models import AS_BUILT, NOMINAL, Device
 from negstiff.models.rig import Rig
 
 from . import seed
-from .nsi_study import as_measurement
 from .report import Report, fmt, run_study
 
 
@@ -31,24 +32,30 @@ def _errors(d, truth=AS_BUILT) -> dict[str, float]:
     }
 
 
-def updating_section(rep: Report, results: dict[str, Any], fast: bool, seed_: int = 0) -> None:
-    res: dict[str, Any] = {}
-    results["updating"] = res
+@dataclass(frozen=True)
+class UpdatingRuns:
+    """What the updating section computed: the GA on the exact features, the GA on the features and on the
+    restoring force of the NSI and SINDy models of an as-built rig record (``runs``), the SINDy fit, and
+    the GA optima from several seeds on the exact features (``identifiability``)."""
+
+    generations: int
+    exact: dict[str, float]
+    ga_exact: GAUpdater
+    runs: dict[str, GAUpdater]
+    sindy: SINDy
+    seeds: tuple[int, ...]
+    identifiability: list[Device]
+
+
+def compute_updating(fast: bool, seed_: int = 0) -> UpdatingRuns:
     gens = 25 if fast else 120
-    rep.heading("5. Model updating with a genetic algorithm (seed section 4.1)")
-    rep.text(
-        f"pymoo's GA (population 60, {gens} generations, SBX crossover and polynomial mutation as in Deb's book, "
-        "elitist) updates E, alpha and m of the device from the nominal design, minimising the seed's Eq. 9: "
-        "the RMS percentage error of the two well frequencies plus that of the two stable equilibria."
-    )
     # A: the as-built device's own exact features
     exact = AS_BUILT.features()
     ga_exact = GAUpdater(generations=gens, seed=seed_ + 1).fit(exact)
-    res["exact_targets"] = ga_exact.result() | {"errors": _errors(ga_exact.device_)}
     # B: an as-built rig record, identified by NSI and by SINDy; the GA updated the seed's way (Eq. 9 on
     # the identified model's features) and like with like (the restoring force over the record's stroke)
     rec = Rig(AS_BUILT, seed=seed_ + 2).random(duration=60.0 if fast else 300.0)
-    m = as_measurement(rec)
+    m = Measurement.from_rig(rec)
     mass = float(rec.meta["mass"])
     nsi, sindy = NSI().fit(m), SINDy().fit(m)
     runs_b: dict[str, Any] = {}
@@ -61,6 +68,32 @@ def updating_section(rep: Report, results: dict[str, Any], fast: bool, seed_: in
                 "m weighed" if fixed else "m free"
             )
             runs_b[key] = GAUpdater(generations=gens, seed=seed_ + 1, fixed_mass=fixed, compare=compare).fit(targets)
+    # identifiability: GA optima from other seeds on the exact features
+    seeds = (11,) if fast else (11, 12, 13, 14, 15)
+    runs = [GAUpdater(generations=gens, seed=s).fit(exact).device_ for s in seeds]
+    return UpdatingRuns(gens, exact, ga_exact, runs_b, sindy, seeds, runs)
+
+
+def updating_section(rep: Report, results: dict[str, Any], fast: bool, seed_: int = 0) -> None:
+    """Compute (``compute_updating``), then render: the table and its reading, Figures 10 and 11, the
+    identifiability plot."""
+    runs = compute_updating(fast, seed_)
+    res: dict[str, Any] = {}
+    results["updating"] = res
+    rep.heading("5. Model updating with a genetic algorithm (seed section 4.1)")
+    rep.text(
+        f"pymoo's GA (population 60, {runs.generations} generations, SBX crossover and polynomial mutation as in "
+        "Deb's book, elitist) updates E, alpha and m of the device from the nominal design, minimising the seed's "
+        "Eq. 9: the RMS percentage error of the two well frequencies plus that of the two stable equilibria."
+    )
+    res["exact_targets"] = runs.ga_exact.result() | {"errors": _errors(runs.ga_exact.device_)}
+    _render_table(rep, res, runs)
+    _render_figures(rep, runs)
+    _render_identifiability(rep, res, runs)
+
+
+def _render_table(rep: Report, res: dict[str, Any], runs: UpdatingRuns) -> None:
+    exact, ga_exact, runs_b, sindy = runs.exact, runs.ga_exact, runs.runs, runs.sindy
     ga = runs_b["NSI, Eq. 9 features, m free"]
     ga_m = runs_b["SINDy, restoring force, m weighed"]
     best = runs_b["SINDy, restoring force, m free"]
@@ -116,6 +149,11 @@ def updating_section(rep: Report, results: dict[str, Any], fast: bool, seed_: in
         f"selected {', '.join(sindy.selected_)}, gives alpha **{eb['alpha_deg']:+.3f} deg** and E/m "
         f"**{eb['E_over_m_percent']:+.2f} %** (weighed mass: E {em['E_percent']:+.2f} %)."
     )
+
+
+def _render_figures(rep: Report, runs: UpdatingRuns) -> None:
+    ga, best = runs.runs["NSI, Eq. 9 features, m free"], runs.runs["SINDy, restoring force, m free"]
+    sindy = runs.sindy
     # Figure 10
     fig, ax = plt.subplots(figsize=(7, 3.6))
     g = np.arange(1, len(ga.history_) + 1)
@@ -153,9 +191,11 @@ def updating_section(rep: Report, results: dict[str, Any], fast: bool, seed_: in
         fig,
         "Figure 11 (seed): restoring force and potential, identified vs starting vs final; dotted: the as-built truth.",
     )
-    # identifiability
-    seeds = (11,) if fast else (11, 12, 13, 14, 15)
-    runs = [GAUpdater(generations=gens, seed=s).fit(exact).device_ for s in seeds]
+
+
+def _render_identifiability(rep: Report, res: dict[str, Any], part: UpdatingRuns) -> None:
+    seeds, runs = part.seeds, part.identifiability
+    ga_m = part.runs["SINDy, restoring force, m weighed"]
     res["identifiability"] = [{"seed": s, "E": d.E, "m": d.m, "alpha_deg": d.alpha_deg} for s, d in zip(seeds, runs)]
     fig, ax = plt.subplots(figsize=(5.5, 4))
     mm = np.linspace(NOMINAL.m * 0.75, NOMINAL.m * 1.25, 50)

@@ -5,6 +5,13 @@ white-noise floor (the top fifth of the band, where the response has died out) a
 above it. The filter's error on the signal (bias) and the noise it passes are both predicted, and the
 choice weighs them for the purpose (``derivative_window``); spectral differentiation is the fallback
 when the band leaves no room for smoothing (e.g. the Silverbox, sampled at 3x its band).
+
+Every velocity and start state of negstiff comes from this module: ``state_derivatives`` (the
+weak form, SINDy, the discrepancy workflow, validation, refinement, the posterior's windows; purpose
+"regression" or "state") and ``smooth_and_differentiate`` (NSI's regression: a window fitted to keep
+the response's band flat to 0.1 %, the gain NSI's frequency-domain fit needs). A start state for a
+free run is ``state_derivatives(..., purpose="state")`` everywhere (``validation.start_state``
+refines it by the system's own free run).
 """
 
 from __future__ import annotations
@@ -166,3 +173,38 @@ def _state_derivatives(z: np.ndarray, fs: float, purpose: str) -> tuple[np.ndarr
     spec = np.fft.rfft(ext)
     info["method"] = "spectral differentiation (the band leaves no room for smoothing)"
     return z.copy(), np.fft.irfft(jw * spec, 2 * n)[:n], np.fft.irfft(jw**2 * spec, 2 * n)[:n], info
+
+
+def velocity_window(z: np.ndarray, fs: float) -> tuple[int, int]:
+    """Savitzky-Golay (window, polynomial order) fitted to the data: the widest window whose gain
+    stays within 0.1 % of 1 up to twice the frequency below which 99.9 % of the displacement's power
+    lies (the displacement's, not the velocity's: differencing whitens the sensor noise, which would
+    fake a wide band exactly when smoothing is needed),
+    trying cubic fits first, then quintic, then septic. Wide enough to average sensor noise, narrow
+    enough not to bend the response (a fixed fs/70 window cut the Silverbox's response by several %).
+    (0, 0) means no window passes: no smoothing, and the velocity by spectral differentiation."""
+    f, p = signal.welch(z - z.mean(), fs, nperseg=min(4096, z.size))
+    cum = np.cumsum(p) / np.sum(p)
+    f_band = min(2 * f[np.searchsorted(cum, 0.999)], 0.45 * fs)
+    for order in (3, 5, 7):
+        best = None
+        for w in range(order + 2, 53, 2):  # odd windows (order is odd)
+            h = np.abs(signal.freqz(signal.savgol_coeffs(w, order), worN=[f_band], fs=fs)[1][0])
+            if abs(h - 1) > 1e-3:
+                break
+            best = w
+        if best is not None:
+            return best, order
+    return 0, 0
+
+
+def smooth_and_differentiate(z: np.ndarray, fs: float) -> tuple[np.ndarray, np.ndarray]:
+    """Savitzky-Golay smoothed displacement and velocity (``velocity_window``), or, when the data's
+    band leaves no room for smoothing, z itself and its spectral derivative."""
+    w, order = velocity_window(z, fs)
+    if w:
+        return (signal.savgol_filter(z, w, order), signal.savgol_filter(z, w, order, deriv=1, delta=1.0 / fs))
+    zm = z.mean()
+    spec = np.fft.rfft(z - zm)
+    v = np.fft.irfft(2j * np.pi * np.fft.rfftfreq(z.size, 1 / fs) * spec, z.size)
+    return z.copy(), v

@@ -122,7 +122,7 @@ class Discrepancy(Estimator):
         # the measured states the gap's free runs start from, whole record (before and after share them)
         self._z0, self._v0, _, _ = state_derivatives(rec.z, rec.fs, purpose="state")
         self._gain = known_input_gain(rec)
-        self.n_id, self.n_fit = n_id, n_fit
+        self.n_id_, self.n_fit_ = n_id, n_fit
 
     def _design(self, rec: Measurement, lo: int, hi: int, stop: float | None):
         """Weak system over samples [lo, hi): the library's columns (and an end-stop column)."""
@@ -167,9 +167,9 @@ class Discrepancy(Estimator):
         return model
 
     def _score(self, rec: Measurement, cand: Candidate) -> Candidate:
-        W, y = self._design(rec, 0, self.n_fit, cand.stop)
+        W, y = self._design(rec, 0, self.n_fit_, cand.stop)
         coef = self._fit(W, y, cand.terms, cand.stop is not None)
-        Ws, ys = self._design(rec, self.n_fit, self.n_id, cand.stop)
+        Ws, ys = self._design(rec, self.n_fit_, self.n_id_, cand.stop)
         r2 = (ys - Ws @ coef) ** 2
         rows = block_rows(self.window_s, rec.fs, self._form.stride)
         nb = r2.size // rows
@@ -177,8 +177,8 @@ class Discrepancy(Estimator):
             need = 2 * rows / max(1, r2.size) * rec.n  # samples of record that give two blocks
             raise DiscrepancyError(
                 f"{rec.source}: too short for the discrepancy workflow: {rec.duration:.3g} s, at least about "
-                f"{need / rec.fs:.3g} s are needed (the part from {100 * self.n_fit / rec.n:.0f} to "
-                f"{100 * self.n_id / rec.n:.0f} % of the record scores each effect in {self.window_s:g} s blocks, "
+                f"{need / rec.fs:.3g} s are needed (the part from {100 * self.n_fit_ / rec.n:.0f} to "
+                f"{100 * self.n_id_ / rec.n:.0f} % of the record scores each effect in {self.window_s:g} s blocks, "
                 "two at least)"
             )
         cand.block_ms = block_scores(r2, rows, ys.var())
@@ -187,7 +187,7 @@ class Discrepancy(Estimator):
         if cand.effect != "none":
             # the catalogue never names an effect whose fit opens an escape just past the stroke
             try:
-                escape = boundedness(self._model(coef, rec, cand.stop), rec.segment(0, self.n_id), free_run=False)
+                escape = boundedness(self._model(coef, rec, cand.stop), rec.segment(0, self.n_id_), free_run=False)
                 escape = escape["escape_z"]
             except ValueError:
                 escape = None
@@ -202,11 +202,11 @@ class Discrepancy(Estimator):
         from scipy import optimize
 
         def ss(zs: float) -> float:
-            W, y = self._design(rec, 0, self.n_fit, zs)
+            W, y = self._design(rec, 0, self.n_fit_, zs)
             coef = self._fit(W, y, terms, True)
             return float(np.sum((y - W @ coef) ** 2)) if coef[-1] < 0 else math.inf  # a stop pushes back
 
-        z = self._zs[: self.n_fit]
+        z = self._zs[: self.n_fit_]
         qs = (0.5, 1, 2, 3, 5, 7, 10)
         grid = [float(np.percentile(z, q)) for q in qs] + [float(np.percentile(z, 100 - q)) for q in qs]
         vals = [ss(g) for g in grid]
@@ -223,11 +223,11 @@ class Discrepancy(Estimator):
     # --- locate ------------------------------------------------------------------------------------
     def locate(self, rec: Measurement, model_terms: tuple[str, ...], stop: float | None) -> dict[str, Any]:
         """Where the current model's weak residual lives: by regime and over the state plane."""
-        W, y = self._design(rec, 0, self.n_id, stop)
+        W, y = self._design(rec, 0, self.n_id_, stop)
         coef = self._fit(W, y, model_terms, stop is not None)
         r = y - W @ coef
         form = self._form
-        centres = np.clip(np.arange(r.size) * form.stride + form.centre(rec.dt), 0, self.n_id - 1)
+        centres = np.clip(np.arange(r.size) * form.stride + form.centre(rec.dt), 0, self.n_id_ - 1)
         z, v = self._zs[centres], self._v[centres]
         model = self._model(coef, rec, stop)
         try:
@@ -270,8 +270,8 @@ class Discrepancy(Estimator):
         self.baseline_model_ = base_model
         self.baseline_refinement_ = None
         if self.refine:  # the gap a user sees is the best the baseline's form predicts, not its weak fit's
-            val = validate(base_model, rec, self.n_id)
-            base_model, _, self.baseline_refinement_ = refine_stage(base_model, rec, self.n_id, val, held=_held(terms))
+            val = validate(base_model, rec, self.n_id_)
+            base_model, _, self.baseline_refinement_ = refine_stage(base_model, rec, self.n_id_, val, held=_held(terms))
         self.gap_before_ = self._gap(rec, base_model)
         self.locate_before_ = self.locate(rec, terms, stop)
         for _ in range(self.max_effects):
@@ -311,11 +311,11 @@ class Discrepancy(Estimator):
             if not self.effects_:
                 self.model_, self.refinement_ = base_model, self.baseline_refinement_
             else:
-                val = validate(self.model_, rec, self.n_id)
-                self.model_, _, self.refinement_ = refine_stage(self.model_, rec, self.n_id, val, held=_held(terms))
+                val = validate(self.model_, rec, self.n_id_)
+                self.model_, _, self.refinement_ = refine_stage(self.model_, rec, self.n_id_, val, held=_held(terms))
         self.gap_after_ = self._gap(rec, self.model_)
         self.locate_after_ = self.locate(rec, terms, stop)
-        self.bounded_ = boundedness(self.model_, rec.segment(0, self.n_id))
+        self.bounded_ = boundedness(self.model_, rec.segment(0, self.n_id_))
         self.unnamed_ = self._unnamed(rec) if self.unnamed else None
         return self
 
@@ -326,7 +326,7 @@ class Discrepancy(Estimator):
         coefficient in its standard errors."""
         from .hybrid import fit_hybrid
 
-        ident = rec.segment(0, self.n_id)
+        ident = rec.segment(0, self.n_id_)
         h = fit_hybrid(self.model_, ident)
         zs, vs, _, _ = state_derivatives(ident.z, ident.fs, purpose="state")
         term = h.term(zs, vs, ident.u)
@@ -334,7 +334,7 @@ class Discrepancy(Estimator):
         return {
             "term_rms": float(np.sqrt(np.mean(term**2))),
             "term_percent_of_restoring_force": float(100 * np.sqrt(np.mean(term**2) / np.mean(force**2))),
-            "gap": h.restarted_gap(rec, self.n_id, self.window_s, self._z0, self._v0),
+            "gap": h.restarted_gap(rec, self.n_id_, self.window_s, self._z0, self._v0),
             **h.to_json(),
         }
 
@@ -370,19 +370,19 @@ class Discrepancy(Estimator):
         return Model.from_dict(d)
 
     def _refit_model(self, rec: Measurement, terms, stop) -> Model:
-        W, y = self._design(rec, 0, self.n_id, stop)
+        W, y = self._design(rec, 0, self.n_id_, stop)
         return self._model(self._fit(W, y, terms, stop is not None), rec, stop)
 
     def _gap(self, rec: Measurement, model: Model) -> dict[str, Any]:
         """Restarted free runs over the held-out tail (and their residual PSD)."""
-        fr = restarted_free_runs(model, rec, self.n_id, self.window_s, self._z0, self._v0)
+        fr = restarted_free_runs(model, rec, self.n_id_, self.window_s, self._z0, self._v0)
         out = {k: v for k, v in fr.items() if not isinstance(v, np.ndarray)}
         ms = fr.get("window_ms")
         if ms is not None:
             ok = np.isfinite(ms)
             # the median window: a single window that diverges near the barrier (chaos) cannot dominate
             out["median_window_rms_um"] = float(1e6 * np.sqrt(np.median(ms[ok]))) if ok.any() else math.inf
-            tail = rec.z[self.n_id :]
+            tail = rec.z[self.n_id_ :]
             out["median_window_percent"] = (
                 float(100 * np.sqrt(np.median(ms[ok])) / np.sqrt(np.mean(tail**2))) if ok.any() else math.inf
             )
@@ -449,8 +449,8 @@ class Discrepancy(Estimator):
             "settings": {
                 "baseline_terms": list(self.baseline),
                 "score": "held-out weak residual (rms, % of the target) over samples "
-                f"[{self.n_fit}, {self.n_id}); named only above max(1 SE, {100 * self.margin:g} %)",
-                "gap": f"restarted {self.window_s:g} s free runs over the held-out tail [{self.n_id}, end): "
+                f"[{self.n_fit_}, {self.n_id_}); named only above max(1 SE, {100 * self.margin:g} %)",
+                "gap": f"restarted {self.window_s:g} s free runs over the held-out tail [{self.n_id_}, end): "
                 "the median window's rms error, % of rms(z) (pooled over all windows in gap_pooled_percent; one "
                 "window that diverges near the barrier, chaos, can dominate the pool)",
             },

@@ -287,6 +287,43 @@ def _correlation_time(e: np.ndarray) -> float:
     return tau
 
 
+def _orthogonal_weights(basis: Basis, zs: np.ndarray, vs: np.ndarray, u: np.ndarray) -> np.ndarray:
+    """An orthonormal basis N of the bump weights whose term is orthogonal, over the states the record
+    visits, to every force the physics can make (1, z, z^2, z^3, z', z'|z'|)."""
+    pick = slice(None, None, max(1, zs.size // 20000))
+    zp, vp, up = zs[pick], vs[pick], u[pick]
+    F = np.column_stack([np.ones_like(zp), zp, zp**2, zp**3, vp, vp * np.abs(vp)])
+    Phi = basis.features(zp, vp, up)
+    N = linalg.null_space((F / np.linalg.norm(F, axis=0)).T @ (Phi / np.linalg.norm(Phi, axis=0)))
+    N = N / np.linalg.norm(Phi, axis=0)[:, None]
+    return np.linalg.qr(N)[0]
+
+
+def _coefficient_shifts(sol, n_res: int, length: int, names, q0: np.ndarray, pscale: np.ndarray) -> tuple[dict, float]:
+    """How far the joint refit moved each physical coefficient, in its standard errors: from the
+    Jacobian at the solution (the start states marginalised: a Schur complement), inflated by the
+    residual's correlation time (coloured residuals: tau samples carry one sample's information)."""
+    p = len(names)
+    J = sparse.csr_matrix(sol.jac)
+    dof = max(1, n_res - sol.x.size)
+    s2 = float(np.sum(sol.fun[:n_res] ** 2) / dof)
+    tau = _correlation_time(sol.fun[:n_res].reshape(n_res // length, length))
+    try:
+        cov = s2 * np.linalg.inv((J.T @ J).toarray())
+        se = np.sqrt(np.clip(np.diag(cov)[:p], 0, None)) * pscale
+    except np.linalg.LinAlgError:
+        se = np.full(p, np.nan)
+    moved = (sol.x[:p] - q0) * pscale
+    se_white = se
+    se = se * math.sqrt(tau)
+    shifts = {
+        n: {"held": float(q0[i] * pscale[i]), "joint": float(sol.x[i] * pscale[i]), "se": float(se[i]),
+            "se_white": float(se_white[i]), "shift_in_se": float(moved[i] / se[i]) if se[i] > 0 else None}
+        for i, n in enumerate(names)
+    }  # fmt: skip
+    return shifts, tau
+
+
 def fit_hybrid(
     model: Model,
     rec: Measurement,
@@ -321,13 +358,7 @@ def fit_hybrid(
     # make (1, z, z^2, z^3, z', z'|z'|): it can carry only what the physics cannot, so it cannot trade
     # against a physical coefficient (measured on the Silverbox without this: the joint refit moved k3
     # by 6 and k1 by 5 standard errors). Weights theta = N phi, N an orthonormal null-space basis.
-    pick = slice(None, None, max(1, rec.n // 20000))
-    zp, vp, up = zs[pick], vs[pick], rec.u[pick]
-    F = np.column_stack([np.ones_like(zp), zp, zp**2, zp**3, vp, vp * np.abs(vp)])
-    Phi = basis.features(zp, vp, up)
-    N = linalg.null_space((F / np.linalg.norm(F, axis=0)).T @ (Phi / np.linalg.norm(Phi, axis=0)))
-    N = N / np.linalg.norm(Phi, axis=0)[:, None]
-    N, _ = np.linalg.qr(N)
+    N = _orthogonal_weights(basis, zs, vs, rec.u)
     P = N.shape[1]
     theta = np.zeros(basis.size)
     stages = []
@@ -371,9 +402,7 @@ def fit_hybrid(
                        "rms_end_m": float(np.sqrt(np.mean(sol.fun[: n_win * length] ** 2))),
                        "evaluations": int(sol.nfev)})  # fmt: skip
 
-    # the joint refit: physics and term together, from the held fit, on the last stage's windows; the
-    # coefficients' standard errors from its Jacobian (the start states marginalised: a Schur
-    # complement), white residuals assumed (an underestimate where the residual is coloured)
+    # the joint refit: physics and term together, from the held fit, on the last stage's windows
     p = len(names)
 
     def joint(t):
@@ -385,36 +414,12 @@ def fit_hybrid(
     jp = shooting_sparsity(n_win, length, p + P, penalty=(p, P))
     sol = optimize.least_squares(joint, np.concatenate([q0, N.T @ theta / force, states]), jac="2-point",
                                  jac_sparsity=jp, method="trf", max_nfev=max_nfev, diff_step=1e-7)  # fmt: skip
-    J = sparse.csr_matrix(sol.jac)
-    dof = max(1, n_win * length - sol.x.size)
-    s2 = float(np.sum(sol.fun[: n_win * length] ** 2) / dof)
-    tau = _correlation_time(sol.fun[: n_win * length].reshape(n_win, length))
-    try:
-        cov = s2 * np.linalg.inv((J.T @ J).toarray())
-        se = np.sqrt(np.clip(np.diag(cov)[:p], 0, None)) * pscale
-    except np.linalg.LinAlgError:
-        se = np.full(p, np.nan)
-    moved = (sol.x[:p] - q0) * pscale
-    se_white = se
-    se = se * math.sqrt(tau)  # coloured residuals: tau samples carry one sample's information
-    shifts = {
-        n: {"held": float(q0[i] * pscale[i]), "joint": float(sol.x[i] * pscale[i]), "se": float(se[i]),
-            "se_white": float(se_white[i]), "shift_in_se": float(moved[i] / se[i]) if se[i] > 0 else None}
-        for i, n in enumerate(names)
-    }  # fmt: skip
-    info = {
-        "stages": stages,
-        "ridge": ridge,
-        "joint": {
-            "rms_end_m": float(np.sqrt(np.mean(sol.fun[: n_win * length] ** 2))),
-            "residual_correlation_samples": tau,
-            "coefficients": shifts,
-            "model": with_values(model, names, sol.x[:p] * pscale).to_dict(),
-            "weights_N": (N @ sol.x[p : p + P] * force).tolist(),
-        },
-    }
+    shifts, tau = _coefficient_shifts(sol, n_win * length, length, names, q0, pscale)
     # the hybrid is the joint fit: with the term orthogonal to the physics' own forces, the physics
     # must move where its output-error fit had bent to cover the missing force (that bend is the shift)
-    joint_model = with_values(model, names, sol.x[:p] * pscale)
-    info["held"] = {"model": model.to_dict(), "weights_N": theta.tolist(), "stages": info.pop("stages")}
-    return Hybrid(joint_model, basis, N @ sol.x[p : p + P] * force, info)
+    joint_model, weights = with_values(model, names, sol.x[:p] * pscale), N @ sol.x[p : p + P] * force
+    joint_info = {"rms_end_m": float(np.sqrt(np.mean(sol.fun[: n_win * length] ** 2))),
+                  "residual_correlation_samples": tau, "coefficients": shifts, "model": joint_model.to_dict(),
+                  "weights_N": weights.tolist()}  # fmt: skip
+    held = {"model": model.to_dict(), "weights_N": theta.tolist(), "stages": stages}
+    return Hybrid(joint_model, basis, weights, {"ridge": ridge, "joint": joint_info, "held": held})

@@ -82,6 +82,13 @@ class Measurement:
     def duration(self) -> float:
         return self.n / self.fs
 
+    @classmethod
+    def from_rig(cls, rec, weighed: bool = True) -> "Measurement":
+        """A virtual-rig record (``models.rig.RigRecord``) as negstiff reads a lab's: the measured base
+        acceleration as input, the measured z as response, the weighed mass (``weighed``) and its source."""
+        mass = float(rec.meta["mass"]) if weighed and rec.meta.get("mass") is not None else None
+        return from_arrays(rec.columns["base_acc"], rec.columns["z"], rec.fs, mass=mass, source=rec.meta["source"])
+
     def segment(self, start: int, stop: int) -> "Measurement":
         """Samples [start, stop) as a new measurement (time base kept)."""
         sl = slice(start, stop)

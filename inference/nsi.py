@@ -39,6 +39,7 @@ from scipy import signal
 from negstiff.models import Model
 
 from . import subspace
+from .derivatives import smooth_and_differentiate, velocity_window  # noqa: F401 (velocity_window: API)
 from .estimator import Estimator
 from .measurement import Measurement, MeasurementError
 from .refine import refine_stage, stroke_quantiles
@@ -51,41 +52,6 @@ BASIS_NAMES = ("x2", "x3", "vabsv")
 
 class NSIError(MeasurementError):
     """The record cannot be identified (too short, not enough excitation, no physical pole)."""
-
-
-def velocity_window(z: np.ndarray, fs: float) -> tuple[int, int]:
-    """Savitzky-Golay (window, polynomial order) fitted to the data: the widest window whose gain
-    stays within 0.1 % of 1 up to twice the frequency below which 99.9 % of the displacement's power
-    lies (the displacement's, not the velocity's: differencing whitens the sensor noise, which would
-    fake a wide band exactly when smoothing is needed),
-    trying cubic fits first, then quintic, then septic. Wide enough to average sensor noise, narrow
-    enough not to bend the response (a fixed fs/70 window cut the Silverbox's response by several %).
-    (0, 0) means no window passes: no smoothing, and the velocity by spectral differentiation."""
-    f, p = signal.welch(z - z.mean(), fs, nperseg=min(4096, z.size))
-    cum = np.cumsum(p) / np.sum(p)
-    f_band = min(2 * f[np.searchsorted(cum, 0.999)], 0.45 * fs)
-    for order in (3, 5, 7):
-        best = None
-        for w in range(order + 2, 53, 2):  # odd windows (order is odd)
-            h = np.abs(signal.freqz(signal.savgol_coeffs(w, order), worN=[f_band], fs=fs)[1][0])
-            if abs(h - 1) > 1e-3:
-                break
-            best = w
-        if best is not None:
-            return best, order
-    return 0, 0
-
-
-def smooth_and_differentiate(z: np.ndarray, fs: float) -> tuple[np.ndarray, np.ndarray]:
-    """Savitzky-Golay smoothed displacement and velocity (``velocity_window``), or, when the data's
-    band leaves no room for smoothing, z itself and its spectral derivative."""
-    w, order = velocity_window(z, fs)
-    if w:
-        return (signal.savgol_filter(z, w, order), signal.savgol_filter(z, w, order, deriv=1, delta=1.0 / fs))
-    zm = z.mean()
-    spec = np.fft.rfft(z - zm)
-    v = np.fft.irfft(2j * np.pi * np.fft.rfftfreq(z.size, 1 / fs) * spec, z.size)
-    return z.copy(), v
 
 
 def well_guesses(rec: Measurement) -> tuple[float | None, float]:
@@ -303,7 +269,10 @@ class NSI(Estimator):
         mean = {k: float(np.mean([getattr(mm, k) for mm in models])) for k in ("k1", "k2", "k3", "c", "c_nl", "k0")}
         self.model_ = Model(m=mass, **mean)
         self.models_by_well_ = {name: mm for name, mm in zip(wells, models)}
-        self.equilibria_ = self.model_.equilibria()
+        try:
+            self.equilibria_ = self.model_.equilibria()
+        except ValueError as exc:  # a well's fit that is no bistable oscillator: the record's verdict, not a bug
+            raise NSIError(f"{rec.source}: the identified restoring force is not usable ({exc})") from None
         self.modal_ = {name: {"f_hz": w.f_hz, "zeta": w.zeta} for name, w in wells.items()}
         self.modal_.setdefault("minus", {"f_hz": None, "zeta": None})
         self.stroke_ = stroke_quantiles(rec.z[:n_id])

@@ -39,7 +39,7 @@ import numpy as np
 from scipy.interpolate import make_interp_spline
 
 from negstiff.models.constants import G
-from negstiff.models.rig import integrate_fft
+from negstiff.models.table import integrate_fft
 
 RESPONSES = ("z", "z_dot", "y", "y_dot", "y_acc")
 """Response columns in the order a record's response is taken from (the first present wins)."""

@@ -107,48 +107,8 @@ class SINDy(Estimator):
 
         # 1. the sparsity path on the fitting part; 2. each support refitted there and scored by
         # its held-out weak residual over the selection part, in blocks
-        sys_fit = form.system(rec, 0, n_fit)
-        sys_sel = form.system(rec, n_fit, n_id)
-        W_sel, y_sel = sys_sel.W_physical, sys_sel.y_physical
-        rows = block_rows(self.window_s, rec.fs, form.stride)
-        n_blocks = y_sel.size // rows
-        if n_blocks < 2:
-            need = 2 * rows / max(1, y_sel.size) * rec.n
-            raise SINDyError(
-                f"{rec.source}: too short for SINDy: {rec.duration:.3g} s, at least about {need / rec.fs:.3g} s are "
-                f"needed ({100 * self.selection_fraction:.0f} % of the record scores the candidate models in "
-                f"{self.window_s:g} s blocks, two at least)"
-            )
+        path = self._path(rec, form, gain, n_fit, n_id, z0s, v0s)
         library, fields = terms(), term_fields()
-        supports: dict[tuple[bool, ...], list[float]] = {}
-        for weight in self.weights:
-            phys = fit_support(sys_fit, gain, weight)
-            supports.setdefault(tuple(bool(c) for c in (phys[: len(library)] != 0)), []).append(weight)
-        path = []
-        for support, weights in supports.items():
-            phys = fit_support(sys_fit, gain, support=support)
-            try:
-                model = model_from(phys, mass_of(rec, gain, phys[-1])[0])
-                fr = restarted_free_runs(model, ident, n_fit, self.window_s, z0s, v0s)
-                # a support whose potential opens an escape just past the stroke is never selected
-                escape = boundedness(model, ident, free_run=False)["escape_z"]
-            except (WeakFormError, ValueError):
-                fr, escape = {}, None
-            ok = fr.get("restart_diverged", 1) == 0 and escape is None
-            block_ms = block_scores((y_sel - W_sel @ phys) ** 2, rows, y_sel.var())
-            path.append(
-                {
-                    "terms": [t for t, on in zip(library, support) if on],
-                    "n_terms": int(sum(support)),
-                    "support": support,
-                    # the geometric middle of the weights that give this support
-                    "weight": float(np.sqrt(min(weights) * max(weights))),
-                    "heldout_residual_percent": float(100 * np.sqrt(block_ms.mean())),
-                    "free_run_percent": fr["restarted_rms_percent"] if ok else math.inf,
-                    "escape_z": escape,
-                    "block_ms": block_ms,
-                }
-            )
         self.path_ = sorted(path, key=lambda p: (p["n_terms"], p["heldout_residual_percent"]))
         chosen = self._select(self.path_)
         if not np.isfinite(chosen["free_run_percent"]):
@@ -188,23 +148,7 @@ class SINDy(Estimator):
             )
             if self.refinement_["applied"] and self.refinement_.get("free_mass"):
                 self.mass_source_ += ", refined by simulation error"
-        self.bounded_ = boundedness(self.model_, ident)
-        if not self.bounded_["ok"]:
-            self.warnings_.append(self.bounded_["warning"])
-        try:
-            self.equilibria_ = self.model_.equilibria().as_dict()
-        except ValueError as exc:
-            self.equilibria_ = {"z_minus": None, "z_0": None, "z_plus": None}
-            self.warnings_.append(f"the identified restoring force has no usable equilibria: {exc}")
-        self.modal_ = {}
-        for well in ("minus", "plus"):
-            try:
-                uls = self.model_.uls(well)
-                self.modal_[well] = {"f_hz": uls.f_hz, "zeta": uls.zeta}
-            except ValueError:
-                self.modal_[well] = {"f_hz": None, "zeta": None}
-        if self.validation_.get("diverged"):
-            self.warnings_.append(self.validation_["warning"])
+        self._diagnose(ident)
         self.settings_ = {
             "form": f"weak: test functions (1 - (s/T)^2)^4, T = {form.half} samples, every {form.stride}",
             "corner_frequency_hz": form.corner_hz,
@@ -222,6 +166,74 @@ class SINDy(Estimator):
             "seed": self.seed,
         }
         return self
+
+    def _diagnose(self, ident: Measurement) -> None:
+        """Boundedness, equilibria and the wells' modal parameters of the fitted model, with warnings."""
+        self.bounded_ = boundedness(self.model_, ident)
+        if not self.bounded_["ok"]:
+            self.warnings_.append(self.bounded_["warning"])
+        try:
+            self.equilibria_ = self.model_.equilibria().as_dict()
+        except ValueError as exc:
+            self.equilibria_ = {"z_minus": None, "z_0": None, "z_plus": None}
+            self.warnings_.append(f"the identified restoring force has no usable equilibria: {exc}")
+        self.modal_ = {}
+        for well in ("minus", "plus"):
+            try:
+                uls = self.model_.uls(well)
+                self.modal_[well] = {"f_hz": uls.f_hz, "zeta": uls.zeta}
+            except ValueError:
+                self.modal_[well] = {"f_hz": None, "zeta": None}
+        if self.validation_.get("diverged"):
+            self.warnings_.append(self.validation_["warning"])
+
+    def _path(self, rec: Measurement, form: WeakForm, gain, n_fit: int, n_id: int, z0s, v0s) -> list[dict]:
+        """The supports of the L0 path on samples [0, n_fit), each refitted there and scored on [n_fit,
+        n_id): its held-out weak residual in blocks, its restarted free runs, an escape past the stroke."""
+        ident = rec.segment(0, n_id)
+        sys_fit = form.system(rec, 0, n_fit)
+        sys_sel = form.system(rec, n_fit, n_id)
+        W_sel, y_sel = sys_sel.W_physical, sys_sel.y_physical
+        rows = block_rows(self.window_s, rec.fs, form.stride)
+        n_blocks = y_sel.size // rows
+        if n_blocks < 2:
+            need = 2 * rows / max(1, y_sel.size) * rec.n
+            raise SINDyError(
+                f"{rec.source}: too short for SINDy: {rec.duration:.3g} s, at least about {need / rec.fs:.3g} s are "
+                f"needed ({100 * self.selection_fraction:.0f} % of the record scores the candidate models in "
+                f"{self.window_s:g} s blocks, two at least)"
+            )
+        library = terms()
+        supports: dict[tuple[bool, ...], list[float]] = {}
+        for weight in self.weights:
+            phys = fit_support(sys_fit, gain, weight)
+            supports.setdefault(tuple(bool(c) for c in (phys[: len(library)] != 0)), []).append(weight)
+        path = []
+        for support, weights in supports.items():
+            phys = fit_support(sys_fit, gain, support=support)
+            try:
+                model = model_from(phys, mass_of(rec, gain, phys[-1])[0])
+                fr = restarted_free_runs(model, ident, n_fit, self.window_s, z0s, v0s)
+                # a support whose potential opens an escape just past the stroke is never selected
+                escape = boundedness(model, ident, free_run=False)["escape_z"]
+            except (WeakFormError, ValueError):
+                fr, escape = {}, None
+            ok = fr.get("restart_diverged", 1) == 0 and escape is None
+            block_ms = block_scores((y_sel - W_sel @ phys) ** 2, rows, y_sel.var())
+            path.append(
+                {
+                    "terms": [t for t, on in zip(library, support) if on],
+                    "n_terms": int(sum(support)),
+                    "support": support,
+                    # the geometric middle of the weights that give this support
+                    "weight": float(np.sqrt(min(weights) * max(weights))),
+                    "heldout_residual_percent": float(100 * np.sqrt(block_ms.mean())),
+                    "free_run_percent": fr["restarted_rms_percent"] if ok else math.inf,
+                    "escape_z": escape,
+                    "block_ms": block_ms,
+                }
+            )
+        return path
 
     def _select(self, path: list[dict]) -> dict:
         """The sparsest candidate whose held-out residual exceeds the best candidate's by less than

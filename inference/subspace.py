@@ -61,7 +61,7 @@ class StateSpace:
         return np.linalg.eigvals(self.A)
 
 
-def _hankel_block(x: np.ndarray, start: int, rows: int, cols: int) -> np.ndarray:
+def hankel_block(x: np.ndarray, start: int, rows: int, cols: int) -> np.ndarray:
     """Rows ``start .. start+rows-1`` of the block Hankel matrix of x (N, ch): shape (rows*ch, cols)."""
     n_ch = x.shape[1]
     out = np.empty((rows * n_ch, cols))
@@ -84,10 +84,10 @@ def lq_factor(u: np.ndarray, y: np.ndarray, i: int, chunk: int = 8192) -> np.nda
     for c0 in range(0, j, chunk):
         cols = min(chunk, j - c0)
         blocks = [
-            _hankel_block(u[c0:], i, i, cols),
-            _hankel_block(u[c0:], 0, i, cols),
-            _hankel_block(y[c0:], 0, i, cols),
-            _hankel_block(y[c0:], i, i, cols),
+            hankel_block(u[c0:], i, i, cols),
+            hankel_block(u[c0:], 0, i, cols),
+            hankel_block(y[c0:], 0, i, cols),
+            hankel_block(y[c0:], i, i, cols),
         ]
         ht = np.vstack(blocks).T
         stacked = ht if r is None else np.vstack([r, ht])

@@ -33,7 +33,6 @@ from typing import Any, Sequence
 import numpy as np
 from scipy import fft as sp_fft
 from scipy import signal
-from scipy.integrate import cumulative_trapezoid
 
 from negstiff.files import atomic_path, write_text
 
@@ -41,6 +40,7 @@ from .constants import G
 from .device import AS_BUILT, Device
 from .equation import Model
 from .simulator import antialias_fir, simulate_batch
+from .table import integrate_twice, table_motion
 
 TAIL_S = 4.0
 """Seconds acquired after the last record and discarded, as the settling time is before it: the
@@ -209,51 +209,6 @@ def write_lab_format(path: Path, kind: str, cols: dict[str, np.ndarray], fs: flo
 def system_from_dict(d: dict[str, Any]) -> Device | Model:
     """Rebuild the truth's system (``{"kind": "device"|"polynomial", "parameters": {...}}``)."""
     return Device.from_dict(d["parameters"]) if d["kind"] == "device" else Model.from_dict(d["parameters"])
-
-
-def table_motion(acc_target: np.ndarray, fs: float, min_hz: float) -> tuple[np.ndarray, np.ndarray]:
-    """Consistent true table displacement b [m] and acceleration b'' [m/s^2] from a target b''.
-
-    The target is projected on frequencies >= ``min_hz`` (a shaker has no DC stroke) and integrated
-    twice in the frequency domain, so b'' is exactly the second derivative of b.
-    """
-    n = acc_target.size
-    spec = np.fft.rfft(acc_target)
-    f = np.fft.rfftfreq(n, 1 / fs)
-    spec[f < min_hz] = 0.0
-    w = 2 * np.pi * f
-    disp_spec = np.zeros_like(spec)
-    disp_spec[f >= min_hz] = -spec[f >= min_hz] / w[f >= min_hz] ** 2
-    return np.fft.irfft(disp_spec, n), np.fft.irfft(spec, n)
-
-
-def integrate_fft(x: np.ndarray, fs: float, highpass_hz: float, order: int = 2) -> np.ndarray:
-    """Band-limited integral of ``order`` 1 or 2 of a sampled signal (a lab's route from an
-    accelerometer to velocity or displacement): exact 1/(i w)^order above ``highpass_hz``, a cosine
-    taper down to half of it, nothing below (a shaker has no DC stroke, and sensor noise integrated
-    grows as 1/f^order)."""
-    n = x.size
-    spec = np.fft.rfft(x - x.mean())
-    f = np.fft.rfftfreq(n, 1 / fs)
-    gain = np.zeros(f.size, dtype=complex if order % 2 else float)
-    band = f >= highpass_hz
-    gain[band] = 1.0 / (2j * np.pi * f[band]) ** order if order % 2 else -1.0 / (2 * np.pi * f[band]) ** order
-    taper = (f >= highpass_hz / 2) & ~band
-    ft = f[taper]
-    w = 0.5 * (1 - np.cos(np.pi * (ft / (highpass_hz / 2) - 1)))
-    gain[taper] = w / (2j * np.pi * ft) ** order if order % 2 else -w / (2 * np.pi * ft) ** order
-    return np.fft.irfft(spec * gain, n)
-
-
-def integrate_twice(acc: np.ndarray, fs: float, highpass_hz: float, method: str = "fft") -> np.ndarray:
-    """Base displacement from measured acceleration as a lab computes it (``Sensors.integration``)."""
-    if method == "time":
-        sos = signal.butter(4, highpass_hz, "highpass", fs=fs, output="sos")
-        vel = signal.sosfiltfilt(sos, cumulative_trapezoid(acc, dx=1 / fs, initial=0.0))
-        return signal.sosfiltfilt(sos, cumulative_trapezoid(vel, dx=1 / fs, initial=0.0))
-    if method != "fft":
-        raise RigError(f"integration must be 'fft' or 'time', got {method!r}")
-    return integrate_fft(acc, fs, highpass_hz, order=2)
 
 
 def _smooth_steps(levels: Sequence[float], step_samples: int, ramp_samples: int) -> np.ndarray:

@@ -122,6 +122,41 @@ def _pool(n: int) -> ThreadPoolExecutor:
     return ThreadPoolExecutor(n, thread_name_prefix="negstiff-sim")
 
 
+def _checked(params, lay: effects.Layout, kind: str, u, dt: float, substeps: int, input_index, x0):
+    """``simulate_batch``'s arguments as the kernel takes them, or a one-line ValueError."""
+    p = np.asarray(params, dtype=np.float64)
+    if p.ndim == 1:
+        p = p[:, None]
+    if p.shape[0] != lay.size:
+        raise ValueError(
+            f"params must have {lay.size} rows (the effect registry's layout), got shape {p.shape}: "
+            "kernel parameters made before an effect was registered?"
+        )
+    nb = p.shape[1]
+    if not np.all(np.isfinite(p)):
+        raise ValueError("simulation parameters contain NaN or inf")
+    if np.any(p[P_M] <= 0):
+        raise ValueError("simulation mass must be positive")
+    if kind not in KINDS:
+        raise ValueError(f"kind must be one of {sorted(KINDS)}, got {kind!r}")
+    u2 = np.atleast_2d(np.asarray(u, dtype=np.float64))
+    if u2.ndim != 2 or u2.shape[1] < 2:
+        raise ValueError("input needs at least two samples")
+    if not np.all(np.isfinite(u2)):
+        raise ValueError("input contains NaN or inf")
+    if not (dt > 0 and math.isfinite(dt)):
+        raise ValueError(f"sample interval must be positive, got {dt}")
+    if int(substeps) < 1:
+        raise ValueError("substeps must be >= 1")
+    uidx = np.zeros(nb, dtype=np.int64) if input_index is None else np.asarray(input_index, dtype=np.int64)
+    if uidx.shape != (nb,) or uidx.min() < 0 or uidx.max() >= u2.shape[0]:
+        raise ValueError("input_index must give one valid input row per batch member")
+    x0 = np.broadcast_to(np.asarray(x0, dtype=np.float64), (nb, 2))
+    if not np.all(np.isfinite(x0)):
+        raise ValueError("initial state contains NaN or inf")
+    return p, u2, uidx, x0
+
+
 def simulate_batch(
     params: np.ndarray,
     kind: str,
@@ -159,37 +194,9 @@ def simulate_batch(
         and per 2e5 member-steps)
     staged : ``u`` holds the input at the stage times (band-limited records), not the samples
     """
-    p = np.asarray(params, dtype=np.float64)
-    if p.ndim == 1:
-        p = p[:, None]
     lay = effects.layout()
-    if p.shape[0] != lay.size:
-        raise ValueError(
-            f"params must have {lay.size} rows (the effect registry's layout), got shape {p.shape}: "
-            "kernel parameters made before an effect was registered?"
-        )
+    p, u2, uidx, x0 = _checked(params, lay, kind, u, dt, substeps, input_index, x0)
     nb = p.shape[1]
-    if not np.all(np.isfinite(p)):
-        raise ValueError("simulation parameters contain NaN or inf")
-    if np.any(p[P_M] <= 0):
-        raise ValueError("simulation mass must be positive")
-    if kind not in KINDS:
-        raise ValueError(f"kind must be one of {sorted(KINDS)}, got {kind!r}")
-    u2 = np.atleast_2d(np.asarray(u, dtype=np.float64))
-    if u2.ndim != 2 or u2.shape[1] < 2:
-        raise ValueError("input needs at least two samples")
-    if not np.all(np.isfinite(u2)):
-        raise ValueError("input contains NaN or inf")
-    if not (dt > 0 and math.isfinite(dt)):
-        raise ValueError(f"sample interval must be positive, got {dt}")
-    if int(substeps) < 1:
-        raise ValueError("substeps must be >= 1")
-    uidx = np.zeros(nb, dtype=np.int64) if input_index is None else np.asarray(input_index, dtype=np.int64)
-    if uidx.shape != (nb,) or uidx.min() < 0 or uidx.max() >= u2.shape[0]:
-        raise ValueError("input_index must give one valid input row per batch member")
-    x0 = np.broadcast_to(np.asarray(x0, dtype=np.float64), (nb, 2))
-    if not np.all(np.isfinite(x0)):
-        raise ValueError("initial state contains NaN or inf")
     gain = input_gain(input_kind, p[P_M])
     n = u2.shape[1]
     if staged:

@@ -3,6 +3,7 @@
 import numpy as np
 import pytest
 
+from negstiff.experiments import silverbox as silverbox_study
 from negstiff.models import AS_BUILT, Model
 from negstiff.models.rig import Rig
 
@@ -24,19 +25,18 @@ def rng():
     return np.random.default_rng(12345)
 
 
-SILVERBOX_TRAIN, SILVERBOX_TEST, SILVERBOX_ARROW = (40650, 105712), (105712, 127400), (0, 40575)
+# the benchmark's split and protocol, from the one Silverbox module (experiments/silverbox.py)
+SILVERBOX_TRAIN, SILVERBOX_TEST, SILVERBOX_ARROW = silverbox_study.TRAIN, silverbox_study.TEST, silverbox_study.ARROW
 
 
 @pytest.fixture(scope="session")
 def silverbox(request):
     """The Silverbox record (real data: an electronic Duffing oscillator, force input V1, output V2);
     skips when ../shared is not beside the checkout."""
-    from negstiff.inference.measurement import load
-
     path = request.config.rootpath / "../shared/data/silverbox/SNLS80mV.mat"
     if not path.exists():
         pytest.skip("shared/ data not beside the repository")
-    return load(path, columns="force=V1,z=V2", fs=610.35)
+    return silverbox_study.load_silverbox(path)
 
 
 @pytest.fixture(scope="session")
@@ -51,11 +51,6 @@ def silverbox_fits(silverbox):
 
 
 def silverbox_prediction_mv(model, m, part) -> float:
-    """Free-run rms error [mV] over ``part`` of the Silverbox record, started from the measured state at
-    the part's sample 50, the first one scored (the benchmark's protocol)."""
-    from negstiff.inference.derivatives import state_derivatives
-    from negstiff.inference.validation import free_run_rms
-
-    seg = m.segment(*part)
-    zs, v, _, _ = state_derivatives(seg.z, seg.fs, purpose="state")
-    return 1e3 * free_run_rms(model, seg.segment(50, seg.n), x0=(zs[50], v[50]))
+    """Free-run rms error [mV] over ``part`` of the Silverbox record (the benchmark's protocol:
+    ``experiments.silverbox.prediction_error_mv``)."""
+    return silverbox_study.prediction_error_mv(model, m, part)

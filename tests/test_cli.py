@@ -178,7 +178,14 @@ def test_reproduce_machinery_on_two_sections(tmp_path, monkeypatch):
     monkeypatch.setenv("NEGSTIFF_CACHE", str(tmp_path / "cache"))
     sections = ("characterization", "nsi")
     results = _check_report(reproduce(tmp_path / "a", fast=True, progress=False, sections=sections), sections)
-    assert results["sections_left_out"] == ["updating", "sindy", "posterior", "discrepancy", "silverbox"]
+    assert results["sections_left_out"] == [
+        "updating",
+        "sindy",
+        "posterior",
+        "discrepancy",
+        "silverbox",
+        "continuation",
+    ]
     assert any((tmp_path / "cache").iterdir()), "the sections were cached"
     again = json.loads(
         (reproduce(tmp_path / "b", fast=True, progress=False, sections=sections) / "results.json").read_text()

@@ -6,8 +6,9 @@ from conftest import SILVERBOX_TEST, silverbox_prediction_mv
 from scipy import linalg, signal
 
 from negstiff.inference import subspace
+from negstiff.inference.derivatives import smooth_and_differentiate
 from negstiff.inference.measurement import MeasurementError, from_arrays
-from negstiff.inference.nsi import NSI, NSIError, smooth_and_differentiate
+from negstiff.inference.nsi import NSI, NSIError
 from negstiff.models import SEED_LIKE_CROSS_WELL_RMS, SEED_LIKE_CUBIC, Model, simulate
 from negstiff.models.rig import Rig, Sensors
 
@@ -51,10 +52,10 @@ def test_chunked_lq_equals_the_direct_factorisation():
     L = subspace.lq_factor(u, y, i, chunk=500)
     j = 3000 - 2 * i + 1
     blocks = [
-        subspace._hankel_block(u, i, i, j),
-        subspace._hankel_block(u, 0, i, j),
-        subspace._hankel_block(y, 0, i, j),
-        subspace._hankel_block(y, i, i, j),
+        subspace.hankel_block(u, i, i, j),
+        subspace.hankel_block(u, 0, i, j),
+        subspace.hankel_block(y, 0, i, j),
+        subspace.hankel_block(y, i, i, j),
     ]
     H = np.vstack(blocks) / np.sqrt(j)
     R = linalg.qr(H.T, mode="r")[0][: H.shape[0]]

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from negstiff.cli import main
-from negstiff.inference.measurement import from_arrays
+from negstiff.inference.measurement import Measurement, from_arrays
 from negstiff.inference.posterior import (
     Posterior,
     convergence_warnings,
@@ -189,10 +189,9 @@ def test_device_likelihood_sees_only_e_over_m():
 
 @pytest.fixture(scope="module")
 def device_posteriors():
-    from negstiff.experiments.posterior_study import as_measurement
     from negstiff.models.device import AS_BUILT
 
-    rec = as_measurement(Rig(AS_BUILT, seed=22).random(duration=4))
+    rec = Measurement.from_rig(Rig(AS_BUILT, seed=22).random(duration=4))
     return {
         prior: Posterior(model="device", mass_prior=prior, seed=3, n_ensembles=2, max_steps=steps).fit(rec).result_
         for prior, steps in (("free", 5000), ("weighed", 3000))

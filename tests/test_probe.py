@@ -142,6 +142,7 @@ def test_bad_input_is_refused_cleanly(workdir, capsys, case, command, kind, what
             "update": ["update", str(workdir / "targets.json"), "-o", str(out)],
             "reproduce": ["reproduce", "-o", str(out)],
             "identify": ["identify", "nsi", str(workdir / "rec.csv"), "-o", str(out)],
+            "nfrc": ["nfrc", str(workdir / "model.json"), "--freq", "9", "--amplitude", "2:4", "-o", str(out)],
         }.get(command) or DATA_COMMANDS[command](workdir, workdir / "rec.csv", out)
         argv = base + [f"{option}={value}"]
     _expect_clean_refusal(workdir, capsys, argv, [out])

@@ -1,0 +1,62 @@
+"""The ``negstiff`` command line: a thin shell over ``negstiff.models``, ``negstiff.inference`` and
+``negstiff.experiments`` (``shared/docs/contract.md`` is its specification): ``parser`` (the
+arguments), ``commands`` (one function per command), ``common`` (input errors, system files, result
+JSON, the checks made before any work).
+
+Exit codes: 0 success, 2 bad input (one line on stderr, no output written).
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import sys
+import threading
+import warnings
+from typing import Sequence
+
+from .common import InputError, bad_input_types, check_paths, load_system, write_json  # noqa: F401 (API)
+from .parser import build_parser
+
+
+def _interrupt_handler(command: str):
+    """Ctrl-C: one line, the outputs being written removed, exit 130 at once. (Raising
+    KeyboardInterrupt is not enough: emcee prints the traceback of any exception inside a
+    log-probability call before passing it on.)"""
+
+    def handler(signum, frame):
+        from negstiff.files import remove_pending
+
+        remove_pending()
+        sys.stderr.write(f"negstiff {command}: interrupted (nothing written)\n")
+        sys.stderr.flush()
+        os._exit(130)
+
+    return handler
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = build_parser()
+    try:
+        args = parser.parse_args(argv)
+    except KeyboardInterrupt:
+        print("negstiff: interrupted", file=sys.stderr)
+        return 130
+    if threading.current_thread() is threading.main_thread() and argv is None:  # the installed command
+        signal.signal(signal.SIGINT, _interrupt_handler(args.command))
+    try:
+        check_paths(args)
+        with warnings.catch_warnings():
+            # the libraries' notices (arviz's dimension names, numpy's empty slices) are not the user's
+            # business; negstiff's own warnings are in the result and on stderr (``warn``)
+            warnings.simplefilter("ignore")
+            return args.func(args)
+    except bad_input_types() as exc:
+        msg = " ".join(str(exc).split()) or type(exc).__name__
+        print(f"negstiff {args.command}: error: {msg}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print(f"negstiff {args.command}: interrupted (nothing written)", file=sys.stderr)
+        return 130
+    except BrokenPipeError:
+        return 141

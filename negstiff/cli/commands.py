@@ -1,0 +1,465 @@
+"""The commands: each reads its inputs, calls ``negstiff.models``, ``negstiff.inference`` or
+``negstiff.experiments``, and writes its output atomically (``shared/docs/contract.md``)."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import sys
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+
+from .common import (
+    InputError,
+    export_options,
+    load_system,
+    out_path,
+    parse_amplitudes,
+    parse_band,
+    parse_effects,
+    parse_span,
+    say,
+    say_refinement,
+    wants_progress,
+    warn,
+    with_record,
+    write_json,
+)
+
+
+def make_rig(args):
+    from negstiff.models.device import AS_BUILT
+    from negstiff.models.rig import Rig, Sensors
+
+    system = load_system(args.model) if args.model else AS_BUILT
+    sensors = Sensors.noiseless() if args.noise_free else Sensors()
+    sensors = dataclasses.replace(sensors, response=args.sensor, response_offset=args.response_offset)
+    try:
+        return Rig(system, effects=parse_effects(args.effect), sensors=sensors, fs=args.fs, seed=args.seed)
+    except ValueError as exc:  # an unknown effect or a bad value: the user's --effect
+        raise InputError(f"--effect: {exc}") from None
+
+
+def cmd_rig(args) -> int:
+    rig = make_rig(args)
+    out = out_path(args) if args.mode != "campaign" else Path(args.out)
+    if args.mode == "random":
+        rec = rig.random(
+            duration=args.duration,
+            rms=args.rms,
+            band=tuple(args.band),
+            start="plus" if args.start == "both" else args.start,
+        )
+        rec.write(out, **export_options(args))
+        say(args, f"wrote {out} ({rec.columns['t'].size} samples at {rig.fs:g} Hz) and its truth")
+    elif args.mode == "sweep":
+        rec = rig.sine_sweep(args.f_start, args.f_stop, args.amplitude, args.duration, args.sweep_mode,
+                             start="plus" if args.start == "both" else args.start)  # fmt: skip
+        rec.write(out, **export_options(args))
+        say(
+            args,
+            f"wrote {out} (sine sweep {args.f_start:g}-{args.f_stop:g} Hz, {args.amplitude:g} m/s^2) and its truth",
+        )
+    elif args.mode == "harmonic":
+        rec = rig.harmonic(args.freq, args.amplitude, args.start, args.settle_periods, args.periods)
+        rec.write(out, **export_options(args))
+        say(args, f"wrote {out} ({args.periods} periods at {args.freq:g} Hz, {args.amplitude:g} m/s^2) and its truth")
+    else:
+        write_campaign(rig, args)
+    return 0
+
+
+def write_campaign(rig, args) -> None:
+    """Stepped sweeps up and/or down from either well, one batched run, written as one folder."""
+    from negstiff.files import atomic_dir
+
+    amps = parse_amplitudes(args.amplitudes)
+    starts = ["plus", "minus"] if args.start == "both" else [args.start]
+    dirs = ["up", "down"] if args.direction == "both" else [args.direction]
+    plans = [(s, d) for s in starts for d in dirs]
+    lists = [amps if d == "up" else amps[::-1] for _, d in plans]
+    say(args, f"campaign: {len(plans)} sweep(s) x {len(amps)} amplitudes at {args.freq:g} Hz, one batched run")
+    sweeps = rig.sweeps(args.freq, lists, [s for s, _ in plans], args.settle_periods, args.periods)
+    index = []
+    with atomic_dir(args.out) as tmp:
+        for (start, direction), recs in zip(plans, sweeps):
+            for rec in recs:
+                amp = rec.truth["excitation"]["amplitude_m_s2"]
+                name = f"{start}_{direction}_{rec.truth['excitation']['step']:03d}_{amp:g}.{args.format or 'csv'}"
+                rec.write(tmp / name, **export_options(args))
+                index.append(
+                    {
+                        "file": name,
+                        "start_well": start,
+                        "direction": direction,
+                        "amplitude_m_s2": amp,
+                        "forcing_hz": args.freq,
+                    }
+                )
+        (tmp / "index.json").write_text(json.dumps({"records": index}, indent=1) + "\n")
+    say(args, f"wrote {len(index)} records to {args.out}/ (index.json lists them)")
+
+
+def cmd_simulate(args) -> int:
+    from negstiff.files import atomic_path
+    from negstiff.inference.derivatives import state_derivatives
+    from negstiff.inference.measurement import load
+    from negstiff.inference.validation import divergence_limits, simulate_record, start_state
+    from negstiff.models import simulate
+    from negstiff.models.simulator import DEFAULT_V_LIMIT, DEFAULT_Z_LIMIT
+
+    system = load_system(args.model)
+    rec = load(args.input, columns=args.columns, fs=args.fs, response=False)
+    rec.require(2, "a simulation")
+    # the record's own start: the state whose free run matches its first periods (validation.start_state)
+    z0, v0 = (None, 0.0)
+    if rec.z is not None and (args.z0 is None or args.v0 is None):
+        z0, v0 = start_state(system, rec)
+    # a record with a response bounds the run by ten times its own stroke and speed (a benchmark in
+    # volts exceeds the shaker defaults' 100 m/s); an input-only record by the shaker defaults
+    limits = {"z_limit": DEFAULT_Z_LIMIT, "v_limit": DEFAULT_V_LIMIT}
+    if rec.z is not None:
+        limits = divergence_limits(rec.z, state_derivatives(rec.z, rec.fs, purpose="state")[1])
+    if args.z0 is not None:
+        z0 = args.z0
+    if args.v0 is not None:
+        v0 = args.v0
+    if z0 is None:
+        z0 = system.equilibria().z_plus
+    if args.interpolation == "linear":
+        res = simulate(system, rec.u, rec.dt, z0=z0, v0=v0, input_kind=rec.input_name, substeps=args.substeps or 2,
+                       **limits)  # fmt: skip
+    else:
+        res = simulate_record(system, rec, (z0, v0), substeps=args.substeps, **limits)
+    if res.diverged[0]:
+        raise InputError(f"simulation of {args.model} under {args.input} failed: {res.describe_failures()}")
+    data = np.column_stack([rec.t, rec.u, res.z[0], res.z_dot[0]])
+    with atomic_path(args.out) as tmp:
+        np.savetxt(tmp, data, delimiter=",", fmt="%.10g", header=f"t,{rec.input_name},z,z_dot", comments="")
+    say(args, f"wrote {args.out} ({rec.n} samples)")
+    return 0
+
+
+def cmd_identify(args) -> int:
+    from negstiff.inference.measurement import load
+
+    rec = load(args.data, columns=args.columns, fs=args.fs, mass=args.mass)
+    frfs = read_frf_results(args.frf)
+    say(args, f"identify {args.method}: {rec.n} samples at {rec.fs:g} Hz, input {rec.input_name}")
+    if args.method == "nsi":
+        from negstiff.inference.nsi import NSI
+
+        est = NSI(order=args.order, block_rows=args.block_rows, refine=not args.no_refine).fit(rec)
+    else:
+        from negstiff.inference.sindy import SINDy
+
+        est = SINDy(n_models=args.ensemble, seed=args.seed, refine=not args.no_refine).fit(rec)
+    result = with_record(est.result(), rec, est.model_)
+    if args.frf:
+        result["frf_comparison"] = frf_comparison(result, frfs)
+        for c in result["frf_comparison"]:
+            say(args, f"{c['well']} well: identified {c['identified_f_hz']:.4f} Hz, FRF {c['frf_f_hz']:.4f} Hz "
+                       f"({c['difference_percent']:+.2f} %)")  # fmt: skip
+    say_refinement(args, result.get("refinement"))
+    v = result["validation"]
+    if v.get("diverged"):
+        say(args, f"WARNING: {v['warning']}")
+    warn(args, result["warnings"])
+    if args.method == "sindy":
+        say(args, f"selected terms: {', '.join(result['selected_terms'])}")
+    write_json(args.out, result)
+    wells = ", ".join(
+        f"{w}: {m['f_hz']:.3f} Hz, zeta {100 * m['zeta']:.1f} %"
+        for w, m in result["modal"].items()
+        if m["f_hz"] is not None
+    )
+    say(args, f"wrote {args.out} ({wells}; validation {v['rms_percent']:.2f} % rms)")
+    return 0
+
+
+def cmd_posterior(args) -> int:
+    from negstiff.inference.measurement import load
+    from negstiff.inference.posterior import Posterior
+    from negstiff.models import Model
+
+    start = None
+    if args.start is not None:
+        start = load_system(args.start)
+        if args.model != "coefficients" or not isinstance(start, Model):
+            raise InputError(
+                f"--start {args.start}: a polynomial model, for the coefficient posterior (--model coefficients)"
+            )
+    rec = load(args.data, columns=args.columns, fs=args.fs, mass=args.mass)
+    if args.duration is not None:
+        rec = rec.segment(0, min(rec.n, int(round(args.duration * rec.fs))))
+    say(args, f"posterior ({args.model}): {rec.n} samples at {rec.fs:g} Hz, input {rec.input_name}")
+    post = Posterior(
+        model=args.model,
+        mass_prior=args.mass_prior,
+        window_s=args.window,
+        max_windows=args.max_windows,
+        n_walkers=args.walkers,
+        n_ensembles=args.ensembles,
+        max_steps=args.max_steps,
+        hdi_prob=args.hdi_prob,
+        adjust=not args.no_adjust,
+        seed=args.seed,
+        progress=wants_progress(args),
+        start=start,
+        refine_start=not args.no_refine,
+    )
+    res = post.fit(rec).result_
+    result = with_record(post.result(), rec)
+    if args.idata:
+        from negstiff.files import atomic_path
+
+        with atomic_path(args.idata) as tmp:
+            res.idata.to_netcdf(tmp, engine="h5netcdf")
+    write_json(args.out, result)
+    warn(args, result["warnings"])
+    line = ", ".join(f"{n} {s['mean']:.4g} +- {s['sd']:.2g}" for n, s in result["parameters"].items())
+    say(args, f"wrote {args.out}: {line}")
+    return 0
+
+
+def cmd_discrepancy(args) -> int:
+    from negstiff.inference.discrepancy import CUBIC_BASELINE, LINEAR_BASELINE, Discrepancy
+    from negstiff.inference.measurement import load
+
+    rec = load(args.data, columns=args.columns, fs=args.fs, mass=args.mass)
+    say(args, f"discrepancy: {rec.n} samples at {rec.fs:g} Hz, input {rec.input_name}, baseline {args.baseline}")
+    base = CUBIC_BASELINE if args.baseline == "cubic" else LINEAR_BASELINE
+    d = Discrepancy(baseline=base, max_effects=args.max_effects, refine=not args.no_refine, unnamed=args.unnamed)
+    d.fit(rec)
+    result = with_record(d.result(), rec, d.model_)
+    say_refinement(args, result.get("refinement"))
+    write_json(args.out, result)
+    warn(args, result["warnings"])
+    say(args, f"where: {result['where']}")
+    un = result.get("unnamed")
+    if un:
+        g = un["gap"]
+        say(args, f"unnamed: a non-parametric term of {un['term_percent_of_restoring_force']:.3g} % of the "
+                   f"restoring force; held-out gap {g.get('physics_median_window_percent', float('nan')):.3g} % -> "
+                   f"{g.get('hybrid_median_window_percent', float('nan')):.3g} % with it")  # fmt: skip
+    say(
+        args,
+        f"wrote {args.out}: named {', '.join(result['effects'])}; held-out gap (restarted free runs) "
+        f"{result['gap_before_percent']:.3g} % -> {result['gap_after_percent']:.3g} %",
+    )
+    return 0
+
+
+def cmd_characterize(args) -> int:
+    from negstiff.inference.characterize import characterize
+    from negstiff.inference.measurement import load
+    from negstiff.inference.nsi import well_guesses
+
+    rec = load(args.data, columns=args.columns, fs=args.fs)
+    if args.signal != "z":
+        col = getattr(rec, args.signal, None)
+        if col is None:
+            raise InputError(f"{args.data}: no column {args.signal!r} to analyse (choose z, y, z_dot or base_disp)")
+        rec = dataclasses.replace(rec, z=col)
+    if args.wells:
+        try:
+            wells = tuple(float(x) for x in args.wells.split(","))
+            if len(wells) not in (2, 3) or not all(np.isfinite(wells)) or list(wells) != sorted(wells):
+                raise ValueError
+        except ValueError:
+            raise InputError(f"--wells {args.wells!r}: give z_minus,z_plus or z_minus,z_0,z_plus in m") from None
+    elif "z_minus_rest" in rec.meta and "z_plus_rest" in rec.meta:
+        wells = (float(rec.meta["z_minus_rest"]), float(rec.meta["z_plus_rest"]))
+    else:
+        try:
+            wells = well_guesses(rec)
+        except ValueError:
+            wells = None
+    if not args.forcing_hz < rec.fs / 2:
+        raise InputError(
+            f"--forcing-hz {args.forcing_hz:g}: above the Nyquist frequency of {args.data} ({rec.fs / 2:g} Hz)"
+        )
+    say(args, f"characterize: {rec.n} samples at {rec.fs:g} Hz, forcing {args.forcing_hz:g} Hz")
+    r = characterize(rec, args.forcing_hz, wells)
+    r.pop("poincare_z")
+    r["wells_used"] = wells
+    r = with_record(r, rec)
+    write_json(args.out, r)
+    warn(args, r["warnings"])
+    lle = r["lle"]
+    lle_txt = "not determinable" if lle["value"] is None else f"{lle['value']:.2f} +- {lle['sd']:.2g} 1/s (Wolf)"
+    say(
+        args,
+        f"wrote {args.out}: period {r['period']}, {r['regime']}, LLE {lle_txt}, "
+        f"{'chaotic' if r['chaotic'] else 'not chaotic'}",
+    )
+    for what, why in r["reasons"].items():
+        say(args, f"{what}: {why}")
+    return 0
+
+
+def frf_well(rec) -> str | None:
+    """The well a low-level record sits in: the rest position (metadata) nearest its mean z."""
+    rest = {}
+    for w in ("minus", "plus"):
+        try:
+            rest[w] = float(rec.meta[f"z_{w}_rest"])
+        except (KeyError, ValueError):
+            pass
+    if not rest or rec.z is None:
+        return None
+    return min(rest, key=lambda w: abs(rest[w] - float(np.mean(rec.z))))
+
+
+def cmd_frf(args) -> int:
+    from negstiff.files import atomic_path
+    from negstiff.inference.frf import frf
+    from negstiff.inference.measurement import load
+
+    band = parse_band(args.band)
+    rec = load(args.data, columns=args.columns, fs=args.fs)
+    if band is not None and band[1] > rec.fs / 2:
+        raise InputError(f"--band {args.band}: beyond the Nyquist frequency of {args.data} ({rec.fs / 2:g} Hz)")
+    say(args, f"frf: {rec.n} samples at {rec.fs:g} Hz, input {rec.input_name}")
+    res = frf(rec, band=band, segment_s=args.segment)
+    curves = res.pop("_curves")
+    res["well"] = frf_well(rec)
+    res = with_record(res, rec)
+    if res["reason"]:
+        res["warnings"].append(res["reason"])
+    figure = Path(args.out).with_suffix(".png")
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    f = curves["f"]
+    sel = (f >= res["band"][0]) & (f <= res["band"][1])
+    fig, (a1, a2) = plt.subplots(2, 1, figsize=(8, 6), sharex=True, height_ratios=[3, 1])
+    a1.semilogy(f[sel], np.abs(curves["H1"][sel]), label="H1")
+    a1.semilogy(f[sel], np.abs(curves["H2"][sel]), "--", label="H2")
+    for p in res["peaks"]:
+        a1.axvline(p["f_hz"], color="0.6", lw=0.8)
+        a1.annotate(f"{p['f_hz']:.3f} Hz, zeta {100 * p['zeta']:.2f} %", (p["f_hz"], np.abs(curves["H1"][sel]).max()),
+                    fontsize=8, ha="left", va="top")  # fmt: skip
+    a1.set(ylabel=f"|z / {rec.input_name}|", title=f"FRF of {Path(args.data).name}")
+    a1.legend()
+    a2.plot(f[sel], curves["coherence"][sel])
+    a2.set(xlabel="frequency [Hz]", ylabel="coherence", ylim=(0, 1.05))
+    fig.tight_layout()
+    res["figure"] = figure.name
+    with atomic_path(figure) as tmp:
+        fig.savefig(tmp, format="png", dpi=110)
+    plt.close(fig)
+    write_json(args.out, res)
+    warn(args, res["warnings"])
+    top = "no peak" if res["f_hz"] is None else f"{res['f_hz']:.4f} Hz, zeta {100 * res['zeta']:.2f} %"
+    say(args, f"wrote {args.out} and {figure.name}: dominant peak {top}; {len(res['peaks'])} peak(s)")
+    return 0
+
+
+def cmd_nfrc(args) -> int:
+    from negstiff.experiments.nfrc import figure
+    from negstiff.files import atomic_path
+    from negstiff.models.continuation import ContinuationError, nfrc
+
+    system = load_system(args.model)
+    freq, amplitude = parse_span(args.freq, "--freq"), parse_span(args.amplitude, "--amplitude")
+    if isinstance(freq, tuple) == isinstance(amplitude, tuple):
+        raise InputError("give a range (F1:F2 or A1:A2) for exactly one of --freq and --amplitude")
+    try:
+        system.equilibria().well(args.well)
+    except ValueError as exc:
+        raise InputError(f"--well {args.well}: {exc}") from None
+    say(args, f"nfrc: continuation in {'amplitude' if isinstance(amplitude, tuple) else 'frequency'} from the "
+              f"{args.well} well")  # fmt: skip
+    try:
+        res = nfrc(system, freq=freq, amplitude=amplitude, well=args.well, input_kind=args.input,
+                   max_period=args.max_period)  # fmt: skip
+    except ContinuationError as exc:
+        raise InputError(str(exc)) from None
+    fig = figure(res)
+    png = Path(args.out).with_suffix(".png")
+    res["figure"] = png.name
+    import matplotlib.pyplot as plt
+
+    with atomic_path(png) as tmp:
+        fig.savefig(tmp, format="png", dpi=110)
+    plt.close(fig)
+    write_json(args.out, res)
+    kinds = ", ".join(f"{b['type']} at {b['amplitude']:.4g} / {b['f_hz']:.4g} Hz (period {b['period']})"
+                      for b in res["bifurcations"]) or "none"  # fmt: skip
+    say(args, f"wrote {args.out} and {png.name}: {len(res['branches'])} branch(es); bifurcations: {kinds}")
+    return 0
+
+
+def read_frf_results(paths: Sequence[str] | None) -> list[tuple[str, float, str | None]]:
+    """(path, peak frequency [Hz], well) of each ``--frf`` result, checked before any work."""
+    from negstiff.files import read_json
+
+    out = []
+    for p in paths or []:
+        try:
+            r = read_json(p)
+            f_frf, well = r["f_hz"], r.get("well")
+        except (ValueError, KeyError, TypeError, AttributeError):
+            raise InputError(f"--frf {p}: not an frf result (needs f_hz)") from None
+        if not isinstance(f_frf, (int, float)) or isinstance(f_frf, bool):
+            raise InputError(f"--frf {p}: the FRF found no peak to compare with (f_hz is {f_frf!r})")
+        out.append((p, float(f_frf), well))
+    return out
+
+
+def frf_comparison(result: dict, frfs: list[tuple[str, float, str | None]]) -> list[dict]:
+    """Each well's identified underlying-linear frequency beside a low-level FRF's (``--frf``)."""
+    out = []
+    for p, f_frf, well in frfs:
+        modal = {w: m["f_hz"] for w, m in result["modal"].items() if m.get("f_hz")}
+        if well not in modal:  # no rest positions in the FRF's record: the nearest well frequency
+            well = min(modal, key=lambda w: abs(modal[w] - f_frf)) if modal else None
+        f_id = modal.get(well)
+        out.append(
+            {
+                "frf": str(p),
+                "well": well,
+                "frf_f_hz": f_frf,
+                "identified_f_hz": f_id,
+                "difference_percent": None if f_id is None else 100 * (f_id / f_frf - 1),
+            }
+        )
+    return out
+
+
+def cmd_update(args) -> int:
+    from tqdm import tqdm
+
+    from negstiff.inference.updating import GAUpdater, load_targets
+
+    targets = load_targets(args.targets)
+    bar = tqdm(total=args.generations, desc="GA", unit="gen", disable=not wants_progress(args), file=sys.stderr)
+
+    def progress(gen: int, best: float) -> None:
+        bar.update(1)
+        bar.set_postfix(best=f"{best:.3f} %")
+
+    ga = GAUpdater(pop_size=args.pop_size, generations=args.generations, fixed_mass=args.fix_mass, seed=args.seed)
+    ga.fit(targets, progress=progress)
+    bar.close()
+    write_json(args.out, ga.result())
+    d = ga.device_
+    say(
+        args,
+        f"wrote {args.out}: E = {d.E / 1e9:.2f} GPa, alpha = {d.alpha_deg:.2f} deg, m = {d.m * 1e3:.1f} g, "
+        f"fitness {ga.fitness_:.3f} % (seed Eq. 9)"
+        + (f", restoring-force mismatch {ga.objective_:.3f} % (minimised)" if ga.stroke_ is not None else ""),
+    )
+    return 0
+
+
+def cmd_reproduce(args) -> int:
+    from negstiff.experiments.reproduce import reproduce
+
+    reproduce(Path(args.out), fast=args.fast, seed=args.seed, progress=wants_progress(args))
+    return 0

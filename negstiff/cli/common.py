@@ -1,0 +1,294 @@
+"""What every command shares: input errors, argument types, reading a system file, writing a result
+JSON, the lines on stderr, and the check that no output overwrites an input."""
+
+from __future__ import annotations
+
+import argparse
+import ast
+import functools
+import importlib.util
+import json
+import sys
+from pathlib import Path
+from typing import Any, Sequence
+
+import numpy as np
+
+
+class InputError(Exception):
+    """Bad input found by the CLI itself (exit 2)."""
+
+
+class Parser(argparse.ArgumentParser):
+    """argparse with the contract's error form: one line naming the option, exit 2 (no usage dump)."""
+
+    def error(self, message: str):
+        self.exit(2, f"{self.prog}: error: {' '.join(message.split())} (see {self.prog} --help)\n")
+
+
+@functools.lru_cache(maxsize=None)
+def _signature_defaults(module: str, cls: str) -> dict[str, Any]:
+    tree = ast.parse(Path(importlib.util.find_spec(module).origin).read_text())
+    init = next(
+        f
+        for c in tree.body
+        if isinstance(c, ast.ClassDef) and c.name == cls
+        for f in c.body
+        if isinstance(f, ast.FunctionDef) and f.name == "__init__"
+    )
+    args = init.args.args[-len(init.args.defaults) :] if init.args.defaults else []
+    out = {}
+    for a, d in zip(args, init.args.defaults):
+        try:
+            out[a.arg] = ast.literal_eval(d)
+        except ValueError:
+            pass  # not a literal (a module constant): the CLI states no default for it
+    return out
+
+
+def default(estimator: str, parameter: str) -> Any:
+    """The default of an estimator's parameter, read from its ``__init__`` signature (``"nsi.NSI"``:
+    ``negstiff.inference.nsi.NSI``), so the CLI states the estimator's own default. Read from the source,
+    not imported: building the parser (``--help``) must not load the compiled simulator."""
+    module, cls = estimator.rsplit(".", 1)
+    return _signature_defaults(f"negstiff.inference.{module}", cls)[parameter]
+
+
+def number(kind, lo=None, hi=None, lo_open=False, what=""):
+    """An argparse type: a number of ``kind`` in [lo, hi] (open at lo with ``lo_open``)."""
+
+    def parse(text: str):
+        try:
+            v = kind(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{text!r} is not {'an integer' if kind is int else 'a number'}") from None
+        if kind is float and not np.isfinite(v):
+            raise argparse.ArgumentTypeError(f"{text!r} is not a finite number")
+        if lo is not None and (v < lo or (lo_open and v == lo)):
+            raise argparse.ArgumentTypeError(f"{text} is out of range: must be {'>' if lo_open else '>='} {lo:g}{what}")
+        if hi is not None and v > hi:
+            raise argparse.ArgumentTypeError(f"{text} is out of range: must be <= {hi:g}{what}")
+        return v
+
+    parse.__name__ = kind.__name__
+    return parse
+
+
+POSITIVE = number(float, 0.0, lo_open=True)
+
+
+POSITIVE_INT = number(int, 1)
+
+
+SEED = number(int, 0, 2**32 - 1)
+
+
+def bad_input_types() -> tuple[type[BaseException], ...]:
+    """The domain's errors (bad input: one line, exit 2). A plain ValueError from inside is a bug and
+    keeps its traceback; where a user's value reaches a validating constructor, the command turns its
+    ValueError into an InputError at that call."""
+    from negstiff.inference.measurement import MeasurementError
+    from negstiff.inference.updating import UpdatingError
+    from negstiff.models.device import GeometryError
+    from negstiff.models.rig import RigError
+
+    return (InputError, MeasurementError, RigError, GeometryError, UpdatingError, FileNotFoundError,
+            json.JSONDecodeError)  # fmt: skip
+
+
+def wants_progress(args) -> bool:
+    return not getattr(args, "quiet", False)
+
+
+def parse_effects(items: Sequence[str] | None) -> dict[str, Any]:
+    """``NAME=VALUE`` (a stop: ``NAME=k:2e4,z:0.035``) into an extra-effects mapping."""
+    out: dict[str, Any] = {}
+    for item in items or []:
+        if "=" not in item:
+            raise InputError(f"--effect {item!r}: expected NAME=VALUE (e.g. coulomb_friction=0.05)")
+        name, value = item.split("=", 1)
+        try:
+            if ":" in value:
+                out[name] = {k: float(v) for k, v in (kv.split(":", 1) for kv in value.split(","))}
+            else:
+                out[name] = float(value)
+        except ValueError:
+            raise InputError(f"--effect {item!r}: the value is not a number (or k:N/m,z:m for a stop)") from None
+    return out
+
+
+def parse_amplitudes(text: str) -> list[float]:
+    """``4:30:0.5`` (start:stop:step, stop included) or ``5,10,15``."""
+    try:
+        if ":" in text:
+            a, b, s = (float(x) for x in text.split(":"))
+            if s <= 0 or b < a:
+                raise ValueError
+            return list(np.round(np.arange(a, b + s / 2, s), 10))
+        return [float(x) for x in text.split(",")]
+    except ValueError:
+        raise InputError(f"--amplitudes {text!r}: use start:stop:step (e.g. 4:30:0.5) or a list 5,10,15") from None
+
+
+def load_system(path: str | Path):
+    """A model JSON (polynomial, contract fields) or a device JSON (geometry fields E, alpha_deg, ...)."""
+    from negstiff.files import read_json
+    from negstiff.models import Device, Model
+
+    path = Path(path)
+    try:
+        d = read_json(path)
+    except ValueError as exc:
+        raise InputError(str(exc)) from None
+    if isinstance(d, dict) and isinstance(d.get("model"), dict):  # an identify result holds a model
+        d = d["model"]
+    if not isinstance(d, dict):
+        raise InputError(f"{path}: a model file is a JSON object")
+    try:
+        return Device.from_dict(d) if "E" in d else Model.from_dict(d)
+    except (KeyError, TypeError, ValueError) as exc:
+        raise InputError(f"{path}: {exc}") from None
+
+
+def write_json(path: str | Path, data: dict) -> None:
+    """Write a result JSON atomically (NaN and inf become null: JSON has no such numbers)."""
+    from negstiff.files import write_text
+
+    write_text(path, json.dumps(_finite(data), indent=2) + "\n")
+
+
+def _finite(o):
+    if isinstance(o, dict):
+        return {k: _finite(v) for k, v in o.items()}
+    if isinstance(o, (list, tuple)):
+        return [_finite(v) for v in o]
+    if isinstance(o, (float, np.floating)):
+        return float(o) if np.isfinite(o) else None
+    if isinstance(o, np.integer):
+        return int(o)
+    if isinstance(o, np.ndarray):
+        return _finite(o.tolist())
+    return o
+
+
+def say(args, text: str) -> None:
+    if wants_progress(args):
+        print(text, file=sys.stderr)
+
+
+def warn(args, warnings: Sequence[str]) -> None:
+    """Warnings are loud: on stderr even with --quiet (and in the result)."""
+    for w in warnings:
+        print(f"negstiff {args.command}: WARNING: {w}", file=sys.stderr)
+
+
+def with_record(result: dict, rec, model=None) -> dict:
+    """A result with how its record was read (time base, response sensor, derived z) and every
+    warning about the record and the model (``inference.plausibility``)."""
+    from negstiff.inference.plausibility import collect
+
+    return {**result, "record": rec.info, "warnings": collect(rec, result, model)}
+
+
+def say_refinement(args, info: dict | None) -> None:
+    """One line on the output-error refinement: held-out free-run error before and after, kept or not."""
+    if not info:
+        return
+    h = info.get("heldout")
+    if h is None:
+        say(args, f"refinement: {info['reason']}")
+        return
+    a, b = h["initial"].get("restarted_rms_percent"), h["refined"].get("restarted_rms_percent")
+    fmt = lambda x: "diverged" if x is None or not np.isfinite(x) else f"{x:.3g} %"  # noqa: E731
+    say(args, f"refinement by simulation error ({info['seconds']:.1f} s): held-out restarted free runs "
+               f"{fmt(a)} -> {fmt(b)} rms, {info['reason'].split(':')[0]}")  # fmt: skip
+
+
+INPUT_ARGS = ("data", "model", "input", "targets", "frf", "start")
+
+
+OUTPUT_ARGS = ("out", "idata")
+
+
+def check_paths(args) -> None:
+    """Before any work: no output may be an input, and every output's folder must be writable."""
+    import os
+    import tempfile
+
+    inputs = {}
+    for name in INPUT_ARGS:
+        v = getattr(args, name, None)
+        for item in v if isinstance(v, list) else [v] if v else []:
+            inputs[Path(item).resolve()] = item
+    for name in OUTPUT_ARGS:
+        v = getattr(args, name, None)
+        if not v:
+            continue
+        out = Path(v).resolve()
+        targets = [out]
+        if args.command == "rig" and out.suffix:
+            targets.append(out.with_name(out.stem + ".truth.json"))
+        if args.command in ("frf", "nfrc"):
+            targets.append(out.with_suffix(".png"))
+        for t in targets:
+            if t in inputs:
+                raise InputError(
+                    f"--{name.replace('_', '-')} {v}: would overwrite the input {inputs[t]}; choose another path"
+                )
+        folder_out = args.command == "reproduce" or (args.command == "rig" and args.mode == "campaign")
+        if out.is_dir() and not folder_out:
+            raise InputError(f"--{name} {v}: is a folder; give a file path")
+        parent = out if folder_out else out.parent
+        while not parent.exists() and parent != parent.parent:
+            parent = parent.parent
+        try:  # the one sure test of a folder's writability: write in it
+            if not parent.is_dir():
+                raise OSError
+            fd, probe = tempfile.mkstemp(prefix=".negstiff-probe.", dir=parent)
+            os.close(fd)
+            os.unlink(probe)
+        except OSError:
+            raise InputError(f"--{name} {v}: cannot write there ({parent} is not a writable folder)") from None
+
+
+def parse_span(text: str, option: str) -> float | tuple[float, float]:
+    """``X`` (a positive number) or ``X1:X2`` (a range, X2 > X1 >= 0)."""
+    try:
+        if ":" in text:
+            lo, hi = (float(x) for x in text.split(":"))
+            if not (np.isfinite(lo) and np.isfinite(hi) and 0 <= lo < hi):
+                raise ValueError
+            return lo, hi
+        v = float(text)
+        if not (np.isfinite(v) and v > 0):
+            raise ValueError
+        return v
+    except ValueError:
+        raise InputError(f"{option} {text!r}: give a positive number or a range X1:X2 with X2 > X1 >= 0") from None
+
+
+def parse_band(text: str | None) -> tuple[float, float] | None:
+    if text is None:
+        return None
+    try:
+        lo, hi = (float(x) for x in text.split(":"))
+        if not (0 <= lo < hi and np.isfinite(hi)):
+            raise ValueError
+    except ValueError:
+        raise InputError(f"--band {text!r}: give F1:F2 in Hz with 0 <= F1 < F2 (e.g. 2:40)") from None
+    return lo, hi
+
+
+def export_options(args) -> dict[str, Any]:
+    """How the rig's file is written (a lab's export: time decimals, accelerations in g)."""
+    return {"time_decimals": args.time_decimals, "acc_unit": args.acc_unit}
+
+
+def out_path(args) -> Path:
+    """The record's path; ``--format`` sets (or checks) its suffix."""
+    out = Path(args.out)
+    if args.format and out.suffix.lower().lstrip(".") != args.format:
+        if out.suffix and not (args.format == "uff" and out.suffix.lower() == ".unv"):
+            raise InputError(f"--format {args.format}: the output {out} has another suffix ({out.suffix})")
+        out = out.with_suffix(f".{args.format}")
+    return out

@@ -1,0 +1,452 @@
+"""The argument parser: one function per command, each adding its subparser (``build_parser``)."""
+
+from __future__ import annotations
+
+import argparse
+
+from negstiff.models import effects
+
+from . import commands as c
+from .common import POSITIVE, SEED, Parser, default, number
+
+POST = "posterior.core.Posterior"
+
+EPILOG_RIG = """examples:
+  negstiff rig random -o rec.csv --seed 1            300 s cross-well random record of the as-built device
+  negstiff rig random --model m.json -o rec.csv      ... of a polynomial model instead (coefficients known exactly)
+  negstiff rig random --effect coulomb_friction=0.05 -o rec.csv   with a hidden extra effect
+  negstiff rig harmonic --freq 9 --amplitude 15 -o h.csv          steady-state harmonic response
+  negstiff rig campaign --amplitudes 4:30:0.5 --start both --direction both -o campaign/
+Every record is written with <name>.truth.json beside it (the truth behind the record)."""
+
+
+def _rig(sub, common: argparse.ArgumentParser, data_opts: argparse.ArgumentParser) -> None:
+    rig = sub.add_parser(
+        "rig",
+        parents=[common],
+        help="virtual test rig: records as the seed's laboratory measures them",
+        description="Virtual shaking table with the as-built device (exact geometry) or a model on it. "
+        "Records: t, base_acc (accelerometer), y (laser), base_disp (double-integrated), "
+        "z = y - base_disp.",
+        epilog=EPILOG_RIG,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    rig.add_argument("mode", choices=["random", "harmonic", "sweep", "campaign"])
+    rig.add_argument(
+        "-o", "--out", required=True, help="record file (.csv, .npz, .uff/.unv, .tdms); for campaign, a folder"
+    )
+    rig.add_argument(
+        "--model", help="drive a model JSON (polynomial truth) or device JSON instead of the as-built device"
+    )
+    rig.add_argument(
+        "--effect",
+        action="append",
+        metavar="NAME=VALUE",
+        help=f"hidden extra effect ({', '.join(e.help() for e in effects.REGISTRY)}); repeatable",
+    )
+    rig.add_argument("--fs", type=number(float, 1.0, 1e6), default=512.0, help="sampling rate [Hz] (default 512)")
+    rig.add_argument("--noise-free", action="store_true", help="perfect sensors (no noise, no bias)")
+    g = rig.add_argument_group("lab variants (records as other labs write them)")
+    g.add_argument(
+        "--sensor",
+        default="displacement",
+        choices=["displacement", "velocity", "absolute", "accelerometer"],
+        help="response sensor: displacement (the seed's laser and double-integrated base: y, base_disp, z), "
+        "velocity (a vibrometer relative to the base: z_dot), absolute (the laser's y only), accelerometer "
+        "(on the moving part: y_acc)",
+    )
+    g.add_argument(
+        "--response-offset",
+        type=number(float),
+        default=0.0,
+        help="DC offset of the response sensor in its units (m, m/s or m/s^2; default 0)",
+    )
+    g.add_argument("--time-decimals", type=number(int, 0, 12), help="print the time column with N fixed decimals (CSV)")
+    g.add_argument(
+        "--format",
+        choices=["csv", "npz", "uff", "tdms"],
+        help="file format (default: from the --out suffix; campaign records: csv); uff: Universal File type 58, "
+        "tdms: LabVIEW TDMS",
+    )
+    g.add_argument(
+        "--acc-unit",
+        default="m/s^2",
+        choices=["m/s^2", "g"],
+        help="write accelerations in g, as base_acc_g / y_acc_g (read back with --columns base_acc=base_acc_g*9.81)",
+    )
+    g = rig.add_argument_group("random")
+    g.add_argument("--duration", type=number(float, 1.0, 1e5), default=300.0, help="record length [s] (default 300)")
+    g.add_argument("--rms", type=POSITIVE, default=14.0, help="table acceleration rms [m/s^2] (default 14: cross-well)")
+    g.add_argument(
+        "--band",
+        type=POSITIVE,
+        nargs=2,
+        default=[2.0, 40.0],
+        metavar=("LO", "HI"),
+        help="excitation band [Hz] (default 2 40)",
+    )
+    g = rig.add_argument_group("sweep (a swept sine by pyExSi: --amplitude, --duration, --start too)")
+    g.add_argument("--f-start", type=POSITIVE, default=2.0, help="start frequency [Hz] (default 2)")
+    g.add_argument("--f-stop", type=POSITIVE, default=40.0, help="stop frequency [Hz] (default 40)")
+    g.add_argument("--sweep-mode", choices=["linear", "logarithmic"], default="linear", help="sweep law")
+    g = rig.add_argument_group("harmonic and campaign")
+    g.add_argument("--freq", type=POSITIVE, default=9.0, help="forcing frequency [Hz] (default 9)")
+    g.add_argument(
+        "--amplitude", type=number(float, 0.0), default=5.0, help="table acceleration amplitude [m/s^2] (harmonic)"
+    )
+    g.add_argument(
+        "--amplitudes", default="4:30:0.5", help="campaign amplitudes start:stop:step or a list (default 4:30:0.5)"
+    )
+    g.add_argument("--start", default="plus", choices=["plus", "minus", "both"], help="starting well (default plus)")
+    g.add_argument("--direction", default="up", choices=["up", "down", "both"], help="campaign sweep direction")
+    g.add_argument(
+        "--settle-periods",
+        type=number(int, 0, 10**6),
+        default=100,
+        help="forcing periods discarded per step (default 100)",
+    )
+    g.add_argument(
+        "--periods", type=number(int, 1, 10**6), default=100, help="forcing periods recorded per step (default 100)"
+    )
+    rig.set_defaults(func=c.cmd_rig)
+
+
+def _simulate(sub, common: argparse.ArgumentParser, data_opts: argparse.ArgumentParser) -> None:
+    sim = sub.add_parser(
+        "simulate",
+        parents=[common, data_opts],
+        help="integrate a model under a record's input",
+        description="Integrate MODEL.json (contract model file, or a device JSON) under INPUT's input "
+        "column. Initial state: from INPUT's first z samples if present, else rest at z_plus.",
+    )
+    sim.add_argument("model", help="model JSON")
+    sim.add_argument("input", help="measurement file whose input column drives the model")
+    sim.add_argument("-o", "--out", required=True, help="output CSV: t,<input>,z,z_dot")
+    sim.add_argument("--z0", type=number(float), help="initial z [m]")
+    sim.add_argument("--v0", type=number(float), help="initial z_dot [m/s]")
+    sim.add_argument(
+        "--substeps",
+        type=number(int, 1, 64),
+        help="RK4 steps per sample interval (default: 2, more where the model is fast for the sampling rate)",
+    )
+    sim.add_argument(
+        "--interpolation",
+        choices=("band-limited", "linear"),
+        default="band-limited",
+        help="the input between samples: band-limited (a record through an anti-aliasing filter; default) "
+        "or linear (a piecewise-linear drive)",
+    )
+    sim.set_defaults(func=c.cmd_simulate)
+
+
+def _identify(sub, common: argparse.ArgumentParser, data_opts: argparse.ArgumentParser) -> None:
+    idf = sub.add_parser(
+        "identify",
+        parents=[common, data_opts],
+        help="identify K and D (and modal parameters) from a record",
+        description="nsi: nonlinear subspace identification around both stable wells (seed section 4): modal "
+        "parameters of each underlying-linear system, the z-frame cubic restoring force and damping. sindy: weak-form "
+        "sparse regression over 1, z..z^5, z', z'|z'|, z'^3, sgn(z') with the input's coefficient fixed by physics, "
+        "terms selected by held-out residual, ensemble inclusion probabilities. Both: equilibria, modal parameters "
+        "and a free-run validation over the held-out last 20 %%.",
+    )
+    idf.add_argument("method", choices=["nsi", "sindy"], help="identification method")
+    idf.add_argument(
+        "--no-refine",
+        action="store_true",
+        help="skip the output-error refinement (the last stage: the model's simulation error minimised over the "
+        "identification part; kept only if it predicts the held-out part at least as well)",
+    )
+    idf.add_argument("data", help="measurement file")
+    idf.add_argument("-o", "--out", required=True, help="result JSON")
+    idf.add_argument(
+        "--mass", type=POSITIVE, help="moving mass [kg] (default: the file's metadata; else per unit mass)"
+    )
+    idf.add_argument(
+        "--order",
+        type=number(int, 2, 20, what=" (the state dimension: 2 per mode)"),
+        default=default("nsi.NSI", "order"),
+        help=f"NSI model order (default {default('nsi.NSI', 'order')}: one mode)",
+    )
+    idf.add_argument(
+        "--block-rows",
+        type=number(int, 2, 500),
+        default=default("nsi.NSI", "block_rows"),
+        help=f"NSI: block rows of the Hankel matrices (default {default('nsi.NSI', 'block_rows')})",
+    )
+    idf.add_argument(
+        "--ensemble",
+        type=number(int, 2, 10000),
+        default=default("sindy.SINDy", "n_models"),
+        help=f"SINDy: bagged models of the ensemble (default {default('sindy.SINDy', 'n_models')})",
+    )
+    idf.add_argument(
+        "--frf",
+        action="append",
+        metavar="R.json",
+        help="an frf result of a low-level test around a well: its peak beside the identified well frequency "
+        "(repeatable, one per well)",
+    )
+    idf.set_defaults(func=c.cmd_identify)
+
+
+def _frf(sub, common: argparse.ArgumentParser, data_opts: argparse.ArgumentParser) -> None:
+    frq = sub.add_parser(
+        "frf",
+        parents=[common, data_opts],
+        help="H1/H2 frequency response with coherence, modal fit of the peaks",
+        description="Frequency response of a (low-level) record from its input to z: H1 and H2 with the coherence "
+        "(Welch, Hann, 50 %% overlap), every resonance peak fitted by a single-degree-of-freedom receptance "
+        "(frequency, damping ratio). Around one well at low level, the peak is that well's underlying-linear "
+        "frequency: compare it with 'identify ... --frf R.json'. Writes R.json and R.png.",
+    )
+    frq.add_argument("data", help="measurement file")
+    frq.add_argument("-o", "--out", required=True, help="result JSON (the figure beside it, .png)")
+    frq.add_argument(
+        "--band", help="frequency band F1:F2 [Hz] (default: where the input's spectrum is within 20 dB of its peak)"
+    )
+    frq.add_argument(
+        "--segment",
+        type=number(float, 0.5, 1e4),
+        help="Welch segment [s] (default 16 s, longer where a lightly damped peak needs finer bins)",
+    )
+    frq.set_defaults(func=c.cmd_frf)
+
+
+def _nfrc(sub, common: argparse.ArgumentParser, data_opts: argparse.ArgumentParser) -> None:
+    nf = sub.add_parser(
+        "nfrc",
+        parents=[common],
+        help="continue a model's periodic response in amplitude or frequency, with stability and bifurcations",
+        description="Periodic orbits of MODEL under b'' = A sin(2 pi f t) (or a force A sin(2 pi f t)), continued "
+        "in A at a fixed f (--freq F --amplitude A1:A2: the seed's bifurcation-map axis) or in f at a fixed A "
+        "(--freq F1:F2 --amplitude A: a nonlinear frequency response curve), by shooting and pseudo-arclength "
+        "through folds; Floquet multipliers give the stability, folds, period doublings (whose doubled branches "
+        "are followed) and Neimark-Sacker points. Writes R.json and R.png.",
+    )
+    nf.add_argument("model", help="model JSON (polynomial, named effects) or device JSON, or an identify result")
+    nf.add_argument("--freq", required=True, help="forcing frequency F [Hz], or a range F1:F2")
+    nf.add_argument("--amplitude", required=True, help="forcing amplitude A [m/s^2, or N], or a range A1:A2")
+    nf.add_argument("--well", choices=["plus", "minus"], default="plus", help="well the continuation starts in")
+    nf.add_argument("--input", choices=["base_acc", "force"], default="base_acc", help="what A is (default base_acc)")
+    nf.add_argument("--max-period", type=number(int, 1, 64), default=4, help="follow doublings up to this period")
+    nf.add_argument("-o", "--out", required=True, help="result JSON (the figure beside it, .png)")
+    nf.set_defaults(func=c.cmd_nfrc)
+
+
+def _posterior(sub, common: argparse.ArgumentParser, data_opts: argparse.ArgumentParser) -> None:
+    pst = sub.add_parser(
+        "posterior",
+        parents=[common, data_opts],
+        help="Bayesian posterior (emcee) of the coefficients or the device parameters",
+        description="emcee posterior with a multiple-shooting output-error likelihood (short windows simulated "
+        "from measured states, start states profiled out, sensor noise sigma sampled). coefficients: k1, k2, k3, c, "
+        "c_nl, sigma (mass fixed: --mass, the file's metadata, or per unit mass). device: E, alpha, m, c, c_nl, "
+        "sigma with the exact geometric restoring force; --mass-prior weighed (N(m, 2 %%)) or free (shows the E-m "
+        "ridge). R-hat across independent ensembles, bulk/tail ESS, autocorrelation times; a run that does not "
+        "converge is reported with a warning in the result.",
+    )
+    pst.add_argument("data", help="measurement file")
+    pst.add_argument("-o", "--out", required=True, help="result JSON")
+    pst.add_argument("--mass", type=POSITIVE, help="moving mass [kg] (default: the file's metadata)")
+    pst.add_argument("--model", choices=["coefficients", "device"], default=default(POST, "model"))
+    pst.add_argument(
+        "--mass-prior",
+        choices=["weighed", "free"],
+        default=default(POST, "mass_prior"),
+        help="device model: mass prior",
+    )
+    pst.add_argument("--idata", help="save the arviz data (posterior, sample stats, log likelihood) as NetCDF")
+    pst.add_argument(
+        "--start",
+        help="coefficients: an identify result (its refined model) or a model file the MAP search starts from "
+        "(default: weak-form least squares of the record, refined by simulation error)",
+    )
+    pst.add_argument(
+        "--no-refine",
+        action="store_true",
+        help="coefficients without --start: start the MAP search from the weak-form estimate itself, not its "
+        "output-error refinement",
+    )
+    pst.add_argument("--duration", type=POSITIVE, help="use only the first DURATION seconds of the record")
+    pst.add_argument(
+        "--window",
+        type=POSITIVE,
+        default=default(POST, "window_s"),
+        help=f"multiple-shooting window [s] (default {default(POST, 'window_s')})",
+    )
+    pst.add_argument(
+        "--max-windows",
+        type=number(int, 4, 10**6),
+        default=default(POST, "max_windows"),
+        help=f"windows used at most, spread over the record (default {default(POST, 'max_windows')})",
+    )
+    pst.add_argument(
+        "--walkers",
+        type=number(int, 16, 10**5, what=" (emcee: twice the 7 dimensions of the device model, at least)"),
+        default=default(POST, "n_walkers"),
+        help=f"walkers per ensemble (default {default(POST, 'n_walkers')})",
+    )
+    pst.add_argument(
+        "--ensembles",
+        type=number(int, 1, 1000),
+        default=default(POST, "n_ensembles"),
+        help=f"independent ensembles (default {default(POST, 'n_ensembles')})",
+    )
+    pst.add_argument(
+        "--max-steps",
+        type=number(int, 1, 10**7),
+        default=default(POST, "max_steps"),
+        help=f"step cap per ensemble (default {default(POST, 'max_steps')})",
+    )
+    pst.add_argument(
+        "--hdi-prob",
+        type=number(float, 0.0, 0.999, lo_open=True),
+        default=default(POST, "hdi_prob"),
+        help=f"credible-interval probability (default {default(POST, 'hdi_prob')})",
+    )
+    pst.add_argument(
+        "--no-adjust",
+        action="store_true",
+        help="no curvature adjustment: the i.i.d. Gaussian likelihood as it stands (narrower, overconfident "
+        "intervals when the input is measured with noise)",
+    )
+    pst.set_defaults(func=c.cmd_posterior)
+
+
+def _discrepancy(sub, common: argparse.ArgumentParser, data_opts: argparse.ArgumentParser) -> None:
+    dsc = sub.add_parser(
+        "discrepancy",
+        parents=[common, data_opts],
+        help="find where model and data disagree, name the missing effect, add it, refit",
+        description="Fits the baseline (cubic K, viscous c; or linear K), locates its equation error over the state "
+        f"and the regimes, scores a catalogue of effects ({', '.join(effects.names())}, none) by held-out "
+        "weak residual, adds the winner, refits everything, repeats until none wins, and measures the held-out gap "
+        "(restarted free runs) before and after.",
+    )
+    dsc.add_argument("data", help="measurement file")
+    dsc.add_argument("-o", "--out", required=True, help="result JSON")
+    dsc.add_argument("--mass", type=POSITIVE, help="moving mass [kg] (default: the file's metadata)")
+    dsc.add_argument("--baseline", choices=["cubic", "linear"], default="cubic", help="starting model")
+    dsc.add_argument(
+        "--max-effects",
+        type=number(int, 0, 20),
+        default=default("discrepancy.Discrepancy", "max_effects"),
+        help=f"effects added at most (default {default('discrepancy.Discrepancy', 'max_effects')})",
+    )
+    dsc.add_argument(
+        "--no-refine",
+        action="store_true",
+        help="skip the output-error refinement (the last stage: the model's simulation error minimised over the "
+        "identification part; kept only if it predicts the held-out part at least as well)",
+    )
+    dsc.add_argument(
+        "--unnamed",
+        action="store_true",
+        help="also fit a non-parametric force g(z, z', u) to what no catalogue effect names (output error, the "
+        "final model held) and report its size, the held-out gap with it, and how far it would move the physical "
+        "coefficients (result key 'unnamed')",
+    )
+    dsc.set_defaults(func=c.cmd_discrepancy)
+
+
+def _characterize(sub, common: argparse.ArgumentParser, data_opts: argparse.ArgumentParser) -> None:
+    chz = sub.add_parser(
+        "characterize",
+        parents=[common, data_opts],
+        help="periodicity, regime, Lyapunov exponent of a harmonic-forced record",
+        description="Periodicity analysis of a steady-state record forced at --forcing-hz (phase-synchronous Poincare "
+        "samples from the measured input's phase), the regime (in-well around either well, or cross-well), the "
+        "amplitude of each branch and the largest Lyapunov exponent (Wolf 1985, embedding from the data; "
+        "Rosenstein beside it).",
+    )
+    chz.add_argument("data", help="measurement file")
+    chz.add_argument("--forcing-hz", type=POSITIVE, required=True, help="forcing frequency [Hz]")
+    chz.add_argument("--signal", default="z", choices=["z", "y", "z_dot", "base_disp"], help="column to analyse")
+    chz.add_argument(
+        "--wells",
+        help="z_minus,z_plus (or z_minus,z_0,z_plus) [m]; default: the file's rest positions, "
+        "else estimated from the data",
+    )
+    chz.add_argument("-o", "--out", required=True, help="result JSON")
+    chz.set_defaults(func=c.cmd_characterize)
+
+
+def _update(sub, common: argparse.ArgumentParser, data_opts: argparse.ArgumentParser) -> None:
+    upd = sub.add_parser(
+        "update",
+        parents=[common],
+        help="GA model updating of the device's E, frame angle and mass",
+        description="Update the physical device (E, alpha, m, from the nominal design) with a genetic algorithm so "
+        "that its well frequencies and equilibria match TARGETS (seed section 4.1, Eq. 9). TARGETS is an "
+        "'identify' result or a JSON with f_minus, f_plus [Hz], z_minus, z_plus [m]. The features depend on E "
+        "and m only through E/m: with the mass free the result is one point of a ridge; --fix-mass pins E.",
+    )
+    upd.add_argument("targets", help="identify result JSON or targets JSON")
+    upd.add_argument("-o", "--out", required=True, help="result JSON")
+    upd.add_argument("--fix-mass", type=POSITIVE, help="weighed moving mass [kg]: update E and alpha only")
+    ga = "updating.GAUpdater"
+    upd.add_argument(
+        "--generations",
+        type=number(int, 1, 10**5),
+        default=default(ga, "generations"),
+        help=f"GA generations (default {default(ga, 'generations')})",
+    )
+    upd.add_argument(
+        "--pop-size",
+        type=number(int, 4, 10**5),
+        default=default(ga, "pop_size"),
+        help=f"GA population (default {default(ga, 'pop_size')})",
+    )
+    upd.set_defaults(func=c.cmd_update)
+
+
+def _reproduce(sub, common: argparse.ArgumentParser, data_opts: argparse.ArgumentParser) -> None:
+    rep = sub.add_parser(
+        "reproduce",
+        parents=[common],
+        help="the whole study, end to end, as one report",
+        description="Run the seed paper's study on the virtual rig and write index.md, index.html and results.json.",
+    )
+    rep.add_argument("-o", "--out", default="reports/paper", help="report folder (default reports/paper)")
+    rep.add_argument("--fast", action="store_true", help="a quick reduced run (minutes)")
+    rep.set_defaults(func=c.cmd_reproduce)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    common = Parser(add_help=False)
+    common.add_argument("--seed", type=SEED, default=0, help="seed of every random draw (same seed, same numbers)")
+    common.add_argument("--quiet", action="store_true", help="no progress on stderr")
+
+    p = Parser(
+        prog="negstiff",
+        description="Identify, update and quantify the uncertainty of nonlinear (bistable, negative-stiffness) "
+        "oscillators from shaker-table records. Units are SI; see 'negstiff COMMAND --help'.",
+    )
+    from negstiff import __version__
+
+    p.add_argument("--version", action="version", version=f"negstiff {__version__}")
+    sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
+
+    # options of every command that reads a measurement file
+    data_opts = Parser(add_help=False)
+    data_opts.add_argument(
+        "--columns", help="column map for foreign files, e.g. force=V1,z=V2 (a map entry may scale: X*9.81)"
+    )
+    data_opts.add_argument(
+        "--fs",
+        type=POSITIVE,
+        help="sampling rate [Hz]; replaces the file's time column (for files without t, or a broken one)",
+    )
+
+    _rig(sub, common, data_opts)
+    _simulate(sub, common, data_opts)
+    _identify(sub, common, data_opts)
+    _frf(sub, common, data_opts)
+    _nfrc(sub, common, data_opts)
+    _posterior(sub, common, data_opts)
+    _discrepancy(sub, common, data_opts)
+    _characterize(sub, common, data_opts)
+    _update(sub, common, data_opts)
+    _reproduce(sub, common, data_opts)
+    return p
