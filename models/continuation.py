@@ -32,11 +32,15 @@ the harmonics, and because the monodromy matrix comes with it.
   bifurcating orbit a little beyond the doubling (where the period-p orbit is unstable), then
   correcting with the 2p map; it is continued like any branch.
 
-Library check (2026-11): no maintained Python package continues periodic orbits of forced systems
-with Floquet multipliers: PyDSTool (continuation via AUTO bindings) has had no release since 2019;
-pycobi and auto-07p's Python interface need Auto-07p's Fortran build; BifurcationKit is Julia, and the
-seed's authors' HBSS_Cont is MATLAB under GPL-3 (not copied). The method is written here, on the
-suite's own simulator.
+Library check (2026-11). PyDSTool's PyCont: last release 0.91.0 (2020); periodic orbits only through
+its AUTO interface (swig and a C compiler) and for autonomous systems, so a forced oscillator must be
+autonomised by hand (a user's forced Duffing could not get its period: pydstool issue 166, 2021).
+pycont-lite (MIT, first release 2025, one author): pseudo-arclength for G(u, p) = 0 with fold and
+branch-point detection; it could follow G = phi(x) - x, but its stability and its test functions are
+those of an equilibrium of G (G's Jacobian M - I stays regular at a period doubling), so it would
+neither give Floquet multipliers nor see a doubling, and the corrector is the small part of this
+module. BifurcationKit is Julia; the seed's authors' HBSS_Cont is MATLAB under GPL-3 (not copied).
+So the method is written here, on the suite's own simulator.
 """
 
 from __future__ import annotations
@@ -156,6 +160,8 @@ class Shooting:
         batched call (two in frequency)."""
         hz, hv = 1e-6 * scale[0], 1e-6 * scale[1]
         hl = 1e-6 * scale[2]
+        if not (f_hz - hl > 0 and np.all(np.isfinite(x))):  # a corrector step out of the physical range
+            raise ContinuationError(f"the corrector left the physical range (f = {f_hz:.4g} Hz)")
         pert = np.array([[0, 0], [hz, 0], [-hz, 0], [0, hv], [0, -hv]], float)
         xs = x[None, :] + pert
         amps = np.full(len(xs), amplitude)

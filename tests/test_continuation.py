@@ -32,16 +32,19 @@ def _stepped(model, freqs, amps, z0, n=128, settle=150, keep=16):
     return out
 
 
-def test_a_linear_oscillator_follows_its_closed_form_frf():
-    """m z'' + c z' + k z = -m A sin(w t): |Z| = A / |k/m - w^2 + i c w / m|. (The model's cubic, 1e-9 N/m^3,
-    is there because a model file needs k3 > 0: at 1 mm it is 1e-18 of the linear force.)"""
-    m = Model(m=1.0, k1=-(WN**2), k2=0.0, k3=1e-9, c=2 * ZETA * WN, c_nl=0.0, k0=0.0)
-    r = nfrc(m, freq=(2.0, 9.0), amplitude=1.0, well="plus")
+@pytest.mark.parametrize("input_kind, mass", [("base_acc", 1.0), ("force", 2.0)])
+def test_a_linear_oscillator_follows_its_closed_form_frf(input_kind, mass):
+    """m z'' + c z' + k z = -m A sin(w t) (base) or A sin(w t) (force): |Z| = A g / |k/m - w^2 + i c w / m|,
+    g = 1 or 1/m. (The model's cubic, 1e-9 N/m^3 per kg, is there because a model file needs k3 > 0: at
+    1 mm it is 1e-18 of the linear force.)"""
+    m = Model(m=mass, k1=-(WN**2) * mass, k2=0.0, k3=1e-9 * mass, c=2 * ZETA * WN * mass, c_nl=0.0, k0=0.0)
+    gain = 1.0 if input_kind == "base_acc" else 1.0 / mass
+    r = nfrc(m, freq=(2.0, 9.0), amplitude=1.0, well="plus", input_kind=input_kind)
     pts = r["branches"][0]["points"]
     assert len(r["branches"]) == 1 and r["bifurcations"] == []
     assert pts[0]["f_hz"] == pytest.approx(2.0) and pts[-1]["f_hz"] >= 9.0
     w = 2 * np.pi * np.array([p["f_hz"] for p in pts])
-    closed = 1.0 / np.abs(WN**2 - w**2 + 2j * ZETA * WN * w)
+    closed = gain / np.abs(WN**2 - w**2 + 2j * ZETA * WN * w)
     first = np.array([p["harmonics"][0] for p in pts])
     assert np.max(np.abs(first / closed - 1)) < 1e-6
     assert all(p["stable"] for p in pts)
@@ -70,18 +73,24 @@ def test_a_hardening_duffing_folds_where_up_and_down_sweeps_jump():
     assert peak == pytest.approx(a_up.max(), rel=5e-3)
 
 
-@pytest.mark.parametrize("well", ["plus", "minus"])
-def test_the_first_period_doubling_at_9_hz_matches_a_stepped_sweep(well):
-    """The seed's axis: amplitude at 9 Hz on the seed-like cubic double well. The stepped sweep (0.1 m/s^2
-    steps, state carried over) shows period 2 when consecutive Poincare samples differ by more than 1e-3
-    of the response while every second one agrees; its first such step is the doubling, within 2 %."""
-    r = nfrc(SEED_LIKE_CUBIC, freq=9.0, amplitude=(2.0, 30.0), well=well)
+WITH_EFFECTS = Model(**{**SEED_LIKE_CUBIC.to_dict(), "extra": {"end_stop": {"k": 2000.0, "z": 0.027},
+                                                                 "coulomb_friction": 0.05}})  # fmt: skip
+"""The cubic with two non-smooth named effects: a stop 4 mm above z_plus and 0.05 N of Coulomb friction."""
+
+
+@pytest.mark.parametrize("model, well", [(SEED_LIKE_CUBIC, "plus"), (SEED_LIKE_CUBIC, "minus"), (WITH_EFFECTS, "plus")])
+def test_the_first_period_doubling_at_9_hz_matches_a_stepped_sweep(model, well):
+    """The seed's axis: amplitude at 9 Hz on the seed-like cubic double well (and on the cubic with a stop
+    and friction). The stepped sweep (0.1 m/s^2 steps, state carried over) shows period 2 when consecutive
+    Poincare samples differ by more than 1e-3 of the response while every second one agrees; its first
+    such step is the doubling, within 2 %."""
+    r = nfrc(model, freq=9.0, amplitude=(2.0, 30.0), well=well)
     pd = [b for b in r["bifurcations"] if b["type"] == "period_doubling" and b["period"] == 1]
     assert pd, r["bifurcations"]
     predicted = pd[0]["amplitude"]
     assert pd[0]["multiplier"] == pytest.approx(-1.0, abs=1e-6)
     amps = np.round(np.arange(2.0, min(30.0, predicted + 2.0), 0.1), 2)
-    steps = _stepped(SEED_LIKE_CUBIC, np.full(amps.size, 9.0), amps, SEED_LIKE_CUBIC.equilibria().well(well))
+    steps = _stepped(model, np.full(amps.size, 9.0), amps, model.equilibria().well(well))
     seen = None
     for a, (p, half) in zip(amps, steps):
         d1, d2 = np.max(np.abs(np.diff(p))) / half, np.max(np.abs(p[2:] - p[:-2])) / half
@@ -117,3 +126,22 @@ def test_the_nfrc_command_writes_the_contract_keys_and_a_figure(tmp_path):
     before = model.read_text()
     assert main(["nfrc", str(model), "--freq", "9", "--amplitude", "2:4", "--quiet", "-o", str(model)]) == 2
     assert model.read_text() == before
+
+
+def test_a_slow_swept_sine_on_the_rig_jumps_just_past_the_continued_folds():
+    """The as-built device's plus well softens; at 3.5 m/s^2 its response folds over between 6.9 and 7.7 Hz.
+    A linear sweep on the rig (0.018 Hz/s, through its sensors) jumps where its branch ends: sweeping up
+    just above the upper fold, sweeping down just below the lower one, late by the few time constants the
+    response needs to leave a branch (1/(zeta omega) ~ 0.3 s, ~0.01 Hz at this rate, and the envelope's
+    0.5 s averaging): within 2 % of the fold, on the late side."""
+    from negstiff.experiments.nfrc import jump_frequency
+    from negstiff.models import AS_BUILT
+    from negstiff.models.rig import Rig
+
+    r = nfrc(AS_BUILT, freq=(5.5, 11.0), amplitude=3.5, well="plus", max_period=1)
+    lower, upper = sorted(b["f_hz"] for b in r["bifurcations"] if b["type"] == "fold")
+    for fa, fb, fold, late in ((5.5, 11.0, upper, 1.0), (11.0, 5.5, lower, -1.0)):
+        rec = Rig(seed=7).sine_sweep(fa, fb, 3.5, 300.0, start="plus")
+        jump = jump_frequency(rec, fa, fb, 300.0)
+        assert jump == pytest.approx(fold, rel=0.02)
+        assert late * (jump - fold) > 0, (jump, fold)
