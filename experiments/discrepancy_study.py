@@ -104,8 +104,8 @@ def maps_figure(rep: Report, d: Discrepancy, effect: str) -> None:
 
 
 def psd_figure(rep: Report, d: Discrepancy, m, effect: str) -> None:
-    f, pb = residual_psd(m, d.baseline_model_, d.n_id)
-    _, pa = residual_psd(m, d.model_, d.n_id)
+    f, pb = residual_psd(m, d.baseline_model_, d.n_id_)
+    _, pa = residual_psd(m, d.model_, d.n_id_)
     fig, ax = plt.subplots(figsize=(6, 3.4))
     ax.semilogy(f, pb, "r-", label="baseline")
     ax.semilogy(f, pa, "k-", label=f"with {', '.join(d.effects_)}")
