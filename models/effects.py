@@ -44,15 +44,20 @@ COULOMB_VELOCITY_SCALE = 1e-3
 """Velocity [m/s] over which a smoothed-sign (Coulomb) force changes sign (tanh smoothing)."""
 
 
-def _signed_power(x: np.ndarray, power: int, odd: bool) -> np.ndarray:
-    """|x|^power sgn(x)^odd as a product of factors (x x x ..., the way pysindy's PolynomialLibrary forms
-    its columns), with |x| for the factors where the parity needs it."""
+def _signed_power(x: np.ndarray, power: int, odd: bool, product: bool = False) -> np.ndarray:
+    """|x|^power sgn(x)^odd: numpy's power, or with ``product`` the product of the factors x x x ... (as
+    pysindy's PolynomialLibrary forms its columns); |x| for the factors where the parity needs it. (The
+    two differ in the last bit from the cube on; the library keeps each column as it was computed before
+    the registry, so that every fit, and every number of the reference report, stays bit for bit.)"""
     if power == 0:
         return np.ones_like(x)
     base = x if odd == bool(power % 2) else np.abs(x)
-    out = base
-    for _ in range(power - 1):
-        out = out * base
+    if product:
+        out = base
+        for _ in range(power - 1):
+            out = out * base
+    else:
+        out = base**power
     if odd and not power % 2:
         out = out * np.sign(x)
     return out
@@ -105,8 +110,10 @@ class Monomial:
         return value * _signed_power(z, p + 1, not self.z_odd) / (p + 1)
 
     def column(self, z, v, velocity_noise: float):
-        """The library column: the law at unit value."""
-        return self.force(1.0, z, v)
+        """The library column: the law at unit value, its z factor as a product (module docstring of
+        ``_signed_power``), its z' factor as numpy's power."""
+        z, v = np.asarray(z, float), np.asarray(v, float)
+        return _signed_power(z, self.z_power, self.z_odd, product=True) * _signed_power(v, self.v_power, self.v_odd)
 
     def scale(self, z_rms: float, v_rms: float) -> float:
         """The term's size at the record's rms state (the refinement's parameter scale)."""
