@@ -57,6 +57,12 @@ STEPS_PER_PERIOD = 256
 """RK4 steps per forcing period: 128 samples x 2 substeps (the kernel's O(h^4) error: ~1e-8)."""
 _SAMPLES = 128
 _SUBSTEPS = 2
+MAX_MULTIPLIER = 1e6
+"""A branch ends where its orbit's largest Floquet multiplier exceeds this: a perturbation grows a
+millionfold in one period, the central differences of the flow (1e-6 of the state) no longer give the
+monodromy, and such orbits lie inside chaos no experiment can hold. Measured: the as-built device's
+period-4 branch from z_plus crept on in ever smaller steps near 26 m/s^2 until the point limit (2000 orbits,
+18 s); there the steps shrank instead, which ends a branch too (``Continuation.run``)."""
 
 
 class ContinuationError(ValueError):
@@ -287,7 +293,7 @@ class Continuation:
         t = self._tangent(M, Gl, scale, None, direction)
         branch.points.append(sh.point(x, *self._af(lam), M, t[2]))
         history = [(y * scale, M)]
-        ds = self.ds
+        ds, crawl = self.ds, 0
         while len(branch.points) < self.max_points:
             y_new, ok, hard = self._correct(y, t, ds, scale)
             if not ok:
@@ -297,6 +303,11 @@ class Continuation:
                     return branch, bifs
                 continue
             ds = ds if hard else min(1.5 * ds, self.ds_max)
+            crawl = crawl + 1 if ds < 0.02 * self.ds_max else 0
+            if crawl > 100:  # a hundred steps at a fiftieth of the largest: the corrector barely converges
+                where = f"{self.parameter} {y[2] * scale[2]:.5g}"
+                self.reason = f"the steps shrank below 1/50 of the largest for 100 orbits at {where}"
+                return branch, bifs
             G, M, Gl = self._eval(y_new, scale)
             t = self._tangent(M, Gl, scale, t, direction)
             phys = y_new * scale
@@ -312,6 +323,10 @@ class Continuation:
             scale, y = new, phys / new
             if not (self.lo <= phys[2] <= self.hi):
                 self.reason = f"{self.parameter} left [{self.lo:g}, {self.hi:g}]"
+                break
+            if point.max_multiplier > MAX_MULTIPLIER:
+                self.reason = (f"the orbit became too unstable to follow (|multiplier| {point.max_multiplier:.2g} > "
+                               f"{MAX_MULTIPLIER:g}) at {self.parameter} {phys[2]:.5g}")  # fmt: skip
                 break
         return branch, bifs
 
