@@ -67,6 +67,7 @@ def _fit_and_score(d2):
     return physics, hyb, e_phys, e_hyb, x[:, n:], test.u, noise
 
 
+@pytest.mark.slow  # default-suite time (CI near its limit, 2026-11-23); run with -m slow
 def test_the_term_finds_a_missing_displacement_dependent_damping():
     # Fact: a Duffing model refined by output error cannot carry d2 z^2 z'. The term, fitted on the first
     # 60 s with the physics held, must (a) bring the free-run error on the last 30 s down to the noise (a

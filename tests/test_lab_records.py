@@ -59,6 +59,7 @@ def test_nsi_on_a_velocity_record_recovers_the_truth(velocity_record):
         assert getattr(est.model_, k) == pytest.approx(getattr(TRUTH, k), rel=0.05), k
 
 
+@pytest.mark.slow  # default-suite time (CI near its limit, 2026-11-23); run with -m slow
 def test_sindy_and_the_posterior_run_on_a_velocity_record(velocity_record, tmp_path):
     _, path = velocity_record
     out = tmp_path / "s.json"

@@ -198,6 +198,7 @@ def device_posteriors():
     }
 
 
+@pytest.mark.slow  # default-suite time (CI near its limit, 2026-11-23); run with -m slow
 def test_device_posterior_shows_the_e_m_ridge_and_weighing_pins_e(device_posteriors):
     # Facts: a base-excited record fixes E/m, not E and m (|corr(E, m)| > 0.9 with m free); the scale's
     # 2 % on m pins E (its HDI at least 5x narrower, the truth inside it); both runs converge.

@@ -79,6 +79,7 @@ def test_derivatives_predict_their_own_error_from_the_record(default_noise_fit):
     assert info["noise_std"] == pytest.approx(Sensors().laser_noise, rel=0.25), "sensor noise read off the record"
 
 
+@pytest.mark.slow  # default-suite time (CI near its limit, 2026-11-23); run with -m slow
 def test_hidden_coulomb_friction_is_found_by_the_ensemble():
     # 0.1 N (5 % of the device's weight): the ensemble must include sgn(v) with probability > 0.9 and
     # no spurious term above 0.5, and the force comes out within 20 % (issue 8's size criterion)
