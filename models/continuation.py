@@ -161,9 +161,10 @@ class Shooting:
         end = np.column_stack([res.z[:, -1], res.z_dot[:, -1]])
         return (end, res.z) if store else end
 
-    def residual_and_jacobian(self, x: np.ndarray, amplitude: float, f_hz: float, parameter: str, scale):
-        """G = phi(x) - x, G_x (2x2, the monodromy minus I), G_lambda (2,): central differences, one
-        batched call (two in frequency)."""
+    def residual_and_jacobian(self, x: np.ndarray, amplitude: float, f_hz: float, parameter: str, scale,
+                              store: bool = False):  # fmt: skip
+        """G = phi(x) - x, the monodromy M (2x2), G_lambda (2,): central differences, one batched call (two
+        in frequency); with ``store`` also the orbit's z samples (the unperturbed member's)."""
         hz, hv = 1e-6 * scale[0], 1e-6 * scale[1]
         hl = 1e-6 * scale[2]
         if not (f_hz - hl > 0 and np.all(np.isfinite(x))):  # a corrector step out of the physical range
@@ -174,19 +175,20 @@ class Shooting:
         if parameter == "amplitude":
             xs = np.vstack([xs, x, x])
             amps = np.concatenate([amps, [amplitude + hl, amplitude - hl]])
-            end = self.flow(xs, amps, f_hz)
+            end, z = self.flow(xs, amps, f_hz, store=True)
             d_lambda = (end[5] - end[6]) / (2 * hl)
         else:
-            end = self.flow(xs, amps, f_hz)
+            end, z = self.flow(xs, amps, f_hz, store=True)
             ep = self.flow(x[None, :], amplitude, f_hz + hl)[0]
             em = self.flow(x[None, :], amplitude, f_hz - hl)[0]
             d_lambda = (ep - em) / (2 * hl)
         M = np.column_stack([(end[1] - end[2]) / (2 * hz), (end[3] - end[4]) / (2 * hv)])
-        return end[0] - x, M, d_lambda
+        return (end[0] - x, M, d_lambda, z[0]) if store else (end[0] - x, M, d_lambda)
 
-    def point(self, x: np.ndarray, amplitude: float, f_hz: float, M: np.ndarray, tangent_lambda: float) -> Point:
-        _, z = self.flow(x[None, :], amplitude, f_hz, store=True)
-        z = z[0, :-1]
+    def point(self, x: np.ndarray, amplitude: float, f_hz: float, M: np.ndarray, tangent_lambda: float,
+              z: np.ndarray) -> Point:  # fmt: skip
+        """The orbit from ``x`` (its z samples ``z``, N + 1 over the period) with its monodromy ``M``."""
+        z = z[:-1]
         spec = np.fft.rfft(z) / z.size
         harm = 2 * np.abs(spec[self.period :: self.period][:5])  # amplitudes at f, 2f, ... [m]
         mu = np.linalg.eigvals(M)
@@ -220,6 +222,10 @@ class Bifurcation:
     period: int
     x0: tuple[float, float] = (math.nan, math.nan)
 
+    def value(self, parameter: str) -> float:
+        """The continuation parameter's value here (``"amplitude"`` or ``"f_hz"``)."""
+        return self.amplitude if parameter == "amplitude" else self.f_hz
+
     def to_json(self) -> dict[str, Any]:
         mu = self.multiplier
         return {
@@ -251,11 +257,10 @@ class Continuation:
     def _af(self, lam: float) -> tuple[float, float]:
         return (lam, self.fixed) if self.parameter == "amplitude" else (self.fixed, lam)
 
-    def _eval(self, y: np.ndarray, scale: np.ndarray):
+    def _eval(self, y: np.ndarray, scale: np.ndarray, store: bool = False):
         x, lam = y[:2] * scale[:2], y[2] * scale[2]
         a, f = self._af(lam)
-        G, M, Gl = self.shooting.residual_and_jacobian(x, a, f, self.parameter, scale)
-        return G, M, Gl
+        return self.shooting.residual_and_jacobian(x, a, f, self.parameter, scale, store)
 
     def correct_fixed(self, x: np.ndarray, lam: float, scale: np.ndarray, tol: float = 1e-10):
         """Newton on G(x) = 0 at a fixed parameter; returns (x, M)."""
@@ -270,9 +275,13 @@ class Continuation:
         raise ContinuationError(f"no periodic orbit of period {self.shooting.period} found at {self.parameter} {lam:g}")
 
     @staticmethod
+    def _jacobian(M: np.ndarray, Gl: np.ndarray, scale: np.ndarray) -> np.ndarray:
+        """[G_x, G_lambda] (2x3) in the scaled unknowns, G scaled like the state."""
+        return np.column_stack([(M - np.eye(2)) * scale[None, :2], Gl * scale[2]]) / scale[:2, None]
+
+    @staticmethod
     def _tangent(M: np.ndarray, Gl: np.ndarray, scale: np.ndarray, previous: np.ndarray | None, sign: float):
-        J = np.column_stack([(M - np.eye(2)) * scale[None, :2], Gl * scale[2]]) / scale[:2, None]
-        t = np.linalg.svd(J)[2][-1]
+        t = np.linalg.svd(Continuation._jacobian(M, Gl, scale))[2][-1]
         if previous is not None:
             return t if t @ previous >= 0 else -t
         return t if t[2] * sign >= 0 else -t
@@ -289,9 +298,9 @@ class Continuation:
         branch = Branch(sh.period, self.parameter, self.well)
         bifs: list[Bifurcation] = []
         y = np.array([x[0], x[1], lam]) / scale
-        G, M, Gl = self._eval(y, scale)
+        G, M, Gl, z = self._eval(y, scale, store=True)
         t = self._tangent(M, Gl, scale, None, direction)
-        branch.points.append(sh.point(x, *self._af(lam), M, t[2]))
+        branch.points.append(sh.point(x, *self._af(lam), M, t[2], z))
         history = [(y * scale, M)]
         ds, crawl = self.ds, 0
         while len(branch.points) < self.max_points:
@@ -308,10 +317,10 @@ class Continuation:
                 where = f"{self.parameter} {y[2] * scale[2]:.5g}"
                 self.reason = f"the steps shrank below 1/50 of the largest for 100 orbits at {where}"
                 return branch, bifs
-            G, M, Gl = self._eval(y_new, scale)
+            G, M, Gl, z = self._eval(y_new, scale, store=True)
             t = self._tangent(M, Gl, scale, t, direction)
             phys = y_new * scale
-            point = sh.point(phys[:2], *self._af(phys[2]), M, t[2])
+            point = sh.point(phys[:2], *self._af(phys[2]), M, t[2], z)
             bifs += self._detect(history, (phys, M), scale)
             branch.points.append(point)
             history.append((phys, M))
@@ -339,9 +348,7 @@ class Continuation:
             for it in range(8):
                 G, M, Gl = self._eval(y_new, scale)
                 Gs = G / scale[:2]
-                J = np.vstack(
-                    [np.column_stack([(M - np.eye(2)) * scale[None, :2], Gl * scale[2]]) / scale[:2, None], t]
-                )
+                J = np.vstack([self._jacobian(M, Gl, scale), t])
                 step = np.linalg.solve(J, -np.concatenate([Gs, [t @ (y_new - y_pred)]]))
                 y_new = y_new + step
                 if np.max(np.abs(step)) < 1e-9 and np.max(np.abs(Gs)) < 1e-7:
@@ -360,7 +367,7 @@ class Continuation:
             if not (np.isfinite(a) and np.isfinite(b)) or a * b > 0:
                 continue
             if kind == "fold":  # the multipliers of whichever neighbour has a real one nearest +1
-                lam, _, x = self._locate_fold(history[-2:] + [cur])
+                lam, x = self._locate_fold(history[-2:] + [cur])
                 M = min(
                     (prev[1], cur[1]), key=lambda m: min(abs(u - 1) + 1e3 * abs(u.imag) for u in np.linalg.eigvals(m))
                 )
@@ -375,7 +382,7 @@ class Continuation:
         return out
 
     @staticmethod
-    def _locate_fold(pts) -> tuple[float, np.ndarray, np.ndarray]:
+    def _locate_fold(pts) -> tuple[float, np.ndarray]:
         """The fold's parameter: the extremum of the parabola lambda(s) through the last three points
         (s: the chord length in the states relative to their spread, and the parameter)."""
         ys = np.array([p[0] for p in pts])
@@ -385,8 +392,8 @@ class Continuation:
             c = np.polyfit(s, ys[:, 2], 2)
             if c[0] != 0:
                 s_star = float(np.clip(-c[1] / (2 * c[0]), s[0], s[-1]))
-                return float(np.polyval(c, s_star)), pts[-1][1], ys[-1][:2]
-        return float(ys[-1][2]), pts[-1][1], ys[-1][:2]
+                return float(np.polyval(c, s_star)), ys[-1][:2]
+        return float(ys[-1][2]), ys[-1][:2]
 
     def _locate(self, prev, cur, kind: str, scale) -> tuple[float, np.ndarray, np.ndarray]:
         """Secant on the test function, the orbit corrected at each trial parameter (fixed)."""
@@ -439,7 +446,10 @@ def nfrc(system, *, freq, amplitude, well: str = "plus", input_kind: str = "base
     fixed = float(freq) if a_span else float(amplitude)
     if fixed <= 0 or (parameter == "f_hz" and lo <= 0):
         raise ContinuationError("the forcing frequency must be positive")
-    z_well = system.equilibria().well(well)
+    try:
+        z_well = system.equilibria().well(well)
+    except ValueError as exc:  # no such well, or a restoring force without usable equilibria
+        raise ContinuationError(f"--well {well}: {exc}") from None
     a0, f0 = (lo, fixed) if a_span else (fixed, lo)
     x = settle(system, input_kind, z_well, a0, f0)
     sh = Shooting(system, input_kind, 1)
@@ -460,12 +470,8 @@ def nfrc(system, *, freq, amplitude, well: str = "plus", input_kind: str = "base
         branches.append(branch)
         # a branch that folds back passes a point twice: one entry per (type, period, parameter)
         for b in bifs:
-            lam_b = b.amplitude if parameter == "amplitude" else b.f_hz
-            if not any(
-                o.type == b.type and o.period == b.period
-                and abs((o.amplitude if parameter == "amplitude" else o.f_hz) - lam_b) < 1e-4 * (hi - lo)
-                for o in bifurcations
-            ):  # fmt: skip
+            same = (o for o in bifurcations if o.type == b.type and o.period == b.period)
+            if not any(abs(o.value(parameter) - b.value(parameter)) < 1e-4 * (hi - lo) for o in same):
                 bifurcations.append(b)
         for b in [b for b in bifurcations if b in bifs]:
             if b.type == "period_doubling" and 2 * shooting.period <= max_period:
@@ -490,7 +496,7 @@ def nfrc(system, *, freq, amplitude, well: str = "plus", input_kind: str = "base
 def _double(shooting: Shooting, b: Bifurcation, parameter: str, fixed: float, span, scale):
     """The period-2p orbit a little beyond a doubling: simulated from the bifurcating orbit, nudged (where
     the period-p orbit is unstable the response settles onto the doubled one), then corrected."""
-    lam_pd = b.amplitude if parameter == "amplitude" else b.f_hz
+    lam_pd = b.value(parameter)
     system, kind = shooting.system, shooting.input_kind
     base = Continuation(shooting, parameter, fixed, b.well, span)
     doubled = Shooting(system, kind, 2 * shooting.period, shooting.z_limit)

@@ -369,10 +369,6 @@ def cmd_nfrc(args) -> int:
     freq, amplitude = parse_span(args.freq, "--freq"), parse_span(args.amplitude, "--amplitude")
     if isinstance(freq, tuple) == isinstance(amplitude, tuple):
         raise InputError("give a range (F1:F2 or A1:A2) for exactly one of --freq and --amplitude")
-    try:
-        system.equilibria().well(args.well)
-    except ValueError as exc:
-        raise InputError(f"--well {args.well}: {exc}") from None
     say(args, f"nfrc: continuation in {'amplitude' if isinstance(amplitude, tuple) else 'frequency'} from the "
               f"{args.well} well")  # fmt: skip
     try:
