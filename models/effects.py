@@ -151,6 +151,13 @@ class OneSidedStop:
     fields = ("k", "z")
 
     @staticmethod
+    def check(name: str, value: dict[str, float]) -> Mapping[str, float]:
+        """The law's own admissible values (finite numbers already): a stiffness k >= 0, a stop z != 0."""
+        if value["k"] < 0 or value["z"] == 0:
+            raise ValueError(f"{name} needs k >= 0 and a stop position z != 0")
+        return MappingProxyType(value)
+
+    @staticmethod
     def beyond(z, z_s: float):
         return (np.asarray(z, float) - z_s) * np.sign(z_s) > 0
 
@@ -189,16 +196,14 @@ class Effect:
         return next((f for f, (law, _) in BASE_TERMS.items() if law == self.law), None)
 
     def value(self, raw: Any) -> Any:
-        """Validate a model file's value: a finite number, or the stop's ``{"k", "z"}``."""
+        """Validate a model file's value: a finite number, or the law's fields (the stop's ``{"k", "z"}``),
+        each finite, then the law's own ``check``."""
         if self.scalar:
             return finite(self.name, raw)
         fields = self.law.fields
         if not isinstance(raw, Mapping) or set(raw) != set(fields):
             raise ValueError(f"extra effect {self.name} takes {{{', '.join(repr(f) for f in fields)}}} ({self.units})")
-        k, z = finite(f"{self.name}.k", raw["k"]), finite(f"{self.name}.z", raw["z"])
-        if k < 0 or z == 0:
-            raise ValueError(f"{self.name} needs k >= 0 and a stop position z != 0")
-        return MappingProxyType({"k": k, "z": z})
+        return self.law.check(self.name, {f: finite(f"{self.name}.{f}", raw[f]) for f in fields})
 
     def help(self) -> str:
         """``name`` or ``name=k:N/m,z:m`` for the CLI."""
