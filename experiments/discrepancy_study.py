@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import dataclasses
 import sys
+from dataclasses import dataclass
 from typing import Any
 
 import matplotlib.pyplot as plt
@@ -38,8 +39,31 @@ def _size_text(v) -> str:
     return fmt(v, 3)
 
 
-def hidden_part(rep: Report, res: dict[str, Any], duration: float, seeds: tuple[int, ...], effects=None) -> dict:
-    rows, out, keep = [], [], {}
+@dataclass(frozen=True)
+class WorkflowRun:
+    """The discrepancy workflow on one rig record: the effect the rig hid (``"none"``: nothing) and its
+    size, the record's seed, the fitted workflow."""
+
+    hidden: str
+    size: Any
+    seed: int
+    measurement: Measurement
+    workflow: Discrepancy
+
+    @property
+    def right(self) -> bool:
+        """Whether the workflow named exactly the hidden effect (``["none"]`` for none)."""
+        return self.workflow.result()["effects"] == [self.hidden]
+
+    def result(self) -> dict[str, Any]:
+        """The record's entry of results.json."""
+        return {"hidden": self.hidden, "size": self.size, "seed": self.seed, "right": self.right,
+                **self.workflow.result()}  # fmt: skip
+
+
+def compute_hidden(duration: float, seeds: tuple[int, ...], effects=None) -> list[WorkflowRun]:
+    """The workflow on a record of each hidden effect of ``HIDDEN`` (or of ``effects`` only) per seed."""
+    runs = []
     for effect, size in HIDDEN.items():
         if effects is not None and effect not in effects:
             continue
@@ -48,26 +72,32 @@ def hidden_part(rep: Report, res: dict[str, Any], duration: float, seeds: tuple[
                 duration=duration, rms=SEED_LIKE_CROSS_WELL_RMS
             )
             m = Measurement.from_rig(rec)
-            d = Discrepancy().fit(m)
-            r = d.result()
-            found = r["effects"]
-            right = found == [effect] if effect != "none" else found == ["none"]
-            est = r["effect_size"].get(effect) if effect != "none" else None
-            rows.append(
-                [
-                    effect,
-                    seed,
-                    "" if size is None else _size_text(size),
-                    ", ".join(found),
-                    "" if est is None else _size_text(est),
-                    "yes" if right else "NO",
-                    r["gap_before_percent"],
-                    r["gap_after_percent"],
-                ]
-            )
-            out.append({"hidden": effect, "size": size, "seed": seed, "right": right, **r})
-            if seed == seeds[0]:
-                keep[effect] = (d, m)
+            runs.append(WorkflowRun(effect, size, seed, m, Discrepancy().fit(m)))
+    return runs
+
+
+def hidden_part(rep: Report, res: dict[str, Any], duration: float, seeds: tuple[int, ...], effects=None) -> dict:
+    """Compute (``compute_hidden``), then render the table of named effects; returns the first seed's run
+    of each effect (for the figures)."""
+    runs = compute_hidden(duration, seeds, effects)
+    rows, out = [], []
+    for run in runs:
+        r = run.result()
+        est = r["effect_size"].get(run.hidden) if run.hidden != "none" else None
+        rows.append(
+            [
+                run.hidden,
+                run.seed,
+                "" if run.size is None else _size_text(run.size),
+                ", ".join(r["effects"]),
+                "" if est is None else _size_text(est),
+                "yes" if r["right"] else "NO",
+                r["gap_before_percent"],
+                r["gap_after_percent"],
+            ]
+        )
+        out.append(r)
+    keep = {run.hidden: run for run in runs if run.seed == seeds[0]}
     res["hidden"] = out
     n_right = sum(o["right"] for o in out)
     rep.heading("Hidden effects on the rig", 3)
@@ -114,11 +144,16 @@ def psd_figure(rep: Report, d: Discrepancy, m, effect: str) -> None:
     rep.figure(f"discrepancy_psd_{effect}", fig, f"Residual PSD before and after (hidden {effect}).")
 
 
-def device_part(rep: Report, res: dict[str, Any], duration: float, seed: int) -> None:
+def compute_device(duration: float, seed: int) -> WorkflowRun:
+    """The workflow on a record of the as-built device: its model-form gap against the cubic baseline."""
     rec = Rig(AS_BUILT, seed=seed).random(duration=duration)
     m = Measurement.from_rig(rec)
-    d = Discrepancy().fit(m)
-    r = d.result()
+    return WorkflowRun("model_form", None, seed, m, Discrepancy().fit(m))
+
+
+def device_part(rep: Report, res: dict[str, Any], duration: float, seed: int) -> None:
+    """Compute (``compute_device``), then render what was named in turn and the gap."""
+    r = compute_device(duration, seed).workflow.result()
     res["as_built"] = r
     rep.heading("The device's own model-form gap (exact geometry against a cubic)", 3)
     rep.text(
@@ -157,9 +192,9 @@ def discrepancy_section(rep: Report, results: dict[str, Any], fast: bool, seed_:
     keep = hidden_part(rep, res, 120.0 if fast else 150.0, seeds, ("none", "coulomb_friction") if fast else None)
     for effect in ("coulomb_friction", "end_stop"):
         if effect in keep:
-            d, m = keep[effect]
-            maps_figure(rep, d, effect)
-            psd_figure(rep, d, m, effect)
+            run = keep[effect]
+            maps_figure(rep, run.workflow, effect)
+            psd_figure(rep, run.workflow, run.measurement, effect)
     if not fast:
         device_part(rep, res, 120.0, seed_ + 5)
 

@@ -253,14 +253,34 @@ def _render_forces(rep: Report, part: PolynomialTruthPart) -> None:
     )
 
 
-def as_built_part(rep: Report, res: dict[str, Any], duration: float, seed_: int) -> None:
+@dataclass(frozen=True)
+class AsBuiltPart:
+    """What the as-built part measured: NSI's cubic on a record of the exact-geometry device, and the
+    exact model's own held-out free-run floor on the same record."""
+
+    measurement: Measurement
+    est: NSI
+    floor: float
+    duration: float
+
+    def result(self) -> dict[str, Any]:
+        r = self.est.result()
+        r.update(truth_features=AS_BUILT.features(), truth_floor_rms_percent=self.floor)
+        return r
+
+
+def compute_as_built(duration: float, seed_: int) -> AsBuiltPart:
     rec = Rig(AS_BUILT, seed=seed_).random(duration=duration)
     m = Measurement.from_rig(rec)
     est = NSI().fit(m)
-    floor = true_floor(AS_BUILT, m, est.settings_["identification_samples"])
-    r = est.result()
-    r.update(truth_features=AS_BUILT.features(), truth_floor_rms_percent=floor)
-    res["as_built"] = r
+    return AsBuiltPart(m, est, true_floor(AS_BUILT, m, est.settings_["identification_samples"]), duration)
+
+
+def as_built_part(rep: Report, res: dict[str, Any], duration: float, seed_: int) -> None:
+    """Compute (``compute_as_built``), then render: the wells' table, the gap to the floor, the force."""
+    part = compute_as_built(duration, seed_)
+    res["as_built"] = part.result()
+    est, floor = part.est, part.floor
     rep.heading("The as-built device: the cubic's model-form gap", 3)
     rows = []
     for w in ("minus", "plus"):
@@ -311,7 +331,9 @@ def as_built_part(rep: Report, res: dict[str, Any], duration: float, seed_: int)
     rep.figure("nsi_as_built_gap", fig, "As-built device: the NSI cubic against the exact geometric restoring force.")
 
 
-def integration_sensitivity(rep: Report, res: dict[str, Any], duration: float, seed_: int) -> None:
+def compute_integration_sensitivity(duration: float, seed_: int) -> dict[str, dict[str, Any]]:
+    """NSI on the same record with the base displacement integrated in the frequency and in the time
+    domain: the base displacement's error, the wells' frequency errors and k2's error, per method."""
     out = {}
     for method in ("fft", "time"):
         rec = Rig(SEED_LIKE_CUBIC, sensors=Sensors(integration=method), seed=seed_).random(
@@ -323,6 +345,12 @@ def integration_sensitivity(rep: Report, res: dict[str, Any], duration: float, s
             "f_error_percent": {w: 100 * (est.wells_[w].f_hz / SEED_LIKE_CUBIC.uls(w).f_hz - 1) for w in est.wells_},
             "k2_error_percent": 100 * (est.model_.k2 / SEED_LIKE_CUBIC.k2 - 1),
         }
+    return out
+
+
+def integration_sensitivity(rep: Report, res: dict[str, Any], duration: float, seed_: int) -> None:
+    """Compute (``compute_integration_sensitivity``), then render the table and its reading."""
+    out = compute_integration_sensitivity(duration, seed_)
     res["integration_sensitivity"] = out
     rep.heading("How the lab integrates the base acceleration matters", 3)
     rep.text(
@@ -358,6 +386,7 @@ def integration_sensitivity(rep: Report, res: dict[str, Any], duration: float, s
 
 
 def stabilization_part(rep: Report, res: dict[str, Any], est: NSI, m: Measurement) -> None:
+    """Compute (NSI's stabilisation rows for orders 2-8 and 10-40 block rows), then render the diagram."""
     rows = est.stabilization(m, orders=(2, 4, 6, 8), block_rows=(10, 20, 30, 40))
     res["stabilization"] = [{k: v for k, v in r.items() if k != "poles"} | {"poles": r.get("poles", [])} for r in rows]
     fig, axes = plt.subplots(1, 2, figsize=(11, 3.8), sharey=True)

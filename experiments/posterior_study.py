@@ -10,6 +10,7 @@ from __future__ import annotations
 import io
 import sys
 import time
+from dataclasses import dataclass
 from typing import Any
 
 import matplotlib.pyplot as plt
@@ -19,7 +20,7 @@ from negstiff.inference.measurement import Measurement
 from negstiff.inference.nsi import NSI
 from negstiff.inference.posterior import Posterior, result_json
 from negstiff.inference.sindy import SINDy
-from negstiff.models import AS_BUILT, SEED_LIKE_CROSS_WELL_RMS, SEED_LIKE_CUBIC
+from negstiff.models import AS_BUILT, SEED_LIKE_CROSS_WELL_RMS, SEED_LIKE_CUBIC, Model
 from negstiff.models.rig import Rig
 
 from .report import Report, fmt, run_study
@@ -42,7 +43,70 @@ def _arviz_png(plot, *args, **kw) -> tuple[bytes | None, str]:
         return None, f"{plot.__name__} could not be drawn: {type(exc).__name__}: {exc}"
 
 
-def coefficient_part(rep: Report, res: dict[str, Any], duration: float, seed_: int, fast: bool) -> None:
+@dataclass(frozen=True)
+class PredictiveCheck:
+    """A posterior predictive band over the first windows (end to end): the measured samples, the 5 and
+    95 % points of the draws' free runs plus noise, the draws' median free run, and the share inside."""
+
+    t: np.ndarray
+    measured: np.ndarray
+    low: np.ndarray
+    high: np.ndarray
+    median: np.ndarray
+    coverage: float
+
+
+def predictive_check(post: Posterior, n_draws: int = 100, seconds: float = 4.0, seed: int = 0) -> PredictiveCheck:
+    """Simulate ``n_draws`` posterior draws over the windows of the first ``seconds``, each a free run from
+    its window's start state, and add the draw's measurement noise."""
+    pr, win, lp = post.result_, post.windows_, post.logpost_
+    rng = np.random.default_rng(seed)
+    flat = pr.samples.reshape(-1, pr.samples.shape[-1])
+    draws = flat[rng.choice(flat.shape[0], n_draws, replace=False)]
+    theta = draws[:, :-1]
+    n_w = min(win.n_windows, int(round(seconds / (win.length * win.dt))))
+    zsim, _ = win.simulate(lp.par.to_params(theta), lp.par.kind)
+    zsim = zsim[:, :n_w].reshape(n_draws, -1)
+    pred = zsim + draws[:, -1:] * rng.standard_normal(zsim.shape)
+    meas = win.z[:n_w].ravel()
+    lo, hi = np.percentile(pred, [5, 95], axis=0)
+    inside = float(np.mean((meas >= lo) & (meas <= hi)))
+    return PredictiveCheck(np.arange(meas.size) * win.dt, meas, lo, hi, np.median(zsim, axis=0), inside)
+
+
+@dataclass(frozen=True)
+class CoefficientPart:
+    """What the coefficient part measured: the posterior of the cubic's coefficients on the first
+    ``duration`` seconds of a rig record of the polynomial truth (wall time ``elapsed``), NSI and SINDy on
+    the whole record, and the posterior predictive check."""
+
+    truth: Model
+    measurement: Measurement
+    post: Posterior
+    elapsed: float
+    nsi: NSI
+    sindy: SINDy
+    predictive: PredictiveCheck
+    duration: float
+
+    @property
+    def deterministic(self) -> dict[str, Model]:
+        return {"NSI": self.nsi.model_, "SINDy": self.sindy.model_}
+
+    def result(self) -> dict[str, Any]:
+        """The part's entry of results.json."""
+        j = result_json(self.post.result_, 0.9)
+        j["elapsed_s"] = self.elapsed
+        j["truth"] = self.truth.to_dict()
+        j["deterministic"] = {k: v.to_dict() for k, v in self.deterministic.items()}
+        j["truth_z_scores"] = {
+            n: (j["parameters"][n]["mean"] - getattr(self.truth, n)) / j["parameters"][n]["sd"] for n in COEFS
+        }
+        j["predictive_coverage_90"] = self.predictive.coverage
+        return j
+
+
+def compute_coefficients(duration: float, seed_: int, fast: bool) -> CoefficientPart:
     truth = SEED_LIKE_CUBIC
     # one record: the posterior on its first ``duration`` seconds, NSI and SINDy on all of it (their
     # selection and validation parts need a minute or more)
@@ -51,20 +115,21 @@ def coefficient_part(rep: Report, res: dict[str, Any], duration: float, seed_: i
     m = m_all.segment(0, int(round(duration * m_all.fs)))
     t0 = time.perf_counter()
     post = Posterior(seed=seed_, max_steps=600 if fast else 6000, n_ensembles=2 if fast else 4, max_windows=None)
-    pr = post.fit(m).result_
+    post.fit(m)
     elapsed = time.perf_counter() - t0
-    j = result_json(pr, 0.9)
     # deterministic estimates on the same record (NSI needs its 20 % tail for validation only)
     nsi = NSI().fit(m_all)
     sindy = SINDy(seed=seed_).fit(m_all)
-    det = {"NSI": nsi.model_, "SINDy": sindy.model_}
-    j["elapsed_s"] = elapsed
-    j["truth"] = truth.to_dict()
-    j["deterministic"] = {k: v.to_dict() for k, v in det.items()}
-    j["truth_z_scores"] = {
-        n: (j["parameters"][n]["mean"] - getattr(truth, n)) / j["parameters"][n]["sd"] for n in COEFS
-    }
+    return CoefficientPart(truth, m, post, elapsed, nsi, sindy, predictive_check(post), duration)
+
+
+def coefficient_part(rep: Report, res: dict[str, Any], duration: float, seed_: int, fast: bool) -> None:
+    """Compute (``compute_coefficients``), then render: the table, the forest, arviz's trace and pair
+    plots, the predictive check, what the data determine."""
+    part = compute_coefficients(duration, seed_, fast)
+    j = part.result()
     res["coefficients"] = j
+    truth, m, pr, det, elapsed = part.truth, part.measurement, part.post.result_, part.deterministic, part.elapsed
     rep.heading("Coefficient posterior (polynomial truth)", 3)
     s = pr.settings
     rep.text(
@@ -128,7 +193,7 @@ def coefficient_part(rep: Report, res: dict[str, Any], duration: float, seed_: i
             rep.blocks.append(("fig", (name, caption)))
         else:
             rep.warning(why)
-    _predictive(rep, res, post, pr)
+    _predictive(rep, part.predictive)
     rep.heading("What the data determine", 4)
     corr = j["correlation"]
     rep.text(
@@ -161,29 +226,14 @@ def _forest(rep: Report, j: dict, truth, det: dict) -> None:
     rep.figure("posterior_forest", fig, "Forest plot: 90 % HDIs beside NSI and SINDy, relative to the truth.")
 
 
-def _predictive(rep: Report, res: dict, post: Posterior, pr) -> None:
-    """Posterior predictive check of the windows' free runs: 100 posterior draws over 4 s."""
-    win, lp = post.windows_, post.logpost_
-    rng = np.random.default_rng(0)
-    flat = pr.samples.reshape(-1, pr.samples.shape[-1])
-    draws = flat[rng.choice(flat.shape[0], 100, replace=False)]
-    theta = draws[:, :-1]
-    n_w = min(win.n_windows, int(round(4.0 / (win.length * win.dt))))
-    zsim, _ = win.simulate(lp.par.to_params(theta), lp.par.kind)
-    zsim = zsim[:, :n_w].reshape(100, -1)
-    noise = draws[:, -1:] * rng.standard_normal(zsim.shape)
-    pred = zsim + noise
-    meas = win.z[:n_w].ravel()
-    t = np.arange(meas.size) * win.dt
-    lo, hi = np.percentile(pred, [5, 95], axis=0)
-    inside = float(np.mean((meas >= lo) & (meas <= hi)))
-    res["coefficients"]["predictive_coverage_90"] = inside
+def _predictive(rep: Report, pc: PredictiveCheck) -> None:
+    """The posterior predictive figure: the 90 % band over the measured windows, and about the median."""
+    t, meas, lo, hi, mid, inside = pc.t, pc.measured, pc.low, pc.high, pc.median, pc.coverage
     fig, ax = plt.subplots(2, 1, figsize=(10, 4.6), sharex=True)
     ax[0].fill_between(t, 1e3 * lo, 1e3 * hi, color="C1", alpha=0.4, label="90 % predictive band")
     ax[0].plot(t, 1e3 * meas, "k-", lw=0.8, label="measured")
     ax[0].set_ylabel("z [mm]")
     ax[0].legend(fontsize=8, loc="upper right")
-    mid = np.median(zsim, axis=0)
     ax[1].fill_between(t, 1e6 * (lo - mid), 1e6 * (hi - mid), color="C1", alpha=0.4)
     ax[1].plot(t, 1e6 * (meas - mid), "k.", ms=1.5)
     ax[1].set(xlabel="t [s] (windows end to end)", ylabel="z - median [um]")
@@ -195,33 +245,57 @@ def _predictive(rep: Report, res: dict, post: Posterior, pr) -> None:
     )
 
 
-def device_part(rep: Report, res: dict[str, Any], duration: float, seed_: int, fast: bool) -> None:
+DEVICE_TRUTH = {
+    "E": AS_BUILT.E,
+    "alpha_deg": AS_BUILT.alpha_deg,
+    "m": AS_BUILT.m,
+    "c": AS_BUILT.c,
+    "c_nl": AS_BUILT.c_nl,
+}
+
+
+@dataclass(frozen=True)
+class DevicePart:
+    """What the device part measured: the device posterior of one as-built record with the mass free and
+    with it weighed (``posteriors``: prior -> (fitted Posterior, wall time))."""
+
+    measurement: Measurement
+    posteriors: dict[str, tuple[Posterior, float]]
+    duration: float
+
+    def result(self) -> dict[str, Any]:
+        """The part's entry of results.json."""
+        out: dict[str, Any] = {}
+        for prior, (post, elapsed) in self.posteriors.items():
+            j = result_json(post.result_, 0.9)
+            j["elapsed_s"] = elapsed
+            out[prior] = j
+        out["truth"] = dict(DEVICE_TRUTH)
+        wf = out["free"]["parameters"]["E"]
+        ww = out["weighed"]["parameters"]["E"]
+        out["E_hdi_width_ratio"] = (wf["hdi_high"] - wf["hdi_low"]) / (ww["hdi_high"] - ww["hdi_low"])
+        out["corr_E_m_free"] = out["free"]["correlation"]["E"]["m"]
+        return out
+
+
+def compute_device(duration: float, seed_: int, fast: bool) -> DevicePart:
     rec = Rig(AS_BUILT, seed=seed_).random(duration=duration)
     m = Measurement.from_rig(rec)
-    truth = {"E": AS_BUILT.E, "alpha_deg": AS_BUILT.alpha_deg, "m": AS_BUILT.m, "c": AS_BUILT.c, "c_nl": AS_BUILT.c_nl}
-    out = {}
+    runs = {}
     for prior in ("free", "weighed"):
         t0 = time.perf_counter()
-        pr = (
-            Posterior(
-                model="device",
-                mass_prior=prior,
-                seed=seed_,
-                max_steps=400 if fast else 6000,
-                n_ensembles=2 if fast else 4,
-            )
-            .fit(m)
-            .result_
-        )
-        j = result_json(pr, 0.9)
-        j["elapsed_s"] = time.perf_counter() - t0
-        out[prior] = j
-    out["truth"] = truth
-    wf = out["free"]["parameters"]["E"]
-    ww = out["weighed"]["parameters"]["E"]
-    out["E_hdi_width_ratio"] = (wf["hdi_high"] - wf["hdi_low"]) / (ww["hdi_high"] - ww["hdi_low"])
-    out["corr_E_m_free"] = out["free"]["correlation"]["E"]["m"]
+        post = Posterior(
+            model="device", mass_prior=prior, seed=seed_, max_steps=400 if fast else 6000, n_ensembles=2 if fast else 4
+        ).fit(m)
+        runs[prior] = (post, time.perf_counter() - t0)
+    return DevicePart(m, runs, duration)
+
+
+def device_part(rep: Report, res: dict[str, Any], duration: float, seed_: int, fast: bool) -> None:
+    """Compute (``compute_device``), then render: the E-m ridge, the table, the priors."""
+    out = compute_device(duration, seed_, fast).result()
     res["device"] = out
+    truth = out["truth"]
     rep.heading("Device posterior (exact geometric restoring force)", 3)
     rep.text(
         f"A {duration:g} s record of the as-built device; the forward model is the exact geometry with E, alpha, m, "

@@ -9,6 +9,7 @@ from __future__ import annotations
 import dataclasses
 import sys
 import time
+from dataclasses import dataclass
 from typing import Any
 
 import matplotlib.pyplot as plt
@@ -55,27 +56,57 @@ def _coefficient_rows(est: SINDy, truth: Model | None, nsi: NSI | None) -> list[
 COEF_HEADER = ["term", "field", "selected", "inclusion prob.", "SINDy", "truth", "error", "ensemble sd", "NSI"]
 
 
-def _summary(est: SINDy, elapsed: float) -> dict[str, Any]:
-    r = est.result()
-    r["elapsed_s"] = elapsed
-    return r
+@dataclass(frozen=True)
+class SindyRun:
+    """What one part of the study measured: SINDy's fit of one rig record (``est``, wall time ``elapsed``),
+    the truth behind the record, and what the part compares it with: NSI on the same record, the effect
+    the rig hid, the true model's own held-out free-run floor."""
+
+    truth: Model
+    measurement: Measurement
+    est: SINDy
+    elapsed: float
+    duration: float
+    nsi: NSI | None = None
+    hidden: dict[str, float] | None = None
+    floor: float | None = None
+
+    def result(self) -> dict[str, Any]:
+        """The part's entry of results.json."""
+        r = self.est.result()
+        r["elapsed_s"] = self.elapsed
+        if self.nsi is not None:
+            r["truth"] = self.truth.to_dict()
+            r["nsi_model"] = self.nsi.model_.to_dict()
+            r["errors_percent"] = {
+                k: 100 * (getattr(self.est.model_, k) / getattr(self.truth, k) - 1)
+                for k in ("k0", "k1", "k2", "k3", "c", "c_nl")
+            }
+        if self.hidden is not None:
+            r["hidden"] = dict(self.hidden)
+        if self.floor is not None:
+            r["truth_features"] = self.truth.features()
+            r["truth_floor_rms_percent"] = self.floor
+        return r
 
 
-def polynomial_part(rep: Report, res: dict[str, Any], duration: float, seed_: int) -> None:
+def compute_polynomial(duration: float, seed_: int) -> SindyRun:
+    """SINDy and NSI on one cross-well record of the polynomial truth (default sensor noise)."""
     truth = SEED_LIKE_CUBIC
     rec = Rig(truth, seed=seed_).random(duration=duration, rms=SEED_LIKE_CROSS_WELL_RMS)
     m = Measurement.from_rig(rec)
     t0 = time.perf_counter()
     est = SINDy(seed=seed_).fit(m)
     elapsed = time.perf_counter() - t0
-    nsi = NSI().fit(m)
-    r = _summary(est, elapsed)
-    r["truth"] = truth.to_dict()
-    r["nsi_model"] = nsi.model_.to_dict()
-    r["errors_percent"] = {
-        k: 100 * (getattr(est.model_, k) / getattr(truth, k) - 1) for k in ("k0", "k1", "k2", "k3", "c", "c_nl")
-    }
-    res["polynomial_truth"] = r
+    return SindyRun(truth, m, est, elapsed, duration, nsi=NSI().fit(m))
+
+
+def polynomial_part(rep: Report, res: dict[str, Any], duration: float, seed_: int) -> None:
+    """Compute (``compute_polynomial``), then render: the selected terms, the coefficient table, the
+    selection path, the forces and the held-out validation."""
+    run = compute_polynomial(duration, seed_)
+    res["polynomial_truth"] = run.result()
+    truth, est, nsi, m, elapsed = run.truth, run.est, run.nsi, run.measurement, run.elapsed
     rep.heading("The discovered equation (polynomial truth, default sensor noise)", 3)
     exact = est.selected_ == ["1", "z", "z^2", "z^3", "v", "v|v|"]
     rep.text(
@@ -167,17 +198,22 @@ def _validation_figure(rep: Report, est: SINDy, nsi: NSI) -> None:
     )
 
 
-def friction_part(rep: Report, res: dict[str, Any], duration: float, seed_: int) -> None:
+def compute_friction(duration: float, seed_: int) -> SindyRun:
+    """SINDy on a record whose rig hides Coulomb friction (SINDy is not told)."""
     truth = SEED_LIKE_CUBIC
-    rec = Rig(truth, effects={"coulomb_friction": HIDDEN_FRICTION_N}, seed=seed_).random(
-        duration=duration, rms=SEED_LIKE_CROSS_WELL_RMS
-    )
+    hidden = {"coulomb_friction": HIDDEN_FRICTION_N}
+    rec = Rig(truth, effects=hidden, seed=seed_).random(duration=duration, rms=SEED_LIKE_CROSS_WELL_RMS)
     m = Measurement.from_rig(rec)
     t0 = time.perf_counter()
     est = SINDy(seed=seed_).fit(m)
-    r = _summary(est, time.perf_counter() - t0)
-    r["hidden"] = {"coulomb_friction": HIDDEN_FRICTION_N}
-    res["hidden_friction"] = r
+    return SindyRun(truth, m, est, time.perf_counter() - t0, duration, hidden=hidden)
+
+
+def friction_part(rep: Report, res: dict[str, Any], duration: float, seed_: int) -> None:
+    """Compute (``compute_friction``), then render: what was selected, the inclusion probabilities."""
+    run = compute_friction(duration, seed_)
+    res["hidden_friction"] = run.result()
+    truth, est = run.truth, run.est
     ens = est.ensemble_
     spurious = {t: e["inclusion_probability"] for t, e in ens.items() if t in ("z^4", "z^5", "v^3")}
     found = est.model_.extra.get("coulomb_friction", 0.0)
@@ -201,15 +237,21 @@ def friction_part(rep: Report, res: dict[str, Any], duration: float, seed_: int)
     )
 
 
-def as_built_part(rep: Report, res: dict[str, Any], duration: float, seed_: int) -> None:
+def compute_as_built(duration: float, seed_: int) -> SindyRun:
+    """SINDy on a record of the as-built device (no polynomial truth), and the exact model's own floor.
+    The wall time is not reported for this part (``elapsed`` 0)."""
     rec = Rig(AS_BUILT, seed=seed_).random(duration=duration)
     m = Measurement.from_rig(rec)
     est = SINDy(seed=seed_).fit(m)
-    r = _summary(est, 0.0)
-    r["truth_features"] = AS_BUILT.features()
     floor = true_floor(AS_BUILT, m, est.settings_["identification_samples"])
-    r["truth_floor_rms_percent"] = floor
-    res["as_built"] = r
+    return SindyRun(AS_BUILT, m, est, 0.0, duration, floor=floor)
+
+
+def as_built_part(rep: Report, res: dict[str, Any], duration: float, seed_: int) -> None:
+    """Compute (``compute_as_built``), then render: the wells' frequencies, the force against the best cubic."""
+    run = compute_as_built(duration, seed_)
+    res["as_built"] = run.result()
+    est, floor = run.est, run.floor
     rep.heading("The as-built device (exact geometric restoring force)", 3)
     rows = []
     for w in ("minus", "plus"):
