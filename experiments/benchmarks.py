@@ -18,6 +18,7 @@ import os
 import platform
 import sys
 import time
+from pathlib import Path
 
 import numpy as np
 
@@ -27,6 +28,7 @@ from negstiff.models.effects import DEVICE_ROWS, POLYNOMIAL_ROWS
 from negstiff.models.rig import Rig
 
 from .baselines import build_c_rk4, median_time, solve_ivp_run
+from .peers import peers_section, scaling, scaling_section
 
 
 def simulator_benchmark(quick: bool = False) -> tuple[list[list[str]], dict]:
@@ -571,6 +573,12 @@ def main(argv=None) -> int:
         + " Both Jacobians reach the same fit (end errors within "
         + f"{100 * max(v['end_error_rel_diff'] for v in rres.values()):.2g} %).",
     ]
+    lines += peers_section(a.quick, _section)
+    lines += scaling_section(
+        scaling((10.0, 30.0, 100.0) if a.quick else (30.0, 300.0, 3000.0)),
+        Path(a.out).with_name("scaling.png"),
+        _section,
+    )
     write_text(a.out, "\n".join(lines) + "\n")
     print("\n".join(lines))
     return 0

@@ -6,9 +6,19 @@ input-output data" (PO-MOESP). Notation of ``shared/docs/algorithms.md`` A.2:
 
 1. Block Hankel matrices of i block rows for the inputs (m channels) and outputs (l channels):
    U_p, U_f, Y_p, Y_f; W_p = [U_p; Y_p].
-2. LQ factor of H = [U_f; W_p; Y_f] / sqrt(j), computed as the R of an economy QR of H^T, accumulated
-   over column chunks of H (memory O(chunk * rows), never the big projections; Gandino &
-   Marchesiello 2010 use the same idea). The j columns are never held at once.
+2. LQ factor of H = [U_f; W_p; Y_f] / sqrt(j). Fast route: L is the Cholesky factor of the Gram matrix
+   H H^T (H = L Q with orthonormal Q gives H H^T = L L^T), and the Gram matrix of a block Hankel
+   matrix is a matrix of lagged correlations: its first block row costs 2i products of the channels
+   with their lags, every other block follows from the one up-left of it by adding the sample that
+   enters and removing the one that leaves (Van Overschee & De Moor 1996, sec. 6.1, and Cho, Xu &
+   Kailath 1994 use the same structure). O(N (m+l)^2 i) work instead of the QR's O(N (2i(m+l))^2),
+   and no Hankel matrix at all. The Gram matrix squares H's condition: where a row's residual variance
+   after the rows before it falls below ``GRAM_MIN_RATIO`` of its own (Cholesky would then lose more
+   than ~1e-5 of it to rounding), or Cholesky fails, the factor comes from the QR route: the R of an
+   economy QR of H^T, accumulated over column chunks of H (memory O(chunk * rows), never the big
+   projections; Gandino & Marchesiello 2010 use the same idea). No numpy/scipy routine or maintained
+   subspace package exploits the Hankel structure (nfoursid and SIPPY build the Hankel matrix and QR
+   it whole; see reports/benchmarks.md), hence this code.
 3. PO-MOESP: SVD of L32, the block of L that couples Y_f to the past after U_f is removed;
    extended observability Gamma = U_1 S_1^(1/2).
 4. A, C from the shift invariance of Gamma; (x0, B, D) by linear least squares on the output equation
@@ -70,16 +80,60 @@ def hankel_block(x: np.ndarray, start: int, rows: int, cols: int) -> np.ndarray:
     return out
 
 
-def lq_factor(u: np.ndarray, y: np.ndarray, i: int, chunk: int = 8192) -> np.ndarray:
-    """Lower-triangular L of the LQ factorisation of H = [U_f; U_p; Y_p; Y_f] / sqrt(j).
+GRAM_MIN_RATIO = 1e-11
+"""The covariance route's Cholesky factor is used while every row keeps at least this fraction of its
+variance after the rows before it (rounding then perturbs L by at most ~eps / ratio ~ 2e-5 of the row;
+on a 300 s rig record the smallest ratio was 1.4e-10 and L agreed with the QR route's to 1.5e-7)."""
 
-    The rows of H^T are processed in chunks; R is updated by QR of [R; chunk]. Memory is
-    O(chunk * 2i(m+l)), independent of the record length squared.
+
+def hankel_gram(u: np.ndarray, y: np.ndarray, i: int) -> np.ndarray:
+    """H H^T / j of H = [U_f; U_p; Y_p; Y_f] from the channels' lagged products, without forming H."""
+    z = np.hstack([u, y])
+    n, c = z.shape
+    j, depth = n - 2 * i + 1, 2 * i
+    g = np.empty((depth, c, depth, c))
+    for d in range(depth):
+        first = z[:j].T @ z[d : d + j]  # block (0, d): the channels against their lag-d copies
+        t = np.arange(depth - 1 - d)
+        # block (o, o + d) = block (o - 1, o - 1 + d) + the products of the sample entering the window
+        # minus those of the sample leaving it
+        step = np.einsum("ta,tb->tab", z[t + j], z[t + d + j]) - np.einsum("ta,tb->tab", z[t], z[t + d])
+        blocks = np.concatenate([first[None], first[None] + np.cumsum(step, axis=0)])
+        for o in range(depth - d):
+            g[o, :, o + d, :] = blocks[o]
+            g[o + d, :, o, :] = blocks[o].T
+    m, l_out = u.shape[1], y.shape[1]
+    rows = [(o, ch) for o in range(i, depth) for ch in range(m)]  # U_f
+    rows += [(o, ch) for o in range(i) for ch in range(m)]  # U_p
+    rows += [(o, m + ch) for o in range(i) for ch in range(l_out)]  # Y_p
+    rows += [(o, m + ch) for o in range(i, depth) for ch in range(l_out)]  # Y_f
+    idx = np.array([o * c + ch for o, ch in rows])
+    return g.reshape(depth * c, depth * c)[np.ix_(idx, idx)] / j
+
+
+def lq_factor(u: np.ndarray, y: np.ndarray, i: int, chunk: int = 8192, route: str = "auto") -> np.ndarray:
+    """Lower-triangular L of the LQ factorisation of H = [U_f; U_p; Y_p; Y_f] / sqrt(j), up to the
+    signs of its columns (which no later step depends on).
+
+    ``route="auto"``: the Cholesky factor of the Hankel Gram matrix (``hankel_gram``) where it is well
+    conditioned (``GRAM_MIN_RATIO``), else the chunked QR; ``"qr"``: the chunked QR always. The QR
+    processes the rows of H^T in chunks, updating R by QR of [R; chunk]: memory O(chunk * 2i(m+l)),
+    independent of the record length squared.
     """
     n = u.shape[0]
     j = n - 2 * i + 1
     if j < 2 * i * (u.shape[1] + y.shape[1]):
         raise ValueError(f"record too short for {i} block rows: {n} samples")
+    if route not in ("auto", "qr"):
+        raise ValueError(f"unknown LQ route {route!r}: 'auto' or 'qr'")
+    if route == "auto":
+        g = hankel_gram(u, y, i)
+        try:
+            L = linalg.cholesky(g, lower=True, check_finite=False)
+        except linalg.LinAlgError:
+            L = None
+        if L is not None and np.min(np.diag(L) ** 2 / np.diag(g)) >= GRAM_MIN_RATIO:
+            return L
     r = None
     for c0 in range(0, j, chunk):
         cols = min(chunk, j - c0)

@@ -49,7 +49,7 @@ def test_chunked_lq_equals_the_direct_factorisation():
     rng = np.random.default_rng(1)
     u, y = rng.standard_normal((3000, 2)), rng.standard_normal((3000, 1))
     i = 6
-    L = subspace.lq_factor(u, y, i, chunk=500)
+    L = subspace.lq_factor(u, y, i, chunk=500, route="qr")
     j = 3000 - 2 * i + 1
     blocks = [
         subspace.hankel_block(u, i, i, j),
@@ -61,6 +61,42 @@ def test_chunked_lq_equals_the_direct_factorisation():
     R = linalg.qr(H.T, mode="r")[0][: H.shape[0]]
     # L is unique up to the signs of its columns
     assert np.allclose(np.abs(L), np.abs(R.T), atol=1e-10)
+
+
+def test_covariance_route_gives_the_qr_factor_of_an_oversampled_record():
+    # The Gram route's L must be the QR route's (up to column signs) to the rounding its conditioning
+    # allows: eps / (smallest residual variance ratio). Channels: band-limited noise at 25x its band
+    # edge and its lightly damped response (the conditioning of a device record at 512 Hz), each with
+    # a sensor noise floor (without one the Gram route is refused: next test and GRAM_MIN_RATIO).
+    rng = np.random.default_rng(3)
+    n, fs = 20000, 512.0
+    b, a = signal.butter(4, 20.0, fs=fs)
+    u = signal.lfilter(b, a, rng.standard_normal((n, 2)), axis=0)
+    u = u / u.std(axis=0) + 1e-2 * rng.standard_normal((n, 2))  # the sensors' noise floor
+    wn, zeta = 2 * np.pi * 8.0, 0.05
+    sys_d = signal.cont2discrete(([1.0], [1.0, 2 * zeta * wn, wn**2]), 1 / fs)
+    y = signal.lfilter(sys_d[0].ravel(), sys_d[1], u[:, 0])[:, None]
+    y = y / y.std() + 1e-3 * rng.standard_normal((n, 1))
+    i = 20
+    g = subspace.hankel_gram(u, y, i)
+    L_qr = subspace.lq_factor(u, y, i, route="qr")
+    L = subspace.lq_factor(u, y, i)
+    assert np.allclose(L_qr @ L_qr.T, g, rtol=0, atol=1e-12 * np.abs(g).max()), "the Gram matrix is H H^T / j"
+    ratio = float(np.min(np.diag(L) ** 2 / np.diag(g)))
+    assert ratio >= subspace.GRAM_MIN_RATIO, "this record takes the covariance route"
+    bound = 100 * np.finfo(float).eps / ratio
+    assert np.abs(np.abs(L) - np.abs(L_qr)).max() <= bound * np.abs(L_qr).max()
+
+
+def test_covariance_route_falls_back_to_qr_on_collinear_channels():
+    # two identical input channels: the Gram matrix is singular, the QR route's factor is returned
+    rng = np.random.default_rng(4)
+    x = rng.standard_normal((4000, 1))
+    u, y = np.hstack([x, x]), rng.standard_normal((4000, 1))
+    L, L_qr = subspace.lq_factor(u, y, 5), subspace.lq_factor(u, y, 5, route="qr")
+    assert np.allclose(L, L_qr, rtol=1e-12, atol=1e-14 * np.abs(L_qr).max())
+    with pytest.raises(ValueError, match="unknown LQ route"):
+        subspace.lq_factor(u, y, 5, route="fast")
 
 
 @pytest.fixture(scope="module")

@@ -57,8 +57,10 @@ def test_linear_gaussian_toy_posterior_is_matched_within_monte_carlo_error():
 
 def test_same_seed_same_chains():
     log_prob, _, _ = _toy()
-    a = sample_ensembles(log_prob, 2, n_walkers=8, n_ensembles=2, seed=5, min_steps=100, max_steps=100, chunk=50)
-    b = sample_ensembles(log_prob, 2, n_walkers=8, n_ensembles=2, seed=5, min_steps=100, max_steps=100, chunk=50)
+    # the ensembles run in threads at once (a) or one after the other (b): the same chains either way
+    kw = dict(n_walkers=8, n_ensembles=2, seed=5, min_steps=100, max_steps=100, chunk=50)
+    a = sample_ensembles(log_prob, 2, workers=2, **kw)
+    b = sample_ensembles(log_prob, 2, workers=1, **kw)
     for ca, cb in zip(a["chains"], b["chains"]):
         assert np.array_equal(ca, cb)
     c = sample_ensembles(log_prob, 2, n_walkers=8, n_ensembles=2, seed=6, min_steps=100, max_steps=100, chunk=50)

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import threading
+
 import numpy as np
 
 from .parametrisation import Parametrisation
@@ -62,6 +64,7 @@ class LogPosterior:
         self.par, self.win, self.q0, self.scale = par, win, q0, scale
         self.adjust = adjust  # (theta_hat, A, free): likelihood at theta_hat + A (theta - theta_hat) on ``free``
         self.calls = 0
+        self._lock = threading.Lock()  # the ensembles call from their threads (``sampling.sample_ensembles``)
 
     def likelihood_point(self, theta: np.ndarray) -> np.ndarray:
         """The parameters the likelihood is evaluated at: ``theta`` reduced (device: to the reference
@@ -98,7 +101,8 @@ class LogPosterior:
         return out
 
     def __call__(self, y: np.ndarray):
-        self.calls += 1
+        with self._lock:
+            self.calls += 1
         q = self.unwhiten(y)
         lp = self.par.log_prior_sampled(q[:, :-1], q[:, -1])
         ll = self.loglik(q, lp=lp)

@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import math
+import os
 import warnings
+from concurrent.futures import ThreadPoolExecutor
 from typing import Any
 
 import numpy as np
@@ -24,18 +26,20 @@ def sample_ensembles(
     chunk: int = 250,
     progress: bool = False,
     p0_scale: float = 1.0,
+    workers: int | None = None,
 ) -> dict[str, Any]:
     """Independent emcee ensembles (DE 80 % / snooker 20 %) of a vectorised ``log_prob`` over scaled
     coordinates (walkers start from N(0, p0_scale^2)). Each runs in chunks until its kept steps (after a
     burn-in of 2 tau, at least one chunk) reach ``tau_multiple`` x the largest autocorrelation time, or
     ``max_steps``; a run that stops short is reported in ``warnings``. Seeds: the walkers' start from
-    ``seed + e``, the moves from ``seed + 1000 + e``: the same seed gives the same chains."""
+    ``seed + e``, the moves from ``seed + 1000 + e``: the same seed gives the same chains, whatever
+    ``workers`` (threads running ensembles at once; None: one per core)."""
     import emcee
 
     moves = [(emcee.moves.DEMove(), 0.8), (emcee.moves.DESnookerMove(), 0.2)]
-    chains, taus, warn, blobs = [], [], [], []
     pbar = _progress_bar(progress, n_ensembles * max_steps)
-    for e in range(n_ensembles):
+
+    def run(e: int):
         rs = np.random.RandomState(seed + e)
         p0 = p0_scale * rs.standard_normal((n_walkers, nd))
         # every walker must start where the posterior is positive (emcee's moves compare log probabilities)
@@ -62,6 +66,7 @@ def sample_ensembles(
             burn = int(min(steps // 2, max(2 * t_max, chunk)))
             if steps >= min_steps and steps - burn >= tau_multiple * t_max:
                 break
+        warn = []
         if not steps - burn >= tau_multiple * t_max:
             warn.append(
                 f"ensemble {e}: not converged after {steps} steps: {steps - burn} kept steps < "
@@ -70,12 +75,25 @@ def sample_ensembles(
         acc = float(np.mean(sampler.acceptance_fraction))
         if acc < 0.05:
             warn.append(f"ensemble {e}: acceptance fraction {acc:.3f} (stuck walkers)")
-        chains.append(sampler.get_chain(discard=burn))
-        blobs.append(sampler.get_blobs(discard=burn))
-        taus.append(tau)
+        return sampler.get_chain(discard=burn), sampler.get_blobs(discard=burn), tau, warn
+
+    # The ensembles are independent (own seeds, own sampler): they run on the machine's cores at once,
+    # each in a thread (the compiled simulator releases the GIL; a step's batch is too small to split
+    # further). Results are gathered in ensemble order, so the numbers are those of a serial run.
+    workers = max(1, min(n_ensembles, os.cpu_count() or 1)) if workers is None else max(1, int(workers))
+    if workers == 1:
+        runs = [run(e) for e in range(n_ensembles)]
+    else:
+        with ThreadPoolExecutor(max_workers=workers) as pool:
+            runs = list(pool.map(run, range(n_ensembles)))
     if pbar is not None:
         pbar.close()
-    return {"chains": chains, "tau": taus, "warnings": warn, "blobs": blobs}
+    return {
+        "chains": [r[0] for r in runs],
+        "tau": [r[2] for r in runs],
+        "warnings": [w for r in runs for w in r[3]],
+        "blobs": [r[1] for r in runs],
+    }
 
 
 def _progress_bar(on: bool, total: int):
