@@ -292,11 +292,18 @@ def end_to_end_peers() -> tuple[list[list[str]], dict]:
     return rows, res
 
 
-def peers_section(quick: bool, _section) -> list[str]:
-    """The benchmarks' peers sections (``_section``: the report's table writer)."""
+def section(title: str, intro: str, header: list[str], rows: list[list[str]]) -> list[str]:
+    """A benchmarks report section: heading, text, a table."""
+    return ["", f"## {title}", "", intro, "", "| " + " | ".join(header) + " |", "|" + "---|" * len(header)] + [
+        "| " + " | ".join(r) + " |" for r in rows
+    ]
+
+
+def peers_section(quick: bool) -> list[str]:
+    """The benchmarks' peers sections."""
     print("peers: subspace step...", file=sys.stderr)
     srows, _ = subspace_peers((20_000, 100_000) if quick else (100_000, 1_000_000))
-    lines = _section(
+    lines = section(
         "Peers: the subspace step (issue 18)",
         "NSI's own problem (four input channels, the output, 30 block rows) at two record lengths: the LQ and the "
         "SVD of L32. Ratios are against negstiff's covariance route; the last column is the largest relative "
@@ -306,7 +313,7 @@ def peers_section(quick: bool, _section) -> list[str]:
     )
     print("peers: SINDy...", file=sys.stderr)
     yrows, yres = sindy_peers(60.0 if quick else 300.0)
-    lines += _section(
+    lines += section(
         "Peers: equation discovery",
         "The v' equation's coefficients against the truth (polynomial truth, a cross-well rig record at default "
         "sensor noise). pysindy's polynomial library has no z'|z'|: its c absorbs the truth's quadratic damping.",
@@ -319,7 +326,7 @@ def peers_section(quick: bool, _section) -> list[str]:
               "each absent from the peer's one fit; the coefficient errors say what that buys."]  # fmt: skip
     print("peers: posterior...", file=sys.stderr)
     prows, pres = posterior_peers(30.0 if quick else 300.0, 1.0)
-    lines += _section(
+    lines += section(
         "Peers: posterior sampling",
         "Effective samples per second (the smallest bulk ESS over the parameters) of `Posterior` with its defaults "
         "against emcee's tutorial recipe: 16 walkers, the stretch move, a Gaussian likelihood over each walker's "
@@ -333,7 +340,7 @@ def peers_section(quick: bool, _section) -> list[str]:
     )
     print("peers: identification end to end...", file=sys.stderr)
     erows, _ = end_to_end_peers()
-    lines += _section(
+    lines += section(
         "Peers: identification end to end (Silverbox)",
         "Each fitted on the Silverbox training part with its defaults and scored by the simulation error on the "
         "test part (the benchmark's protocol, `experiments/silverbox.py`).",
@@ -368,7 +375,7 @@ def scaling(durations: tuple[float, ...] = (30.0, 300.0, 3000.0), seed: int = 7)
     return out
 
 
-def scaling_section(res: dict[str, dict[float, dict]], figure_path, _section) -> list[str]:
+def scaling_section(res: dict[str, dict[float, dict]], figure_path) -> list[str]:
     """The scaling table and its log-log figure (written to ``figure_path``)."""
     import matplotlib
 
@@ -397,7 +404,7 @@ def scaling_section(res: dict[str, dict[float, dict]], figure_path, _section) ->
         name: np.log(by[durations[-1]]["s"] / by[durations[0]]["s"]) / np.log(durations[-1] / durations[0])
         for name, by in res.items()
     }
-    lines = _section(
+    lines = section(
         "Scaling with the record's length (issue 18)",
         "Cross-well rig records of the polynomial truth at 512 Hz; each method with its defaults (the refinement "
         "from a start 2 % off in k1 and k3, on the identification part). Wall time / peak memory traced by Python.",
