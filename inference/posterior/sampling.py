@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 import os
+import threading
 import warnings
 from concurrent.futures import ThreadPoolExecutor
 from typing import Any
@@ -36,10 +37,12 @@ def sample_ensembles(
     ``workers`` (threads running ensembles at once; None: one per core)."""
     import emcee
 
-    moves = [(emcee.moves.DEMove(), 0.8), (emcee.moves.DESnookerMove(), 0.2)]
     pbar = _progress_bar(progress, n_ensembles * max_steps)
+    lock = threading.Lock()  # the progress bar and the warnings filters are shared by the threads
 
     def run(e: int):
+        # each ensemble its own moves: emcee's DEMove keeps per-run state (g0) set up at every step
+        moves = [(emcee.moves.DEMove(), 0.8), (emcee.moves.DESnookerMove(), 0.2)]
         rs = np.random.RandomState(seed + e)
         p0 = p0_scale * rs.standard_normal((n_walkers, nd))
         # every walker must start where the posterior is positive (emcee's moves compare log probabilities)
@@ -56,12 +59,13 @@ def sample_ensembles(
         while steps < max_steps:
             with np.errstate(invalid="ignore", divide="ignore"):
                 state = sampler.run_mcmc(state, min(chunk, max_steps - steps), progress=False)
-            steps = sampler.iteration
-            if pbar is not None:
-                pbar.update(min(chunk, max_steps))
-            with np.errstate(invalid="ignore", divide="ignore"), warnings.catch_warnings():
+            done, steps = steps, sampler.iteration
+            # catch_warnings saves and restores the process's filters: one thread at a time
+            with lock, np.errstate(invalid="ignore", divide="ignore"), warnings.catch_warnings():
                 warnings.simplefilter("ignore")
                 tau = sampler.get_autocorr_time(tol=0, quiet=True)
+                if pbar is not None:
+                    pbar.update(steps - done)
             t_max = float(np.max(tau)) if np.all(np.isfinite(tau)) else math.inf
             burn = int(min(steps // 2, max(2 * t_max, chunk)))
             if steps >= min_steps and steps - burn >= tau_multiple * t_max:
@@ -81,13 +85,15 @@ def sample_ensembles(
     # each in a thread (the compiled simulator releases the GIL; a step's batch is too small to split
     # further). Results are gathered in ensemble order, so the numbers are those of a serial run.
     workers = max(1, min(n_ensembles, os.cpu_count() or 1)) if workers is None else max(1, int(workers))
-    if workers == 1:
-        runs = [run(e) for e in range(n_ensembles)]
-    else:
-        with ThreadPoolExecutor(max_workers=workers) as pool:
-            runs = list(pool.map(run, range(n_ensembles)))
-    if pbar is not None:
-        pbar.close()
+    try:
+        if workers == 1:
+            runs = [run(e) for e in range(n_ensembles)]
+        else:
+            with ThreadPoolExecutor(max_workers=workers) as pool:
+                runs = list(pool.map(run, range(n_ensembles)))
+    finally:
+        if pbar is not None:
+            pbar.close()
     return {
         "chains": [r[0] for r in runs],
         "tau": [r[2] for r in runs],
