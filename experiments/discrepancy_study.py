@@ -53,7 +53,7 @@ class WorkflowRun:
     @property
     def right(self) -> bool:
         """Whether the workflow named exactly the hidden effect (``["none"]`` for none)."""
-        return self.workflow.result()["effects"] == [self.hidden]
+        return (self.workflow.effects_ or ["none"]) == [self.hidden]  # result()'s "effects"
 
     def result(self) -> dict[str, Any]:
         """The record's entry of results.json."""

@@ -152,7 +152,9 @@ class NSI(Estimator):
         self.refine = refine
 
     # --- one well ----------------------------------------------------------------------------
-    def _extended_input(self, rec: Measurement, zs: np.ndarray, v: np.ndarray, z_ref: float):
+    def extended_input(self, rec: Measurement, zs: np.ndarray, v: np.ndarray, z_ref: float):
+        """The subspace step's problem about ``z_ref``: x = z - z_ref, the standardised input channels (the
+        input and the basis functions -x^2, -x^3, -z'|z'|), their scales and means."""
         x = zs - z_ref
         lin = -rec.u if rec.input_name == "base_acc" else rec.u
         chans = np.column_stack([lin, -(x**2), -(x**3), -v * np.abs(v)])
@@ -177,7 +179,7 @@ class NSI(Estimator):
         r (seed Eq. 7), so that K(z*) = 0 there.
         """
         for _ in range(self.passes):
-            x, w, scale, means = self._extended_input(rec, zs, v, z_ref)
+            x, w, scale, means = self.extended_input(rec, zs, v, z_ref)
             y = x - x.mean()
             ys = y.std()
             try:

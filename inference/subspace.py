@@ -111,6 +111,17 @@ def hankel_gram(u: np.ndarray, y: np.ndarray, i: int) -> np.ndarray:
     return g.reshape(depth * c, depth * c)[np.ix_(idx, idx)] / j
 
 
+def covariance_factor(u: np.ndarray, y: np.ndarray, i: int) -> np.ndarray | None:
+    """The covariance route's L (the Cholesky factor of ``hankel_gram``), or None where it is refused:
+    Cholesky fails, or a row keeps less than ``GRAM_MIN_RATIO`` of its variance after the rows before it."""
+    g = hankel_gram(u, y, i)
+    try:
+        L = linalg.cholesky(g, lower=True, check_finite=False)
+    except linalg.LinAlgError:
+        return None
+    return L if np.min(np.diag(L) ** 2 / np.diag(g)) >= GRAM_MIN_RATIO else None
+
+
 def lq_factor(u: np.ndarray, y: np.ndarray, i: int, chunk: int = 8192, route: str = "auto") -> np.ndarray:
     """Lower-triangular L of the LQ factorisation of H = [U_f; U_p; Y_p; Y_f] / sqrt(j), up to the
     signs of its columns (which no later step depends on).
@@ -127,12 +138,8 @@ def lq_factor(u: np.ndarray, y: np.ndarray, i: int, chunk: int = 8192, route: st
     if route not in ("auto", "qr"):
         raise ValueError(f"unknown LQ route {route!r}: 'auto' or 'qr'")
     if route == "auto":
-        g = hankel_gram(u, y, i)
-        try:
-            L = linalg.cholesky(g, lower=True, check_finite=False)
-        except linalg.LinAlgError:
-            L = None
-        if L is not None and np.min(np.diag(L) ** 2 / np.diag(g)) >= GRAM_MIN_RATIO:
+        L = covariance_factor(u, y, i)
+        if L is not None:
             return L
     r = None
     for c0 in range(0, j, chunk):
@@ -150,10 +157,13 @@ def lq_factor(u: np.ndarray, y: np.ndarray, i: int, chunk: int = 8192, route: st
     return r.T / np.sqrt(j)
 
 
-def po_moesp(u: np.ndarray, y: np.ndarray, i: int, order: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Discrete A, C and the singular values from PO-MOESP with ``i`` block rows."""
+def po_moesp(
+    u: np.ndarray, y: np.ndarray, i: int, order: int, route: str = "auto"
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Discrete A, C and the singular values from PO-MOESP with ``i`` block rows (``route``: the LQ's,
+    ``lq_factor``)."""
     m, l_out = u.shape[1], y.shape[1]
-    L = lq_factor(u, y, i)
+    L = lq_factor(u, y, i, route=route)
     a, b = i * m, i * m + i * (m + l_out)
     l32 = L[b:, a:b]
     uu, s, _ = np.linalg.svd(l32, full_matrices=False)

@@ -10,6 +10,10 @@ from . import commands as c
 from .common import POSITIVE, SEED, Parser, default, number
 
 POST = "posterior.core.Posterior"
+NO_REFINE_HELP = (
+    "skip the output-error refinement (the last stage: the model's simulation error minimised over the "
+    "identification part; kept only if it predicts the held-out part at least as well)"
+)
 
 EPILOG_RIG = """examples:
   negstiff rig random -o rec.csv --seed 1            300 s cross-well random record of the as-built device
@@ -154,8 +158,7 @@ def _identify(sub, common: argparse.ArgumentParser, data_opts: argparse.Argument
     idf.add_argument(
         "--no-refine",
         action="store_true",
-        help="skip the output-error refinement (the last stage: the model's simulation error minimised over the "
-        "identification part; kept only if it predicts the held-out part at least as well)",
+        help=NO_REFINE_HELP,
     )
     idf.add_argument("data", help="measurement file")
     idf.add_argument("-o", "--out", required=True, help="result JSON")
@@ -337,8 +340,7 @@ def _discrepancy(sub, common: argparse.ArgumentParser, data_opts: argparse.Argum
     dsc.add_argument(
         "--no-refine",
         action="store_true",
-        help="skip the output-error refinement (the last stage: the model's simulation error minimised over the "
-        "identification part; kept only if it predicts the held-out part at least as well)",
+        help=NO_REFINE_HELP,
     )
     dsc.add_argument(
         "--unnamed",
