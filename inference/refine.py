@@ -16,9 +16,11 @@ Identification*, 2nd ed., 7.3, the output-error model; multiple shooting after B
 * The parameters are those of the physical model: k0 (the constant force: gravity, a static load or
   the force's offset), k1, k2, k3, c, c_nl and the named extra effects, each scaled by its start
   value; for a force input without a known mass the mass too (the input's gain 1/m).
-* ``scipy.optimize.least_squares`` (trust-region reflective) with a finite-difference Jacobian whose
-  sparsity (a window's start state moves only that window's residual) lets scipy group the start-state
-  columns: a Jacobian costs the model's parameters plus two batched simulations, not two per window.
+* Levenberg-Marquardt with the windows' start states eliminated (``shooting``: a window's start state
+  moves only that window's residuals, so the normal equations reduce to a p x p solve), with a
+  finite-difference Jacobian that costs the model's p parameters plus two simulations, all in one
+  batched simulator call. ``scipy.optimize.least_squares`` given the same sparsity (the solver before)
+  took inexact steps that stopped short of the optimum within its evaluation budget (``shooting``).
 
 The result keeps the start model (``initial_model``) beside the refined one, with the simulation
 error of each stage.
@@ -39,6 +41,7 @@ from negstiff.models.simulator import stage_input
 
 from .derivatives import state_derivatives
 from .measurement import Measurement, MeasurementError
+from .shooting import shooting_least_squares
 from .validation import (  # noqa: F401 (free_run_rms: API)
     boundedness,
     divergence_limits,
@@ -135,6 +138,12 @@ def shooting_sparsity(n_win: int, length: int, dense: int, penalty: tuple[int, i
     return out
 
 
+SOLVERS = ("schur", "scipy", "scipy-dense")
+"""``refine``'s least-squares solvers: Levenberg-Marquardt with the start states eliminated
+(``shooting``, the default), and the benchmarks' baselines, ``scipy.optimize.least_squares`` (trust
+region) given the Jacobian's sparsity or not."""
+
+
 def refine(
     model: Model,
     rec: Measurement,
@@ -142,7 +151,7 @@ def refine(
     max_windows: int = 240,
     free_mass: bool = False,
     max_nfev: int = 60,
-    sparse_jacobian: bool = True,
+    solver: str = "schur",
     held: tuple[str, ...] = (),
 ) -> Refinement:
     """Minimise the simulation error of ``model`` on ``rec`` (the identification part: pass a segment).
@@ -154,13 +163,14 @@ def refine(
     windows_s : the schedule of window lengths [s]; a length of at least the record's gives one free run
     max_windows : windows per stage at most, spread evenly over the record
     free_mass : refine the mass too (a force input without a weighed mass: the input's gain)
-    max_nfev : function evaluations per stage at most (``least_squares``)
+    max_nfev : residual evaluations per stage at most
     held : base fields held at their start value (a sparse method's unselected terms stay zero)
-    sparse_jacobian : give scipy the Jacobian's sparsity (False: a dense finite-difference Jacobian, two
-        batched runs per parameter and start state; the benchmarks' baseline)
+    solver : one of ``SOLVERS``
     """
     if rec.z is None:
         raise MeasurementError(f"{rec.source}: refinement needs a response")
+    if solver not in SOLVERS:
+        raise ValueError(f"solver must be one of {SOLVERS}, got {solver!r}")
     names = parameter_names(model, free_mass, held)
     zs, vs, _, _ = state_derivatives(rec.z, rec.fs, purpose="state")
     scale = parameter_scales(model, names, float(np.std(rec.z)), float(np.std(vs)))
@@ -170,6 +180,7 @@ def refine(
     sub = record_substeps(model, rec)
     r = 2 * sub
     u_staged = stage_input(rec.u, sub)
+    x_scale = np.array([max(np.abs(rec.z).max(), 1e-12), max(np.abs(vs).max(), 1e-12)])
     start_model, stages, current = model, [], model
     for w_s in windows_s:
         length = min(rec.n, max(8, int(round(w_s * rec.fs))))
@@ -177,56 +188,71 @@ def refine(
         starts = np.linspace(0, rec.n - length, n_win).astype(int)
         meas = np.stack([rec.z[s : s + length] for s in starts])
         u = np.stack([u_staged[r * s : r * (s + length - 1) + 1] for s in starts])
-        x0 = np.column_stack([zs[starts], vs[starts]])
-        x_scale = np.array([max(np.abs(rec.z).max(), 1e-12), max(np.abs(vs).max(), 1e-12)])
-        p = len(names)
+        x0 = np.column_stack([zs[starts], vs[starts]]) / x_scale
+        penalty = 10 * np.abs(meas).max()
 
-        def residual(theta):
-            m = with_values(model, names, theta[:p] * scale)
-            xs = theta[p:].reshape(-1, 2) * x_scale
+        def residuals(Q, X):
+            """(k, n_win, length) simulation errors of k parameter points and start states, one batch."""
+            k = Q.shape[0]
+            params = np.concatenate(
+                [np.repeat(with_values(model, names, qq * scale).kernel_params()[:, None], n_win, axis=1) for qq in Q],
+                axis=1,
+            )
             res = simulate_batch(
-                np.repeat(m.kernel_params()[:, None], n_win, axis=1), m.kind, u, rec.dt, xs,
-                input_kind=rec.input_name, input_index=np.arange(n_win), substeps=sub, staged=True, **limits,
+                params, model.kind, u, rec.dt, (X * x_scale).reshape(-1, 2), input_kind=rec.input_name,
+                input_index=np.tile(np.arange(n_win), k), substeps=sub, staged=True, **limits,
             )  # fmt: skip
-            r = res.z - meas
-            r[res.diverged] = 10 * np.abs(meas).max()  # a diverging window: a large, finite penalty
-            return r.ravel()
+            out = res.z.reshape(k, n_win, length) - meas
+            out[res.diverged.reshape(k, n_win)] = penalty  # a diverging window: a large, finite penalty
+            return out
 
-        theta0 = np.concatenate([q, (x0 / x_scale).ravel()])
-        pattern = shooting_sparsity(n_win, length, p)
         if stages:
             # the start states alone first, the model held: the windows' best error at the current model
             # is what the predictability test compares (measured start states carry the smoothing's error)
-            states = optimize.least_squares(
-                lambda xs: residual(np.concatenate([q, xs])), theta0[p:], jac="2-point",
-                jac_sparsity=pattern[:, p:] if sparse_jacobian else None, method="trf", max_nfev=10,
-                diff_step=1e-7,
-            )  # fmt: skip
-            theta0 = np.concatenate([q, states.x])
-        r0 = residual(theta0)
+            x0 = _solve(residuals, q, x0, 10, solver, states_only=True)[1]
+        r0 = residuals(q[None], x0[None])[0]
         rms0 = float(np.sqrt(np.mean(r0**2)))
         if stages and rms0 > PREDICTABLE_GROWTH * stages[-1]["rms_end_m"]:
             growth = rms0 / stages[-1]["rms_end_m"]
             reason = f"not predictable over this window (error grew {growth:.3g}x): kept the shorter windows' fit"
             stages.append({"window_s": length / rec.fs, "windows": int(n_win), "rms_start_m": rms0, "skipped": reason})
             break
-        sol = optimize.least_squares(
-            residual, theta0, jac="2-point", jac_sparsity=pattern if sparse_jacobian else None,
-            method="trf", x_scale=1.0,
-            max_nfev=max_nfev, diff_step=1e-7,
-        )  # fmt: skip
-        q = sol.x[:p]
+        q, _, fun, nfev = _solve(residuals, q, x0, max_nfev, solver)
         current = with_values(model, names, q * scale)
         stages.append(
             {
                 "window_s": length / rec.fs,
                 "windows": int(n_win),
                 "rms_start_m": rms0,
-                "rms_end_m": float(np.sqrt(np.mean(sol.fun**2))),
-                "evaluations": int(sol.nfev),
+                "rms_end_m": float(np.sqrt(np.mean(fun**2))),
+                "evaluations": int(nfev),
             }
         )
     return Refinement(current, start_model, names, stages)
+
+
+def _solve(residuals, q, x0, max_nfev: int, solver: str, states_only: bool = False):
+    """One stage's least squares over (q, x0), or x0 alone: (q, x, residuals, evaluations)."""
+    if solver == "schur":
+        if states_only:
+            held = lambda Q, X: residuals(np.repeat(q[None], len(X), 0), X)  # noqa: E731 (the model held)
+            fit = shooting_least_squares(held, np.zeros(0), x0, max_nfev)
+            return q, fit.x, fit.fun, fit.nfev
+        fit = shooting_least_squares(residuals, q, x0, max_nfev)
+        return fit.q, fit.x, fit.fun, fit.nfev
+    p, n_win = (0 if states_only else q.size), x0.shape[0]
+    length = residuals(q[None], x0[None]).shape[2]
+
+    def flat(theta):
+        qq = q if states_only else theta[:p]
+        return residuals(qq[None], theta[p:].reshape(1, n_win, 2))[0].ravel()
+
+    pattern = shooting_sparsity(n_win, length, p) if solver == "scipy" else None
+    theta0 = x0.ravel() if states_only else np.concatenate([q, x0.ravel()])
+    sol = optimize.least_squares(flat, theta0, jac="2-point", jac_sparsity=pattern, method="trf", x_scale=1.0,
+                                 max_nfev=max_nfev, diff_step=1e-7)  # fmt: skip
+    qq = q if states_only else sol.x[:p]
+    return qq, sol.x[p:].reshape(n_win, 2), sol.fun, sol.nfev
 
 
 def stroke_quantiles(z: np.ndarray, n: int = 41) -> np.ndarray:

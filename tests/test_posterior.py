@@ -16,7 +16,7 @@ from negstiff.inference.posterior import (
     sample_ensembles,
     summarise,
 )
-from negstiff.models import SEED_LIKE_CROSS_WELL_RMS, SEED_LIKE_CUBIC
+from negstiff.models import SEED_LIKE_CROSS_WELL_RMS, SEED_LIKE_CUBIC, Model
 from negstiff.models.rig import Rig
 
 
@@ -260,3 +260,31 @@ def test_posterior_starts_from_an_identified_model(tmp_path):
     for bad in (["--start", str(tmp_path / "dev.json")], ["--model", "device", "--start", str(tmp_path / "id.json")]):
         assert main(["posterior", str(path), "-o", str(tmp_path / "x.json"), "--quiet", *bad]) == 2
         assert not (tmp_path / "x.json").exists()
+
+
+def test_likelihood_sum_of_squares_is_the_projected_residuals_norm():
+    # Fact: with Q a window's orthonormal start-state basis, |r - Q Q^T r|^2 = |r|^2 - |Q^T r|^2: the
+    # likelihood's sum of squares (computed the short way) equals the projected residuals' (to rounding,
+    # 1e-9 relative: the projection removes a small part of r), for every window and parameter column
+    from negstiff.inference.posterior.windows import Windows
+
+    r = Rig(SEED_LIKE_CUBIC, seed=13).random(duration=4, rms=SEED_LIKE_CROSS_WELL_RMS)
+    rec = from_arrays(r.columns["base_acc"], r.columns["z"], r.fs, mass=float(r.meta["mass"]), source="rig")
+    win = Windows.cut(rec, 0.125, 40)
+    p = SEED_LIKE_CUBIC.kernel_params()
+    win.set_sensitivities(p, SEED_LIKE_CUBIC.kind)
+    off = Model.from_dict({**SEED_LIKE_CUBIC.to_dict(), "k1": 1.01 * SEED_LIKE_CUBIC.k1})
+    params = np.column_stack([p, off.kernel_params()])
+    zsim, _ = win.simulate(params, SEED_LIKE_CUBIC.kind)
+    direct = np.sum(win.residuals(zsim) ** 2, axis=2)
+    assert direct.shape == (2, win.n_windows)
+    assert np.allclose(win.sum_squares(zsim), direct, rtol=1e-9, atol=0)
+
+
+def test_arviz_data_is_built_on_first_use_only(rig_posterior):
+    # Fact: the pointwise log likelihood (a simulation of every kept draw) is computed when asked for,
+    # once; the summary does not need it
+    _, res = rig_posterior
+    first = res.idata
+    assert res.idata is first
+    assert res.log_likelihood.shape[:2] == first["log_likelihood"]["z"].shape[:2]

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 import math
 import time
 import warnings
@@ -303,35 +304,32 @@ class Posterior(Estimator):
         self.logpost_, self.par_, self.windows_ = logpost, par, win
         tau_max = np.nanmax(tau_arr) if np.isfinite(tau_arr).any() else np.nan  # too short a chain: no tau
         res.thin = max(1, int(np.ceil(tau_max / 2))) if np.isfinite(tau_max) else 1
-        res.idata = self._idata(res, y, rec)
+        res.build_idata = functools.partial(_idata, res, y, logpost, win)
         self.result_ = res
         return self
 
-    def _idata(self, res: PosteriorResult, y: np.ndarray, rec: Measurement):
-        """arviz DataTree: posterior (thinned; chain = ensemble x walker), sample stats, observed
-        data and pointwise (per-window) log likelihood."""
-        import arviz as az
 
-        E, S, W, d = res.samples.shape
-        th = res.thin
-        post = res.samples[:, ::th]  # (E, S', W, d)
-        Sp = post.shape[1]
-        chains = np.moveaxis(post, 2, 1).reshape(E * W, Sp, d)
-        q = np.moveaxis(y[:, ::th], 2, 1).reshape(E * W * Sp, d)
-        ll = np.concatenate(
-            [
-                self.logpost_.loglik(self.logpost_.unwhiten(q[i : i + 2048]), pointwise=True)
-                for i in range(0, q.shape[0], 2048)
-            ]
-        ).reshape(E * W, Sp, -1)
-        res.log_likelihood = ll
-        data = {
-            "posterior": {n: chains[..., i] for i, n in enumerate(res.names)},
-            "sample_stats": {"lp": ll.sum(axis=2)},
-            "log_likelihood": {"z": ll},
-            "observed_data": {"z": self.windows_.z},
-            "constant_data": {"window_start_state": self.windows_.x0, "u": self.windows_.u},
-        }
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")  # "more chains than draws": the walkers of all ensembles
-            return az.from_dict(data)
+def _idata(res: PosteriorResult, y: np.ndarray, logpost: LogPosterior, win: Windows):
+    """arviz DataTree: posterior (thinned; chain = ensemble x walker), sample stats, observed
+    data and pointwise (per-window) log likelihood; and that log likelihood."""
+    import arviz as az
+
+    E, S, W, d = res.samples.shape
+    th = res.thin
+    post = res.samples[:, ::th]  # (E, S', W, d)
+    Sp = post.shape[1]
+    chains = np.moveaxis(post, 2, 1).reshape(E * W, Sp, d)
+    q = np.moveaxis(y[:, ::th], 2, 1).reshape(E * W * Sp, d)
+    ll = np.concatenate(
+        [logpost.loglik(logpost.unwhiten(q[i : i + 2048]), pointwise=True) for i in range(0, q.shape[0], 2048)]
+    ).reshape(E * W, Sp, -1)
+    data = {
+        "posterior": {n: chains[..., i] for i, n in enumerate(res.names)},
+        "sample_stats": {"lp": ll.sum(axis=2)},
+        "log_likelihood": {"z": ll},
+        "observed_data": {"z": win.z},
+        "constant_data": {"window_start_state": win.x0, "u": win.u},
+    }
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # "more chains than draws": the walkers of all ensembles
+        return az.from_dict(data), ll
