@@ -58,45 +58,95 @@ def _source_hash() -> str:
     return h.hexdigest()[:16]
 
 
-def cached_section(name: str, fn, rep: Report, results: dict[str, Any], fast: bool, seed: int, say) -> None:
-    """Run one report section, or replay it from the cache when its inputs (the section, --fast, the
-    seed and the package's source) are unchanged. A section's blocks, figures and results are stored
-    together (pickle, written atomically)."""
+def _cache_path(name: str, fast: bool, seed: int) -> Path | None:
     import hashlib
-    import pickle
 
     cdir = _cache_dir()
     key = hashlib.sha256(f"{name}|{fast}|{seed}|{__version__}|{_source_hash()}".encode()).hexdigest()[:24]
-    path = None if cdir is None else cdir / f"{name}-{key}.pkl"
-    if path is not None and path.is_file():
-        try:
-            blocks, figures, res = pickle.loads(path.read_bytes())
-            rep.blocks += blocks
-            rep.figures.update(figures)
-            results.update(res)
-            say(f"{name}: from the cache ({path})")
-            return
-        except Exception:  # noqa: BLE001 - a stale or broken cache entry is recomputed
-            pass
-    sub = Report(rep.title)
+    return None if cdir is None else cdir / f"{name}-{key}.pkl"
+
+
+def _cached(path: Path | None):
+    """A section's stored (blocks, figures, results), or None (no cache, none stored, a broken entry)."""
+    import pickle
+
+    if path is None or not path.is_file():
+        return None
+    try:
+        return pickle.loads(path.read_bytes())
+    except Exception:  # noqa: BLE001 - a stale or broken cache entry is recomputed
+        return None
+
+
+def _store(path: Path | None, payload, say) -> None:
+    import pickle
+
+    from negstiff.files import atomic_path
+
+    if path is None:
+        return
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        with atomic_path(path) as tmp:
+            tmp.write_bytes(pickle.dumps(payload))
+    except OSError as exc:
+        say(f"could not write the cache {path} ({exc})")
+
+
+def compute_section(name: str, fast: bool, seed: int):
+    """One section of ``SECTION_TABLE`` computed and rendered on its own: (blocks, figures, results),
+    each result stamped with the section's time. Picklable in and out: a worker process runs it."""
+    fn = SECTION_TABLE[name][1]
+    sub = Report("")
     res: dict[str, Any] = {}
     t0 = time.perf_counter()
     fn(sub, res, fast, seed)
     for v in res.values():
         if isinstance(v, dict):
             v.setdefault("section_elapsed_s", time.perf_counter() - t0)
-    rep.blocks += sub.blocks
-    rep.figures.update(sub.figures)
-    results.update(res)
-    if path is not None:
-        from negstiff.files import atomic_path
+    return sub.blocks, sub.figures, res
 
-        try:
-            path.parent.mkdir(parents=True, exist_ok=True)
-            with atomic_path(path) as tmp:
-                tmp.write_bytes(pickle.dumps((sub.blocks, sub.figures, res)))
-        except OSError as exc:
-            say(f"{name}: could not write the cache ({exc})")
+
+def _merge(rep: Report, results: dict[str, Any], payload) -> None:
+    blocks, figures, res = payload
+    rep.blocks += blocks
+    rep.figures.update(figures)
+    results.update(res)
+
+
+def run_sections(names, fast: bool, seed: int, workers: int, say) -> dict[str, Any]:
+    """The sections ``names``, replayed from the cache when their inputs (the section, --fast, the seed
+    and the package's source) are unchanged (each stored as pickled blocks, figures and results, written
+    atomically), else computed on ``workers`` processes at once, the
+    longest first (``SECTION_TABLE``'s measured cost); returns name -> (blocks, figures, results). The
+    sections are independent (each seeds its own draws), so the numbers are those of a serial run."""
+    from concurrent.futures import ProcessPoolExecutor, as_completed
+    from multiprocessing import get_context
+
+    out: dict[str, Any] = {}
+    paths = {n: _cache_path(n, fast, seed) for n in names}
+    for n in names:
+        payload = _cached(paths[n])
+        if payload is not None:
+            say(f"{n}: from the cache ({paths[n]})")
+            out[n] = payload
+    todo = sorted((n for n in names if n not in out), key=lambda n: -SECTION_TABLE[n][2])
+    if workers <= 1 or len(todo) <= 1:
+        for n in todo:
+            say(SECTION_TABLE[n][0])
+            out[n] = compute_section(n, fast, seed)
+            _store(paths[n], out[n], say)
+        return out
+    # spawn, not fork: the parent's numba and BLAS thread pools do not survive a fork
+    with ProcessPoolExecutor(max_workers=workers, mp_context=get_context("spawn")) as pool:
+        futures = {pool.submit(compute_section, n, fast, seed): n for n in todo}
+        say(f"{len(todo)} sections on {workers} processes: {', '.join(todo)}")
+        for fut in as_completed(futures):
+            n = futures[fut]
+            out[n] = fut.result()
+            _store(paths[n], out[n], say)
+            say(f"{SECTION_TABLE[n][0]}: done")
+    return out
 
 
 def simulator_accuracy(duration: float = 10.0, fs: float = 512.0, amplitude: float = 3.0) -> dict[str, Any]:
@@ -191,12 +241,30 @@ def simulator_section(rep: Report, results: dict[str, Any]) -> None:
     )
 
 
-SECTIONS = ("nsi", "updating", "characterization", "sindy", "posterior", "discrepancy", "silverbox", "continuation")
+SECTION_TABLE = {
+    "nsi": ("NSI around both wells", nsi_section, 41),
+    "updating": ("GA model updating", updating_section, 85),
+    "characterization": ("dynamics characterisation", characterization_section, 17),
+    "sindy": ("SINDy equation discovery", sindy_section, 42),
+    "posterior": ("Bayesian posteriors (emcee)", posterior_section, 132),
+    "discrepancy": ("discrepancy workflow", discrepancy_section, 117),
+    "silverbox": ("Silverbox benchmark (real data)", silverbox_section, 99),
+    "continuation": ("continuation against the bifurcation map", continuation_section, 74),
+}
+"""name -> (title, section function, seconds it took in a full run: the order the workers take them)."""
+
+SECTIONS = tuple(SECTION_TABLE)
 
 
-def reproduce(out: Path, fast: bool = False, seed: int = 0, progress: bool = True, sections=None) -> Path:
+def reproduce(
+    out: Path, fast: bool = False, seed: int = 0, progress: bool = True, sections=None, workers: int | None = None
+) -> Path:
     """Run the study and write the report folder ``out`` (atomically). ``sections``: run only these of
-    ``SECTIONS`` (the device, rig and simulator parts always run; the report says which were left out)."""
+    ``SECTIONS`` (the device, rig and simulator parts always run; the report says which were left out).
+    ``workers``: processes computing sections at once (default: the machine's cores)."""
+    import os
+
+    workers = (os.cpu_count() or 1) if workers is None else max(1, int(workers))
     if sections is not None and not set(sections) <= set(SECTIONS):
         raise ValueError(f"unknown sections {sorted(set(sections) - set(SECTIONS))}; known: {SECTIONS}")
     t_start = time.perf_counter()
@@ -218,20 +286,11 @@ def reproduce(out: Path, fast: bool = False, seed: int = 0, progress: bool = Tru
     rig_section(rep, results, fast, seed)
     say("simulator accuracy")
     simulator_section(rep, results)
-    for name, title, fn in (
-        ("nsi", "NSI around both wells", nsi_section),
-        ("updating", "GA model updating", updating_section),
-        ("characterization", "dynamics characterisation", characterization_section),
-        ("sindy", "SINDy equation discovery", sindy_section),
-        ("posterior", "Bayesian posteriors (emcee)", posterior_section),
-        ("discrepancy", "discrepancy workflow", discrepancy_section),
-        ("silverbox", "Silverbox benchmark (real data)", silverbox_section),
-        ("continuation", "continuation against the bifurcation map", continuation_section),
+    names = [n for n in SECTIONS if sections is None or n in sections]
+    for name, payload in sorted(
+        run_sections(names, fast, seed, workers, say).items(), key=lambda kv: names.index(kv[0])
     ):
-        if sections is not None and name not in sections:
-            continue
-        say(title)
-        cached_section(name, fn, rep, results, fast, seed, say)
+        _merge(rep, results, payload)
     if sections is not None:
         results["sections_left_out"] = [n for n in SECTIONS if n not in sections]
         rep.warning(f"A partial run: sections left out: {', '.join(results['sections_left_out']) or 'none'}.")

@@ -457,5 +457,5 @@ def cmd_update(args) -> int:
 def cmd_reproduce(args) -> int:
     from negstiff.experiments.reproduce import reproduce
 
-    reproduce(Path(args.out), fast=args.fast, seed=args.seed, progress=wants_progress(args))
+    reproduce(Path(args.out), fast=args.fast, seed=args.seed, progress=wants_progress(args), workers=args.workers)
     return 0

@@ -412,6 +412,12 @@ def _reproduce(sub, common: argparse.ArgumentParser, data_opts: argparse.Argumen
     )
     rep.add_argument("-o", "--out", default="reports/paper", help="report folder (default reports/paper)")
     rep.add_argument("--fast", action="store_true", help="a quick reduced run (minutes)")
+    rep.add_argument(
+        "--workers",
+        type=number(int, 1, 256),
+        default=None,
+        help="processes computing the report's sections at once (default: the machine's cores)",
+    )
     rep.set_defaults(func=c.cmd_reproduce)
 
 
