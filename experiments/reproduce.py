@@ -52,8 +52,8 @@ def _source_hash() -> str:
     here = Path(__file__).resolve().parent
     h = hashlib.sha256()
     for folder in (here, here.parent / "models", here.parent / "inference"):
-        for f in sorted(folder.glob("*.py")):
-            h.update(f.name.encode())
+        for f in sorted(folder.rglob("*.py")):  # subpackages too (inference/posterior)
+            h.update(str(f.relative_to(folder)).encode())
             h.update(f.read_bytes())
     return h.hexdigest()[:16]
 
@@ -130,20 +130,26 @@ def run_sections(names, fast: bool, seed: int, workers: int, say) -> dict[str, A
         if payload is not None:
             say(f"{n}: from the cache ({paths[n]})")
             out[n] = payload
-    todo = sorted((n for n in names if n not in out), key=lambda n: -SECTION_TABLE[n][2])
+    todo = [n for n in names if n not in out]
     if workers <= 1 or len(todo) <= 1:
-        for n in todo:
+        for n in todo:  # in the report's order
             say(SECTION_TABLE[n][0])
             out[n] = compute_section(n, fast, seed)
             _store(paths[n], out[n], say)
         return out
+    todo.sort(key=lambda n: -SECTION_TABLE[n][2])
     # spawn, not fork: the parent's numba and BLAS thread pools do not survive a fork
     with ProcessPoolExecutor(max_workers=workers, mp_context=get_context("spawn")) as pool:
         futures = {pool.submit(compute_section, n, fast, seed): n for n in todo}
         say(f"{len(todo)} sections on {workers} processes: {', '.join(todo)}")
         for fut in as_completed(futures):
             n = futures[fut]
-            out[n] = fut.result()
+            try:
+                out[n] = fut.result()
+            except BaseException:
+                # the sections not started are cancelled; those finished are cached (a rerun replays them)
+                pool.shutdown(wait=False, cancel_futures=True)
+                raise
             _store(paths[n], out[n], say)
             say(f"{SECTION_TABLE[n][0]}: done")
     return out

@@ -209,7 +209,7 @@ def refine(
         if stages:
             # the start states alone first, the model held: the windows' best error at the current model
             # is what the predictability test compares (measured start states carry the smoothing's error)
-            x0 = _solve(residuals, q, x0, 10, solver, states_only=True)[1]
+            x0 = _solve(residuals, q, x0, 10, solver, length, states_only=True)[1]
         r0 = residuals(q[None], x0[None])[0]
         rms0 = float(np.sqrt(np.mean(r0**2)))
         if stages and rms0 > PREDICTABLE_GROWTH * stages[-1]["rms_end_m"]:
@@ -217,7 +217,7 @@ def refine(
             reason = f"not predictable over this window (error grew {growth:.3g}x): kept the shorter windows' fit"
             stages.append({"window_s": length / rec.fs, "windows": int(n_win), "rms_start_m": rms0, "skipped": reason})
             break
-        q, _, fun, nfev = _solve(residuals, q, x0, max_nfev, solver)
+        q, _, fun, nfev = _solve(residuals, q, x0, max_nfev, solver, length)
         current = with_values(model, names, q * scale)
         stages.append(
             {
@@ -231,7 +231,7 @@ def refine(
     return Refinement(current, start_model, names, stages)
 
 
-def _solve(residuals, q, x0, max_nfev: int, solver: str, states_only: bool = False):
+def _solve(residuals, q, x0, max_nfev: int, solver: str, length: int, states_only: bool = False):
     """One stage's least squares over (q, x0), or x0 alone: (q, x, residuals, evaluations)."""
     if solver == "schur":
         if states_only:
@@ -241,7 +241,6 @@ def _solve(residuals, q, x0, max_nfev: int, solver: str, states_only: bool = Fal
         fit = shooting_least_squares(residuals, q, x0, max_nfev)
         return fit.q, fit.x, fit.fun, fit.nfev
     p, n_win = (0 if states_only else q.size), x0.shape[0]
-    length = residuals(q[None], x0[None]).shape[2]
 
     def flat(theta):
         qq = q if states_only else theta[:p]

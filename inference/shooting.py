@@ -43,7 +43,7 @@ Residuals = Callable[[np.ndarray, np.ndarray], np.ndarray]
 class ShootingFit:
     """The solution: parameters ``q`` (p,), start states ``x`` (n, 2), residuals ``fun`` (n, L), the
     residual evaluations (``nfev``, Jacobians not counted, as scipy counts them), the Jacobians
-    (``njev``), and why it stopped (``status``: "ftol", "xtol" or "max_nfev")."""
+    (``njev``), and why it stopped (``status``: "ftol", "xtol", "max_nfev" or "nonfinite")."""
 
     q: np.ndarray
     x: np.ndarray
@@ -87,31 +87,49 @@ def _inv2(V: np.ndarray) -> np.ndarray:
     return np.stack([np.stack([d, -b], -1), np.stack([-b, a], -1)], -2) / det[:, None, None]
 
 
-def _step(A, B, r, lam, floor):
+@dataclass(frozen=True)
+class _Normal:
+    """The undamped normal equations' blocks at one Jacobian (module docstring): U (p, p), W (n, p, 2),
+    V (n, 2, 2), g_q (p,), g_x (n, 2), and the diagonal of J^T J's floor for the damping."""
+
+    U: np.ndarray
+    W: np.ndarray
+    V: np.ndarray
+    gq: np.ndarray
+    gx: np.ndarray
+    floor: float
+
+    @classmethod
+    def of(cls, A: np.ndarray, B: np.ndarray, r: np.ndarray) -> _Normal:
+        U = np.einsum("nlp,nlq->pq", A, A)
+        V = np.einsum("nlk,nlj->nkj", B, B)
+        top = max(float(np.max(np.diag(U), initial=0.0)), float(V[:, [0, 1], [0, 1]].max()), 1e-300)
+        return cls(U, np.einsum("nlp,nlk->npk", A, B), V, np.einsum("nlp,nl->p", A, r),
+                   np.einsum("nlk,nl->nk", B, r), 1e-12 * top)  # fmt: skip
+
+
+def _step(A, B, ne: _Normal, lam: float):
     """The damped Gauss-Newton step (dq, dx) with the start states eliminated (module docstring), and
-    J d, for the predicted reduction."""
-    gq = np.einsum("nlp,nl->p", A, r)
-    gx = np.einsum("nlk,nl->nk", B, r)
-    U = np.einsum("nlp,nlq->pq", A, A)
-    W = np.einsum("nlp,nlk->npk", A, B)
-    V = np.einsum("nlk,nlj->nkj", B, B)
-    Vd = V.copy()
-    Vd[:, [0, 1], [0, 1]] += lam * np.maximum(V[:, [0, 1], [0, 1]], floor)
+    the linear model's predicted fall of the cost, -(g.d) - |J d|^2 / 2 (computed directly, not as a
+    difference of two nearly equal costs)."""
+    Vd = ne.V.copy()
+    Vd[:, [0, 1], [0, 1]] += lam * np.maximum(ne.V[:, [0, 1], [0, 1]], ne.floor)
     Vi = _inv2(Vd)
     if A.shape[2]:
-        S = U.copy()
-        S[np.diag_indices_from(S)] += lam * np.maximum(np.diag(U), floor)
-        S -= np.einsum("npk,nkj,nqj->pq", W, Vi, W)
-        rhs = -(gq - np.einsum("npk,nkj,nj->p", W, Vi, gx))
+        S = ne.U.copy()
+        S[np.diag_indices_from(S)] += lam * np.maximum(np.diag(ne.U), ne.floor)
+        S -= np.einsum("npk,nkj,nqj->pq", ne.W, Vi, ne.W)
+        rhs = -(ne.gq - np.einsum("npk,nkj,nj->p", ne.W, Vi, ne.gx))
         try:
             dq = np.linalg.solve(S, rhs)
         except np.linalg.LinAlgError:
             dq = np.linalg.lstsq(S, rhs, rcond=None)[0]
     else:
         dq = np.zeros(0)
-    dx = -np.einsum("nkj,nj->nk", Vi, gx + np.einsum("npk,p->nk", W, dq))
+    dx = -np.einsum("nkj,nj->nk", Vi, ne.gx + np.einsum("npk,p->nk", ne.W, dq))
     Jd = np.einsum("nlp,p->nl", A, dq) + np.einsum("nlk,nk->nl", B, dx)
-    return dq, dx, Jd
+    predicted = -(float(ne.gq @ dq) + float(np.sum(ne.gx * dx))) - 0.5 * float(np.sum(Jd**2))
+    return dq, dx, predicted
 
 
 def shooting_least_squares(
@@ -134,27 +152,34 @@ def shooting_least_squares(
     diff_step : relative forward-difference step (scipy's ``diff_step``)
     ftol, xtol : scipy's ``least_squares`` tolerances, with its meanings: the cost's relative fall on
         an accepted step, the step's norm relative to the point's (no gradient test: the gradient's size
-        depends on the residuals' units; a step whose linear model predicts no fall ends with "ftol")
+        depends on the residuals' units). Where no step lowers the cost any more, the damping grows until
+        the step vanishes ("xtol"); a non-finite residual or Jacobian ends the fit ("nonfinite"), a trial
+        point ``fun`` refuses (ValueError) counts as a failed step
     """
     q, x = np.array(q0, float), np.array(x0, float)
     r = fun(q[None], x[None])[0]
     nfev, njev, cost = 1, 0, 0.5 * float(np.sum(r**2))
+    if not np.isfinite(cost):
+        return ShootingFit(q, x, r, nfev, njev, "nonfinite")
     lam, nu, status = 1e-3, 2.0, "max_nfev"
     while nfev < max_nfev and status == "max_nfev":
         A, B = _jacobian(fun, q, x, r, diff_step)
         njev += 1
-        diag = np.concatenate([np.einsum("nlp,nlp->p", A, A), np.einsum("nlk,nlk->nk", B, B).ravel()])
-        floor = 1e-12 * max(float(diag.max()), 1e-300)
+        if not (np.all(np.isfinite(A)) and np.all(np.isfinite(B))):
+            status = "nonfinite"
+            break
+        ne = _Normal.of(A, B, r)
         while nfev < max_nfev:
-            dq, dx, Jd = _step(A, B, r, lam, floor)
-            predicted = cost - 0.5 * float(np.sum((r + Jd) ** 2))
-            if not predicted > 0:  # no descent left in the linear model: at the minimum to rounding
-                status = "ftol"
-                break
-            r_new = fun((q + dq)[None], (x + dx)[None])[0]
-            nfev += 1
-            new_cost = 0.5 * float(np.sum(r_new**2))
-            rho = (cost - new_cost) / predicted if np.isfinite(new_cost) else -1.0
+            dq, dx, predicted = _step(A, B, ne, lam)
+            r_new, new_cost = None, np.inf
+            if predicted > 0 and np.all(np.isfinite(dq)) and np.all(np.isfinite(dx)):
+                try:
+                    r_new = fun((q + dq)[None], (x + dx)[None])[0]
+                    new_cost = 0.5 * float(np.sum(r_new**2))
+                except ValueError:  # a trial point outside the model's domain (e.g. a mass <= 0)
+                    pass
+                nfev += 1
+            rho = (cost - new_cost) / predicted if predicted > 0 and np.isfinite(new_cost) else -1.0
             if rho > 0:
                 fall = cost - new_cost
                 step_norm = np.sqrt(np.sum(dq**2) + np.sum(dx**2))
@@ -167,9 +192,10 @@ def shooting_least_squares(
                 elif step_norm < xtol * (xtol + point_norm):
                     status = "xtol"
                 break
+            # no fall, a fall the linear model did not predict, or a trial that failed: a shorter step
             lam *= nu
             nu *= 2
-            if lam > 1e16:  # steps shrunk to nothing and none lowers the cost
+            if lam > 1e16:  # steps shrunk to nothing and none lowers the cost: at the minimum to rounding
                 status = "xtol"
                 break
     return ShootingFit(q, x, r, nfev, njev, status)

@@ -26,7 +26,8 @@ the projected system.
 
 A record's weak form is a ``WeakForm`` (its smoothed states, test-function width and velocity noise,
 computed once); ``WeakForm.system`` projects a part of the record into a frozen ``WeakSystem``;
-``fit_support`` solves it (pysindy's SR3 / ConstrainedSR3, the input's coefficient fixed by physics);
+``fit_support`` solves it (pysindy's SR3 / ConstrainedSR3 with a penalty or an ensemble, plain constrained
+least squares without: the input's coefficient fixed by physics);
 ``model_from`` and ``mass_of`` turn the coefficients into a model file. No state outlives a call.
 """
 

@@ -25,15 +25,21 @@ class PosteriorResult:
     settings: dict[str, Any]
     map_point: dict[str, float]
     thin: int = 1
-    build_idata: Callable[[], tuple[Any, np.ndarray]] | None = field(default=None, repr=False)
-    _built: tuple[Any, np.ndarray] | None = field(default=None, repr=False)
+    build_idata: Callable[[], tuple[Any, np.ndarray]] | None = field(default=None, repr=False, compare=False)
+    _built: tuple[Any, np.ndarray] | None = field(default=None, init=False, repr=False, compare=False)
 
     def _idata_and_loglik(self) -> tuple[Any, np.ndarray | None]:
         if self._built is None:
             if self.build_idata is None:
                 return None, None
             self._built = self.build_idata()
+            self.build_idata = None  # it holds the run's windows and log posterior: let them go
         return self._built
+
+    def __getstate__(self) -> dict[str, Any]:
+        """Pickled without the builder (it holds the run's log posterior and its lock): a result pickled
+        before its arviz data was asked for has none after unpickling."""
+        return {**self.__dict__, "build_idata": None}
 
     @property
     def idata(self):
