@@ -31,7 +31,7 @@ from negstiff.models.effects import DEVICE_ROWS, POLYNOMIAL_ROWS
 from negstiff.models.rig import Rig
 
 from .baselines import build_c_rk4, median_time, solve_ivp_run
-from .peers import peers_section, scaling, scaling_section
+from .peers import peak, peers_section, scaling, scaling_section
 from .peers import section as _section
 
 
@@ -162,7 +162,6 @@ def _batch_benchmark(model, u_cross: np.ndarray, dt: float, zp: float, t_ivp: fl
 def nsi_benchmark(quick: bool = False) -> tuple[list[list[str]], dict]:
     """NSI on a 300 s record at 512 Hz: total time and peak memory; the LQ step against the direct QR
     of the whole Hankel stack (the baseline whose memory is N x 2i(m+l) at once)."""
-    import tracemalloc
 
     from scipy import linalg
 
@@ -174,15 +173,6 @@ def nsi_benchmark(quick: bool = False) -> tuple[list[list[str]], dict]:
     duration = 60.0 if quick else 300.0
     rec = Rig(SEED_LIKE_CUBIC, seed=21).random(duration=duration, rms=SEED_LIKE_CROSS_WELL_RMS)
     m = from_arrays(rec.columns["base_acc"], rec.columns["z"], 512.0, mass=SEED_LIKE_CUBIC.m)
-
-    def peak(fn):
-        tracemalloc.start()
-        t0 = time.perf_counter()
-        out = fn()
-        t = time.perf_counter() - t0
-        pk = tracemalloc.get_traced_memory()[1]
-        tracemalloc.stop()
-        return t, pk, out
 
     t_nsi, pk_nsi, _ = peak(lambda: NSI().fit(m))
     rng = np.random.default_rng(0)

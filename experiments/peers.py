@@ -32,7 +32,7 @@ from negstiff.models import SEED_LIKE_CROSS_WELL_RMS, SEED_LIKE_CUBIC, Model
 from negstiff.models.rig import Rig
 
 
-def _peak(fn):
+def peak(fn):
     """(seconds, peak traced memory [bytes], result) of ``fn()``; numpy's buffers are traced."""
     tracemalloc.start()
     t0 = time.perf_counter()
@@ -71,9 +71,9 @@ def subspace_peers(sizes: tuple[int, ...] = (100_000, 1_000_000), i: int = 30) -
         cases: dict[str, Any] = {}
         if subspace.covariance_factor(u, y, i) is None:
             raise RuntimeError("the benchmark's problem takes the QR route: relabel the rows")
-        t, pk, (_, _, s_ours) = _peak(lambda: subspace.po_moesp(u, y, i, 2))
+        t, pk, (_, _, s_ours) = peak(lambda: subspace.po_moesp(u, y, i, 2))
         cases["negstiff (covariance route)"] = (t, pk, s_ours)
-        t, pk, (_, _, s_qr) = _peak(lambda: subspace.po_moesp(u, y, i, 2, route="qr"))
+        t, pk, (_, _, s_qr) = peak(lambda: subspace.po_moesp(u, y, i, 2, route="qr"))
         cases["negstiff chunked QR (its fallback)"] = (t, pk, s_qr)
         try:
             import pandas as pd
@@ -87,7 +87,7 @@ def subspace_peers(sizes: tuple[int, ...] = (100_000, 1_000_000), i: int = 30) -
                 # nfoursid's R32 is L32 * sqrt(j): its singular values, normalised as ours
                 return np.linalg.svd(nf.R32, compute_uv=False) / np.sqrt(n - 2 * i + 1)
 
-            t, pk, s_nf = _peak(peer)
+            t, pk, s_nf = peak(peer)
             cases["nfoursid 1.0 (one QR of the whole stack)"] = (t, pk, s_nf)
         except ImportError:
             cases["nfoursid 1.0 (one QR of the whole stack)"] = None
@@ -374,7 +374,7 @@ def scaling(durations: tuple[float, ...] = (30.0, 300.0, 3000.0), seed: int = 7)
             t = time.perf_counter() - t0
             # memory in a second run: tracemalloc's bookkeeping slowed the posterior's many small allocations
             # (from two threads) 2.5x (measured: 71 s traced against 28.6 s untraced on the 300 s record)
-            _, pk, _ = _peak(fn)
+            _, pk, _ = peak(fn)
             out[name][d] = {"s": t, "peak_mb": pk / 1e6, "samples": m.n}
     return out
 
