@@ -52,7 +52,10 @@ def frame_warnings(rec) -> list[str]:
 
     if rec.z is None or rec.input_name != "base_acc" or not rec.info.get("response", {}).get("z_constant_known", True):
         return []
-    fo = frame_offset(replace(rec, meta={k: v for k, v in rec.meta.items() if not k.endswith("_rest")}))
+    gravity_only = replace(rec, meta={k: v for k, v in rec.meta.items() if not k.endswith("_rest")})
+    fo = frame_offset(gravity_only, spread=False)  # the parts' spread only for a warning's text (0.3 s on 300 s)
+    if fo["offset_m"] is not None and abs(fo["offset_m"]) > FRAME_WARN_M:
+        fo = frame_offset(gravity_only)
     if fo["offset_m"] is None:
         return [
             f"the record's physics never carry the weight ({fo['method']}): are base_acc in m/s^2 and z in m, "

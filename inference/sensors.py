@@ -241,7 +241,7 @@ def _frame_anchors(rec) -> tuple[float, dict[str, float]]:
     return origin, wells
 
 
-def frame_offset(rec) -> dict[str, Any]:
+def frame_offset(rec, spread: bool = True) -> dict[str, Any]:
     """The frame constant C that makes a record's z physical (z_true = z + C).
 
     Two anchors, the better one used:
@@ -258,8 +258,9 @@ def frame_offset(rec) -> dict[str, Any]:
       in its equation (k0 is the force's offset): there the frame is not pinned.
 
     The uncertainty ``offset_se_m`` is the spread of the estimates from ``FRAME_PARTS`` parts of the
-    record, scaled to the whole (sd / sqrt(parts)). Returns a
-    dict with ``offset_m`` (None when not pinned), ``offset_se_m``, ``method``.
+    record, scaled to the whole (sd / sqrt(parts)); ``spread=False`` skips the parts (``offset_se_m`` NaN:
+    the plausibility check asks for it only when it warns). Returns a dict with ``offset_m`` (None when
+    not pinned), ``offset_se_m``, ``method``.
     """
     rest = {w: rec.meta.get(f"z_{w}_rest") for w in ("minus", "plus")}
     try:
@@ -273,7 +274,7 @@ def frame_offset(rec) -> dict[str, Any]:
     try:
         x, wells = _frame_anchors(rec)
         n_parts = int(np.clip(rec.duration // FRAME_PART_MIN_S, 2, FRAME_PARTS))
-        edges = np.linspace(0, rec.n, n_parts + 1).astype(int)
+        edges = np.linspace(0, rec.n, n_parts + 1).astype(int) if spread else np.zeros(1, int)
         parts = []
         for a, b in zip(edges[:-1], edges[1:]):
             try:
