@@ -58,11 +58,12 @@ def _source_hash() -> str:
     return h.hexdigest()[:16]
 
 
-def _cache_path(name: str, fast: bool, seed: int) -> Path | None:
+def _cache_path(name: str, fast: bool, seed: int, source: str) -> Path | None:
+    """Where section ``name``'s payload is cached, keyed by its inputs and ``source`` (``_source_hash``)."""
     import hashlib
 
     cdir = _cache_dir()
-    key = hashlib.sha256(f"{name}|{fast}|{seed}|{__version__}|{_source_hash()}".encode()).hexdigest()[:24]
+    key = hashlib.sha256(f"{name}|{fast}|{seed}|{__version__}|{source}".encode()).hexdigest()[:24]
     return None if cdir is None else cdir / f"{name}-{key}.pkl"
 
 
@@ -117,14 +118,15 @@ def _merge(rep: Report, results: dict[str, Any], payload) -> None:
 def run_sections(names, fast: bool, seed: int, workers: int, say) -> dict[str, Any]:
     """The sections ``names``, replayed from the cache when their inputs (the section, --fast, the seed
     and the package's source) are unchanged (each stored as pickled blocks, figures and results, written
-    atomically), else computed on ``workers`` processes at once, the
-    longest first (``SECTION_TABLE``'s measured cost); returns name -> (blocks, figures, results). The
+    atomically), else computed on ``workers`` processes at once, the longest first (``SECTION_TABLE``'s
+    measured cost); returns name -> (blocks, figures, results). The
     sections are independent (each seeds its own draws), so the numbers are those of a serial run."""
     from concurrent.futures import ProcessPoolExecutor, as_completed
     from multiprocessing import get_context
 
     out: dict[str, Any] = {}
-    paths = {n: _cache_path(n, fast, seed) for n in names}
+    source = _source_hash()  # read and hashed once, not per section
+    paths = {n: _cache_path(n, fast, seed, source) for n in names}
     for n in names:
         payload = _cached(paths[n])
         if payload is not None:
