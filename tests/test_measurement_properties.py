@@ -97,3 +97,30 @@ def test_nearly_valid_records_load_or_are_refused_cleanly(tmp_path, response, ex
     p = tmp_path / "v.csv"
     p.write_text(",".join(names) + "\n" + "".join(",".join(f"{x:.{decimals}f}" for x in row) + "\n" for row in data))
     _outcome(p)
+
+
+TIME_TOKENS = st.lists(
+    st.one_of(
+        st.floats(-1e7, 1e7, allow_nan=False).flatmap(
+            lambda v: st.sampled_from(["%.0f", "%.3f", "%.9f", "%.6g", "%.12g", "%g", "%+.4f"]).map(lambda f: f % v)
+        ),
+        st.sampled_from(["0", "-0", ".5", "+.5", "5.", "00.100", "nan", "1e-3", '"0.5"', " 2.5", "0.000488281"]),
+    ),
+    min_size=1,
+    max_size=30,
+)
+
+
+@settings(max_examples=300, deadline=None)
+@given(tokens=TIME_TOKENS)
+def test_the_bytes_route_reads_the_printed_digits_as_the_token_loop_does(tokens):
+    """The time column's printed precision (decimals D, significant digits S) read on the tokens' bytes
+    as one array is the per-token parse's, for every column it accepts (plain decimals); others go to
+    the loop."""
+    from negstiff.inference.measurement import _plain_decimal_digits, _printed_digits
+
+    fast = _plain_decimal_digits(tokens)
+    if fast is not None:
+        assert fast == _printed_digits(tokens)
+    plain = all(set(t) <= set("0123456789.+-") for t in tokens)
+    assert (fast is not None) == plain

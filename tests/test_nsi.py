@@ -99,6 +99,24 @@ def test_covariance_route_falls_back_to_qr_on_collinear_channels():
         subspace.lq_factor(u, y, 5, route="fast")
 
 
+def test_output_equation_recovers_x0_b_d_of_a_system_with_a_negative_and_a_zero_pole():
+    """estimate_bd's regressors (C A^k for x0, the state responses for B, the inputs for D) fit an exact
+    discrete system's output to rounding, including eigenvalues -0.6 (mu^k alternates) and 0 (mu^0 = 1):
+    x0, B and D come back to the linear solve's rounding."""
+    rng = np.random.default_rng(11)
+    A = np.diag([0.95, -0.6, 0.0]) + np.triu(0.05 * rng.standard_normal((3, 3)), 1)
+    B, C, D = rng.standard_normal((3, 2)), rng.standard_normal((1, 3)), rng.standard_normal((1, 2))
+    x0 = rng.standard_normal(3)
+    u = rng.standard_normal((3000, 2))
+    x, y = x0.copy(), np.empty((3000, 1))
+    for k in range(3000):
+        y[k] = C @ x + D @ u[k]
+        x = A @ x + B @ u[k]
+    x0_e, B_e, D_e = subspace.estimate_bd(A, C, u, y)
+    for est, true in ((x0_e, x0), (B_e, B), (D_e, D)):
+        assert np.allclose(est, true, rtol=1e-9, atol=1e-9)
+
+
 @pytest.fixture(scope="module")
 def seed_like_noise_free():
     rec = Rig(SEED_LIKE_CUBIC, sensors=Sensors.noiseless(), seed=1).random(duration=300, rms=SEED_LIKE_CROSS_WELL_RMS)

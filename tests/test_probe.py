@@ -260,3 +260,20 @@ def test_folder_outputs_may_exist(tmp_path):
     (tmp_path / "paper").mkdir()
     for argv in (["reproduce", "-o", str(tmp_path / "paper")], ["rig", "campaign", "-o", str(tmp_path / "paper")]):
         check_paths(build_parser().parse_args(argv))
+
+
+def test_the_installed_command_flushes_its_lines_and_keeps_its_exit_codes(tmp_path):
+    # the command exits without the interpreter's teardown (negstiff.cli.run): what it printed still
+    # reaches a pipe, its file is whole, and bad input still ends with one line and exit 2
+    out = tmp_path / "r.csv"
+    cmd = [sys.executable, "-m", "negstiff", "rig", "random", "--duration", "2", "-o", str(out)]
+    p = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
+    assert p.returncode == 0, p.stderr
+    assert f"wrote {out}" in p.stderr + p.stdout
+    from negstiff.inference.measurement import load
+
+    assert load(out).n == 1024
+    bad = subprocess.run([*cmd[:3], "identify", "nsi", str(tmp_path / "none.csv"), "-o", str(tmp_path / "o.json")],
+                         capture_output=True, text=True, timeout=120)  # fmt: skip
+    assert bad.returncode == 2 and len(bad.stderr.strip().splitlines()) == 1 and "no such file" in bad.stderr
+    assert not (tmp_path / "o.json").exists()

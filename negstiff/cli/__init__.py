@@ -60,3 +60,17 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 130
     except BrokenPipeError:
         return 141
+
+
+def run() -> None:
+    """The installed command: ``main``, then an exit that skips the interpreter's teardown. Everything
+    the command writes is written (atomically) and its worker processes joined inside ``main``; the
+    teardown would only free the loaded libraries' state, which took 0.2 s of a 2.7 s ``identify nsi``
+    (numba's compiled kernels; measured). An exception escaping ``main`` takes the usual way out."""
+    rc = main()
+    try:
+        sys.stdout.flush()
+        sys.stderr.flush()
+    except BrokenPipeError:
+        rc = 141
+    os._exit(int(rc or 0))
