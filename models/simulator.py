@@ -139,7 +139,9 @@ def _checked(params, lay: effects.Layout, kind: str, u, dt: float, substeps: int
         raise ValueError("simulation mass must be positive")
     if kind not in KINDS:
         raise ValueError(f"kind must be one of {sorted(KINDS)}, got {kind!r}")
-    u2 = np.atleast_2d(np.asarray(u, dtype=np.float64))
+    # one array type per kernel argument, whatever the caller passes: each distinct numba signature (a
+    # strided input, a read-only start state) was compiled again, 5-10 s each on a fresh install
+    u2 = np.require(np.atleast_2d(np.asarray(u, dtype=np.float64)), requirements=("C", "W"))
     if u2.ndim != 2 or u2.shape[1] < 2:
         raise ValueError("input needs at least two samples")
     if not np.all(np.isfinite(u2)):
@@ -207,8 +209,8 @@ def simulate_batch(
     status = np.zeros(nb, dtype=np.int64)
     fail = np.full(nb, -1, dtype=np.int64)
     k = KINDS[kind]
-    z0 = np.ascontiguousarray(x0[:, 0])
-    v0 = np.ascontiguousarray(x0[:, 1])
+    z0 = np.array(x0[:, 0], order="C")  # copies: writable even where x0 is a read-only (broadcast) view
+    v0 = np.array(x0[:, 1], order="C")
     if threads is None:
         # a thread pays for its hand-off (~0.2 ms) only with enough work: 64 members and ~2e5 member-steps
         # each (an MCMC step's batch of 0.125 s windows ran slower on two threads than on one, measured)

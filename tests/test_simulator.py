@@ -101,3 +101,23 @@ def test_bad_simulation_arguments_are_refused(kw, message):
         simulate_batch(
             m.kernel_params(), "polynomial", args["u"], args["dt"], np.array([0.02, 0]), substeps=args["substeps"]
         )
+
+
+def test_one_compiled_signature_whatever_the_callers_arrays(rng):
+    # a strided or read-only input, a read-only (broadcast) start state, one member or many: the kernel
+    # sees one array type per argument, so a fresh install compiles each kernel once (every extra
+    # signature is another 5-10 s compile; the old code compiled three here)
+    from negstiff.models import SEED_LIKE_CUBIC
+    from negstiff.models.kernel import _kernel_poly
+
+    p = SEED_LIKE_CUBIC.kernel_params()
+    u = rng.standard_normal((3, 40))
+    read_only = u[0].copy()
+    read_only.setflags(write=False)
+    x0 = np.zeros(2)
+    x0.setflags(write=False)
+    simulate_batch(p, "polynomial", u[0], 1e-3, x0)  # one member, read-only start state
+    simulate_batch(p, "polynomial", read_only, 1e-3, x0)
+    simulate_batch(np.column_stack([p, p]), "polynomial", u.T.T[:, ::2], 1e-3, np.zeros((2, 2)), input_index=[0, 2])
+    simulate_batch(p, "polynomial", np.asfortranarray(u), 1e-3, x0, input_index=[1])
+    assert len(_kernel_poly.signatures) == 1, _kernel_poly.signatures
