@@ -10,10 +10,11 @@ with Gaussian bumps phi, psi, chi on even grids over the range the record visits
 radial-basis network: smooth, local, linear in its weights), kept orthogonal over the visited states to
 every force the physics can make (1, z, z^2, z^3, z', z'|z'|), so g carries only what the physics
 cannot. The weights are fitted by the simulation error on multiple-shooting windows with the physical
-part held (``refine``'s machinery: free start states, a sparse finite-difference Jacobian, start states
-fitted first), with a ridge penalty that keeps g at zero where the data do not ask for it; then physics
-and g are fitted together (the hybrid). How far the physical coefficients move, in units of their own
-standard error, says whether the physics-only fit had bent to cover the missing force.
+part held (``refine``'s machinery: free start states, fitted first, then Levenberg-Marquardt with the
+start states eliminated, ``shooting``), with a ridge penalty that keeps g at zero where the data do not
+ask for it; then physics and g are fitted together (the hybrid). How far the physical coefficients
+move, in units of their own standard error, says whether the physics-only fit had bent to cover the
+missing force.
 
 Why written here: the term must live inside the Runge-Kutta loop of a free run (an output-error fit
 simulates it tens of thousands of times); a Gaussian process or scikit-learn regressor would be
@@ -29,7 +30,7 @@ from typing import Any
 
 import numba
 import numpy as np
-from scipy import linalg, optimize, sparse
+from scipy import linalg
 
 from negstiff.models import Model, effects
 from negstiff.models.kernel import JIT, KINDS, P_M, P_SIGN, force, member, monomials
@@ -37,7 +38,8 @@ from negstiff.models.simulator import input_gain, stage_input
 
 from .derivatives import state_derivatives
 from .measurement import Measurement, MeasurementError
-from .refine import parameter_names, parameter_scales, shooting_sparsity, with_values
+from .refine import parameter_names, parameter_scales, with_values
+from .shooting import parameter_covariance, shooting_least_squares
 from .validation import divergence_limits, record_substeps, staged_windows
 
 
@@ -299,25 +301,23 @@ def _orthogonal_weights(basis: Basis, zs: np.ndarray, vs: np.ndarray, u: np.ndar
     return np.linalg.qr(N)[0]
 
 
-def _coefficient_shifts(sol, n_res: int, length: int, names, q0: np.ndarray, pscale: np.ndarray) -> tuple[dict, float]:
-    """How far the joint refit moved each physical coefficient, in its standard errors: from the
-    Jacobian at the solution (the start states marginalised: a Schur complement), inflated by the
-    residual's correlation time (coloured residuals: tau samples carry one sample's information)."""
+def _coefficient_shifts(sol, cov_unit: np.ndarray, names, q0: np.ndarray, pscale: np.ndarray) -> tuple[dict, float]:
+    """How far the joint refit moved each physical coefficient, in its standard errors: (J^T J)^-1 at the
+    solution with the start states marginalised (``cov_unit``: ``shooting.parameter_covariance``) times
+    the residual variance, inflated by the residual's correlation time (coloured residuals: tau samples
+    carry one sample's information)."""
     p = len(names)
-    J = sparse.csr_matrix(sol.jac)
-    dof = max(1, n_res - sol.x.size)
-    s2 = float(np.sum(sol.fun[:n_res] ** 2) / dof)
-    tau = _correlation_time(sol.fun[:n_res].reshape(n_res // length, length))
-    try:
-        cov = s2 * np.linalg.inv((J.T @ J).toarray())
-        se = np.sqrt(np.clip(np.diag(cov)[:p], 0, None)) * pscale
-    except np.linalg.LinAlgError:
-        se = np.full(p, np.nan)
-    moved = (sol.x[:p] - q0) * pscale
+    n_res = sol.fun.size
+    dof = max(1, n_res - sol.q.size - sol.x.size)
+    s2 = float(np.sum(sol.fun**2) / dof)
+    tau = _correlation_time(sol.fun)
+    diag = np.diag(cov_unit)[:p] if np.all(np.isfinite(cov_unit)) else np.full(p, np.nan)
+    se = np.sqrt(np.clip(s2 * diag, 0, None)) * pscale
+    moved = (sol.q[:p] - q0) * pscale
     se_white = se
     se = se * math.sqrt(tau)
     shifts = {
-        n: {"held": float(q0[i] * pscale[i]), "joint": float(sol.x[i] * pscale[i]), "se": float(se[i]),
+        n: {"held": float(q0[i] * pscale[i]), "joint": float(sol.q[i] * pscale[i]), "se": float(se[i]),
             "se_white": float(se_white[i]), "shift_in_se": float(moved[i] / se[i]) if se[i] > 0 else None}
         for i, n in enumerate(names)
     }  # fmt: skip
@@ -377,48 +377,46 @@ def fit_hybrid(
 
     pen = math.sqrt(ridge) * z_rms  # a weight of size `force` costs ridge * z_rms^2 in the sum of squares
 
-    for w_s in windows_s:
-        length, n_win, meas, u, x0 = windows(w_s)
+    def residuals(length, meas, u, phys_of):
+        """The batched residuals (``shooting.Residuals``) of points (q, X): q's physics (``phys_of``) and
+        term weights, every window's free run from its start states (scaled) X."""
         big = 10 * np.abs(meas).max()
 
-        def residual(t, phys=model):
-            th = N @ t[:P] * force
-            z = sim(phys, th, u, t[P:].reshape(-1, 2))
-            e = np.where(np.isfinite(z), z - meas, big)
-            return np.concatenate([e.ravel(), pen * t[:P]])
+        def fun(Q, X):
+            out = np.empty((Q.shape[0], *meas.shape))
+            for k, (q, xs) in enumerate(zip(Q, X)):
+                phys, t = phys_of(q)
+                z = sim(phys, N @ t * force, u, xs)
+                out[k] = np.where(np.isfinite(z), z - meas, big)  # a diverging window: large, finite
+            return out
 
-        pattern = shooting_sparsity(n_win, length, P, penalty=(0, P))
+        return fun
+
+    for w_s in windows_s:
+        length, n_win, meas, u, x0 = windows(w_s)
+        held_fun = residuals(length, meas, u, lambda q: (model, q))
+        t0 = N.T @ theta / force
         # the start states first, the term held (the measured states carry the smoothing's error)
-        st = optimize.least_squares(lambda xs: residual(np.concatenate([N.T @ theta / force, xs])), x0.ravel(),
-                                    jac="2-point", jac_sparsity=pattern[:, P:], method="trf",
-                                    max_nfev=10, diff_step=1e-7)  # fmt: skip
-        t0 = np.concatenate([N.T @ theta / force, st.x])
-        rms0 = float(np.sqrt(np.mean(st.fun[: n_win * length] ** 2)))
-        sol = optimize.least_squares(residual, t0, jac="2-point", jac_sparsity=pattern, method="trf",
-                                     max_nfev=max_nfev, diff_step=1e-7)  # fmt: skip
-        theta = N @ sol.x[:P] * force
-        states = sol.x[P:]
+        st = shooting_least_squares(lambda Q, X: held_fun(np.repeat(t0[None], len(X), 0), X), np.zeros(0), x0, 10)
+        rms0 = float(np.sqrt(np.mean(st.fun**2)))
+        sol = shooting_least_squares(held_fun, t0, st.x, max_nfev, penalty=np.full(P, pen))
+        theta, states = N @ sol.q * force, sol.x
         stages.append({"window_s": length / rec.fs, "windows": int(n_win), "rms_start_m": rms0,
-                       "rms_end_m": float(np.sqrt(np.mean(sol.fun[: n_win * length] ** 2))),
-                       "evaluations": int(sol.nfev)})  # fmt: skip
+                       "rms_end_m": float(np.sqrt(np.mean(sol.fun**2))), "evaluations": int(sol.nfev),
+                       "jacobians": int(sol.njev), "stop": sol.status})  # fmt: skip
 
     # the joint refit: physics and term together, from the held fit, on the last stage's windows
     p = len(names)
-
-    def joint(t):
-        phys = with_values(model, names, t[:p] * pscale)
-        z = sim(phys, N @ t[p : p + P] * force, u, t[p + P :].reshape(-1, 2))
-        e = np.where(np.isfinite(z), z - meas, big)
-        return np.concatenate([e.ravel(), pen * t[p : p + P]])
-
-    jp = shooting_sparsity(n_win, length, p + P, penalty=(p, P))
-    sol = optimize.least_squares(joint, np.concatenate([q0, N.T @ theta / force, states]), jac="2-point",
-                                 jac_sparsity=jp, method="trf", max_nfev=max_nfev, diff_step=1e-7)  # fmt: skip
-    shifts, tau = _coefficient_shifts(sol, n_win * length, length, names, q0, pscale)
+    joint_fun = residuals(length, meas, u, lambda q: (with_values(model, names, q[:p] * pscale), q[p:]))
+    penalty = np.concatenate([np.zeros(p), np.full(P, pen)])
+    sol = shooting_least_squares(joint_fun, np.concatenate([q0, N.T @ theta / force]), states, max_nfev,
+                                 penalty=penalty)  # fmt: skip
+    shifts, tau = _coefficient_shifts(sol, parameter_covariance(joint_fun, sol, penalty), names, q0, pscale)
     # the hybrid is the joint fit: with the term orthogonal to the physics' own forces, the physics
     # must move where its output-error fit had bent to cover the missing force (that bend is the shift)
-    joint_model, weights = with_values(model, names, sol.x[:p] * pscale), N @ sol.x[p : p + P] * force
-    joint_info = {"rms_end_m": float(np.sqrt(np.mean(sol.fun[: n_win * length] ** 2))),
+    joint_model, weights = with_values(model, names, sol.q[:p] * pscale), N @ sol.q[p:] * force
+    joint_info = {"rms_end_m": float(np.sqrt(np.mean(sol.fun**2))), "evaluations": int(sol.nfev),
+                  "jacobians": int(sol.njev), "stop": sol.status,
                   "residual_correlation_samples": tau, "coefficients": shifts, "model": joint_model.to_dict(),
                   "weights_N": weights.tolist()}  # fmt: skip
     held = {"model": model.to_dict(), "weights_N": theta.tolist(), "stages": stages}

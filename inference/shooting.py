@@ -25,7 +25,9 @@ model: on a 300 s rig record's 240 windows it stopped at its 60-evaluation budge
 pymoo) solves the block-eliminated normal equations; the elimination is the textbook one.
 
 The residuals come from one callable evaluating a batch of points at once, so the p + 2 perturbed
-points of a Jacobian are one batched simulator call.
+points of a Jacobian are one batched simulator call. A ridge on the parameters (``penalty``: rows
+w_j q_j appended to the residuals, as a penalised fit writes them) adds w^2 to U's diagonal and w^2 q to
+g_q: it touches no start state, so the elimination is unchanged.
 """
 
 from __future__ import annotations
@@ -100,15 +102,16 @@ class _Normal:
     floor: float
 
     @classmethod
-    def of(cls, A: np.ndarray, B: np.ndarray, r: np.ndarray) -> _Normal:
+    def of(cls, A: np.ndarray, B: np.ndarray, r: np.ndarray, w2: np.ndarray, q: np.ndarray) -> _Normal:
         U = np.einsum("nlp,nlq->pq", A, A)
+        U[np.diag_indices_from(U)] += w2
         V = np.einsum("nlk,nlj->nkj", B, B)
         top = max(float(np.max(np.diag(U), initial=0.0)), float(V[:, [0, 1], [0, 1]].max()), 1e-300)
-        return cls(U, np.einsum("nlp,nlk->npk", A, B), V, np.einsum("nlp,nl->p", A, r),
+        return cls(U, np.einsum("nlp,nlk->npk", A, B), V, np.einsum("nlp,nl->p", A, r) + w2 * q,
                    np.einsum("nlk,nl->nk", B, r), 1e-12 * top)  # fmt: skip
 
 
-def _step(A, B, ne: _Normal, lam: float):
+def _step(A, B, ne: _Normal, lam: float, w2: np.ndarray):
     """The damped Gauss-Newton step (dq, dx) with the start states eliminated (module docstring), and
     the linear model's predicted fall of the cost, -(g.d) - |J d|^2 / 2 (computed directly, not as a
     difference of two nearly equal costs)."""
@@ -128,7 +131,7 @@ def _step(A, B, ne: _Normal, lam: float):
         dq = np.zeros(0)
     dx = -np.einsum("nkj,nj->nk", Vi, ne.gx + np.einsum("npk,p->nk", ne.W, dq))
     Jd = np.einsum("nlp,p->nl", A, dq) + np.einsum("nlk,nk->nl", B, dx)
-    predicted = -(float(ne.gq @ dq) + float(np.sum(ne.gx * dx))) - 0.5 * float(np.sum(Jd**2))
+    predicted = -(float(ne.gq @ dq) + float(np.sum(ne.gx * dx))) - 0.5 * float(np.sum(Jd**2) + np.sum(w2 * dq**2))
     return dq, dx, predicted
 
 
@@ -140,8 +143,10 @@ def shooting_least_squares(
     diff_step: float = 1e-7,
     ftol: float = 1e-8,
     xtol: float = 1e-8,
+    penalty: np.ndarray | None = None,
 ) -> ShootingFit:
-    """Minimise 0.5 |r(q, x)|^2 over the parameters q and the windows' start states x.
+    """Minimise 0.5 |r(q, x)|^2 (+ 0.5 |w q|^2 with a ``penalty`` w) over the parameters q and the
+    windows' start states x.
 
     Parameters
     ----------
@@ -155,10 +160,15 @@ def shooting_least_squares(
         depends on the residuals' units). Where no step lowers the cost any more, the damping grows until
         the step vanishes ("xtol"); a non-finite residual or Jacobian ends the fit ("nonfinite"), a trial
         point ``fun`` refuses (ValueError) counts as a failed step
+    penalty : (p,) ridge weights w >= 0 on the parameters (the rows w q added to the residuals; ``fun``
+        and the returned ``fun`` hold the windows' residuals alone)
     """
     q, x = np.array(q0, float), np.array(x0, float)
+    w2 = np.zeros(q.size) if penalty is None else np.asarray(penalty, float) ** 2
+    if w2.shape != q.shape or np.any(~np.isfinite(w2)):
+        raise ValueError(f"penalty must be {q.size} finite weights, got {penalty!r}")
     r = fun(q[None], x[None])[0]
-    nfev, njev, cost = 1, 0, 0.5 * float(np.sum(r**2))
+    nfev, njev, cost = 1, 0, 0.5 * float(np.sum(r**2) + np.sum(w2 * q**2))
     if not np.isfinite(cost):
         return ShootingFit(q, x, r, nfev, njev, "nonfinite")
     lam, nu, status = 1e-3, 2.0, "max_nfev"
@@ -168,14 +178,14 @@ def shooting_least_squares(
         if not (np.all(np.isfinite(A)) and np.all(np.isfinite(B))):
             status = "nonfinite"
             break
-        ne = _Normal.of(A, B, r)
+        ne = _Normal.of(A, B, r, w2, q)
         while nfev < max_nfev:
-            dq, dx, predicted = _step(A, B, ne, lam)
+            dq, dx, predicted = _step(A, B, ne, lam, w2)
             r_new, new_cost = None, np.inf
             if predicted > 0 and np.all(np.isfinite(dq)) and np.all(np.isfinite(dx)):
                 try:
                     r_new = fun((q + dq)[None], (x + dx)[None])[0]
-                    new_cost = 0.5 * float(np.sum(r_new**2))
+                    new_cost = 0.5 * float(np.sum(r_new**2) + np.sum(w2 * (q + dq) ** 2))
                 except ValueError:  # a trial point outside the model's domain (e.g. a mass <= 0)
                     pass
                 nfev += 1
@@ -199,3 +209,16 @@ def shooting_least_squares(
                 status = "xtol"
                 break
     return ShootingFit(q, x, r, nfev, njev, status)
+
+
+def parameter_covariance(fun: Residuals, fit: ShootingFit, penalty: np.ndarray | None = None,
+                         diff_step: float = 1e-7) -> np.ndarray:  # fmt: skip
+    """(J^T J)^-1's parameter block at ``fit``'s solution, the start states marginalised (the inverse of
+    the Schur complement U - sum W_i V_i^-1 W_i^T), with the ``penalty`` rows in J; multiply by the
+    residual variance for the parameters' covariance. One more Jacobian (p + 2 simulations)."""
+    q = fit.q
+    w2 = np.zeros(q.size) if penalty is None else np.asarray(penalty, float) ** 2
+    A, B = _jacobian(fun, q, fit.x, fit.fun, diff_step)
+    ne = _Normal.of(A, B, fit.fun, w2, q)
+    S = ne.U - np.einsum("npk,nkj,nqj->pq", ne.W, _inv2(ne.V), ne.W)
+    return np.linalg.inv(S)

@@ -8,7 +8,7 @@ import pytest
 
 from negstiff.inference.measurement import from_arrays
 from negstiff.inference.refine import refine
-from negstiff.inference.shooting import shooting_least_squares
+from negstiff.inference.shooting import parameter_covariance, shooting_least_squares
 from negstiff.models import Model
 from negstiff.models.device import SEED_LIKE_CROSS_WELL_RMS, SEED_LIKE_CUBIC
 from negstiff.models.rig import Rig
@@ -40,6 +40,38 @@ def test_linear_block_problem_reaches_numpys_least_squares_solution():
     assert fit.status in ("ftol", "xtol")
     assert np.allclose(tight.q, exact[:p], rtol=1e-8, atol=1e-8)
     assert np.allclose(tight.x.ravel(), exact[p:], rtol=1e-8, atol=1e-8)
+
+
+
+def test_a_ridge_on_the_parameters_reaches_the_ridge_solution_and_its_covariance():
+    # Fact: with rows w q appended, the linear problem's minimum solves (J^T J + diag(w^2, 0)) theta =
+    # J^T y, and the parameters' block of that matrix's inverse is the marginal covariance the solver's
+    # Schur complement gives. Some parameters unpenalised (w = 0), as the hybrid's physics are
+    rng = np.random.default_rng(1)
+    n, L, p = 25, 10, 4
+    A = rng.standard_normal((n, L, p))
+    B = rng.standard_normal((n, L, 2))
+    y = rng.standard_normal((n, L))
+    w = np.array([0.0, 3.0, 0.5, 0.0])
+
+    def fun(Q, X):
+        return np.einsum("nlp,kp->knl", A, Q) + np.einsum("nlj,knj->knl", B, X) - y[None]
+
+    fit = shooting_least_squares(fun, np.zeros(p), np.zeros((n, 2)), max_nfev=50, ftol=1e-15, penalty=w)
+    J = np.zeros((n * L + p, p + 2 * n))
+    J[: n * L, :p] = A.reshape(n * L, p)
+    for i in range(n):
+        J[i * L : (i + 1) * L, p + 2 * i : p + 2 * i + 2] = B[i]
+    J[n * L :, :p] = np.diag(w)
+    exact = np.linalg.lstsq(J, np.concatenate([y.ravel(), np.zeros(p)]), rcond=None)[0]
+    assert np.allclose(fit.q, exact[:p], rtol=0, atol=1e-8)
+    assert np.allclose(fit.x.ravel(), exact[p:], rtol=0, atol=1e-8)
+    ols = np.linalg.lstsq(J[: n * L], y.ravel(), rcond=None)[0][:p]
+    assert np.sum((w * fit.q) ** 2) < np.sum((w * ols) ** 2)  # the ridge shrinks what it weighs
+    cov = parameter_covariance(fun, fit, penalty=w)
+    assert np.allclose(cov, np.linalg.inv(J.T @ J)[:p, :p], rtol=1e-6, atol=0)
+    with pytest.raises(ValueError, match="penalty"):
+        shooting_least_squares(fun, np.zeros(p), np.zeros((n, 2)), penalty=w[:2])
 
 
 def test_damped_oscillations_recover_frequency_and_damping_from_wrong_start_states():
