@@ -42,7 +42,6 @@ def test_linear_block_problem_reaches_numpys_least_squares_solution():
     assert np.allclose(tight.x.ravel(), exact[p:], rtol=1e-8, atol=1e-8)
 
 
-
 def test_a_ridge_on_the_parameters_reaches_the_ridge_solution_and_its_covariance():
     # Fact: with rows w q appended, the linear problem's minimum solves (J^T J + diag(w^2, 0)) theta =
     # J^T y, and the parameters' block of that matrix's inverse is the marginal covariance the solver's
