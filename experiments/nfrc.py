@@ -82,12 +82,12 @@ def first_doubling_predicted(result: dict[str, Any]) -> float | None:
 
 
 def posterior_draws(m, n_draws: int, seed_: int, fast: bool) -> list:
-    """Models drawn from the coefficient posterior of the record ``m`` (emcee, the suite's defaults; in
-    --fast, two short ensembles)."""
+    """Models drawn from the coefficient posterior of the record ``m`` (emcee, the suite's defaults but
+    two ensembles, for a dozen draws; in --fast, two short ensembles)."""
     from negstiff.inference.posterior import Posterior
     from negstiff.models import Model
 
-    kw = {"n_ensembles": 2, "max_steps": 1500} if fast else {}
+    kw = {"n_ensembles": 2, "max_steps": 1500} if fast else {"n_ensembles": 2}
     res = Posterior(seed=seed_, **kw).fit(m).result_
     flat = res.samples.reshape(-1, res.samples.shape[-1])
     rng = np.random.default_rng(seed_)
