@@ -285,14 +285,14 @@ def simulator_section(rep: Report, results: dict[str, Any]) -> None:
 
 
 SECTION_TABLE = {
-    "nsi": ("NSI around both wells", nsi_section, 41),
-    "updating": ("GA model updating", updating_section, 85),
-    "characterization": ("dynamics characterisation", characterization_section, 17),
-    "sindy": ("SINDy equation discovery", sindy_section, 42),
-    "posterior": ("Bayesian posteriors (emcee)", posterior_section, 132),
-    "discrepancy": ("discrepancy workflow", discrepancy_section, 117),
-    "silverbox": ("Silverbox benchmark (real data)", silverbox_section, 99),
-    "continuation": ("continuation against the bifurcation map", continuation_section, 74),
+    "nsi": ("NSI around both wells", nsi_section, 26),
+    "updating": ("GA model updating", updating_section, 50),
+    "characterization": ("dynamics characterisation", characterization_section, 21),
+    "sindy": ("SINDy equation discovery", sindy_section, 12),
+    "posterior": ("Bayesian posteriors (emcee)", posterior_section, 79),
+    "discrepancy": ("discrepancy workflow", discrepancy_section, 32),
+    "silverbox": ("Silverbox benchmark (real data)", silverbox_section, 54),
+    "continuation": ("continuation against the bifurcation map", continuation_section, 58),
 }
 """name -> (title, section function, seconds it took in a full run: the order the workers take them)."""
 
@@ -306,7 +306,7 @@ def base_section(rep: Report, results: dict[str, Any], fast: bool, seed: int = 0
     simulator_section(rep, results)
 
 
-_TABLE = {"rig": ("virtual rig record and simulator accuracy", base_section, 9), **SECTION_TABLE}
+_TABLE = {"rig": ("virtual rig record and simulator accuracy", base_section, 3), **SECTION_TABLE}
 
 
 def reproduce(
