@@ -33,6 +33,7 @@ from negstiff.models.rig import Rig
 from .baselines import build_c_rk4, median_time, solve_ivp_run
 from .peers import peak, peers_section, scaling, scaling_section
 from .peers import section as _section
+from .waits import waits_section
 
 
 def simulator_benchmark(quick: bool = False) -> tuple[list[list[str]], dict]:
@@ -519,7 +520,8 @@ def main(argv=None) -> int:
     ap.add_argument("-o", "--out", default="reports/benchmarks.md")
     ap.add_argument("--quick", action="store_true", help="60 s records and a batch of 64 (a smoke run)")
     a = ap.parse_args(argv)
-    lines = _simulator_section(a.quick)
+    waits = waits_section(a.quick)  # measured first, on the machine at rest
+    lines = _simulator_section(a.quick) + waits
     print("NSI benchmark...", file=sys.stderr)
     nrows, nres = nsi_benchmark(a.quick)
     lines += _section(
