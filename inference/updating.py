@@ -26,6 +26,8 @@ from typing import Any, Mapping
 import numpy as np
 
 from negstiff.models import NOMINAL, Device
+from negstiff.models.constants import G
+from negstiff.models.device import rod_geometry
 
 from .estimator import Estimator
 
@@ -186,6 +188,24 @@ class GAUpdater(Estimator):
             return PENALTY
         return float(100 * np.sqrt(np.mean((k - k_id) ** 2)) / np.std(k_id))
 
+    def population_fitness(self, X: np.ndarray, targets, stroke: np.ndarray | None, k_id) -> np.ndarray:
+        """``fitness`` (or ``force_mismatch`` where a ``stroke`` is given) of every row of the population
+        X at once, ``PENALTY`` where a device has no double well or cannot reach the stroke."""
+        s = self.start
+        m = np.full(len(X), self.fixed_mass) if self.fixed_mass is not None else X[:, 2]
+        F, ok = s.features_many(X[:, 0], X[:, 1], m)
+        if stroke is None:
+            feats = [dict(zip(("f_minus", "f_plus", "z_minus", "z_plus"), row)) for row in F]
+            return np.array([fitness(f, targets) if good else PENALTY for f, good in zip(feats, ok)])
+        ca, sa = np.cos(np.radians(X[:, 1]))[:, None], np.sin(np.radians(X[:, 1]))[:, None]
+        reach = (stroke > -s.L * ca / (1 - sa)) & (stroke < s.L * ca / (1 + sa))
+        with np.errstate(invalid="ignore"):
+            g, g1, _ = rod_geometry(stroke, s.L, ca, sa, second=False)
+        kf = (3 * X[:, 0] * (s.b * s.h**3 / 12) / s.l**3)[:, None]
+        k = (2 * kf * (g + s.D0) * g1 + (m * G)[:, None]) / m[:, None]
+        mismatch = 100 * np.sqrt(np.mean((k - k_id) ** 2, axis=1)) / np.std(k_id)
+        return np.where(ok & reach.all(axis=1), mismatch, PENALTY)
+
     def fit(self, targets: Mapping[str, float], progress=None) -> "GAUpdater":
         """Run the GA against ``targets`` (``f_minus, f_plus`` [Hz], ``z_minus, z_plus`` [m])."""
         self._validate()
@@ -204,6 +224,7 @@ class GAUpdater(Estimator):
             raise UpdatingError(
                 "compare='restoring_force' needs an identify result with its stroke (stroke_quantiles_m)"
             )
+        k_id = None
         if by_force:
             from negstiff.models import Model
 
@@ -223,6 +244,9 @@ class GAUpdater(Estimator):
                 super().__init__(n_var=len(xl), n_obj=1, xl=np.array(xl), xu=np.array(xu))
 
             def _evaluate(self, X, out, *args, **kwargs):
+                if not updater.start.extra:  # the population at once (``Device.features_many``)
+                    out["F"] = updater.population_fitness(X, targets, stroke if by_force else None, k_id)[:, None]
+                    return
                 f = []
                 for x in X:
                     if by_force:

@@ -79,3 +79,33 @@ def test_least_squares_cubic_departs_from_taylor_model_form_gap():
         np.mean((tay.restoring_force(z) - exact) ** 2)
     )
     assert abs(lsq.k3 / tay.k3 - 1) > 0.2, "the two cubics differ by more than 20 % in k3 (device-model.md)"
+
+
+def test_the_population_features_are_each_devices_own():
+    # Fact: features_many (the GA's whole population at once: the same grid brackets, Newton from each
+    # cell's secant point, bisection where Newton leaves its cell) gives every device's features() to
+    # Brent's tolerance (1e-14 relative on a 30 mm root), and says "no double well" exactly where
+    # features() has none. Devices inside the GA's bounds and far outside them (stiff, soft, steep).
+    rng = np.random.default_rng(5)
+    n = 200
+    E = NOMINAL.E * np.concatenate([1 + 0.25 * rng.uniform(-1, 1, n), [0.05, 0.3, 3.0, 8.0]])
+    alpha = np.concatenate([NOMINAL.alpha_deg + 5 * rng.uniform(-1, 1, n), [20.0, -5.0, 1.0, 40.0]])
+    m = NOMINAL.m * np.concatenate([1 + 0.25 * rng.uniform(-1, 1, n), [0.5, 2.0, 1.0, 0.8]])
+    with np.errstate(invalid="ignore", divide="ignore"):
+        F, ok = NOMINAL.features_many(E, alpha, m)
+    for i in range(E.size):
+        try:
+            d = NOMINAL.with_(E=E[i], alpha_deg=alpha[i], m=m[i]).features()
+        except (ValueError, TypeError):  # no double well (a single well's features() has no z_minus)
+            assert not ok[i], i
+            continue
+        assert ok[i], i
+        ref = [d["f_minus"], d["f_plus"], d["z_minus"], d["z_plus"]]
+        assert np.allclose(F[i], ref, rtol=1e-12, atol=0), (i, F[i], ref)
+    # the bisection fallback on its own: x^3 - 2 on [1, 2] to the last representable point
+    root = NOMINAL._bisect(
+        lambda x, rows: x**3 - 2.0, np.array([0]), np.array([1.0]), np.array([2.0]), np.array([-1.0])
+    )
+    assert abs(root[0] - 2.0 ** (1 / 3)) <= 4 * np.spacing(2.0 ** (1 / 3))
+    with pytest.raises(ValueError, match="extra effects"):
+        NOMINAL.with_(extra={"end_stop": {"k": 1.0, "z": 0.01}}).features_many(E[:2], alpha[:2], m[:2])
