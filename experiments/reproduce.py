@@ -7,6 +7,7 @@ as ``results.json``.
 
 from __future__ import annotations
 
+import os
 import sys
 import time
 from pathlib import Path
@@ -37,8 +38,6 @@ CACHE_ENV = "NEGSTIFF_CACHE"
 
 
 def _cache_dir() -> Path | None:
-    import os
-
     v = os.environ.get(CACHE_ENV)
     if v and v.lower() == "off":
         return None
@@ -154,9 +153,6 @@ def run_sections(names, fast: bool, seed: int, workers: int, say) -> dict[str, A
     atomically), else computed on ``workers`` processes at once, the longest first (``SECTION_TABLE``'s
     measured cost); returns name -> (blocks, figures, results). The
     sections are independent (each seeds its own draws), so the numbers are those of a serial run."""
-    from concurrent.futures import ProcessPoolExecutor, as_completed
-    from multiprocessing import get_context
-
     out: dict[str, Any] = {}
     source = _source_hash()  # read and hashed once, not per section
     paths = {n: _cache_path(n, fast, seed, source) for n in names}
@@ -173,7 +169,23 @@ def run_sections(names, fast: bool, seed: int, workers: int, say) -> dict[str, A
             _store(paths[n], out[n], say)
         return out
     todo.sort(key=lambda n: -_TABLE[n][2])
-    # spawn, not fork: the parent's numba and BLAS thread pools do not survive a fork
+    # spawn, not fork: the parent's numba and BLAS thread pools do not survive a fork. Each worker's own
+    # threads get its share of the cores (NEGSTIFF_THREADS, inherited at spawn), not all of them
+    share = str(max(1, (os.cpu_count() or 1) // workers))
+    saved = os.environ.get("NEGSTIFF_THREADS")
+    os.environ["NEGSTIFF_THREADS"] = saved or share
+    try:
+        return _run_pool(todo, out, paths, fast, seed, workers, say)
+    finally:
+        if saved is None:
+            os.environ.pop("NEGSTIFF_THREADS", None)
+
+
+def _run_pool(todo, out, paths, fast: bool, seed: int, workers: int, say) -> dict[str, Any]:
+    """``run_sections``' parallel part: the kernels' warm-up, then the sections, on ``workers`` processes."""
+    from concurrent.futures import ProcessPoolExecutor, as_completed
+    from multiprocessing import get_context
+
     with ProcessPoolExecutor(max_workers=workers, mp_context=get_context("spawn")) as pool:
         for k in KERNELS:  # first in the queue: compiled once each (loaded, once numba has cached them)
             pool.submit(warm_kernel, k)
@@ -315,8 +327,6 @@ def reproduce(
     """Run the study and write the report folder ``out`` (atomically). ``sections``: run only these of
     ``SECTIONS`` (the device, rig and simulator parts always run; the report says which were left out).
     ``workers``: processes computing sections at once (default: the machine's cores)."""
-    import os
-
     workers = (os.cpu_count() or 1) if workers is None else max(1, int(workers))
     if sections is not None and not set(sections) <= set(SECTIONS):
         raise ValueError(f"unknown sections {sorted(set(sections) - set(SECTIONS))}; known: {SECTIONS}")

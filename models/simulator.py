@@ -115,6 +115,15 @@ def input_gain(input_kind: str, masses: np.ndarray) -> np.ndarray:
     raise ValueError(f"input kind must be 'base_acc' or 'force', got {input_kind!r}")
 
 
+def cores() -> int:
+    """The cores negstiff's own threads may use: ``$NEGSTIFF_THREADS`` if set (``reproduce`` sets it to its
+    cores per worker process: two processes each starting two posterior ensembles, each splitting its
+    batches over two threads, put eight threads on two cores), else the machine's. Thread counts never
+    change a number: the threads' parts are independent."""
+    env = os.environ.get("NEGSTIFF_THREADS", "")
+    return max(1, int(env)) if env.isdigit() else (os.cpu_count() or 1)
+
+
 @functools.lru_cache(maxsize=4)
 def _pool(n: int) -> ThreadPoolExecutor:
     """A thread pool kept for the process (threads started once, not per call: an MCMC run calls the
@@ -215,7 +224,7 @@ def simulate_batch(
         # a thread pays for its hand-off (~0.2 ms) only with enough work: 64 members and ~2e5 member-steps
         # each (an MCMC step's batch of 0.125 s windows ran slower on two threads than on one, measured)
         work = nb * n * int(substeps)
-        threads = min(os.cpu_count() or 1, max(1, nb // 64), max(1, work // 200_000))
+        threads = min(cores(), max(1, nb // 64), max(1, work // 200_000))
     chunks = [c for c in np.array_split(np.arange(nb), max(1, int(threads))) if c.size]
     run_kernel = kernel(k, p, lay.monomials)
 

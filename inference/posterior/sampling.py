@@ -3,13 +3,14 @@
 from __future__ import annotations
 
 import math
-import os
 import threading
 import warnings
 from concurrent.futures import ThreadPoolExecutor
 from typing import Any
 
 import numpy as np
+
+from negstiff.models.simulator import cores
 
 from .windows import PosteriorError
 
@@ -84,7 +85,7 @@ def sample_ensembles(
     # The ensembles are independent (own seeds, own sampler): they run on the machine's cores at once,
     # each in a thread (the compiled simulator releases the GIL; a step's batch is too small to split
     # further). Results are gathered in ensemble order, so the numbers are those of a serial run.
-    workers = max(1, min(n_ensembles, os.cpu_count() or 1)) if workers is None else max(1, int(workers))
+    workers = max(1, min(n_ensembles, cores())) if workers is None else max(1, int(workers))
     try:
         if workers == 1:
             runs = [run(e) for e in range(n_ensembles)]
