@@ -169,23 +169,18 @@ def run_sections(names, fast: bool, seed: int, workers: int, say) -> dict[str, A
             _store(paths[n], out[n], say)
         return out
     todo.sort(key=lambda n: -_TABLE[n][2])
-    # spawn, not fork: the parent's numba and BLAS thread pools do not survive a fork. Each worker's own
-    # threads get its share of the cores (NEGSTIFF_THREADS, inherited at spawn), not all of them
-    share = str(max(1, (os.cpu_count() or 1) // workers))
-    saved = os.environ.get("NEGSTIFF_THREADS")
-    os.environ["NEGSTIFF_THREADS"] = saved or share
-    try:
-        return _run_pool(todo, out, paths, fast, seed, workers, say)
-    finally:
-        if saved is None:
-            os.environ.pop("NEGSTIFF_THREADS", None)
+    return _run_pool(todo, out, paths, fast, seed, workers, say)
 
 
 def _run_pool(todo, out, paths, fast: bool, seed: int, workers: int, say) -> dict[str, Any]:
-    """``run_sections``' parallel part: the kernels' warm-up, then the sections, on ``workers`` processes."""
+    """``run_sections``' parallel part: the kernels' warm-up, then the sections, on ``workers`` processes.
+    Each process's own threads (posterior ensembles, simulator batches) may use every core: capping
+    them at one per process (``NEGSTIFF_THREADS=1``) did not shorten the run (236 s against 187-224 s,
+    on a machine whose speed drifted by 1.7x over the evening: no clear answer either way)."""
     from concurrent.futures import ProcessPoolExecutor, as_completed
     from multiprocessing import get_context
 
+    # spawn, not fork: the parent's numba and BLAS thread pools do not survive a fork
     with ProcessPoolExecutor(max_workers=workers, mp_context=get_context("spawn")) as pool:
         for k in KERNELS:  # first in the queue: compiled once each (loaded, once numba has cached them)
             pool.submit(warm_kernel, k)

@@ -116,10 +116,9 @@ def input_gain(input_kind: str, masses: np.ndarray) -> np.ndarray:
 
 
 def cores() -> int:
-    """The cores negstiff's own threads may use: ``$NEGSTIFF_THREADS`` if set (``reproduce`` sets it to its
-    cores per worker process: two processes each starting two posterior ensembles, each splitting its
-    batches over two threads, put eight threads on two cores), else the machine's. Thread counts never
-    change a number: the threads' parts are independent."""
+    """The cores negstiff's own threads (simulator batches, posterior ensembles) may use:
+    ``$NEGSTIFF_THREADS`` if set (a machine shared with other jobs), else the machine's. Thread counts
+    never change a number: the threads' parts are independent."""
     env = os.environ.get("NEGSTIFF_THREADS", "")
     return max(1, int(env)) if env.isdigit() else (os.cpu_count() or 1)
 
