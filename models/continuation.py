@@ -26,8 +26,8 @@ the harmonics, and because the monodromy matrix comes with it.
   complex pair through the unit circle. (For a single-degree-of-freedom oscillator with positive
   damping, det M = exp(-int c_eff/m dt) < 1, so a complex pair can never leave the circle: no
   Neimark-Sacker bifurcation exists; the check is kept for models with negative effective damping.)
-  Each detected point is located by the secant method on its test function, correcting the orbit at
-  each trial parameter.
+  Each detected point is located by regula falsi on its test function along the branch (in the
+  arclength of the step that crossed it), each trial orbit corrected onto the branch.
 * **Branch switching** at a period doubling: the period-2p orbit is found by simulating from the
   bifurcating orbit a little beyond the doubling (where the period-p orbit is unstable), then
   correcting with the 2p map; it is continued like any branch.
@@ -63,6 +63,8 @@ millionfold in one period, the central differences of the flow (1e-6 of the stat
 monodromy, and such orbits lie inside chaos no experiment can hold. Measured: the as-built device's
 period-4 branch from z_plus crept on in ever smaller steps near 26 m/s^2 until the point limit (2000 orbits,
 18 s); there the steps shrank instead, which ends a branch too (``Continuation.run``)."""
+RETRACE_STEPS = 8
+"""Small steps a bifurcation's step is retraced in where locating along the whole step fails (``_locate``)."""
 
 
 class ContinuationError(ValueError):
@@ -90,6 +92,15 @@ class Point:
     @property
     def stable(self) -> bool:
         return self.max_multiplier < 1.0
+
+    def halves(self, tol: float = 1e-6) -> bool:
+        """Whether this orbit of an even number p of forcing periods repeats after p/2 of them (its z at
+        phase 0 of period k and k + p/2 within ``tol`` of its stroke): the period-p/2 orbit it was born from."""
+        p = len(self.poincare_z)
+        if p < 2 or p % 2:
+            return False
+        z = np.array(self.poincare_z)
+        return bool(np.max(np.abs(z[: p // 2] - z[p // 2 :])) <= tol * (self.max_z - self.min_z))
 
     def to_json(self) -> dict[str, Any]:
         return {
@@ -301,7 +312,7 @@ class Continuation:
         G, M, Gl, z = self._eval(y, scale, store=True)
         t = self._tangent(M, Gl, scale, None, direction)
         branch.points.append(sh.point(x, *self._af(lam), M, t[2], z))
-        history = [(y * scale, M)]
+        last = (y * scale, M)  # the last accepted point: physical (z, z', lambda) and its monodromy matrix
         ds, crawl = self.ds, 0
         while len(branch.points) < self.max_points:
             y_new, ok, hard = self._correct(y, t, ds, scale)
@@ -311,6 +322,7 @@ class Continuation:
                     self.reason = f"the corrector failed at {self.parameter} {y[2] * scale[2]:.5g} (step below ds_min)"
                     return branch, bifs
                 continue
+            step = (y, t, ds, scale)  # the arclength step just taken: where its bifurcations are located
             ds = ds if hard else min(1.5 * ds, self.ds_max)
             crawl = crawl + 1 if ds < 0.02 * self.ds_max else 0
             if crawl > 100:  # a hundred steps at a fiftieth of the largest: the corrector barely converges
@@ -321,11 +333,15 @@ class Continuation:
             t = self._tangent(M, Gl, scale, t, direction)
             phys = y_new * scale
             point = sh.point(phys[:2], *self._af(phys[2]), M, t[2], z)
+            if point.halves():  # back through the doubling it was born at, onto the branch it came from
+                self.reason = (f"the orbit became the period-{sh.period // 2} orbit (followed on its own branch) at "
+                               f"{self.parameter} {phys[2]:.5g}")  # fmt: skip
+                break
             # only within the range asked for: the step that leaves it may cross a sign change beyond it
-            found = self._detect(history, (phys, M), scale)
+            found = self._detect(last, (phys, M), step)
             bifs += [b for b in found if self.lo <= b.value(self.parameter) <= self.hi]
             branch.points.append(point)
-            history.append((phys, M))
+            last = (phys, M)
             # rescale the state to the orbit's size
             zs = max((point.max_z - point.min_z) / 2, z_floor)
             new = np.array([zs, 2 * np.pi * point.f_hz * zs, scale[2]])
@@ -341,13 +357,14 @@ class Continuation:
                 break
         return branch, bifs
 
-    def _correct(self, y: np.ndarray, t: np.ndarray, ds: float, scale: np.ndarray):
-        """Predictor along the tangent, Newton on G = 0 and the arclength condition. Returns (y, converged,
-        hard: more than two iterations)."""
+    def _correct(self, y: np.ndarray, t: np.ndarray, ds: float, scale: np.ndarray, start: np.ndarray | None = None,
+                 max_iter: int = 8):  # fmt: skip
+        """Predictor along the tangent, Newton on G = 0 and the arclength condition (from ``start`` when
+        given, else from the prediction). Returns (y, converged, hard: more than two iterations)."""
         y_pred = y + ds * t
-        y_new = y_pred.copy()
+        y_new = (y_pred if start is None else start).copy()
         try:
-            for it in range(8):
+            for it in range(max_iter):
                 G, M, Gl = self._eval(y_new, scale)
                 Gs = G / scale[:2]
                 J = np.vstack([self._jacobian(M, Gl, scale), t])
@@ -363,22 +380,16 @@ class Continuation:
             pass
         return y_new, False, True
 
-    def _detect(self, history, cur, scale) -> list[Bifurcation]:
-        """Bifurcations between the last accepted point and ``cur`` (physical (z, z', lambda), M)."""
-        prev = history[-1]
+    def _detect(self, prev, cur, step) -> list[Bifurcation]:
+        """Bifurcations between the last accepted point ``prev`` and ``cur`` (each (physical (z, z', lambda),
+        M)), reached by the arclength ``step`` (y, t, ds, scale: ``_correct``'s arguments)."""
         out = []
         tp, tc = _tests(prev[1]), _tests(cur[1])
         for kind in ("fold", "period_doubling", "neimark_sacker"):
             a, b = tp[kind], tc[kind]
             if not (np.isfinite(a) and np.isfinite(b)) or a * b > 0:
                 continue
-            if kind == "fold":  # the multipliers of whichever neighbour has a real one nearest +1
-                lam, x = self._locate_fold(history[-2:] + [cur])
-                M = min(
-                    (prev[1], cur[1]), key=lambda m: min(abs(u - 1) + 1e3 * abs(u.imag) for u in np.linalg.eigvals(m))
-                )
-            else:
-                lam, M, x = self._locate(prev, cur, kind, scale)
+            lam, M, x = self._locate(prev, cur, kind, step)
             mu = np.linalg.eigvals(M)
             target = {"fold": 1.0, "period_doubling": -1.0}.get(kind)
             m = mu[np.argmin(np.abs(mu - target))] if target is not None else mu[np.argmax(np.abs(mu))]
@@ -387,49 +398,59 @@ class Continuation:
                                    (float(x[0]), float(x[1]))))  # fmt: skip
         return out
 
-    @staticmethod
-    def _locate_fold(pts) -> tuple[float, np.ndarray]:
-        """The fold's parameter: the extremum of the parabola lambda(s) through the last three points
-        (s: the chord length in the states relative to their spread, and the parameter)."""
-        ys = np.array([p[0] for p in pts])
-        if len(ys) == 3:
-            w = 1.0 / np.maximum(np.ptp(ys, axis=0), 1e-300)
-            s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(ys, axis=0) * w, axis=1))])
-            c = np.polyfit(s, ys[:, 2], 2)
-            if c[0] != 0:
-                s_star = float(np.clip(-c[1] / (2 * c[0]), s[0], s[-1]))
-                return float(np.polyval(c, s_star)), ys[-1][:2]
-        return float(ys[-1][2]), ys[-1][:2]
-
-    def _locate(self, prev, cur, kind: str, scale) -> tuple[float, np.ndarray, np.ndarray]:
-        """Regula falsi (Illinois) on the test function between the two points whose signs differ, the
-        orbit corrected at each trial parameter (fixed). Every trial stays inside the bracket; a plain
-        secant through the last two trials can leave it (measured: on an NSI model's period-4 branch one
-        step went to an amplitude of 1.7e5 m/s^2, where the corrector still found an orbit)."""
-        (y0, M0), (y1, M1) = prev, cur
-        a, fa, xa = y0[2], _tests(M0)[kind], y0[:2]
-        b, fb, xb = y1[2], _tests(M1)[kind], y1[:2]
-        lam, M, x = b, M1, xb
-        for _ in range(12):
-            if fb == fa:
+    def _locate(self, prev, cur, kind: str, step, depth: int = 0) -> tuple[float, np.ndarray, np.ndarray]:
+        """The zero of ``kind``'s test function on the branch between ``prev`` and ``cur``: regula falsi
+        (Illinois) on the arclength s in [0, ds] of the step that reached ``cur``, each trial corrected onto
+        the branch with the step's predictor and arclength condition (``_correct``). Along the branch, not at
+        a fixed parameter: near a fold the parameter does not determine the orbit, and a fixed-parameter
+        Newton converged onto other orbits (the previous code reported folds with a multiplier of 0.08 and
+        doublings with multipliers near 0 instead of +1 and -1). Where the branch bends within the step so
+        much that a hyperplane of the arclength condition meets it twice, the test function jumps instead of
+        passing zero: then the step is retraced in ``RETRACE_STEPS`` small continuation steps and the zero located
+        in the first that changes sign (twice at most). Returns (parameter, M, state)."""
+        y0, t0, ds, scale = step
+        (p0, M0), (p1, M1) = prev, cur
+        a, fa, ya = 0.0, _tests(M0)[kind], p0 / scale
+        b, fb, yb = ds, _tests(M1)[kind], p1 / scale
+        tol = 1e-7 * max(abs(fa), abs(fb))
+        best = (abs(fb), p1[2], M1, p1[:2])
+        for _ in range(30):
+            if fb == fa or best[0] <= tol:
                 break
             w = fb / (fb - fa)  # in (0, 1) while fa and fb differ in sign: the trial is inside [a, b]
             trial = b - w * (b - a)
-            try:
-                x_t, M_t = self.correct_fixed(xb - w * (xb - xa), trial, scale)
-            except ContinuationError:
+            # Newton from the chord between the bracket's orbits (where the branch bends the tangent's
+            # prediction led it onto another orbit), up to 20 iterations: next to a fold it converges
+            # linearly (measured: 10 iterations to 1e-9)
+            y_t, ok, _ = self._correct(y0, t0, trial, scale, start=yb - w * (yb - ya), max_iter=20)
+            if not ok:
                 break
+            _, M_t, _ = self._eval(y_t, scale)
             f = _tests(M_t)[kind]
-            step = abs(trial - lam)
-            lam, M, x = trial, M_t, x_t
+            best = min(best, (abs(f), y_t[2] * scale[2], M_t, y_t[:2] * scale[:2]), key=lambda r: r[0])
             if f * fb < 0:
-                a, fa, xa = b, fb, xb
+                a, fa, ya = b, fb, yb
             else:
                 fa /= 2  # Illinois: the endpoint kept twice counts half, so the bracket shrinks from both ends
-            b, fb, xb = trial, f, x_t
-            if f == 0 or step < 1e-9 * max(1.0, abs(lam)) or abs(b - a) < 1e-9 * max(1.0, abs(lam)):
+            b, fb, yb = trial, f, y_t
+            if abs(b - a) < 1e-10 * ds:
                 break
-        return float(lam), M, x
+        if best[0] <= tol or depth >= 2:
+            return float(best[1]), best[2], best[3]
+        # retrace the step in small continuation steps; locate in the first that changes sign
+        y, t, M, f = y0, t0, M0, _tests(M0)[kind]
+        for _ in range(RETRACE_STEPS):
+            y_k, ok, _ = self._correct(y, t, ds / RETRACE_STEPS, scale, max_iter=20)
+            if not ok:
+                break
+            _, M_k, Gl_k = self._eval(y_k, scale)
+            f_k = _tests(M_k)[kind]
+            if f_k * f <= 0:
+                return self._locate(
+                    (y * scale, M), (y_k * scale, M_k), kind, (y, t, ds / RETRACE_STEPS, scale), depth + 1
+                )
+            y, t, M, f = y_k, self._tangent(M_k, Gl_k, scale, t, 1.0), M_k, f_k
+        return float(best[1]), best[2], best[3]
 
 
 def settle(system, input_kind: str, z_start: float, amplitude: float, f_hz: float, periods: int = 200):

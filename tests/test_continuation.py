@@ -164,3 +164,27 @@ def test_branches_stay_continuous_and_bifurcations_inside_the_range_asked_for():
         # the last point may lie one step past the range's end
         assert np.all(np.abs(np.diff(a)) <= 3 * 0.05 * (hi - lo)), br["period"]
         assert a[:-1].min() >= lo - 1e-9 and a[:-1].max() <= hi + 1e-9
+
+
+def test_bifurcations_are_located_where_a_multiplier_crosses_the_unit_circle():
+    # Fact: at a fold one Floquet multiplier is +1, at a period doubling -1 (Seydel 7.4). The as-built
+    # device's 9 Hz branches from z_plus turn through folds of strongly unstable orbits, where a multiplier
+    # races from ~12 to below 1 within one continuation step: located at a fixed amplitude (the previous
+    # code), the folds carried multipliers of 0.08 and the doublings multipliers near 0. Located along the
+    # branch, the multiplier is +-1 to the corrector's tolerance (1e-9 in the state; measured <= 1e-5).
+    from negstiff.models import AS_BUILT
+
+    r = nfrc(AS_BUILT, freq=9.0, amplitude=(2.0, 30.0), well="plus")
+    kinds = {b["type"] for b in r["bifurcations"]}
+    assert {"fold", "period_doubling"} <= kinds, kinds
+    for b in r["bifurcations"]:
+        target = 1.0 if b["type"] == "fold" else -1.0
+        assert b["multiplier"] == pytest.approx(target, abs=1e-4), b
+    # a doubled branch ends where it returns onto the orbit it was born from (that orbit's own branch is
+    # followed already): none of its orbits repeats after half its periods
+    for br in r["branches"]:
+        for p in br["points"]:
+            z = np.array(p["poincare_z"])
+            if br["period"] > 1:
+                half = br["period"] // 2
+                assert np.max(np.abs(z[:half] - z[half:])) > 1e-6 * (p["max_z"] - p["min_z"]), br["period"]
