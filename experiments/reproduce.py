@@ -147,6 +147,27 @@ def warm_kernel(name: str) -> None:
         raise ValueError(f"unknown kernel {name!r}: one of {KERNELS}")
 
 
+WORKER_MEMORY_BYTES = 2 * 1024**3
+"""What one section process may hold at its peak (measured up to ~1.6 GB: the posterior section)."""
+
+
+def default_workers() -> int:
+    """Processes for the sections by default: the machine's cores, but no more than the sections (with the
+    rig's) nor than its memory holds at ``WORKER_MEMORY_BYTES`` each."""
+    cores = os.cpu_count() or 1
+    try:
+        memory = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+    except (ValueError, OSError, AttributeError):  # not on every platform
+        memory = cores * WORKER_MEMORY_BYTES
+    return max(1, min(cores, len(_TABLE), memory // WORKER_MEMORY_BYTES))
+
+
+def _share_cores(threads: int) -> None:
+    """A section process's initialiser: its own threads (simulator batches, posterior ensembles) get
+    ``threads``, unless the user set ``NEGSTIFF_THREADS``."""
+    os.environ.setdefault("NEGSTIFF_THREADS", str(threads))
+
+
 def run_sections(names, fast: bool, seed: int, workers: int, say) -> dict[str, Any]:
     """The sections ``names``, replayed from the cache when their inputs (the section, --fast, the seed
     and the package's source) are unchanged (each stored as pickled blocks, figures and results, written
@@ -174,14 +195,18 @@ def run_sections(names, fast: bool, seed: int, workers: int, say) -> dict[str, A
 
 def _run_pool(todo, out, paths, fast: bool, seed: int, workers: int, say) -> dict[str, Any]:
     """``run_sections``' parallel part: the kernels' warm-up, then the sections, on ``workers`` processes.
-    Each process's own threads (posterior ensembles, simulator batches) may use every core: capping
-    them at one per process (``NEGSTIFF_THREADS=1``) did not shorten the run (236 s against 187-224 s,
-    on a machine whose speed drifted by 1.7x over the evening: no clear answer either way)."""
+    Each process's own threads (posterior ensembles, simulator batches) get the cores divided among the
+    processes, but at least two: on 2 cores each may use both (capping them at one per process,
+    ``NEGSTIFF_THREADS=1``, did not shorten the run: 236 s against 187-224 s, on a machine whose speed
+    drifted by 1.7x over the evening), while on many cores the processes' threads do not multiply."""
     from concurrent.futures import ProcessPoolExecutor, as_completed
     from multiprocessing import get_context
 
+    threads = max(2, (os.cpu_count() or 1) // workers)
     # spawn, not fork: the parent's numba and BLAS thread pools do not survive a fork
-    with ProcessPoolExecutor(max_workers=workers, mp_context=get_context("spawn")) as pool:
+    with ProcessPoolExecutor(
+        max_workers=workers, mp_context=get_context("spawn"), initializer=_share_cores, initargs=(threads,)
+    ) as pool:
         for k in KERNELS:  # first in the queue: compiled once each (loaded, once numba has cached them)
             pool.submit(warm_kernel, k)
         futures = {pool.submit(compute_section, n, fast, seed): n for n in todo}
@@ -322,7 +347,7 @@ def reproduce(
     """Run the study and write the report folder ``out`` (atomically). ``sections``: run only these of
     ``SECTIONS`` (the device, rig and simulator parts always run; the report says which were left out).
     ``workers``: processes computing sections at once (default: the machine's cores)."""
-    workers = (os.cpu_count() or 1) if workers is None else max(1, int(workers))
+    workers = default_workers() if workers is None else max(1, int(workers))
     if sections is not None and not set(sections) <= set(SECTIONS):
         raise ValueError(f"unknown sections {sorted(set(sections) - set(SECTIONS))}; known: {SECTIONS}")
     t_start = time.perf_counter()

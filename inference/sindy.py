@@ -2,7 +2,8 @@
 damping and any extra term of the second-order equation of motion, from z and the input only, over
 the library of ``weak`` (z'' = theta . Theta(z, z', u), each term a model-file field or a named
 ``extra`` effect). The input's coefficient is fixed by
-physics with pysindy's ``ConstrainedSR3`` (an equality constraint): -1 for base acceleration, 1/m for a
+physics with an equality constraint (pysindy's ``ConstrainedSR3`` on the sparsity path and in the
+ensemble; constrained least squares where a support is refitted): -1 for base acceleration, 1/m for a
 force with a known mass; only a force record without a mass learns it (then m = 1/coefficient, as NSI
 does from its FRF level).
 
@@ -155,7 +156,12 @@ class SINDy(Estimator):
             "derivatives": form.derivatives["method"],
             "sgn_noise_scale": form.velocity_noise,
             "library": list(library) + ["u"],
-            "input_coefficient": "fixed by physics (ConstrainedSR3)" if gain is not None else "learned (no mass)",
+            "input_coefficient": (
+                "fixed by physics (an equality constraint: pysindy's ConstrainedSR3 on the sparsity path and "
+                "the ensemble, constrained least squares in the support's refit)"
+                if gain is not None
+                else "learned (no mass)"
+            ),
             "selection": "sparsest support whose held-out weak residual (samples "
             f"[{n_fit}, {n_id}), blocks of {self.window_s:g} s) is within max(one standard error, "
             f"{100 * self.margin:g} %) of the best",

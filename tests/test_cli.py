@@ -196,6 +196,27 @@ def test_reproduce_machinery_on_two_sections(tmp_path, monkeypatch):
         reproduce(tmp_path / "c", fast=True, progress=False, sections=("nonsense",))
 
 
+def test_reproduce_sizes_its_processes_to_the_machine(monkeypatch):
+    # A many-core machine: no more section processes than sections, nor than memory holds at 2 GB each
+    # (a section held up to 1.6 GB), and each process's own threads a share of the cores, not all of them
+    import os
+
+    from negstiff.experiments import reproduce as r
+
+    monkeypatch.setattr(os, "cpu_count", lambda: 64)
+    pages = {"SC_PAGE_SIZE": 4096, "SC_PHYS_PAGES": 64 * 1024**3 // 4096}
+    monkeypatch.setattr(os, "sysconf", lambda name: pages[name])
+    assert r.default_workers() == len(r._TABLE), "64 cores, 64 GB: one process per section"
+    pages["SC_PHYS_PAGES"] = 8 * 1024**3 // 4096
+    assert r.default_workers() == 4, "8 GB hold four processes"
+    monkeypatch.delenv("NEGSTIFF_THREADS", raising=False)
+    r._share_cores(16)
+    assert os.environ["NEGSTIFF_THREADS"] == "16"
+    monkeypatch.setenv("NEGSTIFF_THREADS", "3")
+    r._share_cores(16)
+    assert os.environ["NEGSTIFF_THREADS"] == "3", "the user's setting stands"
+
+
 def test_simulate_an_input_only_record_from_rest_at_z_plus(tmp_path):
     # contract: without a z column the model starts at rest at its z_plus
     from negstiff.models import Model

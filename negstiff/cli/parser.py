@@ -416,7 +416,8 @@ def _reproduce(sub, common: argparse.ArgumentParser, data_opts: argparse.Argumen
         "--workers",
         type=number(int, 1, 256),
         default=None,
-        help="processes computing the report's sections at once (default: the machine's cores)",
+        help="processes computing the report's sections at once (default: the machine's cores, at most one per "
+        "section and per 2 GB of memory)",
     )
     rep.set_defaults(func=c.cmd_reproduce)
 
