@@ -18,6 +18,8 @@ from typing import Any
 
 import numpy as np
 
+from negstiff.models.constants import STANDARD_GRAVITY
+
 INPUTS = ("base_acc", "force")
 OPTIONAL = ("z_dot", "y", "base_disp")
 RESPONSE_ONLY = ("y_dot", "y_acc")
@@ -134,11 +136,38 @@ def parse_column_map(text: str | None) -> dict[str, tuple[str, float]]:
     return out
 
 
-def _read_csv(path: Path) -> tuple[dict[str, np.ndarray], dict[str, str]]:
+_UNIT_IN_NAME = re.compile(r"^(?P<name>.*?)\s*(?:\[(?P<square>[^\]]*)\]|\((?P<round>[^)]*)\))\s*$")
+"""A header entry with its unit: ``z [mm]`` or ``z (mm)``."""
+
+
+def _text(path: Path) -> str:
+    """A text file's content: UTF-8 (a byte-order mark, as spreadsheets write, dropped), else Latin-1
+    (older Windows exports write 'µm' so); a file with NUL bytes is not text."""
+    raw = path.read_bytes()
+    if b"\0" in raw[:65536]:
+        raise MeasurementError(f"{path}: unreadable file (not text; a CSV is expected)")
     try:
-        lines = path.read_text().splitlines()
+        return raw.decode("utf-8-sig")
     except UnicodeDecodeError:
-        raise MeasurementError(f"{path}: unreadable file (not text; a CSV is expected)") from None
+        return raw.decode("latin-1")
+
+
+def _dialect(path: Path, header: str, first_row: str) -> tuple[str | None, bool]:
+    """(field separator, decimal comma) of a CSV from its header and first data row: ',' (the contract),
+    ';' (spreadsheets where the decimal mark is a comma, which then appears in the numbers), a tab, or
+    blanks (None). Written here rather than with ``csv.Sniffer``, which guesses from character counts and
+    takes a digit or the decimal point for the separator of a numeric file."""
+    sep = next((d for d in (",", ";", "\t") if d in header), None)
+    decimal_comma = sep != "," and "," in first_row
+    if decimal_comma and "." in first_row:
+        raise MeasurementError(
+            f"{path}: the first data row mixes decimal points and commas: {first_row[:60]!r} (one decimal mark, please)"
+        )
+    return sep, decimal_comma
+
+
+def _read_csv(path: Path) -> tuple[dict[str, np.ndarray], dict[str, str]]:
+    lines = _text(path).splitlines()
     meta: dict[str, str] = {}
     i = 0
     while i < len(lines) and (lines[i].startswith("#") or not lines[i].strip()):
@@ -148,19 +177,29 @@ def _read_csv(path: Path) -> tuple[dict[str, np.ndarray], dict[str, str]]:
         i += 1
     if i >= len(lines):
         raise MeasurementError(f"{path}: no header line (and no data)")
-    names = [c.strip().strip('"').strip() for c in lines[i].split(",")]
     header_line = i + 1
     body = lines[i + 1 :]
     while body and not body[-1].strip():
         body.pop()
     if not body:
         raise MeasurementError(f"{path}: no data rows after the header")
-    use = [j for j, c in enumerate(names) if c]  # trailing commas make unnamed empty columns
+    sep, decimal_comma = _dialect(path, lines[i], body[0])
+    if decimal_comma:
+        body = [line.replace(",", ".") for line in body]
+    names = []
+    for c in lines[i].split(sep):
+        c = c.strip().strip('"').strip()
+        m = _UNIT_IN_NAME.match(c)
+        if m and m.group("name"):  # a unit in the header: the column's name without it, its unit in the metadata
+            c = m.group("name").strip().strip('"').strip()
+            meta[f"unit:{c}"] = (m.group("square") if m.group("square") is not None else m.group("round")).strip()
+        names.append(c)
+    use = [j for j, c in enumerate(names) if c]  # trailing separators make unnamed empty columns
     try:
-        data = np.loadtxt(body, delimiter=",", usecols=use, ndmin=2, dtype=float)
+        data = np.loadtxt(body, delimiter=sep, usecols=use, ndmin=2, dtype=float)
     except ValueError:
         for r, line in enumerate(body):
-            parts = line.split(",")
+            parts = line.split(sep)
             try:
                 [float(parts[j]) for j in use]
             except (ValueError, IndexError):
@@ -171,7 +210,7 @@ def _read_csv(path: Path) -> tuple[dict[str, np.ndarray], dict[str, str]]:
     cols = {names[j]: data[:, k] for k, j in enumerate(use)}
     if "t" in names:  # the printed precision of each time value (lab exports round time)
         j = names.index("t")
-        tokens = [line.partition(",")[0] for line in body] if j == 0 else [line.split(",")[j] for line in body]
+        tokens = [line.partition(sep)[0] for line in body] if j == 0 and sep else [line.split(sep)[j] for line in body]
         cols[RESOLUTION] = printed_resolution(tokens, cols["t"])
     return cols, meta
 
@@ -326,9 +365,11 @@ def load(
     raw, meta = _read(path)
     resolution = raw.pop(RESOLUTION, None)
     cmap = parse_column_map(columns) if isinstance(columns, (str, type(None))) else dict(columns)
-    cols = _mapped_columns(path, raw, cmap)
+    cols, channel_info = _in_si(path, _mapped_columns(path, raw, cmap), meta, cmap)
     if any(name == "t" and (src != "t" or scale != 1.0) for name, (src, scale) in cmap.items()):
         resolution = None  # the printed precision was read for a column named t only
+    if resolution is not None:  # a time column in ms: its printed precision in s too
+        resolution = resolution * channel_info.get("channels", {}).get("t", {}).get("to_si", 1.0)
     input_name, n = _checked_input(path, raw, cols)
     fs, t0, time_info = _time_base(path, cols, meta, fs, resolution)
     if mass is None and "mass" in meta:
@@ -360,7 +401,7 @@ def load(
         meta=meta,
         source=str(path),
         t0=t0,
-        info={"time": time_info, "response": resp, **_channel_info(meta, cmap)},
+        info={"time": time_info, "response": resp, **channel_info},
     )
     return sensors.pin_frame(rec.with_mass(mass))
 
@@ -451,35 +492,86 @@ def _time_base(path: Path, cols: dict, meta: dict, fs: float | None, resolution)
     return fs, 0.0, {"source": "metadata fs"}
 
 
-UNIT_HINTS = {
-    "g": ("m/s^2", 9.81),
-    "mm": ("m", 1e-3),
-    "mm/s": ("m/s", 1e-3),
-    "mm/s^2": ("m/s^2", 1e-3),
-    "um": ("m", 1e-6),
-    "in": ("m", 0.0254),
-    "in/s": ("m/s", 0.0254),
-    "mV": (None, None),
-    "V": (None, None),
+UNITS = {
+    "time": {"s": 1.0, "ms": 1e-3, "us": 1e-6},
+    "length": {"m": 1.0, "cm": 1e-2, "mm": 1e-3, "um": 1e-6, "in": 0.0254},
+    "velocity": {"m/s": 1.0, "cm/s": 1e-2, "mm/s": 1e-3, "um/s": 1e-6, "in/s": 0.0254},
+    "acceleration": {"m/s^2": 1.0, "mm/s^2": 1e-3, "g": STANDARD_GRAVITY, "in/s^2": 0.0254},
+    "force": {"N": 1.0, "kN": 1e3, "mN": 1e-3, "lbf": 4.4482216152605},
 }
-"""Units a lab file may label a channel with that are not the contract's SI units (and the factor)."""
+"""The units a channel's label may state, by dimension, and each one's factor to SI."""
+DIMENSIONS = {
+    "t": "time",
+    "base_acc": "acceleration",
+    "y_acc": "acceleration",
+    "force": "force",
+    "z": "length",
+    "y": "length",
+    "base_disp": "length",
+    "z_dot": "velocity",
+    "y_dot": "velocity",
+}
+"""The dimension of each contract column."""
+RAW_UNITS = ("V", "mV")
+"""A sensor's output before its sensitivity: no unit of the column's dimension."""
 
 
-def _channel_info(meta: dict[str, str], cmap: dict) -> dict[str, Any]:
-    """The units and sensitivities the file states for the channels used (``formats``), with a
-    warning where a mapped channel's unit is not SI and the map does not scale it."""
-    chans = {k.split(":", 1)[1] for k in meta if k.startswith(("unit:", "sensitivity:"))}
-    if not chans:
-        return {}
-    out = {c: {"unit": meta.get(f"unit:{c}"), "sensitivity": meta.get(f"sensitivity:{c}")} for c in sorted(chans)}
-    warns = []
-    for name, (src, scale) in cmap.items():
-        unit = meta.get(f"unit:{src}")
-        if unit in UNIT_HINTS and scale == 1.0:
-            si, f = UNIT_HINTS[unit]
-            fix = f" (scale it: --columns {name}={src}*{f:g})" if f else ""
-            warns.append(f"channel {src} ({name}) is labelled {unit!r} in the file, not SI{fix}")
-    return {"channels": out, **({"warnings": warns} if warns else {})}
+def _unit(label: str) -> str:
+    """A unit label in ``UNITS``' spelling: 'µm' and 'μm' -> 'um', 'm/s²', 'm/s2', 'm/s/s' and 'm s^-2' ->
+    'm/s^2', 'm s^-1' -> 'm/s', 'sec' -> 's'."""
+    u = label.strip().replace("µ", "u").replace("μ", "u").replace("²", "^2").replace(" ", "").replace("*", "")
+    u = re.sub(r"(/s/s|/s2|s\^?-2)$", "/s^2", u)
+    u = re.sub(r"s\^?-1$", "/s", u)
+    return "s" if u in ("sec", "secs") else u
+
+
+def si_factor(label: str, column: str) -> float | None:
+    """The factor that turns ``column``'s values labelled ``label`` into SI, or None where the label is not
+    a unit of the column's dimension in ``UNITS``."""
+    return UNITS[DIMENSIONS[column]].get(_unit(label)) if column in DIMENSIONS else None
+
+
+def _in_si(path: Path, cols: dict[str, np.ndarray], meta: dict[str, str], cmap: dict):
+    """The contract's columns in SI, by the units the file states for them (``unit:<channel>`` metadata: a
+    CSV header's ``z [mm]``, a lab format's channel unit), and what was done: ``(cols, info)``.
+
+    A column under its own name (not mapped) is converted by its stated unit; a unit that is not one of
+    the column's dimension is an error (one line), never a silent SI reading. A mapped column is the
+    user's: its map's scale stands, and a non-SI unit the map does not scale is a warning."""
+    channels: dict[str, dict[str, Any]] = {}
+    for k in meta:
+        if k.startswith(("unit:", "sensitivity:")):
+            c = k.split(":", 1)[1]
+            channels[c] = {"unit": meta.get(f"unit:{c}"), "sensitivity": meta.get(f"sensitivity:{c}")}
+    warns: list[str] = []
+    out = dict(cols)
+    for name in cols:
+        src, scale = cmap.get(name, (name, 1.0))
+        label = meta.get(f"unit:{src}")
+        if label is None or name not in DIMENSIONS:
+            continue
+        f = si_factor(label, name)
+        dim = DIMENSIONS[name]
+        if name in cmap:  # the user's map decides
+            if scale == 1.0 and (label in RAW_UNITS or (f is not None and f != 1.0)):
+                fix = f" (scale it: --columns {name}={src}*{f:.6g})" if f else " (scale it by the sensor's sensitivity)"
+                warns.append(f"channel {src} ({name}) is labelled {label!r} in the file, not SI{fix}")
+            continue
+        if f is None:
+            hint = (
+                "a sensor's raw output: scale it to SI with its sensitivity"
+                if label in RAW_UNITS
+                else f"a {dim} is expected, in {', '.join(UNITS[dim])}"
+            )
+            raise MeasurementError(
+                f"{path}: column {name} is labelled {label!r}: {hint} (or map and scale it: "
+                f"--columns {name}={name}*FACTOR)"
+            )
+        if f != 1.0:
+            out[name] = cols[name] * f
+            channels.setdefault(src, {"unit": label, "sensitivity": None})["to_si"] = f
+    info: dict[str, Any] = {"channels": channels} if channels else {}
+    return out, info | ({"warnings": warns} if warns else {})
 
 
 def time_base(t: np.ndarray, resolution: np.ndarray | None, path) -> tuple[float, float, float]:

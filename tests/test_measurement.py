@@ -155,3 +155,98 @@ def test_an_input_only_record_loads_for_simulation(tmp_path):
     assert m.z is None and m.n == 3
     with pytest.raises(MeasurementError, match="missing column z"):
         load(p)
+
+
+def _record(n=400, fs=200.0, seed=3):
+    """Columns of a record written here: a 5 Hz lightly damped oscillator (scipy's lsim, not the rig)
+    under a random base acceleration, as t [s], base_acc [m/s^2], z [m]."""
+    from scipy import signal
+
+    rng = np.random.default_rng(seed)
+    t = np.arange(n) / fs
+    u = rng.standard_normal(n)
+    wn = 2 * np.pi * 5.0
+    _, z, _ = signal.lsim(([-1.0], [1.0, 2 * 0.05 * wn, wn**2]), u, t)
+    return {"t": t, "base_acc": u, "z": z}
+
+
+def _rows(cols, fmt="{:.9g}"):
+    return [[fmt.format(v) for v in row] for row in zip(*cols.values())]
+
+
+@pytest.mark.parametrize(
+    "dialect",
+    ["semicolon, decimal comma", "tab", "blanks", "byte-order mark, CRLF", "Latin-1 header", "comma and blank"],
+)
+def test_spreadsheet_and_daq_dialects_read_the_same_record(tmp_path, dialect):
+    # Lab exports: a spreadsheet where the decimal mark is a comma separates fields by ';', DAQ software
+    # writes tabs or blanks, Excel's UTF-8 CSV starts with a byte-order mark and ends lines with CRLF,
+    # older Windows tools write Latin-1. Each reads to the same record as the contract's comma file
+    # (the values printed to 9 digits: equal to 1e-9).
+    cols = _record()
+    ref = load(_write(tmp_path, "t,base_acc,z\n" + "".join(",".join(r) + "\n" for r in _rows(cols)), "ref.csv"))
+    rows = _rows(cols)
+    if dialect == "semicolon, decimal comma":
+        text = "t;base_acc;z\n" + "".join(";".join(v.replace(".", ",") for v in r) + "\n" for r in rows)
+    elif dialect == "tab":
+        text = "t\tbase_acc\tz\n" + "".join("\t".join(r) + "\n" for r in rows)
+    elif dialect == "blanks":
+        text = "   t   base_acc   z\n" + "".join("  " + "   ".join(r) + "\n" for r in rows)
+    elif dialect == "comma and blank":
+        text = "t, base_acc, z\n" + "".join(", ".join(r) + "\n" for r in rows)
+    else:
+        text = "t,base_acc,z\r\n" + "".join(",".join(r) + "\r\n" for r in rows)
+    p = tmp_path / "lab.csv"
+    if dialect == "byte-order mark, CRLF":
+        p.write_bytes(text.encode("utf-8-sig"))
+    elif dialect == "Latin-1 header":
+        p.write_bytes(("# operator: Müller, sensor µ-range\n" + text).encode("latin-1"))
+    else:
+        p.write_text(text)
+    m = load(p)
+    assert m.fs == pytest.approx(ref.fs, rel=1e-9) and m.input_name == "base_acc"
+    assert np.allclose(m.u, ref.u, rtol=1e-9, atol=0) and np.allclose(m.z, ref.z, rtol=1e-9, atol=0)
+
+
+def test_units_in_the_header_are_read_into_si(tmp_path):
+    # A DAQ export labels its channels: time in ms, the table's acceleration in g, the laser in mm. Each
+    # is converted to SI by its label (g as standard gravity, 9.80665 m/s^2), never read as if in SI; the
+    # record says what was converted. The same data in SI is the reference.
+    cols = _record()
+    si = "t [s],base_acc [m/s^2],z [m]\n" + "".join(",".join(r) + "\n" for r in _rows(cols))
+    ref = load(_write(tmp_path, si, "si.csv"))
+    lab_cols = {"t": cols["t"] * 1e3, "base_acc": cols["base_acc"] / 9.80665, "z": cols["z"] * 1e3}
+    text = "t (ms),base_acc [g],z [mm]\n" + "".join(",".join(r) + "\n" for r in _rows(lab_cols))
+    m = load(_write(tmp_path, text, "lab.csv"))
+    assert m.fs == pytest.approx(ref.fs, rel=1e-9)
+    assert np.allclose(m.u, ref.u, rtol=1e-8, atol=0) and np.allclose(m.z, ref.z, rtol=1e-8, atol=0)
+    ch = m.info["channels"]
+    assert ch["z"]["to_si"] == pytest.approx(1e-3) and ch["base_acc"]["to_si"] == pytest.approx(9.80665)
+    assert "to_si" not in ref.info["channels"]["z"], "SI labels: nothing converted"
+    # a mapped channel is the user's to scale: its label only warns when the map does not scale it
+    mapped = load(_write(tmp_path, "time [s],acc [g],disp [mm]\n0,1,1\n0.01,2,2\n0.02,3,3\n", "m.csv"),
+                  columns="t=time,base_acc=acc*9.80665,z=disp")  # fmt: skip
+    assert np.allclose(mapped.z, [1, 2, 3]) and np.allclose(mapped.u, 9.80665 * np.array([1, 2, 3]))
+    assert mapped.info["warnings"] == [
+        "channel disp (z) is labelled 'mm' in the file, not SI (scale it: --columns z=disp*0.001)"
+    ]
+
+
+@pytest.mark.parametrize(
+    "header, message",
+    [
+        ("t,base_acc,z [m/s]", "column z is labelled 'm/s': a length is expected, in m, cm, mm, um, in"),
+        ("t,base_acc,z [V]", "column z is labelled 'V': a sensor's raw output: scale it to SI with its sensitivity"),
+        ("t,base_acc [furlong/fortnight],z", "column base_acc is labelled 'furlong/fortnight'"),
+    ],
+)
+def test_a_unit_that_is_not_of_the_columns_dimension_is_refused(tmp_path, header, message):
+    p = _write(tmp_path, header + "\n0,1,1\n0.1,2,2\n0.2,3,3\n")
+    with pytest.raises(MeasurementError, match=message.replace("(", r"\(").replace(")", r"\)")):
+        load(p)
+
+
+def test_mixed_decimal_marks_are_refused(tmp_path):
+    p = _write(tmp_path, "t;base_acc;z\n0,0;1.5;1\n0,1;2;2\n")
+    with pytest.raises(MeasurementError, match="mixes decimal points and commas"):
+        load(p)
