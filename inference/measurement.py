@@ -365,6 +365,7 @@ def load(
     raw, meta = _read(path)
     resolution = raw.pop(RESOLUTION, None)
     cmap = parse_column_map(columns) if isinstance(columns, (str, type(None))) else dict(columns)
+    cmap = {name: (_header_name(src, raw), scale) for name, (src, scale) in cmap.items()}
     cols, channel_info = _in_si(path, _mapped_columns(path, raw, cmap), meta, cmap)
     if any(name == "t" and (src != "t" or scale != 1.0) for name, (src, scale) in cmap.items()):
         resolution = None  # the printed precision was read for a column named t only
@@ -419,6 +420,13 @@ def _read(path: Path) -> tuple[dict[str, np.ndarray], dict[str, str]]:
         raise
     except Exception as exc:  # any parser failure is an unreadable file, said in one line
         raise MeasurementError(f"{path}: unreadable file ({type(exc).__name__}: {exc})".splitlines()[0]) from None
+
+
+def _header_name(src: str, raw: dict[str, np.ndarray]) -> str:
+    """A column map's source as the file's column name: the header's whole text ('Time [s]') names the
+    column its unit was split from ('Time')."""
+    m = _UNIT_IN_NAME.match(src)
+    return m.group("name").strip() if src not in raw and m and m.group("name").strip() in raw else src
 
 
 def _mapped_columns(path: Path, raw: dict[str, np.ndarray], cmap: dict) -> dict[str, np.ndarray]:

@@ -224,8 +224,9 @@ def test_units_in_the_header_are_read_into_si(tmp_path):
     assert ch["z"]["to_si"] == pytest.approx(1e-3) and ch["base_acc"]["to_si"] == pytest.approx(9.80665)
     assert "to_si" not in ref.info["channels"]["z"], "SI labels: nothing converted"
     # a mapped channel is the user's to scale: its label only warns when the map does not scale it
+    # (a map may name a column by the header's whole text, unit and all: 'time [s]')
     mapped = load(_write(tmp_path, "time [s],acc [g],disp [mm]\n0,1,1\n0.01,2,2\n0.02,3,3\n", "m.csv"),
-                  columns="t=time,base_acc=acc*9.80665,z=disp")  # fmt: skip
+                  columns="t=time [s],base_acc=acc*9.80665,z=disp")  # fmt: skip
     assert np.allclose(mapped.z, [1, 2, 3]) and np.allclose(mapped.u, 9.80665 * np.array([1, 2, 3]))
     assert mapped.info["warnings"] == [
         "channel disp (z) is labelled 'mm' in the file, not SI (scale it: --columns z=disp*0.001)"
