@@ -142,6 +142,14 @@ def frf(rec: Measurement, band: tuple[float, float] | None = None, segment_s: fl
         p["h1_over_h2"] = float(np.abs(h1[k]) / np.abs(est["H2"][k]))
         peaks.append(p)
     peaks.sort(key=lambda p: -np.abs(h1[np.argmin(np.abs(f - p["peak_bin_hz"]))]))
+    # one mode, one peak: a noisy |H1| can hold two local maxima on one resonance (the Silverbox's, 0.6 Hz
+    # apart), whose fits return the same mode; a peak whose fitted frequency lies within half the half-power
+    # bandwidth (zeta f) of a stronger one's is that mode again (two modes so close cannot be resolved)
+    kept: list[dict[str, Any]] = []
+    for p in peaks:
+        if not any(abs(p["f_hz"] - q["f_hz"]) <= q["zeta"] * q["f_hz"] for q in kept):
+            kept.append(p)
+    peaks = kept
     top = peaks[0] if peaks else None
     return {
         "f_hz": top["f_hz"] if top else None,
