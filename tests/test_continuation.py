@@ -188,3 +188,44 @@ def test_bifurcations_are_located_where_a_multiplier_crosses_the_unit_circle():
             if br["period"] > 1:
                 half = br["period"] // 2
                 assert np.max(np.abs(z[:half] - z[half:])) > 1e-6 * (p["max_z"] - p["min_z"]), br["period"]
+
+
+def test_a_self_excited_oscillator_locks_onto_its_forcing_beyond_a_neimark_sacker_point():
+    # Fact: a Duffing-Rayleigh oscillator (negative linear damping, positive z'|z'| damping) oscillates by
+    # itself; forced off its natural frequency, the periodic response is unstable below a forcing
+    # amplitude and the motion is quasi-periodic (a torus), above it the response locks onto the forcing.
+    # The boundary is a Neimark-Sacker bifurcation: a complex pair of multipliers crosses the unit
+    # circle. (A damped oscillator cannot have one: det M < 1.) Checked by scipy's DOP853 (another
+    # integrator) from the continued orbit at 0.8x and 1.25x the located amplitude, perturbed by 1e-4 of
+    # its size: over 1000 forcing periods the Poincare points spread over the torus below, and converge
+    # to the orbit above.
+    from scipy.integrate import solve_ivp
+
+    wn, f, m = 2 * np.pi * 5.0, 5.5, 1.0
+    model = Model.from_dict({"m": m, "k0": 0.0, "k1": -(wn**2), "k2": 0.0, "k3": 1000.0, "c": -1.0, "c_nl": 0.5})
+    r = nfrc(model, freq=f, amplitude=(1.0, 400.0), well="plus", input_kind="force", max_period=1)
+    ns = [b for b in r["bifurcations"] if b["type"] == "neimark_sacker"]
+    assert len(ns) == 1, r["bifurcations"]
+    mu = complex(*ns[0]["multiplier"])
+    assert abs(mu) == pytest.approx(1.0, abs=1e-4) and abs(mu.imag) > 0.1
+    a_ns = ns[0]["amplitude"]
+    points = r["branches"][0]["points"]
+
+    def spread(a):
+        p = min(points, key=lambda q: abs(q["amplitude"] - a))
+        size = (p["max_z"] - p["min_z"]) / 2
+
+        def rhs(t, x):
+            z, v = x
+            force = a * np.sin(2 * np.pi * f * t)
+            return [v, (force - (-1.0 * v + 0.5 * v * abs(v)) - (1000.0 * z**3 + wn**2 * z)) / m]
+
+        x0 = [p["z0"] + 1e-4 * size, p["v0"]]
+        T = 1 / f
+        sol = solve_ivp(rhs, (0, 1000 * T), x0, method="DOP853", rtol=1e-10, atol=1e-12 * size,
+                        t_eval=np.arange(900, 1001) * T)  # fmt: skip
+        return np.ptp(sol.y[0]) / size
+
+    below, above = spread(0.8 * a_ns), spread(1.25 * a_ns)  # measured: 3.0 and 2e-8
+    assert below > 1e-2, "below the point: the orbit is left for the torus"
+    assert above < 1e-6, "above it: locked onto the forcing"
