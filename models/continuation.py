@@ -25,7 +25,8 @@ the harmonics, and because the monodromy matrix comes with it.
   **period doubling** a multiplier through -1 (det(M + I) changes sign), a **Neimark-Sacker** a
   complex pair through the unit circle. (For a single-degree-of-freedom oscillator with positive
   damping, det M = exp(-int c_eff/m dt) < 1, so a complex pair can never leave the circle: no
-  Neimark-Sacker bifurcation exists; the check is kept for models with negative effective damping.)
+  Neimark-Sacker bifurcation exists; the check serves models with negative effective damping, and is
+  tested on a forced Duffing-Rayleigh oscillator against scipy's DOP853.)
   Each detected point is located by regula falsi on its test function along the branch (in the
   arclength of the step that crossed it), each trial orbit corrected onto the branch.
 * **Branch switching** at a period doubling: the period-2p orbit is found by simulating from the
