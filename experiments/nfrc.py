@@ -229,7 +229,8 @@ def continuation_section(rep, results: dict[str, Any], fast: bool, seed_: int = 
         _overlay(study),
         "The rig's 9 Hz map (grey: Poincare z of the stepped sweeps up and down) and each model's continued "
         "periodic orbits (their Poincare points; solid stable, dashed unstable), from z_plus (left) and z_minus "
-        "(right).",
+        "(right); orange: the range of the first doubling over the coefficient posterior's draws (drawn at least "
+        "0.1 m/s^2 wide).",
     )
 
 
@@ -303,6 +304,12 @@ def _overlay(study: ContinuationStudy):
                     for mask, ls in ((stable, "-"), (~stable, "--")):
                         ax.plot(a, np.where(mask, pz[:, k], np.nan), ls, color=colors[name], lw=0.9, alpha=0.8,
                                 label=name if (k == 0 and ls == "-" and br["period"] == 1) else None)  # fmt: skip
+        got = [v for v in study.posterior_doublings[well] if v is not None]
+        if got:  # the posterior's band: where its draws put the first doubling (at least 0.1 m/s^2 wide, to be seen)
+            lo, hi = min(got), max(got)
+            mid, half = (lo + hi) / 2, max(hi - lo, 0.1) / 2
+            ax.axvspan(mid - half, mid + half, color="C1", alpha=0.35, lw=0, zorder=1,
+                       label=f"posterior draws' first doubling ({fmt(lo, 4)}-{fmt(hi, 4)})")  # fmt: skip
         ax.set(xlabel="base acceleration amplitude [m/s^2]", title=f"from z_{well}", xlim=(2, 30))
         ax.legend(fontsize=8)
     axes[0].set_ylabel("Poincare z (phase 0) [mm]")
