@@ -157,7 +157,8 @@ def _dialect(path: Path, header: str, first_row: str) -> tuple[str | None, bool]
     ';' (spreadsheets where the decimal mark is a comma, which then appears in the numbers), a tab, or
     blanks (None). Written here rather than with ``csv.Sniffer``, which guesses from character counts and
     takes a digit or the decimal point for the separator of a numeric file."""
-    sep = next((d for d in (",", ";", "\t") if d in header), None)
+    # the separator is in both lines (a header's names may hold commas, a decimal-comma row holds commas)
+    sep = next((d for d in (",", ";", "\t") if d in header and d in first_row), None)
     decimal_comma = sep != "," and "," in first_row
     if decimal_comma and "." in first_row:
         raise MeasurementError(
@@ -524,13 +525,18 @@ RAW_UNITS = ("V", "mV")
 """A sensor's output before its sensitivity: no unit of the column's dimension."""
 
 
+_UNIT_WORDS = {"meter": "m", "metre": "m", "millimeter": "mm", "millimetre": "mm", "second": "s", "sec": "s",
+               "newton": "N"}  # fmt: skip
+"""Units written out, as some exports do (singular or plural)."""
+
+
 def _unit(label: str) -> str:
     """A unit label in ``UNITS``' spelling: 'µm' and 'μm' -> 'um', 'm/s²', 'm/s2', 'm/s/s' and 'm s^-2' ->
-    'm/s^2', 'm s^-1' -> 'm/s', 'sec' -> 's'."""
+    'm/s^2', 'm s^-1' -> 'm/s', 'meters' -> 'm', 'm/sec' -> 'm/s'."""
     u = label.strip().replace("µ", "u").replace("μ", "u").replace("²", "^2").replace(" ", "").replace("*", "")
+    u = re.sub(r"[A-Za-z]{3,}", lambda w: _UNIT_WORDS.get(w.group(0).lower().rstrip("s"), w.group(0)), u)
     u = re.sub(r"(/s/s|/s2|s\^?-2)$", "/s^2", u)
-    u = re.sub(r"s\^?-1$", "/s", u)
-    return "s" if u in ("sec", "secs") else u
+    return re.sub(r"s\^?-1$", "/s", u)
 
 
 def si_factor(label: str, column: str) -> float | None:

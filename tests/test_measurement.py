@@ -251,3 +251,32 @@ def test_mixed_decimal_marks_are_refused(tmp_path):
     p = _write(tmp_path, "t;base_acc;z\n0,0;1.5;1\n0,1;2;2\n")
     with pytest.raises(MeasurementError, match="mixes decimal points and commas"):
         load(p)
+
+
+@pytest.mark.parametrize(
+    "label, column, factor",
+    [
+        ("m/s²", "base_acc", 1.0),
+        ("m/sec^2", "base_acc", 1.0),
+        ("m s^-2", "y_acc", 1.0),
+        ("g", "base_acc", 9.80665),
+        ("meters", "z", 1.0),
+        ("µm", "y", 1e-6),
+        ("mm/s", "z_dot", 1e-3),
+        ("Newtons", "force", 1.0),
+        ("kN", "force", 1e3),
+        ("ms", "t", 1e-3),
+        ("m/s", "z", None),
+        ("N", "base_acc", None),
+    ],
+)
+def test_unit_labels_as_exports_spell_them(label, column, factor):
+    from negstiff.inference.measurement import si_factor
+
+    assert si_factor(label, column) == (None if factor is None else pytest.approx(factor))
+
+
+def test_a_comma_in_a_header_name_does_not_make_a_tab_file_comma_separated(tmp_path):
+    p = _write(tmp_path, "t\tbase_acc\tz\tlaser, raw\n0\t1\t0.5\t7\n0.1\t2\t0.25\t7\n0.2\t3\t0.125\t7\n")
+    m = load(p)
+    assert np.allclose(m.u, [1, 2, 3]) and m.fs == pytest.approx(10.0)
