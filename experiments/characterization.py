@@ -16,7 +16,7 @@ from typing import Any
 import matplotlib.pyplot as plt
 import numpy as np
 
-from negstiff.inference.characterize import characterize
+from negstiff.inference.characterize import characterize, map_point, map_sequence
 from negstiff.inference.derivatives import smooth_and_differentiate
 from negstiff.inference.lyapunov import largest_lyapunov
 from negstiff.inference.measurement import Measurement
@@ -44,17 +44,13 @@ def bifurcation_map(rig: Rig, freq: float, amplitudes, settle_periods: int, reco
     points = []
     for (start, direction), recs in zip(plans, sweeps):
         for rec in recs:
-            m = record_measurement(rec)
-            c = characterize(m, freq, (eq.z_minus, eq.z_0, eq.z_plus), lle=False)
+            p = map_point(record_measurement(rec), freq, (eq.z_minus, eq.z_0, eq.z_plus))
             points.append(
                 {
                     "start": start,
                     "direction": direction,
-                    "amplitude": rec.truth["excitation"]["amplitude_m_s2"],
-                    "period": c["period"],
-                    "regime": c["regime"],
-                    "amplitudes": c["amplitudes"],
-                    "poincare_z": c["poincare_z"][-32:],
+                    "amplitude": rec.truth["excitation"]["amplitude_m_s2"],  # the commanded one, a lab's axis
+                    **{k: p[k] for k in ("period", "regime", "amplitudes", "poincare_z")},
                 }
             )
     return {
@@ -64,6 +60,36 @@ def bifurcation_map(rig: Rig, freq: float, amplitudes, settle_periods: int, reco
         "sweeps": len(plans),
         "amplitudes": len(lists[0]),
     }
+
+
+def map_figure(points: list[dict[str, Any]], overlays: list[dict[str, Any]] = (), unit: str = "m/s^2"):
+    """The bifurcation map (seed Figure 4): each record's Poincare z against its forcing amplitude, a panel
+    per starting well (``start``: plus, minus; one panel where it is unknown), blue sweeping up, red down,
+    black in the records' order; grey behind a cross-well or non-periodic record. Each ``overlays`` entry,
+    a ``negstiff nfrc`` result in amplitude, is drawn over its well's panel (``draw_branches``)."""
+    from .nfrc import draw_branches
+
+    starts = sorted({p.get("start") for p in points}, key=lambda s: ["plus", "minus", None].index(s))
+    fig, axes = plt.subplots(1, len(starts), figsize=(6 * len(starts), 4), sharey=True, squeeze=False)
+    amps = np.unique([p["amplitude"] for p in points])
+    half = 0.5 * float(np.median(np.diff(amps))) if amps.size > 1 else 0.05 * max(abs(float(amps[0])), 1e-12)
+    for ax, start in zip(axes[0], starts):
+        for p in (q for q in points if q.get("start") == start):
+            col = {"up": "C0", "down": "C3"}.get(p.get("direction"), "k")
+            if p["regime"] == "cross-well" or p["period"] is None:
+                ax.axvspan(p["amplitude"] - half, p["amplitude"] + half, color="0.9", zorder=0)
+            z = 1e3 * np.asarray(p["poincare_z"])
+            ax.plot(np.full(z.size, p["amplitude"]), z, ".", ms=1.5, color=col)
+        for k, r in enumerate(overlays):
+            if start is None or r["settings"]["well"] == start:
+                draw_branches(ax, r["branches"], f"C{(k + 2) % 10}", r.get("label", f"continuation {k + 1}"))
+        title = "in the records' order" if start is None else f"starting from z_{start} (blue up, red down)"
+        ax.set(xlabel=f"forcing amplitude [{unit}]", title=title)
+        if overlays:
+            ax.legend(fontsize=8)
+    axes[0][0].set_ylabel("Poincare z (phase 0) [mm]")
+    fig.tight_layout()
+    return fig
 
 
 def characterization_section(rep: Report, results: dict[str, Any], fast: bool, seed_: int = 0) -> None:
@@ -84,33 +110,13 @@ def _bifurcation_part(rep: Report, res: dict[str, Any], rig: Rig, fast: bool) ->
     res["bifurcation_map"] = {k: v for k, v in bm.items() if k != "points"} | {
         "points": [{k: v for k, v in p.items() if k != "poincare_z"} for p in bm["points"]]
     }
-    fig, axes = plt.subplots(1, 2, figsize=(12, 4), sharey=True)
-    for ax, start in zip(axes, ("plus", "minus")):
-        for p in bm["points"]:
-            if p["start"] != start:
-                continue
-            col = "C0" if p["direction"] == "up" else "C3"
-            if p["regime"] == "cross-well" or p["period"] is None:
-                ax.axvspan(p["amplitude"] - 0.1, p["amplitude"] + 0.1, color="0.9", zorder=0)
-            ax.plot(
-                np.full(len(p["poincare_z"]), p["amplitude"]), 1e3 * np.asarray(p["poincare_z"]), ".", ms=1.5, color=col
-            )
-        ax.set(xlabel="base acceleration amplitude [m/s^2]", title=f"starting from z_{start} (blue up, red down)")
-    axes[0].set_ylabel("Poincare z (phase 0) [mm]")
     rep.figure(
         "char_fig4_bifurcation",
-        fig,
+        map_figure(bm["points"]),
         "Figure 4 (seed): bifurcation map at 9 Hz from the rig (Poincare samples "
         "of z against the base-acceleration amplitude); grey: cross-well or non-periodic response.",
     )
-    up_plus = [p for p in bm["points"] if p["start"] == "plus" and p["direction"] == "up"]
-    seq = []
-    for p in up_plus:
-        label = "chaos" if p["period"] is None else f"P{p['period']}"
-        if not seq or seq[-1][0] != label:
-            seq.append([label, p["amplitude"], p["amplitude"]])
-        else:
-            seq[-1][2] = p["amplitude"]
+    seq = map_sequence([p for p in bm["points"] if p["start"] == "plus" and p["direction"] == "up"])
     res["sequence_plus_up"] = seq
     rep.text(
         f"The whole map ({bm['sweeps']} sweeps x {bm['amplitudes']} amplitudes) ran as one batched rig simulation "

@@ -70,10 +70,9 @@ class ContinuationStudy:
 
 def first_doubling_seen(rig_map: dict[str, Any], well: str) -> float | None:
     """The first amplitude of the rig's up sweep from ``well`` whose response is period 2 (or longer)."""
-    for p in rig_map["points"]:
-        if p["start"] == well and p["direction"] == "up" and p["period"] is not None and p["period"] >= 2:
-            return float(p["amplitude"])
-    return None
+    from negstiff.inference.characterize import first_period_2
+
+    return first_period_2([p for p in rig_map["points"] if p["start"] == well and p["direction"] == "up"])
 
 
 def first_doubling_predicted(result: dict[str, Any]) -> float | None:
@@ -285,6 +284,19 @@ def _reading(res: dict[str, Any], models: dict[str, Any]) -> str:
     )
 
 
+def draw_branches(ax, branches: list[dict[str, Any]], color, label: str | None = None) -> None:
+    """A continuation's branches on a bifurcation map's axes: each orbit's Poincare z [mm] against its
+    amplitude, solid where stable, dashed where not; ``label`` on the first period-1 branch's line."""
+    for br in branches:
+        a = np.array([q["amplitude"] for q in br["points"]])
+        stable = np.array([q["stable"] for q in br["points"]])
+        pz = np.array([q["poincare_z"] for q in br["points"]]) * 1e3
+        for k in range(pz.shape[1]):
+            for mask, ls in ((stable, "-"), (~stable, "--")):
+                ax.plot(a, np.where(mask, pz[:, k], np.nan), ls, color=color, lw=0.9, alpha=0.8,
+                        label=label if (k == 0 and ls == "-" and br["period"] == 1) else None)  # fmt: skip
+
+
 def _overlay(study: ContinuationStudy):
     import matplotlib.pyplot as plt
 
@@ -296,14 +308,7 @@ def _overlay(study: ContinuationStudy):
                 ax.plot(np.full(len(p["poincare_z"]), p["amplitude"]), 1e3 * np.asarray(p["poincare_z"]), ".",
                         ms=2.0, color="0.45", zorder=3)  # fmt: skip
         for name in study.models:
-            for br in study.continuations[(name, well)]["branches"]:
-                a = np.array([q["amplitude"] for q in br["points"]])
-                stable = np.array([q["stable"] for q in br["points"]])
-                pz = np.array([q["poincare_z"] for q in br["points"]]) * 1e3
-                for k in range(pz.shape[1]):
-                    for mask, ls in ((stable, "-"), (~stable, "--")):
-                        ax.plot(a, np.where(mask, pz[:, k], np.nan), ls, color=colors[name], lw=0.9, alpha=0.8,
-                                label=name if (k == 0 and ls == "-" and br["period"] == 1) else None)  # fmt: skip
+            draw_branches(ax, study.continuations[(name, well)]["branches"], colors[name], name)
         got = [v for v in study.posterior_doublings[well] if v is not None]
         if got:  # the posterior's band: where its draws put the first doubling (at least 0.1 m/s^2 wide, to be seen)
             lo, hi = min(got), max(got)

@@ -158,3 +158,45 @@ def characterize(rec: Measurement, forcing_hz: float, wells=None, lle: bool = Tr
         out["chaotic"] = False
         out["reasons"]["chaotic"] = "no period, but no Lyapunov exponent to show sensitivity either"
     return out
+
+
+MAP_POINCARE_POINTS = 32
+"""Poincare points kept per record of a bifurcation map (the last ones: the steadiest)."""
+
+
+def map_point(rec: Measurement, forcing_hz: float, wells=None) -> dict[str, Any]:
+    """One record of a stepped harmonic campaign as a point of the bifurcation map (seed Figure 4): the
+    forcing's amplitude measured from the input (its harmonic at ``forcing_hz`` by least squares: m/s^2
+    for base excitation, N for a force), the period, regime, branch amplitudes and the last
+    ``MAP_POINCARE_POINTS`` Poincare z (phase 0); no Lyapunov exponent (a map's records are many)."""
+    from .periodicity import forcing_phase
+
+    c = characterize(rec, forcing_hz, wells, lle=False)
+    amplitude, _ = forcing_phase(rec.u, rec.t - rec.t0, forcing_hz)
+    return {
+        "amplitude": amplitude,
+        "period": c["period"],
+        "regime": c["regime"],
+        "chaotic": c["chaotic"],
+        "amplitudes": c["amplitudes"],
+        "poincare_z": [float(v) for v in np.asarray(c["poincare_z"])[-MAP_POINCARE_POINTS:]],
+        "reason": c["reasons"].get("period"),
+    }
+
+
+def map_sequence(points: list[dict[str, Any]]) -> list[list]:
+    """A sweep's regimes in its order: [label, first amplitude, last amplitude] runs, the label ``P<n>``
+    for period n or ``chaos`` where no period was found."""
+    seq: list[list] = []
+    for p in points:
+        label = "chaos" if p["period"] is None else f"P{p['period']}"
+        if not seq or seq[-1][0] != label:
+            seq.append([label, p["amplitude"], p["amplitude"]])
+        else:
+            seq[-1][2] = p["amplitude"]
+    return seq
+
+
+def first_period_2(points: list[dict[str, Any]]) -> float | None:
+    """The first amplitude of a sweep whose response has a period of 2 or more forcing cycles."""
+    return next((float(p["amplitude"]) for p in points if p["period"] is not None and p["period"] >= 2), None)

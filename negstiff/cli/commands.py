@@ -7,7 +7,7 @@ import dataclasses
 import json
 import sys
 from pathlib import Path
-from typing import Sequence
+from typing import Any, Sequence
 
 import numpy as np
 
@@ -252,27 +252,41 @@ def cmd_discrepancy(args) -> int:
     return 0
 
 
+def parse_wells(text: str | None) -> tuple[float, ...] | None:
+    """``--wells z_minus,z_plus`` (or z_minus,z_0,z_plus) [m], increasing; None when not given."""
+    if not text:
+        return None
+    try:
+        wells = tuple(float(x) for x in text.split(","))
+        if len(wells) not in (2, 3) or not all(np.isfinite(wells)) or list(wells) != sorted(wells):
+            raise ValueError
+    except ValueError:
+        raise InputError(f"--wells {text!r}: give z_minus,z_plus or z_minus,z_0,z_plus in m") from None
+    return wells
+
+
+def rest_wells(rec) -> tuple[float, float] | None:
+    """The rest positions a record's metadata states (``z_minus_rest``, ``z_plus_rest``), or None."""
+    try:
+        return float(rec.meta["z_minus_rest"]), float(rec.meta["z_plus_rest"])
+    except (KeyError, ValueError):
+        return None
+
+
 def cmd_characterize(args) -> int:
     from negstiff.inference.characterize import characterize
     from negstiff.inference.measurement import load
     from negstiff.inference.nsi import well_guesses
 
+    given = parse_wells(args.wells)  # the options before any work
     rec = load(args.data, columns=args.columns, fs=args.fs)
     if args.signal != "z":
         col = getattr(rec, args.signal, None)
         if col is None:
             raise InputError(f"{args.data}: no column {args.signal!r} to analyse (choose z, y, z_dot or base_disp)")
         rec = dataclasses.replace(rec, z=col)
-    if args.wells:
-        try:
-            wells = tuple(float(x) for x in args.wells.split(","))
-            if len(wells) not in (2, 3) or not all(np.isfinite(wells)) or list(wells) != sorted(wells):
-                raise ValueError
-        except ValueError:
-            raise InputError(f"--wells {args.wells!r}: give z_minus,z_plus or z_minus,z_0,z_plus in m") from None
-    elif "z_minus_rest" in rec.meta and "z_plus_rest" in rec.meta:
-        wells = (float(rec.meta["z_minus_rest"]), float(rec.meta["z_plus_rest"]))
-    else:
+    wells = given or rest_wells(rec)
+    if wells is None:
         try:
             wells = well_guesses(rec)
         except ValueError:
@@ -426,6 +440,60 @@ def frf_comparison(result: dict, frfs: list[tuple[str, float, str | None]]) -> l
             }
         )
     return out
+
+
+def cmd_map(args) -> int:
+    from negstiff.experiments.characterization import map_figure
+    from negstiff.files import atomic_path
+    from negstiff.inference.characterize import first_period_2, map_point, map_sequence
+    from negstiff.inference.measurement import load
+
+    from .campaign import campaign_records, continuation_vs_map, read_nfrc_results
+
+    given = parse_wells(args.wells)  # the options and every input file's kind before any work
+    entries, forcing_hz = campaign_records(args.data, args.forcing_hz)
+    overlays = read_nfrc_results(args.nfrc, forcing_hz)
+    say(args, f"map: {len(entries)} record(s) at {forcing_hz:g} Hz")
+    points, wells, input_name = [], given, None
+    for e in entries:
+        rec = load(e["file"], columns=args.columns, fs=args.fs)
+        if not forcing_hz < rec.fs / 2:
+            raise InputError(
+                f"--forcing-hz {forcing_hz:g}: above the Nyquist frequency of {e['file']} ({rec.fs / 2:g} Hz)"
+            )
+        if input_name not in (None, rec.input_name):
+            raise InputError(f"{e['file']}: input {rec.input_name}, the campaign's records before it: {input_name}")
+        input_name = rec.input_name
+        wells = wells or rest_wells(rec)
+        points.append({**e, **map_point(rec, forcing_hz, wells)})
+        say(args, f"  {Path(e['file']).name}: amplitude {points[-1]['amplitude']:.4g}, period {points[-1]['period']}")
+    sweeps: dict[str, Any] = {}
+    for p in points:
+        sweeps.setdefault(" ".join(x for x in (p["start"], p["direction"]) if x) or "records", []).append(p)
+    res: dict[str, Any] = {
+        "forcing_hz": forcing_hz,
+        "input": input_name,
+        "wells_used": wells,
+        "points": points,
+        "sweeps": {k: {"sequence": map_sequence(v), "first_period_2": first_period_2(v)} for k, v in sweeps.items()},
+    }
+    res["continuations"] = [continuation_vs_map(o, points) for o in overlays]
+    if wells is None:
+        res["warnings"] = ["no rest positions (--wells or the records' metadata): a cross-well response is not told "
+                           "from an in-well one; the regime is the side of the median"]  # fmt: skip
+    fig = map_figure(points, overlays, "m/s^2" if input_name == "base_acc" else "N")
+    png = Path(args.out).with_suffix(".png")
+    res["figure"] = png.name
+    import matplotlib.pyplot as plt
+
+    with atomic_path(png) as tmp:
+        fig.savefig(tmp, format="png", dpi=110)
+    plt.close(fig)
+    write_json(args.out, res)
+    warn(args, res.get("warnings", []))
+    seen = "; ".join(f"{k}: first period 2 at {v['first_period_2']}" for k, v in res["sweeps"].items())
+    say(args, f"wrote {args.out} and {png.name}: {seen}")
+    return 0
 
 
 def cmd_update(args) -> int:

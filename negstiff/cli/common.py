@@ -213,7 +213,7 @@ def say_refinement(args, info: dict | None) -> None:
                f"{fmt(a)} -> {fmt(b)} rms, {info['reason'].split(':')[0]}")  # fmt: skip
 
 
-INPUT_ARGS = ("data", "model", "input", "targets", "frf", "start")
+INPUT_ARGS = ("data", "model", "input", "targets", "frf", "start", "nfrc")
 
 
 OUTPUT_ARGS = ("out", "idata")
@@ -237,7 +237,7 @@ def check_paths(args) -> None:
         targets = [out]
         if args.command == "rig" and out.suffix:
             targets.append(out.with_name(out.stem + ".truth.json"))
-        if args.command in ("frf", "nfrc"):
+        if args.command in ("frf", "nfrc", "map"):
             targets.append(out.with_suffix(".png"))
         for t in targets:
             if t in inputs:

@@ -374,6 +374,29 @@ def _characterize(sub, common: argparse.ArgumentParser, data_opts: argparse.Argu
     chz.set_defaults(func=c.cmd_characterize)
 
 
+def _map(sub, common: argparse.ArgumentParser, data_opts: argparse.ArgumentParser) -> None:
+    mp = sub.add_parser(
+        "map",
+        parents=[common, data_opts],
+        help="the bifurcation map of a stepped harmonic campaign (seed Figure 4), with continuations over it",
+        description="Every record of a stepped harmonic campaign at one forcing frequency (files in the order "
+        "given, or a folder: its index.json, as `negstiff rig campaign` writes it, else its measurement files by "
+        "name) analysed for its period, regime and Poincare z (phase 0) against the forcing amplitude measured "
+        "from its input; the sweeps' sequences and first period 2; `negstiff nfrc` results in amplitude at the "
+        "same frequency drawn over the map, each model's predicted first doubling beside the map's. Writes R.json "
+        "and R.png.",
+    )
+    mp.add_argument("data", nargs="+", help="measurement files of the campaign, or its folder")
+    mp.add_argument("--forcing-hz", type=POSITIVE, help="forcing frequency [Hz] (default: the folder's index.json)")
+    mp.add_argument(
+        "--wells",
+        help="z_minus,z_plus (or z_minus,z_0,z_plus) [m] for the regime; default: the records' rest positions",
+    )
+    mp.add_argument("--nfrc", action="append", help="a `negstiff nfrc` result to draw over the map (repeatable)")
+    mp.add_argument("-o", "--out", required=True, help="result JSON (the figure beside it, .png)")
+    mp.set_defaults(func=c.cmd_map)
+
+
 def _update(sub, common: argparse.ArgumentParser, data_opts: argparse.ArgumentParser) -> None:
     upd = sub.add_parser(
         "update",
@@ -456,6 +479,7 @@ def build_parser() -> argparse.ArgumentParser:
     _posterior(sub, common, data_opts)
     _discrepancy(sub, common, data_opts)
     _characterize(sub, common, data_opts)
+    _map(sub, common, data_opts)
     _update(sub, common, data_opts)
     _reproduce(sub, common, data_opts)
     return p

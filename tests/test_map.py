@@ -1,0 +1,121 @@
+"""negstiff map: the bifurcation map of a stepped harmonic campaign (seed Figure 4) from records a lab
+writes, with continuations drawn over it.
+
+The campaign is written here with scipy's DOP853 (not the suite's simulator), as a lab runs it: the
+amplitude stepped without stopping the table (the state carried over), each step's record a CSV of its
+own with a rounded time column and sensor noise, no index."""
+
+import json
+
+import numpy as np
+import pytest
+from scipy.integrate import solve_ivp
+
+from negstiff.cli import main
+from negstiff.models import SEED_LIKE_CUBIC
+
+F_HZ = 9.0
+FS = 512.0
+AMPS = (12.8, 13.0, 13.2, 13.4, 13.6)
+"""Around the seed-like cubic's first doubling from z_plus (13.33 m/s^2 by continuation and by the
+suite's own stepped sweep, tests/test_continuation.py)."""
+
+
+def _campaign(folder, noise=1e-5, settle=150, keep=48, seed=0):
+    m = SEED_LIKE_CUBIC
+    rng = np.random.default_rng(seed)
+
+    def rhs(t, x, a):
+        z, v = x
+        k = ((m.k3 * z + m.k2) * z - m.k1) * z + m.k0
+        return [v, -a * np.sin(2 * np.pi * F_HZ * t) - (m.c * v + m.c_nl * v * abs(v) + k) / m.m]
+
+    x, T = [m.equilibria().z_plus, 0.0], 1 / F_HZ
+    folder.mkdir()
+    for i, a in enumerate(AMPS):
+        sol = solve_ivp(rhs, (0, settle * T), x, args=(a,), method="DOP853", rtol=1e-9, atol=1e-12, max_step=T / 16)
+        t = np.arange(int(round(keep * T * FS))) / FS
+        rec = solve_ivp(rhs, (settle * T, settle * T + t[-1]), sol.y[:, -1], args=(a,), method="DOP853",
+                        rtol=1e-9, atol=1e-12, max_step=T / 16, t_eval=settle * T + t, dense_output=True)  # fmt: skip
+        x = rec.sol(settle * T + keep * T)  # the table goes on: the next step starts where this one ends
+        u = a * np.sin(2 * np.pi * F_HZ * (settle * T + t))
+        z = rec.y[0] + noise * rng.standard_normal(t.size)
+        rows = "".join(f"{tt:.6f},{uu:.6f},{zz:.7f}\n" for tt, uu, zz in zip(t, u, z))
+        (folder / f"step{i:02d}_{a:g}.csv").write_text("t,base_acc,z\n" + rows)
+
+
+def test_the_map_of_a_lab_campaign_sees_the_doubling_the_continuation_predicts(tmp_path):
+    # Fact: the first stepped amplitude whose response has period 2 is the first step above the model's
+    # first period doubling (13.33 m/s^2): the map's first period 2 is 13.4, and the continuation of the
+    # same model, drawn over the map, puts its doubling within the step below it. The amplitudes the map
+    # reads from the inputs are the commanded ones (the input is a clean sine: within 1e-5).
+    _campaign(tmp_path / "campaign")
+    nf = tmp_path / "nf.json"
+    model = tmp_path / "m.json"
+    model.write_text(json.dumps(SEED_LIKE_CUBIC.to_dict()))
+    assert main(["nfrc", str(model), "--freq", "9", "--amplitude", "12:15", "--well", "plus", "--max-period", "1",
+                 "-o", str(nf), "--quiet"]) == 0  # fmt: skip
+    out = tmp_path / "map.json"
+    assert main(["map", str(tmp_path / "campaign"), "--forcing-hz", "9", "--nfrc", str(nf), "-o", str(out),
+                 "--quiet"]) == 0  # fmt: skip
+    r = json.loads(out.read_text())
+    assert np.allclose([p["amplitude"] for p in r["points"]], AMPS, rtol=1e-5)
+    assert [p["period"] for p in r["points"]] == [1, 1, 1, 2, 2]
+    assert r["sweeps"]["records"]["first_period_2"] == pytest.approx(13.4, rel=1e-4)
+    c = r["continuations"][0]
+    assert c["map_first_period_2"] == pytest.approx(13.4, rel=1e-4)
+    assert 13.2 < c["first_doubling"] <= 13.4
+    assert (tmp_path / "map.png").stat().st_size > 1000 and r["warnings"], "no rest positions: said"
+
+
+def test_a_rig_campaign_folder_is_read_by_its_index(tmp_path):
+    # The rig's campaign folder: its index.json gives the forcing frequency, the starting well and the
+    # direction of each sweep, so the map groups them (up and down from z_plus here)
+    camp = tmp_path / "camp"
+    assert main(["rig", "campaign", "--model", str(_model(tmp_path)), "--amplitudes", "4:6:1", "--direction", "both",
+                 "--settle-periods", "20", "--periods", "24", "-o", str(camp), "--quiet"]) == 0  # fmt: skip
+    out = tmp_path / "map.json"
+    assert main(["map", str(camp), "-o", str(out), "--quiet"]) == 0
+    r = json.loads(out.read_text())
+    assert r["forcing_hz"] == 9.0 and set(r["sweeps"]) == {"plus up", "plus down"}
+    assert r["wells_used"] is not None, "the rig's records carry their rest positions"
+    assert all(p["period"] == 1 and p["regime"] == "in-well-plus" for p in r["points"])
+
+
+def _model(tmp_path):
+    p = tmp_path / "model.json"
+    p.write_text(json.dumps(SEED_LIKE_CUBIC.to_dict()))
+    return p
+
+
+@pytest.mark.parametrize(
+    "case, message",
+    [
+        ("nfrc in frequency", "a continuation in amplitude at 9 Hz is needed"),
+        ("no files", "no measurement files"),
+        ("no frequency", "no forcing frequency"),
+        ("bad wells", "--wells"),
+    ],
+)
+def test_bad_map_input_gets_one_line_and_exit_2_before_any_work(tmp_path, capsys, case, message):
+    folder = tmp_path / "f"
+    folder.mkdir()
+    (folder / "a.csv").write_text("t,base_acc,z\n" + "".join(f"{i / 512:.6f},{np.sin(i / 9):.4f},0.02\n"
+                                                              for i in range(2048)))  # fmt: skip
+    args = ["map", str(folder), "--forcing-hz", "9", "-o", str(tmp_path / "o.json"), "--quiet"]
+    if case == "nfrc in frequency":
+        nf = tmp_path / "nf.json"
+        nf.write_text(json.dumps({"settings": {"parameter": "f_hz", "fixed": 3.0, "well": "plus"}, "branches": [],
+                                  "bifurcations": []}))  # fmt: skip
+        args += ["--nfrc", str(nf)]
+    elif case == "no files":
+        (folder / "a.csv").unlink()
+    elif case == "no frequency":
+        args.remove("--forcing-hz")
+        args.remove("9")
+    else:
+        args += ["--wells", "0.02,-0.03"]
+    assert main(args) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and message in err[0], err
+    assert not (tmp_path / "o.json").exists() and not (tmp_path / "o.png").exists()
