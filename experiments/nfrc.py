@@ -284,11 +284,11 @@ def _reading(res: dict[str, Any], models: dict[str, Any]) -> str:
     )
 
 
-def draw_branches(ax, branches: list[dict[str, Any]], color, label: str | None = None) -> None:
+def draw_branches(ax, branches: list[dict[str, Any]], color, label: str | None = None, x: str = "amplitude") -> None:
     """A continuation's branches on a bifurcation map's axes: each orbit's Poincare z [mm] against its
-    amplitude, solid where stable, dashed where not; ``label`` on the first period-1 branch's line."""
+    amplitude (or ``x``), solid where stable, dashed where not; ``label`` on the first period-1 branch's line."""
     for br in branches:
-        a = np.array([q["amplitude"] for q in br["points"]])
+        a = np.array([q[x] for q in br["points"]])
         stable = np.array([q["stable"] for q in br["points"]])
         pz = np.array([q["poincare_z"] for q in br["points"]]) * 1e3
         for k in range(pz.shape[1]):

@@ -184,16 +184,16 @@ def map_point(rec: Measurement, forcing_hz: float, wells=None) -> dict[str, Any]
     }
 
 
-def map_sequence(points: list[dict[str, Any]]) -> list[list]:
-    """A sweep's regimes in its order: [label, first amplitude, last amplitude] runs, the label ``P<n>``
-    for period n or ``chaos`` where no period was found."""
+def map_sequence(points: list[dict[str, Any]], key: str = "amplitude") -> list[list]:
+    """A sweep's regimes in its order: [label, first, last value of ``key``] runs, the label ``P<n>`` for
+    period n or ``chaos`` where no period was found."""
     seq: list[list] = []
     for p in points:
         label = "chaos" if p["period"] is None else f"P{p['period']}"
         if not seq or seq[-1][0] != label:
-            seq.append([label, p["amplitude"], p["amplitude"]])
+            seq.append([label, p[key], p[key]])
         else:
-            seq[-1][2] = p["amplitude"]
+            seq[-1][2] = p[key]
     return seq
 
 

@@ -23,32 +23,23 @@ Every record carries its truth (system, effects, sensors, excitation, seed), wri
 
 from __future__ import annotations
 
-import io
-import json
 import math
-from dataclasses import asdict, dataclass, field
-from pathlib import Path
+from dataclasses import asdict, dataclass
 from typing import Any, Sequence
 
 import numpy as np
 from scipy import fft as sp_fft
 from scipy import signal
 
-from negstiff.files import atomic_path, write_text
-
-from .constants import G
 from .device import AS_BUILT, Device
 from .equation import Model
+from .records import RigError, RigRecord, write_lab_format  # noqa: F401 (RigError, write_lab_format: their home before records.py)
 from .simulator import antialias_fir, simulate_batch
 from .table import integrate_twice, table_motion
 
 TAIL_S = 4.0
 """Seconds acquired after the last record and discarded, as the settling time is before it: the
 double integration's end effects stay out of the records."""
-
-
-class RigError(ValueError):
-    """The rig cannot produce the requested record (bad settings, or the device left its stroke)."""
 
 
 @dataclass(frozen=True)
@@ -91,119 +82,6 @@ class Sensors:
     def noiseless(cls) -> "Sensors":
         """Perfect sensors (no noise, no bias): for checks that need the exact response."""
         return cls(laser_noise=0.0, acc_noise=0.0, acc_bias=0.0, velocity_noise=0.0)
-
-
-@dataclass
-class RigRecord:
-    """One measured record: columns at ``fs``, metadata lines, and the truth behind it.
-
-    ``columns`` holds ``t, base_acc`` and the response sensor's columns (``Sensors.response``; the
-    seed's laser: ``y, base_disp, z``), by the contract's names. ``true`` holds the
-    noise-free ``z``, ``z_dot``, ``base_acc`` and ``base_disp`` at the same samples (never written
-    to the measurement file: a lab does not have them; tests and reports use them as the truth).
-    """
-
-    fs: float
-    columns: dict[str, np.ndarray]
-    meta: dict[str, Any]
-    truth: dict[str, Any]
-    true: dict[str, np.ndarray] = field(repr=False, default_factory=dict)
-
-    def export_columns(self, acc_unit: str = "m/s^2") -> dict[str, np.ndarray]:
-        """The columns as written: accelerations in g are named ``<name>_g`` (a lab's export; map
-        them back with ``--columns base_acc=base_acc_g*9.81``)."""
-        if acc_unit == "m/s^2":
-            return dict(self.columns)
-        if acc_unit != "g":
-            raise RigError(f"acceleration unit must be 'm/s^2' or 'g', got {acc_unit!r}")
-        return {
-            (f"{k}_g" if k in ("base_acc", "y_acc") else k): (v / G if k in ("base_acc", "y_acc") else v)
-            for k, v in self.columns.items()
-        }
-
-    def write(self, path: str | Path, time_decimals: int | None = None, acc_unit: str = "m/s^2") -> Path:
-        """Write the record (CSV, or NPZ by suffix) and ``<stem>.truth.json`` beside it, atomically.
-
-        ``time_decimals`` prints the CSV's time column with that many fixed decimals (a lab export);
-        ``acc_unit="g"`` writes accelerations in g. The record itself does not name its truth file, so
-        the same seed gives the same bytes whatever the file is called."""
-        path = Path(path)
-        truth_path = path.with_name(path.stem + ".truth.json")
-        meta = dict(self.meta)
-        cols = self.export_columns(acc_unit)
-        if acc_unit == "g":
-            meta["units"] = "s, g (accelerations), m, m/s"
-        if path.suffix.lower() == ".npz":
-            with atomic_path(path) as tmp:
-                with open(tmp, "wb") as fh:
-                    np.savez(fh, fs=self.fs, **cols, meta=json.dumps(meta))
-        elif path.suffix.lower() in (".uff", ".unv", ".tdms"):
-            with atomic_path(path) as tmp:
-                write_lab_format(tmp, path.suffix.lower(), cols, self.fs, meta, acc_unit)
-        elif path.suffix.lower() == ".csv":
-            buf = io.StringIO()
-            for k, v in meta.items():
-                buf.write(f"# {k}: {v}\n")
-            data = np.column_stack(list(cols.values()))
-            fmt = ["%.10g"] * len(cols)
-            if time_decimals is not None:
-                if not 0 <= time_decimals <= 12:
-                    raise RigError(f"time decimals must be 0..12, got {time_decimals}")
-                fmt[0] = f"%.{int(time_decimals)}f"
-            np.savetxt(buf, data, delimiter=",", fmt=fmt, header=",".join(cols), comments="")
-            write_text(path, buf.getvalue())
-        else:
-            raise RigError(f"{path}: the rig writes .csv, .npz, .uff (.unv) or .tdms records")
-        write_text(truth_path, json.dumps(self.truth, indent=2) + "\n")
-        return path
-
-
-UNITS = {"t": "s", "base_acc": "m/s^2", "y_acc": "m/s^2", "y": "m", "base_disp": "m", "z": "m", "z_dot": "m/s"}
-"""SI unit of each record column (a ``_g`` suffix: the acceleration in g)."""
-
-
-def write_lab_format(path: Path, kind: str, cols: dict[str, np.ndarray], fs: float, meta: dict, acc_unit: str):
-    """A record as a lab's front end writes it, through the field's libraries: a Universal File of
-    type-58 time responses, one per channel (pyuff; ASCII, as pyuff's binary 58b of this version did not
-    read back its own output), or a TDMS file with one group of waveform channels and the record's
-    metadata as file properties (npTDMS). The time column is not a channel: the time step is."""
-
-    def unit(name: str) -> str:
-        return "g" if name.endswith("_g") else UNITS.get(name, "")
-
-    chans = {k: v for k, v in cols.items() if k != "t"}
-    if kind == ".tdms":
-        from nptdms import ChannelObject, GroupObject, RootObject, TdmsWriter
-
-        with TdmsWriter(str(path)) as w:
-            objs = [RootObject(properties={k: str(v) for k, v in meta.items()}), GroupObject("negstiff")]
-            objs += [
-                ChannelObject("negstiff", k, np.asarray(v, float), properties={"wf_increment": 1.0 / fs,
-                              "wf_start_offset": 0.0, "unit_string": unit(k)})
-                for k, v in chans.items()
-            ]  # fmt: skip
-            w.write_segment(objs)
-        return
-    import pyuff
-
-    x = np.arange(next(iter(chans.values())).size) / fs
-    uff = pyuff.UFF(str(path))
-    for i, (k, v) in enumerate(chans.items()):
-        zero = {
-            f"{a}_{b}": 0
-            for a in ("orddenom", "z_axis")
-            for b in ("spec_data_type", "len_unit_exp", "force_unit_exp", "temp_unit_exp")
-        }
-        ds = pyuff.prepare_58(
-            binary=0, id1=k, id2=str(meta.get("source", "")), func_type=1, rsp_node=i + 1, rsp_dir=3, ref_node=0,
-            ref_dir=0, data=np.asarray(v, float), x=x, ord_data_type=4, num_pts=x.size, abscissa_spacing=1,
-            abscissa_min=0.0, abscissa_inc=1.0 / fs, abscissa_spec_data_type=17, abscissa_len_unit_exp=0,
-            abscissa_force_unit_exp=0, abscissa_temp_unit_exp=0, abscissa_axis_units_lab="s",
-            ordinate_spec_data_type=0, ordinate_len_unit_exp=0, ordinate_force_unit_exp=0, ordinate_temp_unit_exp=0,
-            ordinate_axis_units_lab=unit(k), orddenom_axis_units_lab="", z_axis_axis_units_lab="", z_axis_value=0.0,
-            **zero,
-        )  # fmt: skip
-        uff.write_sets(ds, mode="overwrite" if i == 0 else "add")
 
 
 def system_from_dict(d: dict[str, Any]) -> Device | Model:
@@ -431,16 +309,69 @@ class Rig:
             durations,
             excitation,
             sens_rng,
-            amplitude_lists=[list(map(float, a)) for a in amplitude_lists],
+            steps=[[{"amplitude_m_s2": float(a), "step": j} for j, a in enumerate(amps)] for amps in amplitude_lists],
         )
+
+    def stepped_sines(
+        self,
+        freq_lists: Sequence[Sequence[float]],
+        amplitude: float,
+        starts: Sequence[str],
+        settle_periods: int = 100,
+        record_periods: int = 100,
+    ) -> list[list[RigRecord]]:
+        """Stepped-sine tests, as a lab measures a nonlinear frequency response: the table's acceleration
+        ``amplitude`` [m/s^2] x sin(phase), its frequency stepped through each list without stopping the
+        table (the phase continuous, each new frequency reached by a raised-cosine ramp over two periods of
+        the slower one); one record per step, ``record_periods`` of its own period after ``settle_periods``;
+        all sweeps in one batched simulation."""
+        if len(freq_lists) != len(starts) or not all(len(f) for f in freq_lists):
+            raise RigError("each sweep needs a starting well and at least one frequency")
+        if any(not (0 < f < self.fs / 4) for fl in freq_lists for f in fl):
+            raise RigError(f"forcing frequencies must lie in (0, fs/4) = (0, {self.fs / 4:g}) Hz")
+        if not (amplitude >= 0 and math.isfinite(amplitude)):
+            raise RigError(f"the amplitude must be finite and >= 0, got {amplitude}")
+        if settle_periods < 2 or record_periods < 2:
+            raise RigError("need at least 2 settling and 2 recorded periods per step")
+        fsim = self.fs * self.oversample
+        exc_rng, sens_rng = self._streams()
+        phase0 = exc_rng.uniform(0, 2 * np.pi)
+        accs, settles, durations = [], [], []
+        for freqs in freq_lists:
+            lengths = [int(round((settle_periods + record_periods) / f * self.fs)) * self.oversample for f in freqs]
+            edges = np.concatenate([[0], np.cumsum(lengths)])
+            f_inst = np.repeat(np.asarray(freqs, float), lengths)
+            for k in range(1, len(freqs)):  # raised-cosine transitions between the steps' frequencies
+                r = int(round(2 / min(freqs[k - 1], freqs[k]) * fsim))
+                ramp = 0.5 - 0.5 * np.cos(np.pi * np.arange(r) / r)
+                f_inst[edges[k] : edges[k] + r] = freqs[k - 1] + (freqs[k] - freqs[k - 1]) * ramp
+            env = _smooth_steps([amplitude], f_inst.size, int(round(2 / freqs[0] * fsim)))
+            n_fast = sp_fft.next_fast_len(f_inst.size + int(TAIL_S * fsim), real=True)  # see random()
+            f_inst = np.pad(f_inst, (0, n_fast - f_inst.size), mode="edge")
+            env = np.pad(env, (0, n_fast - env.size), mode="edge")
+            accs.append(env * np.sin(phase0 + 2 * np.pi * np.cumsum(f_inst) / fsim))
+            settles.append([edges[k] / fsim + settle_periods / f for k, f in enumerate(freqs)])
+            durations.append([record_periods / f for f in freqs])
+        excitation = {
+            "type": "harmonic",
+            "campaign": "stepped sine",
+            "settle_periods": settle_periods,
+            "record_periods": record_periods,
+            "phase_rad": phase0,
+        }
+        steps = [[{"freq_hz": float(f), "amplitude_m_s2": float(amplitude), "step": j} for j, f in enumerate(fl)]
+                 for fl in freq_lists]  # fmt: skip
+        return self._run(accs, list(starts), settles, durations, excitation, sens_rng, steps=steps)
 
     # --- the measurement chain ---------------------------------------------------------------
     def _streams(self) -> tuple[np.random.Generator, np.random.Generator]:
         exc, sens = np.random.SeedSequence(self.seed).spawn(2)
         return np.random.default_rng(exc), np.random.default_rng(sens)
 
-    def _run(self, accs, starts, settles, durations, excitation, sens_rng, amplitude_lists=None):
-        """Simulate every excitation in one batch, then measure and cut the records."""
+    def _run(self, accs, starts, settles, durations, excitation, sens_rng, steps=None):
+        """Simulate every excitation in one batch, then measure and cut the records: sweep i's j-th record
+        starts at ``settles[i][j]`` and lasts ``durations[i]`` (or ``durations[i][j]``) seconds; ``steps[i][j]``
+        is added to its excitation (a campaign's per-step values: amplitude, frequency, step)."""
         fsim = self.fs * self.oversample
         s = self.sensors
         n = max(a.size for a in accs)
@@ -486,9 +417,10 @@ class Rig:
                 chans = {k: signal.resample_poly(v, 1, q, window=b) for k, v in chans.items()}
             b_est = integrate_twice(chans["base_acc"], self.fs, s.highpass_hz, s.integration)
             sweep_out = []
-            for j, t0 in enumerate(np.atleast_1d(settles[i])):
+            lasts = np.broadcast_to(np.atleast_1d(durations[i]), np.atleast_1d(settles[i]).shape)
+            for j, (t0, last) in enumerate(zip(np.atleast_1d(settles[i]), lasts)):
                 k0 = int(round(t0 * self.fs))
-                k1 = k0 + int(round(durations[i] * self.fs))
+                k1 = k0 + int(round(last * self.fs))
                 sl = slice(k0, k1)
                 cols = {"t": np.arange(k1 - k0) / self.fs, "base_acc": chans["base_acc"][sl]}
                 if s.response == "displacement":
@@ -504,13 +436,10 @@ class Rig:
                     "base_acc": chans["acc_true"][sl],
                     "base_disp": chans["b_true"][sl],
                 }
-                exc = dict(excitation, start_well=st, record_start_s=k0 / self.fs)
-                if amplitude_lists is not None:
-                    exc["amplitude_m_s2"] = amplitude_lists[i][j]
-                    exc["step"] = j
+                exc = dict(excitation, start_well=st, record_start_s=k0 / self.fs, **(steps[i][j] if steps else {}))
                 sweep_out.append(self._record(cols, true, exc))
             out.append(sweep_out)
-        return out if amplitude_lists is not None else [r[0] for r in out]
+        return out if steps is not None else [r[0] for r in out]
 
     def _response_channels(self, z_dot, acc_true, fsim, rng) -> dict[str, np.ndarray]:
         """The vibrometer's relative velocity or the moving part's accelerometer, at the fine rate

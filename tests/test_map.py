@@ -68,6 +68,64 @@ def test_the_map_of_a_lab_campaign_sees_the_doubling_the_continuation_predicts(t
     assert (tmp_path / "map.png").stat().st_size > 1000 and r["warnings"], "no rest positions: said"
 
 
+WN = 2 * np.pi * 5.0
+DUFFING = {"m": 1.0, "k0": 0.0, "k1": -(WN**2), "k2": 0.0, "k3": 4e6, "c": 2 * 0.02 * WN, "c_nl": 0.0}
+"""A single-well hardening Duffing oscillator (5 Hz, 2 % damping): at 3 m/s^2 its response curve bends
+right, folding at 6.27 and 10.90 Hz (tests/test_continuation.py checks those folds)."""
+
+
+def _stepped_sine(folder, freqs, direction, a=3.0, settle=60, keep=24, seed=1):
+    """A stepped-sine sweep with scipy's DOP853, the table not stopped between steps (the state carried
+    over; each step from phase 0 of its own forcing): a CSV a step, its frequency in its metadata."""
+    d, rng = DUFFING, np.random.default_rng(seed)
+
+    def rhs(t, x, f):
+        z, v = x
+        return [v, -a * np.sin(2 * np.pi * f * t) - (d["c"] * v + d["k3"] * z**3 - d["k1"] * z) / d["m"]]
+
+    x = [0.0, 0.0]
+    for i, f in enumerate(freqs):
+        T = 1 / f
+        t = np.arange(int(round(keep * T * FS))) / FS
+        sol = solve_ivp(rhs, (0, settle * T + keep * T), x, args=(f,), method="DOP853", rtol=1e-9, atol=1e-12,
+                        max_step=T / 16, t_eval=settle * T + t, dense_output=True)  # fmt: skip
+        x = sol.sol(settle * T + keep * T)  # the next step starts where this one ends: at phase 0
+        u = a * np.sin(2 * np.pi * f * (settle * T + t))
+        z = sol.y[0] + 1e-6 * rng.standard_normal(t.size)
+        rows = "".join(f"{tt:.6f},{uu:.6f},{zz:.8f}\n" for tt, uu, zz in zip(t, u, z))
+        (folder / f"{direction}{i:02d}.csv").write_text(f"# forcing_hz: {f:g}\nt,base_acc,z\n" + rows)
+
+
+def test_a_stepped_sine_jumps_just_past_the_continued_folds(tmp_path):
+    # Fact: sweeping up, the response stays on the resonant branch until its fold (10.90 Hz) and drops;
+    # sweeping down, it stays on the low branch until the lower fold (6.27 Hz) and climbs. The jump is
+    # read between the last step before it and the first after: each continued fold lies within that
+    # 0.1 Hz step.
+    up, down = tmp_path / "up", tmp_path / "down"
+    up.mkdir()
+    down.mkdir()
+    # 0.5 Hz steps to 0.5 Hz from a fold, 0.1 Hz steps across it (a coarse step near a fold knocks the
+    # response off its branch early: 0.25 Hz steps dropped at 10.5-10.75 Hz, before the 10.9 Hz fold);
+    # up from below the hysteresis (the resonant branch), down from inside it (the low branch)
+    _stepped_sine(up, np.r_[np.arange(5.5, 10.3, 0.5), np.arange(10.4, 11.25, 0.1)], "up")
+    _stepped_sine(down, np.r_[7.5, 7.0, np.arange(6.7, 5.85, -0.1)], "down")
+    model = tmp_path / "duffing.json"
+    model.write_text(json.dumps(DUFFING))
+    nf = tmp_path / "nf.json"
+    assert main(["nfrc", str(model), "--freq", "4:12", "--amplitude", "3", "--max-period", "1", "-o", str(nf),
+                 "--quiet"]) == 0  # fmt: skip
+    folds = sorted(b["f_hz"] for b in json.loads(nf.read_text())["bifurcations"] if b["type"] == "fold")
+    for folder, fold in ((up, folds[1]), (down, folds[0])):
+        out = tmp_path / f"{folder.name}.json"
+        assert main(["map", str(folder), "--nfrc", str(nf), "-o", str(out), "--quiet"]) == 0
+        r = json.loads(out.read_text())
+        assert r["axis"] == "f_hz" and r["forcing_hz"] is None
+        jump = r["sweeps"]["records"]["jump_hz"]
+        assert abs(jump - fold) <= 0.05 + 1e-9, (folder.name, jump, fold)
+        assert r["continuations"][0]["folds"] == pytest.approx(folds)
+        assert r["continuations"][0]["map_jumps_hz"]["records"] == jump
+
+
 def test_a_rig_campaign_folder_is_read_by_its_index(tmp_path):
     # The rig's campaign folder: its index.json gives the forcing frequency, the starting well and the
     # direction of each sweep, so the map groups them (up and down from z_plus here)
@@ -77,9 +135,24 @@ def test_a_rig_campaign_folder_is_read_by_its_index(tmp_path):
     out = tmp_path / "map.json"
     assert main(["map", str(camp), "-o", str(out), "--quiet"]) == 0
     r = json.loads(out.read_text())
-    assert r["forcing_hz"] == 9.0 and set(r["sweeps"]) == {"plus up", "plus down"}
+    assert r["axis"] == "amplitude" and r["forcing_hz"] == 9.0 and set(r["sweeps"]) == {"plus up", "plus down"}
     assert r["wells_used"] is not None, "the rig's records carry their rest positions"
     assert all(p["period"] == 1 and p["regime"] == "in-well-plus" for p in r["points"])
+
+
+def test_a_rig_stepped_sine_folder_is_a_map_in_frequency(tmp_path):
+    # 'rig campaign --freqs': each record's frequency in the index; the map's axis is the frequency, and
+    # each record's forcing amplitude, read from its input, is the commanded 3 m/s^2 (the accelerometer's
+    # noise and bias: within 1 %)
+    camp = tmp_path / "camp"
+    assert main(["rig", "campaign", "--model", str(_model(tmp_path)), "--freqs", "7:9:1", "--amplitude", "3",
+                 "--settle-periods", "20", "--periods", "24", "-o", str(camp), "--quiet"]) == 0  # fmt: skip
+    out = tmp_path / "map.json"
+    assert main(["map", str(camp), "-o", str(out), "--quiet"]) == 0
+    r = json.loads(out.read_text())
+    assert r["axis"] == "f_hz" and [p["f_hz"] for p in r["points"]] == [7.0, 8.0, 9.0]
+    assert np.allclose([p["amplitude"] for p in r["points"]], 3.0, rtol=0.01)
+    assert set(r["sweeps"]["plus up"]) == {"sequence", "jump_hz"}
 
 
 def _model(tmp_path):

@@ -11,43 +11,55 @@ from .common import InputError
 MEASUREMENT_SUFFIXES = (".csv", ".txt", ".npz", ".mat", ".uff", ".unv", ".tdms", ".lvm")
 
 
-def campaign_records(data: Sequence[str], forcing_hz: float | None) -> tuple[list[dict[str, Any]], float]:
-    """The records of a stepped campaign, each ``{"file", "start", "direction"}`` (None where unknown), and
-    its forcing frequency: the files in the order given, or one folder: its ``index.json`` (``negstiff rig
+def campaign_records(data: Sequence[str]) -> list[dict[str, Any]]:
+    """The records of a stepped campaign, each ``{"file", "start", "direction", "forcing_hz"}`` (None where
+    not known yet): the files in the order given, or one folder: its ``index.json`` (``negstiff rig
     campaign``'s: file, start_well, direction, forcing_hz), else its measurement files by name."""
     from negstiff.files import read_json
 
     folder = Path(data[0]) if len(data) == 1 and Path(data[0]).is_dir() else None
     if folder is None:
-        return [{"file": d, "start": None, "direction": None} for d in data], _forcing(forcing_hz, None, data[0])
+        return [{"file": d, "start": None, "direction": None, "forcing_hz": None} for d in data]
     index = folder / "index.json"
     if not index.is_file():
         files = sorted(p for p in folder.iterdir() if p.suffix.lower() in MEASUREMENT_SUFFIXES)
         if not files:
             raise InputError(f"{folder}: no measurement files ({', '.join(MEASUREMENT_SUFFIXES)}) and no index.json")
-        return [{"file": str(p), "start": None, "direction": None} for p in files], _forcing(forcing_hz, None, folder)
+        return [{"file": str(p), "start": None, "direction": None, "forcing_hz": None} for p in files]
     try:
-        rows = read_json(index)["records"]
-        recs = [{"file": str(folder / r["file"]), "start": r.get("start_well"), "direction": r.get("direction")}
-                for r in rows]  # fmt: skip
-        freqs = {float(r["forcing_hz"]) for r in rows if "forcing_hz" in r}
+        return [
+            {"file": str(folder / r["file"]), "start": r.get("start_well"), "direction": r.get("direction"),
+             "forcing_hz": float(r["forcing_hz"]) if "forcing_hz" in r else None}
+            for r in read_json(index)["records"]
+        ]  # fmt: skip
     except (ValueError, KeyError, TypeError, AttributeError):
         raise InputError(f"{index}: not a campaign index (records: file, start_well, direction, forcing_hz)") from None
-    if len(freqs) > 1:
-        raise InputError(f"{index}: the records have {len(freqs)} forcing frequencies; a map has one")
-    return recs, _forcing(forcing_hz, freqs.pop() if freqs else None, index)
 
 
-def _forcing(given: float | None, indexed: float | None, where) -> float:
-    if given is not None and indexed is not None and abs(given / indexed - 1) > 1e-9:
-        raise InputError(f"--forcing-hz {given:g} disagrees with {where} ({indexed:g} Hz)")
-    if given is None and indexed is None:
-        raise InputError(f"{where}: no forcing frequency: give --forcing-hz")
-    return float(given if given is not None else indexed)
+def forcing_frequencies(entries: list[dict[str, Any]], recs, given: float | None) -> list[float]:
+    """Each record's forcing frequency [Hz]: the index's, else its metadata's ``forcing_hz``, else
+    ``given`` (--forcing-hz); a given one that disagrees with the file's is refused."""
+    out = []
+    for e, rec in zip(entries, recs):
+        stated = e["forcing_hz"]
+        if stated is None and "forcing_hz" in rec.meta:
+            try:
+                stated = float(rec.meta["forcing_hz"])
+            except ValueError:
+                raise InputError(
+                    f"{e['file']}: metadata forcing_hz = {rec.meta['forcing_hz']!r} is not a number"
+                ) from None
+        if given is not None and stated is not None and abs(given / stated - 1) > 1e-9:
+            raise InputError(f"--forcing-hz {given:g} disagrees with {e['file']} ({stated:g} Hz)")
+        if stated is None and given is None:
+            raise InputError(f"{e['file']}: no forcing frequency (no index or metadata forcing_hz): give --forcing-hz")
+        out.append(float(stated if stated is not None else given))
+    return out
 
 
-def read_nfrc_results(paths: Sequence[str] | None, forcing_hz: float) -> list[dict[str, Any]]:
-    """Each ``--nfrc`` result, checked before any work: a continuation in amplitude at ``forcing_hz``."""
+def read_nfrc_results(paths: Sequence[str] | None, axis: str, forcing_hz: float) -> list[dict[str, Any]]:
+    """Each ``--nfrc`` result, checked before any analysis: a continuation along the map's ``axis``
+    (``amplitude``: at ``forcing_hz``; ``f_hz``: its amplitude is compared with the records' afterwards)."""
     from negstiff.files import read_json
 
     out = []
@@ -60,21 +72,44 @@ def read_nfrc_results(paths: Sequence[str] | None, forcing_hz: float) -> list[di
             raise InputError(f"--nfrc {p}: not an nfrc result (needs settings and branches)") from None
         if well not in ("plus", "minus"):
             raise InputError(f"--nfrc {p}: its well is {well!r}, not plus or minus")
-        if parameter != "amplitude" or abs(fixed / forcing_hz - 1) > 1e-6:
+        if axis == "amplitude" and (parameter != "amplitude" or abs(fixed / forcing_hz - 1) > 1e-6):
             raise InputError(f"--nfrc {p}: a continuation in amplitude at {forcing_hz:g} Hz is needed, this one is "
                              f"in {parameter} at {fixed:g}")  # fmt: skip
+        if axis == "f_hz" and parameter != "f_hz":
+            raise InputError(f"--nfrc {p}: the records step the frequency: a continuation in frequency is needed, "
+                             f"this one is in {parameter}")  # fmt: skip
         out.append({"label": Path(p).stem, "settings": st, "branches": branches, "bifurcations": r["bifurcations"]})
     return out
 
 
-def continuation_vs_map(overlay: dict[str, Any], points: list[dict[str, Any]]) -> dict[str, Any]:
-    """A continuation's first doubling of its period-1 branch beside the map's first period 2 sweeping up
-    from its well (or in the records' order where the map does not say)."""
+def jump(points: list[dict[str, Any]]) -> float | None:
+    """Where a stepped-sine sweep's response jumps: the midpoint of the two consecutive steps whose
+    response amplitudes (half peak-to-peak, largest branch) differ most; None for fewer than two steps."""
+    amp = [max(p["amplitudes"]) if p["amplitudes"] else float("nan") for p in points]
+    diffs = [abs(b - a) for a, b in zip(amp, amp[1:])]
+    if not diffs or all(d != d for d in diffs):  # NaN: no amplitudes
+        return None
+    k = max(range(len(diffs)), key=lambda i: diffs[i] if diffs[i] == diffs[i] else -1.0)
+    return 0.5 * (points[k]["f_hz"] + points[k + 1]["f_hz"])
+
+
+def continuation_vs_map(overlay: dict[str, Any], points: list[dict[str, Any]], axis: str) -> dict[str, Any]:
+    """A continuation beside the map. In amplitude: its period-1 branch's first doubling beside the map's
+    first period 2 sweeping up from its well (or in the records' order where the map does not say). In
+    frequency: its folds beside where each of the map's sweeps from its well jumps (sweeping up the
+    response leaves its branch at the upper fold, sweeping down at the lower one)."""
     from negstiff.inference.characterize import first_period_2
 
     well = overlay["settings"]["well"]
-    pd = [b["amplitude"] for b in overlay["bifurcations"] if b["type"] == "period_doubling" and b["period"] == 1]
-    mine = [p for p in points if p["start"] == well and p["direction"] in ("up", None)]
-    sweep = mine or [p for p in points if p["start"] is None]
-    return {"label": overlay["label"], "well": well, "first_doubling": min(pd) if pd else None,
-            "map_first_period_2": first_period_2(sweep)}  # fmt: skip
+    mine = [p for p in points if p["start"] in (well, None)]
+    out: dict[str, Any] = {"label": overlay["label"], "well": well}
+    if axis == "amplitude":
+        pd = [b["amplitude"] for b in overlay["bifurcations"] if b["type"] == "period_doubling" and b["period"] == 1]
+        up = [p for p in mine if p["direction"] in ("up", None)]
+        return out | {"first_doubling": min(pd) if pd else None, "map_first_period_2": first_period_2(up)}
+    folds = sorted(b["f_hz"] for b in overlay["bifurcations"] if b["type"] == "fold" and b["period"] == 1)
+    sweeps: dict[str, list] = {}
+    for p in mine:
+        sweeps.setdefault(p["direction"] or "records", []).append(p)
+    return out | {"folds": folds, "amplitude": overlay["settings"]["fixed"],
+                  "map_jumps_hz": {d: jump(v) for d, v in sweeps.items()}}  # fmt: skip

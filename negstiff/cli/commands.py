@@ -75,28 +75,31 @@ def write_campaign(rig, args) -> None:
     """Stepped sweeps up and/or down from either well, one batched run, written as one folder."""
     from negstiff.files import atomic_dir
 
-    amps = parse_amplitudes(args.amplitudes)
+    in_freq = args.freqs is not None  # a stepped sine in frequency at --amplitude, else in amplitude at --freq
+    values = parse_amplitudes(args.freqs, "--freqs") if in_freq else parse_amplitudes(args.amplitudes)
+    if in_freq and not all(0 < f < rig.fs / 4 for f in values):
+        raise InputError(f"--freqs {args.freqs}: frequencies must lie in (0, fs/4) = (0, {rig.fs / 4:g}) Hz")
     starts = ["plus", "minus"] if args.start == "both" else [args.start]
     dirs = ["up", "down"] if args.direction == "both" else [args.direction]
     plans = [(s, d) for s in starts for d in dirs]
-    lists = [amps if d == "up" else amps[::-1] for _, d in plans]
-    say(args, f"campaign: {len(plans)} sweep(s) x {len(amps)} amplitudes at {args.freq:g} Hz, one batched run")
-    sweeps = rig.sweeps(args.freq, lists, [s for s, _ in plans], args.settle_periods, args.periods)
+    lists = [values if d == "up" else values[::-1] for _, d in plans]
+    what = f"frequencies at {args.amplitude:g} m/s^2" if in_freq else f"amplitudes at {args.freq:g} Hz"
+    say(args, f"campaign: {len(plans)} sweep(s) x {len(values)} {what}, one batched run")
+    if in_freq:
+        sweeps = rig.stepped_sines(lists, args.amplitude, [s for s, _ in plans], args.settle_periods, args.periods)
+    else:
+        sweeps = rig.sweeps(args.freq, lists, [s for s, _ in plans], args.settle_periods, args.periods)
     index = []
     with atomic_dir(args.out) as tmp:
         for (start, direction), recs in zip(plans, sweeps):
             for rec in recs:
-                amp = rec.truth["excitation"]["amplitude_m_s2"]
-                name = f"{start}_{direction}_{rec.truth['excitation']['step']:03d}_{amp:g}.{args.format or 'csv'}"
+                exc = rec.truth["excitation"]
+                amp, f = exc["amplitude_m_s2"], exc.get("freq_hz", args.freq)
+                value = f"{f:g}Hz" if in_freq else f"{amp:g}"
+                name = f"{start}_{direction}_{exc['step']:03d}_{value}.{args.format or 'csv'}"
                 rec.write(tmp / name, **export_options(args))
                 index.append(
-                    {
-                        "file": name,
-                        "start_well": start,
-                        "direction": direction,
-                        "amplitude_m_s2": amp,
-                        "forcing_hz": args.freq,
-                    }
+                    {"file": name, "start_well": start, "direction": direction, "amplitude_m_s2": amp, "forcing_hz": f}
                 )
         (tmp / "index.json").write_text(json.dumps({"records": index}, indent=1) + "\n")
     say(args, f"wrote {len(index)} records to {args.out}/ (index.json lists them)")
@@ -328,7 +331,6 @@ def frf_well(rec) -> str | None:
 
 
 def cmd_frf(args) -> int:
-    from negstiff.files import atomic_path
     from negstiff.inference.frf import frf
     from negstiff.inference.measurement import load
 
@@ -343,7 +345,6 @@ def cmd_frf(args) -> int:
     res = with_record(res, rec)
     if res["reason"]:
         res["warnings"].append(res["reason"])
-    figure = Path(args.out).with_suffix(".png")
     import matplotlib
 
     matplotlib.use("Agg")
@@ -363,20 +364,16 @@ def cmd_frf(args) -> int:
     a2.plot(f[sel], curves["coherence"][sel])
     a2.set(xlabel="frequency [Hz]", ylabel="coherence", ylim=(0, 1.05))
     fig.tight_layout()
-    res["figure"] = figure.name
-    with atomic_path(figure) as tmp:
-        fig.savefig(tmp, format="png", dpi=110)
-    plt.close(fig)
+    res["figure"] = write_figure(fig, args.out)
     write_json(args.out, res)
     warn(args, res["warnings"])
     top = "no peak" if res["f_hz"] is None else f"{res['f_hz']:.4f} Hz, zeta {100 * res['zeta']:.2f} %"
-    say(args, f"wrote {args.out} and {figure.name}: dominant peak {top}; {len(res['peaks'])} peak(s)")
+    say(args, f"wrote {args.out} and {res['figure']}: dominant peak {top}; {len(res['peaks'])} peak(s)")
     return 0
 
 
 def cmd_nfrc(args) -> int:
     from negstiff.experiments.nfrc import figure
-    from negstiff.files import atomic_path
     from negstiff.models.continuation import ContinuationError, nfrc
 
     system = load_system(args.model)
@@ -390,18 +387,11 @@ def cmd_nfrc(args) -> int:
                    max_period=args.max_period)  # fmt: skip
     except ContinuationError as exc:
         raise InputError(str(exc)) from None
-    fig = figure(res)
-    png = Path(args.out).with_suffix(".png")
-    res["figure"] = png.name
-    import matplotlib.pyplot as plt
-
-    with atomic_path(png) as tmp:
-        fig.savefig(tmp, format="png", dpi=110)
-    plt.close(fig)
+    res["figure"] = write_figure(figure(res), args.out)
     write_json(args.out, res)
     kinds = ", ".join(f"{b['type']} at {b['amplitude']:.4g} / {b['f_hz']:.4g} Hz (period {b['period']})"
                       for b in res["bifurcations"]) or "none"  # fmt: skip
-    say(args, f"wrote {args.out} and {png.name}: {len(res['branches'])} branch(es); bifurcations: {kinds}")
+    say(args, f"wrote {args.out} and {res['figure']}: {len(res['branches'])} branch(es); bifurcations: {kinds}")
     return 0
 
 
@@ -444,56 +434,87 @@ def frf_comparison(result: dict, frfs: list[tuple[str, float, str | None]]) -> l
 
 def cmd_map(args) -> int:
     from negstiff.experiments.characterization import map_figure
-    from negstiff.files import atomic_path
     from negstiff.inference.characterize import first_period_2, map_point, map_sequence
     from negstiff.inference.measurement import load
 
-    from .campaign import campaign_records, continuation_vs_map, read_nfrc_results
+    from .campaign import campaign_records, continuation_vs_map, forcing_frequencies, jump, read_nfrc_results
 
-    given = parse_wells(args.wells)  # the options and every input file's kind before any work
-    entries, forcing_hz = campaign_records(args.data, args.forcing_hz)
-    overlays = read_nfrc_results(args.nfrc, forcing_hz)
-    say(args, f"map: {len(entries)} record(s) at {forcing_hz:g} Hz")
-    points, wells, input_name = [], given, None
-    for e in entries:
-        rec = load(e["file"], columns=args.columns, fs=args.fs)
-        if not forcing_hz < rec.fs / 2:
+    given = parse_wells(args.wells)  # the options, and every input read and checked, before any analysis
+    entries = campaign_records(args.data)
+    recs = [load(e["file"], columns=args.columns, fs=args.fs) for e in entries]
+    freqs = forcing_frequencies(entries, recs, args.forcing_hz)
+    axis = "f_hz" if max(freqs) / min(freqs) - 1 > 1e-9 else "amplitude"  # the campaign steps f, or A at one f
+    overlays = read_nfrc_results(args.nfrc, axis, freqs[0])
+    for e, rec, f in zip(entries, recs, freqs):
+        if not f < rec.fs / 2:
             raise InputError(
-                f"--forcing-hz {forcing_hz:g}: above the Nyquist frequency of {e['file']} ({rec.fs / 2:g} Hz)"
+                f"{e['file']}: its forcing frequency {f:g} Hz is above its Nyquist frequency {rec.fs / 2:g} Hz"
             )
-        if input_name not in (None, rec.input_name):
-            raise InputError(f"{e['file']}: input {rec.input_name}, the campaign's records before it: {input_name}")
-        input_name = rec.input_name
-        wells = wells or rest_wells(rec)
-        points.append({**e, **map_point(rec, forcing_hz, wells)})
-        say(args, f"  {Path(e['file']).name}: amplitude {points[-1]['amplitude']:.4g}, period {points[-1]['period']}")
+        if rec.input_name != recs[0].input_name:
+            raise InputError(
+                f"{e['file']}: input {rec.input_name}, the campaign's first record's: {recs[0].input_name}"
+            )
+    wells = given or next((w for w in map(rest_wells, recs) if w), None)
+    say(args, f"map: {len(recs)} record(s), " + ("stepped in frequency" if axis == "f_hz" else f"at {freqs[0]:g} Hz"))
+    points = []
+    for e, rec, f in zip(entries, recs, freqs):
+        points.append({**e, "f_hz": f, **map_point(rec, f, wells)})
+        p = points[-1]
+        say(args, f"  {Path(e['file']).name}: {f:g} Hz, amplitude {p['amplitude']:.4g}, period {p['period']}")
     sweeps: dict[str, Any] = {}
     for p in points:
         sweeps.setdefault(" ".join(x for x in (p["start"], p["direction"]) if x) or "records", []).append(p)
+    summary = {"sequence": map_sequence, "first_period_2": first_period_2} if axis == "amplitude" else {
+        "sequence": lambda v: map_sequence(v, "f_hz"), "jump_hz": jump}  # fmt: skip
     res: dict[str, Any] = {
-        "forcing_hz": forcing_hz,
-        "input": input_name,
+        "axis": axis,
+        "forcing_hz": freqs[0] if axis == "amplitude" else None,
+        "input": recs[0].input_name,
         "wells_used": wells,
         "points": points,
-        "sweeps": {k: {"sequence": map_sequence(v), "first_period_2": first_period_2(v)} for k, v in sweeps.items()},
+        "sweeps": {k: {name: fn(v) for name, fn in summary.items()} for k, v in sweeps.items()},
+        "continuations": [continuation_vs_map(o, points, axis) for o in overlays],
+        "warnings": _map_warnings(points, overlays, axis, wells),
     }
-    res["continuations"] = [continuation_vs_map(o, points) for o in overlays]
+    res["figure"] = write_figure(map_figure(points, overlays, "m/s^2" if res["input"] == "base_acc" else "N", axis),
+                                 args.out)  # fmt: skip
+    write_json(args.out, res)
+    warn(args, res["warnings"])
+    say(
+        args,
+        f"wrote {args.out} and {res['figure']}: "
+        + "; ".join(
+            f"{k}: " + ", ".join(f"{n} {v}" for n, v in s.items() if n != "sequence") for k, s in res["sweeps"].items()
+        ),
+    )
+    return 0
+
+
+def _map_warnings(points, overlays, axis: str, wells) -> list[str]:
+    out = []
     if wells is None:
-        res["warnings"] = ["no rest positions (--wells or the records' metadata): a cross-well response is not told "
-                           "from an in-well one; the regime is the side of the median"]  # fmt: skip
-    fig = map_figure(points, overlays, "m/s^2" if input_name == "base_acc" else "N")
-    png = Path(args.out).with_suffix(".png")
-    res["figure"] = png.name
+        out.append("no rest positions (--wells or the records' metadata): a cross-well response is not told from an "
+                   "in-well one; the regime is the side of the median")  # fmt: skip
+    if axis == "f_hz":
+        a = float(np.median([p["amplitude"] for p in points]))
+        for o in overlays:
+            if abs(o["settings"]["fixed"] / a - 1) > 0.05:
+                out.append(f"--nfrc {o['label']}: continued at amplitude {o['settings']['fixed']:g}, the records' "
+                           f"forcing is {a:.4g} (median): the curves do not compare")  # fmt: skip
+    return out
+
+
+def write_figure(fig, out: str) -> str:
+    """A command's figure beside its result (``out`` with .png), atomically; returns the figure's name."""
     import matplotlib.pyplot as plt
 
+    from negstiff.files import atomic_path
+
+    png = Path(out).with_suffix(".png")
     with atomic_path(png) as tmp:
         fig.savefig(tmp, format="png", dpi=110)
     plt.close(fig)
-    write_json(args.out, res)
-    warn(args, res.get("warnings", []))
-    seen = "; ".join(f"{k}: first period 2 at {v['first_period_2']}" for k, v in res["sweeps"].items())
-    say(args, f"wrote {args.out} and {png.name}: {seen}")
-    return 0
+    return png.name
 
 
 def cmd_update(args) -> int:

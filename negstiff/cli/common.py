@@ -126,8 +126,8 @@ def parse_effects(items: Sequence[str] | None) -> dict[str, Any]:
     return out
 
 
-def parse_amplitudes(text: str) -> list[float]:
-    """``4:30:0.5`` (start:stop:step, stop included) or ``5,10,15``."""
+def parse_amplitudes(text: str, option: str = "--amplitudes") -> list[float]:
+    """``4:30:0.5`` (start:stop:step, stop included) or ``5,10,15`` (the values of ``option``)."""
     try:
         if ":" in text:
             a, b, s = (float(x) for x in text.split(":"))
@@ -136,7 +136,7 @@ def parse_amplitudes(text: str) -> list[float]:
             return list(np.round(np.arange(a, b + s / 2, s), 10))
         return [float(x) for x in text.split(",")]
     except ValueError:
-        raise InputError(f"--amplitudes {text!r}: use start:stop:step (e.g. 4:30:0.5) or a list 5,10,15") from None
+        raise InputError(f"{option} {text!r}: use start:stop:step (e.g. 4:30:0.5) or a list 5,10,15") from None
 
 
 def load_system(path: str | Path):

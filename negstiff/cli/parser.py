@@ -21,6 +21,7 @@ EPILOG_RIG = """examples:
   negstiff rig random --effect coulomb_friction=0.05 -o rec.csv   with a hidden extra effect
   negstiff rig harmonic --freq 9 --amplitude 15 -o h.csv          steady-state harmonic response
   negstiff rig campaign --amplitudes 4:30:0.5 --start both --direction both -o campaign/
+  negstiff rig campaign --freqs 5:11:0.1 --amplitude 3 --direction both -o nfrc_test/   stepped sine
 Every record is written with <name>.truth.json beside it (the truth behind the record)."""
 
 
@@ -100,6 +101,11 @@ def _rig(sub, common: argparse.ArgumentParser, data_opts: argparse.ArgumentParse
     )
     g.add_argument(
         "--amplitudes", default="4:30:0.5", help="campaign amplitudes start:stop:step or a list (default 4:30:0.5)"
+    )
+    g.add_argument(
+        "--freqs",
+        help="a stepped-sine campaign in frequency instead, at --amplitude: start:stop:step or a list [Hz] "
+        "(each step --settle-periods and --periods of its own period)",
     )
     g.add_argument("--start", default="plus", choices=["plus", "minus", "both"], help="starting well (default plus)")
     g.add_argument("--direction", default="up", choices=["up", "down", "both"], help="campaign sweep direction")
@@ -379,15 +385,18 @@ def _map(sub, common: argparse.ArgumentParser, data_opts: argparse.ArgumentParse
         "map",
         parents=[common, data_opts],
         help="the bifurcation map of a stepped harmonic campaign (seed Figure 4), with continuations over it",
-        description="Every record of a stepped harmonic campaign at one forcing frequency (files in the order "
-        "given, or a folder: its index.json, as `negstiff rig campaign` writes it, else its measurement files by "
-        "name) analysed for its period, regime and Poincare z (phase 0) against the forcing amplitude measured "
-        "from its input; the sweeps' sequences and first period 2; `negstiff nfrc` results in amplitude at the "
-        "same frequency drawn over the map, each model's predicted first doubling beside the map's. Writes R.json "
-        "and R.png.",
+        description="Every record of a stepped harmonic campaign (files in the order given, or a folder: its "
+        "index.json, as `negstiff rig campaign` writes it, else its measurement files by name) analysed for its "
+        "period, regime and Poincare z (phase 0), against the forcing amplitude measured from its input (a "
+        "campaign at one frequency: the seed's map) or against its frequency (a stepped sine: each record's "
+        "frequency from the index, its metadata's forcing_hz or --forcing-hz). Each sweep's sequence and first "
+        "period 2, or where a stepped sine jumps; `negstiff nfrc` results along the same axis drawn over the map, "
+        "their first doubling or folds beside the map's. Writes R.json and R.png.",
     )
     mp.add_argument("data", nargs="+", help="measurement files of the campaign, or its folder")
-    mp.add_argument("--forcing-hz", type=POSITIVE, help="forcing frequency [Hz] (default: the folder's index.json)")
+    mp.add_argument(
+        "--forcing-hz", type=POSITIVE, help="forcing frequency [Hz] (default: the index's or each record's metadata)"
+    )
     mp.add_argument(
         "--wells",
         help="z_minus,z_plus (or z_minus,z_0,z_plus) [m] for the regime; default: the records' rest positions",
