@@ -126,33 +126,29 @@ def test_a_stepped_sine_jumps_just_past_the_continued_folds(tmp_path):
         assert r["continuations"][0]["map_jumps_hz"]["records"] == jump
 
 
-def test_a_rig_campaign_folder_is_read_by_its_index(tmp_path):
-    # The rig's campaign folder: its index.json gives the forcing frequency, the starting well and the
-    # direction of each sweep, so the map groups them (up and down from z_plus here)
+@pytest.mark.parametrize("steps", [["--amplitudes", "4:6:1"], ["--freqs", "7:9:1", "--amplitude", "3"]])
+def test_a_rig_campaign_folder_is_read_by_its_index(tmp_path, steps):
+    # The rig's campaign folder: its index.json gives each record's forcing frequency, starting well and
+    # direction, so the map groups the sweeps (up and down from z_plus); a campaign in amplitude at 9 Hz is
+    # the seed's map, a stepped sine ('--freqs') a map along the frequency. Each record's forcing amplitude,
+    # read from its input, is the commanded one (the accelerometer's noise and bias: within 1 %)
     camp = tmp_path / "camp"
-    assert main(["rig", "campaign", "--model", str(_model(tmp_path)), "--amplitudes", "4:6:1", "--direction", "both",
+    assert main(["rig", "campaign", "--model", str(_model(tmp_path)), *steps, "--direction", "both",
                  "--settle-periods", "20", "--periods", "24", "-o", str(camp), "--quiet"]) == 0  # fmt: skip
     out = tmp_path / "map.json"
     assert main(["map", str(camp), "-o", str(out), "--quiet"]) == 0
     r = json.loads(out.read_text())
-    assert r["axis"] == "amplitude" and r["forcing_hz"] == 9.0 and set(r["sweeps"]) == {"plus up", "plus down"}
+    assert set(r["sweeps"]) == {"plus up", "plus down"}
     assert r["wells_used"] is not None, "the rig's records carry their rest positions"
+    up = [p for p in r["points"] if p["direction"] == "up"]
+    if steps[0] == "--freqs":
+        assert r["axis"] == "f_hz" and [p["f_hz"] for p in up] == [7.0, 8.0, 9.0]
+        assert np.allclose([p["amplitude"] for p in up], 3.0, rtol=0.01)
+        assert set(r["sweeps"]["plus up"]) == {"sequence", "jump_hz"}
+    else:
+        assert r["axis"] == "amplitude" and r["forcing_hz"] == 9.0
+        assert np.allclose([p["amplitude"] for p in up], [4.0, 5.0, 6.0], rtol=0.01)
     assert all(p["period"] == 1 and p["regime"] == "in-well-plus" for p in r["points"])
-
-
-def test_a_rig_stepped_sine_folder_is_a_map_in_frequency(tmp_path):
-    # 'rig campaign --freqs': each record's frequency in the index; the map's axis is the frequency, and
-    # each record's forcing amplitude, read from its input, is the commanded 3 m/s^2 (the accelerometer's
-    # noise and bias: within 1 %)
-    camp = tmp_path / "camp"
-    assert main(["rig", "campaign", "--model", str(_model(tmp_path)), "--freqs", "7:9:1", "--amplitude", "3",
-                 "--settle-periods", "20", "--periods", "24", "-o", str(camp), "--quiet"]) == 0  # fmt: skip
-    out = tmp_path / "map.json"
-    assert main(["map", str(camp), "-o", str(out), "--quiet"]) == 0
-    r = json.loads(out.read_text())
-    assert r["axis"] == "f_hz" and [p["f_hz"] for p in r["points"]] == [7.0, 8.0, 9.0]
-    assert np.allclose([p["amplitude"] for p in r["points"]], 3.0, rtol=0.01)
-    assert set(r["sweeps"]["plus up"]) == {"sequence", "jump_hz"}
 
 
 def _model(tmp_path):
