@@ -135,10 +135,34 @@ def frequency_sweeps(models: dict[str, Any], fast: bool, seed_: int) -> list[dic
                 folds[name] = sorted(b["f_hz"] for b in r["bifurcations"] if b["type"] == "fold")
             except (ContinuationError, ValueError):
                 folds[name] = []
+        stepped = stepped_jumps(amp, fast, seed_)
         for direction, (fa, fb) in (("up", SWEEP_BAND), ("down", SWEEP_BAND[::-1])):
             rec = Rig(seed=seed_ + 7).sine_sweep(fa, fb, amp, duration, start="plus")
             out.append({"amplitude": amp, "direction": direction, "rate_hz_s": (fb - fa) / duration,
-                        "rig_jump_hz": jump_frequency(rec, fa, fb, duration), "folds": folds})  # fmt: skip
+                        "rig_jump_hz": jump_frequency(rec, fa, fb, duration), "folds": folds,
+                        "stepped_jump_hz": stepped[direction], "step_hz": STEP_HZ[fast]})  # fmt: skip
+    return out
+
+
+STEP_HZ = {False: 0.1, True: 0.25}
+"""The rig's stepped sines' frequency step [Hz] (full run, --fast)."""
+
+
+def stepped_jumps(amplitude: float, fast: bool, seed_: int) -> dict[str, float | None]:
+    """Stepped sines on the rig (the as-built device, from z_plus) across ``SWEEP_BAND``, up and down in one
+    batched run, as a lab measures a response curve: where each sweep's response amplitude (half the
+    measured z's peak-to-peak) jumps (``characterize.jump``)."""
+    from negstiff.inference.characterize import jump
+    from negstiff.models.rig import Rig
+
+    step = STEP_HZ[fast]
+    up = list(np.round(np.arange(SWEEP_BAND[0], SWEEP_BAND[1] + step / 2, step), 6))
+    sweeps = Rig(seed=seed_ + 8).stepped_sines([up, up[::-1]], amplitude, ["plus", "plus"], 40 if fast else 60, 24)
+    out = {}
+    for direction, recs in zip(("up", "down"), sweeps):
+        points = [{"f_hz": r.truth["excitation"]["freq_hz"], "amplitudes": [0.5 * float(np.ptp(r.columns["z"]))]}
+                  for r in recs]  # fmt: skip
+        out[direction] = jump(points)
     return out
 
 
@@ -238,21 +262,27 @@ def _render_sweeps(rep, res: dict[str, Any], study: ContinuationStudy) -> None:
     upper fold; sweeping down, at the lower one (hardening or softening alike)."""
     rows = []
     for s in study.sweeps:
-        row = [s["amplitude"], s["direction"], f"{s['rate_hz_s']:+.3f}", s["rig_jump_hz"]]
+        row = [s["amplitude"], s["direction"], f"{s['rate_hz_s']:+.3f}", s["rig_jump_hz"], s["stepped_jump_hz"]]
         for name in study.models:
             f = s["folds"][name]
             fold = (max(f) if s["direction"] == "up" else min(f)) if f else None
             row.append(fold)
         rows.append(row)
     res["sweeps"] = study.sweeps
-    rep.table(["amplitude [m/s^2]", "sweep", "rate [Hz/s]", "rig: jump [Hz]"]
+    step = study.sweeps[0]["step_hz"] if study.sweeps else None
+    rep.table(["amplitude [m/s^2]", "sweep", "rate [Hz/s]", "rig: jump [Hz]", f"rig, {step:g} Hz steps: jump [Hz]"]
               + [f"{n}: fold [Hz]" for n in study.models], rows)  # fmt: skip
     rep.text(
         "Slow linear swept sines on the rig (the as-built device, from z_plus, up and down) against the folds of "
         "each model's frequency response at the same amplitude (the plus well softens: its response curve leans "
         "to lower frequencies). Sweeping up, the branch the response is on ends at the upper fold; sweeping down, "
         "at the lower one; the jump comes a little late (the response needs a few of its time constants to leave "
-        "a branch that no longer exists). The jump is read as the largest change of the response's envelope."
+        "a branch that no longer exists). The jump is read as the largest change of the response's envelope. "
+        "Beside them, stepped sines as a lab measures a response curve (`negstiff rig campaign --freqs`, read as "
+        "`negstiff map` reads one): the frequency stepped without stopping the table, each step settled, the jump "
+        "placed midway between the two steps whose response amplitudes differ most (a step near a fold can knock "
+        "the response off its branch early: on a Duffing oscillator 0.25 Hz steps dropped a step before the fold, "
+        "tests/test_map.py)."
     )
 
 

@@ -200,3 +200,14 @@ def map_sequence(points: list[dict[str, Any]], key: str = "amplitude") -> list[l
 def first_period_2(points: list[dict[str, Any]]) -> float | None:
     """The first amplitude of a sweep whose response has a period of 2 or more forcing cycles."""
     return next((float(p["amplitude"]) for p in points if p["period"] is not None and p["period"] >= 2), None)
+
+
+def jump(points: list[dict[str, Any]]) -> float | None:
+    """Where a stepped-sine sweep's response jumps: the midpoint of the two consecutive steps whose
+    response amplitudes (half peak-to-peak, largest branch) differ most; None for fewer than two steps."""
+    amp = [max(p["amplitudes"]) if p["amplitudes"] else float("nan") for p in points]
+    diffs = [abs(b - a) for a, b in zip(amp, amp[1:])]
+    if not diffs or all(d != d for d in diffs):  # NaN: no amplitudes
+        return None
+    k = max(range(len(diffs)), key=lambda i: diffs[i] if diffs[i] == diffs[i] else -1.0)
+    return 0.5 * (points[k]["f_hz"] + points[k + 1]["f_hz"])

@@ -82,23 +82,12 @@ def read_nfrc_results(paths: Sequence[str] | None, axis: str, forcing_hz: float)
     return out
 
 
-def jump(points: list[dict[str, Any]]) -> float | None:
-    """Where a stepped-sine sweep's response jumps: the midpoint of the two consecutive steps whose
-    response amplitudes (half peak-to-peak, largest branch) differ most; None for fewer than two steps."""
-    amp = [max(p["amplitudes"]) if p["amplitudes"] else float("nan") for p in points]
-    diffs = [abs(b - a) for a, b in zip(amp, amp[1:])]
-    if not diffs or all(d != d for d in diffs):  # NaN: no amplitudes
-        return None
-    k = max(range(len(diffs)), key=lambda i: diffs[i] if diffs[i] == diffs[i] else -1.0)
-    return 0.5 * (points[k]["f_hz"] + points[k + 1]["f_hz"])
-
-
 def continuation_vs_map(overlay: dict[str, Any], points: list[dict[str, Any]], axis: str) -> dict[str, Any]:
     """A continuation beside the map. In amplitude: its period-1 branch's first doubling beside the map's
     first period 2 sweeping up from its well (or in the records' order where the map does not say). In
     frequency: its folds beside where each of the map's sweeps from its well jumps (sweeping up the
     response leaves its branch at the upper fold, sweeping down at the lower one)."""
-    from negstiff.inference.characterize import first_period_2
+    from negstiff.inference.characterize import first_period_2, jump
 
     well = overlay["settings"]["well"]
     mine = [p for p in points if p["start"] in (well, None)]

@@ -434,10 +434,10 @@ def frf_comparison(result: dict, frfs: list[tuple[str, float, str | None]]) -> l
 
 def cmd_map(args) -> int:
     from negstiff.experiments.characterization import map_figure
-    from negstiff.inference.characterize import first_period_2, map_point, map_sequence
+    from negstiff.inference.characterize import first_period_2, jump, map_point, map_sequence
     from negstiff.inference.measurement import load
 
-    from .campaign import campaign_records, continuation_vs_map, forcing_frequencies, jump, read_nfrc_results
+    from .campaign import campaign_records, continuation_vs_map, forcing_frequencies, read_nfrc_results
 
     given = parse_wells(args.wells)  # the options, and every input read and checked, before any analysis
     entries = campaign_records(args.data)
