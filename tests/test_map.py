@@ -6,6 +6,7 @@ amplitude stepped without stopping the table (the state carried over), each step
 own with a rounded time column and sensor noise, no index."""
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -164,6 +165,7 @@ def _model(tmp_path):
         ("no files", "no measurement files"),
         ("no frequency", "no forcing frequency"),
         ("bad wells", "--wells"),
+        ("zero frequency", "is not a positive number"),
     ],
 )
 def test_bad_map_input_gets_one_line_and_exit_2_before_any_work(tmp_path, capsys, case, message):
@@ -182,9 +184,24 @@ def test_bad_map_input_gets_one_line_and_exit_2_before_any_work(tmp_path, capsys
     elif case == "no frequency":
         args.remove("--forcing-hz")
         args.remove("9")
+    elif case == "zero frequency":
+        (folder / "a.csv").write_text("# forcing_hz: 0\n" + (folder / "a.csv").read_text())
+        args.remove("--forcing-hz")
+        args.remove("9")
     else:
         args += ["--wells", "0.02,-0.03"]
     assert main(args) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and message in err[0], err
     assert not (tmp_path / "o.json").exists() and not (tmp_path / "o.png").exists()
+
+
+def test_a_folder_without_an_index_is_read_in_its_files_natural_order(tmp_path):
+    # a lab's files step2 ... step10: by their numbers, not their characters (step10 sorts before step2)
+    from negstiff.cli.campaign import campaign_records
+
+    for i in (1, 2, 10, 11):
+        (tmp_path / f"step{i}.csv").write_text("t,base_acc,z\n0,0,0\n")
+    (tmp_path / "step1.truth.json").write_text("{}")
+    names = [Path(p["file"]).name for p in campaign_records([str(tmp_path)])]
+    assert names == ["step1.csv", "step2.csv", "step10.csv", "step11.csv"]

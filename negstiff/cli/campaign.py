@@ -3,6 +3,8 @@ rig campaign`` writes it), its forcing frequency, and the ``negstiff nfrc`` resu
 
 from __future__ import annotations
 
+import math
+import re
 from pathlib import Path
 from typing import Any, Sequence
 
@@ -22,7 +24,7 @@ def campaign_records(data: Sequence[str]) -> list[dict[str, Any]]:
         return [{"file": d, "start": None, "direction": None, "forcing_hz": None} for d in data]
     index = folder / "index.json"
     if not index.is_file():
-        files = sorted(p for p in folder.iterdir() if p.suffix.lower() in MEASUREMENT_SUFFIXES)
+        files = sorted((p for p in folder.iterdir() if p.suffix.lower() in MEASUREMENT_SUFFIXES), key=_natural)
         if not files:
             raise InputError(f"{folder}: no measurement files ({', '.join(MEASUREMENT_SUFFIXES)}) and no index.json")
         return [{"file": str(p), "start": None, "direction": None, "forcing_hz": None} for p in files]
@@ -34,6 +36,11 @@ def campaign_records(data: Sequence[str]) -> list[dict[str, Any]]:
         ]  # fmt: skip
     except (ValueError, KeyError, TypeError, AttributeError):
         raise InputError(f"{index}: not a campaign index (records: file, start_well, direction, forcing_hz)") from None
+
+
+def _natural(path: Path) -> list:
+    """A file name's sort key with its numbers as numbers: step2 before step10, 4.5 before 10."""
+    return [(0, float(t), "") if t[:1].isdigit() else (1, 0.0, t) for t in re.findall(r"\d+(?:\.\d+)?|\D+", path.name)]
 
 
 def forcing_frequencies(entries: list[dict[str, Any]], recs, given: float | None) -> list[float]:
@@ -49,6 +56,8 @@ def forcing_frequencies(entries: list[dict[str, Any]], recs, given: float | None
                 raise InputError(
                     f"{e['file']}: metadata forcing_hz = {rec.meta['forcing_hz']!r} is not a number"
                 ) from None
+        if stated is not None and not (stated > 0 and math.isfinite(stated)):
+            raise InputError(f"{e['file']}: its forcing frequency {stated:g} Hz is not a positive number")
         if given is not None and stated is not None and abs(given / stated - 1) > 1e-9:
             raise InputError(f"--forcing-hz {given:g} disagrees with {e['file']} ({stated:g} Hz)")
         if stated is None and given is None:
