@@ -18,8 +18,6 @@ from typing import Any
 
 import numpy as np
 
-from negstiff.models.constants import STANDARD_GRAVITY
-
 INPUTS = ("base_acc", "force")
 OPTIONAL = ("z_dot", "y", "base_disp")
 RESPONSE_ONLY = ("y_dot", "y_acc")
@@ -367,7 +365,9 @@ def load(
     resolution = raw.pop(RESOLUTION, None)
     cmap = parse_column_map(columns) if isinstance(columns, (str, type(None))) else dict(columns)
     cmap = {name: (_header_name(src, raw), scale) for name, (src, scale) in cmap.items()}
-    cols, channel_info = _in_si(path, _mapped_columns(path, raw, cmap), meta, cmap)
+    from negstiff.inference.units import in_si
+
+    cols, channel_info = in_si(path, _mapped_columns(path, raw, cmap), meta, cmap)
     if any(name == "t" and (src != "t" or scale != 1.0) for name, (src, scale) in cmap.items()):
         resolution = None  # the printed precision was read for a column named t only
     if resolution is not None:  # a time column in ms: its printed precision in s too
@@ -499,93 +499,6 @@ def _time_base(path: Path, cols: dict, meta: dict, fs: float | None, resolution)
     if not (fs > 0 and math.isfinite(fs)):
         raise MeasurementError(f"{path}: sampling rate must be positive, got {fs}")
     return fs, 0.0, {"source": "metadata fs"}
-
-
-UNITS = {
-    "time": {"s": 1.0, "ms": 1e-3, "us": 1e-6},
-    "length": {"m": 1.0, "cm": 1e-2, "mm": 1e-3, "um": 1e-6, "in": 0.0254},
-    "velocity": {"m/s": 1.0, "cm/s": 1e-2, "mm/s": 1e-3, "um/s": 1e-6, "in/s": 0.0254},
-    "acceleration": {"m/s^2": 1.0, "mm/s^2": 1e-3, "g": STANDARD_GRAVITY, "in/s^2": 0.0254},
-    "force": {"N": 1.0, "kN": 1e3, "mN": 1e-3, "lbf": 4.4482216152605},
-}
-"""The units a channel's label may state, by dimension, and each one's factor to SI."""
-DIMENSIONS = {
-    "t": "time",
-    "base_acc": "acceleration",
-    "y_acc": "acceleration",
-    "force": "force",
-    "z": "length",
-    "y": "length",
-    "base_disp": "length",
-    "z_dot": "velocity",
-    "y_dot": "velocity",
-}
-"""The dimension of each contract column."""
-RAW_UNITS = ("V", "mV")
-"""A sensor's output before its sensitivity: no unit of the column's dimension."""
-
-
-_UNIT_WORDS = {"meter": "m", "metre": "m", "millimeter": "mm", "millimetre": "mm", "second": "s", "sec": "s",
-               "newton": "N"}  # fmt: skip
-"""Units written out, as some exports do (singular or plural)."""
-
-
-def _unit(label: str) -> str:
-    """A unit label in ``UNITS``' spelling: 'µm' and 'μm' -> 'um', 'm/s²', 'm/s2', 'm/s/s' and 'm s^-2' ->
-    'm/s^2', 'm s^-1' -> 'm/s', 'meters' -> 'm', 'm/sec' -> 'm/s'."""
-    u = label.strip().replace("µ", "u").replace("μ", "u").replace("²", "^2").replace(" ", "").replace("*", "")
-    u = re.sub(r"[A-Za-z]{3,}", lambda w: _UNIT_WORDS.get(w.group(0).lower().rstrip("s"), w.group(0)), u)
-    u = re.sub(r"(/s/s|/s2|s\^?-2)$", "/s^2", u)
-    return re.sub(r"s\^?-1$", "/s", u)
-
-
-def si_factor(label: str, column: str) -> float | None:
-    """The factor that turns ``column``'s values labelled ``label`` into SI, or None where the label is not
-    a unit of the column's dimension in ``UNITS``."""
-    return UNITS[DIMENSIONS[column]].get(_unit(label)) if column in DIMENSIONS else None
-
-
-def _in_si(path: Path, cols: dict[str, np.ndarray], meta: dict[str, str], cmap: dict):
-    """The contract's columns in SI, by the units the file states for them (``unit:<channel>`` metadata: a
-    CSV header's ``z [mm]``, a lab format's channel unit), and what was done: ``(cols, info)``.
-
-    A column under its own name (not mapped) is converted by its stated unit; a unit that is not one of
-    the column's dimension is an error (one line), never a silent SI reading. A mapped column is the
-    user's: its map's scale stands, and a non-SI unit the map does not scale is a warning."""
-    channels: dict[str, dict[str, Any]] = {}
-    for k in meta:
-        if k.startswith(("unit:", "sensitivity:")):
-            c = k.split(":", 1)[1]
-            channels[c] = {"unit": meta.get(f"unit:{c}"), "sensitivity": meta.get(f"sensitivity:{c}")}
-    warns: list[str] = []
-    out = dict(cols)
-    for name in cols:
-        src, scale = cmap.get(name, (name, 1.0))
-        label = meta.get(f"unit:{src}")
-        if label is None or name not in DIMENSIONS:
-            continue
-        f = si_factor(label, name)
-        dim = DIMENSIONS[name]
-        if name in cmap:  # the user's map decides
-            if scale == 1.0 and (label in RAW_UNITS or (f is not None and f != 1.0)):
-                fix = f" (scale it: --columns {name}={src}*{f:.6g})" if f else " (scale it by the sensor's sensitivity)"
-                warns.append(f"channel {src} ({name}) is labelled {label!r} in the file, not SI{fix}")
-            continue
-        if f is None:
-            hint = (
-                "a sensor's raw output: scale it to SI with its sensitivity"
-                if label in RAW_UNITS
-                else f"a {dim} is expected, in {', '.join(UNITS[dim])}"
-            )
-            raise MeasurementError(
-                f"{path}: column {name} is labelled {label!r}: {hint} (or map and scale it: "
-                f"--columns {name}={name}*FACTOR)"
-            )
-        if f != 1.0:
-            out[name] = cols[name] * f
-            channels.setdefault(src, {"unit": label, "sensitivity": None})["to_si"] = f
-    info: dict[str, Any] = {"channels": channels} if channels else {}
-    return out, info | ({"warnings": warns} if warns else {})
 
 
 def time_base(t: np.ndarray, resolution: np.ndarray | None, path) -> tuple[float, float, float]:

@@ -271,7 +271,7 @@ def test_mixed_decimal_marks_are_refused(tmp_path):
     ],
 )
 def test_unit_labels_as_exports_spell_them(label, column, factor):
-    from negstiff.inference.measurement import si_factor
+    from negstiff.inference.units import si_factor
 
     assert si_factor(label, column) == (None if factor is None else pytest.approx(factor))
 
