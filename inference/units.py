@@ -3,8 +3,7 @@
 A CSV header's ``z [mm]`` or a lab format's channel unit arrives as ``unit:<channel>`` metadata; a
 contract column under its own name is converted by it, or refused where the label is not a unit of the
 column's dimension (``in_si``). Written here, not with pint or astropy.units: they read a lab's 'g' as
-the gram (standard gravity is their 'g0') and 'm/s2' not as m/s^2, and the labels exports write are a
-dozen, in a few spellings.
+the gram (standard gravity is pint's 'g0'), and the labels exports write are a dozen, in a few spellings.
 """
 
 from __future__ import annotations
