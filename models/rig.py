@@ -89,14 +89,18 @@ def system_from_dict(d: dict[str, Any]) -> Device | Model:
     return Device.from_dict(d["parameters"]) if d["kind"] == "device" else Model.from_dict(d["parameters"])
 
 
-def _smooth_steps(levels: Sequence[float], step_samples: int, ramp_samples: int) -> np.ndarray:
-    """Piecewise-constant envelope with raised-cosine transitions of ``ramp_samples`` (starts at 0)."""
-    env = np.repeat(np.asarray(levels, float), step_samples)
-    prev = np.concatenate([[0.0], np.asarray(levels, float)[:-1]])
-    ramp = 0.5 - 0.5 * np.cos(np.pi * np.arange(ramp_samples) / ramp_samples)
-    for i, (a0, a1) in enumerate(zip(prev, levels)):
-        s = i * step_samples
-        env[s : s + ramp_samples] = a0 + (a1 - a0) * ramp
+def _smooth_steps(levels: Sequence[float], step_samples, ramp_samples, start: float = 0.0) -> np.ndarray:
+    """Piecewise-constant profile, level i held for ``step_samples`` (one count, or one per level), each
+    change (from ``start`` into the first level, then between levels) a raised-cosine transition of
+    ``ramp_samples`` (one count, or one per level) at the start of its level."""
+    levels = np.asarray(levels, float)
+    steps = np.broadcast_to(np.asarray(step_samples, int), levels.shape)
+    ramps = np.broadcast_to(np.asarray(ramp_samples, int), levels.shape)
+    env = np.repeat(levels, steps)
+    prev = np.concatenate([[start], levels[:-1]])
+    for a0, a1, s, r in zip(prev, levels, np.concatenate([[0], np.cumsum(steps)[:-1]]), ramps):
+        ramp = 0.5 - 0.5 * np.cos(np.pi * np.arange(r) / r)
+        env[s : s + r] = a0 + (a1 - a0) * ramp
     return env
 
 
@@ -340,11 +344,8 @@ class Rig:
         for freqs in freq_lists:
             lengths = [int(round((settle_periods + record_periods) / f * self.fs)) * self.oversample for f in freqs]
             edges = np.concatenate([[0], np.cumsum(lengths)])
-            f_inst = np.repeat(np.asarray(freqs, float), lengths)
-            for k in range(1, len(freqs)):  # raised-cosine transitions between the steps' frequencies
-                r = int(round(2 / min(freqs[k - 1], freqs[k]) * fsim))
-                ramp = 0.5 - 0.5 * np.cos(np.pi * np.arange(r) / r)
-                f_inst[edges[k] : edges[k] + r] = freqs[k - 1] + (freqs[k] - freqs[k - 1]) * ramp
+            ramps = [int(round(2 / min(f0, f1) * fsim)) for f0, f1 in zip([freqs[0], *freqs[:-1]], freqs)]
+            f_inst = _smooth_steps(freqs, lengths, ramps, start=freqs[0])
             env = _smooth_steps([amplitude], f_inst.size, int(round(2 / freqs[0] * fsim)))
             n_fast = sp_fft.next_fast_len(f_inst.size + int(TAIL_S * fsim), real=True)  # see random()
             f_inst = np.pad(f_inst, (0, n_fast - f_inst.size), mode="edge")
