@@ -205,9 +205,9 @@ def first_period_2(points: list[dict[str, Any]]) -> float | None:
 def jump(points: list[dict[str, Any]]) -> float | None:
     """Where a stepped-sine sweep's response jumps: the midpoint of the two consecutive steps whose
     response amplitudes (half peak-to-peak, largest branch) differ most; None for fewer than two steps."""
-    amp = [max(p["amplitudes"]) if p["amplitudes"] else float("nan") for p in points]
-    diffs = [abs(b - a) for a, b in zip(amp, amp[1:])]
-    if not diffs or all(d != d for d in diffs):  # NaN: no amplitudes
+    amp = np.array([max(p["amplitudes"]) if p["amplitudes"] else np.nan for p in points])
+    diffs = np.abs(np.diff(amp))
+    if not np.isfinite(diffs).any():  # fewer than two steps, or no amplitudes to compare
         return None
-    k = max(range(len(diffs)), key=lambda i: diffs[i] if diffs[i] == diffs[i] else -1.0)
+    k = int(np.nanargmax(diffs))
     return 0.5 * (points[k]["f_hz"] + points[k + 1]["f_hz"])
