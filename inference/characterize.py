@@ -84,13 +84,10 @@ def lyapunov(rec: Measurement, forcing_hz: float, noise: float | None) -> dict[s
     }
 
 
-def characterize(rec: Measurement, forcing_hz: float, wells=None, lle: bool = True) -> dict[str, Any]:
-    """Period, regime, amplitudes and the largest Lyapunov exponent of one harmonic-forced record.
-
-    Returns the contract's keys (``period``, ``regime``, ``chaotic``, ``amplitudes``, ``lle``), each
-    analysis's ``reason`` where it could not be determined (``reasons``), and ``poincare_z``.
-    Raises ``MeasurementError`` only for input no analysis can use.
-    """
+def check_harmonic(rec: Measurement, forcing_hz: float) -> None:
+    """Refuse (``MeasurementError``, one line) a harmonic record no characterisation can use: a forcing
+    at or above the Nyquist frequency, fewer than 10 forcing cycles, a response or an input that does
+    not move (the forcing's phase is read from the input)."""
     if not 0 < forcing_hz < rec.fs / 2:
         raise MeasurementError(
             f"{rec.source}: forcing frequency {forcing_hz:g} Hz must lie below the Nyquist frequency {rec.fs / 2:g} Hz"
@@ -100,22 +97,30 @@ def characterize(rec: Measurement, forcing_hz: float, wells=None, lle: bool = Tr
             f"{rec.source}: too few samples for a characterisation: {rec.duration * forcing_hz:.3g} forcing cycles, "
             "need at least 10"
         )
+    rec.require_motion("a characterisation")
+    rec.require_excitation("a characterisation (the forcing's phase is read from the input)")
+
+
+def characterize(rec: Measurement, forcing_hz: float, wells=None, lle: bool = True) -> dict[str, Any]:
+    """Period, regime, amplitudes and the largest Lyapunov exponent of one harmonic-forced record.
+
+    Returns the contract's keys (``period``, ``regime``, ``chaotic``, ``amplitudes``, ``lle``), each
+    analysis's ``reason`` where it could not be determined (``reasons``), and ``poincare_z``.
+    Raises ``MeasurementError`` only for input no analysis can use (``check_harmonic``).
+    """
+    check_harmonic(rec, forcing_hz)
     out: dict[str, Any] = {"reasons": {}}
-    moving = bool(np.ptp(rec.z) > 0)
     work, q = upsampled(rec, forcing_hz)
     out["interpolation"] = None if q == 1 else f"band-limited (polyphase FIR) x{q} to {work.fs:g} Hz"
     per: dict[str, Any] | None = None
-    if not moving:
-        out["reasons"]["period"] = "the response is constant (a dead or disconnected sensor?): no motion to analyse"
-    else:
-        try:
-            if q == 1:
-                per = periodicity(work, forcing_hz, wells)
-            else:  # the noise of the acquisition, from the white plateau of the record as measured
-                noise = math.sqrt(noise_floor(rec.z, rec.fs)[0])
-                per = periodicity(work, forcing_hz, wells, noise=noise, band_fs=rec.fs)
-        except (MeasurementError, ValueError, np.linalg.LinAlgError) as exc:
-            out["reasons"]["period"] = _reason(exc)
+    try:
+        if q == 1:
+            per = periodicity(work, forcing_hz, wells)
+        else:  # the noise of the acquisition, from the white plateau of the record as measured
+            noise = math.sqrt(noise_floor(rec.z, rec.fs)[0])
+            per = periodicity(work, forcing_hz, wells, noise=noise, band_fs=rec.fs)
+    except (MeasurementError, ValueError, np.linalg.LinAlgError) as exc:
+        out["reasons"]["period"] = _reason(exc)
     if per is not None:
         out |= {k: per[k] for k in ("period", "amplitudes", "tolerance", "residuals", "noise_std")}
         out["poincare_z"] = per["poincare_z"]
@@ -126,11 +131,9 @@ def characterize(rec: Measurement, forcing_hz: float, wells=None, lle: bool = Tr
             )
     else:
         out |= {"period": None, "amplitudes": None, "poincare_z": np.array([])}
-    out["regime"] = classify_regime(rec.z, wells) if moving else None
-    if not moving:
-        out["reasons"]["regime"] = out["reasons"]["period"]
+    out["regime"] = classify_regime(rec.z, wells)
     significant = None
-    if lle and moving:
+    if lle:
         try:
             out["lle"] = lyapunov(work, forcing_hz, out.get("noise_std"))
             v, sd = out["lle"]["value"], out["lle"]["sd"]
@@ -145,9 +148,6 @@ def characterize(rec: Measurement, forcing_hz: float, wells=None, lle: bool = Tr
                 if "neighbour" in str(exc)
                 else _reason(exc)
             )
-    elif lle:
-        out["lle"] = {"value": None, "sd": None, "units": "1/s", "method": "wolf"}
-        out["reasons"]["lle"] = out["reasons"]["period"]
     if out["period"] is not None:
         out["chaotic"] = False
     elif significant is not None:

@@ -266,10 +266,13 @@ class Discrepancy(Estimator):
         return {"regimes": regimes, "worst": worst[0] if worst else None, "z": z, "v": v, "r": r, "wells": wells}
 
     # --- the workflow ------------------------------------------------------------------------------
-    def fit(self, rec: Measurement) -> "Discrepancy":
+    def _check_record(self, rec: Measurement) -> None:
         rec.require(4000, "the discrepancy workflow")
-        if rec.u.std() == 0 or np.ptp(rec.z) == 0:
-            raise DiscrepancyError(f"{rec.source}: not enough excitation: the input or the response is constant")
+        rec.require_excitation("the discrepancy workflow")
+        rec.require_motion("the discrepancy workflow")
+
+    def fit(self, rec: Measurement) -> "Discrepancy":
+        rec = self.check(rec)
         self._systems(rec)
         terms = tuple(self.baseline)
         stop: float | None = None

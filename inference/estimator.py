@@ -2,7 +2,8 @@
 scikit-learn's (``sklearn/base.py``, its developer guide's "rolling your own estimator"):
 
 * ``__init__`` stores its parameters as given, under their own names, and does nothing else;
-* ``fit(data)`` validates the parameters first (``_validate``), learns, and returns ``self``;
+* ``fit(data)`` first runs ``check(data)`` (the parameters, ``_validate``, and the record, ``_check_record``:
+  everything that can refuse the input, before any work or progress output), learns, and returns ``self``;
 * what was learned lives in attributes ending in ``_``;
 * ``result()`` is the learned state as the contract's JSON (``to_json`` its alias).
 
@@ -13,6 +14,7 @@ targets, not (X, y) arrays, and scikit-learn would be a dependency for two small
 from __future__ import annotations
 
 import inspect
+from os import PathLike
 from typing import Any
 
 
@@ -26,6 +28,30 @@ class Estimator:
 
     def _validate(self) -> None:
         """Check the parameters (called first by ``fit``); raise the estimator's domain error."""
+
+    def _check_record(self, rec) -> None:
+        """Check that ``rec`` can be used (length, excitation, motion); raise a ``MeasurementError``."""
+
+    def check(self, data):
+        """Everything ``fit`` checks before it starts (the parameters and the record), so a caller can
+        refuse bad input before printing any progress; returns the record ``fit`` would use.
+
+        ``data`` is a ``Measurement`` or a path to a measurement file (read with ``load``); arrays go
+        through ``from_arrays(u, z, fs)`` first."""
+        from negstiff.errors import InputError
+
+        from .measurement import Measurement, load
+
+        self._validate()
+        if isinstance(data, (str, PathLike)):
+            data = load(data)
+        if not isinstance(data, Measurement):
+            raise InputError(
+                f"{type(self).__name__}.fit takes a Measurement or a file path, got {type(data).__name__} "
+                "(arrays: negstiff.from_arrays(u, z, fs))"
+            )
+        self._check_record(data)
+        return data
 
     def result(self) -> dict[str, Any]:
         raise NotImplementedError

@@ -24,6 +24,7 @@ or record.
 
 from __future__ import annotations
 
+import logging
 from pathlib import Path
 
 import numpy as np
@@ -70,11 +71,13 @@ def read_uff(path: Path):
     """Type-58 time-series channels of a Universal File (pyuff)."""
     import pyuff
 
+    _check_memory(path)
     try:
         sets = pyuff.UFF(str(path)).read_sets()
     except Exception as exc:
         raise _error(f"{path}: unreadable Universal File ({type(exc).__name__}: {exc})".splitlines()[0]) from None
     sets = [sets] if isinstance(sets, dict) else list(sets)
+    _check_uff_complete(path, len(sets))
     cols: dict[str, np.ndarray] = {}
     meta: dict[str, str] = {}
     steps: dict[str, float] = {}
@@ -115,6 +118,32 @@ def read_uff(path: Path):
     return cols, meta
 
 
+def _check_uff_complete(path: Path, n_read: int) -> None:
+    """A Universal File read whole: every dataset opens and closes with a ``-1`` line, and pyuff returned
+    them all (it drops an incomplete last dataset silently; the record would then lose a channel, or its
+    end, and negstiff would derive z from another channel)."""
+    delimiters = sum(1 for line in path.read_bytes().splitlines() if line.strip() == b"-1")
+    if delimiters % 2 or delimiters // 2 != n_read:
+        raise _error(
+            f"{path}: the Universal File is incomplete ({delimiters // 2 + delimiters % 2} datasets begin, "
+            f"{n_read} read whole): truncated in copying? negstiff reads a file whole or not at all"
+        )
+
+
+def _check_memory(path: Path) -> None:
+    """Refuse a lab file whose parse would not fit in memory, before its reader starts."""
+    from negstiff.errors import InputError
+    from negstiff.resources import require_memory
+
+    try:
+        require_memory(LAB_PARSE_BYTES_PER_BYTE * path.stat().st_size, f"reading {path}")
+    except InputError as exc:
+        raise _error(str(exc)) from None
+
+
+LAB_PARSE_BYTES_PER_BYTE = 24
+"""Memory [bytes] a lab format's reader may hold per byte of its file (as for a CSV: the text and its values)."""
+
 UFF_INCREMENT_PRECISION = 5e-6
 """Relative precision of a UFF 58 abscissa increment as printed (E13.5: six significant digits)."""
 
@@ -122,11 +151,27 @@ UFF_INCREMENT_PRECISION = 5e-6
 def read_tdms(path: Path):
     """Every channel of a TDMS file (npTDMS), with wf_increment, unit and sensitivity properties."""
     from nptdms import TdmsFile
+    from nptdms.log import log_manager
 
+    _check_memory(path)
+    # npTDMS says a file is truncated in log lines on stderr (its own handler on each module's logger) and
+    # reads what is there: the lines are collected here (they reach the package's logger), not printed
+    log, notes, console = logging.getLogger("nptdms"), _Notes(), log_manager.console_handler
+    log.addHandler(notes)
+    propagate, log.propagate = log.propagate, False
+    level = console.level
+    console.setLevel(logging.CRITICAL + 1)
     try:
         f = TdmsFile.read(str(path))
     except Exception as exc:
         raise _error(f"{path}: unreadable TDMS file ({type(exc).__name__}: {exc})".splitlines()[0]) from None
+    finally:
+        console.setLevel(level)
+        log.removeHandler(notes)
+        log.propagate = propagate
+    if notes.lines:
+        raise _error(f"{path}: the TDMS file is incomplete (npTDMS: {notes.lines[0]}): truncated in copying? "
+                     "negstiff reads a file whole or not at all")  # fmt: skip
     chans = [(g.name, c) for g in f.groups() for c in g.channels()]
     names = [c.name for _, c in chans]
     cols: dict[str, np.ndarray] = {}
@@ -154,10 +199,22 @@ def read_tdms(path: Path):
     return cols, meta
 
 
+class _Notes(logging.Handler):
+    """A log handler that keeps the warnings a reader logs (npTDMS's word that a file is truncated)."""
+
+    def __init__(self):
+        super().__init__(logging.WARNING)
+        self.lines: list[str] = []
+
+    def emit(self, record: logging.LogRecord) -> None:
+        self.lines.append(record.getMessage())
+
+
 def read_lvm(path: Path):
     """The first segment of a LabVIEW measurement file (lvm_read, no pickle cache)."""
     import lvm_read
 
+    _check_memory(path)
     try:
         d = lvm_read.read(str(path), read_from_pickle=False, dump_file=False)
         seg = d[0]

@@ -100,6 +100,15 @@ half-power bandwidth (2 zeta f): window leakage widens a peak and biases zeta up
 2 % mode at 10 Hz: +15 % with 8 s segments, +4 % with 16 s, +2 % with 32 s)."""
 
 
+def check_frf(rec: Measurement, band: tuple[float, float] | None = None) -> None:
+    """Refuse (``MeasurementError``, one line) what no FRF can be estimated from: an input or a response
+    that does not move, a band beyond the Nyquist frequency."""
+    rec.require_excitation("an FRF")
+    rec.require_motion("an FRF")
+    if band is not None and not (0 <= band[0] < band[1] <= rec.fs / 2):
+        raise MeasurementError(f"{rec.source}: FRF band {band[0]:g}:{band[1]:g} Hz must lie within 0:{rec.fs / 2:g} Hz")
+
+
 def frf(rec: Measurement, band: tuple[float, float] | None = None, segment_s: float | None = None) -> dict[str, Any]:
     """H1/H2 with coherence, every resonance peak in ``band`` fitted (the contract's frf result).
 
@@ -108,6 +117,7 @@ def frf(rec: Measurement, band: tuple[float, float] | None = None, segment_s: fl
     Welch segment is ``SEGMENT_S``, lengthened (up to a quarter of the record) until the resolution
     is ``RESOLUTION_RATIO`` of the dominant peak's half-power bandwidth.
     """
+    check_frf(rec, band)
     if segment_s is None:
         r = frf(rec, band, SEGMENT_S)
         if r["f_hz"] is None:

@@ -18,6 +18,8 @@ from typing import Any
 
 import numpy as np
 
+from negstiff.errors import InputError
+
 INPUTS = ("base_acc", "force")
 OPTIONAL = ("z_dot", "y", "base_disp")
 RESPONSE_ONLY = ("y_dot", "y_acc")
@@ -29,7 +31,7 @@ TIME_JITTER_FRACTION = 0.01
 precision, whichever is larger) and still be uniform: lab exports round time."""
 
 
-class MeasurementError(ValueError):
+class MeasurementError(InputError):
     """Bad measurement input; the message is one line naming the file and the problem."""
 
 
@@ -106,9 +108,41 @@ class Measurement:
         """The same record with the mass given by the caller (overrides the metadata)."""
         if mass is None:
             return self
-        if not (mass > 0 and math.isfinite(mass)):
-            raise MeasurementError(f"{self.source}: mass must be positive, got {mass}")
+        if (
+            isinstance(mass, bool)
+            or not isinstance(mass, (int, float, np.integer, np.floating))
+            or not (MASS_RANGE_KG[0] <= mass <= MASS_RANGE_KG[1])
+        ):
+            raise MeasurementError(f"{self.source}: mass {mass!r} kg is not a moving mass "
+                                   f"({MASS_RANGE_KG[0]:g} to {MASS_RANGE_KG[1]:g} kg)")  # fmt: skip
         return replace(self, mass=float(mass))
+
+    def require_motion(self, what: str) -> None:
+        """Raise ``MeasurementError`` when the response does not move (a dead or disconnected sensor):
+        ``what`` (an identification, a periodicity analysis) needs motion."""
+        if self.z is not None and _constant(self.z):
+            raise MeasurementError(
+                f"{self.source}: the response z is constant ({self.z[0]:.6g} m over {self.n} samples): a dead or "
+                f"disconnected sensor? {what} needs motion"
+            )
+
+    def require_excitation(self, what: str) -> None:
+        """Raise ``MeasurementError`` when the input does not vary (a dead sensor, or no excitation)."""
+        if _constant(self.u):
+            raise MeasurementError(
+                f"{self.source}: the input {self.input_name} is constant ({self.u[0]:.6g} over {self.n} samples): a "
+                f"dead sensor, or no excitation? {what} needs an input that moves"
+            )
+
+
+MASS_RANGE_KG = (1e-9, 1e9)
+"""Moving masses [kg] a record may state: a microgram MEMS proof mass to a building's storey."""
+
+
+def _constant(x: np.ndarray) -> bool:
+    """No variation beyond the values' own floating-point resolution."""
+    span = float(np.ptp(x))
+    return span <= 64 * np.finfo(float).eps * float(np.max(np.abs(x))) or span < 1e-15
 
 
 _MAP_ENTRY = re.compile(r"^\s*(\w+)\s*=\s*([^*]+?)\s*(?:\*\s*([-+0-9.eE]+))?\s*$")
@@ -130,6 +164,10 @@ def parse_column_map(text: str | None) -> dict[str, tuple[str, float]]:
             factor = 1.0 if scale is None else float(scale)
         except ValueError:
             raise MeasurementError(f"column map entry {entry!r}: scale {scale!r} is not a number") from None
+        if name in out:
+            raise MeasurementError(
+                f"column map names {name!r} twice ({out[name][0]!r} and {src!r}): which one is meant?"
+            )
         out[name] = (src, factor)
     return out
 
@@ -138,12 +176,40 @@ _UNIT_IN_NAME = re.compile(r"^(?P<name>.*?)\s*(?:\[(?P<square>[^\]]*)\]|\((?P<ro
 """A header entry with its unit: ``z [mm]`` or ``z (mm)``."""
 
 
+READ_CHUNK_BYTES = 16 * 2**20
+"""A text file is read in chunks of this size, each checked before the next is read."""
+
+TEXT_PARSE_BYTES_PER_BYTE = 8
+"""Memory [bytes] the parser holds per byte of a CSV file (its text, its lines and their values; 4.5
+measured on a 10 MB rig record): a file whose parse would not fit in memory is refused before it is read."""
+
+
 def _text(path: Path) -> str:
     """A text file's content: UTF-8 (a byte-order mark, as spreadsheets write, dropped), else Latin-1
-    (older Windows exports write 'µm' so); a file with NUL bytes is not text."""
-    raw = path.read_bytes()
-    if b"\0" in raw[:65536]:
-        raise MeasurementError(f"{path}: unreadable file (not text; a CSV is expected)")
+    (older Windows exports write 'µm' so). Read in chunks with a bounded budget: a file with NUL bytes
+    is not text, and is refused at the first chunk that holds one (not after reading a gigabyte)."""
+    from negstiff.resources import require_memory
+
+    chunks, offset = [], 0
+    try:
+        size = path.stat().st_size
+        with open(path, "rb") as fh:
+            while chunk := fh.read(READ_CHUNK_BYTES):
+                nul = chunk.find(b"\0")
+                if nul >= 0:
+                    raise MeasurementError(
+                        f"{path}: unreadable file (a NUL byte at byte {offset + nul}: not text; a CSV is expected)"
+                    )
+                if not offset:  # a text head: is the whole file's parse within the memory?
+                    try:
+                        require_memory(size * TEXT_PARSE_BYTES_PER_BYTE, f"reading {path} ({size / 2**20:.4g} MiB)")
+                    except InputError as exc:
+                        raise MeasurementError(f"{exc}; split the file, or save it as NPZ") from None
+                chunks.append(chunk)
+                offset += len(chunk)
+    except OSError as exc:
+        raise MeasurementError(f"{path}: cannot read ({exc.strerror or exc})") from None
+    raw = b"".join(chunks)
     try:
         return raw.decode("utf-8-sig")
     except UnicodeDecodeError:
@@ -192,6 +258,11 @@ def _read_csv(path: Path) -> tuple[dict[str, np.ndarray], dict[str, str]]:
         if m and m.group("name"):  # a unit in the header: the column's name without it, its unit in the metadata
             c = m.group("name").strip().strip('"').strip()
             meta[f"unit:{c}"] = (m.group("square") if m.group("square") is not None else m.group("round")).strip()
+        if c and c in names:
+            raise MeasurementError(
+                f"{path}: the header names column {c!r} twice (columns {names.index(c) + 1} and {len(names) + 1}): "
+                "which one is meant? rename one, or map the one to use with --columns"
+            )
         names.append(c)
     use = [j for j, c in enumerate(names) if c]  # trailing separators make unnamed empty columns
     try:
@@ -276,7 +347,23 @@ def _plain_decimal_digits(tokens: list[str]) -> tuple[int, int] | None:
     return decimals, max(1, int(np.max(digits)))
 
 
+def _require_memory(path: Path, nbytes: float) -> None:
+    from negstiff.resources import require_memory
+
+    try:
+        require_memory(nbytes, f"reading {path}")
+    except InputError as exc:
+        raise MeasurementError(str(exc)) from None
+
+
 def _read_npz(path: Path) -> tuple[dict[str, np.ndarray], dict[str, str]]:
+    import zipfile
+
+    try:  # the arrays' size as stored (compressed or not), before any is read
+        with zipfile.ZipFile(path) as z:
+            _require_memory(path, 3 * sum(i.file_size for i in z.infolist()))
+    except zipfile.BadZipFile:
+        pass  # np.load says what is wrong
     with np.load(path, allow_pickle=False) as f:
         arrays = {k: np.asarray(f[k]) for k in f.files}
     meta: dict[str, str] = {}
@@ -301,6 +388,7 @@ def _with_binary_resolution(cols: dict[str, np.ndarray], stored: dict[str, np.nd
 def _read_mat(path: Path) -> tuple[dict[str, np.ndarray], dict[str, str]]:
     from scipy.io import loadmat
 
+    _require_memory(path, 8 * path.stat().st_size)  # MAT v5 compresses its arrays (zlib): a few times the file
     try:
         raw = loadmat(path)
     except NotImplementedError:
@@ -462,18 +550,49 @@ def _checked_input(path: Path, raw: dict, cols: dict[str, np.ndarray]) -> tuple[
     for k, v in cols.items():
         if v.size != n:
             raise MeasurementError(f"{path}: column {k} has {v.size} samples, {inputs[0]} has {n}")
+    check_values(path, cols)
+    return inputs[0], n
+
+
+def check_values(source, cols: dict[str, np.ndarray]) -> None:
+    """Every value finite and, for a contract column, within the magnitude no shaker-table record in SI
+    exceeds (``units.MAGNITUDE_LIMITS``); one ``MeasurementError`` naming the column, the row and the unit."""
+    from negstiff.inference.units import DIMENSIONS, MAGNITUDE_LIMITS, UNITS
+
+    for k, v in cols.items():
         bad = np.flatnonzero(~np.isfinite(v))
         if bad.size:
-            raise MeasurementError(f"{path}: column {k} is NaN or inf at row {bad[0] + 1}")
-    return inputs[0], n
+            raise MeasurementError(f"{source}: column {k} is NaN or inf at row {bad[0] + 1}")
+        dim = DIMENSIONS.get(k)
+        if dim is None or not v.size:
+            continue
+        limit = MAGNITUDE_LIMITS[dim]
+        big = np.flatnonzero(np.abs(v) > limit)
+        if big.size:
+            unit = next(iter(UNITS[dim]))
+            raise MeasurementError(
+                f"{source}: column {k} is {v[big[0]]:.3g} {unit} at row {big[0] + 1}, beyond any shaker-table record "
+                f"(|{k}| <= {limit:g} {unit}): is it in SI units? scale it with --columns {k}=COL*FACTOR"
+            )
+
+
+def check_sampling_rate(source, fs: float, where: str) -> float:
+    """A sampling rate [Hz] within ``units.SAMPLING_RATE_RANGE_HZ``, or one ``MeasurementError`` naming
+    where it came from."""
+    from negstiff.inference.units import SAMPLING_RATE_RANGE_HZ
+
+    lo, hi = SAMPLING_RATE_RANGE_HZ
+    if isinstance(fs, bool) or not isinstance(fs, (int, float, np.integer, np.floating)) or not lo <= fs <= hi:
+        raise MeasurementError(f"{source}: sampling rate {fs!r} Hz ({where}) is not a rate a record has "
+                               f"({lo:g} to {hi:g} Hz)")  # fmt: skip
+    return float(fs)
 
 
 def _time_base(path: Path, cols: dict, meta: dict, fs: float | None, resolution) -> tuple[float, float, dict]:
     """(fs [Hz], t0 [s], how it was found): the caller's fs (replacing any column t), else column t
     (``time_base``: uniform within its printed precision), else the metadata's fs."""
     if fs is not None:
-        if not (fs > 0 and math.isfinite(fs)):
-            raise MeasurementError(f"{path}: sampling rate must be positive, got {fs}")
+        fs = check_sampling_rate(path, fs, "given by the caller")
         source = f"fs = {fs:g} Hz given by the caller" + (" (replaces column t)" if "t" in cols else "")
         return float(fs), float(cols["t"][0]) if "t" in cols else 0.0, {"source": source}
     fs_meta = meta.get("fs")
@@ -482,8 +601,10 @@ def _time_base(path: Path, cols: dict, meta: dict, fs: float | None, resolution)
             fs = float(fs_meta)
         except ValueError:
             raise MeasurementError(f"{path}: metadata fs = {fs_meta!r} is not a number") from None
+        fs = check_sampling_rate(path, fs, "the metadata's fs")
     if "t" in cols:
         dt, jitter, res = time_base(cols["t"], resolution, path)
+        check_sampling_rate(path, 1.0 / dt if dt > 0 else math.inf, "from column t")
         if fs is not None and abs(fs * dt - 1) > TIME_JITTER_FRACTION:
             raise MeasurementError(
                 f"{path}: fs = {fs:g} Hz disagrees with column t (1/dt = {1 / dt:.6g} Hz); "
@@ -496,8 +617,6 @@ def _time_base(path: Path, cols: dict, meta: dict, fs: float | None, resolution)
         )
     if fs is None:
         raise MeasurementError(f"{path}: no time base: give a column t, '# fs: ...' metadata or --fs")
-    if not (fs > 0 and math.isfinite(fs)):
-        raise MeasurementError(f"{path}: sampling rate must be positive, got {fs}")
     return fs, 0.0, {"source": "metadata fs"}
 
 
@@ -548,11 +667,32 @@ def time_base(t: np.ndarray, resolution: np.ndarray | None, path) -> tuple[float
     return float(dt), float(dev.max()), float(res.max())
 
 
-def from_arrays(u: np.ndarray, z: np.ndarray, fs: float, input_name: str = "base_acc", **kw: Any) -> Measurement:
-    """Build a measurement in memory (validated like a file)."""
+def from_arrays(u: np.ndarray, z: np.ndarray | None, fs: float, input_name: str = "base_acc", **kw: Any) -> Measurement:
+    """Build a measurement in memory, validated like a file: 1-D arrays of one length (at least 2
+    samples), finite values within a shaker-table record's magnitudes in SI units, a sampling rate a
+    record has, a positive mass. Optional columns (``z_dot``, ``y``, ``base_disp``) go in ``kw``."""
     if input_name not in INPUTS:
         raise MeasurementError(f"input must be one of {INPUTS}, got {input_name!r}")
-    u, z = np.asarray(u, float), np.asarray(z, float)
-    if u.shape != z.shape or u.ndim != 1:
-        raise MeasurementError("input and z must be 1-D arrays of the same length")
-    return Measurement(fs=float(fs), input_name=input_name, u=u, z=z, **kw)
+    source = kw.get("source", "<memory>")
+    cols: dict[str, np.ndarray] = {}
+    for name, values in ((input_name, u), ("z", z), *((k, kw[k]) for k in OPTIONAL if kw.get(k) is not None)):
+        if values is None:
+            continue
+        try:
+            arr = np.asarray(values, dtype=float)
+        except (TypeError, ValueError):
+            raise MeasurementError(f"{source}: {name} is not an array of numbers") from None
+        if arr.ndim != 1:
+            raise MeasurementError(f"{source}: {name} must be a 1-D array, got shape {arr.shape}")
+        cols[name] = arr
+    n = cols[input_name].size
+    for name, arr in cols.items():
+        if arr.size != n:
+            raise MeasurementError(f"{source}: {name} has {arr.size} samples, {input_name} has {n}")
+    if n < 2:
+        raise MeasurementError(f"{source}: too few samples ({n}) for a record")
+    check_values(source, cols)
+    fs = check_sampling_rate(source, fs, "given")
+    kw = {**kw, **{k: cols[k] for k in OPTIONAL if k in cols}}
+    rec = Measurement(fs=fs, input_name=input_name, u=cols[input_name], z=cols.get("z"), **{**kw, "mass": None})
+    return rec.with_mass(kw.get("mass"))

@@ -251,9 +251,14 @@ class NSI(Estimator):
             },
         )
 
+    def _check_record(self, rec: Measurement) -> None:
+        rec.require(max(2000, 40 * self.block_rows), "NSI")
+        rec.require_excitation("NSI")
+        rec.require_motion("NSI")
+
     def fit(self, rec: Measurement) -> "NSI":
         """Identify from ``rec``: both wells (or the single well), z-frame model, validation."""
-        rec.require(max(2000, 40 * self.block_rows), "NSI")
+        rec = self.check(rec)
         n_id = int(round(rec.n * (1 - self.validation_fraction)))
         ident = rec.segment(0, n_id)
         zs, v = smooth_and_differentiate(ident.z, ident.fs)

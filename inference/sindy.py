@@ -95,10 +95,13 @@ class SINDy(Estimator):
         self.seed = seed
 
     # --- the workflow ----------------------------------------------------------------------------
-    def fit(self, rec: Measurement) -> "SINDy":
+    def _check_record(self, rec: Measurement) -> None:
         rec.require(MIN_SAMPLES, "SINDy")
-        if rec.u.std() == 0 or np.ptp(rec.z) == 0:
-            raise SINDyError(f"{rec.source}: not enough excitation: the input or the response is constant")
+        rec.require_excitation("SINDy")
+        rec.require_motion("SINDy")
+
+    def fit(self, rec: Measurement) -> "SINDy":
+        rec = self.check(rec)
         n_id = int(round(rec.n * (1 - self.validation_fraction)))
         n_fit = int(round(rec.n * (1 - self.validation_fraction - self.selection_fraction)))
         ident = rec.segment(0, n_id)

@@ -25,6 +25,7 @@ from typing import Any, Mapping
 
 import numpy as np
 
+from negstiff.errors import InputError
 from negstiff.models import NOMINAL, Device
 from negstiff.models.constants import G
 from negstiff.models.device import rod_geometry
@@ -36,7 +37,7 @@ PENALTY = 1e3
 """Fitness [%] of a parameter set whose device has no double well."""
 
 
-class UpdatingError(ValueError):
+class UpdatingError(InputError):
     """Bad targets or settings for model updating."""
 
 
@@ -102,12 +103,12 @@ def targets_from(data: Mapping[str, Any], source: str = "targets") -> dict[str, 
         raise UpdatingError(
             f"{source}: needs an identify result (modal, equilibria) or the keys {', '.join(FEATURES)}"
         ) from None
-    bad = [k for k, v in t.items() if v is None or not math.isfinite(float(v))]
+    bad = [k for k, v in t.items() if v is None]
     if bad:
         raise UpdatingError(
             f"{source}: no value for {', '.join(bad)} (a single-well record cannot update a double-well device)"
         )
-    t = {k: float(v) for k, v in t.items()}
+    t = {k: _target(source, k, v) for k, v in t.items()}
     if not (t["z_minus"] < 0 < t["z_plus"]) or min(t["f_minus"], t["f_plus"]) <= 0:
         raise UpdatingError(f"{source}: targets need z_minus < 0 < z_plus and positive frequencies, got {t}")
     if isinstance(data, Mapping) and "stroke_z" in data and "model" in data:  # targets_from's own output
@@ -115,13 +116,34 @@ def targets_from(data: Mapping[str, Any], source: str = "targets") -> dict[str, 
     return t
 
 
+UNREACHED_FITNESS_PERCENT = 10.0
+"""A best fitness (seed Eq. 9) above this [%] is a device that cannot reach its targets (1-2 % on the seed's
+data and the rig's records)."""
+
+TARGET_RANGES = {"f": (1e-2, 1e3, "Hz"), "z": (-1.0, 1.0, "m")}
+"""Where a well's frequency [Hz] and position [m] may lie: a shaker-table device's, in SI units."""
+
+
+def _target(source: str, key: str, value: Any) -> float:
+    """A target as a finite number in its physical range (``TARGET_RANGES``), or one ``UpdatingError``."""
+    lo, hi, unit = TARGET_RANGES[key[0]]
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise UpdatingError(f"{source}: {key} must be a number [{unit}], got {value!r}")
+    if not (math.isfinite(value) and lo <= value <= hi):
+        raise UpdatingError(f"{source}: {key} = {value!r} {unit} is not a well of a shaker-table device "
+                            f"({lo:g} to {hi:g} {unit})")  # fmt: skip
+    return float(value)
+
+
 def load_targets(path: str | Path) -> dict[str, float]:
     from negstiff.files import read_json
 
     try:
-        data = read_json(path)
+        data = read_json(path, "targets file")
     except ValueError as exc:
         raise UpdatingError(str(exc)) from None
+    if not isinstance(data, Mapping):
+        raise UpdatingError(f"{path}: a targets file is a JSON object (an identify result, or {', '.join(FEATURES)})")
     return targets_from(data, str(path))
 
 
@@ -206,9 +228,22 @@ class GAUpdater(Estimator):
         mismatch = 100 * np.sqrt(np.mean((k - k_id) ** 2, axis=1)) / np.std(k_id)
         return np.where(ok & reach.all(axis=1), mismatch, PENALTY)
 
+    def check(self, targets: Mapping[str, Any]) -> dict[str, Any]:
+        """Everything ``fit`` checks before the GA runs (the settings and the targets); the targets as
+        ``fit`` uses them (``targets_from``)."""
+        self._validate()
+        if not isinstance(targets, Mapping):
+            raise UpdatingError(f"targets are a mapping (an identify result, or {', '.join(FEATURES)})")
+        t = targets_from(targets)
+        if self.compare == "restoring_force" and not ("stroke_z" in t and "model" in t):
+            raise UpdatingError(
+                "compare='restoring_force' needs an identify result with its stroke (stroke_quantiles_m)"
+            )
+        return t
+
     def fit(self, targets: Mapping[str, float], progress=None) -> "GAUpdater":
         """Run the GA against ``targets`` (``f_minus, f_plus`` [Hz], ``z_minus, z_plus`` [m])."""
-        self._validate()
+        targets = self.check(targets)
         from pymoo.algorithms.soo.nonconvex.ga import GA
         from pymoo.core.callback import Callback
         from pymoo.core.problem import Problem
@@ -216,14 +251,9 @@ class GAUpdater(Estimator):
         from pymoo.operators.mutation.pm import PM
         from pymoo.optimize import minimize
 
-        targets = targets_from(targets)
         stroke = targets.pop("stroke_z", None)
         model = targets.pop("model", None)
         by_force = stroke is not None and model is not None and self.compare != "features"
-        if self.compare == "restoring_force" and not by_force:
-            raise UpdatingError(
-                "compare='restoring_force' needs an identify result with its stroke (stroke_quantiles_m)"
-            )
         k_id = None
         if by_force:
             from negstiff.models import Model
@@ -290,6 +320,15 @@ class GAUpdater(Estimator):
         self.targets_ = targets
         return self
 
+    def warnings(self) -> list[str]:
+        """What a physicist would not believe: a best device that still misses its targets."""
+        if not self.fitness_ <= UNREACHED_FITNESS_PERCENT:
+            return [
+                f"the best device misses the targets by {self.fitness_:.3g} % (seed Eq. 9): the targets lie beyond "
+                "what the search box around the nominal design reaches; check them, or widen the bounds"
+            ]
+        return []
+
     def result(self) -> dict[str, Any]:
         """The contract's update JSON (plus features, targets, E/m and settings)."""
         d = self.device_
@@ -306,6 +345,7 @@ class GAUpdater(Estimator):
             "compared": self.compared_,
             "targets": self.targets_,
             "mass_fixed": self.fixed_mass is not None,
+            "warnings": self.warnings(),
             "start": {"E": self.start.E, "alpha_deg": self.start.alpha_deg, "m": self.start.m},
             "settings": {
                 "pop_size": self.pop_size,

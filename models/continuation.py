@@ -52,6 +52,8 @@ from typing import Any
 
 import numpy as np
 
+from negstiff.errors import InputError
+
 from .simulator import simulate_batch
 
 STEPS_PER_PERIOD = 256
@@ -68,7 +70,7 @@ RETRACE_STEPS = 8
 """Small steps a bifurcation's step is retraced in where locating along the whole step fails (``_locate``)."""
 
 
-class ContinuationError(ValueError):
+class ContinuationError(InputError):
     """The continuation cannot start or go on (no periodic orbit found, the model diverges)."""
 
 

@@ -36,12 +36,14 @@ from typing import Any, Mapping
 
 import numpy as np
 
+from negstiff.errors import InputError
+
 from . import effects
 from .constants import G
 from .equation import Equilibria, Model, UnderlyingLinear, find_equilibria
 
 
-class GeometryError(ValueError):
+class GeometryError(InputError):
     """A displacement outside the range where the rod-frame geometry has a solution."""
 
 

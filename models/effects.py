@@ -191,6 +191,13 @@ class Effect:
         return not hasattr(self.law, "fields")
 
     @property
+    def dissipative(self) -> bool:
+        """A force odd in the velocity alone (friction, velocity-power damping): a physical device's value
+        is >= 0 (a negative one feeds energy in); a fitted model's may not be."""
+        law = self.law
+        return isinstance(law, SmoothSign) or (isinstance(law, Monomial) and law.z_power == 0 and law.v_odd)
+
+    @property
     def folds_into(self) -> str | None:
         """The base field whose term this effect's law is (k2, k3, c_nl), or None."""
         return next((f for f, (law, _) in BASE_TERMS.items() if law == self.law), None)

@@ -11,12 +11,13 @@ from typing import Any
 
 import numpy as np
 
+from negstiff.errors import InputError
 from negstiff.files import atomic_path, write_text
 
 from .constants import G
 
 
-class RigError(ValueError):
+class RigError(InputError):
     """The rig cannot produce the requested record (bad settings, or the device left its stroke)."""
 
 

@@ -31,6 +31,9 @@ import numpy as np
 from scipy import fft as sp_fft
 from scipy import signal
 
+from negstiff.errors import InputError
+
+from . import effects as effect_registry
 from .device import AS_BUILT, Device
 from .equation import Model
 from .records import RigError, RigRecord, write_lab_format  # noqa: F401 (RigError, write_lab_format: their home before records.py)
@@ -104,6 +107,11 @@ def _smooth_steps(levels: Sequence[float], step_samples, ramp_samples, start: fl
     return env
 
 
+BYTES_PER_SAMPLE = 200
+"""Memory the rig holds per simulated sample of one run (its excitation, table motion, states and sensor
+channels at the simulation rate, and their FFTs): measured 200 on a 300 s random record, 72 on a campaign."""
+
+
 class Rig:
     """The virtual shaking table with a device on it.
 
@@ -135,6 +143,11 @@ class Rig:
                 if isinstance(system, Model)
                 else system.with_(extra={**dict(system.extra), **effects})
             )
+        for name, value in system.extra.items():
+            effect = effect_registry.get(name)
+            if effect.dissipative and value < 0:
+                raise RigError(f"effect {name} = {value:g} {effect.units}: a {name.replace('_', ' ')} dissipates "
+                               "energy, its value is >= 0 on a physical device")  # fmt: skip
         if not (fs > 0 and math.isfinite(fs)):
             raise RigError(f"sampling rate must be positive, got {fs}")
         if int(oversample) < 1:
@@ -164,10 +177,7 @@ class Rig:
         over 12 s); above about 17 m/s^2 the crossings become chaotic and no model, not even the
         truth, can follow a long free run (see the calibration report).
         """
-        if duration <= 0 or rms <= 0 or not (0 < band[0] < band[1] < self.fs / 2):
-            raise RigError(
-                f"random excitation needs duration > 0, rms > 0 and 0 < band < fs/2; got {duration}, {rms}, {band}"
-            )
+        self.check_random(duration, rms, band, settle, start)
         fsim = self.fs * self.oversample
         # a fast FFT length (the extra samples lengthen the discarded tail): the table motion and the
         # integration are FFTs of the whole acquisition, slow for lengths with large prime factors
@@ -191,6 +201,15 @@ class Rig:
         }
         return self._run([acc], [start], [settle], [duration], excitation, sens_rng)[0]
 
+    def check_random(self, duration=300.0, rms=14.0, band=(2.0, 40.0), settle=5.0, start="plus") -> None:
+        """Everything ``random`` refuses (``RigError``, one line), before any work: the settings, the memory."""
+        if not (duration > 0 and rms > 0 and 0 < band[0] < band[1] < self.fs / 2 and settle >= 0):
+            raise RigError(
+                f"random excitation needs duration > 0, rms > 0 and 0 < band < fs/2; got {duration}, {rms}, {band}"
+            )
+        self._check_start([start])
+        self._require_memory([(duration + settle + TAIL_S) * self.fs * self.oversample], "a random record")
+
     def sine_sweep(
         self,
         f_start: float = 2.0,
@@ -212,10 +231,7 @@ class Rig:
         draws; the two are the same process (a flat-spectrum band-limited Gaussian)."""
         from pyExSi import sine_sweep
 
-        if not (0 < f_start < self.fs / 2 and 0 < f_stop < self.fs / 2) or amplitude < 0 or duration <= 0:
-            raise RigError("a sine sweep needs 0 < f_start, f_stop < fs/2, amplitude >= 0 and duration > 0")
-        if mode not in ("linear", "logarithmic"):
-            raise RigError(f"sweep mode must be 'linear' or 'logarithmic', got {mode!r}")
+        self.check_sine_sweep(f_start, f_stop, amplitude, duration, mode, settle, start)
         fsim = self.fs * self.oversample
         n_settle, n_sweep = int(round(settle * fsim)), int(round(duration * fsim))
         n = sp_fft.next_fast_len(n_settle + n_sweep + int(round(TAIL_S * fsim)), real=True)
@@ -242,6 +258,16 @@ class Rig:
         }
         _, sens_rng = self._streams()
         return self._run([acc], [start], [settle], [duration], excitation, sens_rng)[0]
+
+    def check_sine_sweep(self, f_start=2.0, f_stop=40.0, amplitude=1.0, duration=120.0, mode="linear", settle=5.0,
+                         start="plus") -> None:  # fmt: skip
+        """Everything ``sine_sweep`` refuses (``RigError``, one line), before any work."""
+        if not (0 < f_start < self.fs / 2 and 0 < f_stop < self.fs / 2) or amplitude < 0 or duration <= 0:
+            raise RigError("a sine sweep needs 0 < f_start, f_stop < fs/2, amplitude >= 0 and duration > 0")
+        if mode not in ("linear", "logarithmic"):
+            raise RigError(f"sweep mode must be 'linear' or 'logarithmic', got {mode!r}")
+        self._check_start([start])
+        self._require_memory([(duration + settle + TAIL_S) * self.fs * self.oversample], "a sine sweep")
 
     def harmonic(
         self,
@@ -275,12 +301,7 @@ class Rig:
         record_periods: int = 100,
     ) -> list[list[RigRecord]]:
         """Several stepped sweeps (each from its own starting well) in one batched simulation."""
-        if not (0 < freq < self.fs / 4):
-            raise RigError(f"forcing frequency must lie in (0, fs/4) = (0, {self.fs / 4:g}) Hz, got {freq}")
-        if len(amplitude_lists) != len(starts) or not all(len(a) for a in amplitude_lists):
-            raise RigError("each sweep needs a starting well and at least one amplitude")
-        if settle_periods < 1 or record_periods < 2:
-            raise RigError("need at least 1 settling and 2 recorded periods per step")
+        self.check_sweeps(freq, amplitude_lists, starts, settle_periods, record_periods)
         fsim = self.fs * self.oversample
         period = 1.0 / freq
         step_s = (settle_periods + record_periods) * period
@@ -290,8 +311,6 @@ class Rig:
         phase = exc_rng.uniform(0, 2 * np.pi)
         accs, settles, durations = [], [], []
         for amps in amplitude_lists:
-            if any(not (a >= 0 and math.isfinite(a)) for a in amps):
-                raise RigError(f"harmonic amplitudes must be finite and >= 0, got {list(amps)}")
             env = _smooth_steps(amps, step_n, ramp_n)
             n_fast = sp_fft.next_fast_len(env.size + int(TAIL_S * fsim), real=True)  # see random()
             env = np.pad(env, (0, n_fast - env.size), mode="edge")
@@ -316,6 +335,21 @@ class Rig:
             steps=[[{"amplitude_m_s2": float(a), "step": j} for j, a in enumerate(amps)] for amps in amplitude_lists],
         )
 
+    def check_sweeps(self, freq, amplitude_lists, starts, settle_periods=100, record_periods=100) -> None:
+        """Everything ``sweeps`` (and ``harmonic``, ``sweep``) refuses (``RigError``, one line), before any work."""
+        if not (0 < freq < self.fs / 4):
+            raise RigError(f"forcing frequency must lie in (0, fs/4) = (0, {self.fs / 4:g}) Hz, got {freq}")
+        if len(amplitude_lists) != len(starts) or not all(len(a) for a in amplitude_lists):
+            raise RigError("each sweep needs a starting well and at least one amplitude")
+        if settle_periods < 1 or record_periods < 2:
+            raise RigError("need at least 1 settling and 2 recorded periods per step")
+        for amps in amplitude_lists:
+            if any(not (a >= 0 and math.isfinite(a)) for a in amps):
+                raise RigError(f"harmonic amplitudes must be finite and >= 0, got {list(amps)}")
+        self._check_start(starts)
+        fsim, step_s = self.fs * self.oversample, (settle_periods + record_periods) / freq
+        self._require_memory([len(a) * step_s * fsim + TAIL_S * fsim for a in amplitude_lists], "the campaign")
+
     def stepped_sines(
         self,
         freq_lists: Sequence[Sequence[float]],
@@ -329,14 +363,7 @@ class Rig:
         table (the phase continuous, each new frequency reached by a raised-cosine ramp over two periods of
         the slower one); one record per step, ``record_periods`` of its own period after ``settle_periods``;
         all sweeps in one batched simulation."""
-        if len(freq_lists) != len(starts) or not all(len(f) for f in freq_lists):
-            raise RigError("each sweep needs a starting well and at least one frequency")
-        if any(not (0 < f < self.fs / 4) for fl in freq_lists for f in fl):
-            raise RigError(f"forcing frequencies must lie in (0, fs/4) = (0, {self.fs / 4:g}) Hz")
-        if not (amplitude >= 0 and math.isfinite(amplitude)):
-            raise RigError(f"the amplitude must be finite and >= 0, got {amplitude}")
-        if settle_periods < 2 or record_periods < 2:
-            raise RigError("need at least 2 settling and 2 recorded periods per step")
+        self.check_stepped_sines(freq_lists, amplitude, starts, settle_periods, record_periods)
         fsim = self.fs * self.oversample
         exc_rng, sens_rng = self._streams()
         phase0 = exc_rng.uniform(0, 2 * np.pi)
@@ -364,7 +391,42 @@ class Rig:
                  for fl in freq_lists]  # fmt: skip
         return self._run(accs, list(starts), settles, durations, excitation, sens_rng, steps=steps)
 
+    def check_stepped_sines(self, freq_lists, amplitude, starts, settle_periods=100, record_periods=100) -> None:
+        """Everything ``stepped_sines`` refuses (``RigError``, one line), before any work."""
+        if len(freq_lists) != len(starts) or not all(len(f) for f in freq_lists):
+            raise RigError("each sweep needs a starting well and at least one frequency")
+        if any(not (0 < f < self.fs / 4) for fl in freq_lists for f in fl):
+            raise RigError(f"forcing frequencies must lie in (0, fs/4) = (0, {self.fs / 4:g}) Hz")
+        if not (amplitude >= 0 and math.isfinite(amplitude)):
+            raise RigError(f"the amplitude must be finite and >= 0, got {amplitude}")
+        if settle_periods < 2 or record_periods < 2:
+            raise RigError("need at least 2 settling and 2 recorded periods per step")
+        self._check_start(starts)
+        fsim = self.fs * self.oversample
+        self._require_memory(
+            [sum((settle_periods + record_periods) / f for f in fl) * fsim + TAIL_S * fsim for fl in freq_lists],
+            "the stepped-sine campaign",
+        )
+
     # --- the measurement chain ---------------------------------------------------------------
+    @staticmethod
+    def _check_start(starts) -> None:
+        for st in starts:
+            if st not in ("plus", "minus"):
+                raise RigError(f"starting well must be 'plus' or 'minus', got {st!r}")
+
+    def _require_memory(self, samples: Sequence[float], what: str) -> None:
+        """Refuse (``RigError``, one line) before allocating a batch of simulations of ``samples`` samples
+        each at the simulation rate that the machine cannot hold (``BYTES_PER_SAMPLE`` each)."""
+        from negstiff.resources import require_memory
+
+        total = BYTES_PER_SAMPLE * len(samples) * max(samples)
+        try:
+            require_memory(total, f"{what} ({max(samples) / (self.fs * self.oversample):.4g} s x {len(samples)} "
+                                  f"at {self.fs * self.oversample:g} Hz)")  # fmt: skip
+        except InputError as exc:
+            raise RigError(str(exc)) from None
+
     def _streams(self) -> tuple[np.random.Generator, np.random.Generator]:
         exc, sens = np.random.SeedSequence(self.seed).spawn(2)
         return np.random.default_rng(exc), np.random.default_rng(sens)

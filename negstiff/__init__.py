@@ -1,11 +1,23 @@
 """negstiff: identification, model updating and uncertainty quantification of nonlinear
 (bistable, negative-stiffness) oscillators.
 
+The front door: everything a script needs is a name of this package, loaded on first use (PEP 562: the
+command line's ``--help`` does not pay for the compiled simulator)::
+
+    from negstiff import load, NSI, SINDy, Posterior
+
+    rec = load("lab.csv", columns="base_acc=ACC,z=DISP", mass=0.2)
+    nsi = NSI().fit(rec)
+    print(nsi.model_, nsi.modal_)
+
 The parts: ``negstiff.models`` (the physics: device, equation of motion, simulator, virtual rig),
 ``negstiff.inference`` (learning from data: loading, identification, updating, posteriors),
 ``negstiff.experiments`` (studies that write ``reports/``), and the ``negstiff`` command line.
 """
 
+from __future__ import annotations
+
+import importlib
 from pathlib import Path as _Path
 
 __version__ = "0.1.0"
@@ -16,3 +28,43 @@ __version__ = "0.1.0"
 _here = _Path(__file__).resolve().parent
 if not (_here / "models").is_dir() and (_here.parent / "models" / "__init__.py").is_file():
     __path__.append(str(_here.parent))  # noqa: F821 - a package's __path__
+
+_EXPORTS = {
+    # records
+    "load": "negstiff.inference.measurement",
+    "from_arrays": "negstiff.inference.measurement",
+    "Measurement": "negstiff.inference.measurement",
+    # the physics
+    "Model": "negstiff.models.equation",
+    "Device": "negstiff.models.device",
+    "simulate": "negstiff.models.simulator",
+    "Rig": "negstiff.models.rig",
+    "nfrc": "negstiff.models.continuation",
+    # learning from data
+    "NSI": "negstiff.inference.nsi",
+    "SINDy": "negstiff.inference.sindy",
+    "Discrepancy": "negstiff.inference.discrepancy",
+    "Posterior": "negstiff.inference.posterior.core",
+    "GAUpdater": "negstiff.inference.updating",
+    "characterize": "negstiff.inference.characterize",
+    "frf": "negstiff.inference.frf",
+    # errors and warnings
+    "InputError": "negstiff.errors",
+    "OutputError": "negstiff.errors",
+    "NegstiffWarning": "negstiff.errors",
+    "MeasurementError": "negstiff.inference.measurement",
+}
+
+__all__ = [*_EXPORTS, "__version__"]
+
+
+def __getattr__(name: str):
+    if name in _EXPORTS:
+        value = getattr(importlib.import_module(_EXPORTS[name]), name)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(__all__))

@@ -1,23 +1,50 @@
-"""Atomic file output: a result is either complete on disk or absent, never half-written."""
+"""Files in and out, so that nothing the user gives is lost: outputs are written atomically (complete on
+disk or absent, never half-written), checked before any work (``check_outputs``: never onto an input,
+never onto each other, never onto something that is not a regular file, always a name the file system
+takes), and inputs are read with a bounded budget (``read_bytes``, ``read_json``).
+
+A group of outputs (a record and its truth, a result and its figure) is one ``transaction``: every file
+is staged beside its place and all are moved into place at the end, or none.
+"""
 
 from __future__ import annotations
 
 import contextlib
+import errno
+import json
 import os
 import shutil
 import tempfile
 from pathlib import Path
+from typing import Iterable, Mapping
+
+from negstiff.errors import InputError, OutputError
 
 _PENDING: set[Path] = set()
 """Temporary files and folders being written now (``remove_pending`` deletes them on an interrupt)."""
+
+_STAGED: list[tuple[int, Path, Path, bool]] = []
+"""(process, temporary, final path, is a folder) of the open transaction's outputs, moved into place at its end."""
+
+_TRANSACTION: list[int] = []
+"""The process ids that hold an open transaction (a spawned or forked worker never defers)."""
+
+TEMP_NAME_CHARS = 64
+"""At most this many characters of an output's name go into its temporary name (``.NAME.xxxx.part``):
+a legal 255-character name must not make an illegal temporary one."""
+
+OUTPUT_ERRNOS = {errno.ENOSPC, errno.EDQUOT, errno.EFBIG, errno.EROFS, errno.EIO, errno.ENAMETOOLONG,
+                 errno.EACCES, errno.EPERM, errno.EISDIR, errno.ENOTDIR, errno.EXDEV}  # fmt: skip
+"""What a file system says when an output cannot be written: turned into one ``OutputError`` line."""
 
 
 def remove_pending() -> None:
     """Delete every temporary output still being written (an interrupted command leaves nothing)."""
     for p in list(_PENDING):
         with contextlib.suppress(OSError):
-            shutil.rmtree(p) if p.is_dir() else p.unlink()
+            shutil.rmtree(p) if p.is_dir() and not p.is_symlink() else p.unlink()
         _PENDING.discard(p)
+    _STAGED.clear()
 
 
 def _umask() -> int:
@@ -26,27 +53,95 @@ def _umask() -> int:
     return mask
 
 
+def _temp_prefix(path: Path) -> str:
+    return f".{path.name[:TEMP_NAME_CHARS]}."
+
+
+def _in_transaction() -> bool:
+    return bool(_TRANSACTION) and _TRANSACTION[-1] == os.getpid()
+
+
+@contextlib.contextmanager
+def _output_errors(path: Path):
+    """An operating system's refusal to write ``path`` as one ``OutputError`` line."""
+    try:
+        yield
+    except OSError as exc:
+        if exc.errno in OUTPUT_ERRNOS:
+            raise OutputError(f"cannot write {path}: {exc.strerror or exc} (nothing written)") from None
+        raise
+
+
+@contextlib.contextmanager
+def transaction():
+    """Every output written inside (``atomic_path``, ``atomic_dir``, ``write_text``) is staged and moved
+    into place when the block ends without an exception; on an exception (or ``remove_pending``, on a
+    signal) every staged output is deleted and no final path is touched."""
+    _TRANSACTION.append(os.getpid())
+    start = len(_STAGED)
+    try:
+        yield
+    except BaseException:
+        for _, tmp, _, is_dir in _STAGED[start:]:
+            with contextlib.suppress(OSError):
+                shutil.rmtree(tmp) if is_dir else tmp.unlink()
+            _PENDING.discard(tmp)
+        del _STAGED[start:]
+        raise
+    finally:
+        _TRANSACTION.pop()
+    staged = _STAGED[start:]
+    del _STAGED[start:]
+    try:
+        for _, tmp, path, is_dir in staged:
+            with _output_errors(path):
+                _move_into_place(tmp, path, is_dir)
+    finally:
+        for _, tmp, _, is_dir in staged:
+            if tmp.exists():
+                with contextlib.suppress(OSError):
+                    shutil.rmtree(tmp) if is_dir else tmp.unlink()
+            _PENDING.discard(tmp)
+
+
+def _move_into_place(tmp: Path, path: Path, is_dir: bool) -> None:
+    if is_dir and path.exists():
+        old = path.with_name(f"{_temp_prefix(path)}old")
+        shutil.rmtree(old, ignore_errors=True)
+        os.replace(path, old)
+        os.replace(tmp, path)
+        shutil.rmtree(old, ignore_errors=True)
+    else:
+        os.replace(tmp, path)
+
+
 @contextlib.contextmanager
 def atomic_path(path: str | os.PathLike):
-    """Yield a temporary path beside ``path``; on success it replaces ``path`` in one rename.
-
-    On an exception the temporary file is removed and ``path`` is left untouched.
-    """
+    """Yield a temporary path beside ``path``; on success it replaces ``path`` in one rename (at the end
+    of the open ``transaction``, if any). On an exception the temporary file is removed and ``path`` is
+    left untouched; a file system's refusal (full disk, ...) is an ``OutputError``."""
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".part", dir=path.parent)
-    os.close(fd)
+    with _output_errors(path):
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp_name = tempfile.mkstemp(prefix=_temp_prefix(path), suffix=".part", dir=path.parent)
+        os.close(fd)
+    tmp = Path(tmp_name)
     os.chmod(tmp, 0o666 & ~_umask())  # mkstemp makes 0600; give the file the usual permissions
-    _PENDING.add(Path(tmp))
+    _PENDING.add(tmp)
     try:
-        yield Path(tmp)
-        os.replace(tmp, path)
+        with _output_errors(path):
+            yield tmp
+            if _in_transaction():
+                _STAGED.append((os.getpid(), tmp, path, False))
+                return
+            os.replace(tmp, path)
     except BaseException:
         with contextlib.suppress(FileNotFoundError):
             os.unlink(tmp)
         raise
     finally:
-        _PENDING.discard(Path(tmp))
+        if not _in_transaction():
+            _PENDING.discard(tmp)
 
 
 def write_text(path: str | os.PathLike, text: str) -> Path:
@@ -60,35 +155,187 @@ def write_text(path: str | os.PathLike, text: str) -> Path:
 def atomic_dir(path: str | os.PathLike):
     """Yield a temporary folder beside ``path``; on success it replaces ``path`` as a whole."""
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{path.name}.", suffix=".part", dir=path.parent))
+    with _output_errors(path):
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = Path(tempfile.mkdtemp(prefix=_temp_prefix(path), suffix=".part", dir=path.parent))
     os.chmod(tmp, 0o777 & ~_umask())
     _PENDING.add(tmp)
     try:
-        yield tmp
-        if path.exists():
-            old = path.with_name(f".{path.name}.old")
-            shutil.rmtree(old, ignore_errors=True)
-            os.replace(path, old)
-            os.replace(tmp, path)
-            shutil.rmtree(old, ignore_errors=True)
-        else:
-            os.replace(tmp, path)
+        with _output_errors(path):
+            yield tmp
+            if _in_transaction():
+                _STAGED.append((os.getpid(), tmp, path, True))
+                return
+            _move_into_place(tmp, path, True)
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise
     finally:
-        _PENDING.discard(tmp)
+        if not _in_transaction():
+            _PENDING.discard(tmp)
 
 
-def read_json(path: str | os.PathLike):
-    """Parse a JSON file; ValueError with one line naming the file when it is missing or not JSON."""
-    import json
+# --- inputs ------------------------------------------------------------------------------------------
+JSON_MAX_BYTES = 64 * 2**20
+"""A model, targets or result JSON larger than this is not one negstiff wrote or a person typed."""
 
+JSON_MAX_DEPTH = 32
+"""Nesting deeper than this is not a negstiff JSON (the deepest negstiff writes is 6)."""
+
+
+def read_json(path: str | os.PathLike, what: str = "JSON"):
+    """Parse a JSON file; an ``InputError`` with one line naming the file when it is missing, too
+    large, not JSON, or nested deeper than ``JSON_MAX_DEPTH`` (no parser recursion reaches Python's
+    limit)."""
     path = Path(path)
     if not path.is_file():
-        raise ValueError(f"{path}: no such file")
+        raise InputError(f"{path}: no such file")
+    text = read_bytes(path, JSON_MAX_BYTES, what).decode("utf-8", errors="replace")
+    depth = _max_depth(text)
+    if depth > JSON_MAX_DEPTH:
+        raise InputError(f"{path}: nested {depth} levels deep (a negstiff {what} has a few); not read")
     try:
-        return json.loads(path.read_text())
+        return json.loads(text)
     except json.JSONDecodeError as exc:
-        raise ValueError(f"{path}: not valid JSON ({exc.msg} at line {exc.lineno})") from None
+        raise InputError(f"{path}: not valid JSON ({exc.msg} at line {exc.lineno})") from None
+    except RecursionError:  # pragma: no cover - the depth check comes first
+        raise InputError(f"{path}: nested too deeply to read") from None
+
+
+def _max_depth(text: str) -> int:
+    """The deepest bracket nesting of a JSON text, strings skipped (a linear scan, no recursion)."""
+    depth = best = 0
+    in_string = escaped = False
+    for ch in text:
+        if in_string:
+            if escaped:
+                escaped = False
+            elif ch == "\\":
+                escaped = True
+            elif ch == '"':
+                in_string = False
+        elif ch == '"':
+            in_string = True
+        elif ch in "[{":
+            depth += 1
+            best = max(best, depth)
+        elif ch in "]}":
+            depth -= 1
+    return best
+
+
+def read_bytes(path: str | os.PathLike, max_bytes: int, what: str = "file") -> bytes:
+    """A file's bytes, refused with one line before reading when it is larger than ``max_bytes``."""
+    path = Path(path)
+    try:
+        size = path.stat().st_size
+        if size > max_bytes:
+            raise InputError(
+                f"{path}: {size / 2**20:.4g} MiB, larger than a {what} can be ({max_bytes / 2**20:.4g} MiB); not read"
+            )
+        return path.read_bytes()
+    except OSError as exc:
+        raise InputError(f"{path}: cannot read ({exc.strerror or exc})") from None
+
+
+# --- outputs, checked before any work ----------------------------------------------------------------
+def name_max(folder: Path) -> int:
+    """The longest file name (bytes) the file system holding ``folder`` takes (255 where it does not say)."""
+    try:
+        return int(os.pathconf(folder, "PC_NAME_MAX"))
+    except (OSError, ValueError):
+        return 255
+
+
+def _existing_parent(path: Path) -> Path:
+    parent = path.parent
+    while not parent.exists() and parent != parent.parent:
+        parent = parent.parent
+    return parent
+
+
+def _same_file(a: Path, b: Path) -> bool:
+    try:
+        return os.path.samefile(a, b)
+    except OSError:
+        return False
+
+
+def check_outputs(
+    outputs: Mapping[str, str | os.PathLike],
+    inputs: Iterable[str | os.PathLike] = (),
+    folders: Mapping[str, str] | None = None,
+) -> dict[str, Path]:
+    """Check, before any work, that every output can be written and loses nothing.
+
+    Parameters
+    ----------
+    outputs : {label: path} of every file (and folder) a piece of work will write, side files
+        included (a record's truth, a result's figure); labels name them in messages (``--out``).
+    inputs : every file the work reads (files inside a folder input included).
+    folders : {label: marker} of the outputs that are folders, replaced as a whole; an existing folder
+        is replaced only when it is empty or holds ``marker`` (negstiff's own earlier output).
+
+    Returns the outputs as absolute paths. Raises ``OutputError`` (one line) when a path is empty, is an
+    input (however spelled: relative, absolute, through a symlink, a hard link, or inside a folder
+    output), is another output, exists and is not a regular file (a folder, a device, a pipe), has a
+    name the file system does not take, or lies in a folder that cannot be written.
+    """
+    folders = dict(folders or {})
+    ins = [(Path(p), Path(p).resolve()) for p in inputs if str(p)]
+    out: dict[str, Path] = {}
+    for label, given in outputs.items():
+        if not str(given).strip():
+            raise OutputError(f"{label} '': an empty path; give a file name")
+        path = Path(given)
+        longest = name_max(_existing_parent(Path(os.path.abspath(path))))
+        if len(path.name.encode()) > longest:
+            raise OutputError(f"{label} {given}: the file name is longer than the file system takes "
+                              f"({len(path.name.encode())} bytes, at most {longest})")  # fmt: skip
+        try:
+            real = path.resolve()
+        except OSError as exc:
+            raise OutputError(f"{label} {given}: not a path this system takes ({exc.strerror or exc})") from None
+        for shown, r in ins:
+            if r == real or _same_file(r, real):
+                raise OutputError(f"{label} {given}: would overwrite the input {shown}; choose another path")
+            if label in folders and real in r.parents:
+                raise OutputError(f"{label} {given}: the folder holds the input {shown}, and would be replaced")
+        for other, p in out.items():
+            if p == real:
+                raise OutputError(f"{label} {given} is also {other}: give them different paths")
+        if label in folders:
+            _check_folder_output(label, given, real, folders[label])
+        elif real.exists() or path.is_symlink():
+            if real.is_dir():
+                raise OutputError(f"{label} {given}: is a folder; give a file path")
+            if real.exists() and not real.is_file():
+                raise OutputError(f"{label} {given}: exists and is not a regular file (a device or a pipe?)")
+        _check_writable(label, given, _existing_parent(real))
+        out[label] = real
+    return out
+
+
+def _check_folder_output(label: str, given, real: Path, marker: str) -> None:
+    if not real.exists():
+        return
+    if not real.is_dir():
+        raise OutputError(f"{label} {given}: exists and is not a folder")
+    entries = [p.name for p in real.iterdir()]
+    if entries and marker not in entries:
+        raise OutputError(
+            f"{label} {given}: the folder holds files negstiff did not write (no {marker}); it would be replaced "
+            "as a whole: give a new or empty folder"
+        )
+
+
+def _check_writable(label: str, given, parent: Path) -> None:
+    """An output's folder (where its temporary file, or a folder output's temporary folder, is made)."""
+    try:  # the one sure test of a folder's writability: write in it
+        if not parent.is_dir():
+            raise OSError
+        fd, probe = tempfile.mkstemp(prefix=".negstiff-probe.", dir=parent)
+        os.close(fd)
+        os.unlink(probe)
+    except OSError:
+        raise OutputError(f"{label} {given}: cannot write there ({parent} is not a writable folder)") from None

@@ -189,8 +189,9 @@ def test_a_period_1_record_at_64_hz_is_period_1():
     assert lle["value"] is None or not (lle["value"] > CHAOS_THRESHOLD * 2 * np.pi * F and lle["value"] > 3 * lle["sd"])
 
 
-def test_a_constant_response_is_reported_not_determinable():
+def test_a_constant_response_is_refused_as_a_dead_sensor():
+    # a response that does not move has no period, regime or exponent to report: the record is refused
+    # (it was reported 'not determinable' with exit 0 and no warning, the second probe's finding)
     t = np.arange(40 * 512) / 512
-    c = characterize(from_arrays(np.sin(2 * np.pi * F * t), np.full(t.size, 0.02), 512.0), F)
-    assert c["period"] is None and c["lle"]["value"] is None and not c["chaotic"]
-    assert "constant" in c["reasons"]["period"]
+    with pytest.raises(MeasurementError, match="response z is constant .* dead or disconnected sensor"):
+        characterize(from_arrays(np.sin(2 * np.pi * F * t), np.full(t.size, 0.02), 512.0), F)

@@ -92,11 +92,13 @@ class Posterior(Estimator):
 
     def _validate(self) -> None:
         if self.model not in ("coefficients", "device"):
-            raise ValueError(f"model must be 'coefficients' or 'device', got {self.model!r}")
+            raise PosteriorError(f"model must be 'coefficients' or 'device', got {self.model!r}")
         if self.mass_prior not in ("free", "weighed"):
-            raise ValueError(f"mass_prior must be 'free' or 'weighed', got {self.mass_prior!r}")
+            raise PosteriorError(f"mass_prior must be 'free' or 'weighed', got {self.mass_prior!r}")
         if self.start is not None and (self.model != "coefficients" or not isinstance(self.start, Model)):
-            raise ValueError("a start model is a polynomial model, for the coefficient posterior")
+            raise PosteriorError("a start model is a polynomial model, for the coefficient posterior")
+        if isinstance(self.hdi_prob, bool) or not (isinstance(self.hdi_prob, (int, float)) and 0 < self.hdi_prob < 1):
+            raise PosteriorError(f"hdi_prob must lie in (0, 1) (0.9 for 90 %), got {self.hdi_prob!r}")
 
     def result(self) -> dict[str, Any]:
         """The contract's posterior JSON (``result_json`` of ``result_``)."""
@@ -217,9 +219,14 @@ class Posterior(Estimator):
         return par, win, theta, sol, sigma
 
     # --- the run --------------------------------------------------------------------------------
+    def _check_record(self, rec: Measurement) -> None:
+        rec.require_excitation("the posterior")
+        rec.require_motion("the posterior")
+        Windows.check(rec, self.window_s)
+
     def fit(self, rec: Measurement) -> Posterior:
         """Sample the posterior of ``rec``; the result is ``result_`` (a ``PosteriorResult``)."""
-        self._validate()
+        rec = self.check(rec)
 
         t_start = time.perf_counter()
         par, win, theta, sol, sigma = self.point_estimate(rec)

@@ -54,17 +54,23 @@ class Windows:
     def length(self) -> int:
         return self.z.shape[1]
 
-    @classmethod
-    def cut(cls, rec: Measurement, window_s: float, max_windows: int | None = None, oversample: int = 1) -> "Windows":
+    @staticmethod
+    def check(rec: Measurement, window_s: float) -> tuple[int, int]:
+        """(samples per window, windows in the record), or a ``PosteriorError`` where there are too few."""
         L = int(round(window_s * rec.fs))
         if L < 8:
             raise PosteriorError(f"{rec.source}: window of {window_s} s holds fewer than 8 samples")
         n_win = rec.n // L
         if n_win < 4:
-            raise MeasurementError(
+            raise PosteriorError(
                 f"{rec.source}: too few samples for a posterior: {rec.n} ({rec.duration:.3g} s), need at least "
                 f"{4 * L} (4 windows of {window_s:g} s)"
             )
+        return L, n_win
+
+    @classmethod
+    def cut(cls, rec: Measurement, window_s: float, max_windows: int | None = None, oversample: int = 1) -> "Windows":
+        L, n_win = cls.check(rec, window_s)
         picks = np.arange(n_win)
         if max_windows is not None and n_win > max_windows:
             # evenly spread over the whole record (not its first part): every regime it visits is seen

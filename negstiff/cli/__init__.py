@@ -8,6 +8,7 @@ Exit codes: 0 success, 2 bad input (one line on stderr, no output written).
 
 from __future__ import annotations
 
+import contextlib
 import os
 import signal
 import sys
@@ -15,22 +16,24 @@ import threading
 import warnings
 from typing import Sequence
 
+from negstiff.files import transaction
+
 from .common import InputError, bad_input_types, check_paths, load_system, write_json  # noqa: F401 (API)
 from .parser import build_parser
 
 
-def _interrupt_handler(command: str):
-    """Ctrl-C: one line, the outputs being written removed, exit 130 at once. (Raising
-    KeyboardInterrupt is not enough: emcee prints the traceback of any exception inside a
-    log-probability call before passing it on.)"""
+def _interrupt_handler(command: str, what: str, code: int):
+    """Ctrl-C (SIGINT) or a kill (SIGTERM): one line, the outputs being written removed, exit at once
+    (130, 143). (Raising KeyboardInterrupt is not enough: emcee prints the traceback of any exception
+    inside a log-probability call before passing it on.)"""
 
     def handler(signum, frame):
         from negstiff.files import remove_pending
 
         remove_pending()
-        sys.stderr.write(f"negstiff {command}: interrupted (nothing written)\n")
+        sys.stderr.write(f"negstiff {command}: {what} (nothing written)\n")
         sys.stderr.flush()
-        os._exit(130)
+        os._exit(code)
 
     return handler
 
@@ -43,10 +46,14 @@ def main(argv: Sequence[str] | None = None) -> int:
         print("negstiff: interrupted", file=sys.stderr)
         return 130
     if threading.current_thread() is threading.main_thread() and argv is None:  # the installed command
-        signal.signal(signal.SIGINT, _interrupt_handler(args.command))
+        signal.signal(signal.SIGINT, _interrupt_handler(args.command, "interrupted", 130))
+        signal.signal(signal.SIGTERM, _interrupt_handler(args.command, "terminated", 143))
     try:
         check_paths(args)
-        with warnings.catch_warnings():
+        # a command's outputs (a record and its truth, a result and its figure) land together or not at
+        # all; reproduce's report is one folder already, and its section cache must be readable at once
+        group = transaction() if args.command != "reproduce" else contextlib.nullcontext()
+        with warnings.catch_warnings(), group:
             # the libraries' notices (arviz's dimension names, numpy's empty slices) are not the user's
             # business; negstiff's own warnings are in the result and on stderr (``warn``)
             warnings.simplefilter("ignore")

@@ -38,6 +38,18 @@ def campaign_records(data: Sequence[str]) -> list[dict[str, Any]]:
         raise InputError(f"{index}: not a campaign index (records: file, start_well, direction, forcing_hz)") from None
 
 
+def campaign_files(data: Sequence[str] | None) -> list[Path]:
+    """Every file ``map`` reads for ``data``: the records (a folder's, by its index or its names) and the
+    folder's index; checked against the outputs before any work."""
+    if not data:
+        return []
+    files = [Path(e["file"]) for e in campaign_records(data)]
+    folder = Path(data[0]) if len(data) == 1 and Path(data[0]).is_dir() else None
+    if folder is not None and (folder / "index.json").is_file():
+        files.append(folder / "index.json")
+    return files
+
+
 def _natural(path: Path) -> list:
     """A file name's sort key with its numbers as numbers: step2 before step10, 4.5 before 10."""
     return [(0, float(t), "") if t[:1].isdigit() else (1, 0.0, t) for t in re.findall(r"\d+(?:\.\d+)?|\D+", path.name)]

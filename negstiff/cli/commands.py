@@ -31,43 +31,46 @@ from .common import (
 
 def make_rig(args):
     from negstiff.models.device import AS_BUILT
-    from negstiff.models.rig import Rig, Sensors
+    from negstiff.models.rig import Rig, RigError, Sensors
 
     system = load_system(args.model) if args.model else AS_BUILT
     sensors = Sensors.noiseless() if args.noise_free else Sensors()
     sensors = dataclasses.replace(sensors, response=args.sensor, response_offset=args.response_offset)
     try:
         return Rig(system, effects=parse_effects(args.effect), sensors=sensors, fs=args.fs, seed=args.seed)
+    except RigError:
+        raise
     except ValueError as exc:  # an unknown effect or a bad value: the user's --effect
         raise InputError(f"--effect: {exc}") from None
 
 
 def cmd_rig(args) -> int:
     rig = make_rig(args)
-    out = out_path(args) if args.mode != "campaign" else Path(args.out)
-    if args.mode == "random":
-        rec = rig.random(
-            duration=args.duration,
-            rms=args.rms,
-            band=tuple(args.band),
-            start="plus" if args.start == "both" else args.start,
-        )
-        rec.write(out, **export_options(args))
-        say(args, f"wrote {out} ({rec.columns['t'].size} samples at {rig.fs:g} Hz) and its truth")
-    elif args.mode == "sweep":
-        rec = rig.sine_sweep(args.f_start, args.f_stop, args.amplitude, args.duration, args.sweep_mode,
-                             start="plus" if args.start == "both" else args.start)  # fmt: skip
-        rec.write(out, **export_options(args))
-        say(
-            args,
-            f"wrote {out} (sine sweep {args.f_start:g}-{args.f_stop:g} Hz, {args.amplitude:g} m/s^2) and its truth",
-        )
-    elif args.mode == "harmonic":
-        rec = rig.harmonic(args.freq, args.amplitude, args.start, args.settle_periods, args.periods)
-        rec.write(out, **export_options(args))
-        say(args, f"wrote {out} ({args.periods} periods at {args.freq:g} Hz, {args.amplitude:g} m/s^2) and its truth")
-    else:
+    if args.mode == "campaign":
         write_campaign(rig, args)
+        return 0
+    out = out_path(args)
+    start = "plus" if args.start == "both" else args.start
+    if args.mode == "random":
+        kw = {"duration": args.duration, "rms": args.rms, "band": tuple(args.band), "start": start}
+        rig.check_random(**kw)
+        say(args, f"rig random: {args.duration:g} s at {rig.fs:g} Hz, {args.rms:g} m/s^2 rms")
+        rec = rig.random(**kw)
+        what = f"{rec.columns['t'].size} samples at {rig.fs:g} Hz"
+    elif args.mode == "sweep":
+        kw = {"f_start": args.f_start, "f_stop": args.f_stop, "amplitude": args.amplitude, "duration": args.duration,
+              "mode": args.sweep_mode, "start": start}  # fmt: skip
+        rig.check_sine_sweep(**kw)
+        say(args, f"rig sweep: {args.f_start:g}-{args.f_stop:g} Hz over {args.duration:g} s")
+        rec = rig.sine_sweep(**kw)
+        what = f"sine sweep {args.f_start:g}-{args.f_stop:g} Hz, {args.amplitude:g} m/s^2"
+    else:
+        rig.check_sweeps(args.freq, [[args.amplitude]], [args.start], args.settle_periods, args.periods)
+        say(args, f"rig harmonic: {args.freq:g} Hz, {args.amplitude:g} m/s^2")
+        rec = rig.harmonic(args.freq, args.amplitude, args.start, args.settle_periods, args.periods)
+        what = f"{args.periods} periods at {args.freq:g} Hz, {args.amplitude:g} m/s^2"
+    rec.write(out, **export_options(args))
+    say(args, f"wrote {out} ({what}) and its truth")
     return 0
 
 
@@ -82,11 +85,16 @@ def write_campaign(rig, args) -> None:
     plans = [(s, d) for s in starts for d in dirs]
     lists = [values if d == "up" else values[::-1] for _, d in plans]
     what = f"frequencies at {args.amplitude:g} m/s^2" if in_freq else f"amplitudes at {args.freq:g} Hz"
+    wells = [s for s, _ in plans]
+    if in_freq:
+        rig.check_stepped_sines(lists, args.amplitude, wells, args.settle_periods, args.periods)
+    else:
+        rig.check_sweeps(args.freq, lists, wells, args.settle_periods, args.periods)
     say(args, f"campaign: {len(plans)} sweep(s) x {len(values)} {what}, one batched run")
     if in_freq:
-        sweeps = rig.stepped_sines(lists, args.amplitude, [s for s, _ in plans], args.settle_periods, args.periods)
+        sweeps = rig.stepped_sines(lists, args.amplitude, wells, args.settle_periods, args.periods)
     else:
-        sweeps = rig.sweeps(args.freq, lists, [s for s, _ in plans], args.settle_periods, args.periods)
+        sweeps = rig.sweeps(args.freq, lists, wells, args.settle_periods, args.periods)
     index = []
     with atomic_dir(args.out) as tmp:
         for (start, direction), recs in zip(plans, sweeps):
@@ -114,6 +122,7 @@ def cmd_simulate(args) -> int:
     system = load_system(args.model)
     rec = load(args.input, columns=args.columns, fs=args.fs, response=False)
     rec.require(2, "a simulation")
+    say(args, f"simulate: {rec.n} samples at {rec.fs:g} Hz under {rec.input_name}")
     # the record's own start: the state whose free run matches its first periods (validation.start_state)
     z0, v0 = (None, 0.0)
     if rec.z is not None and (args.z0 is None or args.v0 is None):
@@ -148,15 +157,17 @@ def cmd_identify(args) -> int:
 
     rec = load(args.data, columns=args.columns, fs=args.fs, mass=args.mass)
     frfs = read_frf_results(args.frf)
-    say(args, f"identify {args.method}: {rec.n} samples at {rec.fs:g} Hz, input {rec.input_name}")
     if args.method == "nsi":
         from negstiff.inference.nsi import NSI
 
-        est = NSI(order=args.order, block_rows=args.block_rows, refine=not args.no_refine).fit(rec)
+        est = NSI(order=args.order, block_rows=args.block_rows, refine=not args.no_refine)
     else:
         from negstiff.inference.sindy import SINDy
 
-        est = SINDy(n_models=args.ensemble, seed=args.seed, refine=not args.no_refine).fit(rec)
+        est = SINDy(n_models=args.ensemble, seed=args.seed, refine=not args.no_refine)
+    rec = est.check(rec)  # every refusal before the progress line
+    say(args, f"identify {args.method}: {rec.n} samples at {rec.fs:g} Hz, input {rec.input_name}")
+    est.fit(rec)
     result = with_record(est.result(), rec, est.model_)
     if args.frf:
         result["frf_comparison"] = frf_comparison(result, frfs)
@@ -195,7 +206,6 @@ def cmd_posterior(args) -> int:
     rec = load(args.data, columns=args.columns, fs=args.fs, mass=args.mass)
     if args.duration is not None:
         rec = rec.segment(0, min(rec.n, int(round(args.duration * rec.fs))))
-    say(args, f"posterior ({args.model}): {rec.n} samples at {rec.fs:g} Hz, input {rec.input_name}")
     post = Posterior(
         model=args.model,
         mass_prior=args.mass_prior,
@@ -211,6 +221,8 @@ def cmd_posterior(args) -> int:
         start=start,
         refine_start=not args.no_refine,
     )
+    rec = post.check(rec)  # every refusal before the progress line and bar
+    say(args, f"posterior ({args.model}): {rec.n} samples at {rec.fs:g} Hz, input {rec.input_name}")
     res = post.fit(rec).result_
     result = with_record(post.result(), rec)
     if args.idata:
@@ -230,9 +242,10 @@ def cmd_discrepancy(args) -> int:
     from negstiff.inference.measurement import load
 
     rec = load(args.data, columns=args.columns, fs=args.fs, mass=args.mass)
-    say(args, f"discrepancy: {rec.n} samples at {rec.fs:g} Hz, input {rec.input_name}, baseline {args.baseline}")
     base = CUBIC_BASELINE if args.baseline == "cubic" else LINEAR_BASELINE
     d = Discrepancy(baseline=base, max_effects=args.max_effects, refine=not args.no_refine, unnamed=args.unnamed)
+    rec = d.check(rec)  # every refusal before the progress line
+    say(args, f"discrepancy: {rec.n} samples at {rec.fs:g} Hz, input {rec.input_name}, baseline {args.baseline}")
     d.fit(rec)
     result = with_record(d.result(), rec, d.model_)
     say_refinement(args, result.get("refinement"))
@@ -259,10 +272,10 @@ def parse_wells(text: str | None) -> tuple[float, ...] | None:
         return None
     try:
         wells = tuple(float(x) for x in text.split(","))
-        if len(wells) not in (2, 3) or not all(np.isfinite(wells)) or list(wells) != sorted(wells):
+        if len(wells) not in (2, 3) or not all(np.isfinite(wells)) or any(np.diff(wells) <= 0):
             raise ValueError
     except ValueError:
-        raise InputError(f"--wells {text!r}: give z_minus,z_plus or z_minus,z_0,z_plus in m") from None
+        raise InputError(f"--wells {text!r}: give z_minus,z_plus or z_minus,z_0,z_plus in m, increasing") from None
     return wells
 
 
@@ -275,7 +288,7 @@ def rest_wells(rec) -> tuple[float, float] | None:
 
 
 def cmd_characterize(args) -> int:
-    from negstiff.inference.characterize import characterize
+    from negstiff.inference.characterize import characterize, check_harmonic
     from negstiff.inference.measurement import load
     from negstiff.inference.nsi import well_guesses
 
@@ -296,6 +309,7 @@ def cmd_characterize(args) -> int:
         raise InputError(
             f"--forcing-hz {args.forcing_hz:g}: above the Nyquist frequency of {args.data} ({rec.fs / 2:g} Hz)"
         )
+    check_harmonic(rec, args.forcing_hz)
     say(args, f"characterize: {rec.n} samples at {rec.fs:g} Hz, forcing {args.forcing_hz:g} Hz")
     r = characterize(rec, args.forcing_hz, wells)
     r.pop("poincare_z")
@@ -329,13 +343,14 @@ def frf_well(rec) -> str | None:
 
 
 def cmd_frf(args) -> int:
-    from negstiff.inference.frf import frf
+    from negstiff.inference.frf import check_frf, frf
     from negstiff.inference.measurement import load
 
     band = parse_band(args.band)
     rec = load(args.data, columns=args.columns, fs=args.fs)
     if band is not None and band[1] > rec.fs / 2:
         raise InputError(f"--band {args.band}: beyond the Nyquist frequency of {args.data} ({rec.fs / 2:g} Hz)")
+    check_frf(rec, band)
     say(args, f"frf: {rec.n} samples at {rec.fs:g} Hz, input {rec.input_name}")
     res = frf(rec, band=band, segment_s=args.segment)
     curves = res.pop("_curves")
@@ -432,7 +447,7 @@ def frf_comparison(result: dict, frfs: list[tuple[str, float, str | None]]) -> l
 
 def cmd_map(args) -> int:
     from negstiff.experiments.characterization import map_figure
-    from negstiff.inference.characterize import first_period_2, jump, map_point, map_sequence
+    from negstiff.inference.characterize import check_harmonic, first_period_2, jump, map_point, map_sequence
     from negstiff.inference.measurement import load
 
     from .campaign import campaign_records, continuation_vs_map, forcing_frequencies, read_nfrc_results
@@ -452,6 +467,7 @@ def cmd_map(args) -> int:
             raise InputError(
                 f"{e['file']}: input {rec.input_name}, the campaign's first record's: {recs[0].input_name}"
             )
+        check_harmonic(rec, f)
     wells = given or next((w for w in map(rest_wells, recs) if w), None)
     say(args, f"map: {len(recs)} record(s), " + ("stepped in frequency" if axis == "f_hz" else f"at {freqs[0]:g} Hz"))
     points = []
@@ -521,16 +537,20 @@ def cmd_update(args) -> int:
     from negstiff.inference.updating import GAUpdater, load_targets
 
     targets = load_targets(args.targets)
+    ga = GAUpdater(pop_size=args.pop_size, generations=args.generations, fixed_mass=args.fix_mass, seed=args.seed)
+    ga.check(targets)  # every refusal before the progress bar
+    say(args, f"update: GA of {args.generations} generations x {args.pop_size}")
     bar = tqdm(total=args.generations, desc="GA", unit="gen", disable=not wants_progress(args), file=sys.stderr)
 
     def progress(gen: int, best: float) -> None:
         bar.update(1)
         bar.set_postfix(best=f"{best:.3f} %")
 
-    ga = GAUpdater(pop_size=args.pop_size, generations=args.generations, fixed_mass=args.fix_mass, seed=args.seed)
     ga.fit(targets, progress=progress)
     bar.close()
-    write_json(args.out, ga.result())
+    result = ga.result()
+    write_json(args.out, result)
+    warn(args, result["warnings"])
     d = ga.device_
     say(
         args,

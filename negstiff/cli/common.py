@@ -14,9 +14,7 @@ from typing import Any, Sequence
 
 import numpy as np
 
-
-class InputError(Exception):
-    """Bad input found by the CLI itself (exit 2)."""
+from negstiff.errors import InputError  # noqa: E402 (the one bad-input error, library and CLI)
 
 
 class Parser(argparse.ArgumentParser):
@@ -80,6 +78,7 @@ def number(kind, lo=None, hi=None, lo_open=False, what=""):
         return v
 
     parse.__name__ = kind.__name__
+    parse.kind, parse.lo, parse.hi, parse.lo_open = kind, lo, hi, lo_open  # the declaration, for tests and help
     return parse
 
 
@@ -89,20 +88,29 @@ POSITIVE = number(float, 0.0, lo_open=True)
 POSITIVE_INT = number(int, 1)
 
 
+def mass_option():
+    """A moving mass [kg] in the range a record may state (``measurement.MASS_RANGE_KG``)."""
+    from negstiff.inference.measurement import MASS_RANGE_KG
+
+    return number(float, *MASS_RANGE_KG, what=" kg")
+
+
+def acceleration_option(lo_open: bool = True):
+    """A table acceleration [m/s^2] up to the magnitude of any shaker-table record (``units.MAGNITUDE_LIMITS``)."""
+    from negstiff.inference.units import MAGNITUDE_LIMITS
+
+    return number(float, 0.0, MAGNITUDE_LIMITS["acceleration"], lo_open=lo_open, what=" m/s^2")
+
+
 SEED = number(int, 0, 2**32 - 1)
 
 
 def bad_input_types() -> tuple[type[BaseException], ...]:
     """The domain's errors (bad input: one line, exit 2). A plain ValueError from inside is a bug and
     keeps its traceback; where a user's value reaches a validating constructor, the command turns its
-    ValueError into an InputError at that call."""
-    from negstiff.inference.measurement import MeasurementError
-    from negstiff.inference.updating import UpdatingError
-    from negstiff.models.device import GeometryError
-    from negstiff.models.rig import RigError
-
-    return (InputError, MeasurementError, RigError, GeometryError, UpdatingError, FileNotFoundError,
-            json.JSONDecodeError)  # fmt: skip
+    ValueError into an InputError at that call. Every domain error is an ``InputError``
+    (``negstiff.errors``)."""
+    return (InputError, FileNotFoundError, json.JSONDecodeError)
 
 
 def wants_progress(args) -> bool:
@@ -213,51 +221,57 @@ def say_refinement(args, info: dict | None) -> None:
                f"{fmt(a)} -> {fmt(b)} rms, {info['reason'].split(':')[0]}")  # fmt: skip
 
 
-INPUT_ARGS = ("data", "model", "input", "targets", "frf", "start", "nfrc")
+FIGURE_COMMANDS = ("frf", "nfrc", "map")
+"""Commands that write a figure beside their result (the result's path with .png)."""
 
 
-OUTPUT_ARGS = ("out", "idata")
+def io_paths(args) -> tuple[list[Path], dict[str, str | Path], dict[str, str]]:
+    """What a command reads and writes: (every input file, {label: output}, {label: marker} of the
+    outputs that are folders). A folder input counts as the files read from it (``map``)."""
+    inputs: list[Path] = []
+    for name in ("model", "input", "targets", "start", "frf", "nfrc"):
+        v = getattr(args, name, None)
+        inputs += [Path(x) for x in (v if isinstance(v, list) else [v] if v else [])]
+    data = getattr(args, "data", None)
+    if args.command == "map":
+        from .campaign import campaign_files
+
+        inputs += campaign_files(data)
+    elif data:
+        inputs.append(Path(data))
+    outputs: dict[str, str | Path] = {}
+    folders: dict[str, str] = {}
+    out = getattr(args, "out", None)
+    if out is None:
+        return inputs, outputs, folders
+    if not str(out).strip():  # Path('') is '.': the empty path is refused as the user gave it
+        return inputs, {"--out": out}, folders
+    if args.command == "reproduce" or (args.command == "rig" and args.mode == "campaign"):
+        outputs["--out"] = Path(out)
+        folders["--out"] = "results.json" if args.command == "reproduce" else "index.json"
+    elif args.command == "rig":
+        rec = out_path(args)
+        outputs["--out"] = rec
+        outputs["its truth file"] = rec.with_name(rec.stem + ".truth.json")
+    else:
+        outputs["--out"] = out
+        if args.command in FIGURE_COMMANDS:
+            if Path(out).suffix.lower() == ".png":
+                raise InputError(f"--out {out}: the figure is written beside the result as {Path(out).name}; "
+                                 "give the result another name (R.json)")  # fmt: skip
+            outputs["its figure"] = Path(out).with_suffix(".png")
+    if getattr(args, "idata", None) is not None:
+        outputs["--idata"] = args.idata
+    return inputs, outputs, folders
 
 
 def check_paths(args) -> None:
-    """Before any work: no output may be an input, and every output's folder must be writable."""
-    import os
-    import tempfile
+    """Before any work: every output can be written, and none is an input or another output
+    (``negstiff.files.check_outputs``)."""
+    from negstiff.files import check_outputs
 
-    inputs = {}
-    for name in INPUT_ARGS:
-        v = getattr(args, name, None)
-        for item in v if isinstance(v, list) else [v] if v else []:
-            inputs[Path(item).resolve()] = item
-    for name in OUTPUT_ARGS:
-        v = getattr(args, name, None)
-        if not v:
-            continue
-        out = Path(v).resolve()
-        targets = [out]
-        if args.command == "rig" and out.suffix:
-            targets.append(out.with_name(out.stem + ".truth.json"))
-        if args.command in ("frf", "nfrc", "map"):
-            targets.append(out.with_suffix(".png"))
-        for t in targets:
-            if t in inputs:
-                raise InputError(
-                    f"--{name.replace('_', '-')} {v}: would overwrite the input {inputs[t]}; choose another path"
-                )
-        folder_out = args.command == "reproduce" or (args.command == "rig" and args.mode == "campaign")
-        if out.is_dir() and not folder_out:
-            raise InputError(f"--{name} {v}: is a folder; give a file path")
-        parent = out if folder_out else out.parent
-        while not parent.exists() and parent != parent.parent:
-            parent = parent.parent
-        try:  # the one sure test of a folder's writability: write in it
-            if not parent.is_dir():
-                raise OSError
-            fd, probe = tempfile.mkstemp(prefix=".negstiff-probe.", dir=parent)
-            os.close(fd)
-            os.unlink(probe)
-        except OSError:
-            raise InputError(f"--{name} {v}: cannot write there ({parent} is not a writable folder)") from None
+    inputs, outputs, folders = io_paths(args)
+    check_outputs(outputs, inputs, folders)
 
 
 def parse_span(text: str, option: str) -> float | tuple[float, float]:

@@ -4,10 +4,11 @@ from __future__ import annotations
 
 import argparse
 
+from negstiff.inference.units import SAMPLING_RATE_RANGE_HZ
 from negstiff.models import effects
 
 from . import commands as c
-from .common import POSITIVE, SEED, Parser, default, number
+from .common import POSITIVE, SEED, Parser, acceleration_option, default, mass_option, number
 
 POST = "posterior.core.Posterior"
 NO_REFINE_HELP = (
@@ -81,7 +82,12 @@ def _rig(sub, common: argparse.ArgumentParser, data_opts: argparse.ArgumentParse
     )
     g = rig.add_argument_group("random")
     g.add_argument("--duration", type=number(float, 1.0, 1e5), default=300.0, help="record length [s] (default 300)")
-    g.add_argument("--rms", type=POSITIVE, default=14.0, help="table acceleration rms [m/s^2] (default 14: cross-well)")
+    g.add_argument(
+        "--rms",
+        type=acceleration_option(),
+        default=14.0,
+        help="table acceleration rms [m/s^2] (default 14: cross-well)",
+    )
     g.add_argument(
         "--band",
         type=POSITIVE,
@@ -97,7 +103,10 @@ def _rig(sub, common: argparse.ArgumentParser, data_opts: argparse.ArgumentParse
     g = rig.add_argument_group("harmonic and campaign")
     g.add_argument("--freq", type=POSITIVE, default=9.0, help="forcing frequency [Hz] (default 9)")
     g.add_argument(
-        "--amplitude", type=number(float, 0.0), default=5.0, help="table acceleration amplitude [m/s^2] (harmonic)"
+        "--amplitude",
+        type=acceleration_option(lo_open=False),
+        default=5.0,
+        help="table acceleration amplitude [m/s^2] (harmonic)",
     )
     g.add_argument(
         "--amplitudes", default="4:30:0.5", help="campaign amplitudes start:stop:step or a list (default 4:30:0.5)"
@@ -169,7 +178,7 @@ def _identify(sub, common: argparse.ArgumentParser, data_opts: argparse.Argument
     idf.add_argument("data", help="measurement file")
     idf.add_argument("-o", "--out", required=True, help="result JSON")
     idf.add_argument(
-        "--mass", type=POSITIVE, help="moving mass [kg] (default: the file's metadata; else per unit mass)"
+        "--mass", type=mass_option(), help="moving mass [kg] (default: the file's metadata; else per unit mass)"
     )
     idf.add_argument(
         "--order",
@@ -257,7 +266,7 @@ def _posterior(sub, common: argparse.ArgumentParser, data_opts: argparse.Argumen
     )
     pst.add_argument("data", help="measurement file")
     pst.add_argument("-o", "--out", required=True, help="result JSON")
-    pst.add_argument("--mass", type=POSITIVE, help="moving mass [kg] (default: the file's metadata)")
+    pst.add_argument("--mass", type=mass_option(), help="moving mass [kg] (default: the file's metadata)")
     pst.add_argument("--model", choices=["coefficients", "device"], default=default(POST, "model"))
     pst.add_argument(
         "--mass-prior",
@@ -335,7 +344,7 @@ def _discrepancy(sub, common: argparse.ArgumentParser, data_opts: argparse.Argum
     )
     dsc.add_argument("data", help="measurement file")
     dsc.add_argument("-o", "--out", required=True, help="result JSON")
-    dsc.add_argument("--mass", type=POSITIVE, help="moving mass [kg] (default: the file's metadata)")
+    dsc.add_argument("--mass", type=mass_option(), help="moving mass [kg] (default: the file's metadata)")
     dsc.add_argument("--baseline", choices=["cubic", "linear"], default="cubic", help="starting model")
     dsc.add_argument(
         "--max-effects",
@@ -418,7 +427,7 @@ def _update(sub, common: argparse.ArgumentParser, data_opts: argparse.ArgumentPa
     )
     upd.add_argument("targets", help="identify result JSON or targets JSON")
     upd.add_argument("-o", "--out", required=True, help="result JSON")
-    upd.add_argument("--fix-mass", type=POSITIVE, help="weighed moving mass [kg]: update E and alpha only")
+    upd.add_argument("--fix-mass", type=mass_option(), help="weighed moving mass [kg]: update E and alpha only")
     ga = "updating.GAUpdater"
     upd.add_argument(
         "--generations",
@@ -476,7 +485,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     data_opts.add_argument(
         "--fs",
-        type=POSITIVE,
+        type=number(float, *SAMPLING_RATE_RANGE_HZ, what=" Hz"),
         help="sampling rate [Hz]; replaces the file's time column (for files without t, or a broken one)",
     )
 

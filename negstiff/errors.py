@@ -1,0 +1,27 @@
+"""negstiff's errors and warnings, one family for the library and the command line.
+
+* ``InputError``: something the user gave (a file, a column, an option, a number, a parameter) cannot
+  be used. Its message is one line that names the input and the problem; the command line prints it
+  and exits with 2, before any work. Every domain error (``MeasurementError``, ``RigError``,
+  ``GeometryError``, ``UpdatingError``, ``ContinuationError`` and the estimators' own) is one.
+* ``OutputError``: an output cannot be written (a full disk, a path the file system refuses); nothing
+  is left behind.
+* ``NegstiffWarning``: a result a physicist would not believe (a record in mm, an input in g, an
+  unconverged chain, a model that escapes). It goes through Python's ``warnings`` and into the result.
+
+They live here, below ``models`` and ``inference``, so both raise the same classes.
+"""
+
+from __future__ import annotations
+
+
+class InputError(ValueError):
+    """Bad input: one line naming the input and the problem (the command line's exit 2)."""
+
+
+class OutputError(InputError):
+    """An output cannot be written (disk full, name too long, not a regular file); nothing was left."""
+
+
+class NegstiffWarning(UserWarning):
+    """A result that looks implausible (units, frame, convergence, boundedness): loud, never silent."""
