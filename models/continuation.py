@@ -470,24 +470,55 @@ def _span(value) -> tuple[float, float] | None:
     return None
 
 
+FREQUENCY_LIMIT_HZ = 1e4
+"""Forcing frequencies [Hz] a continuation may reach: a shaker table's band, far above any well's."""
+AMPLITUDE_LIMITS = {"base_acc": 1e7, "force": 1e9}
+"""Forcing amplitudes (m/s^2, N) beyond any shaker-table test (as a record's ``units.MAGNITUDE_LIMITS``)."""
+
+
+def check_nfrc(system, *, freq, amplitude, well: str = "plus", input_kind: str = "base_acc", max_period: int = 4):
+    """Everything ``nfrc`` refuses (``ContinuationError``, one line), before any work; returns the well's z."""
+    try:
+        a_span, f_span = _span(amplitude), _span(freq)
+        f_lo, f_hi = f_span or (float(freq), float(freq))
+        a_lo, a_hi = a_span or (float(amplitude), float(amplitude))
+    except ContinuationError:
+        raise
+    except (TypeError, ValueError, IndexError):
+        raise ContinuationError(
+            f"freq and amplitude are numbers, or (start, stop) pairs; got {freq!r} and {amplitude!r}"
+        ) from None
+    if (a_span is None) == (f_span is None):
+        raise ContinuationError("give a range for exactly one of the amplitude and the frequency (A1:A2 or F1:F2)")
+    if input_kind not in AMPLITUDE_LIMITS:
+        raise ContinuationError(f"the input is base_acc or force, got {input_kind!r}")
+    unit = "m/s^2" if input_kind == "base_acc" else "N"
+    if not (0 < f_lo <= f_hi <= FREQUENCY_LIMIT_HZ):
+        raise ContinuationError(f"the forcing frequency must lie in (0, {FREQUENCY_LIMIT_HZ:g}] Hz, got {freq}")
+    if not (0 <= a_lo <= a_hi <= AMPLITUDE_LIMITS[input_kind]):
+        raise ContinuationError(
+            f"the forcing amplitude must lie in [0, {AMPLITUDE_LIMITS[input_kind]:g}] {unit}, got {amplitude}"
+        )
+    if isinstance(max_period, bool) or not (isinstance(max_period, int) and 1 <= max_period <= 64):
+        raise ContinuationError(f"max_period is an integer 1..64, got {max_period!r}")
+    try:
+        return system.equilibria().well(well)
+    except ValueError as exc:  # no such well, or a restoring force without usable equilibria
+        raise ContinuationError(f"--well {well}: {exc}") from None
+
+
 def nfrc(system, *, freq, amplitude, well: str = "plus", input_kind: str = "base_acc", max_period: int = 4,
          ds: float = 0.01, ds_max: float = 0.05, max_points: int = 2000) -> dict[str, Any]:  # fmt: skip
     """Periodic responses of ``system`` continued in amplitude (``amplitude=(A1, A2)`` at ``freq=f``) or in
     frequency (``freq=(f1, f2)`` at ``amplitude=A``), starting from the ``well`` (``"plus"``/``"minus"``)
     at the range's start; period-doubled branches followed up to ``max_period``. Returns the result
     JSON's ``branches``, ``bifurcations`` and ``settings``."""
+    z_well = check_nfrc(system, freq=freq, amplitude=amplitude, well=well, input_kind=input_kind,
+                        max_period=max_period)  # fmt: skip
     a_span, f_span = _span(amplitude), _span(freq)
-    if (a_span is None) == (f_span is None):
-        raise ContinuationError("give a range for exactly one of the amplitude and the frequency (A1:A2 or F1:F2)")
     parameter = "amplitude" if a_span else "f_hz"
     lo, hi = a_span or f_span
     fixed = float(freq) if a_span else float(amplitude)
-    if fixed <= 0 or (parameter == "f_hz" and lo <= 0):
-        raise ContinuationError("the forcing frequency must be positive")
-    try:
-        z_well = system.equilibria().well(well)
-    except ValueError as exc:  # no such well, or a restoring force without usable equilibria
-        raise ContinuationError(f"--well {well}: {exc}") from None
     a0, f0 = (lo, fixed) if a_span else (fixed, lo)
     x = settle(system, input_kind, z_well, a0, f0)
     sh = Shooting(system, input_kind, 1)

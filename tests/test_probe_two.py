@@ -403,10 +403,13 @@ def test_a_file_too_large_for_the_memory_is_refused_before_it_is_read(lab, capsy
         ["update", "single_well.json"],
         ["characterize", "dead.csv", "--forcing-hz", "9"],
         ["map", "dead.csv", "--forcing-hz", "9"],
+        ["nfrc", "one_well_model.json", "--freq", "9", "--amplitude", "2:4", "--well", "minus"],
+        ["nfrc", "model.json", "--freq", "1e300", "--amplitude", "2:4"],
     ],
-    ids=lambda a: "-".join(a[:2]),
+    ids=lambda a: "-".join(a[:3]),
 )
 def test_refusals_come_before_the_progress_line(lab, capsys, argv):
+    (lab / "one_well_model.json").write_text(json.dumps({"m": 0.2, "k1": -400.0, "k2": 0.0, "k3": 1e5, "c": 1.0}))
     (lab / "single_well.json").write_text(json.dumps({
         "modal": {"minus": {"f_hz": None, "zeta": None}, "plus": {"f_hz": 9.2, "zeta": 0.05}},
         "equilibria": {"z_minus": None, "z_0": None, "z_plus": 0.023}}))  # fmt: skip

@@ -387,19 +387,18 @@ def cmd_frf(args) -> int:
 
 def cmd_nfrc(args) -> int:
     from negstiff.experiments.nfrc import figure
-    from negstiff.models.continuation import ContinuationError, nfrc
+    from negstiff.models.continuation import check_nfrc, nfrc
 
     system = load_system(args.model)
     freq, amplitude = parse_span(args.freq, "--freq"), parse_span(args.amplitude, "--amplitude")
     if isinstance(freq, tuple) == isinstance(amplitude, tuple):
         raise InputError("give a range (F1:F2 or A1:A2) for exactly one of --freq and --amplitude")
+    settings = {"freq": freq, "amplitude": amplitude, "well": args.well, "input_kind": args.input,
+                "max_period": args.max_period}  # fmt: skip
+    check_nfrc(system, **settings)
     say(args, f"nfrc: continuation in {'amplitude' if isinstance(amplitude, tuple) else 'frequency'} from the "
               f"{args.well} well")  # fmt: skip
-    try:
-        res = nfrc(system, freq=freq, amplitude=amplitude, well=args.well, input_kind=args.input,
-                   max_period=args.max_period)  # fmt: skip
-    except ContinuationError as exc:
-        raise InputError(str(exc)) from None
+    res = nfrc(system, **settings)
     res["figure"] = write_figure(figure(res), args.out)
     write_json(args.out, res)
     kinds = ", ".join(f"{b['type']} at {b['amplitude']:.4g} / {b['f_hz']:.4g} Hz (period {b['period']})"
