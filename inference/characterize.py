@@ -31,7 +31,9 @@ from scipy import signal
 from .derivatives import noise_floor
 from .lyapunov import largest_lyapunov
 from .measurement import Measurement, MeasurementError
+from .nsi import well_guesses
 from .periodicity import classify_regime, periodicity
+from .plausibility import classified, issue
 
 CHAOS_THRESHOLD = 0.05
 """A Wolf exponent counts as significantly positive above this many nats per radian of forcing
@@ -101,14 +103,39 @@ def check_harmonic(rec: Measurement, forcing_hz: float) -> None:
     rec.require_excitation("a characterisation (the forcing's phase is read from the input)")
 
 
-def characterize(rec: Measurement, forcing_hz: float, wells=None, lle: bool = True) -> dict[str, Any]:
+def wells_for(rec: Measurement, wells="auto") -> tuple[float, ...] | None:
+    """The wells a regime is judged against: those given (z_minus, z_plus or z_minus, z_0, z_plus [m],
+    increasing; None: none, the regime is the side of the median), else (``"auto"``) the rest positions of
+    the record's metadata, else the stable roots of a cubic fitted to the record (``nsi.well_guesses``)."""
+    if wells is None:
+        return None
+    if not isinstance(wells, str):
+        wells = tuple(float(w) for w in wells)
+        if len(wells) not in (2, 3) or not all(math.isfinite(w) for w in wells) or any(np.diff(wells) <= 0):
+            raise MeasurementError(f"wells {wells}: give z_minus, z_plus (or z_minus, z_0, z_plus) in m, increasing")
+        return wells
+    rest = rec.rest_positions
+    if len(rest) == 2:
+        return rest["minus"], rest["plus"]
+    try:
+        return well_guesses(rec)
+    except ValueError:
+        return None
+
+
+def characterize(
+    rec: Measurement, forcing_hz: float, wells="auto", lle: bool = True, poincare: bool = False
+) -> dict[str, Any]:
     """Period, regime, amplitudes and the largest Lyapunov exponent of one harmonic-forced record.
 
     Returns the contract's keys (``period``, ``regime``, ``chaotic``, ``amplitudes``, ``lle``), each
-    analysis's ``reason`` where it could not be determined (``reasons``), and ``poincare_z``.
-    Raises ``MeasurementError`` only for input no analysis can use (``check_harmonic``).
+    analysis's ``reason`` where it could not be determined (``reasons``), the wells the regime was judged
+    against (``wells_used``: ``wells`` as given, else ``wells_for``), the record (``record``) and its
+    ``warnings`` (also issued as ``NegstiffWarning``); the Poincare z of every forcing cycle with
+    ``poincare``. Raises ``MeasurementError`` only for input no analysis can use (``check_harmonic``).
     """
     check_harmonic(rec, forcing_hz)
+    wells = wells_for(rec, wells)
     out: dict[str, Any] = {"reasons": {}}
     work, q = upsampled(rec, forcing_hz)
     out["interpolation"] = None if q == 1 else f"band-limited (polyphase FIR) x{q} to {work.fs:g} Hz"
@@ -157,7 +184,12 @@ def characterize(rec: Measurement, forcing_hz: float, wells=None, lle: bool = Tr
     else:
         out["chaotic"] = False
         out["reasons"]["chaotic"] = "no period, but no Lyapunov exponent to show sensitivity either"
-    return out
+    if not poincare:
+        out.pop("poincare_z", None)
+    lines = classified(rec)
+    issue(lines)
+    return out | {"wells_used": list(wells) if wells is not None else None, "record": dict(rec.info),
+                  "warnings": [text for _, text in lines]}  # fmt: skip
 
 
 MAP_POINCARE_POINTS = 32
@@ -171,7 +203,7 @@ def map_point(rec: Measurement, forcing_hz: float, wells=None) -> dict[str, Any]
     ``MAP_POINCARE_POINTS`` Poincare z (phase 0); no Lyapunov exponent (a map's records are many)."""
     from .periodicity import forcing_phase
 
-    c = characterize(rec, forcing_hz, wells, lle=False)
+    c = characterize(rec, forcing_hz, wells, lle=False, poincare=True)
     amplitude, _ = forcing_phase(rec.u, rec.t - rec.t0, forcing_hz)
     return {
         "amplitude": amplitude,

@@ -36,7 +36,10 @@ from negstiff.models import Model, effects
 
 from .derivatives import state_derivatives
 from .estimator import Estimator
+from .identification import issue
 from .measurement import Measurement, MeasurementError
+from .parameters import FRACTION, Boolean, Constraint, Interval, Options, Several
+from .plausibility import classified
 from .refine import refine_stage
 from .selection import block_rows, block_scores, compare, indistinguishable
 from .validation import boundedness, residual_psd, restarted_free_runs, validate  # noqa: F401 (residual_psd: API)
@@ -75,6 +78,17 @@ def _held(terms) -> tuple[str, ...]:
     return tuple(f for t, (f, _) in fields.items() if t not in terms and f in BASE_FIELDS)
 
 
+@dataclass(frozen=True)
+class LibraryTerms(Constraint):
+    """A non-empty sequence of the library's terms (``weak.terms``: the registry's, when checked)."""
+
+    def accepts(self, value) -> bool:
+        return Several(Options(library_terms())).accepts(value)
+
+    def describe(self) -> str:
+        return f"a non-empty sequence of library terms ({', '.join(library_terms())})"
+
+
 class DiscrepancyError(MeasurementError):
     """The record cannot support the workflow (too short, no excitation)."""
 
@@ -92,8 +106,20 @@ class Discrepancy(Estimator):
     window_s : restarted free runs and residual blocks [s]
     """
 
+    _parameter_constraints = {
+        "baseline": LibraryTerms(),
+        "validation_fraction": FRACTION,
+        "selection_fraction": FRACTION,
+        "margin": Interval(float, 0.0),
+        "max_effects": Interval(int, 0, 20),
+        "window_s": Interval(float, 0.0, lo_open=True, unit="s"),
+        "refine": Boolean(),
+        "unnamed": Boolean(),
+    }
+
     def __init__(
         self,
+        *,
         baseline: tuple[str, ...] = CUBIC_BASELINE,
         validation_fraction: float = 0.2,
         selection_fraction: float = 0.2,
@@ -105,7 +131,7 @@ class Discrepancy(Estimator):
     ):
         self.refine = refine
         self.unnamed = unnamed
-        self.baseline = tuple(baseline)
+        self.baseline = baseline
         self.validation_fraction = validation_fraction
         self.selection_fraction = selection_fraction
         self.margin = margin
@@ -266,6 +292,13 @@ class Discrepancy(Estimator):
         return {"regimes": regimes, "worst": worst[0] if worst else None, "z": z, "v": v, "r": r, "wells": wells}
 
     # --- the workflow ------------------------------------------------------------------------------
+    def _validate(self) -> None:
+        if self.validation_fraction + self.selection_fraction >= 1:
+            raise DiscrepancyError(
+                f"Discrepancy(validation_fraction={self.validation_fraction}, selection_fraction="
+                f"{self.selection_fraction}): together they leave nothing to fit"
+            )
+
     def _check_record(self, rec: Measurement) -> None:
         rec.require(4000, "the discrepancy workflow")
         rec.require_excitation("the discrepancy workflow")
@@ -329,6 +362,10 @@ class Discrepancy(Estimator):
         self.locate_after_ = self.locate(rec, terms, stop)
         self.bounded_ = boundedness(self.model_, rec.segment(0, self.n_id_))
         self.unnamed_ = self._unnamed(rec) if self.unnamed else None
+        lines = classified(rec, self.model_, [] if self.bounded_["ok"] else [self.bounded_["warning"]])
+        issue(lines)
+        self.warnings_ = [text for _, text in lines]
+        self.record_ = dict(rec.info)
         return self
 
     def _unnamed(self, rec: Measurement) -> dict[str, Any]:
@@ -453,7 +490,8 @@ class Discrepancy(Estimator):
             "initial_model": self.initial_model_.to_dict(),
             "refinement": self.refinement_,
             "bounded": self.bounded_,
-            "warnings": [] if self.bounded_["ok"] else [self.bounded_["warning"]],
+            "warnings": list(self.warnings_),
+            "record": self.record_,
             "baseline_model": self.baseline_model_.to_dict(),
             "effect_size": self.effect_size(),
             **({"unnamed": self.unnamed_} if getattr(self, "unnamed_", None) else {}),

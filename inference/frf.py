@@ -26,6 +26,7 @@ import numpy as np
 from scipy import optimize, signal
 
 from .measurement import Measurement, MeasurementError
+from .plausibility import classified, issue
 
 SEGMENT_S = 16.0
 """Welch segment length [s]: 1/16 Hz bins, at least 8 averages on a 72 s record (fewer on shorter
@@ -115,16 +116,29 @@ def frf(rec: Measurement, band: tuple[float, float] | None = None, segment_s: fl
     Peaks: local maxima of |H1| standing 6 dB above the band's median level (a resonance of a
     lightly damped well stands 20-40 dB above it), at coherence above 0.5. Without ``segment_s`` the
     Welch segment is ``SEGMENT_S``, lengthened (up to a quarter of the record) until the resolution
-    is ``RESOLUTION_RATIO`` of the dominant peak's half-power bandwidth.
+    is ``RESOLUTION_RATIO`` of the dominant peak's half-power bandwidth. The result also holds the well
+    the record sits in (``well``: the rest position of its metadata nearest its mean z, else None), the
+    record (``record``), its ``warnings`` (also issued as ``NegstiffWarning``), and the spectra
+    (``_curves``: arrays, for a figure; not JSON).
     """
     check_frf(rec, band)
     if segment_s is None:
-        r = frf(rec, band, SEGMENT_S)
-        if r["f_hz"] is None:
-            return r
-        need = 1.5 / (RESOLUTION_RATIO * 2 * r["zeta"] * r["f_hz"])
-        seg = min(need, rec.duration / 4)
-        return r if seg <= SEGMENT_S * 1.05 else frf(rec, band, seg)
+        r = _frf(rec, band, SEGMENT_S)
+        if r["f_hz"] is not None:
+            need = 1.5 / (RESOLUTION_RATIO * 2 * r["zeta"] * r["f_hz"])
+            seg = min(need, rec.duration / 4)
+            r = r if seg <= SEGMENT_S * 1.05 else _frf(rec, band, seg)
+    else:
+        r = _frf(rec, band, segment_s)
+    rest = rec.rest_positions
+    r["well"] = min(rest, key=lambda w: abs(rest[w] - float(np.mean(rec.z)))) if rest and rec.z is not None else None
+    lines = classified(rec, None, [r["reason"]] if r["reason"] else [])
+    issue(lines)
+    return r | {"record": dict(rec.info), "warnings": [text for _, text in lines]}
+
+
+def _frf(rec: Measurement, band: tuple[float, float] | None, segment_s: float) -> dict[str, Any]:
+    """``frf`` with a given Welch segment [s]."""
     est = estimate(rec, segment_s)
     f, h1, coh = est["f"], est["H1"], est["coherence"]
     nyq = rec.fs / 2

@@ -97,6 +97,17 @@ class Measurement:
         opt = {k: (None if getattr(self, k) is None else getattr(self, k)[sl]) for k in ("z", *OPTIONAL)}
         return replace(self, u=self.u[sl], t0=self.t0 + start / self.fs, **opt)
 
+    @property
+    def rest_positions(self) -> dict[str, float]:
+        """The wells' rest positions the metadata states (``z_minus_rest``, ``z_plus_rest`` [m]), by well."""
+        out = {}
+        for w in ("minus", "plus"):
+            try:
+                out[w] = float(self.meta[f"z_{w}_rest"])
+            except (KeyError, ValueError):
+                pass
+        return out
+
     def require(self, n_min: int, what: str) -> None:
         """Raise ``MeasurementError`` unless the record has at least ``n_min`` samples for ``what``."""
         if self.n < n_min:

@@ -40,10 +40,9 @@ from negstiff.models import Model
 
 from . import subspace
 from .derivatives import smooth_and_differentiate, velocity_window  # noqa: F401 (velocity_window: API)
-from .estimator import Estimator
+from .identification import Estimate, Identifier, visited_well
 from .measurement import Measurement, MeasurementError
-from .refine import refine_stage, stroke_quantiles
-from .validation import boundedness, restarted_free_runs, validate  # noqa: F401 (their home before validation.py)
+from .parameters import FRACTION, Boolean, Interval, Pair
 from .weak import known_input_gain, mass_of
 
 BASIS_NAMES = ("x2", "x3", "vabsv")
@@ -122,7 +121,7 @@ def physical_pole(ss: subspace.StateSpace) -> complex:
     return complex(best)
 
 
-class NSI(Estimator):
+class NSI(Identifier):
     """Time-domain NSI around both wells (scikit-learn style: configure, ``fit``, read ``*_``).
 
     Parameters
@@ -135,8 +134,19 @@ class NSI(Estimator):
         previous one; the loop stops when the shift falls below 0.1 % of the motion's spread)
     """
 
+    method = "nsi"
+    _parameter_constraints = {
+        "order": Interval(int, 2, 20),
+        "block_rows": Interval(int, 2, 500),
+        "band": Pair(Interval(float, 0.0, 10.0, lo_open=True)),
+        "validation_fraction": FRACTION,
+        "passes": Interval(int, 1, 20),
+        "refine": Boolean(),
+    }
+
     def __init__(
         self,
+        *,
         order: int = 2,
         block_rows: int = 30,
         band: tuple[float, float] = (0.6, 1.6),
@@ -256,53 +266,65 @@ class NSI(Estimator):
         rec.require_excitation("NSI")
         rec.require_motion("NSI")
 
-    def fit(self, rec: Measurement) -> "NSI":
-        """Identify from ``rec``: both wells (or the single well), z-frame model, validation."""
-        rec = self.check(rec)
-        n_id = int(round(rec.n * (1 - self.validation_fraction)))
+    def _estimate(self, rec: Measurement, n_id: int) -> Estimate:
+        """NSI's own estimate: each well's underlying-linear system and nonlinear coefficients from the
+        identification part, averaged into one z-frame model (the shared stages follow: ``Identifier``)."""
         ident = rec.segment(0, n_id)
         zs, v = smooth_and_differentiate(ident.z, ident.fs)
         z_minus, z_plus = well_guesses(ident)
         wells = {"plus": self.fit_well(ident, zs, v, z_plus)}
         if z_minus is not None:
             wells["minus"] = self.fit_well(ident, zs, v, z_minus)
-        self.wells_ = wells
         gains = [w.coefficients["input_gain"] for w in wells.values()]
         # the one mass rule (``weak.mass_of``): a force record without a mass gets it from the FRF level (b = 1/m)
-        mass, self.mass_source_ = mass_of(rec, known_input_gain(rec), float(np.mean(gains)), what="the FRF level")
-        self.mass_normalised_ = self.mass_source_.startswith("none")
-        self.input_gain_ = float(np.mean(gains))
+        mass, mass_source = mass_of(rec, known_input_gain(rec), float(np.mean(gains)), what="the FRF level")
         models = [self._z_frame(w, mass) for w in wells.values()]
         mean = {k: float(np.mean([getattr(mm, k) for mm in models])) for k in ("k1", "k2", "k3", "c", "c_nl", "k0")}
-        self.model_ = Model(m=mass, **mean)
-        self.models_by_well_ = {name: mm for name, mm in zip(wells, models)}
+        model = Model(m=mass, **mean)
         try:
-            self.equilibria_ = self.model_.equilibria()
+            eq = model.equilibria()
         except ValueError as exc:  # a well's fit that is no bistable oscillator: the record's verdict, not a bug
             raise NSIError(f"{rec.source}: the identified restoring force is not usable ({exc})") from None
-        self.modal_ = {name: {"f_hz": w.f_hz, "zeta": w.zeta} for name, w in wells.items()}
-        self.modal_.setdefault("minus", {"f_hz": None, "zeta": None})
-        self.stroke_ = stroke_quantiles(rec.z[:n_id])
-        self.validation_ = validate(self.model_, rec, n_id)
-        self.initial_model_, self.refinement_ = self.model_, None
-        if self.refine:
-            self.model_, self.validation_, self.refinement_ = refine_stage(self.model_, rec, n_id, self.validation_)
-            self.equilibria_ = self.model_.equilibria()
-            if self.refinement_["applied"] and self.refinement_.get("free_mass"):
-                self.mass_source_ += ", refined by simulation error"
-        self.bounded_ = boundedness(self.model_, ident)
-        self.warnings_ = [] if self.bounded_["ok"] else [self.bounded_["warning"]]
-        self.g_estimate_ = self.model_.k0 / self.model_.m if rec.input_name == "base_acc" else None
-        self.settings_ = {
-            "order": self.order,
-            "block_rows": self.block_rows,
-            "band_fraction": list(self.band),
-            "passes": self.passes,
-            "velocity": "Savitzky-Golay (window, order) = {}".format(velocity_window(ident.z, rec.fs)),
-            "basis": list(BASIS_NAMES),
-            "identification_samples": n_id,
+        if z_minus is None and visited_well(rec, z_plus, eq) == "minus":
+            wells = {"minus": wells["plus"]}  # one well visited: named by where it lies (``visited_well``)
+        self.wells_ = wells
+        self.models_by_well_ = {name: mm for name, mm in zip(wells, models)}
+        modal = {w: {"f_hz": wells[w].f_hz, "zeta": wells[w].zeta} if w in wells else {"f_hz": None, "zeta": None}
+                 for w in ("minus", "plus")}  # fmt: skip
+        return Estimate(
+            model=model,
+            mass_source=mass_source,
+            input_gain=float(np.mean(gains)),
+            modal=modal,
+            details={"wells": self._wells_json()},
+            settings={
+                "order": self.order,
+                "block_rows": self.block_rows,
+                "band_fraction": list(self.band),
+                "passes": self.passes,
+                "velocity": "Savitzky-Golay (window, order) = {}".format(velocity_window(ident.z, rec.fs)),
+                "basis": list(BASIS_NAMES),
+            },
+        )
+
+    def _final_details(self, rec: Measurement, model: Model, details: dict[str, Any]) -> dict[str, Any]:
+        """``g_estimate``: the final model's k0/m, the gravity the record's own physics carries (base excitation)."""
+        return {**details, "g_estimate": model.k0 / model.m if rec.input_name == "base_acc" else None}
+
+    def _wells_json(self) -> dict[str, Any]:
+        return {
+            name: {
+                "z_ref": w.z_ref,
+                "f_hz": w.f_hz,
+                "zeta": w.zeta,
+                "coefficients": w.coefficients,
+                "quality_im_over_re": w.quality,
+                "band_hz": list(w.band_hz),
+                "singular_values": w.singular_values,
+                "z_frame_model": self.models_by_well_[name].to_dict(),
+            }
+            for name, w in self.wells_.items()
         }
-        return self
 
     def stabilization(self, rec: Measurement, orders=(2, 4, 6, 8), block_rows=(10, 20, 30, 40)) -> list[dict]:
         """Stabilisation diagram (Marchesiello, Fasana & Garibaldi 2016; algorithms.md A.5): for each
@@ -348,36 +370,3 @@ class NSI(Estimator):
             c_nl=c["c_nl"] * mass,
         )
         return m
-
-    def result(self) -> dict[str, Any]:
-        """The contract's identify JSON (plus NSI details)."""
-        return {
-            "method": "nsi",
-            "mass_source": self.mass_source_,
-            "input_gain": self.input_gain_,
-            "model": self.model_.to_dict(),
-            "initial_model": self.initial_model_.to_dict(),
-            "stroke_quantiles_m": self.stroke_.tolist(),
-            "refinement": self.refinement_,
-            "bounded": self.bounded_,
-            "warnings": list(self.warnings_),
-            "mass_normalised": self.mass_normalised_,
-            "equilibria": self.equilibria_.as_dict(),
-            "modal": self.modal_,
-            "validation": {k: v for k, v in self.validation_.items() if not isinstance(v, np.ndarray)},
-            "wells": {
-                name: {
-                    "z_ref": w.z_ref,
-                    "f_hz": w.f_hz,
-                    "zeta": w.zeta,
-                    "coefficients": w.coefficients,
-                    "quality_im_over_re": w.quality,
-                    "band_hz": list(w.band_hz),
-                    "singular_values": w.singular_values,
-                    "z_frame_model": self.models_by_well_[name].to_dict(),
-                }
-                for name, w in self.wells_.items()
-            },
-            "g_estimate": self.g_estimate_,
-            "settings": self.settings_,
-        }

@@ -8,8 +8,6 @@ result's ``warnings`` and onto stderr, each saying what looks wrong and what to 
 
 from __future__ import annotations
 
-from typing import Any
-
 import numpy as np
 
 STROKE_LIMIT_M = 1.0
@@ -56,6 +54,8 @@ def frame_warnings(rec) -> list[str]:
     fo = frame_offset(gravity_only, spread=False)  # the parts' spread only for a warning's text (0.3 s on 300 s)
     if fo["offset_m"] is not None and abs(fo["offset_m"]) > FRAME_WARN_M:
         fo = frame_offset(gravity_only)
+    if fo["offset_m"] is None and fo.get("one_well"):  # an in-well record cannot say where its zero is: no alarm
+        return []
     if fo["offset_m"] is None:
         return [
             f"the record's physics never carry the weight ({fo['method']}): are base_acc in m/s^2 and z in m, "
@@ -125,13 +125,46 @@ def model_warnings(model, rec) -> list[str]:
     return out
 
 
-def collect(rec, result: dict[str, Any] | None = None, model=None) -> list[str]:
-    """Every warning about a record (its derivation, its units, its frame) and about a result's model
-    (the frame is checked where a model was identified: a harmonic record cannot say it)."""
+def classified(rec, model=None, own: list[str] | tuple[str, ...] = ()) -> list[tuple[type, str]]:
+    """Every warning about a result (``own``: the method's, boundedness, convergence) and about its record
+    (its derivation, its units, its frame) and model (wells beyond the stroke), each with its
+    ``NegstiffWarning`` category, without repeats: what the result holds and Python's ``warnings`` issue."""
+    from negstiff.errors import (
+        BoundednessWarning,
+        ConvergenceWarning,
+        ExtrapolationWarning,
+        FrameWarning,
+        NegstiffWarning,
+        RecordWarning,
+    )
+
+    def kind(text: str) -> type:
+        if "not bounded" in text:
+            return BoundednessWarning
+        if "diverged" in text or "converge" in text or "R-hat" in text or " ESS " in text:
+            return ConvergenceWarning
+        return NegstiffWarning
+
     resp = rec.info.get("response", {}) if rec is not None else {}
-    out = list(rec.info.get("warnings", [])) + list(resp.get("warnings", [])) + record_warnings(rec)
+    lines = [(kind(t), t) for t in own]
+    lines += [
+        (RecordWarning, t) for t in [*rec.info.get("warnings", []), *resp.get("warnings", []), *record_warnings(rec)]
+    ]
     if model is not None:
-        out += input_warnings(rec) + frame_warnings(rec) + model_warnings(model, rec)
-    if result is not None:
-        out = list(result.get("warnings", [])) + [w for w in out if w not in result.get("warnings", [])]
+        lines += [(RecordWarning, t) for t in input_warnings(rec)]
+        lines += [(FrameWarning, t) for t in frame_warnings(rec)]
+        lines += [(ExtrapolationWarning, t) for t in model_warnings(model, rec)]
+    seen, out = set(), []
+    for cat, text in lines:
+        if text not in seen:
+            seen.add(text)
+            out.append((cat, text))
     return out
+
+
+def issue(lines) -> None:
+    """Each (category, text) of ``classified`` through Python's ``warnings`` (a ``NegstiffWarning``)."""
+    import warnings
+
+    for category, text in lines:
+        warnings.warn(text, category, stacklevel=3)

@@ -291,6 +291,7 @@ def frame_offset(rec, spread: bool = True) -> dict[str, Any]:
         if "one" not in rest:
             return {
                 "offset_m": None,
+                "one_well": True,
                 "method": "not pinned: the record stays in one well (no origin between wells to find); give that "
                 "well's rest position as '# z_rest: VALUE' metadata [m]",
             }

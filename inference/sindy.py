@@ -26,16 +26,15 @@ free-run validation, which is the same as NSI's (contract keys match key for key
 from __future__ import annotations
 
 import math
-from typing import Any
 
 import numpy as np
 
 from .derivatives import state_derivatives
-from .estimator import Estimator
+from .identification import Estimate, Identifier
 from .measurement import Measurement
-from .refine import refine_stage, stroke_quantiles
+from .parameters import FRACTION, SEED, Boolean, Interval, Several
 from .selection import block_rows, block_scores, indistinguishable
-from .validation import boundedness, restarted_free_runs, validate
+from .validation import boundedness, restarted_free_runs
 from .weak import (  # noqa: F401 (input_coefficient, weak_least_squares: API)
     BASE_FIELDS,
     Bagging,
@@ -58,7 +57,7 @@ class SINDyError(WeakFormError):
     """The record cannot be identified by SINDy (too short, no excitation, nothing selected)."""
 
 
-class SINDy(Estimator):
+class SINDy(Identifier):
     """Weak-form SINDy identification of the second-order equation of motion (module docstring).
 
     Parameters
@@ -72,8 +71,22 @@ class SINDy(Estimator):
     seed : seeds the ensemble's bagging
     """
 
+    method = "sindy"
+    _parameter_constraints = {
+        "weights": Several(Interval(float, 0.0, lo_open=True)),
+        "n_models": Interval(int, 2, 10000),
+        "subset_fraction": Interval(float, 0.0, 1.0, lo_open=True),
+        "validation_fraction": FRACTION,
+        "selection_fraction": FRACTION,
+        "window_s": Interval(float, 0.0, lo_open=True, unit="s"),
+        "margin": Interval(float, 0.0),
+        "seed": SEED,
+        "refine": Boolean(),
+    }
+
     def __init__(
         self,
+        *,
         weights=tuple(np.logspace(-9, -1, 33)),
         n_models: int = 50,
         subset_fraction: float = 0.6,
@@ -85,7 +98,7 @@ class SINDy(Estimator):
         refine: bool = True,
     ):
         self.refine = refine
-        self.weights = tuple(float(w) for w in weights)
+        self.weights = weights
         self.n_models = n_models
         self.subset_fraction = subset_fraction
         self.validation_fraction = validation_fraction
@@ -95,14 +108,21 @@ class SINDy(Estimator):
         self.seed = seed
 
     # --- the workflow ----------------------------------------------------------------------------
+    def _validate(self) -> None:
+        if self.validation_fraction + self.selection_fraction >= 1:
+            raise SINDyError(
+                f"SINDy(validation_fraction={self.validation_fraction}, selection_fraction={self.selection_fraction}): "
+                "together they leave nothing to fit"
+            )
+
     def _check_record(self, rec: Measurement) -> None:
         rec.require(MIN_SAMPLES, "SINDy")
         rec.require_excitation("SINDy")
         rec.require_motion("SINDy")
 
-    def fit(self, rec: Measurement) -> "SINDy":
-        rec = self.check(rec)
-        n_id = int(round(rec.n * (1 - self.validation_fraction)))
+    def _estimate(self, rec: Measurement, n_id: int) -> Estimate:
+        """SINDy's own estimate: the support selected on held-out residuals, refitted on the
+        identification part, with the ensemble's inclusion probabilities (the shared stages follow)."""
         n_fit = int(round(rec.n * (1 - self.validation_fraction - self.selection_fraction)))
         ident = rec.segment(0, n_id)
         form = WeakForm.of(ident.z, rec.fs)
@@ -125,10 +145,8 @@ class SINDy(Estimator):
         phys = fit_support(sys_id, gain, support=chosen["support"])
         bagging = Bagging(self.n_models, self.subset_fraction, self.seed)
         phys_ens = fit_support(sys_id, gain, chosen["weight"], bagging=bagging)
-        mass, self.mass_source_ = mass_of(rec, gain, phys[-1])
-        self.mass_normalised_ = self.mass_source_.startswith("none")
-        self.input_gain_ = float(phys[-1])
-        self.model_ = model_from(phys, mass)
+        mass, mass_source = mass_of(rec, gain, phys[-1])
+        model = model_from(phys, mass)
         self.selected_ = list(chosen["terms"])
         self.weight_ = chosen["weight"]
         self.ensemble_ = {
@@ -140,61 +158,39 @@ class SINDy(Estimator):
             }
             for i, term in enumerate(library)
         }
-        self.warnings_ = []
-        self.stroke_ = stroke_quantiles(rec.z[:n_id])
-        self.validation_ = validate(self.model_, rec, n_id)
-        self.initial_model_, self.refinement_ = self.model_, None
-        if self.refine:
-            # the selection stands: unselected terms stay zero, the selected ones are refined
-            held = tuple(fields[t][0] for t in library if t not in self.selected_ and fields[t][0] in BASE_FIELDS)
-            self.model_, self.validation_, self.refinement_ = refine_stage(
-                self.model_, rec, n_id, self.validation_, held=held
-            )
-            if self.refinement_["applied"] and self.refinement_.get("free_mass"):
-                self.mass_source_ += ", refined by simulation error"
-        self._diagnose(ident)
-        self.settings_ = {
-            "form": f"weak: test functions (1 - (s/T)^2)^4, T = {form.half} samples, every {form.stride}",
-            "corner_frequency_hz": form.corner_hz,
-            "derivatives": form.derivatives["method"],
-            "sgn_noise_scale": form.velocity_noise,
-            "library": list(library) + ["u"],
-            "input_coefficient": (
-                "fixed by physics (an equality constraint: pysindy's ConstrainedSR3 on the sparsity path and "
-                "the ensemble, constrained least squares in the support's refit)"
-                if gain is not None
-                else "learned (no mass)"
-            ),
-            "selection": "sparsest support whose held-out weak residual (samples "
-            f"[{n_fit}, {n_id}), blocks of {self.window_s:g} s) is within max(one standard error, "
-            f"{100 * self.margin:g} %) of the best",
-            "weight": self.weight_,
-            "n_models": self.n_models,
-            "subset_fraction": self.subset_fraction,
-            "identification_samples": n_id,
-            "seed": self.seed,
-        }
-        return self
-
-    def _diagnose(self, ident: Measurement) -> None:
-        """Boundedness, equilibria and the wells' modal parameters of the fitted model, with warnings."""
-        self.bounded_ = boundedness(self.model_, ident)
-        if not self.bounded_["ok"]:
-            self.warnings_.append(self.bounded_["warning"])
-        try:
-            self.equilibria_ = self.model_.equilibria().as_dict()
-        except ValueError as exc:
-            self.equilibria_ = {"z_minus": None, "z_0": None, "z_plus": None}
-            self.warnings_.append(f"the identified restoring force has no usable equilibria: {exc}")
-        self.modal_ = {}
-        for well in ("minus", "plus"):
-            try:
-                uls = self.model_.uls(well)
-                self.modal_[well] = {"f_hz": uls.f_hz, "zeta": uls.zeta}
-            except ValueError:
-                self.modal_[well] = {"f_hz": None, "zeta": None}
-        if self.validation_.get("diverged"):
-            self.warnings_.append(self.validation_["warning"])
+        # the selection stands in the refinement: unselected terms stay zero, the selected ones are refined
+        held = tuple(fields[t][0] for t in library if t not in self.selected_ and fields[t][0] in BASE_FIELDS)
+        return Estimate(
+            model=model,
+            mass_source=mass_source,
+            input_gain=float(phys[-1]),
+            held=held,
+            details={
+                "selected_terms": self.selected_,
+                "ensemble": self.ensemble_,
+                "path": [{k: v for k, v in p.items() if k not in ("block_ms", "support")} for p in self.path_],
+            },
+            settings={
+                "form": f"weak: test functions (1 - (s/T)^2)^4, T = {form.half} samples, every {form.stride}",
+                "corner_frequency_hz": form.corner_hz,
+                "derivatives": form.derivatives["method"],
+                "sgn_noise_scale": form.velocity_noise,
+                "library": list(library) + ["u"],
+                "input_coefficient": (
+                    "fixed by physics (an equality constraint: pysindy's ConstrainedSR3 on the sparsity path and "
+                    "the ensemble, constrained least squares in the support's refit)"
+                    if gain is not None
+                    else "learned (no mass)"
+                ),
+                "selection": "sparsest support whose held-out weak residual (samples "
+                f"[{n_fit}, {n_id}), blocks of {self.window_s:g} s) is within max(one standard error, "
+                f"{100 * self.margin:g} %) of the best",
+                "weight": self.weight_,
+                "n_models": self.n_models,
+                "subset_fraction": self.subset_fraction,
+                "seed": self.seed,
+            },
+        )
 
     def _path(self, rec: Measurement, form: WeakForm, gain, n_fit: int, n_id: int, z0s, v0s) -> list[dict]:
         """The supports of the L0 path on samples [0, n_fit), each refitted there and scored on [n_fit,
@@ -263,25 +259,3 @@ class SINDy(Estimator):
                 return p
         best["selected"] = True  # pragma: no cover - best always qualifies
         return best
-
-    def result(self) -> dict[str, Any]:
-        """The contract's identify JSON (plus SINDy details)."""
-        return {
-            "method": "sindy",
-            "mass_source": self.mass_source_,
-            "input_gain": self.input_gain_,
-            "model": self.model_.to_dict(),
-            "initial_model": self.initial_model_.to_dict(),
-            "stroke_quantiles_m": self.stroke_.tolist(),
-            "refinement": self.refinement_,
-            "bounded": self.bounded_,
-            "mass_normalised": self.mass_normalised_,
-            "equilibria": self.equilibria_,
-            "warnings": self.warnings_,
-            "modal": self.modal_,
-            "validation": {k: v for k, v in self.validation_.items() if not isinstance(v, np.ndarray)},
-            "selected_terms": self.selected_,
-            "ensemble": self.ensemble_,
-            "path": [{k: v for k, v in p.items() if k not in ("block_ms", "support")} for p in self.path_],
-            "settings": self.settings_,
-        }

@@ -31,6 +31,7 @@ from negstiff.models.constants import G
 from negstiff.models.device import rod_geometry
 
 from .estimator import Estimator
+from .parameters import SEED, Instance, Interval, Options
 
 FEATURES = ("f_minus", "f_plus", "z_minus", "z_plus")
 PENALTY = 1e3
@@ -167,8 +168,19 @@ class GAUpdater(Estimator):
     seed : the GA's random seed (same seed, same result)
     """
 
+    _parameter_constraints = {
+        "start": Instance("negstiff.models.device", "Device"),
+        "pop_size": Interval(int, 4, 10**5),
+        "generations": Interval(int, 1, 10**5),
+        "bounds": Instance("negstiff.inference.updating", "Bounds"),
+        "fixed_mass": Interval(float, 1e-9, 1e9, unit="kg", none=True),
+        "seed": SEED,
+        "compare": Options(("auto", "features", "restoring_force")),
+    }
+
     def __init__(
         self,
+        *,
         start: Device = NOMINAL,
         pop_size: int = 60,
         generations: int = 120,
@@ -179,14 +191,6 @@ class GAUpdater(Estimator):
     ):
         self.start, self.pop_size, self.generations = start, pop_size, generations
         self.bounds, self.fixed_mass, self.seed, self.compare = bounds, fixed_mass, seed, compare
-
-    def _validate(self) -> None:
-        if self.pop_size < 4 or self.generations < 1:
-            raise UpdatingError("the GA needs pop_size >= 4 and generations >= 1")
-        if self.fixed_mass is not None and not (self.fixed_mass > 0 and math.isfinite(self.fixed_mass)):
-            raise UpdatingError(f"fixed mass must be positive, got {self.fixed_mass}")
-        if self.compare not in ("auto", "features", "restoring_force"):
-            raise UpdatingError(f"compare must be auto, features or restoring_force, got {self.compare!r}")
 
     def _device(self, x: np.ndarray) -> Device:
         m = self.fixed_mass if self.fixed_mass is not None else x[2]
@@ -231,7 +235,7 @@ class GAUpdater(Estimator):
     def check(self, targets: Mapping[str, Any]) -> dict[str, Any]:
         """Everything ``fit`` checks before the GA runs (the settings and the targets); the targets as
         ``fit`` uses them (``targets_from``)."""
-        self._validate()
+        self._validate_params()
         if not isinstance(targets, Mapping):
             raise UpdatingError(f"targets are a mapping (an identify result, or {', '.join(FEATURES)})")
         t = targets_from(targets)

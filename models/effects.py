@@ -288,6 +288,11 @@ def normalise(extra: Mapping[str, Any] | None) -> Mapping[str, Any]:
     return MappingProxyType({name: get(name).value(value) for name, value in dict(extra or {}).items()})
 
 
+def plain(extra: Mapping[str, Any]) -> dict[str, Any]:
+    """An ``extra`` mapping as plain dicts (what ``normalise`` made read-only), for pickling and JSON."""
+    return {k: dict(v) if isinstance(v, Mapping) else v for k, v in extra.items()}
+
+
 def force(extra: Mapping[str, Any], z, zdot):
     """Force of the extra effects [N] at displacement ``z`` [m] and velocity ``zdot`` [m/s]."""
     z, zdot = np.asarray(z, float), np.asarray(zdot, float)

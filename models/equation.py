@@ -20,6 +20,7 @@ Extra effects are named terms added to the force, each an entry of the registry 
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass, field
 from typing import Any, Mapping
@@ -125,6 +126,12 @@ class Model:
         k0 = self.m * G if self.k0 is None else finite("k0", self.k0)
         object.__setattr__(self, "k0", k0)
         object.__setattr__(self, "extra", effects.normalise(self.extra))
+
+    def __reduce__(self):
+        """Pickled (and deep-copied) by its fields, the read-only ``extra`` as plain dicts: a model crosses
+        process boundaries (dask, multiprocessing) and ``sklearn.base.clone`` copies it."""
+        values = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
+        return _rebuild, (type(self), {**values, "extra": effects.plain(self.extra)})
 
     # --- forces and energy -------------------------------------------------------------------
     def restoring_force(self, z, include_extra: bool = True):
@@ -245,3 +252,8 @@ class Model:
         for name, row in effects.POLYNOMIAL_ROWS.items():
             p[row] = getattr(self, name)
         return p
+
+
+def _rebuild(cls, values):
+    """``__reduce__``'s inverse: the class built from its fields (validated again)."""
+    return cls(**values)

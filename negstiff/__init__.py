@@ -52,6 +52,7 @@ _EXPORTS = {
     "InputError": "negstiff.errors",
     "OutputError": "negstiff.errors",
     "NegstiffWarning": "negstiff.errors",
+    "NotFittedError": "negstiff.errors",
     "MeasurementError": "negstiff.inference.measurement",
 }
 

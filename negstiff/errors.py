@@ -25,3 +25,27 @@ class OutputError(InputError):
 
 class NegstiffWarning(UserWarning):
     """A result that looks implausible (units, frame, convergence, boundedness): loud, never silent."""
+
+
+class NotFittedError(ValueError, AttributeError):
+    """A learned attribute (``model_``, ``result()``) asked of an estimator before ``fit`` (as scikit-learn's)."""
+
+
+class RecordWarning(NegstiffWarning):
+    """How a record was read looks wrong: units (mm read as m, an input in g), a derived response's error."""
+
+
+class FrameWarning(NegstiffWarning):
+    """A measured z whose zero is not where the record's physics carry the weight (a sensor offset?)."""
+
+
+class ExtrapolationWarning(NegstiffWarning):
+    """A result beyond what the record visited (a model's well outside the stroke)."""
+
+
+class BoundednessWarning(NegstiffWarning):
+    """An identified model that escapes beyond the stroke or diverges under the record's input."""
+
+
+class ConvergenceWarning(NegstiffWarning):
+    """A sampler or an optimiser that did not converge (R-hat, effective sample size, a diverged free run)."""

@@ -1,40 +1,121 @@
-"""The estimator contract (inference/estimator.py, after scikit-learn's): parameters stored as given in
-__init__, validated in fit, fit returns self, learned state in attributes ending in _, result() the
-contract's JSON."""
+"""The estimator contract (inference/estimator.py, after scikit-learn's), enforced: keyword-only
+constructors that store their parameters unchanged, get_params/set_params so that sklearn.base.clone
+copies every estimator, every parameter declared with its constraint and checked by fit before any work
+(one InputError naming the parameter and the allowed range), NotFittedError before fit, and fit taking a
+Measurement or a path, nothing else. Written with the public API only."""
 
 import inspect
+import math
 
+import numpy as np
 import pytest
+from sklearn.base import clone
 
-from negstiff.inference.discrepancy import Discrepancy
-from negstiff.inference.estimator import Estimator
-from negstiff.inference.nsi import NSI
-from negstiff.inference.posterior import Posterior
-from negstiff.inference.sindy import SINDy
-from negstiff.inference.updating import GAUpdater, UpdatingError
+from negstiff import (
+    NSI,
+    Discrepancy,
+    GAUpdater,
+    InputError,
+    NotFittedError,
+    Posterior,
+    SINDy,
+    from_arrays,
+)
+from negstiff.inference.parameters import Boolean, Instance, Interval, Options, Pair, Several
 
 ESTIMATORS = (NSI, SINDy, Discrepancy, Posterior, GAUpdater)
 
 
 @pytest.mark.parametrize("cls", ESTIMATORS, ids=lambda c: c.__name__)
-def test_parameters_are_stored_as_given(cls):
-    # every constructor parameter is an attribute of the same name holding its default; repr shows them
-    est = cls()
-    assert isinstance(est, Estimator)
-    params = est.get_params()
+def test_parameters_are_keywords_stored_as_given_and_clone_round_trips(cls):
     sig = inspect.signature(cls.__init__).parameters
+    assert all(p.kind is inspect.Parameter.KEYWORD_ONLY for n, p in sig.items() if n != "self")
+    with pytest.raises(TypeError):
+        cls(1)
+    est = cls()
+    params = est.get_params()
     assert set(params) == set(sig) - {"self"}
     for name, p in sig.items():
-        if name != "self" and not isinstance(p.default, (tuple, list)):
-            assert params[name] is p.default or params[name] == p.default, name
-    assert repr(est).startswith(cls.__name__ + "(")
+        if name != "self":
+            assert params[name] is p.default, f"{cls.__name__}.{name} is not stored as given"
+    copy = clone(est)  # scikit-learn's clone: a new object with the same parameters, unfitted
+    assert type(copy) is cls and copy is not est
+    assert copy.get_params().keys() == params.keys()
+    assert repr(copy).startswith(cls.__name__ + "(") and "not fitted" in repr(copy)
+    assert copy.set_params(**{next(iter(params)): params[next(iter(params))]}) is copy
+    with pytest.raises(InputError, match="has no parameter 'bogus'"):
+        copy.set_params(bogus=1)
 
 
-def test_bad_parameters_are_refused_by_fit_not_by_the_constructor():
-    # scikit-learn's convention: the constructor stores, fit validates (before any work)
-    ga = GAUpdater(pop_size=2)
-    with pytest.raises(UpdatingError, match="pop_size"):
-        ga.fit({"f_minus": 5.0, "f_plus": 6.0, "z_minus": -0.01, "z_plus": 0.01})
-    post = Posterior(model="nonsense")
-    with pytest.raises(ValueError, match="model must be"):
-        post.fit(None)
+@pytest.mark.parametrize("cls", ESTIMATORS, ids=lambda c: c.__name__)
+def test_every_parameter_has_a_declared_constraint_its_default_meets(cls):
+    est = cls()
+    assert set(cls._parameter_constraints) == set(est.get_params()), "declarations and parameters differ"
+    for name, value in est.get_params().items():
+        assert cls._parameter_constraints[name].accepts(value), f"{cls.__name__}.{name}'s default breaks its constraint"
+
+
+def _bad_values(constraint):
+    """Values a declaration excludes: beyond each bound, the wrong type, NaN, a boolean for a number."""
+    if isinstance(constraint, Interval):
+        out = ["x", math.nan, True]
+        if not constraint.none:
+            out.append(None)
+        if constraint.lo is not None:
+            out.append(constraint.lo if constraint.lo_open else constraint.lo - 1)
+        if constraint.hi is not None:
+            out.append(constraint.hi if constraint.hi_open else constraint.hi + 1)
+        if constraint.kind is int:
+            out.append(2.5)
+        return out
+    if isinstance(constraint, Options):
+        return ["bogus", 3]
+    if isinstance(constraint, Boolean):
+        return ["yes", 1]
+    if isinstance(constraint, Pair):
+        return ["x", (1.0,), (2.0, 1.0)]
+    if isinstance(constraint, Several):
+        return ["x", [], [object()]]
+    if isinstance(constraint, Instance):
+        return ["x"]
+    return ["x", [], ["not a term"]]  # the library's terms (Discrepancy.baseline)
+
+
+CASES = [
+    (cls, name, value)
+    for cls in ESTIMATORS
+    for name, c in cls._parameter_constraints.items()
+    for value in _bad_values(c)
+]
+
+
+@pytest.fixture(scope="module")
+def record():
+    t = np.arange(4096) / 512
+    return from_arrays(np.sin(2 * np.pi * 9 * t), 0.02 + 1e-3 * np.sin(2 * np.pi * 9 * t + 0.3), 512.0, mass=0.2)
+
+
+@pytest.mark.parametrize("cls, name, value", CASES, ids=[f"{c.__name__}.{n}={v!r}" for c, n, v in CASES])
+def test_a_bad_parameter_value_is_one_input_error_before_any_work(record, cls, name, value):
+    est = cls(**{name: value})  # the constructor stores, fit checks (scikit-learn's convention)
+    data = {"f_minus": 11.4, "f_plus": 9.2, "z_minus": -0.029, "z_plus": 0.023} if cls is GAUpdater else record
+    with pytest.raises(InputError, match=rf"{cls.__name__}\({name}=.*\): {name} must be"):
+        est.fit(data)
+
+
+@pytest.mark.parametrize("cls", [NSI, SINDy, Discrepancy, Posterior], ids=lambda c: c.__name__)
+def test_learned_state_before_fit_is_not_fitted_error_and_fit_takes_records_only(cls, record):
+    est = cls()
+    with pytest.raises(NotFittedError, match="not fitted"):
+        est.result()
+    with pytest.raises(NotFittedError):
+        est.model_ if cls is not Posterior else est.result_
+    assert not hasattr(est, "model_")  # NotFittedError is an AttributeError: hasattr says False
+    for bad in (np.zeros(100), [1, 2, 3], {"z": 1}):
+        with pytest.raises(InputError, match="takes a Measurement or a file path"):
+            est.fit(bad)
+
+
+def test_fit_reads_a_path_with_the_same_checks(tmp_path):
+    with pytest.raises(InputError, match="no such file"):
+        NSI().fit(tmp_path / "absent.csv")

@@ -15,7 +15,10 @@ from negstiff.models import Model
 from negstiff.models.device import NOMINAL
 
 from ..estimator import Estimator
+from ..identification import issue
 from ..measurement import Measurement, MeasurementError
+from ..parameters import SEED, Boolean, Instance, Interval, Options
+from ..plausibility import classified
 from .diagnostics import PosteriorResult, convergence_warnings, result_json, summarise
 from .likelihood import LogPosterior, curvature_adjustment
 from .parametrisation import Parametrisation, coefficient_parametrisation, device_parametrisation
@@ -50,8 +53,30 @@ class Posterior(Estimator):
         starts from the same refined point an identification reports (default True)
     """
 
+    _parameter_constraints = {
+        "model": Options(("coefficients", "device")),
+        "mass_prior": Options(("weighed", "free")),
+        "window_s": Interval(float, 0.0, lo_open=True, unit="s"),
+        "max_windows": Interval(int, 4, 10**6, none=True),
+        "n_walkers": Interval(int, 16, 10**5),
+        "n_ensembles": Interval(int, 1, 1000),
+        "tau_multiple": Interval(float, 1.0),
+        "min_steps": Interval(int, 1, 10**7),
+        "max_steps": Interval(int, 1, 10**7),
+        "chunk": Interval(int, 1, 10**7),
+        "hdi_prob": Interval(float, 0.0, 0.999, lo_open=True),
+        "oversample": Interval(int, 1, 16),
+        "adjust": Boolean(),
+        "threads": Interval(int, 1, 1024, none=True),
+        "seed": SEED,
+        "progress": Boolean(),
+        "start": Instance("negstiff.models.equation", "Model", none=True),
+        "refine_start": Boolean(),
+    }
+
     def __init__(
         self,
+        *,
         model: str = "coefficients",
         mass_prior: str = "weighed",
         window_s: float = 0.125,
@@ -91,18 +116,12 @@ class Posterior(Estimator):
         self.refine_start = refine_start
 
     def _validate(self) -> None:
-        if self.model not in ("coefficients", "device"):
-            raise PosteriorError(f"model must be 'coefficients' or 'device', got {self.model!r}")
-        if self.mass_prior not in ("free", "weighed"):
-            raise PosteriorError(f"mass_prior must be 'free' or 'weighed', got {self.mass_prior!r}")
-        if self.start is not None and (self.model != "coefficients" or not isinstance(self.start, Model)):
+        if self.start is not None and self.model != "coefficients":
             raise PosteriorError("a start model is a polynomial model, for the coefficient posterior")
-        if isinstance(self.hdi_prob, bool) or not (isinstance(self.hdi_prob, (int, float)) and 0 < self.hdi_prob < 1):
-            raise PosteriorError(f"hdi_prob must lie in (0, 1) (0.9 for 90 %), got {self.hdi_prob!r}")
 
     def result(self) -> dict[str, Any]:
-        """The contract's posterior JSON (``result_json`` of ``result_``)."""
-        return result_json(self.result_, self.hdi_prob)
+        """The contract's posterior JSON (``result_json`` of ``result_``), with every warning and the record."""
+        return {**result_json(self.result_, self.hdi_prob), "warnings": list(self.warnings_), "record": self.record_}
 
     # --- start point -------------------------------------------------------------------------------
     def _start(self, rec: Measurement, win: Windows) -> tuple[Parametrisation, np.ndarray]:
@@ -313,6 +332,11 @@ class Posterior(Estimator):
         res.thin = max(1, int(np.ceil(tau_max / 2))) if np.isfinite(tau_max) else 1
         res.build_idata = functools.partial(_idata, res, y, logpost, win)
         self.result_ = res
+        # unconverged chains, and the record's own warnings: in the result and through Python's warnings
+        lines = classified(rec, None, res.warnings)
+        issue(lines)
+        self.warnings_ = [text for _, text in lines]
+        self.record_ = dict(rec.info)
         return self
 
 

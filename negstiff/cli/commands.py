@@ -24,7 +24,6 @@ from .common import (
     say_refinement,
     wants_progress,
     warn,
-    with_record,
     write_json,
 )
 
@@ -168,7 +167,7 @@ def cmd_identify(args) -> int:
     rec = est.check(rec)  # every refusal before the progress line
     say(args, f"identify {args.method}: {rec.n} samples at {rec.fs:g} Hz, input {rec.input_name}")
     est.fit(rec)
-    result = with_record(est.result(), rec, est.model_)
+    result = est.result()
     if args.frf:
         result["frf_comparison"] = frf_comparison(result, frfs)
         for c in result["frf_comparison"]:
@@ -176,8 +175,6 @@ def cmd_identify(args) -> int:
                        f"({c['difference_percent']:+.2f} %)")  # fmt: skip
     say_refinement(args, result.get("refinement"))
     v = result["validation"]
-    if v.get("diverged"):
-        say(args, f"WARNING: {v['warning']}")
     warn(args, result["warnings"])
     if args.method == "sindy":
         say(args, f"selected terms: {', '.join(result['selected_terms'])}")
@@ -224,7 +221,7 @@ def cmd_posterior(args) -> int:
     rec = post.check(rec)  # every refusal before the progress line and bar
     say(args, f"posterior ({args.model}): {rec.n} samples at {rec.fs:g} Hz, input {rec.input_name}")
     res = post.fit(rec).result_
-    result = with_record(post.result(), rec)
+    result = post.result()
     if args.idata:
         from negstiff.files import atomic_path
 
@@ -247,7 +244,7 @@ def cmd_discrepancy(args) -> int:
     rec = d.check(rec)  # every refusal before the progress line
     say(args, f"discrepancy: {rec.n} samples at {rec.fs:g} Hz, input {rec.input_name}, baseline {args.baseline}")
     d.fit(rec)
-    result = with_record(d.result(), rec, d.model_)
+    result = d.result()
     say_refinement(args, result.get("refinement"))
     write_json(args.out, result)
     warn(args, result["warnings"])
@@ -279,18 +276,9 @@ def parse_wells(text: str | None) -> tuple[float, ...] | None:
     return wells
 
 
-def rest_wells(rec) -> tuple[float, float] | None:
-    """The rest positions a record's metadata states (``z_minus_rest``, ``z_plus_rest``), or None."""
-    try:
-        return float(rec.meta["z_minus_rest"]), float(rec.meta["z_plus_rest"])
-    except (KeyError, ValueError):
-        return None
-
-
 def cmd_characterize(args) -> int:
     from negstiff.inference.characterize import characterize, check_harmonic
     from negstiff.inference.measurement import load
-    from negstiff.inference.nsi import well_guesses
 
     given = parse_wells(args.wells)  # the options before any work
     rec = load(args.data, columns=args.columns, fs=args.fs)
@@ -299,22 +287,13 @@ def cmd_characterize(args) -> int:
         if col is None:
             raise InputError(f"{args.data}: no column {args.signal!r} to analyse (choose z, y, z_dot or base_disp)")
         rec = dataclasses.replace(rec, z=col)
-    wells = given or rest_wells(rec)
-    if wells is None:
-        try:
-            wells = well_guesses(rec)
-        except ValueError:
-            wells = None
     if not args.forcing_hz < rec.fs / 2:
         raise InputError(
             f"--forcing-hz {args.forcing_hz:g}: above the Nyquist frequency of {args.data} ({rec.fs / 2:g} Hz)"
         )
     check_harmonic(rec, args.forcing_hz)
     say(args, f"characterize: {rec.n} samples at {rec.fs:g} Hz, forcing {args.forcing_hz:g} Hz")
-    r = characterize(rec, args.forcing_hz, wells)
-    r.pop("poincare_z")
-    r["wells_used"] = wells
-    r = with_record(r, rec)
+    r = characterize(rec, args.forcing_hz, given if given is not None else "auto")
     write_json(args.out, r)
     warn(args, r["warnings"])
     lle = r["lle"]
@@ -329,19 +308,6 @@ def cmd_characterize(args) -> int:
     return 0
 
 
-def frf_well(rec) -> str | None:
-    """The well a low-level record sits in: the rest position (metadata) nearest its mean z."""
-    rest = {}
-    for w in ("minus", "plus"):
-        try:
-            rest[w] = float(rec.meta[f"z_{w}_rest"])
-        except (KeyError, ValueError):
-            pass
-    if not rest or rec.z is None:
-        return None
-    return min(rest, key=lambda w: abs(rest[w] - float(np.mean(rec.z))))
-
-
 def cmd_frf(args) -> int:
     from negstiff.inference.frf import check_frf, frf
     from negstiff.inference.measurement import load
@@ -354,10 +320,6 @@ def cmd_frf(args) -> int:
     say(args, f"frf: {rec.n} samples at {rec.fs:g} Hz, input {rec.input_name}")
     res = frf(rec, band=band, segment_s=args.segment)
     curves = res.pop("_curves")
-    res["well"] = frf_well(rec)
-    res = with_record(res, rec)
-    if res["reason"]:
-        res["warnings"].append(res["reason"])
     import matplotlib
 
     matplotlib.use("Agg")
@@ -467,7 +429,8 @@ def cmd_map(args) -> int:
                 f"{e['file']}: input {rec.input_name}, the campaign's first record's: {recs[0].input_name}"
             )
         check_harmonic(rec, f)
-    wells = given or next((w for w in map(rest_wells, recs) if w), None)
+    rests = (r.rest_positions for r in recs)
+    wells = given or next(((w["minus"], w["plus"]) for w in rests if len(w) == 2), None)
     say(args, f"map: {len(recs)} record(s), " + ("stepped in frequency" if axis == "f_hz" else f"at {freqs[0]:g} Hz"))
     points = []
     for e, rec, f in zip(entries, recs, freqs):

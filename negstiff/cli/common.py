@@ -44,13 +44,47 @@ def _signature_defaults(module: str, cls: str) -> dict[str, Any]:
         if isinstance(f, ast.FunctionDef) and f.name == "__init__"
     )
     args = init.args.args[-len(init.args.defaults) :] if init.args.defaults else []
+    pairs = list(zip(args, init.args.defaults)) + list(zip(init.args.kwonlyargs, init.args.kw_defaults))
     out = {}
-    for a, d in zip(args, init.args.defaults):
+    for a, d in pairs:
+        if d is None:  # a keyword-only parameter without a default
+            continue
         try:
             out[a.arg] = ast.literal_eval(d)
         except ValueError:
             pass  # not a literal (a module constant): the CLI states no default for it
     return out
+
+
+@functools.lru_cache(maxsize=None)
+def _constraints(module: str, cls: str) -> dict[str, Any]:
+    """An estimator class's ``_parameter_constraints``, evaluated from its source (``inference.parameters``'
+    classes only), without importing the estimator."""
+    from negstiff.inference.parameters import NAMESPACE
+
+    tree = ast.parse(_source(module).read_text())
+    body = next(c.body for c in tree.body if isinstance(c, ast.ClassDef) and c.name == cls)
+    node = next(
+        a.value for a in body if isinstance(a, ast.Assign) and any(getattr(t, "id", "") == "_parameter_constraints"
+                                                                    for t in a.targets)
+    )  # fmt: skip
+    out = {}
+    for key, value in zip(node.keys, node.values):
+        try:
+            out[ast.literal_eval(key)] = eval(compile(ast.Expression(value), module, "eval"), dict(NAMESPACE))
+        except NameError:
+            pass  # a constraint of the estimator's own (not an option's)
+    return out
+
+
+def declared(estimator: str, parameter: str, what: str = ""):
+    """The argparse type of an option that sets an estimator's parameter: the parameter's declared
+    constraint (``_parameter_constraints``, ``"nsi.NSI"``: ``negstiff.inference.nsi.NSI``), so the command
+    line checks the range the library checks, from one declaration."""
+    module, cls = estimator.rsplit(".", 1)
+    c = _constraints(f"negstiff.inference.{module}", cls)[parameter]
+    unit = f" {c.unit}" if getattr(c, "unit", "") else ""
+    return number(c.kind, c.lo, c.hi, lo_open=c.lo_open, hi_open=c.hi_open, what=what or unit)
 
 
 def default(estimator: str, parameter: str) -> Any:
@@ -61,8 +95,8 @@ def default(estimator: str, parameter: str) -> Any:
     return _signature_defaults(f"negstiff.inference.{module}", cls)[parameter]
 
 
-def number(kind, lo=None, hi=None, lo_open=False, what=""):
-    """An argparse type: a number of ``kind`` in [lo, hi] (open at lo with ``lo_open``)."""
+def number(kind, lo=None, hi=None, lo_open=False, what="", hi_open=False):
+    """An argparse type: a number of ``kind`` in [lo, hi] (open at lo with ``lo_open``, at hi with ``hi_open``)."""
 
     def parse(text: str):
         try:
@@ -73,12 +107,12 @@ def number(kind, lo=None, hi=None, lo_open=False, what=""):
             raise argparse.ArgumentTypeError(f"{text!r} is not a finite number")
         if lo is not None and (v < lo or (lo_open and v == lo)):
             raise argparse.ArgumentTypeError(f"{text} is out of range: must be {'>' if lo_open else '>='} {lo:g}{what}")
-        if hi is not None and v > hi:
-            raise argparse.ArgumentTypeError(f"{text} is out of range: must be <= {hi:g}{what}")
+        if hi is not None and (v > hi or (hi_open and v == hi)):
+            raise argparse.ArgumentTypeError(f"{text} is out of range: must be {'<' if hi_open else '<='} {hi:g}{what}")
         return v
 
     parse.__name__ = kind.__name__
-    parse.kind, parse.lo, parse.hi, parse.lo_open = kind, lo, hi, lo_open  # the declaration, for tests and help
+    parse.kind, parse.lo, parse.hi, parse.lo_open, parse.hi_open = kind, lo, hi, lo_open, hi_open  # for tests
     return parse
 
 
@@ -197,14 +231,6 @@ def warn(args, warnings: Sequence[str]) -> None:
     """Warnings are loud: on stderr even with --quiet (and in the result)."""
     for w in warnings:
         print(f"negstiff {args.command}: WARNING: {w}", file=sys.stderr)
-
-
-def with_record(result: dict, rec, model=None) -> dict:
-    """A result with how its record was read (time base, response sensor, derived z) and every
-    warning about the record and the model (``inference.plausibility``)."""
-    from negstiff.inference.plausibility import collect
-
-    return {**result, "record": rec.info, "warnings": collect(rec, result, model)}
 
 
 def say_refinement(args, info: dict | None) -> None:

@@ -8,7 +8,7 @@ from negstiff.inference.units import SAMPLING_RATE_RANGE_HZ
 from negstiff.models import effects
 
 from . import commands as c
-from .common import POSITIVE, SEED, Parser, acceleration_option, default, mass_option, number
+from .common import POSITIVE, SEED, Parser, acceleration_option, declared, default, mass_option, number
 
 POST = "posterior.core.Posterior"
 NO_REFINE_HELP = (
@@ -182,19 +182,19 @@ def _identify(sub, common: argparse.ArgumentParser, data_opts: argparse.Argument
     )
     idf.add_argument(
         "--order",
-        type=number(int, 2, 20, what=" (the state dimension: 2 per mode)"),
+        type=declared("nsi.NSI", "order", what=" (the state dimension: 2 per mode)"),
         default=default("nsi.NSI", "order"),
         help=f"NSI model order (default {default('nsi.NSI', 'order')}: one mode)",
     )
     idf.add_argument(
         "--block-rows",
-        type=number(int, 2, 500),
+        type=declared("nsi.NSI", "block_rows"),
         default=default("nsi.NSI", "block_rows"),
         help=f"NSI: block rows of the Hankel matrices (default {default('nsi.NSI', 'block_rows')})",
     )
     idf.add_argument(
         "--ensemble",
-        type=number(int, 2, 10000),
+        type=declared("sindy.SINDy", "n_models"),
         default=default("sindy.SINDy", "n_models"),
         help=f"SINDy: bagged models of the ensemble (default {default('sindy.SINDy', 'n_models')})",
     )
@@ -289,37 +289,37 @@ def _posterior(sub, common: argparse.ArgumentParser, data_opts: argparse.Argumen
     pst.add_argument("--duration", type=POSITIVE, help="use only the first DURATION seconds of the record")
     pst.add_argument(
         "--window",
-        type=POSITIVE,
+        type=declared(POST, "window_s"),
         default=default(POST, "window_s"),
         help=f"multiple-shooting window [s] (default {default(POST, 'window_s')})",
     )
     pst.add_argument(
         "--max-windows",
-        type=number(int, 4, 10**6),
+        type=declared(POST, "max_windows"),
         default=default(POST, "max_windows"),
         help=f"windows used at most, spread over the record (default {default(POST, 'max_windows')})",
     )
     pst.add_argument(
         "--walkers",
-        type=number(int, 16, 10**5, what=" (emcee: twice the 7 dimensions of the device model, at least)"),
+        type=declared(POST, "n_walkers", what=" (emcee: twice the 7 dimensions of the device model, at least)"),
         default=default(POST, "n_walkers"),
         help=f"walkers per ensemble (default {default(POST, 'n_walkers')})",
     )
     pst.add_argument(
         "--ensembles",
-        type=number(int, 1, 1000),
+        type=declared(POST, "n_ensembles"),
         default=default(POST, "n_ensembles"),
         help=f"independent ensembles (default {default(POST, 'n_ensembles')})",
     )
     pst.add_argument(
         "--max-steps",
-        type=number(int, 1, 10**7),
+        type=declared(POST, "max_steps"),
         default=default(POST, "max_steps"),
         help=f"step cap per ensemble (default {default(POST, 'max_steps')})",
     )
     pst.add_argument(
         "--hdi-prob",
-        type=number(float, 0.0, 0.999, lo_open=True),
+        type=declared(POST, "hdi_prob"),
         default=default(POST, "hdi_prob"),
         help=f"credible-interval probability (default {default(POST, 'hdi_prob')})",
     )
@@ -348,7 +348,7 @@ def _discrepancy(sub, common: argparse.ArgumentParser, data_opts: argparse.Argum
     dsc.add_argument("--baseline", choices=["cubic", "linear"], default="cubic", help="starting model")
     dsc.add_argument(
         "--max-effects",
-        type=number(int, 0, 20),
+        type=declared("discrepancy.Discrepancy", "max_effects"),
         default=default("discrepancy.Discrepancy", "max_effects"),
         help=f"effects added at most (default {default('discrepancy.Discrepancy', 'max_effects')})",
     )
@@ -427,17 +427,21 @@ def _update(sub, common: argparse.ArgumentParser, data_opts: argparse.ArgumentPa
     )
     upd.add_argument("targets", help="identify result JSON or targets JSON")
     upd.add_argument("-o", "--out", required=True, help="result JSON")
-    upd.add_argument("--fix-mass", type=mass_option(), help="weighed moving mass [kg]: update E and alpha only")
+    upd.add_argument(
+        "--fix-mass",
+        type=declared("updating.GAUpdater", "fixed_mass"),
+        help="weighed moving mass [kg]: update E and alpha only",
+    )
     ga = "updating.GAUpdater"
     upd.add_argument(
         "--generations",
-        type=number(int, 1, 10**5),
+        type=declared(ga, "generations"),
         default=default(ga, "generations"),
         help=f"GA generations (default {default(ga, 'generations')})",
     )
     upd.add_argument(
         "--pop-size",
-        type=number(int, 4, 10**5),
+        type=declared(ga, "pop_size"),
         default=default(ga, "pop_size"),
         help=f"GA population (default {default(ga, 'pop_size')})",
     )

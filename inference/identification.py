@@ -1,0 +1,307 @@
+"""One identification pipeline: what every identification shares, written once.
+
+An identification method (``NSI``, ``SINDy``) supplies only its own estimate of the equation of motion
+(``Identifier._estimate``: the method's equation-error model, the mass it used and, where the method has
+them, its own modal parameters). Everything after it is this module's, the same for every method:
+
+1. the split: the first ``1 - validation_fraction`` of the record identifies, the tail is held out;
+2. the free-run validation over the tail (``validation.validate``: the contract's ``rms_percent`` and
+   the restarted 2 s runs chaos cannot fake);
+3. the output-error refinement (``refine.refine_stage``), kept only if it predicts the tail at least as
+   well (``refine=False`` skips it);
+4. the equilibria and each well's modal parameters of the final model (or the method's own, NSI's
+   subspace step: seed Table 1);
+5. boundedness beyond the stroke and under 1.2x the input (``validation.boundedness``);
+6. every warning a physicist would want: the method's own, boundedness, equilibria, a diverged
+   validation, and the record's plausibility (units, mm-vs-m, an input in g, the frame, wells beyond the
+   stroke: ``plausibility``). Each goes through Python's ``warnings`` (a ``NegstiffWarning``) and into the
+   result, so a script sees what the command line prints.
+
+The result is a frozen ``Identification`` (after ``scipy.integrate.solve_ivp``'s result bunch: named
+fields, ``to_json()`` the contract's identify JSON). ``initial_model`` is the method's own estimate (its
+equation-error step); ``model`` is the refined one. Refined NSI and SINDy models reach the same output-error
+optimum (to 1e-9 on the rig's records), so a consistency check *between methods* compares
+``initial_model`` (or ``modal``), not ``model``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any, Mapping
+
+import numpy as np
+
+from negstiff.models import Model
+from negstiff.models.equation import Equilibria
+
+from .estimator import Estimator
+from .measurement import Measurement
+from .plausibility import classified, issue
+from .refine import refine_stage, stroke_quantiles
+from .validation import boundedness, validate
+
+
+class Bunch(dict):
+    """A read-only dict whose keys are also attributes (``validation.rms_percent``), as scipy's result
+    objects; it is the JSON object it prints as."""
+
+    def __getattr__(self, name: str):
+        try:
+            return self[name]
+        except KeyError:
+            raise AttributeError(name) from None
+
+    def _readonly(self, *args, **kwargs):
+        raise TypeError(f"{type(self).__name__} is read-only")
+
+    __setitem__ = __delitem__ = __setattr__ = update = pop = popitem = clear = setdefault = _readonly  # type: ignore
+
+    def __repr__(self) -> str:
+        keys = ", ".join(k for k in self if not isinstance(self[k], np.ndarray))
+        return f"{type(self).__name__}({keys})"
+
+
+def _plain(d: Mapping[str, Any] | None) -> Bunch | None:
+    return None if d is None else Bunch(d)
+
+
+@dataclass(frozen=True)
+class Estimate:
+    """What a method estimates by itself, before the shared stages (``Identifier._estimate``)."""
+
+    model: Model
+    """The method's equation-error model in the z frame (the contract's model fields)."""
+    mass_source: str
+    """Where the mass came from (``weak.mass_of``)."""
+    input_gain: float
+    """The input's coefficient the method learned or fixed (1/m for a force, 1 for base excitation)."""
+    modal: dict[str, dict[str, float | None]] | None = None
+    """The method's own modal parameters of each well; None: those of the final model's linearisation."""
+    held: tuple[str, ...] = ()
+    """Base fields the refinement keeps at their value (the terms a sparse method did not select)."""
+    details: dict[str, Any] = field(default_factory=dict)
+    """The method's own result keys (NSI: ``wells``, ``g_estimate``; SINDy: ``selected_terms``, ...)."""
+    settings: dict[str, Any] = field(default_factory=dict)
+    warnings: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True, repr=False)
+class Identification:
+    """An identification's result (``NSI().fit(rec).result_``, ``SINDy()...``); ``to_json()`` is the
+    contract's identify JSON, the one the command line writes.
+
+    Attributes
+    ----------
+    method : ``"nsi"`` or ``"sindy"``
+    model : the final model (output-error refined where that predicted the held-out tail no worse)
+    initial_model : the method's own estimate (equation error): what method-vs-method checks compare
+    equilibria : the final model's equilibria (None when its restoring force has none usable)
+    modal : ``{"minus", "plus"}`` -> ``{"f_hz", "zeta"}`` of each well's underlying-linear system
+    validation : free run over the held-out tail (``rms_percent``, ``restarted_rms_percent``, ...)
+    refinement : the output-error stage's account (None with ``refine=False``)
+    bounded : boundedness of the final model (``ok``, ``over_stroke``, ``globally``, ...)
+    stroke_quantiles_m : where the identification part of the record went (``update`` compares there)
+    identification_samples : the split: samples [0, n) identify, [n, N) are held out
+    mass_source, mass_normalised, input_gain : the mass and where it came from
+    record : how the record was read (time base, sensor, what was derived, units)
+    warnings : every warning about the record and the result (also issued as ``NegstiffWarning``)
+    details, settings : the method's own keys and its settings
+    """
+
+    method: str
+    model: Model
+    initial_model: Model
+    equilibria: Equilibria | None
+    modal: Mapping[str, Mapping[str, float | None]]
+    validation: Bunch
+    refinement: Bunch | None
+    bounded: Bunch
+    stroke_quantiles_m: np.ndarray
+    identification_samples: int
+    mass_source: str
+    mass_normalised: bool
+    input_gain: float
+    record: Mapping[str, Any]
+    warnings: tuple[str, ...]
+    details: Mapping[str, Any]
+    settings: Mapping[str, Any]
+
+    def to_json(self) -> dict[str, Any]:
+        """The contract's identify JSON (``negstiff identify`` writes exactly this)."""
+        eq = (
+            self.equilibria.as_dict() if self.equilibria is not None else {"z_minus": None, "z_0": None, "z_plus": None}
+        )
+        return {
+            "method": self.method,
+            "mass_source": self.mass_source,
+            "input_gain": self.input_gain,
+            "model": self.model.to_dict(),
+            "initial_model": self.initial_model.to_dict(),
+            "stroke_quantiles_m": np.asarray(self.stroke_quantiles_m).tolist(),
+            "refinement": None if self.refinement is None else dict(self.refinement),
+            "bounded": dict(self.bounded),
+            "warnings": list(self.warnings),
+            "mass_normalised": self.mass_normalised,
+            "equilibria": eq,
+            "modal": {w: dict(m) for w, m in self.modal.items()},
+            "validation": {k: v for k, v in self.validation.items() if not isinstance(v, np.ndarray)},
+            **dict(self.details),
+            "settings": dict(self.settings),
+            "record": dict(self.record),
+        }
+
+    def __repr__(self) -> str:
+        wells = ", ".join(
+            f"{w} {m['f_hz']:.4g} Hz / {100 * m['zeta']:.3g} %" for w, m in self.modal.items() if m.get("f_hz")
+        )
+        v = self.validation.get("restarted_rms_percent", self.validation.get("rms_percent"))
+        return (
+            f"Identification({self.method}: k1={self.model.k1:.4g}, k2={self.model.k2:.4g}, k3={self.model.k3:.4g}, "
+            f"c={self.model.c:.4g}, c_nl={self.model.c_nl:.4g}; wells {wells or 'none'}; held-out "
+            f"{'n/a' if v is None else f'{v:.3g} %'}; {len(self.warnings)} warning(s))"
+        )
+
+
+def visited_well(rec: Measurement, z: float, equilibria: Equilibria | None = None) -> str:
+    """The name of the one well a record visited, at ``z``: by where it is, the nearer of the rest positions
+    the metadata states, else of a model's two wells (``equilibria``); else ``"plus"``, the contract's name
+    for the well of a single-well system."""
+    rest = rec.rest_positions
+    if len(rest) == 2:
+        return min(rest, key=lambda w: abs(rest[w] - z))
+    if equilibria is not None and equilibria.z_minus is not None:
+        return "minus" if abs(z - equilibria.z_minus) < abs(z - equilibria.z_plus) else "plus"
+    return "plus"
+
+
+def equilibria_and_modes(
+    model: Model, rec: Measurement, stroke: tuple[float, float]
+) -> tuple[Equilibria | None, dict[str, dict[str, float | None]], list[str]]:
+    """The model's equilibria and each well's underlying-linear frequency and damping ratio (None where the
+    model has no such well), with the warnings they call for.
+
+    A model fitted over one well of a record may have roots far outside what the record visited (a quintic's
+    extra roots): then the equilibria inside the stroke (widened by half its span) are reported, and a
+    warning says the others are an extrapolation. A single well is named by where it lies (``visited_well``)."""
+    from negstiff.models.equation import find_equilibria
+
+    notes: list[str] = []
+    try:
+        eq = model.equilibria()
+    except ValueError as exc:
+        lo, hi = stroke
+        pad = 0.5 * (hi - lo)
+        try:
+            eq = find_equilibria(model.restoring_force, model.stiffness, lo - pad, hi + pad)
+        except ValueError:
+            return (
+                None,
+                {w: {"f_hz": None, "zeta": None} for w in ("minus", "plus")},
+                [f"the identified restoring force has no usable equilibria: {exc}"],
+            )
+        notes.append(
+            f"the identified restoring force's equilibria beyond the stroke the record visited are an "
+            f"extrapolation ({exc}); the wells within it are reported"
+        )
+    if eq.z_minus is None and visited_well(rec, eq.z_plus) == "minus":
+        eq = Equilibria(eq.z_plus, None, None)  # type: ignore[arg-type] - the one well, named by where it is
+    modal: dict[str, dict[str, float | None]] = {}
+    for well in ("minus", "plus"):
+        z = eq.z_minus if well == "minus" else eq.z_plus
+        k1t = float(model.stiffness(z)) if z is not None else math.nan
+        if z is None or not k1t > 0:
+            modal[well] = {"f_hz": None, "zeta": None}
+            continue
+        modal[well] = {
+            "f_hz": math.sqrt(k1t / model.m) / (2 * math.pi),
+            "zeta": model.c / (2 * math.sqrt(k1t * model.m)),
+        }
+    return eq, modal, notes
+
+
+class Identifier(Estimator):
+    """Base of the identifications: ``fit`` runs the method's ``_estimate`` and then the shared stages
+    (module docstring). Subclasses declare ``method`` and their parameters; ``validation_fraction`` and
+    ``refine`` are every identification's."""
+
+    method: str = ""
+
+    def _estimate(self, rec: Measurement, n_id: int) -> Estimate:
+        raise NotImplementedError
+
+    def _final_details(self, rec: Measurement, model: Model, details: dict[str, Any]) -> dict[str, Any]:
+        """The method's own result keys that depend on the final model (NSI's ``g_estimate``)."""
+        return details
+
+    def fit(self, data) -> "Identifier":
+        """Identify from ``data`` (a ``Measurement`` or a file path): the method's estimate, then the
+        shared stages (module docstring); the result is ``result_`` (an ``Identification``)."""
+        rec = self.check(data)
+        n_id = int(round(rec.n * (1 - self.validation_fraction)))
+        est = self._estimate(rec, n_id)
+        stroke = stroke_quantiles(rec.z[:n_id])
+        validation = validate(est.model, rec, n_id)
+        model, refinement, mass_source = est.model, None, est.mass_source
+        if self.refine:
+            model, validation, refinement = refine_stage(est.model, rec, n_id, validation, held=est.held)
+            if refinement["applied"] and refinement.get("free_mass"):
+                mass_source += ", refined by simulation error"
+        bounded = boundedness(model, rec.segment(0, n_id))
+        equilibria, modal, eq_warnings = equilibria_and_modes(model, rec, (float(stroke[0]), float(stroke[-1])))
+        if est.modal is not None:
+            modal = est.modal
+        own = [*est.warnings, *([] if bounded["ok"] else [bounded["warning"]]), *eq_warnings]
+        if validation.get("diverged"):
+            own.append(validation["warning"])
+        lines = classified(rec, model, own)
+        issue(lines)
+        self.result_ = Identification(
+            method=self.method,
+            model=model,
+            initial_model=est.model,
+            equilibria=equilibria,
+            modal=modal,
+            validation=Bunch(validation),
+            refinement=_plain(refinement),
+            bounded=Bunch(bounded),
+            stroke_quantiles_m=stroke,
+            identification_samples=n_id,
+            mass_source=mass_source,
+            mass_normalised=est.mass_source.startswith("none"),
+            input_gain=est.input_gain,
+            record=dict(rec.info),
+            warnings=tuple(text for _, text in lines),
+            details=self._final_details(rec, model, est.details),
+            settings={**est.settings, "identification_samples": n_id},
+        )
+        return self
+
+    # the learned state under scikit-learn's names (``model_``, ``validation_``, ...): the result's fields
+    model_ = property(lambda self: self.result_.model)
+    initial_model_ = property(lambda self: self.result_.initial_model)
+    equilibria_ = property(lambda self: self.result_.equilibria)
+    modal_ = property(lambda self: self.result_.modal)
+    validation_ = property(lambda self: self.result_.validation)
+    refinement_ = property(lambda self: self.result_.refinement)
+    bounded_ = property(lambda self: self.result_.bounded)
+    stroke_ = property(lambda self: self.result_.stroke_quantiles_m)
+    warnings_ = property(lambda self: list(self.result_.warnings))
+    settings_ = property(lambda self: self.result_.settings)
+    mass_source_ = property(lambda self: self.result_.mass_source)
+    mass_normalised_ = property(lambda self: self.result_.mass_normalised)
+    input_gain_ = property(lambda self: self.result_.input_gain)
+
+    @property
+    def fitted(self) -> bool:
+        return "result_" in vars(self)
+
+    def result(self) -> dict[str, Any]:
+        """The contract's identify JSON (``result_.to_json()``)."""
+        return self.result_.to_json()
+
+    def _summary(self) -> str:
+        r = self.result_
+        wells = ", ".join(f"{w} {m['f_hz']:.4g} Hz" for w, m in r.modal.items() if m.get("f_hz"))
+        v = r.validation.get("restarted_rms_percent", r.validation.get("rms_percent", math.nan))
+        return f"k3={r.model.k3:.4g}, wells {wells or 'none'}, held-out {v:.3g} %"

@@ -1,0 +1,161 @@
+"""Parameter constraints: what each estimator parameter may be, declared once beside the estimator.
+
+After scikit-learn's ``_parameter_constraints`` (``sklearn/utils/_param_validation.py``): every estimator
+class holds ``_parameter_constraints = {name: Constraint, ...}``; ``Estimator.check`` (the first step of
+``fit``) checks every parameter against it and raises one ``InputError`` naming the estimator, the
+parameter, the value and what is allowed. The command line builds its options' range checks from the same
+declarations (``negstiff.cli.common.declared``), read from the source without importing the estimators
+(``--help`` must not load the compiled simulator); so a declaration is a literal call of the classes here.
+
+Written here rather than imported from scikit-learn: its validation helpers are private API, and
+scikit-learn would become a dependency for them.
+"""
+
+from __future__ import annotations
+
+import math
+import numbers
+from dataclasses import dataclass
+from typing import Any
+
+from negstiff.errors import InputError
+
+
+class Constraint:
+    """What a parameter may be; ``check`` raises ``InputError`` otherwise."""
+
+    def accepts(self, value: Any) -> bool:
+        raise NotImplementedError
+
+    def describe(self) -> str:
+        raise NotImplementedError
+
+    def check(self, owner: str, name: str, value: Any) -> None:
+        if not self.accepts(value):
+            raise InputError(f"{owner}({name}={value!r}): {name} must be {self.describe()}")
+
+
+def _is_int(v: Any) -> bool:
+    return isinstance(v, numbers.Integral) and not isinstance(v, bool)
+
+
+def _is_real(v: Any) -> bool:
+    return isinstance(v, numbers.Real) and not isinstance(v, bool) and math.isfinite(float(v))
+
+
+@dataclass(frozen=True)
+class Interval(Constraint):
+    """A number of ``kind`` (``int`` or ``float``: any finite real) in [lo, hi] (``lo_open``/``hi_open``:
+    the bound excluded; None: unbounded), in ``unit``; ``none`` admits None (a default computed later)."""
+
+    kind: type
+    lo: float | None = None
+    hi: float | None = None
+    lo_open: bool = False
+    hi_open: bool = False
+    unit: str = ""
+    none: bool = False
+
+    def accepts(self, value: Any) -> bool:
+        if value is None:
+            return self.none
+        if not (_is_int(value) if self.kind is int else _is_real(value)):
+            return False
+        if self.lo is not None and (value < self.lo or (self.lo_open and value == self.lo)):
+            return False
+        return not (self.hi is not None and (value > self.hi or (self.hi_open and value == self.hi)))
+
+    def describe(self) -> str:
+        what = "an integer" if self.kind is int else "a finite number"
+        if self.lo is not None or self.hi is not None:
+            lo = "-inf" if self.lo is None else f"{self.lo:g}"
+            hi = "inf" if self.hi is None else f"{self.hi:g}"
+            what += f" in {'(' if self.lo_open else '['}{lo}, {hi}{')' if self.hi_open else ']'}"
+        return what + (f" {self.unit}" if self.unit else "") + (" or None" if self.none else "")
+
+
+@dataclass(frozen=True)
+class Options(Constraint):
+    """One of ``values``."""
+
+    values: tuple
+
+    def accepts(self, value: Any) -> bool:
+        return isinstance(value, str | type(None)) and value in self.values
+
+    def describe(self) -> str:
+        return "one of " + ", ".join(repr(v) for v in self.values)
+
+
+@dataclass(frozen=True)
+class Boolean(Constraint):
+    """True or False."""
+
+    def accepts(self, value: Any) -> bool:
+        return isinstance(value, bool)
+
+    def describe(self) -> str:
+        return "True or False"
+
+
+@dataclass(frozen=True)
+class Pair(Constraint):
+    """Two increasing numbers (lo < hi), each within ``each``."""
+
+    each: Interval
+
+    def accepts(self, value: Any) -> bool:
+        try:
+            a, b = value
+        except (TypeError, ValueError):
+            return False
+        return self.each.accepts(a) and self.each.accepts(b) and a < b
+
+    def describe(self) -> str:
+        return f"two increasing numbers (lo, hi), each {self.each.describe()}"
+
+
+@dataclass(frozen=True)
+class Several(Constraint):
+    """A non-empty sequence of values, each within ``each``."""
+
+    each: Constraint
+
+    def accepts(self, value: Any) -> bool:
+        if isinstance(value, str | bytes) or not hasattr(value, "__len__") or len(value) == 0:
+            return False
+        return all(self.each.accepts(v) for v in value)
+
+    def describe(self) -> str:
+        return f"a non-empty sequence, each {self.each.describe()}"
+
+
+@dataclass(frozen=True)
+class Instance(Constraint):
+    """An instance of the class named ``name`` (its module ``module``), or None with ``none``: checked by
+    name, so a declaration need not import the class (``--help`` reads declarations from the source)."""
+
+    module: str
+    name: str
+    none: bool = False
+
+    def accepts(self, value: Any) -> bool:
+        if value is None:
+            return self.none
+        import importlib
+
+        return isinstance(value, getattr(importlib.import_module(self.module), self.name))
+
+    def describe(self) -> str:
+        return f"a {self.name}" + (" or None" if self.none else "")
+
+
+SEED = Interval(int, 0, 2**32 - 1)
+"""A random seed: numpy's SeedSequence takes any non-negative integer; the command line's 32 bits."""
+
+FRACTION = Interval(float, 0.0, 1.0, lo_open=True, hi_open=True)
+"""A share of a record, strictly between none and all of it."""
+
+NAMESPACE = {c.__name__: c for c in (Interval, Options, Boolean, Pair, Several, Instance)} | {
+    "int": int, "float": float, "SEED": SEED, "FRACTION": FRACTION}  # fmt: skip
+"""What a declaration may name (``negstiff.cli.common.declared`` evaluates declarations in it)."""
