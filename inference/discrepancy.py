@@ -42,7 +42,7 @@ from .parameters import FRACTION, Boolean, Constraint, Interval, Options, Severa
 from .plausibility import classified
 from .refine import refine_stage
 from .selection import block_rows, block_scores, compare, indistinguishable
-from .validation import boundedness, residual_psd, restarted_free_runs, validate  # noqa: F401 (residual_psd: API)
+from .validation import boundedness, restarted_free_runs, validate
 from .weak import BASE_FIELDS, WeakForm, known_input_gain, mass_of, model_from, term_fields
 from .weak import terms as library_terms
 
@@ -250,7 +250,10 @@ class Discrepancy(Estimator):
         j = side.index(grid[i])
         lo, hi = sorted((side[max(j - 1, 0)], side[min(j + 1, len(side) - 1)]))
         if hi > lo:
-            r = optimize.minimize_scalar(ss, bounds=(lo, hi), method="bounded", options={"xatol": 1e-5})
+            # a position where the stop would pull (inf) makes the bounded search's parabola inf - inf: its
+            # golden-section step takes over, as intended; numpy's notice of the NaN is not the user's business
+            with np.errstate(invalid="ignore"):
+                r = optimize.minimize_scalar(ss, bounds=(lo, hi), method="bounded", options={"xatol": 1e-5})
             if r.fun < vals[i]:
                 return float(r.x)
         return grid[i]

@@ -18,7 +18,9 @@ from typing import Any
 
 import numpy as np
 
-from negstiff.errors import InputError
+from negstiff.errors import InputError, RecordWarning
+
+from .plausibility import issue, record_warnings
 
 INPUTS = ("base_acc", "force")
 OPTIONAL = ("z_dot", "y", "base_disp")
@@ -71,6 +73,14 @@ class Measurement:
     @property
     def n(self) -> int:
         return self.u.size
+
+    def __repr__(self) -> str:
+        resp = self.info.get("response", {}).get("measured") or ("z" if self.z is not None else "none")
+        mass = f"{self.mass:g} kg" if self.mass is not None else "none (per unit mass)"
+        return (
+            f"Measurement({self.source!r}: {self.n} samples at {self.fs:g} Hz ({self.duration:.4g} s), input "
+            f"{self.input_name}, response {resp}, mass {mass})"
+        )
 
     @property
     def dt(self) -> float:
@@ -504,7 +514,18 @@ def load(
         t0=t0,
         info={"time": time_info, "response": resp, **channel_info},
     )
-    return sensors.pin_frame(rec.with_mass(mass))
+    rec = sensors.pin_frame(rec.with_mass(mass))
+    return _warned(rec)
+
+
+def _warned(rec: Measurement) -> Measurement:
+    """The record with what looks wrong in it alone (units: mm read as m, an acceleration in mm/s^2; the
+    sensor's derivation) in ``info["warnings"]``, each issued as a ``RecordWarning`` at once: a user learns
+    it when loading, whatever comes next (``plausibility.record_warnings``)."""
+    new = [w for w in record_warnings(rec) if w not in rec.info.get("warnings", [])]
+    lines = [*rec.info.get("warnings", []), *rec.info.get("response", {}).get("warnings", []), *new]
+    issue([(RecordWarning, w) for w in lines])
+    return replace(rec, info={**rec.info, "warnings": [*rec.info.get("warnings", []), *new]}) if new else rec
 
 
 def _read(path: Path) -> tuple[dict[str, np.ndarray], dict[str, str]]:

@@ -39,7 +39,7 @@ from scipy import signal
 from negstiff.models import Model
 
 from . import subspace
-from .derivatives import smooth_and_differentiate, velocity_window  # noqa: F401 (velocity_window: API)
+from .derivatives import smooth_and_differentiate, velocity_window
 from .identification import Estimate, Identifier, visited_well
 from .measurement import Measurement, MeasurementError
 from .parameters import FRACTION, Boolean, Interval, Pair

@@ -42,10 +42,9 @@ from negstiff.models.simulator import stage_input
 from .derivatives import state_derivatives
 from .measurement import Measurement, MeasurementError
 from .shooting import shooting_least_squares
-from .validation import (  # noqa: F401 (free_run_rms: API)
+from .validation import (
     boundedness,
     divergence_limits,
-    free_run_rms,
     record_substeps,
     validate,
 )

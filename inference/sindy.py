@@ -35,19 +35,17 @@ from .measurement import Measurement
 from .parameters import FRACTION, SEED, Boolean, Interval, Several
 from .selection import block_rows, block_scores, indistinguishable
 from .validation import boundedness, restarted_free_runs
-from .weak import (  # noqa: F401 (input_coefficient, weak_least_squares: API)
+from .weak import (
     BASE_FIELDS,
     Bagging,
     WeakForm,
     WeakFormError,
     fit_support,
-    input_coefficient,
     known_input_gain,
     mass_of,
     model_from,
     term_fields,
     terms,
-    weak_least_squares,
 )
 
 MIN_SAMPLES = 4000

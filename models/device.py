@@ -102,6 +102,13 @@ class Device:
             raise ValueError(f"frame angle alpha_deg must lie in (-60, 60) degrees, got {self.alpha_deg}")
         object.__setattr__(self, "extra", effects.normalise(self.extra))
 
+    def __repr__(self) -> str:
+        extra = f", extra={effects.plain(self.extra)!r}" if self.extra else ""
+        return (
+            f"Device(E={self.E:.6g}, alpha_deg={self.alpha_deg:.6g}, m={self.m:.6g}, L={self.L:.6g}, l={self.l:.6g}, "
+            f"b={self.b:.6g}, h={self.h:.6g}, D0={self.D0:.6g}, c={self.c:.6g}, c_nl={self.c_nl:.6g}{extra})"
+        )
+
     def __reduce__(self):
         """Pickled (and deep-copied) by its fields, the read-only ``extra`` as plain dicts: a model crosses
         process boundaries (dask, multiprocessing) and ``sklearn.base.clone`` copies it."""
@@ -348,7 +355,7 @@ class Device:
 
     # --- serialisation and simulator interface --------------------------------------------------
     def to_dict(self) -> dict[str, Any]:
-        extra = {k: (dict(v) if isinstance(v, Mapping) else v) for k, v in self.extra.items()}
+        extra = effects.plain(self.extra)
         return {
             "E": self.E,
             "alpha_deg": self.alpha_deg,

@@ -29,7 +29,7 @@ import numpy as np
 
 from . import effects
 from .constants import G
-from .effects import COULOMB_VELOCITY_SCALE, finite  # noqa: F401 (COULOMB_VELOCITY_SCALE: API)
+from .effects import finite
 
 
 @dataclass(frozen=True)
@@ -127,6 +127,13 @@ class Model:
         object.__setattr__(self, "k0", k0)
         object.__setattr__(self, "extra", effects.normalise(self.extra))
 
+    def __repr__(self) -> str:
+        extra = f", extra={effects.plain(self.extra)!r}" if self.extra else ""
+        return (
+            f"Model(m={self.m:.6g}, k1={self.k1:.6g}, k2={self.k2:.6g}, k3={self.k3:.6g}, c={self.c:.6g}, "
+            f"c_nl={self.c_nl:.6g}, k0={self.k0:.6g}{extra})"
+        )
+
     def __reduce__(self):
         """Pickled (and deep-copied) by its fields, the read-only ``extra`` as plain dicts: a model crosses
         process boundaries (dask, multiprocessing) and ``sklearn.base.clone`` copies it."""
@@ -211,7 +218,7 @@ class Model:
     # --- serialisation -----------------------------------------------------------------------
     def to_dict(self) -> dict[str, Any]:
         """The contract's model JSON fields."""
-        extra = {k: (dict(v) if isinstance(v, Mapping) else v) for k, v in self.extra.items()}
+        extra = effects.plain(self.extra)
         return {
             "m": self.m,
             "k0": self.k0,

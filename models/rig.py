@@ -36,7 +36,7 @@ from negstiff.errors import InputError
 from . import effects as effect_registry
 from .device import AS_BUILT, Device
 from .equation import Model
-from .records import RigError, RigRecord, write_lab_format  # noqa: F401 (RigError, write_lab_format: their home before records.py)
+from .records import RigError, RigRecord
 from .simulator import antialias_fir, simulate_batch
 from .table import integrate_twice, table_motion
 
@@ -159,6 +159,13 @@ class Rig:
         self.seed = int(seed)
         self.weigh_resolution = weigh_resolution
         self.equilibria = system.equilibria()
+
+    def __repr__(self) -> str:
+        system = "the as-built device" if self.system == AS_BUILT else repr(self.system)
+        return (
+            f"Rig({system}, fs={self.fs:g} Hz, oversample={self.oversample}, seed={self.seed}, "
+            f"sensor={self.sensors.response})"
+        )
 
     # --- excitations -------------------------------------------------------------------------
     def random(
@@ -540,7 +547,7 @@ class Rig:
         eq = self.equilibria
         truth = {
             "system": {"kind": self.system.kind, "parameters": self.system.to_dict()},
-            "effects": {k: (dict(v) if isinstance(v, dict) else v) for k, v in self.system.extra.items()},
+            "effects": effect_registry.plain(self.system.extra),
             "equilibria": eq.as_dict(),
             "sensors": asdict(self.sensors),
             "fs": self.fs,

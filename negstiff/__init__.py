@@ -48,6 +48,7 @@ _EXPORTS = {
     "GAUpdater": "negstiff.inference.updating",
     "characterize": "negstiff.inference.characterize",
     "frf": "negstiff.inference.frf",
+    "Identification": "negstiff.inference.identification",
     # errors and warnings
     "InputError": "negstiff.errors",
     "OutputError": "negstiff.errors",

@@ -9,9 +9,9 @@ from conftest import SILVERBOX_ARROW, SILVERBOX_TEST, SILVERBOX_TRAIN, silverbox
 from negstiff.inference.derivatives import state_derivatives
 from negstiff.inference.measurement import from_arrays
 from negstiff.inference.nsi import NSI
-from negstiff.inference.refine import free_run_rms, refine
+from negstiff.inference.refine import refine
 from negstiff.inference.sindy import SINDy
-from negstiff.inference.validation import boundedness, simulate_record
+from negstiff.inference.validation import boundedness, free_run_rms, simulate_record
 from negstiff.models import Model, simulate
 from negstiff.models.device import AS_BUILT, SEED_LIKE_CROSS_WELL_RMS, SEED_LIKE_CUBIC
 from negstiff.models.rig import Rig, Sensors

@@ -6,7 +6,8 @@ from scipy import signal
 
 from negstiff.inference.measurement import load
 from negstiff.models import AS_BUILT, Model
-from negstiff.models.rig import Rig, RigError, Sensors
+from negstiff.models.records import RigError
+from negstiff.models.rig import Rig, Sensors
 
 
 def _uls_fit(rec, band):

@@ -341,19 +341,26 @@ class Posterior(Estimator):
 
 
 def _idata(res: PosteriorResult, y: np.ndarray, logpost: LogPosterior, win: Windows):
-    """arviz DataTree: posterior (thinned; chain = ensemble x walker), sample stats, observed
-    data and pointwise (per-window) log likelihood; and that log likelihood."""
+    """arviz DataTree: posterior (thinned by half the autocorrelation time), sample stats, observed data
+    and pointwise (per-window) log likelihood; and that log likelihood.
+
+    ``chain`` is an independent ensemble: the walkers of one emcee ensemble move together (each move
+    draws on the others), so they are not independent chains, and treating them as such made arviz's
+    R-hat (1.08-1.10) disagree with the across-ensemble R-hat negstiff reports. A chain's ``draw`` runs
+    walker by walker, each walker's steps in order (draw = walker x kept steps + step), so arviz's
+    autocorrelation sees each walker's own series. Every dimension is named: ``window`` (the
+    multiple-shooting windows), ``time`` (a window's samples), ``state`` (z, z_dot)."""
     import arviz as az
 
     E, S, W, d = res.samples.shape
     th = res.thin
-    post = res.samples[:, ::th]  # (E, S', W, d)
-    Sp = post.shape[1]
-    chains = np.moveaxis(post, 2, 1).reshape(E * W, Sp, d)
+    post = np.moveaxis(res.samples[:, ::th], 2, 1)  # (E, W, S', d): walker-major within an ensemble
+    Sp = post.shape[2]
+    chains = post.reshape(E, W * Sp, d)
     q = np.moveaxis(y[:, ::th], 2, 1).reshape(E * W * Sp, d)
     ll = np.concatenate(
         [logpost.loglik(logpost.unwhiten(q[i : i + 2048]), pointwise=True) for i in range(0, q.shape[0], 2048)]
-    ).reshape(E * W, Sp, -1)
+    ).reshape(E, W * Sp, -1)
     data = {
         "posterior": {n: chains[..., i] for i, n in enumerate(res.names)},
         "sample_stats": {"lp": ll.sum(axis=2)},
@@ -361,6 +368,8 @@ def _idata(res: PosteriorResult, y: np.ndarray, logpost: LogPosterior, win: Wind
         "observed_data": {"z": win.z},
         "constant_data": {"window_start_state": win.x0, "u": win.u},
     }
+    dims = {"z": ["window", "time"], "window_start_state": ["window", "state"], "u": ["window", "input_time"]}
     with warnings.catch_warnings():
-        warnings.simplefilter("ignore")  # "more chains than draws": the walkers of all ensembles
-        return az.from_dict(data), ll
+        warnings.simplefilter("ignore")
+        tree = az.from_dict(data, dims=dims, coords={"state": ["z", "z_dot"]})
+    return tree, ll.reshape(E * W, Sp, -1)

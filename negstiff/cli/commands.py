@@ -30,7 +30,8 @@ from .common import (
 
 def make_rig(args):
     from negstiff.models.device import AS_BUILT
-    from negstiff.models.rig import Rig, RigError, Sensors
+    from negstiff.models.records import RigError
+    from negstiff.models.rig import Rig, Sensors
 
     system = load_system(args.model) if args.model else AS_BUILT
     sensors = Sensors.noiseless() if args.noise_free else Sensors()

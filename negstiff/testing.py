@@ -1,0 +1,146 @@
+"""Assertions for the consistency checks users write in pytest, with tolerances taken from the estimates'
+own uncertainty, not picked by hand (after ``numpy.testing``). Each raises ``AssertionError`` with a
+message that says what was compared, the numbers and the tolerance.
+
+* ``assert_covers(posterior, k1=..., ...)``: the posterior's credible interval holds each value (a truth,
+  or another method's estimate);
+* ``assert_agree(a, b, sd_a, sd_b, k=3)``: two estimates agree within k combined standard errors;
+* ``well_frequencies(posterior)``: each well's underlying-linear frequency over the posterior's draws
+  (mean, sd): the uncertainty an identification's well frequency is judged against;
+* ``assert_wells_agree(identification, posterior, k=3)``: an identification's well frequencies lie within
+  k posterior standard deviations of the posterior's (the record's own uncertainty);
+* ``assert_predicts(model, record, reference, factor=2)``: the model's short free runs restarted from the
+  record's measured states follow it within ``factor`` times a reference model's error (the truth, or the
+  best model at hand: the floor a record's noise sets is measured, not assumed).
+
+Example (a pytest consistency check of a lab's record; ``tests/test_testing.py`` runs it)::
+
+    from negstiff import Posterior, SINDy, load
+    from negstiff.testing import assert_predicts, assert_wells_agree
+
+    def test_the_identified_model_is_consistent():
+        rec = load("lab.csv", mass=0.212)
+        sindy = SINDy().fit(rec)
+        post = Posterior(seed=1).fit(rec)
+        assert_wells_agree(sindy.result_, post, k=3)     # SINDy's wells within 3 posterior sd
+        assert_predicts(sindy.model_, rec, reference=my_model, factor=2)   # as well as my own model, nearly
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any, Mapping
+
+import numpy as np
+
+__all__ = ["assert_agree", "assert_covers", "assert_predicts", "assert_wells_agree", "well_frequencies"]
+
+
+def _summary(posterior) -> Mapping[str, Mapping[str, float]]:
+    """The parameter summaries of a fitted ``Posterior`` or of its result JSON."""
+    if isinstance(posterior, Mapping):
+        return posterior["parameters"]
+    return posterior.result()["parameters"]
+
+
+def assert_covers(posterior, **values: float) -> None:
+    """Assert that the posterior's credible interval (``hdi_low``, ``hdi_high``) holds each value."""
+    summary = _summary(posterior)
+    missed = []
+    for name, value in values.items():
+        if name not in summary:
+            raise AssertionError(f"the posterior has no parameter {name!r} (it has {', '.join(summary)})")
+        s = summary[name]
+        if not s["hdi_low"] <= value <= s["hdi_high"]:
+            missed.append(f"{name} = {value:.6g} outside [{s['hdi_low']:.6g}, {s['hdi_high']:.6g}] "
+                          f"(mean {s['mean']:.6g}, sd {s['sd']:.3g})")  # fmt: skip
+    if missed:
+        raise AssertionError("the posterior's credible interval does not hold: " + "; ".join(missed))
+
+
+def assert_agree(
+    a: float, b: float, sd_a: float, sd_b: float = 0.0, k: float = 3.0, what: str = "the estimates"
+) -> None:
+    """Assert |a - b| <= k sqrt(sd_a^2 + sd_b^2): two estimates agree within ``k`` combined standard errors."""
+    tol = k * math.hypot(sd_a, sd_b)
+    if not (math.isfinite(a) and math.isfinite(b) and abs(a - b) <= tol):
+        z = abs(a - b) / math.hypot(sd_a, sd_b) if math.hypot(sd_a, sd_b) > 0 else math.inf
+        raise AssertionError(
+            f"{what} disagree: {a:.6g} and {b:.6g} differ by {abs(a - b):.3g}, {z:.2f} combined standard errors "
+            f"(sd {sd_a:.3g} and {sd_b:.3g}); allowed {k:g}"
+        )
+
+
+def well_frequencies(posterior, draws: int = 400, seed: int = 0) -> dict[str, tuple[float, float]]:
+    """Each well's underlying-linear frequency [Hz] over ``draws`` of a fitted coefficient ``Posterior``:
+    ``{well: (mean, sd)}`` for the wells every draw has (the draws' models, with the record's mass)."""
+    from negstiff.models import Model
+
+    res = posterior.result_
+    names = list(res.names)
+    if "k1" not in names:
+        raise AssertionError("well_frequencies needs a coefficient posterior (model='coefficients')")
+    flat = res.samples.reshape(-1, len(names))
+    rng = np.random.default_rng(seed)
+    pick = flat[rng.choice(flat.shape[0], size=min(draws, flat.shape[0]), replace=False)]
+    mass = res.settings.get("mass") or 1.0
+    freqs: dict[str, list[float]] = {"minus": [], "plus": []}
+    for row in pick:
+        p = dict(zip(names, row))
+        try:
+            model = Model(m=mass, k1=p["k1"], k2=p["k2"], k3=p["k3"], c=p["c"], c_nl=p["c_nl"], k0=p.get("k0"))
+            for well in freqs:
+                freqs[well].append(model.uls(well).f_hz)
+        except ValueError:
+            continue
+    return {w: (float(np.mean(f)), float(np.std(f, ddof=1))) for w, f in freqs.items() if len(f) >= 0.9 * len(pick)}
+
+
+def assert_wells_agree(identification, posterior, k: float = 3.0) -> None:
+    """Assert that each well frequency of an identification (an ``Identification``, an identify result
+    JSON, or a fitted ``NSI``/``SINDy``) lies within ``k`` standard deviations of the posterior's
+    (``well_frequencies``): the record's own uncertainty sets the tolerance."""
+    modal = _modal(identification)
+    post = well_frequencies(posterior)
+    compared = 0
+    for well, (mean, sd) in post.items():
+        f = modal.get(well, {}).get("f_hz")
+        if f is None:
+            continue
+        assert_agree(f, mean, 0.0, sd, k, what=f"the {well} well's frequency [Hz] (identified, posterior mean)")
+        compared += 1
+    if not compared:
+        raise AssertionError(f"no well to compare: identified {sorted(modal)}, posterior {sorted(post)}")
+
+
+def _modal(identification) -> Mapping[str, Mapping[str, Any]]:
+    if isinstance(identification, Mapping):
+        return identification["modal"]
+    return getattr(identification, "modal", None) or identification.result_.modal
+
+
+def assert_predicts(model, record, reference, factor: float = 2.0, window_s: float = 0.125) -> None:
+    """Assert that ``model`` predicts ``record`` within ``factor`` times the error of ``reference`` (the
+    truth of a simulated record, or the best model a user has): free runs of ``window_s`` restarted from
+    the record's measured states (``validation.restarted_free_runs``; 0.125 s, the posterior's windows,
+    short enough that cross-well chaos does not amplify the start states' error), their rms error as a
+    share of rms z. Even the truth errs by its record's noise: the input's and the start states', not
+    only the displacement sensor's white floor (on the rig's records the truth's 0.125 s error is 4-5x
+    that floor), so the floor is measured with a reference model, never assumed."""
+    errors = [_restarted_error(m, record, window_s) for m in (model, reference)]
+    if not errors[0] <= factor * errors[1]:
+        raise AssertionError(
+            f"{record.source}: the model's restarted {window_s:g} s free runs miss the record by {errors[0]:.3g} % rms "
+            f"(of rms z), {errors[0] / errors[1]:.2f} times the reference's {errors[1]:.3g} %; allowed {factor:g} times"
+        )
+
+
+def _restarted_error(model, record, window_s: float) -> float:
+    from negstiff.inference.derivatives import state_derivatives
+    from negstiff.inference.validation import restarted_free_runs
+
+    zs, v, _, _ = state_derivatives(np.asarray(record.z, float), record.fs, purpose="state")
+    runs = restarted_free_runs(model, record, 0, window_s, zs, v)
+    if not runs:
+        raise AssertionError(f"{record.source}: shorter than one {window_s:g} s window")
+    return float(runs["restarted_rms_percent"])
