@@ -229,7 +229,10 @@ def test_units_in_the_header_are_read_into_si(tmp_path):
                   columns="t=time [s],base_acc=acc*9.80665,z=disp")  # fmt: skip
     assert np.allclose(mapped.z, [1, 2, 3]) and np.allclose(mapped.u, 9.80665 * np.array([1, 2, 3]))
     assert mapped.info["warnings"] == [
-        "channel disp (z) is labelled 'mm' in the file, not SI (scale it: --columns z=disp*0.001)"
+        "channel disp (z) is labelled 'mm' in the file, not SI (scale it: --columns z=disp*0.001)",
+        # and what the unscaled record says by itself, said when it is read
+        "z spans 2 m: is the record in mm? negstiff reads SI units (m); scale the column in the map, e.g. "
+        "--columns z=COL*0.001",
     ]
 
 

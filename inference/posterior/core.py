@@ -372,4 +372,4 @@ def _idata(res: PosteriorResult, y: np.ndarray, logpost: LogPosterior, win: Wind
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         tree = az.from_dict(data, dims=dims, coords={"state": ["z", "z_dot"]})
-    return tree, ll.reshape(E * W, Sp, -1)
+    return tree, ll

@@ -13,7 +13,7 @@ import numpy as np
 @dataclass
 class PosteriorResult:
     """A posterior run. ``idata`` (arviz: posterior, sample stats, observed data and the pointwise
-    log likelihood) and ``log_likelihood`` (ensembles*walkers, kept draws, windows; thinned) are built on
+    log likelihood) and ``log_likelihood`` (ensembles, walkers x kept draws, windows; thinned) are built on
     first use: the pointwise log likelihood simulates every kept draw again (4 s of a 30 s run on a
     300 s record, measured), which a run that only reports its summary does not need."""
 
