@@ -127,7 +127,6 @@ def sindy_peers(duration: float = 300.0, seed: int = 1) -> tuple[list[list[str]]
     """Our SINDy and pysindy's weak-form pipeline on one cross-well record of the polynomial truth."""
     import pysindy as ps
 
-    from negstiff.inference.derivatives import state_derivatives
     from negstiff.inference.sindy import SINDy
 
     truth = SEED_LIKE_CUBIC
@@ -149,7 +148,7 @@ def sindy_peers(duration: float = 300.0, seed: int = 1) -> tuple[list[list[str]]
     # normalised columns (without them its default ridge, alpha 0.05, zeroes the cubic's large
     # coefficients: every coefficient was lost, measured) and a negligible ridge. The threshold is the one
     # (of a decade's scan) nearest the truth: the peer's best case, chosen with the truth a user lacks.
-    zs, v, _, _ = state_derivatives(m.z, m.fs, purpose="state")
+    zs, v, _, _ = m.states("state")
     x = np.column_stack([zs, v])
     t = np.arange(m.n) * m.dt
     best = None

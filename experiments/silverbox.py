@@ -21,7 +21,6 @@ from typing import Any
 
 import numpy as np
 
-from negstiff.inference.derivatives import state_derivatives
 from negstiff.inference.measurement import Measurement, load
 from negstiff.inference.validation import free_run_rms, simulate_record
 from negstiff.models import Model, simulate
@@ -79,7 +78,7 @@ def prediction_error_mv(model: Model, m: Measurement, part: tuple[int, int], lin
     diverges. ``linear``: the input drawn straight between samples (the convention before band-limited
     stage inputs), for comparison."""
     seg = m.segment(*part)
-    zs, v, _, _ = state_derivatives(seg.z, seg.fs, purpose="state")
+    zs, v, _, _ = seg.states("state")
     scored = seg.segment(SKIP, seg.n)
     x0 = (zs[SKIP], v[SKIP])
     if not linear:
@@ -161,7 +160,7 @@ def compute(m: Measurement, fast: bool = False) -> SilverboxStudy:
 def hybrid_error_mv(h, m: Measurement, part: tuple[int, int]) -> float:
     """``prediction_error_mv`` for a hybrid model (inf if it diverges)."""
     seg = m.segment(*part)
-    zs, v, _, _ = state_derivatives(seg.z, seg.fs, purpose="state")
+    zs, v, _, _ = seg.states("state")
     scored = seg.segment(SKIP, seg.n)
     z = h.free_run(scored, (zs[SKIP], v[SKIP]))
     return float(1e3 * np.sqrt(np.mean((z - scored.z) ** 2))) if np.all(np.isfinite(z)) else float("inf")
@@ -178,7 +177,7 @@ def hybrid_part(m: Measurement, rows: list[MethodRow]) -> dict[str, Any]:
     train = m.segment(*TRAIN)
     h = fit_hybrid(physics, train)
     seconds = time.perf_counter() - t0
-    zs, vs, _, _ = state_derivatives(train.z, train.fs, purpose="state")
+    zs, vs, _, _ = train.states("state")
     term = h.term(zs, vs, train.u)
     restoring = physics.restoring_force(zs)
     held = h.held()
@@ -210,7 +209,7 @@ def _figure(study: SilverboxStudy, m: Measurement):
     row = next(r for r in study.rows if r.method == "SINDy")
     model = Model.from_dict(row.refined["model"])
     seg = m.segment(*ARROW)
-    zs, v, _, _ = state_derivatives(seg.z, seg.fs, purpose="state")
+    zs, v, _, _ = seg.states("state")
     sim = simulate_record(model, seg.segment(SKIP, seg.n), (zs[SKIP], v[SKIP]))
     err = 1e3 * (sim.z[0] - seg.z[SKIP:])
     t = seg.t[SKIP:]
@@ -221,7 +220,7 @@ def _figure(study: SilverboxStudy, m: Measurement):
     ax[0].set(xlabel="t [s]", ylabel="[mV]", title="Arrow: refined SINDy model, free run")
     ax[0].legend(fontsize=7, loc="upper left")
     test = m.segment(*TEST)
-    zt, vt, _, _ = state_derivatives(test.z, test.fs, purpose="state")
+    zt, vt, _, _ = test.states("state")
     for r, c in ((row, "C0"),):
         for which, ls in (("initial", "--"), ("refined", "-")):
             mm = Model.from_dict(getattr(r, which)["model"])
@@ -372,7 +371,7 @@ def _render_hybrid(rep: Report, h: dict[str, Any], m: Measurement) -> None:
     basis = Basis.from_json(h["basis"])
     theta = np.array(h["weights_N"])
     train = m.segment(*TRAIN)
-    zs, vs, _, _ = state_derivatives(train.z, train.fs, purpose="state")
+    zs, vs, _, _ = train.states("state")
     zg = np.linspace(basis.zc[0], basis.zc[-1], 80)
     vg = np.linspace(basis.vc[0], basis.vc[-1], 80)
     Z, V = np.meshgrid(zg, vg)

@@ -2,7 +2,8 @@
 uncertainty, and characterising the dynamics. Names load on first use (PEP 562); ``negstiff`` itself
 exports the ones a script needs.
 
-* records: ``load``, ``from_arrays``, ``Measurement`` (``measurement``, ``formats``, ``units``, ``sensors``)
+* records: ``load``, ``from_arrays``, ``Measurement`` (``measurement``; files through ``negstiff.io``), the
+  response sensors (``sensors``), the frame of a derived z (``frame``: ``pin_frame``)
 * identification: ``NSI``, ``SINDy`` (one pipeline, ``Identifier`` -> ``Identification``), ``Discrepancy``
 * uncertainty: ``Posterior``; model updating: ``GAUpdater``
 * analysis: ``characterize``, ``frf``
@@ -17,7 +18,7 @@ _EXPORTS = {
     "load": "measurement",
     "from_arrays": "measurement",
     "Measurement": "measurement",
-    "MeasurementError": "measurement",
+    "pin_frame": "frame",
     "NSI": "nsi",
     "SINDy": "sindy",
     "Discrepancy": "discrepancy",

@@ -28,12 +28,15 @@ from typing import Any
 import numpy as np
 from scipy import signal
 
+from negstiff.errors import MeasurementError, issue
+
 from .derivatives import noise_floor
+from .frame import pin_frame
 from .lyapunov import largest_lyapunov
-from .measurement import Measurement, MeasurementError
+from .measurement import Measurement
 from .nsi import well_guesses
 from .periodicity import classify_regime, periodicity
-from .plausibility import classified, issue
+from .plausibility import classified
 
 CHAOS_THRESHOLD = 0.05
 """A Wolf exponent counts as significantly positive above this many nats per radian of forcing
@@ -135,6 +138,7 @@ def characterize(
     ``poincare``. Raises ``MeasurementError`` only for input no analysis can use (``check_harmonic``).
     """
     check_harmonic(rec, forcing_hz)
+    rec = pin_frame(rec)  # the regime is judged against wells in the physical frame
     wells = wells_for(rec, wells)
     out: dict[str, Any] = {"reasons": {}}
     work, q = upsampled(rec, forcing_hz)

@@ -16,12 +16,8 @@ refines it by the system's own free run).
 
 from __future__ import annotations
 
-import collections
-import copy
 import functools
-import hashlib
 import math
-import threading
 
 import numpy as np
 from scipy import signal
@@ -129,35 +125,16 @@ def derivative_window(
     )
 
 
-_STATES: collections.OrderedDict = collections.OrderedDict()
-_STATES_LOCK = threading.Lock()
-"""The last few ``state_derivatives`` results by the record's content: one fit asks for the same
-record's states several times (refinement, validation, boundedness: 12 calls, 3.5 s of 17 on a 150 s
-record, measured)."""
+
 
 
 def state_derivatives(
     z: np.ndarray, fs: float, purpose: str = "regression"
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict]:
-    """Smoothed z, z', z'' and what was done (``derivative_window``'s predictions, and "method").
-    Results are remembered for the last 8 records by content (copies are returned)."""
+    """Smoothed z, z', z'' and what was done (``derivative_window``'s predictions, and "method"). A record
+    computes them once and keeps them (``Measurement.states``)."""
     z = np.asarray(z, dtype=float)
-    key = (hashlib.blake2b(np.ascontiguousarray(z).tobytes(), digest_size=16).digest(), z.size, float(fs), purpose)
-    with _STATES_LOCK:
-        hit = _STATES.get(key)
-        if hit is not None:
-            _STATES.move_to_end(key)
-    if hit is None:
-        hit = _state_derivatives(z, float(fs), purpose)
-        with _STATES_LOCK:
-            _STATES[key] = hit
-            while len(_STATES) > 8:
-                _STATES.popitem(last=False)
-    zs, v, a, info = hit
-    return zs.copy(), v.copy(), a.copy(), copy.deepcopy(info)
-
-
-def _state_derivatives(z: np.ndarray, fs: float, purpose: str) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict]:
+    fs = float(fs)
     w, order, info = derivative_window(z, fs, purpose)
     if w:
         dt = 1.0 / fs

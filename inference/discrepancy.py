@@ -32,12 +32,11 @@ from typing import Any
 
 import numpy as np
 
+from negstiff.errors import MeasurementError, issue
 from negstiff.models import Model, effects
 
-from .derivatives import state_derivatives
 from .estimator import Estimator
-from .identification import issue
-from .measurement import Measurement, MeasurementError
+from .measurement import Measurement
 from .parameters import FRACTION, Boolean, Constraint, Interval, Options, Several
 from .plausibility import classified
 from .refine import refine_stage
@@ -143,10 +142,10 @@ class Discrepancy(Estimator):
         n_id = int(round(rec.n * (1 - self.validation_fraction)))
         n_fit = int(round(rec.n * (1 - self.validation_fraction - self.selection_fraction)))
         ident = rec.segment(0, n_id)
-        self._form = WeakForm.of(ident.z, rec.fs)
+        self._form = WeakForm.of(ident)
         self._zs, self._v = self._form.zs, self._form.v
         # the measured states the gap's free runs start from, whole record (before and after share them)
-        self._z0, self._v0, _, _ = state_derivatives(rec.z, rec.fs, purpose="state")
+        self._z0, self._v0, _, _ = rec.states("state")
         self._gain = known_input_gain(rec)
         self.n_id_, self.n_fit_ = n_id, n_fit
         self._library_systems: dict[tuple[int, int], tuple[Measurement, np.ndarray, np.ndarray]] = {}
@@ -380,7 +379,7 @@ class Discrepancy(Estimator):
 
         ident = rec.segment(0, self.n_id_)
         h = fit_hybrid(self.model_, ident)
-        zs, vs, _, _ = state_derivatives(ident.z, ident.fs, purpose="state")
+        zs, vs, _, _ = ident.states("state")
         term = h.term(zs, vs, ident.u)
         force = self.model_.restoring_force(zs)
         return {
@@ -500,6 +499,7 @@ class Discrepancy(Estimator):
             **({"unnamed": self.unnamed_} if getattr(self, "unnamed_", None) else {}),
             "iterations": self.iterations_,
             "settings": {
+                "identification_samples": self.n_id_,
                 "baseline_terms": list(self.baseline),
                 "score": "held-out weak residual (rms, % of the target) over samples "
                 f"[{self.n_fit_}, {self.n_id_}); named only above max(1 SE, {100 * self.margin:g} %)",

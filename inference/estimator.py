@@ -26,6 +26,8 @@ from typing import Any, ClassVar
 
 from negstiff.errors import InputError, NotFittedError
 
+from .frame import pin_frame
+from .measurement import Measurement, load
 from .parameters import Constraint
 
 
@@ -84,9 +86,8 @@ class Estimator:
         refuse bad input before printing any progress; returns the record ``fit`` would use.
 
         ``data`` is a ``Measurement`` or a path to a measurement file (read with ``load``); arrays go
-        through ``from_arrays(u, z, fs)`` first."""
-        from .measurement import Measurement, load
-
+        through ``from_arrays(u, z, fs)`` first. A z derived from another sensor is pinned to the physical
+        frame here (``frame.pin_frame``), the step that needs it."""
         self._validate_params()
         self._validate()
         if isinstance(data, (str, PathLike)):
@@ -96,6 +97,7 @@ class Estimator:
                 f"{type(self).__name__}.fit takes a Measurement or a file path, got {type(data).__name__} "
                 "(arrays: negstiff.from_arrays(u, z, fs))"
             )
+        data = pin_frame(data)  # a derived z in the physical frame (said in the record's info)
         self._check_record(data)
         return data
 

@@ -25,8 +25,10 @@ from typing import Any
 import numpy as np
 from scipy import optimize, signal
 
-from .measurement import Measurement, MeasurementError
-from .plausibility import classified, issue
+from negstiff.errors import MeasurementError, issue
+
+from .measurement import Measurement
+from .plausibility import classified
 
 SEGMENT_S = 16.0
 """Welch segment length [s]: 1/16 Hz bins, at least 8 averages on a 72 s record (fewer on shorter

@@ -32,12 +32,12 @@ import numba
 import numpy as np
 from scipy import linalg
 
+from negstiff.errors import MeasurementError
 from negstiff.models import Model, effects
 from negstiff.models.kernel import JIT, KINDS, P_M, P_SIGN, force, member, monomials
 from negstiff.models.simulator import input_gain, stage_input
 
-from .derivatives import state_derivatives
-from .measurement import Measurement, MeasurementError
+from .measurement import Measurement
 from .refine import parameter_names, parameter_scales, with_values
 from .shooting import parameter_covariance, shooting_least_squares
 from .validation import divergence_limits, record_substeps, staged_windows
@@ -235,7 +235,7 @@ class Hybrid:
     def free_run(self, rec: Measurement, x0) -> np.ndarray:
         """z of a free run over ``rec`` from ``x0`` (NaN after a divergence)."""
         sub = record_substeps(self.model, rec)
-        zs, vs, _, _ = state_derivatives(rec.z, rec.fs, purpose="state")
+        zs, vs, _, _ = rec.states("state")
         us = stage_input(rec.u, sub)[None]
         x = np.asarray(x0, float)[None]
         oz, _ = simulate_hybrid(self.model, self.basis, self.theta, us, rec.dt, x, sub, rec.input_name,
@@ -341,7 +341,7 @@ def fit_hybrid(
     """
     if rec.z is None:
         raise MeasurementError(f"{rec.source}: a hybrid model needs a response")
-    zs, vs, _, _ = state_derivatives(rec.z, rec.fs, purpose="state")
+    zs, vs, _, _ = rec.states("state")
     basis = Basis.over(zs, vs, rec.u, *shape)
     limits = divergence_limits(rec.z, vs)
     sub = record_substeps(model, rec)

@@ -32,12 +32,13 @@ from typing import Any, Mapping
 
 import numpy as np
 
+from negstiff.errors import issue
 from negstiff.models import Model
 from negstiff.models.equation import Equilibria
 
 from .estimator import Estimator
 from .measurement import Measurement
-from .plausibility import classified, issue
+from .plausibility import classified
 from .refine import refine_stage, stroke_quantiles
 from .validation import boundedness, validate
 

@@ -1,4 +1,6 @@
-"""Measurement files of the contract (``shared/docs/contract.md``): CSV, NPZ and MAT.
+"""Records: ``Measurement`` (one uniformly sampled record in SI units), ``load`` (a file read through
+``negstiff.io``, its columns mapped, converted to SI and checked) and ``from_arrays`` (the same checks for
+arrays in memory).
 
 A measurement is one uniformly sampled record with exactly one input column (``base_acc`` [m/s^2]
 or ``force`` [N]), the output ``z`` [m], and a time base (``t`` [s], or ``fs`` [Hz] from the
@@ -9,32 +11,36 @@ file, the column or row, and what is wrong. Input files are only read.
 
 from __future__ import annotations
 
-import json
+import copy
 import math
-import re
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from negstiff.errors import InputError, RecordWarning
+from negstiff import io as record_io
+from negstiff.errors import MeasurementError, RecordWarning, issue
+from negstiff.io.base import RESOLUTION
+from negstiff.io.schema import (
+    DIMENSIONS,
+    INPUTS,
+    KNOWN,
+    MAGNITUDE_LIMITS,
+    OPTIONAL,
+    SAMPLING_RATE_RANGE_HZ,
+    UNITS,
+    header_name,
+    in_si,
+    parse_column_map,
+)
 
-from .plausibility import issue, record_warnings
-
-INPUTS = ("base_acc", "force")
-OPTIONAL = ("z_dot", "y", "base_disp")
-RESPONSE_ONLY = ("y_dot", "y_acc")
-"""Response columns a record may hold instead of z (``sensors.RESPONSES``): z is derived from them."""
-KNOWN = ("t", *INPUTS, "z", *OPTIONAL, *RESPONSE_ONLY)
+from . import sensors
+from .derivatives import state_derivatives
 
 TIME_JITTER_FRACTION = 0.01
 """A time column's samples may sit this fraction of a step off a uniform grid (or by their printed
 precision, whichever is larger) and still be uniform: lab exports round time."""
-
-
-class MeasurementError(InputError):
-    """Bad measurement input; the message is one line naming the file and the problem."""
 
 
 @dataclass(frozen=True)
@@ -69,6 +75,9 @@ class Measurement:
     source: str = "<memory>"
     t0: float = 0.0
     info: dict[str, Any] = field(default_factory=dict)
+    derived: dict[str, Any] = field(default_factory=dict, init=False, repr=False, compare=False)
+    """What is computed from this record once and kept with it (its smoothed states, its segments, its
+    pinned frame): a record is immutable, so what it gives never changes (``states``, ``segment``)."""
 
     @property
     def n(self) -> int:
@@ -101,11 +110,28 @@ class Measurement:
         mass = float(rec.meta["mass"]) if weighed and rec.meta.get("mass") is not None else None
         return from_arrays(rec.columns["base_acc"], rec.columns["z"], rec.fs, mass=mass, source=rec.meta["source"])
 
-    def segment(self, start: int, stop: int) -> "Measurement":
-        """Samples [start, stop) as a new measurement (time base kept)."""
-        sl = slice(start, stop)
-        opt = {k: (None if getattr(self, k) is None else getattr(self, k)[sl]) for k in ("z", *OPTIONAL)}
-        return replace(self, u=self.u[sl], t0=self.t0 + start / self.fs, **opt)
+    def segment(self, start: int | None, stop: int | None) -> "Measurement":
+        """Samples [start, stop) as a measurement (time base kept); the same object for the same span, so
+        what it derives is derived once (``states``)."""
+        start, stop, _ = slice(start, stop).indices(self.n)
+        key = ("segment", start, stop)
+        seg = self.derived.get(key)
+        if seg is None:
+            sl = slice(start, stop)
+            opt = {k: (None if getattr(self, k) is None else getattr(self, k)[sl]) for k in ("z", *OPTIONAL)}
+            seg = self.derived[key] = replace(self, u=self.u[sl], t0=self.t0 + start / self.fs, **opt)
+        return seg
+
+    def states(self, purpose: str = "state") -> tuple[np.ndarray, np.ndarray, np.ndarray, dict]:
+        """Smoothed z, z', z'' of the record and how they were found (``derivatives.state_derivatives``:
+        ``"state"``, the least-error velocity every free run starts from; ``"regression"``, the weak form's),
+        computed once per record and kept with it (copies are returned: a caller may change its own)."""
+        key = ("states", purpose)
+        hit = self.derived.get(key)
+        if hit is None:
+            hit = self.derived[key] = state_derivatives(self.z, self.fs, purpose)
+        zs, v, a, info = hit
+        return zs.copy(), v.copy(), a.copy(), copy.deepcopy(info)
 
     @property
     def rest_positions(self) -> dict[str, float]:
@@ -166,286 +192,6 @@ def _constant(x: np.ndarray) -> bool:
     return span <= 64 * np.finfo(float).eps * float(np.max(np.abs(x))) or span < 1e-15
 
 
-_MAP_ENTRY = re.compile(r"^\s*(\w+)\s*=\s*([^*]+?)\s*(?:\*\s*([-+0-9.eE]+))?\s*$")
-
-
-def parse_column_map(text: str | None) -> dict[str, tuple[str, float]]:
-    """Parse ``name=SOURCE[*scale],...`` into ``{name: (SOURCE, scale)}``."""
-    if not text:
-        return {}
-    out: dict[str, tuple[str, float]] = {}
-    for entry in text.split(","):
-        m = _MAP_ENTRY.match(entry)
-        if not m:
-            raise MeasurementError(f"column map entry {entry!r} is not of the form name=COLUMN or name=COLUMN*scale")
-        name, src, scale = m.group(1), m.group(2).strip().strip('"'), m.group(3)
-        if name not in KNOWN:
-            raise MeasurementError(f"column map names {name!r}, which is not a measurement column ({', '.join(KNOWN)})")
-        try:
-            factor = 1.0 if scale is None else float(scale)
-        except ValueError:
-            raise MeasurementError(f"column map entry {entry!r}: scale {scale!r} is not a number") from None
-        if name in out:
-            raise MeasurementError(
-                f"column map names {name!r} twice ({out[name][0]!r} and {src!r}): which one is meant?"
-            )
-        out[name] = (src, factor)
-    return out
-
-
-_UNIT_IN_NAME = re.compile(r"^(?P<name>.*?)\s*(?:\[(?P<square>[^\]]*)\]|\((?P<round>[^)]*)\))\s*$")
-"""A header entry with its unit: ``z [mm]`` or ``z (mm)``."""
-
-
-READ_CHUNK_BYTES = 16 * 2**20
-"""A text file is read in chunks of this size, each checked before the next is read."""
-
-TEXT_PARSE_BYTES_PER_BYTE = 8
-"""Memory [bytes] the parser holds per byte of a CSV file (its text, its lines and their values; 4.5
-measured on a 10 MB rig record): a file whose parse would not fit in memory is refused before it is read."""
-
-
-def _text(path: Path) -> str:
-    """A text file's content: UTF-8 (a byte-order mark, as spreadsheets write, dropped), else Latin-1
-    (older Windows exports write 'µm' so). Read in chunks with a bounded budget: a file with NUL bytes
-    is not text, and is refused at the first chunk that holds one (not after reading a gigabyte)."""
-    from negstiff.resources import require_memory
-
-    chunks, offset = [], 0
-    try:
-        size = path.stat().st_size
-        with open(path, "rb") as fh:
-            while chunk := fh.read(READ_CHUNK_BYTES):
-                nul = chunk.find(b"\0")
-                if nul >= 0:
-                    raise MeasurementError(
-                        f"{path}: unreadable file (a NUL byte at byte {offset + nul}: not text; a CSV is expected)"
-                    )
-                if not offset:  # a text head: is the whole file's parse within the memory?
-                    try:
-                        require_memory(size * TEXT_PARSE_BYTES_PER_BYTE, f"reading {path} ({size / 2**20:.4g} MiB)")
-                    except InputError as exc:
-                        raise MeasurementError(f"{exc}; split the file, or save it as NPZ") from None
-                chunks.append(chunk)
-                offset += len(chunk)
-    except OSError as exc:
-        raise MeasurementError(f"{path}: cannot read ({exc.strerror or exc})") from None
-    raw = b"".join(chunks)
-    try:
-        return raw.decode("utf-8-sig")
-    except UnicodeDecodeError:
-        return raw.decode("latin-1")
-
-
-def _dialect(path: Path, header: str, first_row: str) -> tuple[str | None, bool]:
-    """(field separator, decimal comma) of a CSV from its header and first data row: ',' (the contract),
-    ';' (spreadsheets where the decimal mark is a comma, which then appears in the numbers), a tab, or
-    blanks (None). Written here rather than with ``csv.Sniffer``, which guesses from character counts and
-    takes a digit or the decimal point for the separator of a numeric file."""
-    # the separator is in both lines (a header's names may hold commas, a decimal-comma row holds commas)
-    sep = next((d for d in (",", ";", "\t") if d in header and d in first_row), None)
-    decimal_comma = sep != "," and "," in first_row
-    if decimal_comma and "." in first_row:
-        raise MeasurementError(
-            f"{path}: the first data row mixes decimal points and commas: {first_row[:60]!r} (one decimal mark, please)"
-        )
-    return sep, decimal_comma
-
-
-def _read_csv(path: Path) -> tuple[dict[str, np.ndarray], dict[str, str]]:
-    lines = _text(path).splitlines()
-    meta: dict[str, str] = {}
-    i = 0
-    while i < len(lines) and (lines[i].startswith("#") or not lines[i].strip()):
-        if ":" in lines[i]:
-            k, v = lines[i][1:].split(":", 1)
-            meta[k.strip()] = v.strip()
-        i += 1
-    if i >= len(lines):
-        raise MeasurementError(f"{path}: no header line (and no data)")
-    header_line = i + 1
-    body = lines[i + 1 :]
-    while body and not body[-1].strip():
-        body.pop()
-    if not body:
-        raise MeasurementError(f"{path}: no data rows after the header")
-    sep, decimal_comma = _dialect(path, lines[i], body[0])
-    if decimal_comma:
-        body = [line.replace(",", ".") for line in body]
-    names = []
-    for c in lines[i].split(sep):
-        c = c.strip().strip('"').strip()
-        m = _UNIT_IN_NAME.match(c)
-        if m and m.group("name"):  # a unit in the header: the column's name without it, its unit in the metadata
-            c = m.group("name").strip().strip('"').strip()
-            meta[f"unit:{c}"] = (m.group("square") if m.group("square") is not None else m.group("round")).strip()
-        if c and c in names:
-            raise MeasurementError(
-                f"{path}: the header names column {c!r} twice (columns {names.index(c) + 1} and {len(names) + 1}): "
-                "which one is meant? rename one, or map the one to use with --columns"
-            )
-        names.append(c)
-    use = [j for j, c in enumerate(names) if c]  # trailing separators make unnamed empty columns
-    try:
-        data = np.loadtxt(body, delimiter=sep, usecols=use, ndmin=2, dtype=float)
-    except ValueError:
-        for r, line in enumerate(body):
-            parts = line.split(sep)
-            try:
-                [float(parts[j]) for j in use]
-            except (ValueError, IndexError):
-                raise MeasurementError(
-                    f"{path}: row {r + 1} (line {header_line + r + 1}) is not numeric in every column: {line[:60]!r}"
-                ) from None
-        raise MeasurementError(f"{path}: rows are not all numeric") from None
-    cols = {names[j]: data[:, k] for k, j in enumerate(use)}
-    if "t" in names:  # the printed precision of each time value (lab exports round time)
-        j = names.index("t")
-        tokens = [line.partition(sep)[0] for line in body] if j == 0 and sep else [line.split(sep)[j] for line in body]
-        cols[RESOLUTION] = printed_resolution(tokens, cols["t"])
-    return cols, meta
-
-
-RESOLUTION = "\0t_resolution"
-"""Key under which a reader returns the resolution [s] of each value of the time column."""
-
-
-def printed_resolution(tokens: list[str], values: np.ndarray) -> np.ndarray:
-    """The resolution of each printed value of a column, from the column's format as the tokens show it.
-
-    A fixed-decimals export ('%.5f') has one resolution, 10^-D; a significant-digits export ('%.9g')
-    has 10^(e - S + 1) for a value of magnitude 10^e. Trailing zeros are dropped by many writers, so
-    D and S are the largest seen in the column, and each value's resolution is the coarser of the two.
-    """
-    digits = _plain_decimal_digits(tokens)
-    decimals, sig = digits if digits is not None else _printed_digits(tokens)
-    with np.errstate(divide="ignore"):
-        mag = np.floor(np.log10(np.abs(values)))
-    mag[~np.isfinite(mag)] = -np.inf
-    return np.maximum(10.0 ** (-decimals), 10.0 ** (mag - sig + 1))
-
-
-def _printed_digits(tokens: list[str]) -> tuple[int, int]:
-    """(D, S) of ``printed_resolution``: the most decimals (less the exponent) and significant digits."""
-    decimals, sig = 0, 1
-    for tok in tokens:
-        mant, _, exp = tok.strip().strip('"').lower().partition("e")
-        mant = mant.lstrip("+-")
-        whole, _, frac = mant.partition(".")
-        try:
-            e = int(exp) if exp else 0
-        except ValueError:
-            continue
-        decimals = max(decimals, len(frac) - e)
-        sig = max(sig, len((whole + frac).lstrip("0")) or 1)
-    return decimals, sig
-
-
-_PLAIN = np.zeros(256, dtype=bool)
-_PLAIN[np.frombuffer(b"0123456789.+-\0", dtype=np.uint8)] = True
-
-
-def _plain_decimal_digits(tokens: list[str]) -> tuple[int, int] | None:
-    """``_printed_digits`` of a column of plain decimals (digits, sign and point only: what lab exports
-    write) on the tokens' bytes as one array, or None for any other column. The per-token loop took 0.13
-    s on a 300 s record at 512 Hz, half of reading the file; this takes 0.04 s."""
-    text = "".join(tokens)
-    if not tokens or not text.isascii():
-        return None
-    b = np.array(tokens, dtype=bytes)  # NUL-padded to the longest token
-    m = b.view(np.uint8).reshape(b.size, b.itemsize)
-    if not _PLAIN[m].all():
-        return None
-    length = np.count_nonzero(m, axis=1)
-    is_dot = m == ord(".")
-    has_dot = is_dot.any(axis=1)
-    dot = np.argmax(is_dot, axis=1)
-    nonzero = (m >= ord("1")) & (m <= ord("9"))
-    first = np.argmax(nonzero, axis=1)
-    decimals = int(np.max(np.where(has_dot, length - dot - 1, 0)))
-    # significant digits: from the first nonzero digit to the end, less a point among them
-    digits = np.where(nonzero.any(axis=1), length - first - (has_dot & (dot > first)), 0)
-    return decimals, max(1, int(np.max(digits)))
-
-
-def _require_memory(path: Path, nbytes: float) -> None:
-    from negstiff.resources import require_memory
-
-    try:
-        require_memory(nbytes, f"reading {path}")
-    except InputError as exc:
-        raise MeasurementError(str(exc)) from None
-
-
-def _read_npz(path: Path) -> tuple[dict[str, np.ndarray], dict[str, str]]:
-    import zipfile
-
-    try:  # the arrays' size as stored (compressed or not), before any is read
-        with zipfile.ZipFile(path) as z:
-            _require_memory(path, 3 * sum(i.file_size for i in z.infolist()))
-    except zipfile.BadZipFile:
-        pass  # np.load says what is wrong
-    with np.load(path, allow_pickle=False) as f:
-        arrays = {k: np.asarray(f[k]) for k in f.files}
-    meta: dict[str, str] = {}
-    if "meta" in arrays:
-        try:
-            meta = {k: str(v) for k, v in json.loads(str(arrays.pop("meta"))).items()}
-        except (ValueError, AttributeError):
-            raise MeasurementError(f"{path}: the 'meta' entry is not a JSON object") from None
-    if "fs" in arrays and arrays["fs"].size == 1:
-        meta.setdefault("fs", str(float(arrays.pop("fs"))))
-    cols = {k: v.ravel().astype(float) for k, v in arrays.items() if v.ndim >= 1 and v.size > 1}
-    return _with_binary_resolution(cols, arrays), meta
-
-
-def _with_binary_resolution(cols: dict[str, np.ndarray], stored: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
-    """A time column stored in single (or half) precision is as uniform as its float spacing allows."""
-    if "t" in cols and stored["t"].dtype.kind == "f" and stored["t"].dtype.itemsize < 8:
-        cols[RESOLUTION] = np.spacing(np.abs(stored["t"].ravel())).astype(float)
-    return cols
-
-
-def _read_mat(path: Path) -> tuple[dict[str, np.ndarray], dict[str, str]]:
-    from scipy.io import loadmat
-
-    _require_memory(path, 8 * path.stat().st_size)  # MAT v5 compresses its arrays (zlib): a few times the file
-    try:
-        raw = loadmat(path)
-    except NotImplementedError:
-        raise MeasurementError(f"{path}: MATLAB v7.3 (HDF5) files are not supported; save with -v7") from None
-    meta: dict[str, str] = {}
-    cols: dict[str, np.ndarray] = {}
-    for k, v in raw.items():
-        if k.startswith("__") or not isinstance(v, np.ndarray) or v.dtype.kind not in "fiu":
-            continue
-        if v.size == 1:
-            meta[k] = str(float(v.ravel()[0]))
-        elif min(v.shape) == 1:
-            cols[k] = v.ravel().astype(float)
-    return _with_binary_resolution(cols, raw), meta
-
-
-def _lab_reader(suffix: str):
-    """The lab formats' readers (``formats.py``) are imported only when such a file is read."""
-
-    def read(path: Path):
-        from negstiff.inference import formats
-
-        return formats.READERS[suffix](path)
-
-    return read
-
-
-READERS = {
-    ".csv": _read_csv,
-    ".txt": _read_csv,
-    ".npz": _read_npz,
-    ".mat": _read_mat,
-    **{s: _lab_reader(s) for s in (".uff", ".unv", ".tdms", ".lvm")},
-}
-
-
 def load(
     path: str | Path,
     columns: str | dict | None = None,
@@ -464,18 +210,15 @@ def load(
     response : False for an input-only record (``negstiff simulate``): no response column needed
 
     The response is z, or z derived from z_dot, y (with the base's motion), y_dot or y_acc
-    (``sensors.derive``), its frame pinned by physics where its constant is unknown
-    (``sensors.pin_frame``); what was done is in ``info["response"]``.
+    (``sensors.derive``); what was done is in ``info["response"]``. A derived z's constant is unknown:
+    the analyses that need z's frame pin it (``frame.pin_frame``); ``load`` fits nothing.
     """
-    from negstiff.inference import sensors
 
     path = Path(path)
-    raw, meta = _read(path)
+    raw, meta = record_io.read(path)
     resolution = raw.pop(RESOLUTION, None)
     cmap = parse_column_map(columns) if isinstance(columns, (str, type(None))) else dict(columns)
-    cmap = {name: (_header_name(src, raw), scale) for name, (src, scale) in cmap.items()}
-    from negstiff.inference.units import in_si
-
+    cmap = {name: (header_name(src, raw), scale) for name, (src, scale) in cmap.items()}
     cols, channel_info = in_si(path, _mapped_columns(path, raw, cmap), meta, cmap)
     if any(name == "t" and (src != "t" or scale != 1.0) for name, (src, scale) in cmap.items()):
         resolution = None  # the printed precision was read for a column named t only
@@ -514,8 +257,7 @@ def load(
         t0=t0,
         info={"time": time_info, "response": resp, **channel_info},
     )
-    rec = sensors.pin_frame(rec.with_mass(mass))
-    return _warned(rec)
+    return _warned(rec.with_mass(mass))
 
 
 def _warned(rec: Measurement) -> Measurement:
@@ -526,28 +268,6 @@ def _warned(rec: Measurement) -> Measurement:
     lines = [*rec.info.get("warnings", []), *rec.info.get("response", {}).get("warnings", []), *new]
     issue([(RecordWarning, w) for w in lines])
     return replace(rec, info={**rec.info, "warnings": [*rec.info.get("warnings", []), *new]}) if new else rec
-
-
-def _read(path: Path) -> tuple[dict[str, np.ndarray], dict[str, str]]:
-    """The file's columns and metadata by its reader; any parser failure is one line."""
-    if not path.is_file():
-        raise MeasurementError(f"{path}: no such file")
-    reader = READERS.get(path.suffix.lower())
-    if reader is None:
-        raise MeasurementError(f"{path}: unknown file type {path.suffix!r} (use {', '.join(READERS)})")
-    try:
-        return reader(path)
-    except MeasurementError:
-        raise
-    except Exception as exc:  # any parser failure is an unreadable file, said in one line
-        raise MeasurementError(f"{path}: unreadable file ({type(exc).__name__}: {exc})".splitlines()[0]) from None
-
-
-def _header_name(src: str, raw: dict[str, np.ndarray]) -> str:
-    """A column map's source as the file's column name: the header's whole text ('Time [s]') names the
-    column its unit was split from ('Time')."""
-    m = _UNIT_IN_NAME.match(src)
-    return m.group("name").strip() if src not in raw and m and m.group("name").strip() in raw else src
 
 
 def _mapped_columns(path: Path, raw: dict[str, np.ndarray], cmap: dict) -> dict[str, np.ndarray]:
@@ -589,8 +309,6 @@ def _checked_input(path: Path, raw: dict, cols: dict[str, np.ndarray]) -> tuple[
 def check_values(source, cols: dict[str, np.ndarray]) -> None:
     """Every value finite and, for a contract column, within the magnitude no shaker-table record in SI
     exceeds (``units.MAGNITUDE_LIMITS``); one ``MeasurementError`` naming the column, the row and the unit."""
-    from negstiff.inference.units import DIMENSIONS, MAGNITUDE_LIMITS, UNITS
-
     for k, v in cols.items():
         bad = np.flatnonzero(~np.isfinite(v))
         if bad.size:
@@ -611,8 +329,6 @@ def check_values(source, cols: dict[str, np.ndarray]) -> None:
 def check_sampling_rate(source, fs: float, where: str) -> float:
     """A sampling rate [Hz] within ``units.SAMPLING_RATE_RANGE_HZ``, or one ``MeasurementError`` naming
     where it came from."""
-    from negstiff.inference.units import SAMPLING_RATE_RANGE_HZ
-
     lo, hi = SAMPLING_RATE_RANGE_HZ
     if isinstance(fs, bool) or not isinstance(fs, (int, float, np.integer, np.floating)) or not lo <= fs <= hi:
         raise MeasurementError(f"{source}: sampling rate {fs!r} Hz ({where}) is not a rate a record has "
@@ -728,3 +444,28 @@ def from_arrays(u: np.ndarray, z: np.ndarray | None, fs: float, input_name: str 
     kw = {**kw, **{k: cols[k] for k in OPTIONAL if k in cols}}
     rec = Measurement(fs=fs, input_name=input_name, u=cols[input_name], z=cols.get("z"), **{**kw, "mass": None})
     return rec.with_mass(kw.get("mass"))
+
+
+STROKE_LIMIT_M = 1.0
+"""A shaker-table device's relative displacement stays far below this [m]; beyond it, the record is
+not in metres."""
+
+ACC_LIMIT_M_S2 = 2000.0
+"""Table accelerations beyond this rms [m/s^2] (200 g) are not in m/s^2."""
+
+
+def record_warnings(rec) -> list[str]:
+    """Unit checks of a record's columns (SI expected)."""
+    out = []
+    if rec.z is not None:
+        span = float(np.ptp(rec.z))
+        if span > STROKE_LIMIT_M:
+            out.append(
+                f"z spans {span:.3g} m: is the record in mm? negstiff reads SI units (m); scale the column in the map, "
+                "e.g. --columns z=COL*0.001"
+            )
+    if rec.input_name == "base_acc":
+        rms = float(np.std(rec.u))
+        if rms > ACC_LIMIT_M_S2:
+            out.append(f"base_acc has rms {rms:.3g} m/s^2 (over 200 g): is it in mm/s^2? negstiff reads m/s^2")
+    return out

@@ -36,12 +36,13 @@ from typing import Any
 import numpy as np
 from scipy import signal
 
+from negstiff.errors import MeasurementError
 from negstiff.models import Model
 
 from . import subspace
 from .derivatives import smooth_and_differentiate, velocity_window
 from .identification import Estimate, Identifier, visited_well
-from .measurement import Measurement, MeasurementError
+from .measurement import Measurement
 from .parameters import FRACTION, Boolean, Interval, Pair
 from .weak import known_input_gain, mass_of
 

@@ -26,7 +26,9 @@ import numpy as np
 from scipy import signal
 from scipy.interpolate import CubicSpline
 
-from .measurement import Measurement, MeasurementError
+from negstiff.errors import MeasurementError
+
+from .measurement import Measurement
 
 PERIODS = (1, 2, 3, 4, 5, 6, 8, 16)
 

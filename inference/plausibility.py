@@ -8,14 +8,20 @@ result's ``warnings`` and onto stderr, each saying what looks wrong and what to 
 
 from __future__ import annotations
 
-import numpy as np
+from dataclasses import replace
 
-STROKE_LIMIT_M = 1.0
-"""A shaker-table device's relative displacement stays far below this [m]; beyond it, the record is
-not in metres."""
+from negstiff.errors import (
+    BoundednessWarning,
+    ConvergenceWarning,
+    ExtrapolationWarning,
+    FrameWarning,
+    NegstiffWarning,
+    RecordWarning,
+)
 
-ACC_LIMIT_M_S2 = 2000.0
-"""Table accelerations beyond this rms [m/s^2] (200 g) are not in m/s^2."""
+from .frame import frame_offset
+from .measurement import record_warnings
+from .weak import input_coefficient
 
 FRAME_WARN_M = 2e-3
 """A measured z whose zero sits this far [m] from where the record's physics carries the weight is
@@ -24,30 +30,9 @@ warned about. The gravity estimate of the frame errs by ~0.2 mm on the exact dev
 z = -3.6 mm, k0/m = 1.4-1.8 m/s^2: the exact K is not a cubic)."""
 
 
-def record_warnings(rec) -> list[str]:
-    """Unit checks of a record's columns (SI expected)."""
-    out = []
-    if rec.z is not None:
-        span = float(np.ptp(rec.z))
-        if span > STROKE_LIMIT_M:
-            out.append(
-                f"z spans {span:.3g} m: is the record in mm? negstiff reads SI units (m); scale the column in the map, "
-                "e.g. --columns z=COL*0.001"
-            )
-    if rec.input_name == "base_acc":
-        rms = float(np.std(rec.u))
-        if rms > ACC_LIMIT_M_S2:
-            out.append(f"base_acc has rms {rms:.3g} m/s^2 (over 200 g): is it in mm/s^2? negstiff reads m/s^2")
-    return out
-
-
 def frame_warnings(rec) -> list[str]:
     """Is a measured z in the rods-horizontal frame? Where the record's own physics carries the weight
-    (``sensors.frame_offset`` by gravity, rest positions ignored) says how far its zero is from it."""
-    from dataclasses import replace
-
-    from negstiff.inference.sensors import frame_offset
-
+    (``frame.frame_offset`` by gravity, rest positions ignored) says how far its zero is from it."""
     if rec.z is None or rec.input_name != "base_acc" or not rec.info.get("response", {}).get("z_constant_known", True):
         return []
     gravity_only = replace(rec, meta={k: v for k, v in rec.meta.items() if not k.endswith("_rest")})
@@ -80,8 +65,6 @@ acceleration in g gives 9.8."""
 def input_warnings(rec) -> list[str]:
     """Units and mass: the input's weight in the record's own dynamics against the physics' (-1 for a
     base acceleration in m/s^2, 1/m for a force in N; ``weak.input_coefficient``)."""
-    from negstiff.inference.weak import input_coefficient
-
     if rec.z is None or (rec.input_name == "force" and rec.mass is None):
         return []
     try:
@@ -129,15 +112,6 @@ def classified(rec, model=None, own: list[str] | tuple[str, ...] = ()) -> list[t
     """Every warning about a result (``own``: the method's, boundedness, convergence) and about its record
     (its derivation, its units, its frame) and model (wells beyond the stroke), each with its
     ``NegstiffWarning`` category, without repeats: what the result holds and Python's ``warnings`` issue."""
-    from negstiff.errors import (
-        BoundednessWarning,
-        ConvergenceWarning,
-        ExtrapolationWarning,
-        FrameWarning,
-        NegstiffWarning,
-        RecordWarning,
-    )
-
     def kind(text: str) -> type:
         if "not bounded" in text:
             return BoundednessWarning
@@ -160,11 +134,3 @@ def classified(rec, model=None, own: list[str] | tuple[str, ...] = ()) -> list[t
             seen.add(text)
             out.append((cat, text))
     return out
-
-
-def issue(lines) -> None:
-    """Each (category, text) of ``classified`` through Python's ``warnings`` (a ``NegstiffWarning``)."""
-    import warnings
-
-    for category, text in lines:
-        warnings.warn(text, category, stacklevel=3)

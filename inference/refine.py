@@ -36,11 +36,11 @@ from typing import Any
 import numpy as np
 from scipy import optimize, sparse
 
+from negstiff.errors import MeasurementError
 from negstiff.models import Model, effects, simulate_batch
 from negstiff.models.simulator import stage_input
 
-from .derivatives import state_derivatives
-from .measurement import Measurement, MeasurementError
+from .measurement import Measurement
 from .shooting import shooting_least_squares
 from .validation import (
     boundedness,
@@ -171,7 +171,7 @@ def refine(
     if solver not in SOLVERS:
         raise ValueError(f"solver must be one of {SOLVERS}, got {solver!r}")
     names = parameter_names(model, free_mass, held)
-    zs, vs, _, _ = state_derivatives(rec.z, rec.fs, purpose="state")
+    zs, vs, _, _ = rec.states("state")
     scale = parameter_scales(model, names, float(np.std(rec.z)), float(np.std(vs)))
     d = {**model.to_dict(), **dict(model.extra)}
     q = np.array([float(d[n]) for n in names]) / scale

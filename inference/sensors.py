@@ -38,8 +38,10 @@ from typing import Any
 import numpy as np
 from scipy.interpolate import make_interp_spline
 
-from negstiff.models.constants import G
+from negstiff.errors import MeasurementError
 from negstiff.models.table import integrate_fft
+
+from .derivatives import noise_floor
 
 RESPONSES = ("z", "z_dot", "y", "y_dot", "y_acc")
 """Response columns in the order a record's response is taken from (the first present wins)."""
@@ -70,8 +72,6 @@ def integrate_exact(x: np.ndarray, fs: float) -> np.ndarray:
 
 def _noise_rms(x: np.ndarray, fs: float) -> float:
     """White-noise rms of a signal from the plateau of its spectrum (``derivatives.noise_floor``)."""
-    from negstiff.inference.derivatives import noise_floor
-
     try:
         return float(math.sqrt(noise_floor(x, fs)[0]))
     except Exception:  # too short or too clean for a plateau: no estimate
@@ -139,8 +139,6 @@ def derive(cols: dict[str, np.ndarray], input_name: str, fs: float, source: str)
     present, is the time at each end the caller must cut (an accelerometer's integral is not valid
     there).
     """
-    from negstiff.inference.measurement import MeasurementError
-
     measured = next((k for k in RESPONSES if k in cols), None)
     if measured is None:
         raise MeasurementError(
@@ -204,169 +202,3 @@ def derive(cols: dict[str, np.ndarray], input_name: str, fs: float, source: str)
             "(for cross-well motion, which well the device sits in); results hold for in-well records only"
         ],
     }
-
-
-PIN_TERMS = ("1", "z", "z^2", "z^3", "z^4", "z^5", "v", "v|v|")
-"""Library of the frame fit: a quintic restoring force follows the exact device's K near its origin
-(the cubic's K(0) errs there: 0.7-1.7 mm of frame on as-built records, measured; 0.15-0.2 mm with
-the quintic)."""
-
-
-def _crossings(x: np.ndarray, f: np.ndarray) -> np.ndarray:
-    """Zeros of a sampled function, by linear interpolation between the samples that bracket them."""
-    i = np.flatnonzero(np.diff(np.sign(f)) != 0)
-    return x[i] - f[i] * (x[i + 1] - x[i]) / (f[i + 1] - f[i])
-
-
-def _frame_anchors(rec) -> tuple[float, dict[str, float]]:
-    """In the record's own frame: the origin (where a quintic fitted to ``rec`` carries m g, between
-    its wells) and the stable wells, all searched over the stroke the record visited."""
-    from negstiff.inference.weak import weak_least_squares
-
-    model = weak_least_squares(rec, PIN_TERMS)
-    x = np.linspace(rec.z.min(), rec.z.max(), 4001)
-    K = model.restoring_force(x)
-    eq = _crossings(x, K)
-    stable = [e for e in eq if np.interp(e, x, np.gradient(K, x)) > 0]
-    if len(stable) == 1:  # an in-well record: one well, and no origin between wells to find
-        return float("nan"), {"one": stable[0]}
-    wells = {"minus": stable[0], "plus": stable[-1]} if len(stable) >= 2 else {}
-    roots = _crossings(x, K - model.m * G)
-    if not roots.size:
-        raise ValueError("the fitted restoring force never carries the weight over the visited stroke")
-    mid = eq[len(eq) // 2] if eq.size else float(np.median(rec.z))
-    origin = float(roots[np.argmin(np.abs(roots - mid))])
-    if wells and not wells["minus"] < origin < wells["plus"]:
-        wells = {}  # a fit whose weight-carrying point is not between its wells pins nothing well
-    return origin, wells
-
-
-def frame_offset(rec, spread: bool = True) -> dict[str, Any]:
-    """The frame constant C that makes a record's z physical (z_true = z + C).
-
-    Two anchors, the better one used:
-
-    * rest positions (``# z_minus_rest`` / ``# z_plus_rest`` metadata [m], measured statically
-      before the test; ``# z_rest`` for the one well an in-well record stays in): C = z_rest -
-      x_well, with x_well the fitted model's wells in the record's frame (well positions are what a
-      record determines best); an in-well record can only be pinned this way;
-    * gravity: the restoring force at z = 0 (rods horizontal) carries the weight, K(0) = m g (g per
-      unit mass). A quintic restoring force with viscous and quadratic damping is fitted by weak-form
-      least squares (``weak.weak_least_squares``) in the record's frame, where K_rec(x) =
-      K_true(x + C); the origin solves K_rec(x) = m g between the fitted wells (a negative-stiffness
-      device's origin is next to its unstable equilibrium). A force-driven record carries no weight
-      in its equation (k0 is the force's offset): there the frame is not pinned.
-
-    The uncertainty ``offset_se_m`` is the spread of the estimates from ``FRAME_PARTS`` parts of the
-    record, scaled to the whole (sd / sqrt(parts)); ``spread=False`` skips the parts (``offset_se_m`` NaN:
-    the plausibility check asks for it only when it warns). Returns a dict with ``offset_m`` (None when
-    not pinned), ``offset_se_m``, ``method``.
-    """
-    rest = {w: rec.meta.get(f"z_{w}_rest") for w in ("minus", "plus")}
-    try:
-        rest = {w: float(v) for w, v in rest.items() if v is not None}
-        if "z_rest" in rec.meta:  # the rest position of the one well an in-well record stays in
-            rest["one"] = float(rec.meta["z_rest"])
-    except ValueError:
-        rest = {}
-    if rec.input_name != "base_acc" and not rest:
-        return {"offset_m": None, "method": "not pinned: a force-driven record carries no weight (k0 unknown)"}
-    try:
-        x, wells = _frame_anchors(rec)
-        n_parts = int(np.clip(rec.duration // FRAME_PART_MIN_S, 2, FRAME_PARTS))
-        edges = np.linspace(0, rec.n, n_parts + 1).astype(int) if spread else np.zeros(1, int)
-        parts = []
-        for a, b in zip(edges[:-1], edges[1:]):
-            try:
-                part = _frame_anchors(rec.segment(a, b))
-            except Exception:
-                continue
-            if part[1]:  # only parts that visited both wells say where the origin between them is
-                parts.append(part)
-    except Exception as exc:  # a record too short or too poor for the fit: said, not pinned
-        return {"offset_m": None, "method": f"not pinned: {' '.join(str(exc).split())}"}
-    if "one" in wells:
-        if "one" not in rest and len(rest) == 1:
-            rest["one"] = next(iter(rest.values()))
-        if "one" not in rest:
-            return {
-                "offset_m": None,
-                "one_well": True,
-                "method": "not pinned: the record stays in one well (no origin between wells to find); give that "
-                "well's rest position as '# z_rest: VALUE' metadata [m]",
-            }
-    anchored = [w for w in rest if w in wells]
-    if anchored:
-
-        def offset(ws):
-            return float(np.mean([rest[w] - ws[w] for w in anchored]))
-
-        return {
-            "offset_m": offset(wells),
-            "offset_se_m": _se([offset(p[1]) for p in parts if all(w in p[1] for w in anchored)]),
-            "method": "the fitted wells put at the rest positions of the file's metadata ("
-            + ", ".join(f"z_{w}_rest = {rest[w]:g} m" for w in anchored)
-            + ")",
-        }
-    if rec.input_name != "base_acc":
-        return {"offset_m": None, "method": "not pinned: a force-driven record carries no weight (k0 unknown)"}
-    return {
-        "offset_m": -x,
-        "offset_se_m": _se([-p[0] for p in parts]),
-        "method": "K(0) = m g: the frame in which a quintic restoring force fitted to the record carries the "
-        "weight at z = 0, between the wells",
-    }
-
-
-FRAME_SE_WARN_M = 2e-5
-"""A frame standard error above this [m] is warned about: on the seed's cubic (k2 / 3 k3 = 0.5 mm) 20 um moves
-k2 by 4 %."""
-
-FRAME_PARTS = 4
-"""Parts of the record (at most) whose separate frame estimates give the frame's standard error."""
-
-FRAME_PART_MIN_S = 30.0
-"""... each at least this long where the record allows (two parts at least): a 10 s part of a
-cross-well record may visit one well only, and its frame estimate is then off by millimetres."""
-
-
-def _se(estimates: list[float]) -> float:
-    """Standard error of the whole record's estimate from its parts' (NaN with fewer than two)."""
-    if len(estimates) < 2:
-        return float("nan")
-    return float(np.std(estimates, ddof=1) / np.sqrt(len(estimates)))
-
-
-def pin_frame(rec):
-    """``rec`` with z in the physical frame when its constant was unknown (``frame_offset``), and the
-    offset, its uncertainty and the anchor in ``info["response"]``; otherwise ``rec`` itself."""
-    from dataclasses import replace
-
-    resp = rec.info.get("response", {})
-    if rec.z is None or resp.get("z_constant_known", True):
-        return rec
-    fo = frame_offset(rec)
-    resp = {**resp, "frame_offset_m": fo["offset_m"], "frame_offset_se_m": fo.get("offset_se_m"), "frame": fo["method"]}
-    se = fo.get("offset_se_m")
-    se = 0.0 if se is None else se
-    if fo["offset_m"] is not None and not np.isfinite(se):
-        resp["warnings"] = [
-            *resp.get("warnings", []),
-            "z's frame uncertainty could not be estimated (no two "
-            "parts of the record visit both wells); k2 and k1 inherit the frame's error "
-            "(dk2 = 3 k3 dC)",
-        ]
-    elif fo["offset_m"] is None:
-        resp["warnings"] = [
-            *resp.get("warnings", []),
-            f"z's frame is unknown ({fo['method']}); the coefficients k0-k2 are in the record's own frame",
-        ]
-    elif se > FRAME_SE_WARN_M:
-        resp["warnings"] = [
-            *resp.get("warnings", []),
-            f"z's frame is uncertain: offset {1e3 * fo['offset_m']:.3f} "
-            f"+- {1e3 * se:.3f} mm (the record visits one well little?); k2 and k1 inherit it "
-            "(dk2 = 3 k3 dC)",
-        ]
-    z = rec.z if fo["offset_m"] is None else rec.z + fo["offset_m"]
-    return replace(rec, z=z, info={**rec.info, "response": resp})

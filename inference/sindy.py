@@ -29,7 +29,6 @@ import math
 
 import numpy as np
 
-from .derivatives import state_derivatives
 from .identification import Estimate, Identifier
 from .measurement import Measurement
 from .parameters import FRACTION, SEED, Boolean, Interval, Several
@@ -123,8 +122,8 @@ class SINDy(Identifier):
         identification part, with the ensemble's inclusion probabilities (the shared stages follow)."""
         n_fit = int(round(rec.n * (1 - self.validation_fraction - self.selection_fraction)))
         ident = rec.segment(0, n_id)
-        form = WeakForm.of(ident.z, rec.fs)
-        z0s, v0s, _, _ = state_derivatives(ident.z, rec.fs, purpose="state")  # where free runs start
+        form = WeakForm.of(ident)
+        z0s, v0s, _, _ = ident.states("state")  # where free runs start
         gain = known_input_gain(rec)
 
         # 1. the sparsity path on the fitting part; 2. each support refitted there and scored by

@@ -16,11 +16,19 @@ from typing import Any
 import numpy as np
 from scipy import optimize, signal
 
-from negstiff.models import Model, simulate_batch
-from negstiff.models.simulator import DEFAULT_SUBSTEPS, SimulationResult, stage_input
+from negstiff.errors import MeasurementError
+from negstiff.models import Model, simulate, simulate_batch
+from negstiff.models.simulator import (
+    DEFAULT_SUBSTEPS,
+    DEFAULT_V_LIMIT,
+    DEFAULT_Z_LIMIT,
+    SimulationResult,
+    input_gain,
+    stage_input,
+)
 
-from .derivatives import state_derivatives
-from .measurement import Measurement, MeasurementError
+from .frame import pin_frame
+from .measurement import Measurement
 
 
 def divergence_limits(z: np.ndarray, v: np.ndarray) -> dict[str, float]:
@@ -65,7 +73,7 @@ def simulate_record(system, rec: Measurement, x0, substeps: int | None = None, *
     system is fast for the sampling rate (``record_substeps``). The velocity is stored."""
     sub = record_substeps(system, rec) if substeps is None else int(substeps)
     if not limits and rec.z is not None:
-        _, vs, _, _ = state_derivatives(rec.z, rec.fs, purpose="state")
+        _, vs, _, _ = rec.states("state")
         limits = divergence_limits(rec.z, vs)
     return simulate_batch(system.kernel_params(), system.kind, stage_input(rec.u, sub), rec.dt,
                           np.asarray(x0, float), input_kind=rec.input_name, substeps=sub, staged=True,
@@ -82,7 +90,7 @@ def start_state(system, rec: Measurement, guess=None, periods: float = 2.0) -> t
     The window: ``periods`` periods of the system's median linearised frequency over the record's range
     (at least 16 samples). ``guess``: the start of the search (default: the smoothed state at sample 0).
     """
-    zs, vs, _, _ = state_derivatives(rec.z, rec.fs, purpose="state")
+    zs, vs, _, _ = rec.states("state")
     x0 = np.array([zs[0], vs[0]] if guess is None else guess, float)
     lo, hi = float(np.min(rec.z)), float(np.max(rec.z))
     with np.errstate(all="ignore"):
@@ -105,6 +113,33 @@ def start_state(system, rec: Measurement, guess=None, periods: float = 2.0) -> t
     return float(z0), float(v0)
 
 
+def simulate_measured(system, rec: Measurement, z0: float | None = None, v0: float | None = None,
+                      interpolation: str = "band-limited", substeps: int | None = None) -> SimulationResult:
+    """``system`` under ``rec``'s input (``negstiff simulate``): from (``z0``, ``v0``) where given, else from
+    the record's own start (``start_state``: the state whose free run matches its first periods; the
+    record's z pinned to the physical frame first where it was derived), else from rest at ``z_plus``
+    (an input-only record). Bounded by ten times the record's stroke and speed (``divergence_limits``; the
+    shaker defaults for an input-only record). ``interpolation``: the input between samples band-limited
+    (a record through an anti-aliasing filter) or ``"linear"`` (a piecewise-linear drive)."""
+    if interpolation not in ("band-limited", "linear"):
+        raise MeasurementError(f"interpolation is 'band-limited' or 'linear', got {interpolation!r}")
+    limits = {"z_limit": DEFAULT_Z_LIMIT, "v_limit": DEFAULT_V_LIMIT}
+    start = (None, 0.0)
+    if rec.z is not None:
+        rec = pin_frame(rec)
+        limits = divergence_limits(rec.z, rec.states("state")[1])
+        if z0 is None or v0 is None:
+            start = start_state(system, rec)
+    z0 = start[0] if z0 is None else z0
+    v0 = start[1] if v0 is None else v0
+    if z0 is None:
+        z0 = system.equilibria().z_plus
+    if interpolation == "linear":
+        return simulate(system, rec.u, rec.dt, z0=z0, v0=v0, input_kind=rec.input_name, substeps=substeps or 2,
+                        **limits)  # fmt: skip
+    return simulate_record(system, rec, (z0, v0), substeps=substeps, **limits)
+
+
 def staged_windows(system, rec: Measurement, starts: np.ndarray, length: int) -> tuple[np.ndarray, int]:
     """The input of windows [s, s + length) of ``rec`` at every stage time (rows for
     ``simulate_batch(..., staged=True)``) and the substeps they are staged for. The span the windows
@@ -119,7 +154,7 @@ def staged_windows(system, rec: Measurement, starts: np.ndarray, length: int) ->
 def free_run_rms(model: Model, rec: Measurement, skip: int = 0, x0=None) -> float:
     """rms of the free-run simulation error over ``rec`` (started at its measured state, or ``x0``),
     the first ``skip`` samples not scored (the benchmarks' transient); inf if the run diverged."""
-    zs, vs, _, _ = state_derivatives(rec.z, rec.fs, purpose="state")
+    zs, vs, _, _ = rec.states("state")
     if x0 is None:
         x0 = (zs[0], vs[0])
     res = simulate_record(model, rec, x0, **divergence_limits(rec.z, vs))
@@ -142,7 +177,7 @@ def validate(model: Model, rec: Measurement, start: int, window_s: float = 2.0) 
     if tail.n < 10:
         raise MeasurementError(f"{rec.source}: too few samples for the validation segment ({tail.n})")
     # the measured states free runs start from: the least-error velocity (derivatives.py)
-    zs, v, _, _ = state_derivatives(rec.z, rec.fs, purpose="state")
+    zs, v, _, _ = rec.states("state")
     sim = simulate_record(model, tail, (float(zs[start]), float(v[start])), **divergence_limits(rec.z, v))
     z_sim = sim.z[0]
     out: dict[str, Any] = {
@@ -216,7 +251,7 @@ def restarted_free_runs(
 
 def residual_psd(rec: Measurement, model: Model, start: int, window_s: float = 2.0):
     """PSD of the restarted free runs' residual over [start, end): (f, P)."""
-    zs, v, _, _ = state_derivatives(rec.z, rec.fs, purpose="state")
+    zs, v, _, _ = rec.states("state")
     w = int(round(window_s * rec.fs))
     starts = start + w * np.arange((rec.n - start) // w)
     U, sub = staged_windows(model, rec, starts, w)
@@ -289,7 +324,7 @@ def boundedness(system, rec: Measurement, margin: float = STROKE_MARGIN, input_m
     }
     diverged = False
     if free_run:
-        zs, vs, _, _ = state_derivatives(z, rec.fs, purpose="state")
+        zs, vs, _, _ = rec.states("state")
         scaled = dataclasses.replace(rec, u=input_margin * np.asarray(rec.u, float))
         res = simulate_record(system, scaled, (zs[0], vs[0]), **divergence_limits(z, vs))
         diverged = bool(res.diverged[0])
@@ -309,7 +344,6 @@ def boundedness(system, rec: Measurement, margin: float = STROKE_MARGIN, input_m
 
 def input_gain_of(input_kind: str, mass: float) -> float:
     """w in z'' = ... + w u for one model (``simulator.input_gain`` for a scalar mass)."""
-    from negstiff.models.simulator import input_gain
 
     return float(input_gain(input_kind, np.array([mass]))[0])
 

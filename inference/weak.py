@@ -41,10 +41,11 @@ from typing import Any
 import numpy as np
 from scipy import signal
 
+from negstiff.errors import MeasurementError
 from negstiff.models import Model, effects
 
-from .derivatives import noise_floor, state_derivatives
-from .measurement import Measurement, MeasurementError
+from .derivatives import noise_floor
+from .measurement import Measurement
 
 BASE_FIELDS = tuple(effects.BASE_TERMS)
 """The model file's base fields (k0, k1, k2, k3, c, c_nl), each a library term."""
@@ -147,10 +148,11 @@ class WeakForm:
     derivatives: dict[str, Any]
 
     @classmethod
-    def of(cls, z: np.ndarray, fs: float) -> WeakForm:
-        zs, v, _, deriv = state_derivatives(z, fs)
+    def of(cls, rec: Measurement) -> WeakForm:
+        """The weak form of ``rec`` (its regression states, computed once and kept with it)."""
+        zs, v, _, deriv = rec.states("regression")
         noise = deriv["velocity_noise_std"] if np.isfinite(deriv["velocity_noise_std"]) else 0.0
-        half, f_c = test_function_half_width(z, fs)
+        half, f_c = test_function_half_width(rec.z, rec.fs)
         return cls(zs, v, half, float(noise), f_c, deriv)
 
     @property
@@ -327,7 +329,7 @@ def input_coefficient(rec: Measurement, terms=("1", "z", "z^2", "z^3", "z^4", "z
     """The input's coefficient in z'' as the record's own weak-form least squares learns it, unconstrained
     (per unit mass): physics says -1 for a base acceleration in m/s^2 and 1/m for a force in N, so it
     checks the input's units and the mass (``plausibility``)."""
-    form = WeakForm.of(rec.z, rec.fs)
+    form = WeakForm.of(rec)
     return float(fit_support(form.system(rec), None, support=support_of(terms))[-1])
 
 
@@ -335,7 +337,7 @@ def weak_least_squares(rec: Measurement, terms, gain: float | None = None) -> Mo
     """The weak-form least-squares model of a fixed set of library ``terms`` over the whole record (no
     selection, no ensemble): the deterministic start point of the posterior and the discrepancy
     workflow's refits. The input's coefficient is fixed as in ``SINDy`` (or learned without a mass)."""
-    form = WeakForm.of(rec.z, rec.fs)
+    form = WeakForm.of(rec)
     g = known_input_gain(rec) if gain is None else gain
     support = support_of(terms)
     phys = fit_support(form.system(rec), g, support=support)

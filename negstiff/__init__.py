@@ -34,6 +34,7 @@ _EXPORTS = {
     "load": "negstiff.inference.measurement",
     "from_arrays": "negstiff.inference.measurement",
     "Measurement": "negstiff.inference.measurement",
+    "pin_frame": "negstiff.inference.frame",
     # the physics
     "Model": "negstiff.models.equation",
     "Device": "negstiff.models.device",
@@ -54,7 +55,7 @@ _EXPORTS = {
     "OutputError": "negstiff.errors",
     "NegstiffWarning": "negstiff.errors",
     "NotFittedError": "negstiff.errors",
-    "MeasurementError": "negstiff.inference.measurement",
+    "MeasurementError": "negstiff.errors",
 }
 
 __all__ = [*_EXPORTS, "__version__"]

@@ -19,6 +19,10 @@ class InputError(ValueError):
     """Bad input: one line naming the input and the problem (the command line's exit 2)."""
 
 
+class MeasurementError(InputError):
+    """Bad measurement input; the message is one line naming the file and the problem."""
+
+
 class OutputError(InputError):
     """An output cannot be written (disk full, name too long, not a regular file); nothing was left."""
 
@@ -49,3 +53,12 @@ class BoundednessWarning(NegstiffWarning):
 
 class ConvergenceWarning(NegstiffWarning):
     """A sampler or an optimiser that did not converge (R-hat, effective sample size, a diverged free run)."""
+
+
+def issue(lines) -> None:
+    """Each (category, text) through Python's ``warnings`` (a ``NegstiffWarning`` subclass): what a result
+    holds in its ``warnings``, said where a script sees it."""
+    import warnings
+
+    for category, text in lines:
+        warnings.warn(text, category, stacklevel=3)

@@ -136,10 +136,9 @@ def assert_predicts(model, record, reference, factor: float = 2.0, window_s: flo
 
 
 def _restarted_error(model, record, window_s: float) -> float:
-    from negstiff.inference.derivatives import state_derivatives
     from negstiff.inference.validation import restarted_free_runs
 
-    zs, v, _, _ = state_derivatives(np.asarray(record.z, float), record.fs, purpose="state")
+    zs, v, _, _ = record.states("state")
     runs = restarted_free_runs(model, record, 0, window_s, zs, v)
     if not runs:
         raise AssertionError(f"{record.source}: shorter than one {window_s:g} s window")

@@ -7,9 +7,10 @@ import pytest
 from scipy.integrate import solve_ivp
 
 from negstiff.cli import main
+from negstiff.errors import MeasurementError
 from negstiff.inference.characterize import CHAOS_THRESHOLD, characterize
 from negstiff.inference.lyapunov import largest_lyapunov
-from negstiff.inference.measurement import MeasurementError, from_arrays
+from negstiff.inference.measurement import from_arrays
 from negstiff.inference.periodicity import periodicity
 from negstiff.models import AS_BUILT, Model
 from negstiff.models.reference import lyapunov_benettin

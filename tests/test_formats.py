@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 
 from negstiff.cli import main
-from negstiff.inference.measurement import MeasurementError, load
+from negstiff.errors import MeasurementError
+from negstiff.inference.measurement import load
 from negstiff.models.device import SEED_LIKE_CUBIC
 from negstiff.models.rig import Rig
 

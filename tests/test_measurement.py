@@ -3,7 +3,9 @@
 import numpy as np
 import pytest
 
-from negstiff.inference.measurement import MeasurementError, load, parse_column_map
+from negstiff.errors import MeasurementError
+from negstiff.inference.measurement import load
+from negstiff.io.schema import parse_column_map
 
 SILVERBOX = "../shared/data/silverbox"
 
@@ -274,7 +276,7 @@ def test_mixed_decimal_marks_are_refused(tmp_path):
     ],
 )
 def test_unit_labels_as_exports_spell_them(label, column, factor):
-    from negstiff.inference.units import si_factor
+    from negstiff.io.schema import si_factor
 
     assert si_factor(label, column) == (None if factor is None else pytest.approx(factor))
 

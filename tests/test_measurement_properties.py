@@ -9,7 +9,9 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from scipy.io import savemat
 
-from negstiff.inference.measurement import KNOWN, Measurement, MeasurementError, load
+from negstiff.errors import MeasurementError
+from negstiff.inference.measurement import Measurement, load
+from negstiff.io.schema import KNOWN
 
 NAMES = st.sampled_from([*KNOWN, "V1", "V2", "time", "", "meta", "fs", "mass"])
 CELLS = st.one_of(
@@ -117,7 +119,7 @@ def test_the_bytes_route_reads_the_printed_digits_as_the_token_loop_does(tokens)
     """The time column's printed precision (decimals D, significant digits S) read on the tokens' bytes
     as one array is the per-token parse's, for every column it accepts (plain decimals); others go to
     the loop."""
-    from negstiff.inference.measurement import _plain_decimal_digits, _printed_digits
+    from negstiff.io.csv import _plain_decimal_digits, _printed_digits
 
     fast = _plain_decimal_digits(tokens)
     if fast is not None:

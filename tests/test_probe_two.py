@@ -368,7 +368,7 @@ def test_a_gigabyte_of_nul_bytes_after_a_valid_head_is_refused_without_reading_i
     import tracemalloc
 
     from negstiff import load
-    from negstiff.inference.measurement import MeasurementError
+    from negstiff.errors import MeasurementError
 
     f = tmp_path / "nul.csv"
     with open(f, "wb") as fh:

@@ -6,8 +6,9 @@ from conftest import SILVERBOX_TEST, silverbox_prediction_mv
 from scipy import signal
 
 from negstiff.cli import main
+from negstiff.errors import MeasurementError
 from negstiff.inference.derivatives import derivative_window, state_derivatives
-from negstiff.inference.measurement import MeasurementError, from_arrays
+from negstiff.inference.measurement import from_arrays
 from negstiff.inference.sindy import SINDy
 from negstiff.models import SEED_LIKE_CROSS_WELL_RMS, SEED_LIKE_CUBIC, simulate
 from negstiff.models.rig import Rig, Sensors
@@ -144,7 +145,7 @@ def test_library_columns_and_unpenalised_fit_match_pysindy():
     from negstiff.models import effects
 
     _, rec = _record(5, duration=20.0)
-    form = weak.WeakForm.of(rec.z, rec.fs)
+    form = weak.WeakForm.of(rec)
     lib = effects.library_terms()
     funcs = [(lambda law: lambda v, z: law.column(z, v, form.velocity_noise))(t.law) for t in lib]
     names = [(lambda label: lambda v, z: label)(t.label) for t in lib]

@@ -11,12 +11,12 @@ from typing import Any
 import numpy as np
 from scipy import optimize
 
+from negstiff.errors import MeasurementError, issue
 from negstiff.models import Model
 from negstiff.models.device import NOMINAL
 
 from ..estimator import Estimator
-from ..identification import issue
-from ..measurement import Measurement, MeasurementError
+from ..measurement import Measurement
 from ..parameters import SEED, Boolean, Instance, Interval, Options
 from ..plausibility import classified
 from .diagnostics import PosteriorResult, convergence_warnings, result_json, summarise

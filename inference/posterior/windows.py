@@ -7,10 +7,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from negstiff.errors import MeasurementError
 from negstiff.models import simulate_batch
 
-from ..derivatives import state_derivatives
-from ..measurement import Measurement, MeasurementError
+from ..measurement import Measurement
 
 COEFFICIENT_NAMES = ("k1", "k2", "k3", "c", "c_nl", "sigma")
 DEVICE_NAMES = ("E", "alpha_deg", "m", "c", "c_nl", "sigma")
@@ -75,7 +75,7 @@ class Windows:
         if max_windows is not None and n_win > max_windows:
             # evenly spread over the whole record (not its first part): every regime it visits is seen
             picks = np.unique(np.round(np.linspace(0, n_win - 1, max_windows)).astype(int))
-        zs, v, _, _ = state_derivatives(rec.z, rec.fs, purpose="state")
+        zs, v, _, _ = rec.states("state")
         starts = L * picks
         idx = starts[:, None] + np.arange(L)[None, :]
         q = int(oversample)

@@ -113,36 +113,14 @@ def write_campaign(rig, args) -> None:
 
 def cmd_simulate(args) -> int:
     from negstiff.files import atomic_path
-    from negstiff.inference.derivatives import state_derivatives
     from negstiff.inference.measurement import load
-    from negstiff.inference.validation import divergence_limits, simulate_record, start_state
-    from negstiff.models import simulate
-    from negstiff.models.simulator import DEFAULT_V_LIMIT, DEFAULT_Z_LIMIT
+    from negstiff.inference.validation import simulate_measured
 
     system = load_system(args.model)
     rec = load(args.input, columns=args.columns, fs=args.fs, response=False)
     rec.require(2, "a simulation")
     say(args, f"simulate: {rec.n} samples at {rec.fs:g} Hz under {rec.input_name}")
-    # the record's own start: the state whose free run matches its first periods (validation.start_state)
-    z0, v0 = (None, 0.0)
-    if rec.z is not None and (args.z0 is None or args.v0 is None):
-        z0, v0 = start_state(system, rec)
-    # a record with a response bounds the run by ten times its own stroke and speed (a benchmark in
-    # volts exceeds the shaker defaults' 100 m/s); an input-only record by the shaker defaults
-    limits = {"z_limit": DEFAULT_Z_LIMIT, "v_limit": DEFAULT_V_LIMIT}
-    if rec.z is not None:
-        limits = divergence_limits(rec.z, state_derivatives(rec.z, rec.fs, purpose="state")[1])
-    if args.z0 is not None:
-        z0 = args.z0
-    if args.v0 is not None:
-        v0 = args.v0
-    if z0 is None:
-        z0 = system.equilibria().z_plus
-    if args.interpolation == "linear":
-        res = simulate(system, rec.u, rec.dt, z0=z0, v0=v0, input_kind=rec.input_name, substeps=args.substeps or 2,
-                       **limits)  # fmt: skip
-    else:
-        res = simulate_record(system, rec, (z0, v0), substeps=args.substeps, **limits)
+    res = simulate_measured(system, rec, args.z0, args.v0, args.interpolation, args.substeps)
     if res.diverged[0]:
         raise InputError(f"simulation of {args.model} under {args.input} failed: {res.describe_failures()}")
     data = np.column_stack([rec.t, rec.u, res.z[0], res.z_dot[0]])

@@ -131,7 +131,7 @@ def mass_option():
 
 def acceleration_option(lo_open: bool = True):
     """A table acceleration [m/s^2] up to the magnitude of any shaker-table record (``units.MAGNITUDE_LIMITS``)."""
-    from negstiff.inference.units import MAGNITUDE_LIMITS
+    from negstiff.io.schema import MAGNITUDE_LIMITS
 
     return number(float, 0.0, MAGNITUDE_LIMITS["acceleration"], lo_open=lo_open, what=" m/s^2")
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from negstiff.inference.units import SAMPLING_RATE_RANGE_HZ
+from negstiff.io.schema import SAMPLING_RATE_RANGE_HZ
 from negstiff.models import effects
 
 from . import commands as c

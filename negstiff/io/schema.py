@@ -1,4 +1,8 @@
-"""Channel units: what a lab file's label says a channel is in, and its factor to the contract's SI units.
+"""The record schema: the contract's columns, their dimensions and SI units, the magnitudes no shaker-table
+record exceeds, the sampling rates a record may have, the column maps that name a foreign file's
+columns, and the channel units a label may state (one table, read by every reader and writer).
+
+Channel units: what a lab file's label says a channel is in, and its factor to the contract's SI units.
 
 A CSV header's ``z [mm]`` or a lab format's channel unit arrives as ``unit:<channel>`` metadata; a
 contract column under its own name is converted by it, or refused where the label is not a unit of the
@@ -14,9 +18,14 @@ from typing import Any
 
 import numpy as np
 
+from negstiff.errors import MeasurementError
 from negstiff.models.constants import STANDARD_GRAVITY
 
-from .measurement import MeasurementError
+INPUTS = ("base_acc", "force")
+OPTIONAL = ("z_dot", "y", "base_disp")
+RESPONSE_ONLY = ("y_dot", "y_acc")
+"""Response columns a record may hold instead of z (``sensors.RESPONSES``): z is derived from them."""
+KNOWN = ("t", *INPUTS, "z", *OPTIONAL, *RESPONSE_ONLY)
 
 UNITS = {
     "time": {"s": 1.0, "ms": 1e-3, "us": 1e-6},
@@ -38,6 +47,17 @@ DIMENSIONS = {
     "y_dot": "velocity",
 }
 """The dimension of each contract column."""
+SI_UNITS = {dim: next(iter(units)) for dim, units in UNITS.items()}
+"""The SI unit of each dimension (the first of ``UNITS``)."""
+
+
+def si_unit(column: str) -> str:
+    """The unit a column is written in: SI by its dimension, or g for an acceleration written as ``<name>_g``."""
+    if column.endswith("_g") and DIMENSIONS.get(column[:-2]) == "acceleration":
+        return "g"
+    return SI_UNITS[DIMENSIONS[column]] if column in DIMENSIONS else ""
+
+
 MAGNITUDE_LIMITS = {"time": 1e9, "length": 1e3, "velocity": 1e4, "acceleration": 1e7, "force": 1e9}
 """Beyond these magnitudes (s, m, m/s, m/s^2, N) no shaker-table record is in SI units: a value there is
 refused, never fed to the numerics (a 1e300-scale column overflows every product an identification forms)."""
@@ -109,3 +129,41 @@ def in_si(path: Path, cols: dict[str, np.ndarray], meta: dict[str, str], cmap: d
             channels.setdefault(src, {"unit": label, "sensitivity": None})["to_si"] = f
     info: dict[str, Any] = {"channels": channels} if channels else {}
     return out, info | ({"warnings": warns} if warns else {})
+
+
+_MAP_ENTRY = re.compile(r"^\s*(\w+)\s*=\s*([^*]+?)\s*(?:\*\s*([-+0-9.eE]+))?\s*$")
+
+
+def parse_column_map(text: str | None) -> dict[str, tuple[str, float]]:
+    """Parse ``name=SOURCE[*scale],...`` into ``{name: (SOURCE, scale)}``."""
+    if not text:
+        return {}
+    out: dict[str, tuple[str, float]] = {}
+    for entry in text.split(","):
+        m = _MAP_ENTRY.match(entry)
+        if not m:
+            raise MeasurementError(f"column map entry {entry!r} is not of the form name=COLUMN or name=COLUMN*scale")
+        name, src, scale = m.group(1), m.group(2).strip().strip('"'), m.group(3)
+        if name not in KNOWN:
+            raise MeasurementError(f"column map names {name!r}, which is not a measurement column ({', '.join(KNOWN)})")
+        try:
+            factor = 1.0 if scale is None else float(scale)
+        except ValueError:
+            raise MeasurementError(f"column map entry {entry!r}: scale {scale!r} is not a number") from None
+        if name in out:
+            raise MeasurementError(
+                f"column map names {name!r} twice ({out[name][0]!r} and {src!r}): which one is meant?"
+            )
+        out[name] = (src, factor)
+    return out
+
+
+UNIT_IN_NAME = re.compile(r"^(?P<name>.*?)\s*(?:\[(?P<square>[^\]]*)\]|\((?P<round>[^)]*)\))\s*$")
+"""A header entry with its unit: ``z [mm]`` or ``z (mm)``."""
+
+
+def header_name(src: str, raw: dict[str, np.ndarray]) -> str:
+    """A column map's source as the file's column name: the header's whole text ('Time [s]') names the
+    column its unit was split from ('Time')."""
+    m = UNIT_IN_NAME.match(src)
+    return m.group("name").strip() if src not in raw and m and m.group("name").strip() in raw else src
