@@ -20,12 +20,13 @@ an independent check of what NSI, SINDy and a refined model say (seed Eq. 4).
 from __future__ import annotations
 
 import math
-from typing import Any
+from typing import Any, Sequence
 
 import numpy as np
 from scipy import optimize, signal
 
 from negstiff.errors import MeasurementError, issue
+from negstiff.files import read_json
 
 from .measurement import Measurement
 from .plausibility import classified
@@ -190,3 +191,40 @@ def _frf(rec: Measurement, band: tuple[float, float] | None, segment_s: float) -
         "reason": None if top else "no resonance peak with coherence above 0.5 in the band",
         "_curves": est,
     }
+
+
+def read_frf_results(paths: Sequence[str] | None) -> list[tuple[str, float, str | None]]:
+    """(path, peak frequency [Hz], well) of each ``frf`` result file, checked (one ``MeasurementError``)."""
+    out = []
+    for p in paths or []:
+        try:
+            r = read_json(p)
+            f_frf, well = r["f_hz"], r.get("well")
+        except (ValueError, KeyError, TypeError, AttributeError):
+            raise MeasurementError(f"--frf {p}: not an frf result (needs f_hz)") from None
+        if not isinstance(f_frf, (int, float)) or isinstance(f_frf, bool):
+            raise MeasurementError(f"--frf {p}: the FRF found no peak to compare with (f_hz is {f_frf!r})")
+        out.append((p, float(f_frf), well))
+    return out
+
+
+def compare_with_frf(modal: dict, frfs: list[tuple[str, float, str | None]]) -> list[dict]:
+    """Each well's identified underlying-linear frequency (an identification's ``modal``) beside a low-level
+    FRF's (``read_frf_results``; ``identify --frf``): the FRF's well from its record's rest positions, else the
+    identified well of the nearest frequency."""
+    out = []
+    for p, f_frf, well in frfs:
+        modal = {w: m["f_hz"] for w, m in modal.items() if m.get("f_hz")}
+        if well not in modal:  # no rest positions in the FRF's record: the nearest well frequency
+            well = min(modal, key=lambda w: abs(modal[w] - f_frf)) if modal else None
+        f_id = modal.get(well)
+        out.append(
+            {
+                "frf": str(p),
+                "well": well,
+                "frf_f_hz": f_frf,
+                "identified_f_hz": f_id,
+                "difference_percent": None if f_id is None else 100 * (f_id / f_frf - 1),
+            }
+        )
+    return out

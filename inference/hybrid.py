@@ -28,99 +28,18 @@ import math
 from dataclasses import dataclass, field
 from typing import Any
 
-import numba
 import numpy as np
 from scipy import linalg
 
 from negstiff.errors import MeasurementError
 from negstiff.models import Model, effects
-from negstiff.models.kernel import JIT, KINDS, P_M, P_SIGN, force, member, monomials
+from negstiff.models.kernel import KINDS, P_M, kernel_with_term
 from negstiff.models.simulator import input_gain, stage_input
 
 from .measurement import Measurement
 from .refine import parameter_names, parameter_scales, with_values
 from .shooting import parameter_covariance, shooting_least_squares
 from .validation import divergence_limits, record_substeps, staged_windows
-
-
-@numba.njit(inline="always", **JIT)
-def _term(z, v, u, w, a, zc, vc, uc, iz, iv, iu, bz, bv):
-    """g(z, z', u): the tensor-product bumps' weighted sum (bz, bv: scratch for the 1-D bumps)."""
-    for i in range(zc.size):
-        d = (z - zc[i]) * iz
-        bz[i] = math.exp(-0.5 * d * d)
-    for j in range(vc.size):
-        d = (v - vc[j]) * iv
-        bv[j] = math.exp(-0.5 * d * d)
-    g = 0.0
-    for i in range(zc.size):
-        s = 0.0
-        for j in range(vc.size):
-            s += w[i, j] * bv[j]
-        g += s * bz[i]
-    for k in range(uc.size):
-        d = (u - uc[k]) * iu
-        g += a[k] * math.exp(-0.5 * d * d)
-    return g
-
-
-@numba.njit(**JIT)
-def _hybrid_integrate(kind, coulomb, p, mono, gain, u, dt, nsub, z0, v0, w, a, zc, vc, uc, iz, iv, iu, zl, vl, oz, ov):
-    """RK4 of each window b from (z0[b], v0[b]) under its staged input row u[b] (2 nsub (N-1) + 1
-    stage values); one physical parameter column ``p`` for all. Diverged windows turn NaN."""
-    nb, n = oz.shape[1], oz.shape[0]
-    q = member(p, 0, kind)
-    im = 1.0 / q[P_M]
-    h = dt / nsub
-    bz = np.empty(zc.size)
-    bv = np.empty(vc.size)
-    for b in range(nb):
-        z, v = z0[b], v0[b]
-        oz[0, b] = z
-        ov[0, b] = v
-        alive = True
-        for k in range(n - 1):
-            if alive:
-                for j in range(nsub):
-                    c = 2 * (k * nsub + j)
-                    ra, rm, rb = u[b, c], u[b, c + 1], u[b, c + 2]
-                    f1 = (
-                        force(kind, coulomb, z, v, q)
-                        + monomials(z, v, p, 0, mono)
-                        + _term(z, v, ra, w, a, zc, vc, uc, iz, iv, iu, bz, bv)
-                    )
-                    a1 = gain * ra - f1 * im
-                    z2 = z + 0.5 * h * v
-                    v2 = v + 0.5 * h * a1
-                    f2 = (
-                        force(kind, coulomb, z2, v2, q)
-                        + monomials(z2, v2, p, 0, mono)
-                        + _term(z2, v2, rm, w, a, zc, vc, uc, iz, iv, iu, bz, bv)
-                    )
-                    a2 = gain * rm - f2 * im
-                    z3 = z + 0.5 * h * v2
-                    v3 = v + 0.5 * h * a2
-                    f3 = (
-                        force(kind, coulomb, z3, v3, q)
-                        + monomials(z3, v3, p, 0, mono)
-                        + _term(z3, v3, rm, w, a, zc, vc, uc, iz, iv, iu, bz, bv)
-                    )
-                    a3 = gain * rm - f3 * im
-                    z4 = z + h * v3
-                    v4 = v + h * a3
-                    f4 = (
-                        force(kind, coulomb, z4, v4, q)
-                        + monomials(z4, v4, p, 0, mono)
-                        + _term(z4, v4, rb, w, a, zc, vc, uc, iz, iv, iu, bz, bv)
-                    )
-                    a4 = gain * rb - f4 * im
-                    z = z + h / 6.0 * (v + 2.0 * v2 + 2.0 * v3 + v4)
-                    v = v + h / 6.0 * (a1 + 2.0 * a2 + 2.0 * a3 + a4)
-                if not (abs(z) < zl and abs(v) < vl):
-                    alive = False
-            oz[k + 1, b] = z if alive else math.nan
-            ov[k + 1, b] = v if alive else math.nan
-    return 0
 
 
 @dataclass(frozen=True)
@@ -193,18 +112,20 @@ def simulate_hybrid(
 ) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
     """Free runs of physics + g from the start states ``x0`` (B, 2) under staged input rows (B, S);
     returns z and z' (N, B), NaN after a divergence."""
-    u2 = np.atleast_2d(np.asarray(u_staged, float))
+    u2 = np.ascontiguousarray(np.atleast_2d(np.asarray(u_staged, float)))
     x0 = np.atleast_2d(np.asarray(x0, float))
-    p = model.kernel_params()[:, None]
+    nb = x0.shape[0]
+    p = np.ascontiguousarray(np.repeat(model.kernel_params()[:, None], nb, axis=1))
     n = (u2.shape[1] - 1) // (2 * substeps) + 1
-    oz, ov = np.empty((n, x0.shape[0])), np.empty((n, x0.shape[0]))
+    oz, ov = np.empty((n, nb)), np.empty((n, nb))
     w, a = basis.split(np.asarray(theta, float))
-    _hybrid_integrate(
-        KINDS[model.kind], bool(p[P_SIGN, 0] != 0.0), np.ascontiguousarray(p), effects.layout().monomials,
-        float(input_gain(input_kind, p[P_M])[0]),
-        np.ascontiguousarray(u2), float(dt), int(substeps), np.ascontiguousarray(x0[:, 0]),
-        np.ascontiguousarray(x0[:, 1]), w, a, basis.zc, basis.vc, basis.uc, 1.0 / basis.wz, 1.0 / basis.wv,
-        1.0 / basis.wu, float(z_limit), float(v_limit), oz, ov,
+    # the simulator's own Runge-Kutta loop, with g as its extra force (``kernel.extra_term``)
+    kernel_with_term(KINDS[model.kind])(
+        p, effects.layout().monomials, input_gain(input_kind, p[P_M]), u2, np.arange(nb), float(dt),
+        int(substeps), np.ascontiguousarray(x0[:, 0]), np.ascontiguousarray(x0[:, 1]), float(z_limit),
+        float(v_limit), oz, ov, True, np.zeros(nb, dtype=np.int64), np.full(nb, -1, dtype=np.int64),
+        np.ascontiguousarray(w), np.ascontiguousarray(a), basis.zc, basis.vc, basis.uc, 1.0 / basis.wz,
+        1.0 / basis.wv, 1.0 / basis.wu,
     )  # fmt: skip
     return oz, ov
 

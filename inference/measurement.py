@@ -27,6 +27,7 @@ from negstiff.io.schema import (
     INPUTS,
     KNOWN,
     MAGNITUDE_LIMITS,
+    MASS_RANGE_KG,
     OPTIONAL,
     SAMPLING_RATE_RANGE_HZ,
     UNITS,
@@ -182,8 +183,7 @@ class Measurement:
             )
 
 
-MASS_RANGE_KG = (1e-9, 1e9)
-"""Moving masses [kg] a record may state: a microgram MEMS proof mass to a building's storey."""
+
 
 
 def _constant(x: np.ndarray) -> bool:

@@ -27,8 +27,6 @@ import numpy as np
 
 from negstiff.errors import InputError
 from negstiff.models import NOMINAL, Device
-from negstiff.models.constants import G
-from negstiff.models.device import rod_geometry
 
 from .estimator import Estimator
 from .parameters import SEED, Instance, Interval, Options
@@ -223,12 +221,8 @@ class GAUpdater(Estimator):
         if stroke is None:
             feats = [dict(zip(("f_minus", "f_plus", "z_minus", "z_plus"), row)) for row in F]
             return np.array([fitness(f, targets) if good else PENALTY for f, good in zip(feats, ok)])
-        ca, sa = np.cos(np.radians(X[:, 1]))[:, None], np.sin(np.radians(X[:, 1]))[:, None]
-        reach = (stroke > -s.L * ca / (1 - sa)) & (stroke < s.L * ca / (1 + sa))
-        with np.errstate(invalid="ignore"):
-            g, g1, _ = rod_geometry(stroke, s.L, ca, sa, second=False)
-        kf = (3 * X[:, 0] * (s.b * s.h**3 / 12) / s.l**3)[:, None]
-        k = (2 * kf * (g + s.D0) * g1 + (m * G)[:, None]) / m[:, None]
+        force, reach = s.restoring_force_many(stroke, X[:, 0], X[:, 1], m)
+        k = force / m[:, None]
         mismatch = 100 * np.sqrt(np.mean((k - k_id) ** 2, axis=1)) / np.std(k_id)
         return np.where(ok & reach.all(axis=1), mismatch, PENALTY)
 

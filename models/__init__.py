@@ -16,6 +16,7 @@ _EXPORTS = {
     "SEED_LIKE_CUBIC": "device",
     "Device": "device",
     "GeometryError": "device",
+    "load_system": "device",
     "Model": "equation",
     "Equilibria": "equation",
     "Rig": "rig",

@@ -48,6 +48,12 @@ class GeometryError(InputError):
     """A displacement outside the range where the rod-frame geometry has a solution."""
 
 
+def arm_stiffness(E, b: float, h: float, l: float):  # noqa: E741 - the arm's free length, as in device-model.md
+    """Tip stiffness of one arm of the frame, 3 E I / l^3 with I = b h^3 / 12 [N/m] (E [Pa], a number or an
+    array; b, h, l [m]): the one place the frame's linear stiffness is written."""
+    return 3 * E * (b * h**3 / 12) / l**3
+
+
 def rod_geometry(z, L: float, ca, sa, second: bool = True):
     """s(z), s'(z), s''(z) of the rod-frame geometry for a frame of length L at angle alpha (ca, sa: its
     cosine and sine; arrays broadcast against z); s'' None without ``second``."""
@@ -123,8 +129,18 @@ class Device:
 
     @property
     def k_f(self) -> float:
-        """Tip stiffness of one arm, 3 E I / l^3 with I = b h^3 / 12 [N/m]."""
-        return 3 * self.E * (self.b * self.h**3 / 12) / self.l**3
+        """Tip stiffness of one arm [N/m] (``arm_stiffness``)."""
+        return arm_stiffness(self.E, self.b, self.h, self.l)
+
+    def restoring_force_many(self, z, E, alpha_deg, m) -> tuple[np.ndarray, np.ndarray]:
+        """K(z) [N] of this device with (E, alpha_deg, m) replaced by each of n triples, at once: (n, len(z)),
+        and where each device reaches z (the geometry has a solution); no extra effects."""
+        ca, sa = np.cos(np.radians(alpha_deg))[:, None], np.sin(np.radians(alpha_deg))[:, None]
+        reach = (z > -self.L * ca / (1 - sa)) & (z < self.L * ca / (1 + sa))
+        with np.errstate(invalid="ignore"):
+            g, g1, _ = rod_geometry(z, self.L, ca, sa, second=False)
+        kf = arm_stiffness(E, self.b, self.h, self.l)[:, None]
+        return 2 * kf * (g + self.D0) * g1 + (m * G)[:, None], reach
 
     def stroke_limits(self) -> tuple[float, float]:
         """Open interval of z [m] in which the geometry has a solution (B^2 > z^2)."""
@@ -228,7 +244,7 @@ class Device:
             raise ValueError("features_many: a device with extra effects takes features() one by one")
         E, a, m = (np.asarray(x, float) for x in np.broadcast_arrays(E, alpha_deg, m))
         ca, sa = np.cos(np.radians(a))[:, None], np.sin(np.radians(a))[:, None]
-        kf = (3 * E * (self.b * self.h**3 / 12) / self.l**3)[:, None]
+        kf = arm_stiffness(E, self.b, self.h, self.l)[:, None]
         mg = (m * G)[:, None]
         lo, hi = -self.L * ca[:, 0] / (1 - sa[:, 0]), self.L * ca[:, 0] / (1 + sa[:, 0])
         span = hi - lo
@@ -428,3 +444,26 @@ over 60 s on 3 seeds; at 22-24 m/s^2 chaos pushes the floor to 13 % on some reco
 def _rebuild(cls, values):
     """``__reduce__``'s inverse: the class built from its fields (validated again)."""
     return cls(**values)
+
+
+def load_system(path) -> Device | Model:
+    """A model file (the contract's polynomial model JSON, or an ``identify`` result holding one as
+    ``model``) or a device file (the geometry: ``E``, ``alpha_deg``, ...), checked: one ``GeometryError``
+    line naming the file for anything that is not one."""
+    from pathlib import Path
+
+    from negstiff.files import read_json
+
+    path = Path(path)
+    try:
+        d = read_json(path, "model file")
+    except ValueError as exc:
+        raise GeometryError(str(exc)) from None
+    if isinstance(d, dict) and isinstance(d.get("model"), dict):  # an identify result holds a model
+        d = d["model"]
+    if not isinstance(d, dict):
+        raise GeometryError(f"{path}: a model file is a JSON object")
+    try:
+        return Device.from_dict(d) if "E" in d else Model.from_dict(d)
+    except (KeyError, TypeError, ValueError) as exc:
+        raise GeometryError(f"{path}: {' '.join(str(exc).split())}") from None

@@ -82,6 +82,28 @@ def total_force(kind, coulomb, generic, z, v, q, p, b, mono):
 
 
 @numba.njit(inline="always", **JIT)
+def extra_term(z, v, u, w, a, zc, vc, uc, iz, iv, iu, bz, bv):
+    """The extra force hook: g(z, z', u), a weighted sum of tensor-product Gaussian bumps over (z, z') and of
+    bumps over u (the hybrid model's non-parametric term, ``inference.hybrid``; bz, bv: scratch)."""
+    for i in range(zc.size):
+        d = (z - zc[i]) * iz
+        bz[i] = math.exp(-0.5 * d * d)
+    for j in range(vc.size):
+        d = (v - vc[j]) * iv
+        bv[j] = math.exp(-0.5 * d * d)
+    g = 0.0
+    for i in range(zc.size):
+        s = 0.0
+        for j in range(vc.size):
+            s += w[i, j] * bv[j]
+        g += s * bz[i]
+    for k in range(uc.size):
+        d = (u - uc[k]) * iu
+        g += a[k] * math.exp(-0.5 * d * d)
+    return g
+
+
+@numba.njit(inline="always", **JIT)
 def member(p, b, kind):
     """Parameter tuple of member b, with the device's angle rows turned into L cos(a), sin(a)."""
     q = (
@@ -113,6 +135,7 @@ def _integrate(
     kind,
     coulomb,
     generic,
+    extra,
     p,
     mono,
     gain,
@@ -129,12 +152,22 @@ def _integrate(
     store_v,
     status,
     fail_step,
+    hw,
+    ha,
+    hzc,
+    hvc,
+    huc,
+    hiz,
+    hiv,
+    hiu,
 ):
-    """RK4 over the N sample intervals of each member's input row ``u[uidx[b]]``; outputs time-major.
+    """RK4 over the N sample intervals of each member's input row ``u[uidx[b]]``; outputs time-major. The
+    package's one Runge-Kutta stage loop: every simulation of negstiff runs here.
 
     ``out_z.shape[0]`` is N + 1 output samples. The input row holds either the N + 1 samples (linearly
     interpolated inside each interval) or, when it has 2 ``nsub`` N + 1 columns, the input at every
-    Runge-Kutta stage time (``stage_input``), read as it is."""
+    Runge-Kutta stage time (``stage_input``), read as it is. ``extra`` (a staged input) adds the hook
+    ``extra_term`` with its weights and bumps (``hw`` ... ``hiu``) to every member's force."""
     nb = p.shape[1]
     n = out_z.shape[0]
     staged = u.shape[1] != n
@@ -146,6 +179,11 @@ def _integrate(
     wa = np.empty(nb)
     wm = np.empty(nb)
     wb = np.empty(nb)
+    ra = np.empty(nb)
+    rm = np.empty(nb)
+    rb = np.empty(nb)
+    bz = np.empty(hzc.size)
+    bv = np.empty(hvc.size)
     alive = np.ones(nb, dtype=np.bool_)
     for b in range(nb):
         out_z[0, b] = z[b]
@@ -160,9 +198,12 @@ def _integrate(
             if staged:  # the input at the step's start, midpoint and end
                 c = 2 * (k * nsub + j)
                 for b in range(nb):
-                    wa[b] = gain[b] * u[uidx[b], c]
-                    wm[b] = gain[b] * u[uidx[b], c + 1]
-                    wb[b] = gain[b] * u[uidx[b], c + 2]
+                    ra[b] = u[uidx[b], c]
+                    rm[b] = u[uidx[b], c + 1]
+                    rb[b] = u[uidx[b], c + 2]
+                    wa[b] = gain[b] * ra[b]
+                    wm[b] = gain[b] * rm[b]
+                    wb[b] = gain[b] * rb[b]
             else:
                 fa = j / nsub
                 fm = (j + 0.5) / nsub
@@ -177,16 +218,28 @@ def _integrate(
                 im = 1.0 / q[P_M]
                 zb = z[b]
                 vb = v[b]
-                a1 = wa[b] - total_force(kind, coulomb, generic, zb, vb, q, p, b, mono) * im
+                f1 = total_force(kind, coulomb, generic, zb, vb, q, p, b, mono)
+                if extra:
+                    f1 += extra_term(zb, vb, ra[b], hw, ha, hzc, hvc, huc, hiz, hiv, hiu, bz, bv)
+                a1 = wa[b] - f1 * im
                 z2 = zb + 0.5 * h * vb
                 v2 = vb + 0.5 * h * a1
-                a2 = wm[b] - total_force(kind, coulomb, generic, z2, v2, q, p, b, mono) * im
+                f2 = total_force(kind, coulomb, generic, z2, v2, q, p, b, mono)
+                if extra:
+                    f2 += extra_term(z2, v2, rm[b], hw, ha, hzc, hvc, huc, hiz, hiv, hiu, bz, bv)
+                a2 = wm[b] - f2 * im
                 z3 = zb + 0.5 * h * v2
                 v3 = vb + 0.5 * h * a2
-                a3 = wm[b] - total_force(kind, coulomb, generic, z3, v3, q, p, b, mono) * im
+                f3 = total_force(kind, coulomb, generic, z3, v3, q, p, b, mono)
+                if extra:
+                    f3 += extra_term(z3, v3, rm[b], hw, ha, hzc, hvc, huc, hiz, hiv, hiu, bz, bv)
+                a3 = wm[b] - f3 * im
                 z4 = zb + h * v3
                 v4 = vb + h * a3
-                a4 = wb[b] - total_force(kind, coulomb, generic, z4, v4, q, p, b, mono) * im
+                f4 = total_force(kind, coulomb, generic, z4, v4, q, p, b, mono)
+                if extra:
+                    f4 += extra_term(z4, v4, rb[b], hw, ha, hzc, hvc, huc, hiz, hiv, hiu, bz, bv)
+                a4 = wb[b] - f4 * im
                 z[b] = zb + h / 6.0 * (vb + 2.0 * v2 + 2.0 * v3 + v4)
                 v[b] = vb + h / 6.0 * (a1 + 2.0 * a2 + 2.0 * a3 + a4)
         for b in range(nb):
@@ -203,45 +256,68 @@ def _integrate(
     return 0
 
 
+_NO_W = np.zeros((0, 0))
+_NO_V = np.zeros(0)
+"""The extra force hook's arguments in the kernels without it: empty, never read (``extra`` is False)."""
+
 # One compiled kernel per (restoring-force kind, smoothed sign present, extra monomials present): the
 # flags are constants inside each, so the batch loop has no data-dependent branches. (A factory of
 # closures would repeat less, but numba's on-disk cache cannot tell such closures apart.)
 # fmt: off
 @numba.njit(**JIT)
 def _kernel_poly(p, mono, gain, u, uidx, dt, nsub, z0, v0, zl, vl, oz, ov, sv, st, fs):
-    return _integrate(KIND_POLYNOMIAL, False, False, p, mono, gain, u, uidx, dt, nsub,
-                      z0, v0, zl, vl, oz, ov, sv, st, fs)
+    return _integrate(KIND_POLYNOMIAL, False, False, False, p, mono, gain, u, uidx, dt, nsub,
+                      z0, v0, zl, vl, oz, ov, sv, st, fs, _NO_W, _NO_V, _NO_V, _NO_V, _NO_V, 1.0, 1.0, 1.0)
 
 
 @numba.njit(**JIT)
 def _kernel_poly_sign(p, mono, gain, u, uidx, dt, nsub, z0, v0, zl, vl, oz, ov, sv, st, fs):
-    return _integrate(KIND_POLYNOMIAL, True, False, p, mono, gain, u, uidx, dt, nsub,
-                      z0, v0, zl, vl, oz, ov, sv, st, fs)
+    return _integrate(KIND_POLYNOMIAL, True, False, False, p, mono, gain, u, uidx, dt, nsub,
+                      z0, v0, zl, vl, oz, ov, sv, st, fs, _NO_W, _NO_V, _NO_V, _NO_V, _NO_V, 1.0, 1.0, 1.0)
 
 
 @numba.njit(**JIT)
 def _kernel_device(p, mono, gain, u, uidx, dt, nsub, z0, v0, zl, vl, oz, ov, sv, st, fs):
-    return _integrate(KIND_DEVICE, False, False, p, mono, gain, u, uidx, dt, nsub,
-                      z0, v0, zl, vl, oz, ov, sv, st, fs)
+    return _integrate(KIND_DEVICE, False, False, False, p, mono, gain, u, uidx, dt, nsub,
+                      z0, v0, zl, vl, oz, ov, sv, st, fs, _NO_W, _NO_V, _NO_V, _NO_V, _NO_V, 1.0, 1.0, 1.0)
 
 
 @numba.njit(**JIT)
 def _kernel_device_sign(p, mono, gain, u, uidx, dt, nsub, z0, v0, zl, vl, oz, ov, sv, st, fs):
-    return _integrate(KIND_DEVICE, True, False, p, mono, gain, u, uidx, dt, nsub,
-                      z0, v0, zl, vl, oz, ov, sv, st, fs)
+    return _integrate(KIND_DEVICE, True, False, False, p, mono, gain, u, uidx, dt, nsub,
+                      z0, v0, zl, vl, oz, ov, sv, st, fs, _NO_W, _NO_V, _NO_V, _NO_V, _NO_V, 1.0, 1.0, 1.0)
 
 
 @numba.njit(**JIT)
 def _kernel_poly_generic(p, mono, gain, u, uidx, dt, nsub, z0, v0, zl, vl, oz, ov, sv, st, fs):
-    return _integrate(KIND_POLYNOMIAL, True, True, p, mono, gain, u, uidx, dt, nsub,
-                      z0, v0, zl, vl, oz, ov, sv, st, fs)
+    return _integrate(KIND_POLYNOMIAL, True, True, False, p, mono, gain, u, uidx, dt, nsub,
+                      z0, v0, zl, vl, oz, ov, sv, st, fs, _NO_W, _NO_V, _NO_V, _NO_V, _NO_V, 1.0, 1.0, 1.0)
 
 
 @numba.njit(**JIT)
 def _kernel_device_generic(p, mono, gain, u, uidx, dt, nsub, z0, v0, zl, vl, oz, ov, sv, st, fs):
-    return _integrate(KIND_DEVICE, True, True, p, mono, gain, u, uidx, dt, nsub,
-                      z0, v0, zl, vl, oz, ov, sv, st, fs)
+    return _integrate(KIND_DEVICE, True, True, False, p, mono, gain, u, uidx, dt, nsub,
+                      z0, v0, zl, vl, oz, ov, sv, st, fs, _NO_W, _NO_V, _NO_V, _NO_V, _NO_V, 1.0, 1.0, 1.0)
+
+
+@numba.njit(**JIT)
+def _kernel_poly_extra(p, mono, gain, u, uidx, dt, nsub, z0, v0, zl, vl, oz, ov, sv, st, fs, hw, ha, hzc, hvc, huc,
+                       hiz, hiv, hiu):
+    return _integrate(KIND_POLYNOMIAL, True, True, True, p, mono, gain, u, uidx, dt, nsub,
+                      z0, v0, zl, vl, oz, ov, sv, st, fs, hw, ha, hzc, hvc, huc, hiz, hiv, hiu)
+
+
+@numba.njit(**JIT)
+def _kernel_device_extra(p, mono, gain, u, uidx, dt, nsub, z0, v0, zl, vl, oz, ov, sv, st, fs, hw, ha, hzc, hvc,
+                         huc, hiz, hiv, hiu):
+    return _integrate(KIND_DEVICE, True, True, True, p, mono, gain, u, uidx, dt, nsub,
+                      z0, v0, zl, vl, oz, ov, sv, st, fs, hw, ha, hzc, hvc, huc, hiz, hiv, hiu)
 # fmt: on
+
+
+def kernel_with_term(kind: int):
+    """The compiled kernel with the extra force hook (``extra_term``), for a restoring-force kind."""
+    return _kernel_poly_extra if kind == KIND_POLYNOMIAL else _kernel_device_extra
 
 
 def kernel(kind: int, p: np.ndarray, mono: np.ndarray):

@@ -38,6 +38,7 @@ _EXPORTS = {
     # the physics
     "Model": "negstiff.models.equation",
     "Device": "negstiff.models.device",
+    "load_system": "negstiff.models.device",
     "simulate": "negstiff.models.simulator",
     "Rig": "negstiff.models.rig",
     "nfrc": "negstiff.models.continuation",

@@ -18,7 +18,7 @@ from typing import Sequence
 
 from negstiff.files import transaction
 
-from .common import InputError, bad_input_types, check_paths, load_system, write_json  # noqa: F401 (API)
+from .common import InputError, bad_input_types, check_paths, write_json  # noqa: F401 (API)
 from .parser import build_parser
 
 

@@ -7,14 +7,12 @@ import dataclasses
 import json
 import sys
 from pathlib import Path
-from typing import Any, Sequence
 
 import numpy as np
 
 from .common import (
     InputError,
     export_options,
-    load_system,
     out_path,
     parse_amplitudes,
     parse_band,
@@ -29,7 +27,7 @@ from .common import (
 
 
 def make_rig(args):
-    from negstiff.models.device import AS_BUILT
+    from negstiff.models.device import AS_BUILT, load_system
     from negstiff.models.records import RigError
     from negstiff.models.rig import Rig, Sensors
 
@@ -115,6 +113,7 @@ def cmd_simulate(args) -> int:
     from negstiff.files import atomic_path
     from negstiff.inference.measurement import load
     from negstiff.inference.validation import simulate_measured
+    from negstiff.models.device import load_system
 
     system = load_system(args.model)
     rec = load(args.input, columns=args.columns, fs=args.fs, response=False)
@@ -131,6 +130,7 @@ def cmd_simulate(args) -> int:
 
 
 def cmd_identify(args) -> int:
+    from negstiff.inference.frf import compare_with_frf, read_frf_results
     from negstiff.inference.measurement import load
 
     rec = load(args.data, columns=args.columns, fs=args.fs, mass=args.mass)
@@ -148,7 +148,7 @@ def cmd_identify(args) -> int:
     est.fit(rec)
     result = est.result()
     if args.frf:
-        result["frf_comparison"] = frf_comparison(result, frfs)
+        result["frf_comparison"] = compare_with_frf(result["modal"], frfs)
         for c in result["frf_comparison"]:
             say(args, f"{c['well']} well: identified {c['identified_f_hz']:.4f} Hz, FRF {c['frf_f_hz']:.4f} Hz "
                        f"({c['difference_percent']:+.2f} %)")  # fmt: skip
@@ -171,6 +171,7 @@ def cmd_posterior(args) -> int:
     from negstiff.inference.measurement import load
     from negstiff.inference.posterior import Posterior
     from negstiff.models import Model
+    from negstiff.models.device import load_system
 
     start = None
     if args.start is not None:
@@ -288,6 +289,7 @@ def cmd_characterize(args) -> int:
 
 
 def cmd_frf(args) -> int:
+    from negstiff.experiments.frf import figure as frf_figure
     from negstiff.inference.frf import check_frf, frf
     from negstiff.inference.measurement import load
 
@@ -299,25 +301,7 @@ def cmd_frf(args) -> int:
     say(args, f"frf: {rec.n} samples at {rec.fs:g} Hz, input {rec.input_name}")
     res = frf(rec, band=band, segment_s=args.segment)
     curves = res.pop("_curves")
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    f = curves["f"]
-    sel = (f >= res["band"][0]) & (f <= res["band"][1])
-    fig, (a1, a2) = plt.subplots(2, 1, figsize=(8, 6), sharex=True, height_ratios=[3, 1])
-    a1.semilogy(f[sel], np.abs(curves["H1"][sel]), label="H1")
-    a1.semilogy(f[sel], np.abs(curves["H2"][sel]), "--", label="H2")
-    for p in res["peaks"]:
-        a1.axvline(p["f_hz"], color="0.6", lw=0.8)
-        a1.annotate(f"{p['f_hz']:.3f} Hz, zeta {100 * p['zeta']:.2f} %", (p["f_hz"], np.abs(curves["H1"][sel]).max()),
-                    fontsize=8, ha="left", va="top")  # fmt: skip
-    a1.set(ylabel=f"|z / {rec.input_name}|", title=f"FRF of {Path(args.data).name}")
-    a1.legend()
-    a2.plot(f[sel], curves["coherence"][sel])
-    a2.set(xlabel="frequency [Hz]", ylabel="coherence", ylim=(0, 1.05))
-    fig.tight_layout()
+    fig = frf_figure(res, curves, rec.input_name, f"FRF of {Path(args.data).name}")
     res["figure"] = write_figure(fig, args.out)
     write_json(args.out, res)
     warn(args, res["warnings"])
@@ -329,6 +313,7 @@ def cmd_frf(args) -> int:
 def cmd_nfrc(args) -> int:
     from negstiff.experiments.nfrc import figure
     from negstiff.models.continuation import check_nfrc, nfrc
+    from negstiff.models.device import load_system
 
     system = load_system(args.model)
     freq, amplitude = parse_span(args.freq, "--freq"), parse_span(args.amplitude, "--amplitude")
@@ -348,91 +333,17 @@ def cmd_nfrc(args) -> int:
     return 0
 
 
-def read_frf_results(paths: Sequence[str] | None) -> list[tuple[str, float, str | None]]:
-    """(path, peak frequency [Hz], well) of each ``--frf`` result, checked before any work."""
-    from negstiff.files import read_json
-
-    out = []
-    for p in paths or []:
-        try:
-            r = read_json(p)
-            f_frf, well = r["f_hz"], r.get("well")
-        except (ValueError, KeyError, TypeError, AttributeError):
-            raise InputError(f"--frf {p}: not an frf result (needs f_hz)") from None
-        if not isinstance(f_frf, (int, float)) or isinstance(f_frf, bool):
-            raise InputError(f"--frf {p}: the FRF found no peak to compare with (f_hz is {f_frf!r})")
-        out.append((p, float(f_frf), well))
-    return out
-
-
-def frf_comparison(result: dict, frfs: list[tuple[str, float, str | None]]) -> list[dict]:
-    """Each well's identified underlying-linear frequency beside a low-level FRF's (``--frf``)."""
-    out = []
-    for p, f_frf, well in frfs:
-        modal = {w: m["f_hz"] for w, m in result["modal"].items() if m.get("f_hz")}
-        if well not in modal:  # no rest positions in the FRF's record: the nearest well frequency
-            well = min(modal, key=lambda w: abs(modal[w] - f_frf)) if modal else None
-        f_id = modal.get(well)
-        out.append(
-            {
-                "frf": str(p),
-                "well": well,
-                "frf_f_hz": f_frf,
-                "identified_f_hz": f_id,
-                "difference_percent": None if f_id is None else 100 * (f_id / f_frf - 1),
-            }
-        )
-    return out
-
-
 def cmd_map(args) -> int:
     from negstiff.experiments.characterization import map_figure
-    from negstiff.inference.characterize import check_harmonic, first_period_2, jump, map_point, map_sequence
-    from negstiff.inference.measurement import load
-
-    from .campaign import campaign_records, continuation_vs_map, forcing_frequencies, read_nfrc_results
+    from negstiff.inference.campaign import Campaign
 
     given = parse_wells(args.wells)  # the options, and every input read and checked, before any analysis
-    entries = campaign_records(args.data)
-    recs = [load(e["file"], columns=args.columns, fs=args.fs) for e in entries]
-    freqs = forcing_frequencies(entries, recs, args.forcing_hz)
-    axis = "f_hz" if max(freqs) / min(freqs) - 1 > 1e-9 else "amplitude"  # the campaign steps f, or A at one f
-    overlays = read_nfrc_results(args.nfrc, axis, freqs[0])
-    for e, rec, f in zip(entries, recs, freqs):
-        if not f < rec.fs / 2:
-            raise InputError(
-                f"{e['file']}: its forcing frequency {f:g} Hz is above its Nyquist frequency {rec.fs / 2:g} Hz"
-            )
-        if rec.input_name != recs[0].input_name:
-            raise InputError(
-                f"{e['file']}: input {rec.input_name}, the campaign's first record's: {recs[0].input_name}"
-            )
-        check_harmonic(rec, f)
-    rests = (r.rest_positions for r in recs)
-    wells = given or next(((w["minus"], w["plus"]) for w in rests if len(w) == 2), None)
-    say(args, f"map: {len(recs)} record(s), " + ("stepped in frequency" if axis == "f_hz" else f"at {freqs[0]:g} Hz"))
-    points = []
-    for e, rec, f in zip(entries, recs, freqs):
-        points.append({**e, "f_hz": f, **map_point(rec, f, wells)})
-        p = points[-1]
-        say(args, f"  {Path(e['file']).name}: {f:g} Hz, amplitude {p['amplitude']:.4g}, period {p['period']}")
-    sweeps: dict[str, Any] = {}
-    for p in points:
-        sweeps.setdefault(" ".join(x for x in (p["start"], p["direction"]) if x) or "records", []).append(p)
-    summary = {"sequence": map_sequence, "first_period_2": first_period_2} if axis == "amplitude" else {
-        "sequence": lambda v: map_sequence(v, "f_hz"), "jump_hz": jump}  # fmt: skip
-    res: dict[str, Any] = {
-        "axis": axis,
-        "forcing_hz": freqs[0] if axis == "amplitude" else None,
-        "input": recs[0].input_name,
-        "wells_used": wells,
-        "points": points,
-        "sweeps": {k: {name: fn(v) for name, fn in summary.items()} for k, v in sweeps.items()},
-        "continuations": [continuation_vs_map(o, points, axis) for o in overlays],
-        "warnings": _map_warnings(points, overlays, axis, wells),
-    }
-    res["figure"] = write_figure(map_figure(points, overlays, "m/s^2" if res["input"] == "base_acc" else "N", axis),
-                                 args.out)  # fmt: skip
+    campaign = Campaign.read(args.data, args.columns, args.fs, args.forcing_hz, given, args.nfrc)
+    n, f0 = len(campaign.records), campaign.freqs[0]
+    say(args, f"map: {n} record(s), " + ("stepped in frequency" if campaign.axis == "f_hz" else f"at {f0:g} Hz"))
+    res = campaign.map(progress=lambda line: say(args, line))
+    unit = "m/s^2" if res["input"] == "base_acc" else "N"
+    res["figure"] = write_figure(map_figure(res["points"], campaign.overlays, unit, campaign.axis), args.out)
     write_json(args.out, res)
     warn(args, res["warnings"])
     say(
@@ -443,20 +354,6 @@ def cmd_map(args) -> int:
         ),
     )
     return 0
-
-
-def _map_warnings(points, overlays, axis: str, wells) -> list[str]:
-    out = []
-    if wells is None:
-        out.append("no rest positions (--wells or the records' metadata): a cross-well response is not told from an "
-                   "in-well one; the regime is the side of the median")  # fmt: skip
-    if axis == "f_hz":
-        a = float(np.median([p["amplitude"] for p in points]))
-        for o in overlays:
-            if abs(o["settings"]["fixed"] / a - 1) > 0.05:
-                out.append(f"--nfrc {o['label']}: continued at amplitude {o['settings']['fixed']:g}, the records' "
-                           f"forcing is {a:.4g} (median): the curves do not compare")  # fmt: skip
-    return out
 
 
 def write_figure(fig, out: str) -> str:

@@ -124,7 +124,7 @@ POSITIVE_INT = number(int, 1)
 
 def mass_option():
     """A moving mass [kg] in the range a record may state (``measurement.MASS_RANGE_KG``)."""
-    from negstiff.inference.measurement import MASS_RANGE_KG
+    from negstiff.io.schema import MASS_RANGE_KG
 
     return number(float, *MASS_RANGE_KG, what=" kg")
 
@@ -179,26 +179,6 @@ def parse_amplitudes(text: str, option: str = "--amplitudes") -> list[float]:
         return [float(x) for x in text.split(",")]
     except ValueError:
         raise InputError(f"{option} {text!r}: use start:stop:step (e.g. 4:30:0.5) or a list 5,10,15") from None
-
-
-def load_system(path: str | Path):
-    """A model JSON (polynomial, contract fields) or a device JSON (geometry fields E, alpha_deg, ...)."""
-    from negstiff.files import read_json
-    from negstiff.models import Device, Model
-
-    path = Path(path)
-    try:
-        d = read_json(path)
-    except ValueError as exc:
-        raise InputError(str(exc)) from None
-    if isinstance(d, dict) and isinstance(d.get("model"), dict):  # an identify result holds a model
-        d = d["model"]
-    if not isinstance(d, dict):
-        raise InputError(f"{path}: a model file is a JSON object")
-    try:
-        return Device.from_dict(d) if "E" in d else Model.from_dict(d)
-    except (KeyError, TypeError, ValueError) as exc:
-        raise InputError(f"{path}: {exc}") from None
 
 
 def write_json(path: str | Path, data: dict) -> None:
@@ -260,7 +240,7 @@ def io_paths(args) -> tuple[list[Path], dict[str, str | Path], dict[str, str]]:
         inputs += [Path(x) for x in (v if isinstance(v, list) else [v] if v else [])]
     data = getattr(args, "data", None)
     if args.command == "map":
-        from .campaign import campaign_files
+        from negstiff.inference.campaign import campaign_files
 
         inputs += campaign_files(data)
     elif data:

@@ -61,6 +61,9 @@ def si_unit(column: str) -> str:
 MAGNITUDE_LIMITS = {"time": 1e9, "length": 1e3, "velocity": 1e4, "acceleration": 1e7, "force": 1e9}
 """Beyond these magnitudes (s, m, m/s, m/s^2, N) no shaker-table record is in SI units: a value there is
 refused, never fed to the numerics (a 1e300-scale column overflows every product an identification forms)."""
+MASS_RANGE_KG = (1e-9, 1e9)
+"""Moving masses [kg] a record may state: a microgram MEMS proof mass to a building's storey."""
+
 SAMPLING_RATE_RANGE_HZ = (1e-3, 1e7)
 """Sampling rates [Hz] a record may have: an acquisition slower than one sample in 1000 s, or faster than
 10 MHz, is a misread time column or a mistyped rate."""
