@@ -62,6 +62,19 @@ def bifurcation_map(rig: Rig, freq: float, amplitudes, settle_periods: int, reco
     }
 
 
+def draw_branches(ax, branches: list[dict[str, Any]], color, label: str | None = None, x: str = "amplitude") -> None:
+    """A continuation's branches on a bifurcation map's axes: each orbit's Poincare z [mm] against its
+    amplitude (or ``x``), solid where stable, dashed where not; ``label`` on the first period-1 branch's line."""
+    for br in branches:
+        a = np.array([q[x] for q in br["points"]])
+        stable = np.array([q["stable"] for q in br["points"]])
+        pz = np.array([q["poincare_z"] for q in br["points"]]) * 1e3
+        for k in range(pz.shape[1]):
+            for mask, ls in ((stable, "-"), (~stable, "--")):
+                ax.plot(a, np.where(mask, pz[:, k], np.nan), ls, color=color, lw=0.9, alpha=0.8,
+                        label=label if (k == 0 and ls == "-" and br["period"] == 1) else None)  # fmt: skip
+
+
 def map_figure(points: list[dict[str, Any]], overlays: list[dict[str, Any]] = (), unit: str = "m/s^2",
                axis: str = "amplitude"):  # fmt: skip
     """The bifurcation map (seed Figure 4): each record's Poincare z against its forcing amplitude (or its
@@ -69,7 +82,6 @@ def map_figure(points: list[dict[str, Any]], overlays: list[dict[str, Any]] = ()
     where it is unknown), blue sweeping up, red down, black in the records' order; grey behind a cross-well
     or non-periodic record. Each ``overlays`` entry, a ``negstiff nfrc`` result along the same axis, is drawn
     over its well's panel (``draw_branches``)."""
-    from .nfrc import draw_branches
 
     starts = sorted({p.get("start") for p in points}, key=lambda s: ["plus", "minus", None].index(s))
     fig, axes = plt.subplots(1, len(starts), figsize=(6 * len(starts), 4), sharey=True, squeeze=False)

@@ -10,6 +10,7 @@ from typing import Any
 
 import numpy as np
 
+from .characterization import bifurcation_map, draw_branches
 from .report import fmt
 
 MARKERS = {"fold": ("o", "C3"), "period_doubling": ("s", "C2"), "neimark_sacker": ("^", "C4")}
@@ -174,7 +175,6 @@ def compute_continuations(fast: bool, seed_: int = 0) -> ContinuationStudy:
     from negstiff.models.continuation import ContinuationError, nfrc
     from negstiff.models.rig import Rig
 
-    from .characterization import bifurcation_map
 
     t0 = time.perf_counter()
     amps = np.round(np.arange(4.0, 26.01, 0.5 if fast else 0.2), 3)
@@ -312,19 +312,6 @@ def _reading(res: dict[str, Any], models: dict[str, Any]) -> str:
         + "; ".join(cover or ["no draws"])
         + "): where it misses the truth, the gap is the model's form, which no coefficient uncertainty covers."
     )
-
-
-def draw_branches(ax, branches: list[dict[str, Any]], color, label: str | None = None, x: str = "amplitude") -> None:
-    """A continuation's branches on a bifurcation map's axes: each orbit's Poincare z [mm] against its
-    amplitude (or ``x``), solid where stable, dashed where not; ``label`` on the first period-1 branch's line."""
-    for br in branches:
-        a = np.array([q[x] for q in br["points"]])
-        stable = np.array([q["stable"] for q in br["points"]])
-        pz = np.array([q["poincare_z"] for q in br["points"]]) * 1e3
-        for k in range(pz.shape[1]):
-            for mask, ls in ((stable, "-"), (~stable, "--")):
-                ax.plot(a, np.where(mask, pz[:, k], np.nan), ls, color=color, lw=0.9, alpha=0.8,
-                        label=label if (k == 0 and ls == "-" and br["period"] == 1) else None)  # fmt: skip
 
 
 def _overlay(study: ContinuationStudy):
