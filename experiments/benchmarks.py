@@ -166,9 +166,9 @@ def nsi_benchmark(quick: bool = False) -> tuple[list[list[str]], dict]:
 
     from scipy import linalg
 
-    from negstiff.inference import subspace
-    from negstiff.inference.measurement import from_arrays
-    from negstiff.inference.nsi import NSI
+    from negstiff.inference.estimators import subspace
+    from negstiff.inference.estimators.nsi import NSI
+    from negstiff.inference.record.measurement import from_arrays
     from negstiff.models import SEED_LIKE_CROSS_WELL_RMS, SEED_LIKE_CUBIC
 
     duration = 60.0 if quick else 300.0
@@ -270,8 +270,8 @@ def posterior_benchmark(quick: bool = False) -> tuple[list[list[str]], dict]:
     same seed both give the same chain (checked), so the ESS is the same and the ratio is the time's."""
     import emcee
 
-    from negstiff.inference.measurement import from_arrays
-    from negstiff.inference.posterior import LogPosterior, Posterior
+    from negstiff.inference.estimators.posterior import LogPosterior, Posterior
+    from negstiff.inference.record.measurement import from_arrays
     from negstiff.models import SEED_LIKE_CROSS_WELL_RMS, SEED_LIKE_CUBIC
     from negstiff.models.rig import Rig
 
@@ -363,9 +363,9 @@ def refinement_benchmark(quick: bool = False) -> tuple[list[list[str]], dict]:
     Jacobian (two batched runs per parameter and per start state: what ``least_squares`` does unless told
     the sparsity); each with its evaluations and its end error over the best of the three."""
     from negstiff.experiments.silverbox import TRAIN, find_silverbox, load_silverbox
-    from negstiff.inference.measurement import from_arrays
-    from negstiff.inference.nsi import NSI
-    from negstiff.inference.refine import SOLVERS, refine, refine_stage
+    from negstiff.inference.estimators.nsi import NSI
+    from negstiff.inference.record.measurement import from_arrays
+    from negstiff.inference.steps.refine import SOLVERS, refine, refine_stage
     from negstiff.models import SEED_LIKE_CROSS_WELL_RMS, SEED_LIKE_CUBIC
     from negstiff.models.rig import Rig
 

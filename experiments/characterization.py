@@ -16,11 +16,11 @@ from typing import Any
 import matplotlib.pyplot as plt
 import numpy as np
 
-from negstiff.inference.characterize import characterize, map_point, map_sequence
-from negstiff.inference.derivatives import smooth_and_differentiate
-from negstiff.inference.lyapunov import largest_lyapunov
-from negstiff.inference.measurement import Measurement
-from negstiff.inference.periodicity import noise_level, poincare
+from negstiff.inference.analysis.characterize import characterize, map_point, map_sequence
+from negstiff.inference.analysis.lyapunov import largest_lyapunov
+from negstiff.inference.analysis.periodicity import noise_level, poincare
+from negstiff.inference.record.measurement import Measurement
+from negstiff.inference.steps.derivatives import smooth_and_differentiate
 from negstiff.models import AS_BUILT
 from negstiff.models.reference import lyapunov_benettin
 from negstiff.models.rig import Rig, RigRecord

@@ -14,9 +14,9 @@ from typing import Any
 import matplotlib.pyplot as plt
 import numpy as np
 
-from negstiff.inference.discrepancy import Discrepancy
-from negstiff.inference.measurement import Measurement
-from negstiff.inference.validation import residual_psd
+from negstiff.inference.estimators.discrepancy import Discrepancy
+from negstiff.inference.record.measurement import Measurement
+from negstiff.inference.steps.validation import residual_psd
 from negstiff.models import AS_BUILT, SEED_LIKE_CROSS_WELL_RMS, SEED_LIKE_CUBIC
 from negstiff.models.rig import Rig
 

@@ -71,7 +71,7 @@ class ContinuationStudy:
 
 def first_doubling_seen(rig_map: dict[str, Any], well: str) -> float | None:
     """The first amplitude of the rig's up sweep from ``well`` whose response is period 2 (or longer)."""
-    from negstiff.inference.characterize import first_period_2
+    from negstiff.inference.analysis.characterize import first_period_2
 
     return first_period_2([p for p in rig_map["points"] if p["start"] == well and p["direction"] == "up"])
 
@@ -84,7 +84,7 @@ def first_doubling_predicted(result: dict[str, Any]) -> float | None:
 def posterior_draws(m, n_draws: int, seed_: int, fast: bool) -> list:
     """Models drawn from the coefficient posterior of the record ``m`` (emcee, the suite's defaults but
     two ensembles, for a dozen draws; in --fast, two short ensembles)."""
-    from negstiff.inference.posterior import Posterior
+    from negstiff.inference.estimators.posterior import Posterior
     from negstiff.models import Model
 
     kw = {"n_ensembles": 2, "max_steps": 1500} if fast else {"n_ensembles": 2}
@@ -153,7 +153,7 @@ def stepped_jumps(amplitude: float, fast: bool, seed_: int) -> dict[str, float |
     """Stepped sines on the rig (the as-built device, from z_plus) across ``SWEEP_BAND``, up and down in one
     batched run, as a lab measures a response curve: where each sweep's response amplitude (half the
     measured z's peak-to-peak) jumps (``characterize.jump``)."""
-    from negstiff.inference.characterize import jump
+    from negstiff.inference.analysis.characterize import jump
     from negstiff.models.rig import Rig
 
     step = STEP_HZ[fast]
@@ -168,9 +168,9 @@ def stepped_jumps(amplitude: float, fast: bool, seed_: int) -> dict[str, float |
 
 
 def compute_continuations(fast: bool, seed_: int = 0) -> ContinuationStudy:
-    from negstiff.inference.measurement import Measurement
-    from negstiff.inference.nsi import NSI
-    from negstiff.inference.sindy import SINDy
+    from negstiff.inference.estimators.nsi import NSI
+    from negstiff.inference.estimators.sindy import SINDy
+    from negstiff.inference.record.measurement import Measurement
     from negstiff.models import AS_BUILT
     from negstiff.models.continuation import ContinuationError, nfrc
     from negstiff.models.rig import Rig

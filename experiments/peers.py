@@ -27,7 +27,7 @@ from typing import Any
 
 import numpy as np
 
-from negstiff.inference.measurement import Measurement
+from negstiff.inference.record.measurement import Measurement
 from negstiff.models import SEED_LIKE_CROSS_WELL_RMS, SEED_LIKE_CUBIC, Model
 from negstiff.models.rig import Rig
 
@@ -49,8 +49,8 @@ def _nsi_problem(n: int, seed: int = 21) -> tuple[np.ndarray, np.ndarray]:
     """NSI's own subspace problem around z_plus: the four standardised input channels (the base
     acceleration and the nonlinear basis functions) and the standardised output, ``n`` samples of a
     cross-well rig record of the polynomial truth."""
-    from negstiff.inference.derivatives import smooth_and_differentiate
-    from negstiff.inference.nsi import NSI, well_guesses
+    from negstiff.inference.estimators.nsi import NSI, well_guesses
+    from negstiff.inference.steps.derivatives import smooth_and_differentiate
 
     rec = Rig(SEED_LIKE_CUBIC, seed=seed).random(duration=n / 512.0 + 1.0, rms=SEED_LIKE_CROSS_WELL_RMS)
     m = Measurement.from_rig(rec).segment(0, n)
@@ -63,7 +63,7 @@ def _nsi_problem(n: int, seed: int = 21) -> tuple[np.ndarray, np.ndarray]:
 
 def subspace_peers(sizes: tuple[int, ...] = (100_000, 1_000_000), i: int = 30) -> tuple[list[list[str]], dict]:
     """Time and peak memory of the subspace step (LQ + the SVD of L32) at each record length."""
-    from negstiff.inference import subspace
+    from negstiff.inference.estimators import subspace
 
     rows, res = [], {}
     for n in sizes:
@@ -127,7 +127,7 @@ def sindy_peers(duration: float = 300.0, seed: int = 1) -> tuple[list[list[str]]
     """Our SINDy and pysindy's weak-form pipeline on one cross-well record of the polynomial truth."""
     import pysindy as ps
 
-    from negstiff.inference.sindy import SINDy
+    from negstiff.inference.estimators.sindy import SINDy
 
     truth = SEED_LIKE_CUBIC
     rec = Rig(truth, seed=seed).random(duration=duration, rms=SEED_LIKE_CROSS_WELL_RMS)
@@ -186,7 +186,7 @@ def posterior_peers(duration: float = 300.0, peer_seconds: float = 2.0) -> tuple
     import emcee
     from scipy.integrate import solve_ivp
 
-    from negstiff.inference.posterior import Posterior
+    from negstiff.inference.estimators.posterior import Posterior
 
     truth = SEED_LIKE_CUBIC
     rec = Rig(truth, seed=3).random(duration=duration, rms=SEED_LIKE_CROSS_WELL_RMS)
@@ -251,10 +251,10 @@ def end_to_end_peers() -> tuple[list[list[str]], dict]:
     """On the Silverbox training part: NSI and SINDy end to end (their output-error stage included)
     against a plain output-error fit of the cubic from a linear start (``refine`` from k1, c of the
     FRF peak and k2 = k3 = c_nl = 0): time and the test part's simulation error."""
-    from negstiff.inference.frf import frf
-    from negstiff.inference.nsi import NSI
-    from negstiff.inference.refine import refine
-    from negstiff.inference.sindy import SINDy
+    from negstiff.inference.analysis.frf import frf
+    from negstiff.inference.estimators.nsi import NSI
+    from negstiff.inference.estimators.sindy import SINDy
+    from negstiff.inference.steps.refine import refine
 
     from .silverbox import TEST, TRAIN, find_silverbox, load_silverbox, prediction_error_mv
 
@@ -351,10 +351,10 @@ def peers_section(quick: bool) -> list[str]:
 def scaling(durations: tuple[float, ...] = (30.0, 300.0, 3000.0), seed: int = 7) -> dict[str, dict[float, dict]]:
     """Wall time (untraced) and peak traced memory (a second, traced run) of NSI, SINDy, the output-error
     refinement and the posterior (defaults) on cross-well rig records of the polynomial truth of each length."""
-    from negstiff.inference.nsi import NSI
-    from negstiff.inference.posterior import Posterior
-    from negstiff.inference.refine import refine
-    from negstiff.inference.sindy import SINDy
+    from negstiff.inference.estimators.nsi import NSI
+    from negstiff.inference.estimators.posterior import Posterior
+    from negstiff.inference.estimators.sindy import SINDy
+    from negstiff.inference.steps.refine import refine
 
     out: dict[str, dict[float, dict]] = {"NSI": {}, "SINDy": {}, "refinement": {}, "posterior": {}}
     for d in durations:

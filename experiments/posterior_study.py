@@ -16,10 +16,10 @@ from typing import Any
 import matplotlib.pyplot as plt
 import numpy as np
 
-from negstiff.inference.measurement import Measurement
-from negstiff.inference.nsi import NSI
-from negstiff.inference.posterior import Posterior, result_json
-from negstiff.inference.sindy import SINDy
+from negstiff.inference.estimators.nsi import NSI
+from negstiff.inference.estimators.posterior import Posterior, result_json
+from negstiff.inference.estimators.sindy import SINDy
+from negstiff.inference.record.measurement import Measurement
 from negstiff.models import AS_BUILT, SEED_LIKE_CROSS_WELL_RMS, SEED_LIKE_CUBIC, Model
 from negstiff.models.rig import Rig
 

@@ -45,13 +45,20 @@ def _cache_dir() -> Path | None:
 
 
 def _source_hash() -> str:
-    """Hash of the package's source (models, inference, experiments): a code change invalidates the cache."""
+    """Hash of the package's source (models, inference, experiments and negstiff's own: io, errors, files):
+    a code change invalidates the cache."""
     import hashlib
+
+    import negstiff
 
     here = Path(__file__).resolve().parent
     h = hashlib.sha256()
-    for folder in (here, here.parent / "models", here.parent / "inference"):
-        for f in sorted(folder.rglob("*.py")):  # subpackages too (inference/posterior)
+    seen: set[Path] = set()
+    for folder in (here, here.parent / "models", here.parent / "inference", Path(negstiff.__file__).resolve().parent):
+        for f in sorted(folder.rglob("*.py")):  # subpackages too (inference/estimators/posterior)
+            if f.resolve() in seen:  # installed, the package folder holds the others
+                continue
+            seen.add(f.resolve())
             h.update(str(f.relative_to(folder)).encode())
             h.update(f.read_bytes())
     return h.hexdigest()[:16]
@@ -136,7 +143,7 @@ def warm_kernel(name: str) -> None:
     elif name == "device":
         simulate_batch(AS_BUILT.kernel_params(), "device", u, 1e-3, np.array([AS_BUILT.equilibria().z_plus, 0.0]))
     elif name == "hybrid":
-        from negstiff.inference.hybrid import Basis, simulate_hybrid
+        from negstiff.inference.estimators.hybrid import Basis, simulate_hybrid
 
         basis = Basis.over(np.linspace(-1, 1, 9), np.linspace(-1, 1, 9), np.linspace(-1, 1, 9), 2, 2, 2)
         simulate_hybrid(SEED_LIKE_CUBIC, basis, np.zeros(basis.size), np.zeros((1, 9)), 1e-3, np.zeros((1, 2)), 2,

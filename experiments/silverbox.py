@@ -21,8 +21,8 @@ from typing import Any
 
 import numpy as np
 
-from negstiff.inference.measurement import Measurement, load
-from negstiff.inference.validation import free_run_rms, simulate_record
+from negstiff.inference.record.measurement import Measurement, load
+from negstiff.inference.steps.validation import free_run_rms, simulate_record
 from negstiff.models import Model, simulate
 
 from .report import Report, fmt, run_study
@@ -121,9 +121,9 @@ def compute(m: Measurement, fast: bool = False) -> SilverboxStudy:
     """Fit every method on the training part with its defaults (refinement included) and score the
     equation-error and refined models on the three test parts (``fast``: without the discrepancy
     workflow's linear start and NSI)."""
-    from negstiff.inference.discrepancy import LINEAR_BASELINE, Discrepancy
-    from negstiff.inference.nsi import NSI
-    from negstiff.inference.sindy import SINDy
+    from negstiff.inference.estimators.discrepancy import LINEAR_BASELINE, Discrepancy
+    from negstiff.inference.estimators.nsi import NSI
+    from negstiff.inference.estimators.sindy import SINDy
 
     train = m.segment(*TRAIN)
     rows = []
@@ -169,7 +169,7 @@ def hybrid_error_mv(h, m: Measurement, part: tuple[int, int]) -> float:
 def hybrid_part(m: Measurement, rows: list[MethodRow]) -> dict[str, Any]:
     """The refined SINDy model plus a non-parametric discrepancy force (``inference.hybrid``), fitted on
     the training part with the physics held, then refitted jointly; its errors on the three test parts."""
-    from negstiff.inference.hybrid import fit_hybrid
+    from negstiff.inference.estimators.hybrid import fit_hybrid
 
     row = next(r for r in rows if r.method == "SINDy")
     physics = Model.from_dict(row.refined["model"])
@@ -322,7 +322,7 @@ def render(rep: Report, study: SilverboxStudy, m: Measurement) -> dict[str, Any]
 def _render_hybrid(rep: Report, h: dict[str, Any], m: Measurement) -> None:
     import matplotlib.pyplot as plt
 
-    from negstiff.inference.hybrid import Basis
+    from negstiff.inference.estimators.hybrid import Basis
 
     rep.heading("What Duffing still misses: a non-parametric discrepancy term", 3)
     rep.text(

@@ -16,9 +16,9 @@ import matplotlib.pyplot as plt
 import numpy as np
 from scipy import signal
 
-from negstiff.inference.measurement import Measurement
-from negstiff.inference.nsi import NSI
-from negstiff.inference.sindy import SINDy, term_fields
+from negstiff.inference.estimators.nsi import NSI
+from negstiff.inference.estimators.sindy import SINDy, term_fields
+from negstiff.inference.record.measurement import Measurement
 from negstiff.models import AS_BUILT, SEED_LIKE_CROSS_WELL_RMS, SEED_LIKE_CUBIC, Model
 from negstiff.models.rig import Rig
 

@@ -12,10 +12,10 @@ from typing import Any
 import matplotlib.pyplot as plt
 import numpy as np
 
-from negstiff.inference.measurement import Measurement
-from negstiff.inference.nsi import NSI
-from negstiff.inference.sindy import SINDy
-from negstiff.inference.updating import GAUpdater, fitness, targets_from
+from negstiff.inference.estimators.nsi import NSI
+from negstiff.inference.estimators.sindy import SINDy
+from negstiff.inference.estimators.updating import GAUpdater, fitness, targets_from
+from negstiff.inference.record.measurement import Measurement
 from negstiff.models import AS_BUILT, NOMINAL, Device
 from negstiff.models.rig import Rig
 

@@ -31,8 +31,8 @@ RANK_DRAWS = 99
 def one_record(seed: int, duration: float, max_steps: int, n_ensembles: int) -> dict[str, Any]:
     """A rig record with seed ``seed`` and its coefficient posterior: HDIs, ranks, diagnostics.
     Runs in a dask worker (one numba thread: the workers are the parallelism)."""
-    from negstiff.inference.measurement import from_arrays
-    from negstiff.inference.posterior import Posterior, result_json
+    from negstiff.inference.estimators.posterior import Posterior, result_json
+    from negstiff.inference.record.measurement import from_arrays
     from negstiff.models import SEED_LIKE_CROSS_WELL_RMS, SEED_LIKE_CUBIC
     from negstiff.models.rig import Rig
 

@@ -1,13 +1,15 @@
-"""Learning about a device from its records: reading them, identifying, updating, quantifying the
-uncertainty, and characterising the dynamics. Names load on first use (PEP 562); ``negstiff`` itself
-exports the ones a script needs.
+"""Learning about a device from its records, in four groups by role (each with its own docstring). Names
+load on first use (PEP 562); ``negstiff`` itself exports the ones a script needs.
 
-* records: ``load``, ``from_arrays``, ``Measurement`` (``measurement``; files through ``negstiff.io``), the
-  response sensors (``sensors``), the frame of a derived z (``frame``: ``pin_frame``)
-* identification: ``NSI``, ``SINDy`` (one pipeline, ``Identifier`` -> ``Identification``), ``Discrepancy``
-* uncertainty: ``Posterior``; model updating: ``GAUpdater``
-* analysis: ``characterize``, ``frf``
-* the estimator contract: ``Estimator`` (``estimator``), parameter constraints (``parameters``)
+* ``record``: a record as negstiff holds it: ``Measurement``, ``load``, ``from_arrays`` (files through
+  ``negstiff.io``), the response sensors (``sensors``), the frame of a derived z (``frame.pin_frame``);
+* ``steps``: what the estimators are made of: derivatives, the weak form, held-out selection, free-run
+  validation, output-error refinement, multiple shooting, the plausibility checks;
+* ``estimators``: the estimator contract (``base``, ``parameters``), one identification pipeline
+  (``identification``), ``NSI`` (with ``subspace``), ``SINDy``, ``Discrepancy`` (with ``hybrid``),
+  ``Posterior`` (``posterior/``), ``GAUpdater`` (``updating``);
+* ``analysis``: the dynamics of harmonic records: ``characterize`` (with ``periodicity``, ``lyapunov``),
+  the bifurcation map of a campaign (``campaign``), ``frf``.
 """
 
 from __future__ import annotations
@@ -15,20 +17,20 @@ from __future__ import annotations
 import importlib
 
 _EXPORTS = {
-    "load": "measurement",
-    "from_arrays": "measurement",
-    "Measurement": "measurement",
-    "pin_frame": "frame",
-    "NSI": "nsi",
-    "SINDy": "sindy",
-    "Discrepancy": "discrepancy",
-    "Posterior": "posterior.core",
-    "GAUpdater": "updating",
-    "characterize": "characterize",
-    "frf": "frf",
-    "Estimator": "estimator",
-    "Identifier": "identification",
-    "Identification": "identification",
+    "load": "record.measurement",
+    "from_arrays": "record.measurement",
+    "Measurement": "record.measurement",
+    "pin_frame": "record.frame",
+    "NSI": "estimators.nsi",
+    "SINDy": "estimators.sindy",
+    "Discrepancy": "estimators.discrepancy",
+    "Posterior": "estimators.posterior.core",
+    "GAUpdater": "estimators.updating",
+    "characterize": "analysis.characterize",
+    "frf": "analysis.frf",
+    "Estimator": "estimators.base",
+    "Identifier": "estimators.identification",
+    "Identification": "estimators.identification",
 }
 
 __all__ = list(_EXPORTS)

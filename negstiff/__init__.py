@@ -31,10 +31,10 @@ if not (_here / "models").is_dir() and (_here.parent / "models" / "__init__.py")
 
 _EXPORTS = {
     # records
-    "load": "negstiff.inference.measurement",
-    "from_arrays": "negstiff.inference.measurement",
-    "Measurement": "negstiff.inference.measurement",
-    "pin_frame": "negstiff.inference.frame",
+    "load": "negstiff.inference.record.measurement",
+    "from_arrays": "negstiff.inference.record.measurement",
+    "Measurement": "negstiff.inference.record.measurement",
+    "pin_frame": "negstiff.inference.record.frame",
     # the physics
     "Model": "negstiff.models.equation",
     "Device": "negstiff.models.device",
@@ -43,14 +43,14 @@ _EXPORTS = {
     "Rig": "negstiff.models.rig",
     "nfrc": "negstiff.models.continuation",
     # learning from data
-    "NSI": "negstiff.inference.nsi",
-    "SINDy": "negstiff.inference.sindy",
-    "Discrepancy": "negstiff.inference.discrepancy",
-    "Posterior": "negstiff.inference.posterior.core",
-    "GAUpdater": "negstiff.inference.updating",
-    "characterize": "negstiff.inference.characterize",
-    "frf": "negstiff.inference.frf",
-    "Identification": "negstiff.inference.identification",
+    "NSI": "negstiff.inference.estimators.nsi",
+    "SINDy": "negstiff.inference.estimators.sindy",
+    "Discrepancy": "negstiff.inference.estimators.discrepancy",
+    "Posterior": "negstiff.inference.estimators.posterior.core",
+    "GAUpdater": "negstiff.inference.estimators.updating",
+    "characterize": "negstiff.inference.analysis.characterize",
+    "frf": "negstiff.inference.analysis.frf",
+    "Identification": "negstiff.inference.estimators.identification",
     # errors and warnings
     "InputError": "negstiff.errors",
     "OutputError": "negstiff.errors",

@@ -136,7 +136,7 @@ def assert_predicts(model, record, reference, factor: float = 2.0, window_s: flo
 
 
 def _restarted_error(model, record, window_s: float) -> float:
-    from negstiff.inference.validation import restarted_free_runs
+    from negstiff.inference.steps.validation import restarted_free_runs
 
     zs, v, _, _ = record.states("state")
     runs = restarted_free_runs(model, record, 0, window_s, zs, v)

@@ -43,8 +43,8 @@ def silverbox(request):
 def silverbox_fits(silverbox):
     """NSI and SINDy fitted with their defaults (refinement included) on the training part only, once
     per session: several test files check facts about the same fits."""
-    from negstiff.inference.nsi import NSI
-    from negstiff.inference.sindy import SINDy
+    from negstiff.inference.estimators.nsi import NSI
+    from negstiff.inference.estimators.sindy import SINDy
 
     train = silverbox.segment(*SILVERBOX_TRAIN)
     return {"nsi": NSI().fit(train), "sindy": SINDy().fit(train)}

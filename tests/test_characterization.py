@@ -8,10 +8,10 @@ from scipy.integrate import solve_ivp
 
 from negstiff.cli import main
 from negstiff.errors import MeasurementError
-from negstiff.inference.characterize import CHAOS_THRESHOLD, characterize
-from negstiff.inference.lyapunov import largest_lyapunov
-from negstiff.inference.measurement import from_arrays
-from negstiff.inference.periodicity import periodicity
+from negstiff.inference.analysis.characterize import CHAOS_THRESHOLD, characterize
+from negstiff.inference.analysis.lyapunov import largest_lyapunov
+from negstiff.inference.analysis.periodicity import periodicity
+from negstiff.inference.record.measurement import from_arrays
 from negstiff.models import AS_BUILT, Model
 from negstiff.models.reference import lyapunov_benettin
 from negstiff.models.rig import Rig

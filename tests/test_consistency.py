@@ -6,12 +6,12 @@ import dataclasses
 
 import pytest
 
-from negstiff.inference.discrepancy import Discrepancy
-from negstiff.inference.measurement import from_arrays
-from negstiff.inference.nsi import NSI
-from negstiff.inference.posterior import Posterior, result_json
-from negstiff.inference.sindy import SINDy
-from negstiff.inference.updating import GAUpdater, fitness, targets_from
+from negstiff.inference.estimators.discrepancy import Discrepancy
+from negstiff.inference.estimators.nsi import NSI
+from negstiff.inference.estimators.posterior import Posterior, result_json
+from negstiff.inference.estimators.sindy import SINDy
+from negstiff.inference.estimators.updating import GAUpdater, fitness, targets_from
+from negstiff.inference.record.measurement import from_arrays
 from negstiff.models import SEED_LIKE_CROSS_WELL_RMS, SEED_LIKE_CUBIC
 from negstiff.models.rig import Rig
 

@@ -7,8 +7,8 @@ import dataclasses
 import pytest
 from conftest import SILVERBOX_ARROW, SILVERBOX_TEST, SILVERBOX_TRAIN, silverbox_prediction_mv
 
-from negstiff.inference.discrepancy import LINEAR_BASELINE, Discrepancy
-from negstiff.inference.measurement import from_arrays
+from negstiff.inference.estimators.discrepancy import LINEAR_BASELINE, Discrepancy
+from negstiff.inference.record.measurement import from_arrays
 from negstiff.models import AS_BUILT, SEED_LIKE_CROSS_WELL_RMS, SEED_LIKE_CUBIC
 from negstiff.models.rig import Rig
 

@@ -13,10 +13,10 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from negstiff.inference.discrepancy import Discrepancy, catalogue
-from negstiff.inference.measurement import from_arrays
-from negstiff.inference.sindy import SINDy
-from negstiff.inference.weak import terms
+from negstiff.inference.estimators.discrepancy import Discrepancy, catalogue
+from negstiff.inference.estimators.sindy import SINDy
+from negstiff.inference.record.measurement import from_arrays
+from negstiff.inference.steps.weak import terms
 from negstiff.models import SEED_LIKE_CROSS_WELL_RMS, SEED_LIKE_CUBIC, Model, effects, simulate
 from negstiff.models.rig import Rig
 

@@ -1,4 +1,4 @@
-"""The estimator contract (inference/estimator.py, after scikit-learn's), enforced: keyword-only
+"""The estimator contract (inference/estimators/base.py, after scikit-learn's), enforced: keyword-only
 constructors that store their parameters unchanged, get_params/set_params so that sklearn.base.clone
 copies every estimator, every parameter declared with its constraint and checked by fit before any work
 (one InputError naming the parameter and the allowed range), NotFittedError before fit, and fit taking a
@@ -21,7 +21,7 @@ from negstiff import (
     SINDy,
     from_arrays,
 )
-from negstiff.inference.parameters import Boolean, Instance, Interval, Options, Pair, Several
+from negstiff.inference.estimators.parameters import Boolean, Instance, Interval, Options, Pair, Several
 
 ESTIMATORS = (NSI, SINDy, Discrepancy, Posterior, GAUpdater)
 

@@ -8,8 +8,8 @@ import pytest
 from scipy import signal
 
 from negstiff.cli import main
-from negstiff.inference.frf import frf
-from negstiff.inference.measurement import from_arrays
+from negstiff.inference.analysis.frf import frf
+from negstiff.inference.record.measurement import from_arrays
 from negstiff.models.device import SEED_LIKE_CUBIC
 from negstiff.models.rig import Rig
 
@@ -63,7 +63,7 @@ def test_two_modes_give_two_peaks_and_one_mode_one():
 def test_the_silverbox_circuit_has_one_resonance(request):
     # The Silverbox is a single-degree-of-freedom Duffing circuit (its README): one resonance near 69 Hz.
     # Its noisy |H1| has two local maxima on it, 0.6 Hz apart, which were reported as two peaks
-    from negstiff.inference.measurement import load
+    from negstiff.inference.record.measurement import load
 
     path = request.config.rootpath / "../shared/data/silverbox/SNLS80mV.csv"
     if not path.exists():

@@ -7,11 +7,11 @@ import numpy as np
 import pytest
 from conftest import SILVERBOX_TEST, SILVERBOX_TRAIN
 
-from negstiff.inference.derivatives import state_derivatives
-from negstiff.inference.hybrid import fit_hybrid
-from negstiff.inference.measurement import from_arrays
-from negstiff.inference.refine import refine
-from negstiff.inference.validation import free_run_rms
+from negstiff.inference.estimators.hybrid import fit_hybrid
+from negstiff.inference.record.measurement import from_arrays
+from negstiff.inference.steps.derivatives import state_derivatives
+from negstiff.inference.steps.refine import refine
+from negstiff.inference.steps.validation import free_run_rms
 from negstiff.models import Model
 
 M, C, K, K3 = 0.5, 2.0, 2000.0, 2.0e7

@@ -9,7 +9,7 @@ import pytest
 
 from negstiff import load, pin_frame
 from negstiff.cli import main
-from negstiff.inference.nsi import NSI
+from negstiff.inference.estimators.nsi import NSI
 from negstiff.models.device import SEED_LIKE_CROSS_WELL_RMS, SEED_LIKE_CUBIC
 from negstiff.models.rig import Rig, Sensors
 

@@ -198,7 +198,7 @@ def test_bad_map_input_gets_one_line_and_exit_2_before_any_work(tmp_path, capsys
 
 def test_a_folder_without_an_index_is_read_in_its_files_natural_order(tmp_path):
     # a lab's files step2 ... step10: by their numbers, not their characters (step10 sorts before step2)
-    from negstiff.inference.campaign import campaign_records
+    from negstiff.inference.analysis.campaign import campaign_records
 
     for i in (1, 2, 10, 11):
         (tmp_path / f"step{i}.csv").write_text("t,base_acc,z\n0,0,0\n")

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from negstiff.errors import MeasurementError
-from negstiff.inference.measurement import load
+from negstiff.inference.record.measurement import load
 from negstiff.io.schema import parse_column_map
 
 SILVERBOX = "../shared/data/silverbox"

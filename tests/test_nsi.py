@@ -6,10 +6,10 @@ from conftest import SILVERBOX_TEST, silverbox_prediction_mv
 from scipy import linalg, signal
 
 from negstiff.errors import MeasurementError
-from negstiff.inference import subspace
-from negstiff.inference.derivatives import smooth_and_differentiate
-from negstiff.inference.measurement import from_arrays
-from negstiff.inference.nsi import NSI
+from negstiff.inference.estimators import subspace
+from negstiff.inference.estimators.nsi import NSI
+from negstiff.inference.record.measurement import from_arrays
+from negstiff.inference.steps.derivatives import smooth_and_differentiate
 from negstiff.models import SEED_LIKE_CROSS_WELL_RMS, SEED_LIKE_CUBIC, Model, simulate
 from negstiff.models.rig import Rig, Sensors
 

@@ -7,8 +7,7 @@ import numpy as np
 import pytest
 
 from negstiff.cli import main
-from negstiff.inference.measurement import Measurement, from_arrays
-from negstiff.inference.posterior import (
+from negstiff.inference.estimators.posterior import (
     Posterior,
     convergence_warnings,
     curvature_adjustment,
@@ -16,6 +15,7 @@ from negstiff.inference.posterior import (
     sample_ensembles,
     summarise,
 )
+from negstiff.inference.record.measurement import Measurement, from_arrays
 from negstiff.models import SEED_LIKE_CROSS_WELL_RMS, SEED_LIKE_CUBIC, Model
 from negstiff.models.rig import Rig
 
@@ -173,7 +173,7 @@ def test_device_likelihood_sees_only_e_over_m():
     # Fact (device-model.md): m z'' + c z' + c_nl z'|z'| + K(z; E, alpha) = -m (b'' + g) depends on E/m,
     # c/m, c_nl/m only: scaling E, m, c, c_nl together leaves the response unchanged to rounding, and
     # the sampler's coordinates (E, c, c_nl at the reference mass) are that scaling.
-    from negstiff.inference.posterior import device_parametrisation
+    from negstiff.inference.estimators.posterior import device_parametrisation
     from negstiff.models import simulate_batch
     from negstiff.models.device import NOMINAL
 
@@ -220,7 +220,7 @@ def test_device_posterior_shows_the_e_m_ridge_and_weighing_pins_e(device_posteri
 
 def test_a_gaussian_prior_on_a_parameter_the_likelihood_sees_is_refused():
     # the point estimate's least squares has no prior rows: a Gaussian prior belongs on a held parameter
-    from negstiff.inference.posterior import Parametrisation
+    from negstiff.inference.estimators.posterior import Parametrisation
 
     with pytest.raises(ValueError, match="Gaussian prior"):
         Parametrisation(("a",), "polynomial", lambda t: t, np.zeros(1), np.ones(1), gaussian={0: (0.5, 0.1)})
@@ -266,7 +266,7 @@ def test_likelihood_sum_of_squares_is_the_projected_residuals_norm():
     # Fact: with Q a window's orthonormal start-state basis, |r - Q Q^T r|^2 = |r|^2 - |Q^T r|^2: the
     # likelihood's sum of squares (computed the short way) equals the projected residuals' (to rounding,
     # 1e-9 relative: the projection removes a small part of r), for every window and parameter column
-    from negstiff.inference.posterior.windows import Windows
+    from negstiff.inference.estimators.posterior.windows import Windows
 
     r = Rig(SEED_LIKE_CUBIC, seed=13).random(duration=4, rms=SEED_LIKE_CROSS_WELL_RMS)
     rec = from_arrays(r.columns["base_acc"], r.columns["z"], r.fs, mass=float(r.meta["mass"]), source="rig")

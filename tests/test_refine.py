@@ -6,12 +6,12 @@ import numpy as np
 import pytest
 from conftest import SILVERBOX_ARROW, SILVERBOX_TEST, SILVERBOX_TRAIN, silverbox_prediction_mv
 
-from negstiff.inference.derivatives import state_derivatives
-from negstiff.inference.measurement import from_arrays
-from negstiff.inference.nsi import NSI
-from negstiff.inference.refine import refine
-from negstiff.inference.sindy import SINDy
-from negstiff.inference.validation import boundedness, free_run_rms, simulate_record
+from negstiff.inference.estimators.nsi import NSI
+from negstiff.inference.estimators.sindy import SINDy
+from negstiff.inference.record.measurement import from_arrays
+from negstiff.inference.steps.derivatives import state_derivatives
+from negstiff.inference.steps.refine import refine
+from negstiff.inference.steps.validation import boundedness, free_run_rms, simulate_record
 from negstiff.models import Model, simulate
 from negstiff.models.device import AS_BUILT, SEED_LIKE_CROSS_WELL_RMS, SEED_LIKE_CUBIC
 from negstiff.models.rig import Rig, Sensors

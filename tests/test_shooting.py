@@ -6,9 +6,9 @@ record against scipy's solver on the same residuals."""
 import numpy as np
 import pytest
 
-from negstiff.inference.measurement import from_arrays
-from negstiff.inference.refine import refine
-from negstiff.inference.shooting import parameter_covariance, shooting_least_squares
+from negstiff.inference.record.measurement import from_arrays
+from negstiff.inference.steps.refine import refine
+from negstiff.inference.steps.shooting import parameter_covariance, shooting_least_squares
 from negstiff.models import Model
 from negstiff.models.device import SEED_LIKE_CROSS_WELL_RMS, SEED_LIKE_CUBIC
 from negstiff.models.rig import Rig

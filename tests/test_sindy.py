@@ -7,9 +7,9 @@ from scipy import signal
 
 from negstiff.cli import main
 from negstiff.errors import MeasurementError
-from negstiff.inference.derivatives import derivative_window, state_derivatives
-from negstiff.inference.measurement import from_arrays
-from negstiff.inference.sindy import SINDy
+from negstiff.inference.estimators.sindy import SINDy
+from negstiff.inference.record.measurement import from_arrays
+from negstiff.inference.steps.derivatives import derivative_window, state_derivatives
 from negstiff.models import SEED_LIKE_CROSS_WELL_RMS, SEED_LIKE_CUBIC, simulate
 from negstiff.models.rig import Rig, Sensors
 
@@ -141,7 +141,7 @@ def test_library_columns_and_unpenalised_fit_match_pysindy():
     # relative; 5e-8 measured: SR3's own tolerance)
     import pysindy as ps
 
-    from negstiff.inference import weak
+    from negstiff.inference.steps import weak
     from negstiff.models import effects
 
     _, rec = _record(5, duration=20.0)

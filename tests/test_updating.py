@@ -5,7 +5,7 @@ import json
 import pytest
 
 from negstiff.cli import main
-from negstiff.inference.updating import GAUpdater, UpdatingError, fitness, targets_from
+from negstiff.inference.estimators.updating import GAUpdater, UpdatingError, fitness, targets_from
 from negstiff.models import AS_BUILT, NOMINAL
 
 
@@ -87,8 +87,8 @@ def test_ga_from_an_as_built_record_recovers_the_device():
     # +0.42 %). Like with like: both sides are K(z)/m at the same states, so neither the polynomial's
     # form nor where the record went biases the comparison the way Eq. 9's features did (9.44 deg).
     # The seed's Eq. 9 fitness is still reported, and it is small at the recovered device.
-    from negstiff.inference.measurement import from_arrays
-    from negstiff.inference.sindy import SINDy
+    from negstiff.inference.estimators.sindy import SINDy
+    from negstiff.inference.record.measurement import from_arrays
     from negstiff.models.rig import Rig
 
     rec = Rig(AS_BUILT, seed=2).random(duration=300.0)

@@ -111,8 +111,8 @@ def write_campaign(rig, args) -> None:
 
 def cmd_simulate(args) -> int:
     from negstiff.files import atomic_path
-    from negstiff.inference.measurement import load
-    from negstiff.inference.validation import simulate_measured
+    from negstiff.inference.record.measurement import load
+    from negstiff.inference.steps.validation import simulate_measured
     from negstiff.models.device import load_system
 
     system = load_system(args.model)
@@ -130,17 +130,17 @@ def cmd_simulate(args) -> int:
 
 
 def cmd_identify(args) -> int:
-    from negstiff.inference.frf import compare_with_frf, read_frf_results
-    from negstiff.inference.measurement import load
+    from negstiff.inference.analysis.frf import compare_with_frf, read_frf_results
+    from negstiff.inference.record.measurement import load
 
     rec = load(args.data, columns=args.columns, fs=args.fs, mass=args.mass)
     frfs = read_frf_results(args.frf)
     if args.method == "nsi":
-        from negstiff.inference.nsi import NSI
+        from negstiff.inference.estimators.nsi import NSI
 
         est = NSI(order=args.order, block_rows=args.block_rows, refine=not args.no_refine)
     else:
-        from negstiff.inference.sindy import SINDy
+        from negstiff.inference.estimators.sindy import SINDy
 
         est = SINDy(n_models=args.ensemble, seed=args.seed, refine=not args.no_refine)
     rec = est.check(rec)  # every refusal before the progress line
@@ -168,8 +168,8 @@ def cmd_identify(args) -> int:
 
 
 def cmd_posterior(args) -> int:
-    from negstiff.inference.measurement import load
-    from negstiff.inference.posterior import Posterior
+    from negstiff.inference.estimators.posterior import Posterior
+    from negstiff.inference.record.measurement import load
     from negstiff.models import Model
     from negstiff.models.device import load_system
 
@@ -215,8 +215,8 @@ def cmd_posterior(args) -> int:
 
 
 def cmd_discrepancy(args) -> int:
-    from negstiff.inference.discrepancy import CUBIC_BASELINE, LINEAR_BASELINE, Discrepancy
-    from negstiff.inference.measurement import load
+    from negstiff.inference.estimators.discrepancy import CUBIC_BASELINE, LINEAR_BASELINE, Discrepancy
+    from negstiff.inference.record.measurement import load
 
     rec = load(args.data, columns=args.columns, fs=args.fs, mass=args.mass)
     base = CUBIC_BASELINE if args.baseline == "cubic" else LINEAR_BASELINE
@@ -257,8 +257,8 @@ def parse_wells(text: str | None) -> tuple[float, ...] | None:
 
 
 def cmd_characterize(args) -> int:
-    from negstiff.inference.characterize import characterize, check_harmonic
-    from negstiff.inference.measurement import load
+    from negstiff.inference.analysis.characterize import characterize, check_harmonic
+    from negstiff.inference.record.measurement import load
 
     given = parse_wells(args.wells)  # the options before any work
     rec = load(args.data, columns=args.columns, fs=args.fs)
@@ -290,8 +290,8 @@ def cmd_characterize(args) -> int:
 
 def cmd_frf(args) -> int:
     from negstiff.experiments.frf import figure as frf_figure
-    from negstiff.inference.frf import check_frf, frf
-    from negstiff.inference.measurement import load
+    from negstiff.inference.analysis.frf import check_frf, frf
+    from negstiff.inference.record.measurement import load
 
     band = parse_band(args.band)
     rec = load(args.data, columns=args.columns, fs=args.fs)
@@ -335,7 +335,7 @@ def cmd_nfrc(args) -> int:
 
 def cmd_map(args) -> int:
     from negstiff.experiments.characterization import map_figure
-    from negstiff.inference.campaign import Campaign
+    from negstiff.inference.analysis.campaign import Campaign
 
     given = parse_wells(args.wells)  # the options, and every input read and checked, before any analysis
     campaign = Campaign.read(args.data, args.columns, args.fs, args.forcing_hz, given, args.nfrc)
@@ -372,7 +372,7 @@ def write_figure(fig, out: str) -> str:
 def cmd_update(args) -> int:
     from tqdm import tqdm
 
-    from negstiff.inference.updating import GAUpdater, load_targets
+    from negstiff.inference.estimators.updating import GAUpdater, load_targets
 
     targets = load_targets(args.targets)
     ga = GAUpdater(pop_size=args.pop_size, generations=args.generations, fixed_mass=args.fix_mass, seed=args.seed)

@@ -60,7 +60,7 @@ def _signature_defaults(module: str, cls: str) -> dict[str, Any]:
 def _constraints(module: str, cls: str) -> dict[str, Any]:
     """An estimator class's ``_parameter_constraints``, evaluated from its source (``inference.parameters``'
     classes only), without importing the estimator."""
-    from negstiff.inference.parameters import NAMESPACE
+    from negstiff.inference.estimators.parameters import NAMESPACE
 
     tree = ast.parse(_source(module).read_text())
     body = next(c.body for c in tree.body if isinstance(c, ast.ClassDef) and c.name == cls)
@@ -79,7 +79,7 @@ def _constraints(module: str, cls: str) -> dict[str, Any]:
 
 def declared(estimator: str, parameter: str, what: str = ""):
     """The argparse type of an option that sets an estimator's parameter: the parameter's declared
-    constraint (``_parameter_constraints``, ``"nsi.NSI"``: ``negstiff.inference.nsi.NSI``), so the command
+    constraint (``_parameter_constraints``, ``"nsi.NSI"``: ``negstiff.inference.estimators.nsi.NSI``), so the command
     line checks the range the library checks, from one declaration."""
     module, cls = estimator.rsplit(".", 1)
     c = _constraints(f"negstiff.inference.{module}", cls)[parameter]
@@ -89,7 +89,7 @@ def declared(estimator: str, parameter: str, what: str = ""):
 
 def default(estimator: str, parameter: str) -> Any:
     """The default of an estimator's parameter, read from its ``__init__`` signature (``"nsi.NSI"``:
-    ``negstiff.inference.nsi.NSI``), so the CLI states the estimator's own default. Read from the source,
+    ``negstiff.inference.estimators.nsi.NSI``), so the CLI states the estimator's own default. Read from the source,
     not imported: building the parser (``--help``) must not load the compiled simulator."""
     module, cls = estimator.rsplit(".", 1)
     return _signature_defaults(f"negstiff.inference.{module}", cls)[parameter]
@@ -240,7 +240,7 @@ def io_paths(args) -> tuple[list[Path], dict[str, str | Path], dict[str, str]]:
         inputs += [Path(x) for x in (v if isinstance(v, list) else [v] if v else [])]
     data = getattr(args, "data", None)
     if args.command == "map":
-        from negstiff.inference.campaign import campaign_files
+        from negstiff.inference.analysis.campaign import campaign_files
 
         inputs += campaign_files(data)
     elif data:

@@ -10,7 +10,7 @@ from negstiff.models import effects
 from . import commands as c
 from .common import POSITIVE, SEED, Parser, acceleration_option, declared, default, mass_option, number
 
-POST = "posterior.core.Posterior"
+POST = "estimators.posterior.core.Posterior"
 NO_REFINE_HELP = (
     "skip the output-error refinement (the last stage: the model's simulation error minimised over the "
     "identification part; kept only if it predicts the held-out part at least as well)"
@@ -182,21 +182,21 @@ def _identify(sub, common: argparse.ArgumentParser, data_opts: argparse.Argument
     )
     idf.add_argument(
         "--order",
-        type=declared("nsi.NSI", "order", what=" (the state dimension: 2 per mode)"),
-        default=default("nsi.NSI", "order"),
-        help=f"NSI model order (default {default('nsi.NSI', 'order')}: one mode)",
+        type=declared("estimators.nsi.NSI", "order", what=" (the state dimension: 2 per mode)"),
+        default=default("estimators.nsi.NSI", "order"),
+        help=f"NSI model order (default {default('estimators.nsi.NSI', 'order')}: one mode)",
     )
     idf.add_argument(
         "--block-rows",
-        type=declared("nsi.NSI", "block_rows"),
-        default=default("nsi.NSI", "block_rows"),
-        help=f"NSI: block rows of the Hankel matrices (default {default('nsi.NSI', 'block_rows')})",
+        type=declared("estimators.nsi.NSI", "block_rows"),
+        default=default("estimators.nsi.NSI", "block_rows"),
+        help=f"NSI: block rows of the Hankel matrices (default {default('estimators.nsi.NSI', 'block_rows')})",
     )
     idf.add_argument(
         "--ensemble",
-        type=declared("sindy.SINDy", "n_models"),
-        default=default("sindy.SINDy", "n_models"),
-        help=f"SINDy: bagged models of the ensemble (default {default('sindy.SINDy', 'n_models')})",
+        type=declared("estimators.sindy.SINDy", "n_models"),
+        default=default("estimators.sindy.SINDy", "n_models"),
+        help=f"SINDy: bagged models of the ensemble (default {default('estimators.sindy.SINDy', 'n_models')})",
     )
     idf.add_argument(
         "--frf",
@@ -348,9 +348,9 @@ def _discrepancy(sub, common: argparse.ArgumentParser, data_opts: argparse.Argum
     dsc.add_argument("--baseline", choices=["cubic", "linear"], default="cubic", help="starting model")
     dsc.add_argument(
         "--max-effects",
-        type=declared("discrepancy.Discrepancy", "max_effects"),
-        default=default("discrepancy.Discrepancy", "max_effects"),
-        help=f"effects added at most (default {default('discrepancy.Discrepancy', 'max_effects')})",
+        type=declared("estimators.discrepancy.Discrepancy", "max_effects"),
+        default=default("estimators.discrepancy.Discrepancy", "max_effects"),
+        help=f"effects added at most (default {default('estimators.discrepancy.Discrepancy', 'max_effects')})",
     )
     dsc.add_argument(
         "--no-refine",
@@ -429,10 +429,10 @@ def _update(sub, common: argparse.ArgumentParser, data_opts: argparse.ArgumentPa
     upd.add_argument("-o", "--out", required=True, help="result JSON")
     upd.add_argument(
         "--fix-mass",
-        type=declared("updating.GAUpdater", "fixed_mass"),
+        type=declared("estimators.updating.GAUpdater", "fixed_mass"),
         help="weighed moving mass [kg]: update E and alpha only",
     )
-    ga = "updating.GAUpdater"
+    ga = "estimators.updating.GAUpdater"
     upd.add_argument(
         "--generations",
         type=declared(ga, "generations"),

@@ -17,6 +17,8 @@ import numpy as np
 from scipy import optimize, signal
 
 from negstiff.errors import MeasurementError
+from negstiff.inference.record.frame import pin_frame
+from negstiff.inference.record.measurement import Measurement
 from negstiff.models import Model, simulate, simulate_batch
 from negstiff.models.simulator import (
     DEFAULT_SUBSTEPS,
@@ -26,9 +28,6 @@ from negstiff.models.simulator import (
     input_gain,
     stage_input,
 )
-
-from .frame import pin_frame
-from .measurement import Measurement
 
 
 def divergence_limits(z: np.ndarray, v: np.ndarray) -> dict[str, float]:

@@ -37,17 +37,16 @@ import numpy as np
 from scipy import optimize, sparse
 
 from negstiff.errors import MeasurementError
-from negstiff.models import Model, effects, simulate_batch
-from negstiff.models.simulator import stage_input
-
-from .measurement import Measurement
-from .shooting import shooting_least_squares
-from .validation import (
+from negstiff.inference.record.measurement import Measurement
+from negstiff.inference.steps.shooting import shooting_least_squares
+from negstiff.inference.steps.validation import (
     boundedness,
     divergence_limits,
     record_substeps,
     validate,
 )
+from negstiff.models import Model, effects, simulate_batch
+from negstiff.models.simulator import stage_input
 
 PREDICTABLE_GROWTH = 5.0
 """A stage of longer windows is fitted only while its error at the current model stays within this

@@ -18,10 +18,9 @@ from negstiff.errors import (
     NegstiffWarning,
     RecordWarning,
 )
-
-from .frame import frame_offset
-from .measurement import record_warnings
-from .weak import input_coefficient
+from negstiff.inference.record.frame import frame_offset
+from negstiff.inference.record.measurement import record_warnings
+from negstiff.inference.steps.weak import input_coefficient
 
 FRAME_WARN_M = 2e-3
 """A measured z whose zero sits this far [m] from where the record's physics carries the weight is

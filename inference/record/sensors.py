@@ -39,9 +39,8 @@ import numpy as np
 from scipy.interpolate import make_interp_spline
 
 from negstiff.errors import MeasurementError
+from negstiff.inference.steps.derivatives import noise_floor
 from negstiff.models.table import integrate_fft
-
-from .derivatives import noise_floor
 
 RESPONSES = ("z", "z_dot", "y", "y_dot", "y_acc")
 """Response columns in the order a record's response is taken from (the first present wins)."""

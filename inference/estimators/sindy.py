@@ -29,12 +29,12 @@ import math
 
 import numpy as np
 
-from .identification import Estimate, Identifier
-from .measurement import Measurement
-from .parameters import FRACTION, SEED, Boolean, Interval, Several
-from .selection import block_rows, block_scores, indistinguishable
-from .validation import boundedness, restarted_free_runs
-from .weak import (
+from negstiff.inference.estimators.identification import Estimate, Identifier
+from negstiff.inference.estimators.parameters import FRACTION, SEED, Boolean, Interval, Several
+from negstiff.inference.record.measurement import Measurement
+from negstiff.inference.steps.selection import block_rows, block_scores, indistinguishable
+from negstiff.inference.steps.validation import boundedness, restarted_free_runs
+from negstiff.inference.steps.weak import (
     BASE_FIELDS,
     Bagging,
     WeakForm,

@@ -8,9 +8,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from negstiff.errors import MeasurementError
+from negstiff.inference.record.measurement import Measurement
 from negstiff.models import simulate_batch
-
-from ..measurement import Measurement
 
 COEFFICIENT_NAMES = ("k1", "k2", "k3", "c", "c_nl", "sigma")
 DEVICE_NAMES = ("E", "alpha_deg", "m", "c", "c_nl", "sigma")

@@ -12,18 +12,26 @@ import numpy as np
 from scipy import optimize
 
 from negstiff.errors import MeasurementError, issue
+from negstiff.inference.estimators.base import Estimator
+from negstiff.inference.estimators.parameters import SEED, Boolean, Instance, Interval, Options
+from negstiff.inference.estimators.posterior.diagnostics import (
+    PosteriorResult,
+    convergence_warnings,
+    result_json,
+    summarise,
+)
+from negstiff.inference.estimators.posterior.likelihood import LogPosterior, curvature_adjustment
+from negstiff.inference.estimators.posterior.parametrisation import (
+    Parametrisation,
+    coefficient_parametrisation,
+    device_parametrisation,
+)
+from negstiff.inference.estimators.posterior.sampling import sample_ensembles
+from negstiff.inference.estimators.posterior.windows import DROP_FACTOR_AT_MAP, PosteriorError, Windows
+from negstiff.inference.record.measurement import Measurement
+from negstiff.inference.steps.plausibility import classified
 from negstiff.models import Model
 from negstiff.models.device import NOMINAL
-
-from ..estimator import Estimator
-from ..measurement import Measurement
-from ..parameters import SEED, Boolean, Instance, Interval, Options
-from ..plausibility import classified
-from .diagnostics import PosteriorResult, convergence_warnings, result_json, summarise
-from .likelihood import LogPosterior, curvature_adjustment
-from .parametrisation import Parametrisation, coefficient_parametrisation, device_parametrisation
-from .sampling import sample_ensembles
-from .windows import DROP_FACTOR_AT_MAP, PosteriorError, Windows
 
 
 class Posterior(Estimator):
@@ -126,7 +134,7 @@ class Posterior(Estimator):
     # --- start point -------------------------------------------------------------------------------
     def _start(self, rec: Measurement, win: Windows) -> tuple[Parametrisation, np.ndarray]:
         if self.model == "coefficients":
-            from ..weak import weak_least_squares
+            from negstiff.inference.steps.weak import weak_least_squares
 
             if self.start is not None:  # an identified (output-error refined) model: the MAP search starts there
                 if rec.mass is not None and abs(self.start.m / rec.mass - 1) > 1e-6:
@@ -155,8 +163,8 @@ class Posterior(Estimator):
         """The weak-form estimate refined by simulation error over the record (``refine.refine``; the mass
         held: the coefficient posterior holds it too), kept only if it is bounded and predicts the record
         at least as well; ``start_info_`` says which start was used and why."""
-        from ..refine import refine
-        from ..validation import boundedness
+        from negstiff.inference.steps.refine import refine
+        from negstiff.inference.steps.validation import boundedness
 
         info: dict[str, Any] = {"source": "weak-form least squares", "initial_model": weak.to_dict()}
         self.start_info_ = info

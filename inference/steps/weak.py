@@ -42,10 +42,9 @@ import numpy as np
 from scipy import signal
 
 from negstiff.errors import MeasurementError
+from negstiff.inference.record.measurement import Measurement
+from negstiff.inference.steps.derivatives import noise_floor
 from negstiff.models import Model, effects
-
-from .derivatives import noise_floor
-from .measurement import Measurement
 
 BASE_FIELDS = tuple(effects.BASE_TERMS)
 """The model file's base fields (k0, k1, k2, k3, c, c_nl), each a library term."""

@@ -25,10 +25,9 @@ from os import PathLike
 from typing import Any, ClassVar
 
 from negstiff.errors import InputError, NotFittedError
-
-from .frame import pin_frame
-from .measurement import Measurement, load
-from .parameters import Constraint
+from negstiff.inference.estimators.parameters import Constraint
+from negstiff.inference.record.frame import pin_frame
+from negstiff.inference.record.measurement import Measurement, load
 
 
 class Estimator:

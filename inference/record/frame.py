@@ -13,10 +13,9 @@ from typing import Any
 
 import numpy as np
 
+from negstiff.inference.record.measurement import Measurement
+from negstiff.inference.steps.weak import weak_least_squares
 from negstiff.models.constants import G
-
-from .measurement import Measurement
-from .weak import weak_least_squares
 
 PIN_TERMS = ("1", "z", "z^2", "z^3", "z^4", "z^5", "v", "v|v|")
 """Library of the frame fit: a quintic restoring force follows the exact device's K near its origin

@@ -6,8 +6,8 @@ import threading
 
 import numpy as np
 
-from .parametrisation import Parametrisation
-from .windows import Windows
+from negstiff.inference.estimators.posterior.parametrisation import Parametrisation
+from negstiff.inference.estimators.posterior.windows import Windows
 
 
 def curvature_adjustment(J: np.ndarray, r: np.ndarray, n_windows: int, sigma: float, adjust: bool = True):

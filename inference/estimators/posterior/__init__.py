@@ -36,12 +36,21 @@ is computed across ensembles, each ensemble one chain (walkers of one ensemble a
 ESS bulk and tail across all walkers, and capped by the emcee estimate N / tau.
 """
 
-from .core import Posterior
-from .diagnostics import PosteriorResult, convergence_warnings, result_json, summarise
-from .likelihood import LogPosterior, curvature_adjustment
-from .parametrisation import Parametrisation, coefficient_parametrisation, device_parametrisation
-from .sampling import sample_ensembles
-from .windows import (
+from negstiff.inference.estimators.posterior.core import Posterior
+from negstiff.inference.estimators.posterior.diagnostics import (
+    PosteriorResult,
+    convergence_warnings,
+    result_json,
+    summarise,
+)
+from negstiff.inference.estimators.posterior.likelihood import LogPosterior, curvature_adjustment
+from negstiff.inference.estimators.posterior.parametrisation import (
+    Parametrisation,
+    coefficient_parametrisation,
+    device_parametrisation,
+)
+from negstiff.inference.estimators.posterior.sampling import sample_ensembles
+from negstiff.inference.estimators.posterior.windows import (
     COEFFICIENT_NAMES,
     DEVICE_NAMES,
     DROP_FACTOR,

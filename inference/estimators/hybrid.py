@@ -32,14 +32,13 @@ import numpy as np
 from scipy import linalg
 
 from negstiff.errors import MeasurementError
+from negstiff.inference.record.measurement import Measurement
+from negstiff.inference.steps.refine import parameter_names, parameter_scales, with_values
+from negstiff.inference.steps.shooting import parameter_covariance, shooting_least_squares
+from negstiff.inference.steps.validation import divergence_limits, record_substeps, staged_windows
 from negstiff.models import Model, effects
 from negstiff.models.kernel import KINDS, P_M, kernel_with_term
 from negstiff.models.simulator import input_gain, stage_input
-
-from .measurement import Measurement
-from .refine import parameter_names, parameter_scales, with_values
-from .shooting import parameter_covariance, shooting_least_squares
-from .validation import divergence_limits, record_substeps, staged_windows
 
 
 @dataclass(frozen=True)

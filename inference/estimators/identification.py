@@ -33,14 +33,13 @@ from typing import Any, Mapping
 import numpy as np
 
 from negstiff.errors import issue
+from negstiff.inference.estimators.base import Estimator
+from negstiff.inference.record.measurement import Measurement
+from negstiff.inference.steps.plausibility import classified
+from negstiff.inference.steps.refine import refine_stage, stroke_quantiles
+from negstiff.inference.steps.validation import boundedness, validate
 from negstiff.models import Model
 from negstiff.models.equation import Equilibria
-
-from .estimator import Estimator
-from .measurement import Measurement
-from .plausibility import classified
-from .refine import refine_stage, stroke_quantiles
-from .validation import boundedness, validate
 
 
 class Bunch(dict):

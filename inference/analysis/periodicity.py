@@ -27,8 +27,7 @@ from scipy import signal
 from scipy.interpolate import CubicSpline
 
 from negstiff.errors import MeasurementError
-
-from .measurement import Measurement
+from negstiff.inference.record.measurement import Measurement
 
 PERIODS = (1, 2, 3, 4, 5, 6, 8, 16)
 

@@ -21,6 +21,7 @@ import numpy as np
 
 from negstiff import io as record_io
 from negstiff.errors import MeasurementError, RecordWarning, issue
+from negstiff.inference.steps.derivatives import state_derivatives
 from negstiff.io.base import RESOLUTION
 from negstiff.io.schema import (
     DIMENSIONS,
@@ -37,7 +38,6 @@ from negstiff.io.schema import (
 )
 
 from . import sensors
-from .derivatives import state_derivatives
 
 TIME_JITTER_FRACTION = 0.01
 """A time column's samples may sit this fraction of a step off a uniform grid (or by their printed

@@ -37,14 +37,14 @@ import numpy as np
 from scipy import signal
 
 from negstiff.errors import MeasurementError
+from negstiff.inference.estimators.identification import Estimate, Identifier, visited_well
+from negstiff.inference.estimators.parameters import FRACTION, Boolean, Interval, Pair
+from negstiff.inference.record.measurement import Measurement
+from negstiff.inference.steps.derivatives import smooth_and_differentiate, velocity_window
+from negstiff.inference.steps.weak import known_input_gain, mass_of
 from negstiff.models import Model
 
 from . import subspace
-from .derivatives import smooth_and_differentiate, velocity_window
-from .identification import Estimate, Identifier, visited_well
-from .measurement import Measurement
-from .parameters import FRACTION, Boolean, Interval, Pair
-from .weak import known_input_gain, mass_of
 
 BASIS_NAMES = ("x2", "x3", "vabsv")
 """Nonlinear basis: x^2, x^3, x'|x'| (their coefficients are k2~, k3, c_nl)."""

@@ -26,10 +26,9 @@ from typing import Any, Mapping
 import numpy as np
 
 from negstiff.errors import InputError
+from negstiff.inference.estimators.base import Estimator
+from negstiff.inference.estimators.parameters import SEED, Instance, Interval, Options
 from negstiff.models import NOMINAL, Device
-
-from .estimator import Estimator
-from .parameters import SEED, Instance, Interval, Options
 
 FEATURES = ("f_minus", "f_plus", "z_minus", "z_plus")
 PENALTY = 1e3
@@ -170,7 +169,7 @@ class GAUpdater(Estimator):
         "start": Instance("negstiff.models.device", "Device"),
         "pop_size": Interval(int, 4, 10**5),
         "generations": Interval(int, 1, 10**5),
-        "bounds": Instance("negstiff.inference.updating", "Bounds"),
+        "bounds": Instance("negstiff.inference.estimators.updating", "Bounds"),
         "fixed_mass": Interval(float, 1e-9, 1e9, unit="kg", none=True),
         "seed": SEED,
         "compare": Options(("auto", "features", "restoring_force")),

@@ -21,9 +21,8 @@ import numpy as np
 
 from negstiff.errors import MeasurementError
 from negstiff.files import read_json
-
-from .characterize import check_harmonic, first_period_2, jump, map_point, map_sequence
-from .measurement import Measurement, load
+from negstiff.inference.analysis.characterize import check_harmonic, first_period_2, jump, map_point, map_sequence
+from negstiff.inference.record.measurement import Measurement, load
 
 MEASUREMENT_SUFFIXES = (".csv", ".txt", ".npz", ".mat", ".uff", ".unv", ".tdms", ".lvm")
 

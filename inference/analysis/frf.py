@@ -27,9 +27,8 @@ from scipy import optimize, signal
 
 from negstiff.errors import MeasurementError, issue
 from negstiff.files import read_json
-
-from .measurement import Measurement
-from .plausibility import classified
+from negstiff.inference.record.measurement import Measurement
+from negstiff.inference.steps.plausibility import classified
 
 SEGMENT_S = 16.0
 """Welch segment length [s]: 1/16 Hz bins, at least 8 averages on a 72 s record (fewer on shorter

@@ -29,14 +29,13 @@ import numpy as np
 from scipy import signal
 
 from negstiff.errors import MeasurementError, issue
-
-from .derivatives import noise_floor
-from .frame import pin_frame
-from .lyapunov import largest_lyapunov
-from .measurement import Measurement
-from .nsi import well_guesses
-from .periodicity import classify_regime, periodicity
-from .plausibility import classified
+from negstiff.inference.analysis.lyapunov import largest_lyapunov
+from negstiff.inference.analysis.periodicity import classify_regime, periodicity
+from negstiff.inference.estimators.nsi import well_guesses
+from negstiff.inference.record.frame import pin_frame
+from negstiff.inference.record.measurement import Measurement
+from negstiff.inference.steps.derivatives import noise_floor
+from negstiff.inference.steps.plausibility import classified
 
 CHAOS_THRESHOLD = 0.05
 """A Wolf exponent counts as significantly positive above this many nats per radian of forcing
@@ -205,7 +204,7 @@ def map_point(rec: Measurement, forcing_hz: float, wells=None) -> dict[str, Any]
     forcing's amplitude measured from the input (its harmonic at ``forcing_hz`` by least squares: m/s^2
     for base excitation, N for a force), the period, regime, branch amplitudes and the last
     ``MAP_POINCARE_POINTS`` Poincare z (phase 0); no Lyapunov exponent (a map's records are many)."""
-    from .periodicity import forcing_phase
+    from negstiff.inference.analysis.periodicity import forcing_phase
 
     c = characterize(rec, forcing_hz, wells, lle=False, poincare=True)
     amplitude, _ = forcing_phase(rec.u, rec.t - rec.t0, forcing_hz)

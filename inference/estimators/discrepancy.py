@@ -33,17 +33,16 @@ from typing import Any
 import numpy as np
 
 from negstiff.errors import MeasurementError, issue
+from negstiff.inference.estimators.base import Estimator
+from negstiff.inference.estimators.parameters import FRACTION, Boolean, Constraint, Interval, Options, Several
+from negstiff.inference.record.measurement import Measurement
+from negstiff.inference.steps.plausibility import classified
+from negstiff.inference.steps.refine import refine_stage
+from negstiff.inference.steps.selection import block_rows, block_scores, compare, indistinguishable
+from negstiff.inference.steps.validation import boundedness, restarted_free_runs, validate
+from negstiff.inference.steps.weak import BASE_FIELDS, WeakForm, known_input_gain, mass_of, model_from, term_fields
+from negstiff.inference.steps.weak import terms as library_terms
 from negstiff.models import Model, effects
-
-from .estimator import Estimator
-from .measurement import Measurement
-from .parameters import FRACTION, Boolean, Constraint, Interval, Options, Several
-from .plausibility import classified
-from .refine import refine_stage
-from .selection import block_rows, block_scores, compare, indistinguishable
-from .validation import boundedness, restarted_free_runs, validate
-from .weak import BASE_FIELDS, WeakForm, known_input_gain, mass_of, model_from, term_fields
-from .weak import terms as library_terms
 
 CUBIC_BASELINE = ("1", "z", "z^2", "z^3", "v")
 LINEAR_BASELINE = ("1", "z", "v")
@@ -375,7 +374,7 @@ class Discrepancy(Estimator):
         identification part with the final model held (``hybrid.fit_hybrid``), its size, the held-out gap
         with and without it (the same restarted windows), and how far the joint refit moved each physical
         coefficient in its standard errors."""
-        from .hybrid import fit_hybrid
+        from negstiff.inference.estimators.hybrid import fit_hybrid
 
         ident = rec.segment(0, self.n_id_)
         h = fit_hybrid(self.model_, ident)

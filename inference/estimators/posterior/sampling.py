@@ -10,9 +10,8 @@ from typing import Any
 
 import numpy as np
 
+from negstiff.inference.estimators.posterior.windows import PosteriorError
 from negstiff.models.simulator import cores
-
-from .windows import PosteriorError
 
 
 def sample_ensembles(

@@ -9,11 +9,10 @@ from typing import Callable
 
 import numpy as np
 
+from negstiff.inference.estimators.posterior.windows import SIGMA_BOUNDS
 from negstiff.models import Model
 from negstiff.models.device import Device
 from negstiff.models.effects import DEVICE_ROWS, POLYNOMIAL_ROWS, ROWS
-
-from .windows import SIGMA_BOUNDS
 
 
 # ------------------------------------------------------------------------------------------------

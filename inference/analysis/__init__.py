@@ -1,0 +1,3 @@
+"""The dynamics of harmonic records: periodicity on phase-synchronous samples (``periodicity``), Lyapunov
+exponents (``lyapunov``), both composed by ``characterize``; a stepped campaign's bifurcation map
+(``campaign``); frequency response functions (``frf``)."""
