@@ -1,6 +1,11 @@
 """A report as a list of blocks (headings, text, tables, figures), rendered twice from the same
 content: ``index.md`` (figures as PNG files beside it) and a self-contained ``index.html`` (figures
-embedded), plus ``results.json``. The folder is written atomically."""
+embedded), plus ``results.json``. The folder is written atomically.
+
+Both open with the summary (``summary``) and a table of contents; every section (a level-2 heading) is
+numbered and has an anchor. A script builds a report from results with ``add`` (``experiments.sections``:
+one section per kind of result, the same the command ``negstiff report`` writes), ``add_text``,
+``add_table``, ``add_figure`` and ``write``."""
 
 from __future__ import annotations
 
@@ -36,11 +41,109 @@ def fmt(x: Any, digits: int = 4) -> str:
 
 @dataclass
 class Report:
-    """Blocks of a report and the figures they reference."""
+    """Blocks of a report and the figures they reference; ``summary_lines`` open it."""
 
     title: str
     blocks: list[tuple[str, Any]] = field(default_factory=list)
     figures: dict[str, bytes] = field(default_factory=dict)
+    summary_lines: list[str] = field(default_factory=list)
+
+    def summary(self, text: str) -> None:
+        """A line of the summary the report opens with (what was found, in plain words)."""
+        self.summary_lines.append(text)
+
+    # --- building from results (a script's report, ``negstiff report``) ----------------------------
+    def add(self, result, label: str = "") -> "Report":
+        """A section for ``result``: a record, a fitted ``NSI``/``SINDy``/``Posterior``/``Discrepancy``, an
+        ``Identification``, an ``frf``/``characterize``/map result (``sections.section_for``). ``label``
+        tells results of several records apart (a column of the coefficient table each). Returns the report."""
+        from .sections import section_for
+
+        sec = section_for(result, label)
+        self.figures.update(sec.figures)
+        self.blocks.append(("section", sec))
+        return self
+
+    def add_failure(self, title: str, reason: str) -> "Report":
+        """A section that could not be made, in its place, with the reason."""
+        from .sections import Section
+
+        sec = Section("failure", "", title)
+        sec.warning(f"not made: {reason}")
+        sec.summary.append(f"{title}: not made ({reason}).")
+        self.blocks.append(("section", sec))
+        return self
+
+    def add_text(self, text: str, heading: str | None = None) -> "Report":
+        if heading:
+            self.heading(heading)
+        self.text(text)
+        return self
+
+    def add_table(self, header: list[str], rows: list[list[Any]], heading: str | None = None) -> "Report":
+        if heading:
+            self.heading(heading)
+        self.table(header, rows)
+        return self
+
+    def add_figure(self, fig, caption: str, name: str | None = None, heading: str | None = None) -> "Report":
+        if heading:
+            self.heading(heading)
+        self.figure(name or f"figure_{len(self.figures) + 1}", fig, caption)
+        return self
+
+    def _composed(self) -> tuple[list[tuple[str, Any]], list[str]]:
+        """The blocks as rendered and the summary: each section expanded in its place, and, where the report
+        holds estimates, first the table of every coefficient (each method beside the posterior's
+        interval, with a forest plot) and the held-out prediction errors against the noise floor."""
+        secs = [b for k, b in self.blocks if k == "section"]
+        summary = [line for s in secs for line in s.summary] + self.summary_lines
+        head: list[tuple[str, Any]] = []
+        estimates = {col: v for s in secs for col, v in s.estimates.items()}
+        intervals = {f"{s.label or 'posterior'}": s.interval for s in secs if s.interval}
+        if estimates or intervals:
+            from .sections import coefficient_blocks
+
+            blocks, figures, lines = coefficient_blocks(estimates, intervals)
+            self.figures.update(figures)
+            head += blocks
+            summary[1:1] = lines
+        held = {k: v for s in secs for k, v in s.heldout.items()}
+        if len(held) > 1:
+            head += [("h", (2, "Held-out prediction")),
+                     ("p", "Each model's free runs (restarted at measured states, 2 s each) over the part of the "
+                           "record not used to identify it, as a share of rms z, beside the record's sensor-noise "
+                           "floor (a perfect model's error also carries the input's noise and its start states')."),
+                     ("table", (["model", "held-out error [% of rms z]"],
+                                [[k, fmt(v, 3)] for k, v in held.items()]))]  # fmt: skip
+        out: list[tuple[str, Any]] = list(head)
+        for kind, b in self.blocks:
+            if kind == "section":
+                out.append(("h", (2, b.title)))
+                out += b.blocks
+            else:
+                out.append((kind, b))
+        return out, summary
+
+    def results(self) -> dict[str, Any]:
+        """Every section's results (the report's ``results.json``)."""
+        secs = [b for k, b in self.blocks if k == "section"]
+        out: dict[str, Any] = {"sections": [{"kind": s.kind, "label": s.label, "title": s.title, "result": s.json}
+                                            for s in secs]}  # fmt: skip
+        estimates = {col: v for s in secs for col, v in s.estimates.items()}
+        intervals = {f"{s.label or 'posterior'}": s.interval for s in secs if s.interval}
+        from .sections import COEFFICIENTS
+
+        out["coefficients"] = {
+            k: {**{col: est.get(k) for col, est in estimates.items()},
+                **{("posterior" if lab == "posterior" else f"posterior ({lab})"): {
+                    "mean": iv[k][0], "hdi_low": iv[k][1], "hdi_high": iv[k][2]}
+                   for lab, iv in intervals.items() if k in iv}}
+            for k in COEFFICIENTS
+        }  # fmt: skip
+        out["heldout_percent"] = {k: v for s in secs for k, v in s.heldout.items()}
+        out["summary"] = self._composed()[1]
+        return out
 
     def heading(self, text: str, level: int = 2) -> None:
         self.blocks.append(("h", (level, text)))
@@ -65,11 +168,31 @@ class Report:
         self.blocks.append(("fig", (f"{name}.png", caption)))
 
     # --- rendering ---------------------------------------------------------------------------
+    def _sections(self, blocks) -> list[tuple[int, str, str]]:
+        """(block index, number, anchor) of every level-2 heading, numbered in order."""
+        out, n = [], 0
+        for i, (kind, b) in enumerate(blocks):
+            if kind == "h" and b[0] == 2:
+                n += 1
+                out.append(
+                    (i, str(n), f"s{n}-" + re.sub(r"[^a-z0-9]+", "-", _unnumbered(b[1]).lower()).strip("-")[:40])
+                )
+        return out
+
     def markdown(self) -> str:
         out = [f"# {self.title}", ""]
-        for kind, b in self.blocks:
+        blocks, summary = self._composed()
+        sections = self._sections(blocks)
+        numbers = {i: num for i, num, _ in sections}
+        if summary:
+            out += ["**Summary.**", ""] + [f"- {line}" for line in summary] + [""]
+        if sections:
+            out += ["**Contents.**", ""]
+            out += [f"{num}. [{_unnumbered(blocks[i][1][1])}](#{anchor})" for i, num, anchor in sections] + [""]
+        for i, (kind, b) in enumerate(blocks):
             if kind == "h":
-                out += [f"{'#' * b[0]} {b[1]}", ""]
+                text = f"{numbers[i]}. {_unnumbered(b[1])}" if i in numbers else b[1]
+                out += [f"{'#' * b[0]} {text}", ""]
             elif kind == "p":
                 out += [b, ""]
             elif kind == "warn":
@@ -94,12 +217,29 @@ class Report:
             "<style>body{font-family:sans-serif;max-width:60em;margin:2em auto;line-height:1.45}"
             "table{border-collapse:collapse}td,th{border:1px solid #bbb;padding:2px 8px;text-align:right}"
             "th{background:#eee}img{max-width:100%}figcaption{font-style:italic;color:#444}"
-            ".warn{background:#fee;border-left:4px solid #c00;padding:4px 8px}</style></head><body>",
+            ".warn{background:#fee;border-left:4px solid #c00;padding:4px 8px}"
+            ".summary{background:#eef5ff;border-left:4px solid #36c;padding:4px 12px}"
+            "nav.toc{background:#f6f6f6;padding:4px 12px}nav.toc ol{margin:4px 0}</style></head><body>",
             f"<h1>{html.escape(self.title)}</h1>",
         ]
-        for kind, b in self.blocks:
+        blocks, summary = self._composed()
+        sections = self._sections(blocks)
+        numbers = {i: (num, anchor) for i, num, anchor in sections}
+        if summary:
+            items = "".join(f"<li>{inline(x)}</li>" for x in summary)
+            head = "<section class='summary' id='summary'><h2 style='margin:6px 0'>Summary</h2>"
+            parts.append(f"{head}<ul>{items}</ul></section>")
+        if sections:
+            parts.append("<nav class='toc' id='contents'><b>Contents</b><ol>" + "".join(
+                f"<li><a href='#{anchor}'>{inline(_unnumbered(blocks[i][1][1]))}</a></li>"
+                for i, num, anchor in sections) + "</ol></nav>")  # fmt: skip
+        for i, (kind, b) in enumerate(blocks):
             if kind == "h":
-                parts.append(f"<h{b[0]}>{inline(b[1])}</h{b[0]}>")
+                if i in numbers:
+                    num, anchor = numbers[i]
+                    parts.append(f"<h2 id='{anchor}'>{num}. {inline(_unnumbered(b[1]))}</h2>")
+                else:
+                    parts.append(f"<h{b[0]}>{inline(b[1])}</h{b[0]}>")
             elif kind == "p":
                 parts.append(f"<p>{inline(b)}</p>")
             elif kind == "warn":
@@ -118,8 +258,12 @@ class Report:
         parts.append("</body></html>")
         return "\n".join(parts)
 
-    def write(self, folder: str | Path, results: dict[str, Any]) -> Path:
-        """Write index.md, index.html, results.json and the PNGs into ``folder`` atomically."""
+    def write(self, folder: str | Path, results: dict[str, Any] | None = None) -> Path:
+        """Write index.md, index.html, results.json (``results``, else the sections' own: ``results()``) and
+        the PNGs into ``folder`` atomically."""
+        self._composed()  # the figures the composition draws (the forest plot)
+        if results is None:
+            results = self.results()
         with atomic_dir(folder) as tmp:
             for name, data in self.figures.items():
                 (tmp / name).write_bytes(data)
@@ -127,6 +271,11 @@ class Report:
             (tmp / "index.html").write_text(self.html())
             (tmp / "results.json").write_text(json.dumps(results, indent=2, default=_json_default) + "\n")
         return Path(folder)
+
+
+def _unnumbered(text: str) -> str:
+    """A heading without a number it was written with ("4. NSI" -> "NSI"): the renderer numbers."""
+    return re.sub(r"^\d+(\.\d+)*\.?\s+", "", text)
 
 
 def _json_default(o: Any) -> Any:

@@ -50,6 +50,7 @@ _EXPORTS = {
     "GAUpdater": "negstiff.inference.estimators.updating",
     "characterize": "negstiff.inference.analysis.characterize",
     "frf": "negstiff.inference.analysis.frf",
+    "Report": "negstiff.experiments.report",
     "Identification": "negstiff.inference.estimators.identification",
     # errors and warnings
     "InputError": "negstiff.errors",

@@ -36,3 +36,12 @@ def write_csv(path, cols, meta=None):
     rows = np.column_stack(list(cols.values()))
     path.write_text(head + "\n".join(",".join(f"{x:.10g}" for x in r) for r in rows) + "\n")
     return path
+
+
+def write_npz_channels(path, channels, meta=None):
+    """Channels under a lab's own names (``V1``, ``V2``), as a DAQ saves them: a foreign file, read with a map."""
+    import json
+
+    with open(path, "wb") as fh:
+        np.savez(fh, **channels, **({"meta": json.dumps(meta)} if meta else {}))
+    return path

@@ -35,14 +35,44 @@ SEGMENT_S = 16.0
 ones, said by ``averages``)."""
 
 
-def estimate(rec: Measurement, segment_s: float = SEGMENT_S) -> dict[str, np.ndarray]:
-    """H1, H2 and the coherence of z over the input: (f [Hz], H1, H2, coherence, averages)."""
+PERIODIC_CORRELATION = 0.999
+"""An input whose autocorrelation at one lag (0.25 s or more, a third of the record at most) is this close to 1
+is periodic (a multisine, a periodic chirp): its spectrum is lines 1/period apart."""
+
+
+def input_period(rec: Measurement) -> int | None:
+    """The period [samples] of a periodic input (``PERIODIC_CORRELATION``), else None."""
+    u = rec.u - rec.u.mean()
+    n = u.size
+    if n < 64 or not np.any(u):
+        return None
+    spec = np.fft.rfft(u, 2 * n)
+    acf = np.fft.irfft(np.abs(spec) ** 2)[: n // 3 + 1]
+    acf = acf / acf[0] * n / (n - np.arange(acf.size))  # unbiased: each lag over the samples it has
+    lo = max(1, int(0.25 * rec.fs))
+    if acf.size <= lo + 1:
+        return None
+    above = np.flatnonzero(acf[lo:] >= PERIODIC_CORRELATION)
+    if not above.size:
+        return None
+    run_end = above[0] + int(np.argmax(np.diff(np.r_[above, above[-1] + 2]) > 1))  # the first lags that repeat
+    return lo + above[0] + int(np.argmax(acf[lo + above[0] : lo + run_end + 1]))  # the period, not a multiple
+
+
+def estimate(rec: Measurement, segment_s: float = SEGMENT_S, period: int | None = None) -> dict[str, np.ndarray]:
+    """H1, H2 and the coherence of z over the input: (f [Hz], H1, H2, coherence, averages). A periodic input
+    (``period`` samples: a multisine) is averaged over whole periods without a window: every bin is one of its
+    lines, none leaks (Welch's Hann segments of a random input would split its lines and fit noise between)."""
     if rec.z is None:
         raise MeasurementError(f"{rec.source}: an FRF needs a response column")
-    nper = int(min(rec.n // 2, round(segment_s * rec.fs)))
+    if period is not None and rec.n >= 2 * period:
+        kw = {"fs": rec.fs, "nperseg": period, "window": "boxcar", "noverlap": 0, "detrend": "constant"}
+        nper = period
+    else:
+        nper = int(min(rec.n // 2, round(segment_s * rec.fs)))
+        kw = {"fs": rec.fs, "nperseg": nper, "window": "hann", "noverlap": nper // 2, "detrend": "constant"}
     if nper < 64:
         raise MeasurementError(f"{rec.source}: too few samples for an FRF ({rec.n}); need at least 128")
-    kw = {"fs": rec.fs, "nperseg": nper, "window": "hann", "noverlap": nper // 2, "detrend": "constant"}
     f, gxx = signal.welch(rec.u, **kw)
     _, gyy = signal.welch(rec.z, **kw)
     _, gxy = signal.csd(rec.u, rec.z, **kw)  # conj(X) Y: H1 = G_xy / G_xx
@@ -50,7 +80,9 @@ def estimate(rec: Measurement, segment_s: float = SEGMENT_S) -> dict[str, np.nda
         h1 = gxy / gxx
         h2 = gyy / np.conj(gxy)
         coh = np.abs(gxy) ** 2 / (gxx * gyy)
-    return {"f": f, "H1": h1, "H2": h2, "coherence": np.nan_to_num(coh), "Gxx": gxx, "averages": 2 * rec.n // nper - 1}
+    averages = rec.n // nper if kw["window"] == "boxcar" else 2 * rec.n // nper - 1
+    return {"f": f, "H1": h1, "H2": h2, "coherence": np.nan_to_num(coh), "Gxx": gxx, "averages": averages,
+            "window": kw["window"]}  # fmt: skip
 
 
 def _sdof(p, w):
@@ -124,7 +156,10 @@ def frf(rec: Measurement, band: tuple[float, float] | None = None, segment_s: fl
     (``_curves``: arrays, for a figure; not JSON).
     """
     check_frf(rec, band)
-    if segment_s is None:
+    period = input_period(rec) if segment_s is None else None
+    if period is not None:  # a multisine: whole periods, its lines
+        r = _frf(rec, band, period / rec.fs, period)
+    elif segment_s is None:
         r = _frf(rec, band, SEGMENT_S)
         if r["f_hz"] is not None:
             need = 1.5 / (RESOLUTION_RATIO * 2 * r["zeta"] * r["f_hz"])
@@ -139,9 +174,10 @@ def frf(rec: Measurement, band: tuple[float, float] | None = None, segment_s: fl
     return r | {"record": dict(rec.info), "warnings": [text for _, text in lines]}
 
 
-def _frf(rec: Measurement, band: tuple[float, float] | None, segment_s: float) -> dict[str, Any]:
-    """``frf`` with a given Welch segment [s]."""
-    est = estimate(rec, segment_s)
+def _frf(rec: Measurement, band: tuple[float, float] | None, segment_s: float, period: int | None = None
+         ) -> dict[str, Any]:  # fmt: skip
+    """``frf`` with a given Welch segment [s] (or the input's period [samples])."""
+    est = estimate(rec, segment_s, period)
     f, h1, coh = est["f"], est["H1"], est["coherence"]
     nyq = rec.fs / 2
     if band is None:  # the excited band: where the input's spectrum is within 20 dB of its peak
@@ -183,8 +219,10 @@ def _frf(rec: Measurement, band: tuple[float, float] | None, segment_s: float) -
         "coherence": top["coherence"] if top else None,
         "band": [float(band[0]), float(band[1])],
         "peaks": peaks,
-        "estimator": f"H1 = Gxy/Gxx (H2 beside), Welch: Hann, {est['averages']} averages of "
-        f"{segment_s:.3g} s, 50 % overlap; peaks: SDOF receptance fit",
+        "estimator": (f"H1 = Gxy/Gxx (H2 beside), the periodic input's {est['averages']} whole periods of "
+                      f"{segment_s:.4g} s, no window; peaks: SDOF receptance fit" if est["window"] == "boxcar" else
+                      f"H1 = Gxy/Gxx (H2 beside), Welch: Hann, {est['averages']} averages of "
+                      f"{segment_s:.3g} s, 50 % overlap; peaks: SDOF receptance fit"),  # fmt: skip
         "segment_s": float(segment_s),
         "response_per_input": "m per m/s^2 (z / base_acc)" if rec.input_name == "base_acc" else "m per N (z / force)",
         "reason": None if top else "no resonance peak with coherence above 0.5 in the band",

@@ -399,6 +399,27 @@ def cmd_update(args) -> int:
     return 0
 
 
+def cmd_report(args) -> int:
+    from negstiff.experiments.record_report import report_records
+
+    options: dict[str, dict] = {"posterior": {}, "discrepancy": {}}
+    if args.duration is not None:
+        options["posterior"]["duration"] = args.duration
+    if args.max_steps is not None:
+        options["posterior"]["max_steps"] = args.max_steps
+    if args.ensembles is not None:
+        options["posterior"]["n_ensembles"] = args.ensembles
+    if args.max_effects is not None:
+        options["discrepancy"]["max_effects"] = args.max_effects
+    rep = report_records(args.data, args.columns, args.fs, args.mass, args.forcing_hz, parse_wells(args.wells),
+                         args.nfrc, args.only, args.seed, options, progress=lambda line: say(args, line))  # fmt: skip
+    rep.write(args.out)
+    for w in rep.results()["summary"]:
+        say(args, f"  {w}")
+    say(args, f"wrote {args.out}/index.html (and index.md, results.json)")
+    return 0
+
+
 def cmd_reproduce(args) -> int:
     from negstiff.experiments.reproduce import reproduce
 

@@ -239,10 +239,12 @@ def io_paths(args) -> tuple[list[Path], dict[str, str | Path], dict[str, str]]:
         v = getattr(args, name, None)
         inputs += [Path(x) for x in (v if isinstance(v, list) else [v] if v else [])]
     data = getattr(args, "data", None)
-    if args.command == "map":
+    if args.command == "map" or (args.command == "report" and data and (len(data) > 1 or Path(data[0]).is_dir())):
         from negstiff.inference.analysis.campaign import campaign_files
 
         inputs += campaign_files(data)
+    elif args.command == "report" and data:
+        inputs.append(Path(data[0]))
     elif data:
         inputs.append(Path(data))
     outputs: dict[str, str | Path] = {}
@@ -252,9 +254,9 @@ def io_paths(args) -> tuple[list[Path], dict[str, str | Path], dict[str, str]]:
         return inputs, outputs, folders
     if not str(out).strip():  # Path('') is '.': the empty path is refused as the user gave it
         return inputs, {"--out": out}, folders
-    if args.command == "reproduce" or (args.command == "rig" and args.mode == "campaign"):
+    if args.command in ("reproduce", "report") or (args.command == "rig" and args.mode == "campaign"):
         outputs["--out"] = Path(out)
-        folders["--out"] = "results.json" if args.command == "reproduce" else "index.json"
+        folders["--out"] = "index.json" if args.command == "rig" else "results.json"
     elif args.command == "rig":
         rec = out_path(args)
         outputs["--out"] = rec

@@ -448,6 +448,39 @@ def _update(sub, common: argparse.ArgumentParser, data_opts: argparse.ArgumentPa
     upd.set_defaults(func=c.cmd_update)
 
 
+def _report(sub, common: argparse.ArgumentParser, data_opts: argparse.ArgumentParser) -> None:
+    rp = sub.add_parser(
+        "report",
+        parents=[common, data_opts],
+        help="the study on your own record: every analysis that fits it, as one report",
+        description="A report of a record (or of a stepped campaign: several files, or a folder): what the record "
+        "is decides what is run. A broadband record: NSI around each well it visited, SINDy, the coefficient "
+        "posterior, the discrepancy workflow and the FRF; a harmonic record (its input one spectral line, or "
+        "--forcing-hz): the characterisation; a campaign: the bifurcation map, with --nfrc results over it. The "
+        "report opens with a summary and a table of contents, the record (sensor, derivation, frame, warnings), one "
+        "table of every coefficient with each method's estimate beside the posterior's mean and credible interval "
+        "(and a forest plot), and the held-out prediction errors against the record's noise floor. An analysis "
+        "that cannot be made is shown in its place with the reason. Writes FOLDER/index.html, index.md, results.json.",
+    )
+    rp.add_argument("data", nargs="+", help="measurement file, or a campaign's files or folder")
+    rp.add_argument("-o", "--out", required=True, help="report folder (index.html, index.md, results.json, figures)")
+    rp.add_argument("--mass", type=mass_option(), help="moving mass [kg] (default: the file's metadata)")
+    rp.add_argument("--forcing-hz", type=POSITIVE, help="forcing frequency [Hz] of a harmonic record or campaign")
+    rp.add_argument("--wells", help="z_minus,z_plus [m] for the regime of a harmonic record (default: the metadata's)")
+    rp.add_argument("--nfrc", action="append", help="a `negstiff nfrc` result to draw over a campaign's map")
+    rp.add_argument("--only", help="the analyses to run, comma-separated (nsi, sindy, posterior, discrepancy, frf, "
+                    "characterize, map)")  # fmt: skip
+    rp.add_argument("--duration", type=POSITIVE, help="posterior: use only the first DURATION seconds of the record")
+    rp.add_argument("--max-steps", type=declared(POST, "max_steps"), help="posterior: step cap per ensemble")
+    rp.add_argument("--ensembles", type=declared(POST, "n_ensembles"), help="posterior: independent ensembles")
+    rp.add_argument(
+        "--max-effects",
+        type=declared("estimators.discrepancy.Discrepancy", "max_effects"),
+        help="discrepancy: effects added at most",
+    )
+    rp.set_defaults(func=c.cmd_report)
+
+
 def _reproduce(sub, common: argparse.ArgumentParser, data_opts: argparse.ArgumentParser) -> None:
     rep = sub.add_parser(
         "reproduce",
@@ -503,5 +536,6 @@ def build_parser() -> argparse.ArgumentParser:
     _characterize(sub, common, data_opts)
     _map(sub, common, data_opts)
     _update(sub, common, data_opts)
+    _report(sub, common, data_opts)
     _reproduce(sub, common, data_opts)
     return p

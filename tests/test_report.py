@@ -1,0 +1,169 @@
+"""Reports on a user's own records (issue "Reports on the user's own records"): ``negstiff report`` on the
+Silverbox, on a velocity-only record, a harmonic campaign and a low-level record written here with scipy,
+and a report built from Python over records at three amplitudes. Each: exit 0, every analysis present or
+its reason shown, the coefficient table with NSI, SINDy and the posterior's interval, the summary first."""
+
+import json
+
+import numpy as np
+import pytest
+from records import FS, TRUTH, dop853_record, write_csv
+
+from negstiff import NSI, Posterior, Report, SINDy, from_arrays
+from negstiff.cli import main
+
+COEFFICIENTS = ("k1", "k2", "k3", "c", "c_nl")
+
+
+def _run(argv):
+    assert main([str(a) for a in argv] + ["--quiet"]) == 0
+
+
+def _results(folder):
+    res = json.loads((folder / "results.json").read_text())
+    html = (folder / "index.html").read_text()
+    return res, html
+
+
+def _summary_first(html):
+    # the summary, then the contents, then the first numbered section
+    assert html.index("class='summary'") < html.index("id='contents'") < html.index("<h2 id='s1-")
+
+
+def _every_section_or_its_reason(res, kinds):
+    got = [s["kind"] for s in res["sections"]]
+    for kind in kinds:
+        assert kind in got or any(s["kind"] == "failure" for s in res["sections"]), (kind, got)
+    for s in res["sections"]:
+        if s["kind"] == "failure":
+            assert s["title"] and any("not made" in line for line in res["summary"])
+
+
+def _coefficient_table(res, methods=("NSI", "SINDy")):
+    for k in COEFFICIENTS:
+        row = res["coefficients"][k]
+        for m in methods:
+            assert np.isfinite(row[m]), (k, m)
+        post = row["posterior"]
+        assert post["hdi_low"] <= post["mean"] <= post["hdi_high"], k
+
+
+@pytest.fixture(scope="module")
+def velocity_record(tmp_path_factory):
+    """300 s of TRUTH (scipy DOP853) as a vibrometer measures it: relative velocity only (0.1 mm/s noise)."""
+    t, u, _, v = dop853_record(duration=300.0)
+    v = v + 1e-4 * np.random.default_rng(4).standard_normal(v.size)
+    eq = TRUTH.equilibria()
+    d = tmp_path_factory.mktemp("velocity")
+    meta = {"mass": TRUTH.m, "z_minus_rest": f"{eq.z_minus:.6f}", "z_plus_rest": f"{eq.z_plus:.6f}"}
+    return write_csv(d / "ldv.csv", {"t": t, "base_acc": u, "z_dot": v}, meta)
+
+
+def test_report_on_a_velocity_only_record(velocity_record, tmp_path):
+    out = tmp_path / "rep"
+    _run(["report", velocity_record, "--duration", "30", "-o", out])
+    res, html = _results(out)
+    _summary_first(html)
+    _every_section_or_its_reason(res, ("record", "identification", "posterior", "discrepancy", "frf"))
+    _coefficient_table(res)
+    record = next(s for s in res["sections"] if s["kind"] == "record")["result"]
+    assert record["info"]["response"]["measured"] == "z_dot" and record["info"]["response"]["frame"]
+    for k in ("k1", "k3"):  # the truth's polynomial: SINDy recovers it (a sanity check of what is reported)
+        assert res["coefficients"][k]["SINDy"] == pytest.approx(getattr(TRUTH, k), rel=0.05), k
+
+
+def test_report_on_the_silverbox(silverbox, tmp_path):
+    from records import write_npz_channels
+
+    train = silverbox.segment(40650, 105712)
+    data = write_npz_channels(tmp_path / "silverbox_train.npz", {"V1": train.u, "V2": train.z})
+    out = tmp_path / "rep"
+    _run(["report", data, "--columns", "force=V1,z=V2", "--fs", "610.35", "--duration", "20", "-o", out])
+    res, html = _results(out)
+    _summary_first(html)
+    _every_section_or_its_reason(res, ("record", "identification", "posterior", "discrepancy", "frf"))
+    _coefficient_table(res)
+
+
+def _harmonic_record(amplitude, seed, cycles=60):
+    from scipy.integrate import solve_ivp
+
+    f = 9.0
+    w = 2 * np.pi * f
+
+    def rhs(t, x):
+        z, v = x
+        return [v, (-TRUTH.c * v - TRUTH.c_nl * v * abs(v) - TRUTH.restoring_force(z)) / TRUTH.m
+                - amplitude * np.sin(w * t)]  # fmt: skip
+
+    n_settle = int(60 / f * FS)
+    t = np.arange(n_settle + int(cycles / f * FS)) / FS
+    sol = solve_ivp(rhs, (0, t[-1]), [TRUTH.equilibria().z_plus, 0.0], t_eval=t, method="DOP853", rtol=1e-9,
+                    atol=1e-12)  # fmt: skip
+    z = sol.y[0] + 2e-5 * np.random.default_rng(seed).standard_normal(t.size)
+    u = amplitude * np.sin(w * t)
+    return (t - t[n_settle])[n_settle:], u[n_settle:], z[n_settle:]
+
+
+def test_report_on_a_harmonic_campaign_and_one_harmonic_record(tmp_path):
+    eq = TRUTH.equilibria()
+    meta = {"forcing_hz": 9, "z_minus_rest": eq.z_minus, "z_plus_rest": eq.z_plus, "mass": TRUTH.m}
+    camp = tmp_path / "camp"
+    camp.mkdir()
+    for i, a in enumerate((3.0, 6.0, 9.0)):
+        t, u, z = _harmonic_record(a, i)
+        write_csv(camp / f"step{i}.csv", {"t": t, "base_acc": u, "z": z}, meta)
+    out = tmp_path / "map"
+    _run(["report", camp, "-o", out])
+    res, html = _results(out)
+    _summary_first(html)
+    assert [s["kind"] for s in res["sections"]] == ["record", "map"]
+    assert len(next(s for s in res["sections"] if s["kind"] == "map")["result"]["points"]) == 3
+    out = tmp_path / "one"
+    _run(["report", camp / "step0.csv", "-o", out])
+    res, html = _results(out)
+    _summary_first(html)
+    char = next(s for s in res["sections"] if s["kind"] == "characterization")["result"]
+    assert char["period"] == 1, "3 m/s^2 at 9 Hz: the in-well period-1 response"
+
+
+def test_report_on_a_low_level_record(tmp_path):
+    eq = TRUTH.equilibria()
+    t, u, z, _ = dop853_record(duration=60.0, rms=1.5, start=eq.z_minus, seed=3)
+    z = z + 3e-6 * np.random.default_rng(5).standard_normal(z.size)
+    rec = write_csv(tmp_path / "low.csv", {"t": t, "base_acc": u, "z": z},
+                    {"mass": TRUTH.m, "z_minus_rest": eq.z_minus, "z_plus_rest": eq.z_plus})  # fmt: skip
+    out = tmp_path / "rep"
+    _run(["report", rec, "--duration", "20", "-o", out])
+    res, html = _results(out)
+    _summary_first(html)
+    _every_section_or_its_reason(res, ("record", "identification", "posterior", "discrepancy", "frf"))
+    frf = next(s for s in res["sections"] if s["kind"] == "frf")["result"]
+    assert frf["well"] == "minus"
+    assert frf["f_hz"] == pytest.approx(TRUTH.uls("minus").f_hz, rel=0.01), "the low-level FRF: the well's own"
+
+
+def test_a_report_built_from_python_over_three_amplitudes(tmp_path):
+    # an experiment script's report: each record's SINDy and NSI, and one posterior, in one coefficient table
+    rep = Report("Three amplitudes")
+    fits = {}
+    for rms in (6.0, 8.0, 10.0):
+        t, u, z, _ = dop853_record(duration=60.0, rms=rms, seed=int(rms))
+        rec = from_arrays(u, z + 3e-6 * np.random.default_rng(int(rms)).standard_normal(z.size), FS, mass=TRUTH.m,
+                          source=f"rms {rms:g}")  # fmt: skip
+        label = f"{rms:g} m/s^2"
+        fits[label] = SINDy().fit(rec)
+        rep.add(fits[label], label=label).add(NSI().fit(rec), label=label)
+    rep.add(Posterior(seed=1).fit(rec.segment(0, int(20 * FS))), label="10 m/s^2")
+    rep.add_text("SINDy's k3 at each amplitude, one record each.", heading="How k3 moves with amplitude")
+    rep.add_table(["amplitude", "k3"], [[lab, f.model_.k3] for lab, f in fits.items()])
+    rep.write(tmp_path / "rep")
+    res, html = _results(tmp_path / "rep")
+    _summary_first(html)
+    k3 = res["coefficients"]["k3"]
+    for label in fits:
+        assert k3[f"SINDy ({label})"] == pytest.approx(TRUTH.k3, rel=0.05)
+        assert f"NSI ({label})" in k3
+    post = k3["posterior (10 m/s^2)"]
+    assert post["hdi_low"] < post["mean"] < post["hdi_high"]
+    assert "How k3 moves with amplitude" in html
