@@ -26,7 +26,9 @@ from negstiff.models.reference import lyapunov_benettin
 from negstiff.models.rig import Rig, RigRecord
 
 from . import seed
-from .report import Report, fmt, run_study
+from .numbers import fmt
+from .report import Report, run_study
+from .sections import map_figure
 
 
 def record_measurement(rec: RigRecord) -> Measurement:
@@ -60,51 +62,6 @@ def bifurcation_map(rig: Rig, freq: float, amplitudes, settle_periods: int, reco
         "sweeps": len(plans),
         "amplitudes": len(lists[0]),
     }
-
-
-def draw_branches(ax, branches: list[dict[str, Any]], color, label: str | None = None, x: str = "amplitude") -> None:
-    """A continuation's branches on a bifurcation map's axes: each orbit's Poincare z [mm] against its
-    amplitude (or ``x``), solid where stable, dashed where not; ``label`` on the first period-1 branch's line."""
-    for br in branches:
-        a = np.array([q[x] for q in br["points"]])
-        stable = np.array([q["stable"] for q in br["points"]])
-        pz = np.array([q["poincare_z"] for q in br["points"]]) * 1e3
-        for k in range(pz.shape[1]):
-            for mask, ls in ((stable, "-"), (~stable, "--")):
-                ax.plot(a, np.where(mask, pz[:, k], np.nan), ls, color=color, lw=0.9, alpha=0.8,
-                        label=label if (k == 0 and ls == "-" and br["period"] == 1) else None)  # fmt: skip
-
-
-def map_figure(points: list[dict[str, Any]], overlays: list[dict[str, Any]] = (), unit: str = "m/s^2",
-               axis: str = "amplitude"):  # fmt: skip
-    """The bifurcation map (seed Figure 4): each record's Poincare z against its forcing amplitude (or its
-    frequency, ``axis="f_hz"``: a stepped sine), a panel per starting well (``start``: plus, minus; one panel
-    where it is unknown), blue sweeping up, red down, black in the records' order; grey behind a cross-well
-    or non-periodic record. Each ``overlays`` entry, a ``negstiff nfrc`` result along the same axis, is drawn
-    over its well's panel (``draw_branches``)."""
-
-    starts = sorted({p.get("start") for p in points}, key=lambda s: ["plus", "minus", None].index(s))
-    fig, axes = plt.subplots(1, len(starts), figsize=(6 * len(starts), 4), sharey=True, squeeze=False)
-    xs = np.unique([p[axis] for p in points])
-    half = 0.5 * float(np.median(np.diff(xs))) if xs.size > 1 else 0.05 * max(abs(float(xs[0])), 1e-12)
-    for ax, start in zip(axes[0], starts):
-        for p in (q for q in points if q.get("start") == start):
-            col = {"up": "C0", "down": "C3"}.get(p.get("direction"), "k")
-            if p["regime"] == "cross-well" or p["period"] is None:
-                ax.axvspan(p[axis] - half, p[axis] + half, color="0.9", zorder=0)
-            z = 1e3 * np.asarray(p["poincare_z"])
-            ax.plot(np.full(z.size, p[axis]), z, ".", ms=1.5, color=col)
-        for k, r in enumerate(overlays):
-            if start is None or r["settings"]["well"] == start:
-                draw_branches(ax, r["branches"], f"C{(k + 2) % 10}", r.get("label", f"continuation {k + 1}"), axis)
-        title = "in the records' order" if start is None else f"starting from z_{start} (blue up, red down)"
-        xlabel = "forcing frequency [Hz]" if axis == "f_hz" else f"forcing amplitude [{unit}]"
-        ax.set(xlabel=xlabel, title=title)
-        if overlays:
-            ax.legend(fontsize=8)
-    axes[0][0].set_ylabel("Poincare z (phase 0) [mm]")
-    fig.tight_layout()
-    return fig
 
 
 def characterization_section(rep: Report, results: dict[str, Any], fast: bool, seed_: int = 0) -> None:

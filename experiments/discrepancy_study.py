@@ -20,7 +20,8 @@ from negstiff.inference.steps.validation import residual_psd
 from negstiff.models import AS_BUILT, SEED_LIKE_CROSS_WELL_RMS, SEED_LIKE_CUBIC
 from negstiff.models.rig import Rig
 
-from .report import Report, fmt, run_study
+from .numbers import fmt
+from .report import Report, run_study
 
 BASE = dataclasses.replace(SEED_LIKE_CUBIC, c_nl=0.0)
 HIDDEN = {

@@ -10,8 +10,9 @@ from typing import Any
 
 import numpy as np
 
-from .characterization import bifurcation_map, draw_branches
-from .report import fmt
+from .characterization import bifurcation_map
+from .numbers import fmt
+from .sections import draw_branches
 
 MARKERS = {"fold": ("o", "C3"), "period_doubling": ("s", "C2"), "neimark_sacker": ("^", "C4")}
 

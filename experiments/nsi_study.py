@@ -25,7 +25,8 @@ from negstiff.models import AS_BUILT, SEED_LIKE_CROSS_WELL_RMS, SEED_LIKE_CUBIC,
 from negstiff.models.rig import Rig, Sensors
 
 from . import seed
-from .report import Report, fmt, run_study
+from .numbers import fmt
+from .report import Report, run_study
 
 
 def true_floor(truth, m: Measurement, start: int) -> float:

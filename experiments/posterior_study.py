@@ -23,7 +23,8 @@ from negstiff.inference.record.measurement import Measurement
 from negstiff.models import AS_BUILT, SEED_LIKE_CROSS_WELL_RMS, SEED_LIKE_CUBIC, Model
 from negstiff.models.rig import Rig
 
-from .report import Report, fmt, run_study
+from .numbers import fmt
+from .report import Report, run_study
 
 COEFS = ("k1", "k2", "k3", "c", "c_nl")
 

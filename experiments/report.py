@@ -12,7 +12,6 @@ from __future__ import annotations
 import base64
 import html
 import json
-import math
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -25,18 +24,8 @@ import matplotlib.pyplot as plt  # noqa: E402
 
 from negstiff.files import atomic_dir  # noqa: E402
 
-
-def fmt(x: Any, digits: int = 4) -> str:
-    """A number as a person reads it (``digits`` significant figures), or the value as text."""
-    if isinstance(x, bool) or x is None:
-        return str(x)
-    if isinstance(x, (int, float)):
-        if not math.isfinite(x):
-            return str(x)
-        if x != 0 and (abs(x) >= 1e5 or abs(x) < 1e-3):
-            return f"{x:.{digits - 1}e}"
-        return f"{x:.{digits}g}"
-    return str(x)
+from .numbers import fmt  # noqa: E402
+from .sections import COEFFICIENTS, Section, coefficient_blocks, section_for  # noqa: E402
 
 
 @dataclass
@@ -57,8 +46,6 @@ class Report:
         """A section for ``result``: a record, a fitted ``NSI``/``SINDy``/``Posterior``/``Discrepancy``, an
         ``Identification``, an ``frf``/``characterize``/map result (``sections.section_for``). ``label``
         tells results of several records apart (a column of the coefficient table each). Returns the report."""
-        from .sections import section_for
-
         sec = section_for(result, label)
         self.figures.update(sec.figures)
         self.blocks.append(("section", sec))
@@ -66,8 +53,6 @@ class Report:
 
     def add_failure(self, title: str, reason: str) -> "Report":
         """A section that could not be made, in its place, with the reason."""
-        from .sections import Section
-
         sec = Section("failure", "", title)
         sec.warning(f"not made: {reason}")
         sec.summary.append(f"{title}: not made ({reason}).")
@@ -102,8 +87,6 @@ class Report:
         estimates = {col: v for s in secs for col, v in s.estimates.items()}
         intervals = {f"{s.label or 'posterior'}": s.interval for s in secs if s.interval}
         if estimates or intervals:
-            from .sections import coefficient_blocks
-
             blocks, figures, lines = coefficient_blocks(estimates, intervals)
             self.figures.update(figures)
             head += blocks
@@ -132,8 +115,6 @@ class Report:
                                             for s in secs]}  # fmt: skip
         estimates = {col: v for s in secs for col, v in s.estimates.items()}
         intervals = {f"{s.label or 'posterior'}": s.interval for s in secs if s.interval}
-        from .sections import COEFFICIENTS
-
         out["coefficients"] = {
             k: {**{col: est.get(k) for col, est in estimates.items()},
                 **{("posterior" if lab == "posterior" else f"posterior ({lab})"): {

@@ -27,8 +27,9 @@ from .characterization import characterization_section
 from .discrepancy_study import discrepancy_section
 from .nfrc import continuation_section
 from .nsi_study import nsi_section
+from .numbers import fmt
 from .posterior_study import posterior_section
-from .report import Report, fmt
+from .report import Report
 from .silverbox import silverbox_section
 from .sindy_study import sindy_section
 from .updating_study import updating_section

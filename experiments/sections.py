@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-from .report import fmt
+from .numbers import fmt
 
 COEFFICIENTS = ("k1", "k2", "k3", "c", "c_nl")
 """The coefficients every report's table holds (the contract's model fields)."""
@@ -283,8 +283,6 @@ def characterization_section(res: dict[str, Any], label: str = "") -> Section:
 
 def map_section(res: dict[str, Any], overlays=(), label: str = "") -> Section:
     """A bifurcation map (``Campaign.map``) with the continuations drawn over it."""
-    from .characterization import map_figure
-
     sec = Section("map", label, _with_label("Bifurcation map of the campaign", label))
     unit = "m/s^2" if res["input"] == "base_acc" else "N"
     sec.figure(f"map_{_slug(label or 'campaign')}", map_figure(res["points"], list(overlays), unit, res["axis"]),
@@ -352,13 +350,60 @@ def coefficient_blocks(estimates: dict[str, dict[str, float]], intervals: dict[s
     lines = []
     for lab, iv in intervals.items():
         parts = []
-        for col, est in estimates.items():
+        mine = {c: e for c, e in estimates.items() if lab == "posterior" or c.endswith(f"({lab})")}
+        for col, est in (mine or estimates).items():
             inside = [k for k in COEFFICIENTS if k in iv and est.get(k) is not None and iv[k][1] <= est[k] <= iv[k][2]]
             n = sum(1 for k in COEFFICIENTS if k in iv and est.get(k) is not None)
             parts.append(f"{col} {len(inside)} of {n}" + (f" ({', '.join(inside)})" if inside else ""))
         which = "" if lab == "posterior" else f" ({lab})"
         lines.append(f"Estimates inside the posterior's credible intervals{which}: {'; '.join(parts)}.")
     return blocks, {"coefficients_forest.png": buf.getvalue()}, lines
+
+
+def draw_branches(ax, branches: list[dict[str, Any]], color, label: str | None = None, x: str = "amplitude") -> None:
+    """A continuation's branches on a bifurcation map's axes: each orbit's Poincare z [mm] against its
+    amplitude (or ``x``), solid where stable, dashed where not; ``label`` on the first period-1 branch's line."""
+    for br in branches:
+        a = np.array([q[x] for q in br["points"]])
+        stable = np.array([q["stable"] for q in br["points"]])
+        pz = np.array([q["poincare_z"] for q in br["points"]]) * 1e3
+        for k in range(pz.shape[1]):
+            for mask, ls in ((stable, "-"), (~stable, "--")):
+                ax.plot(a, np.where(mask, pz[:, k], np.nan), ls, color=color, lw=0.9, alpha=0.8,
+                        label=label if (k == 0 and ls == "-" and br["period"] == 1) else None)  # fmt: skip
+
+
+def map_figure(points: list[dict[str, Any]], overlays: list[dict[str, Any]] = (), unit: str = "m/s^2",
+               axis: str = "amplitude"):  # fmt: skip
+    """The bifurcation map (seed Figure 4): each record's Poincare z against its forcing amplitude (or its
+    frequency, ``axis="f_hz"``: a stepped sine), a panel per starting well (``start``: plus, minus; one panel
+    where it is unknown), blue sweeping up, red down, black in the records' order; grey behind a cross-well
+    or non-periodic record. Each ``overlays`` entry, a ``negstiff nfrc`` result along the same axis, is drawn
+    over its well's panel (``draw_branches``)."""
+    import matplotlib.pyplot as plt
+
+    starts = sorted({p.get("start") for p in points}, key=lambda s: ["plus", "minus", None].index(s))
+    fig, axes = plt.subplots(1, len(starts), figsize=(6 * len(starts), 4), sharey=True, squeeze=False)
+    xs = np.unique([p[axis] for p in points])
+    half = 0.5 * float(np.median(np.diff(xs))) if xs.size > 1 else 0.05 * max(abs(float(xs[0])), 1e-12)
+    for ax, start in zip(axes[0], starts):
+        for p in (q for q in points if q.get("start") == start):
+            col = {"up": "C0", "down": "C3"}.get(p.get("direction"), "k")
+            if p["regime"] == "cross-well" or p["period"] is None:
+                ax.axvspan(p[axis] - half, p[axis] + half, color="0.9", zorder=0)
+            z = 1e3 * np.asarray(p["poincare_z"])
+            ax.plot(np.full(z.size, p[axis]), z, ".", ms=1.5, color=col)
+        for k, r in enumerate(overlays):
+            if start is None or r["settings"]["well"] == start:
+                draw_branches(ax, r["branches"], f"C{(k + 2) % 10}", r.get("label", f"continuation {k + 1}"), axis)
+        title = "in the records' order" if start is None else f"starting from z_{start} (blue up, red down)"
+        xlabel = "forcing frequency [Hz]" if axis == "f_hz" else f"forcing amplitude [{unit}]"
+        ax.set(xlabel=xlabel, title=title)
+        if overlays:
+            ax.legend(fontsize=8)
+    axes[0][0].set_ylabel("Poincare z (phase 0) [mm]")
+    fig.tight_layout()
+    return fig
 
 
 def section_for(result, label: str = "") -> Section:

@@ -25,7 +25,8 @@ from negstiff.inference.record.measurement import Measurement, load
 from negstiff.inference.steps.validation import free_run_rms, simulate_record
 from negstiff.models import Model, simulate
 
-from .report import Report, fmt, run_study
+from .numbers import fmt
+from .report import Report, run_study
 
 TRAIN = (40650, 105712)
 TEST = (105712, 127400)

@@ -23,7 +23,8 @@ from negstiff.models import AS_BUILT, SEED_LIKE_CROSS_WELL_RMS, SEED_LIKE_CUBIC,
 from negstiff.models.rig import Rig
 
 from .nsi_study import pct, true_floor
-from .report import Report, fmt, run_study
+from .numbers import fmt
+from .report import Report, run_study
 
 HIDDEN_FRICTION_N = 0.1
 """Coulomb friction hidden in the rig for the ensemble check [N] (5 % of the device's weight)."""

@@ -20,7 +20,8 @@ from negstiff.models import AS_BUILT, NOMINAL, Device
 from negstiff.models.rig import Rig
 
 from . import seed
-from .report import Report, fmt, run_study
+from .numbers import fmt
+from .report import Report, run_study
 
 
 def _errors(d, truth=AS_BUILT) -> dict[str, float]:

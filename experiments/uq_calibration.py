@@ -21,7 +21,8 @@ from typing import Any
 import matplotlib.pyplot as plt
 import numpy as np
 
-from .report import Report, fmt
+from .numbers import fmt
+from .report import Report
 
 PARAMS = ("k1", "k2", "k3", "c", "c_nl")
 RANK_DRAWS = 99

@@ -24,6 +24,7 @@ DATA_COMMANDS = {
     "characterize": lambda d, rec, out: ["characterize", str(rec), "--forcing-hz", "9", "-o", str(out)],
     "frf": lambda d, rec, out: ["frf", str(rec), "-o", str(out)],
     "map": lambda d, rec, out: ["map", str(rec), "--forcing-hz", "9", "-o", str(out)],
+    "report": lambda d, rec, out: ["report", str(rec), "-o", str(out)],
 }
 
 GOOD_ROWS = "".join(f"{i / 512:.6f},{np.sin(i / 9):.5f},{0.02 + 1e-3 * np.cos(i / 9):.6f}\n" for i in range(40))

@@ -457,6 +457,7 @@ BASES = {
     "map": lambda lab, out, mode: ["map", lab / "camp", "-o", out],
     "update": lambda lab, out, mode: ["update", lab / "targets.json", "-o", out],
     "reproduce": lambda lab, out, mode: ["reproduce", "-o", out],
+    "report": lambda lab, out, mode: ["report", lab / "rec.csv", "-o", out],
 }
 MODES = {"rig": ["random", "harmonic", "sweep", "campaign"], "identify": ["nsi", "sindy"]}
 

@@ -107,9 +107,12 @@ class Measurement:
     @classmethod
     def from_rig(cls, rec, weighed: bool = True) -> "Measurement":
         """A virtual-rig record (``models.rig.RigRecord``) as negstiff reads a lab's: the measured base
-        acceleration as input, the measured z as response, the weighed mass (``weighed``) and its source."""
+        acceleration as input, the measured z as response, the weighed mass (``weighed``), its source and the
+        wells' rest positions its metadata states (as a file of it holds them)."""
         mass = float(rec.meta["mass"]) if weighed and rec.meta.get("mass") is not None else None
-        return from_arrays(rec.columns["base_acc"], rec.columns["z"], rec.fs, mass=mass, source=rec.meta["source"])
+        meta = {k: str(v) for k, v in rec.meta.items() if k.endswith("_rest")}
+        return from_arrays(rec.columns["base_acc"], rec.columns["z"], rec.fs, mass=mass, source=rec.meta["source"],
+                           meta=meta)  # fmt: skip
 
     def segment(self, start: int | None, stop: int | None) -> "Measurement":
         """Samples [start, stop) as a measurement (time base kept); the same object for the same span, so

@@ -334,7 +334,7 @@ def cmd_nfrc(args) -> int:
 
 
 def cmd_map(args) -> int:
-    from negstiff.experiments.characterization import map_figure
+    from negstiff.experiments.sections import map_figure
     from negstiff.inference.analysis.campaign import Campaign
 
     given = parse_wells(args.wells)  # the options, and every input read and checked, before any analysis

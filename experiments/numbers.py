@@ -1,0 +1,19 @@
+"""How a number reads in a report: its significant figures, in scientific notation when very large or small."""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+
+def fmt(x: Any, digits: int = 4) -> str:
+    """A number as a person reads it (``digits`` significant figures), or the value as text."""
+    if isinstance(x, bool) or x is None:
+        return str(x)
+    if isinstance(x, (int, float)):
+        if not math.isfinite(x):
+            return str(x)
+        if x != 0 and (abs(x) >= 1e5 or abs(x) < 1e-3):
+            return f"{x:.{digits - 1}e}"
+        return f"{x:.{digits}g}"
+    return str(x)
