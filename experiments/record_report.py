@@ -39,9 +39,7 @@ harmonic: a shaker at one frequency. A random, swept or multisine input spreads 
 def harmonic_frequency(rec) -> float | None:
     """The forcing frequency [Hz] of a harmonic record (``HARMONIC_SHARE`` of the input's power in one line,
     refined by least squares), else None."""
-    from scipy import optimize
-
-    from negstiff.inference.analysis.periodicity import forcing_phase
+    from negstiff.inference.analysis.periodicity import refine_frequency
 
     u = rec.u - rec.u.mean()
     spec = np.abs(np.fft.rfft(u * np.hanning(u.size))) ** 2
@@ -50,11 +48,7 @@ def harmonic_frequency(rec) -> float | None:
     k = int(np.argmax(spec[1:])) + 1
     if spec[max(k - 2, 0) : k + 3].sum() < HARMONIC_SHARE * spec.sum():
         return None
-    f0 = k * rec.fs / u.size
-    t = rec.t - rec.t0
-    res = optimize.minimize_scalar(lambda f: -forcing_phase(u, t, f)[0], bounds=(f0 - rec.fs / u.size,
-                                   f0 + rec.fs / u.size), method="bounded")  # fmt: skip
-    return float(res.x)
+    return refine_frequency(u, rec.t - rec.t0, k * rec.fs / u.size, rec.fs / u.size)
 
 
 def _only(only: Sequence[str] | str | None, kind: tuple[str, ...]) -> tuple[str, ...]:

@@ -265,10 +265,17 @@ def characterization_section(res: dict[str, Any], label: str = "") -> Section:
     """A ``characterize`` result: period, regime, amplitudes, Lyapunov exponent, and why not where not."""
     sec = Section("characterization", label, _with_label("Characterisation of the harmonic response", label))
     lle = res.get("lle") or {}
+    forcing = res.get("forcing") or {}
     sec.table(["", "value"], [
         ["period (forcing cycles)", res["period"]], ["regime", res["regime"]], ["chaotic", res["chaotic"]],
-        ["largest Lyapunov exponent [1/s]", lle.get("value")], ["its sd [1/s]", lle.get("sd")],
+        ["forcing, stated [Hz]", forcing.get("stated_hz")], ["forcing, measured on the input [Hz]",
+                                                              forcing.get("measured_hz")],
+        ["largest Lyapunov exponent, Wolf [1/s]", lle.get("value")], ["its sd [1/s]", lle.get("sd")],
+        ["... Rosenstein [1/s]", lle.get("rosenstein")],
     ])  # fmt: skip
+    if res.get("residuals"):
+        sec.table(["period tested", "residual", "tolerance"],
+                  [[p, r, res["tolerances"][p]] for p, r in res["residuals"].items()])  # fmt: skip
     for what, why in res.get("reasons", {}).items():
         sec.text(f"{what}: {why}")
     for w in res.get("warnings", []):

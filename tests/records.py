@@ -45,3 +45,35 @@ def write_npz_channels(path, channels, meta=None):
     with open(path, "wb") as fh:
         np.savez(fh, **channels, **({"meta": json.dumps(meta)} if meta else {}))
     return path
+
+
+def rk4_harmonic(model, amplitudes, f_hz, duration, sim_fs, z0, settle_cycles=100, breathe=0.0, breathe_hz=0.05):
+    """(t, base_acc, z) of ``model`` under harmonic base accelerations a sin(2 pi f t), one column per
+    amplitude in ``amplitudes``, integrated together by a plain fixed-step RK4 at ``sim_fs`` written here
+    (not negstiff's kernel) from rest at ``z0``; the amplitude breathes by ``breathe`` (a fraction) at
+    ``breathe_hz``. The first ``settle_cycles`` forcing cycles are dropped."""
+    a = np.asarray(amplitudes, float)
+    w, h = 2 * np.pi * f_hz, 1.0 / sim_fs
+    m = model
+
+    def acc(t):
+        return a * (1 + breathe * np.sin(2 * np.pi * breathe_hz * t + 1.0)) * np.sin(w * t)
+
+    def rhs(t, z, v):
+        return v, -(m.c * v + m.c_nl * v * np.abs(v) + m.restoring_force(z)) / m.m - acc(t)
+
+    n = int(round((duration + settle_cycles / f_hz) * sim_fs))
+    z, v = np.full(a.shape, float(z0)), np.zeros(a.shape)
+    zs = np.empty((n, a.size))
+    for i in range(n):
+        t = i * h
+        zs[i] = z
+        k1 = rhs(t, z, v)
+        k2 = rhs(t + h / 2, z + h / 2 * k1[0], v + h / 2 * k1[1])
+        k3 = rhs(t + h / 2, z + h / 2 * k2[0], v + h / 2 * k2[1])
+        k4 = rhs(t + h, z + h * k3[0], v + h * k3[1])
+        z = z + h / 6 * (k1[0] + 2 * k2[0] + 2 * k3[0] + k4[0])
+        v = v + h / 6 * (k1[1] + 2 * k2[1] + 2 * k3[1] + k4[1])
+    t = np.arange(n) * h
+    keep = t >= settle_cycles / f_hz
+    return t[keep] - t[keep][0], acc(t[keep][:, None]), zs[keep]

@@ -13,10 +13,14 @@ too short for any cycle count, a forcing frequency beyond Nyquist) fails the who
   tolerance is then read from the white plateau of the record as acquired
   (``derivatives.noise_floor``: 25.5 um for 28.5 um on a 64 Hz record; a 7-point smoothing
   residual read 1.1 mm there, the response's own curvature).
-* The LLE carries an uncertainty: Wolf's estimate on ``LLE_SEGMENTS`` consecutive parts of the
-  record, ``sd`` = their spread / sqrt(parts) (the whole record's estimate is the value). A record
+* The LLE carries an uncertainty: the value is the mean of Wolf's estimates on ``LLE_SEGMENTS``
+  consecutive parts of the record, ``sd`` = their spread / sqrt(parts): the value and its sd are what
+  the listed segments say (the whole record's estimate and Rosenstein's are reported beside). A record
   is *chaotic* when no period is found and the exponent is significantly positive: above
-  ``CHAOS_THRESHOLD`` nats per radian of forcing and ``LLE_SIGMAS`` sd above zero.
+  ``CHAOS_THRESHOLD`` nats per radian of forcing and ``LLE_SIGMAS`` sd above zero. A record with a
+  period never reports a significantly positive exponent: the value is then not determinable, with the
+  reason (a periodic orbit's separation is the noise's). Where Wolf and Rosenstein disagree on the
+  sign, ``reasons["lle_estimators"]`` says so.
 """
 
 from __future__ import annotations
@@ -65,27 +69,48 @@ def _reason(exc: Exception) -> str:
     return " ".join(str(exc).split()) or type(exc).__name__
 
 
+def significantly_positive(value: float | None, sd: float | None, forcing_hz: float) -> bool:
+    """Above ``CHAOS_THRESHOLD`` nats per radian of forcing and (where an sd is known) ``LLE_SIGMAS`` sd."""
+    if value is None or not np.isfinite(value):
+        return False
+    return bool(value > CHAOS_THRESHOLD * 2 * np.pi * forcing_hz and not (sd is not None and np.isfinite(sd)
+                                                                          and value <= LLE_SIGMAS * sd))  # fmt: skip
+
+
 def lyapunov(rec: Measurement, forcing_hz: float, noise: float | None) -> dict[str, Any]:
-    """Wolf's exponent of the whole record with the spread of ``LLE_SEGMENTS`` parts (Rosenstein beside)."""
-    w = largest_lyapunov(rec.z, rec.dt, forcing_hz=forcing_hz, noise=noise)
-    parts = []
-    edges = np.linspace(0, rec.n, LLE_SEGMENTS + 1).astype(int)
-    for a, b in zip(edges[:-1], edges[1:]):
-        try:
-            parts.append(largest_lyapunov(rec.z[a:b], rec.dt, forcing_hz=forcing_hz, noise=noise)["value"])
-        except ValueError:
-            continue
-    sd = float(np.std(parts, ddof=1) / math.sqrt(len(parts))) if len(parts) >= 2 else float("nan")
-    return {
-        "value": w["value"],
+    """Wolf's exponent as the mean of its estimates on ``LLE_SEGMENTS`` consecutive parts of the record
+    (``segments``), ``sd`` their standard error: the value and its uncertainty are what the listed
+    segments say. Beside it: Wolf's estimate on the whole record (``whole_record``) and Rosenstein's
+    (``rosenstein``, None with ``rosenstein_error`` where no divergence can be followed), and whether the
+    two estimators agree on the exponent's sign (``estimators_agree``: both significantly positive, or
+    neither)."""
+    w = largest_lyapunov(rec.z, rec.dt, forcing_hz=forcing_hz, noise=noise, segments=LLE_SEGMENTS)
+    parts = w["segments"]
+    if len(parts) >= 2:
+        value = float(np.mean(parts))
+        sd = float(np.std(parts, ddof=1) / math.sqrt(len(parts)))
+        source = f"mean of {len(parts)} segments"
+    else:  # too short to split: the whole record, without an uncertainty
+        value, sd, source = float(w["value"]), float("nan"), "whole record (too short for segments)"
+    wolf_positive = significantly_positive(value, sd, forcing_hz)
+    rs = w.get("rosenstein")
+    rosenstein_positive = significantly_positive(rs, None, forcing_hz)
+    out = {
+        "value": value,
         "sd": sd,
         "units": "1/s",
         "method": "wolf",
+        "value_from": source,
         "segments": parts,
-        "rosenstein": w["rosenstein"],
+        "whole_record": float(w["value"]),
+        "rosenstein": rs,
+        "estimators_agree": wolf_positive == rosenstein_positive,
         "embedding": {"m": w["m"], "tau_samples": w["tau"] * w["sample_step"]},
         "evolv_samples": w["evolv"] * w["sample_step"],
     }
+    if "rosenstein_error" in w:
+        out["rosenstein_error"] = w["rosenstein_error"]
+    return out
 
 
 def check_harmonic(rec: Measurement, forcing_hz: float) -> None:
@@ -152,12 +177,20 @@ def characterize(
     except (MeasurementError, ValueError, np.linalg.LinAlgError) as exc:
         out["reasons"]["period"] = _reason(exc)
     if per is not None:
-        out |= {k: per[k] for k in ("period", "amplitudes", "tolerance", "residuals", "noise_std")}
+        keys = ("period", "amplitudes", "tolerance", "tolerances", "residuals", "noise_std", "forcing", "spectrum")
+        out |= {k: per[k] for k in keys}
         out["poincare_z"] = per["poincare_z"]
         if per["period"] is None:
+            p_best = min(per["residuals"], key=lambda p: per["residuals"][p] / per["tolerances"][p])
             out["reasons"]["period"] = (
-                f"no period up to 16 forcing cycles repeats within the noise (tolerance {per['tolerance']:.3g}): "
-                "chaotic or quasi-periodic"
+                f"no period up to 16 forcing cycles repeats within the noise and the input's own variation (closest: "
+                f"period {p_best}, residual {per['residuals'][p_best]:.3g} against a tolerance of "
+                f"{per['tolerances'][p_best]:.3g}): chaotic or quasi-periodic"
+            )
+        elif per["spectrum"]["agrees"] is False:
+            out["reasons"]["period_spectrum"] = (
+                f"the Poincare points repeat every {per['period']} cycle(s), but the spectrum's sub-harmonic lines "
+                f"imply {per['spectrum']['period']}"
             )
     else:
         out |= {"period": None, "amplitudes": None, "poincare_z": np.array([])}
@@ -166,10 +199,7 @@ def characterize(
     if lle:
         try:
             out["lle"] = lyapunov(work, forcing_hz, out.get("noise_std"))
-            v, sd = out["lle"]["value"], out["lle"]["sd"]
-            significant = bool(
-                v > CHAOS_THRESHOLD * 2 * np.pi * forcing_hz and (not np.isfinite(sd) or v > LLE_SIGMAS * sd)
-            )
+            significant = significantly_positive(out["lle"]["value"], out["lle"]["sd"], forcing_hz)
         except (ValueError, MeasurementError) as exc:
             out["lle"] = {"value": None, "sd": None, "units": "1/s", "method": "wolf"}
             out["reasons"]["lle"] = (
@@ -177,6 +207,24 @@ def characterize(
                 "no separation to follow"
                 if "neighbour" in str(exc)
                 else _reason(exc)
+            )
+        if significant and out["period"] is not None:
+            # a record that repeats every p cycles within the noise has no positive exponent: what Wolf
+            # followed was the noise's separation, not the dynamics'. Never report both.
+            lle_ = out["lle"]
+            out["lle"] = lle_ | {"value": None, "sd": None, "estimate_discarded": [lle_["value"], lle_["sd"]]}
+            out["reasons"]["lle"] = (
+                f"not determinable: the record repeats every {out['period']} forcing cycle(s) within the noise, "
+                f"yet Wolf's estimate is {lle_['value']:.3g} +- {lle_['sd']:.2g} 1/s; on a periodic orbit the "
+                "separation it follows is the sensor noise's, not the dynamics'"
+            )
+            significant = False
+        if out["lle"].get("estimators_agree") is False:
+            rs = out["lle"]["rosenstein"]
+            out["reasons"]["lle_estimators"] = (
+                f"Wolf ({out['lle']['value'] if out['lle']['value'] is not None else 'not determinable'}) and "
+                f"Rosenstein ({'none' if rs is None else f'{rs:.3g} 1/s'}) disagree on whether the exponent is "
+                "significantly positive"
             )
     if out["period"] is not None:
         out["chaotic"] = False
@@ -201,13 +249,17 @@ MAP_POINCARE_POINTS = 32
 
 def map_point(rec: Measurement, forcing_hz: float, wells=None) -> dict[str, Any]:
     """One record of a stepped harmonic campaign as a point of the bifurcation map (seed Figure 4): the
-    forcing's amplitude measured from the input (its harmonic at ``forcing_hz`` by least squares: m/s^2
+    forcing's amplitude measured from the input (its harmonic at the measured frequency near ``forcing_hz``
+    by least squares: m/s^2
     for base excitation, N for a force), the period, regime, branch amplitudes and the last
     ``MAP_POINCARE_POINTS`` Poincare z (phase 0); no Lyapunov exponent (a map's records are many)."""
     from negstiff.inference.analysis.periodicity import forcing_phase
 
     c = characterize(rec, forcing_hz, wells, lle=False, poincare=True)
-    amplitude, _ = forcing_phase(rec.u, rec.t - rec.t0, forcing_hz)
+    if "forcing" in c:  # the input's amplitude at its measured frequency
+        amplitude = c["forcing"]["amplitude"]
+    else:  # no periodicity analysis could be made: at the stated frequency
+        amplitude, _ = forcing_phase(rec.u, rec.t - rec.t0, forcing_hz)
     return {
         "amplitude": amplitude,
         "period": c["period"],

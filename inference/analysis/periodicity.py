@@ -23,7 +23,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from scipy import signal
+from scipy import ndimage, optimize, signal
 from scipy.interpolate import CubicSpline
 
 from negstiff.errors import MeasurementError
@@ -40,6 +40,46 @@ def forcing_phase(u: np.ndarray, t: np.ndarray, f_hz: float) -> tuple[float, flo
     return float(math.hypot(a, b)), float(math.atan2(b, a))
 
 
+def refine_frequency(u: np.ndarray, t: np.ndarray, f0: float, halfwidth: float) -> float:
+    """The frequency [Hz] within ``f0`` +- ``halfwidth`` whose least-squares sinusoid (with a constant)
+    leaves the least residual in u (a periodogram's peak, refined between its bins)."""
+    def misfit(f: float) -> float:  # the least-squares residual (not the amplitude: over a non-integer number
+        w = 2 * np.pi * f  # of cycles sin and cos are not orthogonal, and the amplitude peaks off the line)
+        X = np.column_stack([np.sin(w * t), np.cos(w * t), np.ones_like(t)])
+        return float(np.sum((u - X @ np.linalg.lstsq(X, u, rcond=None)[0]) ** 2))
+
+    res = optimize.minimize_scalar(misfit, bounds=(f0 - halfwidth, f0 + halfwidth), method="bounded",
+                                   options={"xatol": 1e-7 * f0})  # fmt: skip
+    return float(res.x)
+
+
+FREQUENCY_SEARCH = 0.05
+"""The measured forcing frequency is searched within this fraction of the stated one (a shaker
+controller's error is a fraction of a percent); a line outside it is refused as another frequency."""
+
+
+def measured_forcing(rec: Measurement, f_hz: float) -> dict[str, float]:
+    """The forcing as the input channel says it is: its frequency near the stated ``f_hz`` (the
+    strongest periodogram line within ``FREQUENCY_SEARCH``, refined by least squares), amplitude and
+    phase (u ~ A sin(2 pi f (t - t0) + phi)). Raises ``MeasurementError`` when the input has no line there."""
+    u, t = rec.u - rec.u.mean(), rec.t - rec.t0
+    pad = 8 * rec.n
+    spec = np.abs(np.fft.rfft(u * np.hanning(rec.n), pad))
+    freqs = np.fft.rfftfreq(pad, rec.dt)
+    band = np.flatnonzero(np.abs(freqs - f_hz) <= FREQUENCY_SEARCH * f_hz)
+    if band.size < 3:
+        raise MeasurementError(f"{rec.source}: the record is too short to resolve its forcing near {f_hz:g} Hz")
+    k = band[int(np.argmax(spec[band]))]
+    if k in (band[0], band[-1]):
+        raise MeasurementError(
+            f"{rec.source}: the input has no spectral line within {100 * FREQUENCY_SEARCH:g} % of the stated forcing "
+            f"{f_hz:g} Hz (its strongest there is at the band's edge, {freqs[k]:.4g} Hz): check the frequency"
+        )
+    f = refine_frequency(u, t, float(freqs[k]), 1.0 / rec.duration)
+    amp, phi = forcing_phase(u, t, f)
+    return {"stated_hz": float(f_hz), "measured_hz": f, "amplitude": amp, "phase_rad": phi}
+
+
 @dataclass(frozen=True)
 class Poincare:
     """Phase-synchronous samples of a record: ``z[k, n]``, ``z_dot[k, n]`` at phase ``phases_deg[k]``
@@ -53,14 +93,45 @@ class Poincare:
 
 @dataclass(frozen=True)
 class _Synchronous:
-    """A record's band-limited z as a cubic spline of time, with the forcing's phase from the input."""
+    """A record's band-limited z as a cubic spline of time, and the times its input's phase passes
+    zero (``starts``: one per forcing cycle, drift of the input's phase followed), with the input's
+    amplitude and phase on each cycle (``cycle_amplitude``, ``cycle_phase``)."""
 
     spline: CubicSpline
-    t_first: float
+    starts: np.ndarray
     period: float
-    n_cycles: int
     t_end: float
-    forcing_amplitude: float
+    forcing: dict
+    cycle_amplitude: np.ndarray
+    cycle_phase: np.ndarray
+
+    @property
+    def forcing_amplitude(self) -> float:
+        return self.forcing["amplitude"]
+
+
+PHASE_SMOOTHING_CYCLES = 9
+"""The input's phase is followed over this many forcing cycles (a running mean): a shaker's slow phase
+drift moves the sampling instants with it, the input's noise does not jitter them."""
+
+
+def _cycles(u: np.ndarray, t: np.ndarray, f_hz: float, t_first: float, n_cycles: int):
+    """Amplitude and phase of u on each forcing cycle [t_first + n T, t_first + (n + 1) T), by least
+    squares on sin, cos and a constant (sums over each cycle's samples)."""
+    w, period = 2 * np.pi * f_hz, 1.0 / f_hz
+    idx = np.floor((t - t_first) / period).astype(int)
+    keep = (idx >= 0) & (idx < n_cycles)
+    idx, tt, uu = idx[keep], t[keep], u[keep]
+    s, c = np.sin(w * tt), np.cos(w * tt)
+    cols = (s, c, np.ones_like(s))
+    G = np.empty((n_cycles, 3, 3))
+    r = np.empty((n_cycles, 3))
+    for i in range(3):
+        r[:, i] = np.bincount(idx, cols[i] * uu, n_cycles)
+        for j in range(i, 3):
+            G[:, i, j] = G[:, j, i] = np.bincount(idx, cols[i] * cols[j], n_cycles)
+    coef = np.linalg.solve(G, r[..., None])[..., 0]
+    return np.hypot(coef[:, 0], coef[:, 1]), np.arctan2(coef[:, 1], coef[:, 0])
 
 
 def _synchronous(rec: Measurement, f_hz: float) -> _Synchronous:
@@ -72,17 +143,27 @@ def _synchronous(rec: Measurement, f_hz: float) -> _Synchronous:
             f"{rec.source}: too few samples for a periodicity analysis: {n_cycles + 2} forcing cycles, need at least 10"
         )
     t = rec.t - rec.t0
-    amp, phi = forcing_phase(rec.u, t, f_hz)
-    period = 1.0 / f_hz
+    forcing = measured_forcing(rec, f_hz)
+    f, phi = forcing["measured_hz"], forcing["phase_rad"]
+    period = 1.0 / f
     t_first = (-phi / (2 * np.pi)) % 1.0 * period  # first upward zero crossing of the input's sinusoid
-    return _Synchronous(CubicSpline(t, bandlimited(rec.z, rec.fs, f_hz)), t_first, period, n_cycles, t[-1], amp)
+    n_cycles = int((t[-1] - t_first) / period) - 1
+    amp_n, phi_n = _cycles(rec.u, t, f, t_first, n_cycles)
+    # the phase's drift relative to the fitted sinusoid, unwrapped around phi and followed slowly
+    drift = np.unwrap(phi_n) - phi
+    drift -= 2 * np.pi * np.round(np.median(drift) / (2 * np.pi))
+    k = min(PHASE_SMOOTHING_CYCLES, n_cycles)
+    slow = ndimage.uniform_filter1d(drift, k, mode="nearest")
+    starts = t_first + period * np.arange(n_cycles) - slow / (2 * np.pi * f)
+    spline = CubicSpline(t, bandlimited(rec.z, rec.fs, f))
+    return _Synchronous(spline, starts, period, t[-1], forcing, amp_n, phi_n)
 
 
 def _sections(sync: _Synchronous, phases_deg) -> Poincare:
     zk, vk = [], []
     for ph in phases_deg:
-        tn = sync.t_first + (ph / 360.0) * sync.period + sync.period * np.arange(sync.n_cycles)
-        tn = tn[tn <= sync.t_end]
+        tn = sync.starts + (ph / 360.0) * sync.period
+        tn = tn[(tn >= 0) & (tn <= sync.t_end)]
         zk.append(sync.spline(tn))
         vk.append(sync.spline(tn, 1))
     n = min(len(a) for a in zk)
@@ -122,19 +203,78 @@ def noise_level(z: np.ndarray, fs: float) -> float:
     return float(resid.std() / math.sqrt(1 - np.sum(h**2)))
 
 
-def detect_period(points: np.ndarray, tol: float) -> tuple[int | None, dict[int, float]]:
-    """Smallest period p of a sequence of points (N, d), already scaled by the response's spread, with
-    r(p) < tol and, where tested, r(2p) < tol."""
-    r = {}
+def detect_period(
+    points: np.ndarray, tol: float, inputs: np.ndarray | None = None
+) -> tuple[int | None, dict[int, float], dict[int, float]]:
+    """Smallest period p of a sequence of points (N, d), already scaled by the response's spread, whose
+    residual r(p) = rms_n |P_(n+p) - P_n| lies below its tolerance (and, where tested, r(2p) below
+    twice its own: slow drift left in the points grows with the lag).
+
+    The tolerance of lag p is ``tol`` (the noise's) combined with the part of the differences that the
+    input's own cycle-to-cycle differences explain (``inputs`` (N, k): per-cycle input amplitude and
+    phase; a least-squares fit of P_(n+p) - P_n on U_(n+p) - U_n): a periodic response to a shaker whose
+    amplitude breathes changes with it. Returns (period, residuals, tolerances)."""
+    r, tols = {}, {}
     for p in PERIODS:
         if p >= points.shape[0] // 2:
             break
-        r[p] = float(np.sqrt(np.mean(np.sum((points[p:] - points[:-p]) ** 2, axis=1))))
+        d = points[p:] - points[:-p]
+        r[p] = float(np.sqrt(np.mean(np.sum(d**2, axis=1))))
+        explained = 0.0
+        if inputs is not None:
+            x = inputs[p:] - inputs[:-p]
+            sd = x.std(axis=0)
+            x = x[:, sd > 0] / sd[sd > 0]
+            if x.shape[1]:
+                fit = x @ np.linalg.lstsq(x, d, rcond=None)[0]
+                # less what k regressors explain of any sequence by chance (k / (N - k) of the rest)
+                k_, n_ = x.shape[1], x.shape[0]
+                chance = k_ / max(n_ - k_, 1) * np.mean(np.sum((d - fit) ** 2, axis=1))
+                explained = math.sqrt(max(0.0, float(np.mean(np.sum(fit**2, axis=1))) - chance))
+        tols[p] = math.hypot(tol, explained)
     for p, rp in r.items():
-        # slow drift left in the points grows with the lag: the consistency check at 2p gets 2 tol
-        if rp < tol and (2 * p not in r or r[2 * p] < 2 * tol):
-            return p, r
-    return None, r
+        if rp < tols[p] and (2 * p not in r or r[2 * p] < 2 * tols[2 * p]):
+            return p, r, tols
+    return None, r, tols
+
+
+SPECTRAL_LINE_RATIO = 100.0
+"""A sub-harmonic line counts when its power exceeds this many times the spectrum's median around it
+(20 dB: a periodogram of noise alone exceeds it with probability e^-69 per bin)."""
+
+
+def subharmonic_lines(z: np.ndarray, fs: float, f_hz: float) -> dict[str, Any]:
+    """The spectral cross-check of a period: for each candidate period q > 1, the strongest line at k f / q
+    (k < 2 q, k not a multiple of q's divisors' lines: gcd(k, q) = 1) over the median of the spectrum
+    around it (+- f / (4 q), the line's own bins left out), and the period the significant lines imply
+    (the least common multiple of their q; 1 with none). A chaotic record's broadband spectrum has no
+    such lines to speak of; the check is the periodicity's, not chaos's."""
+    x = (z - z.mean()) * np.hanning(z.size)
+    spec = np.abs(np.fft.rfft(x)) ** 2
+    df = fs / z.size
+    ratios = {}
+    for q in PERIODS[1:]:
+        half = f_hz / (4 * q)
+        if half < 8 * df:  # the record does not resolve lines this close
+            break
+        best = 0.0
+        for k in range(1, 2 * q):
+            if math.gcd(k, q) != 1:
+                continue
+            c = int(round(k * f_hz / q / df))
+            w = int(half / df)
+            near = spec[max(c - w, 0) : c + w + 1]
+            around = np.concatenate([spec[max(c - w, 0) : max(c - 2, 0)], spec[c + 3 : c + w + 1]])
+            if around.size == 0 or near.size == 0:
+                continue
+            # a Hann-windowed line peaks within a bin of its frequency (the forcing is measured to far less)
+            best = max(best, float(spec[max(c - 1, 0) : c + 2].max() / max(np.median(around), 1e-300)))
+        ratios[q] = best
+    significant = [q for q, v in ratios.items() if v > SPECTRAL_LINE_RATIO]
+    return {
+        "line_ratio_db": {f"1/{q}": float(10 * np.log10(max(v, 1e-30))) for q, v in ratios.items()},
+        "period": math.lcm(*significant) if significant else 1,
+    }
 
 
 def periodicity(
@@ -146,10 +286,16 @@ def periodicity(
     positions; z_0 comes from a model), else None. ``noise`` [m] and ``band_fs`` [Hz]: the sensor
     noise and the sampling rate it was acquired at, for a record interpolated from a lower rate
     (default: estimated from ``rec``, at ``rec.fs``).
+
+    The forcing's frequency and phase are the input's (``forcing``: stated and measured), the response
+    is sampled where the input's phase passes zero on each cycle, and each candidate period's residual
+    is reported beside its tolerance (``residuals``, ``tolerances``), with the spectrum's sub-harmonic
+    lines as a cross-check (``spectrum``: their ratios over the floor and the period they imply).
     """
     sync = _synchronous(rec, f_hz)
-    pc = _sections(sync, (0.0,))
-    z0, v0 = pc.z[0], pc.z_dot[0]
+    tn = sync.starts
+    inside = (tn >= 0) & (tn <= sync.t_end)
+    z0, v0 = sync.spline(tn[inside]), sync.spline(tn[inside], 1)
     zs, vs = sync.spline(rec.t - rec.t0), sync.spline(rec.t - rec.t0, 1)
     # scales: the whole response's spread, so a period-1 orbit (Poincare points equal up to noise)
     # gives r(p) ~ noise / response, not ~ 1
@@ -159,6 +305,10 @@ def periodicity(
     n_idx = np.arange(pts.shape[0])
     for k in range(2):
         pts[:, k] -= np.polyval(np.polyfit(n_idx, pts[:, k], 2), n_idx) - pts[:, k].mean()
+    # the input's own cycle-to-cycle variation: relative amplitude, and the phase the sampling did not follow
+    slow = ndimage.uniform_filter1d(np.unwrap(sync.cycle_phase), min(PHASE_SMOOTHING_CYCLES, tn.size), mode="nearest")
+    inputs = np.column_stack([sync.cycle_amplitude / sync.cycle_amplitude.mean() - 1,
+                              np.unwrap(sync.cycle_phase) - slow])[inside]  # fmt: skip
     # noise of a Poincare point: white sensor noise through the band limit fc (gain sqrt(2 fc / fs))
     # and its derivative (gain 2 pi fc sqrt(2 fc / (3 fs)))
     noise = noise_level(rec.z, rec.fs) if noise is None else noise
@@ -169,22 +319,28 @@ def periodicity(
     point_noise = math.hypot(noise * gz / scale_z, noise * gv / scale_v)
     # r(p) of a truly periodic record is sqrt(2) x the point noise; 4x that, and at least 2 %
     tol = max(0.02, 4 * math.sqrt(2) * point_noise)
-    period, r = detect_period(pts, tol)
-    # amplitude per branch: half peak-to-peak of z over each of p consecutive cycles
-    n_per = int(round(rec.fs / f_hz))
-    cycles = rec.z[: (rec.n // n_per) * n_per].reshape(-1, n_per)
+    period, r, tols = detect_period(pts, tol, inputs)
+    # amplitude per branch: half peak-to-peak of the band-limited z over each of p consecutive cycles
     p = period or 1
-    amps = [float(np.mean(0.5 * (cycles[k::p].max(1) - cycles[k::p].min(1)))) for k in range(p)]
+    grid = tn[inside][:-1, None] + sync.period * np.linspace(0, 1, 64, endpoint=False)
+    per_cycle = sync.spline(grid)
+    half_pp = 0.5 * (per_cycle.max(axis=1) - per_cycle.min(axis=1))
+    amps = [float(np.mean(half_pp[k::p])) for k in range(p)]
+    spectrum = subharmonic_lines(sync.spline(rec.t - rec.t0), rec.fs, sync.forcing["measured_hz"])
+    spectrum["agrees"] = spectrum["period"] == period if period is not None else None
     return {
         "period": period,
         "amplitudes": amps,
         "regime": classify_regime(rec.z, wells),
         "residuals": r,
         "tolerance": tol,
+        "tolerances": tols,
         "noise_std": noise,
         "poincare_z": z0,
         "poincare_z_dot": v0,
-        "forcing_amplitude": pc.forcing_amplitude,
+        "forcing_amplitude": sync.forcing_amplitude,
+        "forcing": sync.forcing,
+        "spectrum": spectrum,
     }
 
 

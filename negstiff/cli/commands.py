@@ -278,6 +278,8 @@ def cmd_characterize(args) -> int:
     warn(args, r["warnings"])
     lle = r["lle"]
     lle_txt = "not determinable" if lle["value"] is None else f"{lle['value']:.2f} +- {lle['sd']:.2g} 1/s (Wolf)"
+    if lle.get("rosenstein") is not None:
+        lle_txt += f", {lle['rosenstein']:.2f} 1/s (Rosenstein)"
     say(
         args,
         f"wrote {args.out}: period {r['period']}, {r['regime']}, LLE {lle_txt}, "
