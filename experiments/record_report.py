@@ -76,20 +76,22 @@ def report_records(
     seed: int = 0,
     options: dict[str, dict[str, Any]] | None = None,
     progress: Callable[[str], None] | None = None,
+    gravity: float | None = None,
 ) -> Report:
     """The report of ``data`` (one record, or a campaign's records or folder): every input read and checked
     first (one ``InputError``), then each analysis that fits it; ``options`` per analysis (``{"posterior":
     {"max_steps": 2000}, ...}``: the estimators' parameters); ``progress`` hears of each analysis. Returns the
-    ``Report`` (``write(folder)`` writes it)."""
+    ``Report`` (``write(folder)`` writes it). ``gravity`` [m/s^2] along the motion overrides the records'
+    metadata (0 for a horizontal device)."""
     say = progress or (lambda text: None)
     options = {k: dict(v) for k, v in (options or {}).items()}
     paths = [Path(d) for d in data]
     if len(paths) > 1 or paths[0].is_dir():
-        return _campaign_report(data, columns, fs, forcing_hz, wells, nfrc, _only(only, CAMPAIGN), say)
+        return _campaign_report(data, columns, fs, forcing_hz, wells, nfrc, _only(only, CAMPAIGN), say, gravity)
     from negstiff.inference.record.frame import pin_frame
     from negstiff.inference.record.measurement import load
 
-    rec = load(paths[0], columns=columns, fs=fs, mass=mass)
+    rec = load(paths[0], columns=columns, fs=fs, mass=mass, gravity=gravity)
     f_h = forcing_hz or harmonic_frequency(rec)
     kind = HARMONIC if f_h else BROADBAND
     chosen = _only(only, kind)
@@ -172,10 +174,10 @@ def _plan(rec, chosen, forcing_hz, wells, seed, options) -> list[tuple[str, str,
     return runs
 
 
-def _campaign_report(data, columns, fs, forcing_hz, wells, nfrc, chosen, say) -> Report:
+def _campaign_report(data, columns, fs, forcing_hz, wells, nfrc, chosen, say, gravity=None) -> Report:
     from negstiff.inference.analysis.campaign import Campaign
 
-    campaign = Campaign.read(data, columns, fs, forcing_hz, wells, nfrc)
+    campaign = Campaign.read(data, columns, fs, forcing_hz, wells, nfrc, gravity=gravity)
     rep = Report(f"negstiff report: a campaign of {len(campaign.records)} records")
     say(f"report: the bifurcation map of {len(campaign.records)} records ...")
     rep.add(campaign.records[0], label="first record")

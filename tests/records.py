@@ -9,9 +9,11 @@ TRUTH = Model(m=0.2, k1=426.0, k2=-3060.0, k3=7.77e5, c=0.35, c_nl=0.1)
 FS = 512.0
 
 
-def dop853_record(duration=60.0, rms=8.0, seed=7, start=0.024, fs=FS, rtol=1e-9):
-    """(t, base_acc, z, z_dot) of TRUTH under a multisine base acceleration (2-30 Hz), integrated by
-    scipy's DOP853 (``rtol``, 1e-9 by default) from rest at ``start``: a record negstiff's simulator did not make."""
+def dop853_record(duration=60.0, rms=8.0, seed=7, start=0.024, fs=FS, rtol=1e-9, model=None, hidden=None):
+    """(t, base_acc, z, z_dot) of ``model`` (TRUTH by default) under a multisine base acceleration (2-30 Hz),
+    integrated by scipy's DOP853 (``rtol``, 1e-9 by default) from rest at ``start``: a record negstiff's
+    simulator did not make. ``hidden(z, v)`` is a force [N] the model does not know (an end stop, friction)."""
+    model = TRUTH if model is None else model
     from scipy.integrate import solve_ivp
 
     rng = np.random.default_rng(seed)
@@ -24,7 +26,8 @@ def dop853_record(duration=60.0, rms=8.0, seed=7, start=0.024, fs=FS, rtol=1e-9)
 
     def rhs(t, x):
         z, v = x
-        return [v, (-TRUTH.c * v - TRUTH.c_nl * v * abs(v) - TRUTH.restoring_force(z)) / TRUTH.m - acc(t)]
+        extra = 0.0 if hidden is None else hidden(z, v)
+        return [v, (-model.c * v - model.c_nl * v * abs(v) - model.restoring_force(z) - extra) / model.m - acc(t)]
 
     t = np.arange(int(duration * fs)) / fs
     sol = solve_ivp(rhs, (0, t[-1]), [start, 0.0], t_eval=t, method="DOP853", rtol=rtol, atol=1e-3 * rtol)
@@ -77,3 +80,40 @@ def rk4_harmonic(model, amplitudes, f_hz, duration, sim_fs, z0, settle_cycles=10
     t = np.arange(n) * h
     keep = t >= settle_cycles / f_hz
     return t[keep] - t[keep][0], acc(t[keep][:, None]), zs[keep]
+
+
+# A horizontal bistable harvester in the Moon-Holmes magneto-elastic form, per unit mass:
+# z'' + d z' - a z + b z^3 - theta v = -base_acc, wells at +-L; with a piezo layer, v' = -v / (R C) - kappa z'.
+HARVESTER = {"L": 0.010, "f0": 4.0, "delta": 0.25, "gamma": 0.3, "m": 0.01}
+
+
+def harvester_truth(m=HARVESTER["m"]):
+    """The harvester's model in negstiff's terms (K = -k1 z + k3 z^3: k1, k3 > 0, no k2; k0 = 0: no weight to carry)."""
+    w0 = 2 * np.pi * HARVESTER["f0"]
+    a = w0**2
+    return Model(m=m, k1=a * m, k2=0.0, k3=a / HARVESTER["L"] ** 2 * m, c=HARVESTER["delta"] * w0 * m, c_nl=0.0, k0=0.0)
+
+
+def harvester_record(duration=120.0, fs=2048.0, theta=0.0, kappa=0.0, rc_s=0.05, seed=3):
+    """(t, base_acc, z, z_dot, v) of the harvester under the Moon-Holmes chaotic forcing (gamma 0.3 at the
+    linear frequency f0, delta 0.25: cross-well chaos), integrated by scipy's DOP853 from the plus well;
+    ``theta`` [m/s^2/V] couples a piezo voltage ``v`` (v' = -v / rc_s - kappa z'), 0 by default."""
+    from scipy.integrate import solve_ivp
+
+    L, f0 = HARVESTER["L"], HARVESTER["f0"]
+    w0 = 2 * np.pi * f0
+    a, b, d = w0**2, w0**2 / L**2, HARVESTER["delta"] * w0
+    amp = HARVESTER["gamma"] * L * w0**2
+    rng = np.random.default_rng(seed)
+    phase = rng.uniform(0, 2 * np.pi)
+
+    def acc(t):
+        return amp * np.cos(w0 * t + phase)
+
+    def rhs(t, x):
+        z, v, volt = x
+        return [v, -d * v + a * z - b * z**3 + theta * volt - acc(t), -volt / rc_s - kappa * v]
+
+    t = np.arange(int(duration * fs)) / fs
+    sol = solve_ivp(rhs, (0, t[-1]), [L, 0.0, 0.0], t_eval=t, method="DOP853", rtol=1e-10, atol=1e-13)
+    return t, acc(t), sol.y[0], sol.y[1], sol.y[2]

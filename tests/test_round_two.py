@@ -1,18 +1,20 @@
 """Records unlike the rig's, round two (issue 36): periodicity at any sampling rate, Lyapunov exponents
-that agree with themselves. Every record is written here with numpy/scipy: a plain fixed-step RK4
+that agree with themselves, effects refined like the others and kept only when they help. Every record is written here with numpy/scipy: a plain fixed-step RK4
 (``records.rk4_harmonic``) and scipy's LSODA, never negstiff's simulator."""
 
+import dataclasses
 import math
 
 import numpy as np
 import pytest
-from records import rk4_harmonic
+from records import dop853_record, rk4_harmonic
 from scipy import signal
 from scipy.integrate import solve_ivp
 
-from negstiff import characterize, from_arrays
+from negstiff import Discrepancy, characterize, from_arrays
 from negstiff.inference.analysis.characterize import significantly_positive
 from negstiff.inference.analysis.lyapunov import largest_lyapunov
+from negstiff.models.device import SEED_LIKE_CROSS_WELL_RMS
 from negstiff.models.device import SEED_LIKE_CUBIC as M
 
 F = 9.0
@@ -128,3 +130,52 @@ def test_wolf_and_rosenstein_recover_the_lorenz_exponent_within_5_percent():
     w = largest_lyapunov(x, 0.01)
     assert w["value"] == pytest.approx(LORENZ_LLE, rel=0.05)
     assert w["rosenstein"] == pytest.approx(LORENZ_LLE, rel=0.05)
+
+
+# --- the discrepancy workflow on another simulator's records: effects refined by output error, kept only
+# --- when they help the held-out prediction
+BASE = dataclasses.replace(M, c_nl=0.0)  # the workflow's baseline form (cubic K, viscous c) with its truth
+RMS = SEED_LIKE_CROSS_WELL_RMS  # its excursions reach 43 mm on the minus side
+HIDDEN = {  # the force [N] each effect adds, as the independent simulator writes it (its own laws)
+    "end_stop": ({"k": 3000.0, "z": -0.038}, lambda z, v: 3000.0 * min(0.0, z + 0.038)),  # beyond 3 % of the time
+    "end_stop_soft": ({"k": 1500.0, "z": -0.036}, lambda z, v: 1500.0 * min(0.0, z + 0.036)),
+    "coulomb_friction": (0.1, lambda z, v: 0.1 * math.tanh(v / 1e-4)),  # sharper than negstiff's own smoothing
+    "cubic_damping": (0.3, lambda z, v: 0.3 * v**3),
+    "quintic_stiffness": (1e8, lambda z, v: 1e8 * z**5),
+    "none": (None, None),
+}
+
+
+def _hidden_record(name, seed=11):
+    """120 s of BASE with one hidden force, scipy's DOP853 at rtol 1e-9, 10 um of laser noise and 0.02 m/s^2
+    on the table's accelerometer."""
+    _, hidden = HIDDEN[name]
+    t, u, z, _ = dop853_record(120.0, rms=RMS, seed=seed, model=BASE, hidden=hidden)
+    rng = np.random.default_rng(seed)
+    return from_arrays(u + 0.02 * rng.standard_normal(u.size), z + 10e-6 * rng.standard_normal(z.size), 512.0,
+                       mass=BASE.m, source=f"dop853 {name}")  # fmt: skip
+
+
+@pytest.mark.parametrize("name", [pytest.param(n, marks=pytest.mark.slow) if n == "end_stop_soft" else n for n in HIDDEN])
+def test_hidden_effects_named_alone_sized_and_kept_only_when_they_help(name):
+    """Each hidden effect is the only one named (nothing is added once it explains the gap: a candidate is
+    kept only if the refined model's held-out restarted error falls beyond its standard error), sized
+    within 10 % (an end stop: stiffness within 10 %, onset within 1 mm, both refined by output error,
+    neither given), and the held-out gap shrinks; with nothing hidden, nothing is named."""
+    truth, _ = HIDDEN[name]
+    effect = name.replace("_soft", "")
+    r = Discrepancy().fit(_hidden_record(name)).result()
+    if truth is None:
+        assert r["effects"] == ["none"], r["iterations"]
+        assert r["gap_after_percent"] == r["gap_before_percent"]  # the same model: the same windows, same error
+        return
+    assert r["effects"] == [effect], r["iterations"]
+    size = r["effect_size"][effect]
+    if effect == "end_stop":
+        assert size["k"] == pytest.approx(truth["k"], rel=0.10)
+        assert size["z"] == pytest.approx(truth["z"], abs=1e-3)
+        assert {"end_stop.k", "end_stop.z"} <= set(r["refinement"]["parameters"])
+    else:
+        assert size == pytest.approx(truth, rel=0.10)
+    assert r["gap_after_percent"] < r["gap_before_percent"]
+    assert r["iterations"][0]["kept"] and "kept" in r["iterations"][0]["verdict"]

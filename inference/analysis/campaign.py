@@ -174,11 +174,12 @@ class Campaign:
 
     @classmethod
     def read(cls, data: Sequence[str], columns=None, fs: float | None = None, forcing_hz: float | None = None,
-             wells: tuple[float, ...] | None = None, nfrc: Sequence[str] | None = None) -> Campaign:  # fmt: skip
+             wells: tuple[float, ...] | None = None, nfrc: Sequence[str] | None = None,
+             gravity: float | None = None) -> Campaign:  # fmt: skip
         """Read every record and continuation of ``data`` and check them (one ``MeasurementError``), before
-        any analysis."""
+        any analysis; ``gravity`` [m/s^2] along the motion overrides the records' metadata (0: horizontal)."""
         entries = campaign_records(data)
-        recs = [load(e["file"], columns=columns, fs=fs) for e in entries]
+        recs = [load(e["file"], columns=columns, fs=fs, gravity=gravity) for e in entries]
         freqs = forcing_frequencies(entries, recs, forcing_hz)
         axis = "f_hz" if max(freqs) / min(freqs) - 1 > 1e-9 else "amplitude"  # the campaign steps f, or A at one f
         overlays = read_nfrc_results(nfrc, axis, freqs[0])

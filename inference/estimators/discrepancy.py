@@ -70,6 +70,13 @@ class Candidate:
     notes: dict[str, Any] = field(default_factory=dict)
 
 
+def _stop_of(model: Model, default: float | None) -> float | None:
+    """The onset of the model's positional effect (refined by output error), else ``default``."""
+    pos = _positional()
+    value = model.extra.get(pos.name) if pos is not None else None
+    return float(value["z"]) if value is not None else default
+
+
 def _held(terms) -> tuple[str, ...]:
     """Base fields whose library term the model does not carry: refinement holds them at zero."""
     fields = term_fields()
@@ -320,6 +327,8 @@ class Discrepancy(Estimator):
             base_model, _, self.baseline_refinement_ = refine_stage(base_model, rec, self.n_id_, val, held=_held(terms))
         self.gap_before_ = self._gap(rec, base_model)
         self.locate_before_ = self.locate(rec, terms, stop)
+        current = {"model": base_model, "initial": self.baseline_model_, "refinement": self.baseline_refinement_,
+                   "gap": self.gap_before_}  # fmt: skip
         for _ in range(self.max_effects):
             none = self._score(rec, Candidate("none", terms, stop))
             cands = [none]
@@ -335,31 +344,31 @@ class Discrepancy(Estimator):
             best = self._parsimonious(ranking)
             gain = compare(none.block_ms, best.block_ms, self.margin, none.block_ms)
             named = best.effect != "none" and gain.significant
-            self.iterations_.append(
-                {
-                    "ranking": [{"effect": c.effect, "score": c.heldout_percent, **c.notes} for c in ranking],
-                    "named": best.effect if named else "none",
-                    "gain_percent": float(100 * gain.gain / none.block_ms.mean()),
-                    "standard_error_percent": float(100 * gain.se / none.block_ms.mean()),
-                }
-            )
+            iteration = {
+                "ranking": [{"effect": c.effect, "score": c.heldout_percent, **c.notes} for c in ranking],
+                "named": best.effect if named else "none",
+                "gain_percent": float(100 * gain.gain / none.block_ms.mean()),
+                "standard_error_percent": float(100 * gain.se / none.block_ms.mean()),
+            }
+            self.iterations_.append(iteration)
             if not named:
                 break
+            trial = self._trial(rec, best, [*(a["effect"] for a in added), best.effect])
+            iteration["kept"], iteration["verdict"] = self._helps(rec, current["gap"], trial["gap"], best.effect)
+            iteration["gap_percent"] = {"before": current["gap"].get("median_window_percent"),
+                                        "after": trial["gap"].get("median_window_percent")}  # fmt: skip
+            if not iteration["kept"]:
+                iteration["named"] = "none"
+                break
+            current = trial
             terms = best.terms
-            stop = best.stop
-            added.append({"effect": best.effect, "stop": best.stop})
+            stop = _stop_of(trial["model"], best.stop)  # the next effects are sought beside the refined stop
+            added.append({"effect": best.effect, "stop": stop})
         self.effects_ = [a["effect"] for a in added]
         self.terms_ = terms
         self.stop_ = stop
-        self.model_ = self._as_extra(self._refit_model(rec, terms, stop), self.effects_)
-        self.initial_model_, self.refinement_ = self.model_, None
-        if self.refine:
-            if not self.effects_:
-                self.model_, self.refinement_ = base_model, self.baseline_refinement_
-            else:
-                val = validate(self.model_, rec, self.n_id_)
-                self.model_, _, self.refinement_ = refine_stage(self.model_, rec, self.n_id_, val, held=_held(terms))
-        self.gap_after_ = self._gap(rec, self.model_)
+        self.model_, self.initial_model_, self.refinement_ = current["model"], current["initial"], current["refinement"]
+        self.gap_after_ = current["gap"]  # the same measure as the gap before: restarted runs, same windows
         self.locate_after_ = self.locate(rec, terms, stop)
         self.bounded_ = boundedness(self.model_, rec.segment(0, self.n_id_))
         self.unnamed_ = self._unnamed(rec) if self.unnamed else None
@@ -368,6 +377,38 @@ class Discrepancy(Estimator):
         self.warnings_ = [text for _, text in lines]
         self.record_ = dict(rec.info)
         return self
+
+    def _trial(self, rec: Measurement, best: Candidate, named: list[str]) -> dict[str, Any]:
+        """The model with ``best`` added: every parameter refitted on the identification part by weak least
+        squares, then (``refine``) by output error, every effect's own values included (an end stop's
+        stiffness and onset: ``refine.parameter_names``); its held-out gap."""
+        initial = self._as_extra(self._refit_model(rec, best.terms, best.stop), named)
+        model, refinement = initial, None
+        if self.refine:
+            val = validate(initial, rec, self.n_id_)
+            model, _, refinement = refine_stage(initial, rec, self.n_id_, val, held=_held(best.terms))
+        return {"model": model, "initial": initial, "refinement": refinement, "gap": self._gap(rec, model)}
+
+    def _helps(self, rec: Measurement, before: dict[str, Any], after: dict[str, Any], effect: str) -> tuple[bool, str]:
+        """Is the effect kept? Only if the model with it predicts the held-out tail better, window by window
+        (the same restarted free runs), by more than one standard error of the paired differences of the
+        windows' log mean-square errors (log: a window whose run parts near the barrier, chaos, carries an
+        error 100x the others' and would decide a plain mean alone; the headline gap is the median
+        window's for the same reason): an effect the equation error named that does not help the
+        prediction is said, and left out. A window whose run diverges counts as an error the size of the
+        signal (it predicts nothing)."""
+        a, b = before.get("window_ms"), after.get("window_ms")
+        if a is None or b is None or len(a) != len(b) or len(a) < 2:
+            return False, f"{effect}: not kept: the held-out tail has too few windows to tell whether it helps"
+        worst = float(np.mean(rec.z[self.n_id_ :] ** 2))
+        a, b = (np.log(np.maximum(np.where(np.isfinite(x), x, worst), 1e-300)) for x in (a, b))
+        gain = compare(a, b, 0.0, a)
+        pct = 100 * (1 - math.exp(-gain.gain / 2))  # the windows' rms error, geometric mean
+        se = 50 * gain.se
+        if gain.significant:
+            return True, f"{effect}: kept: the held-out windows' rms error fell {pct:.3g} % (+- {se:.2g} %, geometric mean)"
+        return False, (f"{effect}: named by the equation error but not kept: with it the held-out windows' rms error "
+                       f"changed by {-pct:.3g} % (+- {se:.2g} %, geometric mean), not a fall beyond its uncertainty")  # fmt: skip
 
     def _unnamed(self, rec: Measurement) -> dict[str, Any]:
         """What no catalogue effect names: a non-parametric force g(z, z', u) fitted by output error on the
@@ -428,6 +469,7 @@ class Discrepancy(Estimator):
         fr = restarted_free_runs(model, rec, self.n_id_, self.window_s, self._z0, self._v0)
         out = {k: v for k, v in fr.items() if not isinstance(v, np.ndarray)}
         ms = fr.get("window_ms")
+        out["window_ms"] = ms  # per window, for the paired comparison (``_helps``); not in the result JSON
         if ms is not None:
             ok = np.isfinite(ms)
             # the median window: a single window that diverges near the barrier (chaos) cannot dominate

@@ -33,7 +33,7 @@ from scipy import linalg
 
 from negstiff.errors import MeasurementError
 from negstiff.inference.record.measurement import Measurement
-from negstiff.inference.steps.refine import parameter_names, parameter_scales, with_values
+from negstiff.inference.steps.refine import parameter_names, parameter_scales, values_of, with_values
 from negstiff.inference.steps.shooting import parameter_covariance, shooting_least_squares
 from negstiff.inference.steps.validation import divergence_limits, record_substeps, staged_windows
 from negstiff.models import Model, effects
@@ -272,8 +272,7 @@ def fit_hybrid(
     x_scale = np.array([max(np.abs(rec.z).max(), 1e-12), max(np.abs(vs).max(), 1e-12)])
     names = parameter_names(model, free_mass=False)
     pscale = parameter_scales(model, names, z_rms, v_rms)
-    d = {**model.to_dict(), **dict(model.extra)}
-    q0 = np.array([float(d[n]) for n in names]) / pscale
+    q0 = values_of(model, names) / pscale
     # the term is kept orthogonal, over the states the record visits, to every force the physics can
     # make (1, z, z^2, z^3, z', z'|z'|): it can carry only what the physics cannot, so it cannot trade
     # against a physical coefficient (measured on the Silverbox without this: the joint refit moved k3

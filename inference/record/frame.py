@@ -1,9 +1,10 @@
 """The frame of a derived z: a record whose z was integrated from a velocity or an acceleration has an
 unknown constant; ``pin_frame`` finds it by physics (the wells at the rest positions the metadata states,
-else gravity: K(0) = m g) and returns the record in the physical frame, with the offset, its uncertainty
-and the anchor in ``info["response"]``. It is a step of its own, called by the analyses that need z's
-frame (every estimator's ``check``, ``characterize``, a simulation's start state), never by ``load``: a
-user who only reads a record pays for no fit.
+else gravity: K(0) = m g, or for a device without gravity along its motion the wells' symmetry) and
+returns the record in the physical frame, with the offset, its uncertainty and the anchor in
+``info["response"]``. It is a step of its own, called by the analyses that need z's frame (every
+estimator's ``check``, ``characterize``, a simulation's start state), never by ``load``: a user who only
+reads a record pays for no fit.
 """
 
 from __future__ import annotations
@@ -15,7 +16,6 @@ import numpy as np
 
 from negstiff.inference.record.measurement import Measurement
 from negstiff.inference.steps.weak import weak_least_squares
-from negstiff.models.constants import G
 
 PIN_TERMS = ("1", "z", "z^2", "z^3", "z^4", "z^5", "v", "v|v|")
 """Library of the frame fit: a quintic restoring force follows the exact device's K near its origin
@@ -30,8 +30,11 @@ def _crossings(x: np.ndarray, f: np.ndarray) -> np.ndarray:
 
 
 def _frame_anchors(rec) -> tuple[float, dict[str, float]]:
-    """In the record's own frame: the origin (where a quintic fitted to ``rec`` carries m g, between
-    its wells) and the stable wells, all searched over the stroke the record visited."""
+    """In the record's own frame: the origin and the stable wells, all searched over the stroke the record
+    visited. The origin is where a quintic fitted to ``rec`` carries the weight m g between its wells, or,
+    for a device with no gravity along its motion (``rec.gravity`` 0), midway between its wells (the
+    symmetry of a horizontal double well); ``wells["barrier"]`` is then the unstable equilibrium between
+    them, whose distance from the midpoint measures how symmetric the device is."""
     model = weak_least_squares(rec, PIN_TERMS)
     x = np.linspace(rec.z.min(), rec.z.max(), 4001)
     K = model.restoring_force(x)
@@ -40,7 +43,15 @@ def _frame_anchors(rec) -> tuple[float, dict[str, float]]:
     if len(stable) == 1:  # an in-well record: one well, and no origin between wells to find
         return float("nan"), {"one": stable[0]}
     wells = {"minus": stable[0], "plus": stable[-1]} if len(stable) >= 2 else {}
-    roots = _crossings(x, K - model.m * G)
+    if rec.gravity == 0:
+        if not wells:
+            raise ValueError("the fitted restoring force has no two wells over the visited stroke to be "
+                             "symmetric about")
+        between = [e for e in eq if wells["minus"] < e < wells["plus"]]
+        mid = 0.5 * (wells["minus"] + wells["plus"])
+        barrier = float(between[np.argmin(np.abs(np.array(between) - mid))]) if between else float("nan")
+        return mid, {**wells, "barrier": barrier}
+    roots = _crossings(x, K - model.m * rec.gravity)
     if not roots.size:
         raise ValueError("the fitted restoring force never carries the weight over the visited stroke")
     mid = eq[len(eq) // 2] if eq.size else float(np.median(rec.z))
@@ -59,6 +70,9 @@ def frame_offset(rec, spread: bool = True) -> dict[str, Any]:
       before the test; ``# z_rest`` for the one well an in-well record stays in): C = z_rest -
       x_well, with x_well the fitted model's wells in the record's frame (well positions are what a
       record determines best); an in-well record can only be pinned this way;
+    * the wells' symmetry, for a device with no gravity along its motion (``# gravity: 0``, a horizontal
+      harvester): the origin midway between the fitted wells, and how far the barrier between them sits
+      from it (``asymmetry_m``: how well the symmetry pins the frame);
     * gravity: the restoring force at z = 0 (rods horizontal) carries the weight, K(0) = m g (g per
       unit mass). A quintic restoring force with viscous and quadratic damping is fitted by weak-form
       least squares (``weak.weak_least_squares``) in the record's frame, where K_rec(x) =
@@ -78,7 +92,8 @@ def frame_offset(rec, spread: bool = True) -> dict[str, Any]:
             rest["one"] = float(rec.meta["z_rest"])
     except ValueError:
         rest = {}
-    if rec.input_name != "base_acc" and not rest:
+    horizontal = rec.gravity == 0
+    if rec.input_name != "base_acc" and not rest and not horizontal:
         return {"offset_m": None, "method": "not pinned: a force-driven record carries no weight (k0 unknown)"}
     try:
         x, wells = _frame_anchors(rec)
@@ -117,6 +132,18 @@ def frame_offset(rec, spread: bool = True) -> dict[str, Any]:
             + ", ".join(f"z_{w}_rest = {rest[w]:g} m" for w in anchored)
             + ")",
         }
+    if horizontal:
+        if "minus" not in wells:
+            return {"offset_m": None, "method": "not pinned: gravity 0 along the motion, and the record does not show "
+                    "two wells to be symmetric about; give the rest positions ('# z_minus_rest', '# z_plus_rest')"}
+        return {
+            "offset_m": -x,
+            "offset_se_m": _se([-p[0] for p in parts]),
+            "asymmetry_m": float(wells["barrier"] - x),
+            "method": "the wells' symmetry (gravity 0 along the motion): the origin midway between the wells of a "
+            f"quintic fitted to the record; the barrier between them sits {1e3 * (wells['barrier'] - x):.3g} mm "
+            "from that midpoint",
+        }
     if rec.input_name != "base_acc":
         return {"offset_m": None, "method": "not pinned: a force-driven record carries no weight (k0 unknown)"}
     return {
@@ -148,8 +175,12 @@ def _se(estimates: list[float]) -> float:
 
 def pin_frame(rec: Measurement) -> Measurement:
     """``rec`` with z in the physical frame when its constant was unknown (``frame_offset``), and the
-    offset, its uncertainty and the anchor in ``info["response"]``; otherwise ``rec`` itself. Pinned once
-    per record (the result is kept with it)."""
+    offset, its uncertainty and the anchor in ``info["response"]``; otherwise ``rec`` itself. A response
+    of unknown scale is calibrated first (``scale.calibrate_scale``). Pinned once per record (the result
+    is kept with it)."""
+    from negstiff.inference.record.scale import calibrate_scale
+
+    rec = calibrate_scale(rec)  # a response of unknown scale first made SI (its frame is then in metres)
     resp = rec.info.get("response", {})
     if rec.z is None or resp.get("z_constant_known", True) or resp.get("frame") is not None:
         return rec
@@ -157,7 +188,8 @@ def pin_frame(rec: Measurement) -> Measurement:
     if pinned is not None:
         return pinned
     fo = frame_offset(rec)
-    resp = {**resp, "frame_offset_m": fo["offset_m"], "frame_offset_se_m": fo.get("offset_se_m"), "frame": fo["method"]}
+    resp = {**resp, "frame_offset_m": fo["offset_m"], "frame_offset_se_m": fo.get("offset_se_m"), "frame": fo["method"],
+            **({"frame_asymmetry_m": fo["asymmetry_m"]} if "asymmetry_m" in fo else {})}  # fmt: skip
     se = fo.get("offset_se_m")
     se = 0.0 if se is None else se
     if fo["offset_m"] is not None and not np.isfinite(se):

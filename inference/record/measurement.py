@@ -25,6 +25,7 @@ from negstiff.inference.steps.derivatives import state_derivatives
 from negstiff.io.base import RESOLUTION
 from negstiff.io.schema import (
     DIMENSIONS,
+    GRAVITY_RANGE,
     INPUTS,
     KNOWN,
     MAGNITUDE_LIMITS,
@@ -36,6 +37,7 @@ from negstiff.io.schema import (
     in_si,
     parse_column_map,
 )
+from negstiff.models.constants import G
 
 from . import sensors
 
@@ -148,6 +150,18 @@ class Measurement:
                 pass
         return out
 
+    @property
+    def gravity(self) -> float:
+        """The gravity along the motion [m/s^2]: the metadata's ``gravity`` (0 for a horizontal device, whose
+        frame is then pinned by its wells' symmetry or rest positions, never by K(0) = m g), else g."""
+        return float(self.meta.get("gravity", G))
+
+    def with_gravity(self, gravity: float | None) -> "Measurement":
+        """The same record with the gravity along its motion given by the caller (overrides the metadata)."""
+        if gravity is None:
+            return self
+        return replace(self, meta={**self.meta, "gravity": repr(_checked_gravity(self.source, gravity))})
+
     def require(self, n_min: int, what: str) -> None:
         """Raise ``MeasurementError`` unless the record has at least ``n_min`` samples for ``what``."""
         if self.n < n_min:
@@ -189,6 +203,44 @@ class Measurement:
 
 
 
+def _checked_gravity(source, g) -> float:
+    try:
+        g = float(g)
+    except (TypeError, ValueError):
+        raise MeasurementError(f"{source}: gravity {g!r} is not a number (m/s^2 along the motion: 0 for a "
+                               "horizontal device, 9.81 for a vertical one)") from None  # fmt: skip
+    if not (GRAVITY_RANGE[0] <= g <= GRAVITY_RANGE[1]):
+        lo, hi = GRAVITY_RANGE
+        raise MeasurementError(f"{source}: gravity {g:g} m/s^2 along the motion is outside {lo:g}-{hi:g} (0 for a "
+                               "horizontal device, 9.81 for a vertical one)")  # fmt: skip
+    return g
+
+
+SCALABLE = {"base_acc": ("z", "z_dot"), "force": ("z", "z_dot", "y", "y_dot", "y_acc")}
+"""Response channels whose unknown scale (``*?``) the record's dynamics can estimate: those z is linear in
+(a base-excited record's y, y_dot, y_acc mix the unknown scale with the base's known motion)."""
+
+
+def _unknown_scale(source, name: str | None, input_name: str, mass: float | None, present) -> dict | None:
+    """``info["scale"]`` for a response channel marked ``*?`` (None without one), after checking that the
+    record can identify it: the input's coefficient must be known (-1 for a base acceleration; 1/m for a
+    force, so a force-driven record needs its mass)."""
+    if name is None:
+        return None
+    if name not in SCALABLE[input_name]:
+        what = "the input's scale is what makes a response's scale identifiable: it must be known" \
+            if name in INPUTS else f"only {', '.join(SCALABLE[input_name])} of a {input_name} record can be"
+        raise MeasurementError(f"{source}: {name}'s scale is marked unknown (*?): {what}")  # fmt: skip
+    if name not in present:
+        raise MeasurementError(f"{source}: {name}'s scale is marked unknown (*?), but the record has no {name}")
+    if input_name == "force" and mass is None:
+        raise MeasurementError(
+            f"{source}: {name}'s scale is marked unknown (*?), but a force-driven record without a mass cannot "
+            "identify it (z'' = force / m - ...: scale and mass trade off); give the mass (--mass or '# mass:')"
+        )
+    return {"channel": name, "value": None, "status": "unknown: estimated from the record's dynamics when analysed"}
+
+
 def _constant(x: np.ndarray) -> bool:
     """No variation beyond the values' own floating-point resolution."""
     span = float(np.ptp(x))
@@ -201,6 +253,7 @@ def load(
     fs: float | None = None,
     mass: float | None = None,
     response: bool = True,
+    gravity: float | None = None,
 ) -> Measurement:
     """Read a measurement file.
 
@@ -211,6 +264,8 @@ def load(
     fs : sampling rate [Hz]; replaces the time column when given (the column then only sets t0)
     mass : moving mass [kg] (overrides the metadata's ``mass``)
     response : False for an input-only record (``negstiff simulate``): no response column needed
+    gravity : the gravity along the motion [m/s^2] (overrides the metadata's ``gravity``; 0 for a
+        horizontal device)
 
     The response is z, or z derived from z_dot, y (with the base's motion), y_dot or y_acc
     (``sensors.derive``); what was done is in ``info["response"]``. A derived z's constant is unknown:
@@ -234,6 +289,12 @@ def load(
             mass = float(meta["mass"])
         except ValueError:
             raise MeasurementError(f"{path}: metadata mass = {meta['mass']!r} is not a number") from None
+    if "gravity" in meta:
+        meta = {**meta, "gravity": repr(_checked_gravity(f"{path}: metadata", meta["gravity"]))}
+    unknown = [name for name, (_, scale) in cmap.items() if scale is None]
+    if len(unknown) > 1:
+        raise MeasurementError(f"{path}: scales of {' and '.join(unknown)} marked unknown (*?): one channel at most")
+    scale_info = _unknown_scale(path, unknown[0] if unknown else None, input_name, mass, cols)
     z, resp = None, {"measured": None}
     if response or any(k in cols for k in sensors.RESPONSES):
         z, resp = sensors.derive(cols, input_name, fs, str(path))
@@ -258,9 +319,9 @@ def load(
         meta=meta,
         source=str(path),
         t0=t0,
-        info={"time": time_info, "response": resp, **channel_info},
+        info={"time": time_info, "response": resp, **channel_info, **({"scale": scale_info} if scale_info else {})},
     )
-    return _warned(rec.with_mass(mass))
+    return _warned(rec.with_mass(mass).with_gravity(gravity))
 
 
 def _warned(rec: Measurement) -> Measurement:
@@ -283,7 +344,7 @@ def _mapped_columns(path: Path, raw: dict[str, np.ndarray], cmap: dict) -> dict[
             raise MeasurementError(
                 f"{path}: column map refers to {src!r}, which is not in the file (columns: {', '.join(raw) or 'none'})"
             )
-        cols[name] = raw[src] * scale
+        cols[name] = raw[src] * (1.0 if scale is None else scale)  # an unknown scale (*?): as read
     for name in KNOWN:  # unmapped contract columns present in the file still count
         if name in raw and name not in cols and all(src != name for src, _ in cmap.values()):
             cols[name] = raw[name]
@@ -418,10 +479,22 @@ def time_base(t: np.ndarray, resolution: np.ndarray | None, path) -> tuple[float
     return float(dt), float(dev.max()), float(res.max())
 
 
-def from_arrays(u: np.ndarray, z: np.ndarray | None, fs: float, input_name: str = "base_acc", **kw: Any) -> Measurement:
+def from_arrays(
+    u: np.ndarray,
+    z: np.ndarray | None,
+    fs: float,
+    input_name: str = "base_acc",
+    *,
+    unknown_scale: str | None = None,
+    gravity: float | None = None,
+    **kw: Any,
+) -> Measurement:
     """Build a measurement in memory, validated like a file: 1-D arrays of one length (at least 2
     samples), finite values within a shaker-table record's magnitudes in SI units, a sampling rate a
-    record has, a positive mass. Optional columns (``z_dot``, ``y``, ``base_disp``) go in ``kw``."""
+    record has, a positive mass. Optional columns (``z_dot``, ``y``, ``base_disp``) go in ``kw``; with
+    ``z`` None and a response among them, z is derived from it as ``load`` does (``sensors.derive``).
+    ``unknown_scale`` names a response channel whose sensitivity is unknown (a file's ``*?``);
+    ``gravity`` [m/s^2] the gravity along the motion (0 for a horizontal device)."""
     if input_name not in INPUTS:
         raise MeasurementError(f"input must be one of {INPUTS}, got {input_name!r}")
     source = kw.get("source", "<memory>")
@@ -444,9 +517,21 @@ def from_arrays(u: np.ndarray, z: np.ndarray | None, fs: float, input_name: str 
         raise MeasurementError(f"{source}: too few samples ({n}) for a record")
     check_values(source, cols)
     fs = check_sampling_rate(source, fs, "given")
+    info = dict(kw.pop("info", {}))
+    if z is None and any(k in cols for k in sensors.RESPONSES):
+        z, info["response"] = sensors.derive(cols, input_name, fs, source)
+        if info["response"].get("trim_s"):
+            what = info["response"]["measured"]
+            raise MeasurementError(f"{source}: z from {what} needs the file's route (an integral's ends cut): "
+                                   "derive z yourself, or write the record to a file")  # fmt: skip
+    mass = kw.get("mass")
+    scale_info = _unknown_scale(source, unknown_scale, input_name, mass, cols)
+    if scale_info:
+        info["scale"] = scale_info
     kw = {**kw, **{k: cols[k] for k in OPTIONAL if k in cols}}
-    rec = Measurement(fs=fs, input_name=input_name, u=cols[input_name], z=cols.get("z"), **{**kw, "mass": None})
-    return rec.with_mass(kw.get("mass"))
+    rec = Measurement(fs=fs, input_name=input_name, u=cols[input_name], z=None if z is None else np.asarray(z, float),
+                      **{**kw, "mass": None, "info": info})  # fmt: skip
+    return rec.with_mass(mass).with_gravity(gravity)
 
 
 STROKE_LIMIT_M = 1.0

@@ -31,22 +31,30 @@ z = -3.6 mm, k0/m = 1.4-1.8 m/s^2: the exact K is not a cubic)."""
 
 def frame_warnings(rec) -> list[str]:
     """Is a measured z in the rods-horizontal frame? Where the record's own physics carries the weight
-    (``frame.frame_offset`` by gravity, rest positions ignored) says how far its zero is from it."""
-    if rec.z is None or rec.input_name != "base_acc" or not rec.info.get("response", {}).get("z_constant_known", True):
+    (``frame.frame_offset`` by gravity, rest positions ignored) says how far its zero is from it; for a
+    device without gravity along its motion (``rec.gravity`` 0), the midpoint between its wells."""
+    constant_known = rec.info.get("response", {}).get("z_constant_known", True)
+    if rec.z is None or (rec.input_name != "base_acc" and rec.gravity != 0) or not constant_known:
         return []
     gravity_only = replace(rec, meta={k: v for k, v in rec.meta.items() if not k.endswith("_rest")})
     fo = frame_offset(gravity_only, spread=False)  # the parts' spread only for a warning's text (0.3 s on 300 s)
     if fo["offset_m"] is not None and abs(fo["offset_m"]) > FRAME_WARN_M:
         fo = frame_offset(gravity_only)
-    if fo["offset_m"] is None and fo.get("one_well"):  # an in-well record cannot say where its zero is: no alarm
-        return []
+    if fo["offset_m"] is None and (fo.get("one_well") or rec.gravity == 0):
+        return []  # an in-well record (or a horizontal one without two wells) cannot say where its zero is
     if fo["offset_m"] is None:
         return [
             f"the record's physics never carry the weight ({fo['method']}): are base_acc in m/s^2 and z in m, "
-            "and is the input the table's acceleration?"
+            "and is the input the table's acceleration? (a horizontal device: '# gravity: 0' or --gravity 0)"
         ]
     c, se = fo["offset_m"], fo.get("offset_se_m") or 0.0
     if abs(c) > FRAME_WARN_M:  # the parts' spread (se) is said, not used: short parts may visit one well only
+        if rec.gravity == 0:
+            return [
+                f"z's zero seems {-1e3 * c:.3g} mm off the midpoint between the record's wells (+-{1e3 * se:.2g} mm; "
+                "gravity 0 along the motion, so a symmetric device's origin is that midpoint): a displacement "
+                f"sensor's offset? Shifting z by {1e3 * c:.3g} mm would put it there"
+            ]
         return [
             f"z's zero seems {-1e3 * c:.3g} mm off the rods-horizontal position (+-{1e3 * se:.2g} mm): the record's "
             f"physics carry the weight at z = {-1e3 * c:.3g} mm, not at z = 0 (a displacement sensor's offset?). "

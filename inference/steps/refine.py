@@ -80,24 +80,45 @@ class Refinement:
         }
 
 
+def field_effects(model: Model) -> tuple[str, ...]:
+    """The model's named effects with several values (``effects.Effect.scalar`` false: an end stop's
+    ``{"k", "z"}``), each value refined under the name ``EFFECT.FIELD``."""
+    return tuple(f"{e.name}.{f}" for e in effects.REGISTRY if not e.scalar and e.name in model.extra for f in e.law.fields)
+
+
 def parameter_names(model: Model, free_mass: bool, held=()) -> tuple[str, ...]:
-    """The parameters refined: the base fields (but those ``held``), the model's named scalar effects and
-    the mass when free. A named effect that folds into a base field (``effects.Effect.folds_into``) is
-    refined and that field is not (the two are the same term; refining both leaves a redundant direction)."""
+    """The parameters refined: the base fields (but those ``held``), the model's named scalar effects, the
+    values of its named effects with several (``EFFECT.FIELD``: an end stop's stiffness and onset, refined
+    like the others) and the mass when free. A named effect that folds into a base field
+    (``effects.Effect.folds_into``) is refined and that field is not (the two are the same term; refining
+    both leaves a redundant direction)."""
     named = [e for e in scalar_effects() if e in model.extra]
     out = {effects.get(e).folds_into for e in named} | set(held)
     base = [n for n in ("k0", "k1", "k2", "k3", "c", "c_nl") if n not in out]
-    base += named
+    base += named + list(field_effects(model))
     return tuple(base + (["m"] if free_mass else []))
+
+
+def values_of(model: Model, names) -> np.ndarray:
+    """The current values of the parameters ``names`` (``parameter_names``)."""
+    d = {**model.to_dict(), **dict(model.extra)}
+    out = []
+    for n in names:
+        effect, _, fld = n.partition(".")
+        out.append(float(d[effect][fld]) if fld else float(d[n]))
+    return np.asarray(out, float)
 
 
 def with_values(model: Model, names, values) -> Model:
     """``model`` with the parameters ``names`` set to ``values``."""
     d = model.to_dict()
-    extra = dict(d.pop("extra"))
+    extra = {k: (dict(v) if hasattr(v, "keys") else v) for k, v in d.pop("extra").items()}
     scalar = scalar_effects()
     for n, v in zip(names, values):
-        if n in scalar:
+        effect, _, fld = n.partition(".")
+        if fld:
+            extra[effect][fld] = v
+        elif n in scalar:
             extra[n] = v
         else:
             d[n] = v
@@ -108,15 +129,17 @@ def parameter_scales(model: Model, names, z_rms: float, v_rms: float) -> np.ndar
     """Each parameter's scale: the coefficient that makes its force, at the record's rms state, the
     size of the linear restoring force there (|k1| z_rms); the start value where that is larger. A
     term that starts at zero (an effect to be tried) then moves as readily as the others."""
-    d = {**model.to_dict(), **dict(model.extra)}
     force = max(abs(model.k1) * z_rms, abs(model.c) * v_rms, 1e-300)
     basis = {"k0": 1.0, "k1": z_rms, "k2": z_rms**2, "k3": z_rms**3, "c": v_rms, "c_nl": v_rms**2, "m": None}
     basis |= {e.name: e.law.scale(z_rms, v_rms) for e in effects.REGISTRY if e.scalar}
     out = []
-    for n in names:
+    for n, value in zip(names, values_of(model, names)):
+        if "." in n:  # an effect's own value (a stop's stiffness or onset): scaled by itself, never zero
+            out.append(abs(value) if value else z_rms)
+            continue
         b = basis.get(n)
         natural = model.m if b is None else force / max(b, 1e-300)
-        out.append(max(abs(float(d.get(n, 0.0))), 1e-3 * natural))
+        out.append(max(abs(value), 1e-3 * natural))
     return np.asarray(out, float)
 
 
@@ -172,8 +195,7 @@ def refine(
     names = parameter_names(model, free_mass, held)
     zs, vs, _, _ = rec.states("state")
     scale = parameter_scales(model, names, float(np.std(rec.z)), float(np.std(vs)))
-    d = {**model.to_dict(), **dict(model.extra)}
-    q = np.array([float(d[n]) for n in names]) / scale
+    q = values_of(model, names) / scale
     limits = divergence_limits(rec.z, vs)
     sub = record_substeps(model, rec)
     r = 2 * sub

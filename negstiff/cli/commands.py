@@ -133,7 +133,7 @@ def cmd_identify(args) -> int:
     from negstiff.inference.analysis.frf import compare_with_frf, read_frf_results
     from negstiff.inference.record.measurement import load
 
-    rec = load(args.data, columns=args.columns, fs=args.fs, mass=args.mass)
+    rec = load(args.data, columns=args.columns, fs=args.fs, mass=args.mass, gravity=args.gravity)
     frfs = read_frf_results(args.frf)
     if args.method == "nsi":
         from negstiff.inference.estimators.nsi import NSI
@@ -180,7 +180,7 @@ def cmd_posterior(args) -> int:
             raise InputError(
                 f"--start {args.start}: a polynomial model, for the coefficient posterior (--model coefficients)"
             )
-    rec = load(args.data, columns=args.columns, fs=args.fs, mass=args.mass)
+    rec = load(args.data, columns=args.columns, fs=args.fs, mass=args.mass, gravity=args.gravity)
     if args.duration is not None:
         rec = rec.segment(0, min(rec.n, int(round(args.duration * rec.fs))))
     post = Posterior(
@@ -218,7 +218,7 @@ def cmd_discrepancy(args) -> int:
     from negstiff.inference.estimators.discrepancy import CUBIC_BASELINE, LINEAR_BASELINE, Discrepancy
     from negstiff.inference.record.measurement import load
 
-    rec = load(args.data, columns=args.columns, fs=args.fs, mass=args.mass)
+    rec = load(args.data, columns=args.columns, fs=args.fs, mass=args.mass, gravity=args.gravity)
     base = CUBIC_BASELINE if args.baseline == "cubic" else LINEAR_BASELINE
     d = Discrepancy(baseline=base, max_effects=args.max_effects, refine=not args.no_refine, unnamed=args.unnamed)
     rec = d.check(rec)  # every refusal before the progress line
@@ -261,7 +261,7 @@ def cmd_characterize(args) -> int:
     from negstiff.inference.record.measurement import load
 
     given = parse_wells(args.wells)  # the options before any work
-    rec = load(args.data, columns=args.columns, fs=args.fs)
+    rec = load(args.data, columns=args.columns, fs=args.fs, gravity=args.gravity)
     if args.signal != "z":
         col = getattr(rec, args.signal, None)
         if col is None:
@@ -296,7 +296,7 @@ def cmd_frf(args) -> int:
     from negstiff.inference.record.measurement import load
 
     band = parse_band(args.band)
-    rec = load(args.data, columns=args.columns, fs=args.fs)
+    rec = load(args.data, columns=args.columns, fs=args.fs, gravity=args.gravity)
     if band is not None and band[1] > rec.fs / 2:
         raise InputError(f"--band {args.band}: beyond the Nyquist frequency of {args.data} ({rec.fs / 2:g} Hz)")
     check_frf(rec, band)
@@ -340,7 +340,7 @@ def cmd_map(args) -> int:
     from negstiff.inference.analysis.campaign import Campaign
 
     given = parse_wells(args.wells)  # the options, and every input read and checked, before any analysis
-    campaign = Campaign.read(args.data, args.columns, args.fs, args.forcing_hz, given, args.nfrc)
+    campaign = Campaign.read(args.data, args.columns, args.fs, args.forcing_hz, given, args.nfrc, gravity=args.gravity)
     n, f0 = len(campaign.records), campaign.freqs[0]
     say(args, f"map: {n} record(s), " + ("stepped in frequency" if campaign.axis == "f_hz" else f"at {f0:g} Hz"))
     res = campaign.map(progress=lambda line: say(args, line))
@@ -414,7 +414,8 @@ def cmd_report(args) -> int:
     if args.max_effects is not None:
         options["discrepancy"]["max_effects"] = args.max_effects
     rep = report_records(args.data, args.columns, args.fs, args.mass, args.forcing_hz, parse_wells(args.wells),
-                         args.nfrc, args.only, args.seed, options, progress=lambda line: say(args, line))  # fmt: skip
+                         args.nfrc, args.only, args.seed, options, progress=lambda line: say(args, line),
+                         gravity=args.gravity)  # fmt: skip
     rep.write(args.out)
     for w in rep.results()["summary"]:
         say(args, f"  {w}")

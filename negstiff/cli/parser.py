@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from negstiff.io.schema import SAMPLING_RATE_RANGE_HZ
+from negstiff.io.schema import GRAVITY_RANGE, SAMPLING_RATE_RANGE_HZ
 from negstiff.models import effects
 
 from . import commands as c
@@ -518,12 +518,19 @@ def build_parser() -> argparse.ArgumentParser:
     # options of every command that reads a measurement file
     data_opts = Parser(add_help=False)
     data_opts.add_argument(
-        "--columns", help="column map for foreign files, e.g. force=V1,z=V2 (a map entry may scale: X*9.81)"
+        "--columns", help="column map for foreign files, e.g. force=V1,z=V2 (a map entry may scale: X*9.81; a "
+        "response of unknown sensitivity: z_dot=LDV*?, its scale estimated from the record's dynamics)"
     )
     data_opts.add_argument(
         "--fs",
         type=number(float, *SAMPLING_RATE_RANGE_HZ, what=" Hz"),
         help="sampling rate [Hz]; replaces the file's time column (for files without t, or a broken one)",
+    )
+    data_opts.add_argument(
+        "--gravity",
+        type=number(float, *GRAVITY_RANGE, what=" m/s^2"),
+        help="gravity along the device's motion [m/s^2] (default: the file's '# gravity:', else 9.81); 0 for a "
+        "horizontal device (a harvester): its frame is then pinned by its wells' symmetry or rest positions",
     )
 
     _rig(sub, common, data_opts)

@@ -113,6 +113,8 @@ def in_si(path: Path, cols: dict[str, np.ndarray], meta: dict[str, str], cmap: d
         f = si_factor(label, name)
         dim = DIMENSIONS[name]
         if name in cmap:  # the user's map decides
+            if scale is UNKNOWN_SCALE:  # the dynamics will say: the file's label is moot
+                continue
             if scale == 1.0 and (label in RAW_UNITS or (f is not None and f != 1.0)):
                 fix = f" (scale it: --columns {name}={src}*{f:.6g})" if f else " (scale it by the sensor's sensitivity)"
                 warns.append(f"channel {src} ({name}) is labelled {label!r} in the file, not SI{fix}")
@@ -134,23 +136,36 @@ def in_si(path: Path, cols: dict[str, np.ndarray], meta: dict[str, str], cmap: d
     return out, info | ({"warnings": warns} if warns else {})
 
 
-_MAP_ENTRY = re.compile(r"^\s*(\w+)\s*=\s*([^*]+?)\s*(?:\*\s*([-+0-9.eE]+))?\s*$")
+GRAVITY_RANGE = (0.0, 30.0)
+"""The gravity along a device's motion [m/s^2] (metadata ``gravity``, ``--gravity``): 0 (horizontal) to 9.81
+(vertical); beyond 30 it is not m/s^2."""
+
+
+_MAP_ENTRY = re.compile(r"^\s*(\w+)\s*=\s*([^*]+?)\s*(?:\*\s*([-+0-9.eE]+|\?))?\s*$")
+
+UNKNOWN_SCALE = None
+"""A column map's scale for a channel whose sensitivity is unknown (``z_dot=ldv*?``): the record's own
+dynamics estimate it (``negstiff.inference.record.scale``)."""
 
 
 def parse_column_map(text: str | None) -> dict[str, tuple[str, float]]:
-    """Parse ``name=SOURCE[*scale],...`` into ``{name: (SOURCE, scale)}``."""
+    """Parse ``name=SOURCE[*scale],...`` into ``{name: (SOURCE, scale)}``; ``*?`` marks a scale unknown
+    (``UNKNOWN_SCALE``: a response channel whose sensitivity the record's dynamics are to estimate)."""
     if not text:
         return {}
     out: dict[str, tuple[str, float]] = {}
     for entry in text.split(","):
         m = _MAP_ENTRY.match(entry)
         if not m:
-            raise MeasurementError(f"column map entry {entry!r} is not of the form name=COLUMN or name=COLUMN*scale")
+            raise MeasurementError(
+                f"column map entry {entry!r} is not of the form name=COLUMN, name=COLUMN*scale or name=COLUMN*? "
+                "(scale unknown)"
+            )
         name, src, scale = m.group(1), m.group(2).strip().strip('"'), m.group(3)
         if name not in KNOWN:
             raise MeasurementError(f"column map names {name!r}, which is not a measurement column ({', '.join(KNOWN)})")
         try:
-            factor = 1.0 if scale is None else float(scale)
+            factor = 1.0 if scale is None else UNKNOWN_SCALE if scale == "?" else float(scale)
         except ValueError:
             raise MeasurementError(f"column map entry {entry!r}: scale {scale!r} is not a number") from None
         if name in out:
