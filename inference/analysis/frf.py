@@ -153,9 +153,13 @@ def frf(rec: Measurement, band: tuple[float, float] | None = None, segment_s: fl
     is ``RESOLUTION_RATIO`` of the dominant peak's half-power bandwidth. The result also holds the well
     the record sits in (``well``: the rest position of its metadata nearest its mean z, else None), the
     record (``record``), its ``warnings`` (also issued as ``NegstiffWarning``), and the spectra
-    (``_curves``: arrays, for a figure; not JSON).
+    (``_curves``: arrays, for a figure; not JSON). A response of unknown scale (``*?``) is calibrated
+    first (``scale.calibrate_scale``): the FRF is in SI units.
     """
+    from negstiff.inference.record.scale import calibrate_scale
+
     check_frf(rec, band)
+    rec = calibrate_scale(rec)
     period = input_period(rec) if segment_s is None else None
     if period is not None:  # a multisine: whole periods, its lines
         r = _frf(rec, band, period / rec.fs, period)

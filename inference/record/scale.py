@@ -29,10 +29,10 @@ SCALE_PART_MIN_S = 20.0
 
 
 def _scale_of(rec: Measurement) -> float:
-    from negstiff.inference.steps.weak import input_coefficient
+    from negstiff.inference.steps.weak import input_coefficient, known_input_gain
 
     c = input_coefficient(rec)
-    physical = -1.0 if rec.input_name == "base_acc" else 1.0 / rec.mass
+    physical = known_input_gain(rec)  # never None here: load refuses a force record without a mass
     if not np.isfinite(c) or c == 0:
         raise MeasurementError(f"{rec.source}: the record's dynamics give the input no weight: its response's scale "
                                "cannot be estimated (does the response follow the input?)")  # fmt: skip
