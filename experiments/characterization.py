@@ -170,11 +170,22 @@ def _portraits_and_lle_part(rep: Report, res: dict[str, Any], rig: Rig, fast: bo
         "Figure 6 (seed): Wolf's largest-Lyapunov-exponent estimate on the cross-well "
         "record as it converges, beside the true model's exponent from its variational equations.",
     )
+    case = res["lle_case"]
+    wolf = case["wolf"]
+    wolf_v, wolf_sd, ros, truth = wolf["value"], wolf["sd"], wolf["rosenstein"], case["benettin"]
+    ros_txt = "refused" if ros is None else f"{ros:.3g} 1/s ({100 * (ros / truth - 1):+.0f} %)"
+    wolf_txt = "no value (not determinable)" if wolf_v is None else \
+        f"{wolf_v:.3g} +- {wolf_sd:.2g} 1/s ({100 * (wolf_v / truth - 1):+.0f} %)"  # fmt: skip
     rep.text(
         "Wolf's estimate uses a delay embedding chosen from the data (mutual information, false nearest "
-        "neighbours); Benettin's integrates the true model's tangent dynamics along the true trajectory and is "
-        "the ground truth. Rosenstein's (nolds) is shown as a cross-check; on these records it is the least "
-        "reliable of the three (it fits a divergence curve whose linear region is short at this sampling rate)."
+        "neighbours), pooled over several fiducial trajectories, its value and sd the mean and standard error of "
+        "the record's segments; Rosenstein's (nearest neighbours by a k-d tree, written here: nolds needs the N x "
+        "N distance matrix) is the cross-check; Benettin's integrates the true model's tangent dynamics along the "
+        f"true trajectory and is the ground truth. On the cross-well record Wolf gives {wolf_txt} against "
+        f"Benettin's {truth:.3g} 1/s, Rosenstein {ros_txt}. "
+        "On the periodic records Rosenstein's refuses (None: the neighbours' separation saturates at the noise, "
+        "there is no growth to fit) and no Wolf estimate is significantly positive: a record with a period found "
+        "never reports chaos."
     )
     return chaotic_m
 
