@@ -174,12 +174,42 @@ class OneSidedStop:
         return self.force({"k": 1.0, "z": z_s}, z)
 
 
+class MeasuredChannel:
+    """Force law theta a(t) of a measured auxiliary channel a(t) (a harvester's piezo voltage: the
+    electromechanical coupling): no function of the state, so no kernel row and no library column of z,
+    z'; it drives the model through the record's input (``Measurement.driving``). Named ``aux:CHANNEL``."""
+
+    label = None
+    displacement_only = False
+
+    def __init__(self, channel: str):
+        self.channel = channel
+
+    def __eq__(self, other) -> bool:
+        return isinstance(other, MeasuredChannel) and other.channel == self.channel
+
+    def __hash__(self) -> int:
+        return hash(("MeasuredChannel", self.channel))
+
+
+AUX_PREFIX = "aux:"
+"""The name of a measured channel's term: ``aux:CHANNEL`` (``aux:voltage``)."""
+
+
+def measured_channel(name: str) -> "Effect":
+    """The term of a measured auxiliary channel, ``aux:CHANNEL``; its value theta [N per channel unit]."""
+    channel = name[len(AUX_PREFIX) :]
+    if not channel:
+        raise ValueError(f"extra effect {name!r}: name the channel after {AUX_PREFIX!r} (aux:voltage)")
+    return Effect(name, MeasuredChannel(channel), "N per channel unit")
+
+
 @dataclass(frozen=True)
 class Effect:
     """One registry entry: the name a model file uses, the force law, the value's units."""
 
     name: str
-    law: Monomial | SmoothSign | OneSidedStop
+    law: Monomial | SmoothSign | OneSidedStop | MeasuredChannel
     units: str
 
     @property
@@ -260,6 +290,8 @@ def names() -> tuple[str, ...]:
 
 
 def get(name: str) -> Effect:
+    if name.startswith(AUX_PREFIX):
+        return measured_channel(name)
     for e in REGISTRY:
         if e.name == name:
             return e
@@ -386,6 +418,8 @@ def kernel_rows(m: float, c: float, c_nl: float, extra: Mapping[str, Any]) -> np
     p = np.zeros(lay.size)
     p[ROWS["m"]], p[ROWS["c"]], p[ROWS["c_nl"]] = m, c, c_nl
     for name, value in extra.items():
+        if name.startswith(AUX_PREFIX):  # a measured channel's term drives through the input, not a row
+            continue
         rows = lay.rows[name]
         if len(rows) == 1:
             p[rows[0]] += value

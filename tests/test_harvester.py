@@ -3,11 +3,14 @@ its motion (``# gravity: 0``), a laser vibrometer's volts of unknown sensitivity
 base's acceleration in g. The record is written here with scipy (``records.harvester_record``), never with
 negstiff's simulator."""
 
+import json
+
 import numpy as np
 import pytest
 from records import harvester_record, harvester_truth, write_csv
 
-from negstiff import NSI, InputError, SINDy, from_arrays, load, pin_frame
+from negstiff import NSI, Discrepancy, InputError, SINDy, from_arrays, load, pin_frame
+from negstiff.cli import main
 from negstiff.testing import assert_predicts
 
 GAIN = 0.1  # the vibrometer's sensitivity [m/s per V], unknown to negstiff
@@ -93,3 +96,44 @@ def test_unknown_scale_needs_a_mass_on_a_force_record():
     force = np.sin(2 * np.pi * 5 * t)
     with pytest.raises(InputError, match="mass"):
         from_arrays(force, None, 512.0, "force", z_dot=0.01 * np.cos(2 * np.pi * 5 * t), unknown_scale="z_dot")
+
+
+THETA = 0.05  # the piezo's coupling per unit mass [m/s^2 per V]: z'' = ... + THETA v
+KAPPA = 1000.0  # its electrical side: v' = -v / RC - KAPPA z'
+
+
+@pytest.fixture(scope="module")
+def coupled_file(tmp_path_factory):
+    return _lab_file(tmp_path_factory.mktemp("coupled") / "coupled.csv", theta=THETA, kappa=KAPPA)
+
+
+def test_a_measured_voltage_is_named_and_sized_as_a_term(coupled_file):
+    """The piezo's coupling enters the equation as a term in the measured voltage: the discrepancy workflow
+    names it alone (``aux:voltage``) and SINDy selects it, each within 10 % of the truth (on the left-hand
+    side like every effect: theta / m = -THETA), and the gap shrinks."""
+    rec = load(coupled_file, columns=COLUMNS, aux="voltage")
+    r = Discrepancy().fit(rec).result()
+    assert r["effects"] == ["aux:voltage"], r["iterations"]
+    assert r["aux_per_unit_mass"]["aux:voltage"] == pytest.approx(-THETA, rel=0.10)
+    assert r["gap_after_percent"] < r["gap_before_percent"]
+    s = SINDy().fit(rec).result_
+    assert "aux:voltage" in s.details["selected_terms"]
+    assert s.model.extra["aux:voltage"] / s.model.m == pytest.approx(-THETA, rel=0.10)
+
+
+def test_the_voltage_term_from_the_command_line(coupled_file, tmp_path):
+    """--aux reads the channel; the model file carries aux:voltage; simulate reads the channel the model needs
+    from its input file; a channel that is not there, or a contract column, is one clear error."""
+    out = tmp_path / "d.json"
+    assert main(["discrepancy", str(coupled_file), "--columns", COLUMNS, "--aux", "voltage", "--max-effects", "1",
+                 "-o", str(out), "--quiet"]) == 0  # fmt: skip
+    model = json.loads(out.read_text())["model"]
+    assert "aux:voltage" in model["extra"]
+    (tmp_path / "m.json").write_text(json.dumps(model))
+    sim = tmp_path / "s.csv"
+    assert main(["simulate", str(tmp_path / "m.json"), str(coupled_file), "--columns", COLUMNS, "-o", str(sim),
+                 "--quiet"]) == 0  # fmt: skip
+    assert np.isfinite(np.loadtxt(sim, delimiter=",", skiprows=1)).all()
+    for bad in ("nosuch", "z_dot"):
+        assert main(["discrepancy", str(coupled_file), "--columns", COLUMNS, "--aux", bad, "-o", str(out),
+                     "--quiet"]) == 2  # fmt: skip

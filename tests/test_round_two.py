@@ -1,6 +1,7 @@
 """Records unlike the rig's, round two (issue 36): periodicity at any sampling rate, Lyapunov exponents
-that agree with themselves, effects refined like the others and kept only when they help. Every record is written here with numpy/scipy: a plain fixed-step RK4
-(``records.rk4_harmonic``) and scipy's LSODA, never negstiff's simulator."""
+that agree with themselves, effects refined like the others and kept only when they help. Every record is
+written here with numpy/scipy: a plain fixed-step RK4 (``records.rk4_harmonic``), scipy's LSODA and DOP853,
+never negstiff's simulator."""
 
 import dataclasses
 import math
@@ -156,7 +157,10 @@ def _hidden_record(name, seed=11):
                        mass=BASE.m, source=f"dop853 {name}")  # fmt: skip
 
 
-@pytest.mark.parametrize("name", [pytest.param(n, marks=pytest.mark.slow) if n == "end_stop_soft" else n for n in HIDDEN])
+SLOW = {"end_stop_soft"}  # the replication of the stop with other values: with -m slow
+
+
+@pytest.mark.parametrize("name", [pytest.param(n, marks=pytest.mark.slow) if n in SLOW else n for n in HIDDEN])
 def test_hidden_effects_named_alone_sized_and_kept_only_when_they_help(name):
     """Each hidden effect is the only one named (nothing is added once it explains the gap: a candidate is
     kept only if the refined model's held-out restarted error falls beyond its standard error), sized

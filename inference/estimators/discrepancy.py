@@ -64,6 +64,7 @@ class Candidate:
     effect: str
     terms: tuple[str, ...]
     stop: float | None = None
+    aux: tuple[str, ...] = ()  # measured auxiliary channels whose terms the model carries (``aux:NAME``)
     heldout_percent: float = math.inf
     block_ms: np.ndarray | None = None
     coefficients: np.ndarray | None = None
@@ -156,8 +157,9 @@ class Discrepancy(Estimator):
         self.n_id_, self.n_fit_ = n_id, n_fit
         self._library_systems: dict[tuple[int, int], tuple[Measurement, np.ndarray, np.ndarray]] = {}
 
-    def _design(self, rec: Measurement, lo: int, hi: int, stop: float | None):
-        """Weak system over samples [lo, hi): the library's columns (and an end-stop column). The library's
+    def _design(self, rec: Measurement, lo: int, hi: int, stop: float | None, aux: tuple[str, ...] = ()):
+        """Weak system over samples [lo, hi): the library's columns, the input's, a column per measured
+        auxiliary channel in ``aux`` (its projection, like the input's) and an end-stop column last. The library's
         part is projected once per span and record (a fit asks for the same two spans ~75 times, one per
         candidate stop and effect: 16 of a discrepancy study's 36 s went to projecting them again)."""
         hit = self._library_systems.get((lo, hi))
@@ -168,6 +170,9 @@ class Discrepancy(Estimator):
                 a.setflags(write=False)
             self._library_systems[(lo, hi)] = hit
         W, y = hit[1], hit[2]
+        for name in aux:
+            Wa = self._form.project(np.asarray(rec.aux[name][lo:hi], float)[:, None], rec.dt)[:, 0]
+            W = np.column_stack([W, Wa[: W.shape[0]]])
         if stop is not None:
             z = self._zs[lo:hi]
             col = _positional().law.column(z, stop)
@@ -175,12 +180,14 @@ class Discrepancy(Estimator):
             W = np.column_stack([W, Ws[: W.shape[0]]])
         return W, y
 
-    def _fit(self, W: np.ndarray, y: np.ndarray, terms: tuple[str, ...], stop: bool) -> np.ndarray:
-        """Least squares on ``terms`` (+ the stop column), the input's coefficient fixed by physics."""
+    def _fit(self, W: np.ndarray, y: np.ndarray, terms: tuple[str, ...], stop: bool, n_aux: int = 0) -> np.ndarray:
+        """Least squares on ``terms`` (+ the auxiliary channels' and the stop's columns), the input's
+        coefficient fixed by physics."""
         lib = library_terms()
-        cols = [lib.index(t) for t in terms] + ([W.shape[1] - 1] if stop else [])
-        target = y.copy()
         n_lib = len(lib)
+        aux_cols = list(range(n_lib + 1, n_lib + 1 + n_aux))  # after the input's column; the stop's last
+        cols = [lib.index(t) for t in terms] + aux_cols + ([W.shape[1] - 1] if stop else [])
+        target = y.copy()
         if self._gain is not None:
             target = target - self._gain * W[:, n_lib]
         else:
@@ -189,16 +196,20 @@ class Discrepancy(Estimator):
         scale = np.sqrt(np.mean(A**2, axis=0))  # rms, not std: the constant's column has none
         scale[scale == 0] = 1.0
         coef = np.linalg.lstsq(A / scale, target, rcond=None)[0] / scale
-        full = np.zeros(n_lib + 1 + int(stop))
+        full = np.zeros(n_lib + 1 + n_aux + int(stop))
         full[cols] = coef
         if self._gain is not None:
             full[n_lib] = self._gain
         return full
 
-    def _model(self, coef: np.ndarray, rec: Measurement, stop: float | None) -> Model:
-        phys = coef[: len(library_terms()) + 1]
+    def _model(self, coef: np.ndarray, rec: Measurement, stop: float | None, aux: tuple[str, ...] = ()) -> Model:
+        n_lib = len(library_terms())
+        phys = coef[: n_lib + 1]
         mass = mass_of(rec, self._gain, phys[-1])[0]
         model = model_from(phys, mass)
+        if aux:  # theta a(t) on the left-hand side, like every effect's force: theta = -m x its z'' coefficient
+            terms = {f"{effects.AUX_PREFIX}{name}": -mass * float(coef[n_lib + 1 + i]) for i, name in enumerate(aux)}
+            model = Model(**{**model.to_dict(), "extra": {**dict(model.extra), **terms}})
         if stop is not None:
             k = -mass * float(coef[-1])
             if k > 0:
@@ -207,9 +218,9 @@ class Discrepancy(Estimator):
         return model
 
     def _score(self, rec: Measurement, cand: Candidate) -> Candidate:
-        W, y = self._design(rec, 0, self.n_fit_, cand.stop)
-        coef = self._fit(W, y, cand.terms, cand.stop is not None)
-        Ws, ys = self._design(rec, self.n_fit_, self.n_id_, cand.stop)
+        W, y = self._design(rec, 0, self.n_fit_, cand.stop, cand.aux)
+        coef = self._fit(W, y, cand.terms, cand.stop is not None, len(cand.aux))
+        Ws, ys = self._design(rec, self.n_fit_, self.n_id_, cand.stop, cand.aux)
         r2 = (ys - Ws @ coef) ** 2
         rows = block_rows(self.window_s, rec.fs, self._form.stride)
         nb = r2.size // rows
@@ -227,7 +238,8 @@ class Discrepancy(Estimator):
         if cand.effect != "none":
             # the catalogue never names an effect whose fit opens an escape just past the stroke
             try:
-                escape = boundedness(self._model(coef, rec, cand.stop), rec.segment(0, self.n_id_), free_run=False)
+                model = self._model(coef, rec, cand.stop, cand.aux)
+                escape = boundedness(model, rec.segment(0, self.n_id_), free_run=False)
                 escape = escape["escape_z"]
             except ValueError:
                 escape = None
@@ -236,14 +248,14 @@ class Discrepancy(Estimator):
                 cand.heldout_percent = math.inf
         return cand
 
-    def _fit_stop(self, rec: Measurement, terms: tuple[str, ...]) -> float:
+    def _fit_stop(self, rec: Measurement, terms: tuple[str, ...], aux: tuple[str, ...] = ()) -> float:
         """The end stop's position (a nonlinear parameter) by least squares on the fitting part: a grid
         over the outer 0.5-10 % of the stroke on either side, refined by a bounded scalar search."""
         from scipy import optimize
 
         def ss(zs: float) -> float:
-            W, y = self._design(rec, 0, self.n_fit_, zs)
-            coef = self._fit(W, y, terms, True)
+            W, y = self._design(rec, 0, self.n_fit_, zs, aux)
+            coef = self._fit(W, y, terms, True, len(aux))
             return float(np.sum((y - W @ coef) ** 2)) if coef[-1] < 0 else math.inf  # a stop pushes back
 
         z = self._zs[: self.n_fit_]
@@ -264,15 +276,16 @@ class Discrepancy(Estimator):
         return grid[i]
 
     # --- locate ------------------------------------------------------------------------------------
-    def locate(self, rec: Measurement, model_terms: tuple[str, ...], stop: float | None) -> dict[str, Any]:
+    def locate(self, rec: Measurement, model_terms: tuple[str, ...], stop: float | None,
+               aux: tuple[str, ...] = ()) -> dict[str, Any]:  # fmt: skip
         """Where the current model's weak residual lives: by regime and over the state plane."""
-        W, y = self._design(rec, 0, self.n_id_, stop)
-        coef = self._fit(W, y, model_terms, stop is not None)
+        W, y = self._design(rec, 0, self.n_id_, stop, aux)
+        coef = self._fit(W, y, model_terms, stop is not None, len(aux))
         r = y - W @ coef
         form = self._form
         centres = np.clip(np.arange(r.size) * form.stride + form.centre(rec.dt), 0, self.n_id_ - 1)
         z, v = self._zs[centres], self._v[centres]
-        model = self._model(coef, rec, stop)
+        model = self._model(coef, rec, stop, aux)
         try:
             eq = model.equilibria()
             wells = (eq.z_minus, eq.z_0, eq.z_plus)
@@ -329,17 +342,22 @@ class Discrepancy(Estimator):
         self.locate_before_ = self.locate(rec, terms, stop)
         current = {"model": base_model, "initial": self.baseline_model_, "refinement": self.baseline_refinement_,
                    "gap": self.gap_before_}  # fmt: skip
+        aux: tuple[str, ...] = ()
         for _ in range(self.max_effects):
-            none = self._score(rec, Candidate("none", terms, stop))
+            none = self._score(rec, Candidate("none", terms, stop, aux))
             cands = [none]
             for effect, extra_terms in catalogue().items():
                 if not extra_terms:  # the positional effect: one at most
                     if stop is None:
-                        cands.append(self._score(rec, Candidate(effect, terms, self._fit_stop(rec, terms))))
+                        cands.append(self._score(rec, Candidate(effect, terms, self._fit_stop(rec, terms, aux), aux)))
                     continue
                 if set(extra_terms) <= set(terms):
                     continue
-                cands.append(self._score(rec, Candidate(effect, terms + extra_terms, stop)))
+                cands.append(self._score(rec, Candidate(effect, terms + extra_terms, stop, aux)))
+            for channel in rec.aux:  # each measured auxiliary channel: a term theta a(t), like an effect
+                if channel not in aux:
+                    cands.append(self._score(rec, Candidate(f"{effects.AUX_PREFIX}{channel}", terms, stop,
+                                                            (*aux, channel))))  # fmt: skip
             ranking = sorted(cands, key=lambda c: c.heldout_percent)
             best = self._parsimonious(ranking)
             gain = compare(none.block_ms, best.block_ms, self.margin, none.block_ms)
@@ -361,7 +379,7 @@ class Discrepancy(Estimator):
                 iteration["named"] = "none"
                 break
             current = trial
-            terms = best.terms
+            terms, aux = best.terms, best.aux
             stop = _stop_of(trial["model"], best.stop)  # the next effects are sought beside the refined stop
             added.append({"effect": best.effect, "stop": stop})
         self.effects_ = [a["effect"] for a in added]
@@ -369,7 +387,8 @@ class Discrepancy(Estimator):
         self.stop_ = stop
         self.model_, self.initial_model_, self.refinement_ = current["model"], current["initial"], current["refinement"]
         self.gap_after_ = current["gap"]  # the same measure as the gap before: restarted runs, same windows
-        self.locate_after_ = self.locate(rec, terms, stop)
+        self.aux_ = aux
+        self.locate_after_ = self.locate(rec, terms, stop, aux)
         self.bounded_ = boundedness(self.model_, rec.segment(0, self.n_id_))
         self.unnamed_ = self._unnamed(rec) if self.unnamed else None
         lines = classified(rec, self.model_, [] if self.bounded_["ok"] else [self.bounded_["warning"]])
@@ -382,7 +401,7 @@ class Discrepancy(Estimator):
         """The model with ``best`` added: every parameter refitted on the identification part by weak least
         squares, then (``refine``) by output error, every effect's own values included (an end stop's
         stiffness and onset: ``refine.parameter_names``); its held-out gap."""
-        initial = self._as_extra(self._refit_model(rec, best.terms, best.stop), named)
+        initial = self._as_extra(self._refit_model(rec, best.terms, best.stop, best.aux), named)
         model, refinement = initial, None
         if self.refine:
             val = validate(initial, rec, self.n_id_)
@@ -404,11 +423,11 @@ class Discrepancy(Estimator):
         a, b = (np.log(np.maximum(np.where(np.isfinite(x), x, worst), 1e-300)) for x in (a, b))
         gain = compare(a, b, 0.0, a)
         pct = 100 * (1 - math.exp(-gain.gain / 2))  # the windows' rms error, geometric mean
-        se = 50 * gain.se
+        change = f"{{:.3g}} % (+- {50 * gain.se:.2g} %, geometric mean)"
         if gain.significant:
-            return True, f"{effect}: kept: the held-out windows' rms error fell {pct:.3g} % (+- {se:.2g} %, geometric mean)"
+            return True, f"{effect}: kept: the held-out windows' rms error fell " + change.format(pct)
         return False, (f"{effect}: named by the equation error but not kept: with it the held-out windows' rms error "
-                       f"changed by {-pct:.3g} % (+- {se:.2g} %, geometric mean), not a fall beyond its uncertainty")  # fmt: skip
+                       "changed by " + change.format(-pct) + ", not a fall beyond its uncertainty")  # fmt: skip
 
     def _unnamed(self, rec: Measurement) -> dict[str, Any]:
         """What no catalogue effect names: a non-parametric force g(z, z', u) fitted by output error on the
@@ -420,7 +439,7 @@ class Discrepancy(Estimator):
         ident = rec.segment(0, self.n_id_)
         h = fit_hybrid(self.model_, ident)
         zs, vs, _, _ = ident.states("state")
-        term = h.term(zs, vs, ident.u)
+        term = h.term(zs, vs, ident.driving(self.model_))
         force = self.model_.restoring_force(zs)
         return {
             "term_rms": float(np.sqrt(np.mean(term**2))),
@@ -436,6 +455,7 @@ class Discrepancy(Estimator):
         a stop (measured)."""
         top = ranking[0]
         n_par = {"none": 0, **{e.name: e.n_values for e in effects.REGISTRY}}
+        n_par |= {c.effect: 1 for c in ranking if c.effect.startswith(effects.AUX_PREFIX)}  # theta alone
         ok = []
         for c in ranking:
             if c.effect == "none" or not np.isfinite(c.heldout_percent):
@@ -460,9 +480,9 @@ class Discrepancy(Estimator):
         d["extra"] = extra
         return Model.from_dict(d)
 
-    def _refit_model(self, rec: Measurement, terms, stop) -> Model:
-        W, y = self._design(rec, 0, self.n_id_, stop)
-        return self._model(self._fit(W, y, terms, stop is not None), rec, stop)
+    def _refit_model(self, rec: Measurement, terms, stop, aux: tuple[str, ...] = ()) -> Model:
+        W, y = self._design(rec, 0, self.n_id_, stop, aux)
+        return self._model(self._fit(W, y, terms, stop is not None, len(aux)), rec, stop, aux)
 
     def _gap(self, rec: Measurement, model: Model) -> dict[str, Any]:
         """Restarted free runs over the held-out tail (and their residual PSD)."""
@@ -537,6 +557,8 @@ class Discrepancy(Estimator):
             "record": self.record_,
             "baseline_model": self.baseline_model_.to_dict(),
             "effect_size": self.effect_size(),
+            "aux_per_unit_mass": {e: v / self.model_.m for e, v in self.model_.extra.items()
+                                  if e.startswith(effects.AUX_PREFIX)},  # fmt: skip
             **({"unnamed": self.unnamed_} if getattr(self, "unnamed_", None) else {}),
             "iterations": self.iterations_,
             "settings": {

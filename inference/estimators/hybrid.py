@@ -156,7 +156,7 @@ class Hybrid:
         """z of a free run over ``rec`` from ``x0`` (NaN after a divergence)."""
         sub = record_substeps(self.model, rec)
         zs, vs, _, _ = rec.states("state")
-        us = stage_input(rec.u, sub)[None]
+        us = stage_input(rec.driving(self.model), sub)[None]  # with any measured channel's term (its u)
         x = np.asarray(x0, float)[None]
         oz, _ = simulate_hybrid(self.model, self.basis, self.theta, us, rec.dt, x, sub, rec.input_name,
                                 **divergence_limits(rec.z, vs))  # fmt: skip
@@ -262,10 +262,11 @@ def fit_hybrid(
     if rec.z is None:
         raise MeasurementError(f"{rec.source}: a hybrid model needs a response")
     zs, vs, _, _ = rec.states("state")
-    basis = Basis.over(zs, vs, rec.u, *shape)
+    drive = rec.driving(model)  # the input, plus a measured channel's term the physics holds (the term's u)
+    basis = Basis.over(zs, vs, drive, *shape)
     limits = divergence_limits(rec.z, vs)
     sub = record_substeps(model, rec)
-    us = stage_input(rec.u, sub)
+    us = stage_input(drive, sub)
     r = 2 * sub
     z_rms, v_rms = float(np.std(rec.z)), float(np.std(vs))
     force = max(abs(model.k1) * z_rms, abs(model.c) * v_rms, 1e-300)
@@ -277,7 +278,7 @@ def fit_hybrid(
     # make (1, z, z^2, z^3, z', z'|z'|): it can carry only what the physics cannot, so it cannot trade
     # against a physical coefficient (measured on the Silverbox without this: the joint refit moved k3
     # by 6 and k1 by 5 standard errors). Weights theta = N phi, N an orthonormal null-space basis.
-    N = _orthogonal_weights(basis, zs, vs, rec.u)
+    N = _orthogonal_weights(basis, zs, vs, drive)
     P = N.shape[1]
     theta = np.zeros(basis.size)
     stages = []

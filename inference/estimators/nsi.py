@@ -317,6 +317,10 @@ class NSI(Identifier):
             mass_source=mass_source,
             input_gain=float(np.mean(gains)),
             modal=modal,
+            warnings=tuple(
+                f"NSI's basis is the restoring force's and the damping's: the record's measured channel {a!r} is not "
+                "used (SINDy and the discrepancy workflow offer it as a term)" for a in rec.aux
+            ),
             details={"wells": self._wells_json()},
             settings={
                 "order": self.order,

@@ -39,6 +39,7 @@ from negstiff.inference.steps.weak import (
     Bagging,
     WeakForm,
     WeakFormError,
+    aux_terms,
     fit_support,
     known_input_gain,
     mass_of,
@@ -66,6 +67,9 @@ class SINDy(Identifier):
     window_s : length of the restarted free runs (and of the residual blocks) that score a support [s]
     margin : relative gain in held-out residual a larger support must bring (``_select``)
     seed : seeds the ensemble's bagging
+
+    A record's measured auxiliary channels (``load(..., aux=...)``: a harvester's voltage) join the library
+    as terms theta a(t), named ``aux:NAME`` in the model's ``extra``.
     """
 
     method = "sindy"
@@ -112,6 +116,12 @@ class SINDy(Identifier):
                 "together they leave nothing to fit"
             )
 
+    @staticmethod
+    def _aux(rec: Measurement) -> tuple[str, ...]:
+        """The record's measured auxiliary channels (``--aux``): each offered to the library as a term theta
+        a(t) (``aux:NAME``), thresholded like the others."""
+        return tuple(rec.aux)
+
     def _check_record(self, rec: Measurement) -> None:
         rec.require(MIN_SAMPLES, "SINDy")
         rec.require_excitation("SINDy")
@@ -129,7 +139,9 @@ class SINDy(Identifier):
         # 1. the sparsity path on the fitting part; 2. each support refitted there and scored by
         # its held-out weak residual over the selection part, in blocks
         path = self._path(rec, form, gain, n_fit, n_id, z0s, v0s)
-        library, fields = terms(), term_fields()
+        aux = self._aux(rec)
+        library = terms() + aux_terms(aux)
+        fields = term_fields() | {t: (t, -1.0) for t in aux_terms(aux)}
         self.path_ = sorted(path, key=lambda p: (p["n_terms"], p["heldout_residual_percent"]))
         chosen = self._select(self.path_)
         if not np.isfinite(chosen["free_run_percent"]):
@@ -138,12 +150,12 @@ class SINDy(Identifier):
             )
 
         # 3. refit the chosen support on all identification data; the ensemble at the same weight
-        sys_id = form.system(ident)
+        sys_id = form.system(ident, aux=aux)
         phys = fit_support(sys_id, gain, support=chosen["support"])
         bagging = Bagging(self.n_models, self.subset_fraction, self.seed)
         phys_ens = fit_support(sys_id, gain, chosen["weight"], bagging=bagging)
         mass, mass_source = mass_of(rec, gain, phys[-1])
-        model = model_from(phys, mass)
+        model = model_from(phys, mass, aux)
         self.selected_ = list(chosen["terms"])
         self.weight_ = chosen["weight"]
         self.ensemble_ = {
@@ -193,8 +205,9 @@ class SINDy(Identifier):
         """The supports of the L0 path on samples [0, n_fit), each refitted there and scored on [n_fit,
         n_id): its held-out weak residual in blocks, its restarted free runs, an escape past the stroke."""
         ident = rec.segment(0, n_id)
-        sys_fit = form.system(rec, 0, n_fit)
-        sys_sel = form.system(rec, n_fit, n_id)
+        aux = self._aux(rec)
+        sys_fit = form.system(rec, 0, n_fit, aux)
+        sys_sel = form.system(rec, n_fit, n_id, aux)
         W_sel, y_sel = sys_sel.W_physical, sys_sel.y_physical
         rows = block_rows(self.window_s, rec.fs, form.stride)
         n_blocks = y_sel.size // rows
@@ -205,7 +218,7 @@ class SINDy(Identifier):
                 f"needed ({100 * self.selection_fraction:.0f} % of the record scores the candidate models in "
                 f"{self.window_s:g} s blocks, two at least)"
             )
-        library = terms()
+        library = terms() + aux_terms(aux)
         supports: dict[tuple[bool, ...], list[float]] = {}
         for weight in self.weights:
             phys = fit_support(sys_fit, gain, weight)
@@ -214,7 +227,7 @@ class SINDy(Identifier):
         for support, weights in supports.items():
             phys = fit_support(sys_fit, gain, support=support)
             try:
-                model = model_from(phys, mass_of(rec, gain, phys[-1])[0])
+                model = model_from(phys, mass_of(rec, gain, phys[-1])[0], aux)
                 fr = restarted_free_runs(model, ident, n_fit, self.window_s, z0s, v0s)
                 # a support whose potential opens an escape just past the stroke is never selected
                 escape = boundedness(model, ident, free_run=False)["escape_z"]

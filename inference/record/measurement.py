@@ -15,7 +15,7 @@ import copy
 import math
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any
+from typing import Any, Sequence
 
 import numpy as np
 
@@ -38,6 +38,7 @@ from negstiff.io.schema import (
     parse_column_map,
 )
 from negstiff.models.constants import G
+from negstiff.models.effects import AUX_PREFIX
 
 from . import sensors
 
@@ -78,6 +79,7 @@ class Measurement:
     source: str = "<memory>"
     t0: float = 0.0
     info: dict[str, Any] = field(default_factory=dict)
+    aux: dict[str, np.ndarray] = field(default_factory=dict)
     derived: dict[str, Any] = field(default_factory=dict, init=False, repr=False, compare=False)
     """What is computed from this record once and kept with it (its smoothed states, its segments, its
     pinned frame): a record is immutable, so what it gives never changes (``states``, ``segment``)."""
@@ -125,7 +127,8 @@ class Measurement:
         if seg is None:
             sl = slice(start, stop)
             opt = {k: (None if getattr(self, k) is None else getattr(self, k)[sl]) for k in ("z", *OPTIONAL)}
-            seg = self.derived[key] = replace(self, u=self.u[sl], t0=self.t0 + start / self.fs, **opt)
+            aux = {k: v[sl] for k, v in self.aux.items()}
+            seg = self.derived[key] = replace(self, u=self.u[sl], t0=self.t0 + start / self.fs, aux=aux, **opt)
         return seg
 
     def states(self, purpose: str = "state") -> tuple[np.ndarray, np.ndarray, np.ndarray, dict]:
@@ -138,6 +141,24 @@ class Measurement:
             hit = self.derived[key] = state_derivatives(self.z, self.fs, purpose)
         zs, v, a, info = hit
         return zs.copy(), v.copy(), a.copy(), copy.deepcopy(info)
+
+    def driving(self, model) -> np.ndarray:
+        """The input that drives ``model`` over this record: ``u``, plus the forces of the model's measured
+        auxiliary channels (``aux:NAME`` in its ``extra``: theta a(t), on the left-hand side of the equation
+        like every effect's force, theta in N per channel unit) moved to the input's side: u + theta a / m
+        for a base acceleration (m z'' + ... + theta a = -m u), F - theta a for a force. A model term whose
+        channel the record lacks raises ``MeasurementError``."""
+        extra = getattr(model, "extra", {})
+        terms = {k[len(AUX_PREFIX) :]: float(v) for k, v in extra.items() if k.startswith(AUX_PREFIX)}
+        if not terms:
+            return self.u
+        missing = [k for k in terms if k not in self.aux]
+        if missing:
+            have = ", ".join(self.aux) or "none"
+            raise MeasurementError(f"{self.source}: the model has a term in the measured channel {missing[0]!r}, which "
+                                   f"this record lacks (its auxiliary channels: {have}; --aux)")  # fmt: skip
+        force = sum(theta * self.aux[k] for k, theta in terms.items())
+        return self.u + force / model.m if self.input_name == "base_acc" else self.u - force
 
     @property
     def rest_positions(self) -> dict[str, float]:
@@ -241,6 +262,26 @@ def _unknown_scale(source, name: str | None, input_name: str, mass: float | None
     return {"channel": name, "value": None, "status": "unknown: estimated from the record's dynamics when analysed"}
 
 
+def _aux_channels(source, raw: dict[str, np.ndarray], names, n: int, trim: int = 0) -> dict[str, np.ndarray]:
+    """The auxiliary channels ``names`` (the file's own column names: a piezo's voltage, a coil's current),
+    checked finite and of the record's length; refused when absent or a contract column."""
+    out = {}
+    for name in names or ():
+        name = str(name).strip()
+        if name in KNOWN:
+            raise MeasurementError(f"{source}: --aux {name}: {name} is a measurement column, not an auxiliary channel")
+        if name not in raw:
+            raise MeasurementError(f"{source}: --aux {name}: no such column (columns: {', '.join(raw) or 'none'})")
+        v = np.asarray(raw[name], float)
+        if v.ndim != 1 or v.size != n:
+            raise MeasurementError(f"{source}: auxiliary channel {name} has {v.size} samples, the record {n}")
+        bad = np.flatnonzero(~np.isfinite(v))
+        if bad.size:
+            raise MeasurementError(f"{source}: auxiliary channel {name} is not finite at row {bad[0]}")
+        out[name] = v[trim : v.size - trim] if trim else v
+    return out
+
+
 def _constant(x: np.ndarray) -> bool:
     """No variation beyond the values' own floating-point resolution."""
     span = float(np.ptp(x))
@@ -254,6 +295,7 @@ def load(
     mass: float | None = None,
     response: bool = True,
     gravity: float | None = None,
+    aux: Sequence[str] | str | None = None,
 ) -> Measurement:
     """Read a measurement file.
 
@@ -266,6 +308,8 @@ def load(
     response : False for an input-only record (``negstiff simulate``): no response column needed
     gravity : the gravity along the motion [m/s^2] (overrides the metadata's ``gravity``; 0 for a
         horizontal device)
+    aux : measured auxiliary channels to keep, by the file's column names (``"voltage"`` or
+        ``"voltage,current"``): candidate terms of the discrepancy workflow and SINDy (``aux:NAME``)
 
     The response is z, or z derived from z_dot, y (with the base's motion), y_dot or y_acc
     (``sensors.derive``); what was done is in ``info["response"]``. A derived z's constant is unknown:
@@ -295,6 +339,8 @@ def load(
     if len(unknown) > 1:
         raise MeasurementError(f"{path}: scales of {' and '.join(unknown)} marked unknown (*?): one channel at most")
     scale_info = _unknown_scale(path, unknown[0] if unknown else None, input_name, mass, cols)
+    aux_names = [a for a in (aux.split(",") if isinstance(aux, str) else aux or ()) if str(a).strip()]
+    aux_cols = _aux_channels(path, raw, aux_names, n)
     z, resp = None, {"measured": None}
     if response or any(k in cols for k in sensors.RESPONSES):
         z, resp = sensors.derive(cols, input_name, fs, str(path))
@@ -306,6 +352,7 @@ def load(
                     f"accelerometer loses {resp['trim_s']:g} s at each end"
                 )
             cols = {c: v[k:-k] for c, v in cols.items()}
+            aux_cols = {c: v[k:-k] for c, v in aux_cols.items()}
             z, t0 = z[k:-k], t0 + k / fs
             resp["derived"] += f"; {resp['trim_s']:g} s cut at each end (the integral's end effects)"
     rec = Measurement(
@@ -320,6 +367,7 @@ def load(
         source=str(path),
         t0=t0,
         info={"time": time_info, "response": resp, **channel_info, **({"scale": scale_info} if scale_info else {})},
+        aux=aux_cols,
     )
     return _warned(rec.with_mass(mass).with_gravity(gravity))
 
@@ -494,7 +542,8 @@ def from_arrays(
     record has, a positive mass. Optional columns (``z_dot``, ``y``, ``base_disp``) go in ``kw``; with
     ``z`` None and a response among them, z is derived from it as ``load`` does (``sensors.derive``).
     ``unknown_scale`` names a response channel whose sensitivity is unknown (a file's ``*?``);
-    ``gravity`` [m/s^2] the gravity along the motion (0 for a horizontal device)."""
+    ``gravity`` [m/s^2] the gravity along the motion (0 for a horizontal device); ``aux`` a dict of measured
+    auxiliary channels (``{"voltage": v}``)."""
     if input_name not in INPUTS:
         raise MeasurementError(f"input must be one of {INPUTS}, got {input_name!r}")
     source = kw.get("source", "<memory>")
@@ -528,7 +577,9 @@ def from_arrays(
     scale_info = _unknown_scale(source, unknown_scale, input_name, mass, cols)
     if scale_info:
         info["scale"] = scale_info
-    kw = {**kw, **{k: cols[k] for k in OPTIONAL if k in cols}}
+    aux = kw.pop("aux", None) or {}
+    aux = _aux_channels(source, dict(aux), list(aux), n)
+    kw = {**kw, **{k: cols[k] for k in OPTIONAL if k in cols}, "aux": aux}
     rec = Measurement(fs=fs, input_name=input_name, u=cols[input_name], z=None if z is None else np.asarray(z, float),
                       **{**kw, "mass": None, "info": info})  # fmt: skip
     return rec.with_mass(mass).with_gravity(gravity)

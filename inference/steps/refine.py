@@ -83,7 +83,8 @@ class Refinement:
 def field_effects(model: Model) -> tuple[str, ...]:
     """The model's named effects with several values (``effects.Effect.scalar`` false: an end stop's
     ``{"k", "z"}``), each value refined under the name ``EFFECT.FIELD``."""
-    return tuple(f"{e.name}.{f}" for e in effects.REGISTRY if not e.scalar and e.name in model.extra for f in e.law.fields)
+    named = [e for e in effects.REGISTRY if not e.scalar and e.name in model.extra]
+    return tuple(f"{e.name}.{f}" for e in named for f in e.law.fields)
 
 
 def parameter_names(model: Model, free_mass: bool, held=()) -> tuple[str, ...]:
@@ -199,7 +200,7 @@ def refine(
     limits = divergence_limits(rec.z, vs)
     sub = record_substeps(model, rec)
     r = 2 * sub
-    u_staged = stage_input(rec.u, sub)
+    u_staged = stage_input(rec.driving(model), sub)  # a measured channel's term held at its start value
     x_scale = np.array([max(np.abs(rec.z).max(), 1e-12), max(np.abs(vs).max(), 1e-12)])
     start_model, stages, current = model, [], model
     for w_s in windows_s:

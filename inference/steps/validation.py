@@ -74,7 +74,7 @@ def simulate_record(system, rec: Measurement, x0, substeps: int | None = None, *
     if not limits and rec.z is not None:
         _, vs, _, _ = rec.states("state")
         limits = divergence_limits(rec.z, vs)
-    return simulate_batch(system.kernel_params(), system.kind, stage_input(rec.u, sub), rec.dt,
+    return simulate_batch(system.kernel_params(), system.kind, stage_input(rec.driving(system), sub), rec.dt,
                           np.asarray(x0, float), input_kind=rec.input_name, substeps=sub, staged=True,
                           store_velocity=True, **limits)  # fmt: skip
 
@@ -134,7 +134,8 @@ def simulate_measured(system, rec: Measurement, z0: float | None = None, v0: flo
     if z0 is None:
         z0 = system.equilibria().z_plus
     if interpolation == "linear":
-        return simulate(system, rec.u, rec.dt, z0=z0, v0=v0, input_kind=rec.input_name, substeps=substeps or 2,
+        return simulate(system, rec.driving(system), rec.dt, z0=z0, v0=v0, input_kind=rec.input_name,
+                        substeps=substeps or 2,
                         **limits)  # fmt: skip
     return simulate_record(system, rec, (z0, v0), substeps=substeps, **limits)
 
@@ -146,7 +147,7 @@ def staged_windows(system, rec: Measurement, starts: np.ndarray, length: int) ->
     sub = record_substeps(system, rec)
     r = 2 * sub
     lo, hi = int(np.min(starts)), int(np.max(starts)) + length
-    us = stage_input(rec.u[lo:hi], sub)
+    us = stage_input(rec.driving(system)[lo:hi], sub)  # the input plus any measured channel's term
     return np.stack([us[r * (s - lo) : r * (s - lo + length - 1) + 1] for s in starts]), sub
 
 

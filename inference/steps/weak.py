@@ -62,6 +62,11 @@ def term_fields() -> dict[str, tuple[str, float]]:
     return {t.label: (t.field, t.sign) for t in effects.library_terms()}
 
 
+def aux_terms(channels) -> tuple[str, ...]:
+    """The library terms of measured auxiliary channels: ``aux:NAME`` (each a model's extra of that name)."""
+    return tuple(f"{effects.AUX_PREFIX}{c}" for c in channels)
+
+
 class WeakFormError(MeasurementError):
     """The record's weak form cannot be built (no excitation: a constant response or library term)."""
 
@@ -167,11 +172,14 @@ class WeakForm:
         """Extra columns (samples, k) through the same test functions as the library."""
         return weak_project(cols, test_function(self.half, dt)[0], self.stride, dt)
 
-    def system(self, rec: Measurement, lo: int = 0, hi: int | None = None) -> WeakSystem:
+    def system(self, rec: Measurement, lo: int = 0, hi: int | None = None, aux: tuple[str, ...] = ()) -> WeakSystem:
         """The weak-form system of the samples [lo, hi) of ``rec`` (the record this form was made of,
-        or its first part)."""
+        or its first part); ``aux``: measured auxiliary channels of ``rec`` whose terms theta a(t) join
+        the library (``aux_terms``), before the input's column."""
         seg = rec.segment(lo, rec.n if hi is None else hi)
         F = library_columns(self.zs[lo:hi], self.v[lo:hi], seg.u, self.velocity_noise)
+        if aux:
+            F = np.column_stack([F[:, :-1], *(np.asarray(seg.aux[a], float) for a in aux), F[:, -1]])
         phi, d2 = test_function(self.half, seg.dt)
         W = weak_project(F, phi, self.stride, seg.dt)
         y = weak_project((seg.z - seg.z.mean())[:, None], d2, self.stride, seg.dt)[:, 0]
@@ -260,7 +268,7 @@ def fit_support(
     """Physical coefficients of z'' (per unit mass; the input's last) of a weak system: SR3 at the L0
     ``weight``, the input's coefficient fixed at ``gain`` (None: learned), the terms outside
     ``support`` held at zero; with ``bagging`` the ensemble's, one row per model."""
-    n_feat = len(terms()) + 1
+    n_feat = system.W.shape[1]  # the library's terms, any auxiliary channels', the input last
     rhs = None if gain is None else gain * system.col[-1] / system.s_y
     if weight == 0 and bagging is None:
         return _least_squares(system, rhs, support)
@@ -301,8 +309,9 @@ def _least_squares(system: WeakSystem, rhs: float | None, support=None) -> np.nd
     return xi * system.s_y / system.col
 
 
-def model_from(phys: np.ndarray, mass: float) -> Model:
-    """Model file fields from physical z'' coefficients (per unit mass) and the mass."""
+def model_from(phys: np.ndarray, mass: float, aux: tuple[str, ...] = ()) -> Model:
+    """Model file fields from physical z'' coefficients (per unit mass; the library's terms, then the
+    auxiliary channels ``aux``' terms, the input last) and the mass."""
     fields = {k: 0.0 for k in BASE_FIELDS}
     extra = {}
     lib = effects.library_terms()
@@ -313,6 +322,9 @@ def model_from(phys: np.ndarray, mass: float) -> Model:
             fields[name] = val
         elif coef != 0:
             extra[name] = val
+    for name, coef in zip(aux_terms(aux), phys[len(lib) : len(lib) + len(aux)]):
+        if coef != 0:  # theta a(t) on the left-hand side, like every effect: theta = -m x its z'' coefficient
+            extra[name] = -mass * float(coef)
     return Model(m=mass, extra=extra, **fields)
 
 
@@ -327,9 +339,13 @@ def support_of(selected) -> tuple[bool, ...]:
 def input_coefficient(rec: Measurement, terms=("1", "z", "z^2", "z^3", "z^4", "z^5", "v", "v|v|")) -> float:
     """The input's coefficient in z'' as the record's own weak-form least squares learns it, unconstrained
     (per unit mass): physics says -1 for a base acceleration in m/s^2 and 1/m for a force in N, so it
-    checks the input's units and the mass (``plausibility``)."""
+    checks the input's units and the mass (``plausibility``), and scales a response of unknown sensitivity
+    (``scale``). The record's measured auxiliary channels join the fit (a harvester's voltage: left out, its
+    coupling's share of the motion was taken by the input, 4 % on a coupled record, measured)."""
     form = WeakForm.of(rec)
-    return float(fit_support(form.system(rec), None, support=support_of(terms))[-1])
+    aux = tuple(rec.aux)
+    support = support_of(terms) + (True,) * len(aux)
+    return float(fit_support(form.system(rec, aux=aux), None, support=support)[-1])
 
 
 def weak_least_squares(rec: Measurement, terms, gain: float | None = None) -> Model:

@@ -114,9 +114,13 @@ def cmd_simulate(args) -> int:
     from negstiff.inference.record.measurement import load
     from negstiff.inference.steps.validation import simulate_measured
     from negstiff.models.device import load_system
+    from negstiff.models.effects import AUX_PREFIX
 
     system = load_system(args.model)
-    rec = load(args.input, columns=args.columns, fs=args.fs, response=False)
+    # the measured channels the model's aux:NAME terms need are read with the input, unless --aux names others
+    needed = [k[len(AUX_PREFIX) :] for k in getattr(system, "extra", {}) if k.startswith(AUX_PREFIX)]
+    rec = load(args.input, columns=args.columns, fs=args.fs, response=False, gravity=args.gravity,
+               aux=args.aux if args.aux is not None else needed)  # fmt: skip
     rec.require(2, "a simulation")
     say(args, f"simulate: {rec.n} samples at {rec.fs:g} Hz under {rec.input_name}")
     res = simulate_measured(system, rec, args.z0, args.v0, args.interpolation, args.substeps)
@@ -133,7 +137,7 @@ def cmd_identify(args) -> int:
     from negstiff.inference.analysis.frf import compare_with_frf, read_frf_results
     from negstiff.inference.record.measurement import load
 
-    rec = load(args.data, columns=args.columns, fs=args.fs, mass=args.mass, gravity=args.gravity)
+    rec = load(args.data, columns=args.columns, fs=args.fs, mass=args.mass, gravity=args.gravity, aux=args.aux)
     frfs = read_frf_results(args.frf)
     if args.method == "nsi":
         from negstiff.inference.estimators.nsi import NSI
@@ -218,7 +222,7 @@ def cmd_discrepancy(args) -> int:
     from negstiff.inference.estimators.discrepancy import CUBIC_BASELINE, LINEAR_BASELINE, Discrepancy
     from negstiff.inference.record.measurement import load
 
-    rec = load(args.data, columns=args.columns, fs=args.fs, mass=args.mass, gravity=args.gravity)
+    rec = load(args.data, columns=args.columns, fs=args.fs, mass=args.mass, gravity=args.gravity, aux=args.aux)
     base = CUBIC_BASELINE if args.baseline == "cubic" else LINEAR_BASELINE
     d = Discrepancy(baseline=base, max_effects=args.max_effects, refine=not args.no_refine, unnamed=args.unnamed)
     rec = d.check(rec)  # every refusal before the progress line

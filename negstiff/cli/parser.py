@@ -144,6 +144,11 @@ def _simulate(sub, common: argparse.ArgumentParser, data_opts: argparse.Argument
     sim.add_argument("--z0", type=number(float), help="initial z [m]")
     sim.add_argument("--v0", type=number(float), help="initial z_dot [m/s]")
     sim.add_argument(
+        "--aux",
+        help="measured auxiliary channels of INPUT (default: those the model's aux:NAME terms name), by the file's "
+        "column names",
+    )
+    sim.add_argument(
         "--substeps",
         type=number(int, 1, 64),
         help="RK4 steps per sample interval (default: 2, more where the model is fast for the sampling rate)",
@@ -179,6 +184,11 @@ def _identify(sub, common: argparse.ArgumentParser, data_opts: argparse.Argument
     idf.add_argument("-o", "--out", required=True, help="result JSON")
     idf.add_argument(
         "--mass", type=mass_option(), help="moving mass [kg] (default: the file's metadata; else per unit mass)"
+    )
+    idf.add_argument(
+        "--aux",
+        help="measured auxiliary channels, by the file's column names (e.g. voltage): SINDy offers each as a term "
+        "theta a(t), named aux:NAME (NSI does not use them, and says so)",
     )
     idf.add_argument(
         "--order",
@@ -345,6 +355,11 @@ def _discrepancy(sub, common: argparse.ArgumentParser, data_opts: argparse.Argum
     dsc.add_argument("data", help="measurement file")
     dsc.add_argument("-o", "--out", required=True, help="result JSON")
     dsc.add_argument("--mass", type=mass_option(), help="moving mass [kg] (default: the file's metadata)")
+    dsc.add_argument(
+        "--aux",
+        help="measured auxiliary channels, by the file's column names (e.g. voltage): each a candidate term theta "
+        "a(t) beside the catalogue's effects, named aux:NAME",
+    )
     dsc.add_argument("--baseline", choices=["cubic", "linear"], default="cubic", help="starting model")
     dsc.add_argument(
         "--max-effects",
