@@ -117,3 +117,49 @@ def harvester_record(duration=120.0, fs=2048.0, theta=0.0, kappa=0.0, rc_s=0.05,
     t = np.arange(int(duration * fs)) / fs
     sol = solve_ivp(rhs, (0, t[-1]), [L, 0.0, 0.0], t_eval=t, method="DOP853", rtol=1e-10, atol=1e-13)
     return t, acc(t), sol.y[0], sol.y[1], sol.y[2]
+
+
+def rk4_random_records(seeds, duration=20.0, rms=8.0, band=(2.0, 30.0), oversample=8, settle=5.0, laser=3e-6,
+                       table_noise=0.005, start=0.023, model=None, fs=FS):
+    """Records of ``model`` (TRUTH by default) as another lab's simulator writes them, one per seed: a plain
+    numpy fixed-step RK4 at ``oversample`` x fs, vectorised across the records, its base acceleration
+    band-limited Gaussian noise (``band``, ``rms`` m/s^2) made by FFT at the fine rate and linear between
+    the fine steps (the midpoint stages see the average); ``settle`` s dropped; sampled at fs with white
+    noise on z (``laser`` m) and on the table's accelerometer (``table_noise`` m/s^2).
+    Returns [(base_acc, z)], the measured columns."""
+    model = TRUTH if model is None else model
+    h = 1.0 / (fs * oversample)
+    n = int(round((duration + settle) * fs)) * oversample
+    rngs = [np.random.default_rng(s) for s in seeds]
+    acc = []
+    for rng in rngs:
+        spec = np.fft.rfft(rng.standard_normal(n))
+        f = np.fft.rfftfreq(n, h)
+        spec[(f < band[0]) | (f > band[1])] = 0
+        a = np.fft.irfft(spec, n)
+        acc.append(a * rms / a.std())
+    acc = np.array(acc)
+
+    def f(z, v, a):
+        return v, (-model.c * v - model.c_nl * v * np.abs(v) - model.restoring_force(z)) / model.m - a
+
+    z, v = np.full(len(seeds), start), np.zeros(len(seeds))
+    Z = np.empty_like(acc)
+    for i in range(n):
+        Z[:, i] = z
+        if i == n - 1:
+            break
+        a0, a1 = acc[:, i], acc[:, i + 1]
+        am = 0.5 * (a0 + a1)
+        k1 = f(z, v, a0)
+        k2 = f(z + h / 2 * k1[0], v + h / 2 * k1[1], am)
+        k3 = f(z + h / 2 * k2[0], v + h / 2 * k2[1], am)
+        k4 = f(z + h * k3[0], v + h * k3[1], a1)
+        z = z + h / 6 * (k1[0] + 2 * k2[0] + 2 * k3[0] + k4[0])
+        v = v + h / 6 * (k1[1] + 2 * k2[1] + 2 * k3[1] + k4[1])
+    k0 = int(round(settle * fs))
+    out = []
+    for b, rng in enumerate(rngs):
+        zb, ub = Z[b, ::oversample][k0:], acc[b, ::oversample][k0:]
+        out.append((ub + table_noise * rng.standard_normal(ub.size), zb + laser * rng.standard_normal(zb.size)))
+    return out

@@ -232,6 +232,8 @@ class Posterior(Estimator):
             win.drop_unmatched(p_, par.kind)
             win.set_sensitivities(p_, par.kind)
             theta, sol = self._map(par, win, theta)
+            if it == 0 and win.resolve_substeps(par.to_params(theta[None]), par.kind, sol.jac):
+                theta, sol = self._map(par, win, theta)
         # at the MAP point the model matches every window it can follow to the noise (rms within ~10 % of
         # the median window's): a window 3x above the median is not followed (it turns back near the
         # saddle); measured on the as-built device, one such window held 90 % of the score's variance.
@@ -320,6 +322,7 @@ class Posterior(Estimator):
             "mass": rec.mass,
             "window_s": self.window_s,
             "windows": win.n_windows,
+            "substeps": win.substeps,
             "curvature_adjustment": self.adjust,
             "variance_inflation": [round(float(v), 3) for v in inflation],
             "windows_dropped": [{"start_s": t, "rms_m": r} for t, r in win.dropped],

@@ -29,6 +29,11 @@ class PosteriorError(MeasurementError):
 # ------------------------------------------------------------------------------------------------
 # Windows and the batched likelihood
 # ------------------------------------------------------------------------------------------------
+SUBSTEP_SHIFT_SD = 0.1
+"""The forward model's own discretisation error may move the MAP point by at most this share of its
+standard deviation (``Windows.resolve_substeps`` doubles the RK4 steps per sample until it does not)."""
+
+
 @dataclass
 class Windows:
     """Multiple-shooting windows of a record."""
@@ -170,6 +175,32 @@ class Windows:
             self.starts = self.starts[keep]
         self.proj = None
         return int(bad.sum())
+
+    def resolve_substeps(self, params: np.ndarray, kind: str, jac: np.ndarray, tol: float = SUBSTEP_SHIFT_SD,
+                         most: int = 16) -> bool:  # fmt: skip
+        """Double the RK4 steps per interval until the forward model's own discretisation error moves the
+        MAP point by less than ``tol`` of its Laplace standard deviation. The error of s steps is estimated
+        by the difference of s and 2 s (Richardson: RK4's error falls 16-fold), projected off the start
+        states like the residuals, and carried to the parameters by the least-squares Jacobian ``jac``
+        (the point estimate's, its scaled coordinates: the ratio to the sd is scale free). A record's
+        noise sets how precise the posterior is, so it sets the step too: on a 3 um record of a lightly
+        damped cross-well device one step per sample biased k3 by 1.5 sd (measured); noisier records keep
+        the one step. Returns whether the steps changed."""
+        J = np.asarray(jac)
+        r0 = self.residuals(self.simulate(params, kind)[0])[0]
+        sigma = np.sqrt(np.sum(r0**2) / self.dof)
+        sd = sigma * np.sqrt(np.diag(np.linalg.pinv(J.T @ J)))
+        start = self.substeps
+        while self.substeps < most:
+            s = self.substeps
+            self.substeps = 2 * s
+            r1 = self.residuals(self.simulate(params, kind)[0])[0]
+            shift = np.linalg.lstsq(J, (r1 - r0).ravel(), rcond=None)[0]
+            if not np.max(np.abs(shift) / sd) > tol:
+                self.substeps = s
+                break
+            r0 = r1
+        return self.substeps != start
 
     def set_sensitivities(self, params: np.ndarray, kind: str) -> None:
         """Orthonormal bases of each window's start-state sensitivities (finite differences)."""
