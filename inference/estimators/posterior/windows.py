@@ -187,6 +187,9 @@ class Windows:
         damped cross-well device one step per sample biased k3 by 1.5 sd (measured); noisier records keep
         the one step. Returns whether the steps changed."""
         J = np.asarray(jac)
+        norms = np.linalg.norm(J, axis=0)
+        J = J[:, norms > 1e-6 * norms.max()]  # a direction the windows do not see (a parameter the likelihood
+        # holds: its column ~0) has no sd to measure a shift in (it had 1e4 "sd" from a 1e-12 difference)
         r0 = self.residuals(self.simulate(params, kind)[0])[0]
         sigma = np.sqrt(np.sum(r0**2) / self.dof)
         sd = sigma * np.sqrt(np.diag(np.linalg.pinv(J.T @ J)))
