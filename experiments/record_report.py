@@ -77,21 +77,26 @@ def report_records(
     options: dict[str, dict[str, Any]] | None = None,
     progress: Callable[[str], None] | None = None,
     gravity: float | None = None,
+    aux: Sequence[str] | str | None = None,
 ) -> Report:
     """The report of ``data`` (one record, or a campaign's records or folder): every input read and checked
     first (one ``InputError``), then each analysis that fits it; ``options`` per analysis (``{"posterior":
     {"max_steps": 2000}, ...}``: the estimators' parameters); ``progress`` hears of each analysis. Returns the
     ``Report`` (``write(folder)`` writes it). ``gravity`` [m/s^2] along the motion overrides the records'
-    metadata (0 for a horizontal device)."""
+    metadata (0 for a horizontal device); ``aux`` names measured auxiliary channels of a single record (SINDy
+    and the discrepancy workflow offer each as a term)."""
     say = progress or (lambda text: None)
     options = {k: dict(v) for k, v in (options or {}).items()}
     paths = [Path(d) for d in data]
     if len(paths) > 1 or paths[0].is_dir():
+        if aux:
+            raise InputError("--aux: a campaign's report (characterisation, map) uses no auxiliary channel; "
+                             "give one record")
         return _campaign_report(data, columns, fs, forcing_hz, wells, nfrc, _only(only, CAMPAIGN), say, gravity)
     from negstiff.inference.record.frame import pin_frame
     from negstiff.inference.record.measurement import load
 
-    rec = load(paths[0], columns=columns, fs=fs, mass=mass, gravity=gravity)
+    rec = load(paths[0], columns=columns, fs=fs, mass=mass, gravity=gravity, aux=aux)
     f_h = forcing_hz or harmonic_frequency(rec)
     kind = HARMONIC if f_h else BROADBAND
     chosen = _only(only, kind)

@@ -94,10 +94,11 @@ def harvester_truth(m=HARVESTER["m"]):
     return Model(m=m, k1=a * m, k2=0.0, k3=a / HARVESTER["L"] ** 2 * m, c=HARVESTER["delta"] * w0 * m, c_nl=0.0, k0=0.0)
 
 
-def harvester_record(duration=120.0, fs=2048.0, theta=0.0, kappa=0.0, rc_s=0.05, seed=3):
+def harvester_record(duration=120.0, fs=2048.0, theta=0.0, kappa=0.0, rc_s=0.05, seed=3, broadband=False):
     """(t, base_acc, z, z_dot, v) of the harvester under the Moon-Holmes chaotic forcing (gamma 0.3 at the
-    linear frequency f0, delta 0.25: cross-well chaos), integrated by scipy's DOP853 from the plus well;
-    ``theta`` [m/s^2/V] couples a piezo voltage ``v`` (v' = -v / rc_s - kappa z'), 0 by default."""
+    linear frequency f0, delta 0.25: cross-well chaos), or with ``broadband`` a multisine (1-20 Hz, 2.5 m/s^2
+    rms: cross-well), integrated by scipy's DOP853 from the plus well; ``theta`` [m/s^2/V] couples a piezo
+    voltage ``v`` (v' = -v / rc_s - kappa z'), 0 by default."""
     from scipy.integrate import solve_ivp
 
     L, f0 = HARVESTER["L"], HARVESTER["f0"]
@@ -107,7 +108,12 @@ def harvester_record(duration=120.0, fs=2048.0, theta=0.0, kappa=0.0, rc_s=0.05,
     rng = np.random.default_rng(seed)
     phase = rng.uniform(0, 2 * np.pi)
 
+    lines = np.arange(1.0, 20.0, 0.125)
+    phases = rng.uniform(0, 2 * np.pi, lines.size)
+
     def acc(t):
+        if broadband:
+            return 2.5 * np.sqrt(2 / lines.size) * np.cos(np.multiply.outer(t, 2 * np.pi * lines) + phases).sum(-1)
         return amp * np.cos(w0 * t + phase)
 
     def rhs(t, x):

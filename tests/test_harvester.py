@@ -20,8 +20,8 @@ FS = 2048.0
 COLUMNS = "base_acc=acc*9.81,z_dot=ldv*?"
 
 
-def _lab_file(path, theta=0.0, kappa=0.0, seed=3):
-    t, acc, _, v, volt = harvester_record(theta=theta, kappa=kappa, seed=seed)
+def _lab_file(path, theta=0.0, kappa=0.0, seed=3, broadband=False, duration=120.0):
+    t, acc, _, v, volt = harvester_record(duration, theta=theta, kappa=kappa, seed=seed, broadband=broadband)
     rng = np.random.default_rng(seed + 100)
     cols = {
         "t": t,
@@ -137,3 +137,14 @@ def test_the_voltage_term_from_the_command_line(coupled_file, tmp_path):
     for bad in ("nosuch", "z_dot"):
         assert main(["discrepancy", str(coupled_file), "--columns", COLUMNS, "--aux", bad, "-o", str(out),
                      "--quiet"]) == 2  # fmt: skip
+
+
+def test_a_report_on_the_coupled_record_names_the_voltage(tmp_path):
+    """negstiff report --aux voltage on a broadband record of the coupled harvester (a harmonic one gets the
+    characterisation): the discrepancy section names the coupling, as the command does."""
+    path = _lab_file(tmp_path / "broadband.csv", theta=THETA, kappa=KAPPA, broadband=True, duration=60.0)
+    assert main(["report", str(path), "--columns", COLUMNS, "--aux", "voltage", "--only", "discrepancy",
+                 "-o", str(tmp_path / "rep"), "--quiet"]) == 0  # fmt: skip
+    results = json.loads((tmp_path / "rep" / "results.json").read_text())
+    assert "aux:voltage" in json.dumps(results)
+    assert (tmp_path / "rep" / "index.html").is_file()

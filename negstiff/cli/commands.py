@@ -419,7 +419,7 @@ def cmd_report(args) -> int:
         options["discrepancy"]["max_effects"] = args.max_effects
     rep = report_records(args.data, args.columns, args.fs, args.mass, args.forcing_hz, parse_wells(args.wells),
                          args.nfrc, args.only, args.seed, options, progress=lambda line: say(args, line),
-                         gravity=args.gravity)  # fmt: skip
+                         gravity=args.gravity, aux=args.aux)  # fmt: skip
     rep.write(args.out)
     for w in rep.results()["summary"]:
         say(args, f"  {w}")

@@ -480,6 +480,11 @@ def _report(sub, common: argparse.ArgumentParser, data_opts: argparse.ArgumentPa
     rp.add_argument("data", nargs="+", help="measurement file, or a campaign's files or folder")
     rp.add_argument("-o", "--out", required=True, help="report folder (index.html, index.md, results.json, figures)")
     rp.add_argument("--mass", type=mass_option(), help="moving mass [kg] (default: the file's metadata)")
+    rp.add_argument(
+        "--aux",
+        help="measured auxiliary channels of the record, by the file's column names (e.g. voltage): SINDy and the "
+        "discrepancy workflow offer each as a term theta a(t), named aux:NAME",
+    )
     rp.add_argument("--forcing-hz", type=POSITIVE, help="forcing frequency [Hz] of a harmonic record or campaign")
     rp.add_argument("--wells", help="z_minus,z_plus [m] for the regime of a harmonic record (default: the metadata's)")
     rp.add_argument("--nfrc", action="append", help="a `negstiff nfrc` result to draw over a campaign's map")
