@@ -174,26 +174,24 @@ class OneSidedStop:
         return self.force({"k": 1.0, "z": z_s}, z)
 
 
+@dataclass(frozen=True)
 class MeasuredChannel:
     """Force law theta a(t) of a measured auxiliary channel a(t) (a harvester's piezo voltage: the
     electromechanical coupling): no function of the state, so no kernel row and no library column of z,
     z'; it drives the model through the record's input (``Measurement.driving``). Named ``aux:CHANNEL``."""
 
+    channel: str
     label = None
     displacement_only = False
-
-    def __init__(self, channel: str):
-        self.channel = channel
-
-    def __eq__(self, other) -> bool:
-        return isinstance(other, MeasuredChannel) and other.channel == self.channel
-
-    def __hash__(self) -> int:
-        return hash(("MeasuredChannel", self.channel))
 
 
 AUX_PREFIX = "aux:"
 """The name of a measured channel's term: ``aux:CHANNEL`` (``aux:voltage``)."""
+
+
+def measured_channels(extra: Mapping[str, Any]) -> dict[str, float]:
+    """The measured channels an ``extra`` mapping has terms in: {channel: theta} of its ``aux:CHANNEL``."""
+    return {k[len(AUX_PREFIX) :]: float(v) for k, v in extra.items() if k.startswith(AUX_PREFIX)}
 
 
 def measured_channel(name: str) -> "Effect":

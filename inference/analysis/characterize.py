@@ -80,7 +80,8 @@ def significantly_positive(value: float | None, sd: float | None, forcing_hz: fl
 def lyapunov(rec: Measurement, forcing_hz: float, noise: float | None) -> dict[str, Any]:
     """Wolf's exponent as the mean of its estimates on ``LLE_SEGMENTS`` consecutive parts of the record
     (``segments``), ``sd`` their standard error: the value and its uncertainty are what the listed
-    segments say. Beside it: Wolf's estimate on the whole record (``whole_record``) and Rosenstein's
+    segments say. Beside it: the segments' estimates pooled (``segments_pooled``: their total log stretch
+    over their total time) and Rosenstein's
     (``rosenstein``, None with ``rosenstein_error`` where no divergence can be followed), and whether the
     two estimators agree on the exponent's sign (``estimators_agree``: both significantly positive, or
     neither)."""
@@ -90,8 +91,8 @@ def lyapunov(rec: Measurement, forcing_hz: float, noise: float | None) -> dict[s
         value = float(np.mean(parts))
         sd = float(np.std(parts, ddof=1) / math.sqrt(len(parts)))
         source = f"mean of {len(parts)} segments"
-    else:  # too short to split: the whole record, without an uncertainty
-        value, sd, source = float(w["value"]), float("nan"), "whole record (too short for segments)"
+    else:  # too short to split further: the one segment Wolf could follow, without an uncertainty
+        value, sd, source = float(w["value"]), float("nan"), f"{len(parts)} segment (too short for more)"
     wolf_positive = significantly_positive(value, sd, forcing_hz)
     rs = w.get("rosenstein")
     rosenstein_positive = significantly_positive(rs, None, forcing_hz)
@@ -102,7 +103,7 @@ def lyapunov(rec: Measurement, forcing_hz: float, noise: float | None) -> dict[s
         "method": "wolf",
         "value_from": source,
         "segments": parts,
-        "whole_record": float(w["value"]),
+        "segments_pooled": float(w["value"]),
         "rosenstein": rs,
         "estimators_agree": wolf_positive == rosenstein_positive,
         "embedding": {"m": w["m"], "tau_samples": w["tau"] * w["sample_step"]},

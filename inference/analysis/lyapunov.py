@@ -329,7 +329,8 @@ def largest_lyapunov(
     scalmn = max(1e-3 * extent, 3 * noise * math.sqrt(m)) if noise else None
     if segments > 1:
         runs = []
-        for a, b in zip(*(lambda e: (e[:-1], e[1:]))(np.linspace(0, xs.size, segments + 1).astype(int))):
+        edges = np.linspace(0, xs.size, segments + 1).astype(int)
+        for a, b in zip(edges[:-1], edges[1:]):
             try:
                 runs.append(wolf_pooled(xs[a:b], dts, m, tau, evolv, theiler, scalmx=scalmx, scalmn=scalmn))
             except ValueError:

@@ -40,7 +40,15 @@ from negstiff.inference.steps.plausibility import classified
 from negstiff.inference.steps.refine import refine_stage
 from negstiff.inference.steps.selection import block_rows, block_scores, compare, indistinguishable
 from negstiff.inference.steps.validation import boundedness, restarted_free_runs, validate
-from negstiff.inference.steps.weak import BASE_FIELDS, WeakForm, known_input_gain, mass_of, model_from, term_fields
+from negstiff.inference.steps.weak import (
+    BASE_FIELDS,
+    WeakForm,
+    aux_terms,
+    known_input_gain,
+    mass_of,
+    model_from,
+    term_fields,
+)
 from negstiff.inference.steps.weak import terms as library_terms
 from negstiff.models import Model, effects
 
@@ -156,6 +164,7 @@ class Discrepancy(Estimator):
         self._gain = known_input_gain(rec)
         self.n_id_, self.n_fit_ = n_id, n_fit
         self._library_systems: dict[tuple[int, int], tuple[Measurement, np.ndarray, np.ndarray]] = {}
+        self._aux_columns: dict[tuple[int, int, str], tuple[Measurement, np.ndarray]] = {}
 
     def _design(self, rec: Measurement, lo: int, hi: int, stop: float | None, aux: tuple[str, ...] = ()):
         """Weak system over samples [lo, hi): the library's columns, the input's, a column per measured
@@ -170,9 +179,12 @@ class Discrepancy(Estimator):
                 a.setflags(write=False)
             self._library_systems[(lo, hi)] = hit
         W, y = hit[1], hit[2]
-        for name in aux:
-            Wa = self._form.project(np.asarray(rec.aux[name][lo:hi], float)[:, None], rec.dt)[:, 0]
-            W = np.column_stack([W, Wa[: W.shape[0]]])
+        for name in aux:  # projected once per span like the library (the stop's column moves; these do not)
+            cached = self._aux_columns.get((lo, hi, name))
+            if cached is None or cached[0] is not rec:
+                Wa = self._form.project(np.asarray(rec.aux[name][lo:hi], float)[:, None], rec.dt)[:, 0]
+                cached = self._aux_columns[(lo, hi, name)] = (rec, Wa)
+            W = np.column_stack([W, cached[1][: W.shape[0]]])
         if stop is not None:
             z = self._zs[lo:hi]
             col = _positional().law.column(z, stop)
@@ -204,12 +216,10 @@ class Discrepancy(Estimator):
 
     def _model(self, coef: np.ndarray, rec: Measurement, stop: float | None, aux: tuple[str, ...] = ()) -> Model:
         n_lib = len(library_terms())
-        phys = coef[: n_lib + 1]
+        # weak.model_from's order: the library's terms, the channels' (here after the input's column), the input
+        phys = np.concatenate([coef[:n_lib], coef[n_lib + 1 : n_lib + 1 + len(aux)], coef[n_lib : n_lib + 1]])
         mass = mass_of(rec, self._gain, phys[-1])[0]
-        model = model_from(phys, mass)
-        if aux:  # theta a(t) on the left-hand side, like every effect's force: theta = -m x its z'' coefficient
-            terms = {f"{effects.AUX_PREFIX}{name}": -mass * float(coef[n_lib + 1 + i]) for i, name in enumerate(aux)}
-            model = Model(**{**model.to_dict(), "extra": {**dict(model.extra), **terms}})
+        model = model_from(phys, mass, aux)
         if stop is not None:
             k = -mass * float(coef[-1])
             if k > 0:
@@ -356,8 +366,7 @@ class Discrepancy(Estimator):
                 cands.append(self._score(rec, Candidate(effect, terms + extra_terms, stop, aux)))
             for channel in rec.aux:  # each measured auxiliary channel: a term theta a(t), like an effect
                 if channel not in aux:
-                    cands.append(self._score(rec, Candidate(f"{effects.AUX_PREFIX}{channel}", terms, stop,
-                                                            (*aux, channel))))  # fmt: skip
+                    cands.append(self._score(rec, Candidate(aux_terms([channel])[0], terms, stop, (*aux, channel))))
             ranking = sorted(cands, key=lambda c: c.heldout_percent)
             best = self._parsimonious(ranking)
             gain = compare(none.block_ms, best.block_ms, self.margin, none.block_ms)

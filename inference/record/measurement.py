@@ -38,7 +38,7 @@ from negstiff.io.schema import (
     parse_column_map,
 )
 from negstiff.models.constants import G
-from negstiff.models.effects import AUX_PREFIX
+from negstiff.models.effects import measured_channels
 
 from . import sensors
 
@@ -148,8 +148,7 @@ class Measurement:
         like every effect's force, theta in N per channel unit) moved to the input's side: u + theta a / m
         for a base acceleration (m z'' + ... + theta a = -m u), F - theta a for a force. A model term whose
         channel the record lacks raises ``MeasurementError``."""
-        extra = getattr(model, "extra", {})
-        terms = {k[len(AUX_PREFIX) :]: float(v) for k, v in extra.items() if k.startswith(AUX_PREFIX)}
+        terms = measured_channels(getattr(model, "extra", {}))
         if not terms:
             return self.u
         missing = [k for k in terms if k not in self.aux]
@@ -262,7 +261,7 @@ def _unknown_scale(source, name: str | None, input_name: str, mass: float | None
     return {"channel": name, "value": None, "status": "unknown: estimated from the record's dynamics when analysed"}
 
 
-def _aux_channels(source, raw: dict[str, np.ndarray], names, n: int, trim: int = 0) -> dict[str, np.ndarray]:
+def _aux_channels(source, raw: dict[str, np.ndarray], names, n: int) -> dict[str, np.ndarray]:
     """The auxiliary channels ``names`` (the file's own column names: a piezo's voltage, a coil's current),
     checked finite and of the record's length; refused when absent or a contract column."""
     out = {}
@@ -275,10 +274,8 @@ def _aux_channels(source, raw: dict[str, np.ndarray], names, n: int, trim: int =
         v = np.asarray(raw[name], float)
         if v.ndim != 1 or v.size != n:
             raise MeasurementError(f"{source}: auxiliary channel {name} has {v.size} samples, the record {n}")
-        bad = np.flatnonzero(~np.isfinite(v))
-        if bad.size:
-            raise MeasurementError(f"{source}: auxiliary channel {name} is not finite at row {bad[0]}")
-        out[name] = v[trim : v.size - trim] if trim else v
+        check_values(source, {name: v})  # finite (a channel of its own: no contract magnitude)
+        out[name] = v
     return out
 
 

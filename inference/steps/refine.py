@@ -113,7 +113,7 @@ def values_of(model: Model, names) -> np.ndarray:
 def with_values(model: Model, names, values) -> Model:
     """``model`` with the parameters ``names`` set to ``values``."""
     d = model.to_dict()
-    extra = {k: (dict(v) if hasattr(v, "keys") else v) for k, v in d.pop("extra").items()}
+    extra = effects.plain(d.pop("extra"))  # fresh dicts: an effect's own values are set in place below
     scalar = scalar_effects()
     for n, v in zip(names, values):
         effect, _, fld = n.partition(".")

@@ -114,11 +114,11 @@ def cmd_simulate(args) -> int:
     from negstiff.inference.record.measurement import load
     from negstiff.inference.steps.validation import simulate_measured
     from negstiff.models.device import load_system
-    from negstiff.models.effects import AUX_PREFIX
+    from negstiff.models.effects import measured_channels
 
     system = load_system(args.model)
     # the measured channels the model's aux:NAME terms need are read with the input, unless --aux names others
-    needed = [k[len(AUX_PREFIX) :] for k in getattr(system, "extra", {}) if k.startswith(AUX_PREFIX)]
+    needed = list(measured_channels(getattr(system, "extra", {})))
     rec = load(args.input, columns=args.columns, fs=args.fs, response=False, gravity=args.gravity,
                aux=args.aux if args.aux is not None else needed)  # fmt: skip
     rec.require(2, "a simulation")
