@@ -362,7 +362,7 @@ def refinement_benchmark(quick: bool = False) -> tuple[list[list[str]], dict]:
     sparsity (a window's start state moves only that window), and with a dense finite-difference
     Jacobian (two batched runs per parameter and per start state: what ``least_squares`` does unless told
     the sparsity); each with its evaluations and its end error over the best of the three."""
-    from negstiff.experiments.silverbox import TRAIN, find_silverbox, load_silverbox
+    from negstiff.experiments.silverbox import TRAIN, load_silverbox
     from negstiff.inference.estimators.nsi import NSI
     from negstiff.inference.record.measurement import from_arrays
     from negstiff.inference.steps.refine import SOLVERS, refine, refine_stage
@@ -372,12 +372,10 @@ def refinement_benchmark(quick: bool = False) -> tuple[list[list[str]], dict]:
     duration = 60.0 if quick else 300.0
     r = Rig(SEED_LIKE_CUBIC, seed=4).random(duration=duration, rms=SEED_LIKE_CROSS_WELL_RMS)
     rec = from_arrays(r.columns["base_acc"], r.columns["z"], r.fs, mass=float(r.meta["mass"]), source="bench")
-    cases = [(f"{duration:g} s rig record ({rec.n:,} samples at {rec.fs:g} Hz), NSI start", rec)]
-    path = find_silverbox()
-    if path is not None:
-        cases.append(
-            ("Silverbox training part (65,062 samples at 610 Hz), NSI start", load_silverbox(path).segment(*TRAIN))
-        )
+    cases = [
+        (f"{duration:g} s rig record ({rec.n:,} samples at {rec.fs:g} Hz), NSI start", rec),
+        ("Silverbox training part (65,062 samples at 610 Hz), NSI start", load_silverbox().segment(*TRAIN)),
+    ]
     rows, res = [], {}
     for label, m in cases:
         est = NSI(refine=False).fit(m)

@@ -256,12 +256,9 @@ def end_to_end_peers() -> tuple[list[list[str]], dict]:
     from negstiff.inference.estimators.sindy import SINDy
     from negstiff.inference.steps.refine import refine
 
-    from .silverbox import TEST, TRAIN, find_silverbox, load_silverbox, prediction_error_mv
+    from .silverbox import TEST, TRAIN, load_silverbox, prediction_error_mv
 
-    path = find_silverbox()
-    if path is None:
-        return [["Silverbox", "data not found", "", "", ""]], {}
-    m = load_silverbox(path)
+    m = load_silverbox()
     train = m.segment(*TRAIN)
     res, rows = {}, []
 

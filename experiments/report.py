@@ -3,7 +3,8 @@ content: ``index.md`` (figures as PNG files beside it) and a self-contained ``in
 embedded), plus ``results.json``. The folder is written atomically.
 
 Both open with the summary (``summary``) and a table of contents; every section (a level-2 heading) is
-numbered and has an anchor. A script builds a report from results with ``add`` (``experiments.sections``:
+numbered and has an anchor. In the HTML a long paragraph (method detail) shows its first sentence and
+folds the rest. A script builds a report from results with ``add`` (``experiments.sections``:
 one section per kind of result, the same the command ``negstiff report`` writes), ``add_text``,
 ``add_table``, ``add_figure`` and ``write``."""
 
@@ -200,7 +201,9 @@ class Report:
             "th{background:#eee}img{max-width:100%}figcaption{font-style:italic;color:#444}"
             ".warn{background:#fee;border-left:4px solid #c00;padding:4px 8px}"
             ".summary{background:#eef5ff;border-left:4px solid #36c;padding:4px 12px}"
-            "nav.toc{background:#f6f6f6;padding:4px 12px}nav.toc ol{margin:4px 0}</style></head><body>",
+            "nav.toc{background:#f6f6f6;padding:4px 12px}nav.toc ol{margin:4px 0}"
+            "details>summary{cursor:pointer}details>summary::marker{color:#36c}details[open]>summary{color:#444}"
+            "</style></head><body>",
             f"<h1>{html.escape(self.title)}</h1>",
         ]
         blocks, summary = self._composed()
@@ -222,7 +225,7 @@ class Report:
                 else:
                     parts.append(f"<h{b[0]}>{inline(b[1])}</h{b[0]}>")
             elif kind == "p":
-                parts.append(f"<p>{inline(b)}</p>")
+                parts.append(_folded(b, inline))
             elif kind == "warn":
                 parts.append(f"<p class='warn'><b>Warning:</b> {inline(b)}</p>")
             elif kind == "table":
@@ -252,6 +255,23 @@ class Report:
             (tmp / "index.html").write_text(self.html())
             (tmp / "results.json").write_text(json.dumps(results, indent=2, default=_json_default) + "\n")
         return Path(folder)
+
+
+FOLD_CHARS = 600
+"""A paragraph longer than this is method detail in the HTML report: its first sentence shows, the rest
+is folded (``<details>``); index.md keeps every paragraph whole."""
+
+
+def _folded(text: str, inline) -> str:
+    """A paragraph as HTML: whole when short, else its first sentence with the rest folded."""
+    m = re.match(r"(.{40,}?[.;:])\s+(?=[A-Z(])", text) if len(text) > FOLD_CHARS else None
+    if m is None:
+        return f"<p>{inline(text)}</p>"
+    rest = text[m.end() :]
+    return (
+        f"<details><summary>{inline(m.group(1))} <i>(more: {len(rest.split())} words)</i></summary>"
+        f"<p>{inline(rest)}</p></details>"
+    )
 
 
 def _unnumbered(text: str) -> str:

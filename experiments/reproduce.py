@@ -16,6 +16,7 @@ from typing import Any
 import matplotlib.pyplot as plt
 import numpy as np
 from scipy import signal
+from tqdm import tqdm
 
 from negstiff import __version__
 from negstiff.models import AS_BUILT, simulate
@@ -25,6 +26,7 @@ from negstiff.models.rig import Rig
 from .calibration import device_section
 from .characterization import characterization_section
 from .discrepancy_study import discrepancy_section
+from .findings import conclusion, summary_lines
 from .nfrc import continuation_section
 from .nsi_study import nsi_section
 from .numbers import fmt
@@ -176,12 +178,18 @@ def _share_cores(threads: int) -> None:
     os.environ.setdefault("NEGSTIFF_THREADS", str(threads))
 
 
-def run_sections(names, fast: bool, seed: int, workers: int, say) -> dict[str, Any]:
+def _no_bar(name: str | None = None) -> None:
+    """``run_sections``' default ``tick``: no progress bar."""
+
+
+def run_sections(names, fast: bool, seed: int, workers: int, say, tick=_no_bar) -> dict[str, Any]:
     """The sections ``names``, replayed from the cache when their inputs (the section, --fast, the seed
     and the package's source) are unchanged (each stored as pickled blocks, figures and results, written
     atomically), else computed on ``workers`` processes at once, the longest first (``SECTION_TABLE``'s
     measured cost); returns name -> (blocks, figures, results). The
-    sections are independent (each seeds its own draws), so the numbers are those of a serial run."""
+    sections are independent (each seeds its own draws), so the numbers are those of a serial run.
+    ``tick(name)`` is called as each section is done (``tick(None)`` about every second while they run:
+    the progress bar's clock)."""
     out: dict[str, Any] = {}
     source = _source_hash()  # read and hashed once, not per section
     paths = {n: _cache_path(n, fast, seed, source) for n in names}
@@ -190,24 +198,26 @@ def run_sections(names, fast: bool, seed: int, workers: int, say) -> dict[str, A
         if payload is not None:
             say(f"{n}: from the cache ({paths[n]})")
             out[n] = payload
+            tick(n)
     todo = [n for n in names if n not in out]
     if workers <= 1 or len(todo) <= 1:
         for n in todo:  # in the report's order
             say(_TABLE[n][0])
             out[n] = compute_section(n, fast, seed)
             _store(paths[n], out[n], say)
+            tick(n)
         return out
     todo.sort(key=lambda n: -_TABLE[n][2])
-    return _run_pool(todo, out, paths, fast, seed, workers, say)
+    return _run_pool(todo, out, paths, fast, seed, workers, say, tick)
 
 
-def _run_pool(todo, out, paths, fast: bool, seed: int, workers: int, say) -> dict[str, Any]:
+def _run_pool(todo, out, paths, fast: bool, seed: int, workers: int, say, tick) -> dict[str, Any]:
     """``run_sections``' parallel part: the kernels' warm-up, then the sections, on ``workers`` processes.
     Each process's own threads (posterior ensembles, simulator batches) get the cores divided among the
     processes, but at least two: on 2 cores each may use both (capping them at one per process,
     ``NEGSTIFF_THREADS=1``, did not shorten the run: 236 s against 187-224 s, on a machine whose speed
     drifted by 1.7x over the evening), while on many cores the processes' threads do not multiply."""
-    from concurrent.futures import ProcessPoolExecutor, as_completed
+    from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
     from multiprocessing import get_context
 
     threads = max(2, (os.cpu_count() or 1) // workers)
@@ -219,16 +229,21 @@ def _run_pool(todo, out, paths, fast: bool, seed: int, workers: int, say) -> dic
             pool.submit(warm_kernel, k)
         futures = {pool.submit(compute_section, n, fast, seed): n for n in todo}
         say(f"{len(todo)} sections on {workers} processes: {', '.join(todo)}")
-        for fut in as_completed(futures):
-            n = futures[fut]
-            try:
-                out[n] = fut.result()
-            except BaseException:
-                # the sections not started are cancelled; those finished are cached (a rerun replays them)
-                pool.shutdown(wait=False, cancel_futures=True)
-                raise
-            _store(paths[n], out[n], say)
-            say(f"{_TABLE[n][0]}: done")
+        pending = set(futures)
+        while pending:
+            finished, pending = wait(pending, timeout=1.0, return_when=FIRST_COMPLETED)
+            tick(None)
+            for fut in finished:
+                n = futures[fut]
+                try:
+                    out[n] = fut.result()
+                except BaseException:
+                    # the sections not started are cancelled; those finished are cached (a rerun replays them)
+                    pool.shutdown(wait=False, cancel_futures=True)
+                    raise
+                _store(paths[n], out[n], say)
+                say(f"{_TABLE[n][0]}: done")
+                tick(n)
     return out
 
 
@@ -359,31 +374,50 @@ def reproduce(
     if sections is not None and not set(sections) <= set(SECTIONS):
         raise ValueError(f"unknown sections {sorted(set(sections) - set(SECTIONS))}; known: {SECTIONS}")
     t_start = time.perf_counter()
+    names = ["rig"] + [n for n in SECTIONS if sections is None or n in sections]
+    # one bar over the sections (tqdm: its messages printed above it), its clock refreshed while they run
+    bar = tqdm(total=len(names), desc="reproduce", unit="section", disable=not progress, file=sys.stderr)
 
     def say(msg: str) -> None:
         if progress:
-            print(f"[reproduce {time.perf_counter() - t_start:6.1f} s] {msg}", file=sys.stderr)
+            bar.write(f"[reproduce {time.perf_counter() - t_start:6.1f} s] {msg}", file=sys.stderr)
+
+    def tick(name: str | None) -> None:
+        if name is None:
+            bar.refresh()
+        else:
+            bar.set_postfix_str(name, refresh=False)
+            bar.update(1)
 
     rep = Report("negstiff: nonlinear dynamics of a negative-stiffness oscillator, reproduced on a virtual rig")
     results: dict[str, Any] = {"negstiff_version": __version__, "fast": fast, "seed": seed}
     rep.text(
-        "This report reruns the study of Anastasio, Fasana, Garibaldi and Marchesiello (EURODYN 2020) on a "
-        "virtual shaking table whose truth is known, and sets the seed's numbers beside ours and the truth's. "
+        "This report reruns the study of Anastasio, Fasana, Garibaldi and Marchesiello (EURODYN 2020), the "
+        "reference study, on a virtual shaking table whose truth is known, and sets the reference study's numbers "
+        "beside ours and the truth's. "
         + ("This is a reduced (--fast) run." if fast else "")
     )
     say("device and calibration")
     device_section(rep, results)
-    names = ["rig"] + [n for n in SECTIONS if sections is None or n in sections]
-    for name, payload in sorted(
-        run_sections(names, fast, seed, workers, say).items(), key=lambda kv: names.index(kv[0])
-    ):
+    try:
+        computed = run_sections(names, fast, seed, workers, say, tick)
+    finally:
+        bar.close()
+    for name, payload in sorted(computed.items(), key=lambda kv: names.index(kv[0])):
         _merge(rep, results, payload)
     if sections is not None:
         results["sections_left_out"] = [n for n in SECTIONS if n not in sections]
         rep.warning(f"A partial run: sections left out: {', '.join(results['sections_left_out']) or 'none'}.")
+    for line in summary_lines(results):
+        rep.summary(line)
+    closing = conclusion(results)
+    if closing:
+        rep.heading("Conclusion", 2)
+        for para in closing:
+            rep.text(para)
     elapsed = time.perf_counter() - t_start
     results["elapsed_s"] = elapsed
-    rep.text(f"Run time: {elapsed:.1f} s ({'fast' if fast else 'full'} run, seed {seed}).")
+    rep.text(f"Run time: {elapsed:.1f} s ({'fast' if fast else 'full'} run, random seed {seed}).")
     say(f"writing {out}")
     rep.write(out, results)
     say("done")

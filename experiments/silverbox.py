@@ -12,16 +12,15 @@ Computed first (``compute``, a ``SilverboxStudy``), rendered second (``render``)
 
 from __future__ import annotations
 
-import os
 import sys
 import time
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from negstiff.inference.record.measurement import Measurement, load
+from negstiff.datasets import silverbox
+from negstiff.inference.record.measurement import Measurement
 from negstiff.inference.steps.validation import free_run_rms, simulate_record
 from negstiff.models import Model, simulate
 
@@ -57,20 +56,10 @@ OUTPUT_ERROR_DUFFING_MV = 0.91
 (the issue's anchor, measured before this study existed; not recomputed here)."""
 
 
-def find_silverbox() -> Path | None:
-    """The Silverbox file: $NEGSTIFF_SILVERBOX, else shared/data/silverbox beside the checkout or the
-    working directory (the project keeps data in ../shared)."""
-    env = os.environ.get("NEGSTIFF_SILVERBOX")
-    rel = Path("shared") / "data" / "silverbox" / "SNLS80mV.mat"
-    here = Path(__file__).resolve().parent.parent
-    for p in ([Path(env)] if env else []) + [here.parent / rel, Path.cwd().parent / rel, Path.cwd() / rel]:
-        if p.is_file():
-            return p
-    return None
-
-
-def load_silverbox(path: Path) -> Measurement:
-    return load(path, columns="force=V1,z=V2", fs=610.35)
+def load_silverbox() -> Measurement:
+    """The Silverbox record (``negstiff.datasets.silverbox``: shipped with the package,
+    ``$NEGSTIFF_SILVERBOX`` overrides)."""
+    return silverbox()
 
 
 def prediction_error_mv(model: Model, m: Measurement, part: tuple[int, int], linear: bool = False) -> float:
@@ -398,13 +387,7 @@ def _render_hybrid(rep: Report, h: dict[str, Any], m: Measurement) -> None:
 
 def silverbox_section(rep: Report, results: dict[str, Any], fast: bool, seed_: int = 0) -> None:
     """The Silverbox section of the report (deterministic: no seed; ``fast`` drops the linear start and NSI)."""
-    path = find_silverbox()
-    if path is None:
-        rep.heading("Real data: the Silverbox benchmark", 2)
-        rep.warning("Silverbox data not found (set NEGSTIFF_SILVERBOX to SNLS80mV.mat); section skipped.")
-        results["silverbox"] = None
-        return
-    m = load_silverbox(path)
+    m = load_silverbox()
     results["silverbox"] = render(rep, compute(m, fast), m)
 
 

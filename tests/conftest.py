@@ -30,13 +30,10 @@ SILVERBOX_TRAIN, SILVERBOX_TEST, SILVERBOX_ARROW = silverbox_study.TRAIN, silver
 
 
 @pytest.fixture(scope="session")
-def silverbox(request):
-    """The Silverbox record (real data: an electronic Duffing oscillator, force input V1, output V2);
-    skips when ../shared is not beside the checkout."""
-    path = request.config.rootpath / "../shared/data/silverbox/SNLS80mV.mat"
-    if not path.exists():
-        pytest.skip("shared/ data not beside the repository")
-    return silverbox_study.load_silverbox(path)
+def silverbox():
+    """The Silverbox record (real data: an electronic Duffing oscillator, force input V1, output V2),
+    shipped with the package."""
+    return silverbox_study.load_silverbox()
 
 
 @pytest.fixture(scope="session")

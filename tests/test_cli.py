@@ -170,7 +170,7 @@ def test_reproduce_fast_writes_a_complete_report(tmp_path, monkeypatch):
         assert json.dumps(again[section]) == json.dumps(results[section]), section
 
 
-def test_reproduce_machinery_on_two_sections(tmp_path, monkeypatch):
+def test_reproduce_machinery_on_two_sections(tmp_path, monkeypatch, capsys):
     # The report's machinery (sections, figures, the html, results.json, the cache's replay with the
     # same numbers) on the characterisation and NSI sections; every section: the slow test above.
     from negstiff.experiments.reproduce import reproduce
@@ -187,9 +187,20 @@ def test_reproduce_machinery_on_two_sections(tmp_path, monkeypatch):
         "continuation",
     ]
     assert any((tmp_path / "cache").iterdir()), "the sections were cached"
+    # the report's first screen: the summary (a finding of each section run, none of those left out), then the
+    # table of contents; the conclusion closes it
+    md = (tmp_path / "a" / "index.md").read_text()
+    first = md[: md.index("## 1. ")]
+    assert first.index("**Summary.**") < first.index("**Contents.**")
+    assert "**Chaos.** Wolf's largest Lyapunov exponent" in first and "**Silverbox" not in first
+    assert "id='summary'" in (tmp_path / "a" / "index.html").read_text() and "Conclusion" in md
+    # replayed from the cache, with a progress bar over the sections on stderr
+    capsys.readouterr()
     again = json.loads(
-        (reproduce(tmp_path / "b", fast=True, progress=False, sections=sections) / "results.json").read_text()
+        (reproduce(tmp_path / "b", fast=True, progress=True, sections=sections) / "results.json").read_text()
     )
+    err = capsys.readouterr().err
+    assert "reproduce: 100%" in err and "3/3" in err and "from the cache" in err
     for section in sections:
         assert json.dumps(again[section]) == json.dumps(results[section]), section
     with pytest.raises(ValueError, match="unknown sections"):

@@ -60,15 +60,10 @@ def test_two_modes_give_two_peaks_and_one_mode_one():
     assert np.allclose(found, np.sort(wn) / (2 * np.pi), rtol=5e-3)
 
 
-def test_the_silverbox_circuit_has_one_resonance(request):
+def test_the_silverbox_circuit_has_one_resonance(silverbox):
     # The Silverbox is a single-degree-of-freedom Duffing circuit (its README): one resonance near 69 Hz.
     # Its noisy |H1| has two local maxima on it, 0.6 Hz apart, which were reported as two peaks
-    from negstiff.inference.record.measurement import load
-
-    path = request.config.rootpath / "../shared/data/silverbox/SNLS80mV.csv"
-    if not path.exists():
-        pytest.skip("shared/ data not beside the repository")
-    r = frf(load(path, columns="force=V1,z=V2", fs=610.35))
+    r = frf(silverbox)
     assert len(r["peaks"]) == 1, [p["f_hz"] for p in r["peaks"]]
     assert 60 < r["f_hz"] < 80
 

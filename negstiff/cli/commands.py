@@ -399,7 +399,7 @@ def cmd_update(args) -> int:
     say(
         args,
         f"wrote {args.out}: E = {d.E / 1e9:.2f} GPa, alpha = {d.alpha_deg:.2f} deg, m = {d.m * 1e3:.1f} g, "
-        f"fitness {ga.fitness_:.3f} % (seed Eq. 9)"
+        f"fitness {ga.fitness_:.3f} % (reference study Eq. 9)"
         + (f", restoring-force mismatch {ga.objective_:.3f} % (minimised)" if ga.stroke_ is not None else ""),
     )
     return 0

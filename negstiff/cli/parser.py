@@ -30,7 +30,7 @@ def _rig(sub, common: argparse.ArgumentParser, data_opts: argparse.ArgumentParse
     rig = sub.add_parser(
         "rig",
         parents=[common],
-        help="virtual test rig: records as the seed's laboratory measures them",
+        help="virtual test rig: records as the reference study's laboratory measures them",
         description="Virtual shaking table with the as-built device (exact geometry) or a model on it. "
         "Records: t, base_acc (accelerometer), y (laser), base_disp (double-integrated), "
         "z = y - base_disp.",
@@ -57,7 +57,7 @@ def _rig(sub, common: argparse.ArgumentParser, data_opts: argparse.ArgumentParse
         "--sensor",
         default="displacement",
         choices=["displacement", "velocity", "absolute", "accelerometer"],
-        help="response sensor: displacement (the seed's laser and double-integrated base: y, base_disp, z), "
+        help="response sensor: displacement (the reference study's laser and double-integrated base: y, base_disp, z), "
         "velocity (a vibrometer relative to the base: z_dot), absolute (the laser's y only), accelerometer "
         "(on the moving part: y_acc)",
     )
@@ -168,7 +168,8 @@ def _identify(sub, common: argparse.ArgumentParser, data_opts: argparse.Argument
         "identify",
         parents=[common, data_opts],
         help="identify K and D (and modal parameters) from a record",
-        description="nsi: nonlinear subspace identification around both stable wells (seed section 4): modal "
+        description="nsi: nonlinear subspace identification around both stable wells (reference study section 4): "
+        "modal "
         "parameters of each underlying-linear system, the z-frame cubic restoring force and damping. sindy: weak-form "
         "sparse regression over 1, z..z^5, z', z'|z'|, z'^3, sgn(z') with the input's coefficient fixed by physics, "
         "terms selected by held-out residual, ensemble inclusion probabilities. Both: equilibria, modal parameters "
@@ -247,7 +248,8 @@ def _nfrc(sub, common: argparse.ArgumentParser, data_opts: argparse.ArgumentPars
         parents=[common],
         help="continue a model's periodic response in amplitude or frequency, with stability and bifurcations",
         description="Periodic orbits of MODEL under b'' = A sin(2 pi f t) (or a force A sin(2 pi f t)), continued "
-        "in A at a fixed f (--freq F --amplitude A1:A2: the seed's bifurcation-map axis) or in f at a fixed A "
+        "in A at a fixed f (--freq F --amplitude A1:A2: the reference study's bifurcation-map axis) or in f at a "
+        "fixed A "
         "(--freq F1:F2 --amplitude A: a nonlinear frequency response curve), by shooting and pseudo-arclength "
         "through folds; Floquet multipliers give the stability, folds, period doublings (whose doubled branches "
         "are followed) and Neimark-Sacker points. Writes R.json and R.png.",
@@ -408,11 +410,12 @@ def _map(sub, common: argparse.ArgumentParser, data_opts: argparse.ArgumentParse
     mp = sub.add_parser(
         "map",
         parents=[common, data_opts],
-        help="the bifurcation map of a stepped harmonic campaign (seed Figure 4), with continuations over it",
+        help="the bifurcation map of a stepped harmonic campaign (reference study Figure 4), with continuations "
+        "over it",
         description="Every record of a stepped harmonic campaign (files in the order given, or a folder: its "
         "index.json, as `negstiff rig campaign` writes it, else its measurement files by name) analysed for its "
         "period, regime and Poincare z (phase 0), against the forcing amplitude measured from its input (a "
-        "campaign at one frequency: the seed's map) or against its frequency (a stepped sine: each record's "
+        "campaign at one frequency: the reference study's map) or against its frequency (a stepped sine: each record's "
         "frequency from the index, its metadata's forcing_hz or --forcing-hz). Each sweep's sequence and first "
         "period 2, or where a stepped sine jumps; `negstiff nfrc` results along the same axis drawn over the map, "
         "their first doubling or folds beside the map's. Writes R.json and R.png.",
@@ -436,7 +439,7 @@ def _update(sub, common: argparse.ArgumentParser, data_opts: argparse.ArgumentPa
         parents=[common],
         help="GA model updating of the device's E, frame angle and mass",
         description="Update the physical device (E, alpha, m, from the nominal design) with a genetic algorithm so "
-        "that its well frequencies and equilibria match TARGETS (seed section 4.1, Eq. 9). TARGETS is an "
+        "that its well frequencies and equilibria match TARGETS (reference study section 4.1, Eq. 9). TARGETS is an "
         "'identify' result or a JSON with f_minus, f_plus [Hz], z_minus, z_plus [m]. The features depend on E "
         "and m only through E/m: with the mass free the result is one point of a ridge; --fix-mass pins E.",
     )
@@ -506,9 +509,16 @@ def _reproduce(sub, common: argparse.ArgumentParser, data_opts: argparse.Argumen
         "reproduce",
         parents=[common],
         help="the whole study, end to end, as one report",
-        description="Run the seed paper's study on the virtual rig and write index.md, index.html and results.json.",
+        description="Run the reference study (Anastasio et al., EURODYN 2020) on the virtual rig and write "
+        "index.md, index.html and results.json, showing progress per section.",
     )
-    rep.add_argument("-o", "--out", default="reports/paper", help="report folder (default reports/paper)")
+    rep.add_argument(
+        "-o",
+        "--out",
+        default="reports/latest",
+        help="report folder (default reports/latest, not tracked by git; the committed reference report is "
+        "reports/paper, rewritten only when asked: -o reports/paper)",
+    )
     rep.add_argument("--fast", action="store_true", help="a quick reduced run (minutes)")
     rep.add_argument(
         "--workers",
@@ -522,7 +532,9 @@ def _reproduce(sub, common: argparse.ArgumentParser, data_opts: argparse.Argumen
 
 def build_parser() -> argparse.ArgumentParser:
     common = Parser(add_help=False)
-    common.add_argument("--seed", type=SEED, default=0, help="seed of every random draw (same seed, same numbers)")
+    common.add_argument(
+        "--seed", type=SEED, default=0, help="random seed of every random draw (same random seed, same numbers)"
+    )
     common.add_argument("--quiet", action="store_true", help="no progress on stderr")
 
     p = Parser(
