@@ -1,5 +1,5 @@
-"""Calibration of the rig's device against the seed's headline figures, and the device section of
-the report (seed Figure 2): exact K(z), U(z) against the Taylor and least-squares cubics."""
+"""Calibration of the rig's device against the reference study's headline figures, and the device section of
+the report (reference study Figure 2): exact K(z), U(z) against the Taylor and least-squares cubics."""
 
 from __future__ import annotations
 
@@ -15,7 +15,7 @@ from .report import Report
 
 
 def calibration(device: Device = AS_BUILT) -> dict[str, Any]:
-    """How close the device's features come to the seed's targets (percent errors)."""
+    """How close the device's features come to the reference study's targets (percent errors)."""
     f = device.features()
     uls = {w: device.uls(w) for w in ("minus", "plus")}
     targets = {"f_minus": seed.TABLE1["minus"]["f_hz"], "f_plus": seed.TABLE1["plus"]["f_hz"], "z_plus": seed.Z_PLUS}
@@ -46,14 +46,14 @@ def device_section(rep: Report, results: dict[str, Any]) -> None:
         "taylor_cubic_equilibria": tay.equilibria().as_dict(),
         "lsq_cubic_equilibria": lsq.equilibria().as_dict(),
     }
-    rep.heading("1. The device and its potential (seed Figure 2)")
+    rep.heading("1. The device and its potential (reference study Figure 2)")
     rep.text(
         "The rig's device is the physically-based model of device-model.md: two rods hinged on the moving "
         "mass and on the tips of two pre-compressed leaf-spring arms. Its exact restoring force K(z) is "
-        "geometric; the seed's cubic (Eq. 2) is its Taylor expansion at z = 0. The fixed geometry "
+        "geometric; the reference study's cubic (Eq. 2) is its Taylor expansion at z = 0. The fixed geometry "
         f"(L = {AS_BUILT.L * 1e3:g} mm, l = {AS_BUILT.l * 1e3:g} mm, b = {AS_BUILT.b * 1e3:g} mm, "
         f"h = {AS_BUILT.h * 1e3:g} mm, D0 = {AS_BUILT.D0 * 1e3:g} mm) was calibrated once so that the as-built "
-        "device reproduces the seed's Table 1 frequencies and z_plus; the nominal design is what the drawings say."
+        "device reproduces the paper's Table 1 frequencies and z_plus; the nominal design is what the drawings say."
     )
     rows = []
     for k, label, unit, scale in (
@@ -76,10 +76,10 @@ def device_section(rep: Report, results: dict[str, Any]) -> None:
     rows.append(["zeta at z_plus [%]", "-", 100 * cal["zeta"]["plus"], 100 * cal["seed_zeta"]["plus"], "see text"])
     rep.table(["feature", "nominal design", "as-built (rig truth)", "seed", "as-built vs seed"], rows)
     rep.text(
-        "The damping ratios are lower than the seed's on purpose. At 9 Hz the as-built device shows the seed's "
-        "period-doubling cascade near 12-15 m/s^2 only with well damping of about 5-6 %; at the seed's 11 % / 20 % "
+        "The damping ratios are lower than the paper's on purpose. At 9 Hz the as-built device shows the paper's "
+        "period-doubling cascade near 12-15 m/s^2 only with well damping of about 5-6 %; at the paper's 11 % / 20 % "
         "the cascade moves to about 21 m/s^2 (viscous plus positive quadratic damping cannot give both). The "
-        "rig keeps the dynamics and reports the gap; a polynomial truth with the seed's damping is available "
+        "rig keeps the dynamics and reports the gap; a polynomial truth with the paper's damping is available "
         "for identification studies (`negstiff rig --model`)."
     )
     z = np.linspace(-0.045, 0.040, 400)

@@ -1,4 +1,4 @@
-"""Dynamics characterisation (seed section 3, Figures 4-7) on the virtual rig.
+"""Dynamics characterisation (reference study section 3, Figures 4-7) on the virtual rig.
 
     python -m negstiff.experiments.characterization [-o reports/characterization] [--fast]
 
@@ -65,12 +65,12 @@ def bifurcation_map(rig: Rig, freq: float, amplitudes, settle_periods: int, reco
 
 
 def characterization_section(rep: Report, results: dict[str, Any], fast: bool, seed_: int = 0) -> None:
-    """The seed's section 3 on rig records: the 9 Hz bifurcation map (Figure 4), phase portraits and
+    """The reference study's section 3 on rig records: the 9 Hz bifurcation map (Figure 4), phase portraits and
     Lyapunov exponents of four regimes (Figures 5-6), Poincare sections of the cross-well one (Figure 7)."""
     res: dict[str, Any] = {}
     results["characterization"] = res
     rig = Rig(seed=seed_ + 5)
-    rep.heading("6. Dynamics: bifurcation map, phase portraits, Lyapunov exponent, Poincare sections (seed section 3)")
+    rep.heading("6. Dynamics: bifurcation map, phase portraits, Lyapunov exponent, Poincare sections (paper section 3)")
     _bifurcation_part(rep, res, rig, fast)
     chaotic = _portraits_and_lle_part(rep, res, rig, fast)
     _poincare_part(rep, chaotic)
@@ -95,7 +95,7 @@ def _bifurcation_part(rep: Report, res: dict[str, Any], rig: Rig, fast: bool) ->
         f"in {bm['simulation_s']:.1f} s; analysing its {len(bm['points'])} records took {bm['analysis_s']:.1f} s. "
         "Sweeping up from z_plus the response goes "
         + ", ".join(f"{a} ({fmt(lo, 3)}-{fmt(hi, 3)} m/s^2)" for a, lo, hi in seq)
-        + f". The seed saw period doublings near {seed.CASCADE_M_S2[0]:g}-{seed.CASCADE_M_S2[1]:g} m/s^2 "
+        + f". The reference study saw period doublings near {seed.CASCADE_M_S2[0]:g}-{seed.CASCADE_M_S2[1]:g} m/s^2 "
         "from the positive well and cross-well chaos above them."
     )
 

@@ -1,4 +1,4 @@
-"""NSI study (seed section 4: Table 1, Eq. 8, Table 2, Figures 8-9) on the virtual rig (the Silverbox:
+"""NSI study (reference study section 4: Table 1, Eq. 8, Table 2, Figures 8-9) on the virtual rig (the Silverbox:
 ``experiments/silverbox.py``).
 
     python -m negstiff.experiments.nsi_study [-o reports/nsi] [--fast]
@@ -87,7 +87,7 @@ def _render_modal_tables(rep: Report, part: PolynomialTruthPart) -> None:
     rep.heading("Table 1: modal parameters of the two underlying-linear systems", 3)
     rep.text(
         f"A {duration:g} s cross-well random record ({fmt(SEED_LIKE_CROSS_WELL_RMS)} m/s^2 rms, 2-40 Hz, "
-        f"{crossings} well crossings) of the polynomial truth with the seed's damping size, at the rig's default "
+        f"{crossings} well crossings) of the polynomial truth with the paper's damping size, at the rig's default "
         f"sensor noise. NSI ran around each well, found from the data, in {elapsed:.1f} s "
         f"(order {est.order}, {est.block_rows} block rows, last 20 % held out)."
     )
@@ -147,9 +147,9 @@ def _render_modal_tables(rep: Report, part: PolynomialTruthPart) -> None:
                 seed.EQ8["k1_tilde"],
             ],
         ]
-    rep.table(["frame", "coefficient", "NSI", "truth", "error", "seed Eq. 8"], rows)
+    rep.table(["frame", "coefficient", "NSI", "truth", "error", "reference study Eq. 8"], rows)
     rep.text(
-        "The seed's Eq. 8 does not say which well it was written about; its k1~ = 1340 N/m with m = 0.2 kg "
+        "The reference study's Eq. 8 does not say which well it was written about; its k1~ = 1340 N/m with m = 0.2 kg "
         "would give 13 Hz, neither of its Table 1 frequencies, so it is shown for scale only."
     )
     mm = est.model_
@@ -172,7 +172,7 @@ def _render_modal_tables(rep: Report, part: PolynomialTruthPart) -> None:
         f"Quadratic damping: NSI finds c_nl = {fmt(mm.c_nl, 3)} N s^2/m^2 against the truth's "
         f"{fmt(truth.c_nl, 3)}; its quality index |Im/Re| is "
         f"{fmt(np.mean([w.quality['vabsv'] for w in est.wells_.values()]), 2)}, far worse than the stiffness "
-        "terms' (the z'|z'| column is small and needs a differentiated, noisier signal). The seed's "
+        "terms' (the z'|z'| column is small and needs a differentiated, noisier signal). The reference study's "
         f"c_nl = {seed.C_NL:g} would make the total damping negative above "
         f"|z'| = c/|c_nl| (about {fmt(truth.c / abs(seed.C_NL), 2)} m/s for this device's c), a velocity that "
         "cross-well motion exceeds: a device that pumps energy in at high speed is not physical, so a negative "
@@ -196,7 +196,7 @@ def _render_validation(rep: Report, part: PolynomialTruthPart) -> None:
             ],
             ["true model (floor)", "-", "-", floor, "-"],
             [
-                "seed Table 2",
+                "reference study Table 2",
                 seed.TABLE2["residual_mean_mm"],
                 seed.TABLE2["residual_std_mm"],
                 seed.TABLE2["rms_percent"],
@@ -236,7 +236,7 @@ def _render_forces(rep: Report, part: PolynomialTruthPart) -> None:
     for mdl, lab, st in (
         (truth, "truth", "k-"),
         (mm, "NSI", "r--"),
-        (Model(m=truth.m, k1=0, k2=0, k3=1, c=truth.c, c_nl=seed.C_NL), "c with the seed's c_nl", "C0:"),
+        (Model(m=truth.m, k1=0, k2=0, k3=1, c=truth.c, c_nl=seed.C_NL), "c with the reference study's c_nl", "C0:"),
     ):
         ax[2].plot(zd, mdl.damping_force(zd), st, label=lab)
     ax[0].set(xlabel="z [mm]", ylabel="K [N]")
@@ -248,8 +248,8 @@ def _render_forces(rep: Report, part: PolynomialTruthPart) -> None:
         "nsi_fig9_kud",
         fig,
         "Figure 9 (seed): restoring force K, potential U and damping force D identified by NSI against the "
-        "truth; dotted: the truth's viscous damping with the seed's negative c_nl, which turns the damping force "
-        "around above 0.7 m/s. (The seed's Eq. 8 cubic, placed about either well, dwarfs these curves; its "
+        "truth; dotted: the truth's viscous damping with the paper's negative c_nl, which turns the damping force "
+        "around above 0.7 m/s. (The reference study's Eq. 8 cubic, placed about either well, dwarfs these curves; its "
         "coefficients are in the Eq. 8 table.)",
     )
 
@@ -356,7 +356,7 @@ def integration_sensitivity(rep: Report, res: dict[str, Any], duration: float, s
     rep.heading("How the lab integrates the base acceleration matters", 3)
     rep.text(
         "z is not measured: it is the laser's y minus the table displacement, itself the double integral of the "
-        "measured acceleration (seed section 3). The same record, integrated two ways:"
+        "measured acceleration (reference study section 3). The same record, integrated two ways:"
     )
     rep.table(
         [
@@ -381,7 +381,7 @@ def integration_sensitivity(rep: Report, res: dict[str, Any], duration: float, s
         "Time-domain integration with a high-pass after each step removes part of the table motion at the "
         "excitation band's lower edge; that error is a linear function of the input, so NSI cannot tell it from "
         "the dynamics and the soft well, where the asymmetric stiffness k2~ is largest, absorbs it. "
-        "Frequency-domain integration over the excited band avoids it. The seed does not say which it used; its "
+        "Frequency-domain integration over the excited band avoids it. The paper does not say which it used; its "
         "unequal well damping ratios (11 % / 20 %) are the kind of signature such an error leaves."
     )
 
@@ -421,11 +421,11 @@ def stabilization_part(rep: Report, res: dict[str, Any], est: NSI, m: Measuremen
 
 
 def nsi_section(rep: Report, results: dict[str, Any], fast: bool, seed_: int = 0) -> None:
-    """The NSI section (seed section 4) for the report; numbers go into ``results["nsi"]``."""
+    """The NSI section (reference study section 4) for the report; numbers go into ``results["nsi"]``."""
     res: dict[str, Any] = {}
     results["nsi"] = res
     duration = 60.0 if fast else 300.0
-    rep.heading("4. Nonlinear subspace identification (seed section 4)")
+    rep.heading("4. Nonlinear subspace identification (reference study section 4)")
     est = polynomial_truth_part(rep, res, duration, seed_ + 1)
     as_built_part(rep, res, duration, seed_ + 2)
     if not fast:

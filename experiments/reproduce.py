@@ -1,4 +1,4 @@
-"""``negstiff reproduce``: the seed's study end to end on the virtual rig, as one report.
+"""``negstiff reproduce``: the reference study's study end to end on the virtual rig, as one report.
 
 Sections grow as the suite's capabilities land; each states what it measured and where it differs
 from the seed. Every number in the report is taken from the ``results`` dict that is also written
@@ -290,7 +290,7 @@ def rig_section(rep: Report, results: dict[str, Any], fast: bool, seed: int) -> 
     rep.heading("2. The virtual test rig")
     rep.text(
         f"A {duration:g} s band-limited random record (2-40 Hz, {fmt(r['rms_m_s2'])} m/s^2 rms) of the as-built "
-        f"device, measured as the seed's lab did: laser for y, accelerometer for the table, base displacement by "
+        f"device, measured as the paper's lab did: laser for y, accelerometer for the table, base displacement by "
         f"double integration (high-passed), z = y - b. The device crossed between the wells {crossings} times "
         f"({fmt(r['crossings_per_min'], 3)} per minute). The measured z differs from the true z by "
         f"{fmt(r['z_error_std_m'] * 1e6, 3)} um rms, mostly the low-frequency error of the integrated base "

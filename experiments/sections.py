@@ -136,7 +136,7 @@ def identification_section(est, label: str = "") -> Section:
     sec.text(
         "Each well's underlying-linear system ("
         + ("NSI: its subspace step" if r.method == "nsi" else "the model linearised")
-        + "; seed Table 1):"
+        + "; reference study Table 1):"
     )
     sec.table(["well", "f [Hz]", "zeta [%]"], rows)
     m = r.model
@@ -382,7 +382,7 @@ def draw_branches(ax, branches: list[dict[str, Any]], color, label: str | None =
 
 def map_figure(points: list[dict[str, Any]], overlays: list[dict[str, Any]] = (), unit: str = "m/s^2",
                axis: str = "amplitude"):  # fmt: skip
-    """The bifurcation map (seed Figure 4): each record's Poincare z against its forcing amplitude (or its
+    """The bifurcation map (reference study Figure 4): each record's Poincare z against its forcing amplitude (or its
     frequency, ``axis="f_hz"``: a stepped sine), a panel per starting well (``start``: plus, minus; one panel
     where it is unknown), blue sweeping up, red down, black in the records' order; grey behind a cross-well
     or non-periodic record. Each ``overlays`` entry, a ``negstiff nfrc`` result along the same axis, is drawn

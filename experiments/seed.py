@@ -1,4 +1,4 @@
-"""The seed paper's own numbers (Anastasio, Fasana, Garibaldi, Marchesiello, EURODYN 2020), in one
+"""The reference study's own numbers (Anastasio, Fasana, Garibaldi, Marchesiello, EURODYN 2020), in one
 place, so every report sets ours beside theirs."""
 
 TABLE1 = {"minus": {"f_hz": 11.41, "zeta": 0.112}, "plus": {"f_hz": 9.19, "zeta": 0.203}}

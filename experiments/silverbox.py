@@ -48,7 +48,7 @@ PUBLISHED_BY_TEST_SET_MV = {
     "polynomial NARX (FROLS)": (7.7, 4.2, 2.2),
 }
 """Published rms errors [mV] on the multisine test, the full arrow and the arrow without extrapolation
-(None: not quoted), as the data's README (shared/data/silverbox) gives them; not recomputed here. Its
+(None: not quoted), as the data's README (negstiff/data/silverbox/README.md) gives them; not recomputed here. Its
 polynomial NARX (FROLS; the arrow figures called optimistic there) is another model than the 0.64 mV
 one of ``PUBLISHED_MV``."""
 OUTPUT_ERROR_DUFFING_MV = 0.91

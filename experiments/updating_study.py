@@ -1,4 +1,4 @@
-"""Model-updating study (seed section 4.1: Eq. 9, Figures 10-11) and the E-m identifiability.
+"""Model-updating study (reference study section 4.1: Eq. 9, Figures 10-11) and the E-m identifiability.
 
 python -m negstiff.experiments.updating_study [-o reports/updating] [--fast]
 """
@@ -53,7 +53,7 @@ def compute_updating(fast: bool, seed_: int = 0) -> UpdatingRuns:
     # A: the as-built device's own exact features
     exact = AS_BUILT.features()
     ga_exact = GAUpdater(generations=gens, seed=seed_ + 1).fit(exact)
-    # B: an as-built rig record, identified by NSI and by SINDy; the GA updated the seed's way (Eq. 9 on
+    # B: an as-built rig record, identified by NSI and by SINDy; the GA updated the reference study's way (Eq. 9 on
     # the identified model's features) and like with like (the restoring force over the record's stroke)
     rec = Rig(AS_BUILT, seed=seed_ + 2).random(duration=60.0 if fast else 300.0)
     m = Measurement.from_rig(rec)
@@ -81,10 +81,10 @@ def updating_section(rep: Report, results: dict[str, Any], fast: bool, seed_: in
     runs = compute_updating(fast, seed_)
     res: dict[str, Any] = {}
     results["updating"] = res
-    rep.heading("5. Model updating with a genetic algorithm (seed section 4.1)")
+    rep.heading("5. Model updating with a genetic algorithm (reference study section 4.1)")
     rep.text(
         f"pymoo's GA (population 60, {runs.generations} generations, SBX crossover and polynomial mutation as in "
-        "Deb's book, elitist) updates E, alpha and m of the device from the nominal design, minimising the seed's "
+        "Deb's book, elitist) updates E, alpha and m of the device from the nominal design, minimising the paper's "
         "Eq. 9: the RMS percentage error of the two well frequencies plus that of the two stable equilibria."
     )
     res["exact_targets"] = runs.ga_exact.result() | {"errors": _errors(runs.ga_exact.device_)}
@@ -140,7 +140,7 @@ def _render_table(rep: Report, res: dict[str, Any], runs: UpdatingRuns) -> None:
     en_rf = _errors(runs_b["NSI, restoring force, m free"].device_)
     rep.text(
         f"On the as-built device's own exact features the GA recovers E/m within {ee['E_over_m_percent']:+.3f} % "
-        f"and alpha within {ee['alpha_deg']:+.3f} deg. The seed's way, Eq. 9 on the features of NSI's cubic, puts "
+        f"and alpha within {ee['alpha_deg']:+.3f} deg. The paper's way, Eq. 9 on the features of NSI's cubic, puts "
         f"alpha {en['alpha_deg']:+.2f} deg and E/m {en['E_over_m_percent']:+.2f} % off (final fitness "
         f"{fmt(ga.fitness_, 3)} %, seed: {seed.GA_FITNESS_PERCENT} %; the truth scores {fmt(truth_fit, 3)} % against "
         "those targets): the cubic's well frequencies and equilibria are not the device's, and the GA compared a "

@@ -40,7 +40,7 @@ pycont-lite (MIT, first release 2025, one author): pseudo-arclength for G(u, p) 
 branch-point detection; it could follow G = phi(x) - x, but its stability and its test functions are
 those of an equilibrium of G (G's Jacobian M - I stays regular at a period doubling), so it would
 neither give Floquet multipliers nor see a doubling, and the corrector is the small part of this
-module. BifurcationKit is Julia; the seed's authors' HBSS_Cont is MATLAB under GPL-3 (not copied).
+module. BifurcationKit is Julia; the reference study's authors' HBSS_Cont is MATLAB under GPL-3 (not copied).
 So the method is written here, on the suite's own simulator.
 """
 

@@ -1,4 +1,4 @@
-"""Physically-based model of the negative-stiffness device (``shared/docs/device-model.md``).
+"""Physically-based model of the negative-stiffness device (``docs/device-model.md``).
 
 A bushing of mass m slides on a vertical guide; two rigid rods of length L hinge on it and on the tips
 of the two arms of a U-shaped frame. Each arm is a cantilever leaf spring (free length l, width b,
@@ -12,7 +12,7 @@ and the potential of the two arms plus gravity, and the restoring force, are
 
     U(z) = k_f (s + D0)^2 - k_f D0^2 + m g z,     K(z) = dU/dz = 2 k_f (s + D0) s'(z) + m g.
 
-The Taylor expansion at z = 0 gives the cubic of the seed's Eq. (2):
+The Taylor expansion at z = 0 gives the cubic of the reference study's Eq. (2):
 k1 = 2 D0 k_f / (L cos a), k2 = -3 D0 k_f tan(a) / (L^2 cos a), k0 = m g, and
 
     k3 = k_f (L cos a - D0 (1 + 4 sin^2 a)) / (L^3 cos^3 a)
@@ -25,7 +25,7 @@ The geometry exists only while B^2 > z^2, i.e. for
 -L cos a / (1 - sin a) < z < L cos a / (1 + sin a); outside it ``GeometryError`` is raised.
 
 Calibration (see ``experiments/calibration.py`` and the report): the fixed geometry below and the
-as-built E, alpha, m put the rig's device at the seed's headline figures (Table 1 and Figure 4).
+as-built E, alpha, m put the rig's device at the reference study's headline figures (Table 1 and Figure 4).
 """
 
 from __future__ import annotations
@@ -325,7 +325,7 @@ class Device:
         )
 
     def features(self) -> dict[str, float]:
-        """The GA's features (seed Eq. 9): well frequencies [Hz] and stable equilibria [m]."""
+        """The GA's features (reference study Eq. 9): well frequencies [Hz] and stable equilibria [m]."""
         eq = self.equilibria()
         ks = self.stiffness(np.array([eq.z_minus, eq.z_plus]))
         f = np.sqrt(ks / self.m) / (2 * math.pi)
@@ -347,7 +347,7 @@ class Device:
         )
 
     def taylor_cubic(self) -> Model:
-        """The seed's Eq. (2) cubic from the closed-form Taylor expansion at z = 0."""
+        """The reference study's Eq. (2) cubic from the closed-form Taylor expansion at z = 0."""
         ca, ta = math.cos(self.alpha), math.tan(self.alpha)
         kf, L, D0 = self.k_f, self.L, self.D0
         return Model(
@@ -407,7 +407,7 @@ class Device:
 
 GEOMETRY = {"L": 0.060, "l": 0.094, "b": 0.020, "h": 0.0012, "D0": 0.0059}
 """Fixed geometry of the rig's device [m] (rods, arms, pre-compression); calibrated once so that the
-as-built device reproduces the seed's Table 1 and z_plus (``experiments/calibration.py``)."""
+as-built device reproduces the reference study's Table 1 and z_plus (``experiments/calibration.py``)."""
 
 NOMINAL = Device(E=206e9, alpha_deg=8.0, m=0.200, c=0.0, c_nl=0.0, **GEOMETRY)
 """The design drawings: catalogue steel, the designed frame angle, the designed moving mass."""
@@ -418,10 +418,10 @@ flatter than drawn, the mass heavier by the fasteners (E/m 10 % below the design
 
 Features: 11.45 Hz / 9.20 Hz well frequencies, wells at -28.7 / +22.8 mm (seed: 11.41 / 9.19 Hz,
 z_plus = 23 mm). Damping (c = 1.5 N s/m, c_nl = 0.5 N s^2/m^2, dissipative at every speed) puts
-the 9 Hz period-doubling cascade where the seed saw it (P2 at 14.5-15, P4 at 15.5, cross-well chaos
+the 9 Hz period-doubling cascade where the reference study saw it (P2 at 14.5-15, P4 at 15.5, cross-well chaos
 from 16 m/s^2, starting from z_plus) at the cost of ULS damping ratios of 4.9 % / 6.1 % instead of
-the seed's 11 % / 20 %: with viscous plus positive quadratic damping, this geometry cannot have
-both (at the seed's ratios the cascade moves to about 21 m/s^2). The report says so."""
+the reference study's 11 % / 20 %: with viscous plus positive quadratic damping, this geometry cannot have
+both (at the reference study's ratios the cascade moves to about 21 m/s^2). The report says so."""
 
 
 def _seed_like_cubic():
@@ -433,7 +433,7 @@ def _seed_like_cubic():
 
 SEED_LIKE_CUBIC = _seed_like_cubic()
 """Polynomial truth for identification studies: the as-built device's least-squares cubic with
-damping of the seed's size (c = 3.5 N s/m: well damping ratios 11 % / 16 %, seed 11 % / 20 %), so the
+damping of the reference study's size (c = 3.5 N s/m: well damping ratios 11 % / 16 %, seed 11 % / 20 %), so the
 coefficients that NSI, SINDy and the posteriors must recover exist exactly."""
 SEED_LIKE_CROSS_WELL_RMS = 20.0
 """Random base-excitation level [m/s^2 rms, 2-40 Hz] at which SEED_LIKE_CUBIC crosses between its

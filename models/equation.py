@@ -56,7 +56,7 @@ class Equilibria:
 
 @dataclass(frozen=True)
 class UnderlyingLinear:
-    """Underlying-linear system (ULS) around a stable equilibrium (seed Eqs. 4-7)."""
+    """Underlying-linear system (ULS) around a stable equilibrium (reference study Eqs. 4-7)."""
 
     z_ref: float
     """Reference position z* [m]."""

@@ -1,6 +1,6 @@
-"""Virtual test rig: the seed's shaking-table campaign on a device whose truth is known.
+"""Virtual test rig: the reference study's shaking-table campaign on a device whose truth is known.
 
-What the laboratory of the seed paper (section 3) measures, and how this rig reproduces it:
+What the laboratory of the reference study (section 3) measures, and how this rig reproduces it:
 
 * the table moves the frame's base by b(t); the true table motion is band-limited (no content
   below ``Sensors.table_min_hz``), and its acceleration b'' is what drives the device;
@@ -71,7 +71,7 @@ class Sensors:
     table_min_hz: float = 0.5
     """The table's true motion has no content below this frequency [Hz]."""
     response: str = "displacement"
-    """The response sensor, as labs have them: ``"displacement"`` (the seed's laser on y, the base
+    """The response sensor, as labs have them: ``"displacement"`` (the reference study's laser on y, the base
     double-integrated, z = y - b: columns y, base_disp, z), ``"velocity"`` (a laser Doppler
     vibrometer on the moving part, relative to the base: z_dot), ``"absolute"`` (the laser's y alone:
     the user derives the base), ``"accelerometer"`` (an accelerometer on the moving part: y_acc)."""
@@ -120,7 +120,7 @@ class Rig:
     system : the truth: a ``Device`` (default: ``AS_BUILT``, exact geometry) or a polynomial ``Model``
     effects : hidden extra effects added to the truth (``models.effects`` names and values)
     sensors : measurement-chain imperfections
-    fs : output sampling rate [Hz] (the seed's 512 Hz)
+    fs : output sampling rate [Hz] (the reference study's 512 Hz)
     oversample : simulation and acquisition rate = ``oversample * fs``
     seed : root of every random draw
     weigh_resolution : resolution of the scale that weighs the moving mass [kg] (None: not weighed)
@@ -513,7 +513,7 @@ class Rig:
 
     def _response_channels(self, z_dot, acc_true, fsim, rng) -> dict[str, np.ndarray]:
         """The vibrometer's relative velocity or the moving part's accelerometer, at the fine rate
-        (drawn after the seed's two sensors, so a displacement record is the same bit for bit)."""
+        (drawn after the reference study's two sensors, so a displacement record is the same bit for bit)."""
         s, q = self.sensors, self.oversample
         if s.response == "velocity":
             noise = s.velocity_noise * math.sqrt(q) * rng.standard_normal(z_dot.size)

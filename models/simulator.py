@@ -5,7 +5,7 @@
 Classical fourth-order Runge-Kutta with ``substeps`` steps per sample interval. The sampled input is
 linearly interpolated between samples, the one input convention of the whole suite (the virtual rig,
 the likelihoods and the identification methods all assume it; holding the input constant per sample
-instead costs about 4 % error, ``shared/docs/ecosystem.md`` section 5).
+instead costs about 4 % error, ``docs/ecosystem.md`` section 5).
 
 The kernel is compiled by numba with time in the outer loop and the batch in the inner loop, which
 lets the compiler vectorise across batch members (measured in ``experiments/benchmarks.py``). Batches

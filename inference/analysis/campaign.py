@@ -1,4 +1,4 @@
-"""A stepped harmonic campaign and its bifurcation map (seed Figure 4; ``negstiff map``): the records (files
+"""A stepped harmonic campaign and its bifurcation map (reference study Figure 4; ``negstiff map``): the records (files
 in order, or a folder with ``index.json`` as ``negstiff rig campaign`` writes it, else its files by name),
 each one's forcing frequency, the ``negstiff nfrc`` results drawn over the map, and the map itself: each
 record's period, regime, Poincare z and forcing amplitude measured from its input (``characterize.map_point``),

@@ -1,4 +1,4 @@
-"""Characterisation of one harmonically forced record as independent analyses (seed section 3).
+"""Characterisation of one harmonically forced record as independent analyses (reference study section 3).
 
 Periodicity (period, amplitudes per branch, Poincare points), regime (in-well or cross-well) and the
 largest Lyapunov exponent each give their result, or ``None`` with the ``reason`` it cannot be
@@ -249,7 +249,7 @@ MAP_POINCARE_POINTS = 32
 
 
 def map_point(rec: Measurement, forcing_hz: float, wells=None) -> dict[str, Any]:
-    """One record of a stepped harmonic campaign as a point of the bifurcation map (seed Figure 4): the
+    """One record of a stepped harmonic campaign as a point of the bifurcation map (reference study Figure 4): the
     forcing's amplitude measured from the input (its harmonic at the measured frequency near ``forcing_hz``
     by least squares: m/s^2
     for base excitation, N for a force), the period, regime, branch amplitudes and the last

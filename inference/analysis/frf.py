@@ -2,7 +2,7 @@
 
 Before any nonlinear test a lab measures the FRF around each stable well (random or swept excitation
 at a level that keeps the motion small): its resonance is the well's underlying-linear frequency,
-an independent check of what NSI, SINDy and a refined model say (seed Eq. 4).
+an independent check of what NSI, SINDy and a refined model say (reference study Eq. 4).
 
 * Estimation (Bendat & Piersol, *Random Data*, 4th ed., sections 9.1-9.2): H1 = G_xy / G_xx (noise
   on the response averages out), H2 = G_yy / G_yx (noise on the input averages out), coherence

@@ -1,6 +1,6 @@
 """Largest Lyapunov exponent from a measured time series.
 
-* Embedding (``shared/docs/algorithms.md`` B.1): delay tau at the first minimum of the average mutual
+* Embedding (``docs/algorithms.md`` B.1): delay tau at the first minimum of the average mutual
   information (Fraser & Swinney 1986), at most a quarter forcing period for a forced oscillator,
   dimension m where the fraction of false nearest neighbours (Kennel, Brown & Abarbanel 1992) falls
   below 2 %.

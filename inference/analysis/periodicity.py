@@ -1,5 +1,5 @@
-"""Periodicity analysis and Poincare sections of harmonically forced records (seed section 3;
-``shared/docs/algorithms.md`` part C).
+"""Periodicity analysis and Poincare sections of harmonically forced records (reference study section 3;
+``docs/algorithms.md`` part C).
 
 * The forcing phase comes from the *measured* input: a least-squares sinusoid at the known forcing
   frequency (not the nominal start time), so records whose sampling rate is not a multiple of the

@@ -10,7 +10,7 @@ them, its own modal parameters). Everything after it is this module's, the same 
 3. the output-error refinement (``refine.refine_stage``), kept only if it predicts the tail at least as
    well (``refine=False`` skips it);
 4. the equilibria and each well's modal parameters of the final model (or the method's own, NSI's
-   subspace step: seed Table 1);
+   subspace step: reference study Table 1);
 5. boundedness beyond the stroke and under 1.2x the input (``validation.boundedness``);
 6. every warning a physicist would want: the method's own, boundedness, equilibria, a diverged
    validation, and the record's plausibility (units, mm-vs-m, an input in g, the frame, wells beyond the

@@ -1,15 +1,15 @@
 """Nonlinear subspace identification (NSI) in the time domain, around either stable well.
 
 Marchesiello & Garibaldi (2008), MSSP 22:81-101 ("A time domain approach for identifying nonlinear
-vibrating structures by subspace methods"); the reference-position shift of the seed paper (Eqs. 5-7);
-``shared/docs/algorithms.md`` part A (a reconstruction verified numerically, followed here).
+vibrating structures by subspace methods"); the reference-position shift of the reference study (Eqs. 5-7);
+``docs/algorithms.md`` part A (a reconstruction verified numerically, followed here).
 
 The nonlinear terms act as feedback forces on the underlying-linear system (ULS). Around the
 reference z* (x = z - z*), per unit mass,
 
     x'' + (c/m) x' + (k1~/m) x = u - sum_j (c_j/m) g_j(x, x'),   u = -b'' (base) or f/m (force)
 
-with the basis g = [x^2, x^3, x'|x'|] (seed Eq. 7 for the polynomial, the seed's damping model for
+with the basis g = [x^2, x^3, x'|x'|] (reference study Eq. 7 for the polynomial, the reference study's damping model for
 x'|x'|) and a constant K(z*)/m that vanishes when z* is the equilibrium. Every channel is made zero
 mean, so the subspace step sees only the dynamics; the constant then follows from the time average
 of the equation of motion (with the record's mean velocity and acceleration, both near zero). A
@@ -19,7 +19,7 @@ noise-free) and leaks into k2~ through the mean of x^2 (+12 % measured), so it i
 step (``subspace``), whose
 extended FRF H_e(omega) = [H, c_1 H, ..., c_J H] gives c_j = mean over a band around resonance of
 Re(H_e,j / H_e,0) (A.4), with |Im/Re| as the quality index. The ULS's natural frequency and damping
-come from the physical pole of A_c (seed Table 1). The well z* is found from the data: first the
+come from the physical pole of A_c (reference study Table 1). The well z* is found from the data: first the
 modes of the displacement histogram, then the identified polynomial's own root (one more pass there).
 
 Velocity for x'|x'|: a Savitzky-Golay derivative (cubic; the window is fitted to the data's band by
@@ -202,7 +202,7 @@ class NSI(Identifier):
         Each pass identifies about the current reference z_g, then moves the reference to the
         identified restoring force's stable root r nearest z_g. The reported ULS (f, zeta) is the
         last pass's pole; the shifted coefficients are the last pass's cubic re-expanded exactly at
-        r (seed Eq. 7), so that K(z*) = 0 there.
+        r (reference study Eq. 7), so that K(z*) = 0 there.
         """
         for _ in range(self.passes):
             x, w, scale, means = self.extended_input(rec, zs, v, z_ref)
@@ -383,7 +383,7 @@ class NSI(Identifier):
 
     @staticmethod
     def _z_frame(w: WellFit, mass: float) -> Model:
-        """Back-transform a well's shifted coefficients to the z frame (seed Eq. 7), scaled by mass."""
+        """Back-transform a well's shifted coefficients to the z frame (reference study Eq. 7), scaled by mass."""
         c = w.coefficients
         m = Model.from_shifted(
             w.z_ref,

@@ -2,7 +2,7 @@
 
 Van Overschee & De Moor (1996), "Subspace Identification for Linear Systems"; Verhaegen (1994),
 "Identification of the deterministic part of MIMO state space models given in innovations form from
-input-output data" (PO-MOESP). Notation of ``shared/docs/algorithms.md`` A.2:
+input-output data" (PO-MOESP). Notation of ``docs/algorithms.md`` A.2:
 
 1. Block Hankel matrices of i block rows for the inputs (m channels) and outputs (l channels):
    U_p, U_f, Y_p, Y_f; W_p = [U_p; Y_p].

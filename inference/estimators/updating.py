@@ -1,4 +1,4 @@
-"""Model updating of the physical device with a genetic algorithm (seed section 4.1, Eq. 9).
+"""Model updating of the physical device with a genetic algorithm (reference study section 4.1, Eq. 9).
 
 The fitness compares the device's features (the two well frequencies and stable equilibria) with an
 estimate (an ``identify`` result, or a targets JSON):
@@ -8,7 +8,7 @@ estimate (an ``identify`` result, or a targets JSON):
     eps   = eps_w + eps_z                                                     [%]
 
 The evolution is pymoo's GA (Blank & Deb 2020): tournament selection, simulated binary crossover and
-polynomial mutation (Deb 2001, the seed's ref. [18]), elitist survival, seeded. The parameters are the
+polynomial mutation (Deb 2001, the reference study's ref. [18]), elitist survival, seeded. The parameters are the
 frame's Young's modulus E, the frame angle alpha and the moving mass m, within bounds around the
 nominal design; the rest of the geometry is fixed.
 
@@ -73,7 +73,7 @@ def targets_from(data: Mapping[str, Any], source: str = "targets") -> dict[str, 
     its own model, the model (``model``) and the stroke (``stroke_z``): the updater then compares like
     with like, the device's restoring force with the identified one over the states the record visited
     (``GAUpdater``). Older results (no stroke) give the method's well frequencies and its model's
-    equilibria (the seed's way)."""
+    equilibria (the reference study's way)."""
     if isinstance(data, Mapping) and data.get(STROKE_KEY) is not None and "model" in data:
         from negstiff.models import Model
 
@@ -115,7 +115,7 @@ def targets_from(data: Mapping[str, Any], source: str = "targets") -> dict[str, 
 
 
 UNREACHED_FITNESS_PERCENT = 10.0
-"""A best fitness (seed Eq. 9) above this [%] is a device that cannot reach its targets (1-2 % on the seed's
+"""A best fitness (the paper's Eq. 9) above this [%] is a device that cannot reach its targets (1-2 % on the paper's
 data and the rig's records)."""
 
 TARGET_RANGES = {"f": (1e-2, 1e3, "Hz"), "z": (-1.0, 1.0, "m")}
@@ -306,11 +306,11 @@ class GAUpdater(Estimator):
         self.compared_ = (
             "the restoring force per unit mass over the quantiles of the record's stroke (identified model vs device)"
             if by_force
-            else "exact device features (seed Eq. 9)"
+            else "exact device features (reference study Eq. 9)"
         )
         self.features_ = self.features_of(x)
         self.exact_features_ = self.features_
-        self.fitness_ = float(fitness(self.features_, targets))  # seed Eq. 9, reported in either case
+        self.fitness_ = float(fitness(self.features_, targets))  # reference study Eq. 9, reported in either case
         self.objective_ = float(res.F[0]) if by_force else self.fitness_
         self.stroke_ = stroke if by_force else None
         self.history_ = history
@@ -321,7 +321,7 @@ class GAUpdater(Estimator):
         """What a physicist would not believe: a best device that still misses its targets."""
         if not self.fitness_ <= UNREACHED_FITNESS_PERCENT:
             return [
-                f"the best device misses the targets by {self.fitness_:.3g} % (seed Eq. 9): the targets lie beyond "
+                f"the best device misses the targets by {self.fitness_:.3g} % (paper Eq. 9): the targets lie beyond "
                 "what the search box around the nominal design reaches; check them, or widen the bounds"
             ]
         return []

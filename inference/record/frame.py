@@ -155,7 +155,7 @@ def frame_offset(rec, spread: bool = True) -> dict[str, Any]:
 
 
 FRAME_SE_WARN_M = 2e-5
-"""A frame standard error above this [m] is warned about: on the seed's cubic (k2 / 3 k3 = 0.5 mm) 20 um moves
+"""A frame standard error above this [m] is warned about: on the paper's cubic (k2 / 3 k3 = 0.5 mm) 20 um moves
 k2 by 4 %."""
 
 FRAME_PARTS = 4

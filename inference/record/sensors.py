@@ -2,7 +2,7 @@
 
 A lab measures the moving part's response with whichever sensor it has:
 
-* ``z`` [m]: relative displacement (a laser triangulation sensor on the frame, or the seed's laser
+* ``z`` [m]: relative displacement (a laser triangulation sensor on the frame, or the reference study's laser
   minus the double-integrated base, already subtracted);
 * ``z_dot`` [m/s]: relative velocity (a laser Doppler vibrometer on the moving part, mounted on the
   table, or any velocity sensor relative to the base);
@@ -166,7 +166,7 @@ def derive(cols: dict[str, np.ndarray], input_name: str, fs: float, source: str)
         b = integrate_fft(cols["base_acc"], fs, HIGHPASS_HZ, order=2)
         return cols["y"] - b, {
             "measured": "y",
-            "derived": f"z = y - b, b the double integral of base_acc above {HIGHPASS_HZ:g} Hz (the seed's route)",
+            "derived": f"z = y - b, b the double integral of base_acc above {HIGHPASS_HZ:g} Hz (the paper's route)",
             "trim_s": TRIM_S,
             "z_constant_known": True,
         }

@@ -1,5 +1,5 @@
 """The commands: each reads its inputs, calls ``negstiff.models``, ``negstiff.inference`` or
-``negstiff.experiments``, and writes its output atomically (``shared/docs/contract.md``)."""
+``negstiff.experiments``, and writes its output atomically (``docs/contract.md``)."""
 
 from __future__ import annotations
 
