@@ -70,9 +70,9 @@ def rod_geometry(z, L: float, ca, sa, second: bool = True):
 
 @dataclass(frozen=True)
 class Device:
-    """Geometry, material and mass of the device, with its damping and extra effects.
+    """Geometry, material and mass of the device, with its damping and extra effects (SI units).
 
-    Parameters (SI units)
+    Parameters
     ----------
     E : Young's modulus of the frame [Pa]
     alpha_deg : frame angle [deg]
@@ -194,7 +194,7 @@ class Device:
         return u + effects.stiffness_potential(self.extra, z) if include_extra else u
 
     def damping_force(self, zdot):
-        """c z' + c_nl z'|z'| [N]."""
+        """The damping force ``c z' + c_nl z'|z'|`` [N]."""
         zdot = np.asarray(zdot, float)
         return self.c * zdot + self.c_nl * zdot * np.abs(zdot)
 

@@ -165,7 +165,7 @@ class Model:
         return u + effects.stiffness_potential(self.extra, z) if include_extra else u
 
     def damping_force(self, zdot):
-        """D(z') = c z' + c_nl z'|z'| [N] (without the velocity-dependent extra effects)."""
+        """The damping force ``D(z') = c z' + c_nl z'|z'|`` [N] (without the velocity-dependent extra effects)."""
         zdot = np.asarray(zdot, float)
         return self.c * zdot + self.c_nl * zdot * np.abs(zdot)
 

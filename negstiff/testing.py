@@ -61,7 +61,7 @@ def assert_covers(posterior, **values: float) -> None:
 def assert_agree(
     a: float, b: float, sd_a: float, sd_b: float = 0.0, k: float = 3.0, what: str = "the estimates"
 ) -> None:
-    """Assert |a - b| <= k sqrt(sd_a^2 + sd_b^2): two estimates agree within ``k`` combined standard errors."""
+    """Assert ``|a - b| <= k sqrt(sd_a^2 + sd_b^2)``: two estimates agree within ``k`` combined standard errors."""
     tol = k * math.hypot(sd_a, sd_b)
     if not (math.isfinite(a) and math.isfinite(b) and abs(a - b) <= tol):
         z = abs(a - b) / math.hypot(sd_a, sd_b) if math.hypot(sd_a, sd_b) > 0 else math.inf

@@ -147,7 +147,7 @@ def check_frf(rec: Measurement, band: tuple[float, float] | None = None) -> None
 def frf(rec: Measurement, band: tuple[float, float] | None = None, segment_s: float | None = None) -> dict[str, Any]:
     """H1/H2 with coherence, every resonance peak in ``band`` fitted (the contract's frf result).
 
-    Peaks: local maxima of |H1| standing 6 dB above the band's median level (a resonance of a
+    Peaks: local maxima of ``|H1|`` standing 6 dB above the band's median level (a resonance of a
     lightly damped well stands 20-40 dB above it), at coherence above 0.5. Without ``segment_s`` the
     Welch segment is ``SEGMENT_S``, lengthened (up to a quarter of the record) until the resolution
     is ``RESOLUTION_RATIO`` of the dominant peak's half-power bandwidth. The result also holds the well

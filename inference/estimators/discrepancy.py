@@ -528,13 +528,16 @@ class Discrepancy(Estimator):
                 "the baseline's equation error is spread evenly: no regime carries more than 1.5x its share of the "
                 f"record (largest: {worst}, {w['ratio']:.1f}x)"
             )
+        def where(regime: str) -> str:  # "concentrated at large stroke", "... crossing the barrier"
+            return f"at {regime}" if regime == "large stroke" else regime
+
         txt = (
-            f"the baseline's equation error is concentrated {worst} ({100 * w['residual_share']:.0f} % of the squared "
+            f"the baseline's equation error is concentrated {where(worst)} ({100 * w['residual_share']:.0f} % of the squared "
             f"residual in {100 * w['time_share']:.0f} % of the record, {w['ratio']:.1f}x its share)"
         )
         if len(parts) > 1:
             n2, w2 = parts[1]
-            txt += f"; next {n2} ({w2['ratio']:.1f}x)"
+            txt += f"; next {where(n2)} ({w2['ratio']:.1f}x)"
         return txt
 
     def result(self) -> dict[str, Any]:

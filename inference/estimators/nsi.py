@@ -180,7 +180,7 @@ class NSI(Identifier):
     # --- one well ----------------------------------------------------------------------------
     def extended_input(self, rec: Measurement, zs: np.ndarray, v: np.ndarray, z_ref: float):
         """The subspace step's problem about ``z_ref``: x = z - z_ref, the standardised input channels (the
-        input and the basis functions -x^2, -x^3, -z'|z'|), their scales and means."""
+        input and the basis functions ``-x^2, -x^3, -z'|z'|``), their scales and means."""
         x = zs - z_ref
         lin = -rec.u if rec.input_name == "base_acc" else rec.u
         chans = np.column_stack([lin, -(x**2), -(x**3), -v * np.abs(v)])
