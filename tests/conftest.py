@@ -25,10 +25,6 @@ def rng():
     return np.random.default_rng(12345)
 
 
-# the benchmark's split and protocol, from the one Silverbox module (experiments/silverbox.py)
-SILVERBOX_TRAIN, SILVERBOX_TEST, SILVERBOX_ARROW = silverbox_study.TRAIN, silverbox_study.TEST, silverbox_study.ARROW
-
-
 @pytest.fixture(scope="session")
 def silverbox():
     """The Silverbox record (real data: an electronic Duffing oscillator, force input V1, output V2),
@@ -43,11 +39,30 @@ def silverbox_fits(silverbox):
     from negstiff.inference.estimators.nsi import NSI
     from negstiff.inference.estimators.sindy import SINDy
 
-    train = silverbox.segment(*SILVERBOX_TRAIN)
+    train = silverbox.segment(*silverbox_study.TRAIN)
     return {"nsi": NSI().fit(train), "sindy": SINDy().fit(train)}
 
 
-def silverbox_prediction_mv(model, m, part) -> float:
-    """Free-run rms error [mV] over ``part`` of the Silverbox record (the benchmark's protocol:
-    ``experiments.silverbox.prediction_error_mv``)."""
-    return silverbox_study.prediction_error_mv(model, m, part)
+UNIT_TIER = {
+    "test_equation.py",
+    "test_device.py",
+    "test_measurement.py",
+    "test_measurement_properties.py",
+    "test_structure.py",
+    "test_simulator.py",
+    "test_shooting.py",
+    "test_rig.py",
+    "test_estimator.py",
+    "test_formats.py",
+    "test_probe.py",
+}
+"""The fast unit tier (about 40 s on 2 cores): the physics' building blocks, records and their errors, the
+estimators' contract, the command line's refusals. ``pytest -m unit`` runs it alone; a full run runs it
+first, so a broken building block shows before the studies that use it."""
+
+
+def pytest_collection_modifyitems(config, items):
+    for item in items:
+        if item.path.name in UNIT_TIER:
+            item.add_marker(pytest.mark.unit)
+    items.sort(key=lambda item: item.path.name not in UNIT_TIER)  # stable: the unit tier first, in its order

@@ -4,6 +4,7 @@ what they share: the test utility module (imported as ``from records import ...`
 import numpy as np
 
 from negstiff import Model
+from negstiff.experiments import silverbox as _silverbox
 
 TRUTH = Model(m=0.2, k1=426.0, k2=-3060.0, k3=7.77e5, c=0.35, c_nl=0.1)
 FS = 512.0
@@ -169,3 +170,13 @@ def rk4_random_records(seeds, duration=20.0, rms=8.0, band=(2.0, 30.0), oversamp
         zb, ub = Z[b, ::oversample][k0:], acc[b, ::oversample][k0:]
         out.append((ub + table_noise * rng.standard_normal(ub.size), zb + laser * rng.standard_normal(zb.size)))
     return out
+
+
+# the Silverbox benchmark's split and protocol, from the one Silverbox module (experiments/silverbox.py)
+SILVERBOX_TRAIN, SILVERBOX_TEST, SILVERBOX_ARROW = _silverbox.TRAIN, _silverbox.TEST, _silverbox.ARROW
+
+
+def silverbox_prediction_mv(model, m, part) -> float:
+    """Free-run rms error [mV] over ``part`` of the Silverbox record (the benchmark's protocol:
+    ``experiments.silverbox.prediction_error_mv``)."""
+    return _silverbox.prediction_error_mv(model, m, part)

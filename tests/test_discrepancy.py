@@ -5,7 +5,7 @@ data are generated here; the workflow sees only the measured columns."""
 import dataclasses
 
 import pytest
-from conftest import SILVERBOX_ARROW, SILVERBOX_TEST, SILVERBOX_TRAIN, silverbox_prediction_mv
+from records import SILVERBOX_ARROW, SILVERBOX_TEST, SILVERBOX_TRAIN, silverbox_prediction_mv
 
 from negstiff.inference.estimators.discrepancy import LINEAR_BASELINE, Discrepancy
 from negstiff.inference.record.measurement import from_arrays

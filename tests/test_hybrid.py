@@ -5,7 +5,7 @@ import functools
 
 import numpy as np
 import pytest
-from conftest import SILVERBOX_TEST, SILVERBOX_TRAIN
+from records import SILVERBOX_TEST, SILVERBOX_TRAIN
 
 from negstiff.inference.estimators.hybrid import fit_hybrid
 from negstiff.inference.record.measurement import from_arrays
@@ -122,7 +122,7 @@ def test_silverbox_hybrid_predicts_below_half_a_millivolt(silverbox, silverbox_f
     # The issue's target: physics + term <= 0.5 mV on the multisine test, trained on the training part
     # only; the physical model (refined SINDy) predicts at 0.24 mV, and the term must not make it worse,
     # fitted jointly (measured 0.225 mV) or with the physics held (0.230 mV, its coefficients the physics').
-    from conftest import silverbox_prediction_mv
+    from records import silverbox_prediction_mv
 
     physics = silverbox_fits["sindy"].model_
     hyb = fit_hybrid(physics, silverbox.segment(*SILVERBOX_TRAIN))

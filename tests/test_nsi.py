@@ -2,7 +2,7 @@
 
 import numpy as np
 import pytest
-from conftest import SILVERBOX_TEST, silverbox_prediction_mv
+from records import SILVERBOX_TEST, silverbox_prediction_mv
 from scipy import linalg, signal
 
 from negstiff.errors import MeasurementError

@@ -4,7 +4,7 @@ the Silverbox benchmark against the output-error Duffing fit the issue quotes.""
 
 import numpy as np
 import pytest
-from conftest import SILVERBOX_ARROW, SILVERBOX_TEST, SILVERBOX_TRAIN, silverbox_prediction_mv
+from records import SILVERBOX_ARROW, SILVERBOX_TEST, SILVERBOX_TRAIN, silverbox_prediction_mv
 
 from negstiff.inference.estimators.nsi import NSI
 from negstiff.inference.estimators.sindy import SINDy

@@ -50,8 +50,8 @@ def _coefficient_table(res, methods=("NSI", "SINDy")):
 
 @pytest.fixture(scope="module")
 def velocity_record(tmp_path_factory):
-    """300 s of TRUTH (scipy DOP853) as a vibrometer measures it: relative velocity only (0.1 mm/s noise)."""
-    t, u, _, v = dop853_record(duration=300.0, rtol=1e-8)  # integration error far below the 0.1 mm/s noise
+    """120 s of TRUTH (scipy DOP853) as a vibrometer measures it: relative velocity only (0.1 mm/s noise)."""
+    t, u, _, v = dop853_record(duration=120.0, rtol=1e-8)  # integration error far below the 0.1 mm/s noise
     v = v + 1e-4 * np.random.default_rng(4).standard_normal(v.size)
     eq = TRUTH.equilibria()
     d = tmp_path_factory.mktemp("velocity")
