@@ -9,7 +9,7 @@ and the ensemble gives each term's inclusion probability.
 
 import matplotlib.pyplot as plt
 
-from negstiff import SINDy, Rig
+from negstiff import Rig, SINDy
 from negstiff.inference.record.measurement import Measurement
 from negstiff.models import SEED_LIKE_CUBIC
 

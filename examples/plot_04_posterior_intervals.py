@@ -22,7 +22,7 @@ print("converged:", post.result()["converged"], post.result()["warnings"] or "")
 # %%
 # Each coefficient: the posterior's 90 % interval, the two methods, the truth
 fig, axes = plt.subplots(1, 3, figsize=(9, 2.6))
-for ax, k in zip(axes, ("k1", "k3", "c")):
+for ax, k in zip(axes, ("k1", "k3", "c"), strict=False):
     p = params[k]
     ax.errorbar([0], [p["mean"]], yerr=[[p["mean"] - p["hdi_low"]], [p["hdi_high"] - p["mean"]]], fmt="o",
                 label="posterior 90 %")

@@ -17,7 +17,7 @@ from negstiff.models import SEED_LIKE_CUBIC
 amplitudes = np.arange(4.0, 16.0, 1.0)
 steps = Rig(SEED_LIKE_CUBIC, seed=6).sweep(9.0, amplitudes, start="plus", record_periods=40)
 fig, ax = plt.subplots(figsize=(7, 3.5))
-for a, step in zip(amplitudes, steps):
+for a, step in zip(amplitudes, steps, strict=False):
     c = characterize(Measurement.from_rig(step), forcing_hz=9.0, lle=False, poincare=True)
     ax.plot(np.full(len(c["poincare_z"]), a), 1e3 * np.asarray(c["poincare_z"]), "k.", ms=2)
     print(f"{a:5.1f} m/s^2: period {c['period']}, {c['regime']}")

@@ -1,6 +1,7 @@
 """The baselines the benchmarks measure against: what a user would write without negstiff (scipy's
 ``solve_ivp`` with a Python right-hand side) and the practical limit (a plain C RK4 loop compiled with
-the system compiler), and the timer (median of repeats)."""
+the system compiler), and the timer (median of repeats).
+"""
 
 from __future__ import annotations
 

@@ -162,8 +162,8 @@ def _batch_benchmark(model, u_cross: np.ndarray, dt: float, zp: float, t_ivp: fl
 
 def nsi_benchmark(quick: bool = False) -> tuple[list[list[str]], dict]:
     """NSI on a 300 s record at 512 Hz: total time and peak memory; the LQ step against the direct QR
-    of the whole Hankel stack (the baseline whose memory is N x 2i(m+l) at once)."""
-
+    of the whole Hankel stack (the baseline whose memory is N x 2i(m+l) at once).
+    """
     from scipy import linalg
 
     from negstiff.inference.estimators import subspace
@@ -233,7 +233,8 @@ def nsi_benchmark(quick: bool = False) -> tuple[list[list[str]], dict]:
 
 def bifurcation_benchmark(quick: bool = False) -> tuple[list[list[str]], dict]:
     """The 9 Hz bifurcation map's simulations: all sweeps in one batched rig run against the same
-    records simulated one by one (each step started afresh from its well, the same simulated time)."""
+    records simulated one by one (each step started afresh from its well, the same simulated time).
+    """
     n_amp = 25 if quick else 100
     amps = list(np.linspace(4.0, 26.0, n_amp))
     rig = Rig(seed=31)
@@ -267,7 +268,8 @@ def bifurcation_benchmark(quick: bool = False) -> tuple[list[list[str]], dict]:
 def posterior_benchmark(quick: bool = False) -> tuple[list[list[str]], dict]:
     """Effective samples per second: emcee with the batched (vectorised) likelihood against the same
     sampler calling the same likelihood walker by walker (emcee's default, vectorize=False). With the
-    same seed both give the same chain (checked), so the ESS is the same and the ratio is the time's."""
+    same seed both give the same chain (checked), so the ESS is the same and the ratio is the time's.
+    """
     import emcee
 
     from negstiff.inference.estimators.posterior import LogPosterior, Posterior
@@ -361,7 +363,8 @@ def refinement_benchmark(quick: bool = False) -> tuple[list[list[str]], dict]:
     Levenberg-Marquardt with the start states eliminated, scipy's ``least_squares`` given the Jacobian's
     sparsity (a window's start state moves only that window), and with a dense finite-difference
     Jacobian (two batched runs per parameter and per start state: what ``least_squares`` does unless told
-    the sparsity); each with its evaluations and its end error over the best of the three."""
+    the sparsity); each with its evaluations and its end error over the best of the three.
+    """
     from negstiff.experiments.silverbox import TRAIN, load_silverbox
     from negstiff.inference.estimators.nsi import NSI
     from negstiff.inference.record.measurement import from_arrays
@@ -409,7 +412,8 @@ def refinement_benchmark(quick: bool = False) -> tuple[list[list[str]], dict]:
 def continuation_benchmark(quick: bool = False) -> tuple[list[list[str]], dict]:
     """A 9 Hz continuation from 2 to 30 m/s^2 (issue 16) against the brute-force route a user would take
     instead: a stepped sweep in 0.1 m/s^2 steps with the state carried over (150 settling and 16 recorded
-    periods a step, one simulator call each), which finds only the stable orbits."""
+    periods a step, one simulator call each), which finds only the stable orbits.
+    """
     from negstiff.models import SEED_LIKE_CUBIC
     from negstiff.models.continuation import nfrc
 

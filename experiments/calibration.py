@@ -1,5 +1,6 @@
 """Calibration of the rig's device against the reference study's headline figures, and the device section of
-the report (reference study Figure 2): exact K(z), U(z) against the Taylor and least-squares cubics."""
+the report (reference study Figure 2): exact K(z), U(z) against the Taylor and least-squares cubics.
+"""
 
 from __future__ import annotations
 

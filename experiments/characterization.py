@@ -44,7 +44,7 @@ def bifurcation_map(rig: Rig, freq: float, amplitudes, settle_periods: int, reco
     t_sim = time.perf_counter() - t0
     eq = rig.equilibria
     points = []
-    for (start, direction), recs in zip(plans, sweeps):
+    for (start, direction), recs in zip(plans, sweeps, strict=False):
         for rec in recs:
             p = map_point(record_measurement(rec), freq, (eq.z_minus, eq.z_0, eq.z_plus))
             points.append(
@@ -66,7 +66,8 @@ def bifurcation_map(rig: Rig, freq: float, amplitudes, settle_periods: int, reco
 
 def characterization_section(rep: Report, results: dict[str, Any], fast: bool, seed_: int = 0) -> None:
     """The reference study's section 3 on rig records: the 9 Hz bifurcation map (Figure 4), phase portraits and
-    Lyapunov exponents of four regimes (Figures 5-6), Poincare sections of the cross-well one (Figure 7)."""
+    Lyapunov exponents of four regimes (Figures 5-6), Poincare sections of the cross-well one (Figure 7).
+    """
     res: dict[str, Any] = {}
     results["characterization"] = res
     rig = Rig(seed=seed_ + 5)
@@ -107,7 +108,7 @@ def _portraits_and_lle_part(rep: Report, res: dict[str, Any], rig: Rig, fast: bo
     recs = rig.sweeps(9.0, [[a] for a, _ in cases], ["plus"] * len(cases), 100, 300 if fast else 900)
     fig, axes = plt.subplots(2, 4, figsize=(14, 5.5))
     lle_rows = []
-    for k, ((amp, label), rr) in enumerate(zip(cases, recs)):
+    for k, ((amp, label), rr) in enumerate(zip(cases, recs, strict=False)):
         rec = rr[0]
         m = record_measurement(rec)
         c = characterize(m, 9.0, (rig.equilibria.z_minus, rig.equilibria.z_0, rig.equilibria.z_plus))
@@ -141,7 +142,8 @@ def _portraits_and_lle_part(rep: Report, res: dict[str, Any], rig: Rig, fast: bo
         "period-4 and cross-well responses at 9 Hz (rig records, measured z).",
     )
     res["lle_table"] = [
-        dict(zip(["case", "amplitude", "period", "regime", "wolf", "rosenstein", "benettin", "chaotic"], r))
+        dict(zip(("case", "amplitude", "period", "regime", "wolf", "rosenstein", "benettin", "chaotic"), r,
+                 strict=True))
         for r in lle_rows
     ]
     rep.table(

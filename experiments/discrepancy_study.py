@@ -44,7 +44,8 @@ def _size_text(v) -> str:
 @dataclass(frozen=True)
 class WorkflowRun:
     """The discrepancy workflow on one rig record: the effect the rig hid (``"none"``: nothing) and its
-    size, the record's seed, the fitted workflow."""
+    size, the record's seed, the fitted workflow.
+    """
 
     hidden: str
     size: Any
@@ -80,7 +81,8 @@ def compute_hidden(duration: float, seeds: tuple[int, ...], effects=None) -> lis
 
 def hidden_part(rep: Report, res: dict[str, Any], duration: float, seeds: tuple[int, ...], effects=None) -> dict:
     """Compute (``compute_hidden``), then render the table of named effects; returns the first seed's run
-    of each effect (for the figures)."""
+    of each effect (for the figures).
+    """
     runs = compute_hidden(duration, seeds, effects)
     rows, out = [], []
     for run in runs:

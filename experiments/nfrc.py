@@ -1,6 +1,7 @@
 """Continuation in the report and the CLI: the figure of ``negstiff nfrc`` (the response's extent along
 each branch, stable solid, unstable dashed, bifurcations marked) and the report's section 8, the
-identified models' continuation set on the rig's 9 Hz bifurcation map (compute, then render)."""
+identified models' continuation set on the rig's 9 Hz bifurcation map (compute, then render).
+"""
 
 from __future__ import annotations
 
@@ -18,7 +19,7 @@ MARKERS = {"fold": ("o", "C3"), "period_doubling": ("s", "C2"), "neimark_sacker"
 
 
 def figure(result: dict[str, Any], title: str = ""):
-    """max z and min z along every branch against the continuation parameter [mm]."""
+    """Max z and min z along every branch against the continuation parameter [mm]."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -48,7 +49,7 @@ def figure(result: dict[str, Any], title: str = ""):
     title = title or f"continuation ({result['settings']['well']} well): solid stable, dashed unstable"
     ax.set(xlabel=f"{'frequency' if par == 'f_hz' else 'amplitude'} [{unit}]", ylabel="max z, min z [mm]", title=title)
     handles, labels = ax.get_legend_handles_labels()
-    seen = dict(zip(labels, handles))
+    seen = dict(zip(labels, handles, strict=False))
     ax.legend(seen.values(), seen.keys(), fontsize=8)
     fig.tight_layout()
     return fig
@@ -84,7 +85,8 @@ def first_doubling_predicted(result: dict[str, Any]) -> float | None:
 
 def posterior_draws(m, n_draws: int, seed_: int, fast: bool) -> list:
     """Models drawn from the coefficient posterior of the record ``m`` (emcee, the suite's defaults but
-    two ensembles, for a dozen draws; in --fast, two short ensembles)."""
+    two ensembles, for a dozen draws; in --fast, two short ensembles).
+    """
     from negstiff.inference.estimators.posterior import Posterior
     from negstiff.models import Model
 
@@ -108,7 +110,8 @@ SWEEP_BAND = (5.5, 11.0)
 
 def jump_frequency(rec, f_start: float, f_stop: float, duration: float) -> float:
     """Where a swept sine's response jumps: the largest change of its envelope (the analytic signal's
-    modulus, averaged over 0.5 s), at the sweep's instantaneous frequency there."""
+    modulus, averaged over 0.5 s), at the sweep's instantaneous frequency there.
+    """
     from scipy import signal
 
     z = rec.columns["z"] - np.mean(rec.columns["z"])
@@ -123,7 +126,8 @@ def jump_frequency(rec, f_start: float, f_stop: float, duration: float) -> float
 
 def frequency_sweeps(models: dict[str, Any], fast: bool, seed_: int) -> list[dict[str, Any]]:
     """Slow linear swept sines on the rig (the as-built device) around z_plus, up and down, at
-    ``SWEEP_AMPLITUDES``; beside each, the models' folds (continuation in frequency) at that amplitude."""
+    ``SWEEP_AMPLITUDES``; beside each, the models' folds (continuation in frequency) at that amplitude.
+    """
     from negstiff.models.continuation import ContinuationError, nfrc
     from negstiff.models.rig import Rig
 
@@ -153,7 +157,8 @@ STEP_HZ = {False: 0.1, True: 0.25}
 def stepped_jumps(amplitude: float, fast: bool, seed_: int) -> dict[str, float | None]:
     """Stepped sines on the rig (the as-built device, from z_plus) across ``SWEEP_BAND``, up and down in one
     batched run, as a lab measures a response curve: where each sweep's response amplitude (half the
-    measured z's peak-to-peak) jumps (``characterize.jump``)."""
+    measured z's peak-to-peak) jumps (``characterize.jump``).
+    """
     from negstiff.inference.analysis.characterize import jump
     from negstiff.models.rig import Rig
 
@@ -161,7 +166,7 @@ def stepped_jumps(amplitude: float, fast: bool, seed_: int) -> dict[str, float |
     up = list(np.round(np.arange(SWEEP_BAND[0], SWEEP_BAND[1] + step / 2, step), 6))
     sweeps = Rig(seed=seed_ + 8).stepped_sines([up, up[::-1]], amplitude, ["plus", "plus"], 40 if fast else 60, 24)
     out = {}
-    for direction, recs in zip(("up", "down"), sweeps):
+    for direction, recs in zip(("up", "down"), sweeps, strict=False):
         points = [{"f_hz": r.truth["excitation"]["freq_hz"], "amplitudes": [0.5 * float(np.ptp(r.columns["z"]))]}
                   for r in recs]  # fmt: skip
         out[direction] = jump(points)
@@ -260,7 +265,8 @@ def continuation_section(rep, results: dict[str, Any], fast: bool, seed_: int = 
 
 def _render_sweeps(rep, res: dict[str, Any], study: ContinuationStudy) -> None:
     """The swept sines' jumps against the folds: sweeping up, the branch the response is on ends at the
-    upper fold; sweeping down, at the lower one (hardening or softening alike)."""
+    upper fold; sweeping down, at the lower one (hardening or softening alike).
+    """
     rows = []
     for s in study.sweeps:
         row = [s["amplitude"], s["direction"], f"{s['rate_hz_s']:+.3f}", s["rig_jump_hz"], s["stepped_jump_hz"]]
@@ -319,8 +325,8 @@ def _overlay(study: ContinuationStudy):
     import matplotlib.pyplot as plt
 
     fig, axes = plt.subplots(1, 2, figsize=(13, 4.6), sharey=True)
-    colors = dict(zip(study.models, ("k", "C0", "C3")))
-    for ax, well in zip(axes, ("plus", "minus")):
+    colors = dict(zip(study.models, ("k", "C0", "C3"), strict=False))
+    for ax, well in zip(axes, ("plus", "minus"), strict=False):
         for p in study.rig_map["points"]:
             if p["start"] == well:
                 ax.plot(np.full(len(p["poincare_z"]), p["amplitude"]), 1e3 * np.asarray(p["poincare_z"]), ".",

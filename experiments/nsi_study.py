@@ -32,7 +32,8 @@ from .report import Report, run_study
 def true_floor(truth, m: Measurement, start: int) -> float:
     """The TRUE model's own held-out free-run error on the measured record (the contract's metric), by
     the validation every identified model goes through (``validation.validate``: the same start state,
-    the same input route), so the floor and the models' errors compare."""
+    the same input route), so the floor and the models' errors compare.
+    """
     return float(validate(truth, m, start)["rms_percent"])
 
 
@@ -43,7 +44,8 @@ def pct(a: float, b: float) -> str:
 @dataclass(frozen=True)
 class PolynomialTruthPart:
     """What the polynomial-truth part measured: NSI's fit of a cross-well rig record of the polynomial
-    truth, the true model's own free-run floor on the same held-out data, the record's well crossings."""
+    truth, the true model's own free-run floor on the same held-out data, the record's well crossings.
+    """
 
     truth: Model
     measurement: Measurement
@@ -257,7 +259,8 @@ def _render_forces(rep: Report, part: PolynomialTruthPart) -> None:
 @dataclass(frozen=True)
 class AsBuiltPart:
     """What the as-built part measured: NSI's cubic on a record of the exact-geometry device, and the
-    exact model's own held-out free-run floor on the same record."""
+    exact model's own held-out free-run floor on the same record.
+    """
 
     measurement: Measurement
     est: NSI
@@ -334,7 +337,8 @@ def as_built_part(rep: Report, res: dict[str, Any], duration: float, seed_: int)
 
 def compute_integration_sensitivity(duration: float, seed_: int) -> dict[str, dict[str, Any]]:
     """NSI on the same record with the base displacement integrated in the frequency and in the time
-    domain: the base displacement's error, the wells' frequency errors and k2's error, per method."""
+    domain: the base displacement's error, the wells' frequency errors and k2's error, per method.
+    """
     out = {}
     for method in ("fft", "time"):
         rec = Rig(SEED_LIKE_CUBIC, sensors=Sensors(integration=method), seed=seed_).random(
@@ -391,11 +395,11 @@ def stabilization_part(rep: Report, res: dict[str, Any], est: NSI, m: Measuremen
     rows = est.stabilization(m, orders=(2, 4, 6, 8), block_rows=(10, 20, 30, 40))
     res["stabilization"] = [{k: v for k, v in r.items() if k != "poles"} | {"poles": r.get("poles", [])} for r in rows]
     fig, axes = plt.subplots(1, 2, figsize=(11, 3.8), sharey=True)
-    for ax, well in zip(axes, ("minus", "plus")):
+    for ax, well in zip(axes, ("minus", "plus"), strict=False):
         for r in rows:
             if r["well"] != well or "poles" not in r:
                 continue
-            for f, z in r["poles"]:
+            for f, _zeta in r["poles"]:
                 if 0 < f < 40:
                     ax.plot(
                         f,

@@ -48,7 +48,8 @@ def peak(fn):
 def _nsi_problem(n: int, seed: int = 21) -> tuple[np.ndarray, np.ndarray]:
     """NSI's own subspace problem around z_plus: the four standardised input channels (the base
     acceleration and the nonlinear basis functions) and the standardised output, ``n`` samples of a
-    cross-well rig record of the polynomial truth."""
+    cross-well rig record of the polynomial truth.
+    """
     from negstiff.inference.estimators.nsi import NSI, well_guesses
     from negstiff.inference.steps.derivatives import smooth_and_differentiate
 
@@ -118,7 +119,8 @@ def subspace_peers(sizes: tuple[int, ...] = (100_000, 1_000_000), i: int = 30) -
 
 def _sindy_truth_row(model: Model) -> dict[str, float]:
     """The v' equation's coefficients of a cubic model in pysindy's names (x0 = z, x1 = z', u0 = base acc.):
-    m z'' = -m a - K(z) - c z' - c_nl z'|z'|, K = k0 - k1 z + k2 z^2 + k3 z^3."""
+    m z'' = -m a - K(z) - c z' - c_nl z'|z'|, K = k0 - k1 z + k2 z^2 + k3 z^3.
+    """
     return {"1": -model.k0 / model.m, "x0": model.k1 / model.m, "x0^2": -model.k2 / model.m,
             "x0^3": -model.k3 / model.m, "x1": -model.c / model.m}  # fmt: skip
 
@@ -158,10 +160,10 @@ def sindy_peers(duration: float = 300.0, seed: int = 1) -> tuple[list[list[str]]
             function_library=ps.PolynomialLibrary(degree=3), spatiotemporal_grid=t, K=400, p=4, H_xt=[0.05]
         )
         model = ps.SINDy(feature_library=lib, optimizer=ps.STLSQ(threshold=thr, alpha=1e-8, normalize_columns=True))
-        np.random.seed(seed)  # WeakPDELibrary places its K subdomains with the global numpy generator
+        np.random.seed(seed)  # noqa: NPY002 - WeakPDELibrary places its K subdomains with the global numpy generator
         model.fit(x, t=t, u=m.u[:, None])
         elapsed = time.perf_counter() - t0
-        coef = dict(zip(model.get_feature_names(), model.coefficients()[1]))
+        coef = dict(zip(model.get_feature_names(), model.coefficients()[1], strict=False))
         err = errors(lambda k: coef.get(k, 0.0))
         score = max(abs(e) for e in err.values())
         if best is None or score < best[0]:
@@ -211,7 +213,7 @@ def posterior_peers(duration: float = 300.0, peer_seconds: float = 2.0) -> tuple
     names = ("k1", "k2", "k3", "c", "c_nl")
 
     def log_prob(theta):
-        p = dict(zip(names, theta))
+        p = dict(zip(names, theta, strict=False))
         mm = Model(m=truth.m, k0=truth.k0, **p)
 
         def rhs(t_, x):
@@ -250,7 +252,8 @@ def posterior_peers(duration: float = 300.0, peer_seconds: float = 2.0) -> tuple
 def end_to_end_peers() -> tuple[list[list[str]], dict]:
     """On the Silverbox training part: NSI and SINDy end to end (their output-error stage included)
     against a plain output-error fit of the cubic from a linear start (``refine`` from k1, c of the
-    FRF peak and k2 = k3 = c_nl = 0): time and the test part's simulation error."""
+    FRF peak and k2 = k3 = c_nl = 0): time and the test part's simulation error.
+    """
     from negstiff.inference.analysis.frf import frf
     from negstiff.inference.estimators.nsi import NSI
     from negstiff.inference.estimators.sindy import SINDy
@@ -347,7 +350,8 @@ def peers_section(quick: bool) -> list[str]:
 
 def scaling(durations: tuple[float, ...] = (30.0, 300.0, 3000.0), seed: int = 7) -> dict[str, dict[float, dict]]:
     """Wall time (untraced) and peak traced memory (a second, traced run) of NSI, SINDy, the output-error
-    refinement and the posterior (defaults) on cross-well rig records of the polynomial truth of each length."""
+    refinement and the posterior (defaults) on cross-well rig records of the polynomial truth of each length.
+    """
     from negstiff.inference.estimators.nsi import NSI
     from negstiff.inference.estimators.posterior import Posterior
     from negstiff.inference.estimators.sindy import SINDy

@@ -47,7 +47,8 @@ def _arviz_png(plot, *args, **kw) -> tuple[bytes | None, str]:
 @dataclass(frozen=True)
 class PredictiveCheck:
     """A posterior predictive band over the first windows (end to end): the measured samples, the 5 and
-    95 % points of the draws' free runs plus noise, the draws' median free run, and the share inside."""
+    95 % points of the draws' free runs plus noise, the draws' median free run, and the share inside.
+    """
 
     t: np.ndarray
     measured: np.ndarray
@@ -59,7 +60,8 @@ class PredictiveCheck:
 
 def predictive_check(post: Posterior, n_draws: int = 100, seconds: float = 4.0, seed: int = 0) -> PredictiveCheck:
     """Simulate ``n_draws`` posterior draws over the windows of the first ``seconds``, each a free run from
-    its window's start state, and add the draw's measurement noise."""
+    its window's start state, and add the draw's measurement noise.
+    """
     pr, win, lp = post.result_, post.windows_, post.logpost_
     rng = np.random.default_rng(seed)
     flat = pr.samples.reshape(-1, pr.samples.shape[-1])
@@ -79,7 +81,8 @@ def predictive_check(post: Posterior, n_draws: int = 100, seconds: float = 4.0, 
 class CoefficientPart:
     """What the coefficient part measured: the posterior of the cubic's coefficients on the first
     ``duration`` seconds of a rig record of the polynomial truth (wall time ``elapsed``), NSI and SINDy on
-    the whole record, and the posterior predictive check."""
+    the whole record, and the posterior predictive check.
+    """
 
     truth: Model
     measurement: Measurement
@@ -127,7 +130,8 @@ def compute_coefficients(duration: float, seed_: int, fast: bool) -> Coefficient
 
 def coefficient_part(rep: Report, res: dict[str, Any], duration: float, seed_: int, fast: bool) -> None:
     """Compute (``compute_coefficients``), then render: the table, the forest, arviz's trace and pair
-    plots, the predictive check, what the data determine."""
+    plots, the predictive check, what the data determine.
+    """
     part = compute_coefficients(duration, seed_, fast)
     j = part.result()
     res["coefficients"] = j
@@ -259,7 +263,8 @@ DEVICE_TRUTH = {
 @dataclass(frozen=True)
 class DevicePart:
     """What the device part measured: the device posterior of one as-built record with the mass free and
-    with it weighed (``posteriors``: prior -> (fitted Posterior, wall time))."""
+    with it weighed (``posteriors``: prior -> (fitted Posterior, wall time)).
+    """
 
     measurement: Measurement
     posteriors: dict[str, tuple[Posterior, float]]

@@ -16,8 +16,9 @@ and a section per analysis (``experiments.sections``).
 from __future__ import annotations
 
 import time
+from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import Any, Callable, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -38,7 +39,8 @@ harmonic: a shaker at one frequency. A random, swept or multisine input spreads 
 
 def harmonic_frequency(rec) -> float | None:
     """The forcing frequency [Hz] of a harmonic record (``HARMONIC_SHARE`` of the input's power in one line,
-    refined by least squares), else None."""
+    refined by least squares), else None.
+    """
     from negstiff.inference.analysis.periodicity import refine_frequency
 
     u = rec.u - rec.u.mean()
@@ -84,7 +86,8 @@ def report_records(
     {"max_steps": 2000}, ...}``: the estimators' parameters); ``progress`` hears of each analysis. Returns the
     ``Report`` (``write(folder)`` writes it). ``gravity`` [m/s^2] along the motion overrides the records'
     metadata (0 for a horizontal device); ``aux`` names measured auxiliary channels of a single record (SINDy
-    and the discrepancy workflow offer each as a term)."""
+    and the discrepancy workflow offer each as a term).
+    """
     say = progress or (lambda text: None)
     options = {k: dict(v) for k, v in (options or {}).items()}
     paths = [Path(d) for d in data]
@@ -130,8 +133,9 @@ def report_records(
 
 
 def _crosses_wells(rec) -> bool:
-    """Does the record visit both wells (``periodicity.classify_regime`` against its metadata's rest positions,
-    else the wells of a cubic fitted to it)?"""
+    """Whether the record visits both wells (``periodicity.classify_regime`` against its metadata's rest
+    positions, else the wells of a cubic fitted to it).
+    """
     from negstiff.inference.analysis.periodicity import classify_regime
     from negstiff.inference.estimators.nsi import well_guesses
 

@@ -6,7 +6,8 @@ Both open with the summary (``summary``) and a table of contents; every section 
 numbered and has an anchor. In the HTML a long paragraph (method detail) shows its first sentence and
 folds the rest. A script builds a report from results with ``add`` (``experiments.sections``:
 one section per kind of result, the same the command ``negstiff report`` writes), ``add_text``,
-``add_table``, ``add_figure`` and ``write``."""
+``add_table``, ``add_figure`` and ``write``.
+"""
 
 from __future__ import annotations
 
@@ -43,16 +44,17 @@ class Report:
         self.summary_lines.append(text)
 
     # --- building from results (a script's report, ``negstiff report``) ----------------------------
-    def add(self, result, label: str = "") -> "Report":
+    def add(self, result, label: str = "") -> Report:
         """A section for ``result``: a record, a fitted ``NSI``/``SINDy``/``Posterior``/``Discrepancy``, an
         ``Identification``, an ``frf``/``characterize``/map result (``sections.section_for``). ``label``
-        tells results of several records apart (a column of the coefficient table each). Returns the report."""
+        tells results of several records apart (a column of the coefficient table each). Returns the report.
+        """
         sec = section_for(result, label)
         self.figures.update(sec.figures)
         self.blocks.append(("section", sec))
         return self
 
-    def add_failure(self, title: str, reason: str) -> "Report":
+    def add_failure(self, title: str, reason: str) -> Report:
         """A section that could not be made, in its place, with the reason."""
         sec = Section("failure", "", title)
         sec.warning(f"not made: {reason}")
@@ -60,19 +62,19 @@ class Report:
         self.blocks.append(("section", sec))
         return self
 
-    def add_text(self, text: str, heading: str | None = None) -> "Report":
+    def add_text(self, text: str, heading: str | None = None) -> Report:
         if heading:
             self.heading(heading)
         self.text(text)
         return self
 
-    def add_table(self, header: list[str], rows: list[list[Any]], heading: str | None = None) -> "Report":
+    def add_table(self, header: list[str], rows: list[list[Any]], heading: str | None = None) -> Report:
         if heading:
             self.heading(heading)
         self.table(header, rows)
         return self
 
-    def add_figure(self, fig, caption: str, name: str | None = None, heading: str | None = None) -> "Report":
+    def add_figure(self, fig, caption: str, name: str | None = None, heading: str | None = None) -> Report:
         if heading:
             self.heading(heading)
         self.figure(name or f"figure_{len(self.figures) + 1}", fig, caption)
@@ -81,7 +83,8 @@ class Report:
     def _composed(self) -> tuple[list[tuple[str, Any]], list[str]]:
         """The blocks as rendered and the summary: each section expanded in its place, and, where the report
         holds estimates, first the table of every coefficient (each method beside the posterior's
-        interval, with a forest plot) and the held-out prediction errors against the noise floor."""
+        interval, with a forest plot) and the held-out prediction errors against the noise floor.
+        """
         secs = [b for k, b in self.blocks if k == "section"]
         summary = [line for s in secs for line in s.summary] + self.summary_lines
         head: list[tuple[str, Any]] = []
@@ -244,7 +247,8 @@ class Report:
 
     def write(self, folder: str | Path, results: dict[str, Any] | None = None) -> Path:
         """Write index.md, index.html, results.json (``results``, else the sections' own: ``results()``) and
-        the PNGs into ``folder`` atomically."""
+        the PNGs into ``folder`` atomically.
+        """
         self._composed()  # the figures the composition draws (the forest plot)
         if results is None:
             results = self.results()

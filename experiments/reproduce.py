@@ -49,7 +49,8 @@ def _cache_dir() -> Path | None:
 
 def _source_hash() -> str:
     """Hash of the package's source (models, inference, experiments and negstiff's own: io, errors, files):
-    a code change invalidates the cache."""
+    a code change invalidates the cache.
+    """
     import hashlib
 
     import negstiff
@@ -105,7 +106,8 @@ def _store(path: Path | None, payload, say) -> None:
 
 def compute_section(name: str, fast: bool, seed: int):
     """One section of ``SECTION_TABLE`` computed and rendered on its own: (blocks, figures, results),
-    each result stamped with the section's time. Picklable in and out: a worker process runs it."""
+    each result stamped with the section's time. Picklable in and out: a worker process runs it.
+    """
     fn = _TABLE[name][1]
     sub = Report("")
     res: dict[str, Any] = {}
@@ -132,7 +134,8 @@ def warm_kernel(name: str) -> None:
     """Compile one of ``KERNELS`` (or load it from numba's cache) with a tiny call. A fresh install's
     first run queues these before the sections: each kernel is compiled once, the two workers each
     taking some, instead of by every section process that reaches it first (~6 s a kernel alone; the
-    fresh run took 31 s longer than a cached one, measured)."""
+    fresh run took 31 s longer than a cached one, measured).
+    """
     from negstiff.models import SEED_LIKE_CUBIC, simulate_batch
     from negstiff.models.kernel import P_SIGN
     from negstiff.models.reference import lyapunov_benettin
@@ -163,7 +166,8 @@ WORKER_MEMORY_BYTES = 2 * 1024**3
 
 def default_workers() -> int:
     """Processes for the sections by default: the machine's cores, but no more than the sections (with the
-    rig's) nor than its memory holds at ``WORKER_MEMORY_BYTES`` each."""
+    rig's) nor than its memory holds at ``WORKER_MEMORY_BYTES`` each.
+    """
     cores = os.cpu_count() or 1
     try:
         memory = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
@@ -174,7 +178,8 @@ def default_workers() -> int:
 
 def _share_cores(threads: int) -> None:
     """A section process's initialiser: its own threads (simulator batches, posterior ensembles) get
-    ``threads``, unless the user set ``NEGSTIFF_THREADS``."""
+    ``threads``, unless the user set ``NEGSTIFF_THREADS``.
+    """
     os.environ.setdefault("NEGSTIFF_THREADS", str(threads))
 
 
@@ -189,7 +194,8 @@ def run_sections(names, fast: bool, seed: int, workers: int, say, tick=_no_bar) 
     measured cost); returns name -> (blocks, figures, results). The
     sections are independent (each seeds its own draws), so the numbers are those of a serial run.
     ``tick(name)`` is called as each section is done (``tick(None)`` about every second while they run:
-    the progress bar's clock)."""
+    the progress bar's clock).
+    """
     out: dict[str, Any] = {}
     source = _source_hash()  # read and hashed once, not per section
     paths = {n: _cache_path(n, fast, seed, source) for n in names}
@@ -216,7 +222,8 @@ def _run_pool(todo, out, paths, fast: bool, seed: int, workers: int, say, tick) 
     Each process's own threads (posterior ensembles, simulator batches) get the cores divided among the
     processes, but at least two: on 2 cores each may use both (capping them at one per process,
     ``NEGSTIFF_THREADS=1``, did not shorten the run: 236 s against 187-224 s, on a machine whose speed
-    drifted by 1.7x over the evening), while on many cores the processes' threads do not multiply."""
+    drifted by 1.7x over the evening), while on many cores the processes' threads do not multiply.
+    """
     from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
     from multiprocessing import get_context
 
@@ -249,7 +256,8 @@ def _run_pool(todo, out, paths, fast: bool, seed: int, workers: int, say, tick) 
 
 def simulator_accuracy(duration: float = 10.0, fs: float = 512.0, amplitude: float = 3.0) -> dict[str, Any]:
     """Max |dz| of the simulator against scipy's DOP853 (rtol 1e-10) on an in-well 9 Hz response,
-    both driven by the same linearly interpolated input."""
+    both driven by the same linearly interpolated input.
+    """
     dt = 1 / fs
     t = np.arange(0, duration, dt)
     u = amplitude * np.sin(2 * np.pi * 9.0 * t)
@@ -356,7 +364,8 @@ SECTIONS = tuple(SECTION_TABLE)
 
 def base_section(rep: Report, results: dict[str, Any], fast: bool, seed: int = 0) -> None:
     """The parts every run has after the device's: the virtual rig's record and the simulator's accuracy
-    (computed beside the sections: run first and alone they kept one core idle for 8 s)."""
+    (computed beside the sections: run first and alone they kept one core idle for 8 s).
+    """
     rig_section(rep, results, fast, seed)
     simulator_section(rep, results)
 
@@ -369,7 +378,8 @@ def reproduce(
 ) -> Path:
     """Run the study and write the report folder ``out`` (atomically). ``sections``: run only these of
     ``SECTIONS`` (the device, rig and simulator parts always run; the report says which were left out).
-    ``workers``: processes computing sections at once (default: the machine's cores)."""
+    ``workers``: processes computing sections at once (default: the machine's cores).
+    """
     workers = default_workers() if workers is None else max(1, int(workers))
     if sections is not None and not set(sections) <= set(SECTIONS):
         raise ValueError(f"unknown sections {sorted(set(sections) - set(SECTIONS))}; known: {SECTIONS}")
@@ -403,7 +413,7 @@ def reproduce(
         computed = run_sections(names, fast, seed, workers, say, tick)
     finally:
         bar.close()
-    for name, payload in sorted(computed.items(), key=lambda kv: names.index(kv[0])):
+    for _name, payload in sorted(computed.items(), key=lambda kv: names.index(kv[0])):
         _merge(rep, results, payload)
     if sections is not None:
         results["sections_left_out"] = [n for n in SECTIONS if n not in sections]

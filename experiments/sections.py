@@ -1,5 +1,5 @@
 """A report's sections, one per kind of result: functions of the library's results, shared by the command
-``negstiff report`` (``experiments.record_report``) and by a script's own ``Report``:
+``negstiff report`` (``experiments.record_report``) and by a script's own ``Report``.
 
 * a record (``Measurement``): its time base, sensor, what was derived, its frame and anchor, its warnings;
 * an identification (``NSI``, ``SINDy`` or their ``Identification``): the model, each well's modal
@@ -65,7 +65,8 @@ class Section:
 
 def effective(model) -> dict[str, float]:
     """k1-k3, c, c_nl of a model (a ``Model`` or its dict) with each named effect that is one of those terms
-    folded back in (a discrepancy's ``quadratic_damping`` is c_nl's term: the simulator adds the two)."""
+    folded back in (a discrepancy's ``quadratic_damping`` is c_nl's term: the simulator adds the two).
+    """
     from negstiff.models import effects
 
     d = model if isinstance(model, dict) else model.to_dict()
@@ -310,7 +311,8 @@ def map_section(res: dict[str, Any], overlays=(), label: str = "") -> Section:
 
 def coefficient_blocks(estimates: dict[str, dict[str, float]], intervals: dict[str, dict[str, tuple]]):
     """The report's coefficient table (each method's estimate of k1-k3, c, c_nl beside each posterior's mean
-    and interval) and its forest plot; and the summary's lines on whether the estimates lie inside."""
+    and interval) and its forest plot; and the summary's lines on whether the estimates lie inside.
+    """
     import matplotlib.pyplot as plt
 
     header = ["coefficient", *estimates]
@@ -333,7 +335,7 @@ def coefficient_blocks(estimates: dict[str, dict[str, float]], intervals: dict[s
     fig, axes = plt.subplots(1, len(COEFFICIENTS), figsize=(3.2 * len(COEFFICIENTS), 1.2 + 0.5 * rows_n), sharey=True,
                              squeeze=False)  # fmt: skip
     labels = [*estimates, *(f"posterior {lab}" if lab != "posterior" else "posterior" for lab in intervals)]
-    for ax, k in zip(axes[0], COEFFICIENTS):
+    for ax, k in zip(axes[0], COEFFICIENTS, strict=False):
         for j, est in enumerate(estimates.values()):
             if est.get(k) is not None:
                 ax.plot(est[k], j, "o", color=f"C{j % 10}")
@@ -369,7 +371,8 @@ def coefficient_blocks(estimates: dict[str, dict[str, float]], intervals: dict[s
 
 def draw_branches(ax, branches: list[dict[str, Any]], color, label: str | None = None, x: str = "amplitude") -> None:
     """A continuation's branches on a bifurcation map's axes: each orbit's Poincare z [mm] against its
-    amplitude (or ``x``), solid where stable, dashed where not; ``label`` on the first period-1 branch's line."""
+    amplitude (or ``x``), solid where stable, dashed where not; ``label`` on the first period-1 branch's line.
+    """
     for br in branches:
         a = np.array([q[x] for q in br["points"]])
         stable = np.array([q["stable"] for q in br["points"]])
@@ -386,14 +389,15 @@ def map_figure(points: list[dict[str, Any]], overlays: list[dict[str, Any]] = ()
     frequency, ``axis="f_hz"``: a stepped sine), a panel per starting well (``start``: plus, minus; one panel
     where it is unknown), blue sweeping up, red down, black in the records' order; grey behind a cross-well
     or non-periodic record. Each ``overlays`` entry, a ``negstiff nfrc`` result along the same axis, is drawn
-    over its well's panel (``draw_branches``)."""
+    over its well's panel (``draw_branches``).
+    """
     import matplotlib.pyplot as plt
 
     starts = sorted({p.get("start") for p in points}, key=lambda s: ["plus", "minus", None].index(s))
     fig, axes = plt.subplots(1, len(starts), figsize=(6 * len(starts), 4), sharey=True, squeeze=False)
     xs = np.unique([p[axis] for p in points])
     half = 0.5 * float(np.median(np.diff(xs))) if xs.size > 1 else 0.05 * max(abs(float(xs[0])), 1e-12)
-    for ax, start in zip(axes[0], starts):
+    for ax, start in zip(axes[0], starts, strict=False):
         for p in (q for q in points if q.get("start") == start):
             col = {"up": "C0", "down": "C3"}.get(p.get("direction"), "k")
             if p["regime"] == "cross-well" or p["period"] is None:

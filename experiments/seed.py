@@ -1,5 +1,6 @@
 """The reference study's own numbers (Anastasio, Fasana, Garibaldi, Marchesiello, EURODYN 2020), in one
-place, so every report sets ours beside theirs."""
+place, so every report sets ours beside theirs.
+"""
 
 TABLE1 = {"minus": {"f_hz": 11.41, "zeta": 0.112}, "plus": {"f_hz": 9.19, "zeta": 0.203}}
 """Table 1: modal parameters of the two underlying-linear systems identified with NSI."""

@@ -58,7 +58,8 @@ OUTPUT_ERROR_DUFFING_MV = 0.91
 
 def load_silverbox() -> Measurement:
     """The Silverbox record (``negstiff.datasets.silverbox``: shipped with the package,
-    ``$NEGSTIFF_SILVERBOX`` overrides)."""
+    ``$NEGSTIFF_SILVERBOX`` overrides).
+    """
     return silverbox()
 
 
@@ -66,7 +67,8 @@ def prediction_error_mv(model: Model, m: Measurement, part: tuple[int, int], lin
     """Free-run rms error [mV] of ``model`` over ``part`` of the Silverbox record, started from the
     measured (smoothed) state at the part's sample ``SKIP``, which is the first one scored; inf if it
     diverges. ``linear``: the input drawn straight between samples (the convention before band-limited
-    stage inputs), for comparison."""
+    stage inputs), for comparison.
+    """
     seg = m.segment(*part)
     zs, v, _, _ = seg.states("state")
     scored = seg.segment(SKIP, seg.n)
@@ -110,7 +112,8 @@ def _scores(model: Model, m: Measurement) -> dict[str, Any]:
 def compute(m: Measurement, fast: bool = False) -> SilverboxStudy:
     """Fit every method on the training part with its defaults (refinement included) and score the
     equation-error and refined models on the three test parts (``fast``: without the discrepancy
-    workflow's linear start and NSI)."""
+    workflow's linear start and NSI).
+    """
     from negstiff.inference.estimators.discrepancy import LINEAR_BASELINE, Discrepancy
     from negstiff.inference.estimators.nsi import NSI
     from negstiff.inference.estimators.sindy import SINDy
@@ -158,7 +161,8 @@ def hybrid_error_mv(h, m: Measurement, part: tuple[int, int]) -> float:
 
 def hybrid_part(m: Measurement, rows: list[MethodRow]) -> dict[str, Any]:
     """The refined SINDy model plus a non-parametric discrepancy force (``inference.hybrid``), fitted on
-    the training part with the physics held, then refitted jointly; its errors on the three test parts."""
+    the training part with the physics held, then refitted jointly; its errors on the three test parts.
+    """
     from negstiff.inference.estimators.hybrid import fit_hybrid
 
     row = next(r for r in rows if r.method == "SINDy")
@@ -304,7 +308,8 @@ def render(rep: Report, study: SilverboxStudy, m: Measurement) -> dict[str, Any]
         },  # fmt: skip
         "published_mv": PUBLISHED_MV,
         "published_by_test_set_mv": {
-            k: dict(zip(("test", "arrow", "arrow_no_extrapolation"), v)) for k, v in PUBLISHED_BY_TEST_SET_MV.items()
+            k: dict(zip(("test", "arrow", "arrow_no_extrapolation"), v, strict=True))
+            for k, v in PUBLISHED_BY_TEST_SET_MV.items()
         },
     }
 

@@ -61,7 +61,8 @@ COEF_HEADER = ["term", "field", "selected", "inclusion prob.", "SINDy", "truth",
 class SindyRun:
     """What one part of the study measured: SINDy's fit of one rig record (``est``, wall time ``elapsed``),
     the truth behind the record, and what the part compares it with: NSI on the same record, the effect
-    the rig hid, the true model's own held-out free-run floor."""
+    the rig hid, the true model's own held-out free-run floor.
+    """
 
     truth: Model
     measurement: Measurement
@@ -104,7 +105,8 @@ def compute_polynomial(duration: float, seed_: int) -> SindyRun:
 
 def polynomial_part(rep: Report, res: dict[str, Any], duration: float, seed_: int) -> None:
     """Compute (``compute_polynomial``), then render: the selected terms, the coefficient table, the
-    selection path, the forces and the held-out validation."""
+    selection path, the forces and the held-out validation.
+    """
     run = compute_polynomial(duration, seed_)
     res["polynomial_truth"] = run.result()
     truth, est, nsi, m, elapsed = run.truth, run.est, run.nsi, run.measurement, run.elapsed
@@ -240,7 +242,8 @@ def friction_part(rep: Report, res: dict[str, Any], duration: float, seed_: int)
 
 def compute_as_built(duration: float, seed_: int) -> SindyRun:
     """SINDy on a record of the as-built device (no polynomial truth), and the exact model's own floor.
-    The wall time is not reported for this part (``elapsed`` 0)."""
+    The wall time is not reported for this part (``elapsed`` 0).
+    """
     rec = Rig(AS_BUILT, seed=seed_).random(duration=duration)
     m = Measurement.from_rig(rec)
     est = SINDy(seed=seed_).fit(m)

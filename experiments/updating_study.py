@@ -37,7 +37,8 @@ def _errors(d, truth=AS_BUILT) -> dict[str, float]:
 class UpdatingRuns:
     """What the updating section computed: the GA on the exact features, the GA on the features and on the
     restoring force of the NSI and SINDy models of an as-built rig record (``runs``), the SINDy fit, and
-    the GA optima from several seeds on the exact features (``identifiability``)."""
+    the GA optima from several seeds on the exact features (``identifiability``).
+    """
 
     generations: int
     exact: dict[str, float]
@@ -77,7 +78,8 @@ def compute_updating(fast: bool, seed_: int = 0) -> UpdatingRuns:
 
 def updating_section(rep: Report, results: dict[str, Any], fast: bool, seed_: int = 0) -> None:
     """Compute (``compute_updating``), then render: the table and its reading, Figures 10 and 11, the
-    identifiability plot."""
+    identifiability plot.
+    """
     runs = compute_updating(fast, seed_)
     res: dict[str, Any] = {}
     results["updating"] = res
@@ -197,7 +199,9 @@ def _render_figures(rep: Report, runs: UpdatingRuns) -> None:
 def _render_identifiability(rep: Report, res: dict[str, Any], part: UpdatingRuns) -> None:
     seeds, runs = part.seeds, part.identifiability
     ga_m = part.runs["SINDy, restoring force, m weighed"]
-    res["identifiability"] = [{"seed": s, "E": d.E, "m": d.m, "alpha_deg": d.alpha_deg} for s, d in zip(seeds, runs)]
+    res["identifiability"] = [
+        {"seed": s, "E": d.E, "m": d.m, "alpha_deg": d.alpha_deg} for s, d in zip(seeds, runs, strict=True)
+    ]
     fig, ax = plt.subplots(figsize=(5.5, 4))
     mm = np.linspace(NOMINAL.m * 0.75, NOMINAL.m * 1.25, 50)
     ax.plot(1e3 * mm, AS_BUILT.E / AS_BUILT.m * mm / 1e9, "k:", label="E/m of the as-built device")

@@ -1,4 +1,4 @@
-"""UQ calibration study (issue 7): is a 90 % credible interval right 90 % of the time?
+"""UQ calibration study (issue 7): whether a 90 % credible interval is right 90 % of the time.
 
 The coefficient posterior is run on N independent rig records (new excitation and sensor noise each,
 the same polynomial truth); per parameter, the share of 90 % HDIs that contain the truth, and the rank
@@ -31,7 +31,8 @@ RANK_DRAWS = 99
 
 def one_record(seed: int, duration: float, max_steps: int, n_ensembles: int) -> dict[str, Any]:
     """A rig record with seed ``seed`` and its coefficient posterior: HDIs, ranks, diagnostics.
-    Runs in a dask worker (one numba thread: the workers are the parallelism)."""
+    Runs in a dask worker (one numba thread: the workers are the parallelism).
+    """
     from negstiff.inference.estimators.posterior import Posterior, result_json
     from negstiff.inference.record.measurement import from_arrays
     from negstiff.models import SEED_LIKE_CROSS_WELL_RMS, SEED_LIKE_CUBIC
@@ -130,7 +131,7 @@ def report(rep: Report, results: dict[str, Any], rows: list[dict[str, Any]], set
     if s["unconverged_records"]:
         rep.warning(f"records whose posterior did not converge: {s['unconverged_records']}")
     fig, axes = plt.subplots(1, len(PARAMS), figsize=(12, 2.6), sharey=True)
-    for ax, p in zip(axes, PARAMS):
+    for ax, p in zip(axes, PARAMS, strict=False):
         ax.hist(s["ranks"][p], bins=np.linspace(0, RANK_DRAWS + 1, 11), color="C0", edgecolor="k")
         ax.axhline(n / 10, color="r", lw=1)
         ax.set(title=p, xlabel="rank of the truth")

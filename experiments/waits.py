@@ -38,7 +38,8 @@ def _env(**extra: str) -> dict[str, str]:
 
 def timed(args: list[str], env: dict[str, str] | None = None, cwd: Path | None = None) -> float:
     """Wall time [s] of ``python -m negstiff *args`` (or ``python *args`` when args[0] is ``-c``), which
-    must succeed."""
+    must succeed.
+    """
     cmd = [sys.executable, *(args if args[0] == "-c" else ["-m", "negstiff", *args])]
     t0 = time.perf_counter()
     p = subprocess.run(cmd, env=env or _env(), cwd=cwd, capture_output=True, text=True)

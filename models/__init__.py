@@ -2,7 +2,8 @@
 moves (simulator, virtual test rig). ``models`` never imports ``inference``.
 
 Names are loaded on first use (PEP 562), so ``negstiff.models.effects`` (the effect registry the CLI's
-help lists) comes without the compiled simulator."""
+help lists) comes without the compiled simulator.
+"""
 
 from __future__ import annotations
 

@@ -90,15 +90,18 @@ class Point:
 
     @property
     def max_multiplier(self) -> float:
+        """The largest Floquet multiplier's modulus."""
         return float(max(abs(m) for m in self.multipliers))
 
     @property
     def stable(self) -> bool:
+        """Whether every Floquet multiplier lies inside the unit circle."""
         return self.max_multiplier < 1.0
 
     def halves(self, tol: float = 1e-6) -> bool:
         """Whether this orbit of an even number p of forcing periods repeats after p/2 of them (its z at
-        phase 0 of period k and k + p/2 within ``tol`` of its stroke): the period-p/2 orbit it was born from."""
+        phase 0 of period k and k + p/2 within ``tol`` of its stroke): the period-p/2 orbit it was born from.
+        """
         p = len(self.poincare_z)
         if p < 2 or p % 2:
             return False
@@ -106,6 +109,7 @@ class Point:
         return bool(np.max(np.abs(z[: p // 2] - z[p // 2 :])) <= tol * (self.max_z - self.min_z))
 
     def to_json(self) -> dict[str, Any]:
+        """The point as JSON."""
         return {
             "amplitude": self.amplitude,
             "f_hz": self.f_hz,
@@ -131,6 +135,7 @@ class Branch:
     points: list[Point] = field(default_factory=list)
 
     def to_json(self) -> dict[str, Any]:
+        """The branch as JSON: its period, parameter and points."""
         return {
             "period": self.period,
             "parameter": self.parameter,
@@ -143,7 +148,8 @@ class Shooting:
     """The stroboscopic map of a system under harmonic forcing, with its derivatives.
 
     ``system``: a ``Model`` or ``Device``; ``input_kind``: ``"base_acc"`` (A in m/s^2) or ``"force"``
-    (A in N); ``period``: forcing periods per map."""
+    (A in N); ``period``: forcing periods per map.
+    """
 
     def __init__(self, system, input_kind: str = "base_acc", period: int = 1, z_limit: float = 1.0):
         self.system, self.input_kind, self.period = system, input_kind, int(period)
@@ -160,7 +166,8 @@ class Shooting:
 
     def flow(self, xs: np.ndarray, amplitudes, f_hz: float, store: bool = False):
         """phi(x; A, f) for states ``xs`` (B, 2) and one amplitude per member; (B, 2) end states, and the
-        z samples of the members (B, N) when ``store``."""
+        z samples of the members (B, N) when ``store``.
+        """
         amplitudes = np.broadcast_to(np.asarray(amplitudes, float), (xs.shape[0],))
         rows, index = np.unique(amplitudes, return_inverse=True)
         u = np.stack([self._forcing(a, f_hz)[0] for a in rows])
@@ -178,7 +185,8 @@ class Shooting:
     def residual_and_jacobian(self, x: np.ndarray, amplitude: float, f_hz: float, parameter: str, scale,
                               store: bool = False):  # fmt: skip
         """G = phi(x) - x, the monodromy M (2x2), G_lambda (2,): central differences, one batched call (two
-        in frequency); with ``store`` also the orbit's z samples (the unperturbed member's)."""
+        in frequency); with ``store`` also the orbit's z samples (the unperturbed member's).
+        """
         hz, hv = 1e-6 * scale[0], 1e-6 * scale[1]
         hl = 1e-6 * scale[2]
         if not (f_hz - hl > 0 and np.all(np.isfinite(x))):  # a corrector step out of the physical range
@@ -216,7 +224,8 @@ class Shooting:
 
 def _tests(M: np.ndarray) -> dict[str, float]:
     """Bifurcation test functions of a monodromy matrix: det(M - I) (fold), det(M + I) (doubling) and
-    the complex pair's modulus less one (Neimark-Sacker; +1 when the multipliers are real)."""
+    the complex pair's modulus less one (Neimark-Sacker; +1 when the multipliers are real).
+    """
     mu = np.linalg.eigvals(M)
     complex_pair = abs(mu[0].imag) > 1e-12
     return {
@@ -228,6 +237,8 @@ def _tests(M: np.ndarray) -> dict[str, float]:
 
 @dataclass(frozen=True)
 class Bifurcation:
+    """A bifurcation located along a branch: its type, where, and the crossing multiplier."""
+
     type: str
     amplitude: float
     f_hz: float
@@ -241,6 +252,7 @@ class Bifurcation:
         return self.amplitude if parameter == "amplitude" else self.f_hz
 
     def to_json(self) -> dict[str, Any]:
+        """The bifurcation as JSON."""
         mu = self.multiplier
         return {
             "type": self.type,
@@ -257,7 +269,8 @@ class Continuation:
 
     ``parameter``: ``"amplitude"`` (at the fixed ``f_hz``) or ``"f_hz"`` (at the fixed ``amplitude``);
     ``ds``: the first step, in units of the parameter's range (the step adapts between ``ds_min`` and
-    ``ds_max``)."""
+    ``ds_max``).
+    """
 
     def __init__(self, shooting: Shooting, parameter: str, fixed: float, well: str, lam_range: tuple[float, float],
                  ds: float = 0.01, ds_min: float = 1e-4, ds_max: float = 0.05, max_points: int = 2000):  # fmt: skip
@@ -304,7 +317,8 @@ class Continuation:
         """Continue from the orbit at state ``x`` (phase 0) and parameter ``lam`` towards ``direction``
         (+1: increasing parameter) until the parameter leaves its range. The state's scale follows the
         orbit's size, so a step moves the orbit by a fraction of itself (or the parameter by a fraction
-        of its range), however much the response grows at a resonance."""
+        of its range), however much the response grows at a resonance.
+        """
         sh = self.shooting
         scale = np.array(scale, float)
         z_floor = scale[0]
@@ -363,7 +377,8 @@ class Continuation:
     def _correct(self, y: np.ndarray, t: np.ndarray, ds: float, scale: np.ndarray, start: np.ndarray | None = None,
                  max_iter: int = 8):  # fmt: skip
         """Predictor along the tangent, Newton on G = 0 and the arclength condition (from ``start`` when
-        given, else from the prediction). Returns (y, converged, hard: more than two iterations)."""
+        given, else from the prediction). Returns (y, converged, hard: more than two iterations).
+        """
         y_pred = y + ds * t
         y_new = (y_pred if start is None else start).copy()
         try:
@@ -385,7 +400,8 @@ class Continuation:
 
     def _detect(self, prev, cur, step) -> list[Bifurcation]:
         """Bifurcations between the last accepted point ``prev`` and ``cur`` (each (physical (z, z', lambda),
-        M)), reached by the arclength ``step`` (y, t, ds, scale: ``_correct``'s arguments)."""
+        M)), reached by the arclength ``step`` (y, t, ds, scale: ``_correct``'s arguments).
+        """
         out = []
         tp, tc = _tests(prev[1]), _tests(cur[1])
         for kind in ("fold", "period_doubling", "neimark_sacker"):
@@ -410,7 +426,8 @@ class Continuation:
         doublings with multipliers near 0 instead of +1 and -1). Where the branch bends within the step so
         much that a hyperplane of the arclength condition meets it twice, the test function jumps instead of
         passing zero: then the step is retraced in ``RETRACE_STEPS`` small continuation steps and the zero located
-        in the first that changes sign (twice at most). Returns (parameter, M, state)."""
+        in the first that changes sign (twice at most). Returns (parameter, M, state).
+        """
         y0, t0, ds, scale = step
         (p0, M0), (p1, M1) = prev, cur
         a, fa, ya = 0.0, _tests(M0)[kind], p0 / scale
@@ -512,7 +529,8 @@ def nfrc(system, *, freq, amplitude, well: str = "plus", input_kind: str = "base
     """Periodic responses of ``system`` continued in amplitude (``amplitude=(A1, A2)`` at ``freq=f``) or in
     frequency (``freq=(f1, f2)`` at ``amplitude=A``), starting from the ``well`` (``"plus"``/``"minus"``)
     at the range's start; period-doubled branches followed up to ``max_period``. Returns the result
-    JSON's ``branches``, ``bifurcations`` and ``settings``."""
+    JSON's ``branches``, ``bifurcations`` and ``settings``.
+    """
     z_well = check_nfrc(system, freq=freq, amplitude=amplitude, well=well, input_kind=input_kind,
                         max_period=max_period)  # fmt: skip
     a_span, f_span = _span(amplitude), _span(freq)
@@ -564,7 +582,8 @@ def nfrc(system, *, freq, amplitude, well: str = "plus", input_kind: str = "base
 
 def _double(shooting: Shooting, b: Bifurcation, parameter: str, fixed: float, span, scale):
     """The period-2p orbit a little beyond a doubling: simulated from the bifurcating orbit, nudged (where
-    the period-p orbit is unstable the response settles onto the doubled one), then corrected."""
+    the period-p orbit is unstable the response settles onto the doubled one), then corrected.
+    """
     lam_pd = b.value(parameter)
     system, kind = shooting.system, shooting.input_kind
     base = Continuation(shooting, parameter, fixed, b.well, span)

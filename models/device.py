@@ -32,8 +32,9 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
-from typing import Any, Mapping
+from typing import Any
 
 import numpy as np
 
@@ -50,13 +51,15 @@ class GeometryError(InputError):
 
 def arm_stiffness(E, b: float, h: float, l: float):  # noqa: E741 - the arm's free length, as in device-model.md
     """Tip stiffness of one arm of the frame, 3 E I / l^3 with I = b h^3 / 12 [N/m] (E [Pa], a number or an
-    array; b, h, l [m]): the one place the frame's linear stiffness is written."""
+    array; b, h, l [m]): the one place the frame's linear stiffness is written.
+    """
     return 3 * E * (b * h**3 / 12) / l**3
 
 
 def rod_geometry(z, L: float, ca, sa, second: bool = True):
     """s(z), s'(z), s''(z) of the rod-frame geometry for a frame of length L at angle alpha (ca, sa: its
-    cosine and sine; arrays broadcast against z); s'' None without ``second``."""
+    cosine and sine; arrays broadcast against z); s'' None without ``second``.
+    """
     B = L * ca - z * sa
     R = np.sqrt(B * B - z * z)
     s = R - B
@@ -117,7 +120,8 @@ class Device:
 
     def __reduce__(self):
         """Pickled (and deep-copied) by its fields, the read-only ``extra`` as plain dicts: a model crosses
-        process boundaries (dask, multiprocessing) and ``sklearn.base.clone`` copies it."""
+        process boundaries (dask, multiprocessing) and ``sklearn.base.clone`` copies it.
+        """
         values = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
         return _rebuild, (type(self), {**values, "extra": effects.plain(self.extra)})
 
@@ -134,7 +138,8 @@ class Device:
 
     def restoring_force_many(self, z, E, alpha_deg, m) -> tuple[np.ndarray, np.ndarray]:
         """K(z) [N] of this device with (E, alpha_deg, m) replaced by each of n triples, at once: (n, len(z)),
-        and where each device reaches z (the geometry has a solution); no extra effects."""
+        and where each device reaches z (the geometry has a solution); no extra effects.
+        """
         ca, sa = np.cos(np.radians(alpha_deg))[:, None], np.sin(np.radians(alpha_deg))[:, None]
         reach = (z > -self.L * ca / (1 - sa)) & (z < self.L * ca / (1 + sa))
         with np.errstate(invalid="ignore"):
@@ -147,7 +152,7 @@ class Device:
         ca, sa = math.cos(self.alpha), math.sin(self.alpha)
         return -self.L * ca / (1 - sa), self.L * ca / (1 + sa)
 
-    def with_(self, **changes) -> "Device":
+    def with_(self, **changes) -> Device:
         """A copy with some parameters changed (``dataclasses.replace``)."""
         return replace(self, **changes)
 
@@ -208,7 +213,8 @@ class Device:
     def _geometry_at(self, z: float) -> tuple[float, float, float, float, float]:
         """(s, B, R, q, cos alpha) of ``_s_derivs`` at one z [m] in floats: the same operations in the same
         order, so the same numbers to the bit, without numpy's per-call cost (Brent's method calls the
-        force ~50 times per ``equilibria``; through numpy that was 3/4 of the GA's time, measured)."""
+        force ~50 times per ``equilibria``; through numpy that was 3/4 of the GA's time, measured).
+        """
         alpha = self.alpha
         ca, sa = math.cos(alpha), math.sin(alpha)
         if not -self.L * ca / (1 - sa) < z < self.L * ca / (1 + sa):
@@ -239,7 +245,8 @@ class Device:
 
         The roots of ``equilibria``'s grid are bracketed the same way, then bisected together to the
         last representable point (Brent's method one device at a time: 0.5 ms a device, most of a GA's
-        time). Not for devices with extra effects."""
+        time). Not for devices with extra effects.
+        """
         if self.extra:
             raise ValueError("features_many: a device with extra effects takes features() one by one")
         E, a, m = (np.asarray(x, float) for x in np.broadcast_arrays(E, alpha_deg, m))
@@ -294,7 +301,8 @@ class Device:
     @staticmethod
     def _bisect(force, rows, a, b, fa) -> np.ndarray:
         """Bisection of the brackets [a, b] of ``force`` (rows: the devices) to the last representable
-        midpoint."""
+        midpoint.
+        """
         a, b, fa = a[:, None], b[:, None], fa[:, None]
         for _ in range(200):
             mid = 0.5 * (a + b)
@@ -371,6 +379,7 @@ class Device:
 
     # --- serialisation and simulator interface --------------------------------------------------
     def to_dict(self) -> dict[str, Any]:
+        """The device as a device file's JSON mapping."""
         extra = effects.plain(self.extra)
         return {
             "E": self.E,
@@ -387,7 +396,8 @@ class Device:
         }
 
     @classmethod
-    def from_dict(cls, d: Mapping[str, Any]) -> "Device":
+    def from_dict(cls, d: Mapping[str, Any]) -> Device:
+        """The device of a device file's mapping (``to_dict``'s)."""
         return cls(
             **{k: d[k] for k in ("E", "alpha_deg", "m", "L", "l", "b", "h", "D0")},
             c=d.get("c", 0.0),
@@ -449,7 +459,8 @@ def _rebuild(cls, values):
 def load_system(path) -> Device | Model:
     """A model file (the contract's polynomial model JSON, or an ``identify`` result holding one as
     ``model``) or a device file (the geometry: ``E``, ``alpha_deg``, ...), checked: one ``GeometryError``
-    line naming the file for anything that is not one."""
+    line naming the file for anything that is not one.
+    """
     from pathlib import Path
 
     from negstiff.files import read_json

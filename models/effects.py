@@ -34,9 +34,10 @@ from __future__ import annotations
 import contextlib
 import functools
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass
 from types import MappingProxyType
-from typing import Any, Mapping
+from typing import Any
 
 import numpy as np
 
@@ -48,7 +49,8 @@ def _signed_power(x: np.ndarray, power: int, odd: bool, product: bool = False) -
     """|x|^power sgn(x)^odd: numpy's power, or with ``product`` the product of the factors x x x ... (as
     pysindy's PolynomialLibrary forms its columns); |x| for the factors where the parity needs it. (The
     two differ in the last bit from the cube on; the library keeps each column as it was computed before
-    the registry, so that every fit, and every number of the reference report, stays bit for bit.)"""
+    the registry, so that every fit, and every number of the reference report, stays bit for bit).
+    """
     if power == 0:
         return np.ones_like(x)
     base = x if odd == bool(power % 2) else np.abs(x)
@@ -97,9 +99,11 @@ class Monomial:
 
     @property
     def displacement_only(self) -> bool:
+        """Whether the law depends on z alone (no velocity)."""
         return self.v_power == 0
 
     def force(self, value: float, z, v):
+        """The force [N] of the law at size ``value`` and states ``z``, ``v``."""
         z, v = np.asarray(z, float), np.asarray(v, float)
         return value * _signed_power(z, self.z_power, self.z_odd) * _signed_power(v, self.v_power, self.v_odd)
 
@@ -111,7 +115,8 @@ class Monomial:
 
     def column(self, z, v, velocity_noise: float):
         """The library column: the law at unit value, its z factor as a product (module docstring of
-        ``_signed_power``), its z' factor as numpy's power."""
+        ``_signed_power``), its z' factor as numpy's power.
+        """
         z, v = np.asarray(z, float), np.asarray(v, float)
         return _signed_power(z, self.z_power, self.z_odd, product=True) * _signed_power(v, self.v_power, self.v_odd)
 
@@ -128,17 +133,20 @@ class SmoothSign:
     displacement_only = False
 
     def force(self, value: float, z, v):
+        """The force [N]: ``value tanh(v / COULOMB_VELOCITY_SCALE)``."""
         return value * np.tanh(np.asarray(v, float) / COULOMB_VELOCITY_SCALE)
 
     def column(self, z, v, velocity_noise: float):
         """In the library, the expected sign of the true velocity given the estimated one,
-        erf(z' / (sqrt(2) s_n)), s_n the velocity noise (at least v_s): ``inference.weak``."""
+        erf(z' / (sqrt(2) s_n)), s_n the velocity noise (at least v_s): ``inference.weak``.
+        """
         from scipy import special
 
         scale = math.sqrt(2) * max(velocity_noise, COULOMB_VELOCITY_SCALE)
         return special.erf(np.asarray(v, float) / scale)
 
     def scale(self, z_rms: float, v_rms: float) -> float:
+        """The term's typical size per unit value (1: the force is ``value`` at most)."""
         return 1.0
 
 
@@ -159,13 +167,16 @@ class OneSidedStop:
 
     @staticmethod
     def beyond(z, z_s: float):
+        """Where ``z`` lies beyond the stop's onset ``z_s`` (on the side of its sign)."""
         return (np.asarray(z, float) - z_s) * np.sign(z_s) > 0
 
     def force(self, value: Mapping[str, float], z, v=None):
+        """The stop's force [N]: ``k (z - z_s)`` beyond the onset, 0 before it."""
         z = np.asarray(z, float)
         return value["k"] * np.where(self.beyond(z, value["z"]), z - value["z"], 0.0)
 
     def potential(self, value: Mapping[str, float], z):
+        """The stop's potential [J]: ``k (z - z_s)^2 / 2`` beyond the onset."""
         z = np.asarray(z, float)
         return 0.5 * value["k"] * np.where(self.beyond(z, value["z"]), (z - value["z"]) ** 2, 0.0)
 
@@ -178,7 +189,8 @@ class OneSidedStop:
 class MeasuredChannel:
     """Force law theta a(t) of a measured auxiliary channel a(t) (a harvester's piezo voltage: the
     electromechanical coupling): no function of the state, so no kernel row and no library column of z,
-    z'; it drives the model through the record's input (``Measurement.driving``). Named ``aux:CHANNEL``."""
+    z'; it drives the model through the record's input (``Measurement.driving``). Named ``aux:CHANNEL``.
+    """
 
     channel: str
     label = None
@@ -194,7 +206,7 @@ def measured_channels(extra: Mapping[str, Any]) -> dict[str, float]:
     return {k[len(AUX_PREFIX) :]: float(v) for k, v in extra.items() if k.startswith(AUX_PREFIX)}
 
 
-def measured_channel(name: str) -> "Effect":
+def measured_channel(name: str) -> Effect:
     """The term of a measured auxiliary channel, ``aux:CHANNEL``; its value theta [N per channel unit]."""
     channel = name[len(AUX_PREFIX) :]
     if not channel:
@@ -212,16 +224,19 @@ class Effect:
 
     @property
     def n_values(self) -> int:
+        """The number of values the effect takes (an end stop: k and z)."""
         return len(getattr(self.law, "fields", ())) or 1
 
     @property
     def scalar(self) -> bool:
+        """Whether the effect takes one number."""
         return not hasattr(self.law, "fields")
 
     @property
     def dissipative(self) -> bool:
         """A force odd in the velocity alone (friction, velocity-power damping): a physical device's value
-        is >= 0 (a negative one feeds energy in); a fitted model's may not be."""
+        is >= 0 (a negative one feeds energy in); a fitted model's may not be.
+        """
         law = self.law
         return isinstance(law, SmoothSign) or (isinstance(law, Monomial) and law.z_power == 0 and law.v_odd)
 
@@ -232,7 +247,8 @@ class Effect:
 
     def value(self, raw: Any) -> Any:
         """Validate a model file's value: a finite number, or the law's fields (the stop's ``{"k", "z"}``),
-        each finite, then the law's own ``check``."""
+        each finite, then the law's own ``check``.
+        """
         if self.scalar:
             return finite(self.name, raw)
         fields = self.law.fields
@@ -244,7 +260,8 @@ class Effect:
         """``name`` or ``name=k:N/m,z:m`` for the CLI."""
         if self.scalar:
             return self.name
-        return f"{self.name}=" + ",".join(f"{f}:{u}" for f, u in zip(self.law.fields, self.units.split(", ")))
+        pairs = zip(self.law.fields, self.units.split(", "), strict=True)
+        return f"{self.name}=" + ",".join(f"{f}:{u}" for f, u in pairs)
 
 
 def finite(name: str, value: Any) -> float:
@@ -284,10 +301,12 @@ REGISTRY: list[Effect] = [
 
 
 def names() -> tuple[str, ...]:
+    """The registered effects' names."""
     return tuple(e.name for e in REGISTRY)
 
 
 def get(name: str) -> Effect:
+    """The effect named ``name`` (an ``aux:`` name: a measured channel); ``KeyError`` otherwise."""
     if name.startswith(AUX_PREFIX):
         return measured_channel(name)
     for e in REGISTRY:
@@ -371,7 +390,8 @@ DEVICE_ROWS: Mapping[str, int] = MappingProxyType({"k_f": 1, "L": 2, "alpha": 3,
 @dataclass(frozen=True)
 class Layout:
     """The kernel parameter vector: its size, the row each effect writes, and the extra monomial rows
-    (``monomials``: one (row, z_power, z_odd, v_power, v_odd) per effect with no fixed row)."""
+    (``monomials``: one (row, z_power, z_odd, v_power, v_odd) per effect with no fixed row).
+    """
 
     size: int
     rows: Mapping[str, tuple[int, ...]]
@@ -389,6 +409,7 @@ def _fixed_rows(e: Effect) -> tuple[int, ...] | None:
 
 @functools.lru_cache(maxsize=1)
 def layout() -> Layout:
+    """The kernel's parameter layout of every registered effect."""
     rows, mono = {}, []
     used: dict[int, str] = {}
     for e in REGISTRY:
@@ -411,7 +432,8 @@ def layout() -> Layout:
 
 def kernel_rows(m: float, c: float, c_nl: float, extra: Mapping[str, Any]) -> np.ndarray:
     """The kernel parameter vector with the rows both restoring-force kinds share filled in (mass,
-    damping, every effect); the caller writes the restoring force's rows 1-6."""
+    damping, every effect); the caller writes the restoring force's rows 1-6.
+    """
     lay = layout()
     p = np.zeros(lay.size)
     p[ROWS["m"]], p[ROWS["c"]], p[ROWS["c_nl"]] = m, c, c_nl
@@ -430,7 +452,8 @@ def kernel_rows(m: float, c: float, c_nl: float, extra: Mapping[str, Any]) -> np
 @dataclass(frozen=True)
 class Term:
     """A library column: its label, the law it evaluates and what it maps to (a base field, with the
-    sign of the field relative to -m times the coefficient, or an effect, sign -1)."""
+    sign of the field relative to -m times the coefficient, or an effect, sign -1).
+    """
 
     label: str
     law: Monomial | SmoothSign
@@ -441,7 +464,8 @@ class Term:
 def library_terms() -> tuple[Term, ...]:
     """The library: the base fields' terms and every effect with a column of its own; displacement
     terms first (base, then effects by power), then velocity and mixed terms (base, monomials, then the
-    sign), so a term's position is stable when effects are added."""
+    sign), so a term's position is stable when effects are added.
+    """
     base = [Term(law.label, law, f, s) for f, (law, s) in BASE_TERMS.items()]
     own = [Term(e.law.label, e.law, e.name, -1.0) for e in REGISTRY if e.law.label is not None and e.folds_into is None]
 

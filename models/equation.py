@@ -22,8 +22,9 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Any, Mapping
+from typing import Any
 
 import numpy as np
 
@@ -44,6 +45,7 @@ class Equilibria:
     z_plus: float
 
     def as_dict(self) -> dict[str, float | None]:
+        """The equilibria as a mapping (the result JSON's ``equilibria``)."""
         return {"z_minus": self.z_minus, "z_0": self.z_0, "z_plus": self.z_plus}
 
     def well(self, name: str) -> float:
@@ -136,7 +138,8 @@ class Model:
 
     def __reduce__(self):
         """Pickled (and deep-copied) by its fields, the read-only ``extra`` as plain dicts: a model crosses
-        process boundaries (dask, multiprocessing) and ``sklearn.base.clone`` copies it."""
+        process boundaries (dask, multiprocessing) and ``sklearn.base.clone`` copies it.
+        """
         values = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
         return _rebuild, (type(self), {**values, "extra": effects.plain(self.extra)})
 
@@ -203,7 +206,7 @@ class Model:
         )
 
     @staticmethod
-    def from_shifted(z_ref: float, k1_tilde: float, k2_tilde: float, k3: float, **kw) -> "Model":
+    def from_shifted(z_ref: float, k1_tilde: float, k2_tilde: float, k3: float, **kw) -> Model:
         """Back-transform shifted-frame coefficients (Eq. 7) to the z frame.
 
         k2 = k2~ - 3 k3 z*, and k1 from k1~ = 3 k3 z*^2 + 2 k2 z* - k1. ``k0`` is then fixed by the
@@ -231,7 +234,7 @@ class Model:
         }
 
     @classmethod
-    def from_dict(cls, d: Mapping[str, Any]) -> "Model":
+    def from_dict(cls, d: Mapping[str, Any]) -> Model:
         """Build from the contract's model JSON (``k0`` defaults to ``m*g``; ``extra`` to none)."""
         missing = [k for k in ("m", "k1", "k2", "k3") if k not in d]
         if missing:

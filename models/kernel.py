@@ -84,7 +84,8 @@ def total_force(kind, coulomb, generic, z, v, q, p, b, mono):
 @numba.njit(inline="always", **JIT)
 def extra_term(z, v, u, w, a, zc, vc, uc, iz, iv, iu, bz, bv):
     """The extra force hook: g(z, z', u), a weighted sum of tensor-product Gaussian bumps over (z, z') and of
-    bumps over u (the hybrid model's non-parametric term, ``inference.hybrid``; bz, bv: scratch)."""
+    bumps over u (the hybrid model's non-parametric term, ``inference.hybrid``; bz, bv: scratch).
+    """
     for i in range(zc.size):
         d = (z - zc[i]) * iz
         bz[i] = math.exp(-0.5 * d * d)
@@ -167,7 +168,8 @@ def _integrate(
     ``out_z.shape[0]`` is N + 1 output samples. The input row holds either the N + 1 samples (linearly
     interpolated inside each interval) or, when it has 2 ``nsub`` N + 1 columns, the input at every
     Runge-Kutta stage time (``stage_input``), read as it is. ``extra`` (a staged input) adds the hook
-    ``extra_term`` with its weights and bumps (``hw`` ... ``hiu``) to every member's force."""
+    ``extra_term`` with its weights and bumps (``hw`` ... ``hiu``) to every member's force.
+    """
     nb = p.shape[1]
     n = out_z.shape[0]
     staged = u.shape[1] != n
@@ -322,7 +324,8 @@ def kernel_with_term(kind: int):
 
 def kernel(kind: int, p: np.ndarray, mono: np.ndarray):
     """The compiled kernel for a batch: its restoring-force kind, whether any member has a smoothed
-    sign, whether the registry has extra monomial rows (then one general kernel, sign included)."""
+    sign, whether the registry has extra monomial rows (then one general kernel, sign included).
+    """
     if mono.shape[0]:
         return _kernel_poly_generic if kind == KIND_POLYNOMIAL else _kernel_device_generic
     sign = bool(np.any(p[P_SIGN] != 0.0))

@@ -1,5 +1,6 @@
 """A virtual-rig record and its files: the measured columns, metadata and truth (``RigRecord``), written
-as CSV or NPZ, or as a lab's front end writes it (Universal File type 58, TDMS), through ``negstiff.io``."""
+as CSV or NPZ, or as a lab's front end writes it (Universal File type 58, TDMS), through ``negstiff.io``.
+"""
 
 from __future__ import annotations
 
@@ -42,7 +43,8 @@ class RigRecord:
 
     def export_columns(self, acc_unit: str = "m/s^2") -> dict[str, np.ndarray]:
         """The columns as written: accelerations in g are named ``<name>_g`` (a lab's export; map
-        them back with ``--columns base_acc=base_acc_g*9.81``)."""
+        them back with ``--columns base_acc=base_acc_g*9.81``).
+        """
         if acc_unit == "m/s^2":
             return dict(self.columns)
         if acc_unit != "g":
@@ -57,7 +59,8 @@ class RigRecord:
 
         ``time_decimals`` prints the CSV's time column with that many fixed decimals (a lab export);
         ``acc_unit="g"`` writes accelerations in g. The record itself does not name its truth file, so
-        the same seed gives the same bytes whatever the file is called."""
+        the same seed gives the same bytes whatever the file is called.
+        """
         path = Path(path)
         truth_path = path.with_name(path.stem + ".truth.json")
         meta = dict(self.meta)

@@ -1,7 +1,8 @@
 """Independent references for the simulator: an adaptive DOP853 solution of the same equation
 (``reference_solution``, what the fixed-step kernel is checked against) and the variational equations
 of the largest Lyapunov exponent (``lyapunov_benettin``, Benettin et al. 1980: the exponent's ground
-truth for a model)."""
+truth for a model).
+"""
 
 from __future__ import annotations
 
@@ -33,7 +34,7 @@ from .kernel import (
 def reference_solution(
     system, u: np.ndarray, dt: float, z0: float, v0: float = 0.0, rtol: float = 1e-10, input_kind: str = "base_acc"
 ) -> np.ndarray:
-    """z at the samples by scipy's adaptive DOP853 (``rtol``), with the same linearly
+    """Z at the samples by scipy's adaptive DOP853 (``rtol``), with the same linearly
     interpolated input: the independent reference the simulator is checked against.
 
     The input has a kink at every sample, which an adaptive integrator at tight tolerance crawls
@@ -91,7 +92,8 @@ def reference_solution(
 def _benettin(kind, p, mono, gain, u, dt, nsub, z0, v0, renorm):
     """RK4 of the state and one tangent vector; the tangent is renormalised every ``renorm`` samples
     and its log growth accumulated (Benettin et al. 1980). Jacobian of the force by central
-    differences of the same force law the simulator integrates."""
+    differences of the same force law the simulator integrates.
+    """
     q = member(p, 0, kind)
     im = 1.0 / q[P_M]
     h = dt / nsub
@@ -163,7 +165,8 @@ def lyapunov_benettin(
     (ground truth for the model). The tangent norm is measured in (z [m], z' [m/s]); the exponent does
     not depend on that choice. The first ``transient_s`` seconds are discarded.
 
-    Returns ``{"value", "running"(t, estimate)}``."""
+    Returns ``{"value", "running"(t, estimate)}``.
+    """
     p = system.kernel_params()
     gain = -1.0 if input_kind == "base_acc" else 1.0 / p[P_M]
     logs = _benettin(

@@ -24,8 +24,9 @@ Every record carries its truth (system, effects, sensors, excitation, seed), wri
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import asdict, dataclass
-from typing import Any, Sequence
+from typing import Any
 
 import numpy as np
 from scipy import fft as sp_fft
@@ -82,7 +83,7 @@ class Sensors:
     position [m], a vibrometer's offset [m/s], an accelerometer's bias [m/s^2])."""
 
     @classmethod
-    def noiseless(cls) -> "Sensors":
+    def noiseless(cls) -> Sensors:
         """Perfect sensors (no noise, no bias): for checks that need the exact response."""
         return cls(laser_noise=0.0, acc_noise=0.0, acc_bias=0.0, velocity_noise=0.0)
 
@@ -95,13 +96,14 @@ def system_from_dict(d: dict[str, Any]) -> Device | Model:
 def _smooth_steps(levels: Sequence[float], step_samples, ramp_samples, start: float = 0.0) -> np.ndarray:
     """Piecewise-constant profile, level i held for ``step_samples`` (one count, or one per level), each
     change (from ``start`` into the first level, then between levels) a raised-cosine transition of
-    ``ramp_samples`` (one count, or one per level) at the start of its level."""
+    ``ramp_samples`` (one count, or one per level) at the start of its level.
+    """
     levels = np.asarray(levels, float)
     steps = np.broadcast_to(np.asarray(step_samples, int), levels.shape)
     ramps = np.broadcast_to(np.asarray(ramp_samples, int), levels.shape)
     env = np.repeat(levels, steps)
     prev = np.concatenate([[start], levels[:-1]])
-    for a0, a1, s, r in zip(prev, levels, np.concatenate([[0], np.cumsum(steps)[:-1]]), ramps):
+    for a0, a1, s, r in zip(prev, levels, np.concatenate([[0], np.cumsum(steps)[:-1]]), ramps, strict=False):
         ramp = 0.5 - 0.5 * np.cos(np.pi * np.arange(r) / r)
         env[s : s + r] = a0 + (a1 - a0) * ramp
     return env
@@ -235,7 +237,8 @@ class Rig:
         The random excitation stays the rig's own (an FFT of seeded white noise, band-limited exactly):
         pyExSi's ``random_gaussian`` draws random phases under a prescribed PSD, a different signal
         for the same seed, and every reference record and report of the suite is built on the rig's
-        draws; the two are the same process (a flat-spectrum band-limited Gaussian)."""
+        draws; the two are the same process (a flat-spectrum band-limited Gaussian).
+        """
         from pyExSi import sine_sweep
 
         self.check_sine_sweep(f_start, f_stop, amplitude, duration, mode, settle, start)
@@ -296,7 +299,8 @@ class Rig:
         record_periods: int = 100,
     ) -> list[RigRecord]:
         """Step the harmonic amplitude through ``amplitudes`` without stopping the table, as a lab
-        does (up or down by their order); one record per step, its settling time discarded."""
+        does (up or down by their order); one record per step, its settling time discarded.
+        """
         return self.sweeps(freq, [amplitudes], [start], settle_periods, record_periods)[0]
 
     def sweeps(
@@ -369,7 +373,8 @@ class Rig:
         ``amplitude`` [m/s^2] x sin(phase), its frequency stepped through each list without stopping the
         table (the phase continuous, each new frequency reached by a raised-cosine ramp over two periods of
         the slower one); one record per step, ``record_periods`` of its own period after ``settle_periods``;
-        all sweeps in one batched simulation."""
+        all sweeps in one batched simulation.
+        """
         self.check_stepped_sines(freq_lists, amplitude, starts, settle_periods, record_periods)
         fsim = self.fs * self.oversample
         exc_rng, sens_rng = self._streams()
@@ -378,7 +383,7 @@ class Rig:
         for freqs in freq_lists:
             lengths = [int(round((settle_periods + record_periods) / f * self.fs)) * self.oversample for f in freqs]
             edges = np.concatenate([[0], np.cumsum(lengths)])
-            ramps = [int(round(2 / min(f0, f1) * fsim)) for f0, f1 in zip([freqs[0], *freqs[:-1]], freqs)]
+            ramps = [int(round(2 / min(f0, f1) * fsim)) for f0, f1 in zip([freqs[0], *freqs[:-1]], freqs, strict=False)]
             f_inst = _smooth_steps(freqs, lengths, ramps, start=freqs[0])
             env = _smooth_steps([amplitude], f_inst.size, int(round(2 / freqs[0] * fsim)))
             n_fast = sp_fft.next_fast_len(f_inst.size + int(TAIL_S * fsim), real=True)  # see random()
@@ -424,7 +429,8 @@ class Rig:
 
     def _require_memory(self, samples: Sequence[float], what: str) -> None:
         """Refuse (``RigError``, one line) before allocating a batch of simulations of ``samples`` samples
-        each at the simulation rate that the machine cannot hold (``BYTES_PER_SAMPLE`` each)."""
+        each at the simulation rate that the machine cannot hold (``BYTES_PER_SAMPLE`` each).
+        """
         from negstiff.resources import require_memory
 
         total = BYTES_PER_SAMPLE * len(samples) * max(samples)
@@ -441,7 +447,8 @@ class Rig:
     def _run(self, accs, starts, settles, durations, excitation, sens_rng, steps=None):
         """Simulate every excitation in one batch, then measure and cut the records: sweep i's j-th record
         starts at ``settles[i][j]`` and lasts ``durations[i]`` (or ``durations[i][j]``) seconds; ``steps[i][j]``
-        is added to its excitation (a campaign's per-step values: amplitude, frequency, step)."""
+        is added to its excitation (a campaign's per-step values: amplitude, frequency, step).
+        """
         fsim = self.fs * self.oversample
         s = self.sensors
         n = max(a.size for a in accs)
@@ -468,7 +475,7 @@ class Rig:
             )
         q = self.oversample
         out = []
-        for i, ((b_true, acc_true), st) in enumerate(zip(motions, starts)):
+        for i, ((b_true, acc_true), st) in enumerate(zip(motions, starts, strict=False)):
             acc_meas = acc_true + s.acc_bias + s.acc_noise * math.sqrt(q) * sens_rng.standard_normal(n)
             y_meas = sim.z[i] + b_true + s.laser_noise * math.sqrt(q) * sens_rng.standard_normal(n)
             if s.response in ("displacement", "absolute"):
@@ -488,7 +495,7 @@ class Rig:
             b_est = integrate_twice(chans["base_acc"], self.fs, s.highpass_hz, s.integration)
             sweep_out = []
             lasts = np.broadcast_to(np.atleast_1d(durations[i]), np.atleast_1d(settles[i]).shape)
-            for j, (t0, last) in enumerate(zip(np.atleast_1d(settles[i]), lasts)):
+            for j, (t0, last) in enumerate(zip(np.atleast_1d(settles[i]), lasts, strict=False)):
                 k0 = int(round(t0 * self.fs))
                 k1 = k0 + int(round(last * self.fs))
                 sl = slice(k0, k1)
@@ -513,7 +520,8 @@ class Rig:
 
     def _response_channels(self, z_dot, acc_true, fsim, rng) -> dict[str, np.ndarray]:
         """The vibrometer's relative velocity or the moving part's accelerometer, at the fine rate
-        (drawn after the reference study's two sensors, so a displacement record is the same bit for bit)."""
+        (drawn after the reference study's two sensors, so a displacement record is the same bit for bit).
+        """
         s, q = self.sensors, self.oversample
         if s.response == "velocity":
             noise = s.velocity_noise * math.sqrt(q) * rng.standard_normal(z_dot.size)

@@ -83,7 +83,8 @@ def antialias_fir(q: int) -> np.ndarray:
     delta-sigma converter's digital filter is this flat: +-0.005 dB). scipy's default decimation FIR
     (Hamming, 20 q + 1 taps) rippled by 0.1-0.3 % in the excitation band, an error the nonlinear
     response turns into 0.07-0.7 % biases of k3, c and c_nl for any model fitted to the records
-    (measured with the posterior's forward model on noise-free records)."""
+    (measured with the posterior's forward model on noise-free records).
+    """
     numtaps, beta = signal.kaiserord(100.0, 0.2 / q)
     return signal.firwin(numtaps | 1, 0.9 / q, window=("kaiser", beta))
 
@@ -98,7 +99,8 @@ def stage_input(u: np.ndarray, substeps: int = DEFAULT_SUBSTEPS) -> np.ndarray:
     at f by sinc^2(f / fs) (0.69 at 0.33 fs); a model that sees that input predicts a smaller response.
     On the Silverbox (610 Hz, excited to 200 Hz), SINDy's model predicted the multisine test with
     2.67 mV rms error under linearly interpolated input and 0.25 mV under this one (measured).
-    ``u``: (N,) or (R, N); returns (2 substeps (N - 1) + 1,) or (R, ...)."""
+    ``u``: (N,) or (R, N); returns (2 substeps (N - 1) + 1,) or (R, ...).
+    """
     u = np.asarray(u, dtype=np.float64)
     r = 2 * int(substeps)
     n = u.shape[-1]
@@ -118,7 +120,8 @@ def input_gain(input_kind: str, masses: np.ndarray) -> np.ndarray:
 def cores() -> int:
     """The cores negstiff's own threads (simulator batches, posterior ensembles) may use:
     ``$NEGSTIFF_THREADS`` if set (a machine shared with other jobs), else the machine's. Thread counts
-    never change a number: the threads' parts are independent."""
+    never change a number: the threads' parts are independent.
+    """
     env = os.environ.get("NEGSTIFF_THREADS", "")
     return max(1, int(env)) if env.isdigit() else (os.cpu_count() or 1)
 
@@ -126,7 +129,8 @@ def cores() -> int:
 @functools.lru_cache(maxsize=4)
 def _pool(n: int) -> ThreadPoolExecutor:
     """A thread pool kept for the process (threads started once, not per call: an MCMC run calls the
-    simulator tens of thousands of times, and starting the threads cost as much as a small batch)."""
+    simulator tens of thousands of times, and starting the threads cost as much as a small batch).
+    """
     return ThreadPoolExecutor(n, thread_name_prefix="negstiff-sim")
 
 

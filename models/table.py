@@ -1,6 +1,7 @@
 """The shaking table's motion and a lab's route from its accelerometer to displacement: the true
 table motion of a target acceleration (``table_motion``) and the band-limited integrals a lab computes
-(``integrate_fft``, ``integrate_twice``)."""
+(``integrate_fft``, ``integrate_twice``).
+"""
 
 from __future__ import annotations
 
@@ -29,7 +30,8 @@ def integrate_fft(x: np.ndarray, fs: float, highpass_hz: float, order: int = 2) 
     """Band-limited integral of ``order`` 1 or 2 of a sampled signal (a lab's route from an
     accelerometer to velocity or displacement): exact 1/(i w)^order above ``highpass_hz``, a cosine
     taper down to half of it, nothing below (a shaker has no DC stroke, and sensor noise integrated
-    grows as 1/f^order)."""
+    grows as 1/f^order).
+    """
     n = x.size
     spec = np.fft.rfft(x - x.mean())
     f = np.fft.rfftfreq(n, 1 / fs)

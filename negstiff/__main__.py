@@ -1,3 +1,5 @@
+"""``python -m negstiff``: the command line."""
+
 from negstiff.cli import run
 
 run()

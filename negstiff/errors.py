@@ -57,7 +57,8 @@ class ConvergenceWarning(NegstiffWarning):
 
 def issue(lines) -> None:
     """Each (category, text) through Python's ``warnings`` (a ``NegstiffWarning`` subclass): what a result
-    holds in its ``warnings``, said where a script sees it."""
+    holds in its ``warnings``, said where a script sees it.
+    """
     import warnings
 
     for category, text in lines:

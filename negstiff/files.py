@@ -15,8 +15,8 @@ import json
 import os
 import shutil
 import tempfile
+from collections.abc import Iterable, Mapping
 from pathlib import Path
-from typing import Iterable, Mapping
 
 from negstiff.errors import InputError, OutputError
 
@@ -76,7 +76,8 @@ def _output_errors(path: Path):
 def transaction():
     """Every output written inside (``atomic_path``, ``atomic_dir``, ``write_text``) is staged and moved
     into place when the block ends without an exception; on an exception (or ``remove_pending``, on a
-    signal) every staged output is deleted and no final path is touched."""
+    signal) every staged output is deleted and no final path is touched.
+    """
     _TRANSACTION.append(os.getpid())
     start = len(_STAGED)
     try:
@@ -119,7 +120,8 @@ def _move_into_place(tmp: Path, path: Path, is_dir: bool) -> None:
 def atomic_path(path: str | os.PathLike):
     """Yield a temporary path beside ``path``; on success it replaces ``path`` in one rename (at the end
     of the open ``transaction``, if any). On an exception the temporary file is removed and ``path`` is
-    left untouched; a file system's refusal (full disk, ...) is an ``OutputError``."""
+    left untouched; a file system's refusal (full disk, ...) is an ``OutputError``.
+    """
     path = Path(path)
     with _output_errors(path):
         path.parent.mkdir(parents=True, exist_ok=True)
@@ -186,7 +188,8 @@ JSON_MAX_DEPTH = 32
 def read_json(path: str | os.PathLike, what: str = "JSON"):
     """Parse a JSON file; an ``InputError`` with one line naming the file when it is missing, too
     large, not JSON, or nested deeper than ``JSON_MAX_DEPTH`` (no parser recursion reaches Python's
-    limit)."""
+    limit).
+    """
     path = Path(path)
     if not path.is_file():
         raise InputError(f"{path}: no such file")

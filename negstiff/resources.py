@@ -1,6 +1,7 @@
 """What the machine can hold: a piece of work whose arrays would not fit in memory is refused with one
 line before anything is allocated (a 1e5 s record at 1 MHz asks for terabytes), instead of failing
-inside numpy, or being killed by the operating system with no message."""
+inside numpy, or being killed by the operating system with no message.
+"""
 
 from __future__ import annotations
 
@@ -29,7 +30,8 @@ def available_memory() -> int:
 
 def require_memory(nbytes: float, what: str) -> None:
     """Raise ``InputError`` (one line, naming ``what`` and both sizes) unless ``nbytes`` fits in
-    ``MEMORY_SHARE`` of the available memory."""
+    ``MEMORY_SHARE`` of the available memory.
+    """
     budget = MEMORY_SHARE * available_memory()
     if not nbytes <= budget:
         raise InputError(

@@ -29,7 +29,8 @@ Example (a pytest consistency check of a lab's record; ``tests/test_testing.py``
 from __future__ import annotations
 
 import math
-from typing import Any, Mapping
+from collections.abc import Mapping
+from typing import Any
 
 import numpy as np
 
@@ -73,7 +74,8 @@ def assert_agree(
 
 def well_frequencies(posterior, draws: int = 400, seed: int = 0) -> dict[str, tuple[float, float]]:
     """Each well's underlying-linear frequency [Hz] over ``draws`` of a fitted coefficient ``Posterior``:
-    ``{well: (mean, sd)}`` for the wells every draw has (the draws' models, with the record's mass)."""
+    ``{well: (mean, sd)}`` for the wells every draw has (the draws' models, with the record's mass).
+    """
     from negstiff.models import Model
 
     res = posterior.result_
@@ -86,7 +88,7 @@ def well_frequencies(posterior, draws: int = 400, seed: int = 0) -> dict[str, tu
     mass = res.settings.get("mass") or 1.0
     freqs: dict[str, list[float]] = {"minus": [], "plus": []}
     for row in pick:
-        p = dict(zip(names, row))
+        p = dict(zip(names, row, strict=False))
         try:
             model = Model(m=mass, k1=p["k1"], k2=p["k2"], k3=p["k3"], c=p["c"], c_nl=p["c_nl"], k0=p.get("k0"))
             for well in freqs:
@@ -99,7 +101,8 @@ def well_frequencies(posterior, draws: int = 400, seed: int = 0) -> dict[str, tu
 def assert_wells_agree(identification, posterior, k: float = 3.0) -> None:
     """Assert that each well frequency of an identification (an ``Identification``, an identify result
     JSON, or a fitted ``NSI``/``SINDy``) lies within ``k`` standard deviations of the posterior's
-    (``well_frequencies``): the record's own uncertainty sets the tolerance."""
+    (``well_frequencies``): the record's own uncertainty sets the tolerance.
+    """
     modal = _modal(identification)
     post = well_frequencies(posterior)
     compared = 0
@@ -126,7 +129,8 @@ def assert_predicts(model, record, reference, factor: float = 2.0, window_s: flo
     short enough that cross-well chaos does not amplify the start states' error), their rms error as a
     share of rms z. Even the truth errs by its record's noise: the input's and the start states', not
     only the displacement sensor's white floor (on the rig's records the truth's 0.125 s error is 4-5x
-    that floor), so the floor is measured with a reference model, never assumed."""
+    that floor), so the floor is measured with a reference model, never assumed.
+    """
     errors = [_restarted_error(m, record, window_s) for m in (model, reference)]
     if not errors[0] <= factor * errors[1]:
         raise AssertionError(

@@ -22,7 +22,7 @@ ZETA = 0.05
 def _stepped(model, freqs, amps, z0, n=128, settle=150, keep=16):
     """Poincare samples (phase 0) and the response's half range at each step of a stepped sweep."""
     v0, out = 0.0, []
-    for f, a in zip(freqs, amps):
+    for f, a in zip(freqs, amps, strict=False):
         dt = 1 / (f * n)
         t = np.arange(n * (settle + keep) + 1) * dt
         r = simulate(model, a * np.sin(2 * np.pi * f * t), dt, z0=z0, v0=v0, substeps=2)
@@ -92,7 +92,7 @@ def test_the_first_period_doubling_at_9_hz_matches_a_stepped_sweep(model, well):
     amps = np.round(np.arange(2.0, min(30.0, predicted + 2.0), 0.1), 2)
     steps = _stepped(model, np.full(amps.size, 9.0), amps, model.equilibria().well(well))
     seen = None
-    for a, (p, half) in zip(amps, steps):
+    for a, (p, half) in zip(amps, steps, strict=False):
         d1, d2 = np.max(np.abs(np.diff(p))) / half, np.max(np.abs(p[2:] - p[:-2])) / half
         if d1 > 1e-3 and d2 < 1e-3:
             seen = a

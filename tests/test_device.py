@@ -22,7 +22,7 @@ def test_closed_form_taylor_cubic_matches_a_finite_difference_expansion():
 
     h = 1e-3
     d_h, d_2h = _central_derivatives(exact, h), _central_derivatives(exact, 2 * h)
-    d1, d2, d3 = ((4 * a - b) / 3 for a, b in zip(d_h, d_2h))
+    d1, d2, d3 = ((4 * a - b) / 3 for a, b in zip(d_h, d_2h, strict=False))
     cubic = AS_BUILT.taylor_cubic()
     assert -cubic.k1 == pytest.approx(d1, rel=1e-5)
     assert cubic.k2 == pytest.approx(d2 / 2, rel=1e-5)

@@ -109,7 +109,7 @@ def test_learned_state_before_fit_is_not_fitted_error_and_fit_takes_records_only
     with pytest.raises(NotFittedError, match="not fitted"):
         est.result()
     with pytest.raises(NotFittedError):
-        est.model_ if cls is not Posterior else est.result_
+        est.model_ if cls is not Posterior else est.result_  # noqa: B018 - the access itself must raise
     assert not hasattr(est, "model_")  # NotFittedError is an AttributeError: hasattr says False
     for bad in (np.zeros(100), [1, 2, 3], {"z": 1}):
         with pytest.raises(InputError, match="takes a Measurement or a file path"):

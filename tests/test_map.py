@@ -41,7 +41,7 @@ def _campaign(folder, noise=1e-5, settle=150, keep=48, seed=0):
         x = rec.sol(settle * T + keep * T)  # the table goes on: the next step starts where this one ends
         u = a * np.sin(2 * np.pi * F_HZ * (settle * T + t))
         z = rec.y[0] + noise * rng.standard_normal(t.size)
-        rows = "".join(f"{tt:.6f},{uu:.6f},{zz:.7f}\n" for tt, uu, zz in zip(t, u, z))
+        rows = "".join(f"{tt:.6f},{uu:.6f},{zz:.7f}\n" for tt, uu, zz in zip(t, u, z, strict=False))
         (folder / f"step{i:02d}_{a:g}.csv").write_text("t,base_acc,z\n" + rows)
 
 
@@ -93,7 +93,7 @@ def _stepped_sine(folder, freqs, direction, a=3.0, settle=60, keep=24, seed=1):
         x = sol.sol(settle * T + keep * T)  # the next step starts where this one ends: at phase 0
         u = a * np.sin(2 * np.pi * f * (settle * T + t))
         z = sol.y[0] + 1e-6 * rng.standard_normal(t.size)
-        rows = "".join(f"{tt:.6f},{uu:.6f},{zz:.8f}\n" for tt, uu, zz in zip(t, u, z))
+        rows = "".join(f"{tt:.6f},{uu:.6f},{zz:.8f}\n" for tt, uu, zz in zip(t, u, z, strict=False))
         (folder / f"{direction}{i:02d}.csv").write_text(f"# forcing_hz: {f:g}\nt,base_acc,z\n" + rows)
 
 

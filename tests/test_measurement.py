@@ -98,7 +98,7 @@ def _lab_csv(tmp_path, t_text, n, name="lab.csv"):
     rng = np.random.default_rng(0)
     u = rng.standard_normal(n)
     z = 0.01 * rng.standard_normal(n)
-    lines = ["t,base_acc,z"] + [f"{tt},{uu:.6f},{zz:.8f}" for tt, uu, zz in zip(t_text, u, z)]
+    lines = ["t,base_acc,z"] + [f"{tt},{uu:.6f},{zz:.8f}" for tt, uu, zz in zip(t_text, u, z, strict=False)]
     p = tmp_path / name
     p.write_text("\n".join(lines) + "\n")
     return p
@@ -123,7 +123,7 @@ def test_a_real_gap_is_named_at_its_row(tmp_path):
     fs = 2048.0
     t = np.arange(5000) / fs
     t = np.concatenate([t[:1001], t[1101:]])
-    p = _lab_csv(tmp_path, ["%.9g" % x for x in t], t.size)
+    p = _lab_csv(tmp_path, [f"{x:.9g}" for x in t], t.size)
     with pytest.raises(MeasurementError, match=r"not uniformly sampled at row 1002 .*gap"):
         load(p)
 
@@ -142,7 +142,7 @@ def test_a_gap_in_a_coarsely_printed_time_column_is_named_at_its_row(tmp_path):
 def test_a_repeated_block_is_named_at_its_row(tmp_path):
     t = np.arange(3000) / 512.0
     t = np.concatenate([t[:2000], t[1900:2000], t[2000:]])  # the export wrote 100 rows twice
-    p = _lab_csv(tmp_path, ["%.6f" % x for x in t], t.size)
+    p = _lab_csv(tmp_path, [f"{x:.6f}" for x in t], t.size)
     with pytest.raises(MeasurementError, match="not increasing at row 2001"):
         load(p)
 
@@ -150,7 +150,7 @@ def test_a_repeated_block_is_named_at_its_row(tmp_path):
 def test_fs_replaces_a_broken_time_column(tmp_path):
     t = np.arange(3000) / 512.0
     t[1500:] += 0.1  # a clock jump the user knows about
-    p = _lab_csv(tmp_path, ["%.6f" % x for x in t], t.size)
+    p = _lab_csv(tmp_path, [f"{x:.6f}" for x in t], t.size)
     with pytest.raises(MeasurementError, match="row 1501"):
         load(p)
     m = load(p, fs=512.0)
@@ -179,7 +179,7 @@ def _record(n=400, fs=200.0, seed=3):
 
 
 def _rows(cols, fmt="{:.9g}"):
-    return [[fmt.format(v) for v in row] for row in zip(*cols.values())]
+    return [[fmt.format(v) for v in row] for row in zip(*cols.values(), strict=False)]
 
 
 @pytest.mark.parametrize(

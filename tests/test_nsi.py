@@ -33,7 +33,7 @@ def _a9_record():
 def test_a9_recipe_noise_free_recovery_quality_and_block_row_stability(block_rows):
     truth, rec = _a9_record()
     fits = {i: NSI(block_rows=i).fit(rec).wells_["plus"] for i in block_rows}
-    for i, w in fits.items():
+    for _rows, w in fits.items():
         c = w.coefficients
         # noise-free: only the integrator (h = 0.1 ms) and the basis smoothing err, far below 1e-3
         assert w.f_hz == pytest.approx(10.0, rel=1e-3)

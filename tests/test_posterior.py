@@ -32,7 +32,7 @@ def _toy():
     def log_prob(theta):
         r = y[None, :] - theta @ X.T
         ll = -0.5 * np.sum(r**2, axis=1) / 0.25
-        return list(zip(ll, ll))
+        return list(zip(ll, ll, strict=False))
 
     return log_prob, mean, cov
 
@@ -61,7 +61,7 @@ def test_same_seed_same_chains():
     kw = dict(n_walkers=8, n_ensembles=2, seed=5, min_steps=100, max_steps=100, chunk=50)
     a = sample_ensembles(log_prob, 2, workers=2, **kw)
     b = sample_ensembles(log_prob, 2, workers=1, **kw)
-    for ca, cb in zip(a["chains"], b["chains"]):
+    for ca, cb in zip(a["chains"], b["chains"], strict=False):
         assert np.array_equal(ca, cb)
     c = sample_ensembles(log_prob, 2, n_walkers=8, n_ensembles=2, seed=6, min_steps=100, max_steps=100, chunk=50)
     assert not np.array_equal(a["chains"][0], c["chains"][0])

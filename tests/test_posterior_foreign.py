@@ -38,7 +38,7 @@ def test_calibration_on_twenty_foreign_records():
     interval holds the truth in at least 16 of 20 (0.90 less two binomial sd) and the rms of (mean - truth) /
     sd lies within 0.8-1.25 (its own noise over 20 records is about +-0.16). ~7 min on 2 cores."""
     seeds = list(range(200, 220))
-    rows = [_posterior(u, z, s) for (u, z), s in zip(rk4_random_records(seeds), seeds)]
+    rows = [_posterior(u, z, s) for (u, z), s in zip(rk4_random_records(seeds), seeds, strict=False)]
     for name in NAMES:
         truth = getattr(TRUTH, name)
         ps = [r["parameters"][name] for r in rows]

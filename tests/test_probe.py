@@ -87,7 +87,7 @@ def workdir(tmp_path_factory):
     assert main(["rig", "random", "-o", str(d / "rec.csv"), "--duration", "12", "--seed", "1", "--quiet"]) == 0
     (d / "model.json").write_text(json.dumps({"m": 0.2, "k1": 426.0, "k2": -3060.0, "k3": 7.77e5, "c": 3.5}))
     (d / "targets.json").write_text(json.dumps({"f_minus": 11.4, "f_plus": 9.2, "z_minus": -0.029, "z_plus": 0.023}))
-    for name, (fname, content) in BAD_FILES.items():
+    for fname, content in BAD_FILES.values():
         if content is None:
             continue
         p = d / fname

@@ -31,7 +31,7 @@ TARGETS = {"f_minus": 11.4, "f_plus": 9.2, "z_minus": -0.029, "z_plus": 0.023}
 def _columns(path: Path) -> dict:
     lines = [x for x in path.read_text().splitlines() if not x.startswith("#")]
     data = np.loadtxt(lines[1:], delimiter=",")
-    return dict(zip(lines[0].split(","), data.T))
+    return dict(zip(lines[0].split(","), data.T, strict=False))
 
 
 def _csv(path: Path, cols: dict, meta: dict | None = None) -> Path:
@@ -64,7 +64,8 @@ def lab(tmp_path_factory):
     _csv(d / "short.csv", {"t": t[:1024], "base_acc": u[:1024], "z": z[:1024]})
     _csv(d / "fs_huge.csv", {"base_acc": u, "z": z}, {"fs": "1e300"})
     _csv(d / "fs_tiny.csv", {"base_acc": u, "z": z}, {"fs": "1e-300"})
-    (d / "twoz.csv").write_text("t,base_acc,z,y,z\n" + "".join(f"{a},{b},{c},0,{c}\n" for a, b, c in zip(t, u, z)))
+    (d / "twoz.csv").write_text("t,base_acc,z,y,z\n" + "".join(
+        f"{a},{b},{c},0,{c}\n" for a, b, c in zip(t, u, z, strict=True)))
     return d
 
 

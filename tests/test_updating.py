@@ -35,7 +35,7 @@ def test_ga_recovers_a_known_target_for_a_fixed_seed(exact_run):
     assert exact_run.fitness_ < 0.1
     h = exact_run.history_
     assert len(h) == 60 and h[-1]["best"] <= h[0]["best"], "elitist: the best never gets worse"
-    assert all(b["best"] <= a["best"] + 1e-12 for a, b in zip(h, h[1:]))
+    assert all(b["best"] <= a["best"] + 1e-12 for a, b in zip(h, h[1:], strict=False))
 
 
 def test_the_same_seed_gives_identical_results(exact_run):

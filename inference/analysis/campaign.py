@@ -13,9 +13,10 @@ from __future__ import annotations
 
 import math
 import re
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -30,7 +31,8 @@ MEASUREMENT_SUFFIXES = (".csv", ".txt", ".npz", ".mat", ".uff", ".unv", ".tdms",
 def campaign_records(data: Sequence[str]) -> list[dict[str, Any]]:
     """The records of a stepped campaign, each ``{"file", "start", "direction", "forcing_hz"}`` (None where
     not known yet): the files in the order given, or one folder: its ``index.json`` (``negstiff rig
-    campaign``'s: file, start_well, direction, forcing_hz), else its measurement files by name."""
+    campaign``'s: file, start_well, direction, forcing_hz), else its measurement files by name.
+    """
     folder = Path(data[0]) if len(data) == 1 and Path(data[0]).is_dir() else None
     if folder is None:
         return [{"file": d, "start": None, "direction": None, "forcing_hz": None} for d in data]
@@ -56,7 +58,8 @@ def campaign_records(data: Sequence[str]) -> list[dict[str, Any]]:
 
 def campaign_files(data: Sequence[str] | None) -> list[Path]:
     """Every file ``map`` reads for ``data``: the records (a folder's, by its index or its names) and the
-    folder's index; checked against the outputs before any work."""
+    folder's index; checked against the outputs before any work.
+    """
     if not data:
         return []
     files = [Path(e["file"]) for e in campaign_records(data)]
@@ -73,9 +76,10 @@ def _natural(path: Path) -> list:
 
 def forcing_frequencies(entries: list[dict[str, Any]], recs, given: float | None) -> list[float]:
     """Each record's forcing frequency [Hz]: the index's, else its metadata's ``forcing_hz``, else
-    ``given`` (--forcing-hz); a given one that disagrees with the file's is refused."""
+    ``given`` (--forcing-hz); a given one that disagrees with the file's is refused.
+    """
     out = []
-    for e, rec in zip(entries, recs):
+    for e, rec in zip(entries, recs, strict=False):
         stated = e["forcing_hz"]
         if stated is None and "forcing_hz" in rec.meta:
             try:
@@ -98,7 +102,8 @@ def forcing_frequencies(entries: list[dict[str, Any]], recs, given: float | None
 
 def read_nfrc_results(paths: Sequence[str] | None, axis: str, forcing_hz: float) -> list[dict[str, Any]]:
     """Each ``--nfrc`` result, checked before any analysis: a continuation along the map's ``axis``
-    (``amplitude``: at ``forcing_hz``; ``f_hz``: its amplitude is compared with the records' afterwards)."""
+    (``amplitude``: at ``forcing_hz``; ``f_hz``: its amplitude is compared with the records' afterwards).
+    """
     out = []
     for p in paths or []:
         try:
@@ -127,7 +132,8 @@ def continuation_vs_map(overlay: dict[str, Any], points: list[dict[str, Any]], a
     """A continuation beside the map. In amplitude: its period-1 branch's first doubling beside the map's
     first period 2 sweeping up from its well (or in the records' order where the map does not say). In
     frequency: its folds beside where each of the map's sweeps from its well jumps (sweeping up the
-    response leaves its branch at the upper fold, sweeping down at the lower one)."""
+    response leaves its branch at the upper fold, sweeping down at the lower one).
+    """
     well = overlay["settings"]["well"]
     mine = [p for p in points if p["start"] in (well, None)]
     out: dict[str, Any] = {"label": overlay["label"], "well": well}
@@ -145,7 +151,8 @@ def continuation_vs_map(overlay: dict[str, Any], points: list[dict[str, Any]], a
 
 def map_warnings(points, overlays, axis: str, wells) -> list[str]:
     """What the map cannot say: no wells to tell a cross-well response from an in-well one, or a
-    continuation at another amplitude than the records'."""
+    continuation at another amplitude than the records'.
+    """
     out = []
     if wells is None:
         out.append("no rest positions (--wells or the records' metadata): a cross-well response is not told from an "
@@ -163,7 +170,8 @@ def map_warnings(points, overlays, axis: str, wells) -> list[str]:
 class Campaign:
     """A stepped harmonic campaign, read and checked (``read``): its records, their forcing frequencies,
     the axis it steps (``"amplitude"`` at one frequency, or ``"f_hz"``), the continuations to draw over
-    its map, and the wells its regimes are judged against."""
+    its map, and the wells its regimes are judged against.
+    """
 
     entries: list[dict[str, Any]]
     records: list[Measurement]
@@ -177,13 +185,14 @@ class Campaign:
              wells: tuple[float, ...] | None = None, nfrc: Sequence[str] | None = None,
              gravity: float | None = None) -> Campaign:  # fmt: skip
         """Read every record and continuation of ``data`` and check them (one ``MeasurementError``), before
-        any analysis; ``gravity`` [m/s^2] along the motion overrides the records' metadata (0: horizontal)."""
+        any analysis; ``gravity`` [m/s^2] along the motion overrides the records' metadata (0: horizontal).
+        """
         entries = campaign_records(data)
         recs = [load(e["file"], columns=columns, fs=fs, gravity=gravity) for e in entries]
         freqs = forcing_frequencies(entries, recs, forcing_hz)
         axis = "f_hz" if max(freqs) / min(freqs) - 1 > 1e-9 else "amplitude"  # the campaign steps f, or A at one f
         overlays = read_nfrc_results(nfrc, axis, freqs[0])
-        for e, rec, f in zip(entries, recs, freqs):
+        for e, rec, f in zip(entries, recs, freqs, strict=False):
             if not f < rec.fs / 2:
                 raise MeasurementError(
                     f"{e['file']}: its forcing frequency {f:g} Hz is above its Nyquist frequency {rec.fs / 2:g} Hz"
@@ -199,9 +208,10 @@ class Campaign:
 
     def map(self, progress: Callable[[str], None] | None = None) -> dict[str, Any]:
         """The bifurcation map (``negstiff map``'s result, without its figure); ``progress`` hears of each
-        record as it is analysed."""
+        record as it is analysed.
+        """
         points = []
-        for e, rec, f in zip(self.entries, self.records, self.freqs):
+        for e, rec, f in zip(self.entries, self.records, self.freqs, strict=False):
             points.append({**e, "f_hz": f, **map_point(rec, f, self.wells)})
             p = points[-1]
             if progress:

@@ -57,7 +57,8 @@ MIN_SAMPLES_PER_CYCLE = 48
 
 def upsampled(rec: Measurement, forcing_hz: float) -> tuple[Measurement, int]:
     """The record interpolated band-limited to >= ``MIN_SAMPLES_PER_CYCLE`` samples per forcing
-    cycle (unchanged when it has them), and the factor."""
+    cycle (unchanged when it has them), and the factor.
+    """
     q = math.ceil(MIN_SAMPLES_PER_CYCLE * forcing_hz / rec.fs)
     if q <= 1:
         return rec, 1
@@ -84,7 +85,8 @@ def lyapunov(rec: Measurement, forcing_hz: float, noise: float | None) -> dict[s
     over their total time) and Rosenstein's
     (``rosenstein``, None with ``rosenstein_error`` where no divergence can be followed), and whether the
     two estimators agree on the exponent's sign (``estimators_agree``: both significantly positive, or
-    neither)."""
+    neither).
+    """
     w = largest_lyapunov(rec.z, rec.dt, forcing_hz=forcing_hz, noise=noise, segments=LLE_SEGMENTS)
     parts = w["segments"]
     if len(parts) >= 2:
@@ -117,7 +119,8 @@ def lyapunov(rec: Measurement, forcing_hz: float, noise: float | None) -> dict[s
 def check_harmonic(rec: Measurement, forcing_hz: float) -> None:
     """Refuse (``MeasurementError``, one line) a harmonic record no characterisation can use: a forcing
     at or above the Nyquist frequency, fewer than 10 forcing cycles, a response or an input that does
-    not move (the forcing's phase is read from the input)."""
+    not move (the forcing's phase is read from the input).
+    """
     if not 0 < forcing_hz < rec.fs / 2:
         raise MeasurementError(
             f"{rec.source}: forcing frequency {forcing_hz:g} Hz must lie below the Nyquist frequency {rec.fs / 2:g} Hz"
@@ -134,7 +137,8 @@ def check_harmonic(rec: Measurement, forcing_hz: float) -> None:
 def wells_for(rec: Measurement, wells="auto") -> tuple[float, ...] | None:
     """The wells a regime is judged against: those given (z_minus, z_plus or z_minus, z_0, z_plus [m],
     increasing; None: none, the regime is the side of the median), else (``"auto"``) the rest positions of
-    the record's metadata, else the stable roots of a cubic fitted to the record (``nsi.well_guesses``)."""
+    the record's metadata, else the stable roots of a cubic fitted to the record (``nsi.well_guesses``).
+    """
     if wells is None:
         return None
     if not isinstance(wells, str):
@@ -253,7 +257,8 @@ def map_point(rec: Measurement, forcing_hz: float, wells=None) -> dict[str, Any]
     forcing's amplitude measured from the input (its harmonic at the measured frequency near ``forcing_hz``
     by least squares: m/s^2
     for base excitation, N for a force), the period, regime, branch amplitudes and the last
-    ``MAP_POINCARE_POINTS`` Poincare z (phase 0); no Lyapunov exponent (a map's records are many)."""
+    ``MAP_POINCARE_POINTS`` Poincare z (phase 0); no Lyapunov exponent (a map's records are many).
+    """
     from negstiff.inference.analysis.periodicity import forcing_phase
 
     c = characterize(rec, forcing_hz, wells, lle=False, poincare=True)
@@ -274,7 +279,8 @@ def map_point(rec: Measurement, forcing_hz: float, wells=None) -> dict[str, Any]
 
 def map_sequence(points: list[dict[str, Any]], key: str = "amplitude") -> list[list]:
     """A sweep's regimes in its order: [label, first, last value of ``key``] runs, the label ``P<n>`` for
-    period n or ``chaos`` where no period was found."""
+    period n or ``chaos`` where no period was found.
+    """
     seq: list[list] = []
     for p in points:
         label = "chaos" if p["period"] is None else f"P{p['period']}"
@@ -292,7 +298,8 @@ def first_period_2(points: list[dict[str, Any]]) -> float | None:
 
 def jump(points: list[dict[str, Any]]) -> float | None:
     """Where a stepped-sine sweep's response jumps: the midpoint of the two consecutive steps whose
-    response amplitudes (half peak-to-peak, largest branch) differ most; None for fewer than two steps."""
+    response amplitudes (half peak-to-peak, largest branch) differ most; None for fewer than two steps.
+    """
     amp = np.array([max(p["amplitudes"]) if p["amplitudes"] else np.nan for p in points])
     diffs = np.abs(np.diff(amp))
     if not np.isfinite(diffs).any():  # fewer than two steps, or no amplitudes to compare

@@ -20,7 +20,8 @@ an independent check of what NSI, SINDy and a refined model say (reference study
 from __future__ import annotations
 
 import math
-from typing import Any, Sequence
+from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 from scipy import optimize, signal
@@ -62,7 +63,8 @@ def input_period(rec: Measurement) -> int | None:
 def estimate(rec: Measurement, segment_s: float = SEGMENT_S, period: int | None = None) -> dict[str, np.ndarray]:
     """H1, H2 and the coherence of z over the input: (f [Hz], H1, H2, coherence, averages). A periodic input
     (``period`` samples: a multisine) is averaged over whole periods without a window: every bin is one of its
-    lines, none leaks (Welch's Hann segments of a random input would split its lines and fit noise between)."""
+    lines, none leaks (Welch's Hann segments of a random input would split its lines and fit noise between).
+    """
     if rec.z is None:
         raise MeasurementError(f"{rec.source}: an FRF needs a response column")
     if period is not None and rec.n >= 2 * period:
@@ -137,7 +139,8 @@ half-power bandwidth (2 zeta f): window leakage widens a peak and biases zeta up
 
 def check_frf(rec: Measurement, band: tuple[float, float] | None = None) -> None:
     """Refuse (``MeasurementError``, one line) what no FRF can be estimated from: an input or a response
-    that does not move, a band beyond the Nyquist frequency."""
+    that does not move, a band beyond the Nyquist frequency.
+    """
     rec.require_excitation("an FRF")
     rec.require_motion("an FRF")
     if band is not None and not (0 <= band[0] < band[1] <= rec.fs / 2):
@@ -252,7 +255,8 @@ def read_frf_results(paths: Sequence[str] | None) -> list[tuple[str, float, str 
 def compare_with_frf(modal: dict, frfs: list[tuple[str, float, str | None]]) -> list[dict]:
     """Each well's identified underlying-linear frequency (an identification's ``modal``) beside a low-level
     FRF's (``read_frf_results``; ``identify --frf``): the FRF's well from its record's rest positions, else the
-    identified well of the nearest frequency."""
+    identified well of the nearest frequency.
+    """
     out = []
     for p, f_frf, well in frfs:
         modal = {w: m["f_hz"] for w, m in modal.items() if m.get("f_hz")}

@@ -192,7 +192,8 @@ def wolf_pooled(x: np.ndarray, dt: float, m: int, tau: int, evolv: int, theiler:
                 **kw) -> dict[str, Any]:  # fmt: skip
     """Wolf's estimate pooled over ``fiducials`` trajectories: total log stretch / total evolution time;
     ``spread`` is the standard deviation of the single trajectories' estimates (their neighbour choices
-    differ, the data are the same: it measures the algorithm's noise, not the record's)."""
+    differ, the data are the same: it measures the algorithm's noise, not the record's).
+    """
     n = np.asarray(x).size - (m - 1) * tau
     starts = sorted({int(s) for s in np.linspace(0, min(theiler, max(0, n - 2 * evolv - 1)), fiducials)})
     runs = []
@@ -241,7 +242,8 @@ def rosenstein(
     Returns ``value``, the divergence curve (``t``, ``divergence``) and the fitted window (``fit_t``).
     Raises ``ValueError`` when the separation does not grow beyond a tenth of the orbit's size (a
     periodic orbit within the noise), when the window to fit spans fewer than ``min_span`` samples, or
-    for a series too short."""
+    for a series too short.
+    """
     Y = embed(np.asarray(x, float), m, tau)
     n = Y.shape[0] - horizon
     if n < 10 * (theiler + 1):
@@ -330,7 +332,7 @@ def largest_lyapunov(
     if segments > 1:
         runs = []
         edges = np.linspace(0, xs.size, segments + 1).astype(int)
-        for a, b in zip(edges[:-1], edges[1:]):
+        for a, b in zip(edges[:-1], edges[1:], strict=False):
             try:
                 runs.append(wolf_pooled(xs[a:b], dts, m, tau, evolv, theiler, scalmx=scalmx, scalmn=scalmn))
             except ValueError:

@@ -42,7 +42,8 @@ def forcing_phase(u: np.ndarray, t: np.ndarray, f_hz: float) -> tuple[float, flo
 
 def refine_frequency(u: np.ndarray, t: np.ndarray, f0: float, halfwidth: float) -> float:
     """The frequency [Hz] within ``f0`` +- ``halfwidth`` whose least-squares sinusoid (with a constant)
-    leaves the least residual in u (a periodogram's peak, refined between its bins)."""
+    leaves the least residual in u (a periodogram's peak, refined between its bins).
+    """
     def misfit(f: float) -> float:  # the least-squares residual (not the amplitude: over a non-integer number
         w = 2 * np.pi * f  # of cycles sin and cos are not orthogonal, and the amplitude peaks off the line)
         X = np.column_stack([np.sin(w * t), np.cos(w * t), np.ones_like(t)])
@@ -61,7 +62,8 @@ controller's error is a fraction of a percent); a line outside it is refused as 
 def measured_forcing(rec: Measurement, f_hz: float) -> dict[str, float]:
     """The forcing as the input channel says it is: its frequency near the stated ``f_hz`` (the
     strongest periodogram line within ``FREQUENCY_SEARCH``, refined by least squares), amplitude and
-    phase (u ~ A sin(2 pi f (t - t0) + phi)). Raises ``MeasurementError`` when the input has no line there."""
+    phase (u ~ A sin(2 pi f (t - t0) + phi)). Raises ``MeasurementError`` when the input has no line there.
+    """
     u, t = rec.u - rec.u.mean(), rec.t - rec.t0
     pad = 8 * rec.n
     spec = np.abs(np.fft.rfft(u * np.hanning(rec.n), pad))
@@ -83,7 +85,8 @@ def measured_forcing(rec: Measurement, f_hz: float) -> dict[str, float]:
 @dataclass(frozen=True)
 class Poincare:
     """Phase-synchronous samples of a record: ``z[k, n]``, ``z_dot[k, n]`` at phase ``phases_deg[k]``
-    of forcing cycle n."""
+    of forcing cycle n.
+    """
 
     phases_deg: np.ndarray
     z: np.ndarray
@@ -95,7 +98,8 @@ class Poincare:
 class _Synchronous:
     """A record's band-limited z as a cubic spline of time, and the times its input's phase passes
     zero (``starts``: one per forcing cycle, drift of the input's phase followed), with the input's
-    amplitude and phase on each cycle (``cycle_amplitude``, ``cycle_phase``)."""
+    amplitude and phase on each cycle (``cycle_amplitude``, ``cycle_phase``).
+    """
 
     spline: CubicSpline
     starts: np.ndarray
@@ -117,7 +121,8 @@ drift moves the sampling instants with it, the input's noise does not jitter the
 
 def _cycles(u: np.ndarray, t: np.ndarray, f_hz: float, t_first: float, n_cycles: int):
     """Amplitude and phase of u on each forcing cycle [t_first + n T, t_first + (n + 1) T), by least
-    squares on sin, cos and a constant (sums over each cycle's samples)."""
+    squares on sin, cos and a constant (sums over each cycle's samples).
+    """
     w, period = 2 * np.pi * f_hz, 1.0 / f_hz
     idx = np.floor((t - t_first) / period).astype(int)
     keep = (idx >= 0) & (idx < n_cycles)
@@ -186,16 +191,18 @@ def band_edge(fs: float, f_hz: float) -> float:
 
 
 def bandlimited(z: np.ndarray, fs: float, f_hz: float) -> np.ndarray:
-    """z low-passed (zero-phase, 4th-order Butterworth) at ``band_edge``: the same filter on every
+    """Z low-passed (zero-phase, 4th-order Butterworth) at ``band_edge``: the same filter on every
     forcing cycle cannot create or destroy a periodicity, and it keeps broadband sensor noise out of
-    the differentiated Poincare coordinate."""
+    the differentiated Poincare coordinate.
+    """
     sos = signal.butter(4, band_edge(fs, f_hz), fs=fs, output="sos")
     return signal.sosfiltfilt(sos, z)
 
 
 def noise_level(z: np.ndarray, fs: float) -> float:
     """Sensor noise std [same units as z], from the residual of a light smoothing, scaled for the
-    part of white noise the smoothing keeps."""
+    part of white noise the smoothing keeps.
+    """
     w = 7
     resid = z - signal.savgol_filter(z, w, 3)
     # a cubic 7-point Savitzky-Golay filter passes sum(h^2) of white noise; the residual keeps 1 - that
@@ -213,7 +220,8 @@ def detect_period(
     The tolerance of lag p is ``tol`` (the noise's) combined with the part of the differences that the
     input's own cycle-to-cycle differences explain (``inputs`` (N, k): per-cycle input amplitude and
     phase; a least-squares fit of P_(n+p) - P_n on U_(n+p) - U_n): a periodic response to a shaker whose
-    amplitude breathes changes with it. Returns (period, residuals, tolerances)."""
+    amplitude breathes changes with it. Returns (period, residuals, tolerances).
+    """
     r, tols = {}, {}
     for p in PERIODS:
         if p >= points.shape[0] // 2:
@@ -248,7 +256,8 @@ def subharmonic_lines(z: np.ndarray, fs: float, f_hz: float) -> dict[str, Any]:
     (k < 2 q, k not a multiple of q's divisors' lines: gcd(k, q) = 1) over the median of the spectrum
     around it (+- f / (4 q), the line's own bins left out), and the period the significant lines imply
     (the least common multiple of their q; 1 with none). A chaotic record's broadband spectrum has no
-    such lines to speak of; the check is the periodicity's, not chaos's."""
+    such lines to speak of; the check is the periodicity's, not chaos's.
+    """
     x = (z - z.mean()) * np.hanning(z.size)
     spec = np.abs(np.fft.rfft(x)) ** 2
     df = fs / z.size

@@ -1,5 +1,5 @@
 """The contract every negstiff estimator keeps (NSI, SINDy, Discrepancy, Posterior, GAUpdater), after
-scikit-learn's (``sklearn/base.py``, its developer guide's "rolling your own estimator"), enforced here:
+scikit-learn's (``sklearn/base.py``, its developer guide's "rolling your own estimator"), enforced here.
 
 * ``__init__(self, *, ...)`` takes keywords only, stores them as given under their own names, and does
   nothing else; ``get_params(deep=True)`` and ``set_params(**params)`` read and change them, so
@@ -41,7 +41,8 @@ class Estimator:
 
     def get_params(self, deep: bool = True) -> dict[str, Any]:
         """The constructor's parameters and their current values (``deep``: with those of nested
-        estimators as ``name__parameter``, as scikit-learn's)."""
+        estimators as ``name__parameter``, as scikit-learn's).
+        """
         out = {}
         for name in self._param_names():
             value = getattr(self, name)
@@ -50,9 +51,10 @@ class Estimator:
             out[name] = value
         return out
 
-    def set_params(self, **params: Any) -> "Estimator":
+    def set_params(self, **params: Any) -> Estimator:
         """Set parameters (``name=value``, or ``name__parameter`` of a nested estimator); returns ``self``.
-        Values are checked by ``fit``, as the constructor's."""
+        Values are checked by ``fit``, as the constructor's.
+        """
         names = self._param_names()
         for key, value in params.items():
             name, _, sub = key.partition("__")
@@ -86,7 +88,8 @@ class Estimator:
 
         ``data`` is a ``Measurement`` or a path to a measurement file (read with ``load``); arrays go
         through ``from_arrays(u, z, fs)`` first. A z derived from another sensor is pinned to the physical
-        frame here (``frame.pin_frame``), the step that needs it."""
+        frame here (``frame.pin_frame``), the step that needs it.
+        """
         self._validate_params()
         self._validate()
         if isinstance(data, (str, PathLike)):
@@ -114,9 +117,11 @@ class Estimator:
         return "model_" in vars(self) or "result_" in vars(self) or "device_" in vars(self)
 
     def result(self) -> dict[str, Any]:
+        """The fitted result as the command line writes it (JSON-ready)."""
         raise NotImplementedError
 
     def to_json(self) -> dict[str, Any]:
+        """The result as JSON (``result()``), for ``files.write_json``."""
         return self.result()
 
     def _summary(self) -> str:

@@ -28,7 +28,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, override
 
 import numpy as np
 
@@ -58,7 +58,8 @@ LINEAR_BASELINE = ("1", "z", "v")
 
 def catalogue() -> dict[str, tuple[str, ...]]:
     """Candidate effects (the registry's, in its order) and the library terms each adds; an effect with a
-    positional law (the one-sided stop) adds none: its column is made at a searched position."""
+    positional law (the one-sided stop) adds none: its column is made at a searched position.
+    """
     return {e.name: (() if e.law.label is None else (e.law.label,)) for e in effects.REGISTRY}
 
 
@@ -69,6 +70,8 @@ def _positional() -> effects.Effect | None:
 
 @dataclass
 class Candidate:
+    """A catalogue entry: an effect, its library terms, and an end stop's onset when it has one."""
+
     effect: str
     terms: tuple[str, ...]
     stop: float | None = None
@@ -96,9 +99,11 @@ def _held(terms) -> tuple[str, ...]:
 class LibraryTerms(Constraint):
     """A non-empty sequence of the library's terms (``weak.terms``: the registry's, when checked)."""
 
+    @override
     def accepts(self, value) -> bool:
         return Several(Options(library_terms())).accepts(value)
 
+    @override
     def describe(self) -> str:
         return f"a non-empty sequence of library terms ({', '.join(library_terms())})"
 
@@ -170,7 +175,8 @@ class Discrepancy(Estimator):
         """Weak system over samples [lo, hi): the library's columns, the input's, a column per measured
         auxiliary channel in ``aux`` (its projection, like the input's) and an end-stop column last. The library's
         part is projected once per span and record (a fit asks for the same two spans ~75 times, one per
-        candidate stop and effect: 16 of a discrepancy study's 36 s went to projecting them again)."""
+        candidate stop and effect: 16 of a discrepancy study's 36 s went to projecting them again).
+        """
         hit = self._library_systems.get((lo, hi))
         if hit is None or hit[0] is not rec:
             sysd = self._form.system(rec, lo, hi)
@@ -194,7 +200,8 @@ class Discrepancy(Estimator):
 
     def _fit(self, W: np.ndarray, y: np.ndarray, terms: tuple[str, ...], stop: bool, n_aux: int = 0) -> np.ndarray:
         """Least squares on ``terms`` (+ the auxiliary channels' and the stop's columns), the input's
-        coefficient fixed by physics."""
+        coefficient fixed by physics.
+        """
         lib = library_terms()
         n_lib = len(lib)
         aux_cols = list(range(n_lib + 1, n_lib + 1 + n_aux))  # after the input's column; the stop's last
@@ -260,7 +267,8 @@ class Discrepancy(Estimator):
 
     def _fit_stop(self, rec: Measurement, terms: tuple[str, ...], aux: tuple[str, ...] = ()) -> float:
         """The end stop's position (a nonlinear parameter) by least squares on the fitting part: a grid
-        over the outer 0.5-10 % of the stroke on either side, refined by a bounded scalar search."""
+        over the outer 0.5-10 % of the stroke on either side, refined by a bounded scalar search.
+        """
         from scipy import optimize
 
         def ss(zs: float) -> float:
@@ -335,7 +343,8 @@ class Discrepancy(Estimator):
         rec.require_excitation("the discrepancy workflow")
         rec.require_motion("the discrepancy workflow")
 
-    def fit(self, rec: Measurement) -> "Discrepancy":
+    def fit(self, rec: Measurement) -> Discrepancy:
+        """Locate, name, add and refit on ``rec`` (a ``Measurement`` or a path); returns ``self``."""
         rec = self.check(rec)
         self._systems(rec)
         terms = tuple(self.baseline)
@@ -409,7 +418,8 @@ class Discrepancy(Estimator):
     def _trial(self, rec: Measurement, best: Candidate, named: list[str]) -> dict[str, Any]:
         """The model with ``best`` added: every parameter refitted on the identification part by weak least
         squares, then (``refine``) by output error, every effect's own values included (an end stop's
-        stiffness and onset: ``refine.parameter_names``); its held-out gap."""
+        stiffness and onset: ``refine.parameter_names``); its held-out gap.
+        """
         initial = self._as_extra(self._refit_model(rec, best.terms, best.stop, best.aux), named)
         model, refinement = initial, None
         if self.refine:
@@ -424,7 +434,8 @@ class Discrepancy(Estimator):
         error 100x the others' and would decide a plain mean alone; the headline gap is the median
         window's for the same reason): an effect the equation error named that does not help the
         prediction is said, and left out. A window whose run diverges counts as an error the size of the
-        signal (it predicts nothing)."""
+        signal (it predicts nothing).
+        """
         a, b = before.get("window_ms"), after.get("window_ms")
         if a is None or b is None or len(a) != len(b) or len(a) < 2:
             return False, f"{effect}: not kept: the held-out tail has too few windows to tell whether it helps"
@@ -442,7 +453,8 @@ class Discrepancy(Estimator):
         """What no catalogue effect names: a non-parametric force g(z, z', u) fitted by output error on the
         identification part with the final model held (``hybrid.fit_hybrid``), its size, the held-out gap
         with and without it (the same restarted windows), and how far the joint refit moved each physical
-        coefficient in its standard errors."""
+        coefficient in its standard errors.
+        """
         from negstiff.inference.estimators.hybrid import fit_hybrid
 
         ident = rec.segment(0, self.n_id_)
@@ -461,7 +473,8 @@ class Discrepancy(Estimator):
         """Among the effects within max(1 SE, margin) of the best held-out residual, the one with the
         fewest parameters (the end stop has two: its stiffness and its position), then the lowest
         residual: a two-parameter stop that beats z^5 by 4 % on the as-built device is not evidence of
-        a stop (measured)."""
+        a stop (measured).
+        """
         top = ranking[0]
         n_par = {"none": 0, **{e.name: e.n_values for e in effects.REGISTRY}}
         n_par |= {c.effect: 1 for c in ranking if c.effect.startswith(effects.AUX_PREFIX)}  # theta alone
@@ -478,7 +491,8 @@ class Discrepancy(Estimator):
     @staticmethod
     def _as_extra(model: Model, named: list[str]) -> Model:
         """Named effects that fold into a base field (c_nl, k2, k3) move to ``extra`` under their name, so
-        the model file says what was added (the simulator adds them back to the same field)."""
+        the model file says what was added (the simulator adds them back to the same field).
+        """
         folds = {e.name: e.folds_into for e in effects.REGISTRY if e.folds_into}
         d = model.to_dict()
         extra = dict(d.get("extra") or {})
@@ -518,6 +532,7 @@ class Discrepancy(Estimator):
         return out
 
     def where_text(self) -> str:
+        """Where the baseline's equation error concentrates, in words (the result's ``where``)."""
         loc = self.locate_before_
         if not loc["regimes"]:
             return "no regime could be told apart"
@@ -532,7 +547,8 @@ class Discrepancy(Estimator):
             return f"at {regime}" if regime == "large stroke" else regime
 
         txt = (
-            f"the baseline's equation error is concentrated {where(worst)} ({100 * w['residual_share']:.0f} % of the squared "
+            f"the baseline's equation error is concentrated {where(worst)} "
+            f"({100 * w['residual_share']:.0f} % of the squared "
             f"residual in {100 * w['time_share']:.0f} % of the record, {w['ratio']:.1f}x its share)"
         )
         if len(parts) > 1:
@@ -540,6 +556,7 @@ class Discrepancy(Estimator):
             txt += f"; next {where(n2)} ({w2['ratio']:.1f}x)"
         return txt
 
+    @override
     def result(self) -> dict[str, Any]:
         last = self.iterations_[0] if self.iterations_ else {"ranking": []}  # max_effects = 0: the baseline only
         before = self.gap_before_.get("median_window_percent", math.inf)

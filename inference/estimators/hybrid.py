@@ -44,7 +44,8 @@ from negstiff.models.simulator import input_gain, stage_input
 @dataclass(frozen=True)
 class Basis:
     """Centres and widths of the bumps: ``nz`` x ``nv`` over the (z, z') range the record visits (its
-    0.5-99.5 % quantiles), ``nu`` over the input's; widths equal to the grid spacing."""
+    0.5-99.5 % quantiles), ``nu`` over the input's; widths equal to the grid spacing.
+    """
 
     zc: np.ndarray
     vc: np.ndarray
@@ -55,6 +56,7 @@ class Basis:
 
     @classmethod
     def over(cls, z: np.ndarray, v: np.ndarray, u: np.ndarray, nz: int = 7, nv: int = 5, nu: int = 5) -> Basis:
+        """A basis whose centres span the 0.5-99.5 % quantiles of ``z``, ``v`` and ``u`` (``nz`` x ``nv`` + ``nu``)."""
         def grid(x, k):
             lo, hi = np.quantile(x, [0.005, 0.995])
             c = np.linspace(lo, hi, k) if k > 1 else np.array([0.5 * (lo + hi)])[:k]
@@ -67,9 +69,11 @@ class Basis:
 
     @property
     def size(self) -> int:
+        """The number of basis functions (weights)."""
         return self.zc.size * self.vc.size + self.uc.size
 
     def split(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The weights as the (z, v) grid's matrix and the input's vector."""
         k = self.zc.size * self.vc.size
         return np.ascontiguousarray(theta[:k].reshape(self.zc.size, self.vc.size)), np.ascontiguousarray(theta[k:])
 
@@ -86,7 +90,7 @@ class Basis:
         )
 
     def evaluate(self, theta: np.ndarray, z, v, u=None) -> np.ndarray:
-        """g at the points (z, z', u) [N], any shape (u None: the state part alone)."""
+        """G at the points (z, z', u) [N], any shape (u None: the state part alone)."""
         w, _ = self.split(np.asarray(theta, float))
         g = np.einsum("...i,ij,...j->...", self._bumps(z, self.zc, self.wz), w, self._bumps(v, self.vc, self.wv))
         return g if u is None else g + self.input_part(theta, u)
@@ -98,9 +102,11 @@ class Basis:
 
     @classmethod
     def from_json(cls, d: dict[str, Any]) -> Basis:
+        """The basis of a result's ``basis`` entry."""
         return cls(np.array(d["z_centres"]), np.array(d["v_centres"]), np.array(d["u_centres"]), *d["widths"])
 
     def to_json(self) -> dict[str, Any]:
+        """The basis as JSON: its centres and widths."""
         return {"z_centres": self.zc.tolist(), "v_centres": self.vc.tolist(), "u_centres": self.uc.tolist(),
                 "widths": [self.wz, self.wv, self.wu]}  # fmt: skip
 
@@ -110,7 +116,8 @@ def simulate_hybrid(
     input_kind: str, z_limit: float, v_limit: float,
 ) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
     """Free runs of physics + g from the start states ``x0`` (B, 2) under staged input rows (B, S);
-    returns z and z' (N, B), NaN after a divergence."""
+    returns z and z' (N, B), NaN after a divergence.
+    """
     u2 = np.ascontiguousarray(np.atleast_2d(np.asarray(u_staged, float)))
     x0 = np.atleast_2d(np.asarray(x0, float))
     nb = x0.shape[0]
@@ -132,7 +139,8 @@ def simulate_hybrid(
 @dataclass
 class Hybrid:
     """A fitted hybrid: the physical model, the discrepancy term's basis and weights [N], and the fit's
-    record (stages, the joint refit's coefficient shifts in standard errors)."""
+    record (stages, the joint refit's coefficient shifts in standard errors).
+    """
 
     model: Model
     basis: Basis
@@ -144,16 +152,18 @@ class Hybrid:
         fitted with it held. It cannot undo a bend of the physics (the term is orthogonal to the
         physics' own forces), so where the physics-only fit had bent a coefficient it predicts worse than
         the joint fit; where term and physics trade (the Silverbox's cubic) it keeps the physics' own
-        estimate and, with the bumps vanishing beyond the training range, extrapolates as the physics."""
+        estimate and, with the bumps vanishing beyond the training range, extrapolates as the physics.
+        """
         held = self.info["held"]
         return Hybrid(Model.from_dict(held["model"]), self.basis, np.asarray(held["weights_N"], float),
                       {"fit": "physics held", "joint": self.info.get("joint")})  # fmt: skip
 
     def term(self, z, v, u=None) -> np.ndarray:
+        """The non-parametric force g(z, v, u) [N] at the given states."""
         return self.basis.evaluate(self.theta, z, v, u)
 
     def free_run(self, rec: Measurement, x0) -> np.ndarray:
-        """z of a free run over ``rec`` from ``x0`` (NaN after a divergence)."""
+        """Z of a free run over ``rec`` from ``x0`` (NaN after a divergence)."""
         sub = record_substeps(self.model, rec)
         zs, vs, _, _ = rec.states("state")
         us = stage_input(rec.driving(self.model), sub)[None]  # with any measured channel's term (its u)
@@ -165,7 +175,8 @@ class Hybrid:
     def restarted_gap(self, rec: Measurement, start: int, window_s: float, zs, vs) -> dict[str, float]:
         """The median restarted window's rms error over [start, N) (``validation.restarted_free_runs``'
         windows and measured start states), % of rms(z), for the hybrid and for its physics alone (the
-        same windows with the term's weights at zero)."""
+        same windows with the term's weights at zero).
+        """
         w = int(round(window_s * rec.fs))
         n_win = (rec.n - start) // w
         if n_win < 1:
@@ -187,6 +198,7 @@ class Hybrid:
         return out
 
     def to_json(self) -> dict[str, Any]:
+        """The hybrid model as JSON: the physics, the basis and its weights [N]."""
         return {"model": self.model.to_dict(), "basis": self.basis.to_json(), "weights_N": self.theta.tolist(),
                 **self.info}  # fmt: skip
 
@@ -195,7 +207,8 @@ def _correlation_time(e: np.ndarray) -> float:
     """Integrated autocorrelation time [samples] of window residuals ``e`` (windows, samples), pooled
     over the windows: 1 + 2 sum of the autocorrelation over lags up to its first non-positive value
     (Geyer's initial positive sequence, as emcee's and arviz's ESS do for chains; written here because
-    theirs take chains, not many short residual windows)."""
+    theirs take chains, not many short residual windows).
+    """
     e = e - e.mean(axis=1, keepdims=True)
     var = float(np.mean(e**2))
     if var <= 0:
@@ -211,7 +224,8 @@ def _correlation_time(e: np.ndarray) -> float:
 
 def _orthogonal_weights(basis: Basis, zs: np.ndarray, vs: np.ndarray, u: np.ndarray) -> np.ndarray:
     """An orthonormal basis N of the bump weights whose term is orthogonal, over the states the record
-    visits, to every force the physics can make (1, z, z^2, z^3, z', z'|z'|)."""
+    visits, to every force the physics can make (1, z, z^2, z^3, z', z'|z'|).
+    """
     pick = slice(None, None, max(1, zs.size // 20000))
     zp, vp, up = zs[pick], vs[pick], u[pick]
     F = np.column_stack([np.ones_like(zp), zp, zp**2, zp**3, vp, vp * np.abs(vp)])
@@ -225,7 +239,8 @@ def _coefficient_shifts(sol, cov_unit: np.ndarray, names, q0: np.ndarray, pscale
     """How far the joint refit moved each physical coefficient, in its standard errors: (J^T J)^-1 at the
     solution with the start states marginalised (``cov_unit``: ``shooting.parameter_covariance``) times
     the residual variance, inflated by the residual's correlation time (coloured residuals: tau samples
-    carry one sample's information)."""
+    carry one sample's information).
+    """
     p = len(names)
     n_res = sol.fun.size
     dof = max(1, n_res - sol.q.size - sol.x.size)
@@ -299,12 +314,13 @@ def fit_hybrid(
 
     def residuals(length, meas, u, phys_of):
         """The batched residuals (``shooting.Residuals``) of points (q, X): q's physics (``phys_of``) and
-        term weights, every window's free run from its start states (scaled) X."""
+        term weights, every window's free run from its start states (scaled) X.
+        """
         big = 10 * np.abs(meas).max()
 
         def fun(Q, X):
             out = np.empty((Q.shape[0], *meas.shape))
-            for k, (q, xs) in enumerate(zip(Q, X)):
+            for k, (q, xs) in enumerate(zip(Q, X, strict=False)):
                 phys, t = phys_of(q)
                 z = sim(phys, N @ t * force, u, xs)
                 out[k] = np.where(np.isfinite(z), z - meas, big)  # a diverging window: large, finite

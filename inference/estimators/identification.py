@@ -27,8 +27,9 @@ optimum (to 1e-9 on the rig's records), so a consistency check *between methods*
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Any, Mapping
+from typing import Any
 
 import numpy as np
 
@@ -44,7 +45,8 @@ from negstiff.models.equation import Equilibria
 
 class Bunch(dict):
     """A read-only dict whose keys are also attributes (``validation.rms_percent``), as scipy's result
-    objects; it is the JSON object it prints as."""
+    objects; it is the JSON object it prints as.
+    """
 
     def __getattr__(self, name: str):
         try:
@@ -166,7 +168,8 @@ class Identification:
 def visited_well(rec: Measurement, z: float, equilibria: Equilibria | None = None) -> str:
     """The name of the one well a record visited, at ``z``: by where it is, the nearer of the rest positions
     the metadata states, else of a model's two wells (``equilibria``); else ``"plus"``, the contract's name
-    for the well of a single-well system."""
+    for the well of a single-well system.
+    """
     rest = rec.rest_positions
     if len(rest) == 2:
         return min(rest, key=lambda w: abs(rest[w] - z))
@@ -183,7 +186,8 @@ def equilibria_and_modes(
 
     A model fitted over one well of a record may have roots far outside what the record visited (a quintic's
     extra roots): then the equilibria inside the stroke (widened by half its span) are reported, and a
-    warning says the others are an extrapolation. A single well is named by where it lies (``visited_well``)."""
+    warning says the others are an extrapolation. A single well is named by where it lies (``visited_well``).
+    """
     from negstiff.models.equation import find_equilibria
 
     notes: list[str] = []
@@ -223,7 +227,8 @@ def equilibria_and_modes(
 class Identifier(Estimator):
     """Base of the identifications: ``fit`` runs the method's ``_estimate`` and then the shared stages
     (module docstring). Subclasses declare ``method`` and their parameters; ``validation_fraction`` and
-    ``refine`` are every identification's."""
+    ``refine`` are every identification's.
+    """
 
     method: str = ""
 
@@ -234,9 +239,10 @@ class Identifier(Estimator):
         """The method's own result keys that depend on the final model (NSI's ``g_estimate``)."""
         return details
 
-    def fit(self, data) -> "Identifier":
+    def fit(self, data) -> Identifier:
         """Identify from ``data`` (a ``Measurement`` or a file path): the method's estimate, then the
-        shared stages (module docstring); the result is ``result_`` (an ``Identification``)."""
+        shared stages (module docstring); the result is ``result_`` (an ``Identification``).
+        """
         rec = self.check(data)
         n_id = int(round(rec.n * (1 - self.validation_fraction)))
         est = self._estimate(rec, n_id)
@@ -294,6 +300,7 @@ class Identifier(Estimator):
 
     @property
     def fitted(self) -> bool:
+        """Whether ``fit`` has run (the learned attributes exist)."""
         return "result_" in vars(self)
 
     def result(self) -> dict[str, Any]:

@@ -57,7 +57,7 @@ input spreads over nearly all, a harmonic one over one or two."""
 
 
 def covers_band(u: np.ndarray, fs: float, band: tuple[float, float]) -> bool:
-    """Does the input's power spread over the band (``INPUT_SPREAD``), or sit in a few lines?"""
+    """Whether the input's power spreads over the band (``INPUT_SPREAD``) rather than sitting in a few lines."""
     f, p = signal.welch(u - u.mean(), fs, nperseg=min(u.size, int(8 * fs)))
     p = p[(f >= band[0]) & (f <= band[1])]
     if p.size < 3 or not p.sum() > 0:
@@ -74,7 +74,8 @@ def well_guesses(rec: Measurement) -> tuple[float | None, float]:
     fitted by equation error (least squares of u = z'' + a z' + b z'|z'| + K(z)/m on Savitzky-Golay
     derivatives over a window of ~fs/25 samples). Biased by derivative noise, but good to a few
     percent of the well spacing, which is all NSI needs: it refines each well from its own fit.
-    Returns (z_minus, z_plus) of a double well, (None, z_plus) of a single well."""
+    Returns (z_minus, z_plus) of a double well, (None, z_plus) of a single well.
+    """
     w = max(9, int(round(rec.fs / 25)))
     w += 1 - w % 2
     z = signal.savgol_filter(rec.z, w, 3)
@@ -118,7 +119,8 @@ class WellFit:
 def physical_pole(ss: subspace.StateSpace) -> complex:
     """The pole of the ULS: among underdamped stable poles (0 < zeta < 0.7), the one with the
     largest modal contribution |residue / Re(lambda)| to the linear input column (Marchesiello,
-    Fasana & Garibaldi 2016; algorithms.md A.5). For order 2 it is the only pair."""
+    Fasana & Garibaldi 2016; algorithms.md A.5). For order 2 it is the only pair.
+    """
     lam, psi = np.linalg.eig(ss.A)
     left = np.linalg.inv(psi)
     best, score = None, -1.0
@@ -180,7 +182,8 @@ class NSI(Identifier):
     # --- one well ----------------------------------------------------------------------------
     def extended_input(self, rec: Measurement, zs: np.ndarray, v: np.ndarray, z_ref: float):
         """The subspace step's problem about ``z_ref``: x = z - z_ref, the standardised input channels (the
-        input and the basis functions ``-x^2, -x^3, -z'|z'|``), their scales and means."""
+        input and the basis functions ``-x^2, -x^3, -z'|z'|``), their scales and means.
+        """
         x = zs - z_ref
         lin = -rec.u if rec.input_name == "base_acc" else rec.u
         chans = np.column_stack([lin, -(x**2), -(x**3), -v * np.abs(v)])
@@ -233,7 +236,7 @@ class NSI(Identifier):
             # record (measured), and every coefficient 2 % high. The feedback channels are then read
             # against the pole's own FRF at the known gain (b_est * ratio: as for a force record).
             narrow = rec.input_name == "base_acc" and not covers_band(rec.u, rec.fs, band)
-            c = dict(zip(BASIS_NAMES, (gain_est if narrow else gain) * coef))
+            c = dict(zip(BASIS_NAMES, (gain_est if narrow else gain) * coef, strict=False))
             # time-averaged equation of motion (channels hold -g_j): the constant K(z_g)/m
             c["const"] = (
                 gain * means[0]
@@ -271,7 +274,7 @@ class NSI(Identifier):
             fn,
             zeta,
             coefficients,
-            dict(zip(BASIS_NAMES, quality)),
+            dict(zip(BASIS_NAMES, quality, strict=False)),
             band,
             list(ss.singular_values[:8]),
             {
@@ -289,7 +292,8 @@ class NSI(Identifier):
 
     def _estimate(self, rec: Measurement, n_id: int) -> Estimate:
         """NSI's own estimate: each well's underlying-linear system and nonlinear coefficients from the
-        identification part, averaged into one z-frame model (the shared stages follow: ``Identifier``)."""
+        identification part, averaged into one z-frame model (the shared stages follow: ``Identifier``).
+        """
         ident = rec.segment(0, n_id)
         zs, v = smooth_and_differentiate(ident.z, ident.fs)
         z_minus, z_plus = well_guesses(ident)
@@ -309,7 +313,7 @@ class NSI(Identifier):
         if z_minus is None and visited_well(rec, z_plus, eq) == "minus":
             wells = {"minus": wells["plus"]}  # one well visited: named by where it lies (``visited_well``)
         self.wells_ = wells
-        self.models_by_well_ = {name: mm for name, mm in zip(wells, models)}
+        self.models_by_well_ = {name: mm for name, mm in zip(wells, models, strict=False)}
         modal = {w: {"f_hz": wells[w].f_hz, "zeta": wells[w].zeta} if w in wells else {"f_hz": None, "zeta": None}
                  for w in ("minus", "plus")}  # fmt: skip
         return Estimate(
@@ -327,7 +331,7 @@ class NSI(Identifier):
                 "block_rows": self.block_rows,
                 "band_fraction": list(self.band),
                 "passes": self.passes,
-                "velocity": "Savitzky-Golay (window, order) = {}".format(velocity_window(ident.z, rec.fs)),
+                "velocity": f"Savitzky-Golay (window, order) = {velocity_window(ident.z, rec.fs)}",
                 "basis": list(BASIS_NAMES),
             },
         )
@@ -354,7 +358,8 @@ class NSI(Identifier):
     def stabilization(self, rec: Measurement, orders=(2, 4, 6, 8), block_rows=(10, 20, 30, 40)) -> list[dict]:
         """Stabilisation diagram (Marchesiello, Fasana & Garibaldi 2016; algorithms.md A.5): for each
         (order, block rows) and each well found by ``fit``, every identified pole and the physical
-        pole's coefficients. Run after ``fit`` (it reuses the refined wells)."""
+        pole's coefficients. Run after ``fit`` (it reuses the refined wells).
+        """
         n_id = self.settings_["identification_samples"]
         ident = rec.segment(0, n_id)
         zs, v = smooth_and_differentiate(ident.z, ident.fs)

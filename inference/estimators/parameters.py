@@ -16,7 +16,7 @@ from __future__ import annotations
 import math
 import numbers
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, override
 
 from negstiff.errors import InputError
 
@@ -25,12 +25,15 @@ class Constraint:
     """What a parameter may be; ``check`` raises ``InputError`` otherwise."""
 
     def accepts(self, value: Any) -> bool:
+        """Whether ``value`` is allowed."""
         raise NotImplementedError
 
     def describe(self) -> str:
+        """The allowed values, in words (the end of "NAME must be ...")."""
         raise NotImplementedError
 
     def check(self, owner: str, name: str, value: Any) -> None:
+        """Raise ``InputError`` naming ``owner``, ``name`` and the allowed values unless ``value`` is allowed."""
         if not self.accepts(value):
             raise InputError(f"{owner}({name}={value!r}): {name} must be {self.describe()}")
 
@@ -46,7 +49,8 @@ def _is_real(v: Any) -> bool:
 @dataclass(frozen=True)
 class Interval(Constraint):
     """A number of ``kind`` (``int`` or ``float``: any finite real) in [lo, hi] (``lo_open``/``hi_open``:
-    the bound excluded; None: unbounded), in ``unit``; ``none`` admits None (a default computed later)."""
+    the bound excluded; None: unbounded), in ``unit``; ``none`` admits None (a default computed later).
+    """
 
     kind: type
     lo: float | None = None
@@ -56,6 +60,7 @@ class Interval(Constraint):
     unit: str = ""
     none: bool = False
 
+    @override
     def accepts(self, value: Any) -> bool:
         if value is None:
             return self.none
@@ -65,6 +70,7 @@ class Interval(Constraint):
             return False
         return not (self.hi is not None and (value > self.hi or (self.hi_open and value == self.hi)))
 
+    @override
     def describe(self) -> str:
         what = "an integer" if self.kind is int else "a finite number"
         if self.lo is not None or self.hi is not None:
@@ -80,9 +86,11 @@ class Options(Constraint):
 
     values: tuple
 
+    @override
     def accepts(self, value: Any) -> bool:
         return isinstance(value, str | type(None)) and value in self.values
 
+    @override
     def describe(self) -> str:
         return "one of " + ", ".join(repr(v) for v in self.values)
 
@@ -91,9 +99,11 @@ class Options(Constraint):
 class Boolean(Constraint):
     """True or False."""
 
+    @override
     def accepts(self, value: Any) -> bool:
         return isinstance(value, bool)
 
+    @override
     def describe(self) -> str:
         return "True or False"
 
@@ -104,6 +114,7 @@ class Pair(Constraint):
 
     each: Interval
 
+    @override
     def accepts(self, value: Any) -> bool:
         try:
             a, b = value
@@ -111,6 +122,7 @@ class Pair(Constraint):
             return False
         return self.each.accepts(a) and self.each.accepts(b) and a < b
 
+    @override
     def describe(self) -> str:
         return f"two increasing numbers (lo, hi), each {self.each.describe()}"
 
@@ -121,11 +133,13 @@ class Several(Constraint):
 
     each: Constraint
 
+    @override
     def accepts(self, value: Any) -> bool:
         if isinstance(value, str | bytes) or not hasattr(value, "__len__") or len(value) == 0:
             return False
         return all(self.each.accepts(v) for v in value)
 
+    @override
     def describe(self) -> str:
         return f"a non-empty sequence, each {self.each.describe()}"
 
@@ -133,12 +147,14 @@ class Several(Constraint):
 @dataclass(frozen=True)
 class Instance(Constraint):
     """An instance of the class named ``name`` (its module ``module``), or None with ``none``: checked by
-    name, so a declaration need not import the class (``--help`` reads declarations from the source)."""
+    name, so a declaration need not import the class (``--help`` reads declarations from the source).
+    """
 
     module: str
     name: str
     none: bool = False
 
+    @override
     def accepts(self, value: Any) -> bool:
         if value is None:
             return self.none
@@ -146,6 +162,7 @@ class Instance(Constraint):
 
         return isinstance(value, getattr(importlib.import_module(self.module), self.name))
 
+    @override
     def describe(self) -> str:
         return f"a {self.name}" + (" or None" if self.none else "")
 

@@ -51,6 +51,10 @@ from negstiff.inference.steps.weak import (
 MIN_SAMPLES = 4000
 
 
+DEFAULT_WEIGHTS = tuple(float(w) for w in np.logspace(-9, -1, 33))
+"""The sparsity path's L0 weights by default (33, log-spaced from 1e-9 to 0.1)."""
+
+
 class SINDyError(WeakFormError):
     """The record cannot be identified by SINDy (too short, no excitation, nothing selected)."""
 
@@ -88,7 +92,7 @@ class SINDy(Identifier):
     def __init__(
         self,
         *,
-        weights=tuple(np.logspace(-9, -1, 33)),
+        weights=DEFAULT_WEIGHTS,
         n_models: int = 50,
         subset_fraction: float = 0.6,
         validation_fraction: float = 0.2,
@@ -119,7 +123,8 @@ class SINDy(Identifier):
     @staticmethod
     def _aux(rec: Measurement) -> tuple[str, ...]:
         """The record's measured auxiliary channels (``--aux``): each offered to the library as a term theta
-        a(t) (``aux:NAME``), thresholded like the others."""
+        a(t) (``aux:NAME``), thresholded like the others.
+        """
         return tuple(rec.aux)
 
     def _check_record(self, rec: Measurement) -> None:
@@ -129,7 +134,8 @@ class SINDy(Identifier):
 
     def _estimate(self, rec: Measurement, n_id: int) -> Estimate:
         """SINDy's own estimate: the support selected on held-out residuals, refitted on the
-        identification part, with the ensemble's inclusion probabilities (the shared stages follow)."""
+        identification part, with the ensemble's inclusion probabilities (the shared stages follow).
+        """
         n_fit = int(round(rec.n * (1 - self.validation_fraction - self.selection_fraction)))
         ident = rec.segment(0, n_id)
         form = WeakForm.of(ident)
@@ -203,7 +209,8 @@ class SINDy(Identifier):
 
     def _path(self, rec: Measurement, form: WeakForm, gain, n_fit: int, n_id: int, z0s, v0s) -> list[dict]:
         """The supports of the L0 path on samples [0, n_fit), each refitted there and scored on [n_fit,
-        n_id): its held-out weak residual in blocks, its restarted free runs, an escape past the stroke."""
+        n_id): its held-out weak residual in blocks, its restarted free runs, an escape past the stroke.
+        """
         ident = rec.segment(0, n_id)
         aux = self._aux(rec)
         sys_fit = form.system(rec, 0, n_fit, aux)
@@ -237,7 +244,7 @@ class SINDy(Identifier):
             block_ms = block_scores((y_sel - W_sel @ phys) ** 2, rows, y_sel.var())
             path.append(
                 {
-                    "terms": [t for t, on in zip(library, support) if on],
+                    "terms": [t for t, on in zip(library, support, strict=False) if on],
                     "n_terms": int(sum(support)),
                     "support": support,
                     # the geometric middle of the weights that give this support
@@ -260,7 +267,8 @@ class SINDy(Identifier):
 
         Only admissible candidates compete: those whose restarted free runs stay bounded and whose
         potential opens no escape just past the stroke (``validation.boundedness``); a term that buys
-        equation error at the price of an unbounded model is not selected."""
+        equation error at the price of an unbounded model is not selected.
+        """
         admissible = [p for p in path if np.isfinite(p["free_run_percent"])] or path
         best = min(admissible, key=lambda p: p["heldout_residual_percent"])
         for p in admissible:  # sorted by number of terms, then residual

@@ -50,7 +50,8 @@ class StateSpace:
     def frf_discrete(self, freqs_hz: np.ndarray) -> np.ndarray:
         """H(e^(i omega dt)) of the identified discrete-time model, shape (F, l, m). For band-limited
         (non-ZOH) inputs this, not the inverse-ZOH continuous model, carries the right FRF level
-        below Nyquist (algorithms.md A.3 measured up to 9 % level error the other way)."""
+        below Nyquist (algorithms.md A.3 measured up to 9 % level error the other way).
+        """
         n = self.Ad.shape[0]
         q = np.exp(2j * np.pi * np.asarray(freqs_hz) * self.dt)
         out = np.empty((q.size, self.C.shape[0], self.Bd.shape[1]), complex)
@@ -68,6 +69,7 @@ class StateSpace:
         return out
 
     def poles(self) -> np.ndarray:
+        """The discrete-time poles (eigenvalues of A)."""
         return np.linalg.eigvals(self.A)
 
 
@@ -122,7 +124,8 @@ def hankel_gram(u: np.ndarray, y: np.ndarray, i: int, chunk: int = 4096) -> np.n
 
 def covariance_factor(u: np.ndarray, y: np.ndarray, i: int) -> np.ndarray | None:
     """The covariance route's L (the Cholesky factor of ``hankel_gram``), or None where it is refused:
-    Cholesky fails, or a row keeps less than ``GRAM_MIN_RATIO`` of its variance after the rows before it."""
+    Cholesky fails, or a row keeps less than ``GRAM_MIN_RATIO`` of its variance after the rows before it.
+    """
     g = hankel_gram(u, y, i)
     try:
         L = linalg.cholesky(g, lower=True, check_finite=False)
@@ -170,7 +173,8 @@ def po_moesp(
     u: np.ndarray, y: np.ndarray, i: int, order: int, route: str = "auto"
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Discrete A, C and the singular values from PO-MOESP with ``i`` block rows (``route``: the LQ's,
-    ``lq_factor``)."""
+    ``lq_factor``).
+    """
     m, l_out = u.shape[1], y.shape[1]
     L = lq_factor(u, y, i, route=route)
     a, b = i * m, i * m + i * (m + l_out)

@@ -19,9 +19,10 @@ the GA returns one point of a ridge; weighing m (``fixed_mass``) pins E.
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any
 
 import numpy as np
 
@@ -52,7 +53,8 @@ STROKE_KEY = "stroke_quantiles_m"
 
 def model_features(model) -> dict[str, float] | None:
     """Eq. 9's features of a polynomial model: its stable equilibria and the frequencies of its
-    linearisation there (None without a double well)."""
+    linearisation there (None without a double well).
+    """
     try:
         eq = model.equilibria()
     except ValueError:
@@ -73,7 +75,8 @@ def targets_from(data: Mapping[str, Any], source: str = "targets") -> dict[str, 
     its own model, the model (``model``) and the stroke (``stroke_z``): the updater then compares like
     with like, the device's restoring force with the identified one over the states the record visited
     (``GAUpdater``). Older results (no stroke) give the method's well frequencies and its model's
-    equilibria (the reference study's way)."""
+    equilibria (the reference study's way).
+    """
     if isinstance(data, Mapping) and data.get(STROKE_KEY) is not None and "model" in data:
         from negstiff.models import Model
 
@@ -134,6 +137,7 @@ def _target(source: str, key: str, value: Any) -> float:
 
 
 def load_targets(path: str | Path) -> dict[str, float]:
+    """The targets of a JSON file (an identify result or flat targets), checked; ``InputError`` otherwise."""
     from negstiff.files import read_json
 
     try:
@@ -201,8 +205,9 @@ class GAUpdater(Estimator):
             return None
 
     def force_mismatch(self, x: np.ndarray, stroke: np.ndarray, k_id: np.ndarray) -> float:
-        """rms over the stroke's quantiles of the device's K/m less the identified K/m, % of the latter's
-        spread (``PENALTY`` where the device cannot reach the stroke or has no double well)."""
+        """Rms over the stroke's quantiles of the device's K/m less the identified K/m, % of the latter's
+        spread (``PENALTY`` where the device cannot reach the stroke or has no double well).
+        """
         try:
             d = self._device(x)
             k = np.asarray(d.restoring_force(stroke, include_extra=False), float) / d.m
@@ -213,13 +218,14 @@ class GAUpdater(Estimator):
 
     def population_fitness(self, X: np.ndarray, targets, stroke: np.ndarray | None, k_id) -> np.ndarray:
         """``fitness`` (or ``force_mismatch`` where a ``stroke`` is given) of every row of the population
-        X at once, ``PENALTY`` where a device has no double well or cannot reach the stroke."""
+        X at once, ``PENALTY`` where a device has no double well or cannot reach the stroke.
+        """
         s = self.start
         m = np.full(len(X), self.fixed_mass) if self.fixed_mass is not None else X[:, 2]
         F, ok = s.features_many(X[:, 0], X[:, 1], m)
         if stroke is None:
-            feats = [dict(zip(("f_minus", "f_plus", "z_minus", "z_plus"), row)) for row in F]
-            return np.array([fitness(f, targets) if good else PENALTY for f, good in zip(feats, ok)])
+            feats = [dict(zip(("f_minus", "f_plus", "z_minus", "z_plus"), row, strict=False)) for row in F]
+            return np.array([fitness(f, targets) if good else PENALTY for f, good in zip(feats, ok, strict=False)])
         force, reach = s.restoring_force_many(stroke, X[:, 0], X[:, 1], m)
         k = force / m[:, None]
         mismatch = 100 * np.sqrt(np.mean((k - k_id) ** 2, axis=1)) / np.std(k_id)
@@ -227,7 +233,8 @@ class GAUpdater(Estimator):
 
     def check(self, targets: Mapping[str, Any]) -> dict[str, Any]:
         """Everything ``fit`` checks before the GA runs (the settings and the targets); the targets as
-        ``fit`` uses them (``targets_from``)."""
+        ``fit`` uses them (``targets_from``).
+        """
         self._validate_params()
         if not isinstance(targets, Mapping):
             raise UpdatingError(f"targets are a mapping (an identify result, or {', '.join(FEATURES)})")
@@ -238,7 +245,7 @@ class GAUpdater(Estimator):
             )
         return t
 
-    def fit(self, targets: Mapping[str, float], progress=None) -> "GAUpdater":
+    def fit(self, targets: Mapping[str, float], progress=None) -> GAUpdater:
         """Run the GA against ``targets`` (``f_minus, f_plus`` [Hz], ``z_minus, z_plus`` [m])."""
         targets = self.check(targets)
         from pymoo.algorithms.soo.nonconvex.ga import GA

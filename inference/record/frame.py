@@ -34,7 +34,8 @@ def _frame_anchors(rec) -> tuple[float, dict[str, float]]:
     visited. The origin is where a quintic fitted to ``rec`` carries the weight m g between its wells, or,
     for a device with no gravity along its motion (``rec.gravity`` 0), midway between its wells (the
     symmetry of a horizontal double well); ``wells["barrier"]`` is then the unstable equilibrium between
-    them, whose distance from the midpoint measures how symmetric the device is."""
+    them, whose distance from the midpoint measures how symmetric the device is.
+    """
     model = weak_least_squares(rec, PIN_TERMS)
     x = np.linspace(rec.z.min(), rec.z.max(), 4001)
     K = model.restoring_force(x)
@@ -100,7 +101,7 @@ def frame_offset(rec, spread: bool = True) -> dict[str, Any]:
         n_parts = int(np.clip(rec.duration // FRAME_PART_MIN_S, 2, FRAME_PARTS))
         edges = np.linspace(0, rec.n, n_parts + 1).astype(int) if spread else np.zeros(1, int)
         parts = []
-        for a, b in zip(edges[:-1], edges[1:]):
+        for a, b in zip(edges[:-1], edges[1:], strict=False):
             try:
                 part = _frame_anchors(rec.segment(a, b))
             except Exception:
@@ -177,7 +178,8 @@ def pin_frame(rec: Measurement) -> Measurement:
     """``rec`` with z in the physical frame when its constant was unknown (``frame_offset``), and the
     offset, its uncertainty and the anchor in ``info["response"]``; otherwise ``rec`` itself. A response
     of unknown scale is calibrated first (``scale.calibrate_scale``). Pinned once per record (the result
-    is kept with it)."""
+    is kept with it).
+    """
     from negstiff.inference.record.scale import calibrate_scale
 
     rec = calibrate_scale(rec)  # a response of unknown scale first made SI (its frame is then in metres)

@@ -13,9 +13,10 @@ from __future__ import annotations
 
 import copy
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -86,6 +87,7 @@ class Measurement:
 
     @property
     def n(self) -> int:
+        """The number of samples."""
         return self.u.size
 
     def __repr__(self) -> str:
@@ -98,29 +100,34 @@ class Measurement:
 
     @property
     def dt(self) -> float:
+        """The sampling interval [s]."""
         return 1.0 / self.fs
 
     @property
     def t(self) -> np.ndarray:
+        """The time of every sample [s]."""
         return self.t0 + np.arange(self.n) / self.fs
 
     @property
     def duration(self) -> float:
+        """The record's length [s]."""
         return self.n / self.fs
 
     @classmethod
-    def from_rig(cls, rec, weighed: bool = True) -> "Measurement":
+    def from_rig(cls, rec, weighed: bool = True) -> Measurement:
         """A virtual-rig record (``models.rig.RigRecord``) as negstiff reads a lab's: the measured base
         acceleration as input, the measured z as response, the weighed mass (``weighed``), its source and the
-        wells' rest positions its metadata states (as a file of it holds them)."""
+        wells' rest positions its metadata states (as a file of it holds them).
+        """
         mass = float(rec.meta["mass"]) if weighed and rec.meta.get("mass") is not None else None
         meta = {k: str(v) for k, v in rec.meta.items() if k.endswith("_rest")}
         return from_arrays(rec.columns["base_acc"], rec.columns["z"], rec.fs, mass=mass, source=rec.meta["source"],
                            meta=meta)  # fmt: skip
 
-    def segment(self, start: int | None, stop: int | None) -> "Measurement":
+    def segment(self, start: int | None, stop: int | None) -> Measurement:
         """Samples [start, stop) as a measurement (time base kept); the same object for the same span, so
-        what it derives is derived once (``states``)."""
+        what it derives is derived once (``states``).
+        """
         start, stop, _ = slice(start, stop).indices(self.n)
         key = ("segment", start, stop)
         seg = self.derived.get(key)
@@ -134,7 +141,8 @@ class Measurement:
     def states(self, purpose: str = "state") -> tuple[np.ndarray, np.ndarray, np.ndarray, dict]:
         """Smoothed z, z', z'' of the record and how they were found (``derivatives.state_derivatives``:
         ``"state"``, the least-error velocity every free run starts from; ``"regression"``, the weak form's),
-        computed once per record and kept with it (copies are returned: a caller may change its own)."""
+        computed once per record and kept with it (copies are returned: a caller may change its own).
+        """
         key = ("states", purpose)
         hit = self.derived.get(key)
         if hit is None:
@@ -147,7 +155,8 @@ class Measurement:
         auxiliary channels (``aux:NAME`` in its ``extra``: theta a(t), on the left-hand side of the equation
         like every effect's force, theta in N per channel unit) moved to the input's side: u + theta a / m
         for a base acceleration (m z'' + ... + theta a = -m u), F - theta a for a force. A model term whose
-        channel the record lacks raises ``MeasurementError``."""
+        channel the record lacks raises ``MeasurementError``.
+        """
         terms = measured_channels(getattr(model, "extra", {}))
         if not terms:
             return self.u
@@ -173,10 +182,11 @@ class Measurement:
     @property
     def gravity(self) -> float:
         """The gravity along the motion [m/s^2]: the metadata's ``gravity`` (0 for a horizontal device, whose
-        frame is then pinned by its wells' symmetry or rest positions, never by K(0) = m g), else g."""
+        frame is then pinned by its wells' symmetry or rest positions, never by K(0) = m g), else g.
+        """
         return float(self.meta.get("gravity", G))
 
-    def with_gravity(self, gravity: float | None) -> "Measurement":
+    def with_gravity(self, gravity: float | None) -> Measurement:
         """The same record with the gravity along its motion given by the caller (overrides the metadata)."""
         if gravity is None:
             return self
@@ -189,7 +199,7 @@ class Measurement:
                 f"{self.source}: too few samples for {what}: {self.n} ({self.duration:.3g} s), need at least {n_min}"
             )
 
-    def with_mass(self, mass: float | None) -> "Measurement":
+    def with_mass(self, mass: float | None) -> Measurement:
         """The same record with the mass given by the caller (overrides the metadata)."""
         if mass is None:
             return self
@@ -204,7 +214,8 @@ class Measurement:
 
     def require_motion(self, what: str) -> None:
         """Raise ``MeasurementError`` when the response does not move (a dead or disconnected sensor):
-        ``what`` (an identification, a periodicity analysis) needs motion."""
+        ``what`` (an identification, a periodicity analysis) needs motion.
+        """
         if self.z is not None and _constant(self.z):
             raise MeasurementError(
                 f"{self.source}: the response z is constant ({self.z[0]:.6g} m over {self.n} samples): a dead or "
@@ -244,7 +255,8 @@ SCALABLE = {"base_acc": ("z", "z_dot"), "force": ("z", "z_dot", "y", "y_dot", "y
 def _unknown_scale(source, name: str | None, input_name: str, mass: float | None, present) -> dict | None:
     """``info["scale"]`` for a response channel marked ``*?`` (None without one), after checking that the
     record can identify it: the input's coefficient must be known (-1 for a base acceleration; 1/m for a
-    force, so a force-driven record needs its mass)."""
+    force, so a force-driven record needs its mass).
+    """
     if name is None:
         return None
     if name not in SCALABLE[input_name]:
@@ -263,7 +275,8 @@ def _unknown_scale(source, name: str | None, input_name: str, mass: float | None
 
 def _aux_channels(source, raw: dict[str, np.ndarray], names, n: int) -> dict[str, np.ndarray]:
     """The auxiliary channels ``names`` (the file's own column names: a piezo's voltage, a coil's current),
-    checked finite and of the record's length; refused when absent or a contract column."""
+    checked finite and of the record's length; refused when absent or a contract column.
+    """
     out = {}
     for name in names or ():
         name = str(name).strip()
@@ -312,7 +325,6 @@ def load(
     (``sensors.derive``); what was done is in ``info["response"]``. A derived z's constant is unknown:
     the analyses that need z's frame pin it (``frame.pin_frame``); ``load`` fits nothing.
     """
-
     path = Path(path)
     raw, meta = record_io.read(path)
     resolution = raw.pop(RESOLUTION, None)
@@ -372,7 +384,8 @@ def load(
 def _warned(rec: Measurement) -> Measurement:
     """The record with what looks wrong in it alone (units: mm read as m, an acceleration in mm/s^2; the
     sensor's derivation) in ``info["warnings"]``, each issued as a ``RecordWarning`` at once: a user learns
-    it when loading, whatever comes next (``plausibility.record_warnings``)."""
+    it when loading, whatever comes next (``plausibility.record_warnings``).
+    """
     new = [w for w in record_warnings(rec) if w not in rec.info.get("warnings", [])]
     lines = [*rec.info.get("warnings", []), *rec.info.get("response", {}).get("warnings", []), *new]
     issue([(RecordWarning, w) for w in lines])
@@ -417,7 +430,8 @@ def _checked_input(path: Path, raw: dict, cols: dict[str, np.ndarray]) -> tuple[
 
 def check_values(source, cols: dict[str, np.ndarray]) -> None:
     """Every value finite and, for a contract column, within the magnitude no shaker-table record in SI
-    exceeds (``units.MAGNITUDE_LIMITS``); one ``MeasurementError`` naming the column, the row and the unit."""
+    exceeds (``units.MAGNITUDE_LIMITS``); one ``MeasurementError`` naming the column, the row and the unit.
+    """
     for k, v in cols.items():
         bad = np.flatnonzero(~np.isfinite(v))
         if bad.size:
@@ -437,7 +451,8 @@ def check_values(source, cols: dict[str, np.ndarray]) -> None:
 
 def check_sampling_rate(source, fs: float, where: str) -> float:
     """A sampling rate [Hz] within ``units.SAMPLING_RATE_RANGE_HZ``, or one ``MeasurementError`` naming
-    where it came from."""
+    where it came from.
+    """
     lo, hi = SAMPLING_RATE_RANGE_HZ
     if isinstance(fs, bool) or not isinstance(fs, (int, float, np.integer, np.floating)) or not lo <= fs <= hi:
         raise MeasurementError(f"{source}: sampling rate {fs!r} Hz ({where}) is not a rate a record has "
@@ -447,7 +462,8 @@ def check_sampling_rate(source, fs: float, where: str) -> float:
 
 def _time_base(path: Path, cols: dict, meta: dict, fs: float | None, resolution) -> tuple[float, float, dict]:
     """(fs [Hz], t0 [s], how it was found): the caller's fs (replacing any column t), else column t
-    (``time_base``: uniform within its printed precision), else the metadata's fs."""
+    (``time_base``: uniform within its printed precision), else the metadata's fs.
+    """
     if fs is not None:
         fs = check_sampling_rate(path, fs, "given by the caller")
         source = f"fs = {fs:g} Hz given by the caller" + (" (replaces column t)" if "t" in cols else "")
@@ -540,7 +556,8 @@ def from_arrays(
     ``z`` None and a response among them, z is derived from it as ``load`` does (``sensors.derive``).
     ``unknown_scale`` names a response channel whose sensitivity is unknown (a file's ``*?``);
     ``gravity`` [m/s^2] the gravity along the motion (0 for a horizontal device); ``aux`` a dict of measured
-    auxiliary channels (``{"voltage": v}``)."""
+    auxiliary channels (``{"voltage": v}``).
+    """
     if input_name not in INPUTS:
         raise MeasurementError(f"input must be one of {INPUTS}, got {input_name!r}")
     source = kw.get("source", "<memory>")

@@ -42,7 +42,8 @@ def _scale_of(rec: Measurement) -> float:
 def calibrate_scale(rec: Measurement) -> Measurement:
     """``rec`` with its response channel of unknown scale multiplied by the scale its dynamics say (the
     value, its standard error and how in ``info["scale"]``); ``rec`` itself when no scale is unknown or it
-    was calibrated already. Raises ``MeasurementError`` when the record cannot say."""
+    was calibrated already. Raises ``MeasurementError`` when the record cannot say.
+    """
     info = rec.info.get("scale")
     if not info or info.get("value") is not None:
         return rec
@@ -53,7 +54,7 @@ def calibrate_scale(rec: Measurement) -> Measurement:
     n_parts = int(np.clip(rec.duration // SCALE_PART_MIN_S, 2, SCALE_PARTS))
     edges = np.linspace(0, rec.n, n_parts + 1).astype(int)
     parts = []
-    for a, b in zip(edges[:-1], edges[1:]):
+    for a, b in zip(edges[:-1], edges[1:], strict=False):
         try:
             parts.append(_scale_of(rec.segment(a, b)))
         except (MeasurementError, ValueError, np.linalg.LinAlgError):

@@ -63,7 +63,8 @@ def integrate_exact(x: np.ndarray, fs: float) -> np.ndarray:
     """Antiderivative of a sampled signal (quintic interpolating spline, scipy), zero at the start.
 
     Chosen over the trapezoid rule because the record's band reaches close to Nyquist: the spline's
-    gain error at f is ~(2 pi f dt)^6 / 30240 instead of (2 pi f dt)^2 / 12."""
+    gain error at f is ~(2 pi f dt)^6 / 30240 instead of (2 pi f dt)^2 / 12.
+    """
     t = np.arange(x.size) / fs
     spline = make_interp_spline(t, x, k=5 if x.size > 5 else 1)
     return spline.antiderivative()(t) - spline.antiderivative()(0.0)
@@ -93,12 +94,13 @@ def _trend(z: np.ndarray, fs: float, n_blocks: int = 10) -> tuple[float, float]:
 
 
 def velocity_to_z(v: np.ndarray, fs: float, what: str) -> tuple[np.ndarray, dict[str, Any]]:
-    """z (up to a constant) from a relative velocity, and what the integral carries.
+    """Z (up to a constant) from a relative velocity, and what the integral carries.
 
     A vibrometer has no DC offset worth the name (a Doppler shift is zero at rest), and a bistable
     device's z is not stationary over minutes (it may sit in one well for a long stretch: on a 300 s
     rig record the true z's slope was 3.3 batch-means standard errors from zero), so a ramp is not
-    removed: one beyond ``TREND_SIGMAS`` standard errors is reported as a warning instead."""
+    removed: one beyond ``TREND_SIGMAS`` standard errors is reported as a warning instead.
+    """
     z = integrate_exact(v, fs)
     slope, se = _trend(z, fs)
     sigma_v = _noise_rms(v, fs)

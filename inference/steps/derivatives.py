@@ -33,10 +33,11 @@ def noise_floor(z: np.ndarray, fs: float) -> tuple[float, np.ndarray, np.ndarray
     (measured: 400x on rig records with a flat delta-sigma filter). Without a plateau (the response
     fills the band, as in the Silverbox), the median over the top fifth is taken. S is the measured
     PSD minus the floor where it stands clearly (4x) above it: noise bins fluctuate about the floor,
-    and weighted by omega^2 their positive excursions would be read as a broadband signal."""
+    and weighted by omega^2 their positive excursions would be read as a broadband signal.
+    """
     f, p = signal.welch(z - z.mean(), fs, nperseg=min(4096, z.size))
     edges = np.arange(0.30, 1.0001, 0.05) * fs / 2
-    med = np.array([np.median(p[(f >= a) & (f < b)]) for a, b in zip(edges[:-1], edges[1:])])
+    med = np.array([np.median(p[(f >= a) & (f < b)]) for a, b in zip(edges[:-1], edges[1:], strict=False)])
     best: tuple[int, int] | None = None
     for i in range(med.size):
         for j in range(i + 3, med.size + 1):
@@ -57,7 +58,8 @@ def _filter_response(w: int, order: int, d: int, fs: float, nf: int, df: float) 
     """Frequency response of the Savitzky-Golay d-th derivative filter (window w, order) on the Welch
     grid f = k df, k < nf (centred), and the sum of its squared taps. Cached: the responses depend on
     the rate and the grid only, and every fit asks for the same 150 of them (3456 freqz calls a fit
-    of NSI and SINDy on one record, 2 s of its 17, measured)."""
+    of NSI and SINDy on one record, 2 s of its 17, measured).
+    """
     f = np.arange(nf) * df
     h = signal.savgol_coeffs(w, order, deriv=d, delta=1.0 / fs, use="conv")
     # H(f_k) = sum_n h_n exp(-2 pi i f_k n / fs): on the grid f_k = k fs / N that is the N-point DFT of
@@ -85,7 +87,8 @@ def derivative_window(
     predicts less.
 
     ``purpose="state"``: the window of least predicted velocity error b_v^2 + e_v^2, for the measured
-    state a free run starts from (there the noise counts as much as the bias)."""
+    state a free run starts from (there the noise counts as much as the bias).
+    """
     sigma2, f, S = noise_floor(z, fs)
     df = f[1] - f[0]
     jw = 2j * np.pi * f
@@ -132,7 +135,8 @@ def state_derivatives(
     z: np.ndarray, fs: float, purpose: str = "regression"
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict]:
     """Smoothed z, z', z'' and what was done (``derivative_window``'s predictions, and "method"). A record
-    computes them once and keeps them (``Measurement.states``)."""
+    computes them once and keeps them (``Measurement.states``).
+    """
     z = np.asarray(z, dtype=float)
     fs = float(fs)
     w, order, info = derivative_window(z, fs, purpose)
@@ -165,7 +169,8 @@ def velocity_window(z: np.ndarray, fs: float) -> tuple[int, int]:
     fake a wide band exactly when smoothing is needed),
     trying cubic fits first, then quintic, then septic. Wide enough to average sensor noise, narrow
     enough not to bend the response (a fixed fs/70 window cut the Silverbox's response by several %).
-    (0, 0) means no window passes: no smoothing, and the velocity by spectral differentiation."""
+    (0, 0) means no window passes: no smoothing, and the velocity by spectral differentiation.
+    """
     f, p = signal.welch(z - z.mean(), fs, nperseg=min(4096, z.size))
     cum = np.cumsum(p) / np.sum(p)
     f_band = min(2 * f[np.searchsorted(cum, 0.999)], 0.45 * fs)
@@ -183,7 +188,8 @@ def velocity_window(z: np.ndarray, fs: float) -> tuple[int, int]:
 
 def smooth_and_differentiate(z: np.ndarray, fs: float) -> tuple[np.ndarray, np.ndarray]:
     """Savitzky-Golay smoothed displacement and velocity (``velocity_window``), or, when the data's
-    band leaves no room for smoothing, z itself and its spectral derivative."""
+    band leaves no room for smoothing, z itself and its spectral derivative.
+    """
     w, order = velocity_window(z, fs)
     if w:
         return (signal.savgol_filter(z, w, order), signal.savgol_filter(z, w, order, deriv=1, delta=1.0 / fs))

@@ -32,7 +32,8 @@ z = -3.6 mm, k0/m = 1.4-1.8 m/s^2: the exact K is not a cubic)."""
 def frame_warnings(rec) -> list[str]:
     """Is a measured z in the rods-horizontal frame? Where the record's own physics carries the weight
     (``frame.frame_offset`` by gravity, rest positions ignored) says how far its zero is from it; for a
-    device without gravity along its motion (``rec.gravity`` 0), the midpoint between its wells."""
+    device without gravity along its motion (``rec.gravity`` 0), the midpoint between its wells.
+    """
     constant_known = rec.info.get("response", {}).get("z_constant_known", True)
     if rec.z is None or (rec.input_name != "base_acc" and rec.gravity != 0) or not constant_known:
         return []
@@ -71,7 +72,8 @@ acceleration in g gives 9.8."""
 
 def input_warnings(rec) -> list[str]:
     """Units and mass: the input's weight in the record's own dynamics against the physics' (-1 for a
-    base acceleration in m/s^2, 1/m for a force in N; ``weak.input_coefficient``)."""
+    base acceleration in m/s^2, 1/m for a force in N; ``weak.input_coefficient``).
+    """
     if rec.z is None or (rec.input_name == "force" and rec.mass is None):
         return []
     try:
@@ -118,7 +120,8 @@ def model_warnings(model, rec) -> list[str]:
 def classified(rec, model=None, own: list[str] | tuple[str, ...] = ()) -> list[tuple[type, str]]:
     """Every warning about a result (``own``: the method's, boundedness, convergence) and about its record
     (its derivation, its units, its frame) and model (wells beyond the stroke), each with its
-    ``NegstiffWarning`` category, without repeats: what the result holds and Python's ``warnings`` issue."""
+    ``NegstiffWarning`` category, without repeats: what the result holds and Python's ``warnings`` issue.
+    """
     def kind(text: str) -> type:
         if "not bounded" in text:
             return BoundednessWarning

@@ -65,7 +65,8 @@ def scalar_effects() -> tuple[str, ...]:
 @dataclass(frozen=True)
 class Refinement:
     """What ``refine`` found: the refined model, the start model, the names refined and, per stage,
-    the window length, count and the rms simulation error (m) at its start and end."""
+    the window length, count and the rms simulation error (m) at its start and end.
+    """
 
     model: Model
     initial_model: Model
@@ -73,6 +74,7 @@ class Refinement:
     stages: list[dict[str, Any]] = field(default_factory=list)
 
     def to_json(self) -> dict[str, Any]:
+        """The refinement's account as JSON: parameters, stages, held-out errors and why it was kept."""
         return {
             "parameters": list(self.parameters),
             "stages": self.stages,
@@ -82,7 +84,8 @@ class Refinement:
 
 def field_effects(model: Model) -> tuple[str, ...]:
     """The model's named effects with several values (``effects.Effect.scalar`` false: an end stop's
-    ``{"k", "z"}``), each value refined under the name ``EFFECT.FIELD``."""
+    ``{"k", "z"}``), each value refined under the name ``EFFECT.FIELD``.
+    """
     named = [e for e in effects.REGISTRY if not e.scalar and e.name in model.extra]
     return tuple(f"{e.name}.{f}" for e in named for f in e.law.fields)
 
@@ -92,7 +95,8 @@ def parameter_names(model: Model, free_mass: bool, held=()) -> tuple[str, ...]:
     values of its named effects with several (``EFFECT.FIELD``: an end stop's stiffness and onset, refined
     like the others) and the mass when free. A named effect that folds into a base field
     (``effects.Effect.folds_into``) is refined and that field is not (the two are the same term; refining
-    both leaves a redundant direction)."""
+    both leaves a redundant direction).
+    """
     named = [e for e in scalar_effects() if e in model.extra]
     out = {effects.get(e).folds_into for e in named} | set(held)
     base = [n for n in ("k0", "k1", "k2", "k3", "c", "c_nl") if n not in out]
@@ -115,7 +119,7 @@ def with_values(model: Model, names, values) -> Model:
     d = model.to_dict()
     extra = effects.plain(d.pop("extra"))  # fresh dicts: an effect's own values are set in place below
     scalar = scalar_effects()
-    for n, v in zip(names, values):
+    for n, v in zip(names, values, strict=False):
         effect, _, fld = n.partition(".")
         if fld:
             extra[effect][fld] = v
@@ -129,12 +133,13 @@ def with_values(model: Model, names, values) -> Model:
 def parameter_scales(model: Model, names, z_rms: float, v_rms: float) -> np.ndarray:
     """Each parameter's scale: the coefficient that makes its force, at the record's rms state, the
     size of the linear restoring force there (|k1| z_rms); the start value where that is larger. A
-    term that starts at zero (an effect to be tried) then moves as readily as the others."""
+    term that starts at zero (an effect to be tried) then moves as readily as the others.
+    """
     force = max(abs(model.k1) * z_rms, abs(model.c) * v_rms, 1e-300)
     basis = {"k0": 1.0, "k1": z_rms, "k2": z_rms**2, "k3": z_rms**3, "c": v_rms, "c_nl": v_rms**2, "m": None}
     basis |= {e.name: e.law.scale(z_rms, v_rms) for e in effects.REGISTRY if e.scalar}
     out = []
-    for n, value in zip(names, values_of(model, names)):
+    for n, value in zip(names, values_of(model, names), strict=False):
         if "." in n:  # an effect's own value (a stop's stiffness or onset): scaled by itself, never zero
             out.append(abs(value) if value else z_rms)
             continue
@@ -148,7 +153,8 @@ def shooting_sparsity(n_win: int, length: int, dense: int, penalty: tuple[int, i
     """The Jacobian's sparsity for multiple shooting: ``dense`` leading parameter columns touch every
     residual, each window's two start-state columns only its own ``length`` residuals; ``penalty``
     (first column, count) appends one ridge row per penalised column. Built from blocks (a row-wise
-    ``lil_matrix`` cost 1.3 s per refinement of a 150 s record, measured)."""
+    ``lil_matrix`` cost 1.3 s per refinement of a 150 s record, measured).
+    """
     rows = n_win * length
     states = sparse.kron(sparse.identity(n_win, dtype=np.int8, format="csr"), np.ones((length, 2), np.int8))
     out = sparse.hstack([sparse.csr_matrix(np.ones((rows, dense), dtype=np.int8)), states], format="csr")
@@ -278,7 +284,8 @@ def _solve(residuals, q, x0, max_nfev: int, solver: str, length: int, states_onl
 def stroke_quantiles(z: np.ndarray, n: int = 41) -> np.ndarray:
     """Quantiles (0.5 % to 99.5 %) of the z a record visited: the stroke and how often each part of it
     was visited, which model updating needs to compare a device with an identified polynomial over the
-    same states (``updating.targets_from``)."""
+    same states (``updating.targets_from``).
+    """
     return np.quantile(np.asarray(z, float), np.linspace(0.005, 0.995, n))
 
 
@@ -304,7 +311,8 @@ def refine_stage(
     force and no mass was given (the input's gain is then unknown). Returns the model to keep, its
     validation and the stage's account for the result JSON (``refinement``): what was refined, each
     stage's simulation error, the held-out errors of both models and whether the refined one was kept.
-    ``held``: base fields that stay at their start value (the terms a sparse method did not select)."""
+    ``held``: base fields that stay at their start value (the terms a sparse method did not select).
+    """
     start = time.perf_counter()
     free_mass = rec.input_name == "force" and rec.mass is None
     info: dict[str, Any] = {"applied": False, "initial_model": model.to_dict()}

@@ -30,7 +30,8 @@ def block_rows(window_s: float, fs: float, stride: int) -> int:
 
 def block_scores(r2: np.ndarray, rows: int, scale: float) -> np.ndarray:
     """Mean squared residual per block of ``rows`` (whole blocks only), divided by ``scale`` (the
-    target's variance: dimensionless scores)."""
+    target's variance: dimensionless scores).
+    """
     n = r2.size // rows
     return r2[: n * rows].reshape(n, rows).mean(axis=1) / scale
 
@@ -51,11 +52,12 @@ class Comparison:
 
 def compare(worse: np.ndarray, better: np.ndarray, margin: float, reference: np.ndarray) -> Comparison:
     """Paired comparison of two candidates' block scores; the margin is a fraction of ``reference``'s
-    mean score."""
+    mean score.
+    """
     d = np.asarray(worse) - np.asarray(better)
     return Comparison(float(d.mean()), float(d.std(ddof=1) / math.sqrt(d.size)), margin * float(np.mean(reference)))
 
 
 def indistinguishable(candidate: np.ndarray, best: np.ndarray, margin: float) -> bool:
-    """Does ``candidate`` score within max(1 SE, margin x best) of ``best`` (not significantly worse)?"""
+    """Whether ``candidate`` scores within max(1 SE, margin x best) of ``best`` (not significantly worse)."""
     return not compare(candidate, best, margin, best).significant

@@ -45,7 +45,8 @@ Residuals = Callable[[np.ndarray, np.ndarray], np.ndarray]
 class ShootingFit:
     """The solution: parameters ``q`` (p,), start states ``x`` (n, 2), residuals ``fun`` (n, L), the
     residual evaluations (``nfev``, Jacobians not counted, as scipy counts them), the Jacobians
-    (``njev``), and why it stopped (``status``: "ftol", "xtol", "max_nfev" or "nonfinite")."""
+    (``njev``), and why it stopped (``status``: "ftol", "xtol", "max_nfev" or "nonfinite").
+    """
 
     q: np.ndarray
     x: np.ndarray
@@ -56,6 +57,7 @@ class ShootingFit:
 
     @property
     def cost(self) -> float:
+        """Half the sum of squared residuals at the solution."""
         return 0.5 * float(np.sum(self.fun**2))
 
 
@@ -67,7 +69,8 @@ def _steps(values: np.ndarray, rel: float) -> np.ndarray:
 def _jacobian(fun: Residuals, q: np.ndarray, x: np.ndarray, r: np.ndarray, rel: float):
     """A (n, L, p) and B (n, L, 2) by forward differences, from one batch of p + 2 points: one per
     parameter, and one per start-state component moved in every window at once (the windows are
-    independent, so each window's residual answers its own start state)."""
+    independent, so each window's residual answers its own start state).
+    """
     p = q.size
     hq = _steps(q, rel)
     hx = _steps(x, rel)  # (n, 2)
@@ -92,7 +95,8 @@ def _inv2(V: np.ndarray) -> np.ndarray:
 @dataclass(frozen=True)
 class _Normal:
     """The undamped normal equations' blocks at one Jacobian (module docstring): U (p, p), W (n, p, 2),
-    V (n, 2, 2), g_q (p,), g_x (n, 2), and the diagonal of J^T J's floor for the damping."""
+    V (n, 2, 2), g_q (p,), g_x (n, 2), and the diagonal of J^T J's floor for the damping.
+    """
 
     U: np.ndarray
     W: np.ndarray
@@ -114,7 +118,8 @@ class _Normal:
 def _step(A, B, ne: _Normal, lam: float, w2: np.ndarray):
     """The damped Gauss-Newton step (dq, dx) with the start states eliminated (module docstring), and
     the linear model's predicted fall of the cost, -(g.d) - |J d|^2 / 2 (computed directly, not as a
-    difference of two nearly equal costs)."""
+    difference of two nearly equal costs).
+    """
     Vd = ne.V.copy()
     Vd[:, [0, 1], [0, 1]] += lam * np.maximum(ne.V[:, [0, 1], [0, 1]], ne.floor)
     Vi = _inv2(Vd)
@@ -215,7 +220,8 @@ def parameter_covariance(fun: Residuals, fit: ShootingFit, penalty: np.ndarray |
                          diff_step: float = 1e-7) -> np.ndarray:  # fmt: skip
     """(J^T J)^-1's parameter block at ``fit``'s solution, the start states marginalised (the inverse of
     the Schur complement U - sum W_i V_i^-1 W_i^T), with the ``penalty`` rows in J; multiply by the
-    residual variance for the parameters' covariance. One more Jacobian (p + 2 simulations)."""
+    residual variance for the parameters' covariance. One more Jacobian (p + 2 simulations).
+    """
     q = fit.q
     w2 = np.zeros(q.size) if penalty is None else np.asarray(penalty, float) ** 2
     A, B = _jacobian(fun, q, fit.x, fit.fun, diff_step)

@@ -33,7 +33,8 @@ from negstiff.models.simulator import (
 def divergence_limits(z: np.ndarray, v: np.ndarray) -> dict[str, float]:
     """|z| and |z'| a simulation may reach before it counts as diverged: ten times the record's (the
     simulator's defaults, 1 m and 100 m/s, are a shaker device's; an electronic benchmark's volts per
-    second exceed them)."""
+    second exceed them).
+    """
     return {"z_limit": 10 * float(np.abs(z).max()) + 1e-12, "v_limit": 10 * float(np.abs(v).max()) + 1e-12}
 
 
@@ -47,7 +48,8 @@ MAX_SUBSTEPS = 16
 def record_substeps(system, rec: Measurement) -> int:
     """Runge-Kutta steps per sample for simulating ``system`` against ``rec``: the simulator's default,
     more where the system's stiffest point over the range the record visits makes omega h exceed
-    ``STEP_OMEGA`` (a fast resonance sampled slowly: the Silverbox's 60-90 Hz at 610 Hz)."""
+    ``STEP_OMEGA`` (a fast resonance sampled slowly: the Silverbox's 60-90 Hz at 610 Hz).
+    """
     if rec.z is not None:
         lo, hi = float(np.min(rec.z)), float(np.max(rec.z))
     else:  # an input-only record: the model's wells and what lies between
@@ -69,7 +71,8 @@ def record_substeps(system, rec: Measurement) -> int:
 def simulate_record(system, rec: Measurement, x0, substeps: int | None = None, **limits) -> SimulationResult:
     """A free run of ``system`` under ``rec``'s input from the state ``x0``: the input at every
     Runge-Kutta stage time by band-limited interpolation (``stage_input``), the step refined where the
-    system is fast for the sampling rate (``record_substeps``). The velocity is stored."""
+    system is fast for the sampling rate (``record_substeps``). The velocity is stored.
+    """
     sub = record_substeps(system, rec) if substeps is None else int(substeps)
     if not limits and rec.z is not None:
         _, vs, _, _ = rec.states("state")
@@ -119,7 +122,8 @@ def simulate_measured(system, rec: Measurement, z0: float | None = None, v0: flo
     record's z pinned to the physical frame first where it was derived), else from rest at ``z_plus``
     (an input-only record). Bounded by ten times the record's stroke and speed (``divergence_limits``; the
     shaker defaults for an input-only record). ``interpolation``: the input between samples band-limited
-    (a record through an anti-aliasing filter) or ``"linear"`` (a piecewise-linear drive)."""
+    (a record through an anti-aliasing filter) or ``"linear"`` (a piecewise-linear drive).
+    """
     if interpolation not in ("band-limited", "linear"):
         raise MeasurementError(f"interpolation is 'band-limited' or 'linear', got {interpolation!r}")
     limits = {"z_limit": DEFAULT_Z_LIMIT, "v_limit": DEFAULT_V_LIMIT}
@@ -143,7 +147,8 @@ def simulate_measured(system, rec: Measurement, z0: float | None = None, v0: flo
 def staged_windows(system, rec: Measurement, starts: np.ndarray, length: int) -> tuple[np.ndarray, int]:
     """The input of windows [s, s + length) of ``rec`` at every stage time (rows for
     ``simulate_batch(..., staged=True)``) and the substeps they are staged for. The span the windows
-    cover is interpolated as one signal (no edge effect at a window's start)."""
+    cover is interpolated as one signal (no edge effect at a window's start).
+    """
     sub = record_substeps(system, rec)
     r = 2 * sub
     lo, hi = int(np.min(starts)), int(np.max(starts)) + length
@@ -152,8 +157,9 @@ def staged_windows(system, rec: Measurement, starts: np.ndarray, length: int) ->
 
 
 def free_run_rms(model: Model, rec: Measurement, skip: int = 0, x0=None) -> float:
-    """rms of the free-run simulation error over ``rec`` (started at its measured state, or ``x0``),
-    the first ``skip`` samples not scored (the benchmarks' transient); inf if the run diverged."""
+    """Rms of the free-run simulation error over ``rec`` (started at its measured state, or ``x0``),
+    the first ``skip`` samples not scored (the benchmarks' transient); inf if the run diverged.
+    """
     zs, vs, _, _ = rec.states("state")
     if x0 is None:
         x0 = (zs[0], vs[0])
@@ -209,7 +215,8 @@ def restarted_free_runs(
     model: Model, rec: Measurement, start: int, window_s: float, zs: np.ndarray, v: np.ndarray
 ) -> dict[str, Any]:
     """Free runs of ``window_s`` seconds over [start, N), each restarted from the measured state
-    (``zs``, ``v``: the record's smoothed displacement and velocity)."""
+    (``zs``, ``v``: the record's smoothed displacement and velocity).
+    """
     w = int(round(window_s * rec.fs))
     n_win = (rec.n - start) // w
     if n_win < 1:
@@ -275,7 +282,7 @@ INPUT_MARGIN = 1.2
 
 def boundedness(system, rec: Measurement, margin: float = STROKE_MARGIN, input_margin: float = INPUT_MARGIN,
                 free_run: bool = True) -> dict[str, Any]:  # fmt: skip
-    """Does ``system`` stay bounded where ``rec`` took it, and a little beyond?
+    """Whether ``system`` stays bounded where ``rec`` took it, and a little beyond.
 
     * ``over_stroke``: beyond the stroke the record visited [z_lo, z_hi], over ``margin`` of its span on
       each side, the effective potential (the restoring force less the input's static part, integrated)
@@ -343,8 +350,7 @@ def boundedness(system, rec: Measurement, margin: float = STROKE_MARGIN, input_m
 
 
 def input_gain_of(input_kind: str, mass: float) -> float:
-    """w in z'' = ... + w u for one model (``simulator.input_gain`` for a scalar mass)."""
-
+    """W in z'' = ... + w u for one model (``simulator.input_gain`` for a scalar mass)."""
     return float(input_gain(input_kind, np.array([mass]))[0])
 
 

@@ -52,13 +52,15 @@ BASE_FIELDS = tuple(effects.BASE_TERMS)
 
 def terms() -> tuple[str, ...]:
     """The library's terms (the effect registry's ``library_terms``; the input u is appended last and
-    never thresholded)."""
+    never thresholded).
+    """
     return tuple(t.label for t in effects.library_terms())
 
 
 def term_fields() -> dict[str, tuple[str, float]]:
-    """term -> (model field or extra effect, sign of the field relative to -m times the coefficient).
-    z'' = -(K + D + extra)/m + input: field = -m coef, except k1 (K holds -k1 z): k1 = +m coef."""
+    """Term -> (model field or extra effect, sign of the field relative to -m times the coefficient).
+    z'' = -(K + D + extra)/m + input: field = -m coef, except k1 (K holds -k1 z): k1 = +m coef.
+    """
     return {t.label: (t.field, t.sign) for t in effects.library_terms()}
 
 
@@ -76,7 +78,8 @@ def library_columns(z: np.ndarray, v: np.ndarray, u: np.ndarray, velocity_noise:
     (``effects.library_terms``; ``velocity_noise`` [m/s] is the s_n of the smoothed sign, module
     docstring), then the input u. Written here, not through pysindy's ``GeneralizedLibrary`` of
     ``CustomLibrary`` and ``IdentityLibrary`` (which gave these same columns): each column is one law
-    call, and importing pysindy costs ~1 s, which every record's plausibility check paid."""
+    call, and importing pysindy costs ~1 s, which every record's plausibility check paid.
+    """
     cols = [t.law.column(z, v, velocity_noise) for t in effects.library_terms()]
     return np.column_stack([*cols, u])
 
@@ -87,7 +90,8 @@ def test_function(half: int, dt: float, pad_factor: int = 3) -> tuple[np.ndarray
     the same grid. With the spectral derivative, sum phi''_k z_k = sum phi_k (z'')_k holds exactly for
     a band-limited z (the derivative operator is symmetric), whereas the analytic phi'' sampled makes
     the sums differ by a quadrature error that grows fast for short supports (measured on a clean
-    simulation: 21 % of the target at half = 4, 0.1 % at 10; spectral: 0.03 % and 0.02 %)."""
+    simulation: 21 % of the target at half = 4, 0.1 % at 10; spectral: 0.03 % and 0.02 %).
+    """
     x = np.arange(-half, half + 1) / half
     phi = np.pad((1 - x**2) ** 4, pad_factor * half)
     w = 2 * np.pi * np.fft.rfftfreq(phi.size, dt)
@@ -98,7 +102,8 @@ def test_function_half_width(
     z: np.ndarray, fs: float, tol: float = 1e-2, min_half: int = 4, max_half: int = 200
 ) -> tuple[int, float]:
     """Half-width (samples) of the test function by Messenger & Bortz's rule (module docstring), and
-    the corner frequency [Hz]."""
+    the corner frequency [Hz].
+    """
     _, f, S = noise_floor(z, fs)
     above = np.flatnonzero(S > 0)
     f_c = float(f[above[-1]]) if above.size else fs / 4
@@ -113,7 +118,7 @@ def test_function_half_width(
 
 
 def weak_project(cols: np.ndarray, kernel: np.ndarray, stride: int, dt: float) -> np.ndarray:
-    """int phi_k(t) col(t) dt for test functions centred every ``stride`` samples (rows: k)."""
+    """Int phi_k(t) col(t) dt for test functions centred every ``stride`` samples (rows: k)."""
     out = signal.fftconvolve(cols, kernel[::-1, None], mode="valid", axes=0)
     return out[::stride] * dt
 
@@ -122,7 +127,8 @@ def weak_project(cols: np.ndarray, kernel: np.ndarray, stride: int, dt: float) -
 class WeakSystem:
     """A projected weak-form system: the library's columns W (rows: test functions; the input's
     column last) and the target y, each scaled to unit spread (``col``, ``s_y``), so the L0 threshold
-    acts on dimensionless coefficients."""
+    acts on dimensionless coefficients.
+    """
 
     W: np.ndarray
     y: np.ndarray
@@ -131,10 +137,12 @@ class WeakSystem:
 
     @property
     def W_physical(self) -> np.ndarray:
+        """The weak-form library's columns in physical units."""
         return self.W * self.col
 
     @property
     def y_physical(self) -> np.ndarray:
+        """The weak-form target in physical units."""
         return self.y * self.s_y
 
 
@@ -142,7 +150,8 @@ class WeakSystem:
 class WeakForm:
     """What every weak-form fit of a record needs first, computed once: the smoothed z and z' for the
     library (``derivatives.state_derivatives``), the velocity noise the library's sgn() uses, the test
-    function's half-width and the corner frequency it follows."""
+    function's half-width and the corner frequency it follows.
+    """
 
     zs: np.ndarray
     v: np.ndarray
@@ -175,7 +184,8 @@ class WeakForm:
     def system(self, rec: Measurement, lo: int = 0, hi: int | None = None, aux: tuple[str, ...] = ()) -> WeakSystem:
         """The weak-form system of the samples [lo, hi) of ``rec`` (the record this form was made of,
         or its first part); ``aux``: measured auxiliary channels of ``rec`` whose terms theta a(t) join
-        the library (``aux_terms``), before the input's column."""
+        the library (``aux_terms``), before the input's column.
+        """
         seg = rec.segment(lo, rec.n if hi is None else hi)
         F = library_columns(self.zs[lo:hi], self.v[lo:hi], seg.u, self.velocity_noise)
         if aux:
@@ -194,7 +204,8 @@ class WeakForm:
 # --- the input's coefficient and the mass: one rule for every method --------------------------------
 def known_input_gain(rec: Measurement) -> float | None:
     """The input's coefficient in z'' (per unit mass) fixed by physics: -1 for a base acceleration,
-    1/m for a force with a known mass; None when it is unknown (a force without a mass)."""
+    1/m for a force with a known mass; None when it is unknown (a force without a mass).
+    """
     if rec.input_name == "base_acc":
         return -1.0
     return None if rec.mass is None else 1.0 / rec.mass
@@ -203,7 +214,8 @@ def known_input_gain(rec: Measurement) -> float | None:
 def mass_of(rec: Measurement, gain: float | None, learned_gain: float, what: str = "the input coefficient"):
     """The moving mass and where it came from: given (the record's), estimated from a learned input
     coefficient (a force without a mass: m = 1 / coefficient), or none (per unit mass). Returns
-    (mass, source)."""
+    (mass, source).
+    """
     if rec.mass is not None:
         return rec.mass, "given"
     if gain is None:
@@ -216,18 +228,19 @@ def mass_of(rec: Measurement, gain: float | None, learned_gain: float, what: str
 # --- solving --------------------------------------------------------------------------------------
 @contextlib.contextmanager
 def _seeded_global_rng(seed: int):
-    """pysindy's EnsembleOptimizer draws from numpy's global generator: seed it, then restore it."""
-    state = np.random.get_state()
-    np.random.seed(seed)
+    """Pysindy's EnsembleOptimizer draws from numpy's global generator: seed it, then restore it."""
+    state = np.random.get_state()  # noqa: NPY002 - the library draws from the global generator
+    np.random.seed(seed)  # noqa: NPY002
     try:
         yield
     finally:
-        np.random.set_state(state)
+        np.random.set_state(state)  # noqa: NPY002
 
 
 def _optimizer(weight: float, rhs: float | None, n_feat: int, support=None):
     """SR3 with an L0 penalty; equality constraints fix the input's coefficient (``rhs``) and, when a
-    ``support`` is given, hold the terms outside it at zero (the refit of a selected support)."""
+    ``support`` is given, hold the terms outside it at zero (the refit of a selected support).
+    """
     import pysindy as ps
 
     rows, vals = [], []
@@ -267,7 +280,8 @@ def fit_support(
 ) -> np.ndarray:
     """Physical coefficients of z'' (per unit mass; the input's last) of a weak system: SR3 at the L0
     ``weight``, the input's coefficient fixed at ``gain`` (None: learned), the terms outside
-    ``support`` held at zero; with ``bagging`` the ensemble's, one row per model."""
+    ``support`` held at zero; with ``bagging`` the ensemble's, one row per model.
+    """
     n_feat = system.W.shape[1]  # the library's terms, any auxiliary channels', the input last
     rhs = None if gain is None else gain * system.col[-1] / system.s_y
     if weight == 0 and bagging is None:
@@ -296,7 +310,8 @@ def fit_support(
 def _least_squares(system: WeakSystem, rhs: float | None, support=None) -> np.ndarray:
     """``fit_support`` without a penalty: SR3 at zero weight converges to this constrained least squares
     (to 5e-8 relative, measured on a 300 s rig record), solved directly, without pysindy (whose import
-    costs ~1 s, paid by the plausibility checks, the posterior's start and the frame's pinning)."""
+    costs ~1 s, paid by the plausibility checks, the posterior's start and the frame's pinning).
+    """
     W, y = system.W, system.y
     keep = np.ones(W.shape[1] - 1, bool) if support is None else np.asarray(support, bool)
     xi = np.zeros(W.shape[1])
@@ -311,24 +326,26 @@ def _least_squares(system: WeakSystem, rhs: float | None, support=None) -> np.nd
 
 def model_from(phys: np.ndarray, mass: float, aux: tuple[str, ...] = ()) -> Model:
     """Model file fields from physical z'' coefficients (per unit mass; the library's terms, then the
-    auxiliary channels ``aux``' terms, the input last) and the mass."""
+    auxiliary channels ``aux``' terms, the input last) and the mass.
+    """
     fields = {k: 0.0 for k in BASE_FIELDS}
     extra = {}
     lib = effects.library_terms()
-    for t, coef in zip(lib, phys[: len(lib)]):
+    for t, coef in zip(lib, phys[: len(lib)], strict=False):
         name, sign = t.field, t.sign
         val = sign * mass * float(coef)
         if name in fields:
             fields[name] = val
         elif coef != 0:
             extra[name] = val
-    for name, coef in zip(aux_terms(aux), phys[len(lib) : len(lib) + len(aux)]):
+    for name, coef in zip(aux_terms(aux), phys[len(lib) : len(lib) + len(aux)], strict=False):
         if coef != 0:  # theta a(t) on the left-hand side, like every effect: theta = -m x its z'' coefficient
             extra[name] = -mass * float(coef)
     return Model(m=mass, extra=extra, **fields)
 
 
 def support_of(selected) -> tuple[bool, ...]:
+    """The library's support (a bool per term) of ``selected`` term names; ``ValueError`` for an unknown one."""
     known = terms()
     unknown = set(selected) - set(known)
     if unknown:
@@ -341,7 +358,8 @@ def input_coefficient(rec: Measurement, terms=("1", "z", "z^2", "z^3", "z^4", "z
     (per unit mass): physics says -1 for a base acceleration in m/s^2 and 1/m for a force in N, so it
     checks the input's units and the mass (``plausibility``), and scales a response of unknown sensitivity
     (``scale``). The record's measured auxiliary channels join the fit (a harvester's voltage: left out, its
-    coupling's share of the motion was taken by the input, 4 % on a coupled record, measured)."""
+    coupling's share of the motion was taken by the input, 4 % on a coupled record, measured).
+    """
     form = WeakForm.of(rec)
     aux = tuple(rec.aux)
     support = support_of(terms) + (True,) * len(aux)
@@ -351,7 +369,8 @@ def input_coefficient(rec: Measurement, terms=("1", "z", "z^2", "z^3", "z^4", "z
 def weak_least_squares(rec: Measurement, terms, gain: float | None = None) -> Model:
     """The weak-form least-squares model of a fixed set of library ``terms`` over the whole record (no
     selection, no ensemble): the deterministic start point of the posterior and the discrepancy
-    workflow's refits. The input's coefficient is fixed as in ``SINDy`` (or learned without a mass)."""
+    workflow's refits. The input's coefficient is fixed as in ``SINDy`` (or learned without a mass).
+    """
     form = WeakForm.of(rec)
     g = known_input_gain(rec) if gain is None else gain
     support = support_of(terms)

@@ -14,7 +14,7 @@ import signal
 import sys
 import threading
 import warnings
-from typing import Sequence
+from collections.abc import Sequence
 
 from negstiff.files import transaction
 
@@ -25,7 +25,8 @@ from .parser import build_parser
 def _interrupt_handler(command: str, what: str, code: int):
     """Ctrl-C (SIGINT) or a kill (SIGTERM): one line, the outputs being written removed, exit at once
     (130, 143). (Raising KeyboardInterrupt is not enough: emcee prints the traceback of any exception
-    inside a log-probability call before passing it on.)"""
+    inside a log-probability call before passing it on).
+    """
 
     def handler(signum, frame):
         from negstiff.files import remove_pending
@@ -73,7 +74,8 @@ def run() -> None:
     """The installed command: ``main``, then an exit that skips the interpreter's teardown. Everything
     the command writes is written (atomically) and its worker processes joined inside ``main``; the
     teardown would only free the loaded libraries' state, which took 0.2 s of a 2.7 s ``identify nsi``
-    (numba's compiled kernels; measured). An exception escaping ``main`` takes the usual way out."""
+    (numba's compiled kernels; measured). An exception escaping ``main`` takes the usual way out.
+    """
     rc = main()
     try:
         sys.stdout.flush()

@@ -1,5 +1,6 @@
 """The commands: each reads its inputs, calls ``negstiff.models``, ``negstiff.inference`` or
-``negstiff.experiments``, and writes its output atomically (``docs/contract.md``)."""
+``negstiff.experiments``, and writes its output atomically (``docs/contract.md``).
+"""
 
 from __future__ import annotations
 
@@ -95,7 +96,7 @@ def write_campaign(rig, args) -> None:
         sweeps = rig.sweeps(args.freq, lists, wells, args.settle_periods, args.periods)
     index = []
     with atomic_dir(args.out) as tmp:
-        for (start, direction), recs in zip(plans, sweeps):
+        for (start, direction), recs in zip(plans, sweeps, strict=False):
             for rec in recs:
                 exc = rec.truth["excitation"]
                 amp, f = exc["amplitude_m_s2"], exc.get("freq_hz", args.freq)

@@ -1,5 +1,6 @@
 """What every command shares: input errors, argument types, reading a system file, writing a result
-JSON, the lines on stderr, and the check that no output overwrites an input."""
+JSON, the lines on stderr, and the check that no output overwrites an input.
+"""
 
 from __future__ import annotations
 
@@ -9,8 +10,9 @@ import functools
 import importlib.util
 import json
 import sys
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -27,13 +29,14 @@ class Parser(argparse.ArgumentParser):
 def _source(module: str) -> Path:
     """The source file of ``negstiff.inference.<...>`` without importing it or its parent packages
     (``find_spec`` of a submodule imports its parents: ``inference.posterior``'s loads the compiled
-    simulator, 3.4 s of every command's start, measured)."""
+    simulator, 3.4 s of every command's start, measured).
+    """
     base = Path(importlib.util.find_spec("negstiff.inference").submodule_search_locations[0])
     path = base.joinpath(*module.split(".")[2:])
     return path / "__init__.py" if path.is_dir() else path.with_suffix(".py")
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _signature_defaults(module: str, cls: str) -> dict[str, Any]:
     tree = ast.parse(_source(module).read_text())
     init = next(
@@ -44,7 +47,8 @@ def _signature_defaults(module: str, cls: str) -> dict[str, Any]:
         if isinstance(f, ast.FunctionDef) and f.name == "__init__"
     )
     args = init.args.args[-len(init.args.defaults) :] if init.args.defaults else []
-    pairs = list(zip(args, init.args.defaults)) + list(zip(init.args.kwonlyargs, init.args.kw_defaults))
+    pairs = list(zip(args, init.args.defaults, strict=False))
+    pairs += list(zip(init.args.kwonlyargs, init.args.kw_defaults, strict=False))
     out = {}
     for a, d in pairs:
         if d is None:  # a keyword-only parameter without a default
@@ -56,10 +60,11 @@ def _signature_defaults(module: str, cls: str) -> dict[str, Any]:
     return out
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _constraints(module: str, cls: str) -> dict[str, Any]:
     """An estimator class's ``_parameter_constraints``, evaluated from its source (``inference.parameters``'
-    classes only), without importing the estimator."""
+    classes only), without importing the estimator.
+    """
     from negstiff.inference.estimators.parameters import NAMESPACE
 
     tree = ast.parse(_source(module).read_text())
@@ -69,7 +74,7 @@ def _constraints(module: str, cls: str) -> dict[str, Any]:
                                                                     for t in a.targets)
     )  # fmt: skip
     out = {}
-    for key, value in zip(node.keys, node.values):
+    for key, value in zip(node.keys, node.values, strict=False):
         try:
             out[ast.literal_eval(key)] = eval(compile(ast.Expression(value), module, "eval"), dict(NAMESPACE))
         except NameError:
@@ -80,7 +85,8 @@ def _constraints(module: str, cls: str) -> dict[str, Any]:
 def declared(estimator: str, parameter: str, what: str = ""):
     """The argparse type of an option that sets an estimator's parameter: the parameter's declared
     constraint (``_parameter_constraints``, ``"nsi.NSI"``: ``negstiff.inference.estimators.nsi.NSI``), so the command
-    line checks the range the library checks, from one declaration."""
+    line checks the range the library checks, from one declaration.
+    """
     module, cls = estimator.rsplit(".", 1)
     c = _constraints(f"negstiff.inference.{module}", cls)[parameter]
     unit = f" {c.unit}" if getattr(c, "unit", "") else ""
@@ -90,7 +96,8 @@ def declared(estimator: str, parameter: str, what: str = ""):
 def default(estimator: str, parameter: str) -> Any:
     """The default of an estimator's parameter, read from its ``__init__`` signature (``"nsi.NSI"``:
     ``negstiff.inference.estimators.nsi.NSI``), so the CLI states the estimator's own default. Read from the source,
-    not imported: building the parser (``--help``) must not load the compiled simulator."""
+    not imported: building the parser (``--help``) must not load the compiled simulator.
+    """
     module, cls = estimator.rsplit(".", 1)
     return _signature_defaults(f"negstiff.inference.{module}", cls)[parameter]
 
@@ -143,7 +150,8 @@ def bad_input_types() -> tuple[type[BaseException], ...]:
     """The domain's errors (bad input: one line, exit 2). A plain ValueError from inside is a bug and
     keeps its traceback; where a user's value reaches a validating constructor, the command turns its
     ValueError into an InputError at that call. Every domain error is an ``InputError``
-    (``negstiff.errors``)."""
+    (``negstiff.errors``).
+    """
     return (InputError, FileNotFoundError, json.JSONDecodeError)
 
 
@@ -233,7 +241,8 @@ FIGURE_COMMANDS = ("frf", "nfrc", "map")
 
 def io_paths(args) -> tuple[list[Path], dict[str, str | Path], dict[str, str]]:
     """What a command reads and writes: (every input file, {label: output}, {label: marker} of the
-    outputs that are folders). A folder input counts as the files read from it (``map``)."""
+    outputs that are folders). A folder input counts as the files read from it (``map``).
+    """
     inputs: list[Path] = []
     for name in ("model", "input", "targets", "start", "frf", "nfrc"):
         v = getattr(args, name, None)
@@ -275,7 +284,8 @@ def io_paths(args) -> tuple[list[Path], dict[str, str | Path], dict[str, str]]:
 
 def check_paths(args) -> None:
     """Before any work: every output can be written, and none is an input or another output
-    (``negstiff.files.check_outputs``)."""
+    (``negstiff.files.check_outputs``).
+    """
     from negstiff.files import check_outputs
 
     inputs, outputs, folders = io_paths(args)

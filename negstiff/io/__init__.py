@@ -28,7 +28,8 @@ FORMATS: dict[str, ModuleType] = {s: m for m in (csv, npz, mat, uff, tdms, lvm) 
 
 def read(path: str | Path) -> tuple[dict[str, np.ndarray], dict[str, str]]:
     """A file's channels (float arrays, by the file's names) and metadata (strings); one
-    ``MeasurementError`` line for a missing, unknown or unreadable file."""
+    ``MeasurementError`` line for a missing, unknown or unreadable file.
+    """
     path = Path(path)
     if not path.is_file():
         raise MeasurementError(f"{path}: no such file")
@@ -46,7 +47,8 @@ def read(path: str | Path) -> tuple[dict[str, np.ndarray], dict[str, str]]:
 def write(path: str | Path, cols: dict[str, np.ndarray], fs: float, meta: dict, **options) -> None:
     """Write ``cols`` (the time column first, if any) at ``fs`` [Hz] with ``meta`` in the format of ``path``'s
     suffix (``options``: the format's own, e.g. ``time_decimals`` for CSV). The caller writes atomically
-    (``negstiff.files.atomic_path``): ``path`` may be a temporary name, so ``suffix`` says the format."""
+    (``negstiff.files.atomic_path``): ``path`` may be a temporary name, so ``suffix`` says the format.
+    """
     path = Path(path)
     suffix = options.pop("suffix", path.suffix).lower()
     fmt = FORMATS.get(suffix)

@@ -58,6 +58,7 @@ def common_step(path: Path, steps: dict[str, float]) -> float | None:
 
 
 def equal_lengths(path: Path, cols: dict[str, np.ndarray]) -> None:
+    """Refuse (``MeasurementError``) channels of unequal lengths, naming the first that differs."""
     if not cols:
         raise MeasurementError(f"{path}: no channels in the file")
     ref_name, ref = next(iter(cols.items()))

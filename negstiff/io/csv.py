@@ -1,7 +1,8 @@
 """CSV (and ``.txt``) records: the contract's file, and the dialects spreadsheets and DAQs write (fields
 separated by ``;`` with decimal commas, tabs or blanks; a UTF-8 byte-order mark; Latin-1 text; units in the
 header, ``z [mm]``). Read in chunks with a bounded memory budget; the time column's printed precision is
-kept (lab exports round time)."""
+kept (lab exports round time).
+"""
 
 from __future__ import annotations
 
@@ -28,7 +29,8 @@ measured on a 10 MB rig record): a file whose parse would not fit in memory is r
 def _text(path: Path) -> str:
     """A text file's content: UTF-8 (a byte-order mark, as spreadsheets write, dropped), else Latin-1
     (older Windows exports write 'µm' so). Read in chunks with a bounded budget: a file with NUL bytes
-    is not text, and is refused at the first chunk that holds one (not after reading a gigabyte)."""
+    is not text, and is refused at the first chunk that holds one (not after reading a gigabyte).
+    """
     chunks, offset = [], 0
     try:
         size = path.stat().st_size
@@ -56,7 +58,8 @@ def _dialect(path: Path, header: str, first_row: str) -> tuple[str | None, bool]
     """(field separator, decimal comma) of a CSV from its header and first data row: ',' (the contract),
     ';' (spreadsheets where the decimal mark is a comma, which then appears in the numbers), a tab, or
     blanks (None). Written here rather than with ``csv.Sniffer``, which guesses from character counts and
-    takes a digit or the decimal point for the separator of a numeric file."""
+    takes a digit or the decimal point for the separator of a numeric file.
+    """
     # the separator is in both lines (a header's names may hold commas, a decimal-comma row holds commas)
     sep = next((d for d in (",", ";", "\t") if d in header and d in first_row), None)
     decimal_comma = sep != "," and "," in first_row
@@ -68,6 +71,7 @@ def _dialect(path: Path, header: str, first_row: str) -> tuple[str | None, bool]
 
 
 def read(path: Path) -> tuple[dict[str, np.ndarray], dict[str, str]]:
+    """The columns and ``# key: value`` metadata of a CSV file in any of the lab dialects."""
     lines = _text(path).splitlines()
     meta: dict[str, str] = {}
     i = 0
@@ -159,7 +163,8 @@ _PLAIN[np.frombuffer(b"0123456789.+-\0", dtype=np.uint8)] = True
 def _plain_decimal_digits(tokens: list[str]) -> tuple[int, int] | None:
     """``_printed_digits`` of a column of plain decimals (digits, sign and point only: what lab exports
     write) on the tokens' bytes as one array, or None for any other column. The per-token loop took 0.13
-    s on a 300 s record at 512 Hz, half of reading the file; this takes 0.04 s."""
+    s on a 300 s record at 512 Hz, half of reading the file; this takes 0.04 s.
+    """
     text = "".join(tokens)
     if not tokens or not text.isascii():
         return None
@@ -181,7 +186,8 @@ def _plain_decimal_digits(tokens: list[str]) -> tuple[int, int] | None:
 
 def write(path: Path, cols: dict[str, np.ndarray], fs: float, meta: dict, time_decimals: int | None = None) -> None:
     """The record as the contract's CSV: ``# key: value`` metadata lines, a header, comma-separated rows
-    (``%.10g``; the time column with ``time_decimals`` fixed decimals, as a lab's export rounds it)."""
+    (``%.10g``; the time column with ``time_decimals`` fixed decimals, as a lab's export rounds it).
+    """
     buf = io.StringIO()
     for k, v in meta.items():
         buf.write(f"# {k}: {v}\n")

@@ -1,7 +1,8 @@
 """LabVIEW measurement files (``.lvm``) through **lvm_read** (SDyPy, MIT), called without its pickle cache
 (by default it writes a ``.pkl`` beside the input and trusts one found there: negstiff never writes beside
 an input); channels by the header's names, the time step from ``Delta_X``. Read only: lvm_read writes
-nothing, and labs export LVM from LabVIEW itself."""
+nothing, and labs export LVM from LabVIEW itself.
+"""
 
 from __future__ import annotations
 

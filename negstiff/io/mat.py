@@ -1,5 +1,6 @@
 """MATLAB ``.mat`` records (v4 to v7, through scipy.io; v7.3 is HDF5 and refused with the way out): one
-vector per column, scalars as metadata."""
+vector per column, scalars as metadata.
+"""
 
 from __future__ import annotations
 
@@ -15,6 +16,7 @@ SUFFIXES = (".mat",)
 
 
 def read(path: Path) -> tuple[dict[str, np.ndarray], dict[str, str]]:
+    """The variables (as columns) and metadata of a MATLAB v5 file."""
     from scipy.io import loadmat
 
     check_memory(path, 8 * path.stat().st_size)  # MAT v5 compresses its arrays (zlib): a few times the file
@@ -36,7 +38,8 @@ def read(path: Path) -> tuple[dict[str, np.ndarray], dict[str, str]]:
 
 def write(path: Path, cols: dict[str, np.ndarray], fs: float, meta: dict) -> None:
     """The columns as vectors and ``fs`` as a scalar (MATLAB v5, scipy.io.savemat); numeric metadata as
-    scalars (a .mat file holds no strings the reader keeps)."""
+    scalars (a .mat file holds no strings the reader keeps).
+    """
     from scipy.io import savemat
 
     scalars = {}

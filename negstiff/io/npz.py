@@ -1,5 +1,6 @@
 """NumPy ``.npz`` records: one array per column by the contract's names, ``fs`` as a scalar, ``meta`` a
-JSON object of the metadata; nothing pickled is read."""
+JSON object of the metadata; nothing pickled is read.
+"""
 
 from __future__ import annotations
 
@@ -16,6 +17,7 @@ SUFFIXES = (".npz",)
 
 
 def read(path: Path) -> tuple[dict[str, np.ndarray], dict[str, str]]:
+    """The arrays (as columns) and metadata of an ``.npz`` file."""
     import zipfile
 
     try:  # the arrays' size as stored (compressed or not), before any is read

@@ -78,7 +78,8 @@ _UNIT_WORDS = {"meter": "m", "metre": "m", "millimeter": "mm", "millimetre": "mm
 
 def _unit(label: str) -> str:
     """A unit label in ``UNITS``' spelling: 'µm' and 'μm' -> 'um', 'm/s²', 'm/s2', 'm/s/s' and 'm s^-2' ->
-    'm/s^2', 'm s^-1' -> 'm/s', 'meters' -> 'm', 'm/sec' -> 'm/s'."""
+    'm/s^2', 'm s^-1' -> 'm/s', 'meters' -> 'm', 'm/sec' -> 'm/s'.
+    """
     u = label.strip().replace("µ", "u").replace("μ", "u").replace("²", "^2").replace(" ", "").replace("*", "")
     u = re.sub(r"[A-Za-z]{3,}", lambda w: _UNIT_WORDS.get(w.group(0).lower().rstrip("s"), w.group(0)), u)
     u = re.sub(r"(/s/s|/s2|s\^?-2)$", "/s^2", u)
@@ -87,7 +88,8 @@ def _unit(label: str) -> str:
 
 def si_factor(label: str, column: str) -> float | None:
     """The factor that turns ``column``'s values labelled ``label`` into SI, or None where the label is not
-    a unit of the column's dimension in ``UNITS``."""
+    a unit of the column's dimension in ``UNITS``.
+    """
     return UNITS[DIMENSIONS[column]].get(_unit(label)) if column in DIMENSIONS else None
 
 
@@ -97,7 +99,8 @@ def in_si(path: Path, cols: dict[str, np.ndarray], meta: dict[str, str], cmap: d
 
     A column under its own name (not mapped) is converted by its stated unit; a unit that is not one of
     the column's dimension is an error (one line), never a silent SI reading. A mapped column is the
-    user's: its map's scale stands, and a non-SI unit the map does not scale is a warning."""
+    user's: its map's scale stands, and a non-SI unit the map does not scale is a warning.
+    """
     channels: dict[str, dict[str, Any]] = {}
     for k in meta:
         if k.startswith(("unit:", "sensitivity:")):
@@ -150,7 +153,8 @@ dynamics estimate it (``negstiff.inference.record.scale``)."""
 
 def parse_column_map(text: str | None) -> dict[str, tuple[str, float]]:
     """Parse ``name=SOURCE[*scale],...`` into ``{name: (SOURCE, scale)}``; ``*?`` marks a scale unknown
-    (``UNKNOWN_SCALE``: a response channel whose sensitivity the record's dynamics are to estimate)."""
+    (``UNKNOWN_SCALE``: a response channel whose sensitivity the record's dynamics are to estimate).
+    """
     if not text:
         return {}
     out: dict[str, tuple[str, float]] = {}
@@ -182,6 +186,7 @@ UNIT_IN_NAME = re.compile(r"^(?P<name>.*?)\s*(?:\[(?P<square>[^\]]*)\]|\((?P<rou
 
 def header_name(src: str, raw: dict[str, np.ndarray]) -> str:
     """A column map's source as the file's column name: the header's whole text ('Time [s]') names the
-    column its unit was split from ('Time')."""
+    column its unit was split from ('Time').
+    """
     m = UNIT_IN_NAME.match(src)
     return m.group("name").strip() if src not in raw and m and m.group("name").strip() in raw else src

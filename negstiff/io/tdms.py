@@ -1,7 +1,8 @@
 """LabVIEW TDMS (``.tdms``) through **npTDMS** (LGPL-3.0, used as a library): every channel of every group,
 named by the channel's name (``group/channel`` where two groups share a name); the time step from the
 waveform property ``wf_increment``. A truncated file (npTDMS logs it, then reads what is there) is refused.
-Written as one group of waveform channels with the record's metadata as file properties."""
+Written as one group of waveform channels with the record's metadata as file properties.
+"""
 
 from __future__ import annotations
 

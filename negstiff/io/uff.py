@@ -2,7 +2,8 @@
 MIT): each type-58 record whose function type is a time response (1) is one channel, named by its ID line 1
 (``id1``) as the front end wrote it, else ``node+direction``. A file is read whole or refused (pyuff drops
 an incomplete last dataset silently). Written as ASCII type-58 records, one per channel (pyuff's binary
-58b of this version did not read back its own output)."""
+58b of this version did not read back its own output).
+"""
 
 from __future__ import annotations
 
@@ -88,7 +89,8 @@ def read(path: Path):
 def _check_uff_complete(path: Path, n_read: int) -> None:
     """A Universal File read whole: every dataset opens and closes with a ``-1`` line, and pyuff returned
     them all (it drops an incomplete last dataset silently; the record would then lose a channel, or its
-    end, and negstiff would derive z from another channel)."""
+    end, and negstiff would derive z from another channel).
+    """
     delimiters = sum(1 for line in path.read_bytes().splitlines() if line.strip() == b"-1")
     if delimiters % 2 or delimiters // 2 != n_read:
         raise MeasurementError(

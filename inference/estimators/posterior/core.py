@@ -162,7 +162,8 @@ class Posterior(Estimator):
     def _refined_start(self, rec: Measurement, weak: Model) -> Model:
         """The weak-form estimate refined by simulation error over the record (``refine.refine``; the mass
         held: the coefficient posterior holds it too), kept only if it is bounded and predicts the record
-        at least as well; ``start_info_`` says which start was used and why."""
+        at least as well; ``start_info_`` says which start was used and why.
+        """
         from negstiff.inference.steps.refine import refine
         from negstiff.inference.steps.validation import boundedness
 
@@ -192,7 +193,8 @@ class Posterior(Estimator):
 
     def _map(self, par: Parametrisation, win: Windows, theta: np.ndarray):
         """MAP point of theta (sigma profiled) by least squares on the projected residuals, with the
-        parameters the likelihood does not see held; returns (theta, the least-squares solution)."""
+        parameters the likelihood does not see held; returns (theta, the least-squares solution).
+        """
         x_scale = np.maximum(np.abs(theta), 1e-6)
         free = par.free()
         n_rows = win.n_windows * win.length
@@ -218,7 +220,8 @@ class Posterior(Estimator):
         squares solution, sigma). The MAP point and the windows' start states are found alternately, each
         a profile over the other. The device's mass is held at its start (weighed) value: the
         likelihood depends on E/m, c/m, c_nl/m only (device-model.md), so the MAP point along the E-m
-        ridge is the prior's."""
+        ridge is the prior's.
+        """
         self._validate()
         win = Windows.cut(rec, self.window_s, self.max_windows, oversample=self.oversample)
         win.threads = self.threads
@@ -312,7 +315,7 @@ class Posterior(Estimator):
             tau=tau_arr,
             warnings=warn,
             settings={},
-            map_point={n: float(v) for n, v in zip(names, np.concatenate([theta, [sigma]]))},
+            map_point={n: float(v) for n, v in zip(names, np.concatenate([theta, [sigma]]), strict=False)},
         )
         res.summary = summarise(res.samples, names, tau_arr, self.hdi_prob)
         warn += convergence_warnings(res.summary, self.n_ensembles)
@@ -352,7 +355,7 @@ class Posterior(Estimator):
 
 
 def _idata(res: PosteriorResult, y: np.ndarray, logpost: LogPosterior, win: Windows):
-    """arviz DataTree: posterior (thinned by half the autocorrelation time), sample stats, observed data
+    """Arviz DataTree: posterior (thinned by half the autocorrelation time), sample stats, observed data
     and pointwise (per-window) log likelihood; and that log likelihood.
 
     ``chain`` is an independent ensemble: the walkers of one emcee ensemble move together (each move
@@ -360,7 +363,8 @@ def _idata(res: PosteriorResult, y: np.ndarray, logpost: LogPosterior, win: Wind
     R-hat (1.08-1.10) disagree with the across-ensemble R-hat negstiff reports. A chain's ``draw`` runs
     walker by walker, each walker's steps in order (draw = walker x kept steps + step), so arviz's
     autocorrelation sees each walker's own series. Every dimension is named: ``window`` (the
-    multiple-shooting windows), ``time`` (a window's samples), ``state`` (z, z_dot)."""
+    multiple-shooting windows), ``time`` (a window's samples), ``state`` (z, z_dot).
+    """
     import arviz as az
 
     E, S, W, d = res.samples.shape

@@ -15,7 +15,8 @@ class PosteriorResult:
     """A posterior run. ``idata`` (arviz: posterior, sample stats, observed data and the pointwise
     log likelihood) and ``log_likelihood`` (ensembles, walkers x kept draws, windows; thinned) are built on
     first use: the pointwise log likelihood simulates every kept draw again (4 s of a 30 s run on a
-    300 s record, measured), which a run that only reports its summary does not need."""
+    300 s record, measured), which a run that only reports its summary does not need.
+    """
 
     names: tuple[str, ...]
     samples: np.ndarray  # (ensembles, steps, walkers, d) physical, sigma (not log) last, after burn-in
@@ -38,22 +39,26 @@ class PosteriorResult:
 
     def __getstate__(self) -> dict[str, Any]:
         """Pickled without the builder (it holds the run's log posterior and its lock): a result pickled
-        before its arviz data was asked for has none after unpickling."""
+        before its arviz data was asked for has none after unpickling.
+        """
         return {**self.__dict__, "build_idata": None}
 
     @property
     def idata(self):
+        """The arviz data of the draws (built once, on first use)."""
         return self._idata_and_loglik()[0]
 
     @property
     def log_likelihood(self) -> np.ndarray | None:
+        """Each draw's log likelihood per window (None when not kept)."""
         return self._idata_and_loglik()[1]
 
 
 def summarise(samples: np.ndarray, names, tau: np.ndarray, hdi_prob: float) -> dict[str, dict[str, float]]:
     """Posterior summaries of ``samples`` (ensembles, steps, walkers, d): mean, sd, HDI, R-hat across
     the ensembles (each one chain, draws in step order), bulk and tail ESS over all walkers (arviz,
-    capped by emcee's N / tau), tau."""
+    capped by emcee's N / tau), tau.
+    """
     import arviz as az
 
     E, S, W, d = samples.shape
@@ -87,6 +92,7 @@ def summarise(samples: np.ndarray, names, tau: np.ndarray, hdi_prob: float) -> d
 
 
 def convergence_warnings(summary: dict[str, dict[str, float]], n_ensembles: int) -> list[str]:
+    """A warning per parameter whose R-hat (>= 1.01) or bulk ESS (< 100 per ensemble) says it has not converged."""
     out = []
     for n, s in summary.items():
         if not s["r_hat"] < 1.01:

@@ -32,7 +32,8 @@ def curvature_adjustment(J: np.ndarray, r: np.ndarray, n_windows: int, sigma: fl
     1.7-1.9: the fitted start states remove the residual's slow part, and the estimate misses it.)
 
     Returns (A, V_a, inflation): A and V_a in x coordinates, inflation the clipped eigenvalues (the
-    variance factors the adjustment applied, 1 where none)."""
+    variance factors the adjustment applied, 1 where none).
+    """
     p = J.shape[1]
     H = J.T @ J / sigma**2
     lam_h, U_h = np.linalg.eigh(H)
@@ -58,7 +59,8 @@ class LogPosterior:
     Cholesky factor), q = [theta, log sigma].
 
     ``__call__`` returns one (log posterior, log likelihood) pair per walker (emcee's blob convention
-    with ``vectorize=True``)."""
+    with ``vectorize=True``).
+    """
 
     def __init__(self, par: Parametrisation, win: Windows, q0: np.ndarray, scale: np.ndarray, adjust=None):
         self.par, self.win, self.q0, self.scale = par, win, q0, scale
@@ -68,7 +70,8 @@ class LogPosterior:
 
     def likelihood_point(self, theta: np.ndarray) -> np.ndarray:
         """The parameters the likelihood is evaluated at: ``theta`` reduced (device: to the reference
-        mass, which leaves the likelihood unchanged) and curvature-adjusted about the MAP point."""
+        mass, which leaves the likelihood unchanged) and curvature-adjusted about the MAP point.
+        """
         if self.par.reduce is not None:
             theta = self.par.reduce(theta)
         if self.adjust is None:
@@ -100,10 +103,11 @@ class LogPosterior:
         return out
 
     def __call__(self, y: np.ndarray):
+        """The log posterior at the whitened points ``y`` (one row each): emcee's vectorised callable."""
         with self._lock:
             self.calls += 1
         q = self.unwhiten(y)
         lp = self.par.log_prior_sampled(q[:, :-1], q[:, -1])
         ll = self.loglik(q, lp=lp)
         post = np.where(np.isfinite(ll), ll + lp, -np.inf)
-        return list(zip(post, ll))
+        return list(zip(post, ll, strict=False))

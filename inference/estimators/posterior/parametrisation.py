@@ -1,11 +1,12 @@
 """What the posterior samples: the coefficient and device parametrisations, their priors and maps to the
-simulator's kernel parameters."""
+simulator's kernel parameters.
+"""
 
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Callable
 
 import numpy as np
 
@@ -52,6 +53,7 @@ class Parametrisation:
         return mask
 
     def physical(self, phi: np.ndarray) -> np.ndarray:
+        """The physical parameters of sampled ones ``phi``."""
         return phi if self.to_physical is None else self.to_physical(phi)
 
     def log_prior_sampled(self, phi: np.ndarray, log_sigma: np.ndarray) -> np.ndarray:
@@ -60,6 +62,7 @@ class Parametrisation:
         return lp if self.log_jacobian is None else lp + self.log_jacobian(phi)
 
     def log_prior(self, theta: np.ndarray, log_sigma: np.ndarray) -> np.ndarray:
+        """The log prior of physical parameters ``theta`` and noise levels ``log_sigma`` (flat within the bounds)."""
         ok = np.all((theta > self.lower) & (theta < self.upper), axis=1)
         ok &= (log_sigma > math.log(SIGMA_BOUNDS[0])) & (log_sigma < math.log(SIGMA_BOUNDS[1]))
         lp = np.where(ok, 0.0, -np.inf)

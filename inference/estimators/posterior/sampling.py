@@ -34,7 +34,8 @@ def sample_ensembles(
     burn-in of 2 tau, at least one chunk) reach ``tau_multiple`` x the largest autocorrelation time, or
     ``max_steps``; a run that stops short is reported in ``warnings``. Seeds: the walkers' start from
     ``seed + e``, the moves from ``seed + 1000 + e``: the same seed gives the same chains, whatever
-    ``workers`` (threads running ensembles at once; None: one per core)."""
+    ``workers`` (threads running ensembles at once; None: one per core).
+    """
     import emcee
 
     pbar = _progress_bar(progress, n_ensembles * max_steps)

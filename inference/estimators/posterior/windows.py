@@ -1,5 +1,6 @@
 """Multiple-shooting windows of a record: the batched simulation, start states and the dropping of windows
-the model cannot follow (the likelihood's data)."""
+the model cannot follow (the likelihood's data).
+"""
 
 from __future__ import annotations
 
@@ -52,10 +53,12 @@ class Windows:
 
     @property
     def n_windows(self) -> int:
+        """The number of windows."""
         return self.z.shape[0]
 
     @property
     def length(self) -> int:
+        """The samples per window."""
         return self.z.shape[1]
 
     @staticmethod
@@ -73,7 +76,8 @@ class Windows:
         return L, n_win
 
     @classmethod
-    def cut(cls, rec: Measurement, window_s: float, max_windows: int | None = None, oversample: int = 1) -> "Windows":
+    def cut(cls, rec: Measurement, window_s: float, max_windows: int | None = None, oversample: int = 1) -> Windows:
+        """The record's windows of ``window_s`` seconds (at most ``max_windows``, evenly picked)."""
         L, n_win = cls.check(rec, window_s)
         picks = np.arange(n_win)
         if max_windows is not None and n_win > max_windows:
@@ -134,7 +138,8 @@ class Windows:
     def refine_states(self, params: np.ndarray, kind: str, iterations: int = 3) -> None:
         """Gauss-Newton on each window's start state (all windows at once) for the parameters ``params``:
         the profile over the nuisance states, where the first-order projection alone is not enough
-        (windows that pass near the saddle, whose response the start state changes a lot)."""
+        (windows that pass near the saddle, whose response the start state changes a lot).
+        """
         for _ in range(iterations):
             base, S = self._state_sensitivities(params, kind)
             r = self.z - base
@@ -155,7 +160,8 @@ class Windows:
         dominate the fit (measured: on 4 of 40 8-s records one such window pulled the MAP point 5-70
         standard deviations off the truth). With noise alone no window's rms exceeds the median's by
         more than ~25 % (64 samples), so ``factor`` = 5 drops nothing a correct model matches.
-        Returns the number dropped; ``dropped`` records where and how large."""
+        Returns the number dropped; ``dropped`` records where and how large.
+        """
         zsim, div = self.simulate(params[:, None], kind)
         rms = np.sqrt(np.mean((self.z - zsim[0]) ** 2, axis=1))
         rms = np.where(np.isfinite(rms), rms, np.inf)
@@ -185,7 +191,8 @@ class Windows:
         (the point estimate's, its scaled coordinates: the ratio to the sd is scale free). A record's
         noise sets how precise the posterior is, so it sets the step too: on a 3 um record of a lightly
         damped cross-well device one step per sample biased k3 by 1.5 sd (measured); noisier records keep
-        the one step. Returns whether the steps changed."""
+        the one step. Returns whether the steps changed.
+        """
         J = np.asarray(jac)
         norms = np.linalg.norm(J, axis=0)
         J = J[:, norms > 1e-6 * norms.max()]  # a direction the windows do not see (a parameter the likelihood
@@ -223,7 +230,8 @@ class Windows:
         """The squared norm of each window's projected residual, (P, W): |r|^2 - |Q^T r|^2 with Q the
         window's orthonormal start-state basis (``residuals`` without forming the projected residual:
         the likelihood needs only its norm; measured, a third of the sampler's time went into the
-        projection)."""
+        projection).
+        """
         r = self.z[None] - zsim
         ss = np.einsum("pwl,pwl->pw", r, r)
         if self.proj is None:
@@ -233,4 +241,5 @@ class Windows:
 
     @property
     def dof(self) -> int:
+        """The residuals' degrees of freedom: samples less the start states projected out."""
         return self.n_windows * (self.length - (0 if self.proj is None else self.proj.shape[-1]))
