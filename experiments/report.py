@@ -32,7 +32,29 @@ from .sections import COEFFICIENTS, Section, coefficient_blocks, section_for  # 
 
 @dataclass
 class Report:
-    """Blocks of a report and the figures they reference; ``summary_lines`` open it."""
+    """A report (HTML and Markdown, with its results as JSON) built from results.
+
+    Both renderings open with the summary and a table of contents; every section is numbered and has an
+    anchor; long method detail is folded in the HTML.
+
+    Parameters
+    ----------
+    title : str
+        The report's title.
+    blocks, figures, summary_lines : optional
+        The content so far (built with ``add``, ``add_text``, ``add_table``, ``add_figure``, ``summary``).
+
+    Examples
+    --------
+    >>> import tempfile, pathlib
+    >>> from negstiff import Report, Rig, SINDy
+    >>> from negstiff.inference.record.measurement import Measurement
+    >>> rec = Measurement.from_rig(Rig(seed=1).random(duration=30.0))
+    >>> rep = Report("My device").add(rec).add(SINDy(seed=1).fit(rec), label="30 s")
+    >>> out = rep.write(pathlib.Path(tempfile.mkdtemp()) / "report")
+    >>> sorted(p.name for p in out.iterdir() if p.suffix != ".png")
+    ['index.html', 'index.md', 'results.json']
+    """
 
     title: str
     blocks: list[tuple[str, Any]] = field(default_factory=list)

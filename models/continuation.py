@@ -526,10 +526,47 @@ def check_nfrc(system, *, freq, amplitude, well: str = "plus", input_kind: str =
 
 def nfrc(system, *, freq, amplitude, well: str = "plus", input_kind: str = "base_acc", max_period: int = 4,
          ds: float = 0.01, ds_max: float = 0.05, max_points: int = 2000) -> dict[str, Any]:  # fmt: skip
-    """Periodic responses of ``system`` continued in amplitude (``amplitude=(A1, A2)`` at ``freq=f``) or in
-    frequency (``freq=(f1, f2)`` at ``amplitude=A``), starting from the ``well`` (``"plus"``/``"minus"``)
-    at the range's start; period-doubled branches followed up to ``max_period``. Returns the result
-    JSON's ``branches``, ``bifurcations`` and ``settings``.
+    """Periodic responses of a model under harmonic excitation, continued, with their Floquet stability.
+
+    Shooting with pseudo-arclength continuation (``docs/methods/continuation.md``), in amplitude
+    (``amplitude=(A1, A2)`` at ``freq=f``) or in frequency (``freq=(f1, f2)`` at ``amplitude=A``),
+    starting from the ``well`` at the range's start; period-doubled branches are followed up to
+    ``max_period``.
+
+    Parameters
+    ----------
+    system : Model or Device
+        The model.
+    freq : float or (float, float)
+        Forcing frequency [Hz], or the range continued in.
+    amplitude : float or (float, float)
+        Forcing amplitude [m/s^2 for a base acceleration, N for a force], or the range continued in.
+    well : {"plus", "minus"}, default "plus"
+        The well the first branch starts from.
+    input_kind : {"base_acc", "force"}, default "base_acc"
+        What the forcing is.
+    max_period : int, default 4
+        Follow period-doubled branches up to this period.
+    ds, ds_max : float
+        Initial and largest arclength step (scaled units).
+    max_points : int, default 2000
+        Points per branch at most.
+
+    Returns
+    -------
+    dict
+        The result JSON's ``branches`` (each point's state, parameter, multipliers, stability),
+        ``bifurcations`` (``type``: fold, period_doubling or neimark_sacker; ``amplitude``, ``f_hz``,
+        ``multiplier``) and ``settings``.
+
+    Examples
+    --------
+    >>> from negstiff import nfrc
+    >>> from negstiff.models import SEED_LIKE_CUBIC
+    >>> curve = nfrc(SEED_LIKE_CUBIC, freq=9.0, amplitude=(4.0, 16.0), well="plus", max_period=2)
+    >>> first = next(b for b in curve["bifurcations"] if b["type"] == "period_doubling")
+    >>> 12.0 < first["amplitude"] < 15.0
+    True
     """
     z_well = check_nfrc(system, freq=freq, amplitude=amplitude, well=well, input_kind=input_kind,
                         max_period=max_period)  # fmt: skip

@@ -73,17 +73,36 @@ def rod_geometry(z, L: float, ca, sa, second: bool = True):
 
 @dataclass(frozen=True)
 class Device:
-    """Geometry, material and mass of the device, with its damping and extra effects (SI units).
+    """The physical device: geometry, material and mass, with its damping and extra effects (SI units).
+
+    Its exact restoring force K(z) follows from the rod-frame geometry (``docs/device-model.md``).
 
     Parameters
     ----------
-    E : Young's modulus of the frame [Pa]
-    alpha_deg : frame angle [deg]
-    m : moving mass [kg]
-    L : rod length [m]; l, b, h : arm free length, width, thickness [m]
-    D0 : arm pre-compression at z = 0 [m]
-    c, c_nl : viscous [N s/m] and quadratic [N s^2/m^2] damping of the guide
-    extra : named extra effects (``models.equation``)
+    E : float
+        Young's modulus of the frame [Pa].
+    alpha_deg : float
+        Frame angle [deg].
+    m : float
+        Moving mass [kg].
+    L : float
+        Rod length [m].
+    l, b, h : float
+        Arm free length, width and thickness [m].
+    D0 : float
+        Arm pre-compression at z = 0 [m].
+    c, c_nl : float
+        Viscous [N s/m] and quadratic [N s^2/m^2] damping of the guide.
+    extra : dict, optional
+        Named extra effects (``models.effects``).
+
+    Examples
+    --------
+    >>> from negstiff.models import AS_BUILT
+    >>> eq = AS_BUILT.equilibria()
+    >>> round(1e3 * eq.z_minus, 1), round(1e3 * eq.z_plus, 1)
+    (-28.7, 22.8)
+    >>> cubic = AS_BUILT.lsq_cubic()      # the least-squares cubic Model of the exact K(z)
     """
 
     E: float
@@ -457,9 +476,32 @@ def _rebuild(cls, values):
 
 
 def load_system(path) -> Device | Model:
-    """A model file (the contract's polynomial model JSON, or an ``identify`` result holding one as
-    ``model``) or a device file (the geometry: ``E``, ``alpha_deg``, ...), checked: one ``GeometryError``
-    line naming the file for anything that is not one.
+    """Read a model file or a device file, checked.
+
+    Parameters
+    ----------
+    path : str or pathlib.Path
+        A model file (the contract's polynomial model JSON, or an ``identify`` result holding one as
+        ``model``) or a device file (the geometry: ``E``, ``alpha_deg``, ...).
+
+    Returns
+    -------
+    Model or Device
+        The system the file describes.
+
+    Raises
+    ------
+    GeometryError
+        One line naming the file for anything that is not a model or a device (an ``InputError``).
+
+    Examples
+    --------
+    >>> import json, tempfile, pathlib
+    >>> from negstiff import load_system
+    >>> path = pathlib.Path(tempfile.mkdtemp()) / "model.json"
+    >>> _ = path.write_text(json.dumps({"m": 0.212, "k1": 438.6, "k2": 1001, "k3": 6.72e5, "c": 3.5}))
+    >>> load_system(path).k3
+    672000.0
     """
     from pathlib import Path
 

@@ -100,15 +100,34 @@ def find_equilibria(force, stiffness, z_lo: float, z_hi: float, n_grid: int = 40
 
 @dataclass(frozen=True)
 class Model:
-    """Polynomial (z-frame) model of the contract's model JSON.
+    """The polynomial (z-frame) model of the contract's model file.
+
+    ``m z'' + c z' + c_nl z'|z'| + k3 z^3 + k2 z^2 - k1 z + k0 + extra(z, z') = -m base_acc`` (or ``= force``).
 
     Parameters
     ----------
-    m : mass [kg] (1 for mass-normalised coefficients)
-    k1, k2, k3 : restoring-force coefficients [N/m, N/m^2, N/m^3]
-    c : viscous damping [N s/m]; c_nl : quadratic damping [N s^2/m^2]
-    k0 : constant force [N]; defaults to ``m * G`` (gravity)
-    extra : named extra effects (see the module docstring)
+    m : float
+        Mass [kg] (1 for mass-normalised coefficients).
+    k1, k2, k3 : float
+        Restoring-force coefficients [N/m, N/m^2, N/m^3] of ``K(z) = k3 z^3 + k2 z^2 - k1 z + k0``.
+    c : float
+        Viscous damping [N s/m].
+    c_nl : float
+        Quadratic damping [N s^2/m^2].
+    k0 : float, optional
+        Constant force [N]; defaults to ``m * G`` (gravity along the motion; 0 for a horizontal device).
+    extra : dict, optional
+        Named extra effects (``models.effects``: ``{"coulomb_friction": 0.1}``).
+
+    Examples
+    --------
+    >>> from negstiff import Model
+    >>> model = Model(m=0.212, k1=438.6, k2=1001.0, k3=6.72e5, c=3.5, c_nl=0.5)
+    >>> eq = model.equilibria()
+    >>> eq.z_minus < eq.z_0 < eq.z_plus
+    True
+    >>> round(1e3 * eq.z_plus, 1)
+    21.9
     """
 
     m: float

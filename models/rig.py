@@ -115,17 +115,34 @@ channels at the simulation rate, and their FFTs): measured 200 on a 300 s random
 
 
 class Rig:
-    """The virtual shaking table with a device on it.
+    """The virtual shaking table with a device on it: records measured as a lab measures them.
 
     Parameters
     ----------
-    system : the truth: a ``Device`` (default: ``AS_BUILT``, exact geometry) or a polynomial ``Model``
-    effects : hidden extra effects added to the truth (``models.effects`` names and values)
-    sensors : measurement-chain imperfections
-    fs : output sampling rate [Hz] (the reference study's 512 Hz)
-    oversample : simulation and acquisition rate = ``oversample * fs``
-    seed : root of every random draw
-    weigh_resolution : resolution of the scale that weighs the moving mass [kg] (None: not weighed)
+    system : Device or Model, default AS_BUILT
+        The truth: a ``Device`` (the as-built device, exact geometry) or a polynomial ``Model``.
+    effects : dict, optional
+        Hidden extra effects added to the truth (``models.effects`` names and values).
+    sensors : Sensors, optional
+        The measurement chain: noise, bias, integration, the response sensor (``models.rig.Sensors``).
+    fs : float, default 512
+        Output sampling rate [Hz] (the reference study's).
+    oversample : int, default 4
+        Simulation and acquisition rate = ``oversample * fs``.
+    seed : int, default 0
+        Root of every random draw (same seed, same record).
+    weigh_resolution : float or None, default 1e-4
+        Resolution of the scale that weighs the moving mass [kg] (None: not weighed).
+
+    Examples
+    --------
+    >>> from negstiff import Rig
+    >>> rec = Rig(seed=1).random(duration=30.0, rms=14.0)      # cross-well random motion
+    >>> sorted(rec.columns)
+    ['base_acc', 'base_disp', 't', 'y', 'z']
+    >>> h = Rig(seed=1).harmonic(freq=9.0, amplitude=5.0)         # a steady-state 9 Hz response
+    >>> rec.truth["system"]["kind"]
+    'device'
     """
 
     def __init__(

@@ -39,6 +39,12 @@ def silverbox_path() -> Path:
     ------
     InputError
         ``$NEGSTIFF_SILVERBOX`` names no file.
+
+    Examples
+    --------
+    >>> from negstiff.datasets import silverbox_path
+    >>> silverbox_path().name
+    'SNLS80mV.mat'
     """
     env = os.environ.get("NEGSTIFF_SILVERBOX")
     if env:

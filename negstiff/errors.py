@@ -16,23 +16,75 @@ from __future__ import annotations
 
 
 class InputError(ValueError):
-    """Bad input: one line naming the input and the problem (the command line's exit 2)."""
+    """Bad input: a file, option, unit or number negstiff refuses, with one line saying why.
+
+    The command line turns it into exit 2 and that line on stderr, before any work.
+
+    Examples
+    --------
+    >>> from negstiff import InputError, NSI
+    >>> try:
+    ...     NSI(block_rows=-1).fit("no_such_file.csv")
+    ... except InputError as e:
+    ...     print("refused:", type(e).__name__)
+    refused: InputError
+    """
 
 
 class MeasurementError(InputError):
-    """Bad measurement input; the message is one line naming the file and the problem."""
+    """A record that cannot be read as one (an ``InputError``): the line names the file, column or row.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from negstiff import MeasurementError, from_arrays
+    >>> try:
+    ...     from_arrays(np.zeros(10), np.full(10, np.nan), 100.0)
+    ... except MeasurementError as e:
+    ...     print(e)
+    <memory>: column z is NaN or inf at row 1
+    """
 
 
 class OutputError(InputError):
-    """An output cannot be written (disk full, name too long, not a regular file); nothing was left."""
+    """An output that cannot be written (disk full, name too long, not a regular file); nothing is left behind.
+
+    Examples
+    --------
+    >>> from negstiff import OutputError, InputError
+    >>> issubclass(OutputError, InputError)
+    True
+    """
 
 
 class NegstiffWarning(UserWarning):
-    """A result that looks implausible (units, frame, convergence, boundedness): loud, never silent."""
+    """A result a physicist would not believe (a record in mm, an unconverged chain, an unbounded model).
+
+    Issued through Python's ``warnings`` and kept in the result's ``warnings``; its subclasses
+    (``RecordWarning``, ``FrameWarning``, ``ExtrapolationWarning``, ``BoundednessWarning``,
+    ``ConvergenceWarning``, in ``negstiff.errors``) tell the kinds apart.
+
+    Examples
+    --------
+    >>> import warnings
+    >>> from negstiff import NegstiffWarning
+    >>> with warnings.catch_warnings():
+    ...     warnings.simplefilter("error", NegstiffWarning)     # make every such warning an error
+    """
 
 
 class NotFittedError(ValueError, AttributeError):
-    """A learned attribute (``model_``, ``result()``) asked of an estimator before ``fit`` (as scikit-learn's)."""
+    """A learned attribute (``model_``, ``result_``, ...) read before ``fit`` (also an ``AttributeError``).
+
+    Examples
+    --------
+    >>> from negstiff import NSI, NotFittedError
+    >>> try:
+    ...     NSI().model_
+    ... except NotFittedError as e:
+    ...     print(type(e).__name__)
+    NotFittedError
+    """
 
 
 class RecordWarning(NegstiffWarning):

@@ -160,11 +160,41 @@ def characterize(
 ) -> dict[str, Any]:
     """Period, regime, amplitudes and the largest Lyapunov exponent of one harmonic-forced record.
 
-    Returns the contract's keys (``period``, ``regime``, ``chaotic``, ``amplitudes``, ``lle``), each
-    analysis's ``reason`` where it could not be determined (``reasons``), the wells the regime was judged
-    against (``wells_used``: ``wells`` as given, else ``wells_for``), the record (``record``) and its
-    ``warnings`` (also issued as ``NegstiffWarning``); the Poincare z of every forcing cycle with
-    ``poincare``. Raises ``MeasurementError`` only for input no analysis can use (``check_harmonic``).
+    Parameters
+    ----------
+    rec : Measurement
+        A steady-state response to a harmonic input.
+    forcing_hz : float
+        The forcing frequency [Hz].
+    wells : "auto" or (float, float), default "auto"
+        The stable wells [m] the regime is judged against (``"auto"``: the metadata's rest positions,
+        else the record's own).
+    lle : bool, default True
+        Estimate the largest Lyapunov exponent (Wolf, with Rosenstein beside it).
+    poincare : bool, default False
+        Also return the Poincare z of every forcing cycle.
+
+    Returns
+    -------
+    dict
+        The contract's keys (``period``, ``regime``, ``chaotic``, ``amplitudes``, ``lle``), each
+        analysis's ``reasons`` where it could not be determined, ``wells_used``, ``record``,
+        ``warnings`` (also issued as ``NegstiffWarning``), and ``poincare_z`` with ``poincare``.
+
+    Raises
+    ------
+    MeasurementError
+        Input no analysis can use (too few forcing cycles, a forcing above the Nyquist frequency).
+
+    Examples
+    --------
+    >>> from negstiff import Rig, characterize
+    >>> from negstiff.inference.record.measurement import Measurement
+    >>> from negstiff.models import SEED_LIKE_CUBIC
+    >>> rec = Measurement.from_rig(Rig(SEED_LIKE_CUBIC, seed=6).harmonic(freq=9.0, amplitude=5.0))
+    >>> c = characterize(rec, forcing_hz=9.0, lle=False)
+    >>> c["period"], c["regime"]
+    (1, 'in-well-plus')
     """
     check_harmonic(rec, forcing_hz)
     rec = pin_frame(rec)  # the regime is judged against wells in the physical frame

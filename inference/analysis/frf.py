@@ -148,16 +148,37 @@ def check_frf(rec: Measurement, band: tuple[float, float] | None = None) -> None
 
 
 def frf(rec: Measurement, band: tuple[float, float] | None = None, segment_s: float | None = None) -> dict[str, Any]:
-    """H1/H2 with coherence, every resonance peak in ``band`` fitted (the contract's frf result).
+    """Frequency response functions (H1, H2, coherence) with every resonance peak fitted.
 
-    Peaks: local maxima of ``|H1|`` standing 6 dB above the band's median level (a resonance of a
-    lightly damped well stands 20-40 dB above it), at coherence above 0.5. Without ``segment_s`` the
-    Welch segment is ``SEGMENT_S``, lengthened (up to a quarter of the record) until the resolution
-    is ``RESOLUTION_RATIO`` of the dominant peak's half-power bandwidth. The result also holds the well
-    the record sits in (``well``: the rest position of its metadata nearest its mean z, else None), the
-    record (``record``), its ``warnings`` (also issued as ``NegstiffWarning``), and the spectra
-    (``_curves``: arrays, for a figure; not JSON). A response of unknown scale (``*?``) is calibrated
-    first (``scale.calibrate_scale``): the FRF is in SI units.
+    Peaks are local maxima of ``|H1|`` standing 6 dB above the band's median level at coherence above
+    0.5, each fitted with a single-degree-of-freedom receptance (``docs/methods/frf.md``). A response of
+    unknown scale (``*?``) is calibrated first: the FRF is in SI units.
+
+    Parameters
+    ----------
+    rec : Measurement
+        A record with broadband input (a low-level random or swept test around one well).
+    band : (float, float), optional
+        The frequency band [Hz] searched for peaks (default: the input's band).
+    segment_s : float, optional
+        Welch segment length [s] (default: lengthened until the resolution resolves the dominant peak).
+
+    Returns
+    -------
+    dict
+        The contract's frf result: ``f_hz``, ``zeta``, ``coherence``, ``band``, ``peaks`` (each fitted
+        peak), ``well`` (the rest position nearest the record's mean z), ``record``, ``warnings``, and
+        the spectra in ``_curves`` (arrays, for a figure; not JSON).
+
+    Examples
+    --------
+    >>> from negstiff import Rig, frf
+    >>> from negstiff.inference.record.measurement import Measurement
+    >>> from negstiff.models import SEED_LIKE_CUBIC
+    >>> rec = Measurement.from_rig(Rig(SEED_LIKE_CUBIC, seed=7).random(duration=60.0, rms=0.5, start="minus"))
+    >>> r = frf(rec)
+    >>> abs(r["f_hz"] / SEED_LIKE_CUBIC.uls("minus").f_hz - 1) < 0.01   # the well's own frequency
+    True
     """
     from negstiff.inference.record.scale import calibrate_scale
 

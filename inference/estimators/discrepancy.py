@@ -113,16 +113,56 @@ class DiscrepancyError(MeasurementError):
 
 
 class Discrepancy(Estimator):
-    """The workflow of the module docstring.
+    """The discrepancy workflow: locate where a model and the data disagree, name the missing effect,
+    add it, refit, and show the gap shrink (``docs/methods/discrepancy.md``).
 
     Parameters
     ----------
-    baseline : library terms of the starting model (default: cubic K, viscous c)
-    validation_fraction : held-out tail on which the gap is measured before and after
-    selection_fraction : the part before the tail on which candidate effects are scored
-    margin : relative gain in held-out residual an effect must bring to be named
-    max_effects : iterations (effects added) at most
-    window_s : restarted free runs and residual blocks [s]
+    baseline : tuple of str, default ("1", "z", "z^2", "z^3", "v")
+        Library terms of the starting model (cubic K, viscous c).
+    validation_fraction : float, default 0.2
+        Held-out tail on which the gap is measured before and after.
+    selection_fraction : float, default 0.2
+        The part before the tail on which candidate effects are scored.
+    margin : float, default 0.1
+        Relative gain in held-out residual an effect must bring to be named.
+    max_effects : int, default 3
+        Effects added at most (iterations).
+    window_s : float, default 2
+        Restarted free runs and residual blocks [s].
+    refine : bool, default True
+        Refine each model by output error (an effect is kept only if it then predicts better).
+    unnamed : bool, default False
+        Add a non-parametric force for what no catalogue effect names (the hybrid model).
+
+    Attributes
+    ----------
+    model_ : Model
+        The final model, named effects in ``model_.extra``.
+    baseline_model_ : Model
+        The baseline's fit.
+    effects_ : list of str
+        The effects named and kept, in order (``["none"]`` when nothing was missing).
+    gap_before_, gap_after_ : dict
+        The held-out gap of the baseline and of the final model (restarted free runs).
+    locate_before_, locate_after_ : dict
+        Where the equation error sits, by regime, before and after.
+    iterations_ : list of dict
+        Each round's ranking of the catalogue and what it named.
+    warnings_ : list of str
+        Every warning (also issued as ``NegstiffWarning``).
+
+    Examples
+    --------
+    >>> from negstiff import Discrepancy, Rig
+    >>> from negstiff.inference.record.measurement import Measurement
+    >>> from negstiff.models import SEED_LIKE_CUBIC
+    >>> rig = Rig(SEED_LIKE_CUBIC, effects={"end_stop": {"k": 3000.0, "z": -0.038}}, seed=5)
+    >>> disc = Discrepancy().fit(Measurement.from_rig(rig.random(duration=120.0, rms=20.0)))
+    >>> "end_stop" in disc.effects_
+    True
+    >>> disc.gap_after_["median_window_percent"] < disc.gap_before_["median_window_percent"]
+    True
     """
 
     _parameter_constraints = {

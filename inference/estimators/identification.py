@@ -90,25 +90,51 @@ class Estimate:
 
 @dataclass(frozen=True, repr=False)
 class Identification:
-    """An identification's result (``NSI().fit(rec).result_``, ``SINDy()...``); ``to_json()`` is the
-    contract's identify JSON, the one the command line writes.
+    """An identification's result (``NSI().fit(rec).result_``, ``SINDy().fit(rec).result_``), frozen.
+
+    ``to_json()`` is the contract's identify JSON, the one the command line writes.
 
     Attributes
     ----------
-    method : ``"nsi"`` or ``"sindy"``
-    model : the final model (output-error refined where that predicted the held-out tail no worse)
-    initial_model : the method's own estimate (equation error): what method-vs-method checks compare
-    equilibria : the final model's equilibria (None when its restoring force has none usable)
-    modal : ``{"minus", "plus"}`` -> ``{"f_hz", "zeta"}`` of each well's underlying-linear system
-    validation : free run over the held-out tail (``rms_percent``, ``restarted_rms_percent``, ...)
-    refinement : the output-error stage's account (None with ``refine=False``)
-    bounded : boundedness of the final model (``ok``, ``over_stroke``, ``globally``, ...)
-    stroke_quantiles_m : where the identification part of the record went (``update`` compares there)
-    identification_samples : the split: samples [0, n) identify, [n, N) are held out
-    mass_source, mass_normalised, input_gain : the mass and where it came from
-    record : how the record was read (time base, sensor, what was derived, units)
-    warnings : every warning about the record and the result (also issued as ``NegstiffWarning``)
-    details, settings : the method's own keys and its settings
+    method : {"nsi", "sindy"}
+        The method.
+    model : Model
+        The final model (output-error refined where that predicted the held-out tail no worse).
+    initial_model : Model
+        The method's own estimate (equation error): what method-vs-method checks compare.
+    equilibria : Equilibria or None
+        The final model's equilibria (None when its restoring force has none usable).
+    modal : dict
+        ``{"minus", "plus"}`` -> ``{"f_hz", "zeta"}`` of each well's underlying-linear system.
+    validation : Bunch
+        Free run over the held-out tail (``rms_percent``, ``restarted_rms_percent``, ...).
+    refinement : Bunch or None
+        The output-error stage's account (None with ``refine=False``).
+    bounded : Bunch
+        Boundedness of the final model (``ok``, ``over_stroke``, ``globally``, ...).
+    stroke_quantiles_m : numpy.ndarray
+        Where the identification part of the record went (``update`` compares there).
+    identification_samples : int
+        The split: samples [0, n) identify, [n, N) are held out.
+    mass_source, mass_normalised, input_gain : str, bool, float
+        The mass and where it came from.
+    record : dict
+        How the record was read (time base, sensor, what was derived, units).
+    warnings : tuple of str
+        Every warning about the record and the result (also issued as ``NegstiffWarning``).
+    details, settings : dict
+        The method's own keys and its settings.
+
+    Examples
+    --------
+    >>> from negstiff import NSI, Rig
+    >>> from negstiff.inference.record.measurement import Measurement
+    >>> from negstiff.models import SEED_LIKE_CUBIC
+    >>> res = NSI().fit(Measurement.from_rig(Rig(SEED_LIKE_CUBIC, seed=1).random(duration=30.0, rms=20.0))).result_
+    >>> res.method, res.validation.rms_percent < 5.0
+    ('nsi', True)
+    >>> {"model", "modal", "validation", "warnings"} <= set(res.to_json())
+    True
     """
 
     method: str

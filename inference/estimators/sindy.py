@@ -60,20 +60,62 @@ class SINDyError(WeakFormError):
 
 
 class SINDy(Identifier):
-    """Weak-form SINDy identification of the second-order equation of motion (module docstring).
+    """Weak-form SINDy: which terms of the equation of motion the record asks for, and their sizes.
+
+    The library holds polynomial stiffness, viscous and quadratic damping, the extra effects and a
+    record's measured auxiliary channels (``aux:NAME``); the input's coefficient is fixed by physics
+    (``docs/methods/sindy.md``). The selected model is validated on the held-out tail and refined by
+    output error.
 
     Parameters
     ----------
-    weights : L0 weights of the sparsity path (dimensionless; SR3 threshold sqrt(2 weight))
-    n_models, subset_fraction : ensemble size and bag size (fraction of the test functions)
-    validation_fraction : held-out tail for the final validation (contract: 0.2)
-    selection_fraction : part of the record (before the tail) that scores the candidate supports
-    window_s : length of the restarted free runs (and of the residual blocks) that score a support [s]
-    margin : relative gain in held-out residual a larger support must bring (``_select``)
-    seed : seeds the ensemble's bagging
+    weights : tuple of float, default 33 weights from 1e-9 to 0.1
+        L0 weights of the sparsity path (dimensionless; SR3 threshold sqrt(2 weight)).
+    n_models : int, default 50
+        Ensemble size (bagging) for the inclusion probabilities.
+    subset_fraction : float, default 0.6
+        Bag size, a fraction of the test functions.
+    validation_fraction : float, default 0.2
+        Held-out tail for the final validation (the contract's 0.2).
+    selection_fraction : float, default 0.2
+        Part of the record (before the tail) that scores the candidate supports.
+    window_s : float, default 2
+        Length of the restarted free runs and of the residual blocks that score a support [s].
+    margin : float, default 0.1
+        Relative gain in held-out residual a larger support must bring.
+    seed : int, default 0
+        Seeds the ensemble's bagging.
+    refine : bool, default True
+        Finish by output-error refinement.
 
-    A record's measured auxiliary channels (``load(..., aux=...)``: a harvester's voltage) join the library
-    as terms theta a(t), named ``aux:NAME`` in the model's ``extra``.
+    Attributes
+    ----------
+    result_ : Identification
+        Everything ``fit`` learned; ``result()`` is the contract's JSON.
+    model_ : Model
+        The final model, extra terms in ``model_.extra``.
+    selected_ : list of str
+        The selected library terms (``"z^3"``, ``"v|v|"``, ``"sgn(v)"``, ...).
+    ensemble_ : dict
+        Each term's inclusion probability, median and spread over the ensemble.
+    path_ : list of dict
+        The sparsity path: each candidate support and its held-out score.
+    validation_ : Bunch
+        The free run over the held-out tail.
+    warnings_ : list of str
+        Every warning (also issued as ``NegstiffWarning``).
+
+    Examples
+    --------
+    >>> from negstiff import Rig, SINDy
+    >>> from negstiff.inference.record.measurement import Measurement
+    >>> from negstiff.models import SEED_LIKE_CUBIC
+    >>> rig = Rig(SEED_LIKE_CUBIC, effects={"coulomb_friction": 0.1}, seed=3)
+    >>> sindy = SINDy(seed=1).fit(Measurement.from_rig(rig.random(duration=60.0, rms=20.0)))
+    >>> "sgn(v)" in sindy.selected_                                # the hidden friction, found
+    True
+    >>> abs(sindy.model_.extra["coulomb_friction"] - 0.1) < 0.01
+    True
     """
 
     method = "sindy"

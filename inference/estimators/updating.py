@@ -159,14 +159,49 @@ class Bounds:
 
 
 class GAUpdater(Estimator):
-    """Update E, alpha and m of a device to match identified features (configure, ``fit``, read ``*_``).
+    """Update the device's E, alpha and m with a genetic algorithm to match identified features.
+
+    The reference study's fitness (its Eq. 9) on the well frequencies and equilibria, or, from an
+    identification result, its restoring force over the stroke the record visited
+    (``docs/methods/updating.md``).
 
     Parameters
     ----------
-    start : the nominal design the search is centred on
-    pop_size, generations : GA size
-    fixed_mass : weighed mass [kg]; when given, only E and alpha are updated
-    seed : the GA's random seed (same seed, same result)
+    start : Device, default NOMINAL
+        The nominal design the search is centred on.
+    pop_size, generations : int, default 60, 120
+        The GA's size.
+    bounds : Bounds, optional
+        The search box around ``start`` (relative E and m, alpha in degrees).
+    fixed_mass : float, optional
+        Weighed mass [kg]: only E and alpha are updated (E and m are not separately identifiable from
+        the features).
+    seed : int, default 0
+        The GA's random seed (same seed, same result).
+    compare : {"auto", "features", "force"}, default "auto"
+        What is matched: the features, or (``auto`` when the targets hold a model and its stroke) the
+        restoring force.
+
+    Attributes
+    ----------
+    device_ : Device
+        The updated device.
+    fitness_ : float
+        Its Eq. 9 fitness [%] against the targets.
+    objective_ : float
+        What was minimised [%] (the fitness, or the restoring-force mismatch).
+    features_ : dict
+        The updated device's well frequencies [Hz] and equilibria [m].
+    history_ : list of dict
+        Each generation's best and mean objective.
+
+    Examples
+    --------
+    >>> from negstiff import GAUpdater
+    >>> targets = {"f_minus": 11.45, "f_plus": 9.20, "z_minus": -0.0287, "z_plus": 0.0228}
+    >>> ga = GAUpdater(fixed_mass=0.212, generations=30, seed=1).fit(targets)
+    >>> ga.fitness_ < 1.0                                           # [%], the reference study's Eq. 9
+    True
     """
 
     _parameter_constraints = {

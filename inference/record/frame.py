@@ -175,10 +175,34 @@ def _se(estimates: list[float]) -> float:
 
 
 def pin_frame(rec: Measurement) -> Measurement:
-    """``rec`` with z in the physical frame when its constant was unknown (``frame_offset``), and the
-    offset, its uncertainty and the anchor in ``info["response"]``; otherwise ``rec`` itself. A response
-    of unknown scale is calibrated first (``scale.calibrate_scale``). Pinned once per record (the result
-    is kept with it).
+    """Put a derived z in the physical frame.
+
+    A z integrated from a velocity (or derived from an accelerometer) has no known constant; the
+    record's physics fix it (the fitted wells at the metadata's rest positions, else gravity: K(0) = m g,
+    else, for a horizontal device, the midpoint between the wells). A response of unknown scale is
+    calibrated first. Pinned once per record (the result is kept with it); every estimator calls it.
+
+    Parameters
+    ----------
+    rec : Measurement
+        The record.
+
+    Returns
+    -------
+    Measurement
+        ``rec`` with z in the physical frame when its constant was unknown, and the offset, its
+        uncertainty and the anchor in ``info["response"]``; otherwise ``rec`` itself.
+
+    Examples
+    --------
+    >>> from negstiff import Rig, pin_frame
+    >>> from negstiff.inference.record.measurement import Measurement
+    >>> from negstiff.models.rig import Sensors
+    >>> rec = Measurement.from_rig(Rig(seed=2, sensors=Sensors(response="velocity")).random(duration=60.0))
+    >>> rec.info["response"]["z_constant_known"]
+    False
+    >>> pin_frame(rec).info["response"]["frame"][:52]
+    'the fitted wells put at the rest positions of the fi'
     """
     from negstiff.inference.record.scale import calibrate_scale
 

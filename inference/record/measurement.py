@@ -50,22 +50,43 @@ precision, whichever is larger) and still be uniform: lab exports round time."""
 
 @dataclass(frozen=True)
 class Measurement:
-    """One uniformly sampled record (SI units).
+    """One uniformly sampled record, in SI units (``load`` or ``from_arrays`` make one).
 
     Attributes
     ----------
-    fs : sampling rate [Hz]
-    input_name : ``"base_acc"`` or ``"force"``
-    u : the input column, (N,)
-    z : relative displacement [m], (N,) (measured, or derived from the response sensor: ``info``;
-        None only for an input-only record read with ``response=False``)
-    z_dot, y, base_disp : optional columns, (N,) or None
-    mass : moving mass [kg] from the metadata or the caller, or None (mass-normalised)
-    meta : the file's metadata (``# key: value`` lines) as strings
-    source : where it came from (for messages)
-    t0 : time of the first sample [s]
-    info : how the record was read: ``time`` (the time base, its jitter) and ``response`` (what was
-        measured, and how z was derived from it, with its estimated error); results carry it
+    fs : float
+        Sampling rate [Hz].
+    input_name : {"base_acc", "force"}
+        What the input is.
+    u : numpy.ndarray
+        The input column, (N,).
+    z : numpy.ndarray or None
+        Relative displacement [m], (N,): measured, or derived from the response sensor (``info``); None
+        only for an input-only record read with ``response=False``.
+    z_dot, y, base_disp : numpy.ndarray or None
+        Optional columns, (N,).
+    mass : float or None
+        Moving mass [kg] from the metadata or the caller; None: coefficients per unit mass.
+    meta : dict of str
+        The file's metadata (``# key: value`` lines), as strings.
+    source : str
+        Where it came from (for messages).
+    t0 : float
+        Time of the first sample [s].
+    info : dict
+        How the record was read: ``time`` (the time base, its jitter) and ``response`` (what was
+        measured, how z was derived from it, with its estimated error); results carry it.
+    aux : dict of numpy.ndarray
+        Measured auxiliary channels kept with ``load(..., aux=...)`` (a harvester's voltage), by name.
+
+    Examples
+    --------
+    >>> from negstiff import Rig
+    >>> from negstiff.inference.record.measurement import Measurement
+    >>> rec = Measurement.from_rig(Rig(seed=1).random(duration=20.0))
+    >>> part = rec.segment(0, int(10 * rec.fs))      # the first 10 s, as its own record
+    >>> part.duration, part.mass
+    (10.0, 0.212)
     """
 
     fs: float
@@ -116,13 +137,18 @@ class Measurement:
     @classmethod
     def from_rig(cls, rec, weighed: bool = True) -> Measurement:
         """A virtual-rig record (``models.rig.RigRecord``) as negstiff reads a lab's: the measured base
-        acceleration as input, the measured z as response, the weighed mass (``weighed``), its source and the
-        wells' rest positions its metadata states (as a file of it holds them).
+        acceleration as input, the response its sensor measured (z, or z_dot, y, y_dot, y_acc, from which z
+        is derived as ``load`` derives it), the weighed mass (``weighed``), its source and the wells' rest
+        positions its metadata states (as a file of it holds them).
         """
         mass = float(rec.meta["mass"]) if weighed and rec.meta.get("mass") is not None else None
         meta = {k: str(v) for k, v in rec.meta.items() if k.endswith("_rest")}
-        return from_arrays(rec.columns["base_acc"], rec.columns["z"], rec.fs, mass=mass, source=rec.meta["source"],
-                           meta=meta)  # fmt: skip
+        cols = {k: v for k, v in rec.columns.items() if k not in ("t", "base_acc")}
+        z = cols.pop("z", None)
+        if z is not None:  # a measured z is the response (the laser's y and the base's, already in it, stay out)
+            cols = {}
+        return from_arrays(rec.columns["base_acc"], z, rec.fs, mass=mass, source=rec.meta["source"], meta=meta,
+                           **cols)  # fmt: skip
 
     def segment(self, start: int | None, stop: int | None) -> Measurement:
         """Samples [start, stop) as a measurement (time base kept); the same object for the same span, so
@@ -307,23 +333,51 @@ def load(
     gravity: float | None = None,
     aux: Sequence[str] | str | None = None,
 ) -> Measurement:
-    """Read a measurement file.
-
-    Parameters
-    ----------
-    path : a .csv, .npz, .mat, .uff/.unv, .tdms or .lvm file
-    columns : column map (``"force=V1,z=V2"`` or its parsed dict) for foreign files
-    fs : sampling rate [Hz]; replaces the time column when given (the column then only sets t0)
-    mass : moving mass [kg] (overrides the metadata's ``mass``)
-    response : False for an input-only record (``negstiff simulate``): no response column needed
-    gravity : the gravity along the motion [m/s^2] (overrides the metadata's ``gravity``; 0 for a
-        horizontal device)
-    aux : measured auxiliary channels to keep, by the file's column names (``"voltage"`` or
-        ``"voltage,current"``): candidate terms of the discrepancy workflow and SINDy (``aux:NAME``)
+    """Read a measurement file, checked as the command line checks it.
 
     The response is z, or z derived from z_dot, y (with the base's motion), y_dot or y_acc
     (``sensors.derive``); what was done is in ``info["response"]``. A derived z's constant is unknown:
-    the analyses that need z's frame pin it (``frame.pin_frame``); ``load`` fits nothing.
+    the analyses that need z's frame pin it (``pin_frame``); ``load`` fits nothing.
+
+    Parameters
+    ----------
+    path : str or pathlib.Path
+        A .csv, .npz, .mat, .uff/.unv, .tdms or .lvm file.
+    columns : str or dict, optional
+        Column map for foreign files (``"force=V1,z=V2"``, ``"base_acc=ACC*9.81,z_dot=LDV*?"``, or its
+        parsed dict); ``*?`` marks a response of unknown sensitivity.
+    fs : float, optional
+        Sampling rate [Hz]; replaces the time column when given (the column then only sets t0).
+    mass : float, optional
+        Moving mass [kg] (overrides the metadata's ``mass``).
+    response : bool, default True
+        False for an input-only record (``negstiff simulate``): no response column needed.
+    gravity : float, optional
+        The gravity along the motion [m/s^2] (overrides the metadata's ``gravity``; 0 for a horizontal
+        device).
+    aux : str or sequence of str, optional
+        Measured auxiliary channels to keep, by the file's column names (``"voltage"``): candidate terms
+        of the discrepancy workflow and SINDy (``aux:NAME``).
+
+    Returns
+    -------
+    Measurement
+        The record in SI units, with how it was read in ``info``.
+
+    Raises
+    ------
+    MeasurementError
+        A file, column, unit or number that cannot be read as a record: one line naming the file, the
+        column or row, and the problem.
+
+    Examples
+    --------
+    >>> import tempfile, pathlib
+    >>> from negstiff import Rig, load
+    >>> path = Rig(seed=1).random(duration=10.0).write(pathlib.Path(tempfile.mkdtemp()) / "rec.csv")
+    >>> rec = load(path)
+    >>> rec.fs, rec.input_name, rec.n
+    (512.0, 'base_acc', 5120)
     """
     path = Path(path)
     raw, meta = record_io.read(path)
@@ -550,13 +604,49 @@ def from_arrays(
     gravity: float | None = None,
     **kw: Any,
 ) -> Measurement:
-    """Build a measurement in memory, validated like a file: 1-D arrays of one length (at least 2
-    samples), finite values within a shaker-table record's magnitudes in SI units, a sampling rate a
-    record has, a positive mass. Optional columns (``z_dot``, ``y``, ``base_disp``) go in ``kw``; with
-    ``z`` None and a response among them, z is derived from it as ``load`` does (``sensors.derive``).
-    ``unknown_scale`` names a response channel whose sensitivity is unknown (a file's ``*?``);
-    ``gravity`` [m/s^2] the gravity along the motion (0 for a horizontal device); ``aux`` a dict of measured
-    auxiliary channels (``{"voltage": v}``).
+    """Build a measurement from arrays, validated like a file.
+
+    The arrays must be 1-D, of one length (at least 2 samples), finite, within a shaker-table record's
+    magnitudes in SI units; the sampling rate one a record has; the mass positive. With ``z`` None and a
+    response column in ``kw``, z is derived from it as ``load`` does (``sensors.derive``).
+
+    Parameters
+    ----------
+    u : numpy.ndarray
+        The input, (N,): base acceleration [m/s^2] or force [N].
+    z : numpy.ndarray or None
+        Relative displacement [m], (N,); None when another response column is given (or for an
+        input-only record).
+    fs : float
+        Sampling rate [Hz].
+    input_name : {"base_acc", "force"}, default "base_acc"
+        What ``u`` is.
+    unknown_scale : str, optional
+        A response channel whose sensitivity is unknown (a file's ``*?``).
+    gravity : float, optional
+        The gravity along the motion [m/s^2] (0 for a horizontal device).
+    **kw
+        Optional columns (``z_dot``, ``y``, ``base_disp``, ...), ``mass`` [kg], ``source`` (a name for
+        messages), ``meta`` and ``aux`` (a dict of measured auxiliary channels, ``{"voltage": v}``).
+
+    Returns
+    -------
+    Measurement
+        The record, as ``load`` would give it from a file holding the same columns.
+
+    Raises
+    ------
+    MeasurementError
+        Arrays that are not a record (one line: which array and why).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from negstiff import from_arrays
+    >>> t = np.arange(2048) / 512.0
+    >>> rec = from_arrays(np.sin(2 * np.pi * 9 * t), 1e-3 * np.sin(2 * np.pi * 9 * t), 512.0, mass=0.2)
+    >>> rec.duration, rec.mass
+    (4.0, 0.2)
     """
     if input_name not in INPUTS:
         raise MeasurementError(f"input must be one of {INPUTS}, got {input_name!r}")

@@ -35,30 +35,65 @@ from negstiff.models.device import NOMINAL
 
 
 class Posterior(Estimator):
-    """emcee posterior of a record (module docstring).
+    """The Bayesian posterior of a record's model parameters, sampled with emcee and diagnosed with arviz.
+
+    A multiple-shooting likelihood over short windows, curvature-adjusted, with an RK4 step resolved
+    until its error moves the MAP point by less than 0.1 posterior sd (``docs/methods/posterior.md``).
 
     Parameters
     ----------
-    model : ``"coefficients"`` (k1-k3, c, c_nl, sigma; mass fixed) or ``"device"`` (E, alpha, m, c,
-        c_nl, sigma with the exact geometric K(z))
-    mass_prior : device model only: ``"free"`` or ``"weighed"`` (N(m_weighed, 2 %))
-    window_s : multiple-shooting window length [s]
-    max_windows : at most this many windows, evenly spread over the record (240 x 0.125 s = 30 s of
-        data: a 300 s record's posterior would take five times as long and be no less biased by the
-        model's floor; None: every window)
-    n_walkers, n_ensembles : walkers per ensemble, independent ensembles
-    tau_multiple, min_steps, max_steps, chunk : run length control (emcee docs' rule)
-    hdi_prob : credible-interval probability
-    adjust : curvature adjustment of the likelihood by the windows' sandwich covariance (module
-        docstring; default True); False: the Gaussian likelihood as it stands
-    oversample : 1 (default): the input is pre-emphasised for the simulator's linear interpolation
-        (``Windows.cut``); q > 1: interpolated (FFT, band-limited) to q x fs instead, q times the cost
-    start : coefficient posterior only: the model the MAP search starts from (an ``identify`` result's
-        refined model); default: weak-form least squares of the record, refined by simulation error
-        (``refine_start``)
-    refine_start : without ``start``, refine the weak-form estimate by output error over the record
-        (``refine.refine``, the last stage of ``identify``) before the MAP search: the posterior then
-        starts from the same refined point an identification reports (default True)
+    model : {"coefficients", "device"}, default "coefficients"
+        ``"coefficients"``: k1-k3, c, c_nl, sigma (mass fixed); ``"device"``: E, alpha, m, c, c_nl,
+        sigma with the exact geometric K(z).
+    mass_prior : {"weighed", "free"}, default "weighed"
+        Device model only: the mass weighed (N(m, 2 %)) or free (the E-m ridge shows).
+    window_s : float, default 0.125
+        Window length [s].
+    max_windows : int or None, default 240
+        At most this many windows, evenly spread over the record (None: every window).
+    n_walkers, n_ensembles : int, default 16, 4
+        Walkers per ensemble, independent ensembles (each one arviz chain).
+    tau_multiple, min_steps, max_steps, chunk : float, int, int, int
+        Run-length control: stop when the run exceeds ``tau_multiple`` autocorrelation times.
+    hdi_prob : float, default 0.9
+        Credible-interval probability.
+    oversample : int, default 1
+        1: the input pre-emphasised for the simulator's interpolation; q > 1: interpolated to q x fs.
+    adjust : bool, default True
+        Curvature adjustment of the likelihood by the windows' sandwich covariance.
+    threads : int, optional
+        Threads for the batched likelihood (default: ``NEGSTIFF_THREADS`` or the cores).
+    seed : int, default 0
+        Seeds every draw (same seed, same posterior).
+    progress : bool, default False
+        A progress bar over emcee's steps.
+    start : Model, optional
+        Coefficient posterior only: the model the MAP search starts from (e.g. an identification's).
+    refine_start : bool, default True
+        Without ``start``: refine the weak-form estimate by output error before the MAP search.
+
+    Attributes
+    ----------
+    result_ : PosteriorResult
+        The posterior: ``result()`` is its JSON (``parameters``: each mean, sd, hdi_low, hdi_high, r_hat,
+        ess_bulk; ``map``, ``correlation``, ``converged``, ``warnings``), ``result_.idata`` its arviz data.
+    windows_ : Windows
+        The record's windows the likelihood reads.
+    warnings_ : list of str
+        Every warning (an unconverged chain among them; also issued as ``NegstiffWarning``).
+
+    Examples
+    --------
+    >>> from negstiff import Posterior, Rig
+    >>> from negstiff.inference.record.measurement import Measurement
+    >>> from negstiff.models import SEED_LIKE_CUBIC
+    >>> rec = Measurement.from_rig(Rig(SEED_LIKE_CUBIC, seed=4).random(duration=10.0, rms=20.0))
+    >>> post = Posterior(seed=1, n_ensembles=2).fit(rec)
+    >>> k3 = post.result()["parameters"]["k3"]
+    >>> k3["hdi_low"] < k3["mean"] < k3["hdi_high"]
+    True
+    >>> abs(k3["mean"] - SEED_LIKE_CUBIC.k3) < 4 * k3["sd"]         # the truth within 4 sd
+    True
     """
 
     _parameter_constraints = {
