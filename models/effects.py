@@ -251,6 +251,7 @@ class Effect:
         """
         if self.scalar:
             return finite(self.name, raw)
+        assert isinstance(self.law, OneSidedStop)  # the one law with fields
         fields = self.law.fields
         if not isinstance(raw, Mapping) or set(raw) != set(fields):
             raise ValueError(f"extra effect {self.name} takes {{{', '.join(repr(f) for f in fields)}}} ({self.units})")
@@ -260,6 +261,7 @@ class Effect:
         """``name`` or ``name=k:N/m,z:m`` for the CLI."""
         if self.scalar:
             return self.name
+        assert isinstance(self.law, OneSidedStop)
         pairs = zip(self.law.fields, self.units.split(", "), strict=True)
         return f"{self.name}=" + ",".join(f"{f}:{u}" for f, u in pairs)
 
@@ -347,7 +349,7 @@ def force(extra: Mapping[str, Any], z, zdot):
     z, zdot = np.asarray(z, float), np.asarray(zdot, float)
     f = np.zeros(np.broadcast(z, zdot).shape)
     for e in REGISTRY:
-        if e.name in extra and not e.law.displacement_only:
+        if e.name in extra and not isinstance(e.law, MeasuredChannel) and not e.law.displacement_only:
             f = f + e.law.force(extra[e.name], z, zdot)
     return f + stiffness_force(extra, z)
 
@@ -357,7 +359,7 @@ def stiffness_force(extra: Mapping[str, Any], z):
     z = np.asarray(z, float)
     f = np.zeros(z.shape)
     for e in REGISTRY:
-        if e.name in extra and e.law.displacement_only:
+        if e.name in extra and not isinstance(e.law, MeasuredChannel) and e.law.displacement_only:
             f = f + e.law.force(extra[e.name], z, 0.0)
     return f
 
@@ -367,7 +369,7 @@ def stiffness_potential(extra: Mapping[str, Any], z):
     z = np.asarray(z, float)
     u = np.zeros(z.shape)
     for e in REGISTRY:
-        if e.name in extra and e.law.displacement_only:
+        if e.name in extra and isinstance(e.law, Monomial | OneSidedStop) and e.law.displacement_only:
             u = u + e.law.potential(extra[e.name], z)
     return u
 
@@ -403,20 +405,24 @@ def _fixed_rows(e: Effect) -> tuple[int, ...] | None:
         return (ROWS["sign"],)
     if isinstance(e.law, OneSidedStop):
         return ROWS["stop_k"], ROWS["stop_z"]
-    label = e.law.label
-    return (ROWS[label],) if label in ROWS else (ROWS[e.folds_into],) if e.folds_into in ROWS else None
+    label, folds = e.law.label, e.folds_into
+    if label is not None and label in ROWS:
+        return (ROWS[label],)
+    return (ROWS[folds],) if folds is not None and folds in ROWS else None
 
 
 @functools.lru_cache(maxsize=1)
 def layout() -> Layout:
     """The kernel's parameter layout of every registered effect."""
-    rows, mono = {}, []
+    rows: dict[str, tuple[int, ...]] = {}
+    mono: list[tuple[int, int, int, int, int]] = []
     used: dict[int, str] = {}
     for e in REGISTRY:
         fixed = _fixed_rows(e)
         if fixed is None:
             r = N_FIXED + len(mono)
             law = e.law
+            assert isinstance(law, Monomial)  # a sign, a stop or a channel has its fixed rows
             mono.append((r, law.z_power, int(law.z_odd), law.v_power, int(law.v_odd)))
             fixed = (r,)
         elif not isinstance(e.law, Monomial):  # a monomial may share a row (it adds); a sign or stop may not

@@ -11,6 +11,7 @@ powers ``mono`` gives (one row per monomial: row, z_power, z_odd, v_power, v_odd
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numba
 import numpy as np
@@ -24,7 +25,7 @@ P_M, P_C, P_CNL, P_SIGN, P_V3 = ROWS["m"], ROWS["c"], ROWS["c_nl"], ROWS["sign"]
 P_Z2, P_Z3, P_Z4, P_Z5 = ROWS["z^2"], ROWS["z^3"], ROWS["z^4"], ROWS["z^5"]
 P_STOP_K, P_STOP_Z = ROWS["stop_k"], ROWS["stop_z"]
 
-JIT = {"cache": True, "nogil": True, "error_model": "numpy"}  # numpy error model: no zero-division
+JIT: dict[str, Any] = {"cache": True, "nogil": True, "error_model": "numpy"}  # numpy error model: no zero-division
 # branches in the loop, which is what lets LLVM vectorise over the batch (4x measured here).
 
 

@@ -98,12 +98,12 @@ def _smooth_steps(levels: Sequence[float], step_samples, ramp_samples, start: fl
     change (from ``start`` into the first level, then between levels) a raised-cosine transition of
     ``ramp_samples`` (one count, or one per level) at the start of its level.
     """
-    levels = np.asarray(levels, float)
-    steps = np.broadcast_to(np.asarray(step_samples, int), levels.shape)
-    ramps = np.broadcast_to(np.asarray(ramp_samples, int), levels.shape)
-    env = np.repeat(levels, steps)
-    prev = np.concatenate([[start], levels[:-1]])
-    for a0, a1, s, r in zip(prev, levels, np.concatenate([[0], np.cumsum(steps)[:-1]]), ramps, strict=False):
+    lv = np.asarray(levels, float)
+    steps = np.broadcast_to(np.asarray(step_samples, int), lv.shape)
+    ramps = np.broadcast_to(np.asarray(ramp_samples, int), lv.shape)
+    env = np.repeat(lv, steps)
+    prev = np.concatenate([[start], lv[:-1]])
+    for a0, a1, s, r in zip(prev, lv, np.concatenate([[0], np.cumsum(steps)[:-1]]), ramps, strict=False):
         ramp = 0.5 - 0.5 * np.cos(np.pi * np.arange(r) / r)
         env[s : s + r] = a0 + (a1 - a0) * ramp
     return env

@@ -43,7 +43,7 @@ class Estimator:
         """The constructor's parameters and their current values (``deep``: with those of nested
         estimators as ``name__parameter``, as scikit-learn's).
         """
-        out = {}
+        out: dict[str, Any] = {}
         for name in self._param_names():
             value = getattr(self, name)
             if deep and isinstance(value, Estimator):

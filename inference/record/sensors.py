@@ -105,7 +105,7 @@ def velocity_to_z(v: np.ndarray, fs: float, what: str) -> tuple[np.ndarray, dict
     slope, se = _trend(z, fs)
     sigma_v = _noise_rms(v, fs)
     walk = sigma_v * math.sqrt(z.size / fs / fs / 3) if np.isfinite(sigma_v) else float("nan")
-    info = {
+    info: dict[str, Any] = {
         "derived": f"z = integral of {what} (quintic spline antiderivative)",
         "trend_m_s": slope,
         "trend_se_m_s": se,

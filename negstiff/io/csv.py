@@ -91,7 +91,7 @@ def read(path: Path) -> tuple[dict[str, np.ndarray], dict[str, str]]:
     sep, decimal_comma = _dialect(path, lines[i], body[0])
     if decimal_comma:
         body = [line.replace(",", ".") for line in body]
-    names = []
+    names: list[str] = []
     for c in lines[i].split(sep):
         c = c.strip().strip('"').strip()
         m = UNIT_IN_NAME.match(c)

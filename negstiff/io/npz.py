@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -42,4 +43,5 @@ def read(path: Path) -> tuple[dict[str, np.ndarray], dict[str, str]]:
 def write(path: Path, cols: dict[str, np.ndarray], fs: float, meta: dict) -> None:
     """The columns as arrays, ``fs`` and the metadata (JSON) beside them."""
     with open(path, "wb") as fh:
-        np.savez(fh, fs=fs, **cols, meta=json.dumps(meta))
+        arrays: dict[str, Any] = {"fs": fs, **cols, "meta": json.dumps(meta)}
+        np.savez(fh, **arrays)

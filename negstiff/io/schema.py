@@ -151,13 +151,13 @@ UNKNOWN_SCALE = None
 dynamics estimate it (``negstiff.inference.record.scale``)."""
 
 
-def parse_column_map(text: str | None) -> dict[str, tuple[str, float]]:
+def parse_column_map(text: str | None) -> dict[str, tuple[str, float | None]]:
     """Parse ``name=SOURCE[*scale],...`` into ``{name: (SOURCE, scale)}``; ``*?`` marks a scale unknown
     (``UNKNOWN_SCALE``: a response channel whose sensitivity the record's dynamics are to estimate).
     """
     if not text:
         return {}
-    out: dict[str, tuple[str, float]] = {}
+    out: dict[str, tuple[str, float | None]] = {}  # None: the scale is unknown (``*?``)
     for entry in text.split(","):
         m = _MAP_ENTRY.match(entry)
         if not m:

@@ -104,8 +104,8 @@ def convergence_warnings(summary: dict[str, dict[str, float]], n_ensembles: int)
 
 def result_json(res: PosteriorResult, hdi_prob: float) -> dict[str, Any]:
     """The contract's posterior JSON (plus diagnostics)."""
-    params = {}
-    nuisance = {}
+    params: dict[str, dict[str, float]] = {}
+    nuisance: dict[str, dict[str, float]] = {}
     for n, s in res.summary.items():
         key = "alpha_deg" if n == "alpha_deg" else n
         (nuisance if n in ("k0", "g_offset") else params)[key] = s
