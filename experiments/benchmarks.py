@@ -22,6 +22,7 @@ import platform
 import sys
 import time
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -322,11 +323,11 @@ def posterior_benchmark(quick: bool = False) -> tuple[list[list[str]], dict]:
         P = params.shape[1]
         return np.array(zs).reshape(P, win.n_windows, -1), np.array(div).reshape(P, -1).any(axis=1)
 
-    win.simulate = one_by_one
+    win.simulate = one_by_one  # type: ignore[method-assign]
     try:
         t_plain, sp = run(False)
     finally:
-        win.simulate = orig
+        win.simulate = orig  # type: ignore[method-assign]
     same = same and bool(np.allclose(sb.get_chain(), sp.get_chain()))
     tau = float(np.max(sb.get_autocorr_time(tol=0, quiet=True)))
     ess = nw * steps / max(tau, 1.0)
@@ -389,8 +390,8 @@ def refinement_benchmark(quick: bool = False) -> tuple[list[list[str]], dict]:
         ident = m.segment(0, n_id)
         runs = {}
         for solver in SOLVERS:
-            t, r = median_time(lambda: refine(est.model_, ident, windows_s=(0.05,), solver=solver), 1)
-            runs[solver] = (t, r.stages[0]["rms_end_m"], r.stages[0]["evaluations"])
+            t, ref = median_time(lambda: refine(est.model_, ident, windows_s=(0.05,), solver=solver), 1)
+            runs[solver] = (t, ref.stages[0]["rms_end_m"], ref.stages[0]["evaluations"])
         best = min(v[1] for v in runs.values())
         key = "silverbox" if "Silverbox" in label else "rig"
         first = {k: {"s": t, "rms_end_m": e, "evaluations": n} for k, (t, e, n) in runs.items()}
@@ -417,7 +418,8 @@ def continuation_benchmark(quick: bool = False) -> tuple[list[list[str]], dict]:
     from negstiff.models import SEED_LIKE_CUBIC
     from negstiff.models.continuation import nfrc
 
-    rows, res = [], {}
+    rows: list[list[Any]] = []
+    res: dict[str, Any] = {}
     for name, system in (("seed-like cubic", SEED_LIKE_CUBIC), ("as-built device (exact geometry)", AS_BUILT)):
         for well in ("plus", "minus"):
             nfrc(system, freq=9.0, amplitude=(2.0, 4.0), well=well)  # warm-up: compile

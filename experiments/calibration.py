@@ -109,7 +109,7 @@ def device_section(rep: Report, results: dict[str, Any]) -> None:
     rep.table(
         ["cubic", "k1 [N/m]", "k2 [N/m^2]", "k3 [N/m^3]", "z_minus [mm]", "z_plus [mm]"],
         [
-            [name, m.k1, m.k2, m.k3, 1e3 * m.equilibria().z_minus, 1e3 * m.equilibria().z_plus]
+            [name, m.k1, m.k2, m.k3, 1e3 * (m.equilibria().z_minus or np.nan), 1e3 * m.equilibria().z_plus]
             for name, m in (("Taylor at z = 0", tay), ("least squares over +-30 mm", lsq))
         ],
     )

@@ -125,8 +125,8 @@ def _portraits_and_lle_part(rep: Report, res: dict[str, Any], rig: Rig, fast: bo
         )
         n = int(2.0 * rec.fs)
         t = rec.columns["t"][:n]
-        zs, v = smooth_and_differentiate(m.z, m.fs)
-        axes[0, k].plot(t, 1e3 * m.z[:n], lw=0.7)
+        zs, v = smooth_and_differentiate(m.displacement, m.fs)
+        axes[0, k].plot(t, 1e3 * m.displacement[:n], lw=0.7)
         axes[0, k].set(title=f"{label}: {amp:g} m/s^2", xlabel="t [s]")
         axes[1, k].plot(1e3 * zs[: 20 * n], v[: 20 * n], lw=0.3)
         axes[1, k].set(xlabel="z [mm]")
@@ -159,7 +159,8 @@ def _portraits_and_lle_part(rep: Report, res: dict[str, Any], rig: Rig, fast: bo
         ],
         lle_rows,
     )
-    w = largest_lyapunov(chaotic_m.z, chaotic_m.dt, forcing_hz=9.0, noise=noise_level(chaotic_m.z, chaotic_m.fs))
+    z_chaos = chaotic_m.displacement
+    w = largest_lyapunov(z_chaos, chaotic_m.dt, forcing_hz=9.0, noise=noise_level(z_chaos, chaotic_m.fs))
     fig, ax = plt.subplots(figsize=(7, 3.4))
     ax.plot(w["t"], w["running"], "k-", lw=0.8, label="running Wolf estimate")
     ax.axhline(w["value"], color="C3", label=f"mean {w['value']:.2f} 1/s")

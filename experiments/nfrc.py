@@ -90,8 +90,8 @@ def posterior_draws(m, n_draws: int, seed_: int, fast: bool) -> list:
     from negstiff.inference.estimators.posterior import Posterior
     from negstiff.models import Model
 
-    kw = {"n_ensembles": 2, "max_steps": 1500} if fast else {"n_ensembles": 2}
-    res = Posterior(seed=seed_, **kw).fit(m).result_
+    post = Posterior(seed=seed_, n_ensembles=2, max_steps=1500) if fast else Posterior(seed=seed_, n_ensembles=2)
+    res = post.fit(m).result_
     flat = res.samples.reshape(-1, res.samples.shape[-1])
     rng = np.random.default_rng(seed_)
     names = [n for n in res.names if n != "sigma"]
@@ -224,7 +224,8 @@ def continuation_section(rep, results: dict[str, Any], fast: bool, seed_: int = 
         "recipe), and models drawn from the coefficient posterior of the same record (emcee): the range of their "
         "first doublings is the prediction's uncertainty band."
     )
-    rows, res = [], {"seconds": study.seconds, "models": {}}
+    rows: list[list[Any]] = []
+    res: dict[str, Any] = {"seconds": study.seconds, "models": {}}
     for well in ("plus", "minus"):
         seen = first_doubling_seen(study.rig_map, well)
         res.setdefault("rig_first_doubling", {})[well] = seen

@@ -420,7 +420,7 @@ def stabilization_part(rep: Report, res: dict[str, Any], est: NSI, m: Measuremen
     k3 = [r["coefficients"]["k3"] for r in rows if "coefficients" in r and r["order"] == 2]
     rep.text(
         f"At order 2, k3 varies by {fmt(100 * np.ptp(k3) / np.mean(k3), 2)} % across 10-40 block rows; the "
-        f"chosen settings are order {est.order} (one mode, as the seed) and {est.block_rows} block rows."
+        f"chosen settings are order {est.order} (one mode, as the reference study) and {est.block_rows} block rows."
     )
 
 

@@ -55,7 +55,7 @@ def _nsi_problem(n: int, seed: int = 21) -> tuple[np.ndarray, np.ndarray]:
 
     rec = Rig(SEED_LIKE_CUBIC, seed=seed).random(duration=n / 512.0 + 1.0, rms=SEED_LIKE_CROSS_WELL_RMS)
     m = Measurement.from_rig(rec).segment(0, n)
-    zs, v = smooth_and_differentiate(m.z, m.fs)
+    zs, v = smooth_and_differentiate(m.displacement, m.fs)
     _, z_plus = well_guesses(m)
     x, w, _, _ = NSI().extended_input(m, zs, v, z_plus)
     y = x - x.mean()
@@ -66,7 +66,8 @@ def subspace_peers(sizes: tuple[int, ...] = (100_000, 1_000_000), i: int = 30) -
     """Time and peak memory of the subspace step (LQ + the SVD of L32) at each record length."""
     from negstiff.inference.estimators import subspace
 
-    rows, res = [], {}
+    rows: list[list[Any]] = []
+    res: dict[int, Any] = {}
     for n in sizes:
         u, y = _nsi_problem(n)
         cases: dict[str, Any] = {}
@@ -168,6 +169,7 @@ def sindy_peers(duration: float = 300.0, seed: int = 1) -> tuple[list[list[str]]
         score = max(abs(e) for e in err.values())
         if best is None or score < best[0]:
             best = (score, thr, err, sum(abs(c) > 0 for c in coef.values()), elapsed)
+    assert best is not None  # the thresholds are not empty
     _, thr, err, n_terms, t_peer = best
     res["pysindy"] = {"s": t_peer, "threshold": thr, "errors_percent": err, "terms": int(n_terms)}
     rows = []
@@ -208,8 +210,8 @@ def posterior_peers(duration: float = 300.0, peer_seconds: float = 2.0) -> tuple
     n = int(round(peer_seconds * m.fs))
     seg = m.segment(0, n)
     tt = np.arange(n) * m.dt
-    zs0 = float(seg.z[0])
-    v0 = float((seg.z[1] - seg.z[0]) / m.dt)
+    zs0 = float(seg.displacement[0])
+    v0 = float((seg.displacement[1] - seg.displacement[0]) / m.dt)
     names = ("k1", "k2", "k3", "c", "c_nl")
 
     def log_prob(theta):

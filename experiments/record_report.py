@@ -156,7 +156,7 @@ def _plan(rec, chosen, forcing_hz, wells, seed, options) -> list[tuple[str, str,
     from negstiff.inference.estimators.posterior.core import Posterior
     from negstiff.inference.estimators.sindy import SINDy
 
-    runs = []
+    runs: list[tuple[str, str, Callable[[Any], Any]]] = []
     for name in chosen:
         opts = options.get(name, {})
         if name in ("nsi", "sindy", "posterior", "discrepancy"):

@@ -1,7 +1,7 @@
 """``negstiff reproduce``: the reference study's study end to end on the virtual rig, as one report.
 
 Sections grow as the suite's capabilities land; each states what it measured and where it differs
-from the seed. Every number in the report is taken from the ``results`` dict that is also written
+from the reference study. Every number in the report is taken from the ``results`` dict that is also written
 as ``results.json``.
 """
 

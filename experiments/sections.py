@@ -15,6 +15,7 @@ table take from it (each method's estimates beside the posterior's interval).
 from __future__ import annotations
 
 import io
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -383,7 +384,7 @@ def draw_branches(ax, branches: list[dict[str, Any]], color, label: str | None =
                         label=label if (k == 0 and ls == "-" and br["period"] == 1) else None)  # fmt: skip
 
 
-def map_figure(points: list[dict[str, Any]], overlays: list[dict[str, Any]] = (), unit: str = "m/s^2",
+def map_figure(points: list[dict[str, Any]], overlays: Sequence[dict[str, Any]] = (), unit: str = "m/s^2",
                axis: str = "amplitude"):  # fmt: skip
     """The bifurcation map (reference study Figure 4): each record's Poincare z against its forcing amplitude (or its
     frequency, ``axis="f_hz"``: a stepped sine), a panel per starting well (``start``: plus, minus; one panel
@@ -399,7 +400,7 @@ def map_figure(points: list[dict[str, Any]], overlays: list[dict[str, Any]] = ()
     half = 0.5 * float(np.median(np.diff(xs))) if xs.size > 1 else 0.05 * max(abs(float(xs[0])), 1e-12)
     for ax, start in zip(axes[0], starts, strict=False):
         for p in (q for q in points if q.get("start") == start):
-            col = {"up": "C0", "down": "C3"}.get(p.get("direction"), "k")
+            col = {"up": "C0", "down": "C3"}.get(p.get("direction") or "", "k")
             if p["regime"] == "cross-well" or p["period"] is None:
                 ax.axvspan(p[axis] - half, p[axis] + half, color="0.9", zorder=0)
             z = 1e3 * np.asarray(p["poincare_z"])

@@ -113,7 +113,7 @@ def polynomial_part(rep: Report, res: dict[str, Any], duration: float, seed_: in
     rep.heading("The discovered equation (polynomial truth, default sensor noise)", 3)
     exact = est.selected_ == ["1", "z", "z^2", "z^3", "v", "v|v|"]
     rep.text(
-        f"The same {duration:g} s cross-well record as the NSI section (seed {seed_}). SINDy saw z and the base "
+        f"The same {duration:g} s cross-well record as the NSI section (random seed {seed_}). SINDy saw z and the base "
         f"acceleration only, and took {elapsed:.1f} s ({est.settings_['form']}; derivatives for the "
         f"library: {est.settings_['derivatives']}). Selected terms: **{', '.join(est.selected_)}**"
         + (" - exactly the truth's." if exact else " - NOT the truth's terms (1, z, z^2, z^3, v, v|v|).")
@@ -143,6 +143,7 @@ def polynomial_part(rep: Report, res: dict[str, Any], duration: float, seed_: in
         "sparsest within one standard error (or 10 %) of the best held-out residual wins. The restarted 2 s free "
         "runs are shown, not used: over cross-well motion they amplify small coefficient errors (chaos)."
     )
+    assert nsi is not None  # the polynomial truth's run has NSI beside it
     _force_figure(rep, truth, est, nsi, m)
     _validation_figure(rep, est, nsi)
 
@@ -217,7 +218,7 @@ def friction_part(rep: Report, res: dict[str, Any], duration: float, seed_: int)
     run = compute_friction(duration, seed_)
     res["hidden_friction"] = run.result()
     truth, est = run.truth, run.est
-    ens = est.ensemble_
+    ens: dict[str, dict[str, Any]] = est.ensemble_
     spurious = {t: e["inclusion_probability"] for t, e in ens.items() if t in ("z^4", "z^5", "v^3")}
     found = est.model_.extra.get("coulomb_friction", 0.0)
     rep.heading(f"A hidden effect: {HIDDEN_FRICTION_N:g} N of Coulomb friction", 3)

@@ -162,7 +162,7 @@ def _render_figures(rep: Report, runs: UpdatingRuns) -> None:
     g = np.arange(1, len(ga.history_) + 1)
     ax.semilogy(g, [h["best"] for h in ga.history_], "k-", label="best fitness")
     ax.semilogy(g, [h["mean"] for h in ga.history_], "o", color="C0", ms=3, label="mean fitness")
-    ax.axhline(seed.GA_FITNESS_PERCENT, color="C3", ls=":", label="seed's final 1.38 %")
+    ax.axhline(seed.GA_FITNESS_PERCENT, color="C3", ls=":", label="the reference study's final 1.38 %")
     ax.set(xlabel="generation", ylabel="Eq. 9 fitness [%]")
     ax.legend(fontsize=8)
     rep.figure(

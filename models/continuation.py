@@ -179,6 +179,7 @@ class Shooting:
         )  # fmt: skip
         if np.any(res.diverged):
             raise ContinuationError(f"the orbit left the admissible range: {res.describe_failures()}")
+        assert res.z_dot is not None  # store_velocity=True
         end = np.column_stack([res.z[:, -1], res.z_dot[:, -1]])
         return (end, res.z) if store else end
 
@@ -572,7 +573,10 @@ def nfrc(system, *, freq, amplitude, well: str = "plus", input_kind: str = "base
                         max_period=max_period)  # fmt: skip
     a_span, f_span = _span(amplitude), _span(freq)
     parameter = "amplitude" if a_span else "f_hz"
-    lo, hi = a_span or f_span
+    span = a_span or f_span
+    if span is None:
+        raise ContinuationError("give a range in amplitude (A1:A2) or in frequency (F1:F2)")
+    lo, hi = span
     fixed = float(freq) if a_span else float(amplitude)
     a0, f0 = (lo, fixed) if a_span else (fixed, lo)
     x = settle(system, input_kind, z_well, a0, f0)
@@ -580,7 +584,9 @@ def nfrc(system, *, freq, amplitude, well: str = "plus", input_kind: str = "base
     _, z = sh.flow(x[None, :], a0, f0, store=True)
     z_scale = max(float(np.ptp(z)) / 2, 1e-3 * abs(z_well), 1e-7)
     scale = np.array([z_scale, 2 * np.pi * f0 * z_scale, hi - lo])
-    branches, bifurcations, notes = [], [], []
+    branches: list[Any] = []
+    bifurcations: list[Any] = []
+    notes: list[str] = []
     todo = [(sh, x, lo)]
     while todo:
         shooting, x_start, lam_start = todo.pop(0)

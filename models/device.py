@@ -354,6 +354,8 @@ class Device:
     def features(self) -> dict[str, float]:
         """The GA's features (reference study Eq. 9): well frequencies [Hz] and stable equilibria [m]."""
         eq = self.equilibria()
+        if eq.z_minus is None:
+            raise ValueError("the device has one well: its features (two wells) are not defined")
         ks = self.stiffness(np.array([eq.z_minus, eq.z_plus]))
         f = np.sqrt(ks / self.m) / (2 * math.pi)
         return {"f_minus": float(f[0]), "f_plus": float(f[1]), "z_minus": eq.z_minus, "z_plus": eq.z_plus}
@@ -434,7 +436,7 @@ class Device:
         return p
 
 
-GEOMETRY = {"L": 0.060, "l": 0.094, "b": 0.020, "h": 0.0012, "D0": 0.0059}
+GEOMETRY: dict[str, Any] = {"L": 0.060, "l": 0.094, "b": 0.020, "h": 0.0012, "D0": 0.0059}
 """Fixed geometry of the rig's device [m] (rods, arms, pre-compression); calibrated once so that the
 as-built device reproduces the reference study's Table 1 and z_plus (``experiments/calibration.py``)."""
 

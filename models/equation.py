@@ -1,4 +1,4 @@
-"""Equation of motion of the negative-stiffness oscillator (seed paper, Eqs. 1-7).
+"""Equation of motion of the negative-stiffness oscillator (the reference study, Eqs. 1-7).
 
     m z'' + D(z') + K(z) + extra(z, z') = -m b''      (base excitation)
                                         =  f(t)       (force-driven rig)
@@ -202,9 +202,11 @@ class Model:
         """Equilibria of K(z) (with the stiffness extra effects), sorted and classified."""
         if self.k3 <= 0 and not self.extra:
             raise ValueError("k3 must be positive (hardening) for a bounded double- or single-well model")
+        k0 = self.k0
+        assert k0 is not None  # set by __post_init__
         # Cauchy bound of the cubic's roots, widened for the extra terms
-        bound = 1 + max(abs(self.k2), abs(self.k1), abs(self.k0)) / abs(self.k3 or 1.0)
-        roots = np.roots([self.k3, self.k2, -self.k1, self.k0]) if self.k3 > 0 else np.array([])
+        bound = 1 + max(abs(self.k2), abs(self.k1), abs(k0)) / abs(self.k3 or 1.0)
+        roots = np.roots([self.k3, self.k2, -self.k1, k0]) if self.k3 > 0 else np.array([])
         real = np.sort(roots[np.abs(roots.imag) <= 1e-9 * np.maximum(1, np.abs(roots))].real)
         if real.size and not self.extra:
             bound = 1.01 * np.max(np.abs(real)) + 1e-6

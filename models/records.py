@@ -30,7 +30,7 @@ class RigRecord:
     """One measured record: columns at ``fs``, metadata lines, and the truth behind it.
 
     ``columns`` holds ``t, base_acc`` and the response sensor's columns (``Sensors.response``; the
-    seed's laser: ``y, base_disp, z``), by the contract's names. ``true`` holds the
+    reference study's laser: ``y, base_disp, z``), by the contract's names. ``true`` holds the
     noise-free ``z``, ``z_dot``, ``base_acc`` and ``base_disp`` at the same samples (never written
     to the measurement file: a lab does not have them; tests and reports use them as the truth).
     """

@@ -11,7 +11,7 @@ What the laboratory of the reference study (section 3) measures, and how this ri
   absolute displacement y = z + b (white noise);
 * a delta-sigma acquisition front end low-passes every channel with the same linear-phase FIR
   anti-aliasing filter (delay compensated) and decimates to ``fs``;
-* as in the seed, the base displacement is not measured: it is the double integral of the measured
+* as in the reference study, the base displacement is not measured: it is the double integral of the measured
   acceleration, band-limited below ``Sensors.highpass_hz`` so that bias and noise do not make it run
   away; it is imperfect at low frequency and at the record's ends, and z = y - b_est inherits that;
 * settling time is discarded; the mass is weighed on a scale (``weigh_resolution``).
@@ -580,6 +580,6 @@ class Rig:
             "seed": self.seed,
             "excitation": excitation,
         }
-        if isinstance(self.system, Device):
+        if isinstance(self.system, Device) and eq.z_minus is not None:  # a double well's features
             truth["features"] = self.system.features()
         return RigRecord(self.fs, cols, meta, truth, true)

@@ -72,6 +72,7 @@ def test_report_on_a_velocity_only_record(velocity_record, tmp_path):
         assert res["coefficients"][k]["SINDy"] == pytest.approx(getattr(TRUTH, k), rel=0.05), k
 
 
+@pytest.mark.slow  # 48 s: the Silverbox's identification and prediction are the default tier's (test_nsi, test_sindy)
 def test_report_on_the_silverbox(silverbox, tmp_path):
     from records import write_npz_channels
 
@@ -127,6 +128,7 @@ def test_report_on_a_harmonic_campaign_and_one_harmonic_record(tmp_path):
     assert char["period"] == 1, "3 m/s^2 at 9 Hz: the in-well period-1 response"
 
 
+@pytest.mark.slow  # 23 s: the low-level FRF is the default tier's (test_frf), the report's machinery the others'
 def test_report_on_a_low_level_record(tmp_path):
     eq = TRUTH.equilibria()
     t, u, z, _ = dop853_record(duration=40.0, rms=1.5, start=eq.z_minus, seed=3)

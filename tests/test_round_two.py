@@ -157,8 +157,9 @@ def _hidden_record(name, seed=11):
                        mass=BASE.m, source=f"dop853 {name}")  # fmt: skip
 
 
-SLOW = {"end_stop_soft", "cubic_damping", "quintic_stiffness"}  # with -m slow: the stop's replication, and two
-# effects the default tier already names and sizes on rig records (test_discrepancy); ~35 s off the default suite
+SLOW = {"end_stop_soft", "cubic_damping", "quintic_stiffness", "coulomb_friction"}  # with -m slow: the stop's
+# replication, and three effects the default tier already names and sizes on rig records (test_discrepancy); ~60 s
+# off the default suite
 
 
 @pytest.mark.parametrize("name", [pytest.param(n, marks=pytest.mark.slow) if n in SLOW else n for n in HIDDEN])

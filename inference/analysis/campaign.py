@@ -96,7 +96,9 @@ def forcing_frequencies(entries: list[dict[str, Any]], recs, given: float | None
             raise MeasurementError(
                 f"{e['file']}: no forcing frequency (no index or metadata forcing_hz): give --forcing-hz"
             )
-        out.append(float(stated if stated is not None else given))
+        value = stated if stated is not None else given
+        assert value is not None  # refused above
+        out.append(float(value))
     return out
 
 
@@ -219,8 +221,10 @@ class Campaign:
         sweeps: dict[str, Any] = {}
         for p in points:
             sweeps.setdefault(" ".join(x for x in (p["start"], p["direction"]) if x) or "records", []).append(p)
-        summary = {"sequence": map_sequence, "first_period_2": first_period_2} if self.axis == "amplitude" else {
-            "sequence": lambda v: map_sequence(v, "f_hz"), "jump_hz": jump}  # fmt: skip
+        summary: dict[str, Callable[[list[dict[str, Any]]], Any]] = (
+            {"sequence": map_sequence, "first_period_2": first_period_2} if self.axis == "amplitude"
+            else {"sequence": lambda v: map_sequence(v, "f_hz"), "jump_hz": jump}
+        )  # fmt: skip
         return {
             "axis": self.axis,
             "forcing_hz": self.freqs[0] if self.axis == "amplitude" else None,

@@ -87,7 +87,7 @@ def lyapunov(rec: Measurement, forcing_hz: float, noise: float | None) -> dict[s
     two estimators agree on the exponent's sign (``estimators_agree``: both significantly positive, or
     neither).
     """
-    w = largest_lyapunov(rec.z, rec.dt, forcing_hz=forcing_hz, noise=noise, segments=LLE_SEGMENTS)
+    w = largest_lyapunov(rec.displacement, rec.dt, forcing_hz=forcing_hz, noise=noise, segments=LLE_SEGMENTS)
     parts = w["segments"]
     if len(parts) >= 2:
         value = float(np.mean(parts))
@@ -134,7 +134,7 @@ def check_harmonic(rec: Measurement, forcing_hz: float) -> None:
     rec.require_excitation("a characterisation (the forcing's phase is read from the input)")
 
 
-def wells_for(rec: Measurement, wells="auto") -> tuple[float, ...] | None:
+def wells_for(rec: Measurement, wells="auto") -> tuple[float | None, ...] | None:
     """The wells a regime is judged against: those given (z_minus, z_plus or z_minus, z_0, z_plus [m],
     increasing; None: none, the regime is the side of the median), else (``"auto"``) the rest positions of
     the record's metadata, else the stable roots of a cubic fitted to the record (``nsi.well_guesses``).
@@ -207,7 +207,7 @@ def characterize(
         if q == 1:
             per = periodicity(work, forcing_hz, wells)
         else:  # the noise of the acquisition, from the white plateau of the record as measured
-            noise = math.sqrt(noise_floor(rec.z, rec.fs)[0])
+            noise = math.sqrt(noise_floor(rec.displacement, rec.fs)[0])
             per = periodicity(work, forcing_hz, wells, noise=noise, band_fs=rec.fs)
     except (MeasurementError, ValueError, np.linalg.LinAlgError) as exc:
         out["reasons"]["period"] = _reason(exc)
@@ -229,7 +229,7 @@ def characterize(
             )
     else:
         out |= {"period": None, "amplitudes": None, "poincare_z": np.array([])}
-    out["regime"] = classify_regime(rec.z, wells)
+    out["regime"] = classify_regime(rec.displacement, wells)
     significant = None
     if lle:
         try:

@@ -196,7 +196,8 @@ def frf(rec: Measurement, band: tuple[float, float] | None = None, segment_s: fl
     else:
         r = _frf(rec, band, segment_s)
     rest = rec.rest_positions
-    r["well"] = min(rest, key=lambda w: abs(rest[w] - float(np.mean(rec.z)))) if rest and rec.z is not None else None
+    z = rec.z
+    r["well"] = min(rest, key=lambda w: abs(rest[w] - float(np.mean(z)))) if rest and z is not None else None
     lines = classified(rec, None, [r["reason"]] if r["reason"] else [])
     issue(lines)
     return r | {"record": dict(rec.info), "warnings": [text for _, text in lines]}

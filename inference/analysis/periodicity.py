@@ -160,7 +160,7 @@ def _synchronous(rec: Measurement, f_hz: float) -> _Synchronous:
     k = min(PHASE_SMOOTHING_CYCLES, n_cycles)
     slow = ndimage.uniform_filter1d(drift, k, mode="nearest")
     starts = t_first + period * np.arange(n_cycles) - slow / (2 * np.pi * f)
-    spline = CubicSpline(t, bandlimited(rec.z, rec.fs, f))
+    spline = CubicSpline(t, bandlimited(rec.displacement, rec.fs, f))
     return _Synchronous(spline, starts, period, t[-1], forcing, amp_n, phi_n)
 
 
@@ -320,7 +320,7 @@ def periodicity(
                               np.unwrap(sync.cycle_phase) - slow])[inside]  # fmt: skip
     # noise of a Poincare point: white sensor noise through the band limit fc (gain sqrt(2 fc / fs))
     # and its derivative (gain 2 pi fc sqrt(2 fc / (3 fs)))
-    noise = noise_level(rec.z, rec.fs) if noise is None else noise
+    noise = noise_level(rec.displacement, rec.fs) if noise is None else noise
     band_fs = rec.fs if band_fs is None else band_fs
     fc = min(band_edge(rec.fs, f_hz), band_fs / 2)
     gz = math.sqrt(2 * fc / band_fs)
@@ -340,7 +340,7 @@ def periodicity(
     return {
         "period": period,
         "amplitudes": amps,
-        "regime": classify_regime(rec.z, wells),
+        "regime": classify_regime(rec.displacement, wells),
         "residuals": r,
         "tolerance": tol,
         "tolerances": tols,

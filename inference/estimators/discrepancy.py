@@ -68,6 +68,19 @@ def _positional() -> effects.Effect | None:
     return next((e for e in effects.REGISTRY if e.law.label is None), None)
 
 
+def _stop() -> tuple[str, effects.OneSidedStop]:
+    """The positional effect's name and law, where a candidate has a stop onset (so the registry has one)."""
+    e = _positional()
+    assert e is not None and isinstance(e.law, effects.OneSidedStop)
+    return e.name, e.law
+
+
+def _scores(c: Candidate) -> np.ndarray:
+    """A scored candidate's per-block held-out scores."""
+    assert c.block_ms is not None  # set by ``_score``
+    return c.block_ms
+
+
 @dataclass
 class Candidate:
     """A catalogue entry: an effect, its library terms, and an end stop's onset when it has one."""
@@ -233,7 +246,7 @@ class Discrepancy(Estimator):
             W = np.column_stack([W, cached[1][: W.shape[0]]])
         if stop is not None:
             z = self._zs[lo:hi]
-            col = _positional().law.column(z, stop)
+            col = _stop()[1].column(z, stop)
             Ws = self._form.project(col[:, None], rec.dt)[:, 0]
             W = np.column_stack([W, Ws[: W.shape[0]]])
         return W, y
@@ -270,7 +283,7 @@ class Discrepancy(Estimator):
         if stop is not None:
             k = -mass * float(coef[-1])
             if k > 0:
-                extra = {**dict(model.extra), _positional().name: {"k": k, "z": stop}}
+                extra = {**dict(model.extra), _stop()[0]: {"k": k, "z": stop}}
                 model = Model(**{**model.to_dict(), "extra": extra})
         return model
 
@@ -418,13 +431,13 @@ class Discrepancy(Estimator):
                     cands.append(self._score(rec, Candidate(aux_terms([channel])[0], terms, stop, (*aux, channel))))
             ranking = sorted(cands, key=lambda c: c.heldout_percent)
             best = self._parsimonious(ranking)
-            gain = compare(none.block_ms, best.block_ms, self.margin, none.block_ms)
+            gain = compare(_scores(none), _scores(best), self.margin, _scores(none))
             named = best.effect != "none" and gain.significant
             iteration = {
                 "ranking": [{"effect": c.effect, "score": c.heldout_percent, **c.notes} for c in ranking],
                 "named": best.effect if named else "none",
-                "gain_percent": float(100 * gain.gain / none.block_ms.mean()),
-                "standard_error_percent": float(100 * gain.se / none.block_ms.mean()),
+                "gain_percent": float(100 * gain.gain / _scores(none).mean()),
+                "standard_error_percent": float(100 * gain.se / _scores(none).mean()),
             }
             self.iterations_.append(iteration)
             if not named:
@@ -479,7 +492,7 @@ class Discrepancy(Estimator):
         a, b = before.get("window_ms"), after.get("window_ms")
         if a is None or b is None or len(a) != len(b) or len(a) < 2:
             return False, f"{effect}: not kept: the held-out tail has too few windows to tell whether it helps"
-        worst = float(np.mean(rec.z[self.n_id_ :] ** 2))
+        worst = float(np.mean(rec.displacement[self.n_id_ :] ** 2))
         a, b = (np.log(np.maximum(np.where(np.isfinite(x), x, worst), 1e-300)) for x in (a, b))
         gain = compare(a, b, 0.0, a)
         pct = 100 * (1 - math.exp(-gain.gain / 2))  # the windows' rms error, geometric mean
@@ -522,7 +535,7 @@ class Discrepancy(Estimator):
         for c in ranking:
             if c.effect == "none" or not np.isfinite(c.heldout_percent):
                 continue
-            if indistinguishable(c.block_ms, top.block_ms, self.margin):
+            if indistinguishable(_scores(c), _scores(top), self.margin):
                 ok.append(c)
         if not ok:
             return top
@@ -557,7 +570,7 @@ class Discrepancy(Estimator):
             ok = np.isfinite(ms)
             # the median window: a single window that diverges near the barrier (chaos) cannot dominate
             out["median_window_rms_um"] = float(1e6 * np.sqrt(np.median(ms[ok]))) if ok.any() else math.inf
-            tail = rec.z[self.n_id_ :]
+            tail = rec.displacement[self.n_id_ :]
             out["median_window_percent"] = (
                 float(100 * np.sqrt(np.median(ms[ok])) / np.sqrt(np.mean(tail**2))) if ok.any() else math.inf
             )

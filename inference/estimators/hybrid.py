@@ -169,7 +169,7 @@ class Hybrid:
         us = stage_input(rec.driving(self.model), sub)[None]  # with any measured channel's term (its u)
         x = np.asarray(x0, float)[None]
         oz, _ = simulate_hybrid(self.model, self.basis, self.theta, us, rec.dt, x, sub, rec.input_name,
-                                **divergence_limits(rec.z, vs))  # fmt: skip
+                                **divergence_limits(rec.displacement, vs))  # fmt: skip
         return oz[:, 0]
 
     def restarted_gap(self, rec: Measurement, start: int, window_s: float, zs, vs) -> dict[str, float]:
@@ -183,10 +183,10 @@ class Hybrid:
             return {}
         starts = start + w * np.arange(n_win)
         U, sub = staged_windows(self.model, rec, starts, w)
-        meas = np.stack([rec.z[k : k + w] for k in starts])
+        meas = np.stack([rec.displacement[k : k + w] for k in starts])
         x0 = np.column_stack([zs[starts], vs[starts]])
-        scale = float(np.sqrt(np.mean(rec.z[start:] ** 2)))
-        limits = divergence_limits(rec.z, vs)
+        scale = float(np.sqrt(np.mean(rec.displacement[start:] ** 2)))
+        limits = divergence_limits(rec.displacement, vs)
         out = {}
         for name, theta in (("physics", np.zeros_like(self.theta)), ("hybrid", self.theta)):
             oz, _ = simulate_hybrid(self.model, self.basis, theta, U, rec.dt, x0, sub, rec.input_name, **limits)

@@ -29,7 +29,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Self
 
 import numpy as np
 
@@ -57,7 +57,7 @@ class Bunch(dict):
     def _readonly(self, *args, **kwargs):
         raise TypeError(f"{type(self).__name__} is read-only")
 
-    __setitem__ = __delitem__ = __setattr__ = update = pop = popitem = clear = setdefault = _readonly  # type: ignore
+    __setitem__ = __delitem__ = __setattr__ = update = pop = popitem = clear = setdefault = _readonly
 
     def __repr__(self) -> str:
         keys = ", ".join(k for k in self if not isinstance(self[k], np.ndarray))
@@ -181,7 +181,7 @@ class Identification:
 
     def __repr__(self) -> str:
         wells = ", ".join(
-            f"{w} {m['f_hz']:.4g} Hz / {100 * m['zeta']:.3g} %" for w, m in self.modal.items() if m.get("f_hz")
+            f"{w} {m['f_hz']:.4g} Hz / {100 * (m['zeta'] or 0.0):.3g} %" for w, m in self.modal.items() if m.get("f_hz")
         )
         v = self.validation.get("restarted_rms_percent", self.validation.get("rms_percent"))
         return (
@@ -235,7 +235,8 @@ def equilibria_and_modes(
             f"extrapolation ({exc}); the wells within it are reported"
         )
     if eq.z_minus is None and visited_well(rec, eq.z_plus) == "minus":
-        eq = Equilibria(eq.z_plus, None, None)  # type: ignore[arg-type] - the one well, named by where it is
+        # the one well, named by where it is: as z_minus, z_plus None (against the type's single-well convention)
+        eq = Equilibria(eq.z_plus, None, None)  # type: ignore[arg-type]
     modal: dict[str, dict[str, float | None]] = {}
     for well in ("minus", "plus"):
         z = eq.z_minus if well == "minus" else eq.z_plus
@@ -265,7 +266,7 @@ class Identifier(Estimator):
         """The method's own result keys that depend on the final model (NSI's ``g_estimate``)."""
         return details
 
-    def fit(self, data) -> Identifier:
+    def fit(self, data) -> Self:
         """Identify from ``data`` (a ``Measurement`` or a file path): the method's estimate, then the
         shared stages (module docstring); the result is ``result_`` (an ``Identification``).
         """

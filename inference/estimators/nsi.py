@@ -335,7 +335,7 @@ class NSI(Identifier):
         identification part, averaged into one z-frame model (the shared stages follow: ``Identifier``).
         """
         ident = rec.segment(0, n_id)
-        zs, v = smooth_and_differentiate(ident.z, ident.fs)
+        zs, v = smooth_and_differentiate(ident.displacement, ident.fs)
         z_minus, z_plus = well_guesses(ident)
         wells = {"plus": self.fit_well(ident, zs, v, z_plus)}
         if z_minus is not None:
@@ -354,8 +354,10 @@ class NSI(Identifier):
             wells = {"minus": wells["plus"]}  # one well visited: named by where it lies (``visited_well``)
         self.wells_ = wells
         self.models_by_well_ = {name: mm for name, mm in zip(wells, models, strict=False)}
-        modal = {w: {"f_hz": wells[w].f_hz, "zeta": wells[w].zeta} if w in wells else {"f_hz": None, "zeta": None}
-                 for w in ("minus", "plus")}  # fmt: skip
+        modal: dict[str, dict[str, float | None]] = {
+            w: {"f_hz": wells[w].f_hz, "zeta": wells[w].zeta} if w in wells else {"f_hz": None, "zeta": None}
+            for w in ("minus", "plus")
+        }
         return Estimate(
             model=model,
             mass_source=mass_source,
@@ -371,7 +373,7 @@ class NSI(Identifier):
                 "block_rows": self.block_rows,
                 "band_fraction": list(self.band),
                 "passes": self.passes,
-                "velocity": f"Savitzky-Golay (window, order) = {velocity_window(ident.z, rec.fs)}",
+                "velocity": f"Savitzky-Golay (window, order) = {velocity_window(ident.displacement, rec.fs)}",
                 "basis": list(BASIS_NAMES),
             },
         )
@@ -402,7 +404,7 @@ class NSI(Identifier):
         """
         n_id = self.settings_["identification_samples"]
         ident = rec.segment(0, n_id)
-        zs, v = smooth_and_differentiate(ident.z, ident.fs)
+        zs, v = smooth_and_differentiate(ident.displacement, ident.fs)
         rows = []
         for name, well in self.wells_.items():
             for i in block_rows:

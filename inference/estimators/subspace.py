@@ -52,11 +52,14 @@ class StateSpace:
         (non-ZOH) inputs this, not the inverse-ZOH continuous model, carries the right FRF level
         below Nyquist (algorithms.md A.3 measured up to 9 % level error the other way).
         """
-        n = self.Ad.shape[0]
+        if self.Ad is None or self.Bd is None or self.dt is None:
+            raise ValueError("a continuous-time state space has no discrete FRF (Ad, Bd, dt unset)")
+        Ad, Bd = self.Ad, self.Bd
+        n = Ad.shape[0]
         q = np.exp(2j * np.pi * np.asarray(freqs_hz) * self.dt)
-        out = np.empty((q.size, self.C.shape[0], self.Bd.shape[1]), complex)
+        out = np.empty((q.size, self.C.shape[0], Bd.shape[1]), dtype=np.complex128)
         for k, qk in enumerate(q):
-            out[k] = self.D + self.C @ np.linalg.solve(qk * np.eye(n) - self.Ad, self.Bd)
+            out[k] = self.D + self.C @ np.linalg.solve(qk * np.eye(n) - Ad, Bd)
         return out
 
     def frf(self, freqs_hz: np.ndarray) -> np.ndarray:
@@ -166,6 +169,7 @@ def lq_factor(u: np.ndarray, y: np.ndarray, i: int, chunk: int = 8192, route: st
         stacked = ht if r is None else np.vstack([r, ht])
         r = linalg.qr(stacked, mode="r", overwrite_a=True, check_finite=False)[0]
         r = r[: stacked.shape[1]]
+    assert r is not None  # j > 0: at least one chunk
     return r.T / np.sqrt(j)
 
 

@@ -352,7 +352,8 @@ class GAUpdater(Estimator):
         )
         self.features_ = self.features_of(x)
         self.exact_features_ = self.features_
-        self.fitness_ = float(fitness(self.features_, targets))  # reference study Eq. 9, reported in either case
+        # reference study Eq. 9, reported in either case (inf: the best device has no double well)
+        self.fitness_ = math.inf if self.features_ is None else float(fitness(self.features_, targets))
         self.objective_ = float(res.F[0]) if by_force else self.fitness_
         self.stroke_ = stroke if by_force else None
         self.history_ = history

@@ -102,7 +102,7 @@ class Measurement:
     t0: float = 0.0
     info: dict[str, Any] = field(default_factory=dict)
     aux: dict[str, np.ndarray] = field(default_factory=dict)
-    derived: dict[str, Any] = field(default_factory=dict, init=False, repr=False, compare=False)
+    derived: dict[Any, Any] = field(default_factory=dict, init=False, repr=False, compare=False)
     """What is computed from this record once and kept with it (its smoothed states, its segments, its
     pinned frame): a record is immutable, so what it gives never changes (``states``, ``segment``)."""
 
@@ -134,6 +134,15 @@ class Measurement:
         """The record's length [s]."""
         return self.n / self.fs
 
+    @property
+    def displacement(self) -> np.ndarray:
+        """The response z [m], (N,), for an analysis that needs one: ``z`` where an input-only record (read
+        with ``response=False``) has none, which is one ``MeasurementError`` here.
+        """
+        if self.z is None:
+            raise MeasurementError(f"{self.source}: an input-only record has no response z, which this needs")
+        return self.z
+
     @classmethod
     def from_rig(cls, rec, weighed: bool = True) -> Measurement:
         """A virtual-rig record (``models.rig.RigRecord``) as negstiff reads a lab's: the measured base
@@ -159,7 +168,8 @@ class Measurement:
         seg = self.derived.get(key)
         if seg is None:
             sl = slice(start, stop)
-            opt = {k: (None if getattr(self, k) is None else getattr(self, k)[sl]) for k in ("z", *OPTIONAL)}
+            opt: dict[str, Any] = {k: (None if getattr(self, k) is None else getattr(self, k)[sl])
+                                   for k in ("z", *OPTIONAL)}  # fmt: skip
             aux = {k: v[sl] for k, v in self.aux.items()}
             seg = self.derived[key] = replace(self, u=self.u[sl], t0=self.t0 + start / self.fs, aux=aux, **opt)
         return seg
@@ -172,7 +182,7 @@ class Measurement:
         key = ("states", purpose)
         hit = self.derived.get(key)
         if hit is None:
-            hit = self.derived[key] = state_derivatives(self.z, self.fs, purpose)
+            hit = self.derived[key] = state_derivatives(self.displacement, self.fs, purpose)
         zs, v, a, info = hit
         return zs.copy(), v.copy(), a.copy(), copy.deepcopy(info)
 
@@ -321,7 +331,7 @@ def _aux_channels(source, raw: dict[str, np.ndarray], names, n: int) -> dict[str
 def _constant(x: np.ndarray) -> bool:
     """No variation beyond the values' own floating-point resolution."""
     span = float(np.ptp(x))
-    return span <= 64 * np.finfo(float).eps * float(np.max(np.abs(x))) or span < 1e-15
+    return bool(span <= 64 * np.finfo(float).eps * float(np.max(np.abs(x))) or span < 1e-15)
 
 
 def load(
@@ -404,7 +414,8 @@ def load(
     scale_info = _unknown_scale(path, unknown[0] if unknown else None, input_name, mass, cols)
     aux_names = [a for a in (aux.split(",") if isinstance(aux, str) else aux or ()) if str(a).strip()]
     aux_cols = _aux_channels(path, raw, aux_names, n)
-    z, resp = None, {"measured": None}
+    z: np.ndarray | None = None
+    resp: dict[str, Any] = {"measured": None}
     if response or any(k in cols for k in sensors.RESPONSES):
         z, resp = sensors.derive(cols, input_name, fs, str(path))
         k = int(round(resp.get("trim_s", 0.0) * fs))

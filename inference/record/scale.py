@@ -32,7 +32,8 @@ def _scale_of(rec: Measurement) -> float:
     from negstiff.inference.steps.weak import input_coefficient, known_input_gain
 
     c = input_coefficient(rec)
-    physical = known_input_gain(rec)  # never None here: load refuses a force record without a mass
+    physical = known_input_gain(rec)
+    assert physical is not None  # load refuses a force record of unknown scale without a mass
     if not np.isfinite(c) or c == 0:
         raise MeasurementError(f"{rec.source}: the record's dynamics give the input no weight: its response's scale "
                                "cannot be estimated (does the response follow the input?)")  # fmt: skip

@@ -87,7 +87,8 @@ def field_effects(model: Model) -> tuple[str, ...]:
     ``{"k", "z"}``), each value refined under the name ``EFFECT.FIELD``.
     """
     named = [e for e in effects.REGISTRY if not e.scalar and e.name in model.extra]
-    return tuple(f"{e.name}.{f}" for e in named for f in e.law.fields)
+    # an effect with several values is an end stop (``effects.OneSidedStop``: the one law with fields)
+    return tuple(f"{e.name}.{f}" for e in named if isinstance(e.law, effects.OneSidedStop) for f in e.law.fields)
 
 
 def parameter_names(model: Model, free_mass: bool, held=()) -> tuple[str, ...]:
@@ -136,8 +137,10 @@ def parameter_scales(model: Model, names, z_rms: float, v_rms: float) -> np.ndar
     term that starts at zero (an effect to be tried) then moves as readily as the others.
     """
     force = max(abs(model.k1) * z_rms, abs(model.c) * v_rms, 1e-300)
-    basis = {"k0": 1.0, "k1": z_rms, "k2": z_rms**2, "k3": z_rms**3, "c": v_rms, "c_nl": v_rms**2, "m": None}
-    basis |= {e.name: e.law.scale(z_rms, v_rms) for e in effects.REGISTRY if e.scalar}
+    basis: dict[str, float | None] = {"k0": 1.0, "k1": z_rms, "k2": z_rms**2, "k3": z_rms**3, "c": v_rms,
+                                      "c_nl": v_rms**2, "m": None}  # fmt: skip
+    basis |= {e.name: e.law.scale(z_rms, v_rms) for e in effects.REGISTRY
+              if e.scalar and isinstance(e.law, effects.Monomial | effects.SmoothSign)}  # fmt: skip
     out = []
     for n, value in zip(names, values_of(model, names), strict=False):
         if "." in n:  # an effect's own value (a stop's stiffness or onset): scaled by itself, never zero
@@ -208,7 +211,8 @@ def refine(
     r = 2 * sub
     u_staged = stage_input(rec.driving(model), sub)  # a measured channel's term held at its start value
     x_scale = np.array([max(np.abs(rec.z).max(), 1e-12), max(np.abs(vs).max(), 1e-12)])
-    start_model, stages, current = model, [], model
+    start_model, current = model, model
+    stages: list[dict[str, Any]] = []
     for w_s in windows_s:
         length = min(rec.n, max(8, int(round(w_s * rec.fs))))
         n_win = min(max_windows, max(1, rec.n // length))

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from typing import Any
+from typing import Any, TypedDict, Unpack
 
 import numpy as np
 from scipy import optimize, signal
@@ -30,12 +30,19 @@ from negstiff.models.simulator import (
 )
 
 
-def divergence_limits(z: np.ndarray, v: np.ndarray) -> dict[str, float]:
+class Limits(TypedDict, total=False):
+    """The simulator's divergence bounds: |z| [m] and |z'| [m/s] (either may be left at its default)."""
+
+    z_limit: float
+    v_limit: float
+
+
+def divergence_limits(z: np.ndarray, v: np.ndarray) -> Limits:
     """|z| and |z'| a simulation may reach before it counts as diverged: ten times the record's (the
     simulator's defaults, 1 m and 100 m/s, are a shaker device's; an electronic benchmark's volts per
     second exceed them).
     """
-    return {"z_limit": 10 * float(np.abs(z).max()) + 1e-12, "v_limit": 10 * float(np.abs(v).max()) + 1e-12}
+    return Limits(z_limit=10 * float(np.abs(z).max()) + 1e-12, v_limit=10 * float(np.abs(v).max()) + 1e-12)
 
 
 STEP_OMEGA = 0.25
@@ -68,7 +75,9 @@ def record_substeps(system, rec: Measurement) -> int:
     return int(min(MAX_SUBSTEPS, max(DEFAULT_SUBSTEPS, need)))
 
 
-def simulate_record(system, rec: Measurement, x0, substeps: int | None = None, **limits) -> SimulationResult:
+def simulate_record(
+    system, rec: Measurement, x0, substeps: int | None = None, **limits: Unpack[Limits]
+) -> SimulationResult:
     """A free run of ``system`` under ``rec``'s input from the state ``x0``: the input at every
     Runge-Kutta stage time by band-limited interpolation (``stage_input``), the step refined where the
     system is fast for the sampling rate (``record_substeps``). The velocity is stored.
@@ -94,16 +103,16 @@ def start_state(system, rec: Measurement, guess=None, periods: float = 2.0) -> t
     """
     zs, vs, _, _ = rec.states("state")
     x0 = np.array([zs[0], vs[0]] if guess is None else guess, float)
-    lo, hi = float(np.min(rec.z)), float(np.max(rec.z))
+    lo, hi = float(np.min(rec.displacement)), float(np.max(rec.displacement))
     with np.errstate(all="ignore"):
         k = np.asarray(system.stiffness(np.linspace(lo, hi, 65)), float)
     k = k[np.isfinite(k) & (k > 0)]
     omega = math.sqrt(float(np.median(k)) / system.m) if k.size else 2 * math.pi / rec.duration
     length = int(min(rec.n, max(16, math.ceil(periods * 2 * math.pi / omega * rec.fs))))
     head = rec.segment(0, length)
-    limits = divergence_limits(rec.z, vs)
+    limits = divergence_limits(rec.displacement, vs)
     sub = record_substeps(system, rec)
-    scale = np.array([max(float(np.std(rec.z)), 1e-12), max(float(np.std(vs)), 1e-12)])
+    scale = np.array([max(float(np.std(rec.displacement)), 1e-12), max(float(np.std(vs)), 1e-12)])
 
     def residual(x):
         res = simulate_record(system, head, x * scale, substeps=sub, **limits)
@@ -126,11 +135,11 @@ def simulate_measured(system, rec: Measurement, z0: float | None = None, v0: flo
     """
     if interpolation not in ("band-limited", "linear"):
         raise MeasurementError(f"interpolation is 'band-limited' or 'linear', got {interpolation!r}")
-    limits = {"z_limit": DEFAULT_Z_LIMIT, "v_limit": DEFAULT_V_LIMIT}
-    start = (None, 0.0)
+    limits = Limits(z_limit=DEFAULT_Z_LIMIT, v_limit=DEFAULT_V_LIMIT)
+    start: tuple[float | None, float] = (None, 0.0)
     if rec.z is not None:
         rec = pin_frame(rec)
-        limits = divergence_limits(rec.z, rec.states("state")[1])
+        limits = divergence_limits(rec.displacement, rec.states("state")[1])
         if z0 is None or v0 is None:
             start = start_state(system, rec)
     z0 = start[0] if z0 is None else z0
@@ -163,10 +172,10 @@ def free_run_rms(model: Model, rec: Measurement, skip: int = 0, x0=None) -> floa
     zs, vs, _, _ = rec.states("state")
     if x0 is None:
         x0 = (zs[0], vs[0])
-    res = simulate_record(model, rec, x0, **divergence_limits(rec.z, vs))
+    res = simulate_record(model, rec, x0, **divergence_limits(rec.displacement, vs))
     if res.diverged[0]:
         return math.inf
-    return float(np.sqrt(np.mean((res.z[0, skip:] - rec.z[skip:]) ** 2)))
+    return float(np.sqrt(np.mean((res.z[0, skip:] - rec.displacement[skip:]) ** 2)))
 
 
 def validate(model: Model, rec: Measurement, start: int, window_s: float = 2.0) -> dict[str, Any]:
@@ -184,7 +193,7 @@ def validate(model: Model, rec: Measurement, start: int, window_s: float = 2.0) 
         raise MeasurementError(f"{rec.source}: too few samples for the validation segment ({tail.n})")
     # the measured states free runs start from: the least-error velocity (derivatives.py)
     zs, v, _, _ = rec.states("state")
-    sim = simulate_record(model, tail, (float(zs[start]), float(v[start])), **divergence_limits(rec.z, v))
+    sim = simulate_record(model, tail, (float(zs[start]), float(v[start])), **divergence_limits(rec.displacement, v))
     z_sim = sim.z[0]
     out: dict[str, Any] = {
         "segment": [float(tail.t0), float(tail.t0 + tail.duration)],
@@ -200,7 +209,7 @@ def validate(model: Model, rec: Measurement, start: int, window_s: float = 2.0) 
     else:
         r = z_sim - tail.z
         out.update(
-            rms_percent=float(100 * np.sqrt(np.mean(r**2)) / np.sqrt(np.mean(tail.z**2))),
+            rms_percent=float(100 * np.sqrt(np.mean(r**2)) / np.sqrt(np.mean(tail.displacement**2))),
             residual_mean=float(r.mean()),
             residual_std=float(r.std()),
             z_sim=z_sim,
@@ -235,7 +244,7 @@ def restarted_free_runs(
         substeps=sub,
         staged=True,
     )
-    meas = np.stack([rec.z[k : k + w] for k in starts])
+    meas = np.stack([rec.displacement[k : k + w] for k in starts])
     ok = ~res.diverged
     window_ms = np.full(n_win, np.nan)  # per-window mean square error (nan: diverged), an array: not in JSON
     window_ms[ok] = np.mean((res.z[ok] - meas[ok]) ** 2, axis=1)
@@ -267,7 +276,7 @@ def residual_psd(rec: Measurement, model: Model, start: int, window_s: float = 2
         P, model.kind, U, rec.dt, np.column_stack([zs[starts], v[starts]]),
         input_kind=rec.input_name, input_index=np.arange(starts.size), substeps=sub, staged=True,
     )  # fmt: skip
-    meas = np.stack([rec.z[k : k + w] for k in starts])
+    meas = np.stack([rec.displacement[k : k + w] for k in starts])
     ok = ~res.diverged
     f, p = signal.welch(meas[ok] - res.z[ok], rec.fs, nperseg=min(w, 512), axis=1)
     return f, p.mean(axis=0)

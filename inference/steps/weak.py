@@ -165,7 +165,7 @@ class WeakForm:
         """The weak form of ``rec`` (its regression states, computed once and kept with it)."""
         zs, v, _, deriv = rec.states("regression")
         noise = deriv["velocity_noise_std"] if np.isfinite(deriv["velocity_noise_std"]) else 0.0
-        half, f_c = test_function_half_width(rec.z, rec.fs)
+        half, f_c = test_function_half_width(rec.displacement, rec.fs)
         return cls(zs, v, half, float(noise), f_c, deriv)
 
     @property
@@ -192,7 +192,7 @@ class WeakForm:
             F = np.column_stack([F[:, :-1], *(np.asarray(seg.aux[a], float) for a in aux), F[:, -1]])
         phi, d2 = test_function(self.half, seg.dt)
         W = weak_project(F, phi, self.stride, seg.dt)
-        y = weak_project((seg.z - seg.z.mean())[:, None], d2, self.stride, seg.dt)[:, 0]
+        y = weak_project((seg.displacement - seg.displacement.mean())[:, None], d2, self.stride, seg.dt)[:, 0]
         col = W.std(axis=0)
         col[0] = np.abs(W[:, 0]).mean()  # the constant's projection: int phi dt, the same for every row
         s_y = y.std()

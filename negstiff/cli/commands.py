@@ -127,6 +127,7 @@ def cmd_simulate(args) -> int:
     res = simulate_measured(system, rec, args.z0, args.v0, args.interpolation, args.substeps)
     if res.diverged[0]:
         raise InputError(f"simulation of {args.model} under {args.input} failed: {res.describe_failures()}")
+    assert res.z_dot is not None  # simulate_measured stores the velocity
     data = np.column_stack([rec.t, rec.u, res.z[0], res.z_dot[0]])
     with atomic_path(args.out) as tmp:
         np.savetxt(tmp, data, delimiter=",", fmt="%.10g", header=f"t,{rec.input_name},z,z_dot", comments="")
@@ -143,7 +144,7 @@ def cmd_identify(args) -> int:
     if args.method == "nsi":
         from negstiff.inference.estimators.nsi import NSI
 
-        est = NSI(order=args.order, block_rows=args.block_rows, refine=not args.no_refine)
+        est: NSI | SINDy = NSI(order=args.order, block_rows=args.block_rows, refine=not args.no_refine)
     else:
         from negstiff.inference.estimators.sindy import SINDy
 

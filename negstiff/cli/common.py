@@ -31,7 +31,9 @@ def _source(module: str) -> Path:
     (``find_spec`` of a submodule imports its parents: ``inference.posterior``'s loads the compiled
     simulator, 3.4 s of every command's start, measured).
     """
-    base = Path(importlib.util.find_spec("negstiff.inference").submodule_search_locations[0])
+    spec = importlib.util.find_spec("negstiff.inference")
+    assert spec is not None and spec.submodule_search_locations is not None  # a package of this distribution
+    base = Path(spec.submodule_search_locations[0])
     path = base.joinpath(*module.split(".")[2:])
     return path / "__init__.py" if path.is_dir() else path.with_suffix(".py")
 
@@ -48,11 +50,10 @@ def _signature_defaults(module: str, cls: str) -> dict[str, Any]:
     )
     args = init.args.args[-len(init.args.defaults) :] if init.args.defaults else []
     pairs = list(zip(args, init.args.defaults, strict=False))
-    pairs += list(zip(init.args.kwonlyargs, init.args.kw_defaults, strict=False))
+    # a keyword-only parameter without a default has None here: it has no default to report
+    pairs += [(a, d) for a, d in zip(init.args.kwonlyargs, init.args.kw_defaults, strict=False) if d is not None]
     out = {}
     for a, d in pairs:
-        if d is None:  # a keyword-only parameter without a default
-            continue
         try:
             out[a.arg] = ast.literal_eval(d)
         except ValueError:
@@ -73,8 +74,11 @@ def _constraints(module: str, cls: str) -> dict[str, Any]:
         a.value for a in body if isinstance(a, ast.Assign) and any(getattr(t, "id", "") == "_parameter_constraints"
                                                                     for t in a.targets)
     )  # fmt: skip
+    assert isinstance(node, ast.Dict)  # the class declares its constraints as a dict literal
     out = {}
     for key, value in zip(node.keys, node.values, strict=False):
+        if key is None:  # a ``**mapping`` entry: not a declared constraint
+            continue
         try:
             out[ast.literal_eval(key)] = eval(compile(ast.Expression(value), module, "eval"), dict(NAMESPACE))
         except NameError:

@@ -106,7 +106,8 @@ class Windows:
             u_fine = signal.resample(rec.u, q * rec.n)
             u = u_fine[q * starts[:, None] + np.arange(q * L)[None, :]]
         return cls(
-            rec.dt, rec.input_name, u, rec.z[idx], np.column_stack([zs[starts], v[starts]]), oversample=q, starts=starts
+            rec.dt, rec.input_name, u, rec.displacement[idx], np.column_stack([zs[starts], v[starts]]), oversample=q,
+            starts=starts,
         )
 
     def simulate(self, params: np.ndarray, kind: str, x0: np.ndarray | None = None):
