@@ -366,7 +366,8 @@ def refinement_benchmark(quick: bool = False) -> tuple[list[list[str]], dict]:
     Jacobian (two batched runs per parameter and per start state: what ``least_squares`` does unless told
     the sparsity); each with its evaluations and its end error over the best of the three.
     """
-    from negstiff.experiments.silverbox import TRAIN, load_silverbox
+    from negstiff.datasets import silverbox
+    from negstiff.experiments.silverbox import TRAIN
     from negstiff.inference.estimators.nsi import NSI
     from negstiff.inference.record.measurement import from_arrays
     from negstiff.inference.steps.refine import SOLVERS, refine, refine_stage
@@ -378,7 +379,7 @@ def refinement_benchmark(quick: bool = False) -> tuple[list[list[str]], dict]:
     rec = from_arrays(r.columns["base_acc"], r.columns["z"], r.fs, mass=float(r.meta["mass"]), source="bench")
     cases = [
         (f"{duration:g} s rig record ({rec.n:,} samples at {rec.fs:g} Hz), NSI start", rec),
-        ("Silverbox training part (65,062 samples at 610 Hz), NSI start", load_silverbox().segment(*TRAIN)),
+        ("Silverbox training part (65,062 samples at 610 Hz), NSI start", silverbox().segment(*TRAIN)),
     ]
     rows, res = [], {}
     for label, m in cases:

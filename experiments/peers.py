@@ -256,14 +256,15 @@ def end_to_end_peers() -> tuple[list[list[str]], dict]:
     against a plain output-error fit of the cubic from a linear start (``refine`` from k1, c of the
     FRF peak and k2 = k3 = c_nl = 0): time and the test part's simulation error.
     """
+    from negstiff.datasets import silverbox
     from negstiff.inference.analysis.frf import frf
     from negstiff.inference.estimators.nsi import NSI
     from negstiff.inference.estimators.sindy import SINDy
     from negstiff.inference.steps.refine import refine
 
-    from .silverbox import TEST, TRAIN, load_silverbox, prediction_error_mv
+    from .silverbox import TEST, TRAIN, prediction_error_mv
 
-    m = load_silverbox()
+    m = silverbox()
     train = m.segment(*TRAIN)
     res, rows = {}, []
 

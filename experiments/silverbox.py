@@ -56,13 +56,6 @@ OUTPUT_ERROR_DUFFING_MV = 0.91
 (the issue's anchor, measured before this study existed; not recomputed here)."""
 
 
-def load_silverbox() -> Measurement:
-    """The Silverbox record (``negstiff.datasets.silverbox``: shipped with the package,
-    ``$NEGSTIFF_SILVERBOX`` overrides).
-    """
-    return silverbox()
-
-
 def prediction_error_mv(model: Model, m: Measurement, part: tuple[int, int], linear: bool = False) -> float:
     """Free-run rms error [mV] of ``model`` over ``part`` of the Silverbox record, started from the
     measured (smoothed) state at the part's sample ``SKIP``, which is the first one scored; inf if it
@@ -392,7 +385,7 @@ def _render_hybrid(rep: Report, h: dict[str, Any], m: Measurement) -> None:
 
 def silverbox_section(rep: Report, results: dict[str, Any], fast: bool, seed_: int = 0) -> None:
     """The Silverbox section of the report (deterministic: no seed; ``fast`` drops the linear start and NSI)."""
-    m = load_silverbox()
+    m = silverbox()
     results["silverbox"] = render(rep, compute(m, fast), m)
 
 

@@ -3,6 +3,7 @@
 import numpy as np
 import pytest
 
+from negstiff import datasets
 from negstiff.experiments import silverbox as silverbox_study
 from negstiff.models import AS_BUILT, Model
 from negstiff.models.rig import Rig
@@ -29,7 +30,7 @@ def rng():
 def silverbox():
     """The Silverbox record (real data: an electronic Duffing oscillator, force input V1, output V2),
     shipped with the package."""
-    return silverbox_study.load_silverbox()
+    return datasets.silverbox()
 
 
 @pytest.fixture(scope="session")
