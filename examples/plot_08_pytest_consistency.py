@@ -23,5 +23,7 @@ def test_device_model_is_consistent():
     assert_predicts(sindy.model_, rec, reference=SEED_LIKE_CUBIC, factor=2)  # nearly as good as the truth
 
 
+# %%
+# pytest would collect the function from a ``test_*.py`` file; here it is called directly
 test_device_model_is_consistent()
 print("consistent")

@@ -9,6 +9,9 @@ each method's estimate beside the posterior's interval (and its forest plot), ho
 with the amplitude, and a section per result.
 """
 
+import tempfile
+from pathlib import Path
+
 import matplotlib.pyplot as plt
 
 from negstiff import NSI, Posterior, Report, Rig, SINDy
@@ -23,7 +26,8 @@ for rms in (8.0, 11.0, 14.0):
     rep.add(sindy, label=label).add(NSI().fit(record), label=label)
     k3[rms] = sindy.model_.k3
 
-# one posterior, on the first 20 s of the last record: the interval the estimates are read against
+# %%
+# One posterior, on the first 20 s of the last record: the interval the estimates are read against
 rep.add(Posterior(seed=1).fit(record.segment(0, int(20 * record.fs))), label="14 m/s^2 rms")
 
 fig, ax = plt.subplots(figsize=(5, 3))
@@ -31,5 +35,6 @@ ax.plot(list(k3), list(k3.values()), "o-")
 ax.set(xlabel="table acceleration rms [m/s^2]", ylabel="k3 [N/m^3]")
 rep.add_figure(fig, "SINDy's k3 at each level: the as-built device is not a cubic, so the cubic's best fit moves "
                "with how far the record reaches.", heading="k3 against the excitation level")
-rep.write("report_over_amplitudes")
+out = rep.write(Path(tempfile.mkdtemp()) / "report_over_amplitudes")  # your own folder in a real script
+print(f"wrote {out / 'index.html'}")
 print("\n".join(rep.results()["summary"]))
