@@ -74,7 +74,7 @@ def read(path: Path):
 class _Notes(logging.Handler):
     """A log handler that keeps the warnings a reader logs (npTDMS's word that a file is truncated)."""
 
-    def __init__(self):
+    def __init__(self) -> None:
         super().__init__(logging.WARNING)
         self.lines: list[str] = []
 
