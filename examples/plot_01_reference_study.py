@@ -11,9 +11,8 @@ with a genetic algorithm. Here the same steps run on the virtual rig, whose trut
 import matplotlib.pyplot as plt
 import numpy as np
 
-from negstiff import NSI, GAUpdater, Rig
+from negstiff import NSI, GAUpdater, Measurement, Rig
 from negstiff.inference.estimators.updating import targets_from
-from negstiff.inference.record.measurement import Measurement
 from negstiff.models import AS_BUILT
 
 # %%

@@ -9,8 +9,7 @@ and the ensemble gives each term's inclusion probability.
 
 import matplotlib.pyplot as plt
 
-from negstiff import Rig, SINDy
-from negstiff.inference.record.measurement import Measurement
+from negstiff import Measurement, Rig, SINDy
 from negstiff.models import SEED_LIKE_CUBIC
 
 rig = Rig(SEED_LIKE_CUBIC, effects={"coulomb_friction": 0.1}, seed=3)

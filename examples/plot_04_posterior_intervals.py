@@ -8,8 +8,7 @@ intervals sit beside NSI's and SINDy's point estimates and the truth.
 
 import matplotlib.pyplot as plt
 
-from negstiff import NSI, Posterior, Rig, SINDy
-from negstiff.inference.record.measurement import Measurement
+from negstiff import NSI, Measurement, Posterior, Rig, SINDy
 from negstiff.models import SEED_LIKE_CUBIC
 
 rig = Rig(SEED_LIKE_CUBIC, seed=4)

@@ -6,8 +6,7 @@ Where does a cubic model miss the data, what is missing, and how much of the gap
 close? The record hides an end stop (a stiff contact beyond -38 mm) from the cubic model.
 """
 
-from negstiff import Discrepancy, Rig
-from negstiff.inference.record.measurement import Measurement
+from negstiff import Discrepancy, Measurement, Rig
 from negstiff.models import SEED_LIKE_CUBIC
 
 rig = Rig(SEED_LIKE_CUBIC, effects={"end_stop": {"k": 3000.0, "z": -0.038}}, seed=5)

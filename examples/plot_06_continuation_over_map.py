@@ -10,8 +10,7 @@ in amplitude with their Floquet stability, predict where the first period doubli
 import matplotlib.pyplot as plt
 import numpy as np
 
-from negstiff import Rig, characterize, nfrc
-from negstiff.inference.record.measurement import Measurement
+from negstiff import Measurement, Rig, characterize, nfrc
 from negstiff.models import SEED_LIKE_CUBIC
 
 amplitudes = np.arange(4.0, 16.0, 1.0)

@@ -8,8 +8,7 @@ from the estimates' uncertainty, never from a number picked by hand. Put the fun
 ``test_*.py`` file and pytest runs it; here it is called directly.
 """
 
-from negstiff import Posterior, Rig, SINDy
-from negstiff.inference.record.measurement import Measurement
+from negstiff import Measurement, Posterior, Rig, SINDy
 from negstiff.models import SEED_LIKE_CUBIC
 from negstiff.testing import assert_covers, assert_predicts, assert_wells_agree
 

@@ -14,8 +14,7 @@ from pathlib import Path
 
 import matplotlib.pyplot as plt
 
-from negstiff import NSI, Posterior, Report, Rig, SINDy
-from negstiff.inference.record.measurement import Measurement
+from negstiff import NSI, Measurement, Posterior, Report, Rig, SINDy
 
 rep = Report("How the identified model moves with the excitation level")
 k3 = {}

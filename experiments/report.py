@@ -47,8 +47,7 @@ class Report:
     Examples
     --------
     >>> import tempfile, pathlib
-    >>> from negstiff import Report, Rig, SINDy
-    >>> from negstiff.inference.record.measurement import Measurement
+    >>> from negstiff import Measurement, Report, Rig, SINDy
     >>> rec = Measurement.from_rig(Rig(seed=1).random(duration=30.0))
     >>> rep = Report("My device").add(rec).add(SINDy(seed=1).fit(rec), label="30 s")
     >>> out = rep.write(pathlib.Path(tempfile.mkdtemp()) / "report")

@@ -188,8 +188,7 @@ def characterize(
 
     Examples
     --------
-    >>> from negstiff import Rig, characterize
-    >>> from negstiff.inference.record.measurement import Measurement
+    >>> from negstiff import Measurement, Rig, characterize
     >>> from negstiff.models import SEED_LIKE_CUBIC
     >>> rec = Measurement.from_rig(Rig(SEED_LIKE_CUBIC, seed=6).harmonic(freq=9.0, amplitude=5.0))
     >>> c = characterize(rec, forcing_hz=9.0, lle=False)

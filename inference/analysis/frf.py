@@ -172,8 +172,7 @@ def frf(rec: Measurement, band: tuple[float, float] | None = None, segment_s: fl
 
     Examples
     --------
-    >>> from negstiff import Rig, frf
-    >>> from negstiff.inference.record.measurement import Measurement
+    >>> from negstiff import Measurement, Rig, frf
     >>> from negstiff.models import SEED_LIKE_CUBIC
     >>> rec = Measurement.from_rig(Rig(SEED_LIKE_CUBIC, seed=7).random(duration=60.0, rms=0.5, start="minus"))
     >>> r = frf(rec)

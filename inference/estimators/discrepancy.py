@@ -167,8 +167,7 @@ class Discrepancy(Estimator):
 
     Examples
     --------
-    >>> from negstiff import Discrepancy, Rig
-    >>> from negstiff.inference.record.measurement import Measurement
+    >>> from negstiff import Discrepancy, Measurement, Rig
     >>> from negstiff.models import SEED_LIKE_CUBIC
     >>> rig = Rig(SEED_LIKE_CUBIC, effects={"end_stop": {"k": 3000.0, "z": -0.038}}, seed=5)
     >>> disc = Discrepancy().fit(Measurement.from_rig(rig.random(duration=120.0, rms=20.0)))

@@ -127,8 +127,7 @@ class Identification:
 
     Examples
     --------
-    >>> from negstiff import NSI, Rig
-    >>> from negstiff.inference.record.measurement import Measurement
+    >>> from negstiff import Measurement, NSI, Rig
     >>> from negstiff.models import SEED_LIKE_CUBIC
     >>> res = NSI().fit(Measurement.from_rig(Rig(SEED_LIKE_CUBIC, seed=1).random(duration=30.0, rms=20.0))).result_
     >>> res.method, res.validation.rms_percent < 5.0

@@ -181,8 +181,7 @@ class NSI(Identifier):
 
     Examples
     --------
-    >>> from negstiff import NSI, Rig
-    >>> from negstiff.inference.record.measurement import Measurement
+    >>> from negstiff import Measurement, NSI, Rig
     >>> from negstiff.models import SEED_LIKE_CUBIC
     >>> rec = Measurement.from_rig(Rig(SEED_LIKE_CUBIC, seed=1).random(duration=30.0, rms=20.0))
     >>> nsi = NSI().fit(rec)

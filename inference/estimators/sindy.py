@@ -107,8 +107,7 @@ class SINDy(Identifier):
 
     Examples
     --------
-    >>> from negstiff import Rig, SINDy
-    >>> from negstiff.inference.record.measurement import Measurement
+    >>> from negstiff import Measurement, Rig, SINDy
     >>> from negstiff.models import SEED_LIKE_CUBIC
     >>> rig = Rig(SEED_LIKE_CUBIC, effects={"coulomb_friction": 0.1}, seed=3)
     >>> sindy = SINDy(seed=1).fit(Measurement.from_rig(rig.random(duration=60.0, rms=20.0)))

@@ -195,8 +195,7 @@ def pin_frame(rec: Measurement) -> Measurement:
 
     Examples
     --------
-    >>> from negstiff import Rig, pin_frame
-    >>> from negstiff.inference.record.measurement import Measurement
+    >>> from negstiff import Measurement, Rig, pin_frame
     >>> from negstiff.models.rig import Sensors
     >>> rec = Measurement.from_rig(Rig(seed=2, sensors=Sensors(response="velocity")).random(duration=60.0))
     >>> rec.info["response"]["z_constant_known"]

@@ -81,8 +81,7 @@ class Measurement:
 
     Examples
     --------
-    >>> from negstiff import Rig
-    >>> from negstiff.inference.record.measurement import Measurement
+    >>> from negstiff import Measurement, Rig
     >>> rec = Measurement.from_rig(Rig(seed=1).random(duration=20.0))
     >>> part = rec.segment(0, int(10 * rec.fs))      # the first 10 s, as its own record
     >>> part.duration, part.mass

@@ -84,8 +84,7 @@ class Posterior(Estimator):
 
     Examples
     --------
-    >>> from negstiff import Posterior, Rig
-    >>> from negstiff.inference.record.measurement import Measurement
+    >>> from negstiff import Measurement, Posterior, Rig
     >>> from negstiff.models import SEED_LIKE_CUBIC
     >>> rec = Measurement.from_rig(Rig(SEED_LIKE_CUBIC, seed=4).random(duration=10.0, rms=20.0))
     >>> post = Posterior(seed=1, n_ensembles=2).fit(rec)
