@@ -20,7 +20,6 @@ from negstiff.inference.analysis.characterize import characterize, map_point, ma
 from negstiff.inference.analysis.lyapunov import largest_lyapunov
 from negstiff.inference.analysis.periodicity import noise_level, poincare
 from negstiff.inference.record.measurement import Measurement
-from negstiff.inference.steps.derivatives import smooth_and_differentiate
 from negstiff.models import AS_BUILT
 from negstiff.models.reference import lyapunov_benettin
 from negstiff.models.rig import Rig, RigRecord
@@ -125,7 +124,7 @@ def _portraits_and_lle_part(rep: Report, res: dict[str, Any], rig: Rig, fast: bo
         )
         n = int(2.0 * rec.fs)
         t = rec.columns["t"][:n]
-        zs, v = smooth_and_differentiate(m.displacement, m.fs)
+        zs, v, _, _ = m.states("band")
         axes[0, k].plot(t, 1e3 * m.displacement[:n], lw=0.7)
         axes[0, k].set(title=f"{label}: {amp:g} m/s^2", xlabel="t [s]")
         axes[1, k].plot(1e3 * zs[: 20 * n], v[: 20 * n], lw=0.3)

@@ -51,11 +51,10 @@ def _nsi_problem(n: int, seed: int = 21) -> tuple[np.ndarray, np.ndarray]:
     cross-well rig record of the polynomial truth.
     """
     from negstiff.inference.estimators.nsi import NSI, well_guesses
-    from negstiff.inference.steps.derivatives import smooth_and_differentiate
 
     rec = Rig(SEED_LIKE_CUBIC, seed=seed).random(duration=n / 512.0 + 1.0, rms=SEED_LIKE_CROSS_WELL_RMS)
     m = Measurement.from_rig(rec).segment(0, n)
-    zs, v = smooth_and_differentiate(m.displacement, m.fs)
+    zs, v, _, _ = m.states("band")
     _, z_plus = well_guesses(m)
     x, w, _, _ = NSI().extended_input(m, zs, v, z_plus)
     y = x - x.mean()

@@ -2,7 +2,8 @@
 load on first use (PEP 562); ``negstiff`` itself exports the ones a script needs.
 
 * ``record``: a record as negstiff holds it: ``Measurement``, ``load``, ``from_arrays`` (files through
-  ``negstiff.io``), the response sensors (``sensors``), the frame of a derived z (``frame.pin_frame``);
+  ``negstiff.io``), the response sensors (``sensors``), the record made physical
+  (``frame.pin_frame``: an unknown response scale, a derived z's frame);
 * ``steps``: what the estimators are made of: derivatives, the weak form, held-out selection, free-run
   validation, output-error refinement, multiple shooting, the plausibility checks;
 * ``estimators``: the estimator contract (``base``, ``parameters``), one identification pipeline

@@ -179,7 +179,7 @@ def frf(rec: Measurement, band: tuple[float, float] | None = None, segment_s: fl
     >>> abs(r["f_hz"] / SEED_LIKE_CUBIC.uls("minus").f_hz - 1) < 0.01   # the well's own frequency
     True
     """
-    from negstiff.inference.record.scale import calibrate_scale
+    from negstiff.inference.record.frame import calibrate_scale
 
     check_frf(rec, band)
     rec = calibrate_scale(rec)

@@ -22,9 +22,12 @@ Re(H_e,j / H_e,0) (A.4), with |Im/Re| as the quality index. The ULS's natural fr
 come from the physical pole of A_c (reference study Table 1). The well z* is found from the data: first the
 modes of the displacement histogram, then the identified polynomial's own root (one more pass there).
 
-Velocity for x'|x'|: a Savitzky-Golay derivative (cubic; the window is fitted to the data's band by
-``velocity_window``, so it averages sensor noise without bending the response). The polynomial
-bases use the same Savitzky-Golay smoothed displacement (errors-in-variables, A.8).
+Velocity for x'|x'|: the record's band states (``Measurement.states("band")``, computed once per record): a
+Savitzky-Golay derivative whose window is fitted to the data's band (``derivatives.velocity_window``), so
+it averages sensor noise without bending the response. The polynomial bases use the same smoothed
+displacement (errors-in-variables, A.8). These are not the regression states the weak form uses (their
+window is chosen for the least coefficient bias and may bend the band): NSI's frequency-domain fit needs
+the band's gain flat.
 """
 
 from __future__ import annotations
@@ -40,7 +43,6 @@ from negstiff.errors import MeasurementError
 from negstiff.inference.estimators.identification import Estimate, Identifier, visited_well
 from negstiff.inference.estimators.parameters import FRACTION, Boolean, Interval, Pair
 from negstiff.inference.record.measurement import Measurement
-from negstiff.inference.steps.derivatives import smooth_and_differentiate, velocity_window
 from negstiff.inference.steps.weak import known_input_gain, mass_of
 from negstiff.models import Model
 
@@ -334,7 +336,7 @@ class NSI(Identifier):
         identification part, averaged into one z-frame model (the shared stages follow: ``Identifier``).
         """
         ident = rec.segment(0, n_id)
-        zs, v = smooth_and_differentiate(ident.displacement, ident.fs)
+        zs, v, _, band = ident.states("band")
         z_minus, z_plus = well_guesses(ident)
         wells = {"plus": self.fit_well(ident, zs, v, z_plus)}
         if z_minus is not None:
@@ -372,7 +374,7 @@ class NSI(Identifier):
                 "block_rows": self.block_rows,
                 "band_fraction": list(self.band),
                 "passes": self.passes,
-                "velocity": f"Savitzky-Golay (window, order) = {velocity_window(ident.displacement, rec.fs)}",
+                "velocity": f"Savitzky-Golay (window, order) = {band['window']}",
                 "basis": list(BASIS_NAMES),
             },
         )
@@ -403,7 +405,7 @@ class NSI(Identifier):
         """
         n_id = self.settings_["identification_samples"]
         ident = rec.segment(0, n_id)
-        zs, v = smooth_and_differentiate(ident.displacement, ident.fs)
+        zs, v, _, _ = ident.states("band")
         rows = []
         for name, well in self.wells_.items():
             for i in block_rows:

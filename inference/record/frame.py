@@ -1,10 +1,23 @@
-"""The frame of a derived z: a record whose z was integrated from a velocity or an acceleration has an
-unknown constant; ``pin_frame`` finds it by physics (the wells at the rest positions the metadata states,
-else gravity: K(0) = m g, or for a device without gravity along its motion the wells' symmetry) and
-returns the record in the physical frame, with the offset, its uncertainty and the anchor in
-``info["response"]``. It is a step of its own, called by the analyses that need z's frame (every
-estimator's ``check``, ``characterize``, a simulation's start state), never by ``load``: a user who only
-reads a record pays for no fit.
+"""The record made physical: what a derived or uncalibrated response leaves unknown, fixed by the record's
+own physics, one step (``pin_frame``) that every analysis needing it calls (every estimator's ``check``,
+``characterize``, ``frf``, a simulation's start state), never ``load``: a user who only reads a record
+pays for no fit.
+
+1. **The scale** of a response channel whose sensitivity is unknown (a column map's ``*?``: a laser
+   vibrometer's volts, its gain not written down). In a base-excited record physics fixes the input's
+   coefficient: z'' = -base_acc - (c z' + K(z)) / m. A response read in its sensor's units, z_read = z / s,
+   obeys z_read'' = -base_acc / s - ..., so the coefficient the record's own dynamics learn for the input
+   (``weak.input_coefficient``: a quintic restoring force with viscous and quadratic damping, unconstrained
+   weak-form least squares) is -1 / s. For a force-driven record it is 1 / (m s): the mass must be known, or
+   scale and mass trade off (``load`` refuses that record). ``calibrate_scale`` estimates s with its standard
+   error (the spread of the estimates from parts of the record), multiplies the response by it, so that
+   every coefficient found afterwards is in SI units, and says so in ``info["scale"]`` (a result's
+   ``record.scale``).
+2. **The frame** of a derived z: a z integrated from a velocity or an acceleration has an unknown constant;
+   ``frame_offset`` finds it by physics (the wells at the rest positions the metadata states, else gravity:
+   K(0) = m g, or for a device without gravity along its motion the wells' symmetry) and ``pin_frame``
+   returns the record in the physical frame, with the offset, its uncertainty and the anchor in
+   ``info["response"]``.
 """
 
 from __future__ import annotations
@@ -14,8 +27,9 @@ from typing import Any
 
 import numpy as np
 
+from negstiff.errors import MeasurementError
 from negstiff.inference.record.measurement import Measurement
-from negstiff.inference.steps.weak import weak_least_squares
+from negstiff.inference.steps.weak import input_coefficient, known_input_gain, weak_least_squares
 
 PIN_TERMS = ("1", "z", "z^2", "z^3", "z^4", "z^5", "v", "v|v|")
 """Library of the frame fit: a quintic restoring force follows the exact device's K near its origin
@@ -62,7 +76,7 @@ def _frame_anchors(rec) -> tuple[float, dict[str, float]]:
     return origin, wells
 
 
-def frame_offset(rec, spread: bool = True) -> dict[str, Any]:
+def frame_offset(rec, spread: bool = True, use_rest: bool = True) -> dict[str, Any]:
     """The frame constant C that makes a record's z physical (z_true = z + C).
 
     Two anchors, the better one used:
@@ -83,8 +97,9 @@ def frame_offset(rec, spread: bool = True) -> dict[str, Any]:
 
     The uncertainty ``offset_se_m`` is the spread of the estimates from ``FRAME_PARTS`` parts of the
     record, scaled to the whole (sd / sqrt(parts)); ``spread=False`` skips the parts (``offset_se_m`` NaN:
-    the plausibility check asks for it only when it warns). Returns a dict with ``offset_m`` (None when
-    not pinned), ``offset_se_m``, ``method``.
+    the plausibility check asks for it only when it warns); ``use_rest=False`` ignores the rest positions (the
+    plausibility check asks where the physics alone put the frame). Returns a dict with ``offset_m`` (None
+    when not pinned), ``offset_se_m``, ``method``.
     """
     rest = {w: rec.meta.get(f"z_{w}_rest") for w in ("minus", "plus")}
     try:
@@ -92,6 +107,8 @@ def frame_offset(rec, spread: bool = True) -> dict[str, Any]:
         if "z_rest" in rec.meta:  # the rest position of the one well an in-well record stays in
             rest["one"] = float(rec.meta["z_rest"])
     except ValueError:
+        rest = {}
+    if not use_rest:
         rest = {}
     horizontal = rec.gravity == 0
     if rec.input_name != "base_acc" and not rest and not horizontal:
@@ -174,6 +191,65 @@ def _se(estimates: list[float]) -> float:
     return float(np.std(estimates, ddof=1) / np.sqrt(len(estimates)))
 
 
+SCALE_PARTS = 4
+"""Parts of the record (at most) whose separate estimates give the scale's standard error."""
+
+SCALE_PART_MIN_S = 20.0
+"""... each at least this long where the record allows (two parts at least)."""
+
+
+def _scale_of(rec: Measurement) -> float:
+    c = input_coefficient(rec)
+    physical = known_input_gain(rec)
+    assert physical is not None  # load refuses a force record of unknown scale without a mass
+    if not np.isfinite(c) or c == 0:
+        raise MeasurementError(f"{rec.source}: the record's dynamics give the input no weight: its response's scale "
+                               "cannot be estimated (does the response follow the input?)")  # fmt: skip
+    return physical / c
+
+
+def calibrate_scale(rec: Measurement) -> Measurement:
+    """``rec`` with its response channel of unknown scale multiplied by the scale its dynamics say (the
+    value, its standard error and how in ``info["scale"]``); ``rec`` itself when no scale is unknown or it
+    was calibrated already. Raises ``MeasurementError`` when the record cannot say.
+    """
+    info = rec.info.get("scale")
+    if not info or info.get("value") is not None:
+        return rec
+    done = rec.derived.get("calibrated")
+    if done is not None:
+        return done
+    s = _scale_of(rec)
+    n_parts = int(np.clip(rec.duration // SCALE_PART_MIN_S, 2, SCALE_PARTS))
+    edges = np.linspace(0, rec.n, n_parts + 1).astype(int)
+    parts = []
+    for a, b in zip(edges[:-1], edges[1:], strict=False):
+        try:
+            parts.append(_scale_of(rec.segment(a, b)))
+        except (MeasurementError, ValueError, np.linalg.LinAlgError):
+            continue
+    se = float(np.std(parts, ddof=1) / np.sqrt(len(parts))) if len(parts) >= 2 else float("nan")
+    channel = info["channel"]
+    scaled = {k: getattr(rec, k) * s for k in ("z", "z_dot", "y") if getattr(rec, k) is not None}
+    if rec.input_name == "base_acc" and "y" in scaled:  # not SCALABLE: load refuses it; kept out for safety
+        scaled.pop("y")
+    new_info = {
+        **info,
+        "value": float(s),
+        "se": se,
+        "parts": [float(p) for p in parts],
+        "status": f"estimated: {channel} in SI = {channel} as read x {s:.6g} (+- {se:.2g}), from the input's "
+        "coefficient in the record's own dynamics (physics fixes it); every coefficient is in SI units",
+    }
+    resp = dict(rec.info.get("response", {}))
+    for k in ("velocity_noise_m_s", "integration_error_m", "trend_m_s", "trend_se_m_s"):
+        if isinstance(resp.get(k), (int, float)):
+            resp[k] = resp[k] * abs(s)
+    out = replace(rec, **scaled, info={**rec.info, "scale": new_info, "response": resp})
+    rec.derived["calibrated"] = out
+    return out
+
+
 def pin_frame(rec: Measurement) -> Measurement:
     """Put a derived z in the physical frame.
 
@@ -203,8 +279,6 @@ def pin_frame(rec: Measurement) -> Measurement:
     >>> pin_frame(rec).info["response"]["frame"][:52]
     'the fitted wells put at the rest positions of the fi'
     """
-    from negstiff.inference.record.scale import calibrate_scale
-
     rec = calibrate_scale(rec)  # a response of unknown scale first made SI (its frame is then in metres)
     resp = rec.info.get("response", {})
     if rec.z is None or resp.get("z_constant_known", True) or resp.get("frame") is not None:

@@ -22,7 +22,7 @@ import numpy as np
 
 from negstiff import io as record_io
 from negstiff.errors import MeasurementError, RecordWarning, issue
-from negstiff.inference.steps.derivatives import state_derivatives
+from negstiff.inference.steps.derivatives import noise_floor, state_derivatives
 from negstiff.io.base import RESOLUTION
 from negstiff.io.schema import (
     DIMENSIONS,
@@ -175,15 +175,45 @@ class Measurement:
 
     def states(self, purpose: str = "state") -> tuple[np.ndarray, np.ndarray, np.ndarray, dict]:
         """Smoothed z, z', z'' of the record and how they were found (``derivatives.state_derivatives``:
-        ``"state"``, the least-error velocity every free run starts from; ``"regression"``, the weak form's),
+        ``"state"``, the least-error velocity every free run starts from; ``"regression"``, the weak form's;
+        ``"band"``, NSI's, whose window keeps the response's band flat),
         computed once per record and kept with it (copies are returned: a caller may change its own).
         """
         key = ("states", purpose)
         hit = self.derived.get(key)
         if hit is None:
-            hit = self.derived[key] = state_derivatives(self.displacement, self.fs, purpose)
+            hit = self.derived[key] = state_derivatives(self.displacement, self.fs, purpose, floor=self.noise_floor())
         zs, v, a, info = hit
         return zs.copy(), v.copy(), a.copy(), copy.deepcopy(info)
+
+    def unit_warnings(self) -> list[str]:
+        """Unit checks of the record's columns (SI expected): z spanning more than a stroke could, a base
+        acceleration over 200 g rms. ``load`` issues them at once; the plausibility check asks again of a
+        record made physical (a calibrated response may span more).
+        """
+        out = []
+        if self.z is not None:
+            span = float(np.ptp(self.z))
+            if span > STROKE_LIMIT_M:
+                out.append(
+                    f"z spans {span:.3g} m: is the record in mm? negstiff reads SI units (m); scale the column in the "
+                    "map, e.g. --columns z=COL*0.001"
+                )
+        if self.input_name == "base_acc":
+            rms = float(np.std(self.u))
+            if rms > ACC_LIMIT_M_S2:
+                out.append(f"base_acc has rms {rms:.3g} m/s^2 (over 200 g): is it in mm/s^2? negstiff reads m/s^2")
+        return out
+
+    def noise_floor(self) -> tuple[float, np.ndarray, np.ndarray]:
+        """The displacement's white sensor-noise variance and its signal's PSD, (sigma^2, f, S)
+        (``derivatives.noise_floor``), computed once per record and kept with it: the derivative filters,
+        the weak form's test functions and the characterisation's tolerances all read it.
+        """
+        hit = self.derived.get("noise_floor")
+        if hit is None:
+            hit = self.derived["noise_floor"] = noise_floor(self.displacement, self.fs)
+        return hit
 
     def driving(self, model) -> np.ndarray:
         """The input that drives ``model`` over this record: ``u``, plus the forces of the model's measured
@@ -448,9 +478,9 @@ def load(
 def _warned(rec: Measurement) -> Measurement:
     """The record with what looks wrong in it alone (units: mm read as m, an acceleration in mm/s^2; the
     sensor's derivation) in ``info["warnings"]``, each issued as a ``RecordWarning`` at once: a user learns
-    it when loading, whatever comes next (``plausibility.record_warnings``).
+    it when loading, whatever comes next (``Measurement.unit_warnings``).
     """
-    new = [w for w in record_warnings(rec) if w not in rec.info.get("warnings", [])]
+    new = [w for w in rec.unit_warnings() if w not in rec.info.get("warnings", [])]
     lines = [*rec.info.get("warnings", []), *rec.info.get("response", {}).get("warnings", []), *new]
     issue([(RecordWarning, w) for w in lines])
     return replace(rec, info={**rec.info, "warnings": [*rec.info.get("warnings", []), *new]}) if new else rec
@@ -705,20 +735,3 @@ not in metres."""
 
 ACC_LIMIT_M_S2 = 2000.0
 """Table accelerations beyond this rms [m/s^2] (200 g) are not in m/s^2."""
-
-
-def record_warnings(rec) -> list[str]:
-    """Unit checks of a record's columns (SI expected)."""
-    out = []
-    if rec.z is not None:
-        span = float(np.ptp(rec.z))
-        if span > STROKE_LIMIT_M:
-            out.append(
-                f"z spans {span:.3g} m: is the record in mm? negstiff reads SI units (m); scale the column in the map, "
-                "e.g. --columns z=COL*0.001"
-            )
-    if rec.input_name == "base_acc":
-        rms = float(np.std(rec.u))
-        if rms > ACC_LIMIT_M_S2:
-            out.append(f"base_acc has rms {rms:.3g} m/s^2 (over 200 g): is it in mm/s^2? negstiff reads m/s^2")
-    return out

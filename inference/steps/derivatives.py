@@ -8,8 +8,9 @@ when the band leaves no room for smoothing (e.g. the Silverbox, sampled at 3x it
 
 Every velocity and start state of negstiff comes from this module: ``state_derivatives`` (the
 weak form, SINDy, the discrepancy workflow, validation, refinement, the posterior's windows; purpose
-"regression" or "state") and ``smooth_and_differentiate`` (NSI's regression: a window fitted to keep
-the response's band flat to 0.1 %, the gain NSI's frequency-domain fit needs). A start state for a
+"regression" or "state"; "band", ``smooth_and_differentiate``, is NSI's: a window fitted to keep the
+response's band flat to 0.1 %, the gain its frequency-domain fit needs). A record computes each once
+(``Measurement.states``). A start state for a
 free run is ``state_derivatives(..., purpose="state")`` everywhere (``validation.start_state``
 refines it by the system's own free run).
 """
@@ -74,7 +75,12 @@ def _filter_response(w: int, order: int, d: int, fs: float, nf: int, df: float) 
 
 
 def derivative_window(
-    z: np.ndarray, fs: float, purpose: str = "regression", orders=(3, 5, 7), max_window: int = 101
+    z: np.ndarray,
+    fs: float,
+    purpose: str = "regression",
+    orders=(3, 5, 7),
+    max_window: int = 101,
+    floor: tuple[float, np.ndarray, np.ndarray] | None = None,
 ) -> tuple[int, int, dict]:
     """Savitzky-Golay (window, order) for equation-error regression, from the record's own spectra
     (``noise_floor``): the one of least predicted coefficient bias b_a + b_v + e_v^2, where b_a, b_v are
@@ -87,9 +93,10 @@ def derivative_window(
     predicts less.
 
     ``purpose="state"``: the window of least predicted velocity error b_v^2 + e_v^2, for the measured
-    state a free run starts from (there the noise counts as much as the bias).
+    state a free run starts from (there the noise counts as much as the bias). ``floor``: ``noise_floor(z, fs)``
+    when the caller has it (a record keeps its own: ``Measurement.noise_floor``).
     """
-    sigma2, f, S = noise_floor(z, fs)
+    sigma2, f, S = noise_floor(z, fs) if floor is None else floor
     df = f[1] - f[0]
     jw = 2j * np.pi * f
     power = {d: float(np.sum(np.abs(jw**d) ** 2 * S) * df) for d in (1, 2)}
@@ -132,14 +139,22 @@ def derivative_window(
 
 
 def state_derivatives(
-    z: np.ndarray, fs: float, purpose: str = "regression"
+    z: np.ndarray, fs: float, purpose: str = "regression", floor: tuple[float, np.ndarray, np.ndarray] | None = None
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict]:
     """Smoothed z, z', z'' and what was done (``derivative_window``'s predictions, and "method"). A record
-    computes them once and keeps them (``Measurement.states``).
+    computes them once and keeps them (``Measurement.states``), with its noise floor (``floor``).
+    ``purpose="band"``: NSI's (``smooth_and_differentiate``: the window keeps the response's band flat, the
+    gain a frequency-domain fit needs), its (window, order) in ``info["window"]``.
     """
     z = np.asarray(z, dtype=float)
     fs = float(fs)
-    w, order, info = derivative_window(z, fs, purpose)
+    if purpose == "band":
+        w, order = velocity_window(z, fs)
+        zs, v = smooth_and_differentiate(z, fs, (w, order))
+        a = signal.savgol_filter(z, w, order, deriv=2, delta=1.0 / fs) if w else np.gradient(v, 1.0 / fs)
+        how = f"Savitzky-Golay, window {w}, order {order}" if w else "spectral differentiation"
+        return zs, v, a, {"window": (w, order), "method": f"{how} (the response's band kept flat to 0.1 %)"}
+    w, order, info = derivative_window(z, fs, purpose, floor=floor)
     if w:
         dt = 1.0 / fs
         info["method"] = (
@@ -186,11 +201,14 @@ def velocity_window(z: np.ndarray, fs: float) -> tuple[int, int]:
     return 0, 0
 
 
-def smooth_and_differentiate(z: np.ndarray, fs: float) -> tuple[np.ndarray, np.ndarray]:
-    """Savitzky-Golay smoothed displacement and velocity (``velocity_window``), or, when the data's
-    band leaves no room for smoothing, z itself and its spectral derivative.
+def smooth_and_differentiate(
+    z: np.ndarray, fs: float, window: tuple[int, int] | None = None
+) -> tuple[np.ndarray, np.ndarray]:
+    """Savitzky-Golay smoothed displacement and velocity (``velocity_window``, or ``window`` when the caller
+    has it), or, when the data's band leaves no room for smoothing, z itself and its spectral derivative.
+    A record keeps them (``Measurement.states("band")``).
     """
-    w, order = velocity_window(z, fs)
+    w, order = velocity_window(z, fs) if window is None else window
     if w:
         return (signal.savgol_filter(z, w, order), signal.savgol_filter(z, w, order, deriv=1, delta=1.0 / fs))
     zm = z.mean()

@@ -8,8 +8,6 @@ result's ``warnings`` and onto stderr, each saying what looks wrong and what to 
 
 from __future__ import annotations
 
-from dataclasses import replace
-
 from negstiff.errors import (
     BoundednessWarning,
     ConvergenceWarning,
@@ -19,7 +17,6 @@ from negstiff.errors import (
     RecordWarning,
 )
 from negstiff.inference.record.frame import frame_offset
-from negstiff.inference.record.measurement import record_warnings
 from negstiff.inference.steps.weak import input_coefficient
 
 FRAME_WARN_M = 2e-3
@@ -37,10 +34,9 @@ def frame_warnings(rec) -> list[str]:
     constant_known = rec.info.get("response", {}).get("z_constant_known", True)
     if rec.z is None or (rec.input_name != "base_acc" and rec.gravity != 0) or not constant_known:
         return []
-    gravity_only = replace(rec, meta={k: v for k, v in rec.meta.items() if not k.endswith("_rest")})
-    fo = frame_offset(gravity_only, spread=False)  # the parts' spread only for a warning's text (0.3 s on 300 s)
+    fo = frame_offset(rec, spread=False, use_rest=False)  # the parts' spread only for a warning's text (0.3 s on 300 s)
     if fo["offset_m"] is not None and abs(fo["offset_m"]) > FRAME_WARN_M:
-        fo = frame_offset(gravity_only)
+        fo = frame_offset(rec, use_rest=False)
     if fo["offset_m"] is None and (fo.get("one_well") or rec.gravity == 0):
         return []  # an in-well record (or a horizontal one without two wells) cannot say where its zero is
     if fo["offset_m"] is None:
@@ -132,7 +128,7 @@ def classified(rec, model=None, own: list[str] | tuple[str, ...] = ()) -> list[t
     resp = rec.info.get("response", {}) if rec is not None else {}
     lines = [(kind(t), t) for t in own]
     lines += [
-        (RecordWarning, t) for t in [*rec.info.get("warnings", []), *resp.get("warnings", []), *record_warnings(rec)]
+        (RecordWarning, t) for t in [*rec.info.get("warnings", []), *resp.get("warnings", []), *rec.unit_warnings()]
     ]
     if model is not None:
         lines += [(RecordWarning, t) for t in input_warnings(rec)]

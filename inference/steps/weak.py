@@ -99,12 +99,17 @@ def test_function(half: int, dt: float, pad_factor: int = 3) -> tuple[np.ndarray
 
 
 def test_function_half_width(
-    z: np.ndarray, fs: float, tol: float = 1e-2, min_half: int = 4, max_half: int = 200
+    z: np.ndarray,
+    fs: float,
+    tol: float = 1e-2,
+    min_half: int = 4,
+    max_half: int = 200,
+    floor: tuple[float, np.ndarray, np.ndarray] | None = None,
 ) -> tuple[int, float]:
     """Half-width (samples) of the test function by Messenger & Bortz's rule (module docstring), and
-    the corner frequency [Hz].
+    the corner frequency [Hz]. ``floor``: ``noise_floor(z, fs)`` when the caller has it.
     """
-    _, f, S = noise_floor(z, fs)
+    _, f, S = noise_floor(z, fs) if floor is None else floor
     above = np.flatnonzero(S > 0)
     f_c = float(f[above[-1]]) if above.size else fs / 4
     nfft = 1 << 14
@@ -162,11 +167,18 @@ class WeakForm:
 
     @classmethod
     def of(cls, rec: Measurement) -> WeakForm:
-        """The weak form of ``rec`` (its regression states, computed once and kept with it)."""
-        zs, v, _, deriv = rec.states("regression")
-        noise = deriv["velocity_noise_std"] if np.isfinite(deriv["velocity_noise_std"]) else 0.0
-        half, f_c = test_function_half_width(rec.displacement, rec.fs)
-        return cls(zs, v, half, float(noise), f_c, deriv)
+        """The weak form of ``rec`` (its regression states and test functions), made once per record and
+        kept with it.
+        """
+        hit = rec.derived.get("weak_form")
+        if hit is None:
+            zs, v, _, deriv = rec.states("regression")
+            noise = deriv["velocity_noise_std"] if np.isfinite(deriv["velocity_noise_std"]) else 0.0
+            half, f_c = test_function_half_width(rec.displacement, rec.fs, floor=rec.noise_floor())
+            for a in (zs, v):
+                a.flags.writeable = False  # shared by every fit of the record
+            hit = rec.derived["weak_form"] = cls(zs, v, half, float(noise), f_c, deriv)
+        return hit
 
     @property
     def stride(self) -> int:

@@ -148,7 +148,7 @@ _MAP_ENTRY = re.compile(r"^\s*(\w+)\s*=\s*([^*]+?)\s*(?:\*\s*([-+0-9.eE]+|\?))?\
 
 UNKNOWN_SCALE = None
 """A column map's scale for a channel whose sensitivity is unknown (``z_dot=ldv*?``): the record's own
-dynamics estimate it (``negstiff.inference.record.scale``)."""
+dynamics estimate it (``negstiff.inference.record.frame``)."""
 
 
 def parse_column_map(text: str | None) -> dict[str, tuple[str, float | None]]:
