@@ -199,6 +199,7 @@ def cmd_posterior(args) -> int:
         max_steps=args.max_steps,
         hdi_prob=args.hdi_prob,
         adjust=not args.no_adjust,
+        input_noise=args.input_noise,
         seed=args.seed,
         progress=wants_progress(args),
         start=start,

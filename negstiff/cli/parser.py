@@ -341,6 +341,13 @@ def _posterior(sub, common: argparse.ArgumentParser, data_opts: argparse.Argumen
         help="no curvature adjustment: the i.i.d. Gaussian likelihood as it stands (narrower, overconfident "
         "intervals when the input is measured with noise)",
     )
+    pst.add_argument(
+        "--input-noise",
+        type=declared(POST, "input_noise"),
+        default=default(POST, "input_noise"),
+        help="the input sensor's white noise rms [m/s^2, or N for a force] (default: read from the input's spectral "
+        "floor above the excitation's band; 0: the input taken as exact)",
+    )
     pst.set_defaults(func=c.cmd_posterior)
 
 

@@ -29,6 +29,7 @@ from negstiff.inference.estimators.posterior.parametrisation import (
 from negstiff.inference.estimators.posterior.sampling import sample_ensembles
 from negstiff.inference.estimators.posterior.windows import DROP_FACTOR_AT_MAP, PosteriorError, Windows
 from negstiff.inference.record.measurement import Measurement
+from negstiff.inference.steps.derivatives import noise_floor
 from negstiff.inference.steps.plausibility import classified
 from negstiff.models import Model
 from negstiff.models.device import NOMINAL
@@ -61,6 +62,10 @@ class Posterior(Estimator):
         1: the input pre-emphasised for the simulator's interpolation; q > 1: interpolated to q x fs.
     adjust : bool, default True
         Curvature adjustment of the likelihood by the windows' sandwich covariance.
+    input_noise : float, optional
+        The input sensor's white noise rms [input units: m/s^2 or N]. The model's input is measured too: its
+        noise reaches each window's response through the device (``Windows.set_input_noise``). None (default):
+        estimated from the input's own spectral floor (``input_noise_rms``); 0: the input taken as exact.
     threads : int, optional
         Threads for the batched likelihood (default: ``NEGSTIFF_THREADS`` or the cores).
     seed : int, default 0
@@ -109,6 +114,7 @@ class Posterior(Estimator):
         "hdi_prob": Interval(float, 0.0, 0.999, lo_open=True),
         "oversample": Interval(int, 1, 16),
         "adjust": Boolean(),
+        "input_noise": Interval(float, 0.0, none=True),
         "threads": Interval(int, 1, 1024, none=True),
         "seed": SEED,
         "progress": Boolean(),
@@ -132,6 +138,7 @@ class Posterior(Estimator):
         hdi_prob: float = 0.9,
         oversample: int = 1,
         adjust: bool = True,
+        input_noise: float | None = None,
         threads: int | None = None,
         seed: int = 0,
         progress: bool = False,
@@ -151,6 +158,7 @@ class Posterior(Estimator):
         self.hdi_prob = hdi_prob
         self.oversample = oversample
         self.adjust = adjust
+        self.input_noise = input_noise
         self.threads = threads
         self.seed = seed
         self.progress = progress
@@ -281,7 +289,13 @@ class Posterior(Estimator):
         win.drop_unmatched(p_, par.kind, factor=DROP_FACTOR_AT_MAP)
         win.set_sensitivities(p_, par.kind)
         theta, sol = self._map(par, win, theta)
-        sigma = float(np.sqrt(np.sum(sol.fun**2) / win.dof))  # sol.fun: the projected residuals at theta
+        s_u = input_noise_rms(rec) if self.input_noise is None else float(self.input_noise)
+        self.input_noise_ = {
+            "rms": s_u,
+            "source": "the input's spectral floor" if self.input_noise is None else "given",
+        }
+        win.set_input_noise(par.to_params(theta[None])[:, 0], par.kind, s_u**2)
+        sigma = float(np.sqrt(win.noise_sigma2(sol.fun)))  # sol.fun: the projected residuals at theta
         return par, win, theta, sol, sigma
 
     # --- the run --------------------------------------------------------------------------------
@@ -302,7 +316,11 @@ class Posterior(Estimator):
         # see, the scale is the mass prior's.
         free = par.free()
         x_scale = np.maximum(np.abs(theta), 1e-6)
-        A_x, V_x, inflation = curvature_adjustment(sol.jac, sol.fun, win.n_windows, sigma, adjust=self.adjust)
+        if win.noise_basis is None:
+            A_x, V_x, inflation = curvature_adjustment(sol.jac, sol.fun, win.n_windows, sigma, adjust=self.adjust)
+        else:  # the scores of the likelihood sampled: residuals whitened by the input noise's covariance
+            J_w, r_w = win.whitened(sol.jac, sol.fun, sigma**2)
+            A_x, V_x, inflation = curvature_adjustment(J_w, r_w, win.n_windows, 1.0, adjust=self.adjust)
         cov = np.zeros((theta.size, theta.size))
         cov[np.ix_(free, free)] = V_x * np.outer(x_scale[free], x_scale[free])
         for i, sd in par.fixed_sd.items():  # the likelihood does not see them: the prior's scale
@@ -361,6 +379,7 @@ class Posterior(Estimator):
             "windows": win.n_windows,
             "substeps": win.substeps,
             "curvature_adjustment": self.adjust,
+            "input_noise": dict(self.input_noise_),
             "variance_inflation": [round(float(v), 3) for v in inflation],
             "windows_dropped": [{"start_s": t, "rms_m": r} for t, r in win.dropped],
             "samples_used": int(win.n_windows * win.length),
@@ -386,6 +405,23 @@ class Posterior(Estimator):
         self.warnings_ = [text for _, text in lines]
         self.record_ = dict(rec.info)
         return self
+
+
+INPUT_BAND_FILLED = 0.5
+"""An input whose spectrum stands above its floor in more than this share of the top fifth of the band fills
+the band: its floor is signal, not the sensor's noise, and is not read as noise (``input_noise_rms``)."""
+
+
+def input_noise_rms(rec: Measurement) -> float:
+    """The input sensor's white noise rms [input units], read from the input's own spectrum: the white
+    plateau above the excitation's band (``derivatives.noise_floor``, the same reading as the displacement's).
+    0 when the excitation fills the band (the floor there is signal: nothing to read the noise from).
+    """
+    sigma2, f, S = noise_floor(rec.u, rec.fs)
+    top = f > 0.8 * rec.fs / 2
+    if not top.any() or np.mean(S[top] > 0) > INPUT_BAND_FILLED:
+        return 0.0
+    return math.sqrt(sigma2)
 
 
 def _idata(res: PosteriorResult, y: np.ndarray, logpost: LogPosterior, win: Windows):

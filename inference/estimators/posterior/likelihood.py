@@ -94,10 +94,7 @@ class LogPosterior:
         ok = np.isfinite(lp)
         if ok.any():
             zsim, div = self.win.simulate(self.par.to_params(self.likelihood_point(theta[ok])), self.par.kind)
-            ss = self.win.sum_squares(zsim)  # (P, W)
-            sig2 = np.exp(2 * log_sigma[ok])[:, None]
-            n_w = self.win.dof // self.win.n_windows
-            ll = -0.5 * n_w * np.log(2 * np.pi * sig2) - ss / (2 * sig2)
+            ll = self.win.log_likelihood(zsim, np.exp(2 * log_sigma[ok]))  # (P, W)
             ll[div] = -np.inf
             out[ok] = ll if pointwise else ll.sum(axis=1)
         return out

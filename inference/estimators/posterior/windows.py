@@ -7,6 +7,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
+from scipy.optimize import minimize_scalar
 
 from negstiff.errors import MeasurementError
 from negstiff.inference.record.measurement import Measurement
@@ -50,6 +51,8 @@ class Windows:
     threads: int | None = None  # simulator threads (None: the machine's cores)
     starts: np.ndarray | None = None  # (W,) first sample of each window in the record
     dropped: list[tuple[float, float]] = field(default_factory=list)  # (start [s], rms residual [m]) of dropped windows
+    noise_basis: np.ndarray | None = None  # (W, L - 2, L): each window's input-noise eigenbasis (``set_input_noise``)
+    noise_var: np.ndarray | None = None  # (W, L - 2): the input noise's variance [m^2] along it
 
     @property
     def n_windows(self) -> int:
@@ -180,7 +183,7 @@ class Windows:
         self.u, self.z, self.x0 = self.u[keep], self.z[keep], self.x0[keep]
         if self.starts is not None:
             self.starts = self.starts[keep]
-        self.proj = None
+        self.proj = self.noise_basis = self.noise_var = None
         return int(bad.sum())
 
     def resolve_substeps(self, params: np.ndarray, kind: str, jac: np.ndarray, tol: float = SUBSTEP_SHIFT_SD,
@@ -217,6 +220,101 @@ class Windows:
         """Orthonormal bases of each window's start-state sensitivities (finite differences)."""
         _, S = self._state_sensitivities(params, kind)
         self.proj = np.linalg.qr(S)[0]
+
+    def input_sensitivities(self, params: np.ndarray, kind: str) -> np.ndarray:
+        """Each window's response to its own input samples, (W, L, L): G[w, i, j] = dz_i / du_j, by finite
+        differences of the batched simulator (one simulation per input sample: W L runs of L samples). With
+        ``oversample`` q > 1 a raw sample's perturbation reaches the fine input as a hat of width 2q (linear
+        interpolation: the band-limited interpolant's main lobe).
+        """
+        W, L, q = self.n_windows, self.length, self.oversample
+        base, _ = self.simulate(params[:, None], kind)
+        scale = float(np.std(self.u)) or 1.0
+        du = 1e-3 * scale
+        pulse = np.zeros((L, q * L))
+        hat = 1.0 - np.abs(np.arange(-q + 1, q)) / q
+        for j in range(L):
+            lo = q * j - q + 1
+            idx = np.arange(lo, lo + hat.size)
+            ok = (idx >= 0) & (idx < q * L)
+            pulse[j, idx[ok]] = hat[ok]
+        u = (self.u[:, None, :] + du * pulse[None]).reshape(W * L, q * L)
+        res = simulate_batch(
+            np.repeat(params[:, None], W * L, axis=1), kind, u, self.dt / q, np.repeat(self.x0, L, axis=0),
+            input_kind=self.input_kind, input_index=np.arange(W * L), substeps=self.substeps, threads=self.threads,
+        )  # fmt: skip
+        z = res.z[:, ::q].reshape(W, L, L)  # (window, perturbed sample j, response sample i)
+        return ((z - base[0][:, None, :]) / du).transpose(0, 2, 1)
+
+    def set_input_noise(self, params: np.ndarray, kind: str, variance: float) -> None:
+        """The input sensor's white noise (``variance`` per sample, in the input's units squared) in the
+        likelihood: a window's residual is then e = n_z - G n_u (G: ``input_sensitivities``, the model's
+        response to its input samples, linearised at ``params``), with covariance sigma^2 I + s_u^2 G G^T.
+        Projected off the start states (``proj``), that covariance is diagonalised once per window:
+        ``noise_basis`` (its eigenvectors, the rows of a basis of the projected space) and ``noise_var``
+        (its eigenvalues less sigma^2), so the likelihood costs one small product per window
+        (``log_likelihood``). ``variance`` 0 removes the term.
+        """
+        if not variance > 0:
+            self.noise_basis = self.noise_var = None
+            return
+        if self.proj is None:
+            self.set_sensitivities(params, kind)
+        assert self.proj is not None
+        G = self.input_sensitivities(params, kind)
+        Q = np.linalg.qr(self.proj, mode="complete")[0][:, :, self.proj.shape[-1]:]  # (W, L, L - 2)
+        M = variance * (Q.transpose(0, 2, 1) @ G) @ (G.transpose(0, 2, 1) @ Q)
+        lam, V = np.linalg.eigh(M)
+        self.noise_var = np.maximum(lam, 0.0)
+        self.noise_basis = (Q @ V).transpose(0, 2, 1)
+
+    def log_likelihood(self, zsim: np.ndarray, sigma2: np.ndarray) -> np.ndarray:
+        """Each window's Gaussian log likelihood, (P, W), of the simulations ``zsim`` (P, W, L) with sensor
+        noise ``sigma2`` (P,) [m^2], on the projected residuals: i.i.d. noise alone, or with the input's noise
+        (``set_input_noise``) through each window's eigenbasis.
+        """
+        s2 = np.asarray(sigma2, float)[:, None]
+        n_w = self.dof // self.n_windows
+        if self.noise_basis is None:
+            ss = self.sum_squares(zsim)
+            return -0.5 * n_w * np.log(2 * np.pi * s2) - ss / (2 * s2)
+        assert self.noise_var is not None
+        y = ((self.z[None] - zsim).transpose(1, 0, 2) @ self.noise_basis.transpose(0, 2, 1)).transpose(1, 0, 2)
+        var = self.noise_var[None] + s2[:, :, None]  # (P, W, L - 2)
+        return -0.5 * np.sum(np.log(2 * np.pi * var) + y**2 / var, axis=-1)
+
+    def whitened(self, J: np.ndarray, r: np.ndarray, sigma2: float) -> tuple[np.ndarray, np.ndarray]:
+        """The projected residuals ``r`` (W L,) and their Jacobian ``J`` (W L, p) whitened by the noise model at
+        ``sigma2`` (the curvature adjustment's scores are then those of the right likelihood): (W (L - 2), p),
+        (W (L - 2),). Without the input's noise: ``J / sigma``, ``r / sigma``.
+        """
+        if self.noise_basis is None:
+            s = float(np.sqrt(sigma2))
+            return J / s, r / s
+        assert self.noise_var is not None
+        W, L = self.n_windows, self.length
+        d = 1.0 / np.sqrt(self.noise_var + sigma2)  # (W, L - 2)
+        Jw = (self.noise_basis @ J.reshape(W, L, -1)) * d[:, :, None]
+        rw = (self.noise_basis @ r.reshape(W, L, 1))[:, :, 0] * d
+        return Jw.reshape(-1, J.shape[1]), rw.ravel()
+
+    def noise_sigma2(self, r: np.ndarray) -> float:
+        """The sensor noise variance [m^2] that maximises the likelihood of the projected residuals ``r``
+        (W L,) under the noise model (the residuals' mean square without the input's noise).
+        """
+        if self.noise_basis is None:
+            return float(np.sum(r**2) / self.dof)
+        assert self.noise_var is not None
+        y2 = ((self.noise_basis @ r.reshape(self.n_windows, self.length, 1))[:, :, 0]) ** 2
+        lam = self.noise_var
+
+        def nll(log_s2):
+            v = lam + np.exp(log_s2)
+            return float(np.sum(np.log(v) + y2 / v))
+
+        s0 = float(np.sum(r**2) / self.dof)
+        sol = minimize_scalar(nll, bounds=(np.log(s0) - 12.0, np.log(s0) + 1.0), method="bounded")
+        return float(np.exp(sol.x))
 
     def residuals(self, zsim: np.ndarray) -> np.ndarray:
         """Residuals with the start-state directions projected out: (P, W, L)."""
