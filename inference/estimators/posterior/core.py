@@ -294,7 +294,8 @@ class Posterior(Estimator):
             "rms": s_u,
             "source": "the input's spectral floor" if self.input_noise is None else "given",
         }
-        win.set_input_noise(par.to_params(theta[None])[:, 0], par.kind, s_u**2)
+        ms = float(np.sum(sol.fun**2) / win.dof)  # the sensor's variance or more (it holds the input's noise too)
+        win.set_input_noise(par.to_params(theta[None])[:, 0], par.kind, s_u**2, ms)
         sigma = float(np.sqrt(win.noise_sigma2(sol.fun)))  # sol.fun: the projected residuals at theta
         return par, win, theta, sol, sigma
 
