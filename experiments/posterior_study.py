@@ -21,7 +21,7 @@ from negstiff.inference.estimators.posterior import Posterior, result_json
 from negstiff.inference.estimators.sindy import SINDy
 from negstiff.inference.record.measurement import Measurement
 from negstiff.models import AS_BUILT, SEED_LIKE_CROSS_WELL_RMS, SEED_LIKE_CUBIC, Model
-from negstiff.models.rig import Rig
+from negstiff.models.rig import Rig, Sensors
 
 from .numbers import fmt
 from .report import Report, run_study
@@ -142,9 +142,12 @@ def coefficient_part(rep: Report, res: dict[str, Any], duration: float, seed_: i
         f"A {duration:g} s cross-well random record at the rig's default sensor noise, mass weighed "
         f"({fmt(m.mass, 4)} kg). Likelihood: {s['windows']} windows of {s['window_s']:g} s, each simulated from its "
         f"measured (then profiled) start state ({len(s['windows_dropped'])} dropped: not matched from any nearby start "
-        f"state), the input pre-emphasised for the simulator's interpolation; curvature-adjusted by the windows' "
-        f"sandwich covariance (variance inflation {', '.join(fmt(v, 3) for v in s['variance_inflation'])} along the "
-        f"adjusted directions: the accelerometer's noise, in the model's input and in z, is not i.i.d.). "
+        f"state), the input pre-emphasised for the simulator's interpolation. The table accelerometer's noise in "
+        f"the input ({fmt(s['input_noise']['rms'], 3)} m/s^2 rms, {s['input_noise']['source']}; the rig's "
+        f"{fmt(Sensors().acc_noise, 3)}) is carried through each window's response to its input samples. "
+        f"Curvature-adjusted by the windows' sandwich covariance (variance inflation "
+        f"{', '.join(fmt(v, 3) for v in s['variance_inflation'])} along the adjusted directions: what the likelihood "
+        f"still does not model, mainly the same noise integrated twice into z = y - b and the profiled start states). "
         f"{s['ensembles']} independent ensembles of {s['walkers']} walkers, {s['kept_steps_per_ensemble']} kept steps "
         f"each (largest autocorrelation time {fmt(s['tau_max_steps'], 3)} steps), {s['likelihood_calls']} batched "
         f"likelihood calls, {elapsed:.0f} s."
