@@ -10,7 +10,7 @@ from __future__ import annotations
 import io
 import sys
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import matplotlib.pyplot as plt
@@ -60,7 +60,8 @@ class PredictiveCheck:
 
 def predictive_check(post: Posterior, n_draws: int = 100, seconds: float = 4.0, seed: int = 0) -> PredictiveCheck:
     """Simulate ``n_draws`` posterior draws over the windows of the first ``seconds``, each a free run from
-    its window's start state, and add the draw's measurement noise.
+    its window's start state under the measured input plus a draw of the input sensor's noise (as the
+    likelihood carries it, ``settings.input_noise``), and add the draw's sensor noise.
     """
     pr, win, lp = post.result_, post.windows_, post.logpost_
     rng = np.random.default_rng(seed)
@@ -68,8 +69,13 @@ def predictive_check(post: Posterior, n_draws: int = 100, seconds: float = 4.0, 
     draws = flat[rng.choice(flat.shape[0], n_draws, replace=False)]
     theta = draws[:, :-1]
     n_w = min(win.n_windows, int(round(seconds / (win.length * win.dt))))
-    zsim, _ = win.simulate(lp.par.to_params(theta), lp.par.kind)
-    zsim = zsim[:, :n_w].reshape(n_draws, -1)
+    s_u = float(pr.settings.get("input_noise", {}).get("rms", 0.0))
+    params = lp.par.to_params(theta)
+    runs = []
+    for i in range(n_draws):  # each draw under its own draw of the input's noise
+        noisy = replace(win, u=win.u + s_u * rng.standard_normal(win.u.shape)) if s_u > 0 else win
+        runs.append(noisy.simulate(params[:, i : i + 1], lp.par.kind)[0][0])
+    zsim = np.stack(runs)[:, :n_w].reshape(n_draws, -1)
     pred = zsim + draws[:, -1:] * rng.standard_normal(zsim.shape)
     meas = win.z[:n_w].ravel()
     lo, hi = np.percentile(pred, [5, 95], axis=0)

@@ -38,7 +38,6 @@ from negstiff.inference.analysis.periodicity import classify_regime, periodicity
 from negstiff.inference.estimators.nsi import well_guesses
 from negstiff.inference.record.frame import pin_frame
 from negstiff.inference.record.measurement import Measurement
-from negstiff.inference.steps.derivatives import noise_floor
 from negstiff.inference.steps.plausibility import classified
 
 CHAOS_THRESHOLD = 0.05
@@ -206,7 +205,7 @@ def characterize(
         if q == 1:
             per = periodicity(work, forcing_hz, wells)
         else:  # the noise of the acquisition, from the white plateau of the record as measured
-            noise = math.sqrt(noise_floor(rec.displacement, rec.fs)[0])
+            noise = math.sqrt(rec.noise_floor()[0])
             per = periodicity(work, forcing_hz, wells, noise=noise, band_fs=rec.fs)
     except (MeasurementError, ValueError, np.linalg.LinAlgError) as exc:
         out["reasons"]["period"] = _reason(exc)

@@ -182,7 +182,8 @@ class Measurement:
         key = ("states", purpose)
         hit = self.derived.get(key)
         if hit is None:
-            hit = self.derived[key] = state_derivatives(self.displacement, self.fs, purpose, floor=self.noise_floor())
+            floor = None if purpose == "band" else self.noise_floor()  # the band's window reads its own PSD
+            hit = self.derived[key] = state_derivatives(self.displacement, self.fs, purpose, floor=floor)
         zs, v, a, info = hit
         return zs.copy(), v.copy(), a.copy(), copy.deepcopy(info)
 

@@ -233,13 +233,16 @@ class Posterior(Estimator):
         info.update(source="output-error refinement of the weak-form estimate", model=r.model.to_dict())
         return r.model
 
-    def _map(self, par: Parametrisation, win: Windows, theta: np.ndarray):
+    def _map(self, par: Parametrisation, win: Windows, theta: np.ndarray, sigma2: float | None = None):
         """MAP point of theta (sigma profiled) by least squares on the projected residuals, with the
-        parameters the likelihood does not see held; returns (theta, the least-squares solution).
+        parameters the likelihood does not see held; returns (theta, the least-squares solution). With the
+        input's noise in the likelihood (``Windows.set_input_noise``) the residuals are whitened by the noise
+        model at the sensor's variance ``sigma2`` (generalised least squares: the likelihood's own mode).
         """
         x_scale = np.maximum(np.abs(theta), 1e-6)
         free = par.free()
-        n_rows = win.n_windows * win.length
+        gls = win.noise_basis is not None and sigma2 is not None
+        n_rows = win.n_windows * (win.length - (win.proj.shape[-1] if gls and win.proj is not None else 0))
 
         def resid(x):
             th = theta.copy()
@@ -249,6 +252,9 @@ class Posterior(Estimator):
             zsim, div = win.simulate(par.to_params(th[None]), par.kind)
             if div[0]:
                 return np.full(n_rows, 1.0)
+            if gls:
+                assert sigma2 is not None
+                return win.whitened_residuals(zsim[0], sigma2)
             return win.residuals(zsim)[0].ravel()
 
         x0 = theta[free] / x_scale[free]
@@ -289,14 +295,23 @@ class Posterior(Estimator):
         win.drop_unmatched(p_, par.kind, factor=DROP_FACTOR_AT_MAP)
         win.set_sensitivities(p_, par.kind)
         theta, sol = self._map(par, win, theta)
-        s_u = input_noise_rms(rec) if self.input_noise is None else float(self.input_noise)
-        self.input_noise_ = {
-            "rms": s_u,
-            "source": "the input's spectral floor" if self.input_noise is None else "given",
-        }
-        ms = float(np.sum(sol.fun**2) / win.dof)  # the sensor's variance or more (it holds the input's noise too)
-        win.set_input_noise(par.to_params(theta[None])[:, 0], par.kind, s_u**2, ms)
-        sigma = float(np.sqrt(win.noise_sigma2(sol.fun)))  # sol.fun: the projected residuals at theta
+        if self.input_noise is None:
+            s_u, why = input_noise_rms(rec)
+        else:
+            s_u, why = float(self.input_noise), "given"
+        self.input_noise_ = {"rms": s_u, "source": why}
+        if s_u > 0:
+            # the likelihood's own mode: generalised least squares under the input's noise (two passes, the
+            # sensor's variance re-read between them); its solution is whitened (the curvature adjustment's)
+            r = sol.fun
+            for _ in range(2):
+                ms = float(np.sum(r**2) / win.dof)  # the sensor's variance or more (it holds the input's noise too)
+                win.set_input_noise(par.to_params(theta[None])[:, 0], par.kind, s_u**2, ms)
+                s2 = win.noise_sigma2(r)
+                theta, sol = self._map(par, win, theta, s2)
+                r = win.residuals(win.simulate(par.to_params(theta[None]), par.kind)[0])[0].ravel()
+            return par, win, theta, sol, float(np.sqrt(win.noise_sigma2(r)))
+        sigma = float(np.sqrt(np.sum(sol.fun**2) / win.dof))  # sol.fun: the projected residuals at theta
         return par, win, theta, sol, sigma
 
     # --- the run --------------------------------------------------------------------------------
@@ -317,11 +332,9 @@ class Posterior(Estimator):
         # see, the scale is the mass prior's.
         free = par.free()
         x_scale = np.maximum(np.abs(theta), 1e-6)
-        if win.noise_basis is None:
-            A_x, V_x, inflation = curvature_adjustment(sol.jac, sol.fun, win.n_windows, sigma, adjust=self.adjust)
-        else:  # the scores of the likelihood sampled: residuals whitened by the input noise's covariance
-            J_w, r_w = win.whitened(sol.jac, sol.fun, sigma**2)
-            A_x, V_x, inflation = curvature_adjustment(J_w, r_w, win.n_windows, 1.0, adjust=self.adjust)
+        # the scores of the likelihood sampled (with the input's noise, ``sol`` holds the whitened residuals)
+        sig = sigma if win.noise_basis is None else 1.0
+        A_x, V_x, inflation = curvature_adjustment(sol.jac, sol.fun, win.n_windows, sig, adjust=self.adjust)
         cov = np.zeros((theta.size, theta.size))
         cov[np.ix_(free, free)] = V_x * np.outer(x_scale[free], x_scale[free])
         for i, sd in par.fixed_sd.items():  # the likelihood does not see them: the prior's scale
@@ -413,16 +426,23 @@ INPUT_BAND_FILLED = 0.5
 the band: its floor is signal, not the sensor's noise, and is not read as noise (``input_noise_rms``)."""
 
 
-def input_noise_rms(rec: Measurement) -> float:
+INPUT_NOISE_SHARE = 0.1
+"""A white floor holding more than this share of the input's variance is the excitation itself (a
+broadband input is flat over the band too), not its sensor's noise (``input_noise_rms``)."""
+
+
+def input_noise_rms(rec: Measurement) -> tuple[float, str]:
     """The input sensor's white noise rms [input units], read from the input's own spectrum: the white
-    plateau above the excitation's band (``derivatives.noise_floor``, the same reading as the displacement's).
-    0 when the excitation fills the band (the floor there is signal: nothing to read the noise from).
+    plateau above the excitation's band (``derivatives.noise_floor``, the same reading as the displacement's),
+    and how it was read. 0 when the excitation fills the band: its spectrum stands above the floor up to the
+    Nyquist frequency, or the "floor" holds more than ``INPUT_NOISE_SHARE`` of the input's variance (a flat
+    broadband excitation is a plateau too): nothing to read the noise from.
     """
     sigma2, f, S = noise_floor(rec.u, rec.fs)
     top = f > 0.8 * rec.fs / 2
-    if not top.any() or np.mean(S[top] > 0) > INPUT_BAND_FILLED:
-        return 0.0
-    return math.sqrt(sigma2)
+    if not top.any() or np.mean(S[top] > 0) > INPUT_BAND_FILLED or sigma2 > INPUT_NOISE_SHARE * np.var(rec.u):
+        return 0.0, "not read: the excitation fills the band (its spectral floor is signal); the input taken as exact"
+    return math.sqrt(sigma2), "the input's spectral floor"
 
 
 def _idata(res: PosteriorResult, y: np.ndarray, logpost: LogPosterior, win: Windows):

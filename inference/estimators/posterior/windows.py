@@ -159,6 +159,7 @@ class Windows:
             new, _ = self.simulate(params[:, None], kind, trial)
             better = ok & (np.sum((self.z - new[0]) ** 2, axis=1) < np.sum(r**2, axis=1))
             self.x0 = np.where(better[:, None], trial, self.x0)
+        self.clear_input_noise()
 
     def drop_unmatched(self, params: np.ndarray, kind: str, factor: float = DROP_FACTOR) -> int:
         """Drop the windows the model cannot follow from any nearby start state: those whose residual
@@ -187,7 +188,8 @@ class Windows:
         self.u, self.z, self.x0 = self.u[keep], self.z[keep], self.x0[keep]
         if self.starts is not None:
             self.starts = self.starts[keep]
-        self.proj = self.noise_basis = self.noise_var = None
+        self.proj = None
+        self.clear_input_noise()
         return int(bad.sum())
 
     def resolve_substeps(self, params: np.ndarray, kind: str, jac: np.ndarray, tol: float = SUBSTEP_SHIFT_SD,
@@ -218,12 +220,22 @@ class Windows:
                 self.substeps = s
                 break
             r0 = r1
+        if self.substeps != start:
+            self.clear_input_noise()
         return self.substeps != start
 
     def set_sensitivities(self, params: np.ndarray, kind: str) -> None:
         """Orthonormal bases of each window's start-state sensitivities (finite differences)."""
         _, S = self._state_sensitivities(params, kind)
         self.proj = np.linalg.qr(S)[0]
+        self.clear_input_noise()  # made for the old basis: ``set_input_noise`` again
+
+    def clear_input_noise(self) -> None:
+        """Forget the input-noise term (the likelihood is then the sensor's i.i.d. noise alone): what changes
+        the windows (start states, steps, basis, dropped windows) makes it stale.
+        """
+        self.noise_basis = self.noise_var = None
+        self.noise_rank = 0
 
     def input_sensitivities(self, params: np.ndarray, kind: str) -> np.ndarray:
         """Each window's response to its own input samples, (W, L, L): G[w, i, j] = dz_i / du_j, by finite
@@ -248,7 +260,8 @@ class Windows:
             input_kind=self.input_kind, input_index=np.arange(W * L), substeps=self.substeps, threads=self.threads,
         )  # fmt: skip
         z = res.z[:, ::q].reshape(W, L, L)  # (window, perturbed sample j, response sample i)
-        return ((z - base[0][:, None, :]) / du).transpose(0, 2, 1)
+        G = ((z - base[0][:, None, :]) / du).transpose(0, 2, 1)
+        return np.where(np.isfinite(G), G, 0.0)  # a run that diverges has no linear response: no term there
 
     def set_input_noise(self, params: np.ndarray, kind: str, variance: float, sigma2: float | None = None) -> None:
         """The input sensor's white noise (``variance`` per sample, in the input's units squared) in the
@@ -258,10 +271,13 @@ class Windows:
         ``noise_basis`` (its eigenvectors, the rows of a basis of the projected space) and ``noise_var``
         (its eigenvalues less sigma^2), so the likelihood costs one small product per window
         (``log_likelihood``). The device filters the input's noise into its band: a few directions carry it.
-        Those whose variance is below ``NOISE_RANK_TOL`` of ``sigma2`` (the sensor's, or an upper bound of it)
-        are taken as the sensor's alone (their share of the log likelihood changes by less than that
-        fraction), and the likelihood projects on the others only (``noise_rank``; 16-28 of 62 on a 0.02 m/s^2
-        table). ``variance`` 0 removes the term.
+        Those whose variance is below ``NOISE_RANK_TOL`` of ``sigma2`` (the residuals' mean square: the
+        sensor's variance or a little more) are taken as the sensor's alone (each changes a window's log
+        likelihood by about that fraction of a nat: 7e-4 nats per window at most, measured on a 0.02 m/s^2
+        table), and the likelihood projects on the others only (``noise_rank``: 27 of 62 there). G is the
+        response to the simulator's own input samples (pre-emphasised or interpolated, ``cut``): the
+        raw samples' noise passes those filters with a gain within 1 % of 1 in the device's band (below
+        0.1 fs), where the response to it lives. ``variance`` 0 removes the term.
         """
         if not variance > 0:
             self.noise_basis = self.noise_var = None
@@ -298,6 +314,16 @@ class Windows:
         rest = self.sum_squares(zsim) - np.sum(y**2, axis=-1)  # the other directions: the sensor's noise alone
         return (-0.5 * (n_w - k) * np.log(2 * np.pi * s2) - rest / (2 * s2)
                 - 0.5 * np.sum(np.log(2 * np.pi * var) + y**2 / var, axis=-1))  # fmt: skip
+
+    def whitened_residuals(self, zsim: np.ndarray, sigma2: float) -> np.ndarray:
+        """One simulation's residuals (``zsim``: (W, L)) whitened by the noise model at ``sigma2``: the
+        residual vector whose squared norm is the likelihood's quadratic form (W (L - 2),), for least squares.
+        """
+        r = self.residuals(zsim[None])[0]
+        if self.noise_basis is None:
+            return r.ravel() / np.sqrt(sigma2)
+        assert self.noise_var is not None
+        return ((self.noise_basis @ r[:, :, None])[:, :, 0] / np.sqrt(self.noise_var + sigma2)).ravel()
 
     def whitened(self, J: np.ndarray, r: np.ndarray, sigma2: float) -> tuple[np.ndarray, np.ndarray]:
         """The projected residuals ``r`` (W L,) and their Jacobian ``J`` (W L, p) whitened by the noise model at
