@@ -292,7 +292,7 @@ class Windows:
         lam = np.maximum(lam, 0.0)
         if sigma2 is not None:
             lam = np.where(lam > NOISE_RANK_TOL * sigma2, lam, 0.0)
-        self.noise_rank = int(max(1, (lam > 0).sum(axis=1).max()))
+        self.noise_rank = max(1, int((lam > 0).sum(axis=1).max()))
         self.noise_var = lam
         self.noise_basis = (Q @ V).transpose(0, 2, 1)
 
