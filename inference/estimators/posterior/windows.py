@@ -57,6 +57,7 @@ class Windows:
     noise_basis: np.ndarray | None = None  # (W, L - 2, L): each window's input-noise eigenbasis (``set_input_noise``)
     noise_var: np.ndarray | None = None  # (W, L - 2): the input noise's variance [m^2] along it
     noise_rank: int = 0  # the directions (the last of ``noise_basis``) whose input-noise variance counts
+    _basis_t: np.ndarray | None = field(default=None, repr=False)  # their basis, transposed and contiguous
 
     @property
     def n_windows(self) -> int:
@@ -234,7 +235,7 @@ class Windows:
         """Forget the input-noise term (the likelihood is then the sensor's i.i.d. noise alone): what changes
         the windows (start states, steps, basis, dropped windows) makes it stale.
         """
-        self.noise_basis = self.noise_var = None
+        self.noise_basis = self.noise_var = self._basis_t = None
         self.noise_rank = 0
 
     def input_sensitivities(self, params: np.ndarray, kind: str) -> np.ndarray:
@@ -295,6 +296,7 @@ class Windows:
         self.noise_rank = max(1, int((lam > 0).sum(axis=1).max()))
         self.noise_var = lam
         self.noise_basis = (Q @ V).transpose(0, 2, 1)
+        self._basis_t = None
 
     def log_likelihood(self, zsim: np.ndarray, sigma2: np.ndarray) -> np.ndarray:
         """Each window's Gaussian log likelihood, (P, W), of the simulations ``zsim`` (P, W, L) with sensor
@@ -308,12 +310,15 @@ class Windows:
             return -0.5 * n_w * np.log(2 * np.pi * s2) - ss / (2 * s2)
         assert self.noise_var is not None
         k = self.noise_rank
-        basis = self.noise_basis[:, -k:]  # (W, k, L): the directions the input's noise reaches
-        y = ((self.z[None] - zsim).transpose(1, 0, 2) @ basis.transpose(0, 2, 1)).transpose(1, 0, 2)
-        var = self.noise_var[None, :, -k:] + s2[:, :, None]  # (P, W, k)
-        rest = self.sum_squares(zsim) - np.sum(y**2, axis=-1)  # the other directions: the sensor's noise alone
-        return (-0.5 * (n_w - k) * np.log(2 * np.pi * s2) - rest / (2 * s2)
-                - 0.5 * np.sum(np.log(2 * np.pi * var) + y**2 / var, axis=-1))  # fmt: skip
+        if self._basis_t is None or self._basis_t.shape[-1] != k:  # (W, L, k): the directions the noise reaches
+            self._basis_t = np.ascontiguousarray(self.noise_basis[:, -k:].transpose(0, 2, 1))
+        r = np.ascontiguousarray((self.z[None] - zsim).transpose(1, 0, 2))  # (W, P, L): contiguous, one GEMM each
+        y2 = (r @ self._basis_t) ** 2  # (W, P, k)
+        var = self.noise_var[:, None, -k:] + s2[None]  # (W, P, k)
+        quad = (y2 / var).sum(axis=-1).T  # (P, W)
+        logdet = np.log(var).sum(axis=-1).T
+        rest = self.sum_squares(zsim) - y2.sum(axis=-1).T  # the other directions: the sensor's noise alone
+        return -0.5 * (n_w * np.log(2 * np.pi) + (n_w - k) * np.log(s2) + rest / s2 + logdet + quad)
 
     def whitened_residuals(self, zsim: np.ndarray, sigma2: float) -> np.ndarray:
         """One simulation's residuals (``zsim``: (W, L)) whitened by the noise model at ``sigma2``: the
