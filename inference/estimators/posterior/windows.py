@@ -281,7 +281,7 @@ class Windows:
         0.1 fs), where the response to it lives. ``variance`` 0 removes the term.
         """
         if not variance > 0:
-            self.noise_basis = self.noise_var = None
+            self.clear_input_noise()
             return
         if self.proj is None:
             self.set_sensitivities(params, kind)
@@ -329,21 +329,6 @@ class Windows:
             return r.ravel() / np.sqrt(sigma2)
         assert self.noise_var is not None
         return ((self.noise_basis @ r[:, :, None])[:, :, 0] / np.sqrt(self.noise_var + sigma2)).ravel()
-
-    def whitened(self, J: np.ndarray, r: np.ndarray, sigma2: float) -> tuple[np.ndarray, np.ndarray]:
-        """The projected residuals ``r`` (W L,) and their Jacobian ``J`` (W L, p) whitened by the noise model at
-        ``sigma2`` (the curvature adjustment's scores are then those of the right likelihood): (W (L - 2), p),
-        (W (L - 2),). Without the input's noise: ``J / sigma``, ``r / sigma``.
-        """
-        if self.noise_basis is None:
-            s = float(np.sqrt(sigma2))
-            return J / s, r / s
-        assert self.noise_var is not None
-        W, L = self.n_windows, self.length
-        d = 1.0 / np.sqrt(self.noise_var + sigma2)  # (W, L - 2)
-        Jw = (self.noise_basis @ J.reshape(W, L, -1)) * d[:, :, None]
-        rw = (self.noise_basis @ r.reshape(W, L, 1))[:, :, 0] * d
-        return Jw.reshape(-1, J.shape[1]), rw.ravel()
 
     def noise_sigma2(self, r: np.ndarray) -> float:
         """The sensor noise variance [m^2] that maximises the likelihood of the projected residuals ``r``
