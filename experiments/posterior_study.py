@@ -71,11 +71,13 @@ def predictive_check(post: Posterior, n_draws: int = 100, seconds: float = 4.0, 
     n_w = min(win.n_windows, int(round(seconds / (win.length * win.dt))))
     s_u = float(pr.settings.get("input_noise", {}).get("rms", 0.0))
     params = lp.par.to_params(theta)
-    runs = []
-    for i in range(n_draws):  # each draw under its own draw of the input's noise
-        noisy = replace(win, u=win.u + s_u * rng.standard_normal(win.u.shape)) if s_u > 0 else win
-        runs.append(noisy.simulate(params[:, i : i + 1], lp.par.kind)[0][0])
-    zsim = np.stack(runs)[:, :n_w].reshape(n_draws, -1)
+    head = replace(win, u=win.u[:n_w], z=win.z[:n_w], x0=win.x0[:n_w])  # the windows shown, no more
+    if s_u > 0:  # each draw under its own draw of the input's noise (drawn over every window: the same stream)
+        runs = [replace(head, u=head.u + s_u * rng.standard_normal(win.u.shape)[:n_w]).simulate(
+            params[:, i : i + 1], lp.par.kind)[0][0] for i in range(n_draws)]  # fmt: skip
+        zsim = np.stack(runs).reshape(n_draws, -1)
+    else:
+        zsim = head.simulate(params, lp.par.kind)[0].reshape(n_draws, -1)
     pred = zsim + draws[:, -1:] * rng.standard_normal(zsim.shape)
     meas = win.z[:n_w].ravel()
     lo, hi = np.percentile(pred, [5, 95], axis=0)

@@ -115,12 +115,10 @@ def frame_offset(rec, spread: bool = True, use_rest: bool = True) -> dict[str, A
         return {"offset_m": None, "method": "not pinned: a force-driven record carries no weight (k0 unknown)"}
     try:
         x, wells = _frame_anchors(rec)
-        n_parts = int(np.clip(rec.duration // FRAME_PART_MIN_S, 2, FRAME_PARTS))
-        edges = np.linspace(0, rec.n, n_parts + 1).astype(int) if spread else np.zeros(1, int)
         parts = []
-        for a, b in zip(edges[:-1], edges[1:], strict=False):
+        for seg in _parts(rec, FRAME_PART_MIN_S, FRAME_PARTS) if spread else ():
             try:
-                part = _frame_anchors(rec.segment(a, b))
+                part = _frame_anchors(seg)
             except Exception:
                 continue
             if part[1]:  # only parts that visited both wells say where the origin between them is
@@ -184,6 +182,15 @@ FRAME_PART_MIN_S = 30.0
 cross-well record may visit one well only, and its frame estimate is then off by millimetres."""
 
 
+def _parts(rec: Measurement, min_s: float, most: int) -> list[Measurement]:
+    """The record cut into equal parts, at most ``most``, each at least ``min_s`` seconds where the record
+    allows (two at least): the separate estimates whose spread gives a standard error (``_se``).
+    """
+    n_parts = int(np.clip(rec.duration // min_s, 2, most))
+    edges = np.linspace(0, rec.n, n_parts + 1).astype(int)
+    return [rec.segment(a, b) for a, b in zip(edges[:-1], edges[1:], strict=False)]
+
+
 def _se(estimates: list[float]) -> float:
     """Standard error of the whole record's estimate from its parts' (NaN with fewer than two)."""
     if len(estimates) < 2:
@@ -220,15 +227,13 @@ def calibrate_scale(rec: Measurement) -> Measurement:
     if done is not None:
         return done
     s = _scale_of(rec)
-    n_parts = int(np.clip(rec.duration // SCALE_PART_MIN_S, 2, SCALE_PARTS))
-    edges = np.linspace(0, rec.n, n_parts + 1).astype(int)
     parts = []
-    for a, b in zip(edges[:-1], edges[1:], strict=False):
+    for seg in _parts(rec, SCALE_PART_MIN_S, SCALE_PARTS):
         try:
-            parts.append(_scale_of(rec.segment(a, b)))
+            parts.append(_scale_of(seg))
         except (MeasurementError, ValueError, np.linalg.LinAlgError):
             continue
-    se = float(np.std(parts, ddof=1) / np.sqrt(len(parts))) if len(parts) >= 2 else float("nan")
+    se = _se(parts)
     channel = info["channel"]
     scaled = {k: getattr(rec, k) * s for k in ("z", "z_dot", "y") if getattr(rec, k) is not None}
     if rec.input_name == "base_acc" and "y" in scaled:  # not SCALABLE: load refuses it; kept out for safety
