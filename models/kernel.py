@@ -336,3 +336,150 @@ def kernel(kind: int, p: np.ndarray, mono: np.ndarray):
         (KIND_DEVICE, False): _kernel_device,
         (KIND_DEVICE, True): _kernel_device_sign,
     }[(kind, sign)]
+
+
+# --- structures of N degrees of freedom ----------------------------------------------------------------
+@numba.njit(inline="always", **JIT)
+def _structure_acc(kind, p, b, mono, q, nd, ei, ej, minv, lk, lc, zs, vs, w, acc):
+    """Accelerations of every DOF of member b at one Runge-Kutta stage: the element's force law (``force`` of
+    the same member tuple ``q``) on the relative motion of DOFs ``ej`` and ``ei`` (``ei`` -1: the base),
+    acting on ``ej`` and, with the opposite sign, on ``ei``; plus the linear structure ``lk``, ``lc``.
+    """
+    if ei >= 0:
+        r = zs[ej] - zs[ei]
+        rv = vs[ej] - vs[ei]
+    else:
+        r = zs[ej]
+        rv = vs[ej]
+    f = total_force(kind, True, True, r, rv, q, p, b, mono)
+    for d in range(nd):
+        lin = 0.0
+        for e in range(nd):
+            lin += lk[d, e, b] * zs[e] + lc[d, e, b] * vs[e]
+        if d == ej:
+            lin += f
+        elif d == ei:
+            lin -= f
+        acc[d] = w[d] - lin * minv[d, b]
+
+
+@numba.njit(**JIT)
+def _integrate_structure(kind, p, mono, ei, ej, minv, lk, lc, gain, u, uidx, dt, nsub, z0, v0, z_limit, v_limit,
+                         out_z, out_v, store_v, status, fail_step):  # fmt: skip
+    """RK4 of B structures of N degrees of freedom (state z, z' of each DOF, relative to the base).
+
+        M z'' + C z' + K z + l F(z_J - z_I, z_J' - z_I') = gain u,   l = e_J - e_I,
+
+    F the element's force law of member b's column of ``p`` (the single-DOF kernel's ``force``, with every
+    registry term), ``minv`` (N, B) the inverse masses, ``lk``/``lc`` (N, N, B) the linear structure,
+    ``gain`` (N, B) the input's gain per DOF. Inputs as ``_integrate`` (sample rows linearly interpolated, or
+    staged). Outputs (T, N, B). For N = 1 with no linear structure every operation is the single-DOF
+    kernel's, in its order: the same numbers to the last bit (tested).
+    """
+    nb = p.shape[1]
+    nd = minv.shape[0]
+    n = out_z.shape[0]
+    staged = u.shape[1] != n
+    h = dt / nsub
+    z = z0.copy()
+    v = v0.copy()
+    zb = np.empty(nd)
+    vb = np.empty(nd)
+    zt = np.empty(nd)
+    vt = np.empty(nd)
+    a1 = np.empty(nd)
+    a2 = np.empty(nd)
+    a3 = np.empty(nd)
+    a4 = np.empty(nd)
+    v2 = np.empty(nd)
+    v3 = np.empty(nd)
+    wa = np.empty(nd)
+    wm = np.empty(nd)
+    wb = np.empty(nd)
+    alive = np.ones(nb, dtype=np.bool_)
+    for b in range(nb):
+        for d in range(nd):
+            out_z[0, d, b] = z[d, b]
+            if store_v:
+                out_v[0, d, b] = v[d, b]
+    for k in range(n - 1):
+        for j in range(nsub):
+            for b in range(nb):
+                if staged:
+                    c = 2 * (k * nsub + j)
+                    for d in range(nd):
+                        wa[d] = gain[d, b] * u[uidx[b], c]
+                        wm[d] = gain[d, b] * u[uidx[b], c + 1]
+                        wb[d] = gain[d, b] * u[uidx[b], c + 2]
+                else:
+                    fa = j / nsub
+                    fm = (j + 0.5) / nsub
+                    fb = (j + 1.0) / nsub
+                    for d in range(nd):
+                        ua = gain[d, b] * u[uidx[b], k]
+                        du = gain[d, b] * u[uidx[b], k + 1] - ua
+                        wa[d] = ua + fa * du
+                        wm[d] = ua + fm * du
+                        wb[d] = ua + fb * du
+                q = member(p, b, kind)
+                for d in range(nd):
+                    zb[d] = z[d, b]
+                    vb[d] = v[d, b]
+                _structure_acc(kind, p, b, mono, q, nd, ei, ej, minv, lk, lc, zb, vb, wa, a1)
+                for d in range(nd):
+                    zt[d] = zb[d] + 0.5 * h * vb[d]
+                    v2[d] = vb[d] + 0.5 * h * a1[d]
+                _structure_acc(kind, p, b, mono, q, nd, ei, ej, minv, lk, lc, zt, v2, wm, a2)
+                for d in range(nd):
+                    zt[d] = zb[d] + 0.5 * h * v2[d]
+                    v3[d] = vb[d] + 0.5 * h * a2[d]
+                _structure_acc(kind, p, b, mono, q, nd, ei, ej, minv, lk, lc, zt, v3, wm, a3)
+                for d in range(nd):
+                    zt[d] = zb[d] + h * v3[d]
+                    vt[d] = vb[d] + h * a3[d]
+                _structure_acc(kind, p, b, mono, q, nd, ei, ej, minv, lk, lc, zt, vt, wb, a4)
+                for d in range(nd):
+                    z[d, b] = zb[d] + h / 6.0 * (vb[d] + 2.0 * v2[d] + 2.0 * v3[d] + vt[d])
+                    v[d, b] = vb[d] + h / 6.0 * (a1[d] + 2.0 * a2[d] + 2.0 * a3[d] + a4[d])
+        for b in range(nb):
+            ok = True
+            for d in range(nd):
+                if not (abs(z[d, b]) < z_limit and abs(v[d, b]) < v_limit):
+                    ok = False
+            if alive[b] and not ok:
+                alive[b] = False
+                fail_step[b] = k + 1
+                nonfinite = False
+                for d in range(nd):
+                    if not math.isfinite(z[d, b]):
+                        nonfinite = True
+                status[b] = STATUS_GEOMETRY if (kind == KIND_DEVICE and nonfinite) else STATUS_DIVERGED
+            for d in range(nd):
+                if not alive[b]:
+                    z[d, b] = math.nan
+                    v[d, b] = math.nan
+                out_z[k + 1, d, b] = z[d, b]
+                if store_v:
+                    out_v[k + 1, d, b] = v[d, b]
+    return 0
+
+
+# fmt: off
+@numba.njit(**JIT)
+def _kernel_structure_poly(p, mono, ei, ej, minv, lk, lc, gain, u, uidx, dt, nsub, z0, v0, zl, vl, oz, ov, sv, st,
+                           fs):
+    return _integrate_structure(KIND_POLYNOMIAL, p, mono, ei, ej, minv, lk, lc, gain, u, uidx, dt, nsub, z0, v0, zl,
+                                vl, oz, ov, sv, st, fs)
+
+
+@numba.njit(**JIT)
+def _kernel_structure_device(p, mono, ei, ej, minv, lk, lc, gain, u, uidx, dt, nsub, z0, v0, zl, vl, oz, ov, sv, st,
+                             fs):
+    return _integrate_structure(KIND_DEVICE, p, mono, ei, ej, minv, lk, lc, gain, u, uidx, dt, nsub, z0, v0, zl, vl,
+                                oz, ov, sv, st, fs)
+# fmt: on
+
+
+def structure_kernel(kind: int):
+    """The compiled N-DOF kernel for a restoring-force kind (every registry term compiled in)."""
+    return _kernel_structure_poly if kind == KIND_POLYNOMIAL else _kernel_structure_device

@@ -1,0 +1,537 @@
+"""Identification of a structure of N degrees of freedom carrying one nonlinear element (``models.structure``).
+
+**NSI** as the method was made for (Marchesiello & Garibaldi 2008): the element's basis functions of the relative
+motion r = z_J - z_I about a reference r* (x^2, x^3, r'|r'|, x = r - r*) are feedback inputs of the underlying-
+linear system (ULS), M x'' + C x' + K x = M 1 u - l sum_j mu_j g_j (l = e_J - e_I), identified with every DOF's
+displacement as an output by the package's LTI subspace step (``subspace``, PO-MOESP, state order 2N). Then,
+around each well:
+
+- the ULS's modes: the identified state matrix's poles (frequency |lambda| / 2 pi, damping ratio) and shapes (the
+  output matrix times the eigenvectors);
+- its physical matrices: the identified (A, C) turned into physical coordinates by T = [C; C A] (the state
+  [x; x'] of a model whose outputs are all N displacements), whose lower blocks are -M^-1 K and -M^-1 C: with
+  the record's masses, K and C of the ULS;
+- the element's coefficients mu_j from the extended FRF H_e = H [M 1, l mu_1, ...]: Z(w) H_e with
+  Z = K - w^2 M + i w C (the identified ULS's dynamic stiffness) is [M 1, l mu_1, ...]; its input column, whose
+  value M 1 physics fixes, scales out the level error of the discrete-to-continuous step (as the single-DOF NSI
+  reads ratios to the input column), and mu_j(w) = l . (Z H_e,j) / |l|^2 averaged (Re) over the modes' band, with
+  |Im/Re| as the quality index;
+- the element's linear part is the ULS's I-J coupling (a spring in parallel with the element cannot be told
+  from it: it is counted as the element's); the structure's own K, C are the ULS's without it; the element's
+  constant follows from the time-averaged equations of motion (every channel is zero-mean in the subspace step),
+  and the reference moves to the identified structure's equilibrium (``Structure.element_equilibria``) for the
+  next pass (the reference shift per element).
+
+**SINDy** with one equation per DOF in the weak form (``weak.test_function``, as the single-DOF SINDy): the
+element's terms are shared between the two DOFs it connects with opposite signs (Newton's third law, built into
+the regression as one shared coefficient per term rather than left for the data to find), the linear
+structure's springs and dampers are columns of the DOFs they join, the input's coefficient is fixed by the known
+masses. Sparsity: pysindy's STLSQ on the stacked, column-scaled system over a path of thresholds, each support
+scored by its weak residual on the identification data's last quarter; the sparsest within 1 % of the best is
+kept and refitted.
+
+Both report the same keys (``modal``, ``element``, ``linear``, ``equilibria``, ``validation``).
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from negstiff.errors import InputError, NegstiffWarning
+from negstiff.inference.record.structure import StructureRecord
+from negstiff.inference.steps.weak import test_function, test_function_half_width, weak_project
+from negstiff.models import Model
+from negstiff.models.structure import Mode, Structure, modes_of, modes_of_state_matrix, simulate_structures
+
+from . import subspace
+
+ELEMENT_TERMS = ("1", "r", "r^2", "r^3", "v", "v|v|")
+"""The element's library: F(r, r') = k0 - k1 r + k2 r^2 + k3 r^3 + c r' + c_nl r'|r'| (the single-DOF names)."""
+
+
+THRESHOLDS = tuple(float(t) for t in np.logspace(-4, -1, 13))
+"""SINDy's STLSQ thresholds by default, relative to the target's spread."""
+
+
+class StructureIdentificationError(InputError):
+    """The record cannot be identified as a structure with one element (too short, wrong element, no modes)."""
+
+
+def parse_element(text: str | tuple[int, int], n_dof: int) -> tuple[int, int]:
+    """``"I-J"`` (J the DOF the element moves, I the one it is attached to, 0 the base) as (I, J), checked."""
+    if isinstance(text, str):
+        try:
+            i, j = (int(x) for x in text.split("-"))
+        except ValueError:
+            raise InputError(f"--element must be I-J (e.g. 1-2; 0 is the base), got {text!r}") from None
+    else:
+        i, j = (int(x) for x in text)
+    if not (0 <= i <= n_dof and 1 <= j <= n_dof and i != j):
+        raise InputError(f"--element {i}-{j}: J must be a DOF 1..{n_dof}, I one of 0..{n_dof} (0: the base), I != J")
+    return i, j
+
+
+def _relative(x: np.ndarray, at: tuple[int, int]) -> np.ndarray:
+    i, j = at
+    return x[j - 1] - x[i - 1] if i else x[j - 1].copy()
+
+
+def _coupling(n: int, at: tuple[int, int]) -> np.ndarray:
+    lvec = np.zeros(n)
+    lvec[at[1] - 1] = 1.0
+    if at[0]:
+        lvec[at[0] - 1] = -1.0
+    return lvec
+
+
+def _element_model(coef: dict[str, float], mass: float) -> Model:
+    return Model(m=mass, k0=coef["1"], k1=-coef["r"], k2=coef["r^2"], k3=coef["r^3"], c=coef["v"], c_nl=coef["v|v|"])
+
+
+def _springs(n: int, at: tuple[int, int]) -> list[tuple[int, int]]:
+    """The linear structure's candidate springs/dampers (d, e): e = 0 to the base, else between DOFs d < e;
+    the element's own pair is left out (its linear part is the element's).
+    """
+    pairs = [(d, 0) for d in range(1, n + 1)] + [(d, e) for d in range(1, n + 1) for e in range(d + 1, n + 1)]
+    own = (at[1], 0) if at[0] == 0 else (min(at), max(at))
+    return [p for p in pairs if p != own]
+
+
+def _matrix_of(pairs, values, n: int) -> np.ndarray:
+    K = np.zeros((n, n))
+    for (d, e), k in zip(pairs, values, strict=True):
+        K[d - 1, d - 1] += k
+        if e:
+            K[e - 1, e - 1] += k
+            K[d - 1, e - 1] -= k
+            K[e - 1, d - 1] -= k
+    return K
+
+
+def equation_columns(z: np.ndarray, v: np.ndarray, at: tuple[int, int]) -> tuple[np.ndarray, list[str]]:
+    """The stacked equation-of-motion columns, (N, T, P): for DOF d, the force each parameter puts on it per unit
+    parameter, with the sign of the left-hand side moved right (M z'' - M 1 u = -sum theta_p col_p). Parameters:
+    the linear structure's springs then dampers (``_springs``), then the element's terms (``ELEMENT_TERMS``),
+    shared by DOFs J (+) and I (-).
+    """
+    n, t = z.shape
+    pairs = _springs(n, at)
+    r, vr = _relative(z, at), _relative(v, at)
+    g = [np.ones(t), r, r**2, r**3, vr, vr * np.abs(vr)]
+    lvec = _coupling(n, at)
+    cols = np.zeros((n, t, 2 * len(pairs) + len(g)))
+    for p, (d, e) in enumerate(pairs):
+        for off, x in ((0, z), (len(pairs), v)):
+            cols[d - 1, :, off + p] += x[d - 1] - (x[e - 1] if e else 0.0)
+            if e:
+                cols[e - 1, :, off + p] += x[e - 1] - x[d - 1]
+    for q, gq in enumerate(g):
+        for d in range(n):
+            if lvec[d]:
+                cols[d, :, 2 * len(pairs) + q] = lvec[d] * gq
+    names = [f"k{d}{e}" for d, e in pairs] + [f"c{d}{e}" for d, e in pairs] + [f"element {t_}" for t_ in ELEMENT_TERMS]
+    return cols, names
+
+
+def _assemble(theta: np.ndarray, n: int, at: tuple[int, int], masses) -> Structure:
+    pairs = _springs(n, at)
+    k, c, e = theta[: len(pairs)], theta[len(pairs) : 2 * len(pairs)], theta[2 * len(pairs) :]
+    element = _element_model(dict(zip(ELEMENT_TERMS, e, strict=True)), masses[at[1] - 1])
+    return Structure(tuple(masses), element, _matrix_of(pairs, k, n), _matrix_of(pairs, c, n), at)
+
+
+@dataclass(frozen=True)
+class WellFit:
+    """NSI around one well: the reference r*, the ULS's modes and matrices, the element's shifted coefficients."""
+
+    r_ref: float
+    modes: list[Mode]
+    K: np.ndarray
+    C: np.ndarray
+    coefficients: dict[str, float]
+    quality: dict[str, float]
+    band_hz: tuple[float, float]
+    singular_values: list[float]
+    structure: Structure
+
+
+def free_run_error(structure: Structure, rec: StructureRecord, start: int, window_s: float = 1.0) -> dict[str, Any]:
+    """Free runs of ``structure`` over the record from sample ``start`` on, restarted every ``window_s`` from the
+    record's band-smoothed states: rms error over every DOF in % of the responses' rms, and per DOF. The truth's
+    own value on the same record is the floor noise and chaos leave any model.
+    """
+    zs, v, _ = rec.states()
+    L = max(8, int(round(window_s * rec.fs)))
+    starts = np.arange(start, rec.n - L, L)
+    if not starts.size:
+        raise StructureIdentificationError(f"{rec.source}: the held-out part is shorter than one {window_s} s window")
+    idx = starts[:, None] + np.arange(L + 1)[None, :]
+    u = rec.u[idx]
+    x0 = np.hstack([zs[:, starts].T, v[:, starts].T])
+    res = simulate_structures(structure, u, rec.dt, x0, input_kind=rec.input_name, force_dof=rec.force_dof,
+                              input_index=np.arange(starts.size))  # fmt: skip
+    meas = np.transpose(rec.z[:, idx], (1, 0, 2))  # (W, N, L+1)
+    err = res.z - meas
+    ok = ~res.diverged
+    centred = rec.z[:, start:] - rec.z[:, start:].mean(axis=1, keepdims=True)
+    scale = np.sqrt(np.mean(centred**2, axis=1))
+    if not ok.any():
+        return {"rms_percent": math.inf, "per_dof_percent": [math.inf] * rec.n_dof, "windows": int(starts.size),
+                "diverged": int(starts.size)}  # fmt: skip
+    per = np.sqrt(np.mean(err[ok] ** 2, axis=(0, 2))) / scale
+    total = float(np.sqrt(np.mean((err[ok] / scale[None, :, None]) ** 2)))
+    return {"rms_percent": 100 * total, "per_dof_percent": (100 * per).tolist(), "windows": int(starts.size),
+            "diverged": int((~ok).sum()), "window_s": window_s}  # fmt: skip
+
+
+class _StructureIdentifier:
+    """What NSI and SINDy share: the record's checks, the held-out tail, the result's keys."""
+
+    method = ""
+
+    def __init__(self, *, element: str | tuple[int, int] | None = None, validation_fraction: float = 0.2):
+        self.element = element
+        self.validation_fraction = validation_fraction
+
+    def _prepare(self, rec: StructureRecord) -> tuple[StructureRecord, tuple[int, int], int]:
+        if not isinstance(rec, StructureRecord):
+            raise InputError(
+                "a structure's identification needs a StructureRecord (load_structure, structure_from_arrays)"
+            )
+        if not 0.0 < self.validation_fraction < 0.9:
+            raise InputError(f"validation_fraction must be in (0, 0.9), got {self.validation_fraction}")
+        at = parse_element(self.element if self.element is not None else (0, rec.n_dof) if rec.n_dof == 1 else "",
+                           rec.n_dof) if (self.element is not None or rec.n_dof == 1) else None  # fmt: skip
+        if at is None:
+            raise InputError(f"{rec.source}: a record of {rec.n_dof} DOFs needs the element's place (element='I-J')")
+        n_id = int(round((1 - self.validation_fraction) * rec.n))
+        rec.require(4000, f"{type(self).__name__}")
+        return rec, at, n_id
+
+    def _finish(self, rec: StructureRecord, structure: Structure, n_id: int, modal: dict, extra: dict) -> None:
+        self.structure_ = structure
+        self.element_ = {k: getattr(structure.element, k) for k in ("k0", "k1", "k2", "k3", "c", "c_nl")}
+        self.modal_ = modal
+        self.warnings_: list[str] = list(extra.pop("warnings", []))
+        try:
+            eq = structure.equilibria()
+        except ValueError as exc:
+            raise StructureIdentificationError(f"{rec.source}: the identified element is not usable ({exc})") from None
+        self.equilibria_ = {w: z.tolist() for w, z in eq.items()}
+        self.linear_ = {w: {"K": structure.linear(w)[0].tolist(), "C": structure.linear(w)[1].tolist()} for w in eq}
+        self.linear_["structure"] = {"K": np.asarray(structure.stiffness).tolist(),
+                                     "C": np.asarray(structure.damping).tolist()}  # fmt: skip
+        self.validation_ = free_run_error(structure, rec, n_id)
+        for w in self.warnings_:
+            warnings.warn(w, NegstiffWarning, stacklevel=3)
+        self.details_ = extra
+
+    def result(self) -> dict[str, Any]:
+        """The contract's result JSON of a structure's identification."""
+        return {
+            "method": self.method,
+            "dofs": self.structure_.n_dof,
+            "element_at": list(self.structure_.at),  # type: ignore[arg-type]
+            "structure": self.structure_.to_dict(),
+            "element": {**self.element_, "extra": {}},
+            "modal": {w: [m.to_json() for m in ms] for w, ms in self.modal_.items()},
+            "linear": self.linear_,
+            "equilibria": self.equilibria_,
+            "validation": self.validation_,
+            "warnings": self.warnings_,
+            "details": self.details_,
+        }
+
+
+class StructureNSI(_StructureIdentifier):
+    """Nonlinear subspace identification of a structure of N DOFs with one element (module docstring).
+
+    Parameters
+    ----------
+    element : "I-J" or (I, J)
+        The element moves DOF J relative to DOF I (0: the base).
+    block_rows : int, default 40
+        Block rows of the Hankel matrices.
+    band : (float, float), default (0.6, 1.6)
+        The coefficients' averaging band, as fractions of the lowest and highest mode's frequency.
+    passes : int, default 3
+        Identification passes per well at most (each at the equilibrium the previous one identified).
+    validation_fraction : float, default 0.2
+        The held-out tail.
+
+    Attributes
+    ----------
+    structure_ : Structure
+        The identified structure (element coefficients averaged over the wells, the linear structure too).
+    modal_ : dict
+        ``{well: [Mode, ...]}``: each well's ULS modes by frequency, as identified.
+    element_ : dict
+        The element's k0, k1, k2, k3, c, c_nl (the single-DOF names).
+    wells_ : dict
+        Each well's ``WellFit``.
+    validation_ : dict
+        Restarted free runs over the held-out tail (``free_run_error``).
+    """
+
+    method = "nsi"
+
+    def __init__(self, *, element=None, block_rows: int = 40, band: tuple[float, float] = (0.6, 1.6), passes: int = 3,
+                 validation_fraction: float = 0.2):  # fmt: skip
+        super().__init__(element=element, validation_fraction=validation_fraction)
+        self.block_rows = block_rows
+        self.band = band
+        self.passes = passes
+
+    def fit(self, rec: StructureRecord) -> StructureNSI:
+        """Identify the structure from ``rec`` (a ``StructureRecord``); returns self."""
+        rec, at, n_id = self._prepare(rec)
+        ident = rec.segment(0, n_id)
+        zs, v, window = ident.states()
+        first = StructureSINDy._least_squares(ident, at, zs, v)  # equation error: the wells' first guesses
+        try:
+            guesses = first.element_equilibria()
+        except ValueError as exc:
+            raise StructureIdentificationError(
+                f"{rec.source}: no stable equilibrium of the element found ({exc})"
+            ) from None
+        wells = {}
+        for name in ("minus", "plus"):
+            r0 = getattr(guesses, f"z_{name}")
+            if r0 is not None:
+                wells[name] = self.fit_well(ident, zs, v, at, r0, first)
+        self.wells_ = wells
+        mass = rec.masses[at[1] - 1]
+        coef = {k: float(np.mean([w.structure.element.to_dict()[k] for w in wells.values()]))
+                for k in ("k0", "k1", "k2", "k3", "c", "c_nl")}  # fmt: skip
+        Ks = np.mean([np.asarray(w.structure.stiffness) for w in wells.values()], axis=0)
+        Cs = np.mean([np.asarray(w.structure.damping) for w in wells.values()], axis=0)
+        structure = Structure(rec.masses, Model(m=mass, **coef), 0.5 * (Ks + Ks.T), 0.5 * (Cs + Cs.T), at)
+        self._finish(rec, structure, n_id, {w: f.modes for w, f in wells.items()}, {
+            "wells": {w: {"r_ref": f.r_ref, "coefficients": f.coefficients, "quality_im_over_re": f.quality,
+                          "band_hz": list(f.band_hz), "singular_values": f.singular_values,
+                          "K_uls": f.K.tolist(), "C_uls": f.C.tolist()} for w, f in wells.items()},
+            "settings": {"block_rows": self.block_rows, "order": 2 * rec.n_dof, "band_fraction": list(self.band),
+                         "passes": self.passes, "velocity": f"Savitzky-Golay (window, order) = {window}",
+                         "identification_samples": n_id},
+        })  # fmt: skip
+        return self
+
+    def fit_well(self, rec: StructureRecord, zs: np.ndarray, v: np.ndarray, at: tuple[int, int], r_ref: float,
+                 start: Structure) -> WellFit:  # fmt: skip
+        """The ULS and the element's coefficients about ``r_ref``, moved to the identified equilibrium each pass."""
+        n = rec.n_dof
+        mass = np.asarray(rec.masses)
+        lvec = _coupling(n, at)
+        r, vr = _relative(zs, at), _relative(v, at)
+        lin = -rec.u if rec.input_name == "base_acc" else rec.u
+        if rec.input_name == "base_acc":
+            influence = mass.copy()  # M 1
+        else:
+            influence = np.zeros(n)
+            influence[(rec.force_dof or at[1]) - 1] = 1.0
+        structure = start
+        for _ in range(self.passes):
+            x = r - r_ref
+            chans = np.column_stack([lin, -(x**2), -(x**3), -vr * np.abs(vr)])
+            means, scale = chans.mean(axis=0), chans.std(axis=0)
+            if np.any(scale == 0):
+                raise StructureIdentificationError(f"{rec.source}: the input or a basis function is constant")
+            w = (chans - means) / scale
+            y = (zs - zs.mean(axis=1, keepdims=True)).T
+            ys = y.std(axis=0)
+            try:
+                ss = subspace.identify(w, y / ys, rec.dt, 2 * n, self.block_rows)
+            except (ValueError, np.linalg.LinAlgError) as exc:
+                raise StructureIdentificationError(f"{rec.source}: subspace step failed ({exc})") from None
+            Cp = ys[:, None] * ss.C
+            T = np.vstack([Cp, Cp @ ss.A])
+            Ap = T @ ss.A @ np.linalg.inv(T)
+            K = -mass[:, None] * Ap[n:, :n]
+            C = -mass[:, None] * Ap[n:, n:]
+            K, C = 0.5 * (K + K.T), 0.5 * (C + C.T)
+            modes = modes_of_state_matrix(ss.A, Cp)
+            if len(modes) < n:
+                raise StructureIdentificationError(
+                    f"{rec.source}: {len(modes)} underdamped modes identified around r = {1e3 * r_ref:.2f} mm, "
+                    f"expected {n}"
+                )
+            f_lo, f_hi = min(m.f_hz for m in modes), max(m.f_hz for m in modes)
+            band = (self.band[0] * f_lo, min(self.band[1] * f_hi, 0.45 * rec.fs))
+            freqs = np.linspace(band[0], band[1], 128)
+            he = ss.frf_discrete(freqs) * (ys[None, :, None] / scale[None, None, :])  # (F, N, 4) physical units
+            om = 2 * np.pi * freqs
+            Z = K[None] - om[:, None, None] ** 2 * np.diag(mass)[None] + 1j * om[:, None, None] * C[None]
+            forces = np.einsum("fij,fjq->fiq", Z, he)  # [M 1, l mu_1, ...] up to the level error
+            level = (influence @ influence) / (forces[:, :, 0] @ influence)  # 1 where the level is right
+            mu = (np.einsum("i,fiq->fq", lvec, forces[:, :, 1:]) / (lvec @ lvec)) * level[:, None]
+            coef = mu.real.mean(axis=0)
+            quality = np.abs(mu.imag).mean(axis=0) / np.maximum(np.abs(coef), 1e-300)
+            k1t = float(-K[at[0] - 1, at[1] - 1]) if at[0] else float(K[at[1] - 1].sum())
+            ct = float(-C[at[0] - 1, at[1] - 1]) if at[0] else float(C[at[1] - 1].sum())
+            ll = np.outer(lvec, lvec)
+            Ks, Cs = K - k1t * ll, C - ct * ll
+            # the element's constant F(r_ref) from the time-averaged equations of motion (least squares over DOFs)
+            acc_mean = (v[:, -1] - v[:, 0]) / (v.shape[1] * rec.dt)
+            g_mean = np.array([np.mean(x**2), np.mean(x**3), np.mean(vr * np.abs(vr))])
+            rhs = (influence * lin.mean() - mass * acc_mean - Cs @ v.mean(axis=1) - Ks @ zs.mean(axis=1)
+                   - lvec * (k1t * x.mean() + ct * vr.mean() + coef @ g_mean))  # fmt: skip
+            f0 = float(lvec @ rhs / (lvec @ lvec))
+            # F(r) about r_ref -> z frame: k3 r^3 + k2 r^2 - k1 r + k0
+            poly = np.polynomial.Polynomial([f0, k1t, coef[0], coef[1]])
+            shifted = poly(np.polynomial.Polynomial([-r_ref, 1.0]))
+            c0, c1, c2, c3 = (list(shifted.coef) + [0.0] * 4)[:4]
+            element = Model(m=float(mass[at[1] - 1]), k0=c0, k1=-c1, k2=c2, k3=c3, c=ct, c_nl=float(coef[2]))
+            structure = Structure(rec.masses, element, Ks, Cs, at)
+            try:
+                eq = structure.element_equilibria()
+            except ValueError as exc:
+                raise StructureIdentificationError(
+                    f"{rec.source}: the identified element has no usable equilibria near r = "
+                    f"{1e3 * r_ref:.2f} mm ({exc})"
+                ) from None
+            new = min((z for z in (eq.z_minus, eq.z_plus) if z is not None), key=lambda z: abs(z - r_ref))
+            shift, r_ref = new - r_ref, new
+            if abs(shift) < 1e-3 * r.std():
+                break
+        coefficients = {
+            "k1_tilde": float(element.stiffness(r_ref)),
+            "k2_tilde": float(element.k2 + 3 * element.k3 * r_ref),
+            "k3": element.k3,
+            "c": ct,
+            "c_nl": element.c_nl,
+            "constant_last_pass": f0,
+            "shift_last_pass": shift,
+        }
+        quality_of = dict(zip(("x2", "x3", "vabsv"), quality.tolist(), strict=True))
+        singular = list(ss.singular_values[:12])
+        return WellFit(r_ref, modes, K, C, coefficients, quality_of, band, singular, structure)
+
+
+class StructureSINDy(_StructureIdentifier):
+    """SINDy of a structure of N DOFs in the weak form, one equation per DOF, the element's terms shared by the
+    DOFs it joins (Newton's third law; module docstring).
+
+    Parameters
+    ----------
+    element : "I-J" or (I, J)
+        The element moves DOF J relative to DOF I (0: the base).
+    thresholds : sequence of float
+        STLSQ thresholds on the column-scaled coefficients (the sparsity path).
+    validation_fraction : float, default 0.2
+        The held-out tail.
+    """
+
+    method = "sindy"
+
+    def __init__(self, *, element=None, thresholds=THRESHOLDS,
+                 validation_fraction: float = 0.2):  # fmt: skip
+        super().__init__(element=element, validation_fraction=validation_fraction)
+        self.thresholds = thresholds
+
+    @staticmethod
+    def _least_squares(rec: StructureRecord, at, zs, v) -> Structure:
+        """Plain equation-error least squares on the pointwise equations (smoothed accelerations): a start."""
+        a = np.gradient(v, rec.dt, axis=1)
+        cols, _ = equation_columns(zs, v, at)
+        y, X = _targets(rec, a, cols)
+        theta = np.linalg.lstsq(X, y, rcond=None)[0]
+        return _assemble(theta, rec.n_dof, at, rec.masses)
+
+    def weak_system(self, rec: StructureRecord, at, zs, v) -> tuple[np.ndarray, np.ndarray, list[str], int]:
+        """The stacked weak-form system (rows: DOF x test function; acceleration units) and its names."""
+        half, _ = test_function_half_width(zs[at[1] - 1], rec.fs)
+        phi, d2phi = test_function(half, rec.dt)
+        stride = max(1, half)
+        cols, names = equation_columns(zs, v, at)
+        lin = -rec.u if rec.input_name == "base_acc" else rec.u
+        mass = np.asarray(rec.masses)
+        ys, Xs = [], []
+        for d in range(rec.n_dof):
+            gain = 1.0 if rec.input_name == "base_acc" else float((rec.force_dof or at[1]) - 1 == d)
+            target = weak_project(rec.z[d][:, None], d2phi, stride, rec.dt)[:, 0] * mass[d]
+            target -= (
+                gain
+                * weak_project(lin[:, None], phi, stride, rec.dt)[:, 0]
+                * (mass[d] if rec.input_name == "base_acc" else 1.0)
+            )
+            ys.append(target / mass[d])
+            Xs.append(-weak_project(cols[d], phi, stride, rec.dt) / mass[d])
+        return np.concatenate(ys), np.vstack(Xs), names, ys[0].size
+
+    def fit(self, rec: StructureRecord) -> StructureSINDy:
+        """Identify the structure from ``rec`` (a ``StructureRecord``); returns self."""
+        import pysindy as ps
+
+        rec, at, n_id = self._prepare(rec)
+        ident = rec.segment(0, n_id)
+        zs, v, window = ident.states()
+        y, X, names, per_dof = self.weak_system(ident, at, zs, v)
+        scale = X.std(axis=0)
+        scale[scale == 0] = 1.0
+        Xn = X / scale
+        n_rows = per_dof
+        fit_rows = np.concatenate([np.arange(d * n_rows, d * n_rows + int(0.75 * n_rows)) for d in range(rec.n_dof)])
+        test_rows = np.setdiff1d(np.arange(y.size), fit_rows)
+        path = []
+        for thr in self.thresholds:
+            opt = ps.STLSQ(threshold=thr * np.abs(y).std(), alpha=0.0, max_iter=50)
+            opt.fit(Xn[fit_rows], y[fit_rows])
+            support = np.abs(opt.coef_[0]) > 0
+            if not support.any():
+                continue
+            coef = np.zeros(X.shape[1])
+            coef[support] = np.linalg.lstsq(Xn[fit_rows][:, support], y[fit_rows], rcond=None)[0]
+            score = float(np.sqrt(np.mean((Xn[test_rows] @ coef - y[test_rows]) ** 2)))
+            path.append({"threshold": thr, "support": support, "score": score})
+        if not path:
+            raise StructureIdentificationError(f"{rec.source}: every threshold removed every term")
+        best = min(p["score"] for p in path)
+        chosen = min((p for p in path if p["score"] <= 1.01 * best), key=lambda p: (p["support"].sum(), p["score"]))
+        support = chosen["support"]
+        theta = np.zeros(X.shape[1])
+        theta[support] = np.linalg.lstsq(Xn[:, support], y, rcond=None)[0] / scale[support]
+        structure = _assemble(theta, rec.n_dof, at, rec.masses)
+        try:
+            modal = {w: structure.modes(w) for w in structure.equilibria()}
+        except ValueError as exc:
+            raise StructureIdentificationError(f"{rec.source}: the identified element is not usable ({exc})") from None
+        self._finish(rec, structure, n_id, modal, {
+            "terms": {nm: float(t) for nm, t in zip(names, theta, strict=True)},
+            "selected": [nm for nm, s in zip(names, support, strict=True) if s],
+            "path": [{"threshold": p["threshold"], "terms": int(p["support"].sum()), "held_out_weak_rms": p["score"]}
+                     for p in path],
+            "settings": {"velocity": f"Savitzky-Golay (window, order) = {window}", "identification_samples": n_id,
+                         "newtons_third_law": "the element's terms are one coefficient each, acting on J and, "
+                                              "opposite, on I"},
+        })  # fmt: skip
+        return self
+
+
+def _targets(rec: StructureRecord, a: np.ndarray, cols: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Pointwise stacked targets z_d'' - (input) and columns, per unit mass."""
+    lin = -rec.u if rec.input_name == "base_acc" else rec.u
+    mass = np.asarray(rec.masses)
+    ys, Xs = [], []
+    for d in range(rec.n_dof):
+        if rec.input_name == "base_acc":
+            inp = lin
+        else:
+            inp = lin / mass[d] if (rec.force_dof or 0) - 1 == d else 0.0 * lin
+        ys.append(a[d] - inp)
+        Xs.append(-cols[d] / mass[d])
+    return np.concatenate(ys), np.vstack(Xs)
+
+
+def modes_summary(modal: dict[str, list[Mode]]) -> str:
+    """One line of each well's modes (frequency, damping ratio)."""
+    return "; ".join(
+        f"{w}: " + ", ".join(f"{m.f_hz:.3f} Hz {100 * m.zeta:.2f} %" for m in ms) for w, ms in modal.items()
+    )
+
+
+__all__ = ["StructureNSI", "StructureSINDy", "free_run_error", "parse_element", "modes_of", "modes_summary"]

@@ -1,0 +1,211 @@
+"""A record of a structure of N degrees of freedom: the input and every DOF's response.
+
+The contract's multi-DOF record: the input column (``base_acc`` [m/s^2] or ``force`` [N]) and responses
+``z1 ... zN`` [m] (each DOF's displacement relative to the base, from the rest position of the linear springs
+loaded by the weights), with ``# masses: m1,...,mN`` [kg] in the header. A record keeps the states it
+derives (its band-smoothed displacements and velocities) so that the estimators do not derive them twice.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from negstiff.errors import InputError
+from negstiff.inference.record.measurement import check_sampling_rate, check_values
+from negstiff.inference.steps.derivatives import smooth_and_differentiate, velocity_window
+
+INPUTS = ("base_acc", "force")
+
+
+@dataclass(frozen=True)
+class StructureRecord:
+    """Input ``u`` (T,) and responses ``z`` (N, T) of a structure of N DOFs sampled at ``fs`` [Hz].
+
+    Parameters
+    ----------
+    fs : float
+        Sampling rate [Hz].
+    input_name : {"base_acc", "force"}
+        What ``u`` is.
+    u : (T,) array
+        The input.
+    z : (N, T) array
+        Each DOF's displacement relative to the base [m].
+    masses : tuple of float
+        The DOFs' masses [kg] (the record's ``# masses:``); NSI and SINDy need them to turn the identified
+        dynamics into stiffness and damping.
+    force_dof : int, optional
+        The DOF a force input acts on (1..N); default the element's.
+    """
+
+    fs: float
+    input_name: str
+    u: np.ndarray
+    z: np.ndarray
+    masses: tuple[float, ...]
+    source: str = "<memory>"
+    force_dof: int | None = None
+    meta: dict[str, str] = field(default_factory=dict)
+    derived: dict[Any, Any] = field(default_factory=dict, init=False, repr=False, compare=False)
+
+    def __post_init__(self):
+        fs = check_sampling_rate(self.source, self.fs, "fs")
+        object.__setattr__(self, "fs", fs)
+        if self.input_name not in INPUTS:
+            raise InputError(f"{self.source}: the input must be one of {', '.join(INPUTS)}, got {self.input_name!r}")
+        u = np.asarray(self.u, dtype=float)
+        z = np.atleast_2d(np.asarray(self.z, dtype=float))
+        if u.ndim != 1 or z.ndim != 2 or z.shape[1] != u.size:
+            raise InputError(
+                f"{self.source}: responses must be (N, T) with T = the input's {u.size} samples, got {z.shape}"
+            )
+        check_values(self.source, {self.input_name: u})
+        for i, zi in enumerate(z):  # each response against the displacement's limits, named by its DOF
+            check_values(f"{self.source} (z{i + 1})", {"z": zi})
+        masses = tuple(float(m) for m in self.masses)
+        if len(masses) != z.shape[0] or not all(math.isfinite(m) and m > 0 for m in masses):
+            raise InputError(
+                f"{self.source}: masses must be {z.shape[0]} positive numbers (one per DOF, '# masses: m1,...'), "
+                f"got {list(masses)}"
+            )
+        for name, a in (("u", u), ("z", z)):
+            a.setflags(write=False)
+            object.__setattr__(self, name, a)
+        object.__setattr__(self, "masses", masses)
+
+    @property
+    def n(self) -> int:
+        """Number of samples."""
+        return self.u.size
+
+    @property
+    def n_dof(self) -> int:
+        """Number of degrees of freedom."""
+        return self.z.shape[0]
+
+    @property
+    def dt(self) -> float:
+        """Sampling interval [s]."""
+        return 1.0 / self.fs
+
+    @property
+    def t(self) -> np.ndarray:
+        """Sample times [s] from 0."""
+        return np.arange(self.n) * self.dt
+
+    def segment(self, start: int | None, stop: int | None) -> StructureRecord:
+        """Samples ``start:stop`` as a record of their own (kept: asked again, the same object)."""
+        key = ("segment", start, stop)
+        if key not in self.derived:
+            sl = slice(start, stop)
+            self.derived[key] = replace(self, u=self.u[sl], z=self.z[:, sl])
+        return self.derived[key]
+
+    def states(self) -> tuple[np.ndarray, np.ndarray, tuple[int, int]]:
+        """Band-smoothed displacements and velocities (N, T) of every DOF, with one Savitzky-Golay window for
+        all (the narrowest any DOF's band allows, ``derivatives.velocity_window``: relative motions are
+        differences of DOFs, which must be smoothed alike). Computed once per record; copies returned.
+        """
+        if "states" not in self.derived:
+            windows = [velocity_window(zi, self.fs) for zi in self.z]
+            w = min(windows)
+            pairs = [smooth_and_differentiate(zi, self.fs, w) for zi in self.z]
+            self.derived["states"] = (np.array([p[0] for p in pairs]), np.array([p[1] for p in pairs]), w)
+        zs, v, w = self.derived["states"]
+        return zs.copy(), v.copy(), w
+
+    def require(self, n_min: int, what: str) -> None:
+        """One ``InputError`` when the record is shorter than ``n_min`` samples."""
+        if self.n < n_min:
+            raise InputError(f"{self.source}: {what} needs at least {n_min} samples, the record has {self.n}")
+
+
+def structure_from_arrays(u, z, fs: float, masses, input_name: str = "base_acc", force_dof: int | None = None,
+                          source: str = "<memory>") -> StructureRecord:  # fmt: skip
+    """A multi-DOF record from arrays (every check of a file's, before any work)."""
+    return StructureRecord(float(fs), input_name, np.asarray(u, float), np.asarray(z, float), tuple(masses), source,
+                           force_dof)  # fmt: skip
+
+
+_RESPONSE = re.compile(r"^z(\d+)$")
+
+
+def load_structure(path: str | Path, fs: float | None = None, masses=None) -> StructureRecord:
+    """Read a multi-DOF CSV record: ``# key: value`` header lines (``fs``, ``masses``, ``input``), a header row
+    with ``t`` (optional), the input column and ``z1 ... zN``. ``fs`` and ``masses`` given here override the
+    header's (said nowhere else: a conflict is an error).
+    """
+    p = Path(path)
+    if not p.is_file():
+        raise InputError(f"{p}: no such file")
+    meta: dict[str, str] = {}
+    header: list[str] | None = None
+    with p.open() as fh:
+        for line in fh:
+            s = line.strip()
+            if s.startswith("#"):
+                if ":" in s:
+                    k, v = s[1:].split(":", 1)
+                    meta[k.strip().lower()] = v.strip()
+                continue
+            if s:
+                header = [h.strip() for h in s.split(",")]
+                break
+    if header is None:
+        raise InputError(f"{p}: no header row (columns t, base_acc or force, z1 ... zN)")
+    try:
+        data = np.loadtxt(p, delimiter=",", comments="#", skiprows=1 + sum(1 for _ in _header_lines(p)), ndmin=2)
+    except ValueError as exc:
+        raise InputError(f"{p}: unreadable numbers ({str(exc).splitlines()[0]})") from None
+    if data.shape[1] != len(header):
+        raise InputError(f"{p}: {len(header)} column names but {data.shape[1]} columns of numbers")
+    cols = dict(zip(header, data.T, strict=True))
+    inputs = [c for c in INPUTS if c in cols]
+    if len(inputs) != 1:
+        raise InputError(f"{p}: needs exactly one input column (base_acc or force), has {inputs or 'none'}")
+    dofs = sorted((int(m.group(1)), name) for name in cols if (m := _RESPONSE.match(name)))
+    if not dofs or [d for d, _ in dofs] != list(range(1, len(dofs) + 1)):
+        raise InputError(f"{p}: responses must be z1 ... zN, consecutive; found {[n for _, n in dofs] or 'none'}")
+    rate = _rate(p, cols.get("t"), meta.get("fs"), fs)
+    mass = masses if masses is not None else meta.get("masses")
+    if mass is None:
+        raise InputError(f"{p}: the masses are not given ('# masses: m1,...,mN' in the header, or --masses)")
+    if isinstance(mass, str):
+        try:
+            mass = [float(x) for x in mass.split(",")]
+        except ValueError:
+            raise InputError(f"{p}: '# masses:' must be numbers separated by commas, got {mass!r}") from None
+    force_dof = int(meta["force_dof"]) if "force_dof" in meta else None
+    return StructureRecord(rate, inputs[0], cols[inputs[0]], np.array([cols[n] for _, n in dofs]), tuple(mass), str(p),
+                           force_dof, meta)  # fmt: skip
+
+
+def _header_lines(p: Path):
+    with p.open() as fh:
+        for line in fh:
+            if line.strip().startswith("#"):
+                yield line
+            else:
+                return
+
+
+def _rate(p: Path, t, meta_fs, fs) -> float:
+    if fs is not None:
+        return check_sampling_rate(p, fs, "--fs")
+    if t is not None and t.size > 1:
+        d = np.diff(t)
+        if not np.all(d > 0) or np.ptp(d) > 1e-6 * d.mean():
+            raise InputError(f"{p}: the t column is not uniformly increasing")
+        return check_sampling_rate(p, 1.0 / float(d.mean()), "the t column")
+    if meta_fs is not None:
+        try:
+            return check_sampling_rate(p, float(meta_fs), "'# fs:'")
+        except ValueError:
+            raise InputError(f"{p}: '# fs:' is not a number: {meta_fs!r}") from None
+    raise InputError(f"{p}: no sampling rate (a t column, '# fs:' or --fs)")

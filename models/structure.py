@@ -1,0 +1,396 @@
+"""Structures of N degrees of freedom carrying one nonlinear element (the device).
+
+Each DOF's displacement z_i is relative to the base, measured from the rest position of the linear
+springs loaded by the weights. The element acts on the relative motion r = z_J - z_I of DOF J and the DOF I
+it is attached to (I = 0: the base):
+
+    M z'' + C z' + K z + l F(r, r') = -M 1 b''  (base excitation)   or   = e_k f  (a force at DOF k)
+    l = e_J - e_I,   F(r, r') = K_e(r) + D(r') + extra(r, r')
+
+F is the single-DOF model's force law (``Model``: K_e(r) = k3 r^3 + k2 r^2 - k1 r + k0, its damping and
+extra effects), k0 included: the element's force, its constant too, acts on J and with the opposite sign on
+I (Newton's third law). (Physically the weight of J is not transmitted to I like that; the difference
+is a constant force on I, which a linear spring path from I to the base turns into a shift of the rest
+position the displacements are measured from.) K and C are the linear structure without the element.
+
+The single-DOF ``Model`` is the case N = 1 (J = 1 on the base, K = C = 0): ``Structure.single(model)``
+simulates through the same compiled kernel with the same numbers to the last bit (tested), and every
+quantity here (equilibria, underlying-linear modes) reduces to the model's.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+import numpy as np
+
+from negstiff.errors import InputError
+
+from . import effects
+from .equation import Equilibria, Model
+from .kernel import KINDS, STATUS_OK, structure_kernel
+from .simulator import DEFAULT_SUBSTEPS, DEFAULT_V_LIMIT, DEFAULT_Z_LIMIT, STATUS_TEXT, _pool, cores, input_gain
+
+
+@dataclass(frozen=True)
+class Mode:
+    """One mode of an underlying-linear system: frequency [Hz] (|lambda| / 2 pi), damping ratio, shape."""
+
+    f_hz: float
+    zeta: float
+    shape: tuple[float, ...]
+    """Displacement shape over the DOFs, its largest component 1 (real part, the phase of that component
+    removed)."""
+
+    def to_json(self) -> dict[str, Any]:
+        """The result JSON's mode: f_hz, zeta, shape."""
+        return {"f_hz": self.f_hz, "zeta": self.zeta, "shape": list(self.shape)}
+
+
+def modes_of(mass: np.ndarray, K: np.ndarray, C: np.ndarray) -> list[Mode]:
+    """The modes of M x'' + C x' + K x = 0, sorted by frequency (the eigenvalues of the first-order form)."""
+    n = len(mass)
+    minv = 1.0 / np.asarray(mass, float)
+    A = np.zeros((2 * n, 2 * n))
+    A[:n, n:] = np.eye(n)
+    A[n:, :n] = -minv[:, None] * K
+    A[n:, n:] = -minv[:, None] * C
+    return modes_of_state_matrix(A, np.hstack([np.eye(n), np.zeros((n, n))]))
+
+
+def modes_of_state_matrix(A: np.ndarray, C_out: np.ndarray) -> list[Mode]:
+    """Modes of a continuous state matrix seen through displacement outputs ``C_out``: every pole pair with
+    Im > 0 (underdamped), by frequency; overdamped real poles are not modes and are left out.
+    """
+    lam, psi = np.linalg.eig(A)
+    out = []
+    for r in np.flatnonzero(lam.imag > 0):
+        shape = C_out @ psi[:, r]
+        k = int(np.argmax(np.abs(shape)))
+        shape = (shape / shape[k]).real
+        out.append(
+            Mode(float(abs(lam[r]) / (2 * math.pi)), float(-lam[r].real / abs(lam[r])), tuple(map(float, shape)))
+        )
+    return sorted(out, key=lambda m: m.f_hz)
+
+
+def _matrix(name: str, value, n: int) -> np.ndarray:
+    a = np.zeros((n, n)) if value is None else np.array(value, dtype=float)
+    if a.shape != (n, n):
+        raise InputError(f"structure {name} must be {n} x {n} (one row per DOF), got shape {a.shape}")
+    if not np.all(np.isfinite(a)):
+        raise InputError(f"structure {name} contains NaN or inf")
+    if not np.allclose(a, a.T, rtol=1e-12, atol=1e-12 * max(1.0, float(np.abs(a).max(initial=0.0)))):
+        raise InputError(f"structure {name} must be symmetric (springs and dampers act both ways)")
+    return a
+
+
+@dataclass(frozen=True)
+class Structure:
+    """N degrees of freedom: masses, a linear structure (stiffness and damping matrices, the element
+    excluded) and one nonlinear element between DOF ``at[0]`` (0: the base) and DOF ``at[1]``.
+
+    Parameters
+    ----------
+    masses : sequence of float
+        The DOFs' masses [kg], m_1 ... m_N.
+    element : Model
+        The element's force law on the relative motion (a single-DOF ``Model``; its ``m`` must be the mass
+        of the DOF it moves, which sets its default k0 = m g).
+    stiffness, damping : (N, N) array, optional
+        The linear structure without the element [N/m, N s/m], symmetric; default none.
+    at : (int, int), default (0, N)
+        (I, J): the element moves DOF J relative to DOF I (0: the base). DOFs count from 1.
+
+    Examples
+    --------
+    >>> from negstiff import Model
+    >>> from negstiff.models.structure import Structure
+    >>> device = Model(m=0.2, k1=435.0, k2=1000.0, k3=6.7e5, c=0.6, c_nl=0.4)
+    >>> s = Structure.on_fixture(device, fixture_mass=1.0, fixture_hz=25.0, fixture_zeta=0.02)
+    >>> [round(m.f_hz, 1) for m in s.modes("plus")]
+    [9.8, 26.4]
+    """
+
+    masses: tuple[float, ...]
+    element: Model
+    stiffness: np.ndarray | None = None
+    damping: np.ndarray | None = None
+    at: tuple[int, int] | None = None
+    extra_info: Mapping[str, Any] = field(default_factory=dict, compare=False)
+
+    def __post_init__(self):
+        masses = tuple(effects.finite(f"m{i + 1}", m) for i, m in enumerate(np.atleast_1d(self.masses)))
+        if not masses or min(masses) <= 0:
+            raise InputError(f"structure masses must be positive, got {list(masses)}")
+        n = len(masses)
+        object.__setattr__(self, "masses", masses)
+        if not isinstance(self.element, Model):
+            raise InputError("the element's force law must be a Model (polynomial) in a structure")
+        at = (0, n) if self.at is None else tuple(int(a) for a in self.at)
+        if len(at) != 2 or not (0 <= at[0] <= n and 1 <= at[1] <= n and at[0] != at[1]):
+            raise InputError(f"element I-J must name DOF J in 1..{n} and I in 0..{n} (0: the base), I != J; got {at}")
+        object.__setattr__(self, "at", at)
+        object.__setattr__(self, "stiffness", _matrix("stiffness", self.stiffness, n))
+        object.__setattr__(self, "damping", _matrix("damping", self.damping, n))
+        mj = masses[at[1] - 1]
+        if not math.isclose(self.element.m, mj, rel_tol=1e-12):
+            raise InputError(f"the element's mass {self.element.m:g} kg is not m{at[1]} = {mj:g} kg, the DOF it moves")
+
+    # --- construction -------------------------------------------------------------------------------
+    @classmethod
+    def single(cls, model: Model) -> Structure:
+        """The single-DOF model as a structure of one DOF (the element on the base)."""
+        return cls((model.m,), model)
+
+    @classmethod
+    def on_fixture(cls, element: Model, *, fixture_mass: float, fixture_hz: float, fixture_zeta: float) -> Structure:
+        """The element's mass on a fixture (DOF 1) sprung to the base: fixture frequency and damping ratio
+        of the fixture alone (its mass on its spring), the element between the fixture and DOF 2.
+        """
+        k = fixture_mass * (2 * math.pi * fixture_hz) ** 2
+        c = 2 * fixture_zeta * math.sqrt(k * fixture_mass)
+        return cls(
+            (fixture_mass, element.m),
+            element,
+            np.array([[k, 0.0], [0.0, 0.0]]),
+            np.array([[c, 0.0], [0.0, 0.0]]),
+            (1, 2),
+        )
+
+    @classmethod
+    def chain(cls, masses: Sequence[float], springs: Sequence[float], dampers: Sequence[float], element: Model,
+              at: tuple[int, int]) -> Structure:  # fmt: skip
+        """A chain: spring/damper i joins DOF i to DOF i - 1 (DOF 0 the base); zero for none."""
+        n = len(masses)
+        if len(springs) != n or len(dampers) != n:
+            raise InputError(f"a chain of {n} DOFs needs {n} springs and {n} dampers (0 for none)")
+        K, C = np.zeros((n, n)), np.zeros((n, n))
+        for i, (k, c) in enumerate(zip(springs, dampers, strict=True)):
+            for M, v in ((K, k), (C, c)):
+                M[i, i] += v
+                if i:
+                    M[i - 1, i - 1] += v
+                    M[i - 1, i] -= v
+                    M[i, i - 1] -= v
+        return cls(tuple(masses), element, K, C, at)
+
+    @property
+    def n_dof(self) -> int:
+        """Number of degrees of freedom."""
+        return len(self.masses)
+
+    @property
+    def coupling(self) -> np.ndarray:
+        """L = e_J - e_I: where the element's force acts (+ on J, - on I)."""
+        lvec = np.zeros(self.n_dof)
+        i, j = self.at  # type: ignore[misc]
+        lvec[j - 1] = 1.0
+        if i:
+            lvec[i - 1] = -1.0
+        return lvec
+
+    def with_element(self, element: Model) -> Structure:
+        """The same structure with another element (a fitted one)."""
+        return replace(self, element=element)
+
+    # --- statics and linearisation ----------------------------------------------------------------
+    def _series_stiffness(self) -> float:
+        """kappa: the linear structure's stiffness seen across the element (the static force lambda(r) = kappa r
+        with which it resists a relative displacement r), 0 when DOF J hangs on the element alone.
+        """
+        n, lvec = self.n_dof, self.coupling
+        a = np.zeros((n + 1, n + 1))
+        a[:n, :n] = self.stiffness
+        a[:n, n] = lvec
+        a[n, :n] = lvec
+        sol = np.linalg.lstsq(a, np.r_[np.zeros(n), 1.0], rcond=None)[0]
+        return float(sol[n])
+
+    def _static(self, r: float) -> np.ndarray:
+        """The DOFs' static positions with relative displacement r across the element."""
+        n, lvec = self.n_dof, self.coupling
+        a = np.zeros((n + 1, n + 1))
+        a[:n, :n] = self.stiffness
+        a[:n, n] = lvec
+        a[n, :n] = lvec
+        return np.linalg.lstsq(a, np.r_[np.zeros(n), r], rcond=None)[0][:n]
+
+    def element_equilibria(self) -> Equilibria:
+        """Equilibria of the relative displacement r across the element: F(r) = kappa r
+        (``_series_stiffness``; a spring k in parallel with the element has kappa = -k), the element's own
+        equilibria for N = 1.
+        """
+        kappa = self._series_stiffness()  # F(r) - kappa r = 0: the cubic's -k1 r becomes -(k1 + kappa) r
+        return replace(self.element, k1=self.element.k1 + kappa).equilibria()
+
+    def equilibria(self) -> dict[str, np.ndarray]:
+        """Static positions of every DOF [m] at each stable equilibrium (``"minus"``, ``"plus"``)."""
+        eq = self.element_equilibria()
+        return {w: self._static(eq.well(w)) for w in ("minus", "plus") if getattr(eq, f"z_{w}") is not None}
+
+    def linear(self, well: str) -> tuple[np.ndarray, np.ndarray]:
+        """Stiffness and damping matrices of the underlying-linear system at a well (the element
+        linearised: its K_e'(r*) and c across I-J).
+        """
+        r = self.element_equilibria().well(well)
+        lvec = self.coupling
+        ll = np.outer(lvec, lvec)
+        return self.stiffness + float(self.element.stiffness(r)) * ll, self.damping + self.element.c * ll
+
+    def modes(self, well: str) -> list[Mode]:
+        """The underlying-linear system's modes at a well, by frequency."""
+        K, C = self.linear(well)
+        return modes_of(np.asarray(self.masses), K, C)
+
+    # --- serialisation --------------------------------------------------------------------------------
+    def to_dict(self) -> dict[str, Any]:
+        """The structure as JSON fields (masses, element, at, stiffness, damping)."""
+        return {
+            "masses": list(self.masses),
+            "element": self.element.to_dict(),
+            "at": list(self.at),  # type: ignore[arg-type]
+            "stiffness": np.asarray(self.stiffness).tolist(),
+            "damping": np.asarray(self.damping).tolist(),
+        }
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any]) -> Structure:
+        """Build from ``to_dict``'s fields; one ``InputError`` when they do not make a structure."""
+        unknown = set(d) - {"masses", "element", "at", "stiffness", "damping"}
+        if unknown:
+            raise InputError(f"structure has unknown fields {', '.join(sorted(unknown))}")
+        try:
+            element = Model.from_dict(d["element"])
+            return cls(tuple(d["masses"]), element, d.get("stiffness"), d.get("damping"), tuple(d.get("at") or (0, 1)))
+        except (KeyError, TypeError, ValueError) as exc:
+            raise InputError(f"structure: {exc}") from None
+
+    # --- simulation ---------------------------------------------------------------------------------
+    def arrays(self, input_kind: str = "base_acc", force_dof: int | None = None):
+        """The kernel's arrays of this structure: element parameters (P,), inverse masses (N,), K, C, input
+        gain (N,).
+        """
+        mass = np.asarray(self.masses)
+        if input_kind == "base_acc":
+            gain = input_gain("base_acc", mass)
+        else:
+            k = self.at[1] if force_dof is None else int(force_dof)  # type: ignore[index]
+            if not 1 <= k <= self.n_dof:
+                raise InputError(f"the force acts on a DOF 1..{self.n_dof}, got {k}")
+            gain = np.zeros(self.n_dof)
+            gain[k - 1] = input_gain("force", mass[k - 1 : k])[0]
+        return self.element.kernel_params(), 1.0 / mass, self.stiffness, self.damping, gain
+
+
+@dataclass(frozen=True)
+class StructureResult:
+    """A structure's (batched) simulation: z, z_dot of shape (B, N_dof, T), status and fail_time per member."""
+
+    t: np.ndarray
+    z: np.ndarray
+    z_dot: np.ndarray | None
+    status: np.ndarray
+    fail_time: np.ndarray
+
+    @property
+    def diverged(self) -> np.ndarray:
+        """Boolean mask of members that were stopped."""
+        return self.status != STATUS_OK
+
+    def describe_failures(self, limit: int = 3) -> str:
+        """One line naming the failed members, what happened and when."""
+        bad = np.flatnonzero(self.diverged)
+        parts = [
+            f"member {b}: {STATUS_TEXT[int(self.status[b])]} at t = {self.fail_time[b]:.3f} s" for b in bad[:limit]
+        ]
+        return "; ".join(parts) + (f" (+{bad.size - limit} more)" if bad.size > limit else "")
+
+
+def simulate_structures(
+    structures: Structure | Sequence[Structure],
+    u: np.ndarray,
+    dt: float,
+    x0: np.ndarray,
+    *,
+    input_kind: str = "base_acc",
+    force_dof: int | None = None,
+    input_index: np.ndarray | None = None,
+    substeps: int = DEFAULT_SUBSTEPS,
+    store_velocity: bool = False,
+    z_limit: float = DEFAULT_Z_LIMIT,
+    v_limit: float = DEFAULT_V_LIMIT,
+    threads: int | None = None,
+    staged: bool = False,
+) -> StructureResult:
+    """Integrate B structures (one, repeated for every start state, or one per member; same N and element
+    DOFs) from states ``x0`` (B, 2N) = [z_1..z_N, z_1'..z_N'] under the input rows ``u`` (the conventions of
+    ``simulate_batch``: linear interpolation between samples, or the input at the stage times).
+    """
+    x0 = np.atleast_2d(np.asarray(x0, dtype=np.float64))
+    many = not isinstance(structures, Structure)
+    group = list(structures) if many else [structures] * x0.shape[0]  # type: ignore[list-item]
+    nb = len(group)
+    nd = group[0].n_dof
+    if any(s.n_dof != nd or s.at != group[0].at for s in group):
+        raise InputError("a batch of structures must share the number of DOFs and the element's place")
+    x0 = np.broadcast_to(x0, (nb, 2 * nd))
+    if not np.all(np.isfinite(x0)):
+        raise InputError("initial state contains NaN or inf")
+    parts = [s.arrays(input_kind, force_dof) for s in group]
+    p = np.ascontiguousarray(np.stack([q[0] for q in parts], axis=1))
+    minv = np.ascontiguousarray(np.stack([q[1] for q in parts], axis=1))
+    lk = np.ascontiguousarray(np.stack([q[2] for q in parts], axis=2))
+    lc = np.ascontiguousarray(np.stack([q[3] for q in parts], axis=2))
+    gain = np.ascontiguousarray(np.stack([q[4] for q in parts], axis=1))
+    u2 = np.require(np.atleast_2d(np.asarray(u, dtype=np.float64)), requirements=("C", "W"))
+    if u2.shape[1] < 2 or not np.all(np.isfinite(u2)):
+        raise InputError("input needs at least two finite samples")
+    if not (dt > 0 and math.isfinite(dt)):
+        raise InputError(f"sample interval must be positive, got {dt}")
+    uidx = np.zeros(nb, dtype=np.int64) if input_index is None else np.asarray(input_index, dtype=np.int64)
+    if uidx.shape != (nb,) or uidx.min() < 0 or uidx.max() >= u2.shape[0]:
+        raise InputError("input_index must give one valid input row per batch member")
+    n = u2.shape[1]
+    if staged:
+        r = 2 * int(substeps)
+        if (n - 1) % r or n < r + 1:
+            raise InputError(f"a staged input needs 2 substeps (N - 1) + 1 columns (substeps {substeps}), got {n}")
+        n = (n - 1) // r + 1
+    z0 = np.ascontiguousarray(x0[:, :nd].T)
+    v0 = np.ascontiguousarray(x0[:, nd:].T)
+    status = np.zeros(nb, dtype=np.int64)
+    fail = np.full(nb, -1, dtype=np.int64)
+    lay = effects.layout()
+    ei, ej = group[0].at[0] - 1, group[0].at[1] - 1  # type: ignore[index]
+    run_kernel = structure_kernel(KINDS[group[0].element.kind])
+    if threads is None:
+        threads = min(cores(), max(1, nb // 16), max(1, nb * n * int(substeps) * nd // 200_000))
+    chunks = [c for c in np.array_split(np.arange(nb), max(1, int(threads))) if c.size]
+
+    def run(c):
+        sl = slice(c[0], c[-1] + 1)
+        oz = np.empty((n, nd, c.size))
+        ov = np.empty((n, nd, c.size)) if store_velocity else np.empty((1, nd, c.size))
+        run_kernel(
+            np.ascontiguousarray(p[:, sl]), lay.monomials, ei, ej, np.ascontiguousarray(minv[:, sl]),
+            np.ascontiguousarray(lk[:, :, sl]), np.ascontiguousarray(lc[:, :, sl]), np.ascontiguousarray(gain[:, sl]),
+            u2, uidx[sl], float(dt), int(substeps), np.ascontiguousarray(z0[:, sl]), np.ascontiguousarray(v0[:, sl]),
+            float(z_limit), float(v_limit), oz, ov, store_velocity, status[sl], fail[sl],
+        )  # fmt: skip
+        return oz, ov
+
+    outs = [run(chunks[0])] if len(chunks) == 1 else list(_pool(len(chunks)).map(run, chunks))
+    oz = np.concatenate([o[0] for o in outs], axis=2)
+    ov = np.concatenate([o[1] for o in outs], axis=2) if store_velocity else None
+    t = np.arange(n) * dt
+    return StructureResult(
+        t,
+        np.transpose(oz, (2, 1, 0)),
+        None if ov is None else np.transpose(ov, (2, 1, 0)),
+        status,
+        np.where(fail >= 0, fail * dt, np.nan),
+    )
