@@ -55,6 +55,7 @@ import numpy as np
 from negstiff.errors import InputError
 
 from .simulator import simulate_batch
+from .structure import Structure, simulate_structures
 
 STEPS_PER_PERIOD = 256
 """RK4 steps per forcing period: 128 samples x 2 substeps (the kernel's O(h^4) error: ~1e-8)."""
@@ -80,12 +81,13 @@ class Point:
 
     amplitude: float
     f_hz: float
-    x0: tuple[float, float]
+    x0: tuple[float, ...]
+    """The state at phase 0: (z, z') of a single DOF; (z_1..z_N, z_1'..z_N') of a structure."""
     max_z: float
     min_z: float
     harmonics: tuple[float, ...]
     poincare_z: tuple[float, ...]
-    multipliers: tuple[complex, complex]
+    multipliers: tuple[complex, ...]
     tangent_lambda: float
 
     @property
@@ -114,7 +116,8 @@ class Point:
             "amplitude": self.amplitude,
             "f_hz": self.f_hz,
             "z0": self.x0[0],
-            "v0": self.x0[1],
+            "v0": self.x0[len(self.x0) // 2],
+            **({"state": list(self.x0)} if len(self.x0) > 2 else {}),
             "max_z": self.max_z,
             "min_z": self.min_z,
             "harmonics": list(self.harmonics),
@@ -153,8 +156,16 @@ class Shooting:
 
     def __init__(self, system, input_kind: str = "base_acc", period: int = 1, z_limit: float = 1.0):
         self.system, self.input_kind, self.period = system, input_kind, int(period)
-        self.params = system.kernel_params()
+        self.structure = isinstance(system, Structure)
+        self.params = None if self.structure else system.kernel_params()
+        self.dofs = system.n_dof if self.structure else 1
+        self.dim = 2 * self.dofs
         self.z_limit = z_limit
+
+    def state_scale(self, z_scale: float, f_hz: float) -> np.ndarray:
+        """The state's scale for a response of half-stroke ``z_scale`` at ``f_hz``: z_scale for every
+        displacement, 2 pi f z_scale for every velocity."""
+        return np.r_[np.full(self.dofs, z_scale), np.full(self.dofs, 2 * np.pi * f_hz * z_scale)]
 
     def _forcing(self, amplitude: float, f_hz: float) -> tuple[np.ndarray, float]:
         """The forcing at every RK4 stage time over ``period`` periods, and the sample interval."""
@@ -172,6 +183,18 @@ class Shooting:
         rows, index = np.unique(amplitudes, return_inverse=True)
         u = np.stack([self._forcing(a, f_hz)[0] for a in rows])
         dt = 1.0 / (f_hz * _SAMPLES)
+        if self.structure:  # the element's relative displacement r stands for z (the orbit's extremes, harmonics)
+            sres = simulate_structures(
+                self.system, u, dt, xs, input_kind=self.input_kind, input_index=index, substeps=_SUBSTEPS,
+                store_velocity=True, staged=True, z_limit=self.z_limit, v_limit=1e3,
+            )  # fmt: skip
+            if np.any(sres.diverged):
+                raise ContinuationError(f"the orbit left the admissible range: {sres.describe_failures()}")
+            assert sres.z_dot is not None
+            end = np.hstack([sres.z[:, :, -1], sres.z_dot[:, :, -1]])
+            i, j = self.system.at
+            r = sres.z[:, j - 1] - (sres.z[:, i - 1] if i else 0.0)
+            return (end, r) if store else end
         res = simulate_batch(
             np.repeat(self.params[:, None], xs.shape[0], axis=1), self.system.kind, u, dt, xs,
             input_kind=self.input_kind, input_index=index, substeps=_SUBSTEPS, store_velocity=True, staged=True,
@@ -188,24 +211,27 @@ class Shooting:
         """G = phi(x) - x, the monodromy M (2x2), G_lambda (2,): central differences, one batched call (two
         in frequency); with ``store`` also the orbit's z samples (the unperturbed member's).
         """
-        hz, hv = 1e-6 * scale[0], 1e-6 * scale[1]
-        hl = 1e-6 * scale[2]
+        d = self.dim
+        h = 1e-6 * np.asarray(scale[:d], float)
+        hl = 1e-6 * scale[d]
         if not (f_hz - hl > 0 and np.all(np.isfinite(x))):  # a corrector step out of the physical range
             raise ContinuationError(f"the corrector left the physical range (f = {f_hz:.4g} Hz)")
-        pert = np.array([[0, 0], [hz, 0], [-hz, 0], [0, hv], [0, -hv]], float)
+        pert = np.zeros((1 + 2 * d, d))  # the state, then +-h along each coordinate in turn
+        for k in range(d):
+            pert[1 + 2 * k, k], pert[2 + 2 * k, k] = h[k], -h[k]
         xs = x[None, :] + pert
         amps = np.full(len(xs), amplitude)
         if parameter == "amplitude":
             xs = np.vstack([xs, x, x])
             amps = np.concatenate([amps, [amplitude + hl, amplitude - hl]])
             end, z = self.flow(xs, amps, f_hz, store=True)
-            d_lambda = (end[5] - end[6]) / (2 * hl)
+            d_lambda = (end[1 + 2 * d] - end[2 + 2 * d]) / (2 * hl)
         else:
             end, z = self.flow(xs, amps, f_hz, store=True)
             ep = self.flow(x[None, :], amplitude, f_hz + hl)[0]
             em = self.flow(x[None, :], amplitude, f_hz - hl)[0]
             d_lambda = (ep - em) / (2 * hl)
-        M = np.column_stack([(end[1] - end[2]) / (2 * hz), (end[3] - end[4]) / (2 * hv)])
+        M = np.column_stack([(end[1 + 2 * k] - end[2 + 2 * k]) / (2 * h[k]) for k in range(d)])
         return (end[0] - x, M, d_lambda, z[0]) if store else (end[0] - x, M, d_lambda)
 
     def point(self, x: np.ndarray, amplitude: float, f_hz: float, M: np.ndarray, tangent_lambda: float,
@@ -215,8 +241,8 @@ class Shooting:
         spec = np.fft.rfft(z) / z.size
         harm = 2 * np.abs(spec[self.period :: self.period][:5])  # amplitudes at f, 2f, ... [m]
         mu = np.linalg.eigvals(M)
-        state = (float(x[0]), float(x[1]))
-        mus = (complex(mu[0]), complex(mu[1]))
+        state = tuple(float(q) for q in x)
+        mus = tuple(complex(m) for m in mu)
         harmonics = tuple(float(h) for h in harm)
         poincare = tuple(float(q) for q in z[::_SAMPLES])  # z at phase 0 of each forcing period
         return Point(float(amplitude), float(f_hz), state, float(z.max()), float(z.min()), harmonics, poincare,
@@ -228,11 +254,11 @@ def _tests(M: np.ndarray) -> dict[str, float]:
     the complex pair's modulus less one (Neimark-Sacker; +1 when the multipliers are real).
     """
     mu = np.linalg.eigvals(M)
-    complex_pair = abs(mu[0].imag) > 1e-12
+    pairs = mu[np.abs(mu.imag) > 1e-12]  # of two states: both or neither; of 2N: the largest pair counts
     return {
-        "fold": float(np.linalg.det(M - np.eye(2))),
-        "period_doubling": float(np.linalg.det(M + np.eye(2))),
-        "neimark_sacker": float(abs(mu[0]) - 1.0) if complex_pair else math.nan,
+        "fold": float(np.linalg.det(M - np.eye(M.shape[0]))),
+        "period_doubling": float(np.linalg.det(M + np.eye(M.shape[0]))),
+        "neimark_sacker": float(np.abs(pairs).max() - 1.0) if pairs.size else math.nan,
     }
 
 
@@ -246,7 +272,7 @@ class Bifurcation:
     well: str
     multiplier: complex
     period: int
-    x0: tuple[float, float] = (math.nan, math.nan)
+    x0: tuple[float, ...] = (math.nan, math.nan)
 
     def value(self, parameter: str) -> float:
         """The continuation parameter's value here (``"amplitude"`` or ``"f_hz"``)."""
@@ -286,7 +312,7 @@ class Continuation:
         return (lam, self.fixed) if self.parameter == "amplitude" else (self.fixed, lam)
 
     def _eval(self, y: np.ndarray, scale: np.ndarray, store: bool = False):
-        x, lam = y[:2] * scale[:2], y[2] * scale[2]
+        x, lam = y[:-1] * scale[:-1], y[-1] * scale[-1]
         a, f = self._af(lam)
         return self.shooting.residual_and_jacobian(x, a, f, self.parameter, scale, store)
 
@@ -295,9 +321,9 @@ class Continuation:
         a, f = self._af(lam)
         for _ in range(20):
             G, M, _ = self.shooting.residual_and_jacobian(x, a, f, self.parameter, scale)
-            dx = np.linalg.solve(M - np.eye(2), -G)
+            dx = np.linalg.solve(M - np.eye(M.shape[0]), -G)
             x = x + dx
-            if np.all(np.abs(dx) < tol * scale[:2]):
+            if np.all(np.abs(dx) < tol * scale[:-1]):
                 G, M, _ = self.shooting.residual_and_jacobian(x, a, f, self.parameter, scale)
                 return x, M
         raise ContinuationError(f"no periodic orbit of period {self.shooting.period} found at {self.parameter} {lam:g}")
@@ -305,14 +331,14 @@ class Continuation:
     @staticmethod
     def _jacobian(M: np.ndarray, Gl: np.ndarray, scale: np.ndarray) -> np.ndarray:
         """[G_x, G_lambda] (2x3) in the scaled unknowns, G scaled like the state."""
-        return np.column_stack([(M - np.eye(2)) * scale[None, :2], Gl * scale[2]]) / scale[:2, None]
+        return np.column_stack([(M - np.eye(M.shape[0])) * scale[None, :-1], Gl * scale[-1]]) / scale[:-1, None]
 
     @staticmethod
     def _tangent(M: np.ndarray, Gl: np.ndarray, scale: np.ndarray, previous: np.ndarray | None, sign: float):
         t = np.linalg.svd(Continuation._jacobian(M, Gl, scale))[2][-1]
         if previous is not None:
             return t if t @ previous >= 0 else -t
-        return t if t[2] * sign >= 0 else -t
+        return t if t[-1] * sign >= 0 else -t
 
     def run(self, x: np.ndarray, lam: float, direction: float, scale: np.ndarray) -> tuple[Branch, list[Bifurcation]]:
         """Continue from the orbit at state ``x`` (phase 0) and parameter ``lam`` towards ``direction``
@@ -326,10 +352,10 @@ class Continuation:
         x, M = self.correct_fixed(np.asarray(x, float), lam, scale)
         branch = Branch(sh.period, self.parameter, self.well)
         bifs: list[Bifurcation] = []
-        y = np.array([x[0], x[1], lam]) / scale
+        y = np.r_[x, lam] / scale
         G, M, Gl, z = self._eval(y, scale, store=True)
         t = self._tangent(M, Gl, scale, None, direction)
-        branch.points.append(sh.point(x, *self._af(lam), M, t[2], z))
+        branch.points.append(sh.point(x, *self._af(lam), M, t[-1], z))
         last = (y * scale, M)  # the last accepted point: physical (z, z', lambda) and its monodromy matrix
         ds, crawl = self.ds, 0
         while len(branch.points) < self.max_points:
@@ -337,23 +363,23 @@ class Continuation:
             if not ok:
                 ds /= 2
                 if ds < self.ds_min:
-                    self.reason = f"the corrector failed at {self.parameter} {y[2] * scale[2]:.5g} (step below ds_min)"
+                    self.reason = f"the corrector failed at {self.parameter} {y[-1] * scale[-1]:.5g} (step below ds_min)"
                     return branch, bifs
                 continue
             step = (y, t, ds, scale)  # the arclength step just taken: where its bifurcations are located
             ds = ds if hard else min(1.5 * ds, self.ds_max)
             crawl = crawl + 1 if ds < 0.02 * self.ds_max else 0
             if crawl > 100:  # a hundred steps at a fiftieth of the largest: the corrector barely converges
-                where = f"{self.parameter} {y[2] * scale[2]:.5g}"
+                where = f"{self.parameter} {y[-1] * scale[-1]:.5g}"
                 self.reason = f"the steps shrank below 1/50 of the largest for 100 orbits at {where}"
                 return branch, bifs
             G, M, Gl, z = self._eval(y_new, scale, store=True)
             t = self._tangent(M, Gl, scale, t, direction)
             phys = y_new * scale
-            point = sh.point(phys[:2], *self._af(phys[2]), M, t[2], z)
+            point = sh.point(phys[:-1], *self._af(phys[-1]), M, t[-1], z)
             if point.halves():  # back through the doubling it was born at, onto the branch it came from
                 self.reason = (f"the orbit became the period-{sh.period // 2} orbit (followed on its own branch) at "
-                               f"{self.parameter} {phys[2]:.5g}")  # fmt: skip
+                               f"{self.parameter} {phys[-1]:.5g}")  # fmt: skip
                 break
             # only within the range asked for: the step that leaves it may cross a sign change beyond it
             found = self._detect(last, (phys, M), step)
@@ -362,16 +388,16 @@ class Continuation:
             last = (phys, M)
             # rescale the state to the orbit's size
             zs = max((point.max_z - point.min_z) / 2, z_floor)
-            new = np.array([zs, 2 * np.pi * point.f_hz * zs, scale[2]])
+            new = np.r_[sh.state_scale(zs, point.f_hz), scale[-1]]
             t = t * scale / new
             t /= np.linalg.norm(t)
             scale, y = new, phys / new
-            if not (self.lo <= phys[2] <= self.hi):
+            if not (self.lo <= phys[-1] <= self.hi):
                 self.reason = f"{self.parameter} left [{self.lo:g}, {self.hi:g}]"
                 break
             if point.max_multiplier > MAX_MULTIPLIER:
                 self.reason = (f"the orbit became too unstable to follow (|multiplier| {point.max_multiplier:.2g} > "
-                               f"{MAX_MULTIPLIER:g}) at {self.parameter} {phys[2]:.5g}")  # fmt: skip
+                               f"{MAX_MULTIPLIER:g}) at {self.parameter} {phys[-1]:.5g}")  # fmt: skip
                 break
         return branch, bifs
 
@@ -385,7 +411,7 @@ class Continuation:
         try:
             for it in range(max_iter):
                 G, M, Gl = self._eval(y_new, scale)
-                Gs = G / scale[:2]
+                Gs = G / scale[:-1]
                 J = np.vstack([self._jacobian(M, Gl, scale), t])
                 step = np.linalg.solve(J, -np.concatenate([Gs, [t @ (y_new - y_pred)]]))
                 y_new = y_new + step
@@ -434,7 +460,7 @@ class Continuation:
         a, fa, ya = 0.0, _tests(M0)[kind], p0 / scale
         b, fb, yb = ds, _tests(M1)[kind], p1 / scale
         tol = 1e-7 * max(abs(fa), abs(fb))
-        best = (abs(fb), p1[2], M1, p1[:2])
+        best = (abs(fb), p1[-1], M1, p1[:-1])
         for _ in range(30):
             if fb == fa or best[0] <= tol:
                 break
@@ -448,7 +474,7 @@ class Continuation:
                 break
             _, M_t, _ = self._eval(y_t, scale)
             f = _tests(M_t)[kind]
-            best = min(best, (abs(f), y_t[2] * scale[2], M_t, y_t[:2] * scale[:2]), key=lambda r: r[0])
+            best = min(best, (abs(f), y_t[-1] * scale[-1], M_t, y_t[:-1] * scale[:-1]), key=lambda r: r[0])
             if f * fb < 0:
                 a, fa, ya = b, fb, yb
             else:
@@ -476,7 +502,15 @@ class Continuation:
 
 def settle(system, input_kind: str, z_start: float, amplitude: float, f_hz: float, periods: int = 200):
     """The state at phase 0 after ``periods`` forcing periods from rest at ``z_start`` (a start orbit)."""
-    return Shooting(system, input_kind, period=periods).flow(np.array([[z_start, 0.0]]), amplitude, f_hz)[0]
+    return Shooting(system, input_kind, period=periods).flow(_rest_state(system, z_start)[None, :], amplitude, f_hz)[0]
+
+
+def _rest_state(system, z_start: float) -> np.ndarray:
+    """Rest at ``z_start``: (z, 0) of a single DOF; of a structure, every DOF's static position with the element's
+    relative displacement at ``z_start``, and no velocity."""
+    if isinstance(system, Structure):
+        return np.r_[system.static_positions(z_start), np.zeros(system.n_dof)]
+    return np.array([z_start, 0.0])
 
 
 def _span(value) -> tuple[float, float] | None:
@@ -520,7 +554,8 @@ def check_nfrc(system, *, freq, amplitude, well: str = "plus", input_kind: str =
     if isinstance(max_period, bool) or not (isinstance(max_period, int) and 1 <= max_period <= 64):
         raise ContinuationError(f"max_period is an integer 1..64, got {max_period!r}")
     try:
-        return system.equilibria().well(well)
+        eq = system.element_equilibria() if isinstance(system, Structure) else system.equilibria()
+        return eq.well(well)
     except ValueError as exc:  # no such well, or a restoring force without usable equilibria
         raise ContinuationError(f"--well {well}: {exc}") from None
 
@@ -583,7 +618,7 @@ def nfrc(system, *, freq, amplitude, well: str = "plus", input_kind: str = "base
     sh = Shooting(system, input_kind, 1)
     _, z = sh.flow(x[None, :], a0, f0, store=True)
     z_scale = max(float(np.ptp(z)) / 2, 1e-3 * abs(z_well), 1e-7)
-    scale = np.array([z_scale, 2 * np.pi * f0 * z_scale, hi - lo])
+    scale = np.r_[sh.state_scale(z_scale, f0), hi - lo]
     branches: list[Any] = []
     bifurcations: list[Any] = []
     notes: list[str] = []
@@ -639,11 +674,11 @@ def _double(shooting: Shooting, b: Bifurcation, parameter: str, fixed: float, sp
         a, f = (lam, fixed) if parameter == "amplitude" else (fixed, lam)
         try:
             x_p, _ = base.correct_fixed(np.array(b.x0), lam, scale)
-            nudged = (x_p + np.array([1e-3 * scale[0], 0.0]))[None, :]
+            nudged = (x_p + np.r_[1e-3 * scale[0], np.zeros(x_p.size - 1)])[None, :]
             x = Shooting(system, kind, 400, shooting.z_limit).flow(nudged, a, f)[0]
             x2, _ = cont.correct_fixed(x, lam, scale)
         except ContinuationError:
             continue
-        if np.linalg.norm((shooting.flow(x2[None, :], a, f)[0] - x2) / scale[:2]) > 1e-4:
+        if np.linalg.norm((shooting.flow(x2[None, :], a, f)[0] - x2) / scale[:-1]) > 1e-4:
             return doubled, x2, lam
     return None

@@ -210,7 +210,7 @@ class Structure:
         sol = np.linalg.lstsq(a, np.r_[np.zeros(n), 1.0], rcond=None)[0]
         return float(sol[n])
 
-    def _static(self, r: float) -> np.ndarray:
+    def static_positions(self, r: float) -> np.ndarray:
         """The DOFs' static positions with relative displacement r across the element."""
         n, lvec = self.n_dof, self.coupling
         a = np.zeros((n + 1, n + 1))
@@ -230,7 +230,7 @@ class Structure:
     def equilibria(self) -> dict[str, np.ndarray]:
         """Static positions of every DOF [m] at each stable equilibrium (``"minus"``, ``"plus"``)."""
         eq = self.element_equilibria()
-        return {w: self._static(eq.well(w)) for w in ("minus", "plus") if getattr(eq, f"z_{w}") is not None}
+        return {w: self.static_positions(eq.well(w)) for w in ("minus", "plus") if getattr(eq, f"z_{w}") is not None}
 
     def linear(self, well: str) -> tuple[np.ndarray, np.ndarray]:
         """Stiffness and damping matrices of the underlying-linear system at a well (the element

@@ -125,3 +125,66 @@ def test_structure_record_file(tmp_path):
         load_structure(nomass)
     with pytest.raises(InputError, match="masses"):
         load_structure(path, masses=[1.0])
+
+
+def _stepped_sweep(amps, f_hz, state, periods=120, steps=128):
+    """The device on the fixture under b'' = A sin(2 pi f t), A stepped through ``amps`` (each step going on from the
+    last state, as a shaker test does), a plain RK4 on floats written here (``steps`` a period); per amplitude, the
+    spread of r = z2 - z1 over the last 8 forcing periods at phase 0 (0 on a period-1 orbit)."""
+    m1, m2 = FIXTURE["m"], TRUTH.m
+    k_f = m1 * (2 * np.pi * FIXTURE["f_hz"]) ** 2
+    c_f = 2 * FIXTURE["zeta"] * np.sqrt(k_f * m1)
+    k0, k1, k2, k3, c, cn = TRUTH.k0, TRUTH.k1, TRUTH.k2, TRUTH.k3, TRUTH.c, TRUTH.c_nl
+    h = 1.0 / (f_hz * steps)
+    sines = [float(np.sin(np.pi * k / steps)) for k in range(2 * steps + 1)]  # at every half step of a period
+    z1, z2, v1, v2 = state
+    spread = []
+    for A in amps:
+
+        def rhs(z1, z2, v1, v2, ab):
+            r, vr = z2 - z1, v2 - v1
+            force = ((k3 * r + k2) * r - k1) * r + k0 + c * vr + cn * vr * abs(vr)
+            return (-k_f * z1 - c_f * v1 + force) / m1 - ab, -force / m2 - ab
+
+        section = []
+        for p in range(periods):
+            for k in range(steps):
+                a0, am, a1 = A * sines[2 * k], A * sines[2 * k + 1], A * sines[2 * k + 2]
+                p1, q1 = rhs(z1, z2, v1, v2, a0)
+                s1, s2 = v1 + 0.5 * h * p1, v2 + 0.5 * h * q1
+                p2, q2 = rhs(z1 + 0.5 * h * v1, z2 + 0.5 * h * v2, s1, s2, am)
+                t1, t2 = v1 + 0.5 * h * p2, v2 + 0.5 * h * q2
+                p3, q3 = rhs(z1 + 0.5 * h * s1, z2 + 0.5 * h * s2, t1, t2, am)
+                w1, w2 = v1 + h * p3, v2 + h * q3
+                p4, q4 = rhs(z1 + h * t1, z2 + h * t2, w1, w2, a1)
+                z1 += h / 6 * (v1 + 2 * s1 + 2 * t1 + w1)
+                z2 += h / 6 * (v2 + 2 * s2 + 2 * t2 + w2)
+                v1 += h / 6 * (p1 + 2 * p2 + 2 * p3 + p4)
+                v2 += h / 6 * (q1 + 2 * q2 + 2 * q3 + q4)
+            if p >= periods - 8:
+                section.append(z2 - z1)
+        spread.append(float(np.ptp(section)))
+    return np.array(spread)
+
+
+@pytest.mark.parametrize(("well", "first", "amps"), [
+    ("plus", "period_doubling", np.r_[np.arange(2.0, 7.0, 0.5), np.arange(7.0, 8.6, 0.05)]),
+    ("minus", "fold", np.r_[np.arange(2.0, 7.0, 0.5), np.arange(7.0, 8.5, 0.05)]),
+])  # fmt: skip
+def test_continuation_of_the_device_on_the_fixture_finds_where_a_stepped_test_leaves_the_orbit(well, first, amps):
+    # at 9 Hz the positive well's period-1 orbit first doubles; the negative well's first meets a fold (its first
+    # doubling lies on the resonant branch beyond, which an upward stepped test does not follow); a stepped test
+    # stays on the period-1 orbit up to there and leaves it within one step of it (0.05 m/s^2, 0.6 %)
+    from negstiff import nfrc
+
+    curve = nfrc(ON_FIXTURE, freq=9.0, amplitude=(1.0, 20.0), well=well, max_period=1)
+    met = curve["bifurcations"][0]  # the first along the branch from the well's rest
+    assert met["type"] == first
+    a_bif = met["amplitude"]
+    start = ON_FIXTURE.static_positions(ON_FIXTURE.element_equilibria().well(well))
+    spread = _stepped_sweep(amps, 9.0, (start[0], start[1], 0.0, 0.0))
+    left = np.flatnonzero(spread[3:] > 1e-6)  # the first three amplitudes settle from rest
+    assert left.size and left[0] > 0, "the stepped test never stayed on (or never left) the period-1 orbit"
+    a_step = amps[3:][left[0]]
+    print(f"{well}: {first} at {a_bif:.4f} m/s^2 (continuation), stepped test leaves the orbit at {a_step:.2f}")
+    assert abs(a_step / a_bif - 1) < 0.03, (a_step, a_bif)
