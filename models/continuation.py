@@ -164,7 +164,8 @@ class Shooting:
 
     def state_scale(self, z_scale: float, f_hz: float) -> np.ndarray:
         """The state's scale for a response of half-stroke ``z_scale`` at ``f_hz``: z_scale for every
-        displacement, 2 pi f z_scale for every velocity."""
+        displacement, 2 pi f z_scale for every velocity.
+        """
         return np.r_[np.full(self.dofs, z_scale), np.full(self.dofs, 2 * np.pi * f_hz * z_scale)]
 
     def _forcing(self, amplitude: float, f_hz: float) -> tuple[np.ndarray, float]:
@@ -363,7 +364,8 @@ class Continuation:
             if not ok:
                 ds /= 2
                 if ds < self.ds_min:
-                    self.reason = f"the corrector failed at {self.parameter} {y[-1] * scale[-1]:.5g} (step below ds_min)"
+                    lam = y[-1] * scale[-1]
+                    self.reason = f"the corrector failed at {self.parameter} {lam:.5g} (step below ds_min)"
                     return branch, bifs
                 continue
             step = (y, t, ds, scale)  # the arclength step just taken: where its bifurcations are located
@@ -507,7 +509,8 @@ def settle(system, input_kind: str, z_start: float, amplitude: float, f_hz: floa
 
 def _rest_state(system, z_start: float) -> np.ndarray:
     """Rest at ``z_start``: (z, 0) of a single DOF; of a structure, every DOF's static position with the element's
-    relative displacement at ``z_start``, and no velocity."""
+    relative displacement at ``z_start``, and no velocity.
+    """
     if isinstance(system, Structure):
         return np.r_[system.static_positions(z_start), np.zeros(system.n_dof)]
     return np.array([z_start, 0.0])

@@ -38,6 +38,7 @@ _EXPORTS = {
     # the physics
     "Model": "negstiff.models.equation",
     "Device": "negstiff.models.device",
+    "Structure": "negstiff.models.structure",
     "load_system": "negstiff.models.device",
     "simulate": "negstiff.models.simulator",
     "Rig": "negstiff.models.rig",

@@ -58,6 +58,11 @@ THRESHOLDS = tuple(float(t) for t in np.logspace(-4, -1, 13))
 """SINDy's STLSQ thresholds by default, relative to the target's spread."""
 
 
+ASYMMETRY_WARNING = 0.05
+"""NSI warns when the identified stiffness matrix's asymmetry exceeds this share of its largest entry: the
+record's masses scale the identified M^-1 K back to K, and wrong masses leave it lopsided."""
+
+
 class StructureIdentificationError(InputError):
     """The record cannot be identified as a structure with one element (too short, wrong element, no modes)."""
 
@@ -87,6 +92,13 @@ def _coupling(n: int, at: tuple[int, int]) -> np.ndarray:
     if at[0]:
         lvec[at[0] - 1] = -1.0
     return lvec
+
+
+def _asymmetry(K: np.ndarray) -> float:
+    """The largest |K_ij - K_ji| relative to the larger of the pair, over the coupled pairs (0 when symmetric)."""
+    big = np.maximum(np.abs(K), np.abs(K.T))
+    coupled = big > 1e-6 * big.max()
+    return float(np.max(np.abs(K - K.T)[coupled] / big[coupled], initial=0.0))
 
 
 def _element_model(coef: dict[str, float], mass: float) -> Model:
@@ -311,7 +323,14 @@ class StructureNSI(_StructureIdentifier):
         Ks = np.mean([np.asarray(w.structure.stiffness) for w in wells.values()], axis=0)
         Cs = np.mean([np.asarray(w.structure.damping) for w in wells.values()], axis=0)
         structure = Structure(rec.masses, Model(m=mass, **coef), 0.5 * (Ks + Ks.T), 0.5 * (Cs + Cs.T), at)
+        lopsided = {w: f.coefficients["stiffness_asymmetry"] for w, f in wells.items()}
+        warned = [
+            f"{rec.source}: the identified stiffness matrix of the {w} well is not symmetric ({100 * a:.0f} % of a "
+            "coupling): a linear structure's is (reciprocity); are the masses right?"
+            for w, a in lopsided.items() if a > ASYMMETRY_WARNING
+        ]  # fmt: skip
         self._finish(rec, structure, n_id, {w: f.modes for w, f in wells.items()}, {
+            "warnings": warned,
             "wells": {w: {"r_ref": f.r_ref, "coefficients": f.coefficients, "quality_im_over_re": f.quality,
                           "band_hz": list(f.band_hz), "singular_values": f.singular_values,
                           "K_uls": f.K.tolist(), "C_uls": f.C.tolist()} for w, f in wells.items()},
@@ -353,6 +372,7 @@ class StructureNSI(_StructureIdentifier):
             Ap = T @ ss.A @ np.linalg.inv(T)
             K = -mass[:, None] * Ap[n:, :n]
             C = -mass[:, None] * Ap[n:, n:]
+            asymmetry = _asymmetry(K)  # 0 for the right masses (reciprocity)
             K, C = 0.5 * (K + K.T), 0.5 * (C + C.T)
             modes = modes_of_state_matrix(ss.A, Cp)
             if len(modes) < n:
@@ -406,6 +426,7 @@ class StructureNSI(_StructureIdentifier):
             "c_nl": element.c_nl,
             "constant_last_pass": f0,
             "shift_last_pass": shift,
+            "stiffness_asymmetry": asymmetry,
         }
         quality_of = dict(zip(("x2", "x3", "vabsv"), quality.tolist(), strict=True))
         singular = list(ss.singular_values[:12])

@@ -139,6 +139,8 @@ def cmd_identify(args) -> int:
     from negstiff.inference.analysis.frf import compare_with_frf, read_frf_results
     from negstiff.inference.record.measurement import load
 
+    if args.dofs > 1 or args.element is not None:
+        return _identify_structure(args)
     rec = load(args.data, columns=args.columns, fs=args.fs, mass=args.mass, gravity=args.gravity, aux=args.aux)
     frfs = read_frf_results(args.frf)
     if args.method == "nsi":
@@ -170,6 +172,37 @@ def cmd_identify(args) -> int:
         if m["f_hz"] is not None
     )
     say(args, f"wrote {args.out} ({wells}; validation {v['rms_percent']:.2f} % rms)")
+    return 0
+
+
+def _identify_structure(args) -> int:
+    """``identify --dofs N --element I-J``: a structure's record through ``StructureNSI`` / ``StructureSINDy``."""
+    from negstiff.inference.estimators.structure_id import StructureNSI, StructureSINDy, modes_summary, parse_element
+    from negstiff.inference.record.structure import load_structure
+
+    for option, given in (("--columns", args.columns), ("--mass", args.mass), ("--aux", args.aux), ("--frf", args.frf)):
+        if given:
+            raise InputError(f"{option} is for a single-DOF record (a structure's record names z1 ... zN)")
+    if args.element is None:
+        raise InputError(f"--dofs {args.dofs} needs --element I-J (J the DOF the element moves, I where it is fixed)")
+    masses = parse_amplitudes(args.masses, "--masses") if args.masses else None
+    rec = load_structure(args.data, fs=args.fs, masses=masses)
+    if rec.n_dof != args.dofs:
+        raise InputError(f"{args.data}: --dofs {args.dofs}, but the record has responses z1 ... z{rec.n_dof}")
+    element = parse_element(args.element, rec.n_dof)
+    est: StructureNSI | StructureSINDy
+    if args.method == "nsi":
+        est = StructureNSI(element=element, block_rows=args.block_rows)
+    else:
+        est = StructureSINDy(element=element)
+    say(args, f"identify {args.method}: {rec.n_dof} DOFs, element {element[0]}-{element[1]}, {rec.n} samples at "
+              f"{rec.fs:g} Hz")  # fmt: skip
+    est.fit(rec)
+    result = est.result()
+    warn(args, result["warnings"])
+    write_json(args.out, result)
+    rms = result["validation"]["rms_percent"]
+    say(args, f"wrote {args.out} ({modes_summary(est.modal_)}; validation {rms:.1f} % rms)")
     return 0
 
 

@@ -216,6 +216,19 @@ def _identify(sub, common: argparse.ArgumentParser, data_opts: argparse.Argument
         help="an frf result of a low-level test around a well: its peak beside the identified well frequency "
         "(repeatable, one per well)",
     )
+    idf.add_argument(
+        "--dofs",
+        type=number(int, 1, 50),
+        default=1,
+        help="degrees of freedom of the structure the record measures (default 1; N > 1 reads responses z1 ... zN "
+        "and '# masses: m1,...,mN', and needs --element)",
+    )
+    idf.add_argument(
+        "--element",
+        help="where the nonlinear element acts, I-J: it moves DOF J relative to DOF I (0: the base), e.g. 1-2 for a "
+        "device on a fixture",
+    )
+    idf.add_argument("--masses", help="the DOFs' masses m1,...,mN [kg] (default: the record's '# masses:')")
     idf.set_defaults(func=c.cmd_identify)
 
 
