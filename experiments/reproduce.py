@@ -27,6 +27,7 @@ from .calibration import device_section
 from .characterization import characterization_section
 from .discrepancy_study import discrepancy_section
 from .findings import conclusion, summary_lines
+from .fixture_study import fixture_section
 from .nfrc import continuation_section
 from .nsi_study import nsi_section
 from .numbers import fmt
@@ -356,6 +357,7 @@ SECTION_TABLE = {
     "discrepancy": ("discrepancy workflow", discrepancy_section, 32),
     "silverbox": ("Silverbox benchmark (real data)", silverbox_section, 54),
     "continuation": ("continuation against the bifurcation map", continuation_section, 58),
+    "fixture": ("a fixture that is not rigid (2 DOF)", fixture_section, 25),
 }
 """name -> (title, section function, seconds it took in a full run: the order the workers take them)."""
 
