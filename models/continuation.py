@@ -193,9 +193,10 @@ class Shooting:
                 raise ContinuationError(f"the orbit left the admissible range: {sres.describe_failures()}")
             assert sres.z_dot is not None
             end = np.hstack([sres.z[:, :, -1], sres.z_dot[:, :, -1]])
-            i, j = self.system.at
+            i, j = self.system.place
             r = sres.z[:, j - 1] - (sres.z[:, i - 1] if i else 0.0)
             return (end, r) if store else end
+        assert self.params is not None  # a single-DOF system's
         res = simulate_batch(
             np.repeat(self.params[:, None], xs.shape[0], axis=1), self.system.kind, u, dt, xs,
             input_kind=self.input_kind, input_index=index, substeps=_SUBSTEPS, store_velocity=True, staged=True,

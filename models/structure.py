@@ -23,7 +23,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, replace
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
@@ -183,10 +183,25 @@ class Structure:
         return len(self.masses)
 
     @property
+    def place(self) -> tuple[int, int]:
+        """(I, J): the element moves DOF J relative to DOF I (0: the base)."""
+        return cast(tuple[int, int], self.at)
+
+    @property
+    def K(self) -> np.ndarray:
+        """The linear structure's stiffness matrix [N/m] (the element excluded)."""
+        return cast(np.ndarray, self.stiffness)
+
+    @property
+    def C(self) -> np.ndarray:
+        """The linear structure's damping matrix [N s/m] (the element excluded)."""
+        return cast(np.ndarray, self.damping)
+
+    @property
     def coupling(self) -> np.ndarray:
         """L = e_J - e_I: where the element's force acts (+ on J, - on I)."""
         lvec = np.zeros(self.n_dof)
-        i, j = self.at  # type: ignore[misc]
+        i, j = self.place
         lvec[j - 1] = 1.0
         if i:
             lvec[i - 1] = -1.0
@@ -238,7 +253,7 @@ class Structure:
         r = self.element_equilibria().well(well)
         lvec = self.coupling
         ll = np.outer(lvec, lvec)
-        return self.stiffness + float(self.element.stiffness(r)) * ll, self.damping + self.element.c * ll
+        return self.K + float(self.element.stiffness(r)) * ll, self.C + self.element.c * ll
 
     def modes(self, well: str) -> list[Mode]:
         """The underlying-linear system's modes at a well, by frequency."""
@@ -251,7 +266,7 @@ class Structure:
         return {
             "masses": list(self.masses),
             "element": self.element.to_dict(),
-            "at": list(self.at),  # type: ignore[arg-type]
+            "at": list(self.place),
             "stiffness": np.asarray(self.stiffness).tolist(),
             "damping": np.asarray(self.damping).tolist(),
         }
@@ -277,12 +292,12 @@ class Structure:
         if input_kind == "base_acc":
             gain = input_gain("base_acc", mass)
         else:
-            k = self.at[1] if force_dof is None else int(force_dof)  # type: ignore[index]
+            k = self.place[1] if force_dof is None else int(force_dof)
             if not 1 <= k <= self.n_dof:
                 raise InputError(f"the force acts on a DOF 1..{self.n_dof}, got {k}")
             gain = np.zeros(self.n_dof)
             gain[k - 1] = input_gain("force", mass[k - 1 : k])[0]
-        return self.element.kernel_params(), 1.0 / mass, self.stiffness, self.damping, gain
+        return self.element.kernel_params(), 1.0 / mass, self.K, self.C, gain
 
 
 @dataclass(frozen=True)
@@ -330,8 +345,9 @@ def simulate_structures(
     ``simulate_batch``: linear interpolation between samples, or the input at the stage times).
     """
     x0 = np.atleast_2d(np.asarray(x0, dtype=np.float64))
-    many = not isinstance(structures, Structure)
-    group = list(structures) if many else [structures] * x0.shape[0]  # type: ignore[list-item]
+    group: list[Structure] = (
+        [structures] * x0.shape[0] if isinstance(structures, Structure) else list(structures)
+    )
     nb = len(group)
     nd = group[0].n_dof
     if any(s.n_dof != nd or s.at != group[0].at for s in group):
@@ -364,7 +380,7 @@ def simulate_structures(
     status = np.zeros(nb, dtype=np.int64)
     fail = np.full(nb, -1, dtype=np.int64)
     lay = effects.layout()
-    ei, ej = group[0].at[0] - 1, group[0].at[1] - 1  # type: ignore[index]
+    ei, ej = group[0].place[0] - 1, group[0].place[1] - 1
     run_kernel = structure_kernel(KINDS[group[0].element.kind])
     if threads is None:
         threads = min(cores(), max(1, nb // 16), max(1, nb * n * int(substeps) * nd // 200_000))

@@ -153,7 +153,7 @@ class StructureRig:
         meta = {
             "fs": f"{self.fs:g}",
             "masses": ",".join(f"{m:g}" for m in self.structure.masses),
-            "element": "{}-{}".format(*self.structure.at),  # type: ignore[str-format]
+            "element": "-".join(map(str, self.structure.place)),
             "units": "SI (s, m/s^2, m)",
             "source": f"negstiff virtual structure rig (random, seed {self.seed})",
         }

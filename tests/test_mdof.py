@@ -239,3 +239,23 @@ def test_structure_rig_records_are_seeded_and_read_back(tmp_path):
     assert pay.structure.at == (0, 1) and pay.structure.masses == (TRUTH.m, 0.05)
     plus = pay.structure.modes("plus")
     assert plus[0].f_hz < TRUTH.uls("plus").f_hz and abs(plus[1].shape[1]) == pytest.approx(1.0)
+
+
+def test_posterior_of_the_element_on_its_fixture():
+    # emcee over the element's coefficients, the linear structure fixed at SINDy's: its mean recovers the stiffness
+    # within 1 % and the damping within 5 % (measured on this record: k1-k3 within 0.03 %, c +1.2 %, c_nl -2.1 % with
+    # 80 windows, -2.6 % with 40: the windowed least squares' own bias, the damping's small share of the response)
+    # with converged chains. Its intervals are conditional on the fixed structure and not calibrated yet (z-scores up
+    # to 3.3 on this record): the test does not claim coverage.
+    from negstiff.inference.estimators.structure_posterior import StructurePosterior
+
+    u, z = rk4_fixture_record(duration=60.0, seed=4, noise=1e-5)
+    rec = structure_from_arrays(u, z, FS, (FIXTURE["m"], TRUTH.m))
+    post = StructurePosterior(element="1-2", n_walkers=12, max_windows=40, seed=1).fit(rec)
+    for k in ("k1", "k2", "k3", "c", "c_nl"):
+        p = post.parameters_[k]
+        assert p["mean"] == pytest.approx(getattr(TRUTH, k), rel=0.01 if k.startswith("k") else 0.05), k
+        assert p["r_hat"] < 1.01 and p["hdi_low"] < p["mean"] < p["hdi_high"]
+    assert post.parameters_["sigma"]["mean"] == pytest.approx(1e-5, rel=0.5)  # the lasers' noise, and a little model
+    out = post.result()
+    assert set(out["parameters"]) == {"k1", "k2", "k3", "c", "c_nl", "sigma"} and "fixed" in out["settings"]

@@ -107,17 +107,23 @@ class StructureRecord:
             self.derived[key] = replace(self, u=self.u[sl], z=self.z[:, sl])
         return self.derived[key]
 
-    def states(self) -> tuple[np.ndarray, np.ndarray, tuple[int, int]]:
-        """Band-smoothed displacements and velocities (N, T) of every DOF, with one Savitzky-Golay window for
-        all (the narrowest any DOF's band allows, ``derivatives.velocity_window``: relative motions are
-        differences of DOFs, which must be smoothed alike). Computed once per record; copies returned.
+    def states(self, at: tuple[int, int] | None = None) -> tuple[np.ndarray, np.ndarray, tuple[int, int]]:
+        """Band-smoothed displacements and velocities (N, T) of every DOF, with one Savitzky-Golay window for all
+        (relative motions are differences of DOFs, which must be smoothed alike): the window the element's relative
+        displacement z_J - z_I allows when ``at`` = (I, J) is given (the motion the nonlinear basis reads; a DOF
+        that barely moves, like a stiff fixture's, is mostly sensor noise and would allow none), else the narrowest
+        any DOF allows (``derivatives.velocity_window``). Computed once per record and ``at``; copies returned.
         """
-        if "states" not in self.derived:
-            windows = [velocity_window(zi, self.fs) for zi in self.z]
-            w = min(windows)
+        key = ("states", at)
+        if key not in self.derived:
+            if at is not None:
+                i, j = at
+                w = velocity_window(self.z[j - 1] - (self.z[i - 1] if i else 0.0), self.fs)
+            else:
+                w = min(velocity_window(zi, self.fs) for zi in self.z)
             pairs = [smooth_and_differentiate(zi, self.fs, w) for zi in self.z]
-            self.derived["states"] = (np.array([p[0] for p in pairs]), np.array([p[1] for p in pairs]), w)
-        zs, v, w = self.derived["states"]
+            self.derived[key] = (np.array([p[0] for p in pairs]), np.array([p[1] for p in pairs]), w)
+        zs, v, w = self.derived[key]
         return zs.copy(), v.copy(), w
 
     def require(self, n_min: int, what: str) -> None:
