@@ -187,13 +187,14 @@ FIXTURE = {"m": 1.0, "f_hz": 25.0, "zeta": 0.02}
 
 
 def rk4_fixture_record(duration=60.0, rms=12.0, band=(2.0, 40.0), seed=1, oversample=8, settle=5.0, noise=1e-6,
-                       device=None, fixture=FIXTURE, fs=FS):  # fmt: skip
+                       device=None, fixture=FIXTURE, fs=FS, hidden=None):  # fmt: skip
     """(base_acc, z (2, T)) of ``device`` (TRUTH by default) on a sprung fixture, as another lab's code writes it: a
     plain fixed-step RK4 on Python floats at ``oversample`` x fs (not negstiff's kernel), the base acceleration
     band-limited Gaussian noise made by FFT at the fine rate (linear between fine steps), ``settle`` s dropped,
     sampled at fs with white noise ``noise`` [m] on both displacements. DOF 1 the fixture (its spring and damper to
     the table), DOF 2 the device's mass on the element between them; z relative to the table, from the springs'
-    loaded rest (the element's force, k0 included, acts on DOF 2 and oppositely on DOF 1)."""
+    loaded rest (the element's force, k0 included, acts on DOF 2 and oppositely on DOF 1). ``hidden(r, r')``: a
+    force [N] the element has beside its model (friction), acting like the element's."""
     dev = TRUTH if device is None else device
     m1, m2 = fixture["m"], dev.m
     k_f = m1 * (2 * np.pi * fixture["f_hz"]) ** 2
@@ -211,6 +212,8 @@ def rk4_fixture_record(duration=60.0, rms=12.0, band=(2.0, 40.0), seed=1, oversa
     def rhs(z1, z2, v1, v2, ab):
         r, vr = z2 - z1, v2 - v1
         force = ((k3 * r + k2) * r - k1) * r + k0 + c * vr + cn * vr * abs(vr)
+        if hidden is not None:
+            force += hidden(r, vr)
         return (-k_f * z1 - c_f * v1 + force) / m1 - ab, -force / m2 - ab
 
     # start at rest in the positive well of the element (F(r) = 0, the fixture's spring unloaded)

@@ -150,10 +150,13 @@ def equation_columns(z: np.ndarray, v: np.ndarray, at: tuple[int, int]) -> tuple
     return cols, names
 
 
-def _assemble(theta: np.ndarray, n: int, at: tuple[int, int], masses) -> Structure:
+def _assemble(theta: np.ndarray, n: int, at: tuple[int, int], masses, extra: dict[str, float] | None = None
+              ) -> Structure:  # fmt: skip
     pairs = _springs(n, at)
     k, c, e = theta[: len(pairs)], theta[len(pairs) : 2 * len(pairs)], theta[2 * len(pairs) :]
     element = _element_model(dict(zip(ELEMENT_TERMS, e, strict=True)), masses[at[1] - 1])
+    if extra:
+        element = Model(**{**element.to_dict(), "extra": extra})
     return Structure(tuple(masses), element, _matrix_of(pairs, k, n), _matrix_of(pairs, c, n), at)
 
 
@@ -250,7 +253,7 @@ class _StructureIdentifier:
             "dofs": self.structure_.n_dof,
             "element_at": list(self.structure_.place),
             "structure": self.structure_.to_dict(),
-            "element": {**self.element_, "extra": {}},
+            "element": {**self.element_, "extra": dict(self.structure_.element.extra)},
             "modal": {w: [m.to_json() for m in ms] for w, ms in self.modal_.items()},
             "linear": self.linear_,
             "equilibria": self.equilibria_,
@@ -477,12 +480,19 @@ class StructureSINDy(_StructureIdentifier):
         theta = np.linalg.lstsq(X, y, rcond=None)[0]
         return _assemble(theta, rec.n_dof, at, rec.masses)
 
-    def weak_system(self, rec: StructureRecord, at, zs, v) -> tuple[np.ndarray, np.ndarray, list[str], int]:
-        """The stacked weak-form system (rows: DOF x test function; acceleration units) and its names."""
+    def weak_system(self, rec: StructureRecord, at, zs, v, extra=()) -> tuple[np.ndarray, np.ndarray, list[str], int]:
+        """The stacked weak-form system (rows: DOF x test function; acceleration units) and its names; ``extra``:
+        (name, g) pairs of further element terms g(t) (acting on J and, opposite, on I), appended as columns.
+        """
         half, _ = test_function_half_width(zs[at[1] - 1], rec.fs)
         phi, d2phi = test_function(half, rec.dt)
         stride = max(1, half)
         cols, names = equation_columns(zs, v, at)
+        if extra:
+            lvec = _coupling(rec.n_dof, at)
+            more = np.stack([lvec[:, None] * g[None, :] for _, g in extra], axis=-1)  # (N, T, E)
+            cols = np.concatenate([cols, more], axis=-1)
+            names = names + [f"element {name}" for name, _ in extra]
         lin = -rec.u if rec.input_name == "base_acc" else rec.u
         mass = np.asarray(rec.masses)
         ys, Xs = [], []
@@ -543,6 +553,108 @@ class StructureSINDy(_StructureIdentifier):
             "settings": {"velocity": f"Savitzky-Golay (window, order) = {window}", "identification_samples": n_id,
                          "newtons_third_law": "the element's terms are one coefficient each, acting on J and, "
                                               "opposite, on I"},
+        })  # fmt: skip
+        return self
+
+
+class StructureDiscrepancy(_StructureIdentifier):
+    """What a structure's element model misses, named, added and measured (the discrepancy workflow for N DOFs).
+
+    The baseline is the element's base law (``ELEMENT_TERMS``) fitted with the linear structure by the weak-form
+    least squares of ``StructureSINDy``. Each registered effect with a column of its own (``models.effects``:
+    Coulomb friction, cubic damping, quartic and quintic stiffness) is added in turn as a term of the element
+    (shared by the DOFs it joins) and the system refitted. The effect whose equation error is least on test
+    functions it was not fitted on (the identification part's last quarter) is named, and kept when its model's
+    held-out prediction (free runs of ``window_s`` restarted from the measured state over the last
+    ``validation_fraction``, ``free_run_error``) shrinks the baseline's error by at least ``min_gain`` of it;
+    otherwise nothing is named and the baseline stands.
+
+    Parameters
+    ----------
+    element : "I-J" or (I, J)
+        The element's place.
+    window_s : float, default 0.25
+        Held-out free runs' length [s] (short against cross-well chaos).
+    min_gain : float, default 0.1
+        The share of the baseline's held-out error an effect must remove to be named.
+    validation_fraction : float, default 0.2
+        The held-out tail.
+
+    Attributes
+    ----------
+    named_ : str or None
+        The effect named (a registry name), or None.
+    gap_ : dict
+        Held-out error [% rms] of the baseline and of the model with the named effect.
+    candidates_ : dict
+        Every effect tried: its fitted value and held-out error.
+    structure_ : Structure
+        The final structure (with the named effect, or the baseline).
+    """
+
+    method = "discrepancy"
+
+    def __init__(self, *, element=None, window_s: float = 0.25, min_gain: float = 0.1,
+                 validation_fraction: float = 0.2):  # fmt: skip
+        super().__init__(element=element, validation_fraction=validation_fraction)
+        self.window_s, self.min_gain = window_s, min_gain
+
+    def fit(self, rec: StructureRecord) -> StructureDiscrepancy:
+        """Fit the baseline and every candidate effect on ``rec``, name the one that predicts best; returns self."""
+        from negstiff.models import effects
+
+        rec, at, n_id = self._prepare(rec)
+        ident = rec.segment(0, n_id)
+        zs, v, _ = ident.states(at)
+        r, vr = _relative(zs, at), _relative(v, at)
+        # the smoothed sign's velocity scale: the relative velocity's noise, read as its rough part (first differences
+        # of a white-noise-dominated tail), never below 1e-4 of its spread
+        v_noise = max(float(np.std(np.diff(vr)) / math.sqrt(2)), 1e-4 * float(vr.std()))
+        sindy = StructureSINDy(element=at)
+        y, X, _, per_dof = sindy.weak_system(ident, at, zs, v)
+        # the equation error of each candidate on test functions it was not fitted on (the last quarter of every
+        # DOF's rows) names the effect; the held-out free runs decide whether it is kept
+        fit_rows = np.concatenate([np.arange(d * per_dof, d * per_dof + int(0.75 * per_dof)) for d in range(rec.n_dof)])
+        test_rows = np.setdiff1d(np.arange(y.size), fit_rows)
+
+        def weak_score(X_: np.ndarray, y_: np.ndarray) -> float:
+            th = np.linalg.lstsq(X_[fit_rows], y_[fit_rows], rcond=None)[0]
+            return float(np.sqrt(np.mean((X_[test_rows] @ th - y_[test_rows]) ** 2)))
+
+        theta0 = np.linalg.lstsq(X, y, rcond=None)[0]
+        base = _assemble(theta0, rec.n_dof, at, rec.masses)
+        e0 = free_run_error(base, rec, n_id, self.window_s)["rms_percent"]
+        w0 = weak_score(X, y)
+        terms = [t for t in effects.library_terms() if t.field not in ("k0", "k1", "k2", "k3", "c", "c_nl")]
+        candidates: dict[str, dict[str, float]] = {}
+        fitted: dict[str, Structure] = {}
+        for t in terms:
+            g = t.law.column(r, vr, v_noise)
+            y2, X2, _, _ = sindy.weak_system(ident, at, zs, v, extra=[(t.field, g)])
+            theta = np.linalg.lstsq(X2, y2, rcond=None)[0]
+            value = float(theta[-1])
+            entry = {"value": value, "held_out_weak_rms": weak_score(X2, y2), "held_out_rms_percent": math.inf}
+            candidates[t.field] = entry
+            if effects.get(t.field).dissipative and value < 0:
+                entry["held_out_weak_rms"] = math.inf  # it would feed energy in: unphysical, not a candidate
+                continue
+            try:
+                s = _assemble(theta[:-1], rec.n_dof, at, rec.masses, {t.field: value})
+                entry["held_out_rms_percent"] = free_run_error(s, rec, n_id, self.window_s)["rms_percent"]
+                fitted[t.field] = s
+            except (ValueError, InputError):
+                pass
+        best = min(candidates, key=lambda k: candidates[k]["held_out_weak_rms"])
+        e_best = candidates[best]["held_out_rms_percent"]
+        self.named_ = best if e_best <= (1 - self.min_gain) * e0 else None
+        self.candidates_ = candidates
+        self.gap_ = {"baseline_rms_percent": e0, "with_named_rms_percent": e_best if self.named_ else e0,
+                     "baseline_weak_rms": w0}  # fmt: skip
+        structure = fitted[best] if self.named_ else base
+        modal = {w: structure.modes(w) for w in structure.equilibria()}
+        self._finish(rec, structure, n_id, modal, {
+            "named": self.named_, "gap": self.gap_, "candidates": candidates, "window_s": self.window_s,
+            "min_gain": self.min_gain, "velocity_noise_for_sign": v_noise,
         })  # fmt: skip
         return self
 
