@@ -284,3 +284,16 @@ def test_discrepancy_names_friction_in_the_element_on_its_fixture(friction):
     floor = free_run_error(truth, rec, int(0.8 * rec.n), 0.25)["rms_percent"]
     assert d.gap_["with_named_rms_percent"] <= 0.9 * d.gap_["baseline_rms_percent"]
     assert d.gap_["with_named_rms_percent"] <= 1.1 * floor, (d.gap_, floor)
+
+
+def test_stabilisation_diagram_keeps_both_modes_of_each_well():
+    # over orders 4..8 and two Hankel depths, each well's two physical modes recur within 1 % / 5 % (stable)
+    u, z = rk4_fixture_record(duration=60.0, seed=4)
+    rec = structure_from_arrays(u, z, FS, (FIXTURE["m"], TRUTH.m))
+    nsi = StructureNSI(element="1-2").fit(rec)
+    rows = nsi.stabilization(rec, orders=(4, 6, 8), block_rows=(20, 40))
+    for well in ("minus", "plus"):
+        for true in ON_FIXTURE.modes(well):
+            stable = [p for r in rows if r["well"] == well for p in r.get("poles", [])
+                      if p["stable"] and abs(p["f_hz"] / true.f_hz - 1) < 0.01]  # fmt: skip
+            assert len(stable) >= 3, (well, true.f_hz, len(stable))  # of 4 (orders 6 and 8 x 2 depths)

@@ -345,6 +345,41 @@ class StructureNSI(_StructureIdentifier):
         })  # fmt: skip
         return self
 
+    def stabilization(self, rec: StructureRecord, orders=(4, 6, 8, 10), block_rows=(20, 30, 40, 60)) -> list[dict]:
+        """Stabilisation diagram (Marchesiello, Fasana & Garibaldi 2016) around each well ``fit`` found: for every
+        (order, block rows), the identified poles (f_hz, zeta) with the feedback channels of that well's reference,
+        each marked ``stable`` when a pole of the next lower order lies within 1 % in frequency and 5 % in damping.
+        Physical modes stay put as the order grows; spurious ones wander. Run after ``fit``.
+        """
+        n_id = self.details_["settings"]["identification_samples"]
+        at = self.structure_.place
+        ident = rec.segment(0, n_id)
+        zs, v, _ = ident.states(at)
+        r, vr = _relative(zs, at), _relative(v, at)
+        lin = -ident.u if ident.input_name == "base_acc" else ident.u
+        y = (zs - zs.mean(axis=1, keepdims=True)).T
+        y = y / y.std(axis=0)
+        rows: list[dict] = []
+        for name, well in self.wells_.items():
+            x = r - well.r_ref
+            chans = np.column_stack([lin, -(x**2), -(x**3), -vr * np.abs(vr)])
+            w = (chans - chans.mean(axis=0)) / chans.std(axis=0)
+            for i in block_rows:
+                previous: list[tuple[float, float]] = []
+                for n in orders:
+                    try:
+                        ss = subspace.identify(w, y, ident.dt, n, i)
+                    except (ValueError, np.linalg.LinAlgError) as exc:
+                        rows.append({"well": name, "order": n, "block_rows": i, "error": str(exc)})
+                        continue
+                    lam = np.linalg.eigvals(ss.A)
+                    poles = sorted((float(abs(q) / (2 * math.pi)), float(-q.real / abs(q))) for q in lam if q.imag > 0)
+                    rows.append({"well": name, "order": n, "block_rows": i, "poles": [
+                        {"f_hz": f, "zeta": z, "stable": any(abs(f / pf - 1) < 0.01 and abs(z - pz) < 0.05 * abs(pz)
+                                                             for pf, pz in previous)} for f, z in poles]})  # fmt: skip
+                    previous = poles
+        return rows
+
     def fit_well(self, rec: StructureRecord, zs: np.ndarray, v: np.ndarray, at: tuple[int, int], r_ref: float,
                  start: Structure) -> WellFit:  # fmt: skip
         """The ULS and the element's coefficients about ``r_ref``, moved to the identified equilibrium each pass."""
