@@ -484,11 +484,12 @@ def load_system(path) -> Device | Model:
     ----------
     path : str or pathlib.Path
         A model file (the contract's polynomial model JSON, or an ``identify`` result holding one as
-        ``model``) or a device file (the geometry: ``E``, ``alpha_deg``, ...).
+        ``model``), a device file (the geometry: ``E``, ``alpha_deg``, ...) or a structure of N DOFs
+        (``masses``, ``element``, ``at``, ``stiffness``, ``damping``; or a structure's ``identify`` result).
 
     Returns
     -------
-    Model or Device
+    Model, Device or Structure
         The system the file describes.
 
     Raises
@@ -516,8 +517,17 @@ def load_system(path) -> Device | Model:
         raise GeometryError(str(exc)) from None
     if isinstance(d, dict) and isinstance(d.get("model"), dict):  # an identify result holds a model
         d = d["model"]
+    if isinstance(d, dict) and isinstance(d.get("structure"), dict):  # a structure's identify result holds one
+        d = d["structure"]
     if not isinstance(d, dict):
         raise GeometryError(f"{path}: a model file is a JSON object")
+    if "masses" in d:  # a structure of N DOFs (``models.structure``)
+        from .structure import Structure
+
+        try:
+            return Structure.from_dict(d)  # type: ignore[return-value]
+        except InputError as exc:
+            raise GeometryError(f"{path}: {exc}") from None
     try:
         return Device.from_dict(d) if "E" in d else Model.from_dict(d)
     except (KeyError, TypeError, ValueError) as exc:

@@ -310,8 +310,9 @@ def simulate(
 
     Parameters
     ----------
-    system : Model or Device
-        The system.
+    system : Model, Device or Structure
+        The system (a ``Structure`` of N DOFs: ``z`` and ``z_dot`` of shape (1, N, T), its input band-limited
+        between samples, from rest with the element's relative displacement at ``z0``).
     u : numpy.ndarray
         The input, (N,): base acceleration [m/s^2] or force [N].
     dt : float
@@ -342,6 +343,11 @@ def simulate(
     >>> res.z.shape, bool(res.diverged[0])
     ((1, 2560), False)
     """
+    if hasattr(system, "n_dof"):  # a structure of N DOFs simulates itself (``Structure.simulate``)
+        if v0:
+            raise ValueError("a structure starts from rest (v0 = 0); give z0, the element's relative displacement")
+        return system.simulate(u, dt, z0=z0, input_kind=input_kind, substeps=substeps, z_limit=z_limit,
+                               v_limit=v_limit)  # fmt: skip
     if z0 is None:
         z0 = system.equilibria().z_plus
     return simulate_batch(

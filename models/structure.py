@@ -32,7 +32,16 @@ from negstiff.errors import InputError
 from . import effects
 from .equation import Equilibria, Model
 from .kernel import KINDS, STATUS_OK, structure_kernel
-from .simulator import DEFAULT_SUBSTEPS, DEFAULT_V_LIMIT, DEFAULT_Z_LIMIT, STATUS_TEXT, _pool, cores, input_gain
+from .simulator import (
+    DEFAULT_SUBSTEPS,
+    DEFAULT_V_LIMIT,
+    DEFAULT_Z_LIMIT,
+    STATUS_TEXT,
+    _pool,
+    cores,
+    input_gain,
+    stage_input,
+)
 
 
 @dataclass(frozen=True)
@@ -88,7 +97,7 @@ def _matrix(name: str, value, n: int) -> np.ndarray:
     return a
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class Structure:
     """N degrees of freedom: masses, a linear structure (stiffness and damping matrices, the element
     excluded) and one nonlinear element between DOF ``at[0]`` (0: the base) and DOF ``at[1]``.
@@ -176,6 +185,15 @@ class Structure:
                     M[i - 1, i] -= v
                     M[i, i - 1] -= v
         return cls(tuple(masses), element, K, C, at)
+
+    def __eq__(self, other: object) -> bool:
+        if not isinstance(other, Structure):
+            return NotImplemented
+        return (self.masses, self.element, self.at) == (other.masses, other.element, other.at) and all(
+            np.array_equal(a, b) for a, b in ((self.K, other.K), (self.C, other.C))
+        )
+
+    __hash__ = None  # type: ignore[assignment]
 
     @property
     def n_dof(self) -> int:
@@ -284,6 +302,18 @@ class Structure:
             raise InputError(f"structure: {exc}") from None
 
     # --- simulation ---------------------------------------------------------------------------------
+    def simulate(self, u: np.ndarray, dt: float, *, z0: float | None = None, input_kind: str = "base_acc",
+                 force_dof: int | None = None, substeps: int = DEFAULT_SUBSTEPS, z_limit: float = DEFAULT_Z_LIMIT,
+                 v_limit: float = DEFAULT_V_LIMIT) -> StructureResult:  # fmt: skip
+        """The structure under a sampled input (band-limited between samples, ``stage_input``), from rest with the
+        element's relative displacement at ``z0`` (default: the plus well's); ``z``, ``z_dot`` of shape (1, N, T).
+        """
+        r0 = self.element_equilibria().z_plus if z0 is None else float(z0)
+        x0 = np.r_[self.static_positions(r0), np.zeros(self.n_dof)]
+        return simulate_structures(self, stage_input(u, substeps), dt, x0, input_kind=input_kind, force_dof=force_dof,
+                                   substeps=substeps, store_velocity=True, z_limit=z_limit, v_limit=v_limit,
+                                   staged=True)  # fmt: skip
+
     def arrays(self, input_kind: str = "base_acc", force_dof: int | None = None):
         """The kernel's arrays of this structure: element parameters (P,), inverse masses (N,), K, C, input
         gain (N,).

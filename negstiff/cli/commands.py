@@ -118,6 +118,8 @@ def cmd_simulate(args) -> int:
     from negstiff.models.effects import measured_channels
 
     system = load_system(args.model)
+    if hasattr(system, "n_dof"):  # a structure of N DOFs: its responses z1 ... zN and velocities
+        return _simulate_structure(args, system)
     # the measured channels the model's aux:NAME terms need are read with the input, unless --aux names others
     needed = list(measured_channels(getattr(system, "extra", {})))
     rec = load(args.input, columns=args.columns, fs=args.fs, response=False, gravity=args.gravity,
@@ -132,6 +134,31 @@ def cmd_simulate(args) -> int:
     with atomic_path(args.out) as tmp:
         np.savetxt(tmp, data, delimiter=",", fmt="%.10g", header=f"t,{rec.input_name},z,z_dot", comments="")
     say(args, f"wrote {args.out} ({rec.n} samples)")
+    return 0
+
+
+def _simulate_structure(args, structure) -> int:
+    """``simulate STRUCTURE.json``: the structure under the record's input, every DOF's z and z_dot written."""
+    from negstiff.files import atomic_path
+    from negstiff.inference.record.measurement import load
+
+    for option, given in (("--v0", args.v0), ("--aux", args.aux)):
+        if given:
+            raise InputError(f"{option} is for a single-DOF model (a structure starts from rest; --z0 names its well)")
+    if args.interpolation == "linear":
+        raise InputError("a structure's input is band-limited between samples: --interpolation linear is not offered")
+    rec = load(args.input, columns=args.columns, fs=args.fs, response=False, gravity=args.gravity)
+    rec.require(2, "a simulation")
+    n = structure.n_dof
+    say(args, f"simulate: {n} DOFs, {rec.n} samples at {rec.fs:g} Hz under {rec.input_name}")
+    res = structure.simulate(rec.u, rec.dt, z0=args.z0, input_kind=rec.input_name, substeps=args.substeps or 2)
+    if res.diverged[0]:
+        raise InputError(f"simulation of {args.model} under {args.input} failed: {res.describe_failures()}")
+    data = np.column_stack([rec.t, rec.u, *res.z[0], *res.z_dot[0]])
+    head = ",".join(["t", rec.input_name, *(f"z{i + 1}" for i in range(n)), *(f"z{i + 1}_dot" for i in range(n))])
+    with atomic_path(args.out) as tmp:
+        np.savetxt(tmp, data, delimiter=",", fmt="%.10g", header=head, comments="")
+    say(args, f"wrote {args.out} ({rec.n} samples, {n} DOFs)")
     return 0
 
 
