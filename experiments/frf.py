@@ -29,3 +29,31 @@ def figure(res: dict[str, Any], curves: dict[str, np.ndarray], input_name: str, 
     a2.set(xlabel="frequency [Hz]", ylabel="coherence", ylim=(0, 1.05))
     fig.tight_layout()
     return fig
+
+
+def figure_dofs(res: dict[str, Any], curves: list[dict[str, np.ndarray]], input_name: str, title: str):
+    """The FRF figure of a structure's record: |H1| from the input to every DOF, the coherence below, the merged
+    modes marked.
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, (a1, a2) = plt.subplots(2, 1, figsize=(8, 5.5), sharex=True, gridspec_kw={"height_ratios": [3, 1]})
+    lo, hi = res["dofs"][0]["band"]  # the input's band: outside it the ratio is noise over noise
+    for i, c in enumerate(curves):
+        f = c["f"]
+        sel = (f >= lo) & (f <= hi)
+        a1.semilogy(f[sel], np.abs(c["H1"][sel]), label=f"z{i + 1}")
+        a2.plot(f[sel], c["coherence"][sel], label=f"z{i + 1}")
+    for m in res["modes"]:
+        a1.axvline(m["f_hz"], color="0.6", lw=0.8)
+    a1.set_ylabel(f"|H1| [m per {'m/s^2' if input_name == 'base_acc' else 'N'}]")
+    a1.legend(fontsize=8)
+    a1.set_title(title)
+    a2.set_ylabel("coherence")
+    a2.set_xlabel("frequency [Hz]")
+    a2.set_ylim(0, 1.05)
+    fig.tight_layout()
+    return fig

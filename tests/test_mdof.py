@@ -328,3 +328,26 @@ def test_simulate_a_structure_from_python_and_the_command_line(tmp_path):
     bad = subprocess.run([sys.executable, "-m", "negstiff", "simulate", str(model), str(data), "--v0", "0.1", "-o",
                           str(tmp_path / "no.csv")], capture_output=True, text=True)  # fmt: skip
     assert bad.returncode == 2 and "--v0" in bad.stderr and not (tmp_path / "no.csv").exists()
+
+
+def test_frf_of_a_structure_finds_both_modes_of_the_well(tmp_path):
+    # a low-level random test in the plus well (0.3 m/s^2): the FRFs to the two lasers show the well's two
+    # underlying-linear modes, within 1 % in frequency and 10 % in damping (4 % softening of a 1 m/s^2 test gone)
+    import json
+    import subprocess
+    import sys
+
+    from negstiff.models.rig import Sensors
+    from negstiff.models.structure_rig import StructureRig
+
+    rig = StructureRig.device_on_fixture(TRUTH, seed=2, sensors=Sensors(laser_noise=1e-6))
+    path = rig.random(duration=120.0, rms=0.3, start="plus").write(tmp_path / "low.csv")
+    out = tmp_path / "frf.json"
+    done = subprocess.run([sys.executable, "-m", "negstiff", "frf", str(path), "--dofs", "2", "-o", str(out)],
+                          capture_output=True, text=True)  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    res = json.loads(out.read_text())
+    assert (tmp_path / "frf.png").exists() and [d["dof"] for d in res["dofs"]] == [1, 2]
+    for true in ON_FIXTURE.modes("plus"):
+        near = [m for m in res["modes"] if abs(m["f_hz"] / true.f_hz - 1) < 0.01]
+        assert near and near[0]["zeta"] == pytest.approx(true.zeta, rel=0.10), (true, res["modes"])

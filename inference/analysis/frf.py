@@ -103,7 +103,7 @@ def fit_peak(f: np.ndarray, h: np.ndarray, k: int) -> dict[str, Any]:
     while hi < f.size - 1 and mag[hi] > half:
         hi += 1
     bw = max(f[hi] - f[lo], 2 * (f[1] - f[0]))
-    zeta0 = bw / (2 * f[k])
+    zeta0 = min(max(bw / (2 * f[k]), 1e-5), 0.99)  # a broad low-frequency hump would start beyond the bounds
     sel = (f > f[k] - 1.5 * bw) & (f < f[k] + 1.5 * bw)
     if sel.sum() < 6:  # a sharp peak: at least 3 bins either side
         sel = (np.arange(f.size) >= k - 3) & (np.arange(f.size) <= k + 3)
@@ -294,3 +294,36 @@ def compare_with_frf(modal: dict, frfs: list[tuple[str, float, str | None]]) -> 
             }
         )
     return out
+
+
+def frf_structure(rec, band: tuple[float, float] | None = None, segment_s: float | None = None) -> dict[str, Any]:
+    """The FRFs of a structure's record (``StructureRecord``): from the input to every DOF's response, each as
+    ``frf`` makes it (H1, H2, coherence, fitted peaks), and ``modes``: the peaks found on any DOF, those within 2 %
+    in frequency merged (their mean frequency and damping, and the DOFs that show them). ``_curves``: each DOF's
+    spectra (arrays, for a figure; not JSON).
+    """
+    from negstiff.inference.record.measurement import from_arrays
+
+    dofs, curves, warnings_ = [], [], []
+    for i, zi in enumerate(rec.z):
+        one = from_arrays(rec.u, zi, rec.fs, input_name=rec.input_name, source=f"{rec.source} (z{i + 1})")
+        r = frf(one, band=band, segment_s=segment_s)
+        curves.append(r.pop("_curves"))
+        warnings_ += r.pop("warnings")
+        r.pop("record", None)
+        r.pop("well", None)
+        dofs.append({"dof": i + 1, **r})
+    found = sorted((p["f_hz"], p["zeta"], d["dof"]) for d in dofs for p in d["peaks"])
+    modes: list[dict[str, Any]] = []
+    for f, z, d in found:
+        if modes and abs(f / modes[-1]["f_hz"] - 1) < 0.02:
+            m = modes[-1]
+            m["_all"].append((f, z))
+            m["f_hz"] = float(np.mean([a for a, _ in m["_all"]]))
+            m["zeta"] = float(np.mean([b for _, b in m["_all"]]))
+            m["seen_on"] = sorted(set(m["seen_on"]) | {d})
+        else:
+            modes.append({"f_hz": f, "zeta": z, "seen_on": [d], "_all": [(f, z)]})
+    for m in modes:
+        m.pop("_all")
+    return {"dofs": dofs, "modes": modes, "warnings": warnings_, "_curves": curves}

@@ -363,6 +363,8 @@ def cmd_frf(args) -> int:
     from negstiff.inference.record.measurement import load
 
     band = parse_band(args.band)
+    if args.dofs > 1:
+        return _frf_structure(args, band)
     rec = load(args.data, columns=args.columns, fs=args.fs, gravity=args.gravity)
     if band is not None and band[1] > rec.fs / 2:
         raise InputError(f"--band {args.band}: beyond the Nyquist frequency of {args.data} ({rec.fs / 2:g} Hz)")
@@ -376,6 +378,31 @@ def cmd_frf(args) -> int:
     warn(args, res["warnings"])
     top = "no peak" if res["f_hz"] is None else f"{res['f_hz']:.4f} Hz, zeta {100 * res['zeta']:.2f} %"
     say(args, f"wrote {args.out} and {res['figure']}: dominant peak {top}; {len(res['peaks'])} peak(s)")
+    return 0
+
+
+def _frf_structure(args, band) -> int:
+    """``frf DATA --dofs N``: every DOF's FRF from the input, the modes merged over DOFs."""
+    from negstiff.experiments.frf import figure_dofs
+    from negstiff.inference.analysis.frf import frf_structure
+    from negstiff.inference.record.structure import load_structure
+
+    if args.columns:
+        raise InputError("--columns is for a single-DOF record (a structure's record names z1 ... zN)")
+    rec = load_structure(args.data, fs=args.fs, masses=[1.0] * args.dofs)  # FRFs need no masses
+    if rec.n_dof != args.dofs:
+        raise InputError(f"{args.data}: --dofs {args.dofs}, but the record has responses z1 ... z{rec.n_dof}")
+    if band is not None and band[1] > rec.fs / 2:
+        raise InputError(f"--band {args.band}: beyond the Nyquist frequency of {args.data} ({rec.fs / 2:g} Hz)")
+    say(args, f"frf: {rec.n_dof} DOFs, {rec.n} samples at {rec.fs:g} Hz, input {rec.input_name}")
+    res = frf_structure(rec, band=band, segment_s=args.segment)
+    curves = res.pop("_curves")
+    res["figure"] = write_figure(figure_dofs(res, curves, rec.input_name, f"FRFs of {Path(args.data).name}"), args.out)
+    write_json(args.out, res)
+    warn(args, res["warnings"])
+    modes = ", ".join(f"{m['f_hz']:.3f} Hz ({100 * m['zeta']:.2f} %, z{'/z'.join(map(str, m['seen_on']))})"
+                      for m in res["modes"]) or "no peak"  # fmt: skip
+    say(args, f"wrote {args.out} and {res['figure']}: {modes}")
     return 0
 
 

@@ -252,6 +252,12 @@ def _frf(sub, common: argparse.ArgumentParser, data_opts: argparse.ArgumentParse
         type=number(float, 0.5, 1e4),
         help="Welch segment [s] (default 16 s, longer where a lightly damped peak needs finer bins)",
     )
+    frq.add_argument(
+        "--dofs",
+        type=number(int, 1, 50),
+        default=1,
+        help="degrees of freedom of a structure's record (responses z1 ... zN): the FRF to every DOF, modes merged",
+    )
     frq.set_defaults(func=c.cmd_frf)
 
 
