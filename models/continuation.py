@@ -444,7 +444,7 @@ class Continuation:
             m = mu[np.argmin(np.abs(mu - target))] if target is not None else mu[np.argmax(np.abs(mu))]
             a_, f_ = self._af(lam)
             out.append(Bifurcation(kind, float(a_), float(f_), self.well, complex(m), self.shooting.period,
-                                   (float(x[0]), float(x[1]))))  # fmt: skip
+                                   tuple(float(q) for q in x)))  # fmt: skip
         return out
 
     def _locate(self, prev, cur, kind: str, step, depth: int = 0) -> tuple[float, np.ndarray, np.ndarray]:

@@ -351,3 +351,18 @@ def test_frf_of_a_structure_finds_both_modes_of_the_well(tmp_path):
     for true in ON_FIXTURE.modes("plus"):
         near = [m for m in res["modes"] if abs(m["f_hz"] / true.f_hz - 1) < 0.01]
         assert near and near[0]["zeta"] == pytest.approx(true.zeta, rel=0.10), (true, res["modes"])
+
+
+def test_continuation_follows_the_structures_doubled_branch():
+    # past the plus well's first doubling the period-2 orbit is found and continued: its multipliers are those of
+    # the 4 states, and its own doubling lies above the first
+    from negstiff import nfrc
+
+    curve = nfrc(ON_FIXTURE, freq=9.0, amplitude=(1.0, 12.0), well="plus", max_period=2)
+    periods = sorted({b["period"] for b in curve["branches"]})
+    assert periods == [1, 2]
+    two = next(b for b in curve["branches"] if b["period"] == 2)
+    assert len(two["points"][0]["multipliers"]) == 4 and len(two["points"][0]["state"]) == 4
+    first = next(b for b in curve["bifurcations"] if b["type"] == "period_doubling" and b["period"] == 1)
+    second = [b for b in curve["bifurcations"] if b["type"] == "period_doubling" and b["period"] == 2]
+    assert second and second[0]["amplitude"] > first["amplitude"]
