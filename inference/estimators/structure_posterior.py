@@ -73,6 +73,19 @@ class StructurePosterior:
         The structure with the posterior mean's element.
     warnings_ : list of str
         Convergence and record warnings (also issued as ``NegstiffWarning``).
+    settings_ : dict
+        The windows, the sampler's settings and what was held fixed.
+
+    Examples
+    --------
+    >>> from negstiff import StructurePosterior, load_structure
+    >>> from negstiff.models import SEED_LIKE_CUBIC
+    >>> from negstiff.models.structure_rig import StructureRig
+    >>> rec = load_structure(StructureRig.device_on_fixture(seed=1).random(duration=40.0).write("fixture.csv"))
+    >>> post = StructurePosterior(element="1-2", n_walkers=12, max_windows=24, seed=1).fit(rec)
+    >>> k3 = post.parameters_["k3"]
+    >>> abs(k3["mean"] / SEED_LIKE_CUBIC.k3 - 1) < 0.05
+    True
     """
 
     def __init__(self, *, element=None, start: Structure | None = None, window_s: float = 0.1,

@@ -40,8 +40,21 @@ class StructureRecord:
     masses : tuple of float
         The DOFs' masses [kg] (the record's ``# masses:``); NSI and SINDy need them to turn the identified
         dynamics into stiffness and damping.
+    source : str, default "<memory>"
+        Where the record came from (named in every message).
     force_dof : int, optional
         The DOF a force input acts on (1..N); default the element's.
+    meta : dict, optional
+        The file's ``# key: value`` lines.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from negstiff import StructureRecord
+    >>> t = np.arange(0, 10, 1 / 512)
+    >>> rec = StructureRecord(512.0, "base_acc", np.sin(t), np.vstack([1e-4 * np.sin(t), 1e-3 * np.sin(t)]), (1.0, 0.2))
+    >>> rec.n_dof, rec.n, rec.masses
+    (2, 5120, (1.0, 0.2))
     """
 
     fs: float
@@ -134,7 +147,39 @@ class StructureRecord:
 
 def structure_from_arrays(u, z, fs: float, masses, input_name: str = "base_acc", force_dof: int | None = None,
                           source: str = "<memory>") -> StructureRecord:  # fmt: skip
-    """A multi-DOF record from arrays (every check of a file's, before any work)."""
+    """A multi-DOF record from arrays, with every check a file gets, before any work.
+
+    Parameters
+    ----------
+    u : (T,) array
+        The input: base acceleration [m/s^2] or force [N].
+    z : (N, T) array
+        Each DOF's displacement relative to the base [m].
+    fs : float
+        Sampling rate [Hz].
+    masses : sequence of float
+        The DOFs' masses [kg].
+    input_name : {"base_acc", "force"}, default "base_acc"
+        What ``u`` is.
+    force_dof : int, optional
+        The DOF a force acts on (default: the element's).
+    source : str, default "<memory>"
+        The name messages give the record.
+
+    Returns
+    -------
+    StructureRecord
+        The record.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from negstiff import structure_from_arrays
+    >>> t = np.arange(0, 10, 1 / 512)
+    >>> rec = structure_from_arrays(np.sin(t), [1e-4 * np.sin(t), 1e-3 * np.sin(t)], 512, masses=(1.0, 0.2))
+    >>> rec.n_dof
+    2
+    """
     return StructureRecord(float(fs), input_name, np.asarray(u, float), np.asarray(z, float), tuple(masses), source,
                            force_dof)  # fmt: skip
 
@@ -143,9 +188,32 @@ _RESPONSE = re.compile(r"^z(\d+)$")
 
 
 def load_structure(path: str | Path, fs: float | None = None, masses=None) -> StructureRecord:
-    """Read a multi-DOF CSV record: ``# key: value`` header lines (``fs``, ``masses``, ``input``), a header row
-    with ``t`` (optional), the input column and ``z1 ... zN``. ``fs`` and ``masses`` given here override the
-    header's (said nowhere else: a conflict is an error).
+    """Read a multi-DOF CSV record (the contract's): ``# key: value`` header lines (``fs``, ``masses``), a header
+    row, then the numbers: ``t`` (optional with ``# fs:``), the input column (``base_acc`` or ``force``) and
+    ``z1 ... zN``.
+
+    Parameters
+    ----------
+    path : str or pathlib.Path
+        The CSV file.
+    fs : float, optional
+        Sampling rate [Hz], in place of the file's ``t`` column or ``# fs:``.
+    masses : sequence of float, optional
+        The DOFs' masses [kg], in place of the file's ``# masses:``.
+
+    Returns
+    -------
+    StructureRecord
+        The record; one ``InputError`` naming the file and the problem otherwise.
+
+    Examples
+    --------
+    >>> from negstiff import load_structure
+    >>> from negstiff.models.structure_rig import StructureRig
+    >>> path = StructureRig.device_on_fixture(seed=1).random(duration=5.0).write("fixture.csv")
+    >>> rec = load_structure(path)
+    >>> rec.n_dof, rec.masses
+    (2, (1.0, 0.212))
     """
     p = Path(path)
     if not p.is_file():
