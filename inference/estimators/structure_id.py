@@ -222,10 +222,9 @@ class _StructureIdentifier:
             )
         if not 0.0 < self.validation_fraction < 0.9:
             raise InputError(f"validation_fraction must be in (0, 0.9), got {self.validation_fraction}")
-        at = parse_element(self.element if self.element is not None else (0, rec.n_dof) if rec.n_dof == 1 else "",
-                           rec.n_dof) if (self.element is not None or rec.n_dof == 1) else None  # fmt: skip
-        if at is None:
+        if self.element is None and rec.n_dof > 1:
             raise InputError(f"{rec.source}: a record of {rec.n_dof} DOFs needs the element's place (element='I-J')")
+        at = parse_element(self.element if self.element is not None else (0, 1), rec.n_dof)  # one DOF: on the base
         n_id = int(round((1 - self.validation_fraction) * rec.n))
         rec.require(4000, f"{type(self).__name__}")
         return rec, at, n_id
