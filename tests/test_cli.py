@@ -185,6 +185,7 @@ def test_reproduce_machinery_on_two_sections(tmp_path, monkeypatch, capsys):
         "discrepancy",
         "silverbox",
         "continuation",
+        "fixture",
     ]
     assert any((tmp_path / "cache").iterdir()), "the sections were cached"
     # the report's first screen: the summary (a finding of each section run, none of those left out), then the
