@@ -190,34 +190,37 @@ def test_continuation_of_the_device_on_the_fixture_finds_where_a_stepped_test_le
     assert abs(a_step / a_bif - 1) < 0.03, (a_step, a_bif)
 
 
-def test_command_line_identifies_a_structure_and_refuses_a_wrong_one(tmp_path):
+def test_command_line_identifies_a_structure_and_refuses_a_wrong_one(tmp_path, capsys):
     import json
-    import subprocess
-    import sys
+    import warnings
+
+    from negstiff.cli import main
 
     u, z = rk4_fixture_record(duration=60.0, seed=4)
     t = np.arange(u.size) / FS
     data = write_csv(tmp_path / "two.csv", {"t": t, "base_acc": u, "z1": z[0], "z2": z[1]}, {"masses": "1.0,0.2"})
 
     def run(*args):
-        return subprocess.run([sys.executable, "-m", "negstiff", "identify", *map(str, args)], capture_output=True,
-                              text=True, cwd=tmp_path)  # fmt: skip
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # the CLI says them on stderr, read below
+            code = main(["identify", *map(str, args)])
+        return code, capsys.readouterr().err
 
     out = tmp_path / "r.json"
-    done = run("nsi", data, "--dofs", 2, "--element", "1-2", "-o", out)
-    assert done.returncode == 0, done.stderr
+    code, err = run("nsi", data, "--dofs", 2, "--element", "1-2", "-o", out)
+    assert code == 0, err
     result = json.loads(out.read_text())
     assert [m["f_hz"] for m in result["modal"]["plus"]] == pytest.approx([m.f_hz for m in ON_FIXTURE.modes("plus")],
                                                                           rel=0.01)  # fmt: skip
     assert result["element"]["k3"] == pytest.approx(TRUTH.k3, rel=0.05) and result["element_at"] == [1, 2]
     for bad, says in ((("--dofs", 3, "--element", "1-2"), "z1 ... z2"), (("--dofs", 2), "--element"),
                       (("--dofs", 2, "--element", "3-2"), "J must be")):  # fmt: skip
-        failed = run("sindy", data, *bad, "-o", tmp_path / "no.json")
-        assert failed.returncode == 2 and says in failed.stderr and len(failed.stderr.strip().splitlines()) == 1
+        code, err = run("sindy", data, *bad, "-o", tmp_path / "no.json")
+        assert code == 2 and says in err and len(err.strip().splitlines()) == 1
         assert not (tmp_path / "no.json").exists()
     # a wrong mass leaves the identified stiffness lopsided: said loudly, in the result too
-    warned = run("nsi", data, "--dofs", 2, "--element", "1-2", "--masses", "1.0,0.3", "-o", tmp_path / "w.json")
-    assert warned.returncode == 0 and "are the masses right?" in warned.stderr
+    code, err = run("nsi", data, "--dofs", 2, "--element", "1-2", "--masses", "1.0,0.3", "-o", tmp_path / "w.json")
+    assert code == 0 and "are the masses right?" in err
     assert any("are the masses right?" in w for w in json.loads((tmp_path / "w.json").read_text())["warnings"])
 
 

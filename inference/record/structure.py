@@ -188,9 +188,10 @@ _RESPONSE = re.compile(r"^z(\d+)$")
 
 
 def load_structure(path: str | Path, fs: float | None = None, masses=None) -> StructureRecord:
-    """Read a multi-DOF CSV record (the contract's): ``# key: value`` header lines (``fs``, ``masses``), a header
-    row, then the numbers: ``t`` (optional with ``# fs:``), the input column (``base_acc`` or ``force``) and
-    ``z1 ... zN``.
+    """Read a structure's CSV record, the contract's multi-DOF file.
+
+    ``# key: value`` header lines (``fs``, ``masses``), a header row, then the numbers: ``t`` (optional with
+    ``# fs:``), the input column (``base_acc`` or ``force``) and the responses ``z1`` to ``zN``.
 
     Parameters
     ----------
