@@ -551,7 +551,7 @@ class StructureSINDy(_StructureIdentifier):
         """Plain equation-error least squares on the pointwise equations (smoothed accelerations): a start."""
         a = np.gradient(v, rec.dt, axis=1)
         cols, _ = equation_columns(zs, v, at)
-        y, X = _targets(rec, a, cols)
+        y, X = _targets(rec, a, cols, at)
         theta = np.linalg.lstsq(X, y, rcond=None)[0]
         return _assemble(theta, rec.n_dof, at, rec.masses)
 
@@ -745,8 +745,11 @@ class StructureDiscrepancy(_StructureIdentifier):
         return self
 
 
-def _targets(rec: StructureRecord, a: np.ndarray, cols: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Pointwise stacked targets z_d'' - (input) and columns, per unit mass."""
+def _targets(rec: StructureRecord, a: np.ndarray, cols: np.ndarray, at: tuple[int, int]
+             ) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+    """Pointwise stacked targets z_d'' - (input) and columns, per unit mass (a force acts on ``force_dof``, by
+    default the DOF the element moves, as everywhere else).
+    """
     lin = -rec.u if rec.input_name == "base_acc" else rec.u
     mass = np.asarray(rec.masses)
     ys, Xs = [], []
@@ -754,7 +757,7 @@ def _targets(rec: StructureRecord, a: np.ndarray, cols: np.ndarray) -> tuple[np.
         if rec.input_name == "base_acc":
             inp = lin
         else:
-            inp = lin / mass[d] if (rec.force_dof or 0) - 1 == d else 0.0 * lin
+            inp = lin / mass[d] if (rec.force_dof or at[1]) - 1 == d else 0.0 * lin
         ys.append(a[d] - inp)
         Xs.append(-cols[d] / mass[d])
     return np.concatenate(ys), np.vstack(Xs)
