@@ -55,7 +55,7 @@ import numpy as np
 from negstiff.errors import InputError
 
 from .simulator import simulate_batch
-from .structure import Structure, simulate_structures
+from .structure import Structure, relative, simulate_structures
 
 STEPS_PER_PERIOD = 256
 """RK4 steps per forcing period: 128 samples x 2 substeps (the kernel's O(h^4) error: ~1e-8)."""
@@ -193,8 +193,7 @@ class Shooting:
                 raise ContinuationError(f"the orbit left the admissible range: {sres.describe_failures()}")
             assert sres.z_dot is not None
             end = np.hstack([sres.z[:, :, -1], sres.z_dot[:, :, -1]])
-            i, j = self.system.place
-            r = sres.z[:, j - 1] - (sres.z[:, i - 1] if i else 0.0)
+            r = relative(sres.z, self.system.place)
             return (end, r) if store else end
         assert self.params is not None  # a single-DOF system's
         res = simulate_batch(

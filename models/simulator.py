@@ -55,7 +55,8 @@ class SimulationResult:
     Attributes
     ----------
     t : sample times [s], shape (N,)
-    z, z_dot : displacement [m] and velocity [m/s], shape (B, N) (``z_dot`` None unless stored)
+    z, z_dot : displacement [m] and velocity [m/s], shape (B, N); of a structure of D DOFs (``models.structure``)
+        (B, D, N) (``z_dot`` None unless stored)
     status : per member, 0 ok, 1 diverged, 2 left the device's stroke
     fail_time : per member, time [s] of the first bad sample (NaN when ok)
     """
@@ -139,7 +140,35 @@ def _pool(n: int) -> ThreadPoolExecutor:
     return ThreadPoolExecutor(n, thread_name_prefix="negstiff-sim")
 
 
-def _checked(params, lay: effects.Layout, kind: str, u, dt: float, substeps: int, input_index, x0):
+def checked_input(u, dt: float, substeps: int, input_index, nb: int, staged: bool = False
+                  ) -> tuple[np.ndarray, np.ndarray, int]:  # fmt: skip
+    """The input rows, each member's row index and the output samples as the kernels take them (single-DOF and
+    N-DOF alike), or a one-line ValueError.
+    """
+    # one array type per kernel argument, whatever the caller passes: each distinct numba signature (a
+    # strided input, a read-only start state) was compiled again, 5-10 s each on a fresh install
+    u2 = np.require(np.atleast_2d(np.asarray(u, dtype=np.float64)), requirements=("C", "W"))
+    if u2.ndim != 2 or u2.shape[1] < 2:
+        raise ValueError("input needs at least two samples")
+    if not np.all(np.isfinite(u2)):
+        raise ValueError("input contains NaN or inf")
+    if not (dt > 0 and math.isfinite(dt)):
+        raise ValueError(f"sample interval must be positive, got {dt}")
+    if int(substeps) < 1:
+        raise ValueError("substeps must be >= 1")
+    uidx = np.zeros(nb, dtype=np.int64) if input_index is None else np.asarray(input_index, dtype=np.int64)
+    if uidx.shape != (nb,) or uidx.min() < 0 or uidx.max() >= u2.shape[0]:
+        raise ValueError("input_index must give one valid input row per batch member")
+    n = u2.shape[1]
+    if staged:
+        r = 2 * int(substeps)
+        if (n - 1) % r or n < r + 1:
+            raise ValueError(f"a staged input needs 2 substeps (N - 1) + 1 columns (substeps {substeps}), got {n}")
+        n = (n - 1) // r + 1
+    return u2, uidx, n
+
+
+def _checked(params, lay: effects.Layout, kind: str, u, dt: float, substeps: int, input_index, x0, staged: bool):
     """``simulate_batch``'s arguments as the kernel takes them, or a one-line ValueError."""
     p = np.asarray(params, dtype=np.float64)
     if p.ndim == 1:
@@ -156,24 +185,11 @@ def _checked(params, lay: effects.Layout, kind: str, u, dt: float, substeps: int
         raise ValueError("simulation mass must be positive")
     if kind not in KINDS:
         raise ValueError(f"kind must be one of {sorted(KINDS)}, got {kind!r}")
-    # one array type per kernel argument, whatever the caller passes: each distinct numba signature (a
-    # strided input, a read-only start state) was compiled again, 5-10 s each on a fresh install
-    u2 = np.require(np.atleast_2d(np.asarray(u, dtype=np.float64)), requirements=("C", "W"))
-    if u2.ndim != 2 or u2.shape[1] < 2:
-        raise ValueError("input needs at least two samples")
-    if not np.all(np.isfinite(u2)):
-        raise ValueError("input contains NaN or inf")
-    if not (dt > 0 and math.isfinite(dt)):
-        raise ValueError(f"sample interval must be positive, got {dt}")
-    if int(substeps) < 1:
-        raise ValueError("substeps must be >= 1")
-    uidx = np.zeros(nb, dtype=np.int64) if input_index is None else np.asarray(input_index, dtype=np.int64)
-    if uidx.shape != (nb,) or uidx.min() < 0 or uidx.max() >= u2.shape[0]:
-        raise ValueError("input_index must give one valid input row per batch member")
+    u2, uidx, n = checked_input(u, dt, substeps, input_index, nb, staged)
     x0 = np.broadcast_to(np.asarray(x0, dtype=np.float64), (nb, 2))
     if not np.all(np.isfinite(x0)):
         raise ValueError("initial state contains NaN or inf")
-    return p, u2, uidx, x0
+    return p, u2, uidx, x0, n
 
 
 def simulate_batch(
@@ -214,15 +230,9 @@ def simulate_batch(
     staged : ``u`` holds the input at the stage times (band-limited records), not the samples
     """
     lay = effects.layout()
-    p, u2, uidx, x0 = _checked(params, lay, kind, u, dt, substeps, input_index, x0)
+    p, u2, uidx, x0, n = _checked(params, lay, kind, u, dt, substeps, input_index, x0, staged)
     nb = p.shape[1]
     gain = input_gain(input_kind, p[P_M])
-    n = u2.shape[1]
-    if staged:
-        r = 2 * int(substeps)
-        if (n - 1) % r or n < r + 1:
-            raise ValueError(f"a staged input needs 2 substeps (N - 1) + 1 columns (substeps {substeps}), got {n}")
-        n = (n - 1) // r + 1
     status = np.zeros(nb, dtype=np.int64)
     fail = np.full(nb, -1, dtype=np.int64)
     k = KINDS[kind]

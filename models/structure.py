@@ -31,13 +31,14 @@ from negstiff.errors import InputError
 
 from . import effects
 from .equation import Equilibria, Model
-from .kernel import KINDS, STATUS_OK, structure_kernel
+from .kernel import KINDS, structure_kernel
 from .simulator import (
     DEFAULT_SUBSTEPS,
     DEFAULT_V_LIMIT,
     DEFAULT_Z_LIMIT,
-    STATUS_TEXT,
+    SimulationResult,
     _pool,
+    checked_input,
     cores,
     input_gain,
     stage_input,
@@ -84,6 +85,37 @@ def modes_of_state_matrix(A: np.ndarray, C_out: np.ndarray) -> list[Mode]:
             Mode(float(abs(lam[r]) / (2 * math.pi)), float(-lam[r].real / abs(lam[r])), tuple(map(float, shape)))
         )
     return sorted(out, key=lambda m: m.f_hz)
+
+
+def coupling(n: int, at: tuple[int, int]) -> np.ndarray:
+    """Coupling vector l = e_J - e_I of an element at (I, J) among ``n`` DOFs (I = 0: the base): where its
+    force acts, + on J and - on I.
+    """
+    lvec = np.zeros(n)
+    lvec[at[1] - 1] = 1.0
+    if at[0]:
+        lvec[at[0] - 1] = -1.0
+    return lvec
+
+
+def relative(x: np.ndarray, at: tuple[int, int]) -> np.ndarray:
+    """The element's relative motion x_J - x_I (x_J on the base) of per-DOF rows ``x`` (DOFs on axis -2 or 0)."""
+    i, j = at
+    x = np.asarray(x)
+    rows = (lambda k: x[..., k - 1, :]) if x.ndim > 2 else (lambda k: x[k - 1])
+    return rows(j) - rows(i) if i else rows(j).copy()
+
+
+def assemble(pairs, values, n: int) -> np.ndarray:
+    """The symmetric matrix of springs (or dampers) ``values`` joining DOF pairs (d, e) (e = 0: to the base)."""
+    K = np.zeros((n, n))
+    for (d, e), k in zip(pairs, values, strict=True):
+        K[d - 1, d - 1] += k
+        if e:
+            K[e - 1, e - 1] += k
+            K[d - 1, e - 1] -= k
+            K[e - 1, d - 1] -= k
+    return K
 
 
 def _matrix(name: str, value, n: int) -> np.ndarray:
@@ -176,14 +208,8 @@ class Structure:
         n = len(masses)
         if len(springs) != n or len(dampers) != n:
             raise InputError(f"a chain of {n} DOFs needs {n} springs and {n} dampers (0 for none)")
-        K, C = np.zeros((n, n)), np.zeros((n, n))
-        for i, (k, c) in enumerate(zip(springs, dampers, strict=True)):
-            for M, v in ((K, k), (C, c)):
-                M[i, i] += v
-                if i:
-                    M[i - 1, i - 1] += v
-                    M[i - 1, i] -= v
-                    M[i, i - 1] -= v
+        pairs = [(i + 1, i) for i in range(n)]  # spring i + 1 joins DOF i + 1 to DOF i (0: the base)
+        K, C = assemble(pairs, springs, n), assemble(pairs, dampers, n)
         return cls(tuple(masses), element, K, C, at)
 
     def __eq__(self, other: object) -> bool:
@@ -218,38 +244,33 @@ class Structure:
     @property
     def coupling(self) -> np.ndarray:
         """L = e_J - e_I: where the element's force acts (+ on J, - on I)."""
-        lvec = np.zeros(self.n_dof)
-        i, j = self.place
-        lvec[j - 1] = 1.0
-        if i:
-            lvec[i - 1] = -1.0
-        return lvec
+        return coupling(self.n_dof, self.place)
 
     def with_element(self, element: Model) -> Structure:
         """The same structure with another element (a fitted one)."""
         return replace(self, element=element)
 
     # --- statics and linearisation ----------------------------------------------------------------
+    def _static(self, r: float) -> np.ndarray:
+        """The linear structure's static solution with relative displacement r held across the element: every
+        DOF's position and, last, the force lambda the element must carry (K z + l lambda = 0, l . z = r).
+        """
+        n, lvec = self.n_dof, self.coupling
+        a = np.zeros((n + 1, n + 1))
+        a[:n, :n] = self.K
+        a[:n, n] = lvec
+        a[n, :n] = lvec
+        return np.linalg.lstsq(a, np.r_[np.zeros(n), r], rcond=None)[0]
+
     def _series_stiffness(self) -> float:
         """kappa: the linear structure's stiffness seen across the element (the static force lambda(r) = kappa r
         with which it resists a relative displacement r), 0 when DOF J hangs on the element alone.
         """
-        n, lvec = self.n_dof, self.coupling
-        a = np.zeros((n + 1, n + 1))
-        a[:n, :n] = self.stiffness
-        a[:n, n] = lvec
-        a[n, :n] = lvec
-        sol = np.linalg.lstsq(a, np.r_[np.zeros(n), 1.0], rcond=None)[0]
-        return float(sol[n])
+        return float(self._static(1.0)[-1])
 
     def static_positions(self, r: float) -> np.ndarray:
         """The DOFs' static positions with relative displacement r across the element."""
-        n, lvec = self.n_dof, self.coupling
-        a = np.zeros((n + 1, n + 1))
-        a[:n, :n] = self.stiffness
-        a[:n, n] = lvec
-        a[n, :n] = lvec
-        return np.linalg.lstsq(a, np.r_[np.zeros(n), r], rcond=None)[0][:n]
+        return self._static(r)[:-1]
 
     def element_equilibria(self) -> Equilibria:
         """Equilibria of the relative displacement r across the element: F(r) = kappa r
@@ -304,7 +325,7 @@ class Structure:
     # --- simulation ---------------------------------------------------------------------------------
     def simulate(self, u: np.ndarray, dt: float, *, z0: float | None = None, input_kind: str = "base_acc",
                  force_dof: int | None = None, substeps: int = DEFAULT_SUBSTEPS, z_limit: float = DEFAULT_Z_LIMIT,
-                 v_limit: float = DEFAULT_V_LIMIT) -> StructureResult:  # fmt: skip
+                 v_limit: float = DEFAULT_V_LIMIT) -> SimulationResult:  # fmt: skip
         """The structure under a sampled input (band-limited between samples, ``stage_input``), from rest with the
         element's relative displacement at ``z0`` (default: the plus well's); ``z``, ``z_dot`` of shape (1, N, T).
         """
@@ -330,30 +351,6 @@ class Structure:
         return self.element.kernel_params(), 1.0 / mass, self.K, self.C, gain
 
 
-@dataclass(frozen=True)
-class StructureResult:
-    """A structure's (batched) simulation: z, z_dot of shape (B, N_dof, T), status and fail_time per member."""
-
-    t: np.ndarray
-    z: np.ndarray
-    z_dot: np.ndarray | None
-    status: np.ndarray
-    fail_time: np.ndarray
-
-    @property
-    def diverged(self) -> np.ndarray:
-        """Boolean mask of members that were stopped."""
-        return self.status != STATUS_OK
-
-    def describe_failures(self, limit: int = 3) -> str:
-        """One line naming the failed members, what happened and when."""
-        bad = np.flatnonzero(self.diverged)
-        parts = [
-            f"member {b}: {STATUS_TEXT[int(self.status[b])]} at t = {self.fail_time[b]:.3f} s" for b in bad[:limit]
-        ]
-        return "; ".join(parts) + (f" (+{bad.size - limit} more)" if bad.size > limit else "")
-
-
 def simulate_structures(
     structures: Structure | Sequence[Structure],
     u: np.ndarray,
@@ -369,7 +366,7 @@ def simulate_structures(
     v_limit: float = DEFAULT_V_LIMIT,
     threads: int | None = None,
     staged: bool = False,
-) -> StructureResult:
+) -> SimulationResult:
     """Integrate B structures (one, repeated for every start state, or one per member; same N and element
     DOFs) from states ``x0`` (B, 2N) = [z_1..z_N, z_1'..z_N'] under the input rows ``u`` (the conventions of
     ``simulate_batch``: linear interpolation between samples, or the input at the stage times).
@@ -391,20 +388,7 @@ def simulate_structures(
     lk = np.ascontiguousarray(np.stack([q[2] for q in parts], axis=2))
     lc = np.ascontiguousarray(np.stack([q[3] for q in parts], axis=2))
     gain = np.ascontiguousarray(np.stack([q[4] for q in parts], axis=1))
-    u2 = np.require(np.atleast_2d(np.asarray(u, dtype=np.float64)), requirements=("C", "W"))
-    if u2.shape[1] < 2 or not np.all(np.isfinite(u2)):
-        raise InputError("input needs at least two finite samples")
-    if not (dt > 0 and math.isfinite(dt)):
-        raise InputError(f"sample interval must be positive, got {dt}")
-    uidx = np.zeros(nb, dtype=np.int64) if input_index is None else np.asarray(input_index, dtype=np.int64)
-    if uidx.shape != (nb,) or uidx.min() < 0 or uidx.max() >= u2.shape[0]:
-        raise InputError("input_index must give one valid input row per batch member")
-    n = u2.shape[1]
-    if staged:
-        r = 2 * int(substeps)
-        if (n - 1) % r or n < r + 1:
-            raise InputError(f"a staged input needs 2 substeps (N - 1) + 1 columns (substeps {substeps}), got {n}")
-        n = (n - 1) // r + 1
+    u2, uidx, n = checked_input(u, dt, substeps, input_index, nb, staged)
     z0 = np.ascontiguousarray(x0[:, :nd].T)
     v0 = np.ascontiguousarray(x0[:, nd:].T)
     status = np.zeros(nb, dtype=np.int64)
@@ -432,7 +416,7 @@ def simulate_structures(
     oz = np.concatenate([o[0] for o in outs], axis=2)
     ov = np.concatenate([o[1] for o in outs], axis=2) if store_velocity else None
     t = np.arange(n) * dt
-    return StructureResult(
+    return SimulationResult(
         t,
         np.transpose(oz, (2, 1, 0)),
         None if ov is None else np.transpose(ov, (2, 1, 0)),

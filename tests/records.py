@@ -186,6 +186,37 @@ FIXTURE = {"m": 1.0, "f_hz": 25.0, "zeta": 0.02}
 """The acceptance's fixture: 1 kg on a 25 Hz, 2 % spring to the table (issue "Beyond one degree of freedom")."""
 
 
+def fixture_rk4_step(device, fixture=FIXTURE, hidden=None):
+    """One classical RK4 step, on Python floats, of ``device`` on the sprung fixture (DOF 1 the fixture, DOF 2 the
+    device's mass; the element's force, k0 included, on DOF 2 and oppositely on DOF 1; ``hidden(r, r')`` a force
+    beside it): ``step(z1, z2, v1, v2, h, a0, am, a1)`` -> the state after h under the base acceleration a0, am,
+    a1 at the step's start, middle and end. Written here, not negstiff's kernel."""
+    m1, m2 = fixture["m"], device.m
+    k_f = m1 * (2 * np.pi * fixture["f_hz"]) ** 2
+    c_f = 2 * fixture["zeta"] * np.sqrt(k_f * m1)
+    k0, k1, k2, k3, c, cn = device.k0, device.k1, device.k2, device.k3, device.c, device.c_nl
+
+    def rhs(z1, z2, v1, v2, ab):
+        r, vr = z2 - z1, v2 - v1
+        force = ((k3 * r + k2) * r - k1) * r + k0 + c * vr + cn * vr * abs(vr)
+        if hidden is not None:
+            force += hidden(r, vr)
+        return (-k_f * z1 - c_f * v1 + force) / m1 - ab, -force / m2 - ab
+
+    def step(z1, z2, v1, v2, h, a0, am, a1):
+        p1, q1 = rhs(z1, z2, v1, v2, a0)
+        s1, s2 = v1 + 0.5 * h * p1, v2 + 0.5 * h * q1
+        p2, q2 = rhs(z1 + 0.5 * h * v1, z2 + 0.5 * h * v2, s1, s2, am)
+        t1, t2 = v1 + 0.5 * h * p2, v2 + 0.5 * h * q2
+        p3, q3 = rhs(z1 + 0.5 * h * s1, z2 + 0.5 * h * s2, t1, t2, am)
+        w1, w2 = v1 + h * p3, v2 + h * q3
+        p4, q4 = rhs(z1 + h * t1, z2 + h * t2, w1, w2, a1)
+        return (z1 + h / 6 * (v1 + 2 * s1 + 2 * t1 + w1), z2 + h / 6 * (v2 + 2 * s2 + 2 * t2 + w2),
+                v1 + h / 6 * (p1 + 2 * p2 + 2 * p3 + p4), v2 + h / 6 * (q1 + 2 * q2 + 2 * q3 + q4))  # fmt: skip
+
+    return step
+
+
 def rk4_fixture_record(duration=60.0, rms=12.0, band=(2.0, 40.0), seed=1, oversample=8, settle=5.0, noise=1e-6,
                        device=None, fixture=FIXTURE, fs=FS, hidden=None):  # fmt: skip
     """(base_acc, z (2, T)) of ``device`` (TRUTH by default) on a sprung fixture, as another lab's code writes it: a
@@ -196,10 +227,7 @@ def rk4_fixture_record(duration=60.0, rms=12.0, band=(2.0, 40.0), seed=1, oversa
     loaded rest (the element's force, k0 included, acts on DOF 2 and oppositely on DOF 1). ``hidden(r, r')``: a
     force [N] the element has beside its model (friction), acting like the element's."""
     dev = TRUTH if device is None else device
-    m1, m2 = fixture["m"], dev.m
-    k_f = m1 * (2 * np.pi * fixture["f_hz"]) ** 2
-    c_f = 2 * fixture["zeta"] * np.sqrt(k_f * m1)
-    k0, k1, k2, k3, c, cn = dev.k0, dev.k1, dev.k2, dev.k3, dev.c, dev.c_nl
+    step = fixture_rk4_step(dev, fixture, hidden)
     h = 1.0 / (fs * oversample)
     n = int(round((duration + settle) * fs)) * oversample
     rng = np.random.default_rng(seed)
@@ -208,13 +236,7 @@ def rk4_fixture_record(duration=60.0, rms=12.0, band=(2.0, 40.0), seed=1, oversa
     spec[(f < band[0]) | (f > band[1])] = 0
     a = np.fft.irfft(spec, n)
     acc = (a * rms / a.std()).tolist()
-
-    def rhs(z1, z2, v1, v2, ab):
-        r, vr = z2 - z1, v2 - v1
-        force = ((k3 * r + k2) * r - k1) * r + k0 + c * vr + cn * vr * abs(vr)
-        if hidden is not None:
-            force += hidden(r, vr)
-        return (-k_f * z1 - c_f * v1 + force) / m1 - ab, -force / m2 - ab
+    k0, k1, k2, k3 = dev.k0, dev.k1, dev.k2, dev.k3
 
     # start at rest in the positive well of the element (F(r) = 0, the fixture's spring unloaded)
     roots = np.roots([k3, k2, -k1, k0])
@@ -226,18 +248,7 @@ def rk4_fixture_record(duration=60.0, rms=12.0, band=(2.0, 40.0), seed=1, oversa
             out[0, i // oversample], out[1, i // oversample] = z1, z2
         a0 = acc[i]
         a1 = acc[i + 1] if i + 1 < n else a0
-        am = 0.5 * (a0 + a1)
-        p1, q1 = rhs(z1, z2, v1, v2, a0)
-        s1, s2 = v1 + 0.5 * h * p1, v2 + 0.5 * h * q1
-        p2, q2 = rhs(z1 + 0.5 * h * v1, z2 + 0.5 * h * v2, s1, s2, am)
-        t1, t2 = v1 + 0.5 * h * p2, v2 + 0.5 * h * q2
-        p3, q3 = rhs(z1 + 0.5 * h * s1, z2 + 0.5 * h * s2, t1, t2, am)
-        w1, w2 = v1 + h * p3, v2 + h * q3
-        p4, q4 = rhs(z1 + h * t1, z2 + h * t2, w1, w2, a1)
-        z1 += h / 6 * (v1 + 2 * s1 + 2 * t1 + w1)
-        z2 += h / 6 * (v2 + 2 * s2 + 2 * t2 + w2)
-        v1 += h / 6 * (p1 + 2 * p2 + 2 * p3 + p4)
-        v2 += h / 6 * (q1 + 2 * q2 + 2 * q3 + q4)
+        z1, z2, v1, v2 = step(z1, z2, v1, v2, h, a0, 0.5 * (a0 + a1), a1)
     k = int(round(settle * fs))
     u = np.asarray(acc[::oversample])[k:]
     z = out[:, k:]

@@ -4,7 +4,7 @@ fixture that is not rigid from a record written here with plain numpy (``records
 
 import numpy as np
 import pytest
-from records import FIXTURE, TRUTH, rk4_fixture_record, write_csv
+from records import FIXTURE, TRUTH, fixture_rk4_step, rk4_fixture_record, write_csv
 
 from negstiff import InputError, Model
 from negstiff.inference.estimators.structure_id import StructureNSI, StructureSINDy, free_run_error
@@ -129,38 +129,19 @@ def test_structure_record_file(tmp_path):
 
 def _stepped_sweep(amps, f_hz, state, periods=120, steps=128):
     """The device on the fixture under b'' = A sin(2 pi f t), A stepped through ``amps`` (each step going on from the
-    last state, as a shaker test does), a plain RK4 on floats written here (``steps`` a period); per amplitude, the
-    spread of r = z2 - z1 over the last 8 forcing periods at phase 0 (0 on a period-1 orbit)."""
-    m1, m2 = FIXTURE["m"], TRUTH.m
-    k_f = m1 * (2 * np.pi * FIXTURE["f_hz"]) ** 2
-    c_f = 2 * FIXTURE["zeta"] * np.sqrt(k_f * m1)
-    k0, k1, k2, k3, c, cn = TRUTH.k0, TRUTH.k1, TRUTH.k2, TRUTH.k3, TRUTH.c, TRUTH.c_nl
+    last state, as a shaker test does), the tests' plain RK4 on floats (``records.fixture_rk4_step``, ``steps`` a
+    period); per amplitude, the spread of r = z2 - z1 over the last 8 forcing periods at phase 0 (0 on a period-1
+    orbit)."""
+    step = fixture_rk4_step(TRUTH)
     h = 1.0 / (f_hz * steps)
     sines = [float(np.sin(np.pi * k / steps)) for k in range(2 * steps + 1)]  # at every half step of a period
     z1, z2, v1, v2 = state
     spread = []
     for A in amps:
-
-        def rhs(z1, z2, v1, v2, ab):
-            r, vr = z2 - z1, v2 - v1
-            force = ((k3 * r + k2) * r - k1) * r + k0 + c * vr + cn * vr * abs(vr)
-            return (-k_f * z1 - c_f * v1 + force) / m1 - ab, -force / m2 - ab
-
         section = []
         for p in range(periods):
             for k in range(steps):
-                a0, am, a1 = A * sines[2 * k], A * sines[2 * k + 1], A * sines[2 * k + 2]
-                p1, q1 = rhs(z1, z2, v1, v2, a0)
-                s1, s2 = v1 + 0.5 * h * p1, v2 + 0.5 * h * q1
-                p2, q2 = rhs(z1 + 0.5 * h * v1, z2 + 0.5 * h * v2, s1, s2, am)
-                t1, t2 = v1 + 0.5 * h * p2, v2 + 0.5 * h * q2
-                p3, q3 = rhs(z1 + 0.5 * h * s1, z2 + 0.5 * h * s2, t1, t2, am)
-                w1, w2 = v1 + h * p3, v2 + h * q3
-                p4, q4 = rhs(z1 + h * t1, z2 + h * t2, w1, w2, a1)
-                z1 += h / 6 * (v1 + 2 * s1 + 2 * t1 + w1)
-                z2 += h / 6 * (v2 + 2 * s2 + 2 * t2 + w2)
-                v1 += h / 6 * (p1 + 2 * p2 + 2 * p3 + p4)
-                v2 += h / 6 * (q1 + 2 * q2 + 2 * q3 + q4)
+                z1, z2, v1, v2 = step(z1, z2, v1, v2, h, A * sines[2 * k], A * sines[2 * k + 1], A * sines[2 * k + 2])
             if p >= periods - 8:
                 section.append(z2 - z1)
         spread.append(float(np.ptp(section)))

@@ -46,7 +46,16 @@ from negstiff.errors import InputError, NegstiffWarning
 from negstiff.inference.record.structure import StructureRecord
 from negstiff.inference.steps.weak import test_function, test_function_half_width, weak_project
 from negstiff.models import Model
-from negstiff.models.structure import Mode, Structure, modes_of, modes_of_state_matrix, simulate_structures
+from negstiff.models.structure import (
+    Mode,
+    Structure,
+    assemble,
+    coupling,
+    modes_of,
+    modes_of_state_matrix,
+    relative,
+    simulate_structures,
+)
 
 from . import subspace
 
@@ -81,24 +90,18 @@ def parse_element(text: str | tuple[int, int], n_dof: int) -> tuple[int, int]:
     return i, j
 
 
-def _relative(x: np.ndarray, at: tuple[int, int]) -> np.ndarray:
-    i, j = at
-    return x[j - 1] - x[i - 1] if i else x[j - 1].copy()
-
-
-def _coupling(n: int, at: tuple[int, int]) -> np.ndarray:
-    lvec = np.zeros(n)
-    lvec[at[1] - 1] = 1.0
-    if at[0]:
-        lvec[at[0] - 1] = -1.0
-    return lvec
-
-
 def _asymmetry(K: np.ndarray) -> float:
     """The largest |K_ij - K_ji| relative to the larger of the pair, over the coupled pairs (0 when symmetric)."""
     big = np.maximum(np.abs(K), np.abs(K.T))
     coupled = big > 1e-6 * big.max()
     return float(np.max(np.abs(K - K.T)[coupled] / big[coupled], initial=0.0))
+
+
+def feedback_channels(lin: np.ndarray, x: np.ndarray, vr: np.ndarray) -> np.ndarray:
+    """NSI's extended input about a reference: the excitation and the element's basis as feedback forces,
+    [u, -x^2, -x^3, -r'|r'|] (x = r - r*), one column each.
+    """
+    return np.column_stack([lin, -(x**2), -(x**3), -vr * np.abs(vr)])
 
 
 def _element_model(coef: dict[str, float], mass: float) -> Model:
@@ -114,17 +117,6 @@ def _springs(n: int, at: tuple[int, int]) -> list[tuple[int, int]]:
     return [p for p in pairs if p != own]
 
 
-def _matrix_of(pairs, values, n: int) -> np.ndarray:
-    K = np.zeros((n, n))
-    for (d, e), k in zip(pairs, values, strict=True):
-        K[d - 1, d - 1] += k
-        if e:
-            K[e - 1, e - 1] += k
-            K[d - 1, e - 1] -= k
-            K[e - 1, d - 1] -= k
-    return K
-
-
 def equation_columns(z: np.ndarray, v: np.ndarray, at: tuple[int, int]) -> tuple[np.ndarray, list[str]]:
     """The stacked equation-of-motion columns, (N, T, P): for DOF d, the force each parameter puts on it per unit
     parameter, with the sign of the left-hand side moved right (M z'' - M 1 u = -sum theta_p col_p). Parameters:
@@ -133,9 +125,9 @@ def equation_columns(z: np.ndarray, v: np.ndarray, at: tuple[int, int]) -> tuple
     """
     n, t = z.shape
     pairs = _springs(n, at)
-    r, vr = _relative(z, at), _relative(v, at)
+    r, vr = relative(z, at), relative(v, at)
     g = [np.ones(t), r, r**2, r**3, vr, vr * np.abs(vr)]
-    lvec = _coupling(n, at)
+    lvec = coupling(n, at)
     cols = np.zeros((n, t, 2 * len(pairs) + len(g)))
     for p, (d, e) in enumerate(pairs):
         for off, x in ((0, z), (len(pairs), v)):
@@ -157,7 +149,7 @@ def _assemble(theta: np.ndarray, n: int, at: tuple[int, int], masses, extra: dic
     element = _element_model(dict(zip(ELEMENT_TERMS, e, strict=True)), masses[at[1] - 1])
     if extra:
         element = Model(**{**element.to_dict(), "extra": extra})
-    return Structure(tuple(masses), element, _matrix_of(pairs, k, n), _matrix_of(pairs, c, n), at)
+    return Structure(tuple(masses), element, assemble(pairs, k, n), assemble(pairs, c, n), at)
 
 
 @dataclass(frozen=True)
@@ -372,14 +364,14 @@ class StructureNSI(_StructureIdentifier):
         at = self.structure_.place
         ident = rec.segment(0, n_id)
         zs, v, _ = ident.states(at)
-        r, vr = _relative(zs, at), _relative(v, at)
+        r, vr = relative(zs, at), relative(v, at)
         lin = -ident.u if ident.input_name == "base_acc" else ident.u
         y = (zs - zs.mean(axis=1, keepdims=True)).T
         y = y / y.std(axis=0)
         rows: list[dict] = []
         for name, well in self.wells_.items():
             x = r - well.r_ref
-            chans = np.column_stack([lin, -(x**2), -(x**3), -vr * np.abs(vr)])
+            chans = feedback_channels(lin, x, vr)
             w = (chans - chans.mean(axis=0)) / chans.std(axis=0)
             for i in block_rows:
                 previous: list[tuple[float, float]] = []
@@ -402,8 +394,8 @@ class StructureNSI(_StructureIdentifier):
         """The ULS and the element's coefficients about ``r_ref``, moved to the identified equilibrium each pass."""
         n = rec.n_dof
         mass = np.asarray(rec.masses)
-        lvec = _coupling(n, at)
-        r, vr = _relative(zs, at), _relative(v, at)
+        lvec = coupling(n, at)
+        r, vr = relative(zs, at), relative(v, at)
         lin = -rec.u if rec.input_name == "base_acc" else rec.u
         if rec.input_name == "base_acc":
             influence = mass.copy()  # M 1
@@ -414,7 +406,7 @@ class StructureNSI(_StructureIdentifier):
         stopped, shift = "", 0.0
         for k_pass in range(self.passes):
             x = r - r_ref
-            chans = np.column_stack([lin, -(x**2), -(x**3), -vr * np.abs(vr)])
+            chans = feedback_channels(lin, x, vr)
             means, scale = chans.mean(axis=0), chans.std(axis=0)
             if np.any(scale == 0):
                 raise StructureIdentificationError(f"{rec.source}: the input or a basis function is constant")
@@ -564,7 +556,7 @@ class StructureSINDy(_StructureIdentifier):
         stride = max(1, half)
         cols, names = equation_columns(zs, v, at)
         if extra:
-            lvec = _coupling(rec.n_dof, at)
+            lvec = coupling(rec.n_dof, at)
             more = np.stack([lvec[:, None] * g[None, :] for _, g in extra], axis=-1)  # (N, T, E)
             cols = np.concatenate([cols, more], axis=-1)
             names = names + [f"element {name}" for name, _ in extra]
@@ -692,7 +684,7 @@ class StructureDiscrepancy(_StructureIdentifier):
         rec, at, n_id = self._prepare(rec)
         ident = rec.segment(0, n_id)
         zs, v, _ = ident.states(at)
-        r, vr = _relative(zs, at), _relative(v, at)
+        r, vr = relative(zs, at), relative(v, at)
         # the smoothed sign's velocity scale: the relative velocity's noise, read as its rough part (first differences
         # of a white-noise-dominated tail), never below 1e-4 of its spread
         v_noise = max(float(np.std(np.diff(vr)) / math.sqrt(2)), 1e-4 * float(vr.std()))

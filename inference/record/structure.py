@@ -19,6 +19,7 @@ import numpy as np
 from negstiff.errors import InputError
 from negstiff.inference.record.measurement import check_sampling_rate, check_values, time_base
 from negstiff.inference.steps.derivatives import smooth_and_differentiate, velocity_window
+from negstiff.models.structure import relative
 
 INPUTS = ("base_acc", "force")
 
@@ -130,8 +131,7 @@ class StructureRecord:
         key = ("states", at)
         if key not in self.derived:
             if at is not None:
-                i, j = at
-                w = velocity_window(self.z[j - 1] - (self.z[i - 1] if i else 0.0), self.fs)
+                w = velocity_window(relative(self.z, at), self.fs)
             else:
                 w = min(velocity_window(zi, self.fs) for zi in self.z)
             pairs = [smooth_and_differentiate(zi, self.fs, w) for zi in self.z]
