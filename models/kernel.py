@@ -1,6 +1,7 @@
-"""The compiled force law and Runge-Kutta loop of the simulator (numba), shared by the batched
-simulator (``simulator``), the variational equations (``reference``) and the hybrid model's free runs
-(``inference.hybrid``).
+"""The compiled force law and the one Runge-Kutta loop of negstiff (numba): every simulation, of the single-DOF
+model (N = 1), of a structure of N DOFs (``structure``), of the hybrid model (``inference.hybrid``, through the
+extra force hook), runs in ``_integrate``, called by ``simulator.integrate``. The force law is shared with the
+variational equations (``reference``).
 
 A member's parameters are one column of the kernel parameter vector (``effects.layout``): rows 0-16
 are fixed (mass; the restoring force's rows 1-6, k0..k3 for a polynomial or the device's geometry;
@@ -54,7 +55,7 @@ def force(kind, coulomb, z, v, q):
     return k + d
 
 
-@numba.njit(inline="always", **JIT)
+@numba.njit(**JIT)  # called, not inlined in numba's IR: each inlined copy of a loop is compile time (LLVM inlines it)
 def monomials(z, v, p, b, mono):
     """The registry's monomials without a fixed row: sum of p[row, b] |z|^zp sgn(z)^zo |v|^vp sgn(v)^vo."""
     f = 0.0
@@ -82,7 +83,7 @@ def total_force(kind, coulomb, generic, z, v, q, p, b, mono):
     return force(kind, coulomb, z, v, q)
 
 
-@numba.njit(inline="always", **JIT)
+@numba.njit(**JIT)  # called, not inlined in numba's IR (as ``monomials``; inlining it gained nothing, measured)
 def extra_term(z, v, u, w, a, zc, vc, uc, iz, iv, iu, bz, bv):
     """The extra force hook: g(z, z', u), a weighted sum of tensor-product Gaussian bumps over (z, z') and of
     bumps over u (the hybrid model's non-parametric term, ``inference.hybrid``; bz, bv: scratch).
@@ -106,97 +107,194 @@ def extra_term(z, v, u, w, a, zc, vc, uc, iz, iv, iu, bz, bv):
 
 
 @numba.njit(inline="always", **JIT)
+def _column(q, b):
+    """Member b's parameter tuple from a converted parameter array (``converted``)."""
+    return (q[0, b], q[1, b], q[2, b], q[3, b], q[4, b], q[5, b], q[6, b], q[7, b], q[8, b], q[9, b], q[10, b],
+            q[11, b], q[12, b], q[13, b], q[14, b], q[15, b], q[16, b])  # fmt: skip
+
+
+@numba.njit(inline="always", **JIT)
+def converted(p, kind):
+    """The parameter array with the device's angle rows turned into L cos(a), sin(a) once (what ``member`` does
+    for one member; the same operations, so the same numbers).
+    """
+    q = p.copy()
+    if kind == KIND_DEVICE:
+        for b in range(p.shape[1]):
+            q[2, b] = p[2, b] * math.cos(p[3, b])
+            q[3, b] = math.sin(p[3, b])
+    return q
+
+
+@numba.njit(inline="always", **JIT)
 def member(p, b, kind):
     """Parameter tuple of member b, with the device's angle rows turned into L cos(a), sin(a)."""
-    q = (
-        p[0, b],
-        p[1, b],
-        p[2, b],
-        p[3, b],
-        p[4, b],
-        p[5, b],
-        p[6, b],
-        p[7, b],
-        p[8, b],
-        p[9, b],
-        p[10, b],
-        p[11, b],
-        p[12, b],
-        p[13, b],
-        p[14, b],
-        p[15, b],
-        p[16, b],
-    )
+    q = _column(p, b)
     if kind == KIND_DEVICE:
         q = (q[0], q[1], q[2] * math.cos(q[3]), math.sin(q[3])) + q[4:]
     return q
 
 
 @numba.njit(inline="always", **JIT)
-def _integrate(
-    kind,
-    coulomb,
-    generic,
-    extra,
-    p,
-    mono,
-    gain,
-    u,
-    uidx,
-    dt,
-    nsub,
-    z0,
-    v0,
-    z_limit,
-    v_limit,
-    out_z,
-    out_v,
-    store_v,
-    status,
-    fail_step,
-    hw,
-    ha,
-    hzc,
-    hvc,
-    huc,
-    hiz,
-    hiv,
-    hiu,
-):
-    """RK4 over the N sample intervals of each member's input row ``u[uidx[b]]``; outputs time-major. The
-    package's one Runge-Kutta stage loop: every simulation of negstiff runs here.
+def _accelerations(kind, coulomb, generic, extra, linear, q, mono, ei, ej, minv, lk, lc, zs, vs, w, ur, scratch, acc,
+                   hook):  # fmt: skip
+    """Every member's accelerations at one Runge-Kutta stage, one loop over the batch per operation (the batch is
+    the inner loop everywhere, which is what LLVM vectorises): the element's force law on the relative motion r
+    of DOF ``ej`` and DOF ``ei`` (-1: the base), plus the extra hook; the linear structure ``lk``, ``lc``
+    (``linear``); the element's force on ``ej`` and, opposite, on ``ei``. Arguments are bundled in tuples: a call of
+    more than 30 arguments is a ``*args`` call in Python 3.12's bytecode, which numba's inliner refuses.
+    """
+    r, rv, f, lin, bz, bv = scratch
+    hw, ha, hzc, hvc, huc, hiz, hiv, hiu = hook
+    nb = q.shape[1]
+    nd = zs.shape[0]
+    if ei >= 0:
+        for b in range(nb):
+            r[b] = zs[ej, b] - zs[ei, b]
+            rv[b] = vs[ej, b] - vs[ei, b]
+    else:
+        for b in range(nb):
+            r[b] = zs[ej, b]
+            rv[b] = vs[ej, b]
+    for b in range(nb):
+        f[b] = total_force(kind, coulomb, generic, r[b], rv[b], _column(q, b), q, b, mono)
+    if extra:
+        for b in range(nb):
+            f[b] += extra_term(r[b], rv[b], ur[b], hw, ha, hzc, hvc, huc, hiz, hiv, hiu, bz, bv)
+    for d in range(nd):
+        if linear:
+            for b in range(nb):
+                lin[b] = 0.0
+            for e in range(nd):
+                for b in range(nb):
+                    lin[b] += lk[d, e, b] * zs[e, b] + lc[d, e, b] * vs[e, b]
+            if d == ej:
+                for b in range(nb):
+                    lin[b] += f[b]
+            elif d == ei:
+                for b in range(nb):
+                    lin[b] -= f[b]
+            for b in range(nb):
+                acc[d, b] = w[d, b] - lin[b] * minv[d, b]
+        elif d == ej:
+            for b in range(nb):
+                acc[d, b] = w[d, b] - f[b] * minv[d, b]
+        elif d == ei:
+            for b in range(nb):
+                acc[d, b] = w[d, b] + f[b] * minv[d, b]
+        else:
+            for b in range(nb):
+                acc[d, b] = w[d, b]
 
-    ``out_z.shape[0]`` is N + 1 output samples. The input row holds either the N + 1 samples (linearly
-    interpolated inside each interval) or, when it has 2 ``nsub`` N + 1 columns, the input at every
-    Runge-Kutta stage time (``stage_input``), read as it is. ``extra`` (a staged input) adds the hook
-    ``extra_term`` with its weights and bumps (``hw`` ... ``hiu``) to every member's force.
+
+@numba.njit(inline="always", **JIT)
+def _fused_step(kind, coulomb, generic, extra, q, mono, im, h, z, v, wa, wm, wb, ra, rm, rb, hook, scratch):
+    """One Runge-Kutta step of every member of one DOF on the base without a linear structure (the single-DOF
+    model): ``_integrate``'s stage-wise step with its four stages fused in one loop over the batch, the same
+    operations in the same order (the same numbers to the last bit, tested), the state in registers. The
+    stage-wise loops cost 2-4x at one DOF (each loop's set-up, paid some twenty times per step, measured).
+    """
+    hw, ha, hzc, hvc, huc, hiz, hiv, hiu = hook
+    bz, bv = scratch[4], scratch[5]
+    for b in range(z.size):
+        qb = _column(q, b)
+        zb = z[b]
+        vb = v[b]
+        zs, vs = zb, vb
+        a1 = a2 = a3 = a4 = v2 = v3 = v4 = 0.0
+        for s in range(4):  # one call site of the force law (each inlined copy is compile time; LLVM unrolls this)
+            f = total_force(kind, coulomb, generic, zs, vs, qb, q, b, mono)
+            if extra:
+                f += extra_term(zs, vs, ra[b] if s == 0 else (rb[b] if s == 3 else rm[b]), hw, ha, hzc, hvc, huc, hiz,
+                                hiv, hiu, bz, bv)  # fmt: skip
+            acc = (wa[b] if s == 0 else (wb[b] if s == 3 else wm[b])) - f * im[b]
+            if s == 0:
+                a1 = acc
+                zs = zb + 0.5 * h * vb
+                v2 = vb + 0.5 * h * a1
+                vs = v2
+            elif s == 1:
+                a2 = acc
+                zs = zb + 0.5 * h * v2
+                v3 = vb + 0.5 * h * a2
+                vs = v3
+            elif s == 2:
+                a3 = acc
+                zs = zb + h * v3
+                v4 = vb + h * a3
+                vs = v4
+            else:
+                a4 = acc
+        z[b] = zb + h / 6.0 * (vb + 2.0 * v2 + 2.0 * v3 + v4)
+        v[b] = vb + h / 6.0 * (a1 + 2.0 * a2 + 2.0 * a3 + a4)
+
+
+@numba.njit(inline="always", **JIT)
+def _integrate(kind, coulomb, generic, extra, p, mono, ei, ej, minv, lk, lc, gain, u, uidx, dt, nsub, z0, v0,
+               z_limit, v_limit, out_z, out_v, store_v, status, fail_step, hook):  # fmt: skip
+    """RK4 of B systems of N degrees of freedom over the T - 1 sample intervals of each member's input row
+    ``u[uidx[b]]`` (state z, z' of each DOF, relative to the base): the package's one Runge-Kutta loop, every
+    simulation of negstiff runs here, the single-DOF model as N = 1 (one DOF on the base, no linear structure).
+
+        M z'' + C z' + K z + l F(z_J - z_I, z_J' - z_I') = gain u,   l = e_J - e_I,
+
+    F the element's force law of member b's column of ``p`` (``force`` and the registry's terms), ``minv`` (N, B)
+    the inverse masses, ``lk``/``lc`` (N, N, B) the linear structure (all zero: skipped), ``gain`` (N, B) the
+    input's gain per DOF, ``z0``/``v0`` (N, B); outputs (T, N, B).
+
+    The input row holds either the T samples (linearly interpolated inside each interval) or, when it has
+    2 ``nsub`` (T - 1) + 1 columns, the input at every Runge-Kutta stage time (``stage_input``), read as it is.
+    ``extra`` (a staged input) adds the hook ``extra_term`` with its weights and bumps (``hook``: w, a, the centres
+    in z, z', u and the inverse widths) to the element's force.
     """
     nb = p.shape[1]
+    nd = minv.shape[0]
     n = out_z.shape[0]
     staged = u.shape[1] != n
+    linear = False
+    for d in range(lk.shape[0]):
+        for e in range(lk.shape[1]):
+            for b in range(lk.shape[2]):
+                if lk[d, e, b] != 0.0 or lc[d, e, b] != 0.0:
+                    linear = True
     h = dt / nsub
+    q = converted(p, kind)
+    fused = nd == 1 and ei < 0 and not linear
     z = z0.copy()
     v = v0.copy()
-    ua = np.empty(nb)
-    ub = np.empty(nb)
-    wa = np.empty(nb)
-    wm = np.empty(nb)
-    wb = np.empty(nb)
+    zt = np.empty((nd, nb))
+    vt = np.empty((nd, nb))
+    v2 = np.empty((nd, nb))
+    v3 = np.empty((nd, nb))
+    a1 = np.empty((nd, nb))
+    a2 = np.empty((nd, nb))
+    a3 = np.empty((nd, nb))
+    a4 = np.empty((nd, nb))
+    ua = np.empty((nd, nb))
+    ub = np.empty((nd, nb))
+    wa = np.empty((nd, nb))
+    wm = np.empty((nd, nb))
+    wb = np.empty((nd, nb))
     ra = np.empty(nb)
     rm = np.empty(nb)
     rb = np.empty(nb)
-    bz = np.empty(hzc.size)
-    bv = np.empty(hvc.size)
+    r = np.empty(nb)
+    rv = np.empty(nb)
+    f = np.empty(nb)
+    lin = np.empty(nb)
+    scratch = (r, rv, f, lin, np.empty(hook[2].size), np.empty(hook[3].size))
     alive = np.ones(nb, dtype=np.bool_)
-    for b in range(nb):
-        out_z[0, b] = z[b]
-        if store_v:
-            out_v[0, b] = v[b]
+    for d in range(nd):
+        for b in range(nb):
+            out_z[0, d, b] = z[d, b]
+            if store_v:
+                out_v[0, d, b] = v[d, b]
     for k in range(n - 1):
         if not staged:
-            for b in range(nb):  # gather the input once per sample, outside the vectorised loop
-                ua[b] = gain[b] * u[uidx[b], k]
-                ub[b] = gain[b] * u[uidx[b], k + 1]
+            for d in range(nd):
+                for b in range(nb):  # gather the input once per sample, outside the vectorised loops
+                    ua[d, b] = gain[d, b] * u[uidx[b], k]
+                    ub[d, b] = gain[d, b] * u[uidx[b], k + 1]
         for j in range(nsub):
             if staged:  # the input at the step's start, midpoint and end
                 c = 2 * (k * nsub + j)
@@ -204,58 +302,85 @@ def _integrate(
                     ra[b] = u[uidx[b], c]
                     rm[b] = u[uidx[b], c + 1]
                     rb[b] = u[uidx[b], c + 2]
-                    wa[b] = gain[b] * ra[b]
-                    wm[b] = gain[b] * rm[b]
-                    wb[b] = gain[b] * rb[b]
+                for d in range(nd):
+                    for b in range(nb):
+                        wa[d, b] = gain[d, b] * ra[b]
+                        wm[d, b] = gain[d, b] * rm[b]
+                        wb[d, b] = gain[d, b] * rb[b]
             else:
                 fa = j / nsub
                 fm = (j + 0.5) / nsub
                 fb = (j + 1.0) / nsub
+                for d in range(nd):
+                    for b in range(nb):
+                        du = ub[d, b] - ua[d, b]
+                        wa[d, b] = ua[d, b] + fa * du
+                        wm[d, b] = ua[d, b] + fm * du
+                        wb[d, b] = ua[d, b] + fb * du
+            if fused:
+                _fused_step(kind, coulomb, generic, extra, q, mono, minv[0], h, z[0], v[0], wa[0], wm[0], wb[0], ra,
+                            rm, rb, hook, scratch)  # fmt: skip
+                continue
+            # the four stages through one call site: numba inlines a function by copying its IR, and four copies of
+            # the stage (each with the force law inlined) took minutes to compile; with one, a kernel compiles in ~9 s
+            for s in range(4):
+                if s == 0:
+                    zs, vs, w, ur, acc = z, v, wa, ra, a1
+                elif s == 1:
+                    zs, vs, w, ur, acc = zt, v2, wm, rm, a2
+                elif s == 2:
+                    zs, vs, w, ur, acc = zt, v3, wm, rm, a3
+                else:
+                    zs, vs, w, ur, acc = zt, vt, wb, rb, a4
+                _accelerations(kind, coulomb, generic, extra, linear, q, mono, ei, ej, minv, lk, lc, zs, vs, w, ur,
+                               scratch, acc, hook)  # fmt: skip
+                if s == 0:
+                    for d in range(nd):
+                        for b in range(nb):
+                            zt[d, b] = z[d, b] + 0.5 * h * v[d, b]
+                            v2[d, b] = v[d, b] + 0.5 * h * a1[d, b]
+                elif s == 1:
+                    for d in range(nd):
+                        for b in range(nb):
+                            zt[d, b] = z[d, b] + 0.5 * h * v2[d, b]
+                            v3[d, b] = v[d, b] + 0.5 * h * a2[d, b]
+                elif s == 2:
+                    for d in range(nd):
+                        for b in range(nb):
+                            zt[d, b] = z[d, b] + h * v3[d, b]
+                            vt[d, b] = v[d, b] + h * a3[d, b]
+            for d in range(nd):
                 for b in range(nb):
-                    du = ub[b] - ua[b]
-                    wa[b] = ua[b] + fa * du
-                    wm[b] = ua[b] + fm * du
-                    wb[b] = ua[b] + fb * du
+                    z[d, b] = z[d, b] + h / 6.0 * (v[d, b] + 2.0 * v2[d, b] + 2.0 * v3[d, b] + vt[d, b])
+                    v[d, b] = v[d, b] + h / 6.0 * (a1[d, b] + 2.0 * a2[d, b] + 2.0 * a3[d, b] + a4[d, b])
+        bad = False
+        for d in range(nd):
             for b in range(nb):
-                q = member(p, b, kind)
-                im = 1.0 / q[P_M]
-                zb = z[b]
-                vb = v[b]
-                f1 = total_force(kind, coulomb, generic, zb, vb, q, p, b, mono)
-                if extra:
-                    f1 += extra_term(zb, vb, ra[b], hw, ha, hzc, hvc, huc, hiz, hiv, hiu, bz, bv)
-                a1 = wa[b] - f1 * im
-                z2 = zb + 0.5 * h * vb
-                v2 = vb + 0.5 * h * a1
-                f2 = total_force(kind, coulomb, generic, z2, v2, q, p, b, mono)
-                if extra:
-                    f2 += extra_term(z2, v2, rm[b], hw, ha, hzc, hvc, huc, hiz, hiv, hiu, bz, bv)
-                a2 = wm[b] - f2 * im
-                z3 = zb + 0.5 * h * v2
-                v3 = vb + 0.5 * h * a2
-                f3 = total_force(kind, coulomb, generic, z3, v3, q, p, b, mono)
-                if extra:
-                    f3 += extra_term(z3, v3, rm[b], hw, ha, hzc, hvc, huc, hiz, hiv, hiu, bz, bv)
-                a3 = wm[b] - f3 * im
-                z4 = zb + h * v3
-                v4 = vb + h * a3
-                f4 = total_force(kind, coulomb, generic, z4, v4, q, p, b, mono)
-                if extra:
-                    f4 += extra_term(z4, v4, rb[b], hw, ha, hzc, hvc, huc, hiz, hiv, hiu, bz, bv)
-                a4 = wb[b] - f4 * im
-                z[b] = zb + h / 6.0 * (vb + 2.0 * v2 + 2.0 * v3 + v4)
-                v[b] = vb + h / 6.0 * (a1 + 2.0 * a2 + 2.0 * a3 + a4)
-        for b in range(nb):
-            if alive[b] and not (abs(z[b]) < z_limit and abs(v[b]) < v_limit):
-                alive[b] = False
-                fail_step[b] = k + 1
-                status[b] = STATUS_GEOMETRY if (kind == KIND_DEVICE and not math.isfinite(z[b])) else STATUS_DIVERGED
-            if not alive[b]:
-                z[b] = math.nan
-                v[b] = math.nan
-            out_z[k + 1, b] = z[b]
+                if not (abs(z[d, b]) < z_limit and abs(v[d, b]) < v_limit):
+                    bad = True
+        if bad:  # some member out of range now or before (its state NaN): stop it, say why and when
+            for b in range(nb):
+                ok = True
+                nonfinite = False
+                for d in range(nd):
+                    if not (abs(z[d, b]) < z_limit and abs(v[d, b]) < v_limit):
+                        ok = False
+                    if not math.isfinite(z[d, b]):
+                        nonfinite = True
+                if alive[b] and not ok:
+                    alive[b] = False
+                    fail_step[b] = k + 1
+                    status[b] = STATUS_GEOMETRY if (kind == KIND_DEVICE and nonfinite) else STATUS_DIVERGED
+                if not alive[b]:
+                    for d in range(nd):
+                        z[d, b] = math.nan
+                        v[d, b] = math.nan
+        for d in range(nd):
+            for b in range(nb):
+                out_z[k + 1, d, b] = z[d, b]
             if store_v:
-                out_v[k + 1, b] = v[b]
+                for b in range(nb):
+                    out_v[k + 1, d, b] = v[d, b]
     return 0
 
 
@@ -263,70 +388,69 @@ _NO_W = np.zeros((0, 0))
 _NO_V = np.zeros(0)
 """The extra force hook's arguments in the kernels without it: empty, never read (``extra`` is False)."""
 
-# One compiled kernel per (restoring-force kind, smoothed sign present, extra monomials present): the
-# flags are constants inside each, so the batch loop has no data-dependent branches. (A factory of
-# closures would repeat less, but numba's on-disk cache cannot tell such closures apart.)
+# One compiled kernel per (restoring-force kind, smoothed sign present, extra monomials present, extra hook): the
+# flags are constants inside each, so the batch loops have no data-dependent branches. (A factory of closures
+# would repeat less, but numba's on-disk cache cannot tell such closures apart.)
 # fmt: off
 @numba.njit(**JIT)
-def _kernel_poly(p, mono, gain, u, uidx, dt, nsub, z0, v0, zl, vl, oz, ov, sv, st, fs):
-    return _integrate(KIND_POLYNOMIAL, False, False, False, p, mono, gain, u, uidx, dt, nsub,
-                      z0, v0, zl, vl, oz, ov, sv, st, fs, _NO_W, _NO_V, _NO_V, _NO_V, _NO_V, 1.0, 1.0, 1.0)
+def _kernel_poly(p, mono, ei, ej, minv, lk, lc, gain, u, uidx, dt, nsub, z0, v0, zl, vl, oz, ov, sv, st, fs):
+    return _integrate(KIND_POLYNOMIAL, False, False, False, p, mono, ei, ej, minv, lk, lc, gain, u, uidx, dt, nsub,
+                      z0, v0, zl, vl, oz, ov, sv, st, fs, (_NO_W, _NO_V, _NO_V, _NO_V, _NO_V, 1.0, 1.0, 1.0))
 
 
 @numba.njit(**JIT)
-def _kernel_poly_sign(p, mono, gain, u, uidx, dt, nsub, z0, v0, zl, vl, oz, ov, sv, st, fs):
-    return _integrate(KIND_POLYNOMIAL, True, False, False, p, mono, gain, u, uidx, dt, nsub,
-                      z0, v0, zl, vl, oz, ov, sv, st, fs, _NO_W, _NO_V, _NO_V, _NO_V, _NO_V, 1.0, 1.0, 1.0)
+def _kernel_poly_sign(p, mono, ei, ej, minv, lk, lc, gain, u, uidx, dt, nsub, z0, v0, zl, vl, oz, ov, sv, st, fs):
+    return _integrate(KIND_POLYNOMIAL, True, False, False, p, mono, ei, ej, minv, lk, lc, gain, u, uidx, dt, nsub,
+                      z0, v0, zl, vl, oz, ov, sv, st, fs, (_NO_W, _NO_V, _NO_V, _NO_V, _NO_V, 1.0, 1.0, 1.0))
 
 
 @numba.njit(**JIT)
-def _kernel_device(p, mono, gain, u, uidx, dt, nsub, z0, v0, zl, vl, oz, ov, sv, st, fs):
-    return _integrate(KIND_DEVICE, False, False, False, p, mono, gain, u, uidx, dt, nsub,
-                      z0, v0, zl, vl, oz, ov, sv, st, fs, _NO_W, _NO_V, _NO_V, _NO_V, _NO_V, 1.0, 1.0, 1.0)
+def _kernel_device(p, mono, ei, ej, minv, lk, lc, gain, u, uidx, dt, nsub, z0, v0, zl, vl, oz, ov, sv, st, fs):
+    return _integrate(KIND_DEVICE, False, False, False, p, mono, ei, ej, minv, lk, lc, gain, u, uidx, dt, nsub,
+                      z0, v0, zl, vl, oz, ov, sv, st, fs, (_NO_W, _NO_V, _NO_V, _NO_V, _NO_V, 1.0, 1.0, 1.0))
 
 
 @numba.njit(**JIT)
-def _kernel_device_sign(p, mono, gain, u, uidx, dt, nsub, z0, v0, zl, vl, oz, ov, sv, st, fs):
-    return _integrate(KIND_DEVICE, True, False, False, p, mono, gain, u, uidx, dt, nsub,
-                      z0, v0, zl, vl, oz, ov, sv, st, fs, _NO_W, _NO_V, _NO_V, _NO_V, _NO_V, 1.0, 1.0, 1.0)
+def _kernel_device_sign(p, mono, ei, ej, minv, lk, lc, gain, u, uidx, dt, nsub, z0, v0, zl, vl, oz, ov, sv, st, fs):
+    return _integrate(KIND_DEVICE, True, False, False, p, mono, ei, ej, minv, lk, lc, gain, u, uidx, dt, nsub,
+                      z0, v0, zl, vl, oz, ov, sv, st, fs, (_NO_W, _NO_V, _NO_V, _NO_V, _NO_V, 1.0, 1.0, 1.0))
 
 
 @numba.njit(**JIT)
-def _kernel_poly_generic(p, mono, gain, u, uidx, dt, nsub, z0, v0, zl, vl, oz, ov, sv, st, fs):
-    return _integrate(KIND_POLYNOMIAL, True, True, False, p, mono, gain, u, uidx, dt, nsub,
-                      z0, v0, zl, vl, oz, ov, sv, st, fs, _NO_W, _NO_V, _NO_V, _NO_V, _NO_V, 1.0, 1.0, 1.0)
+def _kernel_poly_generic(p, mono, ei, ej, minv, lk, lc, gain, u, uidx, dt, nsub, z0, v0, zl, vl, oz, ov, sv, st, fs):
+    return _integrate(KIND_POLYNOMIAL, True, True, False, p, mono, ei, ej, minv, lk, lc, gain, u, uidx, dt, nsub,
+                      z0, v0, zl, vl, oz, ov, sv, st, fs, (_NO_W, _NO_V, _NO_V, _NO_V, _NO_V, 1.0, 1.0, 1.0))
 
 
 @numba.njit(**JIT)
-def _kernel_device_generic(p, mono, gain, u, uidx, dt, nsub, z0, v0, zl, vl, oz, ov, sv, st, fs):
-    return _integrate(KIND_DEVICE, True, True, False, p, mono, gain, u, uidx, dt, nsub,
-                      z0, v0, zl, vl, oz, ov, sv, st, fs, _NO_W, _NO_V, _NO_V, _NO_V, _NO_V, 1.0, 1.0, 1.0)
+def _kernel_device_generic(p, mono, ei, ej, minv, lk, lc, gain, u, uidx, dt, nsub, z0, v0, zl, vl, oz, ov, sv, st,
+                           fs):
+    return _integrate(KIND_DEVICE, True, True, False, p, mono, ei, ej, minv, lk, lc, gain, u, uidx, dt, nsub,
+                      z0, v0, zl, vl, oz, ov, sv, st, fs, (_NO_W, _NO_V, _NO_V, _NO_V, _NO_V, 1.0, 1.0, 1.0))
 
 
 @numba.njit(**JIT)
-def _kernel_poly_extra(p, mono, gain, u, uidx, dt, nsub, z0, v0, zl, vl, oz, ov, sv, st, fs, hw, ha, hzc, hvc, huc,
-                       hiz, hiv, hiu):
-    return _integrate(KIND_POLYNOMIAL, True, True, True, p, mono, gain, u, uidx, dt, nsub,
-                      z0, v0, zl, vl, oz, ov, sv, st, fs, hw, ha, hzc, hvc, huc, hiz, hiv, hiu)
+def _kernel_poly_extra(p, mono, ei, ej, minv, lk, lc, gain, u, uidx, dt, nsub, z0, v0, zl, vl, oz, ov, sv, st, fs,
+                       hw, ha, hzc, hvc, huc, hiz, hiv, hiu):
+    return _integrate(KIND_POLYNOMIAL, True, True, True, p, mono, ei, ej, minv, lk, lc, gain, u, uidx, dt, nsub,
+                      z0, v0, zl, vl, oz, ov, sv, st, fs, (hw, ha, hzc, hvc, huc, hiz, hiv, hiu))
 
 
 @numba.njit(**JIT)
-def _kernel_device_extra(p, mono, gain, u, uidx, dt, nsub, z0, v0, zl, vl, oz, ov, sv, st, fs, hw, ha, hzc, hvc,
-                         huc, hiz, hiv, hiu):
-    return _integrate(KIND_DEVICE, True, True, True, p, mono, gain, u, uidx, dt, nsub,
-                      z0, v0, zl, vl, oz, ov, sv, st, fs, hw, ha, hzc, hvc, huc, hiz, hiv, hiu)
+def _kernel_device_extra(p, mono, ei, ej, minv, lk, lc, gain, u, uidx, dt, nsub, z0, v0, zl, vl, oz, ov, sv, st, fs,
+                         hw, ha, hzc, hvc, huc, hiz, hiv, hiu):
+    return _integrate(KIND_DEVICE, True, True, True, p, mono, ei, ej, minv, lk, lc, gain, u, uidx, dt, nsub,
+                      z0, v0, zl, vl, oz, ov, sv, st, fs, (hw, ha, hzc, hvc, huc, hiz, hiv, hiu))
 # fmt: on
 
 
-def kernel_with_term(kind: int):
-    """The compiled kernel with the extra force hook (``extra_term``), for a restoring-force kind."""
-    return _kernel_poly_extra if kind == KIND_POLYNOMIAL else _kernel_device_extra
-
-
-def kernel(kind: int, p: np.ndarray, mono: np.ndarray):
-    """The compiled kernel for a batch: its restoring-force kind, whether any member has a smoothed
-    sign, whether the registry has extra monomial rows (then one general kernel, sign included).
+def kernel(kind: int, p: np.ndarray, mono: np.ndarray, hook: bool = False):
+    """The compiled kernel for a batch: its restoring-force kind, whether any member has a smoothed sign, whether
+    the registry has extra monomial rows (then one general kernel, sign included), whether the extra force hook is
+    used (``hook``: the kernels that take its arguments after the common ones).
     """
+    if hook:
+        return _kernel_poly_extra if kind == KIND_POLYNOMIAL else _kernel_device_extra
     if mono.shape[0]:
         return _kernel_poly_generic if kind == KIND_POLYNOMIAL else _kernel_device_generic
     sign = bool(np.any(p[P_SIGN] != 0.0))
@@ -336,150 +460,3 @@ def kernel(kind: int, p: np.ndarray, mono: np.ndarray):
         (KIND_DEVICE, False): _kernel_device,
         (KIND_DEVICE, True): _kernel_device_sign,
     }[(kind, sign)]
-
-
-# --- structures of N degrees of freedom ----------------------------------------------------------------
-@numba.njit(inline="always", **JIT)
-def _structure_acc(kind, p, b, mono, q, nd, ei, ej, minv, lk, lc, zs, vs, w, acc):
-    """Accelerations of every DOF of member b at one Runge-Kutta stage: the element's force law (``force`` of
-    the same member tuple ``q``) on the relative motion of DOFs ``ej`` and ``ei`` (``ei`` -1: the base),
-    acting on ``ej`` and, with the opposite sign, on ``ei``; plus the linear structure ``lk``, ``lc``.
-    """
-    if ei >= 0:
-        r = zs[ej] - zs[ei]
-        rv = vs[ej] - vs[ei]
-    else:
-        r = zs[ej]
-        rv = vs[ej]
-    f = total_force(kind, True, True, r, rv, q, p, b, mono)
-    for d in range(nd):
-        lin = 0.0
-        for e in range(nd):
-            lin += lk[d, e, b] * zs[e] + lc[d, e, b] * vs[e]
-        if d == ej:
-            lin += f
-        elif d == ei:
-            lin -= f
-        acc[d] = w[d] - lin * minv[d, b]
-
-
-@numba.njit(**JIT)
-def _integrate_structure(kind, p, mono, ei, ej, minv, lk, lc, gain, u, uidx, dt, nsub, z0, v0, z_limit, v_limit,
-                         out_z, out_v, store_v, status, fail_step):  # fmt: skip
-    """RK4 of B structures of N degrees of freedom (state z, z' of each DOF, relative to the base).
-
-        M z'' + C z' + K z + l F(z_J - z_I, z_J' - z_I') = gain u,   l = e_J - e_I,
-
-    F the element's force law of member b's column of ``p`` (the single-DOF kernel's ``force``, with every
-    registry term), ``minv`` (N, B) the inverse masses, ``lk``/``lc`` (N, N, B) the linear structure,
-    ``gain`` (N, B) the input's gain per DOF. Inputs as ``_integrate`` (sample rows linearly interpolated, or
-    staged). Outputs (T, N, B). For N = 1 with no linear structure every operation is the single-DOF
-    kernel's, in its order: the same numbers to the last bit (tested).
-    """
-    nb = p.shape[1]
-    nd = minv.shape[0]
-    n = out_z.shape[0]
-    staged = u.shape[1] != n
-    h = dt / nsub
-    z = z0.copy()
-    v = v0.copy()
-    zb = np.empty(nd)
-    vb = np.empty(nd)
-    zt = np.empty(nd)
-    vt = np.empty(nd)
-    a1 = np.empty(nd)
-    a2 = np.empty(nd)
-    a3 = np.empty(nd)
-    a4 = np.empty(nd)
-    v2 = np.empty(nd)
-    v3 = np.empty(nd)
-    wa = np.empty(nd)
-    wm = np.empty(nd)
-    wb = np.empty(nd)
-    alive = np.ones(nb, dtype=np.bool_)
-    for b in range(nb):
-        for d in range(nd):
-            out_z[0, d, b] = z[d, b]
-            if store_v:
-                out_v[0, d, b] = v[d, b]
-    for k in range(n - 1):
-        for j in range(nsub):
-            for b in range(nb):
-                if staged:
-                    c = 2 * (k * nsub + j)
-                    for d in range(nd):
-                        wa[d] = gain[d, b] * u[uidx[b], c]
-                        wm[d] = gain[d, b] * u[uidx[b], c + 1]
-                        wb[d] = gain[d, b] * u[uidx[b], c + 2]
-                else:
-                    fa = j / nsub
-                    fm = (j + 0.5) / nsub
-                    fb = (j + 1.0) / nsub
-                    for d in range(nd):
-                        ua = gain[d, b] * u[uidx[b], k]
-                        du = gain[d, b] * u[uidx[b], k + 1] - ua
-                        wa[d] = ua + fa * du
-                        wm[d] = ua + fm * du
-                        wb[d] = ua + fb * du
-                q = member(p, b, kind)
-                for d in range(nd):
-                    zb[d] = z[d, b]
-                    vb[d] = v[d, b]
-                _structure_acc(kind, p, b, mono, q, nd, ei, ej, minv, lk, lc, zb, vb, wa, a1)
-                for d in range(nd):
-                    zt[d] = zb[d] + 0.5 * h * vb[d]
-                    v2[d] = vb[d] + 0.5 * h * a1[d]
-                _structure_acc(kind, p, b, mono, q, nd, ei, ej, minv, lk, lc, zt, v2, wm, a2)
-                for d in range(nd):
-                    zt[d] = zb[d] + 0.5 * h * v2[d]
-                    v3[d] = vb[d] + 0.5 * h * a2[d]
-                _structure_acc(kind, p, b, mono, q, nd, ei, ej, minv, lk, lc, zt, v3, wm, a3)
-                for d in range(nd):
-                    zt[d] = zb[d] + h * v3[d]
-                    vt[d] = vb[d] + h * a3[d]
-                _structure_acc(kind, p, b, mono, q, nd, ei, ej, minv, lk, lc, zt, vt, wb, a4)
-                for d in range(nd):
-                    z[d, b] = zb[d] + h / 6.0 * (vb[d] + 2.0 * v2[d] + 2.0 * v3[d] + vt[d])
-                    v[d, b] = vb[d] + h / 6.0 * (a1[d] + 2.0 * a2[d] + 2.0 * a3[d] + a4[d])
-        for b in range(nb):
-            ok = True
-            for d in range(nd):
-                if not (abs(z[d, b]) < z_limit and abs(v[d, b]) < v_limit):
-                    ok = False
-            if alive[b] and not ok:
-                alive[b] = False
-                fail_step[b] = k + 1
-                nonfinite = False
-                for d in range(nd):
-                    if not math.isfinite(z[d, b]):
-                        nonfinite = True
-                status[b] = STATUS_GEOMETRY if (kind == KIND_DEVICE and nonfinite) else STATUS_DIVERGED
-            for d in range(nd):
-                if not alive[b]:
-                    z[d, b] = math.nan
-                    v[d, b] = math.nan
-                out_z[k + 1, d, b] = z[d, b]
-                if store_v:
-                    out_v[k + 1, d, b] = v[d, b]
-    return 0
-
-
-# fmt: off
-@numba.njit(**JIT)
-def _kernel_structure_poly(p, mono, ei, ej, minv, lk, lc, gain, u, uidx, dt, nsub, z0, v0, zl, vl, oz, ov, sv, st,
-                           fs):
-    return _integrate_structure(KIND_POLYNOMIAL, p, mono, ei, ej, minv, lk, lc, gain, u, uidx, dt, nsub, z0, v0, zl,
-                                vl, oz, ov, sv, st, fs)
-
-
-@numba.njit(**JIT)
-def _kernel_structure_device(p, mono, ei, ej, minv, lk, lc, gain, u, uidx, dt, nsub, z0, v0, zl, vl, oz, ov, sv, st,
-                             fs):
-    return _integrate_structure(KIND_DEVICE, p, mono, ei, ej, minv, lk, lc, gain, u, uidx, dt, nsub, z0, v0, zl, vl,
-                                oz, ov, sv, st, fs)
-# fmt: on
-
-
-def structure_kernel(kind: int):
-    """The compiled N-DOF kernel for a restoring-force kind (every registry term compiled in)."""
-    return _kernel_structure_poly if kind == KIND_POLYNOMIAL else _kernel_structure_device

@@ -29,7 +29,7 @@ import numpy as np
 from scipy import signal
 
 from . import effects
-from .kernel import KINDS, P_M, STATUS_DIVERGED, STATUS_GEOMETRY, STATUS_OK, kernel, structure_kernel
+from .kernel import KINDS, P_M, STATUS_DIVERGED, STATUS_GEOMETRY, STATUS_OK, kernel
 
 STATUS_TEXT = {
     STATUS_DIVERGED: "diverged (|z| or |z_dot| beyond its limit, or non-finite)",
@@ -38,11 +38,6 @@ STATUS_TEXT = {
 DEFAULT_SUBSTEPS = 2
 DEFAULT_Z_LIMIT = 1.0
 """Displacement [m] beyond which a simulation is declared diverged."""
-VIA_STRUCTURE = os.environ.get("NEGSTIFF_KERNEL", "") == "structure"
-"""Run every single-DOF simulation through the N-DOF kernel (``models.structure``) as the structure of one DOF
-(``NEGSTIFF_KERNEL=structure``): the check that the single-DOF model is the N = 1 case of the structure, which
-gives the same numbers to the last bit and runs 5x slower (the single-DOF kernel vectorises over the batch; it
-is kept as that case's fast path)."""
 DEFAULT_V_LIMIT = 100.0
 """Speed [m/s] beyond which a simulation is declared diverged. It also catches the spurious bounded
 orbits RK4 can settle into when a growing response is no longer resolved by the step (omega h ~ 1)."""
@@ -142,8 +137,8 @@ def _pool(n: int) -> ThreadPoolExecutor:
 
 def checked_input(u, dt: float, substeps: int, input_index, nb: int, staged: bool = False
                   ) -> tuple[np.ndarray, np.ndarray, int]:  # fmt: skip
-    """The input rows, each member's row index and the output samples as the kernels take them (single-DOF and
-    N-DOF alike), or a one-line ValueError.
+    """The input rows, each member's row index and the output samples as the Runge-Kutta loop takes them (``integrate``:
+    one DOF or N alike), or a one-line ValueError.
     """
     # one array type per kernel argument, whatever the caller passes: each distinct numba signature (a
     # strided input, a read-only start state) was compiled again, 5-10 s each on a fresh install
@@ -232,73 +227,67 @@ def simulate_batch(
     lay = effects.layout()
     p, u2, uidx, x0, n = _checked(params, lay, kind, u, dt, substeps, input_index, x0, staged)
     nb = p.shape[1]
-    gain = input_gain(input_kind, p[P_M])
+    one = lambda a: np.ascontiguousarray(np.asarray(a)[None, :])  # noqa: E731  (the single DOF's row)
+    no_structure = np.zeros((1, 1, nb))
+    oz, ov, status, fail = integrate(
+        KINDS[kind], p, one(1.0 / p[P_M]), no_structure, no_structure, one(input_gain(input_kind, p[P_M])), u2,
+        uidx, n, dt, substeps, one(x0[:, 0]), one(x0[:, 1]), place=(0, 1), store_velocity=store_velocity,
+        z_limit=z_limit, v_limit=v_limit, threads=threads,
+    )  # fmt: skip
+    t = np.arange(n) * dt
+    fail_time = np.where(fail >= 0, fail * dt, np.nan)
+    return SimulationResult(t, oz[:, 0, :].T, None if ov is None else ov[:, 0, :].T, status, fail_time)
+
+
+def integrate(kind: int, p: np.ndarray, minv: np.ndarray, lk: np.ndarray, lc: np.ndarray, gain: np.ndarray,
+              u2: np.ndarray, uidx: np.ndarray, n: int, dt: float, substeps: int, z0: np.ndarray, v0: np.ndarray, *,
+              place: tuple[int, int], store_velocity: bool = False, z_limit: float = DEFAULT_Z_LIMIT,
+              v_limit: float = DEFAULT_V_LIMIT, threads: int | None = None, hook: tuple | None = None,
+              ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray, np.ndarray]:  # fmt: skip
+    """The one call of the compiled Runge-Kutta loop (``kernel._integrate``), split over threads in batch chunks:
+    B systems of N DOFs, the element between DOF ``place[1]`` and DOF ``place[0]`` (0: the base).
+
+    ``p`` (P, B) the element's kernel parameters, ``minv``, ``gain``, ``z0``, ``v0`` (N, B), ``lk``, ``lc``
+    (N, N, B) the linear structure (zeros: none), ``u2``, ``uidx``, ``n`` (output samples) as ``checked_input``
+    returns them, ``hook`` the extra force hook's arguments (``kernel.extra_term``). Returns z, z' (T, N, B) (z'
+    None unless stored), each member's status and failing step (-1: none). The single-DOF model is N = 1, one DOF
+    on the base.
+    """
+    nd, nb = minv.shape
+    if lk.shape != (nd, nd, nb) or lc.shape != (nd, nd, nb) or gain.shape != (nd, nb) or p.shape[1] != nb:
+        raise ValueError(f"the kernel's arrays disagree on N = {nd} DOFs and B = {nb} members")
     status = np.zeros(nb, dtype=np.int64)
     fail = np.full(nb, -1, dtype=np.int64)
-    k = KINDS[kind]
-    z0 = np.array(x0[:, 0], order="C")  # copies: writable even where x0 is a read-only (broadcast) view
-    v0 = np.array(x0[:, 1], order="C")
     if threads is None:
         # a thread pays for its hand-off (~0.2 ms) only with enough work: 64 members and ~2e5 member-steps
         # each (an MCMC step's batch of 0.125 s windows ran slower on two threads than on one, measured)
-        work = nb * n * int(substeps)
-        threads = min(cores(), max(1, nb // 64), max(1, work // 200_000))
+        work = nb * n * int(substeps) * nd
+        threads = min(cores(), max(1, nb * nd // 64), max(1, work // 200_000))
     chunks = [c for c in np.array_split(np.arange(nb), max(1, int(threads))) if c.size]
-    run_kernel = kernel(k, p, lay.monomials)
+    run_kernel = kernel(kind, p, effects.layout().monomials, hook is not None)
+
+    def c_(a):
+        # one array type per kernel argument (C-contiguous, writable), whatever the caller passed: each distinct
+        # numba signature (a strided input, a read-only start state) is another 5-10 s compile on a fresh install
+        return np.require(a, requirements=("C", "W"))
 
     def run(c):
         # each thread writes its own time-major block: shared rows would false-share cache lines
         sl = slice(c[0], c[-1] + 1)
-        oz = np.empty((n, c.size))
-        ov = np.empty((n, c.size)) if store_velocity else np.empty((1, c.size))
-        if VIA_STRUCTURE:
-            return _via_structure(k, np.ascontiguousarray(p[:, sl]), lay.monomials, gain[sl], u2, uidx[sl], dt,
-                                  substeps, z0[sl], v0[sl], z_limit, v_limit, oz, ov, store_velocity, status[sl],
-                                  fail[sl])  # fmt: skip
-        run_kernel(
-            np.ascontiguousarray(p[:, sl]),
-            lay.monomials,
-            gain[sl],
-            u2,
-            uidx[sl],
-            float(dt),
-            int(substeps),
-            z0[sl],
-            v0[sl],
-            float(z_limit),
-            float(v_limit),
-            oz,
-            ov,
-            store_velocity,
-            status[sl],
-            fail[sl],
-        )
+        oz = np.empty((n, nd, c.size))
+        ov = np.empty((n, nd, c.size)) if store_velocity else np.empty((1, nd, c.size))
+        run_kernel(c_(p[:, sl]), effects.layout().monomials, place[0] - 1, place[1] - 1, c_(minv[:, sl]),
+                   c_(lk[:, :, sl]), c_(lc[:, :, sl]), c_(gain[:, sl]), u2, c_(uidx[sl]), float(dt), int(substeps),
+                   c_(z0[:, sl]), c_(v0[:, sl]), float(z_limit), float(v_limit), oz, ov, store_velocity, status[sl],
+                   fail[sl], *(hook or ()))  # fmt: skip
         return oz, ov
 
-    if len(chunks) == 1:
-        parts = [run(chunks[0])]
-    else:
-        parts = list(_pool(len(chunks)).map(run, chunks))
-    out_z = parts[0][0] if len(parts) == 1 else np.hstack([q[0] for q in parts])
-    out_v = None
+    outs = [run(chunks[0])] if len(chunks) == 1 else list(_pool(len(chunks)).map(run, chunks))
+    oz = outs[0][0] if len(outs) == 1 else np.concatenate([o[0] for o in outs], axis=2)
+    ov = None
     if store_velocity:
-        out_v = parts[0][1] if len(parts) == 1 else np.hstack([q[1] for q in parts])
-    t = np.arange(n) * dt
-    fail_time = np.where(fail >= 0, fail * dt, np.nan)
-    return SimulationResult(t, out_z.T, None if out_v is None else out_v.T, status, fail_time)
-
-
-def _via_structure(k, p, mono, gain, u2, uidx, dt, substeps, z0, v0, z_limit, v_limit, oz, ov, store_velocity,
-                   status, fail):  # fmt: skip
-    """One chunk of ``simulate_batch`` through the N-DOF kernel as structures of one DOF (``VIA_STRUCTURE``)."""
-    nb = p.shape[1]
-    zeros = np.zeros((1, 1, nb))
-    oz3, ov3 = oz[:, None, :].copy(), ov[:, None, :].copy()
-    minv, g = np.ascontiguousarray(1.0 / p[P_M][None, :]), np.ascontiguousarray(gain[None, :])
-    structure_kernel(k)(p, mono, -1, 0, minv, zeros, zeros.copy(), g, u2, uidx, float(dt), int(substeps),
-                        z0[None, :].copy(), v0[None, :].copy(), float(z_limit), float(v_limit), oz3, ov3,
-                        store_velocity, status, fail)  # fmt: skip
-    return oz3[:, 0, :], ov3[:, 0, :]
+        ov = outs[0][1] if len(outs) == 1 else np.concatenate([o[1] for o in outs], axis=2)
+    return oz, ov, status, fail
 
 
 def simulate(

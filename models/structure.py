@@ -31,16 +31,15 @@ from negstiff.errors import InputError
 
 from . import effects
 from .equation import Equilibria, Model
-from .kernel import KINDS, structure_kernel
+from .kernel import KINDS
 from .simulator import (
     DEFAULT_SUBSTEPS,
     DEFAULT_V_LIMIT,
     DEFAULT_Z_LIMIT,
     SimulationResult,
-    _pool,
     checked_input,
-    cores,
     input_gain,
+    integrate,
     stage_input,
 )
 
@@ -389,32 +388,10 @@ def simulate_structures(
     lc = np.ascontiguousarray(np.stack([q[3] for q in parts], axis=2))
     gain = np.ascontiguousarray(np.stack([q[4] for q in parts], axis=1))
     u2, uidx, n = checked_input(u, dt, substeps, input_index, nb, staged)
-    z0 = np.ascontiguousarray(x0[:, :nd].T)
-    v0 = np.ascontiguousarray(x0[:, nd:].T)
-    status = np.zeros(nb, dtype=np.int64)
-    fail = np.full(nb, -1, dtype=np.int64)
-    lay = effects.layout()
-    ei, ej = group[0].place[0] - 1, group[0].place[1] - 1
-    run_kernel = structure_kernel(KINDS[group[0].element.kind])
-    if threads is None:
-        threads = min(cores(), max(1, nb // 16), max(1, nb * n * int(substeps) * nd // 200_000))
-    chunks = [c for c in np.array_split(np.arange(nb), max(1, int(threads))) if c.size]
-
-    def run(c):
-        sl = slice(c[0], c[-1] + 1)
-        oz = np.empty((n, nd, c.size))
-        ov = np.empty((n, nd, c.size)) if store_velocity else np.empty((1, nd, c.size))
-        run_kernel(
-            np.ascontiguousarray(p[:, sl]), lay.monomials, ei, ej, np.ascontiguousarray(minv[:, sl]),
-            np.ascontiguousarray(lk[:, :, sl]), np.ascontiguousarray(lc[:, :, sl]), np.ascontiguousarray(gain[:, sl]),
-            u2, uidx[sl], float(dt), int(substeps), np.ascontiguousarray(z0[:, sl]), np.ascontiguousarray(v0[:, sl]),
-            float(z_limit), float(v_limit), oz, ov, store_velocity, status[sl], fail[sl],
-        )  # fmt: skip
-        return oz, ov
-
-    outs = [run(chunks[0])] if len(chunks) == 1 else list(_pool(len(chunks)).map(run, chunks))
-    oz = np.concatenate([o[0] for o in outs], axis=2)
-    ov = np.concatenate([o[1] for o in outs], axis=2) if store_velocity else None
+    oz, ov, status, fail = integrate(
+        KINDS[group[0].element.kind], p, minv, lk, lc, gain, u2, uidx, n, dt, substeps, x0[:, :nd].T, x0[:, nd:].T,
+        place=group[0].place, store_velocity=store_velocity, z_limit=z_limit, v_limit=v_limit, threads=threads,
+    )  # fmt: skip
     t = np.arange(n) * dt
     return SimulationResult(
         t,

@@ -20,7 +20,11 @@ ON_FIXTURE = Structure.on_fixture(TRUTH, fixture_mass=FIXTURE["m"], fixture_hz=F
 @pytest.mark.parametrize("input_kind", ["base_acc", "force"])
 @pytest.mark.parametrize("staged", [False, True])
 def test_the_single_dof_model_is_the_structure_of_one_dof(input_kind, staged):
-    # the same operations in the same order: the same numbers to the last bit, friction and a stop included
+    # one Runge-Kutta loop for every N: the single-DOF model takes its fused per-member step, any other structure
+    # the stage-wise step over the batch; the same operations in the same order, so the same numbers to the last
+    # bit, friction and a stop included. ``Structure.single`` checks that the structure's arrays are the model's; the
+    # stage-wise step is checked on the model's DOF inside a structure of two (a mass beside it, not coupled to it:
+    # on its own spring, the linear structure's loops run; without one, under a force at DOF 1, they are skipped)
     model = Model(m=0.2, k1=426.0, k2=-3060.0, k3=7.77e5, c=0.35, c_nl=0.1,
                   extra={"coulomb_friction": 0.02, "end_stop": {"k": 2e4, "z": 0.03}})  # fmt: skip
     rng = np.random.default_rng(3)
@@ -31,6 +35,12 @@ def test_the_single_dof_model_is_the_structure_of_one_dof(input_kind, staged):
     res = simulate_structures(Structure.single(model), drive, 1 / FS, np.array([0.02, 0.0]), input_kind=input_kind,
                               staged=staged, store_velocity=True)  # fmt: skip
     assert np.array_equal(res.z[:, 0], ref.z) and np.array_equal(res.z_dot[:, 0], ref.z_dot)
+    springs = [(np.diag([0.0, 1e4]), np.diag([0.0, 2.0]))] + ([(None, None)] if input_kind == "force" else [])
+    for K, C in springs:
+        beside = Structure((model.m, 1.0), model, K, C, at=(0, 1))
+        res2 = simulate_structures(beside, drive, 1 / FS, np.array([0.02, 0.0, 0.0, 0.0]), input_kind=input_kind,
+                                   force_dof=1, staged=staged, store_velocity=True)  # fmt: skip
+        assert np.array_equal(res2.z[:, 0], ref.z) and np.array_equal(res2.z_dot[:, 0], ref.z_dot)
 
 
 def test_one_dof_structure_has_the_models_wells_and_underlying_linear_system():
@@ -127,25 +137,27 @@ def test_structure_record_file(tmp_path):
         load_structure(path, masses=[1.0])
 
 
-def _stepped_sweep(amps, f_hz, state, periods=120, steps=128):
+def _stepped_sweep(amps, f_hz, state, periods=120, steps=128, full=False):
     """The device on the fixture under b'' = A sin(2 pi f t), A stepped through ``amps`` (each step going on from the
     last state, as a shaker test does), the tests' plain RK4 on floats (``records.fixture_rk4_step``, ``steps`` a
     period); per amplitude, the spread of r = z2 - z1 over the last 8 forcing periods at phase 0 (0 on a period-1
-    orbit)."""
+    orbit); ``full``: per amplitude (spread, min r, max r over the last period, the final state)."""
     step = fixture_rk4_step(TRUTH)
     h = 1.0 / (f_hz * steps)
     sines = [float(np.sin(np.pi * k / steps)) for k in range(2 * steps + 1)]  # at every half step of a period
     z1, z2, v1, v2 = state
-    spread = []
+    rows = []
     for A in amps:
-        section = []
+        section, last = [], []
         for p in range(periods):
             for k in range(steps):
                 z1, z2, v1, v2 = step(z1, z2, v1, v2, h, A * sines[2 * k], A * sines[2 * k + 1], A * sines[2 * k + 2])
+                if p == periods - 1:
+                    last.append(z2 - z1)
             if p >= periods - 8:
                 section.append(z2 - z1)
-        spread.append(float(np.ptp(section)))
-    return np.array(spread)
+        rows.append((float(np.ptp(section)), min(last), max(last), (z1, z2, v1, v2)))
+    return rows if full else np.array([row[0] for row in rows])
 
 
 @pytest.mark.parametrize(("well", "first", "amps"), [
@@ -154,8 +166,9 @@ def _stepped_sweep(amps, f_hz, state, periods=120, steps=128):
 ])  # fmt: skip
 def test_continuation_of_the_device_on_the_fixture_finds_where_a_stepped_test_leaves_the_orbit(well, first, amps):
     # at 9 Hz the positive well's period-1 orbit first doubles; the negative well's first meets a fold (its first
-    # doubling lies on the resonant branch beyond, which an upward stepped test does not follow); a stepped test
-    # stays on the period-1 orbit up to there and leaves it within one step of it (0.05 m/s^2, 0.6 %)
+    # doubling lies on the resonant branch beyond, which an upward stepped test from rest does not follow: the next
+    # test); a stepped test stays on the period-1 orbit up to there and leaves it within one step of it (0.05 m/s^2,
+    # 0.6 %)
     from negstiff import nfrc
 
     curve = nfrc(ON_FIXTURE, freq=9.0, amplitude=(1.0, 20.0), well=well, max_period=1)
@@ -169,6 +182,29 @@ def test_continuation_of_the_device_on_the_fixture_finds_where_a_stepped_test_le
     a_step = amps[3:][left[0]]
     print(f"{well}: {first} at {a_bif:.4f} m/s^2 (continuation), stepped test leaves the orbit at {a_step:.2f}")
     assert abs(a_step / a_bif - 1) < 0.03, (a_step, a_bif)
+
+
+def test_minus_wells_first_period_doubling_against_a_tapped_stepped_test():
+    # the negative well's branch from rest folds at ~8 m/s^2 (above), back to a fold at ~1.7 m/s^2, and turns into
+    # the resonant branch, which doubles its period first; a shaker test reaches that branch with a tap: from the
+    # well's rest at 3 m/s^2, a 0.6 m/s kick of the device's mass settles on a second, larger period-1 orbit in the
+    # same well. Stepped up from there it stays period-1 until it doubles: the period-2 orbit separates its
+    # Poincare points by ~1 mm, a transient near the doubling (multiplier ~ -1, decaying ~1 % a period) by far less
+    from negstiff import nfrc
+
+    curve = nfrc(ON_FIXTURE, freq=9.0, amplitude=(1.0, 20.0), well="minus", max_period=1)
+    a_pd = next(b["amplitude"] for b in curve["bifurcations"] if b["type"] == "period_doubling")
+    start = ON_FIXTURE.static_positions(ON_FIXTURE.element_equilibria().well("minus"))
+    rest, tapped = ((start[0], start[1], 0.0, tap) for tap in (0.0, 0.6))
+    small, big = (_stepped_sweep([3.0], 9.0, state, periods=150, full=True) for state in (rest, tapped))
+    (_, lo_s, hi_s, _), (_, lo, hi, state) = small[0], big[0]
+    assert hi < 0 and hi - lo > 4 * (hi_s - lo_s), "the tap did not find the larger orbit in the negative well"
+    amps = np.r_[3.5, 4.0, 4.5, np.arange(4.6, 5.6, 0.05)]
+    rows = _stepped_sweep(amps, 9.0, state, full=True)
+    left = [a for a, row in zip(amps, rows, strict=True) if row[0] > 1e-4]
+    assert left and left[0] > amps[3], "the stepped test never stayed on (or never left) the period-1 orbit"
+    print(f"minus: period doubling at {a_pd:.4f} m/s^2 (continuation), the stepped test doubles at {left[0]:.2f}")
+    assert abs(left[0] / a_pd - 1) < 0.03, (left[0], a_pd)
 
 
 def test_command_line_identifies_a_structure_and_refuses_a_wrong_one(tmp_path, capsys):

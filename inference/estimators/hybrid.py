@@ -18,7 +18,7 @@ missing force.
 
 Why written here: the term must live inside the Runge-Kutta loop of a free run (an output-error fit
 simulates it tens of thousands of times); a Gaussian process or scikit-learn regressor would be
-called per stage from Python. The kernel reuses the simulator's own physical force (``_force``), so
+called per stage from Python. The kernel reuses the simulator's own physical force (``kernel.force``), so
 the physics is exactly the physical model's.
 """
 
@@ -36,9 +36,9 @@ from negstiff.inference.record.measurement import Measurement
 from negstiff.inference.steps.refine import parameter_names, parameter_scales, values_of, with_values
 from negstiff.inference.steps.shooting import parameter_covariance, shooting_least_squares
 from negstiff.inference.steps.validation import divergence_limits, record_substeps, staged_windows
-from negstiff.models import Model, effects
-from negstiff.models.kernel import KINDS, P_M, kernel_with_term
-from negstiff.models.simulator import input_gain, stage_input
+from negstiff.models import Model
+from negstiff.models.kernel import KINDS, P_M
+from negstiff.models.simulator import input_gain, integrate, stage_input
 
 
 @dataclass(frozen=True)
@@ -123,16 +123,18 @@ def simulate_hybrid(
     nb = x0.shape[0]
     p = np.ascontiguousarray(np.repeat(model.kernel_params()[:, None], nb, axis=1))
     n = (u2.shape[1] - 1) // (2 * substeps) + 1
-    oz, ov = np.empty((n, nb)), np.empty((n, nb))
     w, a = basis.split(np.asarray(theta, float))
+    one = lambda x: np.ascontiguousarray(np.asarray(x)[None, :])  # noqa: E731  (the single DOF's row)
     # the simulator's own Runge-Kutta loop, with g as its extra force (``kernel.extra_term``)
-    kernel_with_term(KINDS[model.kind])(
-        p, effects.layout().monomials, input_gain(input_kind, p[P_M]), u2, np.arange(nb), float(dt),
-        int(substeps), np.ascontiguousarray(x0[:, 0]), np.ascontiguousarray(x0[:, 1]), float(z_limit),
-        float(v_limit), oz, ov, True, np.zeros(nb, dtype=np.int64), np.full(nb, -1, dtype=np.int64),
-        np.ascontiguousarray(w), np.ascontiguousarray(a), basis.zc, basis.vc, basis.uc, 1.0 / basis.wz,
-        1.0 / basis.wv, 1.0 / basis.wu,
+    oz, ov, _, _ = integrate(
+        KINDS[model.kind], p, one(1.0 / p[P_M]), np.zeros((1, 1, nb)), np.zeros((1, 1, nb)),
+        one(input_gain(input_kind, p[P_M])), u2, np.arange(nb), n, dt, substeps, one(x0[:, 0]), one(x0[:, 1]),
+        place=(0, 1), store_velocity=True, z_limit=z_limit, v_limit=v_limit, threads=1,
+        hook=(np.ascontiguousarray(w), np.ascontiguousarray(a), basis.zc, basis.vc, basis.uc, 1.0 / basis.wz,
+              1.0 / basis.wv, 1.0 / basis.wu),
     )  # fmt: skip
+    assert ov is not None
+    oz, ov = oz[:, 0, :], ov[:, 0, :]
     return oz, ov
 
 

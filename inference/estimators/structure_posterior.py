@@ -31,9 +31,8 @@ from negstiff.errors import InputError, NegstiffWarning
 from negstiff.inference.estimators.posterior.diagnostics import convergence_warnings, summarise
 from negstiff.inference.estimators.posterior.sampling import sample_ensembles
 from negstiff.inference.record.structure import StructureRecord
-from negstiff.models.effects import layout
-from negstiff.models.kernel import KINDS, structure_kernel
-from negstiff.models.simulator import stage_input
+from negstiff.models.kernel import KINDS
+from negstiff.models.simulator import integrate, stage_input
 from negstiff.models.structure import Structure
 
 from .structure_id import StructureSINDy, parse_element
@@ -192,7 +191,6 @@ class _WindowSimulator:
         self.T = idx.shape[1]
         p, minv, K, C, gain = structure.arrays(rec.input_name, rec.force_dof)
         self.p, self.minv, self.K, self.C, self.gain = p, minv, K, C, gain
-        self.kernel = structure_kernel(KINDS[structure.element.kind])
         from negstiff.models.effects import POLYNOMIAL_ROWS, ROWS
 
         self.rows = [POLYNOMIAL_ROWS["k1"], POLYNOMIAL_ROWS["k2"], POLYNOMIAL_ROWS["k3"], ROWS["c"], ROWS["c_nl"]]
@@ -205,14 +203,13 @@ class _WindowSimulator:
         for j, row in enumerate(self.rows):
             p[row] = np.repeat(thetas[:, j], W)
         tile = lambda a: np.ascontiguousarray(np.repeat(a[..., None], nb, axis=-1))  # noqa: E731
-        oz = np.empty((self.T, nd, nb))
-        status, fail = np.zeros(nb, dtype=np.int64), np.full(nb, -1, dtype=np.int64)
-        i, j = self.structure.place
-        z0 = np.ascontiguousarray(np.tile(self.x0[:, :nd].T, B))
-        v0 = np.ascontiguousarray(np.tile(self.x0[:, nd:].T, B))
-        self.kernel(np.ascontiguousarray(p), layout().monomials, i - 1, j - 1, tile(self.minv), tile(self.K),
-                    tile(self.C), tile(self.gain), self.u, np.tile(np.arange(W), B), self.rec.dt, SUBSTEPS, z0, v0,
-                    1.0, 100.0, oz, np.empty((1, nd, nb)), False, status, fail)  # fmt: skip
+        z0 = np.tile(self.x0[:, :nd].T, B)
+        v0 = np.tile(self.x0[:, nd:].T, B)
+        oz, _, status, _ = integrate(
+            KINDS[self.structure.element.kind], np.ascontiguousarray(p), tile(self.minv), tile(self.K), tile(self.C),
+            tile(self.gain), self.u, np.tile(np.arange(W), B), self.T, self.rec.dt, SUBSTEPS, z0, v0,
+            place=self.structure.place, z_limit=1.0, v_limit=100.0, threads=1,
+        )  # fmt: skip
         z = np.transpose(oz, (2, 1, 0)).reshape(B, W, nd, self.T)
         z[status.reshape(B, W) != 0] = np.nan
         return z
