@@ -2,6 +2,8 @@
 structure of one DOF, the structure's statics and modes are physics, and NSI and SINDy identify a device on a
 fixture that is not rigid from a record written here with plain numpy (``records.rk4_fixture_record``)."""
 
+import warnings
+
 import numpy as np
 import pytest
 from records import FIXTURE, TRUTH, fixture_rk4_step, rk4_fixture_record, write_csv
@@ -263,10 +265,9 @@ def test_structure_rig_records_are_seeded_and_read_back(tmp_path):
 
 def test_posterior_of_the_element_on_its_fixture():
     # emcee over the element's coefficients, the linear structure fixed at SINDy's: its mean recovers the stiffness
-    # within 1 % and the damping within 5 % (measured on this record: k1-k3 within 0.03 %, c +1.2 %, c_nl -2.1 % with
-    # 80 windows, -2.6 % with 40: the windowed least squares' own bias, the damping's small share of the response)
-    # with converged chains. Its intervals are conditional on the fixed structure and not calibrated yet (z-scores up
-    # to 3.3 on this record): the test does not claim coverage.
+    # within 1 % and the damping within 5 % (the windowed least squares' own bias and the damping's small share of
+    # the response: over 12 records, k1-k3 within 1.9 %, c within 14 %, c_nl 27 % at worst) with converged chains.
+    # Coverage over many records: the slow test below.
     from negstiff.inference.estimators.structure_posterior import StructurePosterior
 
     u, z = rk4_fixture_record(duration=60.0, seed=4, noise=1e-5)
@@ -279,6 +280,32 @@ def test_posterior_of_the_element_on_its_fixture():
     assert post.parameters_["sigma"]["mean"] == pytest.approx(1e-5, rel=0.5)  # the lasers' noise, and a little model
     out = post.result()
     assert set(out["parameters"]) == {"k1", "k2", "k3", "c", "c_nl", "sigma"} and "fixed" in out["settings"]
+
+
+@pytest.mark.slow  # twelve posteriors, ~90 s; run with -m slow
+def test_element_posterior_intervals_cover_the_truth_over_records():
+    # the posterior's spread against its error over 12 records of the tests' fixture (60 s, 10 um noise, 40 windows):
+    # a calibrated posterior puts the truth at z = (mean - truth) / sd with rms 1 (+-0.2 over 12 records) and inside
+    # its 90 % interval 90 % of the time. Measured with the windows' curvature adjustment: rms z 1.48 / 1.20 / 1.14 /
+    # 1.33 / 1.24 (k1, k2, k3, c, c_nl), coverage 67-100 %; the tempered likelihood it replaced gave rms z 2.0-4.4,
+    # coverage 17-67 % (six records). What is left is a bias of k1 by -1.4 sd (-0.08 %) and of c by +1.1 sd, which
+    # no seed's intervals see: the claim tested is "within 1.6x of calibrated", no better.
+    from negstiff.inference.estimators.structure_posterior import StructurePosterior
+
+    names = ("k1", "k2", "k3", "c", "c_nl")
+    z, inside = [], []
+    for seed in range(1, 13):
+        u, zz = rk4_fixture_record(duration=60.0, seed=seed, noise=1e-5)
+        rec = structure_from_arrays(u, zz, FS, (FIXTURE["m"], TRUTH.m))
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            post = StructurePosterior(element="1-2", n_walkers=12, max_windows=40, seed=1).fit(rec)
+        par = post.parameters_
+        z.append([(par[k]["mean"] - getattr(TRUTH, k)) / par[k]["sd"] for k in names])
+        inside.append([par[k]["hdi_low"] <= getattr(TRUTH, k) <= par[k]["hdi_high"] for k in names])
+    rms = np.sqrt(np.mean(np.square(z), axis=0))
+    print("rms z", rms.round(2), "coverage", np.mean(inside, axis=0).round(2))
+    assert np.all(rms < 1.6) and np.all(np.mean(inside, axis=0) >= 0.6), (rms, np.mean(inside, axis=0))
 
 
 @pytest.mark.parametrize("friction", [0.0, 0.05])
