@@ -264,19 +264,20 @@ def integrate(kind: int, p: np.ndarray, minv: np.ndarray, lk: np.ndarray, lc: np
         work = nb * n * int(substeps) * nd
         threads = min(cores(), max(1, nb * nd // 64), max(1, work // 200_000))
     chunks = [c for c in np.array_split(np.arange(nb), max(1, int(threads))) if c.size]
-    run_kernel = kernel(kind, p, effects.layout().monomials, hook is not None)
+    mono = effects.layout().monomials
+    run_kernel = kernel(kind, p, mono, hook is not None)
 
     def c_(a):
         # one array type per kernel argument (C-contiguous, writable), whatever the caller passed: each distinct
         # numba signature (a strided input, a read-only start state) is another 5-10 s compile on a fresh install
-        return np.require(a, requirements=("C", "W"))
+        return a if a.flags.c_contiguous and a.flags.writeable else np.require(a, requirements=("C", "W"))
 
     def run(c):
         # each thread writes its own time-major block: shared rows would false-share cache lines
         sl = slice(c[0], c[-1] + 1)
         oz = np.empty((n, nd, c.size))
         ov = np.empty((n, nd, c.size)) if store_velocity else np.empty((1, nd, c.size))
-        run_kernel(c_(p[:, sl]), effects.layout().monomials, place[0] - 1, place[1] - 1, c_(minv[:, sl]),
+        run_kernel(c_(p[:, sl]), mono, place[0] - 1, place[1] - 1, c_(minv[:, sl]),
                    c_(lk[:, :, sl]), c_(lc[:, :, sl]), c_(gain[:, sl]), u2, c_(uidx[sl]), float(dt), int(substeps),
                    c_(z0[:, sl]), c_(v0[:, sl]), float(z_limit), float(v_limit), oz, ov, store_velocity, status[sl],
                    fail[sl], *(hook or ()))  # fmt: skip
