@@ -115,23 +115,14 @@ def _column(q, b):
 
 @numba.njit(inline="always", **JIT)
 def converted(p, kind):
-    """The parameter array with the device's angle rows turned into L cos(a), sin(a) once (what ``member`` does
-    for one member; the same operations, so the same numbers).
+    """The parameter array with the device's angle rows turned into L cos(a), sin(a), once per call (not per step);
+    ``_column`` reads one member's tuple from it.
     """
     q = p.copy()
     if kind == KIND_DEVICE:
         for b in range(p.shape[1]):
             q[2, b] = p[2, b] * math.cos(p[3, b])
             q[3, b] = math.sin(p[3, b])
-    return q
-
-
-@numba.njit(inline="always", **JIT)
-def member(p, b, kind):
-    """Parameter tuple of member b, with the device's angle rows turned into L cos(a), sin(a)."""
-    q = _column(p, b)
-    if kind == KIND_DEVICE:
-        q = (q[0], q[1], q[2] * math.cos(q[3]), math.sin(q[3])) + q[4:]
     return q
 
 

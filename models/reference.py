@@ -26,7 +26,8 @@ from .kernel import (
     P_Z3,
     P_Z4,
     P_Z5,
-    member,
+    _column,
+    converted,
     total_force,
 )
 
@@ -94,7 +95,7 @@ def _benettin(kind, p, mono, gain, u, dt, nsub, z0, v0, renorm):
     and its log growth accumulated (Benettin et al. 1980). Jacobian of the force by central
     differences of the same force law the simulator integrates.
     """
-    q = member(p, 0, kind)
+    q = _column(converted(p, kind), 0)
     im = 1.0 / q[P_M]
     h = dt / nsub
     z, v, dz, dv = z0, v0, 1.0, 0.0

@@ -202,6 +202,7 @@ def simulate_batch(
     v_limit: float = DEFAULT_V_LIMIT,
     threads: int | None = None,
     staged: bool = False,
+    hook: tuple | None = None,
 ) -> SimulationResult:
     """Integrate B parameter sets at once.
 
@@ -223,6 +224,8 @@ def simulate_batch(
     threads : worker threads over batch chunks (default: the machine's cores, at most 1 per 64 members
         and per 2e5 member-steps)
     staged : ``u`` holds the input at the stage times (band-limited records), not the samples
+    hook : the extra force hook's arguments (``kernel.extra_term``: weights, bumps; with a staged input), added
+        to every member's force (the hybrid model's term, ``inference.estimators.hybrid``)
     """
     lay = effects.layout()
     p, u2, uidx, x0, n = _checked(params, lay, kind, u, dt, substeps, input_index, x0, staged)
@@ -232,7 +235,7 @@ def simulate_batch(
     oz, ov, status, fail = integrate(
         KINDS[kind], p, one(1.0 / p[P_M]), no_structure, no_structure, one(input_gain(input_kind, p[P_M])), u2,
         uidx, n, dt, substeps, one(x0[:, 0]), one(x0[:, 1]), place=(0, 1), store_velocity=store_velocity,
-        z_limit=z_limit, v_limit=v_limit, threads=threads,
+        z_limit=z_limit, v_limit=v_limit, threads=threads, hook=hook,
     )  # fmt: skip
     t = np.arange(n) * dt
     fail_time = np.where(fail >= 0, fail * dt, np.nan)

@@ -37,8 +37,7 @@ from negstiff.inference.steps.refine import parameter_names, parameter_scales, v
 from negstiff.inference.steps.shooting import parameter_covariance, shooting_least_squares
 from negstiff.inference.steps.validation import divergence_limits, record_substeps, staged_windows
 from negstiff.models import Model
-from negstiff.models.kernel import KINDS, P_M
-from negstiff.models.simulator import input_gain, integrate, stage_input
+from negstiff.models.simulator import simulate_batch, stage_input
 
 
 @dataclass(frozen=True)
@@ -118,24 +117,20 @@ def simulate_hybrid(
     """Free runs of physics + g from the start states ``x0`` (B, 2) under staged input rows (B, S);
     returns z and z' (N, B), NaN after a divergence.
     """
-    u2 = np.ascontiguousarray(np.atleast_2d(np.asarray(u_staged, float)))
+    u2 = np.atleast_2d(np.asarray(u_staged, float))
     x0 = np.atleast_2d(np.asarray(x0, float))
     nb = x0.shape[0]
-    p = np.ascontiguousarray(np.repeat(model.kernel_params()[:, None], nb, axis=1))
-    n = (u2.shape[1] - 1) // (2 * substeps) + 1
     w, a = basis.split(np.asarray(theta, float))
-    one = lambda x: np.ascontiguousarray(np.asarray(x)[None, :])  # noqa: E731  (the single DOF's row)
     # the simulator's own Runge-Kutta loop, with g as its extra force (``kernel.extra_term``)
-    oz, ov, _, _ = integrate(
-        KINDS[model.kind], p, one(1.0 / p[P_M]), np.zeros((1, 1, nb)), np.zeros((1, 1, nb)),
-        one(input_gain(input_kind, p[P_M])), u2, np.arange(nb), n, dt, substeps, one(x0[:, 0]), one(x0[:, 1]),
-        place=(0, 1), store_velocity=True, z_limit=z_limit, v_limit=v_limit, threads=1,
+    res = simulate_batch(
+        np.repeat(model.kernel_params()[:, None], nb, axis=1), model.kind, u2, dt, x0, input_kind=input_kind,
+        input_index=np.arange(nb), substeps=substeps, store_velocity=True, z_limit=z_limit, v_limit=v_limit,
+        threads=1, staged=True,
         hook=(np.ascontiguousarray(w), np.ascontiguousarray(a), basis.zc, basis.vc, basis.uc, 1.0 / basis.wz,
               1.0 / basis.wv, 1.0 / basis.wu),
     )  # fmt: skip
-    assert ov is not None
-    oz, ov = oz[:, 0, :], ov[:, 0, :]
-    return oz, ov
+    assert res.z_dot is not None
+    return res.z.T, res.z_dot.T
 
 
 @dataclass
