@@ -87,6 +87,18 @@ def estimate(rec: Measurement, segment_s: float = SEGMENT_S, period: int | None 
             "window": kw["window"]}  # fmt: skip
 
 
+COHERENT = 0.8
+"""A peak whose coherence reaches this is the input's response (at most a quarter as much uncorrelated output power,
+drift or noise, as input-driven, Bendat & Piersol 9.2.3): the dominant peak is the strongest of these. A drift's
+bump at the bottom of a swept test reaches 0.5-0.65 (measured: a 1-20 Hz sweep, drift 0.1-2 Hz) where a
+resonance stands above 0.9."""
+
+
+def _height(f: np.ndarray, h1: np.ndarray, p: dict[str, Any]) -> float:
+    """|H1| at a peak's bin."""
+    return float(np.abs(h1[np.argmin(np.abs(f - p["peak_bin_hz"]))]))
+
+
 def _sdof(p, w):
     a_re, a_im, wn, zeta, r_re, r_im = p
     return (a_re + 1j * a_im) / (wn**2 - w**2 + 2j * zeta * wn * w) + (r_re + 1j * r_im)
@@ -151,7 +163,9 @@ def frf(rec: Measurement, band: tuple[float, float] | None = None, segment_s: fl
     """Frequency response functions (H1, H2, coherence) with every resonance peak fitted.
 
     Peaks are local maxima of ``|H1|`` standing 6 dB above the band's median level at coherence above
-    0.5, each fitted with a single-degree-of-freedom receptance (``docs/methods/frf.md``). A response of
+    0.5, each fitted with a single-degree-of-freedom receptance (``docs/methods/frf.md``). The dominant peak
+    is the strongest whose coherence reaches ``COHERENT`` (a drift's bump the input does not explain never wins
+    over a resonance; a stronger peak passed over is warned about), else the strongest. A response of
     unknown scale (``*?``) is calibrated first: the FRF is in SI units.
 
     Parameters
@@ -166,8 +180,8 @@ def frf(rec: Measurement, band: tuple[float, float] | None = None, segment_s: fl
     Returns
     -------
     dict
-        The contract's frf result: ``f_hz``, ``zeta``, ``coherence``, ``band``, ``peaks`` (each fitted
-        peak), ``well`` (the rest position nearest the record's mean z), ``record``, ``warnings``, and
+        The contract's frf result: ``f_hz``, ``zeta``, ``coherence`` (the dominant peak's), ``band``, ``peaks``
+        (each fitted peak, the dominant first), ``well`` (the rest position nearest the record's mean z), ``record``, ``warnings``, and
         the spectra in ``_curves`` (arrays, for a figure; not JSON).
 
     Examples
@@ -197,7 +211,8 @@ def frf(rec: Measurement, band: tuple[float, float] | None = None, segment_s: fl
     rest = rec.rest_positions
     z = rec.z
     r["well"] = min(rest, key=lambda w: abs(rest[w] - float(np.mean(z)))) if rest and z is not None else None
-    lines = classified(rec, None, [r["reason"]] if r["reason"] else [])
+    notes = r.pop("_notes")
+    lines = classified(rec, None, ([r["reason"]] if r["reason"] else []) + notes)
     issue(lines)
     return r | {"record": dict(rec.info), "warnings": [text for _, text in lines]}
 
@@ -231,7 +246,10 @@ def _frf(rec: Measurement, band: tuple[float, float] | None, segment_s: float, p
         p["coherence"] = float(coh[k])
         p["h1_over_h2"] = float(np.abs(h1[k]) / np.abs(est["H2"][k]))
         peaks.append(p)
-    peaks.sort(key=lambda p: -np.abs(h1[np.argmin(np.abs(f - p["peak_bin_hz"]))]))
+    # the dominant peak is the strongest coherent one: a peak the input does not explain (a drift's bump at the
+    # bottom of a sweep, where few segments hold the input and a slow drift lifts |H1|) is never a resonance
+    # while a coherent peak stands in the band; only without one is the strongest of the rest reported
+    peaks.sort(key=lambda p: (p["coherence"] < COHERENT, -_height(f, h1, p)))
     # one mode, one peak: a noisy |H1| can hold two local maxima on one resonance (the Silverbox's, 0.6 Hz
     # apart), whose fits return the same mode; a peak whose fitted frequency lies within half the half-power
     # bandwidth (zeta f) of a stronger one's is that mode again (two modes so close cannot be resolved)
@@ -241,6 +259,14 @@ def _frf(rec: Measurement, band: tuple[float, float] | None, segment_s: float, p
             kept.append(p)
     peaks = kept
     top = peaks[0] if peaks else None
+    louder = [p for p in peaks[1:] if top is not None and top["coherence"] >= COHERENT
+              and p["coherence"] < COHERENT and _height(f, h1, p) > _height(f, h1, top)]  # fmt: skip
+    notes = [f"a higher peak at {p['f_hz']:.3g} Hz (coherence {p['coherence']:.2f}) passed over for the coherent one "
+             f"at {top['f_hz']:.4g} Hz (coherence {top['coherence']:.2f}): the input explains little of the response "
+             "there (drift or noise?); --band F1:F2 limits the search" for p in louder if top is not None]  # fmt: skip
+    if top is not None and top["coherence"] < COHERENT:
+        notes.append(f"no peak in the band has coherence above {COHERENT:g}: the dominant peak at {top['f_hz']:.4g} Hz "
+                     f"(coherence {top['coherence']:.2f}) may be drift or noise rather than a resonance")  # fmt: skip
     return {
         "f_hz": top["f_hz"] if top else None,
         "zeta": top["zeta"] if top else None,
@@ -254,6 +280,7 @@ def _frf(rec: Measurement, band: tuple[float, float] | None, segment_s: float, p
         "segment_s": float(segment_s),
         "response_per_input": "m per m/s^2 (z / base_acc)" if rec.input_name == "base_acc" else "m per N (z / force)",
         "reason": None if top else "no resonance peak with coherence above 0.5 in the band",
+        "_notes": notes,
         "_curves": est,
     }
 
