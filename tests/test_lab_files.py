@@ -2,8 +2,6 @@
 LabVIEW measurement file as LabVIEW writes it, a harmonic record's report. Each record is written here with
 numpy/scipy alone."""
 
-import json
-
 import numpy as np
 import pytest
 from scipy import signal
@@ -71,3 +69,89 @@ def test_a_drift_bump_in_a_swept_response_is_not_the_resonance(swept_block, seed
     assert r["peaks"][0]["f_hz"] == r["f_hz"]  # the dominant peak first, as the contract's f_hz
     passed = [p for p in r["peaks"] if p["f_hz"] < 5.0]
     assert all(p["coherence"] < r["coherence"] for p in passed)
+
+
+def _labview_file(path, names, data, dt, units, slow=None, comment=None):
+    """A LabVIEW Measurement File as LabVIEW's Write To Measurement File writes it: one segment, tab separated,
+    one X column, every line of the channel header ending in a separator, the channel names followed by a
+    ``Comment`` column that holds a note on the rows that have one (``comment``: the first row's, if any; no row has
+    one unless an operator typed it). ``slow``: (name, value, dt, unit) of a channel logged once in the same block
+    (``Samples`` 1; its other rows empty)."""
+    names, units = list(names), list(units)
+    n_rows = len(data)
+    samples, steps = [str(n_rows)] * len(names), [f"{dt:.6f}"] * len(names)
+    if slow is not None:
+        names.append(slow[0])
+        units.append(slow[3])
+        samples.append("1")
+        steps.append(f"{slow[2]:.6f}")
+    k = len(names)
+    head = ["LabVIEW Measurement\t", "Writer_Version\t2", "Reader_Version\t2", "Separator\tTab",
+            "Decimal_Separator\t.", "Multi_Headings\tNo", "X_Columns\tOne", "Time_Pref\tRelative",
+            "Operator\tbench", "Date\t2026/11/20", "Time\t14:02:11.5018", "***End_of_Header***\t", "\t"]  # fmt: skip
+    seg = [
+        "Channels\t" + str(k) + "\t" * k,
+        "Samples\t" + "\t".join(samples) + "\t",
+        "Date\t" + "\t".join(["2026/11/20"] * k) + "\t",
+        "Time\t" + "\t".join(["14:02:11.5018"] * k) + "\t",
+        "Y_Unit_Label\t" + "\t".join(units) + "\t",
+        "X_Dimension\t" + "\t".join(["Time"] * k) + "\t",
+        "X0\t" + "\t".join(["0.0000000000000000E+0"] * k) + "\t",
+        "Delta_X\t" + "\t".join(steps) + "\t",
+        "***End_of_Header***\t" + "\t" * k,
+        "X_Value\t" + "\t".join(names) + "\tComment",
+    ]
+    rows = []
+    for i, row in enumerate(data):
+        fields = [f"{i * dt:.6f}", *(f"{v:.6E}" for v in row)]
+        if slow is not None:
+            fields.append(f"{slow[1]:.6E}" if i == 0 else "")
+        if i == 0 and comment:
+            fields.append(comment)  # a row's comment, in the Comment column
+        rows.append("\t".join(fields))
+    path.write_text("\n".join(head + seg + rows) + "\n")
+    return path
+
+
+@pytest.fixture(params=[None, "sweep start"], ids=["no-comment", "a-row-comment"])
+def labview_record(tmp_path, request):
+    """4 s at 512 Hz: a table accelerometer, a laser on the moving part (relative displacement), a force cell,
+    and a temperature logged once (``Samples`` 1, at 1 Hz); with and without a comment on the first row."""
+    rng = np.random.default_rng(11)
+    t = np.arange(int(4 * FS)) / FS
+    acc = 2.0 * np.sin(2 * np.pi * 7.0 * t) + 0.01 * rng.standard_normal(t.size)
+    z = 1.5e-3 * np.sin(2 * np.pi * 7.0 * t - 0.4) + 2e-6 * rng.standard_normal(t.size)
+    force = 0.3 * np.sin(2 * np.pi * 7.0 * t + 0.2)
+    data = np.column_stack([acc, z, force])
+    path = _labview_file(tmp_path / "bench.lvm", ["Accel", "Laser", "Force cell"], data, 1 / FS,
+                         ["m/s^2", "m", "N"], slow=("Temperature", 21.5, 1.0, "C"), comment=request.param)  # fmt: skip
+    return path, data
+
+
+def test_a_labview_file_as_labview_writes_it_loads_with_its_values(labview_record):
+    # Fact: the trailing Comment column of LabVIEW's channel header carries no data, and a channel logged once
+    # (Samples 1) is of another rate than the record: neither stops the record from loading. The values are the
+    # file's to its printed precision (%.6E: 5e-7 relative, i.e. 5e-7 of each channel's amplitude at most), and
+    # the channel set aside is named in the record's info with why.
+    from negstiff.inference.record.measurement import load
+
+    path, data = labview_record
+    rec = load(path, columns="base_acc=Accel,z=Laser")
+    assert rec.n == data.shape[0]
+    assert rec.fs == pytest.approx(FS, rel=1e-6)
+    amp = np.abs(data).max(axis=0)
+    assert np.abs(rec.u - data[:, 0]).max() <= 5e-7 * amp[0]
+    assert np.abs(rec.z - data[:, 1]).max() <= 5e-7 * amp[1]
+    assert "Temperature" in rec.info["set_aside"] and "1 sample" in rec.info["set_aside"]["Temperature"]
+
+
+def test_a_wanted_channel_of_another_rate_is_refused_in_one_line(labview_record, tmp_path, capsys):
+    # Fact: a channel logged once cannot be a column of a 512 Hz record; asking for it is bad input: exit 2 and
+    # one line on stderr naming the file, the channel and why, and no output file.
+    path, _ = labview_record
+    out = tmp_path / "frf.json"
+    code = main(["frf", str(path), "--columns", "base_acc=Accel,z=Temperature", "-o", str(out), "--quiet"])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1, err
+    assert "Temperature" in err[0] and "bench.lvm" in err[0] and "1 sample" in err[0]
+    assert not out.exists()

@@ -181,8 +181,8 @@ def frf(rec: Measurement, band: tuple[float, float] | None = None, segment_s: fl
     -------
     dict
         The contract's frf result: ``f_hz``, ``zeta``, ``coherence`` (the dominant peak's), ``band``, ``peaks``
-        (each fitted peak, the dominant first), ``well`` (the rest position nearest the record's mean z), ``record``, ``warnings``, and
-        the spectra in ``_curves`` (arrays, for a figure; not JSON).
+        (each fitted peak, the dominant first), ``well`` (the rest position nearest the record's mean z),
+        ``record``, ``warnings``, and the spectra in ``_curves`` (arrays, for a figure; not JSON).
 
     Examples
     --------

@@ -23,7 +23,7 @@ import numpy as np
 from negstiff import io as record_io
 from negstiff.errors import MeasurementError, RecordWarning, issue
 from negstiff.inference.steps.derivatives import noise_floor, state_derivatives
-from negstiff.io.base import RESOLUTION
+from negstiff.io.base import RESOLUTION, SET_ASIDE
 from negstiff.io.schema import (
     DIMENSIONS,
     GRAVITY_RANGE,
@@ -424,6 +424,7 @@ def load(
     resolution = raw.pop(RESOLUTION, None)
     cmap = parse_column_map(columns) if isinstance(columns, (str, type(None))) else dict(columns)
     cmap = {name: (header_name(src, raw), scale) for name, (src, scale) in cmap.items()}
+    _refuse_set_aside(path, meta, [src for src, _ in cmap.values()] if cmap else [k for k in KNOWN if k not in raw])
     cols, channel_info = in_si(path, _mapped_columns(path, raw, cmap), meta, cmap)
     if any(name == "t" and (src != "t" or scale != 1.0) for name, (src, scale) in cmap.items()):
         resolution = None  # the printed precision was read for a column named t only
@@ -443,6 +444,7 @@ def load(
         raise MeasurementError(f"{path}: scales of {' and '.join(unknown)} marked unknown (*?): one channel at most")
     scale_info = _unknown_scale(path, unknown[0] if unknown else None, input_name, mass, cols)
     aux_names = [a for a in (aux.split(",") if isinstance(aux, str) else aux or ()) if str(a).strip()]
+    _refuse_set_aside(path, meta, aux_names)
     aux_cols = _aux_channels(path, raw, aux_names, n)
     z: np.ndarray | None = None
     resp: dict[str, Any] = {"measured": None}
@@ -459,6 +461,7 @@ def load(
             aux_cols = {c: v[k:-k] for c, v in aux_cols.items()}
             z, t0 = z[k:-k], t0 + k / fs
             resp["derived"] += f"; {resp['trim_s']:g} s cut at each end (the integral's end effects)"
+    aside = {k[len(SET_ASIDE) :]: v for k, v in meta.items() if k.startswith(SET_ASIDE)}
     rec = Measurement(
         fs=fs,
         input_name=input_name,
@@ -470,7 +473,8 @@ def load(
         meta=meta,
         source=str(path),
         t0=t0,
-        info={"time": time_info, "response": resp, **channel_info, **({"scale": scale_info} if scale_info else {})},
+        info={"time": time_info, "response": resp, **channel_info, **({"scale": scale_info} if scale_info else {}),
+              **({"set_aside": aside} if aside else {})},  # channels of other rates, each with why
         aux=aux_cols,
     )
     return _warned(rec.with_mass(mass).with_gravity(gravity))
@@ -485,6 +489,16 @@ def _warned(rec: Measurement) -> Measurement:
     lines = [*rec.info.get("warnings", []), *rec.info.get("response", {}).get("warnings", []), *new]
     issue([(RecordWarning, w) for w in lines])
     return replace(rec, info={**rec.info, "warnings": [*rec.info.get("warnings", []), *new]}) if new else rec
+
+
+def _refuse_set_aside(path: Path, meta: dict[str, str], wanted) -> None:
+    """One ``MeasurementError`` line for a wanted channel the reader set aside (``SET_ASIDE``: another rate than
+    the record's), naming it and why (the others are listed in the record's ``info["set_aside"]``).
+    """
+    for name in wanted:
+        why = meta.get(SET_ASIDE + str(name))
+        if why is not None:
+            raise MeasurementError(f"{path}: channel {name!r} {why}")
 
 
 def _mapped_columns(path: Path, raw: dict[str, np.ndarray], cmap: dict) -> dict[str, np.ndarray]:

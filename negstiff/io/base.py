@@ -27,6 +27,10 @@ from negstiff.resources import require_memory
 RESOLUTION = "\0t_resolution"
 """Key under which a reader returns the resolution [s] of each value of the time column."""
 
+SET_ASIDE = "set_aside:"
+"""Metadata key prefix of a channel a reader set aside (``SET_ASIDE + name``: why, e.g. another rate than the
+record's); ``load`` refuses such a channel by name, in one line, when it is asked for."""
+
 
 def check_memory(path: Path, nbytes: float) -> None:
     """Refuse a file whose parse would take ``nbytes`` the machine cannot hold, before its reader starts."""
