@@ -129,7 +129,41 @@ def report_records(
             rep.warning("The record crosses between the wells: its FRF is not an underlying-linear system's (the "
                         "FRF of a low-level record around one well is; NSI gives each well's here).")  # fmt: skip
         say(f"report: {title} done ({time.perf_counter() - start:.1f} s)")
+    if kind == HARMONIC:
+        rep.add(harmonic_next_steps(f_h))
     return rep
+
+
+def harmonic_next_steps(forcing_hz: float):
+    """The section a harmonic record's report ends with: what such a record cannot give, what record can, and
+    the command that runs it (a report of a harmonic record runs the characterisation alone).
+    """
+    from .sections import Section
+
+    sec = Section("next", "", "What else the bench can give")
+    rows = [
+        ["K(z), D(zdot), each well's frequency and damping", "a broadband record: random or swept-sine base "
+         "excitation that explores the stroke", "negstiff report REC (NSI, SINDy, posterior, discrepancy, FRF); "
+         "negstiff identify nsi|sindy REC"],
+        ["each well's underlying-linear FRF", "a low-level random or swept record around one well",
+         "negstiff frf REC"],
+        ["the bifurcation map (period doubling, jumps, chaos)", f"a campaign: harmonic records stepped in amplitude "
+         f"at {forcing_hz:.4g} Hz (or in frequency)", "negstiff map REC1 REC2 ... (or FOLDER); negstiff report on "
+         "the same files"],
+        ["the periodic response's stability and bifurcations", "an identified model (from a broadband record)",
+         f"negstiff nfrc MODEL.json --freq {forcing_hz:.4g} --amplitude A1:A2"],
+    ]  # fmt: skip
+    sec.text(f"A harmonic record (one forcing line at {forcing_hz:.4g} Hz) shows what the device does at that "
+             "frequency and level: its period, regime and Lyapunov exponent (the characterisation above). "
+             "Identification and the rest need other records:")  # fmt: skip
+    sec.table(["to get", "record needed", "command"], rows)
+    sec.summary.append(
+        "A harmonic record gives the characterisation only: identification (NSI, SINDy, the posterior, the "
+        "discrepancy workflow) and the FRF need a broadband (random or swept) record, 'negstiff report REC' on it "
+        "runs them; a campaign of harmonic records stepped in amplitude gives the bifurcation map ('negstiff map')."
+    )
+    sec.json = {"forcing_hz": forcing_hz, "next": [{"to_get": a, "record": b, "command": c} for a, b, c in rows]}
+    return sec
 
 
 def _crosses_wells(rec) -> bool:

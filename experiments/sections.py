@@ -87,6 +87,17 @@ def _with_label(name: str, label: str) -> str:
     return f"{name} ({label})" if label else name
 
 
+def _frame_words(resp: dict) -> str:
+    """The frame of a derived z in plain words, for the record's summary line ('' when z was measured)."""
+    method = resp.get("frame")
+    if not method:
+        return ""
+    if resp.get("frame_offset_m") is None:
+        why = method.removeprefix("not pinned:").strip()
+        return f"; z's frame (its unknown constant) is not pinned ({why}): positions in z are up to that constant"
+    return f"; z's frame pinned by {method}"
+
+
 def record_section(rec, label: str = "") -> Section:
     """The record as negstiff read it: time base, sensor, derivation, frame and its anchor, warnings."""
     from negstiff.inference.steps.derivatives import noise_floor
@@ -117,7 +128,7 @@ def record_section(rec, label: str = "") -> Section:
     sec.summary.append(
         f"Record {rec.source}: {rec.duration:.4g} s at {rec.fs:g} Hz, input {rec.input_name}, response "
         f"{resp.get('measured') or 'z'}" + (f" ({resp['derived']})" if resp.get("derived") else "")
-        + (f"; frame pinned by {resp['frame']}" if resp.get("frame") else "")
+        + _frame_words(resp)
         + f"; {len(info.get('warnings', [])) + len(resp.get('warnings', []))} warning(s) about it."
     )  # fmt: skip
     sec.json = {"source": rec.source, "n": rec.n, "fs": rec.fs, "info": info, "noise_floor_percent": noise_pct}

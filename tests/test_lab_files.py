@@ -155,3 +155,51 @@ def test_a_wanted_channel_of_another_rate_is_refused_in_one_line(labview_record,
     assert code == 2 and len(err) == 1, err
     assert "Temperature" in err[0] and "bench.lvm" in err[0] and "1 sample" in err[0]
     assert not out.exists()
+
+
+def _harmonic_in_well_record(path, seconds=4.0, forcing_hz=7.0, amp=1.0):
+    """A harmonic shaker test of a symmetric double well (wells at +-10 mm, 9.2 Hz about each, 3 % damping):
+    1 m/s^2 at 7 Hz keeps the mass in the upper well. The lab's laser vibrometer gives z_dot alone, so z is
+    derived and its constant is unknown. CSV with ``# fs``, no time column."""
+    fw, zeta, z_well = 9.2, 0.03, 0.01
+    a_lin = (2 * np.pi * fw) ** 2 / 2  # K(z)/m = -a_lin z + b z^3 has wells at +-sqrt(a_lin / b), (2 pi fw)^2 there
+    b = a_lin / z_well**2
+    c = 2 * zeta * 2 * np.pi * fw
+    settle = 4.0  # s: the start's transient decays as exp(-zeta 2 pi fw t), to 1e-3 in 4 s; not recorded
+    n = int((settle + seconds) * FS)
+    t = np.arange(n) / FS
+
+    def acc(tt):
+        return amp * np.sin(2 * np.pi * forcing_hz * tt)
+
+    def rhs(tt, x):
+        return [x[1], -acc(tt) - c * x[1] + a_lin * x[0] - b * x[0] ** 3]
+
+    from scipy.integrate import solve_ivp
+
+    sol = solve_ivp(rhs, (0, t[-1]), [z_well, 0.0], t_eval=t, rtol=1e-9, atol=1e-12)
+    keep = t >= settle
+    rows = np.column_stack([acc(t[keep]), sol.y[1][keep]])
+    with open(path, "w") as fh:
+        fh.write(f"# fs: {FS:g}\n# mass: 0.2\nbase_acc,z_dot\n")
+        np.savetxt(fh, rows, delimiter=",", fmt="%.9g")
+    return path
+
+
+def test_a_harmonic_records_report_says_its_frame_plainly_and_what_else_can_be_done(tmp_path):
+    # Fact: a harmonic record gives the characterisation alone; its report says so and names the records and
+    # commands for the rest (identification from a broadband record, the map from a campaign). A z derived from a
+    # vibrometer in one well has an unknown constant no physics pins: the summary says the frame is not pinned,
+    # in a sentence (not "pinned by not pinned").
+    from negstiff.experiments.record_report import report_records
+
+    rec = _harmonic_in_well_record(tmp_path / "harmonic.csv")
+    rep = report_records([rec], forcing_hz=7.0)
+    _, summary = rep._composed()
+    text = " ".join(summary)
+    assert "by not pinned" not in text
+    assert "frame (its unknown constant) is not pinned" in text
+    assert "broadband" in text and "negstiff map" in text
+    out = rep.write(tmp_path / "report")
+    md = (out / "index.md").read_text()
+    assert "What else the bench can give" in md and "negstiff identify" in md and "negstiff nfrc" in md
