@@ -376,7 +376,8 @@ def cmd_frf(args) -> int:
     res["figure"] = write_figure(fig, args.out)
     write_json(args.out, res)
     warn(args, res["warnings"])
-    top = "no peak" if res["f_hz"] is None else f"{res['f_hz']:.4f} Hz, zeta {100 * res['zeta']:.2f} %"
+    top = "no peak" if res["f_hz"] is None else (f"{res['f_hz']:.4f} Hz, zeta {100 * res['zeta']:.2f} %, "
+                                                 f"coherence {res['coherence']:.2f}")  # fmt: skip
     say(args, f"wrote {args.out} and {res['figure']}: dominant peak {top}; {len(res['peaks'])} peak(s)")
     return 0
 
