@@ -129,7 +129,7 @@ def report_records(
             rep.warning("The record crosses between the wells: its FRF is not an underlying-linear system's (the "
                         "FRF of a low-level record around one well is; NSI gives each well's here).")  # fmt: skip
         say(f"report: {title} done ({time.perf_counter() - start:.1f} s)")
-    if kind == HARMONIC:
+    if kind == HARMONIC and f_h:
         rep.add(harmonic_next_steps(f_h))
     return rep
 

@@ -74,7 +74,7 @@ def read(path: Path):
                 + ": a channel of another rate (LabVIEW wrote it in the same block), not a column of this record"
             )
     equal_lengths(path, cols)
-    step = common_step(path, {k: v[2] for k, v in channels.items() if k in cols})
-    if step and "t" not in cols:
-        meta["fs"] = repr(1.0 / step)
+    shared = common_step(path, {k: v[2] for k, v in channels.items() if k in cols})
+    if shared and "t" not in cols:
+        meta["fs"] = repr(1.0 / shared)
     return cols, meta
