@@ -32,9 +32,14 @@ from typing import Any
 import numpy as np
 from scipy import signal
 
-from negstiff.errors import MeasurementError, issue
+from negstiff.errors import MeasurementError, RecordWarning, issue
 from negstiff.inference.analysis.lyapunov import largest_lyapunov
-from negstiff.inference.analysis.periodicity import classify_regime, periodicity
+from negstiff.inference.analysis.periodicity import (
+    FREQUENCY_MISLABEL,
+    check_forcing_line,
+    classify_regime,
+    periodicity,
+)
 from negstiff.inference.estimators.nsi import well_guesses
 from negstiff.inference.record.frame import pin_frame
 from negstiff.inference.record.measurement import Measurement
@@ -118,7 +123,9 @@ def lyapunov(rec: Measurement, forcing_hz: float, noise: float | None) -> dict[s
 def check_harmonic(rec: Measurement, forcing_hz: float) -> None:
     """Refuse (``MeasurementError``, one line) a harmonic record no characterisation can use: a forcing
     at or above the Nyquist frequency, fewer than 10 forcing cycles, a response or an input that does
-    not move (the forcing's phase is read from the input).
+    not move (the forcing's phase is read from the input), a stated forcing frequency that is not the
+    input's (``periodicity.check_forcing_line``: its line carries under 10 % of the input's rms while
+    another line dominates).
     """
     if not 0 < forcing_hz < rec.fs / 2:
         raise MeasurementError(
@@ -131,6 +138,7 @@ def check_harmonic(rec: Measurement, forcing_hz: float) -> None:
         )
     rec.require_motion("a characterisation")
     rec.require_excitation("a characterisation (the forcing's phase is read from the input)")
+    check_forcing_line(rec, forcing_hz)
 
 
 def wells_for(rec: Measurement, wells="auto") -> tuple[float | None, ...] | None:
@@ -210,7 +218,8 @@ def characterize(
     except (MeasurementError, ValueError, np.linalg.LinAlgError) as exc:
         out["reasons"]["period"] = _reason(exc)
     if per is not None:
-        keys = ("period", "amplitudes", "tolerance", "tolerances", "residuals", "noise_std", "forcing", "spectrum")
+        keys = ("period", "decided_by", "steady_from_s", "amplitudes", "tolerance", "tolerances", "residuals",
+                "noise_std", "forcing", "spectrum")  # fmt: skip
         out |= {k: per[k] for k in keys}
         out["poincare_z"] = per["poincare_z"]
         if per["period"] is None:
@@ -220,6 +229,13 @@ def characterize(
                 f"period {p_best}, residual {per['residuals'][p_best]:.3g} against a tolerance of "
                 f"{per['tolerances'][p_best]:.3g}): chaotic or quasi-periodic"
             )
+        elif per["decided_by"] == "spectrum":
+            p = per["period"]
+            out["reasons"]["period_spectrum"] = (
+                f"decided by the spectrum's sub-harmonic lines: the Poincare points repeat every {p} cycle(s) only "
+                f"within {per['residuals'][p] / per['tolerances'][p]:.2g}x their tolerance (residual "
+                f"{per['residuals'][p]:.3g}, tolerance {per['tolerances'][p]:.3g})"
+            )
         elif per["spectrum"]["agrees"] is False:
             out["reasons"]["period_spectrum"] = (
                 f"the Poincare points repeat every {per['period']} cycle(s), but the spectrum's sub-harmonic lines "
@@ -227,7 +243,8 @@ def characterize(
             )
     else:
         out |= {"period": None, "amplitudes": None, "poincare_z": np.array([])}
-    out["regime"] = classify_regime(rec.displacement, wells)
+    steady = rec.t - rec.t0 >= out.get("steady_from_s", 0.0)  # the regime of the steady state
+    out["regime"] = classify_regime(rec.displacement[steady], wells)
     significant = None
     if lle:
         try:
@@ -271,6 +288,11 @@ def characterize(
     if not poincare:
         out.pop("poincare_z", None)
     lines = classified(rec)
+    if "forcing" in out and abs(out["forcing"]["measured_hz"] / forcing_hz - 1) > FREQUENCY_MISLABEL:
+        lines.append((RecordWarning, (
+            f"{rec.source}: the input's forcing line is at {out['forcing']['measured_hz']:.4g} Hz, the stated "
+            f"{forcing_hz:g} Hz: the measured frequency was used"
+        )))  # fmt: skip
     issue(lines)
     return out | {"wells_used": list(wells) if wells is not None else None, "record": dict(rec.info),
                   "warnings": [text for _, text in lines]}  # fmt: skip

@@ -4,16 +4,34 @@
 * The forcing phase comes from the *measured* input: a least-squares sinusoid at the known forcing
   frequency (not the nominal start time), so records whose sampling rate is not a multiple of the
   forcing frequency are sampled phase-synchronously: z and z' are interpolated (cubic spline of the
-  Savitzky-Golay smoothed signal) at t_n = t_phi + n T.
-* Period detection: for p in (1, 2, 3, 4, 5, 6, 8, 16), the residual r(p) = rms_n |P_(n+p) - P_n| of
-  the Poincare points P = (z / std z, z' / std z') scaled by the whole response's spread; the answer is
-  the smallest p with r(p) < tol (and r(2p) < 2 tol when 2p is tested), after removing a slow
-  quadratic trend from the points (drift of the integrated base displacement), else ``None`` (chaotic or
-  quasi-periodic). The tolerance follows the noise: the sensor noise, estimated from the record, is
-  propagated through the smoothing and the derivative to a Poincare point, and tol = max(0.02,
-  4 sqrt(2) x that).
+  band-limited signal) at t_n = t_phi + n T. The first and last ``EDGE_CYCLES`` cycles (and the
+  acquisition's ``EDGE_SAMPLES``) are not compared: the filters' edge transients live there.
+* The stated frequency is checked against the input's own spectrum first (``check_forcing_line``): a
+  stated line that carries under ``STATED_LINE_FRACTION`` of the input's rms while another line
+  dominates is refused (an analysis at the wrong frequency is meaningless); the measured line near the
+  stated one is used, and a difference beyond ``FREQUENCY_MISLABEL`` is said (``forcing_mismatch``).
+* Steady state: a record may begin with a transient, a jump between wells (a campaign's every step
+  does). For each candidate lag p the differences |P_(n+p) - P_n| of the Poincare points are compared
+  with their own level at the record's end: the steady state for p starts after the last cycle whose
+  difference exceeds ``TRANSIENT_FACTOR`` x that level (and the tolerance), so a transient is cut off
+  whatever it looked like (``steady_from_s``: where the steady state of the reported period begins).
+* Period detection: for p in (1, 2, 3, 4, 5, 6, 8, 16), the residual r(p) = rms_n |P_(n+p) - P_n| over
+  the steady state of the Poincare points P = (z / std z, z' / std z') scaled by the steady response's
+  spread; the answer is the smallest p with r(p) < tol (and r(2p) < 2 tol when 2p is tested), after
+  removing a slow quadratic trend from the points (drift of the integrated base displacement). The
+  tolerance follows the noise: the sensor noise, estimated from the record, is propagated through the
+  smoothing and the derivative to a Poincare point, and tol = max(0.02, 4 sqrt(2) x that); to it is
+  added what the input's own cycle-to-cycle variation and the interpolation explain of the differences.
+  The interpolation's error: any linear, shift-invariant interpolation of samples of a period-T signal
+  (harmonics folded back or not) errs at t_n by a function of the forcing phase's offset between two
+  samples, phi_n = frac(t_n fs), alone; a Fourier series in phi_n (``SAMPLING_HARMONICS``) on each
+  branch takes it up, less what as many regressors explain of any sequence by chance.
+* Which verdict decides (``decided_by``): the time domain's, unless it cannot decide: no lag repeats
+  within its tolerance but one within ``UNDECIDED_RATIO`` x it. The spectrum's sub-harmonic lines then
+  name the period, provided its own residual is also within that band; far beyond it (a chaotic or
+  quasi-periodic record) the answer is ``None``.
 * Amplitudes: for period p, the half peak-to-peak of z over each of p consecutive forcing cycles
-  (averaged over the record): one amplitude per branch of the bifurcation map.
+  (averaged over the steady state): one amplitude per branch of the bifurcation map.
 """
 
 from __future__ import annotations
@@ -80,6 +98,61 @@ def measured_forcing(rec: Measurement, f_hz: float) -> dict[str, float]:
     f = refine_frequency(u, t, float(freqs[k]), 1.0 / rec.duration)
     amp, phi = forcing_phase(u, t, f)
     return {"stated_hz": float(f_hz), "measured_hz": f, "amplitude": amp, "phase_rad": phi}
+
+
+STATED_LINE_FRACTION = 0.10
+"""A stated forcing whose line carries under this fraction of the input's rms, while another line
+dominates the input, is refused: the analysis would be of the wrong frequency."""
+
+DOMINANT_LINE_FRACTION = 0.5
+"""A line dominates the input when it carries over this fraction of the input's rms (a harmonic input:
+1/sqrt(2) of its amplitude is its rms, all of it)."""
+
+FREQUENCY_MISLABEL = 0.002
+"""A measured forcing frequency further than this fraction from the stated one is used and said in a
+warning (a shaker controller's error is a fraction of a per mille)."""
+
+
+def _line_rms(u: np.ndarray, t: np.ndarray, f_hz: float) -> float:
+    amp, _ = forcing_phase(u, t, f_hz)
+    return amp / math.sqrt(2)
+
+
+def check_forcing_line(rec: Measurement, f_hz: float) -> dict[str, float]:
+    """The stated forcing frequency against the input's own spectrum, before any analysis.
+
+    The input's dominant line (the Hann periodogram's highest above a few bins from 0 Hz, refined by
+    least squares) and the line near the stated ``f_hz`` (``measured_forcing``'s band) are measured with
+    the rms each carries. Raises ``MeasurementError`` (an ``InputError``, one line naming both
+    frequencies) when the stated line carries under ``STATED_LINE_FRACTION`` of the input's rms while
+    the dominant line, elsewhere, carries over ``DOMINANT_LINE_FRACTION``. Returns ``{"stated_hz",
+    "dominant_hz", "stated_line_rms", "dominant_line_rms", "input_rms"}`` [Hz, input units].
+    """
+    u, t = rec.u - rec.u.mean(), rec.t - rec.t0
+    u_rms = float(u.std())
+    pad = 8 * rec.n
+    spec = np.abs(np.fft.rfft(u * np.hanning(rec.n), pad))
+    freqs = np.fft.rfftfreq(pad, rec.dt)
+    above = freqs > max(4.0 / rec.duration, 0.05 * f_hz)  # not the accelerometer's bias or drift
+    if not above.any() or u_rms == 0:
+        return {"stated_hz": float(f_hz), "dominant_hz": float("nan"), "stated_line_rms": 0.0,
+                "dominant_line_rms": 0.0, "input_rms": u_rms}  # fmt: skip
+    k = int(np.flatnonzero(above)[np.argmax(spec[above])])
+    f_dom = refine_frequency(u, t, float(freqs[k]), 1.0 / rec.duration)
+    band = np.abs(freqs - f_hz) <= FREQUENCY_SEARCH * f_hz
+    k_stated = int(np.flatnonzero(band)[np.argmax(spec[band])]) if band.any() else int(np.argmin(np.abs(freqs - f_hz)))
+    f_near = refine_frequency(u, t, float(freqs[k_stated]), 1.0 / rec.duration)
+    out = {"stated_hz": float(f_hz), "dominant_hz": f_dom, "stated_line_rms": _line_rms(u, t, f_near),
+           "dominant_line_rms": _line_rms(u, t, f_dom), "input_rms": u_rms}  # fmt: skip
+    elsewhere = abs(f_dom - f_hz) > FREQUENCY_SEARCH * f_hz
+    if (elsewhere and out["stated_line_rms"] < STATED_LINE_FRACTION * u_rms
+            and out["dominant_line_rms"] > DOMINANT_LINE_FRACTION * u_rms):  # fmt: skip
+        raise MeasurementError(
+            f"{rec.source}: the stated forcing {f_hz:g} Hz is not the input's: its line there carries "
+            f"{out['stated_line_rms']:.2g} of the input's {u_rms:.3g} rms ({100 * out['stated_line_rms'] / u_rms:.2g} %), "
+            f"its dominant line is at {f_dom:.4g} Hz ({out['dominant_line_rms']:.3g} rms): check the forcing frequency"
+        )
+    return out
 
 
 @dataclass(frozen=True)
@@ -210,40 +283,145 @@ def noise_level(z: np.ndarray, fs: float) -> float:
     return float(resid.std() / math.sqrt(1 - np.sum(h**2)))
 
 
+EDGE_CYCLES = 1
+"""Forcing cycles at each end of a record that are not compared: the band-limited interpolation's and
+the zero-phase filter's edge transients live there (plus ``EDGE_SAMPLES`` of the acquisition)."""
+
+EDGE_SAMPLES = 12
+"""Samples of the acquisition at each end beyond ``EDGE_CYCLES`` (a polyphase FIR's half length is 10)."""
+
+SAMPLING_HARMONICS = 3
+"""Harmonics of the sampling offset phi_n = frac(t_n fs) that take up the interpolation's error."""
+
+TRANSIENT_FACTOR = 5.0
+"""A cycle whose difference |P_(n+p) - P_n| exceeds this many times the steady level (the median of the
+record's last half) and the tolerance belongs to a transient (Gaussian noise alone: a 5.9 sigma
+excursion, probability 3e-8 a cycle)."""
+
+MIN_STEADY_FRACTION = 0.25
+"""The steady state judged is at least this fraction of the record's cycles (and ``MIN_STEADY_CYCLES``):
+a transient longer than the rest leaves the record's end to be judged, and it fails."""
+
+MIN_STEADY_CYCLES = 16
+
+UNDECIDED_RATIO = 3.0
+"""No lag within its tolerance but one within this many times it: the time domain cannot decide, the
+spectrum does."""
+
+
+def sampling_regressors(times: np.ndarray, fs: float, harmonics: int = SAMPLING_HARMONICS) -> np.ndarray:
+    """(N, 2 ``harmonics``) sin and cos of 2 pi j phi_n, phi_n = frac(t_n fs): where each Poincare time falls
+    between two samples acquired at ``fs``. A linear, shift-invariant interpolation of samples of a
+    T-periodic signal s(t) = sum_k c_k exp(2 pi i k t / T) gives at t_n = t_0 + n T the value
+    sum_k c_k exp(2 pi i k t_0 / T) G_k(phi_n), each G_k periodic in t with period 1 / fs: its error is a
+    function of phi_n alone, folded harmonics included (ideal band-limited interpolation: the harmonics
+    folded m times err by exp(-2 pi i m phi_n) - 1, a Fourier series in phi_n).
+    """
+    phi = np.mod(times * fs, 1.0)
+    j = np.arange(1, harmonics + 1)
+    arg = 2 * np.pi * phi[:, None] * j[None, :]
+    return np.column_stack([np.sin(arg), np.cos(arg)])
+
+
+def _explained(d: np.ndarray, x: np.ndarray | None, p: int) -> float:
+    """The rms of what the regressors ``x`` (N, k) explain of the differences ``d`` (N, dim) at lag p, by
+    least squares on each branch n mod p (one fit for all when the branches are short), less what as
+    many regressors explain of any sequence by chance (k / (N - k) of the rest).
+    """
+    if x is None or x.size == 0:
+        return 0.0
+    sd = x.std(axis=0)
+    x = x[:, sd > 1e-12] / sd[sd > 1e-12]
+    n, k = x.shape
+    if k == 0:
+        return 0.0
+    groups = p if n // p >= 10 * k else 1
+    fit = np.zeros_like(d)
+    for b in range(groups):
+        rows = slice(b, None, groups)
+        fit[rows] = x[rows] @ np.linalg.lstsq(x[rows], d[rows], rcond=None)[0]
+    k_all = k * groups
+    chance = k_all / max(n - k_all, 1) * np.mean(np.sum((d - fit) ** 2, axis=1))
+    return math.sqrt(max(0.0, float(np.mean(np.sum(fit**2, axis=1))) - chance))
+
+
+def _detrended(points: np.ndarray) -> np.ndarray:
+    """The points less a quadratic in the cycle index (a slow drift is no periodicity), their mean kept."""
+    n_idx = np.arange(points.shape[0])
+    out = points.copy()
+    if points.shape[0] > 3:
+        for k in range(points.shape[1]):
+            out[:, k] -= np.polyval(np.polyfit(n_idx, out[:, k], 2), n_idx) - out[:, k].mean()
+    return out
+
+
+def steady_start(points: np.ndarray, p: int, tol: float) -> int:
+    """The first cycle of the steady state for lag p: after the last n whose difference |P_(n+p) - P_n|
+    exceeds ``TRANSIENT_FACTOR`` x its median over the record's last half and ``tol`` (a transient, a
+    jump between wells), 0 when none does.
+    """
+    d = np.sqrt(np.sum((points[p:] - points[:-p]) ** 2, axis=1))
+    if d.size < 4:
+        return 0
+    threshold = max(TRANSIENT_FACTOR * float(np.median(d[d.size // 2 :])), tol)
+    out = np.flatnonzero(d > threshold)
+    return int(out[-1] + 1) if out.size else 0
+
+
+def _lag(points: np.ndarray, p: int, tol: float, regressors: np.ndarray | None) -> tuple[float, float]:
+    d = points[p:] - points[:-p]
+    r = float(np.sqrt(np.mean(np.sum(d**2, axis=1))))
+    x = None if regressors is None else regressors[p:] - regressors[:-p]
+    return r, math.hypot(tol, _explained(d, x, p))
+
+
 def detect_period(
     points: np.ndarray, tol: float, inputs: np.ndarray | None = None
 ) -> tuple[int | None, dict[int, float], dict[int, float]]:
     """Smallest period p of a sequence of points (N, d), already scaled by the response's spread, whose
-    residual r(p) = rms_n |P_(n+p) - P_n| lies below its tolerance (and, where tested, r(2p) below
-    twice its own: slow drift left in the points grows with the lag).
-
-    The tolerance of lag p is ``tol`` (the noise's) combined with the part of the differences that the
-    input's own cycle-to-cycle differences explain (``inputs`` (N, k): per-cycle input amplitude and
-    phase; a least-squares fit of P_(n+p) - P_n on U_(n+p) - U_n): a periodic response to a shaker whose
-    amplitude breathes changes with it. Returns (period, residuals, tolerances).
+    residual r(p) = rms_n |P_(n+p) - P_n| over its steady state lies below its tolerance (and, where
+    tested, r(2p) below twice its own: slow drift left in the points grows with the lag). See
+    ``steady_period``, which also returns where each lag's steady state starts; ``inputs`` (N, k) are
+    the per-cycle regressors (input amplitude and phase, sampling offset). Returns (period, residuals,
+    tolerances).
     """
-    r, tols = {}, {}
+    found = steady_period(points, tol, inputs)
+    return found["period"], found["residuals"], found["tolerances"]
+
+
+def steady_period(points: np.ndarray, tol: float, regressors: np.ndarray | None = None) -> dict[str, Any]:
+    """For each lag p of ``PERIODS``: the steady state's first cycle (``steady_start``, at most the last
+    ``MIN_STEADY_FRACTION`` of the cycles), the residual r(p) = rms |P_(n+p) - P_n| over it (the points
+    detrended there) and its tolerance: ``tol`` (the noise's) combined with what the per-cycle
+    ``regressors`` (N, k) explain of the differences. The tolerance takes what the shaker's own
+    cycle-to-cycle variation (amplitude, phase) and the interpolation (the sampling offset) explain: a
+    periodic response to a shaker whose amplitude breathes changes with it, an interpolated one errs
+    by where its instants fall between samples.
+
+    Returns ``{"period", "residuals", "tolerances", "starts"}``: the smallest p with r(p) below its
+    tolerance and, where tested on the same steady state, r(2p) below twice its own (None without).
+    """
+    n = points.shape[0]
+    min_len = min(n, max(MIN_STEADY_CYCLES, math.ceil(MIN_STEADY_FRACTION * n)))
+    r, tols, starts, doubled = {}, {}, {}, {}
     for p in PERIODS:
-        if p >= points.shape[0] // 2:
+        if p >= n // 2:
             break
-        d = points[p:] - points[:-p]
-        r[p] = float(np.sqrt(np.mean(np.sum(d**2, axis=1))))
-        explained = 0.0
-        if inputs is not None:
-            x = inputs[p:] - inputs[:-p]
-            sd = x.std(axis=0)
-            x = x[:, sd > 0] / sd[sd > 0]
-            if x.shape[1]:
-                fit = x @ np.linalg.lstsq(x, d, rcond=None)[0]
-                # less what k regressors explain of any sequence by chance (k / (N - k) of the rest)
-                k_, n_ = x.shape[1], x.shape[0]
-                chance = k_ / max(n_ - k_, 1) * np.mean(np.sum((d - fit) ** 2, axis=1))
-                explained = math.sqrt(max(0.0, float(np.mean(np.sum(fit**2, axis=1))) - chance))
-        tols[p] = math.hypot(tol, explained)
+        s0 = min(steady_start(points, p, tol), n - min_len)
+        tail = _detrended(points[s0:])
+        reg = None if regressors is None else regressors[s0:]
+        if p >= tail.shape[0] // 2:
+            break
+        starts[p] = s0
+        r[p], tols[p] = _lag(tail, p, tol, reg)
+        if 2 * p in PERIODS and 2 * p < tail.shape[0] // 2:
+            doubled[p] = _lag(tail, 2 * p, tol, reg)
+    period = None
     for p, rp in r.items():
-        if rp < tols[p] and (2 * p not in r or r[2 * p] < 2 * tols[2 * p]):
-            return p, r, tols
-    return None, r, tols
+        if rp < tols[p] and (p not in doubled or doubled[p][0] < 2 * doubled[p][1]):
+            period = p
+            break
+    return {"period": period, "residuals": r, "tolerances": tols, "starts": starts}
 
 
 SPECTRAL_LINE_RATIO = 100.0
@@ -300,47 +478,72 @@ def periodicity(
     is sampled where the input's phase passes zero on each cycle, and each candidate period's residual
     is reported beside its tolerance (``residuals``, ``tolerances``), with the spectrum's sub-harmonic
     lines as a cross-check (``spectrum``: their ratios over the floor and the period they imply).
+    Both are judged on the steady state: ``steady_from_s`` [s from the record's start] is where it begins
+    (a transient, a jump between wells before it), ``decided_by`` says which verdict gave the period
+    (``"time"``: the Poincare points; ``"spectrum"``: the sub-harmonic lines, where the points repeat
+    only within ``UNDECIDED_RATIO`` x their tolerance).
     """
     sync = _synchronous(rec, f_hz)
-    tn = sync.starts
-    inside = (tn >= 0) & (tn <= sync.t_end)
-    z0, v0 = sync.spline(tn[inside]), sync.spline(tn[inside], 1)
-    zs, vs = sync.spline(rec.t - rec.t0), sync.spline(rec.t - rec.t0, 1)
-    # scales: the whole response's spread, so a period-1 orbit (Poincare points equal up to noise)
-    # gives r(p) ~ noise / response, not ~ 1
-    scale_z, scale_v = max(zs.std(), 1e-15), max(vs.std(), 1e-15)
+    band_fs = rec.fs if band_fs is None else band_fs
+    t_rel = rec.t - rec.t0
+    # the filters' edge transients: the first and last cycles (and a polyphase FIR's length) not compared
+    edge = EDGE_CYCLES * sync.period + EDGE_SAMPLES / band_fs
+    inside = (sync.starts >= edge) & (sync.starts <= sync.t_end - edge)
+    if inside.sum() < 8:
+        raise MeasurementError(f"{rec.source}: too few forcing cycles inside the record's edges for a periodicity analysis")
+    tn = sync.starts[inside]
+    z0, v0 = sync.spline(tn), sync.spline(tn, 1)
+    zs, vs = sync.spline(t_rel), sync.spline(t_rel, 1)
+    # scales: the steady response's spread (the record's second half: transients are at the start), so a
+    # period-1 orbit (Poincare points equal up to noise) gives r(p) ~ noise / response, not ~ 1
+    late = (t_rel >= 0.5 * sync.t_end) & (t_rel <= sync.t_end - edge)
+    scale_z, scale_v = max(zs[late].std(), 1e-15), max(vs[late].std(), 1e-15)
     pts = np.column_stack([z0 / scale_z, v0 / scale_v])
-    # a slow trend (the integrated base displacement drifts) is no periodicity: remove a quadratic in n
-    n_idx = np.arange(pts.shape[0])
-    for k in range(2):
-        pts[:, k] -= np.polyval(np.polyfit(n_idx, pts[:, k], 2), n_idx) - pts[:, k].mean()
     # the input's own cycle-to-cycle variation: relative amplitude, and the phase the sampling did not follow
-    slow = ndimage.uniform_filter1d(np.unwrap(sync.cycle_phase), min(PHASE_SMOOTHING_CYCLES, tn.size), mode="nearest")
+    slow = ndimage.uniform_filter1d(np.unwrap(sync.cycle_phase), min(PHASE_SMOOTHING_CYCLES, sync.starts.size),
+                                    mode="nearest")  # fmt: skip
     inputs = np.column_stack([sync.cycle_amplitude / sync.cycle_amplitude.mean() - 1,
                               np.unwrap(sync.cycle_phase) - slow])[inside]  # fmt: skip
+    # where each Poincare instant falls between the acquisition's samples: the interpolation's error
+    regressors = np.column_stack([inputs, sampling_regressors(tn, band_fs)])
     # noise of a Poincare point: white sensor noise through the band limit fc (gain sqrt(2 fc / fs))
     # and its derivative (gain 2 pi fc sqrt(2 fc / (3 fs)))
     noise = noise_level(rec.displacement, rec.fs) if noise is None else noise
-    band_fs = rec.fs if band_fs is None else band_fs
     fc = min(band_edge(rec.fs, f_hz), band_fs / 2)
     gz = math.sqrt(2 * fc / band_fs)
     gv = 2 * math.pi * fc * math.sqrt(2 * fc / (3 * band_fs))
     point_noise = math.hypot(noise * gz / scale_z, noise * gv / scale_v)
     # r(p) of a truly periodic record is sqrt(2) x the point noise; 4x that, and at least 2 %
     tol = max(0.02, 4 * math.sqrt(2) * point_noise)
-    period, r, tols = detect_period(pts, tol, inputs)
-    # amplitude per branch: half peak-to-peak of the band-limited z over each of p consecutive cycles
+    found = steady_period(pts, tol, regressors)
+    period, r, tols, starts = found["period"], found["residuals"], found["tolerances"], found["starts"]
+    ratios = {p: r[p] / tols[p] for p in r}
+    p_best = min(ratios, key=ratios.__getitem__) if ratios else None
+    start = starts.get(period or p_best, 0) if ratios else 0
+    steady_from = float(tn[start])
+    f_meas = sync.forcing["measured_hz"]
+    steady = t_rel >= steady_from
+    spectrum = subharmonic_lines(zs[steady], rec.fs, f_meas)
+    decided_by = "time"
+    q = spectrum["period"]
+    if period is None and ratios and ratios[p_best] <= UNDECIDED_RATIO and ratios.get(q, math.inf) <= UNDECIDED_RATIO:
+        # the points nearly repeat, too little beyond their tolerance to call it chaos: the lines decide
+        period, decided_by = q, "spectrum"
+        start = starts[q]
+        steady_from = float(tn[start])
+    spectrum["agrees"] = spectrum["period"] == period if period is not None else None
+    # amplitude per branch: half peak-to-peak of the band-limited z over each of p consecutive steady cycles
     p = period or 1
-    grid = tn[inside][:-1, None] + sync.period * np.linspace(0, 1, 64, endpoint=False)
+    grid = tn[start:][:-1, None] + sync.period * np.linspace(0, 1, 64, endpoint=False)
     per_cycle = sync.spline(grid)
     half_pp = 0.5 * (per_cycle.max(axis=1) - per_cycle.min(axis=1))
     amps = [float(np.mean(half_pp[k::p])) for k in range(p)]
-    spectrum = subharmonic_lines(sync.spline(rec.t - rec.t0), rec.fs, sync.forcing["measured_hz"])
-    spectrum["agrees"] = spectrum["period"] == period if period is not None else None
     return {
         "period": period,
+        "decided_by": decided_by,
+        "steady_from_s": steady_from,
         "amplitudes": amps,
-        "regime": classify_regime(rec.displacement, wells),
+        "regime": classify_regime(rec.displacement[rec.t - rec.t0 >= steady_from], wells),
         "residuals": r,
         "tolerance": tol,
         "tolerances": tols,

@@ -1,0 +1,153 @@
+"""Harmonic records as a lab acquires them: coarse sampling whose harmonics fold back, a transient and a
+jump between wells at the start, a stated forcing frequency that is not the input's.
+
+Every record here is integrated by scipy's DOP853 from a plain double-well Duffing oscillator written in
+this file (per unit mass: z'' + c z' - k1 z + k3 z^3 = -b''), never by negstiff's simulator: wells at
++-20 mm, in-well linear frequency sqrt(2 k1) / 2 pi = 10 Hz, 5 % in-well damping. Sampling is a plain
+point sampler (no anti-aliasing filter: harmonics above the Nyquist frequency fold back), the laser's
+noise 20 um and the accelerometer's 0.03 m/s^2 rms, white, from a seeded generator.
+"""
+
+import warnings
+
+import numpy as np
+import pytest
+from scipy.integrate import solve_ivp
+
+from negstiff.cli import main
+from negstiff.errors import InputError, RecordWarning
+from negstiff.inference.analysis.characterize import characterize
+from negstiff.inference.record.measurement import from_arrays
+
+Z_WELL = 0.020  # m
+K1 = 0.5 * (2 * np.pi * 10.0) ** 2  # 1/s^2: in-well linear frequency 10 Hz
+K3 = K1 / Z_WELL**2  # 1/(m^2 s^2): wells at +-Z_WELL
+C = 2 * 0.05 * 2 * np.pi * 10.0  # 1/s: 5 % of critical in the well
+LASER_NOISE = 20e-6  # m rms
+ACCELEROMETER_NOISE = 0.03  # m/s^2 rms
+
+
+def _rhs(t, x, a, w):
+    z, v = x
+    return [v, -(C * v - K1 * z + K3 * z**3) - a * np.sin(w * t)]
+
+
+def _solve(x0, a, f_hz, t_eval):
+    w = 2 * np.pi * f_hz
+    return solve_ivp(_rhs, (0.0, t_eval[-1]), x0, args=(a, w), method="DOP853", rtol=1e-9, atol=1e-12,
+                     t_eval=t_eval).y  # fmt: skip
+
+
+def _record(a, f_hz, fs, duration, settle=0.0, seed=0):
+    """The Duffing oscillator at rest in the plus well, forced from t = 0 at ``a`` m/s^2 and ``f_hz``,
+    recorded from ``settle`` s on for ``duration`` s at ``fs`` (point samples, noise added), with the true
+    stroboscopic z (phase 0 of every forcing cycle from 0 to the record's end)."""
+    n_settle = int(round(settle * f_hz))
+    t_rec = n_settle / f_hz + np.arange(int(round(duration * fs))) / fs
+    n_cycles = int(t_rec[-1] * f_hz)
+    t_strobe = np.arange(n_cycles + 1) / f_hz
+    t_all = np.union1d(t_rec, t_strobe)
+    y = _solve([Z_WELL, 0.0], a, f_hz, t_all)
+    z_true = y[0][np.searchsorted(t_all, t_rec)]
+    strobe = y[0][np.searchsorted(t_all, t_strobe)]
+    rng = np.random.default_rng(seed)
+    z = z_true + LASER_NOISE * rng.standard_normal(t_rec.size)
+    u = a * np.sin(2 * np.pi * f_hz * t_rec) + ACCELEROMETER_NOISE * rng.standard_normal(t_rec.size)
+    return from_arrays(u, z, fs), strobe
+
+
+def _true_period(strobe, tail=60, tol=1e-6):
+    s = strobe[-tail:]
+    return next((p for p in (1, 2, 4, 8, 16) if np.abs(s[p:] - s[:-p]).max() < tol), None)
+
+
+@pytest.mark.parametrize("a, seed", [(3.0, 0), (5.0, 1), (7.0, 2), (9.0, 3), (11.0, 4)])
+def test_a_period_1_run_at_10_samples_a_period_is_period_1(a, seed):
+    # Fact: a settled in-well run at 6.3 Hz repeats every forcing cycle; sampled at 64 Hz (10.2 samples a
+    # cycle, the 6th harmonic and above folded back) with 20 um of laser noise, its Poincare points
+    # differ by the noise and by the interpolation's error, which depends only on where the forcing's
+    # phase falls between two samples: both are allowed for, so all five runs are period 1.
+    rec, strobe = _record(a, 6.3, 64.0, 40.0, settle=40.0, seed=seed)
+    assert _true_period(strobe) == 1 and rec.z.min() > 0  # in the plus well, period 1
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        c = characterize(rec, 6.3, lle=False)
+    assert c["period"] == 1, c["reasons"]
+    assert c["spectrum"]["period"] == 1 and c["spectrum"]["agrees"] is True
+    assert c["decided_by"] in ("time", "spectrum")
+
+
+def test_a_period_2_record_from_rest_is_period_2_after_its_transient():
+    # Fact: forced at 9.5 m/s^2 and 9 Hz from rest in the plus well, the oscillator jumps into the minus
+    # well within its first cycles and settles there on a period-2 orbit (the true stroboscopic map
+    # repeats every 2 cycles at the end). Recorded at 512 Hz from t = 0, transient kept: period 2, and
+    # the steady state found starts after the last jump between wells, no later than a few cycles after
+    # the true orbit is within the laser's noise.
+    f, fs = 9.0, 512.0
+    rec, strobe = _record(9.5, f, fs, 30.0, seed=7)
+    assert _true_period(strobe) == 2 and strobe[-1] < 0  # period 2 in the minus well
+    crossed = np.flatnonzero(np.diff(np.sign(rec.z)) != 0)
+    assert crossed.size, "the transient should jump between the wells"
+    last_jump_s = rec.t[crossed[-1]] - rec.t0
+    off = np.abs(strobe[2:] - strobe[:-2]) > LASER_NOISE
+    settled_s = (np.flatnonzero(off)[-1] + 3) / f  # the true orbit within the noise from here on
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        c = characterize(rec, f, lle=False)
+    assert c["period"] == 2 and len(c["amplitudes"]) == 2, c["reasons"]
+    assert last_jump_s < c["steady_from_s"] <= settled_s + 10 / f
+    assert c["regime"] == "cross-well" or c["regime"] == "in-well-minus"
+
+
+@pytest.mark.parametrize("fs", [512.0, 64.0])
+def test_a_chaotic_cross_well_record_has_no_period(fs):
+    # Fact: at 12 m/s^2 and 9 Hz the oscillator wanders between its wells without repeating (its true
+    # stroboscopic map has no period up to 16): neither sampling rate's allowance for noise and
+    # interpolation makes it periodic.
+    rec, strobe = _record(12.0, 9.0, fs, 30.0, settle=10.0, seed=11)
+    assert _true_period(strobe) is None and rec.z.min() < -Z_WELL / 2 < Z_WELL / 2 < rec.z.max()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        c = characterize(rec, 9.0, lle=False)
+    assert c["period"] is None and c["chaotic"], c
+    assert c["regime"] == "cross-well"
+
+
+def _at_18_hz(seed=3):
+    """An in-well run forced at 18.0 Hz (4.1 m/s^2 rms), 20 s at 512 Hz."""
+    return _record(5.8, 18.0, 512.0, 20.0, settle=5.0, seed=seed)[0]
+
+
+def test_a_stated_frequency_that_is_not_the_inputs_is_refused():
+    # Fact: a base acceleration at 18.0 Hz carries at 9.1 Hz only the accelerometer's noise (about
+    # 0.03 m/s^2 of 4.1 m/s^2 rms, under 10 %): analysed as a 9.1 Hz record it is refused, in one line
+    # naming both frequencies, before any analysis.
+    rec = _at_18_hz()
+    with pytest.raises(InputError, match=r"9\.1 Hz.*18(\.0)? Hz|18(\.0)? Hz.*9\.1 Hz") as err:
+        characterize(rec, 9.1, lle=False)
+    assert "\n" not in str(err.value)
+
+
+def test_a_stated_frequency_that_is_not_the_inputs_exits_2(tmp_path, capsys):
+    # Fact: the command line turns the refusal into exit code 2, one line on stderr, no result file.
+    rec = _at_18_hz()
+    path, out = tmp_path / "run.csv", tmp_path / "r.json"
+    np.savetxt(path, np.column_stack([rec.t, rec.u, rec.z]), delimiter=",", header="t,base_acc,z", comments="",
+               fmt="%.9g")  # fmt: skip
+    assert main(["characterize", str(path), "--forcing-hz", "9.1", "-o", str(out), "--quiet"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "9.1" in err[0] and "18" in err[0] and "Traceback" not in err[0]
+    assert not out.exists()
+
+
+def test_a_slightly_mislabelled_frequency_uses_the_measured_one_with_a_warning():
+    # Fact: a run forced at 9.05 Hz and stated as 9.0 Hz is the same experiment: the input's line is
+    # measured (within a hundredth of a frequency bin's worth of the truth, 1 / 20 s), used, and the
+    # difference (0.6 %, beyond a shaker controller's error) is said in a warning.
+    rec, strobe = _record(5.0, 9.05, 512.0, 20.0, settle=5.0, seed=5)
+    assert _true_period(strobe) == 1
+    with pytest.warns(RecordWarning, match="9.05"):
+        c = characterize(rec, 9.0, lle=False)
+    assert abs(c["forcing"]["measured_hz"] - 9.05) < 0.01 / 20.0
+    assert c["period"] == 1
+    assert any("9.05" in w for w in c["warnings"])
