@@ -149,7 +149,8 @@ def check_forcing_line(rec: Measurement, f_hz: float) -> dict[str, float]:
             and out["dominant_line_rms"] > DOMINANT_LINE_FRACTION * u_rms):  # fmt: skip
         raise MeasurementError(
             f"{rec.source}: the stated forcing {f_hz:g} Hz is not the input's: its line there carries "
-            f"{out['stated_line_rms']:.2g} of the input's {u_rms:.3g} rms ({100 * out['stated_line_rms'] / u_rms:.2g} %), "
+            f"{out['stated_line_rms']:.2g} of the input's {u_rms:.3g} rms "
+            f"({100 * out['stated_line_rms'] / u_rms:.2g} %), "
             f"its dominant line is at {f_dom:.4g} Hz ({out['dominant_line_rms']:.3g} rms): check the forcing frequency"
         )
     return out
@@ -490,7 +491,9 @@ def periodicity(
     edge = EDGE_CYCLES * sync.period + EDGE_SAMPLES / band_fs
     inside = (sync.starts >= edge) & (sync.starts <= sync.t_end - edge)
     if inside.sum() < 8:
-        raise MeasurementError(f"{rec.source}: too few forcing cycles inside the record's edges for a periodicity analysis")
+        raise MeasurementError(
+            f"{rec.source}: too few forcing cycles inside the record's edges for a periodicity analysis"
+        )
     tn = sync.starts[inside]
     z0, v0 = sync.spline(tn), sync.spline(tn, 1)
     zs, vs = sync.spline(t_rel), sync.spline(t_rel, 1)
