@@ -45,3 +45,84 @@ def _size(nbytes: float) -> str:
         if nbytes >= scale:
             return f"{nbytes / scale:.3g} {unit}"
     return f"{nbytes / 2**10:.3g} KiB"
+
+
+# --- threads -------------------------------------------------------------------------------------------
+# One level of parallelism at a time: a process's BLAS threads get the cores it may use and nobody else is
+# using; inside negstiff's own parallel work (a pool of section processes, the simulator's batch threads)
+# BLAS gets one. Measured (docs/speed.md): NSI's second BLAS thread gains nothing alone and costs 6-15x the
+# CPU time beside other work (OpenBLAS's threads spin while they wait for a core).
+
+
+def usable_cores() -> int:
+    """The cores this process may run on: its CPU affinity (``os.sched_getaffinity``: a ``taskset``, a
+    container's cpuset), else the machine's count; ``$NEGSTIFF_THREADS`` caps it (a machine shared with
+    other jobs).
+    """
+    try:
+        cores = len(os.sched_getaffinity(0))
+    except (AttributeError, OSError):  # not on every platform (macOS, Windows)
+        cores = os.cpu_count() or 1
+    env = os.environ.get("NEGSTIFF_THREADS", "")
+    if env.isdigit():
+        cores = min(cores, int(env))
+    return max(1, cores)
+
+
+def idle_cores() -> int:
+    """The usable cores (``usable_cores``) that other work is not using now: minus the one-minute load
+    average (runnable processes, rounded), at least one. Read when a process starts, before it adds to
+    the load itself.
+    """
+    cores = usable_cores()
+    try:
+        load = os.getloadavg()[0]
+    except (AttributeError, OSError):  # no load average on this platform
+        return cores
+    return max(1, min(cores, cores - round(load)))
+
+
+def _load_blas() -> None:
+    """Load numpy's and scipy's linear algebra: each wheel carries its own OpenBLAS, and threadpoolctl
+    limits only the libraries loaded when it is called.
+    """
+    import numpy.linalg  # noqa: F401
+    import scipy.linalg  # noqa: F401
+
+
+def limit_threads(n: int) -> None:
+    """Limit the process's BLAS and OpenMP thread pools to ``n`` threads (threadpoolctl), and numba's where its
+    threading layer runs: for the whole process (a command's start, a worker process's initialiser).
+    negstiff's compiled kernels take no numba threads (its simulator splits batches over its own threads,
+    ``models.simulator.cores``), so numba's layer is not started for nothing.
+    """
+    from threadpoolctl import threadpool_limits
+
+    _load_blas()
+    threadpool_limits(limits=max(1, int(n)))
+    try:
+        import numba
+        from numba.np.ufunc import parallel
+    except ImportError:  # pragma: no cover - numba is a dependency
+        return
+    if getattr(parallel, "_is_initialized", True):
+        numba.set_num_threads(max(1, min(int(n), numba.config.NUMBA_NUM_THREADS)))
+
+
+def one_blas_thread():
+    """A context in which BLAS runs on one thread (``threadpoolctl.threadpool_limits``): around linear
+    algebra too small for a second thread to pay, or inside negstiff's own threads.
+    """
+    from threadpoolctl import threadpool_limits
+
+    return threadpool_limits(limits=1, user_api="blas")
+
+
+def worker_initializer(threads: int | None = None) -> None:
+    """A worker process's start, in a pool of them (``concurrent.futures``' ``initializer``): BLAS, OpenMP
+    and numba on one thread each (the pool is the parallelism); ``threads``, where given, is what
+    negstiff's own threads may use (``$NEGSTIFF_THREADS``, unless the user set it).
+    """
+    if threads is not None:
+        os.environ.setdefault("NEGSTIFF_THREADS", str(int(threads)))
+    limit_threads(1)

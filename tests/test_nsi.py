@@ -68,7 +68,7 @@ def test_covariance_route_gives_the_qr_factor_of_an_oversampled_record():
     # The Gram route's L must be the QR route's (up to column signs) to the rounding its conditioning
     # allows: eps / (smallest residual variance ratio). Channels: band-limited noise at 25x its band
     # edge and its lightly damped response (the conditioning of a device record at 512 Hz), each with
-    # a sensor noise floor (without one the Gram route is refused: next test and GRAM_MIN_RATIO).
+    # a sensor noise floor (without one the plain Cholesky factor is refused, GRAM_MIN_RATIO: next tests).
     rng = np.random.default_rng(3)
     n, fs = 20000, 512.0
     b, a = signal.butter(4, 20.0, fs=fs)
@@ -89,13 +89,41 @@ def test_covariance_route_gives_the_qr_factor_of_an_oversampled_record():
     assert np.abs(np.abs(L) - np.abs(L_qr)).max() <= bound * np.abs(L_qr).max()
 
 
-def test_covariance_route_falls_back_to_qr_on_collinear_channels():
-    # two identical input channels: the Gram matrix is singular, the QR route's factor is returned
+def test_a_singular_gram_matrix_takes_the_ridge_route_and_keeps_po_moesps_projection():
+    # two identical input channels: the Gram matrix is singular and Cholesky fails; the ridge route factors
+    # it. L L^T is the Gram matrix to the ridge's size, and the singular values of L32 (all that PO-MOESP
+    # reads) are those of the projections themselves: Y_f and the past W_p with the row space of U_f
+    # removed, then Y_f's part in the rest of W_p's row space, each from an SVD. (The QR route's are not:
+    # past its zero pivot the direction it takes is rounding's choice, outside U_f's row space)
     rng = np.random.default_rng(4)
     x = rng.standard_normal((4000, 1))
     u, y = np.hstack([x, x]), rng.standard_normal((4000, 1))
-    L, L_qr = subspace.lq_factor(u, y, 5), subspace.lq_factor(u, y, 5, route="qr")
-    assert np.allclose(L, L_qr, rtol=1e-12, atol=1e-14 * np.abs(L_qr).max())
+    i = 5
+    g = subspace.hankel_gram(u, y, i)
+    with pytest.raises(linalg.LinAlgError):
+        linalg.cholesky(g, lower=True)
+    L, route = subspace.lq_factor_route(u, y, i)
+    assert route == "gram_ridge"
+    ridge = g.shape[0] * np.finfo(float).eps * np.abs(g).max()
+    assert np.allclose(L @ L.T, g, rtol=0, atol=10 * ridge)
+
+    j = u.shape[0] - 2 * i + 1
+    u_f = subspace.hankel_block(u, i, i, j)
+    w_p = np.vstack([subspace.hankel_block(u, 0, i, j), subspace.hankel_block(y, 0, i, j)])
+    y_f = subspace.hankel_block(y, i, i, j)
+
+    def row_basis(a):
+        _, s, vt = np.linalg.svd(a, full_matrices=False)
+        return vt[s > 1e-10 * s[0]]
+
+    def without(a, basis):
+        return a - (a @ basis.T) @ basis
+
+    q_f = row_basis(u_f)
+    expected = np.linalg.svd(without(y_f, q_f) @ row_basis(without(w_p, q_f)).T / np.sqrt(j), compute_uv=False)
+    a, b = 2 * i, 2 * i + 3 * i  # L32: the Y_f rows against the past (U_p, Y_p) columns
+    got = np.linalg.svd(L[b:, a:b], compute_uv=False)
+    assert np.allclose(got, expected, rtol=0, atol=10 * np.sqrt(ridge))
     with pytest.raises(ValueError, match="unknown LQ route"):
         subspace.lq_factor(u, y, 5, route="fast")
 
@@ -116,6 +144,54 @@ def test_output_equation_recovers_x0_b_d_of_a_system_with_a_negative_and_a_zero_
     x0_e, B_e, D_e = subspace.estimate_bd(A, C, u, y)
     for est, true in ((x0_e, x0), (B_e, B), (D_e, D)):
         assert np.allclose(est, true, rtol=1e-9, atol=1e-9)
+
+
+def _dop853_double_well(duration=60.0, fs=512.0, seed=0):
+    """A noise-free record as a library user writes one: m z'' + c z' - k1 z + k3 z^3 = -m b'' integrated by
+    scipy's DOP853 (rtol 1e-8), b'' band-limited random (3-40 Hz, 6 m/s^2 rms, a cubic spline through
+    its samples), sampled at 512 Hz. Wells at +-20 mm, 10 Hz (K'(z*) = 2 k1), 5 % damping.
+    """
+    from scipy.integrate import solve_ivp
+    from scipy.interpolate import CubicSpline
+
+    m, z_star, f_well = 0.2, 0.02, 10.0
+    k1 = m * (2 * np.pi * f_well) ** 2 / 2
+    k3, c = k1 / z_star**2, 2 * 0.05 * np.sqrt(2 * k1 * m)
+    n = int(duration * fs)
+    t = np.arange(n) / fs
+    b = signal.sosfiltfilt(
+        signal.butter(4, [3.0, 40.0], btype="band", fs=fs, output="sos"), np.random.default_rng(seed).standard_normal(n)
+    )
+    b *= 6.0 / b.std()
+    coef = CubicSpline(t, b).c
+
+    def rhs(time, state):
+        k = min(int(time * fs), n - 2)  # the spline's piece, evaluated by hand (CubicSpline's call costs 5x)
+        h, p = time - k / fs, coef[:, k]
+        acc = ((p[0] * h + p[1]) * h + p[2]) * h + p[3]
+        return [state[1], (-c * state[1] + k1 * state[0] - k3 * state[0] ** 3) / m - acc]
+
+    sol = solve_ivp(rhs, (0.0, t[-1]), [z_star, 0.0], method="DOP853", t_eval=t, rtol=1e-8, atol=1e-12)
+    return from_arrays(b, sol.y[0], fs, mass=m, gravity=0.0, source="dop853"), f_well
+
+
+def test_a_noise_free_dop853_record_takes_the_fast_route_and_finds_both_wells(monkeypatch):
+    # a noise-free record's band-limited channels leave the Hankel Gram matrix singular to rounding
+    # (Cholesky fails): NSI takes the ridge route (subspace.GRAM_RIDGE), not the chunked QR (8x the CPU
+    # time). Both wells' frequencies are the truth's linearisation sqrt(K'(z*)/m) within 1 % (measured
+    # 4e-5: the smoothing's), and the QR route's within 2e-6 (measured 8e-7: what the Gram matrix cannot
+    # resolve, below sqrt(n eps) of the largest singular value)
+    rec, f_well = _dop853_double_well()
+    est = NSI(refine=False).fit(rec)
+    assert set(est.wells_) == {"minus", "plus"}
+    for name, well in est.result()["wells"].items():
+        assert well["lq_routes"] and set(well["lq_routes"]) == {"gram_ridge"}, name
+        assert well["f_hz"] == pytest.approx(f_well, rel=0.01), name
+    monkeypatch.setattr(subspace, "gram_factor", lambda g: None)  # every pass through the chunked QR
+    qr = NSI(refine=False).fit(rec)
+    for name, well in est.wells_.items():
+        assert qr.wells_[name].lq_routes == ("qr",) * len(well.lq_routes)
+        assert well.f_hz == pytest.approx(qr.wells_[name].f_hz, rel=2e-6), name
 
 
 @pytest.fixture(scope="module")

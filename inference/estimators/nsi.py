@@ -116,6 +116,8 @@ class WellFit:
     band_hz: tuple[float, float]
     singular_values: list[float]
     frf: dict[str, Any]
+    lq_routes: tuple[str, ...] = ()
+    """Each pass's route of the subspace step's LQ factor (``subspace.LQ_ROUTES``)."""
 
 
 def physical_pole(ss: subspace.StateSpace) -> complex:
@@ -248,6 +250,7 @@ class NSI(Identifier):
         last pass's pole; the shifted coefficients are the last pass's cubic re-expanded exactly at
         r (reference study Eq. 7), so that K(z*) = 0 there.
         """
+        routes = []
         for _ in range(self.passes):
             x, w, scale, means = self.extended_input(rec, zs, v, z_ref)
             y = x - x.mean()
@@ -256,6 +259,7 @@ class NSI(Identifier):
                 ss = subspace.identify(w, (y / ys)[:, None], rec.dt, self.order, self.block_rows)
             except (ValueError, np.linalg.LinAlgError) as exc:
                 raise NSIError(f"{rec.source}: subspace step failed ({exc})") from None
+            routes.append(str(ss.lq_route))
             lam = physical_pole(ss)
             wn, zeta = abs(lam), -lam.real / abs(lam)
             fn = wn / (2 * math.pi)
@@ -324,6 +328,7 @@ class NSI(Identifier):
                 "ratio": ratio,
                 "poles": [(abs(p) / (2 * math.pi), -p.real / abs(p)) for p in ss.poles() if p.imag >= 0],
             },
+            tuple(routes),
         )
 
     def _check_record(self, rec: Measurement) -> None:
@@ -393,6 +398,7 @@ class NSI(Identifier):
                 "quality_im_over_re": w.quality,
                 "band_hz": list(w.band_hz),
                 "singular_values": w.singular_values,
+                "lq_routes": list(w.lq_routes),
                 "z_frame_model": self.models_by_well_[name].to_dict(),
             }
             for name, w in self.wells_.items()
