@@ -153,3 +153,32 @@ def test_a_slightly_mislabelled_frequency_uses_the_measured_one_with_a_warning()
     assert abs(c["forcing"]["measured_hz"] - 9.05) < 0.01 / 20.0
     assert c["period"] == 1
     assert any("9.05" in w for w in c["warnings"])
+
+
+def _wandering(relative_wander, seed=0, f_hz=9.0, fs=500.0, n_cycles=200):
+    """A period-1 response (a fundamental and its third harmonic, 10 mm) whose amplitude wanders slowly
+    (Gaussian noise low-passed at f / 5, ``relative_wander`` rms) with 1 % white sensor noise."""
+    from scipy import signal
+
+    rng = np.random.default_rng(seed)
+    t = np.arange(int(n_cycles / f_hz * fs)) / fs
+    wander = signal.sosfiltfilt(signal.butter(2, f_hz / 5, fs=fs, output="sos"), rng.standard_normal(t.size))
+    wander *= relative_wander / wander.std()
+    z = (1 + wander) * (np.sin(2 * np.pi * f_hz * t + 0.3) + 0.3 * np.sin(2 * np.pi * 3 * f_hz * t))
+    z += 0.01 * rng.standard_normal(t.size)
+    return from_arrays(np.sin(2 * np.pi * f_hz * t), 0.01 * z, fs)
+
+
+def test_the_spectrum_decides_where_the_points_nearly_repeat():
+    # Fact: a period-1 response whose amplitude wanders by 16 % (no sub-harmonic line in its spectrum)
+    # repeats from cycle to cycle beyond the noise's tolerance but within 3x it: the time domain cannot
+    # decide, the spectrum's lines say period 1. Wandering by 60 %, far beyond, it has no period.
+    from negstiff.inference.analysis.periodicity import UNDECIDED_RATIO, periodicity
+
+    p = periodicity(_wandering(0.16), 9.0)
+    ratio = p["residuals"][1] / p["tolerances"][1]
+    assert 1 < ratio <= UNDECIDED_RATIO  # the premise: the points nearly repeat
+    assert p["period"] == 1 and p["decided_by"] == "spectrum" and p["spectrum"]["period"] == 1
+    p = periodicity(_wandering(0.60), 9.0)
+    assert min(p["residuals"][q] / p["tolerances"][q] for q in p["residuals"]) > UNDECIDED_RATIO
+    assert p["period"] is None and p["decided_by"] == "time"
