@@ -90,23 +90,25 @@ def _load_blas() -> None:
     import scipy.linalg  # noqa: F401
 
 
-def limit_threads(n: int) -> None:
-    """Limit the process's BLAS and OpenMP thread pools to ``n`` threads (threadpoolctl), and numba's where its
-    threading layer runs: for the whole process (a command's start, a worker process's initialiser).
-    negstiff's compiled kernels take no numba threads (its simulator splits batches over its own threads,
-    ``models.simulator.cores``), so numba's layer is not started for nothing.
+def limit_threads(n: int):
+    """Limit the process's BLAS and OpenMP thread pools to ``n`` threads (threadpoolctl), and numba's where
+    its threading layer runs: at once, for the whole process (a worker process's initialiser), or until the
+    returned ``threadpool_limits`` context exits (a command). negstiff's compiled kernels take no numba
+    threads (its simulator splits batches over its own threads, ``models.simulator.cores``), so numba's
+    layer is not started for nothing.
     """
     from threadpoolctl import threadpool_limits
 
     _load_blas()
-    threadpool_limits(limits=max(1, int(n)))
+    limiter = threadpool_limits(limits=max(1, int(n)))
     try:
         import numba
         from numba.np.ufunc import parallel
     except ImportError:  # pragma: no cover - numba is a dependency
-        return
+        return limiter
     if getattr(parallel, "_is_initialized", True):
         numba.set_num_threads(max(1, min(int(n), numba.config.NUMBA_NUM_THREADS)))
+    return limiter
 
 
 def one_blas_thread():

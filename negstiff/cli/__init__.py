@@ -17,6 +17,7 @@ import warnings
 from collections.abc import Sequence
 
 from negstiff.files import transaction
+from negstiff.resources import idle_cores, limit_threads
 
 from .common import InputError, bad_input_types, check_paths, write_json  # noqa: F401 (API)
 from .parser import build_parser
@@ -54,7 +55,12 @@ def main(argv: Sequence[str] | None = None) -> int:
         # a command's outputs (a record and its truth, a result and its figure) land together or not at
         # all; reproduce's report is one folder already, and its section cache must be readable at once
         group = transaction() if args.command != "reproduce" else contextlib.nullcontext()
-        with warnings.catch_warnings(), group:
+        # one level of parallelism at a time: BLAS (and OpenMP) on the cores this process may use that other
+        # work is not using now, for the command (an in-process caller gets its own back); beside busy
+        # processes a second BLAS thread only spins (NSI on a 300 s record: 6-15x the CPU time,
+        # docs/speed.md). Work that runs its own threads or processes takes BLAS down to one thread itself
+        # (subspace.identify, reproduce's section processes)
+        with warnings.catch_warnings(), group, limit_threads(idle_cores()):
             # the libraries' notices (arviz's dimension names, numpy's empty slices) are not the user's
             # business; negstiff's own warnings are in the result and on stderr (``warn``)
             warnings.simplefilter("ignore")
