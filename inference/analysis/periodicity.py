@@ -25,11 +25,15 @@
   The interpolation's error: any linear, shift-invariant interpolation of samples of a period-T signal
   (harmonics folded back or not) errs at t_n by a function of the forcing phase's offset between two
   samples, phi_n = frac(t_n fs), alone; a Fourier series in phi_n (``SAMPLING_HARMONICS``) on each
-  branch takes it up, less what as many regressors explain of any sequence by chance.
+  branch takes it up, less what as many regressors explain of any sequence by chance (on a record
+  acquired with under ``SAMPLING_REGRESSORS_BELOW`` samples a cycle; above, the error is negligible).
 * Which verdict decides (``decided_by``): the time domain's, unless it cannot decide: no lag repeats
-  within its tolerance but one within ``UNDECIDED_RATIO`` x it. The spectrum's sub-harmonic lines then
-  name the period, provided its own residual is also within that band; far beyond it (a chaotic or
-  quasi-periodic record) the answer is ``None``.
+  within its tolerance but one within ``UNDECIDED_RATIO`` x it, or the tolerance itself rejects almost
+  nothing (``MAX_DECISIVE_TOLERANCE``: a noise read from a coarse chaotic record's own broadband floor).
+  The spectrum's sub-harmonic lines then name the period q, provided the folded lines k f / q carry
+  ``LINE_FRACTION`` of the response's power (``spectrum.line_fraction``; a chaotic response's broadband
+  spectrum does not) and the time residual of q is within that band; else (and far beyond the band: a
+  chaotic or quasi-periodic record) the answer is ``None``.
 * Amplitudes: for period p, the half peak-to-peak of z over each of p consecutive forcing cycles
   (averaged over the steady state): one amplitude per branch of the bifurcation map.
 """
@@ -309,6 +313,23 @@ UNDECIDED_RATIO = 3.0
 """No lag within its tolerance but one within this many times it: the time domain cannot decide, the
 spectrum does."""
 
+MAX_DECISIVE_TOLERANCE = 0.5
+"""A tolerance this large (of the steady response's spread; independent points differ by 2) rejects
+almost nothing: a noise read from a coarse record's broadband floor (a chaotic response's own, at 7
+samples a cycle) is no sensor's, and the time domain's "periodic" is then the spectrum's to confirm."""
+
+SAMPLING_REGRESSORS_BELOW = 24.0
+"""Samples a forcing cycle (as acquired) below which the interpolation's error is allowed for: above,
+a spline of the band-limited signal errs by far less than any noise, and the regressors would only
+take up chance."""
+
+LINE_FRACTION = 0.9
+"""The spectrum calls a response periodic with period q when the folded lines k f / q (k f / q below
+``HARMONICS_COUNTED`` f) carry at least this fraction of its power (above f / 4q: a drift is not
+counted); a chaotic response's broadband spectrum does not."""
+
+HARMONICS_COUNTED = 24
+
 
 def sampling_regressors(times: np.ndarray, fs: float, harmonics: int = SAMPLING_HARMONICS) -> np.ndarray:
     """(N, 2 ``harmonics``) sin and cos of 2 pi j phi_n, phi_n = frac(t_n fs): where each Poincare time falls
@@ -425,6 +446,30 @@ def steady_period(points: np.ndarray, tol: float, regressors: np.ndarray | None 
     return {"period": period, "residuals": r, "tolerances": tols, "starts": starts}
 
 
+def line_fraction(z: np.ndarray, fs: float, f_hz: float, q: int, acquired_fs: float | None = None) -> float:
+    """The fraction of z's power (Hann periodogram above f / 4q) within two bins of the lines k f / q,
+    k < ``HARMONICS_COUNTED`` q, each folded about the acquisition's Nyquist frequency (``acquired_fs``,
+    default ``fs``: a record interpolated from a coarser acquisition keeps its folded lines where the
+    acquisition put them).
+    """
+    acquired_fs = fs if acquired_fs is None else acquired_fs
+    x = (z - z.mean()) * np.hanning(z.size)
+    spec = np.abs(np.fft.rfft(x)) ** 2
+    freqs = np.fft.rfftfreq(z.size, 1.0 / fs)
+    counted = freqs >= f_hz / (4 * q)
+    total = float(spec[counted].sum())
+    if total <= 0:
+        return 0.0
+    lines = np.arange(1, HARMONICS_COUNTED * q) * f_hz / q
+    folded = np.abs((lines + acquired_fs / 2) % acquired_fs - acquired_fs / 2)
+    df = fs / z.size
+    on = np.zeros(freqs.size, bool)
+    for g in folded:
+        c = int(round(g / df))
+        on[max(c - 2, 0) : c + 3] = True
+    return float(spec[counted & on].sum() / total)
+
+
 SPECTRAL_LINE_RATIO = 100.0
 """A sub-harmonic line counts when its power exceeds this many times the spectrum's median around it
 (20 dB: a periodogram of noise alone exceeds it with probability e^-69 per bin)."""
@@ -508,7 +553,8 @@ def periodicity(
     inputs = np.column_stack([sync.cycle_amplitude / sync.cycle_amplitude.mean() - 1,
                               np.unwrap(sync.cycle_phase) - slow])[inside]  # fmt: skip
     # where each Poincare instant falls between the acquisition's samples: the interpolation's error
-    regressors = np.column_stack([inputs, sampling_regressors(tn, band_fs)])
+    coarse = band_fs / f_hz < SAMPLING_REGRESSORS_BELOW
+    regressors = np.column_stack([inputs, sampling_regressors(tn, band_fs)]) if coarse else inputs
     # noise of a Poincare point: white sensor noise through the band limit fc (gain sqrt(2 fc / fs))
     # and its derivative (gain 2 pi fc sqrt(2 fc / (3 fs)))
     noise = noise_level(rec.displacement, rec.fs) if noise is None else noise
@@ -527,12 +573,18 @@ def periodicity(
     f_meas = sync.forcing["measured_hz"]
     steady = t_rel >= steady_from
     spectrum = subharmonic_lines(zs[steady], rec.fs, f_meas)
-    decided_by = "time"
     q = spectrum["period"]
-    if period is None and ratios and ratios[p_best] <= UNDECIDED_RATIO and ratios.get(q, math.inf) <= UNDECIDED_RATIO:
+    spectrum["line_fraction"] = line_fraction(zs[steady], rec.fs, f_meas, q, band_fs)
+    spectral = q if spectrum["line_fraction"] >= LINE_FRACTION and q in r else None
+    decided_by = "time"
+    if period is not None and tol >= MAX_DECISIVE_TOLERANCE:
+        # a tolerance that rejects nothing: the points' "periodic" is the spectrum's to confirm
+        period, decided_by = spectral, "spectrum"
+    elif period is None and ratios and ratios[p_best] <= UNDECIDED_RATIO and ratios.get(q, math.inf) <= UNDECIDED_RATIO:
         # the points nearly repeat, too little beyond their tolerance to call it chaos: the lines decide
-        period, decided_by = q, "spectrum"
-        start = starts[q]
+        period, decided_by = spectral, "spectrum"
+    if period is not None:
+        start = starts[period]
         steady_from = float(tn[start])
     spectrum["agrees"] = spectrum["period"] == period if period is not None else None
     # amplitude per branch: half peak-to-peak of the band-limited z over each of p consecutive steady cycles
