@@ -38,6 +38,7 @@ from typing import Any
 
 import numpy as np
 from scipy import signal
+from tqdm import tqdm
 
 from negstiff.errors import MeasurementError
 from negstiff.inference.estimators.identification import Estimate, Identifier, visited_well
@@ -165,6 +166,8 @@ class NSI(Identifier):
         stops when the shift falls below 0.1 % of the motion's spread).
     refine : bool, default True
         Finish by output-error refinement (kept only if it predicts the held-out tail no worse).
+    progress : bool, default False
+        A progress bar over the identification passes on stderr, shown once they take more than 2 s.
 
     Attributes
     ----------
@@ -203,6 +206,7 @@ class NSI(Identifier):
         "validation_fraction": FRACTION,
         "passes": Interval(int, 1, 20),
         "refine": Boolean(),
+        "progress": Boolean(),
     }
 
     def __init__(
@@ -214,6 +218,7 @@ class NSI(Identifier):
         validation_fraction: float = 0.2,
         passes: int = 2,
         refine: bool = True,
+        progress: bool = False,
     ):
         self.order = order
         self.block_rows = block_rows
@@ -221,6 +226,7 @@ class NSI(Identifier):
         self.validation_fraction = validation_fraction
         self.passes = passes
         self.refine = refine
+        self.progress = progress
 
     # --- one well ----------------------------------------------------------------------------
     def extended_input(self, rec: Measurement, zs: np.ndarray, v: np.ndarray, z_ref: float):
@@ -242,16 +248,17 @@ class NSI(Identifier):
             )
         return x, w, scale, means
 
-    def fit_well(self, rec: Measurement, zs: np.ndarray, v: np.ndarray, z_ref: float) -> WellFit:
+    def fit_well(self, rec: Measurement, zs: np.ndarray, v: np.ndarray, z_ref: float, bar=None) -> WellFit:
         """Identify the ULS and the nonlinear coefficients around ``z_ref``.
 
         Each pass identifies about the current reference z_g, then moves the reference to the
         identified restoring force's stable root r nearest z_g. The reported ULS (f, zeta) is the
         last pass's pole; the shifted coefficients are the last pass's cubic re-expanded exactly at
-        r (reference study Eq. 7), so that K(z*) = 0 there.
+        r (reference study Eq. 7), so that K(z*) = 0 there. ``bar`` (a tqdm bar, optional) is
+        advanced by ``passes`` over the well, one per pass.
         """
         routes = []
-        for _ in range(self.passes):
+        for done in range(1, self.passes + 1):
             x, w, scale, means = self.extended_input(rec, zs, v, z_ref)
             y = x - x.mean()
             ys = y.std()
@@ -301,7 +308,11 @@ class NSI(Identifier):
                 )
             r = min(stable, key=abs)
             z_ref = z_ref + r
+            if bar is not None:
+                bar.update()
             if abs(r) < 1e-3 * zs.std():  # already at the well: another pass would change nothing
+                if bar is not None:
+                    bar.update(self.passes - done)
                 break
         coefficients = {
             "k1_tilde": wn**2 + 2 * c["x2"] * r + 3 * c["x3"] * r**2,
@@ -343,9 +354,14 @@ class NSI(Identifier):
         ident = rec.segment(0, n_id)
         zs, v, _, band = ident.states("band")
         z_minus, z_plus = well_guesses(ident)
-        wells = {"plus": self.fit_well(ident, zs, v, z_plus)}
-        if z_minus is not None:
-            wells["minus"] = self.fit_well(ident, zs, v, z_minus)
+        bar = tqdm(
+            total=self.passes * (1 if z_minus is None else 2), desc="NSI passes", unit="pass", leave=False,
+            disable=not self.progress, delay=2.0,
+        )  # fmt: skip
+        with bar:
+            wells = {"plus": self.fit_well(ident, zs, v, z_plus, bar)}
+            if z_minus is not None:
+                wells["minus"] = self.fit_well(ident, zs, v, z_minus, bar)
         gains = [w.coefficients["input_gain"] for w in wells.values()]
         # the one mass rule (``weak.mass_of``): a force record without a mass gets it from the FRF level (b = 1/m)
         mass, mass_source = mass_of(rec, known_input_gain(rec), float(np.mean(gains)), what="the FRF level")

@@ -173,7 +173,9 @@ def cmd_identify(args) -> int:
     if args.method == "nsi":
         from negstiff.inference.estimators.nsi import NSI
 
-        est: NSI | SINDy = NSI(order=args.order, block_rows=args.block_rows, refine=not args.no_refine)
+        est: NSI | SINDy = NSI(
+            order=args.order, block_rows=args.block_rows, refine=not args.no_refine, progress=wants_progress(args)
+        )
     else:
         from negstiff.inference.estimators.sindy import SINDy
 
