@@ -107,7 +107,7 @@ def limit_threads(n: int):
     except ImportError:  # pragma: no cover - numba is a dependency
         return limiter
     if getattr(parallel, "_is_initialized", True):
-        numba.set_num_threads(max(1, min(int(n), numba.config.NUMBA_NUM_THREADS)))
+        numba.set_num_threads(max(1, min(int(n), getattr(numba.config, "NUMBA_NUM_THREADS", 1))))
     return limiter
 
 

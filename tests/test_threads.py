@@ -52,6 +52,19 @@ def test_limit_threads_sets_numpys_and_scipys_blas_and_gives_them_back():
     assert _blas_threads() == before
 
 
+def test_numbas_threads_follow_the_limit_once_its_threading_layer_runs():
+    # negstiff's kernels take no numba threads, so a limit does not start numba's threading layer; once it
+    # runs (a user's parallel kernel), its thread count follows the limit
+    import numba
+
+    n0 = numba.get_num_threads()  # starts the layer
+    try:
+        resources.limit_threads(1).restore_original_limits()
+        assert numba.get_num_threads() == 1
+    finally:
+        numba.set_num_threads(n0)
+
+
 def test_the_subspace_step_runs_on_one_blas_thread(monkeypatch):
     # NSI's linear algebra is too small for a second BLAS thread to pay (docs/speed.md): identify limits
     # BLAS to one thread around it, whatever the process has
