@@ -36,6 +36,8 @@ from negstiff.errors import MeasurementError, RecordWarning, issue
 from negstiff.inference.analysis.lyapunov import largest_lyapunov
 from negstiff.inference.analysis.periodicity import (
     FREQUENCY_MISLABEL,
+    LINE_FRACTION,
+    MAX_DECISIVE_TOLERANCE,
     check_forcing_line,
     classify_regime,
     periodicity,
@@ -222,7 +224,19 @@ def characterize(
                 "noise_std", "forcing", "spectrum")  # fmt: skip
         out |= {k: per[k] for k in keys}
         out["poincare_z"] = per["poincare_z"]
-        if per["period"] is None:
+        lines = (f"the spectrum's lines at multiples of f/{per['spectrum']['period']} carry "
+                 f"{100 * per['spectrum']['line_fraction']:.3g} % of the response's power "
+                 f"(a periodic response's: {100 * LINE_FRACTION:g} % or more)")  # fmt: skip
+        loose = per["tolerance"] >= MAX_DECISIVE_TOLERANCE
+        points = (
+            f"the Poincare points cannot tell: their tolerance ({per['tolerance']:.3g} of the response's spread, "
+            f"from a noise of {per['noise_std']:.3g} m read from the record) rejects almost nothing"
+        )
+        if per["period"] is None and per["decided_by"] == "spectrum":
+            out["reasons"]["period"] = f"no period: {points if loose else 'the Poincare points nearly repeat'}, " + (
+                f"and {lines}: chaotic or quasi-periodic"
+            )
+        elif per["period"] is None:
             p_best = min(per["residuals"], key=lambda p: per["residuals"][p] / per["tolerances"][p])
             out["reasons"]["period"] = (
                 f"no period up to 16 forcing cycles repeats within the noise and the input's own variation (closest: "
@@ -231,11 +245,12 @@ def characterize(
             )
         elif per["decided_by"] == "spectrum":
             p = per["period"]
-            out["reasons"]["period_spectrum"] = (
-                f"decided by the spectrum's sub-harmonic lines: the Poincare points repeat every {p} cycle(s) only "
-                f"within {per['residuals'][p] / per['tolerances'][p]:.2g}x their tolerance (residual "
-                f"{per['residuals'][p]:.3g}, tolerance {per['tolerances'][p]:.3g})"
-            )
+            why = points if loose else (
+                f"the Poincare points repeat every {p} cycle(s) only within "
+                f"{per['residuals'][p] / per['tolerances'][p]:.2g}x their tolerance "
+                f"(residual {per['residuals'][p]:.3g}, tolerance {per['tolerances'][p]:.3g})"
+            )  # fmt: skip
+            out["reasons"]["period_spectrum"] = f"decided by the spectrum: {why}; {lines}"
         elif per["spectrum"]["agrees"] is False:
             out["reasons"]["period_spectrum"] = (
                 f"the Poincare points repeat every {per['period']} cycle(s), but the spectrum's sub-harmonic lines "

@@ -345,9 +345,9 @@ def sampling_regressors(times: np.ndarray, fs: float, harmonics: int = SAMPLING_
     return np.column_stack([np.sin(arg), np.cos(arg)])
 
 
-def _explained(d: np.ndarray, x: np.ndarray | None, p: int) -> float:
+def _explained(d: np.ndarray, x: np.ndarray | None, p: int, per_branch: bool = False) -> float:
     """The rms of what the regressors ``x`` (N, k) explain of the differences ``d`` (N, dim) at lag p, by
-    least squares on each branch n mod p (one fit for all when the branches are short), less what as
+    least squares (``per_branch``: on each branch n mod p, unless the branches are short), less what as
     many regressors explain of any sequence by chance (k / (N - k) of the rest).
     """
     if x is None or x.size == 0:
@@ -357,7 +357,7 @@ def _explained(d: np.ndarray, x: np.ndarray | None, p: int) -> float:
     n, k = x.shape
     if k == 0:
         return 0.0
-    groups = p if n // p >= 10 * k else 1
+    groups = p if per_branch and n // p >= 10 * k else 1
     fit = np.zeros_like(d)
     for b in range(groups):
         rows = slice(b, None, groups)
@@ -390,11 +390,13 @@ def steady_start(points: np.ndarray, p: int, tol: float) -> int:
     return int(out[-1] + 1) if out.size else 0
 
 
-def _lag(points: np.ndarray, p: int, tol: float, regressors: np.ndarray | None) -> tuple[float, float]:
+def _lag(
+    points: np.ndarray, p: int, tol: float, regressors: np.ndarray | None, per_branch: bool = False
+) -> tuple[float, float]:
     d = points[p:] - points[:-p]
     r = float(np.sqrt(np.mean(np.sum(d**2, axis=1))))
     x = None if regressors is None else regressors[p:] - regressors[:-p]
-    return r, math.hypot(tol, _explained(d, x, p))
+    return r, math.hypot(tol, _explained(d, x, p, per_branch))
 
 
 def detect_period(
@@ -411,14 +413,16 @@ def detect_period(
     return found["period"], found["residuals"], found["tolerances"]
 
 
-def steady_period(points: np.ndarray, tol: float, regressors: np.ndarray | None = None) -> dict[str, Any]:
+def steady_period(
+    points: np.ndarray, tol: float, regressors: np.ndarray | None = None, per_branch: bool = False
+) -> dict[str, Any]:
     """For each lag p of ``PERIODS``: the steady state's first cycle (``steady_start``, at most the last
     ``MIN_STEADY_FRACTION`` of the cycles), the residual r(p) = rms |P_(n+p) - P_n| over it (the points
     detrended there) and its tolerance: ``tol`` (the noise's) combined with what the per-cycle
     ``regressors`` (N, k) explain of the differences. The tolerance takes what the shaker's own
     cycle-to-cycle variation (amplitude, phase) and the interpolation (the sampling offset) explain: a
     periodic response to a shaker whose amplitude breathes changes with it, an interpolated one errs
-    by where its instants fall between samples.
+    by where its instants fall between samples (differently on each branch: ``per_branch``).
 
     Returns ``{"period", "residuals", "tolerances", "starts"}``: the smallest p with r(p) below its
     tolerance and, where tested on the same steady state, r(2p) below twice its own (None without).
@@ -435,9 +439,9 @@ def steady_period(points: np.ndarray, tol: float, regressors: np.ndarray | None 
         if p >= tail.shape[0] // 2:
             break
         starts[p] = s0
-        r[p], tols[p] = _lag(tail, p, tol, reg)
+        r[p], tols[p] = _lag(tail, p, tol, reg, per_branch)
         if 2 * p in PERIODS and 2 * p < tail.shape[0] // 2:
-            doubled[p] = _lag(tail, 2 * p, tol, reg)
+            doubled[p] = _lag(tail, 2 * p, tol, reg, per_branch)
     period = None
     for p, rp in r.items():
         if rp < tols[p] and (p not in doubled or doubled[p][0] < 2 * doubled[p][1]):
@@ -564,7 +568,7 @@ def periodicity(
     point_noise = math.hypot(noise * gz / scale_z, noise * gv / scale_v)
     # r(p) of a truly periodic record is sqrt(2) x the point noise; 4x that, and at least 2 %
     tol = max(0.02, 4 * math.sqrt(2) * point_noise)
-    found = steady_period(pts, tol, regressors)
+    found = steady_period(pts, tol, regressors, per_branch=coarse)
     period, r, tols, starts = found["period"], found["residuals"], found["tolerances"], found["starts"]
     ratios = {p: r[p] / tols[p] for p in r}
     p_best = min(ratios, key=ratios.__getitem__) if ratios else None
