@@ -36,7 +36,7 @@ import numpy as np
 from negstiff.errors import issue
 from negstiff.inference.estimators.base import Estimator
 from negstiff.inference.record.measurement import Measurement
-from negstiff.inference.steps.plausibility import classified
+from negstiff.inference.steps.plausibility import classified, judgement
 from negstiff.inference.steps.refine import refine_stage, stroke_quantiles
 from negstiff.inference.steps.validation import boundedness, validate
 from negstiff.models import Model
@@ -281,9 +281,10 @@ class Identifier(Estimator):
                 mass_source += ", refined by simulation error"
         bounded = boundedness(model, rec.segment(0, n_id))
         equilibria, modal, eq_warnings = equilibria_and_modes(model, rec, (float(stroke[0]), float(stroke[-1])))
+        judged = judgement(model, rec, validation, modal, est.modal)
         if est.modal is not None:
             modal = est.modal
-        own = [*est.warnings, *([] if bounded["ok"] else [bounded["warning"]]), *eq_warnings]
+        own = [*est.warnings, *([] if bounded["ok"] else [bounded["warning"]]), *eq_warnings, *judged]
         if validation.get("diverged"):
             own.append(validation["warning"])
         lines = classified(rec, model, own)

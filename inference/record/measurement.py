@@ -193,7 +193,8 @@ class Measurement:
         record made physical (a calibrated response may span more).
         """
         out = []
-        if self.z is not None:
+        scale = self.info.get("scale")
+        if self.z is not None and not (scale and scale.get("value") is None):  # a span of unknown units says nothing
             span = float(np.ptp(self.z))
             if span > STROKE_LIMIT_M:
                 out.append(
@@ -449,7 +450,7 @@ def load(
     z: np.ndarray | None = None
     resp: dict[str, Any] = {"measured": None}
     if response or any(k in cols for k in sensors.RESPONSES):
-        z, resp = sensors.derive(cols, input_name, fs, str(path))
+        z, resp = sensors.derive(cols, input_name, fs, str(path), units_known=not unknown)
         k = int(round(resp.get("trim_s", 0.0) * fs))
         if k:
             if n <= 4 * k:
@@ -727,7 +728,7 @@ def from_arrays(
     fs = check_sampling_rate(source, fs, "given")
     info = dict(kw.pop("info", {}))
     if z is None and any(k in cols for k in sensors.RESPONSES):
-        z, info["response"] = sensors.derive(cols, input_name, fs, source)
+        z, info["response"] = sensors.derive(cols, input_name, fs, source, units_known=unknown_scale is None)
         if info["response"].get("trim_s"):
             what = info["response"]["measured"]
             raise MeasurementError(f"{source}: z from {what} needs the file's route (an integral's ends cut): "

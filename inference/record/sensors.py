@@ -93,13 +93,143 @@ def _trend(z: np.ndarray, fs: float, n_blocks: int = 10) -> tuple[float, float]:
     return float(slope), se
 
 
-def velocity_to_z(v: np.ndarray, fs: float, what: str) -> tuple[np.ndarray, dict[str, Any]]:
+DRIFT_CUTOFF_MAX_HZ = 0.05
+"""The highest corner [Hz] of the slow part removed from an integrated velocity: the lower end of the field's
+0.05-0.1 Hz high-pass of a vibrometer's integral (below any shaker's excitation band). The lower end because a
+bistable device's own motion has slow content besides its stays in one well (on the tests' vibrometer record,
+z erred by 0.47 mm rms after a 0.05 Hz corner, 0.80 mm after 0.1 Hz; wells 31 mm apart)."""
+
+DRIFT_CUTOFF_FRACTION = 1.0 / 40.0
+"""The corner is at most this fraction of the velocity's dominant frequency (its spectrum's peak): a decade
+and a half below the dynamics, where a second-order corner changes their amplitude by 0.1 %."""
+
+DRIFT_SPAN_FRACTION = 0.2
+"""A slow part of the integral spanning more than this fraction of the record's own 5-95 % range is removed
+even when its straight-line trend is not significant (a wander that comes back)."""
+
+
+def _dominant_hz(v: np.ndarray, fs: float) -> float:
+    """The frequency [Hz] of the largest line of a velocity's Welch spectrum (8 s segments), DC excluded."""
+    from scipy.signal import welch
+
+    f, p = welch(v - v.mean(), fs, nperseg=min(v.size, int(8 * fs)))
+    p[0] = 0.0
+    return float(f[int(np.argmax(p))])
+
+
+def _slow_part(x: np.ndarray, fs: float, cutoff_hz: float) -> np.ndarray:
+    """The part of ``x`` below ``cutoff_hz``: block means over an eighth of the corner's period, low-passed
+    forward and backward (second-order Butterworth: zero phase, scipy) and interpolated back to every sample.
+    Averaging first keeps the filter well conditioned (a corner at 5e-5 of the sampling rate) and cheap.
+    """
+    from scipy.signal import butter, sosfiltfilt
+
+    block = max(1, int(fs / (8 * cutoff_hz)))
+    nb = x.size // block
+    if nb < 16:  # shorter than two corner periods: only a constant and a ramp are seen as slow
+        t = np.arange(x.size)
+        return np.polyval(np.polyfit(t, x, 1), t)
+    means = x[: nb * block].reshape(nb, block).mean(axis=1)
+    centres = (np.arange(nb) + 0.5) * block - 0.5
+    sos = butter(2, cutoff_hz, "lowpass", fs=fs / block, output="sos")
+    slow = sosfiltfilt(sos, means, padtype="odd", padlen=min(nb - 1, 3 * int(fs / block / cutoff_hz)))
+    return np.interp(np.arange(x.size), centres, slow)
+
+
+def _occupancy(y: np.ndarray) -> np.ndarray:
+    """Each sample's cluster centre among two (1-D two-means from the 10 % and 90 % quantiles): for a
+    cross-well record, the well it is in, so a long stay in one well is a step, not a slow drift; for an
+    in-well record, a square wave at the response's own frequency, whose slow part is nil.
+    """
+    c = np.quantile(y, [0.1, 0.9])
+    for _ in range(20):
+        split = 0.5 * (c[0] + c[1])
+        low = y < split
+        if low.all() or not low.any():
+            return np.full_like(y, y.mean())
+        new = np.array([y[low].mean(), y[~low].mean()])
+        if np.allclose(new, c, rtol=0, atol=1e-12 * (abs(c).max() + 1e-300)):
+            break
+        c = new
+    return np.where(y < 0.5 * (c[0] + c[1]), c[0], c[1])
+
+
+def separate_drift(z: np.ndarray, fs: float, cutoff_hz: float) -> np.ndarray:
+    """The integral's drift: the slow part of ``z`` that is not the device moving between wells.
+
+    A plain high-pass of a bistable record also removes a long stay in one well (it is slow too). Here the
+    occupancy (which of two levels each sample is at, ``_occupancy``) is taken off before the slow part is
+    taken, and the two are re-estimated in turn (three passes): a hop between wells is a step the drift does
+    not follow, a sensor's offset or wander is a smooth curve it does.
+    """
+    drift = _slow_part(z, fs, cutoff_hz)
+    for _ in range(3):
+        drift = _slow_part(z - _occupancy(z - drift), fs, cutoff_hz)
+    return drift - drift.mean()
+
+
+def integral_warnings(info: dict[str, Any], units: str = "mm", scale: float = 1e3) -> list[str]:
+    """What an integrated velocity's account (``velocity_to_z``'s info) calls for, in the record's units:
+    ``units`` and ``scale`` (per metre) for a calibrated record, the column's own ("units as read") else.
+    """
+    out = []
+    what, slope, se, n_s = info["integrated_from"], info["trend_m_s"], info["trend_se_m_s"], info["duration_s"]
+    drift = info.get("drift")
+    if drift is not None:
+        out.append(
+            f"z integrated from {what} drifted by {scale * drift['span_m']:.3g} {units} over the record "
+            f"(a trend of {scale * slope * n_s:.3g} {units}, {abs(slope) / se:.1f} standard errors); its slow part "
+            f"below {drift['cutoff_hz']:.3g} Hz that is not a stay in one well was removed ({drift['cutoff_from']}): "
+            f"z's 5-95 % range {scale * drift['range_before_m']:.3g} -> {scale * drift['range_after_m']:.3g} {units}, "
+            f"{drift['modes_after']} mode(s) of its histogram (was {drift['modes_before']})"
+            + (
+                f"; then a further {scale * drift['physics_span_m']:.3g} {units} by the record's physics (the "
+                "restoring force's slow shift)"
+                if "physics_span_m" in drift
+                else ""
+            )
+        )
+    elif abs(slope) > TREND_SIGMAS * se:
+        out.append(
+            f"z integrated from {what} drifts by {scale * slope * n_s:.3g} {units} over the record "
+            f"({abs(slope) / se:.1f} standard errors): a DC offset of the velocity sensor ({slope:.3g} "
+            f"{units.replace('mm', 'm')}/s)? It is not removed; a long stay in one well looks the same"
+        )
+    return out
+
+
+def _modes(y: np.ndarray) -> int:
+    """How many modes the histogram of ``y`` has (40 bins over its 1-99 % range, smoothed over three, a mode a
+    local maximum holding at least 2 % of the samples' density peak and a dip of 20 % to its neighbour).
+    """
+    lo, hi = np.quantile(y, [0.01, 0.99])
+    if not hi > lo:
+        return 1
+    h, _ = np.histogram(y, bins=40, range=(lo, hi))
+    h = np.convolve(h, np.ones(3) / 3, mode="same")
+    peaks = [i for i in range(1, h.size - 1) if h[i] >= h[i - 1] and h[i] > h[i + 1] and h[i] > 0.02 * h.max()]
+    kept = peaks[:1]
+    for p in peaks[1:]:
+        if h[kept[-1] : p + 1].min() < 0.8 * min(h[kept[-1]], h[p]):
+            kept.append(p)
+        elif h[p] > h[kept[-1]]:
+            kept[-1] = p
+    return max(1, len(kept))
+
+
+def velocity_to_z(
+    v: np.ndarray, fs: float, what: str, units_known: bool = True, drift_cutoff_hz: float | None = None
+) -> tuple[np.ndarray, dict[str, Any]]:
     """Z (up to a constant) from a relative velocity, and what the integral carries.
 
-    A vibrometer has no DC offset worth the name (a Doppler shift is zero at rest), and a bistable
-    device's z is not stationary over minutes (it may sit in one well for a long stretch: on a 300 s
-    rig record the true z's slope was 3.3 batch-means standard errors from zero), so a ramp is not
-    removed: one beyond ``TREND_SIGMAS`` standard errors is reported as a warning instead.
+    A vibrometer's integral drifts over minutes (its zero is not exact and wanders), and a bistable device's
+    z is not stationary either (it may sit in one well for a long stretch). The drift is separated from the
+    stays (``separate_drift``: a hop between wells is a step, a drift a smooth curve) and removed below a
+    corner chosen from the record's own spectrum (``DRIFT_CUTOFF_FRACTION`` of its dominant frequency, at most
+    ``DRIFT_CUTOFF_MAX_HZ``) when it matters: a straight-line trend beyond ``TREND_SIGMAS`` batch-means
+    standard errors, or a slow part spanning over ``DRIFT_SPAN_FRACTION`` of z's range. What was removed, and
+    its effect on z's range and histogram, is in the account (``drift``) and a warning. ``drift_cutoff_hz``
+    fixes the corner (0: never remove).
     """
     z = integrate_exact(v, fs)
     slope, se = _trend(z, fs)
@@ -109,21 +239,44 @@ def velocity_to_z(v: np.ndarray, fs: float, what: str) -> tuple[np.ndarray, dict
         "derived": f"z = integral of {what} (quintic spline antiderivative)",
         "trend_m_s": slope,
         "trend_se_m_s": se,
+        "duration_s": z.size / fs,
+        "integrated_from": what.split()[0],
         "velocity_noise_m_s": sigma_v,
         "integration_error_m": walk,
         "z_constant_known": False,
-        "warnings": [],
     }
-    if abs(slope) > TREND_SIGMAS * se:
-        info["warnings"].append(
-            f"z integrated from {what.split()[0]} drifts by {1e3 * slope * z.size / fs:.3g} mm over the record "
-            f"({abs(slope) / se:.1f} standard errors): a DC offset of the velocity sensor ({slope:.3g} m/s)? "
-            "It is not removed; a long stay in one well looks the same"
-        )
+    if drift_cutoff_hz != 0.0 and z.size >= 64:
+        if drift_cutoff_hz is None:
+            cutoff = min(DRIFT_CUTOFF_MAX_HZ, DRIFT_CUTOFF_FRACTION * _dominant_hz(v, fs))
+            source = f"{DRIFT_CUTOFF_FRACTION:.3g} of the velocity's dominant {cutoff / DRIFT_CUTOFF_FRACTION:.3g} Hz"
+            if cutoff >= DRIFT_CUTOFF_MAX_HZ:
+                source = f"the field's {DRIFT_CUTOFF_MAX_HZ:g} Hz, below the velocity's dominant frequency"
+        else:
+            cutoff, source = float(drift_cutoff_hz), "as given"
+        if cutoff * z.size / fs >= 2.0:  # at least two corner periods in the record, else a drift is a trend
+            drift = separate_drift(z, fs, cutoff)
+            q = np.quantile(z, [0.05, 0.95])
+            corrected = z - drift
+            qc = np.quantile(corrected, [0.05, 0.95])
+            if abs(slope) > TREND_SIGMAS * se or np.ptp(drift) > DRIFT_SPAN_FRACTION * (qc[1] - qc[0]):
+                info["drift"] = {
+                    "cutoff_hz": cutoff,
+                    "cutoff_from": source,
+                    "span_m": float(np.ptp(drift)),
+                    "rms_m": float(np.std(drift)),
+                    "range_before_m": float(q[1] - q[0]),
+                    "range_after_m": float(qc[1] - qc[0]),
+                    "modes_before": _modes(z),
+                    "modes_after": _modes(corrected),
+                }
+                z = corrected
+    info["warnings"] = integral_warnings(info, *(("mm", 1e3) if units_known else ("(units as read)", 1.0)))
     return z, info
 
 
-def derive(cols: dict[str, np.ndarray], input_name: str, fs: float, source: str) -> tuple[np.ndarray, dict]:
+def derive(
+    cols: dict[str, np.ndarray], input_name: str, fs: float, source: str, units_known: bool = True
+) -> tuple[np.ndarray, dict]:
     """The relative displacement z from the record's response columns, and what was done.
 
     Parameters
@@ -132,6 +285,7 @@ def derive(cols: dict[str, np.ndarray], input_name: str, fs: float, source: str)
     input_name : ``"base_acc"`` or ``"force"`` (a force-driven rig's base does not move)
     fs : sampling rate [Hz]
     source : the file, for messages
+    units_known : False when the response's scale is unknown (``*?``): warnings then speak its units as read
 
     Returns
     -------
@@ -150,7 +304,7 @@ def derive(cols: dict[str, np.ndarray], input_name: str, fs: float, source: str)
     if measured == "z":
         return cols["z"], {"measured": "z", "derived": None, "z_constant_known": True}
     if measured == "z_dot":
-        z, info = velocity_to_z(cols["z_dot"], fs, "z_dot")
+        z, info = velocity_to_z(cols["z_dot"], fs, "z_dot", units_known)
         return z, {"measured": "z_dot", **info}
     if measured == "y":
         if "base_disp" in cols:
@@ -176,10 +330,11 @@ def derive(cols: dict[str, np.ndarray], input_name: str, fs: float, source: str)
         if base_moves:
             bv = integrate_fft(cols["base_acc"], fs, HIGHPASS_HZ, order=1)
             z, info = velocity_to_z(
-                cols["y_dot"] - bv, fs, f"y_dot - base velocity (base_acc integrated above {HIGHPASS_HZ:g} Hz)"
+                cols["y_dot"] - bv, fs, f"y_dot - base velocity (base_acc integrated above {HIGHPASS_HZ:g} Hz)",
+                units_known,
             )
         else:
-            z, info = velocity_to_z(cols["y_dot"], fs, "y_dot (force input: the base does not move)")
+            z, info = velocity_to_z(cols["y_dot"], fs, "y_dot (force input: the base does not move)", units_known)
         return z, {"measured": "y_dot", **info, **({"trim_s": TRIM_S} if base_moves else {})}
     # y_acc: the moving part's absolute acceleration
     a = cols["y_acc"] - cols["base_acc"] if base_moves else cols["y_acc"]

@@ -8,6 +8,8 @@ result's ``warnings`` and onto stderr, each saying what looks wrong and what to 
 
 from __future__ import annotations
 
+import numpy as np
+
 from negstiff.errors import (
     BoundednessWarning,
     ConvergenceWarning,
@@ -110,6 +112,84 @@ def model_warnings(model, rec) -> list[str]:
                 f"the model's well {name} = {z:.4g} m lies beyond the stroke the record visited "
                 f"[{lo:.4g}, {hi:.4g}] m: an extrapolation"
             )
+    return out
+
+
+POWER_SIGMAS = 5.0
+"""The record dissipates when the input's mean power exceeds this many batch-means standard errors."""
+
+MODAL_CONTRADICTION = 0.10
+"""A method's own modal frequency further than this (relative) from its model's linearisation sqrt(K'(z*)/m)
+contradicts the model."""
+
+HELD_OUT_LIMIT_PERCENT = 100.0
+"""A held-out free run erring by more than the record's own rms predicts worse than zero."""
+
+
+def input_power(rec) -> tuple[float, float]:
+    """The input's mean power per unit mass over the record [W/kg] and its batch-means standard error (20
+    batches): -<u z'> for a base acceleration, <F z'> / m for a force (1/kg unknown: per newton). Over a long
+    record the kinetic and potential energies average out, so this is what the device dissipates.
+    """
+    _, v, _, _ = rec.states()
+    p = -rec.u * v if rec.input_name == "base_acc" else rec.u * v / (rec.mass or 1.0)
+    nb = 20
+    if p.size < 10 * nb:
+        return float(p.mean()), float("inf")
+    means = np.array([b.mean() for b in np.array_split(p, nb)])
+    return float(p.mean()), float(means.std(ddof=1) / np.sqrt(nb))
+
+
+def judgement(model, rec, validation: dict, modal: dict | None, own_modal: dict | None) -> list[str]:
+    """What a physicist checks before believing an identified model, each a warning: negative viscous
+    damping; a model that dissipates nothing (or gains energy) over a record whose input does work on it (the
+    energy balance <D(z') z'> = input power, ``input_power``); a held-out free run erring by more than the
+    record's rms (``HELD_OUT_LIMIT_PERCENT``); a method's own modal values that contradict its model's
+    linearisation (``MODAL_CONTRADICTION``).
+    """
+    out: list[str] = []
+    if model.c < 0:
+        out.append(
+            f"negative viscous damping c = {model.c:.3g} N s/m: the model feeds energy into small motion, which no "
+            "passive device does (the record's drift, a wrong frame or a missing effect bent the fit?)"
+        )
+    if rec.z is not None and rec.n >= 200:
+        try:
+            p, se = input_power(rec)
+            _, v, _, _ = rec.states()
+            zs = rec.z
+            dissipated = float(np.mean((model.total_force(zs, v) - model.restoring_force(zs)) * v)) / model.m
+        except Exception:  # a record or model the check cannot evaluate: nothing to say
+            p, se, dissipated = 0.0, float("inf"), 0.0
+        if p > POWER_SIGMAS * se and dissipated <= 0:
+            what = "no damping" if dissipated == 0 else f"damping that gains {-dissipated:.3g} W/kg"
+            out.append(
+                f"the model has {what}, but the record dissipates: the input's mean power is {p:.3g} W/kg "
+                f"(+- {se:.2g}); an energy balance the model cannot meet"
+            )
+    # the restarted runs where there are any: one long free run of a chaotic record errs by ~140 % for the truth
+    key = "restarted_rms_percent" if validation.get("restarted_rms_percent") is not None else "rms_percent"
+    worst = validation.get(key)
+    if worst is not None and np.isfinite(worst) and worst > HELD_OUT_LIMIT_PERCENT:
+        what = "restarted free runs err" if key.startswith("restarted") else "free run errs"
+        out.append(
+            f"the model's held-out {what} by {worst:.3g} % of the record's rms: worse than predicting zero, "
+            "so it explains nothing of the held-out part"
+        )
+    if own_modal is not None and modal is not None:
+        for well in ("minus", "plus"):
+            f_own, f_lin = (own_modal.get(well) or {}).get("f_hz"), (modal.get(well) or {}).get("f_hz")
+            if f_own and f_lin and abs(f_own / f_lin - 1) > MODAL_CONTRADICTION:
+                out.append(
+                    f"the {well} well's modal frequency {f_own:.3g} Hz contradicts the model's own linearisation "
+                    f"sqrt(K'(z*)/m) = {f_lin:.3g} Hz: the subspace step and the restoring force disagree "
+                    "(the record's frame or drift, or a model order too low?)"
+                )
+            elif bool(f_own) != bool(f_lin):
+                out.append(
+                    f"the {well} well has a modal frequency by the method ({f_own}) but not by the model's "
+                    f"linearisation ({f_lin}), or the other way round"
+                )
     return out
 
 
