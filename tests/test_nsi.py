@@ -7,7 +7,7 @@ from scipy import linalg, signal
 
 from negstiff.errors import MeasurementError
 from negstiff.inference.estimators import subspace
-from negstiff.inference.estimators.nsi import NSI
+from negstiff.inference.estimators.nsi import NSI, well_guesses
 from negstiff.inference.record.measurement import from_arrays
 from negstiff.inference.steps.derivatives import smooth_and_differentiate
 from negstiff.models import SEED_LIKE_CROSS_WELL_RMS, SEED_LIKE_CUBIC, Model, simulate
@@ -146,7 +146,8 @@ def test_output_equation_recovers_x0_b_d_of_a_system_with_a_negative_and_a_zero_
         assert np.allclose(est, true, rtol=1e-9, atol=1e-9)
 
 
-def _dop853_double_well(duration=60.0, fs=512.0, seed=0):
+@pytest.fixture(scope="module")
+def dop853_double_well():
     """A noise-free record as a library user writes one: m z'' + c z' - k1 z + k3 z^3 = -m b'' integrated by
     scipy's DOP853 (rtol 1e-8), b'' band-limited random (3-40 Hz, 6 m/s^2 rms, a cubic spline through
     its samples), sampled at 512 Hz. Wells at +-20 mm, 10 Hz (K'(z*) = 2 k1), 5 % damping.
@@ -154,6 +155,7 @@ def _dop853_double_well(duration=60.0, fs=512.0, seed=0):
     from scipy.integrate import solve_ivp
     from scipy.interpolate import CubicSpline
 
+    duration, fs, seed = 60.0, 512.0, 0
     m, z_star, f_well = 0.2, 0.02, 10.0
     k1 = m * (2 * np.pi * f_well) ** 2 / 2
     k3, c = k1 / z_star**2, 2 * 0.05 * np.sqrt(2 * k1 * m)
@@ -175,13 +177,13 @@ def _dop853_double_well(duration=60.0, fs=512.0, seed=0):
     return from_arrays(b, sol.y[0], fs, mass=m, gravity=0.0, source="dop853"), f_well
 
 
-def test_a_noise_free_dop853_record_takes_the_fast_route_and_finds_both_wells(monkeypatch):
+def test_a_noise_free_dop853_record_takes_the_fast_route_and_finds_both_wells(dop853_double_well, monkeypatch):
     # a noise-free record's band-limited channels leave the Hankel Gram matrix singular to rounding
     # (Cholesky fails): NSI takes the ridge route (subspace.GRAM_RIDGE), not the chunked QR (8x the CPU
     # time). Both wells' frequencies are the truth's linearisation sqrt(K'(z*)/m) within 1 % (measured
     # 4e-5: the smoothing's), and the QR route's within 2e-6 (measured 8e-7: what the Gram matrix cannot
     # resolve, below sqrt(n eps) of the largest singular value)
-    rec, f_well = _dop853_double_well()
+    rec, f_well = dop853_double_well
     est = NSI(refine=False).fit(rec)
     assert set(est.wells_) == {"minus", "plus"}
     for name, well in est.result()["wells"].items():
@@ -192,6 +194,25 @@ def test_a_noise_free_dop853_record_takes_the_fast_route_and_finds_both_wells(mo
     for name, well in est.wells_.items():
         assert qr.wells_[name].lq_routes == ("qr",) * len(well.lq_routes)
         assert well.f_hz == pytest.approx(qr.wells_[name].f_hz, rel=2e-6), name
+
+
+def test_the_progress_bar_counts_every_pass_of_a_well(dop853_double_well):
+    # identify nsi's bar is advanced by all of a well's passes, whether the well converged early or not:
+    # one pass, two (the default) or five
+    rec, _ = dop853_double_well
+    zs, v, _, _ = rec.states("band")
+    _, z_plus = well_guesses(rec)
+
+    class Ticks:
+        n = 0
+
+        def update(self, k=1):
+            self.n += k
+
+    for passes in (1, 2, 5):
+        ticks = Ticks()
+        NSI(passes=passes).fit_well(rec, zs, v, z_plus, ticks)
+        assert ticks.n == passes
 
 
 @pytest.fixture(scope="module")
