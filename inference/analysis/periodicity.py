@@ -151,11 +151,12 @@ def check_forcing_line(rec: Measurement, f_hz: float) -> dict[str, float]:
     elsewhere = abs(f_dom - f_hz) > FREQUENCY_SEARCH * f_hz
     if (elsewhere and out["stated_line_rms"] < STATED_LINE_FRACTION * u_rms
             and out["dominant_line_rms"] > DOMINANT_LINE_FRACTION * u_rms):  # fmt: skip
+        units = "m/s^2" if rec.input_name == "base_acc" else "N"
         raise MeasurementError(
             f"{rec.source}: the stated forcing {f_hz:g} Hz is not the input's: its line there carries "
-            f"{out['stated_line_rms']:.2g} of the input's {u_rms:.3g} rms "
-            f"({100 * out['stated_line_rms'] / u_rms:.2g} %), "
-            f"its dominant line is at {f_dom:.4g} Hz ({out['dominant_line_rms']:.3g} rms): check the forcing frequency"
+            f"{out['stated_line_rms']:.2g} {units} rms of the input's {u_rms:.3g} "
+            f"({100 * out['stated_line_rms'] / u_rms:.2g} %), its dominant line is at {f_dom:.4g} Hz "
+            f"({out['dominant_line_rms']:.3g} {units} rms): check the forcing frequency"
         )
     return out
 
