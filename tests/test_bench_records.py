@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 from records import write_csv
 
-from negstiff import NSI, Model, SINDy, from_arrays, load, pin_frame
+from negstiff import NSI, InputError, Model, SINDy, from_arrays, load, pin_frame
 from negstiff.inference.analysis.periodicity import classify_regime
 from negstiff.inference.steps.plausibility import judgement
 from negstiff.testing import assert_predicts
@@ -174,3 +174,42 @@ def test_judgement_of_a_model():
     own = {"minus": {"f_hz": 0.79, "zeta": 0.097}, "plus": {"f_hz": 3.89, "zeta": 0.05}}
     said = judgement(TRUTH, rec, good, modal, own)
     assert len([w for w in said if "contradicts" in w]) == 1 and "minus" in said[0]
+
+
+def test_the_drifting_integral_given_as_a_displacement_is_not_a_silent_model(bench_pinned):
+    """The lab's route: the vibrometer's raw integral (drift kept) handed over as z, which negstiff trusts as a
+    measured displacement. Whatever the methods make of merged wells, their results say they are not to be
+    believed: NSI's modes contradict its own restoring force, SINDy's model has no damping though the input
+    does work on the device (an energy balance it cannot meet)."""
+    rec, _, _ = bench_pinned
+    _, u, _, _, volts = bench_record()
+    n = int(60 * rec.fs)  # a minute: the integral drifts 12 mm, more than a third of the wells' separation
+    z_lab = np.cumsum(volts[:n] * GAIN) / rec.fs
+    lab = from_arrays(u[:n], z_lab, rec.fs, mass=M, gravity=0.0)
+    nsi = NSI().fit(lab).result_
+    assert any("contradicts the model's own linearisation" in w for w in nsi.warnings), nsi.warnings
+    sindy = SINDy().fit(lab).result_
+    assert any("record dissipates" in w for w in sindy.warnings), sindy.warnings
+
+
+def test_a_softening_record_is_refused_before_the_work():
+    """A softening oscillator (k3 < 0: z'' + 2 zeta w z' + w^2 z - b z^3 = -u, in-well, written with scipy's
+    DOP853) has no bounded double- or single-well model: refused by a quick least-squares cubic, before NSI's
+    or SINDy's work, with one line that says which check failed."""
+    from scipy.integrate import solve_ivp
+
+    w, b, fs = 2 * np.pi * 8.0, 4e5, 512.0
+    rng = np.random.default_rng(2)
+    f = np.arange(2.0, 20.0, 0.25)
+    amp, ph = 1.5 * np.sqrt(2 / f.size), rng.uniform(0, 2 * np.pi, f.size)
+
+    def acc(t):
+        return amp * np.cos(np.multiply.outer(t, 2 * np.pi * f) + ph).sum(-1)
+
+    t = np.arange(int(40 * fs)) / fs
+    sol = solve_ivp(lambda s, x: [x[1], -0.1 * w * x[1] - w**2 * x[0] + b * x[0] ** 3 - acc(s)], (0, t[-1]),
+                    [0.0, 0.0], t_eval=t, method="DOP853", rtol=1e-9, atol=1e-12)  # fmt: skip
+    rec = from_arrays(acc(t), sol.y[0] + 1e-6 * rng.standard_normal(t.size), fs, mass=0.1)
+    for method in (NSI, SINDy):
+        with pytest.raises(InputError, match="refused before its work: the record's quick least-squares cubic softens"):
+            method().fit(rec)

@@ -33,7 +33,7 @@ from typing import Any, Self
 
 import numpy as np
 
-from negstiff.errors import issue
+from negstiff.errors import InputError, issue
 from negstiff.inference.estimators.base import Estimator
 from negstiff.inference.record.measurement import Measurement
 from negstiff.inference.steps.plausibility import classified, judgement
@@ -250,6 +250,31 @@ def equilibria_and_modes(
     return eq, modal, notes
 
 
+QUICK_TERMS = ("1", "z", "z^2", "z^3", "v", "v|v|")
+"""The quick fit's library: the model file's own polynomial and damping."""
+
+
+def refuse_softening(rec: Measurement, n_id: int, method: str) -> None:
+    """Refuse, in a fraction of a second, a record whose plain weak-form least-squares cubic (``QUICK_TERMS``
+    over the identification part) softens (k3 <= 0): no bounded double- or single-well model explains it, and
+    a method would find so only after its work (NSI's "k3 must be positive" came after 17 s on a 400 s record
+    whose drifting integral had merged the wells). A record too poor for the fit is left to the method.
+    """
+    from negstiff.inference.steps.weak import WeakFormError, weak_least_squares
+
+    try:
+        quick = weak_least_squares(rec.segment(0, n_id), QUICK_TERMS)
+    except (WeakFormError, np.linalg.LinAlgError, ValueError):
+        return
+    if not quick.k3 > 0:
+        raise InputError(
+            f"{rec.source}: {method} refused before its work: the record's quick least-squares cubic softens "
+            f"(k3 = {quick.k3:.3g} N/m^3), so no bounded double- or single-well model explains it; is z in m "
+            "and in one frame throughout (a drifting integral, a sensor's zero that moved), and is it the "
+            "response to this input?"
+        )
+
+
 class Identifier(Estimator):
     """Base of the identifications: ``fit`` runs the method's ``_estimate`` and then the shared stages
     (module docstring). Subclasses declare ``method`` and their parameters; ``validation_fraction`` and
@@ -271,6 +296,7 @@ class Identifier(Estimator):
         """
         rec = self.check(data)
         n_id = int(round(rec.n * (1 - self.validation_fraction)))
+        refuse_softening(rec, n_id, type(self).__name__)
         est = self._estimate(rec, n_id)
         stroke = stroke_quantiles(rec.z[:n_id])
         validation = validate(est.model, rec, n_id)
