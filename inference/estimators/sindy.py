@@ -47,6 +47,7 @@ from negstiff.inference.steps.weak import (
     term_fields,
     terms,
 )
+from negstiff.models import effects
 
 MIN_SAMPLES = 4000
 
@@ -192,8 +193,12 @@ class SINDy(Identifier):
         self.path_ = sorted(path, key=lambda p: (p["n_terms"], p["heldout_residual_percent"]))
         chosen = self._select(self.path_)
         if not np.isfinite(chosen["free_run_percent"]):
+            lossless = not any(getattr(t.law, "v_odd", False) or isinstance(t.law, effects.SmoothSign)
+                               for t in effects.library_terms() if t.label in chosen["terms"])  # fmt: skip
             raise SINDyError(
                 f"{rec.source}: the selected model ({', '.join(chosen['terms'])}) diverged in the restarted free runs"
+                + ("; no damping term was selected, though a device under an input dissipates (is z in one frame "
+                   "throughout, without a drift?)" if lossless else "")  # fmt: skip
             )
 
         # 3. refit the chosen support on all identification data; the ensemble at the same weight
