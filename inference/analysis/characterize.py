@@ -224,7 +224,7 @@ def characterize(
                 "noise_std", "forcing", "spectrum")  # fmt: skip
         out |= {k: per[k] for k in keys}
         out["poincare_z"] = per["poincare_z"]
-        lines = (f"the spectrum's lines at multiples of f/{per['spectrum']['period']} carry "
+        line_share = (f"the spectrum's lines at multiples of f/{per['spectrum']['period']} carry "
                  f"{100 * per['spectrum']['line_fraction']:.3g} % of the response's power "
                  f"(a periodic response's: {100 * LINE_FRACTION:g} % or more)")  # fmt: skip
         loose = per["tolerance"] >= MAX_DECISIVE_TOLERANCE
@@ -234,7 +234,7 @@ def characterize(
         )
         if per["period"] is None and per["decided_by"] == "spectrum":
             out["reasons"]["period"] = f"no period: {points if loose else 'the Poincare points nearly repeat'}, " + (
-                f"and {lines}: chaotic or quasi-periodic"
+                f"and {line_share}: chaotic or quasi-periodic"
             )
         elif per["period"] is None:
             p_best = min(per["residuals"], key=lambda p: per["residuals"][p] / per["tolerances"][p])
@@ -250,7 +250,7 @@ def characterize(
                 f"{per['residuals'][p] / per['tolerances'][p]:.2g}x their tolerance "
                 f"(residual {per['residuals'][p]:.3g}, tolerance {per['tolerances'][p]:.3g})"
             )  # fmt: skip
-            out["reasons"]["period_spectrum"] = f"decided by the spectrum: {why}; {lines}"
+            out["reasons"]["period_spectrum"] = f"decided by the spectrum: {why}; {line_share}"
         elif per["spectrum"]["agrees"] is False:
             out["reasons"]["period_spectrum"] = (
                 f"the Poincare points repeat every {per['period']} cycle(s), but the spectrum's sub-harmonic lines "
