@@ -287,7 +287,7 @@ def drift_by_physics(rec: Measurement) -> Measurement:
             scale = A.std(axis=0)
             scale[scale == 0] = 1.0
             theta = np.linalg.lstsq(A / scale, system.y_physical, rcond=None)[0] / scale
-            a3 = theta[list(np.flatnonzero(support)).index(cube)]
+            a3 = theta[int(np.count_nonzero(np.array(support)[:cube]))]  # z^3's place among the kept terms
             k = H.shape[1]
             gamma = theta[base.shape[1] + 2 * k : base.shape[1] + 3 * k]
             if not np.isfinite(a3) or a3 == 0:
