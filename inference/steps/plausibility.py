@@ -185,10 +185,16 @@ def judgement(model, rec, validation: dict, modal: dict | None, own_modal: dict 
                     f"sqrt(K'(z*)/m) = {f_lin:.3g} Hz: the subspace step and the restoring force disagree "
                     "(the record's frame or drift, or a model order too low?)"
                 )
-            elif bool(f_own) != bool(f_lin):
+            elif f_own and not f_lin:
                 out.append(
-                    f"the {well} well has a modal frequency by the method ({f_own}) but not by the model's "
-                    f"linearisation ({f_lin}), or the other way round"
+                    f"the {well} well has a modal frequency by the method ({f_own:.3g} Hz) but none by the model's own "
+                    "linearisation (the model has no stable equilibrium there): the subspace step and the restoring "
+                    "force disagree"
+                )
+            elif f_lin and not f_own:
+                out.append(
+                    f"the {well} well has a modal frequency by the model's linearisation ({f_lin:.3g} Hz) but none by "
+                    "the method: the subspace step and the restoring force disagree"
                 )
     return out
 
