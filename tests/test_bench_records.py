@@ -174,6 +174,9 @@ def test_judgement_of_a_model():
     own = {"minus": {"f_hz": 0.79, "zeta": 0.097}, "plus": {"f_hz": 3.89, "zeta": 0.05}}
     said = judgement(TRUTH, rec, good, modal, own)
     assert len([w for w in said if "contradicts" in w]) == 1 and "minus" in said[0]
+    one_well = {"minus": {"f_hz": None, "zeta": None}, "plus": {"f_hz": 3.6, "zeta": 0.05}}
+    said = judgement(TRUTH, rec, good, one_well, own)
+    assert any("minus well has a modal frequency by the method (0.79 Hz) but none" in w for w in said), said
 
 
 def test_the_drifting_integral_given_as_a_displacement_is_not_a_silent_model(bench_pinned):
