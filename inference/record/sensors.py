@@ -117,9 +117,9 @@ def _dominant_hz(v: np.ndarray, fs: float) -> float:
     return float(f[int(np.argmax(p))])
 
 
-def _slow_part(x: np.ndarray, fs: float, cutoff_hz: float) -> np.ndarray:
+def _slow_part(x: np.ndarray, fs: float, cutoff_hz: float, order: int = 2) -> np.ndarray:
     """The part of ``x`` below ``cutoff_hz``: block means over an eighth of the corner's period, low-passed
-    forward and backward (second-order Butterworth: zero phase, scipy) and interpolated back to every sample.
+    forward and backward (Butterworth of ``order``: zero phase, scipy) and interpolated back to every sample.
     Averaging first keeps the filter well conditioned (a corner at 5e-5 of the sampling rate) and cheap.
     """
     from scipy.signal import butter, sosfiltfilt
@@ -129,11 +129,16 @@ def _slow_part(x: np.ndarray, fs: float, cutoff_hz: float) -> np.ndarray:
     if nb < 16:  # shorter than two corner periods: only a constant and a ramp are seen as slow
         t = np.arange(x.size)
         return np.polyval(np.polyfit(t, x, 1), t)
+    # a polynomial of the filter's order is taken off first and given back after: the drift's trend (a
+    # sensor's offset integrated once or twice) passes whole, and the filter's ends see no ramp to pad
+    t = np.arange(x.size) / x.size
+    trend = np.polynomial.Polynomial.fit(t, x, order)
+    x = x - trend(t)
     means = x[: nb * block].reshape(nb, block).mean(axis=1)
     centres = (np.arange(nb) + 0.5) * block - 0.5
-    sos = butter(2, cutoff_hz, "lowpass", fs=fs / block, output="sos")
+    sos = butter(order, cutoff_hz, "lowpass", fs=fs / block, output="sos")
     slow = sosfiltfilt(sos, means, padtype="odd", padlen=min(nb - 1, 3 * int(fs / block / cutoff_hz)))
-    return np.interp(np.arange(x.size), centres, slow)
+    return np.interp(np.arange(x.size), centres, slow) + trend(t)
 
 
 def _occupancy(y: np.ndarray) -> np.ndarray:
@@ -154,17 +159,19 @@ def _occupancy(y: np.ndarray) -> np.ndarray:
     return np.where(y < 0.5 * (c[0] + c[1]), c[0], c[1])
 
 
-def separate_drift(z: np.ndarray, fs: float, cutoff_hz: float) -> np.ndarray:
+def separate_drift(z: np.ndarray, fs: float, cutoff_hz: float, order: int = 2) -> np.ndarray:
     """The integral's drift: the slow part of ``z`` that is not the device moving between wells.
 
     A plain high-pass of a bistable record also removes a long stay in one well (it is slow too). Here the
     occupancy (which of two levels each sample is at, ``_occupancy``) is taken off before the slow part is
     taken, and the two are re-estimated in turn (three passes): a hop between wells is a step the drift does
-    not follow, a sensor's offset or wander is a smooth curve it does.
+    not follow, a sensor's offset or wander is a smooth curve it does. ``order``: the low-pass's (2 for a
+    velocity's integral, a random walk's 1/f^2 spectrum; 4 for a double integral's 1/f^4, which a second
+    order's complement would leak through).
     """
-    drift = _slow_part(z, fs, cutoff_hz)
+    drift = _slow_part(z, fs, cutoff_hz, order)
     for _ in range(3):
-        drift = _slow_part(z - _occupancy(z - drift), fs, cutoff_hz)
+        drift = _slow_part(z - _occupancy(z - drift), fs, cutoff_hz, order)
     return drift - drift.mean()
 
 
@@ -218,7 +225,12 @@ def _modes(y: np.ndarray) -> int:
 
 
 def velocity_to_z(
-    v: np.ndarray, fs: float, what: str, units_known: bool = True, drift_cutoff_hz: float | None = None
+    v: np.ndarray,
+    fs: float,
+    what: str,
+    units_known: bool = True,
+    drift_cutoff_hz: float | None = None,
+    always: bool = False,
 ) -> tuple[np.ndarray, dict[str, Any]]:
     """Z (up to a constant) from a relative velocity, and what the integral carries.
 
@@ -229,7 +241,7 @@ def velocity_to_z(
     ``DRIFT_CUTOFF_MAX_HZ``) when it matters: a straight-line trend beyond ``TREND_SIGMAS`` batch-means
     standard errors, or a slow part spanning over ``DRIFT_SPAN_FRACTION`` of z's range. What was removed, and
     its effect on z's range and histogram, is in the account (``drift``) and a warning. ``drift_cutoff_hz``
-    fixes the corner (0: never remove).
+    fixes the corner (0: never remove); ``always`` removes the drift whatever its size (a double integral's).
     """
     z = integrate_exact(v, fs)
     slope, se = _trend(z, fs)
@@ -246,21 +258,23 @@ def velocity_to_z(
         "z_constant_known": False,
     }
     if drift_cutoff_hz != 0.0 and z.size >= 64:
+        dominant = _dominant_hz(v, fs)
         if drift_cutoff_hz is None:
-            cutoff = min(DRIFT_CUTOFF_MAX_HZ, DRIFT_CUTOFF_FRACTION * _dominant_hz(v, fs))
+            cutoff = min(DRIFT_CUTOFF_MAX_HZ, DRIFT_CUTOFF_FRACTION * dominant)
             source = f"{DRIFT_CUTOFF_FRACTION:.3g} of the velocity's dominant {cutoff / DRIFT_CUTOFF_FRACTION:.3g} Hz"
             if cutoff >= DRIFT_CUTOFF_MAX_HZ:
                 source = f"the field's {DRIFT_CUTOFF_MAX_HZ:g} Hz, below the velocity's dominant frequency"
         else:
             cutoff, source = float(drift_cutoff_hz), "as given"
         if cutoff * z.size / fs >= 2.0:  # at least two corner periods in the record, else a drift is a trend
-            drift = separate_drift(z, fs, cutoff)
+            drift = separate_drift(z, fs, cutoff, 4 if always else 2)
             q = np.quantile(z, [0.05, 0.95])
             corrected = z - drift
             qc = np.quantile(corrected, [0.05, 0.95])
-            if abs(slope) > TREND_SIGMAS * se or np.ptp(drift) > DRIFT_SPAN_FRACTION * (qc[1] - qc[0]):
+            if always or abs(slope) > TREND_SIGMAS * se or np.ptp(drift) > DRIFT_SPAN_FRACTION * (qc[1] - qc[0]):
                 info["drift"] = {
                     "cutoff_hz": cutoff,
+                    "dominant_hz": dominant,
                     "cutoff_from": source,
                     "span_m": float(np.ptp(drift)),
                     "rms_m": float(np.std(drift)),
@@ -338,8 +352,27 @@ def derive(
         return z, {"measured": "y_dot", **info, **({"trim_s": TRIM_S} if base_moves else {})}
     # y_acc: the moving part's absolute acceleration
     a = cols["y_acc"] - cols["base_acc"] if base_moves else cols["y_acc"]
-    z = integrate_fft(a, fs, HIGHPASS_HZ, order=2)
     sigma_a = _noise_rms(a, fs)
+    whole = "y_acc - base_acc" if base_moves else "y_acc"
+    if a.size / fs * DRIFT_CUTOFF_MAX_HZ >= 2.0:
+        # a cross-well record keeps its wells: integrated twice whole (the sensor's constant offset off), the
+        # double integral's drift separated from the stays in either well as a vibrometer's is
+        zc, vinfo = velocity_to_z(integrate_exact(a - a.mean(), fs), fs, f"{whole} (twice)", units_known, always=True)
+        drift = vinfo.get("drift") or {}
+        if drift.get("modes_after") == 2:
+            cut = drift["cutoff_hz"]
+            return zc, {
+                **vinfo,
+                "measured": "y_acc",
+                "derived": f"z = double integral of {whole} (quintic spline antiderivatives), its drift below "
+                f"{cut:.3g} Hz separated from the stays in either well (two modes of its histogram: cross-well)",
+                "acceleration_noise_m_s2": sigma_a,
+                # as below, with the separation's corner for the high-pass
+                "integration_error_m": sigma_a / (2 * math.pi * cut) ** 2 * math.sqrt(2 * cut / (3 * fs))
+                if np.isfinite(sigma_a)
+                else float("nan"),
+            }
+    z = integrate_fft(a, fs, HIGHPASS_HZ, order=2)
     return z, {
         "measured": "y_acc",
         "derived": f"z = double integral of {'y_acc - base_acc' if base_moves else 'y_acc'} above {HIGHPASS_HZ:g} Hz",
