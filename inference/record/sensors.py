@@ -127,8 +127,8 @@ def _slow_part(x: np.ndarray, fs: float, cutoff_hz: float, order: int = 2) -> np
     block = max(1, int(fs / (8 * cutoff_hz)))
     nb = x.size // block
     if nb < 16:  # shorter than two corner periods: only a constant and a ramp are seen as slow
-        t = np.arange(x.size)
-        return np.polyval(np.polyfit(t, x, 1), t)
+        n = np.arange(x.size)
+        return np.polyval(np.polyfit(n, x, 1), n)
     # a polynomial of the filter's order is taken off first and given back after: the drift's trend (a
     # sensor's offset integrated once or twice) passes whole, and the filter's ends see no ramp to pad
     t = np.arange(x.size) / x.size
