@@ -15,15 +15,17 @@ What is lost on the way is said, never hidden:
 
 * From a velocity, z is the integral of the measured signal (a quintic spline's antiderivative:
   a 40 Hz component sampled at 512 Hz is integrated within 1e-5, where the trapezoid rule errs by
-  2 %), so its only unknown is the constant (the frame). A trend of the integral far beyond its
-  batch-means standard error is reported (a sensor's DC offset would make one), not removed. The
-  integrated sensor noise is a random walk; its size over the record, sigma_v sqrt(T dt / 3), is
+  2 %), so its unknowns are the constant (the frame) and, over minutes, a drift (the sensor's zero off
+  or wandering). The drift is separated from the device's stays in one well and removed where it
+  matters (``velocity_to_z``; the record's physics take off its remnant: ``frame.drift_by_physics``).
+  The integrated sensor noise is a random walk; its size over the record, sigma_v sqrt(T dt / 3), is
   reported.
 * A base velocity or displacement from the base accelerometer is band-limited (``highpass_hz``): a
   shaker has no DC stroke, and accelerometer noise integrated grows without bound.
-* From an acceleration of the moving part, z needs two integrations: its content below
-  ``highpass_hz`` (for a bistable device, which well it sits in) cannot be recovered from the signal
-  and is not; the result says so and the frame is pinned by physics as for a velocity.
+* From an acceleration of the moving part, z needs two integrations. A cross-well record keeps its wells
+  (the double integral's drift separated from the stays in either well, as a velocity's); an in-well
+  record's content below ``highpass_hz`` (which well it sits in) cannot be recovered from the signal and
+  is not; the result says so and the frame is pinned by physics as for a velocity.
 * The constant is never known from an integral. ``pin_frame`` estimates it from the physics: the
   restoring force at z = 0 (rods horizontal) carries the weight, K(0) = k0 = m g (g per unit mass
   when the mass is unknown). Among the candidate frames, the one whose origin lies between the wells
