@@ -5,14 +5,21 @@ takes), and inputs are read with a bounded budget (``read_bytes``, ``read_json``
 
 A group of outputs (a record and its truth, a result and its figure) is one ``transaction``: every file
 is staged beside its place and all are moved into place at the end, or none.
+
+A folder output (a report, a campaign) is replaced as a whole, so it is written only where nothing of the
+user's is lost (``check_folder``): a new or empty folder, or one holding only what negstiff wrote there
+before, as its manifest (``MANIFEST``: every file's path, size and SHA-256, written with the folder) lists
+it, unchanged.
 """
 
 from __future__ import annotations
 
 import contextlib
 import errno
+import hashlib
 import json
 import os
+import re
 import shutil
 import tempfile
 from collections.abc import Iterable, Mapping
@@ -32,6 +39,11 @@ _TRANSACTION: list[int] = []
 TEMP_NAME_CHARS = 64
 """At most this many characters of an output's name go into its temporary name (``.NAME.xxxx.part``):
 a legal 255-character name must not make an illegal temporary one."""
+
+MANIFEST = ".negstiff-manifest.json"
+"""The file a folder output holds beside what negstiff wrote there: ``{"written_by", "files": {PATH: {"bytes",
+"sha256"}}}`` (paths relative to the folder, with ``/``). A later write replaces the folder only when every
+file in it is listed here, unchanged (``check_folder``)."""
 
 OUTPUT_ERRNOS = {errno.ENOSPC, errno.EDQUOT, errno.EFBIG, errno.EROFS, errno.EIO, errno.ENAMETOOLONG,
                  errno.EACCES, errno.EPERM, errno.EISDIR, errno.ENOTDIR, errno.EXDEV}  # fmt: skip
@@ -94,9 +106,12 @@ def transaction():
     staged = _STAGED[start:]
     del _STAGED[start:]
     try:
+        for _, _, path, is_dir in staged:  # a folder that now holds a user's file: nothing is moved
+            if is_dir:
+                check_folder(path)
         for _, tmp, path, is_dir in staged:
             with _output_errors(path):
-                _move_into_place(tmp, path, is_dir)
+                _move_into_place(tmp, path, is_dir, checked=True)
     finally:
         for _, tmp, _, is_dir in staged:
             if tmp.exists():
@@ -105,13 +120,22 @@ def transaction():
             _PENDING.discard(tmp)
 
 
-def _move_into_place(tmp: Path, path: Path, is_dir: bool) -> None:
-    if is_dir and path.exists():
-        old = path.with_name(f"{_temp_prefix(path)}old")
-        shutil.rmtree(old, ignore_errors=True)
+def _move_into_place(tmp: Path, path: Path, is_dir: bool, checked: bool = False) -> None:
+    """Rename ``tmp`` to ``path``; a folder gets its manifest first and replaces an existing one only when
+    ``check_folder`` allows it (looked at again here, unless ``checked`` just now).
+    """
+    if not is_dir:
+        os.replace(tmp, path)
+        return
+    _write_manifest(tmp)
+    if not checked:
+        check_folder(path)
+    if path.exists():
+        old = tmp.with_name(f"{tmp.name}.old")  # unique beside it, as the temporary folder's name is
         os.replace(path, old)
         os.replace(tmp, path)
-        shutil.rmtree(old, ignore_errors=True)
+        with contextlib.suppress(OSError):
+            old.unlink() if old.is_symlink() else shutil.rmtree(old)
     else:
         os.replace(tmp, path)
 
@@ -155,7 +179,11 @@ def write_text(path: str | os.PathLike, text: str) -> Path:
 
 @contextlib.contextmanager
 def atomic_dir(path: str | os.PathLike):
-    """Yield a temporary folder beside ``path``; on success it replaces ``path`` as a whole."""
+    """Yield a temporary folder beside ``path``; on success it replaces ``path`` as a whole, with its
+    manifest (``MANIFEST``). An existing ``path`` that ``check_folder`` refuses (a user's file in it, a file
+    where the folder is wanted) is an ``OutputError`` and is left as it was; the caller checks it before
+    its work (``check_folder``, ``check_outputs``), this is the last look.
+    """
     path = Path(path)
     with _output_errors(path):
         path.parent.mkdir(parents=True, exist_ok=True)
@@ -276,8 +304,9 @@ def check_outputs(
     outputs : {label: path} of every file (and folder) a piece of work will write, side files
         included (a record's truth, a result's figure); labels name them in messages (``--out``).
     inputs : every file the work reads (files inside a folder input included).
-    folders : {label: marker} of the outputs that are folders, replaced as a whole; an existing folder
-        is replaced only when it is empty or holds ``marker`` (negstiff's own earlier output).
+    folders : {label: marker} of the outputs that are folders, replaced as a whole: an existing one only
+        where ``check_folder`` allows it (the marker, the file that names negstiff's folders of versions
+        before the manifest, is kept for callers; ``check_folder`` knows them all).
 
     Returns the outputs as absolute paths. Raises ``OutputError`` (one line) when a path is empty, is an
     input (however spelled: relative, absolute, through a symlink, a hard link, or inside a folder
@@ -302,13 +331,11 @@ def check_outputs(
         for shown, r in ins:
             if r == real or _same_file(r, real):
                 raise OutputError(f"{label} {given}: would overwrite the input {shown}; choose another path")
-            if label in folders and real in r.parents:
-                raise OutputError(f"{label} {given}: the folder holds the input {shown}, and would be replaced")
         for other, p in out.items():
             if p == real:
                 raise OutputError(f"{label} {given} is also {other}: give them different paths")
         if label in folders:
-            _check_folder_output(label, given, real, folders[label])
+            check_folder(given, label, [shown for shown, _ in ins])
         elif real.exists() or path.is_symlink():
             if real.is_dir():
                 raise OutputError(f"{label} {given}: is a folder; give a file path")
@@ -319,17 +346,147 @@ def check_outputs(
     return out
 
 
-def _check_folder_output(label: str, given, real: Path, marker: str) -> None:
+def check_folder(path: str | os.PathLike, label: str = "folder", inputs: Iterable[str | os.PathLike] = ()) -> Path:
+    """Check, before any work, that the folder output ``path`` may be replaced as a whole, losing nothing.
+
+    It may when it does not exist, is empty, or holds only what negstiff wrote there: every file listed in
+    its manifest (``MANIFEST``) with the same size and SHA-256. A folder written before the manifest
+    (negstiff 0.x: no manifest) may when it holds only the files negstiff wrote into such a folder: a
+    report's ``results.json``, ``index.md``, ``index.html`` and the figures ``index.md`` shows; a
+    campaign's ``index.json``, the records it lists and their truth files.
+
+    Parameters
+    ----------
+    path : the folder.
+    label : how messages name it (``--out``).
+    inputs : files the work reads: a folder holding one is refused.
+
+    Returns the folder's absolute path. Raises ``OutputError`` (one line, naming the first file that would
+    be lost) when the path exists and is not a folder, holds an input, or holds anything else (a user's
+    file, a file changed since negstiff wrote it, a link).
+    """
+    given = str(path)
+    if not given.strip():
+        raise OutputError(f"{label} '': an empty path; give a folder")
+    path = Path(path)
+    try:
+        real = path.resolve()
+    except OSError as exc:
+        raise OutputError(f"{label} {given}: not a path this system takes ({exc.strerror or exc})") from None
+    for shown in inputs:
+        r = Path(shown).resolve()
+        if r == real or _same_file(r, real):
+            raise OutputError(f"{label} {given}: is the input {shown}; choose another folder")
+        if real in r.parents:
+            raise OutputError(f"{label} {given}: the folder holds the input {shown}, and would be replaced")
+    if path.is_symlink() and not real.exists():
+        raise OutputError(f"{label} {given}: a link to nothing ({real}); give a folder")
     if not real.exists():
-        return
+        return real
     if not real.is_dir():
-        raise OutputError(f"{label} {given}: exists and is not a folder")
-    entries = [p.name for p in real.iterdir()]
-    if entries and marker not in entries:
-        raise OutputError(
-            f"{label} {given}: the folder holds files negstiff did not write (no {marker}); it would be replaced "
-            "as a whole: give a new or empty folder"
-        )
+        raise OutputError(f"{label} {given}: exists and is not a folder; give a new or empty folder")
+    lost = _not_negstiffs(real)
+    if lost:
+        raise OutputError(f"{label} {given}: the folder holds {lost}; it would be replaced as a whole: move it "
+                          "or give a new or empty folder")  # fmt: skip
+    return real
+
+
+def _not_negstiffs(folder: Path) -> str | None:
+    """What in ``folder`` negstiff did not write there (said for a message), or None: nothing would be lost."""
+    files: dict[str, Path] = {}
+    for here, dirs, names in os.walk(folder):
+        base = Path(here)
+        for name in [*dirs, *names]:
+            p = base / name
+            rel = p.relative_to(folder).as_posix()
+            if p.is_symlink():
+                return f"{rel}, a link negstiff did not make"
+            if name in names:
+                if not p.is_file():
+                    return f"{rel}, which is not a regular file"
+                files[rel] = p
+    if not files:
+        return None
+    manifest = folder / MANIFEST
+    if MANIFEST in files:
+        listed = _read_manifest(manifest)
+        if listed is None:
+            return f"{MANIFEST}, which is not a manifest negstiff wrote"
+        for rel, p in sorted(files.items()):
+            if rel == MANIFEST:
+                continue
+            if rel not in listed:
+                return f"{rel}, which negstiff did not write there"
+            size, digest = listed[rel]
+            if p.stat().st_size != size or _sha256(p) != digest:
+                return f"{rel}, changed since negstiff wrote it"
+        return None
+    known = _written_before_the_manifest(folder)
+    for rel in sorted(files):
+        if rel not in known:
+            return f"{rel}, which negstiff did not write there"
+    return None
+
+
+def _sha256(path: Path) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for chunk in iter(lambda: fh.read(1 << 20), b""):
+            h.update(chunk)
+    return h.hexdigest()
+
+
+def _write_manifest(folder: Path) -> None:
+    """List every file in ``folder`` (the finished temporary folder) in its ``MANIFEST``."""
+    from negstiff import __version__
+
+    files = {}
+    for here, _, names in os.walk(folder):
+        for name in names:
+            p = Path(here) / name
+            rel = p.relative_to(folder).as_posix()
+            if rel != MANIFEST:
+                files[rel] = {"bytes": p.stat().st_size, "sha256": _sha256(p)}
+    doc = {"written_by": f"negstiff {__version__}", "files": dict(sorted(files.items()))}
+    (folder / MANIFEST).write_text(json.dumps(doc, indent=1) + "\n")
+
+
+def _read_manifest(path: Path) -> dict[str, tuple[int, str]] | None:
+    """{path: (bytes, sha256)} of a manifest, or None when it is not one."""
+    try:
+        files = read_json(path, "manifest")["files"]
+        return {str(k): (int(v["bytes"]), str(v["sha256"])) for k, v in files.items()}
+    except (InputError, KeyError, TypeError, ValueError, AttributeError):
+        return None
+
+
+REPORT_FIGURE = re.compile(r"\]\(([^()\s/\\]+\.png)\)")
+"""A figure's link in a report's index.md (``![caption](name.png)``)."""
+
+
+def _written_before_the_manifest(folder: Path) -> set[str]:
+    """The files negstiff wrote into a report or campaign folder before it wrote a manifest there (its
+    marker file present: ``results.json``, ``index.json``); empty when neither is there.
+    """
+    known: set[str] = set()
+    if (folder / "results.json").is_file():  # a report: its figures are the PNGs index.md shows
+        known |= {"results.json", "index.md", "index.html"}
+        md = folder / "index.md"
+        if md.is_file():
+            with contextlib.suppress(InputError):
+                text = read_bytes(md, JSON_MAX_BYTES, "report").decode("utf-8", errors="replace")
+                known |= set(REPORT_FIGURE.findall(text))
+    if (folder / "index.json").is_file():  # a campaign: the records its index lists, each with its truth
+        try:
+            names = [r["file"] for r in read_json(folder / "index.json", "campaign index")["records"]]
+        except (InputError, KeyError, TypeError):
+            names = []
+        known.add("index.json")
+        for name in names:
+            if isinstance(name, str) and name and "/" not in name and "\\" not in name:
+                known |= {name, Path(name).stem + ".truth.json"}
+    return known
 
 
 def _check_writable(label: str, given, parent: Path) -> None:
