@@ -24,7 +24,8 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
-from negstiff.files import atomic_dir  # noqa: E402
+from negstiff.errors import OutputError  # noqa: E402
+from negstiff.files import atomic_dir, check_folder  # noqa: E402
 
 from .numbers import fmt  # noqa: E402
 from .sections import COEFFICIENTS, Section, coefficient_blocks, section_for  # noqa: E402
@@ -43,6 +44,9 @@ class Report:
         The report's title.
     blocks, figures, summary_lines : optional
         The content so far (built with ``add``, ``add_text``, ``add_table``, ``add_figure``, ``summary``).
+    inputs : optional
+        The files the report was built from (each record ``add`` takes that was read from a file): ``write``
+        never replaces a folder holding one.
 
     Examples
     --------
@@ -52,13 +56,14 @@ class Report:
     >>> rep = Report("My device").add(rec).add(SINDy(seed=1).fit(rec), label="30 s")
     >>> out = rep.write(pathlib.Path(tempfile.mkdtemp()) / "report")
     >>> sorted(p.name for p in out.iterdir() if p.suffix != ".png")
-    ['index.html', 'index.md', 'results.json']
+    ['.negstiff-manifest.json', 'index.html', 'index.md', 'results.json']
     """
 
     title: str
     blocks: list[tuple[str, Any]] = field(default_factory=list)
     figures: dict[str, bytes] = field(default_factory=dict)
     summary_lines: list[str] = field(default_factory=list)
+    inputs: list[Path] = field(default_factory=list)
 
     def summary(self, text: str) -> None:
         """A line of the summary the report opens with (what was found, in plain words)."""
@@ -71,6 +76,9 @@ class Report:
         tells results of several records apart (a column of the coefficient table each). Returns the report.
         """
         sec = section_for(result, label)
+        source = Path(str(getattr(result, "source", "") or "<memory>"))
+        if source.is_file() and source not in self.inputs:
+            self.inputs.append(source)
         self.figures.update(sec.figures)
         self.blocks.append(("section", sec))
         return self
@@ -268,8 +276,14 @@ class Report:
 
     def write(self, folder: str | Path, results: dict[str, Any] | None = None) -> Path:
         """Write index.md, index.html, results.json (``results``, else the sections' own: ``results()``) and
-        the PNGs into ``folder`` atomically.
+        the PNGs into ``folder`` atomically, with the manifest of what was written (``negstiff.files.MANIFEST``).
+
+        ``folder`` is replaced as a whole, so it must be new, empty, or hold only what negstiff wrote there
+        (``negstiff.files.check_folder``): a folder holding another file (a user's, the record the report
+        was built from) or a path that is a file is refused with an ``OutputError``, before anything is
+        written, and left as it was.
         """
+        check_folder(folder, "report folder", self.inputs)
         self._composed()  # the figures the composition draws (the forest plot)
         if results is None:
             results = self.results()
@@ -324,6 +338,11 @@ def run_study(section, title: str, default_out: str, doc: str | None, argv=None)
     ap.add_argument("--fast", action="store_true", help="a quick reduced run")
     ap.add_argument("--seed", type=int, default=0)
     a = ap.parse_args(argv)
+    try:
+        check_folder(a.out, "--out")  # before the study: a folder holding a user's file is refused
+    except OutputError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
     rep = Report(title)
     results: dict[str, Any] = {}
     section(rep, results, a.fast, a.seed)

@@ -19,6 +19,7 @@ from scipy import signal
 from tqdm import tqdm
 
 from negstiff import __version__
+from negstiff.files import check_folder
 from negstiff.models import AS_BUILT, simulate
 from negstiff.models.reference import reference_solution
 from negstiff.models.rig import Rig
@@ -386,6 +387,7 @@ def reproduce(
     ``SECTIONS`` (the device, rig and simulator parts always run; the report says which were left out).
     ``workers``: processes computing sections at once (default: the machine's cores).
     """
+    check_folder(out, "report folder")  # a folder holding a user's file: refused before the study, not after
     workers = default_workers() if workers is None else max(1, int(workers))
     if sections is not None and not set(sections) <= set(SECTIONS):
         raise ValueError(f"unknown sections {sorted(set(sections) - set(SECTIONS))}; known: {SECTIONS}")

@@ -21,6 +21,9 @@ from typing import Any
 import matplotlib.pyplot as plt
 import numpy as np
 
+from negstiff.errors import OutputError
+from negstiff.files import check_folder
+
 from .numbers import fmt
 from .report import Report
 
@@ -154,6 +157,11 @@ def main(argv=None) -> int:
     ap.add_argument("--workers", type=int, default=2, help="LocalCluster worker processes")
     ap.add_argument("--scheduler", help="address of a running dask scheduler (default: a LocalCluster)")
     a = ap.parse_args(argv)
+    try:
+        check_folder(a.out, "--out")  # before the study: a folder holding a user's file is refused
+    except OutputError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
     t0 = time.perf_counter()
     rows = run(a.records, a.duration, a.max_steps, a.ensembles, a.workers, a.scheduler)
     settings = {
