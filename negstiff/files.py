@@ -351,7 +351,7 @@ def check_folder(path: str | os.PathLike, label: str = "folder", inputs: Iterabl
 
     It may when it does not exist, is empty, or holds only what negstiff wrote there: every file listed in
     its manifest (``MANIFEST``) with the same size and SHA-256. A folder written before the manifest
-    (negstiff 0.x: no manifest) may when it holds only the files negstiff wrote into such a folder: a
+    (negstiff 0.1.0: no manifest) may when it holds only the files negstiff wrote into such a folder: a
     report's ``results.json``, ``index.md``, ``index.html`` and the figures ``index.md`` shows; a
     campaign's ``index.json``, the records it lists and their truth files.
 
@@ -395,7 +395,9 @@ def check_folder(path: str | os.PathLike, label: str = "folder", inputs: Iterabl
 def _not_negstiffs(folder: Path) -> str | None:
     """What in ``folder`` negstiff did not write there (said for a message), or None: nothing would be lost."""
     files: dict[str, Path] = {}
-    for here, dirs, names in os.walk(folder):
+    subfolders: list[str] = []
+    unreadable: list[OSError] = []
+    for here, dirs, names in os.walk(folder, onerror=unreadable.append):
         base = Path(here)
         for name in [*dirs, *names]:
             p = base / name
@@ -406,26 +408,35 @@ def _not_negstiffs(folder: Path) -> str | None:
                 if not p.is_file():
                     return f"{rel}, which is not a regular file"
                 files[rel] = p
-    if not files:
+            else:
+                subfolders.append(rel)
+    if unreadable:
+        return f"{unreadable[0].filename or folder}, a folder negstiff cannot read"
+    if not files and not subfolders:
         return None
-    manifest = folder / MANIFEST
+    known: dict[str, tuple[int, str] | None] | None
     if MANIFEST in files:
-        listed = _read_manifest(manifest)
-        if listed is None:
+        known = _read_manifest(folder / MANIFEST)
+        if known is None:
             return f"{MANIFEST}, which is not a manifest negstiff wrote"
-        for rel, p in sorted(files.items()):
-            if rel == MANIFEST:
-                continue
-            if rel not in listed:
-                return f"{rel}, which negstiff did not write there"
-            size, digest = listed[rel]
-            if p.stat().st_size != size or _sha256(p) != digest:
-                return f"{rel}, changed since negstiff wrote it"
-        return None
-    known = _written_before_the_manifest(folder)
-    for rel in sorted(files):
+    else:
+        known = {rel: None for rel in _written_before_the_manifest(folder)}
+    for rel in subfolders:  # a folder of negstiff's holds a file it wrote
+        if not any(k.startswith(rel + "/") for k in known):
+            return f"{rel}/, a folder negstiff did not make there"
+    for rel, p in sorted(files.items()):
+        if rel == MANIFEST:
+            continue
         if rel not in known:
             return f"{rel}, which negstiff did not write there"
+        entry = known[rel]
+        if entry is not None:  # listed in the manifest: as negstiff wrote it
+            size, digest = entry
+            try:
+                if p.stat().st_size != size or _sha256(p) != digest:
+                    return f"{rel}, changed since negstiff wrote it"
+            except OSError:
+                return f"{rel}, which negstiff cannot read"
     return None
 
 
@@ -452,7 +463,7 @@ def _write_manifest(folder: Path) -> None:
     (folder / MANIFEST).write_text(json.dumps(doc, indent=1) + "\n")
 
 
-def _read_manifest(path: Path) -> dict[str, tuple[int, str]] | None:
+def _read_manifest(path: Path) -> dict[str, tuple[int, str] | None] | None:
     """{path: (bytes, sha256)} of a manifest, or None when it is not one."""
     try:
         files = read_json(path, "manifest")["files"]

@@ -208,7 +208,7 @@ def test_an_old_campaign_folder_is_replaceable_only_with_nothing_but_its_records
         check_folder(camp)
 
 
-@pytest.mark.parametrize("kind", ["subfolder", "link", "hidden", "bad manifest"])
+@pytest.mark.parametrize("kind", ["subfolder", "empty subfolder", "link", "hidden", "bad manifest"])
 def test_anything_not_listed_in_the_manifest_is_refused(tmp_path, kind):
     out = tmp_path / "rep"
     with atomic_dir(out) as tmp:
@@ -217,6 +217,8 @@ def test_anything_not_listed_in_the_manifest_is_refused(tmp_path, kind):
     if kind == "subfolder":
         (out / "mine").mkdir()
         (out / "mine" / "data.csv").write_text("1\n")
+    elif kind == "empty subfolder":
+        (out / "mine").mkdir()
     elif kind == "link":
         (out / "data").symlink_to(tmp_path)
     elif kind == "hidden":
