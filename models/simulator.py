@@ -21,7 +21,6 @@ from __future__ import annotations
 
 import functools
 import math
-import os
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
@@ -119,12 +118,14 @@ def input_gain(input_kind: str, masses: np.ndarray) -> np.ndarray:
 
 
 def cores() -> int:
-    """The cores negstiff's own threads (simulator batches, posterior ensembles) may use:
-    ``$NEGSTIFF_THREADS`` if set (a machine shared with other jobs), else the machine's. Thread counts
+    """The cores negstiff's own threads (simulator batches, posterior ensembles) may use: the running
+    command's thread budget (the cores idle when it started: ``resources.thread_budget``), else the cores the
+    process may run on, ``$NEGSTIFF_THREADS`` capping both (a machine shared with other jobs). Thread counts
     never change a number: the threads' parts are independent.
     """
-    env = os.environ.get("NEGSTIFF_THREADS", "")
-    return max(1, int(env)) if env.isdigit() else (os.cpu_count() or 1)
+    from negstiff.resources import thread_budget
+
+    return thread_budget()
 
 
 @functools.lru_cache(maxsize=4)

@@ -82,6 +82,17 @@ def idle_cores() -> int:
     return max(1, min(cores, cores - round(load)))
 
 
+_BUDGET: list[int] = []
+"""The thread budget of the running command (``limit_threads``), read by negstiff's own thread pools."""
+
+
+def thread_budget() -> int:
+    """The threads negstiff's own pools (the simulator's batches) may use: the running command's budget
+    (``limit_threads``: the idle cores when it started), else the usable cores (``usable_cores``).
+    """
+    return _BUDGET[-1] if _BUDGET else usable_cores()
+
+
 def _load_blas() -> None:
     """Load numpy's and scipy's linear algebra: each wheel carries its own OpenBLAS, and threadpoolctl
     limits only the libraries loaded when it is called.
@@ -100,7 +111,7 @@ def limit_threads(n: int):
     from threadpoolctl import threadpool_limits
 
     _load_blas()
-    limiter = threadpool_limits(limits=max(1, int(n)))
+    limiter = _Budget(threadpool_limits(limits=max(1, int(n))), max(1, int(n)))
     try:
         import numba
         from numba.np.ufunc import parallel
@@ -109,6 +120,28 @@ def limit_threads(n: int):
     if getattr(parallel, "_is_initialized", True):
         numba.set_num_threads(max(1, min(int(n), getattr(numba.config, "NUMBA_NUM_THREADS", 1))))
     return limiter
+
+
+class _Budget:
+    """threadpoolctl's limits and negstiff's own thread budget (``thread_budget``: the simulator's pools), set
+    together and given back together when the context exits.
+    """
+
+    def __init__(self, limiter, n: int):
+        self.limiter = limiter
+        _BUDGET.append(n)
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc) -> None:
+        if _BUDGET:
+            _BUDGET.pop()
+        self.limiter.restore_original_limits()
+
+    def restore_original_limits(self) -> None:
+        """Give the BLAS pools and the budget back (threadpoolctl's name)."""
+        self.__exit__(None, None, None)
 
 
 def one_blas_thread():

@@ -121,3 +121,16 @@ def test_reproduces_section_processes_run_blas_on_one_thread():
         threads = pool.submit(os.getenv, "NEGSTIFF_THREADS").result()
     assert _blas_threads(info) == {1}
     assert threads == os.environ.get("NEGSTIFF_THREADS", "2")
+
+
+def test_the_simulators_threads_follow_the_commands_budget(monkeypatch):
+    """A command started beside busy processes runs its simulator batches on the cores idle at its start, as
+    its BLAS: one level of parallelism, sized once (a pool of two threads on a loaded 2-core machine fights the
+    other work for the cores)."""
+    from negstiff.models.simulator import cores
+
+    monkeypatch.delenv("NEGSTIFF_THREADS", raising=False)
+    assert cores() == resources.usable_cores()
+    with resources.limit_threads(1):
+        assert cores() == 1
+    assert cores() == resources.usable_cores()
