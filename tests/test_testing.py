@@ -18,8 +18,10 @@ def fitted():
     t, u, z, _ = dop853_record(duration=40.0, seed=11)
     rec = from_arrays(u, z + 3e-6 * np.random.default_rng(2).standard_normal(z.size), FS, mass=TRUTH.m,
                       source="dop853")  # fmt: skip
-    # a 99 % interval: a consistency check that must hold on every machine, not nine times in ten
-    post = Posterior(seed=1, hdi_prob=0.99).fit(rec.segment(0, int(20 * FS)))
+    # a 99 % interval: a consistency check that must hold on every machine, not nine times in ten. The posterior
+    # on 10 s (20 s before; CI time): its sd grows by sqrt(2), and every tolerance below is in units of that sd
+    # (the check's point: tolerances from the estimates' own uncertainty), so none is loosened by hand
+    post = Posterior(seed=1, hdi_prob=0.99).fit(rec.segment(0, int(10 * FS)))
     return rec, SINDy().fit(rec), post
 
 
