@@ -50,8 +50,11 @@ def _coefficient_table(res, methods=("NSI", "SINDy")):
 
 @pytest.fixture(scope="module")
 def velocity_record(tmp_path_factory):
-    """120 s of TRUTH (scipy DOP853) as a vibrometer measures it: relative velocity only (0.1 mm/s noise)."""
-    t, u, _, v = dop853_record(duration=120.0, rtol=1e-8)  # integration error far below the 0.1 mm/s noise
+    """60 s of TRUTH (scipy DOP853) as a vibrometer measures it: relative velocity only (0.1 mm/s noise). 60 s, not
+    120 (CI time): SINDy's k1 and k3 on it are within 0.01 % of the truth (measured), the posterior's 30 s are the
+    same samples as before (its interval as on 120 s, measured); a 10 s posterior was tried and is not used: on the
+    integrated velocity its interval came out narrower than on 30 s and held neither method's estimates."""
+    t, u, _, v = dop853_record(duration=60.0, rtol=1e-8)  # integration error far below the 0.1 mm/s noise
     v = v + 1e-4 * np.random.default_rng(4).standard_normal(v.size)
     eq = TRUTH.equilibria()
     d = tmp_path_factory.mktemp("velocity")
@@ -146,17 +149,22 @@ def test_report_on_a_low_level_record(tmp_path):
 
 
 def test_a_report_built_from_python_over_three_amplitudes(tmp_path):
-    # an experiment script's report: each record's SINDy and NSI, and one posterior, in one coefficient table
+    # an experiment script's report: each record's SINDy and NSI, and one posterior, in one coefficient table.
+    # 30 s records (40 s before; CI time): with 3 um of laser noise SINDy's k3 errs by ~1e-5 relative on 30 s
+    # (measured, as on 40 s), far inside the 5 % sanity bound. Not shorter: SINDy's held-out selection needs ~21 s,
+    # and on 24 s the 10 m/s^2 record's held-out part (4.8 s) is too short for NSI's restarted free runs (warned).
+    # The posterior on 5 s of the last record (20 s before): its interval's width is not what is tested here, only
+    # that it sits in the table (4x fewer windows, and its wider sd needs fewer RK4 substeps)
     rep = Report("Three amplitudes")
     fits = {}
     for rms in (6.0, 8.0, 10.0):
-        t, u, z, _ = dop853_record(duration=40.0, rms=rms, seed=int(rms), rtol=1e-8)
+        t, u, z, _ = dop853_record(duration=30.0, rms=rms, seed=int(rms), rtol=1e-8)
         rec = from_arrays(u, z + 3e-6 * np.random.default_rng(int(rms)).standard_normal(z.size), FS, mass=TRUTH.m,
                           source=f"rms {rms:g}")  # fmt: skip
         label = f"{rms:g} m/s^2"
         fits[label] = SINDy().fit(rec)
         rep.add(fits[label], label=label).add(NSI().fit(rec), label=label)
-    rep.add(Posterior(seed=1).fit(rec.segment(0, int(20 * FS))), label="10 m/s^2")
+    rep.add(Posterior(seed=1).fit(rec.segment(0, int(5 * FS))), label="10 m/s^2")
     rep.add_text("SINDy's k3 at each amplitude, one record each.", heading="How k3 moves with amplitude")
     rep.add_table(["amplitude", "k3"], [[lab, f.model_.k3] for lab, f in fits.items()])
     rep.write(tmp_path / "rep")
