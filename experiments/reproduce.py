@@ -179,14 +179,14 @@ def default_workers() -> int:
     return max(1, min(cores, len(_TABLE), memory // WORKER_MEMORY_BYTES))
 
 
-def _share_cores(threads: int) -> None:
+def _share_cores(threads: int):
     """A section process's initialiser: BLAS, OpenMP and numba on one thread each, the processes being the
     parallelism (``resources.worker_initializer``; a user's measurement on 2 cores: two section processes
     with two BLAS threads each took 196 s wall and 360 s of CPU, with one each 160 s and 280 s); negstiff's
     own threads (simulator batches, posterior ensembles) get ``threads``, unless the user set
-    ``NEGSTIFF_THREADS``.
+    ``NEGSTIFF_THREADS``. Returns the limits (``worker_initializer``).
     """
-    worker_initializer(threads)
+    return worker_initializer(threads)
 
 
 def _no_bar(name: str | None = None) -> None:

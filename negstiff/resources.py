@@ -101,17 +101,17 @@ def _load_blas() -> None:
     import scipy.linalg  # noqa: F401
 
 
-def limit_threads(n: int):
+def limit_threads(n: int, own: int | None = None):
     """Limit the process's BLAS and OpenMP thread pools to ``n`` threads (threadpoolctl), and numba's where
     its threading layer runs: at once, for the whole process (a worker process's initialiser), or until the
-    returned ``threadpool_limits`` context exits (a command). negstiff's compiled kernels take no numba
-    threads (its simulator splits batches over its own threads, ``models.simulator.cores``), so numba's
-    layer is not started for nothing.
+    returned context exits (a command). negstiff's compiled kernels take no numba threads (its simulator
+    splits batches over its own threads, ``models.simulator.cores``), so numba's layer is not started for
+    nothing; those own threads get ``own`` (default ``n``: ``thread_budget``).
     """
     from threadpoolctl import threadpool_limits
 
     _load_blas()
-    limiter = _Budget(threadpool_limits(limits=max(1, int(n))), max(1, int(n)))
+    limiter = _Budget(threadpool_limits(limits=max(1, int(n))), max(1, int(n if own is None else own)))
     try:
         import numba
         from numba.np.ufunc import parallel
@@ -153,11 +153,12 @@ def one_blas_thread():
     return threadpool_limits(limits=1, user_api="blas")
 
 
-def worker_initializer(threads: int | None = None) -> None:
+def worker_initializer(threads: int | None = None):
     """A worker process's start, in a pool of them (``concurrent.futures``' ``initializer``): BLAS, OpenMP
     and numba on one thread each (the pool is the parallelism); ``threads``, where given, is what
-    negstiff's own threads may use (``$NEGSTIFF_THREADS``, unless the user set it).
+    negstiff's own threads may use (``$NEGSTIFF_THREADS``, unless the user set it). Returns the limits (a
+    caller in its own process gives them back with ``restore_original_limits``).
     """
     if threads is not None:
         os.environ.setdefault("NEGSTIFF_THREADS", str(int(threads)))
-    limit_threads(1)
+    return limit_threads(1, own=usable_cores())

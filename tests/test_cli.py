@@ -222,10 +222,10 @@ def test_reproduce_sizes_its_processes_to_the_machine(monkeypatch):
     pages["SC_PHYS_PAGES"] = 8 * 1024**3 // 4096
     assert r.default_workers() == 4, "8 GB hold four processes"
     monkeypatch.delenv("NEGSTIFF_THREADS", raising=False)
-    r._share_cores(16)
+    r._share_cores(16).restore_original_limits()  # this process's threads given back: it is no worker
     assert os.environ["NEGSTIFF_THREADS"] == "16"
     monkeypatch.setenv("NEGSTIFF_THREADS", "3")
-    r._share_cores(16)
+    r._share_cores(16).restore_original_limits()
     assert os.environ["NEGSTIFF_THREADS"] == "3", "the user's setting stands"
 
 

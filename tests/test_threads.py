@@ -134,3 +134,10 @@ def test_the_simulators_threads_follow_the_commands_budget(monkeypatch):
     with resources.limit_threads(1):
         assert cores() == 1
     assert cores() == resources.usable_cores()
+    # a section process of reproduce: BLAS on one thread, its own threads on what NEGSTIFF_THREADS gives it
+    monkeypatch.setenv("NEGSTIFF_THREADS", "2")
+    limits = resources.worker_initializer(2)
+    try:
+        assert cores() == min(2, resources.usable_cores())
+    finally:
+        limits.restore_original_limits()
