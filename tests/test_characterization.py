@@ -167,6 +167,8 @@ def _true_period(strobe, tol=1e-6):
     return next(p for p in (1, 2, 4, 8) if np.abs(strobe[p:] - strobe[:-p]).max() < tol)
 
 
+# a long study: a stepped DOP853 sweep; tests/test_harmonic_records.py keeps period 2 from scipy's records by default
+@pytest.mark.slow
 def test_a_period_2_record_from_another_integrator_is_period_2():
     # Fact: stepped 13 -> 14 m/s^2 from z_plus, the seed-like cubic doubles at 9 Hz (its stroboscopic
     # map, integrated here by DOP853, repeats every 2 cycles); 150 s at 512 Hz with 30 um noise.

@@ -55,6 +55,8 @@ def test_outside_the_block_the_effect_is_unknown():
     assert "|z|" not in terms()
 
 
+# a long study: a DOP853 reference at rtol 1e-10; the toy's SINDy and discrepancy test keeps it by default
+@pytest.mark.slow
 def test_the_simulator_integrates_the_toy_as_scipy_does(toy):
     """RK4 with 8 substeps against scipy's DOP853 at rtol 1e-10 on the same equation, written here:
     m z'' + c z' + c_nl z'|z'| + K(z) + a |z| = -m b'' with b'' linearly interpolated."""

@@ -139,6 +139,7 @@ def test_the_voltage_term_from_the_command_line(coupled_file, tmp_path):
                      "--quiet"]) == 2  # fmt: skip
 
 
+@pytest.mark.slow  # a long study: a broadband report; the command-line test above keeps the voltage term by default
 def test_a_report_on_the_coupled_record_names_the_voltage(tmp_path):
     """negstiff report --aux voltage on a broadband record of the coupled harvester (a harmonic one gets the
     characterisation): the discrepancy section names the coupling, as the command does."""

@@ -136,6 +136,7 @@ def test_silverbox_hybrid_predicts_below_half_a_millivolt(silverbox, silverbox_f
         assert mv <= 1.02 * physics_mv
 
 
+@pytest.mark.slow  # a long study: the unnamed term from the command line; its library test above keeps it by default
 def test_discrepancy_unnamed_reports_what_no_catalogue_effect_names(tmp_path):
     # Through the command line, as a user would: the baseline alone (--max-effects 0, no refinement) on
     # the record with displacement-dependent damping, --unnamed: the result carries the term, and the

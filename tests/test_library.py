@@ -146,6 +146,8 @@ def test_nsi_and_sindy_share_one_pipeline_and_result_type(scipy_record, scipy_fi
 
 
 # --- 4. posteriors: warnings through Python, arviz as its users expect -----------------------------------
+# a long study: two posteriors; test_posterior.py keeps arviz's data and the convergence warnings by default
+@pytest.mark.slow
 def test_an_unconverged_posterior_warns_and_its_arviz_data_agree_with_its_summary(scipy_record):
     import arviz as az
 

@@ -97,6 +97,8 @@ def _stepped_sine(folder, freqs, direction, a=3.0, settle=60, keep=24, seed=1):
         (folder / f"{direction}{i:02d}.csv").write_text(f"# forcing_hz: {f:g}\nt,base_acc,z\n" + rows)
 
 
+# a long study: a stepped sweep each way; the lab campaign's map test keeps the folds' prediction by default
+@pytest.mark.slow
 def test_a_stepped_sine_jumps_just_past_the_continued_folds(tmp_path):
     # Fact: sweeping up, the response stays on the resonant branch until its fold (10.90 Hz) and drops;
     # sweeping down, it stays on the low branch until the lower fold (6.27 Hz) and climbs. The jump is

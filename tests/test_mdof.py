@@ -263,6 +263,8 @@ def test_structure_rig_records_are_seeded_and_read_back(tmp_path):
     assert plus[0].f_hz < TRUTH.uls("plus").f_hz and abs(plus[1].shape[1]) == pytest.approx(1.0)
 
 
+# a long study: emcee over the element; StructurePosterior's docstring example keeps it running by default
+@pytest.mark.slow
 def test_posterior_of_the_element_on_its_fixture():
     # emcee over the element's coefficients, the linear structure fixed at SINDy's: its mean recovers the stiffness
     # within 1 % and the damping within 5 % (the windowed least squares' own bias and the damping's small share of

@@ -62,6 +62,9 @@ def velocity_record(tmp_path_factory):
     return write_csv(d / "ldv.csv", {"t": t, "base_acc": u, "z_dot": v}, meta)
 
 
+# a long study: the report's sections on a vibrometer record; tests/test_bench_records.py keeps velocity records by
+# default
+@pytest.mark.slow
 def test_report_on_a_velocity_only_record(velocity_record, tmp_path):
     out = tmp_path / "rep"
     _run(["report", velocity_record, "--duration", "30", "-o", out])

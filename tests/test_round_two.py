@@ -74,6 +74,7 @@ def test_cross_well_chaos_has_a_positive_exponent_with_its_uncertainty(minus_wel
     assert lle["rosenstein"] is not None and lle["rosenstein"] > 0 and lle["estimators_agree"]
 
 
+@pytest.mark.slow  # a long study: tests/test_harmonic_records.py keeps period 1 at 64 Hz (five amplitudes) by default
 def test_a_period_1_record_at_64_hz_with_a_shaker_off_frequency_and_breathing():
     # Fact: a shaker 0.3 % off its stated 9 Hz, its amplitude breathing 2 % over 20 s, a period-1 orbit
     # in the plus well (9 m/s^2), acquired at 64 Hz through an anti-aliasing decimation (1024 -> 64 Hz)
@@ -123,6 +124,7 @@ def _lorenz_x(x0=(1.0, 1.0, 1.0), dt=0.01, duration=500.0):
     return solve_ivp(f, (0, t[-1]), list(x0), t_eval=t, method="LSODA", rtol=1e-10, atol=1e-10).y[0][int(20 / dt) :]
 
 
+@pytest.mark.slow  # a long study: 50 000 Lorenz samples; test_characterization.py keeps Wolf on Lorenz by default
 def test_wolf_and_rosenstein_recover_the_lorenz_exponent_within_5_percent():
     # Fact: the Lorenz system (10, 28, 8/3) has lambda_1 = 0.906 1/s. From x(t) alone, 50 000 samples at
     # dt 0.01, both estimators within 5 %, Rosenstein's on a fresh install (no optional package)
