@@ -6,6 +6,7 @@ Measurement or a path, nothing else. Written with the public API only."""
 
 import inspect
 import math
+import re
 
 import numpy as np
 import pytest
@@ -95,7 +96,13 @@ def record():
     return from_arrays(np.sin(2 * np.pi * 9 * t), 0.02 + 1e-3 * np.sin(2 * np.pi * 9 * t + 0.3), 512.0, mass=0.2)
 
 
-@pytest.mark.parametrize("cls, name, value", CASES, ids=[f"{c.__name__}.{n}={v!r}" for c, n, v in CASES])
+def _plain(v) -> str:
+    """A value's test id, the same in every process (an object's repr carries its address: pytest-xdist's
+    workers must collect the same ids)."""
+    return re.sub(r" at 0x[0-9a-f]+", "", repr(v))
+
+
+@pytest.mark.parametrize("cls, name, value", CASES, ids=[f"{c.__name__}.{n}={_plain(v)}" for c, n, v in CASES])
 def test_a_bad_parameter_value_is_one_input_error_before_any_work(record, cls, name, value):
     est = cls(**{name: value})  # the constructor stores, fit checks (scikit-learn's convention)
     data = {"f_minus": 11.4, "f_plus": 9.2, "z_minus": -0.029, "z_plus": 0.023} if cls is GAUpdater else record
