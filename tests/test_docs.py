@@ -54,7 +54,16 @@ def test_every_public_name_has_a_numpydoc_docstring_with_an_example(name, obj):
         assert attrs and all(a.endswith("_") for a in attrs), f"{name}: Attributes must list the learned *_"
 
 
-@pytest.mark.parametrize("name, obj", PUBLIC, ids=[n for n, _ in PUBLIC])
+SLOW_EXAMPLES = {"Posterior"}
+"""An example that samples a posterior (about 10 s): run with -m slow, test_posterior.py keeping Posterior in the
+default suite (StructurePosterior's example stays: it is its default-suite test)."""
+
+
+@pytest.mark.parametrize(
+    "name, obj",
+    [pytest.param(n, o, marks=pytest.mark.slow) if n in SLOW_EXAMPLES else (n, o) for n, o in PUBLIC],
+    ids=[n for n, _ in PUBLIC],
+)
 def test_the_docstring_examples_run(name, obj, tmp_path, monkeypatch):
     # each example as a user would paste it: in a fresh namespace, in an empty working folder; a doctest
     # that issues a NegstiffWarning fails (an example must show a result negstiff believes)

@@ -151,6 +151,9 @@ def test_report_on_a_low_level_record(tmp_path):
     assert frf["f_hz"] == pytest.approx(TRUTH.uls("minus").f_hz, rel=0.01), "the low-level FRF: the well's own"
 
 
+# a long study: three records and their posteriors; the reports on the Silverbox, a harmonic campaign and a
+# low-level record keep the report engine in the default suite
+@pytest.mark.slow
 def test_a_report_built_from_python_over_three_amplitudes(tmp_path):
     # an experiment script's report: each record's SINDy and NSI, and one posterior, in one coefficient table.
     # 30 s records (40 s before; CI time): with 3 um of laser noise SINDy's k3 errs by ~1e-5 relative on 30 s
