@@ -244,11 +244,15 @@ records, z's error after knots every 10 / 5 / 2 / 1 s: 0.082 / 0.027 / 0.0087 / 
 DRIFT_KNOT_MIN_S = 1.0
 
 
-def _hats(t: np.ndarray, t_end: float, spacing: float) -> np.ndarray:
-    """Piecewise-linear hat functions of time with knots every ``spacing`` s over [0, t_end], evaluated at
-    ``t`` (rows) -- a partition of unity: their sum is one everywhere.
+def _knots(t_end: float, spacing: float) -> np.ndarray:
+    """Knots every ``spacing`` s (about) over [0, t_end], at least the two ends."""
+    return np.linspace(0.0, t_end, max(2, int(round(t_end / spacing)) + 1))
+
+
+def _hats(t: np.ndarray, knots: np.ndarray) -> np.ndarray:
+    """Piecewise-linear hat functions of time on ``knots``, evaluated at ``t`` (rows) -- a partition of unity:
+    their sum is one everywhere; ``_hats(t, knots) @ values`` is ``np.interp(t, knots, values)``.
     """
-    knots = np.linspace(0.0, t_end, max(2, int(round(t_end / spacing)) + 1))
     return np.column_stack([np.interp(t, knots, np.eye(knots.size)[j]) for j in range(knots.size)])
 
 
@@ -288,7 +292,8 @@ def drift_by_physics(rec: Measurement) -> Measurement:
             system = form.system(cur)
             rows = system.W.shape[0]
             t_rows = (form.centre(cur.dt) + form.stride * np.arange(rows)) / cur.fs
-            H = _hats(t_rows, cur.duration, spacing)
+            knots = _knots(cur.duration, spacing)
+            H = _hats(t_rows, knots)
             W = system.W_physical
             base = W[:, :-1][:, np.array(support)]
             slow = [H * W[:, [names.index(k)]] for k in ("1", "z", "z^2")]
@@ -302,7 +307,7 @@ def drift_by_physics(rec: Measurement) -> Measurement:
             if not np.isfinite(a3) or a3 == 0:
                 break
             d_knots = -(gamma - gamma.mean()) / (3 * a3)  # z^2 coefficient of z'': -k2/m + 3 k3 d / m, a3 = -k3/m
-            d = _hats(np.arange(rec.n) / rec.fs, rec.duration, spacing) @ d_knots
+            d = np.interp(np.arange(rec.n) / rec.fs, knots, d_knots)  # the hats' sum, without their n x k matrix
             z = z - d
             total += d
     except (WeakFormError, np.linalg.LinAlgError, ValueError):
