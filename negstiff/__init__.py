@@ -10,31 +10,27 @@ command line's ``--help`` does not pay for the compiled simulator)::
     nsi = NSI().fit(rec)
     print(nsi.model_, nsi.modal_)
 
-The parts: ``negstiff.models`` (the physics: device, equation of motion, simulator, virtual rig),
-``negstiff.inference`` (learning from data: loading, identification, updating, posteriors),
-``negstiff.experiments`` (studies that write ``reports/``), and the ``negstiff`` command line.
+The parts, each a folder of this package: ``negstiff.io`` (the lab's file formats), ``negstiff.models``
+(the physics: device, equation of motion, simulator, virtual rig), ``negstiff.inference`` (learning from
+data: records, identification, updating, posteriors), ``negstiff.report`` (reports from results, the
+``negstiff report`` engine), ``negstiff.cli`` (the command line) and ``negstiff.study`` (the reference
+study reproduced, which only the command line's ``reproduce`` imports). The developers' benchmarks are
+outside the package (``benchmarks/`` of the repository).
 """
 
 from __future__ import annotations
 
 import importlib
-from pathlib import Path as _Path
 
 __version__ = "0.1.0"
 
-# In a source checkout the parts are the top-level folders models/, inference/, experiments/ beside
-# this one (the project's layout); installed, setuptools puts them inside this package. Let a
-# checkout import as the installed package does (e.g. ``python -m pytest`` from the repository).
-_here = _Path(__file__).resolve().parent
-if not (_here / "models").is_dir() and (_here.parent / "models" / "__init__.py").is_file():
-    __path__.append(str(_here.parent))  # noqa: F821 - a package's __path__
 
 _EXPORTS = {
     # records
     "load": "negstiff.inference.record.measurement",
     "from_arrays": "negstiff.inference.record.measurement",
     "Measurement": "negstiff.inference.record.measurement",
-    "pin_frame": "negstiff.inference.record.frame",
+    "pin_frame": "negstiff.inference.steps.frame",
     "StructureRecord": "negstiff.inference.record.structure",
     "load_structure": "negstiff.inference.record.structure",
     "structure_from_arrays": "negstiff.inference.record.structure",
@@ -58,7 +54,7 @@ _EXPORTS = {
     "GAUpdater": "negstiff.inference.estimators.updating",
     "characterize": "negstiff.inference.analysis.characterize",
     "frf": "negstiff.inference.analysis.frf",
-    "Report": "negstiff.experiments.report",
+    "Report": "negstiff.report.document",
     "Identification": "negstiff.inference.estimators.identification",
     # errors and warnings
     "InputError": "negstiff.errors",

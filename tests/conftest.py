@@ -4,9 +4,9 @@ import numpy as np
 import pytest
 
 from negstiff import datasets
-from negstiff.experiments import silverbox as silverbox_study
 from negstiff.models import AS_BUILT, Model
 from negstiff.models.rig import Rig
+from negstiff.study import silverbox as silverbox_study
 
 
 @pytest.fixture(scope="session")

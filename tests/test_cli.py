@@ -155,7 +155,7 @@ def _check_report(out, sections):
 
 @pytest.mark.slow  # two minutes: the default suite runs the machinery on two sections (below)
 def test_reproduce_fast_writes_a_complete_report(tmp_path, monkeypatch):
-    from negstiff.experiments.reproduce import SECTIONS
+    from negstiff.study.reproduce import SECTIONS
 
     monkeypatch.setenv("NEGSTIFF_CACHE", str(tmp_path / "cache"))
     out = tmp_path / "paper"
@@ -173,7 +173,7 @@ def test_reproduce_fast_writes_a_complete_report(tmp_path, monkeypatch):
 def test_reproduce_machinery_on_two_sections(tmp_path, monkeypatch, capsys):
     # The report's machinery (sections, figures, the html, results.json, the cache's replay with the
     # same numbers) on the characterisation and NSI sections; every section: the slow test above.
-    from negstiff.experiments.reproduce import reproduce
+    from negstiff.study.reproduce import reproduce
 
     monkeypatch.setenv("NEGSTIFF_CACHE", str(tmp_path / "cache"))
     sections = ("characterization", "nsi")
@@ -213,7 +213,7 @@ def test_reproduce_sizes_its_processes_to_the_machine(monkeypatch):
     # (a section held up to 1.6 GB), and each process's own threads a share of the cores, not all of them
     import os
 
-    from negstiff.experiments import reproduce as r
+    from negstiff.study import reproduce as r
 
     monkeypatch.setattr(os, "cpu_count", lambda: 64)
     pages = {"SC_PAGE_SIZE": 4096, "SC_PHYS_PAGES": 64 * 1024**3 // 4096}

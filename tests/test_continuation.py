@@ -134,9 +134,9 @@ def test_a_slow_swept_sine_on_the_rig_jumps_just_past_the_continued_folds():
     just above the upper fold, sweeping down just below the lower one, late by the few time constants the
     response needs to leave a branch (1/(zeta omega) ~ 0.3 s, ~0.01 Hz at this rate, and the envelope's
     0.5 s averaging): within 2 % of the fold, on the late side."""
-    from negstiff.experiments.nfrc import jump_frequency
     from negstiff.models import AS_BUILT
     from negstiff.models.rig import Rig
+    from negstiff.study.continuation import jump_frequency
 
     r = nfrc(AS_BUILT, freq=(5.5, 11.0), amplitude=3.5, well="plus", max_period=1)
     lower, upper = sorted(b["f_hz"] for b in r["bifurcations"] if b["type"] == "fold")

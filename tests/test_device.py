@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from negstiff.experiments import seed
 from negstiff.models import AS_BUILT, NOMINAL, GeometryError
+from negstiff.study import seed
 
 
 def _central_derivatives(f, h):

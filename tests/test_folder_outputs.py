@@ -138,7 +138,7 @@ def test_reproduce_keeps_a_users_file_beside_results_and_refuses_before_the_stud
 
 
 def test_the_library_reproduce_refuses_before_the_study(tmp_path):
-    from negstiff.experiments.reproduce import reproduce
+    from negstiff.study.reproduce import reproduce
 
     (tmp_path / "notes.txt").write_text("the user's notes")
     start = time.perf_counter()

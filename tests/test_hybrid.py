@@ -8,8 +8,8 @@ import pytest
 from records import SILVERBOX_TEST, SILVERBOX_TRAIN
 
 from negstiff.inference.estimators.hybrid import fit_hybrid
+from negstiff.inference.record.derivatives import state_derivatives
 from negstiff.inference.record.measurement import from_arrays
-from negstiff.inference.steps.derivatives import state_derivatives
 from negstiff.inference.steps.refine import refine
 from negstiff.inference.steps.validation import free_run_rms
 from negstiff.models import Model

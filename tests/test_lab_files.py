@@ -191,7 +191,7 @@ def test_a_harmonic_records_report_says_its_frame_plainly_and_what_else_can_be_d
     # commands for the rest (identification from a broadband record, the map from a campaign). A z derived from a
     # vibrometer in one well has an unknown constant no physics pins: the summary says the frame is not pinned,
     # in a sentence (not "pinned by not pinned").
-    from negstiff.experiments.record_report import report_records
+    from negstiff.report.record import report_records
 
     rec = _harmonic_in_well_record(tmp_path / "harmonic.csv")
     rep = report_records([rec], forcing_hz=7.0)

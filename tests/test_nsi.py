@@ -7,9 +7,10 @@ from scipy import linalg, signal
 
 from negstiff.errors import MeasurementError
 from negstiff.inference.estimators import subspace
-from negstiff.inference.estimators.nsi import NSI, well_guesses
+from negstiff.inference.estimators.nsi import NSI
+from negstiff.inference.record.derivatives import smooth_and_differentiate
 from negstiff.inference.record.measurement import from_arrays
-from negstiff.inference.steps.derivatives import smooth_and_differentiate
+from negstiff.inference.steps.wells import well_guesses
 from negstiff.models import SEED_LIKE_CROSS_WELL_RMS, SEED_LIKE_CUBIC, Model, simulate
 from negstiff.models.rig import Rig, Sensors
 

@@ -522,7 +522,7 @@ def no_work(monkeypatch):
         raise _WorkStarts
 
     monkeypatch.setattr(commands, "say", start)
-    import negstiff.experiments.reproduce as reproduce
+    import negstiff.study.reproduce as reproduce
 
     monkeypatch.setattr(reproduce, "reproduce", start)
 

@@ -8,8 +8,8 @@ from records import SILVERBOX_ARROW, SILVERBOX_TEST, SILVERBOX_TRAIN, silverbox_
 
 from negstiff.inference.estimators.nsi import NSI
 from negstiff.inference.estimators.sindy import SINDy
+from negstiff.inference.record.derivatives import state_derivatives
 from negstiff.inference.record.measurement import from_arrays
-from negstiff.inference.steps.derivatives import state_derivatives
 from negstiff.inference.steps.refine import refine
 from negstiff.inference.steps.validation import boundedness, free_run_rms, simulate_record
 from negstiff.models import Model, simulate

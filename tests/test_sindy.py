@@ -8,8 +8,8 @@ from scipy import signal
 from negstiff.cli import main
 from negstiff.errors import MeasurementError
 from negstiff.inference.estimators.sindy import SINDy
+from negstiff.inference.record.derivatives import derivative_window, state_derivatives
 from negstiff.inference.record.measurement import from_arrays
-from negstiff.inference.steps.derivatives import derivative_window, state_derivatives
 from negstiff.models import SEED_LIKE_CROSS_WELL_RMS, SEED_LIKE_CUBIC, simulate
 from negstiff.models.rig import Rig, Sensors
 

@@ -13,12 +13,8 @@ import pytest
 import negstiff
 
 ROOT = Path(__file__).resolve().parent.parent
-PACKAGES = {
-    "negstiff": ROOT / "negstiff",
-    "negstiff.models": ROOT / "models",
-    "negstiff.inference": ROOT / "inference",
-    "negstiff.experiments": ROOT / "experiments",
-}
+PACKAGES = {"negstiff": ROOT / "negstiff"}
+"""The package is its folder: the import path is the layout."""
 
 
 def _modules() -> dict[str, Path]:
@@ -94,6 +90,64 @@ def test_no_import_cycle_in_the_package():
     assert not cycles, f"import cycles: {cycles}"
 
 
+LAYERS = [
+    ("negstiff.errors", "negstiff.constants", "negstiff.resources", "negstiff.files"),
+    ("negstiff.io",),
+    ("negstiff.models",),
+    ("negstiff.inference.record",),
+    ("negstiff.inference.steps",),
+    ("negstiff.inference.estimators", "negstiff.inference.analysis"),
+    ("negstiff.inference", "negstiff.datasets", "negstiff.testing"),
+    ("negstiff.report",),
+    ("negstiff.study",),
+    ("negstiff.cli", "negstiff.__main__"),
+]
+"""The package's layers, lowest first (``negstiff.inference`` itself is its parts' front door, loading names on
+first use): a module imports its own layer and the ones below, never one above
+(the front door ``negstiff`` itself, which loads names on first use, is above all and is imported only for
+its version)."""
+
+
+def _layer(module: str) -> int | None:
+    for rank, names in enumerate(LAYERS):
+        if any(module == n or module.startswith(n + ".") for n in names):
+            return rank
+    return None
+
+
+def test_no_layer_imports_one_above_it():
+    # the layout is the import path: the folders are the layers, and the arrows point down only; the
+    # reference study (negstiff.study) is imported by the command line alone
+    upward = []
+    for mod, targets in _imports(_modules()).items():
+        for target in targets:
+            a, b = _layer(mod), _layer(target)
+            if a is not None and b is not None and b > a:
+                upward.append(f"{mod} -> {target}")
+    assert not upward, f"imports of a layer above: {upward}"
+    outside = [m for m in _modules() if _layer(m) is None and m != "negstiff"]
+    assert not outside, f"modules outside every layer: {outside}"
+
+
+def test_the_layout_is_the_import_path():
+    # every module of the package is the file its name says (no package-dir remapping, no __path__ addition)
+    import importlib
+
+    for name, f in _modules().items():
+        if name == "negstiff.__main__":  # runs the command line when imported
+            continue
+        module = importlib.import_module(name)
+        assert Path(module.__file__).resolve() == f.resolve(), name
+
+
+def test_the_default_install_does_not_pull_dask():
+    # dask is an extra (studies over many records on a cluster); the library's dependencies name none of it
+    import tomllib
+
+    deps = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["dependencies"]
+    assert not [d for d in deps if d.lower().startswith(("dask", "distributed"))], deps
+
+
 def test_no_module_level_cache_holds_a_records_arrays(tmp_path):
     # after a whole identification, no module's globals hold arrays in a container (a record's states and
     # segments live with the record: Measurement.derived)
@@ -119,10 +173,10 @@ def test_one_runge_kutta_loop_for_the_equation_of_motion():
     # the stage combination z + h/6 (k1 + 2 k2 + 2 k3 + k4) of the equation of motion is written once (the
     # kernel); the other RK4 in the library integrates the variational equations (state and tangent) of the
     # Benettin exponent, a reference of another system (the benchmarks' plain C loop is a peer, not the library)
-    library = [f for name, f in _modules().items() if not name.startswith("negstiff.experiments")]
+    library = [f for name, f in _modules().items() if not name.startswith("negstiff.study")]
     files = sorted(str(f.relative_to(ROOT)) for f in library if "h / 6.0 * (" in f.read_text())
-    assert files == ["models/kernel.py", "models/reference.py"], files
-    assert "variational equations" in (ROOT / "models/reference.py").read_text()
+    assert files == ["negstiff/models/kernel.py", "negstiff/models/reference.py"], files
+    assert "variational equations" in (ROOT / "negstiff/models/reference.py").read_text()
 
 
 @pytest.mark.parametrize("module", sorted(p.name for p in (ROOT / "negstiff/cli").glob("*.py")))

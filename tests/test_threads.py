@@ -112,7 +112,7 @@ def test_a_command_runs_blas_on_the_idle_cores_and_gives_the_caller_its_threads_
 def test_reproduces_section_processes_run_blas_on_one_thread():
     # the section processes are the parallelism: in each, every BLAS library (numpy's and scipy's) runs on
     # one thread, and negstiff's own threads get the share reproduce gives them unless the user set one
-    from negstiff.experiments import reproduce
+    from negstiff.study import reproduce
 
     with ProcessPoolExecutor(
         1, mp_context=get_context("spawn"), initializer=reproduce._share_cores, initargs=(2,)

@@ -2,8 +2,8 @@
 
 import pytest
 
-from negstiff.experiments.report import Report
-from negstiff.experiments.uq_calibration import PARAMS, RANK_DRAWS, report, run, summarise
+from benchmarks.uq_calibration import PARAMS, RANK_DRAWS, report, run, summarise
+from negstiff.report.document import Report
 
 
 def test_the_calibration_study_runs_on_a_local_dask_cluster():

@@ -1,5 +1,5 @@
 """The commands: each reads its inputs, calls ``negstiff.models``, ``negstiff.inference`` or
-``negstiff.experiments``, and writes its output atomically (``docs/contract.md``).
+``negstiff.report`` and ``negstiff.study``, and writes its output atomically (``docs/contract.md``).
 """
 
 from __future__ import annotations
@@ -360,9 +360,9 @@ def cmd_characterize(args) -> int:
 
 
 def cmd_frf(args) -> int:
-    from negstiff.experiments.frf import figure as frf_figure
     from negstiff.inference.analysis.frf import check_frf, frf
     from negstiff.inference.record.measurement import load
+    from negstiff.report.figures import frf_figure
 
     band = parse_band(args.band)
     if args.dofs > 1:
@@ -386,9 +386,9 @@ def cmd_frf(args) -> int:
 
 def _frf_structure(args, band) -> int:
     """``frf DATA --dofs N``: every DOF's FRF from the input, the modes merged over DOFs."""
-    from negstiff.experiments.frf import figure_dofs
     from negstiff.inference.analysis.frf import frf_structure
     from negstiff.inference.record.structure import load_structure
+    from negstiff.report.figures import frf_figure_dofs as figure_dofs
 
     if args.columns:
         raise InputError("--columns is for a single-DOF record (a structure's record names z1 ... zN)")
@@ -410,9 +410,9 @@ def _frf_structure(args, band) -> int:
 
 
 def cmd_nfrc(args) -> int:
-    from negstiff.experiments.nfrc import figure
     from negstiff.models.continuation import check_nfrc, nfrc
     from negstiff.models.device import load_system
+    from negstiff.report.figures import continuation_figure as figure
 
     system = load_system(args.model)
     freq, amplitude = parse_span(args.freq, "--freq"), parse_span(args.amplitude, "--amplitude")
@@ -433,8 +433,8 @@ def cmd_nfrc(args) -> int:
 
 
 def cmd_map(args) -> int:
-    from negstiff.experiments.sections import map_figure
     from negstiff.inference.analysis.campaign import Campaign
+    from negstiff.report.sections import map_figure
 
     given = parse_wells(args.wells)  # the options, and every input read and checked, before any analysis
     campaign = Campaign.read(args.data, args.columns, args.fs, args.forcing_hz, given, args.nfrc, gravity=args.gravity)
@@ -499,7 +499,7 @@ def cmd_update(args) -> int:
 
 
 def cmd_report(args) -> int:
-    from negstiff.experiments.record_report import report_records
+    from negstiff.report.record import report_records
 
     options: dict[str, dict] = {"posterior": {}, "discrepancy": {}}
     if args.duration is not None:
@@ -521,7 +521,7 @@ def cmd_report(args) -> int:
 
 
 def cmd_reproduce(args) -> int:
-    from negstiff.experiments.reproduce import reproduce
+    from negstiff.study.reproduce import reproduce
 
     reproduce(Path(args.out), fast=args.fast, seed=args.seed, progress=wants_progress(args), workers=args.workers)
     return 0

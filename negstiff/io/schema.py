@@ -18,8 +18,8 @@ from typing import Any
 
 import numpy as np
 
+from negstiff.constants import STANDARD_GRAVITY
 from negstiff.errors import MeasurementError
-from negstiff.models.constants import STANDARD_GRAVITY
 
 INPUTS = ("base_acc", "force")
 OPTIONAL = ("z_dot", "y", "base_disp")
@@ -148,7 +148,7 @@ _MAP_ENTRY = re.compile(r"^\s*(\w+)\s*=\s*([^*]+?)\s*(?:\*\s*([-+0-9.eE]+|\?))?\
 
 UNKNOWN_SCALE = None
 """A column map's scale for a channel whose sensitivity is unknown (``z_dot=ldv*?``): the record's own
-dynamics estimate it (``negstiff.inference.record.frame``)."""
+dynamics estimate it (``negstiff.inference.steps.frame``)."""
 
 
 def parse_column_map(text: str | None) -> dict[str, tuple[str, float | None]]:

@@ -1,0 +1,205 @@
+"""What a user waits for: the wall time of the commands as a user runs them (issue 18's targets).
+
+    python -m benchmarks.waits [--quick]
+
+Each command runs in its own process, as installed (``python -m negstiff``), on a rig record written by
+``negstiff rig random`` to a temporary folder, with the environment's PYTHONDONTWRITEBYTECODE removed (a
+user's Python caches its bytecode). Timings are wall clock, from the process's start to its exit:
+
+- ``identify nsi`` on a 300 s record: one untimed run (bytecode and numba caches), then 5 timed;
+- ``posterior`` with its defaults on the same record: 2 timed runs;
+- ``reproduce`` with its section cache off: once on an empty numba cache (a fresh install's first run,
+  the kernels compiled) and once more on that cache (every later run);
+- ``identify nsi`` and ``identify sindy`` on a bench record (``bench_record``: a horizontal bistable harvester
+  under chaotic harmonic forcing, 396 s at 2048 Hz, its velocity from a vibrometer of unknown sensitivity
+  whose integral drifts by 43 mm), alone and beside two busy processes (pure-Python loops, one a core).
+
+The machine's speed drifts (this shared 2-core machine ran the same ``identify nsi`` 2.7-2.9 s and, half
+an hour later, 3.4-4.0 s): the section reports a fixed reference beside the waits, the wall time of a
+fresh process importing ``scipy.signal`` (median of 5), so runs on different days can be compared.
+"""
+
+from __future__ import annotations
+
+import os
+import platform
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+TARGETS = {"identify nsi": 3.0, "posterior": 30.0, "reproduce (fresh install)": 180.0,
+           "identify nsi, bench record": 180.0, "identify sindy, bench record": 180.0}  # fmt: skip
+"""Wall-time targets [s] on 2 cores (the bench record's beside two busy processes: 3x its own)."""
+
+BENCH_FS = 2048.0
+
+
+def bench_record(path: Path, duration: float = 396.0) -> Path:
+    """A lab's long record, written with scipy (DOP853), not negstiff's simulator: a horizontal bistable
+    harvester (Moon-Holmes form per unit mass, z'' + d z' - a z + b z^3 = -u, wells at +-10 mm, 4 Hz) under
+    the chaotic forcing 0.3 L w0^2 cos(w0 t), mass 0.01 kg, no gravity along its motion; the vibrometer's
+    volts (0.1 m/s per V, unknown to negstiff: ``z_dot=ldv*?``) with a zero 1.1e-4 m/s off, a wander below
+    0.03 Hz and white noise; the base's acceleration in g with noise.
+    """
+    import numpy as np
+    from scipy.integrate import solve_ivp
+
+    L, w0 = 0.010, 2 * np.pi * 4.0
+    a, b, d, amp = w0**2, w0**2 / L**2, 0.25 * w0, 0.3 * L * w0**2
+    t = np.arange(int(duration * BENCH_FS)) / BENCH_FS
+    sol = solve_ivp(lambda s, x: [x[1], -d * x[1] + a * x[0] - b * x[0] ** 3 - amp * np.cos(w0 * s + 1.0)],
+                    (0, t[-1]), [L, 0.0], t_eval=t, method="DOP853", rtol=1e-10, atol=1e-13)  # fmt: skip
+    rng = np.random.default_rng(11)
+    spec = np.fft.rfft(rng.standard_normal(t.size))
+    spec[(np.fft.rfftfreq(t.size, 1 / BENCH_FS) > 0.03)] = 0
+    wander = np.fft.irfft(spec, t.size)
+    v = sol.y[1] - 1.1e-4 + 4e-5 * wander / wander.std() + 1e-4 * rng.standard_normal(t.size)
+    acc_g = amp * np.cos(w0 * t + 1.0) / 9.81 + 0.002 * rng.standard_normal(t.size)
+    rows = np.column_stack([t, acc_g, v / 0.1])
+    with open(path, "w") as fh:
+        fh.write("# gravity: 0\n# mass: 0.01\nt,acc,ldv\n")
+        np.savetxt(fh, rows, delimiter=",", fmt="%.10g")
+    return path
+
+
+def _busy(n: int) -> list[subprocess.Popen]:
+    """``n`` busy processes (a pure-Python loop each): the other work on a shared machine."""
+    return [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(n)]
+
+
+def _env(**extra: str) -> dict[str, str]:
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONDONTWRITEBYTECODE"}
+    return env | extra
+
+
+def timed(args: list[str], env: dict[str, str] | None = None, cwd: Path | None = None) -> float:
+    """Wall time [s] of ``python -m negstiff *args`` (or ``python *args`` when args[0] is ``-c``), which
+    must succeed.
+    """
+    cmd = [sys.executable, *(args if args[0] == "-c" else ["-m", "negstiff", *args])]
+    t0 = time.perf_counter()
+    p = subprocess.run(cmd, env=env or _env(), cwd=cwd, capture_output=True, text=True)
+    elapsed = time.perf_counter() - t0
+    if p.returncode != 0:
+        raise RuntimeError(f"{' '.join(args[:3])} failed ({p.returncode}): {p.stderr.strip()[-300:]}")
+    return elapsed
+
+
+def machine() -> dict[str, Any]:
+    """The machine and the versions the waits were measured with."""
+    import numba
+    import numpy
+    import scipy
+
+    model = platform.processor() or "unknown"
+    try:
+        lines = Path("/proc/cpuinfo").read_text().splitlines()
+        model = next(x.split(":", 1)[1].strip() for x in lines if x.startswith("model name"))
+    except (OSError, StopIteration):
+        pass
+    return {
+        "cpu": model,
+        "cores": os.cpu_count(),
+        "python": platform.python_version(),
+        "numpy": numpy.__version__,
+        "scipy": scipy.__version__,
+        "numba": numba.__version__,
+    }
+
+
+def measure(quick: bool = False) -> dict[str, Any]:
+    """The waits (module docstring); ``quick``: a 60 s record, one posterior run, ``reproduce --fast``."""
+    out: dict[str, Any] = {"machine": machine(), "quick": quick}
+    ref = sorted(timed(["-c", "import scipy.signal"]) for _ in range(5))
+    out["reference_import_scipy_signal_s"] = ref[2]
+    with tempfile.TemporaryDirectory(prefix="negstiff-waits-") as tmp:
+        d = Path(tmp)
+        duration = "60" if quick else "300"
+        timed(["rig", "random", "--duration", duration, "--seed", "3", "-o", str(d / "rec.csv")])
+        nsi = ["identify", "nsi", str(d / "rec.csv"), "-o", str(d / "nsi.json")]
+        timed(nsi)  # bytecode and the kernels cached, as on any run but a fresh install's first
+        out["identify nsi"] = [timed(nsi) for _ in range(5)]
+        post = ["posterior", str(d / "rec.csv"), "-o", str(d / "post.json"), "--quiet"]
+        out["posterior"] = [timed(post) for _ in range(1 if quick else 2)]
+        env = _env(NEGSTIFF_CACHE="off", NUMBA_CACHE_DIR=str(d / "numba"))
+        rep = ["reproduce", "-o", str(d / "paper"), "--quiet", *(["--fast"] if quick else [])]
+        out["reproduce (fresh install)"] = [timed(rep, env)]
+        out["reproduce (kernels cached)"] = [timed(rep, env)]
+    return out | bench_waits(quick)
+
+
+def bench_waits(quick: bool = False) -> dict[str, list[float]]:
+    """``identify nsi`` and ``identify sindy`` on the bench record (``bench_record``; 120 s with ``quick``),
+    each alone and then beside two busy processes: wall times [s].
+    """
+    out: dict[str, list[float]] = {}
+    with tempfile.TemporaryDirectory(prefix="negstiff-bench-") as tmp:
+        d = Path(tmp)
+        rec = bench_record(d / "bench.csv", 120.0 if quick else 396.0)
+        for method in ("nsi", "sindy"):
+            cmd = ["identify", method, str(rec), "--columns", "base_acc=acc*9.81,z_dot=ldv*?", "-o",
+                   str(d / f"{method}.json"), "--quiet"]  # fmt: skip
+            out[f"identify {method}, bench record"] = [timed(cmd)]
+            busy = _busy(2)
+            try:
+                out[f"identify {method}, bench record, beside 2 busy processes"] = [timed(cmd)]
+            finally:
+                for p in busy:
+                    p.kill()
+    return out
+
+
+def _row(name: str, times: list[float], quick: bool) -> list[str]:
+    s = sorted(times)
+    med = s[len(s) // 2]
+    spread = f"{s[0]:.2f}-{s[-1]:.2f} s" if len(s) > 1 else f"{s[0]:.1f} s"
+    target = None if quick else TARGETS.get(name)  # --quick: not the targets' conditions
+    verdict = "" if target is None else (f"<= {target:g} s: " + ("met" if med <= target else "**not met**"))
+    return [name, str(len(s)), f"{med:.2f} s", spread, verdict]
+
+
+def waits_section(quick: bool) -> list[str]:
+    """The waits as a benchmarks.md section (measured now)."""
+    from .peers import section
+
+    print("waits (the commands as installed)...", file=sys.stderr)
+    res = measure(quick)
+    m = res["machine"]
+    keys = ["identify nsi", "posterior", "reproduce (fresh install)", "reproduce (kernels cached)"]
+    keys += [f"identify {m}, bench record{x}" for m in ("nsi", "sindy") for x in ("", ", beside 2 busy processes")]
+    rows = [_row(k, res[k], quick) for k in keys]
+    for m in ("nsi", "sindy"):  # beside other work: within 3x of its own time
+        own = res[f"identify {m}, bench record"][0]
+        loaded = res[f"identify {m}, bench record, beside 2 busy processes"][0]
+        rows[keys.index(f"identify {m}, bench record, beside 2 busy processes")][4] = (
+            f"<= 3x alone: {loaded / own:.2f}x, " + ("met" if loaded <= 3 * own else "**not met**")
+        )
+    intro = (
+        f"The commands as a user runs them, each in its own process, on {'60' if quick else '300'} s rig records "
+        f"at 512 Hz (`experiments/waits.py`). Machine: {m['cpu']}, {m['cores']} cores; Python {m['python']}, "
+        f"numpy {m['numpy']}, scipy {m['scipy']}, numba {m['numba']}. The machine's speed drifts over a day: its "
+        f"reference in this run, a fresh process importing scipy.signal, took "
+        f"{res['reference_import_scipy_signal_s']:.2f} s. reproduce ran "
+        "with its section cache off, first on an empty numba cache (a fresh install's first run), then on it. "
+        f"The bench record: {'120' if quick else '396'} s at 2048 Hz of a horizontal bistable harvester in chaos, "
+        "its velocity from a vibrometer of unknown sensitivity whose integral drifts by 43 mm (`bench_record`)."
+        + (" A --quick run (reproduce --fast): not the targets' conditions." if quick else "")
+    )
+    return section("Waits (issue 18)", intro, ["command", "runs", "median", "range", "target"], rows)
+
+
+def main(argv=None) -> int:
+    import argparse
+
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--quick", action="store_true", help="a 60 s record, reproduce --fast")
+    a = ap.parse_args(argv)
+    print("\n".join(waits_section(a.quick)))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,356 @@
+"""Frequency response functions of a low-level test around one well, with a modal fit of each peak.
+
+Before any nonlinear test a lab measures the FRF around each stable well (random or swept excitation
+at a level that keeps the motion small): its resonance is the well's underlying-linear frequency,
+an independent check of what NSI, SINDy and a refined model say (reference study Eq. 4).
+
+* Estimation (Bendat & Piersol, *Random Data*, 4th ed., sections 9.1-9.2): H1 = G_xy / G_xx (noise
+  on the response averages out), H2 = G_yy / G_yx (noise on the input averages out), coherence
+  gamma^2 = |G_xy|^2 / (G_xx G_yy), from Welch-averaged (cross-)spectra of scipy.signal (Hann window,
+  50 % overlap). scipy is used rather than pyFRF: pyFRF averages over repeated impact measurements,
+  a stationary random record is one long Welch average, and scipy.signal is already a dependency.
+* Modal fit of each peak: the single-degree-of-freedom receptance of the equation of motion,
+  H(w) = A / (w_n^2 - w^2 + 2 i zeta w_n w) + R (R: a complex residual of the other modes and of
+  the nonlinearity's distortion), fitted to H1 by least squares on its real and imaginary parts over
+  the half-power band widened 3x (``scipy.optimize.least_squares``), started from peak picking and
+  the half-power bandwidth (Ewins, *Modal Testing*, 2nd ed., 4.3). For base excitation A = -1 (z per
+  table acceleration) and for a force A = 1/m: the fit's A is reported, and for a force it gives m.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+from scipy import optimize, signal
+
+from negstiff.errors import MeasurementError, issue
+from negstiff.files import read_json
+from negstiff.inference.record.measurement import Measurement
+from negstiff.inference.steps.plausibility import classified
+
+SEGMENT_S = 16.0
+"""Welch segment length [s]: 1/16 Hz bins, at least 8 averages on a 72 s record (fewer on shorter
+ones, said by ``averages``)."""
+
+
+PERIODIC_CORRELATION = 0.999
+"""An input whose autocorrelation at one lag (0.25 s or more, a third of the record at most) is this close to 1
+is periodic (a multisine, a periodic chirp): its spectrum is lines 1/period apart."""
+
+
+def input_period(rec: Measurement) -> int | None:
+    """The period [samples] of a periodic input (``PERIODIC_CORRELATION``), else None."""
+    u = rec.u - rec.u.mean()
+    n = u.size
+    if n < 64 or not np.any(u):
+        return None
+    spec = np.fft.rfft(u, 2 * n)
+    acf = np.fft.irfft(np.abs(spec) ** 2)[: n // 3 + 1]
+    acf = acf / acf[0] * n / (n - np.arange(acf.size))  # unbiased: each lag over the samples it has
+    lo = max(1, int(0.25 * rec.fs))
+    if acf.size <= lo + 1:
+        return None
+    above = np.flatnonzero(acf[lo:] >= PERIODIC_CORRELATION)
+    if not above.size:
+        return None
+    run_end = above[0] + int(np.argmax(np.diff(np.r_[above, above[-1] + 2]) > 1))  # the first lags that repeat
+    return lo + above[0] + int(np.argmax(acf[lo + above[0] : lo + run_end + 1]))  # the period, not a multiple
+
+
+def estimate(rec: Measurement, segment_s: float = SEGMENT_S, period: int | None = None) -> dict[str, np.ndarray]:
+    """H1, H2 and the coherence of z over the input: (f [Hz], H1, H2, coherence, averages). A periodic input
+    (``period`` samples: a multisine) is averaged over whole periods without a window: every bin is one of its
+    lines, none leaks (Welch's Hann segments of a random input would split its lines and fit noise between).
+    """
+    if rec.z is None:
+        raise MeasurementError(f"{rec.source}: an FRF needs a response column")
+    if period is not None and rec.n >= 2 * period:
+        kw = {"fs": rec.fs, "nperseg": period, "window": "boxcar", "noverlap": 0, "detrend": "constant"}
+        nper = period
+    else:
+        nper = int(min(rec.n // 2, round(segment_s * rec.fs)))
+        kw = {"fs": rec.fs, "nperseg": nper, "window": "hann", "noverlap": nper // 2, "detrend": "constant"}
+    if nper < 64:
+        raise MeasurementError(f"{rec.source}: too few samples for an FRF ({rec.n}); need at least 128")
+    f, gxx = signal.welch(rec.u, **kw)
+    _, gyy = signal.welch(rec.z, **kw)
+    _, gxy = signal.csd(rec.u, rec.z, **kw)  # conj(X) Y: H1 = G_xy / G_xx
+    with np.errstate(divide="ignore", invalid="ignore"):
+        h1 = gxy / gxx
+        h2 = gyy / np.conj(gxy)
+        coh = np.abs(gxy) ** 2 / (gxx * gyy)
+    averages = rec.n // nper if kw["window"] == "boxcar" else 2 * rec.n // nper - 1
+    return {"f": f, "H1": h1, "H2": h2, "coherence": np.nan_to_num(coh), "Gxx": gxx, "averages": averages,
+            "window": kw["window"]}  # fmt: skip
+
+
+COHERENT = 0.8
+"""A peak whose coherence reaches this is the input's response (at most a quarter as much uncorrelated output power,
+drift or noise, as input-driven, Bendat & Piersol 9.2.3): the dominant peak is the strongest of these. A drift's
+bump at the bottom of a swept test reaches 0.5-0.65 (measured: a 1-20 Hz sweep, drift 0.1-2 Hz) where a
+resonance stands above 0.9."""
+
+
+def _height(f: np.ndarray, h1: np.ndarray, p: dict[str, Any]) -> float:
+    """|H1| at a peak's bin."""
+    return float(np.abs(h1[np.argmin(np.abs(f - p["peak_bin_hz"]))]))
+
+
+def _sdof(p, w):
+    a_re, a_im, wn, zeta, r_re, r_im = p
+    return (a_re + 1j * a_im) / (wn**2 - w**2 + 2j * zeta * wn * w) + (r_re + 1j * r_im)
+
+
+def fit_peak(f: np.ndarray, h: np.ndarray, k: int) -> dict[str, Any]:
+    """SDOF receptance fit around the peak at bin ``k`` (module docstring)."""
+    mag = np.abs(h)
+    half = mag[k] / math.sqrt(2)
+    lo = k
+    while lo > 0 and mag[lo] > half:
+        lo -= 1
+    hi = k
+    while hi < f.size - 1 and mag[hi] > half:
+        hi += 1
+    bw = max(f[hi] - f[lo], 2 * (f[1] - f[0]))
+    zeta0 = min(max(bw / (2 * f[k]), 1e-5), 0.99)  # a broad low-frequency hump would start beyond the bounds
+    sel = (f > f[k] - 1.5 * bw) & (f < f[k] + 1.5 * bw)
+    if sel.sum() < 6:  # a sharp peak: at least 3 bins either side
+        sel = (np.arange(f.size) >= k - 3) & (np.arange(f.size) <= k + 3)
+    w = 2 * np.pi * f[sel]
+    wn0 = 2 * np.pi * f[k]
+    a0 = h[k] * (2j * zeta0 * wn0**2)
+
+    def resid(p):
+        d = _sdof(p, w) - h[sel]
+        return np.concatenate([d.real, d.imag]) / mag[k]
+
+    p0 = [a0.real, a0.imag, wn0, zeta0, 0.0, 0.0]
+    lb = [-np.inf, -np.inf, 0.5 * wn0, 1e-5, -np.inf, -np.inf]
+    ub = [np.inf, np.inf, 1.5 * wn0, 1.0, np.inf, np.inf]
+    sol = optimize.least_squares(resid, p0, bounds=(lb, ub), x_scale="jac")
+    a_re, a_im, wn, zeta, r_re, r_im = sol.x
+    return {
+        "f_hz": float(wn / (2 * np.pi)),
+        "zeta": float(zeta),
+        "modal_constant": [float(a_re), float(a_im)],
+        "peak_bin_hz": float(f[k]),
+        "half_power_zeta": float(zeta0),
+        "fit_rms_relative": float(np.sqrt(np.mean(resid(sol.x) ** 2))),
+        "band_hz": [float(f[sel][0]), float(f[sel][-1])],
+    }
+
+
+RESOLUTION_RATIO = 0.1
+"""The Hann window's resolution bandwidth (1.5 / T) kept below this fraction of the dominant peak's
+half-power bandwidth (2 zeta f): window leakage widens a peak and biases zeta upwards (measured on a
+2 % mode at 10 Hz: +15 % with 8 s segments, +4 % with 16 s, +2 % with 32 s)."""
+
+
+def check_frf(rec: Measurement, band: tuple[float, float] | None = None) -> None:
+    """Refuse (``MeasurementError``, one line) what no FRF can be estimated from: an input or a response
+    that does not move, a band beyond the Nyquist frequency.
+    """
+    rec.require_excitation("an FRF")
+    rec.require_motion("an FRF")
+    if band is not None and not (0 <= band[0] < band[1] <= rec.fs / 2):
+        raise MeasurementError(f"{rec.source}: FRF band {band[0]:g}:{band[1]:g} Hz must lie within 0:{rec.fs / 2:g} Hz")
+
+
+def frf(rec: Measurement, band: tuple[float, float] | None = None, segment_s: float | None = None) -> dict[str, Any]:
+    """Frequency response functions (H1, H2, coherence) with every resonance peak fitted.
+
+    Peaks are local maxima of ``|H1|`` standing 6 dB above the band's median level at coherence above
+    0.5, each fitted with a single-degree-of-freedom receptance (``docs/methods/frf.md``). The dominant peak
+    is the strongest whose coherence reaches ``COHERENT`` (a drift's bump the input does not explain never wins
+    over a resonance; a stronger peak passed over is warned about), else the strongest. A response of
+    unknown scale (``*?``) is calibrated first: the FRF is in SI units.
+
+    Parameters
+    ----------
+    rec : Measurement
+        A record with broadband input (a low-level random or swept test around one well).
+    band : (float, float), optional
+        The frequency band [Hz] searched for peaks (default: the input's band).
+    segment_s : float, optional
+        Welch segment length [s] (default: lengthened until the resolution resolves the dominant peak).
+
+    Returns
+    -------
+    dict
+        The contract's frf result: ``f_hz``, ``zeta``, ``coherence`` (the dominant peak's), ``band``, ``peaks``
+        (each fitted peak, the dominant first), ``well`` (the rest position nearest the record's mean z),
+        ``record``, ``warnings``, and the spectra in ``_curves`` (arrays, for a figure; not JSON).
+
+    Examples
+    --------
+    >>> from negstiff import Measurement, Rig, frf
+    >>> from negstiff.models import SEED_LIKE_CUBIC
+    >>> rec = Measurement.from_rig(Rig(SEED_LIKE_CUBIC, seed=7).random(duration=60.0, rms=0.5, start="minus"))
+    >>> r = frf(rec)
+    >>> abs(r["f_hz"] / SEED_LIKE_CUBIC.uls("minus").f_hz - 1) < 0.01   # the well's own frequency
+    True
+    """
+    from negstiff.inference.steps.frame import calibrate_scale
+
+    check_frf(rec, band)
+    rec = calibrate_scale(rec)
+    period = input_period(rec) if segment_s is None else None
+    if period is not None:  # a multisine: whole periods, its lines
+        r = _frf(rec, band, period / rec.fs, period)
+    elif segment_s is None:
+        r = _frf(rec, band, SEGMENT_S)
+        if r["f_hz"] is not None:
+            need = 1.5 / (RESOLUTION_RATIO * 2 * r["zeta"] * r["f_hz"])
+            seg = min(need, rec.duration / 4)
+            r = r if seg <= SEGMENT_S * 1.05 else _frf(rec, band, seg)
+    else:
+        r = _frf(rec, band, segment_s)
+    rest = rec.rest_positions
+    z = rec.z
+    r["well"] = min(rest, key=lambda w: abs(rest[w] - float(np.mean(z)))) if rest and z is not None else None
+    notes = r.pop("_notes")
+    lines = classified(rec, None, ([r["reason"]] if r["reason"] else []) + notes)
+    issue(lines)
+    return r | {"record": dict(rec.info), "warnings": [text for _, text in lines]}
+
+
+def _frf(rec: Measurement, band: tuple[float, float] | None, segment_s: float, period: int | None = None
+         ) -> dict[str, Any]:  # fmt: skip
+    """``frf`` with a given Welch segment [s] (or the input's period [samples])."""
+    est = estimate(rec, segment_s, period)
+    f, h1, coh = est["f"], est["H1"], est["coherence"]
+    nyq = rec.fs / 2
+    if band is None:  # the excited band: where the input's spectrum is within 20 dB of its peak
+        gxx = est["Gxx"]
+        on = np.flatnonzero((gxx >= 0.01 * gxx[1:].max()) & (f > 0))
+        band = (float(f[on[0]]), float(min(f[on[-1]], 0.8 * nyq))) if on.size else (float(f[1]), 0.8 * nyq)
+    if not (0 <= band[0] < band[1] <= nyq):
+        raise MeasurementError(f"{rec.source}: FRF band {band[0]:g}:{band[1]:g} Hz must lie within 0:{nyq:g} Hz")
+    inb = (f >= band[0]) & (f <= band[1])
+    if inb.sum() < 8:
+        raise MeasurementError(
+            f"{rec.source}: the FRF band {band[0]:g}:{band[1]:g} Hz holds fewer than 8 frequency bins"
+        )
+    idx = np.flatnonzero(inb)
+    mag = np.abs(h1[idx])
+    cand, _ = signal.find_peaks(mag, prominence=np.median(mag))
+    peaks = []
+    for c in cand:
+        k = idx[c]
+        if mag[c] < 2 * np.median(mag) or coh[k] < 0.5:
+            continue
+        p = fit_peak(f, h1, k)
+        p["coherence"] = float(coh[k])
+        p["h1_over_h2"] = float(np.abs(h1[k]) / np.abs(est["H2"][k]))
+        peaks.append(p)
+    # the dominant peak is the strongest coherent one: a peak the input does not explain (a drift's bump at the
+    # bottom of a sweep, where few segments hold the input and a slow drift lifts |H1|) is never a resonance
+    # while a coherent peak stands in the band; only without one is the strongest of the rest reported
+    peaks.sort(key=lambda p: (p["coherence"] < COHERENT, -_height(f, h1, p)))
+    # one mode, one peak: a noisy |H1| can hold two local maxima on one resonance (the Silverbox's, 0.6 Hz
+    # apart), whose fits return the same mode; a peak whose fitted frequency lies within half the half-power
+    # bandwidth (zeta f) of a stronger one's is that mode again (two modes so close cannot be resolved)
+    kept: list[dict[str, Any]] = []
+    for p in peaks:
+        if not any(abs(p["f_hz"] - q["f_hz"]) <= q["zeta"] * q["f_hz"] for q in kept):
+            kept.append(p)
+    peaks = kept
+    top = peaks[0] if peaks else None
+    louder = [p for p in peaks[1:] if top is not None and top["coherence"] >= COHERENT
+              and p["coherence"] < COHERENT and _height(f, h1, p) > _height(f, h1, top)]  # fmt: skip
+    notes = [f"a higher peak at {p['f_hz']:.3g} Hz (coherence {p['coherence']:.2f}) passed over for the coherent one "
+             f"at {top['f_hz']:.4g} Hz (coherence {top['coherence']:.2f}): the input explains little of the response "
+             "there (drift or noise?); --band F1:F2 limits the search" for p in louder if top is not None]  # fmt: skip
+    if top is not None and top["coherence"] < COHERENT:
+        notes.append(f"no peak in the band has coherence above {COHERENT:g}: the dominant peak at {top['f_hz']:.4g} Hz "
+                     f"(coherence {top['coherence']:.2f}) may be drift or noise rather than a resonance")  # fmt: skip
+    return {
+        "f_hz": top["f_hz"] if top else None,
+        "zeta": top["zeta"] if top else None,
+        "coherence": top["coherence"] if top else None,
+        "band": [float(band[0]), float(band[1])],
+        "peaks": peaks,
+        "estimator": (f"H1 = Gxy/Gxx (H2 beside), the periodic input's {est['averages']} whole periods of "
+                      f"{segment_s:.4g} s, no window; peaks: SDOF receptance fit" if est["window"] == "boxcar" else
+                      f"H1 = Gxy/Gxx (H2 beside), Welch: Hann, {est['averages']} averages of "
+                      f"{segment_s:.3g} s, 50 % overlap; peaks: SDOF receptance fit"),  # fmt: skip
+        "segment_s": float(segment_s),
+        "response_per_input": "m per m/s^2 (z / base_acc)" if rec.input_name == "base_acc" else "m per N (z / force)",
+        "reason": None if top else "no resonance peak with coherence above 0.5 in the band",
+        "_notes": notes,
+        "_curves": est,
+    }
+
+
+def read_frf_results(paths: Sequence[str] | None) -> list[tuple[str, float, str | None]]:
+    """(path, peak frequency [Hz], well) of each ``frf`` result file, checked (one ``MeasurementError``)."""
+    out = []
+    for p in paths or []:
+        try:
+            r = read_json(p)
+            f_frf, well = r["f_hz"], r.get("well")
+        except (ValueError, KeyError, TypeError, AttributeError):
+            raise MeasurementError(f"--frf {p}: not an frf result (needs f_hz)") from None
+        if not isinstance(f_frf, (int, float)) or isinstance(f_frf, bool):
+            raise MeasurementError(f"--frf {p}: the FRF found no peak to compare with (f_hz is {f_frf!r})")
+        out.append((p, float(f_frf), well))
+    return out
+
+
+def compare_with_frf(modal: dict, frfs: list[tuple[str, float, str | None]]) -> list[dict]:
+    """Each well's identified underlying-linear frequency (an identification's ``modal``) beside a low-level
+    FRF's (``read_frf_results``; ``identify --frf``): the FRF's well from its record's rest positions, else the
+    identified well of the nearest frequency.
+    """
+    out = []
+    for p, f_frf, well in frfs:
+        modal = {w: m["f_hz"] for w, m in modal.items() if m.get("f_hz")}
+        if well not in modal:  # no rest positions in the FRF's record: the nearest well frequency
+            well = min(modal, key=lambda w: abs(modal[w] - f_frf)) if modal else None
+        f_id = modal.get(well)
+        out.append(
+            {
+                "frf": str(p),
+                "well": well,
+                "frf_f_hz": f_frf,
+                "identified_f_hz": f_id,
+                "difference_percent": None if f_id is None else 100 * (f_id / f_frf - 1),
+            }
+        )
+    return out
+
+
+def frf_structure(rec, band: tuple[float, float] | None = None, segment_s: float | None = None) -> dict[str, Any]:
+    """The FRFs of a structure's record (``StructureRecord``): from the input to every DOF's response, each as
+    ``frf`` makes it (H1, H2, coherence, fitted peaks), and ``modes``: the peaks found on any DOF, those within 2 %
+    in frequency merged (their mean frequency and damping, and the DOFs that show them). ``_curves``: each DOF's
+    spectra (arrays, for a figure; not JSON).
+    """
+    from negstiff.inference.record.measurement import from_arrays
+
+    dofs, curves, warnings_ = [], [], []
+    for i, zi in enumerate(rec.z):
+        one = from_arrays(rec.u, zi, rec.fs, input_name=rec.input_name, source=f"{rec.source} (z{i + 1})")
+        r = frf(one, band=band, segment_s=segment_s)
+        curves.append(r.pop("_curves"))
+        warnings_ += r.pop("warnings")
+        r.pop("record", None)
+        r.pop("well", None)
+        dofs.append({"dof": i + 1, **r})
+    found = sorted((p["f_hz"], p["zeta"], d["dof"]) for d in dofs for p in d["peaks"])
+    modes: list[dict[str, Any]] = []
+    for f, z, d in found:
+        if modes and abs(f / modes[-1]["f_hz"] - 1) < 0.02:
+            m = modes[-1]
+            m["_all"].append((f, z))
+            m["f_hz"] = float(np.mean([a for a, _ in m["_all"]]))
+            m["zeta"] = float(np.mean([b for _, b in m["_all"]]))
+            m["seen_on"] = sorted(set(m["seen_on"]) | {d})
+        else:
+            modes.append({"f_hz": f, "zeta": z, "seen_on": [d], "_all": [(f, z)]})
+    for m in modes:
+        m.pop("_all")
+    return {"dofs": dofs, "modes": modes, "warnings": warnings_, "_curves": curves}

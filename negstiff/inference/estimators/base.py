@@ -1,0 +1,147 @@
+"""The contract every negstiff estimator keeps (NSI, SINDy, Discrepancy, Posterior, GAUpdater), after
+scikit-learn's (``sklearn/base.py``, its developer guide's "rolling your own estimator"), enforced here.
+
+* ``__init__(self, *, ...)`` takes keywords only, stores them as given under their own names, and does
+  nothing else; ``get_params(deep=True)`` and ``set_params(**params)`` read and change them, so
+  ``sklearn.base.clone`` copies an estimator;
+* every parameter is declared with its constraint beside the class (``_parameter_constraints``,
+  ``inference.parameters``); ``fit`` first runs ``check(data)``: every parameter against its declaration
+  and the estimator's own cross-checks (``_validate``), then the record (``_check_record``): everything
+  that can refuse the input, one ``InputError``, before any work or progress output;
+* ``fit(data)`` takes a ``Measurement`` or a path to a measurement file (arrays go through
+  ``from_arrays`` first), learns, and returns ``self``;
+* what was learned lives in attributes ending in ``_``; asking one before ``fit`` raises
+  ``NotFittedError``;
+* ``result()`` is the learned state as the contract's JSON (``to_json`` its alias).
+
+Written here rather than inheriting scikit-learn's ``BaseEstimator``: the estimators take records and
+targets, not (X, y) arrays, and scikit-learn would be a dependency for a few small methods.
+"""
+
+from __future__ import annotations
+
+import inspect
+from os import PathLike
+from typing import Any, ClassVar
+
+from negstiff.errors import InputError, NotFittedError
+from negstiff.inference.estimators.parameters import Constraint
+from negstiff.inference.record.measurement import Measurement, load
+from negstiff.inference.steps.frame import pin_frame
+
+
+class Estimator:
+    """Base of the estimators (module docstring)."""
+
+    _parameter_constraints: ClassVar[dict[str, Constraint]] = {}
+
+    @classmethod
+    def _param_names(cls) -> list[str]:
+        return [p for p in inspect.signature(cls.__init__).parameters if p != "self"]
+
+    def get_params(self, deep: bool = True) -> dict[str, Any]:
+        """The constructor's parameters and their current values (``deep``: with those of nested
+        estimators as ``name__parameter``, as scikit-learn's).
+        """
+        out: dict[str, Any] = {}
+        for name in self._param_names():
+            value = getattr(self, name)
+            if deep and isinstance(value, Estimator):
+                out |= {f"{name}__{k}": v for k, v in value.get_params().items()}
+            out[name] = value
+        return out
+
+    def set_params(self, **params: Any) -> Estimator:
+        """Set parameters (``name=value``, or ``name__parameter`` of a nested estimator); returns ``self``.
+        Values are checked by ``fit``, as the constructor's.
+        """
+        names = self._param_names()
+        for key, value in params.items():
+            name, _, sub = key.partition("__")
+            if name not in names:
+                raise InputError(
+                    f"{type(self).__name__} has no parameter {name!r} (its parameters: {', '.join(names)})"
+                )
+            if sub:
+                getattr(self, name).set_params(**{sub: value})
+            else:
+                setattr(self, name, value)
+        return self
+
+    def _validate_params(self) -> None:
+        """Every parameter against its declared constraint: one ``InputError`` naming it and the range."""
+        for name in self._param_names():
+            constraint = self._parameter_constraints.get(name)
+            if constraint is None:  # a developer's omission, found by the test of the declarations
+                raise TypeError(f"{type(self).__name__}.{name} has no declared constraint")
+            constraint.check(type(self).__name__, name, getattr(self, name))
+
+    def _validate(self) -> None:
+        """The estimator's own checks across parameters (after each is checked alone)."""
+
+    def _check_record(self, rec) -> None:
+        """Check that ``rec`` can be used (length, excitation, motion); raise a ``MeasurementError``."""
+
+    def check(self, data):
+        """Everything ``fit`` checks before it starts (the parameters and the record), so a caller can
+        refuse bad input before printing any progress; returns the record ``fit`` would use.
+
+        ``data`` is a ``Measurement`` or a path to a measurement file (read with ``load``); arrays go
+        through ``from_arrays(u, z, fs)`` first. A z derived from another sensor is pinned to the physical
+        frame here (``frame.pin_frame``), the step that needs it.
+        """
+        self._validate_params()
+        self._validate()
+        if isinstance(data, (str, PathLike)):
+            data = load(data)
+        if not isinstance(data, Measurement):
+            raise InputError(
+                f"{type(self).__name__}.fit takes a Measurement or a file path, got {type(data).__name__} "
+                "(arrays: negstiff.from_arrays(u, z, fs))"
+            )
+        data = pin_frame(data)  # a derived z in the physical frame (said in the record's info)
+        self._check_record(data)
+        return data
+
+    def __getattr__(self, name: str):
+        # reached only when ``name`` is not set: a learned attribute before ``fit``
+        if name.endswith("_") and not name.startswith("__"):
+            raise NotFittedError(
+                f"this {type(self).__name__} is not fitted yet ({name} is learned by fit): call fit first"
+            )
+        raise AttributeError(f"{type(self).__name__!r} object has no attribute {name!r}")
+
+    @property
+    def fitted(self) -> bool:
+        """Whether ``fit`` has run."""
+        return "model_" in vars(self) or "result_" in vars(self) or "device_" in vars(self)
+
+    def result(self) -> dict[str, Any]:
+        """The fitted result as the command line writes it (JSON-ready)."""
+        raise NotImplementedError
+
+    def to_json(self) -> dict[str, Any]:
+        """The result as JSON (``result()``), for ``files.write_json``."""
+        return self.result()
+
+    def _summary(self) -> str:
+        """The headline of a fitted estimator (a line), for ``repr``."""
+        return ""
+
+    def __repr__(self) -> str:
+        defaults = {n: p.default for n, p in inspect.signature(type(self).__init__).parameters.items() if n != "self"}
+        shown = []
+        for name, value in self.get_params(deep=False).items():
+            d = defaults.get(name, inspect.Parameter.empty)
+            try:
+                same = value is d or bool(value == d)
+            except (TypeError, ValueError):  # arrays
+                same = False
+            if not same:
+                text = repr(value)
+                shown.append(f"{name}={text if len(text) <= 40 else text[:37] + '...'}")
+        head = f"{type(self).__name__}({', '.join(shown)})"
+        if not self.fitted:
+            return f"{head}  [not fitted]"
+        summary = self._summary()
+        return f"{head}  [fitted{': ' + summary if summary else ''}]"

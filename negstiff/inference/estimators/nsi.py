@@ -1,0 +1,438 @@
+"""Nonlinear subspace identification (NSI) in the time domain, around either stable well.
+
+Marchesiello & Garibaldi (2008), MSSP 22:81-101 ("A time domain approach for identifying nonlinear
+vibrating structures by subspace methods"); the reference-position shift of the reference study (Eqs. 5-7);
+``docs/algorithms.md`` part A (a reconstruction verified numerically, followed here).
+
+The nonlinear terms act as feedback forces on the underlying-linear system (ULS). Around the
+reference z* (x = z - z*), per unit mass,
+
+    x'' + (c/m) x' + (k1~/m) x = u - sum_j (c_j/m) g_j(x, x'),   u = -b'' (base) or f/m (force)
+
+with the basis g = [x^2, x^3, x'|x'|] (reference study Eq. 7 for the polynomial, the reference study's damping model for
+x'|x'|) and a constant K(z*)/m that vanishes when z* is the equilibrium. Every channel is made zero
+mean, so the subspace step sees only the dynamics; the constant then follows from the time average
+of the equation of motion (with the record's mean velocity and acceleration, both near zero). A
+constant input channel, the alternative of algorithms.md A.7, is poorly determined (|Im/Re| ~ 0.4
+noise-free) and leaks into k2~ through the mean of x^2 (+12 % measured), so it is not used. The extended input
+[u, -g_1, ..., -g_J] (each channel scaled to unit std, A.2.8) goes through a generic LTI subspace
+step (``subspace``), whose
+extended FRF H_e(omega) = [H, c_1 H, ..., c_J H] gives c_j = mean over a band around resonance of
+Re(H_e,j / H_e,0) (A.4), with |Im/Re| as the quality index. The ULS's natural frequency and damping
+come from the physical pole of A_c (reference study Table 1). The well z* is found from the data: first the
+modes of the displacement histogram, then the identified polynomial's own root (one more pass there).
+
+Velocity for x'|x'|: the record's band states (``Measurement.states("band")``, computed once per record): a
+Savitzky-Golay derivative whose window is fitted to the data's band (``derivatives.velocity_window``), so
+it averages sensor noise without bending the response. The polynomial bases use the same smoothed
+displacement (errors-in-variables, A.8). These are not the regression states the weak form uses (their
+window is chosen for the least coefficient bias and may bend the band): NSI's frequency-domain fit needs
+the band's gain flat.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from scipy import signal
+from tqdm import tqdm
+
+from negstiff.errors import MeasurementError
+from negstiff.inference.estimators.identification import Estimate, Identifier, visited_well
+from negstiff.inference.estimators.parameters import FRACTION, Boolean, Interval, Pair
+from negstiff.inference.record.measurement import Measurement
+from negstiff.inference.steps.weak import known_input_gain, mass_of
+from negstiff.inference.steps.wells import well_guesses
+from negstiff.models import Model
+
+from . import subspace
+
+BASIS_NAMES = ("x2", "x3", "vabsv")
+"""Nonlinear basis: x^2, x^3, x'|x'| (their coefficients are k2~, k3, c_nl)."""
+
+
+INPUT_SPREAD = 0.1
+"""An input covers NSI's averaging band when its power there is spread over at least this share of the
+band's frequency bins (effective count (sum p)^2 / sum p^2 of a Welch spectrum): a multisine or random
+input spreads over nearly all, a harmonic one over one or two."""
+
+
+def covers_band(u: np.ndarray, fs: float, band: tuple[float, float]) -> bool:
+    """Whether the input's power spreads over the band (``INPUT_SPREAD``) rather than sitting in a few lines."""
+    f, p = signal.welch(u - u.mean(), fs, nperseg=min(u.size, int(8 * fs)))
+    p = p[(f >= band[0]) & (f <= band[1])]
+    if p.size < 3 or not p.sum() > 0:
+        return False
+    return float(p.sum() ** 2 / np.sum(p**2)) >= INPUT_SPREAD * p.size
+
+
+class NSIError(MeasurementError):
+    """The record cannot be identified (too short, not enough excitation, no physical pole)."""
+
+
+@dataclass(frozen=True)
+class WellFit:
+    """NSI around one reference well (per unit mass unless ``mass`` scales it later)."""
+
+    z_ref: float
+    f_hz: float
+    zeta: float
+    coefficients: dict[str, float]
+    """Per unit mass, shifted frame at z_ref: k1_tilde, k2_tilde, k3, c, c_nl; and the last pass's
+    constant (K/m at its reference) and shift to the root, which show how well z_ref converged."""
+    quality: dict[str, float]
+    """|Im/Re| of each nonlinear coefficient over the averaging band."""
+    band_hz: tuple[float, float]
+    singular_values: list[float]
+    frf: dict[str, Any]
+    lq_routes: tuple[str, ...] = ()
+    """Each pass's route of the subspace step's LQ factor (``subspace.LQ_ROUTES``)."""
+
+
+def physical_pole(ss: subspace.StateSpace) -> complex:
+    """The pole of the ULS: among underdamped stable poles (0 < zeta < 0.7), the one with the
+    largest modal contribution |residue / Re(lambda)| to the linear input column (Marchesiello,
+    Fasana & Garibaldi 2016; algorithms.md A.5). For order 2 it is the only pair.
+    """
+    lam, psi = np.linalg.eig(ss.A)
+    left = np.linalg.inv(psi)
+    best, score = None, -1.0
+    for r, lr in enumerate(lam):
+        if lr.imag <= 0:
+            continue
+        zeta = -lr.real / abs(lr)
+        if not 0 < zeta < 0.7:
+            continue
+        res = abs((ss.C @ psi[:, r])[0] * (left[r] @ ss.B[:, 0]))
+        s = res / abs(lr.real)
+        if s > score:
+            best, score = lr, s
+    if best is None:
+        raise NSIError("no stable underdamped pole was identified (no physical mode in the data)")
+    return complex(best)
+
+
+class NSI(Identifier):
+    """Nonlinear subspace identification around both stable wells.
+
+    Each well's underlying-linear system and the nonlinear coefficients as feedback forces
+    (``docs/methods/nsi.md``), combined into one z-frame model, validated on the held-out tail and
+    refined by output error. scikit-learn style: configure, ``fit``, read the ``*_`` attributes.
+
+    Parameters
+    ----------
+    order : int, default 2
+        State dimension of the ULS model (2 for a single-degree-of-freedom device).
+    block_rows : int, default 30
+        Block rows i of the Hankel matrices.
+    band : (float, float), default (0.6, 1.6)
+        Fractions of the well frequency over which Re(c_j) is averaged.
+    validation_fraction : float, default 0.2
+        Held-out tail for the free-run validation (the contract's last 20 %).
+    passes : int, default 2
+        Identification passes per well at most (each at the z* refined by the previous one; the loop
+        stops when the shift falls below 0.1 % of the motion's spread).
+    refine : bool, default True
+        Finish by output-error refinement (kept only if it predicts the held-out tail no worse).
+    progress : bool, default False
+        A progress bar over the identification passes on stderr, shown once they take more than 2 s.
+
+    Attributes
+    ----------
+    result_ : Identification
+        Everything ``fit`` learned; ``result()`` is the contract's JSON.
+    model_ : Model
+        The final model (refined, where that predicted no worse).
+    initial_model_ : Model
+        NSI's own (equation-error) estimate.
+    modal_ : dict
+        ``{"minus", "plus"}`` -> ``{"f_hz", "zeta"}`` of each well's underlying-linear system.
+    wells_ : dict
+        Each well's fit: its reference z*, frequency, damping and coefficients.
+    validation_ : Bunch
+        The free run over the held-out tail (``rms_percent``, ``restarted_rms_percent``, ...).
+    warnings_ : list of str
+        Every warning about the record and the result (also issued as ``NegstiffWarning``).
+
+    Examples
+    --------
+    >>> from negstiff import Measurement, NSI, Rig
+    >>> from negstiff.models import SEED_LIKE_CUBIC
+    >>> rec = Measurement.from_rig(Rig(SEED_LIKE_CUBIC, seed=1).random(duration=30.0, rms=20.0))
+    >>> nsi = NSI().fit(rec)
+    >>> abs(nsi.model_.k3 / SEED_LIKE_CUBIC.k3 - 1) < 0.02       # the truth within 2 %
+    True
+    >>> sorted(nsi.modal_)
+    ['minus', 'plus']
+    """
+
+    method = "nsi"
+    _parameter_constraints = {
+        "order": Interval(int, 2, 20),
+        "block_rows": Interval(int, 2, 500),
+        "band": Pair(Interval(float, 0.0, 10.0, lo_open=True)),
+        "validation_fraction": FRACTION,
+        "passes": Interval(int, 1, 20),
+        "refine": Boolean(),
+        "progress": Boolean(),
+    }
+
+    def __init__(
+        self,
+        *,
+        order: int = 2,
+        block_rows: int = 30,
+        band: tuple[float, float] = (0.6, 1.6),
+        validation_fraction: float = 0.2,
+        passes: int = 2,
+        refine: bool = True,
+        progress: bool = False,
+    ):
+        self.order = order
+        self.block_rows = block_rows
+        self.band = band
+        self.validation_fraction = validation_fraction
+        self.passes = passes
+        self.refine = refine
+        self.progress = progress
+
+    # --- one well ----------------------------------------------------------------------------
+    def extended_input(self, rec: Measurement, zs: np.ndarray, v: np.ndarray, z_ref: float):
+        """The subspace step's problem about ``z_ref``: x = z - z_ref, the standardised input channels (the
+        input and the basis functions ``-x^2, -x^3, -z'|z'|``), their scales and means.
+        """
+        x = zs - z_ref
+        lin = -rec.u if rec.input_name == "base_acc" else rec.u
+        chans = np.column_stack([lin, -(x**2), -(x**3), -v * np.abs(v)])
+        means = chans.mean(axis=0)
+        scale = chans.std(axis=0)
+        if np.any(scale == 0):
+            raise NSIError(f"{rec.source}: not enough excitation: the input or a basis function is constant")
+        w = (chans - means) / scale
+        if np.linalg.cond(np.corrcoef(w.T)) > 1e8:
+            raise NSIError(
+                f"{rec.source}: not enough excitation: the basis functions are collinear (the record "
+                "does not reach the nonlinear range)"
+            )
+        return x, w, scale, means
+
+    def fit_well(self, rec: Measurement, zs: np.ndarray, v: np.ndarray, z_ref: float, bar=None) -> WellFit:
+        """Identify the ULS and the nonlinear coefficients around ``z_ref``.
+
+        Each pass identifies about the current reference z_g, then moves the reference to the
+        identified restoring force's stable root r nearest z_g. The reported ULS (f, zeta) is the
+        last pass's pole; the shifted coefficients are the last pass's cubic re-expanded exactly at
+        r (reference study Eq. 7), so that K(z*) = 0 there. ``bar`` (a tqdm bar, optional) is
+        advanced by ``passes`` over the well, one per pass.
+        """
+        routes = []
+        for done in range(1, self.passes + 1):
+            x, w, scale, means = self.extended_input(rec, zs, v, z_ref)
+            y = x - x.mean()
+            ys = y.std()
+            try:
+                ss = subspace.identify(w, (y / ys)[:, None], rec.dt, self.order, self.block_rows)
+            except (ValueError, np.linalg.LinAlgError) as exc:
+                raise NSIError(f"{rec.source}: subspace step failed ({exc})") from None
+            routes.append(str(ss.lq_route))
+            lam = physical_pole(ss)
+            wn, zeta = abs(lam), -lam.real / abs(lam)
+            fn = wn / (2 * math.pi)
+            band = (self.band[0] * fn, self.band[1] * fn)
+            freqs = np.linspace(band[0], band[1], 64)
+            he = ss.frf(freqs)[:, 0, :]
+            ratio = he[:, 1:] / he[:, :1] * (scale[0] / scale[1:])
+            coef = ratio.real.mean(axis=0)
+            quality = np.abs(ratio.imag).mean(axis=0) / np.maximum(np.abs(coef), 1e-300)
+            # input gain b of x'' + ... = b u, from the discrete-time FRF level: exactly 1 for base
+            # excitation (the estimate is kept as a check), 1/m for a force record. The ratios give
+            # c_j / b, so b * ratio is per unit mass, like the pole's k/m and c/m.
+            hd = ss.frf_discrete(freqs)[:, 0, 0] * ys / scale[0]
+            w_ = 2 * np.pi * freqs
+            gain_est = float(np.mean((hd * (wn**2 - w_**2 + 2j * zeta * wn * w_)).real))
+            gain = 1.0 if rec.input_name == "base_acc" else gain_est
+            # the ratios c_j / b need the input's FRF over the band; an input that does not cover the band
+            # (a harmonic one: a line) leaves it to the model's extrapolation, 2 % low on a chaotic harvester
+            # record (measured), and every coefficient 2 % high. The feedback channels are then read
+            # against the pole's own FRF at the known gain (b_est * ratio: as for a force record).
+            narrow = rec.input_name == "base_acc" and not covers_band(rec.u, rec.fs, band)
+            c = dict(zip(BASIS_NAMES, (gain_est if narrow else gain) * coef, strict=False))
+            # time-averaged equation of motion (channels hold -g_j): the constant K(z_g)/m
+            c["const"] = (
+                gain * means[0]
+                - wn**2 * x.mean()
+                - 2 * zeta * wn * v.mean()
+                - (v[-1] - v[0]) / (v.size * rec.dt)  # mean acceleration over the record
+                + sum(c[k] * means[j + 1] for j, k in enumerate(BASIS_NAMES))
+            )
+            # restoring force about z_g, per unit mass: const + wn^2 x + c2 x^2 + c3 x^3
+            roots = np.roots([c["x3"], c["x2"], wn**2, c["const"]])
+            real = roots[np.abs(roots.imag) < 1e-9 * max(1.0, np.abs(roots).max())].real
+            stable = [r for r in real if 3 * c["x3"] * r**2 + 2 * c["x2"] * r + wn**2 > 0]
+            if not stable:
+                raise NSIError(
+                    f"{rec.source}: the identified restoring force has no stable equilibrium near "
+                    f"z = {z_ref * 1e3:.2f} mm"
+                )
+            r = min(stable, key=abs)
+            z_ref = z_ref + r
+            if bar is not None:
+                bar.update()
+            if abs(r) < 1e-3 * zs.std():  # already at the well: another pass would change nothing
+                if bar is not None:
+                    bar.update(self.passes - done)
+                break
+        coefficients = {
+            "k1_tilde": wn**2 + 2 * c["x2"] * r + 3 * c["x3"] * r**2,
+            "k2_tilde": c["x2"] + 3 * c["x3"] * r,
+            "k3": c["x3"],
+            "c": 2 * zeta * wn,
+            "c_nl": c["vabsv"],
+            "const_residual": c["const"],
+            "shift_last_pass": r,
+            "input_gain": gain_est,
+        }
+        h0 = he[:, 0] * ys / scale[0]
+        return WellFit(
+            z_ref,
+            fn,
+            zeta,
+            coefficients,
+            dict(zip(BASIS_NAMES, quality, strict=False)),
+            band,
+            list(ss.singular_values[:8]),
+            {
+                "f_hz": freqs,
+                "H": h0,
+                "ratio": ratio,
+                "poles": [(abs(p) / (2 * math.pi), -p.real / abs(p)) for p in ss.poles() if p.imag >= 0],
+            },
+            tuple(routes),
+        )
+
+    def _check_record(self, rec: Measurement) -> None:
+        rec.require(max(2000, 40 * self.block_rows), "NSI")
+        rec.require_excitation("NSI")
+        rec.require_motion("NSI")
+
+    def _estimate(self, rec: Measurement, n_id: int) -> Estimate:
+        """NSI's own estimate: each well's underlying-linear system and nonlinear coefficients from the
+        identification part, averaged into one z-frame model (the shared stages follow: ``Identifier``).
+        """
+        ident = rec.segment(0, n_id)
+        zs, v, _, band = ident.states("band")
+        z_minus, z_plus = well_guesses(ident)
+        bar = tqdm(
+            total=self.passes * (1 if z_minus is None else 2), desc="NSI passes", unit="pass", leave=False,
+            disable=not self.progress, delay=2.0,
+        )  # fmt: skip
+        with bar:
+            wells = {"plus": self.fit_well(ident, zs, v, z_plus, bar)}
+            if z_minus is not None:
+                wells["minus"] = self.fit_well(ident, zs, v, z_minus, bar)
+        gains = [w.coefficients["input_gain"] for w in wells.values()]
+        # the one mass rule (``weak.mass_of``): a force record without a mass gets it from the FRF level (b = 1/m)
+        mass, mass_source = mass_of(rec, known_input_gain(rec), float(np.mean(gains)), what="the FRF level")
+        models = [self._z_frame(w, mass) for w in wells.values()]
+        mean = {k: float(np.mean([getattr(mm, k) for mm in models])) for k in ("k1", "k2", "k3", "c", "c_nl", "k0")}
+        model = Model(m=mass, **mean)
+        try:
+            eq = model.equilibria()
+        except ValueError as exc:  # a well's fit that is no bistable oscillator: the record's verdict, not a bug
+            raise NSIError(f"{rec.source}: the identified restoring force is not usable ({exc})") from None
+        if z_minus is None and visited_well(rec, z_plus, eq) == "minus":
+            wells = {"minus": wells["plus"]}  # one well visited: named by where it lies (``visited_well``)
+        self.wells_ = wells
+        self.models_by_well_ = {name: mm for name, mm in zip(wells, models, strict=False)}
+        modal: dict[str, dict[str, float | None]] = {
+            w: {"f_hz": wells[w].f_hz, "zeta": wells[w].zeta} if w in wells else {"f_hz": None, "zeta": None}
+            for w in ("minus", "plus")
+        }
+        return Estimate(
+            model=model,
+            mass_source=mass_source,
+            input_gain=float(np.mean(gains)),
+            modal=modal,
+            warnings=tuple(
+                f"NSI's basis is the restoring force's and the damping's: the record's measured channel {a!r} is not "
+                "used (SINDy and the discrepancy workflow offer it as a term)" for a in rec.aux
+            ),
+            details={"wells": self._wells_json()},
+            settings={
+                "order": self.order,
+                "block_rows": self.block_rows,
+                "band_fraction": list(self.band),
+                "passes": self.passes,
+                "velocity": f"Savitzky-Golay (window, order) = {band['window']}",
+                "basis": list(BASIS_NAMES),
+            },
+        )
+
+    def _final_details(self, rec: Measurement, model: Model, details: dict[str, Any]) -> dict[str, Any]:
+        """``g_estimate``: the final model's k0/m, the gravity the record's own physics carries (base excitation)."""
+        return {**details, "g_estimate": model.k0 / model.m if rec.input_name == "base_acc" else None}
+
+    def _wells_json(self) -> dict[str, Any]:
+        return {
+            name: {
+                "z_ref": w.z_ref,
+                "f_hz": w.f_hz,
+                "zeta": w.zeta,
+                "coefficients": w.coefficients,
+                "quality_im_over_re": w.quality,
+                "band_hz": list(w.band_hz),
+                "singular_values": w.singular_values,
+                "lq_routes": list(w.lq_routes),
+                "z_frame_model": self.models_by_well_[name].to_dict(),
+            }
+            for name, w in self.wells_.items()
+        }
+
+    def stabilization(self, rec: Measurement, orders=(2, 4, 6, 8), block_rows=(10, 20, 30, 40)) -> list[dict]:
+        """Stabilisation diagram (Marchesiello, Fasana & Garibaldi 2016; algorithms.md A.5): for each
+        (order, block rows) and each well found by ``fit``, every identified pole and the physical
+        pole's coefficients. Run after ``fit`` (it reuses the refined wells).
+        """
+        n_id = self.settings_["identification_samples"]
+        ident = rec.segment(0, n_id)
+        zs, v, _, _ = ident.states("band")
+        rows = []
+        for name, well in self.wells_.items():
+            for i in block_rows:
+                for n in orders:
+                    est = NSI(order=n, block_rows=i, band=self.band, passes=1)
+                    try:
+                        wf = est.fit_well(ident, zs, v, well.z_ref)
+                    except NSIError as exc:
+                        rows.append({"well": name, "order": n, "block_rows": i, "error": str(exc)})
+                        continue
+                    rows.append(
+                        {
+                            "well": name,
+                            "order": n,
+                            "block_rows": i,
+                            "f_hz": wf.f_hz,
+                            "zeta": wf.zeta,
+                            "coefficients": wf.coefficients,
+                            "poles": wf.frf["poles"],
+                        }
+                    )
+        return rows
+
+    @staticmethod
+    def _z_frame(w: WellFit, mass: float) -> Model:
+        """Back-transform a well's shifted coefficients to the z frame (reference study Eq. 7), scaled by mass."""
+        c = w.coefficients
+        m = Model.from_shifted(
+            w.z_ref,
+            c["k1_tilde"] * mass,
+            c["k2_tilde"] * mass,
+            c["k3"] * mass,
+            m=mass,
+            c=c["c"] * mass,
+            c_nl=c["c_nl"] * mass,
+        )
+        return m

@@ -1,0 +1,753 @@
+"""Records: ``Measurement`` (one uniformly sampled record in SI units), ``load`` (a file read through
+``negstiff.io``, its columns mapped, converted to SI and checked) and ``from_arrays`` (the same checks for
+arrays in memory).
+
+A measurement is one uniformly sampled record with exactly one input column (``base_acc`` [m/s^2]
+or ``force`` [N]), the output ``z`` [m], and a time base (``t`` [s], or ``fs`` [Hz] from the
+metadata or the caller). Foreign files are read through a column map (``force=V1,z=V2``; an entry
+may scale, ``base_acc=X1*9.81``). Every problem raises ``MeasurementError`` with one line naming the
+file, the column or row, and what is wrong. Input files are only read.
+"""
+
+from __future__ import annotations
+
+import copy
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from negstiff import io as record_io
+from negstiff.constants import G
+from negstiff.errors import MeasurementError, RecordWarning, issue
+from negstiff.inference.record.derivatives import noise_floor, state_derivatives
+from negstiff.io.base import RESOLUTION, SET_ASIDE
+from negstiff.io.schema import (
+    DIMENSIONS,
+    GRAVITY_RANGE,
+    INPUTS,
+    KNOWN,
+    MAGNITUDE_LIMITS,
+    MASS_RANGE_KG,
+    OPTIONAL,
+    SAMPLING_RATE_RANGE_HZ,
+    UNITS,
+    header_name,
+    in_si,
+    parse_column_map,
+)
+from negstiff.models.effects import measured_channels
+
+from . import sensors
+
+TIME_JITTER_FRACTION = 0.01
+"""A time column's samples may sit this fraction of a step off a uniform grid (or by their printed
+precision, whichever is larger) and still be uniform: lab exports round time."""
+
+
+@dataclass(frozen=True)
+class Measurement:
+    """One uniformly sampled record, in SI units (``load`` or ``from_arrays`` make one).
+
+    Attributes
+    ----------
+    fs : float
+        Sampling rate [Hz].
+    input_name : {"base_acc", "force"}
+        What the input is.
+    u : numpy.ndarray
+        The input column, (N,).
+    z : numpy.ndarray or None
+        Relative displacement [m], (N,): measured, or derived from the response sensor (``info``); None
+        only for an input-only record read with ``response=False``.
+    z_dot, y, base_disp : numpy.ndarray or None
+        Optional columns, (N,).
+    mass : float or None
+        Moving mass [kg] from the metadata or the caller; None: coefficients per unit mass.
+    meta : dict of str
+        The file's metadata (``# key: value`` lines), as strings.
+    source : str
+        Where it came from (for messages).
+    t0 : float
+        Time of the first sample [s].
+    info : dict
+        How the record was read: ``time`` (the time base, its jitter) and ``response`` (what was
+        measured, how z was derived from it, with its estimated error); results carry it.
+    aux : dict of numpy.ndarray
+        Measured auxiliary channels kept with ``load(..., aux=...)`` (a harvester's voltage), by name.
+
+    Examples
+    --------
+    >>> from negstiff import Measurement, Rig
+    >>> rec = Measurement.from_rig(Rig(seed=1).random(duration=20.0))
+    >>> part = rec.segment(0, int(10 * rec.fs))      # the first 10 s, as its own record
+    >>> part.duration, part.mass
+    (10.0, 0.212)
+    """
+
+    fs: float
+    input_name: str
+    u: np.ndarray
+    z: np.ndarray | None
+    z_dot: np.ndarray | None = None
+    y: np.ndarray | None = None
+    base_disp: np.ndarray | None = None
+    mass: float | None = None
+    meta: dict[str, str] = field(default_factory=dict)
+    source: str = "<memory>"
+    t0: float = 0.0
+    info: dict[str, Any] = field(default_factory=dict)
+    aux: dict[str, np.ndarray] = field(default_factory=dict)
+    derived: dict[Any, Any] = field(default_factory=dict, init=False, repr=False, compare=False)
+    """What is computed from this record once and kept with it (its smoothed states, its segments, its
+    pinned frame): a record is immutable, so what it gives never changes (``states``, ``segment``)."""
+
+    @property
+    def n(self) -> int:
+        """The number of samples."""
+        return self.u.size
+
+    def __repr__(self) -> str:
+        resp = self.info.get("response", {}).get("measured") or ("z" if self.z is not None else "none")
+        mass = f"{self.mass:g} kg" if self.mass is not None else "none (per unit mass)"
+        return (
+            f"Measurement({self.source!r}: {self.n} samples at {self.fs:g} Hz ({self.duration:.4g} s), input "
+            f"{self.input_name}, response {resp}, mass {mass})"
+        )
+
+    @property
+    def dt(self) -> float:
+        """The sampling interval [s]."""
+        return 1.0 / self.fs
+
+    @property
+    def t(self) -> np.ndarray:
+        """The time of every sample [s]."""
+        return self.t0 + np.arange(self.n) / self.fs
+
+    @property
+    def duration(self) -> float:
+        """The record's length [s]."""
+        return self.n / self.fs
+
+    @property
+    def displacement(self) -> np.ndarray:
+        """The response z [m], (N,), for an analysis that needs one: ``z`` where an input-only record (read
+        with ``response=False``) has none, which is one ``MeasurementError`` here.
+        """
+        if self.z is None:
+            raise MeasurementError(f"{self.source}: an input-only record has no response z, which this needs")
+        return self.z
+
+    @classmethod
+    def from_rig(cls, rec, weighed: bool = True) -> Measurement:
+        """A virtual-rig record (``models.rig.RigRecord``) as negstiff reads a lab's: the measured base
+        acceleration as input, the response its sensor measured (z, or z_dot, y, y_dot, y_acc, from which z
+        is derived as ``load`` derives it), the weighed mass (``weighed``), its source and the wells' rest
+        positions its metadata states (as a file of it holds them).
+        """
+        mass = float(rec.meta["mass"]) if weighed and rec.meta.get("mass") is not None else None
+        meta = {k: str(v) for k, v in rec.meta.items() if k.endswith("_rest")}
+        cols = {k: v for k, v in rec.columns.items() if k not in ("t", "base_acc")}
+        z = cols.pop("z", None)
+        if z is not None:  # a measured z is the response (the laser's y and the base's, already in it, stay out)
+            cols = {}
+        return from_arrays(rec.columns["base_acc"], z, rec.fs, mass=mass, source=rec.meta["source"], meta=meta,
+                           **cols)  # fmt: skip
+
+    def segment(self, start: int | None, stop: int | None) -> Measurement:
+        """Samples [start, stop) as a measurement (time base kept); the same object for the same span, so
+        what it derives is derived once (``states``).
+        """
+        start, stop, _ = slice(start, stop).indices(self.n)
+        key = ("segment", start, stop)
+        seg = self.derived.get(key)
+        if seg is None:
+            sl = slice(start, stop)
+            opt: dict[str, Any] = {k: (None if getattr(self, k) is None else getattr(self, k)[sl])
+                                   for k in ("z", *OPTIONAL)}  # fmt: skip
+            aux = {k: v[sl] for k, v in self.aux.items()}
+            seg = self.derived[key] = replace(self, u=self.u[sl], t0=self.t0 + start / self.fs, aux=aux, **opt)
+        return seg
+
+    def states(self, purpose: str = "state") -> tuple[np.ndarray, np.ndarray, np.ndarray, dict]:
+        """Smoothed z, z', z'' of the record and how they were found (``derivatives.state_derivatives``:
+        ``"state"``, the least-error velocity every free run starts from; ``"regression"``, the weak form's;
+        ``"band"``, NSI's, whose window keeps the response's band flat),
+        computed once per record and kept with it (copies are returned: a caller may change its own).
+        """
+        key = ("states", purpose)
+        hit = self.derived.get(key)
+        if hit is None:
+            floor = None if purpose == "band" else self.noise_floor()  # the band's window reads its own PSD
+            hit = self.derived[key] = state_derivatives(self.displacement, self.fs, purpose, floor=floor)
+        zs, v, a, info = hit
+        return zs.copy(), v.copy(), a.copy(), copy.deepcopy(info)
+
+    def unit_warnings(self) -> list[str]:
+        """Unit checks of the record's columns (SI expected): z spanning more than a stroke could, a base
+        acceleration over 200 g rms. ``load`` issues them at once; the plausibility check asks again of a
+        record made physical (a calibrated response may span more).
+        """
+        out = []
+        scale = self.info.get("scale")
+        if self.z is not None and not (scale and scale.get("value") is None):  # a span of unknown units says nothing
+            span = float(np.ptp(self.z))
+            if span > STROKE_LIMIT_M:
+                out.append(
+                    f"z spans {span:.3g} m: is the record in mm? negstiff reads SI units (m); scale the column in the "
+                    "map, e.g. --columns z=COL*0.001"
+                )
+        if self.input_name == "base_acc":
+            rms = float(np.std(self.u))
+            if rms > ACC_LIMIT_M_S2:
+                out.append(f"base_acc has rms {rms:.3g} m/s^2 (over 200 g): is it in mm/s^2? negstiff reads m/s^2")
+        return out
+
+    def noise_floor(self) -> tuple[float, np.ndarray, np.ndarray]:
+        """The displacement's white sensor-noise variance and its signal's PSD, (sigma^2, f, S)
+        (``derivatives.noise_floor``), computed once per record and kept with it: the derivative filters,
+        the weak form's test functions and the characterisation's tolerances all read it.
+        """
+        hit = self.derived.get("noise_floor")
+        if hit is None:
+            hit = self.derived["noise_floor"] = noise_floor(self.displacement, self.fs)
+        return hit
+
+    def driving(self, model) -> np.ndarray:
+        """The input that drives ``model`` over this record: ``u``, plus the forces of the model's measured
+        auxiliary channels (``aux:NAME`` in its ``extra``: theta a(t), on the left-hand side of the equation
+        like every effect's force, theta in N per channel unit) moved to the input's side: u + theta a / m
+        for a base acceleration (m z'' + ... + theta a = -m u), F - theta a for a force. A model term whose
+        channel the record lacks raises ``MeasurementError``.
+        """
+        terms = measured_channels(getattr(model, "extra", {}))
+        if not terms:
+            return self.u
+        missing = [k for k in terms if k not in self.aux]
+        if missing:
+            have = ", ".join(self.aux) or "none"
+            raise MeasurementError(f"{self.source}: the model has a term in the measured channel {missing[0]!r}, which "
+                                   f"this record lacks (its auxiliary channels: {have}; --aux)")  # fmt: skip
+        force = sum(theta * self.aux[k] for k, theta in terms.items())
+        return self.u + force / model.m if self.input_name == "base_acc" else self.u - force
+
+    @property
+    def rest_positions(self) -> dict[str, float]:
+        """The wells' rest positions the metadata states (``z_minus_rest``, ``z_plus_rest`` [m]), by well."""
+        out = {}
+        for w in ("minus", "plus"):
+            try:
+                out[w] = float(self.meta[f"z_{w}_rest"])
+            except (KeyError, ValueError):
+                pass
+        return out
+
+    @property
+    def gravity(self) -> float:
+        """The gravity along the motion [m/s^2]: the metadata's ``gravity`` (0 for a horizontal device, whose
+        frame is then pinned by its wells' symmetry or rest positions, never by K(0) = m g), else g.
+        """
+        return float(self.meta.get("gravity", G))
+
+    def with_gravity(self, gravity: float | None) -> Measurement:
+        """The same record with the gravity along its motion given by the caller (overrides the metadata)."""
+        if gravity is None:
+            return self
+        return replace(self, meta={**self.meta, "gravity": repr(_checked_gravity(self.source, gravity))})
+
+    def require(self, n_min: int, what: str) -> None:
+        """Raise ``MeasurementError`` unless the record has at least ``n_min`` samples for ``what``."""
+        if self.n < n_min:
+            raise MeasurementError(
+                f"{self.source}: too few samples for {what}: {self.n} ({self.duration:.3g} s), need at least {n_min}"
+            )
+
+    def with_mass(self, mass: float | None) -> Measurement:
+        """The same record with the mass given by the caller (overrides the metadata)."""
+        if mass is None:
+            return self
+        if (
+            isinstance(mass, bool)
+            or not isinstance(mass, (int, float, np.integer, np.floating))
+            or not (MASS_RANGE_KG[0] <= mass <= MASS_RANGE_KG[1])
+        ):
+            raise MeasurementError(f"{self.source}: mass {mass!r} kg is not a moving mass "
+                                   f"({MASS_RANGE_KG[0]:g} to {MASS_RANGE_KG[1]:g} kg)")  # fmt: skip
+        return replace(self, mass=float(mass))
+
+    def require_motion(self, what: str) -> None:
+        """Raise ``MeasurementError`` when the response does not move (a dead or disconnected sensor):
+        ``what`` (an identification, a periodicity analysis) needs motion.
+        """
+        if self.z is not None and _constant(self.z):
+            raise MeasurementError(
+                f"{self.source}: the response z is constant ({self.z[0]:.6g} m over {self.n} samples): a dead or "
+                f"disconnected sensor? {what} needs motion"
+            )
+
+    def require_excitation(self, what: str) -> None:
+        """Raise ``MeasurementError`` when the input does not vary (a dead sensor, or no excitation)."""
+        if _constant(self.u):
+            raise MeasurementError(
+                f"{self.source}: the input {self.input_name} is constant ({self.u[0]:.6g} over {self.n} samples): a "
+                f"dead sensor, or no excitation? {what} needs an input that moves"
+            )
+
+
+
+
+
+def _checked_gravity(source, g) -> float:
+    try:
+        g = float(g)
+    except (TypeError, ValueError):
+        raise MeasurementError(f"{source}: gravity {g!r} is not a number (m/s^2 along the motion: 0 for a "
+                               "horizontal device, 9.81 for a vertical one)") from None  # fmt: skip
+    if not (GRAVITY_RANGE[0] <= g <= GRAVITY_RANGE[1]):
+        lo, hi = GRAVITY_RANGE
+        raise MeasurementError(f"{source}: gravity {g:g} m/s^2 along the motion is outside {lo:g}-{hi:g} (0 for a "
+                               "horizontal device, 9.81 for a vertical one)")  # fmt: skip
+    return g
+
+
+SCALABLE = {"base_acc": ("z", "z_dot"), "force": ("z", "z_dot", "y", "y_dot", "y_acc")}
+"""Response channels whose unknown scale (``*?``) the record's dynamics can estimate: those z is linear in
+(a base-excited record's y, y_dot, y_acc mix the unknown scale with the base's known motion)."""
+
+
+def _unknown_scale(source, name: str | None, input_name: str, mass: float | None, present) -> dict | None:
+    """``info["scale"]`` for a response channel marked ``*?`` (None without one), after checking that the
+    record can identify it: the input's coefficient must be known (-1 for a base acceleration; 1/m for a
+    force, so a force-driven record needs its mass).
+    """
+    if name is None:
+        return None
+    if name not in SCALABLE[input_name]:
+        what = "the input's scale is what makes a response's scale identifiable: it must be known" \
+            if name in INPUTS else f"only {', '.join(SCALABLE[input_name])} of a {input_name} record can be"
+        raise MeasurementError(f"{source}: {name}'s scale is marked unknown (*?): {what}")  # fmt: skip
+    if name not in present:
+        raise MeasurementError(f"{source}: {name}'s scale is marked unknown (*?), but the record has no {name}")
+    if input_name == "force" and mass is None:
+        raise MeasurementError(
+            f"{source}: {name}'s scale is marked unknown (*?), but a force-driven record without a mass cannot "
+            "identify it (z'' = force / m - ...: scale and mass trade off); give the mass (--mass or '# mass:')"
+        )
+    return {"channel": name, "value": None, "status": "unknown: estimated from the record's dynamics when analysed"}
+
+
+def _aux_channels(source, raw: dict[str, np.ndarray], names, n: int) -> dict[str, np.ndarray]:
+    """The auxiliary channels ``names`` (the file's own column names: a piezo's voltage, a coil's current),
+    checked finite and of the record's length; refused when absent or a contract column.
+    """
+    out = {}
+    for name in names or ():
+        name = str(name).strip()
+        if name in KNOWN:
+            raise MeasurementError(f"{source}: --aux {name}: {name} is a measurement column, not an auxiliary channel")
+        if name not in raw:
+            raise MeasurementError(f"{source}: --aux {name}: no such column (columns: {', '.join(raw) or 'none'})")
+        v = np.asarray(raw[name], float)
+        if v.ndim != 1 or v.size != n:
+            raise MeasurementError(f"{source}: auxiliary channel {name} has {v.size} samples, the record {n}")
+        check_values(source, {name: v})  # finite (a channel of its own: no contract magnitude)
+        out[name] = v
+    return out
+
+
+def _constant(x: np.ndarray) -> bool:
+    """No variation beyond the values' own floating-point resolution."""
+    span = float(np.ptp(x))
+    return bool(span <= 64 * np.finfo(float).eps * float(np.max(np.abs(x))) or span < 1e-15)
+
+
+def load(
+    path: str | Path,
+    columns: str | dict | None = None,
+    fs: float | None = None,
+    mass: float | None = None,
+    response: bool = True,
+    gravity: float | None = None,
+    aux: Sequence[str] | str | None = None,
+) -> Measurement:
+    """Read a measurement file, checked as the command line checks it.
+
+    The response is z, or z derived from z_dot, y (with the base's motion), y_dot or y_acc
+    (``sensors.derive``); what was done is in ``info["response"]``. A derived z's constant is unknown:
+    the analyses that need z's frame pin it (``pin_frame``); ``load`` fits nothing.
+
+    Parameters
+    ----------
+    path : str or pathlib.Path
+        A .csv, .npz, .mat, .uff/.unv, .tdms or .lvm file.
+    columns : str or dict, optional
+        Column map for foreign files (``"force=V1,z=V2"``, ``"base_acc=ACC*9.81,z_dot=LDV*?"``, or its
+        parsed dict); ``*?`` marks a response of unknown sensitivity.
+    fs : float, optional
+        Sampling rate [Hz]; replaces the time column when given (the column then only sets t0).
+    mass : float, optional
+        Moving mass [kg] (overrides the metadata's ``mass``).
+    response : bool, default True
+        False for an input-only record (``negstiff simulate``): no response column needed.
+    gravity : float, optional
+        The gravity along the motion [m/s^2] (overrides the metadata's ``gravity``; 0 for a horizontal
+        device).
+    aux : str or sequence of str, optional
+        Measured auxiliary channels to keep, by the file's column names (``"voltage"``): candidate terms
+        of the discrepancy workflow and SINDy (``aux:NAME``).
+
+    Returns
+    -------
+    Measurement
+        The record in SI units, with how it was read in ``info``.
+
+    Raises
+    ------
+    MeasurementError
+        A file, column, unit or number that cannot be read as a record: one line naming the file, the
+        column or row, and the problem.
+
+    Examples
+    --------
+    >>> import tempfile, pathlib
+    >>> from negstiff import Rig, load
+    >>> path = Rig(seed=1).random(duration=10.0).write(pathlib.Path(tempfile.mkdtemp()) / "rec.csv")
+    >>> rec = load(path)
+    >>> rec.fs, rec.input_name, rec.n
+    (512.0, 'base_acc', 5120)
+    """
+    path = Path(path)
+    raw, meta = record_io.read(path)
+    resolution = raw.pop(RESOLUTION, None)
+    cmap = parse_column_map(columns) if isinstance(columns, (str, type(None))) else dict(columns)
+    cmap = {name: (header_name(src, raw), scale) for name, (src, scale) in cmap.items()}
+    _refuse_set_aside(path, meta, [src for src, _ in cmap.values()] if cmap else [k for k in KNOWN if k not in raw])
+    cols, channel_info = in_si(path, _mapped_columns(path, raw, cmap), meta, cmap)
+    if any(name == "t" and (src != "t" or scale != 1.0) for name, (src, scale) in cmap.items()):
+        resolution = None  # the printed precision was read for a column named t only
+    if resolution is not None:  # a time column in ms: its printed precision in s too
+        resolution = resolution * channel_info.get("channels", {}).get("t", {}).get("to_si", 1.0)
+    input_name, n = _checked_input(path, raw, cols)
+    fs, t0, time_info = _time_base(path, cols, meta, fs, resolution)
+    if mass is None and "mass" in meta:
+        try:
+            mass = float(meta["mass"])
+        except ValueError:
+            raise MeasurementError(f"{path}: metadata mass = {meta['mass']!r} is not a number") from None
+    if "gravity" in meta:
+        meta = {**meta, "gravity": repr(_checked_gravity(f"{path}: metadata", meta["gravity"]))}
+    unknown = [name for name, (_, scale) in cmap.items() if scale is None]
+    if len(unknown) > 1:
+        raise MeasurementError(f"{path}: scales of {' and '.join(unknown)} marked unknown (*?): one channel at most")
+    scale_info = _unknown_scale(path, unknown[0] if unknown else None, input_name, mass, cols)
+    aux_names = [a for a in (aux.split(",") if isinstance(aux, str) else aux or ()) if str(a).strip()]
+    _refuse_set_aside(path, meta, aux_names)
+    aux_cols = _aux_channels(path, raw, aux_names, n)
+    z: np.ndarray | None = None
+    resp: dict[str, Any] = {"measured": None}
+    if response or any(k in cols for k in sensors.RESPONSES):
+        z, resp = sensors.derive(cols, input_name, fs, str(path), units_known=not unknown)
+        k = int(round(resp.get("trim_s", 0.0) * fs))
+        if k:
+            if n <= 4 * k:
+                raise MeasurementError(
+                    f"{path}: too few samples ({n}) to derive z from {resp['measured']}: the integral of an "
+                    f"accelerometer loses {resp['trim_s']:g} s at each end"
+                )
+            cols = {c: v[k:-k] for c, v in cols.items()}
+            aux_cols = {c: v[k:-k] for c, v in aux_cols.items()}
+            z, t0 = z[k:-k], t0 + k / fs
+            resp["derived"] += f"; {resp['trim_s']:g} s cut at each end (the integral's end effects)"
+    aside = {k[len(SET_ASIDE) :]: v for k, v in meta.items() if k.startswith(SET_ASIDE)}
+    rec = Measurement(
+        fs=fs,
+        input_name=input_name,
+        u=cols[input_name],
+        z=z,
+        z_dot=cols.get("z_dot"),
+        y=cols.get("y"),
+        base_disp=cols.get("base_disp"),
+        meta=meta,
+        source=str(path),
+        t0=t0,
+        info={"time": time_info, "response": resp, **channel_info, **({"scale": scale_info} if scale_info else {}),
+              **({"set_aside": aside} if aside else {})},  # channels of other rates, each with why
+        aux=aux_cols,
+    )
+    return _warned(rec.with_mass(mass).with_gravity(gravity))
+
+
+def _warned(rec: Measurement) -> Measurement:
+    """The record with what looks wrong in it alone (units: mm read as m, an acceleration in mm/s^2; the
+    sensor's derivation) in ``info["warnings"]``, each issued as a ``RecordWarning`` at once: a user learns
+    it when loading, whatever comes next (``Measurement.unit_warnings``).
+    """
+    new = [w for w in rec.unit_warnings() if w not in rec.info.get("warnings", [])]
+    lines = [*rec.info.get("warnings", []), *rec.info.get("response", {}).get("warnings", []), *new]
+    issue([(RecordWarning, w) for w in lines])
+    return replace(rec, info={**rec.info, "warnings": [*rec.info.get("warnings", []), *new]}) if new else rec
+
+
+def _refuse_set_aside(path: Path, meta: dict[str, str], wanted) -> None:
+    """One ``MeasurementError`` line for a wanted channel the reader set aside (``SET_ASIDE``: another rate than
+    the record's), naming it and why (the others are listed in the record's ``info["set_aside"]``).
+    """
+    for name in wanted:
+        why = meta.get(SET_ASIDE + str(name))
+        if why is not None:
+            raise MeasurementError(f"{path}: channel {name!r} {why}")
+
+
+def _mapped_columns(path: Path, raw: dict[str, np.ndarray], cmap: dict) -> dict[str, np.ndarray]:
+    """The contract's columns: mapped (and scaled) from the file's, plus unmapped contract names."""
+    if not cmap:
+        return {k: v for k, v in raw.items() if k in KNOWN}
+    cols: dict[str, np.ndarray] = {}
+    for name, (src, scale) in cmap.items():
+        if src not in raw:
+            raise MeasurementError(
+                f"{path}: column map refers to {src!r}, which is not in the file (columns: {', '.join(raw) or 'none'})"
+            )
+        cols[name] = raw[src] * (1.0 if scale is None else scale)  # an unknown scale (*?): as read
+    for name in KNOWN:  # unmapped contract columns present in the file still count
+        if name in raw and name not in cols and all(src != name for src, _ in cmap.values()):
+            cols[name] = raw[name]
+    return cols
+
+
+def _checked_input(path: Path, raw: dict, cols: dict[str, np.ndarray]) -> tuple[str, int]:
+    """The one input column's name and the record's length; equal lengths, finite values."""
+    inputs = [k for k in INPUTS if k in cols]
+    if len(inputs) != 1:
+        what = "no input column" if not inputs else "two input columns"
+        raise MeasurementError(
+            f"{path}: {what}; exactly one of base_acc, force is needed "
+            f"(columns: {', '.join(raw) or 'none'}; map foreign names with --columns)"
+        )
+    n = cols[inputs[0]].size
+    if n < 2:
+        raise MeasurementError(f"{path}: too few samples ({n}) for a record")
+    for k, v in cols.items():
+        if v.size != n:
+            raise MeasurementError(f"{path}: column {k} has {v.size} samples, {inputs[0]} has {n}")
+    check_values(path, cols)
+    return inputs[0], n
+
+
+def check_values(source, cols: dict[str, np.ndarray]) -> None:
+    """Every value finite and, for a contract column, within the magnitude no shaker-table record in SI
+    exceeds (``units.MAGNITUDE_LIMITS``); one ``MeasurementError`` naming the column, the row and the unit.
+    """
+    for k, v in cols.items():
+        bad = np.flatnonzero(~np.isfinite(v))
+        if bad.size:
+            raise MeasurementError(f"{source}: column {k} is NaN or inf at row {bad[0] + 1}")
+        dim = DIMENSIONS.get(k)
+        if dim is None or not v.size:
+            continue
+        limit = MAGNITUDE_LIMITS[dim]
+        big = np.flatnonzero(np.abs(v) > limit)
+        if big.size:
+            unit = next(iter(UNITS[dim]))
+            raise MeasurementError(
+                f"{source}: column {k} is {v[big[0]]:.3g} {unit} at row {big[0] + 1}, beyond any shaker-table record "
+                f"(|{k}| <= {limit:g} {unit}): is it in SI units? scale it with --columns {k}=COL*FACTOR"
+            )
+
+
+def check_sampling_rate(source, fs: float, where: str) -> float:
+    """A sampling rate [Hz] within ``units.SAMPLING_RATE_RANGE_HZ``, or one ``MeasurementError`` naming
+    where it came from.
+    """
+    lo, hi = SAMPLING_RATE_RANGE_HZ
+    if isinstance(fs, bool) or not isinstance(fs, (int, float, np.integer, np.floating)) or not lo <= fs <= hi:
+        raise MeasurementError(f"{source}: sampling rate {fs!r} Hz ({where}) is not a rate a record has "
+                               f"({lo:g} to {hi:g} Hz)")  # fmt: skip
+    return float(fs)
+
+
+def _time_base(path: Path, cols: dict, meta: dict, fs: float | None, resolution) -> tuple[float, float, dict]:
+    """(fs [Hz], t0 [s], how it was found): the caller's fs (replacing any column t), else column t
+    (``time_base``: uniform within its printed precision), else the metadata's fs.
+    """
+    if fs is not None:
+        fs = check_sampling_rate(path, fs, "given by the caller")
+        source = f"fs = {fs:g} Hz given by the caller" + (" (replaces column t)" if "t" in cols else "")
+        return float(fs), float(cols["t"][0]) if "t" in cols else 0.0, {"source": source}
+    fs_meta = meta.get("fs")
+    if fs_meta is not None:
+        try:
+            fs = float(fs_meta)
+        except ValueError:
+            raise MeasurementError(f"{path}: metadata fs = {fs_meta!r} is not a number") from None
+        fs = check_sampling_rate(path, fs, "the metadata's fs")
+    if "t" in cols:
+        dt, jitter, res = time_base(cols["t"], resolution, path)
+        check_sampling_rate(path, 1.0 / dt if dt > 0 else math.inf, "from column t")
+        if fs is not None and abs(fs * dt - 1) > TIME_JITTER_FRACTION:
+            raise MeasurementError(
+                f"{path}: fs = {fs:g} Hz disagrees with column t (1/dt = {1 / dt:.6g} Hz); "
+                "--fs replaces the time column"
+            )
+        return (
+            1.0 / dt,
+            float(cols["t"][0]),
+            {"source": "column t (mean step)", "jitter_s": jitter, "resolution_s": res},
+        )
+    if fs is None:
+        raise MeasurementError(f"{path}: no time base: give a column t, '# fs: ...' metadata or --fs")
+    return fs, 0.0, {"source": "metadata fs"}
+
+
+def time_base(t: np.ndarray, resolution: np.ndarray | None, path) -> tuple[float, float, float]:
+    """The step of a time column that is uniform within its printed precision (or 1 % of a step).
+
+    Returns (mean step [s], largest deviation from the uniform grid [s], coarsest printed
+    resolution [s]). A step that is not positive, or a gap, dropout or repeated block, raises
+    ``MeasurementError`` naming the first bad row (1-based data row).
+    """
+    n = t.size
+    d = np.diff(t)
+    if np.any(d <= 0):
+        r = int(np.flatnonzero(d <= 0)[0]) + 2
+        raise MeasurementError(
+            f"{path}: column t is not increasing at row {r} (t = {t[r - 1]:.9g} s after {t[r - 2]:.9g} s)"
+        )
+    res = np.zeros(n) if resolution is None else np.asarray(resolution, float)
+    res = res + 4 * np.spacing(np.abs(t))  # the column's own floating-point resolution
+    # the typical step: the median of the printed steps, itself off by up to one printed unit
+    k = int(np.argsort(d)[d.size // 2])
+    step = float(d[k])
+    # a step may deviate by the rounding of its two ends (half a printed unit each) plus the median's own
+    # rounding, or by 1 % of a step from each end's grid position
+    tol_d = np.maximum(0.5 * (res[1:] + res[:-1]) + res[k : k + 2].max(), 2 * TIME_JITTER_FRACTION * step)
+    # a step half a typical step off is a gap or a repeat whatever the printing: rounding explains it only
+    # where the column is printed too coarsely to show its own sampling (then --fs is the way)
+    tol_d = np.minimum(tol_d, 0.5 * step)
+    bad = np.flatnonzero(np.abs(d - step) > tol_d * (1 + 1e-9))
+    if bad.size:
+        r = int(bad[0]) + 2
+        raise MeasurementError(
+            f"{path}: column t is not uniformly sampled at row {r} (step {d[r - 2]:.6g} s, typical {step:.6g} s: "
+            "a gap, dropout or repeated block; only rounding of the printed time is tolerated)"
+        )
+    i = np.arange(n) - (n - 1) / 2  # the clock's step: least squares over every sample (rounding averages out)
+    dt = float(i @ (t - t.mean()) / (i @ i))
+    dev = np.abs(t - (t.mean() + dt * i))
+    # half a printed unit (or 1 % of a step), plus the fitted grid's own error (~ resolution / sqrt(n))
+    tol = np.maximum(0.5 * res, TIME_JITTER_FRACTION * dt) + 1e-3 * res.max() + 1e-12 * dt
+    slow = np.flatnonzero(dev > tol)
+    if slow.size:
+        r = int(slow[0]) + 1
+        raise MeasurementError(
+            f"{path}: column t is not uniformly sampled at row {r} (t = {t[r - 1]:.9g} s, {dev[r - 1]:.3g} s off "
+            f"the uniform grid of step {dt:.6g} s; the clock drifts)"
+        )
+    return float(dt), float(dev.max()), float(res.max())
+
+
+def from_arrays(
+    u: np.ndarray,
+    z: np.ndarray | None,
+    fs: float,
+    input_name: str = "base_acc",
+    *,
+    unknown_scale: str | None = None,
+    gravity: float | None = None,
+    **kw: Any,
+) -> Measurement:
+    """Build a measurement from arrays, validated like a file.
+
+    The arrays must be 1-D, of one length (at least 2 samples), finite, within a shaker-table record's
+    magnitudes in SI units; the sampling rate one a record has; the mass positive. With ``z`` None and a
+    response column in ``kw``, z is derived from it as ``load`` does (``sensors.derive``).
+
+    Parameters
+    ----------
+    u : numpy.ndarray
+        The input, (N,): base acceleration [m/s^2] or force [N].
+    z : numpy.ndarray or None
+        Relative displacement [m], (N,); None when another response column is given (or for an
+        input-only record).
+    fs : float
+        Sampling rate [Hz].
+    input_name : {"base_acc", "force"}, default "base_acc"
+        What ``u`` is.
+    unknown_scale : str, optional
+        A response channel whose sensitivity is unknown (a file's ``*?``).
+    gravity : float, optional
+        The gravity along the motion [m/s^2] (0 for a horizontal device).
+    **kw
+        Optional columns (``z_dot``, ``y``, ``base_disp``, ...), ``mass`` [kg], ``source`` (a name for
+        messages), ``meta`` and ``aux`` (a dict of measured auxiliary channels, ``{"voltage": v}``).
+
+    Returns
+    -------
+    Measurement
+        The record, as ``load`` would give it from a file holding the same columns.
+
+    Raises
+    ------
+    MeasurementError
+        Arrays that are not a record (one line: which array and why).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from negstiff import from_arrays
+    >>> t = np.arange(2048) / 512.0
+    >>> rec = from_arrays(np.sin(2 * np.pi * 9 * t), 1e-3 * np.sin(2 * np.pi * 9 * t), 512.0, mass=0.2)
+    >>> rec.duration, rec.mass
+    (4.0, 0.2)
+    """
+    if input_name not in INPUTS:
+        raise MeasurementError(f"input must be one of {INPUTS}, got {input_name!r}")
+    source = kw.get("source", "<memory>")
+    cols: dict[str, np.ndarray] = {}
+    for name, values in ((input_name, u), ("z", z), *((k, kw[k]) for k in OPTIONAL if kw.get(k) is not None)):
+        if values is None:
+            continue
+        try:
+            arr = np.asarray(values, dtype=float)
+        except (TypeError, ValueError):
+            raise MeasurementError(f"{source}: {name} is not an array of numbers") from None
+        if arr.ndim != 1:
+            raise MeasurementError(f"{source}: {name} must be a 1-D array, got shape {arr.shape}")
+        cols[name] = arr
+    n = cols[input_name].size
+    for name, arr in cols.items():
+        if arr.size != n:
+            raise MeasurementError(f"{source}: {name} has {arr.size} samples, {input_name} has {n}")
+    if n < 2:
+        raise MeasurementError(f"{source}: too few samples ({n}) for a record")
+    check_values(source, cols)
+    fs = check_sampling_rate(source, fs, "given")
+    info = dict(kw.pop("info", {}))
+    if z is None and any(k in cols for k in sensors.RESPONSES):
+        z, info["response"] = sensors.derive(cols, input_name, fs, source, units_known=unknown_scale is None)
+        if info["response"].get("trim_s"):
+            what = info["response"]["measured"]
+            raise MeasurementError(f"{source}: z from {what} needs the file's route (an integral's ends cut): "
+                                   "derive z yourself, or write the record to a file")  # fmt: skip
+    mass = kw.get("mass")
+    scale_info = _unknown_scale(source, unknown_scale, input_name, mass, cols)
+    if scale_info:
+        info["scale"] = scale_info
+    aux = kw.pop("aux", None) or {}
+    aux = _aux_channels(source, dict(aux), list(aux), n)
+    kw = {**kw, **{k: cols[k] for k in OPTIONAL if k in cols}, "aux": aux}
+    rec = Measurement(fs=fs, input_name=input_name, u=cols[input_name], z=None if z is None else np.asarray(z, float),
+                      **{**kw, "mass": None, "info": info})  # fmt: skip
+    return rec.with_mass(mass).with_gravity(gravity)
+
+
+STROKE_LIMIT_M = 1.0
+"""A shaker-table device's relative displacement stays far below this [m]; beyond it, the record is
+not in metres."""
+
+ACC_LIMIT_M_S2 = 2000.0
+"""Table accelerations beyond this rms [m/s^2] (200 g) are not in m/s^2."""

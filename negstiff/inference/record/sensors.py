@@ -1,0 +1,395 @@
+"""Response sensors as labs have them: the relative displacement z from what was measured.
+
+A lab measures the moving part's response with whichever sensor it has:
+
+* ``z`` [m]: relative displacement (a laser triangulation sensor on the frame, or the reference study's laser
+  minus the double-integrated base, already subtracted);
+* ``z_dot`` [m/s]: relative velocity (a laser Doppler vibrometer on the moving part, mounted on the
+  table, or any velocity sensor relative to the base);
+* ``y`` [m] or ``y_dot`` [m/s]: the absolute displacement or velocity (a vibrometer on the ground),
+  with the base's motion from ``base_disp`` or from the measured ``base_acc`` (the input);
+* ``y_acc`` [m/s^2]: the moving part's absolute acceleration (an accelerometer on it).
+
+``derive`` returns z together with a plain account of what was done and the error it carries.
+What is lost on the way is said, never hidden:
+
+* From a velocity, z is the integral of the measured signal (a quintic spline's antiderivative:
+  a 40 Hz component sampled at 512 Hz is integrated within 1e-5, where the trapezoid rule errs by
+  2 %), so its unknowns are the constant (the frame) and, over minutes, a drift (the sensor's zero off
+  or wandering). The drift is separated from the device's stays in one well and removed where it
+  matters (``velocity_to_z``; the record's physics take off its remnant: ``frame.drift_by_physics``).
+  The integrated sensor noise is a random walk; its size over the record, sigma_v sqrt(T dt / 3), is
+  reported.
+* A base velocity or displacement from the base accelerometer is band-limited (``highpass_hz``): a
+  shaker has no DC stroke, and accelerometer noise integrated grows without bound.
+* From an acceleration of the moving part, z needs two integrations. A cross-well record keeps its wells
+  (the double integral's drift separated from the stays in either well, as a velocity's); an in-well
+  record's content below ``highpass_hz`` (which well it sits in) cannot be recovered from the signal and
+  is not; the result says so and the frame is pinned by physics as for a velocity.
+* The constant is never known from an integral. ``pin_frame`` estimates it from the physics: the
+  restoring force at z = 0 (rods horizontal) carries the weight, K(0) = k0 = m g (g per unit mass
+  when the mass is unknown). Among the candidate frames, the one whose origin lies between the wells
+  is chosen (for a negative-stiffness device the origin is next to the unstable equilibrium).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+from scipy.interpolate import make_interp_spline
+
+from negstiff.errors import MeasurementError
+from negstiff.inference.record.derivatives import noise_floor
+from negstiff.models.table import integrate_fft
+
+RESPONSES = ("z", "z_dot", "y", "y_dot", "y_acc")
+"""Response columns in the order a record's response is taken from (the first present wins)."""
+
+HIGHPASS_HZ = 1.0
+"""Low-frequency limit of an integration of an accelerometer [Hz] (as the rig's base; below the
+excitation band of a shaker test)."""
+
+TRIM_S = 4.0 / HIGHPASS_HZ
+"""Seconds cut from each end of a record whose z needs a band-limited integral of an accelerometer:
+the integral's end effects decay over a few periods of the high-pass (measured on a 40 s rig record:
+z erred by 7.5 mm rms over the whole record, 0.29 mm beyond 2 s from the ends, 0.06 mm beyond 4 s; the
+rig likewise discards 4 s after its records)."""
+
+TREND_SIGMAS = 5.0
+"""A ramp in an integrated velocity is reported when its slope exceeds this many standard errors."""
+
+
+def integrate_exact(x: np.ndarray, fs: float) -> np.ndarray:
+    """Antiderivative of a sampled signal (quintic interpolating spline, scipy), zero at the start.
+
+    Chosen over the trapezoid rule because the record's band reaches close to Nyquist: the spline's
+    gain error at f is ~(2 pi f dt)^6 / 30240 instead of (2 pi f dt)^2 / 12.
+    """
+    t = np.arange(x.size) / fs
+    spline = make_interp_spline(t, x, k=5 if x.size > 5 else 1)
+    return spline.antiderivative()(t) - spline.antiderivative()(0.0)
+
+
+def _noise_rms(x: np.ndarray, fs: float) -> float:
+    """White-noise rms of a signal from the plateau of its spectrum (``derivatives.noise_floor``)."""
+    try:
+        return float(math.sqrt(noise_floor(x, fs)[0]))
+    except Exception:  # too short or too clean for a plateau: no estimate
+        return float("nan")
+
+
+def _trend(z: np.ndarray, fs: float, n_blocks: int = 10) -> tuple[float, float]:
+    """Least-squares slope of ``z`` over time [units/s] and its batch-means standard error."""
+    n = z.size
+    t = np.arange(n) / fs
+    if n < 4 * n_blocks:
+        return 0.0, float("inf")
+    idx = np.array_split(np.arange(n), n_blocks)
+    tc = np.array([t[i].mean() for i in idx])
+    zm = np.array([z[i].mean() for i in idx])
+    slope, icpt = np.polyfit(tc, zm, 1)
+    resid = zm - (slope * tc + icpt)
+    se = math.sqrt(resid @ resid / (n_blocks - 2) / np.sum((tc - tc.mean()) ** 2))
+    return float(slope), se
+
+
+DRIFT_CUTOFF_MAX_HZ = 0.05
+"""The highest corner [Hz] of the slow part removed from an integrated velocity: the lower end of the field's
+0.05-0.1 Hz high-pass of a vibrometer's integral (below any shaker's excitation band). The lower end because a
+bistable device's own motion has slow content besides its stays in one well (on the tests' vibrometer record,
+z erred by 0.47 mm rms after a 0.05 Hz corner, 0.80 mm after 0.1 Hz; wells 31 mm apart)."""
+
+DRIFT_CUTOFF_FRACTION = 1.0 / 40.0
+"""The corner is at most this fraction of the velocity's dominant frequency (its spectrum's peak): a decade
+and a half below the dynamics, where a second-order corner changes their amplitude by 0.1 %."""
+
+DRIFT_SPAN_FRACTION = 0.2
+"""A slow part of the integral spanning more than this fraction of the record's own 5-95 % range is removed
+even when its straight-line trend is not significant (a wander that comes back)."""
+
+
+def _dominant_hz(v: np.ndarray, fs: float) -> float:
+    """The frequency [Hz] of the largest line of a velocity's Welch spectrum (8 s segments), DC excluded."""
+    from scipy.signal import welch
+
+    f, p = welch(v - v.mean(), fs, nperseg=min(v.size, int(8 * fs)))
+    p[0] = 0.0
+    return float(f[int(np.argmax(p))])
+
+
+def _slow_part(x: np.ndarray, fs: float, cutoff_hz: float, order: int = 2) -> np.ndarray:
+    """The part of ``x`` below ``cutoff_hz``: block means over an eighth of the corner's period, low-passed
+    forward and backward (Butterworth of ``order``: zero phase, scipy) and interpolated back to every sample.
+    Averaging first keeps the filter well conditioned (a corner at 5e-5 of the sampling rate) and cheap.
+    """
+    from scipy.signal import butter, sosfiltfilt
+
+    block = max(1, int(fs / (8 * cutoff_hz)))
+    nb = x.size // block
+    if nb < 16:  # shorter than two corner periods: only a constant and a ramp are seen as slow
+        n = np.arange(x.size)
+        return np.polyval(np.polyfit(n, x, 1), n)
+    # a polynomial of the filter's order is taken off first and given back after: the drift's trend (a
+    # sensor's offset integrated once or twice) passes whole, and the filter's ends see no ramp to pad
+    t = np.arange(x.size) / x.size
+    trend = np.polynomial.Polynomial.fit(t, x, order)
+    x = x - trend(t)
+    means = x[: nb * block].reshape(nb, block).mean(axis=1)
+    centres = (np.arange(nb) + 0.5) * block - 0.5
+    sos = butter(order, cutoff_hz, "lowpass", fs=fs / block, output="sos")
+    slow = sosfiltfilt(sos, means, padtype="odd", padlen=min(nb - 1, 3 * int(fs / block / cutoff_hz)))
+    return np.interp(np.arange(x.size), centres, slow) + trend(t)
+
+
+def _occupancy(y: np.ndarray) -> np.ndarray:
+    """Each sample's cluster centre among two (1-D two-means from the 10 % and 90 % quantiles): for a
+    cross-well record, the well it is in, so a long stay in one well is a step, not a slow drift; for an
+    in-well record, a square wave at the response's own frequency, whose slow part is nil.
+    """
+    c = np.quantile(y, [0.1, 0.9])
+    for _ in range(20):
+        split = 0.5 * (c[0] + c[1])
+        low = y < split
+        if low.all() or not low.any():
+            return np.full_like(y, y.mean())
+        new = np.array([y[low].mean(), y[~low].mean()])
+        if np.allclose(new, c, rtol=0, atol=1e-12 * (abs(c).max() + 1e-300)):
+            break
+        c = new
+    return np.where(y < 0.5 * (c[0] + c[1]), c[0], c[1])
+
+
+def separate_drift(z: np.ndarray, fs: float, cutoff_hz: float, order: int = 2) -> np.ndarray:
+    """The integral's drift: the slow part of ``z`` that is not the device moving between wells.
+
+    A plain high-pass of a bistable record also removes a long stay in one well (it is slow too). Here the
+    occupancy (which of two levels each sample is at, ``_occupancy``) is taken off before the slow part is
+    taken, and the two are re-estimated in turn (three passes): a hop between wells is a step the drift does
+    not follow, a sensor's offset or wander is a smooth curve it does. ``order``: the low-pass's (2 for a
+    velocity's integral, a random walk's 1/f^2 spectrum; 4 for a double integral's 1/f^4, which a second
+    order's complement would leak through).
+    """
+    drift = _slow_part(z, fs, cutoff_hz, order)
+    for _ in range(3):
+        drift = _slow_part(z - _occupancy(z - drift), fs, cutoff_hz, order)
+    return drift - drift.mean()
+
+
+def integral_warnings(info: dict[str, Any], units: str = "mm", scale: float = 1e3) -> list[str]:
+    """What an integrated velocity's account (``velocity_to_z``'s info) calls for, in the record's units:
+    ``units`` and ``scale`` (per metre) for a calibrated record, the column's own ("units as read") else.
+    """
+    out = []
+    what, slope, se, n_s = info["integrated_from"], info["trend_m_s"], info["trend_se_m_s"], info["duration_s"]
+    drift = info.get("drift")
+    if drift is not None:
+        out.append(
+            f"z integrated from {what} drifted by {scale * drift['span_m']:.3g} {units} over the record "
+            f"(a trend of {scale * slope * n_s:.3g} {units}, {abs(slope) / se:.1f} standard errors); its slow part "
+            f"below {drift['cutoff_hz']:.3g} Hz that is not a stay in one well was removed ({drift['cutoff_from']}): "
+            f"z's 5-95 % range {scale * drift['range_before_m']:.3g} -> {scale * drift['range_after_m']:.3g} {units}, "
+            f"{drift['modes_after']} mode(s) of its histogram (was {drift['modes_before']})"
+            + (
+                f"; then a further {scale * drift['physics_span_m']:.3g} {units} by the record's physics (the "
+                "restoring force's slow shift)"
+                if "physics_span_m" in drift
+                else ""
+            )
+        )
+    elif abs(slope) > TREND_SIGMAS * se:
+        out.append(
+            f"z integrated from {what} drifts by {scale * slope * n_s:.3g} {units} over the record "
+            f"({abs(slope) / se:.1f} standard errors): a DC offset of the velocity sensor ({slope:.3g} "
+            f"{units.replace('mm', 'm')}/s)? It is not removed; a long stay in one well looks the same"
+        )
+    return out
+
+
+def _modes(y: np.ndarray) -> int:
+    """How many modes the histogram of ``y`` has (40 bins over its 1-99 % range, smoothed over three, a mode a
+    local maximum holding at least 2 % of the samples' density peak and a dip of 20 % to its neighbour).
+    """
+    lo, hi = np.quantile(y, [0.01, 0.99])
+    if not hi > lo:
+        return 1
+    h, _ = np.histogram(y, bins=40, range=(lo, hi))
+    h = np.convolve(h, np.ones(3) / 3, mode="same")
+    peaks = [i for i in range(1, h.size - 1) if h[i] >= h[i - 1] and h[i] > h[i + 1] and h[i] > 0.02 * h.max()]
+    kept = peaks[:1]
+    for p in peaks[1:]:
+        if h[kept[-1] : p + 1].min() < 0.8 * min(h[kept[-1]], h[p]):
+            kept.append(p)
+        elif h[p] > h[kept[-1]]:
+            kept[-1] = p
+    return max(1, len(kept))
+
+
+def velocity_to_z(
+    v: np.ndarray,
+    fs: float,
+    what: str,
+    units_known: bool = True,
+    drift_cutoff_hz: float | None = None,
+    always: bool = False,
+) -> tuple[np.ndarray, dict[str, Any]]:
+    """Z (up to a constant) from a relative velocity, and what the integral carries.
+
+    A vibrometer's integral drifts over minutes (its zero is not exact and wanders), and a bistable device's
+    z is not stationary either (it may sit in one well for a long stretch). The drift is separated from the
+    stays (``separate_drift``: a hop between wells is a step, a drift a smooth curve) and removed below a
+    corner chosen from the record's own spectrum (``DRIFT_CUTOFF_FRACTION`` of its dominant frequency, at most
+    ``DRIFT_CUTOFF_MAX_HZ``) when it matters: a straight-line trend beyond ``TREND_SIGMAS`` batch-means
+    standard errors, or a slow part spanning over ``DRIFT_SPAN_FRACTION`` of z's range. What was removed, and
+    its effect on z's range and histogram, is in the account (``drift``) and a warning. ``drift_cutoff_hz``
+    fixes the corner (0: never remove); ``always`` removes the drift whatever its size (a double integral's).
+    """
+    z = integrate_exact(v, fs)
+    slope, se = _trend(z, fs)
+    sigma_v = _noise_rms(v, fs)
+    walk = sigma_v * math.sqrt(z.size / fs / fs / 3) if np.isfinite(sigma_v) else float("nan")
+    info: dict[str, Any] = {
+        "derived": f"z = integral of {what} (quintic spline antiderivative)",
+        "trend_m_s": slope,
+        "trend_se_m_s": se,
+        "duration_s": z.size / fs,
+        "integrated_from": what.split()[0],
+        "velocity_noise_m_s": sigma_v,
+        "integration_error_m": walk,
+        "z_constant_known": False,
+    }
+    if drift_cutoff_hz != 0.0 and z.size >= 64:
+        dominant = _dominant_hz(v, fs)
+        if drift_cutoff_hz is None:
+            cutoff = min(DRIFT_CUTOFF_MAX_HZ, DRIFT_CUTOFF_FRACTION * dominant)
+            source = f"{DRIFT_CUTOFF_FRACTION:.3g} of the velocity's dominant {cutoff / DRIFT_CUTOFF_FRACTION:.3g} Hz"
+            if cutoff >= DRIFT_CUTOFF_MAX_HZ:
+                source = f"the field's {DRIFT_CUTOFF_MAX_HZ:g} Hz, below the velocity's dominant frequency"
+        else:
+            cutoff, source = float(drift_cutoff_hz), "as given"
+        if cutoff * z.size / fs >= 2.0:  # at least two corner periods in the record, else a drift is a trend
+            drift = separate_drift(z, fs, cutoff, 4 if always else 2)
+            q = np.quantile(z, [0.05, 0.95])
+            corrected = z - drift
+            qc = np.quantile(corrected, [0.05, 0.95])
+            if always or abs(slope) > TREND_SIGMAS * se or np.ptp(drift) > DRIFT_SPAN_FRACTION * (qc[1] - qc[0]):
+                info["drift"] = {
+                    "cutoff_hz": cutoff,
+                    "dominant_hz": dominant,
+                    "cutoff_from": source,
+                    "span_m": float(np.ptp(drift)),
+                    "rms_m": float(np.std(drift)),
+                    "range_before_m": float(q[1] - q[0]),
+                    "range_after_m": float(qc[1] - qc[0]),
+                    "modes_before": _modes(z),
+                    "modes_after": _modes(corrected),
+                }
+                z = corrected
+    info["warnings"] = integral_warnings(info, *(("mm", 1e3) if units_known else ("(units as read)", 1.0)))
+    return z, info
+
+
+def derive(
+    cols: dict[str, np.ndarray], input_name: str, fs: float, source: str, units_known: bool = True
+) -> tuple[np.ndarray, dict]:
+    """The relative displacement z from the record's response columns, and what was done.
+
+    Parameters
+    ----------
+    cols : the record's columns (contract names, SI units)
+    input_name : ``"base_acc"`` or ``"force"`` (a force-driven rig's base does not move)
+    fs : sampling rate [Hz]
+    source : the file, for messages
+    units_known : False when the response's scale is unknown (``*?``): warnings then speak its units as read
+
+    Returns
+    -------
+    z [m] and an info dict: ``measured`` (the column used), ``derived`` (how), the estimated error and
+    ``z_constant_known`` (False when the frame must be pinned by ``pin_frame``); ``trim_s``, where
+    present, is the time at each end the caller must cut (an accelerometer's integral is not valid
+    there).
+    """
+    measured = next((k for k in RESPONSES if k in cols), None)
+    if measured is None:
+        raise MeasurementError(
+            f"{source}: missing column z (or another response: {', '.join(RESPONSES[1:])}; "
+            f"columns: {', '.join(cols) or 'none'}; map foreign names with --columns)"
+        )
+    base_moves = input_name == "base_acc"
+    if measured == "z":
+        return cols["z"], {"measured": "z", "derived": None, "z_constant_known": True}
+    if measured == "z_dot":
+        z, info = velocity_to_z(cols["z_dot"], fs, "z_dot", units_known)
+        return z, {"measured": "z_dot", **info}
+    if measured == "y":
+        if "base_disp" in cols:
+            return cols["y"] - cols["base_disp"], {
+                "measured": "y",
+                "derived": "z = y - base_disp",
+                "z_constant_known": True,
+            }
+        if not base_moves:
+            return cols["y"], {
+                "measured": "y",
+                "derived": "z = y (force input: the base does not move)",
+                "z_constant_known": True,
+            }
+        b = integrate_fft(cols["base_acc"], fs, HIGHPASS_HZ, order=2)
+        return cols["y"] - b, {
+            "measured": "y",
+            "derived": f"z = y - b, b the double integral of base_acc above {HIGHPASS_HZ:g} Hz (the paper's route)",
+            "trim_s": TRIM_S,
+            "z_constant_known": True,
+        }
+    if measured == "y_dot":
+        if base_moves:
+            bv = integrate_fft(cols["base_acc"], fs, HIGHPASS_HZ, order=1)
+            z, info = velocity_to_z(
+                cols["y_dot"] - bv, fs, f"y_dot - base velocity (base_acc integrated above {HIGHPASS_HZ:g} Hz)",
+                units_known,
+            )
+        else:
+            z, info = velocity_to_z(cols["y_dot"], fs, "y_dot (force input: the base does not move)", units_known)
+        return z, {"measured": "y_dot", **info, **({"trim_s": TRIM_S} if base_moves else {})}
+    # y_acc: the moving part's absolute acceleration
+    a = cols["y_acc"] - cols["base_acc"] if base_moves else cols["y_acc"]
+    sigma_a = _noise_rms(a, fs)
+    whole = "y_acc - base_acc" if base_moves else "y_acc"
+    if a.size / fs * DRIFT_CUTOFF_MAX_HZ >= 2.0:
+        # a cross-well record keeps its wells: integrated twice whole (the sensor's constant offset off), the
+        # double integral's drift separated from the stays in either well as a vibrometer's is
+        zc, vinfo = velocity_to_z(integrate_exact(a - a.mean(), fs), fs, f"{whole} (twice)", units_known, always=True)
+        drift = vinfo.get("drift") or {}
+        if drift.get("modes_after") == 2:
+            cut = drift["cutoff_hz"]
+            return zc, {
+                **vinfo,
+                "measured": "y_acc",
+                "derived": f"z = double integral of {whole} (quintic spline antiderivatives), its drift below "
+                f"{cut:.3g} Hz separated from the stays in either well (two modes of its histogram: cross-well)",
+                "acceleration_noise_m_s2": sigma_a,
+                # as below, with the separation's corner for the high-pass
+                "integration_error_m": sigma_a / (2 * math.pi * cut) ** 2 * math.sqrt(2 * cut / (3 * fs))
+                if np.isfinite(sigma_a)
+                else float("nan"),
+            }
+    z = integrate_fft(a, fs, HIGHPASS_HZ, order=2)
+    return z, {
+        "measured": "y_acc",
+        "derived": f"z = double integral of {'y_acc - base_acc' if base_moves else 'y_acc'} above {HIGHPASS_HZ:g} Hz",
+        "lost": f"z's content below {HIGHPASS_HZ:g} Hz (for a bistable device: which well it sits in) is not in "
+        "an acceleration record; only in-well records are fully described",
+        "trim_s": TRIM_S,
+        "acceleration_noise_m_s2": sigma_a,
+        # white noise of rms sigma_a over the band, integrated twice above f_hp:
+        # var = sigma_a^2 / (fs/2) * int_{f_hp} df / (2 pi f)^4 = sigma_a^2 (2 / (3 fs)) / ((2 pi)^4 f_hp^3)
+        "integration_error_m": sigma_a / (2 * math.pi * HIGHPASS_HZ) ** 2 * math.sqrt(2 * HIGHPASS_HZ / (3 * fs))
+        if np.isfinite(sigma_a)
+        else float("nan"),
+        "z_constant_known": False,
+        "warnings": [
+            f"z was derived from an accelerometer on the moving part: its content below {HIGHPASS_HZ:g} Hz is lost "
+            "(for cross-well motion, which well the device sits in); results hold for in-well records only"
+        ],
+    }

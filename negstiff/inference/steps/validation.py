@@ -1,0 +1,378 @@
+"""Validation of a model against a record by simulation: the free runs every method is judged by.
+
+One route for every free run of a model under a measured input (``simulate_record``): the input at
+each Runge-Kutta stage time by band-limited interpolation (``simulator.stage_input``: a record's
+input passed an anti-aliasing filter, it is not piecewise linear between samples), the step refined
+where the model is fast for the sampling rate (``record_substeps``), and the start state from the
+record's least-error velocity (``derivatives.state_derivatives``).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from typing import Any, TypedDict, Unpack
+
+import numpy as np
+from scipy import optimize, signal
+
+from negstiff.errors import MeasurementError
+from negstiff.inference.record.measurement import Measurement
+from negstiff.inference.steps.frame import pin_frame
+from negstiff.models import Model, simulate, simulate_batch
+from negstiff.models.simulator import (
+    DEFAULT_SUBSTEPS,
+    DEFAULT_V_LIMIT,
+    DEFAULT_Z_LIMIT,
+    SimulationResult,
+    input_gain,
+    stage_input,
+)
+
+
+class Limits(TypedDict, total=False):
+    """The simulator's divergence bounds: |z| [m] and |z'| [m/s] (either may be left at its default)."""
+
+    z_limit: float
+    v_limit: float
+
+
+def divergence_limits(z: np.ndarray, v: np.ndarray) -> Limits:
+    """|z| and |z'| a simulation may reach before it counts as diverged: ten times the record's (the
+    simulator's defaults, 1 m and 100 m/s, are a shaker device's; an electronic benchmark's volts per
+    second exceed them).
+    """
+    return Limits(z_limit=10 * float(np.abs(z).max()) + 1e-12, v_limit=10 * float(np.abs(v).max()) + 1e-12)
+
+
+STEP_OMEGA = 0.25
+"""Largest omega h of a Runge-Kutta step at the stiffest point of the record's range. At omega h = 0.4
+(the Silverbox at two steps per sample) the integration error was 15 % of the model's 0.24 mV
+prediction error; at 0.2 it was below the data's (measured on the multisine test)."""
+MAX_SUBSTEPS = 16
+
+
+def record_substeps(system, rec: Measurement) -> int:
+    """Runge-Kutta steps per sample for simulating ``system`` against ``rec``: the simulator's default,
+    more where the system's stiffest point over the range the record visits makes omega h exceed
+    ``STEP_OMEGA`` (a fast resonance sampled slowly: the Silverbox's 60-90 Hz at 610 Hz).
+    """
+    if rec.z is not None:
+        lo, hi = float(np.min(rec.z)), float(np.max(rec.z))
+    else:  # an input-only record: the model's wells and what lies between
+        try:
+            eq = system.equilibria()
+            wells = [z for z in (eq.z_minus, eq.z_plus) if z is not None]
+            lo, hi = min(wells), max(wells)
+        except (ValueError, AttributeError):
+            lo = hi = 0.0
+    grid = np.linspace(lo, hi, 65)
+    with np.errstate(all="ignore"):
+        k = np.abs(np.asarray(system.stiffness(grid), float))
+    k = k[np.isfinite(k)]
+    omega = math.sqrt(k.max() / system.m) if k.size else 0.0
+    need = math.ceil(omega * rec.dt / STEP_OMEGA)
+    return int(min(MAX_SUBSTEPS, max(DEFAULT_SUBSTEPS, need)))
+
+
+def simulate_record(
+    system, rec: Measurement, x0, substeps: int | None = None, **limits: Unpack[Limits]
+) -> SimulationResult:
+    """A free run of ``system`` under ``rec``'s input from the state ``x0``: the input at every
+    Runge-Kutta stage time by band-limited interpolation (``stage_input``), the step refined where the
+    system is fast for the sampling rate (``record_substeps``). The velocity is stored.
+    """
+    sub = record_substeps(system, rec) if substeps is None else int(substeps)
+    if not limits and rec.z is not None:
+        _, vs, _, _ = rec.states("state")
+        limits = divergence_limits(rec.z, vs)
+    return simulate_batch(system.kernel_params(), system.kind, stage_input(rec.driving(system), sub), rec.dt,
+                          np.asarray(x0, float), input_kind=rec.input_name, substeps=sub, staged=True,
+                          store_velocity=True, **limits)  # fmt: skip
+
+
+def start_state(system, rec: Measurement, guess=None, periods: float = 2.0) -> tuple[float, float]:
+    """The state [z, z'] at ``rec``'s first sample that makes ``system``'s free run match the first
+    ``periods`` of the record best (least squares over the two start values).
+
+    A record's edge is where a derivative estimate is worst: a polynomial through the first samples
+    spans most of a period when the sampling is slow for the resonance (the Silverbox: 7-10 samples per
+    period; its quadratic start missed z' by 40 %, which doubled the free-run error of a good model).
+    The window: ``periods`` periods of the system's median linearised frequency over the record's range
+    (at least 16 samples). ``guess``: the start of the search (default: the smoothed state at sample 0).
+    """
+    zs, vs, _, _ = rec.states("state")
+    x0 = np.array([zs[0], vs[0]] if guess is None else guess, float)
+    lo, hi = float(np.min(rec.displacement)), float(np.max(rec.displacement))
+    with np.errstate(all="ignore"):
+        k = np.asarray(system.stiffness(np.linspace(lo, hi, 65)), float)
+    k = k[np.isfinite(k) & (k > 0)]
+    omega = math.sqrt(float(np.median(k)) / system.m) if k.size else 2 * math.pi / rec.duration
+    length = int(min(rec.n, max(16, math.ceil(periods * 2 * math.pi / omega * rec.fs))))
+    head = rec.segment(0, length)
+    limits = divergence_limits(rec.displacement, vs)
+    sub = record_substeps(system, rec)
+    scale = np.array([max(float(np.std(rec.displacement)), 1e-12), max(float(np.std(vs)), 1e-12)])
+
+    def residual(x):
+        res = simulate_record(system, head, x * scale, substeps=sub, **limits)
+        r = res.z[0] - head.z
+        return np.where(res.diverged[0], 10 * np.abs(head.z).max(), r)
+
+    sol = optimize.least_squares(residual, x0 / scale, method="lm", diff_step=1e-6, max_nfev=50)
+    z0, v0 = sol.x * scale
+    return float(z0), float(v0)
+
+
+def simulate_measured(system, rec: Measurement, z0: float | None = None, v0: float | None = None,
+                      interpolation: str = "band-limited", substeps: int | None = None) -> SimulationResult:
+    """``system`` under ``rec``'s input (``negstiff simulate``): from (``z0``, ``v0``) where given, else from
+    the record's own start (``start_state``: the state whose free run matches its first periods; the
+    record's z pinned to the physical frame first where it was derived), else from rest at ``z_plus``
+    (an input-only record). Bounded by ten times the record's stroke and speed (``divergence_limits``; the
+    shaker defaults for an input-only record). ``interpolation``: the input between samples band-limited
+    (a record through an anti-aliasing filter) or ``"linear"`` (a piecewise-linear drive).
+    """
+    if interpolation not in ("band-limited", "linear"):
+        raise MeasurementError(f"interpolation is 'band-limited' or 'linear', got {interpolation!r}")
+    limits = Limits(z_limit=DEFAULT_Z_LIMIT, v_limit=DEFAULT_V_LIMIT)
+    start: tuple[float | None, float] = (None, 0.0)
+    if rec.z is not None:
+        rec = pin_frame(rec)
+        limits = divergence_limits(rec.displacement, rec.states("state")[1])
+        if z0 is None or v0 is None:
+            start = start_state(system, rec)
+    z0 = start[0] if z0 is None else z0
+    v0 = start[1] if v0 is None else v0
+    if z0 is None:
+        z0 = system.equilibria().z_plus
+    if interpolation == "linear":
+        return simulate(system, rec.driving(system), rec.dt, z0=z0, v0=v0, input_kind=rec.input_name,
+                        substeps=substeps or 2,
+                        **limits)  # fmt: skip
+    return simulate_record(system, rec, (z0, v0), substeps=substeps, **limits)
+
+
+def staged_windows(system, rec: Measurement, starts: np.ndarray, length: int) -> tuple[np.ndarray, int]:
+    """The input of windows [s, s + length) of ``rec`` at every stage time (rows for
+    ``simulate_batch(..., staged=True)``) and the substeps they are staged for. The span the windows
+    cover is interpolated as one signal (no edge effect at a window's start).
+    """
+    sub = record_substeps(system, rec)
+    r = 2 * sub
+    lo, hi = int(np.min(starts)), int(np.max(starts)) + length
+    us = stage_input(rec.driving(system)[lo:hi], sub)  # the input plus any measured channel's term
+    return np.stack([us[r * (s - lo) : r * (s - lo + length - 1) + 1] for s in starts]), sub
+
+
+def free_run_rms(model: Model, rec: Measurement, skip: int = 0, x0=None) -> float:
+    """Rms of the free-run simulation error over ``rec`` (started at its measured state, or ``x0``),
+    the first ``skip`` samples not scored (the benchmarks' transient); inf if the run diverged.
+    """
+    zs, vs, _, _ = rec.states("state")
+    if x0 is None:
+        x0 = (zs[0], vs[0])
+    res = simulate_record(model, rec, x0, **divergence_limits(rec.displacement, vs))
+    if res.diverged[0]:
+        return math.inf
+    return float(np.sqrt(np.mean((res.z[0, skip:] - rec.displacement[skip:]) ** 2)))
+
+
+def validate(model: Model, rec: Measurement, start: int, window_s: float = 2.0) -> dict[str, Any]:
+    """Free-run validation of ``model`` with the measured input over samples [start, N).
+
+    ``rms_percent`` (the contract's): one free run from the measured state at ``start``
+    (Savitzky-Golay z, z'), 100 rms(z_sim - z) / rms(z). Over cross-well records this long run
+    diverges even for the true model once the motion is chaotic (device-model.md), so
+    ``restarted_rms_percent`` adds free runs of ``window_s`` restarted from the measured state at the
+    start of each window (z, z' from the Savitzky-Golay window of least predicted velocity error; all
+    windows in one batched simulation): a gap chaos cannot fake.
+    """
+    tail = rec.segment(start, rec.n)
+    if tail.n < 10:
+        raise MeasurementError(f"{rec.source}: too few samples for the validation segment ({tail.n})")
+    # the measured states free runs start from: the least-error velocity (derivatives.py)
+    zs, v, _, _ = rec.states("state")
+    sim = simulate_record(model, tail, (float(zs[start]), float(v[start])), **divergence_limits(rec.displacement, v))
+    z_sim = sim.z[0]
+    out: dict[str, Any] = {
+        "segment": [float(tail.t0), float(tail.t0 + tail.duration)],
+        "diverged": bool(sim.diverged[0]),
+    }
+    if sim.diverged[0]:
+        out.update(
+            rms_percent=float("inf"),
+            residual_mean=float("nan"),
+            residual_std=float("nan"),
+            warning=f"free run diverged: {sim.describe_failures()}",
+        )
+    else:
+        r = z_sim - tail.z
+        out.update(
+            rms_percent=float(100 * np.sqrt(np.mean(r**2)) / np.sqrt(np.mean(tail.displacement**2))),
+            residual_mean=float(r.mean()),
+            residual_std=float(r.std()),
+            z_sim=z_sim,
+            z_meas=tail.z,
+            t=tail.t,
+        )
+    out.update(restarted_free_runs(model, rec, start, window_s, zs, v))
+    return out
+
+
+def restarted_free_runs(
+    model: Model, rec: Measurement, start: int, window_s: float, zs: np.ndarray, v: np.ndarray
+) -> dict[str, Any]:
+    """Free runs of ``window_s`` seconds over [start, N), each restarted from the measured state
+    (``zs``, ``v``: the record's smoothed displacement and velocity).
+    """
+    w = int(round(window_s * rec.fs))
+    n_win = (rec.n - start) // w
+    if n_win < 1:
+        return {}
+    starts = start + w * np.arange(n_win)
+    U, sub = staged_windows(model, rec, starts, w)
+    P = np.repeat(model.kernel_params()[:, None], n_win, axis=1)
+    res = simulate_batch(
+        P,
+        model.kind,
+        U,
+        rec.dt,
+        np.column_stack([zs[starts], v[starts]]),
+        input_kind=rec.input_name,
+        input_index=np.arange(n_win),
+        substeps=sub,
+        staged=True,
+    )
+    meas = np.stack([rec.displacement[k : k + w] for k in starts])
+    ok = ~res.diverged
+    window_ms = np.full(n_win, np.nan)  # per-window mean square error (nan: diverged), an array: not in JSON
+    window_ms[ok] = np.mean((res.z[ok] - meas[ok]) ** 2, axis=1)
+    if not ok.any():
+        return {
+            "restarted_rms_percent": float("inf"),
+            "restart_window_s": window_s,
+            "restart_windows": int(n_win),
+            "window_ms": window_ms,
+        }
+    err = res.z[ok] - meas[ok]
+    return {
+        "restarted_rms_percent": float(100 * np.sqrt(np.mean(err**2)) / np.sqrt(np.mean(meas[ok] ** 2))),
+        "restart_window_s": window_s,
+        "restart_windows": int(n_win),
+        "restart_diverged": int((~ok).sum()),
+        "window_ms": window_ms,
+    }
+
+
+def residual_psd(rec: Measurement, model: Model, start: int, window_s: float = 2.0):
+    """PSD of the restarted free runs' residual over [start, end): (f, P)."""
+    zs, v, _, _ = rec.states("state")
+    w = int(round(window_s * rec.fs))
+    starts = start + w * np.arange((rec.n - start) // w)
+    U, sub = staged_windows(model, rec, starts, w)
+    P = np.repeat(model.kernel_params()[:, None], starts.size, axis=1)
+    res = simulate_batch(
+        P, model.kind, U, rec.dt, np.column_stack([zs[starts], v[starts]]),
+        input_kind=rec.input_name, input_index=np.arange(starts.size), substeps=sub, staged=True,
+    )  # fmt: skip
+    meas = np.stack([rec.displacement[k : k + w] for k in starts])
+    ok = ~res.diverged
+    f, p = signal.welch(meas[ok] - res.z[ok], rec.fs, nperseg=min(w, 512), axis=1)
+    return f, p.mean(axis=0)
+
+
+STROKE_MARGIN = 0.5
+"""How far beyond the recorded stroke a model's potential must keep confining the motion, as a fraction
+of the stroke's span."""
+INPUT_MARGIN = 1.2
+"""The training input is scaled by this in the boundedness free run (the issue's amplitude margin)."""
+
+
+def boundedness(system, rec: Measurement, margin: float = STROKE_MARGIN, input_margin: float = INPUT_MARGIN,
+                free_run: bool = True) -> dict[str, Any]:  # fmt: skip
+    """Whether ``system`` stays bounded where ``rec`` took it, and a little beyond.
+
+    * ``over_stroke``: beyond the stroke the record visited [z_lo, z_hi], over ``margin`` of its span on
+      each side, the effective potential (the restoring force less the input's static part, integrated)
+      never falls below its lowest value inside the stroke while the force pushes outward: no model
+      term opens an escape just past where the data stopped (a fitted z^4 or negative z^5 does, and a
+      free run that strays there never comes back).
+    * ``globally``: the restoring force confines at infinity (K -> +inf as z -> +inf, -inf as z -> -inf);
+      reported, not required: a polynomial fitted over a stroke need not hold far outside it.
+    * ``free_run``: a free run under the record's input scaled by ``input_margin`` from its measured
+      start state stays within ten times the record's stroke and speed (``divergence_limits``).
+
+    ``ok`` is ``over_stroke and not diverged``.
+    """
+    z = np.asarray(rec.z, float)
+    lo, hi = float(np.min(z)), float(np.max(z))
+    span = max(hi - lo, 1e-12)
+    mass = float(getattr(system, "m", 1.0))
+    f_static = float(mass * input_gain_of(rec.input_name, mass) * np.mean(rec.u))
+    grid = np.linspace(lo - margin * span, hi + margin * span, 2001)
+    k = _force_or_nan(system, grid) - f_static
+    inside = (grid >= lo) & (grid <= hi)
+    escape = None
+    reach = np.isfinite(k)  # a device's rods reach only so far: beyond them nothing escapes
+    if not reach[inside].all():
+        escape = float(grid[inside & ~reach][0])
+    else:
+        grid, k, inside = grid[reach], k[reach], inside[reach]
+        from scipy.integrate import cumulative_trapezoid
+
+        v = cumulative_trapezoid(k, grid, initial=0.0)
+        floor = v[inside].min()
+        above = (grid > hi) & (k < 0) & (v < floor)  # pushed outward, lower than anywhere inside
+        below = (grid < lo) & (k > 0) & (v < floor)
+        hits = grid[above | below]
+        if hits.size:
+            escape = float(hits[np.argmin(np.abs(hits - 0.5 * (lo + hi)))])
+    far = 0.5 * (lo + hi) + np.array([-1.0, 1.0]) * 1e3 * span
+    kf = _force_or_nan(system, far) - f_static
+    out: dict[str, Any] = {
+        "stroke_m": [lo, hi],
+        "margin": margin,
+        "over_stroke": escape is None,
+        "escape_z": escape,
+        # a device whose rods cannot reach far out is confined by its geometry
+        "globally": bool(np.all(np.isnan(kf)) or (np.all(np.isfinite(kf)) and kf[0] < 0 < kf[1])),
+    }
+    diverged = False
+    if free_run:
+        zs, vs, _, _ = rec.states("state")
+        scaled = dataclasses.replace(rec, u=input_margin * np.asarray(rec.u, float))
+        res = simulate_record(system, scaled, (zs[0], vs[0]), **divergence_limits(z, vs))
+        diverged = bool(res.diverged[0])
+        out.update(input_margin=input_margin, diverged_at_margin=diverged)
+    out["ok"] = bool(out["over_stroke"] and not diverged)
+    if not out["ok"]:
+        why = []
+        if escape is not None:
+            why.append(
+                f"its potential opens an escape at z = {escape:.4g} m, just past the stroke [{lo:.4g}, {hi:.4g}] m"
+            )
+        if diverged:
+            why.append(f"it diverges under the record's input scaled by {input_margin:g}")
+        out["warning"] = "the model is not bounded where the record went: " + "; ".join(why)
+    return out
+
+
+def input_gain_of(input_kind: str, mass: float) -> float:
+    """W in z'' = ... + w u for one model (``simulator.input_gain`` for a scalar mass)."""
+    return float(input_gain(input_kind, np.array([mass]))[0])
+
+
+def _force_or_nan(system, z: np.ndarray) -> np.ndarray:
+    """K(z), nan where the system cannot go (a device's geometric stroke)."""
+    with np.errstate(all="ignore"):
+        try:
+            return np.asarray(system.restoring_force(z), float)
+        except ValueError:
+            out = np.full(z.shape, np.nan)
+            for i, zi in enumerate(z):
+                try:
+                    out[i] = float(system.restoring_force(zi))
+                except ValueError:
+                    pass
+            return out

@@ -1,0 +1,80 @@
+"""A virtual-rig record and its files: the measured columns, metadata and truth (``RigRecord``), written
+as CSV or NPZ, or as a lab's front end writes it (Universal File type 58, TDMS), through ``negstiff.io``.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from negstiff import io as record_io
+from negstiff.constants import G
+from negstiff.errors import InputError
+from negstiff.files import atomic_path, write_text
+
+WRITTEN = (".csv", ".npz", ".uff", ".unv", ".tdms")
+"""The formats a rig record is written in (``negstiff.io``; the lab's own: Universal File, TDMS)."""
+
+
+class RigError(InputError):
+    """The rig cannot produce the requested record (bad settings, or the device left its stroke)."""
+
+
+@dataclass
+class RigRecord:
+    """One measured record: columns at ``fs``, metadata lines, and the truth behind it.
+
+    ``columns`` holds ``t, base_acc`` and the response sensor's columns (``Sensors.response``; the
+    reference study's laser: ``y, base_disp, z``), by the contract's names. ``true`` holds the
+    noise-free ``z``, ``z_dot``, ``base_acc`` and ``base_disp`` at the same samples (never written
+    to the measurement file: a lab does not have them; tests and reports use them as the truth).
+    """
+
+    fs: float
+    columns: dict[str, np.ndarray]
+    meta: dict[str, Any]
+    truth: dict[str, Any]
+    true: dict[str, np.ndarray] = field(repr=False, default_factory=dict)
+
+    def export_columns(self, acc_unit: str = "m/s^2") -> dict[str, np.ndarray]:
+        """The columns as written: accelerations in g are named ``<name>_g`` (a lab's export; map
+        them back with ``--columns base_acc=base_acc_g*9.81``).
+        """
+        if acc_unit == "m/s^2":
+            return dict(self.columns)
+        if acc_unit != "g":
+            raise RigError(f"acceleration unit must be 'm/s^2' or 'g', got {acc_unit!r}")
+        return {
+            (f"{k}_g" if k in ("base_acc", "y_acc") else k): (v / G if k in ("base_acc", "y_acc") else v)
+            for k, v in self.columns.items()
+        }
+
+    def write(self, path: str | Path, time_decimals: int | None = None, acc_unit: str = "m/s^2") -> Path:
+        """Write the record (CSV, or NPZ by suffix) and ``<stem>.truth.json`` beside it, atomically.
+
+        ``time_decimals`` prints the CSV's time column with that many fixed decimals (a lab export);
+        ``acc_unit="g"`` writes accelerations in g. The record itself does not name its truth file, so
+        the same seed gives the same bytes whatever the file is called.
+        """
+        path = Path(path)
+        truth_path = path.with_name(path.stem + ".truth.json")
+        meta = dict(self.meta)
+        cols = self.export_columns(acc_unit)
+        if acc_unit == "g":
+            meta["units"] = "s, g (accelerations), m, m/s"
+        suffix = path.suffix.lower()
+        if suffix not in WRITTEN:
+            raise RigError(f"{path}: the rig writes {', '.join(WRITTEN)} records")
+        options = {}
+        if suffix == ".csv" and time_decimals is not None:
+            if not 0 <= time_decimals <= 12:
+                raise RigError(f"time decimals must be 0..12, got {time_decimals}")
+            options["time_decimals"] = time_decimals
+        with atomic_path(path) as tmp:
+            record_io.write(tmp, cols, self.fs, meta, suffix=suffix, **options)
+        write_text(truth_path, json.dumps(self.truth, indent=2) + "\n")
+        return path

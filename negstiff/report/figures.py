@@ -1,0 +1,102 @@
+"""The command line's figures: ``negstiff frf`` (|H1| and |H2| over the band with each fitted peak, and the
+coherence) and ``negstiff nfrc`` (the response's extent along each branch, stable solid, unstable dashed,
+bifurcations marked).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+
+def frf_figure(res: dict[str, Any], curves: dict[str, np.ndarray], input_name: str, title: str):
+    """The FRF figure of an ``frf`` result and its spectra (``_curves``)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    f = curves["f"]
+    sel = (f >= res["band"][0]) & (f <= res["band"][1])
+    fig, (a1, a2) = plt.subplots(2, 1, figsize=(8, 6), sharex=True, height_ratios=[3, 1])
+    a1.semilogy(f[sel], np.abs(curves["H1"][sel]), label="H1")
+    a1.semilogy(f[sel], np.abs(curves["H2"][sel]), "--", label="H2")
+    for p in res["peaks"]:
+        a1.axvline(p["f_hz"], color="0.6", lw=0.8)
+        a1.annotate(f"{p['f_hz']:.3f} Hz, zeta {100 * p['zeta']:.2f} %", (p["f_hz"], np.abs(curves["H1"][sel]).max()),
+                    fontsize=8, ha="left", va="top")  # fmt: skip
+    a1.set(ylabel=f"|z / {input_name}|", title=title)
+    a1.legend()
+    a2.plot(f[sel], curves["coherence"][sel])
+    a2.set(xlabel="frequency [Hz]", ylabel="coherence", ylim=(0, 1.05))
+    fig.tight_layout()
+    return fig
+
+
+def frf_figure_dofs(res: dict[str, Any], curves: list[dict[str, np.ndarray]], input_name: str, title: str):
+    """The FRF figure of a structure's record: |H1| from the input to every DOF, the coherence below, the merged
+    modes marked.
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, (a1, a2) = plt.subplots(2, 1, figsize=(8, 5.5), sharex=True, gridspec_kw={"height_ratios": [3, 1]})
+    lo, hi = res["dofs"][0]["band"]  # the input's band: outside it the ratio is noise over noise
+    for i, c in enumerate(curves):
+        f = c["f"]
+        sel = (f >= lo) & (f <= hi)
+        a1.semilogy(f[sel], np.abs(c["H1"][sel]), label=f"z{i + 1}")
+        a2.plot(f[sel], c["coherence"][sel], label=f"z{i + 1}")
+    for m in res["modes"]:
+        a1.axvline(m["f_hz"], color="0.6", lw=0.8)
+    a1.set_ylabel(f"|H1| [m per {'m/s^2' if input_name == 'base_acc' else 'N'}]")
+    a1.legend(fontsize=8)
+    a1.set_title(title)
+    a2.set_ylabel("coherence")
+    a2.set_xlabel("frequency [Hz]")
+    a2.set_ylim(0, 1.05)
+    fig.tight_layout()
+    return fig
+
+
+MARKERS = {"fold": ("o", "C3"), "period_doubling": ("s", "C2"), "neimark_sacker": ("^", "C4")}
+
+
+def continuation_figure(result: dict[str, Any], title: str = ""):
+    """Max z and min z along every branch against the continuation parameter [mm]."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    par = result["settings"]["parameter"]
+    fig, ax = plt.subplots(figsize=(8, 4.5))
+    for k, br in enumerate(result["branches"]):
+        pts = br["points"]
+        lam = np.array([p[par] for p in pts])
+        stable = np.array([p["stable"] for p in pts])
+        color = f"C{k % 10}" if br["period"] == 1 else f"C{(k + 4) % 10}"
+        for key in ("max_z", "min_z"):
+            z = 1e3 * np.array([p[key] for p in pts])
+            for mask, ls in ((stable, "-"), (~stable, "--")):
+                # join a run to its neighbours so that stable and unstable parts meet
+                edge = mask | np.concatenate([mask[1:], [False]]) | np.concatenate([[False], mask[:-1]])
+                zz = np.where(edge, z, np.nan)
+                ax.plot(lam, zz, ls, color=color, lw=1.2,
+                        label=f"period {br['period']}" if (key == "max_z" and ls == "-") else None)  # fmt: skip
+    for b in result["bifurcations"]:
+        m, c = MARKERS[b["type"]]
+        ax.axvline(b[par], color=c, lw=0.6, ls=":")
+        ax.plot([], [], m, color=c, label=b["type"].replace("_", " "))
+        ax.plot(b[par], 1.0, m, color=c, clip_on=False, transform=ax.get_xaxis_transform())
+    unit = "Hz" if par == "f_hz" else ("m/s^2" if result["settings"]["input"] == "base_acc" else "N")
+    title = title or f"continuation ({result['settings']['well']} well): solid stable, dashed unstable"
+    ax.set(xlabel=f"{'frequency' if par == 'f_hz' else 'amplitude'} [{unit}]", ylabel="max z, min z [mm]", title=title)
+    handles, labels = ax.get_legend_handles_labels()
+    seen = dict(zip(labels, handles, strict=False))
+    ax.legend(seen.values(), seen.keys(), fontsize=8)
+    fig.tight_layout()
+    return fig

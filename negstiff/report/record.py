@@ -1,0 +1,234 @@
+"""The study negstiff runs on its rig, run on a lab's own record (``negstiff report``).
+
+What the record is decides what is run: a broadband record (random, sine sweep, multisine) gets NSI around
+each well it visited, SINDy, the coefficient posterior, the discrepancy workflow and the FRF; a harmonic
+record (its input one spectral line, or ``forcing_hz`` given) gets the characterisation; several records or
+a folder (a stepped campaign) get the bifurcation map, with continuations drawn over it. ``only`` chooses
+among them. Every input is read and checked before any work (one ``InputError``); each analysis that then
+cannot be made is shown in its place with the reason, and the rest of the report is still written.
+
+The report opens with the summary and a table of contents, then the record (sensor, derivation, frame,
+warnings), one table of every coefficient with each method's estimate beside the posterior's mean and
+credible interval (and its forest plot), the held-out prediction errors against the record's noise floor,
+and a section per analysis (``negstiff.report.sections``).
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from negstiff.errors import InputError
+
+from .document import Report
+
+BROADBAND = ("nsi", "sindy", "posterior", "discrepancy", "frf")
+HARMONIC = ("characterize",)
+CAMPAIGN = ("map",)
+SECTIONS = (*BROADBAND, *HARMONIC, *CAMPAIGN)
+"""Every analysis a report may hold (``only`` chooses among them)."""
+
+HARMONIC_SHARE = 0.9
+"""A record whose input puts this share of its power in one spectral line (and its two neighbouring bins) is
+harmonic: a shaker at one frequency. A random, swept or multisine input spreads it."""
+
+
+def harmonic_frequency(rec) -> float | None:
+    """The forcing frequency [Hz] of a harmonic record (``HARMONIC_SHARE`` of the input's power in one line,
+    refined by least squares), else None.
+    """
+    from negstiff.inference.analysis.periodicity import refine_frequency
+
+    u = rec.u - rec.u.mean()
+    spec = np.abs(np.fft.rfft(u * np.hanning(u.size))) ** 2
+    if spec.sum() <= 0:
+        return None
+    k = int(np.argmax(spec[1:])) + 1
+    if spec[max(k - 2, 0) : k + 3].sum() < HARMONIC_SHARE * spec.sum():
+        return None
+    return refine_frequency(u, rec.t - rec.t0, k * rec.fs / u.size, rec.fs / u.size)
+
+
+def _only(only: Sequence[str] | str | None, kind: tuple[str, ...]) -> tuple[str, ...]:
+    if not only:
+        return kind
+    names = tuple(x.strip() for x in (only.split(",") if isinstance(only, str) else only) if x.strip())
+    bad = [n for n in names if n not in SECTIONS]
+    if bad:
+        raise InputError(f"--only {','.join(names)}: unknown analysis {bad[0]!r} (choose among {', '.join(SECTIONS)})")
+    chosen = tuple(n for n in names if n in kind)
+    if not chosen:
+        raise InputError(f"--only {','.join(names)}: none of these fits this record (it takes {', '.join(kind)})")
+    return chosen
+
+
+def report_records(
+    data: Sequence[str | Path],
+    columns: str | None = None,
+    fs: float | None = None,
+    mass: float | None = None,
+    forcing_hz: float | None = None,
+    wells: tuple[float, ...] | None = None,
+    nfrc: Sequence[str] | None = None,
+    only: Sequence[str] | str | None = None,
+    seed: int = 0,
+    options: dict[str, dict[str, Any]] | None = None,
+    progress: Callable[[str], None] | None = None,
+    gravity: float | None = None,
+    aux: Sequence[str] | str | None = None,
+) -> Report:
+    """The report of ``data`` (one record, or a campaign's records or folder): every input read and checked
+    first (one ``InputError``), then each analysis that fits it; ``options`` per analysis (``{"posterior":
+    {"max_steps": 2000}, ...}``: the estimators' parameters); ``progress`` hears of each analysis. Returns the
+    ``Report`` (``write(folder)`` writes it). ``gravity`` [m/s^2] along the motion overrides the records'
+    metadata (0 for a horizontal device); ``aux`` names measured auxiliary channels of a single record (SINDy
+    and the discrepancy workflow offer each as a term).
+    """
+    say = progress or (lambda text: None)
+    options = {k: dict(v) for k, v in (options or {}).items()}
+    paths = [Path(d) for d in data]
+    if len(paths) > 1 or paths[0].is_dir():
+        if aux:
+            raise InputError("--aux: a campaign's report (characterisation, map) uses no auxiliary channel; "
+                             "give one record")
+        return _campaign_report(data, columns, fs, forcing_hz, wells, nfrc, _only(only, CAMPAIGN), say, gravity)
+    from negstiff.inference.record.measurement import load
+    from negstiff.inference.steps.frame import pin_frame
+
+    rec = load(paths[0], columns=columns, fs=fs, mass=mass, gravity=gravity, aux=aux)
+    f_h = forcing_hz or harmonic_frequency(rec)
+    kind = HARMONIC if f_h else BROADBAND
+    chosen = _only(only, kind)
+    runs = _plan(rec, chosen, f_h, wells, seed, options)  # every estimator built and its parameters checked
+    rep = Report(f"negstiff report: {rec.source}")
+    try:
+        rec = pin_frame(rec)  # the record as the analyses see it (a derived z in the physical frame)
+    except InputError:
+        pass
+    rep.add(rec)
+    for name, title, run in runs:
+        start = time.perf_counter()
+        say(f"report: {title} ...")
+        try:
+            result = run(rec)
+        except InputError as exc:
+            rep.add_failure(title, " ".join(str(exc).split()))
+            say(f"report: {title}: not made ({exc})")
+            continue
+        except Exception as exc:  # noqa: BLE001 - a section's failure is shown in its place, the rest written
+            rep.add_failure(title, f"{type(exc).__name__}: {' '.join(str(exc).split())} (a fault of negstiff's: "
+                                   "please report it)")  # fmt: skip
+            say(f"report: {title}: FAILED ({type(exc).__name__}: {exc})")
+            continue
+        rep.add(result)
+        if name == "frf" and _crosses_wells(rec):
+            rep.warning("The record crosses between the wells: its FRF is not an underlying-linear system's (the "
+                        "FRF of a low-level record around one well is; NSI gives each well's here).")  # fmt: skip
+        say(f"report: {title} done ({time.perf_counter() - start:.1f} s)")
+    if kind == HARMONIC and f_h:
+        rep.add(harmonic_next_steps(f_h))
+    return rep
+
+
+def harmonic_next_steps(forcing_hz: float):
+    """The section a harmonic record's report ends with: what such a record cannot give, what record can, and
+    the command that runs it (a report of a harmonic record runs the characterisation alone).
+    """
+    from .sections import Section
+
+    sec = Section("next", "", "What else the bench can give")
+    rows = [
+        ["K(z), D(zdot), each well's frequency and damping", "a broadband record: random or swept-sine base "
+         "excitation that explores the stroke", "negstiff report REC (NSI, SINDy, posterior, discrepancy, FRF); "
+         "negstiff identify nsi|sindy REC"],
+        ["each well's underlying-linear FRF", "a low-level random or swept record around one well",
+         "negstiff frf REC"],
+        ["the bifurcation map (period doubling, jumps, chaos)", f"a campaign: harmonic records stepped in amplitude "
+         f"at {forcing_hz:.4g} Hz (or in frequency)", "negstiff map REC1 REC2 ... (or FOLDER); negstiff report on "
+         "the same files"],
+        ["the periodic response's stability and bifurcations", "an identified model (from a broadband record)",
+         f"negstiff nfrc MODEL.json --freq {forcing_hz:.4g} --amplitude A1:A2"],
+    ]  # fmt: skip
+    sec.text(f"A harmonic record (one forcing line at {forcing_hz:.4g} Hz) shows what the device does at that "
+             "frequency and level: its period, regime and Lyapunov exponent (the characterisation above). "
+             "Identification and the rest need other records:")  # fmt: skip
+    sec.table(["to get", "record needed", "command"], rows)
+    sec.summary.append(
+        "A harmonic record gives the characterisation only: identification (NSI, SINDy, the posterior, the "
+        "discrepancy workflow) and the FRF need a broadband (random or swept) record, 'negstiff report REC' on it "
+        "runs them; a campaign of harmonic records stepped in amplitude gives the bifurcation map ('negstiff map')."
+    )
+    sec.json = {"forcing_hz": forcing_hz, "next": [{"to_get": a, "record": b, "command": c} for a, b, c in rows]}
+    return sec
+
+
+def _crosses_wells(rec) -> bool:
+    """Whether the record visits both wells (``periodicity.classify_regime`` against its metadata's rest
+    positions, else the wells of a cubic fitted to it).
+    """
+    from negstiff.inference.analysis.periodicity import classify_regime
+    from negstiff.inference.steps.wells import well_guesses
+
+    rest = rec.rest_positions
+    try:
+        wells = (rest["minus"], rest["plus"]) if len(rest) == 2 else well_guesses(rec)
+    except (InputError, ValueError):
+        return False
+    return None not in wells and classify_regime(rec.z, wells) == "cross-well"
+
+
+def _plan(rec, chosen, forcing_hz, wells, seed, options) -> list[tuple[str, str, Callable]]:
+    """Each chosen analysis as (name, title, run(record)), its estimator's parameters checked now."""
+    from negstiff.inference.analysis.characterize import characterize
+    from negstiff.inference.analysis.frf import frf
+    from negstiff.inference.estimators.discrepancy import Discrepancy
+    from negstiff.inference.estimators.nsi import NSI
+    from negstiff.inference.estimators.posterior.core import Posterior
+    from negstiff.inference.estimators.sindy import SINDy
+
+    runs: list[tuple[str, str, Callable[[Any], Any]]] = []
+    for name in chosen:
+        opts = options.get(name, {})
+        if name in ("nsi", "sindy", "posterior", "discrepancy"):
+            cls = {"nsi": NSI, "sindy": SINDy, "posterior": Posterior, "discrepancy": Discrepancy}[name]
+            if name in ("sindy", "posterior"):
+                opts.setdefault("seed", seed)
+            duration = opts.pop("duration", None)
+            est = cls(**opts)
+            est._validate_params()
+            est._validate()
+            titles = {"nsi": "NSI around each well", "sindy": "SINDy", "posterior": "the coefficient posterior",
+                      "discrepancy": "the discrepancy workflow"}  # fmt: skip
+
+            def run(r, est=est, duration=duration):
+                if duration is not None:
+                    r = r.segment(0, min(r.n, int(round(duration * r.fs))))
+                return est.fit(r)
+
+            runs.append((name, titles[name], run))
+        elif name == "frf":
+            runs.append((name, "the frequency response", lambda r: frf(r, **options.get("frf", {}))))
+        elif name == "characterize":
+            runs.append((name, "the characterisation", lambda r: characterize(r, forcing_hz, wells or "auto")))
+    return runs
+
+
+def _campaign_report(data, columns, fs, forcing_hz, wells, nfrc, chosen, say, gravity=None) -> Report:
+    from negstiff.inference.analysis.campaign import Campaign
+
+    campaign = Campaign.read(data, columns, fs, forcing_hz, wells, nfrc, gravity=gravity)
+    rep = Report(f"negstiff report: a campaign of {len(campaign.records)} records")
+    say(f"report: the bifurcation map of {len(campaign.records)} records ...")
+    rep.add(campaign.records[0], label="first record")
+    try:
+        res = campaign.map(progress=say)
+    except InputError as exc:
+        return rep.add_failure("the bifurcation map", str(exc))
+    from .sections import map_section
+
+    rep.add(map_section(res, campaign.overlays))
+    return rep

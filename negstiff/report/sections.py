@@ -1,0 +1,459 @@
+"""A report's sections, one per kind of result: functions of the library's results, shared by the command
+``negstiff report`` (``negstiff.report.record``) and by a script's own ``Report``.
+
+* a record (``Measurement``): its time base, sensor, what was derived, its frame and anchor, its warnings;
+* an identification (``NSI``, ``SINDy`` or their ``Identification``): the model, each well's modal
+  parameters, the held-out validation, the refinement, the warnings;
+* a posterior (``Posterior``): each parameter's mean, sd and credible interval with its diagnostics;
+* the discrepancy workflow (``Discrepancy``): what it named, its size, where the baseline erred, the gap;
+* an FRF, a characterisation, a bifurcation map (the ``frf``, ``characterize`` and ``Campaign.map`` dicts).
+
+Each returns a ``Section``: its blocks, its figures, and what the report's summary and its coefficient
+table take from it (each method's estimates beside the posterior's interval).
+"""
+
+from __future__ import annotations
+
+import io
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from .numbers import fmt
+
+COEFFICIENTS = ("k1", "k2", "k3", "c", "c_nl")
+"""The coefficients every report's table holds (the contract's model fields)."""
+
+
+@dataclass
+class Section:
+    """What one result gives a report."""
+
+    kind: str
+    label: str
+    title: str
+    blocks: list[tuple[str, Any]] = field(default_factory=list)
+    figures: dict[str, bytes] = field(default_factory=dict)
+    estimates: dict[str, dict[str, float]] = field(default_factory=dict)
+    """column -> {coefficient: value} (each method's estimates, for the coefficient table)."""
+    interval: dict[str, tuple[float, float, float]] = field(default_factory=dict)
+    """coefficient -> (mean, low, high) of a posterior."""
+    heldout: dict[str, float | None] = field(default_factory=dict)
+    """what -> held-out prediction error [% of rms z]."""
+    summary: list[str] = field(default_factory=list)
+    json: dict[str, Any] = field(default_factory=dict)
+
+    def text(self, text: str) -> None:
+        """A paragraph."""
+        self.blocks.append(("p", text))
+
+    def warning(self, text: str) -> None:
+        """A paragraph set apart as a warning."""
+        self.blocks.append(("warn", text))
+
+    def table(self, header: list[str], rows: list[list[Any]]) -> None:
+        """A table of ``header`` and ``rows`` (numbers at their significant figures)."""
+        self.blocks.append(("table", (header, [[fmt(c) for c in r] for r in rows])))
+
+    def figure(self, name: str, fig, caption: str) -> None:
+        """A matplotlib figure saved as PNG under ``name``, with its caption."""
+        import matplotlib.pyplot as plt
+
+        buf = io.BytesIO()
+        fig.savefig(buf, format="png", dpi=110, bbox_inches="tight")
+        plt.close(fig)
+        self.figures[f"{name}.png"] = buf.getvalue()
+        self.blocks.append(("fig", (f"{name}.png", caption)))
+
+
+def effective(model) -> dict[str, float]:
+    """k1-k3, c, c_nl of a model (a ``Model`` or its dict) with each named effect that is one of those terms
+    folded back in (a discrepancy's ``quadratic_damping`` is c_nl's term: the simulator adds the two).
+    """
+    from negstiff.models import effects
+
+    d = model if isinstance(model, dict) else model.to_dict()
+    out = {k: float(d[k]) for k in COEFFICIENTS}
+    for name, value in (d.get("extra") or {}).items():
+        field = effects.get(name).folds_into
+        if field in out and not isinstance(value, dict):
+            out[field] += float(value)
+    return out
+
+
+def _slug(text: str) -> str:
+    return "".join(ch if ch.isalnum() else "_" for ch in text.lower()).strip("_")[:40]
+
+
+def _with_label(name: str, label: str) -> str:
+    return f"{name} ({label})" if label else name
+
+
+def _frame_words(resp: dict) -> str:
+    """The frame of a derived z in plain words, for the record's summary line ('' when z was measured)."""
+    method = resp.get("frame")
+    if not method:
+        return ""
+    if resp.get("frame_offset_m") is None:
+        why = method.removeprefix("not pinned:").strip()
+        return f"; z's frame (its unknown constant) is not pinned ({why}): positions in z are up to that constant"
+    return f"; z's frame pinned by {method}"
+
+
+def record_section(rec, label: str = "") -> Section:
+    """The record as negstiff read it: time base, sensor, derivation, frame and its anchor, warnings."""
+    from negstiff.inference.record.derivatives import noise_floor
+
+    info = rec.info
+    resp = info.get("response", {})
+    sec = Section("record", label, _with_label(f"The record: {rec.source}", label))
+    noise_pct = None
+    if rec.z is not None and rec.z.size > 64:
+        noise_pct = 100 * float(np.sqrt(noise_floor(rec.z, rec.fs)[0])) / float(np.sqrt(np.mean(rec.z**2)))
+    rows = [
+        ["samples", rec.n],
+        ["sampling rate [Hz]", rec.fs],
+        ["duration [s]", rec.duration],
+        ["input", rec.input_name],
+        ["time base", info.get("time", {}).get("source", "")],
+        ["response measured", resp.get("measured") or "z"],
+        ["how z was derived", resp.get("derived") or "measured"],
+        ["frame", resp.get("frame", "as measured" if resp.get("z_constant_known", True) else "not pinned")],
+        ["frame offset [mm]", "none" if resp.get("frame_offset_m") is None else 1e3 * resp["frame_offset_m"]],
+        ["mass [kg]", rec.mass if rec.mass is not None else "not given: coefficients per unit mass"],
+        ["sensor-noise floor [% of rms z]", noise_pct],
+    ]
+    sec.table(["", "value"], rows)
+    for w in [*info.get("warnings", []), *resp.get("warnings", [])]:
+        sec.warning(w)
+    sec.heldout["the record's sensor-noise floor"] = noise_pct
+    sec.summary.append(
+        f"Record {rec.source}: {rec.duration:.4g} s at {rec.fs:g} Hz, input {rec.input_name}, response "
+        f"{resp.get('measured') or 'z'}" + (f" ({resp['derived']})" if resp.get("derived") else "")
+        + _frame_words(resp)
+        + f"; {len(info.get('warnings', [])) + len(resp.get('warnings', []))} warning(s) about it."
+    )  # fmt: skip
+    sec.json = {"source": rec.source, "n": rec.n, "fs": rec.fs, "info": info, "noise_floor_percent": noise_pct}
+    return sec
+
+
+def identification_section(est, label: str = "") -> Section:
+    """An identification (``NSI``/``SINDy`` fitted, or its ``Identification``)."""
+    r = getattr(est, "result_", est)
+    name = {"nsi": "NSI", "sindy": "SINDy"}.get(r.method, r.method)
+    col = _with_label(name, label)
+    sec = Section("identification", label, _with_label(f"{name}: identification", label))
+    refined = bool(r.refinement and r.refinement.get("applied"))
+    sec.estimates[col] = effective(r.model)
+    if refined:
+        sec.estimates[_with_label(f"{name}, its own estimate", label)] = effective(r.initial_model)
+    rows = [[w, m.get("f_hz"), None if m.get("zeta") is None else 100 * m["zeta"]] for w, m in r.modal.items()]
+    sec.text(
+        "Each well's underlying-linear system ("
+        + ("NSI: its subspace step" if r.method == "nsi" else "the model linearised")
+        + "; reference study Table 1):"
+    )
+    sec.table(["well", "f [Hz]", "zeta [%]"], rows)
+    m = r.model
+    sec.table(
+        ["model", "k1 [N/m]", "k2 [N/m^2]", "k3 [N/m^3]", "c [N s/m]", "c_nl [N s^2/m^2]", "m [kg]"],
+        [["final" + (" (output-error refined)" if refined else ""), m.k1, m.k2, m.k3, m.c, m.c_nl, m.m]]
+        + (
+            [
+                [
+                    "own estimate (equation error)",
+                    r.initial_model.k1,
+                    r.initial_model.k2,
+                    r.initial_model.k3,
+                    r.initial_model.c,
+                    r.initial_model.c_nl,
+                    r.initial_model.m,
+                ]
+            ]
+            if refined
+            else []
+        ),  # fmt: skip
+    )
+    v = r.validation
+    held = v.get("restarted_rms_percent")
+    sec.heldout[col] = held
+    t0, t1 = v.get("segment", [None, None])
+    sec.text(
+        f"Held-out validation over {fmt(t0, 4)}-{fmt(t1, 4)} s (not used to identify): restarted 2 s free runs miss "
+        f"it by {fmt(held, 3)} % of rms z, one free run over the whole tail by {fmt(v.get('rms_percent'), 3)} %. "
+        + (f"Refinement: {r.refinement.get('reason')}." if r.refinement else "No output-error refinement.")
+        + f" Mass: {r.mass_source}."
+    )  # fmt: skip
+    if r.method == "sindy" and "selected_terms" in r.details:
+        sec.text(f"Selected terms: {', '.join(r.details['selected_terms'])}.")
+    for w in r.warnings:
+        sec.warning(w)
+    wells = ", ".join(f"{w} {mm['f_hz']:.4g} Hz (zeta {100 * mm['zeta']:.3g} %)" for w, mm in r.modal.items()
+                      if mm.get("f_hz"))  # fmt: skip
+    sec.summary.append(f"{col} finds the wells at {wells or 'none'}; held-out error {fmt(held, 3)} % of rms z.")
+    sec.json = r.to_json()
+    return sec
+
+
+def posterior_section(post, label: str = "") -> Section:
+    """A fitted ``Posterior``: the summary table with diagnostics, the credible intervals."""
+    res = post.result()
+    pct = 100 * res["hdi_prob"]
+    sec = Section("posterior", label, _with_label("Posterior (emcee)", label))
+    rows = []
+    for n, s in res["parameters"].items():
+        rows.append([n, s["mean"], s["sd"], s["hdi_low"], s["hdi_high"], s["r_hat"], s["ess_bulk"]])
+        if n in COEFFICIENTS:
+            sec.interval[n] = (s["mean"], s["hdi_low"], s["hdi_high"])
+    sec.table(["parameter", "mean", "sd", f"{pct:g} % low", f"{pct:g} % high", "R-hat", "ESS bulk"], rows)
+    st = res["settings"]
+    sec.text(
+        f"{st['ensembles']} independent ensembles of {st['walkers']} walkers, {st['kept_steps_per_ensemble']} kept "
+        f"steps each; {st['windows']} windows of {st['window_s']:g} s; "
+        + ("converged." if res["converged"] else "NOT converged: see the warnings.")
+    )  # fmt: skip
+    for w in res["warnings"]:
+        sec.warning(w)
+    if "k3" in sec.interval:
+        mean, lo, hi = sec.interval["k3"]
+        sec.summary.append(
+            f"The posterior puts k3 at {fmt(mean)} N/m^3 ({pct:g} % interval {fmt(lo)} to {fmt(hi)})"
+            + ("." if res["converged"] else "; its chains did not converge (warnings).")
+        )
+    sec.json = res
+    return sec
+
+
+def discrepancy_section(d, label: str = "") -> Section:
+    """A fitted ``Discrepancy``: what it named, its size, where the baseline erred, the gap before and after."""
+    res = d.result()
+    sec = Section("discrepancy", label, _with_label("Discrepancy: where model and data disagree", label))
+    col = _with_label("discrepancy", label)
+    sec.estimates[col] = effective(res["model"])
+    named = [e for e in res["effects"] if e != "none"]
+    sec.text(f"Where: {res['where']}.")
+    sec.table(["effect", "held-out weak residual score [%]"], [[r["effect"], r["score"]] for r in res["ranking"]])
+    sizes = ", ".join(
+        f"{e} = " + (", ".join(f"{k} {fmt(x)}" for k, x in v.items()) if isinstance(v, dict) else fmt(v))
+        for e, v in res["effect_size"].items()
+    )
+    sec.text(
+        ("Named: " + ", ".join(named) + f" ({sizes})." if named else "No catalogue effect passed its margin.")
+        + f" Held-out gap (restarted free runs, median window): {fmt(res['gap_before_percent'], 3)} % before, "
+        f"{fmt(res['gap_after_percent'], 3)} % after."
+    )  # fmt: skip
+    sec.heldout[col] = res["gap_after_percent"]
+    for w in res["warnings"]:
+        sec.warning(w)
+    sec.summary.append(
+        (f"The discrepancy workflow names {', '.join(named)} ({sizes})" if named else
+         "The discrepancy workflow names no missing effect")
+        + f"; held-out gap {fmt(res['gap_before_percent'], 3)} % -> {fmt(res['gap_after_percent'], 3)} %."
+    )  # fmt: skip
+    sec.json = res
+    return sec
+
+
+def frf_section(res: dict[str, Any], label: str = "", title: str = "") -> Section:
+    """An ``frf`` result (its spectra ``_curves`` drawn where it holds them)."""
+    sec = Section("frf", label, _with_label("Frequency response (H1, H2, coherence)", label))
+    curves = res.get("_curves")
+    if curves is not None:
+        from .figures import frf_figure as figure
+
+        input_name = "base_acc" if "base_acc" in res.get("response_per_input", "") else "force"
+        fig = figure(res, curves, input_name, title or "FRF")
+        sec.figure(f"frf_{_slug(label or 'record')}", fig, "H1 and H2 with each fitted peak; coherence below.")
+    sec.table(["peak", "f [Hz]", "zeta [%]", "coherence"],
+              [[i + 1, p["f_hz"], 100 * p["zeta"], p.get("coherence")]
+               for i, p in enumerate(res["peaks"])])  # fmt: skip
+    for w in res.get("warnings", []):
+        sec.warning(w)
+    top = "no peak" if res["f_hz"] is None else f"{res['f_hz']:.4g} Hz, zeta {100 * res['zeta']:.3g} %"
+    sec.summary.append(f"The FRF's dominant peak: {top} ({len(res['peaks'])} peak(s) in {res['band'][0]:.3g}-"
+                       f"{res['band'][1]:.3g} Hz).")  # fmt: skip
+    sec.json = {k: v for k, v in res.items() if k != "_curves"}
+    return sec
+
+
+def characterization_section(res: dict[str, Any], label: str = "") -> Section:
+    """A ``characterize`` result: period, regime, amplitudes, Lyapunov exponent, and why not where not."""
+    sec = Section("characterization", label, _with_label("Characterisation of the harmonic response", label))
+    lle = res.get("lle") or {}
+    forcing = res.get("forcing") or {}
+    sec.table(["", "value"], [
+        ["period (forcing cycles)", res["period"]], ["regime", res["regime"]], ["chaotic", res["chaotic"]],
+        ["forcing, stated [Hz]", forcing.get("stated_hz")], ["forcing, measured on the input [Hz]",
+                                                              forcing.get("measured_hz")],
+        ["largest Lyapunov exponent, Wolf [1/s]", lle.get("value")], ["its sd [1/s]", lle.get("sd")],
+        ["... Rosenstein [1/s]", lle.get("rosenstein")],
+    ])  # fmt: skip
+    if res.get("residuals"):
+        sec.table(["period tested", "residual", "tolerance"],
+                  [[p, r, res["tolerances"][p]] for p, r in res["residuals"].items()])  # fmt: skip
+    for what, why in res.get("reasons", {}).items():
+        sec.text(f"{what}: {why}")
+    for w in res.get("warnings", []):
+        sec.warning(w)
+    sec.summary.append(
+        f"The harmonic response is {'period ' + str(res['period']) if res['period'] else 'not periodic'}, "
+        f"{res['regime']}, {'chaotic' if res['chaotic'] else 'not chaotic'}."
+    )
+    sec.json = res
+    return sec
+
+
+def map_section(res: dict[str, Any], overlays=(), label: str = "") -> Section:
+    """A bifurcation map (``Campaign.map``) with the continuations drawn over it."""
+    sec = Section("map", label, _with_label("Bifurcation map of the campaign", label))
+    unit = "m/s^2" if res["input"] == "base_acc" else "N"
+    sec.figure(f"map_{_slug(label or 'campaign')}", map_figure(res["points"], list(overlays), unit, res["axis"]),
+               "Each record's Poincare z against its measured forcing; continuations over it.")  # fmt: skip
+    rows = [[k] + [v for n, v in s.items() if n != "sequence"] for k, s in res["sweeps"].items()]
+    key = "first period 2" if res["axis"] == "amplitude" else "jump [Hz]"
+    sec.table(["sweep", key], rows)
+    for c in res["continuations"]:
+        sec.text(f"Continuation {c['label']} ({c['well']} well): " + ", ".join(
+            f"{k} {v}" for k, v in c.items() if k not in ("label", "well")))  # fmt: skip
+    for w in res["warnings"]:
+        sec.warning(w)
+    sec.summary.append("The map's sweeps: " + "; ".join(f"{r[0]}: {key} {fmt(r[1]) if len(r) > 1 else 'none'}"
+                                                        for r in rows) + ".")  # fmt: skip
+    sec.json = res
+    return sec
+
+
+def coefficient_blocks(estimates: dict[str, dict[str, float]], intervals: dict[str, dict[str, tuple]]):
+    """The report's coefficient table (each method's estimate of k1-k3, c, c_nl beside each posterior's mean
+    and interval) and its forest plot; and the summary's lines on whether the estimates lie inside.
+    """
+    import matplotlib.pyplot as plt
+
+    header = ["coefficient", *estimates]
+    for lab in intervals:
+        name = "posterior" if lab == "posterior" else f"posterior ({lab})"
+        header += [f"{name} mean", "interval low", "interval high"]
+    rows = []
+    for k in COEFFICIENTS:
+        row: list[Any] = [k, *[est.get(k) for est in estimates.values()]]
+        for iv in intervals.values():
+            row += list(iv.get(k, (None, None, None)))
+        rows.append(row)
+    blocks: list[tuple[str, Any]] = [
+        ("h", (2, "Coefficients: every method beside the posterior")),
+        ("p", "Each method's estimate of the z-frame coefficients (K = k3 z^3 + k2 z^2 - k1 z + k0, D = c z' + "
+              "c_nl z'|z'|), beside the posterior's mean and credible interval; the forest plot below draws the same."),
+        ("table", (header, [[fmt(c) for c in r] for r in rows])),
+    ]  # fmt: skip
+    rows_n = len(estimates) + len(intervals)
+    fig, axes = plt.subplots(1, len(COEFFICIENTS), figsize=(3.2 * len(COEFFICIENTS), 1.2 + 0.5 * rows_n), sharey=True,
+                             squeeze=False)  # fmt: skip
+    labels = [*estimates, *(f"posterior {lab}" if lab != "posterior" else "posterior" for lab in intervals)]
+    for ax, k in zip(axes[0], COEFFICIENTS, strict=False):
+        for j, est in enumerate(estimates.values()):
+            if est.get(k) is not None:
+                ax.plot(est[k], j, "o", color=f"C{j % 10}")
+        for i, iv in enumerate(intervals.values()):
+            if k in iv:
+                mean, lo, hi = iv[k]
+                y = len(estimates) + i
+                ax.plot([lo, hi], [y, y], "-", color="k", lw=2)
+                ax.plot(mean, y, "s", color="k")
+                ax.axvspan(lo, hi, color="0.85", zorder=0)
+        ax.set_title(k)
+        ax.ticklabel_format(axis="x", style="sci", scilimits=(-3, 4))
+    axes[0, 0].set_yticks(range(len(labels)), labels)
+    axes[0, 0].invert_yaxis()
+    fig.tight_layout()
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=110, bbox_inches="tight")
+    plt.close(fig)
+    blocks.append(("fig", ("coefficients_forest.png", "Forest plot: each method's estimate (dots) and the posterior's "
+                           "mean and credible interval (black, shaded).")))  # fmt: skip
+    lines = []
+    for lab, iv in intervals.items():
+        parts = []
+        mine = {c: e for c, e in estimates.items() if lab == "posterior" or c.endswith(f"({lab})")}
+        for col, est in (mine or estimates).items():
+            inside = [k for k in COEFFICIENTS if k in iv and est.get(k) is not None and iv[k][1] <= est[k] <= iv[k][2]]
+            n = sum(1 for k in COEFFICIENTS if k in iv and est.get(k) is not None)
+            parts.append(f"{col} {len(inside)} of {n}" + (f" ({', '.join(inside)})" if inside else ""))
+        which = "" if lab == "posterior" else f" ({lab})"
+        lines.append(f"Estimates inside the posterior's credible intervals{which}: {'; '.join(parts)}.")
+    return blocks, {"coefficients_forest.png": buf.getvalue()}, lines
+
+
+def draw_branches(ax, branches: list[dict[str, Any]], color, label: str | None = None, x: str = "amplitude") -> None:
+    """A continuation's branches on a bifurcation map's axes: each orbit's Poincare z [mm] against its
+    amplitude (or ``x``), solid where stable, dashed where not; ``label`` on the first period-1 branch's line.
+    """
+    for br in branches:
+        a = np.array([q[x] for q in br["points"]])
+        stable = np.array([q["stable"] for q in br["points"]])
+        pz = np.array([q["poincare_z"] for q in br["points"]]) * 1e3
+        for k in range(pz.shape[1]):
+            for mask, ls in ((stable, "-"), (~stable, "--")):
+                ax.plot(a, np.where(mask, pz[:, k], np.nan), ls, color=color, lw=0.9, alpha=0.8,
+                        label=label if (k == 0 and ls == "-" and br["period"] == 1) else None)  # fmt: skip
+
+
+def map_figure(points: list[dict[str, Any]], overlays: Sequence[dict[str, Any]] = (), unit: str = "m/s^2",
+               axis: str = "amplitude"):  # fmt: skip
+    """The bifurcation map (reference study Figure 4): each record's Poincare z against its forcing amplitude (or its
+    frequency, ``axis="f_hz"``: a stepped sine), a panel per starting well (``start``: plus, minus; one panel
+    where it is unknown), blue sweeping up, red down, black in the records' order; grey behind a cross-well
+    or non-periodic record. Each ``overlays`` entry, a ``negstiff nfrc`` result along the same axis, is drawn
+    over its well's panel (``draw_branches``).
+    """
+    import matplotlib.pyplot as plt
+
+    starts = sorted({p.get("start") for p in points}, key=lambda s: ["plus", "minus", None].index(s))
+    fig, axes = plt.subplots(1, len(starts), figsize=(6 * len(starts), 4), sharey=True, squeeze=False)
+    xs = np.unique([p[axis] for p in points])
+    half = 0.5 * float(np.median(np.diff(xs))) if xs.size > 1 else 0.05 * max(abs(float(xs[0])), 1e-12)
+    for ax, start in zip(axes[0], starts, strict=False):
+        for p in (q for q in points if q.get("start") == start):
+            col = {"up": "C0", "down": "C3"}.get(p.get("direction") or "", "k")
+            if p["regime"] == "cross-well" or p["period"] is None:
+                ax.axvspan(p[axis] - half, p[axis] + half, color="0.9", zorder=0)
+            z = 1e3 * np.asarray(p["poincare_z"])
+            ax.plot(np.full(z.size, p[axis]), z, ".", ms=1.5, color=col)
+        for k, r in enumerate(overlays):
+            if start is None or r["settings"]["well"] == start:
+                draw_branches(ax, r["branches"], f"C{(k + 2) % 10}", r.get("label", f"continuation {k + 1}"), axis)
+        title = "in the records' order" if start is None else f"starting from z_{start} (blue up, red down)"
+        xlabel = "forcing frequency [Hz]" if axis == "f_hz" else f"forcing amplitude [{unit}]"
+        ax.set(xlabel=xlabel, title=title)
+        if overlays:
+            ax.legend(fontsize=8)
+    axes[0][0].set_ylabel("Poincare z (phase 0) [mm]")
+    fig.tight_layout()
+    return fig
+
+
+def section_for(result, label: str = "") -> Section:
+    """The section of any result a report takes (by its kind)."""
+    from negstiff.inference.estimators.discrepancy import Discrepancy
+    from negstiff.inference.estimators.identification import Identification, Identifier
+    from negstiff.inference.estimators.posterior.core import Posterior
+    from negstiff.inference.record.measurement import Measurement
+
+    if isinstance(result, Section):
+        return result
+    if isinstance(result, Measurement):
+        return record_section(result, label)
+    if isinstance(result, (Identifier, Identification)):
+        return identification_section(result, label)
+    if isinstance(result, Posterior):
+        return posterior_section(result, label)
+    if isinstance(result, Discrepancy):
+        return discrepancy_section(result, label)
+    if isinstance(result, dict) and "peaks" in result:
+        return frf_section(result, label)
+    if isinstance(result, dict) and "regime" in result and "period" in result:
+        return characterization_section(result, label)
+    if isinstance(result, dict) and "sweeps" in result:
+        return map_section(result, (), label)
+    raise TypeError(f"a report takes records, fitted estimators and analysis results, not {type(result).__name__}")
