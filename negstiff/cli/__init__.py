@@ -8,19 +8,57 @@ Exit codes: 0 success, 2 bad input (one line on stderr, no output written).
 
 from __future__ import annotations
 
-import contextlib
 import os
 import signal
 import sys
-import threading
-import warnings
-from collections.abc import Sequence
 
-from negstiff.files import transaction
-from negstiff.resources import idle_cores, limit_threads
 
-from .common import InputError, bad_input_types, check_paths, write_json  # noqa: F401 (API)
-from .parser import build_parser
+def _is_the_command() -> bool:
+    """Whether this process is the ``negstiff`` command (the console script or ``python -m negstiff``), as
+    opposed to a program or a test importing the library, or a section process of ``reproduce`` (its
+    ``__main__`` is ``__mp_main__``, and it ignores Ctrl-C: its parent answers for it).
+    """
+    main = sys.modules.get("__main__")
+    if getattr(main, "__name__", "__main__") != "__main__":
+        return False
+    spec = getattr(main, "__spec__", None)
+    if spec is not None and spec.name == "negstiff.__main__":
+        return True
+    name = os.path.basename(getattr(main, "__file__", None) or "")
+    for suffix in ("-script.pyw", "-script.py", ".exe"):  # the console script's spellings (setuptools)
+        name = name.removesuffix(suffix)
+    return name == "negstiff"
+
+
+def _exit_at_once(signum, frame) -> None:
+    """Ctrl-C or a kill before the command has started: one line and the exit code (130, 143); nothing
+    has been written yet.
+    """
+    what, code = ("interrupted", 130) if signum == signal.SIGINT else ("terminated", 143)
+    sys.stderr.write(f"negstiff: {what} (nothing written)\n")
+    sys.stderr.flush()
+    os._exit(code)
+
+
+# Ctrl-C from the first millisecond: the handler is in place before the heavy imports below (numpy, the
+# parser's modules: about a second, during which Python's own KeyboardInterrupt printed a traceback).
+# Only the command installs it, and only where Python's default is still in place (a signal ignored by the
+# parent stays ignored)
+if _is_the_command():
+    for _signum in (signal.SIGINT, signal.SIGTERM):
+        if signal.getsignal(_signum) in (signal.default_int_handler, signal.SIG_DFL):
+            signal.signal(_signum, _exit_at_once)
+
+import contextlib  # noqa: E402 (after the interrupt handler, on purpose)
+import threading  # noqa: E402
+import warnings  # noqa: E402
+from collections.abc import Sequence  # noqa: E402
+
+from negstiff.files import transaction  # noqa: E402
+from negstiff.resources import idle_cores, limit_threads  # noqa: E402
+
+from .common import InputError, bad_input_types, check_paths, write_json  # noqa: E402, F401 (API)
+from .parser import build_parser  # noqa: E402
 
 
 def _interrupt_handler(command: str, what: str, code: int):

@@ -8,7 +8,9 @@ as ``results.json``.
 from __future__ import annotations
 
 import os
+import signal as posix_signal
 import sys
+import threading
 import time
 from pathlib import Path
 from typing import Any
@@ -227,13 +229,24 @@ def _run_pool(todo, out, paths, fast: bool, seed: int, workers: int, say, tick) 
     from multiprocessing import get_context
 
     threads = max(2, (os.cpu_count() or 1) // workers)
+    # Ctrl-C reaches the whole process group: the section processes ignore it and this process answers for
+    # them (``_stop_workers``: they are ended before its one line, with no traceback of theirs and nothing
+    # left running). They ignore it from their first instruction: started while this process ignores SIGINT,
+    # which a spawned Python keeps (a handler set in the initialiser would come after a second of imports)
+    answer = threading.current_thread() is threading.main_thread()
+    previous = posix_signal.getsignal(posix_signal.SIGINT) if answer else None
     # spawn, not fork: the parent's numba and BLAS thread pools do not survive a fork
-    with ProcessPoolExecutor(
+    pool = ProcessPoolExecutor(
         max_workers=workers, mp_context=get_context("spawn"), initializer=_share_cores, initargs=(threads,)
-    ) as pool:
+    )
+    try:
+        if answer:  # a Ctrl-C in the milliseconds the processes take to start is lost (press it again)
+            posix_signal.signal(posix_signal.SIGINT, posix_signal.SIG_IGN)
         for k in KERNELS:  # first in the queue: compiled once each (loaded, once numba has cached them)
-            pool.submit(warm_kernel, k)
+            pool.submit(warm_kernel, k)  # the first submissions start the processes, every one of them
         futures = {pool.submit(compute_section, n, fast, seed): n for n in todo}
+        if answer and previous is not posix_signal.SIG_IGN:  # Ctrl-C: KeyboardInterrupt, caught below
+            posix_signal.signal(posix_signal.SIGINT, posix_signal.default_int_handler)
         say(f"{len(todo)} sections on {workers} processes: {', '.join(todo)}")
         pending = set(futures)
         while pending:
@@ -241,16 +254,36 @@ def _run_pool(todo, out, paths, fast: bool, seed: int, workers: int, say, tick) 
             tick(None)
             for fut in finished:
                 n = futures[fut]
-                try:
-                    out[n] = fut.result()
-                except BaseException:
-                    # the sections not started are cancelled; those finished are cached (a rerun replays them)
-                    pool.shutdown(wait=False, cancel_futures=True)
-                    raise
+                out[n] = fut.result()  # a section's failure: those finished are cached (a rerun replays them)
                 _store(paths[n], out[n], say)
                 say(f"{_TABLE[n][0]}: done")
                 tick(n)
+    except BaseException:  # Ctrl-C, or a section failed: the sections still running are stopped, not waited for
+        if answer:  # a second Ctrl-C does not cut the teardown short
+            posix_signal.signal(posix_signal.SIGINT, posix_signal.SIG_IGN)
+        _stop_workers(pool)
+        raise
+    finally:
+        pool.shutdown(wait=True, cancel_futures=True)
+        if answer:
+            posix_signal.signal(posix_signal.SIGINT, previous)
     return out
+
+
+def _stop_workers(pool) -> None:
+    """End ``pool``'s processes now (SIGTERM: no traceback of theirs) and wait for them, so that the pool's
+    queues are released (the resource tracker then has no semaphore to report). ``concurrent.futures``
+    gives no public way before Python 3.14 (``terminate_workers``); its process table is used until then.
+    """
+    terminate = getattr(pool, "terminate_workers", None)
+    if terminate is not None:
+        terminate()
+        return
+    processes = list((getattr(pool, "_processes", None) or {}).values())
+    for p in processes:
+        p.terminate()
+    for p in processes:
+        p.join(timeout=30)
 
 
 def simulator_accuracy(duration: float = 10.0, fs: float = 512.0, amplitude: float = 3.0) -> dict[str, Any]:
