@@ -31,9 +31,6 @@ _EXPORTS = {
     "from_arrays": "negstiff.inference.record.measurement",
     "Measurement": "negstiff.inference.record.measurement",
     "pin_frame": "negstiff.inference.steps.frame",
-    "StructureRecord": "negstiff.inference.record.structure",
-    "load_structure": "negstiff.inference.record.structure",
-    "structure_from_arrays": "negstiff.inference.record.structure",
     # the physics
     "Model": "negstiff.models.equation",
     "Device": "negstiff.models.device",

@@ -10,7 +10,7 @@ from records import FIXTURE, TRUTH, fixture_rk4_step, rk4_fixture_record, write_
 
 from negstiff import InputError, Model
 from negstiff.inference.estimators.structure_id import StructureNSI, StructureSINDy, free_run_error
-from negstiff.inference.record.structure import load_structure, structure_from_arrays
+from negstiff.inference.record.measurement import from_arrays, load
 from negstiff.models.simulator import simulate_batch, stage_input
 from negstiff.models.structure import Structure, simulate_structures
 
@@ -98,7 +98,7 @@ def test_structure_inputs_are_checked_in_one_line():
 def fixture_record():
     # 300 s of random cross-well motion, 512 Hz, 1 um noise on both DOFs (the issue's acceptance record)
     u, z = rk4_fixture_record(duration=300.0, rms=12.0, seed=1)
-    return structure_from_arrays(u, z, FS, (FIXTURE["m"], TRUTH.m), source="fixture record")
+    return from_arrays(u, z, FS, masses=(FIXTURE["m"], TRUTH.m), source="fixture record")
 
 
 @pytest.mark.parametrize("method", [StructureNSI, StructureSINDy])
@@ -126,17 +126,17 @@ def test_structure_record_file(tmp_path):
     u, z = rk4_fixture_record(duration=2.0, seed=2)
     t = np.arange(u.size) / FS
     path = write_csv(tmp_path / "two.csv", {"t": t, "base_acc": u, "z1": z[0], "z2": z[1]}, {"masses": "1.0,0.2"})
-    rec = load_structure(path)
+    rec = load(path)
     assert rec.n_dof == 2 and rec.masses == (1.0, 0.2) and rec.fs == pytest.approx(FS)
     assert np.allclose(rec.z, z, rtol=1e-9, atol=1e-15)
     bad = write_csv(tmp_path / "bad.csv", {"t": t, "base_acc": u, "z1": z[0], "z3": z[1]}, {"masses": "1.0,0.2"})
     with pytest.raises(InputError, match="z1 ... zN"):
-        load_structure(bad)
+        load(bad)
     nomass = write_csv(tmp_path / "nomass.csv", {"t": t, "base_acc": u, "z1": z[0], "z2": z[1]})
     with pytest.raises(InputError, match="masses"):
-        load_structure(nomass)
+        _ = load(nomass).dof_masses  # a structure's identification needs them; reading the record does not
     with pytest.raises(InputError, match="masses"):
-        load_structure(path, masses=[1.0])
+        load(path, masses=[1.0])
 
 
 def _stepped_sweep(amps, f_hz, state, periods=120, steps=128, full=False):
@@ -253,7 +253,7 @@ def test_structure_rig_records_are_seeded_and_read_back(tmp_path):
     # the lasers' noise and the double-integrated table: z off the truth by about the laser's 30 um, not more
     err = a.z - np.array([a.true["z1"], a.true["z2"]])
     assert 10e-6 < np.sqrt(np.mean(err[:, 512:-512] ** 2)) < 100e-6
-    rec = load_structure(a.write(tmp_path / "fixture.csv"))
+    rec = load(a.write(tmp_path / "fixture.csv"))
     assert rec.n_dof == 2 and rec.masses == pytest.approx(rig.structure.masses) and rec.fs == pytest.approx(FS)
     assert np.allclose(rec.z, a.z, rtol=1e-8, atol=1e-12)
     # the payload campaign: the element on the table moves DOF 1, the payload rides on it (DOF 2)
@@ -273,7 +273,7 @@ def test_posterior_of_the_element_on_its_fixture():
     from negstiff.inference.estimators.structure_posterior import StructurePosterior
 
     u, z = rk4_fixture_record(duration=60.0, seed=4, noise=1e-5)
-    rec = structure_from_arrays(u, z, FS, (FIXTURE["m"], TRUTH.m))
+    rec = from_arrays(u, z, FS, masses=(FIXTURE["m"], TRUTH.m))
     post = StructurePosterior(element="1-2", n_walkers=12, max_windows=40, seed=1).fit(rec)
     for k in ("k1", "k2", "k3", "c", "c_nl"):
         p = post.parameters_[k]
@@ -298,7 +298,7 @@ def test_element_posterior_intervals_cover_the_truth_over_records():
     z, inside = [], []
     for seed in range(1, 13):
         u, zz = rk4_fixture_record(duration=60.0, seed=seed, noise=1e-5)
-        rec = structure_from_arrays(u, zz, FS, (FIXTURE["m"], TRUTH.m))
+        rec = from_arrays(u, zz, FS, masses=(FIXTURE["m"], TRUTH.m))
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             post = StructurePosterior(element="1-2", n_walkers=12, max_windows=40, seed=1).fit(rec)
@@ -322,7 +322,7 @@ def test_discrepancy_names_friction_in_the_element_on_its_fixture(friction):
 
     hidden = (lambda r, v: friction * math.tanh(v / COULOMB_VELOCITY_SCALE)) if friction else None
     u, z = rk4_fixture_record(duration=120.0, seed=7, noise=3e-6, hidden=hidden)
-    rec = structure_from_arrays(u, z, FS, (FIXTURE["m"], TRUTH.m))
+    rec = from_arrays(u, z, FS, masses=(FIXTURE["m"], TRUTH.m))
     d = StructureDiscrepancy(element="1-2").fit(rec)
     if not friction:
         assert d.named_ is None and d.structure_.element.extra == {}
@@ -338,7 +338,7 @@ def test_discrepancy_names_friction_in_the_element_on_its_fixture(friction):
 def test_stabilisation_diagram_keeps_both_modes_of_each_well():
     # over orders 4..8 and two Hankel depths, each well's two physical modes recur within 1 % / 5 % (stable)
     u, z = rk4_fixture_record(duration=60.0, seed=4)
-    rec = structure_from_arrays(u, z, FS, (FIXTURE["m"], TRUTH.m))
+    rec = from_arrays(u, z, FS, masses=(FIXTURE["m"], TRUTH.m))
     nsi = StructureNSI(element="1-2").fit(rec)
     rows = nsi.stabilization(rec, orders=(4, 6, 8), block_rows=(20, 40))
     for well in ("minus", "plus"):
@@ -432,7 +432,7 @@ def test_a_force_on_the_device_identifies_the_same_structure():
     res = simulate_structures(ON_FIXTURE, stage_input(force), 1 / FS, x0, input_kind="force", staged=True)
     k = int(5 * FS)
     z = res.z[0][:, k:] + 1e-6 * rng.standard_normal((2, n - k))
-    rec = structure_from_arrays(force[k:], z, FS, (FIXTURE["m"], TRUTH.m), input_name="force", force_dof=2)
+    rec = from_arrays(force[k:], z, FS, masses=(FIXTURE["m"], TRUTH.m), input_name="force", force_dof=2)
     r = z[1] - z[0]
     assert np.count_nonzero(np.diff(np.sign(r - ON_FIXTURE.element_equilibria().z_0))) > 50
     for method in (StructureNSI, StructureSINDy):

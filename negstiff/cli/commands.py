@@ -207,7 +207,7 @@ def cmd_identify(args) -> int:
 def _identify_structure(args) -> int:
     """``identify --dofs N --element I-J``: a structure's record through ``StructureNSI`` / ``StructureSINDy``."""
     from negstiff.inference.estimators.structure_id import StructureNSI, StructureSINDy, modes_summary, parse_element
-    from negstiff.inference.record.structure import load_structure
+    from negstiff.inference.record.measurement import load
 
     for option, given in (("--columns", args.columns), ("--mass", args.mass), ("--aux", args.aux), ("--frf", args.frf)):
         if given:
@@ -215,7 +215,7 @@ def _identify_structure(args) -> int:
     if args.element is None:
         raise InputError(f"--dofs {args.dofs} needs --element I-J (J the DOF the element moves, I where it is fixed)")
     masses = parse_amplitudes(args.masses, "--masses") if args.masses else None
-    rec = load_structure(args.data, fs=args.fs, masses=masses)
+    rec = load(args.data, fs=args.fs, masses=masses)
     if rec.n_dof != args.dofs:
         raise InputError(f"{args.data}: --dofs {args.dofs}, but the record has responses z1 ... z{rec.n_dof}")
     element = parse_element(args.element, rec.n_dof)
@@ -387,12 +387,12 @@ def cmd_frf(args) -> int:
 def _frf_structure(args, band) -> int:
     """``frf DATA --dofs N``: every DOF's FRF from the input, the modes merged over DOFs."""
     from negstiff.inference.analysis.frf import frf_structure
-    from negstiff.inference.record.structure import load_structure
+    from negstiff.inference.record.measurement import load
     from negstiff.report.figures import frf_figure_dofs as figure_dofs
 
     if args.columns:
         raise InputError("--columns is for a single-DOF record (a structure's record names z1 ... zN)")
-    rec = load_structure(args.data, fs=args.fs, masses=[1.0] * args.dofs)  # FRFs need no masses
+    rec = load(args.data, fs=args.fs)  # FRFs need no masses
     if rec.n_dof != args.dofs:
         raise InputError(f"{args.data}: --dofs {args.dofs}, but the record has responses z1 ... z{rec.n_dof}")
     if band is not None and band[1] > rec.fs / 2:

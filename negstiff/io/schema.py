@@ -47,6 +47,14 @@ DIMENSIONS = {
     "y_dot": "velocity",
 }
 """The dimension of each contract column."""
+
+RESPONSE_CHANNEL = re.compile(r"^z([1-9][0-9]*)$")
+"""A structure's response channel ``z1 ... zN`` (each DOF's displacement relative to the base [m])."""
+
+
+def dimension(column: str) -> str | None:
+    """The dimension of a contract column (``DIMENSIONS``; a structure's ``z1 ... zN`` are lengths), else None."""
+    return "length" if RESPONSE_CHANNEL.match(column) else DIMENSIONS.get(column)
 SI_UNITS = {dim: next(iter(units)) for dim, units in UNITS.items()}
 """The SI unit of each dimension (the first of ``UNITS``)."""
 
@@ -90,7 +98,8 @@ def si_factor(label: str, column: str) -> float | None:
     """The factor that turns ``column``'s values labelled ``label`` into SI, or None where the label is not
     a unit of the column's dimension in ``UNITS``.
     """
-    return UNITS[DIMENSIONS[column]].get(_unit(label)) if column in DIMENSIONS else None
+    dim = dimension(column)
+    return UNITS[dim].get(_unit(label)) if dim is not None else None
 
 
 def in_si(path: Path, cols: dict[str, np.ndarray], meta: dict[str, str], cmap: dict):
@@ -111,10 +120,10 @@ def in_si(path: Path, cols: dict[str, np.ndarray], meta: dict[str, str], cmap: d
     for name in cols:
         src, scale = cmap.get(name, (name, 1.0))
         label = meta.get(f"unit:{src}")
-        if label is None or name not in DIMENSIONS:
+        dim = dimension(name)
+        if label is None or dim is None:
             continue
         f = si_factor(label, name)
-        dim = DIMENSIONS[name]
         if name in cmap:  # the user's map decides
             if scale is UNKNOWN_SCALE:  # the dynamics will say: the file's label is moot
                 continue
@@ -166,8 +175,10 @@ def parse_column_map(text: str | None) -> dict[str, tuple[str, float | None]]:
                 "(scale unknown)"
             )
         name, src, scale = m.group(1), m.group(2).strip().strip('"'), m.group(3)
-        if name not in KNOWN:
-            raise MeasurementError(f"column map names {name!r}, which is not a measurement column ({', '.join(KNOWN)})")
+        if name not in KNOWN and not RESPONSE_CHANNEL.match(name):
+            raise MeasurementError(
+                f"column map names {name!r}, which is not a measurement column ({', '.join(KNOWN)}, z1 ... zN)"
+            )
         try:
             factor = 1.0 if scale is None else UNKNOWN_SCALE if scale == "?" else float(scale)
         except ValueError:

@@ -21,7 +21,6 @@ from negstiff.inference.estimators.nsi import NSI
 from negstiff.inference.estimators.sindy import SINDy
 from negstiff.inference.estimators.structure_id import StructureNSI, StructureSINDy, free_run_error
 from negstiff.inference.record.measurement import from_arrays
-from negstiff.inference.record.structure import structure_from_arrays
 from negstiff.models.device import SEED_LIKE_CUBIC
 from negstiff.models.structure import Structure
 from negstiff.models.structure_rig import StructureRig
@@ -52,7 +51,7 @@ def compute_fixture(fast: bool, seed: int) -> FixtureStudy:
     rig = StructureRig.device_on_fixture(SEED_LIKE_CUBIC, seed=seed + 31, **FIXTURE)
     rec = rig.random(duration=120.0 if fast else 300.0, rms=14.0)
     u = rec.columns["base_acc"]
-    srec = structure_from_arrays(u, rec.z, rec.fs, rig.structure.masses, source="fixture record")
+    srec = from_arrays(u, rec.z, rec.fs, masses=rig.structure.masses, source="fixture record")
     one = from_arrays(u, rec.z[1], rec.fs, mass=rig.structure.masses[1], source="fixture record, z2 alone")
     seconds: dict[str, float] = {}
     single, double = {}, {}
@@ -123,8 +122,8 @@ def fixture_section(rep, results: dict[str, Any], fast: bool, seed: int = 0) -> 
     # state (a single-DOF model as the structure of one DOF on the record of z2 alone)
     start = int(0.8 * study.record.z.shape[1])
     u = study.record.columns["base_acc"]
-    alone = structure_from_arrays(u, study.record.z[1:2], study.record.fs, (s.masses[1],), source="z2 alone")
-    both = structure_from_arrays(u, study.record.z, study.record.fs, s.masses, source="both")
+    alone = from_arrays(u, study.record.z[1:2], study.record.fs, masses=(s.masses[1],), source="z2 alone")
+    both = from_arrays(u, study.record.z, study.record.fs, masses=s.masses, source="both")
     held = {f"single-DOF {n}": free_run_error(Structure.single(e.model_), alone, start, WINDOW_S)["rms_percent"]
             for n, e in study.single.items()}  # fmt: skip
     held |= {f"2-DOF {n}": free_run_error(e.structure_, both, start, WINDOW_S)["per_dof_percent"][1]

@@ -43,7 +43,7 @@ from typing import Any
 import numpy as np
 
 from negstiff.errors import InputError, NegstiffWarning
-from negstiff.inference.record.structure import StructureRecord
+from negstiff.inference.record.measurement import Measurement
 from negstiff.inference.steps.weak import test_function, test_function_half_width, weak_project
 from negstiff.models import Model
 from negstiff.models.structure import (
@@ -167,14 +167,14 @@ class WellFit:
     structure: Structure
 
 
-def free_run_error(structure: Structure, rec: StructureRecord, start: int, window_s: float = 0.25) -> dict[str, Any]:
+def free_run_error(structure: Structure, rec: Measurement, start: int, window_s: float = 0.25) -> dict[str, Any]:
     """Free runs of ``structure`` over the record from sample ``start`` on, restarted every ``window_s`` from the
     record's band-smoothed states: rms error over every DOF in % of the responses' rms, and per DOF. The truth's
     own value on the same record is the floor noise and chaos leave any model. 0.25 s (two periods of the wells)
     by default: over cross-well chaos a 1 s run diverges for any model, the truth too (60 % rms on the tests'
     fixture record), and then a model that moves less scores better.
     """
-    zs, v, _ = rec.states(structure.place)
+    zs, v, _ = rec.channel_states(structure.place)
     L = max(8, int(round(window_s * rec.fs)))
     starts = np.arange(start, rec.n - L, L)
     if not starts.size:
@@ -184,10 +184,10 @@ def free_run_error(structure: Structure, rec: StructureRecord, start: int, windo
     x0 = np.hstack([zs[:, starts].T, v[:, starts].T])
     res = simulate_structures(structure, u, rec.dt, x0, input_kind=rec.input_name, force_dof=rec.force_dof,
                               input_index=np.arange(starts.size))  # fmt: skip
-    meas = np.transpose(rec.z[:, idx], (1, 0, 2))  # (W, N, L+1)
+    meas = np.transpose(rec.channels[:, idx], (1, 0, 2))  # (W, N, L+1)
     err = res.z - meas
     ok = ~res.diverged
-    centred = rec.z[:, start:] - rec.z[:, start:].mean(axis=1, keepdims=True)
+    centred = rec.channels[:, start:] - rec.channels[:, start:].mean(axis=1, keepdims=True)
     scale = np.sqrt(np.mean(centred**2, axis=1))
     if not ok.any():
         return {"rms_percent": math.inf, "per_dof_percent": [math.inf] * rec.n_dof, "windows": int(starts.size),
@@ -207,10 +207,10 @@ class _StructureIdentifier:
         self.element = element
         self.validation_fraction = validation_fraction
 
-    def _prepare(self, rec: StructureRecord) -> tuple[StructureRecord, tuple[int, int], int]:
-        if not isinstance(rec, StructureRecord):
+    def _prepare(self, rec: Measurement) -> tuple[Measurement, tuple[int, int], int]:
+        if not isinstance(rec, Measurement):
             raise InputError(
-                "a structure's identification needs a StructureRecord (load_structure, structure_from_arrays)"
+                "a structure's identification needs a Measurement (load, from_arrays)"
             )
         if not 0.0 < self.validation_fraction < 0.9:
             raise InputError(f"validation_fraction must be in (0, 0.9), got {self.validation_fraction}")
@@ -221,7 +221,7 @@ class _StructureIdentifier:
         rec.require(4000, f"{type(self).__name__}")
         return rec, at, n_id
 
-    def _finish(self, rec: StructureRecord, structure: Structure, n_id: int, modal: dict, extra: dict) -> None:
+    def _finish(self, rec: Measurement, structure: Structure, n_id: int, modal: dict, extra: dict) -> None:
         self.structure_ = structure
         self.element_ = {k: getattr(structure.element, k) for k in ("k0", "k1", "k2", "k3", "c", "c_nl")}
         self.modal_ = modal
@@ -293,10 +293,10 @@ class StructureNSI(_StructureIdentifier):
 
     Examples
     --------
-    >>> from negstiff import StructureNSI, load_structure
+    >>> from negstiff import StructureNSI, load
     >>> from negstiff.models.structure_rig import StructureRig
     >>> rig = StructureRig.device_on_fixture(seed=1)          # the device on a 1 kg, 25 Hz fixture
-    >>> rec = load_structure(rig.random(duration=120.0, rms=14.0).write("fixture.csv"))
+    >>> rec = load(rig.random(duration=120.0, rms=14.0).write("fixture.csv"))
     >>> nsi = StructureNSI(element="1-2").fit(rec)
     >>> [round(m.f_hz, 1) for m in nsi.modal_["minus"]]       # the device's mode, the fixture's
     [11.3, 25.7]
@@ -311,11 +311,11 @@ class StructureNSI(_StructureIdentifier):
         self.band = band
         self.passes = passes
 
-    def fit(self, rec: StructureRecord) -> StructureNSI:
-        """Identify the structure from ``rec`` (a ``StructureRecord``); returns self."""
+    def fit(self, rec: Measurement) -> StructureNSI:
+        """Identify the structure from ``rec`` (a ``Measurement``); returns self."""
         rec, at, n_id = self._prepare(rec)
         ident = rec.segment(0, n_id)
-        zs, v, window = ident.states(at)
+        zs, v, window = ident.channel_states(at)
         first = StructureSINDy._least_squares(ident, at, zs, v)  # equation error: the wells' first guesses
         try:
             guesses = first.element_equilibria()
@@ -329,12 +329,12 @@ class StructureNSI(_StructureIdentifier):
             if r0 is not None:
                 wells[name] = self.fit_well(ident, zs, v, at, r0, first)
         self.wells_ = wells
-        mass = rec.masses[at[1] - 1]
+        mass = rec.dof_masses[at[1] - 1]
         coef = {k: float(np.mean([w.structure.element.to_dict()[k] for w in wells.values()]))
                 for k in ("k0", "k1", "k2", "k3", "c", "c_nl")}  # fmt: skip
         Ks = np.mean([np.asarray(w.structure.stiffness) for w in wells.values()], axis=0)
         Cs = np.mean([np.asarray(w.structure.damping) for w in wells.values()], axis=0)
-        structure = Structure(rec.masses, Model(m=mass, **coef), 0.5 * (Ks + Ks.T), 0.5 * (Cs + Cs.T), at)
+        structure = Structure(rec.dof_masses, Model(m=mass, **coef), 0.5 * (Ks + Ks.T), 0.5 * (Cs + Cs.T), at)
         lopsided = {w: f.coefficients["stiffness_asymmetry"] for w, f in wells.items()}
         stops = [f"{rec.source}: NSI around the {w} well: {f.coefficients['refinement_stopped']}"
                  for w, f in wells.items() if f.coefficients["refinement_stopped"]]  # fmt: skip
@@ -354,7 +354,7 @@ class StructureNSI(_StructureIdentifier):
         })  # fmt: skip
         return self
 
-    def stabilization(self, rec: StructureRecord, orders=(4, 6, 8, 10), block_rows=(20, 30, 40, 60)) -> list[dict]:
+    def stabilization(self, rec: Measurement, orders=(4, 6, 8, 10), block_rows=(20, 30, 40, 60)) -> list[dict]:
         """Stabilisation diagram (Marchesiello, Fasana & Garibaldi 2016) around each well ``fit`` found: for every
         (order, block rows), the identified poles (f_hz, zeta) with the feedback channels of that well's reference,
         each marked ``stable`` when a pole of the next lower order lies within 1 % in frequency and 5 % in damping.
@@ -363,7 +363,7 @@ class StructureNSI(_StructureIdentifier):
         n_id = self.details_["settings"]["identification_samples"]
         at = self.structure_.place
         ident = rec.segment(0, n_id)
-        zs, v, _ = ident.states(at)
+        zs, v, _ = ident.channel_states(at)
         r, vr = relative(zs, at), relative(v, at)
         lin = -ident.u if ident.input_name == "base_acc" else ident.u
         y = (zs - zs.mean(axis=1, keepdims=True)).T
@@ -389,11 +389,11 @@ class StructureNSI(_StructureIdentifier):
                     previous = poles
         return rows
 
-    def fit_well(self, rec: StructureRecord, zs: np.ndarray, v: np.ndarray, at: tuple[int, int], r_ref: float,
+    def fit_well(self, rec: Measurement, zs: np.ndarray, v: np.ndarray, at: tuple[int, int], r_ref: float,
                  start: Structure) -> WellFit:  # fmt: skip
         """The ULS and the element's coefficients about ``r_ref``, moved to the identified equilibrium each pass."""
         n = rec.n_dof
-        mass = np.asarray(rec.masses)
+        mass = np.asarray(rec.dof_masses)
         lvec = coupling(n, at)
         r, vr = relative(zs, at), relative(v, at)
         lin = -rec.u if rec.input_name == "base_acc" else rec.u
@@ -466,7 +466,7 @@ class StructureNSI(_StructureIdentifier):
             c0, c1, c2, c3 = (list(shifted.coef) + [0.0] * 4)[:4]
             element = Model(m=float(mass[at[1] - 1]), k0=float(c0), k1=-float(c1), k2=float(c2), k3=float(c3), c=ct,
                             c_nl=float(coef[2]))  # fmt: skip
-            structure = Structure(rec.masses, element, Ks, Cs, at)
+            structure = Structure(rec.dof_masses, element, Ks, Cs, at)
             try:
                 eq = structure.element_equilibria()
             except ValueError as exc:
@@ -522,10 +522,10 @@ class StructureSINDy(_StructureIdentifier):
 
     Examples
     --------
-    >>> from negstiff import StructureSINDy, load_structure
+    >>> from negstiff import StructureSINDy, load
     >>> from negstiff.models import SEED_LIKE_CUBIC
     >>> from negstiff.models.structure_rig import StructureRig
-    >>> rec = load_structure(StructureRig.device_on_fixture(seed=1).random(duration=120.0).write("fixture.csv"))
+    >>> rec = load(StructureRig.device_on_fixture(seed=1).random(duration=120.0).write("fixture.csv"))
     >>> sindy = StructureSINDy(element="1-2").fit(rec)
     >>> abs(sindy.element_["k3"] / SEED_LIKE_CUBIC.k3 - 1) < 0.02   # the device's cubic stiffness
     True
@@ -539,15 +539,15 @@ class StructureSINDy(_StructureIdentifier):
         self.thresholds = thresholds
 
     @staticmethod
-    def _least_squares(rec: StructureRecord, at, zs, v) -> Structure:
+    def _least_squares(rec: Measurement, at, zs, v) -> Structure:
         """Plain equation-error least squares on the pointwise equations (smoothed accelerations): a start."""
         a = np.gradient(v, rec.dt, axis=1)
         cols, _ = equation_columns(zs, v, at)
         y, X = _targets(rec, a, cols, at)
         theta = np.linalg.lstsq(X, y, rcond=None)[0]
-        return _assemble(theta, rec.n_dof, at, rec.masses)
+        return _assemble(theta, rec.n_dof, at, rec.dof_masses)
 
-    def weak_system(self, rec: StructureRecord, at, zs, v, extra=()) -> tuple[np.ndarray, np.ndarray, list[str], int]:
+    def weak_system(self, rec: Measurement, at, zs, v, extra=()) -> tuple[np.ndarray, np.ndarray, list[str], int]:
         """The stacked weak-form system (rows: DOF x test function; acceleration units) and its names; ``extra``:
         (name, g) pairs of further element terms g(t) (acting on J and, opposite, on I), appended as columns.
         """
@@ -561,11 +561,11 @@ class StructureSINDy(_StructureIdentifier):
             cols = np.concatenate([cols, more], axis=-1)
             names = names + [f"element {name}" for name, _ in extra]
         lin = -rec.u if rec.input_name == "base_acc" else rec.u
-        mass = np.asarray(rec.masses)
+        mass = np.asarray(rec.dof_masses)
         ys, Xs = [], []
         for d in range(rec.n_dof):
             gain = 1.0 if rec.input_name == "base_acc" else float((rec.force_dof or at[1]) - 1 == d)
-            target = weak_project(rec.z[d][:, None], d2phi, stride, rec.dt)[:, 0] * mass[d]
+            target = weak_project(rec.channels[d][:, None], d2phi, stride, rec.dt)[:, 0] * mass[d]
             target -= (
                 gain
                 * weak_project(lin[:, None], phi, stride, rec.dt)[:, 0]
@@ -575,13 +575,13 @@ class StructureSINDy(_StructureIdentifier):
             Xs.append(-weak_project(cols[d], phi, stride, rec.dt) / mass[d])
         return np.concatenate(ys), np.vstack(Xs), names, ys[0].size
 
-    def fit(self, rec: StructureRecord) -> StructureSINDy:
-        """Identify the structure from ``rec`` (a ``StructureRecord``); returns self."""
+    def fit(self, rec: Measurement) -> StructureSINDy:
+        """Identify the structure from ``rec`` (a ``Measurement``); returns self."""
         import pysindy as ps
 
         rec, at, n_id = self._prepare(rec)
         ident = rec.segment(0, n_id)
-        zs, v, window = ident.states(at)
+        zs, v, window = ident.channel_states(at)
         y, X, names, per_dof = self.weak_system(ident, at, zs, v)
         scale = X.std(axis=0)
         scale[scale == 0] = 1.0
@@ -607,7 +607,7 @@ class StructureSINDy(_StructureIdentifier):
         support = chosen["support"]
         theta = np.zeros(X.shape[1])
         theta[support] = np.linalg.lstsq(Xn[:, support], y, rcond=None)[0] / scale[support]
-        structure = _assemble(theta, rec.n_dof, at, rec.masses)
+        structure = _assemble(theta, rec.n_dof, at, rec.dof_masses)
         try:
             modal = {w: structure.modes(w) for w in structure.equilibria()}
         except ValueError as exc:
@@ -660,12 +660,12 @@ class StructureDiscrepancy(_StructureIdentifier):
 
     Examples
     --------
-    >>> from negstiff import StructureDiscrepancy, load_structure
+    >>> from negstiff import StructureDiscrepancy, load
     >>> from negstiff.models import SEED_LIKE_CUBIC
     >>> from negstiff.models.structure_rig import StructureRig
     >>> device = SEED_LIKE_CUBIC.__class__(**{**SEED_LIKE_CUBIC.to_dict(), "extra": {"coulomb_friction": 0.3}})
     >>> rig = StructureRig.device_on_fixture(device, seed=1)   # the element has friction its model lacks
-    >>> rec = load_structure(rig.random(duration=120.0).write("fixture.csv"))
+    >>> rec = load(rig.random(duration=120.0).write("fixture.csv"))
     >>> StructureDiscrepancy(element="1-2").fit(rec).named_
     'coulomb_friction'
     """
@@ -677,13 +677,13 @@ class StructureDiscrepancy(_StructureIdentifier):
         super().__init__(element=element, validation_fraction=validation_fraction)
         self.window_s, self.min_gain = window_s, min_gain
 
-    def fit(self, rec: StructureRecord) -> StructureDiscrepancy:
+    def fit(self, rec: Measurement) -> StructureDiscrepancy:
         """Fit the baseline and every candidate effect on ``rec``, name the one that predicts best; returns self."""
         from negstiff.models import effects
 
         rec, at, n_id = self._prepare(rec)
         ident = rec.segment(0, n_id)
-        zs, v, _ = ident.states(at)
+        zs, v, _ = ident.channel_states(at)
         r, vr = relative(zs, at), relative(v, at)
         # the smoothed sign's velocity scale: the relative velocity's noise, read as its rough part (first differences
         # of a white-noise-dominated tail), never below 1e-4 of its spread
@@ -700,7 +700,7 @@ class StructureDiscrepancy(_StructureIdentifier):
             return float(np.sqrt(np.mean((X_[test_rows] @ th - y_[test_rows]) ** 2)))
 
         theta0 = np.linalg.lstsq(X, y, rcond=None)[0]
-        base = _assemble(theta0, rec.n_dof, at, rec.masses)
+        base = _assemble(theta0, rec.n_dof, at, rec.dof_masses)
         e0 = free_run_error(base, rec, n_id, self.window_s)["rms_percent"]
         w0 = weak_score(X, y)
         terms = [t for t in effects.library_terms() if t.field not in ("k0", "k1", "k2", "k3", "c", "c_nl")]
@@ -717,7 +717,7 @@ class StructureDiscrepancy(_StructureIdentifier):
                 entry["held_out_weak_rms"] = math.inf  # it would feed energy in: unphysical, not a candidate
                 continue
             try:
-                s = _assemble(theta[:-1], rec.n_dof, at, rec.masses, {t.field: value})
+                s = _assemble(theta[:-1], rec.n_dof, at, rec.dof_masses, {t.field: value})
                 entry["held_out_rms_percent"] = free_run_error(s, rec, n_id, self.window_s)["rms_percent"]
                 fitted[t.field] = s
             except (ValueError, InputError):
@@ -737,13 +737,13 @@ class StructureDiscrepancy(_StructureIdentifier):
         return self
 
 
-def _targets(rec: StructureRecord, a: np.ndarray, cols: np.ndarray, at: tuple[int, int]
+def _targets(rec: Measurement, a: np.ndarray, cols: np.ndarray, at: tuple[int, int]
              ) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
     """Pointwise stacked targets z_d'' - (input) and columns, per unit mass (a force acts on ``force_dof``, by
     default the DOF the element moves, as everywhere else).
     """
     lin = -rec.u if rec.input_name == "base_acc" else rec.u
-    mass = np.asarray(rec.masses)
+    mass = np.asarray(rec.dof_masses)
     ys, Xs = [], []
     for d in range(rec.n_dof):
         if rec.input_name == "base_acc":

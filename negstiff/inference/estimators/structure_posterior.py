@@ -7,7 +7,7 @@ linear structure is a nuisance well determined by the modes, and fixing it is th
 makes (its intervals are conditional on it; the result says so).
 
 Likelihood: the record cut into windows of ``window_s`` (about a period: short against the cross-well motion's
-divergence), each simulated from the record's band-smoothed state at its start (``StructureRecord.states``) under
+divergence), each simulated from the record's band-smoothed state at its start (``Measurement.channel_states``) under
 the measured input (band-limited between samples), its start state's directions projected off (profiled out: the
 smoothed state errs, and chaos grows its error within a window); every DOF's residual Gaussian with sd sigma,
 curvature-adjusted by the windows' sandwich covariance (the single-DOF posterior's
@@ -34,7 +34,7 @@ from negstiff.errors import InputError, NegstiffWarning
 from negstiff.inference.estimators.posterior.diagnostics import convergence_warnings, summarise
 from negstiff.inference.estimators.posterior.likelihood import curvature_adjustment
 from negstiff.inference.estimators.posterior.sampling import sample_ensembles
-from negstiff.inference.record.structure import StructureRecord
+from negstiff.inference.record.measurement import Measurement
 from negstiff.models.kernel import KINDS
 from negstiff.models.simulator import integrate, stage_input
 from negstiff.models.structure import Structure
@@ -81,10 +81,10 @@ class StructurePosterior:
 
     Examples
     --------
-    >>> from negstiff import StructurePosterior, load_structure
+    >>> from negstiff import StructurePosterior, load
     >>> from negstiff.models import SEED_LIKE_CUBIC
     >>> from negstiff.models.structure_rig import StructureRig
-    >>> rec = load_structure(StructureRig.device_on_fixture(seed=1).random(duration=40.0).write("fixture.csv"))
+    >>> rec = load(StructureRig.device_on_fixture(seed=1).random(duration=40.0).write("fixture.csv"))
     >>> post = StructurePosterior(element="1-2", n_walkers=12, max_windows=24, seed=1).fit(rec)
     >>> k3 = post.parameters_["k3"]
     >>> abs(k3["mean"] / SEED_LIKE_CUBIC.k3 - 1) < 0.05
@@ -98,9 +98,9 @@ class StructurePosterior:
         self.n_walkers, self.n_ensembles, self.max_steps, self.hdi_prob, self.seed = (
             n_walkers, n_ensembles, max_steps, hdi_prob, seed)  # fmt: skip
 
-    def _check(self, rec: StructureRecord) -> tuple[int, int]:
-        if not isinstance(rec, StructureRecord):
-            raise InputError("a structure's posterior needs a StructureRecord (load_structure, structure_from_arrays)")
+    def _check(self, rec: Measurement) -> tuple[int, int]:
+        if not isinstance(rec, Measurement):
+            raise InputError("a structure's posterior needs a Measurement (load, from_arrays)")
         if not (0 < self.window_s <= 5 and self.max_windows >= 4 and self.n_walkers >= 12 and 0 < self.hdi_prob < 1):
             raise InputError(
                 f"window_s in (0, 5], max_windows >= 4, n_walkers >= 12, hdi_prob in (0, 1); got {self.window_s}, "
@@ -113,7 +113,7 @@ class StructurePosterior:
         assert self.start is not None
         return self.start.place
 
-    def fit(self, rec: StructureRecord) -> StructurePosterior:
+    def fit(self, rec: Measurement) -> StructurePosterior:
         """Sample the element's posterior on ``rec``; returns self."""
         at = self._check(rec)
         start = self.start if self.start is not None else StructureSINDy(element=at).fit(rec).structure_
@@ -125,9 +125,9 @@ class StructurePosterior:
         if starts.size < 4:
             raise InputError(f"{rec.source}: too short for {self.window_s} s windows (4 needed)")
         starts = starts[np.linspace(0, starts.size - 1, min(self.max_windows, starts.size)).round().astype(int)]
-        zs, v, _ = rec.states(at)
+        zs, v, _ = rec.channel_states(at)
         idx = starts[:, None] + np.arange(L + 1)[None, :]
-        data = np.transpose(rec.z[:, idx], (1, 0, 2))  # (W, N, L+1)
+        data = np.transpose(rec.channels[:, idx], (1, 0, 2))  # (W, N, L+1)
         sim = _WindowSimulator(start, rec, idx, np.hstack([zs[:, starts].T, v[:, starts].T]))
         theta0 = np.array([getattr(start.element, k) for k in NAMES])
         sim.start_sensitivity(theta0)
@@ -188,7 +188,7 @@ class StructurePosterior:
 class _WindowSimulator:
     """The record's windows simulated for many element coefficient sets in one kernel call."""
 
-    def __init__(self, structure: Structure, rec: StructureRecord, idx: np.ndarray, x0: np.ndarray):
+    def __init__(self, structure: Structure, rec: Measurement, idx: np.ndarray, x0: np.ndarray):
         self.structure, self.rec = structure, rec
         # the input at every Runge-Kutta stage time (band-limited interpolation of the whole record, ``stage_input``):
         # a record's input is band-limited, and over cross-well chaos the linear convention's small error grows

@@ -4,9 +4,14 @@ arrays in memory).
 
 A measurement is one uniformly sampled record with exactly one input column (``base_acc`` [m/s^2]
 or ``force`` [N]), the output ``z`` [m], and a time base (``t`` [s], or ``fs`` [Hz] from the
-metadata or the caller). Foreign files are read through a column map (``force=V1,z=V2``; an entry
-may scale, ``base_acc=X1*9.81``). Every problem raises ``MeasurementError`` with one line naming the
-file, the column or row, and what is wrong. Input files are only read.
+metadata or the caller). A structure of N degrees of freedom is the same record with N response
+channels: the file's ``z1 ... zN`` [m] (each DOF's displacement relative to the base) and ``# masses:
+m1,...,mN`` [kg], read with every format, column map, unit and check of the single DOF's, per channel; its
+``z`` is then (N, T). N = 1 is the single DOF (a file's lone ``z1`` is its ``z``). A channel's zero is a
+laser's, arbitrary: the record keeps it as measured and says so (``info["response"]["offsets"]``); the
+structure's identification estimates each channel's constant. Foreign files are read through a column
+map (``force=V1,z=V2``; an entry may scale, ``base_acc=X1*9.81``). Every problem raises
+``MeasurementError`` with one line naming the file, the column or row, and what is wrong. Input files are only read.
 """
 
 from __future__ import annotations
@@ -23,18 +28,24 @@ import numpy as np
 from negstiff import io as record_io
 from negstiff.constants import G
 from negstiff.errors import MeasurementError, RecordWarning, issue
-from negstiff.inference.record.derivatives import noise_floor, state_derivatives
+from negstiff.inference.record.derivatives import (
+    noise_floor,
+    smooth_and_differentiate,
+    state_derivatives,
+    velocity_window,
+)
 from negstiff.io.base import RESOLUTION, SET_ASIDE
 from negstiff.io.schema import (
-    DIMENSIONS,
     GRAVITY_RANGE,
     INPUTS,
     KNOWN,
     MAGNITUDE_LIMITS,
     MASS_RANGE_KG,
     OPTIONAL,
+    RESPONSE_CHANNEL,
     SAMPLING_RATE_RANGE_HZ,
     UNITS,
+    dimension,
     header_name,
     in_si,
     parse_column_map,
@@ -61,8 +72,9 @@ class Measurement:
     u : numpy.ndarray
         The input column, (N,).
     z : numpy.ndarray or None
-        Relative displacement [m], (N,): measured, or derived from the response sensor (``info``); None
-        only for an input-only record read with ``response=False``.
+        Relative displacement [m], (T,): measured, or derived from the response sensor (``info``); None
+        only for an input-only record read with ``response=False``. A structure of N > 1 DOFs: (N, T),
+        each DOF's displacement relative to the base (the file's ``z1 ... zN``).
     z_dot, y, base_disp : numpy.ndarray or None
         Optional columns, (N,).
     mass : float or None
@@ -78,6 +90,10 @@ class Measurement:
         measured, how z was derived from it, with its estimated error); results carry it.
     aux : dict of numpy.ndarray
         Measured auxiliary channels kept with ``load(..., aux=...)`` (a harvester's voltage), by name.
+    masses : tuple of float or None
+        A structure's DOF masses m1 ... mN [kg] (``# masses:``); None for a single DOF (its ``mass``).
+    force_dof : int or None
+        The DOF a force input acts on (1..N, metadata ``force_dof``); None: the element's.
 
     Examples
     --------
@@ -101,6 +117,8 @@ class Measurement:
     t0: float = 0.0
     info: dict[str, Any] = field(default_factory=dict)
     aux: dict[str, np.ndarray] = field(default_factory=dict)
+    masses: tuple[float, ...] | None = None
+    force_dof: int | None = None
     derived: dict[Any, Any] = field(default_factory=dict, init=False, repr=False, compare=False)
     """What is computed from this record once and kept with it (its smoothed states, its segments, its
     pinned frame): a record is immutable, so what it gives never changes (``states``, ``segment``)."""
@@ -113,9 +131,34 @@ class Measurement:
     def __repr__(self) -> str:
         resp = self.info.get("response", {}).get("measured") or ("z" if self.z is not None else "none")
         mass = f"{self.mass:g} kg" if self.mass is not None else "none (per unit mass)"
+        if self.n_dof > 1:
+            given = "unknown" if self.masses is None else ", ".join(f"{m:g}" for m in self.masses) + " kg"
+            return (f"Measurement({self.source!r}: {self.n} samples at {self.fs:g} Hz ({self.duration:.4g} s), input "
+                    f"{self.input_name}, responses of {self.n_dof} DOFs {resp}, masses {given})")  # fmt: skip
         return (
             f"Measurement({self.source!r}: {self.n} samples at {self.fs:g} Hz ({self.duration:.4g} s), input "
             f"{self.input_name}, response {resp}, mass {mass})"
+        )
+
+    @property
+    def n_dof(self) -> int:
+        """The number of response channels (degrees of freedom): 1 for a single DOF's record."""
+        return 1 if self.z is None or np.ndim(self.z) == 1 else int(self.z.shape[0])
+
+    @property
+    def channels(self) -> np.ndarray:
+        """The responses as (N, T) for any N (a single DOF's z as one row; a view, read-only)."""
+        return np.atleast_2d(self.displacement)
+
+    @property
+    def dof_masses(self) -> tuple[float, ...]:
+        """The DOFs' masses [kg]: ``masses``, or a single DOF's ``(mass,)``; one ``MeasurementError`` without."""
+        if self.masses is not None:
+            return self.masses
+        if self.n_dof == 1 and self.mass is not None:
+            return (self.mass,)
+        raise MeasurementError(
+            f"{self.source}: the masses are not given ('# masses: m1,...,mN' in the header, or --masses)"
         )
 
     @property
@@ -167,7 +210,7 @@ class Measurement:
         seg = self.derived.get(key)
         if seg is None:
             sl = slice(start, stop)
-            opt: dict[str, Any] = {k: (None if getattr(self, k) is None else getattr(self, k)[sl])
+            opt: dict[str, Any] = {k: (None if getattr(self, k) is None else getattr(self, k)[..., sl])
                                    for k in ("z", *OPTIONAL)}  # fmt: skip
             aux = {k: v[sl] for k, v in self.aux.items()}
             seg = self.derived[key] = replace(self, u=self.u[sl], t0=self.t0 + start / self.fs, aux=aux, **opt)
@@ -186,6 +229,36 @@ class Measurement:
             hit = self.derived[key] = state_derivatives(self.displacement, self.fs, purpose, floor=floor)
         zs, v, a, info = hit
         return zs.copy(), v.copy(), a.copy(), copy.deepcopy(info)
+
+    def channel_states(self, at: tuple[int, int] | None = None) -> tuple[np.ndarray, np.ndarray, tuple[int, int]]:
+        """Band-smoothed displacements and velocities (N, T) of every channel, and the Savitzky-Golay
+        (window, order) used: one window for all (a relative motion is a difference of channels, which must be
+        smoothed alike), the one the element's relative displacement z_J - z_I allows when ``at`` = (I, J) is
+        given (the motion the nonlinear basis reads; a channel that barely moves, like a stiff fixture's, is
+        mostly sensor noise and would allow none), else the narrowest any channel allows
+        (``derivatives.velocity_window``). A structure's counterpart of ``states("band")``, computed once per
+        record and ``at``; copies are returned.
+        """
+        key = ("channel_states", at)
+        hit = self.derived.get(key)
+        if hit is None:
+            z = self.channels
+            if at is not None:
+                r = z[at[1] - 1] - (z[at[0] - 1] if at[0] else 0.0)
+                w = velocity_window(r, self.fs)
+            else:
+                w = min(velocity_window(zi, self.fs) for zi in z)
+            pairs = [smooth_and_differentiate(zi, self.fs, w) for zi in z]
+            hit = self.derived[key] = (np.array([p[0] for p in pairs]), np.array([p[1] for p in pairs]), w)
+        zs, v, w = hit
+        return zs.copy(), v.copy(), w
+
+    def channel_noise(self) -> np.ndarray:
+        """Each channel's white sensor-noise rms [m], (N,) (``derivatives.noise_floor`` per channel), kept."""
+        hit = self.derived.get("channel_noise")
+        if hit is None:
+            hit = self.derived["channel_noise"] = np.sqrt([noise_floor(zi, self.fs)[0] for zi in self.channels])
+        return hit.copy()
 
     def unit_warnings(self) -> list[str]:
         """Unit checks of the record's columns (SI expected): z spanning more than a stroke could, a base
@@ -279,15 +352,28 @@ class Measurement:
                                    f"({MASS_RANGE_KG[0]:g} to {MASS_RANGE_KG[1]:g} kg)")  # fmt: skip
         return replace(self, mass=float(mass))
 
+    def with_masses(self, masses) -> Measurement:
+        """The same record with its DOFs' masses given by the caller (overrides the metadata's ``masses``); a
+        single DOF's one mass is its ``mass``.
+        """
+        if masses is None:
+            return self
+        masses = _checked_masses(self.source, masses, self.n_dof)
+        return self.with_mass(masses[0]) if self.n_dof == 1 else replace(self, masses=masses)
+
     def require_motion(self, what: str) -> None:
         """Raise ``MeasurementError`` when the response does not move (a dead or disconnected sensor):
         ``what`` (an identification, a periodicity analysis) needs motion.
         """
-        if self.z is not None and _constant(self.z):
-            raise MeasurementError(
-                f"{self.source}: the response z is constant ({self.z[0]:.6g} m over {self.n} samples): a dead or "
-                f"disconnected sensor? {what} needs motion"
-            )
+        if self.z is None:
+            return
+        for k, zk in enumerate(np.atleast_2d(self.z)):
+            if _constant(zk):
+                name = "z" if self.n_dof == 1 else f"z{k + 1}"
+                raise MeasurementError(
+                    f"{self.source}: the response {name} is constant ({zk[0]:.6g} m over {self.n} samples): a dead "
+                    f"or disconnected sensor? {what} needs motion"
+                )
 
     def require_excitation(self, what: str) -> None:
         """Raise ``MeasurementError`` when the input does not vary (a dead sensor, or no excitation)."""
@@ -299,6 +385,64 @@ class Measurement:
 
 
 
+
+
+def _checked_masses(source, masses, n_dof: int) -> tuple[float, ...]:
+    """``n_dof`` masses [kg] within ``MASS_RANGE_KG`` (a string "m1,...,mN" too), or one ``MeasurementError``."""
+    if isinstance(masses, str):
+        try:
+            masses = [float(x) for x in masses.split(",")]
+        except ValueError:
+            raise MeasurementError(f"{source}: masses must be numbers separated by commas, got {masses!r}") from None
+    try:
+        out = tuple(float(m) for m in np.atleast_1d(np.asarray(masses, dtype=float)))
+    except (TypeError, ValueError):
+        raise MeasurementError(f"{source}: masses must be numbers, got {masses!r}") from None
+    lo, hi = MASS_RANGE_KG
+    if len(out) != n_dof or not all(lo <= m <= hi for m in out):
+        raise MeasurementError(f"{source}: masses must be {n_dof} masses of {lo:g} to {hi:g} kg (one per DOF, "
+                               f"'# masses: m1,...,mN'), got {list(out)}")  # fmt: skip
+    return out
+
+
+def _response_channels(source, cols: dict[str, np.ndarray]) -> list[str]:
+    """A structure's response columns ``z1 ... zN`` in order (empty for a single DOF's record), checked: consecutive
+    from z1, and not beside a single DOF's response columns.
+    """
+    found = sorted((int(m.group(1)), k) for k in cols if (m := RESPONSE_CHANNEL.match(k)))
+    if not found:
+        return []
+    if [d for d, _ in found] != list(range(1, len(found) + 1)):
+        names = ", ".join(k for _, k in found)
+        raise MeasurementError(f"{source}: responses must be z1 ... zN, consecutive; found {names}")
+    single = [k for k in sensors.RESPONSES if k in cols]
+    if single:
+        raise MeasurementError(f"{source}: a record holds a structure's responses z1 ... zN or a single DOF's "
+                               f"response, not both (it has {found[0][1]} and {single[0]})")  # fmt: skip
+    return [k for _, k in found]
+
+
+def _structure_response(source, cols: dict[str, np.ndarray], names: list[str]) -> tuple[np.ndarray, dict]:
+    """The (N, T) responses and ``info["response"]`` of a structure's record (N > 1): as measured, each channel
+    with its own unknown zero (a laser's), which the record keeps and the identification estimates.
+    """
+    z = np.vstack([cols.pop(k) for k in names])
+    return z, {"measured": f"z1 ... z{len(names)}", "derived": None, "z_constant_known": True,
+               "offsets": "each channel's zero as measured (a laser's is arbitrary): a structure's identification "
+                          "estimates each channel's constant with the equations of motion"}  # fmt: skip
+
+
+def _force_dof(source, value, n_dof: int) -> int | None:
+    """The metadata's ``force_dof`` (the DOF a force acts on, 1..N), checked; None when not given."""
+    if value is None:
+        return None
+    try:
+        k = int(value)
+    except (TypeError, ValueError):
+        raise MeasurementError(f"{source}: force_dof {value!r} is not a DOF number (1..{n_dof})") from None
+    if not 1 <= k <= n_dof:
+        raise MeasurementError(f"{source}: force_dof {k} is not a DOF of the record (1..{n_dof})")
+    return k
 
 
 def _checked_gravity(source, g) -> float:
@@ -373,6 +517,7 @@ def load(
     response: bool = True,
     gravity: float | None = None,
     aux: Sequence[str] | str | None = None,
+    masses: Sequence[float] | str | None = None,
 ) -> Measurement:
     """Read a measurement file, checked as the command line checks it.
 
@@ -399,6 +544,9 @@ def load(
     aux : str or sequence of str, optional
         Measured auxiliary channels to keep, by the file's column names (``"voltage"``): candidate terms
         of the discrepancy workflow and SINDy (``aux:NAME``).
+    masses : sequence of float or str, optional
+        A structure's DOF masses m1 ... mN [kg] (overrides the metadata's ``masses``); its responses are the
+        file's (or the map's) ``z1 ... zN``.
 
     Returns
     -------
@@ -421,6 +569,7 @@ def load(
     (512.0, 'base_acc', 5120)
     """
     path = Path(path)
+    mass_given = mass is not None
     raw, meta = record_io.read(path)
     resolution = raw.pop(RESOLUTION, None)
     cmap = parse_column_map(columns) if isinstance(columns, (str, type(None))) else dict(columns)
@@ -447,9 +596,23 @@ def load(
     aux_names = [a for a in (aux.split(",") if isinstance(aux, str) else aux or ()) if str(a).strip()]
     _refuse_set_aside(path, meta, aux_names)
     aux_cols = _aux_channels(path, raw, aux_names, n)
+    dofs = _response_channels(path, cols)
+    if len(dofs) == 1:  # one DOF: its z
+        cols["z"] = cols.pop(dofs[0])
+    masses = masses if masses is not None else meta.get("masses")
+    dof_masses = None if masses is None else _checked_masses(path, masses, max(1, len(dofs)))
+    if len(dofs) <= 1 and dof_masses is not None and mass is None:
+        mass = dof_masses[0]
+    force_dof = _force_dof(path, meta.get("force_dof"), max(1, len(dofs)))
     z: np.ndarray | None = None
     resp: dict[str, Any] = {"measured": None}
-    if response or any(k in cols for k in sensors.RESPONSES):
+    if len(dofs) > 1:
+        if mass_given:
+            raise MeasurementError(f"{path}: a record of {len(dofs)} DOFs (z1 ... z{len(dofs)}) takes its DOFs' "
+                                   "masses (masses=, --masses, '# masses:'), not one mass")  # fmt: skip
+        z, resp = _structure_response(path, cols, dofs)
+        mass = None  # a structure's are its masses
+    elif response or any(k in cols for k in sensors.RESPONSES):
         z, resp = sensors.derive(cols, input_name, fs, str(path), units_known=not unknown)
         k = int(round(resp.get("trim_s", 0.0) * fs))
         if k:
@@ -477,6 +640,8 @@ def load(
         info={"time": time_info, "response": resp, **channel_info, **({"scale": scale_info} if scale_info else {}),
               **({"set_aside": aside} if aside else {})},  # channels of other rates, each with why
         aux=aux_cols,
+        masses=dof_masses if len(dofs) > 1 else None,
+        force_dof=force_dof,
     )
     return _warned(rec.with_mass(mass).with_gravity(gravity))
 
@@ -505,7 +670,7 @@ def _refuse_set_aside(path: Path, meta: dict[str, str], wanted) -> None:
 def _mapped_columns(path: Path, raw: dict[str, np.ndarray], cmap: dict) -> dict[str, np.ndarray]:
     """The contract's columns: mapped (and scaled) from the file's, plus unmapped contract names."""
     if not cmap:
-        return {k: v for k, v in raw.items() if k in KNOWN}
+        return {k: v for k, v in raw.items() if k in KNOWN or RESPONSE_CHANNEL.match(k)}
     cols: dict[str, np.ndarray] = {}
     for name, (src, scale) in cmap.items():
         if src not in raw:
@@ -513,7 +678,7 @@ def _mapped_columns(path: Path, raw: dict[str, np.ndarray], cmap: dict) -> dict[
                 f"{path}: column map refers to {src!r}, which is not in the file (columns: {', '.join(raw) or 'none'})"
             )
         cols[name] = raw[src] * (1.0 if scale is None else scale)  # an unknown scale (*?): as read
-    for name in KNOWN:  # unmapped contract columns present in the file still count
+    for name in [*KNOWN, *(k for k in raw if RESPONSE_CHANNEL.match(k))]:  # unmapped contract columns count
         if name in raw and name not in cols and all(src != name for src, _ in cmap.values()):
             cols[name] = raw[name]
     return cols
@@ -546,7 +711,7 @@ def check_values(source, cols: dict[str, np.ndarray]) -> None:
         bad = np.flatnonzero(~np.isfinite(v))
         if bad.size:
             raise MeasurementError(f"{source}: column {k} is NaN or inf at row {bad[0] + 1}")
-        dim = DIMENSIONS.get(k)
+        dim = dimension(k)
         if dim is None or not v.size:
             continue
         limit = MAGNITUDE_LIMITS[dim]
@@ -671,7 +836,8 @@ def from_arrays(
     u : numpy.ndarray
         The input, (N,): base acceleration [m/s^2] or force [N].
     z : numpy.ndarray or None
-        Relative displacement [m], (N,); None when another response column is given (or for an
+        Relative displacement [m], (T,), or a structure's responses (N, T) (each DOF's displacement relative
+        to the base; one row is the single DOF's z); None when another response column is given (or for an
         input-only record).
     fs : float
         Sampling rate [Hz].
@@ -682,8 +848,9 @@ def from_arrays(
     gravity : float, optional
         The gravity along the motion [m/s^2] (0 for a horizontal device).
     **kw
-        Optional columns (``z_dot``, ``y``, ``base_disp``, ...), ``mass`` [kg], ``source`` (a name for
-        messages), ``meta`` and ``aux`` (a dict of measured auxiliary channels, ``{"voltage": v}``).
+        Optional columns (``z_dot``, ``y``, ``base_disp``, ...), ``mass`` [kg] (or a structure's ``masses``,
+        one per DOF), ``force_dof`` (the DOF a force acts on), ``source`` (a name for messages), ``meta`` and
+        ``aux`` (a dict of measured auxiliary channels, ``{"voltage": v}``).
 
     Returns
     -------
@@ -703,12 +870,41 @@ def from_arrays(
     >>> rec = from_arrays(np.sin(2 * np.pi * 9 * t), 1e-3 * np.sin(2 * np.pi * 9 * t), 512.0, mass=0.2)
     >>> rec.duration, rec.mass
     (4.0, 0.2)
+    >>> two = from_arrays(np.sin(t), [1e-4 * np.sin(t), 1e-3 * np.sin(t)], 512.0, masses=(1.0, 0.2))
+    >>> two.n_dof, two.masses
+    (2, (1.0, 0.2))
     """
     if input_name not in INPUTS:
         raise MeasurementError(f"input must be one of {INPUTS}, got {input_name!r}")
     source = kw.get("source", "<memory>")
+    masses = kw.pop("masses", None)
+    force_dof = kw.pop("force_dof", None)
+    responses = None
+    if z is not None:
+        try:
+            zz = np.asarray(z, dtype=float)
+        except (TypeError, ValueError):
+            raise MeasurementError(f"{source}: z is not an array of numbers") from None
+        if zz.ndim == 2 and zz.shape[0] == 1:
+            z = zz[0]  # one DOF: its z
+        elif zz.ndim == 2:
+            if any(kw.get(k) is not None for k in OPTIONAL):
+                raise MeasurementError(f"{source}: a structure's record holds its responses z (N, T) alone")
+            responses = {f"z{k + 1}": row for k, row in enumerate(zz)}
+            z = None
+    n_dof = 1 if responses is None else len(responses)
+    if masses is not None:
+        masses = _checked_masses(source, masses, n_dof)
+        if n_dof == 1:
+            if kw.get("mass") is None:
+                kw["mass"] = masses[0]
+            masses = None
+    if n_dof > 1 and kw.get("mass") is not None:
+        raise MeasurementError(f"{source}: a record of {n_dof} DOFs takes its DOFs' masses (masses=), not one mass")
+    force_dof = _force_dof(source, force_dof, n_dof)
     cols: dict[str, np.ndarray] = {}
-    for name, values in ((input_name, u), ("z", z), *((k, kw[k]) for k in OPTIONAL if kw.get(k) is not None)):
+    for name, values in ((input_name, u), ("z", z), *(responses or {}).items(),
+                         *((k, kw[k]) for k in OPTIONAL if kw.get(k) is not None)):  # fmt: skip
         if values is None:
             continue
         try:
@@ -740,8 +936,10 @@ def from_arrays(
     aux = kw.pop("aux", None) or {}
     aux = _aux_channels(source, dict(aux), list(aux), n)
     kw = {**kw, **{k: cols[k] for k in OPTIONAL if k in cols}, "aux": aux}
+    if responses is not None:
+        z, info["response"] = _structure_response(source, cols, list(responses))
     rec = Measurement(fs=fs, input_name=input_name, u=cols[input_name], z=None if z is None else np.asarray(z, float),
-                      **{**kw, "mass": None, "info": info})  # fmt: skip
+                      **{**kw, "mass": None, "info": info, "masses": masses, "force_dof": force_dof})  # fmt: skip
     return rec.with_mass(mass).with_gravity(gravity)
 
 
