@@ -12,7 +12,9 @@ scikit-learn's (``sklearn/base.py``, its developer guide's "rolling your own est
   ``from_arrays`` first), learns, and returns ``self``;
 * what was learned lives in attributes ending in ``_``; asking one before ``fit`` raises
   ``NotFittedError``;
-* ``result()`` is the learned state as the contract's JSON (``to_json`` its alias).
+* ``result()`` is the learned state as the contract's JSON; ``to_json()`` is it with the estimator's class
+  and parameters (``"estimator"``), and ``from_json`` rebuilds a fitted estimator from it
+  (``persistence``); a fitted estimator pickles (``pickle``, ``joblib``) with everything it learned.
 
 Written here rather than inheriting scikit-learn's ``BaseEstimator``: the estimators take records and
 targets, not (X, y) arrays, and scikit-learn would be a dependency for a few small methods.
@@ -20,12 +22,15 @@ targets, not (X, y) arrays, and scikit-learn would be a dependency for a few sma
 
 from __future__ import annotations
 
+import copy
+import functools
 import inspect
 from os import PathLike
-from typing import Any, ClassVar
+from typing import Any, ClassVar, Self
 
 from negstiff.errors import InputError, NotFittedError
 from negstiff.inference.estimators.parameters import Constraint
+from negstiff.inference.estimators.persistence import decode_param, encode_param, json_source
 from negstiff.inference.record.measurement import Measurement, load
 from negstiff.inference.steps.frame import pin_frame
 
@@ -34,6 +39,11 @@ class Estimator:
     """Base of the estimators (module docstring)."""
 
     _parameter_constraints: ClassVar[dict[str, Constraint]] = {}
+
+    def __init_subclass__(cls, **kwargs: Any) -> None:
+        super().__init_subclass__(**kwargs)
+        if "result" in cls.__dict__:  # an estimator rebuilt from its JSON answers with that JSON
+            cls.result = _answering_stored(cls.__dict__["result"])  # type: ignore[method-assign]
 
     @classmethod
     def _param_names(cls) -> list[str]:
@@ -121,8 +131,39 @@ class Estimator:
         raise NotImplementedError
 
     def to_json(self) -> dict[str, Any]:
-        """The result as JSON (``result()``), for ``files.write_json``."""
-        return self.result()
+        """The result JSON (``result()``, the contract's) with ``"estimator": {"class", "params"}``: the JSON
+        object (a dict, as every ``to_json`` of negstiff) that ``from_json`` rebuilds the fitted estimator from.
+        """
+        params = {k: encode_param(v) for k, v in self.get_params(deep=False).items()}
+        return {**self.result(), "estimator": {"class": type(self).__name__, "params": params}}
+
+    @classmethod
+    def from_json(cls, data) -> Self:
+        """A fitted estimator rebuilt from its ``to_json()`` (a dict, its JSON text or a file path): configured
+        with the parameters the JSON names (the defaults where it names none: a result JSON the command line
+        wrote), its ``result()`` the JSON's, its learned attributes those the JSON carries (``persistence``).
+        """
+        d = json_source(data, f"{cls.__name__} JSON")
+        spec = d.pop("estimator", None) or {}
+        if spec.get("class", cls.__name__) != cls.__name__:
+            raise InputError(f"the JSON is a {spec['class']}'s, not a {cls.__name__}'s")
+        names = set(cls._param_names())
+        est = cls(**{k: decode_param(v) for k, v in (spec.get("params") or {}).items() if k in names})
+        est._restore(d)
+        return est
+
+    def _restore(self, result: dict[str, Any]) -> None:
+        """Set the learned state from a result JSON (``from_json``). By default the JSON is kept as the
+        result, with the models it holds as ``model_``, ``initial_model_``, ``baseline_model_`` and its
+        warnings as ``warnings_``; an estimator that can rebuild more overrides this.
+        """
+        from negstiff.models import Model
+
+        self.__dict__["_stored_result"] = copy.deepcopy(result)
+        for key in ("model", "initial_model", "baseline_model"):
+            if isinstance(result.get(key), dict):
+                setattr(self, f"{key}_", Model.from_dict(result[key]))
+        self.warnings_ = list(result.get("warnings", []))
 
     def _summary(self) -> str:
         """The headline of a fitted estimator (a line), for ``repr``."""
@@ -145,3 +186,14 @@ class Estimator:
             return f"{head}  [not fitted]"
         summary = self._summary()
         return f"{head}  [fitted{': ' + summary if summary else ''}]"
+
+
+def _answering_stored(result):
+    """``result`` answering with the JSON an estimator was rebuilt from (``Estimator._restore``), if any."""
+
+    @functools.wraps(result)
+    def answer(self) -> dict[str, Any]:
+        stored = self.__dict__.get("_stored_result")
+        return copy.deepcopy(stored) if stored is not None else result(self)
+
+    return answer

@@ -59,6 +59,19 @@ class Bunch(dict):
 
     __setitem__ = __delitem__ = __setattr__ = update = pop = popitem = clear = setdefault = _readonly
 
+    def __reduce__(self):
+        # rebuilt from a plain dict (pickle's default for a dict subclass sets the items one by one,
+        # which a read-only dict refuses)
+        return (type(self), (dict(self),))
+
+    def __copy__(self) -> Bunch:
+        return type(self)(self)
+
+    def __deepcopy__(self, memo) -> Bunch:
+        import copy
+
+        return type(self)(copy.deepcopy(dict(self), memo))
+
     def __repr__(self) -> str:
         keys = ", ".join(k for k in self if not isinstance(self[k], np.ndarray))
         return f"{type(self).__name__}({keys})"
@@ -177,6 +190,45 @@ class Identification:
             "settings": dict(self.settings),
             "record": dict(self.record),
         }
+
+    @classmethod
+    def from_json(cls, data) -> Identification:
+        """The identification an identify result JSON holds (``to_json()``, its text or a file path). The
+        JSON is the contract's: what it does not hold (the validation's per-window arrays) is not rebuilt, so
+        ``Identification.from_json(r.to_json()).to_json() == r.to_json()``.
+        """
+        from negstiff.inference.estimators.persistence import json_source
+
+        d = json_source(data, "identify result JSON")
+        d.pop("estimator", None)
+        eq = d.pop("equilibria", None) or {}
+        known = {"method", "mass_source", "input_gain", "model", "initial_model", "stroke_quantiles_m",
+                 "refinement", "bounded", "warnings", "mass_normalised", "modal", "validation", "settings",
+                 "record"}  # fmt: skip
+        try:
+            settings = dict(d.get("settings") or {})
+            return cls(
+                method=d["method"],
+                model=Model.from_dict(d["model"]),
+                initial_model=Model.from_dict(d.get("initial_model") or d["model"]),
+                equilibria=None if eq.get("z_plus") is None and eq.get("z_minus") is None
+                else Equilibria(eq.get("z_minus"), eq.get("z_0"), eq.get("z_plus")),  # type: ignore[arg-type]
+                modal={w: dict(m) for w, m in d["modal"].items()},
+                validation=Bunch(d.get("validation") or {}),
+                refinement=_plain(d.get("refinement")),
+                bounded=Bunch(d.get("bounded") or {}),
+                stroke_quantiles_m=np.asarray(d.get("stroke_quantiles_m") or [], float),
+                identification_samples=int(settings.get("identification_samples", 0)),
+                mass_source=d.get("mass_source", ""),
+                mass_normalised=bool(d.get("mass_normalised", False)),
+                input_gain=float(d.get("input_gain", 1.0)),
+                record=dict(d.get("record") or {}),
+                warnings=tuple(d.get("warnings") or ()),
+                details={k: v for k, v in d.items() if k not in known},
+                settings=settings,
+            )
+        except (KeyError, TypeError, ValueError) as exc:
+            raise InputError(f"not an identify result JSON: {type(exc).__name__} {exc}") from None
 
     def __repr__(self) -> str:
         wells = ", ".join(
@@ -359,6 +411,9 @@ class Identifier(Estimator):
     def result(self) -> dict[str, Any]:
         """The contract's identify JSON (``result_.to_json()``)."""
         return self.result_.to_json()
+
+    def _restore(self, result: dict[str, Any]) -> None:
+        self.result_ = Identification.from_json(result)
 
     def _summary(self) -> str:
         r = self.result_

@@ -369,6 +369,13 @@ class GAUpdater(Estimator):
             ]
         return []
 
+    def _restore(self, result: dict[str, Any]) -> None:
+        super()._restore(result)
+        self.device_ = self.start.with_(E=result["E"], alpha_deg=result["alpha_deg"], m=result["m"])
+        self.fitness_, self.objective_ = result["fitness_percent"], result["objective_percent"]
+        self.features_, self.exact_features_ = result.get("features"), result.get("exact_features")
+        self.history_, self.targets_ = result.get("generations", []), result.get("targets") or {}
+
     def result(self) -> dict[str, Any]:
         """The contract's update JSON (plus features, targets, E/m and settings)."""
         d = self.device_

@@ -11,9 +11,10 @@ from typing import Any
 import numpy as np
 from scipy import optimize
 
-from negstiff.errors import MeasurementError, issue
+from negstiff.errors import ConvergenceWarning, MeasurementError, issue
 from negstiff.inference.estimators.base import Estimator
 from negstiff.inference.estimators.parameters import SEED, Boolean, Instance, Interval, Options
+from negstiff.inference.estimators.persistence import provenance
 from negstiff.inference.estimators.posterior.diagnostics import (
     PosteriorResult,
     convergence_warnings,
@@ -33,6 +34,7 @@ from negstiff.inference.record.measurement import Measurement
 from negstiff.inference.steps.plausibility import classified
 from negstiff.models import Model
 from negstiff.models.device import NOMINAL
+from negstiff.models.effects import ROWS
 
 
 class Posterior(Estimator):
@@ -172,6 +174,25 @@ class Posterior(Estimator):
     def result(self) -> dict[str, Any]:
         """The contract's posterior JSON (``result_json`` of ``result_``), with every warning and the record."""
         return {**result_json(self.result_, self.hdi_prob), "warnings": list(self.warnings_), "record": self.record_}
+
+    def _restore(self, result: dict[str, Any]) -> None:
+        self.result_ = PosteriorResult.from_json(result)
+        self.hdi_prob = result.get("hdi_prob", self.hdi_prob)  # the JSON's intervals are at its probability
+        self.warnings_ = list(result.get("warnings", []))
+        self.record_ = dict(result.get("record", {}))
+
+    @property
+    def model_(self):
+        """The model at the posterior mean: a ``Model`` (coefficients, with the record's mass; 1 kg per unit
+        mass) or a ``Device`` (device). Its uncertainty is ``result_`` 's.
+        """
+        res = self.result_
+        mean = {n: s["mean"] for n, s in res.summary.items()}
+        if "k1" in mean:
+            mass = res.settings.get("model_mass") or res.settings.get("mass") or 1.0
+            return Model(m=mass, k1=mean["k1"], k2=mean["k2"], k3=mean["k3"], c=mean["c"], c_nl=mean["c_nl"],
+                         k0=mean.get("k0"))  # fmt: skip
+        return NOMINAL.with_(E=mean["E"], alpha_deg=mean["alpha_deg"], m=mean["m"], c=mean["c"], c_nl=mean["c_nl"])
 
     # --- start point -------------------------------------------------------------------------------
     def _start(self, rec: Measurement, win: Windows) -> tuple[Parametrisation, np.ndarray]:
@@ -407,15 +428,18 @@ class Posterior(Estimator):
             "elapsed_s": time.perf_counter() - t_start,
             "moves": "DEMove 0.8, DESnookerMove 0.2",
             "start": self.start_info_,
+            "model_mass": float(par.to_params(theta[None])[ROWS["m"], 0]),
         }
         self.logpost_, self.par_, self.windows_ = logpost, par, win
         tau_max = np.nanmax(tau_arr) if np.isfinite(tau_arr).any() else np.nan  # too short a chain: no tau
         res.thin = max(1, int(np.ceil(tau_max / 2))) if np.isfinite(tau_max) else 1
+        res.provenance = provenance(rec.source, res.settings)
         res.build_idata = functools.partial(_idata, res, y, logpost, win)
         self.result_ = res
-        # unconverged chains, and the record's own warnings: in the result and through Python's warnings
+        # unconverged chains, and the record's own warnings: in the result and through Python's warnings,
+        # the convergence checks that failed as one warning (a short run fails every parameter's twice)
         lines = classified(rec, None, res.warnings)
-        issue(lines)
+        issue(one_convergence_warning(lines))
         self.warnings_ = [text for _, text in lines]
         self.record_ = dict(rec.info)
         return self
@@ -443,6 +467,17 @@ def input_noise_rms(rec: Measurement) -> tuple[float, str]:
     if not top.any() or np.mean(S[top] > 0) > INPUT_BAND_FILLED or sigma2 > INPUT_NOISE_SHARE * np.var(rec.u):
         return 0.0, "not read: the excitation fills the band (its spectral floor is signal); the input taken as exact"
     return math.sqrt(sigma2), "the input's spectral floor"
+
+
+def one_convergence_warning(lines: list[tuple[type, str]]) -> list[tuple[type, str]]:
+    """``lines`` with the convergence checks that failed (R-hat, ESS, an ensemble's length) merged into one
+    ``ConvergenceWarning``: the result lists each; a script sees one warning per run.
+    """
+    conv = [text for cat, text in lines if issubclass(cat, ConvergenceWarning)]
+    if len(conv) <= 1:
+        return lines
+    merged = f"the posterior has not converged ({len(conv)} checks failed): " + "; ".join(conv)
+    return [(ConvergenceWarning, merged), *((c, t) for c, t in lines if not issubclass(c, ConvergenceWarning))]
 
 
 def _idata(res: PosteriorResult, y: np.ndarray, logpost: LogPosterior, win: Windows):
@@ -478,4 +513,6 @@ def _idata(res: PosteriorResult, y: np.ndarray, logpost: LogPosterior, win: Wind
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         tree = az.from_dict(data, dims=dims, coords={"state": ["z", "z_dot"]})
+    # the run's provenance (record, settings, versions) travels with the data (NetCDF attributes)
+    tree.attrs.update({k: v for k, v in res.provenance.items() if isinstance(v, (str, int, float))})
     return tree, ll

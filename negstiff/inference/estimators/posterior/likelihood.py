@@ -68,6 +68,14 @@ class LogPosterior:
         self.calls = 0
         self._lock = threading.Lock()  # the ensembles call from their threads (``sampling.sample_ensembles``)
 
+    def __getstate__(self) -> dict:
+        # pickled without its lock (a lock does not pickle; a new one is made on loading)
+        return {k: v for k, v in self.__dict__.items() if k != "_lock"}
+
+    def __setstate__(self, state: dict) -> None:
+        self.__dict__.update(state)
+        self._lock = threading.Lock()
+
     def likelihood_point(self, theta: np.ndarray) -> np.ndarray:
         """The parameters the likelihood is evaluated at: ``theta`` reduced (device: to the reference
         mass, which leaves the likelihood unchanged) and curvature-adjusted about the MAP point.

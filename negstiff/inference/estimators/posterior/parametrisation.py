@@ -4,6 +4,7 @@ simulator's kernel parameters.
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -71,6 +72,50 @@ class Parametrisation:
         return lp
 
 
+# The maps are module-level functions bound with ``functools.partial`` (not closures): a fitted Posterior
+# pickles with its parametrisation (a dask worker returns it, a cache keeps it).
+def _coefficient_params(template: np.ndarray, names: tuple[str, ...], theta: np.ndarray) -> np.ndarray:
+    p = np.repeat(template[:, None], theta.shape[0], axis=1)
+    for i, name in enumerate(names):  # k1, k2, k3, c, c_nl, k0: each into its named row
+        p[POLYNOMIAL_ROWS.get(name) or ROWS[name]] = theta[:, i]
+    return p
+
+
+def _device_params(template: np.ndarray, kf_per_E: float, theta: np.ndarray) -> np.ndarray:
+    p = np.repeat(template[:, None], theta.shape[0], axis=1)
+    p[DEVICE_ROWS["k_f"]] = kf_per_E * theta[:, 0]
+    p[DEVICE_ROWS["alpha"]] = np.radians(theta[:, 1])
+    p[ROWS["m"]], p[ROWS["c"]], p[ROWS["c_nl"]] = theta[:, 2], theta[:, 3], theta[:, 4]
+    g = DEVICE_ROWS["g"]
+    p[g] = template[g] + theta[:, 5]  # the static load's acceleration: g plus the nuisance offset
+    return p
+
+
+_MASS_SCALED = [0, 3, 4]  # E, c, c_nl: taken to the reference mass in the device's sampled coordinates
+
+
+def _device_to_physical(m_ref: float, phi: np.ndarray) -> np.ndarray:
+    out = phi.copy()
+    out[:, _MASS_SCALED] *= (phi[:, 2] / m_ref)[:, None]
+    return out
+
+
+def _device_to_sampled(m_ref: float, theta: np.ndarray) -> np.ndarray:
+    out = theta.copy()
+    out[:, _MASS_SCALED] *= (m_ref / theta[:, 2])[:, None]
+    return out
+
+
+def _device_log_jacobian(m_ref: float, phi: np.ndarray) -> np.ndarray:
+    return 3.0 * np.log(phi[:, 2] / m_ref)
+
+
+def _device_reduce(m_ref: float, phi: np.ndarray) -> np.ndarray:
+    out = phi.copy()
+    out[:, 2] = m_ref
+    return out
+
+
 def coefficient_parametrisation(start: Model) -> Parametrisation:
     """k1, k2, k3, c, c_nl (and k0 as a nuisance: the record's static offset) around ``start``."""
     names = ("k1", "k2", "k3", "c", "c_nl", "k0")
@@ -79,13 +124,7 @@ def coefficient_parametrisation(start: Model) -> Parametrisation:
     lower, upper = x - span, x + span
     lower[2] = 0.0  # k3 > 0: a hardening spring, a bounded potential
     lower[3] = lower[4] = 0.0  # dissipative damping
-    template = start.kernel_params()
-
-    def to_params(theta: np.ndarray) -> np.ndarray:
-        p = np.repeat(template[:, None], theta.shape[0], axis=1)
-        for i, name in enumerate(names):  # k1, k2, k3, c, c_nl, k0: each into its named row
-            p[POLYNOMIAL_ROWS.get(name) or ROWS[name]] = theta[:, i]
-        return p
+    to_params = functools.partial(_coefficient_params, start.kernel_params(), names)
 
     desc = [
         "k1, k2, k0: uniform within 10x the magnitude of the deterministic start point on either side "
@@ -103,17 +142,7 @@ def device_parametrisation(start: Device, mass_prior: tuple[float, float] | None
     names = ("E", "alpha_deg", "m", "c", "c_nl", "g_offset")
     lower = np.array([100e9, 2.0, 0.05, 0.0, 0.0, -0.5])
     upper = np.array([320e9, 14.0, 0.6, 50.0, 20.0, 0.5])
-    template = start.kernel_params()
-    kf_per_E = start.k_f / start.E
-
-    def to_params(theta: np.ndarray) -> np.ndarray:
-        p = np.repeat(template[:, None], theta.shape[0], axis=1)
-        p[DEVICE_ROWS["k_f"]] = kf_per_E * theta[:, 0]
-        p[DEVICE_ROWS["alpha"]] = np.radians(theta[:, 1])
-        p[ROWS["m"]], p[ROWS["c"]], p[ROWS["c_nl"]] = theta[:, 2], theta[:, 3], theta[:, 4]
-        g = DEVICE_ROWS["g"]
-        p[g] = template[g] + theta[:, 5]  # the static load's acceleration: g plus the nuisance offset
-        return p
+    to_params = functools.partial(_device_params, start.kernel_params(), start.k_f / start.E)
 
     gauss = {} if mass_prior is None else {2: mass_prior}
     m_ref = float(start.m)
@@ -123,25 +152,10 @@ def device_parametrisation(start: Device, mass_prior: tuple[float, float] | None
     # (E m_ref / m, ...): the likelihood is a function of phi without m, and the posterior along the
     # ridge (a cone in E, m, c, c_nl, its width growing with m) becomes a cylinder the DE moves cross
     # in a few steps. The prior stays the physical one, times the Jacobian (m / m_ref)^3.
-    scaled = [0, 3, 4]
-
-    def to_physical(phi: np.ndarray) -> np.ndarray:
-        out = phi.copy()
-        out[:, scaled] *= (phi[:, 2] / m_ref)[:, None]
-        return out
-
-    def to_sampled(theta: np.ndarray) -> np.ndarray:
-        out = theta.copy()
-        out[:, scaled] *= (m_ref / theta[:, 2])[:, None]
-        return out
-
-    def log_jacobian(phi: np.ndarray) -> np.ndarray:
-        return 3.0 * np.log(phi[:, 2] / m_ref)
-
-    def reduce(phi: np.ndarray) -> np.ndarray:
-        out = phi.copy()
-        out[:, 2] = m_ref
-        return out
+    to_physical = functools.partial(_device_to_physical, m_ref)
+    to_sampled = functools.partial(_device_to_sampled, m_ref)
+    log_jacobian = functools.partial(_device_log_jacobian, m_ref)
+    reduce = functools.partial(_device_reduce, m_ref)
 
     if mass_prior is None:
         # uniform m, cut by E's bounds along the ridge: log m spans at most log(320/100)
