@@ -71,3 +71,27 @@ def equal_lengths(path: Path, cols: dict[str, np.ndarray]) -> None:
             raise MeasurementError(
                 f"{path}: channels {ref_name} and {k} have different lengths ({ref.size}, {v.size} samples)"
             )
+
+
+def unique_names(names: list[str], places: list[str], what: str) -> tuple[list[str], dict[str, str]]:
+    """The channels' names made unique, and what that sets aside: a name that ``what`` (e.g. "datasets")
+    gives to more than one channel becomes ``NAME#PLACE`` for each of them (``places``: where each channel
+    is, e.g. its record number), and the bare name is set aside (``SET_ASIDE``), so that asking for it
+    (``load``'s columns, a column map, ``--aux``) is one line that says which channels hold it and how to
+    map one; a file whose duplicates are never asked for reads as before.
+    """
+    seen: dict[str, list[int]] = {}
+    for j, name in enumerate(names):
+        seen.setdefault(name, []).append(j)
+    out, meta = list(names), {}
+    for name, js in seen.items():
+        if len(js) < 2 or not name:
+            continue
+        for j in js:
+            out[j] = f"{name}#{places[j]}"
+        spelled = ", ".join(out[j] for j in js)
+        meta[SET_ASIDE + name] = (
+            f"is the name of {len(js)} {what} ({', '.join(places[j] for j in js)}): which one is meant? map one of "
+            f"{spelled} (e.g. --columns {name}={out[js[0]]})"
+        )
+    return out, meta

@@ -105,6 +105,8 @@ def read(path: Path) -> tuple[dict[str, np.ndarray], dict[str, str]]:
             )
         names.append(c)
     use = [j for j, c in enumerate(names) if c]  # trailing separators make unnamed empty columns
+    if "t" not in names:
+        _check_no_line_skipped(path, body, header_line)
     try:
         data = np.loadtxt(body, delimiter=sep, usecols=use, ndmin=2, dtype=float)
     except ValueError:
@@ -123,6 +125,21 @@ def read(path: Path) -> tuple[dict[str, np.ndarray], dict[str, str]]:
         tokens = [line.partition(sep)[0] for line in body] if j == 0 and sep else [line.split(sep)[j] for line in body]
         cols[RESOLUTION] = printed_resolution(tokens, cols["t"])
     return cols, meta
+
+
+def _check_no_line_skipped(path: Path, body: list[str], header_line: int) -> None:
+    """A record without a time column (its rate from ``# fs:``) has one sample per data line: a comment or a
+    blank line among them (which the parser would skip) may stand where a sample was, and a dropped sample
+    is undetectable afterwards (the rest of the record would shift by one step). Refused, naming the line.
+    """
+    for r, line in enumerate(body):
+        text = line.strip()
+        if not text or text.startswith("#"):
+            what = "a comment" if text else "a blank line"
+            raise MeasurementError(
+                f"{path}: line {header_line + r + 1} is {what} inside the data: with no t column (the rate from "
+                "# fs:) a sample there would be lost without trace; remove the line, or give the t column"
+            )
 
 
 def printed_resolution(tokens: list[str], values: np.ndarray) -> np.ndarray:

@@ -13,7 +13,7 @@ import numpy as np
 
 from negstiff.errors import MeasurementError
 
-from .base import check_memory, common_step, equal_lengths
+from .base import check_memory, common_step, equal_lengths, unique_names
 from .schema import si_unit
 
 SUFFIXES = (".uff", ".unv")
@@ -49,30 +49,28 @@ def read(path: Path):
     cols: dict[str, np.ndarray] = {}
     meta: dict[str, str] = {}
     steps: dict[str, float] = {}
-    n58 = 0
-    for i, s in enumerate(sets):
-        if s.get("type") != 58:
-            continue
-        n58 += 1
-        name = str(s.get("id1") or "").strip() or f"{s.get('rsp_node')}{s.get('rsp_dir')}"
+    found = [(i, s) for i, s in enumerate(sets) if s.get("type") == 58]
+    names = [str(s.get("id1") or "").strip() or f"{s.get('rsp_node')}{s.get('rsp_dir')}" for _, s in found]
+    names, aside = unique_names(names, [str(i + 1) for i, _ in found], "records")
+    meta.update(aside)
+    for (i, s), name in zip(found, names, strict=True):
         ft = int(s.get("func_type", -1))
         if ft != UFF_TIME_RESPONSE:
             raise MeasurementError(
                 f"{path}: record {i + 1} ({name}) holds a {UFF_FUNCTION_TYPES.get(ft, 'function')} (UFF 58 function "
                 f"type {ft}), not a time series (type 1)"
             )
-        if name in cols:
-            name = f"{name}#{i + 1}"
         data = np.asarray(s["data"])
         if np.iscomplexobj(data):
             raise MeasurementError(f"{path}: record {i + 1} ({name}) is complex, not a time series")
+        _check_point_count(path, i, name, s.get("num_pts"), data.size)
         cols[name] = data.astype(float)
         x = np.asarray(s.get("x", []), float)
         steps[name] = float(s.get("abscissa_inc") or (x[1] - x[0] if x.size > 1 else 0.0))
         unit = str(s.get("ordinate_axis_units_lab") or "").strip()
         if unit:
             meta[f"unit:{name}"] = unit
-    if not n58:
+    if not found:
         raise MeasurementError(f"{path}: no UFF 58 (function at nodal DOF) records in the file")
     equal_lengths(path, cols)
     step = common_step(path, steps)
@@ -84,6 +82,22 @@ def read(path: Path):
             fs = float(round(fs))
         meta["fs"] = repr(fs)
     return cols, meta
+
+
+def _check_point_count(path: Path, i: int, name: str, header, read: int) -> None:
+    """A type-58 record holds the points its header (record 7, ``num_pts``) says: pyuff reads every value
+    up to the closing ``-1`` whatever the header says, so lines lost in copying (or two datasets spliced
+    into one where their delimiters were lost) would otherwise read as a shorter or longer record.
+    """
+    try:
+        said = int(header)
+    except (TypeError, ValueError):
+        raise MeasurementError(f"{path}: record {i + 1} ({name}): no point count in its header") from None
+    if said != read:
+        raise MeasurementError(
+            f"{path}: record {i + 1} ({name}): its header says {said} points, {read} were read: lines lost or "
+            "added in copying? negstiff reads a file whole or not at all"
+        )
 
 
 def _check_uff_complete(path: Path, n_read: int) -> None:
