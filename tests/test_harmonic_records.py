@@ -184,3 +184,56 @@ def test_the_spectrum_decides_where_the_points_nearly_repeat():
     p = periodicity(_wandering(0.60), 9.0)
     assert min(p["residuals"][q] / p["tolerances"][q] for q in p["residuals"]) > UNDECIDED_RATIO
     assert p["period"] is None and p["decided_by"] == "time"
+
+
+@functools.cache
+def _cascade_record(a):
+    """The oscillator forced at ``a`` m/s^2 and 9 Hz, settled 30 s, recorded 100 s at 512 Hz, with its true
+    stroboscopic z: 10.1 m/s^2 is period 4, 10.17 period 8 (checked on the strobe in each test)."""
+    return _record(a, 9.0, 512.0, 100.0, settle=30.0, seed=1)
+
+
+def _slow_wander(n, fs, fraction_of, seed):
+    """What a derived z carries from its sensor chain: a narrow-band wander at 0.47-0.53 Hz (some 18
+    cycles of a 9 Hz forcing; the table's slow motion that a lab's double integration, high-passed near
+    1 Hz, takes out of the base displacement and so leaves in z = y - b), scaled to ``fraction_of``."""
+    from scipy import signal
+
+    sos = signal.butter(2, [0.47, 0.53], "bandpass", fs=fs, output="sos")
+    w = signal.sosfilt(sos, np.random.default_rng(seed).standard_normal(n + int(20 * fs)))[int(20 * fs) :]
+    return fraction_of * w / w.std()
+
+
+@pytest.mark.parametrize("seed", [1, 2])
+def test_a_period_4_record_with_a_slow_sensor_wander_is_period_4(seed):
+    # Fact: the true stroboscopic map repeats every 4 cycles. A z that wanders by 4 % of its spread at
+    # ~0.5 Hz (18 forcing cycles) makes lag 4's points differ beyond their tolerance, while lag 16 (16/18
+    # of the wander's period) cancels most of it: the points alone said period 16 (so did the rig's
+    # "period-4" run at 15.4 m/s^2). The lines decide over the whole steady state, which resolves the lines
+    # of 1/8 and 1/16 and finds none: period 4.
+    from negstiff.inference.analysis.periodicity import periodicity
+
+    rec, strobe = _cascade_record(10.1)
+    assert _true_period(strobe, tail=120) == 4
+    z = rec.z + _slow_wander(rec.n, rec.fs, 0.04 * rec.z.std(), seed)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        p = periodicity(from_arrays(rec.u, z, rec.fs), 9.0)
+    assert p["residuals"][4] > p["tolerances"][4] and p["residuals"][16] < p["tolerances"][16]  # the premise
+    assert p["period"] == 4 and p["decided_by"] == "spectrum", p
+    assert "1/16" in p["spectrum"]["line_ratio_db"] and p["spectrum"]["line_ratio_db"]["1/16"] < 20
+
+
+def test_a_period_8_record_whose_split_is_below_the_tolerance_is_period_8():
+    # Fact: at 10.17 m/s^2 the true map repeats every 8 cycles, its points 4 apart differing by a third of
+    # the noise's tolerance (the time domain alone says 4); the spectrum's 1/8 line stands 44 dB over its
+    # floor (20 dB is significant): period 8, decided by the spectrum.
+    from negstiff.inference.analysis.periodicity import periodicity
+
+    rec, strobe = _cascade_record(10.17)
+    assert _true_period(strobe, tail=200) == 8
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        p = periodicity(rec, 9.0)
+    assert p["residuals"][4] < p["tolerances"][4]  # the premise: lag 4 passes
+    assert p["period"] == 8 and p["decided_by"] == "spectrum" and p["spectrum"]["line_ratio_db"]["1/8"] > 20

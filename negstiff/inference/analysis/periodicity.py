@@ -378,16 +378,18 @@ def _detrended(points: np.ndarray) -> np.ndarray:
     return out
 
 
-def steady_start(points: np.ndarray, p: int, tol: float) -> int:
-    """The first cycle of the steady state for lag p: after the last n whose difference |P_(n+p) - P_n|
-    exceeds ``TRANSIENT_FACTOR`` x its median over the record's last half and ``tol`` (a transient, a
-    jump between wells), 0 when none does.
+def steady_start(points: np.ndarray, p: int, tol: float, latest: int | None = None) -> int:
+    """The first cycle of the steady state for lag p: after the last n before ``latest`` (default: the
+    record's end) whose difference |P_(n+p) - P_n| exceeds ``TRANSIENT_FACTOR`` x its median over the
+    record's last half and ``tol`` (a transient, a jump between wells), 0 when none does. Differences at
+    or after ``latest`` are no transient (a transient is at the start: an excursion in the last cycles is
+    the sensor chain's filter edge or an event the steady state's residual then carries).
     """
     d = np.sqrt(np.sum((points[p:] - points[:-p]) ** 2, axis=1))
     if d.size < 4:
         return 0
     threshold = max(TRANSIENT_FACTOR * float(np.median(d[d.size // 2 :])), tol)
-    out = np.flatnonzero(d > threshold)
+    out = np.flatnonzero(d[:latest] > threshold)
     return int(out[-1] + 1) if out.size else 0
 
 
@@ -434,7 +436,7 @@ def steady_period(
     for p in PERIODS:
         if p >= n // 2:
             break
-        s0 = min(steady_start(points, p, tol), n - min_len)
+        s0 = steady_start(points, p, tol, latest=n - min_len)
         tail = _detrended(points[s0:])
         reg = None if regressors is None else regressors[s0:]
         if p >= tail.shape[0] // 2:
@@ -515,6 +517,35 @@ def subharmonic_lines(z: np.ndarray, fs: float, f_hz: float) -> dict[str, Any]:
     }
 
 
+def _spectral_shorter_period(
+    zs: np.ndarray,
+    t_rel: np.ndarray,
+    tn: np.ndarray,
+    starts: dict[int, int],
+    ratios: dict[int, float],
+    period: int,
+    fs: float,
+    f_hz: float,
+    band_fs: float,
+) -> tuple[int, dict[str, Any]] | None:
+    """The spectrum's shorter period q for a time-domain period p = m q (m > 1), with the spectrum it read,
+    or None: lag q within ``UNDECIDED_RATIO`` x its tolerance, and the lines of z over lag q's steady state
+    (``starts[q]`` on) imply period q, carry ``LINE_FRACTION`` of its power, and were resolved out to 1/p
+    (a record too short to resolve the lines of p leaves the time domain's verdict standing).
+    """
+    for q in sorted(ratios):
+        if q >= period or period % q or ratios[q] > UNDECIDED_RATIO or q not in starts:
+            continue
+        wide = zs[t_rel >= float(tn[starts[q]])]
+        lines = subharmonic_lines(wide, fs, f_hz)
+        if lines["period"] != q or f"1/{period}" not in lines["line_ratio_db"]:
+            continue
+        lines["line_fraction"] = line_fraction(wide, fs, f_hz, q, band_fs)
+        if lines["line_fraction"] >= LINE_FRACTION:
+            return q, lines
+    return None
+
+
 def periodicity(
     rec: Measurement, f_hz: float, wells: tuple | None = None, noise: float | None = None, band_fs: float | None = None
 ) -> dict[str, Any]:
@@ -588,6 +619,21 @@ def periodicity(
     elif period is None and ratios and ratios[p_best] <= UNDECIDED_RATIO and ratios.get(q, math.inf) <= UNDECIDED_RATIO:
         # the points nearly repeat, too little beyond their tolerance to call it chaos: the lines decide
         period, decided_by = spectral, "spectrum"
+    elif period is not None and period > 1:
+        # the points repeat only at a multiple p of a shorter lag q that nearly passes: a slow wander of z
+        # that is no dynamics (a derived z's double-integrated base, high-passed near 0.5 Hz, wanders with a
+        # period of some 18 forcing cycles: lag 16 cancels most of it, lag 4 little) or a true period p. The
+        # lines decide, over the longest steady part lag q allows, where the record resolves the lines of p
+        shorter = _spectral_shorter_period(zs, t_rel, tn, starts, ratios, period, rec.fs, f_meas, band_fs)
+        if shorter is not None:
+            period, spectrum = shorter
+            decided_by = "spectrum"
+    if decided_by == "time" and period is not None and spectral is not None and spectral > period:
+        # the points repeat at p within their tolerance, and significant sub-harmonic lines (20 dB over the
+        # floor) say p is m p: a period doubling whose split is below the points' noise allowance (a true
+        # period 8 read as 4 with the split at a third of the tolerance); lag m p passes as well
+        if spectral % period == 0 and ratios.get(spectral, math.inf) < 1.0:
+            period, decided_by = spectral, "spectrum"
     if period is not None:
         start = starts[period]
         steady_from = float(tn[start])
