@@ -256,3 +256,173 @@ def test_a_two_segment_lvm_is_read_whole(lab_files):
     assert rec.n == truth["z"].size and rec.fs == pytest.approx(FS, rel=1e-9)
     assert np.allclose(rec.u, truth["base_acc"], rtol=1e-8, atol=1e-8 * np.abs(truth["base_acc"]).max())
     assert np.allclose(rec.z, truth["z"], rtol=1e-8, atol=1e-8 * np.abs(truth["z"]).max())
+
+
+# --- wrong acceptances ---------------------------------------------------------------------------------------
+def _write_csv(path: Path, cols: dict, meta: dict | None = None, time_fmt: str = "%.9g") -> Path:
+    """A CSV as a lab's export writes it: 9 significant digits, the time column in ``time_fmt``."""
+    head = "".join(f"# {k}: {v}\n" for k, v in (meta or {}).items()) + ",".join(cols) + "\n"
+    fmts = [time_fmt if k == "t" else "%.9g" for k in cols]
+    rows = np.column_stack(list(cols.values()))
+    path.write_text(head + "".join(",".join(f % x for f, x in zip(fmts, r, strict=True)) + "\n" for r in rows))
+    return path
+
+
+@pytest.fixture(scope="module")
+def records(tmp_path_factory) -> Path:
+    """The probe's records, each 20 s at 512 Hz of the 9 Hz oscillator (scipy), or a part of it."""
+    d = tmp_path_factory.mktemp("acceptances")
+    a, z = _oscillator()
+    t = np.arange(a.size) / FS
+    _write_csv(d / "rec.csv", {"t": t, "base_acc": a, "z": z})
+    # a DAQ that stamps Unix time: 1.7e9 s, printed to the microsecond (the step, 1.953 ms, is resolved)
+    _write_csv(d / "epoch.csv", {"t": 1.7e9 + t, "base_acc": a, "z": z}, time_fmt="%.6f")
+    np.savez(d / "epoch.npz", t=1.7e9 + t, base_acc=a, z=z)
+    rng = np.random.default_rng(5)
+    _write_csv(d / "aux_huge.csv", {"t": t, "base_acc": a, "z": z, "volt": 1e300 * rng.standard_normal(a.size)})
+    # a 9 Hz harmonic record (3 m/s^2), its steady state
+    wn, zeta = 2 * np.pi * 9.0, 0.03
+    u = 3.0 * np.sin(2 * np.pi * 9.0 * t)
+    from scipy import signal as sps
+
+    _, zh, _ = sps.lsim(([-1.0], [1.0, 2 * zeta * wn, wn**2]), u, t)
+    _write_csv(d / "harm.csv", {"t": t, "base_acc": u, "z": zh + 2e-3 + 1e-7 * rng.standard_normal(t.size)})
+    _write_csv(d / "ten_rows.csv", {"t": t[:10], "base_acc": a[:10], "z": z[:10]})
+    (d / "friction.json").write_text(
+        '{"m": 0.2, "k1": 426.0, "k2": -3060.0, "k3": 7.77e5, "c": 3.5, "extra": {"coulomb_friction": -0.5}}'
+    )
+    return d
+
+
+@pytest.mark.parametrize("name", ["epoch.csv", "epoch.npz"])
+def test_a_unix_epoch_time_column_is_read_by_its_spacing(records, name):
+    # only the spacing of t matters: at 1.7e9 s float64 resolves 2.4e-7 s, a ten-thousandth of the 1.953 ms
+    # step; the record is the one stamped from zero (its rate exactly, its start kept)
+    from negstiff.inference.record.measurement import load
+
+    rec, ref = load(records / name), load(records / "rec.csv")
+    assert rec.n == ref.n and rec.fs == pytest.approx(FS, rel=1e-9)
+    assert rec.t0 == pytest.approx(1.7e9, abs=1e-3)
+    assert np.allclose(rec.z, ref.z, rtol=1e-8, atol=0)  # the CSV's 9 significant digits
+
+
+def test_a_time_column_float64_cannot_step_is_refused(tmp_path, capsys):
+    # at 1e17 s float64's spacing is 16 s: a 512 Hz step cannot be told apart there
+    t = 1e17 + np.arange(2048) * 16.0
+    np.savez(tmp_path / "far.npz", t=t, base_acc=np.sin(t - t[0]), z=1e-3 * np.cos(t - t[0]))
+    msg = refused(tmp_path, capsys, ["frf", tmp_path / "far.npz", "-o", tmp_path / "o.json"], [tmp_path / "o.json"])
+    assert "column t" in msg
+
+
+def test_an_aux_channel_beyond_any_instrument_is_refused(records, capsys, tmp_path):
+    # the probe: a 1e300 aux channel was taken (the fit then selected no damping, held-out 134 %)
+    out = tmp_path / "s.json"
+    msg = refused(records, capsys, ["identify", "sindy", records / "aux_huge.csv", "--aux", "volt", "-o", out], [out])
+    assert "volt" in msg
+
+
+def test_a_forcing_frequency_at_two_samples_a_period_is_refused(records, capsys, tmp_path):
+    # 255 Hz sampled at 512 Hz is 2 samples a period: inside any anti-aliasing filter's roll-off, no
+    # Poincare section can be read there (the record's forcing is 9 Hz)
+    out = tmp_path / "c.json"
+    msg = refused(records, capsys, ["characterize", records / "harm.csv", "--forcing-hz", "255", "-o", out], [out])
+    assert "255" in msg
+
+
+def test_a_model_with_negative_friction_is_refused(records, capsys, tmp_path):
+    # a negative Coulomb friction feeds energy in: no physical device has it
+    out = tmp_path / "s.csv"
+    msg = refused(records, capsys, ["simulate", records / "friction.json", records / "rec.csv", "-o", out], [out])
+    assert "coulomb_friction" in msg
+
+
+@pytest.mark.parametrize("extra", [["--forcing-hz", "512"], ["--nfrc", "nope.json"]])
+def test_report_says_when_an_option_is_refused_by_every_analysis(records, capsys, tmp_path, extra):
+    out = tmp_path / "rep"
+    msg = refused(records, capsys, ["report", records / "rec.csv", "--only", "frf", *extra, "-o", out], [out])
+    assert extra[0] in msg
+
+
+def test_report_with_every_section_not_made_exits_2(records, capsys, tmp_path):
+    # ten rows: no analysis can be made from them; a report of nothing but "not made" is not a result
+    out = tmp_path / "rep"
+    refused(records, capsys, ["report", records / "ten_rows.csv", "-o", out], [out])
+
+
+def test_posterior_with_an_input_noise_beyond_any_record_is_one_line(records, capsys, tmp_path):
+    out = tmp_path / "p.json"
+    refused(records, capsys, ["posterior", records / "rec.csv", "--input-noise", "1e300", "-o", out], [out])
+
+
+# --- refusals before the work --------------------------------------------------------------------------------
+def test_rig_refuses_an_unwritable_suffix_before_simulating(tmp_path, capsys):
+    out = tmp_path / "r.lvm"
+    start = time.perf_counter()
+    msg = refused(tmp_path, capsys, ["rig", "random", "--duration", "600", "-o", out], [out])
+    assert ".lvm" in msg and time.perf_counter() - start < 5, "refused after the simulation"
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["frf", "ten_rows.csv"],
+        ["identify", "sindy", "rec.csv", "--quiet-not"],
+        ["discrepancy", "rec.csv", "--quiet-not"],
+    ],
+    ids=["frf-10-rows", "sindy-20s", "discrepancy-20s"],
+)
+def test_too_short_is_refused_before_the_progress_line(records, capsys, tmp_path, argv):
+    # the refusal is the only line: the check needs no work, so it comes before "identify: N samples ..."
+    argv = [records / a if a.endswith(".csv") else a for a in argv if a != "--quiet-not"]
+    out = tmp_path / "o.json"
+    msg = refused(records, capsys, [*argv, "-o", out], [out])
+    assert "short" in msg or "few" in msg, msg
+
+
+def test_simulate_divergence_is_refused_before_the_progress_line(records, capsys, tmp_path):
+    # a model whose cubic stiffness is negative escapes to infinity under any input: one line, no progress
+    (tmp_path / "escape.json").write_text('{"m": 0.2, "k1": 426.0, "k2": 0.0, "k3": -7.77e5, "c": 3.5}')
+    out = tmp_path / "s.csv"
+    msg = refused(tmp_path, capsys, ["simulate", tmp_path / "escape.json", records / "rec.csv", "-o", out], [out])
+    assert "simulat" in msg
+
+
+# --- the library's errors are negstiff's ---------------------------------------------------------------------
+def _u_z(n: int = 2048):
+    t = np.arange(n) / FS
+    return np.sin(2 * np.pi * 9 * t), 1e-3 * np.sin(2 * np.pi * 9 * t - 0.3)
+
+
+@pytest.mark.parametrize(
+    "call",
+    [
+        lambda u, z: __import__("negstiff").from_arrays(None, z, FS),
+        lambda u, z: __import__("negstiff").from_arrays(u, z, FS, aux="v"),
+        lambda u, z: __import__("negstiff").from_arrays(u + 1j * u, z, FS),
+        lambda u, z: __import__("negstiff").from_arrays(u, z + 1j * z, FS),
+        lambda u, z: __import__("negstiff").Model(m=-0.2, k1=426.0, k2=0.0, k3=7.77e5),
+        lambda u, z: __import__("negstiff").Model(m=0.2, k1=426.0, k2=0.0, k3="big"),
+        lambda u, z: __import__("negstiff").Model(m=0.2, k1=426.0, k2=0.0, k3=7.77e5, extra={"coulomb_friction": "x"}),
+        lambda u, z: __import__("negstiff").Structure(("a", 0.2), (426.0,)),
+        lambda u, z: __import__("negstiff").simulate(
+            __import__("negstiff").Model(m=0.2, k1=426.0, k2=0.0, k3=7.77e5), np.r_[u[:-1], np.nan], 1 / FS
+        ),
+        lambda u, z: __import__("negstiff").Rig(seed=-1),
+        lambda u, z: __import__("negstiff").Rig(seed=1.5),
+    ],
+    ids=["u-None", "aux-string", "u-complex", "z-complex", "negative-mass", "k3-text", "effect-text",
+         "structure-text-mass", "simulate-nan-input", "rig-negative-seed", "rig-float-seed"],  # fmt: skip
+)
+def test_library_refusals_are_one_input_error(call):
+    # a program gets one negstiff InputError with one line (never a KeyError, numpy's ValueError or a
+    # ComplexWarning that drops the imaginary part)
+    import warnings
+
+    from negstiff.errors import InputError
+
+    u, z = _u_z()
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # a warning instead of the refusal fails the test
+        with pytest.raises(InputError) as info:
+            call(u, z)
+    assert "\n" not in str(info.value).strip(), str(info.value)

@@ -69,6 +69,13 @@ def si_unit(column: str) -> str:
 MAGNITUDE_LIMITS = {"time": 1e9, "length": 1e3, "velocity": 1e4, "acceleration": 1e7, "force": 1e9}
 """Beyond these magnitudes (s, m, m/s, m/s^2, N) no shaker-table record is in SI units: a value there is
 refused, never fed to the numerics (a 1e300-scale column overflows every product an identification forms)."""
+AUX_MAGNITUDE_LIMIT = 1e15
+"""Beyond this magnitude (in its own units, whatever they are) no lab instrument's channel reads: a 24-bit
+converter counts to 8.4e6, a pressure in Pa or a frequency in Hz stays below 1e12. An auxiliary channel there
+is refused (a 1e300 channel overflows every product a fit forms with it)."""
+TIME_STEP_RESOLUTION = 0.01
+"""A time column's magnitude does not matter (a DAQ stamping Unix time: 1.7e9 s), its steps do: float64's
+spacing at the column's largest value must stay within this fraction of its step (1.7e9 s: 2.4e-7 s)."""
 MASS_RANGE_KG = (1e-9, 1e9)
 """Moving masses [kg] a record may state: a microgram MEMS proof mass to a building's storey."""
 

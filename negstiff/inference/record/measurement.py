@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import copy
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -36,6 +36,7 @@ from negstiff.inference.record.derivatives import (
 )
 from negstiff.io.base import RESOLUTION, SET_ASIDE
 from negstiff.io.schema import (
+    AUX_MAGNITUDE_LIMIT,
     GRAVITY_RANGE,
     INPUTS,
     KNOWN,
@@ -44,6 +45,7 @@ from negstiff.io.schema import (
     OPTIONAL,
     RESPONSE_CHANNEL,
     SAMPLING_RATE_RANGE_HZ,
+    TIME_STEP_RESOLUTION,
     UNITS,
     dimension,
     header_name,
@@ -499,6 +501,12 @@ def _aux_channels(source, raw: dict[str, np.ndarray], names, n: int) -> dict[str
         if v.ndim != 1 or v.size != n:
             raise MeasurementError(f"{source}: auxiliary channel {name} has {v.size} samples, the record {n}")
         check_values(source, {name: v})  # finite (a channel of its own: no contract magnitude)
+        big = np.flatnonzero(np.abs(v) > AUX_MAGNITUDE_LIMIT)
+        if big.size:
+            raise MeasurementError(
+                f"{source}: auxiliary channel {name} is {v[big[0]]:.3g} at row {big[0] + 1}, beyond any lab "
+                f"instrument's reading (|{name}| <= {AUX_MAGNITUDE_LIMIT:g} in its units): scale it to its units"
+            )
         out[name] = v
     return out
 
@@ -714,6 +722,9 @@ def check_values(source, cols: dict[str, np.ndarray]) -> None:
         dim = dimension(k)
         if dim is None or not v.size:
             continue
+        if dim == "time":  # its magnitude does not matter (Unix time), its steps do
+            _check_time_steps(source, k, v)
+            continue
         limit = MAGNITUDE_LIMITS[dim]
         big = np.flatnonzero(np.abs(v) > limit)
         if big.size:
@@ -722,6 +733,24 @@ def check_values(source, cols: dict[str, np.ndarray]) -> None:
                 f"{source}: column {k} is {v[big[0]]:.3g} {unit} at row {big[0] + 1}, beyond any shaker-table record "
                 f"(|{k}| <= {limit:g} {unit}): is it in SI units? scale it with --columns {k}=COL*FACTOR"
             )
+
+
+def _check_time_steps(source, k: str, v: np.ndarray) -> None:
+    """A time column float64 resolves: its spacing at the column's largest value within
+    ``TIME_STEP_RESOLUTION`` of the median step (steps that are not there, none or not finite, are the
+    time base's to refuse).
+    """
+    if v.size < 2:
+        return
+    with np.errstate(over="ignore", invalid="ignore"):
+        step = float(np.median(np.abs(np.diff(v))))
+    top = float(np.max(np.abs(v)))
+    ulp = float(np.spacing(top))
+    if np.isfinite(step) and step > 0 and not ulp <= TIME_STEP_RESOLUTION * step:
+        raise MeasurementError(
+            f"{source}: column {k} reaches {top:.3g} s, where float64 resolves steps of {ulp:.2g} s, not its step "
+            f"of {step:.3g} s: subtract the start time from it (or give the rate, fs, instead)"
+        )
 
 
 def check_sampling_rate(source, fs: float, where: str) -> float:
@@ -877,6 +906,15 @@ def from_arrays(
     if input_name not in INPUTS:
         raise MeasurementError(f"input must be one of {INPUTS}, got {input_name!r}")
     source = kw.get("source", "<memory>")
+    if u is None:
+        raise MeasurementError(f"{source}: the input u is None: give the {input_name} samples")
+    aux_given = kw.get("aux")
+    if aux_given is not None and not isinstance(aux_given, Mapping):
+        raise MeasurementError(f"{source}: aux must map names to channels ({{'voltage': v}}), got "
+                               f"{type(aux_given).__name__}")  # fmt: skip
+    for name, values in (("u", u), ("z", z), *((k, kw.get(k)) for k in OPTIONAL), *dict(aux_given or {}).items()):
+        if values is not None and np.iscomplexobj(values):  # np.asarray(float) would drop the imaginary part
+            raise MeasurementError(f"{source}: {name} is complex: a record's samples are real numbers")
     masses = kw.pop("masses", None)
     force_dof = kw.pop("force_dof", None)
     responses = None
