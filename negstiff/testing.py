@@ -7,8 +7,12 @@ message that says what was compared, the numbers and the tolerance.
 * ``assert_agree(a, b, sd_a, sd_b, k=3)``: two estimates agree within k combined standard errors;
 * ``well_frequencies(posterior)``: each well's underlying-linear frequency over the posterior's draws
   (mean, sd): the uncertainty an identification's well frequency is judged against;
-* ``assert_wells_agree(identification, posterior, k=3)``: an identification's well frequencies lie within
-  k posterior standard deviations of the posterior's (the record's own uncertainty);
+* ``assert_wells_agree(identification, posterior, k=3)``: an identification's own well frequencies lie
+  within k posterior standard deviations of the posterior's (the record's own uncertainty);
+* ``assert_methods_agree(a, b, record, k=3)``: two methods' own estimates of each well's frequency (NSI's
+  subspace pole, SINDy's equation-error model: never their refined models, which reach the same
+  output-error optimum) agree within k of their combined standard errors (``Identifier.own_estimate``:
+  batch means over blocks of the record);
 * ``assert_predicts(model, record, reference, factor=2)``: the model's short free runs restarted from the
   record's measured states follow it within ``factor`` times a reference model's error (the truth, or the
   best model at hand: the floor a record's noise sets is measured, not assumed).
@@ -34,14 +38,46 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["assert_agree", "assert_covers", "assert_predicts", "assert_wells_agree", "well_frequencies"]
+__all__ = ["assert_agree", "assert_covers", "assert_methods_agree", "assert_predicts", "assert_wells_agree",
+           "well_frequencies"]  # fmt: skip
 
 
 def _summary(posterior) -> Mapping[str, Mapping[str, float]]:
-    """The parameter summaries of a fitted ``Posterior`` or of its result JSON."""
-    if isinstance(posterior, Mapping):
-        return posterior["parameters"]
+    """The parameter summaries of a fitted ``Posterior``, a ``PosteriorResult``, or a posterior result JSON
+    (a dict, its text or a path).
+    """
+    if isinstance(posterior, (Mapping, str)) or hasattr(posterior, "__fspath__"):
+        d = _json(posterior)
+        if "parameters" not in d:
+            raise AssertionError(f"not a posterior result JSON: no 'parameters' (keys: {', '.join(sorted(d))})")
+        return d["parameters"]
+    if hasattr(posterior, "summary") and hasattr(posterior, "names"):
+        return posterior.summary
     return posterior.result()["parameters"]
+
+
+def _json(data) -> dict[str, Any]:
+    from negstiff.inference.estimators.persistence import json_source
+
+    return json_source(data)
+
+
+def _model(model):
+    """A ``Model`` of a ``Model``, a model file's dict, an identify result JSON (its ``model``), or a fitted
+    estimator (its ``model_``).
+    """
+    from negstiff.models import Model
+
+    if isinstance(model, Model) or getattr(model, "kind", None) == "device":
+        return model
+    if isinstance(model, (Mapping, str)) or hasattr(model, "__fspath__"):
+        d = _json(model)
+        return Model.from_dict(d["model"] if isinstance(d.get("model"), Mapping) else d)
+    if hasattr(model, "model_"):
+        return model.model_
+    if hasattr(model, "model"):
+        return model.model
+    raise AssertionError(f"not a model: a {type(model).__name__}")
 
 
 def assert_covers(posterior, **values: float) -> None:
@@ -78,14 +114,27 @@ def well_frequencies(posterior, draws: int = 400, seed: int = 0) -> dict[str, tu
     """
     from negstiff.models import Model
 
-    res = posterior.result_
-    names = list(res.names)
-    if "k1" not in names:
-        raise AssertionError("well_frequencies needs a coefficient posterior (model='coefficients')")
-    flat = res.samples.reshape(-1, len(names))
     rng = np.random.default_rng(seed)
-    pick = flat[rng.choice(flat.shape[0], size=min(draws, flat.shape[0]), replace=False)]
-    mass = res.settings.get("mass") or 1.0
+    res = getattr(posterior, "result_", posterior)
+    if isinstance(res, (Mapping, str)) or hasattr(res, "__fspath__") or res.samples.size == 0:
+        # a result JSON holds no draws: its means, sds and correlation (a Gaussian, the Laplace approximation)
+        d = _json(res) if not hasattr(res, "summary") else {"parameters": res.summary, "correlation": res.correlation,
+                                                            "settings": res.settings}  # fmt: skip
+        summ, corr = d["parameters"], d.get("correlation") or {}
+        names = [n for n in ("k1", "k2", "k3", "c", "c_nl", "k0") if n in summ]
+        if "k1" not in names:
+            raise AssertionError("well_frequencies needs a coefficient posterior (model='coefficients')")
+        sd = np.array([summ[n]["sd"] for n in names])
+        R = np.array([[corr.get(a, {}).get(b, float(a == b)) for b in names] for a in names])
+        pick = rng.multivariate_normal([summ[n]["mean"] for n in names], R * np.outer(sd, sd), size=draws)
+        mass = d.get("settings", {}).get("mass") or 1.0
+    else:
+        names = list(res.names)
+        if "k1" not in names:
+            raise AssertionError("well_frequencies needs a coefficient posterior (model='coefficients')")
+        flat = res.samples.reshape(-1, len(names))
+        pick = flat[rng.choice(flat.shape[0], size=min(draws, flat.shape[0]), replace=False)]
+        mass = res.settings.get("mass") or 1.0
     freqs: dict[str, list[float]] = {"minus": [], "plus": []}
     for row in pick:
         p = dict(zip(names, row, strict=False))
@@ -117,13 +166,59 @@ def assert_wells_agree(identification, posterior, k: float = 3.0) -> None:
 
 
 def _modal(identification) -> Mapping[str, Mapping[str, Any]]:
-    if isinstance(identification, Mapping):
-        return identification["modal"]
-    return getattr(identification, "modal", None) or identification.result_.modal
+    """Each well's ``{"f_hz", ...}``: an identification's own (``modal``), or a model's linearisation (a
+    ``Model``, a model file's dict).
+    """
+    if isinstance(identification, (Mapping, str)) or hasattr(identification, "__fspath__"):
+        d = _json(identification)
+        if isinstance(d.get("modal"), Mapping):
+            return d["modal"]
+    elif getattr(identification, "modal", None) is not None:
+        return identification.modal
+    elif "result_" in getattr(identification, "__dict__", {}):
+        return identification.result_.modal
+    model = _model(identification)
+    out: dict[str, Mapping[str, Any]] = {}
+    for well in ("minus", "plus"):
+        try:
+            out[well] = {"f_hz": model.uls(well).f_hz}
+        except ValueError:
+            continue
+    return out
+
+
+def assert_methods_agree(a, b, record=None, k: float = 3.0, blocks: int = 3) -> None:
+    """Assert that two methods' own estimates of each well's frequency agree within ``k`` combined standard
+    errors. ``a``, ``b``: fitted identifications (NSI, SINDy; their ``own_estimate`` on ``record``, the
+    record they were fitted on, in ``blocks`` blocks) or ``own_estimate`` results. The refined models are not
+    compared: both methods refine to the same output-error optimum, so their agreement says nothing.
+    """
+    own = []
+    for est in (a, b):
+        if isinstance(est, Mapping):
+            own.append(est)
+        else:
+            if record is None:
+                raise AssertionError("assert_methods_agree: the record the estimators were fitted on is needed")
+            own.append(est.own_estimate(record, blocks=blocks))
+    compared = 0
+    for well, ma in own[0]["modal"].items():
+        mb = own[1]["modal"].get(well, {})
+        if ma.get("f_hz") is None or mb.get("f_hz") is None:
+            continue
+        if ma.get("f_hz_se") is None or mb.get("f_hz_se") is None:
+            raise AssertionError(f"the {well} well's frequency has no standard error (a block missed the well)")
+        names = f"{own[0].get('method', 'first')}, {own[1].get('method', 'second')}"
+        assert_agree(ma["f_hz"], mb["f_hz"], ma["f_hz_se"], mb["f_hz_se"], k,
+                     what=f"the {well} well's own frequencies [Hz] ({names})")  # fmt: skip
+        compared += 1
+    if not compared:
+        raise AssertionError("no well both methods estimated")
 
 
 def assert_predicts(model, record, reference, factor: float = 2.0, window_s: float = 0.125) -> None:
-    """Assert that ``model`` predicts ``record`` within ``factor`` times the error of ``reference`` (the
+    """Assert that ``model`` (a ``Model``, a model file's dict, an identify result JSON or a fitted estimator)
+    predicts ``record`` within ``factor`` times the error of ``reference`` (the
     truth of a simulated record, or the best model a user has): free runs of ``window_s`` restarted from
     the record's measured states (``validation.restarted_free_runs``; 0.125 s, the posterior's windows,
     short enough that cross-well chaos does not amplify the start states' error), their rms error as a
@@ -131,7 +226,7 @@ def assert_predicts(model, record, reference, factor: float = 2.0, window_s: flo
     only the displacement sensor's white floor (on the rig's records the truth's 0.125 s error is 4-5x
     that floor), so the floor is measured with a reference model, never assumed.
     """
-    errors = [_restarted_error(m, record, window_s) for m in (model, reference)]
+    errors = [_restarted_error(_model(m), record, window_s) for m in (model, reference)]
     if not errors[0] <= factor * errors[1]:
         raise AssertionError(
             f"{record.source}: the model's restarted {window_s:g} s free runs miss the record by {errors[0]:.3g} % rms "

@@ -12,6 +12,9 @@ scikit-learn's (``sklearn/base.py``, its developer guide's "rolling your own est
   ``from_arrays`` first), learns, and returns ``self``;
 * what was learned lives in attributes ending in ``_``; asking one before ``fit`` raises
   ``NotFittedError``;
+* a fitted model (``model_``) predicts a record by restarted free runs (``predict``), scores it
+  (``score``: the median window's error), simulates any input (``simulate``) and prints its equation
+  (``equations``, ``print``), as pysindy's (``prediction``);
 * ``result()`` is the learned state as the contract's JSON; ``to_json()`` is it with the estimator's class
   and parameters (``"estimator"``), and ``from_json`` rebuilds a fitted estimator from it
   (``persistence``); a fitted estimator pickles (``pickle``, ``joblib``) with everything it learned.
@@ -31,12 +34,15 @@ from typing import Any, ClassVar, Self
 from negstiff.errors import InputError, NotFittedError
 from negstiff.inference.estimators.parameters import Constraint
 from negstiff.inference.estimators.persistence import decode_param, encode_param, json_source
+from negstiff.inference.estimators.prediction import ModelPredictions
 from negstiff.inference.record.measurement import Measurement, load
 from negstiff.inference.steps.frame import pin_frame
 
 
-class Estimator:
-    """Base of the estimators (module docstring)."""
+class Estimator(ModelPredictions):
+    """Base of the estimators (module docstring); a fitted ``model_`` predicts, scores, simulates and prints
+    its equation (``prediction.ModelPredictions``).
+    """
 
     _parameter_constraints: ClassVar[dict[str, Constraint]] = {}
 
