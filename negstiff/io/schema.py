@@ -76,6 +76,9 @@ is refused (a 1e300 channel overflows every product a fit forms with it)."""
 TIME_STEP_RESOLUTION = 0.01
 """A time column's magnitude does not matter (a DAQ stamping Unix time: 1.7e9 s), its steps do: float64's
 spacing at the column's largest value must stay within this fraction of its step (1.7e9 s: 2.4e-7 s)."""
+USABLE_BAND_FRACTION = 0.4
+"""The band [fraction of the sampling rate] an acquisition's anti-aliasing filter passes: a forcing above
+0.4 fs (fewer than 2.5 samples a period) lies in the filter's roll-off, where no phase can be read."""
 MASS_RANGE_KG = (1e-9, 1e9)
 """Moving masses [kg] a record may state: a microgram MEMS proof mass to a building's storey."""
 

@@ -29,6 +29,7 @@ from typing import Any
 import numpy as np
 
 from negstiff.constants import G
+from negstiff.errors import InputError
 
 from . import effects
 from .effects import finite
@@ -99,6 +100,25 @@ def find_equilibria(force, stiffness, z_lo: float, z_hi: float, n_grid: int = 40
     )
 
 
+def check_dissipation(extra: Mapping[str, Any], source: str = "model") -> None:
+    """Refuse (``InputError``) a dissipative extra effect (friction, velocity-power damping) below zero: it
+    feeds energy in, which no physical device does (a fitted model's may; this is for a model a user gives to
+    be simulated as a device).
+
+    Parameters
+    ----------
+    extra : mapping
+        A model's or a device's extra effects (``{"coulomb_friction": 0.1}``).
+    source : str
+        What the model is, for the message (its file).
+    """
+    for name, value in extra.items():
+        effect = effects.get(name)
+        if effect.scalar and effect.dissipative and value < 0:
+            raise InputError(f"{source}: effect {name} = {value:g} {effect.units}: a {name.replace('_', ' ')} "
+                             "dissipates energy, its value is >= 0 on a physical device")  # fmt: skip
+
+
 @dataclass(frozen=True)
 class Model:
     """The polynomial (z-frame) model of the contract's model file.
@@ -141,13 +161,17 @@ class Model:
     extra: Mapping[str, Any] = field(default_factory=dict)
 
     def __post_init__(self):
-        for name in ("m", "k1", "k2", "k3", "c", "c_nl"):
-            object.__setattr__(self, name, finite(name, getattr(self, name)))
+        try:  # the registry's checks say what is wrong; a program gets negstiff's error for it
+            for name in ("m", "k1", "k2", "k3", "c", "c_nl"):
+                object.__setattr__(self, name, finite(name, getattr(self, name)))
+            k0 = self.m * G if self.k0 is None else finite("k0", self.k0)
+            extra = effects.normalise(self.extra)
+        except (TypeError, ValueError, KeyError) as exc:
+            raise InputError(" ".join(str(exc).strip("'\"").split()) or f"model: {type(exc).__name__}") from None
         if self.m <= 0:
-            raise ValueError(f"model mass m must be positive, got {self.m}")
-        k0 = self.m * G if self.k0 is None else finite("k0", self.k0)
+            raise InputError(f"model mass m must be positive, got {self.m}")
         object.__setattr__(self, "k0", k0)
-        object.__setattr__(self, "extra", effects.normalise(self.extra))
+        object.__setattr__(self, "extra", extra)
 
     def __repr__(self) -> str:
         extra = f", extra={effects.plain(self.extra)!r}" if self.extra else ""

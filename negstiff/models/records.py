@@ -24,6 +24,20 @@ class RigError(InputError):
     """The rig cannot produce the requested record (bad settings, or the device left its stroke)."""
 
 
+def check_written(path: str | Path) -> None:
+    """Refuse (``RigError``, one line) a record path whose suffix the rig does not write (``WRITTEN``): checked
+    before a record is simulated, not after.
+
+    Parameters
+    ----------
+    path : str or Path
+        Where the record would be written.
+    """
+    path = Path(path)
+    if path.suffix.lower() not in WRITTEN:
+        raise RigError(f"{path}: the rig writes {', '.join(WRITTEN)} records (not {path.suffix or 'no suffix'})")
+
+
 @dataclass
 class RigRecord:
     """One measured record: columns at ``fs``, metadata lines, and the truth behind it.
@@ -67,8 +81,7 @@ class RigRecord:
         if acc_unit == "g":
             meta["units"] = "s, g (accelerations), m, m/s"
         suffix = path.suffix.lower()
-        if suffix not in WRITTEN:
-            raise RigError(f"{path}: the rig writes {', '.join(WRITTEN)} records")
+        check_written(path)
         options = {}
         if suffix == ".csv" and time_decimals is not None:
             if not 0 <= time_decimals <= 12:

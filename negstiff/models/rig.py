@@ -167,6 +167,8 @@ class Rig:
             if effect.dissipative and value < 0:
                 raise RigError(f"effect {name} = {value:g} {effect.units}: a {name.replace('_', ' ')} dissipates "
                                "energy, its value is >= 0 on a physical device")  # fmt: skip
+        if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+            raise RigError(f"seed must be a whole number >= 0 (numpy's SeedSequence), got {seed!r}")
         if not (fs > 0 and math.isfinite(fs)):
             raise RigError(f"sampling rate must be positive, got {fs}")
         if int(oversample) < 1:

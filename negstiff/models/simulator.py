@@ -27,6 +27,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import signal
 
+from negstiff.errors import InputError
+
 from . import effects
 from .kernel import KINDS, P_M, STATUS_DIVERGED, STATUS_GEOMETRY, STATUS_OK, kernel
 
@@ -114,7 +116,7 @@ def input_gain(input_kind: str, masses: np.ndarray) -> np.ndarray:
         return -np.ones_like(masses)
     if input_kind == "force":
         return 1.0 / masses
-    raise ValueError(f"input kind must be 'base_acc' or 'force', got {input_kind!r}")
+    raise InputError(f"input kind must be 'base_acc' or 'force', got {input_kind!r}")
 
 
 def cores() -> int:
@@ -145,21 +147,21 @@ def checked_input(u, dt: float, substeps: int, input_index, nb: int, staged: boo
     # strided input, a read-only start state) was compiled again, 5-10 s each on a fresh install
     u2 = np.require(np.atleast_2d(np.asarray(u, dtype=np.float64)), requirements=("C", "W"))
     if u2.ndim != 2 or u2.shape[1] < 2:
-        raise ValueError("input needs at least two samples")
+        raise InputError("input needs at least two samples")
     if not np.all(np.isfinite(u2)):
-        raise ValueError("input contains NaN or inf")
+        raise InputError("input contains NaN or inf")
     if not (dt > 0 and math.isfinite(dt)):
-        raise ValueError(f"sample interval must be positive, got {dt}")
+        raise InputError(f"sample interval must be positive, got {dt}")
     if int(substeps) < 1:
-        raise ValueError("substeps must be >= 1")
+        raise InputError("substeps must be >= 1")
     uidx = np.zeros(nb, dtype=np.int64) if input_index is None else np.asarray(input_index, dtype=np.int64)
     if uidx.shape != (nb,) or uidx.min() < 0 or uidx.max() >= u2.shape[0]:
-        raise ValueError("input_index must give one valid input row per batch member")
+        raise InputError("input_index must give one valid input row per batch member")
     n = u2.shape[1]
     if staged:
         r = 2 * int(substeps)
         if (n - 1) % r or n < r + 1:
-            raise ValueError(f"a staged input needs 2 substeps (N - 1) + 1 columns (substeps {substeps}), got {n}")
+            raise InputError(f"a staged input needs 2 substeps (N - 1) + 1 columns (substeps {substeps}), got {n}")
         n = (n - 1) // r + 1
     return u2, uidx, n
 
@@ -170,21 +172,21 @@ def _checked(params, lay: effects.Layout, kind: str, u, dt: float, substeps: int
     if p.ndim == 1:
         p = p[:, None]
     if p.shape[0] != lay.size:
-        raise ValueError(
+        raise InputError(
             f"params must have {lay.size} rows (the effect registry's layout), got shape {p.shape}: "
             "kernel parameters made before an effect was registered?"
         )
     nb = p.shape[1]
     if not np.all(np.isfinite(p)):
-        raise ValueError("simulation parameters contain NaN or inf")
+        raise InputError("simulation parameters contain NaN or inf")
     if np.any(p[P_M] <= 0):
-        raise ValueError("simulation mass must be positive")
+        raise InputError("simulation mass must be positive")
     if kind not in KINDS:
-        raise ValueError(f"kind must be one of {sorted(KINDS)}, got {kind!r}")
+        raise InputError(f"kind must be one of {sorted(KINDS)}, got {kind!r}")
     u2, uidx, n = checked_input(u, dt, substeps, input_index, nb, staged)
     x0 = np.broadcast_to(np.asarray(x0, dtype=np.float64), (nb, 2))
     if not np.all(np.isfinite(x0)):
-        raise ValueError("initial state contains NaN or inf")
+        raise InputError("initial state contains NaN or inf")
     return p, u2, uidx, x0, n
 
 
@@ -349,7 +351,7 @@ def simulate(
     """
     if hasattr(system, "n_dof"):  # a structure of N DOFs simulates itself (``Structure.simulate``)
         if v0:
-            raise ValueError("a structure starts from rest (v0 = 0); give z0, the element's relative displacement")
+            raise InputError("a structure starts from rest (v0 = 0); give z0, the element's relative displacement")
         return system.simulate(u, dt, z0=z0, input_kind=input_kind, substeps=substeps, z_limit=z_limit,
                                v_limit=v_limit)  # fmt: skip
     if z0 is None:

@@ -162,7 +162,10 @@ class Structure:
     at: tuple[int, int] | None = None
 
     def __post_init__(self):
-        masses = tuple(effects.finite(f"m{i + 1}", m) for i, m in enumerate(np.atleast_1d(self.masses)))
+        try:
+            masses = tuple(effects.finite(f"m{i + 1}", m) for i, m in enumerate(np.atleast_1d(self.masses)))
+        except ValueError as exc:  # not a number: negstiff's error, the registry's words
+            raise InputError(str(exc)) from None
         if not masses or min(masses) <= 0:
             raise InputError(f"structure masses must be positive, got {list(masses)}")
         n = len(masses)

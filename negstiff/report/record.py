@@ -99,7 +99,12 @@ def report_records(
     from negstiff.inference.record.measurement import load
     from negstiff.inference.steps.frame import pin_frame
 
+    if nfrc:
+        raise InputError("--nfrc: a single record's report draws no NFRC (a campaign's bifurcation map overlays "
+                         "them); give a campaign's records or folder")  # fmt: skip
     rec = load(paths[0], columns=columns, fs=fs, mass=mass, gravity=gravity, aux=aux)
+    if forcing_hz is not None:
+        check_forcing(rec, forcing_hz)
     f_h = forcing_hz or harmonic_frequency(rec)
     kind = HARMONIC if f_h else BROADBAND
     chosen = _only(only, kind)
@@ -110,6 +115,7 @@ def report_records(
     except InputError:
         pass
     rep.add(rec)
+    failed: list[str] = []
     for name, title, run in runs:
         start = time.perf_counter()
         say(f"report: {title} ...")
@@ -118,6 +124,7 @@ def report_records(
         except InputError as exc:
             rep.add_failure(title, " ".join(str(exc).split()))
             say(f"report: {title}: not made ({exc})")
+            failed.append(f"{title}: {' '.join(str(exc).split())}")
             continue
         except Exception as exc:  # noqa: BLE001 - a section's failure is shown in its place, the rest written
             rep.add_failure(title, f"{type(exc).__name__}: {' '.join(str(exc).split())} (a fault of negstiff's: "
@@ -129,9 +136,37 @@ def report_records(
             rep.warning("The record crosses between the wells: its FRF is not an underlying-linear system's (the "
                         "FRF of a low-level record around one well is; NSI gives each well's here).")  # fmt: skip
         say(f"report: {title} done ({time.perf_counter() - start:.1f} s)")
+    if runs and len(failed) == len(runs):  # a report of nothing but "not made" is no result
+        more = f" (and {len(failed) - 1} more: {', '.join(t for t, _, _ in runs[1:])})" if len(failed) > 1 else ""
+        raise InputError(f"{rec.source}: no section of the report could be made: {failed[0]}{more}")
     if kind == HARMONIC and f_h:
         rep.add(harmonic_next_steps(f_h))
     return rep
+
+
+def check_forcing(rec, forcing_hz: float, option: str = "--forcing-hz") -> None:
+    """Refuse (``InputError``) a forcing frequency [Hz] above the record's usable band (``USABLE_BAND_FRACTION``
+    of its sampling rate: its anti-aliasing filter's roll-off, where no forcing phase can be read), before any
+    analysis.
+
+    Parameters
+    ----------
+    rec : Measurement
+        The record.
+    forcing_hz : float
+        The stated forcing frequency [Hz].
+    option : str
+        How the user gave it, for the message.
+    """
+    from negstiff.io.schema import USABLE_BAND_FRACTION
+
+    top = USABLE_BAND_FRACTION * rec.fs
+    if not 0 < forcing_hz <= top:
+        raise InputError(
+            f"{option} {forcing_hz:g}: {rec.fs / forcing_hz:.2g} samples a forcing period at {rec.fs:g} Hz; "
+            f"{rec.source} resolves a forcing up to {top:g} Hz ({USABLE_BAND_FRACTION:g} fs, below its "
+            "anti-aliasing filter's roll-off)"
+        )
 
 
 def harmonic_next_steps(forcing_hz: float):

@@ -41,6 +41,10 @@ PERIODIC_CORRELATION = 0.999
 is periodic (a multisine, a periodic chirp): its spectrum is lines 1/period apart."""
 
 
+MIN_SEGMENT_SAMPLES = 64
+"""The shortest averaging segment [samples] an FRF is estimated on (a record gives two at least)."""
+
+
 def input_period(rec: Measurement) -> int | None:
     """The period [samples] of a periodic input (``PERIODIC_CORRELATION``), else None."""
     u = rec.u - rec.u.mean()
@@ -73,8 +77,10 @@ def estimate(rec: Measurement, segment_s: float = SEGMENT_S, period: int | None 
     else:
         nper = int(min(rec.n // 2, round(segment_s * rec.fs)))
         kw = {"fs": rec.fs, "nperseg": nper, "window": "hann", "noverlap": nper // 2, "detrend": "constant"}
-    if nper < 64:
-        raise MeasurementError(f"{rec.source}: too few samples for an FRF ({rec.n}); need at least 128")
+    if nper < MIN_SEGMENT_SAMPLES:
+        raise MeasurementError(
+            f"{rec.source}: too few samples for an FRF ({rec.n}); need at least {2 * MIN_SEGMENT_SAMPLES}"
+        )
     f, gxx = signal.welch(rec.u, **kw)
     _, gyy = signal.welch(rec.z, **kw)
     _, gxy = signal.csd(rec.u, rec.z, **kw)  # conj(X) Y: H1 = G_xy / G_xx
@@ -153,6 +159,7 @@ def check_frf(rec: Measurement, band: tuple[float, float] | None = None) -> None
     """Refuse (``MeasurementError``, one line) what no FRF can be estimated from: an input or a response
     that does not move, a band beyond the Nyquist frequency.
     """
+    rec.require(2 * MIN_SEGMENT_SAMPLES, "an FRF")  # two averaging segments at least
     rec.require_excitation("an FRF")
     rec.require_motion("an FRF")
     if band is not None and not (0 <= band[0] < band[1] <= rec.fs / 2):
