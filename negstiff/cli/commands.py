@@ -44,11 +44,14 @@ def make_rig(args):
 
 
 def cmd_rig(args) -> int:
+    from negstiff.models.records import check_written
+
     rig = make_rig(args)
     if args.mode == "campaign":
         write_campaign(rig, args)
         return 0
     out = out_path(args)
+    check_written(out)  # the suffix, before the simulation
     start = "plus" if args.start == "both" else args.start
     if args.mode == "random":
         kw = {"duration": args.duration, "rms": args.rms, "band": tuple(args.band), "start": start}
@@ -116,19 +119,21 @@ def cmd_simulate(args) -> int:
     from negstiff.inference.steps.validation import simulate_measured
     from negstiff.models.device import load_system
     from negstiff.models.effects import measured_channels
+    from negstiff.models.equation import check_dissipation
 
     system = load_system(args.model)
     if hasattr(system, "n_dof"):  # a structure of N DOFs: its responses z1 ... zN and velocities
         return _simulate_structure(args, system)
+    check_dissipation(getattr(system, "extra", {}), str(args.model))
     # the measured channels the model's aux:NAME terms need are read with the input, unless --aux names others
     needed = list(measured_channels(getattr(system, "extra", {})))
     rec = load(args.input, columns=args.columns, fs=args.fs, response=False, gravity=args.gravity,
                aux=args.aux if args.aux is not None else needed)  # fmt: skip
     rec.require(2, "a simulation")
-    say(args, f"simulate: {rec.n} samples at {rec.fs:g} Hz under {rec.input_name}")
     res = simulate_measured(system, rec, args.z0, args.v0, args.interpolation, args.substeps)
-    if res.diverged[0]:
+    if res.diverged[0]:  # the refusal is the one line: the progress line follows a run that did not diverge
         raise InputError(f"simulation of {args.model} under {args.input} failed: {res.describe_failures()}")
+    say(args, f"simulate: {rec.n} samples at {rec.fs:g} Hz under {rec.input_name}")
     assert res.z_dot is not None  # simulate_measured stores the velocity
     data = np.column_stack([rec.t, rec.u, res.z[0], res.z_dot[0]])
     with atomic_path(args.out) as tmp:
@@ -328,6 +333,7 @@ def parse_wells(text: str | None) -> tuple[float, ...] | None:
 def cmd_characterize(args) -> int:
     from negstiff.inference.analysis.characterize import characterize, check_harmonic
     from negstiff.inference.record.measurement import load
+    from negstiff.report.record import check_forcing
 
     given = parse_wells(args.wells)  # the options before any work
     rec = load(args.data, columns=args.columns, fs=args.fs, gravity=args.gravity)
@@ -336,10 +342,7 @@ def cmd_characterize(args) -> int:
         if col is None:
             raise InputError(f"{args.data}: no column {args.signal!r} to analyse (choose z, y, z_dot or base_disp)")
         rec = dataclasses.replace(rec, z=col)
-    if not args.forcing_hz < rec.fs / 2:
-        raise InputError(
-            f"--forcing-hz {args.forcing_hz:g}: above the Nyquist frequency of {args.data} ({rec.fs / 2:g} Hz)"
-        )
+    check_forcing(rec, args.forcing_hz)  # within the record's usable band (2 samples a period are not)
     check_harmonic(rec, args.forcing_hz)
     say(args, f"characterize: {rec.n} samples at {rec.fs:g} Hz, forcing {args.forcing_hz:g} Hz")
     r = characterize(rec, args.forcing_hz, given if given is not None else "auto")

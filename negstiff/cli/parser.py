@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from negstiff.io.schema import GRAVITY_RANGE, SAMPLING_RATE_RANGE_HZ
+from negstiff.io.schema import GRAVITY_RANGE, MAGNITUDE_LIMITS, SAMPLING_RATE_RANGE_HZ
 from negstiff.models import effects
 
 from . import commands as c
@@ -362,7 +362,8 @@ def _posterior(sub, common: argparse.ArgumentParser, data_opts: argparse.Argumen
     )
     pst.add_argument(
         "--input-noise",
-        type=declared(POST, "input_noise"),
+        # the declared range, capped where no record's input reaches (its noise beyond is no measurement)
+        type=number(float, declared(POST, "input_noise").lo, MAGNITUDE_LIMITS["force"], what=" (m/s^2 or N)"),
         default=default(POST, "input_noise"),
         help="the input sensor's white noise rms [m/s^2, or N for a force] (default: read from the input's spectral "
         "floor above the excitation's band; 0: the input taken as exact)",
