@@ -66,6 +66,15 @@ class PosteriorResult:
         """Each draw's log likelihood per window (None when not kept)."""
         return self._idata_and_loglik()[1]
 
+    def arviz_summary(self, hdi_prob: float = 0.9):
+        """``arviz.summary`` of ``idata`` at negstiff's interval: the ``hdi_prob`` highest-density interval
+        (arviz's own default is an 89 % equal-tailed one). Passed as arguments, not set in ``az.rcParams``,
+        so the user's session keeps its own defaults.
+        """
+        import arviz as az
+
+        return az.summary(self.idata, ci_prob=hdi_prob, ci_kind="hdi")
+
     # --- NetCDF: the arviz data with the run's draws and provenance ------------------------------------
     def to_netcdf(self, path) -> None:
         """Write the arviz data (``idata``) as NetCDF (h5netcdf), with a ``negstiff_run`` group holding the
