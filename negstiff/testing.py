@@ -39,7 +39,41 @@ from typing import Any
 import numpy as np
 
 __all__ = ["assert_agree", "assert_covers", "assert_methods_agree", "assert_predicts", "assert_wells_agree",
-           "well_frequencies"]  # fmt: skip
+           "cached_fit", "well_frequencies"]  # fmt: skip
+
+
+def cached_fit(estimator, record, cache):
+    """``estimator`` fitted on ``record``, from the folder ``cache`` when a fit of the same estimator class,
+    parameters, record (its input, response, rate and mass) and negstiff version is there (a pickle), else
+    fitted and kept there: a pytest file that checks facts about slow fits pays for them once, not every
+    session (``cache``: e.g. ``request.config.cache.mkdir("negstiff-fits")``). A pickle is read only from a
+    folder of your own.
+    """
+    import hashlib
+    import json
+    import pickle
+    from pathlib import Path
+
+    import negstiff
+    from negstiff.files import atomic_path
+    from negstiff.inference.estimators.persistence import encode_param
+
+    h = hashlib.sha256()
+    params = {k: encode_param(v) for k, v in estimator.get_params(deep=False).items()}
+    h.update(json.dumps([type(estimator).__qualname__, params, negstiff.__version__], sort_keys=True,
+                        default=str).encode())  # fmt: skip
+    for a in (record.u, record.z):
+        if a is not None:
+            h.update(np.ascontiguousarray(a, float).tobytes())
+    h.update(repr((float(record.fs), record.mass, record.input_name)).encode())
+    path = Path(cache) / f"{type(estimator).__name__}-{h.hexdigest()[:24]}.pkl"
+    if path.is_file():
+        return pickle.loads(path.read_bytes())
+    fitted = estimator.fit(record)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with atomic_path(path) as tmp:
+        Path(tmp).write_bytes(pickle.dumps(fitted))
+    return fitted
 
 
 def _summary(posterior) -> Mapping[str, Mapping[str, float]]:
