@@ -143,3 +143,18 @@ def test_discrepancy_pickles_and_round_trips(record):
     back = Discrepancy.from_json(disc.to_json())
     assert text(back.to_json()) == text(disc.to_json())
     assert back.fitted and back.model_ == disc.model_
+
+
+def test_seed_takes_none_an_integer_or_a_generator():
+    # scikit-learn's random_state: a Generator's next draw seeds the run, and the integer used is recorded
+    from negstiff import GAUpdater
+    from negstiff.errors import InputError
+
+    targets = {"f_minus": 11.45, "f_plus": 9.20, "z_minus": -0.0287, "z_plus": 0.0228}
+    runs = [GAUpdater(fixed_mass=0.212, generations=2, pop_size=8, seed=s).fit(targets)
+            for s in (5, None, np.random.default_rng(1), np.random.default_rng(1))]  # fmt: skip
+    seeds = [r.result()["settings"]["seed"] for r in runs]
+    assert seeds[0] == 5 and isinstance(seeds[1], int) and seeds[2] == seeds[3]
+    assert runs[2].device_.E == runs[3].device_.E  # the same generator state, the same run
+    with pytest.raises(InputError, match="Generator"):
+        GAUpdater(seed=-1).fit(targets)

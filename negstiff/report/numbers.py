@@ -17,3 +17,15 @@ def fmt(x: Any, digits: int = 4) -> str:
             return f"{x:.{digits - 1}e}"
         return f"{x:.{digits}g}"
     return str(x)
+
+
+def fmt_interval(lo: float, hi: float, digits: int = 4) -> tuple[str, str]:
+    """The two ends of an interval, each with ``digits`` significant figures or as many more as it takes
+    for them to read apart (up to 15): ``7.770e+05`` and ``7.770e+05`` become ``7.7698e+05`` and
+    ``7.7704e+05``. Equal ends print equal.
+    """
+    for d in range(digits, 16):
+        a, b = fmt(lo, d), fmt(hi, d)
+        if a != b or lo == hi:
+            return a, b
+    return fmt(lo, 15), fmt(hi, 15)

@@ -21,7 +21,7 @@ from typing import Any
 
 import numpy as np
 
-from .numbers import fmt
+from .numbers import fmt, fmt_interval
 
 COEFFICIENTS = ("k1", "k2", "k3", "c", "c_nl")
 """The coefficients every report's table holds (the contract's model fields)."""
@@ -219,7 +219,7 @@ def posterior_section(post, label: str = "") -> Section:
     if "k3" in sec.interval:
         mean, lo, hi = sec.interval["k3"]
         sec.summary.append(
-            f"The posterior puts k3 at {fmt(mean)} N/m^3 ({pct:g} % interval {fmt(lo)} to {fmt(hi)})"
+            f"The posterior puts k3 at {fmt(mean)} N/m^3 ({pct:g} % interval {" to ".join(fmt_interval(lo, hi))})"
             + ("." if res["converged"] else "; its chains did not converge (warnings).")
         )
     sec.json = res

@@ -170,9 +170,43 @@ class Instance(Constraint):
 SEED = Interval(int, 0, 2**32 - 1)
 """A random seed: numpy's SeedSequence takes any non-negative integer; the command line's 32 bits."""
 
+@dataclass(frozen=True)
+class RandomState(Interval):
+    """A seed as scikit-learn's ``random_state``: a non-negative integer (``lo``-``hi``), None (fresh entropy:
+    not reproducible) or a ``numpy.random.Generator`` (its next draw seeds the run); ``seed_of`` resolves it
+    in ``fit``, where the seed used is recorded.
+    """
+
+    @override
+    def accepts(self, value: Any) -> bool:
+        import numpy as np
+
+        return isinstance(value, np.random.Generator) or super().accepts(value)
+
+    @override
+    def describe(self) -> str:
+        return super().describe() + " or a numpy.random.Generator"
+
+
+def seed_of(seed: Any) -> int:
+    """The integer seed a ``RandomState`` parameter gives: itself, a fresh one (None), or the next draw of a
+    ``numpy.random.Generator`` (so one generator seeds several fits differently, as in scikit-learn).
+    """
+    import numpy as np
+
+    if seed is None:
+        return int(np.random.SeedSequence().generate_state(1)[0])
+    if isinstance(seed, np.random.Generator):
+        return int(seed.integers(0, 2**31 - 1))
+    return int(seed)
+
+
+RANDOM_STATE = RandomState(int, 0, 2**32 - 1, none=True)
+"""A seed, None or a ``numpy.random.Generator`` (``RandomState``)."""
+
 FRACTION = Interval(float, 0.0, 1.0, lo_open=True, hi_open=True)
 """A share of a record, strictly between none and all of it."""
 
-NAMESPACE = {c.__name__: c for c in (Interval, Options, Boolean, Pair, Several, Instance)} | {
-    "int": int, "float": float, "SEED": SEED, "FRACTION": FRACTION}  # fmt: skip
+NAMESPACE = {c.__name__: c for c in (Interval, Options, Boolean, Pair, Several, Instance, RandomState)} | {
+    "int": int, "float": float, "SEED": SEED, "RANDOM_STATE": RANDOM_STATE, "FRACTION": FRACTION}  # fmt: skip
 """What a declaration may name (``negstiff.cli.common.declared`` evaluates declarations in it)."""

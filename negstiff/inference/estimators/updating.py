@@ -28,7 +28,7 @@ import numpy as np
 
 from negstiff.errors import InputError
 from negstiff.inference.estimators.base import Estimator
-from negstiff.inference.estimators.parameters import SEED, Instance, Interval, Options
+from negstiff.inference.estimators.parameters import RANDOM_STATE, Instance, Interval, Options, seed_of
 from negstiff.models import NOMINAL, Device
 
 FEATURES = ("f_minus", "f_plus", "z_minus", "z_plus")
@@ -176,8 +176,9 @@ class GAUpdater(Estimator):
     fixed_mass : float, optional
         Weighed mass [kg]: only E and alpha are updated (E and m are not separately identifiable from
         the features).
-    seed : int, default 0
-        The GA's random seed (same seed, same result).
+    seed : int, None or numpy.random.Generator, default 0
+        The GA's random seed (same seed, same result); None: fresh entropy; a Generator: its next draw. The
+        integer used is ``settings["seed"]`` (``seed_``).
     compare : {"auto", "features", "force"}, default "auto"
         What is matched: the features, or (``auto`` when the targets hold a model and its stroke) the
         restoring force.
@@ -210,7 +211,7 @@ class GAUpdater(Estimator):
         "generations": Interval(int, 1, 10**5),
         "bounds": Instance("negstiff.inference.estimators.updating", "Bounds"),
         "fixed_mass": Interval(float, 1e-9, 1e9, unit="kg", none=True),
-        "seed": SEED,
+        "seed": RANDOM_STATE,
         "compare": Options(("auto", "features", "restoring_force")),
     }
 
@@ -222,7 +223,7 @@ class GAUpdater(Estimator):
         generations: int = 120,
         bounds: Bounds = Bounds(),
         fixed_mass: float | None = None,
-        seed: int = 0,
+        seed: int | np.random.Generator | None = 0,
         compare: str = "auto",
     ):
         self.start, self.pop_size, self.generations = start, pop_size, generations
@@ -283,6 +284,7 @@ class GAUpdater(Estimator):
     def fit(self, targets: Mapping[str, float], progress=None) -> GAUpdater:
         """Run the GA against ``targets`` (``f_minus, f_plus`` [Hz], ``z_minus, z_plus`` [m])."""
         targets = self.check(targets)
+        self.seed_ = seed_of(self.seed)  # None or a Generator: the integer drawn here (the result's settings)
         from pymoo.algorithms.soo.nonconvex.ga import GA
         from pymoo.core.callback import Callback
         from pymoo.core.problem import Problem
@@ -341,7 +343,7 @@ class GAUpdater(Estimator):
             pop_size=self.pop_size, crossover=SBX(prob=0.9, eta=15), mutation=PM(eta=20), eliminate_duplicates=True
         )
         res = minimize(
-            DeviceProblem(), alg, ("n_gen", self.generations), seed=self.seed, callback=Record(), verbose=False
+            DeviceProblem(), alg, ("n_gen", self.generations), seed=self.seed_, callback=Record(), verbose=False
         )
         x = np.atleast_1d(res.X)
         self.device_ = self._device(x)
@@ -375,6 +377,7 @@ class GAUpdater(Estimator):
         self.fitness_, self.objective_ = result["fitness_percent"], result["objective_percent"]
         self.features_, self.exact_features_ = result.get("features"), result.get("exact_features")
         self.history_, self.targets_ = result.get("generations", []), result.get("targets") or {}
+        self.seed_ = result.get("settings", {}).get("seed", self.seed)
 
     def result(self) -> dict[str, Any]:
         """The contract's update JSON (plus features, targets, E/m and settings)."""
@@ -397,7 +400,7 @@ class GAUpdater(Estimator):
             "settings": {
                 "pop_size": self.pop_size,
                 "generations": self.generations,
-                "seed": self.seed,
+                "seed": self.seed_,
                 "bounds": vars(self.bounds),
                 "algorithm": "pymoo GA, SBX(0.9, 15), PM(20), elitist",
             },

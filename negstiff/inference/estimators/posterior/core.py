@@ -13,7 +13,7 @@ from scipy import optimize
 
 from negstiff.errors import ConvergenceWarning, MeasurementError, issue
 from negstiff.inference.estimators.base import Estimator
-from negstiff.inference.estimators.parameters import SEED, Boolean, Instance, Interval, Options
+from negstiff.inference.estimators.parameters import RANDOM_STATE, Boolean, Instance, Interval, Options, seed_of
 from negstiff.inference.estimators.persistence import provenance
 from negstiff.inference.estimators.posterior.diagnostics import (
     PosteriorResult,
@@ -70,8 +70,9 @@ class Posterior(Estimator):
         estimated from the input's own spectral floor (``input_noise_rms``); 0: the input taken as exact.
     threads : int, optional
         Threads for the batched likelihood (default: ``NEGSTIFF_THREADS`` or the cores).
-    seed : int, default 0
-        Seeds every draw (same seed, same posterior).
+    seed : int, None or numpy.random.Generator, default 0
+        Seeds every draw (same seed, same posterior); None: fresh entropy; a Generator: its next draw
+        (scikit-learn's ``random_state``). The integer used is ``settings["seed"]``.
     progress : bool, default False
         A progress bar over emcee's steps.
     start : Model, optional
@@ -118,7 +119,7 @@ class Posterior(Estimator):
         "adjust": Boolean(),
         "input_noise": Interval(float, 0.0, none=True),
         "threads": Interval(int, 1, 1024, none=True),
-        "seed": SEED,
+        "seed": RANDOM_STATE,
         "progress": Boolean(),
         "start": Instance("negstiff.models.equation", "Model", none=True),
         "refine_start": Boolean(),
@@ -142,7 +143,7 @@ class Posterior(Estimator):
         adjust: bool = True,
         input_noise: float | None = None,
         threads: int | None = None,
-        seed: int = 0,
+        seed: int | np.random.Generator | None = 0,
         progress: bool = False,
         start: Model | None = None,
         refine_start: bool = True,
@@ -344,6 +345,7 @@ class Posterior(Estimator):
     def fit(self, rec: Measurement) -> Posterior:
         """Sample the posterior of ``rec``; the result is ``result_`` (a ``PosteriorResult``)."""
         rec = self.check(rec)
+        seed = seed_of(self.seed)  # None or a Generator: the integer drawn here, recorded in the settings
 
         t_start = time.perf_counter()
         par, win, theta, sol, sigma = self.point_estimate(rec)
@@ -379,7 +381,7 @@ class Posterior(Estimator):
             nd,
             n_walkers=self.n_walkers,
             n_ensembles=self.n_ensembles,
-            seed=self.seed,
+            seed=seed,
             tau_multiple=self.tau_multiple,
             min_steps=self.min_steps,
             max_steps=self.max_steps,
@@ -424,7 +426,7 @@ class Posterior(Estimator):
             "tau_max_steps": float(np.nanmax(tau_arr)) if np.isfinite(tau_arr).any() else None,
             "likelihood_calls": logpost.calls,
             "priors": par.description,
-            "seed": self.seed,
+            "seed": seed,
             "elapsed_s": time.perf_counter() - t_start,
             "moves": "DEMove 0.8, DESnookerMove 0.2",
             "start": self.start_info_,
