@@ -450,3 +450,68 @@ def test_library_refusals_are_one_input_error(call):
         with pytest.raises(InputError) as info:
             call(u, z)
     assert "\n" not in str(info.value).strip(), str(info.value)
+
+
+# --- the hypothesis search over the library's constructors --------------------------------------------------
+from hypothesis import HealthCheck, given, settings  # noqa: E402
+from hypothesis import strategies as st  # noqa: E402
+
+CARELESS = st.one_of(
+    st.none(),
+    st.booleans(),
+    st.text(max_size=4),
+    st.sampled_from([0, -1, 1, 0.2, -0.2, 1e300, -1e300, float("nan"), float("inf"), 1 + 2j, 2**70]),
+    st.floats(allow_nan=True, allow_infinity=True),
+    st.lists(st.floats(-1e3, 1e3), max_size=3),
+    st.dictionaries(st.text(max_size=3), st.floats(-1, 1), max_size=2),
+)
+"""What a careless or unlucky caller passes for one number: nothing, text, a flag, a non-finite or huge value,
+a complex one, a list, a mapping."""
+
+LIBRARY_SETTINGS = settings(max_examples=120, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+
+
+def _clean_or_input_error(call) -> None:
+    """``call()`` returns, or raises one negstiff InputError with a one-line message; no other exception
+    and no warning (a ComplexWarning, an overflow)."""
+    import warnings
+
+    from negstiff.errors import InputError
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        try:
+            call()
+        except InputError as exc:
+            assert str(exc).strip() and "\n" not in str(exc).strip(), repr(exc)
+
+
+@LIBRARY_SETTINGS
+@given(name=st.sampled_from(["m", "k1", "k2", "k3", "c", "c_nl", "k0", "extra"]), value=CARELESS)
+def test_model_takes_any_value_or_says_which_is_wrong(name, value):
+    from negstiff import Model
+
+    kw = {"m": 0.2, "k1": 426.0, "k2": -3060.0, "k3": 7.77e5, "c": 3.5, "c_nl": 0.0}
+    _clean_or_input_error(lambda: Model(**{**kw, name: value}))
+
+
+@LIBRARY_SETTINGS
+@given(name=st.sampled_from(["seed", "fs", "oversample", "weigh_resolution", "effects"]), value=CARELESS)
+def test_rig_takes_any_setting_or_says_which_is_wrong(name, value):
+    from negstiff import Rig
+
+    _clean_or_input_error(lambda: Rig(**{name: value}))
+
+
+@LIBRARY_SETTINGS
+@given(
+    which=st.sampled_from(["u", "z", "fs", "input_name", "mass", "aux", "z_dot", "gravity"]),
+    value=st.one_of(CARELESS, st.builds(lambda n: np.ones(n), st.integers(0, 5))),
+)
+def test_from_arrays_takes_any_argument_or_says_which_is_wrong(which, value):
+    from negstiff import from_arrays
+
+    u, z = _u_z(1024)
+    kw = {"u": u, "z": z, "fs": FS, "mass": 0.2}
+    kw[which] = value
+    _clean_or_input_error(lambda: from_arrays(**kw))

@@ -24,7 +24,7 @@ Every record carries its truth (system, effects, sensors, excitation, seed), wri
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass
 from typing import Any
 
@@ -114,6 +114,11 @@ BYTES_PER_SAMPLE = 200
 channels at the simulation rate, and their FFTs): measured 200 on a 300 s random record, 72 on a campaign."""
 
 
+def _real(x) -> bool:
+    """A real number (not a flag, not text)."""
+    return not isinstance(x, bool) and isinstance(x, (int, float, np.integer, np.floating))
+
+
 class Rig:
     """The virtual shaking table with a device on it: records measured as a lab measures them.
 
@@ -156,12 +161,17 @@ class Rig:
         seed: int = 0,
         weigh_resolution: float | None = 1e-4,
     ):
+        if effects is not None and not isinstance(effects, Mapping):
+            raise RigError(f"effects must map effect names to values ({{'coulomb_friction': 0.1}}), got {effects!r}")
         if effects:
-            system = (
-                type(system).from_dict({**system.to_dict(), "extra": {**dict(system.extra), **effects}})
-                if isinstance(system, Model)
-                else system.with_(extra={**dict(system.extra), **effects})
-            )
+            try:  # the registry names a wrong effect or value; a program gets the rig's error for it
+                system = (
+                    type(system).from_dict({**system.to_dict(), "extra": {**dict(system.extra), **effects}})
+                    if isinstance(system, Model)
+                    else system.with_(extra={**dict(system.extra), **effects})
+                )
+            except (TypeError, ValueError, KeyError) as exc:
+                raise RigError(f"effects {effects!r}: {' '.join(str(exc).split())}") from None
         for name, value in system.extra.items():
             effect = effect_registry.get(name)
             if effect.dissipative and value < 0:
@@ -169,10 +179,14 @@ class Rig:
                                "energy, its value is >= 0 on a physical device")  # fmt: skip
         if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
             raise RigError(f"seed must be a whole number >= 0 (numpy's SeedSequence), got {seed!r}")
-        if not (fs > 0 and math.isfinite(fs)):
-            raise RigError(f"sampling rate must be positive, got {fs}")
-        if int(oversample) < 1:
-            raise RigError("oversample must be >= 1")
+        if not (_real(fs) and fs > 0 and math.isfinite(fs)):
+            raise RigError(f"sampling rate must be positive, got {fs!r}")
+        if isinstance(oversample, bool) or not isinstance(oversample, (int, np.integer)) or oversample < 1:
+            raise RigError(f"oversample must be a whole number >= 1, got {oversample!r}")
+        if weigh_resolution is not None and not (
+            _real(weigh_resolution) and 0 < weigh_resolution and math.isfinite(weigh_resolution)
+        ):
+            raise RigError(f"weigh_resolution must be None or a positive mass [kg], got {weigh_resolution!r}")
         self.system = system
         self.sensors = sensors
         self.fs = float(fs)

@@ -903,7 +903,7 @@ def from_arrays(
     >>> two.n_dof, two.masses
     (2, (1.0, 0.2))
     """
-    if input_name not in INPUTS:
+    if not isinstance(input_name, str) or input_name not in INPUTS:
         raise MeasurementError(f"input must be one of {INPUTS}, got {input_name!r}")
     source = kw.get("source", "<memory>")
     if u is None:
@@ -912,6 +912,9 @@ def from_arrays(
     if aux_given is not None and not isinstance(aux_given, Mapping):
         raise MeasurementError(f"{source}: aux must map names to channels ({{'voltage': v}}), got "
                                f"{type(aux_given).__name__}")  # fmt: skip
+    for key in aux_given or {}:
+        if not isinstance(key, str) or not key.strip() or key.splitlines() != [key]:
+            raise MeasurementError(f"{source}: aux channel names are one line of text, got {key!r}")
     for name, values in (("u", u), ("z", z), *((k, kw.get(k)) for k in OPTIONAL), *dict(aux_given or {}).items()):
         if values is not None and np.iscomplexobj(values):  # np.asarray(float) would drop the imaginary part
             raise MeasurementError(f"{source}: {name} is complex: a record's samples are real numbers")
