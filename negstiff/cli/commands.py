@@ -51,11 +51,11 @@ def cmd_rig(args) -> int:
         write_campaign(rig, args)
         return 0
     out = out_path(args)
-    check_written(out)  # the suffix, before the simulation
     start = "plus" if args.start == "both" else args.start
     if args.mode == "random":
         kw = {"duration": args.duration, "rms": args.rms, "band": tuple(args.band), "start": start}
         rig.check_random(**kw)
+        check_written(out)  # the suffix, before the simulation
         say(args, f"rig random: {args.duration:g} s at {rig.fs:g} Hz, {args.rms:g} m/s^2 rms")
         rec = rig.random(**kw)
         what = f"{rec.columns['t'].size} samples at {rig.fs:g} Hz"
@@ -63,11 +63,13 @@ def cmd_rig(args) -> int:
         kw = {"f_start": args.f_start, "f_stop": args.f_stop, "amplitude": args.amplitude, "duration": args.duration,
               "mode": args.sweep_mode, "start": start}  # fmt: skip
         rig.check_sine_sweep(**kw)
+        check_written(out)  # the suffix, before the simulation
         say(args, f"rig sweep: {args.f_start:g}-{args.f_stop:g} Hz over {args.duration:g} s")
         rec = rig.sine_sweep(**kw)
         what = f"sine sweep {args.f_start:g}-{args.f_stop:g} Hz, {args.amplitude:g} m/s^2"
     else:
         rig.check_sweeps(args.freq, [[args.amplitude]], [args.start], args.settle_periods, args.periods)
+        check_written(out)  # the suffix, before the simulation
         say(args, f"rig harmonic: {args.freq:g} Hz, {args.amplitude:g} m/s^2")
         rec = rig.harmonic(args.freq, args.amplitude, args.start, args.settle_periods, args.periods)
         what = f"{args.periods} periods at {args.freq:g} Hz, {args.amplitude:g} m/s^2"
