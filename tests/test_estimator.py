@@ -126,3 +126,39 @@ def test_learned_state_before_fit_is_not_fitted_error_and_fit_takes_records_only
 def test_fit_reads_a_path_with_the_same_checks(tmp_path):
     with pytest.raises(InputError, match="no such file"):
         NSI().fit(tmp_path / "absent.csv")
+
+
+STRUCTURE_ESTIMATORS = (NSI, SINDy, Discrepancy)
+"""The estimators of a method for any number of DOFs (``element=``): the same contract at N = 2."""
+
+
+@pytest.fixture(scope="module")
+def two_dof_record():
+    # 30 s of a device on a sprung fixture, written with a plain RK4 (records.rk4_fixture_record), 1 um noise
+    from records import FIXTURE, TRUTH, rk4_fixture_record
+
+    u, z = rk4_fixture_record(duration=30.0, rms=12.0, seed=3)
+    return from_arrays(u, z, 512.0, masses=(FIXTURE["m"], TRUTH.m), source="two DOFs")
+
+
+@pytest.mark.parametrize("cls", STRUCTURE_ESTIMATORS, ids=lambda c: c.__name__)
+def test_the_contract_holds_at_two_dofs(cls, two_dof_record, record):
+    # one class per method at N = 1 and N = 2: clone and params with element=, NotFittedError before fit, a bad
+    # element one InputError before any work (also on a single DOF's record), repr and to_json once fitted
+    est = cls(element="1-2")
+    copy = clone(est)
+    assert copy.get_params()["element"] == "1-2" and "not fitted" in repr(copy)
+    with pytest.raises(NotFittedError):
+        copy.result()
+    for bad in ("1", "2-2", (1, 2, 3), "x-1"):
+        with pytest.raises(InputError, match=rf"{cls.__name__}\(element=.*\): element must be"):
+            cls(element=bad).fit(two_dof_record)
+    with pytest.raises(InputError, match="element"):
+        cls(element="3-1").fit(two_dof_record)  # DOF 3 of two
+    with pytest.raises(InputError, match="element 1-2"):
+        cls(element="1-2").fit(record)
+    est.fit(two_dof_record)
+    assert repr(est).startswith(f"{cls.__name__}(element='1-2')") and "fitted: 2 DOFs" in repr(est)
+    out = est.to_json()
+    assert out["dofs"] == 2 and out["element_at"] == [1, 2] and set(out["modal"]) == {"minus", "plus"}
+    assert est.structure_.n_dof == 2 and len(est.offsets_) == 2

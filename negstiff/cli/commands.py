@@ -173,21 +173,27 @@ def cmd_identify(args) -> int:
     from negstiff.inference.analysis.frf import compare_with_frf, read_frf_results
     from negstiff.inference.record.measurement import load
 
-    if args.dofs > 1 or args.element is not None:
-        return _identify_structure(args)
-    rec = load(args.data, columns=args.columns, fs=args.fs, mass=args.mass, gravity=args.gravity, aux=args.aux)
+    masses = parse_amplitudes(args.masses, "--masses") if args.masses else None
+    rec = load(args.data, columns=args.columns, fs=args.fs, mass=args.mass, gravity=args.gravity, aux=args.aux,
+               masses=masses)  # fmt: skip
+    check_dofs(args, rec)
+    if rec.n_dof > 1 and args.frf:
+        raise InputError(f"--frf compares a single DOF's wells; {args.data} is a record of {rec.n_dof} DOFs")
     frfs = read_frf_results(args.frf)
     if args.method == "nsi":
         from negstiff.inference.estimators.nsi import NSI
 
         est: NSI | SINDy = NSI(
-            order=args.order, block_rows=args.block_rows, refine=not args.no_refine, progress=wants_progress(args)
-        )
+            order=args.order, block_rows=args.block_rows, refine=not args.no_refine, progress=wants_progress(args),
+            element=args.element,
+        )  # fmt: skip
     else:
         from negstiff.inference.estimators.sindy import SINDy
 
-        est = SINDy(n_models=args.ensemble, seed=args.seed, refine=not args.no_refine)
+        est = SINDy(n_models=args.ensemble, seed=args.seed, refine=not args.no_refine, element=args.element)
     rec = est.check(rec)  # every refusal before the progress line
+    if rec.n_dof > 1:
+        return _identify_structure(args, est, rec)
     say(args, f"identify {args.method}: {rec.n} samples at {rec.fs:g} Hz, input {rec.input_name}")
     est.fit(rec)
     result = est.result()
@@ -211,28 +217,18 @@ def cmd_identify(args) -> int:
     return 0
 
 
-def _identify_structure(args) -> int:
-    """``identify --dofs N --element I-J``: a structure's record through ``StructureNSI`` / ``StructureSINDy``."""
-    from negstiff.inference.estimators.structure_id import StructureNSI, StructureSINDy, modes_summary, parse_element
-    from negstiff.inference.record.measurement import load
+def check_dofs(args, rec) -> None:
+    """``--dofs N``: a check of the file (its responses z1 ... zN give N)."""
+    if args.dofs is not None and rec.n_dof != args.dofs:
+        have = "z" if rec.n_dof == 1 else f"z1 ... z{rec.n_dof}"
+        raise InputError(f"{args.data}: --dofs {args.dofs}, but the record has responses {have}")
 
-    for option, given in (("--columns", args.columns), ("--mass", args.mass), ("--aux", args.aux), ("--frf", args.frf)):
-        if given:
-            raise InputError(f"{option} is for a single-DOF record (a structure's record names z1 ... zN)")
-    if args.element is None:
-        raise InputError(f"--dofs {args.dofs} needs --element I-J (J the DOF the element moves, I where it is fixed)")
-    masses = parse_amplitudes(args.masses, "--masses") if args.masses else None
-    rec = load(args.data, fs=args.fs, masses=masses)
-    if rec.n_dof != args.dofs:
-        raise InputError(f"{args.data}: --dofs {args.dofs}, but the record has responses z1 ... z{rec.n_dof}")
-    element = parse_element(args.element, rec.n_dof)
-    est: StructureNSI | StructureSINDy
-    if args.method == "nsi":
-        est = StructureNSI(element=element, block_rows=args.block_rows)
-    else:
-        est = StructureSINDy(element=element)
-    say(args, f"identify {args.method}: {rec.n_dof} DOFs, element {element[0]}-{element[1]}, {rec.n} samples at "
-              f"{rec.fs:g} Hz")  # fmt: skip
+
+def _identify_structure(args, est, rec) -> int:
+    """``identify`` on a structure's record (N > 1 DOFs, ``--element I-J``): the same estimator, its result."""
+    from negstiff.inference.estimators.structure_id import modes_summary
+
+    say(args, f"identify {args.method}: {rec.n_dof} DOFs, element {args.element}, {rec.n} samples at {rec.fs:g} Hz")
     est.fit(rec)
     result = est.result()
     warn(args, result["warnings"])
@@ -370,9 +366,10 @@ def cmd_frf(args) -> int:
     from negstiff.report.figures import frf_figure
 
     band = parse_band(args.band)
-    if args.dofs > 1:
-        return _frf_structure(args, band)
     rec = load(args.data, columns=args.columns, fs=args.fs, gravity=args.gravity)
+    check_dofs(args, rec)
+    if rec.n_dof > 1:
+        return _frf_structure(args, band, rec)
     if band is not None and band[1] > rec.fs / 2:
         raise InputError(f"--band {args.band}: beyond the Nyquist frequency of {args.data} ({rec.fs / 2:g} Hz)")
     check_frf(rec, band)
@@ -389,17 +386,11 @@ def cmd_frf(args) -> int:
     return 0
 
 
-def _frf_structure(args, band) -> int:
-    """``frf DATA --dofs N``: every DOF's FRF from the input, the modes merged over DOFs."""
+def _frf_structure(args, band, rec) -> int:
+    """``frf DATA`` on a structure's record (N > 1 DOFs): every DOF's FRF from the input, the modes merged."""
     from negstiff.inference.analysis.frf import frf_structure
-    from negstiff.inference.record.measurement import load
     from negstiff.report.figures import frf_figure_dofs as figure_dofs
 
-    if args.columns:
-        raise InputError("--columns is for a single-DOF record (a structure's record names z1 ... zN)")
-    rec = load(args.data, fs=args.fs)  # FRFs need no masses
-    if rec.n_dof != args.dofs:
-        raise InputError(f"{args.data}: --dofs {args.dofs}, but the record has responses z1 ... z{rec.n_dof}")
     if band is not None and band[1] > rec.fs / 2:
         raise InputError(f"--band {args.band}: beyond the Nyquist frequency of {args.data} ({rec.fs / 2:g} Hz)")
     say(args, f"frf: {rec.n_dof} DOFs, {rec.n} samples at {rec.fs:g} Hz, input {rec.input_name}")

@@ -219,9 +219,8 @@ def _identify(sub, common: argparse.ArgumentParser, data_opts: argparse.Argument
     idf.add_argument(
         "--dofs",
         type=number(int, 1, 50),
-        default=1,
-        help="degrees of freedom of the structure the record measures (default 1; N > 1 reads responses z1 ... zN "
-        "and '# masses: m1,...,mN', and needs --element)",
+        help="degrees of freedom the record must measure (a check of the file: its responses z1 ... zN and "
+        "'# masses: m1,...,mN' give N; N > 1 needs --element)",
     )
     idf.add_argument(
         "--element",
@@ -255,8 +254,8 @@ def _frf(sub, common: argparse.ArgumentParser, data_opts: argparse.ArgumentParse
     frq.add_argument(
         "--dofs",
         type=number(int, 1, 50),
-        default=1,
-        help="degrees of freedom of a structure's record (responses z1 ... zN): the FRF to every DOF, modes merged",
+        help="degrees of freedom the record must measure (a check of the file; a structure's record, z1 ... zN, "
+        "gives the FRF to every DOF, modes merged)",
     )
     frq.set_defaults(func=c.cmd_frf)
 

@@ -35,6 +35,8 @@ import numpy as np
 from negstiff.errors import MeasurementError, issue
 from negstiff.inference.estimators.base import Estimator
 from negstiff.inference.estimators.parameters import FRACTION, Boolean, Constraint, Interval, Options, Several
+from negstiff.inference.estimators.structure_id import ElementPlace, StructureResults, element_of
+from negstiff.inference.estimators.structure_id import discrepancy as structure_discrepancy
 from negstiff.inference.record.measurement import Measurement
 from negstiff.inference.steps.plausibility import classified
 from negstiff.inference.steps.refine import refine_stage
@@ -125,7 +127,7 @@ class DiscrepancyError(MeasurementError):
     """The record cannot support the workflow (too short, no excitation)."""
 
 
-class Discrepancy(Estimator):
+class Discrepancy(StructureResults, Estimator):
     """The discrepancy workflow: locate where a model and the data disagree, name the missing effect,
     add it, refit, and show the gap shrink (``docs/methods/discrepancy.md``).
 
@@ -146,7 +148,11 @@ class Discrepancy(Estimator):
     refine : bool, default True
         Refine each model by output error (an effect is kept only if it then predicts better).
     unnamed : bool, default False
-        Add a non-parametric force for what no catalogue effect names (the hybrid model).
+        Add a non-parametric force for what no catalogue effect names (the hybrid model; a single DOF's).
+    element : str or (int, int), optional
+        Where the element acts on a record of N > 1 DOFs: ``"I-J"`` (``structure_id.discrepancy``: the element's
+        base law with the linear structure as the baseline, one round of the catalogue, the same paired block
+        rule). None: the single DOF.
 
     Attributes
     ----------
@@ -186,6 +192,7 @@ class Discrepancy(Estimator):
         "window_s": Interval(float, 0.0, lo_open=True, unit="s"),
         "refine": Boolean(),
         "unnamed": Boolean(),
+        "element": ElementPlace(),
     }
 
     def __init__(
@@ -199,7 +206,9 @@ class Discrepancy(Estimator):
         window_s: float = 2.0,
         refine: bool = True,
         unnamed: bool = False,
+        element: str | tuple[int, int] | None = None,
     ):
+        self.element = element
         self.refine = refine
         self.unnamed = unnamed
         self.baseline = baseline
@@ -391,6 +400,14 @@ class Discrepancy(Estimator):
             )
 
     def _check_record(self, rec: Measurement) -> None:
+        if element_of(self, rec) is not None:
+            if tuple(self.baseline) != CUBIC_BASELINE:
+                raise DiscrepancyError(f"Discrepancy(baseline={self.baseline!r}): a structure's baseline is its "
+                                       "element's cubic law with the linear structure (leave baseline at its "
+                                       "default)")  # fmt: skip
+            if self.unnamed:
+                raise DiscrepancyError("Discrepancy(unnamed=True): the non-parametric force is a single DOF's (a "
+                                       f"record of {rec.n_dof} DOFs)")  # fmt: skip
         rec.require(4000, "the discrepancy workflow")
         rec.require_excitation("the discrepancy workflow")
         rec.require_motion("the discrepancy workflow")
@@ -398,6 +415,11 @@ class Discrepancy(Estimator):
     def fit(self, rec: Measurement) -> Discrepancy:
         """Locate, name, add and refit on ``rec`` (a ``Measurement`` or a path); returns ``self``."""
         rec = self.check(rec)
+        at = element_of(self, rec)
+        if at is not None:
+            self.result_ = structure_discrepancy(self, rec, at)
+            self.model_ = self.result_.model
+            return self
         self._systems(rec)
         terms = tuple(self.baseline)
         stop: float | None = None
@@ -610,6 +632,8 @@ class Discrepancy(Estimator):
 
     @override
     def result(self) -> dict[str, Any]:
+        if "result_" in vars(self):  # a structure's (N > 1 DOFs)
+            return self.result_.to_json()
         last = self.iterations_[0] if self.iterations_ else {"ranking": []}  # max_effects = 0: the baseline only
         before = self.gap_before_.get("median_window_percent", math.inf)
         after = self.gap_after_.get("median_window_percent", math.inf)

@@ -43,6 +43,13 @@ from tqdm import tqdm
 from negstiff.errors import MeasurementError
 from negstiff.inference.estimators.identification import Estimate, Identifier, visited_well
 from negstiff.inference.estimators.parameters import FRACTION, Boolean, Interval, Pair
+from negstiff.inference.estimators.structure_id import (
+    ElementPlace,
+    StructureResults,
+    element_of,
+    identify_nsi,
+)
+from negstiff.inference.estimators.structure_id import stabilization as structure_stabilization
 from negstiff.inference.record.measurement import Measurement
 from negstiff.inference.steps.weak import known_input_gain, mass_of
 from negstiff.inference.steps.wells import well_guesses
@@ -115,8 +122,9 @@ def physical_pole(ss: subspace.StateSpace) -> complex:
     return complex(best)
 
 
-class NSI(Identifier):
-    """Nonlinear subspace identification around both stable wells.
+class NSI(StructureResults, Identifier):
+    """Nonlinear subspace identification around both stable wells, of a single DOF or of a structure of N DOFs
+    carrying the element between DOFs I-J (``element``; ``structure_id``).
 
     Each well's underlying-linear system and the nonlinear coefficients as feedback forces
     (``docs/methods/nsi.md``), combined into one z-frame model, validated on the held-out tail and
@@ -125,7 +133,8 @@ class NSI(Identifier):
     Parameters
     ----------
     order : int, default 2
-        State dimension of the ULS model (2 for a single-degree-of-freedom device).
+        State dimension of the ULS model per DOF (2: a single-degree-of-freedom device; a record of N DOFs is
+        identified at order x N).
     block_rows : int, default 30
         Block rows i of the Hankel matrices.
     band : (float, float), default (0.6, 1.6)
@@ -139,6 +148,10 @@ class NSI(Identifier):
         Finish by output-error refinement (kept only if it predicts the held-out tail no worse).
     progress : bool, default False
         A progress bar over the identification passes on stderr, shown once they take more than 2 s.
+    element : str or (int, int), optional
+        Where the element acts on a record of N > 1 DOFs: ``"I-J"``, it moves DOF J relative to DOF I (0: the
+        base). None: the single DOF (on the base). A structure's result is a ``StructureIdentification``
+        (``structure_``, ``element_``, ``offsets_``; no output-error refinement).
 
     Attributes
     ----------
@@ -178,6 +191,7 @@ class NSI(Identifier):
         "passes": Interval(int, 1, 20),
         "refine": Boolean(),
         "progress": Boolean(),
+        "element": ElementPlace(),
     }
 
     def __init__(
@@ -190,7 +204,9 @@ class NSI(Identifier):
         passes: int = 2,
         refine: bool = True,
         progress: bool = False,
+        element: str | tuple[int, int] | None = None,
     ):
+        self.element = element
         self.order = order
         self.block_rows = block_rows
         self.band = band
@@ -314,9 +330,21 @@ class NSI(Identifier):
         )
 
     def _check_record(self, rec: Measurement) -> None:
+        element_of(self, rec)
         rec.require(max(2000, 40 * self.block_rows), "NSI")
         rec.require_excitation("NSI")
         rec.require_motion("NSI")
+
+    def fit(self, data) -> NSI:
+        """Identify from ``data`` (a ``Measurement`` or a file path): a single DOF's record through the shared
+        stages (``Identifier.fit``), a structure's (N > 1 DOFs) through ``structure_id.identify_nsi``.
+        """
+        rec = self.check(data)
+        at = element_of(self, rec)
+        if at is None:
+            return super().fit(rec)
+        self.result_ = identify_nsi(self, rec, at)
+        return self
 
     def _estimate(self, rec: Measurement, n_id: int) -> Estimate:
         """NSI's own estimate: each well's underlying-linear system and nonlinear coefficients from the
@@ -396,6 +424,9 @@ class NSI(Identifier):
         (order, block rows) and each well found by ``fit``, every identified pole and the physical
         pole's coefficients. Run after ``fit`` (it reuses the refined wells).
         """
+        if rec.n_dof > 1:
+            orders_n = tuple(o * rec.n_dof for o in orders)  # the order per DOF, as ``order``
+            return structure_stabilization(self, rec, orders=orders_n, block_rows=block_rows)
         n_id = self.settings_["identification_samples"]
         ident = rec.segment(0, n_id)
         zs, v, _, _ = ident.states("band")

@@ -31,6 +31,7 @@ import numpy as np
 
 from negstiff.inference.estimators.identification import Estimate, Identifier
 from negstiff.inference.estimators.parameters import FRACTION, SEED, Boolean, Interval, Several
+from negstiff.inference.estimators.structure_id import ElementPlace, StructureResults, element_of, identify_sindy
 from negstiff.inference.record.measurement import Measurement
 from negstiff.inference.steps.selection import block_rows, block_scores, indistinguishable
 from negstiff.inference.steps.validation import boundedness, restarted_free_runs
@@ -60,8 +61,10 @@ class SINDyError(WeakFormError):
     """The record cannot be identified by SINDy (too short, no excitation, nothing selected)."""
 
 
-class SINDy(Identifier):
-    """Weak-form SINDy: which terms of the equation of motion the record asks for, and their sizes.
+class SINDy(StructureResults, Identifier):
+    """Weak-form SINDy: which terms of the equation of motion the record asks for, and their sizes, for a single
+    DOF or a structure of N DOFs carrying the element between DOFs I-J (``element``; ``structure_id``: one
+    equation per DOF, the element's terms shared by the DOFs it joins, the same selection rule and ensemble).
 
     The library holds polynomial stiffness, viscous and quadratic damping, the extra effects and a
     record's measured auxiliary channels (``aux:NAME``); the input's coefficient is fixed by physics
@@ -87,7 +90,10 @@ class SINDy(Identifier):
     seed : int, default 0
         Seeds the ensemble's bagging.
     refine : bool, default True
-        Finish by output-error refinement.
+        Finish by output-error refinement (a single DOF's).
+    element : str or (int, int), optional
+        Where the element acts on a record of N > 1 DOFs: ``"I-J"``, it moves DOF J relative to DOF I (0: the
+        base). None: the single DOF. A structure's result is a ``StructureIdentification``.
 
     Attributes
     ----------
@@ -129,6 +135,7 @@ class SINDy(Identifier):
         "margin": Interval(float, 0.0),
         "seed": SEED,
         "refine": Boolean(),
+        "element": ElementPlace(),
     }
 
     def __init__(
@@ -143,7 +150,9 @@ class SINDy(Identifier):
         margin: float = 0.1,
         seed: int = 0,
         refine: bool = True,
+        element: str | tuple[int, int] | None = None,
     ):
+        self.element = element
         self.refine = refine
         self.weights = weights
         self.n_models = n_models
@@ -169,7 +178,21 @@ class SINDy(Identifier):
         """
         return tuple(rec.aux)
 
+    def fit(self, data) -> SINDy:
+        """Identify from ``data`` (a ``Measurement`` or a file path): a single DOF's record through the shared
+        stages (``Identifier.fit``), a structure's (N > 1 DOFs) through ``structure_id.identify_sindy``.
+        """
+        rec = self.check(data)
+        at = element_of(self, rec)
+        if at is None:
+            return super().fit(rec)
+        self.result_ = identify_sindy(self, rec, at)
+        self.selected_ = list(self.result_.details["selected_terms"])
+        self.ensemble_ = self.result_.details["ensemble"]
+        return self
+
     def _check_record(self, rec: Measurement) -> None:
+        element_of(self, rec)
         rec.require(MIN_SAMPLES, "SINDy")
         rec.require_excitation("SINDy")
         rec.require_motion("SINDy")

@@ -1,57 +1,76 @@
-"""Identification of a structure of N degrees of freedom carrying one nonlinear element (``models.structure``).
+"""NSI, SINDy and the discrepancy workflow on a record of N > 1 degrees of freedom: the N-DOF branch of the one
+estimator per method (``NSI``, ``SINDy``, ``Discrepancy`` with ``element="I-J"``), for a structure carrying one
+nonlinear element (``models.structure``). The estimators call these functions when ``rec.n_dof > 1``; a record of
+one DOF takes the single-DOF algorithms unchanged.
+
+**Each channel's zero.** A laser's zero is arbitrary: each response channel carries an unknown constant o_d. The
+equations of motion in the measured coordinates then hold a constant force b_d on every DOF (the linear springs'
+K o and the element's constant, which cannot be told apart from the record), estimated with the other
+parameters, as the single DOF's constant term is. The physical frame (each DOF's displacement from the rest
+position of the linear springs loaded by the weights, the contract's) is then pinned by the physics
+(``physical_frame``): no constant force but the element's, whose constant is the weight it carries,
+K_e(0) = m_J g (g: the record's ``gravity``, 0 for a horizontal device), as the single DOF's frame is pinned by
+K(0) = m g. The offsets found are in the result (``offsets_m``), and every free run is compared with the record
+in the record's own frame.
 
 **NSI** as the method was made for (Marchesiello & Garibaldi 2008): the element's basis functions of the relative
 motion r = z_J - z_I about a reference r* (x^2, x^3, r'|r'|, x = r - r*) are feedback inputs of the underlying-
 linear system (ULS), M x'' + C x' + K x = M 1 u - l sum_j mu_j g_j (l = e_J - e_I), identified with every DOF's
-displacement as an output by the package's LTI subspace step (``subspace``, PO-MOESP, state order 2N). Then,
-around each well:
-
-- the ULS's modes: the identified state matrix's poles (frequency |lambda| / 2 pi, damping ratio) and shapes (the
-  output matrix times the eigenvectors);
-- its physical matrices: the identified (A, C) turned into physical coordinates by T = [C; C A] (the state
-  [x; x'] of a model whose outputs are all N displacements), whose lower blocks are -M^-1 K and -M^-1 C: with
-  the record's masses, K and C of the ULS;
-- the element's coefficients mu_j from the extended FRF H_e = H [M 1, l mu_1, ...]: Z(w) H_e with
-  Z = K - w^2 M + i w C (the identified ULS's dynamic stiffness) is [M 1, l mu_1, ...]; its input column, whose
-  value M 1 physics fixes, scales out the level error of the discrete-to-continuous step (as the single-DOF NSI
-  reads ratios to the input column), and mu_j(w) = l . (Z H_e,j) / |l|^2 averaged (Re) over the modes' band, with
-  |Im/Re| as the quality index;
-- the element's linear part is the ULS's I-J coupling (a spring in parallel with the element cannot be told
-  from it: it is counted as the element's); the structure's own K, C are the ULS's without it; the element's
-  constant follows from the time-averaged equations of motion (every channel is zero-mean in the subspace step),
-  and the reference moves to the identified structure's equilibrium (``Structure.element_equilibria``) for the
-  next pass (the reference shift per element).
+displacement as an output by the package's LTI subspace step (``subspace``, PO-MOESP, state order
+``order`` x N). Then, around each well: the ULS's modes (the identified state matrix's poles and shapes); its
+physical matrices (the identified (A, C) turned into physical coordinates by T = [C; C A], whose lower blocks are
+-M^-1 K and -M^-1 C); the element's coefficients mu_j from the extended FRF H_e = H [M 1, l mu_1, ...]:
+Z(w) H_e = [M 1, l mu_1, ...] with Z = K - w^2 M + i w C, its input column scaling out the level error of the
+discrete-to-continuous step, mu_j(w) = l . (Z H_e,j) / |l|^2 averaged (Re) over the modes' band, |Im/Re| the
+quality index. The element's linear part is the ULS's I-J coupling; the constant forces follow from the
+time-averaged equations of motion, and the reference moves to the identified structure's equilibrium for the next
+pass.
 
 **SINDy** with one equation per DOF in the weak form (``weak.test_function``, as the single-DOF SINDy): the
-element's terms are shared between the two DOFs it connects with opposite signs (Newton's third law, built into
-the regression as one shared coefficient per term rather than left for the data to find), the linear
-structure's springs and dampers are columns of the DOFs they join, the input's coefficient is fixed by the known
-masses. Sparsity: pysindy's STLSQ on the stacked, column-scaled system over a path of thresholds, each support
-scored by its weak residual on the identification data's last quarter; the sparsest within 1 % of the best is
-kept and refitted.
+element's terms are shared between the two DOFs it connects with opposite signs (Newton's third law, one shared
+coefficient per term), the linear structure's springs and dampers are columns of the DOFs they join, each DOF has
+its constant force, the input's coefficient is fixed by the masses. Sparsity and selection are the single DOF's
+rules: a path of L0 weights (pysindy's STLSQ at the threshold sqrt(2 weight) on the column-scaled system), each
+support refitted on the first part of the identification data and scored on the next by its weak residual in
+blocks of ``window_s``; the sparsest support within max(one standard error of the paired block differences,
+``margin``) of the best (``selection.indistinguishable``), refitted on all identification data; pysindy's
+bagging ensemble at the selected weight gives each term's inclusion probability.
 
-Both report the same keys (``modal``, ``element``, ``linear``, ``equilibria``, ``validation``).
+**Discrepancy**: the element's base law with the linear structure is the baseline; each registered effect with a
+column of its own is added as a term of the element and scored like SINDy's supports, on held-out blocks. An
+effect is named when it lowers the held-out weak residual by more than max(one standard error of the paired block
+differences, ``margin``) (``selection.compare``, the single DOF's rule); among those, the largest gain.
+
+Every result reports the same keys (``modal``, ``element``, ``linear``, ``equilibria``, ``offsets_m``,
+``validation``); validation is ``free_run_error``: free runs over the held-out tail restarted every 0.25 s from the
+record's smoothed states, and a model that misses them by more than twice what the channels' sensor noise alone
+explains is warned about.
 """
 
 from __future__ import annotations
 
 import math
+import re
 import warnings
-from dataclasses import dataclass
-from typing import Any
+from dataclasses import dataclass, field
+from typing import Any, override
 
 import numpy as np
+from scipy import optimize
 
-from negstiff.errors import InputError, NegstiffWarning
+from negstiff.errors import InputError, issue
+from negstiff.errors import NegstiffWarning as _Warning
+from negstiff.inference.estimators.parameters import Constraint
 from negstiff.inference.record.measurement import Measurement
+from negstiff.inference.steps.selection import block_rows, block_scores, compare, indistinguishable
 from negstiff.inference.steps.weak import test_function, test_function_half_width, weak_project
 from negstiff.models import Model
+from negstiff.models.simulator import stage_input
 from negstiff.models.structure import (
     Mode,
     Structure,
     assemble,
     coupling,
-    modes_of,
     modes_of_state_matrix,
     relative,
     simulate_structures,
@@ -59,55 +78,198 @@ from negstiff.models.structure import (
 
 from . import subspace
 
-ELEMENT_TERMS = ("1", "r", "r^2", "r^3", "v", "v|v|")
-"""The element's library: F(r, r') = k0 - k1 r + k2 r^2 + k3 r^3 + c r' + c_nl r'|r'| (the single-DOF names)."""
+ELEMENT_TERMS = ("r", "r^2", "r^3", "v", "v|v|")
+"""The element's regressed library: F(r, r') = k0 - k1 r + k2 r^2 + k3 r^3 + c r' + c_nl r'|r'| (the single-DOF
+names); its constant k0 is not regressed (each DOF's constant force holds it) but pinned (``physical_frame``)."""
 
-
-THRESHOLDS = tuple(float(t) for t in np.logspace(-4, -1, 13))
-"""SINDy's STLSQ thresholds by default, relative to the target's spread."""
-
+_FIELDS = {"r": ("k1", -1.0), "r^2": ("k2", 1.0), "r^3": ("k3", 1.0), "v": ("c", 1.0), "v|v|": ("c_nl", 1.0)}
 
 ASYMMETRY_WARNING = 0.05
 """NSI warns when the identified stiffness matrix's asymmetry exceeds this share of its largest entry: the
 record's masses scale the identified M^-1 K back to K, and wrong masses leave it lopsided."""
+
+NOISE_FLOOR_FACTOR = 2.0
+"""A model whose held-out free runs miss the record by more than this many times what the channels' sensor noise
+alone explains is warned about."""
+
+WINDOW_S = 0.25
+"""Held-out free runs' length [s]: two periods of the wells (over cross-well chaos a 1 s run diverges for any
+model, the truth too, and then a model that moves less scores better)."""
 
 
 class StructureIdentificationError(InputError):
     """The record cannot be identified as a structure with one element (too short, wrong element, no modes)."""
 
 
+_PLACE = re.compile(r"^\s*(\d+)\s*-\s*(\d+)\s*$")
+
+
+@dataclass(frozen=True)
+class ElementPlace(Constraint):
+    """Where the nonlinear element acts: None (the single DOF, on the base), ``"I-J"`` or a pair (I, J) of
+    integers, J >= 1 the DOF it moves, I >= 0 the one it is attached to (0: the base), I != J.
+    """
+
+    @override
+    def accepts(self, value) -> bool:
+        if value is None:
+            return True
+        if isinstance(value, str):
+            m = _PLACE.match(value)
+            if not m:
+                return False
+            i, j = int(m.group(1)), int(m.group(2))
+        elif isinstance(value, (tuple, list)) and len(value) == 2 and all(
+            isinstance(x, (int, np.integer)) and not isinstance(x, bool) for x in value
+        ):
+            i, j = (int(x) for x in value)
+        else:
+            return False
+        return i >= 0 and j >= 1 and i != j
+
+    @override
+    def describe(self) -> str:
+        return "None (the single DOF) or I-J: the DOF J >= 1 the element moves and the DOF I >= 0 it is attached to "
+        "(0: the base), I != J"
+
+
 def parse_element(text: str | tuple[int, int], n_dof: int) -> tuple[int, int]:
     """``"I-J"`` (J the DOF the element moves, I the one it is attached to, 0 the base) as (I, J), checked."""
     if isinstance(text, str):
-        try:
-            i, j = (int(x) for x in text.split("-"))
-        except ValueError:
-            raise InputError(f"--element must be I-J (e.g. 1-2; 0 is the base), got {text!r}") from None
+        m = _PLACE.match(text)
+        if not m:
+            raise InputError(f"element must be I-J (e.g. 1-2; 0 is the base), got {text!r}")
+        i, j = int(m.group(1)), int(m.group(2))
     else:
         i, j = (int(x) for x in text)
     if not (0 <= i <= n_dof and 1 <= j <= n_dof and i != j):
-        raise InputError(f"--element {i}-{j}: J must be a DOF 1..{n_dof}, I one of 0..{n_dof} (0: the base), I != J")
+        raise InputError(f"element {i}-{j}: J must be a DOF 1..{n_dof}, I one of 0..{n_dof} (0: the base), I != J")
     return i, j
 
 
-def _asymmetry(K: np.ndarray) -> float:
-    """The largest |K_ij - K_ji| relative to the larger of the pair, over the coupled pairs (0 when symmetric)."""
-    big = np.maximum(np.abs(K), np.abs(K.T))
-    coupled = big > 1e-6 * big.max()
-    return float(np.max(np.abs(K - K.T)[coupled] / big[coupled], initial=0.0))
-
-
-def feedback_channels(lin: np.ndarray, x: np.ndarray, vr: np.ndarray) -> np.ndarray:
-    """NSI's extended input about a reference: the excitation and the element's basis as feedback forces,
-    [u, -x^2, -x^3, -r'|r'|] (x = r - r*), one column each.
+def element_of(est, rec: Measurement) -> tuple[int, int] | None:
+    """The element's place on ``rec`` for estimator ``est`` (its ``element``): None for a record of one DOF (the
+    single-DOF algorithms; its element can only be on the base), else (I, J), checked, with the record's masses.
+    One ``InputError`` before any work otherwise.
     """
-    return np.column_stack([lin, -(x**2), -(x**3), -vr * np.abs(vr)])
+    name = type(est).__name__
+    if rec.n_dof == 1:
+        if est.element is not None and parse_element(est.element, 1) != (0, 1):
+            raise InputError(f"{name}(element={est.element!r}): a record of one DOF has its element on the base (0-1)")
+        return None
+    if est.element is None:
+        raise InputError(f"{rec.source}: a record of {rec.n_dof} DOFs needs the element's place "
+                         f"({name}(element='I-J'), --element I-J)")  # fmt: skip
+    at = parse_element(est.element, rec.n_dof)
+    rec.dof_masses  # noqa: B018 - one MeasurementError without them, before any work
+    return at
 
 
-def _element_model(coef: dict[str, float], mass: float) -> Model:
-    return Model(m=mass, k0=coef["1"], k1=-coef["r"], k2=coef["r^2"], k3=coef["r^3"], c=coef["v"], c_nl=coef["v|v|"])
+# --- the result -------------------------------------------------------------------------------------------------
+class Bunch(dict):
+    """A read-only dict whose keys are also attributes (``validation.rms_percent``)."""
+
+    def __getattr__(self, name: str):
+        try:
+            return self[name]
+        except KeyError:
+            raise AttributeError(name) from None
 
 
+@dataclass(frozen=True, repr=False)
+class StructureIdentification:
+    """A structure's identification (``NSI(element="1-2").fit(rec).result_`` on a record of N > 1 DOFs), frozen;
+    ``to_json()`` is the contract's ``identify --dofs N`` JSON.
+
+    Attributes
+    ----------
+    method : {"nsi", "sindy", "discrepancy"}
+    structure : Structure
+        The identified structure in the physical frame (the element's constant pinned, each channel's zero off).
+    modal : dict
+        ``{well: [Mode, ...]}``: each well's underlying-linear modes by frequency.
+    linear, equilibria : dict
+        The underlying-linear K and C at each well and the structure's own; every DOF's static position per well.
+    offsets_m : tuple of float
+        Each channel's zero found (measured = physical + offset) [m].
+    validation : Bunch
+        Restarted free runs over the held-out tail (``free_run_error``) and the noise floor.
+    warnings : tuple of str
+    details, settings : dict
+    """
+
+    method: str
+    structure: Structure
+    modal: dict[str, list[Mode]]
+    linear: dict[str, Any]
+    equilibria: dict[str, list[float]]
+    offsets_m: tuple[float, ...]
+    validation: Bunch
+    warnings: tuple[str, ...]
+    details: dict[str, Any] = field(default_factory=dict)
+    settings: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def model(self) -> Model:
+        """The element's law (a ``Model`` of the DOF it moves)."""
+        return self.structure.element
+
+    initial_model = model
+    refinement = None
+
+    @property
+    def element(self) -> dict[str, float]:
+        """The element's k0, k1, k2, k3, c, c_nl."""
+        return {k: float(getattr(self.structure.element, k)) for k in ("k0", "k1", "k2", "k3", "c", "c_nl")}
+
+    def to_json(self) -> dict[str, Any]:
+        """The contract's ``identify --dofs N`` JSON."""
+        return {
+            "method": self.method,
+            "dofs": self.structure.n_dof,
+            "element_at": list(self.structure.place),
+            "structure": self.structure.to_dict(),
+            "element": {**self.element, "extra": dict(self.structure.element.extra)},
+            "modal": {w: [m.to_json() for m in ms] for w, ms in self.modal.items()},
+            "linear": self.linear,
+            "equilibria": self.equilibria,
+            "offsets_m": list(self.offsets_m),
+            "validation": dict(self.validation),
+            "warnings": list(self.warnings),
+            "details": self.details,
+            "settings": self.settings,
+        }
+
+    def summary(self) -> str:
+        """One line: the element's k3 and each well's modes."""
+        return f"{self.structure.n_dof} DOFs, element k3={self.structure.element.k3:.4g}; {modes_summary(self.modal)}"
+
+    def __repr__(self) -> str:
+        v = self.validation.get("rms_percent", math.nan)
+        return (f"StructureIdentification({self.method}: {self.summary()}; held-out {v:.3g} %; "
+                f"{len(self.warnings)} warning(s))")  # fmt: skip
+
+
+class StructureResults:
+    """What an estimator learned on a record of N > 1 DOFs, under scikit-learn's names (mixed into ``NSI``,
+    ``SINDy`` and ``Discrepancy``): ``structure_``, ``element_``, ``linear_``, ``offsets_``.
+    """
+
+    result_: Any
+
+    structure_ = property(lambda self: self.result_.structure)
+    element_ = property(lambda self: self.result_.element)
+    linear_ = property(lambda self: self.result_.linear)
+    offsets_ = property(lambda self: self.result_.offsets_m)
+
+    def _summary(self) -> str:
+        r = self.result_
+        if isinstance(r, StructureIdentification):
+            return r.summary()
+        return super()._summary()  # type: ignore[misc]
+
+
+# --- the equations of motion in the measured frame ---------------------------------------------------------------
 def _springs(n: int, at: tuple[int, int]) -> list[tuple[int, int]]:
     """The linear structure's candidate springs/dampers (d, e): e = 0 to the base, else between DOFs d < e;
     the element's own pair is left out (its linear part is the element's).
@@ -119,16 +281,16 @@ def _springs(n: int, at: tuple[int, int]) -> list[tuple[int, int]]:
 
 def equation_columns(z: np.ndarray, v: np.ndarray, at: tuple[int, int]) -> tuple[np.ndarray, list[str]]:
     """The stacked equation-of-motion columns, (N, T, P): for DOF d, the force each parameter puts on it per unit
-    parameter, with the sign of the left-hand side moved right (M z'' - M 1 u = -sum theta_p col_p). Parameters:
-    the linear structure's springs then dampers (``_springs``), then the element's terms (``ELEMENT_TERMS``),
-    shared by DOFs J (+) and I (-).
+    parameter (M z'' - M 1 u = -sum theta_p col_p). Parameters: the linear structure's springs then dampers
+    (``_springs``), the element's terms (``ELEMENT_TERMS``, shared by DOFs J (+) and I (-)), then each DOF's
+    constant force (each channel's zero and the element's constant).
     """
     n, t = z.shape
     pairs = _springs(n, at)
     r, vr = relative(z, at), relative(v, at)
-    g = [np.ones(t), r, r**2, r**3, vr, vr * np.abs(vr)]
+    g = [r, r**2, r**3, vr, vr * np.abs(vr)]
     lvec = coupling(n, at)
-    cols = np.zeros((n, t, 2 * len(pairs) + len(g)))
+    cols = np.zeros((n, t, 2 * len(pairs) + len(g) + n))
     for p, (d, e) in enumerate(pairs):
         for off, x in ((0, z), (len(pairs), v)):
             cols[d - 1, :, off + p] += x[d - 1] - (x[e - 1] if e else 0.0)
@@ -138,42 +300,71 @@ def equation_columns(z: np.ndarray, v: np.ndarray, at: tuple[int, int]) -> tuple
         for d in range(n):
             if lvec[d]:
                 cols[d, :, 2 * len(pairs) + q] = lvec[d] * gq
-    names = [f"k{d}{e}" for d, e in pairs] + [f"c{d}{e}" for d, e in pairs] + [f"element {t_}" for t_ in ELEMENT_TERMS]
+    for d in range(n):
+        cols[d, :, 2 * len(pairs) + len(g) + d] = 1.0
+    names = ([f"k{d}{e}" for d, e in pairs] + [f"c{d}{e}" for d, e in pairs]
+             + [f"element {t_}" for t_ in ELEMENT_TERMS] + [f"constant on z{d + 1}" for d in range(n)])  # fmt: skip
     return cols, names
 
 
-def _assemble(theta: np.ndarray, n: int, at: tuple[int, int], masses, extra: dict[str, float] | None = None
-              ) -> Structure:  # fmt: skip
+def _assemble(theta: np.ndarray, n: int, at: tuple[int, int], masses, extra: dict[str, Any] | None = None
+              ) -> tuple[Structure, np.ndarray]:  # fmt: skip
+    """The structure in the measured frame (its element's constant 0) and each DOF's constant force b."""
     pairs = _springs(n, at)
-    k, c, e = theta[: len(pairs)], theta[len(pairs) : 2 * len(pairs)], theta[2 * len(pairs) :]
-    element = _element_model(dict(zip(ELEMENT_TERMS, e, strict=True)), masses[at[1] - 1])
-    if extra:
-        element = Model(**{**element.to_dict(), "extra": extra})
-    return Structure(tuple(masses), element, assemble(pairs, k, n), assemble(pairs, c, n), at)
+    np_ = len(pairs)
+    k, c = theta[:np_], theta[np_ : 2 * np_]
+    e = dict(zip(ELEMENT_TERMS, theta[2 * np_ : 2 * np_ + len(ELEMENT_TERMS)], strict=True))
+    b = np.asarray(theta[2 * np_ + len(ELEMENT_TERMS) : 2 * np_ + len(ELEMENT_TERMS) + n], float)
+    fields = {f: sign * float(e[t]) for t, (f, sign) in _FIELDS.items()}
+    element = Model(m=float(masses[at[1] - 1]), k0=0.0, extra=extra or {}, **fields)
+    return Structure(tuple(masses), element, assemble(pairs, k, n), assemble(pairs, c, n), at), b
 
 
-@dataclass(frozen=True)
-class WellFit:
-    """NSI around one well: the reference r*, the ULS's modes and matrices, the element's shifted coefficients."""
-
-    r_ref: float
-    modes: list[Mode]
-    K: np.ndarray
-    C: np.ndarray
-    coefficients: dict[str, float]
-    quality: dict[str, float]
-    band_hz: tuple[float, float]
-    singular_values: list[float]
-    structure: Structure
-
-
-def free_run_error(structure: Structure, rec: Measurement, start: int, window_s: float = 0.25) -> dict[str, Any]:
-    """Free runs of ``structure`` over the record from sample ``start`` on, restarted every ``window_s`` from the
-    record's band-smoothed states: rms error over every DOF in % of the responses' rms, and per DOF. The truth's
-    own value on the same record is the floor noise and chaos leave any model. 0.25 s (two periods of the wells)
-    by default: over cross-well chaos a 1 s run diverges for any model, the truth too (60 % rms on the tests'
-    fixture record), and then a model that moves less scores better.
+def physical_frame(structure: Structure, b: np.ndarray, gravity: float) -> tuple[Structure, np.ndarray]:
+    """The structure identified in the record's frame (each DOF's constant force ``b``, its element's polynomial
+    in the measured relative coordinate) in the physical frame, and each channel's zero o (measured = physical +
+    o): the o nearest zero for which Ks o + l G(l.o) + b = l k0 (no constant force but the element's, whose
+    constant is the weight it carries, k0 = m_J g), the element's polynomial re-expanded about l.o (reference
+    study Eq. 7). One ``StructureIdentificationError`` when no such frame exists.
     """
+    el = structure.element
+    lvec = structure.coupling
+    K = np.asarray(structure.stiffness, float)
+    b = np.asarray(b, float) + lvec * el.k0  # the element's own constant is one more constant force
+    k0 = el.m * gravity
+    P = np.polynomial.Polynomial([0.0, -el.k1, el.k2, el.k3])
+
+    def residual(o):
+        return K @ o + lvec * P(lvec @ o) + b - lvec * k0
+
+    def jacobian(o):
+        return K + np.outer(lvec, lvec) * P.deriv()(lvec @ o)
+
+    o, info, ok, msg = optimize.fsolve(residual, np.zeros(structure.n_dof), fprime=jacobian, full_output=True,
+                                       xtol=1e-12)  # fmt: skip
+    scale = float(np.abs(b).max() + abs(k0) + 1e-12)
+    if ok != 1 or np.abs(residual(o)).max() > 1e-6 * scale:
+        raise StructureIdentificationError(
+            f"no physical frame for the identified structure: its constant forces {b.tolist()} N are not the element's "
+            f"weight {k0:.4g} N on linear springs ({msg})"
+        )
+    s = float(lvec @ o)
+    shifted = P(np.polynomial.Polynomial([s, 1.0]))
+    c0, c1, c2, c3 = (list(shifted.coef) + [0.0] * 4)[:4]
+    del c0  # G(s): taken by the frame (K o + l G(s) + b = l k0)
+    element = Model(**{**el.to_dict(), "k0": float(k0), "k1": -float(c1), "k2": float(c2), "k3": float(c3)})
+    return structure.with_element(element), o
+
+
+def free_run_error(structure: Structure, rec: Measurement, start: int, window_s: float = WINDOW_S,
+                   offsets=None) -> dict[str, Any]:  # fmt: skip
+    """Free runs of ``structure`` over the record from sample ``start`` on, restarted every ``window_s`` from the
+    record's band-smoothed states: rms error over every DOF in % of the responses' rms, and per DOF, with the
+    same measure of the channels' sensor noise alone (``noise_floor_percent``: what a perfect model misses). The
+    record's channels are ``offsets`` [m] (each channel's zero, default none) above the structure's frame.
+    """
+    z_all = rec.channels
+    o = np.zeros(rec.n_dof) if offsets is None else np.asarray(offsets, float)
     zs, v, _ = rec.channel_states(structure.place)
     L = max(8, int(round(window_s * rec.fs)))
     starts = np.arange(start, rec.n - L, L)
@@ -181,578 +372,551 @@ def free_run_error(structure: Structure, rec: Measurement, start: int, window_s:
         raise StructureIdentificationError(f"{rec.source}: the held-out part is shorter than one {window_s} s window")
     idx = starts[:, None] + np.arange(L + 1)[None, :]
     u = rec.u[idx]
-    x0 = np.hstack([zs[:, starts].T, v[:, starts].T])
+    x0 = np.hstack([(zs[:, starts] - o[:, None]).T, v[:, starts].T])
     res = simulate_structures(structure, u, rec.dt, x0, input_kind=rec.input_name, force_dof=rec.force_dof,
                               input_index=np.arange(starts.size))  # fmt: skip
-    meas = np.transpose(rec.channels[:, idx], (1, 0, 2))  # (W, N, L+1)
-    err = res.z - meas
+    meas = np.transpose(z_all[:, idx], (1, 0, 2))  # (W, N, L+1)
+    err = res.z + o[None, :, None] - meas
     ok = ~res.diverged
-    centred = rec.channels[:, start:] - rec.channels[:, start:].mean(axis=1, keepdims=True)
+    centred = z_all[:, start:] - z_all[:, start:].mean(axis=1, keepdims=True)
     scale = np.sqrt(np.mean(centred**2, axis=1))
+    noise = rec.channel_noise()
+    floor = 100 * float(np.sqrt(np.mean((noise / scale) ** 2)))
     if not ok.any():
         return {"rms_percent": math.inf, "per_dof_percent": [math.inf] * rec.n_dof, "windows": int(starts.size),
-                "diverged": int(starts.size)}  # fmt: skip
+                "diverged": int(starts.size), "window_s": window_s, "noise_floor_percent": floor}  # fmt: skip
     per = np.sqrt(np.mean(err[ok] ** 2, axis=(0, 2))) / scale
     total = float(np.sqrt(np.mean((err[ok] / scale[None, :, None]) ** 2)))
     return {"rms_percent": 100 * total, "per_dof_percent": (100 * per).tolist(), "windows": int(starts.size),
-            "diverged": int((~ok).sum()), "window_s": window_s}  # fmt: skip
+            "diverged": int((~ok).sum()), "window_s": window_s, "noise_floor_percent": floor}  # fmt: skip
 
 
-class _StructureIdentifier:
-    """What NSI and SINDy share: the record's checks, the held-out tail, the result's keys."""
+def held_out_floor(structure: Structure, rec: Measurement, start: int, offsets, draws: int = 5) -> float | None:
+    """What a right model misses on the held-out windows of a record like ``rec`` (the floor noise, smoothing and
+    chaos leave any model; % of rms z, ``free_run_error``'s measure): ``structure`` run once over the held-out
+    input from the record's state, each channel given its zero and white noise of the channel's sensor-noise rms
+    (``Measurement.channel_noise``), and its own restarted windows measured on that record; the median over
+    ``draws`` noise draws (seeds 0, 1, ...: over cross-well chaos one draw's floor varies by 2x, measured on the
+    tests' fixture record). None when the run escapes (no floor to compare with).
+    """
+    o = np.asarray(offsets, float)
+    zs, v, _ = rec.channel_states(structure.place)
+    x0 = np.concatenate([zs[:, start] - o, v[:, start]])[None, :]
+    # the input between samples band-limited (``stage_input``), as a lab's record's is: the restarted runs' linear
+    # convention then errs on it as on the record (the floor holds that error too)
+    res = simulate_structures(structure, stage_input(rec.u[start:])[None], rec.dt, x0, input_kind=rec.input_name,
+                              force_dof=rec.force_dof, staged=True)  # fmt: skip
+    if bool(np.any(res.diverged)):
+        return None
+    out = []
+    for seed in range(draws):
+        rng = np.random.default_rng(seed)
+        z = res.z[0] + o[:, None] + rec.channel_noise()[:, None] * rng.standard_normal(res.z[0].shape)
+        own = Measurement(rec.fs, rec.input_name, rec.u[start:], z, masses=rec.dof_masses, force_dof=rec.force_dof,
+                          source=f"{rec.source} (the model's own)")  # fmt: skip
+        out.append(free_run_error(structure, own, 0, WINDOW_S, o)["rms_percent"])
+    floor = float(np.median(out))
+    return floor if math.isfinite(floor) else None
 
-    method = ""
 
-    def __init__(self, *, element: str | tuple[int, int] | None = None, validation_fraction: float = 0.2):
-        self.element = element
-        self.validation_fraction = validation_fraction
+def _finish(method: str, rec: Measurement, structure: Structure, offsets: np.ndarray, n_id: int,
+            modal: dict[str, list[Mode]] | None, own_warnings: list[str], details: dict, settings: dict
+            ) -> StructureIdentification:  # fmt: skip
+    """The shared stages of a structure's identification: equilibria, linear matrices, modes, held-out free runs
+    against the noise floor, warnings (issued as ``NegstiffWarning`` and kept in the result).
+    """
+    try:
+        eq = structure.equilibria()
+        if modal is None:
+            modal = {w: structure.modes(w) for w in eq}
+    except ValueError as exc:
+        raise StructureIdentificationError(f"{rec.source}: the identified element is not usable ({exc})") from None
+    linear: dict[str, Any] = {w: {"K": structure.linear(w)[0].tolist(), "C": structure.linear(w)[1].tolist()}
+                              for w in eq}  # fmt: skip
+    linear["structure"] = {"K": np.asarray(structure.stiffness).tolist(), "C": np.asarray(structure.damping).tolist()}
+    validation = free_run_error(structure, rec, n_id, WINDOW_S, offsets)
+    validation["floor_percent"] = held_out_floor(structure, rec, n_id, offsets)
+    lines = list(own_warnings)
+    floor = validation["floor_percent"]
+    if floor is not None and not validation["rms_percent"] <= NOISE_FLOOR_FACTOR * floor:
+        lines.append(
+            f"{rec.source}: the identified structure misses its own record's held-out windows by "
+            f"{validation['rms_percent']:.3g} % of rms z, more than {NOISE_FLOOR_FACTOR:g}x the {floor:.3g} % it "
+            "misses on a record of its own with the channels' sensor noise (the floor of a right model)"
+        )
+    issue([(_Warning, w) for w in lines])
+    return StructureIdentification(
+        method=method, structure=structure, modal=modal, linear=linear,
+        equilibria={w: z.tolist() for w, z in eq.items()}, offsets_m=tuple(float(x) for x in offsets),
+        validation=Bunch(validation), warnings=tuple(lines), details=details,
+        settings={**settings, "identification_samples": n_id, "refinement": "none for N > 1 DOFs",
+                  "frame": "each channel's zero estimated (a constant force per DOF), the element's constant pinned at "
+                           "the weight it carries (m_J g, g the record's gravity)"},
+    )  # fmt: skip
 
-    def _prepare(self, rec: Measurement) -> tuple[Measurement, tuple[int, int], int]:
-        if not isinstance(rec, Measurement):
-            raise InputError(
-                "a structure's identification needs a Measurement (load, from_arrays)"
-            )
-        if not 0.0 < self.validation_fraction < 0.9:
-            raise InputError(f"validation_fraction must be in (0, 0.9), got {self.validation_fraction}")
-        if self.element is None and rec.n_dof > 1:
-            raise InputError(f"{rec.source}: a record of {rec.n_dof} DOFs needs the element's place (element='I-J')")
-        at = parse_element(self.element if self.element is not None else (0, 1), rec.n_dof)  # one DOF: on the base
-        n_id = int(round((1 - self.validation_fraction) * rec.n))
-        rec.require(4000, f"{type(self).__name__}")
-        return rec, at, n_id
 
-    def _finish(self, rec: Measurement, structure: Structure, n_id: int, modal: dict, extra: dict) -> None:
-        self.structure_ = structure
-        self.element_ = {k: getattr(structure.element, k) for k in ("k0", "k1", "k2", "k3", "c", "c_nl")}
-        self.modal_ = modal
-        self.warnings_: list[str] = list(extra.pop("warnings", []))
+# --- the weak form ----------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class _Weak:
+    """The test functions of a structure's weak form: half width and stride in samples, and phi, phi''."""
+
+    half: int
+    stride: int
+    phi: np.ndarray
+    d2phi: np.ndarray
+
+    @classmethod
+    def of(cls, zs_element: np.ndarray, fs: float) -> _Weak:
+        half, _ = test_function_half_width(zs_element, fs)
+        phi, d2phi = test_function(half, 1.0 / fs)
+        return cls(half, max(1, half), phi, d2phi)
+
+
+def weak_system(rec: Measurement, at: tuple[int, int], zs: np.ndarray, v: np.ndarray, form: _Weak,
+                extra=()) -> tuple[np.ndarray, np.ndarray, list[str], int]:  # fmt: skip
+    """The stacked weak-form system over ``rec`` (rows: DOF x test function, acceleration units), its names and
+    rows per DOF; ``extra``: (name, g) pairs of further element terms g(t) (on J and, opposite, on I).
+    """
+    cols, names = equation_columns(zs, v, at)
+    if extra:
+        lvec = coupling(rec.n_dof, at)
+        more = np.stack([lvec[:, None] * g[None, :] for _, g in extra], axis=-1)  # (N, T, E)
+        cols = np.concatenate([cols, more], axis=-1)
+        names = names + [f"element {name}" for name, _ in extra]
+    lin = -rec.u if rec.input_name == "base_acc" else rec.u
+    mass = np.asarray(rec.dof_masses)
+    z = rec.channels
+    ys, Xs = [], []
+    for d in range(rec.n_dof):
+        gain = 1.0 if rec.input_name == "base_acc" else float((rec.force_dof or at[1]) - 1 == d) / mass[d]
+        target = weak_project(z[d][:, None], form.d2phi, form.stride, rec.dt)[:, 0]
+        target -= gain * weak_project(lin[:, None], form.phi, form.stride, rec.dt)[:, 0]
+        ys.append(target)
+        Xs.append(-weak_project(cols[d], form.phi, form.stride, rec.dt) / mass[d])
+    return np.concatenate(ys), np.vstack(Xs), names, ys[0].size
+
+
+def _block_scores(residual: np.ndarray, y: np.ndarray, per_dof: int, n_dof: int, rows: int) -> np.ndarray:
+    """Held-out weak residual per block of ``rows`` test functions, each DOF's squared residual divided by its
+    target's variance and averaged over the DOFs (the same blocks for every candidate: paired comparisons).
+    """
+    r2 = (residual.reshape(n_dof, per_dof) ** 2) / y.reshape(n_dof, per_dof).var(axis=1, keepdims=True)
+    return block_scores(r2.mean(axis=0), rows, 1.0)
+
+
+def _split(est, rec: Measurement) -> tuple[int, int]:
+    n_id = int(round(rec.n * (1 - est.validation_fraction)))
+    n_fit = int(round(rec.n * (1 - est.validation_fraction - getattr(est, "selection_fraction", 0.2))))
+    return n_id, n_fit
+
+
+def _systems(est, rec: Measurement, at, extra_of=None):
+    """The weak systems of the fitting part [0, n_fit) and the selection part [n_fit, n_id) of ``rec`` (the
+    identification part's smoothed states), with the blocks' rows; ``extra_of(zs, v)`` gives extra element terms.
+    """
+    n_id, n_fit = _split(est, rec)
+    ident = rec.segment(0, n_id)
+    zs, v, window = ident.channel_states(at)
+    form = _Weak.of(relative(zs, at), rec.fs)
+    extra = extra_of(zs, v) if extra_of else ()
+    fit = weak_system(ident.segment(0, n_fit), at, zs[:, :n_fit], v[:, :n_fit], form,
+                      [(nm, g[:n_fit]) for nm, g in extra])  # fmt: skip
+    sel = weak_system(ident.segment(n_fit, n_id), at, zs[:, n_fit:], v[:, n_fit:], form,
+                      [(nm, g[n_fit:]) for nm, g in extra])  # fmt: skip
+    whole = weak_system(ident, at, zs, v, form, extra)
+    rows = block_rows(est.window_s, rec.fs, form.stride)
+    if sel[3] // rows < 2:
+        raise StructureIdentificationError(
+            f"{rec.source}: too short for {type(est).__name__} on {rec.n_dof} DOFs: the selection part "
+            f"[{n_fit}, {n_id}) holds fewer than two {est.window_s:g} s blocks"
+        )
+    return fit, sel, whole, rows, window, form, (n_id, n_fit), (zs, v)
+
+
+def _lstsq(X: np.ndarray, y: np.ndarray, support=None) -> np.ndarray:
+    """Least squares on the column-scaled system (rms scaling), the columns outside ``support`` at zero."""
+    keep = np.ones(X.shape[1], bool) if support is None else np.asarray(support, bool)
+    scale = np.sqrt(np.mean(X[:, keep] ** 2, axis=0))
+    scale[scale == 0] = 1.0
+    theta = np.zeros(X.shape[1])
+    theta[keep] = np.linalg.lstsq(X[:, keep] / scale, y, rcond=None)[0] / scale
+    return theta
+
+
+# --- SINDy -------------------------------------------------------------------------------------------------------
+def identify_sindy(est, rec: Measurement, at: tuple[int, int]) -> StructureIdentification:
+    """SINDy on a record of N > 1 DOFs (module docstring): the single DOF's sparsity path, one-standard-error
+    selection on held-out blocks and bagging ensemble, on the structure's stacked weak form.
+    """
+    import pysindy as ps
+
+    from negstiff.inference.steps.weak import _seeded_global_rng
+
+    fit, sel, whole, rows, window, form, (n_id, _), _ = _systems(est, rec, at)
+    (yf, Xf, names, _), (ys, Xs, _, per_sel) = fit[:4], sel[:4]
+    masses = rec.dof_masses
+    colscale = np.sqrt(np.mean(Xf**2, axis=0))
+    colscale[colscale == 0] = 1.0
+    ystd = float(yf.std()) or 1.0
+    supports: dict[tuple[bool, ...], list[float]] = {}
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        for weight in est.weights:
+            opt = ps.STLSQ(threshold=math.sqrt(2 * weight), alpha=0.0, max_iter=50)
+            opt.fit(Xf / colscale, yf / ystd)
+            support = tuple(bool(c) for c in np.abs(opt.coef_[0]) > 0)
+            if any(support):
+                supports.setdefault(support, []).append(weight)
+    path: list[dict[str, Any]] = []
+    for support, weights in supports.items():
+        theta = _lstsq(Xf, yf, support)
         try:
-            eq = structure.equilibria()
-        except ValueError as exc:
-            raise StructureIdentificationError(f"{rec.source}: the identified element is not usable ({exc})") from None
-        self.equilibria_ = {w: z.tolist() for w, z in eq.items()}
-        self.linear_ = {w: {"K": structure.linear(w)[0].tolist(), "C": structure.linear(w)[1].tolist()} for w in eq}
-        self.linear_["structure"] = {"K": np.asarray(structure.stiffness).tolist(),
-                                     "C": np.asarray(structure.damping).tolist()}  # fmt: skip
-        self.validation_ = free_run_error(structure, rec, n_id)
-        for w in self.warnings_:
-            warnings.warn(w, NegstiffWarning, stacklevel=3)
-        self.details_ = extra
+            s, b = _assemble(theta, rec.n_dof, at, masses)
+            physical_frame(s, b, rec.gravity)[0].equilibria()
+            usable = True
+        except (ValueError, InputError):
+            usable = False
+        path.append({"support": support, "terms": [n for n, on in zip(names, support, strict=True) if on],
+                     "n_terms": int(sum(support)), "weight": float(np.sqrt(min(weights) * max(weights))),
+                     "block_ms": _block_scores(ys - Xs @ theta, ys, per_sel, rec.n_dof, rows),
+                     "usable": usable})  # fmt: skip
+    if not path:
+        raise StructureIdentificationError(f"{rec.source}: every weight removed every term")
+    for p in path:
+        p["heldout_residual_percent"] = float(100 * np.sqrt(p["block_ms"].mean()))
+    path.sort(key=lambda p: (p["n_terms"], p["heldout_residual_percent"]))
+    admissible = [p for p in path if p["usable"]] or path
+    best = min(admissible, key=lambda p: p["heldout_residual_percent"])
+    chosen = next(p for p in admissible if indistinguishable(p["block_ms"], best["block_ms"], est.margin))
+    y, X = whole[0], whole[1]
+    theta = _lstsq(X, y, chosen["support"])
+    scale_all = np.sqrt(np.mean(X**2, axis=0))
+    scale_all[scale_all == 0] = 1.0
+    with warnings.catch_warnings(), _seeded_global_rng(est.seed):
+        warnings.simplefilter("ignore")
+        ens = ps.EnsembleOptimizer(ps.STLSQ(threshold=math.sqrt(2 * chosen["weight"]), alpha=0.0, max_iter=50),
+                                   bagging=True, n_models=est.n_models, n_subset=int(est.subset_fraction * y.size))
+        ens.fit(X / scale_all, (y / (float(y.std()) or 1.0))[:, None])
+    coefs = np.array(ens.coef_list)[:, 0, :] * (float(y.std()) or 1.0) / scale_all
+    ensemble = {n: {"inclusion_probability": float(np.mean(coefs[:, i] != 0)), "median": float(np.median(coefs[:, i])),
+                    "sd": float(np.std(coefs[:, i]))} for i, n in enumerate(names)}  # fmt: skip
+    s_m, b = _assemble(theta, rec.n_dof, at, masses)
+    structure, offsets = physical_frame(s_m, b, rec.gravity)
+    return _finish("sindy", rec, structure, offsets, n_id, None, [], {
+        "terms": {nm: float(t) for nm, t in zip(names, theta, strict=True)},
+        "selected_terms": chosen["terms"],
+        "ensemble": ensemble,
+        "path": [{k: v for k, v in p.items() if k not in ("block_ms", "support")} for p in path],
+    }, {
+        "velocity": f"Savitzky-Golay (window, order) = {window}",
+        "form": f"weak: test functions (1 - (s/T)^2)^4, T = {form.half} samples, every {form.stride}",
+        "selection": f"sparsest support whose held-out weak residual (blocks of {est.window_s:g} s) is within "
+                     f"max(one standard error, {100 * est.margin:g} %) of the best",
+        "weight": chosen["weight"], "n_models": est.n_models, "seed": est.seed,
+        "newtons_third_law": "the element's terms are one coefficient each, acting on J and, opposite, on I",
+    })  # fmt: skip
 
-    def result(self) -> dict[str, Any]:
-        """The contract's result JSON of a structure's identification."""
-        return {
-            "method": self.method,
-            "dofs": self.structure_.n_dof,
-            "element_at": list(self.structure_.place),
-            "structure": self.structure_.to_dict(),
-            "element": {**self.element_, "extra": dict(self.structure_.element.extra)},
-            "modal": {w: [m.to_json() for m in ms] for w, ms in self.modal_.items()},
-            "linear": self.linear_,
-            "equilibria": self.equilibria_,
-            "validation": self.validation_,
-            "warnings": self.warnings_,
-            "details": self.details_,
-        }
+
+# --- NSI ---------------------------------------------------------------------------------------------------------
+def feedback_channels(lin: np.ndarray, x: np.ndarray, vr: np.ndarray) -> np.ndarray:
+    """NSI's extended input about a reference: the excitation and the element's basis as feedback forces,
+    [u, -x^2, -x^3, -r'|r'|] (x = r - r*), one column each.
+    """
+    return np.column_stack([lin, -(x**2), -(x**3), -vr * np.abs(vr)])
 
 
-class StructureNSI(_StructureIdentifier):
-    """Nonlinear subspace identification of a structure of N DOFs with one element (module docstring).
+def _asymmetry(K: np.ndarray) -> float:
+    """The largest |K_ij - K_ji| relative to the larger of the pair, over the coupled pairs (0 when symmetric)."""
+    big = np.maximum(np.abs(K), np.abs(K.T))
+    coupled = big > 1e-6 * big.max()
+    return float(np.max(np.abs(K - K.T)[coupled] / big[coupled], initial=0.0))
 
-    Parameters
-    ----------
-    element : "I-J" or (I, J)
-        The element moves DOF J relative to DOF I (0: the base).
-    block_rows : int, default 40
-        Block rows of the Hankel matrices.
-    band : (float, float), default (0.6, 1.6)
-        The coefficients' averaging band, as fractions of the lowest and highest mode's frequency.
-    passes : int, default 3
-        Identification passes per well at most (each at the equilibrium the previous one identified).
-    validation_fraction : float, default 0.2
-        The held-out tail.
 
-    Attributes
-    ----------
-    structure_ : Structure
-        The identified structure (element coefficients averaged over the wells, the linear structure too).
-    modal_ : dict
-        ``{well: [Mode, ...]}``: each well's ULS modes by frequency, as identified.
-    element_ : dict
-        The element's k0, k1, k2, k3, c, c_nl (the single-DOF names).
-    wells_ : dict
-        Each well's ``WellFit``.
-    validation_ : dict
-        Restarted free runs over the held-out tail (``free_run_error``).
-    equilibria_ : dict
-        Every DOF's static position at each well.
-    linear_ : dict
-        The underlying-linear system's K and C at each well, and the structure's own.
-    warnings_ : list of str
-        What NSI did not believe (also issued as ``NegstiffWarning``).
-
-    Examples
-    --------
-    >>> from negstiff import StructureNSI, load
-    >>> from negstiff.models.structure_rig import StructureRig
-    >>> rig = StructureRig.device_on_fixture(seed=1)          # the device on a 1 kg, 25 Hz fixture
-    >>> rec = load(rig.random(duration=120.0, rms=14.0).write("fixture.csv"))
-    >>> nsi = StructureNSI(element="1-2").fit(rec)
-    >>> [round(m.f_hz, 1) for m in nsi.modal_["minus"]]       # the device's mode, the fixture's
-    [11.3, 25.7]
+@dataclass(frozen=True)
+class WellFit:
+    """NSI around one well: the reference r* (measured frame), the ULS's modes and matrices, the element's shifted
+    coefficients, the structure in the physical frame and each channel's zero.
     """
 
-    method = "nsi"
-
-    def __init__(self, *, element=None, block_rows: int = 40, band: tuple[float, float] = (0.6, 1.6), passes: int = 3,
-                 validation_fraction: float = 0.2):  # fmt: skip
-        super().__init__(element=element, validation_fraction=validation_fraction)
-        self.block_rows = block_rows
-        self.band = band
-        self.passes = passes
-
-    def fit(self, rec: Measurement) -> StructureNSI:
-        """Identify the structure from ``rec`` (a ``Measurement``); returns self."""
-        rec, at, n_id = self._prepare(rec)
-        ident = rec.segment(0, n_id)
-        zs, v, window = ident.channel_states(at)
-        first = StructureSINDy._least_squares(ident, at, zs, v)  # equation error: the wells' first guesses
-        try:
-            guesses = first.element_equilibria()
-        except ValueError as exc:
-            raise StructureIdentificationError(
-                f"{rec.source}: no stable equilibrium of the element found ({exc})"
-            ) from None
-        wells = {}
-        for name in ("minus", "plus"):
-            r0 = getattr(guesses, f"z_{name}")
-            if r0 is not None:
-                wells[name] = self.fit_well(ident, zs, v, at, r0, first)
-        self.wells_ = wells
-        mass = rec.dof_masses[at[1] - 1]
-        coef = {k: float(np.mean([w.structure.element.to_dict()[k] for w in wells.values()]))
-                for k in ("k0", "k1", "k2", "k3", "c", "c_nl")}  # fmt: skip
-        Ks = np.mean([np.asarray(w.structure.stiffness) for w in wells.values()], axis=0)
-        Cs = np.mean([np.asarray(w.structure.damping) for w in wells.values()], axis=0)
-        structure = Structure(rec.dof_masses, Model(m=mass, **coef), 0.5 * (Ks + Ks.T), 0.5 * (Cs + Cs.T), at)
-        lopsided = {w: f.coefficients["stiffness_asymmetry"] for w, f in wells.items()}
-        stops = [f"{rec.source}: NSI around the {w} well: {f.coefficients['refinement_stopped']}"
-                 for w, f in wells.items() if f.coefficients["refinement_stopped"]]  # fmt: skip
-        warned = [
-            f"{rec.source}: the identified stiffness matrix of the {w} well is not symmetric ({100 * a:.0f} % of a "
-            "coupling): a linear structure's is (reciprocity); are the masses right?"
-            for w, a in lopsided.items() if a > ASYMMETRY_WARNING
-        ]  # fmt: skip
-        self._finish(rec, structure, n_id, {w: f.modes for w, f in wells.items()}, {
-            "warnings": warned + stops,
-            "wells": {w: {"r_ref": f.r_ref, "coefficients": f.coefficients, "quality_im_over_re": f.quality,
-                          "band_hz": list(f.band_hz), "singular_values": f.singular_values,
-                          "K_uls": f.K.tolist(), "C_uls": f.C.tolist()} for w, f in wells.items()},
-            "settings": {"block_rows": self.block_rows, "order": 2 * rec.n_dof, "band_fraction": list(self.band),
-                         "passes": self.passes, "velocity": f"Savitzky-Golay (window, order) = {window}",
-                         "identification_samples": n_id},
-        })  # fmt: skip
-        return self
-
-    def stabilization(self, rec: Measurement, orders=(4, 6, 8, 10), block_rows=(20, 30, 40, 60)) -> list[dict]:
-        """Stabilisation diagram (Marchesiello, Fasana & Garibaldi 2016) around each well ``fit`` found: for every
-        (order, block rows), the identified poles (f_hz, zeta) with the feedback channels of that well's reference,
-        each marked ``stable`` when a pole of the next lower order lies within 1 % in frequency and 5 % in damping.
-        Physical modes stay put as the order grows; spurious ones wander. Run after ``fit``.
-        """
-        n_id = self.details_["settings"]["identification_samples"]
-        at = self.structure_.place
-        ident = rec.segment(0, n_id)
-        zs, v, _ = ident.channel_states(at)
-        r, vr = relative(zs, at), relative(v, at)
-        lin = -ident.u if ident.input_name == "base_acc" else ident.u
-        y = (zs - zs.mean(axis=1, keepdims=True)).T
-        y = y / y.std(axis=0)
-        rows: list[dict] = []
-        for name, well in self.wells_.items():
-            x = r - well.r_ref
-            chans = feedback_channels(lin, x, vr)
-            w = (chans - chans.mean(axis=0)) / chans.std(axis=0)
-            for i in block_rows:
-                previous: list[tuple[float, float]] = []
-                for n in orders:
-                    try:
-                        ss = subspace.identify(w, y, ident.dt, n, i)
-                    except (ValueError, np.linalg.LinAlgError) as exc:
-                        rows.append({"well": name, "order": n, "block_rows": i, "error": str(exc)})
-                        continue
-                    lam = np.linalg.eigvals(ss.A)
-                    poles = sorted((float(abs(q) / (2 * math.pi)), float(-q.real / abs(q))) for q in lam if q.imag > 0)
-                    rows.append({"well": name, "order": n, "block_rows": i, "poles": [
-                        {"f_hz": f, "zeta": z, "stable": any(abs(f / pf - 1) < 0.01 and abs(z - pz) < 0.05 * abs(pz)
-                                                             for pf, pz in previous)} for f, z in poles]})  # fmt: skip
-                    previous = poles
-        return rows
-
-    def fit_well(self, rec: Measurement, zs: np.ndarray, v: np.ndarray, at: tuple[int, int], r_ref: float,
-                 start: Structure) -> WellFit:  # fmt: skip
-        """The ULS and the element's coefficients about ``r_ref``, moved to the identified equilibrium each pass."""
-        n = rec.n_dof
-        mass = np.asarray(rec.dof_masses)
-        lvec = coupling(n, at)
-        r, vr = relative(zs, at), relative(v, at)
-        lin = -rec.u if rec.input_name == "base_acc" else rec.u
-        if rec.input_name == "base_acc":
-            influence = mass.copy()  # M 1
-        else:
-            influence = np.zeros(n)
-            influence[(rec.force_dof or at[1]) - 1] = 1.0
-        structure = start
-        stopped, shift = "", 0.0
-        for k_pass in range(self.passes):
-            x = r - r_ref
-            chans = feedback_channels(lin, x, vr)
-            means, scale = chans.mean(axis=0), chans.std(axis=0)
-            if np.any(scale == 0):
-                raise StructureIdentificationError(f"{rec.source}: the input or a basis function is constant")
-            w = (chans - means) / scale
-            y = (zs - zs.mean(axis=1, keepdims=True)).T
-            ys = y.std(axis=0)
-            try:
-                ss = subspace.identify(w, y / ys, rec.dt, 2 * n, self.block_rows)
-            except (ValueError, np.linalg.LinAlgError) as exc:
-                if k_pass == 0:
-                    raise StructureIdentificationError(f"{rec.source}: subspace step failed ({exc})") from None
-                # a later pass's reference failed: the previous pass stands, and the result says so
-                stopped = f"the pass at r = {1e3 * r_ref:.3f} mm failed ({exc}); the previous pass's fit is kept"
-                r_ref = r_ref - shift
-                break
-            Cp = ys[:, None] * ss.C
-            T = np.vstack([Cp, Cp @ ss.A])
-            Ap = T @ ss.A @ np.linalg.inv(T)
-            K = -mass[:, None] * Ap[n:, :n]
-            C = -mass[:, None] * Ap[n:, n:]
-            asymmetry = _asymmetry(K)  # 0 for the right masses (reciprocity)
-            K, C = 0.5 * (K + K.T), 0.5 * (C + C.T)
-            modes = modes_of_state_matrix(ss.A, Cp)
-            if len(modes) < n:
-                raise StructureIdentificationError(
-                    f"{rec.source}: {len(modes)} underdamped modes identified around r = {1e3 * r_ref:.2f} mm, "
-                    f"expected {n}"
-                )
-            f_lo, f_hi = min(m.f_hz for m in modes), max(m.f_hz for m in modes)
-            band = (self.band[0] * f_lo, min(self.band[1] * f_hi, 0.45 * rec.fs))
-            freqs = np.linspace(band[0], band[1], 128)
-            he = ss.frf_discrete(freqs) * (ys[None, :, None] / scale[None, None, :])  # (F, N, 4) physical units
-            om = 2 * np.pi * freqs
-            Z = K[None] - om[:, None, None] ** 2 * np.diag(mass)[None] + 1j * om[:, None, None] * C[None]
-            forces = np.einsum("fij,fjq->fiq", Z, he)  # [M 1, l mu_1, ...] up to the level error
-            level = (influence @ influence) / (forces[:, :, 0] @ influence)  # 1 where the level is right
-            mu = (np.einsum("i,fiq->fq", lvec, forces[:, :, 1:]) / (lvec @ lvec)) * level[:, None]
-            coef = mu.real.mean(axis=0)
-            quality = np.abs(mu.imag).mean(axis=0) / np.maximum(np.abs(coef), 1e-300)
-            k1t = float(-K[at[0] - 1, at[1] - 1]) if at[0] else float(K[at[1] - 1].sum())
-            ct = float(-C[at[0] - 1, at[1] - 1]) if at[0] else float(C[at[1] - 1].sum())
-            ll = np.outer(lvec, lvec)
-            Ks, Cs = K - k1t * ll, C - ct * ll
-            # the element's constant F(r_ref) from the time-averaged equations of motion (least squares over DOFs)
-            acc_mean = (v[:, -1] - v[:, 0]) / (v.shape[1] * rec.dt)
-            g_mean = np.array([np.mean(x**2), np.mean(x**3), np.mean(vr * np.abs(vr))])
-            rhs = (influence * lin.mean() - mass * acc_mean - Cs @ v.mean(axis=1) - Ks @ zs.mean(axis=1)
-                   - lvec * (k1t * x.mean() + ct * vr.mean() + coef @ g_mean))  # fmt: skip
-            # each DOF's averaged equation weighted by the inverse size of its forces: a stiff fixture's balances
-            # tens of newtons of spring force, and its small relative error would swamp the element's constant
-            # (measured on the rig's fixture record: the device's damping -7.8 % unweighted, -4.2 % weighted)
-            wts = 1.0 / (np.abs(Ks).sum(axis=1) * zs.std(axis=1) + mass * np.abs(lin).std() + 1e-300)
-            f0 = float((wts * lvec) @ rhs / ((wts * lvec) @ lvec))
-            # F(r) about r_ref -> z frame: k3 r^3 + k2 r^2 - k1 r + k0
-            poly = np.polynomial.Polynomial([f0, k1t, coef[0], coef[1]])
-            shifted = poly(np.polynomial.Polynomial([-r_ref, 1.0]))
-            c0, c1, c2, c3 = (list(shifted.coef) + [0.0] * 4)[:4]
-            element = Model(m=float(mass[at[1] - 1]), k0=float(c0), k1=-float(c1), k2=float(c2), k3=float(c3), c=ct,
-                            c_nl=float(coef[2]))  # fmt: skip
-            structure = Structure(rec.dof_masses, element, Ks, Cs, at)
-            try:
-                eq = structure.element_equilibria()
-            except ValueError as exc:
-                raise StructureIdentificationError(
-                    f"{rec.source}: the identified element has no usable equilibria near r = "
-                    f"{1e3 * r_ref:.2f} mm ({exc})"
-                ) from None
-            new = min((z for z in (eq.z_minus, eq.z_plus) if z is not None), key=lambda z: abs(z - r_ref))
-            shift, r_ref = new - r_ref, new
-            if abs(shift) < 1e-3 * r.std():
-                break
-        coefficients = {
-            "k1_tilde": float(element.stiffness(r_ref)),
-            "k2_tilde": float(element.k2 + 3 * element.k3 * r_ref),
-            "k3": element.k3,
-            "c": ct,
-            "c_nl": element.c_nl,
-            "constant_last_pass": f0,
-            "shift_last_pass": shift,
-            "stiffness_asymmetry": asymmetry,
-            "refinement_stopped": stopped,
-        }
-        quality_of = dict(zip(("x2", "x3", "vabsv"), quality.tolist(), strict=True))
-        singular = list(ss.singular_values[:12])
-        return WellFit(r_ref, modes, K, C, coefficients, quality_of, band, singular, structure)
+    r_ref: float
+    modes: list[Mode]
+    K: np.ndarray
+    C: np.ndarray
+    coefficients: dict[str, Any]
+    quality: dict[str, float]
+    band_hz: tuple[float, float]
+    singular_values: list[float]
+    structure: Structure
+    offsets: np.ndarray
 
 
-class StructureSINDy(_StructureIdentifier):
-    """SINDy of a structure of N DOFs in the weak form, one equation per DOF, the element's terms shared by the
-    DOFs it joins (Newton's third law; module docstring).
-
-    Parameters
-    ----------
-    element : "I-J" or (I, J)
-        The element moves DOF J relative to DOF I (0: the base).
-    thresholds : sequence of float
-        STLSQ thresholds on the column-scaled coefficients (the sparsity path).
-    validation_fraction : float, default 0.2
-        The held-out tail.
-
-    Attributes
-    ----------
-    structure_ : Structure
-        The identified structure.
-    element_ : dict
-        The element's k0, k1, k2, k3, c, c_nl.
-    modal_ : dict
-        ``{well: [Mode, ...]}`` of the identified structure.
-    validation_ : dict
-        Restarted free runs over the held-out tail (``free_run_error``).
-    details_ : dict
-        Every term's coefficient, the selected terms and the sparsity path.
-
-    Examples
-    --------
-    >>> from negstiff import StructureSINDy, load
-    >>> from negstiff.models import SEED_LIKE_CUBIC
-    >>> from negstiff.models.structure_rig import StructureRig
-    >>> rec = load(StructureRig.device_on_fixture(seed=1).random(duration=120.0).write("fixture.csv"))
-    >>> sindy = StructureSINDy(element="1-2").fit(rec)
-    >>> abs(sindy.element_["k3"] / SEED_LIKE_CUBIC.k3 - 1) < 0.02   # the device's cubic stiffness
-    True
+def _least_squares_start(rec: Measurement, at, zs, v, gravity: float) -> tuple[Structure, np.ndarray]:
+    """Plain equation-error least squares on the pointwise equations (smoothed accelerations): the wells' first
+    guesses, in the physical frame, with each channel's zero.
     """
-
-    method = "sindy"
-
-    def __init__(self, *, element=None, thresholds=THRESHOLDS,
-                 validation_fraction: float = 0.2):  # fmt: skip
-        super().__init__(element=element, validation_fraction=validation_fraction)
-        self.thresholds = thresholds
-
-    @staticmethod
-    def _least_squares(rec: Measurement, at, zs, v) -> Structure:
-        """Plain equation-error least squares on the pointwise equations (smoothed accelerations): a start."""
-        a = np.gradient(v, rec.dt, axis=1)
-        cols, _ = equation_columns(zs, v, at)
-        y, X = _targets(rec, a, cols, at)
-        theta = np.linalg.lstsq(X, y, rcond=None)[0]
-        return _assemble(theta, rec.n_dof, at, rec.dof_masses)
-
-    def weak_system(self, rec: Measurement, at, zs, v, extra=()) -> tuple[np.ndarray, np.ndarray, list[str], int]:
-        """The stacked weak-form system (rows: DOF x test function; acceleration units) and its names; ``extra``:
-        (name, g) pairs of further element terms g(t) (acting on J and, opposite, on I), appended as columns.
-        """
-        half, _ = test_function_half_width(zs[at[1] - 1], rec.fs)
-        phi, d2phi = test_function(half, rec.dt)
-        stride = max(1, half)
-        cols, names = equation_columns(zs, v, at)
-        if extra:
-            lvec = coupling(rec.n_dof, at)
-            more = np.stack([lvec[:, None] * g[None, :] for _, g in extra], axis=-1)  # (N, T, E)
-            cols = np.concatenate([cols, more], axis=-1)
-            names = names + [f"element {name}" for name, _ in extra]
-        lin = -rec.u if rec.input_name == "base_acc" else rec.u
-        mass = np.asarray(rec.dof_masses)
-        ys, Xs = [], []
-        for d in range(rec.n_dof):
-            gain = 1.0 if rec.input_name == "base_acc" else float((rec.force_dof or at[1]) - 1 == d)
-            target = weak_project(rec.channels[d][:, None], d2phi, stride, rec.dt)[:, 0] * mass[d]
-            target -= (
-                gain
-                * weak_project(lin[:, None], phi, stride, rec.dt)[:, 0]
-                * (mass[d] if rec.input_name == "base_acc" else 1.0)
-            )
-            ys.append(target / mass[d])
-            Xs.append(-weak_project(cols[d], phi, stride, rec.dt) / mass[d])
-        return np.concatenate(ys), np.vstack(Xs), names, ys[0].size
-
-    def fit(self, rec: Measurement) -> StructureSINDy:
-        """Identify the structure from ``rec`` (a ``Measurement``); returns self."""
-        import pysindy as ps
-
-        rec, at, n_id = self._prepare(rec)
-        ident = rec.segment(0, n_id)
-        zs, v, window = ident.channel_states(at)
-        y, X, names, per_dof = self.weak_system(ident, at, zs, v)
-        scale = X.std(axis=0)
-        scale[scale == 0] = 1.0
-        Xn = X / scale
-        n_rows = per_dof
-        fit_rows = np.concatenate([np.arange(d * n_rows, d * n_rows + int(0.75 * n_rows)) for d in range(rec.n_dof)])
-        test_rows = np.setdiff1d(np.arange(y.size), fit_rows)
-        path = []
-        for thr in self.thresholds:
-            opt = ps.STLSQ(threshold=thr * np.abs(y).std(), alpha=0.0, max_iter=50)
-            opt.fit(Xn[fit_rows], y[fit_rows])
-            support = np.abs(opt.coef_[0]) > 0
-            if not support.any():
-                continue
-            coef = np.zeros(X.shape[1])
-            coef[support] = np.linalg.lstsq(Xn[fit_rows][:, support], y[fit_rows], rcond=None)[0]
-            score = float(np.sqrt(np.mean((Xn[test_rows] @ coef - y[test_rows]) ** 2)))
-            path.append({"threshold": thr, "support": support, "score": score})
-        if not path:
-            raise StructureIdentificationError(f"{rec.source}: every threshold removed every term")
-        best = min(p["score"] for p in path)
-        chosen = min((p for p in path if p["score"] <= 1.01 * best), key=lambda p: (p["support"].sum(), p["score"]))
-        support = chosen["support"]
-        theta = np.zeros(X.shape[1])
-        theta[support] = np.linalg.lstsq(Xn[:, support], y, rcond=None)[0] / scale[support]
-        structure = _assemble(theta, rec.n_dof, at, rec.dof_masses)
-        try:
-            modal = {w: structure.modes(w) for w in structure.equilibria()}
-        except ValueError as exc:
-            raise StructureIdentificationError(f"{rec.source}: the identified element is not usable ({exc})") from None
-        self._finish(rec, structure, n_id, modal, {
-            "terms": {nm: float(t) for nm, t in zip(names, theta, strict=True)},
-            "selected": [nm for nm, s in zip(names, support, strict=True) if s],
-            "path": [{"threshold": p["threshold"], "terms": int(p["support"].sum()), "held_out_weak_rms": p["score"]}
-                     for p in path],
-            "settings": {"velocity": f"Savitzky-Golay (window, order) = {window}", "identification_samples": n_id,
-                         "newtons_third_law": "the element's terms are one coefficient each, acting on J and, "
-                                              "opposite, on I"},
-        })  # fmt: skip
-        return self
-
-
-class StructureDiscrepancy(_StructureIdentifier):
-    """What a structure's element model misses, named, added and measured (the discrepancy workflow for N DOFs).
-
-    The baseline is the element's base law (``ELEMENT_TERMS``) fitted with the linear structure by the weak-form
-    least squares of ``StructureSINDy``. Each registered effect with a column of its own (``models.effects``:
-    Coulomb friction, cubic damping, quartic and quintic stiffness) is added in turn as a term of the element
-    (shared by the DOFs it joins) and the system refitted. The effect whose equation error is least on test
-    functions it was not fitted on (the identification part's last quarter) is named, and kept when its model's
-    held-out prediction (free runs of ``window_s`` restarted from the measured state over the last
-    ``validation_fraction``, ``free_run_error``) shrinks the baseline's error by at least ``min_gain`` of it;
-    otherwise nothing is named and the baseline stands.
-
-    Parameters
-    ----------
-    element : "I-J" or (I, J)
-        The element's place.
-    window_s : float, default 0.25
-        Held-out free runs' length [s] (short against cross-well chaos).
-    min_gain : float, default 0.1
-        The share of the baseline's held-out error an effect must remove to be named.
-    validation_fraction : float, default 0.2
-        The held-out tail.
-
-    Attributes
-    ----------
-    named_ : str or None
-        The effect named (a registry name), or None.
-    gap_ : dict
-        Held-out error [% rms] of the baseline and of the model with the named effect.
-    candidates_ : dict
-        Every effect tried: its fitted value and held-out error.
-    structure_ : Structure
-        The final structure (with the named effect, or the baseline).
-
-    Examples
-    --------
-    >>> from negstiff import StructureDiscrepancy, load
-    >>> from negstiff.models import SEED_LIKE_CUBIC
-    >>> from negstiff.models.structure_rig import StructureRig
-    >>> device = SEED_LIKE_CUBIC.__class__(**{**SEED_LIKE_CUBIC.to_dict(), "extra": {"coulomb_friction": 0.3}})
-    >>> rig = StructureRig.device_on_fixture(device, seed=1)   # the element has friction its model lacks
-    >>> rec = load(rig.random(duration=120.0).write("fixture.csv"))
-    >>> StructureDiscrepancy(element="1-2").fit(rec).named_
-    'coulomb_friction'
-    """
-
-    method = "discrepancy"
-
-    def __init__(self, *, element=None, window_s: float = 0.25, min_gain: float = 0.1,
-                 validation_fraction: float = 0.2):  # fmt: skip
-        super().__init__(element=element, validation_fraction=validation_fraction)
-        self.window_s, self.min_gain = window_s, min_gain
-
-    def fit(self, rec: Measurement) -> StructureDiscrepancy:
-        """Fit the baseline and every candidate effect on ``rec``, name the one that predicts best; returns self."""
-        from negstiff.models import effects
-
-        rec, at, n_id = self._prepare(rec)
-        ident = rec.segment(0, n_id)
-        zs, v, _ = ident.channel_states(at)
-        r, vr = relative(zs, at), relative(v, at)
-        # the smoothed sign's velocity scale: the relative velocity's noise, read as its rough part (first differences
-        # of a white-noise-dominated tail), never below 1e-4 of its spread
-        v_noise = max(float(np.std(np.diff(vr)) / math.sqrt(2)), 1e-4 * float(vr.std()))
-        sindy = StructureSINDy(element=at)
-        y, X, _, per_dof = sindy.weak_system(ident, at, zs, v)
-        # the equation error of each candidate on test functions it was not fitted on (the last quarter of every
-        # DOF's rows) names the effect; the held-out free runs decide whether it is kept
-        fit_rows = np.concatenate([np.arange(d * per_dof, d * per_dof + int(0.75 * per_dof)) for d in range(rec.n_dof)])
-        test_rows = np.setdiff1d(np.arange(y.size), fit_rows)
-
-        def weak_score(X_: np.ndarray, y_: np.ndarray) -> float:
-            th = np.linalg.lstsq(X_[fit_rows], y_[fit_rows], rcond=None)[0]
-            return float(np.sqrt(np.mean((X_[test_rows] @ th - y_[test_rows]) ** 2)))
-
-        theta0 = np.linalg.lstsq(X, y, rcond=None)[0]
-        base = _assemble(theta0, rec.n_dof, at, rec.dof_masses)
-        e0 = free_run_error(base, rec, n_id, self.window_s)["rms_percent"]
-        w0 = weak_score(X, y)
-        terms = [t for t in effects.library_terms() if t.field not in ("k0", "k1", "k2", "k3", "c", "c_nl")]
-        candidates: dict[str, dict[str, float]] = {}
-        fitted: dict[str, Structure] = {}
-        for t in terms:
-            g = t.law.column(r, vr, v_noise)
-            y2, X2, _, _ = sindy.weak_system(ident, at, zs, v, extra=[(t.field, g)])
-            theta = np.linalg.lstsq(X2, y2, rcond=None)[0]
-            value = float(theta[-1])
-            entry = {"value": value, "held_out_weak_rms": weak_score(X2, y2), "held_out_rms_percent": math.inf}
-            candidates[t.field] = entry
-            if effects.get(t.field).dissipative and value < 0:
-                entry["held_out_weak_rms"] = math.inf  # it would feed energy in: unphysical, not a candidate
-                continue
-            try:
-                s = _assemble(theta[:-1], rec.n_dof, at, rec.dof_masses, {t.field: value})
-                entry["held_out_rms_percent"] = free_run_error(s, rec, n_id, self.window_s)["rms_percent"]
-                fitted[t.field] = s
-            except (ValueError, InputError):
-                pass
-        best = min(candidates, key=lambda k: candidates[k]["held_out_weak_rms"])
-        e_best = candidates[best]["held_out_rms_percent"]
-        self.named_ = best if e_best <= (1 - self.min_gain) * e0 else None
-        self.candidates_ = candidates
-        self.gap_ = {"baseline_rms_percent": e0, "with_named_rms_percent": e_best if self.named_ else e0,
-                     "baseline_weak_rms": w0}  # fmt: skip
-        structure = fitted[best] if self.named_ else base
-        modal = {w: structure.modes(w) for w in structure.equilibria()}
-        self._finish(rec, structure, n_id, modal, {
-            "named": self.named_, "gap": self.gap_, "candidates": candidates, "window_s": self.window_s,
-            "min_gain": self.min_gain, "velocity_noise_for_sign": v_noise,
-        })  # fmt: skip
-        return self
-
-
-def _targets(rec: Measurement, a: np.ndarray, cols: np.ndarray, at: tuple[int, int]
-             ) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
-    """Pointwise stacked targets z_d'' - (input) and columns, per unit mass (a force acts on ``force_dof``, by
-    default the DOF the element moves, as everywhere else).
-    """
+    a = np.gradient(v, rec.dt, axis=1)
+    cols, _ = equation_columns(zs, v, at)
     lin = -rec.u if rec.input_name == "base_acc" else rec.u
     mass = np.asarray(rec.dof_masses)
     ys, Xs = [], []
     for d in range(rec.n_dof):
-        if rec.input_name == "base_acc":
-            inp = lin
-        else:
-            inp = lin / mass[d] if (rec.force_dof or at[1]) - 1 == d else 0.0 * lin
-        ys.append(a[d] - inp)
+        gain = 1.0 if rec.input_name == "base_acc" else float((rec.force_dof or at[1]) - 1 == d) / mass[d]
+        ys.append(a[d] - gain * lin)
         Xs.append(-cols[d] / mass[d])
-    return np.concatenate(ys), np.vstack(Xs)
+    theta = _lstsq(np.vstack(Xs), np.concatenate(ys))
+    s, b = _assemble(theta, rec.n_dof, at, rec.dof_masses)
+    return physical_frame(s, b, gravity)
+
+
+def identify_nsi(est, rec: Measurement, at: tuple[int, int]) -> StructureIdentification:
+    """NSI on a record of N > 1 DOFs (module docstring): each well's ULS and element, averaged."""
+    n_id = int(round(rec.n * (1 - est.validation_fraction)))
+    ident = rec.segment(0, n_id)
+    zs, v, window = ident.channel_states(at)
+    first, o0 = _least_squares_start(ident, at, zs, v, rec.gravity)
+    s0 = float(coupling(rec.n_dof, at) @ o0)
+    try:
+        guesses = first.element_equilibria()
+    except ValueError as exc:
+        raise StructureIdentificationError(
+            f"{rec.source}: no stable equilibrium of the element found ({exc})"
+        ) from None
+    wells = {}
+    for name in ("minus", "plus"):
+        r0 = getattr(guesses, f"z_{name}")
+        if r0 is not None:
+            wells[name] = nsi_well(est, ident, zs, v, at, r0 + s0, rec.gravity)
+    est.wells_ = wells
+    masses = rec.dof_masses
+    coef = {k: float(np.mean([w.structure.element.to_dict()[k] for w in wells.values()]))
+            for k in ("k0", "k1", "k2", "k3", "c", "c_nl")}  # fmt: skip
+    Ks = np.mean([np.asarray(w.structure.stiffness) for w in wells.values()], axis=0)
+    Cs = np.mean([np.asarray(w.structure.damping) for w in wells.values()], axis=0)
+    offsets = np.mean([w.offsets for w in wells.values()], axis=0)
+    structure = Structure(masses, Model(m=masses[at[1] - 1], **coef), 0.5 * (Ks + Ks.T), 0.5 * (Cs + Cs.T), at)
+    lopsided = {w: f.coefficients["stiffness_asymmetry"] for w, f in wells.items()}
+    stops = [f"{rec.source}: NSI around the {w} well: {f.coefficients['refinement_stopped']}"
+             for w, f in wells.items() if f.coefficients["refinement_stopped"]]  # fmt: skip
+    warned = [
+        f"{rec.source}: the identified stiffness matrix of the {w} well is not symmetric ({100 * a:.0f} % of a "
+        "coupling): a linear structure's is (reciprocity); are the masses right?"
+        for w, a in lopsided.items() if a > ASYMMETRY_WARNING
+    ]  # fmt: skip
+    return _finish("nsi", rec, structure, offsets, n_id, {w: f.modes for w, f in wells.items()}, warned + stops, {
+        "wells": {w: {"r_ref": f.r_ref, "coefficients": f.coefficients, "quality_im_over_re": f.quality,
+                      "band_hz": list(f.band_hz), "singular_values": f.singular_values, "K_uls": f.K.tolist(),
+                      "C_uls": f.C.tolist(), "offsets_m": f.offsets.tolist()} for w, f in wells.items()},
+    }, {"block_rows": est.block_rows, "order": est.order * rec.n_dof, "band_fraction": list(est.band),
+        "passes": est.passes, "velocity": f"Savitzky-Golay (window, order) = {window}"})  # fmt: skip
+
+
+def nsi_well(est, rec: Measurement, zs: np.ndarray, v: np.ndarray, at: tuple[int, int], r_ref: float,
+             gravity: float) -> WellFit:  # fmt: skip
+    """The ULS and the element's coefficients about ``r_ref`` (the measured frame), moved to the identified
+    equilibrium each pass; each DOF's constant force from the time-averaged equations, the frame pinned.
+    """
+    n = rec.n_dof
+    mass = np.asarray(rec.dof_masses)
+    lvec = coupling(n, at)
+    r, vr = relative(zs, at), relative(v, at)
+    lin = -rec.u if rec.input_name == "base_acc" else rec.u
+    if rec.input_name == "base_acc":
+        influence = mass.copy()  # M 1
+    else:
+        influence = np.zeros(n)
+        influence[(rec.force_dof or at[1]) - 1] = 1.0
+    stopped, shift = "", 0.0
+    fitted = None
+    for k_pass in range(est.passes):
+        x = r - r_ref
+        chans = feedback_channels(lin, x, vr)
+        means, scale = chans.mean(axis=0), chans.std(axis=0)
+        if np.any(scale == 0):
+            raise StructureIdentificationError(f"{rec.source}: the input or a basis function is constant")
+        w = (chans - means) / scale
+        y = (zs - zs.mean(axis=1, keepdims=True)).T
+        ys = y.std(axis=0)
+        try:
+            ss = subspace.identify(w, y / ys, rec.dt, est.order * n, est.block_rows)
+        except (ValueError, np.linalg.LinAlgError) as exc:
+            if k_pass == 0:
+                raise StructureIdentificationError(f"{rec.source}: subspace step failed ({exc})") from None
+            stopped = f"the pass at r = {1e3 * r_ref:.3f} mm failed ({exc}); the previous pass's fit is kept"
+            break
+        Cp = ys[:, None] * ss.C
+        T = np.vstack([Cp, Cp @ ss.A])[: 2 * n]
+        Ap = T @ ss.A @ np.linalg.pinv(T)
+        K = -mass[:, None] * Ap[n:, :n]
+        C = -mass[:, None] * Ap[n:, n:]
+        asymmetry = _asymmetry(K)  # 0 for the right masses (reciprocity)
+        K, C = 0.5 * (K + K.T), 0.5 * (C + C.T)
+        modes = modes_of_state_matrix(ss.A, Cp)
+        if len(modes) < n:
+            raise StructureIdentificationError(
+                f"{rec.source}: {len(modes)} underdamped modes identified around r = {1e3 * r_ref:.2f} mm, expected {n}"
+            )
+        modes = sorted(modes, key=lambda m: -abs(np.asarray(m.shape)).sum())[:n] if len(modes) > n else modes
+        modes = sorted(modes, key=lambda m: m.f_hz)
+        f_lo, f_hi = min(m.f_hz for m in modes), max(m.f_hz for m in modes)
+        band = (est.band[0] * f_lo, min(est.band[1] * f_hi, 0.45 * rec.fs))
+        freqs = np.linspace(band[0], band[1], 128)
+        he = ss.frf_discrete(freqs) * (ys[None, :, None] / scale[None, None, :])  # (F, N, 4) physical units
+        om = 2 * np.pi * freqs
+        Z = K[None] - om[:, None, None] ** 2 * np.diag(mass)[None] + 1j * om[:, None, None] * C[None]
+        forces = np.einsum("fij,fjq->fiq", Z, he)  # [M 1, l mu_1, ...] up to the level error
+        level = (influence @ influence) / (forces[:, :, 0] @ influence)  # 1 where the level is right
+        mu = (np.einsum("i,fiq->fq", lvec, forces[:, :, 1:]) / (lvec @ lvec)) * level[:, None]
+        coef = mu.real.mean(axis=0)
+        quality = np.abs(mu.imag).mean(axis=0) / np.maximum(np.abs(coef), 1e-300)
+        k1t = float(-K[at[0] - 1, at[1] - 1]) if at[0] else float(K[at[1] - 1].sum())
+        ct = float(-C[at[0] - 1, at[1] - 1]) if at[0] else float(C[at[1] - 1].sum())
+        ll = np.outer(lvec, lvec)
+        Ks, Cs = K - k1t * ll, C - ct * ll
+        # each DOF's constant force from the time-averaged equations of motion (the element's F(r_ref) and each
+        # channel's zero are not told apart by the record: the frame pins them)
+        acc_mean = (v[:, -1] - v[:, 0]) / (v.shape[1] * rec.dt)
+        g_mean = np.array([np.mean(x**2), np.mean(x**3), np.mean(vr * np.abs(vr))])
+        b = (influence * lin.mean() - mass * acc_mean - Cs @ v.mean(axis=1) - Ks @ zs.mean(axis=1)
+             - lvec * (k1t * x.mean() + ct * vr.mean() + coef @ g_mean))  # fmt: skip
+        # G(r) about r_ref -> the measured frame: k3 r^3 + k2 r^2 - k1 r + k0, G(r_ref) = 0
+        shifted = np.polynomial.Polynomial([0.0, k1t, coef[0], coef[1]])(np.polynomial.Polynomial([-r_ref, 1.0]))
+        c0, c1, c2, c3 = (list(shifted.coef) + [0.0] * 4)[:4]
+        element = Model(m=float(mass[at[1] - 1]), k0=float(c0), k1=-float(c1), k2=float(c2), k3=float(c3), c=ct,
+                        c_nl=float(coef[2]))  # fmt: skip
+        try:
+            structure, offsets = physical_frame(Structure(rec.dof_masses, element, Ks, Cs, at), b, gravity)
+            eq = structure.element_equilibria()
+        except (ValueError, InputError) as exc:
+            raise StructureIdentificationError(
+                f"{rec.source}: the identified element has no usable equilibria near r = {1e3 * r_ref:.2f} mm ({exc})"
+            ) from None
+        s = float(lvec @ offsets)
+        fitted = (r_ref, modes, K, C, k1t, coef, ct, quality, band, ss, structure, offsets, asymmetry, b)
+        new = min((z + s for z in (eq.z_minus, eq.z_plus) if z is not None), key=lambda z: abs(z - r_ref))
+        shift, r_ref = new - r_ref, new
+        if abs(shift) < 1e-3 * r.std():
+            break
+    assert fitted is not None
+    r_used, modes, K, C, k1t, coef, ct, quality, band, ss, structure, offsets, asymmetry, b = fitted
+    coefficients = {
+        "k1_tilde": k1t,
+        "k2_tilde": float(coef[0]),
+        "k3": float(coef[1]),
+        "c": ct,
+        "c_nl": float(coef[2]),
+        "constant_forces_last_pass": b.tolist(),
+        "shift_last_pass": shift,
+        "stiffness_asymmetry": asymmetry,
+        "refinement_stopped": stopped,
+    }
+    quality_of = dict(zip(("x2", "x3", "vabsv"), quality.tolist(), strict=True))
+    return WellFit(r_used, modes, K, C, coefficients, quality_of, band, list(ss.singular_values[:12]), structure,
+                   offsets)  # fmt: skip
+
+
+def stabilization(est, rec: Measurement, orders=(4, 6, 8, 10), block_rows=(20, 30, 40, 60)) -> list[dict]:
+    """Stabilisation diagram (Marchesiello, Fasana & Garibaldi 2016) around each well a structure's NSI found: for
+    every (order, block rows), the identified poles (f_hz, zeta) with the feedback channels of that well's
+    reference, each marked ``stable`` when a pole of the next lower order lies within 1 % in frequency and 5 % in
+    damping. Physical modes stay put as the order grows; spurious ones wander. Run after ``fit``.
+    """
+    n_id = est.result_.settings["identification_samples"]
+    at = est.result_.structure.place
+    ident = rec.segment(0, n_id)
+    zs, v, _ = ident.channel_states(at)
+    r, vr = relative(zs, at), relative(v, at)
+    lin = -ident.u if ident.input_name == "base_acc" else ident.u
+    y = (zs - zs.mean(axis=1, keepdims=True)).T
+    y = y / y.std(axis=0)
+    rows: list[dict] = []
+    for name, well in est.wells_.items():
+        chans = feedback_channels(lin, r - well.r_ref, vr)
+        w = (chans - chans.mean(axis=0)) / chans.std(axis=0)
+        for i in block_rows:
+            previous: list[tuple[float, float]] = []
+            for n in orders:
+                try:
+                    ss = subspace.identify(w, y, ident.dt, n, i)
+                except (ValueError, np.linalg.LinAlgError) as exc:
+                    rows.append({"well": name, "order": n, "block_rows": i, "error": str(exc)})
+                    continue
+                lam = np.linalg.eigvals(ss.A)
+                poles = sorted((float(abs(q) / (2 * math.pi)), float(-q.real / abs(q))) for q in lam if q.imag > 0)
+                rows.append({"well": name, "order": n, "block_rows": i, "poles": [
+                    {"f_hz": f, "zeta": z, "stable": any(abs(f / pf - 1) < 0.01 and abs(z - pz) < 0.05 * abs(pz)
+                                                         for pf, pz in previous)} for f, z in poles]})  # fmt: skip
+                previous = poles
+    return rows
+
+
+# --- the discrepancy workflow ------------------------------------------------------------------------------------
+def discrepancy(est, rec: Measurement, at: tuple[int, int]) -> StructureIdentification:
+    """The discrepancy workflow on a record of N > 1 DOFs (module docstring): the element's base law with the
+    linear structure, each registered effect added in turn, named by the paired block rule.
+    """
+    from negstiff.models import effects
+
+    ident_states: dict[str, Any] = {}
+
+    def v_noise_of(vr: np.ndarray) -> float:
+        # the smoothed sign's velocity scale: the relative velocity's noise, read as its rough part (first differences
+        # of a white-noise-dominated tail), never below 1e-4 of its spread
+        return max(float(np.std(np.diff(vr)) / math.sqrt(2)), 1e-4 * float(vr.std()))
+
+    terms = [t for t in effects.library_terms() if t.field not in ("k0", "k1", "k2", "k3", "c", "c_nl")]
+
+    def extras(zs, v):
+        r, vr = relative(zs, at), relative(v, at)
+        ident_states["v_noise"] = v_noise_of(vr)
+        return [(t.field, t.law.column(r, vr, ident_states["v_noise"])) for t in terms]
+
+    fit, sel, whole, rows, window, _, (n_id, _), _ = _systems(est, rec, at, extras)
+    (yf, Xf_all, names_all, _), (ys, Xs_all, _, per_sel) = fit[:4], sel[:4]
+    n_base = len(names_all) - len(terms)
+    masses = rec.dof_masses
+
+    def scored(cols: list[int]) -> tuple[np.ndarray, np.ndarray]:
+        theta = _lstsq(Xf_all[:, cols], yf)
+        return theta, _block_scores(ys - Xs_all[:, cols] @ theta, ys, per_sel, rec.n_dof, rows)
+
+    base_cols = list(range(n_base))
+    _, base_blocks = scored(base_cols)
+    ranking: list[dict[str, Any]] = [{"effect": "none", "score": float(100 * np.sqrt(base_blocks.mean()))}]
+    named, best_gain = None, 0.0
+    candidates: dict[str, dict[str, float]] = {}
+    for k, t in enumerate(terms) if est.max_effects > 0 else ():
+        theta, blocks = scored(base_cols + [n_base + k])
+        value = float(theta[-1])
+        cmp = compare(base_blocks, blocks, est.margin, base_blocks)
+        physical = not (effects.get(t.field).dissipative and value < 0)  # a feed of energy is no candidate
+        candidates[t.field] = {"value": value, "score": float(100 * np.sqrt(blocks.mean())), "gain": cmp.gain,
+                               "se": cmp.se, "physical": physical}  # fmt: skip
+        ranking.append({"effect": t.field, "score": candidates[t.field]["score"]})
+        if physical and cmp.significant and cmp.gain > best_gain:
+            named, best_gain = t.field, cmp.gain
+    ranking.sort(key=lambda e: e["score"])
+    y, X = whole[0], whole[1]
+    base_s, base_b = _assemble(_lstsq(X[:, base_cols], y), rec.n_dof, at, masses)
+    baseline, base_offsets = physical_frame(base_s, base_b, rec.gravity)
+    if named is None:
+        structure, offsets = baseline, base_offsets
+    else:
+        k = [t.field for t in terms].index(named)
+        theta = _lstsq(X[:, base_cols + [n_base + k]], y)
+        s, b = _assemble(theta[:-1], rec.n_dof, at, masses, {named: float(theta[-1])})
+        structure, offsets = physical_frame(s, b, rec.gravity)
+    gap_before = free_run_error(baseline, rec, n_id, WINDOW_S, base_offsets)
+    gap_after = free_run_error(structure, rec, n_id, WINDOW_S, offsets)
+    est.effects_ = [named] if named else ["none"]
+    est.gap_before_, est.gap_after_ = gap_before, gap_after
+    est.baseline_structure_ = baseline
+    return _finish("discrepancy", rec, structure, offsets, n_id, None, [], {
+        "effect": named or "none", "ranking": ranking, "candidates": candidates,
+        "gap_before_percent": gap_before["rms_percent"], "gap_after_percent": gap_after["rms_percent"],
+        "velocity_noise_for_sign": ident_states.get("v_noise"),
+    }, {"velocity": f"Savitzky-Golay (window, order) = {window}",
+        "score": f"held-out weak residual in blocks of {est.window_s:g} s; named only above max(1 SE, "
+                 f"{100 * est.margin:g} %)"})  # fmt: skip
 
 
 def modes_summary(modal: dict[str, list[Mode]]) -> str:
@@ -760,6 +924,3 @@ def modes_summary(modal: dict[str, list[Mode]]) -> str:
     return "; ".join(
         f"{w}: " + ", ".join(f"{m.f_hz:.3f} Hz {100 * m.zeta:.2f} %" for m in ms) for w, ms in modal.items()
     )
-
-
-__all__ = ["StructureNSI", "StructureSINDy", "free_run_error", "parse_element", "modes_of", "modes_summary"]

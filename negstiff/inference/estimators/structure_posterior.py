@@ -2,7 +2,7 @@
 
 Parameters: the element's k1, k2, k3, c, c_nl (the single-DOF names) and the displacement sensors' noise sigma
 (one for every DOF: the same kind of laser); the masses and the linear structure (springs, dampers) are fixed at
-a deterministic identification's values (``StructureSINDy`` by default, or the ``start`` structure given): the
+a deterministic identification's values (``SINDy(element=...)`` by default, or the ``start`` structure given): the
 linear structure is a nuisance well determined by the modes, and fixing it is the approximation this posterior
 makes (its intervals are conditional on it; the result says so).
 
@@ -39,7 +39,8 @@ from negstiff.models.kernel import KINDS
 from negstiff.models.simulator import integrate, stage_input
 from negstiff.models.structure import Structure
 
-from .structure_id import StructureSINDy, parse_element
+from .sindy import SINDy
+from .structure_id import parse_element
 
 NAMES = ("k1", "k2", "k3", "c", "c_nl")
 SUBSTEPS = 2
@@ -53,7 +54,7 @@ class StructurePosterior:
     element : "I-J" or (I, J)
         The element's place (J moved, I attached to; 0: the base).
     start : Structure, optional
-        The structure whose linear part is fixed and whose element starts the sampler (default: ``StructureSINDy``
+        The structure whose linear part is fixed and whose element starts the sampler (default: ``SINDy``
         on the record).
     window_s : float, default 0.1
         Length of the likelihood's windows [s].
@@ -116,7 +117,7 @@ class StructurePosterior:
     def fit(self, rec: Measurement) -> StructurePosterior:
         """Sample the element's posterior on ``rec``; returns self."""
         at = self._check(rec)
-        start = self.start if self.start is not None else StructureSINDy(element=at).fit(rec).structure_
+        start = self.start if self.start is not None else SINDy(element=at).fit(rec).structure_
         if start.place != at or start.n_dof != rec.n_dof:
             raise InputError(f"{rec.source}: the start structure's element {start.place} is not the record's {at}")
         n_id = int(0.8 * rec.n)

@@ -1,0 +1,98 @@
+"""One record and one estimator per method for any number of DOFs: a structure's record is a ``Measurement`` read
+through ``negstiff.io`` like a single DOF's, and ``NSI``, ``SINDy`` identify a device on a sprung fixture from it
+with each channel's zero arbitrary, as a laser's is. The records are written here with a plain RK4 on Python
+floats (``records.rk4_fixture_record``), not negstiff's simulator."""
+
+import warnings
+
+import numpy as np
+import pytest
+from records import FIXTURE, rk4_fixture_record, write_csv
+
+from negstiff import NSI, InputError, Model, NegstiffWarning, SINDy, from_arrays, load
+from negstiff.inference.estimators.structure_id import _finish, free_run_error
+from negstiff.models import SEED_LIKE_CUBIC
+from negstiff.models.structure import Structure
+
+FS = 512.0
+DEVICE = Model(**{**SEED_LIKE_CUBIC.to_dict(), "m": 0.2, "k0": 0.2 * 9.81})
+"""The seed-like asymmetric double well (k2, k3 > 0, the negative linear stiffness -k1 z), 0.2 kg."""
+TRUTH = Structure.on_fixture(DEVICE, fixture_mass=FIXTURE["m"], fixture_hz=FIXTURE["f_hz"],
+                             fixture_zeta=FIXTURE["zeta"])  # fmt: skip
+OFFSETS = np.array([3e-4, -2e-4])
+"""Each laser's zero [m]: a few tenths of a millimetre, as a lab's."""
+NOISE = 1e-6
+
+
+@pytest.fixture(scope="module")
+def offset_record():
+    # 120 s of random cross-well base excitation; each mass's displacement relative to the table, 1 um sensor noise,
+    # each channel's zero offset
+    u, z = rk4_fixture_record(duration=120.0, rms=12.0, seed=11, device=DEVICE, noise=NOISE)
+    return from_arrays(u, z + OFFSETS[:, None], FS, masses=(FIXTURE["m"], DEVICE.m), source="offset record")
+
+
+NSI_GAP = pytest.mark.xfail(
+    strict=True,
+    reason="measured on this record (a heavily damped device, zeta 15 %): NSI's plus-well device mode reads -1.3 % at "
+    "block_rows=30 (-0.9 % at 40, -0.5 % at 60) and its k2 +7-11 %; each channel's zero is found (see SINDy) but the "
+    "subspace step's bias on this device is not solved yet",
+)
+
+
+@pytest.mark.parametrize("method", [pytest.param(NSI, marks=NSI_GAP), SINDy])
+def test_a_device_on_a_fixture_is_identified_whatever_each_lasers_zero(offset_record, method):
+    # the physics does not depend on where each laser reads zero: the modes within 1 % in frequency and 10 % in
+    # damping, k1-k3 within 5 %, c within 10 % (the issue's acceptance), each channel's zero found to well within the
+    # 0.1 mm an unmodelled offset moved SINDy's k1 by 13 % (a few um: the constant forces over the springs'
+    # stiffness), and no warning: a right model misses its held-out windows by what noise and chaos leave any model
+    rec = offset_record
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        est = method(element="1-2").fit(rec)
+    for well in ("minus", "plus"):
+        for got, true in zip(est.modal_[well], TRUTH.modes(well), strict=True):
+            assert got.f_hz == pytest.approx(true.f_hz, rel=0.01), (well, got, true)
+            assert got.zeta == pytest.approx(true.zeta, rel=0.10), (well, got, true)
+    for k in ("k1", "k2", "k3"):
+        assert est.element_[k] == pytest.approx(getattr(DEVICE, k), rel=0.05), k
+    assert est.element_["c"] == pytest.approx(DEVICE.c, rel=0.10)
+    assert np.allclose(est.offsets_, OFFSETS, atol=2e-5), est.offsets_
+    assert not [w for w in caught if issubclass(w.category, NegstiffWarning)], [str(w.message) for w in caught]
+    out = est.result()
+    assert out["dofs"] == 2 and out["element_at"] == [1, 2] and len(out["offsets_m"]) == 2
+    assert {"modal", "element", "linear", "equilibria", "validation", "warnings"} <= set(out)
+
+
+def test_a_model_that_misses_the_held_out_windows_warns(offset_record):
+    # a stiffness 3 % off misses the held-out windows by many times what a right model misses on a record of its
+    # own (measured ~20 % against ~2 %): one warning, in the result and through Python's warnings
+    rec = offset_record
+    wrong = TRUTH.with_element(Model(**{**DEVICE.to_dict(), "k3": 1.03 * DEVICE.k3}))
+    n_id = int(0.8 * rec.n)
+    with pytest.warns(NegstiffWarning, match="misses its own record's held-out windows"):
+        res = _finish("sindy", rec, wrong, OFFSETS, n_id, None, [], {}, {})
+    assert any("held-out windows" in w for w in res.warnings)
+    right = free_run_error(TRUTH, rec, n_id, offsets=OFFSETS)["rms_percent"]
+    assert res.validation["rms_percent"] > 2 * right
+
+
+def test_a_structures_file_is_read_through_the_one_reader(tmp_path):
+    # z1 ... zN with their units and a column map, as any record: converted to SI per channel, checked per channel
+    u, z = rk4_fixture_record(duration=2.0, seed=2, device=DEVICE)
+    t = np.arange(u.size) / FS
+    path = write_csv(tmp_path / "lab.csv", {"t": t, "base_acc": u, "z1 [mm]": 1e3 * z[0], "LASER2 [mm]": 1e3 * z[1]},
+                     {"masses": "1.0, 0.2"})  # fmt: skip
+    rec = load(path, columns="z2=LASER2*0.001")
+    assert rec.n_dof == 2 and rec.masses == (1.0, 0.2) and rec.fs == pytest.approx(FS)
+    assert np.allclose(rec.z, z, rtol=1e-8, atol=1e-12)
+    one = load(write_csv(tmp_path / "one.csv", {"t": t, "base_acc": u, "z1": z[1]}, {"masses": "0.2"}))
+    assert one.n_dof == 1 and one.z.ndim == 1 and one.mass == 0.2  # N = 1 is the single DOF's record
+    bad = z.copy()
+    bad[1, 10] = np.nan
+    with pytest.raises(InputError, match="z2 is NaN or inf at row 11"):
+        from_arrays(u, bad, FS, masses=(1.0, 0.2))
+    with pytest.raises(InputError, match="needs the element's place"):
+        NSI().fit(from_arrays(u, z, FS, masses=(1.0, 0.2)))
+    with pytest.raises(InputError, match="masses"):
+        SINDy(element="1-2").fit(from_arrays(u, z, FS))
