@@ -58,7 +58,7 @@ from negstiff.files import transaction  # noqa: E402
 from negstiff.resources import idle_cores, limit_threads  # noqa: E402
 
 from .common import InputError, bad_input_types, check_paths, write_json  # noqa: E402, F401 (API)
-from .parser import build_parser  # noqa: E402
+from .parser import build_parser, command_of  # noqa: E402
 
 
 def _interrupt_handler(command: str, what: str, code: int):
@@ -79,7 +79,7 @@ def _interrupt_handler(command: str, what: str, code: int):
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    parser = build_parser()
+    parser = build_parser(only=command_of(sys.argv[1:] if argv is None else argv) or "")
     try:
         args = parser.parse_args(argv)
     except KeyboardInterrupt:

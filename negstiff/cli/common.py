@@ -5,9 +5,8 @@ JSON, the lines on stderr, and the check that no output overwrites an input.
 from __future__ import annotations
 
 import argparse
-import ast
-import functools
-import importlib.util
+import importlib
+import inspect
 import json
 import sys
 from collections.abc import Sequence
@@ -26,64 +25,13 @@ class Parser(argparse.ArgumentParser):
         self.exit(2, f"{self.prog}: error: {' '.join(message.split())} (see {self.prog} --help)\n")
 
 
-def _source(module: str) -> Path:
-    """The source file of ``negstiff.inference.<...>`` without importing it or its parent packages
-    (``find_spec`` of a submodule imports its parents: ``inference.posterior``'s loads the compiled
-    simulator, 3.4 s of every command's start, measured).
+def _estimator(estimator: str):
+    """The estimator class ``"nsi.NSI"`` names (``negstiff.inference.estimators.nsi.NSI``), imported: only the
+    command that uses it builds its options (``build_parser(only=...)``), and it imports the estimator to
+    run anyway (1.1 s of imports, the compiled simulator's among them; ``negstiff --help`` pays none).
     """
-    spec = importlib.util.find_spec("negstiff.inference")
-    assert spec is not None and spec.submodule_search_locations is not None  # a package of this distribution
-    base = Path(spec.submodule_search_locations[0])
-    path = base.joinpath(*module.split(".")[2:])
-    return path / "__init__.py" if path.is_dir() else path.with_suffix(".py")
-
-
-@functools.cache
-def _signature_defaults(module: str, cls: str) -> dict[str, Any]:
-    tree = ast.parse(_source(module).read_text())
-    init = next(
-        f
-        for c in tree.body
-        if isinstance(c, ast.ClassDef) and c.name == cls
-        for f in c.body
-        if isinstance(f, ast.FunctionDef) and f.name == "__init__"
-    )
-    args = init.args.args[-len(init.args.defaults) :] if init.args.defaults else []
-    pairs = list(zip(args, init.args.defaults, strict=False))
-    # a keyword-only parameter without a default has None here: it has no default to report
-    pairs += [(a, d) for a, d in zip(init.args.kwonlyargs, init.args.kw_defaults, strict=False) if d is not None]
-    out = {}
-    for a, d in pairs:
-        try:
-            out[a.arg] = ast.literal_eval(d)
-        except ValueError:
-            pass  # not a literal (a module constant): the CLI states no default for it
-    return out
-
-
-@functools.cache
-def _constraints(module: str, cls: str) -> dict[str, Any]:
-    """An estimator class's ``_parameter_constraints``, evaluated from its source (``inference.parameters``'
-    classes only), without importing the estimator.
-    """
-    from negstiff.inference.estimators.parameters import NAMESPACE
-
-    tree = ast.parse(_source(module).read_text())
-    body = next(c.body for c in tree.body if isinstance(c, ast.ClassDef) and c.name == cls)
-    node = next(
-        a.value for a in body if isinstance(a, ast.Assign) and any(getattr(t, "id", "") == "_parameter_constraints"
-                                                                    for t in a.targets)
-    )  # fmt: skip
-    assert isinstance(node, ast.Dict)  # the class declares its constraints as a dict literal
-    out = {}
-    for key, value in zip(node.keys, node.values, strict=False):
-        if key is None:  # a ``**mapping`` entry: not a declared constraint
-            continue
-        try:
-            out[ast.literal_eval(key)] = eval(compile(ast.Expression(value), module, "eval"), dict(NAMESPACE))
-        except NameError:
-            pass  # a constraint of the estimator's own (not an option's)
-    return out
+    module, cls = estimator.rsplit(".", 1)
+    return getattr(importlib.import_module(f"negstiff.inference.{module}"), cls)
 
 
 def declared(estimator: str, parameter: str, what: str = ""):
@@ -91,19 +39,16 @@ def declared(estimator: str, parameter: str, what: str = ""):
     constraint (``_parameter_constraints``, ``"nsi.NSI"``: ``negstiff.inference.estimators.nsi.NSI``), so the command
     line checks the range the library checks, from one declaration.
     """
-    module, cls = estimator.rsplit(".", 1)
-    c = _constraints(f"negstiff.inference.{module}", cls)[parameter]
+    c = _estimator(estimator)._parameter_constraints[parameter]
     unit = f" {c.unit}" if getattr(c, "unit", "") else ""
     return number(c.kind, c.lo, c.hi, lo_open=c.lo_open, hi_open=c.hi_open, what=what or unit)
 
 
 def default(estimator: str, parameter: str) -> Any:
-    """The default of an estimator's parameter, read from its ``__init__`` signature (``"nsi.NSI"``:
-    ``negstiff.inference.estimators.nsi.NSI``), so the CLI states the estimator's own default. Read from the source,
-    not imported: building the parser (``--help``) must not load the compiled simulator.
+    """The default of an estimator's parameter, from its ``__init__`` signature (``"nsi.NSI"``:
+    ``negstiff.inference.estimators.nsi.NSI``), so the CLI states the estimator's own default.
     """
-    module, cls = estimator.rsplit(".", 1)
-    return _signature_defaults(f"negstiff.inference.{module}", cls)[parameter]
+    return inspect.signature(_estimator(estimator)).parameters[parameter].default
 
 
 def number(kind, lo=None, hi=None, lo_open=False, what="", hi_open=False):

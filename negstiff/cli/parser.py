@@ -556,7 +556,39 @@ def _reproduce(sub, common: argparse.ArgumentParser, data_opts: argparse.Argumen
     rep.set_defaults(func=c.cmd_reproduce)
 
 
-def build_parser() -> argparse.ArgumentParser:
+class _Listed(Exception):
+    """Raised by ``_ListingOnly.add_parser``: the command is listed, its options are not built."""
+
+
+class _ListingOnly:
+    """The subparsers' stand-in for a command that is not run: ``add_parser`` registers the command (its name
+    and one-line help, for ``negstiff --help`` and argparse's choice) and stops its builder there, before its
+    options' declared ranges import the estimators they name.
+    """
+
+    def __init__(self, sub):
+        self.sub = sub
+
+    def add_parser(self, name, **kw):
+        self.sub.add_parser(name, help=kw.get("help"), add_help=False)
+        raise _Listed
+
+
+COMMANDS = ("rig", "simulate", "identify", "frf", "nfrc", "posterior", "discrepancy", "characterize", "map",
+            "update", "report", "reproduce")  # fmt: skip
+"""Every command, in the order ``negstiff --help`` lists them."""
+
+
+def command_of(argv) -> str | None:
+    """The command ``argv`` runs (its first word that is a command's name), or None."""
+    return next((a for a in argv if a in COMMANDS), None)
+
+
+def build_parser(only: str | None = None) -> argparse.ArgumentParser:
+    """The command line's parser. ``only``: build the options of that command alone (the others listed by
+    name and help), so a command pays for the imports its own options need and ``negstiff --help`` for none;
+    "" builds no command's options; None (default) builds every command's (the tests introspect them).
+    """
     common = Parser(add_help=False)
     common.add_argument(
         "--seed", type=SEED, default=0, help="random seed of every random draw (same random seed, same numbers)"
@@ -591,16 +623,14 @@ def build_parser() -> argparse.ArgumentParser:
         "horizontal device (a harvester): its frame is then pinned by its wells' symmetry or rest positions",
     )
 
-    _rig(sub, common, data_opts)
-    _simulate(sub, common, data_opts)
-    _identify(sub, common, data_opts)
-    _frf(sub, common, data_opts)
-    _nfrc(sub, common, data_opts)
-    _posterior(sub, common, data_opts)
-    _discrepancy(sub, common, data_opts)
-    _characterize(sub, common, data_opts)
-    _map(sub, common, data_opts)
-    _update(sub, common, data_opts)
-    _report(sub, common, data_opts)
-    _reproduce(sub, common, data_opts)
+    builders = {"rig": _rig, "simulate": _simulate, "identify": _identify, "frf": _frf, "nfrc": _nfrc,
+                "posterior": _posterior, "discrepancy": _discrepancy, "characterize": _characterize, "map": _map,
+                "update": _update, "report": _report, "reproduce": _reproduce}  # fmt: skip
+    extra = [name for name in builders if name not in COMMANDS]
+    assert not extra, f"commands missing from COMMANDS: {extra}"
+    for name in COMMANDS:
+        try:
+            builders[name](sub if only is None or only == name else _ListingOnly(sub), common, data_opts)
+        except _Listed:
+            pass
     return p

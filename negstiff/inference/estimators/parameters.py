@@ -4,8 +4,8 @@ After scikit-learn's ``_parameter_constraints`` (``sklearn/utils/_param_validati
 class holds ``_parameter_constraints = {name: Constraint, ...}``; ``Estimator.check`` (the first step of
 ``fit``) checks every parameter against it and raises one ``InputError`` naming the estimator, the
 parameter, the value and what is allowed. The command line builds its options' range checks from the same
-declarations (``negstiff.cli.common.declared``), read from the source without importing the estimators
-(``--help`` must not load the compiled simulator); so a declaration is a literal call of the classes here.
+declarations (``negstiff.cli.common.declared``: the command being run imports its estimator and reads them;
+``negstiff --help`` and the other commands build no estimator options and import none).
 
 Written here rather than imported from scikit-learn: its validation helpers are private API, and
 scikit-learn would become a dependency for them.
