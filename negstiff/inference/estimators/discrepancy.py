@@ -2,25 +2,23 @@
 refit, and show the gap shrink (Kaheman et al. 2019 and Ebers et al. 2024, ecosystem.md 6: the known
 physics fixed, the mismatch sought as a sparse term from a physical catalogue).
 
-1. **Locate.** The baseline (cubic K and viscous c; linear K for a start from nothing) is fitted by
-   weak-form least squares (``weak.weak_least_squares``: the input's coefficient fixed by physics).
-   Its weak residual, the equation error each test function sees, is mapped over the state (z, z'),
-   split by regime (in either well, crossing, near zero velocity, at large stroke), and its share in
-   each regime is compared with the regime's share of the record; restarted short free runs give the
-   gap in time and as a PSD. A long free run is never used: cross-well motion diverges even for the
-   true model (device-model.md).
-2. **Name.** Each catalogue effect (``catalogue()``: every effect of ``models.effects``) is added to
-   the baseline in turn, refitted on the first part of the data and scored on the held-out part by
-   its weak residual (an equation error that chaos cannot fake). ``none`` is the baseline itself. An
-   effect is named only if it lowers the held-out residual by more than max(one standard error of the
-   paired per-block differences, ``margin``) (the one-standard-error rule plus a practical margin, as
-   in ``sindy``): otherwise the answer is ``none``. Among effects that close to the best, the one with
-   fewer parameters wins.
-3. **Add and refit.** The winner enters the model (its ``extra``; an effect whose term is a base
-   field's, such as z'|z'| or z^3, folds into that field), every parameter is refitted on all
-   identification data, and the gap is measured again on the held-out tail: restarted free runs (the
-   median window's rms error: a window whose run diverges near the barrier, chaos, would dominate a
-   pooled rms), residual PSD, maps.
+1. **Locate.** The baseline (the seed's model: cubic K, viscous c, quadratic c_nl; linear K for a start from
+   nothing) is fitted by weak-form least squares (``weak.weak_least_squares``: the input's coefficient fixed by
+   physics). Its weak residual, the equation error each test function sees, is mapped over the state (z, z'),
+   split by regime (in either well, crossing, near zero velocity, at large stroke), and its share in each regime
+   is compared with the regime's share of the record; restarted short free runs give the gap in time and as a
+   PSD. A long free run is never used: cross-well motion diverges even for the true model (device-model.md).
+2. **Name.** Each catalogue effect (``catalogue()``: every effect of ``models.effects``) is added to the
+   baseline in turn, refitted on the first part of the data and scored on the held-out part by its weak residual
+   (an equation error that chaos cannot fake). ``none`` is the baseline itself. An effect is named only if it
+   lowers the held-out residual by more than max(one standard error of the paired per-block differences,
+   ``margin``) (the one-standard-error rule plus a practical margin, as in ``sindy``): otherwise the answer is
+   ``none``. Among effects that close to the best, the one with fewer parameters wins.
+3. **Add and refit.** The winner enters the model (its ``extra``; an effect whose term is a base field's, such
+   as z'|z'| or z^3, lands in that field, c_nl or k3, and only there: one home per term), every parameter is
+   refitted on all identification data, and the gap is measured again on the held-out tail: restarted free runs
+   (the median window's rms error: a window whose run diverges near the barrier, chaos, would dominate a pooled
+   rms), residual PSD, maps.
 4. **Iterate** until ``none`` wins (at most ``max_effects``).
 """
 
@@ -54,7 +52,8 @@ from negstiff.inference.steps.weak import (
 from negstiff.inference.steps.weak import terms as library_terms
 from negstiff.models import Model, effects
 
-CUBIC_BASELINE = ("1", "z", "z^2", "z^3", "v")
+CUBIC_BASELINE = ("1", "z", "z^2", "z^3", "v", "v|v|")
+"""The seed's own model form: cubic K, viscous c and quadratic c_nl (the contract's damping law)."""
 LINEAR_BASELINE = ("1", "z", "v")
 
 
@@ -133,8 +132,10 @@ class Discrepancy(StructureResults, Estimator):
 
     Parameters
     ----------
-    baseline : tuple of str, default ("1", "z", "z^2", "z^3", "v")
-        Library terms of the starting model (cubic K, viscous c).
+    baseline : tuple of str, default ("1", "z", "z^2", "z^3", "v", "v|v|")
+        Library terms of the starting model: the seed's model (cubic K, viscous c, quadratic c_nl). An effect
+        whose law is a base field's term (``quadratic_damping`` is c_nl's z'|z'|) is never a candidate beside
+        that field, and when named from a smaller baseline it lands in its field: one home per term.
     validation_fraction : float, default 0.2
         Held-out tail on which the gap is measured before and after.
     selection_fraction : float, default 0.2
@@ -411,6 +412,24 @@ class Discrepancy(StructureResults, Estimator):
         rec.require(4000, "the discrepancy workflow")
         rec.require_excitation("the discrepancy workflow")
         rec.require_motion("the discrepancy workflow")
+        if element_of(self, rec) is None:
+            self.check_length(rec)
+
+    def check_length(self, rec: Measurement) -> None:
+        """Refuse a single DOF's record too short to score an effect (two ``window_s`` blocks of the part
+        [n_fit, n_id)) with one ``DiscrepancyError``, before any work (``sindy.selection_blocks``: the record's
+        spectrum, no fit); a structure's record is checked by its fit.
+        """
+        from negstiff.inference.estimators.sindy import selection_blocks
+
+        blocks, need_s = selection_blocks(rec, self.validation_fraction, self.selection_fraction, self.window_s)
+        if blocks < 2:
+            lo, hi = 1 - self.validation_fraction - self.selection_fraction, 1 - self.validation_fraction
+            raise DiscrepancyError(
+                f"{rec.source}: too short for the discrepancy workflow: {rec.duration:.3g} s, at least about "
+                f"{need_s:.3g} s are needed (the part from {100 * lo:.0f} to {100 * hi:.0f} % of the record scores "
+                f"each effect in {self.window_s:g} s blocks, two at least)"
+            )
 
     def fit(self, rec: Measurement) -> Discrepancy:
         """Locate, name, add and refit on ``rec`` (a ``Measurement`` or a path); returns ``self``."""
@@ -463,7 +482,7 @@ class Discrepancy(StructureResults, Estimator):
             self.iterations_.append(iteration)
             if not named:
                 break
-            trial = self._trial(rec, best, [*(a["effect"] for a in added), best.effect])
+            trial = self._trial(rec, best)
             iteration["kept"], iteration["verdict"] = self._helps(rec, current["gap"], trial["gap"], best.effect)
             iteration["gap_percent"] = {"before": current["gap"].get("median_window_percent"),
                                         "after": trial["gap"].get("median_window_percent")}  # fmt: skip
@@ -489,12 +508,12 @@ class Discrepancy(StructureResults, Estimator):
         self.record_ = dict(rec.info)
         return self
 
-    def _trial(self, rec: Measurement, best: Candidate, named: list[str]) -> dict[str, Any]:
+    def _trial(self, rec: Measurement, best: Candidate) -> dict[str, Any]:
         """The model with ``best`` added: every parameter refitted on the identification part by weak least
         squares, then (``refine``) by output error, every effect's own values included (an end stop's
         stiffness and onset: ``refine.parameter_names``); its held-out gap.
         """
-        initial = self._as_extra(self._refit_model(rec, best.terms, best.stop, best.aux), named)
+        initial = self._refit_model(rec, best.terms, best.stop, best.aux)
         model, refinement = initial, None
         if self.refine:
             val = validate(initial, rec, self.n_id_)
@@ -562,21 +581,6 @@ class Discrepancy(StructureResults, Estimator):
             return top
         return min(ok, key=lambda c: (n_par[c.effect], c.heldout_percent))
 
-    @staticmethod
-    def _as_extra(model: Model, named: list[str]) -> Model:
-        """Named effects that fold into a base field (c_nl, k2, k3) move to ``extra`` under their name, so
-        the model file says what was added (the simulator adds them back to the same field).
-        """
-        folds = {e.name: e.folds_into for e in effects.REGISTRY if e.folds_into}
-        d = model.to_dict()
-        extra = dict(d.get("extra") or {})
-        for e in named:
-            if e in folds:
-                extra[e] = d[folds[e]]
-                d[folds[e]] = 0.0
-        d["extra"] = extra
-        return Model.from_dict(d)
-
     def _refit_model(self, rec: Measurement, terms, stop, aux: tuple[str, ...] = ()) -> Model:
         W, y = self._design(rec, 0, self.n_id_, stop, aux)
         return self._model(self._fit(W, y, terms, stop is not None, len(aux)), rec, stop, aux)
@@ -598,10 +602,14 @@ class Discrepancy(StructureResults, Estimator):
         return out
 
     def effect_size(self) -> dict[str, Any]:
-        """The named effects' values in the model file's units."""
+        """The named effects' values in the model file's units (an effect that is a base field's term, such as
+        ``quadratic_damping``, is read from its field: c_nl).
+        """
         out = {}
+        folds = {e.name: e.folds_into for e in effects.REGISTRY if e.folds_into}
+        fields = self.model_.to_dict()
         for e in self.effects_:
-            val = self.model_.extra.get(e)
+            val = fields[folds[e]] if e in folds else self.model_.extra.get(e)
             out[e] = dict(val) if isinstance(val, dict) or hasattr(val, "keys") else val
         return out
 
