@@ -50,7 +50,7 @@ from negstiff.inference.estimators.structure_id import (
     identify_nsi,
 )
 from negstiff.inference.estimators.structure_id import stabilization as structure_stabilization
-from negstiff.inference.record.measurement import Measurement
+from negstiff.inference.record.measurement import Measurement, per_unit_mass_warning
 from negstiff.inference.steps.weak import known_input_gain, mass_of
 from negstiff.inference.steps.wells import well_guesses
 from negstiff.models import Model
@@ -384,9 +384,10 @@ class NSI(StructureResults, Identifier):
             mass_source=mass_source,
             input_gain=float(np.mean(gains)),
             modal=modal,
-            warnings=tuple(
-                f"NSI's basis is the restoring force's and the damping's: the record's measured channel {a!r} is not "
-                "used (SINDy and the discrepancy workflow offer it as a term)" for a in rec.aux
+            warnings=(
+                *(f"NSI's basis is the restoring force's and the damping's: the record's measured channel {a!r} is "
+                  "not used (SINDy and the discrepancy workflow offer it as a term)" for a in rec.aux),
+                *filter(None, [per_unit_mass_warning(rec)]),
             ),
             details={"wells": self._wells_json()},
             settings={

@@ -30,9 +30,9 @@ import math
 import numpy as np
 
 from negstiff.inference.estimators.identification import Estimate, Identifier
-from negstiff.inference.estimators.parameters import FRACTION, SEED, Boolean, Interval, Several
+from negstiff.inference.estimators.parameters import FRACTION, RANDOM_STATE, Boolean, Interval, Several, seed_of
 from negstiff.inference.estimators.structure_id import ElementPlace, StructureResults, element_of, identify_sindy
-from negstiff.inference.record.measurement import Measurement
+from negstiff.inference.record.measurement import Measurement, per_unit_mass_warning
 from negstiff.inference.steps.selection import block_rows, block_scores, indistinguishable
 from negstiff.inference.steps.validation import boundedness, restarted_free_runs
 from negstiff.inference.steps.weak import (
@@ -47,6 +47,7 @@ from negstiff.inference.steps.weak import (
     model_from,
     term_fields,
     terms,
+    test_function_half_width,
 )
 from negstiff.models import effects
 
@@ -59,6 +60,26 @@ DEFAULT_WEIGHTS = tuple(float(w) for w in np.logspace(-9, -1, 33))
 
 class SINDyError(WeakFormError):
     """The record cannot be identified by SINDy (too short, no excitation, nothing selected)."""
+
+
+def selection_blocks(rec: Measurement, validation_fraction: float, selection_fraction: float,
+                     window_s: float) -> tuple[int, float]:  # fmt: skip
+    """How many ``window_s`` blocks of weak-form rows the selection part of a single DOF's record holds, and
+    about how long a record [s] would give two: the check a weak-form fit (SINDy, the discrepancy workflow)
+    makes before any work. The rows are counted as ``WeakForm.system`` makes them: the test function's
+    half-width h from the identification part's spectrum (the fit's own, kept with the record's segment), the
+    kernel 8 h + 1 samples long, one row every max(1, h // 2) samples of the selection part [n_fit, n_id).
+    """
+    n_id = int(round(rec.n * (1 - validation_fraction)))
+    n_fit = int(round(rec.n * (1 - validation_fraction - selection_fraction)))
+    ident = rec.segment(0, n_id)
+    half, _ = test_function_half_width(ident.displacement, ident.fs, floor=ident.noise_floor())
+    stride = max(1, half // 2)
+    rows = block_rows(window_s, rec.fs, stride)
+    valid = n_id - n_fit - 8 * half  # the samples where a whole test function fits
+    n_rows = 0 if valid <= 0 else -(-valid // stride)
+    need = (8 * half + (2 * rows - 1) * stride + 1) / max(selection_fraction, 1e-12)  # samples of the record
+    return n_rows // rows, float(need / rec.fs)
 
 
 class SINDy(StructureResults, Identifier):
@@ -87,8 +108,9 @@ class SINDy(StructureResults, Identifier):
         Length of the restarted free runs and of the residual blocks that score a support [s].
     margin : float, default 0.1
         Relative gain in held-out residual a larger support must bring.
-    seed : int, default 0
-        Seeds the ensemble's bagging.
+    seed : int, None or numpy.random.Generator, default 0
+        Seeds the ensemble's bagging (same seed, same ensemble); None: fresh entropy; a Generator: its next draw
+        (scikit-learn's ``random_state``). The integer used is ``seed_`` and the result's ``settings["seed"]``.
     refine : bool, default True
         Finish by output-error refinement (a single DOF's).
     element : str or (int, int), optional
@@ -111,6 +133,8 @@ class SINDy(StructureResults, Identifier):
         The free run over the held-out tail.
     warnings_ : list of str
         Every warning (also issued as ``NegstiffWarning``).
+    seed_ : int
+        The integer seed the fit used (``seed``, or drawn from None or a Generator).
 
     Examples
     --------
@@ -133,7 +157,7 @@ class SINDy(StructureResults, Identifier):
         "selection_fraction": FRACTION,
         "window_s": Interval(float, 0.0, lo_open=True, unit="s"),
         "margin": Interval(float, 0.0),
-        "seed": SEED,
+        "seed": RANDOM_STATE,
         "refine": Boolean(),
         "element": ElementPlace(),
     }
@@ -148,7 +172,7 @@ class SINDy(StructureResults, Identifier):
         selection_fraction: float = 0.2,
         window_s: float = 2.0,
         margin: float = 0.1,
-        seed: int = 0,
+        seed: int | np.random.Generator | None = 0,
         refine: bool = True,
         element: str | tuple[int, int] | None = None,
     ):
@@ -183,6 +207,7 @@ class SINDy(StructureResults, Identifier):
         stages (``Identifier.fit``), a structure's (N > 1 DOFs) through ``structure_id.identify_sindy``.
         """
         rec = self.check(data)
+        self.seed_ = seed_of(self.seed)  # None or a Generator: the integer drawn here, recorded in the settings
         at = element_of(self, rec)
         if at is None:
             return super().fit(rec)
@@ -192,10 +217,26 @@ class SINDy(StructureResults, Identifier):
         return self
 
     def _check_record(self, rec: Measurement) -> None:
-        element_of(self, rec)
+        at = element_of(self, rec)
         rec.require(MIN_SAMPLES, "SINDy")
         rec.require_excitation("SINDy")
         rec.require_motion("SINDy")
+        if at is None:
+            self.check_length(rec)
+
+    def check_length(self, rec: Measurement) -> None:
+        """Refuse a single DOF's record too short for the selection's scoring blocks (two ``window_s`` blocks
+        of the selection part at least) with one ``SINDyError``: a cheap check (the record's spectrum, no fit),
+        made by ``check`` so a caller refuses before printing any progress. A structure's record is checked by
+        its fit (its blocks follow the element's smoothed states).
+        """
+        blocks, need_s = selection_blocks(rec, self.validation_fraction, self.selection_fraction, self.window_s)
+        if blocks < 2:
+            raise SINDyError(
+                f"{rec.source}: too short for SINDy: {rec.duration:.3g} s, at least about {need_s:.3g} s are "
+                f"needed ({100 * self.selection_fraction:.0f} % of the record scores the candidate models in "
+                f"{self.window_s:g} s blocks, two at least)"
+            )
 
     def _estimate(self, rec: Measurement, n_id: int) -> Estimate:
         """SINDy's own estimate: the support selected on held-out residuals, refitted on the
@@ -227,7 +268,7 @@ class SINDy(StructureResults, Identifier):
         # 3. refit the chosen support on all identification data; the ensemble at the same weight
         sys_id = form.system(ident, aux=aux)
         phys = fit_support(sys_id, gain, support=chosen["support"])
-        bagging = Bagging(self.n_models, self.subset_fraction, self.seed)
+        bagging = Bagging(self.n_models, self.subset_fraction, self.seed_)
         phys_ens = fit_support(sys_id, gain, chosen["weight"], bagging=bagging)
         mass, mass_source = mass_of(rec, gain, phys[-1])
         model = model_from(phys, mass, aux)
@@ -249,6 +290,7 @@ class SINDy(StructureResults, Identifier):
             mass_source=mass_source,
             input_gain=float(phys[-1]),
             held=held,
+            warnings=tuple(filter(None, [per_unit_mass_warning(rec)])),
             details={
                 "selected_terms": self.selected_,
                 "ensemble": self.ensemble_,
@@ -272,7 +314,7 @@ class SINDy(StructureResults, Identifier):
                 "weight": self.weight_,
                 "n_models": self.n_models,
                 "subset_fraction": self.subset_fraction,
-                "seed": self.seed,
+                "seed": self.seed_,
             },
         )
 

@@ -592,7 +592,7 @@ def identify_sindy(est, rec: Measurement, at: tuple[int, int]) -> StructureIdent
     theta = _lstsq(X, y, chosen["support"])
     scale_all = np.sqrt(np.mean(X**2, axis=0))
     scale_all[scale_all == 0] = 1.0
-    with warnings.catch_warnings(), _seeded_global_rng(est.seed):
+    with warnings.catch_warnings(), _seeded_global_rng(est.seed_):
         warnings.simplefilter("ignore")
         ens = ps.EnsembleOptimizer(ps.STLSQ(threshold=math.sqrt(2 * chosen["weight"]), alpha=0.0, max_iter=50),
                                    bagging=True, n_models=est.n_models, n_subset=int(est.subset_fraction * y.size))
@@ -612,7 +612,7 @@ def identify_sindy(est, rec: Measurement, at: tuple[int, int]) -> StructureIdent
         "form": f"weak: test functions (1 - (s/T)^2)^4, T = {form.half} samples, every {form.stride}",
         "selection": f"sparsest support whose held-out weak residual (blocks of {est.window_s:g} s) is within "
                      f"max(one standard error, {100 * est.margin:g} %) of the best",
-        "weight": chosen["weight"], "n_models": est.n_models, "seed": est.seed,
+        "weight": chosen["weight"], "n_models": est.n_models, "seed": est.seed_,
         "newtons_third_law": "the element's terms are one coefficient each, acting on J and, opposite, on I",
     })  # fmt: skip
 

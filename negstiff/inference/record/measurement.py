@@ -125,6 +125,62 @@ class Measurement:
     """What is computed from this record once and kept with it (its smoothed states, its segments, its
     pinned frame): a record is immutable, so what it gives never changes (``states``, ``segment``)."""
 
+    def __post_init__(self) -> None:
+        """The record's invariants, checked however it is made (``Measurement(...)`` directly, ``replace``,
+        ``from_arrays``, ``load``): what ``from_arrays`` checks of arrays (the input's name, a sampling rate a
+        record has, 1-D columns of one length of at least 2 samples, real, finite and within a shaker-table
+        record's SI magnitudes; a mass within ``MASS_RANGE_KG``), each failure one ``MeasurementError``.
+        Columns given as sequences become float arrays.
+        """
+        source = self.source
+        if not isinstance(self.input_name, str) or self.input_name not in INPUTS:
+            raise MeasurementError(f"{source}: input must be one of {INPUTS}, got {self.input_name!r}")
+        object.__setattr__(self, "fs", check_sampling_rate(source, self.fs, "given"))
+        cols: dict[str, np.ndarray] = {}
+        names = [("u", self.input_name), ("z", "z"), *((k, k) for k in OPTIONAL if k in ("z_dot", "y", "base_disp"))]
+        for attr, name in names:
+            values = getattr(self, attr)
+            if values is None:
+                continue
+            if np.iscomplexobj(values):
+                raise MeasurementError(f"{source}: {name} is complex: a record's samples are real numbers")
+            try:
+                arr = np.asarray(values, dtype=float)
+            except (TypeError, ValueError):
+                raise MeasurementError(f"{source}: {name} is not an array of numbers") from None
+            if arr is not values:
+                object.__setattr__(self, attr, arr)
+            if attr == "z" and arr.ndim == 2 and arr.shape[0] > 1:
+                cols.update({f"z{k + 1}": row for k, row in enumerate(arr)})
+            elif arr.ndim != 1:
+                raise MeasurementError(f"{source}: {name} must be a 1-D array (a structure's z: (N, T)), got shape "
+                                       f"{arr.shape}")  # fmt: skip
+            else:
+                cols[name] = arr
+        n = cols[self.input_name].size
+        for name, arr in cols.items():
+            if arr.size != n:
+                raise MeasurementError(f"{source}: {name} has {arr.size} samples, {self.input_name} has {n}")
+        if n < 2:
+            raise MeasurementError(f"{source}: too few samples ({n}) for a record")
+        check_values(source, cols)
+        if not isinstance(self.aux, Mapping):
+            raise MeasurementError(f"{source}: aux must map names to channels ({{'voltage': v}})")
+        for name, v in self.aux.items():
+            if np.ndim(v) != 1 or np.size(v) != n:
+                raise MeasurementError(f"{source}: auxiliary channel {name} has {np.size(v)} samples, the record {n}")
+            if not np.all(np.isfinite(v)):
+                raise MeasurementError(f"{source}: auxiliary channel {name} is NaN or inf")
+        if self.mass is not None:
+            m = self.mass
+            if isinstance(m, bool) or not isinstance(m, (int, float, np.integer, np.floating)) or not (
+                MASS_RANGE_KG[0] <= m <= MASS_RANGE_KG[1]
+            ):
+                raise MeasurementError(f"{source}: mass {m!r} kg is not a moving mass "
+                                       f"({MASS_RANGE_KG[0]:g} to {MASS_RANGE_KG[1]:g} kg)")  # fmt: skip
+        if self.masses is not None:
+            object.__setattr__(self, "masses", _checked_masses(source, self.masses, self.n_dof))
+
     @property
     def n(self) -> int:
         """The number of samples."""
@@ -654,6 +710,21 @@ def load(
     return _warned(rec.with_mass(mass).with_gravity(gravity))
 
 
+def per_unit_mass_warning(rec: Measurement) -> str | None:
+    """The warning an identification of ``rec`` carries when its coefficients are per unit mass (a base-excited
+    single DOF's record without a mass: m = 1, ``"mass_normalised": true``), else None. The contract lets the mass
+    be omitted, so this warns rather than refuses (a per-unit-mass model still gives the wells, the modes, the
+    ratios k3/k1 and a free run); it is said, in the result and through ``warnings``, because every force and
+    stiffness in it is one divided by the unknown mass.
+    """
+    if rec.mass is not None or rec.input_name != "base_acc" or rec.n_dof != 1:
+        return None
+    return (
+        f"{rec.source}: no mass given (--mass, '# mass:' or from_arrays(..., mass=)): the coefficients are per unit "
+        "mass (m = 1, mass_normalised): k0-k3, c and c_nl are the device's divided by its moving mass"
+    )
+
+
 def _warned(rec: Measurement) -> Measurement:
     """The record with what looks wrong in it alone (units: mm read as m, an acceleration in mm/s^2; the
     sensor's derivation) in ``info["warnings"]``, each issued as a ``RecordWarning`` at once: a user learns
@@ -850,6 +921,7 @@ def from_arrays(
     fs: float,
     input_name: str = "base_acc",
     *,
+    mass: float | None = None,
     unknown_scale: str | None = None,
     gravity: float | None = None,
     **kw: Any,
@@ -872,13 +944,17 @@ def from_arrays(
         Sampling rate [Hz].
     input_name : {"base_acc", "force"}, default "base_acc"
         What ``u`` is.
+    mass : float, optional
+        The moving mass [kg] (a structure's: ``masses``, one per DOF). Without it an identification's
+        coefficients are per unit mass (m = 1): its result says so (``"mass_normalised": true``) and warns
+        (docs/contract.md); a force-driven record's mass is then estimated from the input's coefficient.
     unknown_scale : str, optional
         A response channel whose sensitivity is unknown (a file's ``*?``).
     gravity : float, optional
         The gravity along the motion [m/s^2] (0 for a horizontal device).
     **kw
-        Optional columns (``z_dot``, ``y``, ``base_disp``, ...), ``mass`` [kg] (or a structure's ``masses``,
-        one per DOF), ``force_dof`` (the DOF a force acts on), ``source`` (a name for messages), ``meta`` and
+        Optional columns (``z_dot``, ``y``, ``base_disp``, ...), a structure's ``masses`` (one per DOF) [kg],
+        ``force_dof`` (the DOF a force acts on), ``source`` (a name for messages), ``meta`` and
         ``aux`` (a dict of measured auxiliary channels, ``{"voltage": v}``).
 
     Returns
@@ -918,6 +994,7 @@ def from_arrays(
     for name, values in (("u", u), ("z", z), *((k, kw.get(k)) for k in OPTIONAL), *dict(aux_given or {}).items()):
         if values is not None and np.iscomplexobj(values):  # np.asarray(float) would drop the imaginary part
             raise MeasurementError(f"{source}: {name} is complex: a record's samples are real numbers")
+    kw["mass"] = mass
     masses = kw.pop("masses", None)
     force_dof = kw.pop("force_dof", None)
     responses = None
