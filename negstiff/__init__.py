@@ -43,7 +43,6 @@ _EXPORTS = {
     "NSI": "negstiff.inference.estimators.nsi",
     "SINDy": "negstiff.inference.estimators.sindy",
     "Discrepancy": "negstiff.inference.estimators.discrepancy",
-    "StructurePosterior": "negstiff.inference.estimators.structure_posterior",
     "Posterior": "negstiff.inference.estimators.posterior.core",
     "GAUpdater": "negstiff.inference.estimators.updating",
     "characterize": "negstiff.inference.analysis.characterize",

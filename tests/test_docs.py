@@ -56,7 +56,7 @@ def test_every_public_name_has_a_numpydoc_docstring_with_an_example(name, obj):
 
 SLOW_EXAMPLES = {"Posterior"}
 """An example that samples a posterior (about 10 s): run with -m slow, test_posterior.py keeping Posterior in the
-default suite (StructurePosterior's example stays: it is its default-suite test)."""
+default suite."""
 
 
 @pytest.mark.parametrize(

@@ -29,6 +29,7 @@ from negstiff.inference.estimators.posterior.parametrisation import (
 )
 from negstiff.inference.estimators.posterior.sampling import sample_ensembles
 from negstiff.inference.estimators.posterior.windows import DROP_FACTOR_AT_MAP, PosteriorError, Windows
+from negstiff.inference.estimators.structure_id import ElementPlace, element_of
 from negstiff.inference.record.derivatives import noise_floor
 from negstiff.inference.record.measurement import Measurement
 from negstiff.inference.steps.plausibility import classified
@@ -79,6 +80,12 @@ class Posterior(Estimator):
         Coefficient posterior only: the model the MAP search starts from (e.g. an identification's).
     refine_start : bool, default True
         Without ``start``: refine the weak-form estimate by output error before the MAP search.
+    element : str or (int, int), optional
+        Where the element acts on a record of N > 1 DOFs: ``"I-J"``, it moves DOF J relative to DOF I (0: the
+        base). None: the single DOF. On a structure's record the element's k1-k3, c, c_nl and the sensors'
+        sigma are sampled, the masses, the linear structure and each channel's zero fixed at
+        ``SINDy(element=...)``'s (``posterior.structure``); ``model="coefficients"``, no ``start`` and no
+        ``input_noise`` there.
 
     Attributes
     ----------
@@ -89,6 +96,8 @@ class Posterior(Estimator):
         The record's windows the likelihood reads.
     warnings_ : list of str
         Every warning (an unconverged chain among them; also issued as ``NegstiffWarning``).
+    structure_, offsets_ : Structure, tuple of float
+        A structure's record only: the structure with the posterior mean's element, each channel's zero [m].
 
     Examples
     --------
@@ -123,6 +132,7 @@ class Posterior(Estimator):
         "progress": Boolean(),
         "start": Instance("negstiff.models.equation", "Model", none=True),
         "refine_start": Boolean(),
+        "element": ElementPlace(),
     }
 
     def __init__(
@@ -147,6 +157,7 @@ class Posterior(Estimator):
         progress: bool = False,
         start: Model | None = None,
         refine_start: bool = True,
+        element: str | tuple[int, int] | None = None,
     ):
         self.model = model
         self.mass_prior = mass_prior
@@ -167,14 +178,50 @@ class Posterior(Estimator):
         self.progress = progress
         self.start = start
         self.refine_start = refine_start
+        self.element = element
 
     def _validate(self) -> None:
         if self.start is not None and self.model != "coefficients":
             raise PosteriorError("a start model is a polynomial model, for the coefficient posterior")
 
     def result(self) -> dict[str, Any]:
-        """The contract's posterior JSON (``result_json`` of ``result_``), with every warning and the record."""
-        return {**result_json(self.result_, self.hdi_prob), "warnings": list(self.warnings_), "record": self.record_}
+        """The contract's posterior JSON (``result_json`` of ``result_``), with every warning and the record; on a
+        structure's record also ``dofs``, ``element_at``, ``structure`` (the posterior mean's), ``offsets_m`` and
+        ``modal`` (that structure's modes per well).
+        """
+        out = {**result_json(self.result_, self.hdi_prob), "warnings": list(self.warnings_), "record": self.record_}
+        settings = self.result_.settings
+        if "element_at" in settings:
+            s = self.structure_
+            out.update(dofs=s.n_dof, element_at=list(settings["element_at"]), structure=s.to_dict(),
+                       offsets_m=list(settings["offsets_m"]),
+                       modal={w: [m.to_json() for m in s.modes(w)] for w in s.equilibria()})  # fmt: skip
+        return out
+
+    @property
+    def structure_(self):
+        """A structure's record: the ``Structure`` with the posterior mean's element (its linear part fixed)."""
+        from negstiff.inference.estimators.posterior.structure import mean_structure
+
+        settings = self.result_.settings
+        if "element_at" not in settings:
+            raise AttributeError("structure_: a single DOF's posterior has no structure (its model is model_)")
+        return mean_structure(settings, self.result_.summary)
+
+    @property
+    def offsets_(self) -> tuple[float, ...]:
+        """A structure's record: each channel's zero [m] the posterior held (measured = physical + offset)."""
+        settings = self.result_.settings
+        if "offsets_m" not in settings:
+            raise AttributeError("offsets_: a single DOF's posterior works in the record's pinned frame")
+        return tuple(float(o) for o in settings["offsets_m"])
+
+    def _summary(self) -> str:
+        settings = self.result_.settings
+        if "element_at" not in settings:
+            return ""
+        k3 = self.result_.summary["k3"]
+        return f"{settings['dofs']} DOFs, element k3 {k3['mean']:.4g} +- {k3['sd']:.2g}"
 
     def _restore(self, result: dict[str, Any]) -> None:
         self.result_ = PosteriorResult.from_json(result)
@@ -188,6 +235,8 @@ class Posterior(Estimator):
         mass) or a ``Device`` (device). Its uncertainty is ``result_`` 's.
         """
         res = self.result_
+        if "element_at" in res.settings:  # a structure's: the element's law of the DOF it moves
+            return self.structure_.element
         mean = {n: s["mean"] for n, s in res.summary.items()}
         if "k1" in mean:
             mass = res.settings.get("model_mass") or res.settings.get("mass") or 1.0
@@ -338,6 +387,20 @@ class Posterior(Estimator):
 
     # --- the run --------------------------------------------------------------------------------
     def _check_record(self, rec: Measurement) -> None:
+        if element_of(self, rec) is not None:
+            from negstiff.inference.estimators.posterior.structure import window_starts
+
+            name = type(self).__name__
+            if self.model != "coefficients":
+                raise PosteriorError(f"{name}(model={self.model!r}): a structure's posterior samples its element's "
+                                     "coefficients (model='coefficients')")  # fmt: skip
+            if self.start is not None:
+                raise PosteriorError(f"{name}(start=...): a structure's posterior starts from SINDy(element=...)")
+            if self.input_noise:
+                raise PosteriorError(f"{name}(input_noise={self.input_noise!r}): the input's noise is not carried "
+                                     "through a structure (None or 0 there)")  # fmt: skip
+            window_starts(rec, self.window_s, self.max_windows)
+            return
         rec.require_excitation("the posterior")
         rec.require_motion("the posterior")
         Windows.check(rec, self.window_s)
@@ -346,6 +409,9 @@ class Posterior(Estimator):
         """Sample the posterior of ``rec``; the result is ``result_`` (a ``PosteriorResult``)."""
         rec = self.check(rec)
         seed = seed_of(self.seed)  # None or a Generator: the integer drawn here, recorded in the settings
+        at = element_of(self, rec)
+        if at is not None:
+            return self._fit_structure(rec, at, seed)
 
         t_start = time.perf_counter()
         par, win, theta, sol, sigma = self.point_estimate(rec)
@@ -440,6 +506,23 @@ class Posterior(Estimator):
         self.result_ = res
         # unconverged chains, and the record's own warnings: in the result and through Python's warnings,
         # the convergence checks that failed as one warning (a short run fails every parameter's twice)
+        lines = classified(rec, None, res.warnings)
+        issue(one_convergence_warning(lines))
+        self.warnings_ = [text for _, text in lines]
+        self.record_ = dict(rec.info)
+        return self
+
+
+    def _fit_structure(self, rec: Measurement, at: tuple[int, int], seed: int) -> Posterior:
+        """The element's posterior on a structure's record (``posterior.structure``)."""
+        from negstiff.inference.estimators.posterior.structure import fit_structure
+
+        t_start = time.perf_counter()
+        res, _, sim = fit_structure(self, rec, at, seed)
+        res.settings["elapsed_s"] = time.perf_counter() - t_start
+        res.provenance = provenance(rec.source, res.settings)
+        self.result_, self.windows_ = res, sim
+        self.input_noise_ = dict(res.settings["input_noise"])
         lines = classified(rec, None, res.warnings)
         issue(one_convergence_warning(lines))
         self.warnings_ = [text for _, text in lines]
