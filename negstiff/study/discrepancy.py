@@ -18,6 +18,7 @@ from negstiff.inference.estimators.discrepancy import Discrepancy
 from negstiff.inference.record.measurement import Measurement
 from negstiff.inference.steps.validation import residual_psd
 from negstiff.models import AS_BUILT, SEED_LIKE_CROSS_WELL_RMS, SEED_LIKE_CUBIC
+from negstiff.models import effects as registry
 from negstiff.models.rig import Rig
 from negstiff.report.document import Report, run_study
 from negstiff.report.numbers import fmt
@@ -54,8 +55,16 @@ class WorkflowRun:
 
     @property
     def right(self) -> bool:
-        """Whether the workflow named exactly the hidden effect (``["none"]`` for none)."""
-        return (self.workflow.effects_ or ["none"]) == [self.hidden]  # result()'s "effects"
+        """Whether the workflow named exactly the hidden effect (``["none"]`` for none); a hidden effect that is
+        the baseline's own term (quadratic damping: c_nl) is right when nothing is named and the field holds it
+        within 20 % (one home per term).
+        """
+        named = self.workflow.effects_ or ["none"]  # result()'s "effects"
+        folds = registry.get(self.hidden).folds_into if self.hidden in registry.names() else None
+        if folds is not None and folds in self.workflow.model_.to_dict() and isinstance(self.size, float):
+            value = self.workflow.model_.to_dict()[folds]
+            return named == ["none"] and abs(value - self.size) <= 0.2 * abs(self.size)
+        return named == [self.hidden]
 
     def result(self) -> dict[str, Any]:
         """The record's entry of results.json."""
@@ -87,6 +96,8 @@ def hidden_part(rep: Report, res: dict[str, Any], duration: float, seeds: tuple[
     for run in runs:
         r = run.result()
         est = r["effect_size"].get(run.hidden) if run.hidden != "none" else None
+        if est is None and run.hidden == "quadratic_damping":  # the baseline's own c_nl holds it
+            est = r["model"]["c_nl"]
         rows.append(
             [
                 run.hidden,
@@ -105,8 +116,9 @@ def hidden_part(rep: Report, res: dict[str, Any], duration: float, seeds: tuple[
     n_right = sum(o["right"] for o in out)
     rep.heading("Hidden effects on the rig", 3)
     rep.text(
-        f"The rig's truth is the baseline's own form (cubic K, viscous c; the seed-like coefficients, no c_nl) "
-        f"plus one hidden effect of realistic size, or none; {duration:g} s cross-well records at default sensor "
+        f"The rig's truth is the seed-like cubic K and viscous c (no c_nl) plus one hidden effect of realistic "
+        f"size, or none; the baseline is the seed's model (c and c_nl), so hidden quadratic damping is right when "
+        f"nothing is named and c_nl holds it (one home per term); {duration:g} s cross-well records at default sensor "
         f"noise, seeds {', '.join(map(str, seeds))}. The workflow saw only the measured columns. Named right in "
         f"**{n_right} of {len(out)}** records. Gap: restarted 2 s free runs over the held-out last 20 %, the median "
         "window's rms error in % of rms(z)."

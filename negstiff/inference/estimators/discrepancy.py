@@ -39,7 +39,7 @@ from negstiff.inference.record.measurement import Measurement
 from negstiff.inference.steps.plausibility import classified
 from negstiff.inference.steps.refine import refine_stage
 from negstiff.inference.steps.selection import block_rows, block_scores, compare, indistinguishable
-from negstiff.inference.steps.validation import boundedness, restarted_free_runs, validate
+from negstiff.inference.steps.validation import boundedness, restarted_free_runs, staged_windows, validate
 from negstiff.inference.steps.weak import (
     BASE_FIELDS,
     WeakForm,
@@ -50,7 +50,7 @@ from negstiff.inference.steps.weak import (
     term_fields,
 )
 from negstiff.inference.steps.weak import terms as library_terms
-from negstiff.models import Model, effects
+from negstiff.models import Model, effects, simulate_batch
 
 CUBIC_BASELINE = ("1", "z", "z^2", "z^3", "v", "v|v|")
 """The seed's own model form: cubic K, viscous c and quadratic c_nl (the contract's damping law)."""
@@ -74,6 +74,17 @@ def _stop() -> tuple[str, effects.OneSidedStop]:
     e = _positional()
     assert e is not None and isinstance(e.law, effects.OneSidedStop)
     return e.name, e.law
+
+
+def share_text(share: float) -> str:
+    """A share (0..1) in per cent with the digits it needs: two significant ones below 10 % (94, 2.3, 0.35,
+    0.0041), never a small share rounded to "0".
+    """
+    pct = 100 * share
+    if not pct > 0:
+        return "0"
+    digits = max(0, 1 - math.floor(math.log10(pct)))
+    return f"{pct:.{digits}f}"
 
 
 def _scores(c: Candidate) -> np.ndarray:
@@ -165,6 +176,10 @@ class Discrepancy(StructureResults, Estimator):
         The effects named and kept, in order (``["none"]`` when nothing was missing).
     gap_before_, gap_after_ : dict
         The held-out gap of the baseline and of the final model (restarted free runs).
+    gap_regime_ : dict
+        Per named effect, the gap over the held-out windows where it acts (``_regime``): ``before`` (the
+        baseline), ``after`` (the final model): the median window's rms error in % of those windows' rms z;
+        ``windows``, ``window_s``.
     locate_before_, locate_after_ : dict
         Where the equation error sits, by regime, before and after.
     iterations_ : list of dict
@@ -483,7 +498,8 @@ class Discrepancy(StructureResults, Estimator):
             if not named:
                 break
             trial = self._trial(rec, best)
-            iteration["kept"], iteration["verdict"] = self._helps(rec, current["gap"], trial["gap"], best.effect)
+            iteration["kept"], iteration["verdict"], iteration["evidence"] = self._helps(
+                rec, current["gap"], trial["gap"], best.effect, current["model"], trial["model"])
             iteration["gap_percent"] = {"before": current["gap"].get("median_window_percent"),
                                         "after": trial["gap"].get("median_window_percent")}  # fmt: skip
             if not iteration["kept"]:
@@ -499,6 +515,12 @@ class Discrepancy(StructureResults, Estimator):
         self.model_, self.initial_model_, self.refinement_ = current["model"], current["initial"], current["refinement"]
         self.gap_after_ = current["gap"]  # the same measure as the gap before: restarted runs, same windows
         self.aux_ = aux
+        # each named effect's regime: the held-out windows where it acts, the baseline against the final model
+        self.gap_regime_ = {}
+        for e in self.effects_:
+            reg = self._regime(rec, self.gap_before_, self.gap_after_, e, base_model, self.model_)
+            self.gap_regime_[e] = {"before": reg.get("gap_before_percent"), "after": reg.get("gap_after_percent"),
+                                   "windows": reg.get("windows", 0), "window_s": reg.get("window_s")}  # fmt: skip
         self.locate_after_ = self.locate(rec, terms, stop, aux)
         self.bounded_ = boundedness(self.model_, rec.segment(0, self.n_id_))
         self.unnamed_ = self._unnamed(rec) if self.unnamed else None
@@ -520,27 +542,132 @@ class Discrepancy(StructureResults, Estimator):
             model, _, refinement = refine_stage(initial, rec, self.n_id_, val, held=_held(best.terms))
         return {"model": model, "initial": initial, "refinement": refinement, "gap": self._gap(rec, model)}
 
-    def _helps(self, rec: Measurement, before: dict[str, Any], after: dict[str, Any], effect: str) -> tuple[bool, str]:
-        """Is the effect kept? Only if the model with it predicts the held-out tail better, window by window
-        (the same restarted free runs), by more than one standard error of the paired differences of the
-        windows' log mean-square errors (log: a window whose run parts near the barrier, chaos, carries an
-        error 100x the others' and would decide a plain mean alone; the headline gap is the median
-        window's for the same reason): an effect the equation error named that does not help the
-        prediction is said, and left out. A window whose run diverges counts as an error the size of the
-        signal (it predicts nothing).
+    def _helps(self, rec: Measurement, before: dict[str, Any], after: dict[str, Any], effect: str,
+               model_before: Model, model_after: Model) -> tuple[bool, str, dict[str, Any]]:  # fmt: skip
+        """Whether the effect is kept, and why.
+
+        Judged on the held-out tail twice, the same restarted free runs before and after (paired), each
+        comparison by the windows' log mean-square errors (log: a window whose run parts near the barrier,
+        chaos, carries an error 100x the others' and would decide a plain mean alone; a
+        window whose run diverges counts as an error the size of the signal):
+
+        * **pooled**: every ``window_s`` window of the tail;
+        * **where it acts** (``_regime``): windows starting just before each episode where the effect's force
+          is large, scored on their own, beside the tail's windows where it never acts (the rest).
+
+        Kept when the model with it predicts the windows where it acts better by more than one standard error
+        of their paired differences and does not predict the rest worse beyond theirs; with fewer than three
+        such windows (an effect the tail barely reaches) the pooled rule decides. An effect the equation
+        error named that does not help the prediction is said, and left out.
         """
-        a, b = before.get("window_ms"), after.get("window_ms")
+        pooled = self._paired(rec, before.get("window_ms"), after.get("window_ms"))
+        regime = self._regime(rec, before, after, effect, model_before, model_after)
+        evidence = {"pooled": pooled, "regime": regime}
+        change = "{:.3g} % (one standard error: {:.3g} to {:.3g} %, geometric mean)"
+        if regime.get("windows", 0) >= 3:
+            acts, rest = regime["acting"], regime.get("rest")
+            worse = rest is not None and rest["gain_percent"] < 0 and rest["significant"]
+            what = (f"the {regime['windows']} held-out windows where it acts: rms error fell "
+                    + change.format(acts["gain_percent"], *acts["gain_interval_percent"]))  # fmt: skip
+            if acts["significant"] and acts["gain_percent"] > 0 and not worse:
+                return True, f"{effect}: kept: {what}; the rest not worse", evidence
+            why = "the rest predicted worse" if worse else "not a fall beyond its uncertainty"
+            return False, f"{effect}: named by the equation error but not kept: {what}: {why}", evidence
+        if pooled is None:
+            return False, f"{effect}: not kept: the held-out tail has too few windows to tell if it helps", evidence
+        txt = change.format(pooled["gain_percent"], *pooled["gain_interval_percent"])
+        if pooled["significant"] and pooled["gain_percent"] > 0:
+            return True, f"{effect}: kept: the held-out windows' rms error fell {txt}", evidence
+        return False, (f"{effect}: named by the equation error but not kept: with it the held-out windows' rms error "
+                       f"fell {txt}, not beyond its uncertainty"), evidence  # fmt: skip
+
+    def _paired(self, rec: Measurement, a, b) -> dict[str, Any] | None:
+        """Paired comparison of two models' per-window mean-square errors (the same windows) by their logs:
+        the rms error's fall in % (geometric mean), its standard error, whether it exceeds one standard error.
+        """
         if a is None or b is None or len(a) != len(b) or len(a) < 2:
-            return False, f"{effect}: not kept: the held-out tail has too few windows to tell whether it helps"
+            return None
         worst = float(np.mean(rec.displacement[self.n_id_ :] ** 2))
         a, b = (np.log(np.maximum(np.where(np.isfinite(x), x, worst), 1e-300)) for x in (a, b))
         gain = compare(a, b, 0.0, a)
-        pct = 100 * (1 - math.exp(-gain.gain / 2))  # the windows' rms error, geometric mean
-        change = f"{{:.3g}} % (+- {50 * gain.se:.2g} %, geometric mean)"
-        if gain.significant:
-            return True, f"{effect}: kept: the held-out windows' rms error fell " + change.format(pct)
-        return False, (f"{effect}: named by the equation error but not kept: with it the held-out windows' rms error "
-                       "changed by " + change.format(-pct) + ", not a fall beyond its uncertainty")  # fmt: skip
+        return {
+            "windows": int(len(a)),
+            "gain_percent": float(100 * (1 - math.exp(-gain.gain / 2))),  # the windows' rms error, geometric mean
+            "gain_interval_percent": [float(100 * (1 - math.exp(-(gain.gain + k * gain.se) / 2))) for k in (-1, 1)],
+            "significant": bool(gain.significant),
+        }
+
+    def _effect_force(self, model: Model, effect: str, z: np.ndarray, v: np.ndarray) -> np.ndarray | None:
+        """The named effect's force [N] in ``model`` at the states (z, v); None for a measured channel's term."""
+        e = effects.get(effect)
+        if isinstance(e.law, effects.MeasuredChannel):
+            return None
+        value = model.to_dict()[e.folds_into] if e.folds_into else model.extra.get(effect)
+        if value is None:
+            return None
+        return np.asarray(e.law.force(value, z, v), float)
+
+    def _regime(self, rec: Measurement, before: dict[str, Any], after: dict[str, Any], effect: str,
+                model_before: Model, model_after: Model) -> dict[str, Any]:  # fmt: skip
+        """The held-out windows where ``effect`` acts, scored on their own: free runs of ``window_s / 2``
+        restarted a quarter window before each episode of the tail where the effect's force (the model's
+        with it, at the measured states) exceeds a quarter of its rms over the samples where it acts at all;
+        and the tail's ``window_s`` windows that hold no such sample (the rest). Gaps in % of the windows'
+        rms z, before and after, and the paired comparisons.
+        """
+        z, v = self._z0, self._v0
+        force = self._effect_force(model_after, effect, z[self.n_id_ :], v[self.n_id_ :])
+        if force is None:
+            return {"windows": 0, "reason": "a measured channel's term acts wherever the channel does"}
+        nz = np.abs(force) > 0
+        if not nz.any():
+            return {"windows": 0, "reason": "the effect does not act in the held-out tail"}
+        acting = np.abs(force) > 0.25 * np.sqrt(np.mean(force[nz] ** 2))
+        length = max(8, int(round(self.window_s * rec.fs / 2)))
+        lead = length // 4
+        starts: list[int] = []
+        edges = np.flatnonzero(np.diff(np.concatenate([[0], acting.astype(np.int8)])) == 1)  # episodes' first samples
+        for e in edges:
+            s0 = self.n_id_ + max(0, int(e) - lead)
+            if s0 + length <= rec.n and (not starts or s0 >= starts[-1] + length):
+                starts.append(s0)
+        out: dict[str, Any] = {"window_s": length / rec.fs, "windows": len(starts),
+                               "acting_share_of_tail": float(np.mean(acting))}  # fmt: skip
+        if len(starts) < 2:
+            return out
+        idx = np.array(starts)
+        ms_b, ms_a = (self._runs_at(m, rec, idx, length) for m in (model_before, model_after))
+        meas = np.stack([rec.displacement[k : k + length] for k in idx])
+        ref = float(np.sqrt(np.mean(meas**2)))
+        worst = float(np.mean(meas**2))
+        # the median window's rms error, % of those windows' rms z (the headline gap's measure: one run that
+        # parts near the barrier, chaos, cannot decide it)
+        out["gap_before_percent"], out["gap_after_percent"] = (
+            float(100 * np.sqrt(np.median(np.where(np.isfinite(m), m, worst))) / ref) for m in (ms_b, ms_a)
+        )
+        out["acting"] = self._paired(rec, ms_b, ms_a)
+        w = int(round(self.window_s * rec.fs))
+        a, b = before.get("window_ms"), after.get("window_ms")
+        if a is not None and b is not None:
+            clear = np.array([not acting[k * w : (k + 1) * w].any() for k in range(len(a))])
+            if clear.sum() >= 2:
+                out["rest"] = self._paired(rec, np.asarray(a)[clear], np.asarray(b)[clear])
+        return out
+
+    def _runs_at(self, model: Model, rec: Measurement, starts: np.ndarray, length: int) -> np.ndarray:
+        """Mean-square error of free runs of ``length`` samples restarted from the measured states at ``starts``
+        (nan: diverged): ``restarted_free_runs``' batch at chosen starts (``validation.staged_windows``).
+        """
+        U, sub = staged_windows(model, rec, starts, length)
+        n = len(starts)
+        res = simulate_batch(np.repeat(model.kernel_params()[:, None], n, axis=1), model.kind, U, rec.dt,
+                             np.column_stack([self._z0[starts], self._v0[starts]]), input_kind=rec.input_name,
+                             input_index=np.arange(n), substeps=sub, staged=True)  # fmt: skip
+        meas = np.stack([rec.displacement[k : k + length] for k in starts])
+        ms = np.full(n, np.nan)
+        ok = ~res.diverged
+        ms[ok] = np.mean((res.z[ok] - meas[ok]) ** 2, axis=1)
+        return ms
 
     def _unnamed(self, rec: Measurement) -> dict[str, Any]:
         """What no catalogue effect names: a non-parametric force g(z, z', u) fitted by output error on the
@@ -630,8 +757,8 @@ class Discrepancy(StructureResults, Estimator):
 
         txt = (
             f"the baseline's equation error is concentrated {where(worst)} "
-            f"({100 * w['residual_share']:.0f} % of the squared "
-            f"residual in {100 * w['time_share']:.0f} % of the record, {w['ratio']:.1f}x its share)"
+            f"({share_text(w['residual_share'])} % of the squared "
+            f"residual in {share_text(w['time_share'])} % of the record, {w['ratio']:.1f}x its share)"
         )
         if len(parts) > 1:
             n2, w2 = parts[1]
@@ -660,6 +787,7 @@ class Discrepancy(StructureResults, Estimator):
                 "after": self.gap_after_.get("median_window_rms_um"),
             },
             "where": self.where_text(),
+            "gap_regime_percent": self.gap_regime_,
             "regimes_before": self.locate_before_["regimes"],
             "regimes_after": self.locate_after_["regimes"],
             "model": self.model_.to_dict(),
