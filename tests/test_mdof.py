@@ -243,6 +243,38 @@ def test_command_line_identifies_a_structure_and_refuses_a_wrong_one(tmp_path, c
     assert any("are the masses right?" in w for w in json.loads((tmp_path / "w.json").read_text())["warnings"])
 
 
+def test_command_line_posterior_reads_the_dofs_from_the_file(tmp_path, capsys):
+    # negstiff posterior on a structure's file: N from its z1, z2 and '# masses:' (--dofs a check), the element
+    # sampled with each channel's zero read (0.3 mm on z1 here, within 20 um); a wrong --dofs and a missing
+    # --element are one line and exit 2 before any work, no output written
+    import json
+    import warnings
+
+    from negstiff.cli import main
+
+    u, z = rk4_fixture_record(duration=30.0, seed=3)
+    t = np.arange(u.size) / FS
+    data = write_csv(tmp_path / "two.csv", {"t": t, "base_acc": u, "z1": z[0] + 3e-4, "z2": z[1]},
+                     {"masses": f"{FIXTURE['m']},{TRUTH.m}"})  # fmt: skip
+
+    def run(*args):
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # the CLI says them on stderr
+            code = main(["posterior", *map(str, args)])
+        return code, capsys.readouterr().err
+
+    out = tmp_path / "p.json"
+    code, err = run(data, "--element", "1-2", "--ensembles", 2, "--max-steps", 100, "--max-windows", 12, "-o", out)
+    assert code == 0, err
+    result = json.loads(out.read_text())
+    assert result["dofs"] == 2 and result["element_at"] == [1, 2] and abs(result["offsets_m"][0] - 3e-4) < 20e-6
+    assert result["parameters"]["k3"]["mean"] == pytest.approx(TRUTH.k3, rel=0.01)
+    for bad, says in ((("--dofs", 3, "--element", "1-2"), "z1 ... z2"), ((), "element")):
+        code, err = run(data, *bad, "-o", tmp_path / "no.json")
+        assert code == 2 and says in err and len(err.strip().splitlines()) == 1
+        assert not (tmp_path / "no.json").exists()
+
+
 def test_structure_rig_records_are_seeded_and_read_back(tmp_path):
     from negstiff.models.structure_rig import StructureRig
 

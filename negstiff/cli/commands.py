@@ -251,7 +251,9 @@ def cmd_posterior(args) -> int:
             raise InputError(
                 f"--start {args.start}: a polynomial model, for the coefficient posterior (--model coefficients)"
             )
-    rec = load(args.data, columns=args.columns, fs=args.fs, mass=args.mass, gravity=args.gravity)
+    masses = parse_amplitudes(args.masses, "--masses") if args.masses else None
+    rec = load(args.data, columns=args.columns, fs=args.fs, mass=args.mass, gravity=args.gravity, masses=masses)
+    check_dofs(args, rec)  # N from the file; --dofs a check
     if args.duration is not None:
         rec = rec.segment(0, min(rec.n, int(round(args.duration * rec.fs))))
     post = Posterior(
@@ -269,9 +271,11 @@ def cmd_posterior(args) -> int:
         progress=wants_progress(args),
         start=start,
         refine_start=not args.no_refine,
+        element=args.element,
     )
     rec = post.check(rec)  # every refusal before the progress line and bar
-    say(args, f"posterior ({args.model}): {rec.n} samples at {rec.fs:g} Hz, input {rec.input_name}")
+    where = f", {rec.n_dof} DOFs, element {args.element}" if rec.n_dof > 1 else ""
+    say(args, f"posterior ({args.model}{where}): {rec.n} samples at {rec.fs:g} Hz, input {rec.input_name}")
     res = post.fit(rec).result_
     result = post.result()
     if args.idata:

@@ -367,6 +367,18 @@ def _posterior(sub, common: argparse.ArgumentParser, data_opts: argparse.Argumen
         help="the input sensor's white noise rms [m/s^2, or N for a force] (default: read from the input's spectral "
         "floor above the excitation's band; 0: the input taken as exact)",
     )
+    pst.add_argument(
+        "--dofs",
+        type=number(int, 1, 50),
+        help="degrees of freedom the record must measure (a check of the file: its responses z1 ... zN and "
+        "'# masses: m1,...,mN' give N; N > 1 needs --element)",
+    )
+    pst.add_argument(
+        "--element",
+        help="a structure's record: where the nonlinear element acts, I-J (it moves DOF J relative to DOF I, 0: the "
+        "base); its coefficients are sampled, the linear structure and each channel's zero fixed at SINDy's",
+    )
+    pst.add_argument("--masses", help="the DOFs' masses m1,...,mN [kg] (default: the record's '# masses:')")
     pst.set_defaults(func=c.cmd_posterior)
 
 
