@@ -19,8 +19,8 @@ import numpy as np
 
 from negstiff.inference.estimators.nsi import NSI
 from negstiff.inference.estimators.sindy import SINDy
-from negstiff.inference.estimators.structure_id import free_run_error
 from negstiff.inference.record.measurement import from_arrays
+from negstiff.inference.steps.validation import restarted_structure_runs as free_run_error
 from negstiff.models.device import SEED_LIKE_CUBIC
 from negstiff.models.structure import Structure
 from negstiff.models.structure_rig import StructureRig

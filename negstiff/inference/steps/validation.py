@@ -28,6 +28,7 @@ from negstiff.models.simulator import (
     input_gain,
     stage_input,
 )
+from negstiff.models.structure import Structure, simulate_structures
 
 
 class Limits(TypedDict, total=False):
@@ -263,6 +264,47 @@ def restarted_free_runs(
         "restart_diverged": int((~ok).sum()),
         "window_ms": window_ms,
     }
+
+
+STRUCTURE_WINDOW_S = 0.25
+"""A structure's restarted windows [s] (``restarted_structure_runs``; ``structure_id.WINDOW_S``)."""
+
+
+def restarted_structure_runs(structure: Structure, rec: Measurement, start: int, window_s: float = STRUCTURE_WINDOW_S,
+                             offsets=None) -> dict[str, Any]:  # fmt: skip
+    """The restarted windows of a structure of N >= 1 DOFs (a single DOF as ``Structure.single(model)``; the
+    estimators' ``free_run_error``): free runs of ``structure`` over the record from sample ``start`` on,
+    restarted every ``window_s`` from the record's band-smoothed states: rms error over every DOF in % of the
+    responses' rms, and per DOF, with the same measure of the channels' sensor noise alone
+    (``noise_floor_percent``: what a perfect model misses). The record's channels are ``offsets`` [m] (each
+    channel's zero, default none) above the structure's frame.
+    """
+    z_all = rec.channels
+    o = np.zeros(rec.n_dof) if offsets is None else np.asarray(offsets, float)
+    zs, v, _ = rec.channel_states(structure.place)
+    L = max(8, int(round(window_s * rec.fs)))
+    starts = np.arange(start, rec.n - L, L)
+    if not starts.size:
+        raise MeasurementError(f"{rec.source}: the held-out part is shorter than one {window_s} s window")
+    idx = starts[:, None] + np.arange(L + 1)[None, :]
+    u = rec.u[idx]
+    x0 = np.hstack([(zs[:, starts] - o[:, None]).T, v[:, starts].T])
+    res = simulate_structures(structure, u, rec.dt, x0, input_kind=rec.input_name, force_dof=rec.force_dof,
+                              input_index=np.arange(starts.size))  # fmt: skip
+    meas = np.transpose(z_all[:, idx], (1, 0, 2))  # (W, N, L+1)
+    err = res.z + o[None, :, None] - meas
+    ok = ~res.diverged
+    centred = z_all[:, start:] - z_all[:, start:].mean(axis=1, keepdims=True)
+    scale = np.sqrt(np.mean(centred**2, axis=1))
+    noise = rec.channel_noise()
+    floor = 100 * float(np.sqrt(np.mean((noise / scale) ** 2)))
+    if not ok.any():
+        return {"rms_percent": math.inf, "per_dof_percent": [math.inf] * rec.n_dof, "windows": int(starts.size),
+                "diverged": int(starts.size), "window_s": window_s, "noise_floor_percent": floor}  # fmt: skip
+    per = np.sqrt(np.mean(err[ok] ** 2, axis=(0, 2))) / scale
+    total = float(np.sqrt(np.mean((err[ok] / scale[None, :, None]) ** 2)))
+    return {"rms_percent": 100 * total, "per_dof_percent": (100 * per).tolist(), "windows": int(starts.size),
+            "diverged": int((~ok).sum()), "window_s": window_s, "noise_floor_percent": floor}  # fmt: skip
 
 
 def residual_psd(rec: Measurement, model: Model, start: int, window_s: float = 2.0):
