@@ -176,7 +176,7 @@ def device_part(rep: Report, res: dict[str, Any], duration: float, seed: int) ->
         f"{AS_BUILT.c_nl:g}). Where: {r['where']}. Named in turn: **{', '.join(r['effects'])}**; held-out gap "
         f"{fmt(r['gap_before_percent'], 3)} % -> {fmt(r['gap_after_percent'], 3)} %. The exact restoring force is "
         "not a cubic: higher-order stiffness (or, on some records, a one-sided stiffening that fits as an end stop) "
-        "is the right answer, and the device's genuine quadratic damping (c_nl, left out of the baseline) comes next."
+        "is the right answer; the device's genuine quadratic damping is the baseline's own c_nl (the seed's model)."
     )
     rep.table(
         ["iteration", "named", "best three (held-out weak residual %)", "gain over none [%]"],
