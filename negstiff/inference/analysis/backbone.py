@@ -1,0 +1,409 @@
+"""Backbone curves of a free decay: the instantaneous frequency and damping ratio against amplitude, measured and
+predicted by a model.
+
+A lightly damped nonlinear oscillator ringing down passes slowly through its family of periodic orbits, so
+its frequency at each amplitude traces the backbone of its conservative part, and the decay rate of its
+amplitude gives the damping at that amplitude (Feldman, *Hilbert Transform Applications in Mechanical
+Vibration*, 2011, ch. 6, FREEVIB; the same curves SSMLearn and FrID draw from decays).
+
+* **The decay** (``decay_start``): the record after its input's last activity (a release, a hammer's last
+  hit, a shaker switched off): the input stands at its floor (its tail's median and median absolute deviation)
+  from there on; an input identically zero is a decay from the first sample.
+* **Hilbert** (``hilbert_backbone``): the response about its final rest, band-passed around the fundamental
+  (zero-phase Butterworth, ``scipy.signal.sosfiltfilt``: its DC, which moves with amplitude in an asymmetric well,
+  and its harmonics off), the analytic signal (``scipy.signal.hilbert``) gives the envelope a(t) (divided by the
+  filter's gain at the instantaneous frequency) and the phase; both are averaged over one period (the ripple the
+  remaining harmonics leave), the frequency is the phase's slope and the damping ratio
+  zeta = sigma / sqrt(sigma^2 + w_d^2), sigma = -d ln a / dt. The amplitude is the fundamental harmonic's.
+* **Peaks** (``peak_backbone``, the cross-check): each cycle between two upward crossings of the rest level
+  (linear interpolation): frequency 1 / period, amplitude half the peak-to-peak (parabolic peaks), damping from
+  the logarithmic decrement of successive cycles. The amplitude is the orbit's half peak-to-peak.
+* **Predicted** (``predict_backbone``): the model's free decay from the record's state at the decay's start
+  (``negstiff.models.simulate``, zero input), measured by the same estimator, so both curves carry that
+  estimator's bias; with a posterior's draws (a list of models), the band the draws' curves span.
+* **Conservative** (``conservative_backbone``): the model's exact backbone without damping, by quadrature over
+  each orbit of energy E in a well (period T(E) = 2 int dz / sqrt(2 (E - V(z)) / m), substituted z =
+  z_lo + (z_hi - z_lo)(1 - cos theta) / 2 so the turning points are regular), with both amplitudes (half the
+  peak-to-peak, and the fundamental harmonic's, the Hilbert estimator's); its damping ratio is the slow flow's
+  for viscous damping, dE/dt = -c <v^2> over the orbit (first order in c: the averaging method's, exact as
+  c -> 0). It holds where the damping is light (a few per cent).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+from scipy import optimize, signal
+
+from negstiff.errors import MeasurementError
+from negstiff.inference.analysis.impact import MAD_TO_SIGMA
+from negstiff.inference.record.measurement import Measurement
+
+QUIET_DEVIATIONS = 10.0
+"""The input is active where it stands more than this many floor deviations from its tail's median."""
+
+MIN_CYCLES = 6
+"""A decay shorter than this many periods of its response is refused: the band-pass and the period averages need
+three periods at each end."""
+
+EDGE_CYCLES = 3
+"""Periods left out at each end of the band-passed decay (the zero-phase filter's and the Hilbert transform's
+end effects)."""
+
+NOISE_MARGIN = 100.0
+"""The backbone stops where the envelope falls below this many times the band's noise rms (the band-passed
+sensor noise): the phase's noise, about noise / amplitude radians, then moves a period's frequency by under
+0.2 %; below, by several per cent."""
+
+SMOOTH_CYCLES = 3
+"""The phase and the log-envelope are smoothed by local quadratics over this many periods."""
+
+DAMPING_CYCLES = 8
+"""The decay rate is the slope of a local quadratic of the log-envelope over this many periods (over three, the
+filter's and the harmonics' ripple moved a noise-free linear decay's damping by +-15 %; over eight, by +-3 %)."""
+
+
+def decay_start(rec: Measurement) -> tuple[int, str]:
+    """The first sample of the record's free decay, and how it was found (module docstring)."""
+    u = np.asarray(rec.u, float)
+    tail = u[-max(16, u.size // 5) :]
+    offset = float(np.median(tail))
+    floor = MAD_TO_SIGMA * float(np.median(np.abs(tail - offset)))
+    dev = np.abs(u - offset)
+    if dev.max() <= max(QUIET_DEVIATIONS * floor, 1e-12 * max(1.0, abs(offset))):
+        return 0, f"the input ({rec.input_name}) stays at its floor throughout: a decay from the first sample"
+    last = int(np.flatnonzero(dev > QUIET_DEVIATIONS * floor)[-1])
+    start = min(last + 1 + max(2, int(0.002 * rec.fs)), rec.n)
+    return start, (f"after the input's last activity at {rec.t0 + last / rec.fs:.4g} s ({rec.input_name} beyond "
+                   f"{QUIET_DEVIATIONS:g} deviations of its floor, {floor:.3g}, about its tail's "
+                   f"{offset:.3g})")  # fmt: skip
+
+
+def _crossings(x: np.ndarray, fs: float) -> np.ndarray:
+    """Times [s] of the upward zero crossings of ``x``, linearly interpolated."""
+    i = np.flatnonzero((x[:-1] < 0) & (x[1:] >= 0))
+    return (i + x[i] / (x[i] - x[i + 1])) / fs
+
+
+def _parabolic(x: np.ndarray, k: int) -> float:
+    """The extreme of the parabola through x[k-1], x[k], x[k+1]."""
+    if k <= 0 or k >= x.size - 1:
+        return float(x[k])
+    a, b, c = x[k - 1], x[k], x[k + 1]
+    den = a - 2 * b + c
+    return float(b - 0.125 * (a - c) ** 2 / den) if den else float(b)
+
+
+def _zeta(sigma: np.ndarray, w_d: np.ndarray) -> np.ndarray:
+    return sigma / np.sqrt(sigma**2 + w_d**2)
+
+
+def peak_backbone(x: np.ndarray, fs: float, floor: float = 0.0) -> dict[str, np.ndarray]:
+    """Per cycle of ``x`` (a decay about its rest, rest = 0): time [s], half peak-to-peak amplitude, frequency
+    [Hz] (1 / the period between upward crossings) and damping ratio (log decrement of successive cycles); the
+    cycles until the amplitude first falls below ``floor`` [m] (the sensor's noise crosses zero at random).
+    """
+    tc = _crossings(x, fs)
+    if tc.size < 3:
+        return {k: np.array([]) for k in ("t_s", "amplitude_m", "f_hz", "zeta")}
+    amp, mids = [], []
+    for a, b in zip(tc[:-1], tc[1:], strict=True):
+        i0, i1 = int(math.ceil(a * fs)), int(math.floor(b * fs)) + 1
+        seg = x[i0:i1]
+        hi, lo = int(np.argmax(seg)) + i0, int(np.argmin(seg)) + i0
+        amp.append(0.5 * (_parabolic(x, hi) - _parabolic(x, lo)))
+        mids.append(0.5 * (a + b))
+    amp_a, period = np.array(amp), np.diff(tc)
+    low = np.flatnonzero(amp_a < floor)
+    if low.size:
+        amp_a, period, mids = amp_a[: low[0]], period[: low[0]], mids[: low[0]]
+    w_d = 2 * np.pi / period
+    # the decrement between neighbouring cycles, centred on each (ends: one-sided)
+    sigma = -np.gradient(np.log(np.maximum(amp_a, 1e-300)), np.array(mids)) if amp_a.size > 1 \
+        else np.full(amp_a.size, np.nan)  # fmt: skip
+    return {"t_s": np.array(mids), "amplitude_m": amp_a, "f_hz": w_d / (2 * np.pi), "zeta": _zeta(sigma, w_d)}
+
+
+def _band(x: np.ndarray, fs: float, noise_rms: float) -> tuple[float, float]:
+    """The band-pass around the fundamental: from the frequencies of the cycles above the noise (``peak_backbone``),
+    0.6 of the lowest to 1.5 of the highest, below 1.9 of the lowest (the second harmonic out).
+    """
+    f = peak_backbone(x, fs, floor=NOISE_MARGIN * noise_rms)["f_hz"]
+    if f.size < MIN_CYCLES:
+        raise MeasurementError(f"the decay holds {f.size} cycles about its rest above {NOISE_MARGIN:g} times the "
+                               f"sensor's noise; a backbone needs {MIN_CYCLES} at least")  # fmt: skip
+    lo, hi = float(np.min(f)), float(np.max(f))
+    return 0.6 * lo, min(1.5 * hi, 1.9 * lo, 0.45 * fs)
+
+
+def hilbert_backbone(x: np.ndarray, fs: float, band: tuple[float, float] | None = None,
+                     noise_rms: float = 0.0) -> dict[str, Any]:  # fmt: skip
+    """Per period of ``x`` (a decay about its rest): time [s], the fundamental's amplitude [m], frequency [Hz]
+    and damping ratio by the Hilbert transform of the band-passed decay (module docstring); ``noise_rms``: the
+    sensor's white noise [m] (the backbone stops at ``NOISE_MARGIN`` times its band-passed share).
+    """
+    band = _band(x, fs, noise_rms) if band is None else band
+    sos = signal.butter(4, band, btype="bandpass", fs=fs, output="sos")
+    y = signal.sosfiltfilt(sos, x)
+    # zero-padded to twice its length: the FFT's wrap-around would put the decay's large start beside its small end,
+    # and the Hilbert kernel's 1/t tail would carry it there (measured: the last periods' damping doubled)
+    z = signal.hilbert(y, N=2 * y.size)[: y.size]
+    f_mean = math.sqrt(band[0] * band[1]) / 0.95  # the band's centre: 0.6 f_lo to 1.5 f_hi
+    per = max(3, int(round(fs / f_mean)))
+    # phase and log-envelope, each a local quadratic over SMOOTH_CYCLES periods (Savitzky-Golay): its slope is the
+    # frequency and the decay rate, the ripple the remaining harmonics leave averaged out
+    win = 2 * (SMOOTH_CYCLES * per // 2) + 1
+    phase = np.unwrap(np.angle(z))
+    w_s = signal.savgol_filter(phase, win, 2, deriv=1) * fs
+    ln_raw = np.log(np.maximum(np.abs(z), 1e-300))
+    gain = np.abs(signal.sosfreqz(sos, worN=np.clip(w_s / (2 * np.pi), 1e-9, None), fs=fs)[1]) ** 2  # filtfilt: |H|^2
+    ln_a = signal.savgol_filter(ln_raw, win, 2) - np.log(np.maximum(gain, 1e-12))
+    win_d = 2 * (DAMPING_CYCLES * per // 2) + 1
+    sigma_all = -signal.savgol_filter(ln_raw, min(win_d, 2 * (x.size // 2) - 1), 2, deriv=1) * fs
+    half_d = min(win_d // 2, x.size // 2 - 1)  # within half a window of an end: the nearest full window's slope
+    sigma_all[:half_d], sigma_all[x.size - half_d :] = sigma_all[half_d], sigma_all[x.size - half_d - 1]
+    edge = EDGE_CYCLES * per
+    idx = np.arange(edge, x.size - edge, per)
+    if idx.size < 2:
+        raise MeasurementError(f"the decay is too short for a Hilbert backbone: {x.size / fs:.3g} s at {f_mean:.3g} "
+                               f"Hz (needs {2 * EDGE_CYCLES + 2} periods)")  # fmt: skip
+    sigma = sigma_all[idx]
+    amp = np.exp(ln_a[idx])
+    noise_band = noise_rms * math.sqrt(2 * (band[1] - band[0]) / fs)
+    f_idx = w_s[idx] / (2 * np.pi)
+    keep = (amp > NOISE_MARGIN * noise_band * math.sqrt(2)) & (f_idx > band[0]) & (f_idx < band[1])
+    if keep.sum() < 2:
+        raise MeasurementError(f"the decay's envelope stands above {NOISE_MARGIN:g} times the band's noise for "
+                               "under two periods: no backbone")  # fmt: skip
+    last = int(np.flatnonzero(keep)[-1]) + 1 if keep.all() else int(np.argmin(keep))
+    sl = slice(0, max(last, 2))
+    w_d = w_s[idx][sl]
+    return {"t_s": idx[sl] / fs, "amplitude_m": amp[sl], "f_hz": w_d / (2 * np.pi), "zeta": _zeta(sigma[sl], w_d),
+            "band_hz": [float(band[0]), float(band[1])]}  # fmt: skip
+
+
+def _decay_part(rec: Measurement) -> tuple[np.ndarray, int, float, str]:
+    """(the decay about its rest [m], its first sample, the rest [m], how the start was found)."""
+    start, how = decay_start(rec)
+    z = np.asarray(rec.displacement, float)[start:]
+    if z.size < 16:
+        raise MeasurementError(f"{rec.source}: no free decay after the input's last activity ({how})")
+    rest = float(np.median(z[-max(8, z.size // 10) :]))
+    return z - rest, start, rest, how
+
+
+def _curves(d: dict[str, Any]) -> dict[str, Any]:
+    return {k: (np.asarray(v).tolist() if isinstance(v, np.ndarray) else v) for k, v in d.items()}
+
+
+def measure_backbone(rec: Measurement) -> dict[str, Any]:
+    """The measured backbones of a free-decay record (Hilbert, and peaks as a cross-check), arrays.
+
+    Returns
+    -------
+    dict
+        ``hilbert`` and ``peaks`` (each ``t_s``, ``amplitude_m``, ``f_hz``, ``zeta`` arrays; the peaks' cut to the
+        Hilbert's amplitude range), ``decay`` (its start [s], how it was found, the rest [m], the initial state).
+    """
+    if rec.n_dof > 1:
+        raise MeasurementError(f"{rec.source}: a backbone is a single DOF's (this record has {rec.n_dof} DOFs)")
+    x, start, rest, how = _decay_part(rec)
+    noise = math.sqrt(max(rec.noise_floor()[0], 0.0)) if rec.n >= 256 else 0.0
+    hil = hilbert_backbone(x, rec.fs, noise_rms=noise)
+    pk = peak_backbone(x, rec.fs, floor=NOISE_MARGIN * noise)
+    lo, hi = float(np.min(hil["amplitude_m"])), float(np.max(hil["amplitude_m"]))
+    inside = (pk["t_s"] >= hil["t_s"][0]) & (pk["t_s"] <= hil["t_s"][-1])
+    pk = {k: v[inside] for k, v in pk.items()}
+    z_s, v_s, _, _ = rec.states("state")
+    return {
+        "hilbert": hil,
+        "peaks": pk,
+        "decay": {"start_s": rec.t0 + start / rec.fs, "found": how, "duration_s": x.size / rec.fs, "rest_m": rest,
+                  "z0_m": float(rec.displacement[start]), "v0_m_s": float(v_s[start]),
+                  "noise_m": noise},  # fmt: skip
+        "amplitude_range_m": [lo, hi],
+    }
+
+
+def _model_decay(model, z0: float, v0: float, fs: float, n: int) -> np.ndarray:
+    """The model's free decay from (z0, v0), n samples at fs (``negstiff.models.simulate``, zero force)."""
+    from negstiff.models.simulator import simulate
+
+    res = simulate(model, np.zeros(n), 1.0 / fs, z0=z0, v0=v0, input_kind="force")
+    if res.diverged[0]:
+        raise MeasurementError(f"the model's free decay from z0 = {z0:.4g} m diverged ({res.describe_failures()})")
+    return np.asarray(res.z[0], float)
+
+
+def _model_start(model, measured: dict[str, Any], rec: Measurement) -> tuple[float, float, str]:
+    """The model's initial state for the record's decay: the record's (z0, v0) when its z is in the model's frame
+    (a measured z); a derived z's constant unknown, the record's rest put on the model's well nearest to it.
+    """
+    d = measured["decay"]
+    known = (rec.info.get("response") or {}).get("z_constant_known", True)
+    if known:
+        return d["z0_m"], d["v0_m_s"], "the record's state at the decay's start"
+    eq = model.equilibria()
+    wells = [w for w in (eq.z_minus, eq.z_plus) if w is not None]
+    f_small = measured["hilbert"]["f_hz"][-1]
+    well = min(wells, key=lambda w: abs(math.sqrt(max(model.stiffness(w), 0.0) / model.m) / (2 * np.pi) - f_small))
+    return (well + d["z0_m"] - d["rest_m"], d["v0_m_s"],
+            "the record's z (its constant unknown) about its rest, put on the model's well of the nearest frequency")
+
+
+def predict_backbone(model, rec: Measurement, measured: dict[str, Any] | None = None) -> dict[str, Any]:
+    """The backbone ``model`` predicts for ``rec``'s decay: its free decay from the record's initial state,
+    measured by the same estimators (``hilbert``, ``peaks``) and the same band-pass as the record's.
+    """
+    measured = measure_backbone(rec) if measured is None else measured
+    z0, v0, how = _model_start(model, measured, rec)
+    n = int(round(measured["decay"]["duration_s"] * rec.fs))
+    z = _model_decay(model, z0, v0, rec.fs, n)
+    x = z - float(np.median(z[-max(8, n // 10) :]))
+    hil = hilbert_backbone(x, rec.fs, band=tuple(measured["hilbert"]["band_hz"]))
+    return {"hilbert": hil, "peaks": peak_backbone(x, rec.fs), "initial": {"z0_m": z0, "v0_m_s": v0, "from": how}}
+
+
+def on_amplitudes(curve: dict[str, Any], amplitudes: np.ndarray, key: str = "f_hz") -> np.ndarray:
+    """A backbone's ``key`` interpolated at ``amplitudes`` [m] (NaN outside its range): a decay's, while its
+    amplitude falls (where it stops falling, its end is the rest's and the noise's), or any curve's in order of
+    amplitude.
+    """
+    a, v = np.asarray(curve["amplitude_m"]), np.asarray(curve[key])
+    if a.size > 1 and a[0] > a[1]:
+        rising = np.flatnonzero(np.diff(a) >= 0)
+        stop = int(rising[0]) + 1 if rising.size else a.size
+        a, v = a[:stop], v[:stop]
+    order = np.argsort(a)
+    return np.interp(amplitudes, a[order], v[order], left=np.nan, right=np.nan)
+
+
+def conservative_backbone(model, well: str, amplitude_max: float, n: int = 40, nodes: int = 400) -> dict[str, Any]:
+    """The exact backbone of ``model``'s conservative part in ``well`` up to the half peak-to-peak
+    ``amplitude_max`` [m] (module docstring): ``peak_amplitude_m`` (half peak-to-peak), ``amplitude_m`` (the
+    fundamental harmonic's), ``f_hz`` and ``zeta`` (viscous c's slow flow, first order), arrays of ``n`` orbits.
+    """
+    eq = model.equilibria()
+    zs = eq.well(well)
+    m = model.m
+
+    def v(z):
+        return model.potential(z) - model.potential(zs)
+
+    barrier = eq.z_0
+    lo_lim = barrier if (barrier is not None and barrier < zs) else zs - 1.0
+    hi_lim = barrier if (barrier is not None and barrier > zs) else zs + 1.0
+    e_max = float(min(v(min(zs + amplitude_max, hi_lim)), v(max(zs - amplitude_max, lo_lim))))
+    if barrier is not None:  # the orbits of the well: below its barrier
+        e_max = min(e_max, 0.999 * float(v(barrier)))
+    th = (np.arange(nodes) + 0.5) * np.pi / nodes  # midpoints: the turning points' regular integrand
+    out: dict[str, list[float]] = {"peak_amplitude_m": [], "amplitude_m": [], "f_hz": [], "zeta": [], "energy_j": []}
+    for e in e_max * np.geomspace(1e-6, 1.0, n):
+        z_lo = optimize.brentq(lambda z, e=e: v(z) - e, lo_lim, zs)
+        z_hi = optimize.brentq(lambda z, e=e: v(z) - e, zs, hi_lim)
+        half = 0.5 * (z_hi - z_lo)
+        z = z_lo + half * (1 - np.cos(th))
+        speed = np.sqrt(np.maximum(2 * (e - v(z)) / m, 1e-300))
+        dt = half * np.sin(th) / speed * (np.pi / nodes)
+        period = 2 * dt.sum()
+        t = np.cumsum(dt) - dt / 2
+        w = 2 * np.pi / period
+        c1 = 4 / period * np.sum(z * np.cos(w * t) * dt)  # the fundamental of the even orbit z(t) = z(-t)
+        out["peak_amplitude_m"].append(half)
+        out["amplitude_m"].append(abs(c1))
+        out["f_hz"].append(1 / period)
+        out["energy_j"].append(e)
+        out["zeta"].append(2 * np.sum(speed**2 * dt) / period)  # <v^2> over the orbit, turned into zeta below
+    res: dict[str, Any] = {k: np.array(val) for k, val in out.items()}
+    # slow flow: dE/dt = -c <v^2>; d ln a / dt = (d ln a / dE) dE/dt; zeta = -(d ln a/dt) / w (first order in c)
+    dlna_de = np.gradient(np.log(res["amplitude_m"]), np.log(res["energy_j"])) / res["energy_j"]
+    res["zeta"] = model.c * res["zeta"] * dlna_de / (2 * np.pi * res["f_hz"])
+    res["well"] = well
+    return res
+
+
+def credible_band(curves: Sequence[dict[str, Any]], amplitudes: np.ndarray, prob: float = 0.9) -> dict[str, Any]:
+    """The band the draws' backbones span at ``amplitudes`` [m]: the central ``prob`` interval of each's
+    frequency and damping ratio (draws whose curve does not reach an amplitude left out there).
+    """
+    f = np.array([on_amplitudes(c, amplitudes, "f_hz") for c in curves])
+    z = np.array([on_amplitudes(c, amplitudes, "zeta") for c in curves])
+    q = [(1 - prob) / 2, (1 + prob) / 2]
+    with np.errstate(all="ignore"):
+        import warnings
+
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)  # an amplitude no draw reaches: NaN
+            fq, zq = np.nanquantile(f, q, axis=0), np.nanquantile(z, q, axis=0)
+    return {"prob": prob, "amplitude_m": amplitudes.tolist(), "f_hz_low": fq[0].tolist(), "f_hz_high": fq[1].tolist(),
+            "zeta_low": zq[0].tolist(), "zeta_high": zq[1].tolist(), "draws": len(curves)}  # fmt: skip
+
+
+def backbone(rec: Measurement, model=None, draws: Sequence | None = None, prob: float = 0.9) -> dict[str, Any]:
+    """Backbone curves of a free-decay record, measured and (with ``model``, ``draws``) predicted.
+
+    Parameters
+    ----------
+    rec : Measurement
+        A single DOF's record whose input is at its floor after a release (``decay_start``): a free decay, the
+        ring-down after a hammer's last hit or a shaker switched off.
+    model : negstiff.models.Model, optional
+        A model whose free decay from the record's initial state is measured alike (``predict_backbone``).
+    draws : sequence of Model, optional
+        A posterior's draws: the predicted backbone's credible band (``prob``).
+
+    Returns
+    -------
+    dict
+        ``measured`` (``hilbert`` and ``peaks``: ``amplitude_m``, ``f_hz``, ``zeta``, ``t_s`` lists), ``decay``,
+        ``amplitude_range_m``, ``linear`` (the Hilbert backbone at its smallest amplitude: ``f_hz``, ``zeta``),
+        ``band_hz``; with a model ``predicted`` (the same, and ``difference_percent``: the largest
+        |f_predicted / f_measured - 1| over the measured range, Hilbert), with draws ``credible``; ``warnings``.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from negstiff import from_arrays
+    >>> t = np.arange(8192) / 1024.0
+    >>> z = 1e-3 * np.exp(-0.6 * t) * np.cos(2 * np.pi * 10 * t)   # a linear 10 Hz, ~1 % decay
+    >>> r = backbone(from_arrays(np.zeros_like(t), z, 1024.0, input_name="force"))
+    >>> round(r["linear"]["f_hz"], 2), round(100 * r["linear"]["zeta"], 2)   # 0.6 / (2 pi 10) = 0.955 %
+    (10.0, 0.96)
+    """
+    measured = measure_backbone(rec)
+    hil = measured["hilbert"]
+    small = np.argsort(hil["amplitude_m"])[: max(3, hil["amplitude_m"].size // 5)]
+    out: dict[str, Any] = {
+        "measured": {"hilbert": _curves({k: v for k, v in hil.items() if k != "band_hz"}),
+                     "peaks": _curves(measured["peaks"])},  # fmt: skip
+        "decay": measured["decay"],
+        "amplitude_range_m": measured["amplitude_range_m"],
+        "band_hz": hil["band_hz"],
+        "linear": {"f_hz": float(np.median(hil["f_hz"][small])), "zeta": float(np.median(hil["zeta"][small])),
+                   "amplitude_m": [float(hil["amplitude_m"][small].min()), float(hil["amplitude_m"][small].max())],
+                   "from": "the median of the Hilbert backbone's smallest fifth of amplitudes"},  # fmt: skip
+        "estimator": "Hilbert transform of the band-passed decay (scipy.signal.hilbert; zero-phase Butterworth "
+        f"{hil['band_hz'][0]:.3g}-{hil['band_hz'][1]:.3g} Hz), one point per period; peaks: half peak-to-peak, period "
+        "between upward crossings of the rest, log decrement",
+        "warnings": [],
+    }
+    if model is not None:
+        pred = predict_backbone(model, rec, measured)
+        f_pred = on_amplitudes(pred["hilbert"], np.asarray(hil["amplitude_m"]))
+        diff = np.abs(f_pred / np.asarray(hil["f_hz"]) - 1)
+        out["predicted"] = {"hilbert": _curves({k: v for k, v in pred["hilbert"].items() if k != "band_hz"}),
+                            "peaks": _curves(pred["peaks"]), "initial": pred["initial"],
+                            "difference_percent": float(100 * np.nanmax(diff)) if np.any(np.isfinite(diff)) else None,
+                            "covered_share": float(np.mean(np.isfinite(diff)))}  # fmt: skip
+        if out["predicted"]["covered_share"] < 0.8:
+            out["warnings"].append(f"the model's decay covers {100 * out['predicted']['covered_share']:.0f} % of the "
+                                   "measured amplitude range")  # fmt: skip
+    if draws:
+        curves = [predict_backbone(d, rec, measured)["hilbert"] for d in draws]
+        lo, hi = measured["amplitude_range_m"]
+        grid = np.geomspace(lo, hi, 40)
+        out["credible"] = credible_band(curves, grid, prob)
+    return out
