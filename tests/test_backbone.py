@@ -10,7 +10,7 @@ import warnings
 
 import numpy as np
 import pytest
-from impact_records import DOUBLE_WELL, DUFFING, MASS, decay_record, hammer_record
+from impact_records import DOUBLE_WELL, DUFFING, DUFFING_HZ, MASS, decay_record, hammer_record
 
 from negstiff import Model
 from negstiff.inference.analysis.backbone import backbone, conservative_backbone, decay_start, on_amplitudes
@@ -108,3 +108,23 @@ def test_posterior_draws_give_a_band_that_holds_the_truth():
     width = (hi - lo) / f_true
     assert 0.004 < width[np.argmin(np.abs(a - 0.008))] < 0.007
     assert np.all(width[a < 5e-4] < 0.002)
+
+
+def test_cli_backbone_with_a_model(tmp_path, capsys):
+    # negstiff backbone DATA --model M.json: the measured and predicted curves in the JSON, a figure beside it
+    import json
+
+    from negstiff.cli import main
+
+    _, z, _ = decay_record(DUFFING, 0.012, FS, 8.0)
+    zm = z + LASER_M * np.random.default_rng(6).standard_normal(z.size)
+    data = tmp_path / "decay.csv"
+    np.savetxt(data, np.column_stack([np.zeros_like(zm), zm]), delimiter=",", header="force,z", comments="# fs: 1024\n")
+    model = tmp_path / "model.json"
+    model.write_text(json.dumps(DUFFING.to_dict()))
+    out = tmp_path / "bb.json"
+    assert main(["backbone", str(data), "--model", str(model), "-o", str(out)]) == 0
+    r = json.loads(out.read_text())
+    assert r["predicted"]["difference_percent"] < 1.0
+    assert r["linear"]["f_hz"] == pytest.approx(DUFFING_HZ, rel=0.01)
+    assert (tmp_path / "bb.png").exists() and "small-amplitude" in capsys.readouterr().err

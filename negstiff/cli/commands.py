@@ -379,6 +379,10 @@ def cmd_frf(args) -> int:
     check_frf(rec, band)
     say(args, f"frf: {rec.n} samples at {rec.fs:g} Hz, input {rec.input_name}")
     res = frf(rec, band=band, segment_s=args.segment)
+    if res.get("impacts"):
+        imp = res["impacts"]
+        say(args, f"frf: treated as an impact test: {imp['hits']} hit(s) found in the force channel (offset "
+                  f"{imp['offset_n'][0]:.3g} N removed), blocks of {imp['block_s']:.3g} s; {imp['windows']}")
     curves = res.pop("_curves")
     fig = frf_figure(res, curves, rec.input_name, f"FRF of {Path(args.data).name}")
     res["figure"] = write_figure(fig, args.out)
@@ -406,6 +410,34 @@ def _frf_structure(args, band, rec) -> int:
     modes = ", ".join(f"{m['f_hz']:.3f} Hz ({100 * m['zeta']:.2f} %, z{'/z'.join(map(str, m['seen_on']))})"
                       for m in res["modes"]) or "no peak"  # fmt: skip
     say(args, f"wrote {args.out} and {res['figure']}: {modes}")
+    return 0
+
+
+def cmd_backbone(args) -> int:
+    from negstiff.inference.analysis.backbone import backbone
+    from negstiff.inference.record.measurement import load
+    from negstiff.models.device import load_system
+    from negstiff.report.figures import backbone_figure
+
+    model = load_system(args.model) if args.model else None
+    if model is not None and not hasattr(model, "k3"):
+        raise InputError(f"--model {args.model}: a backbone's prediction needs a model file (coefficients), not a "
+                         "device file")  # fmt: skip
+    rec = load(args.data, columns=args.columns, fs=args.fs, gravity=args.gravity, mass=args.mass)
+    if rec.n_dof > 1:
+        raise InputError(f"{args.data}: a backbone is a single DOF's; this record has {rec.n_dof} DOFs")
+    say(args, f"backbone: {rec.n} samples at {rec.fs:g} Hz, input {rec.input_name}")
+    res = backbone(rec, model=model)
+    res["figure"] = write_figure(backbone_figure(res, f"Backbone of {Path(args.data).name}"), args.out)
+    write_json(args.out, res)
+    warn(args, res["warnings"])
+    lo, hi = res["amplitude_range_m"]
+    lin = res["linear"]
+    pred = res.get("predicted")
+    say(args, f"wrote {args.out} and {res['figure']}: decay from {res['decay']['start_s']:.4g} s, amplitudes "
+              f"{1e3 * hi:.3g} to {1e3 * lo:.3g} mm, small-amplitude {lin['f_hz']:.4f} Hz, zeta "
+              f"{100 * lin['zeta']:.2f} %" + ("" if pred is None or pred["difference_percent"] is None else
+                                              f"; the model's backbone within {pred['difference_percent']:.2f} %"))
     return 0
 
 

@@ -260,6 +260,24 @@ def _frf(sub, common: argparse.ArgumentParser, data_opts: argparse.ArgumentParse
     frq.set_defaults(func=c.cmd_frf)
 
 
+def _backbone(sub, common: argparse.ArgumentParser, data_opts: argparse.ArgumentParser) -> None:
+    bb = sub.add_parser(
+        "backbone",
+        parents=[common, data_opts],
+        help="backbone curves (frequency and damping against amplitude) of a free decay, measured and predicted",
+        description="The free decay after the record's input falls silent (a release, a hammer's last hit, a shaker "
+        "switched off; an input at its floor throughout is a decay from the start): its instantaneous frequency and "
+        "damping ratio against amplitude by the Hilbert transform of the band-passed response, with the "
+        "peak-to-peak cycles as a cross-check; with --model, the model's free decay from the record's state "
+        "measured alike. Writes OUT.json and OUT.png.",
+    )
+    bb.add_argument("data", help="measurement file (a force or base_acc column, silent after the release)")
+    bb.add_argument("--model", help="model file (JSON): its predicted backbone beside the measured one")
+    bb.add_argument("--mass", type=mass_option(), help="moving mass [kg] (default: the file's '# mass:')")
+    bb.add_argument("-o", "--out", required=True, help="result JSON (the figure beside it, .png)")
+    bb.set_defaults(func=c.cmd_backbone)
+
+
 def _nfrc(sub, common: argparse.ArgumentParser, data_opts: argparse.ArgumentParser) -> None:
     nf = sub.add_parser(
         "nfrc",
@@ -586,7 +604,7 @@ class _ListingOnly:
         raise _Listed
 
 
-COMMANDS = ("rig", "simulate", "identify", "frf", "nfrc", "posterior", "discrepancy", "characterize", "map",
+COMMANDS = ("rig", "simulate", "identify", "frf", "backbone", "nfrc", "posterior", "discrepancy", "characterize", "map",
             "update", "report", "reproduce")  # fmt: skip
 """Every command, in the order ``negstiff --help`` lists them."""
 
@@ -635,9 +653,9 @@ def build_parser(only: str | None = None) -> argparse.ArgumentParser:
         "horizontal device (a harvester): its frame is then pinned by its wells' symmetry or rest positions",
     )
 
-    builders = {"rig": _rig, "simulate": _simulate, "identify": _identify, "frf": _frf, "nfrc": _nfrc,
-                "posterior": _posterior, "discrepancy": _discrepancy, "characterize": _characterize, "map": _map,
-                "update": _update, "report": _report, "reproduce": _reproduce}  # fmt: skip
+    builders = {"rig": _rig, "simulate": _simulate, "identify": _identify, "frf": _frf, "backbone": _backbone,
+                "nfrc": _nfrc, "posterior": _posterior, "discrepancy": _discrepancy, "characterize": _characterize,
+                "map": _map, "update": _update, "report": _report, "reproduce": _reproduce}  # fmt: skip
     extra = [name for name in builders if name not in COMMANDS]
     assert not extra, f"commands missing from COMMANDS: {extra}"
     for name in COMMANDS:

@@ -1,6 +1,6 @@
 """The command line's figures: ``negstiff frf`` (|H1| and |H2| over the band with each fitted peak, and the
 coherence) and ``negstiff nfrc`` (the response's extent along each branch, stable solid, unstable dashed,
-bifurcations marked).
+bifurcations marked), ``negstiff backbone`` (frequency and damping against amplitude).
 """
 
 from __future__ import annotations
@@ -58,6 +58,38 @@ def frf_figure_dofs(res: dict[str, Any], curves: list[dict[str, np.ndarray]], in
     a2.set_ylabel("coherence")
     a2.set_xlabel("frequency [Hz]")
     a2.set_ylim(0, 1.05)
+    fig.tight_layout()
+    return fig
+
+
+def backbone_figure(res: dict[str, Any], title: str):
+    """The backbone figure of a ``backbone`` result: frequency and damping ratio against amplitude [mm], the
+    measured Hilbert curve, its peak-to-peak cross-check, the model's prediction and the draws' band where given.
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, (a1, a2) = plt.subplots(1, 2, figsize=(10, 4.5), sharey=True)
+    curves = [("measured (Hilbert)", res["measured"]["hilbert"], "C0", "-"),
+              ("measured (peaks)", res["measured"]["peaks"], "C0", ":")]  # fmt: skip
+    if res.get("predicted"):
+        curves.append(("model (Hilbert)", res["predicted"]["hilbert"], "C3", "--"))
+    for label, c, color, ls in curves:
+        a = 1e3 * np.asarray(c["amplitude_m"])
+        a1.plot(c["f_hz"], a, ls, color=color, label=label)
+        a2.plot(100 * np.asarray(c["zeta"]), a, ls, color=color, label=label)
+    band = res.get("credible")
+    if band:
+        a = 1e3 * np.asarray(band["amplitude_m"])
+        a1.fill_betweenx(a, band["f_hz_low"], band["f_hz_high"], color="C3", alpha=0.2,
+                         label=f"model, {100 * band['prob']:.0f} % band")  # fmt: skip
+        a2.fill_betweenx(a, 100 * np.asarray(band["zeta_low"]), 100 * np.asarray(band["zeta_high"]), color="C3",
+                         alpha=0.2)  # fmt: skip
+    a1.set(xlabel="frequency [Hz]", ylabel="amplitude [mm]", title=title)
+    a2.set(xlabel="damping ratio [%]")
+    a1.legend(fontsize=8)
     fig.tight_layout()
     return fig
 
