@@ -23,6 +23,7 @@ DATA_COMMANDS = {
     "discrepancy": lambda d, rec, out: ["discrepancy", str(rec), "-o", str(out)],
     "characterize": lambda d, rec, out: ["characterize", str(rec), "--forcing-hz", "9", "-o", str(out)],
     "frf": lambda d, rec, out: ["frf", str(rec), "-o", str(out)],
+    "backbone": lambda d, rec, out: ["backbone", str(rec), "-o", str(out)],
     "map": lambda d, rec, out: ["map", str(rec), "--forcing-hz", "9", "-o", str(out)],
     "report": lambda d, rec, out: ["report", str(rec), "-o", str(out)],
 }
