@@ -241,6 +241,29 @@ class StructureIdentification:
             "settings": self.settings,
         }
 
+    @classmethod
+    def from_json(cls, data) -> StructureIdentification:
+        """The identification a structure's identify result JSON holds (``to_json()``, its text or a file path):
+        ``StructureIdentification.from_json(r.to_json()).to_json() == r.to_json()`` (the ``element`` key is the
+        structure's element, read from ``structure``).
+        """
+        from negstiff.inference.estimators.persistence import json_source
+
+        d = json_source(data, "structure identify result JSON")
+        try:
+            structure = Structure.from_dict(d["structure"])
+            modal = {w: [Mode(float(m["f_hz"]), float(m["zeta"]), tuple(float(x) for x in m["shape"])) for m in ms]
+                     for w, ms in d["modal"].items()}  # fmt: skip
+            return cls(
+                method=d["method"], structure=structure, modal=modal, linear=dict(d.get("linear") or {}),
+                equilibria={w: list(z) for w, z in (d.get("equilibria") or {}).items()},
+                offsets_m=tuple(float(x) for x in d["offsets_m"]), validation=Bunch(d.get("validation") or {}),
+                warnings=tuple(d.get("warnings") or ()), details=dict(d.get("details") or {}),
+                settings=dict(d.get("settings") or {}),
+            )  # fmt: skip
+        except (KeyError, TypeError, ValueError) as exc:
+            raise InputError(f"not a structure's identify result JSON: {type(exc).__name__} {exc}") from None
+
     def summary(self) -> str:
         """One line: the element's k3 and each well's modes."""
         return f"{self.structure.n_dof} DOFs, element k3={self.structure.element.k3:.4g}; {modes_summary(self.modal)}"
@@ -262,6 +285,17 @@ class StructureResults:
     element_ = property(lambda self: self.result_.element)
     linear_ = property(lambda self: self.result_.linear)
     offsets_ = property(lambda self: self.result_.offsets_m)
+
+    def _restore(self, result: dict[str, Any]) -> None:
+        """A structure's result JSON (``"structure"`` and ``"dofs"`` in it) rebuilt as its
+        ``StructureIdentification`` (``from_json``); a single DOF's by the estimator's own ``_restore``.
+        """
+        if "structure" in result and "dofs" in result:
+            self.result_ = StructureIdentification.from_json(result)
+            if not isinstance(getattr(type(self), "model_", None), property):  # Discrepancy's own attribute
+                self.model_ = self.result_.model
+            return
+        super()._restore(result)  # type: ignore[misc]
 
     def _summary(self) -> str:
         r = self.result_
