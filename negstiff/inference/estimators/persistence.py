@@ -84,6 +84,8 @@ def encode_param(value: Any) -> Any:
         return value.item()
     if isinstance(value, np.ndarray):
         return value.tolist()
+    if isinstance(value, os.PathLike):  # a file path (Posterior's chain_file)
+        return os.fspath(value)
     return value
 
 

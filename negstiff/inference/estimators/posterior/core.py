@@ -4,8 +4,10 @@ from __future__ import annotations
 
 import functools
 import math
+import os
 import time
 import warnings
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -27,7 +29,12 @@ from negstiff.inference.estimators.posterior.parametrisation import (
     coefficient_parametrisation,
     device_parametrisation,
 )
-from negstiff.inference.estimators.posterior.sampling import sample_ensembles
+from negstiff.inference.estimators.posterior.sampling import (
+    ChainFile,
+    ChainFilePath,
+    check_chain_file,
+    sample_ensembles,
+)
 from negstiff.inference.estimators.posterior.windows import DROP_FACTOR_AT_MAP, PosteriorError, Windows
 from negstiff.inference.estimators.structure_id import ElementPlace, element_of
 from negstiff.inference.record.derivatives import noise_floor
@@ -86,6 +93,17 @@ class Posterior(Estimator):
         sigma are sampled, the masses, the linear structure and each channel's zero fixed at
         ``SINDy(element=...)``'s (``posterior.structure``); ``model="coefficients"``, no ``start`` and no
         ``input_noise`` there.
+    chain_file : str or os.PathLike, optional
+        An HDF5 file (``.h5``, ``.hdf5``) the emcee chains are saved to as they run (emcee's ``HDFBackend``,
+        each ensemble's chain, log probability and random state in its group ``ensemble_E``): a long run kept
+        on disk, read with ``emcee.backends.HDFBackend(path, name="ensemble_0")``. A fresh run replaces the
+        chains of a file it made before; any other existing HDF5 file is refused. None (default): in memory.
+    resume : bool, default False
+        Continue the chains saved in ``chain_file`` (by a run of the same record, settings and seed) instead of
+        starting afresh: each ensemble from its saved walkers and random state, up to ``max_steps`` in all and
+        under the same stopping rule, so a run stopped after k steps and resumed gives the chain one
+        uninterrupted run would (``settings["resumed_steps"]``: each ensemble's saved steps). Another run's
+        chains are refused.
 
     Attributes
     ----------
@@ -133,6 +151,8 @@ class Posterior(Estimator):
         "start": Instance("negstiff.models.equation", "Model", none=True),
         "refine_start": Boolean(),
         "element": ElementPlace(),
+        "chain_file": ChainFilePath(),
+        "resume": Boolean(),
     }
 
     def __init__(
@@ -158,6 +178,8 @@ class Posterior(Estimator):
         start: Model | None = None,
         refine_start: bool = True,
         element: str | tuple[int, int] | None = None,
+        chain_file: str | os.PathLike | None = None,
+        resume: bool = False,
     ):
         self.model = model
         self.mass_prior = mass_prior
@@ -179,10 +201,23 @@ class Posterior(Estimator):
         self.start = start
         self.refine_start = refine_start
         self.element = element
+        self.chain_file = chain_file
+        self.resume = resume
 
     def _validate(self) -> None:
         if self.start is not None and self.model != "coefficients":
             raise PosteriorError("a start model is a polynomial model, for the coefficient posterior")
+        check_chain_file(self.chain_file, self.resume, self.n_ensembles)
+
+    def chains_to(self, centre: np.ndarray, scale: np.ndarray, ndim: int, seed: int) -> ChainFile | None:
+        """Where this run's chains are saved (``chain_file``; None: in memory), the run named by the sampled
+        coordinates' ``centre`` and ``scale``, their dimension and the seed (a resume must match them).
+        """
+        if self.chain_file is None:
+            return None
+        run = {"walkers": self.n_walkers, "ndim": int(ndim), "seed": int(seed),
+               "centre": np.ravel(centre).tolist(), "scale": np.ravel(scale).tolist()}  # fmt: skip
+        return ChainFile(Path(self.chain_file), bool(self.resume), run)
 
     def result(self) -> dict[str, Any]:
         """The contract's posterior JSON (``result_json`` of ``result_``), with every warning and the record; on a
@@ -453,6 +488,7 @@ class Posterior(Estimator):
             max_steps=self.max_steps,
             chunk=self.chunk,
             progress=self.progress,
+            chain_file=self.chains_to(q0, scale, nd, seed),
         )
         chains, taus, warn = run["chains"], run["tau"], run["warnings"]
         n_keep = min(c.shape[0] for c in chains)
@@ -493,6 +529,8 @@ class Posterior(Estimator):
             "likelihood_calls": logpost.calls,
             "priors": par.description,
             "seed": seed,
+            "chain_file": None if self.chain_file is None else str(self.chain_file),
+            "resumed_steps": run["resumed_steps"],
             "elapsed_s": time.perf_counter() - t_start,
             "moves": "DEMove 0.8, DESnookerMove 0.2",
             "start": self.start_info_,

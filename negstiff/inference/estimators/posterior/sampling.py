@@ -1,17 +1,156 @@
-"""Independent emcee ensembles run until the autocorrelation rule holds (emcee docs)."""
+"""Independent emcee ensembles run until the autocorrelation rule holds (emcee docs), their chains kept in memory
+or saved as they run to an HDF5 file (emcee's ``HDFBackend``, one group per ensemble), from which a stopped run
+resumes (``ChainFile``).
+"""
 
 from __future__ import annotations
 
+import contextlib
+import json
 import math
+import os
 import threading
 import warnings
 from concurrent.futures import ThreadPoolExecutor
-from typing import Any
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, override
 
 import numpy as np
 
+from negstiff.inference.estimators.parameters import Constraint
 from negstiff.inference.estimators.posterior.windows import PosteriorError
 from negstiff.models.simulator import cores
+
+CHAIN_SUFFIXES = (".h5", ".hdf5")
+"""What a chain file's name ends with (an HDF5 file, emcee's ``HDFBackend``)."""
+RUN_ATTRIBUTE = "negstiff_run"
+"""The chain file's root attribute naming the run its chains belong to (``ChainFile.run``, JSON text)."""
+
+
+class ChainFilePath(Constraint):
+    """None, or the path (``str`` or ``os.PathLike``) of an HDF5 file (``.h5``, ``.hdf5``)."""
+
+    @override
+    def accepts(self, value: Any) -> bool:
+        if value is None:
+            return True
+        if not isinstance(value, (str, os.PathLike)):
+            return False
+        return Path(value).suffix.lower() in CHAIN_SUFFIXES
+
+    @override
+    def describe(self) -> str:
+        return f"None or the path of an HDF5 file ({', '.join(CHAIN_SUFFIXES)})"
+
+
+def _group(e: int) -> str:
+    return f"ensemble_{e}"
+
+
+def check_chain_file(path, resume: bool, n_ensembles: int) -> None:
+    """Refuse, before any work, a chain file that cannot be used: ``resume`` without a file, or with one that
+    holds no saved chains of ``n_ensembles`` ensembles; an existing file that is not a negstiff chain file
+    (a fresh run replaces a chain file's chains, never another HDF5 file). One ``PosteriorError``.
+    """
+    if path is None:
+        if resume:
+            raise PosteriorError("resume=True continues the chains saved in chain_file: give chain_file")
+        return
+    path = Path(path)
+    if not path.exists():
+        if resume:
+            raise PosteriorError(f"{path}: no such chain file to resume")
+        return
+    import h5py
+
+    try:
+        with _FILE_LOCK, h5py.File(path, "r") as f:
+            run = f.attrs.get(RUN_ATTRIBUTE)
+            saved = [e for e in range(n_ensembles) if _group(e) in f and f[_group(e)].attrs.get("iteration", 0) > 0]
+    except OSError as exc:
+        raise PosteriorError(f"{path}: not a readable HDF5 file ({exc})") from None
+    if run is None:
+        raise PosteriorError(f"{path}: an HDF5 file that is not a negstiff chain file (left as it is)")
+    if resume and len(saved) < n_ensembles:
+        raise PosteriorError(f"{path}: holds the saved chains of {len(saved)} of the {n_ensembles} ensembles asked")
+
+
+_FILE_LOCK = threading.RLock()
+"""One open handle of a chain file at a time: the ensembles run in threads and each step of each writes to the
+file (HDF5 refuses a file opened for writing and reading at once by two handles of one process)."""
+
+
+def _locked_backend():
+    import emcee
+
+    class LockedHDFBackend(emcee.backends.HDFBackend):
+        """emcee's HDF5 backend whose every open of the file holds ``_FILE_LOCK`` until it is closed."""
+
+        @contextlib.contextmanager
+        def open(self, mode="r"):
+            with _FILE_LOCK:
+                f = super().open(mode)
+                try:
+                    yield f
+                finally:
+                    f.close()
+
+    return LockedHDFBackend
+
+
+@dataclass(frozen=True)
+class ChainFile:
+    """Where a posterior's emcee chains are saved as they run: an HDF5 file, each ensemble's chain, log
+    probability, blobs and random state in its group ``ensemble_E`` (emcee's ``HDFBackend``).
+
+    ``resume``: continue the chains saved there (the walkers and emcee's random state restored, the run's
+    stopping rule judged on the whole chain) rather than replace them, so a run stopped after k steps and
+    resumed gives the chain one uninterrupted run of the same seed would. ``run`` identifies the run the chains
+    belong to (the sampled coordinates' centre and scale, walkers, dimension, seed): a resume about another
+    run is refused.
+    """
+
+    path: Path
+    resume: bool = False
+    run: dict[str, Any] = field(default_factory=dict)
+
+    def start(self) -> None:
+        """A fresh run: the file made anew with the run's identity. A resume: the identity checked."""
+        import h5py
+
+        with _FILE_LOCK:
+            if not self.resume:
+                with h5py.File(self.path, "w") as f:
+                    f.attrs[RUN_ATTRIBUTE] = json.dumps(self.run)
+                return
+            with h5py.File(self.path, "r") as f:
+                saved = json.loads(str(f.attrs[RUN_ATTRIBUTE]))
+        if not _same_run(saved, self.run):
+            raise PosteriorError(
+                f"{self.path}: its chains are another run's (the record, the posterior's settings or the seed "
+                f"differ: saved seed {saved.get('seed')}, walkers {saved.get('walkers')}, this run's "
+                f"{self.run.get('seed')}, {self.run.get('walkers')}); resume=False starts afresh"
+            )
+
+    def backend(self, e: int):
+        """Ensemble ``e``'s emcee backend (its group of the file)."""
+        return _locked_backend()(str(self.path), name=_group(e))
+
+
+RUN_RTOL = 1e-6
+"""Relative tolerance on the sampled coordinates' centre and scale when a resumed run is matched to its saved
+chains: the same record and settings give them again (the MAP search repeated), to rounding."""
+
+
+def _same_run(saved: dict[str, Any], run: dict[str, Any]) -> bool:
+    if {k: saved.get(k) for k in ("walkers", "ndim", "seed")} != {k: run.get(k) for k in ("walkers", "ndim", "seed")}:
+        return False
+    for key in ("centre", "scale"):
+        a, b = np.asarray(saved.get(key, []), float), np.asarray(run.get(key, []), float)
+        if a.shape != b.shape or not np.allclose(a, b, rtol=RUN_RTOL, atol=RUN_RTOL * float(np.abs(b).max(initial=0))):
+            return False
+    return True
 
 
 def sample_ensembles(
@@ -28,6 +167,7 @@ def sample_ensembles(
     progress: bool = False,
     p0_scale: float = 1.0,
     workers: int | None = None,
+    chain_file: ChainFile | None = None,
 ) -> dict[str, Any]:
     """Independent emcee ensembles (DE 80 % / snooker 20 %) of a vectorised ``log_prob`` over scaled
     coordinates (walkers start from N(0, p0_scale^2)). Each runs in chunks until its kept steps (after a
@@ -35,32 +175,48 @@ def sample_ensembles(
     ``max_steps``; a run that stops short is reported in ``warnings``. Seeds: the walkers' start from
     ``seed + e``, the moves from ``seed + 1000 + e``: the same seed gives the same chains, whatever
     ``workers`` (threads running ensembles at once; None: one per core).
+
+    ``chain_file``: each ensemble's chain saved to that HDF5 file as it runs (``ChainFile``); with its
+    ``resume``, each ensemble continues from its saved walkers and random state (emcee's backend restores
+    both), its rule judged first on the saved chain (a run that had stopped converged stays as it was), so
+    k saved steps and max_steps - k more are the chain of one run of max_steps. ``resumed_steps``: each
+    ensemble's saved steps at the start (0: a fresh run).
     """
     import emcee
 
     pbar = _progress_bar(progress, n_ensembles * max_steps)
     lock = threading.Lock()  # the progress bar and the warnings filters are shared by the threads
+    if chain_file is not None:
+        chain_file.start()
+    resume = chain_file is not None and chain_file.resume
 
     def run(e: int):
         # each ensemble its own moves: emcee's DEMove keeps per-run state (g0) set up at every step
         moves = [(emcee.moves.DEMove(), 0.8), (emcee.moves.DESnookerMove(), 0.2)]
-        rs = np.random.RandomState(seed + e)
-        p0 = p0_scale * rs.standard_normal((n_walkers, nd))
-        # every walker must start where the posterior is positive (emcee's moves compare log probabilities)
-        for _ in range(50):
-            bad = ~np.isfinite(np.array([lp for lp, _ in log_prob(p0)]))
-            if not bad.any():
-                break
-            p0[bad] = 0.5 * p0_scale * rs.standard_normal((int(bad.sum()), nd))
+        backend = None if chain_file is None else chain_file.backend(e)
+        if resume:
+            # emcee restores the walkers' last state and the moves' random state from the backend
+            sampler = emcee.EnsembleSampler(n_walkers, nd, log_prob, vectorize=True, moves=moves, backend=backend)
+            state = None
         else:
-            raise PosteriorError("no start point of positive posterior density near the MAP point")
-        sampler = emcee.EnsembleSampler(n_walkers, nd, log_prob, vectorize=True, moves=moves)
-        sampler.random_state = np.random.RandomState(seed + 1000 + e).get_state()
-        state, steps, tau, burn = p0, 0, np.full(nd, np.inf), 0
-        while steps < max_steps:
-            with np.errstate(invalid="ignore", divide="ignore"):
-                state = sampler.run_mcmc(state, min(chunk, max_steps - steps), progress=False)
-            done, steps = steps, sampler.iteration
+            rs = np.random.RandomState(seed + e)
+            p0 = p0_scale * rs.standard_normal((n_walkers, nd))
+            # every walker must start where the posterior is positive (emcee's moves compare log probabilities)
+            for _ in range(50):
+                bad = ~np.isfinite(np.array([lp for lp, _ in log_prob(p0)]))
+                if not bad.any():
+                    break
+                p0[bad] = 0.5 * p0_scale * rs.standard_normal((int(bad.sum()), nd))
+            else:
+                raise PosteriorError("no start point of positive posterior density near the MAP point")
+            if backend is not None:
+                backend.reset(n_walkers, nd)
+            sampler = emcee.EnsembleSampler(n_walkers, nd, log_prob, vectorize=True, moves=moves, backend=backend)
+            sampler.random_state = np.random.RandomState(seed + 1000 + e).get_state()
+            state = p0
+        resumed = steps = int(sampler.iteration)
+
+        def judged(done: int) -> tuple[np.ndarray, float, int, bool]:
             # catch_warnings saves and restores the process's filters: one thread at a time
             with lock, np.errstate(invalid="ignore", divide="ignore"), warnings.catch_warnings():
                 warnings.simplefilter("ignore")
@@ -69,8 +225,16 @@ def sample_ensembles(
                     pbar.update(steps - done)
             t_max = float(np.max(tau)) if np.all(np.isfinite(tau)) else math.inf
             burn = int(min(steps // 2, max(2 * t_max, chunk)))
-            if steps >= min_steps and steps - burn >= tau_multiple * t_max:
-                break
+            return tau, t_max, burn, steps >= min_steps and steps - burn >= tau_multiple * t_max
+
+        tau, t_max, burn, done = np.full(nd, np.inf), math.inf, 0, False
+        if steps:  # a resumed run: its rule first judged on the saved chain
+            tau, t_max, burn, done = judged(0)
+        while steps < max_steps and not done:
+            with np.errstate(invalid="ignore", divide="ignore"):
+                state = sampler.run_mcmc(state, min(chunk, max_steps - steps), progress=False)
+            before, steps = steps, int(sampler.iteration)
+            tau, t_max, burn, done = judged(before)
         warn = []
         if not steps - burn >= tau_multiple * t_max:
             warn.append(
@@ -80,7 +244,7 @@ def sample_ensembles(
         acc = float(np.mean(sampler.acceptance_fraction))
         if acc < 0.05:
             warn.append(f"ensemble {e}: acceptance fraction {acc:.3f} (stuck walkers)")
-        return sampler.get_chain(discard=burn), sampler.get_blobs(discard=burn), tau, warn
+        return sampler.get_chain(discard=burn), sampler.get_blobs(discard=burn), tau, warn, resumed
 
     # The ensembles are independent (own seeds, own sampler): they run on the machine's cores at once,
     # each in a thread (the compiled simulator releases the GIL; a step's batch is too small to split
@@ -100,6 +264,7 @@ def sample_ensembles(
         "tau": [r[2] for r in runs],
         "warnings": [w for r in runs for w in r[3]],
         "blobs": [r[1] for r in runs],
+        "resumed_steps": [r[4] for r in runs],
     }
 
 

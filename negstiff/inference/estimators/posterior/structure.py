@@ -90,7 +90,8 @@ def fit_structure(est, rec: Measurement, at: tuple[int, int], seed: int) -> tupl
     log_prob = functools.partial(_log_prob, sim, data, theta, s_gn, A, centre, scale, n_obs)
     run = sample_ensembles(log_prob, 6, n_walkers=est.n_walkers, n_ensembles=est.n_ensembles, seed=seed,
                            tau_multiple=est.tau_multiple, min_steps=est.min_steps, max_steps=est.max_steps,
-                           chunk=est.chunk, progress=est.progress)  # fmt: skip
+                           chunk=est.chunk, progress=est.progress,
+                           chain_file=est.chains_to(centre, scale, 6, seed))  # fmt: skip
     S = min(c.shape[0] for c in run["chains"])
     chains = np.stack([c[-S:] for c in run["chains"]])  # (E, S, walkers, d) scaled
     phys = centre + chains * scale
@@ -124,6 +125,8 @@ def fit_structure(est, rec: Measurement, at: tuple[int, int], seed: int) -> tupl
         "tau_max_steps": float(tau_max) if np.isfinite(tau_max) else None,
         "priors": ["k1, k2, k3: flat", "c, c_nl: flat on [0, inf): the element dissipates", "log sigma: flat"],
         "seed": seed,
+        "chain_file": None if est.chain_file is None else str(est.chain_file),
+        "resumed_steps": run["resumed_steps"],
         "moves": "DEMove 0.8, DESnookerMove 0.2",
         "fixed": "masses, the linear structure (springs, dampers) and each channel's zero at SINDy's",
         "start": {"source": f"SINDy(element='{at[0]}-{at[1]}')", "structure": start.to_dict()},
