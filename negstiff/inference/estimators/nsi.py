@@ -41,6 +41,7 @@ from scipy import signal
 from tqdm import tqdm
 
 from negstiff.errors import MeasurementError
+from negstiff.inference.analysis.record_kind import check_decay, identification_record, record_kind
 from negstiff.inference.estimators.identification import Estimate, Identifier, visited_well
 from negstiff.inference.estimators.parameters import FRACTION, Boolean, Interval, Pair
 from negstiff.inference.estimators.structure_id import (
@@ -51,7 +52,7 @@ from negstiff.inference.estimators.structure_id import (
 )
 from negstiff.inference.estimators.structure_id import stabilization as structure_stabilization
 from negstiff.inference.record.measurement import Measurement, per_unit_mass_warning
-from negstiff.inference.steps.weak import known_input_gain, mass_of
+from negstiff.inference.steps.weak import free_decay, known_input_gain, mass_of
 from negstiff.inference.steps.wells import well_guesses
 from negstiff.models import Model
 
@@ -74,6 +75,21 @@ def covers_band(u: np.ndarray, fs: float, band: tuple[float, float]) -> bool:
     if p.size < 3 or not p.sum() > 0:
         return False
     return float(p.sum() ** 2 / np.sum(p**2)) >= INPUT_SPREAD * p.size
+
+
+def decay_feedback(ss: subspace.StateSpace, freqs: np.ndarray, wn: float, zeta: float, gains: np.ndarray) -> np.ndarray:
+    """A free decay's nonlinear coefficients over the band, per unit mass (Anastasio & Marchesiello 2019, the
+    free-decay form of NSI: no linear input, the feedback channels alone).
+
+    Without a measured input the ratios H_e,j / H_e,0 of the forced form do not exist; the extended FRF's
+    feedback columns are read against the identified pole's own per-unit-mass FRF instead, c_j = H_e,j(omega)
+    (wn^2 - omega^2 + 2 i zeta wn omega), from the discrete-time model (the FRF level below Nyquist, as the
+    forced form's input gain). ``gains`` rescales each standardised channel to the physical one (y std over
+    the channel's std). Returns (F, J) complex: the real part is c_j, the imaginary part the quality index.
+    """
+    hd = ss.frf_discrete(freqs)[:, 0, :] * gains
+    w = 2 * np.pi * freqs
+    return hd * (wn**2 - w**2 + 2j * zeta * wn * w)[:, None]
 
 
 class NSIError(MeasurementError):
@@ -99,10 +115,11 @@ class WellFit:
     """Each pass's route of the subspace step's LQ factor (``subspace.LQ_ROUTES``)."""
 
 
-def physical_pole(ss: subspace.StateSpace) -> complex:
+def physical_pole(ss: subspace.StateSpace, column: int | None = 0) -> complex:
     """The pole of the ULS: among underdamped stable poles (0 < zeta < 0.7), the one with the
     largest modal contribution |residue / Re(lambda)| to the linear input column (Marchesiello,
-    Fasana & Garibaldi 2016; algorithms.md A.5). For order 2 it is the only pair.
+    Fasana & Garibaldi 2016; algorithms.md A.5). For order 2 it is the only pair. ``column`` None (a free
+    decay, no linear input): the contribution to all input columns (the feedback channels) together.
     """
     lam, psi = np.linalg.eig(ss.A)
     left = np.linalg.inv(psi)
@@ -113,7 +130,8 @@ def physical_pole(ss: subspace.StateSpace) -> complex:
         zeta = -lr.real / abs(lr)
         if not 0 < zeta < 0.7:
             continue
-        res = abs((ss.C @ psi[:, r])[0] * (left[r] @ ss.B[:, 0]))
+        b = left[r] @ (ss.B if column is None else ss.B[:, column])
+        res = abs((ss.C @ psi[:, r])[0]) * float(np.linalg.norm(np.atleast_1d(b)))
         s = res / abs(lr.real)
         if s > score:
             best, score = lr, s
@@ -218,11 +236,16 @@ class NSI(StructureResults, Identifier):
     # --- one well ----------------------------------------------------------------------------
     def extended_input(self, rec: Measurement, zs: np.ndarray, v: np.ndarray, z_ref: float):
         """The subspace step's problem about ``z_ref``: x = z - z_ref, the standardised input channels (the
-        input and the basis functions ``-x^2, -x^3, -z'|z'|``), their scales and means.
+        input and the basis functions ``-x^2, -x^3, -z'|z'|``; a free decay's: the basis functions alone), their
+        scales and means.
         """
         x = zs - z_ref
-        lin = -rec.u if rec.input_name == "base_acc" else rec.u
-        chans = np.column_stack([lin, -(x**2), -(x**3), -v * np.abs(v)])
+        basis = [-(x**2), -(x**3), -v * np.abs(v)]
+        if free_decay(rec):  # no input: the feedback channels alone drive the ULS from its initial state
+            chans = np.column_stack(basis)
+        else:
+            lin = -rec.u if rec.input_name == "base_acc" else rec.u
+            chans = np.column_stack([lin, *basis])
         means = chans.mean(axis=0)
         scale = chans.std(axis=0)
         if np.any(scale == 0):
@@ -254,35 +277,44 @@ class NSI(StructureResults, Identifier):
             except (ValueError, np.linalg.LinAlgError) as exc:
                 raise NSIError(f"{rec.source}: subspace step failed ({exc})") from None
             routes.append(str(ss.lq_route))
-            lam = physical_pole(ss)
+            decay = free_decay(rec)
+            lam = physical_pole(ss, None if decay else 0)
             wn, zeta = abs(lam), -lam.real / abs(lam)
             fn = wn / (2 * math.pi)
             band = (self.band[0] * fn, self.band[1] * fn)
             freqs = np.linspace(band[0], band[1], 64)
-            he = ss.frf(freqs)[:, 0, :]
-            ratio = he[:, 1:] / he[:, :1] * (scale[0] / scale[1:])
-            coef = ratio.real.mean(axis=0)
-            quality = np.abs(ratio.imag).mean(axis=0) / np.maximum(np.abs(coef), 1e-300)
-            # input gain b of x'' + ... = b u, from the discrete-time FRF level: exactly 1 for base
-            # excitation (the estimate is kept as a check), 1/m for a force record. The ratios give
-            # c_j / b, so b * ratio is per unit mass, like the pole's k/m and c/m.
-            hd = ss.frf_discrete(freqs)[:, 0, 0] * ys / scale[0]
-            w_ = 2 * np.pi * freqs
-            gain_est = float(np.mean((hd * (wn**2 - w_**2 + 2j * zeta * wn * w_)).real))
-            gain = 1.0 if rec.input_name == "base_acc" else gain_est
-            # the ratios c_j / b need the input's FRF over the band; an input that does not cover the band
-            # (a harmonic one: a line) leaves it to the model's extrapolation, 2 % low on a chaotic harvester
-            # record (measured), and every coefficient 2 % high. The feedback channels are then read
-            # against the pole's own FRF at the known gain (b_est * ratio: as for a force record).
-            narrow = rec.input_name == "base_acc" and not covers_band(rec.u, rec.fs, band)
-            c = dict(zip(BASIS_NAMES, (gain_est if narrow else gain) * coef, strict=False))
+            if decay:
+                he = ss.frf(freqs)[:, 0, :]
+                ratio = decay_feedback(ss, freqs, wn, zeta, ys / scale)
+                coef = ratio.real.mean(axis=0)
+                quality = np.abs(ratio.imag).mean(axis=0) / np.maximum(np.abs(coef), 1e-300)
+                gain_est = gain = 1.0  # per unit mass: the ULS's own x'' + 2 zeta wn x' + wn^2 x (no input to scale)
+                c = dict(zip(BASIS_NAMES, coef, strict=False))
+            else:
+                he = ss.frf(freqs)[:, 0, :]
+                ratio = he[:, 1:] / he[:, :1] * (scale[0] / scale[1:])
+                coef = ratio.real.mean(axis=0)
+                quality = np.abs(ratio.imag).mean(axis=0) / np.maximum(np.abs(coef), 1e-300)
+                # input gain b of x'' + ... = b u, from the discrete-time FRF level: exactly 1 for base
+                # excitation (the estimate is kept as a check), 1/m for a force record. The ratios give
+                # c_j / b, so b * ratio is per unit mass, like the pole's k/m and c/m.
+                hd = ss.frf_discrete(freqs)[:, 0, 0] * ys / scale[0]
+                w_ = 2 * np.pi * freqs
+                gain_est = float(np.mean((hd * (wn**2 - w_**2 + 2j * zeta * wn * w_)).real))
+                gain = 1.0 if rec.input_name == "base_acc" else gain_est
+                # the ratios c_j / b need the input's FRF over the band; an input that does not cover the band
+                # (a harmonic one: a line) leaves it to the model's extrapolation, 2 % low on a chaotic harvester
+                # record (measured), and every coefficient 2 % high. The feedback channels are then read
+                # against the pole's own FRF at the known gain (b_est * ratio: as for a force record).
+                narrow = rec.input_name == "base_acc" and not covers_band(rec.u, rec.fs, band)
+                c = dict(zip(BASIS_NAMES, (gain_est if narrow else gain) * coef, strict=False))
             # time-averaged equation of motion (channels hold -g_j): the constant K(z_g)/m
             c["const"] = (
-                gain * means[0]
+                (0.0 if decay else gain * means[0])
                 - wn**2 * x.mean()
                 - 2 * zeta * wn * v.mean()
                 - (v[-1] - v[0]) / (v.size * rec.dt)  # mean acceleration over the record
-                + sum(c[k] * means[j + 1] for j, k in enumerate(BASIS_NAMES))
+                + sum(c[k] * means[j + (0 if decay else 1)] for j, k in enumerate(BASIS_NAMES))
             )
             # restoring force about z_g, per unit mass: const + wn^2 x + c2 x^2 + c3 x^3
             roots = np.roots([c["x3"], c["x2"], wn**2, c["const"]])
@@ -311,7 +343,8 @@ class NSI(StructureResults, Identifier):
             "shift_last_pass": r,
             "input_gain": gain_est,
         }
-        h0 = he[:, 0] * ys / scale[0]
+        w_ = 2 * np.pi * freqs
+        h0 = 1.0 / (wn**2 - w_**2 + 2j * zeta * wn * w_) if decay else he[:, 0] * ys / scale[0]
         return WellFit(
             z_ref,
             fn,
@@ -332,17 +365,26 @@ class NSI(StructureResults, Identifier):
     def _check_record(self, rec: Measurement) -> None:
         element_of(self, rec)
         rec.require(max(2000, 40 * self.block_rows), "NSI")
-        rec.require_excitation("NSI")
+        if rec.n_dof > 1 or record_kind(rec).kind != "decay":
+            rec.require_excitation("NSI")
+        else:
+            check_decay(rec, "NSI")
         rec.require_motion("NSI")
 
     def fit(self, data) -> NSI:
         """Identify from ``data`` (a ``Measurement`` or a file path): a single DOF's record through the shared
         stages (``Identifier.fit``), a structure's (N > 1 DOFs) through ``structure_id.identify_nsi``.
+
+        A single DOF's record is read by its kind (``record_kind``): a hammer's force windowed (each hit's
+        offset removed, zero between the pulses), a free decay (an input at its floor throughout) through the
+        decay form (``decay_feedback``); the kind is the result's ``record_kind``.
         """
         rec = self.check(data)
         at = element_of(self, rec)
         if at is None:
-            return super().fit(rec)
+            kind = record_kind(rec)
+            self.record_kind_ = kind
+            return super().fit(identification_record(rec, kind))
         self.result_ = identify_nsi(self, rec, at)
         return self
 
@@ -362,8 +404,13 @@ class NSI(StructureResults, Identifier):
             if z_minus is not None:
                 wells["minus"] = self.fit_well(ident, zs, v, z_minus, bar)
         gains = [w.coefficients["input_gain"] for w in wells.values()]
-        # the one mass rule (``weak.mass_of``): a force record without a mass gets it from the FRF level (b = 1/m)
-        mass, mass_source = mass_of(rec, known_input_gain(rec), float(np.mean(gains)), what="the FRF level")
+        # the one mass rule (``weak.mass_of``): a force record without a mass gets it from the FRF level (b = 1/m);
+        # a free decay has no input to scale by: the mass given, else per unit mass
+        if free_decay(rec):
+            mass, mass_source = mass_of(rec, 1.0, 1.0)
+            gains = [1.0 / mass]
+        else:
+            mass, mass_source = mass_of(rec, known_input_gain(rec), float(np.mean(gains)), what="the FRF level")
         models = [self._z_frame(w, mass) for w in wells.values()]
         mean = {k: float(np.mean([getattr(mm, k) for mm in models])) for k in ("k1", "k2", "k3", "c", "c_nl", "k0")}
         model = Model(m=mass, **mean)
@@ -389,7 +436,7 @@ class NSI(StructureResults, Identifier):
                   "not used (SINDy and the discrepancy workflow offer it as a term)" for a in rec.aux),
                 *filter(None, [per_unit_mass_warning(rec)]),
             ),
-            details={"wells": self._wells_json()},
+            details={"wells": self._wells_json(), **self._kind_json()},
             settings={
                 "order": self.order,
                 "block_rows": self.block_rows,
@@ -403,6 +450,10 @@ class NSI(StructureResults, Identifier):
     def _final_details(self, rec: Measurement, model: Model, details: dict[str, Any]) -> dict[str, Any]:
         """``g_estimate``: the final model's k0/m, the gravity the record's own physics carries (base excitation)."""
         return {**details, "g_estimate": model.k0 / model.m if rec.input_name == "base_acc" else None}
+
+    def _kind_json(self) -> dict[str, Any]:
+        kind = vars(self).get("record_kind_")
+        return {} if kind is None else {"record_kind": {"kind": kind.kind, "how": kind.how}}
 
     def _wells_json(self) -> dict[str, Any]:
         return {

@@ -29,6 +29,7 @@ import math
 
 import numpy as np
 
+from negstiff.inference.analysis.record_kind import check_decay, identification_record, record_kind
 from negstiff.inference.estimators.identification import Estimate, Identifier
 from negstiff.inference.estimators.parameters import FRACTION, RANDOM_STATE, Boolean, Interval, Several, seed_of
 from negstiff.inference.estimators.structure_id import ElementPlace, StructureResults, element_of, identify_sindy
@@ -42,6 +43,7 @@ from negstiff.inference.steps.weak import (
     WeakFormError,
     aux_terms,
     fit_support,
+    is_ring_down,
     known_input_gain,
     mass_of,
     model_from,
@@ -73,7 +75,8 @@ def selection_blocks(rec: Measurement, validation_fraction: float, selection_fra
     n_id = int(round(rec.n * (1 - validation_fraction)))
     n_fit = int(round(rec.n * (1 - validation_fraction - selection_fraction)))
     ident = rec.segment(0, n_id)
-    half, _ = test_function_half_width(ident.displacement, ident.fs, floor=ident.noise_floor())
+    half, _ = test_function_half_width(ident.displacement, ident.fs, floor=ident.noise_floor(),
+                                       ring_down=is_ring_down(ident))  # fmt: skip
     stride = max(1, half // 2)
     rows = block_rows(window_s, rec.fs, stride)
     valid = n_id - n_fit - 8 * half  # the samples where a whole test function fits
@@ -210,7 +213,9 @@ class SINDy(StructureResults, Identifier):
         self.seed_ = seed_of(self.seed)  # None or a Generator: the integer drawn here, recorded in the settings
         at = element_of(self, rec)
         if at is None:
-            return super().fit(rec)
+            # a hammer's force windowed, a free decay's input zero: the weak form without an input term
+            self.record_kind_ = kind = record_kind(rec)
+            return super().fit(identification_record(rec, kind))
         self.result_ = identify_sindy(self, rec, at)
         self.selected_ = list(self.result_.details["selected_terms"])
         self.ensemble_ = self.result_.details["ensemble"]
@@ -219,7 +224,10 @@ class SINDy(StructureResults, Identifier):
     def _check_record(self, rec: Measurement) -> None:
         at = element_of(self, rec)
         rec.require(MIN_SAMPLES, "SINDy")
-        rec.require_excitation("SINDy")
+        if at is not None or record_kind(rec).kind != "decay":
+            rec.require_excitation("SINDy")
+        else:
+            check_decay(rec, "SINDy")
         rec.require_motion("SINDy")
         if at is None:
             self.check_length(rec)
@@ -230,13 +238,35 @@ class SINDy(StructureResults, Identifier):
         made by ``check`` so a caller refuses before printing any progress. A structure's record is checked by
         its fit (its blocks follow the element's smoothed states).
         """
-        blocks, need_s = selection_blocks(rec, self.validation_fraction, self.selection_fraction, self.window_s)
+        window = self.scoring_window(rec)
+        blocks, need_s = selection_blocks(rec, self.validation_fraction, self.selection_fraction, window)
         if blocks < 2:
             raise SINDyError(
                 f"{rec.source}: too short for SINDy: {rec.duration:.3g} s, at least about {need_s:.3g} s are "
                 f"needed ({100 * self.selection_fraction:.0f} % of the record scores the candidate models in "
-                f"{self.window_s:g} s blocks, two at least)"
+                f"{window:.3g} s blocks, two at least)"
             )
+
+    def scoring_window(self, rec: Measurement) -> float:
+        """The scoring blocks' and restarted free runs' length [s]: ``window_s``; on a hammer's or a free decay's
+        record (``record_kind``: a ring-down lasts seconds, the lab's records 10 s) shortened to what gives the
+        selection part two blocks, but never so short that the selection part holds fewer weak-form rows than
+        the system needs (four a column).
+        """
+        kind = record_kind(rec)
+        if kind.kind not in ("impact", "decay"):
+            return float(self.window_s)
+        rec = identification_record(rec, kind)  # as the fit reads it (the same weak form's test functions)
+        n_id = int(round(rec.n * (1 - self.validation_fraction)))
+        n_fit = int(round(rec.n * (1 - self.validation_fraction - self.selection_fraction)))
+        ident = rec.segment(0, n_id)
+        half, _ = test_function_half_width(ident.displacement, ident.fs, floor=ident.noise_floor(),
+                                           ring_down=is_ring_down(ident))  # fmt: skip
+        stride = max(1, half // 2)
+        rows = max(0, -(-(n_id - n_fit - 8 * half) // stride))  # the selection part's weak-form rows
+        fits = (rows // 2) * stride / rec.fs  # two blocks of them
+        floor = 2 * (len(terms()) + 1) * stride / rec.fs  # WeakForm.system's four rows a column over two blocks
+        return float(min(self.window_s, max(fits, floor)))
 
     def _estimate(self, rec: Measurement, n_id: int) -> Estimate:
         """SINDy's own estimate: the support selected on held-out residuals, refitted on the
@@ -295,6 +325,8 @@ class SINDy(StructureResults, Identifier):
                 "selected_terms": self.selected_,
                 "ensemble": self.ensemble_,
                 "path": [{k: v for k, v in p.items() if k not in ("block_ms", "support")} for p in self.path_],
+                **({} if vars(self).get("record_kind_") is None
+                   else {"record_kind": {"kind": self.record_kind_.kind, "how": self.record_kind_.how}}),
             },
             settings={
                 "form": f"weak: test functions (1 - (s/T)^2)^4, T = {form.half} samples, every {form.stride}",
@@ -309,7 +341,7 @@ class SINDy(StructureResults, Identifier):
                     else "learned (no mass)"
                 ),
                 "selection": "sparsest support whose held-out weak residual (samples "
-                f"[{n_fit}, {n_id}), blocks of {self.window_s:g} s) is within max(one standard error, "
+                f"[{n_fit}, {n_id}), blocks of {self.scoring_window(rec):.3g} s) is within max(one standard error, "
                 f"{100 * self.margin:g} %) of the best",
                 "weight": self.weight_,
                 "n_models": self.n_models,
@@ -327,26 +359,34 @@ class SINDy(StructureResults, Identifier):
         sys_fit = form.system(rec, 0, n_fit, aux)
         sys_sel = form.system(rec, n_fit, n_id, aux)
         W_sel, y_sel = sys_sel.W_physical, sys_sel.y_physical
-        rows = block_rows(self.window_s, rec.fs, form.stride)
+        window = self.scoring_window(rec)
+        rows = block_rows(window, rec.fs, form.stride)
         n_blocks = y_sel.size // rows
         if n_blocks < 2:
             need = 2 * rows / max(1, y_sel.size) * rec.n
             raise SINDyError(
                 f"{rec.source}: too short for SINDy: {rec.duration:.3g} s, at least about {need / rec.fs:.3g} s are "
                 f"needed ({100 * self.selection_fraction:.0f} % of the record scores the candidate models in "
-                f"{self.window_s:g} s blocks, two at least)"
+                f"{window:.3g} s blocks, two at least)"
             )
         library = terms() + aux_terms(aux)
+        # a ring-down (a decay, a hammer's record) dissipates by what it is: its viscous term is in every support.
+        # The equation error cannot weigh it: c z' is 2 zeta of the inertia's size (3 % at 1.5 %), under the
+        # selection's margin, so a double well's hammer record selected no damping at all (measured)
+        dissipates = record_kind(rec).kind in ("impact", "decay")
         supports: dict[tuple[bool, ...], list[float]] = {}
         for weight in self.weights:
             phys = fit_support(sys_fit, gain, weight)
-            supports.setdefault(tuple(bool(c) for c in (phys[: len(library)] != 0)), []).append(weight)
+            on = phys[: len(library)] != 0
+            if dissipates:
+                on[library.index("v")] = True
+            supports.setdefault(tuple(bool(c) for c in on), []).append(weight)
         path = []
         for support, weights in supports.items():
             phys = fit_support(sys_fit, gain, support=support)
             try:
                 model = model_from(phys, mass_of(rec, gain, phys[-1])[0], aux)
-                fr = restarted_free_runs(model, ident, n_fit, self.window_s, z0s, v0s)
+                fr = restarted_free_runs(model, ident, n_fit, window, z0s, v0s)
                 # a support whose potential opens an escape just past the stroke is never selected
                 escape = boundedness(model, ident, free_run=False)["escape_z"]
             except (WeakFormError, ValueError):

@@ -318,7 +318,8 @@ def refine_stage(
     ``held``: base fields that stay at their start value (the terms a sparse method did not select).
     """
     start = time.perf_counter()
-    free_mass = rec.input_name == "force" and rec.mass is None
+    # a force without a weighed mass: the input's gain; a free decay (no input) cannot weigh it (per unit mass)
+    free_mass = rec.input_name == "force" and rec.mass is None and bool(np.any(rec.u))
     info: dict[str, Any] = {"applied": False, "initial_model": model.to_dict()}
     try:
         r = refine(model, rec.segment(0, n_id), free_mass=free_mass, held=held)
