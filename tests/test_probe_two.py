@@ -64,6 +64,8 @@ def lab(tmp_path_factory):
     _csv(d / "short.csv", {"t": t[:1024], "base_acc": u[:1024], "z": z[:1024]})
     _csv(d / "fs_huge.csv", {"base_acc": u, "z": z}, {"fs": "1e300"})
     _csv(d / "fs_tiny.csv", {"base_acc": u, "z": z}, {"fs": "1e-300"})
+    # a structure's record (the device on a fixture): two responses and the masses in the header
+    _csv(d / "rec2.csv", {"t": t, "base_acc": u, "z1": 0.05 * z, "z2": z}, {"masses": "1.0,0.2"})
     (d / "twoz.csv").write_text("t,base_acc,z,y,z\n" + "".join(
         f"{a},{b},{c},0,{c}\n" for a, b, c in zip(t, u, z, strict=True)))
     return d
@@ -445,6 +447,9 @@ TEXTS = {  # the options whose values are text: good ones and bad ones
     "frf": [["targets.json"]],
     "start": ["model.json", "targets.json"],
     "model": ["model.json", "targets.json"],
+    # a structure's options: the element's place, the masses, the DOFs the file must hold
+    "element": ["1-2", "0-2", "2-1", "1-1", "0-3", "a-b", "12", "-1-2", "1.5-2", ""],
+    "masses": ["1.0,0.2", "1,-1", "a,b", "1e300,1", "1", "1,2,3", "nan,1", "0,0.2", ""],
 }
 BASES = {
     "rig": lambda lab, out, mode: ["rig", mode, "-o", out],
@@ -459,8 +464,14 @@ BASES = {
     "update": lambda lab, out, mode: ["update", lab / "targets.json", "-o", out],
     "reproduce": lambda lab, out, mode: ["reproduce", "-o", out],
     "report": lambda lab, out, mode: ["report", lab / "rec.csv", "-o", out],
+    # the same commands on a structure's record (N read from the file; --dofs, --element, --masses drawn)
+    "identify@2dof": lambda lab, out, mode: ["identify", mode, lab / "rec2.csv", "-o", out],
+    "frf@2dof": lambda lab, out, mode: ["frf", lab / "rec2.csv", "-o", out],
+    "posterior@2dof": lambda lab, out, mode: ["posterior", lab / "rec2.csv", "-o", out],
+    "discrepancy@2dof": lambda lab, out, mode: ["discrepancy", lab / "rec2.csv", "-o", out],
 }
-MODES = {"rig": ["random", "harmonic", "sweep", "campaign"], "identify": ["nsi", "sindy"]}
+MODES = {"rig": ["random", "harmonic", "sweep", "campaign"], "identify": ["nsi", "sindy"],
+         "identify@2dof": ["nsi", "sindy"]}  # fmt: skip
 
 
 def _values(action):
@@ -501,7 +512,9 @@ def invocations(draw, lab, out):
     if command == "nfrc":
         argv += ["--freq", draw(st.sampled_from(TEXTS["freq"]))]
         argv += ["--amplitude", draw(st.sampled_from(TEXTS["amplitude"]))]
-    actions = [a for a in OPTIONS[command] if a.dest not in ("forcing_hz",) or command == "map"]
+    actions = [a for a in OPTIONS[command.split("@")[0]] if a.dest not in ("forcing_hz",) or command == "map"]
+    if command.endswith("@2dof"):  # the structure's options drawn more often than the rest
+        actions += [a for a in actions if a.dest in ("dofs", "element", "masses")] * 3
     for action in draw(st.lists(st.sampled_from(actions), max_size=4, unique_by=lambda a: a.dest)):
         value = draw(_values(action))
         values = value if isinstance(value, list) else [value]

@@ -8,6 +8,7 @@ import argparse
 import importlib
 import inspect
 import json
+import math
 import sys
 from collections.abc import Sequence
 from pathlib import Path
@@ -125,17 +126,25 @@ def parse_effects(items: Sequence[str] | None) -> dict[str, Any]:
     return out
 
 
+MAX_AMPLITUDE_STEPS = 10_000
+"""Amplitudes (or frequencies) one stepped run may hold: a campaign of 10,000 steps is days of shaking."""
+
+
 def parse_amplitudes(text: str, option: str = "--amplitudes") -> list[float]:
     """``4:30:0.5`` (start:stop:step, stop included) or ``5,10,15`` (the values of ``option``)."""
     try:
         if ":" in text:
             a, b, s = (float(x) for x in text.split(":"))
-            if s <= 0 or b < a:
+            if not all(np.isfinite((a, b, s))) or s <= 0 or b < a:
                 raise ValueError
-            return list(np.round(np.arange(a, b + s / 2, s), 10))
-        return [float(x) for x in text.split(",")]
+        else:
+            return [float(x) for x in text.split(",")]
     except ValueError:
         raise InputError(f"{option} {text!r}: use start:stop:step (e.g. 4:30:0.5) or a list 5,10,15") from None
+    steps = math.floor((b - a) / s + 0.5) + 1
+    if steps > MAX_AMPLITUDE_STEPS:  # counted before numpy allocates them (1:1e9:1e-9: 1e18 steps)
+        raise InputError(f"{option} {text!r}: {steps:.3g} values; at most {MAX_AMPLITUDE_STEPS} in one run")
+    return list(np.round(np.arange(a, b + s / 2, s), 10))
 
 
 def write_json(path: str | Path, data: dict) -> None:
