@@ -2,7 +2,9 @@
 
 What the record is decides what is run: a broadband record (random, sine sweep, multisine) gets NSI around
 each well it visited, SINDy, the coefficient posterior, the discrepancy workflow and the FRF; a harmonic
-record (its input one spectral line, or ``forcing_hz`` given) gets the characterisation; several records or
+record (its input one spectral line, or ``forcing_hz`` given) gets the characterisation; a hammer's record
+(``analysis.record_kind``) the FRF, NSI, SINDy and the posterior; a free decay NSI, SINDy and the backbone
+(measured and the identified model's); several records or
 a folder (a stepped campaign) get the bifurcation map, with continuations drawn over it. ``only`` chooses
 among them. Every input is read and checked before any work (one ``InputError``); each analysis that then
 cannot be made is shown in its place with the reason, and the rest of the report is still written.
@@ -29,7 +31,12 @@ from .document import Report
 BROADBAND = ("nsi", "sindy", "posterior", "discrepancy", "frf")
 HARMONIC = ("characterize",)
 CAMPAIGN = ("map",)
-SECTIONS = (*BROADBAND, *HARMONIC, *CAMPAIGN)
+IMPACT = ("frf", "nsi", "sindy", "interval")
+"""A hammer's record: its FRF (hits, offsets, windows), the identifications with the force windowed, NSI's
+estimate's interval by batch means over blocks of the record (a hit or so each)."""
+DECAY = ("nsi", "sindy", "backbone")
+"""A free decay: the identifications (their decay forms), then the backbone measured and the identified model's."""
+SECTIONS = (*BROADBAND, *HARMONIC, *CAMPAIGN, "backbone", "interval")
 """Every analysis a report may hold (``only`` chooses among them)."""
 
 HARMONIC_SHARE = 0.9
@@ -105,8 +112,15 @@ def report_records(
     rec = load(paths[0], columns=columns, fs=fs, mass=mass, gravity=gravity, aux=aux)
     if forcing_hz is not None:
         check_forcing(rec, forcing_hz)
-    f_h = forcing_hz or harmonic_frequency(rec)
-    kind = HARMONIC if f_h else BROADBAND
+    from negstiff.inference.analysis.record_kind import check_decay, record_kind
+
+    what = record_kind(rec)
+    if what.kind == "decay":
+        check_decay(rec, "the report")  # a dead input on a record at rest: nothing to report, said before any work
+    f_h = None if what.kind in ("impact", "decay") and forcing_hz is None else forcing_hz or harmonic_frequency(rec)
+    if f_h is not None and forcing_hz is None and f_h < 2 / rec.duration:
+        f_h = None  # a 'line' under two cycles in the record is its drift or its offset, no forcing
+    kind = {"impact": IMPACT, "decay": DECAY}.get(what.kind, HARMONIC if f_h else BROADBAND)
     chosen = _only(only, kind)
     runs = _plan(rec, chosen, f_h, wells, seed, options)  # every estimator built and its parameters checked
     rep = Report(f"negstiff report: {rec.source}")
@@ -115,6 +129,8 @@ def report_records(
     except InputError:
         pass
     rep.add(rec)
+    if what.kind in ("impact", "decay"):
+        rep.add_text(f"Read as {'a hammer' if what.kind == 'impact' else 'a free decay'}'s record: {what.how}.")
     failed: list[str] = []
     for name, title, run in runs:
         start = time.perf_counter()
@@ -130,6 +146,7 @@ def report_records(
             rep.add_failure(title, f"{type(exc).__name__}: {' '.join(str(exc).split())} (a fault of negstiff's: "
                                    "please report it)")  # fmt: skip
             say(f"report: {title}: FAILED ({type(exc).__name__}: {exc})")
+            failed.append(f"{title}: {type(exc).__name__}: {' '.join(str(exc).split())}")
             continue
         rep.add(result)
         if name == "frf" and _crosses_wells(rec):
@@ -226,6 +243,7 @@ def _plan(rec, chosen, forcing_hz, wells, seed, options) -> list[tuple[str, str,
     from negstiff.inference.estimators.sindy import SINDy
 
     runs: list[tuple[str, str, Callable[[Any], Any]]] = []
+    fitted: dict[str, Any] = {}  # the identifications' fits, for the backbone's predicted curve
     for name in chosen:
         opts = options.get(name, {})
         if name in ("nsi", "sindy", "posterior", "discrepancy"):
@@ -239,17 +257,46 @@ def _plan(rec, chosen, forcing_hz, wells, seed, options) -> list[tuple[str, str,
             titles = {"nsi": "NSI around each well", "sindy": "SINDy", "posterior": "the coefficient posterior",
                       "discrepancy": "the discrepancy workflow"}  # fmt: skip
 
-            def run(r, est=est, duration=duration):
+            def run(r, est=est, duration=duration, name=name):
                 if duration is not None:
                     r = r.segment(0, min(r.n, int(round(duration * r.fs))))
-                return est.fit(r)
+                fitted[name] = est.fit(r)
+                return fitted[name]
 
             runs.append((name, titles[name], run))
         elif name == "frf":
             runs.append((name, "the frequency response", lambda r: frf(r, **options.get("frf", {}))))
+        elif name == "interval":
+            runs.append((name, "the identification's interval", lambda r: _interval(r, fitted)))
+        elif name == "backbone":
+            runs.append((name, "the backbone", lambda r: _backbone(r, fitted)))
         elif name == "characterize":
             runs.append((name, "the characterisation", lambda r: characterize(r, forcing_hz, wells or "auto")))
     return runs
+
+
+def _interval(rec, fitted: dict[str, Any]) -> dict[str, Any]:
+    """The first identification's own estimate with its batch-means standard error (``own_estimate``) over
+    three blocks of the record as the identification read it (a hammer's force windowed).
+    """
+    from negstiff.inference.analysis.record_kind import identification_record, record_kind
+
+    for name in ("nsi", "sindy"):
+        if name in fitted:
+            return fitted[name].own_estimate(identification_record(rec, record_kind(rec)), blocks=3)
+    raise InputError(f"{rec.source}: no identification was made, so it has no interval")
+
+
+def _backbone(rec, fitted: dict[str, Any]) -> dict[str, Any]:
+    """The decay's backbone, measured and predicted by the first identification that was made (NSI's, else
+    SINDy's).
+    """
+    from negstiff.inference.analysis.backbone import backbone
+
+    for name, label in (("nsi", "NSI"), ("sindy", "SINDy")):
+        if name in fitted:
+            return {**backbone(rec, model=fitted[name].model_), "model_name": f"{label}'s model"}
+    return backbone(rec)
 
 
 def _campaign_report(data, columns, fs, forcing_hz, wells, nfrc, chosen, say, gravity=None) -> Report:

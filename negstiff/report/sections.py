@@ -6,7 +6,8 @@
   parameters, the held-out validation, the refinement, the warnings;
 * a posterior (``Posterior``): each parameter's mean, sd and credible interval with its diagnostics;
 * the discrepancy workflow (``Discrepancy``): what it named, its size, where the baseline erred, the gap;
-* an FRF, a characterisation, a bifurcation map (the ``frf``, ``characterize`` and ``Campaign.map`` dicts).
+* an FRF, a characterisation, a bifurcation map, a decay's backbone (the ``frf``, ``characterize``,
+  ``Campaign.map`` and ``backbone`` dicts).
 
 Each returns a ``Section``: its blocks, its figures, and what the report's summary and its coefficient
 table take from it (each method's estimates beside the posterior's interval).
@@ -177,7 +178,9 @@ def identification_section(est, label: str = "") -> Section:
         ),  # fmt: skip
     )
     v = r.validation
-    held = v.get("restarted_rms_percent")
+    # a quiet tail (a decay's) scores no restarted window: the one free run's error then
+    keys = ("restarted_rms_percent", "median_window_percent", "rms_percent")
+    held = next((v[k] for k in keys if v.get(k) is not None), None)
     sec.heldout[col] = held
     t0, t1 = v.get("segment", [None, None])
     sec.text(
@@ -223,6 +226,41 @@ def posterior_section(post, label: str = "") -> Section:
             + ("." if res["converged"] else "; its chains did not converge (warnings).")
         )
     sec.json = res
+    return sec
+
+
+def interval_section(own: dict[str, Any], label: str = "", prob: float = 0.95) -> Section:
+    """A method's own estimate with its batch-means interval (``Identifier.own_estimate``): each block of the
+    identification part (a hammer's record: about one hit each) identified alone; the interval is Student's t
+    over the blocks (``blocks - 1`` degrees of freedom) times the standard error they give.
+    """
+    from scipy import stats
+
+    name = {"nsi": "NSI", "sindy": "SINDy"}.get(own["method"], own["method"])
+    blocks = len(own["blocks"])
+    t = float(stats.t.ppf(0.5 + prob / 2, blocks - 1))
+    sec = Section("interval", label, _with_label(f"{name}: its estimate's interval ({blocks} blocks)", label))
+    rows = []
+    for well, m in own["modal"].items():
+        if m.get("f_hz") is None:
+            continue
+        for key, unit, scale in (("f_hz", "Hz", 1.0), ("zeta", "%", 100.0)):
+            se = m.get(f"{key}_se")
+            half = None if se is None else t * se * scale
+            rows.append([f"{key} ({well}) [{unit}]", scale * m[key], half])
+    for key in COEFFICIENTS:
+        mean, se = own["model"].get(key), own["model_se"].get(key)
+        rows.append([key, mean, None if se is None else t * se])
+    sec.table(["quantity", "estimate", f"+- ({100 * prob:g} %)"], rows)
+    sec.text(f"The identification part cut into {blocks} blocks, each identified alone by {name}'s own step (no "
+             f"refinement); {100 * prob:g} % interval: Student's t ({blocks - 1} degrees of freedom) times the blocks' "
+             "standard error (their scatter over sqrt(blocks)). The estimate is the whole record's.")  # fmt: skip
+    # not the coefficient table's ``interval`` (a posterior's credible interval): a batch-means interval of its own
+    mean, se = own["model"].get("k3"), own["model_se"].get("k3")
+    if mean is not None and se is not None:
+        sec.summary.append(f"{name}'s k3 = {fmt(mean)} N/m^3 ({100 * prob:g} % interval over {blocks} blocks: "
+                           f"{' to '.join(fmt_interval(mean - t * se, mean + t * se))}).")  # fmt: skip
+    sec.json = dict(own)
     return sec
 
 
@@ -275,6 +313,48 @@ def frf_section(res: dict[str, Any], label: str = "", title: str = "") -> Sectio
     sec.summary.append(f"The FRF's dominant peak: {top} ({len(res['peaks'])} peak(s) in {res['band'][0]:.3g}-"
                        f"{res['band'][1]:.3g} Hz).")  # fmt: skip
     sec.json = {k: v for k, v in res.items() if k != "_curves"}
+    return sec
+
+
+def backbone_section(res: dict[str, Any], label: str = "", model_name: str = "") -> Section:
+    """A ``backbone`` result (``negstiff.inference.analysis.backbone``): the measured curves and, where the
+    result holds it, the identified model's (``model_name`` says which identification's).
+    """
+    from .figures import backbone_figure
+
+    sec = Section("backbone", label, _with_label("Backbone of the free decay (frequency and damping against "
+                                                 "amplitude)", label))  # fmt: skip
+    sec.figure(f"backbone_{_slug(label or 'record')}", backbone_figure(res, "backbone"),
+               "Frequency and damping ratio against amplitude: measured (Hilbert, peaks)"
+               + (f" and {model_name or 'the model'}'s free decay from the record's state" if res.get("predicted")
+                  else ""))  # fmt: skip
+    lo, hi = res["amplitude_range_m"]
+    lin = res["linear"]
+    d = res["decay"]
+    sec.text(f"The decay from {fmt(d.get('start_s'), 4)} s ({d.get('found', '')}); amplitudes {fmt(1e3 * lo, 3)} to "
+             f"{fmt(1e3 * hi, 3)} mm. At its smallest amplitudes: {fmt(lin['f_hz'], 5)} Hz, zeta "
+             f"{fmt(100 * lin['zeta'], 3)} %. {res.get('estimator', '')}.")  # fmt: skip
+    hil = res["measured"]["hilbert"]
+    a = np.asarray(hil["amplitude_m"])
+    rows = []
+    if a.size:
+        for q in (0.1, 0.5, 0.9):
+            k = int(np.argmin(np.abs(a - np.quantile(a, q))))
+            rows.append([1e3 * a[k], hil["f_hz"][k], 100 * hil["zeta"][k]])
+    sec.table(["amplitude [mm]", "f [Hz] (Hilbert)", "zeta [%]"], rows)
+    pred = res.get("predicted")
+    if pred:
+        diff = fmt(pred.get("difference_percent"), 3)
+        sec.text(f"{model_name or 'The model'}'s backbone differs from the measured one by {diff} % at most over the "
+                 "measured range (frequency, Hilbert).")  # fmt: skip
+    for w in res.get("warnings", []):
+        sec.warning(w)
+    sec.summary.append(
+        f"The decay's backbone: {fmt(lin['f_hz'], 5)} Hz at small amplitude, over {fmt(1e3 * lo, 3)}-"
+        f"{fmt(1e3 * hi, 3)} mm"
+        + (f"; {model_name or 'the model'}'s within {fmt(pred.get('difference_percent'), 3)} %." if pred else ".")
+    )
+    sec.json = dict(res)
     return sec
 
 
@@ -450,6 +530,10 @@ def section_for(result, label: str = "") -> Section:
         return posterior_section(result, label)
     if isinstance(result, Discrepancy):
         return discrepancy_section(result, label)
+    if isinstance(result, dict) and "standard_error" in result and "blocks" in result:
+        return interval_section(result, label)
+    if isinstance(result, dict) and "measured" in result and "decay" in result:
+        return backbone_section(result, label, result.get("model_name", ""))
     if isinstance(result, dict) and "peaks" in result:
         return frf_section(result, label)
     if isinstance(result, dict) and "regime" in result and "period" in result:
