@@ -48,6 +48,7 @@ from negstiff.inference.steps.weak import (
     mass_of,
     model_from,
     term_fields,
+    test_function,
 )
 from negstiff.inference.steps.weak import terms as library_terms
 from negstiff.models import Model, effects, simulate_batch
@@ -112,6 +113,13 @@ def _stop_of(model: Model, default: float | None) -> float | None:
     pos = _positional()
     value = model.extra.get(pos.name) if pos is not None else None
     return float(value["z"]) if value is not None else default
+
+
+def _size_of(model: Model, effect: str) -> Any:
+    """An effect's value in ``model`` (a base field's term read from its field), None where it is absent."""
+    e = effects.get(effect)
+    val = model.to_dict()[e.folds_into] if e.folds_into else model.extra.get(effect)
+    return dict(val) if hasattr(val, "keys") else val
 
 
 def _held(terms) -> tuple[str, ...]:
@@ -342,18 +350,24 @@ class Discrepancy(StructureResults, Estimator):
                 cand.heldout_percent = math.inf
         return cand
 
-    def _fit_stop(self, rec: Measurement, terms: tuple[str, ...], aux: tuple[str, ...] = ()) -> float:
-        """The end stop's position (a nonlinear parameter) by least squares on the fitting part: a grid
-        over the outer 0.5-10 % of the stroke on either side, refined by a bounded scalar search.
+    def _fit_stop(self, rec: Measurement, terms: tuple[str, ...], aux: tuple[str, ...] = (), upto: int | None = None,
+                  keep: np.ndarray | None = None) -> float:  # fmt: skip
+        """The end stop's position (a nonlinear parameter) by least squares on the fitting part (or the weak rows
+        ``keep`` of [0, ``upto``)): a grid over the outer 0.5-10 % of the stroke on either side, refined by a
+        bounded scalar search.
         """
         from scipy import optimize
 
+        upto = self.n_fit_ if upto is None else upto
+
         def ss(zs: float) -> float:
-            W, y = self._design(rec, 0, self.n_fit_, zs, aux)
+            W, y = self._design(rec, 0, upto, zs, aux)
+            if keep is not None:
+                W, y = W[keep], y[keep]
             coef = self._fit(W, y, terms, True, len(aux))
             return float(np.sum((y - W @ coef) ** 2)) if coef[-1] < 0 else math.inf  # a stop pushes back
 
-        z = self._zs[: self.n_fit_]
+        z = self._zs[:upto]
         qs = (0.5, 1, 2, 3, 5, 7, 10)
         grid = [float(np.percentile(z, q)) for q in qs] + [float(np.percentile(z, 100 - q)) for q in qs]
         vals = [ss(g) for g in grid]
@@ -459,6 +473,7 @@ class Discrepancy(StructureResults, Estimator):
         stop: float | None = None
         added: list[dict[str, Any]] = []
         self.iterations_ = []
+        self._folds_evidence: dict[str, dict[str, Any]] = {}
         base_model = self._refit_model(rec, terms, stop)
         self.baseline_model_ = base_model
         self.baseline_refinement_ = None
@@ -499,7 +514,8 @@ class Discrepancy(StructureResults, Estimator):
                 break
             trial = self._trial(rec, best)
             iteration["kept"], iteration["verdict"], iteration["evidence"] = self._helps(
-                rec, current["gap"], trial["gap"], best.effect, current["model"], trial["model"])
+                rec, current["gap"], trial["gap"], best.effect, current["model"], trial["model"],
+                Candidate("before", terms, stop, aux), best)
             iteration["gap_percent"] = {"before": current["gap"].get("median_window_percent"),
                                         "after": trial["gap"].get("median_window_percent")}  # fmt: skip
             if not iteration["kept"]:
@@ -519,8 +535,13 @@ class Discrepancy(StructureResults, Estimator):
         self.gap_regime_ = {}
         for e in self.effects_:
             reg = self._regime(rec, self.gap_before_, self.gap_after_, e, base_model, self.model_)
+            judged = "held-out tail"
+            if reg.get("windows", 0) < 3 and self._folds_evidence.get(e, {}).get("acting") is not None:
+                # the tail barely reaches it: the cross-validated windows' gap (fits that never saw them)
+                reg, judged = self._folds_evidence[e], "cross-validated blocks of the record"
             self.gap_regime_[e] = {"before": reg.get("gap_before_percent"), "after": reg.get("gap_after_percent"),
-                                   "windows": reg.get("windows", 0), "window_s": reg.get("window_s")}  # fmt: skip
+                                   "windows": reg.get("windows", 0), "window_s": reg.get("window_s"),
+                                   "judged_on": judged}  # fmt: skip
         self.locate_after_ = self.locate(rec, terms, stop, aux)
         self.bounded_ = boundedness(self.model_, rec.segment(0, self.n_id_))
         self.unnamed_ = self._unnamed(rec) if self.unnamed else None
@@ -543,7 +564,8 @@ class Discrepancy(StructureResults, Estimator):
         return {"model": model, "initial": initial, "refinement": refinement, "gap": self._gap(rec, model)}
 
     def _helps(self, rec: Measurement, before: dict[str, Any], after: dict[str, Any], effect: str,
-               model_before: Model, model_after: Model) -> tuple[bool, str, dict[str, Any]]:  # fmt: skip
+               model_before: Model, model_after: Model, spec_before: Candidate | None = None,
+               best: Candidate | None = None) -> tuple[bool, str, dict[str, Any]]:  # fmt: skip
         """Whether the effect is kept, and why.
 
         Judged on the held-out tail twice, the same restarted free runs before and after (paired), each
@@ -555,19 +577,31 @@ class Discrepancy(StructureResults, Estimator):
         * **where it acts** (``_regime``): windows starting just before each episode where the effect's force
           is large, scored on their own, beside the tail's windows where it never acts (the rest).
 
+        * **where it acts, cross-validated** (``_regime_folds``), when the tail holds fewer than three such
+          windows (an effect the tail barely reaches): the windows where it acts anywhere in the record, in
+          blocks, each predicted by fits made without its block's data.
+
         Kept when the model with it predicts the windows where it acts better by more than one standard error
-        of their paired differences and does not predict the rest worse beyond theirs; with fewer than three
-        such windows (an effect the tail barely reaches) the pooled rule decides. An effect the equation
-        error named that does not help the prediction is said, and left out.
+        of their paired differences and does not predict the rest of the tail worse beyond theirs; with fewer
+        than three such windows in the tail, the cross-validated windows decide, and with fewer than three of
+        those too, the pooled rule. An effect the equation error named that does not help the prediction is
+        said, and left out.
         """
         pooled = self._paired(rec, before.get("window_ms"), after.get("window_ms"))
         regime = self._regime(rec, before, after, effect, model_before, model_after)
-        evidence = {"pooled": pooled, "regime": regime}
+        evidence: dict[str, Any] = {"pooled": pooled, "regime": regime}
         change = "{:.3g} % (one standard error: {:.3g} to {:.3g} %, geometric mean)"
-        if regime.get("windows", 0) >= 3:
-            acts, rest = regime["acting"], regime.get("rest")
+        judged, where = regime, "held-out windows"
+        if regime.get("windows", 0) < 3 and spec_before is not None and best is not None:
+            evidence["folds"] = self._regime_folds(rec, effect, spec_before, best, model_after)
+            self._folds_evidence[effect] = evidence["folds"]
+            if evidence["folds"].get("windows", 0) >= 3 and evidence["folds"].get("acting") is not None:
+                judged = {**evidence["folds"], "rest": regime.get("rest")}
+                where = f"windows of the record (in {len(judged['folds'])} blocks, each predicted by fits without it)"
+        if judged.get("windows", 0) >= 3 and judged.get("acting") is not None:
+            acts, rest = judged["acting"], judged.get("rest")
             worse = rest is not None and rest["gain_percent"] < 0 and rest["significant"]
-            what = (f"the {regime['windows']} held-out windows where it acts: rms error fell "
+            what = (f"the {judged['windows']} {where} where it acts: rms error fell "
                     + change.format(acts["gain_percent"], *acts["gain_interval_percent"]))  # fmt: skip
             if acts["significant"] and acts["gain_percent"] > 0 and not worse:
                 return True, f"{effect}: kept: {what}; the rest not worse", evidence
@@ -581,13 +615,14 @@ class Discrepancy(StructureResults, Estimator):
         return False, (f"{effect}: named by the equation error but not kept: with it the held-out windows' rms error "
                        f"fell {txt}, not beyond its uncertainty"), evidence  # fmt: skip
 
-    def _paired(self, rec: Measurement, a, b) -> dict[str, Any] | None:
+    def _paired(self, rec: Measurement, a, b, worst: float | None = None) -> dict[str, Any] | None:
         """Paired comparison of two models' per-window mean-square errors (the same windows) by their logs:
         the rms error's fall in % (geometric mean), its standard error, whether it exceeds one standard error.
         """
         if a is None or b is None or len(a) != len(b) or len(a) < 2:
             return None
-        worst = float(np.mean(rec.displacement[self.n_id_ :] ** 2))
+        if worst is None:  # a diverged run counts as an error the size of the signal (the tail's, by default)
+            worst = float(np.mean(rec.displacement[self.n_id_ :] ** 2))
         a, b = (np.log(np.maximum(np.where(np.isfinite(x), x, worst), 1e-300)) for x in (a, b))
         gain = compare(a, b, 0.0, a)
         return {
@@ -619,18 +654,9 @@ class Discrepancy(StructureResults, Estimator):
         force = self._effect_force(model_after, effect, z[self.n_id_ :], v[self.n_id_ :])
         if force is None:
             return {"windows": 0, "reason": "a measured channel's term acts wherever the channel does"}
-        nz = np.abs(force) > 0
-        if not nz.any():
+        if not np.any(np.abs(force) > 0):
             return {"windows": 0, "reason": "the effect does not act in the held-out tail"}
-        acting = np.abs(force) > 0.25 * np.sqrt(np.mean(force[nz] ** 2))
-        length = max(8, int(round(self.window_s * rec.fs / 2)))
-        lead = length // 4
-        starts: list[int] = []
-        edges = np.flatnonzero(np.diff(np.concatenate([[0], acting.astype(np.int8)])) == 1)  # episodes' first samples
-        for e in edges:
-            s0 = self.n_id_ + max(0, int(e) - lead)
-            if s0 + length <= rec.n and (not starts or s0 >= starts[-1] + length):
-                starts.append(s0)
+        acting, starts, length = self._episodes(rec, force, self.n_id_)
         out: dict[str, Any] = {"window_s": length / rec.fs, "windows": len(starts),
                                "acting_share_of_tail": float(np.mean(acting))}  # fmt: skip
         if len(starts) < 2:
@@ -652,6 +678,85 @@ class Discrepancy(StructureResults, Estimator):
             clear = np.array([not acting[k * w : (k + 1) * w].any() for k in range(len(a))])
             if clear.sum() >= 2:
                 out["rest"] = self._paired(rec, np.asarray(a)[clear], np.asarray(b)[clear])
+        return out
+
+    def _episodes(self, rec: Measurement, force: np.ndarray, lo: int) -> tuple[np.ndarray, list[int], int]:
+        """Where a force acts (above a quarter of its rms over the samples where it acts at all) and the starts
+        of windows of ``window_s / 2`` restarted a quarter window before each episode (no two overlapping);
+        ``force`` is given from sample ``lo`` on. Returns (acting mask, starts, window length in samples).
+        """
+        nz = np.abs(force) > 0
+        acting = np.abs(force) > 0.25 * np.sqrt(np.mean(force[nz] ** 2)) if nz.any() else nz
+        length = max(8, int(round(self.window_s * rec.fs / 2)))
+        lead = length // 4
+        starts: list[int] = []
+        edges = np.flatnonzero(np.diff(np.concatenate([[0], acting.astype(np.int8)])) == 1)  # episodes' first samples
+        for e in edges:
+            s0 = lo + max(0, int(e) - lead)
+            if s0 + length <= rec.n and (not starts or s0 >= starts[-1] + length):
+                starts.append(s0)
+        return acting, starts, length
+
+    def _regime_folds(self, rec: Measurement, effect: str, before: Candidate, best: Candidate,
+                      model_after: Model, folds: int = 5) -> dict[str, Any]:  # fmt: skip
+        """The windows where ``effect`` acts anywhere in the record, judged by blocked cross-validation: the
+        episodes where its force (``model_after``'s, at the measured states) is large, their restarted windows
+        split into ``folds`` contiguous blocks in time; for each block the model without the effect (``before``'s
+        terms) and with it (``best``'s, an end stop's onset searched again) are fitted by weak least squares on
+        the identification part without the block's data (the weak rows whose test function touches one of its
+        windows or any sample between them where the effect acts) and run from the block's windows. Every
+        window is thus predicted by fits that never saw it: the honest judgement where the held-out tail barely
+        reaches the effect. Returns the windows, the gaps before and after (the median window's rms error, % of
+        those windows' rms z), the paired comparison ``acting`` and each fold's fitted size.
+        """
+        force = self._effect_force(model_after, effect, self._z0, self._v0)
+        if force is None or not np.any(np.abs(force) > 0):
+            return {"windows": 0}
+        acting, starts, length = self._episodes(rec, force, 0)
+        out: dict[str, Any] = {"windows": len(starts), "window_s": length / rec.fs,
+                               "acting_share_of_record": float(np.mean(acting))}  # fmt: skip
+        if len(starts) < 3:
+            return out
+        form = self._form
+        n_rows = self._design(rec, 0, self.n_id_, None, before.aux)[0].shape[0]
+        support = test_function(form.half, rec.dt)[0].size
+        row_lo = np.arange(n_rows) * form.stride  # row k's test function spans [row_lo, row_lo + support)
+        groups = np.array_split(np.array(starts), min(folds, len(starts)))
+        ms_b, ms_a, sizes = [], [], []
+        pos = _positional()
+        for idx in groups:
+            held = np.zeros(rec.n + 1, np.int64)  # the block's samples: its windows and its contacts between them
+            for k in idx:
+                held[k] += 1
+                held[k + length] -= 1
+            mask = np.cumsum(held)[: rec.n] > 0
+            span = slice(int(idx[0]), int(idx[-1]) + length)
+            mask[span] |= acting[span]
+            cum = np.concatenate([[0], np.cumsum(mask[: self.n_id_])])
+            hi = np.minimum(row_lo + support, self.n_id_)
+            keep = (cum[hi] - cum[np.minimum(row_lo, self.n_id_)]) == 0
+            models = []
+            for cand in (before, best):
+                stop = cand.stop
+                if pos is not None and cand.effect == pos.name:
+                    stop = self._fit_stop(rec, cand.terms, cand.aux, upto=self.n_id_, keep=keep)
+                W, y = self._design(rec, 0, self.n_id_, stop, cand.aux)
+                coef = self._fit(W[keep], y[keep], cand.terms, stop is not None, len(cand.aux))
+                models.append(self._model(coef, rec, stop, cand.aux))
+            ms_b.append(self._runs_at(models[0], rec, idx, length))
+            ms_a.append(self._runs_at(models[1], rec, idx, length))
+            folds_size = _size_of(models[1], effect)
+            sizes.append({"from_s": float(idx[0] / rec.fs), "to_s": float((idx[-1] + length) / rec.fs),
+                          "windows": int(len(idx)), "size": folds_size})  # fmt: skip
+        b, a = np.concatenate(ms_b), np.concatenate(ms_a)
+        meas = np.stack([rec.displacement[k : k + length] for k in starts])
+        ref = float(np.sqrt(np.mean(meas**2)))
+        worst = float(np.mean(meas**2))
+        out["gap_before_percent"], out["gap_after_percent"] = (
+            float(100 * np.sqrt(np.median(np.where(np.isfinite(m), m, worst))) / ref) for m in (b, a)
+        )
+        out["acting"] = self._paired(rec, b, a, worst)
+        out["folds"] = sizes
         return out
 
     def _runs_at(self, model: Model, rec: Measurement, starts: np.ndarray, length: int) -> np.ndarray:
