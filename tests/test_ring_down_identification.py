@@ -132,3 +132,11 @@ def test_a_constant_input_without_a_ring_down_is_refused():
     for method in (NSI, SINDy):
         with pytest.raises(MeasurementError, match="the input force is constant .* does not ring down"):
             method().fit(from_arrays(np.zeros(6000), z, FS, input_name="force", mass=MASS, source="quiet.csv"))
+
+
+def test_sindy_refuses_a_decay_that_has_rung_down_before_its_scoring_part():
+    # at 1.5 % the Duffing's decay is at its noise (5 um) by 60-80 % of a 10 s record, where SINDy scores its
+    # candidate supports: one line saying so before the fit, not a model without its cubic
+    rec = _decay(DUFFING, 0.008, seed=1, duration=10.0)
+    with pytest.raises(MeasurementError, match="cannot score its candidate models on this ring-down"):
+        SINDy().check(rec)

@@ -241,6 +241,13 @@ class SINDy(StructureResults, Identifier):
         window = self.scoring_window(rec)
         blocks, need_s = selection_blocks(rec, self.validation_fraction, self.selection_fraction, window)
         if blocks < 2:
+            if record_kind(rec).kind in ("impact", "decay"):  # a longer record of the same ring-down would not help
+                raise SINDyError(
+                    f"{rec.source}: SINDy cannot score its candidate models on this ring-down: the part that scores "
+                    f"them ({100 * self.selection_fraction:.0f} % of the record, before the held-out tail) holds "
+                    f"under two blocks of {window:.3g} s of test functions; a response decayed into its noise there "
+                    "widens them (cut the record where it meets the noise, or hit again before it does)"
+                )
             raise SINDyError(
                 f"{rec.source}: too short for SINDy: {rec.duration:.3g} s, at least about {need_s:.3g} s are "
                 f"needed ({100 * self.selection_fraction:.0f} % of the record scores the candidate models in "
