@@ -35,7 +35,7 @@ from negstiff.errors import MeasurementError
 from negstiff.inference.record.measurement import Measurement
 from negstiff.inference.steps.refine import parameter_names, parameter_scales, values_of, with_values
 from negstiff.inference.steps.shooting import parameter_covariance, shooting_least_squares
-from negstiff.inference.steps.validation import divergence_limits, record_substeps, staged_windows
+from negstiff.inference.steps.validation import divergence_limits, record_substeps, restart_windows, staged_windows
 from negstiff.models import Model
 from negstiff.models.simulator import simulate_batch, stage_input
 
@@ -170,18 +170,16 @@ class Hybrid:
         return oz[:, 0]
 
     def restarted_gap(self, rec: Measurement, start: int, window_s: float, zs, vs) -> dict[str, float]:
-        """The median restarted window's rms error over [start, N) (``validation.restarted_free_runs``'
-        windows and measured start states), % of rms(z), for the hybrid and for its physics alone (the
-        same windows with the term's weights at zero).
+        """The median restarted window's rms error over [start, N) (``validation.restart_windows``: the single
+        DOF's validation windows, and the measured start states), % of rms(z), for the hybrid and for its physics
+        alone (the same windows with the term's weights at zero).
         """
-        w = int(round(window_s * rec.fs))
-        n_win = (rec.n - start) // w
-        if n_win < 1:
+        windows = restart_windows(rec.n, rec.fs, window_s, start=start)
+        if len(windows) < 1:
             return {}
-        starts = start + w * np.arange(n_win)
-        U, sub = staged_windows(self.model, rec, starts, w)
-        meas = np.stack([rec.displacement[k : k + w] for k in starts])
-        x0 = np.column_stack([zs[starts], vs[starts]])
+        U, sub = staged_windows(self.model, rec, windows.starts, windows.length)
+        meas = windows.measured(rec.displacement)
+        x0 = windows.start_states(zs, vs)
         scale = float(np.sqrt(np.mean(rec.displacement[start:] ** 2)))
         limits = divergence_limits(rec.displacement, vs)
         out = {}

@@ -154,6 +154,81 @@ def simulate_measured(system, rec: Measurement, z0: float | None = None, v0: flo
     return simulate_record(system, rec, (z0, v0), substeps=substeps, **limits)
 
 
+@dataclasses.dataclass(frozen=True)
+class RestartWindows:
+    """Windows of a record each restarted from the record's measured state at its first sample: the one
+    cutting of every restarted free run (``restart_windows``).
+
+    Attributes
+    ----------
+    starts : numpy.ndarray
+        (W,) each window's first sample.
+    length : int
+        Samples each window spans (its start included).
+    step : int
+        Samples from one window's start to the next's (before any pick of ``max_windows``).
+    """
+
+    starts: np.ndarray
+    length: int
+    step: int
+
+    def __len__(self) -> int:
+        return int(self.starts.size)
+
+    @property
+    def index(self) -> np.ndarray:
+        """(W, length) the samples of every window."""
+        return self.starts[:, None] + np.arange(self.length)[None, :]
+
+    def measured(self, x: np.ndarray) -> np.ndarray:
+        """A signal's samples in every window: (W, length) of a 1-D ``x``, (W, N, length) of (N, T) channels."""
+        x = np.asarray(x)
+        return x[self.index] if x.ndim == 1 else np.transpose(x[:, self.index], (1, 0, 2))
+
+    def start_states(self, z: np.ndarray, v: np.ndarray) -> np.ndarray:
+        """The measured state at every window's start, rows [z, z'] (1-D ``z``, ``v``) or [z_1..z_N, z'_1..z'_N]
+        ((N, T) channels).
+        """
+        z, v = np.asarray(z), np.asarray(v)
+        if z.ndim == 1:
+            return np.column_stack([z[self.starts], v[self.starts]])
+        return np.hstack([z[:, self.starts].T, v[:, self.starts].T])
+
+
+def restart_windows(n: int, fs: float, window_s: float, *, start: int = 0, extra: int = 0, min_step: int = 1,
+                    max_windows: int | None = None) -> RestartWindows:  # fmt: skip
+    """The restarted windows over samples [``start``, ``n``) of a record sampled at ``fs``: one every
+    ``window_s`` seconds (``round(window_s fs)`` samples, at least ``min_step``), each spanning that step and
+    ``extra`` more samples (a structure's windows end on the next one's first sample: ``extra=1``), as many as
+    fit whole; at most ``max_windows``, then picked evenly over the span (every regime the record visits seen).
+
+    The callers' settings are theirs: a single DOF's held-out validation (``restarted_free_runs``: 2 s windows
+    from the split), a structure's (``restarted_structure_runs``: 0.25 s, at least 8 samples, ``extra=1``),
+    the hybrid's gap (``hybrid.Hybrid.restarted_gap``, as the single DOF's) and the posterior's likelihood
+    windows (``posterior.windows.Windows.cut``: 0.125 s over the whole record, ``max_windows``).
+    """
+    step = max(int(min_step), int(round(window_s * fs)))
+    length = step + int(extra)
+    count = (n - start - length) // step + 1 if n - start >= length else 0
+    picks = np.arange(count)
+    if max_windows is not None and count > max_windows:
+        picks = np.unique(np.round(np.linspace(0, count - 1, max_windows)).astype(int))
+    return RestartWindows(start + step * picks, length, step)
+
+
+def simulate_windows(model: Model, rec: Measurement, windows: RestartWindows, zs: np.ndarray, v: np.ndarray,
+                     **limits: Unpack[Limits]) -> SimulationResult:  # fmt: skip
+    """``model``'s free runs over ``windows`` of ``rec``, each restarted from the measured state (``zs``, ``v``)
+    at its start, in one batched simulation: the input at every stage time (``staged_windows``).
+    """
+    n_win = len(windows)
+    U, sub = staged_windows(model, rec, windows.starts, windows.length)
+    P = np.repeat(model.kernel_params()[:, None], n_win, axis=1)
+    return simulate_batch(P, model.kind, U, rec.dt, windows.start_states(zs, v), input_kind=rec.input_name,
+                          input_index=np.arange(n_win), substeps=sub, staged=True, **limits)  # fmt: skip
+
+
 def staged_windows(system, rec: Measurement, starts: np.ndarray, length: int) -> tuple[np.ndarray, int]:
     """The input of windows [s, s + length) of ``rec`` at every stage time (rows for
     ``simulate_batch(..., staged=True)``) and the substeps they are staged for. The span the windows
@@ -225,27 +300,15 @@ def restarted_free_runs(
     model: Model, rec: Measurement, start: int, window_s: float, zs: np.ndarray, v: np.ndarray
 ) -> dict[str, Any]:
     """Free runs of ``window_s`` seconds over [start, N), each restarted from the measured state
-    (``zs``, ``v``: the record's smoothed displacement and velocity).
+    (``zs``, ``v``: the record's smoothed displacement and velocity): ``restart_windows``' windows,
+    ``simulate_windows``' runs.
     """
-    w = int(round(window_s * rec.fs))
-    n_win = (rec.n - start) // w
+    windows = restart_windows(rec.n, rec.fs, window_s, start=start)
+    n_win = len(windows)
     if n_win < 1:
         return {}
-    starts = start + w * np.arange(n_win)
-    U, sub = staged_windows(model, rec, starts, w)
-    P = np.repeat(model.kernel_params()[:, None], n_win, axis=1)
-    res = simulate_batch(
-        P,
-        model.kind,
-        U,
-        rec.dt,
-        np.column_stack([zs[starts], v[starts]]),
-        input_kind=rec.input_name,
-        input_index=np.arange(n_win),
-        substeps=sub,
-        staged=True,
-    )
-    meas = np.stack([rec.displacement[k : k + w] for k in starts])
+    res = simulate_windows(model, rec, windows, zs, v)
+    meas = windows.measured(rec.displacement)
     ok = ~res.diverged
     window_ms = np.full(n_win, np.nan)  # per-window mean square error (nan: diverged), an array: not in JSON
     window_ms[ok] = np.mean((res.z[ok] - meas[ok]) ** 2, axis=1)
@@ -282,16 +345,16 @@ def restarted_structure_runs(structure: Structure, rec: Measurement, start: int,
     z_all = rec.channels
     o = np.zeros(rec.n_dof) if offsets is None else np.asarray(offsets, float)
     zs, v, _ = rec.channel_states(structure.place)
-    L = max(8, int(round(window_s * rec.fs)))
-    starts = np.arange(start, rec.n - L, L)
+    # windows of L + 1 samples, each ending on the next one's start (the structure's input is linear between them)
+    windows = restart_windows(rec.n, rec.fs, window_s, start=start, extra=1, min_step=8)
+    starts = windows.starts
     if not starts.size:
         raise MeasurementError(f"{rec.source}: the held-out part is shorter than one {window_s} s window")
-    idx = starts[:, None] + np.arange(L + 1)[None, :]
-    u = rec.u[idx]
-    x0 = np.hstack([(zs[:, starts] - o[:, None]).T, v[:, starts].T])
+    u = windows.measured(rec.u)
+    x0 = windows.start_states(zs - o[:, None], v)
     res = simulate_structures(structure, u, rec.dt, x0, input_kind=rec.input_name, force_dof=rec.force_dof,
                               input_index=np.arange(starts.size))  # fmt: skip
-    meas = np.transpose(z_all[:, idx], (1, 0, 2))  # (W, N, L+1)
+    meas = windows.measured(z_all)  # (W, N, L+1)
     err = res.z + o[None, :, None] - meas
     ok = ~res.diverged
     centred = z_all[:, start:] - z_all[:, start:].mean(axis=1, keepdims=True)
@@ -310,17 +373,11 @@ def restarted_structure_runs(structure: Structure, rec: Measurement, start: int,
 def residual_psd(rec: Measurement, model: Model, start: int, window_s: float = 2.0):
     """PSD of the restarted free runs' residual over [start, end): (f, P)."""
     zs, v, _, _ = rec.states("state")
-    w = int(round(window_s * rec.fs))
-    starts = start + w * np.arange((rec.n - start) // w)
-    U, sub = staged_windows(model, rec, starts, w)
-    P = np.repeat(model.kernel_params()[:, None], starts.size, axis=1)
-    res = simulate_batch(
-        P, model.kind, U, rec.dt, np.column_stack([zs[starts], v[starts]]),
-        input_kind=rec.input_name, input_index=np.arange(starts.size), substeps=sub, staged=True,
-    )  # fmt: skip
-    meas = np.stack([rec.displacement[k : k + w] for k in starts])
+    windows = restart_windows(rec.n, rec.fs, window_s, start=start)
+    res = simulate_windows(model, rec, windows, zs, v)
+    meas = windows.measured(rec.displacement)
     ok = ~res.diverged
-    f, p = signal.welch(meas[ok] - res.z[ok], rec.fs, nperseg=min(w, 512), axis=1)
+    f, p = signal.welch(meas[ok] - res.z[ok], rec.fs, nperseg=min(windows.length, 512), axis=1)
     return f, p.mean(axis=0)
 
 

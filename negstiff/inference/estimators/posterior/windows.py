@@ -11,6 +11,7 @@ from scipy.optimize import minimize_scalar
 
 from negstiff.errors import MeasurementError
 from negstiff.inference.record.measurement import Measurement
+from negstiff.inference.steps.validation import restart_windows
 from negstiff.models import simulate_batch
 
 COEFFICIENT_NAMES = ("k1", "k2", "k3", "c", "c_nl", "sigma")
@@ -86,14 +87,12 @@ class Windows:
     @classmethod
     def cut(cls, rec: Measurement, window_s: float, max_windows: int | None = None, oversample: int = 1) -> Windows:
         """The record's windows of ``window_s`` seconds (at most ``max_windows``, evenly picked)."""
-        L, n_win = cls.check(rec, window_s)
-        picks = np.arange(n_win)
-        if max_windows is not None and n_win > max_windows:
-            # evenly spread over the whole record (not its first part): every regime it visits is seen
-            picks = np.unique(np.round(np.linspace(0, n_win - 1, max_windows)).astype(int))
+        L, _ = cls.check(rec, window_s)
+        # the record's restarted windows (``validation.restart_windows``), at most ``max_windows`` evenly spread over
+        # the whole record (not its first part): every regime it visits is seen
+        windows = restart_windows(rec.n, rec.fs, window_s, max_windows=max_windows)
         zs, v, _, _ = rec.states("state")
-        starts = L * picks
-        idx = starts[:, None] + np.arange(L)[None, :]
+        starts, idx = windows.starts, windows.index
         q = int(oversample)
         if q == 1:
             # RK4 with the simulator's linearly interpolated input averages the input over a step like
@@ -114,7 +113,7 @@ class Windows:
             u_fine = signal.resample(rec.u, q * rec.n)
             u = u_fine[q * starts[:, None] + np.arange(q * L)[None, :]]
         return cls(
-            rec.dt, rec.input_name, u, rec.displacement[idx], np.column_stack([zs[starts], v[starts]]), oversample=q,
+            rec.dt, rec.input_name, u, windows.measured(rec.displacement), windows.start_states(zs, v), oversample=q,
             starts=starts,
         )
 
