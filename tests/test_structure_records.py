@@ -32,17 +32,7 @@ def offset_record():
     return from_arrays(u, z + OFFSETS[:, None], FS, masses=(FIXTURE["m"], DEVICE.m), source="offset record")
 
 
-NSI_GAP = pytest.mark.xfail(
-    strict=True,
-    reason="measured on this record (a heavily damped device, zeta 15 %): with the measured channels as the subspace "
-    "step's outputs (the smoothed ones bent the plus-well device mode to -1.3 % and k2 to +11 %) every mode is within "
-    "0.25 % in frequency and 0.4 % in damping, k1 +0.03 %, k2 -4.1 %, k3 +0.02 %, c +0.22 %, but z2's zero is found "
-    "22.6 um off (z1's 0.3 um; 10.5 um at block_rows=40, where k2 is +2.1 %): the constant forces' equation inherits "
-    "k2's scatter",
-)
-
-
-@pytest.mark.parametrize("method", [pytest.param(NSI, marks=NSI_GAP), SINDy])
+@pytest.mark.parametrize("method", [NSI, SINDy])
 def test_a_device_on_a_fixture_is_identified_whatever_each_lasers_zero(offset_record, method):
     # the physics does not depend on where each laser reads zero: the modes within 1 % in frequency and 10 % in
     # damping, k1-k3 within 5 %, c within 10 % (the issue's acceptance), each channel's zero found to well within the
