@@ -8,6 +8,7 @@ linearisation), the cubic the final model's. The tolerances are the acceptance's
 comments (seed 1).
 """
 
+import json
 import warnings
 
 import numpy as np
@@ -140,3 +141,21 @@ def test_sindy_refuses_a_decay_that_has_rung_down_before_its_scoring_part():
     rec = _decay(DUFFING, 0.008, seed=1, duration=10.0)
     with pytest.raises(MeasurementError, match="cannot score its candidate models on this ring-down"):
         SINDy().check(rec)
+
+
+@pytest.mark.parametrize("method", ["nsi", "sindy"])
+def test_identify_on_a_hammer_file_says_how_it_read_it(tmp_path, capsys, method):
+    # the command line: the lab's file (force with its offset, the response), identified and said to be a hammer's
+    from negstiff.cli import main
+
+    rec = _hammer(DUFFING, seed=3)
+    path = tmp_path / "hammer.csv"
+    with open(path, "w") as fh:
+        fh.write(f"# mass: {MASS}\nt,force,z\n")
+        np.savetxt(fh, np.column_stack([np.arange(rec.n) / FS, rec.u, rec.z]), delimiter=",", fmt="%.9g")
+    out = tmp_path / "r.json"
+    assert main(["identify", method, str(path), "-o", str(out)]) == 0
+    assert "read as a hammer's record: 4 hammer hit(s)" in capsys.readouterr().err
+    res = json.loads(out.read_text())
+    assert res["record_kind"]["kind"] == "impact"
+    assert res["modal"]["plus"]["f_hz"] == pytest.approx(12.0, rel=0.01)

@@ -197,6 +197,9 @@ def cmd_identify(args) -> int:
     say(args, f"identify {args.method}: {rec.n} samples at {rec.fs:g} Hz, input {rec.input_name}")
     est.fit(rec)
     result = est.result()
+    kind = result.get("record_kind") or {}
+    if kind.get("kind") in ("impact", "decay"):
+        say(args, f"read as {'a hammer' if kind['kind'] == 'impact' else 'a free decay'}'s record: {kind['how']}")
     if args.frf:
         result["frf_comparison"] = compare_with_frf(result["modal"], frfs)
         for c in result["frf_comparison"]:
