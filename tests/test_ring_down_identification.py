@@ -26,9 +26,10 @@ HITS = (0.5, 3.0, 5.5, 8.0)
 
 LASER_HAMMER_M = 1e-6
 """The hammer records' displacement noise [m rms], 1 um against a 6 mm response (a laser vibrometer's or a good
-triangulation sensor's). At 5 um NSI's own Duffing cubic came out 9 % low (the noise in the -x^3 channel and in
-the output are correlated, an errors-in-variables bias of the subspace step, measured over four seeds) and the
-output-error refinement, which corrects it, was kept on two of four seeds: the tail's last hit judges it."""
+triangulation sensor's). At 5 um NSI's own Duffing cubic came out 8-11 % low (the noise in the -x^3 channel and in
+the output are correlated, an errors-in-variables bias of the subspace step, measured over six seeds) and the
+output-error refinement, which corrects it, was kept on three of six: the tail's last hit judges it (a strict
+xfail below)."""
 
 LASER_DECAY_M = 5e-6
 """The decays' displacement noise [m rms] (a laser triangulation sensor's)."""
@@ -50,12 +51,12 @@ def _truth(model: Model) -> dict[str, tuple[float, float]]:
     return out
 
 
-def _hammer(model, seed):
+def _hammer(model, seed, laser_m=LASER_HAMMER_M):
     z_rest = model.equilibria().z_plus
     _, f, z, _ = hammer_record(model, z_rest, FS, HITS, 40.0, 0.004, 10.0)
     rng = np.random.default_rng(seed)
     force = f + 0.5 + 0.05 * rng.standard_normal(f.size)
-    zm = z + LASER_HAMMER_M * rng.standard_normal(z.size)
+    zm = z + laser_m * rng.standard_normal(z.size)
     return from_arrays(force, zm, FS, input_name="force", mass=MASS, source="hammer.csv")
 
 
@@ -159,3 +160,12 @@ def test_identify_on_a_hammer_file_says_how_it_read_it(tmp_path, capsys, method)
     res = json.loads(out.read_text())
     assert res["record_kind"]["kind"] == "impact"
     assert res["modal"]["plus"]["f_hz"] == pytest.approx(12.0, rel=0.01)
+
+
+@pytest.mark.xfail(strict=True, reason="NSI's own cubic on a hammer's record at 5 um: an errors-in-variables bias")
+def test_nsi_cubic_of_a_hammer_record_at_a_triangulation_sensors_noise():
+    # at 5 um (1 kHz, the band-states' window 5 samples: no room to average the noise) NSI's own k3 came out
+    # -8.2 to -10.6 % over seeds 0-5 (the output's noise and the -x^3 channel's are correlated); the output-error
+    # refinement, which reaches -0.25 %, was kept on three of them (seed 1: not kept, k3 -9.2 %, measured)
+    est = _fit(NSI(), _hammer(DUFFING, seed=1, laser_m=5e-6))
+    assert est.model_.k3 == pytest.approx(DUFFING.k3, rel=0.05)
