@@ -684,7 +684,8 @@ def _in_frame(structure: Structure, offsets: np.ndarray, frame: np.ndarray) -> t
     """
     el = structure.element
     d = float(structure.coupling @ (np.asarray(frame) - np.asarray(offsets)))
-    P = np.polynomial.Polynomial([el.k0, -el.k1, el.k2, el.k3])(np.polynomial.Polynomial([d, 1.0]))
+    k0 = float(el.to_dict()["k0"])  # None in a model means m g: the dict holds the value
+    P = np.polynomial.Polynomial([k0, -el.k1, el.k2, el.k3])(np.polynomial.Polynomial([d, 1.0]))
     c0, c1, c2, c3 = (list(P.coef) + [0.0] * 4)[:4]
     element = Model(**{**el.to_dict(), "k0": float(c0), "k1": -float(c1), "k2": float(c2), "k3": float(c3)})
     return structure.with_element(element), np.asarray(frame, float)
