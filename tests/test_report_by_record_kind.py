@@ -10,7 +10,7 @@ import json
 
 import numpy as np
 import pytest
-from impact_records import DUFFING, DUFFING_HZ, MASS, decay_record, hammer_record
+from impact_records import DOUBLE_WELL, DUFFING, DUFFING_HZ, MASS, decay_record, hammer_record
 
 from negstiff.cli import main
 from negstiff.models import Model
@@ -77,3 +77,18 @@ def test_a_record_with_nothing_to_report_is_refused_in_one_line(tmp_path, capsys
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "does not ring down" in err[0]
     assert not out.exists()
+
+
+def test_a_double_wells_decay_across_the_barrier_reports_the_last_wells_backbone(tmp_path):
+    # released 12 mm beyond the plus well, the double well crosses the barrier and rings down in the minus well:
+    # the backbone is that well's (its small-amplitude frequency the minus well's linear one, 11.24 Hz)
+    eq = DOUBLE_WELL.equilibria()
+    t, z, _ = decay_record(DOUBLE_WELL, eq.z_plus + 0.012, FS, 6.0)
+    zm = z + 5e-6 * np.random.default_rng(1).standard_normal(t.size)
+    out = tmp_path / "out"
+    assert main(["report", str(_write(tmp_path / "decay.csv", t, np.zeros_like(t), zm)), "-o", str(out),
+                 "--quiet"]) == 0  # fmt: skip
+    bb = _sections(out)[-1]["result"]
+    f_minus = np.sqrt(DOUBLE_WELL.stiffness(eq.z_minus) / MASS) / (2 * np.pi)
+    assert bb["linear"]["f_hz"] == pytest.approx(f_minus, rel=0.01)
+    assert bb["predicted"]["difference_percent"] < 1.0
