@@ -362,3 +362,16 @@ def test_input_noise_term_reads_as_sensor_noise_plus_the_filtered_input_noise():
         exact = stats.multivariate_normal(np.zeros(y.size), C).logpdf(y)
         assert np.isclose(ll[w], exact, rtol=1e-8)
         assert abs(ll_cut[w] - exact) <= 0.5e-4 * (y.size + np.sum(y**2) / sigma**2)
+
+
+def test_a_hammers_record_is_refused_before_any_work():
+    # the posterior's windows see the input only in a hammer's hits (it crashed in its step-size check on such a
+    # record, a traceback): refused at once with one line naming the kind, as the command line shows it
+    from impact_records import DUFFING, hammer_record
+
+    from negstiff.errors import InputError
+
+    _, f, z, _ = hammer_record(DUFFING, 0.0, 2000.0, [0.5, 3.0, 5.5], 1.8, 0.004, 8.0)
+    rec = from_arrays(f + 0.5, z, 2000.0, input_name="force", mass=DUFFING.m)
+    with pytest.raises(InputError, match="a hammer's record .* NSI's and SINDy's intervals"):
+        Posterior(seed=0).fit(rec)

@@ -438,6 +438,13 @@ class Posterior(Estimator):
             return
         rec.require_excitation("the posterior")
         rec.require_motion("the posterior")
+        from negstiff.inference.analysis.record_kind import record_kind
+
+        kind = record_kind(rec)
+        if kind.kind in ("impact", "decay"):  # its windows see the input only in the hits (a traceback before)
+            what = {"impact": "a hammer's record", "decay": "a free decay"}[kind.kind]
+            raise PosteriorError(f"{rec.source}: {what} ({kind.how}): the posterior samples base-excited "
+                                 "or continuously forced records; NSI's and SINDy's intervals cover these")  # fmt: skip
         Windows.check(rec, self.window_s)
 
     def fit(self, rec: Measurement) -> Posterior:
