@@ -62,6 +62,8 @@ def test_identification_pickles_and_round_trips_its_json(fits, name, tmp_path):
         back = type(est).from_json(source)
         assert back.fitted and back.model_ == est.model_
         assert text(back.to_json()) == text(est.to_json())
+        if isinstance(est, SINDy):  # the terms it selected and its ensemble come back with it
+            assert back.selected_ == est.selected_ and back.ensemble_ == est.ensemble_
     assert est.to_json()["estimator"]["class"] == type(est).__name__
     # the result object alone, both ways
     res = est.result_

@@ -26,6 +26,7 @@ free-run validation, which is the same as NSI's (contract keys match key for key
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 
@@ -204,6 +205,15 @@ class SINDy(StructureResults, Identifier):
         a(t) (``aux:NAME``), thresholded like the others.
         """
         return tuple(rec.aux)
+
+    def _restore(self, result: dict[str, Any]) -> None:
+        """The result JSON's own state (``from_json``), with the terms selected and the ensemble's statistics."""
+        super()._restore(result)
+        held = result.get("details", {}) if "structure" in result else result  # a structure's keeps them apart
+        if "selected_terms" in held:
+            self.selected_ = list(held["selected_terms"])
+        if "ensemble" in held:
+            self.ensemble_ = held["ensemble"]
 
     def fit(self, data) -> SINDy:
         """Identify from ``data`` (a ``Measurement`` or a file path): a single DOF's record through the shared
