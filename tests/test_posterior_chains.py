@@ -7,6 +7,7 @@ numpy RK4 written in the tests, a laser's 3 um and an accelerometer's 5 mm/s^2 o
 (the chain's bookkeeping is checked, not the posterior's convergence).
 """
 
+import json
 import warnings
 
 import h5py
@@ -104,3 +105,20 @@ def test_a_structures_run_stopped_and_resumed_is_the_uninterrupted_run(tmp_path)
     resumed = fit(rec, **run, chain_file=tmp_path / "chains.h5", resume=True)
     assert resumed.result_.settings["resumed_steps"] == [30, 30]
     assert np.array_equal(resumed.result_.samples, full.result_.samples)
+
+
+def test_the_command_line_saves_and_resumes_a_chain(tmp_path, capsys):
+    # a run stopped by its step cap and resumed from its chain file carries on from the saved steps; --resume
+    # without a chain file is one line before any work
+    from negstiff.cli import main
+
+    rec = tmp_path / "r.csv"
+    assert main(["rig", "random", "-o", str(rec), "--duration", "12", "--quiet"]) == 0
+    chains, out1, out2 = tmp_path / "ch.h5", tmp_path / "p1.json", tmp_path / "p2.json"
+    base = ["posterior", str(rec), "--walkers", "16", "--ensembles", "2", "--quiet", "--chain-file", str(chains)]
+    assert main([*base, "-o", str(out1), "--max-steps", "40"]) == 0 and chains.exists()
+    assert main([*base, "-o", str(out2), "--max-steps", "80", "--resume"]) == 0
+    assert json.loads(out2.read_text())["settings"]["resumed_steps"] == [40, 40]
+    capsys.readouterr()
+    assert main(["posterior", str(rec), "-o", str(tmp_path / "p3.json"), "--resume", "--quiet"]) == 2
+    assert len(capsys.readouterr().err.strip().splitlines()) == 1

@@ -275,6 +275,8 @@ def cmd_posterior(args) -> int:
         start=start,
         refine_start=not args.no_refine,
         element=args.element,
+        chain_file=args.chain_file,
+        resume=args.resume,
     )
     rec = post.check(rec)  # every refusal before the progress line and bar
     where = f", {rec.n_dof} DOFs, element {args.element}" if rec.n_dof > 1 else ""
@@ -314,6 +316,15 @@ def cmd_discrepancy(args) -> int:
         say(args, f"unnamed: a non-parametric term of {un['term_percent_of_restoring_force']:.3g} % of the "
                    f"restoring force; held-out gap {g.get('physics_median_window_percent', float('nan')):.3g} % -> "
                    f"{g.get('hybrid_median_window_percent', float('nan')):.3g} % with it")  # fmt: skip
+    for effect, iv in result.get("effect_interval", {}).items():
+        parts = [(k, v) for k, v in iv.items() if isinstance(v, dict) and v.get("interval")] or (
+            [("", iv)] if iv.get("interval") else [])  # fmt: skip
+        sizes = ", ".join(f"{k + ' ' if k else ''}{v['value']:.4g} [{v['interval'][0]:.4g}, {v['interval'][1]:.4g}]"
+                          for k, v in parts)  # fmt: skip
+        b = result.get("bayesian", {}).get(effect, {})
+        opinion = (f"; LOO over {b['windows']} windows prefers the model {b['prefers']} it (elpd difference "
+                   f"{b['elpd_diff']:.3g} +- {b['dse']:.3g})" if "prefers" in b else "")  # fmt: skip
+        say(args, f"{effect}: {sizes or 'no interval'} ({100 * iv['prob']:g} % interval){opinion}")
     say(
         args,
         f"wrote {args.out}: named {', '.join(result['effects'])}; held-out gap (restarted free runs) "

@@ -126,8 +126,9 @@ def parse_effects(items: Sequence[str] | None) -> dict[str, Any]:
     return out
 
 
-MAX_AMPLITUDE_STEPS = 10_000
-"""Amplitudes (or frequencies) one stepped run may hold: a campaign of 10,000 steps is days of shaking."""
+MAX_AMPLITUDE_STEPS = 1_000_000
+"""Values a stepped range may unfold to before anything is allocated (beyond, the memory check of the run they
+step refuses what the machine cannot hold; 1:1e9:1e-9 is 1e18 values)."""
 
 
 def parse_amplitudes(text: str, option: str = "--amplitudes") -> list[float]:
@@ -237,6 +238,8 @@ def io_paths(args) -> tuple[list[Path], dict[str, str | Path], dict[str, str]]:
             outputs["its figure"] = Path(out).with_suffix(".png")
     if getattr(args, "idata", None) is not None:
         outputs["--idata"] = args.idata
+    if getattr(args, "chain_file", None) is not None:  # written as the run goes (resumed: continued)
+        outputs["--chain-file"] = args.chain_file
     return inputs, outputs, folders
 
 

@@ -324,6 +324,16 @@ def _posterior(sub, common: argparse.ArgumentParser, data_opts: argparse.Argumen
     )
     pst.add_argument("--idata", help="save the arviz data (posterior, sample stats, log likelihood) as NetCDF")
     pst.add_argument(
+        "--chain-file",
+        metavar="F.h5",
+        help="save each ensemble's emcee chain to this HDF5 file as it runs (a long run that stops keeps its steps)",
+    )
+    pst.add_argument(
+        "--resume",
+        action="store_true",
+        help="continue the chains saved in --chain-file by a run of the same record, settings and --seed",
+    )
+    pst.add_argument(
         "--start",
         help="coefficients: an identify result (its refined model) or a model file the MAP search starts from "
         "(default: weak-form least squares of the record, refined by simulation error)",
