@@ -50,6 +50,17 @@ def _record(seed: int, stop: float | None = None, friction: bool = False, c_nl: 
     return from_arrays(u_meas, z_meas, FS, mass=model.m, source=f"dop853-{seed}"), z
 
 
+def _covers(interval: dict, truth: float) -> bool:
+    lo, hi = interval["interval"]
+    return lo <= truth <= hi
+
+
+def _second_opinion_names(r: dict, effect: str) -> bool:
+    """arviz.compare's LOO over the windows prefers the model with the effect (the frequentist rule named it)."""
+    b = r["bayesian"][effect]
+    return b["prefers"] == "with" and b["elpd_diff"] > 0
+
+
 REGIME_SHORT = pytest.mark.xfail(
     strict=True,
     reason="measured: named and sized, but the 3 held-out windows where the stop acts have a median error of "
@@ -75,6 +86,11 @@ def test_an_end_stop_acting_briefly_is_named_sized_and_its_regime_gap_halved(see
     assert regime["windows"] >= 3 and regime["after"] <= regime["before"] / 2, regime
     assert r["gap_after_percent"] <= r["gap_before_percent"]
     assert "evidence" in r["iterations"][0] and "regime" in r["iterations"][0]["evidence"]
+    # the stop's size with its 90 % interval (a Laplace approximation of the output error over the record's
+    # windows, window-robust, widened by its mode's distance) covers the truth
+    interval = r["effect_interval"]["end_stop"]
+    assert _covers(interval["k"], STOP_K) and _covers(interval["z"], onset), interval
+    assert _second_opinion_names(r, "end_stop"), r["bayesian"]
 
 
 @pytest.mark.parametrize("seed", SEEDS)
@@ -89,6 +105,9 @@ def test_quadratic_damping_with_coulomb_friction_both_found(seed):
     assert r["effect_size"]["coulomb_friction"] == pytest.approx(FRICTION, rel=0.1)
     assert r["model"]["c_nl"] == pytest.approx(1.0, rel=0.2)
     assert "quadratic_damping" not in r["model"]["extra"] and "cubic_damping" not in r["model"]["extra"]
+    # friction's 90 % interval covers 0.1 N
+    assert _covers(r["effect_interval"]["coulomb_friction"], FRICTION), r["effect_interval"]
+    assert _second_opinion_names(r, "coulomb_friction"), r["bayesian"]
 
 
 @pytest.mark.parametrize("seed", SEEDS)
@@ -112,7 +131,7 @@ def test_a_clean_record_names_nothing(seed):
     rec, _ = _record(seed)
     r = Discrepancy().fit(rec).result()
     assert r["effects"] == ["none"], r["iterations"]
-    assert r["gap_regime_percent"] == {}
+    assert r["gap_regime_percent"] == {} and r["effect_interval"] == {} and r["bayesian"] == {}
     assert " 0 % of the record" not in r["where"]
 
 
@@ -180,3 +199,7 @@ def test_an_end_stop_the_held_out_tail_never_reaches_is_judged_where_it_acts():
     regime = r["gap_regime_percent"]["end_stop"]
     assert regime["judged_on"].startswith("cross-validated")
     assert regime["after"] <= regime["before"] / 2, regime  # the gap where it acts halved (measured: 3.7 -> 0.035 %)
+    # its 90 % interval covers the truth
+    interval = r["effect_interval"]["end_stop"]
+    assert _covers(interval["k"], STOP_K) and _covers(interval["z"], onset), interval
+    assert _second_opinion_names(r, "end_stop"), r["bayesian"]
