@@ -100,23 +100,18 @@ def as_record(data, who: str):
 
 def restarted_runs(model, rec, window_s: float, start: int = 0) -> Prediction:
     """Free runs of ``window_s`` over [start, N) of ``rec``, each restarted from the record's measured state
-    (``validation.staged_windows``' input, the simulator's batched RK4), and their score.
+    (the one cutting of restarted windows, ``validation.restart_windows``, run by ``simulate_windows``), and
+    their score.
     """
-    from negstiff.inference.steps.validation import staged_windows
-    from negstiff.models.simulator import simulate_batch
+    from negstiff.inference.steps.validation import restart_windows, simulate_windows
 
-    w = int(round(window_s * rec.fs))
-    n_win = (rec.n - start) // w if w >= 2 else 0
-    if n_win < 1:
+    windows = restart_windows(rec.n, rec.fs, window_s, start=start)
+    if windows.length < 2 or len(windows) < 1:
         raise InputError(f"{rec.source}: shorter than one {window_s:g} s window after sample {start}")
     zs, v, _, _ = rec.states("state")
-    starts = start + w * np.arange(n_win)
-    U, sub = staged_windows(model, rec, starts, w)
-    P = np.repeat(model.kernel_params()[:, None], n_win, axis=1)
-    x0 = np.column_stack([zs[starts], v[starts]])
-    res = simulate_batch(P, model.kind, U, rec.dt, x0, input_kind=rec.input_name, input_index=np.arange(n_win),
-                         substeps=sub, staged=True)  # fmt: skip
-    meas = np.stack([rec.displacement[k : k + w] for k in starts])
+    res = simulate_windows(model, rec, windows, zs, v)
+    starts, w, n_win = windows.starts, windows.length, len(windows)
+    meas = rec.displacement[windows.index]
     z = np.array(res.z, float)
     z[res.diverged] = np.nan
     ms = np.full(n_win, np.nan)
