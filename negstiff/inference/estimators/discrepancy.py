@@ -19,7 +19,11 @@ physics fixed, the mismatch sought as a sparse term from a physical catalogue).
    refitted on all identification data, and the gap is measured again on the held-out tail: restarted free runs
    (the median window's rms error: a window whose run diverges near the barrier, chaos, would dominate a pooled
    rms), residual PSD, maps.
-4. **Iterate** until ``none`` wins (at most ``max_effects``).
+4. **Iterate** until ``none`` wins (at most ``max_effects``). An effect the held-out tail barely reaches is
+   judged where it acts anywhere in the record by blocked cross-validation (``_regime_folds``).
+5. **Size and second opinion.** Each named effect's interval by a Laplace approximation of the output error over
+   the record's restarted windows (``effect_interval``; ``Posterior`` samples no ``extra`` effect), and
+   ``arviz.compare``'s LOO over those windows with and without it (``_bayesian_opinion``) beside the rule above.
 """
 
 from __future__ import annotations
@@ -210,6 +214,10 @@ class Discrepancy(StructureResults, Estimator):
         Where the equation error sits, by regime, before and after.
     iterations_ : list of dict
         Each round's ranking of the catalogue and what it named.
+    effect_interval_ : dict
+        Per named effect, its size with its 90 % interval (``effect_interval``: a Laplace approximation).
+    bayesian_ : dict
+        Per named effect, ``arviz.compare``'s LOO over the record's windows with and without it.
     warnings_ : list of str
         Every warning (also issued as ``NegstiffWarning``).
 
@@ -301,11 +309,9 @@ class Discrepancy(StructureResults, Estimator):
             W = np.column_stack([W, Ws[: W.shape[0]]])
         return W, y
 
-    def _fit(self, W: np.ndarray, y: np.ndarray, terms: tuple[str, ...], stop: bool, n_aux: int = 0,
-             rows: int | None = None) -> Any:  # fmt: skip
+    def _fit(self, W: np.ndarray, y: np.ndarray, terms: tuple[str, ...], stop: bool, n_aux: int = 0) -> np.ndarray:
         """Least squares on ``terms`` (+ the auxiliary channels' and the stop's columns), the input's
-        coefficient fixed by physics; with ``rows``, also the coefficients' block-robust covariance (blocks of
-        ``rows`` weak rows).
+        coefficient fixed by physics.
         """
         lib = library_terms()
         n_lib = len(lib)
@@ -324,19 +330,7 @@ class Discrepancy(StructureResults, Estimator):
         full[cols] = coef
         if self._gain is not None:
             full[n_lib] = self._gain
-        if rows is None:
-            return full
-        # the coefficients' covariance, block-robust (a sandwich over blocks of ``rows`` weak rows: neighbouring
-        # test functions overlap and the equation error is coloured, so the rows are not independent)
-        r = target - A @ coef
-        As = A / scale
-        bread = np.linalg.pinv(As.T @ As)
-        nb = max(1, r.size // rows)
-        g = np.stack([As[k * rows : (k + 1) * rows].T @ r[k * rows : (k + 1) * rows] for k in range(nb)])
-        cov = bread @ (g.T @ g) * (nb / max(1, nb - len(cols))) @ bread / np.outer(scale, scale)
-        full_cov = np.zeros((full.size, full.size))
-        full_cov[np.ix_(cols, cols)] = cov
-        return full, full_cov
+        return full
 
     def _model(self, coef: np.ndarray, rec: Measurement, stop: float | None, aux: tuple[str, ...] = ()) -> Model:
         n_lib = len(library_terms())
@@ -575,7 +569,6 @@ class Discrepancy(StructureResults, Estimator):
                                    "windows": reg.get("windows", 0), "window_s": reg.get("window_s"),
                                    "judged_on": judged}  # fmt: skip
         self.locate_after_ = self.locate(rec, terms, stop, aux)
-        self.bayesian_: dict[str, Any] = {}
         self.effect_interval_ = self.effect_interval(rec)
         self.bounded_ = boundedness(self.model_, rec.segment(0, self.n_id_))
         self.unnamed_ = self._unnamed(rec) if self.unnamed else None
@@ -900,17 +893,20 @@ class Discrepancy(StructureResults, Estimator):
 
     def effect_interval(self, rec: Measurement, prob: float = 0.9) -> dict[str, Any]:
         """Each named effect's size with its interval (probability ``prob``), by a Laplace approximation of the
-        output error over the windows where it acts (``_interval_windows``): free runs restarted from the measured
-        states, the effect's values moved and every other parameter held at the final model's. The posterior
-        under a flat prior is taken Gaussian about the final model's value, its covariance the Gauss-Newton
-        inverse Hessian made robust over windows (a sandwich with each window one cluster: the samples of a run
-        are correlated, so the windows, not the samples, are the independent units), scaled by the windows'
-        residual variance. ``Posterior`` does not sample ``extra`` effects, hence this approximation.
+        output error over the record's restarted windows (``_interval_windows``: every half window, and one more
+        before each episode where the effect acts), every refined parameter free (``refine.parameter_names``).
+        The posterior under a flat prior is taken Gaussian, its covariance the Gauss-Newton inverse Hessian made
+        robust over windows (a sandwich with each window one cluster: the samples of a run are correlated, so the
+        windows, not the samples, are the independent units); the effect's marginal is kept, widened by the
+        distance between the reported value and these windows' mode (one Gauss-Newton step), and centred on the
+        reported value. ``Posterior`` does not sample ``extra`` effects, hence this approximation. Also fills
+        ``bayesian_`` (``_bayesian_opinion``) for each effect with an interval.
         """
         from scipy import stats
 
         zq = float(stats.norm.ppf(0.5 + prob / 2))
         out: dict[str, Any] = {}
+        self.bayesian_: dict[str, Any] = {}
         for e in self.effects_:
             value = _size_of(self.model_, e)
             keys = sorted(value) if isinstance(value, dict) else [None]
