@@ -144,6 +144,58 @@ def _without(model: Model, effect: str) -> Model:
     return Model(**{**fields, "extra": {k: v for k, v in dict(model.extra).items() if k != effect}})
 
 
+def _loo_compare(ms_with: np.ndarray, ms_without: np.ndarray, residual_rows, length: int,
+                 rng: np.random.Generator) -> dict[str, Any]:  # fmt: skip
+    """``arviz.compare`` (PSIS-LOO) of two models by windows: ``ms_*`` each window's mean-square run error per draw
+    (draws, windows). Each window's log density is Gaussian with ``n_eff`` independent samples (``length`` over the
+    errors' integrated autocorrelation time, from ``residual_rows``) and a noise variance drawn per draw from its
+    scaled inverse chi-square posterior (so that each model's draws differ, as LOO needs).
+    """
+    import arviz as az
+
+    # the integrated autocorrelation time (samples), summed to the first negative lag: a window of ``length``
+    # correlated samples carries length / tau independent ones (numpy's correlate: arviz's autocorrelation works
+    # on chains, not on these residual windows)
+    taus = []
+    for row in residual_rows:
+        if not np.all(np.isfinite(row)) or not np.any(row):
+            continue
+        x = row - row.mean()
+        ac = np.correlate(x, x, "full")[x.size - 1 :] / np.dot(x, x)
+        neg = np.flatnonzero(ac < 0)
+        taus.append(1 + 2 * np.sum(ac[1 : neg[0] if neg.size else ac.size]))
+    tau = float(np.median(taus)) if taus else float(length)
+    n_eff = max(1.0, length / max(tau, 1.0))
+    draws, windows = ms_with.shape
+
+    def loglik(ms: np.ndarray) -> np.ndarray:
+        nu = n_eff * ms.shape[1]
+        s2 = np.mean(ms, axis=1)  # each draw's pooled variance
+        sig2 = nu * s2 / rng.chisquare(nu, size=s2.size)
+        return -0.5 * n_eff * (np.log(2 * np.pi * sig2)[:, None] + ms / sig2[:, None])
+
+    data = {name: az.from_dict({"posterior": {"draw_index": np.arange(draws, dtype=float)[None, :]},
+                                "log_likelihood": {"windows": loglik(ms)[None]}})
+            for name, ms in (("with", ms_with), ("without", ms_without))}  # fmt: skip
+    try:
+        table = az.compare(data, round_to="none")
+    except (ValueError, FloatingPointError) as err:  # arviz cannot score these windows
+        return {"windows": int(windows), "error": str(err)}
+    diff = float(table.loc["with", "elpd"] - table.loc["without", "elpd"])
+    dse = float(max(table.loc["with", "dse"], table.loc["without", "dse"]))
+    return {
+        "elpd_with": float(table.loc["with", "elpd"]),
+        "elpd_without": float(table.loc["without", "elpd"]),
+        "elpd_diff": diff,  # with minus without: > 0 favours naming it
+        "dse": dse,
+        "weight_with": float(table.loc["with", "weight"]),
+        "prefers": "with" if diff > 0 else "without",
+        "beyond_two_se": bool(abs(diff) > 2 * dse),
+        "windows": int(windows),
+        "effective_samples_per_window": n_eff,
+    }
+
+
 def _held(terms) -> tuple[str, ...]:
     """Base fields whose library term the model does not carry: refinement holds them at zero."""
     fields = term_fields()
@@ -616,7 +668,8 @@ class Discrepancy(StructureResults, Estimator):
         """
         pooled = self._paired(rec, before.get("window_ms"), after.get("window_ms"))
         regime = self._regime(rec, before, after, effect, model_before, model_after)
-        evidence: dict[str, Any] = {"pooled": pooled, "regime": regime}
+        evidence: dict[str, Any] = {"pooled": pooled, "regime": regime,
+                                    "bayesian": self._held_out_opinion(rec, model_before, model_after)}  # fmt: skip
         change = "{:.3g} % (one standard error: {:.3g} to {:.3g} %, geometric mean)"
         judged, where = regime, "held-out windows"
         if regime.get("windows", 0) < 3 and spec_before is not None and best is not None:
@@ -975,8 +1028,6 @@ class Discrepancy(StructureResults, Estimator):
         time) and a noise variance drawn from its scaled inverse chi-square posterior (so that each model's
         draws differ, as LOO needs).
         """
-        import arviz as az
-
         rng = np.random.default_rng(0)
         meas = np.stack([rec.displacement[k : k + length] for k in idx])
         worst = float(np.mean(meas**2))
@@ -993,51 +1044,30 @@ class Discrepancy(StructureResults, Estimator):
             with_ms.append(window_ms(_with_size(self.model_, effect, size))[0])
         ms_with = np.stack(with_ms)  # (draws, windows)
         ms_without, r_without = window_ms(_without(self.model_, effect))
-        # the errors' integrated autocorrelation time (samples), summed to the first negative lag: a window of
-        # ``length`` correlated samples carries length / tau independent ones (numpy's correlate: arviz's
-        # autocorrelation works on chains, not on these residual windows)
-        r_mid = self._residuals_at(self.model_, rec, idx, length)
-        taus = []
-        for row in (*r_mid, *r_without):
-            if not np.all(np.isfinite(row)) or not np.any(row):
-                continue
-            x = row - row.mean()
-            ac = np.correlate(x, x, "full")[x.size - 1 :] / np.dot(x, x)
-            neg = np.flatnonzero(ac < 0)
-            taus.append(1 + 2 * np.sum(ac[1 : neg[0] if neg.size else ac.size]))
-        tau = float(np.median(taus)) if taus else float(length)
-        n_eff = max(1.0, length / max(tau, 1.0))
+        out = _loo_compare(ms_with, np.repeat(ms_without[None, :], draws, axis=0),
+                           [*self._residuals_at(self.model_, rec, idx, length), *r_without], length, rng)  # fmt: skip
+        out["method"] = (f"arviz.compare (PSIS-LOO) over {where} ({length / rec.fs:g} s restarted runs), {draws} "
+                         "draws of the effect's size from its Laplace approximation and of the noise variance")
+        return out
 
-        def loglik(ms: np.ndarray) -> np.ndarray:  # ms: (draws, windows)
-            nu = n_eff * ms.shape[1]
-            s2 = np.mean(ms, axis=1)  # each draw's pooled variance
-            sig2 = nu * s2 / rng.chisquare(nu, size=s2.size)
-            return -0.5 * n_eff * (np.log(2 * np.pi * sig2)[:, None] + ms / sig2[:, None])
-
-        ll_with = loglik(ms_with)
-        ll_without = loglik(np.repeat(ms_without[None, :], draws, axis=0))
-        data = {name: az.from_dict({"posterior": {"sigma2_draw": np.arange(draws, dtype=float)[None, :]},
-                                    "log_likelihood": {"windows": ll[None]}})
-                for name, ll in (("with", ll_with), ("without", ll_without))}  # fmt: skip
-        try:
-            table = az.compare(data, round_to="none")
-        except (ValueError, FloatingPointError) as err:  # arviz cannot score these windows
-            return {"windows": int(idx.size), "error": str(err)}
-        diff = float(table.loc["without", "elpd_diff"] - table.loc["with", "elpd_diff"])
-        dse = float(max(table.loc["with", "dse"], table.loc["without", "dse"]))
-        return {
-            "elpd_with": float(table.loc["with", "elpd"]),
-            "elpd_without": float(table.loc["without", "elpd"]),
-            "elpd_diff": -diff,  # with minus without: > 0 favours naming it
-            "dse": dse,
-            "weight_with": float(table.loc["with", "weight"]),
-            "prefers": "with" if -diff > 0 else "without",
-            "beyond_two_se": bool(abs(diff) > 2 * dse),
-            "windows": int(idx.size),
-            "effective_samples_per_window": n_eff,
-            "method": f"arviz.compare (PSIS-LOO) over {where} ({length / rec.fs:g} s restarted runs), "
-            f"{draws} draws of the effect's size from its Laplace approximation and of the noise variance",
-        }
+    def _held_out_opinion(self, rec: Measurement, model_before: Model, model_after: Model,
+                          draws: int = 64) -> dict[str, Any]:  # fmt: skip
+        """A round's Bayesian second opinion: the held-out tail's ``window_s`` restarted runs' predictive
+        densities with the effect (``model_after``) and without it (``model_before``), compared by
+        ``arviz.compare`` (PSIS-LOO over the windows; the noise variance drawn, the models' parameters held).
+        """
+        w = int(round(self.window_s * rec.fs))
+        idx = self.n_id_ + w * np.arange((rec.n - self.n_id_) // w)
+        if idx.size < 2:
+            return {"windows": int(idx.size), "error": "too few held-out windows"}
+        rb, ra = (self._residuals_at(m, rec, idx, w) for m in (model_before, model_after))
+        worst = float(np.mean(rec.displacement[self.n_id_ :] ** 2))
+        ms_b, ms_a = (np.where(np.isfinite(m), m, worst) for m in (np.mean(rb**2, axis=1), np.mean(ra**2, axis=1)))
+        rng = np.random.default_rng(0)
+        out = _loo_compare(np.repeat(ms_a[None], draws, 0), np.repeat(ms_b[None], draws, 0), [*ra, *rb], w, rng)
+        out["method"] = (f"arviz.compare (PSIS-LOO) over the held-out tail's {idx.size} restarted {self.window_s:g} s "
+                         f"runs, {draws} draws of the noise variance")
+        return out
 
     def where_text(self) -> str:
         """Where the baseline's equation error concentrates, in words (the result's ``where``)."""
