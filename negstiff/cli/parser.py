@@ -26,6 +26,18 @@ EPILOG_RIG = """examples:
 Every record is written with <name>.truth.json beside it (the truth behind the record)."""
 
 
+def _structure_options(p: argparse.ArgumentParser, element_help: str) -> None:
+    """A structure's options of a fitting command: --dofs (a check of the file), --element, --masses."""
+    p.add_argument(
+        "--dofs",
+        type=number(int, 1, 50),
+        help="degrees of freedom the record must measure (a check of the file: its responses z1 ... zN and "
+        "'# masses: m1,...,mN' give N; N > 1 needs --element)",
+    )
+    p.add_argument("--element", help=element_help)
+    p.add_argument("--masses", help="the DOFs' masses m1,...,mN [kg] (default: the record's '# masses:')")
+
+
 def _rig(sub, common: argparse.ArgumentParser, data_opts: argparse.ArgumentParser) -> None:
     rig = sub.add_parser(
         "rig",
@@ -216,18 +228,8 @@ def _identify(sub, common: argparse.ArgumentParser, data_opts: argparse.Argument
         help="an frf result of a low-level test around a well: its peak beside the identified well frequency "
         "(repeatable, one per well)",
     )
-    idf.add_argument(
-        "--dofs",
-        type=number(int, 1, 50),
-        help="degrees of freedom the record must measure (a check of the file: its responses z1 ... zN and "
-        "'# masses: m1,...,mN' give N; N > 1 needs --element)",
-    )
-    idf.add_argument(
-        "--element",
-        help="where the nonlinear element acts, I-J: it moves DOF J relative to DOF I (0: the base), e.g. 1-2 for a "
-        "device on a fixture",
-    )
-    idf.add_argument("--masses", help="the DOFs' masses m1,...,mN [kg] (default: the record's '# masses:')")
+    _structure_options(idf, "where the nonlinear element acts, I-J: it moves DOF J relative to DOF I (0: the base), "
+                       "e.g. 1-2 for a device on a fixture")  # fmt: skip
     idf.set_defaults(func=c.cmd_identify)
 
 
@@ -395,18 +397,9 @@ def _posterior(sub, common: argparse.ArgumentParser, data_opts: argparse.Argumen
         help="the input sensor's white noise rms [m/s^2, or N for a force] (default: read from the input's spectral "
         "floor above the excitation's band; 0: the input taken as exact)",
     )
-    pst.add_argument(
-        "--dofs",
-        type=number(int, 1, 50),
-        help="degrees of freedom the record must measure (a check of the file: its responses z1 ... zN and "
-        "'# masses: m1,...,mN' give N; N > 1 needs --element)",
-    )
-    pst.add_argument(
-        "--element",
-        help="a structure's record: where the nonlinear element acts, I-J (it moves DOF J relative to DOF I, 0: the "
-        "base); its coefficients are sampled, the linear structure and each channel's zero fixed at SINDy's",
-    )
-    pst.add_argument("--masses", help="the DOFs' masses m1,...,mN [kg] (default: the record's '# masses:')")
+    _structure_options(pst, "a structure's record: where the nonlinear element acts, I-J (it moves DOF J relative "
+                       "to DOF I, 0: the base); its coefficients are sampled, the linear structure and each channel's "
+                       "zero fixed at SINDy's")  # fmt: skip
     pst.set_defaults(func=c.cmd_posterior)
 
 
