@@ -336,6 +336,27 @@ def test_a_model_with_negative_friction_is_refused(records, capsys, tmp_path):
     assert "coulomb_friction" in msg
 
 
+STRUCTURE = {"masses": [1.0, 0.2], "element": {"m": 0.2, "k1": 426.0, "k2": 1000.0, "k3": 6.7e5, "c": 3.5, "c_nl": 0.5},
+             "at": [1, 2], "stiffness": [[24674.0, 0.0], [0.0, 0.0]], "damping": [[3.1, 0.0], [0.0, 0.0]]}  # fmt: skip
+
+
+@pytest.mark.parametrize("change, says", [
+    ({"at": [0.5, 2]}, "two DOF numbers"),   # was read as (0, 2)
+    ({"at": "12"}, "two DOF numbers"),       # was read as (1, 2)
+    ({"masses": [True, 0.2]}, "m1 must be a number"),  # was 1 kg
+    ({"masses": [1.0] * 100_000, "stiffness": None, "damping": None}, "at most 1000 DOFs"),  # 74.5 GiB, traceback
+])  # fmt: skip
+def test_a_structure_file_that_does_not_say_a_structure_is_refused(records, capsys, tmp_path, change, says):
+    # a structure's JSON is read as written: an element's place is two DOF numbers, a mass a number, and a
+    # structure of 100,000 DOFs is refused before its dense matrices are allocated; one line, nothing written
+    import json
+
+    system = tmp_path / "structure.json"
+    system.write_text(json.dumps({k: v for k, v in {**STRUCTURE, **change}.items() if v is not None}))
+    out = tmp_path / "s.csv"
+    assert says in refused(tmp_path, capsys, ["simulate", system, records / "rec.csv", "-o", out], [out])
+
+
 @pytest.mark.parametrize("extra", [["--forcing-hz", "512"], ["--nfrc", "nope.json"]])
 def test_report_says_when_an_option_is_refused_by_every_analysis(records, capsys, tmp_path, extra):
     out = tmp_path / "rep"

@@ -117,6 +117,10 @@ def assemble(pairs, values, n: int) -> np.ndarray:
     return K
 
 
+MAX_DOFS = 1000
+"""The most DOFs a structure may have: its matrices are dense (N x N), its simulation loops over them."""
+
+
 def _matrix(name: str, value, n: int) -> np.ndarray:
     a = np.zeros((n, n)) if value is None else np.array(value, dtype=float)
     if a.shape != (n, n):
@@ -162,8 +166,14 @@ class Structure:
     at: tuple[int, int] | None = None
 
     def __post_init__(self):
-        try:
-            masses = tuple(effects.finite(f"m{i + 1}", m) for i, m in enumerate(np.atleast_1d(self.masses)))
+        given = self.masses
+        if isinstance(given, (str, bytes)) or not np.iterable(given):  # a number alone: one DOF
+            given = [given]
+        if len(given) > MAX_DOFS:  # before any N x N matrix (100,000 DOFs asked for 74.5 GiB)
+            raise InputError(f"a structure of {len(given)} DOFs: negstiff's structures are lumped models of at "
+                             f"most {MAX_DOFS} DOFs")  # fmt: skip
+        try:  # each mass a number as given (a JSON true is not 1 kg)
+            masses = tuple(effects.finite(f"m{i + 1}", m) for i, m in enumerate(given))
         except ValueError as exc:  # not a number: negstiff's error, the registry's words
             raise InputError(str(exc)) from None
         if not masses or min(masses) <= 0:
@@ -172,6 +182,9 @@ class Structure:
         object.__setattr__(self, "masses", masses)
         if not isinstance(self.element, Model):
             raise InputError("the element's force law must be a Model (polynomial) in a structure")
+        if self.at is not None and (isinstance(self.at, (str, bytes)) or not np.iterable(self.at) or any(
+                isinstance(a, bool) or not isinstance(a, (int, np.integer)) for a in self.at)):  # fmt: skip
+            raise InputError(f"element I-J must be two DOF numbers (integers, 0: the base), got {self.at!r}")
         at = (0, n) if self.at is None else tuple(int(a) for a in self.at)
         if len(at) != 2 or not (0 <= at[0] <= n and 1 <= at[1] <= n and at[0] != at[1]):
             raise InputError(f"element I-J must name DOF J in 1..{n} and I in 0..{n} (0: the base), I != J; got {at}")
@@ -320,7 +333,9 @@ class Structure:
             raise InputError(f"structure has unknown fields {', '.join(sorted(unknown))}")
         try:
             element = Model.from_dict(d["element"])
-            return cls(tuple(d["masses"]), element, d.get("stiffness"), d.get("damping"), tuple(d.get("at") or (0, 1)))
+            at = d.get("at") or (0, 1)
+            at = at if isinstance(at, str) else tuple(at)  # a text is refused as written, not read digit by digit
+            return cls(d["masses"], element, d.get("stiffness"), d.get("damping"), at)  # type: ignore[arg-type]
         except (KeyError, TypeError, ValueError) as exc:
             raise InputError(f"structure: {exc}") from None
 
