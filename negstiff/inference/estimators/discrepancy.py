@@ -15,7 +15,7 @@ physics fixed, the mismatch sought as a sparse term from a physical catalogue).
    ``margin``) (the one-standard-error rule plus a practical margin, as in ``sindy``): otherwise the answer is
    ``none``. Among effects that close to the best, the one with fewer parameters wins.
 3. **Add and refit.** The winner enters the model (its ``extra``; an effect whose term is a base field's, such
-   as z'|z'| or z^3, lands in that field, c_nl or k3, and only there: one home per term), every parameter is
+   as ``z'|z'|`` or z^3, lands in that field, c_nl or k3, and only there: one home per term), every parameter is
    refitted on all identification data, and the gap is measured again on the held-out tail: restarted free runs
    (the median window's rms error: a window whose run diverges near the barrier, chaos, would dominate a pooled
    rms), residual PSD, maps.
@@ -227,7 +227,7 @@ class Discrepancy(StructureResults, Estimator):
     ----------
     baseline : tuple of str, default ("1", "z", "z^2", "z^3", "v", "v|v|")
         Library terms of the starting model: the seed's model (cubic K, viscous c, quadratic c_nl). An effect
-        whose law is a base field's term (``quadratic_damping`` is c_nl's z'|z'|) is never a candidate beside
+        whose law is a base field's term (``quadratic_damping`` is c_nl's ``z'|z'|``) is never a candidate beside
         that field, and when named from a smaller baseline it lands in its field: one home per term.
     validation_fraction : float, default 0.2
         Held-out tail on which the gap is measured before and after.
