@@ -22,17 +22,16 @@ from typing import Any
 import matplotlib
 
 matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
 
 from negstiff.errors import OutputError  # noqa: E402
 from negstiff.files import atomic_dir, check_folder  # noqa: E402
 
 from .numbers import fmt  # noqa: E402
-from .sections import COEFFICIENTS, Section, coefficient_blocks, section_for  # noqa: E402
+from .sections import COEFFICIENTS, Blocks, Section, coefficient_blocks, section_for  # noqa: E402
 
 
 @dataclass
-class Report:
+class Report(Blocks):
     """A report (HTML and Markdown, with its results as JSON) built from results.
 
     Both renderings open with the summary and a table of contents; every section is numbered and has an
@@ -165,28 +164,6 @@ class Report:
     def heading(self, text: str, level: int = 2) -> None:
         """A heading of ``level`` (2: a section)."""
         self.blocks.append(("h", (level, text)))
-
-    def text(self, text: str) -> None:
-        """A paragraph."""
-        self.blocks.append(("p", text))
-
-    def warning(self, text: str) -> None:
-        """A paragraph set apart as a warning."""
-        self.blocks.append(("warn", text))
-
-    def table(self, header: list[str], rows: list[list[Any]]) -> None:
-        """A table of ``header`` and ``rows`` (numbers at their significant figures)."""
-        self.blocks.append(("table", (header, [[fmt(c) for c in r] for r in rows])))
-
-    def figure(self, name: str, fig, caption: str) -> None:
-        """Add a matplotlib figure as ``name``.png with a caption (the figure is closed)."""
-        import io
-
-        buf = io.BytesIO()
-        fig.savefig(buf, format="png", dpi=110, bbox_inches="tight")
-        plt.close(fig)
-        self.figures[f"{name}.png"] = buf.getvalue()
-        self.blocks.append(("fig", (f"{name}.png", caption)))
 
     # --- rendering ---------------------------------------------------------------------------
     def _sections(self, blocks) -> list[tuple[int, str, str]]:

@@ -28,23 +28,13 @@ COEFFICIENTS = ("k1", "k2", "k3", "c", "c_nl")
 """The coefficients every report's table holds (the contract's model fields)."""
 
 
-@dataclass
-class Section:
-    """What one result gives a report."""
+class Blocks:
+    """The blocks a report is written in (paragraphs, warnings, tables, figures), added to ``blocks`` and
+    ``figures``: one way of writing them for a ``Section`` and a whole ``Report``.
+    """
 
-    kind: str
-    label: str
-    title: str
-    blocks: list[tuple[str, Any]] = field(default_factory=list)
-    figures: dict[str, bytes] = field(default_factory=dict)
-    estimates: dict[str, dict[str, float]] = field(default_factory=dict)
-    """column -> {coefficient: value} (each method's estimates, for the coefficient table)."""
-    interval: dict[str, tuple[float, float, float]] = field(default_factory=dict)
-    """coefficient -> (mean, low, high) of a posterior."""
-    heldout: dict[str, float | None] = field(default_factory=dict)
-    """what -> held-out prediction error [% of rms z]."""
-    summary: list[str] = field(default_factory=list)
-    json: dict[str, Any] = field(default_factory=dict)
+    blocks: list[tuple[str, Any]]
+    figures: dict[str, bytes]
 
     def text(self, text: str) -> None:
         """A paragraph."""
@@ -67,6 +57,25 @@ class Section:
         plt.close(fig)
         self.figures[f"{name}.png"] = buf.getvalue()
         self.blocks.append(("fig", (f"{name}.png", caption)))
+
+
+@dataclass
+class Section(Blocks):
+    """What one result gives a report."""
+
+    kind: str
+    label: str
+    title: str
+    blocks: list[tuple[str, Any]] = field(default_factory=list)
+    figures: dict[str, bytes] = field(default_factory=dict)
+    estimates: dict[str, dict[str, float]] = field(default_factory=dict)
+    """column -> {coefficient: value} (each method's estimates, for the coefficient table)."""
+    interval: dict[str, tuple[float, float, float]] = field(default_factory=dict)
+    """coefficient -> (mean, low, high) of a posterior."""
+    heldout: dict[str, float | None] = field(default_factory=dict)
+    """what -> held-out prediction error [% of rms z]."""
+    summary: list[str] = field(default_factory=list)
+    json: dict[str, Any] = field(default_factory=dict)
 
 
 def effective(model) -> dict[str, float]:
