@@ -1,9 +1,14 @@
 """Records written in the tests themselves with numpy and scipy (not with negstiff's rig or simulator), and
 what they share: the test utility module (imported as ``from records import ...``)."""
 
+import hashlib
+import os
+from pathlib import Path
+
 import numpy as np
 
 from negstiff import Model
+from negstiff.cli import main
 from negstiff.study import silverbox as _silverbox
 
 TRUTH = Model(m=0.2, k1=426.0, k2=-3060.0, k3=7.77e5, c=0.35, c_nl=0.1)
@@ -253,3 +258,29 @@ def rk4_fixture_record(duration=60.0, rms=12.0, band=(2.0, 40.0), seed=1, oversa
     u = np.asarray(acc[::oversample])[k:]
     z = out[:, k:]
     return u, z + noise * rng.standard_normal(z.shape)
+
+
+# --- a refusal as the contract states it (the probes' files share it) ----------------------------------
+def snapshot(d: Path) -> dict:
+    """Every regular file under ``d`` and its SHA-256."""
+    return {str(p.relative_to(d)): hashlib.sha256(p.read_bytes()).hexdigest() for p in sorted(d.rglob("*"))
+            if p.is_file() and not p.is_symlink()}  # fmt: skip
+
+
+def refused(lab: Path, capsys, argv, outputs=()) -> str:
+    """A command line the CLI refuses as the contract says: exit 2, one line naming an error, no traceback, no
+    output written, every file under ``lab`` unchanged and no temporary file left behind. Returns the line."""
+    before = snapshot(lab)
+    try:
+        rc = main([str(a) for a in argv])
+    except SystemExit as exc:  # argparse's errors
+        rc = exc.code
+    err = capsys.readouterr().err
+    lines = [x for x in err.strip().splitlines() if x.strip()]
+    assert rc == 2, f"exit {rc} for {argv}: {err}"
+    assert len(lines) == 1 and "error" in lines[0] and "Traceback" not in err, err
+    for o in outputs:
+        assert not os.path.exists(o), f"{o} was written"
+    assert snapshot(lab) == before, "an input was modified"
+    assert not [p for p in lab.rglob("*.part")], "a temporary file was left behind"
+    return lines[0]

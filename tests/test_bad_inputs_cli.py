@@ -4,7 +4,6 @@ before the work, and the library's errors that are negstiff's. Each case is refu
 line on stderr, no traceback, nothing written, every input byte-identical; in Python one ``InputError``)
 or, where the input is legal, read to a sound result."""
 
-import hashlib
 import os
 import shutil
 import signal
@@ -15,33 +14,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
-from negstiff.cli import main
+from records import refused
 
 ROOT = Path(__file__).resolve().parents[1]
-
-
-def _snapshot(d: Path) -> dict:
-    return {str(p.relative_to(d)): hashlib.sha256(p.read_bytes()).hexdigest() for p in sorted(d.rglob("*"))
-            if p.is_file() and not p.is_symlink()}  # fmt: skip
-
-
-def refused(folder: Path, capsys, argv, outputs=()) -> str:
-    """Exit 2, one line naming an error, no traceback, no output written, every file of ``folder``
-    unchanged."""
-    before = _snapshot(folder)
-    try:
-        rc = main([str(a) for a in argv])
-    except SystemExit as exc:  # argparse's errors
-        rc = exc.code
-    err = capsys.readouterr().err
-    lines = [x for x in err.strip().splitlines() if x.strip()]
-    assert rc == 2, f"exit {rc} for {argv}: {err}"
-    assert len(lines) == 1 and "error" in lines[0] and "Traceback" not in err, err
-    for o in outputs:
-        assert not os.path.exists(o), f"{o} was written"
-    assert _snapshot(folder) == before, "an input was modified"
-    return lines[0]
 
 
 # --- Ctrl-C: one line and exit 130 from the first millisecond ----------------------------------------------

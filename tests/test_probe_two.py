@@ -4,7 +4,6 @@ byte-identical) or, where the input is legal, runs to a sound result. No command
 read, whatever the path spelling. A hypothesis search over every command's options, drawn from the
 parser's own declarations, finds no traceback before the work starts."""
 
-import hashlib
 import json
 import os
 import resource
@@ -18,6 +17,7 @@ import numpy as np
 import pytest
 from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
+from records import refused
 
 import negstiff.cli.commands as commands
 from negstiff.cli import build_parser, main
@@ -69,29 +69,6 @@ def lab(tmp_path_factory):
     (d / "twoz.csv").write_text("t,base_acc,z,y,z\n" + "".join(
         f"{a},{b},{c},0,{c}\n" for a, b, c in zip(t, u, z, strict=True)))
     return d
-
-
-def _snapshot(d: Path) -> dict:
-    return {str(p.relative_to(d)): hashlib.sha256(p.read_bytes()).hexdigest() for p in sorted(d.rglob("*"))
-            if p.is_file() and not p.is_symlink()}  # fmt: skip
-
-
-def refused(lab, capsys, argv, outputs=()):
-    """Exit 2, one line naming an error, no traceback, no output written, every input unchanged."""
-    before = _snapshot(lab)
-    try:
-        rc = main([str(a) for a in argv])
-    except SystemExit as exc:  # argparse's errors
-        rc = exc.code
-    err = capsys.readouterr().err
-    lines = [x for x in err.strip().splitlines() if x.strip()]
-    assert rc == 2, f"exit {rc} for {argv}: {err}"
-    assert len(lines) == 1 and "error" in lines[0] and "Traceback" not in err, err
-    for o in outputs:
-        assert not os.path.exists(o), f"{o} was written"
-    assert _snapshot(lab) == before, "an input was modified"
-    assert not [p for p in lab.rglob("*.part")], "a temporary file was left behind"
-    return lines[0]
 
 
 # --- 1. no command writes onto a file it read, whatever the spelling --------------------------------------
