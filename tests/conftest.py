@@ -55,7 +55,7 @@ UNIT_TIER = {
     "test_rig.py",
     "test_estimator.py",
     "test_formats.py",
-    "test_probe.py",
+    "test_bad_inputs_commands.py",
 }
 """The fast unit tier (about 40 s on 2 cores): the physics' building blocks, records and their errors, the
 estimators' contract, the command line's refusals. ``pytest -m unit`` runs it alone; a full run runs it

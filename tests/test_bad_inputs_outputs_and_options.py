@@ -1,4 +1,4 @@
-"""The second bad-input probe (issue "Nothing lost, nothing crashes"), kept as tests: every case the probe
+"""Bad outputs and options, kept as tests: every case the probe
 found is refused cleanly (exit 2, one line on stderr, no traceback, nothing written, every input
 byte-identical) or, where the input is legal, runs to a sound result. No command may write onto a file it
 read, whatever the path spelling. A hypothesis search over every command's options, drawn from the

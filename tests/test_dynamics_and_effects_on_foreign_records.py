@@ -1,4 +1,4 @@
-"""Records unlike the rig's, round two (issue 36): periodicity at any sampling rate, Lyapunov exponents
+"""Records unlike the rig's: periodicity at any sampling rate, Lyapunov exponents
 that agree with themselves, effects refined like the others and kept only when they help. Every record is
 written here with numpy/scipy: a plain fixed-step RK4 (``records.rk4_harmonic``), scipy's LSODA and DOP853,
 never negstiff's simulator."""

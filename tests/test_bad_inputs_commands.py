@@ -1,4 +1,4 @@
-"""The bad-input probe of the lab-records issue, re-created: every contract command, fed bad files, bad
+"""Bad inputs to every command: every contract command, fed bad files, bad
 options and bad output paths, ends with exit 2 and one line on stderr, writes nothing, and leaves its
 inputs untouched. Ctrl-C ends with one line and exit 130."""
 
