@@ -43,7 +43,14 @@ from negstiff.inference.record.measurement import Measurement
 from negstiff.inference.steps.plausibility import classified
 from negstiff.inference.steps.refine import parameter_names, parameter_scales, refine_stage, values_of, with_values
 from negstiff.inference.steps.selection import block_rows, block_scores, compare, indistinguishable
-from negstiff.inference.steps.validation import boundedness, restarted_free_runs, staged_windows, validate
+from negstiff.inference.steps.validation import (
+    RestartWindows,
+    boundedness,
+    restart_windows,
+    restarted_free_runs,
+    simulate_windows,
+    validate,
+)
 from negstiff.inference.steps.weak import (
     BASE_FIELDS,
     WeakForm,
@@ -55,7 +62,7 @@ from negstiff.inference.steps.weak import (
     test_function,
 )
 from negstiff.inference.steps.weak import terms as library_terms
-from negstiff.models import Model, effects, simulate_batch
+from negstiff.models import Model, effects
 
 CUBIC_BASELINE = ("1", "z", "z^2", "z^3", "v", "v|v|")
 """The seed's own model form: cubic K, viscous c and quadratic c_nl (the contract's damping law)."""
@@ -736,14 +743,13 @@ class Discrepancy(StructureResults, Estimator):
             return {"windows": 0, "reason": "a measured channel's term acts wherever the channel does"}
         if not np.any(np.abs(force) > 0):
             return {"windows": 0, "reason": "the effect does not act in the held-out tail"}
-        acting, starts, length = self._episodes(rec, force, self.n_id_)
-        out: dict[str, Any] = {"window_s": length / rec.fs, "windows": len(starts),
+        acting, windows = self._episodes(rec, force, self.n_id_)
+        out: dict[str, Any] = {"window_s": windows.length / rec.fs, "windows": len(windows),
                                "acting_share_of_tail": float(np.mean(acting))}  # fmt: skip
-        if len(starts) < 2:
+        if len(windows) < 2:
             return out
-        idx = np.array(starts)
-        ms_b, ms_a = (self._runs_at(m, rec, idx, length) for m in (model_before, model_after))
-        meas = np.stack([rec.displacement[k : k + length] for k in idx])
+        ms_b, ms_a = (self._runs_at(m, rec, windows) for m in (model_before, model_after))
+        meas = windows.measured(rec.displacement)
         ref = float(np.sqrt(np.mean(meas**2)))
         worst = float(np.mean(meas**2))
         # the median window's rms error, % of those windows' rms z (the headline gap's measure: one run that
@@ -752,18 +758,19 @@ class Discrepancy(StructureResults, Estimator):
             float(100 * np.sqrt(np.median(np.where(np.isfinite(m), m, worst))) / ref) for m in (ms_b, ms_a)
         )
         out["acting"] = self._paired(rec, ms_b, ms_a)
-        w = int(round(self.window_s * rec.fs))
         a, b = before.get("window_ms"), after.get("window_ms")
         if a is not None and b is not None:
-            clear = np.array([not acting[k * w : (k + 1) * w].any() for k in range(len(a))])
+            # the tail's windows (``restarted_free_runs``' own) that hold no sample where it acts
+            tail = restart_windows(rec.n, rec.fs, self.window_s, start=self.n_id_)
+            clear = ~tail.measured(np.concatenate([np.zeros(self.n_id_, bool), acting])).any(axis=1)
             if clear.sum() >= 2:
                 out["rest"] = self._paired(rec, np.asarray(a)[clear], np.asarray(b)[clear])
         return out
 
-    def _episodes(self, rec: Measurement, force: np.ndarray, lo: int) -> tuple[np.ndarray, list[int], int]:
-        """Where a force acts (above a quarter of its rms over the samples where it acts at all) and the starts
-        of windows of ``window_s / 2`` restarted a quarter window before each episode (no two overlapping);
-        ``force`` is given from sample ``lo`` on. Returns (acting mask, starts, window length in samples).
+    def _episodes(self, rec: Measurement, force: np.ndarray, lo: int) -> tuple[np.ndarray, RestartWindows]:
+        """Where a force acts (above a quarter of its rms over the samples where it acts at all) and windows of
+        ``window_s / 2`` restarted a quarter window before each episode (no two overlapping); ``force`` is given
+        from sample ``lo`` on. Returns (acting mask from ``lo`` on, the windows).
         """
         nz = np.abs(force) > 0
         acting = np.abs(force) > 0.25 * np.sqrt(np.mean(force[nz] ** 2)) if nz.any() else nz
@@ -775,7 +782,7 @@ class Discrepancy(StructureResults, Estimator):
             s0 = lo + max(0, int(e) - lead)
             if s0 + length <= rec.n and (not starts or s0 >= starts[-1] + length):
                 starts.append(s0)
-        return acting, starts, length
+        return acting, RestartWindows.at(starts, length)
 
     def _regime_folds(self, rec: Measurement, effect: str, before: Candidate, best: Candidate,
                       model_after: Model, folds: int = 5) -> dict[str, Any]:  # fmt: skip
@@ -792,24 +799,23 @@ class Discrepancy(StructureResults, Estimator):
         force = self._effect_force(model_after, effect, self._z0, self._v0)
         if force is None or not np.any(np.abs(force) > 0):
             return {"windows": 0}
-        acting, starts, length = self._episodes(rec, force, 0)
-        out: dict[str, Any] = {"windows": len(starts), "window_s": length / rec.fs,
+        acting, windows = self._episodes(rec, force, 0)
+        length = windows.length
+        out: dict[str, Any] = {"windows": len(windows), "window_s": length / rec.fs,
                                "acting_share_of_record": float(np.mean(acting))}  # fmt: skip
-        if len(starts) < 3:
+        if len(windows) < 3:
             return out
         form = self._form
         n_rows = self._design(rec, 0, self.n_id_, None, before.aux)[0].shape[0]
         support = test_function(form.half, rec.dt)[0].size
         row_lo = np.arange(n_rows) * form.stride  # row k's test function spans [row_lo, row_lo + support)
-        groups = np.array_split(np.array(starts), min(folds, len(starts)))
+        groups = np.array_split(windows.starts, min(folds, len(windows)))
         ms_b, ms_a, sizes = [], [], []
         pos = _positional()
         for idx in groups:
-            held = np.zeros(rec.n + 1, np.int64)  # the block's samples: its windows and its contacts between them
-            for k in idx:
-                held[k] += 1
-                held[k + length] -= 1
-            mask = np.cumsum(held)[: rec.n] > 0
+            block = RestartWindows.at(idx, length)
+            mask = np.zeros(rec.n, bool)  # the block's samples: its windows and its contacts between them
+            mask[block.index] = True
             span = slice(int(idx[0]), int(idx[-1]) + length)
             mask[span] |= acting[span]
             cum = np.concatenate([[0], np.cumsum(mask[: self.n_id_])])
@@ -823,13 +829,13 @@ class Discrepancy(StructureResults, Estimator):
                 W, y = self._design(rec, 0, self.n_id_, stop, cand.aux)
                 coef = self._fit(W[keep], y[keep], cand.terms, stop is not None, len(cand.aux))
                 models.append(self._model(coef, rec, stop, cand.aux))
-            ms_b.append(self._runs_at(models[0], rec, idx, length))
-            ms_a.append(self._runs_at(models[1], rec, idx, length))
+            ms_b.append(self._runs_at(models[0], rec, block))
+            ms_a.append(self._runs_at(models[1], rec, block))
             folds_size = _size_of(models[1], effect)
             sizes.append({"from_s": float(idx[0] / rec.fs), "to_s": float((idx[-1] + length) / rec.fs),
                           "windows": int(len(idx)), "size": folds_size})  # fmt: skip
         b, a = np.concatenate(ms_b), np.concatenate(ms_a)
-        meas = np.stack([rec.displacement[k : k + length] for k in starts])
+        meas = windows.measured(rec.displacement)
         ref = float(np.sqrt(np.mean(meas**2)))
         worst = float(np.mean(meas**2))
         out["gap_before_percent"], out["gap_after_percent"] = (
@@ -839,20 +845,18 @@ class Discrepancy(StructureResults, Estimator):
         out["folds"] = sizes
         return out
 
-    def _runs_at(self, model: Model, rec: Measurement, starts: np.ndarray, length: int) -> np.ndarray:
-        """Mean-square error of free runs of ``length`` samples restarted from the measured states at ``starts``
-        (nan: diverged): ``restarted_free_runs``' batch at chosen starts (``validation.staged_windows``).
+    def _runs_at(self, model: Model, rec: Measurement, windows: RestartWindows) -> np.ndarray:
+        """Mean-square error of free runs over ``windows``, each restarted from the measured state at its start
+        (nan: diverged).
         """
-        return np.mean(self._residuals_at(model, rec, starts, length) ** 2, axis=1)
+        return np.mean(self._residuals_at(model, rec, windows) ** 2, axis=1)
 
-    def _residuals_at(self, model: Model, rec: Measurement, starts: np.ndarray, length: int) -> np.ndarray:
-        """Free runs' errors (run minus measured z, one row per start; nan rows: diverged), ``_runs_at``'s."""
-        U, sub = staged_windows(model, rec, starts, length)
-        n = len(starts)
-        res = simulate_batch(np.repeat(model.kernel_params()[:, None], n, axis=1), model.kind, U, rec.dt,
-                             np.column_stack([self._z0[starts], self._v0[starts]]), input_kind=rec.input_name,
-                             input_index=np.arange(n), substeps=sub, staged=True)  # fmt: skip
-        meas = np.stack([rec.displacement[k : k + length] for k in starts])
+    def _residuals_at(self, model: Model, rec: Measurement, windows: RestartWindows) -> np.ndarray:
+        """Free runs' errors over ``windows`` (run minus measured z, one row per window; nan rows: diverged):
+        ``validation.simulate_windows`` from the states the gap's runs start from.
+        """
+        res = simulate_windows(model, rec, windows, self._z0, self._v0)
+        meas = windows.measured(rec.displacement)
         out = np.full(meas.shape, np.nan)
         ok = ~res.diverged
         out[ok] = res.z[ok] - meas[ok]
@@ -929,20 +933,22 @@ class Discrepancy(StructureResults, Estimator):
             out[e] = dict(val) if isinstance(val, dict) or hasattr(val, "keys") else val
         return out
 
-    def _interval_windows(self, rec: Measurement, effect: str) -> tuple[np.ndarray, int, str]:
+    def _interval_windows(self, rec: Measurement, effect: str) -> tuple[RestartWindows, str]:
         """The windows an effect's interval is judged on, over the whole record as a posterior's data: runs of
-        ``window_s / 2`` restarted every half window, and one more before each episode where the effect acts.
+        ``window_s / 2`` restarted every half window, and one more before each episode where the effect acts
+        (``_episodes``' windows, of the same length).
         """
-        length = max(8, int(round(self.window_s * rec.fs / 2)))
-        starts = set(range(0, rec.n - length + 1, length))
+        every = restart_windows(rec.n, rec.fs, self.window_s / 2, min_step=8)
+        starts = set(every.starts.tolist())
         force = self._effect_force(self.model_, effect, self._z0, self._v0)
         extra = 0
         if force is not None and np.any(np.abs(force) > 0):
-            acting, episodes, _ = self._episodes(rec, force, 0)
+            acting, episodes = self._episodes(rec, force, 0)
             if acting.mean() < 0.5:
-                extra = len(set(episodes) - starts)
-                starts |= set(episodes)
-        return np.array(sorted(starts)), length, f"the record's windows, {extra} of them restarted where it acts"
+                extra = len(set(episodes.starts.tolist()) - starts)
+                starts |= set(episodes.starts.tolist())
+        windows = RestartWindows.at(sorted(starts), every.length)
+        return windows, f"the record's windows, {extra} of them restarted where it acts"
 
     def effect_interval(self, rec: Measurement, prob: float = 0.9) -> dict[str, Any]:
         """Each named effect's size with its interval (probability ``prob``), by a Laplace approximation of the
@@ -966,18 +972,19 @@ class Discrepancy(StructureResults, Estimator):
             if value is None or effects.get(e).law.label is None and not isinstance(value, dict):
                 out[e] = {"value": value, "interval": None, "prob": prob, "method": "not available for this effect"}
                 continue
-            idx, length, where = self._interval_windows(rec, e)
+            windows, where = self._interval_windows(rec, e)
+            length = windows.length
             names = parameter_names(self.model_, False, held=_held(self.terms_))
             mine = [f"{e}.{k}" if k is not None else e for k in keys]
-            if len(idx) < 3 or not set(mine) <= set(names):
+            if len(windows) < 3 or not set(mine) <= set(names):
                 out[e] = {"value": value, "interval": None, "prob": prob, "method": "not available for this effect"}
                 continue
             theta = values_of(self.model_, names)
             scales = parameter_scales(self.model_, names, float(np.std(self._z0)), float(np.std(self._v0)))
             steps = 1e-3 * np.maximum(np.abs(theta), np.abs(scales))
 
-            def residuals(th: np.ndarray, names=names, idx=idx, length=length) -> np.ndarray:
-                return self._residuals_at(with_values(self.model_, names, th), rec, idx, length)
+            def residuals(th: np.ndarray, names=names, windows=windows) -> np.ndarray:
+                return self._residuals_at(with_values(self.model_, names, th), rec, windows)
 
             r0 = residuals(theta)
             J = np.stack([(residuals(theta + np.eye(theta.size)[j] * steps[j]) - r0) / steps[j]
@@ -1016,10 +1023,11 @@ class Discrepancy(StructureResults, Estimator):
                 out[e] = {**parts["value"], "prob": prob, "method": method}
             else:
                 out[e] = {**parts, "prob": prob, "method": method}
-            self.bayesian_[e] = self._bayesian_opinion(rec, e, idx[ok], length, theta, cov, keys, where)
+            ran = RestartWindows.at(windows.starts[ok], length)
+            self.bayesian_[e] = self._bayesian_opinion(rec, e, ran, theta, cov, keys, where)
         return out
 
-    def _bayesian_opinion(self, rec: Measurement, effect: str, idx: np.ndarray, length: int, theta: np.ndarray,
+    def _bayesian_opinion(self, rec: Measurement, effect: str, windows: RestartWindows, theta: np.ndarray,
                           cov: np.ndarray, keys: list, where: str, draws: int = 64) -> dict[str, Any]:  # fmt: skip
         """A Bayesian second opinion on naming ``effect``: the windows' predictive densities of the final model
         with it (its size drawn from the Laplace approximation) and without it (the rest held), compared by
@@ -1029,11 +1037,11 @@ class Discrepancy(StructureResults, Estimator):
         draws differ, as LOO needs).
         """
         rng = np.random.default_rng(0)
-        meas = np.stack([rec.displacement[k : k + length] for k in idx])
-        worst = float(np.mean(meas**2))
+        length = windows.length
+        worst = float(np.mean(windows.measured(rec.displacement) ** 2))
 
         def window_ms(model: Model) -> tuple[np.ndarray, np.ndarray]:
-            r = self._residuals_at(model, rec, idx, length)
+            r = self._residuals_at(model, rec, windows)
             ms = np.nanmean(r**2, axis=1)
             return np.where(np.isfinite(ms), ms, worst), r
 
@@ -1045,7 +1053,7 @@ class Discrepancy(StructureResults, Estimator):
         ms_with = np.stack(with_ms)  # (draws, windows)
         ms_without, r_without = window_ms(_without(self.model_, effect))
         out = _loo_compare(ms_with, np.repeat(ms_without[None, :], draws, axis=0),
-                           [*self._residuals_at(self.model_, rec, idx, length), *r_without], length, rng)  # fmt: skip
+                           [*self._residuals_at(self.model_, rec, windows), *r_without], length, rng)  # fmt: skip
         out["method"] = (f"arviz.compare (PSIS-LOO) over {where} ({length / rec.fs:g} s restarted runs), {draws} "
                          "draws of the effect's size from its Laplace approximation and of the noise variance")
         return out
@@ -1056,17 +1064,17 @@ class Discrepancy(StructureResults, Estimator):
         densities with the effect (``model_after``) and without it (``model_before``), compared by
         ``arviz.compare`` (PSIS-LOO over the windows; the noise variance drawn, the models' parameters held).
         """
-        w = int(round(self.window_s * rec.fs))
-        idx = self.n_id_ + w * np.arange((rec.n - self.n_id_) // w)
-        if idx.size < 2:
-            return {"windows": int(idx.size), "error": "too few held-out windows"}
-        rb, ra = (self._residuals_at(m, rec, idx, w) for m in (model_before, model_after))
+        windows = restart_windows(rec.n, rec.fs, self.window_s, start=self.n_id_)  # the tail's gap windows
+        if len(windows) < 2:
+            return {"windows": len(windows), "error": "too few held-out windows"}
+        rb, ra = (self._residuals_at(m, rec, windows) for m in (model_before, model_after))
         worst = float(np.mean(rec.displacement[self.n_id_ :] ** 2))
         ms_b, ms_a = (np.where(np.isfinite(m), m, worst) for m in (np.mean(rb**2, axis=1), np.mean(ra**2, axis=1)))
         rng = np.random.default_rng(0)
-        out = _loo_compare(np.repeat(ms_a[None], draws, 0), np.repeat(ms_b[None], draws, 0), [*ra, *rb], w, rng)
-        out["method"] = (f"arviz.compare (PSIS-LOO) over the held-out tail's {idx.size} restarted {self.window_s:g} s "
-                         f"runs, {draws} draws of the noise variance")
+        out = _loo_compare(np.repeat(ms_a[None], draws, 0), np.repeat(ms_b[None], draws, 0), [*ra, *rb],
+                           windows.length, rng)  # fmt: skip
+        out["method"] = (f"arviz.compare (PSIS-LOO) over the held-out tail's {len(windows)} restarted "
+                         f"{self.window_s:g} s runs, {draws} draws of the noise variance")  # fmt: skip
         return out
 
     def where_text(self) -> str:

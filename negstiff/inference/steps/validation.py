@@ -173,6 +173,13 @@ class RestartWindows:
     length: int
     step: int
 
+    @classmethod
+    def at(cls, starts, length: int) -> RestartWindows:
+        """Windows of ``length`` samples at chosen ``starts`` (not evenly stepped: the discrepancy workflow's
+        windows before each episode where an effect acts); ``step`` is ``length``.
+        """
+        return cls(np.asarray(starts, dtype=np.int64).reshape(-1), int(length), int(length))
+
     def __len__(self) -> int:
         return int(self.starts.size)
 
