@@ -5,6 +5,7 @@ import hashlib
 import os
 from pathlib import Path
 
+import numba
 import numpy as np
 
 from negstiff import Model
@@ -73,8 +74,12 @@ def rk4_harmonic(model, amplitudes, f_hz, duration, sim_fs, z0, settle_cycles=10
 
     n = int(round((duration + settle_cycles / f_hz) * sim_fs))
     z, v = np.full(a.shape, float(z0)), np.zeros(a.shape)
-    zs = np.empty((n, a.size))
-    for i in range(n):
+    if not m.extra:  # the polynomial model: the same RK4, compiled (a 30 s record took 4 s)
+        zs = _rk4_harmonic_polynomial(a, w, h, n, float(z0), breathe, 2 * np.pi * breathe_hz,
+                                      (m.m, m.k0, m.k1, m.k2, m.k3, m.c, m.c_nl))  # fmt: skip
+    else:
+        zs = np.empty((n, a.size))
+    for i in range(0 if not m.extra else n):
         t = i * h
         zs[i] = z
         k1 = rhs(t, z, v)
@@ -86,6 +91,35 @@ def rk4_harmonic(model, amplitudes, f_hz, duration, sim_fs, z0, settle_cycles=10
     t = np.arange(n) * h
     keep = t >= settle_cycles / f_hz
     return t[keep] - t[keep][0], acc(t[keep][:, None]), zs[keep]
+
+
+@numba.njit(cache=True)
+def _rk4_harmonic_polynomial(a, w, h, n, z0, breathe, wb, p):  # pragma: no cover (compiled)
+    """``rk4_harmonic``'s RK4 for a model whose restoring force is the cubic ((k3 z + k2) z - k1) z + k0, one
+    amplitude at a time on floats: the numpy loop, step for step."""
+    m, k0, k1, k2, k3, c, c_nl = p
+    zs = np.empty((n, a.size))
+    for j in range(a.size):
+        z, v = z0, 0.0
+        for i in range(n):
+            t = i * h
+            zs[i, j] = z
+            a0 = a[j] * (1 + breathe * np.sin(wb * t + 1.0)) * np.sin(w * t)
+            tm = t + h / 2
+            am = a[j] * (1 + breathe * np.sin(wb * tm + 1.0)) * np.sin(w * tm)
+            t1 = t + h
+            a1 = a[j] * (1 + breathe * np.sin(wb * t1 + 1.0)) * np.sin(w * t1)
+            z1, v1 = z, v
+            p1 = -(c * v1 + c_nl * v1 * abs(v1) + (((k3 * z1 + k2) * z1 - k1) * z1 + k0)) / m - a0
+            z2, v2 = z + h / 2 * v1, v + h / 2 * p1
+            p2 = -(c * v2 + c_nl * v2 * abs(v2) + (((k3 * z2 + k2) * z2 - k1) * z2 + k0)) / m - am
+            z3, v3 = z + h / 2 * v2, v + h / 2 * p2
+            p3 = -(c * v3 + c_nl * v3 * abs(v3) + (((k3 * z3 + k2) * z3 - k1) * z3 + k0)) / m - am
+            z4, v4 = z + h * v3, v + h * p3
+            p4 = -(c * v4 + c_nl * v4 * abs(v4) + (((k3 * z4 + k2) * z4 - k1) * z4 + k0)) / m - a1
+            z = z + h / 6 * (v1 + 2 * v2 + 2 * v3 + v4)
+            v = v + h / 6 * (p1 + 2 * p2 + 2 * p3 + p4)
+    return zs
 
 
 # A horizontal bistable harvester in the Moon-Holmes magneto-elastic form, per unit mass:
@@ -152,10 +186,54 @@ def rk4_random_records(seeds, duration=20.0, rms=8.0, band=(2.0, 30.0), oversamp
         acc.append(a * rms / a.std())
     acc = np.array(acc)
 
+    z, v = np.full(len(seeds), start), np.zeros(len(seeds))
+    if not model.extra:  # the polynomial model: the same RK4, compiled (8x faster; a 30 s record took 11 s)
+        Z = _rk4_polynomial(acc, h, z, model.m, model.k0, model.k1, model.k2, model.k3, model.c, model.c_nl)
+    else:
+        Z = _rk4_numpy(acc, h, z, v, model)
+    k0 = int(round(settle * fs))
+    out = []
+    for b, rng in enumerate(rngs):
+        zb, ub = Z[b, ::oversample][k0:], acc[b, ::oversample][k0:]
+        out.append((ub + table_noise * rng.standard_normal(ub.size), zb + laser * rng.standard_normal(zb.size)))
+    return out
+
+
+@numba.njit(cache=True)
+def _rk4_polynomial(acc, h, z0, m, k0, k1, k2, k3, c, c_nl):  # pragma: no cover (compiled)
+    """``rk4_random_records``' RK4 for a model whose restoring force is the cubic ((k3 z + k2) z - k1) z + k0,
+    record by record on floats: the numpy loop below, step for step."""
+    S, n = acc.shape
+    Z = np.empty((S, n))
+    for b in range(S):
+        z, v = z0[b], 0.0
+        for i in range(n):
+            Z[b, i] = z
+            if i == n - 1:
+                break
+            a0, a1 = acc[b, i], acc[b, i + 1]
+            am = 0.5 * (a0 + a1)
+            z1, v1 = z, v
+            p1 = (-c * v1 - c_nl * v1 * abs(v1) - (((k3 * z1 + k2) * z1 - k1) * z1 + k0)) / m - a0
+            z2, v2 = z + h / 2 * v1, v + h / 2 * p1
+            p2 = (-c * v2 - c_nl * v2 * abs(v2) - (((k3 * z2 + k2) * z2 - k1) * z2 + k0)) / m - am
+            z3, v3 = z + h / 2 * v2, v + h / 2 * p2
+            p3 = (-c * v3 - c_nl * v3 * abs(v3) - (((k3 * z3 + k2) * z3 - k1) * z3 + k0)) / m - am
+            z4, v4 = z + h * v3, v + h * p3
+            p4 = (-c * v4 - c_nl * v4 * abs(v4) - (((k3 * z4 + k2) * z4 - k1) * z4 + k0)) / m - a1
+            z = z + h / 6 * (v1 + 2 * v2 + 2 * v3 + v4)
+            v = v + h / 6 * (p1 + 2 * p2 + 2 * p3 + p4)
+    return Z
+
+
+def _rk4_numpy(acc, h, z, v, model):
+    """``rk4_random_records``' RK4 for any model (its extra terms through ``restoring_force``), vectorised across
+    the records."""
+
     def f(z, v, a):
         return v, (-model.c * v - model.c_nl * v * np.abs(v) - model.restoring_force(z)) / model.m - a
 
-    z, v = np.full(len(seeds), start), np.zeros(len(seeds))
+    n = acc.shape[1]
     Z = np.empty_like(acc)
     for i in range(n):
         Z[:, i] = z
@@ -169,12 +247,7 @@ def rk4_random_records(seeds, duration=20.0, rms=8.0, band=(2.0, 30.0), oversamp
         k4 = f(z + h * k3[0], v + h * k3[1], a1)
         z = z + h / 6 * (k1[0] + 2 * k2[0] + 2 * k3[0] + k4[0])
         v = v + h / 6 * (k1[1] + 2 * k2[1] + 2 * k3[1] + k4[1])
-    k0 = int(round(settle * fs))
-    out = []
-    for b, rng in enumerate(rngs):
-        zb, ub = Z[b, ::oversample][k0:], acc[b, ::oversample][k0:]
-        out.append((ub + table_noise * rng.standard_normal(ub.size), zb + laser * rng.standard_normal(zb.size)))
-    return out
+    return Z
 
 
 # the Silverbox benchmark's split and protocol, from the one Silverbox module (experiments/silverbox.py)
@@ -222,6 +295,47 @@ def fixture_rk4_step(device, fixture=FIXTURE, hidden=None):
     return step
 
 
+@numba.njit(cache=True)
+def _rk4_fixture_polynomial(acc, h, oversample, z2, p):  # pragma: no cover (compiled)
+    """``rk4_fixture_record``'s RK4 (``fixture_rk4_step``'s, operation for operation) compiled, for an element
+    without a hidden force."""
+    m1, k_f, c_f, m2, k0, k1, k2, k3, c, cn = p
+    n = acc.size
+    out = np.empty((2, n // oversample))
+    z1, v1, v2 = 0.0, 0.0, 0.0
+    for i in range(n):
+        if i % oversample == 0:
+            out[0, i // oversample], out[1, i // oversample] = z1, z2
+        a0 = acc[i]
+        a1 = acc[i + 1] if i + 1 < n else a0
+        am = 0.5 * (a0 + a1)
+        # stage 1
+        r, vr = z2 - z1, v2 - v1
+        f = ((k3 * r + k2) * r - k1) * r + k0 + c * vr + cn * vr * abs(vr)
+        p1, q1 = (-k_f * z1 - c_f * v1 + f) / m1 - a0, -f / m2 - a0
+        s1, s2 = v1 + 0.5 * h * p1, v2 + 0.5 * h * q1
+        # stage 2
+        y1, y2 = z1 + 0.5 * h * v1, z2 + 0.5 * h * v2
+        r, vr = y2 - y1, s2 - s1
+        f = ((k3 * r + k2) * r - k1) * r + k0 + c * vr + cn * vr * abs(vr)
+        p2, q2 = (-k_f * y1 - c_f * s1 + f) / m1 - am, -f / m2 - am
+        t1, t2 = v1 + 0.5 * h * p2, v2 + 0.5 * h * q2
+        # stage 3
+        y1, y2 = z1 + 0.5 * h * s1, z2 + 0.5 * h * s2
+        r, vr = y2 - y1, t2 - t1
+        f = ((k3 * r + k2) * r - k1) * r + k0 + c * vr + cn * vr * abs(vr)
+        p3, q3 = (-k_f * y1 - c_f * t1 + f) / m1 - am, -f / m2 - am
+        w1, w2 = v1 + h * p3, v2 + h * q3
+        # stage 4
+        y1, y2 = z1 + h * t1, z2 + h * t2
+        r, vr = y2 - y1, w2 - w1
+        f = ((k3 * r + k2) * r - k1) * r + k0 + c * vr + cn * vr * abs(vr)
+        p4, q4 = (-k_f * y1 - c_f * w1 + f) / m1 - a1, -f / m2 - a1
+        z1, z2, v1, v2 = (z1 + h / 6 * (v1 + 2 * s1 + 2 * t1 + w1), z2 + h / 6 * (v2 + 2 * s2 + 2 * t2 + w2),
+                          v1 + h / 6 * (p1 + 2 * p2 + 2 * p3 + p4), v2 + h / 6 * (q1 + 2 * q2 + 2 * q3 + q4))
+    return out
+
+
 def rk4_fixture_record(duration=60.0, rms=12.0, band=(2.0, 40.0), seed=1, oversample=8, settle=5.0, noise=1e-6,
                        device=None, fixture=FIXTURE, fs=FS, hidden=None):  # fmt: skip
     """(base_acc, z (2, T)) of ``device`` (TRUTH by default) on a sprung fixture, as another lab's code writes it: a
@@ -248,7 +362,12 @@ def rk4_fixture_record(duration=60.0, rms=12.0, band=(2.0, 40.0), seed=1, oversa
     z2 = float(max(roots[np.abs(roots.imag) < 1e-9].real))
     z1, v1, v2 = 0.0, 0.0, 0.0
     out = np.empty((2, n // oversample))
-    for i in range(n):
+    if hidden is None:  # the same steps, compiled (a 300 s record took 16 s)
+        m1 = fixture["m"]
+        k_f = m1 * (2 * np.pi * fixture["f_hz"]) ** 2
+        p = (m1, k_f, 2 * fixture["zeta"] * np.sqrt(k_f * m1), dev.m, k0, k1, k2, k3, dev.c, dev.c_nl)
+        out = _rk4_fixture_polynomial(np.asarray(acc), h, oversample, z2, p)
+    for i in range(n if hidden is not None else 0):
         if i % oversample == 0:
             out[0, i // oversample], out[1, i // oversample] = z1, z2
         a0 = acc[i]
