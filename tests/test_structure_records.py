@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from records import FIXTURE, rk4_fixture_record, write_csv
 
-from negstiff import NSI, InputError, Model, NegstiffWarning, SINDy, from_arrays, load
+from negstiff import NSI, Discrepancy, InputError, Model, NegstiffWarning, SINDy, from_arrays, load
 from negstiff.inference.estimators.structure_id import _finish, free_run_error
 from negstiff.models import SEED_LIKE_CUBIC
 from negstiff.models.structure import Structure
@@ -88,3 +88,15 @@ def test_a_structures_file_is_read_through_the_one_reader(tmp_path):
         NSI().fit(from_arrays(u, z, FS, masses=(1.0, 0.2)))
     with pytest.raises(InputError, match="masses"):
         SINDy(element="1-2").fit(from_arrays(u, z, FS))
+
+
+@pytest.mark.parametrize("method", [NSI, SINDy, Discrepancy])
+def test_output_error_refinement_is_refused_on_a_structure_before_the_work(method):
+    # refinement is defined for a single DOF's record; asked for on a structure's it is one InputError naming the
+    # estimator and the structure, before any work (a 2 s record: the check needs none of it), and left unset it
+    # is simply not run (None: where defined)
+    u, z = rk4_fixture_record(duration=2.0, seed=2, device=DEVICE)
+    rec = from_arrays(u, z, FS, masses=(FIXTURE["m"], DEVICE.m), source="short record")
+    with pytest.raises(InputError, match=rf"{method.__name__}\(refine=True\).*single DOF.*2 DOFs, element 1-2"):
+        method(element="1-2", refine=True).fit(rec)
+    assert method(element="1-2").refine is None

@@ -169,6 +169,11 @@ def _simulate_structure(args, structure) -> int:
     return 0
 
 
+def refinement(args) -> bool | None:
+    """The estimators' ``refine`` from ``--no-refine``: False, else None (where defined: a single DOF's record)."""
+    return False if args.no_refine else None
+
+
 def cmd_identify(args) -> int:
     from negstiff.inference.analysis.frf import compare_with_frf, read_frf_results
     from negstiff.inference.record.measurement import load
@@ -184,13 +189,13 @@ def cmd_identify(args) -> int:
         from negstiff.inference.estimators.nsi import NSI
 
         est: NSI | SINDy = NSI(
-            order=args.order, block_rows=args.block_rows, refine=not args.no_refine, progress=wants_progress(args),
+            order=args.order, block_rows=args.block_rows, refine=refinement(args), progress=wants_progress(args),
             element=args.element,
         )  # fmt: skip
     else:
         from negstiff.inference.estimators.sindy import SINDy
 
-        est = SINDy(n_models=args.ensemble, seed=args.seed, refine=not args.no_refine, element=args.element)
+        est = SINDy(n_models=args.ensemble, seed=args.seed, refine=refinement(args), element=args.element)
     rec = est.check(rec)  # every refusal before the progress line
     if rec.n_dof > 1:
         return _identify_structure(args, est, rec)
@@ -301,7 +306,7 @@ def cmd_discrepancy(args) -> int:
 
     rec = load(args.data, columns=args.columns, fs=args.fs, mass=args.mass, gravity=args.gravity, aux=args.aux)
     base = CUBIC_BASELINE if args.baseline == "cubic" else LINEAR_BASELINE
-    d = Discrepancy(baseline=base, max_effects=args.max_effects, refine=not args.no_refine, unnamed=args.unnamed)
+    d = Discrepancy(baseline=base, max_effects=args.max_effects, refine=refinement(args), unnamed=args.unnamed)
     rec = d.check(rec)  # every refusal before the progress line
     say(args, f"discrepancy: {rec.n} samples at {rec.fs:g} Hz, input {rec.input_name}, baseline {args.baseline}")
     d.fit(rec)

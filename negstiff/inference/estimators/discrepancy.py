@@ -246,8 +246,9 @@ class Discrepancy(StructureResults, Estimator):
         Effects added at most (iterations).
     window_s : float, default 2
         Restarted free runs and residual blocks [s].
-    refine : bool, default True
-        Refine each model by output error (an effect is kept only if it then predicts better).
+    refine : bool or None, default None
+        Refine each model by output error (an effect is kept only if it then predicts better). None: where it is
+        defined, a single DOF's record; ``refine=True`` on a structure's record is one ``InputError``.
     unnamed : bool, default False
         Add a non-parametric force for what no catalogue effect names (the hybrid model; a single DOF's).
     element : str or (int, int), optional
@@ -299,7 +300,7 @@ class Discrepancy(StructureResults, Estimator):
         "margin": Interval(float, 0.0),
         "max_effects": Interval(int, 0, 20),
         "window_s": Interval(float, 0.0, lo_open=True, unit="s"),
-        "refine": Boolean(),
+        "refine": Boolean(none=True),
         "unnamed": Boolean(),
         "element": ElementPlace(),
     }
@@ -313,7 +314,7 @@ class Discrepancy(StructureResults, Estimator):
         margin: float = 0.1,
         max_effects: int = 3,
         window_s: float = 2.0,
-        refine: bool = True,
+        refine: bool | None = None,
         unnamed: bool = False,
         element: str | tuple[int, int] | None = None,
     ):
@@ -562,7 +563,7 @@ class Discrepancy(StructureResults, Estimator):
         base_model = self._refit_model(rec, terms, stop)
         self.baseline_model_ = base_model
         self.baseline_refinement_ = None
-        if self.refine:  # the gap a user sees is the best the baseline's form predicts, not its weak fit's
+        if self.refine is not False:  # the gap a user sees is the best the baseline's form predicts, not its weak fit's
             val = validate(base_model, rec, self.n_id_)
             base_model, _, self.baseline_refinement_ = refine_stage(base_model, rec, self.n_id_, val, held=_held(terms))
         self.gap_before_ = self._gap(rec, base_model)
@@ -644,7 +645,7 @@ class Discrepancy(StructureResults, Estimator):
         """
         initial = self._refit_model(rec, best.terms, best.stop, best.aux)
         model, refinement = initial, None
-        if self.refine:
+        if self.refine is not False:
             val = validate(initial, rec, self.n_id_)
             model, _, refinement = refine_stage(initial, rec, self.n_id_, val, held=_held(best.terms))
         return {"model": model, "initial": initial, "refinement": refinement, "gap": self._gap(rec, model)}

@@ -354,7 +354,7 @@ class Identifier(Estimator):
         stroke = stroke_quantiles(rec.z[:n_id])
         validation = validate(est.model, rec, n_id)
         model, refinement, mass_source = est.model, None, est.mass_source
-        if self.refine:
+        if self.refine is not False:  # None: where defined, and a single DOF's record is
             model, validation, refinement = refine_stage(est.model, rec, n_id, validation, held=est.held)
             if refinement["applied"] and refinement.get("free_mass"):
                 mass_source += ", refined by simulation error"

@@ -162,14 +162,16 @@ class NSI(StructureResults, Identifier):
     passes : int, default 2
         Identification passes per well at most (each at the z* refined by the previous one; the loop
         stops when the shift falls below 0.1 % of the motion's spread).
-    refine : bool, default True
-        Finish by output-error refinement (kept only if it predicts the held-out tail no worse).
+    refine : bool or None, default None
+        Finish by output-error refinement (kept only if it predicts the held-out tail no worse). None: where it is
+        defined, a single DOF's record. On a structure's record (``element``) it is not defined yet, and
+        ``refine=True`` there is one ``InputError``.
     progress : bool, default False
         A progress bar over the identification passes on stderr, shown once they take more than 2 s.
     element : str or (int, int), optional
         Where the element acts on a record of N > 1 DOFs: ``"I-J"``, it moves DOF J relative to DOF I (0: the
         base). None: the single DOF (on the base). A structure's result is a ``StructureIdentification``
-        (``structure_``, ``element_``, ``offsets_``; no output-error refinement).
+        (``structure_``, ``element_``, ``offsets_``; no output-error refinement: ``refine``).
 
     Attributes
     ----------
@@ -207,7 +209,7 @@ class NSI(StructureResults, Identifier):
         "band": Pair(Interval(float, 0.0, 10.0, lo_open=True)),
         "validation_fraction": FRACTION,
         "passes": Interval(int, 1, 20),
-        "refine": Boolean(),
+        "refine": Boolean(none=True),
         "progress": Boolean(),
         "element": ElementPlace(),
     }
@@ -220,7 +222,7 @@ class NSI(StructureResults, Identifier):
         band: tuple[float, float] = (0.6, 1.6),
         validation_fraction: float = 0.2,
         passes: int = 2,
-        refine: bool = True,
+        refine: bool | None = None,
         progress: bool = False,
         element: str | tuple[int, int] | None = None,
     ):
@@ -365,7 +367,7 @@ class NSI(StructureResults, Identifier):
     def _check_record(self, rec: Measurement) -> None:
         element_of(self, rec)
         rec.require(max(2000, 40 * self.block_rows), "NSI")
-        if rec.n_dof > 1 or record_kind(rec).kind != "decay":
+        if record_kind(rec).kind != "decay":
             rec.require_excitation("NSI")
         else:
             check_decay(rec, "NSI")
@@ -381,11 +383,11 @@ class NSI(StructureResults, Identifier):
         """
         rec = self.check(data)
         at = element_of(self, rec)
+        kind = record_kind(rec)
+        self.record_kind_ = kind
         if at is None:
-            kind = record_kind(rec)
-            self.record_kind_ = kind
             return super().fit(identification_record(rec, kind))
-        self.result_ = identify_nsi(self, rec, at)
+        self.result_ = identify_nsi(self, identification_record(rec, kind), at)
         return self
 
     def _estimate(self, rec: Measurement, n_id: int) -> Estimate:

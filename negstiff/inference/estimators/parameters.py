@@ -97,15 +97,17 @@ class Options(Constraint):
 
 @dataclass(frozen=True)
 class Boolean(Constraint):
-    """True or False."""
+    """True or False (or None, "where it applies", with ``none``)."""
+
+    none: bool = False
 
     @override
     def accepts(self, value: Any) -> bool:
-        return isinstance(value, bool)
+        return isinstance(value, bool) or (self.none and value is None)
 
     @override
     def describe(self) -> str:
-        return "True or False"
+        return "True, False or None" if self.none else "True or False"
 
 
 @dataclass(frozen=True)

@@ -115,8 +115,10 @@ class SINDy(StructureResults, Identifier):
     seed : int, None or numpy.random.Generator, default 0
         Seeds the ensemble's bagging (same seed, same ensemble); None: fresh entropy; a Generator: its next draw
         (scikit-learn's ``random_state``). The integer used is ``seed_`` and the result's ``settings["seed"]``.
-    refine : bool, default True
-        Finish by output-error refinement (a single DOF's).
+    refine : bool or None, default None
+        Finish by output-error refinement (kept only if it predicts the held-out tail no worse). None: where it is
+        defined, a single DOF's record. On a structure's record (``element``) it is not defined yet, and
+        ``refine=True`` there is one ``InputError``.
     element : str or (int, int), optional
         Where the element acts on a record of N > 1 DOFs: ``"I-J"``, it moves DOF J relative to DOF I (0: the
         base). None: the single DOF. A structure's result is a ``StructureIdentification``.
@@ -162,7 +164,7 @@ class SINDy(StructureResults, Identifier):
         "window_s": Interval(float, 0.0, lo_open=True, unit="s"),
         "margin": Interval(float, 0.0),
         "seed": RANDOM_STATE,
-        "refine": Boolean(),
+        "refine": Boolean(none=True),
         "element": ElementPlace(),
     }
 
@@ -177,7 +179,7 @@ class SINDy(StructureResults, Identifier):
         window_s: float = 2.0,
         margin: float = 0.1,
         seed: int | np.random.Generator | None = 0,
-        refine: bool = True,
+        refine: bool | None = None,
         element: str | tuple[int, int] | None = None,
     ):
         self.element = element
@@ -222,11 +224,11 @@ class SINDy(StructureResults, Identifier):
         rec = self.check(data)
         self.seed_ = seed_of(self.seed)  # None or a Generator: the integer drawn here, recorded in the settings
         at = element_of(self, rec)
+        # a hammer's force windowed, a free decay's input zero: the weak form without an input term
+        self.record_kind_ = kind = record_kind(rec)
         if at is None:
-            # a hammer's force windowed, a free decay's input zero: the weak form without an input term
-            self.record_kind_ = kind = record_kind(rec)
             return super().fit(identification_record(rec, kind))
-        self.result_ = identify_sindy(self, rec, at)
+        self.result_ = identify_sindy(self, identification_record(rec, kind), at)
         self.selected_ = list(self.result_.details["selected_terms"])
         self.ensemble_ = self.result_.details["ensemble"]
         return self
@@ -234,7 +236,7 @@ class SINDy(StructureResults, Identifier):
     def _check_record(self, rec: Measurement) -> None:
         at = element_of(self, rec)
         rec.require(MIN_SAMPLES, "SINDy")
-        if at is not None or record_kind(rec).kind != "decay":
+        if record_kind(rec).kind != "decay":
             rec.require_excitation("SINDy")
         else:
             check_decay(rec, "SINDy")
