@@ -32,31 +32,42 @@ def _force_law(model: Model):
     return force
 
 
-def hammer_record(model, z_rest, fs, hits, peak_n, width_s, duration):
-    """(t, force, z, z_dot) of ``model`` at rest at ``z_rest`` hit at the times ``hits`` [s] by half-sine pulses
-    of ``peak_n`` [N] lasting ``width_s``: DOP853 piece by piece (short steps inside each pulse, none imposed
-    between), noise-free and without offsets (the test adds the lab's)."""
-    law = _force_law(model)
-    n = int(round(duration * fs))
-    t = np.arange(n) / fs
-
+def _pulses(hits, peak_n, width_s):
     def pulse(tt):
         return sum(peak_n * np.sin(np.pi * (tt - h) / width_s) * ((tt >= h) & (tt <= h + width_s)) for h in hits)
 
-    def rhs(tt, x):
-        return [x[1], (pulse(tt) - law(x[0], x[1])) / model.m]
+    return pulse
 
+
+def _piecewise(rhs, x0, t, hits, width_s, duration):
+    """The states at ``t`` of ``x' = rhs(t, x)`` from ``x0``: DOP853 piece by piece (short steps inside each pulse,
+    none imposed between), rows of the state."""
     edges = sorted({0.0, float(duration), *hits, *[h + width_s for h in hits]})
-    x = np.array([z_rest, 0.0])
-    z, v = np.empty(n), np.empty(n)
+    x = np.asarray(x0, float)
+    out = np.empty((x.size, t.size))
     for a, b in zip(edges[:-1], edges[1:], strict=True):
         sel = (t >= a) & ((t < b) | (b == edges[-1]))
         inside = any(abs(a - h) < 1e-12 for h in hits)
         sol = solve_ivp(rhs, (a, b), x, method="DOP853", rtol=1e-10, atol=1e-13, dense_output=True,
                         max_step=width_s / 16 if inside else np.inf)  # fmt: skip
         if sel.any():
-            z[sel], v[sel] = sol.sol(t[sel])
+            out[:, sel] = sol.sol(t[sel])
         x = sol.y[:, -1]
+    return out
+
+
+def hammer_record(model, z_rest, fs, hits, peak_n, width_s, duration):
+    """(t, force, z, z_dot) of ``model`` at rest at ``z_rest`` hit at the times ``hits`` [s] by half-sine pulses
+    of ``peak_n`` [N] lasting ``width_s``: DOP853 piece by piece (short steps inside each pulse, none imposed
+    between), noise-free and without offsets (the test adds the lab's)."""
+    law = _force_law(model)
+    t = np.arange(int(round(duration * fs))) / fs
+    pulse = _pulses(hits, peak_n, width_s)
+
+    def rhs(tt, x):
+        return [x[1], (pulse(tt) - law(x[0], x[1])) / model.m]
+
+    z, v = _piecewise(rhs, [z_rest, 0.0], t, hits, width_s, duration)
     return t, pulse(t), z, v
 
 
@@ -67,3 +78,45 @@ def decay_record(model, z0, fs, duration, v0=0.0):
     sol = solve_ivp(lambda tt, x: [x[1], -law(x[0], x[1]) / model.m], (0.0, t[-1]), [z0, v0], t_eval=t,
                     method="DOP853", rtol=1e-10, atol=1e-13)  # fmt: skip
     return t, sol.y[0], sol.y[1]
+
+
+def fixture_rhs(device, fixture_mass, fixture_hz, fixture_zeta, force=None, force_dof=2):
+    """The equations of motion of ``device`` on a fixture (DOF 1: ``fixture_mass`` on its spring and damper to the
+    ground, ``fixture_hz`` and ``fixture_zeta`` of the fixture alone; DOF 2 the device's mass on the element between
+    them, the element's force, k0 included, on DOF 2 and oppositely on DOF 1), displacements from the springs'
+    loaded rest; ``force(t)`` [N] on DOF ``force_dof``. State (z1, z2, v1, v2)."""
+    law = _force_law(device)
+    m1, m2 = fixture_mass, device.m
+    k_f = m1 * (2 * np.pi * fixture_hz) ** 2
+    c_f = 2 * fixture_zeta * np.sqrt(k_f * m1)
+
+    def rhs(tt, x):
+        z1, z2, v1, v2 = x
+        el = law(z2 - z1, v2 - v1)
+        p = 0.0 if force is None else force(tt)
+        return [v1, v2, (-k_f * z1 - c_f * v1 + el + (p if force_dof == 1 else 0.0)) / m1,
+                (-el + (p if force_dof == 2 else 0.0)) / m2]  # fmt: skip
+
+    return rhs
+
+
+def fixture_hammer_record(device, fixture, fs, hits, peak_n, width_s, duration, force_dof=2, well="plus"):
+    """(t, force, z (2, T)) of ``device`` on ``fixture`` (``fixture_rhs``'s keywords) at rest in its element's
+    ``well`` (the fixture's spring unloaded), hit on DOF ``force_dof`` at the times ``hits`` [s] by half-sine pulses
+    of ``peak_n`` [N] lasting ``width_s``: DOP853 piece by piece, noise-free and without offsets."""
+    eq = device.equilibria()
+    r0 = eq.z_plus if well == "plus" else eq.z_minus
+    t = np.arange(int(round(duration * fs))) / fs
+    pulse = _pulses(hits, peak_n, width_s)
+    x = _piecewise(fixture_rhs(device, **fixture, force=pulse, force_dof=force_dof), [0.0, r0, 0.0, 0.0], t, hits,
+                   width_s, duration)  # fmt: skip
+    return t, pulse(t), x[:2]
+
+
+def fixture_decay_record(device, fixture, z0, fs, duration):
+    """(t, z (2, T)) of ``device`` on ``fixture`` released at rest from ``z0`` = (z1, z2) [m] (DOP853,
+    noise-free)."""
+    t = np.arange(int(round(duration * fs))) / fs
+    sol = solve_ivp(fixture_rhs(device, **fixture), (0.0, t[-1]), [z0[0], z0[1], 0.0, 0.0], t_eval=t,
+                    method="DOP853", rtol=1e-10, atol=1e-13)  # fmt: skip
+    return t, sol.y[:2]

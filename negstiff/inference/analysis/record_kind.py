@@ -1,4 +1,4 @@
-"""What kind of test a single DOF's record is, and the input an identification reads from it.
+"""What kind of test a record is (a single DOF's or a structure's), and the input an identification reads from it.
 
 Three kinds of test are common in a structural-dynamics lab (issue "Hammer and decay tests"):
 
@@ -22,7 +22,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from negstiff.errors import InputError, MeasurementError
+from negstiff.errors import MeasurementError
 from negstiff.inference.analysis.impact import Impacts, find_impacts
 from negstiff.inference.record.measurement import Measurement
 
@@ -45,7 +45,7 @@ def record_kind(rec: Measurement, decay: bool | None = None) -> RecordKind:
     Parameters
     ----------
     rec : Measurement
-        A single DOF's record.
+        A single DOF's record or a structure's (its force on one DOF, ``force_dof``).
     decay : bool, optional
         True: the record is a free decay whatever its input column holds (its input is not used); False: it is
         not one; None: decided from the input column (a decay when it stays at its floor throughout).
@@ -56,7 +56,7 @@ def record_kind(rec: Measurement, decay: bool | None = None) -> RecordKind:
     """
     if decay:
         return RecordKind("decay", "named a free decay by the caller: the input column is not used")
-    if rec.n_dof == 1 and decay is None and is_constant(rec.u):
+    if decay is None and is_constant(rec.u):
         return RecordKind("decay", f"the input ({rec.input_name}) is constant throughout: a free decay")
     if rec.input_name == "base_acc":
         return RecordKind("base", "base acceleration")
@@ -72,11 +72,15 @@ least this many times the last tenth's (a record at rest with a constant input i
 
 
 def check_decay(rec: Measurement, what: str) -> None:
-    """Raise ``MeasurementError`` when a free decay's response does not ring down (``RING_DOWN``)."""
-    z = np.asarray(rec.displacement, float)
-    tenth = max(8, z.size // 10)
-    rest = float(np.median(z[-tenth:]))
-    start, end = float(np.std(z[:tenth] - rest)), float(np.std(z[-tenth:] - rest))
+    """Raise ``MeasurementError`` when a free decay's response does not ring down (``RING_DOWN``); a structure's
+    when none of its channels does (each channel's ratio, the largest read).
+    """
+    z = np.atleast_2d(np.asarray(rec.displacement, float))
+    tenth = max(8, z.shape[1] // 10)
+    rest = np.median(z[:, -tenth:], axis=1, keepdims=True)
+    starts, ends = np.std(z[:, :tenth] - rest, axis=1), np.std(z[:, -tenth:] - rest, axis=1)
+    best = int(np.argmax(starts / np.maximum(ends, 1e-300)))
+    start, end = float(starts[best]), float(ends[best])
     if not start > RING_DOWN * end:
         raise MeasurementError(
             f"{rec.source}: the input {rec.input_name} is constant ({rec.u[0]:.6g} over {rec.n} samples) and the "
@@ -113,7 +117,5 @@ def identification_record(rec: Measurement, kind: RecordKind) -> Measurement:
     if kind.kind == "impact" and kind.impacts is not None:
         return replace(rec, u=impact_input(rec, kind.impacts))
     if kind.kind == "decay":
-        if rec.n_dof > 1:
-            raise InputError(f"{rec.source}: a free decay of a structure of {rec.n_dof} DOFs is not identified yet")
         return replace(rec, u=np.zeros(rec.n))
     return rec
