@@ -10,14 +10,14 @@ in amplitude with their Floquet stability, predict where the first period doubli
 import matplotlib.pyplot as plt
 import numpy as np
 
-from negstiff import Measurement, Rig, characterize, nfrc
+from negstiff import Measurement, Rig, characterise, nfrc
 from negstiff.models import SEED_LIKE_CUBIC
 
 amplitudes = np.arange(4.0, 16.0, 1.0)
 steps = Rig(SEED_LIKE_CUBIC, seed=6).sweep(9.0, amplitudes, start="plus", record_periods=40)
 fig, ax = plt.subplots(figsize=(7, 3.5))
 for a, step in zip(amplitudes, steps, strict=False):
-    c = characterize(Measurement.from_rig(step), forcing_hz=9.0, lle=False, poincare=True)
+    c = characterise(Measurement.from_rig(step), forcing_hz=9.0, lle=False, poincare=True)
     ax.plot(np.full(len(c["poincare_z"]), a), 1e3 * np.asarray(c["poincare_z"]), "k.", ms=2)
     print(f"{a:5.1f} m/s^2: period {c['period']}, {c['regime']}")
 

@@ -45,7 +45,8 @@ _EXPORTS = {
     "Discrepancy": "negstiff.inference.estimators.discrepancy",
     "Posterior": "negstiff.inference.estimators.posterior.core",
     "GAUpdater": "negstiff.inference.estimators.updating",
-    "characterize": "negstiff.inference.analysis.characterize",
+    "characterise": "negstiff.inference.analysis.characterise",
+    "characterize": "negstiff.inference.analysis.characterise",  # the first spelling, kept: ``characterise``
     "frf": "negstiff.inference.analysis.frf",
     "Report": "negstiff.report.document",
     "Identification": "negstiff.inference.estimators.identification",

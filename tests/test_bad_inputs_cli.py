@@ -300,7 +300,7 @@ def test_a_forcing_frequency_at_two_samples_a_period_is_refused(records, capsys,
     # 255 Hz sampled at 512 Hz is 2 samples a period: inside any anti-aliasing filter's roll-off, no
     # Poincare section can be read there (the record's forcing is 9 Hz)
     out = tmp_path / "c.json"
-    msg = refused(records, capsys, ["characterize", records / "harm.csv", "--forcing-hz", "255", "-o", out], [out])
+    msg = refused(records, capsys, ["characterise", records / "harm.csv", "--forcing-hz", "255", "-o", out], [out])
     assert "255" in msg
 
 

@@ -8,7 +8,7 @@ from scipy.integrate import solve_ivp
 
 from negstiff.cli import main
 from negstiff.errors import MeasurementError
-from negstiff.inference.analysis.characterize import CHAOS_THRESHOLD, characterize
+from negstiff.inference.analysis.characterise import CHAOS_THRESHOLD, characterise
 from negstiff.inference.analysis.lyapunov import largest_lyapunov
 from negstiff.inference.analysis.periodicity import periodicity
 from negstiff.inference.record.measurement import from_arrays
@@ -97,7 +97,7 @@ def long_records():
 def test_wolf_agrees_with_the_variational_ground_truth_on_a_chaotic_record(long_records):
     _, rec = long_records
     m = from_arrays(rec.columns["base_acc"], rec.columns["z"], 512.0)
-    c = characterize(m, 9.0, (AS_BUILT.equilibria().z_minus, AS_BUILT.equilibria().z_plus))
+    c = characterise(m, 9.0, (AS_BUILT.equilibria().z_minus, AS_BUILT.equilibria().z_plus))
     b = lyapunov_benettin(
         AS_BUILT, rec.true["base_acc"], 1 / 512, rec.true["z"][0], rec.true["z_dot"][0], transient_s=5.0
     )["value"]
@@ -107,16 +107,16 @@ def test_wolf_agrees_with_the_variational_ground_truth_on_a_chaotic_record(long_
 
 def test_a_periodic_record_is_not_significantly_positive(long_records):
     rec, _ = long_records
-    c = characterize(from_arrays(rec.columns["base_acc"], rec.columns["z"], 512.0), 9.0)
+    c = characterise(from_arrays(rec.columns["base_acc"], rec.columns["z"], 512.0), 9.0)
     assert c["period"] == 1 and not c["chaotic"]
     assert c["lle"]["value"] < CHAOS_THRESHOLD * 2 * np.pi * 9.0
 
 
-def test_characterize_command_and_a_record_too_short(tmp_path):
+def test_characterise_command_and_a_record_too_short(tmp_path):
     rec = tmp_path / "h.csv"
     assert main(["rig", "harmonic", "-o", str(rec), "--amplitude", "5", "--periods", "120", "--quiet"]) == 0
     out = tmp_path / "c.json"
-    assert main(["characterize", str(rec), "--forcing-hz", "9", "-o", str(out), "--quiet"]) == 0
+    assert main(["characterise", str(rec), "--forcing-hz", "9", "-o", str(out), "--quiet"]) == 0
     r = json.loads(out.read_text())
     assert {"period", "regime", "chaotic", "amplitudes", "lle"} <= set(r) and r["lle"]["units"] == "1/s"
     assert r["period"] == 1 and r["regime"] == "in-well-plus"
@@ -174,7 +174,7 @@ def test_a_period_2_record_from_another_integrator_is_period_2():
     # map, integrated here by DOP853, repeats every 2 cycles); 150 s at 512 Hz with 30 um noise.
     rec, strobe = _duffing_record([13.0, 14.0], 512.0, 150.0)
     assert _true_period(strobe) == 2
-    c = characterize(rec, F)
+    c = characterise(rec, F)
     assert c["period"] == 2 and not c["chaotic"] and len(c["amplitudes"]) == 2
     lle = c["lle"]
     assert lle["value"] is None or not (lle["value"] > CHAOS_THRESHOLD * 2 * np.pi * F and lle["value"] > 3 * lle["sd"])
@@ -186,7 +186,7 @@ def test_a_period_1_record_at_64_hz_is_period_1():
     # positive (Wolf alone gave +0.08 1/s on such a record: the segments' spread must cover it).
     rec, strobe = _duffing_record([9.0], 64.0, 4096 / 64.0, sim_fs=1024.0)
     assert _true_period(strobe) == 1 and rec.n == 4096
-    c = characterize(rec, F)
+    c = characterise(rec, F)
     assert c["period"] == 1 and not c["chaotic"], c["reasons"]
     lle = c["lle"]
     assert lle["value"] is None or not (lle["value"] > CHAOS_THRESHOLD * 2 * np.pi * F and lle["value"] > 3 * lle["sd"])
@@ -197,4 +197,20 @@ def test_a_constant_response_is_refused_as_a_dead_sensor():
     # (it was reported 'not determinable' with exit 0 and no warning, the second probe's finding)
     t = np.arange(40 * 512) / 512
     with pytest.raises(MeasurementError, match="response z is constant .* dead or disconnected sensor"):
-        characterize(from_arrays(np.sin(2 * np.pi * F * t), np.full(t.size, 0.02), 512.0), F)
+        characterise(from_arrays(np.sin(2 * np.pi * F * t), np.full(t.size, 0.02), 512.0), F)
+
+
+def test_the_contracts_first_spelling_runs_the_same_command_and_function(tmp_path):
+    # negstiff spells British; the contract first named the command and function 'characterize', and a script that
+    # ran then runs now: the alias is the same function, and the CLI's alias writes the same result
+    import negstiff
+    from negstiff.cli import main
+
+    assert negstiff.characterize is negstiff.characterise
+    Rig(seed=3).harmonic(freq=9.0, amplitude=4.0, settle_periods=50, record_periods=100).write(tmp_path / "h.csv")
+    outs = []
+    for name in ("characterise", "characterize"):
+        out = tmp_path / f"{name}.json"
+        assert main([name, str(tmp_path / "h.csv"), "--forcing-hz", "9", "--quiet", "-o", str(out)]) == 0
+        outs.append(json.loads(out.read_text()))
+    assert outs[0]["period"] == outs[1]["period"] and outs[0]["regime"] == outs[1]["regime"]

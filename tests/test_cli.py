@@ -176,7 +176,7 @@ def test_reproduce_machinery_on_two_sections(tmp_path, monkeypatch, capsys):
     from negstiff.study.reproduce import reproduce
 
     monkeypatch.setenv("NEGSTIFF_CACHE", str(tmp_path / "cache"))
-    sections = ("characterization", "nsi")
+    sections = ("characterisation", "nsi")
     results = _check_report(reproduce(tmp_path / "a", fast=True, progress=False, sections=sections), sections)
     assert results["sections_left_out"] == [
         "updating",

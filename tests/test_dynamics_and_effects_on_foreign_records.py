@@ -12,8 +12,8 @@ from records import dop853_record, rk4_harmonic
 from scipy import signal
 from scipy.integrate import solve_ivp
 
-from negstiff import Discrepancy, characterize, from_arrays
-from negstiff.inference.analysis.characterize import significantly_positive
+from negstiff import Discrepancy, characterise, from_arrays
+from negstiff.inference.analysis.characterise import significantly_positive
 from negstiff.inference.analysis.lyapunov import largest_lyapunov
 from negstiff.models.device import SEED_LIKE_CROSS_WELL_RMS
 from negstiff.models.device import SEED_LIKE_CUBIC as M
@@ -51,7 +51,7 @@ def test_period_doublings_at_512_hz_are_found(minus_well_records, amp, expected)
     # at 512 Hz (56.9 samples per cycle) with 20 um noise, must say the same, and so must its spectrum
     rec, strobe = minus_well_records[amp]
     assert _true_period(strobe) == expected
-    c = characterize(rec, F, wells=None)
+    c = characterise(rec, F, wells=None)
     assert c["period"] == expected, (c["residuals"], c["tolerances"])
     assert c["spectrum"]["period"] == expected and c["spectrum"]["agrees"]
     assert not c["chaotic"] and len(c["amplitudes"]) == expected
@@ -64,7 +64,7 @@ def test_period_doublings_at_512_hz_are_found(minus_well_records, amp, expected)
 def test_cross_well_chaos_has_a_positive_exponent_with_its_uncertainty(minus_well_records):
     rec, strobe = minus_well_records[28.0]
     assert _true_period(strobe) is None and np.ptp(strobe) > 0.03  # both wells visited, no repetition
-    c = characterize(rec, F, wells=(M.equilibria().z_minus, M.equilibria().z_plus))
+    c = characterise(rec, F, wells=(M.equilibria().z_minus, M.equilibria().z_plus))
     assert c["period"] is None and c["chaotic"] and c["regime"] == "cross-well"
     lle = c["lle"]
     # the value is what the listed segments say: their mean, with their standard error
@@ -83,7 +83,7 @@ def test_a_period_1_record_at_64_hz_with_a_shaker_off_frequency_and_breathing():
     zs = signal.decimate(z[:, 0], 16, ftype="fir", zero_phase=True)
     us = signal.decimate(acc[:, 0], 16, ftype="fir", zero_phase=True)
     rec = from_arrays(us, zs + NOISE * np.random.default_rng(1).standard_normal(zs.size), 64.0)
-    c = characterize(rec, F)
+    c = characterise(rec, F)
     assert c["period"] == 1 and not c["chaotic"], c["reasons"]
     # the forcing is the input's: stated 9 Hz, measured within 1e-4 of the true 9.027 Hz
     assert c["forcing"]["stated_hz"] == F and c["forcing"]["measured_hz"] == pytest.approx(f_true, rel=1e-4)
@@ -97,7 +97,7 @@ def test_a_period_found_never_carries_a_significantly_positive_exponent(monkeypa
     # says on such a record (here made to say +50 1/s on every segment: what a 64 Hz lab record gave,
     # following its noise), the result never holds a period and a significantly positive exponent
     # together: the exponent is "not determinable", with the reason and the discarded estimate.
-    import negstiff.inference.analysis.characterize as ch
+    import negstiff.inference.analysis.characterise as ch
 
     t, acc, z = rk4_harmonic(M, [9.0], F, 30.0, SIM_FS, M.equilibria().z_plus)
     zs, us = (signal.resample_poly(x, 4, 9)[64:-64] for x in (z[:, 0], acc[:, 0]))
@@ -109,7 +109,7 @@ def test_a_period_found_never_carries_a_significantly_positive_exponent(monkeypa
         return w | {"value": 50.0, "segments": [48.0, 50.0, 51.0, 51.0]}
 
     monkeypatch.setattr(ch, "largest_lyapunov", noisy_wolf)
-    c = characterize(rec, F)
+    c = characterise(rec, F)
     assert c["period"] == 1 and not c["chaotic"]
     assert c["lle"]["value"] is None and c["lle"]["estimate_discarded"][0] == pytest.approx(50.0)
     assert c["reasons"]["lle"].startswith("not determinable: the record repeats every 1 forcing cycle")
@@ -124,7 +124,7 @@ def _lorenz_x(x0=(1.0, 1.0, 1.0), dt=0.01, duration=500.0):
     return solve_ivp(f, (0, t[-1]), list(x0), t_eval=t, method="LSODA", rtol=1e-10, atol=1e-10).y[0][int(20 / dt) :]
 
 
-@pytest.mark.slow  # a long study: 50 000 Lorenz samples; test_characterization.py keeps Wolf on Lorenz by default
+@pytest.mark.slow  # a long study: 50 000 Lorenz samples; test_characterisation.py keeps Wolf on Lorenz by default
 def test_wolf_and_rosenstein_recover_the_lorenz_exponent_within_5_percent():
     # Fact: the Lorenz system (10, 28, 8/3) has lambda_1 = 0.906 1/s. From x(t) alone, 50 000 samples at
     # dt 0.01, both estimators within 5 %, Rosenstein's on a fresh install (no optional package)

@@ -231,7 +231,7 @@ def test_contract_commands_run_on_lab_formats(record, suffix, tmp_path):
                        ["m/s^2", "m", "m", "m"])  # fmt: skip
     else:
         h = harmonic.write(tmp_path / f"h.{suffix}")
-    runs["characterize"] = ["characterize", str(h), "--forcing-hz", "9", "-o", str(tmp_path / "c.json")]
+    runs["characterise"] = ["characterise", str(h), "--forcing-hz", "9", "-o", str(tmp_path / "c.json")]
     for name, argv in runs.items():
         assert main([*argv, "--quiet"]) == 0, name
     assert json.loads((tmp_path / "c.json").read_text())["period"] == 1

@@ -17,7 +17,7 @@ from scipy.integrate import solve_ivp
 
 from negstiff.cli import main
 from negstiff.errors import InputError, RecordWarning
-from negstiff.inference.analysis.characterize import characterize
+from negstiff.inference.analysis.characterise import characterise
 from negstiff.inference.record.measurement import from_arrays
 
 Z_WELL = 0.020  # m
@@ -72,7 +72,7 @@ def test_a_period_1_run_at_10_samples_a_period_is_period_1(a, seed):
     assert _true_period(strobe) == 1 and rec.z.min() > 0  # in the plus well, period 1
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        c = characterize(rec, 6.3, lle=False)
+        c = characterise(rec, 6.3, lle=False)
     assert c["period"] == 1, c["reasons"]
     assert c["spectrum"]["period"] == 1 and c["spectrum"]["agrees"] is True
     assert c["decided_by"] in ("time", "spectrum")
@@ -94,7 +94,7 @@ def test_a_period_2_record_from_rest_is_period_2_after_its_transient():
     settled_s = (np.flatnonzero(off)[-1] + 3) / f  # the true orbit within the noise from here on
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        c = characterize(rec, f, lle=False)
+        c = characterise(rec, f, lle=False)
     assert c["period"] == 2 and len(c["amplitudes"]) == 2, c["reasons"]
     assert last_jump_s < c["steady_from_s"] <= settled_s + 10 / f
     assert c["regime"] == "cross-well" or c["regime"] == "in-well-minus"
@@ -111,7 +111,7 @@ def test_a_chaotic_cross_well_record_has_no_period(a, fs):
     assert _true_period(strobe) is None and rec.z.min() < -Z_WELL / 2 < Z_WELL / 2 < rec.z.max()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        c = characterize(rec, 9.0, lle=False)
+        c = characterise(rec, 9.0, lle=False)
     assert c["period"] is None and c["chaotic"], c
     assert c["regime"] == "cross-well"
 
@@ -128,7 +128,7 @@ def test_a_stated_frequency_that_is_not_the_inputs_is_refused():
     # naming both frequencies, before any analysis.
     rec = _at_18_hz()
     with pytest.raises(InputError, match=r"9\.1 Hz.*18(\.0)? Hz|18(\.0)? Hz.*9\.1 Hz") as err:
-        characterize(rec, 9.1, lle=False)
+        characterise(rec, 9.1, lle=False)
     assert "\n" not in str(err.value)
 
 
@@ -138,7 +138,7 @@ def test_a_stated_frequency_that_is_not_the_inputs_exits_2(tmp_path, capsys):
     path, out = tmp_path / "run.csv", tmp_path / "r.json"
     np.savetxt(path, np.column_stack([rec.t, rec.u, rec.z]), delimiter=",", header="t,base_acc,z", comments="",
                fmt="%.9g")  # fmt: skip
-    assert main(["characterize", str(path), "--forcing-hz", "9.1", "-o", str(out), "--quiet"]) == 2
+    assert main(["characterise", str(path), "--forcing-hz", "9.1", "-o", str(out), "--quiet"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "9.1" in err[0] and "18" in err[0] and "Traceback" not in err[0]
     assert not out.exists()
@@ -151,7 +151,7 @@ def test_a_slightly_mislabelled_frequency_uses_the_measured_one_with_a_warning()
     rec, strobe = _record(5.0, 9.05, 512.0, 20.0, settle=3.0, seed=5)
     assert _true_period(strobe) == 1
     with pytest.warns(RecordWarning, match="9.05"):
-        c = characterize(rec, 9.0, lle=False)
+        c = characterise(rec, 9.0, lle=False)
     assert abs(c["forcing"]["measured_hz"] - 9.05) < 0.01 / 20.0
     assert c["period"] == 1
     assert any("9.05" in w for w in c["warnings"])

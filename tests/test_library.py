@@ -23,7 +23,7 @@ from negstiff import (
     Posterior,
     Rig,
     SINDy,
-    characterize,
+    characterise,
     frf,
     from_arrays,
     load,
@@ -63,7 +63,7 @@ def test_the_front_door_exports_every_public_name_lazily():
             assert getattr(module, name) is not None, f"{module.__name__}.{name}"
     # importing the package, and building the command line's parser for `negstiff --help` or for a command
     # that fits nothing, loads no compiled simulator (a fitting command's options import their estimator)
-    for only in ("", "rig", "frf", "characterize"):
+    for only in ("", "rig", "frf", "characterise"):
         code = ("import negstiff, sys; from negstiff.cli import build_parser; "
                 f"build_parser(only={only!r}); print('numba' in sys.modules)")  # fmt: skip
         out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
@@ -230,4 +230,4 @@ def test_the_whole_workflow_from_python_gives_the_cli_json(scipy_record, scipy_f
     assert not sim.diverged[0]
     nf = nfrc(model, freq=9.0, amplitude=(2.0, 6.0), well="plus")
     assert nf["branches"] and all(p["stable"] in (True, False) for p in nf["branches"][0]["points"])
-    assert isinstance(rec, Measurement) and callable(characterize) and callable(frf)
+    assert isinstance(rec, Measurement) and callable(characterise) and callable(frf)

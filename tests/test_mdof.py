@@ -394,7 +394,7 @@ def test_stabilisation_diagram_keeps_both_modes_of_each_well():
     u, z = rk4_fixture_record(duration=60.0, seed=4)
     rec = from_arrays(u, z, FS, masses=(FIXTURE["m"], TRUTH.m))
     nsi = NSI(element="1-2").fit(rec)
-    rows = nsi.stabilization(rec, orders=(2, 3, 4), block_rows=(20, 40))
+    rows = nsi.stabilisation(rec, orders=(2, 3, 4), block_rows=(20, 40))
     for well in ("minus", "plus"):
         for true in ON_FIXTURE.modes(well):
             stable = [p for r in rows if r["well"] == well for p in r.get("poles", [])

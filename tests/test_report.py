@@ -130,7 +130,7 @@ def test_report_on_a_harmonic_campaign_and_one_harmonic_record(tmp_path):
     _run(["report", camp / "step0.csv", "-o", out])
     res, html = _results(out)
     _summary_first(html)
-    char = next(s for s in res["sections"] if s["kind"] == "characterization")["result"]
+    char = next(s for s in res["sections"] if s["kind"] == "characterisation")["result"]
     assert char["period"] == 1, "3 m/s^2 at 9 Hz: the in-well period-1 response"
 
 

@@ -351,8 +351,8 @@ def parse_wells(text: str | None) -> tuple[float, ...] | None:
     return wells
 
 
-def cmd_characterize(args) -> int:
-    from negstiff.inference.analysis.characterize import characterize, check_harmonic
+def cmd_characterise(args) -> int:
+    from negstiff.inference.analysis.characterise import characterise, check_harmonic
     from negstiff.inference.record.measurement import load
     from negstiff.report.record import check_forcing
 
@@ -365,8 +365,8 @@ def cmd_characterize(args) -> int:
         rec = dataclasses.replace(rec, z=col)
     check_forcing(rec, args.forcing_hz)  # within the record's usable band (2 samples a period are not)
     check_harmonic(rec, args.forcing_hz)
-    say(args, f"characterize: {rec.n} samples at {rec.fs:g} Hz, forcing {args.forcing_hz:g} Hz")
-    r = characterize(rec, args.forcing_hz, given if given is not None else "auto")
+    say(args, f"characterise: {rec.n} samples at {rec.fs:g} Hz, forcing {args.forcing_hz:g} Hz")
+    r = characterise(rec, args.forcing_hz, given if given is not None else "auto")
     write_json(args.out, r)
     warn(args, r["warnings"])
     lle = r["lle"]

@@ -443,9 +443,10 @@ def _discrepancy(sub, common: argparse.ArgumentParser, data_opts: argparse.Argum
     dsc.set_defaults(func=c.cmd_discrepancy)
 
 
-def _characterize(sub, common: argparse.ArgumentParser, data_opts: argparse.ArgumentParser) -> None:
+def _characterise(sub, common: argparse.ArgumentParser, data_opts: argparse.ArgumentParser) -> None:
     chz = sub.add_parser(
-        "characterize",
+        "characterise",
+        aliases=["characterize"],  # the contract's first spelling, kept: a script that ran keeps running
         parents=[common, data_opts],
         help="periodicity, regime, Lyapunov exponent of a harmonic-forced record",
         description="Periodicity analysis of a steady-state record forced at --forcing-hz (phase-synchronous Poincare "
@@ -462,7 +463,7 @@ def _characterize(sub, common: argparse.ArgumentParser, data_opts: argparse.Argu
         "else estimated from the data",
     )
     chz.add_argument("-o", "--out", required=True, help="result JSON")
-    chz.set_defaults(func=c.cmd_characterize)
+    chz.set_defaults(func=c.cmd_characterise)
 
 
 def _map(sub, common: argparse.ArgumentParser, data_opts: argparse.ArgumentParser) -> None:
@@ -551,7 +552,7 @@ def _report(sub, common: argparse.ArgumentParser, data_opts: argparse.ArgumentPa
     rp.add_argument("--wells", help="z_minus,z_plus [m] for the regime of a harmonic record (default: the metadata's)")
     rp.add_argument("--nfrc", action="append", help="a `negstiff nfrc` result to draw over a campaign's map")
     rp.add_argument("--only", help="the analyses to run, comma-separated (nsi, sindy, posterior, discrepancy, frf, "
-                    "characterize, map)")  # fmt: skip
+                    "characterise, map)")  # fmt: skip
     rp.add_argument("--duration", type=POSITIVE, help="posterior: use only the first DURATION seconds of the record")
     rp.add_argument("--max-steps", type=declared(POST, "max_steps"), help="posterior: step cap per ensemble")
     rp.add_argument("--ensembles", type=declared(POST, "n_ensembles"), help="posterior: independent ensembles")
@@ -603,18 +604,22 @@ class _ListingOnly:
         self.sub = sub
 
     def add_parser(self, name, **kw):
-        self.sub.add_parser(name, help=kw.get("help"), add_help=False)
+        self.sub.add_parser(name, help=kw.get("help"), aliases=kw.get("aliases", ()), add_help=False)
         raise _Listed
 
 
-COMMANDS = ("rig", "simulate", "identify", "frf", "backbone", "nfrc", "posterior", "discrepancy", "characterize", "map",
+COMMANDS = ("rig", "simulate", "identify", "frf", "backbone", "nfrc", "posterior", "discrepancy", "characterise", "map",
             "update", "report", "reproduce")  # fmt: skip
 """Every command, in the order ``negstiff --help`` lists them."""
 
 
+ALIASES = {"characterize": "characterise"}
+"""Other spellings of a command's name that run it (the contract's first spellings; negstiff spells British)."""
+
+
 def command_of(argv) -> str | None:
-    """The command ``argv`` runs (its first word that is a command's name), or None."""
-    return next((a for a in argv if a in COMMANDS), None)
+    """The command ``argv`` runs (its first word that is a command's name or an alias of one), or None."""
+    return next((ALIASES.get(a, a) for a in argv if a in COMMANDS or a in ALIASES), None)
 
 
 def build_parser(only: str | None = None) -> argparse.ArgumentParser:
@@ -657,7 +662,7 @@ def build_parser(only: str | None = None) -> argparse.ArgumentParser:
     )
 
     builders = {"rig": _rig, "simulate": _simulate, "identify": _identify, "frf": _frf, "backbone": _backbone,
-                "nfrc": _nfrc, "posterior": _posterior, "discrepancy": _discrepancy, "characterize": _characterize,
+                "nfrc": _nfrc, "posterior": _posterior, "discrepancy": _discrepancy, "characterise": _characterise,
                 "map": _map, "update": _update, "report": _report, "reproduce": _reproduce}  # fmt: skip
     extra = [name for name in builders if name not in COMMANDS]
     assert not extra, f"commands missing from COMMANDS: {extra}"

@@ -10,7 +10,7 @@ load on first use (PEP 562); ``negstiff`` itself exports the ones a script needs
 * ``estimators``: the estimator contract (``base``, ``parameters``), one identification pipeline
   (``identification``), ``NSI`` (with ``subspace``), ``SINDy``, ``Discrepancy`` (with ``hybrid``),
   ``Posterior`` (``posterior/``), ``GAUpdater`` (``updating``);
-* ``analysis``: the dynamics of harmonic records: ``characterize`` (with ``periodicity``, ``lyapunov``),
+* ``analysis``: the dynamics of harmonic records: ``characterise`` (with ``periodicity``, ``lyapunov``),
   the bifurcation map of a campaign (``campaign``), ``frf``.
 """
 
@@ -28,7 +28,8 @@ _EXPORTS = {
     "Discrepancy": "estimators.discrepancy",
     "Posterior": "estimators.posterior.core",
     "GAUpdater": "estimators.updating",
-    "characterize": "analysis.characterize",
+    "characterise": "analysis.characterise",
+    "characterize": "analysis.characterise",
     "frf": "analysis.frf",
     "Estimator": "estimators.base",
     "Identifier": "estimators.identification",

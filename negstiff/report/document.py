@@ -71,7 +71,7 @@ class Report(Blocks):
     # --- building from results (a script's report, ``negstiff report``) ----------------------------
     def add(self, result, label: str = "") -> Report:
         """A section for ``result``: a record, a fitted ``NSI``/``SINDy``/``Posterior``/``Discrepancy``, an
-        ``Identification``, an ``frf``/``characterize``/map result (``sections.section_for``). ``label``
+        ``Identification``, an ``frf``/``characterise``/map result (``sections.section_for``). ``label``
         tells results of several records apart (a column of the coefficient table each). Returns the report.
         """
         sec = section_for(result, label)

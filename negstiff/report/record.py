@@ -29,7 +29,7 @@ from negstiff.errors import InputError
 from .document import Report
 
 BROADBAND = ("nsi", "sindy", "posterior", "discrepancy", "frf")
-HARMONIC = ("characterize",)
+HARMONIC = ("characterise",)
 CAMPAIGN = ("map",)
 IMPACT = ("frf", "nsi", "sindy", "interval")
 """A hammer's record: its FRF (hits, offsets, windows), the identifications with the force windowed, NSI's
@@ -235,7 +235,7 @@ def _crosses_wells(rec) -> bool:
 
 def _plan(rec, chosen, forcing_hz, wells, seed, options) -> list[tuple[str, str, Callable]]:
     """Each chosen analysis as (name, title, run(record)), its estimator's parameters checked now."""
-    from negstiff.inference.analysis.characterize import characterize
+    from negstiff.inference.analysis.characterise import characterise
     from negstiff.inference.analysis.frf import frf
     from negstiff.inference.estimators.discrepancy import Discrepancy
     from negstiff.inference.estimators.nsi import NSI
@@ -270,8 +270,8 @@ def _plan(rec, chosen, forcing_hz, wells, seed, options) -> list[tuple[str, str,
             runs.append((name, "the identification's interval", lambda r: _interval(r, fitted)))
         elif name == "backbone":
             runs.append((name, "the backbone", lambda r: _backbone(r, fitted)))
-        elif name == "characterize":
-            runs.append((name, "the characterisation", lambda r: characterize(r, forcing_hz, wells or "auto")))
+        elif name == "characterise":
+            runs.append((name, "the characterisation", lambda r: characterise(r, forcing_hz, wells or "auto")))
     return runs
 
 

@@ -6,7 +6,7 @@
   parameters, the held-out validation, the refinement, the warnings;
 * a posterior (``Posterior``): each parameter's mean, sd and credible interval with its diagnostics;
 * the discrepancy workflow (``Discrepancy``): what it named, its size, where the baseline erred, the gap;
-* an FRF, a characterisation, a bifurcation map, a decay's backbone (the ``frf``, ``characterize``,
+* an FRF, a characterisation, a bifurcation map, a decay's backbone (the ``frf``, ``characterise``,
   ``Campaign.map`` and ``backbone`` dicts).
 
 Each returns a ``Section``: its blocks, its figures, and what the report's summary and its coefficient
@@ -367,9 +367,9 @@ def backbone_section(res: dict[str, Any], label: str = "", model_name: str = "")
     return sec
 
 
-def characterization_section(res: dict[str, Any], label: str = "") -> Section:
-    """A ``characterize`` result: period, regime, amplitudes, Lyapunov exponent, and why not where not."""
-    sec = Section("characterization", label, _with_label("Characterisation of the harmonic response", label))
+def characterisation_section(res: dict[str, Any], label: str = "") -> Section:
+    """A ``characterise`` result: period, regime, amplitudes, Lyapunov exponent, and why not where not."""
+    sec = Section("characterisation", label, _with_label("Characterisation of the harmonic response", label))
     lle = res.get("lle") or {}
     forcing = res.get("forcing") or {}
     sec.table(["", "value"], [
@@ -546,7 +546,7 @@ def section_for(result, label: str = "") -> Section:
     if isinstance(result, dict) and "peaks" in result:
         return frf_section(result, label)
     if isinstance(result, dict) and "regime" in result and "period" in result:
-        return characterization_section(result, label)
+        return characterisation_section(result, label)
     if isinstance(result, dict) and "sweeps" in result:
         return map_section(result, (), label)
     raise TypeError(f"a report takes records, fitted estimators and analysis results, not {type(result).__name__}")

@@ -1,6 +1,6 @@
 """Dynamics characterisation (reference study section 3, Figures 4-7) on the virtual rig.
 
-    python -m negstiff.study.characterization [-o reports/characterization] [--fast]
+    python -m negstiff.study.characterisation [-o reports/characterisation] [--fast]
 
 The bifurcation map is built as a lab builds it: stepped harmonic sweeps (up and down, from either
 well) on the rig, every record analysed for its period from the measured signals; all sweeps run in
@@ -16,7 +16,7 @@ from typing import Any
 import matplotlib.pyplot as plt
 import numpy as np
 
-from negstiff.inference.analysis.characterize import characterize, map_point, map_sequence
+from negstiff.inference.analysis.characterise import characterise, map_point, map_sequence
 from negstiff.inference.analysis.lyapunov import largest_lyapunov
 from negstiff.inference.analysis.periodicity import noise_level, poincare
 from negstiff.inference.record.measurement import Measurement
@@ -63,12 +63,12 @@ def bifurcation_map(rig: Rig, freq: float, amplitudes, settle_periods: int, reco
     }
 
 
-def characterization_section(rep: Report, results: dict[str, Any], fast: bool, seed_: int = 0) -> None:
+def characterisation_section(rep: Report, results: dict[str, Any], fast: bool, seed_: int = 0) -> None:
     """The reference study's section 3 on rig records: the 9 Hz bifurcation map (Figure 4), phase portraits and
     Lyapunov exponents of four regimes (Figures 5-6), Poincare sections of the cross-well one (Figure 7).
     """
     res: dict[str, Any] = {}
-    results["characterization"] = res
+    results["characterisation"] = res
     rig = Rig(seed=seed_ + 5)
     rep.heading("6. Dynamics: bifurcation map, phase portraits, Lyapunov exponent, Poincare sections (paper section 3)")
     _bifurcation_part(rep, res, rig, fast)
@@ -110,7 +110,7 @@ def _portraits_and_lle_part(rep: Report, res: dict[str, Any], rig: Rig, fast: bo
     for k, ((amp, label), rr) in enumerate(zip(cases, recs, strict=False)):
         rec = rr[0]
         m = record_measurement(rec)
-        c = characterize(m, 9.0, (rig.equilibria.z_minus, rig.equilibria.z_0, rig.equilibria.z_plus))
+        c = characterise(m, 9.0, (rig.equilibria.z_minus, rig.equilibria.z_0, rig.equilibria.z_plus))
         b = lyapunov_benettin(
             AS_BUILT,
             rec.true["base_acc"],
@@ -217,9 +217,9 @@ def _poincare_part(rep: Report, chaotic_m) -> None:
 
 def main(argv=None) -> int:
     return run_study(
-        characterization_section,
+        characterisation_section,
         "negstiff: dynamics of the negative-stiffness oscillator at 9 Hz",
-        "reports/characterization",
+        "reports/characterisation",
         __doc__,
         argv,
     )

@@ -14,7 +14,7 @@ import numpy as np
 from negstiff.report.numbers import fmt
 from negstiff.report.sections import draw_branches
 
-from .characterization import bifurcation_map
+from .characterisation import bifurcation_map
 
 
 # --- the report's section: the identified models' continuation against the rig's bifurcation map -------
@@ -35,7 +35,7 @@ class ContinuationStudy:
 
 def first_doubling_seen(rig_map: dict[str, Any], well: str) -> float | None:
     """The first amplitude of the rig's up sweep from ``well`` whose response is period 2 (or longer)."""
-    from negstiff.inference.analysis.characterize import first_period_2
+    from negstiff.inference.analysis.characterise import first_period_2
 
     return first_period_2([p for p in rig_map["points"] if p["start"] == well and p["direction"] == "up"])
 
@@ -119,9 +119,9 @@ STEP_HZ = {False: 0.1, True: 0.25}
 def stepped_jumps(amplitude: float, fast: bool, seed_: int) -> dict[str, float | None]:
     """Stepped sines on the rig (the as-built device, from z_plus) across ``SWEEP_BAND``, up and down in one
     batched run, as a lab measures a response curve: where each sweep's response amplitude (half the
-    measured z's peak-to-peak) jumps (``characterize.jump``).
+    measured z's peak-to-peak) jumps (``characterise.jump``).
     """
-    from negstiff.inference.analysis.characterize import jump
+    from negstiff.inference.analysis.characterise import jump
     from negstiff.models.rig import Rig
 
     step = STEP_HZ[fast]

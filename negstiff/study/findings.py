@@ -91,7 +91,7 @@ def summary_lines(results: dict[str, Any]) -> list[str]:
             f"frequencies and equilibria: over seeds m spreads {fmt(spread['m'], 3)} % "
             f"(E/m {fmt(spread['E_over_m'], 2)} %)."
         )
-    lle = _get(results, "characterization", "lle_case")
+    lle = _get(results, "characterisation", "lle_case")
     if lle and lle.get("wolf") and lle.get("benettin"):
         w, b = lle["wolf"], lle["benettin"]
         out.append(
@@ -182,7 +182,7 @@ def conclusion(results: dict[str, Any]) -> list[str]:
             f"against the rig's {rig:.2f}; a model that fits the record can still miss a bifurcation, and "
             "continuation over a measured map is the check."
         )
-    lle = _get(results, "characterization", "lle_case")
+    lle = _get(results, "characterisation", "lle_case")
     if lle and lle.get("wolf") and lle.get("benettin"):
         w, b = lle["wolf"]["value"], lle["benettin"]
         out.append(

@@ -390,10 +390,10 @@ def integration_sensitivity(rep: Report, res: dict[str, Any], duration: float, s
     )
 
 
-def stabilization_part(rep: Report, res: dict[str, Any], est: NSI, m: Measurement) -> None:
+def stabilisation_part(rep: Report, res: dict[str, Any], est: NSI, m: Measurement) -> None:
     """Compute (NSI's stabilisation rows for orders 2-8 and 10-40 block rows), then render the diagram."""
-    rows = est.stabilization(m, orders=(2, 4, 6, 8), block_rows=(10, 20, 30, 40))
-    res["stabilization"] = [{k: v for k, v in r.items() if k != "poles"} | {"poles": r.get("poles", [])} for r in rows]
+    rows = est.stabilisation(m, orders=(2, 4, 6, 8), block_rows=(10, 20, 30, 40))
+    res["stabilisation"] = [{k: v for k, v in r.items() if k != "poles"} | {"poles": r.get("poles", [])} for r in rows]
     fig, axes = plt.subplots(1, 2, figsize=(11, 3.8), sharey=True)
     for ax, well in zip(axes, ("minus", "plus"), strict=False):
         for r in rows:
@@ -412,7 +412,7 @@ def stabilization_part(rep: Report, res: dict[str, Any], est: NSI, m: Measuremen
         ax.set(xlabel="pole frequency [Hz]", title=f"reference z_{well}")
     axes[0].set_ylabel("model order (+ block rows / 100)")
     rep.figure(
-        "nsi_stabilization",
+        "nsi_stabilisation",
         fig,
         "Stabilisation diagram: poles identified for model orders 2-8 and 10-40 block "
         "rows (grey); red: the pole the rule picks (largest modal contribution, 0 < zeta < 0.7); dashed: truth.",
@@ -435,7 +435,7 @@ def nsi_section(rep: Report, results: dict[str, Any], fast: bool, seed_: int = 0
     if not fast:
         integration_sensitivity(rep, res, duration, seed_ + 3)
         rec = Rig(SEED_LIKE_CUBIC, seed=seed_ + 1).random(duration=duration, rms=SEED_LIKE_CROSS_WELL_RMS)
-        stabilization_part(rep, res, est, Measurement.from_rig(rec))
+        stabilisation_part(rep, res, est, Measurement.from_rig(rec))
 
 
 def main(argv=None) -> int:

@@ -30,7 +30,7 @@ from negstiff.report.numbers import fmt
 from negstiff.resources import worker_initializer
 
 from .calibration import device_section
-from .characterization import characterization_section
+from .characterisation import characterisation_section
 from .continuation import continuation_section
 from .discrepancy import discrepancy_section
 from .findings import conclusion, summary_lines
@@ -382,7 +382,7 @@ def simulator_section(rep: Report, results: dict[str, Any]) -> None:
 SECTION_TABLE = {
     "nsi": ("NSI around both wells", nsi_section, 26),
     "updating": ("GA model updating", updating_section, 50),
-    "characterization": ("dynamics characterisation", characterization_section, 21),
+    "characterisation": ("dynamics characterisation", characterisation_section, 21),
     "sindy": ("SINDy equation discovery", sindy_section, 12),
     "posterior": ("Bayesian posteriors (emcee)", posterior_section, 79),
     "discrepancy": ("discrepancy workflow", discrepancy_section, 32),

@@ -1,7 +1,7 @@
 """A stepped harmonic campaign and its bifurcation map (reference study Figure 4; ``negstiff map``): the records (files
 in order, or a folder with ``index.json`` as ``negstiff rig campaign`` writes it, else its files by name),
 each one's forcing frequency, the ``negstiff nfrc`` results drawn over the map, and the map itself: each
-record's period, regime, Poincare z and forcing amplitude measured from its input (``characterize.map_point``),
+record's period, regime, Poincare z and forcing amplitude measured from its input (``characterise.map_point``),
 each sweep's sequence and first period 2 (or where a stepped sine jumps), each continuation's first doubling
 or folds beside the map's.
 
@@ -22,7 +22,7 @@ import numpy as np
 
 from negstiff.errors import MeasurementError
 from negstiff.files import read_json
-from negstiff.inference.analysis.characterize import check_harmonic, first_period_2, jump, map_point, map_sequence
+from negstiff.inference.analysis.characterise import check_harmonic, first_period_2, jump, map_point, map_sequence
 from negstiff.inference.record.measurement import Measurement, load
 
 MEASUREMENT_SUFFIXES = (".csv", ".txt", ".npz", ".mat", ".uff", ".unv", ".tdms", ".lvm")

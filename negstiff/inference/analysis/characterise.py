@@ -164,7 +164,7 @@ def wells_for(rec: Measurement, wells="auto") -> tuple[float | None, ...] | None
         return None
 
 
-def characterize(
+def characterise(
     rec: Measurement, forcing_hz: float, wells="auto", lle: bool = True, poincare: bool = False
 ) -> dict[str, Any]:
     """Period, regime, amplitudes and the largest Lyapunov exponent of one harmonic-forced record.
@@ -197,10 +197,10 @@ def characterize(
 
     Examples
     --------
-    >>> from negstiff import Measurement, Rig, characterize
+    >>> from negstiff import Measurement, Rig, characterise
     >>> from negstiff.models import SEED_LIKE_CUBIC
     >>> rec = Measurement.from_rig(Rig(SEED_LIKE_CUBIC, seed=6).harmonic(freq=9.0, amplitude=5.0))
-    >>> c = characterize(rec, forcing_hz=9.0, lle=False)
+    >>> c = characterise(rec, forcing_hz=9.0, lle=False)
     >>> c["period"], c["regime"]
     (1, 'in-well-plus')
     """
@@ -313,6 +313,10 @@ def characterize(
                   "warnings": [text for _, text in lines]}  # fmt: skip
 
 
+characterize = characterise
+"""The first spelling of ``characterise`` (the contract's command kept it), the same function."""
+
+
 MAP_POINCARE_POINTS = 32
 """Poincare points kept per record of a bifurcation map (the last ones: the steadiest)."""
 
@@ -326,7 +330,7 @@ def map_point(rec: Measurement, forcing_hz: float, wells=None) -> dict[str, Any]
     """
     from negstiff.inference.analysis.periodicity import forcing_phase
 
-    c = characterize(rec, forcing_hz, wells, lle=False, poincare=True)
+    c = characterise(rec, forcing_hz, wells, lle=False, poincare=True)
     if "forcing" in c:  # the input's amplitude at its measured frequency
         amplitude = c["forcing"]["amplitude"]
     else:  # no periodicity analysis could be made: at the stated frequency

@@ -50,7 +50,7 @@ from negstiff.inference.estimators.structure_id import (
     element_of,
     identify_nsi,
 )
-from negstiff.inference.estimators.structure_id import stabilization as structure_stabilization
+from negstiff.inference.estimators.structure_id import stabilisation as structure_stabilisation
 from negstiff.inference.record.measurement import Measurement, per_unit_mass_warning
 from negstiff.inference.steps.weak import free_decay, known_input_gain, mass_of
 from negstiff.inference.steps.wells import well_guesses
@@ -473,14 +473,14 @@ class NSI(StructureResults, Identifier):
             for name, w in self.wells_.items()
         }
 
-    def stabilization(self, rec: Measurement, orders=(2, 4, 6, 8), block_rows=(10, 20, 30, 40)) -> list[dict]:
+    def stabilisation(self, rec: Measurement, orders=(2, 4, 6, 8), block_rows=(10, 20, 30, 40)) -> list[dict]:
         """Stabilisation diagram (Marchesiello, Fasana & Garibaldi 2016; algorithms.md A.5): for each
         (order, block rows) and each well found by ``fit``, every identified pole and the physical
         pole's coefficients. Run after ``fit`` (it reuses the refined wells).
         """
         if rec.n_dof > 1:
             orders_n = tuple(o * rec.n_dof for o in orders)  # the order per DOF, as ``order``
-            return structure_stabilization(self, rec, orders=orders_n, block_rows=block_rows)
+            return structure_stabilisation(self, rec, orders=orders_n, block_rows=block_rows)
         n_id = self.settings_["identification_samples"]
         ident = rec.segment(0, n_id)
         zs, v, _, _ = ident.states("band")

@@ -890,7 +890,7 @@ def nsi_well(est, rec: Measurement, zs: np.ndarray, v: np.ndarray, at: tuple[int
                    offsets)  # fmt: skip
 
 
-def stabilization(est, rec: Measurement, orders=(4, 6, 8, 10), block_rows=(20, 30, 40, 60)) -> list[dict]:
+def stabilisation(est, rec: Measurement, orders=(4, 6, 8, 10), block_rows=(20, 30, 40, 60)) -> list[dict]:
     """Stabilisation diagram (Marchesiello, Fasana & Garibaldi 2016) around each well a structure's NSI found: for
     every (order, block rows), the identified poles (f_hz, zeta) with the feedback channels of that well's
     reference, each marked ``stable`` when a pole of the next lower order lies within 1 % in frequency and 5 % in

@@ -1,6 +1,6 @@
 """The record made physical: what a derived or uncalibrated response leaves unknown, fixed by the record's
 own physics, one step (``pin_frame``) that every analysis needing it calls (every estimator's ``check``,
-``characterize``, ``frf``, a simulation's start state), never ``load``: a user who only reads a record
+``characterise``, ``frf``, a simulation's start state), never ``load``: a user who only reads a record
 pays for no fit.
 
 1. **The scale** of a response channel whose sensitivity is unknown (a column map's ``*?``: a laser
