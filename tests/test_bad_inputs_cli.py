@@ -104,6 +104,30 @@ def test_ctrl_c_on_reproduce_is_one_line_and_the_workers_go_quietly(tmp_path):
     assert not _running_in_group(p.pid), "a process of the command is still running"
 
 
+def test_sigterm_on_reproduce_ends_its_section_processes_too(tmp_path):
+    # a kill of the command alone (SIGTERM to its process, as a scheduler or `kill PID` sends it, not to its group)
+    # ended the parent with its one line and left the two section processes running, orphaned, for minutes
+    out = tmp_path / "report"
+    env = dict(os.environ, NEGSTIFF_CACHE="off")
+    p = subprocess.Popen([sys.executable, "-m", "negstiff", "reproduce", "--fast", "--quiet", "-o", str(out)],
+                         stderr=subprocess.PIPE, stdout=subprocess.DEVNULL, text=True, cwd=tmp_path, env=env,
+                         start_new_session=True)  # fmt: skip
+    deadline = time.monotonic() + 120
+    while len(_descendants(p.pid)) < 3 and p.poll() is None and time.monotonic() < deadline:
+        time.sleep(0.05)  # the resource tracker and two section processes
+    assert p.poll() is None, p.communicate()[1]
+    time.sleep(1.5)
+    p.send_signal(signal.SIGTERM)
+    _, err = p.communicate(timeout=90)
+    assert p.returncode == 143, err
+    assert len(err.strip().splitlines()) == 1 and "terminated" in err, err
+    assert not out.exists()
+    deadline = time.monotonic() + 10  # the resource tracker leaves once its last client is gone
+    while _running_in_group(p.pid) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    assert not _running_in_group(p.pid), "a process of the command is still running"
+
+
 # --- lab formats checked against their own header -----------------------------------------------------------
 FS = 512.0
 """Samples per second of the lab-format records: 20 s is 10,240 samples (UFF headers say 10240)."""

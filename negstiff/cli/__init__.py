@@ -61,16 +61,29 @@ from .common import InputError, bad_input_types, check_paths, write_json  # noqa
 from .parser import build_parser, command_of  # noqa: E402
 
 
+class _Terminated(BaseException):
+    """A kill (SIGTERM) while the command's worker processes run: raised in the main thread so that the pool
+    that started them stops them and releases its queues on the way out (``reproduce._run_pool``).
+    """
+
+
 def _interrupt_handler(command: str, what: str, code: int):
     """Ctrl-C (SIGINT) or a kill (SIGTERM): one line, the outputs being written removed, exit at once
     (130, 143). (Raising KeyboardInterrupt is not enough: emcee prints the traceback of any exception
-    inside a log-probability call before passing it on).
+    inside a log-probability call before passing it on.) A kill while worker processes run (reproduce's
+    sections) is raised instead (``_Terminated``), in this process where no emcee runs: the pool ends its
+    processes and releases its queues, then ``main`` prints the line (a kill of the command alone, not its
+    group, had left them running).
     """
 
     def handler(signum, frame):
+        import multiprocessing
+
         from negstiff.files import remove_pending
 
         remove_pending()
+        if signum == signal.SIGTERM and multiprocessing.active_children():
+            raise _Terminated
         sys.stderr.write(f"negstiff {command}: {what} (nothing written)\n")
         sys.stderr.flush()
         os._exit(code)
@@ -110,6 +123,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt:
         print(f"negstiff {args.command}: interrupted (nothing written)", file=sys.stderr)
         return 130
+    except _Terminated:
+        from negstiff.files import remove_pending
+
+        remove_pending()
+        print(f"negstiff {args.command}: terminated (nothing written)", file=sys.stderr)
+        return 143
     except BrokenPipeError:
         return 141
 
