@@ -103,13 +103,14 @@ def summary_lines(results: dict[str, Any]) -> list[str]:
     if sb:
         best = min(v["refined"]["test_mv"] for v in sb.values())
         # methods within 1 % of the best are named together (NSI and SINDy converge to one refined model)
-        best_name = " and ".join(k for k, v in sb.items() if v["refined"]["test_mv"] <= 1.01 * best)
+        names = [k.split(" (")[0] for k, v in sb.items() if v["refined"]["test_mv"] <= 1.01 * best]
+        best_name = names[0] if len(names) == 1 else ", ".join(names[:-1]) + " and " + names[-1]
         hyb = _get(results, "silverbox", "hybrid", "test_mv")
         pub = _get(results, "silverbox", "published_mv") or {}
         best_pub = min(pub.items(), key=lambda kv: kv[1]) if pub else None
         line = (
-            f"**Silverbox (real data).** {best_name} (refined by output error) predict"
-            f"{'' if ' and ' in best_name else 's'} the multisine test to {fmt(best, 3)} mV rms"
+            f"**Silverbox (real data).** {best_name}, refined by output error, predict"
+            f"{'' if len(names) > 1 else 's'} the multisine test to {fmt(best, 3)} mV rms"
         )
         if hyb is not None:
             line += f" ({fmt(hyb, 3)} mV with the non-parametric discrepancy term)"
