@@ -7,8 +7,11 @@ from typing import Any
 
 
 def fmt(x: Any, digits: int = 4) -> str:
-    """A number as a person reads it (``digits`` significant figures), or the value as text."""
-    if isinstance(x, bool) or x is None:
+    """A number as a person reads it (``digits`` significant figures), or the value as text; None (nothing to
+    show, a table's empty cell) as "-"."""
+    if x is None:
+        return "-"
+    if isinstance(x, bool):
         return str(x)
     if isinstance(x, (int, float)):
         if not math.isfinite(x):
