@@ -101,3 +101,11 @@ def test_the_posterior_of_a_free_decay_covers_the_truth():
     # [1499958, 1500010]
     rec = _decay(DOUBLE_WELL, DOUBLE_WELL.equilibria().z_plus + 0.012, seed=1, duration=6.0)
     _covers(_posterior(rec), DOUBLE_WELL, "minus")
+
+
+def test_an_input_noise_on_a_ring_down_is_refused_before_any_work():
+    # its windows hold no input: a noise of the input reaches none of them, said in one line
+    from negstiff.errors import InputError
+
+    with pytest.raises(InputError, match="free decays between the pulses: no input's noise"):
+        Posterior(input_noise=0.05).fit(_hammer(DUFFING, seed=1))
