@@ -518,7 +518,9 @@ def _checked_gravity(source, g) -> float:
 
 SCALABLE = {"base_acc": ("z", "z_dot"), "force": ("z", "z_dot", "y", "y_dot", "y_acc")}
 """Response channels whose unknown scale (``*?``) the record's dynamics can estimate: those z is linear in
-(a base-excited record's y, y_dot, y_acc mix the unknown scale with the base's known motion)."""
+(a base-excited record's y, y_dot, y_acc mix the unknown scale with the base's known motion). One more: a
+base-excited record's y_dot when it is the response, an absolute velocity of unknown gain (a vibrometer on the
+ground): the base's known motion in z = integral of (g y_dot - b') says g (``sensors.absolute_velocity_gain``)."""
 
 
 def _unknown_scale(source, name: str | None, input_name: str, mass: float | None, present) -> dict | None:
@@ -528,7 +530,8 @@ def _unknown_scale(source, name: str | None, input_name: str, mass: float | None
     """
     if name is None:
         return None
-    if name not in SCALABLE[input_name]:
+    absolute = input_name == "base_acc" and name == "y_dot" and not any(k in present for k in ("z", "z_dot", "y"))
+    if name not in SCALABLE[input_name] and not absolute:
         what = "the input's scale is what makes a response's scale identifiable: it must be known" \
             if name in INPUTS else f"only {', '.join(SCALABLE[input_name])} of a {input_name} record can be"
         raise MeasurementError(f"{source}: {name}'s scale is marked unknown (*?): {what}")  # fmt: skip
@@ -539,6 +542,10 @@ def _unknown_scale(source, name: str | None, input_name: str, mass: float | None
             f"{source}: {name}'s scale is marked unknown (*?), but a force-driven record without a mass cannot "
             "identify it (z'' = force / m - ...: scale and mass trade off); give the mass (--mass or '# mass:')"
         )
+    if absolute:  # its gain is estimated with z (``sensors.absolute_velocity_gain``); z's scale then as z_dot's
+        status = ("unknown: y_dot's gain estimated as z was derived (the base's known motion in z), the measured "
+                  "point's participation in the input from the record's dynamics when analysed")  # fmt: skip
+        return {"channel": name, "value": None, "status": status}
     return {"channel": name, "value": None, "status": "unknown: estimated from the record's dynamics when analysed"}
 
 
