@@ -81,10 +81,15 @@ def test_a_structures_hammer_and_decay_records_are_read_by_their_kind():
     assert record_kind(_decay(DOUBLE_WELL, DOUBLE_WELL_RELEASE, seed=1, duration=4.0)).kind == "decay"
 
 
-def test_nsi_identifies_a_hammer_record_of_a_duffing_on_a_fixture():
-    # the force windowed (each hit's offset off, zero between pulses) drives the structure's NSI. Measured: 11.658 /
-    # 1.40 % and 25.724 / 2.09 % (truth 11.662 / 1.42 %, 25.726 / 2.14 %), k3 -2.7 %
-    _check(_fit(NSI(element="1-2"), _hammer(DUFFING, seed=1)), DUFFING, ["plus"], "impact")
+@pytest.mark.parametrize("device", [DUFFING, DOUBLE_WELL], ids=["duffing", "double_well"])
+def test_nsi_identifies_a_hammer_record_on_a_fixture(device):
+    # the force windowed (each hit's offset off, zero between pulses) drives the structure's NSI, the masses given
+    # scaling its level (the sampled pulse's own level is 5 % low). Measured: Duffing 11.658 / 1.40 % and 25.724 /
+    # 2.09 % (truth 11.662 / 1.42 %, 25.726 / 2.14 %), k3 +1.9 %; double well (plus) 10.112 / 1.82 %, 25.505 / 2.17 %
+    # (truth 10.111 / 1.84 %, 25.503 / 2.17 %), k3 -2.6 % (-5.0 % noise-free with the input column's level). Over
+    # seeds 2-4 the modes stay within 0.04 % and 1.4 %, k3 -5.2 to +1.2 % (Duffing) and -2.0 to +0.4 % (double well):
+    # the Duffing's cubic at 1 um is at the acceptance's edge
+    _check(_fit(NSI(element="1-2"), _hammer(device, seed=1)), device, ["plus"], "impact")
 
 
 def test_sindy_identifies_a_free_decay_of_the_double_well_on_a_fixture():
@@ -118,17 +123,9 @@ def test_sindy_identifies_a_lightly_damped_free_decay_of_the_duffing_on_a_fixtur
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason="NSI's structure cubic from a ring-down in one well is biased (no refinement)")
-def test_nsi_cubic_of_a_hammer_record_of_the_double_well_on_a_fixture():
-    # the record stays in the plus well (r from 10 to 26 mm). NSI's modes pass (10.093 / 1.83 %, 25.503 / 2.17 %);
-    # its cubic came out -7.6 % (-4.5 % noise-free: a bias of the structure's NSI from one well's ring-down, which
-    # the single DOF's output-error refinement takes off and the structure's path does not have)
-    _check(_fit(NSI(element="1-2"), _hammer(DOUBLE_WELL, seed=1)), DOUBLE_WELL, ["plus"], "impact")
-
-
-@pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason="NSI's structure cubic from a ring-down in one well is biased (no refinement)")
+@pytest.mark.xfail(strict=True, reason="NSI's structure cubic from the Duffing's one-well decay is biased")
 def test_nsi_cubic_of_a_free_decay_of_the_duffing_on_a_fixture():
-    # measured: 11.663 / 0.49 %, 25.761 / 2.01 % (modes pass), k3 -8.9 %
+    # measured: 11.663 / 0.49 %, 25.761 / 2.01 % (modes pass), k3 -8.9 % (the decay form, its level the masses'; the
+    # double well's decay, which crosses its barrier, gives k3 +0.1 %: the cause is not known yet)
     est = _fit(NSI(element="1-2"), _decay(LIGHT_DUFFING, (0.0, 0.008), seed=1, duration=10.0))
     _check(est, LIGHT_DUFFING, ["plus"], "decay")
