@@ -4,7 +4,8 @@ c_nl) under a random-phase multisine base acceleration (2-30 Hz, 20 m/s^2 rms, c
 the laser's white noise (5 um rms), the accelerometer's bias (0.05 m/s^2) and noise (0.02 m/s^2 rms), and the
 start-up transient from rest kept in the record. The workflow sees only the measured columns.
 
-Each fact is checked at one seed by default and at three (a study) with ``-m slow``.
+Each fact is checked by default at one seed on a shorter record (``SHORT``: the first part of seed 1's), and with
+``-m slow`` at three seeds on ``DURATION`` records (a study).
 """
 
 import dataclasses
@@ -19,13 +20,22 @@ from negstiff.inference.record.measurement import from_arrays
 from negstiff.models import SEED_LIKE_CUBIC
 
 FS = 500.0
-DURATION = 60.0
+DURATION = 60.0  # s: the three-seed study's records
+SHORT = 30.0  # s: the default tier's records (seed 1's first half: the same trajectory, half the cost)
 LASER_NOISE = 5e-6  # m rms
 STOP_K = 3000.0  # N/m
 STOP_ONSET = {1: 0.026, 2: -0.037, 3: 0.026}  # m: a bumper a few mm inside the reach of the side each seed's
 # record visits (acting in 1-5 % of it): seed 2 stays mostly in the minus well (z > 26 mm in 0.4 % of it)
 FRICTION = 0.1  # N, 5 % of the moving mass's weight
-SEEDS = [1, pytest.param(2, marks=pytest.mark.slow), pytest.param(3, marks=pytest.mark.slow)]
+
+
+def study(xfail: dict | None = None, short: float = SHORT) -> list:
+    """(seed, duration) parameters: seed 1 on a ``short`` record by default; seeds 1-3 on ``DURATION`` records with
+    ``-m slow``, each with its strict xfail mark in ``xfail`` ({seed: mark}) where it has one."""
+    xfail = xfail or {}
+    slow = [pytest.param(s, DURATION, marks=[pytest.mark.slow, *([xfail[s]] if s in xfail else [])], id=f"{s}")
+            for s in (1, 2, 3)]  # fmt: skip
+    return [pytest.param(1, short, id="1-short"), *slow]
 
 
 def _hidden(stop: float | None, friction: bool):
@@ -40,10 +50,11 @@ def _hidden(stop: float | None, friction: bool):
     return force
 
 
-def _record(seed: int, stop: float | None = None, friction: bool = False, c_nl: float | None = None):
-    """(measurement, true z) of the seed-like device with the hidden effects."""
+def _record(seed: int, stop: float | None = None, friction: bool = False, c_nl: float | None = None,
+            duration: float = DURATION):  # fmt: skip
+    """(measurement, true z) of the seed-like device with the hidden effects, ``duration`` seconds long."""
     model = SEED_LIKE_CUBIC if c_nl is None else dataclasses.replace(SEED_LIKE_CUBIC, c_nl=c_nl)
-    _, u, z, _ = dop853_record(DURATION, rms=20.0, seed=seed, start=0.023, fs=FS, rtol=1e-8, model=model,
+    _, u, z, _ = dop853_record(duration, rms=20.0, seed=seed, start=0.023, fs=FS, rtol=1e-8, model=model,
                                hidden=_hidden(stop, friction))  # fmt: skip
     rng = np.random.default_rng(1000 + seed)
     z_meas = z + LASER_NOISE * rng.standard_normal(z.size)
@@ -70,18 +81,18 @@ REGIME_SHORT = pytest.mark.xfail(
 
 
 @functools.cache
-def _stop_fit(seed: int) -> tuple[dict, float]:
+def _stop_fit(seed: int, duration: float) -> tuple[dict, float]:
     """The workflow's result on seed's end-stop record and the share of it where the stop acts (one fit per
-    seed, shared by the tests that read it)."""
+    record, shared by the tests that read it)."""
     onset = STOP_ONSET[seed]
-    rec, z = _record(seed, stop=onset)
+    rec, z = _record(seed, stop=onset, duration=duration)
     return Discrepancy().fit(rec).result(), float(np.mean((z - onset) * np.sign(onset) > 0))
 
 
-@pytest.mark.parametrize("seed", [*SEEDS[:2], pytest.param(3, marks=[pytest.mark.slow, REGIME_SHORT])])
-def test_an_end_stop_acting_briefly_is_named_sized_and_its_regime_gap_halved(seed):
+@pytest.mark.parametrize("seed, duration", study({3: REGIME_SHORT}))
+def test_an_end_stop_acting_briefly_is_named_sized_and_its_regime_gap_halved(seed, duration):
     onset = STOP_ONSET[seed]
-    r, share = _stop_fit(seed)
+    r, share = _stop_fit(seed, duration)
     assert 0.01 <= share <= 0.05, share  # the record's premise: the stop acts in 1-5 % of it
     assert r["effects"] == ["end_stop"], r["iterations"]
     size = r["effect_size"]["end_stop"]
@@ -103,23 +114,22 @@ INTERVAL_NARROW = pytest.mark.xfail(
 )
 
 
-@pytest.mark.parametrize("seed", [1, pytest.param(2, marks=[pytest.mark.slow, INTERVAL_NARROW]),
-                                  pytest.param(3, marks=pytest.mark.slow)])  # fmt: skip
-def test_an_end_stop_interval_covers_its_truth(seed):
+@pytest.mark.parametrize("seed, duration", study({2: INTERVAL_NARROW}))
+def test_an_end_stop_interval_covers_its_truth(seed, duration):
     # the stop's size with its 90 % interval (a Laplace approximation of the output error over the record's
     # restarted windows, window-robust, widened by the distance to their mode) covers the truth; the Bayesian
     # second opinion (arviz's LOO over those windows) prefers the model with the stop
-    r, _ = _stop_fit(seed)
+    r, _ = _stop_fit(seed, duration)
     interval = r["effect_interval"]["end_stop"]
     assert _covers(interval["k"], STOP_K) and _covers(interval["z"], STOP_ONSET[seed]), interval
     assert _second_opinion_names(r, "end_stop"), r["bayesian"]
 
 
-@pytest.mark.parametrize("seed", SEEDS)
-def test_quadratic_damping_with_coulomb_friction_both_found(seed):
+@pytest.mark.parametrize("seed, duration", study())
+def test_quadratic_damping_with_coulomb_friction_both_found(seed, duration):
     # c_nl = 1 N s^2/m^2 (twice the seed's) with 0.1 N of friction: c_nl is the baseline's own term, so it is
     # found there (not as an extra effect, not as cubic damping), and friction is named beside it
-    rec, _ = _record(seed, friction=True, c_nl=1.0)
+    rec, _ = _record(seed, friction=True, c_nl=1.0, duration=duration)
     r = Discrepancy().fit(rec).result()
     assert r["effects"] == ["coulomb_friction"], r["iterations"]
     # friction within 10 %: 0.1 N against the inertial force's ~4 N rms; the velocity's noise blurs its sign
@@ -143,11 +153,11 @@ ONSET_INTERVAL_NARROW = pytest.mark.xfail(
 )
 
 
-@pytest.mark.parametrize("seed", [1, pytest.param(2, marks=pytest.mark.slow),
-                                  pytest.param(3, marks=[pytest.mark.slow, ONSET_INTERVAL_NARROW])])  # fmt: skip
-def test_an_end_stop_with_friction_both_named_one_per_round(seed):
+# 40 s by default: in seed 1's first 30 s friction, the second effect, is not named (measured)
+@pytest.mark.parametrize("seed, duration", study({3: ONSET_INTERVAL_NARROW}, short=40.0))
+def test_an_end_stop_with_friction_both_named_one_per_round(seed, duration):
     onset = STOP_ONSET[seed]
-    rec, _ = _record(seed, stop=onset, friction=True)
+    rec, _ = _record(seed, stop=onset, friction=True, duration=duration)
     r = Discrepancy().fit(rec).result()
     assert sorted(r["effects"]) == ["coulomb_friction", "end_stop"], r["iterations"]
     # one effect per round, each judged with the ones before it in place: the rounds' order is the effects'
@@ -162,11 +172,11 @@ def test_an_end_stop_with_friction_both_named_one_per_round(seed):
     assert _covers(intervals["end_stop"]["k"], STOP_K) and _covers(intervals["end_stop"]["z"], onset), intervals
 
 
-@pytest.mark.parametrize("seed", SEEDS)
-def test_a_clean_record_names_nothing(seed):
+@pytest.mark.parametrize("seed, duration", study())
+def test_a_clean_record_names_nothing(seed, duration):
     # the seed's own model form made the record: nothing is missing, and no regime is called out by a share
     # printed as "0 %"
-    rec, _ = _record(seed)
+    rec, _ = _record(seed, duration=duration)
     r = Discrepancy().fit(rec).result()
     assert r["effects"] == ["none"], r["iterations"]
     assert r["gap_regime_percent"] == {} and r["effect_interval"] == {} and r["bayesian"] == {}
@@ -182,12 +192,12 @@ def test_a_share_is_printed_with_the_digits_it_needs():
     assert share_text(0.0) == "0"
 
 
-def _plus_well_then_minus_record(seed: int = 1, duration: float = 60.0, onset: float = 0.025):
-    """(measurement, true z) of the issue's scenario: the device starts in its plus well, where a bumper ``onset``
-    above the centre is hit in ~3 % of the record, under a random-phase multisine base acceleration (2-30 Hz at
-    0.1 Hz: no 4 s period) of 7 m/s^2 rms that rises to 10 m/s^2 at 40 % of the record: the device then jumps to
-    the deeper minus well and stays there, so the held-out tail (the last 20 %) never reaches the stop. DOP853,
-    the laser's 5 um noise, the accelerometer's bias and noise.
+def _plus_well_then_minus_record(seed: int = 1, duration: float = 30.0, onset: float = 0.025):
+    """(measurement, true z) of a record whose held-out tail never reaches the stop: the device starts in its plus
+    well, where a bumper ``onset`` above the centre is hit in ~3 % of the record, under a random-phase multisine
+    base acceleration (2-30 Hz at 0.1 Hz: no 4 s period) of 7 m/s^2 rms that rises to 10 m/s^2 at 40 % of the
+    record: the device then jumps to the deeper minus well and stays there, so the held-out tail (the last 20 %)
+    never reaches the stop. DOP853, the laser's 5 um noise, the accelerometer's bias and noise.
     """
     from scipy.integrate import solve_ivp
 
@@ -214,9 +224,9 @@ def _plus_well_then_minus_record(seed: int = 1, duration: float = 60.0, onset: f
 
 
 def test_an_end_stop_the_held_out_tail_never_reaches_is_judged_where_it_acts():
-    # the issue's own scenario: the stop acts in 1-5 % of the record, all of it before the held-out tail, so the
-    # tail holds no window where it acts; it is judged on the windows where it acts anywhere in the record, each
-    # predicted by fits made without its block's data (blocked cross-validation), and named
+    # the stop acts in 1-5 % of the record, all of it before the held-out tail, so the tail holds no window where
+    # it acts; it is judged on the windows where it acts anywhere in the record, each predicted by fits made without
+    # its block's data (blocked cross-validation), and named
     onset = 0.025
     rec, z = _plus_well_then_minus_record(onset=onset)
     acting = z > onset
@@ -224,7 +234,7 @@ def test_an_end_stop_the_held_out_tail_never_reaches_is_judged_where_it_acts():
     r = Discrepancy().fit(rec).result()
     assert r["effects"] == ["end_stop"], r["iterations"]
     size = r["effect_size"]["end_stop"]
-    # stiffness within 20 % and onset within 1 mm (5 um noise; ~1500 samples beyond the onset)
+    # stiffness within 20 % and onset within 1 mm (5 um noise; ~460 samples beyond the onset)
     assert size["k"] == pytest.approx(STOP_K, rel=0.2)
     assert size["z"] == pytest.approx(onset, abs=1e-3)
     evidence = r["iterations"][0]["evidence"]
@@ -236,9 +246,83 @@ def test_an_end_stop_the_held_out_tail_never_reaches_is_judged_where_it_acts():
         assert f["size"]["k"] == pytest.approx(STOP_K, rel=0.2) and f["size"]["z"] == pytest.approx(onset, abs=1e-3)
     regime = r["gap_regime_percent"]["end_stop"]
     assert regime["judged_on"].startswith("cross-validated")
-    assert regime["after"] <= regime["before"] / 2, regime  # the gap where it acts halved (measured: 3.7 -> 0.035 %)
+    assert regime["after"] <= regime["before"] / 2, regime  # the gap where it acts halved (measured: 3.7 -> 0.034 %)
     # its 90 % interval covers the truth
     interval = r["effect_interval"]["end_stop"]
     assert _covers(interval["k"], STOP_K) and _covers(interval["z"], onset), interval
     assert _second_opinion_names(r, "end_stop"), r["bayesian"]
-    assert evidence["bayesian"]["prefers"] == "with", evidence["bayesian"]  # measured: elpd +1763 +- 51
+    assert evidence["bayesian"]["prefers"] == "with", evidence["bayesian"]
+
+
+ISSUE_ONSET = 0.028  # m: 28 mm above the origin, on the plus well's side (z_plus = 21.9 mm, z_minus = -28.4 mm)
+ISSUE_DURATION = 120.0  # s
+
+
+def _random_record_from_the_plus_well(seed: int):
+    """(measurement, true z) of the scenario in which a stop hit only from the plus well went unnamed: the seed-like
+    device with a bumper of 3000 N/m ``ISSUE_ONSET`` above the centre, started at rest in its plus well under a
+    band-limited Gaussian random base acceleration (2-40 Hz, the rig's band, 20 m/s^2 rms), which throws it into
+    the deeper minus well within a second: it returns to the plus well, and to the bumper, only briefly. The
+    acceleration is white noise at 8x the sampling rate through a zero-phase 4th-order Butterworth band-pass, a
+    cubic spline between its samples for the integrator; DOP853, the laser's 5 um noise, the accelerometer's bias
+    and noise.
+    """
+    from scipy import signal
+    from scipy.integrate import solve_ivp
+    from scipy.interpolate import CubicSpline
+
+    m = SEED_LIKE_CUBIC
+    rng = np.random.default_rng(seed)
+    fine = 8 * FS
+    t_fine = np.arange(int((ISSUE_DURATION + 1.0) * fine)) / fine
+    sos = signal.butter(4, [2.0, 40.0], btype="band", fs=fine, output="sos")
+    a = signal.sosfiltfilt(sos, rng.standard_normal(t_fine.size))
+    a *= 20.0 / np.sqrt(np.mean(a**2))
+    spline = CubicSpline(t_fine, a)
+    pieces = spline.c.T.tolist()  # each interval's cubic, highest power first: evaluated by hand (a spline's
+    # own call costs more than the rest of the right-hand side, which the integrator calls ~600,000 times)
+
+    def rhs(t, x):
+        z, v = x
+        i = int(t * fine)
+        s = t - i / fine
+        c3, c2, c1, c0 = pieces[i]
+        acc = ((c3 * s + c2) * s + c1) * s + c0
+        contact = STOP_K * (z - ISSUE_ONSET) if z > ISSUE_ONSET else 0.0
+        k = ((m.k3 * z + m.k2) * z - m.k1) * z + m.k0
+        return [v, (-m.c * v - m.c_nl * v * abs(v) - k - contact) / m.m - acc]
+
+    t = np.arange(int(ISSUE_DURATION * FS)) / FS
+    z = solve_ivp(rhs, (0, t[-1]), [0.022, 0.0], t_eval=t, method="DOP853", rtol=1e-8, atol=1e-11).y[0]
+    noise = np.random.default_rng(1000 + seed)
+    u_meas = spline(t) + 0.05 + 0.02 * noise.standard_normal(z.size)
+    z_meas = z + LASER_NOISE * noise.standard_normal(z.size)
+    return from_arrays(u_meas, z_meas, FS, mass=m.m, source=f"plus-well-start-{seed}"), z
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("seed", [1, 2])
+def test_an_end_stop_hit_from_the_plus_well_alone_is_named_on_a_long_random_record(seed):
+    # the scenario the stop was first missed on: 120 s at 20 m/s^2 rms, the stop 28 mm above, the record starting
+    # in the plus well and living in the minus well; the stop acts in a fraction of a percent of the record
+    # (measured: 0.24 % at seed 1, 0.16 % at seed 2), beyond the 0.5 % of the stroke the onset's search once
+    # started from (it then settled at 24.3 mm with k ~600 N/m and the stop was not named)
+    rec, z = _random_record_from_the_plus_well(seed)
+    z_0 = SEED_LIKE_CUBIC.equilibria().z_0
+    acting = z > ISSUE_ONSET
+    assert z[0] > z_0 and np.mean(z > z_0) < 0.05, np.mean(z > z_0)  # starts in the plus well, lives in the minus
+    assert 0 < acting.mean() < 0.01, acting.mean()
+    r = Discrepancy().fit(rec).result()
+    assert "plus well" in r["where"].split(";")[0], r["where"]  # the baseline's error sits where the stop is
+    assert r["effects"] == ["end_stop"], r["iterations"]
+    size = r["effect_size"]["end_stop"]
+    # stiffness within 20 % and onset within 1 mm (measured: 2986 N/m and 27.998 mm at seed 1, 3006 N/m and
+    # 28.000 mm at seed 2): the laser's 5 um noise is far below both
+    assert size["k"] == pytest.approx(STOP_K, rel=0.2)
+    assert size["z"] == pytest.approx(ISSUE_ONSET, abs=1e-3)
+    # the gap where it acts at least halved (measured: 15.8 -> 0.17 % over 11 windows at seed 1, 12.2 -> 0.10 %
+    # over 6 at seed 2, cross-validated: the held-out tail reaches it in 1-2 windows)
+    regime = r["gap_regime_percent"]["end_stop"]
+    assert regime["windows"] >= 3 and regime["after"] <= regime["before"] / 2, regime
+    interval = r["effect_interval"]["end_stop"]
+    assert _covers(interval["k"], STOP_K) and _covers(interval["z"], ISSUE_ONSET), interval

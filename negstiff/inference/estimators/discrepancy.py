@@ -67,6 +67,9 @@ from negstiff.models import Model, effects
 CUBIC_BASELINE = ("1", "z", "z^2", "z^3", "v", "v|v|")
 """The seed's own model form: cubic K, viscous c and quadratic c_nl (the contract's damping law)."""
 LINEAR_BASELINE = ("1", "z", "v")
+STOP_MIN_SAMPLES = 10
+"""An end stop's onset is sought only where at least this many samples of the fitting part lie beyond it (a stop
+sized from fewer would fit the noise of a few extreme samples)."""
 
 
 def catalogue() -> dict[str, tuple[str, ...]]:
@@ -439,8 +442,11 @@ class Discrepancy(StructureResults, Estimator):
     def _fit_stop(self, rec: Measurement, terms: tuple[str, ...], aux: tuple[str, ...] = (), upto: int | None = None,
                   keep: np.ndarray | None = None) -> float:  # fmt: skip
         """The end stop's position (a nonlinear parameter) by least squares on the fitting part (or the weak rows
-        ``keep`` of [0, ``upto``)): a grid over the outer 0.5-10 % of the stroke on either side, refined by a
-        bounded scalar search.
+        ``keep`` of [0, ``upto``)): a grid over the outer 0.05-10 % of the stroke on either side (an onset with at
+        least ``STOP_MIN_SAMPLES`` samples beyond it), refined by a bounded scalar search between the best grid
+        point's neighbours. The grid reaches 0.05 %: a stop hit in 0.2 % of a record (the plus well's bumper on a
+        record that lives in the minus well) lies beyond the 0.5 % point, and a search that starts there never
+        reaches it (measured: onset 24.3 mm and k 340-640 N/m for a 3000 N/m stop at 28 mm, then not named).
         """
         from scipy import optimize
 
@@ -454,11 +460,11 @@ class Discrepancy(StructureResults, Estimator):
             return float(np.sum((y - W @ coef) ** 2)) if coef[-1] < 0 else math.inf  # a stop pushes back
 
         z = self._zs[:upto]
-        qs = (0.5, 1, 2, 3, 5, 7, 10)
+        qs = tuple(q for q in (0.05, 0.1, 0.2, 0.5, 1, 2, 3, 5, 7, 10) if q / 100 * z.size >= STOP_MIN_SAMPLES)
         grid = [float(np.percentile(z, q)) for q in qs] + [float(np.percentile(z, 100 - q)) for q in qs]
         vals = [ss(g) for g in grid]
         i = int(np.argmin(vals))
-        side = grid[:7] if i < 7 else grid[7:]
+        side = grid[: len(qs)] if i < len(qs) else grid[len(qs) :]
         j = side.index(grid[i])
         lo, hi = sorted((side[max(j - 1, 0)], side[min(j + 1, len(side) - 1)]))
         if hi > lo:
