@@ -384,7 +384,10 @@ def physical_frame(structure: Structure, b: np.ndarray, gravity: float) -> tuple
     o, info, ok, msg = optimize.fsolve(residual, np.zeros(structure.n_dof), fprime=jacobian, full_output=True,
                                        xtol=1e-12)  # fmt: skip
     scale = float(np.abs(b).max() + abs(k0) + 1e-12)
-    if ok != 1 or np.abs(residual(o)).max() > 1e-6 * scale:
+    # the residual decides, not fsolve's flag: on a horizontal Duffing's decay (constant forces of 0.2 mN, no weight)
+    # it flagged "not making good progress" at a residual of 3e-20 N, a frame found at its first steps
+    del ok
+    if np.abs(residual(o)).max() > 1e-6 * scale:
         raise StructureIdentificationError(
             f"no physical frame for the identified structure: its constant forces {b.tolist()} N are not the element's "
             f"weight {k0:.4g} N on linear springs ({msg})"
