@@ -301,11 +301,12 @@ def _rk4_fixture_polynomial(acc, h, oversample, z2, p):  # pragma: no cover (com
     without a hidden force."""
     m1, k_f, c_f, m2, k0, k1, k2, k3, c, cn = p
     n = acc.size
-    out = np.empty((2, n // oversample))
+    out = np.empty((4, n // oversample))  # z1, z2, v1, v2
     z1, v1, v2 = 0.0, 0.0, 0.0
     for i in range(n):
         if i % oversample == 0:
             out[0, i // oversample], out[1, i // oversample] = z1, z2
+            out[2, i // oversample], out[3, i // oversample] = v1, v2
         a0 = acc[i]
         a1 = acc[i + 1] if i + 1 < n else a0
         am = 0.5 * (a0 + a1)
@@ -337,14 +338,15 @@ def _rk4_fixture_polynomial(acc, h, oversample, z2, p):  # pragma: no cover (com
 
 
 def rk4_fixture_record(duration=60.0, rms=12.0, band=(2.0, 40.0), seed=1, oversample=8, settle=5.0, noise=1e-6,
-                       device=None, fixture=FIXTURE, fs=FS, hidden=None):  # fmt: skip
+                       device=None, fixture=FIXTURE, fs=FS, hidden=None, velocity=False):  # fmt: skip
     """(base_acc, z (2, T)) of ``device`` (TRUTH by default) on a sprung fixture, as another lab's code writes it: a
     plain fixed-step RK4 on Python floats at ``oversample`` x fs (not negstiff's kernel), the base acceleration
     band-limited Gaussian noise made by FFT at the fine rate (linear between fine steps), ``settle`` s dropped,
     sampled at fs with white noise ``noise`` [m] on both displacements. DOF 1 the fixture (its spring and damper to
     the table), DOF 2 the device's mass on the element between them; z relative to the table, from the springs'
     loaded rest (the element's force, k0 included, acts on DOF 2 and oppositely on DOF 1). ``hidden(r, r')``: a
-    force [N] the element has beside its model (friction), acting like the element's."""
+    force [N] the element has beside its model (friction), acting like the element's. ``velocity``: also the
+    integrator's own velocities (2, T) relative to the table, noise-free (a model without a hidden force)."""
     dev = TRUTH if device is None else device
     step = fixture_rk4_step(dev, fixture, hidden)
     h = 1.0 / (fs * oversample)
@@ -367,6 +369,10 @@ def rk4_fixture_record(duration=60.0, rms=12.0, band=(2.0, 40.0), seed=1, oversa
         k_f = m1 * (2 * np.pi * fixture["f_hz"]) ** 2
         p = (m1, k_f, 2 * fixture["zeta"] * np.sqrt(k_f * m1), dev.m, k0, k1, k2, k3, dev.c, dev.c_nl)
         out = _rk4_fixture_polynomial(np.asarray(acc), h, oversample, z2, p)
+    elif velocity:
+        raise ValueError("velocity=True: the compiled route only (no hidden force)")
+    velocities = out[2:] if hidden is None else None
+    out = out[:2]
     for i in range(n if hidden is not None else 0):
         if i % oversample == 0:
             out[0, i // oversample], out[1, i // oversample] = z1, z2
@@ -376,7 +382,8 @@ def rk4_fixture_record(duration=60.0, rms=12.0, band=(2.0, 40.0), seed=1, oversa
     k = int(round(settle * fs))
     u = np.asarray(acc[::oversample])[k:]
     z = out[:, k:]
-    return u, z + noise * rng.standard_normal(z.shape)
+    z = z + noise * rng.standard_normal(z.shape)
+    return (u, z, velocities[:, k:]) if velocity else (u, z)
 
 
 # --- a refusal as the contract states it (the probes' files share it) ----------------------------------

@@ -51,10 +51,28 @@ DIMENSIONS = {
 RESPONSE_CHANNEL = re.compile(r"^z([1-9][0-9]*)$")
 """A structure's response channel ``z1 ... zN`` (each DOF's displacement relative to the base [m])."""
 
+CHANNEL_SENSOR = re.compile(r"^(z|y)([1-9][0-9]*)(_dot|_acc)?$")
+"""A structure's DOF response as its sensor measured it: ``zK`` (relative displacement), ``zK_dot`` (relative
+velocity), ``yK``, ``yK_dot``, ``yK_acc`` (absolute displacement, velocity, acceleration): the single DOF's
+response columns with the DOF's number K (``sensors.RESPONSES``)."""
+
+
+def channel_sensor(column: str) -> tuple[int, str] | None:
+    """(K, the single DOF's column name) of a structure's response column (``z2_dot`` -> (2, "z_dot")), else
+    None. The name may be one no response has (``z2_acc``): the reader refuses it.
+    """
+    m = CHANNEL_SENSOR.match(column)
+    return None if m is None else (int(m.group(2)), m.group(1) + (m.group(3) or ""))
+
 
 def dimension(column: str) -> str | None:
-    """The dimension of a contract column (``DIMENSIONS``; a structure's ``z1 ... zN`` are lengths), else None."""
-    return "length" if RESPONSE_CHANNEL.match(column) else DIMENSIONS.get(column)
+    """The dimension of a contract column (``DIMENSIONS``; a structure's ``z1 ... zN`` are lengths, its ``zK_dot``
+    velocities, and so on), else None.
+    """
+    sensor = channel_sensor(column)
+    return DIMENSIONS.get(sensor[1] if sensor is not None else column)
+
+
 SI_UNITS = {dim: next(iter(units)) for dim, units in UNITS.items()}
 """The SI unit of each dimension (the first of ``UNITS``)."""
 
@@ -63,7 +81,8 @@ def si_unit(column: str) -> str:
     """The unit a column is written in: SI by its dimension, or g for an acceleration written as ``<name>_g``."""
     if column.endswith("_g") and DIMENSIONS.get(column[:-2]) == "acceleration":
         return "g"
-    return SI_UNITS[DIMENSIONS[column]] if column in DIMENSIONS else ""
+    dim = dimension(column)
+    return SI_UNITS[dim] if dim is not None else ""
 
 
 MAGNITUDE_LIMITS = {"time": 1e9, "length": 1e3, "velocity": 1e4, "acceleration": 1e7, "force": 1e9}
@@ -185,9 +204,10 @@ def parse_column_map(text: str | None) -> dict[str, tuple[str, float | None]]:
                 "(scale unknown)"
             )
         name, src, scale = m.group(1), m.group(2).strip().strip('"'), m.group(3)
-        if name not in KNOWN and not RESPONSE_CHANNEL.match(name):
+        if name not in KNOWN and channel_sensor(name) is None:
             raise MeasurementError(
-                f"column map names {name!r}, which is not a measurement column ({', '.join(KNOWN)}, z1 ... zN)"
+                f"column map names {name!r}, which is not a measurement column ({', '.join(KNOWN)}, z1 ... zN, "
+                "or a DOF's z1_dot, y1, y1_dot, y1_acc)"
             )
         try:
             factor = 1.0 if scale is None else UNKNOWN_SCALE if scale == "?" else float(scale)

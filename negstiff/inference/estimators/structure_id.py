@@ -361,12 +361,25 @@ def _assemble(theta: np.ndarray, n: int, at: tuple[int, int], masses, extra: dic
     return Structure(tuple(masses), element, assemble(pairs, k, n), assemble(pairs, c, n), at), b
 
 
-def physical_frame(structure: Structure, b: np.ndarray, gravity: float) -> tuple[Structure, np.ndarray]:
+def unknown_zeros(rec: Measurement) -> bool:
+    """Whether a record's channels have no zero of their own (derived from a velocity or an acceleration: an
+    integral's constant is arbitrary), so that the frame must be chosen by the physics alone (``physical_frame``'s
+    ``between_wells``); a laser's zero, however arbitrary, is a few tenths of a millimetre off at most.
+    """
+    return any(a.get("derived") for a in (rec.info.get("response") or {}).get("channels", ()))
+
+
+def physical_frame(structure: Structure, b: np.ndarray, gravity: float,
+                   between_wells: bool = False) -> tuple[Structure, np.ndarray]:  # fmt: skip
     """The structure identified in the record's frame (each DOF's constant force ``b``, its element's polynomial
     in the measured relative coordinate) in the physical frame, and each channel's zero o (measured = physical +
-    o): the o nearest zero for which Ks o + l G(l.o) + b = l k0 (no constant force but the element's, whose
-    constant is the weight it carries, k0 = m_J g), the element's polynomial re-expanded about l.o (reference
-    study Eq. 7). One ``StructureIdentificationError`` when no such frame exists.
+    o): the o for which Ks o + l G(l.o) + b = l k0 (no constant force but the element's, whose constant is the
+    weight it carries, k0 = m_J g), the element's polynomial re-expanded about l.o (reference study Eq. 7). A
+    bistable element allows three such frames, its polynomial re-expanded about either well or the barrier, each
+    describing the same motion: the one nearest the channels' zeros (a laser's), or with ``between_wells`` (channels
+    with no zero of their own, ``unknown_zeros``) the middle one, the barrier's (``_barrier_frame``; the frame of
+    negstiff's device models: r = 0 on the negative-stiffness branch). One
+    ``StructureIdentificationError`` when no such frame exists.
     """
     el = structure.element
     lvec = structure.coupling
@@ -374,6 +387,9 @@ def physical_frame(structure: Structure, b: np.ndarray, gravity: float) -> tuple
     b = np.asarray(b, float) + lvec * el.k0  # the element's own constant is one more constant force
     k0 = el.m * gravity
     P = np.polynomial.Polynomial([0.0, -el.k1, el.k2, el.k3])
+    start = np.zeros(structure.n_dof)
+    if between_wells:
+        start = _barrier_frame(K, lvec, P, b, k0, start)
 
     def residual(o):
         return K @ o + lvec * P(lvec @ o) + b - lvec * k0
@@ -381,8 +397,7 @@ def physical_frame(structure: Structure, b: np.ndarray, gravity: float) -> tuple
     def jacobian(o):
         return K + np.outer(lvec, lvec) * P.deriv()(lvec @ o)
 
-    o, info, ok, msg = optimize.fsolve(residual, np.zeros(structure.n_dof), fprime=jacobian, full_output=True,
-                                       xtol=1e-12)  # fmt: skip
+    o, info, ok, msg = optimize.fsolve(residual, start, fprime=jacobian, full_output=True, xtol=1e-12)
     scale = float(np.abs(b).max() + abs(k0) + 1e-12)
     # the residual decides, not fsolve's flag: on a horizontal Duffing's decay (constant forces of 0.2 mN, no weight)
     # it flagged "not making good progress" at a residual of 3e-20 N, a frame found at its first steps
@@ -398,6 +413,30 @@ def physical_frame(structure: Structure, b: np.ndarray, gravity: float) -> tuple
     del c0  # G(s): taken by the frame (K o + l G(s) + b = l k0)
     element = Model(**{**el.to_dict(), "k0": float(k0), "k1": -float(c1), "k2": float(c2), "k3": float(c3)})
     return structure.with_element(element), o
+
+
+def _barrier_frame(K: np.ndarray, lvec: np.ndarray, P, b: np.ndarray, k0: float, fallback: np.ndarray) -> np.ndarray:
+    """The middle of a bistable element's three frames (the barrier's; ``physical_frame``): with the element's
+    force lambda = P(s) at s = l.o, K o + l lambda = l k0 - b and l.o = s are linear in (o, lambda) (the bordered
+    system ``Structure._static`` solves, invertible whenever the structure with the element held is grounded, a
+    DOF carried by the element alone included), so lambda(s) = lambda0 + lambda1 s and the frames are the real
+    roots of P(s) = lambda(s), a cubic. ``fallback`` where the system is singular or the cubic has no real root.
+    """
+    n = K.shape[0]
+    A = np.zeros((n + 1, n + 1))
+    A[:n, :n], A[:n, n], A[n, :n] = K, lvec, lvec
+    e = np.zeros(n + 1)
+    e[n] = 1.0
+    try:
+        x0 = np.linalg.solve(A, np.concatenate([lvec * k0 - b, [0.0]]))
+        x1 = np.linalg.solve(A, e)
+    except np.linalg.LinAlgError:
+        return fallback
+    roots = (P - np.polynomial.Polynomial([x0[n], x1[n]])).roots()
+    real = sorted(float(r.real) for r in roots if abs(r.imag) <= 1e-9 * max(1.0, abs(r.real)))
+    if not real:
+        return fallback
+    return x0[:n] + real[len(real) // 2] * x1[:n]
 
 
 def held_out_floor(structure: Structure, rec: Measurement, start: int, offsets, draws: int = 5) -> float | None:
@@ -603,7 +642,7 @@ def identify_sindy(est, rec: Measurement, at: tuple[int, int]) -> StructureIdent
         theta = _lstsq(Xf, yf, support)
         try:
             s, b = _assemble(theta, rec.n_dof, at, masses)
-            physical_frame(s, b, rec.gravity)[0].equilibria()
+            physical_frame(s, b, rec.gravity, unknown_zeros(rec))[0].equilibria()
             usable = True
         except (ValueError, InputError):
             usable = False
@@ -632,7 +671,7 @@ def identify_sindy(est, rec: Measurement, at: tuple[int, int]) -> StructureIdent
     ensemble = {n: {"inclusion_probability": float(np.mean(coefs[:, i] != 0)), "median": float(np.median(coefs[:, i])),
                     "sd": float(np.std(coefs[:, i]))} for i, n in enumerate(names)}  # fmt: skip
     s_m, b = _assemble(theta, rec.n_dof, at, masses)
-    structure, offsets = physical_frame(s_m, b, rec.gravity)
+    structure, offsets = physical_frame(s_m, b, rec.gravity, unknown_zeros(rec))
     return _finish("sindy", rec, structure, offsets, n_id, None, [], {
         "terms": {nm: float(t) for nm, t in zip(names, theta, strict=True)},
         "selected_terms": chosen["terms"],
@@ -696,7 +735,7 @@ def _least_squares_start(rec: Measurement, at, zs, v, gravity: float) -> tuple[S
         Xs.append(-cols[d] / mass[d])
     theta = _lstsq(np.vstack(Xs), np.concatenate(ys))
     s, b = _assemble(theta, rec.n_dof, at, rec.dof_masses)
-    return physical_frame(s, b, gravity)
+    return physical_frame(s, b, gravity, unknown_zeros(rec))
 
 
 def weak_frame(rec: Measurement, at: tuple[int, int], zs: np.ndarray, v: np.ndarray, gravity: float) -> np.ndarray:
@@ -706,7 +745,7 @@ def weak_frame(rec: Measurement, at: tuple[int, int], zs: np.ndarray, v: np.ndar
     form = _Weak.of(relative(zs, at), rec.fs)
     y, X, _, _ = weak_system(rec, at, zs, v, form, [])
     s, b = _assemble(_lstsq(X, y), rec.n_dof, at, rec.dof_masses)
-    return physical_frame(s, b, gravity)[1]
+    return physical_frame(s, b, gravity, unknown_zeros(rec))[1]
 
 
 def _in_frame(structure: Structure, offsets: np.ndarray, frame: np.ndarray) -> tuple[Structure, np.ndarray]:
@@ -869,7 +908,8 @@ def nsi_well(est, rec: Measurement, zs: np.ndarray, v: np.ndarray, at: tuple[int
         element = Model(m=float(mass[at[1] - 1]), k0=float(c0), k1=-float(c1), k2=float(c2), k3=float(c3), c=ct,
                         c_nl=float(coef[2]))  # fmt: skip
         try:
-            structure, offsets = physical_frame(Structure(rec.dof_masses, element, Ks, Cs, at), b, gravity)
+            structure, offsets = physical_frame(Structure(rec.dof_masses, element, Ks, Cs, at), b, gravity,
+                                                unknown_zeros(rec))
             eq = structure.element_equilibria()
         except (ValueError, InputError) as exc:
             raise StructureIdentificationError(
@@ -982,14 +1022,14 @@ def discrepancy(est, rec: Measurement, at: tuple[int, int]) -> StructureIdentifi
     ranking.sort(key=lambda e: e["score"])
     y, X = whole[0], whole[1]
     base_s, base_b = _assemble(_lstsq(X[:, base_cols], y), rec.n_dof, at, masses)
-    baseline, base_offsets = physical_frame(base_s, base_b, rec.gravity)
+    baseline, base_offsets = physical_frame(base_s, base_b, rec.gravity, unknown_zeros(rec))
     if named is None:
         structure, offsets = baseline, base_offsets
     else:
         k = [t.field for t in terms].index(named)
         theta = _lstsq(X[:, base_cols + [n_base + k]], y)
         s, b = _assemble(theta[:-1], rec.n_dof, at, masses, {named: float(theta[-1])})
-        structure, offsets = physical_frame(s, b, rec.gravity)
+        structure, offsets = physical_frame(s, b, rec.gravity, unknown_zeros(rec))
     gap_before = free_run_error(baseline, rec, n_id, WINDOW_S, base_offsets)
     gap_after = free_run_error(structure, rec, n_id, WINDOW_S, offsets)
     est.effects_ = [named] if named else ["none"]

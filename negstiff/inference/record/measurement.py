@@ -43,10 +43,10 @@ from negstiff.io.schema import (
     MAGNITUDE_LIMITS,
     MASS_RANGE_KG,
     OPTIONAL,
-    RESPONSE_CHANNEL,
     SAMPLING_RATE_RANGE_HZ,
     TIME_STEP_RESOLUTION,
     UNITS,
+    channel_sensor,
     dimension,
     header_name,
     in_si,
@@ -54,7 +54,7 @@ from negstiff.io.schema import (
 )
 from negstiff.models.effects import measured_channels
 
-from . import sensors
+from . import channels, sensors
 
 TIME_JITTER_FRACTION = 0.01
 """A time column's samples may sit this fraction of a step off a uniform grid (or by their printed
@@ -463,33 +463,6 @@ def _checked_masses(source, masses, n_dof: int) -> tuple[float, ...]:
     return out
 
 
-def _response_channels(source, cols: dict[str, np.ndarray]) -> list[str]:
-    """A structure's response columns ``z1 ... zN`` in order (empty for a single DOF's record), checked: consecutive
-    from z1, and not beside a single DOF's response columns.
-    """
-    found = sorted((int(m.group(1)), k) for k in cols if (m := RESPONSE_CHANNEL.match(k)))
-    if not found:
-        return []
-    if [d for d, _ in found] != list(range(1, len(found) + 1)):
-        names = ", ".join(k for _, k in found)
-        raise MeasurementError(f"{source}: responses must be z1 ... zN, consecutive; found {names}")
-    single = [k for k in sensors.RESPONSES if k in cols]
-    if single:
-        raise MeasurementError(f"{source}: a record holds a structure's responses z1 ... zN or a single DOF's "
-                               f"response, not both (it has {found[0][1]} and {single[0]})")  # fmt: skip
-    return [k for _, k in found]
-
-
-def _structure_response(source, cols: dict[str, np.ndarray], names: list[str]) -> tuple[np.ndarray, dict]:
-    """The (N, T) responses and ``info["response"]`` of a structure's record (N > 1): as measured, each channel
-    with its own unknown zero (a laser's), which the record keeps and the identification estimates.
-    """
-    z = np.vstack([cols.pop(k) for k in names])
-    return z, {"measured": f"z1 ... z{len(names)}", "derived": None, "z_constant_known": True,
-               "offsets": "each channel's zero as measured (a laser's is arbitrary): a structure's identification "
-                          "estimates each channel's constant with the equations of motion"}  # fmt: skip
-
-
 def _force_dof(source, value, n_dof: int) -> int | None:
     """The metadata's ``force_dof`` (the DOF a force acts on, 1..N), checked; None when not given."""
     if value is None:
@@ -667,9 +640,9 @@ def load(
     aux_names = [a for a in (aux.split(",") if isinstance(aux, str) else aux or ()) if str(a).strip()]
     _refuse_set_aside(path, meta, aux_names)
     aux_cols = _aux_channels(path, raw, aux_names, n)
-    dofs = _response_channels(path, cols)
-    if len(dofs) == 1:  # one DOF: its z
-        cols["z"] = cols.pop(dofs[0])
+    dofs = channels.response_channels(path, cols)
+    if len(dofs) == 1:  # one DOF: a single DOF's response (z1 its z, z1_dot its z_dot, ...)
+        cols[channel_sensor(dofs[1])[1]] = cols.pop(dofs[1])  # type: ignore[index]
     masses = masses if masses is not None else meta.get("masses")
     dof_masses = None if masses is None else _checked_masses(path, masses, max(1, len(dofs)))
     if len(dofs) <= 1 and dof_masses is not None and mass is None:
@@ -681,21 +654,21 @@ def load(
         if mass_given:
             raise MeasurementError(f"{path}: a record of {len(dofs)} DOFs (z1 ... z{len(dofs)}) takes its DOFs' "
                                    "masses (masses=, --masses, '# masses:'), not one mass")  # fmt: skip
-        z, resp = _structure_response(path, cols, dofs)
+        z, resp = channels.derive_channels(path, cols, dofs, input_name, fs, units_known=not unknown)
         mass = None  # a structure's are its masses
     elif response or any(k in cols for k in sensors.RESPONSES):
         z, resp = sensors.derive(cols, input_name, fs, str(path), units_known=not unknown)
-        k = int(round(resp.get("trim_s", 0.0) * fs))
-        if k:
-            if n <= 4 * k:
-                raise MeasurementError(
-                    f"{path}: too few samples ({n}) to derive z from {resp['measured']}: the integral of an "
-                    f"accelerometer loses {resp['trim_s']:g} s at each end"
-                )
-            cols = {c: v[k:-k] for c, v in cols.items()}
-            aux_cols = {c: v[k:-k] for c, v in aux_cols.items()}
-            z, t0 = z[k:-k], t0 + k / fs
-            resp["derived"] += f"; {resp['trim_s']:g} s cut at each end (the integral's end effects)"
+    k = int(round(resp.get("trim_s", 0.0) * fs))
+    if k and z is not None:
+        if n <= 4 * k:
+            raise MeasurementError(
+                f"{path}: too few samples ({n}) to derive z from {resp['measured']}: the integral of an "
+                f"accelerometer loses {resp['trim_s']:g} s at each end"
+            )
+        cols = {c: v[k:-k] for c, v in cols.items()}
+        aux_cols = {c: v[k:-k] for c, v in aux_cols.items()}
+        z, t0 = z[..., k:-k], t0 + k / fs
+        resp["derived"] += f"; {resp['trim_s']:g} s cut at each end (the integral's end effects)"
     aside = {k[len(SET_ASIDE) :]: v for k, v in meta.items() if k.startswith(SET_ASIDE)}
     rec = Measurement(
         fs=fs,
@@ -756,7 +729,7 @@ def _refuse_set_aside(path: Path, meta: dict[str, str], wanted) -> None:
 def _mapped_columns(path: Path, raw: dict[str, np.ndarray], cmap: dict) -> dict[str, np.ndarray]:
     """The contract's columns: mapped (and scaled) from the file's, plus unmapped contract names."""
     if not cmap:
-        return {k: v for k, v in raw.items() if k in KNOWN or RESPONSE_CHANNEL.match(k)}
+        return {k: v for k, v in raw.items() if k in KNOWN or channel_sensor(k) is not None}
     cols: dict[str, np.ndarray] = {}
     for name, (src, scale) in cmap.items():
         if src not in raw:
@@ -764,7 +737,7 @@ def _mapped_columns(path: Path, raw: dict[str, np.ndarray], cmap: dict) -> dict[
                 f"{path}: column map refers to {src!r}, which is not in the file (columns: {', '.join(raw) or 'none'})"
             )
         cols[name] = raw[src] * (1.0 if scale is None else scale)  # an unknown scale (*?): as read
-    for name in [*KNOWN, *(k for k in raw if RESPONSE_CHANNEL.match(k))]:  # unmapped contract columns count
+    for name in [*KNOWN, *(k for k in raw if channel_sensor(k) is not None)]:  # unmapped contract columns count
         if name in raw and name not in cols and all(src != name for src, _ in cmap.values()):
             cols[name] = raw[name]
     return cols
@@ -1062,7 +1035,7 @@ def from_arrays(
     aux = _aux_channels(source, dict(aux), list(aux), n)
     kw = {**kw, **{k: cols[k] for k in OPTIONAL if k in cols}, "aux": aux}
     if responses is not None:
-        z, info["response"] = _structure_response(source, cols, list(responses))
+        z, info["response"] = channels.derive_channels(source, cols, dict(enumerate(responses, 1)), input_name, fs)
     rec = Measurement(fs=fs, input_name=input_name, u=cols[input_name], z=None if z is None else np.asarray(z, float),
                       **{**kw, "mass": None, "info": info, "masses": masses, "force_dof": force_dof})  # fmt: skip
     return rec.with_mass(mass).with_gravity(gravity)
