@@ -364,14 +364,15 @@ def test_input_noise_term_reads_as_sensor_noise_plus_the_filtered_input_noise():
         assert abs(ll_cut[w] - exact) <= 0.5e-4 * (y.size + np.sum(y**2) / sigma**2)
 
 
-def test_a_hammers_record_is_refused_before_any_work():
-    # the posterior's windows see the input only in a hammer's hits (it crashed in its step-size check on such a
-    # record, a traceback): refused at once with one line naming the kind, as the command line shows it
+def test_a_noise_free_hammer_record_is_one_error_not_a_traceback():
+    # a hammer's record is sampled (tests/test_posterior_impact.py); one without any noise has no posterior to
+    # sample (its likelihood is a point): one PosteriorError line, as the command line shows it, never a traceback
     from impact_records import DUFFING, hammer_record
 
-    from negstiff.errors import InputError
+    from negstiff.inference.estimators.posterior.windows import PosteriorError
 
     _, f, z, _ = hammer_record(DUFFING, 0.0, 2000.0, [0.5, 3.0, 5.5], 1.8, 0.004, 8.0)
     rec = from_arrays(f + 0.5, z, 2000.0, input_name="force", mass=DUFFING.m)
-    with pytest.raises(InputError, match="a hammer's record .* NSI's and SINDy's intervals"):
+    with pytest.raises(PosteriorError, match="no start point of positive posterior density") as err:
         Posterior(seed=0).fit(rec)
+    assert len(str(err.value).splitlines()) == 1
