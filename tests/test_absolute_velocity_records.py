@@ -117,3 +117,26 @@ def test_a_gain_the_record_cannot_say_is_refused(tmp_path, record):
     path = lab_file(tmp_path / "still.csv", still)
     with pytest.raises(InputError, match="gain"):
         load(path, columns=COLUMNS)
+
+
+def well_hz(z):
+    """The truth's underlying-linear frequency at a well: sqrt(K'(z) / m) / 2 pi."""
+    stiffness = K3 * (3 * z**2 - 2 * (Z_MINUS + Z_PLUS) * z + Z_MINUS * Z_PLUS)
+    return np.sqrt(stiffness / M) / (2 * np.pi)
+
+
+@pytest.mark.slow  # two minutes of record, each method's whole fit; the fast tests above check the route itself
+@pytest.mark.parametrize("method", ["nsi", "sindy"])
+def test_an_absolute_velocity_record_is_identified(tmp_path, method):
+    """Through y_dot=COLUMN*?, both methods find the device: both wells within 10 % of their positions and their
+    underlying-linear frequencies within 5 %, positive damping, held-out windows predicted within 50 %."""
+    from negstiff import NSI, SINDy
+
+    path = lab_file(tmp_path / "ground.csv", device_record(duration=120.0))
+    res = (NSI() if method == "nsi" else SINDy()).fit(load(path, columns=COLUMNS)).result_
+    assert res.equilibria.z_minus == pytest.approx(Z_MINUS, rel=0.10)
+    assert res.equilibria.z_plus == pytest.approx(Z_PLUS, rel=0.10)
+    assert res.modal["minus"]["f_hz"] == pytest.approx(well_hz(Z_MINUS), rel=0.05)
+    assert res.modal["plus"]["f_hz"] == pytest.approx(well_hz(Z_PLUS), rel=0.05)
+    assert res.model.c > 0
+    assert res.validation["restarted_rms_percent"] < 50  # held-out windows, each restarted from the measured state
