@@ -160,3 +160,23 @@ def test_seed_takes_none_an_integer_or_a_generator():
     assert runs[2].device_.E == runs[3].device_.E  # the same generator state, the same run
     with pytest.raises(InputError, match="Generator"):
         GAUpdater(seed=-1).fit(targets)
+
+
+def test_models_drawn_from_a_posterior_carry_its_draws_and_its_seed(posterior):
+    # each drawn model is the posterior mean's model (its mass) with one draw's coefficients: their
+    # spread is the posterior's, the same seed draws the same models, and a fit rebuilt from its JSON (no draws)
+    # says so in one error
+    from negstiff import InputError
+
+    draws = posterior.draw_models(40, seed=3)
+    assert len(draws) == 40 and all(d.m == posterior.model_.m for d in draws)
+    k3 = np.array([d.k3 for d in draws])
+    s = posterior.result()["parameters"]["k3"]
+    # 40 draws of correlated chains (a short run's): their mean within one posterior sd of the posterior's (a
+    # standard error of sd / 6 for independent draws, a few times that for these), their sd within a factor 2
+    assert abs(k3.mean() - s["mean"]) < s["sd"] and 0.5 < k3.std() / s["sd"] < 2
+    assert [d.k3 for d in posterior.draw_models(40, seed=3)] == list(k3)
+    with pytest.raises(InputError, match="holds no draws"):
+        Posterior.from_json(json.dumps(posterior.to_json())).draw_models(5)
+    with pytest.raises(InputError, match="n must be"):
+        posterior.draw_models(0)

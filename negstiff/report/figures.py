@@ -84,7 +84,7 @@ def backbone_figure(res: dict[str, Any], title: str):
     if band:
         a = 1e3 * np.asarray(band["amplitude_m"])
         a1.fill_betweenx(a, band["f_hz_low"], band["f_hz_high"], color="C3", alpha=0.2,
-                         label=f"model, {100 * band['prob']:.0f} % band")  # fmt: skip
+                         label=f"posterior draws, {100 * band['prob']:.0f} % band ({band['draws']})")  # fmt: skip
         a2.fill_betweenx(a, 100 * np.asarray(band["zeta_low"]), 100 * np.asarray(band["zeta_high"]), color="C3",
                          alpha=0.2)  # fmt: skip
     a1.set(xlabel="frequency [Hz]", ylabel="amplitude [mm]", title=title)

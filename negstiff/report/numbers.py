@@ -8,7 +8,8 @@ from typing import Any
 
 def fmt(x: Any, digits: int = 4) -> str:
     """A number as a person reads it (``digits`` significant figures), or the value as text; None (nothing to
-    show, a table's empty cell) as "-"."""
+    show, a table's empty cell) as "-".
+    """
     if x is None:
         return "-"
     if isinstance(x, bool):

@@ -31,11 +31,13 @@ from .document import Report
 BROADBAND = ("nsi", "sindy", "posterior", "discrepancy", "frf")
 HARMONIC = ("characterise",)
 CAMPAIGN = ("map",)
-IMPACT = ("frf", "nsi", "sindy", "interval")
+IMPACT = ("frf", "nsi", "sindy", "interval", "posterior")
 """A hammer's record: its FRF (hits, offsets, windows), the identifications with the force windowed, NSI's
-estimate's interval by batch means over blocks of the record (a hit or so each)."""
-DECAY = ("nsi", "sindy", "backbone")
-"""A free decay: the identifications (their decay forms), then the backbone measured and the identified model's."""
+estimate's interval by batch means over blocks of the record (a hit or so each), and the coefficient posterior
+(its windows between the hits)."""
+DECAY = ("nsi", "sindy", "posterior", "backbone")
+"""A free decay: the identifications (their decay forms), the coefficient posterior, then the backbone measured and
+the identified model's, with the posterior's credible band."""
 SECTIONS = (*BROADBAND, *HARMONIC, *CAMPAIGN, "backbone", "interval")
 """Every analysis a report may hold (``only`` chooses among them)."""
 
@@ -287,16 +289,23 @@ def _interval(rec, fitted: dict[str, Any]) -> dict[str, Any]:
     raise InputError(f"{rec.source}: no identification was made, so it has no interval")
 
 
+BACKBONE_DRAWS = 24
+"""Posterior draws whose predicted backbones make the report's credible band."""
+
+
 def _backbone(rec, fitted: dict[str, Any]) -> dict[str, Any]:
     """The decay's backbone, measured and predicted by the first identification that was made (NSI's, else
-    SINDy's).
+    SINDy's, else the posterior mean's), with the credible band of ``BACKBONE_DRAWS`` posterior draws where the
+    posterior was sampled.
     """
     from negstiff.inference.analysis.backbone import backbone
 
-    for name, label in (("nsi", "NSI"), ("sindy", "SINDy")):
+    post = fitted.get("posterior")
+    draws = post.draw_models(min(BACKBONE_DRAWS, post.result_.samples[..., 0].size)) if post is not None else None
+    for name, label in (("nsi", "NSI"), ("sindy", "SINDy"), ("posterior", "the posterior mean")):
         if name in fitted:
             model = fitted[name].model_
-            return {**backbone(_last_well(rec, model), model=model), "model_name": f"{label}'s model"}
+            return {**backbone(_last_well(rec, model), model=model, draws=draws), "model_name": f"{label}'s model"}
     return backbone(rec)
 
 

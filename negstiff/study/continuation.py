@@ -50,18 +50,9 @@ def posterior_draws(m, n_draws: int, seed_: int, fast: bool) -> list:
     two ensembles, for a dozen draws; in --fast, two short ensembles).
     """
     from negstiff.inference.estimators.posterior import Posterior
-    from negstiff.models import Model
 
     post = Posterior(seed=seed_, n_ensembles=2, max_steps=1500) if fast else Posterior(seed=seed_, n_ensembles=2)
-    res = post.fit(m).result_
-    flat = res.samples.reshape(-1, res.samples.shape[-1])
-    rng = np.random.default_rng(seed_)
-    names = [n for n in res.names if n != "sigma"]
-    mass = 1.0 if m.mass is None else float(m.mass)
-    out = []
-    for row in flat[rng.choice(flat.shape[0], n_draws, replace=False)]:
-        out.append(Model(m=mass, **{n: float(row[res.names.index(n)]) for n in names}))
-    return out
+    return post.fit(m).draw_models(n_draws, seed=seed_)
 
 
 SWEEP_AMPLITUDES = (3.0, 3.5)

@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 from scipy import optimize
 
-from negstiff.errors import ConvergenceWarning, MeasurementError, issue
+from negstiff.errors import ConvergenceWarning, InputError, MeasurementError, issue
 from negstiff.inference.estimators.base import Estimator
 from negstiff.inference.estimators.parameters import RANDOM_STATE, Boolean, Instance, Interval, Options, seed_of
 from negstiff.inference.estimators.persistence import provenance
@@ -278,6 +278,28 @@ class Posterior(Estimator):
             return Model(m=mass, k1=mean["k1"], k2=mean["k2"], k3=mean["k3"], c=mean["c"], c_nl=mean["c_nl"],
                          k0=mean.get("k0"))  # fmt: skip
         return NOMINAL.with_(E=mean["E"], alpha_deg=mean["alpha_deg"], m=mean["m"], c=mean["c"], c_nl=mean["c_nl"])
+
+    def draw_models(self, n: int, seed: int | None = 0) -> list:
+        """``n`` models drawn from the sampled posterior (steps and walkers of every ensemble, without replacement):
+        the posterior mean's model (``model_``, its mass and constant) with each draw's coefficients. A credible band
+        for what a model predicts: a backbone (``analysis.backbone``'s ``draws``), a continuation. The coefficient
+        posterior of a single DOF or a structure's element; a fit rebuilt from its JSON has no draws (one
+        ``InputError``).
+        """
+        from dataclasses import replace
+
+        res = self.result_
+        if "k1" not in res.names:
+            raise InputError("draw_models: the device posterior's draws are devices, not coefficient models")
+        flat = np.asarray(res.samples).reshape(-1, len(res.names))
+        if flat.shape[0] == 0:
+            raise InputError("draw_models: this posterior holds no draws (rebuilt from its JSON: keep its NetCDF)")
+        if not (isinstance(n, int | np.integer) and 0 < n <= flat.shape[0]):
+            raise InputError(f"draw_models: n must be 1 to {flat.shape[0]} (the draws held), got {n!r}")
+        rows = flat[np.random.default_rng(seed).choice(flat.shape[0], int(n), replace=False)]
+        fields = [k for k in ("k0", "k1", "k2", "k3", "c", "c_nl") if k in res.names]
+        base = self.model_
+        return [replace(base, **{k: float(row[res.names.index(k)]) for k in fields}) for row in rows]
 
     # --- start point -------------------------------------------------------------------------------
     def _start(self, rec: Measurement, win: Windows) -> tuple[Parametrisation, np.ndarray]:
