@@ -75,8 +75,11 @@ def _second_opinion_names(r: dict, effect: str) -> bool:
 
 REGIME_SHORT = pytest.mark.xfail(
     strict=True,
-    reason="measured: named and sized, but the 3 held-out windows where the stop acts have a median error of "
-    "149 % before and 98 % after (the runs leave the well after the contact): a third, not half",
+    reason="measured: named and sized, but the 3 held-out windows where the stop acts (1 s, at 49.3, 53.3 and 57.3 "
+    "s: one phase of the 4 s multisine) have a median error of 149 % before and 98 % after: the motion crosses the "
+    "barrier 5 times in each, and the true model's own runs miss by 103-114 % there; in their first 0.25 s the true "
+    "model misses by 2-3 %, the fit by 0.4-0.6 %, the baseline by 55 %: the 1 s regime windows outlast the record's "
+    "predictability, not a fault of the named model",
 )
 
 
@@ -107,18 +110,13 @@ def test_an_end_stop_acting_briefly_is_named_sized_and_its_regime_gap_halved(see
     assert "evidence" in r["iterations"][0] and "regime" in r["iterations"][0]["evidence"]
 
 
-INTERVAL_NARROW = pytest.mark.xfail(
-    strict=True,
-    reason="measured: k 2976.8 N/m +- 0.43 (90 %: 2976.1 to 2977.5), 0.8 % off the truth: the Laplace "
-    "approximation of the output error over the windows carries the noise's scatter, not the estimate's bias",
-)
-
-
-@pytest.mark.parametrize("seed, duration", study({2: INTERVAL_NARROW}))
+@pytest.mark.parametrize("seed, duration", study())
 def test_an_end_stop_interval_covers_its_truth(seed, duration):
     # the stop's size with its 90 % interval (a Laplace approximation of the output error over the record's
     # restarted windows, window-robust, widened by the distance to their mode) covers the truth; the Bayesian
-    # second opinion (arviz's LOO over those windows) prefers the model with the stop
+    # second opinion (arviz's LOO over those windows) prefers the model with the stop. At seed 2 the fit's k is
+    # 0.8 % off (2976.8 N/m): its interval covers 3000 only with the Hessian inverted in the parameters' scales
+    # (in SI units pinv dropped the direction k trades with the onset: +- 0.43 N/m at 90 %, measured)
     r, _ = _stop_fit(seed, duration)
     interval = r["effect_interval"]["end_stop"]
     assert _covers(interval["k"], STOP_K) and _covers(interval["z"], STOP_ONSET[seed]), interval
@@ -147,9 +145,10 @@ def test_quadratic_damping_with_coulomb_friction_both_found(seed, duration):
 
 ONSET_INTERVAL_NARROW = pytest.mark.xfail(
     strict=True,
-    reason="measured: both named and sized, friction's interval covers 0.1 N, the stop's k 2961 [2826, 3095] N/m "
-    "covers 3000, but its onset 25.962 mm +- 0.012 (90 %: 25.943 to 25.981) misses 26 mm by 38 um: the Laplace "
-    "approximation carries the noise's scatter, not the estimate's bias",
+    reason="measured: both named and sized, friction's interval covers 0.1 N, the stop's k 2961 [2816, 3105] N/m "
+    "covers 3000, but its onset 25.962 mm (90 %: 25.943 to 25.982) misses 26 mm: the output-error refinement was "
+    "rejected on this record (held-out error 0.349 -> 0.542 %), so the onset is the weak form's, 38 um low, and the "
+    "windows' own mode (25.968 mm) is low too: a bias the noise's scatter does not hold",
 )
 
 
