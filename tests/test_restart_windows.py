@@ -49,3 +49,23 @@ def test_measured_segments_and_start_states_of_one_channel_and_of_several():
     zz, vv = np.stack([z, 10 * z]), np.stack([v, 10 * v])
     assert win.measured(zz).shape == (4, 2, 8)
     assert np.array_equal(win.start_states(zz, vv)[0], [4.0, 40.0, -4.0, -40.0])
+
+
+def test_windows_at_chosen_starts_cut_and_run_like_the_stepped_ones():
+    # the discrepancy's windows before each episode of an effect: chosen starts, one length; cut alike, and run by
+    # simulate_windows to the same numbers as the evenly stepped windows with those starts
+    from negstiff import Rig, from_arrays
+    from negstiff.inference.steps.validation import RestartWindows, simulate_windows
+    from negstiff.models import AS_BUILT
+
+    win = RestartWindows.at([3, 17, 30], 5)
+    assert len(win) == 3 and win.length == win.step == 5
+    assert np.array_equal(win.measured(np.arange(40.0))[1], np.arange(17.0, 22.0))
+    r = Rig(seed=2).random(duration=4.0)
+    rec = from_arrays(r.columns["base_acc"], r.columns["z"], r.fs, mass=float(r.meta["mass"]))
+    zs, v, _, _ = rec.states("state")
+    stepped = restart_windows(rec.n, rec.fs, 0.5)
+    chosen = RestartWindows.at(stepped.starts, stepped.length)
+    model = AS_BUILT.lsq_cubic()
+    a, b = (simulate_windows(model, rec, w, zs, v) for w in (stepped, chosen))
+    assert np.array_equal(a.z, b.z)
