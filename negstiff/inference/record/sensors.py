@@ -7,7 +7,8 @@ A lab measures the moving part's response with whichever sensor it has:
 * ``z_dot`` [m/s]: relative velocity (a laser Doppler vibrometer on the moving part, mounted on the
   table, or any velocity sensor relative to the base);
 * ``y`` [m] or ``y_dot`` [m/s]: the absolute displacement or velocity (a vibrometer on the ground),
-  with the base's motion from ``base_disp`` or from the measured ``base_acc`` (the input);
+  with the base's motion from ``base_disp`` or from the measured ``base_acc`` (the input); a ``y_dot`` of
+  unknown gain (``*?``) has it estimated from the record's dynamics (``absolute_velocity_gain``);
 * ``y_acc`` [m/s^2]: the moving part's absolute acceleration (an accelerometer on it).
 
 ``derive`` returns z together with a plain account of what was done and the error it carries.
