@@ -1,5 +1,7 @@
 """Shared fixtures: small rig records (seconds, not minutes) reused across tests."""
 
+import os
+
 import numpy as np
 import pytest
 
@@ -67,3 +69,14 @@ def pytest_collection_modifyitems(config, items):
         if item.path.name in UNIT_TIER:
             item.add_marker(pytest.mark.unit)
     items.sort(key=lambda item: item.path.name not in UNIT_TIER)  # stable: the unit tier first, in its order
+
+
+def pytest_configure(config):
+    """Under pytest-xdist the worker processes are the parallelism, as reproduce's section processes are
+    (``resources.worker_initializer``): BLAS on one thread in each, and negstiff's own threads on the worker's
+    share of the cores, not every worker on every core."""
+    workers = int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", "0") or 0)
+    if workers > 1 and hasattr(config, "workerinput"):
+        from negstiff.resources import usable_cores, worker_initializer
+
+        worker_initializer(threads=max(1, usable_cores() // workers))
