@@ -79,11 +79,9 @@ def _running_in_group(pgid: int) -> list[int]:
 
 
 @pytest.mark.skipif(not Path("/proc/self/task").exists(), reason="needs Linux's /proc to see the workers")
-def test_ctrl_c_on_reproduce_is_one_line_and_the_workers_go_quietly(tmp_path):
-    # the probe: Ctrl-C on reproduce printed the parent's one line, then each spawned worker's
-    # KeyboardInterrupt traceback and the resource tracker's "5 leaked semaphore objects" (76-130 lines).
-    # A terminal's Ctrl-C reaches the whole process group: it is sent so here, a second after the
-    # section processes started (while they import and begin their sections)
+def _reproduce_with_its_processes(tmp_path):
+    """``negstiff reproduce`` started in a session of its own, returned (process, its output folder) 1.5 s after
+    its section processes started (while they import and begin their sections)."""
     out = tmp_path / "report"
     env = dict(os.environ, NEGSTIFF_CACHE="off")
     p = subprocess.Popen([sys.executable, "-m", "negstiff", "reproduce", "--fast", "--quiet", "-o", str(out)],
@@ -94,6 +92,15 @@ def test_ctrl_c_on_reproduce_is_one_line_and_the_workers_go_quietly(tmp_path):
         time.sleep(0.05)  # the resource tracker and two section processes
     assert p.poll() is None, p.communicate()[1]
     time.sleep(1.5)
+    return p, out
+
+
+def test_ctrl_c_on_reproduce_is_one_line_and_the_workers_go_quietly(tmp_path):
+    # the probe: Ctrl-C on reproduce printed the parent's one line, then each spawned worker's
+    # KeyboardInterrupt traceback and the resource tracker's "5 leaked semaphore objects" (76-130 lines).
+    # A terminal's Ctrl-C reaches the whole process group: it is sent so here, a second after the
+    # section processes started (while they import and begin their sections)
+    p, out = _reproduce_with_its_processes(tmp_path)
     os.killpg(p.pid, signal.SIGINT)
     _, err = p.communicate(timeout=90)  # stderr closes once every process holding it (workers, tracker) ended
     assert p.returncode == 130, err
@@ -107,16 +114,7 @@ def test_ctrl_c_on_reproduce_is_one_line_and_the_workers_go_quietly(tmp_path):
 def test_sigterm_on_reproduce_ends_its_section_processes_too(tmp_path):
     # a kill of the command alone (SIGTERM to its process, as a scheduler or `kill PID` sends it, not to its group)
     # ended the parent with its one line and left the two section processes running, orphaned, for minutes
-    out = tmp_path / "report"
-    env = dict(os.environ, NEGSTIFF_CACHE="off")
-    p = subprocess.Popen([sys.executable, "-m", "negstiff", "reproduce", "--fast", "--quiet", "-o", str(out)],
-                         stderr=subprocess.PIPE, stdout=subprocess.DEVNULL, text=True, cwd=tmp_path, env=env,
-                         start_new_session=True)  # fmt: skip
-    deadline = time.monotonic() + 120
-    while len(_descendants(p.pid)) < 3 and p.poll() is None and time.monotonic() < deadline:
-        time.sleep(0.05)  # the resource tracker and two section processes
-    assert p.poll() is None, p.communicate()[1]
-    time.sleep(1.5)
+    p, out = _reproduce_with_its_processes(tmp_path)
     p.send_signal(signal.SIGTERM)
     _, err = p.communicate(timeout=90)
     assert p.returncode == 143, err

@@ -2,9 +2,7 @@
 options and bad output paths, ends with exit 2 and one line on stderr, writes nothing, and leaves its
 inputs untouched. Ctrl-C ends with one line and exit 130."""
 
-import hashlib
 import json
-import os
 import signal
 import subprocess
 import sys
@@ -12,6 +10,7 @@ import time
 
 import numpy as np
 import pytest
+from records import refused
 
 from negstiff.cli import build_parser, main
 from negstiff.cli.parser import ALIASES
@@ -105,25 +104,6 @@ def workdir(tmp_path_factory):
     return d
 
 
-def _snapshot(d):
-    return {p.name: hashlib.sha256(p.read_bytes()).hexdigest() for p in d.iterdir() if p.is_file()}
-
-
-def _expect_clean_refusal(workdir, capsys, argv, outputs):
-    before = _snapshot(workdir)
-    try:
-        rc = main(argv)
-    except SystemExit as exc:  # argparse's errors
-        rc = exc.code
-    err = capsys.readouterr().err
-    lines = [x for x in err.strip().splitlines() if x.strip()]
-    assert rc == 2, f"exit {rc} for {argv}: {err}"
-    assert len(lines) == 1 and "error" in lines[0] and "Traceback" not in err, err
-    for o in outputs:
-        assert not os.path.exists(o), f"{o} was written"
-    assert _snapshot(workdir) == before, "an input was modified"
-
-
 CASES = (
     # (an input-only record is what simulate takes: test_cli covers it)
     [(f"{c}-{b}", c, "file", b) for c in DATA_COMMANDS for b in BAD_FILES if (c, b) != ("simulate", "npz_no_z")]
@@ -150,7 +130,7 @@ def test_bad_input_is_refused_cleanly(workdir, capsys, case, command, kind, what
             "nfrc": ["nfrc", str(workdir / "model.json"), "--freq", "9", "--amplitude", "2:4", "-o", str(out)],
         }.get(command) or DATA_COMMANDS[command](workdir, workdir / "rec.csv", out)
         argv = base + [f"{option}={value}"]
-    _expect_clean_refusal(workdir, capsys, argv, [out])
+    refused(workdir, capsys, argv, [out])
 
 
 OUTPUT_COMMANDS = {
@@ -186,11 +166,11 @@ def test_outputs_never_overwrite_inputs_or_fail_late(workdir, capsys, command, p
             out = workdir / "rec.npz"  # would write rec.truth.json, the csv record's truth
             (workdir / "rec.truth.json").touch()
             argv = ["rig", "random", "-o", str(out), "--duration", "5", "--model", str(workdir / "rec.truth.json")]
-            _expect_clean_refusal(workdir, capsys, argv, [out])
+            refused(workdir, capsys, argv, [out])
             return
     argv = OUTPUT_COMMANDS[command](workdir, rec, out)
     outputs = [] if problem in ("onto_input", "folder", "onto_model_or_truth") else [out]
-    _expect_clean_refusal(workdir, capsys, argv, outputs)
+    refused(workdir, capsys, argv, outputs)
 
 
 MODEL_PROBLEMS = {
@@ -217,7 +197,7 @@ def test_bad_model_and_target_files(workdir, capsys, problem, command, tmp_path)
         "rig": ["rig", "random", "--model", str(f), "-o", str(out), "--duration", "5"],
         "update": ["update", str(f), "-o", str(out)],
     }[command]
-    _expect_clean_refusal(workdir, capsys, argv, [out])
+    refused(workdir, capsys, argv, [out])
 
 
 @pytest.mark.parametrize(
@@ -248,7 +228,7 @@ def test_command_line_misuse(workdir, capsys, argv, tmp_path):
     argv = [
         str(workdir / "rec.csv") if a == "REC" else (str(tmp_path / a) if a in ("o.json", "o.csv") else a) for a in argv
     ]
-    _expect_clean_refusal(workdir, capsys, argv, [tmp_path / "o.json", tmp_path / "o.csv"])
+    refused(workdir, capsys, argv, [tmp_path / "o.json", tmp_path / "o.csv"])
 
 
 def test_ctrl_c_ends_with_one_line_and_exit_130(workdir, tmp_path):
