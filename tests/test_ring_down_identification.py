@@ -169,3 +169,23 @@ def test_nsi_cubic_of_a_hammer_record_at_a_triangulation_sensors_noise():
     # refinement, which reaches -0.25 %, was kept on three of them (seed 1: not kept, k3 -9.2 %, measured)
     est = _fit(NSI(), _hammer(DUFFING, seed=1, laser_m=5e-6))
     assert est.model_.k3 == pytest.approx(DUFFING.k3, rel=0.05)
+
+
+@pytest.mark.parametrize("kind", ["hammer", "decay"])
+def test_the_discrepancy_workflow_says_what_it_does_not_read_yet(kind):
+    # a ring-down is identified by NSI and SINDy and sampled by the posterior; the discrepancy workflow does not
+    # read one yet, and says so in one line naming the record's kind, before any work (it said "too short" of a
+    # 10 s hammer's record, and "a dead sensor?" of a free decay)
+    from negstiff import Discrepancy
+    from negstiff.inference.estimators.discrepancy import DiscrepancyError
+
+    if kind == "hammer":
+        t, f, z, _ = hammer_record(DUFFING, 0.0, 1000.0, (0.5, 3.0, 5.5, 8.0), 40.0, 0.004, 10.0)
+        rec = from_arrays(f + 0.5, z, 1000.0, input_name="force", mass=DUFFING.m)
+    else:
+        t, z, _ = decay_record(DUFFING, 0.008, 1000.0, 10.0)
+        rec = from_arrays(np.zeros_like(t), z, 1000.0, input_name="force", mass=DUFFING.m)
+    what = "a hammer's record" if kind == "hammer" else "a free decay"
+    with pytest.raises(DiscrepancyError, match=f"{what}.*does not read ring-downs yet; NSI and SINDy") as err:
+        Discrepancy().fit(rec)
+    assert len(str(err.value).splitlines()) == 1

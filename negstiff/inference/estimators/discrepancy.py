@@ -530,6 +530,14 @@ class Discrepancy(StructureResults, Estimator):
             if self.unnamed:
                 raise DiscrepancyError("Discrepancy(unnamed=True): the non-parametric force is a single DOF's (a "
                                        f"record of {rec.n_dof} DOFs)")  # fmt: skip
+        from negstiff.inference.analysis.record_kind import record_kind
+
+        kind = record_kind(rec).kind
+        if kind in ("impact", "decay"):
+            what = "a hammer's record" if kind == "impact" else "a free decay (its input constant)"
+            raise DiscrepancyError(f"{rec.source}: {what}: the discrepancy workflow takes a sustained input (its "
+                                   "held-out windows and regimes need one) and does not read ring-downs yet; NSI and "
+                                   "SINDy identify this record, and the posterior samples it")  # fmt: skip
         rec.require(4000, "the discrepancy workflow")
         rec.require_excitation("the discrepancy workflow")
         rec.require_motion("the discrepancy workflow")
