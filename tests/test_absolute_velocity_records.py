@@ -104,6 +104,7 @@ def test_a_point_inboard_of_the_mass_is_rescaled_by_its_participation(tmp_path, 
     calibrated = calibrate_scale(rec)
     # the scale from the weak form's input coefficient: 0.85 % high measured (1.0076 where the point is the mass)
     assert calibrated.info["scale"]["value"] == pytest.approx(1 / 0.75, rel=0.02)
+    assert "participation" in calibrated.info["scale"]["status"]  # the scale is the point's share, not the gain
     k = int(round(4.0 * FS))
     z_true = record[2][k : k + rec.n]
     assert _z_error(calibrated.z, z_true) < 0.015 * np.std(z_true)  # the scale's error dominates (0.8 %)

@@ -354,6 +354,12 @@ def calibrate_scale(rec: Measurement) -> Measurement:
         "status": f"estimated: {channel} in SI = {channel} as read x {s:.6g} (+- {se:.2g}), from the input's "
         "coefficient in the record's own dynamics (physics fixes it); every coefficient is in SI units",
     }
+    gain = (rec.info.get("response") or {}).get("gain")
+    if gain:  # an absolute velocity of unknown gain: its gain was found at load; this scale is the point's share
+        new_info["status"] = (f"estimated: z in SI = z as derived x {s:.6g} (+- {se:.2g}), the measured point's "
+                              f"participation in the device's motion ({channel}'s gain was estimated at load: "
+                              "info['response']['gain']), from the input's coefficient in the record's own dynamics; "
+                              "every coefficient is in SI units")  # fmt: skip
     resp = dict(rec.info.get("response", {}))
     for k in ("velocity_noise_m_s", "integration_error_m", "trend_m_s", "trend_se_m_s"):
         if isinstance(resp.get(k), (int, float)):
