@@ -180,7 +180,7 @@ def cmd_identify(args) -> int:
 
     masses = parse_amplitudes(args.masses, "--masses") if args.masses else None
     rec = load(args.data, columns=args.columns, fs=args.fs, mass=args.mass, gravity=args.gravity, aux=args.aux,
-               masses=masses)  # fmt: skip
+               masses=masses, decay=args.decay)  # fmt: skip
     check_dofs(args, rec)
     if rec.n_dof > 1 and args.frf:
         raise InputError(f"--frf compares a single DOF's wells; {args.data} is a record of {rec.n_dof} DOFs")
@@ -260,7 +260,8 @@ def cmd_posterior(args) -> int:
                 f"--start {args.start}: a polynomial model, for the coefficient posterior (--model coefficients)"
             )
     masses = parse_amplitudes(args.masses, "--masses") if args.masses else None
-    rec = load(args.data, columns=args.columns, fs=args.fs, mass=args.mass, gravity=args.gravity, masses=masses)
+    rec = load(args.data, columns=args.columns, fs=args.fs, mass=args.mass, gravity=args.gravity, masses=masses,
+               decay=args.decay)  # fmt: skip
     check_dofs(args, rec)  # N from the file; --dofs a check
     if args.duration is not None:
         rec = rec.segment(0, min(rec.n, int(round(args.duration * rec.fs))))
@@ -442,7 +443,7 @@ def cmd_backbone(args) -> int:
     if model is not None and not hasattr(model, "k3"):
         raise InputError(f"--model {args.model}: a backbone's prediction needs a model file (coefficients), not a "
                          "device file")  # fmt: skip
-    rec = load(args.data, columns=args.columns, fs=args.fs, gravity=args.gravity, mass=args.mass)
+    rec = load(args.data, columns=args.columns, fs=args.fs, gravity=args.gravity, mass=args.mass, decay=args.decay)
     if rec.n_dof > 1:
         raise InputError(f"{args.data}: a backbone is a single DOF's; this record has {rec.n_dof} DOFs")
     say(args, f"backbone: {rec.n} samples at {rec.fs:g} Hz, input {rec.input_name}")
@@ -563,7 +564,7 @@ def cmd_report(args) -> int:
         options["discrepancy"]["max_effects"] = args.max_effects
     rep = report_records(args.data, args.columns, args.fs, args.mass, args.forcing_hz, parse_wells(args.wells),
                          args.nfrc, args.only, args.seed, options, progress=lambda line: say(args, line),
-                         gravity=args.gravity, aux=args.aux)  # fmt: skip
+                         gravity=args.gravity, aux=args.aux, decay=args.decay)  # fmt: skip
     rep.write(args.out)
     for w in rep.results()["summary"]:
         say(args, f"  {w}")

@@ -175,6 +175,10 @@ def _simulate(sub, common: argparse.ArgumentParser, data_opts: argparse.Argument
     sim.set_defaults(func=c.cmd_simulate)
 
 
+DECAY_HELP = ("the record is a free decay whatever its input column holds (a force channel left connected that "
+              "reads only its noise); a constant input is one without saying so")
+
+
 def _identify(sub, common: argparse.ArgumentParser, data_opts: argparse.ArgumentParser) -> None:
     idf = sub.add_parser(
         "identify",
@@ -195,6 +199,7 @@ def _identify(sub, common: argparse.ArgumentParser, data_opts: argparse.Argument
     )
     idf.add_argument("data", help="measurement file")
     idf.add_argument("-o", "--out", required=True, help="result JSON")
+    idf.add_argument("--decay", action="store_true", help=DECAY_HELP)
     idf.add_argument(
         "--mass", type=mass_option(), help="moving mass [kg] (default: the file's metadata; else per unit mass)"
     )
@@ -277,6 +282,7 @@ def _backbone(sub, common: argparse.ArgumentParser, data_opts: argparse.Argument
     bb.add_argument("--model", help="model file (JSON): its predicted backbone beside the measured one")
     bb.add_argument("--mass", type=mass_option(), help="moving mass [kg] (default: the file's '# mass:')")
     bb.add_argument("-o", "--out", required=True, help="result JSON (the figure beside it, .png)")
+    bb.add_argument("--decay", action="store_true", help=DECAY_HELP)
     bb.set_defaults(func=c.cmd_backbone)
 
 
@@ -315,6 +321,7 @@ def _posterior(sub, common: argparse.ArgumentParser, data_opts: argparse.Argumen
         "converge is reported with a warning in the result.",
     )
     pst.add_argument("data", help="measurement file")
+    pst.add_argument("--decay", action="store_true", help=DECAY_HELP)
     pst.add_argument("-o", "--out", required=True, help="result JSON")
     pst.add_argument("--mass", type=mass_option(), help="moving mass [kg] (default: the file's metadata)")
     pst.add_argument("--model", choices=["coefficients", "device"], default=default(POST, "model"))
@@ -542,6 +549,7 @@ def _report(sub, common: argparse.ArgumentParser, data_opts: argparse.ArgumentPa
     )
     rp.add_argument("data", nargs="+", help="measurement file, or a campaign's files or folder")
     rp.add_argument("-o", "--out", required=True, help="report folder (index.html, index.md, results.json, figures)")
+    rp.add_argument("--decay", action="store_true", help=DECAY_HELP + " (a single record)")
     rp.add_argument("--mass", type=mass_option(), help="moving mass [kg] (default: the file's metadata)")
     rp.add_argument(
         "--aux",

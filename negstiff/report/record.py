@@ -89,21 +89,24 @@ def report_records(
     progress: Callable[[str], None] | None = None,
     gravity: float | None = None,
     aux: Sequence[str] | str | None = None,
+    decay: bool = False,
 ) -> Report:
     """The report of ``data`` (one record, or a campaign's records or folder): every input read and checked
     first (one ``InputError``), then each analysis that fits it; ``options`` per analysis (``{"posterior":
     {"max_steps": 2000}, ...}``: the estimators' parameters); ``progress`` hears of each analysis. Returns the
     ``Report`` (``write(folder)`` writes it). ``gravity`` [m/s^2] along the motion overrides the records'
     metadata (0 for a horizontal device); ``aux`` names measured auxiliary channels of a single record (SINDy
-    and the discrepancy workflow offer each as a term).
+    and the discrepancy workflow offer each as a term); ``decay``: a single record is a free decay whatever its
+    input column holds (``load``'s).
     """
     say = progress or (lambda text: None)
     options = {k: dict(v) for k, v in (options or {}).items()}
     paths = [Path(d) for d in data]
     if len(paths) > 1 or paths[0].is_dir():
-        if aux:
-            raise InputError("--aux: a campaign's report (characterisation, map) uses no auxiliary channel; "
-                             "give one record")
+        if aux or decay:
+            option = "--aux: a campaign's report (characterisation, map) uses no auxiliary channel" if aux else \
+                "--decay: a campaign's records are forced (characterisation, map)"
+            raise InputError(f"{option}; give one record")
         return _campaign_report(data, columns, fs, forcing_hz, wells, nfrc, _only(only, CAMPAIGN), say, gravity)
     from negstiff.inference.record.measurement import load
     from negstiff.inference.steps.frame import pin_frame
@@ -111,7 +114,7 @@ def report_records(
     if nfrc:
         raise InputError("--nfrc: a single record's report draws no NFRC (a campaign's bifurcation map overlays "
                          "them); give a campaign's records or folder")  # fmt: skip
-    rec = load(paths[0], columns=columns, fs=fs, mass=mass, gravity=gravity, aux=aux)
+    rec = load(paths[0], columns=columns, fs=fs, mass=mass, gravity=gravity, aux=aux, decay=decay)
     if forcing_hz is not None:
         check_forcing(rec, forcing_hz)
     from negstiff.inference.analysis.record_kind import check_decay, record_kind

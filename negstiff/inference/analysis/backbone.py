@@ -68,6 +68,8 @@ filter's and the harmonics' ripple moved a noise-free linear decay's damping by 
 
 def decay_start(rec: Measurement) -> tuple[int, str]:
     """The first sample of the record's free decay, and how it was found (module docstring)."""
+    if rec.info.get("decay"):
+        return 0, "named a free decay by the caller (decay=True, --decay): from the first sample"
     u = np.asarray(rec.u, float)
     tail = u[-max(16, u.size // 5) :]
     offset = float(np.median(tail))

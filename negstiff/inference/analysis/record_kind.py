@@ -54,8 +54,9 @@ def record_kind(rec: Measurement, decay: bool | None = None) -> RecordKind:
     -------
     RecordKind
     """
-    if decay:
-        return RecordKind("decay", "named a free decay by the caller: the input column is not used")
+    if decay or (decay is None and rec.info.get("decay")):
+        return RecordKind("decay", "named a free decay by the caller (decay=True, --decay): the input column is not "
+                                   "used")  # fmt: skip
     if decay is None and is_constant(rec.u):
         return RecordKind("decay", f"the input ({rec.input_name}) is constant throughout: a free decay")
     if rec.input_name == "base_acc":
@@ -81,6 +82,10 @@ def check_decay(rec: Measurement, what: str) -> None:
     starts, ends = np.std(z[:, :tenth] - rest, axis=1), np.std(z[:, -tenth:] - rest, axis=1)
     best = int(np.argmax(starts / np.maximum(ends, 1e-300)))
     start, end = float(starts[best]), float(ends[best])
+    if not start > RING_DOWN * end and rec.info.get("decay"):
+        raise MeasurementError(f"{rec.source}: named a free decay, but the response does not ring down (its first "
+                               f"tenth's rms {start:.3g} m about the rest, the last tenth's {end:.3g} m): nothing for "
+                               f"{what} to read")  # fmt: skip
     if not start > RING_DOWN * end:
         raise MeasurementError(
             f"{rec.source}: the input {rec.input_name} is constant ({rec.u[0]:.6g} over {rec.n} samples) and the "

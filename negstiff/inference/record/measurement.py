@@ -562,6 +562,7 @@ def load(
     gravity: float | None = None,
     aux: Sequence[str] | str | None = None,
     masses: Sequence[float] | str | None = None,
+    decay: bool = False,
 ) -> Measurement:
     """Read a measurement file, checked as the command line checks it.
 
@@ -591,6 +592,10 @@ def load(
     masses : sequence of float or str, optional
         A structure's DOF masses m1 ... mN [kg] (overrides the metadata's ``masses``); its responses are the
         file's (or the map's) ``z1 ... zN``.
+    decay : bool, default False
+        The record is a free decay whatever its input column holds (a force channel left connected that reads only
+        its noise): the analyses read it as one (``record_kind``; ``info["decay"]``). A constant input is a decay
+        without saying so.
 
     Returns
     -------
@@ -682,7 +687,8 @@ def load(
         source=str(path),
         t0=t0,
         info={"time": time_info, "response": resp, **channel_info, **({"scale": scale_info} if scale_info else {}),
-              **({"set_aside": aside} if aside else {})},  # channels of other rates, each with why
+              **({"set_aside": aside} if aside else {}),  # channels of other rates, each with why
+              **({"decay": True} if decay else {})},
         aux=aux_cols,
         masses=dof_masses if len(dofs) > 1 else None,
         force_dof=force_dof,
@@ -904,6 +910,7 @@ def from_arrays(
     mass: float | None = None,
     unknown_scale: str | None = None,
     gravity: float | None = None,
+    decay: bool = False,
     **kw: Any,
 ) -> Measurement:
     """Build a measurement from arrays, validated like a file.
@@ -932,6 +939,8 @@ def from_arrays(
         A response channel whose sensitivity is unknown (a file's ``*?``).
     gravity : float, optional
         The gravity along the motion [m/s^2] (0 for a horizontal device).
+    decay : bool, default False
+        The record is a free decay whatever ``u`` holds (``load``'s ``decay``).
     **kw
         Optional columns (``z_dot``, ``y``, ``base_disp``, ...), a structure's ``masses`` (one per DOF) [kg],
         ``force_dof`` (the DOF a force acts on), ``source`` (a name for messages), ``meta`` and
@@ -1021,6 +1030,8 @@ def from_arrays(
     check_values(source, cols)
     fs = check_sampling_rate(source, fs, "given")
     info = dict(kw.pop("info", {}))
+    if decay:
+        info["decay"] = True
     if z is None and any(k in cols for k in sensors.RESPONSES):
         z, info["response"] = sensors.derive(cols, input_name, fs, source, units_known=unknown_scale is None)
         if info["response"].get("trim_s"):
