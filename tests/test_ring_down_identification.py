@@ -221,8 +221,8 @@ def test_the_command_line_names_a_decay_with_its_noisy_force_channel(tmp_path, c
     path = tmp_path / "release.csv"
     with open(path, "w") as fh:
         fh.write(f"# mass: {DUFFING.m}\nt,force,z\n")
-        np.savetxt(fh, np.column_stack([t, 0.3 + 0.05 * rng.standard_normal(t.size),
-                                        z + 1e-6 * rng.standard_normal(t.size)]), delimiter=",", fmt="%.9g")  # fmt: skip
+        force, zm = 0.3 + 0.05 * rng.standard_normal(t.size), z + 1e-6 * rng.standard_normal(t.size)
+        np.savetxt(fh, np.column_stack([t, force, zm]), delimiter=",", fmt="%.9g")
     out = tmp_path / "nsi.json"
     assert main(["identify", "nsi", str(path), "--decay", "-o", str(out), "--quiet"]) == 0
     res = json.loads(out.read_text())
