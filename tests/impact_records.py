@@ -5,7 +5,7 @@ as ``from impact_records import ...``."""
 import numpy as np
 from scipy.integrate import solve_ivp
 
-from negstiff import Model
+from negstiff import Model, from_arrays
 
 MASS = 0.2
 """Moving mass [kg] of both oscillators."""
@@ -78,6 +78,25 @@ def decay_record(model, z0, fs, duration, v0=0.0):
     sol = solve_ivp(lambda tt, x: [x[1], -law(x[0], x[1]) / model.m], (0.0, t[-1]), [z0, v0], t_eval=t,
                     method="DOP853", rtol=1e-10, atol=1e-13)  # fmt: skip
     return t, sol.y[0], sol.y[1]
+
+
+def measured_hammer(model, seed, laser_m, fs=1000.0, hits=(0.5, 3.0, 5.5, 8.0)):
+    """A hammer's record of ``model`` at rest in its plus well, as a lab measures it: 40 N half-sine hits of 4 ms
+    (``hammer_record``), the force channel with a 0.5 N offset and 0.05 N of noise, the laser with ``laser_m``
+    of white noise; 10 s at ``fs``, as a ``Measurement``."""
+    _, f, z, _ = hammer_record(model, model.equilibria().z_plus, fs, hits, 40.0, 0.004, 10.0)
+    rng = np.random.default_rng(seed)
+    force = f + 0.5 + 0.05 * rng.standard_normal(f.size)
+    zm = z + laser_m * rng.standard_normal(z.size)
+    return from_arrays(force, zm, fs, input_name="force", mass=MASS, source="hammer.csv")
+
+
+def measured_decay(model, z0, seed, duration, laser_m, fs=1000.0):
+    """A free decay of ``model`` released from rest at ``z0`` (``decay_record``), the laser with ``laser_m`` of
+    white noise, as a ``Measurement`` whose force column is zero."""
+    _, z, _ = decay_record(model, z0, fs, duration)
+    zm = z + laser_m * np.random.default_rng(seed).standard_normal(z.size)
+    return from_arrays(np.zeros(z.size), zm, fs, input_name="force", mass=MASS, source="decay.csv")
 
 
 def fixture_rhs(device, fixture_mass, fixture_hz, fixture_zeta, force=None, force_dof=2):

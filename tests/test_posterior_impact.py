@@ -11,9 +11,9 @@ import warnings
 
 import numpy as np
 import pytest
-from impact_records import DOUBLE_WELL, DUFFING, MASS, decay_record, hammer_record
+from impact_records import DOUBLE_WELL, DUFFING, MASS, measured_decay, measured_hammer
 
-from negstiff import Posterior, from_arrays
+from negstiff import Posterior
 from negstiff.inference.analysis.record_kind import identification_record, record_kind
 from negstiff.inference.estimators.posterior.parametrisation import coefficient_parametrisation
 from negstiff.inference.estimators.posterior.windows import Windows
@@ -25,17 +25,11 @@ LASER_M = 1e-6
 
 
 def _hammer(model, seed):
-    _, f, z, _ = hammer_record(model, model.equilibria().z_plus, FS, HITS, 40.0, 0.004, 10.0)
-    rng = np.random.default_rng(seed)
-    force = f + 0.5 + 0.05 * rng.standard_normal(f.size)
-    zm = z + LASER_M * rng.standard_normal(z.size)
-    return from_arrays(force, zm, FS, input_name="force", mass=MASS, source="hammer.csv")
+    return measured_hammer(model, seed, LASER_M, FS, HITS)
 
 
 def _decay(model, z0, seed, duration):
-    _, z, _ = decay_record(model, z0, FS, duration)
-    zm = z + LASER_M * np.random.default_rng(seed).standard_normal(z.size)
-    return from_arrays(np.zeros(z.size), zm, FS, input_name="force", mass=MASS, source="decay.csv")
+    return measured_decay(model, z0, seed, duration, LASER_M, FS)
 
 
 def _well_hz(k1, k2, k3, k0, z_near):

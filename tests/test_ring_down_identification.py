@@ -13,7 +13,7 @@ import warnings
 
 import numpy as np
 import pytest
-from impact_records import DOUBLE_WELL, DUFFING, MASS, decay_record, hammer_record
+from impact_records import DOUBLE_WELL, DUFFING, MASS, decay_record, hammer_record, measured_decay, measured_hammer
 
 from negstiff import NSI, SINDy, from_arrays
 from negstiff.errors import MeasurementError
@@ -52,18 +52,11 @@ def _truth(model: Model) -> dict[str, tuple[float, float]]:
 
 
 def _hammer(model, seed, laser_m=LASER_HAMMER_M):
-    z_rest = model.equilibria().z_plus
-    _, f, z, _ = hammer_record(model, z_rest, FS, HITS, 40.0, 0.004, 10.0)
-    rng = np.random.default_rng(seed)
-    force = f + 0.5 + 0.05 * rng.standard_normal(f.size)
-    zm = z + laser_m * rng.standard_normal(z.size)
-    return from_arrays(force, zm, FS, input_name="force", mass=MASS, source="hammer.csv")
+    return measured_hammer(model, seed, laser_m, FS, HITS)
 
 
 def _decay(model, z0, seed, duration):
-    _, z, _ = decay_record(model, z0, FS, duration)
-    zm = z + LASER_DECAY_M * np.random.default_rng(seed).standard_normal(z.size)
-    return from_arrays(np.zeros(z.size), zm, FS, input_name="force", mass=MASS, source="decay.csv")
+    return measured_decay(model, z0, seed, duration, LASER_DECAY_M, FS)
 
 
 def _fit(est, rec):
