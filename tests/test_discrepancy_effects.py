@@ -83,6 +83,18 @@ REGIME_SHORT = pytest.mark.xfail(
 )
 
 
+def _assert_stop_found(r: dict, onset: float) -> None:
+    """The issue's acceptance for an end stop: named alone; its contact stiffness within 20 % and its onset within
+    1 mm (the laser's 5 um noise is far below both; what limits them is how few samples lie beyond the onset); the
+    gap in the windows where it acts, scored on their own (at least three), at least halved."""
+    assert r["effects"] == ["end_stop"], r["iterations"]
+    size = r["effect_size"]["end_stop"]
+    assert size["k"] == pytest.approx(STOP_K, rel=0.2)
+    assert size["z"] == pytest.approx(onset, abs=1e-3)
+    regime = r["gap_regime_percent"]["end_stop"]
+    assert regime["windows"] >= 3 and regime["after"] <= regime["before"] / 2, regime
+
+
 @functools.cache
 def _stop_fit(seed: int, duration: float) -> tuple[dict, float]:
     """The workflow's result on seed's end-stop record and the share of it where the stop acts (one fit per
@@ -97,15 +109,7 @@ def test_an_end_stop_acting_briefly_is_named_sized_and_its_regime_gap_halved(see
     onset = STOP_ONSET[seed]
     r, share = _stop_fit(seed, duration)
     assert 0.01 <= share <= 0.05, share  # the record's premise: the stop acts in 1-5 % of it
-    assert r["effects"] == ["end_stop"], r["iterations"]
-    size = r["effect_size"]["end_stop"]
-    # contact stiffness within 20 % and onset within 1 mm: the laser's 5 um noise is far below both; what limits
-    # them is how few samples lie beyond the onset (1-5 % of the record)
-    assert size["k"] == pytest.approx(STOP_K, rel=0.2)
-    assert size["z"] == pytest.approx(onset, abs=1e-3)
-    # the held-out windows where the stop acts, scored on their own: the model with it halves their gap
-    regime = r["gap_regime_percent"]["end_stop"]
-    assert regime["windows"] >= 3 and regime["after"] <= regime["before"] / 2, regime
+    _assert_stop_found(r, onset)
     assert r["gap_after_percent"] <= r["gap_before_percent"]
     assert "evidence" in r["iterations"][0] and "regime" in r["iterations"][0]["evidence"]
 
@@ -313,15 +317,9 @@ def test_an_end_stop_hit_from_the_plus_well_alone_is_named_on_a_long_random_reco
     assert 0 < acting.mean() < 0.01, acting.mean()
     r = Discrepancy().fit(rec).result()
     assert "plus well" in r["where"].split(";")[0], r["where"]  # the baseline's error sits where the stop is
-    assert r["effects"] == ["end_stop"], r["iterations"]
-    size = r["effect_size"]["end_stop"]
-    # stiffness within 20 % and onset within 1 mm (measured: 2986 N/m and 27.998 mm at seed 1, 3006 N/m and
-    # 28.000 mm at seed 2): the laser's 5 um noise is far below both
-    assert size["k"] == pytest.approx(STOP_K, rel=0.2)
-    assert size["z"] == pytest.approx(ISSUE_ONSET, abs=1e-3)
-    # the gap where it acts at least halved (measured: 15.8 -> 0.17 % over 11 windows at seed 1, 12.2 -> 0.10 %
-    # over 6 at seed 2, cross-validated: the held-out tail reaches it in 1-2 windows)
-    regime = r["gap_regime_percent"]["end_stop"]
-    assert regime["windows"] >= 3 and regime["after"] <= regime["before"] / 2, regime
+    # measured: 2986 N/m and 27.998 mm at seed 1, 3006 N/m and 28.000 mm at seed 2; the gap where it acts 15.8 ->
+    # 0.17 % over 11 windows at seed 1, 12.2 -> 0.10 % over 6 at seed 2, cross-validated (the held-out tail reaches
+    # it in 1-2 windows)
+    _assert_stop_found(r, ISSUE_ONSET)
     interval = r["effect_interval"]["end_stop"]
     assert _covers(interval["k"], STOP_K) and _covers(interval["z"], ISSUE_ONSET), interval
