@@ -81,9 +81,9 @@ def _interrupt_handler(command: str, what: str, code: int):
 
         from negstiff.files import remove_pending
 
-        remove_pending()
         if signum == signal.SIGTERM and multiprocessing.active_children():
-            raise _Terminated
+            raise _Terminated  # main removes what was being written once the pool has stopped
+        remove_pending()
         sys.stderr.write(f"negstiff {command}: {what} (nothing written)\n")
         sys.stderr.flush()
         os._exit(code)
