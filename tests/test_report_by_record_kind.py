@@ -67,6 +67,13 @@ def test_a_free_decay_reports_its_identification_and_backbone(tmp_path):
     assert bb["linear"]["f_hz"] == pytest.approx(DUFFING_HZ, rel=0.01)
     # NSI's model, decayed from the record's state and measured alike, traces the measured backbone within 1 %
     assert bb["predicted"]["difference_percent"] < 1.0
+    # with it, the forced response NSI's model predicts about the same well, three levels spanning the decay's
+    # amplitudes, each peak on that model's backbone (light damping: zeta^2 = 0.0025 % below it; 0.01 % allowed
+    # for the continuation's resolution), and the report says what the grey curves are
+    curves = bb["forced"]["curves"]
+    assert bb["forced"]["well"] == "plus" and len(curves) == 3
+    assert all(abs(c["peak_off_backbone_percent"]) < 0.01 for c in curves)
+    assert "forced response" in (out / "index.md").read_text()
     assert (out / "backbone_record.png").is_file()
 
 
