@@ -375,7 +375,8 @@ class Discrepancy(StructureResults, Estimator):
         hit = self._library_systems.get((lo, hi))
         if hit is None or hit[0] is not rec:
             sysd = self._form.system(rec, lo, hi)
-            hit = (rec, sysd.W_physical, sysd.y_physical)
+            read = self._between_pulses(rec, lo, hi, sysd.y_physical.size)
+            hit = (rec, sysd.W_physical * read[:, None], sysd.y_physical * read)
             for a in hit[1:]:
                 a.setflags(write=False)
             self._library_systems[(lo, hi)] = hit
@@ -391,7 +392,28 @@ class Discrepancy(StructureResults, Estimator):
             col = _stop()[1].column(z, stop)
             Ws = self._form.project(col[:, None], rec.dt)[:, 0]
             W = np.column_stack([W, Ws[: W.shape[0]]])
+        if aux or stop is not None:  # a row the library's part does not read (``_between_pulses``) reads none
+            W = W * self._between_pulses(rec, lo, hi, y.size)[:, None]
         return W, y
+
+    def _between_pulses(self, rec: Measurement, lo: int, hi: int, rows: int) -> np.ndarray:
+        """Which of the ``rows`` weak-form rows of samples [lo, hi) the fits read (1.0) and which they do not (0.0):
+        on a hammer's record (``record_kind``) a row whose test function holds a sample of a pulse is not read (the
+        hits set the ring-downs' states, the rows after them read the ring-downs, as its restarted windows start
+        after the pulses: ``_after_pulses``); on any other record every row. A pulse of a few samples is not
+        resolved by its samples (a 40 N, 4 ms half-sine at 1 kHz integrates 5 % short, its phase decides), and the
+        rows across it made the fit trade the missing impulse for damping: on the seed-like double well hit four
+        times, c 0.561 and c_nl -0.303 against 0.5 and 0, the held-out gap 3.9 % against the true model's 0.32 %;
+        with them not read, c 0.5006, c_nl -0.003, the gap 0.36 % (1 um of noise, measured).
+        """
+        kind = vars(self).get("record_kind_")
+        if kind is None or kind.kind != "impact":
+            return np.ones(rows)
+        support = test_function(self._form.half, rec.dt)[0].size
+        busy = np.concatenate([[0], np.cumsum(np.asarray(rec.u)[lo:hi] != 0)])
+        first = np.minimum(np.arange(rows) * self._form.stride, hi - lo)
+        last = np.minimum(first + support, hi - lo)
+        return ((busy[last] - busy[first]) == 0).astype(float)
 
     def _fit(self, W: np.ndarray, y: np.ndarray, terms: tuple[str, ...], stop: bool, n_aux: int = 0) -> np.ndarray:
         """Least squares on ``terms`` (+ the auxiliary channels' and the stop's columns), the input's
@@ -604,11 +626,22 @@ class Discrepancy(StructureResults, Estimator):
 
         self.record_kind_ = kind = record_kind(rec)
         self.window_s_ = ring_down_window(rec, self.validation_fraction, self.selection_fraction, self.window_s)
-        window_s, self.window_s = self.window_s, self.window_s_
+        # a hammer's record is not refined by output error unless asked (refine=True): the refinement's windows and
+        # its held-out free run cross the pulses its samples do not resolve (``_after_pulses``): on the double well
+        # with a stop it moved the stop's k from 3004 to 2956 N/m (the truth 3000) and was kept by 0.2 % of a
+        # held-out error the tail's hit decided (measured)
+        unrefined = kind.kind == "impact" and self.refine is None
+        params = {"window_s": self.window_s, "refine": self.refine}
+        self.window_s, self.refine = self.window_s_, False if unrefined else self.refine
         try:
-            return self._fit_one(identification_record(rec, kind))
+            self._fit_one(identification_record(rec, kind))
         finally:
-            self.window_s = window_s
+            self.window_s, self.refine = params["window_s"], params["refine"]
+        if unrefined:
+            self.refinement_ = {"applied": False, "reason": "not run on a hammer's record (refine=True runs it): its "
+                                "windows and held-out free run would cross the pulses, which a few samples do not "
+                                "resolve"}  # fmt: skip
+        return self
 
     def _fit_one(self, rec: Measurement) -> Discrepancy:
         """The workflow on a single DOF's record as it is read (``fit``: a ring-down's input windowed)."""
