@@ -246,6 +246,18 @@ class LibraryTerms(Constraint):
         return f"a non-empty sequence of library terms ({', '.join(library_terms())})"
 
 
+_READ = {
+    "base": "as recorded",
+    "force": "as recorded",
+    "impact": "the force windowed (each hit's offset off, zero between its pulses); the weak-form rows and restarted "
+    "windows that would hold a pulse not read (each window restarted after it); blocks and windows shortened to "
+    "the ring-down (settings.window_s); no output-error refinement unless refine=True",
+    "decay": "a free decay from the record's own initial state, its input not used; blocks and windows shortened to "
+    "the ring-down (settings.window_s)",
+}
+"""How the workflow reads each record kind (``record_kind``; the result's ``record_kind.read``)."""
+
+
 class DiscrepancyError(MeasurementError):
     """The record cannot support the workflow (too short, no excitation)."""
 
@@ -589,12 +601,16 @@ class Discrepancy(StructureResults, Estimator):
         [n_fit, n_id)) with one ``DiscrepancyError``, before any work (``sindy.selection_blocks``: the record's
         spectrum, no fit); a structure's record is checked by its fit.
         """
-        from negstiff.inference.analysis.record_kind import record_kind
+        from negstiff.inference.analysis.record_kind import identification_record, record_kind
         from negstiff.inference.estimators.sindy import ring_down_window, selection_blocks
 
+        kind = record_kind(rec)
         window = ring_down_window(rec, self.validation_fraction, self.selection_fraction, self.window_s)
-        blocks, need_s = selection_blocks(rec, self.validation_fraction, self.selection_fraction, window)
-        if blocks < 2 and record_kind(rec).kind in ("impact", "decay"):  # a longer record would not help
+        # counted on the record as the fit reads it: a decay named so (--decay) whose force channel holds noise has
+        # a ring-down's test functions there, wider than its noisy input's (it passed, and the fit then refused)
+        read = identification_record(rec, kind)
+        blocks, need_s = selection_blocks(read, self.validation_fraction, self.selection_fraction, window)
+        if blocks < 2 and kind.kind in ("impact", "decay"):  # a longer record would not help
             raise DiscrepancyError(
                 f"{rec.source}: the discrepancy workflow cannot score its candidate effects on this ring-down: the "
                 f"part that scores them ({100 * self.selection_fraction:.0f} % of the record, before the held-out "
@@ -1294,12 +1310,15 @@ class Discrepancy(StructureResults, Estimator):
                                   if e.startswith(effects.AUX_PREFIX)},  # fmt: skip
             **({"unnamed": self.unnamed_} if getattr(self, "unnamed_", None) else {}),
             "iterations": self.iterations_,
+            "record_kind": {"kind": self.record_kind_.kind, "how": self.record_kind_.how,
+                            "read": _READ[self.record_kind_.kind]},  # fmt: skip
             "settings": {
                 "identification_samples": self.n_id_,
+                "window_s": self.window_s_,  # ``window_s``, shortened on a ring-down (``sindy.ring_down_window``)
                 "baseline_terms": list(self.baseline),
                 "score": "held-out weak residual (rms, % of the target) over samples "
                 f"[{self.n_fit_}, {self.n_id_}); named only above max(1 SE, {100 * self.margin:g} %)",
-                "gap": f"restarted {self.window_s:g} s free runs over the held-out tail [{self.n_id_}, end): "
+                "gap": f"restarted {self.window_s_:g} s free runs over the held-out tail [{self.n_id_}, end): "
                 "the median window's rms error, % of rms(z) (pooled over all windows in gap_pooled_percent; one "
                 "window that diverges near the barrier, chaos, can dominate the pool)",
             },
