@@ -199,18 +199,22 @@ def _write(path, u, z):
 
 
 def test_the_command_line_reads_a_hammer_file(tmp_path, capsys):
-    # the lab's file (force with its offset and noise, the response): read as a hammer's, the stop named
+    # the lab's file (force with its offset and noise, the response): read as a hammer's, the stop named. The
+    # non-parametric force (--unnamed) is not fitted there, and the result says why: fitted and judged on windows
+    # across the pulses it closed the gap they make (4.4 -> 1.2 %, the named model's own gap 0.38 %: measured)
     from negstiff.cli import main
 
     rec, _ = _hammer(1, _stop_at(_stop_onset()))
     path = _write(tmp_path / "hammer.csv", rec.u, rec.z)
     out = tmp_path / "r.json"
-    assert main(["discrepancy", str(path), "-o", str(out)]) == 0
+    assert main(["discrepancy", str(path), "--unnamed", "-o", str(out)]) == 0
     err = capsys.readouterr().err
     assert "read as a hammer's record: 4 hammer hit(s)" in err
     assert "refinement: not run on a hammer's record" in err
+    assert "unnamed: not fitted on a hammer's record" in err
     res = json.loads(out.read_text())
     assert res["record_kind"]["kind"] == "impact" and res["effects"] == ["end_stop"]
+    assert "pulses" in res["unnamed"]["reason"]
 
 
 def test_the_command_line_names_a_decay_with_its_noisy_force_channel(tmp_path, capsys):

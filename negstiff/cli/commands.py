@@ -321,7 +321,9 @@ def cmd_discrepancy(args) -> int:
     warn(args, result["warnings"])
     say(args, f"where: {result['where']}")
     un = result.get("unnamed")
-    if un:
+    if un and "gap" not in un:  # not fitted (a hammer's record): why
+        say(args, f"unnamed: {un['reason']}")
+    elif un:
         g = un["gap"]
         say(args, f"unnamed: a non-parametric term of {un['term_percent_of_restoring_force']:.3g} % of the "
                    f"restoring force; held-out gap {g.get('physics_median_window_percent', float('nan')):.3g} % -> "
