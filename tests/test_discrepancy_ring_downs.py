@@ -74,12 +74,12 @@ def _decay(model, z0, seed, duration, hidden):
     return from_arrays(np.zeros(z.size), zm, FS, input_name="force", mass=MASS, source=f"decay-{seed}")
 
 
-def _hammer(seed, hidden):
+def _hammer(seed, hidden, laser_m=LASER_HAMMER_M):
     model = DOUBLE_WELL
     _, f, z, _ = hammer_record_with_force(model, model.equilibria().z_plus, FS, HITS, 40.0, 0.004, 10.0, hidden)
     rng = np.random.default_rng(seed)
     force = f + 0.5 + 0.05 * rng.standard_normal(f.size)
-    zm = z + LASER_HAMMER_M * rng.standard_normal(z.size)
+    zm = z + laser_m * rng.standard_normal(z.size)
     return from_arrays(force, zm, FS, input_name="force", mass=MASS, source=f"hammer-{seed}"), z
 
 
@@ -175,6 +175,50 @@ def test_an_end_stop_hit_after_each_hammer_blow_is_named_and_sized(seed):
     assert r["bayesian"]["end_stop"]["prefers"] == "with", r["bayesian"]
     # not refined by output error (its windows would cross the pulses), and the result says why
     assert not r["refinement"]["applied"] and "hammer" in r["refinement"]["reason"]
+
+
+HAMMER_FRICTION_N = 0.02
+"""Coulomb friction [N] on the hammered double well: 4 F / k = 95 um a cycle, the viscous 1.9 % as much at 0.8 mm,
+so each hit's ring-down ends (0.36 mm before the next hit) in friction's part."""
+
+
+def _friction_hammer_fit(seed: int) -> dict:
+    rec, _ = _hammer(seed, lambda z, v: HAMMER_FRICTION_N * np.tanh(v / 1e-3))
+    return _fit(rec)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_coulomb_friction_in_a_hammer_records_ring_downs_is_named_and_sized(seed):
+    # the fast sibling: friction in a free decay (above). Measured: named 20.87, 20.79, 20.71 mN (+3.5 to +4.3 %; c
+    # 2 % low and c_nl 0.02-0.03 N s^2/m^2 beside it: the three share the ring-downs' dissipation), the gap where it
+    # acts 0.29-0.43 % -> 0.03-0.04 % over 10-12 cross-validated windows; the 90 % intervals, +-5 % ([19.75, 21.98],
+    # [19.73, 21.85], [19.74, 21.67] mN), hold 20 mN near their lower ends
+    r = _friction_hammer_fit(seed)
+    assert r["record_kind"]["kind"] == "impact"
+    assert r["effects"] == ["coulomb_friction"], r["iterations"]
+    assert r["effect_size"]["coulomb_friction"] == pytest.approx(HAMMER_FRICTION_N, rel=0.1)  # the issue's 10 %
+    regime = r["gap_regime_percent"]["coulomb_friction"]
+    assert regime["windows"] >= 3 and regime["after"] <= regime["before"] / 2, regime
+    assert _covers(r["effect_interval"]["coulomb_friction"], HAMMER_FRICTION_N), r["effect_interval"]
+    assert r["bayesian"]["coulomb_friction"]["prefers"] == "with", r["bayesian"]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_an_end_stop_after_hammer_blows_at_a_triangulation_sensors_noise(seed):
+    # the default test's record with 5 um of displacement noise (1 um there). Measured: named, k 2994, 2993, 2983
+    # N/m, onsets within 2.3 um, intervals covering both, the gap where it acts 4.0-8.3 % -> 0.20-0.45 %
+    rec, _ = _hammer(seed, _stop_at(_stop_onset()), laser_m=5e-6)
+    r = _fit(rec)
+    assert r["effects"] == ["end_stop"], r["iterations"]
+    size = r["effect_size"]["end_stop"]
+    assert size["k"] == pytest.approx(STOP_K, rel=0.2)
+    assert size["z"] == pytest.approx(_stop_onset(), abs=1e-3)
+    regime = r["gap_regime_percent"]["end_stop"]
+    assert regime["windows"] >= 3 and regime["after"] <= regime["before"] / 2, regime
+    interval = r["effect_interval"]["end_stop"]
+    assert _covers(interval["k"], STOP_K) and _covers(interval["z"], _stop_onset()), interval
 
 
 def test_a_clean_hammer_record_names_nothing_and_reads_its_damping_between_the_hits():
