@@ -21,6 +21,7 @@ from impact_records import (
     LIGHT_DUFFING,
     MASS,
     decay_record_with_force,
+    fixture_decay_record,
     hammer_record_with_force,
 )
 
@@ -274,3 +275,17 @@ def test_the_command_line_names_a_decay_with_its_noisy_force_channel(tmp_path, c
     assert "read as a free decay's record: named a free decay by the caller" in capsys.readouterr().err
     res = json.loads(out.read_text())
     assert res["record_kind"]["kind"] == "decay" and res["effects"] == ["none"]
+
+
+def test_a_structures_ring_down_is_refused_in_one_line():
+    # a 2-DOF decay (the device on a sprung fixture, released from rest): the structure's workflow would read it raw
+    # (its windows across the hits, no ring-down blocks: a clean hammer record's held-out gap 12 %, measured), so it
+    # is refused as before, before any work, pointing at NSI and SINDy
+    from negstiff.inference.estimators.discrepancy import DiscrepancyError
+
+    fixture = {"fixture_mass": 1.0, "fixture_hz": 25.0, "fixture_zeta": 0.02}
+    _, z = fixture_decay_record(LIGHT_DUFFING, fixture, (0.0, 0.008), FS, 5.0)
+    rec = from_arrays(np.zeros(z.shape[1]), z, FS, input_name="force", masses=(1.0, MASS), source="fixture decay")
+    with pytest.raises(DiscrepancyError, match="a free decay of 2 DOFs: .* not a structure's yet; NSI and SINDy") as e:
+        Discrepancy(element="1-2").check(rec)
+    assert len(str(e.value).splitlines()) == 1

@@ -600,8 +600,16 @@ class Discrepancy(StructureResults, Estimator):
                                        f"record of {rec.n_dof} DOFs)")  # fmt: skip
         from negstiff.inference.analysis.record_kind import check_decay, record_kind
 
+        kind = record_kind(rec).kind
+        if kind in ("impact", "decay") and element_of(self, rec) is not None:
+            # a structure's ring-down is read raw by ``structure_id.discrepancy`` (its windows across the hits, no
+            # ring-down blocks: a clean 2-DOF hammer record's held-out gap 12 %, measured): refused as before
+            what = "a hammer's record" if kind == "impact" else "a free decay"
+            raise DiscrepancyError(f"{rec.source}: {what} of {rec.n_dof} DOFs: the discrepancy workflow reads a single "
+                                   "DOF's ring-down, not a structure's yet; NSI and SINDy identify this record "
+                                   "(element=)")  # fmt: skip
         rec.require(4000, "the discrepancy workflow")
-        if record_kind(rec).kind != "decay":  # a free decay has no input: its response must ring down instead
+        if kind != "decay":  # a free decay has no input: its response must ring down instead
             rec.require_excitation("the discrepancy workflow")
         else:
             check_decay(rec, "the discrepancy workflow")
