@@ -1101,9 +1101,9 @@ class Discrepancy(StructureResults, Estimator):
         """The held-out tail's restarted free runs (``validation.restarted_free_runs``' keys) over ``_tail_windows``:
         ``restarted_free_runs`` itself where they are its windows (any record but a hammer's).
         """
-        windows = self._tail_windows(rec)
         if vars(self).get("record_kind_") is None or self.record_kind_.kind != "impact":
             return restarted_free_runs(model, rec, self.n_id_, self.window_s, self._z0, self._v0)
+        windows = self._tail_windows(rec)
         if not len(windows):
             return {}
         err = self._residuals_at(model, rec, windows)
