@@ -684,8 +684,9 @@ class Discrepancy(StructureResults, Estimator):
                                 "windows and held-out free run would cross the pulses, which a few samples do not "
                                 "resolve"}  # fmt: skip
         if no_hybrid:
-            self.unnamed_ = {"reason": "not fitted on a hammer's record: the non-parametric force is fitted and judged "
-                                       "by output error on windows that would cross the pulses"}  # fmt: skip
+            why = ("not fitted on a hammer's record: the non-parametric force is fitted and judged by output error on "
+                   "windows that would cross the pulses")  # fmt: skip
+            self.unnamed_: dict[str, Any] | None = {"reason": why}
         return self
 
     def _fit_one(self, rec: Measurement) -> Discrepancy:
