@@ -139,3 +139,40 @@ def test_nsi_cubic_of_a_lightly_damped_free_decay_of_the_duffing_on_a_fixture():
     # the response's band (``derivatives.BASIS_SNR``) k3 +1.1, -1.3, +0.2, -1.6 % over seeds 1-4 (measured)
     est = _fit(NSI(element="1-2"), _decay(LIGHT_DUFFING, (0.0, 0.008), seed=1, duration=10.0))
     _check(est, LIGHT_DUFFING, ["plus"], "decay")
+
+
+def _posterior(rec, **kw):
+    from negstiff import Posterior
+
+    return _fit(Posterior(element="1-2", **kw), rec)
+
+
+def test_the_elements_posterior_reads_a_structures_free_decay():
+    # the element's posterior on the double well's decay on a fixture: the windows are free decays from their own
+    # states, the linear structure fixed at SINDy's. A short run (two ensembles, 400 steps: not converged, and it
+    # says so) is enough for the facts: the record is read as a decay, the posterior mean's k3 is the truth's
+    # within 0.1 % (measured -0.002 %; 1 um on a 12 mm release) and its modes the truth's within 1 %. Before, it
+    # failed after the work ("no start point of positive posterior density": c_nl's least squares at -2.4e-4 put
+    # the walkers' start ball across the dampers' bound)
+    rec = _decay(DOUBLE_WELL, DOUBLE_WELL_RELEASE, seed=1, duration=4.0)
+    post = _posterior(rec, n_ensembles=2, min_steps=200, max_steps=400, max_windows=24)
+    res = post.result()
+    assert res["parameters"]["k3"]["mean"] == pytest.approx(DOUBLE_WELL.k3, rel=1e-3)
+    assert res["parameters"]["c_nl"]["hdi_low"] >= 0.0
+    for got, true in zip(post.structure_.modes("minus"), _structure(DOUBLE_WELL).modes("minus"), strict=True):
+        assert got.f_hz == pytest.approx(true.f_hz, rel=0.01)
+    assert "linear structure" in res["settings"]["fixed"]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("kind", ["hammer", "decay"])
+def test_the_elements_posterior_on_a_structures_ring_down_holds_the_cubic(kind):
+    # the default sampler on the Duffing's hammer record (windows between the hits only: a 4 ms pulse is not
+    # resolved by the simulator's staged input) and on the double well's decay: the 90 % interval of k3 holds the
+    # truth. Measured: hammer k3 3.0017e6 [2.9998e6, 3.0035e6], decay 1.49998e6 [1.49994e6, 1.50002e6]. The
+    # intervals are conditional on the linear structure fixed at SINDy's: k1 and c read 0.003-3 % off with
+    # intervals narrower than that (hammer c 0.465 [0.464, 0.465] against 0.452), which the result's settings say
+    device, rec = ((DUFFING, _hammer(DUFFING, seed=1)) if kind == "hammer"
+                   else (DOUBLE_WELL, _decay(DOUBLE_WELL, DOUBLE_WELL_RELEASE, seed=1, duration=4.0)))  # fmt: skip
+    k3 = _posterior(rec).result()["parameters"]["k3"]
+    assert k3["hdi_low"] <= device.k3 <= k3["hdi_high"], k3
