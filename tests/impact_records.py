@@ -139,3 +139,32 @@ def fixture_decay_record(device, fixture, z0, fs, duration):
     sol = solve_ivp(fixture_rhs(device, **fixture), (0.0, t[-1]), [z0[0], z0[1], 0.0, 0.0], t_eval=t,
                     method="DOP853", rtol=1e-10, atol=1e-13)  # fmt: skip
     return t, sol.y[:2]
+
+
+LIGHT_DUFFING = Model(m=MASS, k1=DUFFING.k1, k2=0.0, k3=DUFFING.k3, c=DUFFING.c / 3, k0=0.0)
+"""The Duffing at 0.5 % damping: a decay that rings for seconds (a friction's linear envelope shows over many
+cycles)."""
+
+
+def hammer_record_with_force(model, z_rest, fs, hits, peak_n, width_s, duration, hidden):
+    """``hammer_record`` of ``model`` with a force ``hidden(z, z_dot)`` [N] it does not know (an end stop, friction)
+    acting on the mass beside its own: (t, force, z, z_dot), DOP853 piece by piece, noise-free."""
+    law = _force_law(model)
+    t = np.arange(int(round(duration * fs))) / fs
+    pulse = _pulses(hits, peak_n, width_s)
+
+    def rhs(tt, x):
+        return [x[1], (pulse(tt) - law(x[0], x[1]) - hidden(x[0], x[1])) / model.m]
+
+    z, v = _piecewise(rhs, [z_rest, 0.0], t, hits, width_s, duration)
+    return t, pulse(t), z, v
+
+
+def decay_record_with_force(model, z0, fs, duration, hidden, v0=0.0):
+    """``decay_record`` of ``model`` with a force ``hidden(z, z_dot)`` [N] it does not know acting beside its own:
+    (t, z, z_dot), released at ``z0`` [m] with ``v0`` [m/s] (DOP853, noise-free)."""
+    law = _force_law(model)
+    t = np.arange(int(round(duration * fs))) / fs
+    sol = solve_ivp(lambda tt, x: [x[1], -(law(x[0], x[1]) + hidden(x[0], x[1])) / model.m], (0.0, t[-1]),
+                    [z0, v0], t_eval=t, method="DOP853", rtol=1e-10, atol=1e-13)  # fmt: skip
+    return t, sol.y[0], sol.y[1]

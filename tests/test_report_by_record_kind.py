@@ -53,6 +53,23 @@ def test_a_hammer_record_reports_its_frf_identification_and_interval(tmp_path):
     assert (out / "frf_record.png").is_file()
 
 
+def test_a_hammer_records_report_holds_the_discrepancy_workflow(tmp_path):
+    # the discrepancy workflow reads a hammer's record as the identifications do (its windows after the hits): on a
+    # Duffing hit four times (the force channel offset by 0.5 N), the seed's model form and nothing more, it names
+    # nothing and says how it read the record
+    t, f, z, _ = hammer_record(DUFFING, 0.0, FS, (0.5, 3.0, 5.5, 8.0), 40.0, 0.004, 10.0)
+    rng = np.random.default_rng(2)
+    rec = _write(tmp_path / "hammer.csv", t, f + 0.5 + 0.05 * rng.standard_normal(t.size),
+                 z + 1e-6 * rng.standard_normal(t.size))  # fmt: skip
+    out = tmp_path / "out"
+    assert main(["report", str(rec), "-o", str(out), "--quiet", "--only", "discrepancy"]) == 0
+    secs = _sections(out)
+    assert [s["kind"] for s in secs] == ["record", "discrepancy"]
+    res = secs[1]["result"]
+    assert res["effects"] == ["none"], res["iterations"]
+    assert res["record_kind"]["kind"] == "impact"
+
+
 def test_a_free_decay_reports_its_identification_and_backbone(tmp_path):
     t, z, _ = decay_record(LIGHT_DUFFING, 0.008, FS, 10.0)
     zm = z + 5e-6 * np.random.default_rng(2).standard_normal(t.size)
@@ -67,6 +84,13 @@ def test_a_free_decay_reports_its_identification_and_backbone(tmp_path):
     assert bb["linear"]["f_hz"] == pytest.approx(DUFFING_HZ, rel=0.01)
     # NSI's model, decayed from the record's state and measured alike, traces the measured backbone within 1 %
     assert bb["predicted"]["difference_percent"] < 1.0
+    # with it, the forced response NSI's model predicts about the same well, three levels spanning the decay's
+    # amplitudes, each peak on that model's backbone (light damping: zeta^2 = 0.0025 % below it; 0.01 % allowed
+    # for the continuation's resolution), and the report says what the grey curves are
+    curves = bb["forced"]["curves"]
+    assert bb["forced"]["well"] == "plus" and len(curves) == 3
+    assert all(abs(c["peak_off_backbone_percent"]) < 0.01 for c in curves)
+    assert "forced response" in (out / "index.md").read_text()
     assert (out / "backbone_record.png").is_file()
 
 
@@ -110,10 +134,13 @@ def test_a_free_decays_report_gives_the_posterior_and_its_backbone_band(tmp_path
     out = tmp_path / "out"
     assert main(["report", str(path), "-o", str(out), "--quiet"]) == 0
     secs = _sections(out)
-    assert [s["kind"] for s in secs] == ["record", "identification", "identification", "posterior", "backbone"]
+    assert [s["kind"] for s in secs] == ["record", "identification", "identification", "posterior", "discrepancy",
+                                         "backbone"]  # fmt: skip
     k3 = secs[3]["result"]["parameters"]["k3"]
     assert k3["hdi_low"] <= LIGHT_DUFFING.k3 <= k3["hdi_high"], k3
-    band = secs[4]["result"]["credible"]
+    # the record is the seed's model form alone: the discrepancy workflow names nothing on it
+    assert secs[4]["result"]["effects"] == ["none"], secs[4]["result"]["iterations"]
+    band = secs[5]["result"]["credible"]
     assert band["draws"] == 24 and band["prob"] == pytest.approx(0.9)
     truth = backbone(load(path), model=LIGHT_DUFFING)["predicted"]["hilbert"]
     order = np.argsort(truth["amplitude_m"])  # a decay's amplitudes fall with time

@@ -305,19 +305,25 @@ def cmd_discrepancy(args) -> int:
     from negstiff.inference.estimators.discrepancy import CUBIC_BASELINE, LINEAR_BASELINE, Discrepancy
     from negstiff.inference.record.measurement import load
 
-    rec = load(args.data, columns=args.columns, fs=args.fs, mass=args.mass, gravity=args.gravity, aux=args.aux)
+    rec = load(args.data, columns=args.columns, fs=args.fs, mass=args.mass, gravity=args.gravity, aux=args.aux,
+               decay=args.decay)  # fmt: skip
     base = CUBIC_BASELINE if args.baseline == "cubic" else LINEAR_BASELINE
     d = Discrepancy(baseline=base, max_effects=args.max_effects, refine=refinement(args), unnamed=args.unnamed)
     rec = d.check(rec)  # every refusal before the progress line
     say(args, f"discrepancy: {rec.n} samples at {rec.fs:g} Hz, input {rec.input_name}, baseline {args.baseline}")
     d.fit(rec)
     result = d.result()
+    kind = result.get("record_kind") or {}
+    if kind.get("kind") in ("impact", "decay"):
+        say(args, f"read as {'a hammer' if kind['kind'] == 'impact' else 'a free decay'}'s record: {kind['how']}")
     say_refinement(args, result.get("refinement"))
     write_json(args.out, result)
     warn(args, result["warnings"])
     say(args, f"where: {result['where']}")
     un = result.get("unnamed")
-    if un:
+    if un and "gap" not in un:  # not fitted (a hammer's record): why
+        say(args, f"unnamed: {un['reason']}")
+    elif un:
         g = un["gap"]
         say(args, f"unnamed: a non-parametric term of {un['term_percent_of_restoring_force']:.3g} % of the "
                    f"restoring force; held-out gap {g.get('physics_median_window_percent', float('nan')):.3g} % -> "

@@ -429,6 +429,7 @@ def _discrepancy(sub, common: argparse.ArgumentParser, data_opts: argparse.Argum
         "a(t) beside the catalogue's effects, named aux:NAME",
     )
     dsc.add_argument("--baseline", choices=["cubic", "linear"], default="cubic", help="starting model")
+    dsc.add_argument("--decay", action="store_true", help=DECAY_HELP)
     dsc.add_argument(
         "--max-effects",
         type=declared("estimators.discrepancy.Discrepancy", "max_effects"),

@@ -64,7 +64,8 @@ def frf_figure_dofs(res: dict[str, Any], curves: list[dict[str, np.ndarray]], in
 
 def backbone_figure(res: dict[str, Any], title: str):
     """The backbone figure of a ``backbone`` result: frequency and damping ratio against amplitude [mm], the
-    measured Hilbert curve, its peak-to-peak cross-check, the model's prediction and the draws' band where given.
+    measured Hilbert curve, its peak-to-peak cross-check, the model's prediction, its forced responses (half the
+    peak-to-peak against the forcing frequency, grey) and the draws' band where given.
     """
     import matplotlib
 
@@ -80,6 +81,15 @@ def backbone_figure(res: dict[str, Any], title: str):
         a = 1e3 * np.asarray(c["amplitude_m"])
         a1.plot(c["f_hz"], a, ls, color=color, label=label)
         a2.plot(100 * np.asarray(c["zeta"]), a, ls, color=color, label=label)
+    for k, c in enumerate((res.get("forced") or {}).get("curves", [])):
+        a = 1e3 * np.asarray(c["amplitude_m"])
+        stable = np.asarray(c["stable"], bool)
+        for mask, ls in ((stable, "-"), (~stable, "--")):
+            edge = mask | np.r_[mask[1:], False] | np.r_[False, mask[:-1]]  # runs joined to their neighbours
+            a1.plot(c["f_hz"], np.where(edge, a, np.nan), ls, color="0.45", lw=0.9,
+                    label="model's forced response (dashed: unstable)" if (k == 0 and ls == "-") else None)  # fmt: skip
+        a1.annotate(f"{c['force_n']:.2g} N", (c["peak"]["f_hz"], 1e3 * c["peak"]["amplitude_m"]), fontsize=7,
+                    color="0.35", xytext=(3, 2), textcoords="offset points")  # fmt: skip
     band = res.get("credible")
     if band:
         a = 1e3 * np.asarray(band["amplitude_m"])
@@ -89,8 +99,10 @@ def backbone_figure(res: dict[str, Any], title: str):
                          alpha=0.2)  # fmt: skip
     a1.set(xlabel="frequency [Hz]", ylabel="amplitude [mm]", title=title)
     a2.set(xlabel="damping ratio [%]")
-    a1.legend(fontsize=8)
-    fig.tight_layout()
+    handles, labels = a1.get_legend_handles_labels()
+    rows = -(-len(labels) // 3)
+    fig.legend(handles, labels, loc="lower center", ncol=3, fontsize=8, frameon=False)  # below: the curves' peaks
+    fig.tight_layout(rect=(0, 0.045 * rows, 1, 1))  # fill both upper corners (softening and hardening)
     return fig
 
 

@@ -31,13 +31,13 @@ from .document import Report
 BROADBAND = ("nsi", "sindy", "posterior", "discrepancy", "frf")
 HARMONIC = ("characterise",)
 CAMPAIGN = ("map",)
-IMPACT = ("frf", "nsi", "sindy", "interval", "posterior")
+IMPACT = ("frf", "nsi", "sindy", "interval", "posterior", "discrepancy")
 """A hammer's record: its FRF (hits, offsets, windows), the identifications with the force windowed, NSI's
-estimate's interval by batch means over blocks of the record (a hit or so each), and the coefficient posterior
-(its windows between the hits)."""
-DECAY = ("nsi", "sindy", "posterior", "backbone")
-"""A free decay: the identifications (their decay forms), the coefficient posterior, then the backbone measured and
-the identified model's, with the posterior's credible band."""
+estimate's interval by batch means over blocks of the record (a hit or so each), the coefficient posterior (its
+windows between the hits) and the discrepancy workflow (its windows after the hits)."""
+DECAY = ("nsi", "sindy", "posterior", "discrepancy", "backbone")
+"""A free decay: the identifications (their decay forms), the coefficient posterior, the discrepancy workflow, then
+the backbone measured and the identified model's, with the posterior's credible band."""
 SECTIONS = (*BROADBAND, *HARMONIC, *CAMPAIGN, "backbone", "interval")
 """Every analysis a report may hold (``only`` chooses among them)."""
 

@@ -27,6 +27,12 @@ Vibration*, 2011, ch. 6, FREEVIB; the same curves SSMLearn and FrID draw from de
   peak-to-peak, and the fundamental harmonic's, the Hilbert estimator's); its damping ratio is the slow flow's
   for viscous damping, dE/dt = -c <v^2> over the orbit (first order in c: the averaging method's, exact as
   c -> 0). It holds where the damping is light (a few per cent).
+* **Forced response** (``forced_response``): the periodic responses the model predicts under a harmonic force
+  (``negstiff.models.continuation.nfrc``, in frequency at fixed force levels, with Floquet stability), at the
+  levels whose linear resonance reaches a quarter, half and nine tenths of the decay's largest amplitude, drawn
+  with the backbones as SSMLearn and FrID draw them. For light damping each curve's peak lies at the model's
+  backbone frequency times sqrt(1 - 2 zeta^2) (a linear oscillator's displacement resonance: -0.0225 % at
+  zeta = 1.5 %): the distance is reported, a check of the model against itself.
 """
 
 from __future__ import annotations
@@ -327,6 +333,81 @@ def conservative_backbone(model, well: str, amplitude_max: float, n: int = 40, n
     return res
 
 
+FORCED_LEVELS = (0.25, 0.5, 0.9)
+"""The forced responses' levels: the force whose linear resonance (F / (2 zeta k), the well's linearisation)
+reaches these fractions of the decay's largest amplitude."""
+
+FORCED_SPAN = (0.8, 1.2)
+"""The forced responses' frequency range: these factors times the lowest and the highest frequency the model's
+backbone or the decay reaches."""
+
+
+def _rest_well(model, rest_m: float, z_constant_known: bool, f_small: float) -> str:
+    """The model's well the decay rests in: the nearest to the record's rest where z is in the model's frame, else
+    the one whose linear frequency is nearest the decay's at its smallest amplitude.
+    """
+    eq = model.equilibria()
+    wells = {n: w for n, w in (("minus", eq.z_minus), ("plus", eq.z_plus)) if w is not None}
+    if z_constant_known:
+        return min(wells, key=lambda n: abs(wells[n] - rest_m))
+    return min(wells, key=lambda n: abs(math.sqrt(max(model.stiffness(wells[n]), 0.0) / model.m) / (2 * np.pi)
+                                        - f_small))  # fmt: skip
+
+
+def forced_response(model, well: str, amplitude_max: float, f_range: tuple[float, float],
+                    levels: Sequence[float] = FORCED_LEVELS) -> dict[str, Any]:  # fmt: skip
+    """The periodic responses of ``model`` about ``well`` under f = F sin(2 pi f t), continued in frequency over
+    ``f_range`` [Hz] at the forces whose linear resonance reaches ``levels`` times ``amplitude_max`` [m].
+
+    Returns
+    -------
+    dict
+        ``curves``: per level ``force_n``, ``f_hz``, ``amplitude_m`` (half the peak-to-peak, the peaks backbone's
+        amplitude), ``stable`` lists, ``peak`` (``f_hz``, ``amplitude_m``) and ``peak_off_backbone_percent`` (the
+        peak's frequency against the model's conservative backbone at the peak's amplitude); ``well``;
+        ``warnings`` (a level the continuation did not follow).
+    """
+    from negstiff.models.continuation import ContinuationError, nfrc
+
+    eq = model.equilibria()
+    k = float(model.stiffness(eq.well(well)))
+    zeta = model.c / (2 * math.sqrt(k * model.m)) if k > 0 else 0.0
+    out: dict[str, Any] = {"well": well, "f_range_hz": list(f_range), "curves": [], "warnings": []}
+    if not zeta > 0:
+        out["warnings"].append(f"no forced response drawn: the model's damping in its {well} well is not positive "
+                               f"(zeta {zeta:.3g})")  # fmt: skip
+        return out
+    cons = conservative_backbone(model, well, amplitude_max * 1.5, n=80)
+    for level in levels:
+        force = level * amplitude_max * 2 * zeta * k
+        try:
+            res = nfrc(model, freq=tuple(f_range), amplitude=force, well=well, input_kind="force", max_period=1)
+        except ContinuationError as exc:
+            out["warnings"].append(f"the forced response at {force:.3g} N was not followed: {exc}")
+            continue
+        pts = [p for b in res["branches"] if b["period"] == 1 for p in b["points"]]
+        if not pts:
+            out["warnings"].append(f"the forced response at {force:.3g} N has no periodic branch")
+            continue
+        amp = np.array([(p["max_z"] - p["min_z"]) / 2 for p in pts])
+        f = np.array([p["f_hz"] for p in pts])
+        top = int(np.argmax(amp))
+        f_top, a_top = float(f[top]), float(amp[top])
+        if 0 < top < amp.size - 1:  # the peak between the continuation's points: quadratics in the point index
+            a_, b_, c_ = amp[top - 1 : top + 2]
+            s_top = 0.5 * (a_ - c_) / (a_ - 2 * b_ + c_) if a_ - 2 * b_ + c_ < 0 else 0.0
+            qa, qf = np.polyfit([-1, 0, 1], amp[top - 1 : top + 2], 2), np.polyfit([-1, 0, 1], f[top - 1 : top + 2], 2)
+            f_top, a_top = float(np.polyval(qf, s_top)), float(np.polyval(qa, s_top))
+        f_bb = np.interp(a_top, cons["peak_amplitude_m"], cons["f_hz"], left=np.nan, right=np.nan)
+        out["curves"].append({
+            "force_n": float(force), "f_hz": f.tolist(), "amplitude_m": amp.tolist(),
+            "stable": [bool(p["stable"]) for p in pts],
+            "peak": {"f_hz": f_top, "amplitude_m": a_top},
+            "peak_off_backbone_percent": float(100 * (f_top / f_bb - 1)) if np.isfinite(f_bb) else None,
+        })  # fmt: skip
+    return out
+
+
 def credible_band(curves: Sequence[dict[str, Any]], amplitudes: np.ndarray, prob: float = 0.9) -> dict[str, Any]:
     """The band the draws' backbones span at ``amplitudes`` [m]: the central ``prob`` interval of each's
     frequency and damping ratio (draws whose curve does not reach an amplitude left out there).
@@ -344,7 +425,8 @@ def credible_band(curves: Sequence[dict[str, Any]], amplitudes: np.ndarray, prob
             "zeta_low": zq[0].tolist(), "zeta_high": zq[1].tolist(), "draws": len(curves)}  # fmt: skip
 
 
-def backbone(rec: Measurement, model=None, draws: Sequence | None = None, prob: float = 0.9) -> dict[str, Any]:
+def backbone(rec: Measurement, model=None, draws: Sequence | None = None, prob: float = 0.9,
+             forced: bool = True) -> dict[str, Any]:  # fmt: skip
     """Backbone curves of a free-decay record, measured and (with ``model``, ``draws``) predicted.
 
     Parameters
@@ -356,6 +438,8 @@ def backbone(rec: Measurement, model=None, draws: Sequence | None = None, prob: 
         A model whose free decay from the record's initial state is measured alike (``predict_backbone``).
     draws : sequence of Model, optional
         A posterior's draws: the predicted backbone's credible band (``prob``).
+    forced : bool, default True
+        With a model, also its forced responses about the well the decay rests in (``forced_response``).
 
     Returns
     -------
@@ -363,7 +447,8 @@ def backbone(rec: Measurement, model=None, draws: Sequence | None = None, prob: 
         ``measured`` (``hilbert`` and ``peaks``: ``amplitude_m``, ``f_hz``, ``zeta``, ``t_s`` lists), ``decay``,
         ``amplitude_range_m``, ``linear`` (the Hilbert backbone at its smallest amplitude: ``f_hz``, ``zeta``),
         ``band_hz``; with a model ``predicted`` (the same, and ``difference_percent``: the largest
-        |f_predicted / f_measured - 1| over the measured range, Hilbert), with draws ``credible``; ``warnings``.
+        |f_predicted / f_measured - 1| over the measured range, Hilbert) and ``forced`` (``forced_response``), with
+        draws ``credible``; ``warnings``.
 
     Examples
     --------
@@ -403,6 +488,14 @@ def backbone(rec: Measurement, model=None, draws: Sequence | None = None, prob: 
         if out["predicted"]["covered_share"] < 0.8:
             out["warnings"].append(f"the model's decay covers {100 * out['predicted']['covered_share']:.0f} % of the "
                                    "measured amplitude range")  # fmt: skip
+        if forced:
+            known = (rec.info.get("response") or {}).get("z_constant_known", True)
+            well = _rest_well(model, measured["decay"]["rest_m"], known, float(hil["f_hz"][-1]))
+            f_all = np.concatenate([hil["f_hz"], pred["hilbert"]["f_hz"]])
+            f_range = (FORCED_SPAN[0] * float(np.min(f_all)), FORCED_SPAN[1] * float(np.max(f_all)))
+            a_max = float(np.max(measured["peaks"]["amplitude_m"], initial=measured["amplitude_range_m"][1]))
+            out["forced"] = forced_response(model, well, a_max, f_range)
+            out["warnings"] += out["forced"]["warnings"]
     if draws:
         curves = [predict_backbone(d, rec, measured)["hilbert"] for d in draws]
         lo, hi = measured["amplitude_range_m"]

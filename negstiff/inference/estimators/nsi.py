@@ -51,6 +51,7 @@ from negstiff.inference.estimators.structure_id import (
     identify_nsi,
 )
 from negstiff.inference.estimators.structure_id import stabilisation as structure_stabilisation
+from negstiff.inference.record.derivatives import band_limited, basis_band_hz
 from negstiff.inference.record.measurement import Measurement, per_unit_mass_warning
 from negstiff.inference.steps.weak import free_decay, known_input_gain, mass_of
 from negstiff.inference.steps.wells import well_guesses
@@ -242,7 +243,9 @@ class NSI(StructureResults, Identifier):
         scales and means.
         """
         x = zs - z_ref
-        basis = [-(x**2), -(x**3), -v * np.abs(v)]
+        cut = basis_band_hz(rec.displacement, rec.fs, rec.noise_floor())  # the basis without the noise's band
+        xb, vb = band_limited(zs, rec.fs, cut) - z_ref, band_limited(v, rec.fs, cut)
+        basis = [-(xb**2), -(xb**3), -vb * np.abs(vb)]
         if free_decay(rec):  # no input: the feedback channels alone drive the ULS from its initial state
             chans = np.column_stack(basis)
         else:

@@ -86,6 +86,30 @@ def selection_blocks(rec: Measurement, validation_fraction: float, selection_fra
     return n_rows // rows, float(need / rec.fs)
 
 
+def ring_down_window(rec: Measurement, validation_fraction: float, selection_fraction: float,
+                     window_s: float) -> float:  # fmt: skip
+    """The scoring blocks' and restarted free runs' length [s] of a weak-form fit that scores on the selection
+    part [n_fit, n_id) (SINDy, the discrepancy workflow): ``window_s``; on a hammer's or a free decay's record
+    (``record_kind``: a ring-down lasts seconds, the lab's records 10 s) shortened to what gives the selection
+    part two blocks, but never so short that the selection part holds fewer weak-form rows than the system needs
+    (four a column).
+    """
+    kind = record_kind(rec)
+    if kind.kind not in ("impact", "decay"):
+        return float(window_s)
+    rec = identification_record(rec, kind)  # as the fit reads it (the same weak form's test functions)
+    n_id = int(round(rec.n * (1 - validation_fraction)))
+    n_fit = int(round(rec.n * (1 - validation_fraction - selection_fraction)))
+    ident = rec.segment(0, n_id)
+    half, _ = test_function_half_width(ident.displacement, ident.fs, floor=ident.noise_floor(),
+                                       ring_down=is_ring_down(ident))  # fmt: skip
+    stride = max(1, half // 2)
+    rows = max(0, -(-(n_id - n_fit - 8 * half) // stride))  # the selection part's weak-form rows
+    fits = (rows // 2) * stride / rec.fs  # two blocks of them
+    floor = 2 * (len(terms()) + 1) * stride / rec.fs  # WeakForm.system's four rows a column over two blocks
+    return float(min(window_s, max(fits, floor)))
+
+
 class SINDy(StructureResults, Identifier):
     """Weak-form SINDy: which terms of the equation of motion the record asks for, and their sizes, for a single
     DOF or a structure of N DOFs carrying the element between DOFs I-J (``element``; ``structure_id``: one
@@ -267,25 +291,10 @@ class SINDy(StructureResults, Identifier):
             )
 
     def scoring_window(self, rec: Measurement) -> float:
-        """The scoring blocks' and restarted free runs' length [s]: ``window_s``; on a hammer's or a free decay's
-        record (``record_kind``: a ring-down lasts seconds, the lab's records 10 s) shortened to what gives the
-        selection part two blocks, but never so short that the selection part holds fewer weak-form rows than
-        the system needs (four a column).
+        """The scoring blocks' and restarted free runs' length [s]: ``window_s``, shortened on a ring-down
+        (``ring_down_window``).
         """
-        kind = record_kind(rec)
-        if kind.kind not in ("impact", "decay"):
-            return float(self.window_s)
-        rec = identification_record(rec, kind)  # as the fit reads it (the same weak form's test functions)
-        n_id = int(round(rec.n * (1 - self.validation_fraction)))
-        n_fit = int(round(rec.n * (1 - self.validation_fraction - self.selection_fraction)))
-        ident = rec.segment(0, n_id)
-        half, _ = test_function_half_width(ident.displacement, ident.fs, floor=ident.noise_floor(),
-                                           ring_down=is_ring_down(ident))  # fmt: skip
-        stride = max(1, half // 2)
-        rows = max(0, -(-(n_id - n_fit - 8 * half) // stride))  # the selection part's weak-form rows
-        fits = (rows // 2) * stride / rec.fs  # two blocks of them
-        floor = 2 * (len(terms()) + 1) * stride / rec.fs  # WeakForm.system's four rows a column over two blocks
-        return float(min(self.window_s, max(fits, floor)))
+        return ring_down_window(rec, self.validation_fraction, self.selection_fraction, self.window_s)
 
     def _estimate(self, rec: Measurement, n_id: int) -> Estimate:
         """SINDy's own estimate: the support selected on held-out residuals, refitted on the

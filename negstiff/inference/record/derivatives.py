@@ -177,6 +177,49 @@ def state_derivatives(
     return z.copy(), np.fft.irfft(jw * spec, 2 * n)[:n], np.fft.irfft(jw**2 * spec, 2 * n)[:n], info
 
 
+def response_band_hz(z: np.ndarray, fs: float) -> float:
+    """The response's band [Hz]: twice the frequency below which 99.9 % of the displacement's power lies (Welch),
+    at most 0.45 fs (the displacement's, not the velocity's: differencing whitens the sensor noise).
+    """
+    f, p = signal.welch(z - z.mean(), fs, nperseg=min(4096, z.size))
+    cum = np.cumsum(p) / np.sum(p)
+    return float(min(2 * f[np.searchsorted(cum, 0.999)], 0.45 * fs))
+
+
+BASIS_SNR = 1000.0
+"""A nonlinear basis (NSI's x^2, x^3, x'|x'|) is built from z and z' low-passed where the displacement's PSD falls
+below this many times its white sensor noise's (30 dB), never below ``BASIS_BAND`` times the response's band
+(``basis_band_hz``). Above it the channels hold mostly noise, which, in the nonlinear channels and in the output at
+once, biases the subspace step's coefficients (errors in variables): on a Duffing's hammer record at 5 um (1 kHz;
+the band states' window 5 samples) NSI's k3 came out -9 to -11 % over four seeds, and -0.6 to +0.7 % with the basis
+low-passed (measured)."""
+
+BASIS_BAND = 2.0
+"""The basis's low-pass corner is at least this many times the response's band (``response_band_hz``), where the
+4th-order zero-phase Butterworth's gain is 0.996: the response itself is not bent (at one band, its -3 dB
+corner, the 2-DOF rig's k2 moved 2.4 % noise-free; at two, 0.04 %)."""
+
+
+def basis_band_hz(z: np.ndarray, fs: float, floor: tuple[float, np.ndarray, np.ndarray] | None = None) -> float:
+    """The corner [Hz] a nonlinear basis is low-passed at (``BASIS_SNR``): the highest frequency where the measured
+    displacement ``z``'s PSD stands ``BASIS_SNR`` times above its white noise floor (``noise_floor``, or ``floor``
+    where the caller has it), or ``BASIS_BAND`` times the response's band if higher. At or above 0.45 fs (a record
+    whose noise lies far below its response everywhere) ``band_limited`` takes nothing off.
+    """
+    var, f, s = noise_floor(z, fs) if floor is None else floor
+    above = np.flatnonzero(s > BASIS_SNR * var / (fs / 2))
+    return max(BASIS_BAND * response_band_hz(z, fs), float(f[above[-1]]) if above.size else 0.0)
+
+
+def band_limited(x: np.ndarray, fs: float, cut_hz: float) -> np.ndarray:
+    """``x`` low-passed at ``cut_hz`` without phase (4th-order Butterworth, ``scipy.signal.sosfiltfilt``), or
+    ``x`` itself where the cut is at 0.45 fs or above (nothing to take off).
+    """
+    if cut_hz >= 0.45 * fs:
+        return x
+    return signal.sosfiltfilt(signal.butter(4, cut_hz, fs=fs, output="sos"), x, axis=-1)
+
+
 def velocity_window(z: np.ndarray, fs: float) -> tuple[int, int]:
     """Savitzky-Golay (window, polynomial order) fitted to the data: the widest window whose gain
     stays within 0.1 % of 1 up to twice the frequency below which 99.9 % of the displacement's power
@@ -186,9 +229,7 @@ def velocity_window(z: np.ndarray, fs: float) -> tuple[int, int]:
     enough not to bend the response (a fixed fs/70 window cut the Silverbox's response by several %).
     (0, 0) means no window passes: no smoothing, and the velocity by spectral differentiation.
     """
-    f, p = signal.welch(z - z.mean(), fs, nperseg=min(4096, z.size))
-    cum = np.cumsum(p) / np.sum(p)
-    f_band = min(2 * f[np.searchsorted(cum, 0.999)], 0.45 * fs)
+    f_band = response_band_hz(z, fs)
     for order in (3, 5, 7):
         best = None
         for w in range(order + 2, 53, 2):  # odd windows (order is odd)
