@@ -1259,8 +1259,12 @@ class Discrepancy(StructureResults, Estimator):
 
     def effect_interval(self, rec: Measurement, prob: float = 0.9) -> dict[str, Any]:
         """Each named effect's size with its interval (probability ``prob``), by a Laplace approximation of the
-        output error over the record's restarted windows (``_interval_windows``: every half window, and one more
-        before each episode where the effect acts), every refined parameter free (``refine.parameter_names``).
+        output error over the record's restarted windows (``_interval_windows``: runs of the record's predictable
+        span, ``predictability_``, one after the other, and one more before each episode where the effect acts),
+        every refined parameter free (``refine.parameter_names``). A run longer than the span would pass chaos's
+        amplification in its linearisation off as information (an end stop's onset over 1 s windows: 25.943-25.982
+        mm for a 26 mm truth, three windows of 88 holding 56 % of the true model's squared error; over 0.594 s
+        windows 25.749-26.176 mm, measured).
         The posterior under a flat prior is taken Gaussian, its covariance the Gauss-Newton inverse Hessian made
         robust over windows (a sandwich with each window one cluster: the samples of a run are correlated, so the
         windows, not the samples, are the independent units); the effect's marginal is kept, widened by the
