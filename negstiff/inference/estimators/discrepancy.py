@@ -72,6 +72,12 @@ from negstiff.models import Model, effects
 CUBIC_BASELINE = ("1", "z", "z^2", "z^3", "v", "v|v|")
 """The seed's own model form: cubic K, viscous c and quadratic c_nl (the contract's damping law)."""
 LINEAR_BASELINE = ("1", "z", "v")
+PREDICTABILITY_FRACTION = 0.1
+"""The record's predictability horizon (``Discrepancy._predictability``) is the time by which runs restarted from
+state estimates that differ by their noise have parted by this fraction of the signal's rms (pooled over restarts)."""
+LOCAL_DRAWS = 4
+"""Draws of the start states' noise per window when the predictable span of the windows where an effect acts is
+measured (``Discrepancy._episode_windows``)."""
 STOP_MIN_SAMPLES = 10
 """An end stop's onset is sought only where at least this many samples of the fitting part lie beyond it (a stop
 sized from fewer would fit the noise of a few extreme samples)."""
@@ -313,6 +319,10 @@ class Discrepancy(StructureResults, Estimator):
         Per named effect, the gap over the held-out windows where it acts (``_regime``): ``before`` (the
         baseline), ``after`` (the final model): the median window's rms error in % of those windows' rms z;
         ``windows``, ``window_s``.
+    predictability_ : dict
+        The record's predictability horizon (``_predictability``: the baseline's runs restarted from states that
+        differ by their noise part by 10 % of rms z), measured before any effect is scored; ``window_s`` there is
+        the length of the regime's and the interval's windows (the horizon, at most ``window_s / 2``).
     locate_before_, locate_after_ : dict
         Where the equation error sits, by regime, before and after.
     iterations_ : list of dict
@@ -704,6 +714,9 @@ class Discrepancy(StructureResults, Estimator):
             val = validate(base_model, rec, self.n_id_)
             base_model, _, self.baseline_refinement_ = refine_stage(base_model, rec, self.n_id_, val, held=_held(terms))
         self.gap_before_ = self._gap(rec, base_model)
+        # the regime's and the interval's windows last no longer than the record stays predictable: measured once,
+        # from the record and the baseline, before any effect is scored, the same for the baseline and every effect
+        self.predictability_ = self._predictability(rec, base_model)
         self.locate_before_ = self.locate(rec, terms, stop)
         current = {"model": base_model, "initial": self.baseline_model_, "refinement": self.baseline_refinement_,
                    "gap": self.gap_before_}  # fmt: skip
@@ -764,7 +777,7 @@ class Discrepancy(StructureResults, Estimator):
                 reg, judged = self._folds_evidence[e], "cross-validated blocks of the record"
             self.gap_regime_[e] = {"before": reg.get("gap_before_percent"), "after": reg.get("gap_after_percent"),
                                    "windows": reg.get("windows", 0), "window_s": reg.get("window_s"),
-                                   "judged_on": judged}  # fmt: skip
+                                   "record_window_s": reg.get("record_window_s"), "judged_on": judged}  # fmt: skip
         self.locate_after_ = self.locate(rec, terms, stop, aux)
         self.effect_interval_ = self.effect_interval(rec)
         self.bounded_ = boundedness(self.model_, rec.segment(0, self.n_id_))
@@ -818,7 +831,7 @@ class Discrepancy(StructureResults, Estimator):
         change = "{:.3g} % (one standard error: {:.3g} to {:.3g} %, geometric mean)"
         judged, where = regime, "held-out windows"
         if regime.get("windows", 0) < 3 and spec_before is not None and best is not None:
-            evidence["folds"] = self._regime_folds(rec, effect, spec_before, best, model_after)
+            evidence["folds"] = self._regime_folds(rec, effect, spec_before, best, model_after, model_before)
             self._folds_evidence[effect] = evidence["folds"]
             if evidence["folds"].get("windows", 0) >= 3 and evidence["folds"].get("acting") is not None:
                 judged = {**evidence["folds"], "rest": regime.get("rest")}
@@ -869,11 +882,12 @@ class Discrepancy(StructureResults, Estimator):
 
     def _regime(self, rec: Measurement, before: dict[str, Any], after: dict[str, Any], effect: str,
                 model_before: Model, model_after: Model) -> dict[str, Any]:  # fmt: skip
-        """The held-out windows where ``effect`` acts, scored on their own: free runs of ``window_s / 2``
-        restarted a quarter window before each episode of the tail where the effect's force (the model's
-        with it, at the measured states) exceeds a quarter of its rms over the samples where it acts at all;
-        and the tail's ``window_s`` windows that hold no such sample (the rest). Gaps in % of the windows'
-        rms z, before and after, and the paired comparisons.
+        """The held-out windows where ``effect`` acts, scored on their own: free runs restarted a quarter window
+        before each episode of the tail where the effect's force (the model's with it, at the measured states)
+        exceeds a quarter of its rms over the samples where it acts at all, no longer than the motion there stays
+        predictable by either model (``_episode_windows``: ``window_s / 2`` at most); and the tail's ``window_s``
+        windows that hold no such sample (the rest). Gaps in % of the windows' rms z, before and after, and the
+        paired comparisons.
         """
         z, v = self._z0, self._v0
         force = self._effect_force(model_after, effect, z[self.n_id_ :], v[self.n_id_ :])
@@ -881,8 +895,9 @@ class Discrepancy(StructureResults, Estimator):
             return {"windows": 0, "reason": "a measured channel's term acts wherever the channel does"}
         if not np.any(np.abs(force) > 0):
             return {"windows": 0, "reason": "the effect does not act in the held-out tail"}
-        acting, windows = self._episodes(rec, force, self.n_id_)
+        acting, windows, horizon = self._episode_windows(rec, force, self.n_id_, (model_before, model_after))
         out: dict[str, Any] = {"window_s": windows.length / rec.fs, "windows": len(windows),
+                               "record_window_s": horizon["record_s"],
                                "acting_share_of_tail": float(np.mean(acting))}  # fmt: skip
         if len(windows) < 2:
             return out
@@ -905,14 +920,106 @@ class Discrepancy(StructureResults, Estimator):
                 out["rest"] = self._paired(rec, np.asarray(a)[clear], np.asarray(b)[clear])
         return out
 
-    def _episodes(self, rec: Measurement, force: np.ndarray, lo: int) -> tuple[np.ndarray, RestartWindows]:
+    def _predictability(self, rec: Measurement, model: Model) -> dict[str, Any]:
+        """How long ``model``'s runs restarted from the record's states stay predictable: pairs of runs restarted
+        every ``window_s / 20`` over the identification part, one from the measured state and one from that state
+        moved by a draw of its noise (the displacement's sensor noise and the state velocity's predicted noise,
+        ``Measurement.states``' ``noise_std`` and ``velocity_noise_std``; seeded), for at most ``window_s / 2``;
+        the horizon is the first time their rms separation, pooled over the pairs, exceeds
+        ``PREDICTABILITY_FRACTION`` of the part's rms z. A run restarted from noisy states misses by that much
+        however right its model: a window longer than this scores chaos, not the model (measured: where an end
+        stop acted, the true model's own 1 s runs missed by 103-114 % and by 2-3 % over their first 0.25 s).
+        Returns ``{"horizon_s", "window_s"`` (the regime's and the interval's window: the horizon, at most
+        ``window_s / 2`` and at least 8 samples), ``"limited"`` (whether the horizon shortened it), ``"restarts"``,
+        ``"fraction"``, ``"method"}``.
+        """
+        cap = max(8, int(round(self.window_s * rec.fs / 2)))
+        _, _, _, info = rec.states("state")
+        sz, sv = (float(info[k]) if np.isfinite(info[k]) else 0.0 for k in ("noise_std", "velocity_noise_std"))
+        every = restart_windows(self.n_id_, rec.fs, self.window_s / 20, min_step=1)
+        windows = RestartWindows.at(every.starts[every.starts + cap <= self.n_id_], cap)
+        out: dict[str, Any] = {"horizon_s": cap / rec.fs, "window_s": cap / rec.fs, "limited": False,
+                               "restarts": len(windows), "fraction": PREDICTABILITY_FRACTION}  # fmt: skip
+        out["method"] = (f"pairs of the baseline's runs restarted every {self.window_s / 20:g} s over the "
+                         f"identification part, one from a state moved by its noise ({1e6 * sz:.3g} um, "
+                         f"{1e3 * sv:.3g} mm/s rms): the "
+                         f"time their pooled rms separation exceeds {100 * PREDICTABILITY_FRACTION:g} % of rms z, at "
+                         f"most {cap / rec.fs:g} s")  # fmt: skip
+        if len(windows) < 2:
+            return out
+        rng = np.random.default_rng(0)
+        zp, vp = self._z0.copy(), self._v0.copy()
+        zp[windows.starts] += sz * rng.standard_normal(len(windows))
+        vp[windows.starts] += sv * rng.standard_normal(len(windows))
+        a, b = simulate_windows(model, rec, windows, self._z0, self._v0), simulate_windows(model, rec, windows, zp, vp)
+        ok = ~a.diverged & ~b.diverged
+        if ok.sum() < 2:
+            return out
+        separation = np.sqrt(np.mean((a.z[ok] - b.z[ok]) ** 2, axis=0))
+        over = separation > PREDICTABILITY_FRACTION * np.sqrt(np.mean(rec.displacement[: self.n_id_] ** 2))
+        if over.any():
+            length = max(8, int(np.argmax(over)))
+            out.update(horizon_s=int(np.argmax(over)) / rec.fs, window_s=length / rec.fs, limited=True)
+        return out
+
+    def _window_length(self, rec: Measurement) -> int:
+        """Samples of the regime's and the interval's windows: the record's predictability horizon
+        (``predictability_``), at most ``window_s / 2``.
+        """
+        return max(8, int(round(self.predictability_["window_s"] * rec.fs)))
+
+    def _episode_windows(self, rec: Measurement, force: np.ndarray, lo: int,
+                         models: tuple[Model, ...]) -> tuple[np.ndarray, RestartWindows, dict[str, Any]]:  # fmt: skip
+        """``_episodes``' windows no longer than the motion there stays predictable by the models compared on them:
+        each model's runs from the windows' start states and from those states moved by draws of their noise
+        (``LOCAL_DRAWS`` per window, seeded), the first time their rms separation, pooled over windows and draws,
+        exceeds ``PREDICTABILITY_FRACTION`` of the identification part's rms z; the shorter of the models' (and of
+        the record's span, ``_window_length``). Measured before any run is compared with the record, the same for
+        every model. Where an effect acts the motion can be far less predictable than the record's average (an end
+        stop's bounce next to the barrier: 0.17 s against 0.9 s, measured), which the baseline, without the
+        effect, does not show. Returns (acting mask, the windows, ``{"horizon_s", "record_s"}``).
+        """
+        acting, windows = self._episodes(rec, force, lo)
+        length = windows.length
+        info = {"record_s": length / rec.fs, "horizon_s": length / rec.fs}
+        if len(windows) < 1:
+            return acting, windows, info
+        _, _, _, states = rec.states("state")
+        sz, sv = (float(states[k]) if np.isfinite(states[k]) else 0.0 for k in ("noise_std", "velocity_noise_std"))
+        limit = PREDICTABILITY_FRACTION * float(np.sqrt(np.mean(rec.displacement[: self.n_id_] ** 2)))
+        rng = np.random.default_rng(0)
+        dz, dv = (scale * rng.standard_normal((LOCAL_DRAWS, len(windows))) for scale in (sz, sv))
+        for model in models:
+            a = simulate_windows(model, rec, windows, self._z0, self._v0)
+            seps = []
+            for k in range(LOCAL_DRAWS):  # every window's start state moved by one draw at a time
+                zp, vp = self._z0.copy(), self._v0.copy()
+                zp[windows.starts] += dz[k]
+                vp[windows.starts] += dv[k]
+                b = simulate_windows(model, rec, windows, zp, vp)
+                ok = ~a.diverged & ~b.diverged
+                seps.append(a.z[ok] - b.z[ok])
+            sep = np.concatenate(seps)
+            if sep.shape[0] < 1:
+                continue
+            over = np.sqrt(np.mean(sep**2, axis=0)) > limit
+            if over.any():
+                length = min(length, max(8, int(np.argmax(over))))
+        if length < windows.length:
+            acting, windows = self._episodes(rec, force, lo, length)
+            info["horizon_s"] = length / rec.fs
+        return acting, windows, info
+
+    def _episodes(self, rec: Measurement, force: np.ndarray, lo: int,
+                  length: int | None = None) -> tuple[np.ndarray, RestartWindows]:  # fmt: skip
         """Where a force acts (above a quarter of its rms over the samples where it acts at all) and windows of
-        ``window_s / 2`` restarted a quarter window before each episode (no two overlapping); ``force`` is given
-        from sample ``lo`` on. Returns (acting mask from ``lo`` on, the windows).
+        ``length`` samples (by default the record's predictable span, ``_window_length``: ``window_s / 2`` at
+        most) restarted a quarter window before each episode (no two overlapping); ``force`` is given from sample
+        ``lo`` on. Returns (acting mask from ``lo`` on, the windows).
         """
         nz = np.abs(force) > 0
         acting = np.abs(force) > 0.25 * np.sqrt(np.mean(force[nz] ** 2)) if nz.any() else nz
-        length = max(8, int(round(self.window_s * rec.fs / 2)))
+        length = self._window_length(rec) if length is None else length
         lead = length // 4
         starts: list[int] = []
         edges = np.flatnonzero(np.diff(np.concatenate([[0], acting.astype(np.int8)])) == 1)  # episodes' first samples
@@ -923,7 +1030,8 @@ class Discrepancy(StructureResults, Estimator):
         return acting, self._after_pulses(rec, RestartWindows.at(starts, length))
 
     def _regime_folds(self, rec: Measurement, effect: str, before: Candidate, best: Candidate,
-                      model_after: Model, folds: int = 5) -> dict[str, Any]:  # fmt: skip
+                      model_after: Model, model_before: Model | None = None,
+                      folds: int = 5) -> dict[str, Any]:  # fmt: skip
         """The windows where ``effect`` acts anywhere in the record, judged by blocked cross-validation: the
         episodes where its force (``model_after``'s, at the measured states) is large, their restarted windows
         split into ``folds`` contiguous blocks in time; for each block the model without the effect (``before``'s
@@ -937,9 +1045,11 @@ class Discrepancy(StructureResults, Estimator):
         force = self._effect_force(model_after, effect, self._z0, self._v0)
         if force is None or not np.any(np.abs(force) > 0):
             return {"windows": 0}
-        acting, windows = self._episodes(rec, force, 0)
+        compared = (model_after,) if model_before is None else (model_before, model_after)
+        acting, windows, horizon = self._episode_windows(rec, force, 0, compared)
         length = windows.length
         out: dict[str, Any] = {"windows": len(windows), "window_s": length / rec.fs,
+                               "record_window_s": horizon["record_s"],
                                "acting_share_of_record": float(np.mean(acting))}  # fmt: skip
         if len(windows) < 3:
             return out
@@ -1131,11 +1241,11 @@ class Discrepancy(StructureResults, Estimator):
         return out
 
     def _interval_windows(self, rec: Measurement, effect: str) -> tuple[RestartWindows, str]:
-        """The windows an effect's interval is judged on, over the whole record as a posterior's data: runs of
-        ``window_s / 2`` restarted every half window, and one more before each episode where the effect acts
-        (``_episodes``' windows, of the same length).
+        """The windows an effect's interval is judged on, over the whole record as a posterior's data: runs of the
+        record's predictable span (``_window_length``: ``window_s / 2`` at most) restarted one after the other,
+        and one more before each episode where the effect acts (``_episodes``' windows, of the same length).
         """
-        every = restart_windows(rec.n, rec.fs, self.window_s / 2, min_step=8)
+        every = restart_windows(rec.n, rec.fs, self._window_length(rec) / rec.fs, min_step=8)
         starts = set(every.starts.tolist())
         force = self._effect_force(self.model_, effect, self._z0, self._v0)
         extra = 0
@@ -1149,8 +1259,12 @@ class Discrepancy(StructureResults, Estimator):
 
     def effect_interval(self, rec: Measurement, prob: float = 0.9) -> dict[str, Any]:
         """Each named effect's size with its interval (probability ``prob``), by a Laplace approximation of the
-        output error over the record's restarted windows (``_interval_windows``: every half window, and one more
-        before each episode where the effect acts), every refined parameter free (``refine.parameter_names``).
+        output error over the record's restarted windows (``_interval_windows``: runs of the record's predictable
+        span, ``predictability_``, one after the other, and one more before each episode where the effect acts),
+        every refined parameter free (``refine.parameter_names``). A run longer than the span would pass chaos's
+        amplification in its linearisation off as information (an end stop's onset over 1 s windows: 25.943-25.982
+        mm for a 26 mm truth, three windows of 88 holding 56 % of the true model's squared error; over 0.594 s
+        windows 25.749-26.176 mm, measured).
         The posterior under a flat prior is taken Gaussian, its covariance the Gauss-Newton inverse Hessian made
         robust over windows (a sandwich with each window one cluster: the samples of a run are correlated, so the
         windows, not the samples, are the independent units); the effect's marginal is kept, widened by the
@@ -1324,6 +1438,7 @@ class Discrepancy(StructureResults, Estimator):
             },
             "where": self.where_text(),
             "gap_regime_percent": self.gap_regime_,
+            "predictability": dict(self.predictability_),
             "regimes_before": self.locate_before_["regimes"],
             "regimes_after": self.locate_after_["regimes"],
             "model": self.model_.to_dict(),
