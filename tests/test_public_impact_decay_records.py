@@ -220,3 +220,17 @@ def test_cli_frf_reads_the_hammer_mat_file(tmp_path):
     r = json.loads(out.read_text())
     assert r["impacts"]["hits"] == 1
     assert r["f_hz"] == pytest.approx(HAMMER_F_PUBLISHED_HZ, rel=0.01)
+
+
+@pytest.mark.xfail(strict=True, reason="measured: load refuses the 3.2 s record with its response mapped as an "
+                   "accelerometer (y_acc): 'too few samples (4096) to derive z from y_acc: the integral of an "
+                   "accelerometer loses 4 s at each end'; no analyser's hammer block of an accelerometer (1-4 s) can "
+                   "be read as one")  # fmt: skip
+def test_a_short_accelerometer_hammer_record_is_read():
+    # if the response is an accelerometer's (the file does not say; other exports of this analyser's layout hold an
+    # acceleration in g), mapping it so gives the same mode: the accelerance's peak is the receptance's within zeta^2
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        rec = load(HAMMER, columns="force=Time_chan_1,y_acc=Time_chan_2", fs=HAMMER_FS, gravity=0.0)
+        r = frf(rec)
+    assert r["f_hz"] == pytest.approx(HAMMER_F_PUBLISHED_HZ, rel=0.01)
