@@ -1,5 +1,5 @@
-"""Real public records shipped with the tests: a measured free decay of a hardening oscillator (issue "Hammer and
-decay tests").
+"""Real public records shipped with the tests: a measured free decay of a hardening oscillator and a measured hammer
+hit (issue "Hammer and decay tests").
 
 FrID (T. Breunung, B. Balachandran, "Frequency response based identification of nonlinear oscillators", J. Sound
 Vib. 2024, 118651; https://github.com/tbreunung/FrID, MIT License) holds the strain-gauge record of a cantilever
@@ -13,10 +13,18 @@ The published value is the authors' identification of this record: their SINDy m
 cycle here with plain numpy (period between upward zero crossings, half peak-to-peak amplitude). The tolerances
 are the acceptance's; what each estimate reached is in the comments.
 
-No hammer (impact) record whose licence allows shipping it and whose natural frequency is published was found;
-the issue's impact half is open.
+The Engineering Vibration Toolbox for Python (J. C. Slater, R. Timbó; https://github.com/vibrationtoolbox/
+vibration_toolbox, MIT License) ships ``case1.mat``, a two-channel analyser's record of one hammer hit (force and
+response, 1280 Hz, 3.2 s) on a lightly damped structure, and identifies its mode in a doctest of ``sdof_cf``:
+212.0925 Hz. The file is in ``tests/data/vibration_toolbox_hammer_case1``, unchanged (its README says what the
+source documents and what it does not: the channels' units and the response's quantity). Acceptance (the issue):
+``frf``'s frequency of the hit within 1 % of the published one. NSI and SINDy are not compared on it: the record is
+a continuous structure's (its response outside 180-245 Hz is half the mode's rms in the first 50 ms) sampled at
+six samples per cycle of its mode, not a single DOF's, and both refuse it (NSI: no stable underdamped pole; SINDy:
+its model diverges in the free runs).
 """
 
+import json
 import warnings
 from functools import cache
 from pathlib import Path
@@ -24,9 +32,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 from scipy.io import loadmat
+from scipy.signal import butter, hilbert, sosfiltfilt
 
 from negstiff import NSI, SINDy
 from negstiff.inference.analysis.backbone import backbone, on_amplitudes
+from negstiff.inference.analysis.frf import frf
+from negstiff.inference.analysis.impact import find_impacts
 from negstiff.inference.record.measurement import load
 
 FRID = Path(__file__).parent / "data" / "frid_magneto_mechanical_decay"
@@ -121,3 +132,105 @@ def test_nsi_and_sindy_identify_the_decays_linear_frequency(method):
     f_published = float(np.mean(_published()["f_hz"][-SMALL_CYCLES:]))
     found = [m["f_hz"] for m in est.modal_.values() if m["f_hz"] is not None]
     assert found and min(abs(f / f_published - 1) for f in found) < 0.01, found
+
+
+HAMMER = Path(__file__).parent / "data" / "vibration_toolbox_hammer_case1" / "case1.mat"
+HAMMER_FS = 1280.0
+"""The analyser's rate (``Time_Sample_Rate``): the file's single-precision time column drifts off it by up to 7e-8 s a
+step, which ``load`` rightly refuses as a clock."""
+
+HAMMER_COLUMNS = "force=Time_chan_1,z=Time_chan_2"
+"""The hammer's channel as the force, the response as z. The response's quantity is not documented; a mode damped
+0.09 % peaks at the same frequency in receptance, mobility and accelerance (within zeta^2 ~ 1e-6), so reading it as
+z moves nothing the tests measure. Its units are not documented either (it spans 14 'm'): frequencies and damping
+do not depend on the scale."""
+
+HAMMER_F_PUBLISHED_HZ = 212.092530551
+"""The toolbox's identification of this file: ``vtb.sdof_cf(Freq_domain, Hf_chan_2, 500, 1000)`` -> ``nf``, printed
+212.092530551... in its docstring example (``vibration_toolbox/ema.py``, a doctest): an SDOF fit of the analyser's
+averaged FRF over 156-312 Hz."""
+
+
+@cache
+def _hammer_record():
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # the response's span in 'm' (units not documented)
+        return load(HAMMER, columns=HAMMER_COLUMNS, fs=HAMMER_FS, gravity=0.0)
+
+
+@cache
+def _hammer_frf() -> dict:
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # one hit: its coherence is 1 by construction (said in the result)
+        return frf(_hammer_record())
+
+
+def test_the_mat_record_is_one_hammer_hit_at_its_start():
+    # the analyser's export as the toolbox ships it (variables of three lengths; the time record is 4096 samples):
+    # one pulse of a few ms at the block's start (the analyser triggered on it), on a channel settled at an offset
+    rec = _hammer_record()
+    assert rec.fs == HAMMER_FS and rec.n == 4096 and rec.input_name == "force"
+    hits = find_impacts(rec.u, rec.fs)
+    assert hits is not None and hits.count == 1
+    assert hits.starts[0] < 4  # the block opens on the hit's rise: no pre-trigger to read the offset from
+    assert 2e-3 < (hits.pulse_ends[0] - hits.starts[0]) / rec.fs < 10e-3  # a hammer's contact: 4.7 ms here
+    # (its peak stands 32 floor deviations high, just over the 30 an impact needs: a light tap or a 1280 Hz
+    # analyser's few samples of the pulse)
+
+
+def test_frf_of_the_hammer_hit_is_the_published_frequency():
+    # the hit's H1 (force window, the exponential window the 4.7 % ring-down at the block's end needs, one SDOF
+    # receptance fitted): 212.0987 Hz, +0.003 % from the toolbox's 212.0925 Hz (from the analyser's FRF averaged
+    # over hits the file does not hold); the band-passed ring-down's zero crossings over 0.5-3 s give 212.105 Hz.
+    # The acceptance is 1 %; the FRF's bins (zero-padded 4x) are 0.078 Hz apart, 0.04 % of the mode
+    r = _hammer_frf()
+    assert r["impacts"]["hits"] == 1 and r["impacts"]["exponential_tau_s"] is not None
+    assert r["f_hz"] == pytest.approx(HAMMER_F_PUBLISHED_HZ, rel=0.01)
+    assert len(r["peaks"]) == 1  # the only mode fitted in the hammer's band (0.6-415 Hz): one local maximum at
+    # 34 Hz is set aside (its SDOF fit erred by over 5 % of its peak)
+
+
+def test_frf_damping_of_the_hammer_hit_is_the_ring_downs_own():
+    # the exponential window's added decay (1/tau = 0.48 1/s, 0.036 % at 212 Hz) taken off the fit: 0.087 %. The
+    # ring-down's own decay, independent of the FRF: the envelope (Hilbert) of the response band-passed around the
+    # mode (180-245 Hz, 4th-order Butterworth forward and back), a straight line in log over 0.3-2.5 s, where the
+    # early transient of the other modes has died: 0.089 % (0.086-0.097 % over windows from 0.3-1 s to 2.5-3 s, the
+    # FRF's 0.087 % 3 % below this one, 10 % below the highest). Within 15 %: the windowed fit, uncorrected
+    # (0.123 %), is 38 % above
+    rec, r = _hammer_record(), _hammer_frf()
+    x = np.asarray(rec.z, float)
+    t = np.arange(x.size) / rec.fs
+    env = np.abs(hilbert(sosfiltfilt(butter(4, [180.0, 245.0], btype="band", fs=rec.fs, output="sos"), x)))
+    on = (t >= 0.3) & (t <= 2.5)
+    sigma = -np.polyfit(t[on], np.log(env[on]), 1)[0]
+    zeta_ring_down = sigma / (2 * np.pi * r["f_hz"])
+    assert r["zeta"] == pytest.approx(zeta_ring_down, rel=0.15)
+    assert r["peaks"][0]["windowed"]["zeta"] > 1.3 * zeta_ring_down  # the correction is what brings it there
+
+
+def test_cli_frf_reads_the_hammer_mat_file(tmp_path):
+    # the command a user runs on the analyser's file: its columns mapped, its rate given; the same mode
+    from negstiff.cli import main
+
+    out = tmp_path / "case1.json"
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        assert main(["frf", str(HAMMER), "--columns", HAMMER_COLUMNS, "--fs", str(HAMMER_FS), "--gravity", "0",
+                     "--quiet", "-o", str(out)]) == 0  # fmt: skip
+    r = json.loads(out.read_text())
+    assert r["impacts"]["hits"] == 1
+    assert r["f_hz"] == pytest.approx(HAMMER_F_PUBLISHED_HZ, rel=0.01)
+
+
+@pytest.mark.xfail(strict=True, reason="measured: load refuses the 3.2 s record with its response mapped as an "
+                   "accelerometer (y_acc): 'too few samples (4096) to derive z from y_acc: the integral of an "
+                   "accelerometer loses 4 s at each end'; no analyser's hammer block of an accelerometer (1-4 s) can "
+                   "be read as one")  # fmt: skip
+def test_a_short_accelerometer_hammer_record_is_read():
+    # if the response is an accelerometer's (the file does not say; other exports of this analyser's layout hold an
+    # acceleration in g), mapping it so gives the same mode: the accelerance's peak is the receptance's within zeta^2
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        rec = load(HAMMER, columns="force=Time_chan_1,y_acc=Time_chan_2", fs=HAMMER_FS, gravity=0.0)
+        r = frf(rec)
+    assert r["f_hz"] == pytest.approx(HAMMER_F_PUBLISHED_HZ, rel=0.01)
