@@ -65,9 +65,8 @@ def window_starts(rec: Measurement, window_s: float, max_windows: int | None) ->
 
 def fit_structure(est, rec: Measurement, at: tuple[int, int], seed: int) -> tuple[PosteriorResult, list[str], Any]:
     """The element's posterior on ``rec`` for the ``Posterior`` ``est``: (the result, its warnings, the windows)."""
-    from negstiff.inference.estimators.sindy import SINDy
-
     from negstiff.inference.analysis.record_kind import identification_record, record_kind
+    from negstiff.inference.estimators.sindy import SINDy
 
     ident = SINDy(element=at).fit(rec)
     start, offsets = ident.structure_, np.asarray(ident.offsets_, float)
@@ -81,8 +80,10 @@ def fit_structure(est, rec: Measurement, at: tuple[int, int], seed: int) -> tupl
         # (``Windows.free_windows``: a pulse of a few samples is not resolved by the simulator's staged input)
         quiet = ~np.any(np.asarray(rec.u)[starts[:, None] + np.arange(L + 1)[None, :]] != 0.0, axis=1)
         if int(quiet.sum()) < 4:
-            raise PosteriorError(f"{rec.source}: {int(quiet.sum())} of the {starts.size} windows of {est.window_s:g} "
-                                 "s lie between the hammer's pulses: a ring-down's posterior needs 4 at least")  # fmt: skip
+            raise PosteriorError(
+                f"{rec.source}: {int(quiet.sum())} of the {starts.size} windows of {est.window_s:g} s lie between "
+                "the hammer's pulses: a ring-down's posterior needs 4 at least"
+            )
         starts = starts[quiet]
         if est.max_windows is not None:
             starts = starts[np.linspace(0, starts.size - 1, min(est.max_windows, starts.size)).round().astype(int)]
