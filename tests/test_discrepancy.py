@@ -34,7 +34,8 @@ def _record(effects, seed, duration=120.0):
 @pytest.mark.parametrize("seed", [1, pytest.param(2, marks=pytest.mark.slow)])  # seed 2: the replication, with -m slow
 @pytest.mark.parametrize("effect", sorted(HIDDEN))
 def test_a_hidden_effect_is_named_sized_and_its_gap_closed(effect, seed):
-    d = Discrepancy().fit(_record({effect: HIDDEN[effect]}, seed))
+    rec = _record({effect: HIDDEN[effect]}, seed)
+    d = Discrepancy().fit(rec)
     r = d.result()
     if effect == "quadratic_damping":
         # the baseline is the seed's model, c_nl z'|z'| included: quadratic damping is not missing, it is c_nl
@@ -50,8 +51,14 @@ def test_a_hidden_effect_is_named_sized_and_its_gap_closed(effect, seed):
         assert size["z"] == pytest.approx(truth["z"], abs=1e-3)
     else:
         assert size == pytest.approx(truth, rel=0.2)
-    # the held-out gap (restarted free runs) shrinks by at least 2
-    assert r["gap_after_percent"] <= r["gap_before_percent"] / 2
+    # the held-out gap (restarted free runs) shrinks by at least 2, or to the true model's own gap on the record
+    # (measured alike): no model closes it further than the noise and the motion's chaos let the truth. Cubic
+    # damping at seed 2: 0.190 -> 0.117 %, the truth's 0.131 % (measured)
+    before, after = r["gap_before_percent"], r["gap_after_percent"]
+    if after > before / 2:
+        truth = dataclasses.replace(BASE, extra={effect: HIDDEN[effect]})
+        floor = d._gap(rec, truth)["median_window_percent"]
+        assert after <= floor, (before, after, floor)
     assert effect in r["model"]["extra"]
 
 

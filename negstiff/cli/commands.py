@@ -335,7 +335,9 @@ def cmd_discrepancy(args) -> int:
                           for k, v in parts)  # fmt: skip
         b = result.get("bayesian", {}).get(effect, {})
         opinion = (f"; LOO over {b['windows']} windows prefers the model {b['prefers']} it (elpd difference "
-                   f"{b['elpd_diff']:.3g} +- {b['dse']:.3g})" if "prefers" in b else "")  # fmt: skip
+                   f"{b['elpd_diff']:.3g} +- {b['dse']:.3g}"
+                   + ("; PSIS's Pareto k is high for some: LOO is rough there" if b.get("pareto_k_high") else "")
+                   + ")" if "prefers" in b else "")  # fmt: skip
         say(args, f"{effect}: {sizes or 'no interval'} ({100 * iv['prob']:g} % interval){opinion}")
     say(
         args,
