@@ -14,7 +14,8 @@ import pytest
 from impact_records import DOUBLE_WELL, DUFFING, MASS, hammer_record
 
 from negstiff.inference.analysis.frf import frf
-from negstiff.inference.analysis.impact import correct_exponential, find_impacts
+from negstiff.inference.analysis.impact import correct_exponential
+from negstiff.inference.record.impacts import find_impacts
 from negstiff.inference.record.measurement import from_arrays
 
 FS = 2048.0

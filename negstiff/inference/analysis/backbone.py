@@ -45,7 +45,7 @@ import numpy as np
 from scipy import optimize, signal
 
 from negstiff.errors import MeasurementError
-from negstiff.inference.analysis.impact import MAD_TO_SIGMA
+from negstiff.inference.record.impacts import MAD_TO_SIGMA
 from negstiff.inference.record.measurement import Measurement
 
 QUIET_DEVIATIONS = 10.0

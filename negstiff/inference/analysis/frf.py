@@ -31,7 +31,8 @@ from scipy import optimize, signal
 
 from negstiff.errors import MeasurementError, issue
 from negstiff.files import read_json
-from negstiff.inference.analysis.impact import Impacts, correct_exponential, find_impacts, impact_band, impact_spectra
+from negstiff.inference.analysis.impact import correct_exponential, impact_band, impact_spectra
+from negstiff.inference.record.impacts import Impacts, find_impacts
 from negstiff.inference.record.measurement import Measurement
 from negstiff.inference.steps.plausibility import classified
 

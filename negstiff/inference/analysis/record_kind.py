@@ -4,7 +4,7 @@ Three kinds of test are common in a structural-dynamics lab (issue "Hammer and d
 
 - ``"base"``: base-excited (a shaker under the device; the input is the base's acceleration);
 - ``"force"`` and ``"impact"``: a force on the device, a shaker's or a hammer's (short pulses far above the
-  channel's floor: ``impact.find_impacts``);
+  channel's floor: ``record.impacts.find_impacts``);
 - ``"decay"``: no input, a free decay from the record's own initial state (a release): the input column is
   constant (a zero written for it), or the caller says so. A channel of noise alone is not told from a random
   input by its own statistics (a Gaussian input of 60 000 samples stays within 5 of its deviations, which
@@ -23,7 +23,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from negstiff.errors import MeasurementError
-from negstiff.inference.analysis.impact import Impacts, find_impacts
+from negstiff.inference.record.impacts import Impacts, find_impacts
 from negstiff.inference.record.measurement import Measurement
 
 KINDS = ("base", "force", "impact", "decay")
