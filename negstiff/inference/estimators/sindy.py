@@ -65,6 +65,20 @@ class SINDyError(WeakFormError):
     """The record cannot be identified by SINDy (too short, no excitation, nothing selected)."""
 
 
+def _selection_rows(rec: Measurement, validation_fraction: float,
+                    selection_fraction: float) -> tuple[int, int, int, int]:  # fmt: skip
+    """(n_id, n_fit, the test function's half-width h, the rows' stride) of a weak-form fit that scores on the
+    selection part [n_fit, n_id): h from the identification part's spectrum (the fit's own, kept with the
+    record's segment), one row every max(1, h // 2) samples.
+    """
+    n_id = int(round(rec.n * (1 - validation_fraction)))
+    n_fit = int(round(rec.n * (1 - validation_fraction - selection_fraction)))
+    ident = rec.segment(0, n_id)
+    half, _ = test_function_half_width(ident.displacement, ident.fs, floor=ident.noise_floor(),
+                                       ring_down=is_ring_down(ident))  # fmt: skip
+    return n_id, n_fit, half, max(1, half // 2)
+
+
 def selection_blocks(rec: Measurement, validation_fraction: float, selection_fraction: float,
                      window_s: float) -> tuple[int, float]:  # fmt: skip
     """How many ``window_s`` blocks of weak-form rows the selection part of a single DOF's record holds, and
@@ -73,12 +87,7 @@ def selection_blocks(rec: Measurement, validation_fraction: float, selection_fra
     half-width h from the identification part's spectrum (the fit's own, kept with the record's segment), the
     kernel 8 h + 1 samples long, one row every max(1, h // 2) samples of the selection part [n_fit, n_id).
     """
-    n_id = int(round(rec.n * (1 - validation_fraction)))
-    n_fit = int(round(rec.n * (1 - validation_fraction - selection_fraction)))
-    ident = rec.segment(0, n_id)
-    half, _ = test_function_half_width(ident.displacement, ident.fs, floor=ident.noise_floor(),
-                                       ring_down=is_ring_down(ident))  # fmt: skip
-    stride = max(1, half // 2)
+    n_id, n_fit, half, stride = _selection_rows(rec, validation_fraction, selection_fraction)
     rows = block_rows(window_s, rec.fs, stride)
     valid = n_id - n_fit - 8 * half  # the samples where a whole test function fits
     n_rows = 0 if valid <= 0 else -(-valid // stride)
@@ -98,12 +107,7 @@ def ring_down_window(rec: Measurement, validation_fraction: float, selection_fra
     if kind.kind not in ("impact", "decay"):
         return float(window_s)
     rec = identification_record(rec, kind)  # as the fit reads it (the same weak form's test functions)
-    n_id = int(round(rec.n * (1 - validation_fraction)))
-    n_fit = int(round(rec.n * (1 - validation_fraction - selection_fraction)))
-    ident = rec.segment(0, n_id)
-    half, _ = test_function_half_width(ident.displacement, ident.fs, floor=ident.noise_floor(),
-                                       ring_down=is_ring_down(ident))  # fmt: skip
-    stride = max(1, half // 2)
+    n_id, n_fit, half, stride = _selection_rows(rec, validation_fraction, selection_fraction)
     rows = max(0, -(-(n_id - n_fit - 8 * half) // stride))  # the selection part's weak-form rows
     fits = (rows // 2) * stride / rec.fs  # two blocks of them
     floor = 2 * (len(terms()) + 1) * stride / rec.fs  # WeakForm.system's four rows a column over two blocks

@@ -407,6 +407,15 @@ def absolute_velocity_gain(
     }
 
 
+def _double_integral_error(sigma_a: float, corner: float, fs: float) -> float:
+    """The rms error [m] of white acceleration noise ``sigma_a`` integrated twice above ``corner`` [Hz]:
+    var = sigma_a^2 / (fs/2) * int_{corner} df / (2 pi f)^4 = sigma_a^2 (2 / (3 fs)) / ((2 pi)^4 corner^3).
+    """
+    if not np.isfinite(sigma_a):
+        return math.nan
+    return sigma_a / (2 * math.pi * corner) ** 2 * math.sqrt(2 * corner / (3 * fs))
+
+
 def _ring_down_integral(a: np.ndarray, fs: float, sigma_a: float, what: str) -> tuple[np.ndarray, dict]:
     """Z of an accelerometer's ring-down (a hammer's record, a free decay), no sample lost: at rest before the
     record (the hammer's pre-trigger, or the hit or the release at its first sample) and after it, so the
@@ -429,9 +438,7 @@ def _ring_down_integral(a: np.ndarray, fs: float, sigma_a: float, what: str) -> 
         "lost": f"z's constant and its content below {corner:.3g} Hz",
         "highpass_hz": corner,
         "acceleration_noise_m_s2": sigma_a,
-        "integration_error_m": sigma_a / (2 * math.pi * corner) ** 2 * math.sqrt(2 * corner / (3 * fs))
-        if np.isfinite(sigma_a)
-        else float("nan"),
+        "integration_error_m": _double_integral_error(sigma_a, corner, fs),
         "z_constant_known": False,
     }
 
@@ -540,10 +547,7 @@ def derive(
                 "derived": f"z = double integral of {whole} (quintic spline antiderivatives), its drift below "
                 f"{cut:.3g} Hz separated from the stays in either well (two modes of its histogram: cross-well)",
                 "acceleration_noise_m_s2": sigma_a,
-                # as below, with the separation's corner for the high-pass
-                "integration_error_m": sigma_a / (2 * math.pi * cut) ** 2 * math.sqrt(2 * cut / (3 * fs))
-                if np.isfinite(sigma_a)
-                else float("nan"),
+                "integration_error_m": _double_integral_error(sigma_a, cut, fs),  # the separation's corner
             }
     force = cols.get("force")
     hits = find_impacts(force, fs) if (force is not None and not base_moves) else None
@@ -557,11 +561,7 @@ def derive(
         "an acceleration record; only in-well records are fully described",
         "trim_s": TRIM_S,
         "acceleration_noise_m_s2": sigma_a,
-        # white noise of rms sigma_a over the band, integrated twice above f_hp:
-        # var = sigma_a^2 / (fs/2) * int_{f_hp} df / (2 pi f)^4 = sigma_a^2 (2 / (3 fs)) / ((2 pi)^4 f_hp^3)
-        "integration_error_m": sigma_a / (2 * math.pi * HIGHPASS_HZ) ** 2 * math.sqrt(2 * HIGHPASS_HZ / (3 * fs))
-        if np.isfinite(sigma_a)
-        else float("nan"),
+        "integration_error_m": _double_integral_error(sigma_a, HIGHPASS_HZ, fs),
         "z_constant_known": False,
         "warnings": [
             f"z was derived from an accelerometer on the moving part: its content below {HIGHPASS_HZ:g} Hz is lost "
