@@ -150,3 +150,18 @@ def test_a_free_decays_report_gives_the_posterior_and_its_backbone_band(tmp_path
     lo, hi = np.asarray(band["f_hz_low"]), np.asarray(band["f_hz_high"])
     inside = (f_true >= lo * (1 - 5e-4)) & (f_true <= hi * (1 + 5e-4))
     assert inside.mean() >= 0.9, inside.mean()
+
+
+def test_a_structures_record_is_refused_in_one_line_before_any_work(tmp_path, capsys):
+    # a 2-DOF hammer record (z1, z2 and the masses): the report's sections read one response, and the command
+    # crashed with a traceback in its record section; now one line says what reads a structure, exit 2, no output
+    t, f, z, _ = hammer_record(DUFFING, 0.0, FS, (0.5,), 40.0, 0.004, 3.0)
+    path = tmp_path / "structure.csv"
+    with open(path, "w") as fh:
+        fh.write(f"# masses: 1.0, {MASS}\n# force_dof: 2\n# fs: {FS:g}\nt,force,z1,z2\n")
+        np.savetxt(fh, np.column_stack([t, f, 0.1 * z, z]), delimiter=",", fmt="%.9g")
+    out = tmp_path / "out"
+    assert main(["report", str(path), "-o", str(out)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "2 DOFs" in err[0] and "--element" in err[0]
+    assert not out.exists()

@@ -115,6 +115,11 @@ def report_records(
         raise InputError("--nfrc: a single record's report draws no NFRC (a campaign's bifurcation map overlays "
                          "them); give a campaign's records or folder")  # fmt: skip
     rec = load(paths[0], columns=columns, fs=fs, mass=mass, gravity=gravity, aux=aux, decay=decay)
+    if rec.n_dof > 1:  # before any work: the sections read one response (they crashed on a structure's z1 ... zN)
+        raise InputError(
+            f"{rec.source}: a record of {rec.n_dof} DOFs (z1 ... z{rec.n_dof}): the report reads a single DOF's; "
+            "identify a structure with `negstiff identify nsi|sindy DATA --element I-J` (and posterior, frf --dofs)"
+        )
     if forcing_hz is not None:
         check_forcing(rec, forcing_hz)
     from negstiff.inference.analysis.record_kind import check_decay, record_kind
