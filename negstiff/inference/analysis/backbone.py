@@ -29,7 +29,8 @@ Vibration*, 2011, ch. 6, FREEVIB; the same curves SSMLearn and FrID draw from de
   c -> 0). It holds where the damping is light (a few per cent).
 * **Forced response** (``forced_response``): the periodic responses the model predicts under a harmonic force
   (``negstiff.models.continuation.nfrc``, in frequency at fixed force levels, with Floquet stability), at the
-  levels whose linear resonance reaches a quarter, half and nine tenths of the decay's largest amplitude, drawn
+  levels whose resonance reaches a quarter, half and nine tenths of the decay's largest amplitude (the model's
+  damping over a harmonic orbit balanced by the force's work), drawn
   with the backbones as SSMLearn and FrID draw them. For light damping each curve's peak lies at the model's
   backbone frequency times sqrt(1 - 2 zeta^2) (a linear oscillator's displacement resonance: -0.0225 % at
   zeta = 1.5 %): the distance is reported, a check of the model against itself.
@@ -334,8 +335,8 @@ def conservative_backbone(model, well: str, amplitude_max: float, n: int = 40, n
 
 
 FORCED_LEVELS = (0.25, 0.5, 0.9)
-"""The forced responses' levels: the force whose linear resonance (F / (2 zeta k), the well's linearisation)
-reaches these fractions of the decay's largest amplitude."""
+"""The forced responses' levels: the force whose resonance reaches these fractions of the decay's largest amplitude
+(``_resonant_force``)."""
 
 FORCED_SPAN = (0.8, 1.2)
 """The forced responses' frequency range: these factors times the lowest and the highest frequency the model's
@@ -354,10 +355,31 @@ def _rest_well(model, rest_m: float, z_constant_known: bool, f_small: float) -> 
                                         - f_small))  # fmt: skip
 
 
+def _resonant_force(model, z_well: float, amplitude: float, cons: dict[str, Any], nodes: int = 256) -> float | None:
+    """The harmonic force [N] whose resonance reaches ``amplitude`` [m] (half the peak-to-peak) about ``z_well``:
+    the energy the model's damping (every velocity-dependent force, its effects' too) takes from the harmonic orbit
+    z = z_well + a cos(w t) at the backbone's frequency there, per cycle, over pi a (at resonance the force's work
+    meets it: F pi a = E). None where the backbone does not reach the amplitude. With viscous damping alone it is
+    the linear F = 2 zeta k a; a quadratic damping's grows with the amplitude (on a measured magneto-mechanical
+    decay NSI's c_nl put the top curve's peak at a quarter of its linear target, measured).
+    """
+    f = np.interp(amplitude, cons["peak_amplitude_m"], cons["f_hz"], left=np.nan, right=np.nan)
+    if not np.isfinite(f):
+        return None
+    w = 2 * np.pi * f
+    th = 2 * np.pi * (np.arange(nodes) + 0.5) / nodes
+    z = z_well + amplitude * np.cos(th)
+    v = -amplitude * w * np.sin(th)
+    dissipative = np.asarray(model.total_force(z, v)) - np.asarray(model.total_force(z, 0.0 * v))
+    energy = float(np.sum(dissipative * v) * (2 * np.pi / w) / nodes)  # over one period
+    return energy / (np.pi * amplitude) if energy > 0 else None
+
+
 def forced_response(model, well: str, amplitude_max: float, f_range: tuple[float, float],
                     levels: Sequence[float] = FORCED_LEVELS) -> dict[str, Any]:  # fmt: skip
     """The periodic responses of ``model`` about ``well`` under f = F sin(2 pi f t), continued in frequency over
-    ``f_range`` [Hz] at the forces whose linear resonance reaches ``levels`` times ``amplitude_max`` [m].
+    ``f_range`` [Hz] at the forces whose resonance reaches ``levels`` times ``amplitude_max`` [m] (``_resonant_force``:
+    the model's damping over a harmonic orbit at its backbone's frequency).
 
     Returns
     -------
@@ -378,8 +400,9 @@ def forced_response(model, well: str, amplitude_max: float, f_range: tuple[float
                                f"(zeta {zeta:.3g})")  # fmt: skip
         return out
     cons = conservative_backbone(model, well, amplitude_max * 1.5, n=80)
+    z_well = eq.well(well)
     for level in levels:
-        force = level * amplitude_max * 2 * zeta * k
+        force = _resonant_force(model, z_well, level * amplitude_max, cons) or level * amplitude_max * 2 * zeta * k
         try:
             res = nfrc(model, freq=tuple(f_range), amplitude=force, well=well, input_kind="force", max_period=1)
         except ContinuationError as exc:
