@@ -198,6 +198,12 @@ def identification_section(est, label: str = "") -> Section:
         + (f"Refinement: {r.refinement.get('reason')}." if r.refinement else "No output-error refinement.")
         + f" Mass: {r.mass_source}."
     )  # fmt: skip
+    mean, std = v.get("residual_mean"), v.get("residual_std")
+    if held is not None and held == v.get("rms_percent") and mean is not None and std:
+        offset = mean**2 / (mean**2 + std**2)
+        if offset > 0.25:  # a ring-down's quiet tail: its rest, not its motion, can hold most of the error
+            sec.text(f"{fmt(100 * offset, 2)} % of that free run's squared error is a constant offset "
+                     f"({fmt(mean, 2)} in z's units): the model's rest against the record's, not its motion.")
     if r.method == "sindy" and "selected_terms" in r.details:
         sec.text(f"Selected terms: {', '.join(r.details['selected_terms'])}.")
     for w in r.warnings:
