@@ -322,12 +322,15 @@ class Posterior(Estimator):
             # the MAP search's residual is flat (outside the support: a zero Jacobian): moved inside by 1e-6 of the
             # prior's span (c_nl to 0.03 N s^2/m^2), where the search's first steps stay in the support (one ulp inside,
             # the search stayed at its start: the Duffing's frequency interval missed 12 Hz by 0.002 Hz, measured)
-            # The margin is at most a tenth of the parameter's own size: the prior's span has a floor of 1e-3 of
-            # the largest coefficient's magnitude, in that coefficient's units (k3's), which on a record in a
-            # strain gauge's units (k3 5e11 per unit mass) put a viscous c of 4 at 5000 and the start diverged
+            # Only a start on or past a bound is moved, by at most a tenth of its own size (at least 1e-9 of the
+            # span: off the bound, where the search's steps stay in the support): the prior's span has a floor of
+            # 1e-3 of the largest coefficient's magnitude, in that coefficient's units (k3's), which on a record in a
+            # strain gauge's units (k3 5e11 per unit mass) moved a viscous c of 4, inside, to 5000 and the start
+            # diverged
             span = par.upper - par.lower
-            margin = np.minimum(1e-6 * span, np.where(theta != 0, 0.1 * np.abs(theta), np.inf))
-            theta = np.clip(theta, par.lower + margin, par.upper - margin)
+            margin = np.minimum(1e-6 * span, np.maximum(0.1 * np.abs(theta), 1e-9 * span))
+            inside = np.where(theta >= par.upper, par.upper - margin, theta)
+            theta = np.where(theta <= par.lower, par.lower + margin, inside)
         else:
             if rec.mass is None and self.mass_prior == "weighed":
                 raise PosteriorError(f"{rec.source}: the device posterior with a weighed mass needs --mass or metadata")
