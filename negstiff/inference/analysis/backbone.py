@@ -387,22 +387,30 @@ def forced_response(model, well: str, amplitude_max: float, f_range: tuple[float
         ``curves``: per level ``force_n``, ``f_hz``, ``amplitude_m`` (half the peak-to-peak, the peaks backbone's
         amplitude), ``stable`` lists, ``peak`` (``f_hz``, ``amplitude_m``) and ``peak_off_backbone_percent`` (the
         peak's frequency against the model's conservative backbone at the peak's amplitude); ``well``;
-        ``warnings`` (a level the continuation did not follow).
+        ``warnings`` (a level not drawn: beyond the well's orbits, no dissipation, not followed; a peak more than
+        20 % from its target).
     """
     from negstiff.models.continuation import ContinuationError, nfrc
 
     eq = model.equilibria()
-    k = float(model.stiffness(eq.well(well)))
-    zeta = model.c / (2 * math.sqrt(k * model.m)) if k > 0 else 0.0
+    z_well = eq.well(well)
     out: dict[str, Any] = {"well": well, "f_range_hz": list(f_range), "curves": [], "warnings": []}
-    if not zeta > 0:
-        out["warnings"].append(f"no forced response drawn: the model's damping in its {well} well is not positive "
-                               f"(zeta {zeta:.3g})")  # fmt: skip
+    if not float(model.stiffness(z_well)) > 0:
+        out["warnings"].append(f"no forced response drawn: the model's {well} well is not stable (K' <= 0)")
         return out
     cons = conservative_backbone(model, well, amplitude_max * 1.5, n=80)
-    z_well = eq.well(well)
+    reach = float(np.max(cons["peak_amplitude_m"]))
     for level in levels:
-        force = _resonant_force(model, z_well, level * amplitude_max, cons) or level * amplitude_max * 2 * zeta * k
+        target = level * amplitude_max
+        # the force whose work meets the model's damping over the orbit (every velocity-dependent term: a negative
+        # c with a positive c_nl can still dissipate); none where the well's backbone does not reach the target
+        # (beyond its barrier) or the orbit gains energy: said, not replaced by a linear guess
+        force = _resonant_force(model, z_well, target, cons) if target <= reach else None
+        if force is None:
+            why = (f"beyond the {well} well's orbits (they reach {1e3 * reach:.3g} mm)" if target > reach
+                   else "the model's damping does not dissipate over that orbit")  # fmt: skip
+            out["warnings"].append(f"no forced response at {1e3 * target:.3g} mm: {why}")
+            continue
         try:
             res = nfrc(model, freq=tuple(f_range), amplitude=force, well=well, input_kind="force", max_period=1)
         except ContinuationError as exc:
@@ -422,6 +430,9 @@ def forced_response(model, well: str, amplitude_max: float, f_range: tuple[float
             qa, qf = np.polyfit([-1, 0, 1], amp[top - 1 : top + 2], 2), np.polyfit([-1, 0, 1], f[top - 1 : top + 2], 2)
             f_top, a_top = float(np.polyval(qf, s_top)), float(np.polyval(qa, s_top))
         f_bb = np.interp(a_top, cons["peak_amplitude_m"], cons["f_hz"], left=np.nan, right=np.nan)
+        if abs(a_top / target - 1) > 0.2:  # the orbit is not the cosine the force was sized on (near a barrier)
+            out["warnings"].append(f"the forced response at {force:.3g} N peaks at {1e3 * a_top:.3g} mm, not the "
+                                   f"{1e3 * target:.3g} mm it was sized for (the orbit far from a cosine)")  # fmt: skip
         out["curves"].append({
             "force_n": float(force), "f_hz": f.tolist(), "amplitude_m": amp.tolist(),
             "stable": [bool(p["stable"]) for p in pts],
