@@ -226,9 +226,10 @@ def _loo_compare(ms_with: np.ndarray, ms_without: np.ndarray, residual_rows, len
         warnings.simplefilter("always")
         try:
             table = az.compare(data, round_to="none")
-        except (ValueError, FloatingPointError) as err:  # arviz cannot score these windows
+        except ValueError as err:  # arviz cannot score these windows
             return {"windows": int(windows), "error": str(err)}
     pareto = any("Pareto" in str(w.message) for w in said) or bool("warning" in table and np.any(table["warning"]))
+    weight = float(table.loc["with", "weight"])
     diff = float(table.loc["with", "elpd"] - table.loc["without", "elpd"])
     dse = float(max(table.loc["with", "dse"], table.loc["without", "dse"]))
     return {
@@ -236,7 +237,7 @@ def _loo_compare(ms_with: np.ndarray, ms_without: np.ndarray, residual_rows, len
         "elpd_without": float(table.loc["without", "elpd"]),
         "elpd_diff": diff,  # with minus without: > 0 favours naming it
         "dse": dse,
-        "weight_with": float(table.loc["with", "weight"]),
+        "weight_with": weight if math.isfinite(weight) else None,  # the stacking weights overflow far apart
         "prefers": "with" if diff > 0 else "without",
         "beyond_two_se": bool(abs(diff) > 2 * dse),
         "windows": int(windows),
