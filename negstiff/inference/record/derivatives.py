@@ -196,8 +196,8 @@ low-passed (measured)."""
 
 BASIS_BAND = 2.0
 """The basis's low-pass corner is at least this many times the response's band (``response_band_hz``), where the
-4th-order zero-phase Butterworth's gain is 0.996: the response itself is not bent (at one band, its -3 dB
-corner, the 2-DOF rig's k2 moved 2.4 % noise-free; at two, 0.04 %)."""
+4th-order zero-phase Butterworth's gain is 0.996: the response itself is not bent (at one band, its corner, -6 dB
+run forward and back, the 2-DOF rig's k2 moved 2.4 % noise-free; at two, 0.04 %)."""
 
 
 def basis_band_hz(z: np.ndarray, fs: float, floor: tuple[float, np.ndarray, np.ndarray] | None = None) -> float:
