@@ -279,9 +279,13 @@ class SINDy(StructureResults, Identifier):
         its fit (its blocks follow the element's smoothed states).
         """
         window = self.scoring_window(rec)
-        blocks, need_s = selection_blocks(rec, self.validation_fraction, self.selection_fraction, window)
+        kind = record_kind(rec)
+        # counted on the record as the fit reads it (a decay named so whose force channel holds noise, a hammer's
+        # force windowed), as the discrepancy workflow's check counts it
+        read = identification_record(rec, kind) if kind.kind in ("impact", "decay") else rec
+        blocks, need_s = selection_blocks(read, self.validation_fraction, self.selection_fraction, window)
         if blocks < 2:
-            if record_kind(rec).kind in ("impact", "decay"):  # a longer record of the same ring-down would not help
+            if kind.kind in ("impact", "decay"):  # a longer record of the same ring-down would not help
                 raise SINDyError(
                     f"{rec.source}: SINDy cannot score its candidate models on this ring-down: the part that scores "
                     f"them ({100 * self.selection_fraction:.0f} % of the record, before the held-out tail) holds "
