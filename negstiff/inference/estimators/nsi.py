@@ -51,7 +51,6 @@ from negstiff.inference.estimators.structure_id import (
     identify_nsi,
 )
 from negstiff.inference.estimators.structure_id import stabilisation as structure_stabilisation
-from negstiff.inference.record.derivatives import band_limited, basis_band_hz
 from negstiff.inference.record.measurement import Measurement, per_unit_mass_warning
 from negstiff.inference.steps.weak import free_decay, known_input_gain, mass_of
 from negstiff.inference.steps.wells import well_guesses
@@ -240,11 +239,12 @@ class NSI(StructureResults, Identifier):
     def extended_input(self, rec: Measurement, zs: np.ndarray, v: np.ndarray, z_ref: float):
         """The subspace step's problem about ``z_ref``: x = z - z_ref, the standardised input channels (the
         input and the basis functions ``-x^2, -x^3, -z'|z'|``; a free decay's: the basis functions alone), their
-        scales and means.
+        scales and means. ``zs`` and ``v`` are the record's band states (``states("band")``); the basis is built
+        from them low-passed (``Measurement.basis_states``).
         """
         x = zs - z_ref
-        cut = basis_band_hz(rec.displacement, rec.fs, rec.noise_floor())  # the basis without the noise's band
-        xb, vb = band_limited(zs, rec.fs, cut) - z_ref, band_limited(v, rec.fs, cut)
+        zb, vb = rec.basis_states()  # the band states without the noise's band, computed once per record
+        xb = zb - z_ref
         basis = [-(xb**2), -(xb**3), -vb * np.abs(vb)]
         if free_decay(rec):  # no input: the feedback channels alone drive the ULS from its initial state
             chans = np.column_stack(basis)

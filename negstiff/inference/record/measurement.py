@@ -29,6 +29,8 @@ from negstiff import io as record_io
 from negstiff.constants import G
 from negstiff.errors import MeasurementError, RecordWarning, issue
 from negstiff.inference.record.derivatives import (
+    band_limited,
+    basis_band_hz,
     noise_floor,
     smooth_and_differentiate,
     state_derivatives,
@@ -287,6 +289,19 @@ class Measurement:
             hit = self.derived[key] = state_derivatives(self.displacement, self.fs, purpose, floor=floor)
         zs, v, a, info = hit
         return zs.copy(), v.copy(), a.copy(), copy.deepcopy(info)
+
+    def basis_states(self) -> tuple[np.ndarray, np.ndarray]:
+        """NSI's band states (``states("band")``) low-passed where the record holds its sensor's noise alone
+        (``derivatives.basis_band_hz``, ``band_limited``): the z and z' a nonlinear basis is built from (their noise,
+        correlated with the output's, biases the subspace step: errors in variables), computed once per record
+        and kept with it (copies are returned).
+        """
+        hit = self.derived.get("basis_states")
+        if hit is None:
+            zs, v, _, _ = self.states("band")
+            cut = basis_band_hz(self.displacement, self.fs, self.noise_floor())
+            hit = self.derived["basis_states"] = (band_limited(zs, self.fs, cut), band_limited(v, self.fs, cut))
+        return hit[0].copy(), hit[1].copy()
 
     def channel_states(self, at: tuple[int, int] | None = None) -> tuple[np.ndarray, np.ndarray, tuple[int, int]]:
         """Band-smoothed displacements and velocities (N, T) of every channel, and the Savitzky-Golay
