@@ -252,13 +252,9 @@ def _model_start(model, measured: dict[str, Any], rec: Measurement) -> tuple[flo
     (a measured z); a derived z's constant unknown, the record's rest put on the model's well nearest to it.
     """
     d = measured["decay"]
-    known = (rec.info.get("response") or {}).get("z_constant_known", True)
-    if known:
+    if _z_constant_known(rec):
         return d["z0_m"], d["v0_m_s"], "the record's state at the decay's start"
-    eq = model.equilibria()
-    wells = [w for w in (eq.z_minus, eq.z_plus) if w is not None]
-    f_small = measured["hilbert"]["f_hz"][-1]
-    well = min(wells, key=lambda w: abs(math.sqrt(max(model.stiffness(w), 0.0) / model.m) / (2 * np.pi) - f_small))
+    well = model.equilibria().well(_rest_well(model, measured, rec))
     return (well + d["z0_m"] - d["rest_m"], d["v0_m_s"],
             "the record's z (its constant unknown) about its rest, put on the model's well of the nearest frequency")
 
@@ -343,14 +339,20 @@ FORCED_SPAN = (0.8, 1.2)
 backbone or the decay reaches."""
 
 
-def _rest_well(model, rest_m: float, z_constant_known: bool, f_small: float) -> str:
-    """The model's well the decay rests in: the nearest to the record's rest where z is in the model's frame, else
-    the one whose linear frequency is nearest the decay's at its smallest amplitude.
+def _z_constant_known(rec: Measurement) -> bool:
+    """Whether the record's z is in the model's frame (a measured z), not a derived one with its constant unknown."""
+    return (rec.info.get("response") or {}).get("z_constant_known", True)
+
+
+def _rest_well(model, measured: dict[str, Any], rec: Measurement) -> str:
+    """The model's well the record's decay rests in: the nearest to the record's rest where z is in the model's
+    frame, else the one whose linear frequency is nearest the decay's at its smallest amplitude.
     """
     eq = model.equilibria()
     wells = {n: w for n, w in (("minus", eq.z_minus), ("plus", eq.z_plus)) if w is not None}
-    if z_constant_known:
-        return min(wells, key=lambda n: abs(wells[n] - rest_m))
+    if _z_constant_known(rec):
+        return min(wells, key=lambda n: abs(wells[n] - measured["decay"]["rest_m"]))
+    f_small = measured["hilbert"]["f_hz"][-1]
     return min(wells, key=lambda n: abs(math.sqrt(max(model.stiffness(wells[n]), 0.0) / model.m) / (2 * np.pi)
                                         - f_small))  # fmt: skip
 
@@ -523,8 +525,7 @@ def backbone(rec: Measurement, model=None, draws: Sequence | None = None, prob: 
             out["warnings"].append(f"the model's decay covers {100 * out['predicted']['covered_share']:.0f} % of the "
                                    "measured amplitude range")  # fmt: skip
         if forced:
-            known = (rec.info.get("response") or {}).get("z_constant_known", True)
-            well = _rest_well(model, measured["decay"]["rest_m"], known, float(hil["f_hz"][-1]))
+            well = _rest_well(model, measured, rec)
             f_all = np.concatenate([hil["f_hz"], pred["hilbert"]["f_hz"]])
             f_range = (FORCED_SPAN[0] * float(np.min(f_all)), FORCED_SPAN[1] * float(np.max(f_all)))
             a_max = float(np.max(measured["peaks"]["amplitude_m"], initial=measured["amplitude_range_m"][1]))
