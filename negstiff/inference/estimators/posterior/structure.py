@@ -36,7 +36,7 @@ import numpy as np
 from negstiff.inference.estimators.posterior.diagnostics import PosteriorResult, convergence_warnings, summarise
 from negstiff.inference.estimators.posterior.likelihood import curvature_adjustment
 from negstiff.inference.estimators.posterior.sampling import sample_ensembles
-from negstiff.inference.estimators.posterior.windows import PosteriorError
+from negstiff.inference.estimators.posterior.windows import PosteriorError, between_pulses
 from negstiff.inference.record.measurement import Measurement
 from negstiff.models.kernel import KINDS
 from negstiff.models.simulator import integrate, stage_input
@@ -48,9 +48,12 @@ IDENTIFICATION_SHARE = 0.8
 """The windows are cut from the record's first 80 % (the identification part of every estimator)."""
 
 
-def window_starts(rec: Measurement, window_s: float, max_windows: int | None) -> tuple[np.ndarray, int]:
+def window_starts(rec: Measurement, window_s: float, max_windows: int | None,
+                  free: bool = False) -> tuple[np.ndarray, int]:  # fmt: skip
     """The first sample of each window (evenly picked, at most ``max_windows``) over the identification part
-    and the samples per window less one; one ``PosteriorError`` when fewer than 4 fit.
+    and the samples per window less one; one ``PosteriorError`` when fewer than 4 fit. ``free``: a ring-down's
+    record (its input zero between the pulses), only the windows between the pulses (``windows.between_pulses``:
+    a pulse of a few samples is not resolved by the simulator's staged input), each a free decay from its state.
     """
     n_id = int(IDENTIFICATION_SHARE * rec.n)
     L = max(8, int(round(window_s * rec.fs)))
@@ -58,6 +61,8 @@ def window_starts(rec: Measurement, window_s: float, max_windows: int | None) ->
     if starts.size < 4:
         raise PosteriorError(f"{rec.source}: too short for a structure's posterior: 4 windows of {window_s:g} s "
                              f"needed in its first {100 * IDENTIFICATION_SHARE:g} %")  # fmt: skip
+    if free:
+        starts = starts[between_pulses(rec, starts[:, None] + np.arange(L + 1)[None, :], window_s)]
     if max_windows is not None:
         starts = starts[np.linspace(0, starts.size - 1, min(max_windows, starts.size)).round().astype(int)]
     return starts, L
@@ -74,19 +79,7 @@ def fit_structure(est, rec: Measurement, at: tuple[int, int], seed: int) -> tupl
     ring_down = kind.kind in ("impact", "decay")
     if ring_down:  # a hammer's force windowed (zero between its pulses), a decay's input zero: as the fit read it
         rec = identification_record(rec, kind)
-    starts, L = window_starts(rec, est.window_s, None if ring_down else est.max_windows)
-    if ring_down:
-        # the windows between the pulses, each a free decay from its own state, as the single DOF's
-        # (``Windows.free_windows``: a pulse of a few samples is not resolved by the simulator's staged input)
-        quiet = ~np.any(np.asarray(rec.u)[starts[:, None] + np.arange(L + 1)[None, :]] != 0.0, axis=1)
-        if int(quiet.sum()) < 4:
-            raise PosteriorError(
-                f"{rec.source}: {int(quiet.sum())} of the {starts.size} windows of {est.window_s:g} s lie between "
-                "the hammer's pulses: a ring-down's posterior needs 4 at least"
-            )
-        starts = starts[quiet]
-        if est.max_windows is not None:
-            starts = starts[np.linspace(0, starts.size - 1, min(est.max_windows, starts.size)).round().astype(int)]
+    starts, L = window_starts(rec, est.window_s, est.max_windows, free=ring_down)
     zs, v, _ = rec.channel_states(at)
     idx = starts[:, None] + np.arange(L + 1)[None, :]
     # the record in the structure's frame: each channel's zero (measured = physical + offset) taken off

@@ -40,6 +40,20 @@ SUBSTEP_SHIFT_SD = 0.1
 standard deviation (``Windows.resolve_substeps`` doubles the RK4 steps per sample until it does not)."""
 
 
+def between_pulses(rec: Measurement, index: np.ndarray, window_s: float) -> np.ndarray:
+    """Which windows (rows of sample indices ``index``) of a ring-down's record have a zero input throughout: the
+    windows between a hammer's pulses (its force windowed, ``record_kind.identification_record``), every window of
+    a free decay. One ``PosteriorError`` when fewer than 4 do.
+    """
+    quiet = ~np.any(np.asarray(rec.u)[index] != 0.0, axis=1)
+    if int(quiet.sum()) < 4:
+        raise PosteriorError(
+            f"{rec.source}: {int(quiet.sum())} of the {len(index)} windows of {window_s:g} s lie between the "
+            "hammer's pulses: a ring-down's posterior needs 4 at least"
+        )
+    return quiet
+
+
 @dataclass
 class Windows:
     """Multiple-shooting windows of a record."""
@@ -137,13 +151,7 @@ class Windows:
         hits set the start states, the windows read the ring-down. The band-limiting pre-emphasis of ``cut`` is
         not applied: on the windowed force it rings (5 mN between 40 N pulses, 4 um of static response).
         """
-        idx = windows.index
-        quiet = ~np.any(np.asarray(rec.u)[idx] != 0.0, axis=1)
-        if int(quiet.sum()) < 4:
-            raise PosteriorError(
-                f"{rec.source}: {int(quiet.sum())} of the {len(windows)} windows of {window_s:g} s lie between the "
-                "hammer's pulses: a ring-down's posterior needs 4 at least"
-            )
+        quiet = between_pulses(rec, windows.index, window_s)
         z = windows.measured(rec.displacement)[quiet]
         return cls(rec.dt, rec.input_name, np.zeros_like(z), z, windows.start_states(zs, v)[quiet],
                    starts=windows.starts[quiet])  # fmt: skip
