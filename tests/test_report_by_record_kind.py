@@ -10,7 +10,7 @@ import json
 
 import numpy as np
 import pytest
-from impact_records import DOUBLE_WELL, DUFFING, DUFFING_HZ, MASS, decay_record, hammer_record
+from impact_records import DOUBLE_WELL, DUFFING, DUFFING_HZ, MASS, decay_record, hammer_record, measured_hammer
 
 from negstiff.cli import main
 from negstiff.models import Model
@@ -27,15 +27,19 @@ def _write(path, t, force, z):
     return path
 
 
+def _hammer_file(tmp_path, seed):
+    """The Duffing hit four times as a lab measures it (``measured_hammer``: the force's 0.5 N offset and 0.05 N of
+    noise, 1 um of laser noise), written as the lab's CSV."""
+    rec = measured_hammer(DUFFING, seed, 1e-6, FS)
+    return _write(tmp_path / "hammer.csv", np.arange(rec.n) / FS, rec.u, rec.z)
+
+
 def _sections(out):
     return json.loads((out / "results.json").read_text())["sections"]
 
 
 def test_a_hammer_record_reports_its_frf_identification_and_interval(tmp_path):
-    t, f, z, _ = hammer_record(DUFFING, 0.0, FS, (0.5, 3.0, 5.5, 8.0), 40.0, 0.004, 10.0)
-    rng = np.random.default_rng(1)
-    rec = _write(tmp_path / "hammer.csv", t, f + 0.5 + 0.05 * rng.standard_normal(t.size),
-                 z + 1e-6 * rng.standard_normal(t.size))  # fmt: skip
+    rec = _hammer_file(tmp_path, seed=1)
     out = tmp_path / "out"
     # a hammer's report holds the posterior too (the slow test below); these facts need the rest alone
     assert main(["report", str(rec), "-o", str(out), "--quiet", "--only", "frf,nsi,sindy,interval"]) == 0
@@ -57,10 +61,7 @@ def test_a_hammer_records_report_holds_the_discrepancy_workflow(tmp_path):
     # the discrepancy workflow reads a hammer's record as the identifications do (its windows after the hits): on a
     # Duffing hit four times (the force channel offset by 0.5 N), the seed's model form and nothing more, it names
     # nothing and says how it read the record
-    t, f, z, _ = hammer_record(DUFFING, 0.0, FS, (0.5, 3.0, 5.5, 8.0), 40.0, 0.004, 10.0)
-    rng = np.random.default_rng(2)
-    rec = _write(tmp_path / "hammer.csv", t, f + 0.5 + 0.05 * rng.standard_normal(t.size),
-                 z + 1e-6 * rng.standard_normal(t.size))  # fmt: skip
+    rec = _hammer_file(tmp_path, seed=2)
     out = tmp_path / "out"
     assert main(["report", str(rec), "-o", str(out), "--quiet", "--only", "discrepancy"]) == 0
     secs = _sections(out)
