@@ -187,6 +187,15 @@ def _without(model: Model, effect: str) -> Model:
     return Model(**{**fields, "extra": {k: v for k, v in dict(model.extra).items() if k != effect}})
 
 
+def _start_noise(rec: Measurement) -> tuple[float, float]:
+    """The noise of a restarted run's start state: the displacement's sensor noise [m] and the state velocity's
+    predicted noise [m/s] (``Measurement.states``' ``noise_std`` and ``velocity_noise_std``; 0 where not finite).
+    """
+    _, _, _, info = rec.states("state")
+    sz, sv = (float(info[k]) if np.isfinite(info[k]) else 0.0 for k in ("noise_std", "velocity_noise_std"))
+    return sz, sv
+
+
 def _loo_compare(ms_with: np.ndarray, ms_without: np.ndarray, residual_rows, length: int,
                  rng: np.random.Generator) -> dict[str, Any]:  # fmt: skip
     """``arviz.compare`` (PSIS-LOO) of two models by windows: ``ms_*`` each window's mean-square run error per draw
@@ -942,8 +951,7 @@ class Discrepancy(StructureResults, Estimator):
         ``"fraction"``, ``"method"}``.
         """
         cap = max(8, int(round(self.window_s * rec.fs / 2)))
-        _, _, _, info = rec.states("state")
-        sz, sv = (float(info[k]) if np.isfinite(info[k]) else 0.0 for k in ("noise_std", "velocity_noise_std"))
+        sz, sv = _start_noise(rec)
         every = restart_windows(self.n_id_, rec.fs, self.window_s / 20, min_step=1)
         windows = RestartWindows.at(every.starts[every.starts + cap <= self.n_id_], cap)
         out: dict[str, Any] = {"horizon_s": cap / rec.fs, "window_s": cap / rec.fs, "limited": False,
@@ -955,20 +963,36 @@ class Discrepancy(StructureResults, Estimator):
                          f"most {cap / rec.fs:g} s")  # fmt: skip
         if len(windows) < 2:
             return out
-        rng = np.random.default_rng(0)
-        zp, vp = self._z0.copy(), self._v0.copy()
-        zp[windows.starts] += sz * rng.standard_normal(len(windows))
-        vp[windows.starts] += sv * rng.standard_normal(len(windows))
-        a, b = simulate_windows(model, rec, windows, self._z0, self._v0), simulate_windows(model, rec, windows, zp, vp)
-        ok = ~a.diverged & ~b.diverged
-        if ok.sum() < 2:
-            return out
-        separation = np.sqrt(np.mean((a.z[ok] - b.z[ok]) ** 2, axis=0))
-        over = separation > PREDICTABILITY_FRACTION * np.sqrt(np.mean(rec.displacement[: self.n_id_] ** 2))
-        if over.any():
-            length = max(8, int(np.argmax(over)))
-            out.update(horizon_s=int(np.argmax(over)) / rec.fs, window_s=length / rec.fs, limited=True)
+        parted = self._parting_sample(rec, model, windows, draws=1, min_pairs=2)
+        if parted is not None:
+            out.update(horizon_s=parted / rec.fs, window_s=max(8, parted) / rec.fs, limited=True)
         return out
+
+    def _parting_sample(self, rec: Measurement, model: Model, windows: RestartWindows, draws: int,
+                        min_pairs: int) -> int | None:  # fmt: skip
+        """The first sample at which ``model``'s runs from ``windows``' start states and from those states moved by
+        ``draws`` draws of their noise each (``_start_noise``; seeded, the same draws for every model) part by more
+        than ``PREDICTABILITY_FRACTION`` of the identification part's rms z, their rms separation pooled over the
+        windows and the draws; None where they never do or fewer than ``min_pairs`` pairs ran without diverging.
+        """
+        sz, sv = _start_noise(rec)
+        rng = np.random.default_rng(0)
+        dz, dv = (scale * rng.standard_normal((draws, len(windows))) for scale in (sz, sv))
+        a = simulate_windows(model, rec, windows, self._z0, self._v0)
+        seps = []
+        for k in range(draws):  # every window's start state moved by one draw at a time
+            zp, vp = self._z0.copy(), self._v0.copy()
+            zp[windows.starts] += dz[k]
+            vp[windows.starts] += dv[k]
+            b = simulate_windows(model, rec, windows, zp, vp)
+            ok = ~a.diverged & ~b.diverged
+            seps.append(a.z[ok] - b.z[ok])
+        sep = np.concatenate(seps)
+        if sep.shape[0] < min_pairs:
+            return None
+        limit = PREDICTABILITY_FRACTION * float(np.sqrt(np.mean(rec.displacement[: self.n_id_] ** 2)))
+        over = np.sqrt(np.mean(sep**2, axis=0)) > limit
+        return int(np.argmax(over)) if over.any() else None
 
     def _window_length(self, rec: Measurement) -> int:
         """Samples of the regime's and the interval's windows: the record's predictability horizon
@@ -992,27 +1016,10 @@ class Discrepancy(StructureResults, Estimator):
         info = {"record_s": length / rec.fs, "horizon_s": length / rec.fs}
         if len(windows) < 1:
             return acting, windows, info
-        _, _, _, states = rec.states("state")
-        sz, sv = (float(states[k]) if np.isfinite(states[k]) else 0.0 for k in ("noise_std", "velocity_noise_std"))
-        limit = PREDICTABILITY_FRACTION * float(np.sqrt(np.mean(rec.displacement[: self.n_id_] ** 2)))
-        rng = np.random.default_rng(0)
-        dz, dv = (scale * rng.standard_normal((LOCAL_DRAWS, len(windows))) for scale in (sz, sv))
         for model in models:
-            a = simulate_windows(model, rec, windows, self._z0, self._v0)
-            seps = []
-            for k in range(LOCAL_DRAWS):  # every window's start state moved by one draw at a time
-                zp, vp = self._z0.copy(), self._v0.copy()
-                zp[windows.starts] += dz[k]
-                vp[windows.starts] += dv[k]
-                b = simulate_windows(model, rec, windows, zp, vp)
-                ok = ~a.diverged & ~b.diverged
-                seps.append(a.z[ok] - b.z[ok])
-            sep = np.concatenate(seps)
-            if sep.shape[0] < 1:
-                continue
-            over = np.sqrt(np.mean(sep**2, axis=0)) > limit
-            if over.any():
-                length = min(length, max(8, int(np.argmax(over))))
+            parted = self._parting_sample(rec, model, windows, draws=LOCAL_DRAWS, min_pairs=1)
+            if parted is not None:
+                length = min(length, max(8, parted))
         if length < windows.length:
             acting, windows = self._episodes(rec, force, lo, length)
             info["horizon_s"] = length / rec.fs
