@@ -46,7 +46,9 @@ def test_the_registry_derives_the_model_the_library_and_the_catalogue(toy):
     with pytest.raises(ValueError, match="already"):
         with effects.registered(TOY):
             pass
-    assert m.kernel_params().size == effects.N_FIXED + 1
+    # the toy's monomial has no fixed row: it gets the layout's last row, after the registry's own (z^6, z^7)
+    assert m.kernel_params().size == effects.layout().size
+    assert effects.layout().rows["abs_stiffness"] == (effects.layout().size - 1,)
 
 
 def test_outside_the_block_the_effect_is_unknown():

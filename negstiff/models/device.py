@@ -43,6 +43,7 @@ from negstiff.errors import InputError
 
 from . import effects
 from .equation import Equilibria, Model, UnderlyingLinear, find_equilibria
+from .shaped import rod_geometry
 
 
 class GeometryError(InputError):
@@ -54,21 +55,6 @@ def arm_stiffness(E, b: float, h: float, l: float):  # noqa: E741 - the arm's fr
     array; b, h, l [m]): the one place the frame's linear stiffness is written.
     """
     return 3 * E * (b * h**3 / 12) / l**3
-
-
-def rod_geometry(z, L: float, ca, sa, second: bool = True):
-    """s(z), s'(z), s''(z) of the rod-frame geometry for a frame of length L at angle alpha (ca, sa: its
-    cosine and sine; arrays broadcast against z); s'' None without ``second``.
-    """
-    B = L * ca - z * sa
-    R = np.sqrt(B * B - z * z)
-    s = R - B
-    q = B * sa + z
-    s1 = sa - q / R
-    if not second:
-        return s, s1, None
-    s2 = -(ca * ca * R * R + q * q) / R**3
-    return s, s1, s2
 
 
 @dataclass(frozen=True)

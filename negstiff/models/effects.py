@@ -41,6 +41,8 @@ from typing import Any
 
 import numpy as np
 
+from .shaped import DipoleMagnet, ObliqueSprings, RodFrame, ShapedLaw, Spline
+
 COULOMB_VELOCITY_SCALE = 1e-3
 """Velocity [m/s] over which a smoothed-sign (Coulomb) force changes sign (tanh smoothing)."""
 
@@ -184,6 +186,14 @@ class OneSidedStop:
         """The library column of a stop at z_s (unit stiffness)."""
         return self.force({"k": 1.0, "z": z_s}, z)
 
+    def parameters(self, value: Mapping[str, float]) -> dict[str, float]:
+        """The value's parameters as flat named numbers (refinement, posterior): ``k`` and ``z``."""
+        return {f: float(value[f]) for f in self.fields}
+
+    def with_parameters(self, value: Mapping[str, float], params: Mapping[str, float]) -> dict[str, float]:
+        """``value`` with some of its parameters replaced."""
+        return {**dict(value), **{k: float(v) for k, v in params.items()}}
+
 
 @dataclass(frozen=True)
 class MeasuredChannel:
@@ -216,11 +226,16 @@ def measured_channel(name: str) -> Effect:
 
 @dataclass(frozen=True)
 class Effect:
-    """One registry entry: the name a model file uses, the force law, the value's units."""
+    """One registry entry: the name a model file uses, the force law, the value's units, and whether it is
+    ``catalogued``: a term of the default library (SINDy's) and a candidate of the discrepancy workflow's
+    catalogue. A law's own part (a magnet's dipole, a spline, the septic term) is not: a law names it
+    (``models.laws``), and every method reads it there.
+    """
 
     name: str
-    law: Monomial | SmoothSign | OneSidedStop | MeasuredChannel
+    law: Monomial | SmoothSign | OneSidedStop | MeasuredChannel | ShapedLaw
     units: str
+    catalogued: bool = True
 
     @property
     def n_values(self) -> int:
@@ -251,17 +266,24 @@ class Effect:
         """
         if self.scalar:
             return finite(self.name, raw)
-        assert isinstance(self.law, OneSidedStop)  # the one law with fields
-        fields = self.law.fields
+        law = self.law
+        assert isinstance(law, OneSidedStop | ShapedLaw)  # the laws with fields
+        fields = law.fields
         if not isinstance(raw, Mapping) or set(raw) != set(fields):
             raise ValueError(f"extra effect {self.name} takes {{{', '.join(repr(f) for f in fields)}}} ({self.units})")
-        return self.law.check(self.name, {f: finite(f"{self.name}.{f}", raw[f]) for f in fields})
+
+        def number_or_list(f: str, x: Any) -> Any:
+            if isinstance(x, list | tuple | np.ndarray):
+                return tuple(finite(f"{self.name}.{f}[{i}]", xi) for i, xi in enumerate(x))
+            return finite(f"{self.name}.{f}", x)
+
+        return law.check(self.name, {f: number_or_list(f, raw[f]) for f in fields})
 
     def help(self) -> str:
         """``name`` or ``name=k:N/m,z:m`` for the CLI."""
         if self.scalar:
             return self.name
-        assert isinstance(self.law, OneSidedStop)
+        assert isinstance(self.law, OneSidedStop | ShapedLaw)
         pairs = zip(self.law.fields, self.units.split(", "), strict=True)
         return f"{self.name}=" + ",".join(f"{f}:{u}" for f, u in pairs)
 
@@ -298,6 +320,13 @@ REGISTRY: list[Effect] = [
     Effect("quartic_stiffness", Monomial(4), "N/m^4"),
     Effect("quintic_stiffness", Monomial(5, True), "N/m^5"),
     Effect("end_stop", OneSidedStop(), "N/m, m"),
+    # the laws' own parts (``models.laws``): not in the default library or the discrepancy's catalogue
+    Effect("sextic_stiffness", Monomial(6), "N/m^6", catalogued=False),
+    Effect("septic_stiffness", Monomial(7, True), "N/m^7", catalogued=False),
+    Effect("magnet", DipoleMagnet(), "N m^4, m", catalogued=False),
+    Effect("oblique_springs", ObliqueSprings(), "N/m, m, m", catalogued=False),
+    Effect("rod_frame", RodFrame(), "N/m, m, m, deg", catalogued=False),
+    Effect("spline", Spline(), "m, N", catalogued=False),
 ]
 """The effects a model file may name, in the order the CLI lists them."""
 
@@ -369,7 +398,7 @@ def stiffness_potential(extra: Mapping[str, Any], z):
     z = np.asarray(z, float)
     u = np.zeros(z.shape)
     for e in REGISTRY:
-        if e.name in extra and isinstance(e.law, Monomial | OneSidedStop) and e.law.displacement_only:
+        if e.name in extra and isinstance(e.law, Monomial | OneSidedStop | ShapedLaw) and e.law.displacement_only:
             u = u + e.law.potential(extra[e.name], z)
     return u
 
@@ -418,6 +447,9 @@ def layout() -> Layout:
     mono: list[tuple[int, int, int, int, int]] = []
     used: dict[int, str] = {}
     for e in REGISTRY:
+        if isinstance(e.law, ShapedLaw):  # evaluated from the model's table (``tabulate``), no row of its own
+            rows[e.name] = ()
+            continue
         fixed = _fixed_rows(e)
         if fixed is None:
             r = N_FIXED + len(mono)
@@ -449,9 +481,52 @@ def kernel_rows(m: float, c: float, c_nl: float, extra: Mapping[str, Any]) -> np
         rows = lay.rows[name]
         if len(rows) == 1:
             p[rows[0]] += value
-        else:
+        elif len(rows) == 2:
             p[rows[0]], p[rows[1]] = value["k"], value["z"]
-    return p
+    table = tabulate(extra)
+    return p if table is None else np.concatenate([p, table])
+
+
+TABLE_KNOTS = 257
+"""Knots of the simulator's table of a model's shaped parts (``tabulate``): the cubic Hermite interpolant of the
+force and stiffness at the knots errs by at most h^4 max|F^(4)| / 384 (h the knot spacing), 1e-10 of a magnet's
+force over +-8 gaps."""
+TABLE_ROWS = 3 + 4 * (TABLE_KNOTS + 1)
+"""Rows the table adds after the layout's: its first knot [m], the inverse knot spacing [1/m], the last knot's
+index, then four polynomial coefficients [N] (in t, knot spacings from the segment's start) for each segment: the
+tangent line below the first knot, the Hermite cubic of each interval, the tangent line beyond the last knot."""
+
+
+def shaped_parts(extra: Mapping[str, Any]) -> list[tuple[ShapedLaw, Mapping[str, Any]]]:
+    """The model's shaped parts (``models.shaped``) with their values, in the registry's order."""
+    return [(e.law, extra[e.name]) for e in REGISTRY if e.name in extra and isinstance(e.law, ShapedLaw)]
+
+
+def tabulate(extra: Mapping[str, Any]) -> np.ndarray | None:
+    """The table the simulator's kernel interpolates for the model's shaped parts (``TABLE_ROWS``): their total
+    force and stiffness at ``TABLE_KNOTS`` knots evenly spread over the hull of their spans, continued by the end
+    knots' tangent lines beyond it (as a spline's own force is); None without shaped parts.
+
+    A law without a compiled row costs one table look-up and a cubic per force evaluation, whatever its formula:
+    that is what lets any law be simulated at about the polynomial's speed (``benchmarks``).
+    """
+    parts = shaped_parts(extra)
+    if not parts:
+        return None
+    spans = np.array([law.span(value) for law, value in parts])
+    lo, hi = float(spans[:, 0].min()), float(spans[:, 1].max())
+    z = np.linspace(lo, hi, TABLE_KNOTS)
+    h = (hi - lo) / (TABLE_KNOTS - 1)
+    f = sum(np.broadcast_to(law.force(value, z), z.shape) for law, value in parts)
+    d = h * sum(np.broadcast_to(law.stiffness(value, z), z.shape) for law, value in parts)
+    if not (np.all(np.isfinite(f)) and np.all(np.isfinite(d))):
+        names = ", ".join(type(law).__name__ for law, _ in parts)
+        raise ValueError(f"a shaped force law ({names}) is not finite over its span")
+    df = f[1:] - f[:-1]
+    cubic = np.column_stack([f[:-1], d[:-1], 3 * df - 2 * d[:-1] - d[1:], d[:-1] + d[1:] - 2 * df])  # Hermite
+    tails = np.array([[f[0], d[0], 0.0, 0.0], [f[-1], d[-1], 0.0, 0.0]])
+    segments = np.vstack([tails[:1], cubic, tails[1:]])
+    return np.concatenate([[lo, 1.0 / h, float(TABLE_KNOTS - 1)], segments.reshape(-1)])
 
 
 # --- the identification library ---------------------------------------------------------------------
@@ -473,7 +548,8 @@ def library_terms() -> tuple[Term, ...]:
     sign), so a term's position is stable when effects are added.
     """
     base = [Term(law.label, law, f, s) for f, (law, s) in BASE_TERMS.items()]
-    own = [Term(e.law.label, e.law, e.name, -1.0) for e in REGISTRY if e.law.label is not None and e.folds_into is None]
+    own = [Term(e.law.label, e.law, e.name, -1.0) for e in REGISTRY
+           if e.catalogued and e.law.label is not None and e.folds_into is None]  # fmt: skip
 
     def key(t: Term):
         is_base = t.field in BASE_TERMS

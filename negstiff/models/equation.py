@@ -69,7 +69,8 @@ class UnderlyingLinear:
     k2_tilde: float
     """Quadratic coefficient in the shifted frame, k2 + 3 k3 z* [N/m^2]."""
     k3: float
-    """Cubic coefficient (frame-independent) [N/m^3]."""
+    """Cubic coefficient in the shifted frame, the third derivative K^(3)(z*) / 6 [N/m^3] (of a cubic, k3 itself:
+    frame-independent)."""
     f_hz: float
     """Undamped natural frequency sqrt(k1~/m)/(2 pi) [Hz]."""
     zeta: float
@@ -224,7 +225,15 @@ class Model:
 
     # --- equilibria and linearisation ---------------------------------------------------------
     def equilibria(self) -> Equilibria:
-        """Equilibria of K(z) (with the stiffness extra effects), sorted and classified."""
+        """Equilibria of K(z) (with the stiffness extra effects), sorted and classified: sought near the cubic's
+        roots, or over the spans of the model's shaped parts where they hold the force (a magnet's, a spline's:
+        ``models.shaped``).
+        """
+        shaped = effects.shaped_parts(self.extra)
+        if shaped and self.k3 <= 0:  # the shaped parts hold the force: its equilibria lie where they act
+            spans = np.array([law.span(value) for law, value in shaped])
+            return find_equilibria(self.restoring_force, self.stiffness, float(spans[:, 0].min()),
+                                   float(spans[:, 1].max()))  # fmt: skip
         if self.k3 <= 0 and not self.extra:
             raise ValueError("k3 must be positive (hardening) for a bounded double- or single-well model")
         k0 = self.k0
@@ -246,9 +255,14 @@ class Model:
         """Underlying-linear system around the ``"minus"`` or ``"plus"`` well (Eqs. 4-7)."""
         zs = self.equilibria().well(well)
         k1t = float(self.stiffness(zs))
-        k2t = self.k2 + 3 * self.k3 * zs
+        k2t, k3t = self.k2 + 3 * self.k3 * zs, self.k3
+        if self.extra:  # the displacement effects' own K''/2 and K'''/6 at the well, by central differences
+            h = 1e-4 * max(abs(zs), 1e-2)
+            ks = [float(effects.stiffness_force(self.extra, zs + j * h)) for j in (-2, -1, 0, 1, 2)]
+            k2t += (ks[3] - 2 * ks[2] + ks[1]) / h**2 / 2
+            k3t += (ks[4] - 2 * ks[3] + 2 * ks[1] - ks[0]) / (2 * h**3) / 6
         return UnderlyingLinear(
-            zs, k1t, k2t, self.k3, math.sqrt(k1t / self.m) / (2 * math.pi), self.c / (2 * math.sqrt(k1t * self.m))
+            zs, k1t, k2t, k3t, math.sqrt(k1t / self.m) / (2 * math.pi), self.c / (2 * math.sqrt(k1t * self.m))
         )
 
     @staticmethod

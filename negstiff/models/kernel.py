@@ -76,11 +76,44 @@ def monomials(z, v, p, b, mono):
 
 
 @numba.njit(inline="always", **JIT)
-def total_force(kind, coulomb, generic, z, v, q, p, b, mono):
-    """``force`` plus, in the kernels compiled with ``generic``, the extra monomial rows."""
+def tabled(z, tab, b):
+    """The shaped parts' force from member b's table (``effects.tabulate``; ``tab`` (B, rows): each member's table
+    contiguous, ``member_tables``): the cubic of z's interval (knot spacings from the first knot), the end
+    knots' tangent lines beyond them, each four coefficients in one cache line; no branch on the data but the
+    guard that sends a NaN state to the first segment (the result stays NaN).
+    """
+    x = (z - tab[b, 0]) * tab[b, 1]
+    last = tab[b, 2]  # the last knot's index: the right tail's segment
+    xc = x if x > -1.0 else -1.0
+    xc = xc if xc < last else last
+    i = int(math.floor(xc))
+    t = x - (i if i > 0 else 0)  # the left tail's t is measured from the first knot, as the first interval's
+    r = 3 + 4 * (i + 1)
+    return tab[b, r] + t * (tab[b, r + 1] + t * (tab[b, r + 2] + t * tab[b, r + 3]))
+
+
+@numba.njit(inline="always", **JIT)
+def member_tables(p, ts):
+    """Each member's table rows (from ``ts``; -1: none) as one contiguous row per member (B, rows), copied once
+    per call: in the parameter array a member's table is strided by the batch.
+    """
+    if ts < 0:
+        return np.zeros((p.shape[1], 1))
+    return np.ascontiguousarray(p[ts:, :].T)
+
+
+@numba.njit(inline="always", **JIT)
+def total_force(kind, coulomb, generic, table, z, v, q, p, b, mono, ts, tab):
+    """``force`` plus, in the kernels compiled with ``generic``, the extra monomial rows, and in those compiled with
+    ``table``, the shaped parts' table (``ts`` its first row in ``p``, -1: none; ``tab`` the members' tables,
+    ``member_tables``).
+    """
+    f = force(kind, coulomb, z, v, q)
     if generic:
-        return force(kind, coulomb, z, v, q) + monomials(z, v, p, b, mono)
-    return force(kind, coulomb, z, v, q)
+        f += monomials(z, v, p, b, mono)
+    if table:
+        f += tabled(z, tab, b)
+    return f
 
 
 @numba.njit(**JIT)  # called, not inlined in numba's IR (as ``monomials``; inlining it gained nothing, measured)
@@ -127,8 +160,8 @@ def converted(p, kind):
 
 
 @numba.njit(inline="always", **JIT)
-def _accelerations(kind, coulomb, generic, extra, linear, q, mono, ei, ej, minv, lk, lc, zs, vs, w, ur, scratch, acc,
-                   hook):  # fmt: skip
+def _accelerations(kind, coulomb, generic, table, extra, linear, q, mono, ts, tab, ei, ej, minv, lk, lc, zs, vs, w, ur,
+                   scratch, acc, hook):  # fmt: skip
     """Every member's accelerations at one Runge-Kutta stage, one loop over the batch per operation (the batch is
     the inner loop everywhere, which is what LLVM vectorises): the element's force law on the relative motion r
     of DOF ``ej`` and DOF ``ei`` (-1: the base), plus the extra hook; the linear structure ``lk``, ``lc``
@@ -148,7 +181,7 @@ def _accelerations(kind, coulomb, generic, extra, linear, q, mono, ei, ej, minv,
             r[b] = zs[ej, b]
             rv[b] = vs[ej, b]
     for b in range(nb):
-        f[b] = total_force(kind, coulomb, generic, r[b], rv[b], _column(q, b), q, b, mono)
+        f[b] = total_force(kind, coulomb, generic, table, r[b], rv[b], _column(q, b), q, b, mono, ts, tab)
     if extra:
         for b in range(nb):
             f[b] += extra_term(r[b], rv[b], ur[b], hw, ha, hzc, hvc, huc, hiz, hiv, hiu, bz, bv)
@@ -179,7 +212,8 @@ def _accelerations(kind, coulomb, generic, extra, linear, q, mono, ei, ej, minv,
 
 
 @numba.njit(inline="always", **JIT)
-def _fused_step(kind, coulomb, generic, extra, q, mono, im, h, z, v, wa, wm, wb, ra, rm, rb, hook, scratch):
+def _fused_step(kind, coulomb, generic, table, extra, q, mono, ts, tab, im, h, z, v, wa, wm, wb, ra, rm, rb, hook,
+                scratch):  # fmt: skip
     """One Runge-Kutta step of every member of one DOF on the base without a linear structure (the single-DOF
     model): ``_integrate``'s stage-wise step with its four stages fused in one loop over the batch, the same
     operations in the same order (the same numbers to the last bit, tested), the state in registers. The
@@ -194,7 +228,7 @@ def _fused_step(kind, coulomb, generic, extra, q, mono, im, h, z, v, wa, wm, wb,
         zs, vs = zb, vb
         a1 = a2 = a3 = a4 = v2 = v3 = v4 = 0.0
         for s in range(4):  # one call site of the force law (each inlined copy is compile time; LLVM unrolls this)
-            f = total_force(kind, coulomb, generic, zs, vs, qb, q, b, mono)
+            f = total_force(kind, coulomb, generic, table, zs, vs, qb, q, b, mono, ts, tab)
             if extra:
                 f += extra_term(zs, vs, ra[b] if s == 0 else (rb[b] if s == 3 else rm[b]), hw, ha, hzc, hvc, huc, hiz,
                                 hiv, hiu, bz, bv)  # fmt: skip
@@ -221,7 +255,7 @@ def _fused_step(kind, coulomb, generic, extra, q, mono, im, h, z, v, wa, wm, wb,
 
 
 @numba.njit(inline="always", **JIT)
-def _integrate(kind, coulomb, generic, extra, p, mono, ei, ej, minv, lk, lc, gain, u, uidx, dt, nsub, z0, v0,
+def _integrate(kind, coulomb, generic, table, extra, p, mono, ts, ei, ej, minv, lk, lc, gain, u, uidx, dt, nsub, z0, v0,
                z_limit, v_limit, out_z, out_v, store_v, status, fail_step, hook):  # fmt: skip
     """RK4 of B systems of N degrees of freedom over the T - 1 sample intervals of each member's input row
     ``u[uidx[b]]`` (state z, z' of each DOF, relative to the base): the package's one Runge-Kutta loop, every
@@ -250,6 +284,7 @@ def _integrate(kind, coulomb, generic, extra, p, mono, ei, ej, minv, lk, lc, gai
                     linear = True
     h = dt / nsub
     q = converted(p, kind)
+    tab = member_tables(p, ts)
     fused = nd == 1 and ei < 0 and not linear
     z = z0.copy()
     v = v0.copy()
@@ -309,8 +344,8 @@ def _integrate(kind, coulomb, generic, extra, p, mono, ei, ej, minv, lk, lc, gai
                         wm[d, b] = ua[d, b] + fm * du
                         wb[d, b] = ua[d, b] + fb * du
             if fused:
-                _fused_step(kind, coulomb, generic, extra, q, mono, minv[0], h, z[0], v[0], wa[0], wm[0], wb[0], ra,
-                            rm, rb, hook, scratch)  # fmt: skip
+                _fused_step(kind, coulomb, generic, table, extra, q, mono, ts, tab, minv[0], h, z[0], v[0], wa[0],
+                            wm[0], wb[0], ra, rm, rb, hook, scratch)  # fmt: skip
                 continue
             # the four stages through one call site: numba inlines a function by copying its IR, and four copies of
             # the stage (each with the force law inlined) took minutes to compile; with one, a kernel compiles in ~9 s
@@ -323,8 +358,8 @@ def _integrate(kind, coulomb, generic, extra, p, mono, ei, ej, minv, lk, lc, gai
                     zs, vs, w, ur, acc = zt, v3, wm, rm, a3
                 else:
                     zs, vs, w, ur, acc = zt, vt, wb, rb, a4
-                _accelerations(kind, coulomb, generic, extra, linear, q, mono, ei, ej, minv, lk, lc, zs, vs, w, ur,
-                               scratch, acc, hook)  # fmt: skip
+                _accelerations(kind, coulomb, generic, table, extra, linear, q, mono, ts, tab, ei, ej, minv, lk, lc,
+                               zs, vs, w, ur, scratch, acc, hook)  # fmt: skip
                 if s == 0:
                     for d in range(nd):
                         for b in range(nb):
@@ -384,67 +419,77 @@ _NO_V = np.zeros(0)
 # would repeat less, but numba's on-disk cache cannot tell such closures apart.)
 # fmt: off
 @numba.njit(**JIT)
-def _kernel_poly(p, mono, ei, ej, minv, lk, lc, gain, u, uidx, dt, nsub, z0, v0, zl, vl, oz, ov, sv, st, fs):
-    return _integrate(KIND_POLYNOMIAL, False, False, False, p, mono, ei, ej, minv, lk, lc, gain, u, uidx, dt, nsub,
+def _kernel_poly(p, mono, ts, ei, ej, minv, lk, lc, gain, u, uidx, dt, nsub, z0, v0, zl, vl, oz, ov, sv, st, fs):
+    return _integrate(KIND_POLYNOMIAL, False, False, False, False, p, mono, ts, ei, ej, minv, lk, lc, gain, u, uidx, dt,
+                      nsub, z0, v0, zl, vl, oz, ov, sv, st, fs, (_NO_W, _NO_V, _NO_V, _NO_V, _NO_V, 1.0, 1.0, 1.0))
+
+
+@numba.njit(**JIT)
+def _kernel_poly_sign(p, mono, ts, ei, ej, minv, lk, lc, gain, u, uidx, dt, nsub, z0, v0, zl, vl, oz, ov, sv, st, fs):
+    return _integrate(KIND_POLYNOMIAL, True, False, False, False, p, mono, ts, ei, ej, minv, lk, lc, gain, u, uidx, dt,
+                      nsub, z0, v0, zl, vl, oz, ov, sv, st, fs, (_NO_W, _NO_V, _NO_V, _NO_V, _NO_V, 1.0, 1.0, 1.0))
+
+
+@numba.njit(**JIT)
+def _kernel_device(p, mono, ts, ei, ej, minv, lk, lc, gain, u, uidx, dt, nsub, z0, v0, zl, vl, oz, ov, sv, st, fs):
+    return _integrate(KIND_DEVICE, False, False, False, False, p, mono, ts, ei, ej, minv, lk, lc, gain, u, uidx, dt,
+                      nsub, z0, v0, zl, vl, oz, ov, sv, st, fs, (_NO_W, _NO_V, _NO_V, _NO_V, _NO_V, 1.0, 1.0, 1.0))
+
+
+@numba.njit(**JIT)
+def _kernel_device_sign(p, mono, ts, ei, ej, minv, lk, lc, gain, u, uidx, dt, nsub, z0, v0, zl, vl, oz, ov, sv, st, fs):
+    return _integrate(KIND_DEVICE, True, False, False, False, p, mono, ts, ei, ej, minv, lk, lc, gain, u, uidx, dt,
+                      nsub, z0, v0, zl, vl, oz, ov, sv, st, fs, (_NO_W, _NO_V, _NO_V, _NO_V, _NO_V, 1.0, 1.0, 1.0))
+
+
+@numba.njit(**JIT)
+def _kernel_poly_table(p, mono, ts, ei, ej, minv, lk, lc, gain, u, uidx, dt, nsub, z0, v0, zl, vl, oz, ov, sv, st, fs):
+    return _integrate(KIND_POLYNOMIAL, False, False, True, False, p, mono, ts, ei, ej, minv, lk, lc, gain, u, uidx, dt,
+                      nsub, z0, v0, zl, vl, oz, ov, sv, st, fs, (_NO_W, _NO_V, _NO_V, _NO_V, _NO_V, 1.0, 1.0, 1.0))
+
+
+@numba.njit(**JIT)
+def _kernel_poly_generic(p, mono, ts, ei, ej, minv, lk, lc, gain, u, uidx, dt, nsub, z0, v0, zl, vl, oz, ov, sv, st,
+                         fs):
+    return _integrate(KIND_POLYNOMIAL, True, True, True, False, p, mono, ts, ei, ej, minv, lk, lc, gain, u, uidx, dt,
+                      nsub, z0, v0, zl, vl, oz, ov, sv, st, fs, (_NO_W, _NO_V, _NO_V, _NO_V, _NO_V, 1.0, 1.0, 1.0))
+
+
+@numba.njit(**JIT)
+def _kernel_device_generic(p, mono, ts, ei, ej, minv, lk, lc, gain, u, uidx, dt, nsub, z0, v0, zl, vl, oz, ov, sv,
+                           st, fs):
+    return _integrate(KIND_DEVICE, True, True, True, False, p, mono, ts, ei, ej, minv, lk, lc, gain, u, uidx, dt, nsub,
                       z0, v0, zl, vl, oz, ov, sv, st, fs, (_NO_W, _NO_V, _NO_V, _NO_V, _NO_V, 1.0, 1.0, 1.0))
 
 
 @numba.njit(**JIT)
-def _kernel_poly_sign(p, mono, ei, ej, minv, lk, lc, gain, u, uidx, dt, nsub, z0, v0, zl, vl, oz, ov, sv, st, fs):
-    return _integrate(KIND_POLYNOMIAL, True, False, False, p, mono, ei, ej, minv, lk, lc, gain, u, uidx, dt, nsub,
-                      z0, v0, zl, vl, oz, ov, sv, st, fs, (_NO_W, _NO_V, _NO_V, _NO_V, _NO_V, 1.0, 1.0, 1.0))
-
-
-@numba.njit(**JIT)
-def _kernel_device(p, mono, ei, ej, minv, lk, lc, gain, u, uidx, dt, nsub, z0, v0, zl, vl, oz, ov, sv, st, fs):
-    return _integrate(KIND_DEVICE, False, False, False, p, mono, ei, ej, minv, lk, lc, gain, u, uidx, dt, nsub,
-                      z0, v0, zl, vl, oz, ov, sv, st, fs, (_NO_W, _NO_V, _NO_V, _NO_V, _NO_V, 1.0, 1.0, 1.0))
-
-
-@numba.njit(**JIT)
-def _kernel_device_sign(p, mono, ei, ej, minv, lk, lc, gain, u, uidx, dt, nsub, z0, v0, zl, vl, oz, ov, sv, st, fs):
-    return _integrate(KIND_DEVICE, True, False, False, p, mono, ei, ej, minv, lk, lc, gain, u, uidx, dt, nsub,
-                      z0, v0, zl, vl, oz, ov, sv, st, fs, (_NO_W, _NO_V, _NO_V, _NO_V, _NO_V, 1.0, 1.0, 1.0))
-
-
-@numba.njit(**JIT)
-def _kernel_poly_generic(p, mono, ei, ej, minv, lk, lc, gain, u, uidx, dt, nsub, z0, v0, zl, vl, oz, ov, sv, st, fs):
-    return _integrate(KIND_POLYNOMIAL, True, True, False, p, mono, ei, ej, minv, lk, lc, gain, u, uidx, dt, nsub,
-                      z0, v0, zl, vl, oz, ov, sv, st, fs, (_NO_W, _NO_V, _NO_V, _NO_V, _NO_V, 1.0, 1.0, 1.0))
-
-
-@numba.njit(**JIT)
-def _kernel_device_generic(p, mono, ei, ej, minv, lk, lc, gain, u, uidx, dt, nsub, z0, v0, zl, vl, oz, ov, sv, st,
-                           fs):
-    return _integrate(KIND_DEVICE, True, True, False, p, mono, ei, ej, minv, lk, lc, gain, u, uidx, dt, nsub,
-                      z0, v0, zl, vl, oz, ov, sv, st, fs, (_NO_W, _NO_V, _NO_V, _NO_V, _NO_V, 1.0, 1.0, 1.0))
-
-
-@numba.njit(**JIT)
-def _kernel_poly_extra(p, mono, ei, ej, minv, lk, lc, gain, u, uidx, dt, nsub, z0, v0, zl, vl, oz, ov, sv, st, fs,
+def _kernel_poly_extra(p, mono, ts, ei, ej, minv, lk, lc, gain, u, uidx, dt, nsub, z0, v0, zl, vl, oz, ov, sv, st, fs,
                        hw, ha, hzc, hvc, huc, hiz, hiv, hiu):
-    return _integrate(KIND_POLYNOMIAL, True, True, True, p, mono, ei, ej, minv, lk, lc, gain, u, uidx, dt, nsub,
-                      z0, v0, zl, vl, oz, ov, sv, st, fs, (hw, ha, hzc, hvc, huc, hiz, hiv, hiu))
+    return _integrate(KIND_POLYNOMIAL, True, True, True, True, p, mono, ts, ei, ej, minv, lk, lc, gain, u, uidx, dt,
+                      nsub, z0, v0, zl, vl, oz, ov, sv, st, fs, (hw, ha, hzc, hvc, huc, hiz, hiv, hiu))
 
 
 @numba.njit(**JIT)
-def _kernel_device_extra(p, mono, ei, ej, minv, lk, lc, gain, u, uidx, dt, nsub, z0, v0, zl, vl, oz, ov, sv, st, fs,
+def _kernel_device_extra(p, mono, ts, ei, ej, minv, lk, lc, gain, u, uidx, dt, nsub, z0, v0, zl, vl, oz, ov, sv, st, fs,
                          hw, ha, hzc, hvc, huc, hiz, hiv, hiu):
-    return _integrate(KIND_DEVICE, True, True, True, p, mono, ei, ej, minv, lk, lc, gain, u, uidx, dt, nsub,
+    return _integrate(KIND_DEVICE, True, True, True, True, p, mono, ts, ei, ej, minv, lk, lc, gain, u, uidx, dt, nsub,
                       z0, v0, zl, vl, oz, ov, sv, st, fs, (hw, ha, hzc, hvc, huc, hiz, hiv, hiu))
 # fmt: on
 
 
-def kernel(kind: int, p: np.ndarray, mono: np.ndarray, hook: bool = False):
+def kernel(kind: int, p: np.ndarray, mono: np.ndarray, hook: bool = False, table: bool = False):
     """The compiled kernel for a batch: its restoring-force kind, whether any member has a smoothed sign, whether
-    the registry has extra monomial rows (then one general kernel, sign included), whether the extra force hook is
-    used (``hook``: the kernels that take its arguments after the common ones).
+    the batch uses extra monomial rows or a table of shaped parts (``table``; then one general kernel, sign
+    included), whether the extra force hook is used (``hook``: the kernels that take its arguments after the
+    common ones).
     """
     if hook:
         return _kernel_poly_extra if kind == KIND_POLYNOMIAL else _kernel_device_extra
-    if mono.shape[0]:
-        return _kernel_poly_generic if kind == KIND_POLYNOMIAL else _kernel_device_generic
     sign = bool(np.any(p[P_SIGN] != 0.0))
+    if table and kind == KIND_POLYNOMIAL and not sign and not mono.shape[0]:  # a shaped law: the table alone
+        return _kernel_poly_table
+    if mono.shape[0] or table:
+        return _kernel_poly_generic if kind == KIND_POLYNOMIAL else _kernel_device_generic
     return {
         (KIND_POLYNOMIAL, False): _kernel_poly,
         (KIND_POLYNOMIAL, True): _kernel_poly_sign,

@@ -28,6 +28,7 @@ from .kernel import (
     P_Z5,
     _column,
     converted,
+    member_tables,
     total_force,
 )
 
@@ -52,6 +53,7 @@ def reference_solution(
     ca, sa = math.cos(p[3]), math.sin(p[3])
     q = p.tolist()
     mono = effects.layout().monomials.tolist()
+    shaped = effects.shaped_parts(getattr(system, "extra", {}))  # their own formulas, not the simulator's table
 
     def force(z: float, v: float) -> float:
         if system.kind == "polynomial":
@@ -63,6 +65,8 @@ def reference_solution(
         k += z * z * (q[P_Z2] + z * (q[P_Z3] + z * (q[P_Z4] + z * q[P_Z5])))
         dz = z - q[P_STOP_Z]
         k += 0.5 * q[P_STOP_K] * (dz + math.copysign(1.0, q[P_STOP_Z]) * abs(dz))
+        for law, value in shaped:
+            k += float(law.force(value, z))
         d = v * (q[P_C] + q[P_CNL] * abs(v) + q[P_V3] * v * v)
         for row, zp, zo, vp, vo in mono:  # the registry's monomials without a fixed row
             k += (
@@ -90,12 +94,13 @@ def reference_solution(
 
 
 @numba.njit(cache=True, error_model="numpy")
-def _benettin(kind, p, mono, gain, u, dt, nsub, z0, v0, renorm):
+def _benettin(kind, p, mono, ts, gain, u, dt, nsub, z0, v0, renorm):
     """RK4 of the state and one tangent vector; the tangent is renormalised every ``renorm`` samples
     and its log growth accumulated (Benettin et al. 1980). Jacobian of the force by central
     differences of the same force law the simulator integrates.
     """
     q = _column(converted(p, kind), 0)
+    tab = member_tables(p, ts)
     im = 1.0 / q[P_M]
     h = dt / nsub
     z, v, dz, dv = z0, v0, 1.0, 0.0
@@ -118,18 +123,18 @@ def _benettin(kind, p, mono, gain, u, dt, nsub, z0, v0, renorm):
                     ddv = dv + c * h * st[s - 1, 3]
                 frac = (j + c) / nsub
                 w = u0 + frac * du
-                f = total_force(kind, False, True, zz, vv, q, p, 0, mono) + q[P_SIGN] * math.tanh(
+                f = total_force(kind, False, True, zz, vv, q, p, 0, mono, ts, tab) + q[P_SIGN] * math.tanh(
                     vv / COULOMB_VELOCITY_SCALE
                 )
                 ez = 1e-7 * max(1e-3, abs(zz))
                 ev = 1e-6 * max(1e-2, abs(vv))
                 fz = (
-                    total_force(kind, False, True, zz + ez, vv, q, p, 0, mono)
-                    - total_force(kind, False, True, zz - ez, vv, q, p, 0, mono)
+                    total_force(kind, False, True, zz + ez, vv, q, p, 0, mono, ts, tab)
+                    - total_force(kind, False, True, zz - ez, vv, q, p, 0, mono, ts, tab)
                 ) / (2 * ez)
                 fv = (
-                    total_force(kind, False, True, zz, vv + ev, q, p, 0, mono)
-                    - total_force(kind, False, True, zz, vv - ev, q, p, 0, mono)
+                    total_force(kind, False, True, zz, vv + ev, q, p, 0, mono, ts, tab)
+                    - total_force(kind, False, True, zz, vv - ev, q, p, 0, mono, ts, tab)
                 ) / (2 * ev)
                 fv += q[P_SIGN] / COULOMB_VELOCITY_SCALE / math.cosh(vv / COULOMB_VELOCITY_SCALE) ** 2
                 st[s, 0] = vv
@@ -170,10 +175,12 @@ def lyapunov_benettin(
     """
     p = system.kernel_params()
     gain = -1.0 if input_kind == "base_acc" else 1.0 / p[P_M]
+    lay = effects.layout()
     logs = _benettin(
         KINDS[system.kind],
         np.ascontiguousarray(p[:, None]),
-        effects.layout().monomials,
+        lay.monomials,
+        lay.size if p.size > lay.size else -1,
         gain,
         np.asarray(u, float),
         float(dt),

@@ -171,10 +171,10 @@ def _checked(params, lay: effects.Layout, kind: str, u, dt: float, substeps: int
     p = np.asarray(params, dtype=np.float64)
     if p.ndim == 1:
         p = p[:, None]
-    if p.shape[0] != lay.size:
+    if p.shape[0] not in (lay.size, lay.size + effects.TABLE_ROWS):
         raise InputError(
-            f"params must have {lay.size} rows (the effect registry's layout), got shape {p.shape}: "
-            "kernel parameters made before an effect was registered?"
+            f"params must have {lay.size} rows (the effect registry's layout; {lay.size + effects.TABLE_ROWS} with a "
+            f"table of shaped parts), got shape {p.shape}: kernel parameters made before an effect was registered?"
         )
     nb = p.shape[1]
     if not np.all(np.isfinite(p)):
@@ -270,8 +270,13 @@ def integrate(kind: int, p: np.ndarray, minv: np.ndarray, lk: np.ndarray, lc: np
         work = nb * n * int(substeps) * nd
         threads = min(cores(), max(1, nb * nd // 64), max(1, work // 200_000))
     chunks = [c for c in np.array_split(np.arange(nb), max(1, int(threads))) if c.size]
-    mono = effects.layout().monomials
-    run_kernel = kernel(kind, p, mono, hook is not None)
+    lay = effects.layout()
+    mono = lay.monomials
+    if mono.shape[0]:  # only the monomial rows some member uses: a model without them keeps the fast kernels
+        mono = np.ascontiguousarray(mono[np.any(p[mono[:, 0]] != 0.0, axis=1)])
+    table = p.shape[0] > lay.size  # a table of shaped parts (``effects.tabulate``) after the layout's rows
+    ts = lay.size if table else -1
+    run_kernel = kernel(kind, p, mono, hook is not None, table)
 
     def c_(a):
         # one array type per kernel argument (C-contiguous, writable), whatever the caller passed: each distinct
@@ -283,7 +288,7 @@ def integrate(kind: int, p: np.ndarray, minv: np.ndarray, lk: np.ndarray, lc: np
         sl = slice(c[0], c[-1] + 1)
         oz = np.empty((n, nd, c.size))
         ov = np.empty((n, nd, c.size)) if store_velocity else np.empty((1, nd, c.size))
-        run_kernel(c_(p[:, sl]), mono, place[0] - 1, place[1] - 1, c_(minv[:, sl]),
+        run_kernel(c_(p[:, sl]), mono, ts, place[0] - 1, place[1] - 1, c_(minv[:, sl]),
                    c_(lk[:, :, sl]), c_(lc[:, :, sl]), c_(gain[:, sl]), u2, c_(uidx[sl]), float(dt), int(substeps),
                    c_(z0[:, sl]), c_(v0[:, sl]), float(z_limit), float(v_limit), oz, ov, store_velocity, status[sl],
                    fail[sl], *(hook or ()))  # fmt: skip

@@ -88,12 +88,12 @@ def catalogue() -> dict[str, tuple[str, ...]]:
     """Candidate effects (the registry's, in its order) and the library terms each adds; an effect with a
     positional law (the one-sided stop) adds none: its column is made at a searched position.
     """
-    return {e.name: (() if e.law.label is None else (e.law.label,)) for e in effects.REGISTRY}
+    return {e.name: (() if e.law.label is None else (e.law.label,)) for e in effects.REGISTRY if e.catalogued}
 
 
 def _positional() -> effects.Effect | None:
-    """The registry's effect with a positional law (at most one: the kernel has one stop row)."""
-    return next((e for e in effects.REGISTRY if e.law.label is None), None)
+    """The catalogue's effect with a positional law (at most one: the kernel has one stop row)."""
+    return next((e for e in effects.REGISTRY if e.catalogued and e.law.label is None), None)
 
 
 def _stop() -> tuple[str, effects.OneSidedStop]:

@@ -84,11 +84,11 @@ class Refinement:
 
 def field_effects(model: Model) -> tuple[str, ...]:
     """The model's named effects with several values (``effects.Effect.scalar`` false: an end stop's
-    ``{"k", "z"}``), each value refined under the name ``EFFECT.FIELD``.
+    ``{"k", "z"}``, a magnet's ``{"A", "d"}``, a spline's coefficients ``c0``, ``c1``, ...), each refined under
+    the name ``EFFECT.PARAMETER`` (the law's ``parameters``).
     """
     named = [e for e in effects.REGISTRY if not e.scalar and e.name in model.extra]
-    # an effect with several values is an end stop (``effects.OneSidedStop``: the one law with fields)
-    return tuple(f"{e.name}.{f}" for e in named if isinstance(e.law, effects.OneSidedStop) for f in e.law.fields)
+    return tuple(f"{e.name}.{f}" for e in named for f in e.law.parameters(model.extra[e.name]))
 
 
 def parameter_names(model: Model, free_mass: bool, held=()) -> tuple[str, ...]:
@@ -111,7 +111,7 @@ def values_of(model: Model, names) -> np.ndarray:
     out = []
     for n in names:
         effect, _, fld = n.partition(".")
-        out.append(float(d[effect][fld]) if fld else float(d[n]))
+        out.append(effects.get(effect).law.parameters(d[effect])[fld] if fld else float(d[n]))
     return np.asarray(out, float)
 
 
@@ -123,7 +123,7 @@ def with_values(model: Model, names, values) -> Model:
     for n, v in zip(names, values, strict=False):
         effect, _, fld = n.partition(".")
         if fld:
-            extra[effect][fld] = v
+            extra[effect] = effects.get(effect).law.with_parameters(extra[effect], {fld: v})
         elif n in scalar:
             extra[n] = v
         else:
