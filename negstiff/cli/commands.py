@@ -190,12 +190,13 @@ def cmd_identify(args) -> int:
 
         est: NSI | SINDy = NSI(
             order=args.order, block_rows=args.block_rows, refine=refinement(args), progress=wants_progress(args),
-            element=args.element,
+            element=args.element, law=args.law, damping=args.damping,
         )  # fmt: skip
     else:
         from negstiff.inference.estimators.sindy import SINDy
 
-        est = SINDy(n_models=args.ensemble, seed=args.seed, refine=refinement(args), element=args.element)
+        est = SINDy(n_models=args.ensemble, seed=args.seed, refine=refinement(args), element=args.element,
+                    law=args.law, damping=args.damping)  # fmt: skip
     rec = est.check(rec)  # every refusal before the progress line
     if rec.n_dof > 1:
         return _identify_structure(args, est, rec)

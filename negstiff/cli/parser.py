@@ -179,6 +179,29 @@ DECAY_HELP = ("the record is a free decay whatever its input column holds (a for
               "reads only its noise); a constant input is one without saying so")
 
 
+def _law_options(p: argparse.ArgumentParser) -> None:
+    """--law and --damping: the restoring and the damping law (``models.laws``) a fit reads."""
+    from negstiff.models import laws
+
+    p.add_argument(
+        "--law",
+        choices=[*laws.names("restoring"), "auto"],
+        help="the restoring-force law: " + "; ".join(f"{law.name}: {law.title}" for law in laws.LAWS
+                                                     if law.kind == "restoring")
+        + "; auto: every law fitted and the one that predicts the record best kept (the comparison in the result's "
+        "law_choice). Default: the method's own (NSI the cubic, SINDy its sparse catalogue), the other laws "
+        "compared where it fails its checks",
+    )  # fmt: skip
+    p.add_argument(
+        "--damping",
+        choices=list(laws.names("damping")),
+        default=laws.DEFAULT_DAMPING,
+        help="the damping law with --law: " + "; ".join(f"{law.name}: {law.title}" for law in laws.LAWS
+                                                         if law.kind == "damping")
+        + f" (default {laws.DEFAULT_DAMPING})",
+    )  # fmt: skip
+
+
 def _identify(sub, common: argparse.ArgumentParser, data_opts: argparse.ArgumentParser) -> None:
     idf = sub.add_parser(
         "identify",
@@ -226,6 +249,7 @@ def _identify(sub, common: argparse.ArgumentParser, data_opts: argparse.Argument
         default=default("estimators.sindy.SINDy", "n_models"),
         help=f"SINDy: bagged models of the ensemble (default {default('estimators.sindy.SINDy', 'n_models')})",
     )
+    _law_options(idf)
     idf.add_argument(
         "--frf",
         action="append",

@@ -324,7 +324,7 @@ REGISTRY: list[Effect] = [
     Effect("sextic_stiffness", Monomial(6), "N/m^6", catalogued=False),
     Effect("septic_stiffness", Monomial(7, True), "N/m^7", catalogued=False),
     Effect("magnet", DipoleMagnet(), "N m^4, m", catalogued=False),
-    Effect("oblique_springs", ObliqueSprings(), "N/m, m, m", catalogued=False),
+    Effect("oblique_springs", ObliqueSprings(), "N, m", catalogued=False),
     Effect("rod_frame", RodFrame(), "N/m, m, m, deg", catalogued=False),
     Effect("spline", Spline(), "m, N", catalogued=False),
 ]

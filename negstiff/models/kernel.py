@@ -111,7 +111,7 @@ def total_force(kind, coulomb, generic, table, z, v, q, p, b, mono, ts, tab):
     f = force(kind, coulomb, z, v, q)
     if generic:
         f += monomials(z, v, p, b, mono)
-    if table:
+    if table and ts >= 0:  # a generic kernel runs members without a table too (ts -1)
         f += tabled(z, tab, b)
     return f
 

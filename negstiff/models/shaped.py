@@ -19,8 +19,9 @@ The parts:
   bistable harvesters, Mann & Owens 2010, J. Sound Vib. 329:1215; Stanton, McGehee & Mann 2010, Physica D
   239:640, whose full dipole-dipole energy differs by the moments' orientation term).
 * ``ObliqueSprings``: two springs of stiffness k, free length L0, hinged at a half-span a from the axis of
-  motion: F = 2 k z (1 - L0 / sqrt(a^2 + z^2)), the quasi-zero-stiffness isolator's negative-stiffness mechanism
-  (Carrella, Brennan & Waters 2007, J. Sound Vib. 301:678, Eq. 2); L0 > a makes the springs compressed at z = 0.
+  motion, push with 2 k z (1 - L0 / sqrt(a^2 + z^2)), the quasi-zero-stiffness isolator's negative-stiffness
+  mechanism (Carrella, Brennan & Waters 2007, J. Sound Vib. 301:678, Eq. 2): a linear spring 2 k z (a model's k1)
+  and this part, -2 P z / sqrt(a^2 + z^2) with P = k L0.
 * ``RodFrame``: the reference study's device, the exact rod-frame geometry of ``docs/device-model.md``:
   F = 2 k_f (s + D0) s'(z), s = -B + sqrt(B^2 - z^2), B = L cos(alpha) - z sin(alpha); linear in k_f and
   k_f D0, its shape the rod length L and the frame angle alpha.
@@ -207,49 +208,51 @@ class DipoleMagnet(ShapedLaw):
 
 @dataclass(frozen=True)
 class ObliqueSprings(ShapedLaw):
-    """Two oblique springs: F = 2 k z (1 - L0 / sqrt(a^2 + z^2)) [N] (``{"k": N/m, "L0": m, "a": m}``)."""
+    """Two oblique springs' negative stiffness: F = -2 P z / sqrt(a^2 + z^2) [N] (``{"P": N, "a": m}``).
 
-    fields: ClassVar[tuple[str, ...]] = ("k", "L0", "a")
+    Two springs of stiffness k and free length L0, hinged at a half-span a from the axis of motion, push with
+    2 k z (1 - L0 / sqrt(a^2 + z^2)) (Carrella, Brennan & Waters 2007, Eq. 2): the 2 k z is a linear spring (a
+    model's k1 holds it with any other spring in parallel), the rest this part, with P = k L0.
+    """
+
+    fields: ClassVar[tuple[str, ...]] = ("P", "a")
     shape: ClassVar[tuple[str, ...]] = ("a",)
 
     def columns(self, shape, z):
-        """2 z and -2 z / sqrt(a^2 + z^2): the coefficients are k and k L0."""
+        """The one column -2 z / sqrt(a^2 + z^2)."""
         a = np.asarray(shape["a"], float)
         z = np.asarray(z, float)
-        return [2.0 * z, -2.0 * z / np.sqrt(a * a + z * z)]
+        return [-2.0 * z / np.sqrt(a * a + z * z)]
 
     def coefficients(self, value):
-        """(k, k L0)."""
-        k, L0 = np.asarray(value["k"], float), np.asarray(value["L0"], float)
-        return [k, k * L0]
+        """(P,)."""
+        return [np.asarray(value["P"], float)]
 
     def value_of(self, shape, coefficients):
-        """``{"k", "L0", "a"}``; L0 = (k L0) / k."""
-        k = float(coefficients[0])
-        return {"k": k, "L0": float(coefficients[1]) / k if k else 0.0, "a": float(shape["a"])}
+        """``{"P", "a"}``."""
+        return {"P": float(coefficients[0]), "a": float(shape["a"])}
 
     def stiffness(self, value, z):
-        """dF/dz = 2 k (1 - L0 a^2 / (a^2 + z^2)^(3/2))."""
+        """dF/dz = -2 P a^2 / (a^2 + z^2)^(3/2)."""
         z = np.asarray(z, float)
-        k, L0, a = (np.asarray(value[f], float) for f in ("k", "L0", "a"))
-        return 2.0 * k * (1.0 - L0 * a * a / (a * a + z * z) ** 1.5)
+        P, a = np.asarray(value["P"], float), np.asarray(value["a"], float)
+        return -2.0 * P * a * a / (a * a + z * z) ** 1.5
 
     def potential(self, value, z):
-        """The springs' energy k (sqrt(a^2 + z^2) - L0)^2 - k (a - L0)^2 [J], zero at z = 0."""
+        """The part's energy -2 P (sqrt(a^2 + z^2) - a) [J], zero at z = 0."""
         z = np.asarray(z, float)
-        k, L0, a = (np.asarray(value[f], float) for f in ("k", "L0", "a"))
-        return k * ((np.sqrt(a * a + z * z) - L0) ** 2 - (a - L0) ** 2)
+        P, a = np.asarray(value["P"], float), np.asarray(value["a"], float)
+        return -2.0 * P * (np.sqrt(a * a + z * z) - a)
 
     def span(self, value):
-        """+-6 a, and at least +-3 L0: the springs' nonlinearity lives within a few a of the axis."""
-        a, L0 = float(np.max(value["a"])), float(np.max(np.abs(value["L0"])))
-        w = max(6.0 * a, 3.0 * L0)
-        return -w, w
+        """+-8 a: beyond it the part's stiffness is below 1/500 of its value at z = 0."""
+        a = float(np.max(value["a"]))
+        return -8.0 * a, 8.0 * a
 
     def check(self, name, value):
-        """A half-span a > 0 and a free length L0 >= 0."""
-        if not value["a"] > 0 or value["L0"] < 0:
-            raise ValueError(f"{name} needs a half-span a > 0 and a free length L0 >= 0 [m]")
+        """A half-span a > 0."""
+        if not value["a"] > 0:
+            raise ValueError(f"{name} needs a half-span a > 0 [m], got {value['a']}")
         return MappingProxyType(dict(value))
 
     def shape_bounds(self, stroke):

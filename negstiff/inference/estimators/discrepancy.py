@@ -52,6 +52,8 @@ from negstiff.inference.steps.selection import block_rows, block_scores, compare
 from negstiff.inference.steps.validation import (
     RestartWindows,
     boundedness,
+    parting_sample,
+    predictability,
     restart_windows,
     restarted_free_runs,
     simulate_windows,
@@ -73,9 +75,6 @@ from negstiff.models import Model, effects
 CUBIC_BASELINE = ("1", "z", "z^2", "z^3", "v", "v|v|")
 """The seed's own model form: cubic K, viscous c and quadratic c_nl (the contract's damping law)."""
 LINEAR_BASELINE = ("1", "z", "v")
-PREDICTABILITY_FRACTION = 0.1
-"""The record's predictability horizon (``Discrepancy._predictability``) is the time by which runs restarted from
-state estimates that differ by their noise have parted by this fraction of the signal's rms (pooled over restarts)."""
 LOCAL_DRAWS = 4
 """Draws of the start states' noise per window when the predictable span of the windows where an effect acts is
 measured (``Discrepancy._episode_windows``)."""
@@ -185,15 +184,6 @@ def _without(model: Model, effect: str) -> Model:
     if e.folds_into:
         return Model(**{**fields, e.folds_into: 0.0})
     return Model(**{**fields, "extra": {k: v for k, v in dict(model.extra).items() if k != effect}})
-
-
-def _start_noise(rec: Measurement) -> tuple[float, float]:
-    """The noise of a restarted run's start state: the displacement's sensor noise [m] and the state velocity's
-    predicted noise [m/s] (``Measurement.states``' ``noise_std`` and ``velocity_noise_std``; 0 where not finite).
-    """
-    _, _, _, info = rec.states("state")
-    sz, sv = (float(info[k]) if np.isfinite(info[k]) else 0.0 for k in ("noise_std", "velocity_noise_std"))
-    return sz, sv
 
 
 def _loo_compare(ms_with: np.ndarray, ms_without: np.ndarray, residual_rows, length: int,
@@ -938,61 +928,15 @@ class Discrepancy(StructureResults, Estimator):
         return out
 
     def _predictability(self, rec: Measurement, model: Model) -> dict[str, Any]:
-        """How long ``model``'s runs restarted from the record's states stay predictable: pairs of runs restarted
-        every ``window_s / 20`` over the identification part, one from the measured state and one from that state
-        moved by a draw of its noise (the displacement's sensor noise and the state velocity's predicted noise,
-        ``Measurement.states``' ``noise_std`` and ``velocity_noise_std``; seeded), for at most ``window_s / 2``;
-        the horizon is the first time their rms separation, pooled over the pairs, exceeds
-        ``PREDICTABILITY_FRACTION`` of the part's rms z. A run restarted from noisy states misses by that much
-        however right its model: a window longer than this scores chaos, not the model (measured: where an end
-        stop acted, the true model's own 1 s runs missed by 103-114 % and by 2-3 % over their first 0.25 s).
-        Returns ``{"horizon_s", "window_s"`` (the regime's and the interval's window: the horizon, at most
-        ``window_s / 2`` and at least 8 samples), ``"limited"`` (whether the horizon shortened it), ``"restarts"``,
-        ``"fraction"``, ``"method"}``.
+        """How long ``model``'s runs restarted from the record's states stay predictable (``validation.predictability``
+        over the identification part, at most ``window_s / 2``).
         """
-        cap = max(8, int(round(self.window_s * rec.fs / 2)))
-        sz, sv = _start_noise(rec)
-        every = restart_windows(self.n_id_, rec.fs, self.window_s / 20, min_step=1)
-        windows = RestartWindows.at(every.starts[every.starts + cap <= self.n_id_], cap)
-        out: dict[str, Any] = {"horizon_s": cap / rec.fs, "window_s": cap / rec.fs, "limited": False,
-                               "restarts": len(windows), "fraction": PREDICTABILITY_FRACTION}  # fmt: skip
-        out["method"] = (f"pairs of the baseline's runs restarted every {self.window_s / 20:g} s over the "
-                         f"identification part, one from a state moved by its noise ({1e6 * sz:.3g} um, "
-                         f"{1e3 * sv:.3g} mm/s rms): the "
-                         f"time their pooled rms separation exceeds {100 * PREDICTABILITY_FRACTION:g} % of rms z, at "
-                         f"most {cap / rec.fs:g} s")  # fmt: skip
-        if len(windows) < 2:
-            return out
-        parted = self._parting_sample(rec, model, windows, draws=1, min_pairs=2)
-        if parted is not None:
-            out.update(horizon_s=parted / rec.fs, window_s=max(8, parted) / rec.fs, limited=True)
-        return out
+        return predictability(model, rec, self.n_id_, self.window_s, self._z0, self._v0)
 
     def _parting_sample(self, rec: Measurement, model: Model, windows: RestartWindows, draws: int,
                         min_pairs: int) -> int | None:  # fmt: skip
-        """The first sample at which ``model``'s runs from ``windows``' start states and from those states moved by
-        ``draws`` draws of their noise each (``_start_noise``; seeded, the same draws for every model) part by more
-        than ``PREDICTABILITY_FRACTION`` of the identification part's rms z, their rms separation pooled over the
-        windows and the draws; None where they never do or fewer than ``min_pairs`` pairs ran without diverging.
-        """
-        sz, sv = _start_noise(rec)
-        rng = np.random.default_rng(0)
-        dz, dv = (scale * rng.standard_normal((draws, len(windows))) for scale in (sz, sv))
-        a = simulate_windows(model, rec, windows, self._z0, self._v0)
-        seps = []
-        for k in range(draws):  # every window's start state moved by one draw at a time
-            zp, vp = self._z0.copy(), self._v0.copy()
-            zp[windows.starts] += dz[k]
-            vp[windows.starts] += dv[k]
-            b = simulate_windows(model, rec, windows, zp, vp)
-            ok = ~a.diverged & ~b.diverged
-            seps.append(a.z[ok] - b.z[ok])
-        sep = np.concatenate(seps)
-        if sep.shape[0] < min_pairs:
-            return None
-        limit = PREDICTABILITY_FRACTION * float(np.sqrt(np.mean(rec.displacement[: self.n_id_] ** 2)))
-        over = np.sqrt(np.mean(sep**2, axis=0)) > limit
-        return int(np.argmax(over)) if over.any() else None
+        """``validation.parting_sample`` of ``model``'s runs over ``windows`` (the identification part's rms z)."""
+        return parting_sample(model, rec, windows, self._z0, self._v0, self.n_id_, draws, min_pairs)
 
     def _window_length(self, rec: Measurement) -> int:
         """Samples of the regime's and the interval's windows: the record's predictability horizon

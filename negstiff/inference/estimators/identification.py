@@ -28,19 +28,20 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any, Self
 
 import numpy as np
 
-from negstiff.errors import InputError, issue
+from negstiff.errors import InputError, MeasurementError, issue
 from negstiff.inference.estimators.base import Estimator
 from negstiff.inference.estimators.prediction import window_errors
 from negstiff.inference.record.measurement import Measurement
+from negstiff.inference.steps import law_choice
 from negstiff.inference.steps.plausibility import classified, judgement
 from negstiff.inference.steps.refine import refine_stage, stroke_quantiles
 from negstiff.inference.steps.validation import boundedness, validate
-from negstiff.models import Model
+from negstiff.models import Model, laws
 from negstiff.models.equation import Equilibria
 
 
@@ -328,16 +329,121 @@ def refuse_softening(rec: Measurement, n_id: int, method: str) -> None:
         )
 
 
+def quick_spline_holds(rec: Measurement, n_id: int) -> bool:
+    """Whether a quick weak-form least-squares spline (8 intervals over the identification part's stroke, the
+    reference study's damping) has a force that grows outward at both ends of the stroke: a bounded law may still
+    explain a record whose quick cubic softens (a magnet's force, which turns over beyond its wells).
+    """
+    from negstiff.inference.steps.shape import stroke
+    from negstiff.inference.steps.weak import Library, WeakForm, WeakFormError, fit_support, known_input_gain
+
+    part = rec.segment(0, n_id)
+    lo, hi = stroke(part)
+    shape = {"spline": {"knots": tuple(np.linspace(lo, hi, 9))}}
+    lib = Library.of_laws("spline", laws.DEFAULT_DAMPING, shape)
+    try:
+        phys = fit_support(WeakForm.of(part).system(part, library=lib), known_input_gain(part))
+        model = lib.model(phys, 1.0)
+    except (WeakFormError, np.linalg.LinAlgError, ValueError):
+        return False
+    return bool(np.all(model.stiffness(np.array([lo, hi])) > 0))
+
+
 class Identifier(Estimator):
     """Base of the identifications: ``fit`` runs the method's ``_estimate`` and then the shared stages
-    (module docstring). Subclasses declare ``method`` and their parameters; ``validation_fraction`` and
-    ``refine`` are every identification's.
+    (module docstring). Subclasses declare ``method`` and their parameters; ``validation_fraction``, ``refine``,
+    ``law`` and ``damping`` are every identification's.
     """
 
     method: str = ""
+    law: str | None = None
+    damping: str = laws.DEFAULT_DAMPING
 
-    def _estimate(self, rec: Measurement, n_id: int) -> Estimate:
+    def _estimate(self, rec: Measurement, n_id: int, law: laws.Law | None = None) -> Estimate:
+        """The method's own estimate over the first ``n_id`` samples, reading ``law`` (None: the method's own
+        default: NSI's cubic, SINDy's catalogue) with the damping law ``damping``.
+        """
         raise NotImplementedError
+
+    def _held_by_law(self, est: Estimate, law: str) -> Estimate:
+        """``est`` with the base fields outside the restoring and the damping law held by the refinement (a law's
+        model is refined within its law: the geometric law has no k1 to move).
+        """
+        free = set(laws.get(law).fields) | set(laws.get(self.damping, "damping").fields)
+        outside = tuple(f for f in ("k0", "k1", "k2", "k3", "c", "c_nl") if f not in free and f not in est.held)
+        return replace(est, held=(*est.held, *outside))
+
+    def _estimate_law(self, rec: Measurement, n_id: int) -> tuple[Estimate, dict[str, Any] | None]:
+        """The estimate of the law asked for, or of the law the record asks for (``law_choice``): a named law
+        as it is; None the method's default, the other laws compared where it fails its checks (and said);
+        ``"auto"`` every law compared. Returns the estimate and the comparison's account (None: no comparison).
+
+        A record whose quick least-squares cubic softens is refused in a fraction of a second (``refuse_softening``)
+        when the cubic is asked for by name, and by default unless a quick spline's force still grows outward at
+        both ends of the stroke (``quick_spline_holds``): then the other laws are compared.
+        """
+        if self.law not in (None, "auto"):
+            if self.law == laws.DEFAULT_RESTORING:
+                refuse_softening(rec, n_id, type(self).__name__)
+            return self._held_by_law(self._estimate(rec, n_id, laws.get(self.law, "restoring")), self.law), None
+        names = laws.names("restoring")
+        why = None
+        if self.law is None:
+            try:
+                refuse_softening(rec, n_id, type(self).__name__)
+            except InputError:
+                if not quick_spline_holds(rec, n_id):
+                    raise
+                failed = ["its quick least-squares fit softens (k3 <= 0)"]
+            else:
+                try:
+                    est = self._estimate(rec, n_id, None)
+                    failed = law_choice.problems(est.model, rec, n_id)
+                except (MeasurementError, ValueError, ArithmeticError) as exc:
+                    failed = [" ".join(str(exc).split())]
+                if not failed:
+                    return est, None
+            why = f"the default law ({laws.DEFAULT_RESTORING}) failed its checks: {'; '.join(failed)}"
+            names = tuple(n for n in names if n != laws.DEFAULT_RESTORING)
+        n_fit = n_id - int(round(law_choice.SELECTION_FRACTION * rec.n))
+        if n_fit < n_id // 2:
+            raise InputError(f"{rec.source}: too short to compare laws (the selection part would exceed the fit)")
+        fitting = rec.segment(0, n_fit)
+        candidates = []
+        for name in names:
+            cand = law_choice.Candidate(name)
+            try:
+                cand.model = self._estimate(fitting, n_fit, laws.get(name)).model
+                cand.problems = law_choice.problems(cand.model, rec, n_fit)
+            except (MeasurementError, ValueError, ArithmeticError) as exc:
+                cand.problems = [" ".join(str(exc).split())]
+            candidates.append(cand)
+        windows = law_choice.score(candidates, rec, n_fit, n_id)
+        account = {"requested": self.law or "default", "why": why, **windows,
+                   "candidates": [c.to_json() for c in candidates]}  # fmt: skip
+        # the best on the selection part, estimated on the whole identification part and judged again there: where
+        # it fails, the next best
+        for best in law_choice.ranked(candidates):
+            try:
+                est = self._held_by_law(self._estimate(rec, n_id, laws.get(best.law)), best.law)
+                failed = law_choice.problems(est.model, rec, n_id)
+            except (MeasurementError, ValueError, ArithmeticError) as exc:
+                failed = [" ".join(str(exc).split())]
+            if not failed:
+                break
+            best.problems = [f"on the whole identification part: {failed[0]}"]
+        else:
+            reasons = "; ".join(f"{c.law}: {c.problems[0] if c.problems else 'no estimate'}" for c in candidates)
+            raise MeasurementError(f"{rec.source}: no law explains the record{' (' + why + ')' if why else ''}: "
+                                   f"{reasons}")  # fmt: skip
+        account["candidates"] = [c.to_json() for c in candidates]
+        account["chosen"] = best.law
+        said = (f"{why}; the laws were compared on what they predict" if why else "the laws were compared on what "
+                "they predict") + (f" ({windows['windows']} windows of {windows['window_s']:.3g} s restarted over "
+                f"the selection part): {best.law} chosen (median window {best.median_percent:.3g} %, weight "
+                f"{best.weight:.2f})")  # fmt: skip
+        return replace(est, warnings=(*est.warnings, said) if why else est.warnings,
+                       details={**est.details, "law_choice": {**account, "summary": said}}), account
 
     def _final_details(self, rec: Measurement, model: Model, details: dict[str, Any]) -> dict[str, Any]:
         """The method's own result keys that depend on the final model (NSI's ``g_estimate``)."""
@@ -349,8 +455,7 @@ class Identifier(Estimator):
         """
         rec = self.check(data)
         n_id = int(round(rec.n * (1 - self.validation_fraction)))
-        refuse_softening(rec, n_id, type(self).__name__)
-        est = self._estimate(rec, n_id)
+        est, _ = self._estimate_law(rec, n_id)
         stroke = stroke_quantiles(rec.z[:n_id])
         validation = validate(est.model, rec, n_id)
         model, refinement, mass_source = est.model, None, est.mass_source

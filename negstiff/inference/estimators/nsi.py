@@ -40,10 +40,10 @@ import numpy as np
 from scipy import signal
 from tqdm import tqdm
 
-from negstiff.errors import MeasurementError
+from negstiff.errors import InputError, MeasurementError
 from negstiff.inference.analysis.record_kind import check_decay, identification_record, record_kind
 from negstiff.inference.estimators.identification import Estimate, Identifier, visited_well
-from negstiff.inference.estimators.parameters import FRACTION, Boolean, Interval, Pair
+from negstiff.inference.estimators.parameters import DAMPING_LAW, FRACTION, RESTORING_LAW, Boolean, Interval, Pair
 from negstiff.inference.estimators.structure_id import (
     ElementPlace,
     StructureResults,
@@ -52,14 +52,92 @@ from negstiff.inference.estimators.structure_id import (
 )
 from negstiff.inference.estimators.structure_id import stabilisation as structure_stabilisation
 from negstiff.inference.record.measurement import Measurement, per_unit_mass_warning
+from negstiff.inference.steps.shape import fit_shape
 from negstiff.inference.steps.weak import free_decay, known_input_gain, mass_of
 from negstiff.inference.steps.wells import well_guesses
-from negstiff.models import Model
+from negstiff.models import Model, laws
 
 from . import subspace
 
 BASIS_NAMES = ("x2", "x3", "vabsv")
-"""Nonlinear basis: x^2, x^3, x'|x'| (their coefficients are k2~, k3, c_nl)."""
+"""The cubic law's nonlinear basis with the reference study's damping: x^2, x^3, x'|x'| (their coefficients are
+k2~, k3, c_nl); any other law's is ``Basis``'s."""
+
+
+@dataclass(frozen=True)
+class Basis:
+    """NSI's nonlinear basis about a reference z* for a restoring and a damping law (``models.laws``) at a shape:
+    the law's columns with their value and slope at z* taken off (they are the ULS's constant and stiffness),
+    so each basis function vanishes to first order at x = z - z* = 0.
+
+    A column that is a power of z (a polynomial law's z^2, z^3, ...) is re-expanded about z* as the powers of x
+    (reference study Eq. 7: the same span, exact); any other column (a magnet's, the rod frame's, a spline's)
+    enters as its remainder R(x) = C(z* + x) - C(z*) - C'(z*) x. The damping law's columns but the viscous one
+    are functions of x' alone and enter as they are. Where the remainders are linearly dependent (a spline
+    holds every straight line), only their independent combinations are kept (``reduce``).
+    """
+
+    restoring: laws.Law
+    damping: laws.Law
+    shape: laws.Shape
+
+    def names(self) -> tuple[str, ...]:
+        """The basis functions' names: x2, x3, ... for powers, ``LABEL~`` for remainders, the damping's labels
+        (``vabsv`` for x'|x'|, as the reference study's basis).
+        """
+        disp = [self._name(c) for c in self.restoring.column_list(self.shape) if self._kind(c) != "linear"]
+        vel = ["vabsv" if c.label == "v|v|" else c.label for c in self.damping.column_list(self.shape)
+               if c.label != "v"]  # fmt: skip
+        return tuple(disp + vel)
+
+    @staticmethod
+    def _kind(col: laws.Column) -> str:
+        if col.label in ("1", "z"):
+            return "linear"
+        if col.label.startswith("z^") and col.label[2:].isdigit():
+            return "power"
+        return "remainder"
+
+    def _name(self, col: laws.Column) -> str:
+        return f"x{col.label[2:]}" if self._kind(col) == "power" else f"{col.label}~"
+
+    def displacement(self, x: np.ndarray, z_ref: float) -> np.ndarray:
+        """The displacement basis functions at x = z - z* (samples, functions)."""
+        x = np.asarray(x, float)
+        cols = [c for c in self.restoring.column_list(self.shape)]
+        out = []
+        if any(self._kind(c) == "remainder" for c in cols):
+            h = 1e-6 * max(abs(z_ref), float(np.std(x)), 1e-6)
+            at = self.restoring.columns(np.array([z_ref - h, z_ref, z_ref + h]), np.zeros(3), self.shape)
+            here = self.restoring.columns(z_ref + x, np.zeros_like(x), self.shape)
+        for j, c in enumerate(cols):
+            kind = self._kind(c)
+            if kind == "power":
+                out.append(x ** int(c.label[2:]))
+            elif kind == "remainder":
+                slope = (at[2, j] - at[0, j]) / (2 * h)
+                out.append(here[:, j] - at[1, j] - slope * x)
+        return np.column_stack(out) if out else np.zeros((x.size, 0))
+
+    def velocity(self, v: np.ndarray, velocity_noise: float = 0.0) -> np.ndarray:
+        """The damping basis functions at x' (samples, functions)."""
+        v = np.asarray(v, float)
+        cols = self.damping.columns(np.zeros_like(v), v, self.shape, velocity_noise)
+        keep = [j for j, c in enumerate(self.damping.column_list(self.shape)) if c.label != "v"]
+        return cols[:, keep]
+
+
+def reduce(basis: np.ndarray, tol: float = 1e-9) -> np.ndarray:
+    """A (functions, k) map onto the independent combinations of ``basis``'s columns (samples, functions): the
+    right singular vectors above ``tol`` of the largest (the identity where they are independent already).
+    """
+    scale = basis.std(axis=0)
+    scale[scale == 0] = 1.0
+    _, sv, vt = np.linalg.svd(basis / scale, full_matrices=False)
+    keep = sv > tol * sv.max() if sv.size else np.zeros(0, bool)
+    if keep.all():
+        return np.eye(basis.shape[1])
+    return (vt[keep] / scale).T
 
 
 INPUT_SPREAD = 0.1
@@ -92,6 +170,63 @@ def decay_feedback(ss: subspace.StateSpace, freqs: np.ndarray, wn: float, zeta: 
     return hd * (wn**2 - w**2 + 2j * zeta * wn * w)[:, None]
 
 
+@dataclass(frozen=True)
+class _WellForce:
+    """An identified restoring force per unit mass about a reference z_g: const + wn^2 x + sum_j c_j D_j(x),
+    x = z - z_g, D_j the law's displacement basis (``Basis.displacement``).
+    """
+
+    basis: Basis
+    z_g: float
+    const: float
+    wn2: float
+    c: np.ndarray
+
+    def __call__(self, x):
+        x = np.atleast_1d(np.asarray(x, float))
+        return self.const + self.wn2 * x + self.basis.displacement(x, self.z_g) @ self.c
+
+    def at(self, z):
+        """The force at absolute z [m] (per unit mass)."""
+        return self(np.asarray(z, float) - self.z_g)
+
+    def derivatives(self, x: float) -> tuple[float, float, float]:
+        """The first three derivatives at x: exact for powers, central differences elsewhere."""
+        powers = [(j, int(n[1:])) for j, n in enumerate(self.basis.names()[: self.c.size]) if n[1:].isdigit()]
+        out = [self.wn2, 0.0, 0.0]
+        for j, p in powers:
+            out[0] += self.c[j] * p * x ** (p - 1)
+            out[1] += self.c[j] * p * (p - 1) * x ** (p - 2) if p >= 2 else 0.0
+            out[2] += self.c[j] * p * (p - 1) * (p - 2) * x ** (p - 3) if p >= 3 else 0.0
+        rest = [j for j in range(self.c.size) if j not in dict(powers)]
+        if rest:
+            h = 1e-4 * max(abs(self.z_g), 1e-2)
+            xs = x + h * np.arange(-2, 3)
+            g = self.basis.displacement(xs, self.z_g)[:, rest] @ self.c[rest]
+            out[0] += float((g[3] - g[1]) / (2 * h))
+            out[1] += float((g[3] - 2 * g[2] + g[1]) / h**2)
+            out[2] += float((g[4] - 2 * g[3] + 2 * g[1] - g[0]) / (2 * h**3))
+        return float(out[0]), float(out[1]), float(out[2])
+
+
+def _stable_root(force: _WellForce, span: float) -> float | None:
+    """The stable root (positive slope) of ``force`` nearest x = 0 within twice the motion's span: sign changes
+    on a grid, then Brent's method.
+    """
+    from scipy.optimize import brentq
+
+    grid = np.linspace(-2 * span, 2 * span, 4001)
+    f = force(grid)
+    roots = []
+    for i in np.flatnonzero(np.sign(f[:-1]) * np.sign(f[1:]) <= 0):
+        if f[i] == 0.0:
+            roots.append(float(grid[i]))
+        elif f[i + 1] != 0.0:
+            roots.append(brentq(lambda x: float(force(x)[0]), grid[i], grid[i + 1], xtol=1e-15, rtol=1e-14))
+    stable = [r for r in roots if force.derivatives(r)[0] > 0]
+    return min(stable, key=abs) if stable else None
+
+
 class NSIError(MeasurementError):
     """The record cannot be identified (too short, not enough excitation, no physical pole)."""
 
@@ -113,6 +248,10 @@ class WellFit:
     frf: dict[str, Any]
     lq_routes: tuple[str, ...] = ()
     """Each pass's route of the subspace step's LQ factor (``subspace.LQ_ROUTES``)."""
+    force: Any = None
+    """The identified restoring force about the well (``_WellForce``: per unit mass, K(z*) = 0 at ``z_ref``)."""
+    damping_coefficients: tuple[float, ...] = ()
+    """The damping law's coefficients per unit mass, its columns' order (c first)."""
 
 
 def physical_pole(ss: subspace.StateSpace, column: int | None = 0) -> complex:
@@ -212,6 +351,8 @@ class NSI(StructureResults, Identifier):
         "refine": Boolean(none=True),
         "progress": Boolean(),
         "element": ElementPlace(),
+        "law": RESTORING_LAW,
+        "damping": DAMPING_LAW,
     }
 
     def __init__(
@@ -225,8 +366,12 @@ class NSI(StructureResults, Identifier):
         refine: bool | None = None,
         progress: bool = False,
         element: str | tuple[int, int] | None = None,
+        law: str | None = None,
+        damping: str = laws.DEFAULT_DAMPING,
     ):
         self.element = element
+        self.law = law
+        self.damping = damping
         self.order = order
         self.block_rows = block_rows
         self.band = band
@@ -236,21 +381,25 @@ class NSI(StructureResults, Identifier):
         self.progress = progress
 
     # --- one well ----------------------------------------------------------------------------
-    def extended_input(self, rec: Measurement, zs: np.ndarray, v: np.ndarray, z_ref: float):
+    def extended_input(self, rec: Measurement, zs: np.ndarray, v: np.ndarray, z_ref: float, basis: Basis | None = None):
         """The subspace step's problem about ``z_ref``: x = z - z_ref, the standardised input channels (the
-        input and the basis functions ``-x^2, -x^3, -z'|z'|``; a free decay's: the basis functions alone), their
-        scales and means. ``zs`` and ``v`` are the record's band states (``states("band")``); the basis is built
-        from them low-passed (``Measurement.basis_states``).
+        input and the basis functions' negatives, ``Basis``; a free decay's: the basis functions alone), their
+        scales and means, and the map from the channels' combinations back to the basis functions (``reduce``).
+        ``zs`` and ``v`` are the record's band states (``states("band")``); the basis is built from them
+        low-passed (``Measurement.basis_states``). ``basis`` None: the cubic's with the reference study's damping.
         """
+        basis = Basis(laws.get("cubic"), laws.get("quadratic"), {}) if basis is None else basis
         x = zs - z_ref
         zb, vb = rec.basis_states()  # the band states without the noise's band, computed once per record
         xb = zb - z_ref
-        basis = [-(xb**2), -(xb**3), -vb * np.abs(vb)]
-        if free_decay(rec):  # no input: the feedback channels alone drive the ULS from its initial state
-            chans = np.column_stack(basis)
-        else:
+        functions = np.column_stack([basis.displacement(xb, z_ref), basis.velocity(vb)])
+        combine = reduce(functions)
+        if combine.shape != (functions.shape[1],) * 2 or np.any(combine != np.eye(functions.shape[1])):
+            functions = functions @ combine
+        chans = -functions
+        if not free_decay(rec):  # no input: the feedback channels alone drive the ULS from its initial state
             lin = -rec.u if rec.input_name == "base_acc" else rec.u
-            chans = np.column_stack([lin, *basis])
+            chans = np.column_stack([lin, chans])
         means = chans.mean(axis=0)
         scale = chans.std(axis=0)
         if np.any(scale == 0):
@@ -261,20 +410,25 @@ class NSI(StructureResults, Identifier):
                 f"{rec.source}: not enough excitation: the basis functions are collinear (the record "
                 "does not reach the nonlinear range)"
             )
-        return x, w, scale, means
+        return x, w, scale, means, combine
 
-    def fit_well(self, rec: Measurement, zs: np.ndarray, v: np.ndarray, z_ref: float, bar=None) -> WellFit:
+    def fit_well(self, rec: Measurement, zs: np.ndarray, v: np.ndarray, z_ref: float, bar=None,
+                 basis: Basis | None = None) -> WellFit:  # fmt: skip
         """Identify the ULS and the nonlinear coefficients around ``z_ref``.
 
-        Each pass identifies about the current reference z_g, then moves the reference to the
-        identified restoring force's stable root r nearest z_g. The reported ULS (f, zeta) is the
-        last pass's pole; the shifted coefficients are the last pass's cubic re-expanded exactly at
-        r (reference study Eq. 7), so that K(z*) = 0 there. ``bar`` (a tqdm bar, optional) is
-        advanced by ``passes`` over the well, one per pass.
+        Each pass identifies about the current reference z_g, then moves the reference to the identified
+        restoring force's stable root r nearest z_g. The reported ULS (f, zeta) is the last pass's pole; the
+        shifted coefficients (k1~, k2~, k3: the force's derivatives at the root) are the last pass's force's at r
+        (reference study Eq. 7 for the cubic), so that K(z*) = 0 there. ``bar`` (a tqdm bar, optional) is
+        advanced by ``passes`` over the well, one per pass. ``basis``: the law's (``Basis``; None: the cubic's).
         """
+        basis = Basis(laws.get("cubic"), laws.get("quadratic"), {}) if basis is None else basis
+        names = basis.names()
+        n_disp = len(names) - basis.velocity(np.zeros(1)).shape[1]
         routes = []
+        span = float(np.ptp(zs))
         for done in range(1, self.passes + 1):
-            x, w, scale, means = self.extended_input(rec, zs, v, z_ref)
+            x, w, scale, means, combine = self.extended_input(rec, zs, v, z_ref, basis)
             y = x - x.mean()
             ys = y.std()
             try:
@@ -294,7 +448,7 @@ class NSI(StructureResults, Identifier):
                 coef = ratio.real.mean(axis=0)
                 quality = np.abs(ratio.imag).mean(axis=0) / np.maximum(np.abs(coef), 1e-300)
                 gain_est = gain = 1.0  # per unit mass: the ULS's own x'' + 2 zeta wn x' + wn^2 x (no input to scale)
-                c = dict(zip(BASIS_NAMES, coef, strict=False))
+                combined = coef
             else:
                 he = ss.frf(freqs)[:, 0, :]
                 ratio = he[:, 1:] / he[:, :1] * (scale[0] / scale[1:])
@@ -312,25 +466,24 @@ class NSI(StructureResults, Identifier):
                 # record (measured), and every coefficient 2 % high. The feedback channels are then read
                 # against the pole's own FRF at the known gain (b_est * ratio: as for a force record).
                 narrow = rec.input_name == "base_acc" and not covers_band(rec.u, rec.fs, band)
-                c = dict(zip(BASIS_NAMES, (gain_est if narrow else gain) * coef, strict=False))
+                combined = (gain_est if narrow else gain) * coef
             # time-averaged equation of motion (channels hold -g_j): the constant K(z_g)/m
-            c["const"] = (
+            const = (
                 (0.0 if decay else gain * means[0])
                 - wn**2 * x.mean()
                 - 2 * zeta * wn * v.mean()
                 - (v[-1] - v[0]) / (v.size * rec.dt)  # mean acceleration over the record
-                + sum(c[k] * means[j + (0 if decay else 1)] for j, k in enumerate(BASIS_NAMES))
+                + sum(c * means[j + (0 if decay else 1)] for j, c in enumerate(combined))
             )
-            # restoring force about z_g, per unit mass: const + wn^2 x + c2 x^2 + c3 x^3
-            roots = np.roots([c["x3"], c["x2"], wn**2, c["const"]])
-            real = roots[np.abs(roots.imag) < 1e-9 * max(1.0, np.abs(roots).max())].real
-            stable = [r for r in real if 3 * c["x3"] * r**2 + 2 * c["x2"] * r + wn**2 > 0]
-            if not stable:
+            c = combine @ combined  # each basis function's coefficient
+            # restoring force about z_g, per unit mass: const + wn^2 x + sum_j c_j D_j(x)
+            force = _WellForce(basis, z_ref, const, wn**2, np.asarray(c[:n_disp], float))
+            r = _stable_root(force, span)
+            if r is None:
                 raise NSIError(
                     f"{rec.source}: the identified restoring force has no stable equilibrium near "
                     f"z = {z_ref * 1e3:.2f} mm"
                 )
-            r = min(stable, key=abs)
             z_ref = z_ref + r
             if bar is not None:
                 bar.update()
@@ -338,15 +491,18 @@ class NSI(StructureResults, Identifier):
                 if bar is not None:
                     bar.update(self.passes - done)
                 break
+        d1, d2, d3 = force.derivatives(r)
+        damping = dict(zip(names[n_disp:], c[n_disp:], strict=True))
         coefficients = {
-            "k1_tilde": wn**2 + 2 * c["x2"] * r + 3 * c["x3"] * r**2,
-            "k2_tilde": c["x2"] + 3 * c["x3"] * r,
-            "k3": c["x3"],
+            "k1_tilde": d1,
+            "k2_tilde": d2 / 2,
+            "k3": d3 / 6,
             "c": 2 * zeta * wn,
-            "c_nl": c["vabsv"],
-            "const_residual": c["const"],
+            "c_nl": damping.get("vabsv", 0.0),
+            "const_residual": const,
             "shift_last_pass": r,
             "input_gain": gain_est,
+            **({} if names == BASIS_NAMES else {"basis": dict(zip(names, c.tolist(), strict=True))}),
         }
         w_ = 2 * np.pi * freqs
         h0 = 1.0 / (wn**2 - w_**2 + 2j * zeta * wn * w_) if decay else he[:, 0] * ys / scale[0]
@@ -355,7 +511,7 @@ class NSI(StructureResults, Identifier):
             fn,
             zeta,
             coefficients,
-            dict(zip(BASIS_NAMES, quality, strict=False)),
+            dict(zip(names, quality, strict=False)) if combine.shape[1] == len(names) else {},
             band,
             list(ss.singular_values[:8]),
             {
@@ -365,6 +521,8 @@ class NSI(StructureResults, Identifier):
                 "poles": [(abs(p) / (2 * math.pi), -p.real / abs(p)) for p in ss.poles() if p.imag >= 0],
             },
             tuple(routes),
+            force=force,
+            damping_coefficients=(2 * zeta * wn, *c[n_disp:]),
         )
 
     def _check_record(self, rec: Measurement) -> None:
@@ -390,24 +548,34 @@ class NSI(StructureResults, Identifier):
         self.record_kind_ = kind
         if at is None:
             return super().fit(identification_record(rec, kind))
+        if self.law is not None:
+            raise InputError(f"{type(self).__name__}(law={self.law!r}): a law is read on a single DOF's record; a "
+                             "structure's element has its own basis (element=): give no law")
         self.result_ = identify_nsi(self, identification_record(rec, kind), at)
         return self
 
-    def _estimate(self, rec: Measurement, n_id: int) -> Estimate:
+    def _estimate(self, rec: Measurement, n_id: int, law: laws.Law | None = None) -> Estimate:
         """NSI's own estimate: each well's underlying-linear system and nonlinear coefficients from the
-        identification part, averaged into one z-frame model (the shared stages follow: ``Identifier``).
+        identification part, averaged into one z-frame model (the shared stages follow: ``Identifier``); the
+        nonlinear basis is ``law``'s (None: the cubic) and the damping law's (``Basis``), a shaped part's shape the
+        record's (``shape.fit_shape``).
         """
         ident = rec.segment(0, n_id)
+        restoring, damping = laws.get(law or laws.DEFAULT_RESTORING, "restoring"), laws.get(self.damping, "damping")
+        shape_fit = None
+        if restoring.shaped():
+            shape_fit = fit_shape(ident, restoring, damping, n_fit=int(round(0.75 * n_id)), n_id=n_id)
+        basis = self.basis_ = Basis(restoring, damping, {} if shape_fit is None else shape_fit.shape)
         zs, v, _, band = ident.states("band")
-        z_minus, z_plus = well_guesses(ident)
+        z_minus, z_plus = well_guesses(ident, restoring, damping, basis.shape)
         bar = tqdm(
             total=self.passes * (1 if z_minus is None else 2), desc="NSI passes", unit="pass", leave=False,
             disable=not self.progress, delay=2.0,
         )  # fmt: skip
         with bar:
-            wells = {"plus": self.fit_well(ident, zs, v, z_plus, bar)}
+            wells = {"plus": self.fit_well(ident, zs, v, z_plus, bar, basis)}
             if z_minus is not None:
-                wells["minus"] = self.fit_well(ident, zs, v, z_minus, bar)
+                wells["minus"] = self.fit_well(ident, zs, v, z_minus, bar, basis)
         gains = [w.coefficients["input_gain"] for w in wells.values()]
         # the one mass rule (``weak.mass_of``): a force record without a mass gets it from the FRF level (b = 1/m);
         # a free decay has no input to scale by: the mass given, else per unit mass
@@ -416,9 +584,10 @@ class NSI(StructureResults, Identifier):
             gains = [1.0 / mass]
         else:
             mass, mass_source = mass_of(rec, known_input_gain(rec), float(np.mean(gains)), what="the FRF level")
-        models = [self._z_frame(w, mass) for w in wells.values()]
-        mean = {k: float(np.mean([getattr(mm, k) for mm in models])) for k in ("k1", "k2", "k3", "c", "c_nl", "k0")}
-        model = Model(m=mass, **mean)
+        stroke = (float(zs.min()), float(zs.max()))
+        frames = [self._z_frame(w, basis, stroke) for w in wells.values()]
+        models = [laws.compose(restoring, damping, f, mass, basis.shape) for f in frames]
+        model = laws.compose(restoring, damping, np.mean(frames, axis=0), mass, basis.shape)
         try:
             eq = model.equilibria()
         except ValueError as exc:  # a well's fit that is no bistable oscillator: the record's verdict, not a bug
@@ -448,7 +617,10 @@ class NSI(StructureResults, Identifier):
                 "band_fraction": list(self.band),
                 "passes": self.passes,
                 "velocity": f"Savitzky-Golay (window, order) = {band['window']}",
-                "basis": list(BASIS_NAMES),
+                "basis": list(basis.names()),
+                "law": restoring.name,
+                "damping_law": damping.name,
+                **({} if shape_fit is None else {"shape": shape_fit.to_json()}),
             },
         )
 
@@ -493,7 +665,7 @@ class NSI(StructureResults, Identifier):
                 for n in orders:
                     est = NSI(order=n, block_rows=i, band=self.band, passes=1)
                     try:
-                        wf = est.fit_well(ident, zs, v, well.z_ref)
+                        wf = est.fit_well(ident, zs, v, well.z_ref, basis=vars(self).get("basis_"))
                     except NSIError as exc:
                         rows.append({"well": name, "order": n, "block_rows": i, "error": str(exc)})
                         continue
@@ -511,16 +683,15 @@ class NSI(StructureResults, Identifier):
         return rows
 
     @staticmethod
-    def _z_frame(w: WellFit, mass: float) -> Model:
-        """Back-transform a well's shifted coefficients to the z frame (reference study Eq. 7), scaled by mass."""
-        c = w.coefficients
-        m = Model.from_shifted(
-            w.z_ref,
-            c["k1_tilde"] * mass,
-            c["k2_tilde"] * mass,
-            c["k3"] * mass,
-            m=mass,
-            c=c["c"] * mass,
-            c_nl=c["c_nl"] * mass,
-        )
-        return m
+    def _z_frame(w: WellFit, basis: Basis, stroke: tuple[float, float]) -> np.ndarray:
+        """A well's model as the law's z'' coefficients per unit mass (``models.laws``' column order, restoring then
+        damping): the law's restoring columns fitted by least squares to the well's identified force over the
+        stroke (exact where the law holds the force: the cubic's re-expansion, reference study Eq. 7), its damping
+        the well's.
+        """
+        z = np.linspace(stroke[0], stroke[1], 401)
+        C = basis.restoring.columns(z, np.zeros_like(z), basis.shape)
+        scale = np.where(np.ptp(C, axis=0) > 0, C.std(axis=0), np.abs(C).mean(axis=0))
+        scale[scale == 0] = 1.0
+        theta = np.linalg.lstsq(C / scale, w.force.at(z), rcond=None)[0] / scale
+        return -np.concatenate([theta, w.damping_coefficients])

@@ -96,6 +96,28 @@ class Options(Constraint):
 
 
 @dataclass(frozen=True)
+class LawName(Constraint):
+    """The name of a registered law of ``kind`` (``models.laws``: read when checked, so a law registered later
+    counts), or one of ``also`` (``"auto"``: compare the laws; None: the method's default).
+    """
+
+    kind: str
+    also: tuple = ()
+
+    @override
+    def accepts(self, value: Any) -> bool:
+        from negstiff.models import laws
+
+        return (isinstance(value, str) and value in laws.names(self.kind)) or value in self.also
+
+    @override
+    def describe(self) -> str:
+        from negstiff.models import laws
+
+        return "one of " + ", ".join(repr(v) for v in (*laws.names(self.kind), *self.also))
+
+
+@dataclass(frozen=True)
 class Boolean(Constraint):
     """True or False (or None, "where it applies", with ``none``)."""
 
@@ -209,6 +231,13 @@ RANDOM_STATE = RandomState(int, 0, 2**32 - 1, none=True)
 FRACTION = Interval(float, 0.0, 1.0, lo_open=True, hi_open=True)
 """A share of a record, strictly between none and all of it."""
 
-NAMESPACE = {c.__name__: c for c in (Interval, Options, Boolean, Pair, Several, Instance, RandomState)} | {
-    "int": int, "float": float, "SEED": SEED, "RANDOM_STATE": RANDOM_STATE, "FRACTION": FRACTION}  # fmt: skip
+RESTORING_LAW = LawName("restoring", ("auto", None))
+"""A restoring law's name, ``"auto"`` (compare them all) or None (the method's default; the others tried if it
+fails its checks)."""
+DAMPING_LAW = LawName("damping")
+"""A damping law's name."""
+
+NAMESPACE = {c.__name__: c for c in (Interval, Options, Boolean, Pair, Several, Instance, RandomState, LawName)} | {
+    "int": int, "float": float, "SEED": SEED, "RANDOM_STATE": RANDOM_STATE, "FRACTION": FRACTION,
+    "RESTORING_LAW": RESTORING_LAW, "DAMPING_LAW": DAMPING_LAW}  # fmt: skip
 """What a declaration may name (``negstiff.cli.common.declared`` evaluates declarations in it)."""

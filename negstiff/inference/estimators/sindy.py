@@ -30,29 +30,38 @@ from typing import Any
 
 import numpy as np
 
+from negstiff.errors import InputError
 from negstiff.inference.analysis.record_kind import check_decay, identification_record, record_kind
 from negstiff.inference.estimators.identification import Estimate, Identifier
-from negstiff.inference.estimators.parameters import FRACTION, RANDOM_STATE, Boolean, Interval, Several, seed_of
+from negstiff.inference.estimators.parameters import (
+    DAMPING_LAW,
+    FRACTION,
+    RANDOM_STATE,
+    RESTORING_LAW,
+    Boolean,
+    Interval,
+    Several,
+    seed_of,
+)
 from negstiff.inference.estimators.structure_id import ElementPlace, StructureResults, element_of, identify_sindy
 from negstiff.inference.record.measurement import Measurement, per_unit_mass_warning
 from negstiff.inference.steps.selection import block_rows, block_scores, indistinguishable
+from negstiff.inference.steps.shape import fit_shape
 from negstiff.inference.steps.validation import boundedness, restarted_free_runs
 from negstiff.inference.steps.weak import (
     BASE_FIELDS,
     Bagging,
+    Library,
     WeakForm,
     WeakFormError,
-    aux_terms,
     fit_support,
     is_ring_down,
     known_input_gain,
     mass_of,
-    model_from,
-    term_fields,
     terms,
     test_function_half_width,
 )
-from negstiff.models import effects
+from negstiff.models import effects, laws
 
 MIN_SAMPLES = 4000
 
@@ -194,6 +203,8 @@ class SINDy(StructureResults, Identifier):
         "seed": RANDOM_STATE,
         "refine": Boolean(none=True),
         "element": ElementPlace(),
+        "law": RESTORING_LAW,
+        "damping": DAMPING_LAW,
     }
 
     def __init__(
@@ -209,9 +220,13 @@ class SINDy(StructureResults, Identifier):
         seed: int | np.random.Generator | None = 0,
         refine: bool | None = None,
         element: str | tuple[int, int] | None = None,
+        law: str | None = None,
+        damping: str = laws.DEFAULT_DAMPING,
     ):
         self.element = element
         self.refine = refine
+        self.law = law
+        self.damping = damping
         self.weights = weights
         self.n_models = n_models
         self.subset_fraction = subset_fraction
@@ -256,6 +271,9 @@ class SINDy(StructureResults, Identifier):
         self.record_kind_ = kind = record_kind(rec)
         if at is None:
             return super().fit(identification_record(rec, kind))
+        if self.law is not None:
+            raise InputError(f"{type(self).__name__}(law={self.law!r}): a law is read on a single DOF's record; a "
+                             "structure's element has its own basis (element=): give no law")
         self.result_ = identify_sindy(self, identification_record(rec, kind), at)
         self.selected_ = list(self.result_.details["selected_terms"])
         self.ensemble_ = self.result_.details["ensemble"]
@@ -304,9 +322,10 @@ class SINDy(StructureResults, Identifier):
         """
         return ring_down_window(rec, self.validation_fraction, self.selection_fraction, self.window_s)
 
-    def _estimate(self, rec: Measurement, n_id: int) -> Estimate:
+    def _estimate(self, rec: Measurement, n_id: int, law: laws.Law | None = None) -> Estimate:
         """SINDy's own estimate: the support selected on held-out residuals, refitted on the
-        identification part, with the ensemble's inclusion probabilities (the shared stages follow).
+        identification part, with the ensemble's inclusion probabilities (the shared stages follow); its library
+        the registry's catalogue, or ``law``'s columns and the damping law's (``Library``).
         """
         n_fit = int(round(rec.n * (1 - self.validation_fraction - self.selection_fraction)))
         ident = rec.segment(0, n_id)
@@ -316,15 +335,15 @@ class SINDy(StructureResults, Identifier):
 
         # 1. the sparsity path on the fitting part; 2. each support refitted there and scored by
         # its held-out weak residual over the selection part, in blocks
-        path = self._path(rec, form, gain, n_fit, n_id, z0s, v0s)
-        aux = self._aux(rec)
-        library = terms() + aux_terms(aux)
-        fields = term_fields() | {t: (t, -1.0) for t in aux_terms(aux)}
+        lib = self._library(rec, n_fit, n_id, law)
+        path = self._path(rec, form, gain, n_fit, n_id, z0s, v0s, lib)
+        library = lib.labels()
+        fields = lib.fields()
         self.path_ = sorted(path, key=lambda p: (p["n_terms"], p["heldout_residual_percent"]))
         chosen = self._select(self.path_)
         if not np.isfinite(chosen["free_run_percent"]):
-            lossless = not any(getattr(t.law, "v_odd", False) or isinstance(t.law, effects.SmoothSign)
-                               for t in effects.library_terms() if t.label in chosen["terms"])  # fmt: skip
+            dissipative = {"c", "c_nl", *(e.name for e in effects.REGISTRY if e.dissipative)}
+            lossless = not any(fields[t][0] in dissipative for t in chosen["terms"])
             raise SINDyError(
                 f"{rec.source}: the selected model ({', '.join(chosen['terms'])}) diverged in the restarted free runs"
                 + ("; no damping term was selected, though a device under an input dissipates (is z in one frame "
@@ -332,12 +351,12 @@ class SINDy(StructureResults, Identifier):
             )
 
         # 3. refit the chosen support on all identification data; the ensemble at the same weight
-        sys_id = form.system(ident, aux=aux)
+        sys_id = form.system(ident, library=lib)
         phys = fit_support(sys_id, gain, support=chosen["support"])
         bagging = Bagging(self.n_models, self.subset_fraction, self.seed_)
         phys_ens = fit_support(sys_id, gain, chosen["weight"], bagging=bagging)
         mass, mass_source = mass_of(rec, gain, phys[-1])
-        model = model_from(phys, mass, aux)
+        model = lib.model(phys, mass)
         self.selected_ = list(chosen["terms"])
         self.weight_ = chosen["weight"]
         self.ensemble_ = {
@@ -370,6 +389,9 @@ class SINDy(StructureResults, Identifier):
                 "derivatives": form.derivatives["method"],
                 "sgn_noise_scale": form.velocity_noise,
                 "library": list(library) + ["u"],
+                "law": lib.restoring.name if lib.restoring else "catalogue",
+                "damping_law": lib.damping.name if lib.damping else "catalogue",
+                **({"shape": self.shape_.to_json()} if lib.by_law else {}),
                 "input_coefficient": (
                     "fixed by physics (an equality constraint: pysindy's ConstrainedSR3 on the sparsity path and "
                     "the ensemble, constrained least squares in the support's refit)"
@@ -386,14 +408,25 @@ class SINDy(StructureResults, Identifier):
             },
         )
 
-    def _path(self, rec: Measurement, form: WeakForm, gain, n_fit: int, n_id: int, z0s, v0s) -> list[dict]:
+    def _library(self, rec: Measurement, n_fit: int, n_id: int, law: laws.Law | None) -> Library:
+        """The columns the path selects among: the registry's catalogue (``law`` None), or the laws' at the shape
+        the record gives their shaped parts (``shape.fit_shape``), with the record's auxiliary channels.
+        """
+        aux = self._aux(rec)
+        if law is None:
+            return Library.catalogue(aux)
+        fit = fit_shape(rec, law, self.damping, n_fit=n_fit, n_id=n_id, window_s=self.scoring_window(rec), aux=aux)
+        self.shape_ = fit
+        return Library.of_laws(law, self.damping, fit.shape, aux)
+
+    def _path(self, rec: Measurement, form: WeakForm, gain, n_fit: int, n_id: int, z0s, v0s,
+              lib: Library) -> list[dict]:  # fmt: skip
         """The supports of the L0 path on samples [0, n_fit), each refitted there and scored on [n_fit,
         n_id): its held-out weak residual in blocks, its restarted free runs, an escape past the stroke.
         """
         ident = rec.segment(0, n_id)
-        aux = self._aux(rec)
-        sys_fit = form.system(rec, 0, n_fit, aux)
-        sys_sel = form.system(rec, n_fit, n_id, aux)
+        sys_fit = form.system(rec, 0, n_fit, library=lib)
+        sys_sel = form.system(rec, n_fit, n_id, library=lib)
         W_sel, y_sel = sys_sel.W_physical, sys_sel.y_physical
         window = self.scoring_window(rec)
         rows = block_rows(window, rec.fs, form.stride)
@@ -405,7 +438,7 @@ class SINDy(StructureResults, Identifier):
                 f"needed ({100 * self.selection_fraction:.0f} % of the record scores the candidate models in "
                 f"{window:.3g} s blocks, two at least)"
             )
-        library = terms() + aux_terms(aux)
+        library = lib.labels()
         # a ring-down (a decay, a hammer's record) dissipates by what it is: its viscous term is in every support.
         # The equation error cannot weigh it: c z' is 2 zeta of the inertia's size (3 % at 1.5 %), under the
         # selection's margin, so a double well's hammer record selected no damping at all (measured)
@@ -421,7 +454,7 @@ class SINDy(StructureResults, Identifier):
         for support, weights in supports.items():
             phys = fit_support(sys_fit, gain, support=support)
             try:
-                model = model_from(phys, mass_of(rec, gain, phys[-1])[0], aux)
+                model = lib.model(phys, mass_of(rec, gain, phys[-1])[0])
                 fr = restarted_free_runs(model, ident, n_fit, window, z0s, v0s)
                 # a support whose potential opens an escape just past the stroke is never selected
                 escape = boundedness(model, ident, free_run=False)["escape_z"]

@@ -35,6 +35,7 @@ from __future__ import annotations
 
 import contextlib
 import warnings
+from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
@@ -44,7 +45,7 @@ from scipy import signal
 from negstiff.errors import MeasurementError
 from negstiff.inference.record.derivatives import noise_floor
 from negstiff.inference.record.measurement import Measurement
-from negstiff.models import Model, effects
+from negstiff.models import Model, effects, laws
 
 BASE_FIELDS = tuple(effects.BASE_TERMS)
 """The model file's base fields (k0, k1, k2, k3, c, c_nl), each a library term."""
@@ -71,6 +72,77 @@ def aux_terms(channels) -> tuple[str, ...]:
 
 class WeakFormError(MeasurementError):
     """The record's weak form cannot be built (no excitation: a constant response or library term)."""
+
+
+@dataclass(frozen=True)
+class Library:
+    """The columns a weak-form fit regresses z'' on, as pysindy's feature library: passed in, not chosen by a
+    flag. ``Library.catalogue`` is the default, every catalogued term of the effect registry (``terms``);
+    ``Library.of_laws`` a restoring and a damping law at a shape of their shaped parts (``models.laws``). Both
+    append the record's measured auxiliary channels (``aux``); the input's column follows them in every system.
+    """
+
+    restoring: laws.Law | None = None
+    damping: laws.Law | None = None
+    shape: laws.Shape | None = None
+    aux: tuple[str, ...] = ()
+
+    @classmethod
+    def catalogue(cls, aux: tuple[str, ...] = ()) -> Library:
+        """The default library: the registry's catalogued terms (``terms``), then the auxiliary channels'."""
+        return cls(aux=tuple(aux))
+
+    @classmethod
+    def of_laws(cls, restoring, damping, shape: laws.Shape | None = None, aux: tuple[str, ...] = ()) -> Library:
+        """The columns of a restoring and a damping law (names or ``Law``s) at ``shape``, then the channels'."""
+        return cls(laws.get(restoring, "restoring"), laws.get(damping, "damping"), shape, tuple(aux))
+
+    @property
+    def by_law(self) -> bool:
+        """Whether the columns are laws' (else the registry's catalogue)."""
+        return self.restoring is not None
+
+    def labels(self) -> tuple[str, ...]:
+        """The columns' names (the input's excluded): a term's label, a shaped part's ``PART[j]``, ``aux:NAME``."""
+        if not self.by_law:
+            return terms() + aux_terms(self.aux)
+        assert self.restoring is not None and self.damping is not None
+        cols = self.restoring.column_list(self.shape) + self.damping.column_list(self.shape)
+        return tuple(c.label for c in cols) + aux_terms(self.aux)
+
+    def fields(self) -> dict[str, tuple[str, float]]:
+        """Each column's label -> (the model field, effect or part it sizes, the sign of the value relative to
+        -m times the coefficient), as ``term_fields``.
+        """
+        if not self.by_law:
+            return term_fields() | {t: (t, -1.0) for t in aux_terms(self.aux)}
+        assert self.restoring is not None and self.damping is not None
+        cols = self.restoring.column_list(self.shape) + self.damping.column_list(self.shape)
+        return {c.label: (c.target, c.sign) for c in cols} | {t: (t, -1.0) for t in aux_terms(self.aux)}
+
+    def columns(self, z: np.ndarray, v: np.ndarray, u: np.ndarray, velocity_noise: float,
+                aux: Mapping[str, np.ndarray] | None = None) -> np.ndarray:  # fmt: skip
+        """The library evaluated pointwise (samples, columns + 1), the input u last."""
+        if not self.by_law:
+            F = library_columns(z, v, u, velocity_noise)[:, :-1]
+        else:
+            assert self.restoring is not None and self.damping is not None
+            F = np.column_stack([self.restoring.columns(z, v, self.shape, velocity_noise),
+                                 self.damping.columns(z, v, self.shape, velocity_noise)])  # fmt: skip
+        extra = [np.asarray((aux or {})[a], float) for a in self.aux]
+        return np.column_stack([F, *extra, u])
+
+    def model(self, phys: np.ndarray, mass: float) -> Model:
+        """The model of the columns' z'' coefficients (per unit mass; the input's last) and the mass."""
+        if not self.by_law:
+            return model_from(phys, mass, self.aux)
+        assert self.restoring is not None and self.damping is not None
+        n = len(self.labels()) - len(self.aux)
+        model = laws.compose(self.restoring, self.damping, phys[:n], mass, self.shape)
+        extra = {name: -mass * float(c) for name, c in zip(aux_terms(self.aux), phys[n : n + len(self.aux)],
+                                                            strict=True) if c != 0}  # fmt: skip
+        return model if not extra else Model.from_dict({**model.to_dict(), "extra": {**model.to_dict()["extra"],
+                                                                                   **extra}})  # fmt: skip
 
 
 def library_columns(z: np.ndarray, v: np.ndarray, u: np.ndarray, velocity_noise: float) -> np.ndarray:
@@ -201,20 +273,22 @@ class WeakForm:
         """Extra columns (samples, k) through the same test functions as the library."""
         return weak_project(cols, test_function(self.half, dt)[0], self.stride, dt)
 
-    def system(self, rec: Measurement, lo: int = 0, hi: int | None = None, aux: tuple[str, ...] = ()) -> WeakSystem:
+    def system(self, rec: Measurement, lo: int = 0, hi: int | None = None, aux: tuple[str, ...] = (),
+               library: Library | None = None) -> WeakSystem:  # fmt: skip
         """The weak-form system of the samples [lo, hi) of ``rec`` (the record this form was made of,
-        or its first part); ``aux``: measured auxiliary channels of ``rec`` whose terms theta a(t) join
-        the library (``aux_terms``), before the input's column.
+        or its first part) over ``library`` (default: the registry's catalogue, ``Library.catalogue``); ``aux``:
+        measured auxiliary channels of ``rec`` whose terms theta a(t) join the catalogue (``aux_terms``), before
+        the input's column (a ``library`` names its own).
         """
         seg = rec.segment(lo, rec.n if hi is None else hi)
-        F = library_columns(self.zs[lo:hi], self.v[lo:hi], seg.u, self.velocity_noise)
-        if aux:
-            F = np.column_stack([F[:, :-1], *(np.asarray(seg.aux[a], float) for a in aux), F[:, -1]])
+        library = Library.catalogue(aux) if library is None else library
+        F = library.columns(self.zs[lo:hi], self.v[lo:hi], seg.u, self.velocity_noise, seg.aux)
         phi, d2 = test_function(self.half, seg.dt)
         W = weak_project(F, phi, self.stride, seg.dt)
         y = weak_project((seg.displacement - seg.displacement.mean())[:, None], d2, self.stride, seg.dt)[:, 0]
         col = W.std(axis=0)
-        col[0] = np.abs(W[:, 0]).mean()  # the constant's projection: int phi dt, the same for every row
+        const = np.flatnonzero(np.ptp(F[:, :-1], axis=0) == 0)  # a constant column (k0's): int phi dt on every row
+        col[const] = np.abs(W[:, const]).mean(axis=0)
         if not np.any(seg.u):
             # no input (a free decay, or a hammer record's quiet stretch between hits): the weak form without an
             # input term; its column is zero, so its coefficient (fixed: ``known_input_gain``) acts on nothing

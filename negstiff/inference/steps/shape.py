@@ -1,0 +1,225 @@
+"""The shape of a law's shaped parts from a record: variable projection on the weak form.
+
+A law whose parts are linear in their coefficients and nonlinear in their shape (``models.shaped``: a magnet's
+gap, the rod frame's length and angle, a spline's knots) is fitted by separating the two (Golub & Pereyra 1973,
+SIAM J. Numer. Anal. 10:413): at a shape, the coefficients are the weak form's constrained least squares
+(``weak.fit_support``: the input's coefficient fixed by physics), and the shape minimises what that least
+squares leaves, its relative weak residual. Only the shaped parts' columns depend on the shape, so only they
+are projected again at each trial (the others once).
+
+A spline's shape is its knots: evenly spaced over the record's stroke (its 0.5 and 99.5 % quantiles), their
+number chosen by what the fit predicts: each count is fitted on the first part and scored on the next by its
+weak residual in blocks, and the fewest knots whose score is within one standard error (or ``margin``) of the
+best are kept (the one-standard-error rule, as SINDy's selection; Hastie, Tibshirani & Friedman 2009, 7.10).
+
+Every method that reads a law takes its shape from here (SINDy's library, NSI's basis, the law comparison, the
+record's preparation), so a shape is found once per record and law (kept with the record, ``Measurement.derived``).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from scipy import optimize
+
+from negstiff.inference.record.measurement import Measurement
+from negstiff.inference.steps.selection import block_rows, block_scores, indistinguishable
+from negstiff.inference.steps.weak import Library, WeakForm, WeakFormError, fit_support, known_input_gain
+from negstiff.models import laws
+from negstiff.models.shaped import ShapedLaw, Spline
+
+STROKE_QUANTILES = (0.005, 0.995)
+"""The record's stroke: these quantiles of its z (a spline's knots span it; the shapes' search box scales with it)."""
+SPLINE_MARGIN = 0.02
+"""A spline with more knots must lower the held-out weak residual by more than this fraction (or one standard
+error) of the best count's to be kept (the equation error's floor on a lab record: ``selection``)."""
+
+
+@dataclass(frozen=True)
+class ShapeFit:
+    """A law's shape on a record: ``shape`` (part -> fields), the relative weak residual it leaves on the fitting
+    part, each trial's (``tried``), and how it was chosen (``method``).
+    """
+
+    shape: dict[str, dict[str, Any]]
+    residual: float
+    tried: list[dict[str, Any]] = field(default_factory=list)
+    method: str = ""
+
+    def to_json(self) -> dict[str, Any]:
+        """The shape and its search, as JSON."""
+        return {"shape": {k: {f: list(v) if isinstance(v, tuple) else v for f, v in s.items()}
+                          for k, s in self.shape.items()},
+                "residual": self.residual, "method": self.method, "tried": self.tried}  # fmt: skip
+
+
+def stroke(rec: Measurement, n: int | None = None) -> tuple[float, float]:
+    """The stroke of ``rec``'s first ``n`` samples: ``STROKE_QUANTILES`` of z [m]."""
+    z = rec.z[: rec.n if n is None else n]
+    lo, hi = np.quantile(z, STROKE_QUANTILES)
+    return float(lo), float(hi)
+
+
+class _Problem:
+    """The weak-form least squares of a law over samples [lo, hi) of a record, its shape-free columns projected
+    once: ``residual(shape)`` projects only the shaped parts' columns.
+    """
+
+    def __init__(self, rec: Measurement, restoring: laws.Law, damping: laws.Law, lo: int, hi: int,
+                 aux: tuple[str, ...] = ()):  # fmt: skip
+        self.rec, self.restoring, self.damping, self.lo, self.hi, self.aux = rec, restoring, damping, lo, hi, aux
+        self.form = WeakForm.of(rec)
+        self.gain = known_input_gain(rec)
+        self.shaped = restoring.shaped()
+        self.zs = self.form.zs[lo:hi]
+
+    def library(self, shape) -> Library:
+        return Library.of_laws(self.restoring, self.damping, shape, self.aux)
+
+    def system(self, shape):
+        return self.form.system(self.rec, self.lo, self.hi, library=self.library(shape))
+
+    def residual(self, shape) -> float:
+        """The relative weak residual ||y - W theta||^2 / ||y||^2 of the constrained least squares at ``shape``
+        (inf where the shape cannot be evaluated: the rods cannot reach the stroke).
+        """
+        with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
+            try:
+                system = self.system(shape)
+            except (WeakFormError, ValueError, np.linalg.LinAlgError):
+                return math.inf
+            if not np.all(np.isfinite(system.W)):
+                return math.inf
+            phys = fit_support(system, self.gain)
+        r = system.y_physical - system.W_physical @ phys
+        return float(np.mean(r**2) / np.mean(system.y_physical**2))
+
+
+def _box_search(problem: _Problem, name: str, law: ShapedLaw, rng_stroke, others) -> tuple[dict, float, list]:
+    """One shaped part's shape by bounded minimisation of the weak residual from each of its guesses (the other
+    parts' shapes held at ``others``), in coordinates that map the part's box onto the real line.
+    """
+    bounds = law.shape_bounds(rng_stroke)
+    keys = list(bounds)
+    lo = np.array([bounds[k][0] for k in keys])
+    hi = np.array([bounds[k][1] for k in keys])
+
+    def unpack(x):
+        # a logistic map of each coordinate into its box: the search is unconstrained and never leaves it
+        return {k: float(a + (b - a) / (1 + math.exp(-xi))) for k, a, b, xi in zip(keys, lo, hi, x, strict=True)}
+
+    def pack(shape):
+        f = np.clip((np.array([shape[k] for k in keys]) - lo) / (hi - lo), 1e-6, 1 - 1e-6)
+        return np.log(f / (1 - f))
+
+    def objective(x):
+        return problem.residual({**others, name: unpack(x)})
+
+    tried, best, best_r = [], None, math.inf
+    for guess in law.shape_guesses(rng_stroke):
+        x0 = pack(guess)
+        sol = optimize.minimize(objective, x0, method="Nelder-Mead",
+                                options={"xatol": 1e-4, "fatol": 1e-9, "maxfev": 60 * len(keys)})  # fmt: skip
+        shape, r = unpack(sol.x), float(sol.fun)
+        tried.append({"start": guess, "shape": shape, "residual": r})
+        if r < best_r:
+            best, best_r = shape, r
+    if best is None or not math.isfinite(best_r):
+        raise WeakFormError(f"{problem.rec.source}: no shape of the {name} part explains the record (every trial "
+                            "failed: is the stroke inside the part's reach?)")  # fmt: skip
+    return best, best_r, tried
+
+
+def _spline_knots(problem_fit: _Problem, problem_sel: _Problem, name: str, law: Spline, rng_stroke, others,
+                  window_s: float) -> tuple[dict, float, list]:  # fmt: skip
+    """A spline's knots: each count of ``law.shape_guesses`` fitted on the fitting part and scored by its weak
+    residual in blocks on the selection part; the fewest knots within one standard error (or ``SPLINE_MARGIN``)
+    of the best (module docstring).
+    """
+    rec = problem_fit.rec
+    rows = block_rows(window_s, rec.fs, problem_fit.form.stride)
+    trials = []
+    for guess in law.shape_guesses(rng_stroke):
+        shape = {**others, name: guess}
+        try:
+            sys_fit, sys_sel = problem_fit.system(shape), problem_sel.system(shape)
+        except (WeakFormError, ValueError, np.linalg.LinAlgError):
+            continue
+        phys = fit_support(sys_fit, problem_fit.gain)
+        y = sys_sel.y_physical
+        r2 = (y - sys_sel.W_physical @ phys) ** 2
+        blocks = block_scores(r2, rows, y.var()) if y.size >= 2 * rows else np.array([r2.mean() / y.var()])
+        trials.append((guess, blocks, problem_fit.residual(shape)))
+    if not trials:
+        raise WeakFormError(f"{rec.source}: no spline over the stroke could be fitted (too little motion?)")
+    best = min(trials, key=lambda t: t[1].mean())
+    for guess, blocks, r in trials:  # the fewest knots first
+        if indistinguishable(blocks, best[1], SPLINE_MARGIN):
+            tried = [{"shape": {"knots": list(g["knots"])}, "heldout_residual": float(b.mean()), "residual": rr}
+                     for g, b, rr in trials]  # fmt: skip
+            return guess, r, tried
+    raise AssertionError("the best count always qualifies")  # pragma: no cover
+
+
+def fit_shape(rec: Measurement, restoring, damping, *, n_fit: int | None = None, n_id: int | None = None,
+              window_s: float = 2.0, aux: tuple[str, ...] = ()) -> ShapeFit:  # fmt: skip
+    """The shape of ``restoring``'s shaped parts on ``rec`` (module docstring): found on samples [0, n_fit), a
+    spline's knot count scored on [n_fit, n_id) in ``window_s`` blocks (default: the first 60 % and the next 20 %
+    of the record). A law without shaped parts has the empty shape. Kept with the record.
+
+    Parameters
+    ----------
+    rec : Measurement
+        The record (its z in the physical frame: ``pin_frame``).
+    restoring, damping : str or Law
+        The laws (``models.laws``).
+    n_fit, n_id : int, optional
+        The fitting part's and the identification part's ends (samples).
+    window_s : float
+        The blocks' length [s] that score a spline's knot counts.
+    aux : tuple of str
+        Measured auxiliary channels whose terms join the fit.
+
+    Returns
+    -------
+    ShapeFit
+    """
+    restoring, damping = laws.get(restoring, "restoring"), laws.get(damping, "damping")
+    n_id = int(round(0.8 * rec.n)) if n_id is None else n_id
+    n_fit = int(round(0.6 * rec.n)) if n_fit is None else n_fit
+    key = ("shape", restoring.name, damping.name, n_fit, n_id, float(window_s), tuple(aux))
+    hit = rec.derived.get(key)
+    if hit is not None:
+        return hit
+    shaped = restoring.shaped()
+    fitting = _Problem(rec, restoring, damping, 0, n_fit, tuple(aux))
+    if not shaped:
+        out = ShapeFit({}, fitting.residual({}), method="no shaped part")
+        rec.derived[key] = out
+        return out
+    rng = stroke(rec, n_id)
+    shape: dict[str, dict[str, Any]] = {n: law.shape_guesses(rng)[0] for n, law in shaped.items()}
+    tried: list[dict[str, Any]] = []
+    methods = []
+    residual = math.inf
+    for name, law in shaped.items():  # one part at a time (the laws have one shaped part each)
+        others = {k: v for k, v in shape.items() if k != name}
+        if isinstance(law, Spline):
+            selecting = _Problem(rec, restoring, damping, n_fit, n_id, tuple(aux))
+            best, residual, t = _spline_knots(fitting, selecting, name, law, rng, others, window_s)
+            methods.append(f"{name}: {len(best['knots']) - 1} intervals over the stroke "
+                           f"[{1e3 * rng[0]:.3g}, {1e3 * rng[1]:.3g}] mm, the fewest whose held-out weak residual is "
+                           f"within one standard error (or {100 * SPLINE_MARGIN:g} %) of the best")  # fmt: skip
+        else:
+            best, residual, t = _box_search(fitting, name, law, rng, others)
+            methods.append(f"{name}: " + ", ".join(f"{k} = {v:.4g}" for k, v in best.items())
+                           + " by variable projection (Nelder-Mead over the part's box from "
+                           f"{len(t)} starts, the weak form's least squares inside)")  # fmt: skip
+        shape[name] = best
+        tried += [{"part": name, **x} for x in t]
+    out = ShapeFit(shape, residual, tried, "; ".join(methods))
+    rec.derived[key] = out
+    return out

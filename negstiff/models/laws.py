@@ -1,0 +1,249 @@
+"""Restoring-force and damping laws: the named forms a model's force may take, each a composition of parts.
+
+A law frees some of the model file's base fields (``k0``..``k3``; ``c``, ``c_nl``) and adds parts of the effect
+registry (``effects.REGISTRY``: monomials, a smoothed sign, the shaped parts of ``models.shaped``). Every method
+reads a law the same way, as pysindy reads a feature library: at a shape of its shaped parts, the law is a list
+of columns of z and z' (``Law.columns``), each column's coefficient one model field or one part coefficient
+(``Law.model``). NSI takes the columns as its nonlinear basis, SINDy and the weak-form fits as their library,
+the refinement and the posterior as their parameters, and the simulator as the model the coefficients make.
+
+Adding a law is one entry of ``LAWS`` (a test adds one with ``registered``), as adding an effect is one entry of
+the effect registry.
+
+The restoring laws (``kind="restoring"``):
+
+* ``cubic``: K = k3 z^3 + k2 z^2 - k1 z + k0, the reference study's Eq. (2).
+* ``quintic``, ``septic``: polynomials of order 5 and 7 (the top coefficient must come out positive: a bounded
+  tail, checked where a model is judged).
+* ``magnet``: a linear spring, a constant (a tilt) and two facing magnets as point dipoles (``shaped.DipoleMagnet``).
+* ``oblique_springs``: a linear spring, a constant and two oblique springs' negative stiffness
+  (``shaped.ObliqueSprings``).
+* ``geometric``: the reference study's rod-frame geometry (``shaped.RodFrame``) with gravity's constant.
+* ``spline``: a smooth force with no formula, a cubic B-spline over the record's stroke (``shaped.Spline``).
+
+The damping laws (``kind="damping"``): ``viscous`` (c z'), ``quadratic`` (c z' + c_nl z'|z'|, the reference
+study's), ``cubic_damping`` (c z' + c3 z'^3) and ``friction`` (c z' + F tanh(z'/v_s)).
+"""
+
+from __future__ import annotations
+
+import contextlib
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from . import effects
+from .shaped import ShapedLaw
+
+Shape = Mapping[str, Mapping[str, Any]]
+"""The shapes of a law's shaped parts: part name -> its shape fields (``{"magnet": {"d": 0.02}}``)."""
+
+
+@dataclass(frozen=True)
+class Column:
+    """One column of a law: its label, what its coefficient becomes (a base field, an effect, or a shaped
+    part's coefficient ``index``), and the sign of that value relative to -m times the coefficient in z''.
+    """
+
+    label: str
+    target: str
+    index: int
+    sign: float
+
+
+@dataclass(frozen=True)
+class Law:
+    """A named law: the base fields it frees and the registry parts it adds (module docstring).
+
+    Parameters
+    ----------
+    name : str
+        The name the CLI (``--law``, ``--damping``) and the results use.
+    kind : {"restoring", "damping"}
+        Which force the law is.
+    fields : tuple of str
+        The model file's base fields it frees (the others are zero).
+    parts : tuple of str
+        The effect registry's entries it adds.
+    title : str
+        One line for people: the law's formula.
+    reference : str
+        Where the form comes from.
+    """
+
+    name: str
+    kind: str
+    fields: tuple[str, ...]
+    parts: tuple[str, ...] = ()
+    title: str = ""
+    reference: str = ""
+
+    def __post_init__(self):
+        if self.kind not in ("restoring", "damping"):
+            raise ValueError(f"a law is 'restoring' or 'damping', got {self.kind!r}")
+        for f in self.fields:
+            if f not in effects.BASE_TERMS:
+                raise ValueError(f"law {self.name}: {f!r} is not a base field ({', '.join(effects.BASE_TERMS)})")
+        for p in self.parts:
+            effects.get(p)  # raises for an unknown part
+
+    # --- its parts ------------------------------------------------------------------------------------
+    def shaped(self) -> dict[str, ShapedLaw]:
+        """The law's shaped parts by name (their columns depend on a shape: ``models.shaped``)."""
+        return {p: law for p in self.parts if isinstance(law := effects.get(p).law, ShapedLaw)}
+
+    def shape_guesses(self, stroke: tuple[float, float]) -> list[dict[str, dict[str, Any]]]:
+        """Starting shapes of the law's shaped parts for a record whose z spans ``stroke`` [m] (every combination
+        of each part's guesses; one empty shape for a law without shaped parts).
+        """
+        out: list[dict[str, dict[str, Any]]] = [{}]
+        for name, law in self.shaped().items():
+            out = [{**s, name: g} for s in out for g in law.shape_guesses(stroke)]
+        return out
+
+    def shape_of(self, model) -> dict[str, dict[str, Any]]:
+        """The shapes of the law's shaped parts in a model."""
+        return {name: law.shape_of(model.extra[name]) for name, law in self.shaped().items() if name in model.extra}
+
+    # --- columns ------------------------------------------------------------------------------------
+    def column_list(self, shape: Shape | None = None) -> list[Column]:
+        """The law's columns (labels and targets) at ``shape``: the base fields' terms, then each scalar part's,
+        then each shaped part's coefficients.
+        """
+        cols = [Column(effects.BASE_TERMS[f][0].label, f, 0, effects.BASE_TERMS[f][1]) for f in self.fields]
+        for p in self.parts:
+            e = effects.get(p)
+            if isinstance(e.law, ShapedLaw):
+                n = len(e.law.columns((shape or {})[p], np.zeros(1)))
+                cols += [Column(f"{p}[{j}]", p, j, -1.0) for j in range(n)]
+            else:
+                cols.append(Column(e.law.label, p, 0, -1.0))
+        return cols
+
+    def columns(self, z, v, shape: Shape | None = None, velocity_noise: float = 0.0) -> np.ndarray:
+        """The law's columns evaluated at the states z [m], z' [m/s] (samples, columns), at ``shape``; a smoothed
+        sign's column is the expected sign of the true velocity given the noisy one (``effects.SmoothSign``).
+        """
+        z, v = np.asarray(z, float), np.asarray(v, float)
+        out = [effects.BASE_TERMS[f][0].column(z, v, velocity_noise) for f in self.fields]
+        for p in self.parts:
+            law = effects.get(p).law
+            if isinstance(law, ShapedLaw):
+                out += [np.broadcast_to(c, z.shape) for c in law.columns((shape or {})[p], z)]
+            else:
+                out.append(law.column(z, v, velocity_noise))
+        return np.column_stack(out) if out else np.zeros((z.size, 0))
+
+    def values(self, coefficients, mass: float, shape: Shape | None = None) -> tuple[dict[str, float], dict]:
+        """The model fields and extra effects of the law's z'' coefficients (per unit mass; ``column_list``'s
+        order) and the mass: base fields and scalar effects ``sign x m x coefficient``, a shaped part's value from
+        its shape and its coefficients ``-m x coefficient``.
+        """
+        coefficients = np.asarray(coefficients, float)
+        fields: dict[str, float] = {}
+        extra: dict[str, Any] = {}
+        shaped: dict[str, list[float]] = {}
+        for col, c in zip(self.column_list(shape), coefficients, strict=True):
+            value = col.sign * mass * float(c)
+            if col.target in effects.BASE_TERMS:
+                fields[col.target] = value
+            elif col.target in self.shaped():
+                shaped.setdefault(col.target, []).append(value)
+            else:
+                extra[col.target] = value
+        for name, coef in shaped.items():
+            extra[name] = self.shaped()[name].value_of((shape or {})[name], coef)
+        return fields, extra
+
+
+def compose(restoring: Law, damping: Law, coefficients, mass: float, shape: Shape | None = None,
+            k0: float | None = None):  # fmt: skip
+    """The model of a restoring and a damping law's z'' coefficients (restoring first, then damping, as
+    ``Law.column_list`` orders each) and the mass; ``k0`` given where the restoring law leaves it out.
+    """
+    from .equation import Model
+
+    n = len(restoring.column_list(shape))
+    fr, er = restoring.values(coefficients[:n], mass, shape)
+    fd, ed = damping.values(coefficients[n:], mass, shape)
+    fields = {k: 0.0 for k in ("k1", "k2", "k3", "c", "c_nl")} | fr | fd
+    if "k0" not in fields:
+        fields["k0"] = 0.0 if k0 is None else k0
+    return Model(m=mass, **fields, extra={**er, **ed})
+
+
+LAWS: list[Law] = [
+    Law("cubic", "restoring", ("k0", "k1", "k2", "k3"), (), "K = k3 z^3 + k2 z^2 - k1 z + k0",
+        "the reference study, Eq. (2)"),
+    Law("quintic", "restoring", ("k0", "k1", "k2", "k3"), ("quartic_stiffness", "quintic_stiffness"),
+        "K = k5 z^5 + k4 z^4 + k3 z^3 + k2 z^2 - k1 z + k0", "a polynomial of order 5"),
+    Law("septic", "restoring", ("k0", "k1", "k2", "k3"),
+        ("quartic_stiffness", "quintic_stiffness", "sextic_stiffness", "septic_stiffness"),
+        "K = k7 z^7 + ... + k2 z^2 - k1 z + k0", "a polynomial of order 7"),
+    Law("magnet", "restoring", ("k0", "k1"), ("magnet",), "K = k0 - k1 z - 3 A z / (d^2 + z^2)^(5/2)",
+        "point dipoles: Moon & Holmes 1979; Mann & Owens 2010; Stanton, McGehee & Mann 2010"),
+    Law("oblique_springs", "restoring", ("k0", "k1"), ("oblique_springs",),
+        "K = k0 - k1 z - 2 P z / sqrt(a^2 + z^2)", "Carrella, Brennan & Waters 2007, Eq. (2)"),
+    Law("geometric", "restoring", ("k0",), ("rod_frame",), "K = k0 + 2 k_f (s + D0) s'(z)",
+        "the reference device's rod frame: docs/device-model.md"),
+    Law("spline", "restoring", (), ("spline",), "K = a cubic B-spline over the stroke, straight beyond it",
+        "de Boor 1978; knots chosen by the data"),
+    Law("viscous", "damping", ("c",), (), "D = c z'", "linear viscous damping"),
+    Law("quadratic", "damping", ("c", "c_nl"), (), "D = c z' + c_nl z'|z'|", "the reference study's damping"),
+    Law("cubic_damping", "damping", ("c",), ("cubic_damping",), "D = c z' + c3 z'^3", "a cubic damper"),
+    Law("friction", "damping", ("c",), ("coulomb_friction",), "D = c z' + F tanh(z' / v_s)",
+        "viscous and Coulomb friction, smoothed"),
+]  # fmt: skip
+"""The laws, in the order the CLI lists them."""
+
+DEFAULT_RESTORING = "cubic"
+DEFAULT_DAMPING = "quadratic"
+
+
+def names(kind: str | None = None) -> tuple[str, ...]:
+    """The laws' names (of one ``kind``: ``"restoring"`` or ``"damping"``)."""
+    return tuple(law.name for law in LAWS if kind is None or law.kind == kind)
+
+
+def get(name: str | Law, kind: str | None = None) -> Law:
+    """The law named ``name`` (a ``Law`` passes through), checked against ``kind``; ``ValueError`` otherwise."""
+    if isinstance(name, Law):
+        law = name
+    else:
+        law = next((x for x in LAWS if x.name == name), None)  # type: ignore[assignment]
+        if law is None:
+            known = names(kind)
+            raise ValueError(f"unknown {kind + ' ' if kind else ''}law {name!r}; known: {', '.join(known)}")
+    if kind is not None and law.kind != kind:
+        raise ValueError(f"{law.name} is a {law.kind} law, not a {kind} one; {kind} laws: {', '.join(names(kind))}")
+    return law
+
+
+def of_model(model, kind: str = "restoring") -> Law:
+    """The simplest law that holds ``model``'s force of one ``kind``: the first of ``LAWS`` whose parts include
+    every extra effect of that kind the model has and whose fields include its nonzero base fields.
+    """
+    disp = {"restoring": True, "damping": False}[kind]
+    used = {n for n, v in model.extra.items() if not n.startswith(effects.AUX_PREFIX)
+            and effects.get(n).law.displacement_only == disp}  # fmt: skip
+    base = {f for f in (("k1", "k2", "k3") if disp else ("c", "c_nl")) if getattr(model, f) != 0}
+    for law in LAWS:
+        if law.kind == kind and used <= set(law.parts) and base <= set(law.fields):
+            return law
+    raise ValueError(f"no {kind} law holds the model's {', '.join(sorted(used | base))}")
+
+
+@contextlib.contextmanager
+def registered(*laws: Law):
+    """Add laws for the duration of a ``with`` block (tests, experiments)."""
+    for law in laws:
+        if law.name in names():
+            raise ValueError(f"a law named {law.name!r} is registered already")
+    LAWS.extend(laws)
+    try:
+        yield laws
+    finally:
+        for law in laws:
+            LAWS.remove(law)
