@@ -101,7 +101,8 @@ def find_equilibria(force, stiffness, z_lo: float, z_hi: float, n_grid: int = 40
         return f"[{shown}{', ...' if len(zs) > 4 else ''}] mm ({len(zs)})" if len(zs) > 4 else f"[{shown}] mm"
 
     raise ValueError(
-        f"restoring force has equilibria {mm(roots)}, stable {mm(stable)}; expected one stable, or stable-unstable-stable"
+        f"restoring force has equilibria {mm(roots)}, stable {mm(stable)}; expected one stable, or "
+        "stable-unstable-stable"
     )
 
 
