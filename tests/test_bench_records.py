@@ -15,7 +15,6 @@ import pytest
 from records import write_csv
 
 from negstiff import NSI, InputError, Model, SINDy, from_arrays, load, pin_frame
-from negstiff.errors import MeasurementError
 from negstiff.inference.analysis.periodicity import classify_regime
 from negstiff.inference.steps.plausibility import judgement
 from negstiff.testing import assert_predicts
@@ -218,22 +217,18 @@ def test_judgement_of_a_model():
 
 def test_the_drifting_integral_given_as_a_displacement_is_not_a_silent_model(bench_pinned):
     """The lab's route: the vibrometer's raw integral (drift kept) handed over as z, which negstiff trusts as a
-    measured displacement. Whatever the methods make of merged wells, they do not hand over a model to believe:
-    the default law's model fails its checks (NSI's damping feeds energy in; SINDy's has no damping though the
-    input does work on the device), every other law is tried and fails its own (no stable well, a well outside
-    the stroke, energy fed in), and the refusal says each law's reason in one line."""
+    measured displacement. Whatever the methods make of merged wells, their results say they are not to be
+    believed: NSI's modes contradict its own restoring force, SINDy's model has no damping though the input
+    does work on the device (an energy balance it cannot meet)."""
     rec, _, _ = bench_pinned
     _, u, _, _, volts = bench_record()
     n = int(60 * rec.fs)  # a minute: the integral drifts 12 mm, more than a third of the wells' separation
     z_lab = np.cumsum(volts[:n] * GAIN) / rec.fs
     lab = from_arrays(u[:n], z_lab, rec.fs, mass=M, gravity=0.0)
-    for method in (NSI, SINDy):
-        with pytest.raises(MeasurementError, match="no law explains the record") as refused:
-            method().fit(lab)
-        said = str(refused.value)
-        assert "the default law (cubic) failed its checks: its damping feeds energy in" in said, said
-        assert all(f"{law}:" in said for law in ("quintic", "septic", "magnet", "geometric", "spline")), said
-        assert "\n" not in said
+    nsi = NSI().fit(lab).result_
+    assert any("contradicts the model's own linearisation" in w for w in nsi.warnings), nsi.warnings
+    sindy = SINDy().fit(lab).result_
+    assert any("record dissipates" in w for w in sindy.warnings), sindy.warnings
 
 
 def test_a_softening_record_is_refused_before_the_work():

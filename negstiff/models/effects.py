@@ -517,8 +517,10 @@ def tabulate(extra: Mapping[str, Any]) -> np.ndarray | None:
     lo, hi = float(spans[:, 0].min()), float(spans[:, 1].max())
     z = np.linspace(lo, hi, TABLE_KNOTS)
     h = (hi - lo) / (TABLE_KNOTS - 1)
-    f = sum(np.broadcast_to(law.force(value, z), z.shape) for law, value in parts)
-    d = h * sum(np.broadcast_to(law.stiffness(value, z), z.shape) for law, value in parts)
+    f, d = np.zeros(z.shape), np.zeros(z.shape)
+    for law, value in parts:
+        f += np.broadcast_to(law.force(value, z), z.shape)
+        d += h * np.broadcast_to(law.stiffness(value, z), z.shape)
     if not (np.all(np.isfinite(f)) and np.all(np.isfinite(d))):
         names = ", ".join(type(law).__name__ for law, _ in parts)
         raise ValueError(f"a shaped force law ({names}) is not finite over its span")
@@ -549,7 +551,7 @@ def library_terms() -> tuple[Term, ...]:
     """
     base = [Term(law.label, law, f, s) for f, (law, s) in BASE_TERMS.items()]
     own = [Term(e.law.label, e.law, e.name, -1.0) for e in REGISTRY
-           if e.catalogued and e.law.label is not None and e.folds_into is None]  # fmt: skip
+           if e.catalogued and isinstance(e.law, Monomial | SmoothSign) and e.folds_into is None]  # fmt: skip
 
     def key(t: Term):
         is_base = t.field in BASE_TERMS

@@ -119,6 +119,7 @@ class Law:
                 n = len(e.law.columns((shape or {})[p], np.zeros(1)))
                 cols += [Column(f"{p}[{j}]", p, j, -1.0) for j in range(n)]
             else:
+                assert isinstance(e.law, effects.Monomial | effects.SmoothSign)  # a column of its own
                 cols.append(Column(e.law.label, p, 0, -1.0))
         return cols
 
@@ -133,6 +134,7 @@ class Law:
             if isinstance(law, ShapedLaw):
                 out += [np.broadcast_to(c, z.shape) for c in law.columns((shape or {})[p], z)]
             else:
+                assert isinstance(law, effects.Monomial | effects.SmoothSign)  # a column of its own
                 out.append(law.column(z, v, velocity_noise))
         return np.column_stack(out) if out else np.zeros((z.size, 0))
 

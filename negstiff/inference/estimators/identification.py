@@ -40,7 +40,7 @@ from negstiff.inference.record.measurement import Measurement
 from negstiff.inference.steps import law_choice
 from negstiff.inference.steps.plausibility import classified, judgement
 from negstiff.inference.steps.refine import refine_stage, stroke_quantiles
-from negstiff.inference.steps.validation import boundedness, validate
+from negstiff.inference.steps.validation import boundedness, predictability, restarted_free_runs, validate
 from negstiff.models import Model, laws
 from negstiff.models.equation import Equilibria
 
@@ -329,6 +329,30 @@ def refuse_softening(rec: Measurement, n_id: int, method: str) -> None:
         )
 
 
+PREDICTABLE_CAP_S = 2.0
+"""The held-out windows sized by the record's predictability are at most as long as the 2 s windows."""
+
+
+def predictable_validation(model: Model, rec: Measurement, n_id: int) -> dict[str, Any]:
+    """The held-out tail [n_id, N) scored by ``model``'s runs restarted from the measured state in windows no
+    longer than the record stays predictable (``validation.predictability``, the discrepancy workflow's horizon,
+    measured with ``model`` over the identification part; at most ``PREDICTABLE_CAP_S``): on a chaotic record a
+    2 s run is beyond what even the true model predicts (79-101 % measured), these windows are not. Returns the
+    horizon and the windows' errors (``window_errors``' keys, ``restarted_rms_percent``, ``window_s``).
+    """
+    z0, v0, _, _ = rec.states("state")
+    try:
+        horizon = predictability(model, rec, n_id, 2 * PREDICTABLE_CAP_S, z0, v0)
+        runs = restarted_free_runs(model, rec, n_id, horizon["window_s"], z0, v0)
+    except (MeasurementError, ValueError, ArithmeticError):
+        return {}
+    if not runs:
+        return {}
+    ms = runs.pop("window_ms")
+    return {"horizon_s": horizon["horizon_s"], "window_s": horizon["window_s"], "limited": horizon["limited"],
+            **runs, **window_errors(ms, rec.displacement[n_id:])}  # fmt: skip
+
+
 def quick_spline_holds(rec: Measurement, n_id: int) -> bool:
     """Whether a quick weak-form least-squares spline (8 intervals over the identification part's stroke, the
     reference study's damping) has a force that grows outward at both ends of the stroke: a bounded law may still
@@ -387,7 +411,7 @@ class Identifier(Estimator):
                 refuse_softening(rec, n_id, type(self).__name__)
             return self._held_by_law(self._estimate(rec, n_id, laws.get(self.law, "restoring")), self.law), None
         names = laws.names("restoring")
-        why = None
+        why, default = None, None
         if self.law is None:
             try:
                 refuse_softening(rec, n_id, type(self).__name__)
@@ -397,12 +421,13 @@ class Identifier(Estimator):
                 failed = ["its quick least-squares fit softens (k3 <= 0)"]
             else:
                 try:
-                    est = self._estimate(rec, n_id, None)
-                    failed = law_choice.problems(est.model, rec, n_id)
+                    default = self._estimate(rec, n_id, None)
+                    failed = law_choice.problems(default.model, rec, n_id)
                 except (MeasurementError, ValueError, ArithmeticError) as exc:
                     failed = [" ".join(str(exc).split())]
                 if not failed:
-                    return est, None
+                    assert default is not None
+                    return default, None
             why = f"the default law ({laws.DEFAULT_RESTORING}) failed its checks: {'; '.join(failed)}"
             names = tuple(n for n in names if n != laws.DEFAULT_RESTORING)
         n_fit = n_id - int(round(law_choice.SELECTION_FRACTION * rec.n))
@@ -434,8 +459,15 @@ class Identifier(Estimator):
             best.problems = [f"on the whole identification part: {failed[0]}"]
         else:
             reasons = "; ".join(f"{c.law}: {c.problems[0] if c.problems else 'no estimate'}" for c in candidates)
-            raise MeasurementError(f"{rec.source}: no law explains the record{' (' + why + ')' if why else ''}: "
-                                   f"{reasons}")  # fmt: skip
+            if default is None:
+                raise MeasurementError(f"{rec.source}: no law explains the record{' (' + why + ')' if why else ''}: "
+                                       f"{reasons}")  # fmt: skip
+            # the default's model, with what is wrong with it: the judgement's warnings follow (shared stages)
+            said = f"{why}, and no other law passes its checks ({reasons}): the default's model is kept, not to be " \
+                   "believed"  # fmt: skip
+            return replace(default, warnings=(*default.warnings, said),
+                           details={**default.details, "law_choice": {**account, "chosen": None,
+                                                                      "summary": said}}), account  # fmt: skip
         account["candidates"] = [c.to_json() for c in candidates]
         account["chosen"] = best.law
         said = (f"{why}; the laws were compared on what they predict" if why else "the laws were compared on what "
@@ -464,7 +496,8 @@ class Identifier(Estimator):
             if refinement["applied"] and refinement.get("free_mass"):
                 mass_source += ", refined by simulation error"
         # the held-out headline robust to one well switch: the median restarted window, with the spread
-        validation = {**validation, **window_errors(validation.get("window_ms", np.empty(0)), rec.displacement[n_id:])}
+        validation = {**validation, **window_errors(validation.get("window_ms", np.empty(0)), rec.displacement[n_id:]),
+                      "predictable": predictable_validation(model, rec, n_id)}  # fmt: skip
         bounded = boundedness(model, rec.segment(0, n_id))
         span = (float(stroke[0]), float(stroke[-1]))
         equilibria, modal, eq_warnings = equilibria_and_modes(model, rec, span)

@@ -312,6 +312,15 @@ class NSI(StructureResults, Identifier):
         base). None: the single DOF (on the base). A structure's result is a ``StructureIdentification``
         (``structure_``, ``element_``, ``offsets_``; no output-error refinement: ``refine``).
 
+    law : str or None, default None
+        The restoring-force law (``models.laws``: ``"cubic"``, ``"quintic"``, ``"septic"``, ``"magnet"``,
+        ``"oblique_springs"``, ``"geometric"``, ``"spline"``) whose columns the method reads, a shaped part's shape
+        found on the record (``shape.fit_shape``); ``"auto"``: every law estimated and the one that predicts the
+        record best kept (``law_choice``); None: the method's own default (the cubic), the other laws
+        compared where it fails its checks, and said.
+    damping : str, default "quadratic"
+        The damping law read with ``law`` (``"viscous"``, ``"quadratic"``, ``"cubic_damping"``, ``"friction"``).
+
     Attributes
     ----------
     result_ : Identification
@@ -491,6 +500,7 @@ class NSI(StructureResults, Identifier):
                 if bar is not None:
                     bar.update(self.passes - done)
                 break
+        assert r is not None  # every pass found its root or raised
         d1, d2, d3 = force.derivatives(r)
         damping = dict(zip(names[n_disp:], c[n_disp:], strict=True))
         coefficients = {

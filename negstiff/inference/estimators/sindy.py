@@ -160,6 +160,15 @@ class SINDy(StructureResults, Identifier):
         Where the element acts on a record of N > 1 DOFs: ``"I-J"``, it moves DOF J relative to DOF I (0: the
         base). None: the single DOF. A structure's result is a ``StructureIdentification``.
 
+    law : str or None, default None
+        The restoring-force law (``models.laws``: ``"cubic"``, ``"quintic"``, ``"septic"``, ``"magnet"``,
+        ``"oblique_springs"``, ``"geometric"``, ``"spline"``) whose columns the method reads, a shaped part's shape
+        found on the record (``shape.fit_shape``); ``"auto"``: every law estimated and the one that predicts the
+        record best kept (``law_choice``); None: the method's own default (the registry's sparse catalogue), the
+        other laws compared where it fails its checks, and said.
+    damping : str, default "quadratic"
+        The damping law read with ``law`` (``"viscous"``, ``"quadratic"``, ``"cubic_damping"``, ``"friction"``).
+
     Attributes
     ----------
     result_ : Identification

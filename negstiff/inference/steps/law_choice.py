@@ -4,8 +4,8 @@ Every identification can read any restoring law (``models.laws``). When the law 
 or the method's default (the reference study's cubic) fails its checks, the candidates are compared the same
 way for every method (``identification.Identifier``):
 
-1. **Judged first** (``problems``): a model that has no stable well, whose wells lie outside the stroke the record
-   visited, whose potential opens an escape just past the stroke (``validation.boundedness``) or whose damping
+1. **Judged first** (``problems``): a model that has no stable well, no well inside the stroke the record visited,
+   whose potential opens an escape just past the stroke (``validation.boundedness``) or whose damping
    feeds energy in over the record's velocities is never chosen, whatever it predicts.
 2. **Scored on what it predicts**: each candidate is estimated on the first part of the identification data and
    its runs restarted from the measured state over the next part (``SELECTION_FRACTION`` of the record, never the
@@ -38,7 +38,8 @@ from negstiff.models import Model
 SELECTION_FRACTION = 0.2
 """The share of the record (before the held-out tail) over which the candidate laws are scored."""
 STROKE_MARGIN = 0.25
-"""A well may lie at most this share of the stroke's span beyond the stroke the record visited."""
+"""One well at least must lie within the stroke the record visited, widened by this share of its span on either
+side (a well the record did not visit, an in-well record's other well, lies where the model puts it)."""
 MAX_WINDOW_S = 2.0
 """The comparison's windows are the record's predictability horizon, at most half of this [s]."""
 
@@ -48,6 +49,7 @@ def problems(model: Model, rec: Measurement, n: int) -> list[str]:
     an empty list when it passes.
     """
     out = []
+    assert rec.z is not None  # a single DOF's record
     z = rec.z[:n]
     lo, hi = (float(q) for q in np.quantile(z, (0.005, 0.995)))
     try:
@@ -56,9 +58,9 @@ def problems(model: Model, rec: Measurement, n: int) -> list[str]:
         return [f"no usable well ({' '.join(str(exc).split())})"]
     margin = STROKE_MARGIN * (hi - lo)
     wells = [w for w in (eq.z_minus, eq.z_plus) if w is not None]
-    outside = [w for w in wells if not lo - margin <= w <= hi + margin]
-    if outside:
-        out.append(f"a well at {1e3 * outside[0]:.3g} mm, outside the stroke [{1e3 * lo:.3g}, {1e3 * hi:.3g}] mm")
+    if not any(lo - margin <= w <= hi + margin for w in wells):  # the record rests nowhere the model does
+        out.append(f"no well inside the stroke [{1e3 * lo:.3g}, {1e3 * hi:.3g}] mm (wells at "
+                   + ", ".join(f"{1e3 * w:.3g}" for w in wells) + " mm)")  # fmt: skip
     try:
         escape = boundedness(model, rec.segment(0, n), free_run=False)["escape_z"]
     except (ValueError, ArithmeticError):
@@ -111,14 +113,14 @@ def score(candidates: list[Candidate], rec: Measurement, n_fit: int, n_id: int) 
     if not ok:
         return {}
     z0, v0, _, _ = rec.states("state")
-    horizon = predictability(ok[0].model, rec, n_fit, MAX_WINDOW_S, z0, v0)  # type: ignore[arg-type]
+    horizon = predictability(ok[0].model, rec, n_fit, MAX_WINDOW_S, z0, v0)
     windows = restart_windows(n_id, rec.fs, horizon["window_s"], start=n_fit)
     if len(windows) < 2:
         raise ValueError(f"{rec.source}: the selection part holds fewer than two {horizon['window_s']:.3g} s windows")
     meas = windows.measured(rec.displacement)
     scale = float(np.sqrt(np.mean(meas**2)))
     for c in ok:
-        res = simulate_windows(c.model, rec, windows, z0, v0)  # type: ignore[arg-type]
+        res = simulate_windows(c.model, rec, windows, z0, v0)
         ms = np.full(len(windows), np.inf)
         good = ~res.diverged
         ms[good] = np.mean((res.z[good] - meas[good]) ** 2, axis=1)
@@ -132,8 +134,9 @@ def score(candidates: list[Candidate], rec: Measurement, n_fit: int, n_id: int) 
         length = windows.length
         elpd = []
         for c in ok:
-            s2 = float(np.mean(c.window_ms))  # type: ignore[arg-type]
-            elpd.append(float(np.sum(-0.5 * length * (np.log(2 * np.pi * s2) + c.window_ms / s2))))  # type: ignore[operator]
+            ms = np.asarray(c.window_ms, float)
+            s2 = float(np.mean(ms))
+            elpd.append(float(np.sum(-0.5 * length * (np.log(2 * np.pi * s2) + ms / s2))))
         e = np.array(elpd)
         w = np.exp(e - e.max())
         for c, wi in zip(ok, w / w.sum(), strict=True):

@@ -88,7 +88,14 @@ def field_effects(model: Model) -> tuple[str, ...]:
     the name ``EFFECT.PARAMETER`` (the law's ``parameters``).
     """
     named = [e for e in effects.REGISTRY if not e.scalar and e.name in model.extra]
-    return tuple(f"{e.name}.{f}" for e in named for f in e.law.parameters(model.extra[e.name]))
+    return tuple(f"{e.name}.{f}" for e in named for f in _fielded(e.name).parameters(model.extra[e.name]))
+
+
+def _fielded(name: str) -> effects.OneSidedStop | effects.ShapedLaw:
+    """The law of an effect with several values (its ``parameters`` and ``with_parameters``)."""
+    law = effects.get(name).law
+    assert isinstance(law, effects.OneSidedStop | effects.ShapedLaw)
+    return law
 
 
 def parameter_names(model: Model, free_mass: bool, held=()) -> tuple[str, ...]:
@@ -111,7 +118,7 @@ def values_of(model: Model, names) -> np.ndarray:
     out = []
     for n in names:
         effect, _, fld = n.partition(".")
-        out.append(effects.get(effect).law.parameters(d[effect])[fld] if fld else float(d[n]))
+        out.append(_fielded(effect).parameters(d[effect])[fld] if fld else float(d[n]))
     return np.asarray(out, float)
 
 
@@ -123,7 +130,7 @@ def with_values(model: Model, names, values) -> Model:
     for n, v in zip(names, values, strict=False):
         effect, _, fld = n.partition(".")
         if fld:
-            extra[effect] = effects.get(effect).law.with_parameters(extra[effect], {fld: v})
+            extra[effect] = _fielded(effect).with_parameters(extra[effect], {fld: v})
         elif n in scalar:
             extra[n] = v
         else:

@@ -58,6 +58,7 @@ class ShapeFit:
 
 def stroke(rec: Measurement, n: int | None = None) -> tuple[float, float]:
     """The stroke of ``rec``'s first ``n`` samples: ``STROKE_QUANTILES`` of z [m]."""
+    assert rec.z is not None  # a single DOF's record
     z = rec.z[: rec.n if n is None else n]
     lo, hi = np.quantile(z, STROKE_QUANTILES)
     return float(lo), float(hi)
