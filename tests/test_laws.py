@@ -139,3 +139,24 @@ def test_an_unknown_law_and_a_law_on_a_structure_are_refused_in_one_line(tmp_pat
     for method in (NSI, SINDy):
         with pytest.raises(InputError, match="a law is read on a single DOF's record"):
             method(law="magnet", element="1-2").fit(rec)
+
+
+def test_the_device_and_the_geometric_law_are_one_force():
+    # The GA's and the posterior's device (E, alpha, m with the drawings' geometry) and the geometric law's model
+    # (the rod frame's part with the device's k_f, D0, L, alpha) are the same force: equal restoring force and
+    # stiffness over the stroke, the same wells and well frequencies, and the same motion when simulated (the
+    # device's compiled geometry against the law's table).
+    from negstiff.models import AS_BUILT
+
+    law = AS_BUILT.law_model()
+    lo, hi = AS_BUILT.stroke_limits()
+    z = np.linspace(0.9 * lo, 0.9 * hi, 301)
+    scale = np.max(np.abs(AS_BUILT.restoring_force(z)))
+    assert np.allclose(law.restoring_force(z), AS_BUILT.restoring_force(z), rtol=0, atol=1e-12 * scale)
+    for well in ("minus", "plus"):
+        assert law.uls(well).z_ref == pytest.approx(AS_BUILT.uls(well).z_ref, rel=1e-9)
+        assert law.uls(well).f_hz == pytest.approx(AS_BUILT.uls(well).f_hz, rel=1e-9)
+    fs = 512.0
+    u = 6.0 * np.sin(2 * np.pi * 9.0 * np.arange(0, 4.0, 1 / fs))
+    a, b = simulate(AS_BUILT, u, 1 / fs).z[0], simulate(law, u, 1 / fs).z[0]
+    assert np.max(np.abs(a - b)) < 1e-6 * np.ptp(a)  # the table's interpolation error, far below any noise

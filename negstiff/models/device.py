@@ -384,6 +384,16 @@ class Device:
         (k3, k2, k1), *_ = np.linalg.lstsq(A, r, rcond=None)
         return Model(m=self.m, k0=self.m * G, k1=k1, k2=k2, k3=k3, c=self.c, c_nl=self.c_nl, extra=self.extra)
 
+    def law_model(self) -> Model:
+        """The device as a ``Model`` of the geometric law (``models.laws``: gravity's constant and the rod frame's
+        part, ``shaped.RodFrame``, with this device's k_f, D0, L and alpha), its damping and extra effects: the same
+        force as ``restoring_force`` (the same ``rod_geometry``), read by every method that reads a law (NSI's and
+        SINDy's ``law="geometric"``, the posterior's, the simulator's table).
+        """
+        frame = {"k_f": self.k_f, "D0": self.D0, "L": self.L, "alpha_deg": self.alpha_deg}
+        return Model(m=self.m, k1=0.0, k2=0.0, k3=0.0, k0=self.m * G, c=self.c, c_nl=self.c_nl,
+                     extra={**effects.plain(self.extra), "rod_frame": frame})  # fmt: skip
+
     # --- serialisation and simulator interface --------------------------------------------------
     def to_dict(self) -> dict[str, Any]:
         """The device as a device file's JSON mapping."""

@@ -435,7 +435,7 @@ class SINDy(StructureResults, Identifier):
         """
         ident = rec.segment(0, n_id)
         sys_fit = form.system(rec, 0, n_fit, library=lib)
-        sys_sel = form.system(rec, n_fit, n_id, library=lib)
+        sys_sel = form.system(rec, n_fit, n_id, library=lib, scoring=True)
         W_sel, y_sel = sys_sel.W_physical, sys_sel.y_physical
         window = self.scoring_window(rec)
         rows = block_rows(window, rec.fs, form.stride)

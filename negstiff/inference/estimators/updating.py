@@ -397,6 +397,9 @@ class GAUpdater(Estimator):
             "mass_fixed": self.fixed_mass is not None,
             "warnings": self.warnings(),
             "start": {"E": self.start.E, "alpha_deg": self.start.alpha_deg, "m": self.start.m},
+            # the updated device as the geometric law's model (``Device.law_model``): what every method reads
+            "model": d.law_model().to_dict(),
+            "law": "geometric",
             "settings": {
                 "pop_size": self.pop_size,
                 "generations": self.generations,

@@ -26,6 +26,7 @@ from typing import Any
 
 import numpy as np
 
+from negstiff.errors import MeasurementError
 from negstiff.inference.record.measurement import Measurement
 from negstiff.inference.steps.validation import (
     boundedness,
@@ -114,9 +115,12 @@ def score(candidates: list[Candidate], rec: Measurement, n_fit: int, n_id: int) 
         return {}
     z0, v0, _, _ = rec.states("state")
     horizon = predictability(ok[0].model, rec, n_fit, MAX_WINDOW_S, z0, v0)
-    windows = restart_windows(n_id, rec.fs, horizon["window_s"], start=n_fit)
+    # at most a quarter of the selection part each (a short record's, a ring-down's: four windows at least)
+    window_s = max(8 / rec.fs, min(horizon["window_s"], (n_id - n_fit) / rec.fs / 4))
+    windows = restart_windows(n_id, rec.fs, window_s, start=n_fit)
     if len(windows) < 2:
-        raise ValueError(f"{rec.source}: the selection part holds fewer than two {horizon['window_s']:.3g} s windows")
+        raise MeasurementError(f"{rec.source}: too short to compare laws: the selection part holds fewer than two "
+                               f"{window_s:.3g} s windows")  # fmt: skip
     meas = windows.measured(rec.displacement)
     scale = float(np.sqrt(np.mean(meas**2)))
     for c in ok:
@@ -141,7 +145,7 @@ def score(candidates: list[Candidate], rec: Measurement, n_fit: int, n_id: int) 
         w = np.exp(e - e.max())
         for c, wi in zip(ok, w / w.sum(), strict=True):
             c.weight = float(wi)
-    return {"horizon_s": horizon["horizon_s"], "window_s": horizon["window_s"], "windows": len(windows),
+    return {"horizon_s": horizon["horizon_s"], "window_s": window_s, "windows": len(windows),
             "horizon": horizon["method"]}  # fmt: skip
 
 

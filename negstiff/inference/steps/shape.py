@@ -134,26 +134,33 @@ def _box_search(problem: _Problem, name: str, law: ShapedLaw, rng_stroke, others
     return best, best_r, tried
 
 
-def _spline_knots(problem_fit: _Problem, problem_sel: _Problem, name: str, law: Spline, rng_stroke, others,
+def _spline_knots(problem: _Problem, n_fit: int, name: str, law: Spline, rng_stroke, others,
                   window_s: float) -> tuple[dict, float, list]:  # fmt: skip
-    """A spline's knots: each count of ``law.shape_guesses`` fitted on the fitting part and scored by its weak
-    residual in blocks on the selection part; the fewest knots within one standard error (or ``SPLINE_MARGIN``)
-    of the best (module docstring).
+    """A spline's knots: each count of ``law.shape_guesses`` fitted on the weak form's rows whose test functions lie
+    before ``n_fit`` and scored by its weak residual, in blocks, on the rows after it (one system over the whole
+    identification part: a ring-down's later part, whose motion no longer reaches the outer knots, still scores);
+    the fewest knots within one standard error (or ``SPLINE_MARGIN``) of the best (module docstring).
     """
-    rec = problem_fit.rec
-    rows = block_rows(window_s, rec.fs, problem_fit.form.stride)
+    rec = problem.rec
+    form = problem.form
+    rows = block_rows(window_s, rec.fs, form.stride)
     trials = []
     for guess in law.shape_guesses(rng_stroke):
         shape = {**others, name: guess}
         try:
-            sys_fit, sys_sel = problem_fit.system(shape), problem_sel.system(shape)
+            system = problem.system(shape)
         except (WeakFormError, ValueError, np.linalg.LinAlgError):
             continue
-        phys = fit_support(sys_fit, problem_fit.gain)
-        y = sys_sel.y_physical
-        r2 = (y - sys_sel.W_physical @ phys) ** 2
-        blocks = block_scores(r2, rows, y.var()) if y.size >= 2 * rows else np.array([r2.mean() / y.var()])
-        trials.append((guess, blocks, problem_fit.residual(shape)))
+        centre = form.centre(rec.dt) + form.stride * np.arange(system.W.shape[0])
+        fit, sel = centre + 4 * form.half < n_fit, centre - 4 * form.half >= n_fit  # whole test functions either side
+        if fit.sum() < 4 * system.W.shape[1] or sel.sum() < 2:
+            continue
+        W, y = system.W_physical, system.y_physical
+        sub = type(system)(system.W[fit], system.y[fit], system.col, system.s_y)
+        phys = fit_support(sub, problem.gain)
+        r2 = (y[sel] - W[sel] @ phys) ** 2
+        blocks = block_scores(r2, rows, y[sel].var()) if sel.sum() >= 2 * rows else np.array([r2.mean() / y[sel].var()])
+        trials.append((guess, blocks, float(np.mean((y[fit] - W[fit] @ phys) ** 2) / np.mean(y[fit] ** 2))))
     if not trials:
         raise WeakFormError(f"{rec.source}: no spline over the stroke could be fitted (too little motion?)")
     best = min(trials, key=lambda t: t[1].mean())
@@ -209,8 +216,8 @@ def fit_shape(rec: Measurement, restoring, damping, *, n_fit: int | None = None,
     for name, law in shaped.items():  # one part at a time (the laws have one shaped part each)
         others = {k: v for k, v in shape.items() if k != name}
         if isinstance(law, Spline):
-            selecting = _Problem(rec, restoring, damping, n_fit, n_id, tuple(aux))
-            best, residual, t = _spline_knots(fitting, selecting, name, law, rng, others, window_s)
+            whole = _Problem(rec, restoring, damping, 0, n_id, tuple(aux))
+            best, residual, t = _spline_knots(whole, n_fit, name, law, rng, others, window_s)
             methods.append(f"{name}: {len(best['knots']) - 1} intervals over the stroke "
                            f"[{1e3 * rng[0]:.3g}, {1e3 * rng[1]:.3g}] mm, the fewest whose held-out weak residual is "
                            f"within one standard error (or {100 * SPLINE_MARGIN:g} %) of the best")  # fmt: skip

@@ -274,11 +274,13 @@ class WeakForm:
         return weak_project(cols, test_function(self.half, dt)[0], self.stride, dt)
 
     def system(self, rec: Measurement, lo: int = 0, hi: int | None = None, aux: tuple[str, ...] = (),
-               library: Library | None = None) -> WeakSystem:  # fmt: skip
+               library: Library | None = None, scoring: bool = False) -> WeakSystem:  # fmt: skip
         """The weak-form system of the samples [lo, hi) of ``rec`` (the record this form was made of,
         or its first part) over ``library`` (default: the registry's catalogue, ``Library.catalogue``); ``aux``:
         measured auxiliary channels of ``rec`` whose terms theta a(t) join the catalogue (``aux_terms``), before
-        the input's column (a ``library`` names its own).
+        the input's column (a ``library`` names its own). A ``scoring`` system (a selection part's, which only
+        scores coefficients fitted elsewhere) may hold columns that vanish there: a spline's outer functions where a
+        ring-down no longer reaches them.
         """
         seg = rec.segment(lo, rec.n if hi is None else hi)
         library = Library.catalogue(aux) if library is None else library
@@ -294,6 +296,8 @@ class WeakForm:
             # input term; its column is zero, so its coefficient (fixed: ``known_input_gain``) acts on nothing
             col[-1] = 1.0
         s_y = y.std()
+        if scoring:
+            col[col == 0] = 1.0
         if s_y == 0 or np.any(col == 0) or W.shape[0] < 4 * W.shape[1]:
             raise WeakFormError(f"{rec.source}: not enough excitation: the response or a library term is constant")
         return WeakSystem(W / col, y / s_y, col, float(s_y))
