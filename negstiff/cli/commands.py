@@ -559,6 +559,19 @@ def cmd_update(args) -> int:
     return 0
 
 
+def law_readers() -> tuple[str, ...]:
+    """The report's analyses whose estimator takes ``law`` and ``damping``."""
+    import inspect
+
+    from negstiff.inference.estimators.discrepancy import Discrepancy
+    from negstiff.inference.estimators.nsi import NSI
+    from negstiff.inference.estimators.posterior.core import Posterior
+    from negstiff.inference.estimators.sindy import SINDy
+
+    classes = {"nsi": NSI, "sindy": SINDy, "posterior": Posterior, "discrepancy": Discrepancy}
+    return tuple(n for n, c in classes.items() if {"law", "damping"} <= set(inspect.signature(c).parameters))
+
+
 def cmd_report(args) -> int:
     from negstiff.report.record import report_records
 
@@ -569,6 +582,12 @@ def cmd_report(args) -> int:
         options["posterior"]["max_steps"] = args.max_steps
     if args.ensembles is not None:
         options["posterior"]["n_ensembles"] = args.ensembles
+    from negstiff.models import laws
+
+    if args.law is not None or args.damping != laws.DEFAULT_DAMPING:
+        # every analysis that reads a law (the identifications; the others as they come to read one)
+        for name in law_readers():
+            options.setdefault(name, {}).update(law=args.law, damping=args.damping)
     if args.max_effects is not None:
         options["discrepancy"]["max_effects"] = args.max_effects
     rep = report_records(args.data, args.columns, args.fs, args.mass, args.forcing_hz, parse_wells(args.wells),

@@ -586,6 +586,7 @@ def _report(sub, common: argparse.ArgumentParser, data_opts: argparse.ArgumentPa
     rp.add_argument("--nfrc", action="append", help="a `negstiff nfrc` result to draw over a campaign's map")
     rp.add_argument("--only", help="the analyses to run, comma-separated (nsi, sindy, posterior, discrepancy, frf, "
                     "characterise, map)")  # fmt: skip
+    _law_options(rp)
     rp.add_argument("--duration", type=POSITIVE, help="posterior: use only the first DURATION seconds of the record")
     rp.add_argument("--max-steps", type=declared(POST, "max_steps"), help="posterior: step cap per ensemble")
     rp.add_argument("--ensembles", type=declared(POST, "n_ensembles"), help="posterior: independent ensembles")

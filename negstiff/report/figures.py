@@ -144,3 +144,33 @@ def continuation_figure(result: dict[str, Any], title: str = ""):
     ax.legend(seen.values(), seen.keys(), fontsize=8)
     fig.tight_layout()
     return fig
+
+
+def force_figure(models: dict[str, Any], stroke: tuple[float, float], title: str = "",
+                 band: dict[str, Any] | None = None):  # fmt: skip
+    """The restoring force K(z) [N] of each model (``{label: Model}``) over the measured stroke [m] (its wells
+    marked), with a posterior's credible band where one is given (``band``: ``{"z_m", "low", "high"}``, a
+    posterior's ``force_band``).
+    """
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(8, 4.2))
+    z = np.linspace(stroke[0], stroke[1], 401)
+    if band:
+        ax.fill_between(1e3 * np.asarray(band["z_m"]), band["low"], band["high"], color="0.85",
+                        label=band.get("label", "posterior 90 % band"))  # fmt: skip
+    for label, model in models.items():
+        (line,) = ax.plot(1e3 * z, model.restoring_force(z), lw=1.5, label=label)
+        try:
+            eq = model.equilibria()
+        except ValueError:
+            continue
+        wells = [w for w in (eq.z_minus, eq.z_plus) if w is not None and stroke[0] <= w <= stroke[1]]
+        ax.plot(1e3 * np.array(wells), np.zeros(len(wells)), "o", color=line.get_color(), ms=5)
+    ax.axhline(0.0, color="0.5", lw=0.6)
+    ax.set_xlabel("z [mm] (the record's stroke)")
+    ax.set_ylabel("restoring force K(z) [N]" + (" per unit mass" if all(m.m == 1.0 for m in models.values()) else ""))
+    ax.set_title(title, fontsize=10)
+    ax.legend(fontsize=8, frameon=False)
+    fig.tight_layout()
+    return fig

@@ -206,6 +206,7 @@ def identification_section(est, label: str = "") -> Section:
                      f"({fmt(mean, 2)} in z's units): the model's rest against the record's, not its motion.")
     if r.method == "sindy" and "selected_terms" in r.details:
         sec.text(f"Selected terms: {', '.join(r.details['selected_terms'])}.")
+    _law_blocks(sec, r, name)
     for w in r.warnings:
         sec.warning(w)
     wells = ", ".join(f"{w} {mm['f_hz']:.4g} Hz (zeta {100 * mm['zeta']:.3g} %)" for w, mm in r.modal.items()
@@ -213,6 +214,51 @@ def identification_section(est, label: str = "") -> Section:
     sec.summary.append(f"{col} finds the wells at {wells or 'none'}; held-out error {fmt(held, 3)} % of rms z.")
     sec.json = r.to_json()
     return sec
+
+
+def _law_blocks(sec: Section, r, name: str) -> None:
+    """The law the identification read (its formula and its parts' values), the comparison of laws where one was
+    made, the held-out tail in windows of the record's predictability, and the force over the stroke.
+    """
+    from negstiff.models import laws
+
+    law_name = r.settings.get("law")
+    law = laws.get(law_name) if law_name in laws.names() else None
+    if law is not None:
+        damping = r.settings.get("damping_law")
+        sec.text(f"Restoring-force law: {law.name}, {law.title} ({law.reference})"
+                 + (f"; damping law: {damping}." if damping and damping != "catalogue" else "."))  # fmt: skip
+        parts = {k: v for k, v in r.model.extra.items() if isinstance(v, dict) or k in law.parts}
+        if parts:
+            rows = [[f"{part}.{f}", v] for part, value in parts.items()
+                    for f, v in (value.items() if isinstance(value, dict) else [("value", value)])
+                    if not isinstance(v, (list, tuple))]  # fmt: skip
+            if rows:
+                sec.table(["the law's part", "value (SI)"], rows)
+        if r.settings.get("shape"):
+            sec.text(f"Its shape, from the record: {r.settings['shape'].get('method', '')}.")
+    choice = r.details.get("law_choice")
+    if choice:
+        sec.text(f"Laws compared: {choice.get('summary', '')}.")
+        sec.table(["law", "held-out median window [%]", "weight", "why not"],
+                  [[c["law"], c["heldout_median_window_percent"], c["weight"], "; ".join(c["problems"][:1])]
+                   for c in choice["candidates"]])  # fmt: skip
+    pred = r.validation.get("predictable") or {}
+    if pred.get("median_window_percent") is not None:
+        sooner = " sooner" if pred.get("limited") else ""
+        sec.text(f"In windows as long as the record stays predictable ({fmt(pred['window_s'], 3)} s: runs restarted "
+                 f"from states that differ by their noise part by 10 % of rms z{sooner}), the held-out median window "
+                 f"errs by {fmt(pred['median_window_percent'], 3)} %.")  # fmt: skip
+    stroke = np.asarray(r.stroke_quantiles_m, float)
+    if stroke.size >= 2 and np.ptp(stroke) > 0:
+        from .figures import force_figure
+
+        models = {f"{name}" + (" (refined)" if r.refinement and r.refinement.get("applied") else ""): r.model}
+        if r.refinement and r.refinement.get("applied"):
+            models[f"{name}, its own estimate"] = r.initial_model
+        sec.figure(_slug(f"force {name} {sec.label}"), force_figure(models, (float(stroke[0]), float(stroke[-1])),
+                                                                    f"{name}: the restoring force over the stroke"),
+                   f"{name}'s restoring force K(z) over the stroke the record visited (its wells marked)")  # fmt: skip
 
 
 def posterior_section(post, label: str = "") -> Section:
