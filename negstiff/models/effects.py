@@ -535,14 +535,17 @@ def tabulate_members(parts: list[tuple[ShapedLaw, Mapping[str, Any]]]) -> np.nda
     hi = np.asarray(spans[0][1], float)
     for a, b in spans[1:]:
         lo, hi = np.minimum(lo, a), np.maximum(hi, b)
-    lo, hi = np.atleast_1d(lo.reshape(-1)), np.atleast_1d(hi.reshape(-1))  # (B,): the batch's first axis
-    n = max(lo.size, hi.size)
-    lo, hi = np.broadcast_to(lo, (n,)), np.broadcast_to(hi, (n,))
-    z = np.linspace(lo, hi, TABLE_KNOTS, axis=-1)  # (B, knots): each member its own
-    h = (hi - lo) / (TABLE_KNOTS - 1)
+    lo, hi = np.atleast_1d(lo.reshape(-1)), np.atleast_1d(hi.reshape(-1))  # (B,) or (1,): the batch's first axis
+    z = np.linspace(lo, hi, TABLE_KNOTS, axis=-1)  # (B, knots): each member its own (or one for all)
     with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
-        f = sum(np.broadcast_to(law.force(value, z), z.shape) for law, value in parts)
-        d = h[:, None] * sum(np.broadcast_to(law.stiffness(value, z), z.shape) for law, value in parts)
+        forces = [law.force(value, z) for law, value in parts]
+        slopes = [law.stiffness(value, z) for law, value in parts]
+        shape = np.broadcast_shapes(z.shape, *(np.shape(x) for x in forces + slopes))  # (B, knots)
+        n = shape[0]
+        lo, hi = np.broadcast_to(lo, (n,)), np.broadcast_to(hi, (n,))
+        h = (hi - lo) / (TABLE_KNOTS - 1)
+        f = sum(np.broadcast_to(x, shape) for x in forces)
+        d = h[:, None] * sum(np.broadcast_to(x, shape) for x in slopes)
         df = f[:, 1:] - f[:, :-1]
         # each member's segments (B, knots + 1, 4): the tangent line below the first knot, the Hermite cubic of each
         # interval, the tangent line beyond the last knot

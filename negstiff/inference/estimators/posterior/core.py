@@ -583,6 +583,9 @@ class Posterior(Estimator):
                                      "coefficients (model='coefficients')")  # fmt: skip
             if self.start is not None:
                 raise PosteriorError(f"{name}(start=...): a structure's posterior starts from SINDy(element=...)")
+            if self.laws() is not None:
+                raise PosteriorError(f"{name}(law={self.law!r}, damping={self.damping!r}): a structure's posterior "
+                                     "samples its element's cubic coefficients (no law read yet)")  # fmt: skip
             if self.input_noise:
                 raise PosteriorError(f"{name}(input_noise={self.input_noise!r}): the input's noise is not carried "
                                      "through a structure (None or 0 there)")  # fmt: skip

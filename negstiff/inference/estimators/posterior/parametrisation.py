@@ -163,7 +163,14 @@ def coefficient_parametrisation(start: Model) -> Parametrisation:
 
 
 def device_parametrisation(start: Device, mass_prior: tuple[float, float] | None) -> Parametrisation:
-    """E, alpha, m, c, c_nl of the device with its exact geometric restoring force."""
+    """E, alpha, m, c, c_nl of the device with its exact geometric restoring force.
+
+    The restoring force is the ``geometric`` law's (``models.laws``: the rod frame of ``shaped.RodFrame`` with
+    gravity's constant, K = m g + 2 k_f (s + D0) s'(z)) read in the device's physical parameters: k_f = 3 E I / l^3
+    from Young's modulus and the arms' drawings, the frame angle alpha, the mass m, and L, D0 at the drawings'
+    values (``docs/device-model.md``); ``law_parametrisation`` of the geometric law samples k_f, D0, L, alpha and
+    k0 themselves, the mass held. At the same values both give the same force (``tests/test_posterior_laws.py``).
+    """
     names = ("E", "alpha_deg", "m", "c", "c_nl", "g_offset")
     lower = np.array([100e9, 2.0, 0.05, 0.0, 0.0, -0.5])
     upper = np.array([320e9, 14.0, 0.6, 50.0, 20.0, 0.5])
