@@ -122,12 +122,10 @@ def test_a_laws_parameters_make_its_models_kernel_parameters_and_force(name):
     restoring, damping, model = _law_model(name)
     par = law_parametrisation(model, restoring, damping, (-0.03, 0.03), 0.01, 0.3)
     lm = par.law
-    from negstiff.inference.steps.refine import values_of
-
-    x = values_of(model, par.names)
+    x = lm.start_values()
     rng = np.random.default_rng(RNG_SEED + 2)
     batch = x * (1 + 0.02 * rng.standard_normal((4, x.size)))
-    batch[0] = x
+    batch[0] = x  # (a shift, where the law has one, is 0 here: the models' own frame; its test is below)
     p = par.to_params(batch)
     z = np.linspace(-0.03, 0.03, 41)
     K = lm.restoring_force(batch, z)
@@ -137,10 +135,34 @@ def test_a_laws_parameters_make_its_models_kernel_parameters_and_force(name):
         assert p.shape[0] == ref.size
         assert np.allclose(p[:, b], ref, rtol=1e-12, atol=1e-12 * np.abs(ref).max()), b
         assert np.allclose(K[b], mb.restoring_force(z), rtol=1e-10, atol=1e-10 * np.abs(K[b]).max()), b
-    # every parameter the laws free is sampled, and nothing else
+    # every parameter the laws free is sampled, and nothing else (but the centred parts' centre)
     shaped = [f"{p}.{f}" for p, law in restoring.shaped().items() for f in law.parameters(model.extra[p])]
     scalar = [p for p in restoring.parts if p not in restoring.shaped()]
-    assert set(par.names) == set(restoring.fields) | {"c", "c_nl"} | set(scalar) | set(shaped)
+    centre = {"z_shift"} if any(law.centred for law in restoring.shaped().values()) else set()
+    assert set(par.names) == set(restoring.fields) | {"c", "c_nl"} | set(scalar) | set(shaped) | centre
+
+
+@pytest.mark.parametrize("name", ["magnet", "oblique_springs"])
+def test_a_centred_parts_shift_translates_the_force_and_the_motion(name):
+    # Fact: facing magnets and oblique springs act about their own centre, which a record's frame need not share;
+    # the posterior samples that centre s (``z_shift``) as K(z - s). Shifted by s = 0.4 mm the band's force is the
+    # model's at z - s (to 1e-10: the same closed forms), and the simulated motion is the model's translated by s
+    # (to 1e-7 of the stroke over 2 s: the table's interpolation, its knots moved by s, against the unshifted one).
+    restoring, damping, model = _law_model(name)
+    par = law_parametrisation(model, restoring, damping, (-0.03, 0.03), 0.01, 0.3)
+    x = par.law.start_values()
+    s = 4e-4
+    xs = x.copy()
+    xs[par.names.index("z_shift")] = s
+    z = np.linspace(-0.03, 0.03, 61)
+    K = par.law.restoring_force(xs, z)[0]
+    assert np.allclose(K, model.restoring_force(z - s), rtol=0, atol=1e-10 * np.abs(K).max())
+    fs = 1024.0
+    u = 3.0 * np.sin(2 * np.pi * 7 * np.arange(int(2 * fs)) / fs)
+    x0 = np.array([[0.004, 0.0]])
+    a = simulate_batch(par.to_params(x), par.kind, u[None], 1 / fs, x0, substeps=2)
+    b = simulate_batch(par.to_params(xs), par.kind, u[None], 1 / fs, x0 + [s, 0.0], substeps=2)
+    assert np.abs(b.z[0] - s - a.z[0]).max() < 1e-7 * np.ptp(a.z[0])
 
 
 def test_the_device_and_the_geometric_law_are_one_force():
@@ -195,22 +217,17 @@ def test_the_priors_hold_the_physics_they_state():
             if hi is not None:
                 assert par.upper[i] <= hi, (name, p)
             assert any(line.startswith(p) for line in par.description), (name, p)
-        from negstiff.inference.steps.refine import values_of
-
-        x = values_of(model, par.names)
-        assert par.inside(x[None])[0], name  # the start is admissible
+        assert par.inside(par.law.start_values()[None])[0], name  # the start is admissible
     restoring, damping, model = _law_model("spline")
     par = law_parametrisation(model, restoring, damping, (-0.03, 0.03), 0.01, 0.3)
-    from negstiff.inference.steps.refine import values_of
-
-    x = values_of(model, par.names)
+    x = par.law.start_values()
     falling = x.copy()
     falling[par.names.index("spline.c8")] = x[par.names.index("spline.c7")] - 1.0  # the last end slope negative
     assert par.inside(x[None])[0] and not par.inside(falling[None])[0]
     # the magnet's table must reach every z the record visited: a gap so small that +-8 d falls short is refused
     restoring, damping, model = _law_model("magnet")
     par = law_parametrisation(model, restoring, damping, (-0.03, 0.03), 0.01, 0.3)
-    x = values_of(model, par.names)
+    x = par.law.start_values()
     short = x.copy()
     short[par.names.index("magnet.d")] = 0.003
     assert not par.inside(short[None])[0]
@@ -256,7 +273,7 @@ def test_a_laws_posterior_result_and_command(tmp_path):
     post = Posterior(**kw).fit(rec)
     res = post.result()
     assert {"k1", "c", "oblique_springs.P", "oblique_springs.a", "sigma"} == set(res["parameters"])
-    assert set(res["nuisance_parameters"]) == {"k0"}
+    assert set(res["nuisance_parameters"]) == {"k0", "z_shift"}  # the springs' centre in the record's frame
     assert res["settings"]["law"]["restoring"] == "oblique_springs" and res["settings"]["law"]["damping"] == "viscous"
     band = res["force_band"]
     lo, med, hi = (np.array(band[k]) for k in ("low_n", "median_n", "high_n"))

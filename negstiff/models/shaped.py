@@ -84,6 +84,9 @@ class ShapedLaw:
     shape: ClassVar[tuple[str, ...]] = ()
     bounds: ClassVar[dict[str, tuple[float, float]]] = {}
     """Each field's physically admissible open interval (``check``'s ranges), where it has one: a prior's box."""
+    centred: ClassVar[bool] = False
+    """Whether the part's force is odd about its own z = 0, a centre a record's frame need not share (facing
+    magnets, a pair of oblique springs: their centre is where the lab's z is zero only by construction)."""
 
     # --- the part's algebra (subclasses) ------------------------------------------------------------
     def columns(self, shape: Mapping[str, Any], z) -> list[np.ndarray]:
@@ -172,6 +175,7 @@ class DipoleMagnet(ShapedLaw):
     fields: ClassVar[tuple[str, ...]] = ("A", "d")
     shape: ClassVar[tuple[str, ...]] = ("d",)
     bounds: ClassVar[dict[str, tuple[float, float]]] = {"d": (0.0, np.inf)}
+    centred: ClassVar[bool] = True
 
     def columns(self, shape, z):
         """The one column -3 z / (d^2 + z^2)^(5/2) [m^-4]."""
@@ -232,6 +236,7 @@ class ObliqueSprings(ShapedLaw):
     fields: ClassVar[tuple[str, ...]] = ("P", "a")
     shape: ClassVar[tuple[str, ...]] = ("a",)
     bounds: ClassVar[dict[str, tuple[float, float]]] = {"a": (0.0, np.inf)}
+    centred: ClassVar[bool] = True
 
     def columns(self, shape, z):
         """The one column -2 z / sqrt(a^2 + z^2)."""

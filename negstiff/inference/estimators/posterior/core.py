@@ -33,6 +33,7 @@ from negstiff.inference.estimators.posterior.diagnostics import (
 )
 from negstiff.inference.estimators.posterior.likelihood import LogPosterior, curvature_adjustment
 from negstiff.inference.estimators.posterior.parametrisation import (
+    SHIFT,
     Parametrisation,
     coefficient_parametrisation,
     device_parametrisation,
@@ -326,7 +327,7 @@ class Posterior(Estimator):
         if "law" in res.settings:  # a law's: its start model with the mean's parameters
             from negstiff.inference.steps.refine import with_values
 
-            names = [n for n in res.names if n != "sigma"]
+            names = [n for n in res.names if n not in ("sigma", SHIFT)]
             start = Model.from_dict(res.settings["law"]["start_model"])
             return with_values(start, names, np.array([mean[n] for n in names]))
         if "k1" in mean:
@@ -356,9 +357,9 @@ class Posterior(Estimator):
         if "law" in res.settings:  # every law parameter of each draw, in the posterior mean's model
             from negstiff.inference.steps.refine import with_values
 
-            names = [k for k in res.names if k != "sigma"]
+            keep = [i for i, k in enumerate(res.names) if k not in ("sigma", SHIFT)]
             base = self.model_
-            return [with_values(base, names, row[: len(names)]) for row in rows]
+            return [with_values(base, [res.names[i] for i in keep], row[keep]) for row in rows]
         fields = [k for k in ("k0", "k1", "k2", "k3", "c", "c_nl") if k in res.names]
         base = self.model_
         return [replace(base, **{k: float(row[res.names.index(k)]) for k in fields}) for row in rows]
@@ -436,12 +437,11 @@ class Posterior(Estimator):
             start = self._refined_start(rec, weak, held)
             self.start_info_["shape"] = shape.to_json()
             self.start_info_["law"] = {"restoring": restoring.name, "damping": damping.name}
-        from negstiff.inference.steps.refine import values_of
-
         _, v, _, _ = rec.states("state")
         reach = (float(np.min(rec.z)), float(np.max(rec.z)))
         par = law_parametrisation(start, restoring, damping, reach, float(np.std(rec.z)), float(np.std(v)))
-        theta = values_of(start, par.names)
+        assert par.law is not None
+        theta = par.law.start_values()
         if par.support is not None and not par.inside(moved_inside(par, theta)[None])[0]:
             raise PosteriorError(f"{rec.source}: the {restoring.name} law's deterministic fit lies outside the "
                                  f"prior's support ({'; '.join(par.description[1:])})")  # fmt: skip
@@ -705,7 +705,10 @@ class Posterior(Estimator):
             lm = par.law
             res.settings["law"] = {"restoring": lm.restoring.name, "damping": lm.damping.name,
                                    "title": f"{lm.restoring.title}; {lm.damping.title}",
-                                   "parameters": list(par.names), "start_model": lm.start.to_dict()}  # fmt: skip
+                                   "parameters": list(par.names), "start_model": lm.start.to_dict(),
+                                   "frame": ("the record's" if lm.shift < 0 else
+                                             f"the parts' own: the record's z less {SHIFT} (its summary among the "
+                                             "nuisance parameters; force_band is in the record's frame)")}  # fmt: skip
             res.force_band = force_band(par, res.samples, stroke_of(rec), self.hdi_prob, seed,
                                         np.concatenate([theta, [sigma]]))  # fmt: skip
         self.logpost_, self.par_, self.windows_ = logpost, par, win

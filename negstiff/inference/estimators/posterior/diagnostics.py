@@ -223,7 +223,7 @@ def result_json(res: PosteriorResult, hdi_prob: float) -> dict[str, Any]:
     nuisance: dict[str, dict[str, float]] = {}
     for n, s in res.summary.items():
         key = "alpha_deg" if n == "alpha_deg" else n
-        (nuisance if n in ("k0", "g_offset") else params)[key] = s
+        (nuisance if n in ("k0", "g_offset", "z_shift") else params)[key] = s
     return {
         "hdi_prob": hdi_prob,
         "parameters": params,

@@ -243,14 +243,15 @@ class LawMap:
     template: np.ndarray
     rows: tuple[int, ...]
     parts: tuple[tuple[str, tuple[tuple[str, int], ...]], ...]
+    shift: int = -1  # the column of ``SHIFT`` (the centred parts' centre in the record's frame), -1: none
 
     @classmethod
     def of(cls, start: Model, restoring: laws.Law, damping: laws.Law, names: tuple[str, ...]) -> LawMap:
-        """The map of ``names`` (base fields, scalar parts, ``PART.PARAMETER``) about ``start``."""
+        """The map of ``names`` (base fields, scalar parts, ``PART.PARAMETER``, ``SHIFT``) about ``start``."""
         lay = effects.layout()
         rows = []
         for n in names:
-            if "." in n:
+            if "." in n or n == SHIFT:
                 rows.append(-1)
             elif n in POLYNOMIAL_ROWS:
                 rows.append(POLYNOMIAL_ROWS[n])
@@ -266,7 +267,16 @@ class LawMap:
         template = start.kernel_params().copy()
         for r in set(rows) - {-1}:
             template[r] = 0.0  # written from the parameters (summed where two share a row)
-        return cls(restoring, damping, tuple(names), start, template, tuple(rows), tuple(parts))
+        shift = names.index(SHIFT) if SHIFT in names else -1
+        return cls(restoring, damping, tuple(names), start, template, tuple(rows), tuple(parts), shift)
+
+    def start_values(self) -> np.ndarray:
+        """The start's parameters (``refine.values_of``; the shift 0: the parts centred where the record's z is 0)."""
+        from negstiff.inference.steps.refine import values_of
+
+        law_names = [n for n in self.names if n != SHIFT]
+        x = dict(zip(law_names, values_of(self.start, law_names), strict=True))
+        return np.array([x.get(n, 0.0) for n in self.names])
 
     def _values(self, theta: np.ndarray) -> list[tuple[ShapedLaw, dict[str, Any]]]:
         """Each shaped part's batch of values (``ShapedLaw.batch``) of parameters ``theta`` (B, d)."""
@@ -287,7 +297,13 @@ class LawMap:
             if r >= 0:
                 p[r] += theta[:, i]
         if self.parts:
-            p[effects.layout().size :] = effects.tabulate_members(self._values(theta))
+            size = effects.layout().size
+            p[size:] = effects.tabulate_members(self._values(theta))
+            if self.shift >= 0:  # K(z - s) = (k0 + k1 s) - k1 z + parts(z - s): the table's knots moved by s
+                s = theta[:, self.shift]
+                k1 = theta[:, self.names.index("k1")] if "k1" in self.names else self.start.k1
+                p[size] += s
+                p[POLYNOMIAL_ROWS["k0"]] += k1 * s
         return p
 
     def restoring_force(self, theta: np.ndarray, z) -> np.ndarray:
@@ -296,10 +312,12 @@ class LawMap:
         once.
         """
         theta = np.atleast_2d(theta)
-        z = np.asarray(z, float)
+        z = np.asarray(z, float)[None, :]
+        if self.shift >= 0:  # the law about its parts' centre s in the record's frame: K(z - s)
+            z = z - theta[:, self.shift, None]
         start = self.start
         base = {k: np.full(theta.shape[0], float(getattr(start, k) or 0.0)) for k in ("k0", "k1", "k2", "k3")}
-        K = np.zeros((theta.shape[0], z.size))
+        K = np.zeros((theta.shape[0], z.shape[1]))
         fixed_extra = dict(start.extra)
         for i, n in enumerate(self.names):
             if n in base:
@@ -307,21 +325,24 @@ class LawMap:
             elif "." not in n and n in fixed_extra:
                 law = effects.get(n).law
                 if law.displacement_only:
-                    K += law.force(theta[:, i, None], z[None, :], 0.0)
+                    K += law.force(theta[:, i, None], z, 0.0)
                 fixed_extra.pop(n)
         K += base["k3"][:, None] * z**3 + base["k2"][:, None] * z**2 - base["k1"][:, None] * z + base["k0"][:, None]
         for name, _ in self.parts:
             fixed_extra.pop(name, None)
-        K += effects.stiffness_force(fixed_extra, z)[None, :]  # the start's parts no parameter moves
+        K += effects.stiffness_force(fixed_extra, z)  # the start's parts no parameter moves
         for law, value in self._values(theta):
             K += np.broadcast_to(law.force(value, z), K.shape)
         return K
 
     def model(self, row: np.ndarray) -> Model:
-        """The model of one row of parameters (the start's with them set: ``refine.with_values``)."""
+        """The model of one row of parameters (the start's with them set: ``refine.with_values``); with a ``SHIFT``,
+        the law's model in its parts' own frame (the record's z less the shift).
+        """
         from negstiff.inference.steps.refine import with_values
 
-        return with_values(self.start, self.names, np.asarray(row, float))
+        keep = [i for i, n in enumerate(self.names) if n != SHIFT]
+        return with_values(self.start, [self.names[i] for i in keep], np.asarray(row, float)[keep])
 
 
 def _law_support(lawmap: LawMap, reach: tuple[float, float], tails: tuple[str, ...], theta: np.ndarray) -> np.ndarray:
@@ -330,10 +351,11 @@ def _law_support(lawmap: LawMap, reach: tuple[float, float], tails: tuple[str, .
     outward at both ends of its knots (its straight lines beyond them: a bounded potential).
     """
     ok = np.ones(theta.shape[0], bool)
+    s = theta[:, lawmap.shift] if lawmap.shift >= 0 else 0.0  # the parts' centre in the record's frame
     for law, value in lawmap._values(theta):
         lo, hi = law.span(value)
-        ok &= (np.ravel(np.broadcast_to(lo, (theta.shape[0], 1))) < reach[0])
-        ok &= (np.ravel(np.broadcast_to(hi, (theta.shape[0], 1))) > reach[1])
+        ok &= np.ravel(np.broadcast_to(lo, (theta.shape[0], 1))) + s < reach[0]
+        ok &= np.ravel(np.broadcast_to(hi, (theta.shape[0], 1))) + s > reach[1]
     for name in tails:
         law = effects.get(name).law
         value = law.batch(lawmap.start.extra[name], {f: theta[:, i] for f, i in dict(lawmap.parts)[name]})
@@ -342,6 +364,12 @@ def _law_support(lawmap: LawMap, reach: tuple[float, float], tails: tuple[str, .
         ok &= np.all(np.reshape(k, (theta.shape[0], 2)) > 0, axis=1)
     return ok
 
+
+SHIFT = "z_shift"
+"""The name of a law's nuisance parameter: the centre of its centred parts (``ShapedLaw.centred``: facing magnets,
+oblique springs) in the record's frame [m]."""
+SHIFT_WIDTH = 0.1
+"""The shift's uniform prior: within this share of the record's stroke (its lowest to highest z) either side of 0."""
 
 PRIOR_WIDTH = 10.0
 """A law parameter's uniform prior spans this many times its size on either side of the deterministic start (its
@@ -425,6 +453,16 @@ def law_parametrisation(start: Model, restoring: laws.Law, damping: laws.Law, re
     else:
         desc.append(f"mass fixed at m = {start.m:g} kg (weighed)")
     desc.append(f"sigma: log-uniform on ({SIGMA_BOUNDS[0]:g}, {SIGMA_BOUNDS[1]:g}) m")
+    centred = [p for p, law in restoring.shaped().items() if law.centred]
+    if centred and set(restoring.fields) <= {"k0", "k1"} and set(restoring.parts) <= set(restoring.shaped()):
+        # the parts' centre where the record's z is 0 only by construction (a derived z pinned between the fitted
+        # wells, a laser zeroed elsewhere): a nuisance, its uncertainty carried into the force's band
+        half = SHIFT_WIDTH * (reach[1] - reach[0])
+        names = (*names, SHIFT)
+        lower, upper = np.append(lower, -half), np.append(upper, half)
+        desc.append(f"{SHIFT}: uniform on ({-1e3 * half:.3g}, {1e3 * half:.3g}) mm, a nuisance: the "
+                    f"{', '.join(centred)} part's centre in the record's frame (K(z) is the law's K(z - {SHIFT}); the "
+                    "models of the mean and of the draws are in the part's own frame)")  # fmt: skip
     lawmap = LawMap.of(start, restoring, damping, names)
     tails = tuple(p for p, law in restoring.shaped().items() if isinstance(law, Spline))
     for p in tails:
