@@ -289,7 +289,7 @@ def cmd_posterior(args) -> int:
     )
     rec = post.check(rec)  # every refusal before the progress line and bar
     where = f", {rec.n_dof} DOFs, element {args.element}" if rec.n_dof > 1 else ""
-    pair = post.laws()
+    pair = post.law_pair()
     what = args.model if pair is None else f"laws {pair[0].name} and {pair[1].name}"
     say(args, f"posterior ({what}{where}): {rec.n} samples at {rec.fs:g} Hz, input {rec.input_name}")
     res = post.fit(rec).result_

@@ -544,8 +544,12 @@ def tabulate_members(parts: list[tuple[ShapedLaw, Mapping[str, Any]]]) -> np.nda
         n = shape[0]
         lo, hi = np.broadcast_to(lo, (n,)), np.broadcast_to(hi, (n,))
         h = (hi - lo) / (TABLE_KNOTS - 1)
-        f = sum(np.broadcast_to(x, shape) for x in forces)
-        d = h[:, None] * sum(np.broadcast_to(x, shape) for x in slopes)
+        f, d = np.zeros(shape), np.zeros(shape)
+        for x in forces:
+            f = f + x
+        for x in slopes:
+            d = d + x
+        d = h[:, None] * d
         df = f[:, 1:] - f[:, :-1]
         # each member's segments (B, knots + 1, 4): the tangent line below the first knot, the Hermite cubic of each
         # interval, the tangent line beyond the last knot

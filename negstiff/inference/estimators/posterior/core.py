@@ -239,13 +239,13 @@ class Posterior(Estimator):
     def _validate(self) -> None:
         if self.start is not None and self.model != "coefficients":
             raise PosteriorError("a start model is a polynomial model, for the coefficient posterior")
-        if self.laws() is not None and self.model != "coefficients":
+        if self.law_pair() is not None and self.model != "coefficients":
             raise PosteriorError(f"law={self.law!r}, damping={self.damping!r}: a law's parameters are sampled as "
                                  "coefficients (model='coefficients'); the device model is the geometric law in its "
                                  "physical parameters")  # fmt: skip
         check_chain_file(self.chain_file, self.resume, self.n_ensembles)
 
-    def laws(self) -> tuple[laws.Law, laws.Law] | None:
+    def law_pair(self) -> tuple[laws.Law, laws.Law] | None:
         """The restoring and the damping law sampled (``law``, ``damping``), or None: the coefficient or device
         parametrisation (``model``).
         """
@@ -366,7 +366,7 @@ class Posterior(Estimator):
 
     # --- start point -------------------------------------------------------------------------------
     def _start(self, rec: Measurement, win: Windows) -> tuple[Parametrisation, np.ndarray]:
-        pair = self.laws()
+        pair = self.law_pair()
         if pair is not None:
             par, theta = self._law_start(rec, *pair)
             return par, moved_inside(par, theta)
@@ -438,8 +438,9 @@ class Posterior(Estimator):
             self.start_info_["shape"] = shape.to_json()
             self.start_info_["law"] = {"restoring": restoring.name, "damping": damping.name}
         _, v, _, _ = rec.states("state")
-        reach = (float(np.min(rec.z)), float(np.max(rec.z)))
-        par = law_parametrisation(start, restoring, damping, reach, float(np.std(rec.z)), float(np.std(v)))
+        z = np.asarray(rec.z, float)
+        reach = (float(np.min(z)), float(np.max(z)))
+        par = law_parametrisation(start, restoring, damping, reach, float(np.std(z)), float(np.std(v)))
         assert par.law is not None
         theta = par.law.start_values()
         if par.support is not None and not par.inside(moved_inside(par, theta)[None])[0]:
@@ -583,7 +584,7 @@ class Posterior(Estimator):
                                      "coefficients (model='coefficients')")  # fmt: skip
             if self.start is not None:
                 raise PosteriorError(f"{name}(start=...): a structure's posterior starts from SINDy(element=...)")
-            if self.laws() is not None:
+            if self.law_pair() is not None:
                 raise PosteriorError(f"{name}(law={self.law!r}, damping={self.damping!r}): a structure's posterior "
                                      "samples its element's cubic coefficients (no law read yet)")  # fmt: skip
             if self.input_noise:

@@ -17,9 +17,9 @@ from __future__ import annotations
 
 import functools
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
@@ -278,9 +278,9 @@ class LawMap:
         x = dict(zip(law_names, values_of(self.start, law_names), strict=True))
         return np.array([x.get(n, 0.0) for n in self.names])
 
-    def _values(self, theta: np.ndarray) -> list[tuple[ShapedLaw, dict[str, Any]]]:
+    def _values(self, theta: np.ndarray) -> list[tuple[ShapedLaw, Mapping[str, Any]]]:
         """Each shaped part's batch of values (``ShapedLaw.batch``) of parameters ``theta`` (B, d)."""
-        out = []
+        out: list[tuple[ShapedLaw, Mapping[str, Any]]] = []
         for name, cols in self.parts:
             law = effects.get(name).law
             assert isinstance(law, ShapedLaw)
@@ -324,8 +324,9 @@ class LawMap:
                 base[n] = theta[:, i]
             elif "." not in n and n in fixed_extra:
                 law = effects.get(n).law
-                if law.displacement_only:
-                    K += law.force(theta[:, i, None], z, 0.0)
+                assert isinstance(law, effects.Monomial | effects.SmoothSign)  # a scalar part
+                if law.displacement_only:  # its value a column of sizes (B, 1): the law broadcasts
+                    K += law.force(cast(Any, theta[:, i, None]), z, 0.0)
                 fixed_extra.pop(n)
         K += base["k3"][:, None] * z**3 + base["k2"][:, None] * z**2 - base["k1"][:, None] * z + base["k0"][:, None]
         for name, _ in self.parts:
@@ -357,10 +358,11 @@ def _law_support(lawmap: LawMap, reach: tuple[float, float], tails: tuple[str, .
         ok &= np.ravel(np.broadcast_to(lo, (theta.shape[0], 1))) + s < reach[0]
         ok &= np.ravel(np.broadcast_to(hi, (theta.shape[0], 1))) + s > reach[1]
     for name in tails:
-        law = effects.get(name).law
-        value = law.batch(lawmap.start.extra[name], {f: theta[:, i] for f, i in dict(lawmap.parts)[name]})
+        spline = effects.get(name).law
+        assert isinstance(spline, Spline)
+        value = spline.batch(lawmap.start.extra[name], {f: theta[:, i] for f, i in dict(lawmap.parts)[name]})
         knots = np.asarray(value["knots"], float)
-        k = law.stiffness(value, knots[[0, -1]])
+        k = spline.stiffness(value, knots[[0, -1]])
         ok &= np.all(np.reshape(k, (theta.shape[0], 2)) > 0, axis=1)
     return ok
 
@@ -419,6 +421,7 @@ def law_parametrisation(start: Model, restoring: laws.Law, damping: laws.Law, re
         part, _, fld = n.partition(".")
         if fld:
             law = effects.get(part).law
+            assert isinstance(law, ShapedLaw)
             value = start.extra[part]
             coef = np.abs(np.asarray(value["coef"], float)) if isinstance(law, Spline) else None
             size[i] = float(coef.max()) if coef is not None else max(abs(x[i]), law.scale(value, z_rms)[fld])
