@@ -284,10 +284,14 @@ def cmd_posterior(args) -> int:
         element=args.element,
         chain_file=args.chain_file,
         resume=args.resume,
+        law=args.law,
+        damping=args.damping,
     )
     rec = post.check(rec)  # every refusal before the progress line and bar
     where = f", {rec.n_dof} DOFs, element {args.element}" if rec.n_dof > 1 else ""
-    say(args, f"posterior ({args.model}{where}): {rec.n} samples at {rec.fs:g} Hz, input {rec.input_name}")
+    pair = post.law_pair()
+    what = args.model if pair is None else f"laws {pair[0].name} and {pair[1].name}"
+    say(args, f"posterior ({what}{where}): {rec.n} samples at {rec.fs:g} Hz, input {rec.input_name}")
     res = post.fit(rec).result_
     result = post.result()
     if args.idata:

@@ -428,6 +428,23 @@ def _posterior(sub, common: argparse.ArgumentParser, data_opts: argparse.Argumen
         help="the input sensor's white noise rms [m/s^2, or N for a force] (default: read from the input's spectral "
         "floor above the excitation's band; 0: the input taken as exact)",
     )
+    from negstiff.models import laws
+
+    pst.add_argument(
+        "--law",
+        choices=list(laws.names("restoring")),
+        help="sample a restoring-force law's parameters (every base field it frees and every parameter of its parts: "
+        "a magnet's A and d, a spline's coefficients over the record's knots, the rod frame's k_f, D0, L, alpha), "
+        "about its deterministic fit; the result adds the force's credible band over the stroke (force_band): "
+        + "; ".join(f"{law.name}: {law.title}" for law in laws.LAWS if law.kind == "restoring")
+        + ". Default: the coefficient or device model (--model)",
+    )  # fmt: skip
+    pst.add_argument(
+        "--damping",
+        choices=list(laws.names("damping")),
+        help="the damping law sampled with --law (default quadratic; without --law: the cubic with this damping): "
+        + "; ".join(f"{law.name}: {law.title}" for law in laws.LAWS if law.kind == "damping"),
+    )  # fmt: skip
     _structure_options(pst, "a structure's record: where the nonlinear element acts, I-J (it moves DOF J relative "
                        "to DOF I, 0: the base); its coefficients are sampled, the linear structure and each channel's "
                        "zero fixed at SINDy's")  # fmt: skip

@@ -513,22 +513,53 @@ def tabulate(extra: Mapping[str, Any]) -> np.ndarray | None:
     parts = shaped_parts(extra)
     if not parts:
         return None
-    spans = np.array([law.span(value) for law, value in parts])
-    lo, hi = float(spans[:, 0].min()), float(spans[:, 1].max())
-    z = np.linspace(lo, hi, TABLE_KNOTS)
-    h = (hi - lo) / (TABLE_KNOTS - 1)
-    f, d = np.zeros(z.shape), np.zeros(z.shape)
-    for law, value in parts:
-        f += np.broadcast_to(law.force(value, z), z.shape)
-        d += h * np.broadcast_to(law.stiffness(value, z), z.shape)
-    if not (np.all(np.isfinite(f)) and np.all(np.isfinite(d))):
+    table = tabulate_members(parts)
+    if not np.all(np.isfinite(table)):
         names = ", ".join(type(law).__name__ for law, _ in parts)
         raise ValueError(f"a shaped force law ({names}) is not finite over its span")
-    df = f[1:] - f[:-1]
-    cubic = np.column_stack([f[:-1], d[:-1], 3 * df - 2 * d[:-1] - d[1:], d[:-1] + d[1:] - 2 * df])  # Hermite
-    tails = np.array([[f[0], d[0], 0.0, 0.0], [f[-1], d[-1], 0.0, 0.0]])
-    segments = np.vstack([tails[:1], cubic, tails[1:]])
-    return np.concatenate([[lo, 1.0 / h, float(TABLE_KNOTS - 1)], segments.reshape(-1)])
+    return table[:, 0]
+
+
+def tabulate_members(parts: list[tuple[ShapedLaw, Mapping[str, Any]]]) -> np.ndarray:
+    """The simulator's tables (``tabulate``) of a batch of B members at once, (``TABLE_ROWS``, B): one table per
+    member, its knots over the hull of that member's spans, every part's force and stiffness evaluated for the
+    whole batch in one call (a posterior's walkers, a GA's population).
+
+    Each part's value holds its fields as a batch of values (``models.shaped``): a field of shape (B, 1) (a
+    spline's coefficients (B, 1, n)) is one value per member, a number (or a spline's knots) is shared. One value
+    per part gives B = 1. A member whose parts are not finite over its span (a rod shorter than its offset) has
+    a table of NaN there: the caller decides what it means (a posterior: outside the prior's support).
+    """
+    spans = [law.span(value) for law, value in parts]
+    lo = np.asarray(spans[0][0], float)
+    hi = np.asarray(spans[0][1], float)
+    for a, b in spans[1:]:
+        lo, hi = np.minimum(lo, a), np.maximum(hi, b)
+    lo, hi = np.atleast_1d(lo.reshape(-1)), np.atleast_1d(hi.reshape(-1))  # (B,) or (1,): the batch's first axis
+    z = np.linspace(lo, hi, TABLE_KNOTS, axis=-1)  # (B, knots): each member its own (or one for all)
+    with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
+        forces = [law.force(value, z) for law, value in parts]
+        slopes = [law.stiffness(value, z) for law, value in parts]
+        shape = np.broadcast_shapes(z.shape, *(np.shape(x) for x in forces + slopes))  # (B, knots)
+        n = shape[0]
+        lo, hi = np.broadcast_to(lo, (n,)), np.broadcast_to(hi, (n,))
+        h = (hi - lo) / (TABLE_KNOTS - 1)
+        f, d = np.zeros(shape), np.zeros(shape)
+        for x in forces:
+            f = f + x
+        for x in slopes:
+            d = d + x
+        d = h[:, None] * d
+        df = f[:, 1:] - f[:, :-1]
+        # each member's segments (B, knots + 1, 4): the tangent line below the first knot, the Hermite cubic of each
+        # interval, the tangent line beyond the last knot
+        cubic = np.stack([f[:, :-1], d[:, :-1], 3 * df - 2 * d[:, :-1] - d[:, 1:], d[:, :-1] + d[:, 1:] - 2 * df], -1)
+    zero = np.zeros_like(f[:, 0])
+    first = np.stack([f[:, 0], d[:, 0], zero, zero], axis=-1)[:, None]
+    last = np.stack([f[:, -1], d[:, -1], zero, zero], axis=-1)[:, None]
+    segments = np.concatenate([first, cubic, last], axis=1).reshape(n, -1)
+    head = np.column_stack([lo, 1.0 / h, np.full(n, float(TABLE_KNOTS - 1))])
+    return np.ascontiguousarray(np.concatenate([head, segments], axis=1).T)
 
 
 # --- the identification library ---------------------------------------------------------------------

@@ -37,7 +37,6 @@ and equilibria are sought.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 from types import MappingProxyType
@@ -67,6 +66,11 @@ def rod_reach(L, alpha_rad) -> tuple[Any, Any]:
     return -L * ca / (1 - sa), L * ca / (1 + sa)
 
 
+def _number(x) -> Any:
+    """A 0-d value as a float, an array of values (a batch's) as an array: a span of one value is two numbers."""
+    return float(x) if np.ndim(x) == 0 else np.asarray(x, float)
+
+
 class ShapedLaw:
     """A displacement force linear in its coefficients and nonlinear in its shape (module docstring).
 
@@ -78,6 +82,11 @@ class ShapedLaw:
     displacement_only: ClassVar[bool] = True
     fields: ClassVar[tuple[str, ...]] = ()
     shape: ClassVar[tuple[str, ...]] = ()
+    bounds: ClassVar[dict[str, tuple[float, float]]] = {}
+    """Each field's physically admissible open interval (``check``'s ranges), where it has one: a prior's box."""
+    centred: ClassVar[bool] = False
+    """Whether the part's force is odd about its own z = 0, a centre a record's frame need not share (facing
+    magnets, a pair of oblique springs: their centre is where the lab's z is zero only by construction)."""
 
     # --- the part's algebra (subclasses) ------------------------------------------------------------
     def columns(self, shape: Mapping[str, Any], z) -> list[np.ndarray]:
@@ -147,6 +156,13 @@ class ShapedLaw:
         """``value`` with some of its ``parameters`` replaced."""
         return {**dict(value), **{k: float(v) for k, v in params.items()}}
 
+    def batch(self, value: Mapping[str, Any], params: Mapping[str, np.ndarray]) -> dict[str, Any]:
+        """A batch of B values: ``value`` with some of its ``parameters`` given one number per member (arrays of
+        shape (B,)), as the part's methods take a batch (fields of shape (B, 1), broadcasting against z of shape
+        (T,) or (B, T)); the others shared. ``with_parameters`` for a posterior's walkers or a GA's population.
+        """
+        return {**dict(value), **{k: np.asarray(v, float)[:, None] for k, v in params.items()}}
+
     def scale(self, value: Mapping[str, Any], z_rms: float) -> dict[str, float]:
         """Each parameter's natural size at a record's rms displacement (refinement's scaling)."""
         return {k: max(abs(float(value[k])), 1e-12) for k in self.fields}
@@ -158,6 +174,8 @@ class DipoleMagnet(ShapedLaw):
 
     fields: ClassVar[tuple[str, ...]] = ("A", "d")
     shape: ClassVar[tuple[str, ...]] = ("d",)
+    bounds: ClassVar[dict[str, tuple[float, float]]] = {"d": (0.0, np.inf)}
+    centred: ClassVar[bool] = True
 
     def columns(self, shape, z):
         """The one column -3 z / (d^2 + z^2)^(5/2) [m^-4]."""
@@ -185,9 +203,9 @@ class DipoleMagnet(ShapedLaw):
         return A * ((d * d + z * z) ** -1.5 - d**-3.0)
 
     def span(self, value):
-        """+-8 d: beyond it the force is below 1e-3 of its peak (it decays as z^-4)."""
-        d = float(np.max(value["d"]))
-        return -8.0 * d, 8.0 * d
+        """+-8 d: beyond it the force is below 1e-3 of its peak (it decays as z^-4); per member of a batch."""
+        d = np.asarray(value["d"], float)
+        return _number(-8.0 * d), _number(8.0 * d)
 
     def check(self, name, value):
         """A gap d > 0."""
@@ -217,6 +235,8 @@ class ObliqueSprings(ShapedLaw):
 
     fields: ClassVar[tuple[str, ...]] = ("P", "a")
     shape: ClassVar[tuple[str, ...]] = ("a",)
+    bounds: ClassVar[dict[str, tuple[float, float]]] = {"a": (0.0, np.inf)}
+    centred: ClassVar[bool] = True
 
     def columns(self, shape, z):
         """The one column -2 z / sqrt(a^2 + z^2)."""
@@ -245,9 +265,9 @@ class ObliqueSprings(ShapedLaw):
         return -2.0 * P * (np.sqrt(a * a + z * z) - a)
 
     def span(self, value):
-        """+-8 a: beyond it the part's stiffness is below 1/500 of its value at z = 0."""
-        a = float(np.max(value["a"]))
-        return -8.0 * a, 8.0 * a
+        """+-8 a: beyond it the part's stiffness is below 1/500 of its value at z = 0; per member of a batch."""
+        a = np.asarray(value["a"], float)
+        return _number(-8.0 * a), _number(8.0 * a)
 
     def check(self, name, value):
         """A half-span a > 0."""
@@ -274,6 +294,8 @@ class RodFrame(ShapedLaw):
 
     fields: ClassVar[tuple[str, ...]] = ("k_f", "D0", "L", "alpha_deg")
     shape: ClassVar[tuple[str, ...]] = ("L", "alpha_deg")
+    bounds: ClassVar[dict[str, tuple[float, float]]] = {"k_f": (0.0, np.inf), "D0": (0.0, np.inf), "L": (0.0, np.inf),
+                                                        "alpha_deg": (-60.0, 60.0)}  # fmt: skip
 
     @staticmethod
     def _geometry(shape, z, second=False):
@@ -311,9 +333,11 @@ class RodFrame(ShapedLaw):
         return k * ((s + D0) ** 2 - D0 * D0)
 
     def span(self, value):
-        """The reach of the rods, 2 % short of each end (the force grows without bound at the ends)."""
-        lo, hi = rod_reach(float(np.max(value["L"])), math.radians(float(np.max(value["alpha_deg"]))))
-        return 0.98 * float(lo), 0.98 * float(hi)
+        """The reach of the rods, 2 % short of each end (the force grows without bound at the ends); per member of
+        a batch.
+        """
+        lo, hi = rod_reach(np.asarray(value["L"], float), np.radians(np.asarray(value["alpha_deg"], float)))
+        return _number(0.98 * lo), _number(0.98 * hi)
 
     def check(self, name, value):
         """Positive k_f, D0 and L, and a frame angle within (-60, 60) degrees (``Device``'s own ranges)."""
@@ -380,26 +404,43 @@ class Spline(ShapedLaw):
         w = 0.5 * (k[-1] - k[0])
         return float(k[0] - w), float(k[-1] + w)
 
-    def potential(self, value, z):
-        """int_0^z F dz [J]: the spline's antiderivative inside, the straight lines' beyond."""
+    @classmethod
+    def _integrals(cls, knots, z) -> np.ndarray:
+        """Each basis function's integral from the first knot to z, (*z.shape, n): the B-splines' antiderivatives
+        inside, their straight continuations' beyond.
+        """
         from scipy.interpolate import BSpline
 
+        knots = np.asarray(knots, float)
+        t = cls._t(knots)
+        basis = BSpline(t, np.eye(t.size - 4), 3)
+        lo, hi = knots[0], knots[-1]
+        z = np.asarray(z, float)
+        out = basis.antiderivative()(np.clip(z, lo, hi))
+        for end, side in ((lo, z < lo), (hi, z > hi)):
+            dz = np.where(side, z - end, 0.0)[..., None]
+            out = out + basis(end) * dz + 0.5 * basis.derivative()(end) * dz * dz
+        return out
+
+    def stiffness(self, value, z):
+        """dF/dz [N/m]: the basis functions' derivatives (constant beyond the end knots, as the lines are), weighted
+        by the coefficients (their last axis; a batch's leading axes broadcast against z's).
+        """
+        from scipy.interpolate import BSpline
+
+        knots = np.asarray(value["knots"], float)
+        t = self._t(knots)
+        slope = BSpline(t, np.eye(t.size - 4), 3).derivative()(np.clip(np.asarray(z, float), knots[0], knots[-1]))
+        return np.sum(np.asarray(value["coef"], float) * slope, axis=-1)
+
+    def potential(self, value, z):
+        """int_0^z F dz [J]: the spline's antiderivative inside, the straight lines' beyond (the coefficients' last
+        axis their own; a batch's leading axes broadcast against z's).
+        """
         z = np.asarray(z, float)
         knots = np.asarray(value["knots"], float)
-        spline = BSpline(self._t(knots), np.asarray(value["coef"], float), 3)
-        prim = spline.antiderivative()
-        d1 = spline.derivative()
-        lo, hi = knots[0], knots[-1]
-
-        def integral(x):
-            xi = np.clip(x, lo, hi)
-            out = prim(xi)
-            for end, side in ((lo, x < lo), (hi, x > hi)):
-                dz = np.where(side, x - end, 0.0)
-                out = out + spline(end) * dz + 0.5 * d1(end) * dz * dz
-            return out
-
-        return integral(z) - integral(np.zeros_like(z))
+        coef = np.asarray(value["coef"], float)
+        return np.sum(coef * (self._integrals(knots, z) - self._integrals(knots, np.zeros(1))), axis=-1)
 
     def check(self, name, value):
         """At least two knots, increasing, and len(knots) + 2 coefficients."""
@@ -418,6 +459,16 @@ class Spline(ShapedLaw):
         for k, v in params.items():
             coef[int(k[1:])] = float(v)
         return {"knots": tuple(value["knots"]), "coef": tuple(coef)}
+
+    def batch(self, value, params):
+        """A batch of B splines over the same knots: ``coef`` of shape (B, 1, n), each coefficient ``cJ`` given
+        (an array of shape (B,)) or shared (``value``'s).
+        """
+        n = max((np.size(v) for v in params.values()), default=1)
+        coef = np.repeat(np.asarray(value["coef"], float)[None, :], n, axis=0)
+        for k, v in params.items():
+            coef[:, int(k[1:])] = np.asarray(v, float)
+        return {"knots": tuple(value["knots"]), "coef": coef[:, None, :]}
 
     def scale(self, value, z_rms):
         """Each coefficient's size, or the largest's thousandth."""

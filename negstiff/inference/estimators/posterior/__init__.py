@@ -1,5 +1,7 @@
-"""Bayesian inference with emcee: posteriors over the coefficients (k1, k2, k3, c, c_nl) or the device
-(E, alpha, m, c, c_nl), with the exact forward model inside a multiple-shooting output-error likelihood.
+"""Bayesian inference with emcee: posteriors over the coefficients (k1, k2, k3, c, c_nl), the device
+(E, alpha, m, c, c_nl) or the parameters of a restoring and a damping law (``models.laws``: a magnet's A and d, a
+spline's coefficients, ...; ``Posterior(law=...)``, with the restoring force's credible band over the stroke),
+with the exact forward model inside a multiple-shooting output-error likelihood.
 
 Likelihood. z is measured with noise; z' and z'' are not measured. The record is cut into windows of
 ``window_s`` seconds; each is simulated from the measured state at its start (Savitzky-Golay z, z'
@@ -49,9 +51,11 @@ from negstiff.inference.estimators.posterior.diagnostics import (
 )
 from negstiff.inference.estimators.posterior.likelihood import LogPosterior, curvature_adjustment
 from negstiff.inference.estimators.posterior.parametrisation import (
+    LawMap,
     Parametrisation,
     coefficient_parametrisation,
     device_parametrisation,
+    law_parametrisation,
 )
 from negstiff.inference.estimators.posterior.sampling import sample_ensembles
 from negstiff.inference.estimators.posterior.windows import (
@@ -70,6 +74,7 @@ __all__ = [
     "DROP_FACTOR",
     "DROP_FACTOR_AT_MAP",
     "SIGMA_BOUNDS",
+    "LawMap",
     "LogPosterior",
     "Parametrisation",
     "Posterior",
@@ -80,6 +85,7 @@ __all__ = [
     "convergence_warnings",
     "curvature_adjustment",
     "device_parametrisation",
+    "law_parametrisation",
     "result_json",
     "sample_ensembles",
     "summarise",

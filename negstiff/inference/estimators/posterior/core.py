@@ -15,7 +15,15 @@ from scipy import optimize
 
 from negstiff.errors import ConvergenceWarning, InputError, MeasurementError, issue
 from negstiff.inference.estimators.base import Estimator
-from negstiff.inference.estimators.parameters import RANDOM_STATE, Boolean, Instance, Interval, Options, seed_of
+from negstiff.inference.estimators.parameters import (
+    RANDOM_STATE,
+    Boolean,
+    Instance,
+    Interval,
+    LawName,
+    Options,
+    seed_of,
+)
 from negstiff.inference.estimators.persistence import provenance
 from negstiff.inference.estimators.posterior.diagnostics import (
     PosteriorResult,
@@ -25,9 +33,11 @@ from negstiff.inference.estimators.posterior.diagnostics import (
 )
 from negstiff.inference.estimators.posterior.likelihood import LogPosterior, curvature_adjustment
 from negstiff.inference.estimators.posterior.parametrisation import (
+    SHIFT,
     Parametrisation,
     coefficient_parametrisation,
     device_parametrisation,
+    law_parametrisation,
 )
 from negstiff.inference.estimators.posterior.sampling import (
     ChainFile,
@@ -40,9 +50,15 @@ from negstiff.inference.estimators.structure_id import ElementPlace, element_of
 from negstiff.inference.record.derivatives import noise_floor
 from negstiff.inference.record.measurement import Measurement
 from negstiff.inference.steps.plausibility import classified
-from negstiff.models import Model
+from negstiff.models import Model, laws
 from negstiff.models.device import NOMINAL
 from negstiff.models.effects import ROWS
+
+FORCE_BAND_POINTS = 101
+"""Displacements of the force band's grid over the record's stroke (``force_band``)."""
+FORCE_BAND_DRAWS = 400
+"""Posterior draws (at most) the force band's quantiles are taken over: its 5 and 95 % quantiles then move by
+about 0.02 posterior sd from draw to draw of the band (the order statistics' spread), far below the band's width."""
 
 
 class Posterior(Estimator):
@@ -56,6 +72,16 @@ class Posterior(Estimator):
     model : {"coefficients", "device"}, default "coefficients"
         ``"coefficients"``: k1-k3, c, c_nl, sigma (mass fixed); ``"device"``: E, alpha, m, c, c_nl,
         sigma with the exact geometric K(z).
+    law : str, optional
+        A restoring-force law of ``models.laws`` (``"magnet"``, ``"septic"``, ``"geometric"``, ``"spline"``, ...):
+        every parameter it frees and every parameter of its parts is sampled (``law_parametrisation``: a magnet's
+        A and d, a spline's coefficients over the record's knots, the rod frame's k_f, D0, L and alpha), with the
+        damping law's and sigma, about the laws' deterministic fit (the weak form at the law's shape,
+        ``steps.shape.fit_shape``, refined by output error); the result adds the restoring force's credible band
+        over the stroke (``force_band``). None (default): the coefficient parametrisation (``model``) unchanged.
+    damping : str, optional
+        The damping law with ``law`` (``models.laws``; default ``"quadratic"``, the reference study's). Given
+        without ``law``: the cubic with this damping law, sampled as a law.
     mass_prior : {"weighed", "free"}, default "weighed"
         Device model only: the mass weighed (N(m, 2 %)) or free (the E-m ridge shows).
     window_s : float, default 0.125
@@ -153,6 +179,8 @@ class Posterior(Estimator):
         "element": ElementPlace(),
         "chain_file": ChainFilePath(),
         "resume": Boolean(),
+        "law": LawName("restoring", (None,)),
+        "damping": LawName("damping", (None,)),
     }
 
     def __init__(
@@ -180,6 +208,8 @@ class Posterior(Estimator):
         element: str | tuple[int, int] | None = None,
         chain_file: str | os.PathLike | None = None,
         resume: bool = False,
+        law: str | None = None,
+        damping: str | None = None,
     ):
         self.model = model
         self.mass_prior = mass_prior
@@ -203,11 +233,32 @@ class Posterior(Estimator):
         self.element = element
         self.chain_file = chain_file
         self.resume = resume
+        self.law = law
+        self.damping = damping
 
     def _validate(self) -> None:
         if self.start is not None and self.model != "coefficients":
             raise PosteriorError("a start model is a polynomial model, for the coefficient posterior")
+        if self.law_pair() is not None and self.model != "coefficients":
+            raise PosteriorError(f"law={self.law!r}, damping={self.damping!r}: a law's parameters are sampled as "
+                                 "coefficients (model='coefficients'); the device model is the geometric law in its "
+                                 "physical parameters")  # fmt: skip
         check_chain_file(self.chain_file, self.resume, self.n_ensembles)
+
+    def law_pair(self) -> tuple[laws.Law, laws.Law] | None:
+        """The restoring and the damping law sampled (``law``, ``damping``), or None: the coefficient or device
+        parametrisation (``model``).
+        """
+        if self.law is None and self.damping is None:
+            return None
+        return (laws.get(self.law or laws.DEFAULT_RESTORING, "restoring"),
+                laws.get(self.damping or laws.DEFAULT_DAMPING, "damping"))  # fmt: skip
+
+    def walkers(self, ndim: int) -> int:
+        """The walkers per ensemble: ``n_walkers``, or twice the dimension where that is more (a law's many
+        parameters: emcee's moves need more walkers than dimensions, and its docs advise twice).
+        """
+        return max(int(self.n_walkers), 2 * int(ndim))
 
     def chains_to(self, centre: np.ndarray, scale: np.ndarray, ndim: int, seed: int) -> ChainFile | None:
         """Where this run's chains are saved (``chain_file``; None: in memory), the run named by the sampled
@@ -215,7 +266,7 @@ class Posterior(Estimator):
         """
         if self.chain_file is None:
             return None
-        run = {"walkers": self.n_walkers, "ndim": int(ndim), "seed": int(seed),
+        run = {"walkers": self.walkers(ndim), "ndim": int(ndim), "seed": int(seed),
                "centre": np.ravel(centre).tolist(), "scale": np.ravel(scale).tolist()}  # fmt: skip
         return ChainFile(Path(self.chain_file), bool(self.resume), run)
 
@@ -273,6 +324,12 @@ class Posterior(Estimator):
         if "element_at" in res.settings:  # a structure's: the element's law of the DOF it moves
             return self.structure_.element
         mean = {n: s["mean"] for n, s in res.summary.items()}
+        if "law" in res.settings:  # a law's: its start model with the mean's parameters
+            from negstiff.inference.steps.refine import with_values
+
+            names = [n for n in res.names if n not in ("sigma", SHIFT)]
+            start = Model.from_dict(res.settings["law"]["start_model"])
+            return with_values(start, names, np.array([mean[n] for n in names]))
         if "k1" in mean:
             mass = res.settings.get("model_mass") or res.settings.get("mass") or 1.0
             return Model(m=mass, k1=mean["k1"], k2=mean["k2"], k3=mean["k3"], c=mean["c"], c_nl=mean["c_nl"],
@@ -289,7 +346,7 @@ class Posterior(Estimator):
         from dataclasses import replace
 
         res = self.result_
-        if "k1" not in res.names:
+        if "k1" not in res.names and "law" not in res.settings:
             raise InputError("draw_models: the device posterior's draws are devices, not coefficient models")
         flat = np.asarray(res.samples).reshape(-1, len(res.names))
         if flat.shape[0] == 0:
@@ -297,12 +354,22 @@ class Posterior(Estimator):
         if not (isinstance(n, int | np.integer) and 0 < n <= flat.shape[0]):
             raise InputError(f"draw_models: n must be 1 to {flat.shape[0]} (the draws held), got {n!r}")
         rows = flat[np.random.default_rng(seed).choice(flat.shape[0], int(n), replace=False)]
+        if "law" in res.settings:  # every law parameter of each draw, in the posterior mean's model
+            from negstiff.inference.steps.refine import with_values
+
+            keep = [i for i, k in enumerate(res.names) if k not in ("sigma", SHIFT)]
+            base = self.model_
+            return [with_values(base, [res.names[i] for i in keep], row[keep]) for row in rows]
         fields = [k for k in ("k0", "k1", "k2", "k3", "c", "c_nl") if k in res.names]
         base = self.model_
         return [replace(base, **{k: float(row[res.names.index(k)]) for k in fields}) for row in rows]
 
     # --- start point -------------------------------------------------------------------------------
     def _start(self, rec: Measurement, win: Windows) -> tuple[Parametrisation, np.ndarray]:
+        pair = self.law_pair()
+        if pair is not None:
+            par, theta = self._law_start(rec, *pair)
+            return par, moved_inside(par, theta)
         if self.model == "coefficients":
             from negstiff.inference.steps.weak import weak_least_squares
 
@@ -327,10 +394,7 @@ class Posterior(Estimator):
             # 1e-3 of the largest coefficient's magnitude, in that coefficient's units (k3's), which on a record in a
             # strain gauge's units (k3 5e11 per unit mass) moved a viscous c of 4, inside, to 5000 and the start
             # diverged
-            span = par.upper - par.lower
-            margin = np.minimum(1e-6 * span, np.maximum(0.1 * np.abs(theta), 1e-9 * span))
-            inside = np.where(theta >= par.upper, par.upper - margin, theta)
-            theta = np.where(theta <= par.lower, par.lower + margin, inside)
+            theta = moved_inside(par, theta)
         else:
             if rec.mass is None and self.mass_prior == "weighed":
                 raise PosteriorError(f"{rec.source}: the device posterior with a weighed mass needs --mass or metadata")
@@ -342,10 +406,53 @@ class Posterior(Estimator):
             self.start_info_ = {"source": "the device's nominal values"}
         return par, theta
 
-    def _refined_start(self, rec: Measurement, weak: Model) -> Model:
+    def _law_start(self, rec: Measurement, restoring: laws.Law, damping: laws.Law) -> tuple[Parametrisation,
+                                                                                            np.ndarray]:  # fmt: skip
+        """The laws' deterministic start and parametrisation: ``start`` where given (it must hold the laws' parts),
+        else the weak form's constrained least squares at the law's shape (``shape.fit_shape``: variable projection;
+        a spline's knots over the record's stroke, their number chosen by the data) refined by output error within
+        the laws (``_refined_start``, the base fields the laws leave out held at zero).
+        """
+        from negstiff.inference.steps.shape import fit_shape
+        from negstiff.inference.steps.weak import Library, WeakForm, fit_support, known_input_gain, mass_of
+
+        free = set(restoring.fields) | set(damping.fields)
+        held = tuple(f for f in ("k0", "k1", "k2", "k3", "c", "c_nl") if f not in free)
+        if self.start is not None:
+            missing = [p for p in (*restoring.parts, *damping.parts) if p not in self.start.extra]
+            if missing:
+                raise PosteriorError(f"the start model lacks the {restoring.name} and {damping.name} laws' "
+                                     f"part(s) {', '.join(missing)}")  # fmt: skip
+            if rec.mass is not None and abs(self.start.m / rec.mass - 1) > 1e-6:
+                raise PosteriorError(f"{rec.source}: the start model's mass ({self.start.m:g} kg) is not the "
+                                     f"record's ({rec.mass:g} kg)")  # fmt: skip
+            start = self.start
+            self.start_info_ = {"source": "given", "model": start.to_dict()}
+        else:
+            shape = fit_shape(rec, restoring, damping)
+            lib = Library.of_laws(restoring, damping, shape.shape)
+            gain = known_input_gain(rec)
+            phys = fit_support(WeakForm.of(rec).system(rec, library=lib), gain)
+            weak = lib.model(phys, mass_of(rec, gain, phys[-1])[0])
+            start = self._refined_start(rec, weak, held)
+            self.start_info_["shape"] = shape.to_json()
+            self.start_info_["law"] = {"restoring": restoring.name, "damping": damping.name}
+        _, v, _, _ = rec.states("state")
+        z = np.asarray(rec.z, float)
+        reach = (float(np.min(z)), float(np.max(z)))
+        par = law_parametrisation(start, restoring, damping, reach, float(np.std(z)), float(np.std(v)))
+        assert par.law is not None
+        theta = par.law.start_values()
+        if par.support is not None and not par.inside(moved_inside(par, theta)[None])[0]:
+            raise PosteriorError(f"{rec.source}: the {restoring.name} law's deterministic fit lies outside the "
+                                 f"prior's support ({'; '.join(par.description[1:])})")  # fmt: skip
+        return par, theta
+
+    def _refined_start(self, rec: Measurement, weak: Model, held: tuple[str, ...] = ()) -> Model:
         """The weak-form estimate refined by simulation error over the record (``refine.refine``; the mass
-        held: the coefficient posterior holds it too), kept only if it is bounded and predicts the record
-        at least as well; ``start_info_`` says which start was used and why.
+        held: the coefficient posterior holds it too; the base fields ``held`` too: those a law leaves out), kept
+        only if it is bounded and predicts the record at least as well; ``start_info_`` says which start was used
+        and why.
         """
         from negstiff.inference.steps.refine import refine
         from negstiff.inference.steps.validation import boundedness
@@ -357,7 +464,7 @@ class Posterior(Estimator):
             return weak
         t0 = time.perf_counter()
         try:
-            r = refine(weak, rec)
+            r = refine(weak, rec, held=held) if held else refine(weak, rec)
         except (ValueError, MeasurementError) as exc:
             info["reason"] = f"refinement failed, the weak-form estimate is the start: {exc}"
             return weak
@@ -388,9 +495,12 @@ class Posterior(Estimator):
         def resid(x):
             th = theta.copy()
             th[free] = x * x_scale[free]
-            if np.any(th <= par.lower) or np.any(th >= par.upper):
+            if not par.inside(th[None])[0]:
                 return np.full(n_rows, 1.0)
-            zsim, div = win.simulate(par.to_params(th[None]), par.kind)
+            params = par.to_params(th[None])
+            if not np.all(np.isfinite(params)):
+                return np.full(n_rows, 1.0)
+            zsim, div = win.simulate(params, par.kind)
             if div[0]:
                 return np.full(n_rows, 1.0)
             if gls:
@@ -474,6 +584,9 @@ class Posterior(Estimator):
                                      "coefficients (model='coefficients')")  # fmt: skip
             if self.start is not None:
                 raise PosteriorError(f"{name}(start=...): a structure's posterior starts from SINDy(element=...)")
+            if self.law_pair() is not None:
+                raise PosteriorError(f"{name}(law={self.law!r}, damping={self.damping!r}): a structure's posterior "
+                                     "samples its element's cubic coefficients (no law read yet)")  # fmt: skip
             if self.input_noise:
                 raise PosteriorError(f"{name}(input_noise={self.input_noise!r}): the input's noise is not carried "
                                      "through a structure (None or 0 there)")  # fmt: skip
@@ -533,7 +646,7 @@ class Posterior(Estimator):
         run = sample_ensembles(
             logpost,
             nd,
-            n_walkers=self.n_walkers,
+            n_walkers=self.walkers(nd),
             n_ensembles=self.n_ensembles,
             seed=seed,
             tau_multiple=self.tau_multiple,
@@ -575,7 +688,7 @@ class Posterior(Estimator):
             "variance_inflation": [round(float(v), 3) for v in inflation],
             "windows_dropped": [{"start_s": t, "rms_m": r} for t, r in win.dropped],
             "samples_used": int(win.n_windows * win.length),
-            "walkers": self.n_walkers,
+            "walkers": self.walkers(nd),
             "ensembles": self.n_ensembles,
             "kept_steps_per_ensemble": int(n_keep),
             "tau_max_steps": float(np.nanmax(tau_arr)) if np.isfinite(tau_arr).any() else None,
@@ -589,6 +702,16 @@ class Posterior(Estimator):
             "start": self.start_info_,
             "model_mass": float(par.to_params(theta[None])[ROWS["m"], 0]),
         }
+        if par.law is not None:
+            lm = par.law
+            res.settings["law"] = {"restoring": lm.restoring.name, "damping": lm.damping.name,
+                                   "title": f"{lm.restoring.title}; {lm.damping.title}",
+                                   "parameters": list(par.names), "start_model": lm.start.to_dict(),
+                                   "frame": ("the record's" if lm.shift < 0 else
+                                             f"the parts' own: the record's z less {SHIFT} (its summary among the "
+                                             "nuisance parameters; force_band is in the record's frame)")}  # fmt: skip
+            res.force_band = force_band(par, res.samples, stroke_of(rec), self.hdi_prob, seed,
+                                        np.concatenate([theta, [sigma]]))  # fmt: skip
         self.logpost_, self.par_, self.windows_ = logpost, par, win
         tau_max = np.nanmax(tau_arr) if np.isfinite(tau_arr).any() else np.nan  # too short a chain: no tau
         res.thin = max(1, int(np.ceil(tau_max / 2))) if np.isfinite(tau_max) else 1
@@ -619,6 +742,45 @@ class Posterior(Estimator):
         self.warnings_ = [text for _, text in lines]
         self.record_ = dict(rec.info)
         return self
+
+
+def stroke_of(rec: Measurement) -> tuple[float, float]:
+    """The record's stroke: the 0.5 and 99.5 % quantiles of its z [m] (``steps.shape.stroke``)."""
+    from negstiff.inference.steps.shape import stroke
+
+    return stroke(rec)
+
+
+def force_band(par: Parametrisation, samples: np.ndarray, stroke: tuple[float, float], prob: float, seed: int,
+               map_point: np.ndarray) -> dict[str, Any]:  # fmt: skip
+    """The restoring force's credible band over the record's stroke: K(z) [N] of at most ``FORCE_BAND_DRAWS``
+    posterior draws (picked without replacement, seeded by ``seed``) on ``FORCE_BAND_POINTS`` displacements from the
+    stroke's low to its high end, and each displacement's median and equal-tailed ``prob`` interval over the draws
+    (pointwise: 5 and 95 % at ``prob`` 0.9), with the force at the MAP point. In the record's frame (its pinned z).
+    """
+    assert par.law is not None
+    flat = np.asarray(samples).reshape(-1, samples.shape[-1])[:, :-1]  # sigma (the last) is no force's
+    n = min(FORCE_BAND_DRAWS, flat.shape[0])
+    rows = np.random.default_rng(seed).choice(flat.shape[0], n, replace=False)
+    z = np.linspace(stroke[0], stroke[1], FORCE_BAND_POINTS)
+    K = par.law.restoring_force(flat[rows], z)
+    tail = 0.5 * (1.0 - prob)
+    lo, med, hi = np.quantile(K, [tail, 0.5, 1.0 - tail], axis=0)
+    return {"z_m": z.tolist(), "median_n": med.tolist(), "low_n": lo.tolist(), "high_n": hi.tolist(),
+            "map_n": par.law.restoring_force(map_point[None, :-1], z)[0].tolist(), "prob": float(prob),
+            "quantiles": [tail, 1.0 - tail], "draws": int(n), "stroke_quantiles": [0.005, 0.995],
+            "mass_kg": float(par.law.start.m),
+            "frame": "the record's z as the posterior read it (its pinned frame: record.response)"}  # fmt: skip
+
+
+def moved_inside(par: Parametrisation, theta: np.ndarray) -> np.ndarray:
+    """A start ``theta`` on or past a prior's bound moved inside (``Posterior._start``'s reasons): by 1e-6 of the
+    prior's span, at most a tenth of its own size (at least 1e-9 of the span).
+    """
+    span = par.upper - par.lower
+    margin = np.minimum(1e-6 * span, np.maximum(0.1 * np.abs(theta), 1e-9 * span))
+    inside = np.where(theta >= par.upper, par.upper - margin, theta)
+    return np.where(theta <= par.lower, par.lower + margin, inside)
 
 
 INPUT_BAND_FILLED = 0.5

@@ -44,6 +44,8 @@ class PosteriorResult:
     """The record's source, the settings and the software's versions (``persistence.provenance``)."""
     correlation: dict[str, dict[str, float]] | None = field(default=None, repr=False)
     """The parameters' correlation when there are no samples (a result rebuilt from its JSON)."""
+    force_band: dict[str, Any] | None = field(default=None, repr=False)
+    """A law's posterior: the restoring force's credible band over the record's stroke (``core.force_band``)."""
     _built: tuple[Any, np.ndarray] | None = field(default=None, init=False, repr=False, compare=False)
 
     def _idata_and_loglik(self) -> tuple[Any, np.ndarray | None]:
@@ -101,6 +103,7 @@ class PosteriorResult:
                 "settings_json": json.dumps(self.settings, default=_plain),
                 "map_json": json.dumps(self.map_point),
                 "thin": int(self.thin),
+                **({} if self.force_band is None else {"force_band_json": json.dumps(self.force_band)}),
             },
         )
         tree["negstiff_run"] = run
@@ -127,6 +130,7 @@ class PosteriorResult:
             map_point=json.loads(run.attrs["map_json"]),
             thin=int(run.attrs["thin"]),
             provenance={str(k): v for k, v in tree.attrs.items()},
+            force_band=json.loads(run.attrs["force_band_json"]) if "force_band_json" in run.attrs else None,
         )
         del tree["negstiff_run"]
         ll = tree["log_likelihood"].dataset["z"].values if "log_likelihood" in tree.children else None
@@ -152,6 +156,7 @@ class PosteriorResult:
             settings=dict(d.get("settings", {})),
             map_point=dict(d.get("map", {})),
             correlation=d.get("correlation"),
+            force_band=d.get("force_band"),
         )
 
 
@@ -213,12 +218,12 @@ def convergence_warnings(summary: dict[str, dict[str, float]], n_ensembles: int)
 
 
 def result_json(res: PosteriorResult, hdi_prob: float) -> dict[str, Any]:
-    """The contract's posterior JSON (plus diagnostics)."""
+    """The contract's posterior JSON (plus diagnostics; a law's posterior adds its ``force_band``)."""
     params: dict[str, dict[str, float]] = {}
     nuisance: dict[str, dict[str, float]] = {}
     for n, s in res.summary.items():
         key = "alpha_deg" if n == "alpha_deg" else n
-        (nuisance if n in ("k0", "g_offset") else params)[key] = s
+        (nuisance if n in ("k0", "g_offset", "z_shift") else params)[key] = s
     return {
         "hdi_prob": hdi_prob,
         "parameters": params,
@@ -228,6 +233,7 @@ def result_json(res: PosteriorResult, hdi_prob: float) -> dict[str, Any]:
         "converged": not res.warnings,
         "warnings": res.warnings,
         "settings": res.settings,
+        **({} if res.force_band is None else {"force_band": res.force_band}),
     }
 
 

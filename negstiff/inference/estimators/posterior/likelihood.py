@@ -101,10 +101,16 @@ class LogPosterior:
         out = np.full((q.shape[0], self.win.n_windows) if pointwise else q.shape[0], -np.inf)
         ok = np.isfinite(lp)
         if ok.any():
-            zsim, div = self.win.simulate(self.par.to_params(self.likelihood_point(theta[ok])), self.par.kind)
-            ll = self.win.log_likelihood(zsim, np.exp(2 * log_sigma[ok]))  # (P, W)
-            ll[div] = -np.inf
-            out[ok] = ll if pointwise else ll.sum(axis=1)
+            params = self.par.to_params(self.likelihood_point(theta[ok]))
+            finite = np.all(np.isfinite(params), axis=0)  # a law's table is NaN where its parts are not finite
+            if not finite.all():
+                ok[ok] = finite
+                params = params[:, finite]
+            if ok.any():
+                zsim, div = self.win.simulate(params, self.par.kind)
+                ll = self.win.log_likelihood(zsim, np.exp(2 * log_sigma[ok]))  # (P, W)
+                ll[div] = -np.inf
+                out[ok] = ll if pointwise else ll.sum(axis=1)
         return out
 
     def __call__(self, y: np.ndarray):

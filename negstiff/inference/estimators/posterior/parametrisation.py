@@ -1,20 +1,33 @@
-"""What the posterior samples: the coefficient and device parametrisations, their priors and maps to the
+"""What the posterior samples: the coefficient, device and law parametrisations, their priors and maps to the
 simulator's kernel parameters.
+
+* ``coefficient_parametrisation``: the reference study's cubic and quadratic damping, k1, k2, k3, c, c_nl (k0 a
+  nuisance), the mass fixed.
+* ``device_parametrisation``: the reference device in its physical parameters E, alpha, m (the rod-frame geometry
+  of the ``geometric`` law, its other dimensions fixed at the drawings'), c, c_nl.
+* ``law_parametrisation``: any restoring and damping law of ``models.laws``, every base field the laws free and
+  every parameter of their parts (``Law.parts``: a monomial's size, a magnet's A and d, a spline's coefficients over
+  the record's knots, the rod frame's k_f, D0, L and alpha), named as the refinement names them
+  (``refine.parameter_names``: ``k1``, ``quintic_stiffness``, ``magnet.d``, ``spline.c3``). A batch of walkers'
+  kernel parameters is made in one pass: the base and monomial rows written at once, the shaped parts' tables by
+  ``effects.tabulate_members`` (every part's force and stiffness evaluated over the batch and its knots at once).
 """
 
 from __future__ import annotations
 
 import functools
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
+from typing import Any, cast
 
 import numpy as np
 
 from negstiff.inference.estimators.posterior.windows import SIGMA_BOUNDS
-from negstiff.models import Model
+from negstiff.models import Model, effects, laws
 from negstiff.models.device import Device
 from negstiff.models.effects import DEVICE_ROWS, POLYNOMIAL_ROWS, ROWS
+from negstiff.models.shaped import ShapedLaw, Spline
 
 
 # ------------------------------------------------------------------------------------------------
@@ -40,6 +53,11 @@ class Parametrisation:
     to_sampled: Callable[[np.ndarray], np.ndarray] | None = None
     log_jacobian: Callable[[np.ndarray], np.ndarray] | None = None
     reduce: Callable[[np.ndarray], np.ndarray] | None = None
+    # a prior's support beyond its box (a law's: a spline's tail rising outward, the parts tabulated over the
+    # record's stroke): (B, d) physical parameters -> (B,) bool; None: the box alone
+    support: Callable[[np.ndarray], np.ndarray] | None = None
+    # a law's parametrisation: its map (names, kernel rows, forces, models of parameters); None otherwise
+    law: LawMap | None = None
 
     def __post_init__(self):
         # a Gaussian prior enters the sampler's posterior, not the point estimate's least squares: it is
@@ -62,9 +80,16 @@ class Parametrisation:
         lp = self.log_prior(self.physical(phi), log_sigma)
         return lp if self.log_jacobian is None else lp + self.log_jacobian(phi)
 
+    def inside(self, theta: np.ndarray) -> np.ndarray:
+        """Whether each row of physical parameters ``theta`` (B, d) lies in the prior's support: (B,) bool."""
+        ok = np.all((theta > self.lower) & (theta < self.upper), axis=1)
+        if self.support is not None and ok.any():
+            ok[ok] = self.support(theta[ok])
+        return ok
+
     def log_prior(self, theta: np.ndarray, log_sigma: np.ndarray) -> np.ndarray:
         """The log prior of physical parameters ``theta`` and noise levels ``log_sigma`` (flat within the bounds)."""
-        ok = np.all((theta > self.lower) & (theta < self.upper), axis=1)
+        ok = self.inside(theta)
         ok &= (log_sigma > math.log(SIGMA_BOUNDS[0])) & (log_sigma < math.log(SIGMA_BOUNDS[1]))
         lp = np.where(ok, 0.0, -np.inf)
         for i, (mu, sd) in self.gaussian.items():
@@ -138,7 +163,14 @@ def coefficient_parametrisation(start: Model) -> Parametrisation:
 
 
 def device_parametrisation(start: Device, mass_prior: tuple[float, float] | None) -> Parametrisation:
-    """E, alpha, m, c, c_nl of the device with its exact geometric restoring force."""
+    """E, alpha, m, c, c_nl of the device with its exact geometric restoring force.
+
+    The restoring force is the ``geometric`` law's (``models.laws``: the rod frame of ``shaped.RodFrame`` with
+    gravity's constant, K = m g + 2 k_f (s + D0) s'(z)) read in the device's physical parameters: k_f = 3 E I / l^3
+    from Young's modulus and the arms' drawings, the frame angle alpha, the mass m, and L, D0 at the drawings'
+    values (``docs/device-model.md``); ``law_parametrisation`` of the geometric law samples k_f, D0, L, alpha and
+    k0 themselves, the mass held. At the same values both give the same force (``tests/test_posterior_laws.py``).
+    """
     names = ("E", "alpha_deg", "m", "c", "c_nl", "g_offset")
     lower = np.array([100e9, 2.0, 0.05, 0.0, 0.0, -0.5])
     upper = np.array([320e9, 14.0, 0.6, 50.0, 20.0, 0.5])
@@ -188,3 +220,260 @@ def device_parametrisation(start: Device, mass_prior: tuple[float, float] | None
         log_jacobian,
         reduce,
     )
+
+
+# ------------------------------------------------------------------------------------------------
+# A law's parametrisation
+# ------------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class LawMap:
+    """How a restoring and a damping law's parameters (``names``, ``refine.parameter_names``' spelling) make the
+    simulator's kernel parameters, the restoring force and a model, for one row of parameters or a batch.
+
+    ``start`` is the model whose parameters are varied (the deterministic start: its mass, its shaped parts' fixed
+    fields, a spline's knots); ``rows`` the kernel row each base field or scalar part writes (-1: none, a parameter
+    that is a shaped part's); ``parts`` each shaped part's registry name and the parameter columns of its
+    ``parameters``.
+    """
+
+    restoring: laws.Law
+    damping: laws.Law
+    names: tuple[str, ...]
+    start: Model
+    template: np.ndarray
+    rows: tuple[int, ...]
+    parts: tuple[tuple[str, tuple[tuple[str, int], ...]], ...]
+    shift: int = -1  # the column of ``SHIFT`` (the centred parts' centre in the record's frame), -1: none
+
+    @classmethod
+    def of(cls, start: Model, restoring: laws.Law, damping: laws.Law, names: tuple[str, ...]) -> LawMap:
+        """The map of ``names`` (base fields, scalar parts, ``PART.PARAMETER``, ``SHIFT``) about ``start``."""
+        lay = effects.layout()
+        rows = []
+        for n in names:
+            if "." in n or n == SHIFT:
+                rows.append(-1)
+            elif n in POLYNOMIAL_ROWS:
+                rows.append(POLYNOMIAL_ROWS[n])
+            elif n in ROWS:
+                rows.append(ROWS[n])
+            else:  # a scalar part (a monomial, the smoothed sign): its layout row
+                rows.append(lay.rows[n][0])
+        parts = []
+        for name in effects.REGISTRY:
+            if isinstance(name.law, ShapedLaw) and name.name in start.extra:
+                cols = tuple((n.partition(".")[2], i) for i, n in enumerate(names) if n.partition(".")[0] == name.name)
+                parts.append((name.name, cols))
+        template = start.kernel_params().copy()
+        for r in set(rows) - {-1}:
+            template[r] = 0.0  # written from the parameters (summed where two share a row)
+        shift = names.index(SHIFT) if SHIFT in names else -1
+        return cls(restoring, damping, tuple(names), start, template, tuple(rows), tuple(parts), shift)
+
+    def start_values(self) -> np.ndarray:
+        """The start's parameters (``refine.values_of``; the shift 0: the parts centred where the record's z is 0)."""
+        from negstiff.inference.steps.refine import values_of
+
+        law_names = [n for n in self.names if n != SHIFT]
+        x = dict(zip(law_names, values_of(self.start, law_names), strict=True))
+        return np.array([x.get(n, 0.0) for n in self.names])
+
+    def _values(self, theta: np.ndarray) -> list[tuple[ShapedLaw, Mapping[str, Any]]]:
+        """Each shaped part's batch of values (``ShapedLaw.batch``) of parameters ``theta`` (B, d)."""
+        out: list[tuple[ShapedLaw, Mapping[str, Any]]] = []
+        for name, cols in self.parts:
+            law = effects.get(name).law
+            assert isinstance(law, ShapedLaw)
+            out.append((law, law.batch(self.start.extra[name], {f: theta[:, i] for f, i in cols})))
+        return out
+
+    def params(self, theta: np.ndarray) -> np.ndarray:
+        """The kernel parameters (rows, B) of parameters ``theta`` (B, d): the start's, with the base and scalar
+        rows written and each member's table of the shaped parts (NaN where a member's parts are not finite).
+        """
+        theta = np.atleast_2d(theta)
+        p = np.repeat(self.template[:, None], theta.shape[0], axis=1)
+        for i, r in enumerate(self.rows):
+            if r >= 0:
+                p[r] += theta[:, i]
+        if self.parts:
+            size = effects.layout().size
+            p[size:] = effects.tabulate_members(self._values(theta))
+            if self.shift >= 0:  # K(z - s) = (k0 + k1 s) - k1 z + parts(z - s): the table's knots moved by s
+                s = theta[:, self.shift]
+                k1 = theta[:, self.names.index("k1")] if "k1" in self.names else self.start.k1
+                p[size] += s
+                p[POLYNOMIAL_ROWS["k0"]] += k1 * s
+        return p
+
+    def restoring_force(self, theta: np.ndarray, z) -> np.ndarray:
+        """K(z) [N] of each row of ``theta`` (B, d) at displacements ``z`` [m] (Z,): (B, Z). The base polynomial
+        K = k3 z^3 + k2 z^2 - k1 z + k0, the scalar displacement parts and the shaped parts, all of the batch at
+        once.
+        """
+        theta = np.atleast_2d(theta)
+        z = np.asarray(z, float)[None, :]
+        if self.shift >= 0:  # the law about its parts' centre s in the record's frame: K(z - s)
+            z = z - theta[:, self.shift, None]
+        start = self.start
+        base = {k: np.full(theta.shape[0], float(getattr(start, k) or 0.0)) for k in ("k0", "k1", "k2", "k3")}
+        K = np.zeros((theta.shape[0], z.shape[1]))
+        fixed_extra = dict(start.extra)
+        for i, n in enumerate(self.names):
+            if n in base:
+                base[n] = theta[:, i]
+            elif "." not in n and n in fixed_extra:
+                law = effects.get(n).law
+                assert isinstance(law, effects.Monomial | effects.SmoothSign)  # a scalar part
+                if law.displacement_only:  # its value a column of sizes (B, 1): the law broadcasts
+                    K += law.force(cast(Any, theta[:, i, None]), z, 0.0)
+                fixed_extra.pop(n)
+        K += base["k3"][:, None] * z**3 + base["k2"][:, None] * z**2 - base["k1"][:, None] * z + base["k0"][:, None]
+        for name, _ in self.parts:
+            fixed_extra.pop(name, None)
+        K += effects.stiffness_force(fixed_extra, z)  # the start's parts no parameter moves
+        for law, value in self._values(theta):
+            K += np.broadcast_to(law.force(value, z), K.shape)
+        return K
+
+    def model(self, row: np.ndarray) -> Model:
+        """The model of one row of parameters (the start's with them set: ``refine.with_values``); with a ``SHIFT``,
+        the law's model in its parts' own frame (the record's z less the shift).
+        """
+        from negstiff.inference.steps.refine import with_values
+
+        keep = [i for i, n in enumerate(self.names) if n != SHIFT]
+        return with_values(self.start, [self.names[i] for i in keep], np.asarray(row, float)[keep])
+
+
+def _law_support(lawmap: LawMap, reach: tuple[float, float], tails: tuple[str, ...], theta: np.ndarray) -> np.ndarray:
+    """Each row's admissibility beyond the box (``law_parametrisation``): every shaped part's span covers the
+    record's ``reach`` [m] (its table holds every z the record visited), and each spline named in ``tails`` rises
+    outward at both ends of its knots (its straight lines beyond them: a bounded potential).
+    """
+    ok = np.ones(theta.shape[0], bool)
+    s = theta[:, lawmap.shift] if lawmap.shift >= 0 else 0.0  # the parts' centre in the record's frame
+    for law, value in lawmap._values(theta):
+        lo, hi = law.span(value)
+        ok &= np.ravel(np.broadcast_to(lo, (theta.shape[0], 1))) + s < reach[0]
+        ok &= np.ravel(np.broadcast_to(hi, (theta.shape[0], 1))) + s > reach[1]
+    for name in tails:
+        spline = effects.get(name).law
+        assert isinstance(spline, Spline)
+        value = spline.batch(lawmap.start.extra[name], {f: theta[:, i] for f, i in dict(lawmap.parts)[name]})
+        knots = np.asarray(value["knots"], float)
+        k = spline.stiffness(value, knots[[0, -1]])
+        ok &= np.all(np.reshape(k, (theta.shape[0], 2)) > 0, axis=1)
+    return ok
+
+
+SHIFT = "z_shift"
+"""The name of a law's nuisance parameter: the centre of its centred parts (``ShapedLaw.centred``: facing magnets,
+oblique springs) in the record's frame [m]."""
+SHIFT_WIDTH = 0.1
+"""The shift's uniform prior: within this share of the record's stroke (its lowest to highest z) either side of 0."""
+
+PRIOR_WIDTH = 10.0
+"""A law parameter's uniform prior spans this many times its size on either side of the deterministic start (its
+size: the start's magnitude, or the parameter's natural scale where the start is near zero), cut by physics."""
+
+
+def _top_power(restoring: laws.Law) -> tuple[str, int] | None:
+    """The restoring law's highest power of z that it frees, and the parameter that sizes it (a field or a part)."""
+    terms = [(f, effects.BASE_TERMS[f][0].z_power) for f in restoring.fields]
+    for p in restoring.parts:
+        law = effects.get(p).law
+        if isinstance(law, effects.Monomial) and law.displacement_only:
+            terms.append((p, law.z_power))
+    return max(terms, key=lambda t: t[1]) if terms else None
+
+
+def law_parametrisation(start: Model, restoring: laws.Law, damping: laws.Law, reach: tuple[float, float],
+                        z_rms: float, v_rms: float) -> Parametrisation:  # fmt: skip
+    """Every parameter of a restoring and a damping law about the deterministic start ``start`` (the laws' model:
+    the weak form at the law's shape, refined by output error), with uniform priors cut by physics (module
+    docstring; ``description`` states each).
+
+    Parameters
+    ----------
+    start : Model
+        The laws' model (its mass held, as the coefficient posterior holds it).
+    restoring, damping : Law
+        The laws (``models.laws``).
+    reach : (float, float)
+        The record's lowest and highest z [m]: the shaped parts must be tabulated over it (their span covers it).
+    z_rms, v_rms : float
+        The record's rms displacement [m] and velocity [m/s]: each parameter's natural scale (``refine``'s).
+
+    Returns
+    -------
+    Parametrisation
+        Its ``law`` the map to kernel parameters, forces and models (``LawMap``).
+    """
+    from negstiff.inference.steps.refine import parameter_names, parameter_scales, values_of
+
+    free = set(restoring.fields) | set(damping.fields)
+    held = tuple(f for f in ("k0", "k1", "k2", "k3", "c", "c_nl") if f not in free)
+    names = parameter_names(start, False, held)
+    x = values_of(start, names)
+    size = np.maximum(np.abs(x), parameter_scales(start, names, z_rms, v_rms))
+    for i, n in enumerate(names):  # a shaped part's parameter: its own scale (a spline's: its largest coefficient)
+        part, _, fld = n.partition(".")
+        if fld:
+            law = effects.get(part).law
+            assert isinstance(law, ShapedLaw)
+            value = start.extra[part]
+            coef = np.abs(np.asarray(value["coef"], float)) if isinstance(law, Spline) else None
+            size[i] = float(coef.max()) if coef is not None else max(abs(x[i]), law.scale(value, z_rms)[fld])
+    lower, upper = x - PRIOR_WIDTH * size, x + PRIOR_WIDTH * size
+    desc = [f"every parameter uniform within {PRIOR_WIDTH:g}x its size on either side of the deterministic start "
+            "(its size: the start's magnitude, or its natural scale at the record's rms state where that is larger; "
+            "a spline's coefficients: the largest one's), cut by physics:"]  # fmt: skip
+    for i, n in enumerate(names):
+        part, _, fld = n.partition(".")
+        if not fld and n in ("c", "c_nl") or (not fld and n not in effects.BASE_TERMS and effects.get(n).dissipative):
+            lower[i] = max(lower[i], 0.0)
+            desc.append(f"{n}: > 0 (dissipative)")
+        if fld:
+            law = effects.get(part).law
+            assert isinstance(law, ShapedLaw)
+            if fld in law.bounds:
+                lo_b, hi_b = law.bounds[fld]
+                lower[i], upper[i] = max(lower[i], lo_b), min(upper[i], hi_b)
+                desc.append(f"{n}: within ({lo_b:g}, {hi_b:g}) ({part}'s physical range)")
+    top = _top_power(restoring)
+    if top is not None and top[1] >= 3 and top[1] % 2:  # an odd top power: its coefficient positive, a bounded tail
+        i = names.index(top[0])
+        lower[i] = max(lower[i], 0.0)
+        desc.append(f"{top[0]}: > 0 (the top power z^{top[1]} hardens: a bounded potential)")
+    elif top is not None and top[0] == "k1" and restoring.shaped():
+        i = names.index("k1")  # the shaped parts fade or saturate far out: the linear spring bounds the potential
+        upper[i] = min(upper[i], 0.0)
+        desc.append("k1: < 0 (K holds -k1 z: the linear spring stiffens the device beyond where its "
+                    f"{', '.join(restoring.shaped())} part acts, a bounded potential)")  # fmt: skip
+    if start.m == 1.0:
+        desc.append(f"mass fixed at m = {start.m:g} kg (per unit mass)")
+    else:
+        desc.append(f"mass fixed at m = {start.m:g} kg (weighed)")
+    desc.append(f"sigma: log-uniform on ({SIGMA_BOUNDS[0]:g}, {SIGMA_BOUNDS[1]:g}) m")
+    centred = [p for p, law in restoring.shaped().items() if law.centred]
+    if centred and set(restoring.fields) <= {"k0", "k1"} and set(restoring.parts) <= set(restoring.shaped()):
+        # the parts' centre where the record's z is 0 only by construction (a derived z pinned between the fitted
+        # wells, a laser zeroed elsewhere): a nuisance, its uncertainty carried into the force's band
+        half = SHIFT_WIDTH * (reach[1] - reach[0])
+        names = (*names, SHIFT)
+        lower, upper = np.append(lower, -half), np.append(upper, half)
+        desc.append(f"{SHIFT}: uniform on ({-1e3 * half:.3g}, {1e3 * half:.3g}) mm, a nuisance: the "
+                    f"{', '.join(centred)} part's centre in the record's frame (K(z) is the law's K(z - {SHIFT}); the "
+                    "models of the mean and of the draws are in the part's own frame)")  # fmt: skip
+    lawmap = LawMap.of(start, restoring, damping, names)
+    tails = tuple(p for p, law in restoring.shaped().items() if isinstance(law, Spline))
+    for p in tails:
+        desc.append(f"{p}: rising at both end knots (its straight lines beyond them: a bounded potential)")
+    if lawmap.parts:
+        desc.append(f"the shaped parts ({', '.join(n for n, _ in lawmap.parts)}) tabulated over every z the record "
+                    f"visited, [{1e3 * reach[0]:.4g}, {1e3 * reach[1]:.4g}] mm: their span covers it")  # fmt: skip
+    support = functools.partial(_law_support, lawmap, (float(reach[0]), float(reach[1])), tails)
+    desc.append(f"restoring law {restoring.name} ({restoring.title}); damping law {damping.name} ({damping.title})")
+    return Parametrisation(tuple(names), start.kind, lawmap.params, lower, upper, {}, desc, support=support,
+                           law=lawmap)  # fmt: skip
