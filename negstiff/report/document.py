@@ -27,7 +27,7 @@ from negstiff.errors import OutputError  # noqa: E402
 from negstiff.files import atomic_dir, check_folder  # noqa: E402
 
 from .numbers import fmt  # noqa: E402
-from .sections import COEFFICIENTS, Blocks, Section, coefficient_blocks, section_for  # noqa: E402
+from .sections import Blocks, Section, coefficient_blocks, coefficient_keys, section_for  # noqa: E402
 
 
 @dataclass
@@ -126,6 +126,19 @@ class Report(Blocks):
             self.figures.update(figures)
             head += blocks
             summary[1:1] = lines
+        models = {col: m for s in secs for col, m in s.models.items()}
+        band = next((s.band for s in secs if s.band), None)
+        strokes = [s.stroke for s in secs if s.stroke]
+        if strokes and (band or any(m.extra for m in models.values())):  # a law beyond the cubic: its force drawn
+            from .figures import force_figure
+
+            stroke = (min(a for a, _ in strokes), max(b for _, b in strokes))
+            fig = force_figure(models, stroke, "the restoring force over the stroke", band)
+            Blocks.figure(self, "force_over_stroke", fig,
+                          "Each method's restoring force K(z) over the stroke the record visited (wells marked)"
+                          + (", in the posterior's credible band (shaded; its z in the record's pinned frame)"
+                             if band else ""))  # fmt: skip
+            head.append(self.blocks.pop())
         held = {k: v for s in secs for k, v in s.heldout.items()}
         if len(held) > 1:
             head += [("h", (2, "Held-out prediction")),
@@ -155,7 +168,7 @@ class Report(Blocks):
                 **{("posterior" if lab == "posterior" else f"posterior ({lab})"): {
                     "mean": iv[k][0], "hdi_low": iv[k][1], "hdi_high": iv[k][2]}
                    for lab, iv in intervals.items() if k in iv}}
-            for k in COEFFICIENTS
+            for k in coefficient_keys(estimates, intervals)
         }  # fmt: skip
         out["heldout_percent"] = {k: v for s in secs for k, v in s.heldout.items()}
         out["summary"] = self._composed()[1]

@@ -149,18 +149,29 @@ def continuation_figure(result: dict[str, Any], title: str = ""):
 def force_figure(models: dict[str, Any], stroke: tuple[float, float], title: str = "",
                  band: dict[str, Any] | None = None):  # fmt: skip
     """The restoring force K(z) [N] of each model (``{label: Model}``) over the measured stroke [m] (its wells
-    marked), with a posterior's credible band where one is given (``band``: ``{"z_m", "low", "high"}``, a
-    posterior's ``force_band``).
+    marked); with a posterior's credible band (``band``: a posterior's ``force_band``, ``{"z_m", "low_n",
+    "high_n", "median_n"}``) shaded, and below it each model's force minus the band's median with the band about
+    zero (a band a fraction of a percent of the force wide is seen there).
     """
     import matplotlib.pyplot as plt
 
-    fig, ax = plt.subplots(figsize=(8, 4.2))
+    rows = 2 if band else 1
+    fig, axes = plt.subplots(rows, 1, figsize=(8, 4.2 if rows == 1 else 6.4), sharex=True, squeeze=False,
+                             height_ratios=[3, 2][:rows])  # fmt: skip
+    ax = axes[0, 0]
     z = np.linspace(stroke[0], stroke[1], 401)
     if band:
-        ax.fill_between(1e3 * np.asarray(band["z_m"]), band["low"], band["high"], color="0.85",
-                        label=band.get("label", "posterior 90 % band"))  # fmt: skip
+        zb = np.asarray(band["z_m"])
+        ax.fill_between(1e3 * zb, band["low_n"], band["high_n"], color="0.8", label=band.get("label", "posterior band"))
+        med = np.asarray(band["median_n"])
+        axes[1, 0].fill_between(1e3 * zb, np.asarray(band["low_n"]) - med, np.asarray(band["high_n"]) - med,
+                                color="0.8")  # fmt: skip
+        axes[1, 0].axhline(0.0, color="0.5", lw=0.6)
+        axes[1, 0].set_ylabel("K(z) - posterior median [N]")
     for label, model in models.items():
         (line,) = ax.plot(1e3 * z, model.restoring_force(z), lw=1.5, label=label)
+        if band:
+            axes[1, 0].plot(1e3 * zb, model.restoring_force(zb) - med, lw=1.2, color=line.get_color())
         try:
             eq = model.equilibria()
         except ValueError:
@@ -168,7 +179,7 @@ def force_figure(models: dict[str, Any], stroke: tuple[float, float], title: str
         wells = [w for w in (eq.z_minus, eq.z_plus) if w is not None and stroke[0] <= w <= stroke[1]]
         ax.plot(1e3 * np.array(wells), np.zeros(len(wells)), "o", color=line.get_color(), ms=5)
     ax.axhline(0.0, color="0.5", lw=0.6)
-    ax.set_xlabel("z [mm] (the record's stroke)")
+    axes[-1, 0].set_xlabel("z [mm] (the record's stroke)")
     ax.set_ylabel("restoring force K(z) [N]" + (" per unit mass" if all(m.m == 1.0 for m in models.values()) else ""))
     ax.set_title(title, fontsize=10)
     ax.legend(fontsize=8, frameon=False)

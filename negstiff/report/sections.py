@@ -16,7 +16,7 @@ table take from it (each method's estimates beside the posterior's interval).
 from __future__ import annotations
 
 import io
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -76,21 +76,50 @@ class Section(Blocks):
     """what -> held-out prediction error [% of rms z]."""
     summary: list[str] = field(default_factory=list)
     json: dict[str, Any] = field(default_factory=dict)
+    models: dict[str, Any] = field(default_factory=dict)
+    """column -> the method's final ``Model`` (the report's force figure draws each over the stroke)."""
+    band: dict[str, Any] | None = None
+    """A law's posterior: its force band over the stroke (``Posterior``'s ``force_band``)."""
+    stroke: tuple[float, float] | None = None
+    """The stroke the record visited [m] (the identification part's 0.5 and 99.5 % quantiles)."""
 
 
 def effective(model) -> dict[str, float]:
     """k1-k3, c, c_nl of a model (a ``Model`` or its dict) with each named effect that is one of those terms
-    folded back in (a discrepancy's ``quadratic_damping`` is c_nl's term: the simulator adds the two).
+    folded back in (a discrepancy's ``quadratic_damping`` is c_nl's term: the simulator adds the two), and each
+    shaped part's parameters (a magnet's ``magnet.A``, ``magnet.d``: ``models.shaped``), named as the refinement
+    and the posterior name them.
     """
     from negstiff.models import effects
+    from negstiff.models.shaped import ShapedLaw
 
     d = model if isinstance(model, dict) else model.to_dict()
     out = {k: float(d[k]) for k in COEFFICIENTS}
     for name, value in (d.get("extra") or {}).items():
+        law = effects.get(name).law
+        if isinstance(law, ShapedLaw):
+            out |= {f"{name}.{p}": v for p, v in law.parameters(value).items()}
+            continue
         field = effects.get(name).folds_into
         if field in out and not isinstance(value, dict):
             out[field] += float(value)
     return out
+
+
+def coefficient_keys(estimates: dict[str, dict[str, float]], intervals: dict[str, dict[str, tuple]]) -> list[str]:
+    """The coefficients a report's table holds: the contract's five, and every other any estimate or interval has
+    (a law's parts' parameters), in the order first met; a base coefficient every estimate holds at zero and no
+    interval has (the cubic's k3 beside a magnet's law) is left out where other rows remain.
+    """
+    keys = list(COEFFICIENTS)
+    for d in [*estimates.values(), *intervals.values()]:
+        keys += [k for k in d if k not in keys]
+    extra = [k for k in keys if k not in COEFFICIENTS]
+    if not extra:
+        return keys
+    held = [k for k in COEFFICIENTS if any(est.get(k) for est in estimates.values()) or any(k in iv for iv in
+                                                                                             intervals.values())]
+    return held + extra
 
 
 def _slug(text: str) -> str:
@@ -157,6 +186,9 @@ def identification_section(est, label: str = "") -> Section:
     sec = Section("identification", label, _with_label(f"{name}: identification", label))
     refined = bool(r.refinement and r.refinement.get("applied"))
     sec.estimates[col] = effective(r.model)
+    sec.models[col] = r.model
+    q = np.asarray(r.stroke_quantiles_m, float)
+    sec.stroke = (float(q[0]), float(q[-1])) if q.size >= 2 else None
     if refined:
         sec.estimates[_with_label(f"{name}, its own estimate", label)] = effective(r.initial_model)
     rows = [[w, m.get("f_hz"), None if m.get("zeta") is None else 100 * m["zeta"]] for w, m in r.modal.items()]
@@ -166,26 +198,16 @@ def identification_section(est, label: str = "") -> Section:
         + "; reference study Table 1):"
     )
     sec.table(["well", "f [Hz]", "zeta [%]"], rows)
-    m = r.model
+    units = {"k1": "N/m", "k2": "N/m^2", "k3": "N/m^3", "c": "N s/m", "c_nl": "N s^2/m^2"}
+    own = effective(r.initial_model)
+    keys = coefficient_keys({"final": effective(r.model), **({"own": own} if refined else {})}, {})
+    cols = [k for k in keys if k in units]  # the base coefficients; a law's parts' parameters in their own table
     sec.table(
-        ["model", "k1 [N/m]", "k2 [N/m^2]", "k3 [N/m^3]", "c [N s/m]", "c_nl [N s^2/m^2]", "m [kg]"],
-        [["final" + (" (output-error refined)" if refined else ""), m.k1, m.k2, m.k3, m.c, m.c_nl, m.m]]
-        + (
-            [
-                [
-                    "own estimate (equation error)",
-                    r.initial_model.k1,
-                    r.initial_model.k2,
-                    r.initial_model.k3,
-                    r.initial_model.c,
-                    r.initial_model.c_nl,
-                    r.initial_model.m,
-                ]
-            ]
-            if refined
-            else []
-        ),  # fmt: skip
-    )
+        ["model", *[f"{k} [{units[k]}]" for k in cols], "m [kg]"],
+        [["final" + (" (output-error refined)" if refined else ""), *[getattr(r.model, k) for k in cols], r.model.m]]
+        + ([["own estimate (equation error)", *[getattr(r.initial_model, k) for k in cols], r.initial_model.m]]
+           if refined else []),
+    )  # fmt: skip
     v = r.validation
     # a quiet tail (a decay's) scores no restarted window: the one free run's error then
     keys = ("restarted_rms_percent", "median_window_percent", "rms_percent")
@@ -218,7 +240,8 @@ def identification_section(est, label: str = "") -> Section:
 
 def _law_blocks(sec: Section, r, name: str) -> None:
     """The law the identification read (its formula and its parts' values), the comparison of laws where one was
-    made, the held-out tail in windows of the record's predictability, and the force over the stroke.
+    made, and the held-out tail in windows of the record's predictability (the report draws every method's force
+    over the stroke once, ``Report``).
     """
     from negstiff.models import laws
 
@@ -228,13 +251,12 @@ def _law_blocks(sec: Section, r, name: str) -> None:
         damping = r.settings.get("damping_law")
         sec.text(f"Restoring-force law: {law.name}, {law.title} ({law.reference})"
                  + (f"; damping law: {damping}." if damping and damping != "catalogue" else "."))  # fmt: skip
-        parts = {k: v for k, v in r.model.extra.items() if isinstance(v, dict) or k in law.parts}
-        if parts:
-            rows = [[f"{part}.{f}", v] for part, value in parts.items()
-                    for f, v in (value.items() if isinstance(value, dict) else [("value", value)])
-                    if not isinstance(v, (list, tuple))]  # fmt: skip
-            if rows:
-                sec.table(["the law's part", "value (SI)"], rows)
+        final, own = effective(r.model), effective(r.initial_model)
+        rows = [[k, final[k], own.get(k)] for k in final if "." in k]
+        rows += [[k, float(v), r.initial_model.extra.get(k)] for k, v in r.model.extra.items()
+                 if k in law.parts and not isinstance(v, Mapping)]  # the law's monomials (z^4 ... z^7)
+        if rows:
+            sec.table(["the law's part", "final (SI)", "own estimate (SI)"], rows)
         if r.settings.get("shape"):
             sec.text(f"Its shape, from the record: {r.settings['shape'].get('method', '')}.")
     choice = r.details.get("law_choice")
@@ -249,16 +271,6 @@ def _law_blocks(sec: Section, r, name: str) -> None:
         sec.text(f"In windows as long as the record stays predictable ({fmt(pred['window_s'], 3)} s: runs restarted "
                  f"from states that differ by their noise part by 10 % of rms z{sooner}), the held-out median window "
                  f"errs by {fmt(pred['median_window_percent'], 3)} %.")  # fmt: skip
-    stroke = np.asarray(r.stroke_quantiles_m, float)
-    if stroke.size >= 2 and np.ptp(stroke) > 0:
-        from .figures import force_figure
-
-        models = {f"{name}" + (" (refined)" if r.refinement and r.refinement.get("applied") else ""): r.model}
-        if r.refinement and r.refinement.get("applied"):
-            models[f"{name}, its own estimate"] = r.initial_model
-        sec.figure(_slug(f"force {name} {sec.label}"), force_figure(models, (float(stroke[0]), float(stroke[-1])),
-                                                                    f"{name}: the restoring force over the stroke"),
-                   f"{name}'s restoring force K(z) over the stroke the record visited (its wells marked)")  # fmt: skip
 
 
 def posterior_section(post, label: str = "") -> Section:
@@ -269,7 +281,7 @@ def posterior_section(post, label: str = "") -> Section:
     rows = []
     for n, s in res["parameters"].items():
         rows.append([n, s["mean"], s["sd"], s["hdi_low"], s["hdi_high"], s["r_hat"], s["ess_bulk"]])
-        if n in COEFFICIENTS:
+        if n in COEFFICIENTS or "." in n:  # a base coefficient, or a law's part's parameter (PART.NAME)
             sec.interval[n] = (s["mean"], s["hdi_low"], s["hdi_high"])
     sec.table(["parameter", "mean", "sd", f"{pct:g} % low", f"{pct:g} % high", "R-hat", "ESS bulk"], rows)
     st = res["settings"]
@@ -280,6 +292,9 @@ def posterior_section(post, label: str = "") -> Section:
     )  # fmt: skip
     for w in res["warnings"]:
         sec.warning(w)
+    if res.get("force_band"):
+        sec.band = {**res["force_band"], "label": f"posterior {100 * res['force_band']['prob']:g} % band"}
+        sec.stroke = (float(sec.band["z_m"][0]), float(sec.band["z_m"][-1]))
     if "k3" in sec.interval:
         mean, lo, hi = sec.interval["k3"]
         sec.summary.append(
@@ -487,7 +502,8 @@ def coefficient_blocks(estimates: dict[str, dict[str, float]], intervals: dict[s
         name = "posterior" if lab == "posterior" else f"posterior ({lab})"
         header += [f"{name} mean", "interval low", "interval high"]
     rows = []
-    for k in COEFFICIENTS:
+    keys = coefficient_keys(estimates, intervals)
+    for k in keys:
         row: list[Any] = [k, *[est.get(k) for est in estimates.values()]]
         for iv in intervals.values():
             row += list(iv.get(k, (None, None, None)))
@@ -495,14 +511,15 @@ def coefficient_blocks(estimates: dict[str, dict[str, float]], intervals: dict[s
     blocks: list[tuple[str, Any]] = [
         ("h", (2, "Coefficients: every method beside the posterior")),
         ("p", "Each method's estimate of the z-frame coefficients (K = k3 z^3 + k2 z^2 - k1 z + k0, D = c z' + "
-              "c_nl z'|z'|), beside the posterior's mean and credible interval; the forest plot below draws the same."),
+              "c_nl z'|z'|; a law's parts by their parameters, PART.NAME), beside the posterior's mean and credible "
+              "interval; the forest plot below draws the same."),
         ("table", (header, [[fmt(c) for c in r] for r in rows])),
     ]  # fmt: skip
     rows_n = len(estimates) + len(intervals)
-    fig, axes = plt.subplots(1, len(COEFFICIENTS), figsize=(3.2 * len(COEFFICIENTS), 1.2 + 0.5 * rows_n), sharey=True,
+    fig, axes = plt.subplots(1, len(keys), figsize=(3.2 * len(keys), 1.2 + 0.5 * rows_n), sharey=True,
                              squeeze=False)  # fmt: skip
     labels = [*estimates, *(f"posterior {lab}" if lab != "posterior" else "posterior" for lab in intervals)]
-    for ax, k in zip(axes[0], COEFFICIENTS, strict=False):
+    for ax, k in zip(axes[0], keys, strict=False):
         for j, est in enumerate(estimates.values()):
             if est.get(k) is not None:
                 ax.plot(est[k], j, "o", color=f"C{j % 10}")
@@ -528,8 +545,8 @@ def coefficient_blocks(estimates: dict[str, dict[str, float]], intervals: dict[s
         parts = []
         mine = {c: e for c, e in estimates.items() if lab == "posterior" or c.endswith(f"({lab})")}
         for col, est in (mine or estimates).items():
-            inside = [k for k in COEFFICIENTS if k in iv and est.get(k) is not None and iv[k][1] <= est[k] <= iv[k][2]]
-            n = sum(1 for k in COEFFICIENTS if k in iv and est.get(k) is not None)
+            inside = [k for k in keys if k in iv and est.get(k) is not None and iv[k][1] <= est[k] <= iv[k][2]]
+            n = sum(1 for k in keys if k in iv and est.get(k) is not None)
             parts.append(f"{col} {len(inside)} of {n}" + (f" ({', '.join(inside)})" if inside else ""))
         which = "" if lab == "posterior" else f" ({lab})"
         lines.append(f"Estimates inside the posterior's credible intervals{which}: {'; '.join(parts)}.")

@@ -11,11 +11,13 @@ way for every method (``identification.Identifier``):
    its runs restarted from the measured state over the next part (``SELECTION_FRACTION`` of the record, never the
    held-out tail) are compared with the record, in windows no longer than the record stays predictable
    (``validation.predictability``: the discrepancy workflow's horizon; a window longer than it scores chaos).
-3. **Weighed**: each candidate's weight is its pseudo-Bayesian-model-averaging weight from the windows'
-   Gaussian log predictive densities (Yao, Vehtari, Simpson & Gelman 2018, Bayesian Analysis 13:917, Eq. 8; each
-   window's errors scaled by the candidate's own error variance), so a reader sees how decisive the choice was.
+3. **Weighed**: each candidate's weight is its pseudo-BMA+ weight from the windows' Gaussian log predictive
+   densities (Yao, Vehtari, Simpson & Gelman 2018, Bayesian Analysis 13:917, section 3.3: the log scores summed
+   over windows re-weighted by a Bayesian bootstrap; each window's errors scaled by the candidate's own error
+   variance), so a reader sees how decisive the choice was.
 
-The candidate with the least median window error is chosen; its weight says whether another was close.
+The candidate of the greatest weight is chosen (ties: the least median window error); each candidate's median
+window error is said beside it.
 """
 
 from __future__ import annotations
@@ -41,6 +43,8 @@ SELECTION_FRACTION = 0.2
 STROKE_MARGIN = 0.25
 """One well at least must lie within the stroke the record visited, widened by this share of its span on either
 side (a well the record did not visit, an in-well record's other well, lies where the model puts it)."""
+BOOTSTRAP_DRAWS = 1000
+"""Bayesian-bootstrap draws of the windows' weights behind each candidate's pseudo-BMA+ weight."""
 MAX_WINDOW_S = 2.0
 """The comparison's windows are the record's predictability horizon, at most half of this [s]."""
 
@@ -134,22 +138,27 @@ def score(candidates: list[Candidate], rec: Measurement, n_fit: int, n_id: int) 
             c.problems.append(f"{int((~good).sum())} of its {len(windows)} restarted runs diverged")
     ok = [c for c in ok if c.admissible]
     if ok:
-        # pseudo-BMA: each window's Gaussian log density of its errors under the candidate's own error variance
+        # pseudo-BMA+ (Yao et al. 2018, section 3.3): each window's Gaussian log density of its errors under the
+        # candidate's own error variance, summed over windows re-weighted by a Bayesian bootstrap (Dirichlet(1)
+        # weights, seeded), each draw's softmax averaged
         length = windows.length
         elpd = []
         for c in ok:
             ms = np.asarray(c.window_ms, float)
             s2 = float(np.mean(ms))
-            elpd.append(float(np.sum(-0.5 * length * (np.log(2 * np.pi * s2) + ms / s2))))
-        e = np.array(elpd)
-        w = np.exp(e - e.max())
-        for c, wi in zip(ok, w / w.sum(), strict=True):
+            elpd.append(-0.5 * length * (np.log(2 * np.pi * s2) + ms / s2))
+        e = np.array(elpd)  # (candidates, windows)
+        alpha = np.random.default_rng(0).dirichlet(np.ones(e.shape[1]), BOOTSTRAP_DRAWS)  # (draws, windows)
+        z = e.shape[1] * alpha @ e.T  # (draws, candidates)
+        w = np.exp(z - z.max(axis=1, keepdims=True))
+        w = (w / w.sum(axis=1, keepdims=True)).mean(axis=0)
+        for c, wi in zip(ok, w, strict=True):
             c.weight = float(wi)
     return {"horizon_s": horizon["horizon_s"], "window_s": window_s, "windows": len(windows),
             "horizon": horizon["method"]}  # fmt: skip
 
 
 def ranked(candidates: list[Candidate]) -> list[Candidate]:
-    """The admissible candidates, the least median window error first."""
+    """The admissible candidates, the greatest weight first (ties: the least median window error)."""
     ok = [c for c in candidates if c.admissible and math.isfinite(c.median_percent)]
-    return sorted(ok, key=lambda c: c.median_percent)
+    return sorted(ok, key=lambda c: (-c.weight, c.median_percent))
