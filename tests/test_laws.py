@@ -160,3 +160,27 @@ def test_the_device_and_the_geometric_law_are_one_force():
     u = 6.0 * np.sin(2 * np.pi * 9.0 * np.arange(0, 4.0, 1 / fs))
     a, b = simulate(AS_BUILT, u, 1 / fs).z[0], simulate(law, u, 1 / fs).z[0]
     assert np.max(np.abs(a - b)) < 1e-6 * np.ptp(a)  # the table's interpolation error, far below any noise
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("method", [NSI, SINDy])
+@pytest.mark.parametrize("name", ["rod_frame", "septic", "oblique_springs", "magnet"])
+def test_the_law_chosen_is_the_truths_or_as_good(records, name, method):
+    # Every law compared on what it predicts (law="auto"): the one chosen is the truth's, or one whose force is
+    # within 3 % rms of the truth's over the stroke; its wells within 2 % (in the record's frame), their
+    # underlying-linear frequencies within 2 % and damping ratios within 10 %.
+    r, rec, offset = records[name]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        res = method(law="auto").fit(rec).result_
+    choice = res.details["law_choice"]
+    stroke = np.quantile(rec.z, (0.005, 0.995))
+    assert choice["chosen"] == LAW_OF[name] or _force_error(res.model, r.truth, offset, stroke) < 0.03, choice
+    truth = r.truth
+    for well, z in truth.wells.items():
+        got = res.equilibria.z_plus if well == "plus" else res.equilibria.z_minus
+        half = 0.5 * (truth.stroke[1] - truth.stroke[0])
+        scale = abs(z) if abs(z) > 0.05 * half else half
+        assert abs(got - (z + offset)) < 0.02 * scale, (well, got, z + offset)
+        assert res.modal[well]["f_hz"] == pytest.approx(truth.f_hz[well], rel=0.02)
+        assert res.modal[well]["zeta"] == pytest.approx(truth.zeta[well], rel=0.10)

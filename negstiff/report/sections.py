@@ -112,7 +112,8 @@ def coefficient_keys(estimates: dict[str, dict[str, float]], intervals: dict[str
     interval has (the cubic's k3 beside a magnet's law) is left out where other rows remain.
     """
     keys = list(COEFFICIENTS)
-    for d in [*estimates.values(), *intervals.values()]:
+    sources: list[dict[str, Any]] = [*estimates.values(), *intervals.values()]
+    for d in sources:
         keys += [k for k in d if k not in keys]
     extra = [k for k in keys if k not in COEFFICIENTS]
     if not extra:
@@ -210,8 +211,8 @@ def identification_section(est, label: str = "") -> Section:
     )  # fmt: skip
     v = r.validation
     # a quiet tail (a decay's) scores no restarted window: the one free run's error then
-    keys = ("restarted_rms_percent", "median_window_percent", "rms_percent")
-    held = next((v[k] for k in keys if v.get(k) is not None), None)
+    held_keys = ("restarted_rms_percent", "median_window_percent", "rms_percent")
+    held = next((v[k] for k in held_keys if v.get(k) is not None), None)
     sec.heldout[col] = held
     t0, t1 = v.get("segment", [None, None])
     sec.text(

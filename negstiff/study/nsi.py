@@ -266,10 +266,14 @@ class AsBuiltPart:
     est: NSI
     floor: float
     duration: float
+    by_law: NSI | None = None
+    """NSI with every law compared on the same record (``law="auto"``): the law the record asks for."""
 
     def result(self) -> dict[str, Any]:
         r = self.est.result()
         r.update(truth_features=AS_BUILT.features(), truth_floor_rms_percent=self.floor)
+        if self.by_law is not None:
+            r["by_law"] = self.by_law.result()
         return r
 
 
@@ -277,7 +281,8 @@ def compute_as_built(duration: float, seed_: int) -> AsBuiltPart:
     rec = Rig(AS_BUILT, seed=seed_).random(duration=duration)
     m = Measurement.from_rig(rec)
     est = NSI().fit(m)
-    return AsBuiltPart(m, est, true_floor(AS_BUILT, m, est.settings_["identification_samples"]), duration)
+    by_law = NSI(law="auto").fit(m)
+    return AsBuiltPart(m, est, true_floor(AS_BUILT, m, est.settings_["identification_samples"]), duration, by_law)
 
 
 def as_built_part(rep: Report, res: dict[str, Any], duration: float, seed_: int) -> None:
@@ -330,9 +335,34 @@ def as_built_part(rep: Report, res: dict[str, Any], duration: float, seed_: int)
     ax.plot(1e3 * z, AS_BUILT.restoring_force(z), "k-", label="exact geometry (truth)")
     ax.plot(1e3 * z, est.model_.restoring_force(z), "r--", label="NSI cubic")
     ax.plot(1e3 * z, AS_BUILT.lsq_cubic().restoring_force(z), "C2:", label="least-squares cubic of the truth")
+    if part.by_law is not None:
+        ax.plot(1e3 * z, part.by_law.model_.restoring_force(z), "C1-.",
+                label=f"NSI, {part.by_law.settings_['law']} law (chosen)")  # fmt: skip
     ax.set(xlabel="z [mm]", ylabel="K [N]")
     ax.legend(fontsize=8)
-    rep.figure("nsi_as_built_gap", fig, "As-built device: the NSI cubic against the exact geometric restoring force.")
+    rep.figure("nsi_as_built_gap", fig, "As-built device: the NSI cubic and NSI with the law the record asks for "
+               "against the exact geometric restoring force.")  # fmt: skip
+    if part.by_law is not None:
+        law_rows(rep, part.by_law, "NSI")
+
+
+def law_rows(rep: Report, est, name: str) -> None:
+    """The law a method chose on the as-built record (``law="auto"``): the comparison and each well against the
+    exact geometry's.
+    """
+    choice = est.result_.details.get("law_choice") or {}
+    rows = []
+    for w in ("minus", "plus"):
+        uls = AS_BUILT.uls(w)
+        z_fit = est.equilibria_.z_minus if w == "minus" else est.equilibria_.z_plus
+        rows.append([f"z_{w}", 1e3 * z_fit, 1e3 * uls.z_ref, pct(z_fit, uls.z_ref), est.modal_[w]["f_hz"], uls.f_hz,
+                     pct(est.modal_[w]["f_hz"], uls.f_hz)])  # fmt: skip
+    rep.text(f"With every law compared on what it predicts (``law='auto'``), {name} keeps the "
+             f"**{choice.get('chosen')}** law ({choice.get('summary', '')}). Each well against the exact geometry's:")
+    rep.table(["well", "z* [mm]", "z* exact [mm]", "z* error", "f [Hz]", "f exact [Hz]", "f error"], rows)
+    rep.table(["law", "held-out median window [%]", "weight", "why not"],
+              [[c["law"], c["heldout_median_window_percent"], c["weight"], "; ".join(c["problems"][:1])]
+               for c in choice.get("candidates", [])])  # fmt: skip
 
 
 def compute_integration_sensitivity(duration: float, seed_: int) -> dict[str, dict[str, Any]]:

@@ -25,7 +25,7 @@ from negstiff.models.rig import Rig
 from negstiff.report.document import Report, run_study
 from negstiff.report.numbers import fmt
 
-from .nsi import pct, true_floor
+from .nsi import law_rows, pct, true_floor
 
 HIDDEN_FRICTION_N = 0.1
 """Coulomb friction hidden in the rig for the ensemble check [N] (5 % of the device's weight)."""
@@ -73,6 +73,8 @@ class SindyRun:
     nsi: NSI | None = None
     hidden: dict[str, float] | None = None
     floor: float | None = None
+    by_law: SINDy | None = None
+    """SINDy with every law compared on the same record (``law="auto"``; the as-built part)."""
 
     def result(self) -> dict[str, Any]:
         """The part's entry of results.json."""
@@ -90,6 +92,8 @@ class SindyRun:
         if self.floor is not None:
             r["truth_features"] = self.truth.features()
             r["truth_floor_rms_percent"] = self.floor
+        if self.by_law is not None:
+            r["by_law"] = self.by_law.result()
         return r
 
 
@@ -250,7 +254,7 @@ def compute_as_built(duration: float, seed_: int) -> SindyRun:
     m = Measurement.from_rig(rec)
     est = SINDy(seed=seed_).fit(m)
     floor = true_floor(AS_BUILT, m, est.settings_["identification_samples"])
-    return SindyRun(AS_BUILT, m, est, 0.0, duration, floor=floor)
+    return SindyRun(AS_BUILT, m, est, 0.0, duration, floor=floor, by_law=SINDy(seed=seed_, law="auto").fit(m))
 
 
 def as_built_part(rep: Report, res: dict[str, Any], duration: float, seed_: int) -> None:
@@ -282,10 +286,16 @@ def as_built_part(rep: Report, res: dict[str, Any], duration: float, seed_: int)
     ax.plot(1e3 * z, AS_BUILT.restoring_force(z), "k-", lw=2, label="exact geometry (truth)")
     ax.plot(1e3 * z, est.model_.restoring_force(z), "r--", label="SINDy")
     ax.plot(1e3 * z, AS_BUILT.lsq_cubic().restoring_force(z), "C2:", label="least-squares cubic of the truth")
+    if run.by_law is not None:
+        ax.plot(1e3 * z, run.by_law.model_.restoring_force(z), "C1-.",
+                label=f"SINDy, {run.by_law.settings_['law']} law (chosen)")  # fmt: skip
     ax.set(xlabel="z [mm]", ylabel="K [N]")
     ax.legend(fontsize=8)
     ax.grid(alpha=0.3)
-    rep.figure("sindy_as_built", fig, "As-built device: exact restoring force, SINDy's polynomial, the best cubic.")
+    rep.figure("sindy_as_built", fig, "As-built device: exact restoring force, SINDy's polynomial, the best cubic, "
+               "and SINDy with the law the record asks for.")  # fmt: skip
+    if run.by_law is not None:
+        law_rows(rep, run.by_law, "SINDy")
 
 
 def sindy_section(rep: Report, results: dict[str, Any], fast: bool, seed_: int = 0) -> None:
