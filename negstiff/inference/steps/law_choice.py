@@ -5,7 +5,8 @@ or the method's default (the reference study's cubic) fails its checks, the cand
 way for every method (``identification.Identifier``):
 
 1. **Judged first** (``problems``): a model that has no stable well, no well inside the stroke the record visited,
-   whose potential opens an escape just past the stroke (``validation.boundedness``) or whose damping
+   whose potential opens an escape just past the stroke or whose free run under the record's input, 1.2 times as
+   large, leaves for good (``validation.boundedness``), or whose damping
    feeds energy in over the record's velocities is never chosen, whatever it predicts.
 2. **Scored on what it predicts**: each candidate is estimated on the first part of the identification data and
    its runs restarted from the measured state over the next part (``SELECTION_FRACTION`` of the record, never the
@@ -67,11 +68,13 @@ def problems(model: Model, rec: Measurement, n: int) -> list[str]:
         out.append(f"no well inside the stroke [{1e3 * lo:.3g}, {1e3 * hi:.3g}] mm (wells at "
                    + ", ".join(f"{1e3 * w:.3g}" for w in wells) + " mm)")  # fmt: skip
     try:
-        escape = boundedness(model, rec.segment(0, n), free_run=False)["escape_z"]
+        bounded = boundedness(model, rec.segment(0, n))
     except (ValueError, ArithmeticError):
-        escape = None
-    if escape is not None:
-        out.append(f"its potential opens an escape at {1e3 * escape:.3g} mm, just past the stroke")
+        bounded = {"escape_z": None, "ok": True}
+    if bounded["escape_z"] is not None:
+        out.append(f"its potential opens an escape at {1e3 * bounded['escape_z']:.3g} mm, just past the stroke")
+    elif not bounded["ok"]:  # its free run under the record's input, a little larger, leaves for good
+        out.append(bounded.get("warning") or "it is not bounded where the record went")
     _, v, _, _ = rec.segment(0, n).states("state")
     with np.errstate(all="ignore"):  # the damping's force at the record's states, and its power
         d = model.total_force(z, v) - model.total_force(z, np.zeros_like(v))
