@@ -69,8 +69,9 @@ class _Problem:
     """
 
     def __init__(self, rec: Measurement, restoring: laws.Law, damping: laws.Law, lo: int, hi: int,
-                 aux: tuple[str, ...] = ()):  # fmt: skip
+                 aux: tuple[str, ...] = (), scoring: bool = False):  # fmt: skip
         self.rec, self.restoring, self.damping, self.lo, self.hi, self.aux = rec, restoring, damping, lo, hi, aux
+        self.scoring = scoring  # a part that scores fits made elsewhere: a column it never reaches is zeros there
         self.form = WeakForm.of(rec)
         self.gain = known_input_gain(rec)
         self.shaped = restoring.shaped()
@@ -80,7 +81,7 @@ class _Problem:
         return Library.of_laws(self.restoring, self.damping, shape, self.aux)
 
     def system(self, shape):
-        return self.form.system(self.rec, self.lo, self.hi, library=self.library(shape))
+        return self.form.system(self.rec, self.lo, self.hi, library=self.library(shape), unvisited=self.scoring)
 
     def residual(self, shape) -> float:
         """The relative weak residual ||y - W theta||^2 / ||y||^2 of the constrained least squares at ``shape``
@@ -208,7 +209,9 @@ def fit_shape(rec: Measurement, restoring, damping, *, n_fit: int | None = None,
     for name, law in shaped.items():  # one part at a time (the laws have one shaped part each)
         others = {k: v for k, v in shape.items() if k != name}
         if isinstance(law, Spline):
-            selecting = _Problem(rec, restoring, damping, n_fit, n_id, tuple(aux))
+            # scored where the record may not reach every knot (a decay's late part: its outer basis functions are
+            # zero there, which refused every count and with it the spline)
+            selecting = _Problem(rec, restoring, damping, n_fit, n_id, tuple(aux), scoring=True)
             best, residual, t = _spline_knots(fitting, selecting, name, law, rng, others, window_s)
             methods.append(f"{name}: {len(best['knots']) - 1} intervals over the stroke "
                            f"[{1e3 * rng[0]:.3g}, {1e3 * rng[1]:.3g}] mm, the fewest whose held-out weak residual is "

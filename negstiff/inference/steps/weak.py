@@ -274,11 +274,13 @@ class WeakForm:
         return weak_project(cols, test_function(self.half, dt)[0], self.stride, dt)
 
     def system(self, rec: Measurement, lo: int = 0, hi: int | None = None, aux: tuple[str, ...] = (),
-               library: Library | None = None) -> WeakSystem:  # fmt: skip
+               library: Library | None = None, unvisited: bool = False) -> WeakSystem:  # fmt: skip
         """The weak-form system of the samples [lo, hi) of ``rec`` (the record this form was made of,
         or its first part) over ``library`` (default: the registry's catalogue, ``Library.catalogue``); ``aux``:
         measured auxiliary channels of ``rec`` whose terms theta a(t) join the catalogue (``aux_terms``), before
-        the input's column (a ``library`` names its own).
+        the input's column (a ``library`` names its own). A column zero throughout the part (a spline's basis
+        function over a stroke the part never reaches: a decay's late part) is refused as no excitation, or with
+        ``unvisited`` kept as zeros: a system that scores coefficients fitted on another part, never one fitted.
         """
         seg = rec.segment(lo, rec.n if hi is None else hi)
         library = Library.catalogue(aux) if library is None else library
@@ -289,6 +291,8 @@ class WeakForm:
         col = W.std(axis=0)
         const = np.flatnonzero(np.ptp(F[:, :-1], axis=0) == 0)  # a constant column (k0's): int phi dt on every row
         col[const] = np.abs(W[:, const]).mean(axis=0)
+        if unvisited:
+            col[:-1][np.all(F[:, :-1] == 0, axis=0)] = 1.0  # zero columns kept as zeros (scoring only)
         if not np.any(seg.u):
             # no input (a free decay, or a hammer record's quiet stretch between hits): the weak form without an
             # input term; its column is zero, so its coefficient (fixed: ``known_input_gain``) acts on nothing
