@@ -17,8 +17,9 @@ import numpy as np
 from scipy import signal
 
 from negstiff.inference.estimators.nsi import NSI
-from negstiff.inference.estimators.sindy import SINDy, term_fields
+from negstiff.inference.estimators.sindy import SINDy
 from negstiff.inference.record.measurement import Measurement
+from negstiff.inference.steps.weak import term_fields
 from negstiff.models import AS_BUILT, SEED_LIKE_CROSS_WELL_RMS, SEED_LIKE_CUBIC, Model
 from negstiff.models.rig import Rig
 from negstiff.report.document import Report, run_study

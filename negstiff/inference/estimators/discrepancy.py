@@ -59,6 +59,7 @@ from negstiff.inference.steps import law_choice
 from negstiff.inference.steps.plausibility import classified
 from negstiff.inference.steps.refine import parameter_names, parameter_scales, refine_stage, values_of, with_values
 from negstiff.inference.steps.selection import block_rows, block_scores, compare, indistinguishable
+from negstiff.inference.steps.shape import ShapeFit, fit_shape
 from negstiff.inference.steps.validation import (
     RestartWindows,
     boundedness,
@@ -69,7 +70,6 @@ from negstiff.inference.steps.validation import (
     simulate_windows,
     validate,
 )
-from negstiff.inference.steps.shape import ShapeFit, fit_shape
 from negstiff.inference.steps.weak import (
     BASE_FIELDS,
     Library,
@@ -625,7 +625,7 @@ class Discrepancy(StructureResults, Estimator):
         lib = library_terms()
         n_lib = len(lib)
         extra = self._law_extra(law)
-        aux_cols = list(range(n_lib + 1, n_lib + 1 + n_aux))  # after the input's column; the law's next, the stop's last
+        aux_cols = list(range(n_lib + 1, n_lib + 1 + n_aux))  # after the input's; the law's next, the stop's last
         index = {t: i for i, t in enumerate(lib)} | {t: n_lib + 1 + n_aux + j for j, t in enumerate(extra)}
         cols = [index[t] for t in terms] + aux_cols + ([W.shape[1] - 1] if stop else [])
         target = y.copy()
@@ -650,17 +650,17 @@ class Discrepancy(StructureResults, Estimator):
         phys = np.concatenate([coef[:n_lib], coef[n_lib + 1 : n_lib + 1 + len(aux)], coef[n_lib : n_lib + 1]])
         mass = mass_of(rec, self._gain, phys[-1])[0]
         model = model_from(phys, mass, aux)
-        extra = self._law_extra(law)
-        if extra:  # the law's own parts (a shaped part's value from its shape and coefficients, z^6, z^7)
+        labels = self._law_extra(law)
+        if labels:  # the law's own parts (a shaped part's value from its shape and coefficients, z^6, z^7)
             assert law is not None
             lw, shape = laws.get(law), self._shapes_of(law)
             cols = lw.column_list(shape)
             at = n_lib + 1 + len(aux)
-            own = dict(zip(extra, coef[at : at + len(extra)], strict=True))
+            own = dict(zip(labels, coef[at : at + len(labels)], strict=True))
             _, parts = lw.values([own.get(c.label, 0.0) for c in cols], mass, shape)
             targets = {c.target for c in cols if c.label in own}
-            model = Model(**{**model.to_dict(), "extra": {**dict(model.extra),
-                                                         **{k: v for k, v in parts.items() if k in targets}}})  # fmt: skip
+            own_parts = {k: v for k, v in parts.items() if k in targets}
+            model = Model(**{**model.to_dict(), "extra": {**dict(model.extra), **own_parts}})
         if stop is not None:
             k = -mass * float(coef[-1])
             if k > 0:
@@ -1076,7 +1076,8 @@ class Discrepancy(StructureResults, Estimator):
         """
         try:
             return law_choice.choose(rec, self.n_id_, laws.names("restoring"),
-                                     lambda part, n, name: self._law_estimate(rec, part, n, name), lambda m: m)  # fmt: skip
+                                     lambda part, n, name: self._law_estimate(rec, part, n, name),
+                                     lambda m: m)  # fmt: skip
         except InputError as exc:
             raise DiscrepancyError(str(exc)) from None
 
