@@ -353,10 +353,13 @@ class Discrepancy(StructureResults, Estimator):
         The baseline's damping law (``viscous``, ``quadratic``, ``cubic_damping``, ``friction``): its columns
         replace ``baseline``'s velocity terms. None: ``baseline``'s own with no ``law`` (the reference study's
         quadratic damping by default), the reference study's ``quadratic`` with one.
-    offer_laws : bool, default True
+    offer_laws : bool, optional
         Offer every other restoring law as a candidate beside the catalogue's effects (``law:NAME``: it replaces
         the restoring force rather than adding a term to it), scored by the same held-out rules, so that "the force
-        is not a cubic" can be what is named.
+        is not a cubic" can be what is named. None (default): where the baseline's restoring force is a law (the
+        cubic of the seed's model, or ``law``'s), not where it is none (``LINEAR_BASELINE``: a start from nothing,
+        which the catalogue's terms build up one at a time; a law would add several at once, the Silverbox's z^2
+        and z^3 as the cubic law before its cubic stiffness).
     validation_fraction : float, default 0.2
         Held-out tail on which the gap is measured before and after.
     selection_fraction : float, default 0.2
@@ -446,7 +449,7 @@ class Discrepancy(StructureResults, Estimator):
         "element": ElementPlace(),
         "law": RESTORING_LAW,
         "damping": LawName("damping", (None,)),
-        "offer_laws": Boolean(),
+        "offer_laws": Boolean(none=True),
     }
 
     def __init__(
@@ -463,7 +466,7 @@ class Discrepancy(StructureResults, Estimator):
         element: str | tuple[int, int] | None = None,
         law: str | None = None,
         damping: str | None = None,
-        offer_laws: bool = True,
+        offer_laws: bool | None = None,
     ):
         self.law = law
         self.damping = damping
@@ -942,7 +945,8 @@ class Discrepancy(StructureResults, Estimator):
         current = {"model": base_model, "initial": self.baseline_model_, "refinement": self.baseline_refinement_,
                    "gap": self.gap_before_}  # fmt: skip
         aux: tuple[str, ...] = ()
-        self.laws_offered_ = [n for n in laws.names("restoring") if n != law] if self.offer_laws else []
+        offer = law is not None if self.offer_laws is None else self.offer_laws
+        self.laws_offered_ = [n for n in laws.names("restoring") if n != law] if offer else []
         for _ in range(self.max_effects):
             none = self._score(rec, Candidate("none", terms, stop, aux, law))
             cands = [none]
@@ -1444,7 +1448,6 @@ class Discrepancy(StructureResults, Estimator):
         two-parameter stop that beats z^5 by 4 % on the as-built device is not evidence of a stop (measured).
         """
         top = ranking[0]
-        n_par = {c.effect: self._extra_parameters(c, terms, law) for c in ranking}
         ok = []
         for c in ranking:
             if c.effect == "none" or not np.isfinite(c.heldout_percent):
@@ -1453,7 +1456,7 @@ class Discrepancy(StructureResults, Estimator):
                 ok.append(c)
         if not ok:
             return top
-        return min(ok, key=lambda c: (n_par[c.effect], c.heldout_percent))
+        return min(ok, key=lambda c: (self._extra_parameters(c, terms, law), c.heldout_percent))
 
     def _refit_model(self, rec: Measurement, terms, stop, aux: tuple[str, ...] = (), law: str | None = None) -> Model:
         W, y = self._design(rec, 0, self.n_id_, stop, aux, law)
