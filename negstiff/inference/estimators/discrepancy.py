@@ -3,7 +3,9 @@ refit, and show the gap shrink (Kaheman et al. 2019 and Ebers et al. 2024, ecosy
 physics fixed, the mismatch sought as a sparse term from a physical catalogue).
 
 1. **Locate.** The baseline (the seed's model: cubic K, viscous c, quadratic c_nl; linear K for a start from
-   nothing) is fitted by weak-form least squares (``weak.weak_least_squares``: the input's coefficient fixed by
+   nothing; or a restoring and a damping law of ``models.laws`` at the record's shape, ``law=``, ``damping=``, the
+   law the record asks for with ``law="auto"``, chosen by the identifications' one comparison, ``law_choice.choose``)
+   is fitted by weak-form least squares (``weak.weak_least_squares``: the input's coefficient fixed by
    physics). Its weak residual, the equation error each test function sees, is mapped over the state (z, z'),
    split by regime (in either well, crossing, near zero velocity, at large stroke), and its share in each regime
    is compared with the regime's share of the record; restarted short free runs give the gap in time and as a
@@ -13,7 +15,12 @@ physics fixed, the mismatch sought as a sparse term from a physical catalogue).
    (an equation error that chaos cannot fake). ``none`` is the baseline itself. An effect is named only if it
    lowers the held-out residual by more than max(one standard error of the paired per-block differences,
    ``margin``) (the one-standard-error rule plus a practical margin, as in ``sindy``): otherwise the answer is
-   ``none``. Among effects that close to the best, the one with fewer parameters wins.
+   ``none``. Among effects that close to the best, the one with fewer parameters wins. Every other restoring law
+   is a candidate too (``law:NAME``, where the baseline's restoring force is a law): its columns at its shape
+   (``shape.fit_shape``, variable projection) replace the restoring force's rather than add a term, scored alike,
+   counting the parameters it adds to the current restoring force, and never named where it fails the
+   identifications' checks (``law_choice.problems``): "the force is not a cubic" can be what is named (the rig's
+   as-built device: the geometric law, where the catalogue alone named z^5, z^4 and a stop it does not have).
 3. **Add and refit.** The winner enters the model (its ``extra``; an effect whose term is a base field's, such
    as ``z'|z'|`` or z^3, lands in that field, c_nl or k3, and only there: one home per term), every parameter is
    refitted on all identification data, and the gap is measured again on the held-out tail: restarted free runs
