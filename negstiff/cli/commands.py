@@ -313,9 +313,12 @@ def cmd_discrepancy(args) -> int:
     rec = load(args.data, columns=args.columns, fs=args.fs, mass=args.mass, gravity=args.gravity, aux=args.aux,
                decay=args.decay)  # fmt: skip
     base = CUBIC_BASELINE if args.baseline == "cubic" else LINEAR_BASELINE
-    d = Discrepancy(baseline=base, max_effects=args.max_effects, refine=refinement(args), unnamed=args.unnamed)
+    d = Discrepancy(baseline=base, max_effects=args.max_effects, refine=refinement(args), unnamed=args.unnamed,
+                    law=args.law, damping=args.damping, offer_laws=False if args.no_laws else None)  # fmt: skip
     rec = d.check(rec)  # every refusal before the progress line
-    say(args, f"discrepancy: {rec.n} samples at {rec.fs:g} Hz, input {rec.input_name}, baseline {args.baseline}")
+    what = f"law {args.law}" if args.law else f"baseline {args.baseline}"
+    say(args, f"discrepancy: {rec.n} samples at {rec.fs:g} Hz, input {rec.input_name}, {what}"
+              + (f", damping {args.damping}" if args.damping else ""))  # fmt: skip
     d.fit(rec)
     result = d.result()
     kind = result.get("record_kind") or {}
@@ -333,7 +336,16 @@ def cmd_discrepancy(args) -> int:
         say(args, f"unnamed: a non-parametric term of {un['term_percent_of_restoring_force']:.3g} % of the "
                    f"restoring force; held-out gap {g.get('physics_median_window_percent', float('nan')):.3g} % -> "
                    f"{g.get('hybrid_median_window_percent', float('nan')):.3g} % with it")  # fmt: skip
+    for i, it in enumerate(result.get("iterations", [])):
+        first = it.get("first") or {}
+        if first.get("why") and first.get("effect") != "none":
+            say(args, f"round {i + 1}: {first['effect']} ranked first, not named: {first['why']}")
     for effect, iv in result.get("effect_interval", {}).items():
+        if effect.startswith("law:"):
+            size = iv.get("value") or {}
+            say(args, f"{effect}: the restoring force is the {effect[4:]} law's ("
+                      + ", ".join(f"{k} {v:.4g}" for k, v in size.items()) + ")")  # fmt: skip
+            continue
         parts = [(k, v) for k, v in iv.items() if isinstance(v, dict) and v.get("interval")] or (
             [("", iv)] if iv.get("interval") else [])  # fmt: skip
         sizes = ", ".join(f"{k + ' ' if k else ''}{v['value']:.4g} [{v['interval'][0]:.4g}, {v['interval'][1]:.4g}]"

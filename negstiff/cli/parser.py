@@ -202,6 +202,34 @@ def _law_options(p: argparse.ArgumentParser) -> None:
     )  # fmt: skip
 
 
+def _discrepancy_law_options(p: argparse.ArgumentParser) -> None:
+    """The discrepancy workflow's --law, --damping and --no-laws (``Discrepancy(law=, damping=, offer_laws=)``)."""
+    from negstiff.models import laws
+
+    p.add_argument(
+        "--law",
+        choices=[*laws.names("restoring"), "auto"],
+        help="the baseline's restoring-force law (its columns at the record's shape): "
+        + "; ".join(f"{law.name}: {law.title}" for law in laws.LAWS if law.kind == "restoring")
+        + "; auto: the law the record asks for, chosen as identify chooses it (the comparison in the result's "
+        "baseline_law.choice). Default: --baseline's terms",
+    )  # fmt: skip
+    p.add_argument(
+        "--damping",
+        choices=list(laws.names("damping")),
+        help="the baseline's damping law: " + "; ".join(f"{law.name}: {law.title}" for law in laws.LAWS
+                                                         if law.kind == "damping")
+        + f" (default: --baseline's own without --law, {laws.DEFAULT_DAMPING} with it)",
+    )  # fmt: skip
+    p.add_argument(
+        "--no-laws",
+        action="store_true",
+        help="offer no restoring law as a candidate (by default, where the baseline's restoring force is a law, the "
+        "cubic's or --law's, every other law is offered beside the catalogue's effects, named law:NAME: it replaces "
+        "the restoring force rather than adding a term; --baseline linear is built up by the catalogue's terms)",
+    )
+
+
 def _identify(sub, common: argparse.ArgumentParser, data_opts: argparse.ArgumentParser) -> None:
     idf = sub.add_parser(
         "identify",
@@ -456,10 +484,11 @@ def _discrepancy(sub, common: argparse.ArgumentParser, data_opts: argparse.Argum
         "discrepancy",
         parents=[common, data_opts],
         help="find where model and data disagree, name the missing effect, add it, refit",
-        description="Fits the baseline (cubic K, viscous c; or linear K), locates its equation error over the state "
-        f"and the regimes, scores a catalogue of effects ({', '.join(effects.names())}, none) by held-out "
-        "weak residual, adds the winner, refits everything, repeats until none wins, and measures the held-out gap "
-        "(restarted free runs) before and after.",
+        description="Fits the baseline (cubic K, viscous c and c_nl; a linear K; or a law, --law), locates its "
+        "equation error over the state and the regimes, scores a catalogue of effects "
+        f"({', '.join(e.name for e in effects.REGISTRY if e.catalogued)}, none) and the other restoring laws "
+        "(law:NAME, each in place of the restoring force) by held-out weak residual, adds the winner, refits "
+        "everything, repeats until none wins, and measures the held-out gap (restarted free runs) before and after.",
     )
     dsc.add_argument("data", help="measurement file")
     dsc.add_argument("-o", "--out", required=True, help="result JSON")
@@ -469,7 +498,9 @@ def _discrepancy(sub, common: argparse.ArgumentParser, data_opts: argparse.Argum
         help="measured auxiliary channels, by the file's column names (e.g. voltage): each a candidate term theta "
         "a(t) beside the catalogue's effects, named aux:NAME",
     )
-    dsc.add_argument("--baseline", choices=["cubic", "linear"], default="cubic", help="starting model")
+    dsc.add_argument("--baseline", choices=["cubic", "linear"], default="cubic",
+                     help="starting model without --law: the seed's (cubic K, c and c_nl) or a linear one")  # fmt: skip
+    _discrepancy_law_options(dsc)
     dsc.add_argument("--decay", action="store_true", help=DECAY_HELP)
     dsc.add_argument(
         "--max-effects",

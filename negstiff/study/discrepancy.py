@@ -175,8 +175,9 @@ def device_part(rep: Report, res: dict[str, Any], duration: float, seed: int) ->
         f"A {duration:g} s record of the as-built device (exact geometric K(z), c = {AS_BUILT.c:g}, c_nl = "
         f"{AS_BUILT.c_nl:g}). Where: {r['where']}. Named in turn: **{', '.join(r['effects'])}**; held-out gap "
         f"{fmt(r['gap_before_percent'], 3)} % -> {fmt(r['gap_after_percent'], 3)} %. The exact restoring force is "
-        "not a cubic: higher-order stiffness (or, on some records, a one-sided stiffening that fits as an end stop) "
-        "is the right answer; the device's genuine quadratic damping is the baseline's own c_nl (the seed's model)."
+        "not a cubic: offered the restoring laws beside the catalogue's effects, the right answer is the device's "
+        "own geometric law (the catalogue alone names higher-order stiffness or a one-sided stiffening that fits as "
+        "an end stop); the device's genuine quadratic damping is the baseline's own c_nl (the seed's model)."
     )
     rep.table(
         ["iteration", "named", "best three (held-out weak residual %)", "gain over none [%]"],

@@ -3,7 +3,9 @@ refit, and show the gap shrink (Kaheman et al. 2019 and Ebers et al. 2024, ecosy
 physics fixed, the mismatch sought as a sparse term from a physical catalogue).
 
 1. **Locate.** The baseline (the seed's model: cubic K, viscous c, quadratic c_nl; linear K for a start from
-   nothing) is fitted by weak-form least squares (``weak.weak_least_squares``: the input's coefficient fixed by
+   nothing; or a restoring and a damping law of ``models.laws`` at the record's shape, ``law=``, ``damping=``, the
+   law the record asks for with ``law="auto"``, chosen by the identifications' one comparison, ``law_choice.choose``)
+   is fitted by weak-form least squares (``weak.weak_least_squares``: the input's coefficient fixed by
    physics). Its weak residual, the equation error each test function sees, is mapped over the state (z, z'),
    split by regime (in either well, crossing, near zero velocity, at large stroke), and its share in each regime
    is compared with the regime's share of the record; restarted short free runs give the gap in time and as a
@@ -13,7 +15,12 @@ physics fixed, the mismatch sought as a sparse term from a physical catalogue).
    (an equation error that chaos cannot fake). ``none`` is the baseline itself. An effect is named only if it
    lowers the held-out residual by more than max(one standard error of the paired per-block differences,
    ``margin``) (the one-standard-error rule plus a practical margin, as in ``sindy``): otherwise the answer is
-   ``none``. Among effects that close to the best, the one with fewer parameters wins.
+   ``none``. Among effects that close to the best, the one with fewer parameters wins. Every other restoring law
+   is a candidate too (``law:NAME``, where the baseline's restoring force is a law): its columns at its shape
+   (``shape.fit_shape``, variable projection) replace the restoring force's rather than add a term, scored alike,
+   counting the parameters it adds to the current restoring force, and never named where it fails the
+   identifications' checks (``law_choice.problems``): "the force is not a cubic" can be what is named (the rig's
+   as-built device: the geometric law, where the catalogue alone named z^5, z^4 and a stop it does not have).
 3. **Add and refit.** The winner enters the model (its ``extra``; an effect whose term is a base field's, such
    as ``z'|z'|`` or z^3, lands in that field, c_nl or k3, and only there: one home per term), every parameter is
    refitted on all identification data, and the gap is measured again on the held-out tail: restarted free runs
@@ -42,13 +49,24 @@ import numpy as np
 
 from negstiff.errors import InputError, MeasurementError, issue
 from negstiff.inference.estimators.base import Estimator
-from negstiff.inference.estimators.parameters import FRACTION, Boolean, Constraint, Interval, Options, Several
+from negstiff.inference.estimators.parameters import (
+    FRACTION,
+    RESTORING_LAW,
+    Boolean,
+    Constraint,
+    Interval,
+    LawName,
+    Options,
+    Several,
+)
 from negstiff.inference.estimators.structure_id import ElementPlace, StructureResults, element_of
 from negstiff.inference.estimators.structure_id import discrepancy as structure_discrepancy
 from negstiff.inference.record.measurement import Measurement
+from negstiff.inference.steps import law_choice
 from negstiff.inference.steps.plausibility import classified
 from negstiff.inference.steps.refine import parameter_names, parameter_scales, refine_stage, values_of, with_values
 from negstiff.inference.steps.selection import block_rows, block_scores, compare, indistinguishable
+from negstiff.inference.steps.shape import ShapeFit, fit_shape
 from negstiff.inference.steps.validation import (
     RestartWindows,
     boundedness,
@@ -61,8 +79,10 @@ from negstiff.inference.steps.validation import (
 )
 from negstiff.inference.steps.weak import (
     BASE_FIELDS,
+    Library,
     WeakForm,
     aux_terms,
+    fit_support,
     known_input_gain,
     mass_of,
     model_from,
@@ -70,7 +90,7 @@ from negstiff.inference.steps.weak import (
     test_function,
 )
 from negstiff.inference.steps.weak import terms as library_terms
-from negstiff.models import Model, effects
+from negstiff.models import Model, effects, laws
 
 CUBIC_BASELINE = ("1", "z", "z^2", "z^3", "v", "v|v|")
 """The seed's own model form: cubic K, viscous c and quadratic c_nl (the contract's damping law)."""
@@ -78,6 +98,9 @@ LINEAR_BASELINE = ("1", "z", "v")
 LOCAL_DRAWS = 4
 """Draws of the start states' noise per window when the predictable span of the windows where an effect acts is
 measured (``Discrepancy._episode_windows``)."""
+LAW_PREFIX = "law:"
+"""A candidate that replaces the restoring force by a law of ``models.laws`` (rather than adding a term to it) is
+named ``law:NAME`` (``law:geometric``), beside the catalogue's effects and the measured channels' ``aux:NAME``."""
 STOP_MIN_SAMPLES = 10
 """An end stop's onset is sought only where at least this many samples of the fitting part lie beyond it (a stop
 sized from fewer would fit the noise of a few extreme samples)."""
@@ -93,6 +116,11 @@ def catalogue() -> dict[str, tuple[str, ...]]:
 def _positional() -> effects.Effect | None:
     """The catalogue's effect with a positional law (at most one: the kernel has one stop row)."""
     return next((e for e in effects.REGISTRY if e.catalogued and e.law.label is None), None)
+
+
+def law_of(name: str) -> str | None:
+    """The law a candidate's name ``law:NAME`` offers, None for an effect's (or a channel's) name."""
+    return name[len(LAW_PREFIX) :] if name.startswith(LAW_PREFIX) else None
 
 
 def _stop() -> tuple[str, effects.OneSidedStop]:
@@ -121,12 +149,15 @@ def _scores(c: Candidate) -> np.ndarray:
 
 @dataclass
 class Candidate:
-    """A catalogue entry: an effect, its library terms, and an end stop's onset when it has one."""
+    """A catalogue entry: an effect, its library terms, and an end stop's onset when it has one; ``law`` the
+    restoring law whose columns beyond the catalogue's the terms may name (None: the catalogue's alone).
+    """
 
     effect: str
     terms: tuple[str, ...]
     stop: float | None = None
     aux: tuple[str, ...] = ()  # measured auxiliary channels whose terms the model carries (``aux:NAME``)
+    law: str | None = None
     heldout_percent: float = math.inf
     block_ms: np.ndarray | None = None
     coefficients: np.ndarray | None = None
@@ -245,6 +276,34 @@ def _loo_compare(ms_with: np.ndarray, ms_without: np.ndarray, residual_rows, len
     }
 
 
+def _displacement_labels() -> tuple[str, ...]:
+    """The catalogue's terms of z alone (the restoring force's: 1, z, z^2, ...)."""
+    return tuple(t.label for t in effects.library_terms() if t.law.displacement_only)
+
+
+def _damping_of(velocity: tuple[str, ...]) -> str | None:
+    """The damping law whose columns are the terms ``velocity`` (``("v", "v|v|")``: ``quadratic``), else None."""
+    return next((n for n in laws.names("damping")
+                 if tuple(c.label for c in laws.get(n).column_list()) == tuple(velocity)), None)  # fmt: skip
+
+
+def law_parameters(model: Model, name: str) -> dict[str, float]:
+    """The restoring law ``name``'s parameters in ``model``, flat: its base fields (``k0``, ``k1``, ...) and its
+    parts' (a scalar part by its name, a shaped part's ``PART.FIELD``: ``rod_frame.L``, ``spline.c3``).
+    """
+    law = laws.get(name)
+    out = {f: float(getattr(model, f)) for f in law.fields}
+    for part in law.parts:
+        value = model.extra.get(part)
+        if value is None:
+            continue
+        if effects.get(part).scalar:
+            out[part] = float(value)
+        else:
+            out |= {f"{part}.{k}": float(v) for k, v in effects.get(part).law.parameters(value).items()}  # type: ignore[union-attr]
+    return out
+
+
 def _held(terms) -> tuple[str, ...]:
     """Base fields whose library term the model does not carry: refinement holds them at zero."""
     fields = term_fields()
@@ -287,9 +346,27 @@ class Discrepancy(StructureResults, Estimator):
     Parameters
     ----------
     baseline : tuple of str, default ("1", "z", "z^2", "z^3", "v", "v|v|")
-        Library terms of the starting model: the seed's model (cubic K, viscous c, quadratic c_nl). An effect
-        whose law is a base field's term (``quadratic_damping`` is c_nl's ``z'|z'|``) is never a candidate beside
-        that field, and when named from a smaller baseline it lands in its field: one home per term.
+        Library terms of the starting model where no ``law`` is given: the seed's model (cubic K, viscous c,
+        quadratic c_nl). An effect whose law is a base field's term (``quadratic_damping`` is c_nl's ``z'|z'|``) is
+        never a candidate beside that field, and when named from a smaller baseline it lands in its field: one home
+        per term.
+    law : str, optional
+        The baseline's restoring law (``models.laws``: ``cubic``, ``quintic``, ``septic``, ``magnet``,
+        ``oblique_springs``, ``geometric``, ``spline``): its columns at the shape the record gives its shaped parts
+        (``shape.fit_shape``, variable projection on the weak form). ``"auto"``: the law the record asks for, chosen
+        as the identifications choose it (``law_choice.choose``: each law judged, then compared on restarted windows
+        at the record's predictability horizon). None: ``baseline``'s terms.
+    damping : str, optional
+        The baseline's damping law (``viscous``, ``quadratic``, ``cubic_damping``, ``friction``): its columns
+        replace ``baseline``'s velocity terms. None: ``baseline``'s own with no ``law`` (the reference study's
+        quadratic damping by default), the reference study's ``quadratic`` with one.
+    offer_laws : bool, optional
+        Offer every other restoring law as a candidate beside the catalogue's effects (``law:NAME``: it replaces
+        the restoring force rather than adding a term to it), scored by the same held-out rules, so that "the force
+        is not a cubic" can be what is named. None (default): where the baseline's restoring force is a law (the
+        cubic of the seed's model, or ``law``'s), not where it is none (``LINEAR_BASELINE``: a start from nothing,
+        which the catalogue's terms build up one at a time; a law would add several at once, the Silverbox's z^2
+        and z^3 as the cubic law before its cubic stiffness).
     validation_fraction : float, default 0.2
         Held-out tail on which the gap is measured before and after.
     selection_fraction : float, default 0.2
@@ -319,7 +396,15 @@ class Discrepancy(StructureResults, Estimator):
     baseline_model_ : Model
         The baseline's fit.
     effects_ : list of str
-        The effects named and kept, in order (``["none"]`` when nothing was missing).
+        The effects named and kept, in order (``["none"]`` when nothing was missing); a law that replaced the
+        restoring force is ``law:NAME``.
+    law_ : str or None
+        The final model's restoring law (None: a baseline's terms that are no law's, ``LINEAR_BASELINE``).
+    baseline_law_ : dict
+        The baseline's laws: ``restoring``, ``damping``, what was ``requested``, the ``shape`` and, with
+        ``law="auto"``, the comparison that chose it (``choice``).
+    laws_offered_ : list of str
+        The restoring laws offered as candidates.
     gap_before_, gap_after_ : dict
         The held-out gap of the baseline and of the final model (restarted free runs).
     gap_regime_ : dict
@@ -369,6 +454,9 @@ class Discrepancy(StructureResults, Estimator):
         "refine": Boolean(none=True),
         "unnamed": Boolean(),
         "element": ElementPlace(),
+        "law": RESTORING_LAW,
+        "damping": LawName("damping", (None,)),
+        "offer_laws": Boolean(none=True),
     }
 
     def __init__(
@@ -383,7 +471,13 @@ class Discrepancy(StructureResults, Estimator):
         refine: bool | None = None,
         unnamed: bool = False,
         element: str | tuple[int, int] | None = None,
+        law: str | None = None,
+        damping: str | None = None,
+        offer_laws: bool | None = None,
     ):
+        self.law = law
+        self.damping = damping
+        self.offer_laws = offer_laws
         self.element = element
         self.refine = refine
         self.unnamed = unnamed
@@ -407,12 +501,76 @@ class Discrepancy(StructureResults, Estimator):
         self.n_id_, self.n_fit_ = n_id, n_fit
         self._library_systems: dict[tuple[int, int], tuple[Measurement, np.ndarray, np.ndarray]] = {}
         self._aux_columns: dict[tuple[int, int, str], tuple[Measurement, np.ndarray]] = {}
+        self._law_columns: dict[tuple[int, int, str], tuple[Measurement, np.ndarray]] = {}
+        self._shapes: dict[str, ShapeFit | str] = {}  # each law's shape on the record, or why it has none
 
-    def _design(self, rec: Measurement, lo: int, hi: int, stop: float | None, aux: tuple[str, ...] = ()):
+    # --- the laws' columns beside the catalogue's ----------------------------------------------------
+    def _damping_law(self) -> str:
+        """The damping law the laws' shapes are fitted with: ``damping``, else the one whose columns are the
+        baseline's velocity terms (the reference study's ``quadratic`` where none is).
+        """
+        if self.damping is not None:
+            return self.damping
+        return _damping_of(tuple(t for t in self.baseline if t not in _displacement_labels())) or laws.DEFAULT_DAMPING
+
+    def _shape(self, rec: Measurement, law: str) -> ShapeFit:
+        """``law``'s shape on the record (``shape.fit_shape`` on the fitting part, a spline's knots scored on the
+        selection part), found once; ``DiscrepancyError`` saying why where it has none.
+        """
+        hit = self._shapes.get(law)
+        if hit is None:
+            try:
+                hit = fit_shape(rec, law, self._damping_law(), n_fit=self.n_fit_, n_id=self.n_id_,
+                                window_s=self.window_s)  # fmt: skip
+            except (MeasurementError, ValueError, ArithmeticError, np.linalg.LinAlgError) as exc:
+                hit = " ".join(str(exc).split()) or type(exc).__name__
+            self._shapes[law] = hit
+        if isinstance(hit, str):
+            raise DiscrepancyError(f"{rec.source}: the {law} law has no shape on this record: {hit}")
+        return hit
+
+    def _law_extra(self, law: str | None) -> tuple[str, ...]:
+        """The columns of ``law`` (at its shape) that the catalogue has not (a shaped part's, z^6, z^7), in the
+        law's order; none without a law.
+        """
+        if law is None:
+            return ()
+        lw = laws.get(law)
+        known = set(library_terms())
+        labels = [c.label for c in lw.column_list(self._shapes_of(law))]
+        return tuple(t for t in labels if t not in known)
+
+    def _shapes_of(self, law: str) -> dict[str, Any]:
+        """The shape fields of ``law``'s shaped parts (empty for a law without: no fit needed)."""
+        if not laws.get(law).shaped():
+            return {}
+        hit = self._shapes.get(law)
+        assert isinstance(hit, ShapeFit), f"the {law} law's shape is sought first (_shape)"
+        return hit.shape
+
+    def _law_terms(self, law: str) -> tuple[str, ...]:
+        """The restoring force's columns of ``law`` (labels, at its shape)."""
+        return tuple(c.label for c in laws.get(law).column_list(self._shapes_of(law)))
+
+    def _restoring_terms(self, terms, law: str | None) -> tuple[str, ...]:
+        """The restoring force's share of ``terms``: the displacement-only catalogue terms and ``law``'s own."""
+        own = set(_displacement_labels()) | set(self._law_extra(law))
+        return tuple(t for t in terms if t in own)
+
+    def _n_parameters(self, terms, law: str | None) -> int:
+        """The restoring force's parameters: its columns' coefficients and its shaped parts' searched shape fields
+        (a spline's knots are set by the stroke: none).
+        """
+        shape = 0 if law is None else sum(len(p.shape_bounds((-1.0, 1.0))) for p in laws.get(law).shaped().values())
+        return len(self._restoring_terms(terms, law)) + shape
+
+    def _design(self, rec: Measurement, lo: int, hi: int, stop: float | None, aux: tuple[str, ...] = (),
+                law: str | None = None):  # fmt: skip
         """Weak system over samples [lo, hi): the library's columns, the input's, a column per measured
-        auxiliary channel in ``aux`` (its projection, like the input's) and an end-stop column last. The library's
-        part is projected once per span and record (a fit asks for the same two spans ~75 times, one per
-        candidate stop and effect: 16 of a discrepancy study's 36 s went to projecting them again).
+        auxiliary channel in ``aux`` (its projection, like the input's), ``law``'s columns the catalogue has not
+        (``_law_extra``, at its shape) and an end-stop column last. The library's part is projected once per span
+        and record (a fit asks for the same two spans ~75 times, one per candidate stop and effect: 16 of a
+        discrepancy study's 36 s went to projecting them again), a law's once per span too.
         """
         hit = self._library_systems.get((lo, hi))
         if hit is None or hit[0] is not rec:
@@ -429,12 +587,24 @@ class Discrepancy(StructureResults, Estimator):
                 Wa = self._form.project(np.asarray(rec.aux[name][lo:hi], float)[:, None], rec.dt)[:, 0]
                 cached = self._aux_columns[(lo, hi, name)] = (rec, Wa)
             W = np.column_stack([W, cached[1][: W.shape[0]]])
+        extra = self._law_extra(law)
+        if extra:
+            assert law is not None
+            cached = self._law_columns.get((lo, hi, law))
+            if cached is None or cached[0] is not rec:
+                lw = laws.get(law)
+                at = [i for i, c in enumerate(lw.column_list(self._shapes_of(law))) if c.label in extra]
+                with np.errstate(invalid="ignore", over="ignore"):
+                    cols = lw.columns(self._zs[lo:hi], self._v[lo:hi], self._shapes_of(law),
+                                      self._form.velocity_noise)[:, at]  # fmt: skip
+                cached = self._law_columns[(lo, hi, law)] = (rec, self._form.project(cols, rec.dt))
+            W = np.column_stack([W, cached[1][: W.shape[0]]])
         if stop is not None:
             z = self._zs[lo:hi]
             col = _stop()[1].column(z, stop)
             Ws = self._form.project(col[:, None], rec.dt)[:, 0]
             W = np.column_stack([W, Ws[: W.shape[0]]])
-        if aux or stop is not None:  # a row the library's part does not read (``_between_pulses``) reads none
+        if aux or extra or stop is not None:  # a row the library's part does not read (``_between_pulses``) reads none
             W = W * self._between_pulses(rec, lo, hi, y.size)[:, None]
         return W, y
 
@@ -457,14 +627,17 @@ class Discrepancy(StructureResults, Estimator):
         last = np.minimum(first + support, hi - lo)
         return ((busy[last] - busy[first]) == 0).astype(float)
 
-    def _fit(self, W: np.ndarray, y: np.ndarray, terms: tuple[str, ...], stop: bool, n_aux: int = 0) -> np.ndarray:
+    def _fit(self, W: np.ndarray, y: np.ndarray, terms: tuple[str, ...], stop: bool, n_aux: int = 0,
+             law: str | None = None) -> np.ndarray:  # fmt: skip
         """Least squares on ``terms`` (+ the auxiliary channels' and the stop's columns), the input's
-        coefficient fixed by physics.
+        coefficient fixed by physics; ``law``: the restoring law whose own columns (``_design``) ``terms`` may name.
         """
         lib = library_terms()
         n_lib = len(lib)
-        aux_cols = list(range(n_lib + 1, n_lib + 1 + n_aux))  # after the input's column; the stop's last
-        cols = [lib.index(t) for t in terms] + aux_cols + ([W.shape[1] - 1] if stop else [])
+        extra = self._law_extra(law)
+        aux_cols = list(range(n_lib + 1, n_lib + 1 + n_aux))  # after the input's; the law's next, the stop's last
+        index = {t: i for i, t in enumerate(lib)} | {t: n_lib + 1 + n_aux + j for j, t in enumerate(extra)}
+        cols = [index[t] for t in terms] + aux_cols + ([W.shape[1] - 1] if stop else [])
         target = y.copy()
         if self._gain is not None:
             target = target - self._gain * W[:, n_lib]
@@ -474,18 +647,30 @@ class Discrepancy(StructureResults, Estimator):
         scale = np.sqrt(np.mean(A**2, axis=0))  # rms, not std: the constant's column has none
         scale[scale == 0] = 1.0
         coef = np.linalg.lstsq(A / scale, target, rcond=None)[0] / scale
-        full = np.zeros(n_lib + 1 + n_aux + int(stop))
+        full = np.zeros(n_lib + 1 + n_aux + len(extra) + int(stop))
         full[cols] = coef
         if self._gain is not None:
             full[n_lib] = self._gain
         return full
 
-    def _model(self, coef: np.ndarray, rec: Measurement, stop: float | None, aux: tuple[str, ...] = ()) -> Model:
+    def _model(self, coef: np.ndarray, rec: Measurement, stop: float | None, aux: tuple[str, ...] = (),
+               law: str | None = None) -> Model:  # fmt: skip
         n_lib = len(library_terms())
         # weak.model_from's order: the library's terms, the channels' (here after the input's column), the input
         phys = np.concatenate([coef[:n_lib], coef[n_lib + 1 : n_lib + 1 + len(aux)], coef[n_lib : n_lib + 1]])
         mass = mass_of(rec, self._gain, phys[-1])[0]
         model = model_from(phys, mass, aux)
+        labels = self._law_extra(law)
+        if labels:  # the law's own parts (a shaped part's value from its shape and coefficients, z^6, z^7)
+            assert law is not None
+            lw, shape = laws.get(law), self._shapes_of(law)
+            cols = lw.column_list(shape)
+            at = n_lib + 1 + len(aux)
+            own = dict(zip(labels, coef[at : at + len(labels)], strict=True))
+            _, parts = lw.values([own.get(c.label, 0.0) for c in cols], mass, shape)
+            targets = {c.target for c in cols if c.label in own}
+            own_parts = {k: v for k, v in parts.items() if k in targets}
+            model = Model(**{**model.to_dict(), "extra": {**dict(model.extra), **own_parts}})
         if stop is not None:
             k = -mass * float(coef[-1])
             if k > 0:
@@ -494,9 +679,9 @@ class Discrepancy(StructureResults, Estimator):
         return model
 
     def _score(self, rec: Measurement, cand: Candidate) -> Candidate:
-        W, y = self._design(rec, 0, self.n_fit_, cand.stop, cand.aux)
-        coef = self._fit(W, y, cand.terms, cand.stop is not None, len(cand.aux))
-        Ws, ys = self._design(rec, self.n_fit_, self.n_id_, cand.stop, cand.aux)
+        W, y = self._design(rec, 0, self.n_fit_, cand.stop, cand.aux, cand.law)
+        coef = self._fit(W, y, cand.terms, cand.stop is not None, len(cand.aux), cand.law)
+        Ws, ys = self._design(rec, self.n_fit_, self.n_id_, cand.stop, cand.aux, cand.law)
         r2 = (ys - Ws @ coef) ** 2
         rows = block_rows(self.window_s, rec.fs, self._form.stride)
         nb = r2.size // rows
@@ -511,10 +696,20 @@ class Discrepancy(StructureResults, Estimator):
         cand.block_ms = block_scores(r2, rows, ys.var())
         cand.heldout_percent = float(100 * np.sqrt(cand.block_ms.mean()))
         cand.coefficients = coef
-        if cand.effect != "none":
+        if law_of(cand.effect) is not None:
+            # a law that fails the identifications' checks is never named (``law_choice.problems``: no stable well,
+            # a well outside the stroke, an escape just past it, damping that feeds energy in), whatever it scores
+            try:
+                failed = law_choice.problems(self._model(coef, rec, cand.stop, cand.aux, cand.law), rec, self.n_id_)
+            except (ValueError, ArithmeticError) as exc:
+                failed = [" ".join(str(exc).split())]
+            if failed:
+                cand.notes["problems"] = failed
+                cand.heldout_percent = math.inf
+        elif cand.effect != "none":
             # the catalogue never names an effect whose fit opens an escape just past the stroke
             try:
-                model = self._model(coef, rec, cand.stop, cand.aux)
+                model = self._model(coef, rec, cand.stop, cand.aux, cand.law)
                 escape = boundedness(model, rec.segment(0, self.n_id_), free_run=False)
                 escape = escape["escape_z"]
             except ValueError:
@@ -524,8 +719,26 @@ class Discrepancy(StructureResults, Estimator):
                 cand.heldout_percent = math.inf
         return cand
 
+    def _law_candidate(self, rec: Measurement, name: str, terms: tuple[str, ...], stop: float | None,
+                       aux: tuple[str, ...], law: str | None) -> Candidate:  # fmt: skip
+        """The candidate that replaces the restoring force of ``terms`` (``law``'s, or the catalogue's terms of z
+        alone) by the law ``name`` at its shape, the rest (the damping, a stop, the channels) held; scored as an
+        effect is (``_score``). A law with no shape on the record is not a candidate, and says why.
+        """
+        cand = Candidate(f"{LAW_PREFIX}{name}", (), stop, aux, name)
+        try:
+            shape = self._shape(rec, name)
+        except DiscrepancyError as exc:
+            cand.notes["problems"] = [str(exc)]
+            return cand
+        rest = tuple(t for t in terms if t not in self._restoring_terms(terms, law))
+        cand.terms = self._law_terms(name) + rest
+        if shape.shape:
+            cand.notes["shape"] = shape.to_json()["shape"]
+        return self._score(rec, cand)
+
     def _fit_stop(self, rec: Measurement, terms: tuple[str, ...], aux: tuple[str, ...] = (), upto: int | None = None,
-                  keep: np.ndarray | None = None) -> float:  # fmt: skip
+                  keep: np.ndarray | None = None, law: str | None = None) -> float:  # fmt: skip
         """The end stop's position (a nonlinear parameter) by least squares on the fitting part (or the weak rows
         ``keep`` of [0, ``upto``)): a grid over the outer 0.05-10 % of the stroke on either side (an onset with at
         least ``STOP_MIN_SAMPLES`` samples beyond it), refined by a bounded scalar search between the best grid
@@ -538,10 +751,10 @@ class Discrepancy(StructureResults, Estimator):
         upto = self.n_fit_ if upto is None else upto
 
         def ss(zs: float) -> float:
-            W, y = self._design(rec, 0, upto, zs, aux)
+            W, y = self._design(rec, 0, upto, zs, aux, law)
             if keep is not None:
                 W, y = W[keep], y[keep]
-            coef = self._fit(W, y, terms, True, len(aux))
+            coef = self._fit(W, y, terms, True, len(aux), law)
             return float(np.sum((y - W @ coef) ** 2)) if coef[-1] < 0 else math.inf  # a stop pushes back
 
         z = self._zs[:upto]
@@ -563,16 +776,16 @@ class Discrepancy(StructureResults, Estimator):
 
     # --- locate ------------------------------------------------------------------------------------
     def locate(self, rec: Measurement, model_terms: tuple[str, ...], stop: float | None,
-               aux: tuple[str, ...] = ()) -> dict[str, Any]:  # fmt: skip
+               aux: tuple[str, ...] = (), law: str | None = None) -> dict[str, Any]:  # fmt: skip
         """Where the current model's weak residual lives: by regime and over the state plane."""
-        W, y = self._design(rec, 0, self.n_id_, stop, aux)
-        coef = self._fit(W, y, model_terms, stop is not None, len(aux))
+        W, y = self._design(rec, 0, self.n_id_, stop, aux, law)
+        coef = self._fit(W, y, model_terms, stop is not None, len(aux), law)
         r = y - W @ coef
         form = self._form
         centres = np.clip(np.arange(r.size) * form.stride + form.centre(rec.dt), 0, self.n_id_ - 1)
         z, v = self._zs[centres], self._v[centres]
-        model = self._model(coef, rec, stop, aux)
         try:
+            model = self._model(coef, rec, stop, aux, law)
             eq = model.equilibria()
             wells = (eq.z_minus, eq.z_0, eq.z_plus)
         except ValueError:
@@ -600,6 +813,9 @@ class Discrepancy(StructureResults, Estimator):
 
     # --- the workflow ------------------------------------------------------------------------------
     def _validate(self) -> None:
+        if self.law is not None and tuple(self.baseline) != CUBIC_BASELINE:
+            raise InputError(f"Discrepancy(law={self.law!r}, baseline={self.baseline!r}): a law's baseline is its "
+                             "columns (with the damping law's): give a law or baseline terms, not both")  # fmt: skip
         if self.validation_fraction + self.selection_fraction >= 1:
             raise DiscrepancyError(
                 f"Discrepancy(validation_fraction={self.validation_fraction}, selection_fraction="
@@ -612,6 +828,10 @@ class Discrepancy(StructureResults, Estimator):
                 raise DiscrepancyError(f"Discrepancy(baseline={self.baseline!r}): a structure's baseline is its "
                                        "element's cubic law with the linear structure (leave baseline at its "
                                        "default)")  # fmt: skip
+            if self.law is not None or self.damping is not None:
+                raise DiscrepancyError(f"Discrepancy(law={self.law!r}, damping={self.damping!r}): a structure's "
+                                       "baseline is its element's cubic law with the linear structure (give no "
+                                       "law)")  # fmt: skip
             if self.unnamed:
                 raise DiscrepancyError("Discrepancy(unnamed=True): the non-parametric force is a single DOF's (a "
                                        f"record of {rec.n_dof} DOFs)")  # fmt: skip
@@ -709,12 +929,16 @@ class Discrepancy(StructureResults, Estimator):
     def _fit_one(self, rec: Measurement) -> Discrepancy:
         """The workflow on a single DOF's record as it is read (``fit``: a ring-down's input windowed)."""
         self._systems(rec)
-        terms = tuple(self.baseline)
+        terms, law = self._baseline(rec)
         stop: float | None = None
         added: list[dict[str, Any]] = []
         self.iterations_ = []
         self._folds_evidence: dict[str, dict[str, Any]] = {}
-        base_model = self._refit_model(rec, terms, stop)
+        try:
+            base_model = self._refit_model(rec, terms, stop, (), law)
+        except ValueError as exc:  # a law's parts refuse their fitted values (a rod frame's spring k_f below 0)
+            raise DiscrepancyError(f"{rec.source}: the baseline law ({law}) does not fit this record: "
+                                   f"{' '.join(str(exc).split())}") from None  # fmt: skip
         self.baseline_model_ = base_model
         self.baseline_refinement_ = None
         if self.refine is not False:  # the gap a user sees is the best the baseline's form predicts, not its weak fit's
@@ -724,26 +948,33 @@ class Discrepancy(StructureResults, Estimator):
         # the regime's and the interval's windows last no longer than the record stays predictable: measured once,
         # from the record and the baseline, before any effect is scored, the same for the baseline and every effect
         self.predictability_ = self._predictability(rec, base_model)
-        self.locate_before_ = self.locate(rec, terms, stop)
+        self.locate_before_ = self.locate(rec, terms, stop, (), law)
         current = {"model": base_model, "initial": self.baseline_model_, "refinement": self.baseline_refinement_,
                    "gap": self.gap_before_}  # fmt: skip
         aux: tuple[str, ...] = ()
+        offer = law is not None if self.offer_laws is None else self.offer_laws
+        self.laws_offered_ = [n for n in laws.names("restoring") if n != law] if offer else []
         for _ in range(self.max_effects):
-            none = self._score(rec, Candidate("none", terms, stop, aux))
+            none = self._score(rec, Candidate("none", terms, stop, aux, law))
             cands = [none]
             for effect, extra_terms in catalogue().items():
                 if not extra_terms:  # the positional effect: one at most
                     if stop is None:
-                        cands.append(self._score(rec, Candidate(effect, terms, self._fit_stop(rec, terms, aux), aux)))
+                        cands.append(self._score(rec, Candidate(effect, terms, self._fit_stop(rec, terms, aux, law=law),
+                                                                aux, law)))  # fmt: skip
                     continue
                 if set(extra_terms) <= set(terms):
                     continue
-                cands.append(self._score(rec, Candidate(effect, terms + extra_terms, stop, aux)))
+                cands.append(self._score(rec, Candidate(effect, terms + extra_terms, stop, aux, law)))
             for channel in rec.aux:  # each measured auxiliary channel: a term theta a(t), like an effect
                 if channel not in aux:
-                    cands.append(self._score(rec, Candidate(aux_terms([channel])[0], terms, stop, (*aux, channel))))
+                    cands.append(self._score(rec, Candidate(aux_terms([channel])[0], terms, stop, (*aux, channel),
+                                                            law)))  # fmt: skip
+            for name in self.laws_offered_:  # each other restoring law, in place of the restoring force
+                if name != law:
+                    cands.append(self._law_candidate(rec, name, terms, stop, aux, law))
             ranking = sorted(cands, key=lambda c: c.heldout_percent)
-            best = self._parsimonious(ranking)
+            best = self._parsimonious(ranking, terms, law)
             gain = compare(_scores(none), _scores(best), self.margin, _scores(none))
             named = best.effect != "none" and gain.significant
             iteration = {
@@ -754,22 +985,25 @@ class Discrepancy(StructureResults, Estimator):
             }
             self.iterations_.append(iteration)
             if not named:
+                iteration["first"] = self._first(ranking, best, None, terms, law, gain)
                 break
             trial = self._trial(rec, best)
             iteration["kept"], iteration["verdict"], iteration["evidence"] = self._helps(
                 rec, current["gap"], trial["gap"], best.effect, current["model"], trial["model"],
-                Candidate("before", terms, stop, aux), best)
+                Candidate("before", terms, stop, aux, law), best)
             iteration["gap_percent"] = {"before": current["gap"].get("median_window_percent"),
                                         "after": trial["gap"].get("median_window_percent")}  # fmt: skip
+            iteration["first"] = self._first(ranking, best, iteration, terms, law, gain)
             if not iteration["kept"]:
                 iteration["named"] = "none"
                 break
             current = trial
-            terms, aux = best.terms, best.aux
+            terms, aux, law = best.terms, best.aux, best.law
             stop = _stop_of(trial["model"], best.stop)  # the next effects are sought beside the refined stop
             added.append({"effect": best.effect, "stop": stop})
         self.effects_ = [a["effect"] for a in added]
         self.terms_ = terms
+        self.law_ = law
         self.stop_ = stop
         self.model_, self.initial_model_, self.refinement_ = current["model"], current["initial"], current["refinement"]
         self.gap_after_ = current["gap"]  # the same measure as the gap before: restarted runs, same windows
@@ -785,7 +1019,7 @@ class Discrepancy(StructureResults, Estimator):
             self.gap_regime_[e] = {"before": reg.get("gap_before_percent"), "after": reg.get("gap_after_percent"),
                                    "windows": reg.get("windows", 0), "window_s": reg.get("window_s"),
                                    "record_window_s": reg.get("record_window_s"), "judged_on": judged}  # fmt: skip
-        self.locate_after_ = self.locate(rec, terms, stop, aux)
+        self.locate_after_ = self.locate(rec, terms, stop, aux, law)
         self.effect_interval_ = self.effect_interval(rec)
         self.bounded_ = boundedness(self.model_, rec.segment(0, self.n_id_))
         self.unnamed_ = self._unnamed(rec) if self.unnamed else None
@@ -795,12 +1029,130 @@ class Discrepancy(StructureResults, Estimator):
         self.record_ = dict(rec.info)
         return self
 
+    def _baseline(self, rec: Measurement) -> tuple[tuple[str, ...], str | None]:
+        """The baseline's terms and its restoring law (``law``, ``damping``; module docstring, 1), and its account
+        in ``baseline_law_``. None: ``baseline``'s terms, their velocity terms replaced by ``damping``'s columns where
+        it is given; the law is then the cubic where they are its terms (the reference study's, the default) and
+        none otherwise (``LINEAR_BASELINE``). A law: its columns at the record's shape (``_shape``). ``"auto"``: the
+        law the record asks for, chosen as the identifications choose it (``law_choice.choose``).
+        """
+        damping = self._damping_law()
+        damping_terms = tuple(c.label for c in laws.get(damping).column_list())
+        choice = None
+        velocity = damping_terms
+        if self.law is None:
+            restoring = tuple(t for t in self.baseline if t in _displacement_labels())
+            velocity = tuple(t for t in self.baseline if t not in restoring)
+            terms = restoring + (velocity if self.damping is None else damping_terms)
+            cubic = self._law_terms(laws.DEFAULT_RESTORING)
+            law = laws.DEFAULT_RESTORING if restoring == cubic else None
+        else:
+            law = self.law
+            if law == "auto":
+                choice = self._choose_law(rec)
+                law = choice.best.law
+            self._shape(rec, law)
+            terms = self._law_terms(law) + damping_terms
+        self.baseline_law_ = {
+            "requested": self.law,
+            "restoring": law,
+            "damping": damping if self.law is not None or self.damping is not None else _damping_of(velocity),
+            "terms": list(terms),
+            "shape": None if law is None or not laws.get(law).shaped() else self._shapes[law].to_json(),  # type: ignore[union-attr]
+            "choice": None if choice is None else self._choice_json(choice),
+        }
+        return terms, law
+
+    def _law_estimate(self, rec: Measurement, part: Measurement, n: int, name: str) -> Model:
+        """``law_choice.choose``'s estimate of the law ``name`` over the first ``n`` samples of ``part``: on the
+        identification part itself the workflow's own fit (the law's columns at the record's shape, ``_shape``,
+        and the damping law's, by weak least squares over [0, n_id)); on the comparison's fitting part the same
+        fit of that part alone (its shape found there, on its first ``1 - selection / (1 - validation)``).
+        """
+        damping = self._damping_law()
+        if part is rec and n == self.n_id_:
+            self._shape(rec, name)
+            terms = self._law_terms(name) + tuple(c.label for c in laws.get(damping).column_list())
+            return self._refit_model(rec, terms, None, (), name)
+        share = 1 - self.selection_fraction / (1 - self.validation_fraction)
+        fit = fit_shape(part, name, damping, n_fit=int(round(share * n)), n_id=n, window_s=self.window_s)
+        lib = Library.of_laws(name, damping, fit.shape)
+        gain = known_input_gain(part)
+        phys = fit_support(WeakForm.of(part).system(part, 0, n, library=lib), gain)
+        return lib.model(phys, mass_of(part, gain, phys[-1])[0])
+
+    def _choose_law(self, rec: Measurement) -> law_choice.Choice:
+        """The restoring law the record asks for (``law="auto"``), by the identifications' comparison
+        (``law_choice.choose``) with this workflow's estimate of each (``_law_estimate``).
+        """
+        try:
+            return law_choice.choose(rec, self.n_id_, laws.names("restoring"),
+                                     lambda part, n, name: self._law_estimate(rec, part, n, name),
+                                     lambda m: m)  # fmt: skip
+        except InputError as exc:
+            raise DiscrepancyError(str(exc)) from None
+
+    @staticmethod
+    def _choice_json(choice: law_choice.Choice) -> dict[str, Any]:
+        """The comparison that chose the baseline's law, as the identifications' ``law_choice``."""
+        best = choice.best
+        return {**choice.windows, "chosen": best.law, "candidates": [c.to_json() for c in choice.candidates],
+                "summary": f"the laws were compared on what they predict ({choice.windows.get('windows')} windows of "
+                           f"{choice.windows.get('window_s', math.nan):.3g} s restarted over the selection part): "
+                           f"{best.law} chosen (median window {best.median_percent:.3g} %, weight "
+                           f"{best.weight:.2f})"}  # fmt: skip
+
+    def _extra_parameters(self, c: Candidate, terms: tuple[str, ...], law: str | None) -> int:
+        """The parameters a candidate adds to the current model: an effect's values (an end stop's two), a
+        channel's theta, a law's restoring parameters beyond the current restoring force's (``_n_parameters``:
+        the geometric law's k0, k_f, k_f D0, L and alpha against the cubic's k0..k3 adds one; a magnet's none).
+        """
+        if c.effect == "none":
+            return 0
+        if law_of(c.effect) is not None:
+            return self._n_parameters(c.terms, c.law) - self._n_parameters(terms, law)
+        if c.effect.startswith(effects.AUX_PREFIX):
+            return 1  # theta alone
+        return effects.get(c.effect).n_values
+
+    def _first(self, ranking: list[Candidate], best: Candidate, iteration: dict[str, Any] | None,
+               terms: tuple[str, ...], law: str | None, gain) -> dict[str, Any]:  # fmt: skip
+        """Why the candidate ranked first (the least held-out weak residual) was named or not, in words: the
+        result's ``iterations[].first``.
+        """
+        first = ranking[0]
+        out: dict[str, Any] = {"effect": first.effect, "score": first.heldout_percent,
+                               "named": bool(iteration is not None and iteration.get("kept")
+                                             and best is first)}  # fmt: skip
+        none = next(c for c in ranking if c.effect == "none")
+        if first.effect == "none":
+            out["why"] = "no candidate's held-out weak residual fell below the baseline's"
+            return out
+        if best is not first:
+            n_first, n_best = (self._extra_parameters(c, terms, law) for c in (first, best))
+            out["why"] = (f"{best.effect} scores within max(one standard error, {100 * self.margin:g} %) of it "
+                          f"({best.heldout_percent:.3g} % against {first.heldout_percent:.3g} %) with fewer parameters "
+                          f"({n_best} against {n_first}): the simpler of the two was the candidate")  # fmt: skip
+            if iteration is None:
+                out["why"] += (f", and its gain over the baseline ({100 * gain.gain / _scores(none).mean():.3g} %) was "
+                               f"not beyond max(one standard error, {100 * self.margin:g} %)")  # fmt: skip
+            elif not iteration.get("kept"):
+                out["why"] += f"; {iteration['verdict']}"
+            return out
+        if iteration is None:
+            out["why"] = (f"its gain over the baseline ({100 * gain.gain / _scores(none).mean():.3g} % of its held-out "
+                          f"weak residual, one standard error {100 * gain.se / _scores(none).mean():.3g} %) is not "
+                          f"beyond max(one standard error, {100 * self.margin:g} %)")  # fmt: skip
+        elif not iteration.get("kept"):
+            out["why"] = iteration["verdict"]
+        return out
+
     def _trial(self, rec: Measurement, best: Candidate) -> dict[str, Any]:
         """The model with ``best`` added: every parameter refitted on the identification part by weak least
         squares, then (``refine``) by output error, every effect's own values included (an end stop's
         stiffness and onset: ``refine.parameter_names``); its held-out gap.
         """
-        initial = self._refit_model(rec, best.terms, best.stop, best.aux)
+        initial = self._refit_model(rec, best.terms, best.stop, best.aux, best.law)
         model, refinement = initial, None
         if self.refine is not False:
             val = validate(initial, rec, self.n_id_)
@@ -878,7 +1230,11 @@ class Discrepancy(StructureResults, Estimator):
         }
 
     def _effect_force(self, model: Model, effect: str, z: np.ndarray, v: np.ndarray) -> np.ndarray | None:
-        """The named effect's force [N] in ``model`` at the states (z, v); None for a measured channel's term."""
+        """The named effect's force [N] in ``model`` at the states (z, v); None for a measured channel's term and
+        for a law (it replaces the restoring force at every state: it acts wherever the motion goes).
+        """
+        if law_of(effect) is not None:
+            return None
         e = effects.get(effect)
         if isinstance(e.law, effects.MeasuredChannel):
             return None
@@ -899,7 +1255,9 @@ class Discrepancy(StructureResults, Estimator):
         z, v = self._z0, self._v0
         force = self._effect_force(model_after, effect, z[self.n_id_ :], v[self.n_id_ :])
         if force is None:
-            return {"windows": 0, "reason": "a measured channel's term acts wherever the channel does"}
+            return {"windows": 0, "reason": "a law replaces the restoring force at every state: judged on every "
+                    "held-out window" if law_of(effect) is not None else "a measured channel's term acts wherever "
+                    "the channel does"}  # fmt: skip
         if not np.any(np.abs(force) > 0):
             return {"windows": 0, "reason": "the effect does not act in the held-out tail"}
         acting, windows, horizon = self._episode_windows(rec, force, self.n_id_, (model_before, model_after))
@@ -1013,7 +1371,7 @@ class Discrepancy(StructureResults, Estimator):
         if len(windows) < 3:
             return out
         form = self._form
-        n_rows = self._design(rec, 0, self.n_id_, None, before.aux)[0].shape[0]
+        n_rows = self._design(rec, 0, self.n_id_, None, before.aux, before.law)[0].shape[0]
         support = test_function(form.half, rec.dt)[0].size
         row_lo = np.arange(n_rows) * form.stride  # row k's test function spans [row_lo, row_lo + support)
         groups = np.array_split(windows.starts, min(folds, len(windows)))
@@ -1032,10 +1390,10 @@ class Discrepancy(StructureResults, Estimator):
             for cand in (before, best):
                 stop = cand.stop
                 if pos is not None and cand.effect == pos.name:
-                    stop = self._fit_stop(rec, cand.terms, cand.aux, upto=self.n_id_, keep=keep)
-                W, y = self._design(rec, 0, self.n_id_, stop, cand.aux)
-                coef = self._fit(W[keep], y[keep], cand.terms, stop is not None, len(cand.aux))
-                models.append(self._model(coef, rec, stop, cand.aux))
+                    stop = self._fit_stop(rec, cand.terms, cand.aux, upto=self.n_id_, keep=keep, law=cand.law)
+                W, y = self._design(rec, 0, self.n_id_, stop, cand.aux, cand.law)
+                coef = self._fit(W[keep], y[keep], cand.terms, stop is not None, len(cand.aux), cand.law)
+                models.append(self._model(coef, rec, stop, cand.aux, cand.law))
             ms_b.append(self._runs_at(models[0], rec, block))
             ms_a.append(self._runs_at(models[1], rec, block))
             folds_size = _size_of(models[1], effect)
@@ -1089,15 +1447,14 @@ class Discrepancy(StructureResults, Estimator):
             **h.to_json(),
         }
 
-    def _parsimonious(self, ranking: list[Candidate]) -> Candidate:
+    def _parsimonious(self, ranking: list[Candidate], terms: tuple[str, ...] = CUBIC_BASELINE,
+                      law: str | None = laws.DEFAULT_RESTORING) -> Candidate:  # fmt: skip
         """Among the effects within max(1 SE, margin) of the best held-out residual, the one with the
-        fewest parameters (the end stop has two: its stiffness and its position), then the lowest
-        residual: a two-parameter stop that beats z^5 by 4 % on the as-built device is not evidence of
-        a stop (measured).
+        fewest parameters (``_extra_parameters``: the end stop has two, its stiffness and its position; a law
+        what it adds to the current restoring force, ``terms`` of ``law``), then the lowest residual: a
+        two-parameter stop that beats z^5 by 4 % on the as-built device is not evidence of a stop (measured).
         """
         top = ranking[0]
-        n_par = {"none": 0, **{e.name: e.n_values for e in effects.REGISTRY}}
-        n_par |= {c.effect: 1 for c in ranking if c.effect.startswith(effects.AUX_PREFIX)}  # theta alone
         ok = []
         for c in ranking:
             if c.effect == "none" or not np.isfinite(c.heldout_percent):
@@ -1106,11 +1463,11 @@ class Discrepancy(StructureResults, Estimator):
                 ok.append(c)
         if not ok:
             return top
-        return min(ok, key=lambda c: (n_par[c.effect], c.heldout_percent))
+        return min(ok, key=lambda c: (self._extra_parameters(c, terms, law), c.heldout_percent))
 
-    def _refit_model(self, rec: Measurement, terms, stop, aux: tuple[str, ...] = ()) -> Model:
-        W, y = self._design(rec, 0, self.n_id_, stop, aux)
-        return self._model(self._fit(W, y, terms, stop is not None, len(aux)), rec, stop, aux)
+    def _refit_model(self, rec: Measurement, terms, stop, aux: tuple[str, ...] = (), law: str | None = None) -> Model:
+        W, y = self._design(rec, 0, self.n_id_, stop, aux, law)
+        return self._model(self._fit(W, y, terms, stop is not None, len(aux), law), rec, stop, aux, law)
 
     def _gap(self, rec: Measurement, model: Model) -> dict[str, Any]:
         """Restarted free runs over the held-out tail (and their residual PSD)."""
@@ -1189,12 +1546,17 @@ class Discrepancy(StructureResults, Estimator):
 
     def effect_size(self) -> dict[str, Any]:
         """The named effects' values in the model file's units (an effect that is a base field's term, such as
-        ``quadratic_damping``, is read from its field: c_nl).
+        ``quadratic_damping``, is read from its field: c_nl); a law's, its parameters in the final model (its base
+        fields and its parts', ``PART.FIELD``; None where a later round replaced it).
         """
-        out = {}
+        out: dict[str, Any] = {}
         folds = {e.name: e.folds_into for e in effects.REGISTRY if e.folds_into}
         fields = self.model_.to_dict()
         for e in self.effects_:
+            name = law_of(e)
+            if name is not None:
+                out[e] = law_parameters(self.model_, name) if name == self.law_ else None
+                continue
             val = fields[folds[e]] if e in folds else self.model_.extra.get(e)
             out[e] = dict(val) if isinstance(val, dict) or hasattr(val, "keys") else val
         return out
@@ -1237,6 +1599,11 @@ class Discrepancy(StructureResults, Estimator):
         out: dict[str, Any] = {}
         self.bayesian_: dict[str, Any] = {}
         for e in self.effects_:
+            if law_of(e) is not None:
+                out[e] = {"value": self.effect_size()[e], "interval": None, "prob": prob,
+                          "method": "not available for a law: it replaces the restoring force, whose parameters "
+                          "this approximation of an effect's size does not sample"}  # fmt: skip
+                continue
             value = _size_of(self.model_, e)
             keys = sorted(value) if isinstance(value, dict) else [None]
             if value is None or effects.get(e).law.label is None and not isinstance(value, dict):
@@ -1407,6 +1774,9 @@ class Discrepancy(StructureResults, Estimator):
             "warnings": list(self.warnings_),
             "record": self.record_,
             "baseline_model": self.baseline_model_.to_dict(),
+            "baseline_law": self.baseline_law_,
+            "laws_offered": list(self.laws_offered_),
+            "law": self.law_,
             "effect_size": self.effect_size(),
             "effect_interval": self.effect_interval_,
             "bayesian": self.bayesian_,

@@ -430,45 +430,26 @@ class Identifier(Estimator):
                     return default, None
             why = f"the default law ({laws.DEFAULT_RESTORING}) failed its checks: {'; '.join(failed)}"
             names = tuple(n for n in names if n != laws.DEFAULT_RESTORING)
-        n_fit = n_id - int(round(law_choice.SELECTION_FRACTION * rec.n))
-        if n_fit < n_id // 2:
-            raise InputError(f"{rec.source}: too short to compare laws (the selection part would exceed the fit)")
-        fitting = rec.segment(0, n_fit)
-        candidates = []
-        for name in names:
-            cand = law_choice.Candidate(name)
-            try:
-                cand.model = self._estimate(fitting, n_fit, laws.get(name)).model
-                cand.problems = law_choice.problems(cand.model, rec, n_fit)
-            except (MeasurementError, ValueError, ArithmeticError) as exc:
-                cand.problems = [" ".join(str(exc).split())]
-            candidates.append(cand)
-        windows = law_choice.score(candidates, rec, n_fit, n_id)
-        account = {"requested": self.law or "default", "why": why, **windows,
-                   "candidates": [c.to_json() for c in candidates]}  # fmt: skip
-        # the best on the selection part, estimated on the whole identification part and judged again there: where
-        # it fails, the next best
-        for best in law_choice.ranked(candidates):
-            try:
-                est = self._held_by_law(self._estimate(rec, n_id, laws.get(best.law)), best.law)
-                failed = law_choice.problems(est.model, rec, n_id)
-            except (MeasurementError, ValueError, ArithmeticError) as exc:
-                failed = [" ".join(str(exc).split())]
-            if not failed:
-                break
-            best.problems = [f"on the whole identification part: {failed[0]}"]
-        else:
-            reasons = "; ".join(f"{c.law}: {c.problems[0] if c.problems else 'no estimate'}" for c in candidates)
+        state = dict(vars(self))  # the default's learned state (its wells, its selection): kept if no law passes
+        try:
+            choice = law_choice.choose(rec, n_id, names, lambda part, n, name: self._estimate(part, n, laws.get(name)),
+                                       lambda est: est.model, why)  # fmt: skip
+        except law_choice.NoLawError as exc:
             if default is None:
-                raise MeasurementError(f"{rec.source}: no law explains the record{' (' + why + ')' if why else ''}: "
-                                       f"{reasons}")  # fmt: skip
+                raise
+            vars(self).clear()
+            vars(self).update(state)
             # the default's model, with what is wrong with it: the judgement's warnings follow (shared stages)
-            said = f"{why}, and no other law passes its checks ({reasons}): the default's model is kept, not to be " \
-                   "believed"  # fmt: skip
+            said = f"{why}, and no other law passes its checks ({exc.reasons}): the default's model is kept, not to " \
+                   "be believed"  # fmt: skip
+            account = {"requested": self.law or "default", "why": why, **exc.windows, "chosen": None,
+                       "summary": said, "candidates": [c.to_json() for c in exc.candidates]}  # fmt: skip
             return replace(default, warnings=(*default.warnings, said),
-                           details={**default.details, "law_choice": {**account, "chosen": None,
-                                                                      "summary": said}}), account  # fmt: skip
-        account["candidates"] = [c.to_json() for c in candidates]
+                           details={**default.details, "law_choice": account}), account
+        best, windows = choice.best, choice.windows
+        est = self._held_by_law(choice.estimate, best.law)
+        account = {"requested": self.law or "default", "why": why, **windows,
+                   "candidates": [c.to_json() for c in choice.candidates]}  # fmt: skip
         account["chosen"] = best.law
         said = (f"{why}; the laws were compared on what they predict" if why else "the laws were compared on what "
                 "they predict") + (f" ({windows['windows']} windows of {windows['window_s']:.3g} s restarted over "

@@ -24,12 +24,13 @@ window error is said beside it.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
-from negstiff.errors import MeasurementError
+from negstiff.errors import InputError, MeasurementError
 from negstiff.inference.record.measurement import Measurement
 from negstiff.inference.steps.validation import (
     boundedness,
@@ -165,3 +166,77 @@ def ranked(candidates: list[Candidate]) -> list[Candidate]:
     """The admissible candidates, the greatest weight first (ties: the least median window error)."""
     ok = [c for c in candidates if c.admissible and math.isfinite(c.median_percent)]
     return sorted(ok, key=lambda c: (-c.weight, c.median_percent))
+
+
+@dataclass
+class Choice:
+    """What ``choose`` found: the chosen law's ``estimate`` over the whole identification part (whatever the
+    caller's estimator returns), its ``best`` candidate, every ``candidate`` as the comparison saw it and the
+    windows' account (``score``'s).
+    """
+
+    estimate: Any
+    best: Candidate
+    candidates: list[Candidate]
+    windows: dict[str, Any]
+
+
+class NoLawError(MeasurementError):
+    """No law passes its checks (``choose``): the comparison is kept with the refusal (``candidates``, ``windows``)
+    so a caller that has a model of its own (an identification's default) can keep it and say why.
+    """
+
+    def __init__(self, message: str, candidates: list[Candidate], windows: dict[str, Any]):
+        super().__init__(message)
+        self.candidates, self.windows = candidates, windows
+
+    @property
+    def reasons(self) -> str:
+        """Each candidate's first problem, in one line."""
+        return "; ".join(f"{c.law}: {c.problems[0] if c.problems else 'no estimate'}" for c in self.candidates)
+
+
+ESTIMATE_ERRORS = (MeasurementError, ValueError, ArithmeticError)
+"""What an estimate of a law may raise on a record it cannot explain (said as the candidate's problem)."""
+
+
+def choose(rec: Measurement, n_id: int, names, estimate: Callable[[Measurement, int, str], Any],
+           model_of: Callable[[Any], Model], why: str | None = None) -> Choice:  # fmt: skip
+    """The law ``rec`` asks for among ``names`` (module docstring), for any estimator: each law estimated on the
+    fitting part (``estimate(part, n, name)``, ``model_of`` its model) and judged there (``problems``), the
+    admissible scored on the selection part (``score``), and the best, estimated again on the whole identification
+    part [0, ``n_id``), judged again there (where it fails, the next best). Every identification (``Identifier``)
+    and the discrepancy workflow's baseline (``Discrepancy(law="auto")``) choose by this one comparison.
+
+    Raises ``InputError`` where the record is too short to compare laws and ``NoLawError`` (a ``MeasurementError``
+    holding the comparison) where no law passes (``why``, the reason the laws were compared, is said in its
+    message).
+    """
+    n_fit = n_id - int(round(SELECTION_FRACTION * rec.n))
+    if n_fit < n_id // 2:
+        raise InputError(f"{rec.source}: too short to compare laws (the selection part would exceed the fit)")
+    fitting = rec.segment(0, n_fit)
+    candidates = []
+    for name in names:
+        cand = Candidate(name)
+        try:
+            cand.model = model_of(estimate(fitting, n_fit, name))
+            cand.problems = problems(cand.model, rec, n_fit)
+        except ESTIMATE_ERRORS as exc:
+            cand.problems = [" ".join(str(exc).split())]
+        candidates.append(cand)
+    windows = score(candidates, rec, n_fit, n_id)
+    # the best on the selection part, estimated on the whole identification part and judged again there: where it
+    # fails, the next best
+    for best in ranked(candidates):
+        try:
+            est = estimate(rec, n_id, best.law)
+            failed = problems(model_of(est), rec, n_id)
+        except ESTIMATE_ERRORS as exc:
+            failed = [" ".join(str(exc).split())]
+        if not failed:
+            return Choice(est, best, candidates, windows)
+        best.problems = [f"on the whole identification part: {failed[0]}"]
+    reasons = "; ".join(f"{c.law}: {c.problems[0] if c.problems else 'no estimate'}" for c in candidates)
+    raise NoLawError(f"{rec.source}: no law explains the record{' (' + why + ')' if why else ''}: {reasons}",
+                     candidates, windows)  # fmt: skip

@@ -70,8 +70,9 @@ class _Problem:
     """
 
     def __init__(self, rec: Measurement, restoring: laws.Law, damping: laws.Law, lo: int, hi: int,
-                 aux: tuple[str, ...] = ()):  # fmt: skip
+                 aux: tuple[str, ...] = (), scoring: bool = False):  # fmt: skip
         self.rec, self.restoring, self.damping, self.lo, self.hi, self.aux = rec, restoring, damping, lo, hi, aux
+        self.scoring = scoring  # a part that scores fits made elsewhere: a column it never reaches is zeros there
         self.form = WeakForm.of(rec)
         self.gain = known_input_gain(rec)
         self.shaped = restoring.shaped()
@@ -81,7 +82,7 @@ class _Problem:
         return Library.of_laws(self.restoring, self.damping, shape, self.aux)
 
     def system(self, shape):
-        return self.form.system(self.rec, self.lo, self.hi, library=self.library(shape))
+        return self.form.system(self.rec, self.lo, self.hi, library=self.library(shape), scoring=self.scoring)
 
     def residual(self, shape) -> float:
         """The relative weak residual ||y - W theta||^2 / ||y||^2 of the constrained least squares at ``shape``
