@@ -22,7 +22,8 @@ The restoring laws (``kind="restoring"``):
 * ``spline``: a smooth force with no formula, a cubic B-spline over the record's stroke (``shaped.Spline``).
 
 The damping laws (``kind="damping"``): ``viscous`` (c z'), ``quadratic`` (c z' + c_nl z'|z'|, the reference
-study's), ``cubic_damping`` (c z' + c3 z'^3) and ``friction`` (c z' + F tanh(z'/v_s)).
+study's), ``cubic_damping`` (c z' + c3 z'^3), ``friction`` (c z' + F tanh(z'/v_s)) and ``polynomial_damping``
+(c z' + c_nl z'|z'| + c3 z'^3: an equivalent damping ratio that may rise, then fall, with amplitude).
 """
 
 from __future__ import annotations
@@ -197,6 +198,8 @@ LAWS: list[Law] = [
     Law("cubic_damping", "damping", ("c",), ("cubic_damping",), "D = c z' + c3 z'^3", "a cubic damper"),
     Law("friction", "damping", ("c",), ("coulomb_friction",), "D = c z' + F tanh(z' / v_s)",
         "viscous and Coulomb friction, smoothed"),
+    Law("polynomial_damping", "damping", ("c", "c_nl"), ("cubic_damping",), "D = c z' + c_nl z'|z'| + c3 z'^3",
+        "a damping ratio that may rise and then fall with amplitude (an eddy current's, a joint's)"),
 ]  # fmt: skip
 """The laws, in the order the CLI lists them."""
 
