@@ -167,20 +167,21 @@ def waits_section(quick: bool) -> list[str]:
 
     print("waits (the commands as installed)...", file=sys.stderr)
     res = measure(quick)
-    m = res["machine"]
+    mach = res["machine"]
     keys = ["identify nsi", "posterior", "reproduce (fresh install)", "reproduce (kernels cached)"]
     keys += [f"identify {m}, bench record{x}" for m in ("nsi", "sindy") for x in ("", ", beside 2 busy processes")]
     rows = [_row(k, res[k], quick) for k in keys]
-    for m in ("nsi", "sindy"):  # beside other work: within 3x of its own time
-        own = res[f"identify {m}, bench record"][0]
-        loaded = res[f"identify {m}, bench record, beside 2 busy processes"][0]
-        rows[keys.index(f"identify {m}, bench record, beside 2 busy processes")][4] = (
+    for method in ("nsi", "sindy"):  # beside other work: within 3x of its own time
+        own = res[f"identify {method}, bench record"][0]
+        loaded = res[f"identify {method}, bench record, beside 2 busy processes"][0]
+        rows[keys.index(f"identify {method}, bench record, beside 2 busy processes")][4] = (
             f"<= 3x alone: {loaded / own:.2f}x, " + ("met" if loaded <= 3 * own else "**not met**")
         )
     intro = (
         f"The commands as a user runs them, each in its own process, on {'60' if quick else '300'} s rig records "
-        f"at 512 Hz (`experiments/waits.py`). Machine: {m['cpu']}, {m['cores']} cores; Python {m['python']}, "
-        f"numpy {m['numpy']}, scipy {m['scipy']}, numba {m['numba']}. The machine's speed drifts over a day: its "
+        f"at 512 Hz (`benchmarks/waits.py`). Machine: {mach['cpu']}, {mach['cores']} cores; Python {mach['python']}, "
+        f"numpy {mach['numpy']}, scipy {mach['scipy']}, numba {mach['numba']}. The machine's speed drifts over a day: "
+        "its "
         f"reference in this run, a fresh process importing scipy.signal, took "
         f"{res['reference_import_scipy_signal_s']:.2f} s. reproduce ran "
         "with its section cache off, first on an empty numba cache (a fresh install's first run), then on it. "
