@@ -7,9 +7,10 @@ pays for no fit.
    vibrometer's volts, its gain not written down). In a base-excited record physics fixes the input's
    coefficient: z'' = -base_acc - (c z' + K(z)) / m. A response read in its sensor's units, z_read = z / s,
    obeys z_read'' = -base_acc / s - ..., so the coefficient the record's own dynamics learn for the input
-   (``weak.input_coefficient``: a quintic restoring force with viscous and quadratic damping, unconstrained
-   weak-form least squares) is -1 / s. For a force-driven record it is 1 / (m s): the mass must be known, or
-   scale and mass trade off (``load`` refuses that record). ``calibrate_scale`` estimates s with its standard
+   (``weak.input_coefficient`` over ``weak.stroke_library``: a restoring force with no formula, a spline over the
+   stroke, with viscous and quadratic damping, unconstrained weak-form least squares) is -1 / s. For a
+   force-driven record it is 1 / (m s): the mass must be known, or scale and mass trade off (``load`` refuses
+   that record). ``calibrate_scale`` estimates s with its standard
    error (the spread of the estimates from parts of the record), multiplies the response by it, so that
    every coefficient found afterwards is in SI units, and says so in ``info["scale"]`` (a result's
    ``record.scale``).
@@ -28,14 +29,17 @@ from typing import Any
 import numpy as np
 
 from negstiff.errors import MeasurementError
+from negstiff.inference.record import stroke_spline
 from negstiff.inference.record.measurement import Measurement
 from negstiff.inference.record.sensors import integral_warnings
-from negstiff.inference.steps.weak import input_coefficient, known_input_gain, weak_least_squares
-
-PIN_TERMS = ("1", "z", "z^2", "z^3", "z^4", "z^5", "v", "v|v|")
-"""Library of the frame fit: a quintic restoring force follows the exact device's K near its origin
-(the cubic's K(0) errs there: 0.7-1.7 mm of frame on as-built records, measured; 0.15-0.2 mm with
-the quintic)."""
+from negstiff.inference.steps.weak import (
+    WeakForm,
+    WeakFormError,
+    fit_support,
+    input_coefficient,
+    known_input_gain,
+    stroke_library,
+)
 
 
 def _crossings(x: np.ndarray, f: np.ndarray) -> np.ndarray:
@@ -44,16 +48,30 @@ def _crossings(x: np.ndarray, f: np.ndarray) -> np.ndarray:
     return x[i] - f[i] * (x[i + 1] - x[i]) / (f[i + 1] - f[i])
 
 
+def restoring_force(rec: Measurement, points: int = 4001) -> tuple[np.ndarray, np.ndarray]:
+    """The record's restoring force per unit mass, K(x)/m [m/s^2], on ``points`` even points x [m] over the stroke
+    it visited: the preparation's spline (``weak.stroke_library``: any smooth device's force) fitted to the record's
+    weak form with viscous and quadratic damping, the input's coefficient fixed by physics (learned where it is not
+    known: a force without a mass). In the record's own frame: K_rec(x) = K_true(x + C).
+    """
+    library = stroke_library(rec)
+    gain = known_input_gain(rec)
+    phys = fit_support(WeakForm.of(rec).system(rec, library=library), gain)
+    assert library.shape is not None
+    knots = np.asarray(library.shape["spline"]["knots"])
+    x = np.linspace(knots[0], knots[-1], points)
+    return x, -(stroke_spline.basis(x, knots) @ phys[: knots.size + 2])
+
+
 def _frame_anchors(rec) -> tuple[float, dict[str, float]]:
     """In the record's own frame: the origin and the stable wells, all searched over the stroke the record
-    visited. The origin is where a quintic fitted to ``rec`` carries the weight m g between its wells, or,
-    for a device with no gravity along its motion (``rec.gravity`` 0), midway between its wells (the
-    symmetry of a horizontal double well); ``wells["barrier"]`` is then the unstable equilibrium between
-    them, whose distance from the midpoint measures how symmetric the device is.
+    visited. The origin is where the record's restoring force (``restoring_force``: a spline over its stroke)
+    carries the weight (g per unit mass) between its wells, or, for a device with no gravity along its motion
+    (``rec.gravity`` 0), midway between its wells (the symmetry of a horizontal double well); ``wells["barrier"]``
+    is then the unstable equilibrium between them, whose distance from the midpoint measures how symmetric the
+    device is.
     """
-    model = weak_least_squares(rec, PIN_TERMS)
-    x = np.linspace(rec.z.min(), rec.z.max(), 4001)
-    K = model.restoring_force(x)
+    x, K = restoring_force(rec)
     eq = _crossings(x, K)
     stable = [e for e in eq if np.interp(e, x, np.gradient(K, x)) > 0]
     if len(stable) == 1:  # an in-well record: one well, and no origin between wells to find
@@ -67,7 +85,7 @@ def _frame_anchors(rec) -> tuple[float, dict[str, float]]:
         mid = 0.5 * (wells["minus"] + wells["plus"])
         barrier = float(between[np.argmin(np.abs(np.array(between) - mid))]) if between else float("nan")
         return mid, {**wells, "barrier": barrier}
-    roots = _crossings(x, K - model.m * rec.gravity)
+    roots = _crossings(x, K - rec.gravity)
     if not roots.size:
         raise ValueError("the fitted restoring force never carries the weight over the visited stroke")
     mid = eq[len(eq) // 2] if eq.size else float(np.median(rec.z))
@@ -90,9 +108,9 @@ def frame_offset(rec, spread: bool = True, use_rest: bool = True) -> dict[str, A
       harvester): the origin midway between the fitted wells, and how far the barrier between them sits
       from it (``asymmetry_m``: how well the symmetry pins the frame);
     * gravity: the restoring force at z = 0 (rods horizontal) carries the weight, K(0) = m g (g per
-      unit mass). A quintic restoring force with viscous and quadratic damping is fitted by weak-form
-      least squares (``weak.weak_least_squares``) in the record's frame, where K_rec(x) =
-      K_true(x + C); the origin solves K_rec(x) = m g between the fitted wells (a negative-stiffness
+      unit mass). A restoring force with no formula (a spline over the stroke, ``restoring_force``) with
+      viscous and quadratic damping is fitted by weak-form least squares in the record's frame, where
+      K_rec(x) = K_true(x + C); the origin solves K_rec(x) = m g between the fitted wells (a negative-stiffness
       device's origin is next to its unstable equilibrium). A force-driven record carries no weight
       in its equation (k0 is the force's offset): there the frame is not pinned.
 
@@ -158,15 +176,15 @@ def frame_offset(rec, spread: bool = True, use_rest: bool = True) -> dict[str, A
             "offset_se_m": _se([-p[0] for p in parts]),
             "asymmetry_m": float(wells["barrier"] - x),
             "method": "the wells' symmetry (gravity 0 along the motion): the origin midway between the wells of a "
-            f"quintic fitted to the record; the barrier between them sits {1e3 * (wells['barrier'] - x):.3g} mm "
-            "from that midpoint",
+            "spline restoring force fitted to the record; the barrier between them sits "
+            f"{1e3 * (wells['barrier'] - x):.3g} mm from that midpoint",
         }
     if rec.input_name != "base_acc":
         return {"offset_m": None, "method": "not pinned: a force-driven record carries no weight (k0 unknown)"}
     return {
         "offset_m": -x,
         "offset_se_m": _se([-p[0] for p in parts]),
-        "method": "K(0) = m g: the frame in which a quintic restoring force fitted to the record carries the "
+        "method": "K(0) = m g: the frame in which a spline restoring force fitted to the record carries the "
         "weight at z = 0, between the wells",
     }
 
@@ -207,18 +225,16 @@ SCALE_PART_MIN_S = 20.0
 
 
 def _scale_of(rec: Measurement) -> float:
-    c = input_coefficient(rec)
+    """The response's scale from the input's coefficient the record's dynamics learn (over ``weak.stroke_library``:
+    a spline restoring force, so that a device whose force is not a polynomial does not bias it).
+    """
+    c = input_coefficient(rec, library=stroke_library(rec))
     physical = known_input_gain(rec)
     assert physical is not None  # load refuses a force record of unknown scale without a mass
     if not np.isfinite(c) or c == 0:
         raise MeasurementError(f"{rec.source}: the record's dynamics give the input no weight: its response's scale "
                                "cannot be estimated (does the response follow the input?)")  # fmt: skip
     return physical / c
-
-
-DRIFT_TERMS = ("z^3", "v", "v|v|")
-"""The drift fit's library besides its slowly varying constant, z and z^2 (a cubic restoring force: the drift
-shifts its z^2 coefficient by -3 k3 d)."""
 
 
 def _with_integral_warnings(resp: dict[str, Any], si: bool) -> dict[str, Any]:
@@ -256,23 +272,35 @@ def _hats(t: np.ndarray, knots: np.ndarray) -> np.ndarray:
     return np.column_stack([np.interp(t, knots, np.eye(knots.size)[j]) for j in range(knots.size)])
 
 
+def _contrasts(H: np.ndarray) -> np.ndarray:
+    """Hat functions less the last one (rows: times; k - 1 columns): coefficients on them are the values at the
+    first k - 1 knots of a curve whose values at the knots sum to zero (the last is minus their sum). A drift's
+    constant is no drift (it moves z's frame, which the frame's step pins) and, as d K'(z), it is almost the
+    restoring force's own change of frame: left free, it would make the fit ill-conditioned.
+    """
+    return H[:, :-1] - H[:, -1:]
+
+
 def drift_by_physics(rec: Measurement) -> Measurement:
     """``rec`` with what its integral's drift separation left of the drift removed by the record's physics.
 
-    A drift d(t) left in z shifts the restoring force: the equation holds in z - d, so a cubic fitted in z
-    has a z^2 coefficient k2 - 3 k3 d(t). The record's weak form (``weak.WeakForm``) is fitted with a
-    constant, z and z^2 coefficient that vary slowly (hat functions of time) beside fixed z^3, damping and input
-    terms, the input's coefficient learned (the response's scale may be unknown); d(t) = (k2 - k2(t)) / (3 k3)
-    is taken off z and the fit repeated (``DRIFT_PASSES``); the knots are ``DRIFT_KNOT_PERIODS`` periods of the dominant
-    frequency apart. A bistable device is sensitive to this: 0.5 mm of drift in z moves
-    its restoring force by K'(z) 0.5 mm, a quarter of the input's force on the tests' vibrometer record, where
-    it turned NSI's well frequencies 30 % low and left SINDy without damping (measured).
+    A drift d(t) left in z shifts the restoring force: the equation holds in z - d, so with the force fitted in z,
+    K(z - d) ~ K(z) - d(t) K'(z). Each pass fits the record's weak form (``weak.WeakForm``) over the preparation's
+    library (``weak.stroke_library``: a restoring force with no formula, a spline over the stroke, with viscous and
+    quadratic damping; the input's coefficient learned, the response's scale may be unknown), takes K'(z) from that
+    spline, fits again with a slowly varying coefficient of K'(z) (hat functions of time, their values summing to
+    zero: ``_contrasts``) beside the fixed columns, reads d(t) from it and takes it off z (``DRIFT_PASSES``, each
+    re-linearising about the last; the knots are ``DRIFT_KNOT_PERIODS`` periods of the dominant frequency apart).
+    For a cubic this is the z^2 coefficient's shift -3 k3 d(t) that a cubic's scheme reads, with the z and constant
+    terms' shifts of the same d; for a device whose force is not a polynomial the polynomial's misfit is not taken
+    for drift (a cubic's scheme moved the magnet harvester's in-well z by 1.35 mm that was not drift, measured). A
+    bistable device is sensitive to this: 0.5 mm of drift in z moves its restoring force by K'(z) 0.5 mm, a quarter
+    of the input's force on the tests' vibrometer record, where it turned NSI's well frequencies 30 % low and left
+    SINDy without damping (measured).
 
     Applied only to a z integrated from a velocity whose drift was separated (``sensors.velocity_to_z``'s
     ``drift``); other records are returned as they are. What it moved is in ``info["response"]["drift"]``.
     """
-    from negstiff.inference.steps.weak import WeakForm, WeakFormError, support_of, terms
-
     resp = rec.info.get("response", {})
     drift = resp.get("drift")
     if rec.z is None or not drift or "physics_span_m" in drift:
@@ -282,31 +310,29 @@ def drift_by_physics(rec: Measurement) -> Measurement:
         return done
     spacing = float(np.clip(DRIFT_KNOT_PERIODS / drift["dominant_hz"], DRIFT_KNOT_MIN_S, 0.5 / drift["cutoff_hz"]))
     z, total = rec.z, np.zeros(rec.n)
-    names = terms()
-    cube = names.index("z^3")
-    support = support_of(DRIFT_TERMS)
     try:
         for _ in range(DRIFT_PASSES):
             cur = replace(rec, z=z, info={**rec.info})
             form = WeakForm.of(cur)
-            system = form.system(cur)
+            library = stroke_library(cur)
+            system = form.system(cur, library=library)
+            assert library.shape is not None
+            knots_z = np.asarray(library.shape["spline"]["knots"])
+            n_k = knots_z.size + 2
+            spline = fit_support(system, None)[:n_k]  # z'' = B(z) a + ...: the restoring force is -m B(z) a
+            slope = form.project((stroke_spline.slopes(form.zs, knots_z) @ spline)[:, None], cur.dt)[:, 0]
             rows = system.W.shape[0]
             t_rows = (form.centre(cur.dt) + form.stride * np.arange(rows)) / cur.fs
             knots = _knots(cur.duration, spacing)
-            H = _hats(t_rows, knots)
-            W = system.W_physical
-            base = W[:, :-1][:, np.array(support)]
-            slow = [H * W[:, [names.index(k)]] for k in ("1", "z", "z^2")]
-            A = np.column_stack([base, *slow, W[:, -1]])
+            C = _contrasts(_hats(t_rows, knots))
+            A = np.column_stack([system.W_physical, C * slope[:, None]])
             scale = A.std(axis=0)
             scale[scale == 0] = 1.0
             theta = np.linalg.lstsq(A / scale, system.y_physical, rcond=None)[0] / scale
-            a3 = theta[int(np.count_nonzero(np.array(support)[:cube]))]  # z^3's place among the kept terms
-            k = H.shape[1]
-            gamma = theta[base.shape[1] + 2 * k : base.shape[1] + 3 * k]
-            if not np.isfinite(a3) or a3 == 0:
+            gamma = theta[system.W.shape[1] :]  # z'' holds B(z - d) a ~ B(z) a - d B'(z) a: gamma = -d
+            if not np.all(np.isfinite(gamma)):
                 break
-            d_knots = -(gamma - gamma.mean()) / (3 * a3)  # z^2 coefficient of z'': -k2/m + 3 k3 d / m, a3 = -k3/m
+            d_knots = -np.append(gamma, -gamma.sum())
             d = np.interp(np.arange(rec.n) / rec.fs, knots, d_knots)  # the hats' sum, without their n x k matrix
             z = z - d
             total += d
@@ -314,8 +340,8 @@ def drift_by_physics(rec: Measurement) -> Measurement:
         return rec
     total -= total.mean()
     drift = {**drift, "physics_span_m": float(np.ptp(total)), "physics_rms_m": float(np.std(total)),
-             "physics": f"then the restoring force's slow shift (its z^2 coefficient, -3 k3 d(t), knots every "
-             f"{spacing:.3g} s) taken off: {DRIFT_PASSES} passes"}  # fmt: skip
+             "physics": f"then the restoring force's slow shift (-d(t) K'(z), K a spline over the stroke, knots "
+             f"every {spacing:.3g} s) taken off: {DRIFT_PASSES} passes"}  # fmt: skip
     si = not (rec.info.get("scale") and rec.info["scale"].get("value") is None)
     resp = _with_integral_warnings({**resp, "drift": drift}, si)
     out = replace(rec, z=rec.z - total, info={**rec.info, "response": resp})

@@ -43,6 +43,7 @@ import numpy as np
 from scipy import signal
 
 from negstiff.errors import MeasurementError
+from negstiff.inference.record import stroke_spline
 from negstiff.inference.record.derivatives import noise_floor
 from negstiff.inference.record.measurement import Measurement
 from negstiff.models import Model, effects, laws
@@ -477,16 +478,30 @@ def support_of(selected) -> tuple[bool, ...]:
     return tuple(t in selected for t in known)
 
 
-def input_coefficient(rec: Measurement, terms=("1", "z", "z^2", "z^3", "z^4", "z^5", "v", "v|v|")) -> float:
+def stroke_library(rec: Measurement, aux: tuple[str, ...] = ()) -> Library:
+    """The library of a record's own preparation: a restoring force with no formula, a cubic B-spline over the stroke
+    z visited (``record.stroke_spline``: any smooth device's force), and the reference study's viscous and quadratic
+    damping, then the measured auxiliary channels ``aux``. The scale, the drift's physics and the frame read it
+    (``frame``), so that none of them assumes a polynomial the device may not follow.
+    """
+    return Library.of_laws("spline", laws.DEFAULT_DAMPING, stroke_spline.shape(rec.z), aux)
+
+
+def input_coefficient(rec: Measurement, terms=("1", "z", "z^2", "z^3", "z^4", "z^5", "v", "v|v|"),
+                      library: Library | None = None) -> float:  # fmt: skip
     """The input's coefficient in z'' as the record's own weak-form least squares learns it, unconstrained
     (per unit mass): physics says -1 for a base acceleration in m/s^2 and 1/m for a force in N, so it
     checks the input's units and the mass (``plausibility``), and scales a response of unknown sensitivity
-    (``scale``). The record's measured auxiliary channels join the fit (a harvester's voltage: left out, its
-    coupling's share of the motion was taken by the input, 4 % on a coupled record, measured).
+    (``frame.calibrate_scale``, over ``stroke_library``). The fit's columns are the library ``terms`` (a quintic
+    restoring force with viscous and quadratic damping by default), or ``library``'s where given (whose ``aux``
+    are then its own). The record's measured auxiliary channels join the terms' fit (a harvester's voltage: left
+    out, its coupling's share of the motion was taken by the input, 4 % on a coupled record, measured).
     """
     if not np.any(rec.u):
         raise WeakFormError(f"{rec.source}: the input is zero throughout (a free decay): no coefficient to learn")
     form = WeakForm.of(rec)
+    if library is not None:
+        return float(fit_support(form.system(rec, library=library), None)[-1])
     aux = tuple(rec.aux)
     support = support_of(terms) + (True,) * len(aux)
     return float(fit_support(form.system(rec, aux=aux), None, support=support)[-1])
