@@ -325,10 +325,14 @@ def absolute_velocity_gain(
 
     z' = g v_read - b' (b' the base's velocity from its accelerometer): the base enters z at its known scale, so
     a wrong g leaves a multiple of the base's motion in z that no restoring force of z explains. For each trial g,
-    z'' = g v_read' - b'' is fitted by least squares on a quintic of z (the read channel's drift separated as
-    ``velocity_to_z`` does, scaled by g; a ramp's first order in the fit), viscous and quadratic damping and the
-    base's acceleration, that acceleration's coefficient free (the measured point's participation in the input: 1
-    at the moving mass, less inboard on a beam; it is left to the response's scale, ``frame.calibrate_scale``).
+    z'' = g v_read' - b'' is fitted by least squares on a restoring force with no formula, a cubic B-spline over
+    z's stroke (``stroke_spline``: any smooth device's force; the read channel's drift separated as
+    ``velocity_to_z`` does, scaled by g; a ramp's first order in the fit, t K'(z)), viscous and quadratic damping
+    and the base's acceleration, that acceleration's coefficient free (the measured point's participation in the
+    input: 1 at the moving mass, less inboard on a beam; it is left to the response's scale,
+    ``frame.calibrate_scale``). The force must be one the device can have: with a quintic, whose misfit of a
+    magnet harvester's force a wrong gain partly took up, the gain of ``tests/law_records.py``'s chaotic magnet
+    record came out 6.6 % high (0.01 % with the spline, measured).
     ``g`` minimises the fit's residual relative to g v_read': a log grid over ``GAIN_SEARCH_DECADES`` (twice: the
     drift found at the first one's gain), then Brent's method. Refused (``MeasurementError``) when the minimum
     lies at the grid's edge or is not sharper than ``GAIN_SHARPNESS``. Returns g and an account (the relative
@@ -417,8 +421,9 @@ def absolute_velocity_gain(
         "residual_fraction": best,
         "input_coefficient": coef,
         "residual_rise": rise,
-        "how": "the gain at which z = integral of (g y_dot - base velocity) obeys a quintic restoring force with "
-        "viscous and quadratic damping best (equation error, the base acceleration's coefficient free)",
+        "how": "the gain at which z = integral of (g y_dot - base velocity) obeys a restoring force with no formula "
+        f"(a cubic spline over z's stroke, {stroke_spline.STROKE_INTERVALS} intervals) with viscous and quadratic "
+        "damping best (equation error, the base acceleration's coefficient free)",
     }
 
 

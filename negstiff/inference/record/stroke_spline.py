@@ -37,8 +37,9 @@ lab record (a few 1e-3), and cost 19 columns (a cubic polynomial's space is insi
 _SPLINE = Spline()
 
 
-def knots(z: np.ndarray, intervals: int = STROKE_INTERVALS) -> np.ndarray:
-    """The preparation spline's knots [m]: ``intervals`` even intervals over [min z, max z].
+def knots(z: np.ndarray, intervals: int | None = None) -> np.ndarray:
+    """The preparation spline's knots [m]: ``intervals`` (default ``STROKE_INTERVALS``) even intervals over
+    [min z, max z].
 
     Raises
     ------
@@ -49,10 +50,10 @@ def knots(z: np.ndarray, intervals: int = STROKE_INTERVALS) -> np.ndarray:
     lo, hi = float(np.min(z)), float(np.max(z))
     if not hi > lo:
         raise ValueError("z does not move: no stroke for a restoring force")
-    return np.linspace(lo, hi, intervals + 1)
+    return np.linspace(lo, hi, (STROKE_INTERVALS if intervals is None else intervals) + 1)
 
 
-def shape(z: np.ndarray, intervals: int = STROKE_INTERVALS) -> dict[str, dict[str, tuple[float, ...]]]:
+def shape(z: np.ndarray, intervals: int | None = None) -> dict[str, dict[str, tuple[float, ...]]]:
     """The shape of the ``spline`` law (``models.laws``) over z's stroke: ``{"spline": {"knots": ...}}``, the
     shape a ``weak.Library.of_laws("spline", ...)`` takes.
     """

@@ -478,13 +478,14 @@ def support_of(selected) -> tuple[bool, ...]:
     return tuple(t in selected for t in known)
 
 
-def stroke_library(rec: Measurement, aux: tuple[str, ...] = ()) -> Library:
+def stroke_library(rec: Measurement) -> Library:
     """The library of a record's own preparation: a restoring force with no formula, a cubic B-spline over the stroke
     z visited (``record.stroke_spline``: any smooth device's force), and the reference study's viscous and quadratic
-    damping, then the measured auxiliary channels ``aux``. The scale, the drift's physics and the frame read it
-    (``frame``), so that none of them assumes a polynomial the device may not follow.
+    damping, then the record's measured auxiliary channels (a harvester's voltage: its coupling is a force of the
+    record's dynamics). The scale, the drift's physics and the frame read it (``frame``), so that none of them
+    assumes a polynomial the device may not follow.
     """
-    return Library.of_laws("spline", laws.DEFAULT_DAMPING, stroke_spline.shape(rec.z), aux)
+    return Library.of_laws("spline", laws.DEFAULT_DAMPING, stroke_spline.shape(rec.z), tuple(rec.aux))
 
 
 def input_coefficient(rec: Measurement, terms=("1", "z", "z^2", "z^3", "z^4", "z^5", "v", "v|v|"),
