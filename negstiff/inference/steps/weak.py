@@ -485,6 +485,8 @@ def stroke_library(rec: Measurement) -> Library:
     record's dynamics). The scale, the drift's physics and the frame read it (``frame``), so that none of them
     assumes a polynomial the device may not follow.
     """
+    if rec.z is None:
+        raise WeakFormError(f"{rec.source}: a structure's record has no single z for a restoring force over its stroke")
     return Library.of_laws("spline", laws.DEFAULT_DAMPING, stroke_spline.shape(rec.z), tuple(rec.aux))
 
 
