@@ -7,7 +7,7 @@ the drift a velocity's integral leaves in z (``frame.drift_by_physics``: K(z - d
 of a derived z (``frame.frame_offset``: the wells, where the weight is carried). None of the questions is about
 the force's form, so none assumes one: a polynomial that does not follow the device leaves a misfit that the
 unknown the step estimates then takes up (a quintic put a magnet harvester's vibrometer gain 6.6 % high, and a
-cubic's slowly varying z^2 coefficient moved the in-well record's z by 1.4 mm that was not drift; measured on
+cubic's slowly varying z^2 coefficient moved the in-well record's z by 1.35 mm that was not drift; measured on
 ``tests/law_records.py``'s records).
 
 The force is a cubic B-spline (de Boor 1978, "A Practical Guide to Splines", Springer; ``models.shaped.Spline``)

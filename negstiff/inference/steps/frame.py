@@ -10,15 +10,19 @@ pays for no fit.
    (``weak.input_coefficient`` over ``weak.stroke_library``: a restoring force with no formula, a spline over the
    stroke, with viscous and quadratic damping, unconstrained weak-form least squares) is -1 / s. For a
    force-driven record it is 1 / (m s): the mass must be known, or scale and mass trade off (``load`` refuses
-   that record). ``calibrate_scale`` estimates s with its standard
-   error (the spread of the estimates from parts of the record), multiplies the response by it, so that
-   every coefficient found afterwards is in SI units, and says so in ``info["scale"]`` (a result's
-   ``record.scale``).
+   that record). ``calibrate_scale`` estimates s with its standard error (the spread of the estimates from parts
+   of the record), multiplies the response by it, so that every coefficient found afterwards is in SI units, and
+   says so in ``info["scale"]`` (a result's ``record.scale``).
 2. **The frame** of a derived z: a z integrated from a velocity or an acceleration has an unknown constant;
    ``frame_offset`` finds it by physics (the wells at the rest positions the metadata states, else gravity:
    K(0) = m g, or for a device without gravity along its motion the wells' symmetry) and ``pin_frame``
    returns the record in the physical frame, with the offset, its uncertainty and the anchor in
    ``info["response"]``.
+
+Each step reads the record's restoring force as one with no formula, a spline over the stroke it visited
+(``weak.stroke_library``, ``record.stroke_spline``), so that a device whose force is not a polynomial (facing
+magnets, oblique springs, the reference study's rod frame) leaves no misfit for the scale, the drift or the frame
+to take up.
 """
 
 from __future__ import annotations
