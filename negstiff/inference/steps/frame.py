@@ -251,8 +251,17 @@ def _with_integral_warnings(resp: dict[str, Any], si: bool) -> dict[str, Any]:
     said = integral_warnings(resp) if si else integral_warnings(resp, "(units as read)", 1.0)
     return {**resp, "warnings": said + kept}
 
-DRIFT_PASSES = 3
-"""Passes of the drift's physical refinement (each re-linearises about the previous pass)."""
+DRIFT_STEPS = 30
+"""Gauss-Newton steps of the drift's physical refinement at most (each re-linearises the restoring force about the
+last estimate; ``drift_by_physics``). A residual drift of several millimetres (wells 31 mm apart) took six steps
+on the tests' 120 s absolute-vibrometer record, the last two quadratically convergent (measured)."""
+
+DRIFT_CONVERGED = 1e-4
+"""The refinement stops when a step moves the drift by less than this fraction of z's 5-95 % range."""
+
+DRIFT_HALVINGS = 4
+"""A step that makes the restoring force's fit worse is halved, at most this many times in a row (damped
+Gauss-Newton)."""
 
 DRIFT_KNOT_PERIODS = 10.0
 """The drift's knots are this many periods of the record's dominant frequency apart (a hat spans twenty: slow
@@ -285,22 +294,54 @@ def _contrasts(H: np.ndarray) -> np.ndarray:
     return H[:, :-1] - H[:, -1:]
 
 
+def _drift_step(form: WeakForm, rec: Measurement, drift: np.ndarray, C: np.ndarray,
+                knots: np.ndarray) -> tuple[float, np.ndarray]:  # fmt: skip
+    """One Gauss-Newton step of the drift (``drift_by_physics``) from ``drift`` [z's unit, per sample]: the relative
+    residual of the restoring force's fit with the drift taken off (the spline over the stroke of z - d), and the
+    step at the time knots ``knots``.
+    """
+    library = stroke_library(rec, rec.z - drift)
+    system = form.system(rec, library=library, drift=drift)
+    assert library.shape is not None
+    n_k = len(library.shape["spline"]["knots"]) + 2
+    W, y = system.W_physical, system.y_physical
+    phys = fit_support(system, None)
+    r = y - W @ phys
+    residual = float(r @ r / (y @ y))
+    spline = phys[:n_k]  # z'' = B(z) a + ...: the restoring force per unit mass is -B(z) a
+    zs = form.zs - drift
+    slope = form.project((stroke_spline.slopes(zs, np.asarray(library.shape["spline"]["knots"])) @ spline)[:, None],
+                         rec.dt)[:, 0]  # fmt: skip
+    A = np.column_stack([W, C * slope[:, None]])
+    scale = A.std(axis=0)
+    scale[scale == 0] = 1.0
+    theta = np.linalg.lstsq(A / scale, y, rcond=None)[0] / scale
+    gamma = theta[W.shape[1] :]  # z'' holds B(z - d) a ~ B(z) a - d B'(z) a: gamma = -d (at the knots)
+    if not np.all(np.isfinite(gamma)):
+        raise ValueError("the drift's step is not finite")
+    step_knots = -np.append(gamma, -gamma.sum())
+    return residual, np.interp(np.arange(rec.n) / rec.fs, knots, step_knots)  # the hats' sum, without their matrix
+
+
 def drift_by_physics(rec: Measurement) -> Measurement:
     """``rec`` with what its integral's drift separation left of the drift removed by the record's physics.
 
     A drift d(t) left in z shifts the restoring force: the equation holds in z - d, so with the force fitted in z,
-    K(z - d) ~ K(z) - d(t) K'(z). Each pass fits the record's weak form (``weak.WeakForm``) over the preparation's
+    K(z - d) ~ K(z) - d(t) K'(z). The record's weak form (``weak.WeakForm``) is fitted over the preparation's
     library (``weak.stroke_library``: a restoring force with no formula, a spline over the stroke, with viscous and
-    quadratic damping; the input's coefficient learned, the response's scale may be unknown), takes K'(z) from that
-    spline, fits again with a slowly varying coefficient of K'(z) (hat functions of time, their values summing to
-    zero: ``_contrasts``) beside the fixed columns, reads d(t) from it and takes it off z (``DRIFT_PASSES``, each
-    re-linearising about the last; the knots are ``DRIFT_KNOT_PERIODS`` periods of the dominant frequency apart).
-    For a cubic this is the z^2 coefficient's shift -3 k3 d(t) that a cubic's scheme reads, with the z and constant
-    terms' shifts of the same d; for a device whose force is not a polynomial the polynomial's misfit is not taken
-    for drift (a cubic's scheme moved the magnet harvester's in-well z by 1.35 mm that was not drift, measured). A
-    bistable device is sensitive to this: 0.5 mm of drift in z moves its restoring force by K'(z) 0.5 mm, a quarter
-    of the input's force on the tests' vibrometer record, where it turned NSI's well frequencies 30 % low and left
-    SINDy without damping (measured).
+    quadratic damping; the input's coefficient learned, the response's scale may be unknown); K'(z) is taken from
+    that spline and the fit repeated with a slowly varying coefficient of K'(z) (hat functions of time
+    ``DRIFT_KNOT_PERIODS`` periods of the dominant frequency apart, their values summing to zero: ``_contrasts``)
+    beside the fixed columns, which gives the step of d(t). Taking d off z (the weak form's states and target,
+    ``WeakForm.system``'s ``drift``) and re-linearising is Gauss-Newton on the drift and the force together (Nocedal
+    & Wright 2006, "Numerical Optimization", 10.3), repeated until a step moves d by less than ``DRIFT_CONVERGED``
+    of z's range (``DRIFT_STEPS`` at most; a step that worsens the force's fit is halved, ``DRIFT_HALVINGS``).
+    For a cubic the first step reads the z^2 coefficient's shift -3 k3 d(t) that a cubic's scheme read, with the
+    z and constant terms' shifts of the same d; for a device whose force is not a polynomial, the polynomial's
+    misfit is not taken for drift (a cubic's scheme moved the magnet harvester's in-well z by 1.35 mm that was not
+    drift, measured). A bistable device is sensitive to this: 0.5 mm of drift in z moves its restoring force by
+    K'(z) 0.5 mm, a quarter of the input's force on the tests' vibrometer record, where it turned NSI's well
+    frequencies 30 % low and left SINDy without damping (measured).
 
     Applied only to a z integrated from a velocity whose drift was separated (``sensors.velocity_to_z``'s
     ``drift``); other records are returned as they are. What it moved is in ``info["response"]["drift"]``.
@@ -313,39 +354,32 @@ def drift_by_physics(rec: Measurement) -> Measurement:
     if done is not None:
         return done
     spacing = float(np.clip(DRIFT_KNOT_PERIODS / drift["dominant_hz"], DRIFT_KNOT_MIN_S, 0.5 / drift["cutoff_hz"]))
-    z, total = rec.z, np.zeros(rec.n)
+    q = np.quantile(rec.z, [0.05, 0.95])
+    total, step = np.zeros(rec.n), np.zeros(rec.n)
+    best, halvings, steps = float("inf"), 0, 0
     try:
-        for _ in range(DRIFT_PASSES):
-            cur = replace(rec, z=z, info={**rec.info})
-            form = WeakForm.of(cur)
-            library = stroke_library(cur)
-            system = form.system(cur, library=library)
-            assert library.shape is not None
-            knots_z = np.asarray(library.shape["spline"]["knots"])
-            n_k = knots_z.size + 2
-            spline = fit_support(system, None)[:n_k]  # z'' = B(z) a + ...: the restoring force is -m B(z) a
-            slope = form.project((stroke_spline.slopes(form.zs, knots_z) @ spline)[:, None], cur.dt)[:, 0]
-            rows = system.W.shape[0]
-            t_rows = (form.centre(cur.dt) + form.stride * np.arange(rows)) / cur.fs
-            knots = _knots(cur.duration, spacing)
-            C = _contrasts(_hats(t_rows, knots))
-            A = np.column_stack([system.W_physical, C * slope[:, None]])
-            scale = A.std(axis=0)
-            scale[scale == 0] = 1.0
-            theta = np.linalg.lstsq(A / scale, system.y_physical, rcond=None)[0] / scale
-            gamma = theta[system.W.shape[1] :]  # z'' holds B(z - d) a ~ B(z) a - d B'(z) a: gamma = -d
-            if not np.all(np.isfinite(gamma)):
+        form = WeakForm.of(rec)
+        rows = -(-(rec.n - 2 * form.centre(rec.dt)) // form.stride)  # the test functions' rows (``weak_project``)
+        knots = _knots(rec.duration, spacing)
+        C = _contrasts(_hats((form.centre(rec.dt) + form.stride * np.arange(rows)) / rec.fs, knots))
+        for _ in range(DRIFT_STEPS):
+            residual, new = _drift_step(form, rec, total, C, knots)
+            if residual > best and halvings < DRIFT_HALVINGS:  # the last step made the force's fit worse: half of it
+                step = 0.5 * step
+                total = total - step
+                halvings += 1
+                continue
+            best, halvings, steps = min(best, residual), 0, steps + 1
+            step = new
+            total = total + step
+            if np.ptp(step) < DRIFT_CONVERGED * (q[1] - q[0]):
                 break
-            d_knots = -np.append(gamma, -gamma.sum())
-            d = np.interp(np.arange(rec.n) / rec.fs, knots, d_knots)  # the hats' sum, without their n x k matrix
-            z = z - d
-            total += d
     except (WeakFormError, np.linalg.LinAlgError, ValueError):
         return rec
     total -= total.mean()
     drift = {**drift, "physics_span_m": float(np.ptp(total)), "physics_rms_m": float(np.std(total)),
              "physics": f"then the restoring force's slow shift (-d(t) K'(z), K a spline over the stroke, knots "
-             f"every {spacing:.3g} s) taken off: {DRIFT_PASSES} passes"}  # fmt: skip
+             f"every {spacing:.3g} s) taken off: {steps} Gauss-Newton steps"}  # fmt: skip
     si = not (rec.info.get("scale") and rec.info["scale"].get("value") is None)
     resp = _with_integral_warnings({**resp, "drift": drift}, si)
     out = replace(rec, z=rec.z - total, info={**rec.info, "response": resp})

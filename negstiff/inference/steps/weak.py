@@ -275,18 +275,24 @@ class WeakForm:
         return weak_project(cols, test_function(self.half, dt)[0], self.stride, dt)
 
     def system(self, rec: Measurement, lo: int = 0, hi: int | None = None, aux: tuple[str, ...] = (),
-               library: Library | None = None) -> WeakSystem:  # fmt: skip
+               library: Library | None = None, drift: np.ndarray | None = None) -> WeakSystem:  # fmt: skip
         """The weak-form system of the samples [lo, hi) of ``rec`` (the record this form was made of,
         or its first part) over ``library`` (default: the registry's catalogue, ``Library.catalogue``); ``aux``:
         measured auxiliary channels of ``rec`` whose terms theta a(t) join the catalogue (``aux_terms``), before
-        the input's column (a ``library`` names its own).
+        the input's column (a ``library`` names its own). ``drift``: a slow drift of z (one value per sample of
+        ``rec``, its unit) taken off the smoothed states (z - d, z' - d') and the target, without smoothing the
+        record again (the smoothing is linear, and a slow d passes it unchanged).
         """
         seg = rec.segment(lo, rec.n if hi is None else hi)
         library = Library.catalogue(aux) if library is None else library
-        F = library.columns(self.zs[lo:hi], self.v[lo:hi], seg.u, self.velocity_noise, seg.aux)
+        zs, v, disp = self.zs[lo:hi], self.v[lo:hi], seg.displacement
+        if drift is not None:
+            d = np.asarray(drift, float)[lo:hi]
+            zs, v, disp = zs - d, v - np.gradient(d, seg.dt), disp - d
+        F = library.columns(zs, v, seg.u, self.velocity_noise, seg.aux)
         phi, d2 = test_function(self.half, seg.dt)
         W = weak_project(F, phi, self.stride, seg.dt)
-        y = weak_project((seg.displacement - seg.displacement.mean())[:, None], d2, self.stride, seg.dt)[:, 0]
+        y = weak_project((disp - disp.mean())[:, None], d2, self.stride, seg.dt)[:, 0]
         col = W.std(axis=0)
         const = np.flatnonzero(np.ptp(F[:, :-1], axis=0) == 0)  # a constant column (k0's): int phi dt on every row
         col[const] = np.abs(W[:, const]).mean(axis=0)
@@ -478,16 +484,18 @@ def support_of(selected) -> tuple[bool, ...]:
     return tuple(t in selected for t in known)
 
 
-def stroke_library(rec: Measurement) -> Library:
+def stroke_library(rec: Measurement, z: np.ndarray | None = None) -> Library:
     """The library of a record's own preparation: a restoring force with no formula, a cubic B-spline over the stroke
-    z visited (``record.stroke_spline``: any smooth device's force), and the reference study's viscous and quadratic
-    damping, then the record's measured auxiliary channels (a harvester's voltage: its coupling is a force of the
-    record's dynamics). The scale, the drift's physics and the frame read it (``frame``), so that none of them
-    assumes a polynomial the device may not follow.
+    z visited (``record.stroke_spline``: any smooth device's force; ``z``, where given, is the z whose stroke it
+    spans, else the record's), and the reference study's viscous and quadratic damping, then the record's measured
+    auxiliary channels (a harvester's voltage: its coupling is a force of the record's dynamics). The scale, the
+    drift's physics and the frame read it (``frame``), so that none of them assumes a polynomial the device may
+    not follow.
     """
-    if rec.z is None:
+    z = rec.z if z is None else z
+    if z is None:
         raise WeakFormError(f"{rec.source}: a structure's record has no single z for a restoring force over its stroke")
-    return Library.of_laws("spline", laws.DEFAULT_DAMPING, stroke_spline.shape(rec.z), tuple(rec.aux))
+    return Library.of_laws("spline", laws.DEFAULT_DAMPING, stroke_spline.shape(z), tuple(rec.aux))
 
 
 def input_coefficient(rec: Measurement, terms=("1", "z", "z^2", "z^3", "z^4", "z^5", "v", "v|v|"),
