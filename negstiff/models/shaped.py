@@ -390,6 +390,17 @@ class Spline(ShapedLaw):
         cols = cols + np.where((z > hi)[..., None], (z - hi)[..., None] * slopes[1], 0.0)
         return list(np.moveaxis(cols, -1, 0))
 
+    def slope_columns(self, shape, z) -> np.ndarray:
+        """Each column's derivative at z [1/m] (samples, columns): the B-spline basis' derivative (quadratic
+        pieces), constant beyond the end knots (the straight lines). They sum to zero, as the columns sum to one.
+        """
+        from scipy.interpolate import BSpline
+
+        knots = np.asarray(shape["knots"], float)
+        t = self._t(knots)
+        z = np.clip(np.asarray(z, float).reshape(-1), knots[0], knots[-1])
+        return np.asarray(BSpline(t, np.eye(t.size - 4), 3).derivative()(z))
+
     def coefficients(self, value):
         """The B-spline coefficients (the last axis of ``coef``)."""
         return list(np.moveaxis(np.asarray(value["coef"], float), -1, 0))

@@ -7,17 +7,22 @@ pays for no fit.
    vibrometer's volts, its gain not written down). In a base-excited record physics fixes the input's
    coefficient: z'' = -base_acc - (c z' + K(z)) / m. A response read in its sensor's units, z_read = z / s,
    obeys z_read'' = -base_acc / s - ..., so the coefficient the record's own dynamics learn for the input
-   (``weak.input_coefficient``: a quintic restoring force with viscous and quadratic damping, unconstrained
-   weak-form least squares) is -1 / s. For a force-driven record it is 1 / (m s): the mass must be known, or
-   scale and mass trade off (``load`` refuses that record). ``calibrate_scale`` estimates s with its standard
-   error (the spread of the estimates from parts of the record), multiplies the response by it, so that
-   every coefficient found afterwards is in SI units, and says so in ``info["scale"]`` (a result's
-   ``record.scale``).
+   (``weak.input_coefficient`` over ``weak.stroke_library``: a restoring force with no formula, a spline over the
+   stroke, with viscous and quadratic damping, unconstrained weak-form least squares) is -1 / s. For a
+   force-driven record it is 1 / (m s): the mass must be known, or scale and mass trade off (``load`` refuses
+   that record). ``calibrate_scale`` estimates s with its standard error (the spread of the estimates from parts
+   of the record), multiplies the response by it, so that every coefficient found afterwards is in SI units, and
+   says so in ``info["scale"]`` (a result's ``record.scale``).
 2. **The frame** of a derived z: a z integrated from a velocity or an acceleration has an unknown constant;
    ``frame_offset`` finds it by physics (the wells at the rest positions the metadata states, else gravity:
    K(0) = m g, or for a device without gravity along its motion the wells' symmetry) and ``pin_frame``
    returns the record in the physical frame, with the offset, its uncertainty and the anchor in
    ``info["response"]``.
+
+Each step reads the record's restoring force as one with no formula, a spline over the stroke it visited
+(``weak.stroke_library``, ``record.stroke_spline``), so that a device whose force is not a polynomial (facing
+magnets, oblique springs, the reference study's rod frame) leaves no misfit for the scale, the drift or the frame
+to take up.
 """
 
 from __future__ import annotations
@@ -28,14 +33,17 @@ from typing import Any
 import numpy as np
 
 from negstiff.errors import MeasurementError
+from negstiff.inference.record import stroke_spline
 from negstiff.inference.record.measurement import Measurement
 from negstiff.inference.record.sensors import integral_warnings
-from negstiff.inference.steps.weak import input_coefficient, known_input_gain, weak_least_squares
-
-PIN_TERMS = ("1", "z", "z^2", "z^3", "z^4", "z^5", "v", "v|v|")
-"""Library of the frame fit: a quintic restoring force follows the exact device's K near its origin
-(the cubic's K(0) errs there: 0.7-1.7 mm of frame on as-built records, measured; 0.15-0.2 mm with
-the quintic)."""
+from negstiff.inference.steps.weak import (
+    WeakForm,
+    WeakFormError,
+    fit_support,
+    input_coefficient,
+    known_input_gain,
+    stroke_library,
+)
 
 
 def _crossings(x: np.ndarray, f: np.ndarray) -> np.ndarray:
@@ -44,16 +52,30 @@ def _crossings(x: np.ndarray, f: np.ndarray) -> np.ndarray:
     return x[i] - f[i] * (x[i + 1] - x[i]) / (f[i + 1] - f[i])
 
 
+def restoring_force(rec: Measurement, points: int = 4001) -> tuple[np.ndarray, np.ndarray]:
+    """The record's restoring force per unit mass, K(x)/m [m/s^2], on ``points`` even points x [m] over the stroke
+    it visited: the preparation's spline (``weak.stroke_library``: any smooth device's force) fitted to the record's
+    weak form with viscous and quadratic damping, the input's coefficient fixed by physics (learned where it is not
+    known: a force without a mass). In the record's own frame: K_rec(x) = K_true(x + C).
+    """
+    library = stroke_library(rec)
+    gain = known_input_gain(rec)
+    phys = fit_support(WeakForm.of(rec).system(rec, library=library), gain)
+    assert library.shape is not None
+    knots = np.asarray(library.shape["spline"]["knots"])
+    x = np.linspace(knots[0], knots[-1], points)
+    return x, -(stroke_spline.basis(x, knots) @ phys[: knots.size + 2])
+
+
 def _frame_anchors(rec) -> tuple[float, dict[str, float]]:
     """In the record's own frame: the origin and the stable wells, all searched over the stroke the record
-    visited. The origin is where a quintic fitted to ``rec`` carries the weight m g between its wells, or,
-    for a device with no gravity along its motion (``rec.gravity`` 0), midway between its wells (the
-    symmetry of a horizontal double well); ``wells["barrier"]`` is then the unstable equilibrium between
-    them, whose distance from the midpoint measures how symmetric the device is.
+    visited. The origin is where the record's restoring force (``restoring_force``: a spline over its stroke)
+    carries the weight (g per unit mass) between its wells, or, for a device with no gravity along its motion
+    (``rec.gravity`` 0), midway between its wells (the symmetry of a horizontal double well); ``wells["barrier"]``
+    is then the unstable equilibrium between them, whose distance from the midpoint measures how symmetric the
+    device is.
     """
-    model = weak_least_squares(rec, PIN_TERMS)
-    x = np.linspace(rec.z.min(), rec.z.max(), 4001)
-    K = model.restoring_force(x)
+    x, K = restoring_force(rec)
     eq = _crossings(x, K)
     stable = [e for e in eq if np.interp(e, x, np.gradient(K, x)) > 0]
     if len(stable) == 1:  # an in-well record: one well, and no origin between wells to find
@@ -67,7 +89,7 @@ def _frame_anchors(rec) -> tuple[float, dict[str, float]]:
         mid = 0.5 * (wells["minus"] + wells["plus"])
         barrier = float(between[np.argmin(np.abs(np.array(between) - mid))]) if between else float("nan")
         return mid, {**wells, "barrier": barrier}
-    roots = _crossings(x, K - model.m * rec.gravity)
+    roots = _crossings(x, K - rec.gravity)
     if not roots.size:
         raise ValueError("the fitted restoring force never carries the weight over the visited stroke")
     mid = eq[len(eq) // 2] if eq.size else float(np.median(rec.z))
@@ -90,9 +112,9 @@ def frame_offset(rec, spread: bool = True, use_rest: bool = True) -> dict[str, A
       harvester): the origin midway between the fitted wells, and how far the barrier between them sits
       from it (``asymmetry_m``: how well the symmetry pins the frame);
     * gravity: the restoring force at z = 0 (rods horizontal) carries the weight, K(0) = m g (g per
-      unit mass). A quintic restoring force with viscous and quadratic damping is fitted by weak-form
-      least squares (``weak.weak_least_squares``) in the record's frame, where K_rec(x) =
-      K_true(x + C); the origin solves K_rec(x) = m g between the fitted wells (a negative-stiffness
+      unit mass). A restoring force with no formula (a spline over the stroke, ``restoring_force``) with
+      viscous and quadratic damping is fitted by weak-form least squares in the record's frame, where
+      K_rec(x) = K_true(x + C); the origin solves K_rec(x) = m g between the fitted wells (a negative-stiffness
       device's origin is next to its unstable equilibrium). A force-driven record carries no weight
       in its equation (k0 is the force's offset): there the frame is not pinned.
 
@@ -158,15 +180,15 @@ def frame_offset(rec, spread: bool = True, use_rest: bool = True) -> dict[str, A
             "offset_se_m": _se([-p[0] for p in parts]),
             "asymmetry_m": float(wells["barrier"] - x),
             "method": "the wells' symmetry (gravity 0 along the motion): the origin midway between the wells of a "
-            f"quintic fitted to the record; the barrier between them sits {1e3 * (wells['barrier'] - x):.3g} mm "
-            "from that midpoint",
+            "spline restoring force fitted to the record; the barrier between them sits "
+            f"{1e3 * (wells['barrier'] - x):.3g} mm from that midpoint",
         }
     if rec.input_name != "base_acc":
         return {"offset_m": None, "method": "not pinned: a force-driven record carries no weight (k0 unknown)"}
     return {
         "offset_m": -x,
         "offset_se_m": _se([-p[0] for p in parts]),
-        "method": "K(0) = m g: the frame in which a quintic restoring force fitted to the record carries the "
+        "method": "K(0) = m g: the frame in which a spline restoring force fitted to the record carries the "
         "weight at z = 0, between the wells",
     }
 
@@ -207,18 +229,16 @@ SCALE_PART_MIN_S = 20.0
 
 
 def _scale_of(rec: Measurement) -> float:
-    c = input_coefficient(rec)
+    """The response's scale from the input's coefficient the record's dynamics learn (over ``weak.stroke_library``:
+    a spline restoring force, so that a device whose force is not a polynomial does not bias it).
+    """
+    c = input_coefficient(rec, library=stroke_library(rec))
     physical = known_input_gain(rec)
     assert physical is not None  # load refuses a force record of unknown scale without a mass
     if not np.isfinite(c) or c == 0:
         raise MeasurementError(f"{rec.source}: the record's dynamics give the input no weight: its response's scale "
                                "cannot be estimated (does the response follow the input?)")  # fmt: skip
     return physical / c
-
-
-DRIFT_TERMS = ("z^3", "v", "v|v|")
-"""The drift fit's library besides its slowly varying constant, z and z^2 (a cubic restoring force: the drift
-shifts its z^2 coefficient by -3 k3 d)."""
 
 
 def _with_integral_warnings(resp: dict[str, Any], si: bool) -> dict[str, Any]:
@@ -231,8 +251,17 @@ def _with_integral_warnings(resp: dict[str, Any], si: bool) -> dict[str, Any]:
     said = integral_warnings(resp) if si else integral_warnings(resp, "(units as read)", 1.0)
     return {**resp, "warnings": said + kept}
 
-DRIFT_PASSES = 3
-"""Passes of the drift's physical refinement (each re-linearises about the previous pass)."""
+DRIFT_STEPS = 30
+"""Gauss-Newton steps of the drift's physical refinement at most (each re-linearises the restoring force about the
+last estimate; ``drift_by_physics``). A residual drift of several millimetres (wells 31 mm apart) took six steps
+on the tests' 120 s absolute-vibrometer record, the last two quadratically convergent (measured)."""
+
+DRIFT_CONVERGED = 1e-4
+"""The refinement stops when a step moves the drift by less than this fraction of z's 5-95 % range."""
+
+DRIFT_HALVINGS = 4
+"""A step that makes the restoring force's fit worse is halved, at most this many times in a row (damped
+Gauss-Newton)."""
 
 DRIFT_KNOT_PERIODS = 10.0
 """The drift's knots are this many periods of the record's dominant frequency apart (a hat spans twenty: slow
@@ -256,23 +285,67 @@ def _hats(t: np.ndarray, knots: np.ndarray) -> np.ndarray:
     return np.column_stack([np.interp(t, knots, np.eye(knots.size)[j]) for j in range(knots.size)])
 
 
+def _contrasts(H: np.ndarray) -> np.ndarray:
+    """Hat functions less the last one (rows: times; k - 1 columns): coefficients on them are the values at the
+    first k - 1 knots of a curve whose values at the knots sum to zero (the last is minus their sum). A drift's
+    constant is no drift (it moves z's frame, which the frame's step pins) and, as d K'(z), it is almost the
+    restoring force's own change of frame: left free, it would make the fit ill-conditioned.
+    """
+    return H[:, :-1] - H[:, -1:]
+
+
+def _drift_step(form: WeakForm, rec: Measurement, drift: np.ndarray, C: np.ndarray,
+                knots: np.ndarray) -> tuple[float, np.ndarray]:  # fmt: skip
+    """One Gauss-Newton step of the drift (``drift_by_physics``) from ``drift`` [z's unit, per sample]: the relative
+    residual of the restoring force's fit with the drift taken off (the spline over the stroke of z - d), and the
+    step at the time knots ``knots``.
+    """
+    library = stroke_library(rec, rec.z - drift)
+    system = form.system(rec, library=library, drift=drift)
+    assert library.shape is not None
+    n_k = len(library.shape["spline"]["knots"]) + 2
+    W, y = system.W_physical, system.y_physical
+    phys = fit_support(system, None)
+    r = y - W @ phys
+    residual = float(r @ r / (y @ y))
+    spline = phys[:n_k]  # z'' = B(z) a + ...: the restoring force per unit mass is -B(z) a
+    zs = form.zs - drift
+    slope = form.project((stroke_spline.slopes(zs, np.asarray(library.shape["spline"]["knots"])) @ spline)[:, None],
+                         rec.dt)[:, 0]  # fmt: skip
+    A = np.column_stack([W, C * slope[:, None]])
+    scale = A.std(axis=0)
+    scale[scale == 0] = 1.0
+    theta = np.linalg.lstsq(A / scale, y, rcond=None)[0] / scale
+    gamma = theta[W.shape[1] :]  # z'' holds B(z - d) a ~ B(z) a - d B'(z) a: gamma = -d (at the knots)
+    if not np.all(np.isfinite(gamma)):
+        raise ValueError("the drift's step is not finite")
+    step_knots = -np.append(gamma, -gamma.sum())
+    return residual, np.interp(np.arange(rec.n) / rec.fs, knots, step_knots)  # the hats' sum, without their matrix
+
+
 def drift_by_physics(rec: Measurement) -> Measurement:
     """``rec`` with what its integral's drift separation left of the drift removed by the record's physics.
 
-    A drift d(t) left in z shifts the restoring force: the equation holds in z - d, so a cubic fitted in z
-    has a z^2 coefficient k2 - 3 k3 d(t). The record's weak form (``weak.WeakForm``) is fitted with a
-    constant, z and z^2 coefficient that vary slowly (hat functions of time) beside fixed z^3, damping and input
-    terms, the input's coefficient learned (the response's scale may be unknown); d(t) = (k2 - k2(t)) / (3 k3)
-    is taken off z and the fit repeated (``DRIFT_PASSES``); the knots are ``DRIFT_KNOT_PERIODS`` periods of the dominant
-    frequency apart. A bistable device is sensitive to this: 0.5 mm of drift in z moves
-    its restoring force by K'(z) 0.5 mm, a quarter of the input's force on the tests' vibrometer record, where
-    it turned NSI's well frequencies 30 % low and left SINDy without damping (measured).
+    A drift d(t) left in z shifts the restoring force: the equation holds in z - d, so with the force fitted in z,
+    K(z - d) ~ K(z) - d(t) K'(z). The record's weak form (``weak.WeakForm``) is fitted over the preparation's
+    library (``weak.stroke_library``: a restoring force with no formula, a spline over the stroke, with viscous and
+    quadratic damping; the input's coefficient learned, the response's scale may be unknown); K'(z) is taken from
+    that spline and the fit repeated with a slowly varying coefficient of K'(z) (hat functions of time
+    ``DRIFT_KNOT_PERIODS`` periods of the dominant frequency apart, their values summing to zero: ``_contrasts``)
+    beside the fixed columns, which gives the step of d(t). Taking d off z (the weak form's states and target,
+    ``WeakForm.system``'s ``drift``) and re-linearising is Gauss-Newton on the drift and the force together (Nocedal
+    & Wright 2006, "Numerical Optimization", 10.3), repeated until a step moves d by less than ``DRIFT_CONVERGED``
+    of z's range (``DRIFT_STEPS`` at most; a step that worsens the force's fit is halved, ``DRIFT_HALVINGS``).
+    For a cubic the first step reads the z^2 coefficient's shift -3 k3 d(t) that a cubic's scheme read, with the
+    z and constant terms' shifts of the same d; for a device whose force is not a polynomial, the polynomial's
+    misfit is not taken for drift (a cubic's scheme moved the magnet harvester's in-well z by 1.35 mm that was not
+    drift, measured). A bistable device is sensitive to this: 0.5 mm of drift in z moves its restoring force by
+    K'(z) 0.5 mm, a quarter of the input's force on the tests' vibrometer record, where it turned NSI's well
+    frequencies 30 % low and left SINDy without damping (measured).
 
     Applied only to a z integrated from a velocity whose drift was separated (``sensors.velocity_to_z``'s
     ``drift``); other records are returned as they are. What it moved is in ``info["response"]["drift"]``.
     """
-    from negstiff.inference.steps.weak import WeakForm, WeakFormError, support_of, terms
-
     resp = rec.info.get("response", {})
     drift = resp.get("drift")
     if rec.z is None or not drift or "physics_span_m" in drift:
@@ -281,41 +354,32 @@ def drift_by_physics(rec: Measurement) -> Measurement:
     if done is not None:
         return done
     spacing = float(np.clip(DRIFT_KNOT_PERIODS / drift["dominant_hz"], DRIFT_KNOT_MIN_S, 0.5 / drift["cutoff_hz"]))
-    z, total = rec.z, np.zeros(rec.n)
-    names = terms()
-    cube = names.index("z^3")
-    support = support_of(DRIFT_TERMS)
+    q = np.quantile(rec.z, [0.05, 0.95])
+    total, step = np.zeros(rec.n), np.zeros(rec.n)
+    best, halvings, steps = float("inf"), 0, 0
     try:
-        for _ in range(DRIFT_PASSES):
-            cur = replace(rec, z=z, info={**rec.info})
-            form = WeakForm.of(cur)
-            system = form.system(cur)
-            rows = system.W.shape[0]
-            t_rows = (form.centre(cur.dt) + form.stride * np.arange(rows)) / cur.fs
-            knots = _knots(cur.duration, spacing)
-            H = _hats(t_rows, knots)
-            W = system.W_physical
-            base = W[:, :-1][:, np.array(support)]
-            slow = [H * W[:, [names.index(k)]] for k in ("1", "z", "z^2")]
-            A = np.column_stack([base, *slow, W[:, -1]])
-            scale = A.std(axis=0)
-            scale[scale == 0] = 1.0
-            theta = np.linalg.lstsq(A / scale, system.y_physical, rcond=None)[0] / scale
-            a3 = theta[int(np.count_nonzero(np.array(support)[:cube]))]  # z^3's place among the kept terms
-            k = H.shape[1]
-            gamma = theta[base.shape[1] + 2 * k : base.shape[1] + 3 * k]
-            if not np.isfinite(a3) or a3 == 0:
+        form = WeakForm.of(rec)
+        rows = -(-(rec.n - 2 * form.centre(rec.dt)) // form.stride)  # the test functions' rows (``weak_project``)
+        knots = _knots(rec.duration, spacing)
+        C = _contrasts(_hats((form.centre(rec.dt) + form.stride * np.arange(rows)) / rec.fs, knots))
+        for _ in range(DRIFT_STEPS):
+            residual, new = _drift_step(form, rec, total, C, knots)
+            if residual > best and halvings < DRIFT_HALVINGS:  # the last step made the force's fit worse: half of it
+                step = 0.5 * step
+                total = total - step
+                halvings += 1
+                continue
+            best, halvings, steps = min(best, residual), 0, steps + 1
+            step = new
+            total = total + step
+            if np.ptp(step) < DRIFT_CONVERGED * (q[1] - q[0]):
                 break
-            d_knots = -(gamma - gamma.mean()) / (3 * a3)  # z^2 coefficient of z'': -k2/m + 3 k3 d / m, a3 = -k3/m
-            d = np.interp(np.arange(rec.n) / rec.fs, knots, d_knots)  # the hats' sum, without their n x k matrix
-            z = z - d
-            total += d
     except (WeakFormError, np.linalg.LinAlgError, ValueError):
         return rec
     total -= total.mean()
     drift = {**drift, "physics_span_m": float(np.ptp(total)), "physics_rms_m": float(np.std(total)),
-             "physics": f"then the restoring force's slow shift (its z^2 coefficient, -3 k3 d(t), knots every "
-             f"{spacing:.3g} s) taken off: {DRIFT_PASSES} passes"}  # fmt: skip
+             "physics": f"then the restoring force's slow shift (-d(t) K'(z), K a spline over the stroke, knots "
+             f"every {spacing:.3g} s) taken off: {steps} Gauss-Newton steps"}  # fmt: skip
     si = not (rec.info.get("scale") and rec.info["scale"].get("value") is None)
     resp = _with_integral_warnings({**resp, "drift": drift}, si)
     out = replace(rec, z=rec.z - total, info={**rec.info, "response": resp})

@@ -43,6 +43,7 @@ import numpy as np
 from scipy import signal
 
 from negstiff.errors import MeasurementError
+from negstiff.inference.record import stroke_spline
 from negstiff.inference.record.derivatives import noise_floor
 from negstiff.inference.record.measurement import Measurement
 from negstiff.models import Model, effects, laws
@@ -274,20 +275,27 @@ class WeakForm:
         return weak_project(cols, test_function(self.half, dt)[0], self.stride, dt)
 
     def system(self, rec: Measurement, lo: int = 0, hi: int | None = None, aux: tuple[str, ...] = (),
-               library: Library | None = None, scoring: bool = False) -> WeakSystem:  # fmt: skip
+               library: Library | None = None, scoring: bool = False,
+               drift: np.ndarray | None = None) -> WeakSystem:  # fmt: skip
         """The weak-form system of the samples [lo, hi) of ``rec`` (the record this form was made of,
         or its first part) over ``library`` (default: the registry's catalogue, ``Library.catalogue``); ``aux``:
         measured auxiliary channels of ``rec`` whose terms theta a(t) join the catalogue (``aux_terms``), before
         the input's column (a ``library`` names its own). A ``scoring`` system (a selection part's, which only
         scores coefficients fitted elsewhere) may hold columns that vanish there: a spline's outer functions where a
-        ring-down no longer reaches them.
+        ring-down no longer reaches them. ``drift``: a slow drift of z (one value per sample of ``rec``, its unit)
+        taken off the smoothed states (z - d, z' - d') and the target, without smoothing the record again (the
+        smoothing is linear, and a slow d passes it unchanged).
         """
         seg = rec.segment(lo, rec.n if hi is None else hi)
         library = Library.catalogue(aux) if library is None else library
-        F = library.columns(self.zs[lo:hi], self.v[lo:hi], seg.u, self.velocity_noise, seg.aux)
+        zs, v, disp = self.zs[lo:hi], self.v[lo:hi], seg.displacement
+        if drift is not None:
+            d = np.asarray(drift, float)[lo:hi]
+            zs, v, disp = zs - d, v - np.gradient(d, seg.dt), disp - d
+        F = library.columns(zs, v, seg.u, self.velocity_noise, seg.aux)
         phi, d2 = test_function(self.half, seg.dt)
         W = weak_project(F, phi, self.stride, seg.dt)
-        y = weak_project((seg.displacement - seg.displacement.mean())[:, None], d2, self.stride, seg.dt)[:, 0]
+        y = weak_project((disp - disp.mean())[:, None], d2, self.stride, seg.dt)[:, 0]
         col = W.std(axis=0)
         const = np.flatnonzero(np.ptp(F[:, :-1], axis=0) == 0)  # a constant column (k0's): int phi dt on every row
         col[const] = np.abs(W[:, const]).mean(axis=0)
@@ -481,16 +489,35 @@ def support_of(selected) -> tuple[bool, ...]:
     return tuple(t in selected for t in known)
 
 
-def input_coefficient(rec: Measurement, terms=("1", "z", "z^2", "z^3", "z^4", "z^5", "v", "v|v|")) -> float:
+def stroke_library(rec: Measurement, z: np.ndarray | None = None) -> Library:
+    """The library of a record's own preparation: a restoring force with no formula, a cubic B-spline over the stroke
+    z visited (``record.stroke_spline``: any smooth device's force; ``z``, where given, is the z whose stroke it
+    spans, else the record's), and the reference study's viscous and quadratic damping, then the record's measured
+    auxiliary channels (a harvester's voltage: its coupling is a force of the record's dynamics). The scale, the
+    drift's physics and the frame read it (``frame``), so that none of them assumes a polynomial the device may
+    not follow.
+    """
+    z = rec.z if z is None else z
+    if z is None:
+        raise WeakFormError(f"{rec.source}: a structure's record has no single z for a restoring force over its stroke")
+    return Library.of_laws("spline", laws.DEFAULT_DAMPING, stroke_spline.shape(z), tuple(rec.aux))
+
+
+def input_coefficient(rec: Measurement, terms=("1", "z", "z^2", "z^3", "z^4", "z^5", "v", "v|v|"),
+                      library: Library | None = None) -> float:  # fmt: skip
     """The input's coefficient in z'' as the record's own weak-form least squares learns it, unconstrained
     (per unit mass): physics says -1 for a base acceleration in m/s^2 and 1/m for a force in N, so it
     checks the input's units and the mass (``plausibility``), and scales a response of unknown sensitivity
-    (``scale``). The record's measured auxiliary channels join the fit (a harvester's voltage: left out, its
-    coupling's share of the motion was taken by the input, 4 % on a coupled record, measured).
+    (``frame.calibrate_scale``, over ``stroke_library``). The fit's columns are the library ``terms`` (a quintic
+    restoring force with viscous and quadratic damping by default), or ``library``'s where given (whose ``aux``
+    are then its own). The record's measured auxiliary channels join the terms' fit (a harvester's voltage: left
+    out, its coupling's share of the motion was taken by the input, 4 % on a coupled record, measured).
     """
     if not np.any(rec.u):
         raise WeakFormError(f"{rec.source}: the input is zero throughout (a free decay): no coefficient to learn")
     form = WeakForm.of(rec)
+    if library is not None:
+        return float(fit_support(form.system(rec, library=library), None)[-1])
     aux = tuple(rec.aux)
     support = support_of(terms) + (True,) * len(aux)
     return float(fit_support(form.system(rec, aux=aux), None, support=support)[-1])
