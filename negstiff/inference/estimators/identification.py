@@ -26,8 +26,9 @@ optimum (to 1e-9 on the rig's records), so a consistency check *between methods*
 
 from __future__ import annotations
 
+import dataclasses
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any, Self
 
@@ -243,28 +244,50 @@ class Identification:
         )
 
 
-def visited_well(rec: Measurement, z: float, equilibria: Equilibria | None = None) -> str:
-    """The name of the one well a record visited, at ``z``: by where it is, the nearer of the rest positions
-    the metadata states, else of a model's two wells (``equilibria``); else ``"plus"``, the contract's name
-    for the well of a single-well system.
+def visited_well(rec: Measurement, z: float, models: Sequence[Model] = (),
+                 stroke: tuple[float, float] | None = None) -> str:  # fmt: skip
+    """The name of the one well a record visited, at ``z`` [m].
+
+    In order: the nearer of the rest positions the metadata states; else the nearer of the two wells of the
+    first of ``models`` that has two; else the side of the barrier: the well lies below the region where a
+    model's stiffness K'(z) is not positive (the barrier between the wells) for the minus well, above it for the
+    plus well, that region sought within one span of ``stroke`` (lo, hi) [m] (where the record went) beyond its
+    ends; else ``"plus"``, the contract's name for the well of a single-well system (a stiffness positive
+    throughout). A cubic fitted over one well of a bistable device may keep one root only, but it keeps the
+    softening towards the barrier (a record in the minus well, 11.41 Hz, was named plus by its one root).
     """
     rest = rec.rest_positions
     if len(rest) == 2:
         return min(rest, key=lambda w: abs(rest[w] - z))
-    if equilibria is not None and equilibria.z_minus is not None:
-        return "minus" if abs(z - equilibria.z_minus) < abs(z - equilibria.z_plus) else "plus"
+    for model in models:
+        try:
+            eq = model.equilibria()
+        except (ValueError, ArithmeticError):
+            continue
+        if eq.z_minus is not None and eq.z_plus is not None:
+            return "minus" if abs(z - eq.z_minus) < abs(z - eq.z_plus) else "plus"
+    lo, hi = stroke if stroke is not None else (z, z)
+    lo, hi = min(lo, z), max(hi, z)
+    span = hi - lo if hi > lo else max(abs(z), 1e-3)
+    grid = np.linspace(lo - span, hi + span, 2001)
+    for model in models:
+        with np.errstate(all="ignore"):
+            soft = grid[np.asarray(model.stiffness(grid), float) <= 0]
+        if soft.size:
+            return "minus" if soft[np.argmin(np.abs(soft - z))] > z else "plus"
     return "plus"
 
 
 def equilibria_and_modes(
-    model: Model, rec: Measurement, stroke: tuple[float, float]
+    model: Model, rec: Measurement, stroke: tuple[float, float], namers: Sequence[Model] = ()
 ) -> tuple[Equilibria | None, dict[str, dict[str, float | None]], list[str]]:
     """The model's equilibria and each well's underlying-linear frequency and damping ratio (None where the
     model has no such well), with the warnings they call for.
 
     A model fitted over one well of a record may have roots far outside what the record visited (a quintic's
     extra roots): then the equilibria inside the stroke (widened by half its span) are reported, and a
-    warning says the others are an extrapolation. A single well is named by where it lies (``visited_well``).
+    warning says the others are an extrapolation. A single well is named by where it lies (``visited_well``:
+    by ``model``, then by the other models of ``namers``, the same models that name the method's own well).
     """
     from negstiff.models.equation import find_equilibria
 
@@ -286,7 +309,7 @@ def equilibria_and_modes(
             f"the identified restoring force's equilibria beyond the stroke the record visited are an "
             f"extrapolation ({exc}); the wells within it are reported"
         )
-    if eq.z_minus is None and visited_well(rec, eq.z_plus) == "minus":
+    if eq.z_minus is None and visited_well(rec, eq.z_plus, (model, *namers), stroke) == "minus":
         # the one well, named by where it is: as z_minus, z_plus None (against the type's single-well convention)
         eq = Equilibria(eq.z_plus, None, None)  # type: ignore[arg-type]
     modal: dict[str, dict[str, float | None]] = {}
@@ -343,6 +366,26 @@ class Identifier(Estimator):
         """The method's own result keys that depend on the final model (NSI's ``g_estimate``)."""
         return details
 
+    def _name_own_well(self, est: Estimate, well: str) -> Estimate:
+        """``est`` with the one well its own modal parameters give (where they give one) named ``well``: the name
+        the final model and the method's own agree on (``visited_well``). A method keeping more under the wells'
+        names (NSI's ``wells``) renames them too (``_renamed_well``).
+        """
+        if est.modal is None:
+            return est
+        found = [w for w, m in est.modal.items() if m.get("f_hz") is not None]
+        if len(found) != 1 or found[0] == well:
+            return est
+        other = found[0]
+        self._renamed_well(other, well)
+        details = dict(est.details)
+        if isinstance(details.get("wells"), dict) and other in details["wells"]:
+            details["wells"] = {well if w == other else w: v for w, v in details["wells"].items()}
+        return dataclasses.replace(est, modal={other: est.modal[well], well: est.modal[other]}, details=details)
+
+    def _renamed_well(self, old: str, new: str) -> None:
+        """What the method keeps under a well's name, renamed (``_name_own_well``); nothing by default."""
+
     def fit(self, data) -> Self:
         """Identify from ``data`` (a ``Measurement`` or a file path): the method's estimate, then the
         shared stages (module docstring); the result is ``result_`` (an ``Identification``).
@@ -362,14 +405,16 @@ class Identifier(Estimator):
         validation = {**validation, **window_errors(validation.get("window_ms", np.empty(0)), rec.displacement[n_id:])}
         bounded = boundedness(model, rec.segment(0, n_id))
         span = (float(stroke[0]), float(stroke[-1]))
-        equilibria, modal, eq_warnings = equilibria_and_modes(model, rec, span)
+        # one well visited: one name for it, by the final and the method's own model alike (``visited_well``)
+        est = self._name_own_well(est, visited_well(rec, float(np.median(rec.z[:n_id])), (model, est.model), span))
+        equilibria, modal, eq_warnings = equilibria_and_modes(model, rec, span, (est.model,))
         judged = judgement(model, rec, validation, modal, est.modal)
         details = dict(self._final_details(rec, model, est.details))
         details["modal_of_model"] = modal  # the final (refined) model's linearisation
         # ``modal`` is the method's own estimate (what method-vs-method checks compare): NSI's subspace pole,
         # else the linearisation of the method's own (equation-error) model, never the refined model's (NSI
         # and SINDy refine to the same output-error optimum, 6 digits alike)
-        modal = est.modal if est.modal is not None else equilibria_and_modes(est.model, rec, span)[1]
+        modal = est.modal if est.modal is not None else equilibria_and_modes(est.model, rec, span, (model,))[1]
         own = [*est.warnings, *([] if bounded["ok"] else [bounded["warning"]]), *eq_warnings, *judged]
         if validation.get("diverged"):
             own.append(validation["warning"])

@@ -52,6 +52,7 @@ from negstiff.inference.estimators.structure_id import (
 )
 from negstiff.inference.estimators.structure_id import stabilisation as structure_stabilisation
 from negstiff.inference.record.measurement import Measurement, per_unit_mass_warning
+from negstiff.inference.steps.refine import stroke_quantiles
 from negstiff.inference.steps.weak import free_decay, known_input_gain, mass_of
 from negstiff.inference.steps.wells import well_guesses
 from negstiff.models import Model
@@ -420,10 +421,11 @@ class NSI(StructureResults, Identifier):
         mean = {k: float(np.mean([getattr(mm, k) for mm in models])) for k in ("k1", "k2", "k3", "c", "c_nl", "k0")}
         model = Model(m=mass, **mean)
         try:
-            eq = model.equilibria()
+            model.equilibria()  # usable: a bistable or single-well restoring force
         except ValueError as exc:  # a well's fit that is no bistable oscillator: the record's verdict, not a bug
             raise NSIError(f"{rec.source}: the identified restoring force is not usable ({exc})") from None
-        if z_minus is None and visited_well(rec, z_plus, eq) == "minus":
+        stroke = stroke_quantiles(ident.z)
+        if z_minus is None and visited_well(rec, z_plus, (model,), (float(stroke[0]), float(stroke[-1]))) == "minus":
             wells = {"minus": wells["plus"]}  # one well visited: named by where it lies (``visited_well``)
         self.wells_ = wells
         self.models_by_well_ = {name: mm for name, mm in zip(wells, models, strict=False)}
@@ -451,6 +453,11 @@ class NSI(StructureResults, Identifier):
                 "basis": list(BASIS_NAMES),
             },
         )
+
+    def _renamed_well(self, old: str, new: str) -> None:
+        """The one well's fit and model under the name the final model gives it (``Identifier._name_own_well``)."""
+        self.wells_ = {new if w == old else w: fit for w, fit in self.wells_.items()}
+        self.models_by_well_ = {new if w == old else w: mm for w, mm in self.models_by_well_.items()}
 
     def _final_details(self, rec: Measurement, model: Model, details: dict[str, Any]) -> dict[str, Any]:
         """``g_estimate``: the final model's k0/m, the gravity the record's own physics carries (base excitation)."""
