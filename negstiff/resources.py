@@ -72,7 +72,7 @@ def usable_cores() -> int:
 def idle_cores() -> int:
     """The usable cores (``usable_cores``) that other work is not using now: minus the one-minute load
     average (runnable processes, rounded), at least one. Read when a process starts, before it adds to
-    the load itself.
+    the load itself. No thread count that can change a number is taken from it (``FIT_BLAS_THREADS``).
     """
     cores = usable_cores()
     try:
@@ -88,7 +88,7 @@ _BUDGET: list[int] = []
 
 def thread_budget() -> int:
     """The threads negstiff's own pools (the simulator's batches) may use: the running command's budget
-    (``limit_threads``: the idle cores when it started), else the usable cores (``usable_cores``).
+    (``limit_threads``: the usable cores), else the usable cores (``usable_cores``).
     """
     return _BUDGET[-1] if _BUDGET else usable_cores()
 
@@ -142,6 +142,24 @@ class _Budget:
     def restore_original_limits(self) -> None:
         """Give the BLAS pools and the budget back (threadpoolctl's name)."""
         self.__exit__(None, None, None)
+
+
+FIT_BLAS_THREADS = 1
+"""The BLAS threads an estimator's ``fit`` runs its linear algebra on, from any entry (a script, the command
+line, a dask worker) and on any load: a fixed number, because a sum split over threads is added in another order
+(the same record's refined k1 read 381.6666 from Python and 381.6463 from the command, which had set its BLAS
+threads from the idle cores). One, because a second buys nothing on the estimators' small products and costs
+6-15x the CPU time beside other work (docs/speed.md)."""
+
+
+def fit_threads():
+    """The context an estimator's ``fit`` runs in (``Estimator``): BLAS on ``FIT_BLAS_THREADS``, whatever the
+    process's pool; the caller's pool is given back when it exits.
+    """
+    from threadpoolctl import threadpool_limits
+
+    _load_blas()
+    return threadpool_limits(limits=FIT_BLAS_THREADS, user_api="blas")
 
 
 def one_blas_thread():

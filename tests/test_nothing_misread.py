@@ -4,13 +4,16 @@ model order, a spurious resonance), tracebacks, and refusals that printed a prog
 exit 2 and one line on stderr (one ``InputError`` in Python), before any progress line, nothing written, every
 input byte-identical. The records are written here with numpy and scipy (``records``)."""
 
+import json
 import math
+import os
 
 import numpy as np
 import pytest
 from records import TRUTH, dop853_record, write_csv
 
 from negstiff import NSI, SINDy, load
+from negstiff.cli import main
 
 FS = 512.0
 
@@ -77,3 +80,99 @@ def test_modal_names_the_well_the_record_visited(one_well_files, method, well):
     # cubic has one root there, which the contract's single-well convention names plus): the name is where the
     # record went, judged by where the model's barrier (its negative stiffness) lies
     _names_the_visited_well(method().fit(load(one_well_files[well])).result(), well)
+
+
+# --- 2. the same numbers on any load, from any entry ---------------------------------------------------------
+def _blas_threads() -> set[int]:
+    from threadpoolctl import threadpool_info
+
+    return {lib["num_threads"] for lib in threadpool_info() if lib["user_api"] == "blas"}
+
+
+def test_a_fits_blas_threads_are_a_function_of_the_settings_not_of_the_load(one_well_files, monkeypatch, tmp_path):
+    # the command set its BLAS threads from the idle cores (the usable cores minus the load average), the library
+    # left the process's: the linear algebra's sums, and so the numbers, moved with the machine's load (a refined
+    # k1 381.6666 against 381.6463). A fit now runs its linear algebra on one BLAS thread from any entry
+    from threadpoolctl import threadpool_limits
+
+    from negstiff import resources
+    from negstiff.inference.estimators import identification
+
+    seen = []
+    validate = identification.validate
+
+    def spy(*args, **kwargs):
+        seen.append(_blas_threads())
+        return validate(*args, **kwargs)
+
+    monkeypatch.setattr(identification, "validate", spy)
+    monkeypatch.setattr(os, "sched_getaffinity", lambda pid: {0, 1}, raising=False)
+    monkeypatch.delenv("NEGSTIFF_THREADS", raising=False)
+    rec = load(one_well_files["minus"]).segment(0, int(30 * FS))
+    for n in (1, 2):
+        with threadpool_limits(limits=n):
+            NSI(refine=False).fit(rec)
+    for load_average in (0.0, 1.6):
+        monkeypatch.setattr(os, "getloadavg", lambda la=load_average: (la, la, la))
+        argv = ["identify", "nsi", str(one_well_files["minus"]), "--no-refine", "-o", str(tmp_path / "n.json")]
+        assert main([*argv, "--quiet"]) == 0
+    assert seen == [{1}] * 4, seen
+    assert resources.FIT_BLAS_THREADS == 1
+
+
+def _library_result(command: str, files: dict):
+    """The library's result for the record and settings of ``_COMMANDS[command]``."""
+    from negstiff import Discrepancy, GAUpdater, Posterior
+    from negstiff.inference.estimators.updating import load_targets
+
+    if command == "update":
+        return GAUpdater(generations=4, pop_size=8, seed=0).fit(load_targets(files["targets"])).result()
+    est = {"nsi": NSI(), "sindy": SINDy(), "posterior": Posterior(max_steps=300, n_ensembles=2, seed=0),
+           "discrepancy": Discrepancy(max_effects=1)}[command]  # fmt: skip
+    return est.fit(load(files["short" if command == "posterior" else "minus"])).result()
+
+
+_COMMANDS = {
+    "nsi": ["identify", "nsi", "{minus}"],
+    "sindy": ["identify", "sindy", "{minus}"],
+    "posterior": ["posterior", "{short}", "--max-steps", "300", "--ensembles", "2"],
+    "discrepancy": ["discrepancy", "{minus}", "--max-effects", "1"],
+    "update": ["update", "{targets}", "--generations", "4", "--pop-size", "8"],
+}
+
+
+@pytest.fixture(scope="module")
+def every_input(one_well_files, tmp_path_factory):
+    """The minus-well record, its first 10 s (a posterior's), and a GA's targets (the reference device's wells)."""
+    d = tmp_path_factory.mktemp("entries")
+    raw = np.loadtxt(one_well_files["minus"], delimiter=",", skiprows=2, max_rows=int(10 * FS))  # t, base_acc, z
+    short = write_csv(d / "short.csv", dict(zip(("t", "base_acc", "z"), raw.T, strict=True)), {"mass": "0.2"})
+    targets = d / "targets.json"
+    targets.write_text(json.dumps({"f_minus": 11.45, "f_plus": 9.2, "z_minus": -0.0287, "z_plus": 0.0228}))
+    return {**one_well_files, "short": short, "targets": targets}
+
+
+@pytest.mark.parametrize("command", list(_COMMANDS))
+def test_every_estimator_gives_the_same_numbers_from_python_and_the_command_on_one_and_two_threads(
+        every_input, command, monkeypatch, tmp_path):  # fmt: skip
+    # the same record, settings and seed give the same numbers (to 1e-12) from a script and from the command, and
+    # with one and with two threads (BLAS's pool, negstiff's own: the simulator's batches, the ensembles), on an
+    # idle machine and a loaded one
+    from negstiff import resources
+
+    monkeypatch.setattr(os, "sched_getaffinity", lambda pid: {0, 1}, raising=False)
+    results = {}
+    for threads in (1, 2):
+        with resources.limit_threads(threads):
+            results[f"python, {threads} thread(s)"] = json.loads(json.dumps(_library_result(command, every_input)))
+        monkeypatch.setenv("NEGSTIFF_THREADS", str(threads))
+        monkeypatch.setattr(os, "getloadavg", lambda t=threads: (2.0 - t, 2.0 - t, 2.0 - t))
+        out = tmp_path / f"{command}{threads}.json"
+        argv = [a.format(**every_input) for a in _COMMANDS[command]]
+        assert main([*argv, "-o", str(out), "--quiet", "--seed", "0"]) == 0
+        results[f"command, {threads} thread(s)"] = json.loads(out.read_text())
+    first, *rest = results
+    for name in rest:
+        assert not _equal_to(results[first], results[name]), (first, name, _equal_to(results[first], results[name]))
+    if command in ("nsi", "sindy"):  # the command names the visited well as the library does
+        _names_the_visited_well(results["command, 1 thread(s)"], "minus")

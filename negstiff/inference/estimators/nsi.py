@@ -424,7 +424,7 @@ class NSI(StructureResults, Identifier):
             model.equilibria()  # usable: a bistable or single-well restoring force
         except ValueError as exc:  # a well's fit that is no bistable oscillator: the record's verdict, not a bug
             raise NSIError(f"{rec.source}: the identified restoring force is not usable ({exc})") from None
-        stroke = stroke_quantiles(ident.z)
+        stroke = stroke_quantiles(ident.displacement)
         if z_minus is None and visited_well(rec, z_plus, (model,), (float(stroke[0]), float(stroke[-1]))) == "minus":
             wells = {"minus": wells["plus"]}  # one well visited: named by where it lies (``visited_well``)
         self.wells_ = wells
