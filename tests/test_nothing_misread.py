@@ -10,7 +10,7 @@ import os
 
 import numpy as np
 import pytest
-from records import TRUTH, dop853_record, write_csv
+from records import TRUTH, dop853_record, refused, rk4_harmonic, write_csv
 
 from negstiff import NSI, SINDy, load
 from negstiff.cli import main
@@ -176,3 +176,81 @@ def test_every_estimator_gives_the_same_numbers_from_python_and_the_command_on_o
         assert not _equal_to(results[first], results[name]), (first, name, _equal_to(results[first], results[name]))
     if command in ("nsi", "sindy"):  # the command names the visited well as the library does
         _names_the_visited_well(results["command, 1 thread(s)"], "minus")
+
+
+# --- a small lab for the refusals: records written here with numpy -----------------------------------------
+@pytest.fixture(scope="module")
+def lab(tmp_path_factory):
+    """A harmonic record of the reference device (9 Hz, 3 m/s^2, from the plus well: RK4 of ``records``), a
+    broadband one (2-30 Hz, 12 s), a structure's record (z1, z2 with their masses), and model files."""
+    d = tmp_path_factory.mktemp("misread_lab")
+    t, a, z = rk4_harmonic(TRUTH, [3.0], 9.0, 40.0, 8 * FS, TRUTH_WELLS.z_plus, settle_cycles=60)
+    keep = slice(None, None, 8)
+    write_csv(d / "harm.csv", {"t": t[keep], "base_acc": a[keep, 0], "z": z[keep, 0]}, {"mass": "0.2"})
+    t, u, z, _ = dop853_record(duration=12.0, rms=8.0, seed=2)
+    write_csv(d / "rec.csv", {"t": t, "base_acc": u, "z": z}, {"mass": "0.2"})
+    write_csv(d / "rec2.csv", {"t": t, "base_acc": u, "z1": 0.05 * z, "z2": z}, {"masses": "1.0,0.2"})
+    (d / "model.json").write_text(json.dumps({"m": 0.2, "k1": 426.0, "k2": -3060.0, "k3": 7.77e5, "c": 0.35}))
+    return d
+
+
+# --- 4. an odd model order -----------------------------------------------------------------------------------
+def test_an_odd_nsi_order_is_refused_naming_the_modes_it_would_split(lab, capsys):
+    # a mode is a pair of complex poles, two states: NSI(order=3) asked for one and a half modes and was taken
+    from negstiff import InputError
+
+    with pytest.raises(InputError, match=r"order=3.*even") as info:
+        NSI(order=3).check(load(lab / "rec.csv"))
+    assert "\n" not in str(info.value)
+    out = lab / "o.json"
+    msg = refused(lab, capsys, ["identify", "nsi", lab / "rec.csv", "--order", "3", "-o", out], [out])
+    assert "--order" in msg and "even" in msg, msg
+
+
+# --- 5. a study's entry at the front door ---------------------------------------------------------------------
+def test_fit_many_is_on_the_front_door_beside_the_estimators():
+    import negstiff
+    from negstiff.inference.estimators.many import fit_many
+
+    assert "fit_many" in negstiff.__all__ and negstiff.fit_many is fit_many
+
+
+# --- 7. a structure's record given to a single DOF's analysis -------------------------------------------------
+def test_characterise_refuses_a_structures_record_in_one_line(lab, capsys):
+    # z1, z2: the characterisation of one response; it crashed (an IndexError, or a 42 GiB least squares)
+    from negstiff import InputError, characterise
+
+    with pytest.raises(InputError, match="2 DOFs") as info:
+        characterise(load(lab / "rec2.csv"), 9.0)
+    assert "\n" not in str(info.value)
+    out = lab / "c.json"
+    msg = refused(lab, capsys, ["characterise", lab / "rec2.csv", "--forcing-hz", "9", "-o", out], [out])
+    assert "2 DOFs" in msg, msg
+
+
+# --- 8. a model beyond any clock ------------------------------------------------------------------------------
+def test_simulate_refuses_a_model_whose_frequency_is_beyond_any_step_naming_it(lab, capsys):
+    # m = 1e-300 kg and k = 1e300 N/m: a natural frequency of 1e300 rad/s, which no step resolves (an
+    # OverflowError in math.ceil of the steps it needs)
+    from negstiff import InputError, Model, simulate
+    from negstiff.inference.steps.validation import simulate_measured
+
+    (lab / "stiff.json").write_text(json.dumps({"m": 1e-300, "k1": 1e300, "k2": 0.0, "k3": 1e300, "c": 1.0}))
+    out = lab / "s.csv"
+    msg = refused(lab, capsys, ["simulate", lab / "stiff.json", lab / "rec.csv", "-o", out], [out])
+    assert "frequency" in msg and "1e-300 kg" in msg, msg
+    rec, stiff = load(lab / "rec.csv"), Model(m=1e-300, k1=1e300, k2=0.0, k3=1e300, c=1.0)
+    with pytest.raises(InputError, match="frequency"):  # the command's library path
+        simulate_measured(stiff, rec)
+    assert simulate(stiff, rec.u, rec.dt).diverged[0]  # the simulator's own result says so (solve_ivp's status)
+
+
+# --- 10. the analysis's first spelling ------------------------------------------------------------------------
+def test_report_only_takes_characterize_as_the_commands_alias(lab, tmp_path):
+    # characterize is kept as the command's alias of characterise; --only said "unknown analysis" for it
+    out = tmp_path / "rep"
+    assert main(["report", str(lab / "harm.csv"), "--only", "characterize", "--forcing-hz", "9", "-o", str(out),
+                 "--quiet"]) == 0  # fmt: skip
+    results = json.loads((out / "results.json").read_text())
+    assert "characterisation" in [s["kind"] for s in results["sections"]], results["sections"]
+    assert any("period 1, in-well-plus" in line for line in results["summary"]), results["summary"]

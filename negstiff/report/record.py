@@ -62,10 +62,15 @@ def harmonic_frequency(rec) -> float | None:
     return refine_frequency(u, rec.t - rec.t0, k * rec.fs / u.size, rec.fs / u.size)
 
 
+SECTION_ALIASES = {"characterize": "characterise"}
+"""An analysis's other spellings ``only`` takes: the command's alias (``negstiff characterize``) names its section."""
+
+
 def _only(only: Sequence[str] | str | None, kind: tuple[str, ...]) -> tuple[str, ...]:
     if not only:
         return kind
-    names = tuple(x.strip() for x in (only.split(",") if isinstance(only, str) else only) if x.strip())
+    names = tuple(SECTION_ALIASES.get(x.strip(), x.strip())
+                  for x in (only.split(",") if isinstance(only, str) else only) if x.strip())  # fmt: skip
     bad = [n for n in names if n not in SECTIONS]
     if bad:
         raise InputError(f"--only {','.join(names)}: unknown analysis {bad[0]!r} (choose among {', '.join(SECTIONS)})")

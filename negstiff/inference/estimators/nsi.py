@@ -205,7 +205,7 @@ class NSI(StructureResults, Identifier):
 
     method = "nsi"
     _parameter_constraints = {
-        "order": Interval(int, 2, 20),
+        "order": Interval(int, 2, 20, even=True),  # two states per mode: an odd order splits one
         "block_rows": Interval(int, 2, 500),
         "band": Pair(Interval(float, 0.0, 10.0, lo_open=True)),
         "validation_fraction": FRACTION,

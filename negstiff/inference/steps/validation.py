@@ -53,10 +53,39 @@ prediction error; at 0.2 it was below the data's (measured on the multisine test
 MAX_SUBSTEPS = 16
 
 
+RK4_LIMIT = 2.8
+"""The largest omega h at which the classical Runge-Kutta step is stable on an undamped oscillator (2 sqrt 2)."""
+
+
 def record_substeps(system, rec: Measurement) -> int:
     """Runge-Kutta steps per sample for simulating ``system`` against ``rec``: the simulator's default,
     more where the system's stiffest point over the range the record visits makes omega h exceed
-    ``STEP_OMEGA`` (a fast resonance sampled slowly: the Silverbox's 60-90 Hz at 610 Hz).
+    ``STEP_OMEGA`` (a fast resonance sampled slowly: the Silverbox's 60-90 Hz at 610 Hz); at most
+    ``MAX_SUBSTEPS`` (a system beyond them diverges, said by its result: ``check_resolved`` refuses it first).
+    """
+    omega, _ = stiffest(system, rec)
+    need = math.ceil(min(omega * rec.dt / STEP_OMEGA, MAX_SUBSTEPS))
+    return int(min(MAX_SUBSTEPS, max(DEFAULT_SUBSTEPS, need)))
+
+
+def check_resolved(system, rec: Measurement, what: str) -> None:
+    """Refuse (``MeasurementError``, one line naming the mass and the stiffness) a system whose stiffest linear
+    frequency over the record's range is beyond what ``MAX_SUBSTEPS`` Runge-Kutta steps a sample resolve
+    (``RK4_LIMIT``): its run can only diverge (m = 1e-300 kg with k = 1e300 N/m overflowed the count of steps).
+    """
+    omega, k_max = stiffest(system, rec)
+    top = RK4_LIMIT * MAX_SUBSTEPS / rec.dt
+    if not omega <= top:
+        raise MeasurementError(
+            f"{what}: the model's stiffest linear frequency sqrt(|K'(z)| / m) = sqrt({k_max:.3g} N/m / {system.m:.3g} "
+            f"kg) = {omega / (2 * math.pi):.3g} Hz over the record's range is beyond what {MAX_SUBSTEPS} Runge-Kutta "
+            f"steps a sample resolve at {rec.fs:g} Hz (up to {top / (2 * math.pi):.3g} Hz): is m in kg and K in N/m?"
+        )
+
+
+def stiffest(system, rec: Measurement) -> tuple[float, float]:
+    """The system's stiffest linear angular frequency [rad/s] over the range the record visits (the model's wells
+    and what lies between for an input-only record), and that |K'(z)| [N/m].
     """
     if rec.z is not None:
         lo, hi = float(np.min(rec.z)), float(np.max(rec.z))
@@ -70,10 +99,9 @@ def record_substeps(system, rec: Measurement) -> int:
     grid = np.linspace(lo, hi, 65)
     with np.errstate(all="ignore"):
         k = np.abs(np.asarray(system.stiffness(grid), float))
-    k = k[np.isfinite(k)]
-    omega = math.sqrt(k.max() / system.m) if k.size else 0.0
-    need = math.ceil(omega * rec.dt / STEP_OMEGA)
-    return int(min(MAX_SUBSTEPS, max(DEFAULT_SUBSTEPS, need)))
+        k = k[np.isfinite(k)]
+        k_max = float(k.max()) if k.size else 0.0
+        return float(np.sqrt(np.float64(k_max) / system.m)), k_max
 
 
 def simulate_record(
@@ -136,6 +164,7 @@ def simulate_measured(system, rec: Measurement, z0: float | None = None, v0: flo
     """
     if interpolation not in ("band-limited", "linear"):
         raise MeasurementError(f"interpolation is 'band-limited' or 'linear', got {interpolation!r}")
+    check_resolved(system, rec, f"simulation under {rec.source}")
     limits = Limits(z_limit=DEFAULT_Z_LIMIT, v_limit=DEFAULT_V_LIMIT)
     start: tuple[float | None, float] = (None, 0.0)
     if rec.z is not None:
