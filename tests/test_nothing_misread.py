@@ -254,3 +254,54 @@ def test_report_only_takes_characterize_as_the_commands_alias(lab, tmp_path):
     results = json.loads((out / "results.json").read_text())
     assert "characterisation" in [s["kind"] for s in results["sections"]], results["sections"]
     assert any("period 1, in-well-plus" in line for line in results["summary"]), results["summary"]
+
+
+# --- 9. one line, before the work ----------------------------------------------------------------------------
+STRUCTURE = {"masses": [1.0, 0.2], "element": {"m": 0.2, "k1": 426.0, "k2": 1000.0, "k3": 6.7e5, "c": 3.5, "c_nl": 0.5},
+             "at": [1, 2], "stiffness": [[4.0e4, 0.0], [0.0, 0.0]], "damping": [[20.0, 0.0], [0.0, 0.0]]}  # fmt: skip
+
+
+@pytest.fixture(scope="module")
+def bad_lab(lab, one_well_files):
+    """The probe's records, each written with numpy from the lab's: a structure's of 3 samples and one whose
+    input is dead, a 60 s record with a dead auxiliary channel, a vibrometer reading its noise alone, a 3-row
+    record; a model of another mass; structures with a huge mass and with a spring of negative stiffness."""
+    raw = np.loadtxt(lab / "rec.csv", delimiter=",", skiprows=2)
+    t, u, z = raw.T
+    write_csv(lab / "rec2_3.csv", {"t": t[:3], "base_acc": u[:3], "z1": 0.05 * z[:3], "z2": z[:3]}, {"masses": "1,0.2"})
+    write_csv(lab / "rec2_dead.csv", {"t": t, "base_acc": 0 * u, "z1": 0.05 * z, "z2": z}, {"masses": "1.0,0.2"})
+    write_csv(lab / "three.csv", {"t": t[:3], "base_acc": u[:3], "z": z[:3]}, {"mass": "0.2"})
+    long = np.loadtxt(one_well_files["minus"], delimiter=",", skiprows=2)
+    noise = 1e-4 * np.random.default_rng(0).standard_normal(long.shape[0])
+    write_csv(lab / "ldv_noise.csv", {"t": long[:, 0], "base_acc": long[:, 1], "z_dot": noise}, {"mass": "0.2"})
+    write_csv(lab / "dead_aux.csv", {"t": long[:, 0], "base_acc": long[:, 1], "z": long[:, 2], "volt": 0 * long[:, 0]},
+              {"mass": "0.2"})  # fmt: skip
+    (lab / "m03.json").write_text(json.dumps({"m": 0.3, "k1": 426.0, "k2": -3060.0, "k3": 7.77e5, "c": 0.35}))
+    (lab / "S.json").write_text(json.dumps(STRUCTURE))
+    (lab / "S_heavy.json").write_text(json.dumps({**STRUCTURE, "masses": [1e300, 0.2]}))
+    (lab / "S_negative.json").write_text(json.dumps({**STRUCTURE, "stiffness": [[-4.0e4, 0.0], [0.0, 0.0]]}))
+    return lab
+
+
+@pytest.mark.parametrize("argv, says", [
+    (["frf", "rec2_3.csv"], "too few samples"),
+    (["frf", "rec2_dead.csv"], "constant"),
+    (["identify", "sindy", "dead_aux.csv", "--aux", "volt"], "volt"),
+    (["identify", "nsi", "ldv_noise.csv"], "no trace of the input"),
+    (["posterior", "rec.csv", "--input-noise", "1e7"], "1e+07"),
+    (["posterior", "rec.csv", "--start", "m03.json", "--no-refine"], "0.3 kg"),
+    (["report", "rec.csv", "--duration", "0.01"], "--duration 0.01"),
+    (["report", "three.csv"], "three.csv"),
+    (["simulate", "S.json", "rec.csv", "--z0", "1e6"], "1e+06"),
+    (["simulate", "S_heavy.json", "rec.csv"], "1e+300 kg"),
+    (["simulate", "S_negative.json", "rec.csv"], "-40000 N/m"),
+], ids=["frf-2dof-3-samples", "frf-2dof-dead-input", "sindy-dead-aux", "nsi-vibrometer-noise", "posterior-input-noise",
+        "posterior-start-of-another-mass", "report-duration", "report-3-rows", "simulate-structure-far-start",
+        "simulate-structure-huge-mass", "simulate-structure-negative-spring"])  # fmt: skip
+def test_refusals_are_one_line_before_any_progress(bad_lab, capsys, argv, says):
+    # each printed a progress line (or an emcee bar, or a "not made" line per section) before its one error
+    # line; the structure's three ran and said "diverged at t = 0.002 s" instead of the value that is wrong
+    out = bad_lab / ("o.csv" if argv[0] == "simulate" else "o" if argv[0] == "report" else "o.json")
+    argv = [bad_lab / a if a.endswith((".csv", ".json")) else a for a in argv]
+    msg = refused(bad_lab, capsys, [*argv, "-o", out], [out])  # not --quiet: a progress line would show
+    assert says in msg, msg

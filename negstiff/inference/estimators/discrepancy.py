@@ -641,6 +641,7 @@ class Discrepancy(StructureResults, Estimator):
         else:
             check_decay(rec, "the discrepancy workflow")
         rec.require_motion("the discrepancy workflow")
+        rec.require_live_aux("the discrepancy workflow")
         if element_of(self, rec) is None:
             self.check_length(rec)
 

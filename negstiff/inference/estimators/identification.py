@@ -338,11 +338,16 @@ def refuse_softening(rec: Measurement, n_id: int, method: str) -> None:
     """
     from negstiff.inference.steps.weak import WeakFormError, weak_least_squares
 
+    key = ("quick_cubic", n_id)
+    if key in rec.derived:  # judged once per record (the check, then the fit)
+        return
     try:
         quick = weak_least_squares(rec.segment(0, n_id), QUICK_TERMS)
     except (WeakFormError, np.linalg.LinAlgError, ValueError):
         return
-    if not quick.k3 > 0:
+    if quick.k3 > 0:
+        rec.derived[key] = True
+    else:
         raise InputError(
             f"{rec.source}: {method} refused before its work: the record's quick least-squares cubic softens "
             f"(k3 = {quick.k3:.3g} N/m^3), so no bounded double- or single-well model explains it; is z in m "
@@ -361,6 +366,21 @@ class Identifier(Estimator):
 
     def _estimate(self, rec: Measurement, n_id: int) -> Estimate:
         raise NotImplementedError
+
+    def _check_response(self, rec: Measurement) -> None:
+        """A single DOF's record as the fit reads it (``identification_record``) checked in the record's check,
+        before any progress line: a broadband record's response carries a trace of its input
+        (``Measurement.require_response``), and its quick cubic does not soften (``refuse_softening``). A
+        vibrometer reading its own noise was refused by NSI's subspace step, after its progress line.
+        """
+        from negstiff.inference.analysis.record_kind import identification_record, record_kind
+
+        if rec.n_dof == 1 and getattr(self, "element", None) is None:
+            kind = record_kind(rec)
+            if kind.kind not in ("impact", "decay"):
+                rec.require_response(type(self).__name__)
+            read = identification_record(rec, kind)
+            refuse_softening(read, int(round(read.n * (1 - self.validation_fraction))), type(self).__name__)
 
     def _final_details(self, rec: Measurement, model: Model, details: dict[str, Any]) -> dict[str, Any]:
         """The method's own result keys that depend on the final model (NSI's ``g_estimate``)."""

@@ -376,6 +376,7 @@ class NSI(StructureResults, Identifier):
         else:
             check_decay(rec, "NSI")
         rec.require_motion("NSI")
+        self._check_response(rec)
 
     def fit(self, data) -> NSI:
         """Identify from ``data`` (a ``Measurement`` or a file path): a single DOF's record through the shared

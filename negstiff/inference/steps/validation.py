@@ -83,6 +83,32 @@ def check_resolved(system, rec: Measurement, what: str) -> None:
         )
 
 
+def check_structure_run(structure: Structure, z0: float | None, z_limit: float = DEFAULT_Z_LIMIT) -> None:
+    """Refuse (``MeasurementError``, one line naming the value) a structure no simulation under a record can run:
+    a mass beyond what a lab's structure holds (``MASS_RANGE_KG``), a linear stiffness or damping matrix that is
+    not positive semi-definite (a spring that pushes its masses away, a damper that feeds energy in: a negative
+    stiffness is the element's ``k1``), a start ``z0`` [m] across the element beyond the simulation's bound
+    ``z_limit``. Each ran and said "diverged at t = 0.002 s" instead.
+    """
+    from negstiff.io.schema import MASS_RANGE_KG
+
+    lo, hi = MASS_RANGE_KG
+    for i, m in enumerate(structure.masses):
+        if not lo <= m <= hi:
+            raise MeasurementError(f"the structure's mass m{i + 1} = {m:g} kg is beyond the masses a lab's structure "
+                                   f"holds ({lo:g} to {hi:g} kg)")  # fmt: skip
+    for name, matrix, unit, why in (("stiffness", structure.stiffness, "N/m", "a spring that pushes its masses away "
+                                     "(a negative stiffness is the element's k1)"),
+                                    ("damping", structure.damping, "N s/m", "a damper that feeds energy in")):
+        eig = np.linalg.eigvalsh(np.asarray(matrix, float))
+        if eig.size and eig.min() < -1e-12 * max(1.0, float(np.abs(eig).max())):
+            raise MeasurementError(f"the structure's linear {name} matrix has the eigenvalue {eig.min():g} {unit}: "
+                                   f"{why}; it must be positive semi-definite")  # fmt: skip
+    if z0 is not None and not abs(z0) < z_limit:
+        raise MeasurementError(f"a start z0 = {z0:g} m across the element lies beyond the simulation's bound |z| < "
+                               f"{z_limit:g} m")  # fmt: skip
+
+
 def stiffest(system, rec: Measurement) -> tuple[float, float]:
     """The system's stiffest linear angular frequency [rad/s] over the range the record visits (the model's wells
     and what lies between for an input-only record), and that |K'(z)| [N/m].

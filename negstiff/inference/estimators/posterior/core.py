@@ -307,11 +307,7 @@ class Posterior(Estimator):
             from negstiff.inference.steps.weak import weak_least_squares
 
             if self.start is not None:  # an identified (output-error refined) model: the MAP search starts there
-                if rec.mass is not None and abs(self.start.m / rec.mass - 1) > 1e-6:
-                    raise PosteriorError(
-                        f"{rec.source}: the start model's mass ({self.start.m:g} kg) is not the record's "
-                        f"({rec.mass:g} kg)"
-                    )
+                self._check_start_mass(rec)
                 start = self.start
                 self.start_info_ = {"source": "given", "model": start.to_dict()}
             else:
@@ -491,7 +487,23 @@ class Posterior(Estimator):
             raise PosteriorError(f"{type(self).__name__}(input_noise={self.input_noise!r}): a {kind.kind} "
                                  "record's windows are free decays between the pulses: no input's noise reaches "
                                  "them")  # fmt: skip
+        u_rms = float(np.std(rec.u))
+        if self.input_noise and not self.input_noise < u_rms:  # no start point had a positive density, after the bar
+            unit = "m/s^2" if rec.input_name == "base_acc" else "N"
+            raise PosteriorError(f"{type(self).__name__}(input_noise={self.input_noise:g}): the input's noise must be "
+                                 f"below the input's own rms, {u_rms:.3g} {unit} on {rec.source} (the input would be "
+                                 "its noise alone); None reads it from the input's spectrum")  # fmt: skip
+        self._check_start_mass(rec)
         Windows.check(rec, self.window_s)
+
+    def _check_start_mass(self, rec: Measurement) -> None:
+        """Refuse a start model (``start``) of another mass than the record's (in the record's check, before the
+        progress line and the bar; ``point_estimate`` checks it too).
+        """
+        if (self.model == "coefficients" and self.start is not None and rec.mass is not None
+                and abs(self.start.m / rec.mass - 1) > 1e-6):  # fmt: skip
+            raise PosteriorError(f"{rec.source}: the start model's mass ({self.start.m:g} kg) is not the record's "
+                                 f"({rec.mass:g} kg)")  # fmt: skip
 
     def fit(self, rec: Measurement) -> Posterior:
         """Sample the posterior of ``rec``; the result is ``result_`` (a ``PosteriorResult``)."""
