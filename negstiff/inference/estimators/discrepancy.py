@@ -73,6 +73,10 @@ from negstiff.models import Model, effects
 CUBIC_BASELINE = ("1", "z", "z^2", "z^3", "v", "v|v|")
 """The seed's own model form: cubic K, viscous c and quadratic c_nl (the contract's damping law)."""
 LINEAR_BASELINE = ("1", "z", "v")
+MEASURED_SE = 2.0
+"""A measured channel's term (``aux:NAME``) is named when its held-out weak residual falls by more than this many
+standard errors (no practical margin: a channel of noise alone is named by chance in about 2 % of rounds)."""
+
 PREDICTABILITY_FRACTION = 0.1
 """The record's predictability horizon (``Discrepancy._predictability``) is the time by which runs restarted from
 state estimates that differ by their noise have parted by this fraction of the signal's rms (pooled over restarts)."""
@@ -755,8 +759,11 @@ class Discrepancy(StructureResults, Estimator):
                     cands.append(self._score(rec, Candidate(aux_terms([channel])[0], terms, stop, (*aux, channel))))
             ranking = sorted(cands, key=lambda c: c.heldout_percent)
             best = self._parsimonious(ranking)
-            gain = compare(_scores(none), _scores(best), self.margin, _scores(none))
-            named = best.effect != "none" and gain.significant
+            # a measured channel's term (aux:NAME) is no guess from a catalogue: no practical margin (the lab's
+            # consistency floor a catalogue's term can buy back), twice the standard error instead of once
+            measured = best.effect.startswith(effects.AUX_PREFIX)
+            gain = compare(_scores(none), _scores(best), 0.0 if measured else self.margin, _scores(none))
+            named = best.effect != "none" and (gain.gain > MEASURED_SE * gain.se if measured else gain.significant)
             iteration = {
                 "ranking": [{"effect": c.effect, "score": c.heldout_percent, **c.notes} for c in ranking],
                 "named": best.effect if named else "none",
@@ -765,6 +772,8 @@ class Discrepancy(StructureResults, Estimator):
             }
             self.iterations_.append(iteration)
             if not named:
+                if best.effect != "none":  # why the effect ranked first was not named
+                    iteration["verdict"] = self._not_named(ranking[0], best, iteration, measured)
                 break
             trial = self._trial(rec, best)
             iteration["kept"], iteration["verdict"], iteration["evidence"] = self._helps(
@@ -805,6 +814,17 @@ class Discrepancy(StructureResults, Estimator):
         self.warnings_ = [text for _, text in lines]
         self.record_ = dict(rec.info)
         return self
+
+    def _not_named(self, first: Candidate, best: Candidate, iteration: dict[str, Any], measured: bool) -> str:
+        """Why the round's best candidate (``best``, the first-ranked ``first`` or one as good with fewer
+        parameters) was not named: its held-out weak residual's fall against the rule it did not pass.
+        """
+        who = f"{first.effect}, ranked first," if best is first else (
+            f"{first.effect}, ranked first (and {best.effect}, as good with fewer parameters),")  # fmt: skip
+        rule = ("twice its standard error (a measured channel)" if measured else
+                f"the naming margin ({100 * self.margin:g} % of the residual) or one standard error")  # fmt: skip
+        return (f"{who} not named: with {best.effect} the held-out weak residual fell {iteration['gain_percent']:.3g} "
+                f"% (one standard error {iteration['standard_error_percent']:.3g} %), not beyond {rule}")
 
     def _trial(self, rec: Measurement, best: Candidate) -> dict[str, Any]:
         """The model with ``best`` added: every parameter refitted on the identification part by weak least
@@ -854,6 +874,14 @@ class Discrepancy(StructureResults, Estimator):
             if evidence["folds"].get("windows", 0) >= 3 and evidence["folds"].get("acting") is not None:
                 judged = {**evidence["folds"], "rest": regime.get("rest")}
                 where = f"windows of the record (in {len(judged['folds'])} blocks, each predicted by fits without it)"
+        # a measured channel's term the equation error named (beyond twice its standard error) is kept unless it
+        # predicts worse beyond its uncertainty: the catalogue's rule (better beyond it) dropped a piezo's coupling
+        # whose windows' error fell 30 % within a wide one (measured)
+        measured = effect.startswith(effects.AUX_PREFIX)
+
+        def not_worse(c: dict[str, Any] | None) -> bool:
+            return c is not None and not (c["gain_percent"] < 0 and c["significant"])
+
         if judged.get("windows", 0) >= 3 and judged.get("acting") is not None:
             acts, rest = judged["acting"], judged.get("rest")
             worse = rest is not None and rest["gain_percent"] < 0 and rest["significant"]
@@ -861,6 +889,8 @@ class Discrepancy(StructureResults, Estimator):
                     + change.format(acts["gain_percent"], *acts["gain_interval_percent"]))  # fmt: skip
             if acts["significant"] and acts["gain_percent"] > 0 and not worse:
                 return True, f"{effect}: kept: {what}; the rest not worse", evidence
+            if measured and not_worse(acts) and not worse:
+                return True, f"{effect}: kept: a measured channel, not worse: {what}; the rest not worse", evidence
             why = "the rest predicted worse" if worse else "not a fall beyond its uncertainty"
             return False, f"{effect}: named by the equation error but not kept: {what}: {why}", evidence
         if pooled is None:
@@ -868,6 +898,9 @@ class Discrepancy(StructureResults, Estimator):
         txt = change.format(pooled["gain_percent"], *pooled["gain_interval_percent"])
         if pooled["significant"] and pooled["gain_percent"] > 0:
             return True, f"{effect}: kept: the held-out windows' rms error fell {txt}", evidence
+        if measured and not_worse(pooled):
+            return True, (f"{effect}: kept: a measured channel the equation error names, not predicting the held-out "
+                          f"windows worse: their rms error fell {txt}"), evidence  # fmt: skip
         return False, (f"{effect}: named by the equation error but not kept: with it the held-out windows' rms error "
                        f"fell {txt}, not beyond its uncertainty"), evidence  # fmt: skip
 
