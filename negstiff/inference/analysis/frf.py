@@ -326,15 +326,19 @@ Piersol, *Random Data*, eq. 9.65): a ground test's sweep at 10 % response noise 
 errors high and dozens of maxima of the noise (one inside the anti-resonance, where the coherence dips) 2-7."""
 
 
+Peaks = list[dict[str, Any]]
+
+
 def _resonances(f: np.ndarray, h1: np.ndarray, coh: np.ndarray, averages: int, cand: np.ndarray,
-                prominence: np.ndarray, peaks: list[dict[str, Any]]) -> tuple[list[dict[str, Any]], list[dict]]:  # fmt: skip
+                prominence: np.ndarray, peaks: Peaks) -> tuple[Peaks, Peaks]:  # fmt: skip
     """``peaks`` (fitted at ``cand``'s bins, of ``prominence``) split into resonances and the local maxima of a
     stationary estimate's random error: those within ``PEAK_RANDOM_ERRORS`` of their surroundings, those whose fit
     ran to a damping bound, and those narrower than a frequency bin (a resolved resonance seen through the Hann
     window is a few bins wide; a one-bin spike is the estimate's noise).
     """
     df = float(f[1] - f[0])
-    keep, off = [], []
+    keep: Peaks = []
+    off: Peaks = []
     for p in peaks:
         k = int(np.argmin(np.abs(f - p["peak_bin_hz"])))
         i = np.flatnonzero(cand == k)
