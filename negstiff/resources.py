@@ -179,4 +179,18 @@ def worker_initializer(threads: int | None = None):
     """
     if threads is not None:
         os.environ.setdefault("NEGSTIFF_THREADS", str(int(threads)))
+    _thread_lock_for_bars()
     return limit_threads(1, own=usable_cores())
+
+
+def _thread_lock_for_bars() -> None:
+    """A worker's progress bars (tqdm) share a thread lock, not tqdm's default multiprocessing lock: that is a
+    semaphore the resource tracker reports as leaked when the worker is ended (Ctrl-C on reproduce printed
+    "There appear to be 2 leaked semaphore objects"); a worker's bars are its own.
+    """
+    try:
+        from tqdm.std import TqdmDefaultWriteLock
+    except ImportError:  # pragma: no cover - tqdm is a dependency
+        return
+    if not hasattr(TqdmDefaultWriteLock, "mp_lock"):
+        TqdmDefaultWriteLock.mp_lock = None

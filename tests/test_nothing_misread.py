@@ -337,3 +337,49 @@ def test_frf_reports_the_resonances_not_the_noise_in_an_anti_resonance(seed, met
     found = sorted(p["f_hz"] for p in r["peaks"])
     assert len(found) == 2, [(round(p["f_hz"], 3), round(p["zeta"], 4), round(p["coherence"], 2)) for p in r["peaks"]]
     assert found == pytest.approx([2.469, 6.357], rel=0.01)
+
+
+# --- 11. Ctrl-C late in reproduce ----------------------------------------------------------------------------
+SECTION_PROCESS = """
+import os, sys, time, warnings
+from concurrent.futures import ProcessPoolExecutor
+from multiprocessing import get_context
+from pathlib import Path
+from negstiff.study import reproduce
+
+def section(here):  # what a section does: a progress bar (tqdm), a warning of its own, then work
+    from tqdm import tqdm
+    from negstiff.errors import ConvergenceWarning
+    for _ in tqdm(range(3), disable=True):
+        pass
+    warnings.warn("the posterior has not converged", ConvergenceWarning)
+    (Path(here) / f"ran{os.getpid()}").touch()
+    time.sleep(60)
+
+if __name__ == "__main__":
+    here = Path(sys.argv[1])
+    pool = ProcessPoolExecutor(2, mp_context=get_context("spawn"), initializer=reproduce._share_cores, initargs=(1,))
+    futures = [pool.submit(section, str(here)) for _ in range(2)]
+    deadline = time.monotonic() + 90
+    while len(list(here.glob("ran*"))) < 2 and time.monotonic() < deadline:  # both sections under way
+        time.sleep(0.1)
+    time.sleep(0.5)
+    reproduce._stop_workers(pool)  # what reproduce does on Ctrl-C, before its one line
+    pool.shutdown(wait=True, cancel_futures=True)
+    print(len(list(here.glob("ran*"))))
+"""
+
+
+def test_section_processes_ended_by_ctrl_c_leave_no_line_of_their_own(tmp_path):
+    # Ctrl-C at 25-40 s into reproduce printed the parent's one line and 8 more: a section's ConvergenceWarning and
+    # the resource tracker's "2 leaked semaphore objects" (each process's tqdm lock, a multiprocessing semaphore,
+    # never released by a process that is ended). A section's warnings are in its results; its bars' lock is a
+    # thread lock. Run as reproduce runs them, in a program of its own (the tracker writes to its stderr)
+    import subprocess
+    import sys
+
+    script = tmp_path / "sections.py"
+    script.write_text(SECTION_PROCESS)
+    done = subprocess.run([sys.executable, str(script), str(tmp_path)], capture_output=True, text=True, timeout=150)
+    assert done.returncode == 0 and done.stdout.strip() == "2", (done.stdout, done.stderr)  # both sections ran
+    assert done.stderr.strip() == "", done.stderr
