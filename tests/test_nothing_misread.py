@@ -383,3 +383,29 @@ def test_section_processes_ended_by_ctrl_c_leave_no_line_of_their_own(tmp_path):
     done = subprocess.run([sys.executable, str(script), str(tmp_path)], capture_output=True, text=True, timeout=150)
     assert done.returncode == 0 and done.stdout.strip() == "2", (done.stdout, done.stderr)  # both sections ran
     assert done.stderr.strip() == "", done.stderr
+
+
+# --- 12. left in the last notes ------------------------------------------------------------------------------
+def test_a_per_unit_mass_models_forced_responses_are_forces_per_kilogram():
+    # a decay without a mass gives a model per unit mass (m = 1): its forced responses' levels are newtons per
+    # kilogram of moving mass, labelled N; the same decay with its mass (0.2 kg) and the model in newtons gives
+    # forces 0.2 times as large in N: the device's force, per kilogram in the first
+    import warnings
+    from dataclasses import replace
+
+    from impact_records import DUFFING, MASS, decay_record
+
+    from negstiff import from_arrays
+    from negstiff.inference.analysis.backbone import backbone
+
+    _, z, _ = decay_record(DUFFING, 0.008, 1024.0, 8.0)
+    z = z + 5e-6 * np.random.default_rng(3).standard_normal(z.size)
+    per_kg = replace(DUFFING, m=1.0, k1=DUFFING.k1 / MASS, k3=DUFFING.k3 / MASS, c=DUFFING.c / MASS)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        r_kg = backbone(from_arrays(np.zeros_like(z), z, 1024.0, input_name="force"), model=per_kg)
+        r_n = backbone(from_arrays(np.zeros_like(z), z, 1024.0, input_name="force", mass=MASS), model=DUFFING)
+    assert r_kg["forced"]["force_unit"] == "N/kg" and r_n["forced"]["force_unit"] == "N"
+    for a, b in zip(r_kg["forced"]["curves"], r_n["forced"]["curves"], strict=True):
+        assert a["force_n"] * MASS == pytest.approx(b["force_n"], rel=1e-6)
+    assert not [w for w in r_kg["warnings"] if " N " in w or w.endswith(" N")], r_kg["warnings"]

@@ -368,7 +368,8 @@ def backbone_section(res: dict[str, Any], label: str = "", model_name: str = "")
         if forced:
             off = max(abs(c["peak_off_backbone_percent"] or 0.0) for c in forced)
             sec.text(f"Grey: the forced response {model_name or 'the model'} predicts under a harmonic force of "
-                     + ", ".join(f"{fmt(c['force_n'], 2)}" for c in forced) + " N about its "
+                     + ", ".join(f"{fmt(c['force_n'], 2)}" for c in forced)
+                     + f" {res['forced'].get('force_unit', 'N')} about its "
                      f"{res['forced']['well']} well (continuation, dashed where unstable); each peak lies within "
                      f"{'0.01' if off < 0.01 else fmt(off, 2)} % of the model's own backbone (light damping puts it "
                      "zeta^2 below).")  # fmt: skip

@@ -378,7 +378,7 @@ def _resonant_force(model, z_well: float, amplitude: float, cons: dict[str, Any]
 
 
 def forced_response(model, well: str, amplitude_max: float, f_range: tuple[float, float],
-                    levels: Sequence[float] = FORCED_LEVELS) -> dict[str, Any]:  # fmt: skip
+                    levels: Sequence[float] = FORCED_LEVELS, force_unit: str = "N") -> dict[str, Any]:  # fmt: skip
     """The periodic responses of ``model`` about ``well`` under f = F sin(2 pi f t), continued in frequency over
     ``f_range`` [Hz] at the forces whose resonance reaches ``levels`` times ``amplitude_max`` [m] (``_resonant_force``:
     the model's damping over a harmonic orbit at its backbone's frequency).
@@ -390,13 +390,16 @@ def forced_response(model, well: str, amplitude_max: float, f_range: tuple[float
         amplitude), ``stable`` lists, ``peak`` (``f_hz``, ``amplitude_m``) and ``peak_off_backbone_percent`` (the
         peak's frequency against the model's conservative backbone at the peak's amplitude); ``well``;
         ``warnings`` (a level not drawn: beyond the well's orbits, no dissipation, not followed; a peak more than
-        20 % from its target).
+        20 % from its target); ``force_unit``: ``force_unit``, the forces' unit (``"N/kg"`` for a model per unit
+        mass: its force is the device's per kilogram of moving mass, ``force_unit_of``).
     """
     from negstiff.models.continuation import ContinuationError, nfrc
 
     eq = model.equilibria()
     z_well = eq.well(well)
-    out: dict[str, Any] = {"well": well, "f_range_hz": list(f_range), "curves": [], "warnings": []}
+    unit = force_unit
+    out: dict[str, Any] = {"well": well, "f_range_hz": list(f_range), "curves": [], "warnings": [],
+                           "force_unit": unit}  # fmt: skip
     if not float(model.stiffness(z_well)) > 0:
         out["warnings"].append(f"no forced response drawn: the model's {well} well is not stable (K' <= 0)")
         return out
@@ -416,11 +419,11 @@ def forced_response(model, well: str, amplitude_max: float, f_range: tuple[float
         try:
             res = nfrc(model, freq=tuple(f_range), amplitude=force, well=well, input_kind="force", max_period=1)
         except ContinuationError as exc:
-            out["warnings"].append(f"the forced response at {force:.3g} N was not followed: {exc}")
+            out["warnings"].append(f"the forced response at {force:.3g} {unit} was not followed: {exc}")
             continue
         pts = [p for b in res["branches"] if b["period"] == 1 for p in b["points"]]
         if not pts:
-            out["warnings"].append(f"the forced response at {force:.3g} N has no periodic branch")
+            out["warnings"].append(f"the forced response at {force:.3g} {unit} has no periodic branch")
             continue
         amp = np.array([(p["max_z"] - p["min_z"]) / 2 for p in pts])
         f = np.array([p["f_hz"] for p in pts])
@@ -433,7 +436,7 @@ def forced_response(model, well: str, amplitude_max: float, f_range: tuple[float
             f_top, a_top = float(np.polyval(qf, s_top)), float(np.polyval(qa, s_top))
         f_bb = np.interp(a_top, cons["peak_amplitude_m"], cons["f_hz"], left=np.nan, right=np.nan)
         if abs(a_top / target - 1) > 0.2:  # the orbit is not the cosine the force was sized on (near a barrier)
-            out["warnings"].append(f"the forced response at {force:.3g} N peaks at {1e3 * a_top:.3g} mm, not the "
+            out["warnings"].append(f"the forced response at {force:.3g} {unit} peaks at {1e3 * a_top:.3g} mm, not the "
                                    f"{1e3 * target:.3g} mm it was sized for (the orbit far from a cosine)")  # fmt: skip
         out["curves"].append({
             "force_n": float(force), "f_hz": f.tolist(), "amplitude_m": amp.tolist(),
@@ -442,6 +445,13 @@ def forced_response(model, well: str, amplitude_max: float, f_range: tuple[float
             "peak_off_backbone_percent": float(100 * (f_top / f_bb - 1)) if np.isfinite(f_bb) else None,
         })  # fmt: skip
     return out
+
+
+def force_unit_of(model, rec: Measurement) -> str:
+    """The unit of ``model``'s forces on ``rec``: ``"N/kg"`` for a model per unit mass (m = 1 identified from a
+    record without a mass: every force the device's divided by its moving mass), else ``"N"``.
+    """
+    return "N/kg" if rec.mass is None and float(model.m) == 1.0 else "N"
 
 
 def credible_band(curves: Sequence[dict[str, Any]], amplitudes: np.ndarray, prob: float = 0.9) -> dict[str, Any]:
@@ -529,7 +539,7 @@ def backbone(rec: Measurement, model=None, draws: Sequence | None = None, prob: 
             f_all = np.concatenate([hil["f_hz"], pred["hilbert"]["f_hz"]])
             f_range = (FORCED_SPAN[0] * float(np.min(f_all)), FORCED_SPAN[1] * float(np.max(f_all)))
             a_max = float(np.max(measured["peaks"]["amplitude_m"], initial=measured["amplitude_range_m"][1]))
-            out["forced"] = forced_response(model, well, a_max, f_range)
+            out["forced"] = forced_response(model, well, a_max, f_range, force_unit=force_unit_of(model, rec))
             out["warnings"] += out["forced"]["warnings"]
     if draws:
         curves = [predict_backbone(d, rec, measured)["hilbert"] for d in draws]
