@@ -409,3 +409,24 @@ def test_a_per_unit_mass_models_forced_responses_are_forces_per_kilogram():
     for a, b in zip(r_kg["forced"]["curves"], r_n["forced"]["curves"], strict=True):
         assert a["force_n"] * MASS == pytest.approx(b["force_n"], rel=1e-6)
     assert not [w for w in r_kg["warnings"] if " N " in w or w.endswith(" N")], r_kg["warnings"]
+
+
+def test_the_hilbert_backbones_first_and_last_periods_carry_no_end_effects():
+    # a linear 10 Hz oscillator at 0.5 % damping released from 5 mm, recorded for 20 s (it still rings at the
+    # end): every period of the Hilbert backbone gives the decay's damping within 10 % (measured 4.4 %) and its
+    # frequency within 0.5 % (the first period's 0.38 %, the band-pass's start). The first and last periods' damping
+    # read 0.13 % and 2.5 % (the band-pass's and the Hilbert transform's ends inside the damping's eight-period
+    # window), which a reader takes for physics
+    from negstiff import from_arrays
+    from negstiff.inference.analysis.backbone import backbone
+
+    fs, f0, zeta = 1024.0, 10.0, 0.005
+    t = np.arange(int(20.0 * fs)) / fs
+    w = 2 * np.pi * f0
+    wd = w * math.sqrt(1 - zeta**2)
+    z = 5e-3 * np.exp(-zeta * w * t) * (np.cos(wd * t) + zeta * w / wd * np.sin(wd * t))
+    z += 5e-7 * np.random.default_rng(0).standard_normal(z.size)  # a laser's noise
+    hil = backbone(from_arrays(np.zeros_like(t), z, fs, input_name="force"))["measured"]["hilbert"]
+    assert len(hil["zeta"]) > 150  # the decay's periods above the noise, less the ends
+    assert np.array(hil["zeta"]) == pytest.approx(zeta, rel=0.10)
+    assert np.array(hil["f_hz"]) == pytest.approx(wd / (2 * np.pi), rel=5e-3)

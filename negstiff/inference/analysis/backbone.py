@@ -65,6 +65,11 @@ NOISE_MARGIN = 100.0
 sensor noise): the phase's noise, about noise / amplitude radians, then moves a period's frequency by under
 0.2 %; below, by several per cent."""
 
+DAMPING_EDGE_CYCLES = EDGE_CYCLES + 2
+"""Periods at each end of the band-passed decay whose log-envelope the decay rate's fit does not read: the end
+effects reach further into a slope over ``DAMPING_CYCLES`` periods than into a period's frequency (measured on linear
+decays to their ends: every period's damping within 5 % at 0.5 %, within 7 % at 0.1 %)."""
+
 SMOOTH_CYCLES = 3
 """The phase and the log-envelope are smoothed by local quadratics over this many periods."""
 
@@ -170,10 +175,18 @@ def hilbert_backbone(x: np.ndarray, fs: float, band: tuple[float, float] | None 
     ln_raw = np.log(np.maximum(np.abs(z), 1e-300))
     gain = np.abs(signal.sosfreqz(sos, worN=np.clip(w_s / (2 * np.pi), 1e-9, None), fs=fs)[1]) ** 2  # filtfilt: |H|^2
     ln_a = signal.savgol_filter(ln_raw, win, 2) - np.log(np.maximum(gain, 1e-12))
-    win_d = 2 * (DAMPING_CYCLES * per // 2) + 1
-    sigma_all = -signal.savgol_filter(ln_raw, min(win_d, 2 * (x.size // 2) - 1), 2, deriv=1) * fs
-    half_d = min(win_d // 2, x.size // 2 - 1)  # within half a window of an end: the nearest full window's slope
-    sigma_all[:half_d], sigma_all[x.size - half_d :] = sigma_all[half_d], sigma_all[x.size - half_d - 1]
+    # the decay rate: the slope of a local quadratic of the log-envelope over DAMPING_CYCLES periods, each window clear
+    # of the envelope's end effects (``DAMPING_EDGE_CYCLES``); within half a window of them, the nearest clear
+    # window's: the nearest window from the record's ends reached into them, and a 0.5 % decay's first and last
+    # periods read 0.13 % and 2.5 % (measured)
+    cut = DAMPING_EDGE_CYCLES * per
+    clear = slice(min(cut, x.size // 4), max(x.size - cut, x.size - x.size // 4))
+    n_clear = clear.stop - clear.start
+    win_d = min(2 * (DAMPING_CYCLES * per // 2) + 1, 2 * ((n_clear - 1) // 2) + 1)
+    sigma_all = np.empty(x.size)
+    sigma_all[clear] = -signal.savgol_filter(ln_raw[clear], win_d, 2, deriv=1) * fs
+    first, last = clear.start + win_d // 2, clear.stop - 1 - win_d // 2
+    sigma_all[:first], sigma_all[last + 1 :] = sigma_all[first], sigma_all[last]
     edge = EDGE_CYCLES * per
     idx = np.arange(edge, x.size - edge, per)
     if idx.size < 2:
