@@ -430,3 +430,19 @@ def test_the_hilbert_backbones_first_and_last_periods_carry_no_end_effects():
     assert len(hil["zeta"]) > 150  # the decay's periods above the noise, less the ends
     assert np.array(hil["zeta"]) == pytest.approx(zeta, rel=0.10)
     assert np.array(hil["f_hz"]) == pytest.approx(wd / (2 * np.pi), rel=5e-3)
+
+
+def test_the_discrepancys_predictability_does_not_depend_on_the_frame(lab, tmp_path):
+    # the record's horizon is where restarted runs part by a tenth of the motion's size: z's rms about zero made it
+    # depend on where z's zero lies (0.40 s, and 0.58 s with z read 50 mm lower); the same cross-well record with a
+    # sensor's zero elsewhere (the baseline's cubic shifted with it) has the same horizon
+    from negstiff import Discrepancy, from_arrays
+
+    t, u, z, _ = dop853_record(duration=40.0, rms=8.0, seed=5)
+    noise = 3e-6 * np.random.default_rng(5).standard_normal(z.size)
+    horizons = []
+    for offset in (0.0, -0.05):
+        rec = from_arrays(u, z + noise + offset, FS, mass=0.2)
+        horizons.append(Discrepancy(max_effects=0, refine=False).fit(rec).predictability_)
+    assert horizons[0]["limited"], horizons[0]  # chaos: the horizon is the record's, not the cap
+    assert horizons[1]["horizon_s"] == pytest.approx(horizons[0]["horizon_s"], rel=0.05), horizons
