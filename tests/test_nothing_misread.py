@@ -446,3 +446,45 @@ def test_the_discrepancys_predictability_does_not_depend_on_the_frame(lab, tmp_p
         horizons.append(Discrepancy(max_effects=0, refine=False).fit(rec).predictability_)
     assert horizons[0]["limited"], horizons[0]  # chaos: the horizon is the record's, not the cap
     assert horizons[1]["horizon_s"] == pytest.approx(horizons[0]["horizon_s"], rel=0.05), horizons
+
+
+def test_discrepancy_fit_leaves_its_parameters_as_given_and_its_interval_reads_the_record_as_the_fit(monkeypatch):
+    # on a hammer's record the fit set window_s to the ring-down's window and refine to False while it ran, and
+    # effect_interval called after it read the record raw (the force's 0.5 N offset and pulses as the input): the
+    # parameters stay as given throughout, and effect_interval on the same record gives the fit's own interval
+    # (bit-equal: the same code on the record read the same way)
+    import warnings
+
+    from impact_records import DOUBLE_WELL, MASS, hammer_record_with_force
+
+    from negstiff import Discrepancy, from_arrays
+    from negstiff.inference.estimators import discrepancy
+
+    onset = float(DOUBLE_WELL.equilibria().z_plus + 0.005)
+
+    def stop(z, v):
+        return 3000.0 * (z - onset) if z > onset else 0.0
+
+    _, f, z, _ = hammer_record_with_force(DOUBLE_WELL, DOUBLE_WELL.equilibria().z_plus, 1000.0, (0.5, 3.0, 5.5, 8.0),
+                                          40.0, 0.004, 10.0, stop)  # fmt: skip
+    rng = np.random.default_rng(1)
+    rec = from_arrays(f + 0.5 + 0.05 * rng.standard_normal(f.size), z + 1e-6 * rng.standard_normal(z.size), 1000.0,
+                      input_name="force", mass=MASS)  # fmt: skip
+    est = Discrepancy()
+    given = est.get_params()
+    seen = []
+    predictability = discrepancy.Discrepancy._predictability
+
+    def spy(self, *args, **kwargs):
+        seen.append(self.get_params())
+        return predictability(self, *args, **kwargs)
+
+    monkeypatch.setattr(discrepancy.Discrepancy, "_predictability", spy)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        est.fit(rec)
+        again = est.effect_interval(rec)
+    assert est.effects_ == ["end_stop"], est.iterations_
+    assert seen == [given] and est.get_params() == given
+    assert est.window_s_ < est.window_s  # the ring-down's windows, kept beside the parameter
+    assert again == est.effect_interval_

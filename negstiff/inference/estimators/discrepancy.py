@@ -40,7 +40,7 @@ from typing import Any, override
 
 import numpy as np
 
-from negstiff.errors import InputError, MeasurementError, issue
+from negstiff.errors import InputError, MeasurementError, NotFittedError, issue
 from negstiff.inference.estimators.base import Estimator
 from negstiff.inference.estimators.parameters import FRACTION, Boolean, Constraint, Interval, Options, Several
 from negstiff.inference.estimators.structure_id import ElementPlace, StructureResults, element_of
@@ -521,14 +521,14 @@ class Discrepancy(StructureResults, Estimator):
         coef = self._fit(W, y, cand.terms, cand.stop is not None, len(cand.aux))
         Ws, ys = self._design(rec, self.n_fit_, self.n_id_, cand.stop, cand.aux)
         r2 = (ys - Ws @ coef) ** 2
-        rows = block_rows(self.window_s, rec.fs, self._form.stride)
+        rows = block_rows(self.window_s_, rec.fs, self._form.stride)
         nb = r2.size // rows
         if nb < 2:
             need = 2 * rows / max(1, r2.size) * rec.n  # samples of record that give two blocks
             raise DiscrepancyError(
                 f"{rec.source}: too short for the discrepancy workflow: {rec.duration:.3g} s, at least about "
                 f"{need / rec.fs:.3g} s are needed (the part from {100 * self.n_fit_ / rec.n:.0f} to "
-                f"{100 * self.n_id_ / rec.n:.0f} % of the record scores each effect in {self.window_s:g} s blocks, "
+                f"{100 * self.n_id_ / rec.n:.0f} % of the record scores each effect in {self.window_s_:g} s blocks, "
                 "two at least)"
             )
         cand.block_ms = block_scores(r2, rows, ys.var())
@@ -713,13 +713,11 @@ class Discrepancy(StructureResults, Estimator):
         # the pulses, it closed the gap the pulses make (4.4 -> 1.2 % on the double well with its stop found, whose
         # own gap was 0.38 %: measured)
         no_hybrid = kind.kind == "impact" and self.unnamed
-        window_s, refine, unnamed = self.window_s, self.refine, self.unnamed
-        self.window_s, self.refine = self.window_s_, False if unrefined else self.refine
-        self.unnamed = unnamed and not no_hybrid
-        try:
-            self._fit_one(identification_record(rec, kind))
-        finally:
-            self.window_s, self.refine, self.unnamed = window_s, refine, unnamed
+        # what this fit runs with, kept apart from the parameters (which the fit leaves as given: it swapped them while
+        # it ran, so a method called after it on a ring-down read the record raw, in the parameter's windows)
+        self._refine_run = False if unrefined else self.refine
+        self._unnamed_run = self.unnamed and not no_hybrid
+        self._fit_one(identification_record(rec, kind))
         if unrefined:
             self.refinement_ = {"applied": False, "reason": "not run on a hammer's record (refine=True runs it): its "
                                 "windows and held-out free run would cross the pulses, which a few samples do not "
@@ -741,7 +739,7 @@ class Discrepancy(StructureResults, Estimator):
         base_model = self._refit_model(rec, terms, stop)
         self.baseline_model_ = base_model
         self.baseline_refinement_ = None
-        if self.refine is not False:  # the gap a user sees is the best the baseline's form predicts, not its weak fit's
+        if self._refine_run is not False:  # the gap a user sees: the best the baseline's form predicts, not its weak fit's
             val = validate(base_model, rec, self.n_id_)
             base_model, _, self.baseline_refinement_ = refine_stage(base_model, rec, self.n_id_, val, held=_held(terms))
         self.gap_before_ = self._gap(rec, base_model)
@@ -815,9 +813,9 @@ class Discrepancy(StructureResults, Estimator):
                                    "windows": reg.get("windows", 0), "window_s": reg.get("window_s"),
                                    "record_window_s": reg.get("record_window_s"), "judged_on": judged}  # fmt: skip
         self.locate_after_ = self.locate(rec, terms, stop, aux)
-        self.effect_interval_ = self.effect_interval(rec)
+        self.effect_interval_ = self._effect_interval(rec)
         self.bounded_ = boundedness(self.model_, rec.segment(0, self.n_id_))
-        self.unnamed_ = self._unnamed(rec) if self.unnamed else None
+        self.unnamed_ = self._unnamed(rec) if self._unnamed_run else None
         lines = classified(rec, self.model_, [] if self.bounded_["ok"] else [self.bounded_["warning"]])
         issue(lines)
         self.warnings_ = [text for _, text in lines]
@@ -842,7 +840,7 @@ class Discrepancy(StructureResults, Estimator):
         """
         initial = self._refit_model(rec, best.terms, best.stop, best.aux)
         model, refinement = initial, None
-        if self.refine is not False:
+        if self._refine_run is not False:
             val = validate(initial, rec, self.n_id_)
             model, _, refinement = refine_stage(initial, rec, self.n_id_, val, held=_held(best.terms))
         return {"model": model, "initial": initial, "refinement": refinement, "gap": self._gap(rec, model)}
@@ -994,13 +992,13 @@ class Discrepancy(StructureResults, Estimator):
         ``window_s / 2`` and at least 8 samples), ``"limited"`` (whether the horizon shortened it), ``"restarts"``,
         ``"fraction"``, ``"method"}``.
         """
-        cap = max(8, int(round(self.window_s * rec.fs / 2)))
+        cap = max(8, int(round(self.window_s_ * rec.fs / 2)))
         sz, sv = _start_noise(rec)
-        every = restart_windows(self.n_id_, rec.fs, self.window_s / 20, min_step=1)
+        every = restart_windows(self.n_id_, rec.fs, self.window_s_ / 20, min_step=1)
         windows = RestartWindows.at(every.starts[every.starts + cap <= self.n_id_], cap)
         out: dict[str, Any] = {"horizon_s": cap / rec.fs, "window_s": cap / rec.fs, "limited": False,
                                "restarts": len(windows), "fraction": PREDICTABILITY_FRACTION}  # fmt: skip
-        out["method"] = (f"pairs of the baseline's runs restarted every {self.window_s / 20:g} s over the "
+        out["method"] = (f"pairs of the baseline's runs restarted every {self.window_s_ / 20:g} s over the "
                          f"identification part, one from a state moved by its noise ({1e6 * sz:.3g} um, "
                          f"{1e3 * sv:.3g} mm/s rms): the time their pooled rms separation exceeds "
                          f"{100 * PREDICTABILITY_FRACTION:g} % of z's amplitude (half its 5-95 % range), at most "
@@ -1187,7 +1185,7 @@ class Discrepancy(StructureResults, Estimator):
         return {
             "term_rms": float(np.sqrt(np.mean(term**2))),
             "term_percent_of_restoring_force": float(100 * np.sqrt(np.mean(term**2) / np.mean(force**2))),
-            "gap": h.restarted_gap(rec, self.n_id_, self.window_s, self._z0, self._v0),
+            "gap": h.restarted_gap(rec, self.n_id_, self.window_s_, self._z0, self._v0),
             **h.to_json(),
         }
 
@@ -1267,14 +1265,14 @@ class Discrepancy(StructureResults, Estimator):
         """The held-out tail's gap windows: ``window_s`` windows from the split (``restart_windows``), on a hammer's
         record restarted after its pulses (``_after_pulses``).
         """
-        return self._after_pulses(rec, restart_windows(rec.n, rec.fs, self.window_s, start=self.n_id_))
+        return self._after_pulses(rec, restart_windows(rec.n, rec.fs, self.window_s_, start=self.n_id_))
 
     def _tail_runs(self, model: Model, rec: Measurement) -> dict[str, Any]:
         """The held-out tail's restarted free runs (``validation.restarted_free_runs``' keys) over ``_tail_windows``:
         ``restarted_free_runs`` itself where they are its windows (any record but a hammer's).
         """
         if vars(self).get("record_kind_") is None or self.record_kind_.kind != "impact":
-            return restarted_free_runs(model, rec, self.n_id_, self.window_s, self._z0, self._v0)
+            return restarted_free_runs(model, rec, self.n_id_, self.window_s_, self._z0, self._v0)
         windows = self._tail_windows(rec)
         if not len(windows):
             return {}
@@ -1318,7 +1316,21 @@ class Discrepancy(StructureResults, Estimator):
         windows = self._after_pulses(rec, RestartWindows.at(sorted(starts), every.length))
         return windows, f"the record's windows, {extra} of them restarted where it acts"
 
-    def effect_interval(self, rec: Measurement, prob: float = 0.9) -> dict[str, Any]:
+    def effect_interval(self, data, prob: float = 0.9) -> dict[str, Any]:
+        """Each named effect's size with its interval (probability ``prob``) on ``data`` (a ``Measurement`` or a path:
+        the record this estimator was fitted on), read as the fit read it (``record_kind_``: a hammer's force
+        windowed, a free decay's input zero; its windows ``window_s_`` long): ``_effect_interval``.
+        """
+        if not self.fitted:
+            raise NotFittedError(f"this {type(self).__name__} is not fitted yet (effect_interval reads its fit): call "
+                                 "fit first")  # fmt: skip
+        from negstiff.inference.analysis.record_kind import identification_record
+
+        rec = self.check(data)
+        kind = vars(self).get("record_kind_")
+        return self._effect_interval(rec if kind is None else identification_record(rec, kind), prob)
+
+    def _effect_interval(self, rec: Measurement, prob: float = 0.9) -> dict[str, Any]:
         """Each named effect's size with its interval (probability ``prob``), by a Laplace approximation of the
         output error over the record's restarted windows (``_interval_windows``: runs of the record's predictable
         span, ``predictability_``, one after the other, and one more before each episode where the effect acts),
@@ -1448,7 +1460,7 @@ class Discrepancy(StructureResults, Estimator):
         out = _loo_compare(np.repeat(ms_a[None], draws, 0), np.repeat(ms_b[None], draws, 0), [*ra, *rb],
                            windows.length, rng)  # fmt: skip
         out["method"] = (f"arviz.compare (PSIS-LOO) over the held-out tail's {len(windows)} restarted "
-                         f"{self.window_s:g} s runs, {draws} draws of the noise variance")  # fmt: skip
+                         f"{self.window_s_:g} s runs, {draws} draws of the noise variance")  # fmt: skip
         return out
 
     def where_text(self) -> str:
