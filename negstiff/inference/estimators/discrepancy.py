@@ -739,7 +739,7 @@ class Discrepancy(StructureResults, Estimator):
         base_model = self._refit_model(rec, terms, stop)
         self.baseline_model_ = base_model
         self.baseline_refinement_ = None
-        if self._refine_run is not False:  # the gap a user sees: the best the baseline's form predicts, not its weak fit's
+        if self._refine_run is not False:  # the gap a user sees: the best the baseline form predicts, not its weak fit
             val = validate(base_model, rec, self.n_id_)
             base_model, _, self.baseline_refinement_ = refine_stage(base_model, rec, self.n_id_, val, held=_held(terms))
         self.gap_before_ = self._gap(rec, base_model)
