@@ -488,3 +488,25 @@ def test_discrepancy_fit_leaves_its_parameters_as_given_and_its_interval_reads_t
     assert seen == [given] and est.get_params() == given
     assert est.window_s_ < est.window_s  # the ring-down's windows, kept beside the parameter
     assert again == est.effect_interval_
+
+
+def test_a_decays_posterior_warns_that_its_k2_holds_for_zs_zero_as_measured():
+    # a symmetric Duffing (k2 = 0) rings down about its one well: the data read the restoring force's curvature there,
+    # K''(z*) = 2 k2 + 6 k3 z*, and k2 follows only with z's zero (k0 is a nuisance: a cubic with a free constant is
+    # the same model in any frame), so a zero off by d moves k2 by 3 k3 d; here a zero off by the laser's own 1 um
+    # noise moves k2 by 9 N/m^2, beyond its posterior's standard deviation. k2 read 24.7 +- 9.9 for a truth of 0 on
+    # such a decay, with no word: the result says how far its interval rests on z's zero
+    import warnings
+
+    from impact_records import DUFFING, measured_decay
+
+    from negstiff import Posterior
+
+    rec = measured_decay(DUFFING, 0.008, 1, 8.0, 1e-6, 1000.0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        r = Posterior(seed=1, n_ensembles=2, max_steps=600).fit(rec).result()
+    said = [w for w in r["warnings"] if "z's zero" in w]
+    assert len(said) == 1 and said[0].startswith("k2 = "), r["warnings"]
+    sd = r["parameters"]["k2"]["sd"]
+    assert 3 * DUFFING.k3 * 1e-6 > sd  # the premise: a 1 um zero moves k2 beyond its sd
