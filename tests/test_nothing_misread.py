@@ -510,3 +510,26 @@ def test_a_decays_posterior_warns_that_its_k2_holds_for_zs_zero_as_measured():
     assert len(said) == 1 and said[0].startswith("k2 = "), r["warnings"]
     sd = r["parameters"]["k2"]["sd"]
     assert 3 * DUFFING.k3 * 1e-6 > sd  # the premise: a 1 um zero moves k2 beyond its sd
+
+
+# --- 13. the rendered report of a record without a mass ------------------------------------------------------
+def test_a_report_without_a_mass_labels_its_coefficients_per_kilogram_and_names_its_file_once(tmp_path):
+    # a free decay without a mass gives coefficients per unit mass: its report labelled them N/m, N/m^3, N s/m with
+    # "m [kg] 1" beside them; and its title and the record's heading carried the record's full path, which ran off the
+    # page: the file's name there, the path once in the record's table
+    from impact_records import DUFFING, decay_record
+
+    _, z, _ = decay_record(DUFFING, 0.008, 1000.0, 8.0)
+    z = z + 1e-6 * np.random.default_rng(1).standard_normal(z.size)
+    deep = tmp_path / "lab" / "campaign-2026" / "hammer-and-decay" / "channel-3"
+    deep.mkdir(parents=True)
+    path = write_csv(deep / "decay.csv", {"t": np.arange(z.size) / 1000.0, "force": np.zeros(z.size), "z": z})
+    out = tmp_path / "rep"
+    assert main(["report", str(path), "--decay", "--only", "nsi", "-o", str(out), "--quiet"]) == 0
+    md = (out / "index.md").read_text()
+    assert md.splitlines()[0] == "# negstiff report: decay.csv", md.splitlines()[0]
+    assert md.count(str(path)) == 1, md.count(str(path))  # the record's table
+    assert "k3 [N/m^3 per kg]" in md and "k3 [N/m^3]" not in md
+    assert "m [kg]" not in md
+    html = (out / "index.html").read_text()
+    assert "<title>negstiff report: decay.csv</title>" in html

@@ -139,7 +139,7 @@ def report_records(
     chosen = _only(only, kind)
     runs = _plan(rec, chosen, f_h, wells, seed, options)  # every estimator built and its parameters checked
     refused = _preflight(rec, runs)  # every section's own check of the record, before any progress line
-    rep = Report(f"negstiff report: {rec.source}")
+    rep = Report(f"negstiff report: {Path(rec.source).name}")  # the path once, in the record's table
     try:
         rec = pin_frame(rec)  # the record as the analyses see it (a derived z in the physical frame)
     except InputError:

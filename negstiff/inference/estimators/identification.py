@@ -497,8 +497,8 @@ class Identifier(Estimator):
         -------
         dict
             ``{"modal": {WELL: {"f_hz", "f_hz_se", "zeta", "zeta_se"}}, "model": {NAME: value},
-            "model_se": {NAME: se}, "blocks": [...], "method": ...}``: the estimate is this fit's own
-            (``modal_``, ``initial_model_``), the standard errors the blocks'.
+            "model_se": {NAME: se}, "blocks": [...], "method": ..., "mass_normalised"}``: the estimate is this fit's
+            own (``modal_``, ``initial_model_``), the standard errors the blocks'; ``mass_normalised``: per unit mass.
         """
         rec = self.check(data)
         if not (isinstance(blocks, int) and blocks >= 2):
@@ -524,7 +524,7 @@ class Identifier(Estimator):
         names = ("k0", "k1", "k2", "k3", "c", "c_nl")
         model_se = {n: float(np.std([blk["model"][n] for blk in per_block], ddof=1) / math.sqrt(blocks)) for n in names}
         return {"method": self.method, "modal": out_modal, "model": {n: getattr(own.initial_model, n) for n in names},
-                "model_se": model_se, "blocks": per_block,
+                "model_se": model_se, "blocks": per_block, "mass_normalised": own.mass_normalised,
                 "standard_error": f"batch means over {blocks} blocks of the identification part"}  # fmt: skip
 
     def _restore(self, result: dict[str, Any]) -> None:
