@@ -533,3 +533,14 @@ def test_a_report_without_a_mass_labels_its_coefficients_per_kilogram_and_names_
     assert "m [kg]" not in md
     html = (out / "index.html").read_text()
     assert "<title>negstiff report: decay.csv</title>" in html
+
+
+def test_a_duration_beyond_the_record_takes_the_whole_record(lab, every_input, tmp_path):
+    # found by the extended search: --duration 1e308 overflowed (int of an infinite sample count) in the report's
+    # check of its posterior; a duration past the record's end is the whole record
+    out = tmp_path / "p.json"
+    argv = ["posterior", str(every_input["short"]), "--duration", "1e308", "--max-steps", "100", "--ensembles", "2"]
+    assert main([*argv, "-o", str(out), "--quiet"]) == 0
+    assert json.loads(out.read_text())["settings"]["windows"] > 0
+    rep = tmp_path / "rep"
+    assert main(["report", str(lab / "rec.csv"), "--only", "frf", "--duration", "1e308", "-o", str(rep), "--quiet"]) == 0

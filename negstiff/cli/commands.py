@@ -269,7 +269,7 @@ def cmd_posterior(args) -> int:
                decay=args.decay)  # fmt: skip
     check_dofs(args, rec)  # N from the file; --dofs a check
     if args.duration is not None:
-        rec = rec.segment(0, min(rec.n, int(round(args.duration * rec.fs))))
+        rec = rec.segment(0, rec.n if not args.duration * rec.fs < rec.n else int(round(args.duration * rec.fs)))
     post = Posterior(
         model=args.model,
         mass_prior=args.mass_prior,

@@ -314,7 +314,9 @@ def _plan(rec, chosen, forcing_hz, wells, seed, options) -> list[Run]:
                       "discrepancy": "the discrepancy workflow"}  # fmt: skip
 
             def part(r, duration=duration):
-                return r if duration is None else r.segment(0, min(r.n, int(round(duration * r.fs))))
+                if duration is None or not duration * r.fs < r.n:  # the whole record (1e308 s: no overflow)
+                    return r
+                return r.segment(0, int(round(duration * r.fs)))
 
             def run(r, est=est, part=part, name=name):
                 fitted[name] = est.fit(part(r))
