@@ -543,4 +543,5 @@ def test_a_duration_beyond_the_record_takes_the_whole_record(lab, every_input, t
     assert main([*argv, "-o", str(out), "--quiet"]) == 0
     assert json.loads(out.read_text())["settings"]["windows"] > 0
     rep = tmp_path / "rep"
-    assert main(["report", str(lab / "rec.csv"), "--only", "frf", "--duration", "1e308", "-o", str(rep), "--quiet"]) == 0
+    argv = ["report", str(lab / "rec.csv"), "--only", "frf", "--duration", "1e308", "-o", str(rep)]
+    assert main([*argv, "--quiet"]) == 0
