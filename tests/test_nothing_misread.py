@@ -127,7 +127,7 @@ def _library_result(command: str, files: dict):
 
     if command == "update":
         return GAUpdater(generations=4, pop_size=8, seed=0).fit(load_targets(files["targets"])).result()
-    est = {"nsi": NSI(), "sindy": SINDy(), "posterior": Posterior(max_steps=300, n_ensembles=2, seed=0),
+    est = {"nsi": NSI(), "sindy": SINDy(), "posterior": Posterior(max_steps=150, n_ensembles=2, seed=0),
            "discrepancy": Discrepancy(max_effects=1)}[command]  # fmt: skip
     return est.fit(load(files["short" if command == "posterior" else "minus"])).result()
 
@@ -135,7 +135,7 @@ def _library_result(command: str, files: dict):
 _COMMANDS = {
     "nsi": ["identify", "nsi", "{minus}"],
     "sindy": ["identify", "sindy", "{minus}"],
-    "posterior": ["posterior", "{short}", "--max-steps", "300", "--ensembles", "2"],
+    "posterior": ["posterior", "{short}", "--max-steps", "150", "--ensembles", "2"],
     "discrepancy": ["discrepancy", "{minus}", "--max-effects", "1"],
     "update": ["update", "{targets}", "--generations", "4", "--pop-size", "8"],
 }
