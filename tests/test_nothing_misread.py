@@ -75,11 +75,14 @@ def _names_the_visited_well(result: dict, well: str) -> None:
 
 @pytest.mark.parametrize("well", ["minus", "plus"])
 @pytest.mark.parametrize("method", [NSI, SINDy], ids=["nsi", "sindy"])
-def test_modal_names_the_well_the_record_visited(one_well_files, method, well):
+def test_modal_names_the_well_the_record_visited(one_well_files, method, well, tmp_path):
     # a record that stays in the minus well (11.41 Hz) was reported under "plus" by SINDy (its equation-error
     # cubic has one root there, which the contract's single-well convention names plus): the name is where the
-    # record went, judged by where the model's barrier (its negative stiffness) lies
+    # record went, judged by where the model's barrier (its negative stiffness) lies; from Python and the command
     _names_the_visited_well(method().fit(load(one_well_files[well])).result(), well)
+    out = tmp_path / "id.json"
+    assert main(["identify", method.__name__.lower(), str(one_well_files[well]), "-o", str(out), "--quiet"]) == 0
+    _names_the_visited_well(json.loads(out.read_text()), well)
 
 
 # --- 2. the same numbers on any load, from any entry ---------------------------------------------------------
