@@ -45,6 +45,7 @@ _EXPORTS = {
     "Discrepancy": "negstiff.inference.estimators.discrepancy",
     "Posterior": "negstiff.inference.estimators.posterior.core",
     "GAUpdater": "negstiff.inference.estimators.updating",
+    "fit_many": "negstiff.inference.estimators.many",  # every estimator on many records, serially or on dask
     "characterise": "negstiff.inference.analysis.characterise",
     "characterize": "negstiff.inference.analysis.characterise",  # the first spelling, kept: ``characterise``
     "frf": "negstiff.inference.analysis.frf",

@@ -72,7 +72,7 @@ def usable_cores() -> int:
 def idle_cores() -> int:
     """The usable cores (``usable_cores``) that other work is not using now: minus the one-minute load
     average (runnable processes, rounded), at least one. Read when a process starts, before it adds to
-    the load itself.
+    the load itself. No thread count that can change a number is taken from it (``FIT_BLAS_THREADS``).
     """
     cores = usable_cores()
     try:
@@ -88,7 +88,7 @@ _BUDGET: list[int] = []
 
 def thread_budget() -> int:
     """The threads negstiff's own pools (the simulator's batches) may use: the running command's budget
-    (``limit_threads``: the idle cores when it started), else the usable cores (``usable_cores``).
+    (``limit_threads``: the usable cores), else the usable cores (``usable_cores``).
     """
     return _BUDGET[-1] if _BUDGET else usable_cores()
 
@@ -144,6 +144,24 @@ class _Budget:
         self.__exit__(None, None, None)
 
 
+FIT_BLAS_THREADS = 1
+"""The BLAS threads an estimator's ``fit`` runs its linear algebra on, from any entry (a script, the command
+line, a dask worker) and on any load: a fixed number, because a sum split over threads is added in another order
+(the same record's refined k1 read 381.6666 from Python and 381.6463 from the command, which had set its BLAS
+threads from the idle cores). One, because a second buys nothing on the estimators' small products and costs
+6-15x the CPU time beside other work (docs/speed.md)."""
+
+
+def fit_threads():
+    """The context an estimator's ``fit`` runs in (``Estimator``): BLAS on ``FIT_BLAS_THREADS``, whatever the
+    process's pool; the caller's pool is given back when it exits.
+    """
+    from threadpoolctl import threadpool_limits
+
+    _load_blas()
+    return threadpool_limits(limits=FIT_BLAS_THREADS, user_api="blas")
+
+
 def one_blas_thread():
     """A context in which BLAS runs on one thread (``threadpoolctl.threadpool_limits``): around linear
     algebra too small for a second thread to pay, or inside negstiff's own threads.
@@ -161,4 +179,18 @@ def worker_initializer(threads: int | None = None):
     """
     if threads is not None:
         os.environ.setdefault("NEGSTIFF_THREADS", str(int(threads)))
+    _thread_lock_for_bars()
     return limit_threads(1, own=usable_cores())
+
+
+def _thread_lock_for_bars() -> None:
+    """A worker's progress bars (tqdm) share a thread lock, not tqdm's default multiprocessing lock: that is a
+    semaphore the resource tracker reports as leaked when the worker is ended (Ctrl-C on reproduce printed
+    "There appear to be 2 leaked semaphore objects"); a worker's bars are its own.
+    """
+    try:
+        from tqdm.std import TqdmDefaultWriteLock
+    except ImportError:  # pragma: no cover - tqdm is a dependency
+        return
+    if not hasattr(TqdmDefaultWriteLock, "mp_lock"):
+        TqdmDefaultWriteLock.mp_lock = None

@@ -26,6 +26,8 @@ from negstiff.errors import OutputError
 from negstiff.files import check_outputs
 
 MODEL = {"m": 0.2, "k1": 426.0, "k2": -3060.0, "k3": 7.77e5, "c": 3.5}
+STRUCTURE = {"masses": [1.0, 0.2], "element": {"m": 0.2, "k1": 426.0, "k2": 1000.0, "k3": 6.7e5, "c": 3.5, "c_nl": 0.5},
+             "at": [1, 2], "stiffness": [[4.0e4, 0.0], [0.0, 0.0]], "damping": [[20.0, 0.0], [0.0, 0.0]]}  # fmt: skip
 TARGETS = {"f_minus": 11.4, "f_plus": 9.2, "z_minus": -0.029, "z_plus": 0.023}
 
 
@@ -67,6 +69,9 @@ def lab(tmp_path_factory):
     _csv(d / "fs_tiny.csv", {"base_acc": u, "z": z}, {"fs": "1e-300"})
     # a structure's record (the device on a fixture): two responses and the masses in the header
     _csv(d / "rec2.csv", {"t": t, "base_acc": u, "z1": 0.05 * z, "z2": z}, {"masses": "1.0,0.2"})
+    # a record with an auxiliary channel (a live one and a dead one), and a structure's model file
+    _csv(d / "aux.csv", {"t": t, "base_acc": u, "z": z, "volt": np.sin(t), "dead": np.zeros_like(t)})
+    (d / "structure.json").write_text(json.dumps(STRUCTURE))
     (d / "twoz.csv").write_text("t,base_acc,z,y,z\n" + "".join(
         f"{a},{b},{c},0,{c}\n" for a, b, c in zip(t, u, z, strict=True)))
     return d
@@ -428,6 +433,10 @@ TEXTS = {  # the options whose values are text: good ones and bad ones
     # a structure's options: the element's place, the masses, the DOFs the file must hold
     "element": ["1-2", "0-2", "2-1", "1-1", "0-3", "a-b", "12", "-1-2", "1.5-2", ""],
     "masses": ["1.0,0.2", "1,-1", "a,b", "1e300,1", "1", "1,2,3", "nan,1", "0,0.2", ""],
+    # round four: the report's analyses (the command's alias among them), auxiliary channels, a start far out
+    "only": ["characterize", "characterise", "nsi,frf", "frf", "bogus", "", "map"],
+    "aux": ["volt", "dead", "volt,dead", "nosuch", "z", ""],
+    "z0": ["0.023", "1e6", "-1e300", "nan", "x"],
 }
 BASES = {
     "rig": lambda lab, out, mode: ["rig", mode, "-o", out],
@@ -447,9 +456,13 @@ BASES = {
     "frf@2dof": lambda lab, out, mode: ["frf", lab / "rec2.csv", "-o", out],
     "posterior@2dof": lambda lab, out, mode: ["posterior", lab / "rec2.csv", "-o", out],
     "discrepancy@2dof": lambda lab, out, mode: ["discrepancy", lab / "rec2.csv", "-o", out],
+    # round four: a structure simulated, and a record with auxiliary channels (its --aux drawn more often)
+    "simulate@2dof": lambda lab, out, mode: ["simulate", lab / "structure.json", lab / "rec.csv", "-o", out],
+    "identify@aux": lambda lab, out, mode: ["identify", mode, lab / "aux.csv", "-o", out],
+    "discrepancy@aux": lambda lab, out, mode: ["discrepancy", lab / "aux.csv", "-o", out],
 }
 MODES = {"rig": ["random", "harmonic", "sweep", "campaign"], "identify": ["nsi", "sindy"],
-         "identify@2dof": ["nsi", "sindy"]}  # fmt: skip
+         "identify@2dof": ["nsi", "sindy"], "identify@aux": ["nsi", "sindy"]}  # fmt: skip
 
 
 def _values(action):
@@ -492,7 +505,9 @@ def invocations(draw, lab, out):
         argv += ["--amplitude", draw(st.sampled_from(TEXTS["amplitude"]))]
     actions = [a for a in OPTIONS[command.split("@")[0]] if a.dest not in ("forcing_hz",) or command == "map"]
     if command.endswith("@2dof"):  # the structure's options drawn more often than the rest
-        actions += [a for a in actions if a.dest in ("dofs", "element", "masses")] * 3
+        actions += [a for a in actions if a.dest in ("dofs", "element", "masses", "z0")] * 3
+    if command.endswith("@aux"):
+        actions += [a for a in actions if a.dest == "aux"] * 3
     for action in draw(st.lists(st.sampled_from(actions), max_size=4, unique_by=lambda a: a.dest)):
         value = draw(_values(action))
         values = value if isinstance(value, list) else [value]

@@ -55,7 +55,7 @@ import warnings  # noqa: E402
 from collections.abc import Sequence  # noqa: E402
 
 from negstiff.files import transaction  # noqa: E402
-from negstiff.resources import idle_cores, limit_threads  # noqa: E402
+from negstiff.resources import limit_threads, usable_cores  # noqa: E402
 
 from .common import InputError, bad_input_types, check_paths, write_json  # noqa: E402, F401 (API)
 from .parser import build_parser, command_of  # noqa: E402
@@ -106,12 +106,12 @@ def main(argv: Sequence[str] | None = None) -> int:
         # a command's outputs (a record and its truth, a result and its figure) land together or not at
         # all; reproduce's report is one folder already, and its section cache must be readable at once
         group = transaction() if args.command != "reproduce" else contextlib.nullcontext()
-        # one level of parallelism at a time: BLAS (and OpenMP) on the cores this process may use that other
-        # work is not using now, for the command (an in-process caller gets its own back); beside busy
-        # processes a second BLAS thread only spins (NSI on a 300 s record: 6-15x the CPU time,
-        # docs/speed.md). Work that runs its own threads or processes takes BLAS down to one thread itself
-        # (subspace.identify, reproduce's section processes)
-        with warnings.catch_warnings(), group, limit_threads(idle_cores()):
+        # one level of parallelism at a time, sized by the settings and never by the machine's load: BLAS (and
+        # OpenMP) on one thread for the command, as an estimator's fit runs it from any entry (resources.
+        # FIT_BLAS_THREADS: a sum split over threads is added in another order, and the numbers had moved with
+        # the load average), negstiff's own threads (simulator batches, posterior ensembles: their parts are
+        # independent) on the cores this process may use; an in-process caller gets its own back
+        with warnings.catch_warnings(), group, limit_threads(1, own=usable_cores()):
             # the libraries' notices (arviz's dimension names, numpy's empty slices) are not the user's
             # business; negstiff's own warnings are in the result and on stderr (``warn``)
             warnings.simplefilter("ignore")

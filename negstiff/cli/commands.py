@@ -148,6 +148,7 @@ def _simulate_structure(args, structure) -> int:
     """``simulate STRUCTURE.json``: the structure under the record's input, every DOF's z and z_dot written."""
     from negstiff.files import atomic_path
     from negstiff.inference.record.measurement import load
+    from negstiff.inference.steps.validation import check_structure_run
 
     for option, given in (("--v0", args.v0), ("--aux", args.aux)):
         if given:
@@ -156,6 +157,10 @@ def _simulate_structure(args, structure) -> int:
         raise InputError("a structure's input is band-limited between samples: --interpolation linear is not offered")
     rec = load(args.input, columns=args.columns, fs=args.fs, response=False, gravity=args.gravity)
     rec.require(2, "a simulation")
+    try:
+        check_structure_run(structure, args.z0)
+    except InputError as exc:
+        raise InputError(f"{args.model}: {exc}") from None
     n = structure.n_dof
     say(args, f"simulate: {n} DOFs, {rec.n} samples at {rec.fs:g} Hz under {rec.input_name}")
     res = structure.simulate(rec.u, rec.dt, z0=args.z0, input_kind=rec.input_name, substeps=args.substeps or 2)
@@ -265,7 +270,7 @@ def cmd_posterior(args) -> int:
                decay=args.decay)  # fmt: skip
     check_dofs(args, rec)  # N from the file; --dofs a check
     if args.duration is not None:
-        rec = rec.segment(0, min(rec.n, int(round(args.duration * rec.fs))))
+        rec = rec.segment(0, rec.n if not args.duration * rec.fs < rec.n else int(round(args.duration * rec.fs)))
     post = Posterior(
         model=args.model,
         mass_prior=args.mass_prior,
@@ -441,11 +446,12 @@ def cmd_frf(args) -> int:
 
 def _frf_structure(args, band, rec) -> int:
     """``frf DATA`` on a structure's record (N > 1 DOFs): every DOF's FRF from the input, the modes merged."""
-    from negstiff.inference.analysis.frf import frf_structure
+    from negstiff.inference.analysis.frf import check_frf, frf_structure
     from negstiff.report.figures import frf_figure_dofs as figure_dofs
 
     if band is not None and band[1] > rec.fs / 2:
         raise InputError(f"--band {args.band}: beyond the Nyquist frequency of {args.data} ({rec.fs / 2:g} Hz)")
+    check_frf(rec, band)  # every DOF's: before the progress line
     say(args, f"frf: {rec.n_dof} DOFs, {rec.n} samples at {rec.fs:g} Hz, input {rec.input_name}")
     res = frf_structure(rec, band=band, segment_s=args.segment)
     curves = res.pop("_curves")

@@ -42,7 +42,8 @@ def declared(estimator: str, parameter: str, what: str = ""):
     """
     c = _estimator(estimator)._parameter_constraints[parameter]
     unit = f" {c.unit}" if getattr(c, "unit", "") else ""
-    return number(c.kind, c.lo, c.hi, lo_open=c.lo_open, hi_open=c.hi_open, what=what or unit)
+    return number(c.kind, c.lo, c.hi, lo_open=c.lo_open, hi_open=c.hi_open, what=what or unit,
+                  even=getattr(c, "even", False))  # fmt: skip
 
 
 def default(estimator: str, parameter: str) -> Any:
@@ -52,8 +53,10 @@ def default(estimator: str, parameter: str) -> Any:
     return inspect.signature(_estimator(estimator)).parameters[parameter].default
 
 
-def number(kind, lo=None, hi=None, lo_open=False, what="", hi_open=False):
-    """An argparse type: a number of ``kind`` in [lo, hi] (open at lo with ``lo_open``, at hi with ``hi_open``)."""
+def number(kind, lo=None, hi=None, lo_open=False, what="", hi_open=False, even=False):
+    """An argparse type: a number of ``kind`` in [lo, hi] (open at lo with ``lo_open``, at hi with ``hi_open``;
+    an even integer with ``even``).
+    """
 
     def parse(text: str):
         try:
@@ -66,10 +69,13 @@ def number(kind, lo=None, hi=None, lo_open=False, what="", hi_open=False):
             raise argparse.ArgumentTypeError(f"{text} is out of range: must be {'>' if lo_open else '>='} {lo:g}{what}")
         if hi is not None and (v > hi or (hi_open and v == hi)):
             raise argparse.ArgumentTypeError(f"{text} is out of range: must be {'<' if hi_open else '<='} {hi:g}{what}")
+        if even and v % 2:
+            raise argparse.ArgumentTypeError(f"{text} is odd: must be even{what}")
         return v
 
     parse.__name__ = kind.__name__
     parse.kind, parse.lo, parse.hi, parse.lo_open, parse.hi_open = kind, lo, hi, lo_open, hi_open  # for tests
+    parse.even = even
     return parse
 
 

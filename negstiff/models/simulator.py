@@ -121,7 +121,7 @@ def input_gain(input_kind: str, masses: np.ndarray) -> np.ndarray:
 
 def cores() -> int:
     """The cores negstiff's own threads (simulator batches, posterior ensembles) may use: the running
-    command's thread budget (the cores idle when it started: ``resources.thread_budget``), else the cores the
+    command's thread budget (the cores the process may use: ``resources.thread_budget``), else the cores the
     process may run on, ``$NEGSTIFF_THREADS`` capping both (a machine shared with other jobs). Thread counts
     never change a number: the threads' parts are independent.
     """

@@ -122,7 +122,8 @@ class Report(Blocks):
         estimates = {col: v for s in secs for col, v in s.estimates.items()}
         intervals = {f"{s.label or 'posterior'}": s.interval for s in secs if s.interval}
         if estimates or intervals:
-            blocks, figures, lines = coefficient_blocks(estimates, intervals)
+            per_kg = any(s.kind == "record" and "mass" in s.json and s.json["mass"] is None for s in secs)
+            blocks, figures, lines = coefficient_blocks(estimates, intervals, per_kg)
             self.figures.update(figures)
             head += blocks
             summary[1:1] = lines

@@ -88,7 +88,8 @@ def backbone_figure(res: dict[str, Any], title: str):
             edge = mask | np.r_[mask[1:], False] | np.r_[False, mask[:-1]]  # runs joined to their neighbours
             a1.plot(c["f_hz"], np.where(edge, a, np.nan), ls, color="0.45", lw=0.9,
                     label="model's forced response (dashed: unstable)" if (k == 0 and ls == "-") else None)  # fmt: skip
-        a1.annotate(f"{c['force_n']:.2g} N", (c["peak"]["f_hz"], 1e3 * c["peak"]["amplitude_m"]), fontsize=7,
+        unit = (res.get("forced") or {}).get("force_unit", "N")
+        a1.annotate(f"{c['force_n']:.2g} {unit}", (c["peak"]["f_hz"], 1e3 * c["peak"]["amplitude_m"]), fontsize=7,
                     color="0.35", xytext=(3, 2), textcoords="offset points")  # fmt: skip
     band = res.get("credible")
     if band:

@@ -62,10 +62,15 @@ def harmonic_frequency(rec) -> float | None:
     return refine_frequency(u, rec.t - rec.t0, k * rec.fs / u.size, rec.fs / u.size)
 
 
+SECTION_ALIASES = {"characterize": "characterise"}
+"""An analysis's other spellings ``only`` takes: the command's alias (``negstiff characterize``) names its section."""
+
+
 def _only(only: Sequence[str] | str | None, kind: tuple[str, ...]) -> tuple[str, ...]:
     if not only:
         return kind
-    names = tuple(x.strip() for x in (only.split(",") if isinstance(only, str) else only) if x.strip())
+    names = tuple(SECTION_ALIASES.get(x.strip(), x.strip())
+                  for x in (only.split(",") if isinstance(only, str) else only) if x.strip())  # fmt: skip
     bad = [n for n in names if n not in SECTIONS]
     if bad:
         raise InputError(f"--only {','.join(names)}: unknown analysis {bad[0]!r} (choose among {', '.join(SECTIONS)})")
@@ -133,7 +138,8 @@ def report_records(
     kind = {"impact": IMPACT, "decay": DECAY}.get(what.kind, HARMONIC if f_h else BROADBAND)
     chosen = _only(only, kind)
     runs = _plan(rec, chosen, f_h, wells, seed, options)  # every estimator built and its parameters checked
-    rep = Report(f"negstiff report: {rec.source}")
+    refused = _preflight(rec, runs)  # every section's own check of the record, before any progress line
+    rep = Report(f"negstiff report: {Path(rec.source).name}")  # the path once, in the record's table
     try:
         rec = pin_frame(rec)  # the record as the analyses see it (a derived z in the physical frame)
     except InputError:
@@ -142,10 +148,12 @@ def report_records(
     if what.kind in ("impact", "decay"):
         rep.add_text(f"Read as {'a hammer' if what.kind == 'impact' else 'a free decay'}'s record: {what.how}.")
     failed: list[str] = []
-    for name, title, run in runs:
+    for name, title, run, _ in runs:
         start = time.perf_counter()
         say(f"report: {title} ...")
         try:
+            if name in refused:  # its check refused the record already (``_preflight``): not run again
+                raise refused[name]
             result = run(rec)
         except InputError as exc:
             rep.add_failure(title, " ".join(str(exc).split()))
@@ -164,7 +172,7 @@ def report_records(
                         "FRF of a low-level record around one well is; NSI gives each well's here).")  # fmt: skip
         say(f"report: {title} done ({time.perf_counter() - start:.1f} s)")
     if runs and len(failed) == len(runs):  # a report of nothing but "not made" is no result
-        more = f" (and {len(failed) - 1} more: {', '.join(t for t, _, _ in runs[1:])})" if len(failed) > 1 else ""
+        more = f" (and {len(failed) - 1} more: {', '.join(t for t, _, _, _ in runs[1:])})" if len(failed) > 1 else ""
         raise InputError(f"{rec.source}: no section of the report could be made: {failed[0]}{more}")
     if kind == HARMONIC and f_h:
         rep.add(harmonic_next_steps(f_h))
@@ -243,16 +251,54 @@ def _crosses_wells(rec) -> bool:
     return None not in wells and classify_regime(rec.z, wells) == "cross-well"
 
 
-def _plan(rec, chosen, forcing_hz, wells, seed, options) -> list[tuple[str, str, Callable]]:
-    """Each chosen analysis as (name, title, run(record)), its estimator's parameters checked now."""
-    from negstiff.inference.analysis.characterise import characterise
-    from negstiff.inference.analysis.frf import frf
+class _OptionRefused(InputError):
+    """An option the user gave that the one analysis it is for refuses (``_preflight`` raises it at once)."""
+
+
+Run = tuple[str, str, Callable[[Any], Any], Callable[[Any], None] | None]
+"""A report's section: (name, title, run(record), check(record) or None: what the run checks before its work)."""
+
+DEPENDS = {"interval": ("nsi", "sindy")}
+"""Sections made from another's fit: not made where every one they read was refused."""
+
+
+def _preflight(rec, runs: list[Run]) -> dict[str, InputError]:
+    """Each section's own check of the record (``Run``), before any progress line: an option refused by the one
+    analysis it is for is one ``InputError`` at once (``--duration 0.01``: the posterior's part of the record too
+    short); a record that every section refuses is one ``InputError`` naming the first refusal and the rest (a
+    3-row file printed a "not made" line per section first). Returns the sections refused (made as "not made").
+    """
+    refused: dict[str, InputError] = {}
+    for name, _, _, check in runs:
+        if check is None:
+            continue
+        try:
+            check(rec)
+        except _OptionRefused:
+            raise
+        except InputError as exc:
+            refused[name] = exc
+    for name, needs in DEPENDS.items():
+        if any(n == name for n, *_ in runs) and all(n in refused or n not in [r[0] for r in runs] for n in needs):
+            refused[name] = InputError(f"{rec.source}: no identification was made, so it has no interval")
+    if runs and len(refused) == len(runs):
+        first = runs[0]
+        msg = " ".join(str(refused[first[0]]).split())
+        more = f" (and {len(runs) - 1} more: {', '.join(n for n, _, _, _ in runs[1:])})" if len(runs) > 1 else ""
+        raise InputError(f"{rec.source}: no section of the report could be made: {first[1]}: {msg}{more}")
+    return refused
+
+
+def _plan(rec, chosen, forcing_hz, wells, seed, options) -> list[Run]:
+    """Each chosen analysis as (name, title, run(record), check(record)), its estimator's parameters checked now."""
+    from negstiff.inference.analysis.characterise import characterise, check_harmonic
+    from negstiff.inference.analysis.frf import check_frf, frf
     from negstiff.inference.estimators.discrepancy import Discrepancy
     from negstiff.inference.estimators.nsi import NSI
     from negstiff.inference.estimators.posterior.core import Posterior
     from negstiff.inference.estimators.sindy import SINDy
 
-    runs: list[tuple[str, str, Callable[[Any], Any]]] = []
+    runs: list[Run] = []
     fitted: dict[str, Any] = {}  # the identifications' fits, for the backbone's predicted curve
     for name in chosen:
         opts = options.get(name, {})
@@ -267,21 +313,33 @@ def _plan(rec, chosen, forcing_hz, wells, seed, options) -> list[tuple[str, str,
             titles = {"nsi": "NSI around each well", "sindy": "SINDy", "posterior": "the coefficient posterior",
                       "discrepancy": "the discrepancy workflow"}  # fmt: skip
 
-            def run(r, est=est, duration=duration, name=name):
-                if duration is not None:
-                    r = r.segment(0, min(r.n, int(round(duration * r.fs))))
-                fitted[name] = est.fit(r)
+            def part(r, duration=duration):
+                if duration is None or not duration * r.fs < r.n:  # the whole record (1e308 s: no overflow)
+                    return r
+                return r.segment(0, int(round(duration * r.fs)))
+
+            def run(r, est=est, part=part, name=name):
+                fitted[name] = est.fit(part(r))
                 return fitted[name]
 
-            runs.append((name, titles[name], run))
+            def check(r, est=est, part=part, duration=duration):
+                est.check(r)
+                if duration is not None:  # the option's part of a record the analysis takes whole
+                    try:
+                        est.check(part(r))
+                    except InputError as exc:
+                        raise _OptionRefused(f"--duration {duration:g}: {' '.join(str(exc).split())}") from None
+
+            runs.append((name, titles[name], run, check))
         elif name == "frf":
-            runs.append((name, "the frequency response", lambda r: frf(r, **options.get("frf", {}))))
+            runs.append((name, "the frequency response", lambda r: frf(r, **options.get("frf", {})), check_frf))
         elif name == "interval":
-            runs.append((name, "the identification's interval", lambda r: _interval(r, fitted)))
+            runs.append((name, "the identification's interval", lambda r: _interval(r, fitted), None))
         elif name == "backbone":
-            runs.append((name, "the backbone", lambda r: _backbone(r, fitted)))
+            runs.append((name, "the backbone", lambda r: _backbone(r, fitted), None))
         elif name == "characterise":
-            runs.append((name, "the characterisation", lambda r: characterise(r, forcing_hz, wells or "auto")))
+            runs.append((name, "the characterisation", lambda r: characterise(r, forcing_hz, wells or "auto"),
+                         lambda r: check_harmonic(r, forcing_hz)))  # fmt: skip
     return runs
 
 

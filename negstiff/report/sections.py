@@ -18,6 +18,7 @@ from __future__ import annotations
 import io
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -26,6 +27,14 @@ from .numbers import fmt, fmt_interval
 
 COEFFICIENTS = ("k1", "k2", "k3", "c", "c_nl")
 """The coefficients every report's table holds (the contract's model fields)."""
+
+UNITS = {"k1": "N/m", "k2": "N/m^2", "k3": "N/m^3", "c": "N s/m", "c_nl": "N s^2/m^2"}
+"""The coefficients' units (SI)."""
+
+
+def coefficient_units(per_kg: bool = False) -> dict[str, str]:
+    """Each coefficient's unit: SI, or per kilogram of moving mass for a model identified without a mass (m = 1)."""
+    return {k: f"{u} per kg" if per_kg else u for k, u in UNITS.items()}
 
 
 class Blocks:
@@ -148,11 +157,13 @@ def record_section(rec, label: str = "") -> Section:
 
     info = rec.info
     resp = info.get("response", {})
-    sec = Section("record", label, _with_label(f"The record: {rec.source}", label))
+    # the file's name in the heading (a lab's path ran off the page there and in the title), its path in the table
+    sec = Section("record", label, _with_label(f"The record: {Path(rec.source).name}", label))
     noise_pct = None
     if rec.z is not None and rec.z.size > 64:
         noise_pct = 100 * float(np.sqrt(noise_floor(rec.z, rec.fs)[0])) / float(np.sqrt(np.mean(rec.z**2)))
     rows = [
+        ["file", rec.source],
         ["samples", rec.n],
         ["sampling rate [Hz]", rec.fs],
         ["duration [s]", rec.duration],
@@ -170,12 +181,13 @@ def record_section(rec, label: str = "") -> Section:
         sec.warning(w)
     sec.heldout["the record's sensor-noise floor"] = noise_pct
     sec.summary.append(
-        f"Record {rec.source}: {rec.duration:.4g} s at {rec.fs:g} Hz, input {rec.input_name}, response "
+        f"Record {Path(rec.source).name}: {rec.duration:.4g} s at {rec.fs:g} Hz, input {rec.input_name}, response "
         f"{resp.get('measured') or 'z'}" + (f" ({resp['derived']})" if resp.get("derived") else "")
         + _frame_words(resp)
         + f"; {len(info.get('warnings', [])) + len(resp.get('warnings', []))} warning(s) about it."
     )  # fmt: skip
-    sec.json = {"source": rec.source, "n": rec.n, "fs": rec.fs, "info": info, "noise_floor_percent": noise_pct}
+    sec.json = {"source": rec.source, "n": rec.n, "fs": rec.fs, "info": info, "noise_floor_percent": noise_pct,
+                "mass": rec.mass}  # fmt: skip
     return sec
 
 
@@ -199,16 +211,21 @@ def identification_section(est, label: str = "") -> Section:
         + "; reference study Table 1):"
     )
     sec.table(["well", "f [Hz]", "zeta [%]"], rows)
-    units = {"k1": "N/m", "k2": "N/m^2", "k3": "N/m^3", "c": "N s/m", "c_nl": "N s^2/m^2"}
+    per_kg = bool(r.mass_normalised)  # no mass given: every coefficient the device's over its moving mass
+    units = coefficient_units(per_kg)
+    mass_col = [] if per_kg else ["m [kg]"]
     own = effective(r.initial_model)
     keys = coefficient_keys({"final": effective(r.model), **({"own": own} if refined else {})}, {})
     cols = [k for k in keys if k in units]  # the base coefficients; a law's parts' parameters in their own table
     sec.table(
-        ["model", *[f"{k} [{units[k]}]" for k in cols], "m [kg]"],
-        [["final" + (" (output-error refined)" if refined else ""), *[getattr(r.model, k) for k in cols], r.model.m]]
-        + ([["own estimate (equation error)", *[getattr(r.initial_model, k) for k in cols], r.initial_model.m]]
-           if refined else []),
+        ["model", *[f"{k} [{units[k]}]" for k in cols], *mass_col],
+        [["final" + (" (output-error refined)" if refined else ""), *[getattr(r.model, k) for k in cols],
+          *([] if per_kg else [r.model.m])]]
+        + ([["own estimate (equation error)", *[getattr(r.initial_model, k) for k in cols],
+             *([] if per_kg else [r.initial_model.m])]] if refined else []),
     )  # fmt: skip
+    if per_kg:
+        sec.text("No mass was given: the coefficients are per kilogram of moving mass (the device's divided by it).")
     v = r.validation
     # a quiet tail (a decay's) scores no restarted window: the one free run's error then
     held_keys = ("restarted_rms_percent", "median_window_percent", "rms_percent")
@@ -298,8 +315,9 @@ def posterior_section(post, label: str = "") -> Section:
         sec.stroke = (float(sec.band["z_m"][0]), float(sec.band["z_m"][-1]))
     if "k3" in sec.interval:
         mean, lo, hi = sec.interval["k3"]
+        unit = coefficient_units(st.get("mass") is None and st.get("model") == "coefficients")["k3"]
         sec.summary.append(
-            f"The posterior puts k3 at {fmt(mean)} N/m^3 ({pct:g} % interval {" to ".join(fmt_interval(lo, hi))})"
+            f"The posterior puts k3 at {fmt(mean)} {unit} ({pct:g} % interval {" to ".join(fmt_interval(lo, hi))})"
             + ("." if res["converged"] else "; its chains did not converge (warnings).")
         )
     sec.json = res
@@ -335,7 +353,8 @@ def interval_section(own: dict[str, Any], label: str = "", prob: float = 0.95) -
     # not the coefficient table's ``interval`` (a posterior's credible interval): a batch-means interval of its own
     mean, se = own["model"].get("k3"), own["model_se"].get("k3")
     if mean is not None and se is not None:
-        sec.summary.append(f"{name}'s k3 = {fmt(mean)} N/m^3 ({100 * prob:g} % interval over {blocks} blocks: "
+        unit = coefficient_units(bool(own.get("mass_normalised")))["k3"]
+        sec.summary.append(f"{name}'s k3 = {fmt(mean)} {unit} ({100 * prob:g} % interval over {blocks} blocks: "
                            f"{' to '.join(fmt_interval(mean - t * se, mean + t * se))}).")  # fmt: skip
     sec.json = dict(own)
     return sec
@@ -430,7 +449,8 @@ def backbone_section(res: dict[str, Any], label: str = "", model_name: str = "")
         if forced:
             off = max(abs(c["peak_off_backbone_percent"] or 0.0) for c in forced)
             sec.text(f"Grey: the forced response {model_name or 'the model'} predicts under a harmonic force of "
-                     + ", ".join(f"{fmt(c['force_n'], 2)}" for c in forced) + " N about its "
+                     + ", ".join(f"{fmt(c['force_n'], 2)}" for c in forced)
+                     + f" {res['forced'].get('force_unit', 'N')} about its "
                      f"{res['forced']['well']} well (continuation, dashed where unstable); each peak lies within "
                      f"{'0.01' if off < 0.01 else fmt(off, 2)} % of the model's own backbone (light damping puts it "
                      "zeta^2 below).")  # fmt: skip
@@ -492,9 +512,11 @@ def map_section(res: dict[str, Any], overlays=(), label: str = "") -> Section:
     return sec
 
 
-def coefficient_blocks(estimates: dict[str, dict[str, float]], intervals: dict[str, dict[str, tuple]]):
+def coefficient_blocks(estimates: dict[str, dict[str, float]], intervals: dict[str, dict[str, tuple]],
+                       per_kg: bool = False):  # fmt: skip
     """The report's coefficient table (each method's estimate of k1-k3, c, c_nl beside each posterior's mean
-    and interval) and its forest plot; and the summary's lines on whether the estimates lie inside.
+    and interval) and its forest plot; and the summary's lines on whether the estimates lie inside. ``per_kg``: the
+    record states no mass, the coefficients are per kilogram of moving mass.
     """
     import matplotlib.pyplot as plt
 
@@ -504,8 +526,9 @@ def coefficient_blocks(estimates: dict[str, dict[str, float]], intervals: dict[s
         header += [f"{name} mean", "interval low", "interval high"]
     rows = []
     keys = coefficient_keys(estimates, intervals)
+    units = coefficient_units(per_kg)
     for k in keys:
-        row: list[Any] = [k, *[est.get(k) for est in estimates.values()]]
+        row: list[Any] = [f"{k} [{units[k]}]" if k in units else k, *[est.get(k) for est in estimates.values()]]
         for iv in intervals.values():
             row += list(iv.get(k, (None, None, None)))
         rows.append(row)
@@ -513,7 +536,8 @@ def coefficient_blocks(estimates: dict[str, dict[str, float]], intervals: dict[s
         ("h", (2, "Coefficients: every method beside the posterior")),
         ("p", "Each method's estimate of the z-frame coefficients (K = k3 z^3 + k2 z^2 - k1 z + k0, D = c z' + "
               "c_nl z'|z'|; a law's parts by their parameters, PART.NAME), beside the posterior's mean and credible "
-              "interval; the forest plot below draws the same."),
+              "interval; the forest plot below draws the same."
+              + (" No mass was given: they are per kilogram of moving mass." if per_kg else "")),
         ("table", (header, [[fmt(c) for c in r] for r in rows])),
     ]  # fmt: skip
     rows_n = len(estimates) + len(intervals)

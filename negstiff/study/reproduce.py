@@ -12,6 +12,7 @@ import signal as posix_signal
 import sys
 import threading
 import time
+import warnings
 from pathlib import Path
 from typing import Any
 
@@ -179,8 +180,11 @@ def _share_cores(threads: int):
     parallelism (``resources.worker_initializer``; a user's measurement on 2 cores: two section processes
     with two BLAS threads each took 196 s wall and 360 s of CPU, with one each 160 s and 280 s); negstiff's
     own threads (simulator batches, posterior ensembles) get ``threads``, unless the user set
-    ``NEGSTIFF_THREADS``. Returns the limits (``worker_initializer``).
+    ``NEGSTIFF_THREADS``. A section's warnings are in its results, not on the command's stderr (as the command's
+    own: ``cli.main``; a ConvergenceWarning printed beside Ctrl-C's one line). Returns the limits
+    (``worker_initializer``).
     """
+    warnings.simplefilter("ignore")
     return worker_initializer(threads)
 
 

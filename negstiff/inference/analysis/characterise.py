@@ -123,12 +123,15 @@ def lyapunov(rec: Measurement, forcing_hz: float, noise: float | None) -> dict[s
 
 
 def check_harmonic(rec: Measurement, forcing_hz: float) -> None:
-    """Refuse (``MeasurementError``, one line) a harmonic record no characterisation can use: a forcing
-    at or above the Nyquist frequency, fewer than 10 forcing cycles, a response or an input that does
-    not move (the forcing's phase is read from the input), a stated forcing frequency that is not the
-    input's (``periodicity.check_forcing_line``: its line carries under 10 % of the input's rms while
-    another line dominates).
+    """Refuse (``MeasurementError``, one line) a harmonic record no characterisation can use: a structure's
+    record (N > 1 responses: a characterisation reads one), a forcing at or above the Nyquist frequency, fewer
+    than 10 forcing cycles, a response or an input that does not move (the forcing's phase is read from the
+    input), a stated forcing frequency that is not the input's (``periodicity.check_forcing_line``: its line
+    carries under 10 % of the input's rms while another line dominates).
     """
+    if rec.n_dof > 1:  # its z (N, T) crashed the regime's indexing, or a least squares of 42 GiB
+        raise MeasurementError(f"{rec.source}: a characterisation reads a single DOF's response z; this record holds "
+                               f"a structure's responses of {rec.n_dof} DOFs (z1 ... z{rec.n_dof})")  # fmt: skip
     if not 0 < forcing_hz < rec.fs / 2:
         raise MeasurementError(
             f"{rec.source}: forcing frequency {forcing_hz:g} Hz must lie below the Nyquist frequency {rec.fs / 2:g} Hz"

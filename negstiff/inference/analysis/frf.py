@@ -273,7 +273,7 @@ def _impact_frf(rec: Measurement, band: tuple[float, float] | None, hits: Impact
     if band is None:
         band = impact_band(est, rec.fs)
     # one hit's coherence is 1 by construction: it judges nothing, so no peak is passed over for it
-    r = _peaks(rec, est, band, min_coherence=0.5 if hits.count > 1 else 0.0, most=IMPACT_PEAKS)
+    r = _peaks(rec, est, band, min_coherence=0.5 if hits.count > 1 else 0.0, most=IMPACT_PEAKS, stationary=False)
     tau = est["tau_s"]
     # a fit at its damping bounds (a broad hump near 0 Hz, the noise beyond the hammer's band) is no mode: the
     # lab's silent "0.3 Hz, zeta 100 %"; nor is a local maximum of the noise that one SDOF receptance does not fit
@@ -281,6 +281,7 @@ def _impact_frf(rec: Measurement, band: tuple[float, float] | None, hits: Impact
     off = [p for p in r["peaks"] if not (ZETA_BOUNDS[0] * 1.5 < p["zeta"] < ZETA_BOUNDS[1] / 2)
            or p["fit_rms_relative"] > IMPACT_FIT_RMS]  # fmt: skip
     r["peaks"] = [p for p in r["peaks"] if p not in off]
+    r["set_aside_hz"] = sorted(float(p["f_hz"]) for p in off)
     if off:
         r["_notes"].append(f"{len(off)} local maxima set aside (their fits ran to a damping bound, or erred by over "
                            f"{100 * IMPACT_FIT_RMS:g} % of the peak: no resonance), "
@@ -318,10 +319,43 @@ def _impact_frf(rec: Measurement, band: tuple[float, float] | None, hits: Impact
     }
 
 
+PEAK_RANDOM_ERRORS = 6.0
+"""A stationary FRF's local maximum is a resonance only where it stands above its surroundings (its prominence) by
+more than this many random errors of |H1| at its bin, eps = sqrt(1 - gamma^2) / (|gamma| sqrt(2 n_d)) (Bendat &
+Piersol, *Random Data*, eq. 9.65): a ground test's sweep at 10 % response noise showed its two modes 12-1900 random
+errors high and dozens of maxima of the noise (one inside the anti-resonance, where the coherence dips) 2-7."""
+
+
+Peaks = list[dict[str, Any]]
+
+
+def _resonances(f: np.ndarray, h1: np.ndarray, coh: np.ndarray, averages: int, cand: np.ndarray,
+                prominence: np.ndarray, peaks: Peaks) -> tuple[Peaks, Peaks]:  # fmt: skip
+    """``peaks`` (fitted at ``cand``'s bins, of ``prominence``) split into resonances and the local maxima of a
+    stationary estimate's random error: those within ``PEAK_RANDOM_ERRORS`` of their surroundings, those whose fit
+    ran to a damping bound, and those narrower than a frequency bin (a resolved resonance seen through the Hann
+    window is a few bins wide; a one-bin spike is the estimate's noise).
+    """
+    df = float(f[1] - f[0])
+    keep: Peaks = []
+    off: Peaks = []
+    for p in peaks:
+        k = int(np.argmin(np.abs(f - p["peak_bin_hz"])))
+        i = np.flatnonzero(cand == k)
+        g = min(max(float(coh[k]), 1e-12), 1.0)
+        eps = math.sqrt(1 - g) / (math.sqrt(g) * math.sqrt(2 * max(averages, 1)))
+        rise = float(prominence[i[0]]) / max(float(np.abs(h1[k])), 1e-300) if i.size else math.inf
+        bounded = not ZETA_BOUNDS[0] * 1.5 < p["zeta"] < ZETA_BOUNDS[1] / 2
+        (off if rise <= PEAK_RANDOM_ERRORS * eps or bounded or 2 * p["zeta"] * p["f_hz"] < df else keep).append(p)
+    return keep, off
+
+
 def _peaks(rec: Measurement, est: dict[str, Any], band: tuple[float, float], min_coherence: float = 0.5,
-           most: int | None = None) -> dict[str, Any]:  # fmt: skip
+           most: int | None = None, stationary: bool = True) -> dict[str, Any]:  # fmt: skip
     """The peaks of ``est``'s H1 in ``band``, each fitted, the dominant first (``frf``); ``most``: only the
-    candidates of the largest prominence fitted (a zero-padded spectrum's noise holds thousands of local maxima).
+    candidates of the largest prominence fitted (a zero-padded spectrum's noise holds thousands of local maxima);
+    ``stationary`` (a Welch or periodic average): the local maxima of the estimate's random error set aside
+    (``_resonances``; an impact record's are judged by its own rules).
     """
     f, h1, coh = est["f"], est["H1"], est["coherence"]
     nyq = rec.fs / 2
@@ -346,6 +380,10 @@ def _peaks(rec: Measurement, est: dict[str, Any], band: tuple[float, float], min
         p["coherence"] = float(coh[k])
         p["h1_over_h2"] = float(np.abs(h1[k]) / np.abs(est["H2"][k]))
         peaks.append(p)
+    notes: list[str] = []
+    off: list[dict[str, Any]] = []
+    if stationary and peaks:  # the result's ``set_aside_hz``: the estimate's noise is no news to warn about
+        peaks, off = _resonances(f, h1, coh, int(est.get("averages", 1)), idx[cand], props["prominences"], peaks)
     # the dominant peak is the strongest coherent one: a peak the input does not explain (a drift's bump at the
     # bottom of a sweep, where few segments hold the input and a slow drift lifts |H1|) is never a resonance
     # while a coherent peak stands in the band; only without one is the strongest of the rest reported
@@ -361,9 +399,9 @@ def _peaks(rec: Measurement, est: dict[str, Any], band: tuple[float, float], min
     top = peaks[0] if peaks else None
     louder = [p for p in peaks[1:] if top is not None and top["coherence"] >= COHERENT
               and p["coherence"] < COHERENT and _height(f, h1, p) > _height(f, h1, top)]  # fmt: skip
-    notes = [f"a higher peak at {p['f_hz']:.3g} Hz (coherence {p['coherence']:.2f}) passed over for the coherent one "
-             f"at {top['f_hz']:.4g} Hz (coherence {top['coherence']:.2f}): the input explains little of the response "
-             "there (drift or noise?); --band F1:F2 limits the search" for p in louder if top is not None]  # fmt: skip
+    notes += [f"a higher peak at {p['f_hz']:.3g} Hz (coherence {p['coherence']:.2f}) passed over for the coherent one "
+              f"at {top['f_hz']:.4g} Hz (coherence {top['coherence']:.2f}): the input explains little of the response "
+              "there (drift or noise?); --band F1:F2 limits the search" for p in louder if top is not None]  # fmt: skip
     if top is not None and top["coherence"] < COHERENT:
         notes.append(f"no peak in the band has coherence above {COHERENT:g}: the dominant peak at {top['f_hz']:.4g} Hz "
                      f"(coherence {top['coherence']:.2f}) may be drift or noise rather than a resonance")  # fmt: skip
@@ -373,6 +411,7 @@ def _peaks(rec: Measurement, est: dict[str, Any], band: tuple[float, float], min
         "coherence": top["coherence"] if top else None,
         "band": [float(band[0]), float(band[1])],
         "peaks": peaks,
+        "set_aside_hz": sorted(float(p["f_hz"]) for p in off),
         "response_per_input": "m per m/s^2 (z / base_acc)" if rec.input_name == "base_acc" else "m per N (z / force)",
         "reason": None if top else f"no resonance peak with coherence above {min_coherence:g} in the band",
         "_notes": notes,

@@ -50,6 +50,8 @@ class Estimator(ModelPredictions):
         super().__init_subclass__(**kwargs)
         if "result" in cls.__dict__:  # an estimator rebuilt from its JSON answers with that JSON
             cls.result = _answering_stored(cls.__dict__["result"])  # type: ignore[method-assign]
+        if "fit" in cls.__dict__:  # the same numbers from any entry and on any load (``resources.fit_threads``)
+            setattr(cls, "fit", _on_fit_threads(cls.__dict__["fit"]))  # noqa: B010 (mypy: no fit on the base)
 
     @classmethod
     def _param_names(cls) -> list[str]:
@@ -192,6 +194,19 @@ class Estimator(ModelPredictions):
             return f"{head}  [not fitted]"
         summary = self._summary()
         return f"{head}  [fitted{': ' + summary if summary else ''}]"
+
+
+def _on_fit_threads(fit):
+    """``fit`` with its linear algebra on ``resources.FIT_BLAS_THREADS`` BLAS threads, whatever the caller's pool."""
+
+    @functools.wraps(fit)
+    def on_fit_threads(self, *args, **kwargs):
+        from negstiff.resources import fit_threads
+
+        with fit_threads():
+            return fit(self, *args, **kwargs)
+
+    return on_fit_threads
 
 
 def _answering_stored(result):

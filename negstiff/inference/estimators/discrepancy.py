@@ -47,7 +47,7 @@ from typing import Any, override
 
 import numpy as np
 
-from negstiff.errors import InputError, MeasurementError, issue
+from negstiff.errors import InputError, MeasurementError, NotFittedError, issue
 from negstiff.inference.estimators.base import Estimator
 from negstiff.inference.estimators.parameters import (
     FRACTION,
@@ -95,6 +95,9 @@ from negstiff.models import Model, effects, laws
 CUBIC_BASELINE = ("1", "z", "z^2", "z^3", "v", "v|v|")
 """The seed's own model form: cubic K, viscous c and quadratic c_nl (the contract's damping law)."""
 LINEAR_BASELINE = ("1", "z", "v")
+MEASURED_SE = 2.0
+"""A measured channel's term (``aux:NAME``) is named when its held-out weak residual falls by more than this many
+standard errors (no practical margin: a channel of noise alone is named by chance in about 2 % of rounds)."""
 LOCAL_DRAWS = 4
 """Draws of the start states' noise per window when the predictable span of the windows where an effect acts is
 measured (``Discrepancy._episode_windows``)."""
@@ -683,14 +686,14 @@ class Discrepancy(StructureResults, Estimator):
         coef = self._fit(W, y, cand.terms, cand.stop is not None, len(cand.aux), cand.law)
         Ws, ys = self._design(rec, self.n_fit_, self.n_id_, cand.stop, cand.aux, cand.law)
         r2 = (ys - Ws @ coef) ** 2
-        rows = block_rows(self.window_s, rec.fs, self._form.stride)
+        rows = block_rows(self.window_s_, rec.fs, self._form.stride)
         nb = r2.size // rows
         if nb < 2:
             need = 2 * rows / max(1, r2.size) * rec.n  # samples of record that give two blocks
             raise DiscrepancyError(
                 f"{rec.source}: too short for the discrepancy workflow: {rec.duration:.3g} s, at least about "
                 f"{need / rec.fs:.3g} s are needed (the part from {100 * self.n_fit_ / rec.n:.0f} to "
-                f"{100 * self.n_id_ / rec.n:.0f} % of the record scores each effect in {self.window_s:g} s blocks, "
+                f"{100 * self.n_id_ / rec.n:.0f} % of the record scores each effect in {self.window_s_:g} s blocks, "
                 "two at least)"
             )
         cand.block_ms = block_scores(r2, rows, ys.var())
@@ -851,6 +854,7 @@ class Discrepancy(StructureResults, Estimator):
         else:
             check_decay(rec, "the discrepancy workflow")
         rec.require_motion("the discrepancy workflow")
+        rec.require_live_aux("the discrepancy workflow")
         if element_of(self, rec) is None:
             self.check_length(rec)
 
@@ -909,13 +913,11 @@ class Discrepancy(StructureResults, Estimator):
         # the pulses, it closed the gap the pulses make (4.4 -> 1.2 % on the double well with its stop found, whose
         # own gap was 0.38 %: measured)
         no_hybrid = kind.kind == "impact" and self.unnamed
-        window_s, refine, unnamed = self.window_s, self.refine, self.unnamed
-        self.window_s, self.refine = self.window_s_, False if unrefined else self.refine
-        self.unnamed = unnamed and not no_hybrid
-        try:
-            self._fit_one(identification_record(rec, kind))
-        finally:
-            self.window_s, self.refine, self.unnamed = window_s, refine, unnamed
+        # what this fit runs with, kept apart from the parameters (which the fit leaves as given: it swapped them while
+        # it ran, so a method called after it on a ring-down read the record raw, in the parameter's windows)
+        self._refine_run = False if unrefined else self.refine
+        self._unnamed_run = self.unnamed and not no_hybrid
+        self._fit_one(identification_record(rec, kind))
         if unrefined:
             self.refinement_ = {"applied": False, "reason": "not run on a hammer's record (refine=True runs it): its "
                                 "windows and held-out free run would cross the pulses, which a few samples do not "
@@ -941,7 +943,7 @@ class Discrepancy(StructureResults, Estimator):
                                    f"{' '.join(str(exc).split())}") from None  # fmt: skip
         self.baseline_model_ = base_model
         self.baseline_refinement_ = None
-        if self.refine is not False:  # the gap a user sees is the best the baseline's form predicts, not its weak fit's
+        if self._refine_run is not False:  # the gap a user sees: the best the baseline form predicts, not its weak fit
             val = validate(base_model, rec, self.n_id_)
             base_model, _, self.baseline_refinement_ = refine_stage(base_model, rec, self.n_id_, val, held=_held(terms))
         self.gap_before_ = self._gap(rec, base_model)
@@ -975,8 +977,11 @@ class Discrepancy(StructureResults, Estimator):
                     cands.append(self._law_candidate(rec, name, terms, stop, aux, law))
             ranking = sorted(cands, key=lambda c: c.heldout_percent)
             best = self._parsimonious(ranking, terms, law)
-            gain = compare(_scores(none), _scores(best), self.margin, _scores(none))
-            named = best.effect != "none" and gain.significant
+            # a measured channel's term (aux:NAME) is no guess from a catalogue: no practical margin (the lab's
+            # consistency floor a catalogue's term can buy back), twice the standard error instead of once
+            measured = best.effect.startswith(effects.AUX_PREFIX)
+            gain = compare(_scores(none), _scores(best), 0.0 if measured else self.margin, _scores(none))
+            named = best.effect != "none" and (gain.gain > MEASURED_SE * gain.se if measured else gain.significant)
             iteration = {
                 "ranking": [{"effect": c.effect, "score": c.heldout_percent, **c.notes} for c in ranking],
                 "named": best.effect if named else "none",
@@ -1020,9 +1025,9 @@ class Discrepancy(StructureResults, Estimator):
                                    "windows": reg.get("windows", 0), "window_s": reg.get("window_s"),
                                    "record_window_s": reg.get("record_window_s"), "judged_on": judged}  # fmt: skip
         self.locate_after_ = self.locate(rec, terms, stop, aux, law)
-        self.effect_interval_ = self.effect_interval(rec)
+        self.effect_interval_ = self._effect_interval(rec)
         self.bounded_ = boundedness(self.model_, rec.segment(0, self.n_id_))
-        self.unnamed_ = self._unnamed(rec) if self.unnamed else None
+        self.unnamed_ = self._unnamed(rec) if self._unnamed_run else None
         lines = classified(rec, self.model_, [] if self.bounded_["ok"] else [self.bounded_["warning"]])
         issue(lines)
         self.warnings_ = [text for _, text in lines]
@@ -1154,7 +1159,7 @@ class Discrepancy(StructureResults, Estimator):
         """
         initial = self._refit_model(rec, best.terms, best.stop, best.aux, best.law)
         model, refinement = initial, None
-        if self.refine is not False:
+        if self._refine_run is not False:
             val = validate(initial, rec, self.n_id_)
             model, _, refinement = refine_stage(initial, rec, self.n_id_, val, held=_held(best.terms))
         return {"model": model, "initial": initial, "refinement": refinement, "gap": self._gap(rec, model)}
@@ -1195,6 +1200,14 @@ class Discrepancy(StructureResults, Estimator):
             if evidence["folds"].get("windows", 0) >= 3 and evidence["folds"].get("acting") is not None:
                 judged = {**evidence["folds"], "rest": regime.get("rest")}
                 where = f"windows of the record (in {len(judged['folds'])} blocks, each predicted by fits without it)"
+        # a measured channel's term the equation error named (beyond twice its standard error) is kept unless it
+        # predicts worse beyond its uncertainty: the catalogue's rule (better beyond it) dropped a piezo's coupling
+        # whose windows' error fell 30 % within a wide one (measured)
+        measured = effect.startswith(effects.AUX_PREFIX)
+
+        def not_worse(c: dict[str, Any] | None) -> bool:
+            return c is not None and not (c["gain_percent"] < 0 and c["significant"])
+
         if judged.get("windows", 0) >= 3 and judged.get("acting") is not None:
             acts, rest = judged["acting"], judged.get("rest")
             worse = rest is not None and rest["gain_percent"] < 0 and rest["significant"]
@@ -1202,6 +1215,8 @@ class Discrepancy(StructureResults, Estimator):
                     + change.format(acts["gain_percent"], *acts["gain_interval_percent"]))  # fmt: skip
             if acts["significant"] and acts["gain_percent"] > 0 and not worse:
                 return True, f"{effect}: kept: {what}; the rest not worse", evidence
+            if measured and not_worse(acts) and not worse:
+                return True, f"{effect}: kept: a measured channel, not worse: {what}; the rest not worse", evidence
             why = "the rest predicted worse" if worse else "not a fall beyond its uncertainty"
             return False, f"{effect}: named by the equation error but not kept: {what}: {why}", evidence
         if pooled is None:
@@ -1209,6 +1224,9 @@ class Discrepancy(StructureResults, Estimator):
         txt = change.format(pooled["gain_percent"], *pooled["gain_interval_percent"])
         if pooled["significant"] and pooled["gain_percent"] > 0:
             return True, f"{effect}: kept: the held-out windows' rms error fell {txt}", evidence
+        if measured and not_worse(pooled):
+            return True, (f"{effect}: kept: a measured channel the equation error names, not predicting the held-out "
+                          f"windows worse: their rms error fell {txt}"), evidence  # fmt: skip
         return False, (f"{effect}: named by the equation error but not kept: with it the held-out windows' rms error "
                        f"fell {txt}, not beyond its uncertainty"), evidence  # fmt: skip
 
@@ -1287,13 +1305,13 @@ class Discrepancy(StructureResults, Estimator):
 
     def _predictability(self, rec: Measurement, model: Model) -> dict[str, Any]:
         """How long ``model``'s runs restarted from the record's states stay predictable (``validation.predictability``
-        over the identification part, at most ``window_s / 2``).
+        over the identification part, at most ``window_s / 2`` of the fit's own window, ``window_s_``).
         """
-        return predictability(model, rec, self.n_id_, self.window_s, self._z0, self._v0)
+        return predictability(model, rec, self.n_id_, self.window_s_, self._z0, self._v0)
 
     def _parting_sample(self, rec: Measurement, model: Model, windows: RestartWindows, draws: int,
                         min_pairs: int) -> int | None:  # fmt: skip
-        """``validation.parting_sample`` of ``model``'s runs over ``windows`` (the identification part's rms z)."""
+        """``validation.parting_sample`` of ``model``'s runs over ``windows`` (the identification part's amplitude)."""
         return parting_sample(model, rec, windows, self._z0, self._v0, self.n_id_, draws, min_pairs)
 
     def _window_length(self, rec: Measurement) -> int:
@@ -1307,9 +1325,9 @@ class Discrepancy(StructureResults, Estimator):
         """``_episodes``' windows no longer than the motion there stays predictable by the models compared on them:
         each model's runs from the windows' start states and from those states moved by draws of their noise
         (``LOCAL_DRAWS`` per window, seeded), the first time their rms separation, pooled over windows and draws,
-        exceeds ``PREDICTABILITY_FRACTION`` of the identification part's rms z; the shorter of the models' (and of
-        the record's span, ``_window_length``). Measured before any run is compared with the record, the same for
-        every model. Where an effect acts the motion can be far less predictable than the record's average (an end
+        exceeds ``PREDICTABILITY_FRACTION`` of the identification part's amplitude (``motion_amplitude``); the
+        shorter of the models' (and of the record's span, ``_window_length``). Measured before any run is compared
+        with the record, the same for every model. Where an effect acts the motion can be far less predictable than the record's average (an end
         stop's bounce next to the barrier: 0.17 s against 0.9 s, measured), which the baseline, without the
         effect, does not show. Returns (acting mask, the windows, ``{"horizon_s", "record_s"}``).
         """
@@ -1443,7 +1461,7 @@ class Discrepancy(StructureResults, Estimator):
         return {
             "term_rms": float(np.sqrt(np.mean(term**2))),
             "term_percent_of_restoring_force": float(100 * np.sqrt(np.mean(term**2) / np.mean(force**2))),
-            "gap": h.restarted_gap(rec, self.n_id_, self.window_s, self._z0, self._v0),
+            "gap": h.restarted_gap(rec, self.n_id_, self.window_s_, self._z0, self._v0),
             **h.to_json(),
         }
 
@@ -1522,14 +1540,14 @@ class Discrepancy(StructureResults, Estimator):
         """The held-out tail's gap windows: ``window_s`` windows from the split (``restart_windows``), on a hammer's
         record restarted after its pulses (``_after_pulses``).
         """
-        return self._after_pulses(rec, restart_windows(rec.n, rec.fs, self.window_s, start=self.n_id_))
+        return self._after_pulses(rec, restart_windows(rec.n, rec.fs, self.window_s_, start=self.n_id_))
 
     def _tail_runs(self, model: Model, rec: Measurement) -> dict[str, Any]:
         """The held-out tail's restarted free runs (``validation.restarted_free_runs``' keys) over ``_tail_windows``:
         ``restarted_free_runs`` itself where they are its windows (any record but a hammer's).
         """
         if vars(self).get("record_kind_") is None or self.record_kind_.kind != "impact":
-            return restarted_free_runs(model, rec, self.n_id_, self.window_s, self._z0, self._v0)
+            return restarted_free_runs(model, rec, self.n_id_, self.window_s_, self._z0, self._v0)
         windows = self._tail_windows(rec)
         if not len(windows):
             return {}
@@ -1578,7 +1596,21 @@ class Discrepancy(StructureResults, Estimator):
         windows = self._after_pulses(rec, RestartWindows.at(sorted(starts), every.length))
         return windows, f"the record's windows, {extra} of them restarted where it acts"
 
-    def effect_interval(self, rec: Measurement, prob: float = 0.9) -> dict[str, Any]:
+    def effect_interval(self, data, prob: float = 0.9) -> dict[str, Any]:
+        """Each named effect's size with its interval (probability ``prob``) on ``data`` (a ``Measurement`` or a path:
+        the record this estimator was fitted on), read as the fit read it (``record_kind_``: a hammer's force
+        windowed, a free decay's input zero; its windows ``window_s_`` long): ``_effect_interval``.
+        """
+        if not self.fitted:
+            raise NotFittedError(f"this {type(self).__name__} is not fitted yet (effect_interval reads its fit): call "
+                                 "fit first")  # fmt: skip
+        from negstiff.inference.analysis.record_kind import identification_record
+
+        rec = self.check(data)
+        kind = vars(self).get("record_kind_")
+        return self._effect_interval(rec if kind is None else identification_record(rec, kind), prob)
+
+    def _effect_interval(self, rec: Measurement, prob: float = 0.9) -> dict[str, Any]:
         """Each named effect's size with its interval (probability ``prob``), by a Laplace approximation of the
         output error over the record's restarted windows (``_interval_windows``: runs of the record's predictable
         span, ``predictability_``, one after the other, and one more before each episode where the effect acts),
@@ -1713,7 +1745,7 @@ class Discrepancy(StructureResults, Estimator):
         out = _loo_compare(np.repeat(ms_a[None], draws, 0), np.repeat(ms_b[None], draws, 0), [*ra, *rb],
                            windows.length, rng)  # fmt: skip
         out["method"] = (f"arviz.compare (PSIS-LOO) over the held-out tail's {len(windows)} restarted "
-                         f"{self.window_s:g} s runs, {draws} draws of the noise variance")  # fmt: skip
+                         f"{self.window_s_:g} s runs, {draws} draws of the noise variance")  # fmt: skip
         return out
 
     def where_text(self) -> str:

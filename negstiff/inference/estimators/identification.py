@@ -26,8 +26,9 @@ optimum (to 1e-9 on the rig's records), so a consistency check *between methods*
 
 from __future__ import annotations
 
+import dataclasses
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any, Self
 
@@ -244,28 +245,50 @@ class Identification:
         )
 
 
-def visited_well(rec: Measurement, z: float, equilibria: Equilibria | None = None) -> str:
-    """The name of the one well a record visited, at ``z``: by where it is, the nearer of the rest positions
-    the metadata states, else of a model's two wells (``equilibria``); else ``"plus"``, the contract's name
-    for the well of a single-well system.
+def visited_well(rec: Measurement, z: float, models: Sequence[Model] = (),
+                 stroke: tuple[float, float] | None = None) -> str:  # fmt: skip
+    """The name of the one well a record visited, at ``z`` [m].
+
+    In order: the nearer of the rest positions the metadata states; else the nearer of the two wells of the
+    first of ``models`` that has two; else the side of the barrier: the well lies below the region where a
+    model's stiffness K'(z) is not positive (the barrier between the wells) for the minus well, above it for the
+    plus well, that region sought within one span of ``stroke`` (lo, hi) [m] (where the record went) beyond its
+    ends; else ``"plus"``, the contract's name for the well of a single-well system (a stiffness positive
+    throughout). A cubic fitted over one well of a bistable device may keep one root only, but it keeps the
+    softening towards the barrier (a record in the minus well, 11.41 Hz, was named plus by its one root).
     """
     rest = rec.rest_positions
     if len(rest) == 2:
         return min(rest, key=lambda w: abs(rest[w] - z))
-    if equilibria is not None and equilibria.z_minus is not None:
-        return "minus" if abs(z - equilibria.z_minus) < abs(z - equilibria.z_plus) else "plus"
+    for model in models:
+        try:
+            eq = model.equilibria()
+        except (ValueError, ArithmeticError):
+            continue
+        if eq.z_minus is not None and eq.z_plus is not None:
+            return "minus" if abs(z - eq.z_minus) < abs(z - eq.z_plus) else "plus"
+    lo, hi = stroke if stroke is not None else (z, z)
+    lo, hi = min(lo, z), max(hi, z)
+    span = hi - lo if hi > lo else max(abs(z), 1e-3)
+    grid = np.linspace(lo - span, hi + span, 2001)
+    for model in models:
+        with np.errstate(all="ignore"):
+            soft = grid[np.asarray(model.stiffness(grid), float) <= 0]
+        if soft.size:
+            return "minus" if soft[np.argmin(np.abs(soft - z))] > z else "plus"
     return "plus"
 
 
 def equilibria_and_modes(
-    model: Model, rec: Measurement, stroke: tuple[float, float]
+    model: Model, rec: Measurement, stroke: tuple[float, float], namers: Sequence[Model] = ()
 ) -> tuple[Equilibria | None, dict[str, dict[str, float | None]], list[str]]:
     """The model's equilibria and each well's underlying-linear frequency and damping ratio (None where the
     model has no such well), with the warnings they call for.
 
     A model fitted over one well of a record may have roots far outside what the record visited (a quintic's
     extra roots): then the equilibria inside the stroke (widened by half its span) are reported, and a
-    warning says the others are an extrapolation. A single well is named by where it lies (``visited_well``).
+    warning says the others are an extrapolation. A single well is named by where it lies (``visited_well``:
+    by ``model``, then by the other models of ``namers``, the same models that name the method's own well).
     """
     from negstiff.models.equation import find_equilibria
 
@@ -287,7 +310,7 @@ def equilibria_and_modes(
             f"the identified restoring force's equilibria beyond the stroke the record visited are an "
             f"extrapolation ({exc}); the wells within it are reported"
         )
-    if eq.z_minus is None and visited_well(rec, eq.z_plus) == "minus":
+    if eq.z_minus is None and visited_well(rec, eq.z_plus, (model, *namers), stroke) == "minus":
         # the one well, named by where it is: as z_minus, z_plus None (against the type's single-well convention)
         eq = Equilibria(eq.z_plus, None, None)  # type: ignore[arg-type]
     modal: dict[str, dict[str, float | None]] = {}
@@ -316,11 +339,16 @@ def refuse_softening(rec: Measurement, n_id: int, method: str) -> None:
     """
     from negstiff.inference.steps.weak import WeakFormError, weak_least_squares
 
+    key = ("quick_cubic", n_id)
+    if key in rec.derived:  # judged once per record (the check, then the fit)
+        return
     try:
         quick = weak_least_squares(rec.segment(0, n_id), QUICK_TERMS)
     except (WeakFormError, np.linalg.LinAlgError, ValueError):
         return
-    if not quick.k3 > 0:
+    if quick.k3 > 0:
+        rec.derived[key] = True
+    else:
         raise InputError(
             f"{rec.source}: {method} refused before its work: the record's quick least-squares cubic softens "
             f"(k3 = {quick.k3:.3g} N/m^3), so no bounded double- or single-well model explains it; is z in m "
@@ -458,9 +486,49 @@ class Identifier(Estimator):
         return replace(est, warnings=(*est.warnings, said) if why else est.warnings,
                        details={**est.details, "law_choice": {**account, "summary": said}}), account
 
+    def _check_response(self, rec: Measurement) -> None:
+        """A single DOF's record as the fit reads it (``identification_record``) checked in the record's check,
+        before any progress line: a broadband record's response carries a trace of its input
+        (``Measurement.require_response``), and its quick cubic does not soften (``refuse_softening``). A
+        vibrometer reading its own noise was refused by NSI's subspace step, after its progress line.
+        """
+        from negstiff.inference.analysis.record_kind import identification_record, record_kind
+
+        if rec.n_dof == 1 and getattr(self, "element", None) is None:
+            kind = record_kind(rec)
+            if kind.kind not in ("impact", "decay"):
+                rec.require_response(type(self).__name__)
+            read = identification_record(rec, kind)
+            n_id = int(round(read.n * (1 - self.validation_fraction)))
+            # a softening quick cubic refuses here where the cubic is asked for, or where no law could hold the
+            # record either (a quick spline's force does not grow outward at the stroke's ends); else the laws are
+            # compared (``_estimate_law``)
+            if self.law == laws.DEFAULT_RESTORING or (self.law is None and not quick_spline_holds(read, n_id)):
+                refuse_softening(read, n_id, type(self).__name__)
+
     def _final_details(self, rec: Measurement, model: Model, details: dict[str, Any]) -> dict[str, Any]:
         """The method's own result keys that depend on the final model (NSI's ``g_estimate``)."""
         return details
+
+    def _name_own_well(self, est: Estimate, well: str) -> Estimate:
+        """``est`` with the one well its own modal parameters give (where they give one) named ``well``: the name
+        the final model and the method's own agree on (``visited_well``). A method keeping more under the wells'
+        names (NSI's ``wells``) renames them too (``_renamed_well``).
+        """
+        if est.modal is None:
+            return est
+        found = [w for w, m in est.modal.items() if m.get("f_hz") is not None]
+        if len(found) != 1 or found[0] == well:
+            return est
+        other = found[0]
+        self._renamed_well(other, well)
+        details = dict(est.details)
+        if isinstance(details.get("wells"), dict) and other in details["wells"]:
+            details["wells"] = {well if w == other else w: v for w, v in details["wells"].items()}
+        return dataclasses.replace(est, modal={other: est.modal[well], well: est.modal[other]}, details=details)
+
+    def _renamed_well(self, old: str, new: str) -> None:
+        """What the method keeps under a well's name, renamed (``_name_own_well``); nothing by default."""
 
     def fit(self, data) -> Self:
         """Identify from ``data`` (a ``Measurement`` or a file path): the method's estimate, then the
@@ -481,14 +549,16 @@ class Identifier(Estimator):
                       "predictable": predictable_validation(model, rec, n_id)}  # fmt: skip
         bounded = boundedness(model, rec.segment(0, n_id))
         span = (float(stroke[0]), float(stroke[-1]))
-        equilibria, modal, eq_warnings = equilibria_and_modes(model, rec, span)
+        # one well visited: one name for it, by the final and the method's own model alike (``visited_well``)
+        est = self._name_own_well(est, visited_well(rec, float(np.median(rec.z[:n_id])), (model, est.model), span))
+        equilibria, modal, eq_warnings = equilibria_and_modes(model, rec, span, (est.model,))
         judged = judgement(model, rec, validation, modal, est.modal)
         details = dict(self._final_details(rec, model, est.details))
         details["modal_of_model"] = modal  # the final (refined) model's linearisation
         # ``modal`` is the method's own estimate (what method-vs-method checks compare): NSI's subspace pole,
         # else the linearisation of the method's own (equation-error) model, never the refined model's (NSI
         # and SINDy refine to the same output-error optimum, 6 digits alike)
-        modal = est.modal if est.modal is not None else equilibria_and_modes(est.model, rec, span)[1]
+        modal = est.modal if est.modal is not None else equilibria_and_modes(est.model, rec, span, (model,))[1]
         own = [*est.warnings, *([] if bounded["ok"] else [bounded["warning"]]), *eq_warnings, *judged]
         if validation.get("diverged"):
             own.append(validation["warning"])
@@ -551,8 +621,8 @@ class Identifier(Estimator):
         -------
         dict
             ``{"modal": {WELL: {"f_hz", "f_hz_se", "zeta", "zeta_se"}}, "model": {NAME: value},
-            "model_se": {NAME: se}, "blocks": [...], "method": ...}``: the estimate is this fit's own
-            (``modal_``, ``initial_model_``), the standard errors the blocks'.
+            "model_se": {NAME: se}, "blocks": [...], "method": ..., "mass_normalised"}``: the estimate is this fit's
+            own (``modal_``, ``initial_model_``), the standard errors the blocks'; ``mass_normalised``: per unit mass.
         """
         rec = self.check(data)
         if not (isinstance(blocks, int) and blocks >= 2):
@@ -578,7 +648,7 @@ class Identifier(Estimator):
         names = ("k0", "k1", "k2", "k3", "c", "c_nl")
         model_se = {n: float(np.std([blk["model"][n] for blk in per_block], ddof=1) / math.sqrt(blocks)) for n in names}
         return {"method": self.method, "modal": out_modal, "model": {n: getattr(own.initial_model, n) for n in names},
-                "model_se": model_se, "blocks": per_block,
+                "model_se": model_se, "blocks": per_block, "mass_normalised": own.mass_normalised,
                 "standard_error": f"batch means over {blocks} blocks of the identification part"}  # fmt: skip
 
     def _restore(self, result: dict[str, Any]) -> None:

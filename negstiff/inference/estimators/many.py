@@ -113,6 +113,15 @@ def fit_many(
     -------
     ManyFits
         The fitted estimators, the refused records' reasons, and the coverage.
+
+    Examples
+    --------
+    >>> from negstiff import NSI, Measurement, Rig, fit_many
+    >>> from negstiff.models import SEED_LIKE_CUBIC
+    >>> recs = [Measurement.from_rig(Rig(SEED_LIKE_CUBIC, seed=s).random(duration=30.0, rms=20.0)) for s in (1, 2)]
+    >>> many = fit_many({"nsi": NSI(refine=False)}, recs)      # serially, here; scheduler="local": on dask
+    >>> [fit.modal_["plus"]["f_hz"] > 0 for fit in many.fits["nsi"]], many.errors["nsi"]
+    ([True, True], [None, None])
     """
     named = dict(estimators) if isinstance(estimators, Mapping) else {type(e).__name__: e for e in estimators}
     if not named or not records:

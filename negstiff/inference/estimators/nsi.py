@@ -52,6 +52,7 @@ from negstiff.inference.estimators.structure_id import (
 )
 from negstiff.inference.estimators.structure_id import stabilisation as structure_stabilisation
 from negstiff.inference.record.measurement import Measurement, per_unit_mass_warning
+from negstiff.inference.steps.refine import stroke_quantiles
 from negstiff.inference.steps.shape import fit_shape
 from negstiff.inference.steps.weak import free_decay, known_input_gain, mass_of
 from negstiff.inference.steps.wells import well_guesses
@@ -370,7 +371,7 @@ class NSI(StructureResults, Identifier):
 
     method = "nsi"
     _parameter_constraints = {
-        "order": Interval(int, 2, 20),
+        "order": Interval(int, 2, 20, even=True),  # two states per mode: an odd order splits one
         "block_rows": Interval(int, 2, 500),
         "band": Pair(Interval(float, 0.0, 10.0, lo_open=True)),
         "validation_fraction": FRACTION,
@@ -561,6 +562,7 @@ class NSI(StructureResults, Identifier):
         else:
             check_decay(rec, "NSI")
         rec.require_motion("NSI")
+        self._check_response(rec)
 
     def fit(self, data) -> NSI:
         """Identify from ``data`` (a ``Measurement`` or a file path): a single DOF's record through the shared
@@ -617,10 +619,11 @@ class NSI(StructureResults, Identifier):
         models = [laws.compose(restoring, damping, f, mass, basis.shape) for f in frames]
         model = laws.compose(restoring, damping, np.mean(frames, axis=0), mass, basis.shape)
         try:
-            eq = model.equilibria()
+            model.equilibria()  # usable: a bistable or single-well restoring force
         except ValueError as exc:  # a well's fit that is no bistable oscillator: the record's verdict, not a bug
             raise NSIError(f"{rec.source}: the identified restoring force is not usable ({exc})") from None
-        if z_minus is None and visited_well(rec, z_plus, eq) == "minus":
+        q = stroke_quantiles(ident.displacement)
+        if z_minus is None and visited_well(rec, z_plus, (model,), (float(q[0]), float(q[-1]))) == "minus":
             wells = {"minus": wells["plus"]}  # one well visited: named by where it lies (``visited_well``)
         self.wells_ = wells
         self.models_by_well_ = {name: mm for name, mm in zip(wells, models, strict=False)}
@@ -651,6 +654,11 @@ class NSI(StructureResults, Identifier):
                 **({} if shape_fit is None else {"shape": shape_fit.to_json()}),
             },
         )
+
+    def _renamed_well(self, old: str, new: str) -> None:
+        """The one well's fit and model under the name the final model gives it (``Identifier._name_own_well``)."""
+        self.wells_ = {new if w == old else w: fit for w, fit in self.wells_.items()}
+        self.models_by_well_ = {new if w == old else w: mm for w, mm in self.models_by_well_.items()}
 
     def _final_details(self, rec: Measurement, model: Model, details: dict[str, Any]) -> dict[str, Any]:
         """``g_estimate``: the final model's k0/m, the gravity the record's own physics carries (base excitation)."""

@@ -49,7 +49,8 @@ def _is_real(v: Any) -> bool:
 @dataclass(frozen=True)
 class Interval(Constraint):
     """A number of ``kind`` (``int`` or ``float``: any finite real) in [lo, hi] (``lo_open``/``hi_open``:
-    the bound excluded; None: unbounded), in ``unit``; ``none`` admits None (a default computed later).
+    the bound excluded; None: unbounded), in ``unit``; ``none`` admits None (a default computed later); ``even``:
+    an even integer only (a model order: two states per mode).
     """
 
     kind: type
@@ -59,6 +60,7 @@ class Interval(Constraint):
     hi_open: bool = False
     unit: str = ""
     none: bool = False
+    even: bool = False
 
     @override
     def accepts(self, value: Any) -> bool:
@@ -68,11 +70,13 @@ class Interval(Constraint):
             return False
         if self.lo is not None and (value < self.lo or (self.lo_open and value == self.lo)):
             return False
+        if self.even and value % 2:
+            return False
         return not (self.hi is not None and (value > self.hi or (self.hi_open and value == self.hi)))
 
     @override
     def describe(self) -> str:
-        what = "an integer" if self.kind is int else "a finite number"
+        what = ("an even integer" if self.even else "an integer") if self.kind is int else "a finite number"
         if self.lo is not None or self.hi is not None:
             lo = "-inf" if self.lo is None else f"{self.lo:g}"
             hi = "inf" if self.hi is None else f"{self.hi:g}"

@@ -296,8 +296,10 @@ class SINDy(StructureResults, Identifier):
         else:
             check_decay(rec, "SINDy")
         rec.require_motion("SINDy")
+        rec.require_live_aux("SINDy")
         if at is None:
             self.check_length(rec)
+            self._check_response(rec)
 
     def check_length(self, rec: Measurement) -> None:
         """Refuse a single DOF's record too short for the selection's scoring blocks (two ``window_s`` blocks

@@ -481,8 +481,54 @@ class Measurement:
                 f"dead sensor, or no excitation? {what} needs an input that moves"
             )
 
+    def require_response(self, what: str) -> None:
+        """Raise ``MeasurementError`` when the response carries no trace of the input: its coherence with the input
+        stays, in every bin below 0.8 of the Nyquist frequency, where two independent signals' reaches by chance
+        (the largest of K bins is significant at ``RESPONSE_TRACE_P`` when K (1 - gamma^2)^(n_d - 1) is below it,
+        n_d the Welch averages of segments of about a second: Bendat & Piersol 9.2.3): a sensor reading its own
+        noise (a vibrometer off its target). A nonlinear response, chaotic too, keeps a linear part of its input
+        (a cross-well record's best bin: coherence 0.56 over 31 averages, p = 4e-9; a vibrometer's noise: 0.044 over
+        119, p = 0.97). A record without an input (a free decay) or a hammer's is not judged here.
+        """
+        from scipy import signal
+
+        if self.z is None or self.n_dof != 1 or _constant(self.u) or _constant(self.z):
+            return
+        nper = int(min(self.n // 16, round(self.fs)))
+        if nper < 64:
+            return
+        f, coh = signal.coherence(self.u, self.z, fs=self.fs, nperseg=nper)
+        band = (f > 0) & (f < 0.8 * self.fs / 2)
+        if not band.any():
+            return
+        best = float(np.nan_to_num(coh[band]).max())
+        averages = 2 * self.n // nper - 1
+        p = band.sum() * (1 - best) ** (averages - 1)
+        if p > RESPONSE_TRACE_P:
+            raise MeasurementError(
+                f"{self.source}: the response carries no trace of the input {self.input_name}: its coherence with it "
+                f"reaches {best:.2g} at most over {averages} averages, which independent signals reach by chance (p = "
+                f"{min(p, 1.0):.2g}); is its sensor reading its own noise? {what} needs the response to this input"
+            )
+
+    def require_live_aux(self, what: str) -> None:
+        """Raise ``MeasurementError`` when a measured auxiliary channel does not vary (a dead sensor): a term in it
+        is a constant, which the restoring force's k0 cannot be told from (``what`` offers each as a term).
+        """
+        for name, a in self.aux.items():
+            if _constant(a):
+                raise MeasurementError(
+                    f"{self.source}: the auxiliary channel {name!r} is constant ({a[0]:.6g} over {self.n} samples): a "
+                    f"dead or disconnected sensor? {what} offers it as a term, which needs a channel that moves"
+                )
 
 
+
+
+
+RESPONSE_TRACE_P = 0.01
+"""A response whose best coherence with the input is not significant at this level (over the band's bins) carries
+no trace of the input (``Measurement.require_response``)."""
 
 
 def _checked_masses(source, masses, n_dof: int) -> tuple[float, ...]:

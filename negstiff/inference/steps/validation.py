@@ -53,10 +53,65 @@ prediction error; at 0.2 it was below the data's (measured on the multisine test
 MAX_SUBSTEPS = 16
 
 
+RK4_LIMIT = 2.8
+"""The largest omega h at which the classical Runge-Kutta step is stable on an undamped oscillator (2 sqrt 2)."""
+
+
 def record_substeps(system, rec: Measurement) -> int:
     """Runge-Kutta steps per sample for simulating ``system`` against ``rec``: the simulator's default,
     more where the system's stiffest point over the range the record visits makes omega h exceed
-    ``STEP_OMEGA`` (a fast resonance sampled slowly: the Silverbox's 60-90 Hz at 610 Hz).
+    ``STEP_OMEGA`` (a fast resonance sampled slowly: the Silverbox's 60-90 Hz at 610 Hz); at most
+    ``MAX_SUBSTEPS`` (a system beyond them diverges, said by its result: ``check_resolved`` refuses it first).
+    """
+    omega, _ = stiffest(system, rec)
+    need = math.ceil(min(omega * rec.dt / STEP_OMEGA, MAX_SUBSTEPS))
+    return int(min(MAX_SUBSTEPS, max(DEFAULT_SUBSTEPS, need)))
+
+
+def check_resolved(system, rec: Measurement, what: str) -> None:
+    """Refuse (``MeasurementError``, one line naming the mass and the stiffness) a system whose stiffest linear
+    frequency over the record's range is beyond what ``MAX_SUBSTEPS`` Runge-Kutta steps a sample resolve
+    (``RK4_LIMIT``): its run can only diverge (m = 1e-300 kg with k = 1e300 N/m overflowed the count of steps).
+    """
+    omega, k_max = stiffest(system, rec)
+    top = RK4_LIMIT * MAX_SUBSTEPS / rec.dt
+    if not omega <= top:
+        raise MeasurementError(
+            f"{what}: the model's stiffest linear frequency sqrt(|K'(z)| / m) = sqrt({k_max:.3g} N/m / {system.m:.3g} "
+            f"kg) = {omega / (2 * math.pi):.3g} Hz over the record's range is beyond what {MAX_SUBSTEPS} Runge-Kutta "
+            f"steps a sample resolve at {rec.fs:g} Hz (up to {top / (2 * math.pi):.3g} Hz): is m in kg and K in N/m?"
+        )
+
+
+def check_structure_run(structure: Structure, z0: float | None, z_limit: float = DEFAULT_Z_LIMIT) -> None:
+    """Refuse (``MeasurementError``, one line naming the value) a structure no simulation under a record can run:
+    a mass beyond what a lab's structure holds (``MASS_RANGE_KG``), a linear stiffness or damping matrix that is
+    not positive semi-definite (a spring that pushes its masses away, a damper that feeds energy in: a negative
+    stiffness is the element's ``k1``), a start ``z0`` [m] across the element beyond the simulation's bound
+    ``z_limit``. Each ran and said "diverged at t = 0.002 s" instead.
+    """
+    from negstiff.io.schema import MASS_RANGE_KG
+
+    lo, hi = MASS_RANGE_KG
+    for i, m in enumerate(structure.masses):
+        if not lo <= m <= hi:
+            raise MeasurementError(f"the structure's mass m{i + 1} = {m:g} kg is beyond the masses a lab's structure "
+                                   f"holds ({lo:g} to {hi:g} kg)")  # fmt: skip
+    for name, matrix, unit, why in (("stiffness", structure.stiffness, "N/m", "a spring that pushes its masses away "
+                                     "(a negative stiffness is the element's k1)"),
+                                    ("damping", structure.damping, "N s/m", "a damper that feeds energy in")):
+        eig = np.linalg.eigvalsh(np.asarray(matrix, float))
+        if eig.size and eig.min() < -1e-12 * max(1.0, float(np.abs(eig).max())):
+            raise MeasurementError(f"the structure's linear {name} matrix has the eigenvalue {eig.min():g} {unit}: "
+                                   f"{why}; it must be positive semi-definite")  # fmt: skip
+    if z0 is not None and not abs(z0) < z_limit:
+        raise MeasurementError(f"a start z0 = {z0:g} m across the element lies beyond the simulation's bound |z| < "
+                               f"{z_limit:g} m")  # fmt: skip
+
+
+def stiffest(system, rec: Measurement) -> tuple[float, float]:
+    """The system's stiffest linear angular frequency [rad/s] over the range the record visits (the model's wells
+    and what lies between for an input-only record), and that |K'(z)| [N/m].
     """
     if rec.z is not None:
         lo, hi = float(np.min(rec.z)), float(np.max(rec.z))
@@ -70,10 +125,9 @@ def record_substeps(system, rec: Measurement) -> int:
     grid = np.linspace(lo, hi, 65)
     with np.errstate(all="ignore"):
         k = np.abs(np.asarray(system.stiffness(grid), float))
-    k = k[np.isfinite(k)]
-    omega = math.sqrt(k.max() / system.m) if k.size else 0.0
-    need = math.ceil(omega * rec.dt / STEP_OMEGA)
-    return int(min(MAX_SUBSTEPS, max(DEFAULT_SUBSTEPS, need)))
+        k = k[np.isfinite(k)]
+        k_max = float(k.max()) if k.size else 0.0
+        return float(np.sqrt(np.float64(k_max) / system.m)), k_max
 
 
 def simulate_record(
@@ -136,6 +190,7 @@ def simulate_measured(system, rec: Measurement, z0: float | None = None, v0: flo
     """
     if interpolation not in ("band-limited", "linear"):
         raise MeasurementError(f"interpolation is 'band-limited' or 'linear', got {interpolation!r}")
+    check_resolved(system, rec, f"simulation under {rec.source}")
     limits = Limits(z_limit=DEFAULT_Z_LIMIT, v_limit=DEFAULT_V_LIMIT)
     start: tuple[float | None, float] = (None, 0.0)
     if rec.z is not None:
@@ -238,7 +293,17 @@ def simulate_windows(model: Model, rec: Measurement, windows: RestartWindows, zs
 
 PREDICTABILITY_FRACTION = 0.1
 """The record's predictability horizon (``predictability``) is the time by which runs restarted from state
-estimates that differ by their noise have parted by this fraction of the signal's rms (pooled over restarts)."""
+estimates that differ by their noise have parted by this fraction of the motion's amplitude (pooled over restarts:
+``motion_amplitude``)."""
+
+
+def motion_amplitude(z: np.ndarray) -> float:
+    """The motion's amplitude [m]: half the range between z's 5 and 95 % quantiles (a sine's amplitude within 1.3 %),
+    the scale the predictability's runs part on. Where z's zero lies does not matter: its rms about zero, the scale
+    before, moved a chaotic record's horizon from 0.40 s to 0.58 s with z read 50 mm lower (measured).
+    """
+    lo, hi = np.quantile(np.asarray(z, float), [0.05, 0.95])
+    return float(hi - lo) / 2
 
 
 def start_noise(rec: Measurement) -> tuple[float, float]:
@@ -254,9 +319,9 @@ def parting_sample(model: Model, rec: Measurement, windows: RestartWindows, z0: 
                    draws: int, min_pairs: int) -> int | None:  # fmt: skip
     """The first sample at which ``model``'s runs from ``windows``' start states (``z0``, ``v0``: the record's
     states) and from those states moved by ``draws`` draws of their noise each (``start_noise``; seeded, the same
-    draws for every model) part by more than ``PREDICTABILITY_FRACTION`` of the rms z of the record's first
-    ``n_id`` samples, their rms separation pooled over the windows and the draws; None where they never do or
-    fewer than ``min_pairs`` pairs ran without diverging.
+    draws for every model) part by more than ``PREDICTABILITY_FRACTION`` of the amplitude of the record's first
+    ``n_id`` samples (``motion_amplitude``: where z's zero lies does not matter), their rms separation pooled over
+    the windows and the draws; None where they never do or fewer than ``min_pairs`` pairs ran without diverging.
     """
     sz, sv = start_noise(rec)
     rng = np.random.default_rng(0)
@@ -273,7 +338,7 @@ def parting_sample(model: Model, rec: Measurement, windows: RestartWindows, z0: 
     sep = np.concatenate(seps)
     if sep.shape[0] < min_pairs:
         return None
-    limit = PREDICTABILITY_FRACTION * float(np.sqrt(np.mean(rec.displacement[:n_id] ** 2)))
+    limit = PREDICTABILITY_FRACTION * motion_amplitude(rec.displacement[:n_id])
     over = np.sqrt(np.mean(sep**2, axis=0)) > limit
     return int(np.argmax(over)) if over.any() else None
 
@@ -285,7 +350,8 @@ def predictability(model: Model, rec: Measurement, n_id: int, window_s: float, z
     from that state moved by a draw of its noise (the displacement's sensor noise and the state velocity's
     predicted noise, ``Measurement.states``' ``noise_std`` and ``velocity_noise_std``; seeded), for at most
     ``window_s / 2``; the horizon is the first time their rms separation, pooled over the pairs, exceeds
-    ``PREDICTABILITY_FRACTION`` of the part's rms z. A run restarted from noisy states misses by that much
+    ``PREDICTABILITY_FRACTION`` of the part's amplitude (``motion_amplitude``). A run restarted from noisy states
+    misses by that much
     however right its model: a window longer than this scores chaos, not the model (measured: where an end
     stop acted, the true model's own 1 s runs missed by 103-114 % and by 2-3 % over their first 0.25 s).
     Returns ``{"horizon_s", "window_s"`` (the windows that score a model: the horizon, at most ``window_s / 2``
@@ -301,8 +367,8 @@ def predictability(model: Model, rec: Measurement, n_id: int, window_s: float, z
     out["method"] = (f"pairs of the baseline's runs restarted every {window_s / 20:g} s over the "
                      f"identification part, one from a state moved by its noise ({1e6 * sz:.3g} um, "
                      f"{1e3 * sv:.3g} mm/s rms): the "
-                     f"time their pooled rms separation exceeds {100 * PREDICTABILITY_FRACTION:g} % of rms z, at "
-                     f"most {cap / rec.fs:g} s")  # fmt: skip
+                     f"time their pooled rms separation exceeds {100 * PREDICTABILITY_FRACTION:g} % of z's amplitude "
+                     f"(half its 5-95 % range), at most {cap / rec.fs:g} s")  # fmt: skip
     if len(windows) < 2:
         return out
     parted = parting_sample(model, rec, windows, z0, v0, n_id, draws=1, min_pairs=2)

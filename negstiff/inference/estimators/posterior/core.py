@@ -374,11 +374,7 @@ class Posterior(Estimator):
             from negstiff.inference.steps.weak import weak_least_squares
 
             if self.start is not None:  # an identified (output-error refined) model: the MAP search starts there
-                if rec.mass is not None and abs(self.start.m / rec.mass - 1) > 1e-6:
-                    raise PosteriorError(
-                        f"{rec.source}: the start model's mass ({self.start.m:g} kg) is not the record's "
-                        f"({rec.mass:g} kg)"
-                    )
+                self._check_start_mass(rec)
                 start = self.start
                 self.start_info_ = {"source": "given", "model": start.to_dict()}
             else:
@@ -604,7 +600,23 @@ class Posterior(Estimator):
             raise PosteriorError(f"{type(self).__name__}(input_noise={self.input_noise!r}): a {kind.kind} "
                                  "record's windows are free decays between the pulses: no input's noise reaches "
                                  "them")  # fmt: skip
+        u_rms = float(np.std(rec.u))
+        if self.input_noise and not self.input_noise < u_rms:  # no start point had a positive density, after the bar
+            unit = "m/s^2" if rec.input_name == "base_acc" else "N"
+            raise PosteriorError(f"{type(self).__name__}(input_noise={self.input_noise:g}): the input's noise must be "
+                                 f"below the input's own rms, {u_rms:.3g} {unit} on {rec.source} (the input would be "
+                                 "its noise alone); None reads it from the input's spectrum")  # fmt: skip
+        self._check_start_mass(rec)
         Windows.check(rec, self.window_s)
+
+    def _check_start_mass(self, rec: Measurement) -> None:
+        """Refuse a start model (``start``) of another mass than the record's (in the record's check, before the
+        progress line and the bar; ``point_estimate`` checks it too).
+        """
+        if (self.model == "coefficients" and self.start is not None and rec.mass is not None
+                and abs(self.start.m / rec.mass - 1) > 1e-6):  # fmt: skip
+            raise PosteriorError(f"{rec.source}: the start model's mass ({self.start.m:g} kg) is not the record's "
+                                 f"({rec.mass:g} kg)")  # fmt: skip
 
     def fit(self, rec: Measurement) -> Posterior:
         """Sample the posterior of ``rec``; the result is ``result_`` (a ``PosteriorResult``)."""
@@ -676,6 +688,7 @@ class Posterior(Estimator):
         )
         res.summary = summarise(res.samples, names, tau_arr, self.hdi_prob)
         warn += convergence_warnings(res.summary, self.n_ensembles)
+        warn += k2_frame_warning(rec, res.summary)
         res.settings = {
             "model": self.model,
             "mass_prior": self.mass_prior if self.model == "device" else None,
@@ -781,6 +794,27 @@ def moved_inside(par: Parametrisation, theta: np.ndarray) -> np.ndarray:
     margin = np.minimum(1e-6 * span, np.maximum(0.1 * np.abs(theta), 1e-9 * span))
     inside = np.where(theta >= par.upper, par.upper - margin, theta)
     return np.where(theta <= par.lower, par.lower + margin, inside)
+
+
+def k2_frame_warning(rec: Measurement, summary: dict[str, Any]) -> list[str]:
+    """The warning a ring-down's posterior carries where its k2 rests on z's zero more than on the data: about one
+    well the record reads the restoring force's curvature there, K''(z*) = 2 k2 + 6 k3 z*, and with k0 a nuisance (a
+    cubic with a free constant is the same model in any frame) k2 follows only from z's zero, which an offset d moves
+    by 3 k3 d. Said where a zero off by the displacement's own noise (``Measurement.noise_floor``) moves it beyond its
+    standard deviation (a symmetric Duffing's decay: k2 24.7 +- 9.9 for a truth of 0, unsaid before).
+    """
+    from negstiff.inference.analysis.record_kind import record_kind
+
+    if "k2" not in summary or "k3" not in summary or rec.n_dof != 1 or record_kind(rec).kind not in ("impact", "decay"):
+        return []
+    noise = math.sqrt(max(float(rec.noise_floor()[0]), 0.0))
+    k2, k3 = summary["k2"], float(summary["k3"]["mean"])
+    shift = 3 * abs(k3) * noise
+    if not shift > k2["sd"]:
+        return []
+    return [f"k2 = {k2['mean']:.3g} +- {k2['sd']:.3g} holds for z's zero as measured: a ring-down about one well reads "
+            f"the restoring force's curvature there (2 k2 + 6 k3 z*), and a zero off by the displacement's own noise "
+            f"({1e6 * noise:.2g} um) moves k2 by 3 k3 d = {shift:.3g}, beyond its standard deviation"]
 
 
 INPUT_BAND_FILLED = 0.5
