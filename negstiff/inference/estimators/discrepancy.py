@@ -1327,9 +1327,9 @@ class Discrepancy(StructureResults, Estimator):
         (``LOCAL_DRAWS`` per window, seeded), the first time their rms separation, pooled over windows and draws,
         exceeds ``PREDICTABILITY_FRACTION`` of the identification part's amplitude (``motion_amplitude``); the
         shorter of the models' (and of the record's span, ``_window_length``). Measured before any run is compared
-        with the record, the same for every model. Where an effect acts the motion can be far less predictable than the record's average (an end
-        stop's bounce next to the barrier: 0.17 s against 0.9 s, measured), which the baseline, without the
-        effect, does not show. Returns (acting mask, the windows, ``{"horizon_s", "record_s"}``).
+        with the record, the same for every model. Where an effect acts the motion can be far less predictable than
+        the record's average (an end stop's bounce next to the barrier: 0.17 s against 0.9 s, measured), which the
+        baseline, without the effect, does not show. Returns (acting mask, the windows, ``{"horizon_s", "record_s"}``).
         """
         acting, windows = self._episodes(rec, force, lo)
         length = windows.length
