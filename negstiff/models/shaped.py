@@ -168,14 +168,50 @@ class ShapedLaw:
         return {k: max(abs(float(value[k])), 1e-12) for k in self.fields}
 
 
+class WidthShaped(ShapedLaw):
+    """A part whose shape is one width w > 0 (a magnets' gap, the springs' half-span) that its force decays or
+    saturates over: it acts within +-``SPAN_WIDTHS`` widths, the search looks between ``WIDTH_BOUNDS`` half-strokes
+    and starts from ``WIDTH_GUESSES`` half-strokes (a subclass sets them, and names the width ``shape[0]``).
+    """
+
+    SPAN_WIDTHS: ClassVar[float] = 8.0
+    WIDTH_BOUNDS: ClassVar[tuple[float, float]] = (0.1, 5.0)
+    WIDTH_GUESSES: ClassVar[tuple[float, ...]] = (0.5, 1.0, 2.0)
+    WIDTH_WORD: ClassVar[str] = "width"
+
+    def span(self, value):
+        """+-``SPAN_WIDTHS`` widths, per member of a batch."""
+        w = np.asarray(value[self.shape[0]], float)
+        return _number(-self.SPAN_WIDTHS * w), _number(self.SPAN_WIDTHS * w)
+
+    def check(self, name, value):
+        """A width > 0."""
+        w = self.shape[0]
+        if not value[w] > 0:
+            raise ValueError(f"{name} needs a {self.WIDTH_WORD} {w} > 0 [m], got {value[w]}")
+        return MappingProxyType(dict(value))
+
+    def shape_bounds(self, stroke):
+        """The width between ``WIDTH_BOUNDS`` half-strokes."""
+        half = 0.5 * (stroke[1] - stroke[0])
+        return {self.shape[0]: (self.WIDTH_BOUNDS[0] * half, self.WIDTH_BOUNDS[1] * half)}
+
+    def shape_guesses(self, stroke):
+        """Widths of ``WIDTH_GUESSES`` half-strokes."""
+        half = 0.5 * (stroke[1] - stroke[0])
+        return [{self.shape[0]: f * half} for f in self.WIDTH_GUESSES]
+
+
 @dataclass(frozen=True)
-class DipoleMagnet(ShapedLaw):
+class DipoleMagnet(WidthShaped):
     """Facing magnets as point dipoles: F = -3 A z / (d^2 + z^2)^(5/2) [N] (``{"A": N m^4, "d": m}``)."""
 
     fields: ClassVar[tuple[str, ...]] = ("A", "d")
     shape: ClassVar[tuple[str, ...]] = ("d",)
     bounds: ClassVar[dict[str, tuple[float, float]]] = {"d": (0.0, np.inf)}
     centred: ClassVar[bool] = True
+    # beyond +-8 gaps the force is below 1e-3 of its peak (it decays as z^-4); a harvester's wells lie near d / 2 to d
+    WIDTH_WORD: ClassVar[str] = "gap"
 
     def columns(self, shape, z):
         """The one column -3 z / (d^2 + z^2)^(5/2) [m^-4]."""
@@ -202,30 +238,10 @@ class DipoleMagnet(ShapedLaw):
         A, d = np.asarray(value["A"], float), np.asarray(value["d"], float)
         return A * ((d * d + z * z) ** -1.5 - d**-3.0)
 
-    def span(self, value):
-        """+-8 d: beyond it the force is below 1e-3 of its peak (it decays as z^-4); per member of a batch."""
-        d = np.asarray(value["d"], float)
-        return _number(-8.0 * d), _number(8.0 * d)
-
-    def check(self, name, value):
-        """A gap d > 0."""
-        if not value["d"] > 0:
-            raise ValueError(f"{name} needs a gap d > 0 [m], got {value['d']}")
-        return MappingProxyType(dict(value))
-
-    def shape_bounds(self, stroke):
-        """The gap between a tenth of the stroke's half-width and five times it."""
-        half = 0.5 * (stroke[1] - stroke[0])
-        return {"d": (0.1 * half, 5.0 * half)}
-
-    def shape_guesses(self, stroke):
-        """Gaps of 0.5, 1 and 2 half-strokes (the wells of a dipole harvester lie near d / 2 to d)."""
-        half = 0.5 * (stroke[1] - stroke[0])
-        return [{"d": f * half} for f in (0.5, 1.0, 2.0)]
 
 
 @dataclass(frozen=True)
-class ObliqueSprings(ShapedLaw):
+class ObliqueSprings(WidthShaped):
     """Two oblique springs' negative stiffness: F = -2 P z / sqrt(a^2 + z^2) [N] (``{"P": N, "a": m}``).
 
     Two springs of stiffness k and free length L0, hinged at a half-span a from the axis of motion, push with
@@ -237,6 +253,10 @@ class ObliqueSprings(ShapedLaw):
     shape: ClassVar[tuple[str, ...]] = ("a",)
     bounds: ClassVar[dict[str, tuple[float, float]]] = {"a": (0.0, np.inf)}
     centred: ClassVar[bool] = True
+    # beyond +-8 half-spans the part's stiffness is below 1/500 of its value at z = 0
+    WIDTH_BOUNDS: ClassVar[tuple[float, float]] = (0.05, 10.0)
+    WIDTH_GUESSES: ClassVar[tuple[float, ...]] = (0.5, 1.5, 4.0)
+    WIDTH_WORD: ClassVar[str] = "half-span"
 
     def columns(self, shape, z):
         """The one column -2 z / sqrt(a^2 + z^2)."""
@@ -264,26 +284,6 @@ class ObliqueSprings(ShapedLaw):
         P, a = np.asarray(value["P"], float), np.asarray(value["a"], float)
         return -2.0 * P * (np.sqrt(a * a + z * z) - a)
 
-    def span(self, value):
-        """+-8 a: beyond it the part's stiffness is below 1/500 of its value at z = 0; per member of a batch."""
-        a = np.asarray(value["a"], float)
-        return _number(-8.0 * a), _number(8.0 * a)
-
-    def check(self, name, value):
-        """A half-span a > 0."""
-        if not value["a"] > 0:
-            raise ValueError(f"{name} needs a half-span a > 0 [m], got {value['a']}")
-        return MappingProxyType(dict(value))
-
-    def shape_bounds(self, stroke):
-        """The half-span between a twentieth of the stroke's half-width and ten times it."""
-        half = 0.5 * (stroke[1] - stroke[0])
-        return {"a": (0.05 * half, 10.0 * half)}
-
-    def shape_guesses(self, stroke):
-        """Half-spans of 0.5, 1.5 and 4 half-strokes."""
-        half = 0.5 * (stroke[1] - stroke[0])
-        return [{"a": f * half} for f in (0.5, 1.5, 4.0)]
 
 
 @dataclass(frozen=True)
