@@ -228,24 +228,6 @@ def _stable_root(force: _WellForce, span: float) -> float | None:
     return min(stable, key=abs) if stable else None
 
 
-WORKING_RATE_BANDS = 10.0
-"""NSI works at a sampling rate of about this many response bands (``derivatives.response_band_hz``): a record
-sampled faster is decimated by the largest factor that keeps its rate at least this many bands (``working_rate``).
-The subspace step's 30 block rows then span as much of a period as on the reference study's records (512 Hz, a
-62 Hz band: 8 bands, left as they are); on a 2048 Hz harvester record of a 28 Hz band (73 bands) they spanned a
-twentieth of a 6.5 Hz period, and the identified discrete-time system came out unstable (measured)."""
-
-
-def working_rate(rec: Measurement) -> Measurement:
-    """``rec`` decimated (``Measurement.decimated``) to about ``WORKING_RATE_BANDS`` response bands; ``rec`` itself
-    when it is sampled at fewer than twice that.
-    """
-    from negstiff.inference.record.derivatives import response_band_hz
-
-    q = int(rec.fs // (WORKING_RATE_BANDS * max(response_band_hz(rec.displacement, rec.fs), 1e-9)))
-    return rec.decimated(q) if q >= 2 else rec
-
-
 class NSIError(MeasurementError):
     """The record cannot be identified (too short, not enough excitation, no physical pole)."""
 
@@ -590,7 +572,7 @@ class NSI(StructureResults, Identifier):
         nonlinear basis is ``law``'s (None: the cubic) and the damping law's (``Basis``), a shaped part's shape the
         record's (``shape.fit_shape``).
         """
-        ident = working_rate(rec.segment(0, n_id))
+        ident = rec.segment(0, n_id)
         restoring, damping = laws.get(law or laws.DEFAULT_RESTORING, "restoring"), laws.get(self.damping, "damping")
         shape_fit = None
         if restoring.shaped():

@@ -276,31 +276,6 @@ class Measurement:
             seg = self.derived[key] = replace(self, u=self.u[sl], t0=self.t0 + start / self.fs, aux=aux, **opt)
         return seg
 
-    def decimated(self, q: int) -> Measurement:
-        """The record at ``fs / q``: every channel through the acquisition's own flat anti-aliasing FIR
-        (``simulator.antialias_fir``: flat to 1e-5 up to 0.8 of the new Nyquist frequency, 100 dB down beyond it;
-        scipy's ``resample_poly``, its ends extended along a line), one sample in ``q`` kept. Kept with the record.
-        """
-        q = int(q)
-        if q <= 1:
-            return self
-        key = ("decimated", q)
-        hit = self.derived.get(key)
-        if hit is None:
-            from scipy import signal
-
-            from negstiff.models.simulator import antialias_fir
-
-            fir = antialias_fir(q)
-
-            def down(x):
-                return None if x is None else signal.resample_poly(x, 1, q, axis=-1, window=fir, padtype="line")
-
-            opt = {k: down(getattr(self, k)) for k in ("z", *OPTIONAL)}
-            aux = {k: down(v) for k, v in self.aux.items()}
-            hit = self.derived[key] = replace(self, fs=self.fs / q, u=down(self.u), aux=aux, **opt)
-        return hit
-
     def states(self, purpose: str = "state") -> tuple[np.ndarray, np.ndarray, np.ndarray, dict]:
         """Smoothed z, z', z'' of the record and how they were found (``derivatives.state_derivatives``:
         ``"state"``, the least-error velocity every free run starts from; ``"regression"``, the weak form's;
