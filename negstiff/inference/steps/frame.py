@@ -92,7 +92,12 @@ def _frame_anchors(rec) -> tuple[float, dict[str, float]]:
     roots = _crossings(x, K - rec.gravity)
     if not roots.size:
         raise ValueError("the fitted restoring force never carries the weight over the visited stroke")
-    mid = eq[len(eq) // 2] if eq.size else float(np.median(rec.z))
+    # the weight is carried next to the barrier: the unstable equilibrium nearest the middle of the outermost wells
+    # (the spline may wiggle where the record barely went: a false well and barrier there must not be the middle)
+    slope = np.gradient(K, x)
+    unstable = np.array([e for e in eq if np.interp(e, x, slope) <= 0])
+    centre = 0.5 * (wells["minus"] + wells["plus"]) if wells else float(np.median(rec.z))
+    mid = float(unstable[np.argmin(np.abs(unstable - centre))]) if unstable.size else centre
     origin = float(roots[np.argmin(np.abs(roots - mid))])
     if wells and not wells["minus"] < origin < wells["plus"]:
         wells = {}  # a fit whose weight-carrying point is not between its wells pins nothing well
