@@ -165,14 +165,21 @@ def test_a_measured_coupling_ranked_first_is_named_and_sized(weakly_coupled_file
     30 % within a wider one), at 0.004 by the catalogue's 10 % naming margin (its term buys back 4.5 % of the weak
     residual, five standard errors), a margin made for effects guessed from a catalogue against the lab's
     consistency floor."""
-    r = Discrepancy().fit(load(weakly_coupled_files[theta], columns=COLUMNS, aux="voltage")).result()
+    # the catalogue alone (offer_laws=False): a law in place of the cubic is a question of its own (on this symmetric
+    # harvester the oblique springs' law, a cubic without k2 over this stroke, predicts the held-out windows 43 %
+    # better than the baseline's free k2 after the coupling, and is named: tests/test_discrepancy_laws.py)
+    r = Discrepancy(offer_laws=False).fit(load(weakly_coupled_files[theta], columns=COLUMNS, aux="voltage")).result()
     first = r["iterations"][0]
-    assert first["ranking"][0]["effect"] == "aux:voltage", first["ranking"][:3]
+    # first among the catalogue's effects (a restoring law in place of the cubic may score above it by equation
+    # error, and then predict no better: it is weighed after a measured channel that passes its own rule)
+    effects_only = [c["effect"] for c in first["ranking"] if not c["effect"].startswith("law:")]
+    assert effects_only[0] == "aux:voltage", first["ranking"][:3]
+    assert first["named"] == "aux:voltage"
     assert r["effects"] == ["aux:voltage"], [(it["named"], it.get("verdict")) for it in r["iterations"]]
     assert r["aux_per_unit_mass"]["aux:voltage"] == pytest.approx(-theta, rel=0.10)
     for it in r["iterations"]:  # a round that names nothing says why its first-ranked effect was not named
         if it["named"] == "none" and it["ranking"][0]["effect"] != "none":
-            assert it["verdict"].startswith(f"{it['ranking'][0]['effect']}, ranked first"), it
+            assert it["first"]["effect"] == it["ranking"][0]["effect"] and it["first"]["why"], it
 
 
 def test_a_channel_of_noise_alone_is_not_named(harvester_file, tmp_path):

@@ -220,6 +220,13 @@ def _without(model: Model, effect: str) -> Model:
     return Model(**{**fields, "extra": {k: v for k, v in dict(model.extra).items() if k != effect}})
 
 
+def _passes_measured(gain) -> bool:
+    """A measured channel's naming rule: its held-out weak residual falls by more than ``MEASURED_SE`` standard
+    errors (``MEASURED_SE``).
+    """
+    return bool(gain.gain > MEASURED_SE * gain.se)
+
+
 def _loo_compare(ms_with: np.ndarray, ms_without: np.ndarray, residual_rows, length: int,
                  rng: np.random.Generator) -> dict[str, Any]:  # fmt: skip
     """``arviz.compare`` (PSIS-LOO) of two models by windows: ``ms_*`` each window's mean-square run error per draw
@@ -978,12 +985,21 @@ class Discrepancy(StructureResults, Estimator):
             ranking = sorted(cands, key=lambda c: c.heldout_percent)
             best = self._parsimonious(ranking, terms, law)
             # a measured channel's term (aux:NAME) is no guess from a catalogue: no practical margin (the lab's
-            # consistency floor a catalogue's term can buy back), twice the standard error instead of once
+            # consistency floor a catalogue's term can buy back), twice the standard error instead of once; and it
+            # is weighed first: a channel that passes its own rule is named before any guessed effect or law (a law
+            # in place of the cubic bought a weak coupling's record 30 % of its weak residual, then predicted no
+            # better and ended the round with the coupling unnamed: measured)
+            passing = [c for c in ranking if c.effect.startswith(effects.AUX_PREFIX)
+                       and _passes_measured(compare(_scores(none), _scores(c), 0.0, _scores(none)))]  # fmt: skip
+            first_channel = passing[0] if passing else None
+            best = first_channel or best
             measured = best.effect.startswith(effects.AUX_PREFIX)
             gain = compare(_scores(none), _scores(best), 0.0 if measured else self.margin, _scores(none))
-            named = best.effect != "none" and (gain.gain > MEASURED_SE * gain.se if measured else gain.significant)
+            named = best.effect != "none" and (_passes_measured(gain) if measured else gain.significant)
             iteration = {
-                "ranking": [{"effect": c.effect, "score": c.heldout_percent, **c.notes} for c in ranking],
+                "ranking": [{"effect": c.effect, **c.notes,  # an inf (a run that diverged) is JSON's None, as written
+                             "score": c.heldout_percent if math.isfinite(c.heldout_percent) else None}
+                            for c in ranking],  # fmt: skip
                 "named": best.effect if named else "none",
                 "gain_percent": float(100 * gain.gain / _scores(none).mean()),
                 "standard_error_percent": float(100 * gain.se / _scores(none).mean()),
