@@ -383,12 +383,16 @@ class Spline(ShapedLaw):
         z = np.asarray(z, float)
         lo, hi = knots[0], knots[-1]
         flat = np.clip(z, lo, hi).reshape(-1)
-        cols = BSpline.design_matrix(flat, t, 3, extrapolate=False).toarray().reshape(*z.shape, n)
+        # extrapolate=True on the clipped z: the same matrix, without scipy's bounds check (Python's min and max over
+        # the samples: two thirds of the call's time on a 150,000-sample record, measured)
+        cols = BSpline.design_matrix(flat, t, 3, extrapolate=True).toarray()
         # each function's slope at the end knots (the straight lines beyond): of the derivative's own B-spline
         slopes = BSpline(t, np.eye(n), 3).derivative()(np.array([lo, hi]))  # (2, n)
-        cols = cols + np.where((z < lo)[..., None], (z - lo)[..., None] * slopes[0], 0.0)
-        cols = cols + np.where((z > hi)[..., None], (z - hi)[..., None] * slopes[1], 0.0)
-        return list(np.moveaxis(cols, -1, 0))
+        zf = z.reshape(-1)
+        for out, end, slope in ((zf < lo, lo, slopes[0]), (zf > hi, hi, slopes[1])):
+            if out.any():  # the few samples beyond the end knots alone
+                cols[out] += (zf[out] - end)[:, None] * slope
+        return list(np.moveaxis(cols.reshape(*z.shape, n), -1, 0))
 
     def slope_columns(self, shape, z) -> np.ndarray:
         """Each column's derivative at z [1/m] (samples, columns): the B-spline basis' derivative (quadratic
