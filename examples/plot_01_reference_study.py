@@ -57,5 +57,7 @@ for well, m in nsi.result_.modal.items():
 # gap, which the full study (``negstiff reproduce``) measures.
 ga = GAUpdater(fixed_mass=0.212, generations=40, seed=1).fit(targets_from(nsi.result(), "NSI"))
 d = ga.device_
-print(f"E = {d.E / 1e9:.1f} GPa (truth {AS_BUILT.E / 1e9:.1f}), alpha = {d.alpha_deg:.2f} deg "
-      f"(truth {AS_BUILT.alpha_deg:.2f})")
+print(
+    f"E = {d.E / 1e9:.1f} GPa (truth {AS_BUILT.E / 1e9:.1f}), alpha = {d.alpha_deg:.2f} deg "
+    f"(truth {AS_BUILT.alpha_deg:.2f})"
+)

@@ -24,6 +24,8 @@ rec = load(path)
 print(rec.info["response"]["derived"])
 nsi = NSI().fit(rec)
 truth = rig.system.equilibria()
-print(f"wells: {1e3 * nsi.result_.equilibria.z_minus:.2f} / {1e3 * nsi.result_.equilibria.z_plus:.2f} mm "
-      f"(truth {1e3 * truth.z_minus:.2f} / {1e3 * truth.z_plus:.2f} mm)")
+print(
+    f"wells: {1e3 * nsi.result_.equilibria.z_minus:.2f} / {1e3 * nsi.result_.equilibria.z_plus:.2f} mm "
+    f"(truth {1e3 * truth.z_minus:.2f} / {1e3 * truth.z_plus:.2f} mm)"
+)
 print(nsi.result_.warnings or "no warnings")

@@ -23,8 +23,13 @@ print("converged:", post.result()["converged"], post.result()["warnings"] or "")
 fig, axes = plt.subplots(1, 3, figsize=(9, 2.6))
 for ax, k in zip(axes, ("k1", "k3", "c"), strict=False):
     p = params[k]
-    ax.errorbar([0], [p["mean"]], yerr=[[p["mean"] - p["hdi_low"]], [p["hdi_high"] - p["mean"]]], fmt="o",
-                label="posterior 90 %")
+    ax.errorbar(
+        [0],
+        [p["mean"]],
+        yerr=[[p["mean"] - p["hdi_low"]], [p["hdi_high"] - p["mean"]]],
+        fmt="o",
+        label="posterior 90 %",
+    )
     ax.plot([1], [getattr(nsi.model_, k)], "s", label="NSI")
     ax.plot([2], [getattr(sindy.model_, k)], "^", label="SINDy")
     ax.axhline(getattr(SEED_LIKE_CUBIC, k), color="k", lw=0.8, label="truth")

@@ -32,8 +32,12 @@ rep.add(Posterior(seed=1).fit(record.segment(0, int(20 * record.fs))), label="14
 fig, ax = plt.subplots(figsize=(5, 3))
 ax.plot(list(k3), list(k3.values()), "o-")
 ax.set(xlabel="table acceleration rms [m/s^2]", ylabel="k3 [N/m^3]")
-rep.add_figure(fig, "SINDy's k3 at each level: the as-built device is not a cubic, so the cubic's best fit moves "
-               "with how far the record reaches.", heading="k3 against the excitation level")
+rep.add_figure(
+    fig,
+    "SINDy's k3 at each level: the as-built device is not a cubic, so the cubic's best fit moves "
+    "with how far the record reaches.",
+    heading="k3 against the excitation level",
+)
 out = rep.write(Path(tempfile.mkdtemp()) / "report_over_amplitudes")  # your own folder in a real script
 print(f"wrote {out / 'index.html'}")
 print("\n".join(rep.results()["summary"]))

@@ -25,8 +25,17 @@ if TYPE_CHECKING:
     from negstiff.inference.record.measurement import Measurement
     from negstiff.models import Model
 
-__all__ = ["SILVERBOX_FS", "TRAIN", "TEST", "ARROW", "SKIP", "PUBLISHED_MV", "silverbox", "silverbox_path",
-           "prediction_error_mv"]
+__all__ = [
+    "SILVERBOX_FS",
+    "TRAIN",
+    "TEST",
+    "ARROW",
+    "SKIP",
+    "PUBLISHED_MV",
+    "silverbox",
+    "silverbox_path",
+    "prediction_error_mv",
+]
 
 SILVERBOX_FS = 610.35
 """The Silverbox's sampling frequency [Hz]: 10**7 / 2**14."""

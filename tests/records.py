@@ -165,8 +165,19 @@ def harvester_record(duration=120.0, fs=2048.0, theta=0.0, kappa=0.0, rc_s=0.05,
     return t, acc(t), sol.y[0], sol.y[1], sol.y[2]
 
 
-def rk4_random_records(seeds, duration=20.0, rms=8.0, band=(2.0, 30.0), oversample=8, settle=5.0, laser=3e-6,
-                       table_noise=0.005, start=0.023, model=None, fs=FS):
+def rk4_random_records(
+    seeds,
+    duration=20.0,
+    rms=8.0,
+    band=(2.0, 30.0),
+    oversample=8,
+    settle=5.0,
+    laser=3e-6,
+    table_noise=0.005,
+    start=0.023,
+    model=None,
+    fs=FS,
+):
     """Records of ``model`` (TRUTH by default) as another lab's simulator writes them, one per seed: a plain
     numpy fixed-step RK4 at ``oversample`` x fs, vectorised across the records, its base acceleration
     band-limited Gaussian noise (``band``, ``rms`` m/s^2) made by FFT at the fine rate and linear between
@@ -332,8 +343,12 @@ def _rk4_fixture_polynomial(acc, h, oversample, z2, p):  # pragma: no cover (com
         r, vr = y2 - y1, w2 - w1
         f = ((k3 * r + k2) * r - k1) * r + k0 + c * vr + cn * vr * abs(vr)
         p4, q4 = (-k_f * y1 - c_f * w1 + f) / m1 - a1, -f / m2 - a1
-        z1, z2, v1, v2 = (z1 + h / 6 * (v1 + 2 * s1 + 2 * t1 + w1), z2 + h / 6 * (v2 + 2 * s2 + 2 * t2 + w2),
-                          v1 + h / 6 * (p1 + 2 * p2 + 2 * p3 + p4), v2 + h / 6 * (q1 + 2 * q2 + 2 * q3 + q4))
+        z1, z2, v1, v2 = (
+            z1 + h / 6 * (v1 + 2 * s1 + 2 * t1 + w1),
+            z2 + h / 6 * (v2 + 2 * s2 + 2 * t2 + w2),
+            v1 + h / 6 * (p1 + 2 * p2 + 2 * p3 + p4),
+            v2 + h / 6 * (q1 + 2 * q2 + 2 * q3 + q4),
+        )
     return out
 
 

@@ -533,8 +533,12 @@ def test_from_arrays_takes_any_argument_or_says_which_is_wrong(which, value):
 def _estimator_params():
     from negstiff import NSI, Discrepancy, GAUpdater, Posterior, SINDy
 
-    return [(cls, name) for cls in (NSI, SINDy, Discrepancy, Posterior, GAUpdater) for name in cls._param_names()
-            if name not in ("start", "chain_file")]  # fmt: skip (a file is not a number: the CLI's search draws those)
+    return [
+        (cls, name)
+        for cls in (NSI, SINDy, Discrepancy, Posterior, GAUpdater)
+        for name in cls._param_names()
+        if name not in ("start", "chain_file")
+    ]  # fmt: skip (a file is not a number: the CLI's search draws those)
 
 
 @LIBRARY_SETTINGS

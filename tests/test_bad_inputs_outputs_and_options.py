@@ -72,8 +72,9 @@ def lab(tmp_path_factory):
     # a record with an auxiliary channel (a live one and a dead one), and a structure's model file
     _csv(d / "aux.csv", {"t": t, "base_acc": u, "z": z, "volt": np.sin(t), "dead": np.zeros_like(t)})
     (d / "structure.json").write_text(json.dumps(STRUCTURE))
-    (d / "twoz.csv").write_text("t,base_acc,z,y,z\n" + "".join(
-        f"{a},{b},{c},0,{c}\n" for a, b, c in zip(t, u, z, strict=True)))
+    (d / "twoz.csv").write_text(
+        "t,base_acc,z,y,z\n" + "".join(f"{a},{b},{c},0,{c}\n" for a, b, c in zip(t, u, z, strict=True))
+    )
     return d
 
 
@@ -412,8 +413,11 @@ def _declared_options():
     """{(command, mode): [(option, action)]} from the parser itself."""
     parser = build_parser()
     sub = next(a for a in parser._actions if a.dest == "command").choices
-    return {name: [a for a in p._actions if a.option_strings and a.dest not in ("help", "quiet", "out", "idata")]
-            for name, p in sub.items() if name not in ALIASES}  # fmt: skip (an alias is its command's parser)
+    return {
+        name: [a for a in p._actions if a.option_strings and a.dest not in ("help", "quiet", "out", "idata")]
+        for name, p in sub.items()
+        if name not in ALIASES
+    }  # fmt: skip (an alias is its command's parser)
 
 
 OPTIONS = _declared_options()

@@ -9,7 +9,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-INNER = '''
+INNER = """
 import os, sys, warnings
 from pathlib import Path
 sys.path.insert(0, os.environ["TESTS_DIR"])
@@ -36,7 +36,7 @@ def test_the_cached_fit_recovers_k3(monkeypatch):
         nsi = cached_fit(NSI(), rec, os.environ["FIT_CACHE"])
     assert abs(nsi.model_.k3 / TRUTH.k3 - 1) < 0.01  # a cubic within 1 % on a 3 um laser's record
     Path(os.environ["FIT_COUNTER"] + ".k3").write_text(repr(nsi.model_.k3))
-'''
+"""
 
 
 def test_the_second_session_fits_nothing(tmp_path):

@@ -216,8 +216,10 @@ def test_the_whole_workflow_from_python_gives_the_cli_json(scipy_record, scipy_f
         "nsi": (scipy_fits["nsi"].result(), ["identify", "nsi", str(scipy_record)]),
         "sindy": (scipy_fits["sindy"].result(), ["identify", "sindy", str(scipy_record)]),
         # a short chain (the JSON is what is compared, not the sampler's convergence)
-        "posterior": (Posterior(seed=0, max_steps=600).fit(load(short)).result(),
-                      ["posterior", short, "--max-steps", "600"]),  # fmt: skip
+        "posterior": (
+            Posterior(seed=0, max_steps=600).fit(load(short)).result(),
+            ["posterior", short, "--max-steps", "600"],
+        ),  # fmt: skip
         "discrepancy": (disc, ["discrepancy", str(scipy_record)]),
     }
     for name, (py, argv) in runs.items():

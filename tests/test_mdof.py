@@ -354,8 +354,9 @@ def test_element_posterior_intervals_cover_the_truth_over_records():
         rec = from_arrays(u, zz, FS, masses=(FIXTURE["m"], TRUTH.m))
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            post = Posterior(element="1-2", window_s=0.1, max_windows=40, n_ensembles=2, max_steps=3000,
-                             seed=1).fit(rec)
+            post = Posterior(element="1-2", window_s=0.1, max_windows=40, n_ensembles=2, max_steps=3000, seed=1).fit(
+                rec
+            )
         par = post.result()["parameters"]
         z.append([(par[k]["mean"] - getattr(TRUTH, k)) / par[k]["sd"] for k in names])
         inside.append([par[k]["hdi_low"] <= getattr(TRUTH, k) <= par[k]["hdi_high"] for k in names])

@@ -69,8 +69,11 @@ def _names_the_visited_well(result: dict, well: str) -> None:
         assert got[well]["f_hz"] == pytest.approx(TRUTH_HZ[well], rel=5e-3), (key, got)
         f_other = got[other]["f_hz"]
         assert f_other is None or abs(f_other / TRUTH_HZ[well] - 1) > 0.05, (key, got)
-    assert not [w for w in result["warnings"] if f"{other} well has a modal frequency" in w and "Hz" in w and
-                f"{TRUTH_HZ[well]:.2f}" in w], result["warnings"]
+    assert not [
+        w
+        for w in result["warnings"]
+        if f"{other} well has a modal frequency" in w and "Hz" in w and f"{TRUTH_HZ[well]:.2f}" in w
+    ], result["warnings"]
 
 
 @pytest.mark.parametrize("well", ["minus", "plus"])

@@ -29,7 +29,7 @@ def test_a_quiet_record_gets_a_fine_enough_integrator_and_covers_the_truth():
     # 10 s (the 20 s default before; CI time): the posterior's sd grows by sqrt(2), so the coarse step's bias
     # (1.5 sd on 20 s) is ~1 sd here, still ten times the 0.1 sd the steps are resolved to: the steps are
     # still raised (2 per sample here, measured), and the coverage is of the wider intervals this record gives
-    (u, z), = rk4_random_records([201], table_noise=0.0, duration=10.0)
+    ((u, z),) = rk4_random_records([201], table_noise=0.0, duration=10.0)
     r = _posterior(u, z, 201)
     assert r["settings"]["substeps"] >= 2
     for name in ("k1", "k3"):
@@ -47,7 +47,7 @@ def test_the_table_accelerometers_noise_is_read_and_carried_not_absorbed():
     # larger without the term on each of 20 such records (median 13.7 against 1.65): at least 3 times here.
     from negstiff.inference.estimators.posterior import curvature_adjustment
 
-    (u, z), = rk4_random_records([207], table_noise=0.02)
+    ((u, z),) = rk4_random_records([207], table_noise=0.02)
     rec = from_arrays(u, z, 512.0, mass=TRUTH.m, source="numpy RK4 207")
     post = Posterior(seed=207)
     _, win, _, sol, sigma = post.point_estimate(rec)

@@ -9,8 +9,10 @@ import pytest
 from negstiff.inference.steps.validation import restart_windows
 
 
-@pytest.mark.parametrize("n, start, window_s, fs", [(15360, 12288, 2.0, 512.0), (5000, 0, 0.125, 512.0),
-                                                    (1000, 999, 2.0, 512.0), (4096, 100, 0.01, 1000.0)])
+@pytest.mark.parametrize(
+    "n, start, window_s, fs",
+    [(15360, 12288, 2.0, 512.0), (5000, 0, 0.125, 512.0), (1000, 999, 2.0, 512.0), (4096, 100, 0.01, 1000.0)],
+)
 def test_the_single_dofs_windows_are_whole_consecutive_and_inside_the_record(n, start, window_s, fs):
     w = int(round(window_s * fs))
     win = restart_windows(n, fs, window_s, start=start)

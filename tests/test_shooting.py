@@ -92,8 +92,10 @@ def test_damped_oscillations_recover_frequency_and_damping_from_wrong_start_stat
     q_scale, x_scale = np.array([w_true, zeta_true]), np.array([1.0, 30.0])
 
     def fun(Q, X):
-        out = [free(*(qq * q_scale), xx[:, 0] * x_scale[0], xx[:, 1] * x_scale[1]) - meas for qq, xx in
-               zip(Q, X, strict=True)]
+        out = [
+            free(*(qq * q_scale), xx[:, 0] * x_scale[0], xx[:, 1] * x_scale[1]) - meas
+            for qq, xx in zip(Q, X, strict=True)
+        ]
         return np.stack(out)
 
     start_x = (x_true + 0.01 * rng.standard_normal((n, 2)) * [1, 30]) / x_scale

@@ -56,8 +56,10 @@ def test_force_input_is_divided_by_the_mass():
 def test_batch_path_gives_the_same_result_as_the_single_path(rng):
     t = np.arange(0, 20, 1 / FS)
     u = rng.normal(0, 8, t.size)
-    devs = [AS_BUILT.with_(E=AS_BUILT.E * f, c=AS_BUILT.c * g)
-            for f, g in zip([0.98, 1.0, 1.02], [1.0, 1.2, 0.8], strict=True)]
+    devs = [
+        AS_BUILT.with_(E=AS_BUILT.E * f, c=AS_BUILT.c * g)
+        for f, g in zip([0.98, 1.0, 1.02], [1.0, 1.2, 0.8], strict=True)
+    ]
     P = np.column_stack([d.kernel_params() for d in devs])
     zp = AS_BUILT.equilibria().z_plus
     batch = simulate_batch(P, "device", u, 1 / FS, np.array([zp, 0.0]), threads=2)

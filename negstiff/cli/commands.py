@@ -431,8 +431,11 @@ def cmd_frf(args) -> int:
     res = frf(rec, band=band, segment_s=args.segment)
     if res.get("impacts"):
         imp = res["impacts"]
-        say(args, f"frf: treated as an impact test: {imp['hits']} hit(s) found in the force channel (offset "
-                  f"{imp['offset_n'][0]:.3g} N removed), blocks of {imp['block_s']:.3g} s; {imp['windows']}")
+        say(
+            args,
+            f"frf: treated as an impact test: {imp['hits']} hit(s) found in the force channel (offset "
+            f"{imp['offset_n'][0]:.3g} N removed), blocks of {imp['block_s']:.3g} s; {imp['windows']}",
+        )
     curves = res.pop("_curves")
     fig = frf_figure(res, curves, rec.input_name, f"FRF of {Path(args.data).name}")
     res["figure"] = write_figure(fig, args.out)
@@ -485,10 +488,17 @@ def cmd_backbone(args) -> int:
     lo, hi = res["amplitude_range_m"]
     lin = res["linear"]
     pred = res.get("predicted")
-    say(args, f"wrote {args.out} and {res['figure']}: decay from {res['decay']['start_s']:.4g} s, amplitudes "
-              f"{1e3 * hi:.3g} to {1e3 * lo:.3g} mm, small-amplitude {lin['f_hz']:.4f} Hz, zeta "
-              f"{100 * lin['zeta']:.2f} %" + ("" if pred is None or pred["difference_percent"] is None else
-                                              f"; the model's backbone within {pred['difference_percent']:.2f} %"))
+    say(
+        args,
+        f"wrote {args.out} and {res['figure']}: decay from {res['decay']['start_s']:.4g} s, amplitudes "
+        f"{1e3 * hi:.3g} to {1e3 * lo:.3g} mm, small-amplitude {lin['f_hz']:.4f} Hz, zeta "
+        f"{100 * lin['zeta']:.2f} %"
+        + (
+            ""
+            if pred is None or pred["difference_percent"] is None
+            else f"; the model's backbone within {pred['difference_percent']:.2f} %"
+        ),
+    )
     return 0
 
 

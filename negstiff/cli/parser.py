@@ -175,8 +175,10 @@ def _simulate(sub, common: argparse.ArgumentParser, data_opts: argparse.Argument
     sim.set_defaults(func=c.cmd_simulate)
 
 
-DECAY_HELP = ("the record is a free decay whatever its input column holds (a force channel left connected that "
-              "reads only its noise); a constant input is one without saying so")
+DECAY_HELP = (
+    "the record is a free decay whatever its input column holds (a force channel left connected that "
+    "reads only its noise); a constant input is one without saying so"
+)
 
 
 def _law_options(p: argparse.ArgumentParser) -> None:
@@ -728,8 +730,9 @@ def build_parser(only: str | None = None) -> argparse.ArgumentParser:
     # options of every command that reads a measurement file
     data_opts = Parser(add_help=False)
     data_opts.add_argument(
-        "--columns", help="column map for foreign files, e.g. force=V1,z=V2 (a map entry may scale: X*9.81; a "
-        "response of unknown sensitivity: z_dot=LDV*?, its scale estimated from the record's dynamics)"
+        "--columns",
+        help="column map for foreign files, e.g. force=V1,z=V2 (a map entry may scale: X*9.81; a "
+        "response of unknown sensitivity: z_dot=LDV*?, its scale estimated from the record's dynamics)",
     )
     data_opts.add_argument(
         "--fs",

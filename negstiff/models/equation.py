@@ -96,6 +96,7 @@ def find_equilibria(force, stiffness, z_lo: float, z_hi: float, n_grid: int = 40
         return Equilibria(stable[0], unstable[0], stable[1])
     if len(stable) == 1 and not unstable:
         return Equilibria(None, None, stable[0])
+
     def mm(zs):  # at most four, in mm: a flat force has a root at every grid point
         shown = ", ".join(f"{1e3 * z:.3g}" for z in zs[:4])
         return f"[{shown}{', ...' if len(zs) > 4 else ''}] mm ({len(zs)})" if len(zs) > 4 else f"[{shown}] mm"

@@ -414,6 +414,7 @@ _NO_W = np.zeros((0, 0))
 _NO_V = np.zeros(0)
 """The extra force hook's arguments in the kernels without it: empty, never read (``extra`` is False)."""
 
+
 # One compiled kernel per (restoring-force kind, smoothed sign present, extra monomials present, extra hook): the
 # flags are constants inside each, so the batch loops have no data-dependent branches. (A factory of closures
 # would repeat less, but numba's on-disk cache cannot tell such closures apart.)

@@ -239,7 +239,6 @@ class DipoleMagnet(WidthShaped):
         return A * ((d * d + z * z) ** -1.5 - d**-3.0)
 
 
-
 @dataclass(frozen=True)
 class ObliqueSprings(WidthShaped):
     """Two oblique springs' negative stiffness: F = -2 P z / sqrt(a^2 + z^2) [N] (``{"P": N, "a": m}``).
@@ -283,7 +282,6 @@ class ObliqueSprings(WidthShaped):
         z = np.asarray(z, float)
         P, a = np.asarray(value["P"], float), np.asarray(value["a"], float)
         return -2.0 * P * (np.sqrt(a * a + z * z) - a)
-
 
 
 @dataclass(frozen=True)

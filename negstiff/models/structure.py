@@ -389,9 +389,7 @@ def simulate_structures(
     ``simulate_batch``: linear interpolation between samples, or the input at the stage times).
     """
     x0 = np.atleast_2d(np.asarray(x0, dtype=np.float64))
-    group: list[Structure] = (
-        [structures] * x0.shape[0] if isinstance(structures, Structure) else list(structures)
-    )
+    group: list[Structure] = [structures] * x0.shape[0] if isinstance(structures, Structure) else list(structures)
     nb = len(group)
     nd = group[0].n_dof
     if any(s.n_dof != nd or s.at != group[0].at for s in group):

@@ -163,7 +163,13 @@ class StructureRig:
             "fs": self.fs,
             "oversample": q,
             "seed": self.seed,
-            "excitation": {"type": "random", "duration_s": duration, "rms_m_s2": rms, "band_hz": list(band),
-                           "settle_s": settle, "start_well": start},  # fmt: skip
+            "excitation": {
+                "type": "random",
+                "duration_s": duration,
+                "rms_m_s2": rms,
+                "band_hz": list(band),
+                "settle_s": settle,
+                "start_well": start,
+            },  # fmt: skip
         }
         return StructureRigRecord(self.fs, cols, meta, truth, {k: v[sl] for k, v in true.items()})

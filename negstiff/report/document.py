@@ -220,6 +220,7 @@ class Report(Blocks):
 
     def html(self) -> str:
         """The report as one self-contained HTML page (figures inline)."""
+
         def inline(s: str) -> str:
             s = html.escape(s)
             s = re.sub(r"\*\*(.+?)\*\*", r"<b>\1</b>", s)

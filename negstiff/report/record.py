@@ -109,8 +109,11 @@ def report_records(
     paths = [Path(d) for d in data]
     if len(paths) > 1 or paths[0].is_dir():
         if aux or decay:
-            option = "--aux: a campaign's report (characterisation, map) uses no auxiliary channel" if aux else \
-                "--decay: a campaign's records are forced (characterisation, map)"
+            option = (
+                "--aux: a campaign's report (characterisation, map) uses no auxiliary channel"
+                if aux
+                else "--decay: a campaign's records are forced (characterisation, map)"
+            )
             raise InputError(f"{option}; give one record")
         return _campaign_report(data, columns, fs, forcing_hz, wells, nfrc, _only(only, CAMPAIGN), say, gravity)
     from negstiff.inference.record.measurement import load

@@ -127,8 +127,11 @@ def coefficient_keys(estimates: dict[str, dict[str, float]], intervals: dict[str
     extra = [k for k in keys if k not in COEFFICIENTS]
     if not extra:
         return keys
-    held = [k for k in COEFFICIENTS if any(est.get(k) for est in estimates.values()) or any(k in iv for iv in
-                                                                                             intervals.values())]
+    held = [
+        k
+        for k in COEFFICIENTS
+        if any(est.get(k) for est in estimates.values()) or any(k in iv for iv in intervals.values())
+    ]
     return held + extra
 
 
@@ -242,8 +245,10 @@ def identification_section(est, label: str = "") -> Section:
     if held is not None and held == v.get("rms_percent") and mean is not None and std:
         offset = mean**2 / (mean**2 + std**2)
         if offset > 0.25:  # a ring-down's quiet tail: its rest, not its motion, can hold most of the error
-            sec.text(f"{fmt(100 * offset, 2)} % of that free run's squared error is a constant offset "
-                     f"({fmt(mean, 2)} in z's units): the model's rest against the record's, not its motion.")
+            sec.text(
+                f"{fmt(100 * offset, 2)} % of that free run's squared error is a constant offset "
+                f"({fmt(mean, 2)} in z's units): the model's rest against the record's, not its motion."
+            )
     if r.method == "sindy" and "selected_terms" in r.details:
         sec.text(f"Selected terms: {', '.join(r.details['selected_terms'])}.")
     _law_blocks(sec, r, name)
@@ -271,8 +276,11 @@ def _law_blocks(sec: Section, r, name: str) -> None:
                  + (f"; damping law: {damping}." if damping and damping != "catalogue" else "."))  # fmt: skip
         final, own = effective(r.model), effective(r.initial_model)
         rows = [[k, final[k], own.get(k)] for k in final if "." in k]
-        rows += [[k, float(v), r.initial_model.extra.get(k)] for k, v in r.model.extra.items()
-                 if k in law.parts and not isinstance(v, Mapping)]  # the law's monomials (z^4 ... z^7)
+        rows += [
+            [k, float(v), r.initial_model.extra.get(k)]
+            for k, v in r.model.extra.items()
+            if k in law.parts and not isinstance(v, Mapping)
+        ]  # the law's monomials (z^4 ... z^7)
         if rows:
             sec.table(["the law's part", "final (SI)", "own estimate (SI)"], rows)
         if r.settings.get("shape"):
@@ -317,7 +325,7 @@ def posterior_section(post, label: str = "") -> Section:
         mean, lo, hi = sec.interval["k3"]
         unit = coefficient_units(st.get("mass") is None and st.get("model") == "coefficients")["k3"]
         sec.summary.append(
-            f"The posterior puts k3 at {fmt(mean)} {unit} ({pct:g} % interval {" to ".join(fmt_interval(lo, hi))})"
+            f"The posterior puts k3 at {fmt(mean)} {unit} ({pct:g} % interval {' to '.join(fmt_interval(lo, hi))})"
             + ("." if res["converged"] else "; its chains did not converge (warnings).")
         )
     sec.json = res

@@ -141,8 +141,9 @@ def _portraits_and_lle_part(rep: Report, res: dict[str, Any], rig: Rig, fast: bo
         "period-4 and cross-well responses at 9 Hz (rig records, measured z).",
     )
     res["lle_table"] = [
-        dict(zip(("case", "amplitude", "period", "regime", "wolf", "rosenstein", "benettin", "chaotic"), r,
-                 strict=True))
+        dict(
+            zip(("case", "amplitude", "period", "regime", "wolf", "rosenstein", "benettin", "chaotic"), r, strict=True)
+        )
         for r in lle_rows
     ]
     rep.table(

@@ -134,7 +134,6 @@ def compute_continuations(fast: bool, seed_: int = 0) -> ContinuationStudy:
     from negstiff.models.continuation import ContinuationError, nfrc
     from negstiff.models.rig import Rig
 
-
     t0 = time.perf_counter()
     amps = np.round(np.arange(4.0, 26.01, 0.5 if fast else 0.2), 3)
     rig_map = bifurcation_map(Rig(seed=seed_ + 5), 9.0, amps, 40 if fast else 60, 32 if fast else 48)

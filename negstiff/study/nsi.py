@@ -357,8 +357,10 @@ def law_rows(rep: Report, est, name: str) -> None:
         z_fit = est.equilibria_.z_minus if w == "minus" else est.equilibria_.z_plus
         rows.append([f"z_{w}", 1e3 * z_fit, 1e3 * uls.z_ref, pct(z_fit, uls.z_ref), est.modal_[w]["f_hz"], uls.f_hz,
                      pct(est.modal_[w]["f_hz"], uls.f_hz)])  # fmt: skip
-    rep.text(f"With every law compared on what it predicts (``law='auto'``), {name} keeps the "
-             f"**{choice.get('chosen')}** law ({choice.get('summary', '')}). Each well against the exact geometry's:")
+    rep.text(
+        f"With every law compared on what it predicts (``law='auto'``), {name} keeps the "
+        f"**{choice.get('chosen')}** law ({choice.get('summary', '')}). Each well against the exact geometry's:"
+    )
     rep.table(["well", "z* [mm]", "z* exact [mm]", "z* error", "f [Hz]", "f exact [Hz]", "f error"], rows)
     rep.table(["law", "held-out median window [%]", "weight", "why not"],
               [[c["law"], c["heldout_median_window_percent"], c["weight"], "; ".join(c["problems"][:1])]

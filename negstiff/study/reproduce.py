@@ -442,8 +442,7 @@ def reproduce(
     rep.text(
         "This report reruns the study of Anastasio, Fasana, Garibaldi and Marchesiello (EURODYN 2020), the "
         "reference study, on a virtual shaking table whose truth is known, and sets the reference study's numbers "
-        "beside ours and the truth's. "
-        + ("This is a reduced (--fast) run." if fast else "")
+        "beside ours and the truth's. " + ("This is a reduced (--fast) run." if fast else "")
     )
     say("device and calibration")
     device_section(rep, results)

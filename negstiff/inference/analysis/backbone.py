@@ -243,9 +243,15 @@ def measure_backbone(rec: Measurement) -> dict[str, Any]:
     return {
         "hilbert": hil,
         "peaks": pk,
-        "decay": {"start_s": rec.t0 + start / rec.fs, "found": how, "duration_s": x.size / rec.fs, "rest_m": rest,
-                  "z0_m": float(rec.displacement[start]), "v0_m_s": float(v_s[start]),
-                  "noise_m": noise},  # fmt: skip
+        "decay": {
+            "start_s": rec.t0 + start / rec.fs,
+            "found": how,
+            "duration_s": x.size / rec.fs,
+            "rest_m": rest,
+            "z0_m": float(rec.displacement[start]),
+            "v0_m_s": float(v_s[start]),
+            "noise_m": noise,
+        },  # fmt: skip
         "amplitude_range_m": [lo, hi],
     }
 
@@ -268,8 +274,11 @@ def _model_start(model, measured: dict[str, Any], rec: Measurement) -> tuple[flo
     if _z_constant_known(rec):
         return d["z0_m"], d["v0_m_s"], "the record's state at the decay's start"
     well = model.equilibria().well(_rest_well(model, measured, rec))
-    return (well + d["z0_m"] - d["rest_m"], d["v0_m_s"],
-            "the record's z (its constant unknown) about its rest, put on the model's well of the nearest frequency")
+    return (
+        well + d["z0_m"] - d["rest_m"],
+        d["v0_m_s"],
+        "the record's z (its constant unknown) about its rest, put on the model's well of the nearest frequency",
+    )
 
 
 def predict_backbone(model, rec: Measurement, measured: dict[str, Any] | None = None) -> dict[str, Any]:
@@ -523,14 +532,19 @@ def backbone(rec: Measurement, model=None, draws: Sequence | None = None, prob: 
     hil = measured["hilbert"]
     small = np.argsort(hil["amplitude_m"])[: max(3, hil["amplitude_m"].size // 5)]
     out: dict[str, Any] = {
-        "measured": {"hilbert": _curves({k: v for k, v in hil.items() if k != "band_hz"}),
-                     "peaks": _curves(measured["peaks"])},  # fmt: skip
+        "measured": {
+            "hilbert": _curves({k: v for k, v in hil.items() if k != "band_hz"}),
+            "peaks": _curves(measured["peaks"]),
+        },  # fmt: skip
         "decay": measured["decay"],
         "amplitude_range_m": measured["amplitude_range_m"],
         "band_hz": hil["band_hz"],
-        "linear": {"f_hz": float(np.median(hil["f_hz"][small])), "zeta": float(np.median(hil["zeta"][small])),
-                   "amplitude_m": [float(hil["amplitude_m"][small].min()), float(hil["amplitude_m"][small].max())],
-                   "from": "the median of the Hilbert backbone's smallest fifth of amplitudes"},  # fmt: skip
+        "linear": {
+            "f_hz": float(np.median(hil["f_hz"][small])),
+            "zeta": float(np.median(hil["zeta"][small])),
+            "amplitude_m": [float(hil["amplitude_m"][small].min()), float(hil["amplitude_m"][small].max())],
+            "from": "the median of the Hilbert backbone's smallest fifth of amplitudes",
+        },  # fmt: skip
         "estimator": "Hilbert transform of the band-passed decay (scipy.signal.hilbert; zero-phase Butterworth "
         f"{hil['band_hz'][0]:.3g}-{hil['band_hz'][1]:.3g} Hz), one point per period; peaks: half peak-to-peak, period "
         "between upward crossings of the rest, log decrement",

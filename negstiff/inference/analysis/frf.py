@@ -248,10 +248,13 @@ def _frf(rec: Measurement, band: tuple[float, float] | None, segment_s: float, p
         band = (float(f[on[0]]), float(min(f[on[-1]], 0.8 * nyq))) if on.size else (float(f[1]), 0.8 * nyq)
     r = _peaks(rec, est, band)
     return r | {
-        "estimator": (f"H1 = Gxy/Gxx (H2 beside), the periodic input's {est['averages']} whole periods of "
-                      f"{segment_s:.4g} s, no window; peaks: SDOF receptance fit" if est["window"] == "boxcar" else
-                      f"H1 = Gxy/Gxx (H2 beside), Welch: Hann, {est['averages']} averages of "
-                      f"{segment_s:.3g} s, 50 % overlap; peaks: SDOF receptance fit"),  # fmt: skip
+        "estimator": (
+            f"H1 = Gxy/Gxx (H2 beside), the periodic input's {est['averages']} whole periods of "
+            f"{segment_s:.4g} s, no window; peaks: SDOF receptance fit"
+            if est["window"] == "boxcar"
+            else f"H1 = Gxy/Gxx (H2 beside), Welch: Hann, {est['averages']} averages of "
+            f"{segment_s:.3g} s, 50 % overlap; peaks: SDOF receptance fit"
+        ),  # fmt: skip
         "segment_s": float(segment_s),
     }
 
@@ -283,9 +286,11 @@ def _impact_frf(rec: Measurement, band: tuple[float, float] | None, hits: Impact
     r["peaks"] = [p for p in r["peaks"] if p not in off]
     r["set_aside_hz"] = sorted(float(p["f_hz"]) for p in off)
     if off:
-        r["_notes"].append(f"{len(off)} local maxima set aside (their fits ran to a damping bound, or erred by over "
-                           f"{100 * IMPACT_FIT_RMS:g} % of the peak: no resonance), "
-                           f"at {', '.join(f'{p['f_hz']:.4g}' for p in off[:4])}{' ...' if len(off) > 4 else ''} Hz")
+        r["_notes"].append(
+            f"{len(off)} local maxima set aside (their fits ran to a damping bound, or erred by over "
+            f"{100 * IMPACT_FIT_RMS:g} % of the peak: no resonance), "
+            f"at {', '.join(f'{p["f_hz"]:.4g}' for p in off[:4])}{' ...' if len(off) > 4 else ''} Hz"
+        )
     for p in r["peaks"]:
         p["windowed"] = {"f_hz": p["f_hz"], "zeta": p["zeta"]}
         p["f_hz"], p["zeta"] = correct_exponential(p["f_hz"], p["zeta"], tau)
@@ -312,9 +317,11 @@ def _impact_frf(rec: Measurement, band: tuple[float, float] | None, hits: Impact
         "set_aside": list(hits.dropped),
     }
     return r | {
-        "estimator": (f"impact: H1 = sum conj(F) X / sum |F|^2 over {hits.count} hit(s) of {est['block_s']:.4g} s, "
-                      f"each offset by its pre-trigger median, zero-padded to {est['nfft']} points; {est['window']}; "
-                      "peaks: SDOF receptance fit"),  # fmt: skip
+        "estimator": (
+            f"impact: H1 = sum conj(F) X / sum |F|^2 over {hits.count} hit(s) of {est['block_s']:.4g} s, "
+            f"each offset by its pre-trigger median, zero-padded to {est['nfft']} points; {est['window']}; "
+            "peaks: SDOF receptance fit"
+        ),  # fmt: skip
         "segment_s": float(est["block_s"]),
     }
 

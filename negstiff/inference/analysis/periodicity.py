@@ -66,6 +66,7 @@ def refine_frequency(u: np.ndarray, t: np.ndarray, f0: float, halfwidth: float) 
     """The frequency [Hz] within ``f0`` +- ``halfwidth`` whose least-squares sinusoid (with a constant)
     leaves the least residual in u (a periodogram's peak, refined between its bins).
     """
+
     def misfit(f: float) -> float:  # the least-squares residual (not the amplitude: over a non-integer number
         w = 2 * np.pi * f  # of cycles sin and cos are not orthogonal, and the amplitude peaks off the line)
         X = np.column_stack([np.sin(w * t), np.cos(w * t), np.ones_like(t)])

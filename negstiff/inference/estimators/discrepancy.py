@@ -997,9 +997,14 @@ class Discrepancy(StructureResults, Estimator):
             gain = compare(_scores(none), _scores(best), 0.0 if measured else self.margin, _scores(none))
             named = best.effect != "none" and (_passes_measured(gain) if measured else gain.significant)
             iteration = {
-                "ranking": [{"effect": c.effect, **c.notes,  # an inf (a run that diverged) is JSON's None, as written
-                             "score": c.heldout_percent if math.isfinite(c.heldout_percent) else None}
-                            for c in ranking],  # fmt: skip
+                "ranking": [
+                    {
+                        "effect": c.effect,
+                        **c.notes,  # an inf (a run that diverged) is JSON's None, as written
+                        "score": c.heldout_percent if math.isfinite(c.heldout_percent) else None,
+                    }
+                    for c in ranking
+                ],  # fmt: skip
                 "named": best.effect if named else "none",
                 "gain_percent": float(100 * gain.gain / _scores(none).mean()),
                 "standard_error_percent": float(100 * gain.se / _scores(none).mean()),
@@ -1010,8 +1015,15 @@ class Discrepancy(StructureResults, Estimator):
                 break
             trial = self._trial(rec, best)
             iteration["kept"], iteration["verdict"], iteration["evidence"] = self._helps(
-                rec, current["gap"], trial["gap"], best.effect, current["model"], trial["model"],
-                Candidate("before", terms, stop, aux, law), best)
+                rec,
+                current["gap"],
+                trial["gap"],
+                best.effect,
+                current["model"],
+                trial["model"],
+                Candidate("before", terms, stop, aux, law),
+                best,
+            )
             iteration["gap_percent"] = {"before": current["gap"].get("median_window_percent"),
                                         "after": trial["gap"].get("median_window_percent")}  # fmt: skip
             iteration["first"] = self._first(ranking, best, iteration, terms, law, gain)
@@ -1741,8 +1753,10 @@ class Discrepancy(StructureResults, Estimator):
         ms_without, r_without = window_ms(_without(self.model_, effect))
         out = _loo_compare(ms_with, np.repeat(ms_without[None, :], len(ms_with), axis=0),
                            [*self._residuals_at(self.model_, rec, windows), *r_without], length, rng)  # fmt: skip
-        out["method"] = (f"arviz.compare (PSIS-LOO) over {where} ({length / rec.fs:g} s restarted runs), {draws} "
-                         "draws of the effect's size from its Laplace approximation and of the noise variance")
+        out["method"] = (
+            f"arviz.compare (PSIS-LOO) over {where} ({length / rec.fs:g} s restarted runs), {draws} "
+            "draws of the effect's size from its Laplace approximation and of the noise variance"
+        )
         return out
 
     def _held_out_opinion(self, rec: Measurement, model_before: Model, model_after: Model,
@@ -1776,6 +1790,7 @@ class Discrepancy(StructureResults, Estimator):
                 "the baseline's equation error is spread evenly: no regime carries more than 1.5x its share of the "
                 f"record (largest: {worst}, {w['ratio']:.1f}x)"
             )
+
         def where(regime: str) -> str:  # "concentrated at large stroke", "... crossing the barrier"
             return f"at {regime}" if regime == "large stroke" else regime
 
@@ -1828,12 +1843,16 @@ class Discrepancy(StructureResults, Estimator):
             "effect_size": self.effect_size(),
             "effect_interval": self.effect_interval_,
             "bayesian": self.bayesian_,
-            "aux_per_unit_mass": {e: v / self.model_.m for e, v in self.model_.extra.items()
-                                  if e.startswith(effects.AUX_PREFIX)},  # fmt: skip
+            "aux_per_unit_mass": {
+                e: v / self.model_.m for e, v in self.model_.extra.items() if e.startswith(effects.AUX_PREFIX)
+            },  # fmt: skip
             **({"unnamed": self.unnamed_} if getattr(self, "unnamed_", None) else {}),
             "iterations": self.iterations_,
-            "record_kind": {"kind": self.record_kind_.kind, "how": self.record_kind_.how,
-                            "read": _READ[self.record_kind_.kind]},  # fmt: skip
+            "record_kind": {
+                "kind": self.record_kind_.kind,
+                "how": self.record_kind_.how,
+                "read": _READ[self.record_kind_.kind],
+            },  # fmt: skip
             "settings": {
                 "identification_samples": self.n_id_,
                 "window_s": self.window_s_,  # ``window_s``, shortened on a ring-down (``sindy.ring_down_window``)

@@ -56,6 +56,7 @@ class Basis:
     @classmethod
     def over(cls, z: np.ndarray, v: np.ndarray, u: np.ndarray, nz: int = 7, nv: int = 5, nu: int = 5) -> Basis:
         """A basis whose centres span the 0.5-99.5 % quantiles of ``z``, ``v`` and ``u`` (``nz`` x ``nv`` + ``nu``)."""
+
         def grid(x, k):
             lo, hi = np.quantile(x, [0.005, 0.995])
             c = np.linspace(lo, hi, k) if k > 1 else np.array([0.5 * (lo + hi)])[:k]

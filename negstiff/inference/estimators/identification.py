@@ -214,7 +214,8 @@ class Identification:
                 method=d["method"],
                 model=Model.from_dict(d["model"]),
                 initial_model=Model.from_dict(d.get("initial_model") or d["model"]),
-                equilibria=None if eq.get("z_plus") is None and eq.get("z_minus") is None
+                equilibria=None
+                if eq.get("z_plus") is None and eq.get("z_minus") is None
                 else Equilibria(eq.get("z_minus"), eq.get("z_0"), eq.get("z_plus")),  # type: ignore[arg-type]
                 modal={w: dict(m) for w, m in d["modal"].items()},
                 validation=Bunch(d.get("validation") or {}),
@@ -472,8 +473,9 @@ class Identifier(Estimator):
                    "be believed"  # fmt: skip
             account = {"requested": self.law or "default", "why": why, **exc.windows, "chosen": None,
                        "summary": said, "candidates": [c.to_json() for c in exc.candidates]}  # fmt: skip
-            return replace(default, warnings=(*default.warnings, said),
-                           details={**default.details, "law_choice": account}), account
+            return replace(
+                default, warnings=(*default.warnings, said), details={**default.details, "law_choice": account}
+            ), account
         best, windows = choice.best, choice.windows
         est = self._held_by_law(choice.estimate, best.law)
         account = {"requested": self.law or "default", "why": why, **windows,
@@ -483,8 +485,11 @@ class Identifier(Estimator):
                 "they predict") + (f" ({windows['windows']} windows of {windows['window_s']:.3g} s restarted over "
                 f"the selection part): {best.law} chosen (median window {best.median_percent:.3g} %, weight "
                 f"{best.weight:.2f})")  # fmt: skip
-        return replace(est, warnings=(*est.warnings, said) if why else est.warnings,
-                       details={**est.details, "law_choice": {**account, "summary": said}}), account
+        return replace(
+            est,
+            warnings=(*est.warnings, said) if why else est.warnings,
+            details={**est.details, "law_choice": {**account, "summary": said}},
+        ), account
 
     def _check_response(self, rec: Measurement) -> None:
         """A single DOF's record as the fit reads it (``identification_record``) checked in the record's check,

@@ -176,8 +176,13 @@ def coverage(fits: ManyFits, truths: Sequence[Mapping[str, float]]) -> dict[str,
                     per.setdefault(p, []).append(bool(s["hdi_low"] <= value <= s["hdi_high"]))
         if per and prob is not None:
             out[name] = {
-                p: {"hits": sum(h), "records": len(h), "share": sum(h) / len(h), "hdi_prob": prob,
-                    "share_se": math.sqrt(prob * (1 - prob) / len(h))}  # fmt: skip
+                p: {
+                    "hits": sum(h),
+                    "records": len(h),
+                    "share": sum(h) / len(h),
+                    "hdi_prob": prob,
+                    "share_se": math.sqrt(prob * (1 - prob) / len(h)),
+                }  # fmt: skip
                 for p, h in per.items()
             }
     return out

@@ -561,8 +561,10 @@ class NSI(StructureResults, Identifier):
         if at is None:
             return super().fit(identification_record(rec, kind))
         if self.law is not None:
-            raise InputError(f"{type(self).__name__}(law={self.law!r}): a law is read on a single DOF's record; a "
-                             "structure's element has its own basis (element=): give no law")
+            raise InputError(
+                f"{type(self).__name__}(law={self.law!r}): a law is read on a single DOF's record; a "
+                "structure's element has its own basis (element=): give no law"
+            )
         self.result_ = identify_nsi(self, identification_record(rec, kind), at)
         return self
 
@@ -619,8 +621,11 @@ class NSI(StructureResults, Identifier):
             input_gain=float(np.mean(gains)),
             modal=modal,
             warnings=(
-                *(f"NSI's basis is the restoring force's and the damping's: the record's measured channel {a!r} is "
-                  "not used (SINDy and the discrepancy workflow offer it as a term)" for a in rec.aux),
+                *(
+                    f"NSI's basis is the restoring force's and the damping's: the record's measured channel {a!r} is "
+                    "not used (SINDy and the discrepancy workflow offer it as a term)"
+                    for a in rec.aux
+                ),
                 *filter(None, [per_unit_mass_warning(rec)]),
             ),
             details={"wells": self._wells_json(), **self._kind_json()},

@@ -198,6 +198,7 @@ class Instance(Constraint):
 SEED = Interval(int, 0, 2**32 - 1)
 """A random seed: numpy's SeedSequence takes any non-negative integer; the command line's 32 bits."""
 
+
 @dataclass(frozen=True)
 class RandomState(Interval):
     """A seed as scikit-learn's ``random_state``: a non-negative integer (``lo``-``hi``), None (fresh entropy:

@@ -281,8 +281,10 @@ class SINDy(StructureResults, Identifier):
         if at is None:
             return super().fit(identification_record(rec, kind))
         if self.law is not None:
-            raise InputError(f"{type(self).__name__}(law={self.law!r}): a law is read on a single DOF's record; a "
-                             "structure's element has its own basis (element=): give no law")
+            raise InputError(
+                f"{type(self).__name__}(law={self.law!r}): a law is read on a single DOF's record; a "
+                "structure's element has its own basis (element=): give no law"
+            )
         self.result_ = identify_sindy(self, identification_record(rec, kind), at)
         self.selected_ = list(self.result_.details["selected_terms"])
         self.ensemble_ = self.result_.details["ensemble"]
@@ -357,8 +359,12 @@ class SINDy(StructureResults, Identifier):
             lossless = not any(fields[t][0] in dissipative for t in chosen["terms"])
             raise SINDyError(
                 f"{rec.source}: the selected model ({', '.join(chosen['terms'])}) diverged in the restarted free runs"
-                + ("; no damping term was selected, though a device under an input dissipates (is z in one frame "
-                   "throughout, without a drift?)" if lossless else "")  # fmt: skip
+                + (
+                    "; no damping term was selected, though a device under an input dissipates (is z in one frame "
+                    "throughout, without a drift?)"
+                    if lossless
+                    else ""
+                )  # fmt: skip
             )
 
         # 3. refit the chosen support on all identification data; the ensemble at the same weight
@@ -391,8 +397,11 @@ class SINDy(StructureResults, Identifier):
                 "selected_terms": self.selected_,
                 "ensemble": self.ensemble_,
                 "path": [{k: v for k, v in p.items() if k not in ("block_ms", "support")} for p in self.path_],
-                **({} if vars(self).get("record_kind_") is None
-                   else {"record_kind": {"kind": self.record_kind_.kind, "how": self.record_kind_.how}}),
+                **(
+                    {}
+                    if vars(self).get("record_kind_") is None
+                    else {"record_kind": {"kind": self.record_kind_.kind, "how": self.record_kind_.how}}
+                ),
             },
             settings={
                 "form": f"weak: test functions (1 - (s/T)^2)^4, T = {form.half} samples, every {form.stride}",

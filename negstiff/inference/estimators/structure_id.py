@@ -121,8 +121,10 @@ class ElementPlace(Constraint):
             if not m:
                 return False
             i, j = int(m.group(1)), int(m.group(2))
-        elif isinstance(value, (tuple, list)) and len(value) == 2 and all(
-            isinstance(x, (int, np.integer)) and not isinstance(x, bool) for x in value
+        elif (
+            isinstance(value, (tuple, list))
+            and len(value) == 2
+            and all(isinstance(x, (int, np.integer)) and not isinstance(x, bool) for x in value)
         ):
             i, j = (int(x) for x in value)
         else:
@@ -665,8 +667,12 @@ def identify_sindy(est, rec: Measurement, at: tuple[int, int]) -> StructureIdent
     scale_all[scale_all == 0] = 1.0
     with warnings.catch_warnings(), _seeded_global_rng(est.seed_):
         warnings.simplefilter("ignore")
-        ens = ps.EnsembleOptimizer(ps.STLSQ(threshold=math.sqrt(2 * chosen["weight"]), alpha=0.0, max_iter=50),
-                                   bagging=True, n_models=est.n_models, n_subset=int(est.subset_fraction * y.size))
+        ens = ps.EnsembleOptimizer(
+            ps.STLSQ(threshold=math.sqrt(2 * chosen["weight"]), alpha=0.0, max_iter=50),
+            bagging=True,
+            n_models=est.n_models,
+            n_subset=int(est.subset_fraction * y.size),
+        )
         ens.fit(X / scale_all, (y / (float(y.std()) or 1.0))[:, None])
     coefs = np.array(ens.coef_list)[:, 0, :] * (float(y.std()) or 1.0) / scale_all
     ensemble = {n: {"inclusion_probability": float(np.mean(coefs[:, i] != 0)), "median": float(np.median(coefs[:, i])),
@@ -918,8 +924,9 @@ def nsi_well(est, rec: Measurement, zs: np.ndarray, v: np.ndarray, at: tuple[int
         element = Model(m=float(mass[at[1] - 1]), k0=float(c0), k1=-float(c1), k2=float(c2), k3=float(c3), c=ct,
                         c_nl=float(coef[2]))  # fmt: skip
         try:
-            structure, offsets = physical_frame(Structure(rec.dof_masses, element, Ks, Cs, at), b, gravity,
-                                                unknown_zeros(rec))
+            structure, offsets = physical_frame(
+                Structure(rec.dof_masses, element, Ks, Cs, at), b, gravity, unknown_zeros(rec)
+            )
             eq = structure.element_equilibria()
         except (ValueError, InputError) as exc:
             raise StructureIdentificationError(

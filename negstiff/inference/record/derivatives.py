@@ -135,9 +135,6 @@ def derivative_window(
     )
 
 
-
-
-
 def state_derivatives(
     z: np.ndarray, fs: float, purpose: str = "regression", floor: tuple[float, np.ndarray, np.ndarray] | None = None
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict]:

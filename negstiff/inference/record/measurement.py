@@ -175,8 +175,10 @@ class Measurement:
                 raise MeasurementError(f"{source}: auxiliary channel {name} is NaN or inf")
         if self.mass is not None:
             m = self.mass
-            if isinstance(m, bool) or not isinstance(m, (int, float, np.integer, np.floating)) or not (
-                MASS_RANGE_KG[0] <= m <= MASS_RANGE_KG[1]
+            if (
+                isinstance(m, bool)
+                or not isinstance(m, (int, float, np.integer, np.floating))
+                or not (MASS_RANGE_KG[0] <= m <= MASS_RANGE_KG[1])
             ):
                 raise MeasurementError(f"{source}: mass {m!r} kg is not a moving mass "
                                        f"({MASS_RANGE_KG[0]:g} to {MASS_RANGE_KG[1]:g} kg)")  # fmt: skip
@@ -498,9 +500,6 @@ class Measurement:
                 )
 
 
-
-
-
 RESPONSE_TRACE_P = 0.01
 """A response whose best coherence with the input is not significant at this level (over the band's bins) carries
 no trace of the input (``Measurement.require_response``)."""
@@ -566,8 +565,11 @@ def _unknown_scale(source, name: str | None, input_name: str, mass: float | None
         return None
     absolute = input_name == "base_acc" and name == "y_dot" and not any(k in present for k in ("z", "z_dot", "y"))
     if name not in SCALABLE[input_name] and not absolute:
-        what = "the input's scale is what makes a response's scale identifiable: it must be known" \
-            if name in INPUTS else f"only {', '.join(SCALABLE[input_name])} of a {input_name} record can be"
+        what = (
+            "the input's scale is what makes a response's scale identifiable: it must be known"
+            if name in INPUTS
+            else f"only {', '.join(SCALABLE[input_name])} of a {input_name} record can be"
+        )
         raise MeasurementError(f"{source}: {name}'s scale is marked unknown (*?): {what}")  # fmt: skip
     if name not in present:
         raise MeasurementError(f"{source}: {name}'s scale is marked unknown (*?), but the record has no {name}")
@@ -747,9 +749,14 @@ def load(
         meta=meta,
         source=str(path),
         t0=t0,
-        info={"time": time_info, "response": resp, **channel_info, **({"scale": scale_info} if scale_info else {}),
-              **({"set_aside": aside} if aside else {}),  # channels of other rates, each with why
-              **({"decay": True} if decay else {})},
+        info={
+            "time": time_info,
+            "response": resp,
+            **channel_info,
+            **({"scale": scale_info} if scale_info else {}),
+            **({"set_aside": aside} if aside else {}),  # channels of other rates, each with why
+            **({"decay": True} if decay else {}),
+        },
         aux=aux_cols,
         masses=dof_masses if len(dofs) > 1 else None,
         force_dof=force_dof,

@@ -471,8 +471,14 @@ def _ring_down_integral(a: np.ndarray, fs: float, sigma_a: float, first_hit: int
             f"z was derived from an accelerometer's hammer record: its content below {corner:.3g} Hz is lost (an "
             "asymmetric well's mean shift with the amplitude, which well the device rests in); a quadratic stiffness "
             "k2 read from it is not reliable (a seed-like double well's z erred by a quarter, measured)",
-            *([f"the hammer record ends still ringing ({100 * end:.0f} % of its loudest tenth's rms): its z, "
-               "integrated to a rest after the record, errs most over its last part"] if end > RING_DOWN_WARN else []),
+            *(
+                [
+                    f"the hammer record ends still ringing ({100 * end:.0f} % of its loudest tenth's rms): its z, "
+                    "integrated to a rest after the record, errs most over its last part"
+                ]
+                if end > RING_DOWN_WARN
+                else []
+            ),
         ],
     }
 

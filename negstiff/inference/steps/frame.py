@@ -83,8 +83,9 @@ def _frame_anchors(rec) -> tuple[float, dict[str, float]]:
     wells = {"minus": stable[0], "plus": stable[-1]} if len(stable) >= 2 else {}
     if rec.gravity == 0:
         if not wells:
-            raise ValueError("the fitted restoring force has no two wells over the visited stroke to be "
-                             "symmetric about")
+            raise ValueError(
+                "the fitted restoring force has no two wells over the visited stroke to be symmetric about"
+            )
         between = [e for e in eq if wells["minus"] < e < wells["plus"]]
         mid = 0.5 * (wells["minus"] + wells["plus"])
         barrier = float(between[np.argmin(np.abs(np.array(between) - mid))]) if between else float("nan")
@@ -178,8 +179,11 @@ def frame_offset(rec, spread: bool = True, use_rest: bool = True) -> dict[str, A
         }
     if horizontal:
         if "minus" not in wells:
-            return {"offset_m": None, "method": "not pinned: gravity 0 along the motion, and the record does not show "
-                    "two wells to be symmetric about; give the rest positions ('# z_minus_rest', '# z_plus_rest')"}
+            return {
+                "offset_m": None,
+                "method": "not pinned: gravity 0 along the motion, and the record does not show "
+                "two wells to be symmetric about; give the rest positions ('# z_minus_rest', '# z_plus_rest')",
+            }
         return {
             "offset_m": -x,
             "offset_se_m": _se([-p[0] for p in parts]),
@@ -255,6 +259,7 @@ def _with_integral_warnings(resp: dict[str, Any], si: bool) -> dict[str, Any]:
     kept = [w for w in resp.get("warnings", []) if not w.startswith("z integrated from")]
     said = integral_warnings(resp) if si else integral_warnings(resp, "(units as read)", 1.0)
     return {**resp, "warnings": said + kept}
+
 
 DRIFT_STEPS = 30
 """Gauss-Newton steps of the drift's physical refinement at most (each re-linearises the restoring force about the

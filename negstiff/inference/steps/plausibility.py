@@ -204,6 +204,7 @@ def classified(rec, model=None, own: list[str] | tuple[str, ...] = ()) -> list[t
     (its derivation, its units, its frame) and model (wells beyond the stroke), each with its
     ``NegstiffWarning`` category, without repeats: what the result holds and Python's ``warnings`` issue.
     """
+
     def kind(text: str) -> type:
         if "not bounded" in text:
             return BoundednessWarning

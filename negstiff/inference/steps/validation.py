@@ -97,9 +97,15 @@ def check_structure_run(structure: Structure, z0: float | None, z_limit: float =
         if not lo <= m <= hi:
             raise MeasurementError(f"the structure's mass m{i + 1} = {m:g} kg is beyond the masses a lab's structure "
                                    f"holds ({lo:g} to {hi:g} kg)")  # fmt: skip
-    for name, matrix, unit, why in (("stiffness", structure.stiffness, "N/m", "a spring that pushes its masses away "
-                                     "(a negative stiffness is the element's k1)"),
-                                    ("damping", structure.damping, "N s/m", "a damper that feeds energy in")):
+    for name, matrix, unit, why in (
+        (
+            "stiffness",
+            structure.stiffness,
+            "N/m",
+            "a spring that pushes its masses away (a negative stiffness is the element's k1)",
+        ),
+        ("damping", structure.damping, "N s/m", "a damper that feeds energy in"),
+    ):
         eig = np.linalg.eigvalsh(np.asarray(matrix, float))
         if eig.size and eig.min() < -1e-12 * max(1.0, float(np.abs(eig).max())):
             raise MeasurementError(f"the structure's linear {name} matrix has the eigenvalue {eig.min():g} {unit}: "
@@ -179,8 +185,14 @@ def start_state(system, rec: Measurement, guess=None, periods: float = 2.0) -> t
     return float(z0), float(v0)
 
 
-def simulate_measured(system, rec: Measurement, z0: float | None = None, v0: float | None = None,
-                      interpolation: str = "band-limited", substeps: int | None = None) -> SimulationResult:
+def simulate_measured(
+    system,
+    rec: Measurement,
+    z0: float | None = None,
+    v0: float | None = None,
+    interpolation: str = "band-limited",
+    substeps: int | None = None,
+) -> SimulationResult:
     """``system`` under ``rec``'s input (``negstiff simulate``): from (``z0``, ``v0``) where given, else from
     the record's own start (``start_state``: the state whose free run matches its first periods; the
     record's z pinned to the physical frame first where it was derived), else from rest at ``z_plus``

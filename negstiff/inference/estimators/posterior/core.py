@@ -739,7 +739,6 @@ class Posterior(Estimator):
         self.record_ = dict(rec.info)
         return self
 
-
     def _fit_structure(self, rec: Measurement, at: tuple[int, int], seed: int) -> Posterior:
         """The element's posterior on a structure's record (``posterior.structure``)."""
         from negstiff.inference.estimators.posterior.structure import fit_structure
@@ -812,9 +811,11 @@ def k2_frame_warning(rec: Measurement, summary: dict[str, Any]) -> list[str]:
     shift = 3 * abs(k3) * noise
     if not shift > k2["sd"]:
         return []
-    return [f"k2 = {k2['mean']:.3g} +- {k2['sd']:.3g} holds for z's zero as measured: a ring-down about one well reads "
-            f"the restoring force's curvature there (2 k2 + 6 k3 z*), and a zero off by the displacement's own noise "
-            f"({1e6 * noise:.2g} um) moves k2 by 3 k3 d = {shift:.3g}, beyond its standard deviation"]
+    return [
+        f"k2 = {k2['mean']:.3g} +- {k2['sd']:.3g} holds for z's zero as measured: a ring-down about one well reads "
+        f"the restoring force's curvature there (2 k2 + 6 k3 z*), and a zero off by the displacement's own noise "
+        f"({1e6 * noise:.2g} um) moves k2 by 3 k3 d = {shift:.3g}, beyond its standard deviation"
+    ]
 
 
 INPUT_BAND_FILLED = 0.5

@@ -130,8 +130,11 @@ def fit_structure(est, rec: Measurement, at: tuple[int, int], seed: int) -> tupl
         "curvature_adjustment": est.adjust,
         "variance_inflation": [round(float(x), 3) for x in inflation],
         "residual_correlation_time": tau_res,
-        "input_noise": {"rms": None, "source": "not carried through a structure (the curvature adjustment widens "
-                                               "for what the input's noise leaves in the residual)"},
+        "input_noise": {
+            "rms": None,
+            "source": "not carried through a structure (the curvature adjustment widens "
+            "for what the input's noise leaves in the residual)",
+        },
         "samples_used": int(data.size),
         "walkers": est.n_walkers,
         "ensembles": est.n_ensembles,

@@ -135,7 +135,12 @@ class Windows:
             u_fine = signal.resample(rec.u, q * rec.n)
             u = u_fine[q * starts[:, None] + np.arange(q * L)[None, :]]
         return cls(
-            rec.dt, rec.input_name, u, windows.measured(rec.displacement), windows.start_states(zs, v), oversample=q,
+            rec.dt,
+            rec.input_name,
+            u,
+            windows.measured(rec.displacement),
+            windows.start_states(zs, v),
+            oversample=q,
             starts=starts,
         )
 
@@ -325,7 +330,7 @@ class Windows:
             self.set_sensitivities(params, kind)
         assert self.proj is not None
         G = self.input_sensitivities(params, kind)
-        Q = np.linalg.qr(self.proj, mode="complete")[0][:, :, self.proj.shape[-1]:]  # (W, L, L - 2)
+        Q = np.linalg.qr(self.proj, mode="complete")[0][:, :, self.proj.shape[-1] :]  # (W, L, L - 2)
         M = variance * (Q.transpose(0, 2, 1) @ G) @ (G.transpose(0, 2, 1) @ Q)
         lam, V = np.linalg.eigh(M)  # ascending: the directions that carry the input's noise come last
         lam = np.maximum(lam, 0.0)
