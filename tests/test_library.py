@@ -215,10 +215,10 @@ def test_the_whole_workflow_from_python_gives_the_cli_json(scipy_record, scipy_f
         # the module's NSI and SINDy fits of this record with their defaults (the same fits a script makes)
         "nsi": (scipy_fits["nsi"].result(), ["identify", "nsi", str(scipy_record)]),
         "sindy": (scipy_fits["sindy"].result(), ["identify", "sindy", str(scipy_record)]),
-        # a short chain (the JSON is what is compared, not the sampler's convergence)
+        # a short chain of two ensembles (the JSON is what is compared, not the sampler's convergence)
         "posterior": (
-            Posterior(seed=0, max_steps=600).fit(load(short)).result(),
-            ["posterior", short, "--max-steps", "600"],
+            Posterior(seed=0, max_steps=300, n_ensembles=2).fit(load(short)).result(),
+            ["posterior", short, "--max-steps", "300", "--ensembles", "2"],
         ),  # fmt: skip
         "discrepancy": (disc, ["discrepancy", str(scipy_record)]),
     }
