@@ -349,17 +349,26 @@ def get(name: str) -> Effect:
 @contextlib.contextmanager
 def registered(*effects: Effect):
     """Add effects to the registry for the duration of a ``with`` block (tests, experiments)."""
-    for e in effects:
-        if e.name in names():
-            raise ValueError(f"an effect named {e.name!r} is registered already")
-    REGISTRY.extend(effects)
-    try:
-        layout.cache_clear()
+    with registered_in(REGISTRY, effects, names(), "an effect", layout.cache_clear):
         yield effects
+
+
+@contextlib.contextmanager
+def registered_in(registry: list, items, known, what: str, changed=lambda: None):
+    """Add named ``items`` to ``registry`` for a ``with`` block (an effect's, a law's), refusing a name in
+    ``known``; ``changed`` runs after each change (a cached layout cleared).
+    """
+    for item in items:
+        if item.name in known:
+            raise ValueError(f"{what} named {item.name!r} is registered already")
+    registry.extend(items)
+    try:
+        changed()
+        yield items
     finally:
-        for e in effects:
-            REGISTRY.remove(e)
-        layout.cache_clear()
+        for item in items:
+            registry.remove(item)
+        changed()
 
 
 # --- forces and potentials of an ``extra`` mapping ---------------------------------------------------

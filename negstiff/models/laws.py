@@ -243,12 +243,5 @@ def of_model(model, kind: str = "restoring") -> Law:
 @contextlib.contextmanager
 def registered(*laws: Law):
     """Add laws for the duration of a ``with`` block (tests, experiments)."""
-    for law in laws:
-        if law.name in names():
-            raise ValueError(f"a law named {law.name!r} is registered already")
-    LAWS.extend(laws)
-    try:
+    with effects.registered_in(LAWS, laws, names(), "a law"):
         yield laws
-    finally:
-        for law in laws:
-            LAWS.remove(law)
