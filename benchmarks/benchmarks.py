@@ -1,6 +1,6 @@
 """Benchmarks of the hot paths, each against a named baseline in the same run.
 
-    python -m benchmarks.benchmarks [-o reports/benchmarks.md] [--quick]
+    python -m benchmarks.benchmarks [-o reports/benchmarks.md] [--quick] [--only simulator,nsi,...]
 
 Simulator (issue 2): one 300 s record at 512 Hz and a batch of 256 such records (parameters +-2 %),
 against ``scipy.integrate.solve_ivp`` (RK45, rtol 1e-8, atol 1e-10, Python right-hand side with the
@@ -499,18 +499,25 @@ def continuation_benchmark(quick: bool = False) -> tuple[list[list[str]], dict]:
     return rows, res
 
 
-def _simulator_section(quick: bool) -> list[str]:
-    """The report's head and the simulator section (issue 2)."""
-    print("simulator benchmark (solve_ivp takes a while)...", file=sys.stderr)
-    rows, res = simulator_benchmark(quick)
-    s = res["single"]
-    lines = [
+def _header(quick: bool) -> list[str]:
+    """The report's head: the machine and how it was written."""
+    return [
         "# negstiff benchmarks",
         "",
         f"Machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores, Python "
         f"{platform.python_version()}, numpy {np.__version__}. Written by `python -m benchmarks.benchmarks`"
-        f"{' --quick' if quick else ''}; every ratio is against the baseline measured in the same run.",
-        "",
+        f"{' --quick' if quick else ''}, each section as soon as it is measured (its figures also in "
+        "`benchmarks.json`; `--only NAME` reruns one section in place); every ratio is against the baseline "
+        "measured in the same section's run.",
+    ]
+
+
+def _simulator_section(quick: bool) -> tuple[list[str], dict]:
+    """The simulator section (issue 2) and its figures."""
+    print("simulator benchmark (solve_ivp takes a while)...", file=sys.stderr)
+    rows, res = simulator_benchmark(quick)
+    s = res["single"]
+    lines = [
         "## Simulator (issue 2)",
         "",
         "Record: the rig's default cross-well random excitation (300 s at 512 Hz, 153,600 samples) driving the "
@@ -547,10 +554,10 @@ def _simulator_section(quick: bool) -> list[str]:
             f"amortises to {b['per_record_s'] * 1e3:.2f} ms per record, "
             f"{res['c_rk4_2']['s'] / b['per_record_s']:.1f}x faster than one C loop per record."
         ]
-    return lines
+    return lines, res
 
 
-def _posterior_section(quick: bool) -> list[str]:
+def _posterior_section(quick: bool) -> tuple[list[str], dict]:
     """Posterior sampling (issue 7): batched likelihood against the per-walker loop."""
     print("posterior benchmark...", file=sys.stderr)
     prows, pres = posterior_benchmark(quick)
@@ -582,19 +589,13 @@ def _posterior_section(quick: bool) -> list[str]:
             f"the batch is {pres['t_plain'] / pres['t_batch']:.1f}x faster."
         ),
     ]
-    return lines
+    return lines, pres
 
 
-def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("-o", "--out", default="reports/benchmarks.md")
-    ap.add_argument("--quick", action="store_true", help="60 s records and a batch of 64 (a smoke run)")
-    a = ap.parse_args(argv)
-    waits = waits_section(a.quick)  # measured first, on the machine at rest
-    lines = _simulator_section(a.quick) + waits
+def _nsi_section(quick: bool) -> tuple[list[str], dict]:
     print("NSI benchmark...", file=sys.stderr)
-    nrows, nres = nsi_benchmark(a.quick)
-    lines += _section(
+    rows, res = nsi_benchmark(quick)
+    lines = _section(
         "NSI (issue 4)",
         (
             "Peak memory is what Python allocates (tracemalloc) during the call. Neither negstiff route holds the "
@@ -602,37 +603,48 @@ def main(argv=None) -> int:
             "chunk, not by the record length."
         ),
         ["case", "method", "wall time", "peak memory", "vs baseline"],
-        nrows,
+        rows,
     )
+    return lines, res
+
+
+def _bifurcation_section(quick: bool) -> tuple[list[str], dict]:
     print("bifurcation-map benchmark...", file=sys.stderr)
-    brows, bres = bifurcation_benchmark(a.quick)
-    lines += _section(
+    rows, res = bifurcation_benchmark(quick)
+    lines = _section(
         "Bifurcation map (issue 3)",
         (
             "Wall time of producing the records (simulation, sensor chain, anti-aliasing, integration), before "
             "the periodicity analysis."
         ),
         ["case", "method", "wall time", "vs baseline"],
-        brows,
+        rows,
     )
-    lines += _posterior_section(a.quick)
+    return lines, res
+
+
+def _continuation_section(quick: bool) -> tuple[list[str], dict]:
     print("continuation benchmark...", file=sys.stderr)
-    crows, cres = continuation_benchmark(a.quick)
-    lines += _section(
+    rows, res = continuation_benchmark(quick)
+    lines = _section(
         "Continuation (issue 16)",
         (
             "`negstiff nfrc` at 9 Hz from 2 to 30 m/s^2 (doubled branches followed to period 4), against the "
             "stepped sweep a user would simulate instead. Target: under 30 s on 2 cores."
         ),
         ["case", "method", "wall time", "what it gives"],
-        crows,
+        rows,
     )
-    slowest = max(v["s"] for k, v in cres.items() if k != "brute_force_s")
+    slowest = max(v["s"] for k, v in res.items() if k != "brute_force_s")
     lines += ["", f"The slowest continuation took {slowest:.1f} s: the 30 s target is "
               + ("met." if slowest < 30 else "**not met**.")]  # fmt: skip
+    return lines, res
+
+
+def _refinement_section(quick: bool) -> tuple[list[str], dict]:
     print("refinement benchmark...", file=sys.stderr)
-    rrows, rres = refinement_benchmark(a.quick)
-    lines += _section(
+    rows, res = refinement_benchmark(quick)
+    lines = _section(
         "Output-error refinement (issue 15)",
         (
             "The stage `identify nsi|sindy` and `discrepancy` end with, timed on its own from the equation-error "
@@ -641,28 +653,138 @@ def main(argv=None) -> int:
             "Target: under 10 s for a 300 s record on 2 cores."
         ),
         ["case", "method", "wall time", "vs baseline", "evaluations, end error"],
-        rrows,
+        rows,
     )
-    t300 = rres["rig"]["refine_stage_s"]
+    t300 = res["rig"]["refine_stage_s"]
     lines += [
         "",
-        f"On the {'60' if a.quick else '300'} s record the refinement takes {t300:.1f} s: the 10 s target is "
+        f"On the {'60' if quick else '300'} s record the refinement takes {t300:.1f} s: the 10 s target is "
         + ("met." if t300 < 10 else "**not met**.")
         + " "
         + " ".join(
             f"{k}: scipy's sparse solver took {v['first_stage']['scipy']['evaluations']} evaluations and ended "
             f"{100 * (v['first_stage']['scipy']['rms_end_m'] / v['first_stage']['schur']['rms_end_m'] - 1):+.4f} % "
             f"from negstiff's end error, reached in {v['first_stage']['schur']['evaluations']}."
-            for k, v in rres.items()
+            for k, v in res.items()
         ),
     ]
-    lines += peers_section(a.quick)
-    lines += scaling_section(
-        scaling((10.0, 30.0, 100.0) if a.quick else (30.0, 300.0, 3000.0)),
-        Path(a.out).with_name("scaling.png"),
-    )
-    write_text(a.out, "\n".join(lines) + "\n")
-    print("\n".join(lines))
+    return lines, res
+
+
+SECTIONS: dict[str, Any] = {
+    "waits": lambda quick, out: (waits_section(quick), None),
+    "simulator": lambda quick, out: _simulator_section(quick),
+    "nsi": lambda quick, out: _nsi_section(quick),
+    "bifurcation": lambda quick, out: _bifurcation_section(quick),
+    "posterior": lambda quick, out: _posterior_section(quick),
+    "continuation": lambda quick, out: _continuation_section(quick),
+    "refinement": lambda quick, out: _refinement_section(quick),
+    "peers": lambda quick, out: (peers_section(quick), None),
+    "scaling": lambda quick, out: (
+        scaling_section(
+            res := scaling((10.0, 30.0, 100.0) if quick else (30.0, 300.0, 3000.0)),
+            Path(out).with_name("scaling.png"),
+        ),
+        res,
+    ),
+}
+"""The sections in the order they are measured (the waits first, on the machine at rest): name -> (quick, the
+Markdown's path) -> (its Markdown lines, its figures for the JSON, or None where only the text holds them)."""
+
+ORDER = ("simulator", "waits", "nsi", "bifurcation", "posterior", "continuation", "refinement", "peers", "scaling")
+"""The sections' order in the Markdown."""
+
+
+def _blocks(lines: list[str]) -> tuple[list[str], list[tuple[str, list[str]]]]:
+    """A Markdown text as its head (before the first ``## ``) and its ``## `` blocks, in order."""
+    head: list[str] = []
+    blocks: list[tuple[str, list[str]]] = []
+    for line in lines:
+        if line.startswith("## "):
+            blocks.append((line, [line]))
+        elif blocks:
+            blocks[-1][1].append(line)
+        else:
+            head.append(line)
+    return head, blocks
+
+
+def _key(heading: str) -> str:
+    """A block's name, its heading without the issue it came from ("## Waits (issue 18)" -> "Waits")."""
+    return heading[3:].split(" (issue")[0].strip()
+
+
+BLOCKS = {"Simulator": "simulator", "Waits": "waits", "NSI": "nsi", "Bifurcation map": "bifurcation",
+          "Posterior sampling": "posterior", "Continuation": "continuation", "Output-error refinement": "refinement",
+          "Peers": "peers", "Scaling": "scaling"}  # fmt: skip
+"""Which section writes a block (by its name's start: the peers write four)."""
+
+
+def _rank(heading: str) -> int:
+    """A block's place in the Markdown: its section's in ``ORDER`` (a block of no known section last)."""
+    key = _key(heading)
+    for start, name in BLOCKS.items():
+        if key.startswith(start):
+            return ORDER.index(name)
+    return len(ORDER)
+
+
+def write_section(out: str, name: str, lines: list[str], quick: bool) -> None:
+    """Put one section's blocks into the Markdown at ``out`` in place of the same blocks (every other block kept),
+    a new one where ``ORDER`` puts it, its date after each heading; written at once, atomically.
+    """
+    path = Path(out)
+    blocks = _blocks(path.read_text().splitlines() if path.exists() else [])[1]
+    head = _header(quick)  # this run's machine and way
+    stamp = f"*Measured {time.strftime('%Y-%m-%d')}{' (--quick)' if quick else ''}, section `{name}`.*"
+    for heading, block in _blocks(lines)[1]:
+        block = _trim([heading, "", stamp, *block[1:]])
+        keys = [_key(h) for h, _ in blocks]
+        if _key(heading) in keys:
+            blocks[keys.index(_key(heading))] = (heading, block)
+        else:  # before the first block of a later section (a full run measures the waits first)
+            at = next((k for k, (h, _) in enumerate(blocks) if _rank(h) > _rank(heading)), len(blocks))
+            blocks.insert(at, (heading, block))
+    text = [*_trim(head)] + [line for _, block in blocks for line in block]
+    write_text(out, "\n".join(text).rstrip("\n") + "\n")
+
+
+def _trim(block: list[str]) -> list[str]:
+    """A block with one blank line after it."""
+    while block and not block[-1].strip():
+        block = block[:-1]
+    return [*block, ""]
+
+
+def write_figures(out: str, name: str, res, quick: bool) -> None:
+    """One section's figures into ``benchmarks.json`` beside the Markdown (the others kept)."""
+    import json
+
+    path = Path(out).with_suffix(".json")
+    data = json.loads(path.read_text()) if path.exists() else {}
+    data[name] = {"measured": time.strftime("%Y-%m-%d"), "quick": quick, "figures": res}
+    text = json.dumps(data, indent=1, default=lambda o: o.tolist() if hasattr(o, "tolist") else str(o))
+    write_text(str(path), text + "\n")
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("-o", "--out", default="reports/benchmarks.md")
+    ap.add_argument("--quick", action="store_true", help="60 s records and a batch of 64 (a smoke run)")
+    ap.add_argument("--only", default="", help=f"comma-separated sections to rerun in place: {', '.join(SECTIONS)}")
+    a = ap.parse_args(argv)
+    only = [n.strip() for n in a.only.split(",") if n.strip()] or list(SECTIONS)
+    unknown = [n for n in only if n not in SECTIONS]
+    if unknown:
+        ap.error(f"unknown section {', '.join(unknown)}: one of {', '.join(SECTIONS)}")
+    if set(only) == set(SECTIONS) and Path(a.out).exists():
+        write_text(a.out, "\n".join(_header(a.quick)) + "\n")  # a full run: every section measured anew
+    for name in (n for n in SECTIONS if n in only):
+        lines, res = SECTIONS[name](a.quick, a.out)
+        write_section(a.out, name, lines, a.quick)  # at once: a later section's failure loses nothing measured
+        if res is not None:
+            write_figures(a.out, name, res, a.quick)
+        print("\n".join(lines))
     return 0
 
 
