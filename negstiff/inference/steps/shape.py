@@ -5,7 +5,9 @@ gap, the rod frame's length and angle, a spline's knots) is fitted by separating
 SIAM J. Numer. Anal. 10:413): at a shape, the coefficients are the weak form's constrained least squares
 (``weak.fit_support``: the input's coefficient fixed by physics), and the shape minimises what that least
 squares leaves, its relative weak residual. Only the shaped parts' columns depend on the shape, so only they
-are projected again at each trial (the others once).
+are projected again at each trial (the others once). A part with one width is searched on a grid across its box
+and refined by bounded Brent (Brent 1973); a part with more shape fields (the rod frame's) by Nelder-Mead from a
+few starts, in coordinates that keep it inside its box.
 
 A spline's shape is its knots: evenly spaced over the record's stroke (its 0.5 and 99.5 % quantiles), their
 number chosen by what the fit predicts: each count is fitted on the first part and scored on the next by its
