@@ -777,8 +777,7 @@ def main(argv=None) -> int:
     unknown = [n for n in only if n not in SECTIONS]
     if unknown:
         ap.error(f"unknown section {', '.join(unknown)}: one of {', '.join(SECTIONS)}")
-    if set(only) == set(SECTIONS) and Path(a.out).exists():
-        write_text(a.out, "\n".join(_header(a.quick)) + "\n")  # a full run: every section measured anew
+    # no section's old text is dropped before its new one is measured: a run that stops keeps the earlier figures
     for name in (n for n in SECTIONS if n in only):
         lines, res = SECTIONS[name](a.quick, a.out)
         write_section(a.out, name, lines, a.quick)  # at once: a later section's failure loses nothing measured
