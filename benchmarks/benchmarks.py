@@ -691,9 +691,6 @@ SECTIONS: dict[str, Any] = {
 """The sections in the order they are measured (the waits first, on the machine at rest): name -> (quick, the
 Markdown's path) -> (its Markdown lines, its figures for the JSON, or None where only the text holds them)."""
 
-ORDER = ("simulator", "waits", "nsi", "bifurcation", "posterior", "continuation", "refinement", "peers", "scaling")
-"""The sections' order in the Markdown."""
-
 
 def _blocks(lines: list[str]) -> tuple[list[str], list[tuple[str, list[str]]]]:
     """A Markdown text as its head (before the first ``## ``) and its ``## `` blocks, in order."""
@@ -714,24 +711,20 @@ def _key(heading: str) -> str:
     return heading[3:].split(" (issue")[0].strip()
 
 
-BLOCKS = {"Simulator": "simulator", "Waits": "waits", "NSI": "nsi", "Bifurcation map": "bifurcation",
-          "Posterior sampling": "posterior", "Continuation": "continuation", "Output-error refinement": "refinement",
-          "Peers": "peers", "Scaling": "scaling"}  # fmt: skip
-"""Which section writes a block (by its name's start: the peers write four)."""
+BLOCKS = ("Simulator", "Waits", "NSI", "Bifurcation map", "Posterior sampling", "Continuation",
+          "Output-error refinement", "Peers", "Scaling")  # fmt: skip
+"""The blocks' names (their starts: the peers write four blocks) in the Markdown's order."""
 
 
 def _rank(heading: str) -> int:
-    """A block's place in the Markdown: its section's in ``ORDER`` (a block of no known section last)."""
+    """A block's place in the Markdown: its name's in ``BLOCKS`` (a block of no known name last)."""
     key = _key(heading)
-    for start, name in BLOCKS.items():
-        if key.startswith(start):
-            return ORDER.index(name)
-    return len(ORDER)
+    return next((i for i, start in enumerate(BLOCKS) if key.startswith(start)), len(BLOCKS))
 
 
 def write_section(out: str, name: str, lines: list[str], quick: bool) -> None:
     """Put one section's blocks into the Markdown at ``out`` in place of the same blocks (every other block kept),
-    a new one where ``ORDER`` puts it, its date after each heading; written at once, atomically.
+    a new one where ``BLOCKS`` puts it, its date after each heading; written at once, atomically.
     """
     path = Path(out)
     blocks = _blocks(path.read_text().splitlines() if path.exists() else [])[1]

@@ -169,9 +169,10 @@ class ShapedLaw:
 
 
 class WidthShaped(ShapedLaw):
-    """A part whose shape is one width w > 0 (a magnets' gap, the springs' half-span) that its force decays or
-    saturates over: it acts within +-``SPAN_WIDTHS`` widths, the search looks between ``WIDTH_BOUNDS`` half-strokes
-    and starts from ``WIDTH_GUESSES`` half-strokes (a subclass sets them, and names the width ``shape[0]``).
+    """A part with one coefficient (``fields[0]``) and a shape of one width w > 0 (``shape[0]``: a magnets' gap, the
+    springs' half-span) that its force decays or saturates over: it acts within +-``SPAN_WIDTHS`` widths, the
+    search looks between ``WIDTH_BOUNDS`` half-strokes (``inference.steps.shape``: a grid across them, then Brent),
+    and its starting shapes are ``WIDTH_GUESSES`` half-strokes (a subclass sets them).
     """
 
     SPAN_WIDTHS: ClassVar[float] = 8.0
@@ -201,6 +202,14 @@ class WidthShaped(ShapedLaw):
         half = 0.5 * (stroke[1] - stroke[0])
         return [{self.shape[0]: f * half} for f in self.WIDTH_GUESSES]
 
+    def coefficients(self, value):
+        """(the one coefficient,)."""
+        return [np.asarray(value[self.fields[0]], float)]
+
+    def value_of(self, shape, coefficients):
+        """The value of the width and the one coefficient."""
+        return {self.fields[0]: float(coefficients[0]), self.shape[0]: float(shape[self.shape[0]])}
+
 
 @dataclass(frozen=True)
 class DipoleMagnet(WidthShaped):
@@ -217,14 +226,6 @@ class DipoleMagnet(WidthShaped):
         """The one column -3 z / (d^2 + z^2)^(5/2) [m^-4]."""
         d = np.asarray(shape["d"], float)
         return [-3.0 * z / (d * d + z * z) ** 2.5]
-
-    def coefficients(self, value):
-        """(A,)."""
-        return [np.asarray(value["A"], float)]
-
-    def value_of(self, shape, coefficients):
-        """``{"A", "d"}`` of the gap d and the coefficient A."""
-        return {"A": float(coefficients[0]), "d": float(shape["d"])}
 
     def stiffness(self, value, z):
         """dF/dz = -3 A (d^2 - 4 z^2) / (d^2 + z^2)^(7/2)."""
@@ -262,14 +263,6 @@ class ObliqueSprings(WidthShaped):
         a = np.asarray(shape["a"], float)
         z = np.asarray(z, float)
         return [-2.0 * z / np.sqrt(a * a + z * z)]
-
-    def coefficients(self, value):
-        """(P,)."""
-        return [np.asarray(value["P"], float)]
-
-    def value_of(self, shape, coefficients):
-        """``{"P", "a"}``."""
-        return {"P": float(coefficients[0]), "a": float(shape["a"])}
 
     def stiffness(self, value, z):
         """dF/dz = -2 P a^2 / (a^2 + z^2)^(3/2)."""

@@ -134,6 +134,8 @@ def _box_search(problem: _Problem, name: str, law: ShapedLaw, rng_stroke, others
     """
     bounds = law.shape_bounds(rng_stroke)
     keys = list(bounds)
+    if len(keys) == 1:
+        return _width_search(problem, name, keys[0], *bounds[keys[0]], others)
     lo = np.array([bounds[k][0] for k in keys])
     hi = np.array([bounds[k][1] for k in keys])
 
@@ -148,8 +150,6 @@ def _box_search(problem: _Problem, name: str, law: ShapedLaw, rng_stroke, others
     def objective(x):
         return problem.residual({**others, name: unpack(x)})
 
-    if len(keys) == 1:
-        return _width_search(problem, name, keys[0], float(lo[0]), float(hi[0]), others)
     tried, best, best_r = [], None, math.inf
     for guess in law.shape_guesses(rng_stroke):
         x0 = pack(guess)
@@ -170,12 +170,13 @@ WIDTH_GRID = 13
 neighbours)."""
 
 
-def _width_search(problem: _Problem, name: str, key: str, lo: float, hi: float, others) -> tuple[dict, float, list]:
+def _width_search(problem: _Problem, name: str, key: str, lo, hi, others) -> tuple[dict, float, list]:
     """A part with one width (the magnets' gap, the springs' half-span): its weak residual on ``WIDTH_GRID`` widths
     evenly in log across [lo, hi], then scipy's bounded Brent between the best width's neighbours. Nelder-Mead from
     three starts took up to 180 residuals (each a projection of the part's columns) and stopped at its budget on
     most records; this takes ~25 and sees the whole box before it refines.
     """
+    lo, hi = float(lo), float(hi)
     grid = np.geomspace(lo, hi, WIDTH_GRID) if lo > 0 else np.linspace(lo, hi, WIDTH_GRID)
 
     def residual(width: float) -> float:
