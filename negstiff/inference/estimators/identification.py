@@ -390,6 +390,9 @@ def quick_spline_holds(rec: Measurement, n_id: int) -> bool:
     from negstiff.inference.steps.shape import stroke
     from negstiff.inference.steps.weak import Library, WeakForm, WeakFormError, fit_support, known_input_gain
 
+    key = ("quick_spline_holds", n_id)
+    if key in rec.derived:  # judged once per record (the check, then the fit)
+        return rec.derived[key]
     part = rec.segment(0, n_id)
     lo, hi = stroke(part)
     shape = {"spline": {"knots": tuple(np.linspace(lo, hi, 9))}}
@@ -398,8 +401,11 @@ def quick_spline_holds(rec: Measurement, n_id: int) -> bool:
         phys = fit_support(WeakForm.of(part).system(part, library=lib), known_input_gain(part))
         model = lib.model(phys, 1.0)
     except (WeakFormError, np.linalg.LinAlgError, ValueError):
-        return False
-    return bool(np.all(model.stiffness(np.array([lo, hi])) > 0))
+        holds = False
+    else:
+        holds = bool(np.all(model.stiffness(np.array([lo, hi])) > 0))
+    rec.derived[key] = holds
+    return holds
 
 
 class Identifier(Estimator):
@@ -507,9 +513,13 @@ class Identifier(Estimator):
             n_id = int(round(read.n * (1 - self.validation_fraction)))
             # a softening quick cubic refuses here where the cubic is asked for, or where no law could hold the
             # record either (a quick spline's force does not grow outward at the stroke's ends); else the laws are
-            # compared (``_estimate_law``)
-            if self.law == laws.DEFAULT_RESTORING or (self.law is None and not quick_spline_holds(read, n_id)):
-                refuse_softening(read, n_id, type(self).__name__)
+            # compared (``_estimate_law``). The spline is fitted only where the cubic softens.
+            if self.law in (None, laws.DEFAULT_RESTORING):
+                try:
+                    refuse_softening(read, n_id, type(self).__name__)
+                except InputError:
+                    if self.law is not None or not quick_spline_holds(read, n_id):
+                        raise
 
     def _final_details(self, rec: Measurement, model: Model, details: dict[str, Any]) -> dict[str, Any]:
         """The method's own result keys that depend on the final model (NSI's ``g_estimate``)."""

@@ -68,15 +68,16 @@ def problems(model: Model, rec: Measurement, n: int) -> list[str]:
     if not any(lo - margin <= w <= hi + margin for w in wells):  # the record rests nowhere the model does
         out.append(f"no well inside the stroke [{1e3 * lo:.3g}, {1e3 * hi:.3g}] mm (wells at "
                    + ", ".join(f"{1e3 * w:.3g}" for w in wells) + " mm)")  # fmt: skip
+    seg = rec.segment(0, n)  # one segment for both checks: what it derives is kept with it
     try:
-        bounded = boundedness(model, rec.segment(0, n))
+        bounded = boundedness(model, seg)
     except (ValueError, ArithmeticError):
         bounded = {"escape_z": None, "ok": True}
     if bounded["escape_z"] is not None:
         out.append(f"its potential opens an escape at {1e3 * bounded['escape_z']:.3g} mm, just past the stroke")
     elif not bounded["ok"]:  # its free run under the record's input, a little larger, leaves for good
         out.append(bounded.get("warning") or "it is not bounded where the record went")
-    _, v, _, _ = rec.segment(0, n).states("state")
+    _, v, _, _ = seg.states("state")
     with np.errstate(all="ignore"):  # the damping's force at the record's states, and its power
         d = model.total_force(z, v) - model.total_force(z, np.zeros_like(v))
     power = float(np.mean(v * d))
