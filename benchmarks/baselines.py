@@ -47,7 +47,11 @@ void rk4(const double *p, const double *u, long n, double dt, int nsub, double z
 def median_time[T](fn: Callable[[], T], repeats: int) -> tuple[float, T]:
     """The median wall time [s] of ``repeats`` calls of ``fn`` (at least one), and the last call's result."""
     times: list[float] = []
+    out = None
     for _ in range(repeats):
+        # the previous call's result freed before the next call, as a caller's loop frees it: a batch's 300 MB
+        # output kept alive made the next call fault in fresh pages, 2.4x the polynomial batch's time (measured)
+        del out
         t0 = time.perf_counter()
         out = fn()
         times.append(time.perf_counter() - t0)

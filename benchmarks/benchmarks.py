@@ -147,9 +147,9 @@ def _batch_benchmark(model, u_cross: np.ndarray, dt: float, zp: float, t_ivp: fl
     Pd[DEVICE_ROWS["k_f"]] *= 1 + 0.02 * rng.uniform(-1, 1, nb)
     x0 = np.array([zp, 0.0])
     simulate_batch(P[:, :4], "polynomial", u_cross[:100], dt, x0)
-    t_b, _ = median_time(lambda: simulate_batch(P, "polynomial", u_cross, dt, x0), 3)
+    t_b, _ = median_time(lambda: simulate_batch(P, "polynomial", u_cross, dt, x0), 5)
     t_bd, _ = median_time(
-        lambda: simulate_batch(Pd, "device", u_cross, dt, np.array([AS_BUILT.equilibria().z_plus, 0])), 3
+        lambda: simulate_batch(Pd, "device", u_cross, dt, np.array([AS_BUILT.equilibria().z_plus, 0])), 5
     )
     # the same law on a 25 Hz, 2 % fixture of 1 kg (2 DOF): the Runge-Kutta loop's stage-wise path, against the
     # single DOF's fused one above
@@ -157,7 +157,7 @@ def _batch_benchmark(model, u_cross: np.ndarray, dt: float, zp: float, t_ivp: fl
     xs = np.r_[fixture.static_positions(fixture.element_equilibria().z_plus), 0.0, 0.0]
     group = [fixture.with_element(replace(model, k1=model.k1 * (1 + 0.02 * e))) for e in rng.uniform(-1, 1, nb)]
     simulate_structures(group[:4], u_cross[:100], dt, xs)
-    t_s, _ = median_time(lambda: simulate_structures(group, u_cross, dt, xs), 3)
+    t_s, _ = median_time(lambda: simulate_structures(group, u_cross, dt, xs), 5)
     # the geometric law's table, +-2 % k_f per member (each member its own table)
     law = AS_BUILT.law_model()
     frames = [replace(law, extra={"rod_frame": {**law.extra["rod_frame"], "k_f": law.extra["rod_frame"]["k_f"] * f}})
@@ -165,7 +165,7 @@ def _batch_benchmark(model, u_cross: np.ndarray, dt: float, zp: float, t_ivp: fl
     Pl = np.column_stack([m.kernel_params() for m in frames])
     xl = np.array([AS_BUILT.equilibria().z_plus, 0])
     simulate_batch(Pl[:, :4], "polynomial", u_cross[:100], dt, xl)
-    t_bl, _ = median_time(lambda: simulate_batch(Pl, "polynomial", u_cross, dt, xl), 3)
+    t_bl, _ = median_time(lambda: simulate_batch(Pl, "polynomial", u_cross, dt, xl), 5)
     res = {
         "members": nb,
         "table_law_s": t_bl,
@@ -541,10 +541,10 @@ def _simulator_section(quick: bool) -> tuple[list[str], dict]:
         f"A law outside the kernel's rows (issue 55: within 2x the cubic's time) takes {law_single:.2f}x the "
         f"polynomial's time for one record ({'met' if law_single <= 2 else 'not met'}) and {law_batch:.1f}x in the "
         f"batch ({'met' if law_batch <= 2 else 'not met'}). One record: the look-up (a floor, an index, four "
-        "loads, a cubic) lies on each Runge-Kutta stage's chain of dependent operations, the next stage waiting on "
-        "it. The batch: the polynomial's runs 4-8 members per vector instruction, while a table look-up loads from "
-        "an address each member computes, a gather LLVM does not emit for this machine (none in the compiled loop, "
-        "measured: 4 ns a scalar look-up against 0.3 ns a member's vectorised cubic)."
+        "loads, a cubic) adds to each Runge-Kutta stage's chain of dependent operations. The batch: the "
+        "polynomial's batch runs four members per vector instruction, while a table look-up loads from an address "
+        "each member computes, a gather LLVM does not emit for this machine, so a batch of tables runs member by "
+        "member at about one record's speed."
     ]
     if "c_rk4_2" in res:
         ratio = s["numba_s"] / res["c_rk4_2"]["s"]

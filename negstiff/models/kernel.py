@@ -97,8 +97,10 @@ def member_tables(p, ts):
     """Each member's table rows (from ``ts``; -1: none) as one contiguous row per member (B, rows), copied once
     per call: in the parameter array a member's table is strided by the batch.
     """
-    if ts < 0:
-        return np.zeros((p.shape[1], 1))
+    if ts < 0:  # a table of zeros: one knot at 0, its two tangent segments zero (``tabled`` reads it as any)
+        none = np.zeros((p.shape[1], 11))
+        none[:, 1] = 1.0
+        return none
     return np.ascontiguousarray(p[ts:, :].T)
 
 
@@ -111,8 +113,8 @@ def total_force(kind, coulomb, generic, table, z, v, q, p, b, mono, ts, tab):
     f = force(kind, coulomb, z, v, q)
     if generic:
         f += monomials(z, v, p, b, mono)
-    if table and ts >= 0:  # a generic kernel runs members without a table too (ts -1)
-        f += tabled(z, tab, b)
+    if table:  # a member without a table (ts -1) reads a table of zeros: a branch on ts here, in the stage loop,
+        f += tabled(z, tab, b)  # made a law's record 2.8x the polynomial's time against 1.4x without (measured)
     return f
 
 
@@ -180,8 +182,11 @@ def _accelerations(kind, coulomb, generic, table, extra, linear, q, mono, ts, ta
         for b in range(nb):
             r[b] = zs[ej, b]
             rv[b] = vs[ej, b]
-    for b in range(nb):
-        f[b] = total_force(kind, coulomb, generic, table, r[b], rv[b], _column(q, b), q, b, mono, ts, tab)
+    for b in range(nb):  # vectorised over the batch: the table's look-up is a loop of its own (a gather)
+        f[b] = total_force(kind, coulomb, generic, False, r[b], rv[b], _column(q, b), q, b, mono, ts, tab)
+    if table:
+        for b in range(nb):
+            f[b] += tabled(r[b], tab, b)
     if extra:
         for b in range(nb):
             f[b] += extra_term(r[b], rv[b], ur[b], hw, ha, hzc, hvc, huc, hiz, hiv, hiu, bz, bv)
