@@ -80,3 +80,10 @@ def pytest_configure(config):
         from negstiff.resources import usable_cores, worker_initializer
 
         worker_initializer(threads=max(1, usable_cores() // workers))
+        # each worker compiles its share of the kernels first (or loads them from numba's cache): on a fresh
+        # install every worker compiled each kernel its first test needed, the same kernel in two workers at once
+        from negstiff.study.reproduce import ALL_KERNELS, warm_kernel
+
+        index = int(config.workerinput["workerid"].removeprefix("gw"))
+        for name in ALL_KERNELS[index::workers]:
+            warm_kernel(name)

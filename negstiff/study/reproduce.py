@@ -128,9 +128,13 @@ def _merge(rep: Report, results: dict[str, Any], payload) -> None:
 KERNELS = ("polynomial", "device", "polynomial_sign", "hybrid", "benettin")
 """The compiled kernels a full run uses, in the order the sections first need them."""
 
+ALL_KERNELS = (*KERNELS, "table", "generic", "device_sign")
+"""Every kernel ``warm_kernel`` compiles: ``KERNELS``, a law's table (``table``), the general kernel (extra
+monomial rows, or a table with a smoothed sign: ``generic``) and the device's with a smoothed sign."""
+
 
 def warm_kernel(name: str) -> None:
-    """Compile one of ``KERNELS`` (or load it from numba's cache) with a tiny call. A fresh install's
+    """Compile one of ``ALL_KERNELS`` (or load it from numba's cache) with a tiny call. A fresh install's
     first run queues these before the sections: each kernel is compiled once, the two workers each
     taking some, instead of by every section process that reaches it first (~6 s a kernel alone; the
     fresh run took 31 s longer than a cached one, measured).
@@ -145,8 +149,16 @@ def warm_kernel(name: str) -> None:
         if name == "polynomial_sign":
             p[P_SIGN] = 1e-3
         simulate_batch(p, "polynomial", u, 1e-3, np.zeros(2))
-    elif name == "device":
-        simulate_batch(AS_BUILT.kernel_params(), "device", u, 1e-3, np.array([AS_BUILT.equilibria().z_plus, 0.0]))
+    elif name in ("device", "device_sign"):
+        p = AS_BUILT.kernel_params()
+        if name == "device_sign":
+            p[P_SIGN] = 1e-3
+        simulate_batch(p, "device", u, 1e-3, np.array([AS_BUILT.equilibria().z_plus, 0.0]))
+    elif name in ("table", "generic"):  # the device's geometric law as a law's table; with a sign: the general one
+        p = AS_BUILT.law_model().kernel_params()
+        if name == "generic":
+            p[P_SIGN] = 1e-3
+        simulate_batch(p, "polynomial", u, 1e-3, np.array([AS_BUILT.equilibria().z_plus, 0.0]))
     elif name == "hybrid":
         from negstiff.inference.estimators.hybrid import Basis, simulate_hybrid
 
@@ -156,7 +168,7 @@ def warm_kernel(name: str) -> None:
     elif name == "benettin":
         lyapunov_benettin(SEED_LIKE_CUBIC, u, 1e-3, SEED_LIKE_CUBIC.equilibria().z_plus, transient_s=0.0)
     else:
-        raise ValueError(f"unknown kernel {name!r}: one of {KERNELS}")
+        raise ValueError(f"unknown kernel {name!r}: one of {ALL_KERNELS}")
 
 
 WORKER_MEMORY_BYTES = 2 * 1024**3
