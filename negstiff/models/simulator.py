@@ -276,7 +276,9 @@ def integrate(kind: int, p: np.ndarray, minv: np.ndarray, lk: np.ndarray, lc: np
         mono = np.ascontiguousarray(mono[np.any(p[mono[:, 0]] != 0.0, axis=1)])
     table = p.shape[0] > lay.size  # a table of shaped parts (``effects.tabulate``) after the layout's rows
     ts = lay.size if table else -1
-    run_kernel = kernel(kind, p, mono, hook is not None, table)
+    # one DOF on the base without a linear structure runs the fused step; anything else the stage-wise loops
+    staged = not (nd == 1 and place[0] == 0 and not (np.any(lk) or np.any(lc)))
+    run_kernel = kernel(kind, p, mono, hook is not None, table, staged)
 
     def c_(a):
         # one array type per kernel argument (C-contiguous, writable), whatever the caller passed: each distinct

@@ -125,12 +125,13 @@ def _merge(rep: Report, results: dict[str, Any], payload) -> None:
     results.update(res)
 
 
-KERNELS = ("polynomial", "device", "polynomial_sign", "hybrid", "benettin")
+KERNELS = ("polynomial", "device", "polynomial_sign", "hybrid", "benettin", "structure")
 """The compiled kernels a full run uses, in the order the sections first need them."""
 
 ALL_KERNELS = (*KERNELS, "table", "generic", "device_sign")
 """Every kernel ``warm_kernel`` compiles: ``KERNELS``, a law's table (``table``), the general kernel (extra
-monomial rows, or a table with a smoothed sign: ``generic``) and the device's with a smoothed sign."""
+monomial rows, or a table with a smoothed sign: ``generic``) and the device's with a smoothed sign (``structure``,
+in ``KERNELS``: the stage-wise kernel of the polynomial element on a sprung fixture, the fixture section's)."""
 
 
 def warm_kernel(name: str) -> None:
@@ -165,6 +166,12 @@ def warm_kernel(name: str) -> None:
         basis = Basis.over(np.linspace(-1, 1, 9), np.linspace(-1, 1, 9), np.linspace(-1, 1, 9), 2, 2, 2)
         simulate_hybrid(SEED_LIKE_CUBIC, basis, np.zeros(basis.size), np.zeros((1, 9)), 1e-3, np.zeros((1, 2)), 2,
                         "base_acc", 1.0, 100.0)  # fmt: skip
+    elif name == "structure":  # the polynomial element on a sprung fixture: two DOFs, the stage-wise loops
+        from negstiff.models.structure import Structure, simulate_structures
+
+        fixture = Structure.on_fixture(SEED_LIKE_CUBIC, fixture_mass=1.0, fixture_hz=25.0, fixture_zeta=0.02)
+        x0 = np.r_[fixture.static_positions(fixture.element_equilibria().z_plus), 0.0, 0.0]
+        simulate_structures([fixture], u, 1e-3, x0)
     elif name == "benettin":
         lyapunov_benettin(SEED_LIKE_CUBIC, u, 1e-3, SEED_LIKE_CUBIC.equilibria().z_plus, transient_s=0.0)
     else:
