@@ -129,9 +129,9 @@ KERNELS = ("polynomial", "device", "polynomial_sign", "hybrid", "benettin", "str
 """The compiled kernels a full run uses, in the order the sections first need them."""
 
 ALL_KERNELS = (*KERNELS, "table", "generic", "device_sign")
-"""Every kernel ``warm_kernel`` compiles: ``KERNELS``, a law's table (``table``), the general kernel (extra
-monomial rows, or a table with a smoothed sign: ``generic``) and the device's with a smoothed sign (``structure``,
-in ``KERNELS``: the stage-wise kernel of the polynomial element on a sprung fixture, the fixture section's)."""
+"""Every kernel ``warm_kernel`` compiles: ``KERNELS`` (among them ``structure``, the stage-wise kernel of the
+polynomial element on a sprung fixture), a law's table (``table``), the general kernel (extra monomial rows, or a
+table with a smoothed sign: ``generic``) and the device's with a smoothed sign (``device_sign``)."""
 
 
 def warm_kernel(name: str) -> None:
