@@ -235,8 +235,8 @@ def posterior_peers(duration: float = 300.0, peer_seconds: float = 2.0) -> tuple
     sampler.run_mcmc(p0, 3, progress=False)
     per_step = (time.perf_counter() - t0) / 3 * (data_s / peer_seconds)
     ours_per_s = ess / t_ours
-    # the peer's ESS per step taken as ours (DE moves in whitened coordinates mix faster per step than
-    # the stretch move, so this flatters the peer)
+    # the peer's ESS per step taken as ours (the independence and DE moves in whitened coordinates mix
+    # faster per step than the stretch move, so this flatters the peer)
     peer_per_s = (ess / (steps * s["ensembles"])) / per_step
     res = {
         "negstiff": {"s": t_ours, "ess_min": ess, "ess_per_s": ours_per_s, "data_s": data_s},

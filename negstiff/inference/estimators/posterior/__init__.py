@@ -29,9 +29,11 @@ claims. The device's likelihood depends on E/m, c/m, c_nl/m only: it is evaluate
 mass, and the sampler works in (E, c, c_nl at the reference mass, m, ...), where the E-m ridge is a
 cylinder whose length is the mass prior's (``device_parametrisation``).
 
-Sampler. emcee's differential-evolution moves (80 % DE, 20 % snooker; ecosystem.md 2) in coordinates
-scaled by a Laplace approximation at the MAP point (scipy ``least_squares`` on the same residual),
-walkers started from that Gaussian. Independent ensembles (default 4, seeds seed..seed+3) run until
+Sampler. emcee ensembles in coordinates whitened by a Laplace approximation at the MAP point (scipy
+``least_squares`` on the same residual), walkers started from that Gaussian, moved half the time by an
+independence Metropolis-Hastings proposal from that approximation (a Student t: ``laplace_independence_move``)
+and half by emcee's differential evolution (``MOVES``; not emcee 3.1.6's snooker move, whose stationary
+distribution is not the target: ecosystem.md 2). Independent ensembles (default 4, seeds seed..seed+3) run until
 every parameter's integrated autocorrelation time tau satisfies steps >= ``tau_multiple`` tau (the
 emcee docs' rule) or ``max_steps`` is reached (then a loud warning). R-hat (rank-normalised, split)
 is computed across ensembles, each ensemble one chain (walkers of one ensemble are not independent);

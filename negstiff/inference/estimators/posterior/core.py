@@ -40,6 +40,7 @@ from negstiff.inference.estimators.posterior.parametrisation import (
     law_parametrisation,
 )
 from negstiff.inference.estimators.posterior.sampling import (
+    MOVES,
     ChainFile,
     ChainFilePath,
     check_chain_file,
@@ -711,7 +712,7 @@ class Posterior(Estimator):
             "chain_file": None if self.chain_file is None else str(self.chain_file),
             "resumed_steps": run["resumed_steps"],
             "elapsed_s": time.perf_counter() - t_start,
-            "moves": "DEMove 0.8, DESnookerMove 0.2",
+            "moves": MOVES,
             "start": self.start_info_,
             "model_mass": float(par.to_params(theta[None])[ROWS["m"], 0]),
         }

@@ -153,6 +153,43 @@ def _same_run(saved: dict[str, Any], run: dict[str, Any]) -> bool:
     return True
 
 
+MOVES = "Laplace independence (Student t, 5 dof) 0.5, DEMove 0.5"
+"""The emcee moves each ensemble makes (``sample_ensembles``), as the results' settings name them."""
+INDEPENDENCE_DOF = 5.0
+"""The degrees of freedom of the independence move's Student t: tails heavier than the Laplace approximation's, so
+that the posterior's own tails, wherever wider, are still proposed (an independence sampler whose proposal is
+lighter-tailed than its target is not geometrically ergodic: Mengersen & Tweedie 1996)."""
+
+
+def laplace_independence_move(nd: int, df: float = INDEPENDENCE_DOF):
+    """An emcee ``MHMove`` proposing each walker's next point afresh from a standard multivariate Student t
+    (``df`` degrees of freedom) about the origin: the independence Metropolis-Hastings sampler (Tierney 1994),
+    its proposal the Laplace approximation in the coordinates the posterior samples, which the approximation
+    whitens (``LogPosterior``: q = q0 + C y). Where the posterior is close to its approximation, a proposal is
+    accepted most of the time and the next point is independent of the last: the autocorrelation time falls
+    to a few steps (4-5 on the 300 s rig record, against 21-28 with differential evolution alone). The Hastings
+    factor log t(x) - log t(x') keeps the move exact for any posterior; where the posterior is far from
+    its approximation (a banana, a shifted mode) the move is rarely accepted and the DE move carries the chain.
+
+    Why not emcee's ``DESnookerMove``, the docs' companion of DE: in emcee 3.1.6 (the latest release) its
+    proposal scales the direction by the square root of its length and halves the Hastings factor, so its
+    stationary distribution is not the target (fixed upstream in dfm/emcee pull request 531, not released).
+    Measured on N(0, I) in 7 dimensions: its samples' sd 0.82; the DE 0.8 / snooker 0.2 mix negstiff used
+    0.943, posterior intervals 6 % too narrow; DE alone and this mix 1.00.
+    """
+    import emcee
+
+    def log_t(v: np.ndarray) -> np.ndarray:
+        return -0.5 * (df + nd) * np.log1p(np.sum(v**2, axis=1) / df)
+
+    def proposal(x0: np.ndarray, random) -> tuple[np.ndarray, np.ndarray]:
+        n = x0.shape[0]
+        x = random.standard_normal((n, nd)) / np.sqrt(random.chisquare(df, n) / df)[:, None]
+        return x, log_t(x0) - log_t(x)  # emcee's factor: log q(x0) - log q(x) for q independent of x0
+
+    return emcee.moves.MHMove(proposal, ndim=nd)
+
+
 def sample_ensembles(
     log_prob,
     nd: int,
@@ -169,12 +206,12 @@ def sample_ensembles(
     workers: int | None = None,
     chain_file: ChainFile | None = None,
 ) -> dict[str, Any]:
-    """Independent emcee ensembles (DE 80 % / snooker 20 %) of a vectorised ``log_prob`` over scaled
-    coordinates (walkers start from N(0, p0_scale^2)). Each runs in chunks until its kept steps (after a
-    burn-in of 2 tau, at least one chunk) reach ``tau_multiple`` x the largest autocorrelation time, or
-    ``max_steps``; a run that stops short is reported in ``warnings``. Seeds: the walkers' start from
-    ``seed + e``, the moves from ``seed + 1000 + e``: the same seed gives the same chains, whatever
-    ``workers`` (threads running ensembles at once; None: one per core).
+    """Independent emcee ensembles (``MOVES``: the Laplace independence move and DE, half each) of a vectorised
+    ``log_prob`` over coordinates the Laplace approximation whitens (walkers start from N(0, p0_scale^2)). Each runs
+    in chunks until its kept steps (after a burn-in of 2 tau, at least one chunk) reach ``tau_multiple`` x the
+    largest autocorrelation time, or ``max_steps``; a run that stops short is reported in ``warnings``. Seeds: the
+    walkers' start from ``seed + e``, the moves from ``seed + 1000 + e``: the same seed gives the same chains,
+    whatever ``workers`` (threads running ensembles at once; None: one per core).
 
     ``chain_file``: each ensemble's chain saved to that HDF5 file as it runs (``ChainFile``); with its
     ``resume``, each ensemble continues from its saved walkers and random state (emcee's backend restores
@@ -192,7 +229,7 @@ def sample_ensembles(
 
     def run(e: int):
         # each ensemble its own moves: emcee's DEMove keeps per-run state (g0) set up at every step
-        moves = [(emcee.moves.DEMove(), 0.8), (emcee.moves.DESnookerMove(), 0.2)]
+        moves = [(laplace_independence_move(nd), 0.5), (emcee.moves.DEMove(), 0.5)]
         backend = None if chain_file is None else chain_file.backend(e)
         if resume:
             # emcee restores the walkers' last state and the moves' random state from the backend

@@ -35,7 +35,7 @@ import numpy as np
 
 from negstiff.inference.estimators.posterior.diagnostics import PosteriorResult, convergence_warnings, summarise
 from negstiff.inference.estimators.posterior.likelihood import curvature_adjustment
-from negstiff.inference.estimators.posterior.sampling import sample_ensembles
+from negstiff.inference.estimators.posterior.sampling import MOVES, sample_ensembles
 from negstiff.inference.estimators.posterior.windows import PosteriorError, between_pulses
 from negstiff.inference.record.measurement import Measurement
 from negstiff.models.kernel import KINDS
@@ -144,7 +144,7 @@ def fit_structure(est, rec: Measurement, at: tuple[int, int], seed: int) -> tupl
         "seed": seed,
         "chain_file": None if est.chain_file is None else str(est.chain_file),
         "resumed_steps": run["resumed_steps"],
-        "moves": "DEMove 0.8, DESnookerMove 0.2",
+        "moves": MOVES,
         "fixed": "masses, the linear structure (springs, dampers) and each channel's zero at SINDy's",
         "start": {"source": f"SINDy(element='{at[0]}-{at[1]}')", "structure": start.to_dict()},
         "offsets_m": [float(o) for o in offsets],
