@@ -231,11 +231,11 @@ def cmd_identify(args) -> int:
     return 0
 
 
-def check_dofs(args, rec) -> None:
-    """``--dofs N``: a check of the file (its responses z1 ... zN give N)."""
+def check_dofs(args, rec, path=None) -> None:
+    """``--dofs N``: a check of the file ``path`` (default ``args.data``): its responses z1 ... zN give N."""
     if args.dofs is not None and rec.n_dof != args.dofs:
         have = "z" if rec.n_dof == 1 else f"z1 ... z{rec.n_dof}"
-        raise InputError(f"{args.data}: --dofs {args.dofs}, but the record has responses {have}")
+        raise InputError(f"{path or args.data}: --dofs {args.dofs}, but the record has responses {have}")
 
 
 def _identify_structure(args, est, rec) -> int:
@@ -266,11 +266,14 @@ def cmd_posterior(args) -> int:
                 f"--start {args.start}: a polynomial model, for the coefficient posterior (--model coefficients)"
             )
     masses = parse_amplitudes(args.masses, "--masses") if args.masses else None
-    rec = load(args.data, columns=args.columns, fs=args.fs, mass=args.mass, gravity=args.gravity, masses=masses,
-               decay=args.decay)  # fmt: skip
-    check_dofs(args, rec)  # N from the file; --dofs a check
-    if args.duration is not None:
-        rec = rec.segment(0, rec.n if not args.duration * rec.fs < rec.n else int(round(args.duration * rec.fs)))
+    recs = []
+    for path in args.data:  # several: records of one device, fitted together
+        rec = load(path, columns=args.columns, fs=args.fs, mass=args.mass, gravity=args.gravity, masses=masses,
+                   decay=args.decay)  # fmt: skip
+        check_dofs(args, rec, path)  # N from the file; --dofs a check
+        if args.duration is not None:
+            rec = rec.segment(0, rec.n if not args.duration * rec.fs < rec.n else int(round(args.duration * rec.fs)))
+        recs.append(rec)
     post = Posterior(
         model=args.model,
         mass_prior=args.mass_prior,
@@ -292,12 +295,15 @@ def cmd_posterior(args) -> int:
         law=args.law,
         damping=args.damping,
     )
-    rec = post.check(rec)  # every refusal before the progress line and bar
+    checked = post.check(recs if len(recs) > 1 else recs[0])  # every refusal before the progress line and bar
+    rec = checked[0] if isinstance(checked, list) else checked
     where = f", {rec.n_dof} DOFs, element {args.element}" if rec.n_dof > 1 else ""
     pair = post.law_pair()
     what = args.model if pair is None else f"laws {pair[0].name} and {pair[1].name}"
-    say(args, f"posterior ({what}{where}): {rec.n} samples at {rec.fs:g} Hz, input {rec.input_name}")
-    res = post.fit(rec).result_
+    n = sum(r.n for r in checked) if isinstance(checked, list) else rec.n
+    joint = f" of {len(checked)} records" if isinstance(checked, list) else ""
+    say(args, f"posterior ({what}{where}): {n} samples{joint} at {rec.fs:g} Hz, input {rec.input_name}")
+    res = post.fit(checked).result_
     result = post.result()
     if args.idata:
         from negstiff.files import atomic_path

@@ -220,7 +220,7 @@ def io_paths(args) -> tuple[list[Path], dict[str, str | Path], dict[str, str]]:
     elif args.command == "report" and data:
         inputs.append(Path(data[0]))
     elif data:
-        inputs.append(Path(data))
+        inputs += [Path(x) for x in (data if isinstance(data, list) else [data])]  # posterior: one or several
     outputs: dict[str, str | Path] = {}
     folders: dict[str, str] = {}
     out = getattr(args, "out", None)

@@ -374,7 +374,12 @@ def _posterior(sub, common: argparse.ArgumentParser, data_opts: argparse.Argumen
         "ridge). R-hat across independent ensembles, bulk/tail ESS, autocorrelation times; a run that does not "
         "converge is reported with a warning in the result.",
     )
-    pst.add_argument("data", help="measurement file")
+    pst.add_argument(
+        "data",
+        nargs="+",
+        help="measurement file; several: records of one device fitted together "
+        "(the device's parameters shared, each record its own sensor noise sigma_1, sigma_2, ...)",
+    )
     pst.add_argument("--decay", action="store_true", help=DECAY_HELP)
     pst.add_argument("-o", "--out", required=True, help="result JSON")
     pst.add_argument("--mass", type=mass_option(), help="moving mass [kg] (default: the file's metadata)")

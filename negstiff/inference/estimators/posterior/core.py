@@ -328,7 +328,7 @@ class Posterior(Estimator):
         if "law" in res.settings:  # a law's: its start model with the mean's parameters
             from negstiff.inference.steps.refine import with_values
 
-            names = [n for n in res.names if n not in ("sigma", SHIFT)]
+            names = [n for n in res.names if not is_noise(n) and n != SHIFT]
             start = Model.from_dict(res.settings["law"]["start_model"])
             return with_values(start, names, np.array([mean[n] for n in names]))
         if "k1" in mean:
@@ -358,7 +358,7 @@ class Posterior(Estimator):
         if "law" in res.settings:  # every law parameter of each draw, in the posterior mean's model
             from negstiff.inference.steps.refine import with_values
 
-            keep = [i for i, k in enumerate(res.names) if k not in ("sigma", SHIFT)]
+            keep = [i for i, k in enumerate(res.names) if not is_noise(k) and k != SHIFT]
             base = self.model_
             return [with_values(base, [res.names[i] for i in keep], row[keep]) for row in rows]
         fields = [k for k in ("k0", "k1", "k2", "k3", "c", "c_nl") if k in res.names]
@@ -478,7 +478,7 @@ class Posterior(Estimator):
         info.update(source="output-error refinement of the weak-form estimate", model=r.model.to_dict())
         return r.model
 
-    def _map(self, par: Parametrisation, win: Windows, theta: np.ndarray, sigma2: float | None = None):
+    def _map(self, par: Parametrisation, win: Windows, theta: np.ndarray, sigma2: float | np.ndarray | None = None):
         """MAP point of theta (sigma profiled) by least squares on the projected residuals, with the
         parameters the likelihood does not see held; returns (theta, the least-squares solution). With the
         input's noise in the likelihood (``Windows.set_input_noise``) the residuals are whitened by the noise
@@ -486,8 +486,9 @@ class Posterior(Estimator):
         """
         x_scale = np.maximum(np.abs(theta), 1e-6)
         free = par.free()
-        gls = win.noise_basis is not None and sigma2 is not None
-        n_rows = win.n_windows * (win.length - (win.proj.shape[-1] if gls and win.proj is not None else 0))
+        gls = sigma2 is not None and (win.noise_basis is not None or win.n_groups > 1)  # a joint fit: each record's
+        reduced = gls and win.noise_basis is not None and win.proj is not None  # whitened in the projected basis
+        n_rows = win.n_windows * (win.length - (win.proj.shape[-1] if reduced and win.proj is not None else 0))
 
         def resid(x):
             th = theta.copy()
@@ -511,22 +512,30 @@ class Posterior(Estimator):
         th[free] = sol.x * x_scale[free]
         return th, sol
 
-    def point_estimate(self, rec: Measurement):
+    def point_estimate(self, rec: Measurement | list[Measurement]):
         """Windows, MAP point and noise model of a record: (parametrisation, windows, theta, the least
         squares solution, sigma). The MAP point and the windows' start states are found alternately, each
         a profile over the other. The device's mass is held at its start (weighed) value: the
         likelihood depends on E/m, c/m, c_nl/m only (device-model.md), so the MAP point along the E-m
         ridge is the prior's.
+
+        Several records of one device (a list: a lab's runs fitted together): each record's windows cut as its
+        own (``Windows.joined``), the device's parameters shared, each record its own sensor noise (sigma: (R,))
+        and input noise; the start model is the first record's.
         """
         from negstiff.inference.analysis.record_kind import identification_record, record_kind
 
         self._validate()
-        kind = record_kind(rec)
-        ring_down = kind.kind in ("impact", "decay")
+        recs = list(rec) if isinstance(rec, (list, tuple)) else [rec]
+        kinds = [record_kind(r) for r in recs]
+        ring_down = kinds[0].kind in ("impact", "decay")
         if ring_down:  # a hammer's force windowed, a decay's input zero; the windows between the pulses
-            rec = identification_record(rec, kind)
-        win = Windows.cut(rec, self.window_s, self.max_windows, oversample=self.oversample, free=ring_down)
+            recs = [identification_record(r, k) for r, k in zip(recs, kinds, strict=True)]
+        parts = [Windows.cut(r, self.window_s, self.max_windows, oversample=self.oversample, free=ring_down)
+                 for r in recs]  # fmt: skip
+        win = parts[0] if len(parts) == 1 else Windows.joined(parts)
         win.threads = self.threads
+        rec = recs[0]
         par, theta = self._start(rec, win)
         zsim, div = win.simulate(par.to_params(theta[None]), par.kind)
         if div[0]:
@@ -550,23 +559,32 @@ class Posterior(Estimator):
         win.set_sensitivities(p_, par.kind)
         theta, sol = self._map(par, win, theta)
         if ring_down:  # no input in its windows: nothing of the input's noise reaches the likelihood
-            s_u, why = 0.0, f"none: {kind.kind} record, its windows free decays between the pulses (no input)"
+            found = [(0.0, f"none: {kinds[0].kind} record, its windows free decays between the pulses (no input)")]
         elif self.input_noise is None:
-            s_u, why = input_noise_rms(rec)
+            found = [input_noise_rms(r) for r in recs]
         else:
-            s_u, why = float(self.input_noise), "given"
-        self.input_noise_ = {"rms": s_u, "source": why}
-        if s_u > 0:
+            found = [(float(self.input_noise), "given")]
+        joint = len(recs) > 1
+        s_u = np.array([f[0] for f in found]) if joint and len(found) > 1 else found[0][0]
+        self.input_noise_ = ({"rms": [f[0] for f in found], "source": [f[1] for f in found]} if joint
+                             else {"rms": found[0][0], "source": found[0][1]})  # fmt: skip
+        if np.any(np.asarray(s_u) > 0):
             # the likelihood's own mode: generalised least squares under the input's noise (two passes, the
             # sensor's variance re-read between them); its solution is whitened (the curvature adjustment's)
             r = sol.fun
             for _ in range(2):
-                ms = float(np.sum(r**2) / win.dof)  # the sensor's variance or more (it holds the input's noise too)
-                win.set_input_noise(par.to_params(theta[None])[:, 0], par.kind, s_u**2, ms)
-                s2 = win.noise_sigma2(r)
+                ms = _mean_square(win, r)  # the sensor's variance or more (it holds the input's noise too)
+                win.set_input_noise(par.to_params(theta[None])[:, 0], par.kind, np.square(s_u), ms)
+                s2 = win.noise_sigma2(r) if not joint else win.noise_sigma2_groups(r)
                 theta, sol = self._map(par, win, theta, s2)
                 r = win.residuals(win.simulate(par.to_params(theta[None]), par.kind)[0])[0].ravel()
-            return par, win, theta, sol, float(np.sqrt(win.noise_sigma2(r)))
+            s2 = win.noise_sigma2(r) if not joint else win.noise_sigma2_groups(r)
+            return par, win, theta, sol, (float(np.sqrt(s2)) if not joint else np.sqrt(s2))
+        if joint:  # each record's own sensor noise: the MAP point weighs each record's residuals by it
+            s2 = _mean_square(win, sol.fun)
+            theta, sol = self._map(par, win, theta, s2)
+            r = win.residuals(win.simulate(par.to_params(theta[None]), par.kind)[0])[0].ravel()
+            return par, win, theta, sol, np.sqrt(_mean_square(win, r))
         sigma = float(np.sqrt(np.sum(sol.fun**2) / win.dof))  # sol.fun: the projected residuals at theta
         return par, win, theta, sol, sigma
 
@@ -619,16 +637,57 @@ class Posterior(Estimator):
             raise PosteriorError(f"{rec.source}: the start model's mass ({self.start.m:g} kg) is not the record's "
                                  f"({rec.mass:g} kg)")  # fmt: skip
 
-    def fit(self, rec: Measurement) -> Posterior:
-        """Sample the posterior of ``rec``; the result is ``result_`` (a ``PosteriorResult``)."""
+    def check(self, data):
+        """``Estimator.check``; a list or tuple of records (a lab's runs of one device, fitted together: the
+        device's parameters shared, each record its own windows, input noise and sensor noise) is checked record by
+        record and as a set: single-DOF records of one kind (base, force, hammer or decay) with the same sampling
+        rate, input and mass. Returns the list (one record: that record).
+        """
+        if not isinstance(data, (list, tuple)):
+            return super().check(data)
+        if not data:
+            raise InputError(f"{type(self).__name__}.fit: an empty list of records")
+        recs = [super(Posterior, self).check(r) for r in data]
+        if len(recs) == 1:
+            return recs[0]
+        from negstiff.inference.analysis.record_kind import record_kind
+
+        first, kind = recs[0], record_kind(recs[0]).kind
+        for r in recs[1:]:
+            name = f"{r.source} (fitted with {first.source})"
+            if element_of(self, r) is not None or element_of(self, first) is not None:
+                raise PosteriorError(f"{name}: several records of a structure are not fitted together yet: one "
+                                     "record")  # fmt: skip
+            if abs(r.fs / first.fs - 1) > 1e-9:
+                raise PosteriorError(f"{name}: sampled at {r.fs:g} Hz, the first at {first.fs:g} Hz: the records "
+                                     "fitted together share the windows' length (resample one)")  # fmt: skip
+            if r.input_name != first.input_name:
+                raise PosteriorError(f"{name}: its input is {r.input_name}, the first's {first.input_name}")
+            if (r.mass is None) != (first.mass is None) or (r.mass is not None and first.mass is not None
+                                                             and abs(r.mass / first.mass - 1) > 1e-6):  # fmt: skip
+                raise PosteriorError(f"{name}: its mass ({r.mass}) is not the first's ({first.mass}): one device")
+            if record_kind(r).kind != kind:
+                raise PosteriorError(f"{name}: a {record_kind(r).kind} record, the first a {kind} record: records "
+                                     "of one kind are fitted together")  # fmt: skip
+        return recs
+
+    def fit(self, rec: Measurement | list[Measurement]) -> Posterior:
+        """Sample the posterior of ``rec``; the result is ``result_`` (a ``PosteriorResult``). A list of records of
+        one device: their joint posterior (``check``), each record its own sensor noise (``sigma_1`` ..).
+        """
         rec = self.check(rec)
         seed = seed_of(self.seed)  # None or a Generator: the integer drawn here, recorded in the settings
-        at = element_of(self, rec)
+        at = None if isinstance(rec, list) else element_of(self, rec)
         if at is not None:
+            assert not isinstance(rec, list)
             return self._fit_structure(rec, at, seed)
 
         t_start = time.perf_counter()
         par, win, theta, sol, sigma = self.point_estimate(rec)
+        recs = list(rec) if isinstance(rec, list) else [rec]
+        rec = recs[0]
+        sigmas = np.atleast_1d(np.asarray(sigma, float))  # a joint fit: each record's sensor noise
+        R = sigmas.size
         # Laplace approximation at the MAP point, curvature-adjusted (``curvature_adjustment``): the sampler
         # works in coordinates whitened by its Cholesky factor, where the posterior is close to N(0, I)
         # (DE moves then decorrelate in ~10 steps). Along the device's E-m ridge, which the data do not
@@ -636,7 +695,7 @@ class Posterior(Estimator):
         free = par.free()
         x_scale = np.maximum(np.abs(theta), 1e-6)
         # the scores of the likelihood sampled (with the input's noise, ``sol`` holds the whitened residuals)
-        sig = sigma if win.noise_basis is None else 1.0
+        sig = sigma if win.noise_basis is None and R == 1 else 1.0
         A_x, V_x, inflation = curvature_adjustment(sol.jac, sol.fun, win.n_windows, sig, adjust=self.adjust)
         cov = np.zeros((theta.size, theta.size))
         cov[np.ix_(free, free)] = V_x * np.outer(x_scale[free], x_scale[free])
@@ -648,10 +707,10 @@ class Posterior(Estimator):
             chol = np.linalg.cholesky(cov)
         except np.linalg.LinAlgError:
             chol = np.diag(np.sqrt(np.diag(cov)))
-        q0 = np.concatenate([theta, [math.log(sigma)]])
+        q0 = np.concatenate([theta, np.log(sigmas)])
         scale = np.zeros((q0.size, q0.size))
-        scale[:-1, :-1] = chol
-        scale[-1, -1] = 1.0 / math.sqrt(2 * win.dof)  # the sd of log sigma
+        scale[:-R, :-R] = chol
+        scale[-R:, -R:] = np.diag(1.0 / np.sqrt(2 * win.dof_groups()))  # the sd of each log sigma
         A_theta = A_x * np.outer(x_scale[free], 1.0 / x_scale[free])
         logpost = LogPosterior(par, win, q0, scale, (theta, A_theta, free) if self.adjust else None)
 
@@ -673,10 +732,10 @@ class Posterior(Estimator):
         n_keep = min(c.shape[0] for c in chains)
         y = np.stack([c[-n_keep:] for c in chains])  # (E, S, W, nd)
         q = logpost.unwhiten(y.reshape(-1, nd))
-        q[:, :-1] = par.physical(q[:, :-1])
+        q[:, :-R] = par.physical(q[:, :-R])
         q = q.reshape(y.shape)
-        q[..., -1] = np.exp(q[..., -1])
-        names = tuple(par.names) + ("sigma",)
+        q[..., -R:] = np.exp(q[..., -R:])
+        names = tuple(par.names) + noise_names(R)
         tau_arr = np.array(taus)
         res = PosteriorResult(
             names=names,
@@ -685,7 +744,7 @@ class Posterior(Estimator):
             tau=tau_arr,
             warnings=warn,
             settings={},
-            map_point={n: float(v) for n, v in zip(names, np.concatenate([theta, [sigma]]), strict=False)},
+            map_point={n: float(v) for n, v in zip(names, np.concatenate([theta, sigmas]), strict=False)},
         )
         res.summary = summarise(res.samples, names, tau_arr, self.hdi_prob)
         warn += convergence_warnings(res.summary, self.n_ensembles)
@@ -724,12 +783,16 @@ class Posterior(Estimator):
                                    "frame": ("the record's" if lm.shift < 0 else
                                              f"the parts' own: the record's z less {SHIFT} (its summary among the "
                                              "nuisance parameters; force_band is in the record's frame)")}  # fmt: skip
-            res.force_band = force_band(par, res.samples, stroke_of(rec), self.hdi_prob, seed,
-                                        np.concatenate([theta, [sigma]]))  # fmt: skip
+            res.force_band = force_band(par, res.samples[..., : theta.size + 1], stroke_of(rec), self.hdi_prob, seed,
+                                        np.concatenate([theta, sigmas[:1]]))  # fmt: skip
         self.logpost_, self.par_, self.windows_ = logpost, par, win
         tau_max = np.nanmax(tau_arr) if np.isfinite(tau_arr).any() else np.nan  # too short a chain: no tau
         res.thin = max(1, int(np.ceil(tau_max / 2))) if np.isfinite(tau_max) else 1
-        res.provenance = provenance(rec.source, res.settings)
+        if R > 1:
+            per = np.bincount(win.groups, minlength=R)
+            res.settings["records"] = [{"source": str(r.source), "samples": int(r.n), "duration_s": r.duration,
+                                        "windows": int(per[g])} for g, r in enumerate(recs)]  # fmt: skip
+        res.provenance = provenance(" + ".join(str(r.source) for r in recs), res.settings)
         res.build_idata = functools.partial(_idata, res, y, logpost, win)
         self.result_ = res
         # unconverged chains, and the record's own warnings: in the result and through Python's warnings,
@@ -737,7 +800,7 @@ class Posterior(Estimator):
         lines = classified(rec, None, res.warnings)
         issue(one_convergence_warning(lines))
         self.warnings_ = [text for _, text in lines]
-        self.record_ = dict(rec.info)
+        self.record_ = dict(rec.info) if R == 1 else {"records": [dict(r.info) for r in recs]}
         return self
 
     def _fit_structure(self, rec: Measurement, at: tuple[int, int], seed: int) -> Posterior:
@@ -755,6 +818,27 @@ class Posterior(Estimator):
         self.warnings_ = [text for _, text in lines]
         self.record_ = dict(rec.info)
         return self
+
+
+def noise_names(n_records: int) -> tuple[str, ...]:
+    """The sensor noise's parameter names: ``sigma`` for one record, ``sigma_1`` .. ``sigma_R`` for a joint fit's R
+    records (in the order given).
+    """
+    return ("sigma",) if n_records == 1 else tuple(f"sigma_{i + 1}" for i in range(n_records))
+
+
+def is_noise(name: str) -> bool:
+    """Whether a posterior's parameter is a record's sensor noise (``noise_names``)."""
+    return name == "sigma" or (name.startswith("sigma_") and name[6:].isdigit())
+
+
+def _mean_square(win: Windows, r: np.ndarray):
+    """The residuals' mean square per degree of freedom: a float for one record, each record's (R,) for several."""
+    if win.n_groups == 1:
+        return float(np.sum(r**2) / win.dof)
+    r = np.asarray(r).reshape(win.n_windows, -1)
+    assert win.groups is not None
+    return np.bincount(win.groups, weights=np.sum(r**2, axis=1), minlength=win.n_groups) / win.dof_groups()
 
 
 def stroke_of(rec: Measurement) -> tuple[float, float]:

@@ -56,7 +56,8 @@ def curvature_adjustment(J: np.ndarray, r: np.ndarray, n_windows: int, sigma: fl
 # ------------------------------------------------------------------------------------------------
 class LogPosterior:
     """Vectorised log posterior in whitened coordinates y, q = q0 + C y (C: the Laplace approximation's
-    Cholesky factor), q = [theta, log sigma].
+    Cholesky factor), q = [theta, log sigma] (a joint fit of R records: [theta, log sigma_1 .. log sigma_R], each
+    record's sensor noise, ``Windows.groups``).
 
     ``__call__`` returns one (log posterior, log likelihood) pair per walker (emcee's blob convention
     with ``vectorize=True``).
@@ -66,6 +67,7 @@ class LogPosterior:
         self.par, self.win, self.q0, self.scale = par, win, q0, scale
         self.adjust = adjust  # (theta_hat, A, free): likelihood at theta_hat + A (theta - theta_hat) on ``free``
         self.calls = 0
+        self.n_noise = win.n_groups  # the sigmas at the end of q
         self._lock = threading.Lock()  # the ensembles call from their threads (``sampling.sample_ensembles``)
 
     def __getstate__(self) -> dict:
@@ -93,9 +95,14 @@ class LogPosterior:
         """Whitened coordinates y -> the sampled coordinates q = [phi, log sigma]."""
         return self.q0 + np.atleast_2d(y) @ self.scale.T
 
+    def split(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The sampled coordinates q split into (theta, log sigma): (B, d) and (B,), or (B, R) for R records."""
+        R = getattr(self, "n_noise", 1)  # a LogPosterior pickled before joint fits: one record's
+        return (q[:, :-1], q[:, -1]) if R == 1 else (q[:, :-R], q[:, -R:])
+
     def loglik(self, q: np.ndarray, pointwise: bool = False, lp: np.ndarray | None = None) -> np.ndarray:
         """Log likelihood (-inf outside the prior's support); ``lp``: the log prior, if already known."""
-        theta, log_sigma = q[:, :-1], q[:, -1]
+        theta, log_sigma = self.split(q)
         if lp is None:
             lp = self.par.log_prior_sampled(theta, log_sigma)
         out = np.full((q.shape[0], self.win.n_windows) if pointwise else q.shape[0], -np.inf)
@@ -118,7 +125,7 @@ class LogPosterior:
         with self._lock:
             self.calls += 1
         q = self.unwhiten(y)
-        lp = self.par.log_prior_sampled(q[:, :-1], q[:, -1])
+        lp = self.par.log_prior_sampled(*self.split(q))
         ll = self.loglik(q, lp=lp)
         post = np.where(np.isfinite(ll), ll + lp, -np.inf)
         return list(zip(post, ll, strict=False))

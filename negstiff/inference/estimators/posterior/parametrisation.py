@@ -88,9 +88,12 @@ class Parametrisation:
         return ok
 
     def log_prior(self, theta: np.ndarray, log_sigma: np.ndarray) -> np.ndarray:
-        """The log prior of physical parameters ``theta`` and noise levels ``log_sigma`` (flat within the bounds)."""
+        """The log prior of physical parameters ``theta`` and noise levels ``log_sigma`` ((B,), or (B, R): each
+        record's of a joint fit; flat within the bounds).
+        """
         ok = self.inside(theta)
-        ok &= (log_sigma > math.log(SIGMA_BOUNDS[0])) & (log_sigma < math.log(SIGMA_BOUNDS[1]))
+        in_bounds = (log_sigma > math.log(SIGMA_BOUNDS[0])) & (log_sigma < math.log(SIGMA_BOUNDS[1]))
+        ok &= in_bounds if in_bounds.ndim == 1 else in_bounds.all(axis=1)  # (B, R): each record's noise
         lp = np.where(ok, 0.0, -np.inf)
         for i, (mu, sd) in self.gaussian.items():
             lp = lp - 0.5 * ((theta[:, i] - mu) / sd) ** 2

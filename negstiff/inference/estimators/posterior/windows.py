@@ -73,6 +73,44 @@ class Windows:
     noise_var: np.ndarray | None = None  # (W, L - 2): the input noise's variance [m^2] along it
     noise_rank: int = 0  # the directions (the last of ``noise_basis``) whose input-noise variance counts
     _basis_t: np.ndarray | None = field(default=None, repr=False)  # their basis, transposed and contiguous
+    groups: np.ndarray | None = None  # (W,) the record each window is of (``joined``: several records); None: one
+
+    @classmethod
+    def joined(cls, parts: list[Windows]) -> Windows:
+        """The windows of several records of one device as one set (a lab's runs fitted together): each record's
+        windows cut as its own (its input, start states and dropped windows), ``groups`` naming the record of each,
+        so that each record keeps its own sensor noise (``n_groups`` sigmas in the likelihood). The records share
+        the sampling step, window length, kind of input and oversampling (``Posterior.check`` refuses others).
+        """
+        first = parts[0]
+        starts = [p.starts if p.starts is not None else np.zeros(p.n_windows, int) for p in parts]
+        return cls(
+            first.dt, first.input_kind, np.concatenate([p.u for p in parts]), np.concatenate([p.z for p in parts]),
+            np.concatenate([p.x0 for p in parts]), oversample=first.oversample, threads=first.threads,
+            starts=np.concatenate(starts),
+            groups=np.concatenate([np.full(p.n_windows, g) for g, p in enumerate(parts)]),
+        )  # fmt: skip
+
+    @property
+    def n_groups(self) -> int:
+        """The records the windows are of (each its own sensor noise): 1 for one record's."""
+        return 1 if self.groups is None else int(self.groups.max()) + 1
+
+    def per_window(self, values) -> np.ndarray:
+        """Per-record values (a scalar, (R,), or (P, R) for P parameter sets) spread to the windows: (W,) or
+        (P, W); a scalar or a single record's stays as it is (broadcast).
+        """
+        v = np.asarray(values, float)
+        if self.groups is None or v.ndim == 0 or v.shape[-1] == 1:
+            return v
+        return v[..., self.groups]
+
+    def dof_groups(self) -> np.ndarray:
+        """Each record's degrees of freedom (``dof`` split over ``groups``): (R,)."""
+        per = self.length - (0 if self.proj is None else self.proj.shape[-1])
+        if self.groups is None:
+            return np.array([self.n_windows * per])
+        return np.bincount(self.groups, minlength=self.n_groups) * per
 
     @property
     def n_windows(self) -> int:
@@ -230,6 +268,8 @@ class Windows:
         t0 = (self.starts if self.starts is not None else np.zeros(self.n_windows)) * self.dt
         self.dropped += [(float(t0[w]), float(rms[w])) for w in np.flatnonzero(bad)]
         self.u, self.z, self.x0 = self.u[keep], self.z[keep], self.x0[keep]
+        if self.groups is not None:
+            self.groups = self.groups[keep]
         if self.starts is not None:
             self.starts = self.starts[keep]
         self.proj = None
@@ -307,7 +347,8 @@ class Windows:
         G = ((z - base[0][:, None, :]) / du).transpose(0, 2, 1)
         return np.where(np.isfinite(G), G, 0.0)  # a run that diverges has no linear response: no term there
 
-    def set_input_noise(self, params: np.ndarray, kind: str, variance: float, sigma2: float | None = None) -> None:
+    def set_input_noise(self, params: np.ndarray, kind: str, variance: float | np.ndarray,
+                        sigma2: float | np.ndarray | None = None) -> None:  # fmt: skip
         """The input sensor's white noise (``variance`` per sample, in the input's units squared) in the
         likelihood: a window's residual is then e = n_z - G n_u (G: ``input_sensitivities``, the model's
         response to its input samples, linearised at ``params``), with covariance sigma^2 I + s_u^2 G G^T.
@@ -323,7 +364,8 @@ class Windows:
         raw samples' noise passes those filters with a gain within 1 % of 1 in the device's band (below
         0.1 fs), where the response to it lives. ``variance`` 0 removes the term.
         """
-        if not variance > 0:
+        var = self.per_window(variance)  # a joint fit: each record's input sensor (W,)
+        if not np.any(var > 0):
             self.clear_input_noise()
             return
         if self.proj is None:
@@ -331,11 +373,13 @@ class Windows:
         assert self.proj is not None
         G = self.input_sensitivities(params, kind)
         Q = np.linalg.qr(self.proj, mode="complete")[0][:, :, self.proj.shape[-1] :]  # (W, L, L - 2)
-        M = variance * (Q.transpose(0, 2, 1) @ G) @ (G.transpose(0, 2, 1) @ Q)
+        var_w = var if var.ndim == 0 else var[:, None, None]
+        M = var_w * (Q.transpose(0, 2, 1) @ G) @ (G.transpose(0, 2, 1) @ Q)
         lam, V = np.linalg.eigh(M)  # ascending: the directions that carry the input's noise come last
         lam = np.maximum(lam, 0.0)
         if sigma2 is not None:
-            lam = np.where(lam > NOISE_RANK_TOL * sigma2, lam, 0.0)
+            s2 = self.per_window(sigma2)
+            lam = np.where(lam > NOISE_RANK_TOL * (s2 if s2.ndim == 0 else s2[:, None]), lam, 0.0)
         self.noise_rank = max(1, int((lam > 0).sum(axis=1).max()))
         self.noise_var = lam
         self.noise_basis = (Q @ V).transpose(0, 2, 1)
@@ -343,10 +387,11 @@ class Windows:
 
     def log_likelihood(self, zsim: np.ndarray, sigma2: np.ndarray) -> np.ndarray:
         """Each window's Gaussian log likelihood, (P, W), of the simulations ``zsim`` (P, W, L) with sensor
-        noise ``sigma2`` (P,) [m^2], on the projected residuals: i.i.d. noise alone, or with the input's noise
-        (``set_input_noise``) through each window's eigenbasis.
+        noise ``sigma2`` (P,) [m^2] (a joint fit: (P, R), each record's), on the projected residuals: i.i.d. noise
+        alone, or with the input's noise (``set_input_noise``) through each window's eigenbasis.
         """
-        s2 = np.asarray(sigma2, float)[:, None]
+        s2 = np.asarray(sigma2, float)
+        s2 = s2[:, None] if s2.ndim == 1 else self.per_window(s2)  # (P, 1), or (P, W) for several records
         n_w = self.dof // self.n_windows
         if self.noise_basis is None:
             ss = self.sum_squares(zsim)
@@ -357,7 +402,7 @@ class Windows:
             self._basis_t = np.ascontiguousarray(self.noise_basis[:, -k:].transpose(0, 2, 1))
         r = np.ascontiguousarray((self.z[None] - zsim).transpose(1, 0, 2))  # (W, P, L): contiguous, one GEMM each
         y2 = (r @ self._basis_t) ** 2  # (W, P, k)
-        var = self.noise_var[:, None, -k:] + s2[None]  # (W, P, k)
+        var = self.noise_var[:, None, -k:] + s2.T[:, :, None]  # (W, P, k)
         quad = (y2 / var).sum(axis=-1).T  # (P, W)
         logdet = np.log(var).sum(axis=-1).T
         rest = self.sum_squares(zsim) - y2.sum(axis=-1).T  # the other directions: the sensor's noise alone
@@ -368,10 +413,26 @@ class Windows:
         residual vector whose squared norm is the likelihood's quadratic form (W (L - 2),), for least squares.
         """
         r = self.residuals(zsim[None])[0]
+        s2 = self.per_window(sigma2)  # a joint fit: each record's (W,)
+        s2 = s2 if s2.ndim == 0 else s2.reshape(-1, 1)
         if self.noise_basis is None:
-            return r.ravel() / np.sqrt(sigma2)
+            return (r / np.sqrt(s2)).ravel()
         assert self.noise_var is not None
-        return ((self.noise_basis @ r[:, :, None])[:, :, 0] / np.sqrt(self.noise_var + sigma2)).ravel()
+        return ((self.noise_basis @ r[:, :, None])[:, :, 0] / np.sqrt(self.noise_var + s2)).ravel()
+
+    def noise_sigma2_groups(self, r: np.ndarray) -> np.ndarray:
+        """``noise_sigma2`` of each record's windows (a joint fit): (R,)."""
+        if self.groups is None:
+            return np.array([self.noise_sigma2(r)])
+        r = np.asarray(r).reshape(self.n_windows, -1)
+        out = []
+        for g in range(self.n_groups):
+            sub = Windows(self.dt, self.input_kind, self.u[self.groups == g], self.z[self.groups == g],
+                          self.x0[self.groups == g], proj=None if self.proj is None else self.proj[self.groups == g],
+                          noise_basis=None if self.noise_basis is None else self.noise_basis[self.groups == g],
+                          noise_var=None if self.noise_var is None else self.noise_var[self.groups == g])  # fmt: skip
+            out.append(sub.noise_sigma2(r[self.groups == g].ravel()))
+        return np.array(out)
 
     def noise_sigma2(self, r: np.ndarray) -> float:
         """The sensor noise variance [m^2] that maximises the likelihood of the projected residuals ``r``
