@@ -672,6 +672,15 @@ def _refinement_section(quick: bool) -> tuple[list[str], dict]:
     return lines, res
 
 
+def _design_section(quick: bool) -> tuple[list[str], dict]:
+    """Test design, checked against the rig (``design_check``): 2 seeds with ``quick``."""
+    from .design_check import design_check, design_section
+
+    print("design check...", file=sys.stderr)
+    res = design_check((1, 2) if quick else (1, 2, 3, 4, 5))
+    return design_section(res), res
+
+
 SECTIONS: dict[str, Any] = {
     "waits": lambda quick, out: (waits_section(quick), None),
     "simulator": lambda quick, out: _simulator_section(quick),
@@ -680,6 +689,7 @@ SECTIONS: dict[str, Any] = {
     "posterior": lambda quick, out: _posterior_section(quick),
     "continuation": lambda quick, out: _continuation_section(quick),
     "refinement": lambda quick, out: _refinement_section(quick),
+    "design": lambda quick, out: _design_section(quick),
     "peers": lambda quick, out: (peers_section(quick), None),
     "scaling": lambda quick, out: (
         scaling_section(
@@ -713,7 +723,7 @@ def _key(heading: str) -> str:
 
 
 BLOCKS = ("Simulator", "Waits", "NSI", "Bifurcation map", "Posterior sampling", "Continuation",
-          "Output-error refinement", "Peers", "Scaling")  # fmt: skip
+          "Output-error refinement", "Test design", "Peers", "Scaling")  # fmt: skip
 """The blocks' names (their starts: the peers write four blocks) in the Markdown's order."""
 
 

@@ -49,6 +49,7 @@ _EXPORTS = {
     "characterise": "negstiff.inference.analysis.characterise",
     "characterize": "negstiff.inference.analysis.characterise",  # the first spelling, kept: ``characterise``
     "frf": "negstiff.inference.analysis.frf",
+    "design": "negstiff.inference.analysis.design",  # the test to run next, from a posterior
     "Report": "negstiff.report.document",
     "Identification": "negstiff.inference.estimators.identification",
     # errors and warnings

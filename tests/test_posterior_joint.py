@@ -49,10 +49,14 @@ def _record(seed: int, laser_noise: float, fs: float = FS):
 
 
 @pytest.fixture(scope="module")
-def fits():
-    quiet, loud = _record(1, 30e-6), _record(2, 90e-6)  # the second record's laser 3x noisier
+def records():
+    return _record(1, 30e-6), _record(2, 90e-6)  # the second record's laser 3x noisier
+
+
+@pytest.fixture(scope="module")
+def fits(records):
+    quiet, loud = records
     return {
-        "records": (quiet, loud),
         "quiet": Posterior(seed=0).fit(quiet).result(),
         "loud": Posterior(seed=0).fit(loud).result(),
         "joint": Posterior(seed=0).fit([quiet, loud]).result(),
@@ -64,7 +68,8 @@ def _width(res, name):
     return p["hdi_high"] - p["hdi_low"]
 
 
-def test_each_record_keeps_its_own_sensor_noise(fits):
+def test_each_record_keeps_its_own_sensor_noise_and_the_records_information_adds(fits):
+    # one test of the fits (a module fixture is made once per pytest-xdist worker that runs a test of it)
     joint = fits["joint"]["parameters"]
     assert "sigma" not in joint and {"sigma_1", "sigma_2"} <= set(joint)
     # each laser's noise, read from its own windows' residuals: within 10 % (the projection's 2 of 64 samples per
@@ -75,8 +80,6 @@ def test_each_record_keeps_its_own_sensor_noise(fits):
     assert [r["source"] for r in settings["records"]] == ["DOP853 record 1", "DOP853 record 2"]
     assert len(settings["input_noise"]["rms"]) == 2
 
-
-def test_the_records_information_adds(fits):
     # Two records of one device: the joint posterior's precision is the sum of each record's (Gaussian
     # posteriors, flat priors), 1 / w^2 = 1 / w1^2 + 1 / w2^2 for the 90 % widths. Each width carries its
     # curvature adjustment, read from the spread of ~60 windows' scores (a variance to ~20 %, so a width to
@@ -93,8 +96,8 @@ def test_the_records_information_adds(fits):
         assert abs(p["mean"] - getattr(TRUTH, name)) < 3 * p["sd"], name
 
 
-def test_records_that_are_not_one_device_s_runs_are_refused_before_the_work(fits):
-    quiet, _ = fits["records"]
+def test_records_that_are_not_one_device_s_runs_are_refused_before_the_work(records):
+    quiet, _ = records
     other_rate = _record(3, 30e-6, fs=400.0)
     with pytest.raises(PosteriorError, match="400 Hz"):
         Posterior().check([quiet, other_rate])
@@ -103,9 +106,9 @@ def test_records_that_are_not_one_device_s_runs_are_refused_before_the_work(fits
         Posterior().check([quiet, heavier])
 
 
-def test_the_command_reads_several_records(fits, tmp_path, capsys):
+def test_the_command_reads_several_records(records, tmp_path, capsys):
     paths = []
-    for i, rec in enumerate(fits["records"]):
+    for i, rec in enumerate(records):
         p = tmp_path / f"run{i + 1}.csv"
         t = np.arange(rec.n) / rec.fs
         np.savetxt(p, np.column_stack([t, rec.u, rec.z]), delimiter=",", header="t,base_acc,z", comments="")

@@ -567,6 +567,31 @@ def write_figure(fig, out: str) -> str:
     return png.name
 
 
+def cmd_design(args) -> int:
+    from negstiff.inference.analysis.design import design, design_figure, prepared
+
+    run = prepared(
+        args.posterior,
+        targets=args.target,
+        duration=args.duration,
+        max_table_acc=args.max_acc,
+        max_table_disp=args.table_stroke,
+        stroke=args.stroke,
+        candidates=args.candidates,
+        draws=args.draws,
+        seed=args.seed,
+    )  # fmt: skip  (every refusal before the work)
+    say(args, f"design: {args.candidates} candidate tests x {args.draws} posterior draws, targets "
+              f"{', '.join(run['targets'])}")  # fmt: skip
+    result = design(args.posterior, **run)
+    result["figure"] = write_figure(design_figure(result), args.out)
+    write_json(args.out, result)
+    best = result["best"]
+    say(args, f"wrote {args.out}: next test {best['test']}, targets' intervals {best['score']:.3g}x narrower "
+              f"(the default random test: {result['default_test']['score']:.3g}x)")  # fmt: skip
+    return 0
+
+
 def cmd_update(args) -> int:
     from tqdm import tqdm
 

@@ -200,7 +200,7 @@ def say_refinement(args, info: dict | None) -> None:
                f"{fmt(a)} -> {fmt(b)} rms, {info['reason'].split(':')[0]}")  # fmt: skip
 
 
-FIGURE_COMMANDS = ("frf", "nfrc", "map")
+FIGURE_COMMANDS = ("frf", "nfrc", "map", "design")
 """Commands that write a figure beside their result (the result's path with .png)."""
 
 
@@ -209,7 +209,7 @@ def io_paths(args) -> tuple[list[Path], dict[str, str | Path], dict[str, str]]:
     outputs that are folders). A folder input counts as the files read from it (``map``).
     """
     inputs: list[Path] = []
-    for name in ("model", "input", "targets", "start", "frf", "nfrc"):
+    for name in ("model", "input", "targets", "start", "frf", "nfrc", "posterior"):
         v = getattr(args, name, None)
         inputs += [Path(x) for x in (v if isinstance(v, list) else [v] if v else [])]
     data = getattr(args, "data", None)

@@ -580,6 +580,34 @@ def _map(sub, common: argparse.ArgumentParser, data_opts: argparse.ArgumentParse
     mp.set_defaults(func=c.cmd_map)
 
 
+def _design(sub, common: argparse.ArgumentParser, data_opts: argparse.ArgumentParser) -> None:
+    dsg = sub.add_parser(
+        "design",
+        parents=[common],
+        help="the test to run next: candidate tests ranked by how much they would narrow the posterior",
+        description="Rank the tests the rig can run next (random at a level, a harmonic at an amplitude and "
+        "frequency, a linear sine sweep at an amplitude), within the limits given, by the expected shrinkage of the "
+        "targeted parameters' 90 %% intervals: the posterior's draws run through each candidate on the virtual rig "
+        "with the record's noise, each simulated record read as the posterior reads one (Laplace approximation of "
+        "the expected posterior covariance). The grid's best candidates are searched further in their level and "
+        "frequency. POSTERIOR is a coefficient posterior of a base-excited record (negstiff posterior ... -o).",
+    )
+    dsg.add_argument("posterior", help="posterior result JSON")
+    dsg.add_argument("-o", "--out", required=True, help="design result JSON (a figure of the criterion beside it)")
+    dsg.add_argument("--target", help="the parameters to pin down, comma-separated among k1,k2,k3,c,c_nl "
+                     "(default: all)")  # fmt: skip
+    dsg.add_argument("--duration", type=POSITIVE, help="the next record's length [s] (default: the posterior's "
+                     "record's)")  # fmt: skip
+    dsg.add_argument("--max-acc", type=POSITIVE, default=80.0, help="the table's peak acceleration [m/s^2] "
+                     "(default 80)")  # fmt: skip
+    dsg.add_argument("--table-stroke", type=POSITIVE, help="the table's peak displacement [m] (default: no limit)")
+    dsg.add_argument("--stroke", type=POSITIVE, help="the device's travel from its saddle to a stop [m]: a test that "
+                     "reaches it is infeasible (default: no stop)")  # fmt: skip
+    dsg.add_argument("--candidates", type=number(int, 4), default=50, help="grid candidates (default 50)")
+    dsg.add_argument("--draws", type=number(int, 1), default=16, help="posterior draws per candidate (default 16)")
+    dsg.set_defaults(func=c.cmd_design)
+
+
 def _update(sub, common: argparse.ArgumentParser, data_opts: argparse.ArgumentParser) -> None:
     upd = sub.add_parser(
         "update",
@@ -639,8 +667,8 @@ def _report(sub, common: argparse.ArgumentParser, data_opts: argparse.ArgumentPa
     rp.add_argument("--forcing-hz", type=POSITIVE, help="forcing frequency [Hz] of a harmonic record or campaign")
     rp.add_argument("--wells", help="z_minus,z_plus [m] for the regime of a harmonic record (default: the metadata's)")
     rp.add_argument("--nfrc", action="append", help="a `negstiff nfrc` result to draw over a campaign's map")
-    rp.add_argument("--only", help="the analyses to run, comma-separated (nsi, sindy, posterior, discrepancy, frf, "
-                    "characterise, map)")  # fmt: skip
+    rp.add_argument("--only", help="the analyses to run, comma-separated (nsi, sindy, posterior, design, discrepancy, "
+                    "frf, characterise, map; design runs the posterior it reads)")  # fmt: skip
     _law_options(rp)
     rp.add_argument("--duration", type=POSITIVE, help="posterior: use only the first DURATION seconds of the record")
     rp.add_argument("--max-steps", type=declared(POST, "max_steps"), help="posterior: step cap per ensemble")
@@ -697,8 +725,8 @@ class _ListingOnly:
         raise _Listed
 
 
-COMMANDS = ("rig", "simulate", "identify", "frf", "backbone", "nfrc", "posterior", "discrepancy", "characterise", "map",
-            "update", "report", "reproduce")  # fmt: skip
+COMMANDS = ("rig", "simulate", "identify", "frf", "backbone", "nfrc", "posterior", "design", "discrepancy",
+            "characterise", "map", "update", "report", "reproduce")  # fmt: skip
 """Every command, in the order ``negstiff --help`` lists them."""
 
 
@@ -752,7 +780,8 @@ def build_parser(only: str | None = None) -> argparse.ArgumentParser:
     )
 
     builders = {"rig": _rig, "simulate": _simulate, "identify": _identify, "frf": _frf, "backbone": _backbone,
-                "nfrc": _nfrc, "posterior": _posterior, "discrepancy": _discrepancy, "characterise": _characterise,
+                "nfrc": _nfrc, "posterior": _posterior, "design": _design, "discrepancy": _discrepancy,
+                "characterise": _characterise,
                 "map": _map, "update": _update, "report": _report, "reproduce": _reproduce}  # fmt: skip
     extra = [name for name in builders if name not in COMMANDS]
     assert not extra, f"commands missing from COMMANDS: {extra}"

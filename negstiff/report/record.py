@@ -28,7 +28,7 @@ from negstiff.errors import InputError
 
 from .document import Report
 
-BROADBAND = ("nsi", "sindy", "posterior", "discrepancy", "frf")
+BROADBAND = ("nsi", "sindy", "posterior", "design", "discrepancy", "frf")
 HARMONIC = ("characterise",)
 CAMPAIGN = ("map",)
 IMPACT = ("frf", "nsi", "sindy", "interval", "posterior", "discrepancy")
@@ -75,6 +75,8 @@ def _only(only: Sequence[str] | str | None, kind: tuple[str, ...]) -> tuple[str,
     if bad:
         raise InputError(f"--only {','.join(names)}: unknown analysis {bad[0]!r} (choose among {', '.join(SECTIONS)})")
     chosen = tuple(n for n in names if n in kind)
+    if "design" in chosen and "posterior" not in chosen:  # the design reads the posterior: sampled first
+        chosen = tuple(x for n in chosen for x in (("posterior", n) if n == "design" else (n,)))
     if not chosen:
         raise InputError(f"--only {','.join(names)}: none of these fits this record (it takes {', '.join(kind)})")
     return chosen
@@ -261,7 +263,7 @@ class _OptionRefused(InputError):
 Run = tuple[str, str, Callable[[Any], Any], Callable[[Any], None] | None]
 """A report's section: (name, title, run(record), check(record) or None: what the run checks before its work)."""
 
-DEPENDS = {"interval": ("nsi", "sindy")}
+DEPENDS = {"interval": ("nsi", "sindy"), "design": ("posterior",)}
 """Sections made from another's fit: not made where every one they read was refused."""
 
 
@@ -340,6 +342,8 @@ def _plan(rec, chosen, forcing_hz, wells, seed, options) -> list[Run]:
             runs.append((name, "the identification's interval", lambda r: _interval(r, fitted), None))
         elif name == "backbone":
             runs.append((name, "the backbone", lambda r: _backbone(r, fitted), None))
+        elif name == "design":
+            runs.append((name, "what to test next", lambda r: _design(r, fitted, seed), _check_design))
         elif name == "characterise":
             runs.append((name, "the characterisation", lambda r: characterise(r, forcing_hz, wells or "auto"),
                          lambda r: check_harmonic(r, forcing_hz)))  # fmt: skip
@@ -356,6 +360,27 @@ def _interval(rec, fitted: dict[str, Any]) -> dict[str, Any]:
         if name in fitted:
             return fitted[name].own_estimate(identification_record(rec, record_kind(rec)), blocks=3)
     raise InputError(f"{rec.source}: no identification was made, so it has no interval")
+
+
+REPORT_DESIGN = {"candidates": 16, "draws": 4, "search": 4}
+"""The report's test design: a smaller search than ``negstiff design``'s (a tenth of its evaluations: seconds, not a
+minute); ``negstiff design`` on the report's posterior searches further."""
+
+
+def _check_design(rec) -> None:
+    if rec.input_name != "base_acc":
+        raise InputError(f"{rec.source}: a force-driven record: the design plans shaker-table tests from a "
+                         "base-excited record's posterior")  # fmt: skip
+
+
+def _design(rec, fitted: dict[str, Any], seed: int) -> dict[str, Any]:
+    """The test to run next (``analysis.design``) from the report's coefficient posterior."""
+    from negstiff.inference.analysis.design import design
+
+    post = fitted.get("posterior")
+    if post is None:
+        raise InputError(f"{rec.source}: no posterior was sampled, so no test can be designed from it")
+    return design(post, seed=seed, **REPORT_DESIGN)
 
 
 BACKBONE_DRAWS = 24

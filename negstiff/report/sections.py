@@ -634,6 +634,49 @@ def map_figure(points: list[dict[str, Any]], overlays: Sequence[dict[str, Any]] 
     return fig
 
 
+def design_section(res: dict[str, Any], label: str = "") -> Section:
+    """A ``design`` result: the tests ranked by what they would teach, their predicted widths beside today's, the
+    criterion over level and frequency, and what the best costs.
+    """
+    from negstiff.inference.analysis.design import design_figure
+
+    sec = Section("design", label, _with_label("What to test next", label))
+    targets = res["targets"]
+    best, ref = res["best"], res["default_test"]
+    sec.text(f"The tests the rig could run next ({res['settings']['duration_s']:.3g} s each), ranked by how much they "
+             f"would narrow the 90 % intervals of {', '.join(targets)}: the posterior's draws run through each on "
+             "the virtual rig with this record's noise, each simulated record read as the posterior reads one "
+             f"({res['search']['evaluated']} tests evaluated, {res['search']['draws']} draws each). Shrinkage: the "
+             "geometric mean over the targets of the width now / the predicted width. The first-ranked test, run "
+             "and fitted with this record (`negstiff posterior THIS.csv NEXT.csv`), should give the widths in its "
+             "row.")  # fmt: skip
+    rows = [["now", "", *[res["now"][n] for n in targets], "", "", ""]]
+    shown = [r for r in res["ranked"] if r["feasible"]][:5]
+    if ref not in shown:
+        shown.append(ref)
+    for r in shown:
+        name = r["test"] + (" (the rig's default)" if r is ref else "")
+        rows.append([name, r["score"], *[r["predicted_width"][n] for n in targets],
+                     r["cost"]["peak_table_acc_m_s2"], 1e3 * r["cost"]["peak_table_disp_m"],
+                     r["cost"]["draws_visiting_both_wells"]])  # fmt: skip
+    sec.table(["test", "shrinkage", *[f"{n} 90 % width" for n in targets], "peak table acc [m/s^2]",
+               "table stroke [mm]", "draws visiting both wells"], rows)  # fmt: skip
+    sec.figure(f"design_{_slug(label or 'record')}", design_figure(res),
+               "The criterion over the candidates' settings: harmonics over frequency and amplitude (left), random "
+               "and swept tests over their level (right); the star is the chosen test, the cross the rig's default "
+               "random test.")  # fmt: skip
+    infeasible = [r for r in res["ranked"] if not r["feasible"]]
+    if infeasible:
+        sec.text(f"{len(infeasible)} candidate(s) lay outside the limits (the first: {infeasible[0]['test']}: "
+                 f"{infeasible[0]['problems'][0]}).")  # fmt: skip
+    for a in res.get("assumptions", []):
+        sec.text(f"Assumed: {a}.")
+    sec.summary.append(f"What to test next: {best['test']}, predicted to narrow the intervals of {', '.join(targets)} "
+                       f"{best['score']:.3g}x (the rig's default random test: {ref['score']:.3g}x).")  # fmt: skip
+    sec.json = res
+    return sec
+
+
 def section_for(result, label: str = "") -> Section:
     """The section of any result a report takes (by its kind)."""
     from negstiff.inference.estimators.discrepancy import Discrepancy
@@ -661,4 +704,6 @@ def section_for(result, label: str = "") -> Section:
         return characterisation_section(result, label)
     if isinstance(result, dict) and "sweeps" in result:
         return map_section(result, (), label)
+    if isinstance(result, dict) and "ranked" in result and "criterion" in result:
+        return design_section(result, label)
     raise TypeError(f"a report takes records, fitted estimators and analysis results, not {type(result).__name__}")

@@ -528,6 +528,7 @@ class Posterior(Estimator):
         self._validate()
         recs = list(rec) if isinstance(rec, (list, tuple)) else [rec]
         kinds = [record_kind(r) for r in recs]
+        self.record_kind_ = kinds[0].kind
         ring_down = kinds[0].kind in ("impact", "decay")
         if ring_down:  # a hammer's force windowed, a decay's input zero; the windows between the pulses
             recs = [identification_record(r, k) for r, k in zip(recs, kinds, strict=True)]
@@ -774,6 +775,10 @@ class Posterior(Estimator):
             "moves": MOVES,
             "start": self.start_info_,
             "model_mass": float(par.to_params(theta[None])[ROWS["m"], 0]),
+            "record_kind": self.record_kind_,
+            "input": rec.input_name,
+            "fs": rec.fs,
+            "duration_s": [r.duration for r in recs] if R > 1 else rec.duration,
         }
         if par.law is not None:
             lm = par.law

@@ -1,0 +1,131 @@
+"""Which test next, checked against reality: the designed test run on the rig and fitted jointly with the first
+record, against the rig's default random test of the same duration; and the design's time against solving each
+draw through each candidate with scipy's ``solve_ivp``.
+
+    python -m benchmarks.benchmarks --only design
+
+On 20 s rig records of the polynomial truth under the rig's default random test (5 seeds): the first record's
+posterior, ``design`` over the five coefficients (its defaults: 50 grid candidates, 8 draws), the first-ranked test
+and the default test each run on the rig (seed 100 + s) and fitted jointly with the first record. The shrinkage of a
+test is the geometric mean over the coefficients of the 90 % width before / after.
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+
+import numpy as np
+
+SEEDS = (1, 2, 3, 4, 5)
+DURATION = 20.0
+
+
+def design_check(seeds=SEEDS, duration: float = DURATION) -> dict:
+    """The realised check (module docstring): per seed the chosen test, its predicted and realised widths, the
+    default test's realised widths, and the design's time.
+    """
+    from negstiff.inference.analysis.design import DEFAULT_RANDOM_RMS, Candidate, design
+    from negstiff.inference.estimators.posterior import Posterior
+    from negstiff.inference.record.measurement import Measurement
+    from negstiff.models import SEED_LIKE_CUBIC
+    from negstiff.models.rig import Rig
+
+    rows = []
+    for seed in seeds:
+        first = Measurement.from_rig(Rig(SEED_LIKE_CUBIC, seed=seed).random(duration=duration, rms=DEFAULT_RANDOM_RMS))
+        post = Posterior(seed=0).fit(first).result()
+        t0 = time.perf_counter()
+        plan = design(post, seed=0)
+        t_design = time.perf_counter() - t0
+        best = plan["best"]
+        chosen = Candidate(best["kind"], best.get("rms_m_s2") or best["amplitude_m_s2"], best.get("freq_hz"))
+        row = {"seed": seed, "design_s": t_design, "evaluated": plan["search"]["evaluated"], "test": best["test"],
+               "now": plan["now"], "predicted": best["predicted_width"],
+               "predicted_default": plan["default_test"]["predicted_width"]}  # fmt: skip
+        for name, test in (("designed", chosen), ("default", Candidate("random", DEFAULT_RANDOM_RMS))):
+            second = Measurement.from_rig(test.run(Rig(SEED_LIKE_CUBIC, seed=100 + seed), duration))
+            joint = Posterior(seed=0).fit([first, second]).result()["parameters"]
+            row[name] = {k: joint[k]["hdi_high"] - joint[k]["hdi_low"] for k in plan["now"]}
+            row[name + "_truth_inside"] = int(sum(joint[k]["hdi_low"] <= getattr(SEED_LIKE_CUBIC, k)
+                                                  <= joint[k]["hdi_high"] for k in plan["now"]))  # fmt: skip
+        row["shrink_designed"] = _shrink(row["now"], row["designed"])
+        row["shrink_default"] = _shrink(row["now"], row["default"])
+        rows.append(row)
+        print(f"design check: seed {seed}, {row['test']}: {row['shrink_designed']:.3g}x against "
+              f"{row['shrink_default']:.3g}x", file=sys.stderr)  # fmt: skip
+    return {"rows": rows, "solve_ivp": _solve_ivp_equivalent(rows)}
+
+
+def _shrink(now: dict, after: dict) -> float:
+    return float(np.exp(np.mean([np.log(now[k] / after[k]) for k in now])))
+
+
+def _solve_ivp_equivalent(rows) -> dict:
+    """What the design's simulations would cost with ``solve_ivp`` (RK45, rtol 1e-8): one 20 s record of the truth
+    under a random input timed, times the trajectories one design integrates at least (candidates x draws x the 7
+    columns of the Jacobian's finite differences, the windows' start-state refinement left out).
+    """
+    from scipy.integrate import solve_ivp
+
+    from negstiff.models import SEED_LIKE_CUBIC
+    from negstiff.models.rig import Rig
+
+    rec = Rig(SEED_LIKE_CUBIC, seed=1).random(duration=DURATION, rms=8.0)
+    t = rec.columns["t"] - rec.columns["t"][0]
+    u = rec.true["base_acc"]
+    m = SEED_LIKE_CUBIC
+
+    def rhs(s, x):
+        return [x[1], -np.interp(s, t, u) - (m.restoring_force(x[0]) + m.damping_force(x[1])) / m.m]
+
+    t0 = time.perf_counter()
+    solve_ivp(rhs, (0, t[-1]), [rec.true["z"][0], 0.0], t_eval=t, rtol=1e-8, atol=1e-12)
+    one = time.perf_counter() - t0
+    evaluated = float(np.median([r["evaluated"] for r in rows]))
+    n = evaluated * 8 * 7
+    design_s = float(np.median([r["design_s"] for r in rows]))
+    return {"one_record_s": one, "trajectories": n, "estimated_s": one * n, "design_s": design_s,
+            "ratio": one * n / design_s}  # fmt: skip
+
+
+def design_section(res: dict) -> list[str]:
+    """The report section."""
+    from .peers import section
+
+    rows = res["rows"]
+    table = []
+    for r in rows:
+        realised = [r["designed"][k] / r["predicted"][k] for k in r["now"]]
+        table.append([str(r["seed"]), r["test"], f"{r['design_s']:.1f} s", f"{r['shrink_designed']:.3g}x",
+                      f"{r['shrink_default']:.3g}x", f"{r['shrink_designed'] / r['shrink_default']:.3g}",
+                      f"{min(realised):.2f}-{max(realised):.2f}",
+                      f"{r['designed_truth_inside']} / {r['default_truth_inside']}"])  # fmt: skip
+    ratios = [r["shrink_designed"] / r["shrink_default"] for r in rows]
+    per_param = {k: float(np.median([r["designed"][k] / r["predicted"][k] for r in rows])) for k in rows[0]["now"]}
+    s = res["solve_ivp"]
+    intro = (
+        "The first record: 20 s of the rig's default random test (14 m/s^2 rms) on the polynomial truth, which "
+        "settles into one well. `design` over the five coefficients with its defaults; the first-ranked test and the "
+        "rig's default random test each run on the rig (another seed) and fitted jointly with the first record. "
+        "Shrinkage: the geometric mean over k1, k2, k3, c, c_nl of the 90 % width before / after. Realised / "
+        "predicted: the designed test's joint widths over the design's prediction. Truth inside: of the five "
+        "coefficients, inside the joint 90 % intervals (designed / default)."
+    )
+    lines = section("Test design", intro, ["seed", "chosen test", "design time", "shrinkage (designed)",
+                                           "shrinkage (default)", "ratio", "realised / predicted",
+                                           "truth inside"], table)  # fmt: skip
+    med = float(np.median(ratios))
+    lines += [
+        "",
+        f"Median ratio {med:.3g} (the acceptance: at least 1.5, "
+        + ("met" if med >= 1.5 else "**not met**")
+        + "). Median realised / predicted per coefficient: "
+        + ", ".join(f"{k} {v:.2f}" for k, v in per_param.items())
+        + " (within 30 %: "
+        + ("met" if all(abs(v - 1) <= 0.3 for v in per_param.values()) else "**not met**")
+        + f"). One design took {s['design_s']:.0f} s (median); its simulations through solve_ivp (RK45, rtol 1e-8: "
+        f"{s['one_record_s']:.2f} s for one 20 s record, times {s['trajectories']:.0f} trajectories at least) would "
+        f"take about {s['estimated_s'] / 60:.0f} min, {s['ratio']:.0f}x longer.",
+    ]
+    return lines

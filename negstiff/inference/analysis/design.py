@@ -1,0 +1,622 @@
+"""Which test next: the lab's next run designed from what the posterior still does not know.
+
+A lab that has run one test and sampled its posterior asks which test to run now, at what level, frequency and
+length, so that what it still does not know is pinned down. For each candidate test the rig can run (a
+band-limited random run at a level, a harmonic at an amplitude and frequency, a linear swept sine at an amplitude),
+within the limits the user states (duration, peak table acceleration, table stroke, the device's own travel),
+draws of the posterior are run through the candidate on the virtual rig (``models.rig.Rig``) with the measurement
+noise the record showed (the laser's sigma, the accelerometer's noise), and the information each simulated record
+would add is read as the posterior itself reads a record: its multiple-shooting windows (``Windows.cut``, the start
+states profiled), the residuals' Jacobian with the start-state directions projected out, curvature-adjusted by the
+windows' sandwich covariance (``likelihood.curvature_adjustment``: what the sensor chain's correlated noise leaves).
+
+The criterion is the Laplace approximation of the expected posterior covariance after the test,
+E_theta[(Sigma_now^-1 + I_test(theta))^-1] over the draws (Bayesian A-optimality in its Laplace form: Chaloner and
+Verdinelli 1995, "Bayesian experimental design: a review", Statistical Science 10(3), 273-304; Ryan, Drovandi,
+McGree and Pettitt 2016, "A review of modern computational algorithms for Bayesian optimal design", International
+Statistical Review 84(1), 128-154), read as the expected shrinkage of the targeted parameters' 90 % intervals: each
+interval's width now times sqrt(Var_after / Var_now), the score the geometric mean of width_now / width_after over
+the targets. The expected information gain about the targets in the same approximation, 0.5 log(det Sigma_now /
+det Sigma_after) [nats], is reported beside it. A grid of candidates is evaluated, and the best ones are searched
+further in their continuous settings (level, frequency: bounded scalar and Nelder-Mead searches, the same noise
+draws for every candidate so the criterion is a smooth function of the settings).
+
+What it assumes, said in the result: the next record is read by a sensor chain like the rig's (a laser on the
+moving part, the table's accelerometer integrated twice) with the noise levels the posterior found; the posterior is
+Gaussian with its reported means, standard deviations and correlations (its JSON keeps no draws).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from negstiff.errors import InputError
+
+COEFFICIENTS = ("k1", "k2", "k3", "c", "c_nl")
+"""The parameters a design can target (the coefficient posterior's)."""
+NAMES = (*COEFFICIENTS, "k0")
+"""The parameters the information is computed over (k0, the static offset, a nuisance the records share)."""
+DEFAULT_RANDOM_RMS = 14.0
+"""The rig's default random test level [m/s^2 rms, 2-40 Hz] (``Rig.random``): the reference each design is
+compared with."""
+DEFAULT_MAX_ACC = 80.0
+"""Default peak table acceleration [m/s^2] (8 g: a small electrodynamic shaker's with a 0.2 kg device)."""
+BAND = (2.0, 40.0)
+"""The random test's band and the sweep's start and stop [Hz] (the rig's default excitation band)."""
+
+
+@dataclass(frozen=True)
+class Limits:
+    """What the lab's rig can do: the record's duration [s], the peak table acceleration [m/s^2] and displacement
+    [m] (None: no limit stated), and the device's travel [m] (its largest excursion from the saddle before a stop;
+    None: no stop).
+    """
+
+    duration_s: float
+    max_table_acc: float = DEFAULT_MAX_ACC
+    max_table_disp: float | None = None
+    stroke: float | None = None
+
+
+@dataclass(frozen=True)
+class Candidate:
+    """One test the rig can run: ``kind`` random (``level`` the table acceleration's rms over ``BAND``), harmonic
+    (``level`` its amplitude at ``freq``) or sweep (``level`` the amplitude of a linear sweep over ``BAND``).
+    """
+
+    kind: str
+    level: float
+    freq: float | None = None
+
+    def run(self, rig, duration: float):
+        """The rig's record of this test, ``duration`` seconds long (a harmonic: whole periods)."""
+        if self.kind == "random":
+            return rig.random(duration=duration, rms=self.level, band=BAND, settle=2.0)
+        if self.kind == "sweep":
+            return rig.sine_sweep(f_start=BAND[0], f_stop=BAND[1], amplitude=self.level, duration=duration,
+                                  settle=1.0)  # fmt: skip
+        assert self.freq is not None
+        periods = max(8, int(round(duration * self.freq)))
+        return rig.harmonic(freq=self.freq, amplitude=self.level, settle_periods=10, record_periods=periods)
+
+    def table_disp_bound(self) -> float:
+        """The table's peak displacement [m] a sinusoidal test asks for (its lowest frequency's A / w^2)."""
+        if self.kind == "random":
+            return 0.0  # a random run's is read from its record (``evaluate``)
+        f = self.freq if self.kind == "harmonic" and self.freq is not None else BAND[0]
+        return self.level / (2 * math.pi * f) ** 2
+
+    def describe(self) -> str:
+        """One line a lab reads."""
+        if self.kind == "random":
+            return f"random {self.level:.3g} m/s^2 rms, {BAND[0]:g}-{BAND[1]:g} Hz"
+        if self.kind == "sweep":
+            return f"linear sine sweep {BAND[0]:g}-{BAND[1]:g} Hz at {self.level:.3g} m/s^2"
+        return f"harmonic {self.freq:.3g} Hz at {self.level:.3g} m/s^2"
+
+    def to_json(self) -> dict[str, Any]:
+        """The test's settings."""
+        out: dict[str, Any] = {"kind": self.kind, "test": self.describe()}
+        if self.kind == "random":
+            out.update(rms_m_s2=self.level, band_hz=list(BAND))
+        elif self.kind == "sweep":
+            out.update(amplitude_m_s2=self.level, f_start_hz=BAND[0], f_stop_hz=BAND[1])
+        else:
+            out.update(amplitude_m_s2=self.level, freq_hz=self.freq)
+        return out
+
+
+@dataclass
+class PosteriorState:
+    """What a design needs of a coefficient posterior's JSON: the Gaussian over ``NAMES`` (means, sds,
+    correlations), the 90 % widths now, the noise levels, the mass and the windows the posterior read.
+    """
+
+    mean: np.ndarray
+    cov: np.ndarray
+    widths: dict[str, float]
+    hdi_prob: float
+    sigma: float
+    input_noise: float
+    mass: float
+    fs: float
+    window_s: float
+    max_windows: int
+    duration_s: float
+    source: str = ""
+
+    @classmethod
+    def from_json(cls, res: dict[str, Any], source: str = "") -> PosteriorState:
+        """The state of a posterior result (``Posterior.result()`` or its file); one ``InputError`` for a posterior
+        a design cannot read (another model, a law's, a structure's, a record of another kind, an old file).
+        """
+        if not isinstance(res, dict) or "parameters" not in res or "settings" not in res:
+            raise InputError(f"{source or 'the posterior'}: not a posterior result (no parameters and settings)")
+        s = res["settings"]
+        where = source or "the posterior"
+        if "element_at" in s:
+            raise InputError(f"{where}: a structure's posterior; the design reads a single DOF's coefficient posterior")
+        if s.get("model") != "coefficients" or "law" in s:
+            what = f"law {s['law']['restoring']}" if "law" in s else f"model {s.get('model')}"
+            raise InputError(f"{where}: a posterior of the {what}; the design reads the coefficient posterior "
+                             "(k1, k2, k3, c, c_nl)")  # fmt: skip
+        kind = s.get("record_kind")
+        if kind is None:
+            raise InputError(f"{where}: written before posteriors recorded their record's kind: sample it again")
+        if kind != "base" or s.get("input") != "base_acc":
+            raise InputError(f"{where}: a posterior of a {kind} record ({s.get('input')}); the design plans "
+                             "shaker-table tests from a base-excited record's posterior")  # fmt: skip
+        params = {**res.get("nuisance_parameters", {}), **res["parameters"]}
+        missing = [n for n in NAMES if n not in params]
+        if missing:
+            raise InputError(f"{where}: no {', '.join(missing)} among its parameters")
+        sd = np.array([params[n]["sd"] for n in NAMES], float)
+        corr = res.get("correlation") or {}
+        C = np.array([[corr.get(a, {}).get(b, 1.0 if a == b else 0.0) for b in NAMES] for a in NAMES], float)
+        cov = C * np.outer(sd, sd)
+        noise = "sigma" if "sigma" in params else "sigma_1"
+        rms = s.get("input_noise", {}).get("rms", 0.0)
+        rms = float(rms[0] if isinstance(rms, list) else rms or 0.0)
+        dur = s.get("duration_s")
+        return cls(
+            mean=np.array([params[n]["mean"] for n in NAMES], float),
+            cov=0.5 * (cov + cov.T),
+            widths={n: float(params[n]["hdi_high"] - params[n]["hdi_low"]) for n in COEFFICIENTS},
+            hdi_prob=float(res.get("hdi_prob", 0.9)),
+            sigma=float(params[noise]["mean"]),
+            input_noise=rms,
+            mass=float(s.get("model_mass") or s.get("mass") or 1.0),
+            fs=float(s["fs"]),
+            window_s=float(s["window_s"]),
+            max_windows=int(s.get("windows", 240)),
+            duration_s=float(dur[0] if isinstance(dur, list) else dur),
+            source=source,
+        )
+
+    def model_at(self, theta: np.ndarray):
+        """The polynomial model of the parameters ``theta`` (over ``NAMES``) with the posterior's mass."""
+        from negstiff.models import Model
+
+        return Model(m=self.mass, **{n: float(v) for n, v in zip(NAMES, theta, strict=True)})
+
+    def draws(self, n: int, seed: int) -> np.ndarray:
+        """``n`` draws of the Gaussian posterior, each a usable double well (k3, c, c_nl >= 0, two wells); the
+        first is the mean.
+        """
+        rng = np.random.default_rng(seed)
+        L = np.linalg.cholesky(self.cov + 1e-30 * np.eye(len(NAMES)))
+        out = [self.mean]
+        for _ in range(100 * n):
+            if len(out) >= n:
+                break
+            th = self.mean + L @ rng.standard_normal(len(NAMES))
+            if th[2] > 0 and th[3] >= 0 and th[4] >= 0:
+                try:
+                    if self.model_at(th).equilibria().z_minus is not None:
+                        out.append(th)
+                except (ValueError, ArithmeticError):
+                    continue
+        return np.array(out[:n])
+
+
+@dataclass
+class Evaluation:
+    """One candidate's predicted outcome: the expected covariance after the test, the targets' widths, the score
+    (geometric-mean shrinkage of the targets' intervals), the information gain and what the test costs.
+    """
+
+    candidate: Candidate
+    cov_after: np.ndarray
+    widths_after: dict[str, float]
+    score: float
+    eig_nats: float
+    cost: dict[str, Any]
+    problems: list[str] = field(default_factory=list)
+
+    @property
+    def feasible(self) -> bool:
+        """Within every limit."""
+        return not self.problems
+
+    def to_json(self, widths_now: dict[str, float]) -> dict[str, Any]:
+        """The candidate's row of the design's result."""
+        return {**self.candidate.to_json(), "score": self.score, "eig_nats": self.eig_nats,
+                "predicted_width": self.widths_after,
+                "shrink": {n: widths_now[n] / w for n, w in self.widths_after.items()},
+                "cost": self.cost, "feasible": self.feasible, "problems": self.problems}  # fmt: skip
+
+
+def _information(state: PosteriorState, candidate: Candidate, limits: Limits, theta: np.ndarray, seed: int):
+    """The information (over ``NAMES``) one record of ``candidate`` under the parameters ``theta`` would carry, as the
+    posterior reads it (module docstring), and what the run costs.
+    """
+    from negstiff.inference.estimators.posterior.likelihood import curvature_adjustment
+    from negstiff.inference.estimators.posterior.parametrisation import coefficient_parametrisation
+    from negstiff.inference.estimators.posterior.windows import Windows
+    from negstiff.inference.record.measurement import Measurement
+    from negstiff.models.rig import Rig, Sensors
+
+    model = state.model_at(theta)
+    sensors = Sensors(laser_noise=state.sigma, acc_noise=max(state.input_noise, 1e-9))
+    rig = Rig(model, sensors=sensors, fs=state.fs, seed=seed)
+    rec = candidate.run(rig, limits.duration_s)
+    eq = model.equilibria()
+    z = np.asarray(rec.true["z"])
+    centre = eq.z_0 if eq.z_0 is not None else eq.z_plus
+    cost = {
+        "duration_s": float(len(z) / state.fs),
+        "peak_table_acc_m_s2": float(np.max(np.abs(rec.true["base_acc"]))),
+        "peak_table_disp_m": float(np.max(np.abs(rec.true["base_disp"]))),
+        "peak_travel_m": float(np.max(np.abs(z - centre))),
+        "other_well_share": float(np.mean(np.sign(z - centre) != np.sign(eq.z_plus - centre))),
+    }
+    m = Measurement.from_rig(rec)
+    win = Windows.cut(m, state.window_s, state.max_windows)
+    par = coefficient_parametrisation(model)
+    th = np.array([getattr(model, n) for n in par.names])
+    kind = par.kind
+    p0 = par.to_params(th[None])[:, 0]
+    win.refine_states(p0, kind)
+    win.set_sensitivities(p0, kind)
+    x_scale = np.maximum(np.abs(th), 1e-6)
+    h = 1e-5 * x_scale
+
+    def whitened(point: np.ndarray, s2: float | None):
+        """The whitened residuals at ``point`` and their Jacobian (x coordinates), or None where a run diverges."""
+        thetas = np.vstack([point, point + np.diag(h)])
+        zsim, div = win.simulate(par.to_params(thetas), kind)
+        if div.any():
+            return None
+        if s2 is None:
+            return win.residuals(zsim[:1])[0].ravel(), None
+        res = np.stack([win.whitened_residuals(zsim[i], s2) for i in range(len(thetas))])  # (1 + p, n)
+        return res[0], np.stack([(res[0] - res[1 + i]) / (h[i] / x_scale[i]) for i in range(len(point))], axis=1)
+
+    first = whitened(th, None)
+    if first is None:
+        return None, cost
+    r0 = first[0]
+    # The residuals whitened by the sensor's variance alone: the posterior's likelihood also carries the input's
+    # noise through each window's response (``Windows.set_input_noise``), which changed the predicted widths by
+    # 0.2 % on a 20 s record (measured) and cost three times the rest of the evaluation.
+    s2 = float(np.sum(r0**2)) / win.dof
+    at = whitened(th, s2)
+    assert at is not None
+    # The sandwich read where the posterior reads it, at the record's MAP point (one Gauss-Newton step from the
+    # draw): there the parameters have taken up what the sensor chain's systematic error (the integrated
+    # accelerometer's) resembles, and the windows' scores are smaller. Read at the draw itself, the inflation was
+    # twice the posterior's (10.3 against 4.9 on one 20 s record) and the predicted widths 1.2-1.7x the posterior's.
+    step = np.linalg.lstsq(at[1], at[0], rcond=None)[0] * x_scale
+    at_map = whitened(th + step, s2)
+    res0, J = at if at_map is None else at_map
+    assert J is not None
+    _, V_x, _ = curvature_adjustment(J, res0, win.n_windows, 1.0)
+    V = V_x * np.outer(x_scale, x_scale)
+    order = [par.names.index(n) for n in NAMES]
+    V = V[np.ix_(order, order)]
+    return np.linalg.pinv(V, hermitian=True), cost
+
+
+def evaluate(state: PosteriorState, candidate: Candidate, limits: Limits, targets: tuple[str, ...],
+             draws: np.ndarray, seed: int) -> Evaluation:  # fmt: skip
+    """The expected outcome of ``candidate`` over the posterior's ``draws`` (module docstring); the noise of each
+    draw's record seeded ``seed + d`` (the same for every candidate: common random numbers).
+    """
+    problems = []
+    if candidate.kind != "random" and candidate.level > limits.max_table_acc:
+        problems.append(f"amplitude {candidate.level:.3g} m/s^2 above the table's {limits.max_table_acc:g} m/s^2")
+    if limits.max_table_disp is not None and candidate.table_disp_bound() > limits.max_table_disp:
+        problems.append(f"table stroke {1e3 * candidate.table_disp_bound():.3g} mm above the shaker's "
+                        f"{1e3 * limits.max_table_disp:g} mm")  # fmt: skip
+    P0inv = np.linalg.pinv(state.cov, hermitian=True)
+    covs, costs, eigs = [], [], []
+    idx = [NAMES.index(n) for n in targets]
+    for d, th in enumerate(draws):
+        info, cost = _information(state, candidate, limits, th, seed + d)
+        costs.append(cost)
+        if info is None:
+            problems.append("the model diverges under this test (a draw of the posterior leaves every well)")
+            break
+        after = np.linalg.pinv(P0inv + info, hermitian=True)
+        covs.append(after)
+        sub_now, sub_after = state.cov[np.ix_(idx, idx)], after[np.ix_(idx, idx)]
+        eigs.append(0.5 * (np.linalg.slogdet(sub_now)[1] - np.linalg.slogdet(sub_after)[1]))
+    cost = {k: float(np.max([c[k] for c in costs])) for k in costs[0]}
+    cost["other_well_share"] = float(np.mean([c["other_well_share"] for c in costs]))
+    # the risk that the test does not do what it is chosen for: in how many draws the record visits both wells
+    cost["draws_visiting_both_wells"] = float(np.mean([0.05 < c["other_well_share"] < 0.95 for c in costs]))
+    if candidate.kind == "random" and cost["peak_table_acc_m_s2"] > limits.max_table_acc:
+        problems.append(f"peak table acceleration {cost['peak_table_acc_m_s2']:.3g} m/s^2 above the table's "
+                        f"{limits.max_table_acc:g} m/s^2")  # fmt: skip
+    if (candidate.kind == "random" and limits.max_table_disp is not None
+            and cost["peak_table_disp_m"] > limits.max_table_disp):  # fmt: skip
+        problems.append(f"table stroke {1e3 * cost['peak_table_disp_m']:.3g} mm above the shaker's "
+                        f"{1e3 * limits.max_table_disp:g} mm")  # fmt: skip
+    if limits.stroke is not None and cost["peak_travel_m"] > limits.stroke:
+        problems.append(f"the device travels {1e3 * cost['peak_travel_m']:.3g} mm from its saddle, beyond its "
+                        f"{1e3 * limits.stroke:g} mm stroke (a stop)")  # fmt: skip
+    if not covs:
+        return Evaluation(candidate, state.cov, dict(state.widths), 1.0, 0.0, cost, problems)
+    after = np.mean(covs, axis=0)  # the expected posterior covariance (Laplace) over the draws
+    # each target's width after the test, the mean over the draws of each draw's width (the width now scaled by
+    # the Laplace sd's shrinkage): the width a run of the test is expected to give. (The width of the mean
+    # covariance, dominated by the draws that teach least, was 25-40 % wider than the realised on the rig's
+    # 20 s records: docs/design.md.)
+    i = [NAMES.index(n) for n in targets]
+    ratio = np.sqrt(np.maximum(np.array([np.diag(c)[i] for c in covs]), 0.0) / np.diag(state.cov)[i])  # (D, T)
+    widths = {n: state.widths[n] * float(np.mean(ratio[:, k])) for k, n in enumerate(targets)}
+    cost["width_spread"] = {n: [state.widths[n] * float(np.min(ratio[:, k])), state.widths[n] *
+                                float(np.max(ratio[:, k]))] for k, n in enumerate(targets)}  # fmt: skip
+    score = math.exp(float(np.mean([math.log(state.widths[n] / widths[n]) for n in targets])))
+    return Evaluation(candidate, after, widths, score, float(np.mean(eigs)), cost, problems)
+
+
+def _grid(state: PosteriorState, limits: Limits, n: int) -> list[Candidate]:
+    """About ``n`` candidates spread over the kinds and their settings (harmonics around the wells' frequencies)."""
+    model = state.model_at(state.mean)
+    f_wells = [model.uls(w).f_hz for w in ("minus", "plus")]
+    f_lo, f_hi = max(1.0, 0.5 * min(f_wells)), min(state.fs / 8, 2.5 * max(f_wells))
+    n_r = max(2, n // 6)
+    n_s = max(2, n // 8)
+    n_h = max(4, n - n_r - n_s)
+    n_f = max(2, int(round(math.sqrt(n_h * 1.2))))
+    n_a = max(2, n_h // n_f)
+    top = limits.max_table_acc
+    out = [Candidate("random", float(x)) for x in np.geomspace(top / 16, top / 3.5, n_r)]
+    out += [Candidate("sweep", float(x)) for x in np.geomspace(top / 12, top, n_s)]
+    out += [Candidate("harmonic", float(a), float(f)) for f in np.geomspace(f_lo, f_hi, n_f)
+            for a in np.geomspace(top / 12, top, n_a)]  # fmt: skip
+    return out
+
+
+def _search(state, limits, targets, draws, seed, start: Evaluation, budget: int, evaluated: list) -> Evaluation:
+    """The continuous settings of one candidate searched from its grid point (``budget`` evaluations at most): a
+    bounded scalar search of the level, or Nelder-Mead over log frequency and log amplitude for a harmonic.
+    """
+    from scipy import optimize
+
+    best = [start]
+    top = limits.max_table_acc
+
+    def run(c: Candidate) -> float:
+        ev = evaluate(state, c, limits, targets, draws, seed)
+        evaluated.append(ev)
+        if ev.feasible and ev.score > best[0].score:
+            best[0] = ev
+        return -ev.score if ev.feasible else 0.0
+
+    c0 = start.candidate
+    if c0.kind in ("random", "sweep"):
+        hi = top / 3.5 if c0.kind == "random" else top
+        optimize.minimize_scalar(lambda lg: run(replace(c0, level=float(math.exp(lg)))), method="bounded",
+                                 bounds=(math.log(top / 40), math.log(hi)),
+                                 options={"maxiter": budget, "xatol": 0.05})  # fmt: skip
+    else:
+        assert c0.freq is not None
+
+        def f(x):
+            return run(replace(c0, level=float(min(math.exp(x[1]), top)), freq=float(math.exp(x[0]))))
+
+        optimize.minimize(f, [math.log(c0.freq), math.log(c0.level)], method="Nelder-Mead",
+                          options={"maxfev": budget, "initial_simplex": [
+                              [math.log(c0.freq), math.log(c0.level)],
+                              [math.log(c0.freq) + 0.15, math.log(c0.level)],
+                              [math.log(c0.freq), math.log(c0.level) - 0.3]]})  # fmt: skip
+    return best[0]
+
+
+def design(posterior, *, targets=None, duration: float | None = None, max_table_acc: float = DEFAULT_MAX_ACC,
+           max_table_disp: float | None = None, stroke: float | None = None, candidates: int = 50,
+           draws: int = 16, search: int = 12, seed: int = 0) -> dict[str, Any]:  # fmt: skip
+    """The tests ranked by what they would teach (module docstring).
+
+    Parameters
+    ----------
+    posterior : Posterior, dict or path
+        A fitted coefficient ``Posterior`` of a base-excited record, its ``result()``, or its JSON file.
+    targets : sequence of str, optional
+        The parameters to pin down (among k1, k2, k3, c, c_nl; default all).
+    duration : float, optional
+        The next record's length [s] (default: the posterior's record's).
+    max_table_acc, max_table_disp : float
+        The table's peak acceleration [m/s^2] and displacement [m] (None: no displacement limit stated).
+    stroke : float, optional
+        The device's travel from its saddle to a stop [m]; a test that reaches it is infeasible.
+    candidates : int
+        Grid candidates before the continuous search.
+    draws : int
+        Posterior draws each candidate is simulated under (the first the mean).
+    search : int
+        Evaluations of the continuous search per searched candidate (the best two of the grid).
+    seed : int
+        Seed of the draws and of the simulated records' noise (same seed, same design).
+
+    Returns
+    -------
+    dict
+        ``{"targets", "criterion", "now", "ranked", "best", "default_test", "search", "assumptions",
+        "settings"}`` (``docs/contract.md``).
+    """
+    t0 = time.perf_counter()
+    state = _state_of(posterior)
+    targets = _targets(targets)
+    limits = _limits(state, duration, max_table_acc, max_table_disp, stroke)
+    _counts(candidates=candidates, draws=draws, search=search, seed=seed)
+    th = state.draws(int(draws), int(seed))
+    evaluated = [evaluate(state, c, limits, targets, th, int(seed)) for c in _grid(state, limits, int(candidates))]
+    n_grid = len(evaluated)
+    feasible = sorted((e for e in evaluated if e.feasible), key=lambda e: -e.score)
+    for start in feasible[:2] if search else []:
+        _search(state, limits, targets, th, int(seed), start, int(search), evaluated)
+    reference = evaluate(state, Candidate("random", DEFAULT_RANDOM_RMS), limits, targets, th, int(seed))
+    unique = {
+        (
+            e.candidate.kind,
+            round(e.candidate.level, 6),
+            None if e.candidate.freq is None else round(e.candidate.freq, 6),
+        ): e
+        for e in evaluated
+    }  # a setting the search met again: once
+    ranked = sorted(unique.values(), key=lambda e: (not e.feasible, -e.score))
+    if not ranked[0].feasible:
+        raise InputError("no candidate test lies within the limits (every one " + ranked[0].problems[0] + "): "
+                         "widen the table's limits or the device's stroke")  # fmt: skip
+    rows = [e.to_json(state.widths) for e in ranked]
+    return {
+        "targets": list(targets),
+        "criterion": {
+            "name": "expected shrinkage of the targets' 90 % intervals (geometric mean of width now / width after)",
+            "method": "Laplace approximation of the expected posterior covariance after the test over the "
+            "posterior's draws, each draw's information read from a simulated record as the posterior "
+            "reads one (multiple-shooting windows, start states profiled, curvature-adjusted)",
+            "references": [
+                "Chaloner and Verdinelli 1995, Statistical Science 10(3) 273-304",
+                "Ryan, Drovandi, McGree and Pettitt 2016, International Statistical Review 84(1) 128-154",
+            ],
+        },  # fmt: skip
+        "now": {n: state.widths[n] for n in targets},
+        "ranked": rows,
+        "best": rows[0],
+        "default_test": reference.to_json(state.widths),
+        "search": {
+            "grid": n_grid,
+            "evaluated": len(unique),
+            "seconds": time.perf_counter() - t0,
+            "draws": int(draws),
+        },  # fmt: skip
+        "assumptions": [
+            "the next record is read by a sensor chain like the rig's (a laser on the moving part, the table's "
+            f"accelerometer integrated twice), laser noise {state.sigma:.3g} m and accelerometer noise "
+            f"{state.input_noise:.3g} m/s^2 (the posterior's)",
+            "the posterior is Gaussian with its reported means, sds and correlations",
+        ],
+        "settings": {
+            "duration_s": limits.duration_s,
+            "max_table_acc_m_s2": limits.max_table_acc,
+            "max_table_disp_m": limits.max_table_disp,
+            "stroke_m": limits.stroke,
+            "candidates": candidates,
+            "draws": draws,
+            "search": search,
+            "seed": seed,
+            "posterior": state.source,
+        },  # fmt: skip
+    }
+
+
+def prepared(posterior, *, targets=None, duration: float | None = None, max_table_acc: float = DEFAULT_MAX_ACC,
+             max_table_disp: float | None = None, stroke: float | None = None, candidates: int = 50, draws: int = 16,
+             search: int = 12, seed: int = 0) -> dict[str, Any]:  # fmt: skip
+    """Every check ``design`` makes before its work (the posterior, the targets, the limits, the counts), in a
+    fraction of a second: one ``InputError`` for the first bad input. Returns ``design``'s keyword arguments.
+    """
+    state = _state_of(posterior)
+    _limits(state, duration, max_table_acc, max_table_disp, stroke)
+    _counts(candidates=candidates, draws=draws, search=search, seed=seed)
+    return {"targets": _targets(targets), "duration": duration, "max_table_acc": max_table_acc,
+            "max_table_disp": max_table_disp, "stroke": stroke, "candidates": candidates, "draws": draws,
+            "search": search, "seed": seed}  # fmt: skip
+
+
+def _counts(**counts) -> None:
+    for name, v in counts.items():
+        lo = {"candidates": 4, "draws": 1, "search": 0, "seed": 0}[name]
+        if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < lo:
+            raise InputError(f"{name} must be a whole number >= {lo}, got {v!r}")
+
+
+def design_figure(result: dict[str, Any]):
+    """The criterion over the candidates' settings: the harmonics' score over frequency and amplitude, the random
+    runs' and sweeps' over their level, the chosen test and the default random test marked.
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    rows = [r for r in result["ranked"] if r["feasible"]]
+    fig, (a, b) = plt.subplots(1, 2, figsize=(10.5, 4.0), constrained_layout=True)
+    h = [r for r in rows if r["kind"] == "harmonic"]
+    if h:
+        sc = a.scatter([r["freq_hz"] for r in h], [r["amplitude_m_s2"] for r in h], c=[r["score"] for r in h],
+                       cmap="viridis", s=36, norm=matplotlib.colors.LogNorm())  # fmt: skip
+        fig.colorbar(sc, ax=a, label="expected shrinkage of the targets' intervals")
+    a.set(xscale="log", yscale="log", xlabel="frequency [Hz]", ylabel="amplitude [m/s$^2$]", title="harmonic tests")
+    for kind, mark in (("random", "o-"), ("sweep", "s-")):
+        r = sorted((x for x in rows if x["kind"] == kind), key=lambda x: x.get("rms_m_s2") or x["amplitude_m_s2"])
+        if r:
+            b.plot([x.get("rms_m_s2") or x["amplitude_m_s2"] for x in r], [x["score"] for x in r], mark, ms=4,
+                   label="random (rms)" if kind == "random" else "linear sweep (amplitude)")  # fmt: skip
+    best, ref = result["best"], result["default_test"]
+    lvl = best.get("rms_m_s2") or best["amplitude_m_s2"]
+    (a if best["kind"] == "harmonic" else b).plot(best["freq_hz"] if best["kind"] == "harmonic" else lvl,
+                                                  lvl if best["kind"] == "harmonic" else best["score"], "r*", ms=14,
+                                                  label=f"chosen: {best['test']}")  # fmt: skip
+    b.plot(ref["rms_m_s2"], ref["score"], "kx", ms=10, mew=2, label=f"default: {ref['test']}")
+    b.set(xscale="log", yscale="log", xlabel="level [m/s$^2$]", ylabel="expected shrinkage",
+          title=f"targets {', '.join(result['targets'])}")  # fmt: skip
+    b.legend(fontsize=8)
+    if best["kind"] == "harmonic":
+        a.legend(fontsize=8)
+    return fig
+
+
+def _state_of(posterior) -> PosteriorState:
+    import json
+
+    if isinstance(posterior, (str, Path)):
+        path = Path(posterior)
+        try:
+            res = json.loads(path.read_text())
+        except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+            raise InputError(f"{path}: not a readable posterior result ({type(exc).__name__})") from None
+        return PosteriorState.from_json(res, str(path))
+    if isinstance(posterior, dict):
+        return PosteriorState.from_json(posterior)
+    if hasattr(posterior, "result") and callable(posterior.result):
+        return PosteriorState.from_json(posterior.result(), "the posterior")
+    raise InputError(f"design takes a fitted Posterior, its result or its JSON file, got {type(posterior).__name__}")
+
+
+def _targets(targets) -> tuple[str, ...]:
+    if targets is None:
+        return COEFFICIENTS
+    names = tuple(str(t).strip() for t in (targets.split(",") if isinstance(targets, str) else targets))
+    bad = [t for t in names if t not in COEFFICIENTS]
+    if bad or not names:
+        raise InputError(f"target {', '.join(bad) or '(none)'}: not a parameter of the coefficient posterior "
+                         f"(one or more of {', '.join(COEFFICIENTS)})")  # fmt: skip
+    return tuple(dict.fromkeys(names))
+
+
+def _limits(state: PosteriorState, duration, max_acc, max_disp, stroke) -> Limits:
+    dur = state.duration_s if duration is None else duration
+    for name, v in (("duration", dur), ("max_table_acc", max_acc), ("max_table_disp", max_disp)):
+        if v is None and name == "max_table_disp":
+            continue
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v <= 0:
+            raise InputError(f"{name} must be a positive number, got {v!r}")
+    if dur < 4 * state.window_s:
+        raise InputError(f"duration {dur:g} s: shorter than 4 of the posterior's {state.window_s:g} s windows")
+    if max_acc <= 3 * state.input_noise:
+        raise InputError(f"max_table_acc {max_acc:g} m/s^2: within 3x the accelerometer's noise "
+                         f"({state.input_noise:.3g} m/s^2 rms): no test the record could read")  # fmt: skip
+    if stroke is not None:
+        if isinstance(stroke, bool) or not isinstance(stroke, (int, float)) or not math.isfinite(stroke):
+            raise InputError(f"stroke must be a number [m], got {stroke!r}")
+        if stroke <= 3 * state.sigma:
+            raise InputError(f"stroke {stroke:g} m: within 3x the laser's noise ({state.sigma:.3g} m): no motion "
+                             "the record could read")  # fmt: skip
+        eq = state.model_at(state.mean).equilibria()
+        centre = eq.z_0 if eq.z_0 is not None else eq.z_plus
+        if stroke <= abs(eq.z_plus - centre):
+            raise InputError(f"stroke {1e3 * stroke:g} mm: inside the well the device rests in "
+                             f"({1e3 * abs(eq.z_plus - centre):.3g} mm from its saddle)")  # fmt: skip
+    return Limits(float(dur), float(max_acc), None if max_disp is None else float(max_disp),
+                  None if stroke is None else float(stroke))  # fmt: skip
