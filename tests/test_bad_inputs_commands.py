@@ -90,6 +90,7 @@ def workdir(tmp_path_factory):
     assert main(["rig", "random", "-o", str(d / "rec.csv"), "--duration", "12", "--seed", "1", "--quiet"]) == 0
     (d / "model.json").write_text(json.dumps({"m": 0.2, "k1": 426.0, "k2": -3060.0, "k3": 7.77e5, "c": 3.5}))
     (d / "targets.json").write_text(json.dumps({"f_minus": 11.4, "f_plus": 9.2, "z_minus": -0.029, "z_plus": 0.023}))
+    (d / "post.json").write_text(json.dumps({"parameters": {}}))  # design's input: refused before it is read
     for fname, content in BAD_FILES.values():
         if content is None:
             continue
@@ -128,6 +129,7 @@ def test_bad_input_is_refused_cleanly(workdir, capsys, case, command, kind, what
             "reproduce": ["reproduce", "-o", str(out)],
             "identify": ["identify", "nsi", str(workdir / "rec.csv"), "-o", str(out)],
             "nfrc": ["nfrc", str(workdir / "model.json"), "--freq", "9", "--amplitude", "2:4", "-o", str(out)],
+            "design": ["design", str(workdir / "post.json"), "-o", str(out)],
         }.get(command) or DATA_COMMANDS[command](workdir, workdir / "rec.csv", out)
         argv = base + [f"{option}={value}"]
     refused(workdir, capsys, argv, [out])
@@ -137,6 +139,7 @@ OUTPUT_COMMANDS = {
     **DATA_COMMANDS,
     "update": lambda d, rec, out: ["update", str(d / "targets.json"), "-o", str(out)],
     "rig": lambda d, rec, out: ["rig", "random", "-o", str(out), "--duration", "5"],
+    "design": lambda d, rec, out: ["design", str(d / "post.json"), "-o", str(out)],
 }
 
 
@@ -155,7 +158,7 @@ OUTPUT_CASES = [
 def test_outputs_never_overwrite_inputs_or_fail_late(workdir, capsys, command, problem):
     rec = workdir / "rec.csv"
     if problem == "onto_input":
-        out = {"update": workdir / "targets.json"}.get(command, rec)
+        out = {"update": workdir / "targets.json", "design": workdir / "post.json"}.get(command, rec)
     elif problem == "unwritable":
         out = "/proc/negstiff-probe/out.json"
     elif problem == "folder":

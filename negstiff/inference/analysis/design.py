@@ -442,6 +442,15 @@ def design(posterior, *, targets=None, duration: float | None = None, max_table_
     dict
         ``{"targets", "criterion", "now", "ranked", "best", "default_test", "search", "assumptions",
         "settings"}`` (``docs/contract.md``).
+
+    Examples
+    --------
+    >>> from negstiff import Measurement, Posterior, Rig, design
+    >>> from negstiff.models import SEED_LIKE_CUBIC
+    >>> rec = Measurement.from_rig(Rig(SEED_LIKE_CUBIC, seed=4).random(duration=10.0, rms=14.0))
+    >>> plan = design(Posterior(seed=0).fit(rec), targets=("k1", "k3"), candidates=8, draws=2, search=0)
+    >>> plan["best"]["score"] >= plan["default_test"]["score"]   # the chosen test teaches at least the default's
+    True
     """
     t0 = time.perf_counter()
     state = _state_of(posterior)
