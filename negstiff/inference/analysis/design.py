@@ -569,8 +569,17 @@ def design_figure(result: dict[str, Any]):
                                                   label=f"chosen: {best['test']}")  # fmt: skip
     b.plot(ref["rms_m_s2"], ref["score"], "kx", ms=10, mew=2, label=f"default: {ref['test']}")
     b.set(xscale="log", yscale="log", xlabel="level [m/s$^2$]", ylabel="expected shrinkage",
-          title=f"targets {', '.join(result['targets'])}")  # fmt: skip
+          title=f"random and swept tests; targets {', '.join(result['targets'])}")  # fmt: skip
     b.legend(fontsize=8)
+    plain = matplotlib.ticker.FuncFormatter(lambda v, _: f"{v:g}")
+    for ax in (a, b):  # plain numbers on the log axes (not 4x10^0), the minor ticks unlabelled
+        for axis in (ax.xaxis, ax.yaxis):
+            axis.set_major_locator(matplotlib.ticker.LogLocator(subs=(1.0, 2.0, 5.0)))
+            axis.set_major_formatter(plain)
+            axis.set_minor_formatter(matplotlib.ticker.NullFormatter())
+    if h:
+        sc.colorbar.ax.yaxis.set_major_formatter(plain)
+        sc.colorbar.ax.yaxis.set_minor_formatter(plain)
     if best["kind"] == "harmonic":
         a.legend(fontsize=8)
     return fig
