@@ -41,6 +41,7 @@ def design_check(seeds=SEEDS, duration: float = DURATION) -> dict:
         best = plan["best"]
         chosen = Candidate(best["kind"], best.get("rms_m_s2") or best["amplitude_m_s2"], best.get("freq_hz"))
         row = {"seed": seed, "design_s": t_design, "evaluated": plan["search"]["evaluated"], "test": best["test"],
+               "draws": plan["search"]["draws"],
                "now": plan["now"], "predicted": best["predicted_width"],
                "predicted_default": plan["default_test"]["predicted_width"]}  # fmt: skip
         for name, test in (("designed", chosen), ("default", Candidate("random", DEFAULT_RANDOM_RMS))):
@@ -63,7 +64,7 @@ def _shrink(now: dict, after: dict) -> float:
 
 def _solve_ivp_equivalent(rows) -> dict:
     """What the design's simulations would cost with ``solve_ivp`` (RK45, rtol 1e-8): one 20 s record of the truth
-    under a random input timed, times the trajectories one design integrates at least (candidates x draws x the 7
+    under a random input timed, times the trajectories one design integrates at least (evaluations x draws x the 7
     columns of the Jacobian's finite differences, the windows' start-state refinement left out).
     """
     from scipy.integrate import solve_ivp
@@ -83,7 +84,7 @@ def _solve_ivp_equivalent(rows) -> dict:
     solve_ivp(rhs, (0, t[-1]), [rec.true["z"][0], 0.0], t_eval=t, rtol=1e-8, atol=1e-12)
     one = time.perf_counter() - t0
     evaluated = float(np.median([r["evaluated"] for r in rows]))
-    n = evaluated * 8 * 7
+    n = evaluated * float(np.median([r["draws"] for r in rows])) * 7
     design_s = float(np.median([r["design_s"] for r in rows]))
     return {"one_record_s": one, "trajectories": n, "estimated_s": one * n, "design_s": design_s,
             "ratio": one * n / design_s}  # fmt: skip

@@ -50,8 +50,11 @@ def test_the_ranking_is_by_the_predicted_shrinkage_and_within_the_limits(designe
         assert r["cost"]["peak_table_acc_m_s2"] <= 80.0 + 1e-9 or r["kind"] != "random"
         # a test teaches something or nothing, never less than nothing: the posterior only narrows
         assert all(s >= 1 - 1e-9 for s in r["shrink"].values())
-    # the default random test is scored alike, for comparison; the first-ranked does at least as well
+    # every feasible test's record fits the duration asked (a harmonic: whole periods within it)
+    assert all(r["cost"]["duration_s"] <= designed["settings"]["duration_s"] * (1 + 1e-6) for r in feasible)
+    # the default random test is scored alike and ranked among the candidates; the first-ranked does at least as well
     assert designed["default_test"]["test"].startswith(f"random {DEFAULT_RANDOM_RMS:g}")
+    assert any(r["test"] == designed["default_test"]["test"] for r in rows)
     assert designed["best"]["score"] >= designed["default_test"]["score"] - 1e-9
     assert designed["search"]["evaluated"] > designed["search"]["grid"]  # the continuous search ran
 
@@ -104,6 +107,14 @@ def test_a_posterior_of_another_kind_is_refused(posterior_json, tmp_path, capsys
     cases = {
         "decay": {**res, "settings": {**res["settings"], "record_kind": "decay", "input": "force"}},
         "device": {**res, "settings": {**res["settings"], "model": "device"}},
+        # a single well (k1 < 0: K rises through zero once): no second well's frequency to place the harmonics
+        "single_well": {
+            **res,
+            "parameters": {
+                **res["parameters"],
+                "k1": {**res["parameters"]["k1"], "mean": -res["parameters"]["k1"]["mean"]},
+            },
+        },
         "old": {**res, "settings": {k: v for k, v in res["settings"].items() if k != "record_kind"}},
         "not": {"hello": 1},
     }

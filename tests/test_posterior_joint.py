@@ -106,6 +106,19 @@ def test_records_that_are_not_one_device_s_runs_are_refused_before_the_work(reco
         Posterior().check([quiet, heavier])
 
 
+def test_a_noisier_shorter_record_keeps_its_windows(records):
+    # each record's windows are judged against its own median residual (a window the model cannot follow is dropped):
+    # against the pooled median, a record 10x noisier and half as long lost every window (all "3x the median")
+    quiet, _ = records
+    loud = _record(4, 300e-6)
+    loud = loud.segment(0, loud.n // 2)
+    post = Posterior(seed=0)
+    post.check([quiet, loud])
+    _, win, _, _, sigma = post.point_estimate([quiet, loud])
+    assert np.bincount(win.groups).tolist() == [64, 32] and not win.dropped
+    assert sigma[0] == pytest.approx(30e-6, rel=0.1) and sigma[1] == pytest.approx(300e-6, rel=0.1)
+
+
 def test_the_command_reads_several_records(records, tmp_path, capsys):
     paths = []
     for i, rec in enumerate(records):

@@ -643,8 +643,9 @@ def design_section(res: dict[str, Any], label: str = "") -> Section:
     sec = Section("design", label, _with_label("What to test next", label))
     targets = res["targets"]
     best, ref = res["best"], res["default_test"]
+    pct = 100 * res.get("hdi_prob", 0.9)
     sec.text(f"The tests the rig could run next ({res['settings']['duration_s']:.3g} s each), ranked by how much they "
-             f"would narrow the 90 % intervals of {', '.join(targets)}: the posterior's draws run through each on "
+             f"would narrow the {pct:g} % intervals of {', '.join(targets)}: the posterior's draws run through each on "
              "the virtual rig with this record's noise, each simulated record read as the posterior reads one "
              f"({res['search']['evaluated']} tests evaluated, {res['search']['draws']} draws each). Shrinkage: the "
              "geometric mean over the targets of the width now / the predicted width. The first-ranked test, run "
@@ -659,7 +660,7 @@ def design_section(res: dict[str, Any], label: str = "") -> Section:
         rows.append([name, r["score"], *[r["predicted_width"][n] for n in targets],
                      r["cost"]["peak_table_acc_m_s2"], 1e3 * r["cost"]["peak_table_disp_m"],
                      r["cost"]["draws_visiting_both_wells"]])  # fmt: skip
-    sec.table(["test", "shrinkage", *[f"{n} 90 % width" for n in targets], "peak table acc [m/s^2]",
+    sec.table(["test", "shrinkage", *[f"{n} {pct:g} % width" for n in targets], "peak table acc [m/s^2]",
                "table stroke [mm]", "draws visiting both wells"], rows)  # fmt: skip
     sec.figure(f"design_{_slug(label or 'record')}", design_figure(res),
                "The criterion over the candidates' settings: harmonics over frequency and amplitude (left), random "

@@ -29,6 +29,7 @@ Gaussian with its reported means, standard deviations and correlations (its JSON
 from __future__ import annotations
 
 import math
+import numbers
 import time
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -37,6 +38,7 @@ from typing import Any
 import numpy as np
 
 from negstiff.errors import InputError
+from negstiff.inference.estimators.posterior.windows import PosteriorError
 
 COEFFICIENTS = ("k1", "k2", "k3", "c", "c_nl")
 """The parameters a design can target (the coefficient posterior's)."""
@@ -82,8 +84,8 @@ class Candidate:
             return rig.sine_sweep(f_start=BAND[0], f_stop=BAND[1], amplitude=self.level, duration=duration,
                                   settle=1.0)  # fmt: skip
         assert self.freq is not None
-        periods = max(8, int(round(duration * self.freq)))
-        return rig.harmonic(freq=self.freq, amplitude=self.level, settle_periods=10, record_periods=periods)
+        periods = int(math.floor(duration * self.freq + 1e-9))  # whole periods within the duration
+        return rig.harmonic(freq=self.freq, amplitude=self.level, settle_periods=10, record_periods=max(periods, 1))
 
     def table_disp_bound(self) -> float:
         """The table's peak displacement [m] a sinusoidal test asks for (its lowest frequency's A / w^2)."""
@@ -164,7 +166,10 @@ class PosteriorState:
         rms = s.get("input_noise", {}).get("rms", 0.0)
         rms = float(rms[0] if isinstance(rms, list) else rms or 0.0)
         dur = s.get("duration_s")
-        return cls(
+        if not float(s.get("fs", 0.0)) > 2.5 * BAND[1]:
+            raise InputError(f"{where}: a record at {s.get('fs')} Hz: the rig's tests reach {BAND[1]:g} Hz, which "
+                             f"needs a record above {2.5 * BAND[1]:g} Hz")  # fmt: skip
+        out = cls(
             mean=np.array([params[n]["mean"] for n in NAMES], float),
             cov=0.5 * (cov + cov.T),
             widths={n: float(params[n]["hdi_high"] - params[n]["hdi_low"]) for n in COEFFICIENTS},
@@ -174,10 +179,18 @@ class PosteriorState:
             mass=float(s.get("model_mass") or s.get("mass") or 1.0),
             fs=float(s["fs"]),
             window_s=float(s["window_s"]),
-            max_windows=int(s.get("windows", 240)),
+            max_windows=int(s.get("max_windows") or 240),  # the posterior's cap (a longer test: more windows)
             duration_s=float(dur[0] if isinstance(dur, list) else dur),
             source=source,
         )
+        try:
+            eq = out.model_at(out.mean).equilibria()
+        except (ValueError, ArithmeticError) as exc:
+            raise InputError(f"{where}: its mean model has no usable well ({exc})") from None
+        if eq.z_minus is None:
+            raise InputError(f"{where}: its mean model has a single well; the design reads a double well's posterior "
+                             "(both wells' frequencies place its harmonics)")  # fmt: skip
+        return out
 
     def model_at(self, theta: np.ndarray):
         """The polynomial model of the parameters ``theta`` (over ``NAMES``) with the posterior's mass."""
@@ -318,7 +331,11 @@ def evaluate(state: PosteriorState, candidate: Candidate, limits: Limits, target
     covs, costs, eigs = [], [], []
     idx = [NAMES.index(n) for n in targets]
     for d, th in enumerate(draws):
-        info, cost = _information(state, candidate, limits, th, seed + d)
+        try:
+            info, cost = _information(state, candidate, limits, th, seed + d)
+        except PosteriorError as exc:  # too short for the posterior's windows (a harmonic's whole periods)
+            return Evaluation(candidate, state.cov, dict(state.widths), 1.0, 0.0, {},
+                              [*problems, f"its record cannot be read: {exc}"])  # fmt: skip
         costs.append(cost)
         if info is None:
             problems.append("the model diverges under this test (a draw of the posterior leaves every well)")
@@ -338,6 +355,8 @@ def evaluate(state: PosteriorState, candidate: Candidate, limits: Limits, target
             and cost["peak_table_disp_m"] > limits.max_table_disp):  # fmt: skip
         problems.append(f"table stroke {1e3 * cost['peak_table_disp_m']:.3g} mm above the shaker's "
                         f"{1e3 * limits.max_table_disp:g} mm")  # fmt: skip
+    if cost["duration_s"] > limits.duration_s * (1 + 1e-6):
+        problems.append(f"its record lasts {cost['duration_s']:.3g} s, beyond the {limits.duration_s:g} s asked")
     if limits.stroke is not None and cost["peak_travel_m"] > limits.stroke:
         problems.append(f"the device travels {1e3 * cost['peak_travel_m']:.3g} mm from its saddle, beyond its "
                         f"{1e3 * limits.stroke:g} mm stroke (a stop)")  # fmt: skip
@@ -347,7 +366,7 @@ def evaluate(state: PosteriorState, candidate: Candidate, limits: Limits, target
     # each target's width after the test, the mean over the draws of each draw's width (the width now scaled by
     # the Laplace sd's shrinkage): the width a run of the test is expected to give. (The width of the mean
     # covariance, dominated by the draws that teach least, was 25-40 % wider than the realised on the rig's
-    # 20 s records: docs/design.md.)
+    # 20 s records: docs/methods/design.md.)
     i = [NAMES.index(n) for n in targets]
     ratio = np.sqrt(np.maximum(np.array([np.diag(c)[i] for c in covs]), 0.0) / np.diag(state.cov)[i])  # (D, T)
     widths = {n: state.widths[n] * float(np.mean(ratio[:, k])) for k, n in enumerate(targets)}
@@ -357,11 +376,18 @@ def evaluate(state: PosteriorState, candidate: Candidate, limits: Limits, target
     return Evaluation(candidate, after, widths, score, float(np.mean(eigs)), cost, problems)
 
 
-def _grid(state: PosteriorState, limits: Limits, n: int) -> list[Candidate]:
-    """About ``n`` candidates spread over the kinds and their settings (harmonics around the wells' frequencies)."""
+def _harmonic_band(state: PosteriorState) -> tuple[float, float]:
+    """The harmonics' frequencies [Hz]: half the lower well's underlying-linear frequency to 2.5 times the higher's
+    (within fs / 8).
+    """
     model = state.model_at(state.mean)
     f_wells = [model.uls(w).f_hz for w in ("minus", "plus")]
-    f_lo, f_hi = max(1.0, 0.5 * min(f_wells)), min(state.fs / 8, 2.5 * max(f_wells))
+    return max(1.0, 0.5 * min(f_wells)), min(state.fs / 8, 2.5 * max(f_wells))
+
+
+def _grid(state: PosteriorState, limits: Limits, n: int) -> list[Candidate]:
+    """About ``n`` candidates spread over the kinds and their settings (harmonics around the wells' frequencies)."""
+    f_lo, f_hi = _harmonic_band(state)
     n_r = max(2, n // 6)
     n_s = max(2, n // 8)
     n_h = max(4, n - n_r - n_s)
@@ -400,8 +426,11 @@ def _search(state, limits, targets, draws, seed, start: Evaluation, budget: int,
     else:
         assert c0.freq is not None
 
+        f_lo, f_hi = _harmonic_band(state)
+
         def f(x):
-            return run(replace(c0, level=float(min(math.exp(x[1]), top)), freq=float(math.exp(x[0]))))
+            freq = float(min(max(math.exp(x[0]), f_lo), f_hi))  # within the grid's band
+            return run(replace(c0, level=float(min(math.exp(x[1]), top)), freq=freq))
 
         optimize.minimize(f, [math.log(c0.freq), math.log(c0.level)], method="Nelder-Mead",
                           options={"maxfev": budget, "initial_simplex": [
@@ -464,6 +493,7 @@ def design(posterior, *, targets=None, duration: float | None = None, max_table_
     for start in feasible[:2] if search else []:
         _search(state, limits, targets, th, int(seed), start, int(search), evaluated)
     reference = evaluate(state, Candidate("random", DEFAULT_RANDOM_RMS), limits, targets, th, int(seed))
+    evaluated.append(reference)  # a candidate too: the first-ranked test teaches at least what the default does
     unique = {
         (
             e.candidate.kind,
@@ -479,8 +509,10 @@ def design(posterior, *, targets=None, duration: float | None = None, max_table_
     rows = [e.to_json(state.widths) for e in ranked]
     return {
         "targets": list(targets),
+        "hdi_prob": state.hdi_prob,
         "criterion": {
-            "name": "expected shrinkage of the targets' 90 % intervals (geometric mean of width now / width after)",
+            "name": f"expected shrinkage of the targets' {100 * state.hdi_prob:g} % intervals (geometric mean of "
+            "width now / width after)",
             "method": "Laplace approximation of the expected posterior covariance after the test over the "
             "posterior's draws, each draw's information read from a simulated record as the posterior "
             "reads one (multiple-shooting windows, start states profiled, curvature-adjusted)",
@@ -618,7 +650,7 @@ def _limits(state: PosteriorState, duration, max_acc, max_disp, stroke) -> Limit
     for name, v in (("duration", dur), ("max_table_acc", max_acc), ("max_table_disp", max_disp)):
         if v is None and name == "max_table_disp":
             continue
-        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v <= 0:
+        if isinstance(v, bool) or not isinstance(v, numbers.Real) or not math.isfinite(v) or v <= 0:
             raise InputError(f"{name} must be a positive number, got {v!r}")
     if dur < 4 * state.window_s:
         raise InputError(f"duration {dur:g} s: shorter than 4 of the posterior's {state.window_s:g} s windows")
@@ -626,7 +658,7 @@ def _limits(state: PosteriorState, duration, max_acc, max_disp, stroke) -> Limit
         raise InputError(f"max_table_acc {max_acc:g} m/s^2: within 3x the accelerometer's noise "
                          f"({state.input_noise:.3g} m/s^2 rms): no test the record could read")  # fmt: skip
     if stroke is not None:
-        if isinstance(stroke, bool) or not isinstance(stroke, (int, float)) or not math.isfinite(stroke):
+        if isinstance(stroke, bool) or not isinstance(stroke, numbers.Real) or not math.isfinite(stroke):
             raise InputError(f"stroke must be a number [m], got {stroke!r}")
         if stroke <= 3 * state.sigma:
             raise InputError(f"stroke {stroke:g} m: within 3x the laser's noise ({state.sigma:.3g} m): no motion "

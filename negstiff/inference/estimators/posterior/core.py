@@ -267,7 +267,7 @@ class Posterior(Estimator):
         """
         if self.chain_file is None:
             return None
-        run = {"walkers": self.walkers(ndim), "ndim": int(ndim), "seed": int(seed),
+        run = {"walkers": self.walkers(ndim), "ndim": int(ndim), "seed": int(seed), "moves": MOVES,
                "centre": np.ravel(centre).tolist(), "scale": np.ravel(scale).tolist()}  # fmt: skip
         return ChainFile(Path(self.chain_file), bool(self.resume), run)
 
@@ -566,7 +566,8 @@ class Posterior(Estimator):
         else:
             found = [(float(self.input_noise), "given")]
         joint = len(recs) > 1
-        s_u = np.array([f[0] for f in found]) if joint and len(found) > 1 else found[0][0]
+        found = found * len(recs) if joint and len(found) == 1 else found  # given, or none: each record's the same
+        s_u = np.array([f[0] for f in found]) if joint else found[0][0]
         self.input_noise_ = ({"rms": [f[0] for f in found], "source": [f[1] for f in found]} if joint
                              else {"rms": found[0][0], "source": found[0][1]})  # fmt: skip
         if np.any(np.asarray(s_u) > 0):
@@ -756,6 +757,7 @@ class Posterior(Estimator):
             "mass": rec.mass,
             "window_s": self.window_s,
             "windows": win.n_windows,
+            "max_windows": self.max_windows,
             "substeps": win.substeps,
             "curvature_adjustment": self.adjust,
             "input_noise": dict(self.input_noise_),

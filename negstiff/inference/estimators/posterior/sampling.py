@@ -144,7 +144,8 @@ chains: the same record and settings give them again (the MAP search repeated), 
 
 
 def _same_run(saved: dict[str, Any], run: dict[str, Any]) -> bool:
-    if {k: saved.get(k) for k in ("walkers", "ndim", "seed")} != {k: run.get(k) for k in ("walkers", "ndim", "seed")}:
+    keys = ("walkers", "ndim", "seed", "moves")  # chains of other moves (a file of an older run) are another run's
+    if {k: saved.get(k) for k in keys} != {k: run.get(k) for k in keys}:
         return False
     for key in ("centre", "scale"):
         a, b = np.asarray(saved.get(key, []), float), np.asarray(run.get(key, []), float)

@@ -256,8 +256,11 @@ class Windows:
         zsim, div = self.simulate(params[:, None], kind)
         rms = np.sqrt(np.mean((self.z - zsim[0]) ** 2, axis=1))
         rms = np.where(np.isfinite(rms), rms, np.inf)
-        bad = rms > factor * np.median(rms)
-        if bad.all() or not bad.any():
+        groups = np.zeros(self.n_windows, int) if self.groups is None else self.groups
+        # each record's windows against its own median (a joint fit's records have their own noise)
+        median = np.array([np.median(rms[groups == g]) for g in range(self.n_groups)])[groups]
+        bad = rms > factor * median
+        if not bad.any() or any(bad[groups == g].all() for g in range(self.n_groups)):
             return 0
         if bad.sum() > self.n_windows // 4:
             raise PosteriorError(
