@@ -565,7 +565,8 @@ def _posterior_section(quick: bool) -> tuple[list[str], dict]:
     lines = _section(
         "Posterior sampling (issue 7)",
         (
-            "Effective samples per second of emcee (DE moves, whitened coordinates) on the coefficient posterior: "
+            "Effective samples per second of emcee (the posterior's own moves, whitened coordinates) on the "
+            "coefficient posterior: "
             "the batched likelihood (every walker and every multiple-shooting window in one simulator call) against "
             "the same likelihood called walker by walker. Same seed, same chain "
             f"({'verified' if pres['same_chain'] else 'NOT identical'}), so the ESS ({pres['ess']:.0f} from "
