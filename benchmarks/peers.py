@@ -57,7 +57,7 @@ def _nsi_problem(n: int, seed: int = 21) -> tuple[np.ndarray, np.ndarray]:
     m = Measurement.from_rig(rec).segment(0, n)
     zs, v, _, _ = m.states("band")
     _, z_plus = well_guesses(m)
-    x, w, _, _ = NSI().extended_input(m, zs, v, z_plus)
+    x, w, *_ = NSI().extended_input(m, zs, v, z_plus)  # (x, w, scale, means, combine)
     y = x - x.mean()
     return w, (y / y.std())[:, None]
 
@@ -300,16 +300,22 @@ def section(title: str, intro: str, header: list[str], rows: list[list[str]]) ->
 def peers_section(quick: bool) -> list[str]:
     """The benchmarks' peers sections."""
     print("peers: subspace step...", file=sys.stderr)
-    srows, _ = subspace_peers((20_000, 100_000) if quick else (100_000, 1_000_000))
+    srows, sres = subspace_peers((20_000, 100_000) if quick else (100_000, 1_000_000))
     lines = section(
         "Peers: the subspace step (issue 18)",
         "NSI's own problem (four input channels, the output, 30 block rows) at two record lengths: the LQ and the "
         "SVD of L32. Ratios are against negstiff's covariance route; the last column is the largest relative "
-        "difference of the first two singular values from it (the same subspace, to rounding). Timed with "
+        "difference of the first two singular values from it. Timed with "
         "tracemalloc on (for the memory column), which slows Python-level allocation alike for all three.",
         ["problem", "method", "wall time", "peak memory", "time / memory vs negstiff", "singular values"],
         srows,
     )
+    worst = max(r["sv_rel_diff"] for per_n in sres.values() for r in per_n.values())
+    lines += ["", "The three agree to rounding: the same subspace." if worst < 1e-6 else (
+        f"**The covariance route's singular values differ from the QR routes' by up to {worst:.1e}**, where they "
+        "agreed to 1e-9 before NSI's extended input became a law's columns (the basis this problem takes from "
+        "`NSI.extended_input`); the cause is not yet found, and the times are compared on problems that are no longer "
+        "solved to the same precision.")]  # fmt: skip
     print("peers: SINDy...", file=sys.stderr)
     yrows, yres = sindy_peers(60.0 if quick else 300.0)
     lines += section(
