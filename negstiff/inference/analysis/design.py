@@ -280,36 +280,31 @@ def _information(state: PosteriorState, candidate: Candidate, limits: Limits, th
     x_scale = np.maximum(np.abs(th), 1e-6)
     h = 1e-5 * x_scale
 
-    def whitened(point: np.ndarray, s2: float | None):
-        """The whitened residuals at ``point`` and their Jacobian (x coordinates), or None where a run diverges."""
+    def projected(point: np.ndarray):
+        """The projected residuals at ``point`` and their Jacobian (x coordinates), one batched simulation of the
+        point and its finite-difference neighbours; None where a run diverges.
+        """
         thetas = np.vstack([point, point + np.diag(h)])
         zsim, div = win.simulate(par.to_params(thetas), kind)
         if div.any():
             return None
-        if s2 is None:
-            return win.residuals(zsim[:1])[0].ravel(), None
-        res = np.stack([win.whitened_residuals(zsim[i], s2) for i in range(len(thetas))])  # (1 + p, n)
+        res = win.residuals(zsim).reshape(len(thetas), -1)  # (1 + p, W L)
         return res[0], np.stack([(res[0] - res[1 + i]) / (h[i] / x_scale[i]) for i in range(len(point))], axis=1)
 
-    first = whitened(th, None)
-    if first is None:
+    at = projected(th)
+    if at is None:
         return None, cost
-    r0 = first[0]
-    # The residuals whitened by the sensor's variance alone: the posterior's likelihood also carries the input's
-    # noise through each window's response (``Windows.set_input_noise``), which changed the predicted widths by
-    # 0.2 % on a 20 s record (measured) and cost three times the rest of the evaluation.
-    s2 = float(np.sum(r0**2)) / win.dof
-    at = whitened(th, s2)
-    assert at is not None
+    # The sensor's noise alone: the posterior's likelihood also carries the input's noise through each window's
+    # response (``Windows.set_input_noise``), which changed the predicted widths by 0.2 % on a 20 s record
+    # (measured) and cost three times the rest of the evaluation.
+    sigma = math.sqrt(float(np.sum(at[0] ** 2)) / win.dof)
     # The sandwich read where the posterior reads it, at the record's MAP point (one Gauss-Newton step from the
     # draw): there the parameters have taken up what the sensor chain's systematic error (the integrated
     # accelerometer's) resembles, and the windows' scores are smaller. Read at the draw itself, the inflation was
     # twice the posterior's (10.3 against 4.9 on one 20 s record) and the predicted widths 1.2-1.7x the posterior's.
     step = np.linalg.lstsq(at[1], at[0], rcond=None)[0] * x_scale
-    at_map = whitened(th + step, s2)
-    res0, J = at if at_map is None else at_map
-    assert J is not None
-    _, V_x, _ = curvature_adjustment(J, res0, win.n_windows, 1.0)
+    res0, J = projected(th + step) or at
+    _, V_x, _ = curvature_adjustment(J, res0, win.n_windows, sigma)
     V = V_x * np.outer(x_scale, x_scale)
     order = [par.names.index(n) for n in NAMES]
     V = V[np.ix_(order, order)]
