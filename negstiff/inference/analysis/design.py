@@ -297,7 +297,7 @@ def _information(state: PosteriorState, candidate: Candidate, limits: Limits, th
     # The sensor's noise alone: the posterior's likelihood also carries the input's noise through each window's
     # response (``Windows.set_input_noise``), which changed the predicted widths by 0.2 % on a 20 s record
     # (measured) and cost three times the rest of the evaluation.
-    sigma = math.sqrt(float(np.sum(at[0] ** 2)) / win.dof)
+    sigma = math.sqrt(win.mean_square(at[0]))
     # The sandwich read where the posterior reads it, at the record's MAP point (one Gauss-Newton step from the
     # draw): there the parameters have taken up what the sensor chain's systematic error (the integrated
     # accelerometer's) resembles, and the windows' scores are smaller. Read at the draw itself, the inflation was

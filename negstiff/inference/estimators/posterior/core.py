@@ -575,7 +575,7 @@ class Posterior(Estimator):
             # sensor's variance re-read between them); its solution is whitened (the curvature adjustment's)
             r = sol.fun
             for _ in range(2):
-                ms = _mean_square(win, r)  # the sensor's variance or more (it holds the input's noise too)
+                ms = win.mean_square(r)  # the sensor's variance or more (it holds the input's noise too)
                 win.set_input_noise(par.to_params(theta[None])[:, 0], par.kind, np.square(s_u), ms)
                 s2 = win.noise_sigma2(r) if not joint else win.noise_sigma2_groups(r)
                 theta, sol = self._map(par, win, theta, s2)
@@ -583,11 +583,11 @@ class Posterior(Estimator):
             s2 = win.noise_sigma2(r) if not joint else win.noise_sigma2_groups(r)
             return par, win, theta, sol, (float(np.sqrt(s2)) if not joint else np.sqrt(s2))
         if joint:  # each record's own sensor noise: the MAP point weighs each record's residuals by it
-            s2 = _mean_square(win, sol.fun)
+            s2 = win.mean_square(sol.fun)
             theta, sol = self._map(par, win, theta, s2)
             r = win.residuals(win.simulate(par.to_params(theta[None]), par.kind)[0])[0].ravel()
-            return par, win, theta, sol, np.sqrt(_mean_square(win, r))
-        sigma = float(np.sqrt(np.sum(sol.fun**2) / win.dof))  # sol.fun: the projected residuals at theta
+            return par, win, theta, sol, np.sqrt(win.mean_square(r))
+        sigma = math.sqrt(win.mean_square(sol.fun))  # sol.fun: the projected residuals at theta
         return par, win, theta, sol, sigma
 
     # --- the run --------------------------------------------------------------------------------
@@ -655,9 +655,10 @@ class Posterior(Estimator):
         from negstiff.inference.analysis.record_kind import record_kind
 
         first, kind = recs[0], record_kind(recs[0]).kind
+        structure = element_of(self, first) is not None
         for r in recs[1:]:
             name = f"{r.source} (fitted with {first.source})"
-            if element_of(self, r) is not None or element_of(self, first) is not None:
+            if structure or element_of(self, r) is not None:
                 raise PosteriorError(f"{name}: several records of a structure are not fitted together yet: one "
                                      "record")  # fmt: skip
             if abs(r.fs / first.fs - 1) > 1e-9:
@@ -668,9 +669,9 @@ class Posterior(Estimator):
             if (r.mass is None) != (first.mass is None) or (r.mass is not None and first.mass is not None
                                                              and abs(r.mass / first.mass - 1) > 1e-6):  # fmt: skip
                 raise PosteriorError(f"{name}: its mass ({r.mass}) is not the first's ({first.mass}): one device")
-            if record_kind(r).kind != kind:
-                raise PosteriorError(f"{name}: a {record_kind(r).kind} record, the first a {kind} record: records "
-                                     "of one kind are fitted together")  # fmt: skip
+            if (other := record_kind(r).kind) != kind:
+                raise PosteriorError(f"{name}: a {other} record, the first a {kind} record: records of one kind are "
+                                     "fitted together")  # fmt: skip
         return recs
 
     def fit(self, rec: Measurement | list[Measurement]) -> Posterior:
@@ -837,15 +838,6 @@ def noise_names(n_records: int) -> tuple[str, ...]:
 def is_noise(name: str) -> bool:
     """Whether a posterior's parameter is a record's sensor noise (``noise_names``)."""
     return name == "sigma" or (name.startswith("sigma_") and name[6:].isdigit())
-
-
-def _mean_square(win: Windows, r: np.ndarray):
-    """The residuals' mean square per degree of freedom: a float for one record, each record's (R,) for several."""
-    if win.n_groups == 1:
-        return float(np.sum(r**2) / win.dof)
-    r = np.asarray(r).reshape(win.n_windows, -1)
-    assert win.groups is not None
-    return np.bincount(win.groups, weights=np.sum(r**2, axis=1), minlength=win.n_groups) / win.dof_groups()
 
 
 def stroke_of(rec: Measurement) -> tuple[float, float]:

@@ -54,6 +54,20 @@ def between_pulses(rec: Measurement, index: np.ndarray, window_s: float) -> np.n
     return quiet
 
 
+def _profiled_sigma2(y2: np.ndarray, lam: np.ndarray, s0: float) -> float:
+    """The sensor variance [m^2] maximising the likelihood of squared residuals ``y2`` along directions whose
+    input-noise variances are ``lam`` (each direction's variance lam + sigma^2); ``s0``, the residuals' mean square,
+    brackets the search (12 decades below it to e above).
+    """
+
+    def nll(log_s2):
+        v = lam + np.exp(log_s2)
+        return float(np.sum(np.log(v) + y2 / v))
+
+    sol = minimize_scalar(nll, bounds=(np.log(s0) - 12.0, np.log(s0) + 1.0), method="bounded")
+    return float(np.exp(sol.x))
+
+
 @dataclass
 class Windows:
     """Multiple-shooting windows of a record."""
@@ -423,19 +437,14 @@ class Windows:
         assert self.noise_var is not None
         return ((self.noise_basis @ r[:, :, None])[:, :, 0] / np.sqrt(self.noise_var + s2)).ravel()
 
-    def noise_sigma2_groups(self, r: np.ndarray) -> np.ndarray:
-        """``noise_sigma2`` of each record's windows (a joint fit): (R,)."""
+    def mean_square(self, r: np.ndarray):
+        """The projected residuals' (``r``: (W L,)) mean square per degree of freedom: a float for one record's
+        windows, each record's (R,) for several.
+        """
         if self.groups is None:
-            return np.array([self.noise_sigma2(r)])
-        r = np.asarray(r).reshape(self.n_windows, -1)
-        out = []
-        for g in range(self.n_groups):
-            sub = Windows(self.dt, self.input_kind, self.u[self.groups == g], self.z[self.groups == g],
-                          self.x0[self.groups == g], proj=None if self.proj is None else self.proj[self.groups == g],
-                          noise_basis=None if self.noise_basis is None else self.noise_basis[self.groups == g],
-                          noise_var=None if self.noise_var is None else self.noise_var[self.groups == g])  # fmt: skip
-            out.append(sub.noise_sigma2(r[self.groups == g].ravel()))
-        return np.array(out)
+            return float(np.sum(r**2) / self.dof)
+        rows = np.sum(np.asarray(r).reshape(self.n_windows, -1) ** 2, axis=1)
+        return np.bincount(self.groups, weights=rows, minlength=self.n_groups) / self.dof_groups()
 
     def noise_sigma2(self, r: np.ndarray) -> float:
         """The sensor noise variance [m^2] that maximises the likelihood of the projected residuals ``r``
@@ -444,16 +453,23 @@ class Windows:
         if self.noise_basis is None:
             return float(np.sum(r**2) / self.dof)
         assert self.noise_var is not None
-        y2 = ((self.noise_basis @ r.reshape(self.n_windows, self.length, 1))[:, :, 0]) ** 2
-        lam = self.noise_var
+        return _profiled_sigma2(self._noise_y2(r), self.noise_var, float(np.sum(r**2) / self.dof))
 
-        def nll(log_s2):
-            v = lam + np.exp(log_s2)
-            return float(np.sum(np.log(v) + y2 / v))
+    def noise_sigma2_groups(self, r: np.ndarray) -> np.ndarray:
+        """``noise_sigma2`` of each record's windows (a joint fit): (R,)."""
+        ms = np.atleast_1d(self.mean_square(r))
+        if self.noise_basis is None:
+            return ms
+        assert self.noise_var is not None
+        y2 = self._noise_y2(r)
+        groups = np.zeros(self.n_windows, int) if self.groups is None else self.groups
+        return np.array([_profiled_sigma2(y2[groups == g], self.noise_var[groups == g], float(ms[g]))
+                         for g in range(self.n_groups)])  # fmt: skip
 
-        s0 = float(np.sum(r**2) / self.dof)
-        sol = minimize_scalar(nll, bounds=(np.log(s0) - 12.0, np.log(s0) + 1.0), method="bounded")
-        return float(np.exp(sol.x))
+    def _noise_y2(self, r: np.ndarray) -> np.ndarray:
+        """The squared residuals along each window's input-noise eigenbasis: (W, L - 2)."""
+        assert self.noise_basis is not None
+        return ((self.noise_basis @ r.reshape(self.n_windows, self.length, 1))[:, :, 0]) ** 2
 
     def residuals(self, zsim: np.ndarray) -> np.ndarray:
         """Residuals with the start-state directions projected out: (P, W, L)."""
