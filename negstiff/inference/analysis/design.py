@@ -30,9 +30,9 @@ from __future__ import annotations
 
 import math
 import numbers
+import os
 import time
 from dataclasses import dataclass, field, replace
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -613,15 +613,10 @@ def design_figure(result: dict[str, Any]):
 
 
 def _state_of(posterior) -> PosteriorState:
-    import json
+    if isinstance(posterior, (str, os.PathLike)):
+        from negstiff.files import read_json  # one line for a missing, oversized or broken file
 
-    if isinstance(posterior, (str, Path)):
-        path = Path(posterior)
-        try:
-            res = json.loads(path.read_text())
-        except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
-            raise InputError(f"{path}: not a readable posterior result ({type(exc).__name__})") from None
-        return PosteriorState.from_json(res, str(path))
+        return PosteriorState.from_json(read_json(posterior, "posterior result"), str(posterior))
     if isinstance(posterior, dict):
         return PosteriorState.from_json(posterior)
     if hasattr(posterior, "result") and callable(posterior.result):
