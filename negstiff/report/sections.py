@@ -656,7 +656,7 @@ def design_section(res: dict[str, Any], label: str = "") -> Section:
     if ref not in shown:
         shown.append(ref)
     for r in shown:
-        name = r["test"] + (" (the rig's default)" if r is ref else "")
+        name = r["test"] + (" (the rig's default)" if r["test"] == ref["test"] else "")
         rows.append([name, r["score"], *[r["predicted_width"][n] for n in targets],
                      r["cost"]["peak_table_acc_m_s2"], 1e3 * r["cost"]["peak_table_disp_m"],
                      r["cost"]["draws_visiting_both_wells"]])  # fmt: skip
