@@ -44,6 +44,19 @@ from .table import integrate_twice, table_motion
 TAIL_S = 4.0
 """Seconds acquired after the last record and discarded, as the settling time is before it: the
 double integration's end effects stay out of the records."""
+RAMP_DOWN_S = 3.0
+"""A sine test's ramp-down to rest [s], within the discarded tail (``_ended``)."""
+RAMP_UP_S = 2.0
+"""A sine test's ramp-up from rest [s] where its first settling time allows (``_ramp_up``)."""
+
+
+def _ramp_up(period_s: float, settle_s: float, fsim: float) -> int:
+    """Samples of a sine test's first ramp-up from rest: ``RAMP_UP_S``, within half the first settling time, and
+    two periods at least. A two-period ramp set the table moving slowly where the lab's integral (high-passed at
+    1 Hz) cannot see: a 10 s record of a 9 Hz, 10 m/s^2 harmonic after ten settling periods read z 0.078 mm off,
+    2.7 times the laser's noise (measured).
+    """
+    return int(round(max(2 * period_s, min(RAMP_UP_S, 0.5 * settle_s)) * fsim))
 
 
 @dataclass(frozen=True)
@@ -107,6 +120,20 @@ def _smooth_steps(levels: Sequence[float], step_samples, ramp_samples, start: fl
         ramp = 0.5 - 0.5 * np.cos(np.pi * np.arange(r) / r)
         env[s : s + r] = a0 + (a1 - a0) * ramp
     return env
+
+
+def _ended(env: np.ndarray, n_total: int, ramp_samples: int) -> np.ndarray:
+    """``env`` held at its last level up to ``n_total`` samples, then brought to zero by a raised cosine over its
+    last ``ramp_samples``, as a shaker controller ends a sine test (its ramp-down). The table's motion is the FFT's
+    periodic integral of the drive (``table.table_motion``): a drive that stopped at full amplitude and wrapped to
+    its silent start carried a slow table motion below the lab's integration high-pass, so the lab's z (laser minus
+    the table accelerometer's double integral) was off by millimetres (a 9 Hz harmonic at 10 m/s^2: 0.68 mm rms,
+    23 times the laser's noise; a 2-40 Hz sweep at 10 m/s^2: 4.7 mm; measured).
+    """
+    out = np.pad(env, (0, n_total - env.size), mode="edge")
+    r = min(ramp_samples, n_total - env.size)
+    out[n_total - r :] *= 0.5 + 0.5 * np.cos(np.pi * np.arange(r) / r)
+    return out
 
 
 BYTES_PER_SAMPLE = 200
@@ -288,7 +315,12 @@ class Rig:
         acc[n_settle:] = sine_sweep(
             t[n_settle:] - t[n_settle], phi=phi0, freq_start=f_start, sweep_rate=rate, mode=mode
         )
-        acc *= amplitude
+        # the controller's ramp-up over the first half of the settling time and its ramp-down in the discarded
+        # tail (``_ended``): the drive's ends meet at rest, so the table's motion has no slow part the lab's
+        # integration misses
+        n_up = n_settle // 2
+        acc[:n_up] *= 0.5 - 0.5 * np.cos(np.pi * np.arange(n_up) / max(n_up, 1))
+        acc *= amplitude * _ended(np.ones(n_settle + n_sweep), n, int(round(RAMP_DOWN_S * fsim)))
         excitation = {
             "type": "sine_sweep",
             "f_start_hz": f_start,
@@ -332,7 +364,9 @@ class Rig:
         record_periods: int = 100,
     ) -> list[RigRecord]:
         """Step the harmonic amplitude through ``amplitudes`` without stopping the table, as a lab
-        does (up or down by their order); one record per step, its settling time discarded.
+        does (up or down by their order); one record per step, its settling time discarded. The first step ramps
+        up from rest (``_ramp_up``), each next one over two periods, and the test ramps down to rest in the
+        discarded tail (``_ended``).
         """
         return self.sweeps(freq, [amplitudes], [start], settle_periods, record_periods)[0]
 
@@ -354,10 +388,11 @@ class Rig:
         exc_rng, sens_rng = self._streams()
         phase = exc_rng.uniform(0, 2 * np.pi)
         accs, settles, durations = [], [], []
+        first_ramp = _ramp_up(period, settle_periods * period, fsim)
         for amps in amplitude_lists:
-            env = _smooth_steps(amps, step_n, ramp_n)
+            env = _smooth_steps(amps, step_n, [first_ramp] + [ramp_n] * (len(amps) - 1))
             n_fast = sp_fft.next_fast_len(env.size + int(TAIL_S * fsim), real=True)  # see random()
-            env = np.pad(env, (0, n_fast - env.size), mode="edge")
+            env = _ended(env, n_fast, int(round(RAMP_DOWN_S * fsim)))
             t = np.arange(env.size) / fsim
             accs.append(env * np.sin(2 * np.pi * freq * t + phase))
             settles.append([i * step_n / fsim + settle_periods * period for i in range(len(amps))])
@@ -406,7 +441,8 @@ class Rig:
         ``amplitude`` [m/s^2] x sin(phase), its frequency stepped through each list without stopping the
         table (the phase continuous, each new frequency reached by a raised-cosine ramp over two periods of
         the slower one); one record per step, ``record_periods`` of its own period after ``settle_periods``;
-        all sweeps in one batched simulation.
+        all sweeps in one batched simulation. The test ramps up from rest (``_ramp_up``) and down to rest in the
+        discarded tail (``_ended``), as a controller runs it.
         """
         self.check_stepped_sines(freq_lists, amplitude, starts, settle_periods, record_periods)
         fsim = self.fs * self.oversample
@@ -418,10 +454,10 @@ class Rig:
             edges = np.concatenate([[0], np.cumsum(lengths)])
             ramps = [int(round(2 / min(f0, f1) * fsim)) for f0, f1 in zip([freqs[0], *freqs[:-1]], freqs, strict=False)]
             f_inst = _smooth_steps(freqs, lengths, ramps, start=freqs[0])
-            env = _smooth_steps([amplitude], f_inst.size, int(round(2 / freqs[0] * fsim)))
+            env = _smooth_steps([amplitude], f_inst.size, _ramp_up(1 / freqs[0], settle_periods / freqs[0], fsim))
             n_fast = sp_fft.next_fast_len(f_inst.size + int(TAIL_S * fsim), real=True)  # see random()
             f_inst = np.pad(f_inst, (0, n_fast - f_inst.size), mode="edge")
-            env = np.pad(env, (0, n_fast - env.size), mode="edge")
+            env = _ended(env, n_fast, int(round(RAMP_DOWN_S * fsim)))
             accs.append(env * np.sin(phase0 + 2 * np.pi * np.cumsum(f_inst) / fsim))
             settles.append([edges[k] / fsim + settle_periods / f for k, f in enumerate(freqs)])
             durations.append([record_periods / f for f in freqs])
