@@ -25,6 +25,7 @@ from typing import Any
 import numpy as np
 
 from negstiff.errors import InputError
+from negstiff.inference.analysis.periodicity import harmonic_frequency
 
 from .document import Report
 
@@ -40,27 +41,6 @@ DECAY = ("nsi", "sindy", "posterior", "discrepancy", "backbone")
 the backbone measured and the identified model's, with the posterior's credible band."""
 SECTIONS = (*BROADBAND, *HARMONIC, *CAMPAIGN, "backbone", "interval")
 """Every analysis a report may hold (``only`` chooses among them)."""
-
-HARMONIC_SHARE = 0.9
-"""A record whose input puts this share of its power in one spectral line (and its two neighbouring bins) is
-harmonic: a shaker at one frequency. A random, swept or multisine input spreads it."""
-
-
-def harmonic_frequency(rec) -> float | None:
-    """The forcing frequency [Hz] of a harmonic record (``HARMONIC_SHARE`` of the input's power in one line,
-    refined by least squares), else None.
-    """
-    from negstiff.inference.analysis.periodicity import refine_frequency
-
-    u = rec.u - rec.u.mean()
-    spec = np.abs(np.fft.rfft(u * np.hanning(u.size))) ** 2
-    if spec.sum() <= 0:
-        return None
-    k = int(np.argmax(spec[1:])) + 1
-    if spec[max(k - 2, 0) : k + 3].sum() < HARMONIC_SHARE * spec.sum():
-        return None
-    return refine_frequency(u, rec.t - rec.t0, k * rec.fs / u.size, rec.fs / u.size)
-
 
 SECTION_ALIASES = {"characterize": "characterise"}
 """An analysis's other spellings ``only`` takes: the command's alias (``negstiff characterize``) names its section."""

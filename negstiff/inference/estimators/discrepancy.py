@@ -846,6 +846,7 @@ class Discrepancy(StructureResults, Estimator):
                 raise DiscrepancyError("Discrepancy(unnamed=True): the non-parametric force is a single DOF's (a "
                                        f"record of {rec.n_dof} DOFs)")  # fmt: skip
         from negstiff.inference.analysis.record_kind import check_decay, record_kind
+        from negstiff.inference.estimators.identification import refuse_one_orbit
 
         kind = record_kind(rec).kind
         if kind in ("impact", "decay") and element_of(self, rec) is not None:
@@ -858,6 +859,8 @@ class Discrepancy(StructureResults, Estimator):
         rec.require(4000, "the discrepancy workflow")
         if kind != "decay":  # a free decay has no input: its response must ring down instead
             rec.require_excitation("the discrepancy workflow")
+            if element_of(self, rec) is None:
+                refuse_one_orbit(rec, "the discrepancy workflow")
         else:
             check_decay(rec, "the discrepancy workflow")
         rec.require_motion("the discrepancy workflow")

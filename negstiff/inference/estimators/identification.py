@@ -332,6 +332,23 @@ QUICK_TERMS = ("1", "z", "z^2", "z^3", "v", "v|v|")
 """The quick fit's library: the model file's own polynomial and damping."""
 
 
+def refuse_one_orbit(rec: Measurement, method: str) -> None:
+    """Refuse (``InputError``, one line, before any work) a harmonic record whose response is periodic
+    (``periodicity.steady_orbit``): one orbit at one frequency shows the restoring force and damping along it
+    alone, so a fit's coefficients would be numbers the record does not hold. The report gives such a record its
+    characterisation alone, for the same reason.
+    """
+    from negstiff.inference.analysis.periodicity import steady_orbit
+
+    orbit = steady_orbit(rec)
+    if orbit is not None:
+        raise InputError(
+            f"{rec.source}: {method} refused before its work: {orbit}: one orbit at one frequency shows the "
+            "restoring force and damping along it alone, not their coefficients apart; identify a random or swept "
+            "record of the device, or characterise this one (negstiff characterise)"
+        )
+
+
 def refuse_softening(rec: Measurement, n_id: int, method: str) -> None:
     """Refuse, in a fraction of a second, a record whose plain weak-form least-squares cubic (``QUICK_TERMS``
     over the identification part) softens (k3 <= 0): no bounded double- or single-well model explains it, and
@@ -509,6 +526,7 @@ class Identifier(Estimator):
             kind = record_kind(rec)
             if kind.kind not in ("impact", "decay"):
                 rec.require_response(type(self).__name__)
+                refuse_one_orbit(rec, type(self).__name__)
             read = identification_record(rec, kind)
             n_id = int(round(read.n * (1 - self.validation_fraction)))
             # a softening quick cubic refuses here where the cubic is asked for, or where no law could hold the
