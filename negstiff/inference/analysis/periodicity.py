@@ -41,6 +41,7 @@
 from __future__ import annotations
 
 import math
+import warnings
 from dataclasses import dataclass
 from typing import Any
 
@@ -718,7 +719,11 @@ def steady_orbit(rec: Measurement) -> str | None:
     if f_hz is None:
         return None
     try:
-        found = periodicity(rec, f_hz)
+        # a check's only output is its refusal: the analysis's own warnings (and scipy 1.16's sosfiltfilt's
+        # DeprecationWarning under numpy 2.5) are the characterisation's to say, not the identification's
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            found = periodicity(rec, f_hz)
     except MeasurementError:  # too few cycles to tell: not judged here
         return None
     if found["period"] is None:
