@@ -333,19 +333,18 @@ QUICK_TERMS = ("1", "z", "z^2", "z^3", "v", "v|v|")
 
 
 def refuse_one_orbit(rec: Measurement, method: str) -> None:
-    """Refuse (``InputError``, one line, before any work) a harmonic record whose response is periodic
-    (``periodicity.steady_orbit``): one orbit at one frequency shows the restoring force and damping along it
-    alone, so a fit's coefficients would be numbers the record does not hold. The report gives such a record its
-    characterisation alone, for the same reason.
+    """Refuse (``InputError``, one line, before any work) a harmonic record whose response is one nearly sinusoidal
+    periodic orbit (``periodicity.steady_orbit``): its restoring force's nonlinearity shows only through small
+    harmonics, and a fit's coefficients would be numbers the record does not hold.
     """
     from negstiff.inference.analysis.periodicity import steady_orbit
 
     orbit = steady_orbit(rec)
     if orbit is not None:
         raise InputError(
-            f"{rec.source}: {method} refused before its work: {orbit}: one orbit at one frequency shows the "
-            "restoring force and damping along it alone, not their coefficients apart; identify a random or swept "
-            "record of the device, or characterise this one (negstiff characterise)"
+            f"{rec.source}: {method} refused before its work: {orbit}: such an orbit shows the restoring force and "
+            "damping near one amplitude alone, not their coefficients apart; identify a random or swept record of "
+            "the device, or one that drives it across both wells, or characterise this one (negstiff characterise)"
         )
 
 
