@@ -207,13 +207,19 @@ def identification_section(est, label: str = "") -> Section:
     sec.stroke = (float(q[0]), float(q[-1])) if q.size >= 2 else None
     if refined:
         sec.estimates[_with_label(f"{name}, its own estimate", label)] = effective(r.initial_model)
-    rows = [[w, m.get("f_hz"), None if m.get("zeta") is None else 100 * m["zeta"]] for w, m in r.modal.items()]
+    final = r.details.get("modal_of_model") or {}
+
+    def _pct(m):
+        return None if m.get("zeta") is None else 100 * m["zeta"]
+
+    rows = [[w, m.get("f_hz"), _pct(m), final.get(w, {}).get("f_hz"), _pct(final.get(w, {}))]
+            for w, m in r.modal.items()]  # fmt: skip
     sec.text(
-        "Each well's underlying-linear system ("
-        + ("NSI: its subspace step" if r.method == "nsi" else "the model linearised")
-        + "; reference study Table 1):"
+        "Each well's underlying-linear system, by the method's own step ("
+        + ("NSI: its subspace step" if r.method == "nsi" else "its equation-error model linearised")
+        + "; reference study Table 1) and by the final model linearised:"
     )
-    sec.table(["well", "f [Hz]", "zeta [%]"], rows)
+    sec.table(["well", "own f [Hz]", "own zeta [%]", "final f [Hz]", "final zeta [%]"], rows)
     per_kg = bool(r.mass_normalised)  # no mass given: every coefficient the device's over its moving mass
     units = coefficient_units(per_kg)
     mass_col = [] if per_kg else ["m [kg]"]
@@ -254,9 +260,17 @@ def identification_section(est, label: str = "") -> Section:
     _law_blocks(sec, r, name)
     for w in r.warnings:
         sec.warning(w)
-    wells = ", ".join(f"{w} {mm['f_hz']:.4g} Hz (zeta {100 * mm['zeta']:.3g} %)" for w, mm in r.modal.items()
+    # the summary's wells are the final model's (the one written, refined where it was); the method's own estimate
+    # beside them where it differs by more than 5 %: on an in-well sweep SINDy's own put a 8.25 Hz well at 4.8 Hz
+    # and its refined model at 8.26 Hz (measured), and the summary said 4.8
+    said = final if any(m.get("f_hz") for m in final.values()) else r.modal
+    wells = ", ".join(f"{w} {mm['f_hz']:.4g} Hz (zeta {100 * mm['zeta']:.3g} %)" for w, mm in said.items()
                       if mm.get("f_hz"))  # fmt: skip
-    sec.summary.append(f"{col} finds the wells at {wells or 'none'}; held-out error {fmt(held, 3)} % of rms z.")
+    apart = [f"{w} {m['f_hz']:.4g} Hz" for w, m in r.modal.items() if m.get("f_hz") and said.get(w, {}).get("f_hz")
+             and abs(m["f_hz"] / said[w]["f_hz"] - 1) > 0.05]  # fmt: skip
+    own_said = f" (its own step's estimate: {', '.join(apart)})" if apart and said is final else ""
+    sec.summary.append(f"{col}'s model has its wells at {wells or 'none'}{own_said}; held-out error {fmt(held, 3)} % "
+                       "of rms z.")  # fmt: skip
     sec.json = r.to_json()
     return sec
 
