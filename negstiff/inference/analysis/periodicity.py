@@ -723,7 +723,7 @@ def _harmonic_share(rec: Measurement, f_hz: float, start_s: float) -> float:
     keep = t >= start_s
     w = 2 * np.pi * f_hz * t[keep]
     cols = [np.ones(w.size)] + [fn(k * w) for k in range(1, 7) for fn in (np.cos, np.sin)]
-    coef = np.linalg.lstsq(np.column_stack(cols), rec.z[keep], rcond=None)[0]
+    coef = np.linalg.lstsq(np.column_stack(cols), rec.displacement[keep], rcond=None)[0]
     amp = np.hypot(coef[1::2], coef[2::2])
     return float(np.sqrt(np.sum(amp[1:] ** 2)) / max(amp[0], 1e-300))
 
