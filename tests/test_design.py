@@ -72,6 +72,21 @@ def test_a_table_stroke_makes_low_frequency_tests_infeasible(posterior_json):
             assert r["cost"]["peak_table_disp_m"] <= 0.005
 
 
+def test_a_risky_chosen_test_is_warned_about_and_a_stated_stroke_is_not(posterior_json):
+    # a design made without a table stroke warns when its chosen test moves the table beyond 12.5 mm (half a
+    # mid-size shaker's inch): on this record the chosen test moves it about 26 mm (measured); stating the shaker's
+    # stroke takes the warning away (the test then within it), and the warnings are the result's too
+    from negstiff import NegstiffWarning
+
+    with pytest.warns(NegstiffWarning, match="no table stroke was stated"):
+        res = design(posterior_json, candidates=8, draws=2, seed=0)
+    stroke = res["best"]["cost"]["peak_table_disp_m"]
+    assert stroke > 0.0125 and any("no table stroke was stated" in w for w in res["warnings"])
+    stated = design(posterior_json, candidates=8, draws=2, seed=0, max_table_disp=0.1)
+    assert not any("table stroke" in w for w in stated["warnings"])
+    assert stated["best"]["cost"]["peak_table_disp_m"] <= 0.1
+
+
 def test_the_command_writes_the_library_s_design_and_its_figure(posterior_json, designed, tmp_path, capsys):
     out = tmp_path / "design.json"
     argv = ["design", str(posterior_json), "-o", str(out), "--candidates", "8", "--draws", "2", "--quiet"]
@@ -82,7 +97,9 @@ def test_the_command_writes_the_library_s_design_and_its_figure(posterior_json, 
     lib = design(posterior_json, candidates=8, draws=2, seed=0)
     assert res["best"] == lib["best"] and res["ranked"] == lib["ranked"] and res["targets"] == list(lib["targets"])
     assert (tmp_path / "design.png").stat().st_size > 10_000
-    capsys.readouterr()
+    # the result's warnings are said on stderr too, even with --quiet
+    err = capsys.readouterr().err
+    assert res["warnings"] == lib["warnings"] and all(f"WARNING: {w}" in err for w in res["warnings"]), err
 
 
 @pytest.mark.parametrize(

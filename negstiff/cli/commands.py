@@ -586,6 +586,7 @@ def cmd_design(args) -> int:
     result = design(args.posterior, **run)
     result["figure"] = write_figure(design_figure(result), args.out)
     write_json(args.out, result)
+    warn(args, result["warnings"])
     best = result["best"]
     say(args, f"wrote {args.out}: next test {best['test']}, targets' intervals {best['score']:.3g}x narrower "
               f"(the default random test: {result['default_test']['score']:.3g}x)")  # fmt: skip

@@ -686,6 +686,8 @@ def design_section(res: dict[str, Any], label: str = "") -> Section:
                  f"{infeasible[0]['problems'][0]}).")  # fmt: skip
     for a in res.get("assumptions", []):
         sec.text(f"Assumed: {a}.")
+    for w in res.get("warnings", []):
+        sec.warning(w)
     sec.summary.append(f"What to test next: {best['test']}, predicted to narrow the intervals of {', '.join(targets)} "
                        f"{best['score']:.3g}x (the rig's default random test: {ref['score']:.3g}x).")  # fmt: skip
     sec.json = res

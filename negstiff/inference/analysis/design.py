@@ -32,12 +32,13 @@ import math
 import numbers
 import os
 import time
+import warnings
 from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
 
-from negstiff.errors import InputError
+from negstiff.errors import InputError, NegstiffWarning
 from negstiff.inference.estimators.posterior.windows import PosteriorError
 
 COEFFICIENTS = ("k1", "k2", "k3", "c", "c_nl")
@@ -504,8 +505,12 @@ def design(posterior, *, targets=None, duration: float | None = None, max_table_
         raise InputError("no candidate test lies within the limits (every one " + ranked[0].problems[0] + "): "
                          "widen the table's limits or the device's stroke")  # fmt: skip
     rows = [e.to_json(state.widths) for e in ranked]
+    risks = _risks(rows[0], limits)
+    for text in risks:
+        warnings.warn(text, NegstiffWarning, stacklevel=2)
     return {
         "targets": list(targets),
+        "warnings": risks,
         "hdi_prob": state.hdi_prob,
         "criterion": {
             "name": f"expected shrinkage of the targets' {100 * state.hdi_prob:g} % intervals (geometric mean of "
@@ -546,6 +551,39 @@ def design(posterior, *, targets=None, duration: float | None = None, max_table_
             "posterior": state.source,
         },  # fmt: skip
     }
+
+
+UNSTATED_TABLE_STROKE = 0.0125
+"""The table displacement [m, peak] beyond which a design made without a stated table stroke warns: half of a mid-size
+electrodynamic shaker's 25 mm (1 inch) peak-to-peak stroke. Long-stroke tables reach 150 mm, small shakers 10 mm:
+the user's ``max_table_disp`` decides, and the warning asks for it."""
+WIDTH_SPREAD_WARNING = 3.0
+"""A chosen test whose predicted width of a target differs by this factor between the posterior's draws (the
+widest over the narrowest) is said to depend on where the truth lies within the posterior."""
+
+
+def _risks(best: dict[str, Any], limits: Limits) -> list[str]:
+    """What could make the first-ranked test teach less than the design says, or not run: draws that cross to the
+    other well beside draws that do not (the record's regime depends on where the truth lies), a predicted width
+    that differs widely between the draws, and a table stroke the user did not bound.
+    """
+    cost, out = best["cost"], []
+    both = cost.get("draws_visiting_both_wells", 0.0)
+    if 0.0 < both < 1.0:
+        out.append(f"the chosen test ({best['test']}) visits both wells in {100 * both:.0f} % of the posterior's "
+                   "draws and stays in one well in the rest: what it teaches depends on where the truth lies (a "
+                   "run that stays in the first record's well teaches little new)")  # fmt: skip
+    spread = {n: hi / lo for n, (lo, hi) in cost.get("width_spread", {}).items() if lo > 0}
+    wide = {n: r for n, r in spread.items() if r > WIDTH_SPREAD_WARNING}
+    if wide:
+        out.append(f"the chosen test's predicted widths differ between the posterior's draws by up to "
+                   f"{max(wide.values()):.3g}x ({', '.join(sorted(wide))}): the expected shrinkage is an average over "
+                   "outcomes this far apart")  # fmt: skip
+    disp = cost.get("peak_table_disp_m")
+    if limits.max_table_disp is None and disp is not None and disp > UNSTATED_TABLE_STROKE:
+        out.append(f"the chosen test moves the table {1e3 * disp:.3g} mm (peak) and no table stroke was stated: "
+                   "give the shaker's (max_table_disp, --table-stroke) if it has less")  # fmt: skip
+    return out
 
 
 def prepared(posterior, *, targets=None, duration: float | None = None, max_table_acc: float = DEFAULT_MAX_ACC,
