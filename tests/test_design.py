@@ -72,6 +72,17 @@ def test_a_table_stroke_makes_low_frequency_tests_infeasible(posterior_json):
             assert r["cost"]["peak_table_disp_m"] <= 0.005
 
 
+def test_a_sensor_range_makes_tests_it_cannot_read_infeasible(posterior_json):
+    # the laser on the moving part reads the device's motion and the table's together: with a 30 mm range, every
+    # feasible test's reading spans at most 30 mm, and the tests that would span more are refused by name
+    res = design(posterior_json, sensor_range=0.03, **QUICK)
+    assert res["settings"]["sensor_range_m"] == 0.03
+    for r in res["ranked"]:
+        if r["feasible"]:
+            assert r["cost"]["sensor_span_m"] <= 0.03
+    assert any("displacement sensor" in p for r in res["ranked"] for p in r["problems"])
+
+
 def test_a_risky_chosen_test_is_warned_about_and_a_stated_stroke_is_not(posterior_json):
     # a design made without a table stroke warns when its chosen test moves the table beyond 12.5 mm (half a
     # mid-size shaker's inch): on this record the chosen test moves it about 26 mm (measured); stating the shaker's
@@ -109,6 +120,7 @@ def test_the_command_writes_the_library_s_design_and_its_figure(posterior_json, 
         (["--target", "sigma"], "not a parameter"),
         (["--stroke", "1e-5"], "noise"),
         (["--stroke", "0.003"], "inside the well"),
+        (["--sensor-range", "1e-5"], "noise"),
         (["--duration", "0.2"], "shorter than 4"),
     ],
 )

@@ -577,6 +577,7 @@ def cmd_design(args) -> int:
         max_table_acc=args.max_acc,
         max_table_disp=args.table_stroke,
         stroke=args.stroke,
+        sensor_range=args.sensor_range,
         candidates=args.candidates,
         draws=args.draws,
         seed=args.seed,

@@ -603,6 +603,9 @@ def _design(sub, common: argparse.ArgumentParser, data_opts: argparse.ArgumentPa
     dsg.add_argument("--table-stroke", type=POSITIVE, help="the table's peak displacement [m] (default: no limit)")
     dsg.add_argument("--stroke", type=POSITIVE, help="the device's travel from its saddle to a stop [m]: a test that "
                      "reaches it is infeasible (default: no stop)")  # fmt: skip
+    dsg.add_argument("--sensor-range", type=POSITIVE, help="the displacement sensor's measuring range [m]: a test "
+                     "whose reading (the device's and the table's motion) spans more is infeasible (default: no "
+                     "range)")  # fmt: skip
     dsg.add_argument("--candidates", type=number(int, 4), default=50, help="grid candidates (default 50)")
     dsg.add_argument("--draws", type=number(int, 1), default=16, help="posterior draws per candidate (default 16)")
     dsg.set_defaults(func=c.cmd_design)

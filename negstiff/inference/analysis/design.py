@@ -57,14 +57,16 @@ BAND = (2.0, 40.0)
 @dataclass(frozen=True)
 class Limits:
     """What the lab's rig can do: the record's duration [s], the peak table acceleration [m/s^2] and displacement
-    [m] (None: no limit stated), and the device's travel [m] (its largest excursion from the saddle before a stop;
-    None: no stop).
+    [m] (None: no limit stated), the device's travel [m] (its largest excursion from the saddle before a stop;
+    None: no stop), and the displacement sensor's measuring range [m] (the span its reading may cover: the laser on
+    the moving part reads the device's motion and the table's together; None: no range stated).
     """
 
     duration_s: float
     max_table_acc: float = DEFAULT_MAX_ACC
     max_table_disp: float | None = None
     stroke: float | None = None
+    sensor_range: float | None = None
 
 
 @dataclass(frozen=True)
@@ -270,6 +272,8 @@ def _information(state: PosteriorState, candidate: Candidate, limits: Limits, th
         "peak_table_acc_m_s2": float(np.max(np.abs(rec.true["base_acc"]))),
         "peak_table_disp_m": float(np.max(np.abs(rec.true["base_disp"]))),
         "peak_travel_m": float(np.max(np.abs(z - centre))),
+        # the span the laser on the moving part reads (the device's motion and the table's)
+        "sensor_span_m": float(np.ptp(z + np.asarray(rec.true["base_disp"]))),
         "other_well_share": float(np.mean(np.sign(z - centre) != np.sign(eq.z_plus - centre))),
     }
     m = Measurement.from_rig(rec)
@@ -355,6 +359,9 @@ def evaluate(state: PosteriorState, candidate: Candidate, limits: Limits, target
                         f"{1e3 * limits.max_table_disp:g} mm")  # fmt: skip
     if cost["duration_s"] > limits.duration_s * (1 + 1e-6):
         problems.append(f"its record lasts {cost['duration_s']:.3g} s, beyond the {limits.duration_s:g} s asked")
+    if limits.sensor_range is not None and cost["sensor_span_m"] > limits.sensor_range:
+        problems.append(f"the displacement sensor would read a {1e3 * cost['sensor_span_m']:.3g} mm span, beyond its "
+                        f"{1e3 * limits.sensor_range:g} mm range")  # fmt: skip
     if limits.stroke is not None and cost["peak_travel_m"] > limits.stroke:
         problems.append(f"the device travels {1e3 * cost['peak_travel_m']:.3g} mm from its saddle, beyond its "
                         f"{1e3 * limits.stroke:g} mm stroke (a stop)")  # fmt: skip
@@ -439,8 +446,8 @@ def _search(state, limits, targets, draws, seed, start: Evaluation, budget: int,
 
 
 def design(posterior, *, targets=None, duration: float | None = None, max_table_acc: float = DEFAULT_MAX_ACC,
-           max_table_disp: float | None = None, stroke: float | None = None, candidates: int = 50,
-           draws: int = 16, search: int = 12, seed: int = 0) -> dict[str, Any]:  # fmt: skip
+           max_table_disp: float | None = None, stroke: float | None = None, sensor_range: float | None = None,
+           candidates: int = 50, draws: int = 16, search: int = 12, seed: int = 0) -> dict[str, Any]:  # fmt: skip
     """The tests ranked by what they would teach (module docstring).
 
     Parameters
@@ -455,6 +462,9 @@ def design(posterior, *, targets=None, duration: float | None = None, max_table_
         The table's peak acceleration [m/s^2] and displacement [m] (None: no displacement limit stated).
     stroke : float, optional
         The device's travel from its saddle to a stop [m]; a test that reaches it is infeasible.
+    sensor_range : float, optional
+        The displacement sensor's measuring range [m]: a test whose reading (the device's and the table's motion
+        together, for the rig's laser on the moving part) spans more is infeasible.
     candidates : int
         Grid candidates before the continuous search.
     draws : int
@@ -482,7 +492,7 @@ def design(posterior, *, targets=None, duration: float | None = None, max_table_
     t0 = time.perf_counter()
     state = _state_of(posterior)
     targets = _targets(targets)
-    limits = _limits(state, duration, max_table_acc, max_table_disp, stroke)
+    limits = _limits(state, duration, max_table_acc, max_table_disp, stroke, sensor_range)
     _counts(candidates=candidates, draws=draws, search=search, seed=seed)
     th = state.draws(int(draws), int(seed))
     evaluated = [evaluate(state, c, limits, targets, th, int(seed)) for c in _grid(state, limits, int(candidates))]
@@ -544,6 +554,7 @@ def design(posterior, *, targets=None, duration: float | None = None, max_table_
             "max_table_acc_m_s2": limits.max_table_acc,
             "max_table_disp_m": limits.max_table_disp,
             "stroke_m": limits.stroke,
+            "sensor_range_m": limits.sensor_range,
             "candidates": candidates,
             "draws": draws,
             "search": search,
@@ -587,17 +598,17 @@ def _risks(best: dict[str, Any], limits: Limits) -> list[str]:
 
 
 def prepared(posterior, *, targets=None, duration: float | None = None, max_table_acc: float = DEFAULT_MAX_ACC,
-             max_table_disp: float | None = None, stroke: float | None = None, candidates: int = 50, draws: int = 16,
-             search: int = 12, seed: int = 0) -> dict[str, Any]:  # fmt: skip
+             max_table_disp: float | None = None, stroke: float | None = None, sensor_range: float | None = None,
+             candidates: int = 50, draws: int = 16, search: int = 12, seed: int = 0) -> dict[str, Any]:  # fmt: skip
     """Every check ``design`` makes before its work (the posterior, the targets, the limits, the counts), in a
     fraction of a second: one ``InputError`` for the first bad input. Returns ``design``'s keyword arguments.
     """
     state = _state_of(posterior)
-    _limits(state, duration, max_table_acc, max_table_disp, stroke)
+    _limits(state, duration, max_table_acc, max_table_disp, stroke, sensor_range)
     _counts(candidates=candidates, draws=draws, search=search, seed=seed)
     return {"targets": _targets(targets), "duration": duration, "max_table_acc": max_table_acc,
-            "max_table_disp": max_table_disp, "stroke": stroke, "candidates": candidates, "draws": draws,
-            "search": search, "seed": seed}  # fmt: skip
+            "max_table_disp": max_table_disp, "stroke": stroke, "sensor_range": sensor_range,
+            "candidates": candidates, "draws": draws, "search": search, "seed": seed}  # fmt: skip
 
 
 def _counts(**counts) -> None:
@@ -675,10 +686,11 @@ def _targets(targets) -> tuple[str, ...]:
     return tuple(dict.fromkeys(names))
 
 
-def _limits(state: PosteriorState, duration, max_acc, max_disp, stroke) -> Limits:
+def _limits(state: PosteriorState, duration, max_acc, max_disp, stroke, sensor_range=None) -> Limits:
     dur = state.duration_s if duration is None else duration
-    for name, v in (("duration", dur), ("max_table_acc", max_acc), ("max_table_disp", max_disp)):
-        if v is None and name == "max_table_disp":
+    for name, v in (("duration", dur), ("max_table_acc", max_acc), ("max_table_disp", max_disp),
+                    ("sensor_range", sensor_range)):  # fmt: skip
+        if v is None and name in ("max_table_disp", "sensor_range"):
             continue
         if isinstance(v, bool) or not isinstance(v, numbers.Real) or not math.isfinite(v) or v <= 0:
             raise InputError(f"{name} must be a positive number, got {v!r}")
@@ -698,5 +710,9 @@ def _limits(state: PosteriorState, duration, max_acc, max_disp, stroke) -> Limit
         if stroke <= abs(eq.z_plus - centre):
             raise InputError(f"stroke {1e3 * stroke:g} mm: inside the well the device rests in "
                              f"({1e3 * abs(eq.z_plus - centre):.3g} mm from its saddle)")  # fmt: skip
+    if sensor_range is not None and sensor_range <= 3 * state.sigma:
+        raise InputError(f"sensor_range {sensor_range:g} m: within 3x the laser's noise ({state.sigma:.3g} m): no "
+                         "motion the record could read")  # fmt: skip
     return Limits(float(dur), float(max_acc), None if max_disp is None else float(max_disp),
-                  None if stroke is None else float(stroke))  # fmt: skip
+                  None if stroke is None else float(stroke),
+                  None if sensor_range is None else float(sensor_range))  # fmt: skip
