@@ -45,8 +45,8 @@ def design_check(seeds=SEEDS, duration: float = DURATION) -> dict:
                "now": plan["now"], "predicted": best["predicted_width"],
                "predicted_default": plan["default_test"]["predicted_width"]}  # fmt: skip
         for name, test in (("designed", chosen), ("default", Candidate("random", DEFAULT_RANDOM_RMS))):
-            second = Measurement.from_rig(test.run(Rig(SEED_LIKE_CUBIC, seed=100 + seed), duration))
-            joint = Posterior(seed=0).fit([first, second]).result()["parameters"]
+            nexts = [Measurement.from_rig(r) for r in test.records(Rig(SEED_LIKE_CUBIC, seed=100 + seed), duration)]
+            joint = Posterior(seed=0).fit([first, *nexts]).result()["parameters"]
             row[name] = {k: joint[k]["hdi_high"] - joint[k]["hdi_low"] for k in plan["now"]}
             row[name + "_truth_inside"] = int(sum(joint[k]["hdi_low"] <= getattr(SEED_LIKE_CUBIC, k)
                                                   <= joint[k]["hdi_high"] for k in plan["now"]))  # fmt: skip

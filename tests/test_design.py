@@ -83,6 +83,22 @@ def test_a_sensor_range_makes_tests_it_cannot_read_infeasible(posterior_json):
     assert any("displacement sensor" in p for r in res["ranked"] for p in r["problems"])
 
 
+def test_a_stepped_campaign_is_a_candidate_whose_records_share_the_duration(posterior_json):
+    # the reference study's practice: harmonic steps at one frequency, the table not stopped. Its four records share
+    # the duration asked (each step's whole periods), their information adds, and the rows say the steps
+    from negstiff.inference.analysis.design import Candidate, Limits, _state_of, evaluate
+
+    state = _state_of(posterior_json)
+    camp = Candidate("campaign", 40.0, 9.0)
+    ev = evaluate(state, camp, Limits(duration_s=state.duration_s), ("k1", "k3"), state.draws(2, 0), 0)
+    assert ev.feasible and ev.score > 1.0
+    assert state.duration_s - 4 / 9.0 <= ev.cost["duration_s"] <= state.duration_s
+    row = ev.to_json(state.widths)
+    assert row["steps_m_s2"] == pytest.approx([10.0, 20.0, 30.0, 40.0]) and "stepped campaign 9 Hz" in row["test"]
+    res = design(posterior_json, **QUICK)
+    assert any(r["kind"] == "campaign" for r in res["ranked"])
+
+
 def test_a_risky_chosen_test_is_warned_about_and_a_stated_stroke_is_not(posterior_json):
     # a design made without a table stroke warns when its chosen test moves the table beyond 12.5 mm (half a
     # mid-size shaker's inch): on this record the chosen test moves it about 26 mm (measured); stating the shaker's

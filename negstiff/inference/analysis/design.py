@@ -52,6 +52,11 @@ DEFAULT_MAX_ACC = 80.0
 """Default peak table acceleration [m/s^2] (8 g: a small electrodynamic shaker's with a 0.2 kg device)."""
 BAND = (2.0, 40.0)
 """The random test's band and the sweep's start and stop [Hz] (the rig's default excitation band)."""
+CAMPAIGN_STEPS = 4
+"""A stepped campaign's amplitude steps (``level`` / 4, / 2, 3 / 4, ``level``) at one frequency, the duration shared
+between their records, as the reference study stepped its harmonic campaign."""
+SINUSOIDAL = ("harmonic", "campaign")
+"""The kinds set by an amplitude and a frequency (searched over both; drawn over both)."""
 
 
 @dataclass(frozen=True)
@@ -72,7 +77,8 @@ class Limits:
 @dataclass(frozen=True)
 class Candidate:
     """One test the rig can run: ``kind`` random (``level`` the table acceleration's rms over ``BAND``), harmonic
-    (``level`` its amplitude at ``freq``) or sweep (``level`` the amplitude of a linear sweep over ``BAND``).
+    (``level`` its amplitude at ``freq``), sweep (``level`` the amplitude of a linear sweep over ``BAND``) or campaign
+    (``CAMPAIGN_STEPS`` harmonic steps at ``freq`` up to ``level``, one record each, the table not stopped).
     """
 
     kind: str
@@ -88,15 +94,29 @@ class Candidate:
             # was 2.1 mm off (the table's slow motion the lab's 1 Hz integration misses), after 1.5 s 0.29 mm
             return rig.sine_sweep(f_start=BAND[0], f_stop=BAND[1], amplitude=self.level, duration=duration,
                                   settle=3.0)  # fmt: skip
-        assert self.freq is not None
+        assert self.freq is not None and self.kind == "harmonic", "a campaign is several records: ``records``"
         periods = int(math.floor(duration * self.freq + 1e-9))  # whole periods within the duration
         return rig.harmonic(freq=self.freq, amplitude=self.level, settle_periods=10, record_periods=max(periods, 1))
+
+    def amplitudes(self) -> list[float]:
+        """A campaign's steps [m/s^2]."""
+        return [self.level * (k + 1) / CAMPAIGN_STEPS for k in range(CAMPAIGN_STEPS)]
+
+    def records(self, rig, duration: float) -> list:
+        """The rig's records of this test: one, or a campaign's one per step (``duration`` shared between them, each
+        step's whole periods after ten of settling).
+        """
+        if self.kind != "campaign":
+            return [self.run(rig, duration)]
+        assert self.freq is not None
+        periods = max(2, int(math.floor(duration * self.freq / CAMPAIGN_STEPS + 1e-9)))
+        return rig.sweep(self.freq, self.amplitudes(), settle_periods=10, record_periods=periods)
 
     def table_disp_bound(self) -> float:
         """The table's peak displacement [m] a sinusoidal test asks for (its lowest frequency's A / w^2)."""
         if self.kind == "random":
             return 0.0  # a random run's is read from its record (``evaluate``)
-        f = self.freq if self.kind == "harmonic" and self.freq is not None else BAND[0]
+        f = self.freq if self.kind in SINUSOIDAL and self.freq is not None else BAND[0]
         return self.level / (2 * math.pi * f) ** 2
 
     def describe(self) -> str:
@@ -105,6 +125,8 @@ class Candidate:
             return f"random {self.level:.3g} m/s^2 rms, {BAND[0]:g}-{BAND[1]:g} Hz"
         if self.kind == "sweep":
             return f"linear sine sweep {BAND[0]:g}-{BAND[1]:g} Hz at {self.level:.3g} m/s^2"
+        if self.kind == "campaign":
+            return f"stepped campaign {self.freq:.3g} Hz, {CAMPAIGN_STEPS} steps to {self.level:.3g} m/s^2"
         return f"harmonic {self.freq:.3g} Hz at {self.level:.3g} m/s^2"
 
     def to_json(self) -> dict[str, Any]:
@@ -116,6 +138,8 @@ class Candidate:
             out.update(amplitude_m_s2=self.level, f_start_hz=BAND[0], f_stop_hz=BAND[1])
         else:
             out.update(amplitude_m_s2=self.level, freq_hz=self.freq)
+            if self.kind == "campaign":
+                out["steps_m_s2"] = self.amplitudes()
         return out
 
 
@@ -251,31 +275,47 @@ class Evaluation:
 
 
 def _information(state: PosteriorState, candidate: Candidate, limits: Limits, theta: np.ndarray, seed: int):
-    """The information (over ``NAMES``) one record of ``candidate`` under the parameters ``theta`` would carry, as the
-    posterior reads it (module docstring), and what the run costs.
+    """The information (over ``NAMES``) the records of ``candidate`` under the parameters ``theta`` would carry, as
+    the posterior reads them (module docstring), and what the run costs.
     """
-    from negstiff.inference.estimators.posterior.likelihood import curvature_adjustment
-    from negstiff.inference.estimators.posterior.parametrisation import coefficient_parametrisation
-    from negstiff.inference.estimators.posterior.windows import Windows
-    from negstiff.inference.record.measurement import Measurement
     from negstiff.models.rig import Rig, Sensors
 
     model = state.model_at(theta)
     sensors = Sensors(laser_noise=state.sigma, acc_noise=max(state.input_noise, 1e-9))
     rig = Rig(model, sensors=sensors, fs=state.fs, seed=seed)
-    rec = candidate.run(rig, limits.duration_s)
+    recs = candidate.records(rig, limits.duration_s)
     eq = model.equilibria()
-    z = np.asarray(rec.true["z"])
     centre = eq.z_0 if eq.z_0 is not None else eq.z_plus
+    zs = [np.asarray(r.true["z"]) for r in recs]
+    z_all = np.concatenate(zs)
     cost = {
-        "duration_s": float(len(z) / state.fs),
-        "peak_table_acc_m_s2": float(np.max(np.abs(rec.true["base_acc"]))),
-        "peak_table_disp_m": float(np.max(np.abs(rec.true["base_disp"]))),
-        "peak_travel_m": float(np.max(np.abs(z - centre))),
+        "duration_s": float(z_all.size / state.fs),
+        "peak_table_acc_m_s2": max(float(np.max(np.abs(r.true["base_acc"]))) for r in recs),
+        "peak_table_disp_m": max(float(np.max(np.abs(r.true["base_disp"]))) for r in recs),
+        "peak_travel_m": float(np.max(np.abs(z_all - centre))),
         # the span the laser on the moving part reads (the device's motion and the table's)
-        "sensor_span_m": float(np.ptp(z + np.asarray(rec.true["base_disp"]))),
-        "other_well_share": float(np.mean(np.sign(z - centre) != np.sign(eq.z_plus - centre))),
+        "sensor_span_m": max(float(np.ptp(z + np.asarray(r.true["base_disp"]))) for z, r in zip(zs, recs, strict=True)),
+        "other_well_share": float(np.mean(np.sign(z_all - centre) != np.sign(eq.z_plus - centre))),
     }
+    # independent records' information adds (a campaign's steps: the joint posterior reads each with its own windows)
+    total = None
+    for rec in recs:
+        info = _record_information(state, model, rec)
+        if info is None:
+            return None, cost
+        total = info if total is None else total + info
+    return total, cost
+
+
+def _record_information(state: PosteriorState, model, rec) -> np.ndarray | None:
+    """The information (over ``NAMES``) one simulated record of ``model`` carries as the posterior reads it, or None
+    where a run diverges.
+    """
+    from negstiff.inference.estimators.posterior.likelihood import curvature_adjustment
+    from negstiff.inference.estimators.posterior.parametrisation import coefficient_parametrisation
+    from negstiff.inference.estimators.posterior.windows import Windows
+    from negstiff.inference.record.measurement import Measurement
+
     m = Measurement.from_rig(rec)
     win = Windows.cut(m, state.window_s, state.max_windows)
     par = coefficient_parametrisation(model)
@@ -300,7 +340,7 @@ def _information(state: PosteriorState, candidate: Candidate, limits: Limits, th
 
     at = projected(th)
     if at is None:
-        return None, cost
+        return None
     # The sensor's noise alone: the posterior's likelihood also carries the input's noise through each window's
     # response (``Windows.set_input_noise``), which changed the predicted widths by 0.2 % on a 20 s record
     # (measured) and cost three times the rest of the evaluation.
@@ -315,7 +355,7 @@ def _information(state: PosteriorState, candidate: Candidate, limits: Limits, th
     V = V_x * np.outer(x_scale, x_scale)
     order = [par.names.index(n) for n in NAMES]
     V = V[np.ix_(order, order)]
-    return np.linalg.pinv(V, hermitian=True), cost
+    return np.linalg.pinv(V, hermitian=True)
 
 
 def evaluate(state: PosteriorState, candidate: Candidate, limits: Limits, targets: tuple[str, ...],
@@ -395,7 +435,8 @@ def _grid(state: PosteriorState, limits: Limits, n: int) -> list[Candidate]:
     f_lo, f_hi = _harmonic_band(state)
     n_r = max(2, n // 6)
     n_s = max(2, n // 8)
-    n_h = max(4, n - n_r - n_s)
+    n_c = 2 * max(1, n // 16)  # stepped campaigns: two top levels at n_c / 2 frequencies (6 of 50)
+    n_h = max(4, n - n_r - n_s - n_c)
     n_f = max(2, int(round(math.sqrt(n_h * 1.2))))
     n_a = max(2, n_h // n_f)
     top = limits.max_table_acc
@@ -403,6 +444,9 @@ def _grid(state: PosteriorState, limits: Limits, n: int) -> list[Candidate]:
     out += [Candidate("sweep", float(x)) for x in np.geomspace(top / 12, top, n_s)]
     out += [Candidate("harmonic", float(a), float(f)) for f in np.geomspace(f_lo, f_hi, n_f)
             for a in np.geomspace(top / 12, top, n_a)]  # fmt: skip
+    # stepped campaigns at the wells' frequencies and between them, to half and to the whole of the table's reach
+    freqs = np.geomspace(f_lo, f_hi, n_c // 2) if n_c > 2 else [math.sqrt(f_lo * f_hi)]
+    out += [Candidate("campaign", float(a), float(f)) for f in freqs for a in (top / 2, top)]
     return out
 
 
@@ -423,7 +467,7 @@ def _search(state, limits, targets, draws, seed, start: Evaluation, budget: int,
         return -ev.score if ev.feasible else 0.0
 
     c0 = start.candidate
-    if c0.kind in ("random", "sweep"):
+    if c0.kind not in SINUSOIDAL:
         hi = top / 3.5 if c0.kind == "random" else top
         optimize.minimize_scalar(lambda lg: run(replace(c0, level=float(math.exp(lg)))), method="bounded",
                                  bounds=(math.log(top / 40), math.log(hi)),
@@ -629,12 +673,17 @@ def design_figure(result: dict[str, Any]):
 
     rows = [r for r in result["ranked"] if r["feasible"]]
     fig, (a, b) = plt.subplots(1, 2, figsize=(10.5, 4.0), constrained_layout=True)
-    h = [r for r in rows if r["kind"] == "harmonic"]
+    h = [r for r in rows if r["kind"] in SINUSOIDAL]
     if h:
-        sc = a.scatter([r["freq_hz"] for r in h], [r["amplitude_m_s2"] for r in h], c=[r["score"] for r in h],
-                       cmap="viridis", s=36, norm=matplotlib.colors.LogNorm())  # fmt: skip
+        norm = matplotlib.colors.LogNorm(min(r["score"] for r in h), max(r["score"] for r in h))
+        for kind, mark, name in (("harmonic", "o", "harmonic"), ("campaign", "D", "stepped campaign (its top step)")):
+            k = [r for r in h if r["kind"] == kind]
+            if k:
+                sc = a.scatter([r["freq_hz"] for r in k], [r["amplitude_m_s2"] for r in k], c=[r["score"] for r in k],
+                               cmap="viridis", s=36, norm=norm, marker=mark, label=name)  # fmt: skip
         fig.colorbar(sc, ax=a, label="expected shrinkage of the targets' intervals")
-    a.set(xscale="log", yscale="log", xlabel="frequency [Hz]", ylabel="amplitude [m/s$^2$]", title="harmonic tests")
+    a.set(xscale="log", yscale="log", xlabel="frequency [Hz]", ylabel="amplitude [m/s$^2$]",
+          title="harmonic tests and stepped campaigns")  # fmt: skip
     for kind, mark in (("random", "o-"), ("sweep", "s-")):
         r = sorted((x for x in rows if x["kind"] == kind), key=lambda x: x.get("rms_m_s2") or x["amplitude_m_s2"])
         if r:
@@ -642,9 +691,9 @@ def design_figure(result: dict[str, Any]):
                    label="random (rms)" if kind == "random" else "linear sweep (amplitude)")  # fmt: skip
     best, ref = result["best"], result["default_test"]
     lvl = best.get("rms_m_s2") or best["amplitude_m_s2"]
-    (a if best["kind"] == "harmonic" else b).plot(best["freq_hz"] if best["kind"] == "harmonic" else lvl,
-                                                  lvl if best["kind"] == "harmonic" else best["score"], "r*", ms=14,
-                                                  label=f"chosen: {best['test']}")  # fmt: skip
+    sinusoidal = best["kind"] in SINUSOIDAL
+    (a if sinusoidal else b).plot(best["freq_hz"] if sinusoidal else lvl, lvl if sinusoidal else best["score"], "r*",
+                                  ms=14, label=f"chosen: {best['test']}")  # fmt: skip
     b.plot(ref["rms_m_s2"], ref["score"], "kx", ms=10, mew=2, label=f"default: {ref['test']}")
     b.set(xscale="log", yscale="log", xlabel="level [m/s$^2$]", ylabel="expected shrinkage",
           title=f"random and swept tests; targets {', '.join(result['targets'])}")  # fmt: skip
@@ -658,7 +707,7 @@ def design_figure(result: dict[str, Any]):
     if h:
         sc.colorbar.ax.yaxis.set_major_formatter(plain)
         sc.colorbar.ax.yaxis.set_minor_formatter(plain)
-    if best["kind"] == "harmonic":
+    if h:
         a.legend(fontsize=8)
     return fig
 
