@@ -318,8 +318,7 @@ class Rig:
         # the controller's ramp-up over the first half of the settling time and its ramp-down in the discarded
         # tail (``_ended``): the drive's ends meet at rest, so the table's motion has no slow part the lab's
         # integration misses
-        n_up = n_settle // 2
-        acc[:n_up] *= 0.5 - 0.5 * np.cos(np.pi * np.arange(n_up) / max(n_up, 1))
+        acc[: n_settle + n_sweep] *= _smooth_steps([1.0], n_settle + n_sweep, n_settle // 2)
         acc *= amplitude * _ended(np.ones(n_settle + n_sweep), n, int(round(RAMP_DOWN_S * fsim)))
         excitation = {
             "type": "sine_sweep",

@@ -833,7 +833,8 @@ class Discrepancy(StructureResults, Estimator):
             )
 
     def _check_record(self, rec: Measurement) -> None:
-        if element_of(self, rec) is not None:
+        at = element_of(self, rec)  # None: a single DOF's record
+        if at is not None:
             if tuple(self.baseline) != CUBIC_BASELINE:
                 raise DiscrepancyError(f"Discrepancy(baseline={self.baseline!r}): a structure's baseline is its "
                                        "element's cubic law with the linear structure (leave baseline at its "
@@ -849,7 +850,7 @@ class Discrepancy(StructureResults, Estimator):
         from negstiff.inference.estimators.identification import refuse_one_orbit
 
         kind = record_kind(rec).kind
-        if kind in ("impact", "decay") and element_of(self, rec) is not None:
+        if kind in ("impact", "decay") and at is not None:
             # a structure's ring-down is read raw by ``structure_id.discrepancy`` (its windows across the hits, no
             # ring-down blocks: a clean 2-DOF hammer record's held-out gap 12 %, measured): refused as before
             what = "a hammer's record" if kind == "impact" else "a free decay"
@@ -859,13 +860,13 @@ class Discrepancy(StructureResults, Estimator):
         rec.require(4000, "the discrepancy workflow")
         if kind != "decay":  # a free decay has no input: its response must ring down instead
             rec.require_excitation("the discrepancy workflow")
-            if element_of(self, rec) is None:
+            if at is None:
                 refuse_one_orbit(rec, "the discrepancy workflow")
         else:
             check_decay(rec, "the discrepancy workflow")
         rec.require_motion("the discrepancy workflow")
         rec.require_live_aux("the discrepancy workflow")
-        if element_of(self, rec) is None:
+        if at is None:
             self.check_length(rec)
 
     def check_length(self, rec: Measurement) -> None:
