@@ -49,8 +49,8 @@ def test_the_ranking_is_by_the_predicted_shrinkage_and_within_the_limits(designe
         shrink = [designed["now"][n] / w for n, w in r["predicted_width"].items()]
         assert r["score"] == pytest.approx(math.exp(np.mean(np.log(shrink))), rel=1e-9)
         assert r["cost"]["peak_table_acc_m_s2"] <= 80.0 + 1e-9 or r["kind"] != "random"
-        # a test teaches something or nothing, never less than nothing: the posterior only narrows
-        assert all(s >= 1 - 1e-9 for s in r["shrink"].values())
+    # the first-ranked test narrows every targeted interval
+    assert all(s > 1 for s in designed["best"]["shrink"].values())
     # every feasible test's record fits the duration asked (a harmonic: whole periods within it)
     assert all(r["cost"]["duration_s"] <= designed["settings"]["duration_s"] * (1 + 1e-6) for r in feasible)
     # the default random test is scored alike and ranked among the candidates; the first-ranked does at least as well
@@ -58,6 +58,17 @@ def test_the_ranking_is_by_the_predicted_shrinkage_and_within_the_limits(designe
     assert any(r["test"] == designed["default_test"]["test"] for r in rows)
     assert designed["best"]["score"] >= designed["default_test"]["score"] - 1e-9
     assert designed["search"]["evaluated"] > designed["search"]["grid"]  # the continuous search ran
+
+
+def test_a_posterior_without_its_laplace_parts_is_read_by_adding_each_record_s_information(posterior_json):
+    # a posterior sampled before it kept settings.laplace: the test's adjusted information is added to the
+    # posterior's precision (said in the criterion); precisions only add, so no test widens any interval there,
+    # while the joint fit's sandwich (the default) can, for a record the model reads worse than the first
+    res = json.loads(posterior_json.read_text())
+    del res["settings"]["laplace"]
+    old = design(res, **QUICK)
+    assert "sample it again" in old["criterion"]["method"]
+    assert all(s >= 1 - 1e-9 for r in old["ranked"] if r["feasible"] for s in r["shrink"].values())
 
 
 def test_a_table_stroke_makes_low_frequency_tests_infeasible(posterior_json):
@@ -101,15 +112,16 @@ def test_a_stepped_campaign_is_a_candidate_whose_records_share_the_duration(post
 
 def test_a_risky_chosen_test_is_warned_about_and_a_stated_stroke_is_not(posterior_json):
     # a design made without a table stroke warns when its chosen test moves the table beyond 12.5 mm (half a
-    # mid-size shaker's inch): on this record the chosen test moves it about 26 mm (measured); stating the shaker's
-    # stroke takes the warning away (the test then within it), and the warnings are the result's too
+    # mid-size shaker's inch): on this record the test chosen for the damping is a large harmonic that moves it
+    # about 80 mm (measured); stating the shaker's stroke takes the warning away (the test then within it), and the
+    # warnings are the result's too
     from negstiff import NegstiffWarning
 
     with pytest.warns(NegstiffWarning, match="no table stroke was stated"):
-        res = design(posterior_json, candidates=8, draws=2, seed=0)
+        res = design(posterior_json, targets=("c", "c_nl"), candidates=8, draws=2, seed=0)
     stroke = res["best"]["cost"]["peak_table_disp_m"]
     assert stroke > 0.0125 and any("no table stroke was stated" in w for w in res["warnings"])
-    stated = design(posterior_json, candidates=8, draws=2, seed=0, max_table_disp=0.1)
+    stated = design(posterior_json, targets=("c", "c_nl"), candidates=8, draws=2, seed=0, max_table_disp=0.1)
     assert not any("table stroke" in w for w in stated["warnings"])
     assert stated["best"]["cost"]["peak_table_disp_m"] <= 0.1
 
@@ -193,9 +205,6 @@ def test_the_report_of_a_base_excited_record_says_what_to_test_next(tmp_path):
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason="measured 2026-11-29: the realised widths of k1-k3 are a median 1.33-1.42 of "
-                   "the predicted (c, c_nl 1.05-1.06) for the chosen large-orbit harmonics, beyond 30 %; the ratio to "
-                   "the default test (median 16.5) is met")  # fmt: skip
 def test_the_designed_test_teaches_more_than_the_default_one_when_run_on_the_rig():
     """The acceptance: on 20 s rig records of the polynomial truth (its default random test, which stays in one
     well), the first-ranked test run on the rig and fitted jointly with the first record narrows the five

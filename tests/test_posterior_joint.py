@@ -89,6 +89,14 @@ def test_each_record_keeps_its_own_sensor_noise_and_the_records_information_adds
         predicted = (w1**-2 + w2**-2) ** -0.5
         assert wj == pytest.approx(predicted, rel=0.25), name
         assert wj < min(w1, w2), name
+    # the Laplace parts a design adds a test's to (settings.laplace): the joint fit's model information and its
+    # windows' score covariance are each record's, summed (each read at its own MAP point: the Jacobian moves with
+    # the points' difference, a few sd of a 8 s record, and the scores' spread estimates a variance to ~20 %)
+    parts = {k: fits[k]["settings"]["laplace"] for k in fits}
+    assert parts["joint"]["parameters"] == parts["quiet"]["parameters"] == ["k1", "k2", "k3", "c", "c_nl", "k0"]
+    for key, rel in (("information", 0.02), ("score_covariance", 0.25)):  # measured: 0.2 % and 8 %
+        joint, summed = (np.diag(parts["joint"][key]), np.diag(parts["quiet"][key]) + np.diag(parts["loud"][key]))
+        assert joint == pytest.approx(summed, rel=rel), (key, joint / summed)
     # the truth within 3 sd of the joint mean for every coefficient (the intervals' own calibration is
     # checked on many records elsewhere)
     for name in ("k1", "k2", "k3", "c", "c_nl"):

@@ -31,7 +31,7 @@ from negstiff.inference.estimators.posterior.diagnostics import (
     result_json,
     summarise,
 )
-from negstiff.inference.estimators.posterior.likelihood import LogPosterior, curvature_adjustment
+from negstiff.inference.estimators.posterior.likelihood import LogPosterior, information_parts, sandwich
 from negstiff.inference.estimators.posterior.parametrisation import (
     SHIFT,
     Parametrisation,
@@ -699,7 +699,14 @@ class Posterior(Estimator):
         x_scale = np.maximum(np.abs(theta), 1e-6)
         # the scores of the likelihood sampled (with the input's noise, ``sol`` holds the whitened residuals)
         sig = sigma if win.noise_basis is None and R == 1 else 1.0
-        A_x, V_x, inflation = curvature_adjustment(sol.jac, sol.fun, win.n_windows, sig, adjust=self.adjust)
+        H_x, meat_x = information_parts(sol.jac, sol.fun, win.n_windows, sig)
+        A_x, V_x, inflation = sandwich(H_x, meat_x if self.adjust else None)
+        # the two parts in the parameters' own units: what a joint fit with another record adds to (a design's
+        # prediction, ``analysis.design``)
+        unit = 1.0 / np.outer(x_scale[free], x_scale[free])
+        laplace = {"parameters": [par.names[i] for i in np.flatnonzero(free)],
+                   "information": (H_x * unit).tolist(),
+                   "score_covariance": None if meat_x is None else (meat_x * unit).tolist()}  # fmt: skip
         cov = np.zeros((theta.size, theta.size))
         cov[np.ix_(free, free)] = V_x * np.outer(x_scale[free], x_scale[free])
         for i, sd in par.fixed_sd.items():  # the likelihood does not see them: the prior's scale
@@ -763,6 +770,7 @@ class Posterior(Estimator):
             "curvature_adjustment": self.adjust,
             "input_noise": dict(self.input_noise_),
             "variance_inflation": [round(float(v), 3) for v in inflation],
+            "laplace": laplace,
             "windows_dropped": [{"start_s": t, "rms_m": r} for t, r in win.dropped],
             "samples_used": int(win.n_windows * win.length),
             "walkers": self.walkers(nd),

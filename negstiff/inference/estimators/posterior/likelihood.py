@@ -34,16 +34,36 @@ def curvature_adjustment(J: np.ndarray, r: np.ndarray, n_windows: int, sigma: fl
     Returns (A, V_a, inflation): A and V_a in x coordinates, inflation the clipped eigenvalues (the
     variance factors the adjustment applied, 1 where none).
     """
+    H, meat = information_parts(J, r, n_windows, sigma)
+    return sandwich(H, meat if adjust else None)
+
+
+def information_parts(J: np.ndarray, r: np.ndarray, n_windows: int, sigma: float):
+    """The model's information H = J^T J / sigma^2 and the windows' score covariance (the sandwich's meat, with the
+    small-sample factor W / (W - p); None where there are too few windows to estimate it), ``curvature_adjustment``'s
+    two parts. Independent records' parts add: a joint fit's sandwich is ``sandwich(H_1 + H_2, M_1 + M_2)``, not
+    the sum of each record's adjusted information (the joint estimate weights the records by H, not by what each
+    really carries), which is what a design must predict (``analysis.design``).
+    """
     p = J.shape[1]
     H = J.T @ J / sigma**2
+    if n_windows <= p + 1:
+        return H, None
+    scores = np.einsum("wlp,wl->wp", J.reshape(n_windows, -1, p), r.reshape(n_windows, -1)) / sigma**2
+    return H, scores.T @ scores * n_windows / (n_windows - p)
+
+
+def sandwich(H: np.ndarray, meat: np.ndarray | None):
+    """The curvature adjustment of ``curvature_adjustment`` from its parts (``information_parts``): (A, V_a,
+    inflation); ``meat`` None gives the model's own covariance H^-1 (no adjustment).
+    """
+    p = H.shape[0]
     lam_h, U_h = np.linalg.eigh(H)
     lam_h = np.maximum(lam_h, 1e-12 * lam_h.max())
     H_half = (U_h * np.sqrt(lam_h)) @ U_h.T
     H_inv_half = (U_h / np.sqrt(lam_h)) @ U_h.T
-    if not adjust or n_windows <= p + 1:
+    if meat is None:
         return np.eye(p), H_inv_half @ H_inv_half, np.ones(p)
-    scores = np.einsum("wlp,wl->wp", J.reshape(n_windows, -1, p), r.reshape(n_windows, -1)) / sigma**2
-    meat = scores.T @ scores * n_windows / (n_windows - p)
     lam, U = np.linalg.eigh(H_inv_half @ meat @ H_inv_half)  # = H^1/2 V_s H^1/2
     lam = np.maximum(lam, 1.0)
     V = H_inv_half @ (U * lam) @ U.T @ H_inv_half
