@@ -584,7 +584,7 @@ def cmd_design(args) -> int:
     )  # fmt: skip  (every refusal before the work)
     say(args, f"design: {args.candidates} candidate tests x {args.draws} posterior draws, targets "
               f"{', '.join(run['targets'])}")  # fmt: skip
-    result = design(args.posterior, **run)
+    result = design(**run)  # the posterior as ``prepared`` read it
     result["figure"] = write_figure(design_figure(result), args.out)
     write_json(args.out, result)
     warn(args, result["warnings"])

@@ -550,8 +550,9 @@ def design(posterior, *, targets=None, duration: float | None = None, max_table_
 
     Parameters
     ----------
-    posterior : Posterior, dict or path
-        A fitted coefficient ``Posterior`` of a base-excited record, its ``result()``, or its JSON file.
+    posterior : Posterior, dict, path or PosteriorState
+        A fitted coefficient ``Posterior`` of a base-excited record, its ``result()``, its JSON file, or the state
+        ``prepared`` read from one.
     targets : sequence of str, optional
         The parameters to pin down (among k1, k2, k3, c, c_nl; default all).
     duration : float, optional
@@ -705,12 +706,13 @@ def prepared(posterior, *, targets=None, duration: float | None = None, max_tabl
              max_table_disp: float | None = None, stroke: float | None = None, sensor_range: float | None = None,
              candidates: int = 50, draws: int = 16, search: int = 12, seed: int = 0) -> dict[str, Any]:  # fmt: skip
     """Every check ``design`` makes before its work (the posterior, the targets, the limits, the counts), in a
-    fraction of a second: one ``InputError`` for the first bad input. Returns ``design``'s keyword arguments.
+    fraction of a second: one ``InputError`` for the first bad input. Returns ``design``'s arguments, the
+    posterior as read (``design(**prepared(...))`` reads its file once).
     """
     state = _state_of(posterior)
     _limits(state, duration, max_table_acc, max_table_disp, stroke, sensor_range)
     _counts(candidates=candidates, draws=draws, search=search, seed=seed)
-    return {"targets": _targets(targets), "duration": duration, "max_table_acc": max_table_acc,
+    return {"posterior": state, "targets": _targets(targets), "duration": duration, "max_table_acc": max_table_acc,
             "max_table_disp": max_table_disp, "stroke": stroke, "sensor_range": sensor_range,
             "candidates": candidates, "draws": draws, "search": search, "seed": seed}  # fmt: skip
 
@@ -773,6 +775,8 @@ def design_figure(result: dict[str, Any]):
 
 
 def _state_of(posterior) -> PosteriorState:
+    if isinstance(posterior, PosteriorState):  # read already (``prepared``)
+        return posterior
     if isinstance(posterior, (str, os.PathLike)):
         from negstiff.files import read_json  # one line for a missing, oversized or broken file
 
