@@ -23,12 +23,15 @@ def _broadband(seed: int, duration: float = 24.0) -> np.ndarray:
     return z + NOISE * rng.standard_normal(n)
 
 
-def test_a_short_records_corner_is_where_its_band_ends_not_a_noise_bin_beyond_it():
-    # A 24 s record's Welch PSD averages five segments: its noise bins scatter, and now and then one stands 4x above
-    # the floor far beyond the band. Read as the corner, it made the test functions 4-8 samples wide instead of 21
-    # (in 3 of these 40 seeds: 107, 150 and 250 Hz; on the rig's 24 s random records in 2 of 5, whose held-out weak
-    # residual was then the laser's noise). The corner is where the 2-40 Hz response ends, in every seed.
-    corners = [half_width(_broadband(seed), FS) for seed in range(40)]
+@pytest.mark.parametrize("duration", [8.0, 12.0, 19.2, 24.0])
+def test_a_short_records_corner_is_where_its_band_ends_not_a_noise_bin_beyond_it(duration):
+    # A short record's Welch PSD averages few segments (one at 8 s, three at 19.2 s, five at 24 s): its noise bins
+    # scatter, and some stand 4x above the floor far beyond the band. Read as the corner (the last bin 4x above
+    # it), they made the test functions 4-8 samples wide instead of 21: at 24 s in 3 of these 40 seeds (107-250
+    # Hz), at 8 s in all 40 (220-256 Hz); with pairs of bins 4x above it, still in 10 of 40 at 19.2 s and 39 at
+    # 12 s (measured). On the rig's 24 s random records the held-out weak residual was then the laser's noise. The
+    # corner is where the 2-40 Hz response ends, in every seed.
+    corners = [half_width(_broadband(seed, duration), FS) for seed in range(40)]
     assert all(38.0 <= fc <= 45.0 for _, fc in corners), [fc for _, fc in corners]
     assert {half for half, _ in corners} == {21}
 
