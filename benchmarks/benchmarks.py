@@ -682,6 +682,15 @@ def _design_section(quick: bool) -> tuple[list[str], dict]:
     return design_section(res), res
 
 
+def _separation_section(quick: bool) -> tuple[list[str], dict]:
+    """Telling two effects apart, checked against the rig (``separation_check``): 2 seeds with ``quick``."""
+    from .design_check import separation_check, separation_section
+
+    print("separation check...", file=sys.stderr)
+    res = separation_check((1, 2) if quick else (1, 2, 3, 4, 5))
+    return separation_section(res), res
+
+
 SECTIONS: dict[str, Any] = {
     "waits": lambda quick, out: (waits_section(quick), None),
     "simulator": lambda quick, out: _simulator_section(quick),
@@ -691,6 +700,7 @@ SECTIONS: dict[str, Any] = {
     "continuation": lambda quick, out: _continuation_section(quick),
     "refinement": lambda quick, out: _refinement_section(quick),
     "design": lambda quick, out: _design_section(quick),
+    "separation": lambda quick, out: _separation_section(quick),
     "peers": lambda quick, out: (peers_section(quick), None),
     "scaling": lambda quick, out: (
         scaling_section(

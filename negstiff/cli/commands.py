@@ -568,8 +568,18 @@ def write_figure(fig, out: str) -> str:
 
 
 def cmd_design(args) -> int:
-    from negstiff.inference.analysis.design import design, design_figure, prepared
+    from negstiff.inference.analysis.design import design, design_figure, prepared, separation
 
+    if args.separate is not None:
+        run = prepared(args.posterior, duration=args.duration, max_table_acc=args.max_acc)  # the posterior's checks
+        say(args, f"design: which random test tells apart the effects {args.separate} ranked first")
+        result = separation(run["posterior"], args.separate, duration=args.duration, max_table_acc=args.max_acc,
+                            seed=args.seed)  # fmt: skip
+        write_json(args.out, result)
+        best = result["best"]
+        say(args, f"wrote {args.out}: {best['test']} tells them apart with {best['information_bits']:.2f} bits "
+                  f"(the default random test: {result['default_test']['information_bits']:.2f})")  # fmt: skip
+        return 0
     run = prepared(
         args.posterior,
         targets=args.target,

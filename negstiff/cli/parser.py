@@ -608,6 +608,10 @@ def _design(sub, common: argparse.ArgumentParser, data_opts: argparse.ArgumentPa
                      "range)")  # fmt: skip
     dsg.add_argument("--candidates", type=number(int, 4), default=50, help="grid candidates (default 50)")
     dsg.add_argument("--draws", type=number(int, 1), default=16, help="posterior draws per candidate (default 16)")
+    dsg.add_argument("--separate", metavar="DISCREPANCY.json", help="instead, the test that tells apart the two "
+                     "effects the discrepancy workflow ranked first on the first record (its result JSON): random "
+                     "tests ranked by the information the workflow's verdict carries about which is "
+                     "present")  # fmt: skip
     dsg.set_defaults(func=c.cmd_design)
 
 

@@ -702,6 +702,160 @@ def _risks(best: dict[str, Any], limits: Limits) -> list[str]:
     return out
 
 
+SEPARATION_LEVELS = (3.0, 4.5, 6.0, 9.0, 14.0, 20.0, 28.0)
+"""The random tests' levels [m/s^2 rms] a separation compares (the rig's default test, 14, among them): friction
+shows at low levels, where it is a larger part of the damping, cubic damping at high ones."""
+
+
+def separation(posterior, discrepancy=None, *, hypotheses: dict[str, Any] | None = None,
+               duration: float | None = None, max_table_acc: float = DEFAULT_MAX_ACC,
+               levels: tuple[float, ...] = SEPARATION_LEVELS, records: int = 4,
+               seed: int = 0) -> dict[str, Any]:  # fmt: skip
+    """Which test tells two competing effects apart: the discrepancy workflow's runners-up on the first record
+    (the first two catalogue effects of its first round, each with the size its fit gave), or ``hypotheses``
+    ({effect: size}).
+
+    Each hypothesis is the posterior's mean model with that effect at that size. For each candidate test (random
+    at ``levels``, within ``max_table_acc`` at its peak) and each hypothesis, ``records`` records are written by the
+    virtual rig with the posterior's noise (the same seeds for every candidate) and read by the workflow itself
+    (``Discrepancy(offer_laws=False)``); its verdict (the effect named first, ``none``, another effect, or a
+    refusal) is the test's outcome. The criterion is the information the verdict carries about which hypothesis
+    is true, I(H; verdict) in bits with the hypotheses equally likely (1 bit: the verdict always tells them
+    apart), the model-discrimination design's expected information about the model indicator (Box and Hill 1967,
+    Technometrics 9(1), 57-71; Drovandi, McGree and Pettitt 2014, J. Comput. Graph. Stat. 23(1), 3-24), each
+    hypothesis's chance of being named beside it. Returns ``{"hypotheses", "criterion", "ranked", "best",
+    "default_test", "settings"}``. What it assumes: the posterior's mean model carries the effect on top of its
+    damping (the posterior was fitted without it), and the workflow's verdict on a simulated record is what it
+    would say on the lab's.
+    """
+    import dataclasses
+
+    from negstiff.inference.estimators.discrepancy import Discrepancy
+    from negstiff.inference.record.measurement import Measurement
+    from negstiff.models.rig import Rig, Sensors
+
+    state = _state_of(posterior)
+    hyp = _hypotheses(discrepancy, hypotheses)
+    limits = _limits(state, duration, max_table_acc, None, None)
+    _counts(records=records, seed=seed)
+    if not levels or any(not (math.isfinite(v) and v > 0) for v in levels):
+        raise InputError(f"levels {levels!r}: random tests' rms levels must be positive")
+    t0 = time.perf_counter()
+    sensors = Sensors(laser_noise=state.sigma, acc_noise=max(state.input_noise, 1e-9))
+    base = state.model_at(state.mean)
+    rows: list[dict[str, Any]] = []
+    for level in sorted(set(levels) | {DEFAULT_RANDOM_RMS}):
+        cand = Candidate("random", float(level))
+        outcomes: dict[str, dict[str, float]] = {}
+        peak = 0.0
+        for h, size in hyp.items():
+            model = dataclasses.replace(base, extra={h: size})
+            seen: dict[str, float] = {}
+            for r in range(records):
+                rec = cand.run(Rig(model, sensors=sensors, fs=state.fs, seed=seed + r), limits.duration_s)
+                peak = max(peak, float(np.max(np.abs(rec.true["base_acc"]))))
+                try:
+                    named = Discrepancy(offer_laws=False).fit(Measurement.from_rig(rec)).result()["effects"]
+                    verdict = named[0] if named and named[0] in hyp or named == ["none"] else "another effect"
+                except (InputError, ValueError, ArithmeticError):
+                    verdict = "refused"
+                seen[verdict] = seen.get(verdict, 0.0) + 1.0 / records
+            outcomes[h] = seen
+        bits = _verdict_information(outcomes)
+        problems = [] if peak <= limits.max_table_acc else [
+            f"peak table acceleration {peak:.3g} m/s^2 above the table's {limits.max_table_acc:g} m/s^2"]  # fmt: skip
+        rows.append({"kind": "random", "test": cand.describe(), "rms_m_s2": float(level), "band_hz": list(BAND),
+                     "information_bits": bits, "outcomes": outcomes,
+                     "names_right": {h: outcomes[h].get(h, 0.0) for h in hyp},
+                     "cost": {"duration_s": limits.duration_s, "peak_table_acc_m_s2": peak},
+                     "feasible": not problems, "problems": problems})  # fmt: skip
+    # equally informative tests (to the 0.01 bit: four records' verdicts are coarse) in favour of the one that names
+    # the leading hypothesis (the workflow's first-ranked) when it is true: it tells them apart by naming the likelier
+    # effect, not by naming its rival
+    lead = next(iter(hyp))
+
+    def rank(r: dict[str, Any]) -> tuple:
+        right = r["names_right"]
+        return (
+            not r["feasible"],
+            -round(float(r["information_bits"]), 2),
+            -right[lead],
+            -float(np.mean(list(right.values()))),
+        )
+
+    rows.sort(key=rank)
+    default = next(r for r in rows if r["rms_m_s2"] == DEFAULT_RANDOM_RMS)
+    return {
+        "hypotheses": hyp,
+        "criterion": {
+            "name": "information the discrepancy workflow's verdict carries about which effect is present [bits]",
+            "method": f"each hypothesis (the posterior's mean model with the effect) run through each test on the "
+            f"virtual rig, {records} records each, read by Discrepancy(offer_laws=False); I(H; verdict) with the "
+            "hypotheses equally likely",
+            "references": [
+                "Box and Hill 1967, Technometrics 9(1) 57-71",
+                "Drovandi, McGree and Pettitt 2014, J. Comput. Graph. Stat. 23(1) 3-24",
+            ],
+        },  # fmt: skip
+        "ranked": rows,
+        "best": rows[0],
+        "default_test": default,
+        "settings": {
+            "duration_s": limits.duration_s,
+            "max_table_acc_m_s2": limits.max_table_acc,
+            "levels_m_s2": sorted(set(levels) | {DEFAULT_RANDOM_RMS}),
+            "records": records,
+            "seed": seed,
+            "seconds": time.perf_counter() - t0,
+            "posterior": state.source,
+        },  # fmt: skip
+    }
+
+
+def _hypotheses(discrepancy, hypotheses) -> dict[str, Any]:
+    """The two effects a separation compares, with their sizes: given, or the discrepancy result's (its dict or
+    file) first two catalogue effects of its first round; one ``InputError`` otherwise.
+    """
+    from negstiff.models import effects
+
+    if hypotheses is None:
+        if discrepancy is None:
+            raise InputError("a separation needs the discrepancy's result on the first record or hypotheses "
+                             "({effect: size})")  # fmt: skip
+        if isinstance(discrepancy, (str, os.PathLike)):
+            from negstiff.files import read_json
+
+            discrepancy = read_json(discrepancy, "discrepancy result")
+        try:
+            ranking = discrepancy["iterations"][0]["ranking"]
+        except (KeyError, IndexError, TypeError):
+            raise InputError("not a discrepancy result (no iterations[0].ranking)") from None
+        hypotheses = {r["effect"]: r["size"] for r in ranking if r.get("size") is not None}
+        hypotheses = dict(list(hypotheses.items())[:2])
+        if len(hypotheses) < 2:
+            raise InputError("the discrepancy result ranks fewer than two catalogue effects with a size (a result "
+                             "written before rankings kept sizes: run it again)")  # fmt: skip
+    known = set(effects.names())
+    bad = [h for h in hypotheses if h not in known]
+    if bad or len(hypotheses) != 2:
+        raise InputError(f"hypotheses {list(hypotheses)}: two of the catalogue's effects ({', '.join(sorted(known))})")
+    return dict(hypotheses)
+
+
+def _verdict_information(outcomes: dict[str, dict[str, float]]) -> float:
+    """I(H; verdict) [bits] with the hypotheses equally likely, from each hypothesis's verdict frequencies."""
+    hs = list(outcomes)
+    verdicts = {v for o in outcomes.values() for v in o}
+    bits = 0.0
+    for v in verdicts:
+        p_v = float(np.mean([outcomes[h].get(v, 0.0) for h in hs]))
+        for h in hs:
+            p = outcomes[h].get(v, 0.0)
+            if p > 0:
+                bits += p / len(hs) * math.log2(p / p_v)
+    return bits
+
+
 def prepared(posterior, *, targets=None, duration: float | None = None, max_table_acc: float = DEFAULT_MAX_ACC,
              max_table_disp: float | None = None, stroke: float | None = None, sensor_range: float | None = None,
              candidates: int = 50, draws: int = 16, search: int = 12, seed: int = 0) -> dict[str, Any]:  # fmt: skip
@@ -719,7 +873,7 @@ def prepared(posterior, *, targets=None, duration: float | None = None, max_tabl
 
 def _counts(**counts) -> None:
     for name, v in counts.items():
-        lo = {"candidates": 4, "draws": 1, "search": 0, "seed": 0}[name]
+        lo = {"candidates": 4, "draws": 1, "search": 0, "seed": 0, "records": 1}[name]
         if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < lo:
             raise InputError(f"{name} must be a whole number >= {lo}, got {v!r}")
 

@@ -688,6 +688,23 @@ class Discrepancy(StructureResults, Estimator):
                 model = Model(**{**model.to_dict(), "extra": extra})
         return model
 
+    def _size_of(self, rec: Measurement, cand: Candidate) -> dict[str, Any]:
+        """A ranked effect's size as its fit on the scoring part has it (``{"size": ...}``; the model's entry for
+        it), for a catalogue effect that scored; nothing for the baseline, a law or a channel. What a test
+        design takes as each hypothesis (``analysis.design.separation``).
+        """
+        if (cand.effect == "none" or cand.coefficients is None or not math.isfinite(cand.heldout_percent)
+                or law_of(cand.effect) is not None or cand.effect.startswith(effects.AUX_PREFIX)):  # fmt: skip
+            return {}
+        try:
+            size = self._model(cand.coefficients, rec, cand.stop, cand.aux, cand.law).extra.get(cand.effect)
+        except (ValueError, ArithmeticError):
+            return {}
+        if size is None:
+            return {}
+        # a stop's {"k", "z"} is the model's read-only mapping: a plain dict of floats, as JSON and pickle take it
+        return {"size": {k: float(v) for k, v in size.items()} if hasattr(size, "items") else float(size)}
+
     def _score(self, rec: Measurement, cand: Candidate) -> Candidate:
         W, y = self._design(rec, 0, self.n_fit_, cand.stop, cand.aux, cand.law)
         coef = self._fit(W, y, cand.terms, cand.stop is not None, len(cand.aux), cand.law)
@@ -1006,6 +1023,7 @@ class Discrepancy(StructureResults, Estimator):
                         "effect": c.effect,
                         **c.notes,  # an inf (a run that diverged) is JSON's None, as written
                         "score": c.heldout_percent if math.isfinite(c.heldout_percent) else None,
+                        **self._size_of(rec, c),
                     }
                     for c in ranking
                 ],  # fmt: skip
