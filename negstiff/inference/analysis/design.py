@@ -230,6 +230,15 @@ class PosteriorState:
                              "(both wells' frequencies place its harmonics)")  # fmt: skip
         return out
 
+    def rig(self, model, seed: int):
+        """The virtual rig running ``model`` with the noise the posterior found (the laser's sigma, the
+        accelerometer's noise), at the record's rate.
+        """
+        from negstiff.models.rig import Rig, Sensors
+
+        sensors = Sensors(laser_noise=self.sigma, acc_noise=max(self.input_noise, 1e-9))
+        return Rig(model, sensors=sensors, fs=self.fs, seed=seed)
+
     def model_at(self, theta: np.ndarray):
         """The polynomial model of the parameters ``theta`` (over ``NAMES``) with the posterior's mass."""
         from negstiff.models import Model
@@ -287,12 +296,8 @@ def _information(state: PosteriorState, candidate: Candidate, limits: Limits, th
     """The information (over ``NAMES``) the records of ``candidate`` under the parameters ``theta`` would carry, as
     the posterior reads them (module docstring), and what the run costs.
     """
-    from negstiff.models.rig import Rig, Sensors
-
     model = state.model_at(theta)
-    sensors = Sensors(laser_noise=state.sigma, acc_noise=max(state.input_noise, 1e-9))
-    rig = Rig(model, sensors=sensors, fs=state.fs, seed=seed)
-    recs = candidate.records(rig, limits.duration_s)
+    recs = candidate.records(state.rig(model, seed), limits.duration_s)
     eq = model.equilibria()
     centre = eq.z_0 if eq.z_0 is not None else eq.z_plus
     zs = [np.asarray(r.true["z"]) for r in recs]
@@ -444,9 +449,8 @@ def evaluate(state: PosteriorState, candidate: Candidate, limits: Limits, target
     cost["other_well_share"] = float(np.mean([c["other_well_share"] for c in costs]))
     # the risk that the test does not do what it is chosen for: in how many draws the record visits both wells
     cost["draws_visiting_both_wells"] = float(np.mean([0.05 < c["other_well_share"] < 0.95 for c in costs]))
-    if candidate.kind == "random" and cost["peak_table_acc_m_s2"] > limits.max_table_acc:
-        problems.append(f"peak table acceleration {cost['peak_table_acc_m_s2']:.3g} m/s^2 above the table's "
-                        f"{limits.max_table_acc:g} m/s^2")  # fmt: skip
+    if candidate.kind == "random":
+        problems += _peak_acc_problems(cost["peak_table_acc_m_s2"], limits)
     if (candidate.kind == "random" and limits.max_table_disp is not None
             and cost["peak_table_disp_m"] > limits.max_table_disp):  # fmt: skip
         problems.append(f"table stroke {1e3 * cost['peak_table_disp_m']:.3g} mm above the shaker's "
@@ -473,6 +477,13 @@ def evaluate(state: PosteriorState, candidate: Candidate, limits: Limits, target
                                 float(np.max(ratio[:, k]))] for k, n in enumerate(targets)}  # fmt: skip
     score = math.exp(float(np.mean([math.log(state.widths[n] / widths[n]) for n in targets])))
     return Evaluation(candidate, after, widths, score, float(np.mean(eigs)), cost, problems)
+
+
+def _peak_acc_problems(peak: float, limits: Limits) -> list[str]:
+    """A random test's record whose peak table acceleration [m/s^2] exceeds the table's, said in one line."""
+    if peak <= limits.max_table_acc:
+        return []
+    return [f"peak table acceleration {peak:.3g} m/s^2 above the table's {limits.max_table_acc:g} m/s^2"]
 
 
 def _harmonic_band(state: PosteriorState) -> tuple[float, float]:
@@ -732,7 +743,6 @@ def separation(posterior, discrepancy=None, *, hypotheses: dict[str, Any] | None
 
     from negstiff.inference.estimators.discrepancy import Discrepancy
     from negstiff.inference.record.measurement import Measurement
-    from negstiff.models.rig import Rig, Sensors
 
     state = _state_of(posterior)
     hyp = _hypotheses(discrepancy, hypotheses)
@@ -741,10 +751,10 @@ def separation(posterior, discrepancy=None, *, hypotheses: dict[str, Any] | None
     if not levels or any(not (math.isfinite(v) and v > 0) for v in levels):
         raise InputError(f"levels {levels!r}: random tests' rms levels must be positive")
     t0 = time.perf_counter()
-    sensors = Sensors(laser_noise=state.sigma, acc_noise=max(state.input_noise, 1e-9))
     base = state.model_at(state.mean)
+    compared = sorted(set(levels) | {DEFAULT_RANDOM_RMS})
     rows: list[dict[str, Any]] = []
-    for level in sorted(set(levels) | {DEFAULT_RANDOM_RMS}):
+    for level in compared:
         cand = Candidate("random", float(level))
         outcomes: dict[str, dict[str, float]] = {}
         peak = 0.0
@@ -752,18 +762,17 @@ def separation(posterior, discrepancy=None, *, hypotheses: dict[str, Any] | None
             model = dataclasses.replace(base, extra={h: size})
             seen: dict[str, float] = {}
             for r in range(records):
-                rec = cand.run(Rig(model, sensors=sensors, fs=state.fs, seed=seed + r), limits.duration_s)
+                rec = cand.run(state.rig(model, seed + r), limits.duration_s)
                 peak = max(peak, float(np.max(np.abs(rec.true["base_acc"]))))
                 try:
                     named = Discrepancy(offer_laws=False).fit(Measurement.from_rig(rec)).result()["effects"]
-                    verdict = named[0] if named and named[0] in hyp or named == ["none"] else "another effect"
+                    verdict = named[0] if named and (named[0] in hyp or named[0] == "none") else "another effect"
                 except (InputError, ValueError, ArithmeticError):
                     verdict = "refused"
                 seen[verdict] = seen.get(verdict, 0.0) + 1.0 / records
             outcomes[h] = seen
         bits = _verdict_information(outcomes)
-        problems = [] if peak <= limits.max_table_acc else [
-            f"peak table acceleration {peak:.3g} m/s^2 above the table's {limits.max_table_acc:g} m/s^2"]  # fmt: skip
+        problems = _peak_acc_problems(peak, limits)
         rows.append({"kind": "random", "test": cand.describe(), "rms_m_s2": float(level), "band_hz": list(BAND),
                      "information_bits": bits, "outcomes": outcomes,
                      "names_right": {h: outcomes[h].get(h, 0.0) for h in hyp},
@@ -803,7 +812,7 @@ def separation(posterior, discrepancy=None, *, hypotheses: dict[str, Any] | None
         "settings": {
             "duration_s": limits.duration_s,
             "max_table_acc_m_s2": limits.max_table_acc,
-            "levels_m_s2": sorted(set(levels) | {DEFAULT_RANDOM_RMS}),
+            "levels_m_s2": compared,
             "records": records,
             "seed": seed,
             "seconds": time.perf_counter() - t0,

@@ -23,6 +23,10 @@ import math
 import numpy as np
 from scipy import signal
 
+WELCH_SEGMENT = 4096
+"""The samples of the Welch PSD's segments (Hann, overlapping by half) that ``noise_floor`` reads a record with
+(the whole record when shorter): ``weak.noise_excursion`` counts its averages from it."""
+
 
 def noise_floor(z: np.ndarray, fs: float) -> tuple[float, np.ndarray, np.ndarray]:
     """White sensor-noise variance of ``z`` and the signal's own PSD: (sigma^2, f, S).
@@ -36,7 +40,7 @@ def noise_floor(z: np.ndarray, fs: float) -> tuple[float, np.ndarray, np.ndarray
     PSD minus the floor where it stands clearly (4x) above it: noise bins fluctuate about the floor,
     and weighted by omega^2 their positive excursions would be read as a broadband signal.
     """
-    f, p = signal.welch(z - z.mean(), fs, nperseg=min(4096, z.size))
+    f, p = signal.welch(z - z.mean(), fs, nperseg=min(WELCH_SEGMENT, z.size))
     edges = np.arange(0.30, 1.0001, 0.05) * fs / 2
     med = np.array([np.median(p[(f >= a) & (f < b)]) for a, b in zip(edges[:-1], edges[1:], strict=False)])
     best: tuple[int, int] | None = None
@@ -178,7 +182,7 @@ def response_band_hz(z: np.ndarray, fs: float) -> float:
     """The response's band [Hz]: twice the frequency below which 99.9 % of the displacement's power lies (Welch),
     at most 0.45 fs (the displacement's, not the velocity's: differencing whitens the sensor noise).
     """
-    f, p = signal.welch(z - z.mean(), fs, nperseg=min(4096, z.size))
+    f, p = signal.welch(z - z.mean(), fs, nperseg=min(WELCH_SEGMENT, z.size))
     cum = np.cumsum(p) / np.sum(p)
     return float(min(2 * f[np.searchsorted(cum, 0.999)], 0.45 * fs))
 

@@ -44,7 +44,7 @@ from scipy import signal
 
 from negstiff.errors import MeasurementError
 from negstiff.inference.record import stroke_spline
-from negstiff.inference.record.derivatives import noise_floor
+from negstiff.inference.record.derivatives import WELCH_SEGMENT, noise_floor
 from negstiff.inference.record.measurement import Measurement
 from negstiff.models import Model, effects, laws
 
@@ -213,7 +213,7 @@ def noise_excursion(n: int, bins: int, alpha: float = 0.05) -> float:
     """
     from scipy.stats import chi2  # scipy's distribution: its quantile, not a hand-written one
 
-    nperseg = min(4096, n)  # ``noise_floor``'s segments, overlapping by half
+    nperseg = min(WELCH_SEGMENT, n)  # ``noise_floor``'s segments, overlapping by half
     k = max(1, (n - nperseg) // (nperseg // 2) + 1)
     dof = 2 * k / (1 + 2 * 0.167**2 * (k - 1) / k)
     return max(4.0, float(chi2.ppf(1 - alpha / max(bins, 1), dof) / chi2.median(dof)))
