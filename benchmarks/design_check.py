@@ -67,7 +67,8 @@ def separation_check(seeds=SEEDS, friction: float = 0.02, duration: float = 24.0
     import dataclasses
 
     from negstiff import Discrepancy
-    from negstiff.inference.analysis.design import DEFAULT_RANDOM_RMS, Candidate, separation
+    from negstiff.inference.analysis.design import DEFAULT_RANDOM_RMS, Candidate
+    from negstiff.inference.analysis.separation import separation
     from negstiff.inference.estimators.posterior import Posterior
     from negstiff.inference.record.measurement import Measurement
     from negstiff.models import SEED_LIKE_CUBIC

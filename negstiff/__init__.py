@@ -50,6 +50,7 @@ _EXPORTS = {
     "characterize": "negstiff.inference.analysis.characterise",  # the first spelling, kept: ``characterise``
     "frf": "negstiff.inference.analysis.frf",
     "design": "negstiff.inference.analysis.design",  # the test to run next, from a posterior
+    "separation": "negstiff.inference.analysis.separation",  # the test that tells two effects apart
     "Report": "negstiff.report.document",
     "Identification": "negstiff.inference.estimators.identification",
     # errors and warnings

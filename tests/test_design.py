@@ -219,7 +219,7 @@ def test_the_designed_test_teaches_more_than_the_default_one_when_run_on_the_rig
 
 
 def test_the_verdicts_information_is_one_bit_when_they_always_differ_and_none_when_alike():
-    from negstiff.inference.analysis.design import _verdict_information
+    from negstiff.inference.analysis.separation import _verdict_information
 
     # friction named whenever it is present, nothing named when cubic damping is: the verdict tells them apart
     apart = {"coulomb_friction": {"coulomb_friction": 1.0}, "cubic_damping": {"none": 1.0}}
@@ -242,13 +242,45 @@ def test_the_verdicts_information_is_one_bit_when_they_always_differ_and_none_wh
         ({"discrepancy": {"effects": []}}, "not a discrepancy result"),
         ({"discrepancy": {"iterations": [{"ranking": [{"effect": "none", "score": 1.0}]}]}}, "fewer than two"),
         ({"hypotheses": {"coulomb_friction": 0.02, "cubic_damping": 0.5}, "records": 0}, "records must be"),
+        ({"hypotheses": {"coulomb_friction": "much", "cubic_damping": 0.5}}, "must be a finite number"),
+        ({"hypotheses": {"coulomb_friction": 0.02, "cubic_damping": 0.5}, "levels": (3.0, -1.0)}, "levels"),
+        ({"hypotheses": {"coulomb_friction": 0.02, "cubic_damping": 0.5}, "max_table_disp": 0.0}, "max_table_disp"),
+        # the fixture's posterior read a 10 s record: the workflow needs about 21 s, so each of the separation's
+        # records would be refused and every test would score 0 bits; checked on one record, before the work
+        ({"hypotheses": {"coulomb_friction": 0.02, "cubic_damping": 0.5}}, "cannot be read by the discrepancy"),
     ],
 )
 def test_a_separation_refuses_what_it_cannot_compare_before_the_work(posterior_json, kwargs, message):
-    from negstiff.inference.analysis.design import separation
+    from negstiff.inference.analysis.separation import separation
 
     with pytest.raises(InputError, match=message):
         separation(posterior_json, **kwargs)
+
+
+def test_a_separation_does_not_choose_a_test_beyond_the_table_s_stroke(posterior_json):
+    """A 3 m/s^2 random test moves the table about 7 mm, the default 14 m/s^2 test about 34 mm (the rig's 2-40 Hz
+    band): with a 20 mm stroke the default test is infeasible, said so, and the quieter one is chosen."""
+    from negstiff.inference.analysis.separation import separation
+
+    sep = separation(posterior_json, hypotheses={"coulomb_friction": 0.02, "cubic_damping": 2.0}, duration=24.0,
+                     max_table_disp=0.02, levels=(3.0,), records=1)  # fmt: skip
+    default, best = sep["default_test"], sep["best"]
+    assert default["cost"]["peak_table_disp_m"] > 0.02 and not default["feasible"]
+    assert "table stroke" in default["problems"][0]
+    assert best["rms_m_s2"] == 3.0 and best["feasible"] and best["cost"]["peak_table_disp_m"] <= 0.02
+    assert sep["settings"]["max_table_disp_m"] == 0.02
+
+
+@pytest.mark.parametrize("option", [["--target", "k3"], ["--candidates", "8"], ["--draws", "4"]])
+def test_a_separation_refuses_a_design_s_option_it_does_not_read(posterior_json, tmp_path, capsys, option):
+    disc = tmp_path / "disc.json"
+    disc.write_text(json.dumps({"iterations": [{"ranking": [{"effect": "coulomb_friction", "size": 0.02},
+                                                            {"effect": "cubic_damping", "size": 2.0}]}]}))  # fmt: skip
+    out = tmp_path / "sep.json"
+    assert main(["design", str(posterior_json), "--separate", str(disc), "-o", str(out), "--quiet", *option]) == 2
+    assert not out.exists()
+    err = capsys.readouterr().err
+    assert option[0] in err and "does not read" in err and len(err.strip().splitlines()) == 1
 
 
 def test_the_command_refuses_a_separation_file_that_is_not_a_discrepancy_result(posterior_json, tmp_path, capsys):

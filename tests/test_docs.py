@@ -54,9 +54,9 @@ def test_every_public_name_has_a_numpydoc_docstring_with_an_example(name, obj):
         assert attrs and all(a.endswith("_") for a in attrs), f"{name}: Attributes must list the learned *_"
 
 
-SLOW_EXAMPLES = {"Posterior", "design"}
+SLOW_EXAMPLES = {"Posterior", "design", "separation"}
 """An example that samples a posterior (about 10 s): run with -m slow, test_posterior.py and test_design.py keeping
-Posterior and design in the default suite."""
+Posterior, design and separation in the default suite."""
 
 
 @pytest.mark.parametrize(

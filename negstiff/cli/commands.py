@@ -568,18 +568,34 @@ def write_figure(fig, out: str) -> str:
 
 
 def cmd_design(args) -> int:
-    from negstiff.inference.analysis.design import design, design_figure, prepared, separation
+    from negstiff.inference.analysis.design import design, design_figure, prepared
+    from negstiff.inference.analysis.separation import separation
 
     if args.separate is not None:
-        run = prepared(args.posterior, duration=args.duration, max_table_acc=args.max_acc)  # the posterior's checks
+        given = [o for o, v in (("--target", args.target), ("--candidates", args.candidates),
+                                ("--draws", args.draws)) if v is not None]  # fmt: skip
+        if given:
+            raise InputError(f"{', '.join(given)}: a design's option; a separation (--separate) ranks random tests by "
+                             "what the discrepancy workflow's verdict tells, and does not read it")  # fmt: skip
         say(args, f"design: which random test tells apart the effects {args.separate} ranked first")
-        result = separation(run["posterior"], args.separate, duration=args.duration, max_table_acc=args.max_acc,
-                            seed=args.seed)  # fmt: skip
+        result = separation(
+            args.posterior,
+            args.separate,
+            duration=args.duration,
+            max_table_acc=args.max_acc,
+            max_table_disp=args.table_stroke,
+            stroke=args.stroke,
+            sensor_range=args.sensor_range,
+            seed=args.seed,
+        )  # fmt: skip  (every refusal before the work)
         write_json(args.out, result)
+        warn(args, result["warnings"])
         best = result["best"]
         say(args, f"wrote {args.out}: {best['test']} tells them apart with {best['information_bits']:.2f} bits "
                   f"(the default random test: {result['default_test']['information_bits']:.2f})")  # fmt: skip
         return 0
+    args.candidates = 50 if args.candidates is None else args.candidates
+    args.draws = 16 if args.draws is None else args.draws
     run = prepared(
         args.posterior,
         targets=args.target,

@@ -606,8 +606,8 @@ def _design(sub, common: argparse.ArgumentParser, data_opts: argparse.ArgumentPa
     dsg.add_argument("--sensor-range", type=POSITIVE, help="the displacement sensor's measuring range [m]: a test "
                      "whose reading (the device's and the table's motion) spans more is infeasible (default: no "
                      "range)")  # fmt: skip
-    dsg.add_argument("--candidates", type=number(int, 4), default=50, help="grid candidates (default 50)")
-    dsg.add_argument("--draws", type=number(int, 1), default=16, help="posterior draws per candidate (default 16)")
+    dsg.add_argument("--candidates", type=number(int, 4), help="grid candidates (default 50)")
+    dsg.add_argument("--draws", type=number(int, 1), help="posterior draws per candidate (default 16)")
     dsg.add_argument("--separate", metavar="DISCREPANCY.json", help="instead, the test that tells apart the two "
                      "effects the discrepancy workflow ranked first on the first record (its result JSON): random "
                      "tests ranked by the information the workflow's verdict carries about which is "

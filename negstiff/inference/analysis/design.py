@@ -298,19 +298,7 @@ def _information(state: PosteriorState, candidate: Candidate, limits: Limits, th
     """
     model = state.model_at(theta)
     recs = candidate.records(state.rig(model, seed), limits.duration_s)
-    eq = model.equilibria()
-    centre = eq.z_0 if eq.z_0 is not None else eq.z_plus
-    zs = [np.asarray(r.true["z"]) for r in recs]
-    z_all = np.concatenate(zs)
-    cost = {
-        "duration_s": float(z_all.size / state.fs),
-        "peak_table_acc_m_s2": max(float(np.max(np.abs(r.true["base_acc"]))) for r in recs),
-        "peak_table_disp_m": max(float(np.max(np.abs(r.true["base_disp"]))) for r in recs),
-        "peak_travel_m": float(np.max(np.abs(z_all - centre))),
-        # the span the laser on the moving part reads (the device's motion and the table's)
-        "sensor_span_m": max(float(np.ptp(z + np.asarray(r.true["base_disp"]))) for z, r in zip(zs, recs, strict=True)),
-        "other_well_share": float(np.mean(np.sign(z_all - centre) != np.sign(eq.z_plus - centre))),
-    }
+    cost = record_cost(state, model, recs)
     # independent records' information and score covariance add (a campaign's steps: the joint posterior reads each
     # with its own windows, and its sandwich sums both parts over all windows)
     H = M = None
@@ -321,6 +309,48 @@ def _information(state: PosteriorState, candidate: Candidate, limits: Limits, th
         H = parts[0] if H is None else H + parts[0]
         M = parts[1] if M is None else M + parts[1]
     return (H, M), cost
+
+
+def record_cost(state: PosteriorState, model, recs: list) -> dict[str, float]:
+    """What the rig's records ``recs`` of ``model`` cost: their duration, the table's peak acceleration and
+    displacement, the device's travel from its saddle, the span the displacement sensor reads, and the share of
+    the time spent in the other well.
+    """
+    eq = model.equilibria()
+    centre = eq.z_0 if eq.z_0 is not None else eq.z_plus
+    zs = [np.asarray(r.true["z"]) for r in recs]
+    z_all = np.concatenate(zs)
+    return {
+        "duration_s": float(z_all.size / state.fs),
+        "peak_table_acc_m_s2": max(float(np.max(np.abs(r.true["base_acc"]))) for r in recs),
+        "peak_table_disp_m": max(float(np.max(np.abs(r.true["base_disp"]))) for r in recs),
+        "peak_travel_m": float(np.max(np.abs(z_all - centre))),
+        # the span the laser on the moving part reads (the device's motion and the table's)
+        "sensor_span_m": max(float(np.ptp(z + np.asarray(r.true["base_disp"]))) for z, r in zip(zs, recs, strict=True)),
+        "other_well_share": float(np.mean(np.sign(z_all - centre) != np.sign(eq.z_plus - centre))),
+    }
+
+
+def limit_problems(candidate: Candidate, cost: dict[str, float], limits: Limits) -> list[str]:
+    """The limits a test's records (``cost``, the worst over the draws) exceed, one line each: a random run's peak
+    table acceleration and displacement (read from its records; a sinusoidal test's are checked from its settings
+    in ``evaluate``), the duration, the sensor's range and the device's stroke.
+    """
+    problems = []
+    if candidate.kind == "random":
+        problems += _peak_acc_problems(cost["peak_table_acc_m_s2"], limits)
+        if limits.max_table_disp is not None and cost["peak_table_disp_m"] > limits.max_table_disp:
+            problems.append(f"table stroke {1e3 * cost['peak_table_disp_m']:.3g} mm above the shaker's "
+                            f"{1e3 * limits.max_table_disp:g} mm")  # fmt: skip
+    if cost["duration_s"] > limits.duration_s * (1 + 1e-6):
+        problems.append(f"its record lasts {cost['duration_s']:.3g} s, beyond the {limits.duration_s:g} s asked")
+    if limits.sensor_range is not None and cost["sensor_span_m"] > limits.sensor_range:
+        problems.append(f"the displacement sensor would read a {1e3 * cost['sensor_span_m']:.3g} mm span, beyond its "
+                        f"{1e3 * limits.sensor_range:g} mm range")  # fmt: skip
+    if limits.stroke is not None and cost["peak_travel_m"] > limits.stroke:
+        problems.append(f"the device travels {1e3 * cost['peak_travel_m']:.3g} mm from its saddle, beyond its "
+                        f"{1e3 * limits.stroke:g} mm stroke (a stop)")  # fmt: skip
+    return problems
 
 
 def _record_information(state: PosteriorState, model, rec) -> tuple[np.ndarray, np.ndarray] | None:
@@ -449,20 +479,7 @@ def evaluate(state: PosteriorState, candidate: Candidate, limits: Limits, target
     cost["other_well_share"] = float(np.mean([c["other_well_share"] for c in costs]))
     # the risk that the test does not do what it is chosen for: in how many draws the record visits both wells
     cost["draws_visiting_both_wells"] = float(np.mean([0.05 < c["other_well_share"] < 0.95 for c in costs]))
-    if candidate.kind == "random":
-        problems += _peak_acc_problems(cost["peak_table_acc_m_s2"], limits)
-    if (candidate.kind == "random" and limits.max_table_disp is not None
-            and cost["peak_table_disp_m"] > limits.max_table_disp):  # fmt: skip
-        problems.append(f"table stroke {1e3 * cost['peak_table_disp_m']:.3g} mm above the shaker's "
-                        f"{1e3 * limits.max_table_disp:g} mm")  # fmt: skip
-    if cost["duration_s"] > limits.duration_s * (1 + 1e-6):
-        problems.append(f"its record lasts {cost['duration_s']:.3g} s, beyond the {limits.duration_s:g} s asked")
-    if limits.sensor_range is not None and cost["sensor_span_m"] > limits.sensor_range:
-        problems.append(f"the displacement sensor would read a {1e3 * cost['sensor_span_m']:.3g} mm span, beyond its "
-                        f"{1e3 * limits.sensor_range:g} mm range")  # fmt: skip
-    if limits.stroke is not None and cost["peak_travel_m"] > limits.stroke:
-        problems.append(f"the device travels {1e3 * cost['peak_travel_m']:.3g} mm from its saddle, beyond its "
-                        f"{1e3 * limits.stroke:g} mm stroke (a stop)")  # fmt: skip
+    problems += limit_problems(candidate, cost, limits)
     if not covs:
         return Evaluation(candidate, state.cov, dict(state.widths), 1.0, 0.0, cost, problems)
     after = np.mean(covs, axis=0)  # the expected posterior covariance (Laplace) over the draws
@@ -711,158 +728,6 @@ def _risks(best: dict[str, Any], limits: Limits) -> list[str]:
         out.append(f"the chosen test moves the table {1e3 * disp:.3g} mm (peak) and no table stroke was stated: "
                    "give the shaker's (max_table_disp, --table-stroke) if it has less")  # fmt: skip
     return out
-
-
-SEPARATION_LEVELS = (3.0, 4.5, 6.0, 9.0, 14.0, 20.0, 28.0)
-"""The random tests' levels [m/s^2 rms] a separation compares (the rig's default test, 14, among them): friction
-shows at low levels, where it is a larger part of the damping, cubic damping at high ones."""
-
-
-def separation(posterior, discrepancy=None, *, hypotheses: dict[str, Any] | None = None,
-               duration: float | None = None, max_table_acc: float = DEFAULT_MAX_ACC,
-               levels: tuple[float, ...] = SEPARATION_LEVELS, records: int = 4,
-               seed: int = 0) -> dict[str, Any]:  # fmt: skip
-    """Which test tells two competing effects apart: the discrepancy workflow's runners-up on the first record
-    (the first two catalogue effects of its first round, each with the size its fit gave), or ``hypotheses``
-    ({effect: size}).
-
-    Each hypothesis is the posterior's mean model with that effect at that size. For each candidate test (random
-    at ``levels``, within ``max_table_acc`` at its peak) and each hypothesis, ``records`` records are written by the
-    virtual rig with the posterior's noise (the same seeds for every candidate) and read by the workflow itself
-    (``Discrepancy(offer_laws=False)``); its verdict (the effect named first, ``none``, another effect, or a
-    refusal) is the test's outcome. The criterion is the information the verdict carries about which hypothesis
-    is true, I(H; verdict) in bits with the hypotheses equally likely (1 bit: the verdict always tells them
-    apart), the model-discrimination design's expected information about the model indicator (Box and Hill 1967,
-    Technometrics 9(1), 57-71; Drovandi, McGree and Pettitt 2014, J. Comput. Graph. Stat. 23(1), 3-24), each
-    hypothesis's chance of being named beside it. Returns ``{"hypotheses", "criterion", "ranked", "best",
-    "default_test", "settings"}``. What it assumes: the posterior's mean model carries the effect on top of its
-    damping (the posterior was fitted without it), and the workflow's verdict on a simulated record is what it
-    would say on the lab's.
-    """
-    import dataclasses
-
-    from negstiff.inference.estimators.discrepancy import Discrepancy
-    from negstiff.inference.record.measurement import Measurement
-
-    state = _state_of(posterior)
-    hyp = _hypotheses(discrepancy, hypotheses)
-    limits = _limits(state, duration, max_table_acc, None, None)
-    _counts(records=records, seed=seed)
-    if not levels or any(not (math.isfinite(v) and v > 0) for v in levels):
-        raise InputError(f"levels {levels!r}: random tests' rms levels must be positive")
-    t0 = time.perf_counter()
-    base = state.model_at(state.mean)
-    compared = sorted(set(levels) | {DEFAULT_RANDOM_RMS})
-    rows: list[dict[str, Any]] = []
-    for level in compared:
-        cand = Candidate("random", float(level))
-        outcomes: dict[str, dict[str, float]] = {}
-        peak = 0.0
-        for h, size in hyp.items():
-            model = dataclasses.replace(base, extra={h: size})
-            seen: dict[str, float] = {}
-            for r in range(records):
-                rec = cand.run(state.rig(model, seed + r), limits.duration_s)
-                peak = max(peak, float(np.max(np.abs(rec.true["base_acc"]))))
-                try:
-                    named = Discrepancy(offer_laws=False).fit(Measurement.from_rig(rec)).result()["effects"]
-                    verdict = named[0] if named and (named[0] in hyp or named[0] == "none") else "another effect"
-                except (InputError, ValueError, ArithmeticError):
-                    verdict = "refused"
-                seen[verdict] = seen.get(verdict, 0.0) + 1.0 / records
-            outcomes[h] = seen
-        bits = _verdict_information(outcomes)
-        problems = _peak_acc_problems(peak, limits)
-        rows.append({"kind": "random", "test": cand.describe(), "rms_m_s2": float(level), "band_hz": list(BAND),
-                     "information_bits": bits, "outcomes": outcomes,
-                     "names_right": {h: outcomes[h].get(h, 0.0) for h in hyp},
-                     "cost": {"duration_s": limits.duration_s, "peak_table_acc_m_s2": peak},
-                     "feasible": not problems, "problems": problems})  # fmt: skip
-    # equally informative tests (to the 0.01 bit: four records' verdicts are coarse) in favour of the one that names
-    # the leading hypothesis (the workflow's first-ranked) when it is true: it tells them apart by naming the likelier
-    # effect, not by naming its rival
-    lead = next(iter(hyp))
-
-    def rank(r: dict[str, Any]) -> tuple:
-        right = r["names_right"]
-        return (
-            not r["feasible"],
-            -round(float(r["information_bits"]), 2),
-            -right[lead],
-            -float(np.mean(list(right.values()))),
-        )
-
-    rows.sort(key=rank)
-    default = next(r for r in rows if r["rms_m_s2"] == DEFAULT_RANDOM_RMS)
-    return {
-        "hypotheses": hyp,
-        "criterion": {
-            "name": "information the discrepancy workflow's verdict carries about which effect is present [bits]",
-            "method": f"each hypothesis (the posterior's mean model with the effect) run through each test on the "
-            f"virtual rig, {records} records each, read by Discrepancy(offer_laws=False); I(H; verdict) with the "
-            "hypotheses equally likely",
-            "references": [
-                "Box and Hill 1967, Technometrics 9(1) 57-71",
-                "Drovandi, McGree and Pettitt 2014, J. Comput. Graph. Stat. 23(1) 3-24",
-            ],
-        },  # fmt: skip
-        "ranked": rows,
-        "best": rows[0],
-        "default_test": default,
-        "settings": {
-            "duration_s": limits.duration_s,
-            "max_table_acc_m_s2": limits.max_table_acc,
-            "levels_m_s2": compared,
-            "records": records,
-            "seed": seed,
-            "seconds": time.perf_counter() - t0,
-            "posterior": state.source,
-        },  # fmt: skip
-    }
-
-
-def _hypotheses(discrepancy, hypotheses) -> dict[str, Any]:
-    """The two effects a separation compares, with their sizes: given, or the discrepancy result's (its dict or
-    file) first two catalogue effects of its first round; one ``InputError`` otherwise.
-    """
-    from negstiff.models import effects
-
-    if hypotheses is None:
-        if discrepancy is None:
-            raise InputError("a separation needs the discrepancy's result on the first record or hypotheses "
-                             "({effect: size})")  # fmt: skip
-        if isinstance(discrepancy, (str, os.PathLike)):
-            from negstiff.files import read_json
-
-            discrepancy = read_json(discrepancy, "discrepancy result")
-        try:
-            ranking = discrepancy["iterations"][0]["ranking"]
-        except (KeyError, IndexError, TypeError):
-            raise InputError("not a discrepancy result (no iterations[0].ranking)") from None
-        hypotheses = {r["effect"]: r["size"] for r in ranking if r.get("size") is not None}
-        hypotheses = dict(list(hypotheses.items())[:2])
-        if len(hypotheses) < 2:
-            raise InputError("the discrepancy result ranks fewer than two catalogue effects with a size (a result "
-                             "written before rankings kept sizes: run it again)")  # fmt: skip
-    known = set(effects.names())
-    bad = [h for h in hypotheses if h not in known]
-    if bad or len(hypotheses) != 2:
-        raise InputError(f"hypotheses {list(hypotheses)}: two of the catalogue's effects ({', '.join(sorted(known))})")
-    return dict(hypotheses)
-
-
-def _verdict_information(outcomes: dict[str, dict[str, float]]) -> float:
-    """I(H; verdict) [bits] with the hypotheses equally likely, from each hypothesis's verdict frequencies."""
-    hs = list(outcomes)
-    verdicts = {v for o in outcomes.values() for v in o}
-    bits = 0.0
-    for v in verdicts:
-        p_v = float(np.mean([outcomes[h].get(v, 0.0) for h in hs]))
-        for h in hs:
-            p = outcomes[h].get(v, 0.0)
-            if p > 0:
-                bits += p / len(hs) * math.log2(p / p_v)
-    return bits
 
 
 def prepared(posterior, *, targets=None, duration: float | None = None, max_table_acc: float = DEFAULT_MAX_ACC,

@@ -691,7 +691,7 @@ class Discrepancy(StructureResults, Estimator):
     def _size_of(self, rec: Measurement, cand: Candidate) -> dict[str, Any]:
         """A ranked effect's size as its fit on the scoring part has it (``{"size": ...}``; the model's entry for
         it), for a catalogue effect that scored; nothing for the baseline, a law or a channel. What a test
-        design takes as each hypothesis (``analysis.design.separation``).
+        design takes as each hypothesis (``analysis.separation``).
         """
         if (cand.effect == "none" or cand.coefficients is None or not math.isfinite(cand.heldout_percent)
                 or law_of(cand.effect) is not None or cand.effect.startswith(effects.AUX_PREFIX)):  # fmt: skip
