@@ -691,6 +691,15 @@ def _separation_section(quick: bool) -> tuple[list[str], dict]:
     return separation_section(res), res
 
 
+def _ring_down_design_section(quick: bool) -> tuple[list[str], dict]:
+    """Hammer hits and releases, checked against the rig (``ring_down_check``): 2 seeds with ``quick``."""
+    from .design_check import ring_down_check, ring_down_section
+
+    print("ring-down design check...", file=sys.stderr)
+    res = ring_down_check((1, 2) if quick else (1, 2, 3, 4, 5))
+    return ring_down_section(res), res
+
+
 SECTIONS: dict[str, Any] = {
     "waits": lambda quick, out: (waits_section(quick), None),
     "simulator": lambda quick, out: _simulator_section(quick),
@@ -701,6 +710,7 @@ SECTIONS: dict[str, Any] = {
     "refinement": lambda quick, out: _refinement_section(quick),
     "design": lambda quick, out: _design_section(quick),
     "separation": lambda quick, out: _separation_section(quick),
+    "ring-down-design": lambda quick, out: _ring_down_design_section(quick),
     "peers": lambda quick, out: (peers_section(quick), None),
     "scaling": lambda quick, out: (
         scaling_section(

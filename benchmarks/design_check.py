@@ -95,6 +95,89 @@ def separation_check(seeds=SEEDS, friction: float = 0.02, duration: float = 24.0
     return {"rows": rows, "friction_n": friction, "duration_s": duration}
 
 
+HAMMER_FIRST_N = 20.0
+"""The first record's hits [N] in the ring-down check (4 of them, 4 ms: the double well rings about 4 mm in its
+plus well, a quarter of the way to its saddle)."""
+
+
+def ring_down_check(seeds=SEEDS, duration: float = 10.0) -> dict:
+    """Which hammer test or release next, checked against reality: on the virtual rig (1 kHz, its default laser),
+    the lightly damped double well of the tests' hammer records (``tests/impact_records.DOUBLE_WELL``, 1.9 %
+    damping) hit four times at ``HAMMER_FIRST_N``; its posterior, ``design`` with its defaults, and the chosen test
+    and the reference test each run on the rig (seed 100 + s) and fitted jointly with the first record.
+    """
+    from negstiff import Model
+    from negstiff.inference.analysis.design import Candidate, design
+    from negstiff.inference.estimators.posterior import Posterior
+    from negstiff.inference.record.measurement import Measurement
+    from negstiff.models.rig import Rig
+
+    # the tests' double well (``tests/impact_records.py``), written out: the benchmarks do not import the tests
+    p = np.poly((-0.015, 0.004, 0.020)) * 1.5e6
+    truth = Model(m=0.2, k1=-p[2], k2=p[1], k3=1.5e6, c=0.5, k0=p[3])
+    rows = []
+    for seed in seeds:
+        rig = Rig(truth, seed=seed, fs=1000.0)
+        first = Measurement.from_rig(rig.hammer(peak=HAMMER_FIRST_N, hits=4, duration=duration))
+        post = Posterior(seed=0).fit(first).result()
+        t0 = time.perf_counter()
+        plan = design(post, seed=seed)
+        t_design = time.perf_counter() - t0
+        row = {"seed": seed, "design_s": t_design, "now": plan["now"]}
+        for name, r in (("designed", plan["best"]), ("default", plan["default_test"])):
+            test = Candidate(r["kind"], r.get("peak_force_n", r.get("release_offset_m")), hits=r.get("hits"))
+            nxt = Measurement.from_rig(test.run(Rig(truth, seed=100 + seed, fs=1000.0), duration))
+            joint = Posterior(seed=0).fit([first, nxt]).result()["parameters"]
+            row[name + "_test"] = r["test"]
+            row[name + "_predicted"] = r["predicted_width"]
+            row[name + "_both_wells"] = r["cost"]["draws_visiting_both_wells"]
+            row[name] = {k: joint[k]["hdi_high"] - joint[k]["hdi_low"] for k in plan["now"]}
+            row[name + "_truth_inside"] = int(sum(joint[k]["hdi_low"] <= getattr(truth, k) <= joint[k]["hdi_high"]
+                                                  for k in plan["now"]))  # fmt: skip
+        row["shrink_designed"] = _shrink(row["now"], row["designed"])
+        row["shrink_default"] = _shrink(row["now"], row["default"])
+        rows.append(row)
+        print(f"ring-down design check: seed {seed}, {row['designed_test']}: {row['shrink_designed']:.3g}x against "
+              f"{row['shrink_default']:.3g}x", file=sys.stderr)  # fmt: skip
+    return {"rows": rows, "first_hits_n": HAMMER_FIRST_N, "duration_s": duration}
+
+
+def ring_down_section(res: dict) -> list[str]:
+    """The report section of ``ring_down_check``."""
+    from .peers import section
+
+    rows = res["rows"]
+    table = []
+    for r in rows:
+        cells = [str(r["seed"]), r["designed_test"], f"{r['design_s']:.0f} s"]
+        for name in ("designed", "default"):
+            ratio = [r[name][k] / r[name + "_predicted"][k] for k in r["now"]]
+            cells.append(f"{r['shrink_' + name]:.3g}x, {min(ratio):.2f}-{max(ratio):.2f}")
+        cells += [f"{r['default_both_wells']:.2f}", f"{r['designed_truth_inside']} / {r['default_truth_inside']}"]
+        table.append(cells)
+    per_param = {
+        k: float(np.median([r["designed"][k] / r["designed_predicted"][k] for r in rows])) for k in rows[0]["now"]
+    }
+    intro = (
+        f"The first record: {res['duration_s']:g} s of four {res['first_hits_n']:g} N hammer hits (4 ms) on the "
+        "virtual rig at 1 kHz, the device the lightly damped double well of the tests' hammer records (wells at "
+        "-15 / +20 mm, 1.9 % damping), at rest in its plus well. `design` with its defaults ranks hammer tests "
+        "(peak force, 2-8 hits) and releases; the chosen test and the reference test (four hits ringing at half "
+        "the distance to the saddle) each run on the rig (another seed) and fitted jointly with the first record. "
+        "Shrinkage: the geometric mean over the five coefficients of the 90 % width before / after; realised / "
+        "predicted: per coefficient, the range over the five."
+    )
+    lines = section("Test design: hammer hits and releases", intro,
+                    ["seed", "chosen test", "design time", "chosen: shrinkage, realised / predicted",
+                     "reference: shrinkage, realised / predicted", "reference: draws visiting both wells",
+                     "truth inside (chosen / reference)"], table)  # fmt: skip
+    lines += ["", "Median realised / predicted of the chosen test per coefficient: "
+              + ", ".join(f"{k} {v:.2f}" for k, v in per_param.items())
+              + ". A test that throws some of the posterior's draws across the saddle and not others has a two-valued "
+              "outcome: the prediction is its average, and the realised width lies on one side of it."]  # fmt: skip
+    return lines
+
+
 def _shrink(now: dict, after: dict) -> float:
     return float(np.exp(np.mean([np.log(now[k] / after[k]) for k in now])))
 

@@ -568,12 +568,12 @@ def write_figure(fig, out: str) -> str:
 
 
 def cmd_design(args) -> int:
-    from negstiff.inference.analysis.design import design, design_figure, prepared
+    from negstiff.inference.analysis.design import DEFAULT_MAX_ACC, design, design_figure, prepared
     from negstiff.inference.analysis.separation import separation
 
     if args.separate is not None:
         given = [o for o, v in (("--target", args.target), ("--candidates", args.candidates),
-                                ("--draws", args.draws)) if v is not None]  # fmt: skip
+                                ("--draws", args.draws), ("--max-force", args.max_force)) if v is not None]  # fmt: skip
         if given:
             raise InputError(f"{', '.join(given)}: a design's option; a separation (--separate) ranks random tests by "
                              "what the discrepancy workflow's verdict tells, and does not read it")  # fmt: skip
@@ -582,7 +582,7 @@ def cmd_design(args) -> int:
             args.posterior,
             args.separate,
             duration=args.duration,
-            max_table_acc=args.max_acc,
+            max_table_acc=DEFAULT_MAX_ACC if args.max_acc is None else args.max_acc,
             max_table_disp=args.table_stroke,
             stroke=args.stroke,
             sensor_range=args.sensor_range,
@@ -604,6 +604,7 @@ def cmd_design(args) -> int:
         max_table_disp=args.table_stroke,
         stroke=args.stroke,
         sensor_range=args.sensor_range,
+        max_force=args.max_force,
         candidates=args.candidates,
         draws=args.draws,
         seed=args.seed,
@@ -615,8 +616,9 @@ def cmd_design(args) -> int:
     write_json(args.out, result)
     warn(args, result["warnings"])
     best = result["best"]
+    ref = result["default_test"]
     say(args, f"wrote {args.out}: next test {best['test']}, targets' intervals {best['score']:.3g}x narrower "
-              f"(the default random test: {result['default_test']['score']:.3g}x)")  # fmt: skip
+              f"(the default test, {ref['test']}: {ref['score']:.3g}x)")  # fmt: skip
     return 0
 
 

@@ -590,7 +590,9 @@ def _design(sub, common: argparse.ArgumentParser, data_opts: argparse.ArgumentPa
         "targeted parameters' 90 %% intervals: the posterior's draws run through each candidate on the virtual rig "
         "with the record's noise, each simulated record read as the posterior reads one (Laplace approximation of "
         "the expected posterior covariance). The grid's best candidates are searched further in their level and "
-        "frequency. POSTERIOR is a coefficient posterior of a base-excited record (negstiff posterior ... -o).",
+        "frequency. POSTERIOR is a coefficient posterior of a base-excited record (negstiff posterior ... -o); of a "
+        "hammer's record or a free decay, hammer hits (peak force, hit count) and releases from a held position "
+        "are ranked instead.",
     )
     dsg.add_argument("posterior", help="posterior result JSON")
     dsg.add_argument("-o", "--out", required=True, help="design result JSON (a figure of the criterion beside it)")
@@ -598,8 +600,10 @@ def _design(sub, common: argparse.ArgumentParser, data_opts: argparse.ArgumentPa
                      "(default: all)")  # fmt: skip
     dsg.add_argument("--duration", type=POSITIVE, help="the next record's length [s] (default: the posterior's "
                      "record's)")  # fmt: skip
-    dsg.add_argument("--max-acc", type=POSITIVE, default=80.0, help="the table's peak acceleration [m/s^2] "
-                     "(default 80)")  # fmt: skip
+    dsg.add_argument("--max-acc", type=POSITIVE, help="the table's peak acceleration [m/s^2] (default 80; a "
+                     "base-excited record's posterior)")  # fmt: skip
+    dsg.add_argument("--max-force", type=POSITIVE, help="the hammer's peak force [N] (a hammer's or a decay's "
+                     "posterior; default: no limit)")  # fmt: skip
     dsg.add_argument("--table-stroke", type=POSITIVE, help="the table's peak displacement [m] (default: no limit)")
     dsg.add_argument("--stroke", type=POSITIVE, help="the device's travel from its saddle to a stop [m]: a test that "
                      "reaches it is infeasible (default: no stop)")  # fmt: skip

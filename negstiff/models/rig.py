@@ -94,6 +94,9 @@ class Sensors:
     response_offset: float = 0.0
     """DC offset of the response sensor, in its units (a laser zero away from the rods-horizontal
     position [m], a vibrometer's offset [m/s], an accelerometer's bias [m/s^2])."""
+    force_noise: float = 0.05
+    """The impact hammer's load cell noise [N rms] (``Rig.hammer``): a modal hammer's, about 0.1 % of a light
+    hit's peak."""
 
     @classmethod
     def noiseless(cls) -> Sensors:
@@ -278,6 +281,94 @@ class Rig:
             )
         self._check_start([start])
         self._require_memory([(duration + settle + TAIL_S) * self.fs * self.oversample], "a random record")
+
+    def hammer(
+        self,
+        peak: float = 20.0,
+        hits: int = 4,
+        duration: float = 10.0,
+        width: float = 0.004,
+        start: str = "plus",
+    ) -> RigRecord:
+        """The device hit by an impact hammer with the table held still: ``hits`` half-sine pulses of ``peak`` [N]
+        lasting ``width`` [s], evenly spread (the first at 5 % of the record, each next after an equal share of the
+        rest), from rest in the ``start`` well.
+
+        The laser reads z (no base motion), the hammer's load cell the force (``Sensors.force_noise``). The device
+        is simulated at the rig's ``oversample`` times ``fs``, or finer so that a pulse spans 16 samples, the force
+        sampled on that grid (a pulse of a few output samples is not resolved by the band-limited input), and read
+        at ``fs``. Columns ``t, force, z``.
+        """
+        self.check_hammer(peak, hits, duration, width, start)
+        n = int(round(duration * self.fs))
+        q = max(self.oversample, math.ceil(16 / (width * self.fs)))
+        t_fine = np.arange(n * q) / (self.fs * q)
+        times = [0.05 * duration + k * 0.95 * duration / hits for k in range(hits)]
+        force = np.zeros(t_fine.size)
+        for h in times:
+            inside = (t_fine >= h) & (t_fine <= h + width)
+            force[inside] += peak * np.sin(np.pi * (t_fine[inside] - h) / width)
+        excitation = {"type": "hammer", "duration_s": duration, "peak_n": peak, "hits": hits, "width_s": width,
+                      "hit_times_s": times}  # fmt: skip
+        return self._force_record(force, q, self._well(start), excitation)
+
+    def release(self, z0: float, duration: float = 10.0) -> RigRecord:
+        """A free decay: the moving part held at ``z0`` [m] and released from rest at t = 0, the table still. The
+        laser reads z; the record's force column is zero (no input: a free decay, read as one). Columns ``t,
+        force, z``.
+        """
+        if not (_real(z0) and math.isfinite(z0)):
+            raise RigError(f"release position must be a finite number [m], got {z0!r}")
+        if not (_real(duration) and duration > 0 and math.isfinite(duration)):
+            raise RigError(f"a release needs a positive duration, got {duration!r}")
+        self._require_memory([duration * self.fs * self.oversample], "a release record")
+        n = int(round(duration * self.fs))
+        excitation = {"type": "release", "duration_s": duration, "z0_m": float(z0)}
+        return self._force_record(np.zeros(n * self.oversample), self.oversample, float(z0), excitation)
+
+    def check_hammer(self, peak=20.0, hits=4, duration=10.0, width=0.004, start="plus") -> None:
+        """Everything ``hammer`` refuses (``RigError``, one line), before any work."""
+        if isinstance(hits, bool) or not isinstance(hits, (int, np.integer)) or hits < 1:
+            raise RigError(f"hits must be a whole number >= 1, got {hits!r}")
+        if not all(_real(v) and v > 0 and math.isfinite(v) for v in (peak, duration, width)):
+            raise RigError(f"a hammer test needs peak > 0 [N], duration > 0 and width > 0 [s]; got {peak!r}, "
+                           f"{duration!r}, {width!r}")  # fmt: skip
+        if width * hits >= 0.5 * duration:
+            raise RigError(f"{hits} pulses of {width:g} s fill half of the {duration:g} s record or more: no ring-down "
+                           "between them")  # fmt: skip
+        self._check_start([start])
+        q = max(self.oversample, math.ceil(16 / (width * self.fs)))
+        self._require_memory([duration * self.fs * q], "a hammer record")
+
+    def _well(self, start: str) -> float:
+        z = getattr(self.equilibria, f"z_{start}", None)
+        if z is None:
+            raise RigError(f"the device has no {start} well to rest in")
+        return float(z)
+
+    def _force_record(self, force: np.ndarray, q: int, z0: float, excitation: dict[str, Any]) -> RigRecord:
+        """The record of the device driven by ``force`` [N] (on the grid ``q`` times ``fs``) from rest at ``z0``,
+        the table still: z read by the laser at ``fs`` (every ``q``-th sample; the force is not band-limited, so no
+        acquisition filter is modelled), the force by the hammer's load cell.
+        """
+        from .simulator import simulate
+
+        if self.sensors.response not in ("displacement", "absolute"):
+            raise RigError(f"a hammer or release test is read by the laser on the moving part (response "
+                           f"'displacement' or 'absolute'), not {self.sensors.response!r}")  # fmt: skip
+        res = simulate(self.system, force, 1.0 / (self.fs * q), z0=z0, v0=0.0, input_kind="force")
+        if res.diverged[0]:
+            raise RigError(f"the device left every well under the {excitation['type']} test "
+                           f"({res.describe_failures()})")  # fmt: skip
+        assert res.z_dot is not None  # ``simulate`` stores the velocity
+        z, z_dot, f = res.z[0][::q], res.z_dot[0][::q], force[::q]
+        _, sens_rng = self._streams()
+        s = self.sensors
+        laser = s.laser_noise * sens_rng.standard_normal(z.size)  # the laser's noise first, the load cell's after
+        cell = s.force_noise * sens_rng.standard_normal(f.size) if excitation["type"] == "hammer" else 0.0
+        cols = {"t": np.arange(z.size) / self.fs, "force": f + cell, "z": z + s.response_offset + laser}
+        true = {"z": z, "z_dot": z_dot, "force": f}
+        return self._record(cols, true, excitation)
 
     def sine_sweep(
         self,

@@ -32,13 +32,15 @@ from .document import Report
 BROADBAND = ("nsi", "sindy", "posterior", "design", "discrepancy", "frf")
 HARMONIC = ("characterise",)
 CAMPAIGN = ("map",)
-IMPACT = ("frf", "nsi", "sindy", "interval", "posterior", "discrepancy")
+IMPACT = ("frf", "nsi", "sindy", "interval", "posterior", "design", "discrepancy")
 """A hammer's record: its FRF (hits, offsets, windows), the identifications with the force windowed, NSI's
 estimate's interval by batch means over blocks of the record (a hit or so each), the coefficient posterior (its
-windows between the hits) and the discrepancy workflow (its windows after the hits)."""
-DECAY = ("nsi", "sindy", "posterior", "discrepancy", "backbone")
-"""A free decay: the identifications (their decay forms), the coefficient posterior, the discrepancy workflow, then
-the backbone measured and the identified model's, with the posterior's credible band."""
+windows between the hits), the hammer hits and releases to run next, and the discrepancy workflow (its windows after
+the hits)."""
+DECAY = ("nsi", "sindy", "posterior", "design", "discrepancy", "backbone")
+"""A free decay: the identifications (their decay forms), the coefficient posterior, the hammer hits and releases to
+run next, the discrepancy workflow, then the backbone measured and the identified model's, with the posterior's
+credible band."""
 SECTIONS = (*BROADBAND, *HARMONIC, *CAMPAIGN, "backbone", "interval")
 """Every analysis a report may hold (``only`` chooses among them)."""
 
@@ -348,9 +350,12 @@ minute); ``negstiff design`` on the report's posterior searches further."""
 
 
 def _check_design(rec) -> None:
-    if rec.input_name != "base_acc":
-        raise InputError(f"{rec.source}: a force-driven record: the design plans shaker-table tests from a "
-                         "base-excited record's posterior")  # fmt: skip
+    from negstiff.inference.analysis.record_kind import record_kind
+
+    if rec.input_name != "base_acc" and record_kind(rec).kind not in ("impact", "decay"):
+        raise InputError(f"{rec.source}: a shaker's force record: the design plans shaker-table tests from a "
+                         "base-excited record's posterior, hammer hits and releases from a hammer's or a "
+                         "decay's")  # fmt: skip
 
 
 def _design(rec, fitted: dict[str, Any], seed: int) -> dict[str, Any]:

@@ -658,7 +658,11 @@ def design_section(res: dict[str, Any], label: str = "") -> Section:
     targets = res["targets"]
     best, ref = res["best"], res["default_test"]
     pct = 100 * res.get("hdi_prob", 0.9)
-    sec.text(f"The tests the rig could run next ({res['settings']['duration_s']:.3g} s each), ranked by how much they "
+    table = res["settings"].get("bench", "table") == "table"
+    reference = "the rig's default random test" if table else f"the reference test ({ref['test']})"
+    what = "" if table else ": hammer hits and releases from a held position, the table still"
+    sec.text(f"The tests the {'rig' if table else 'lab'} could run next ({res['settings']['duration_s']:.3g} s "
+             f"each{what}), ranked by how much they "
              f"would narrow the {pct:g} % intervals of {', '.join(targets)}: the posterior's draws run through each on "
              "the virtual rig with this record's noise, each simulated record read as the posterior reads one "
              f"({res['search']['evaluated']} tests evaluated, {res['search']['draws']} draws each). Shrinkage: the "
@@ -670,16 +674,21 @@ def design_section(res: dict[str, Any], label: str = "") -> Section:
     if ref not in shown:
         shown.append(ref)
     for r in shown:
-        name = r["test"] + (" (the rig's default)" if r["test"] == ref["test"] else "")
-        rows.append([name, r["score"], *[r["predicted_width"][n] for n in targets],
-                     r["cost"]["peak_table_acc_m_s2"], 1e3 * r["cost"]["peak_table_disp_m"],
+        name = r["test"] + ((" (the rig's default)" if table else " (the reference)") if r["test"] == ref["test"]
+                            else "")  # fmt: skip
+        cost = ([r["cost"]["peak_table_acc_m_s2"], 1e3 * r["cost"]["peak_table_disp_m"]] if table
+                else [r["cost"]["peak_force_n"], 1e3 * r["cost"]["peak_travel_m"]])  # fmt: skip
+        rows.append([name, r["score"], *[r["predicted_width"][n] for n in targets], *cost,
                      r["cost"]["draws_visiting_both_wells"]])  # fmt: skip
-    sec.table(["test", "shrinkage", *[f"{n} {pct:g} % width" for n in targets], "peak table acc [m/s^2]",
-               "table stroke [mm]", "draws visiting both wells"], rows)  # fmt: skip
+    heads = ["peak table acc [m/s^2]", "table stroke [mm]"] if table else ["peak force [N]", "travel from rest [mm]"]
+    sec.table(["test", "shrinkage", *[f"{n} {pct:g} % width" for n in targets], *heads,
+               "draws visiting both wells"], rows)  # fmt: skip
     sec.figure(f"design_{_slug(label or 'record')}", design_figure(res),
                "The criterion over the candidates' settings: harmonics over frequency and amplitude (left), random "
                "and swept tests over their level (right); the star is the chosen test, the cross the rig's default "
-               "random test.")  # fmt: skip
+               "random test." if table else "The criterion over the candidates' settings: hammer tests over their "
+               "peak force, one line per hit count (left), releases over their start's distance from rest (right); "
+               "the star is the chosen test, the cross the reference test.")  # fmt: skip
     infeasible = [r for r in res["ranked"] if not r["feasible"]]
     if infeasible:
         sec.text(f"{len(infeasible)} candidate(s) lay outside the limits (the first: {infeasible[0]['test']}: "
@@ -689,7 +698,7 @@ def design_section(res: dict[str, Any], label: str = "") -> Section:
     for w in res.get("warnings", []):
         sec.warning(w)
     sec.summary.append(f"What to test next: {best['test']}, predicted to narrow the intervals of {', '.join(targets)} "
-                       f"{best['score']:.3g}x (the rig's default random test: {ref['score']:.3g}x).")  # fmt: skip
+                       f"{best['score']:.3g}x ({reference}: {ref['score']:.3g}x).")  # fmt: skip
     sec.json = res
     return sec
 

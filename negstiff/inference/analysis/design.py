@@ -60,12 +60,20 @@ CAMPAIGN_STEPS = 4
 between their records, as the reference study stepped its harmonic campaign."""
 SINUSOIDAL = ("harmonic", "campaign")
 """The kinds set by an amplitude and a frequency (searched over both; drawn over both)."""
+RING_DOWN = ("hammer", "release")
+"""The tests of a device fixed to the ground, read as ring-downs (a hammer's hits, a release from a held position):
+the candidates of a hammer's or a free decay's posterior, whose joint fit reads windows of free decay."""
+HAMMER_WIDTH_S = 0.004
+"""A hammer hit's half-sine duration [s]: a modal hammer's medium tip on a light structure (1-5 ms)."""
+HAMMER_HITS = (2, 4, 8)
+"""A hammer test's hit counts on the grid (evenly spread over the record)."""
 
 
 @dataclass(frozen=True)
 class Limits:
     """What the lab's rig can do: the record's duration [s], the peak table acceleration [m/s^2] and displacement
-    [m] (None: no limit stated), the device's travel [m] (its largest excursion from the saddle before a stop;
+    [m] (None: no limit stated; a shaker's tests), the hammer's peak force [N] (a hammer's tests), the device's
+    travel [m] (its largest excursion from the saddle before a stop;
     None: no stop), and the displacement sensor's measuring range [m] (the span its reading may cover: the laser on
     the moving part reads the device's motion and the table's together; None: no range stated).
     """
@@ -75,6 +83,8 @@ class Limits:
     max_table_disp: float | None = None
     stroke: float | None = None
     sensor_range: float | None = None
+    max_force: float | None = None
+    """The hammer's peak force [N] (a ring-down posterior's tests; None: no limit stated)."""
 
 
 @dataclass(frozen=True)
@@ -87,9 +97,19 @@ class Candidate:
     kind: str
     level: float
     freq: float | None = None
+    hits: int | None = None
+    """A hammer test's hits (``level`` their peak force [N]); a release's ``level`` is its start's offset [m]
+    from the well the device rests in (positive away from the saddle, negative towards it or past it)."""
 
     def run(self, rig, duration: float):
         """The rig's record of this test, ``duration`` seconds long (a harmonic: whole periods)."""
+        if self.kind == "hammer":
+            assert self.hits is not None
+            return rig.hammer(peak=self.level, hits=self.hits, duration=duration, width=HAMMER_WIDTH_S)
+        if self.kind == "release":
+            rest = rig.equilibria.z_plus
+            outwards = 1.0 if rig.equilibria.z_0 is None or rest > rig.equilibria.z_0 else -1.0
+            return rig.release(rest + outwards * self.level, duration=duration)
         if self.kind == "random":
             return rig.random(duration=duration, rms=self.level, band=BAND, settle=2.0)
         if self.kind == "sweep":
@@ -117,13 +137,18 @@ class Candidate:
 
     def table_disp_bound(self) -> float:
         """The table's peak displacement [m] a sinusoidal test asks for (its lowest frequency's A / w^2)."""
-        if self.kind == "random":
-            return 0.0  # a random run's is read from its record (``evaluate``)
+        if self.kind in ("random", *RING_DOWN):
+            return 0.0  # a random run's is read from its record (``evaluate``); a hammer's or release's table is still
         f = self.freq if self.kind in SINUSOIDAL and self.freq is not None else BAND[0]
         return self.level / (2 * math.pi * f) ** 2
 
     def describe(self) -> str:
         """One line a lab reads."""
+        if self.kind == "hammer":
+            return f"{self.hits} hammer hits of {self.level:.3g} N ({1e3 * HAMMER_WIDTH_S:g} ms half-sine)"
+        if self.kind == "release":
+            where = "away from the saddle" if self.level > 0 else "towards the saddle"
+            return f"free decay released {1e3 * abs(self.level):.3g} mm from rest, {where}"
         if self.kind == "random":
             return f"random {self.level:.3g} m/s^2 rms, {BAND[0]:g}-{BAND[1]:g} Hz"
         if self.kind == "sweep":
@@ -135,7 +160,11 @@ class Candidate:
     def to_json(self) -> dict[str, Any]:
         """The test's settings."""
         out: dict[str, Any] = {"kind": self.kind, "test": self.describe()}
-        if self.kind == "random":
+        if self.kind == "hammer":
+            out.update(peak_force_n=self.level, hits=self.hits, width_s=HAMMER_WIDTH_S)
+        elif self.kind == "release":
+            out.update(release_offset_m=self.level)
+        elif self.kind == "random":
             out.update(rms_m_s2=self.level, band_hz=list(BAND))
         elif self.kind == "sweep":
             out.update(amplitude_m_s2=self.level, f_start_hz=BAND[0], f_stop_hz=BAND[1])
@@ -164,6 +193,10 @@ class PosteriorState:
     max_windows: int
     duration_s: float
     source: str = ""
+    bench: str = "table"
+    """Which tests the lab's next run is chosen from: ``"table"`` (a base-excited record's posterior: the shaking
+    table's random, harmonic, swept and stepped tests) or ``"ring-down"`` (a hammer's or a free decay's posterior:
+    hammer hits and releases, ``RING_DOWN``)."""
     information: np.ndarray | None = None
     """The first record's model information H over ``NAMES`` (the posterior's ``settings.laplace``), or None
     (a posterior written before it was kept: the records' adjusted informations are then added instead)."""
@@ -188,9 +221,11 @@ class PosteriorState:
         kind = s.get("record_kind")
         if kind is None:
             raise InputError(f"{where}: written before posteriors recorded their record's kind: sample it again")
-        if kind != "base" or s.get("input") != "base_acc":
+        ring_down = kind in ("impact", "decay")
+        if not ring_down and (kind != "base" or s.get("input") != "base_acc"):
             raise InputError(f"{where}: a posterior of a {kind} record ({s.get('input')}); the design plans "
-                             "shaker-table tests from a base-excited record's posterior")  # fmt: skip
+                             "shaker-table tests from a base-excited record's posterior, and hammer hits and "
+                             "releases from a hammer's or a free decay's")  # fmt: skip
         params = {**res.get("nuisance_parameters", {}), **res["parameters"]}
         missing = [n for n in NAMES if n not in params]
         if missing:
@@ -203,7 +238,7 @@ class PosteriorState:
         rms = s.get("input_noise", {}).get("rms", 0.0)
         rms = float(rms[0] if isinstance(rms, list) else rms or 0.0)
         dur = s.get("duration_s")
-        if not float(s.get("fs", 0.0)) > 2.5 * BAND[1]:
+        if not ring_down and not float(s.get("fs", 0.0)) > 2.5 * BAND[1]:
             raise InputError(f"{where}: a record at {s.get('fs')} Hz: the rig's tests reach {BAND[1]:g} Hz, which "
                              f"needs a record above {2.5 * BAND[1]:g} Hz")  # fmt: skip
         out = cls(
@@ -219,13 +254,14 @@ class PosteriorState:
             max_windows=int(s.get("max_windows") or 240),  # the posterior's cap (a longer test: more windows)
             duration_s=float(dur[0] if isinstance(dur, list) else dur),
             source=source,
+            bench="ring-down" if ring_down else "table",
             **_laplace_parts(s.get("laplace")),
         )
         try:
             eq = out.model_at(out.mean).equilibria()
         except (ValueError, ArithmeticError) as exc:
             raise InputError(f"{where}: its mean model has no usable well ({exc})") from None
-        if eq.z_minus is None:
+        if eq.z_minus is None and not ring_down:
             raise InputError(f"{where}: its mean model has a single well; the design reads a double well's posterior "
                              "(both wells' frequencies place its harmonics)")  # fmt: skip
         return out
@@ -239,6 +275,17 @@ class PosteriorState:
         sensors = Sensors(laser_noise=self.sigma, acc_noise=max(self.input_noise, 1e-9))
         return Rig(model, sensors=sensors, fs=self.fs, seed=seed)
 
+    def rest_scale(self) -> float:
+        """The mean model's own length scale of its resting (plus) well [m], on which the ring-down tests' grids
+        are laid: the distance to the saddle of a double well; of a single well, the amplitude at which the cubic
+        doubles its stiffness, sqrt(k_lin / (3 k3)).
+        """
+        model = self.model_at(self.mean)
+        eq = model.equilibria()
+        if eq.z_0 is not None:
+            return abs(eq.z_plus - eq.z_0)
+        return math.sqrt(max(model.uls("plus").k1_tilde, 1e-12) / (3 * model.k3))
+
     def model_at(self, theta: np.ndarray):
         """The polynomial model of the parameters ``theta`` (over ``NAMES``) with the posterior's mass."""
         from negstiff.models import Model
@@ -246,8 +293,8 @@ class PosteriorState:
         return Model(m=self.mass, **{n: float(v) for n, v in zip(NAMES, theta, strict=True)})
 
     def draws(self, n: int, seed: int) -> np.ndarray:
-        """``n`` draws of the Gaussian posterior, each a usable double well (k3, c, c_nl >= 0, two wells); the
-        first is the mean.
+        """``n`` draws of the Gaussian posterior, each a usable model (k3, c, c_nl >= 0; two wells for a table's
+        tests, a plus well to rest in for a ring-down's); the first is the mean.
         """
         rng = np.random.default_rng(seed)
         L = np.linalg.cholesky(self.cov + 1e-30 * np.eye(len(NAMES)))
@@ -258,7 +305,8 @@ class PosteriorState:
             th = self.mean + L @ rng.standard_normal(len(NAMES))
             if th[2] > 0 and th[3] >= 0 and th[4] >= 0:
                 try:
-                    if self.model_at(th).equilibria().z_minus is not None:
+                    eq = self.model_at(th).equilibria()
+                    if (eq.z_minus if self.bench == "table" else eq.z_plus) is not None:
                         out.append(th)
                 except (ValueError, ArithmeticError):
                     continue
@@ -320,15 +368,20 @@ def record_cost(state: PosteriorState, model, recs: list) -> dict[str, float]:
     centre = eq.z_0 if eq.z_0 is not None else eq.z_plus
     zs = [np.asarray(r.true["z"]) for r in recs]
     z_all = np.concatenate(zs)
-    return {
-        "duration_s": float(z_all.size / state.fs),
-        "peak_table_acc_m_s2": max(float(np.max(np.abs(r.true["base_acc"]))) for r in recs),
-        "peak_table_disp_m": max(float(np.max(np.abs(r.true["base_disp"]))) for r in recs),
-        "peak_travel_m": float(np.max(np.abs(z_all - centre))),
-        # the span the laser on the moving part reads (the device's motion and the table's)
-        "sensor_span_m": max(float(np.ptp(z + np.asarray(r.true["base_disp"]))) for z, r in zip(zs, recs, strict=True)),
-        "other_well_share": float(np.mean(np.sign(z_all - centre) != np.sign(eq.z_plus - centre))),
-    }
+    table = [np.asarray(r.true["base_disp"]) if "base_disp" in r.true else 0.0 for r in recs]  # still: a hammer's
+    cost = {"duration_s": float(z_all.size / state.fs)}
+    if "base_acc" in recs[0].true:
+        cost["peak_table_acc_m_s2"] = max(float(np.max(np.abs(r.true["base_acc"]))) for r in recs)
+        cost["peak_table_disp_m"] = max(float(np.max(np.abs(b))) for b in table)
+    else:
+        cost["peak_force_n"] = max(float(np.max(np.abs(r.true["force"]))) for r in recs)
+    cost["peak_travel_m"] = float(np.max(np.abs(z_all - centre)))
+    # the span the laser on the moving part reads (the device's motion and the table's)
+    cost["sensor_span_m"] = max(float(np.ptp(z + b)) for z, b in zip(zs, table, strict=True))
+    # of a single well (a ring-down's draw): no other well to visit
+    other = np.sign(z_all - centre) != np.sign(eq.z_plus - centre)
+    cost["other_well_share"] = 0.0 if eq.z_0 is None else float(np.mean(other))
+    return cost
 
 
 def limit_problems(candidate: Candidate, cost: dict[str, float], limits: Limits) -> list[str]:
@@ -337,6 +390,8 @@ def limit_problems(candidate: Candidate, cost: dict[str, float], limits: Limits)
     in ``evaluate``), the duration, the sensor's range and the device's stroke.
     """
     problems = []
+    if candidate.kind == "hammer" and limits.max_force is not None and candidate.level > limits.max_force:
+        problems.append(f"peak force {candidate.level:.3g} N above the hammer's {limits.max_force:g} N")
     if candidate.kind == "random":
         problems += _peak_acc_problems(cost["peak_table_acc_m_s2"], limits)
         if limits.max_table_disp is not None and cost["peak_table_disp_m"] > limits.max_table_disp:
@@ -355,16 +410,20 @@ def limit_problems(candidate: Candidate, cost: dict[str, float], limits: Limits)
 
 def _record_information(state: PosteriorState, model, rec) -> tuple[np.ndarray, np.ndarray] | None:
     """The model information H and the windows' score covariance M (over ``NAMES``, in the parameters' units) of
-    one simulated record of ``model`` as the posterior reads it (``likelihood.information_parts``), or None where a
-    run diverges.
+    one simulated record of ``model`` as the posterior reads it (``likelihood.information_parts``; a hammer's or
+    release's record as a ring-down, its windows the free decays between the pulses), or None where a run diverges.
     """
+    from negstiff.inference.analysis.record_kind import identification_record, record_kind
     from negstiff.inference.estimators.posterior.likelihood import information_parts
     from negstiff.inference.estimators.posterior.parametrisation import coefficient_parametrisation
     from negstiff.inference.estimators.posterior.windows import Windows
     from negstiff.inference.record.measurement import Measurement
 
     m = Measurement.from_rig(rec)
-    win = Windows.cut(m, state.window_s, state.max_windows)
+    ring_down = state.bench == "ring-down"
+    if ring_down:  # as the posterior reads a hammer's record or a decay (``Posterior.point_estimate``)
+        m = identification_record(m, record_kind(m))
+    win = Windows.cut(m, state.window_s, state.max_windows, free=ring_down)
     par = coefficient_parametrisation(model)
     th = np.array([getattr(model, n) for n in par.names])
     kind = par.kind
@@ -452,8 +511,10 @@ def evaluate(state: PosteriorState, candidate: Candidate, limits: Limits, target
     """The expected outcome of ``candidate`` over the posterior's ``draws`` (module docstring); the noise of each
     draw's record seeded ``seed + d`` (the same for every candidate: common random numbers).
     """
+    from negstiff.models.records import RigError
+
     problems = []
-    if candidate.kind != "random" and candidate.level > limits.max_table_acc:
+    if candidate.kind in ("harmonic", "campaign", "sweep") and candidate.level > limits.max_table_acc:
         problems.append(f"amplitude {candidate.level:.3g} m/s^2 above the table's {limits.max_table_acc:g} m/s^2")
     if limits.max_table_disp is not None and candidate.table_disp_bound() > limits.max_table_disp:
         problems.append(f"table stroke {1e3 * candidate.table_disp_bound():.3g} mm above the shaker's "
@@ -467,6 +528,9 @@ def evaluate(state: PosteriorState, candidate: Candidate, limits: Limits, target
         except PosteriorError as exc:  # too short for the posterior's windows (a harmonic's whole periods)
             return Evaluation(candidate, state.cov, dict(state.widths), 1.0, 0.0, {},
                               [*problems, f"its record cannot be read: {exc}"])  # fmt: skip
+        except RigError as exc:  # a hit or a release that throws a draw of the posterior out of every well
+            return Evaluation(candidate, state.cov, dict(state.widths), 1.0, 0.0, {},
+                              [*problems, f"the model diverges under this test ({exc})"])  # fmt: skip
         costs.append(cost)
         if info is None:
             problems.append("the model diverges under this test (a draw of the posterior leaves every well)")
@@ -512,8 +576,51 @@ def _harmonic_band(state: PosteriorState) -> tuple[float, float]:
     return max(1.0, 0.5 * min(f_wells)), min(state.fs / 8, 2.5 * max(f_wells))
 
 
+def _hammer_force(state: PosteriorState, amplitude: float) -> float:
+    """The peak force [N] of a ``HAMMER_WIDTH_S`` half-sine hit that sets the mean model ringing at about
+    ``amplitude`` [m] in its plus well: impulse 2 F w / pi = m v0, v0 = amplitude x the well's angular frequency.
+    """
+    model = state.model_at(state.mean)
+    w = 2 * math.pi * model.uls("plus").f_hz
+    return amplitude * w * state.mass * math.pi / (2 * HAMMER_WIDTH_S)
+
+
+def _ring_down_levels(state: PosteriorState, limits: Limits, kind: str) -> tuple[float, float]:
+    """The span of a ring-down test's level: a hit ringing at 0.1 to 3 times the rest well's scale
+    (``PosteriorState.rest_scale``, within the hammer's force), a release 0.1 to 3 times it away from rest.
+    """
+    scale = state.rest_scale()
+    if kind == "hammer":
+        lo, hi = _hammer_force(state, 0.1 * scale), _hammer_force(state, 3.0 * scale)
+        if limits.max_force is not None:
+            hi = min(hi, limits.max_force)
+            lo = min(lo, hi / 4)
+        return lo, hi
+    return 0.1 * scale, 3.0 * scale
+
+
+def ring_down_reference(state: PosteriorState, limits: Limits) -> Candidate:
+    """The reference a ring-down posterior's design is compared with (its record's own test is not in the
+    posterior's file): four hits ringing at half the rest well's scale, within the hammer's force.
+    """
+    force = _hammer_force(state, 0.5 * state.rest_scale())
+    if limits.max_force is not None:
+        force = min(force, limits.max_force)
+    return Candidate("hammer", float(force), hits=4)
+
+
 def _grid(state: PosteriorState, limits: Limits, n: int) -> list[Candidate]:
-    """About ``n`` candidates spread over the kinds and their settings (harmonics around the wells' frequencies)."""
+    """About ``n`` candidates spread over the kinds and their settings (harmonics around the wells' frequencies;
+    a ring-down posterior's: hammer hits over force and count, releases away from and towards the saddle).
+    """
+    if state.bench == "ring-down":
+        n_hit = max(2, (n * 2 // 3) // len(HAMMER_HITS))
+        out = [Candidate("hammer", float(f), hits=k) for k in HAMMER_HITS
+               for f in np.geomspace(*_ring_down_levels(state, limits, "hammer"), n_hit)]  # fmt: skip
+        n_rel = max(2, (n - len(out)) // 2)
+        lo, hi = _ring_down_levels(state, limits, "release")
+        out += [Candidate("release", float(sign * a)) for sign in (1.0, -1.0) for a in np.geomspace(lo, hi, n_rel)]
+        return out
     f_lo, f_hi = _harmonic_band(state)
     n_r = max(2, n // 6)
     n_s = max(2, n // 8)
@@ -549,7 +656,13 @@ def _search(state, limits, targets, draws, seed, start: Evaluation, budget: int,
         return -ev.score if ev.feasible else 0.0
 
     c0 = start.candidate
-    if c0.kind not in SINUSOIDAL:
+    if c0.kind in RING_DOWN:  # the level's magnitude (a release keeps its side of the rest well)
+        lo, hi = _ring_down_levels(state, limits, c0.kind)
+        sign = math.copysign(1.0, c0.level)
+        optimize.minimize_scalar(lambda lg: run(replace(c0, level=sign * float(math.exp(lg)))), method="bounded",
+                                 bounds=(math.log(lo), math.log(hi)),
+                                 options={"maxiter": budget, "xatol": 0.05})  # fmt: skip
+    elif c0.kind not in SINUSOIDAL:
         hi = top / 3.5 if c0.kind == "random" else top
         optimize.minimize_scalar(lambda lg: run(replace(c0, level=float(math.exp(lg)))), method="bounded",
                                  bounds=(math.log(top / 40), math.log(hi)),
@@ -571,27 +684,32 @@ def _search(state, limits, targets, draws, seed, start: Evaluation, budget: int,
     return best[0]
 
 
-def design(posterior, *, targets=None, duration: float | None = None, max_table_acc: float = DEFAULT_MAX_ACC,
+def design(posterior, *, targets=None, duration: float | None = None, max_table_acc: float | None = None,
            max_table_disp: float | None = None, stroke: float | None = None, sensor_range: float | None = None,
-           candidates: int = 50, draws: int = 16, search: int = 12, seed: int = 0) -> dict[str, Any]:  # fmt: skip
+           max_force: float | None = None, candidates: int = 50, draws: int = 16, search: int = 12,
+           seed: int = 0) -> dict[str, Any]:  # fmt: skip
     """The tests ranked by what they would teach (module docstring).
 
     Parameters
     ----------
     posterior : Posterior, dict, path or PosteriorState
-        A fitted coefficient ``Posterior`` of a base-excited record, its ``result()``, its JSON file, or the state
-        ``prepared`` read from one.
+        A fitted coefficient ``Posterior`` of a base-excited record (the table's tests are ranked), or of a
+        hammer's record or a free decay (hammer hits and releases are ranked: ``RING_DOWN``); its ``result()``, its
+        JSON file, or the state ``prepared`` read from one.
     targets : sequence of str, optional
         The parameters to pin down (among k1, k2, k3, c, c_nl; default all).
     duration : float, optional
         The next record's length [s] (default: the posterior's record's).
-    max_table_acc, max_table_disp : float
-        The table's peak acceleration [m/s^2] and displacement [m] (None: no displacement limit stated).
+    max_table_acc, max_table_disp : float, optional
+        The table's peak acceleration [m/s^2] (default 80) and displacement [m] (None: no limit stated); a
+        base-excited posterior's only.
     stroke : float, optional
         The device's travel from its saddle to a stop [m]; a test that reaches it is infeasible.
     sensor_range : float, optional
         The displacement sensor's measuring range [m]: a test whose reading (the device's and the table's motion
         together, for the rig's laser on the moving part) spans more is infeasible.
+    max_force : float, optional
+        The hammer's peak force [N] (a ring-down posterior's only; None: no limit stated).
     candidates : int
         Grid candidates before the continuous search.
     draws : int
@@ -619,7 +737,7 @@ def design(posterior, *, targets=None, duration: float | None = None, max_table_
     t0 = time.perf_counter()
     state = _state_of(posterior)
     targets = _targets(targets)
-    limits = _limits(state, duration, max_table_acc, max_table_disp, stroke, sensor_range)
+    limits = _limits(state, duration, max_table_acc, max_table_disp, stroke, sensor_range, max_force)
     _counts(candidates=candidates, draws=draws, search=search, seed=seed)
     th = state.draws(int(draws), int(seed))
     evaluated = [evaluate(state, c, limits, targets, th, int(seed)) for c in _grid(state, limits, int(candidates))]
@@ -627,13 +745,16 @@ def design(posterior, *, targets=None, duration: float | None = None, max_table_
     feasible = sorted((e for e in evaluated if e.feasible), key=lambda e: -e.score)
     for start in feasible[:2] if search else []:
         _search(state, limits, targets, th, int(seed), start, int(search), evaluated)
-    reference = evaluate(state, Candidate("random", DEFAULT_RANDOM_RMS), limits, targets, th, int(seed))
+    default = (Candidate("random", DEFAULT_RANDOM_RMS) if state.bench == "table"
+               else ring_down_reference(state, limits))  # fmt: skip
+    reference = evaluate(state, default, limits, targets, th, int(seed))
     evaluated.append(reference)  # a candidate too: the first-ranked test teaches at least what the default does
     unique = {
         (
             e.candidate.kind,
             round(e.candidate.level, 6),
             None if e.candidate.freq is None else round(e.candidate.freq, 6),
+            e.candidate.hits,
         ): e
         for e in evaluated
     }  # a setting the search met again: once
@@ -677,17 +798,26 @@ def design(posterior, *, targets=None, duration: float | None = None, max_table_
             "draws": int(draws),
         },  # fmt: skip
         "assumptions": [
-            "the next record is read by a sensor chain like the rig's (a laser on the moving part, the table's "
-            f"accelerometer integrated twice), laser noise {state.sigma:.3g} m and accelerometer noise "
-            f"{state.input_noise:.3g} m/s^2 (the posterior's)",
+            (
+                "the next record is read by a sensor chain like the rig's (a laser on the moving part, the table's "
+                f"accelerometer integrated twice), laser noise {state.sigma:.3g} m and accelerometer noise "
+                f"{state.input_noise:.3g} m/s^2 (the posterior's)"
+                if state.bench == "table"
+                else f"the next record is read by a laser on the moving part with the posterior's noise "
+                f"({state.sigma:.3g} m), the device at rest in its plus well before the test, the table still; a hit "
+                f"is a {1e3 * HAMMER_WIDTH_S:g} ms half-sine; the default test compared with is "
+                f"'{default.describe()}' (the first record's own test is not in the posterior's file)"
+            ),
             "the posterior is Gaussian with its reported means, sds and correlations",
         ],
         "settings": {
             "duration_s": limits.duration_s,
-            "max_table_acc_m_s2": limits.max_table_acc,
+            "max_table_acc_m_s2": limits.max_table_acc if state.bench == "table" else None,
             "max_table_disp_m": limits.max_table_disp,
             "stroke_m": limits.stroke,
             "sensor_range_m": limits.sensor_range,
+            "max_force_n": limits.max_force,
+            "bench": state.bench,
             "candidates": candidates,
             "draws": draws,
             "search": search,
@@ -727,22 +857,28 @@ def _risks(best: dict[str, Any], limits: Limits) -> list[str]:
     if limits.max_table_disp is None and disp is not None and disp > UNSTATED_TABLE_STROKE:
         out.append(f"the chosen test moves the table {1e3 * disp:.3g} mm (peak) and no table stroke was stated: "
                    "give the shaker's (max_table_disp, --table-stroke) if it has less")  # fmt: skip
+    if best["kind"] in RING_DOWN and limits.stroke is None:
+        out.append(f"the chosen test moves the device {1e3 * cost['peak_travel_m']:.3g} mm from rest and no stroke was "
+                   "stated: a larger motion teaches more until a stop, so give the device's (stroke, --stroke) if "
+                   "it has less")  # fmt: skip
     return out
 
 
-def prepared(posterior, *, targets=None, duration: float | None = None, max_table_acc: float = DEFAULT_MAX_ACC,
+def prepared(posterior, *, targets=None, duration: float | None = None, max_table_acc: float | None = None,
              max_table_disp: float | None = None, stroke: float | None = None, sensor_range: float | None = None,
-             candidates: int = 50, draws: int = 16, search: int = 12, seed: int = 0) -> dict[str, Any]:  # fmt: skip
+             max_force: float | None = None, candidates: int = 50, draws: int = 16, search: int = 12,
+             seed: int = 0) -> dict[str, Any]:  # fmt: skip
     """Every check ``design`` makes before its work (the posterior, the targets, the limits, the counts), in a
     fraction of a second: one ``InputError`` for the first bad input. Returns ``design``'s arguments, the
     posterior as read (``design(**prepared(...))`` reads its file once).
     """
     state = _state_of(posterior)
-    _limits(state, duration, max_table_acc, max_table_disp, stroke, sensor_range)
+    _limits(state, duration, max_table_acc, max_table_disp, stroke, sensor_range, max_force)
     _counts(candidates=candidates, draws=draws, search=search, seed=seed)
     return {"posterior": state, "targets": _targets(targets), "duration": duration, "max_table_acc": max_table_acc,
             "max_table_disp": max_table_disp, "stroke": stroke, "sensor_range": sensor_range,
-            "candidates": candidates, "draws": draws, "search": search, "seed": seed}  # fmt: skip
+            "max_force": max_force, "candidates": candidates, "draws": draws, "search": search,
+            "seed": seed}  # fmt: skip
 
 
 def _counts(**counts) -> None:
@@ -763,6 +899,9 @@ def design_figure(result: dict[str, Any]):
 
     rows = [r for r in result["ranked"] if r["feasible"]]
     fig, (a, b) = plt.subplots(1, 2, figsize=(10.5, 4.0), constrained_layout=True)
+    if any(r["kind"] in RING_DOWN for r in result["ranked"]):
+        _ring_down_panels(a, b, rows, result)
+        return fig
     h = [r for r in rows if r["kind"] in SINUSOIDAL]
     if h:
         norm = matplotlib.colors.LogNorm(min(r["score"] for r in h), max(r["score"] for r in h))
@@ -802,6 +941,42 @@ def design_figure(result: dict[str, Any]):
     return fig
 
 
+def _ring_down_panels(a, b, rows: list[dict[str, Any]], result: dict[str, Any]) -> None:
+    """A ring-down posterior's criterion: the hammer tests' over their peak force (one line per hit count), the
+    releases' over their start's distance from rest (away from the saddle and towards it), chosen and default
+    marked.
+    """
+    for k in HAMMER_HITS:
+        r = sorted((x for x in rows if x["kind"] == "hammer" and x["hits"] == k), key=lambda x: x["peak_force_n"])
+        if r:
+            a.plot([x["peak_force_n"] for x in r], [x["score"] for x in r], "o-", ms=4, label=f"{k} hits")
+    for sign, name in ((1, "away from the saddle"), (-1, "towards the saddle")):
+        r = sorted((x for x in rows if x["kind"] == "release" and sign * x["release_offset_m"] > 0),
+                   key=lambda x: abs(x["release_offset_m"]))  # fmt: skip
+        if r:
+            b.plot([1e3 * abs(x["release_offset_m"]) for x in r], [x["score"] for x in r], "s-", ms=4, label=name)
+    for row, mark, what in ((result["best"], "r*", "chosen"), (result["default_test"], "kx", "default")):
+        ax, x = (a, row["peak_force_n"]) if row["kind"] == "hammer" else (b, 1e3 * abs(row["release_offset_m"]))
+        ax.plot(x, row["score"], mark, ms=14 if what == "chosen" else 10, mew=2, label=f"{what}: {row['test']}")
+    a.set(xscale="log", yscale="log", xlabel="peak force [N]", ylabel="expected shrinkage",
+          title="hammer hits")  # fmt: skip
+    b.set(xscale="log", yscale="log", xlabel="release from rest [mm]", ylabel="expected shrinkage",
+          title=f"free decays; targets {', '.join(result['targets'])}")  # fmt: skip
+    plain = matplotlib_plain()
+    for ax in (a, b):
+        ax.legend(fontsize=8)
+        for axis in (ax.xaxis, ax.yaxis):
+            axis.set_major_formatter(plain)
+            axis.set_minor_formatter(plain)
+
+
+def matplotlib_plain():
+    """A tick formatter writing plain numbers (4, not 4x10^0) on log axes."""
+    import matplotlib.ticker
+
+    return matplotlib.ticker.FuncFormatter(lambda v, _: f"{v:g}")
+
+
 def _state_of(posterior) -> PosteriorState:
     if isinstance(posterior, PosteriorState):  # read already (``prepared``)
         return posterior
@@ -827,11 +1002,20 @@ def _targets(targets) -> tuple[str, ...]:
     return tuple(dict.fromkeys(names))
 
 
-def _limits(state: PosteriorState, duration, max_acc, max_disp, stroke, sensor_range=None) -> Limits:
+def _limits(state: PosteriorState, duration, max_acc, max_disp, stroke, sensor_range=None, max_force=None) -> Limits:
     dur = state.duration_s if duration is None else duration
+    if state.bench == "ring-down":
+        given = [n for n, v in (("max_table_acc", max_acc), ("max_table_disp", max_disp)) if v is not None]
+        if given:
+            raise InputError(f"{', '.join(given)}: a table's limit; a hammer's or a decay's posterior plans hammer "
+                             "hits and releases, the table still (max_force bounds the hammer)")  # fmt: skip
+    elif max_force is not None:
+        raise InputError("max_force: a hammer's limit; a base-excited record's posterior plans the table's tests "
+                         "(max_table_acc, max_table_disp bound them)")  # fmt: skip
+    max_acc = DEFAULT_MAX_ACC if max_acc is None else max_acc
     for name, v in (("duration", dur), ("max_table_acc", max_acc), ("max_table_disp", max_disp),
-                    ("sensor_range", sensor_range)):  # fmt: skip
-        if v is None and name in ("max_table_disp", "sensor_range"):
+                    ("sensor_range", sensor_range), ("max_force", max_force)):  # fmt: skip
+        if v is None and name in ("max_table_disp", "sensor_range", "max_force"):
             continue
         if isinstance(v, bool) or not isinstance(v, numbers.Real) or not math.isfinite(v) or v <= 0:
             raise InputError(f"{name} must be a positive number, got {v!r}")
@@ -855,5 +1039,5 @@ def _limits(state: PosteriorState, duration, max_acc, max_disp, stroke, sensor_r
         raise InputError(f"sensor_range {sensor_range:g} m: within 3x the laser's noise ({state.sigma:.3g} m): no "
                          "motion the record could read")  # fmt: skip
     return Limits(float(dur), float(max_acc), None if max_disp is None else float(max_disp),
-                  None if stroke is None else float(stroke),
-                  None if sensor_range is None else float(sensor_range))  # fmt: skip
+                  None if stroke is None else float(stroke), None if sensor_range is None else float(sensor_range),
+                  None if max_force is None else float(max_force))  # fmt: skip

@@ -99,6 +99,9 @@ def separation(posterior, discrepancy=None, *, hypotheses: dict[str, Any] | None
     from negstiff.inference.record.measurement import Measurement
 
     state = _state_of(posterior)
+    if state.bench != "table":
+        raise InputError(f"{state.source or 'the posterior'}: a hammer's or a decay's posterior; a separation compares "
+                         "the table's random tests (a base-excited record's posterior)")  # fmt: skip
     hyp = _hypotheses(discrepancy, hypotheses)
     limits = _limits(state, duration, max_table_acc, max_table_disp, stroke, sensor_range)
     _counts(records=records, seed=seed)

@@ -250,17 +250,19 @@ class Measurement:
     @classmethod
     def from_rig(cls, rec, weighed: bool = True) -> Measurement:
         """A virtual-rig record (``models.rig.RigRecord``) as negstiff reads a lab's: the measured base
-        acceleration as input, the response its sensor measured (z, or z_dot, y, y_dot, y_acc, from which z
+        acceleration as input (a hammer's or release's record: the force), the response its sensor measured (z,
+        or z_dot, y, y_dot, y_acc, from which z
         is derived as ``load`` derives it), the weighed mass (``weighed``), its source and the wells' rest
         positions its metadata states (as a file of it holds them).
         """
         mass = float(rec.meta["mass"]) if weighed and rec.meta.get("mass") is not None else None
         meta = {k: str(v) for k, v in rec.meta.items() if k.endswith("_rest")}
-        cols = {k: v for k, v in rec.columns.items() if k not in ("t", "base_acc")}
+        inp = "force" if "force" in rec.columns else "base_acc"  # a hammer's or release's record: the load cell's
+        cols = {k: v for k, v in rec.columns.items() if k not in ("t", inp)}
         z = cols.pop("z", None)
         if z is not None:  # a measured z is the response (the laser's y and the base's, already in it, stay out)
             cols = {}
-        return from_arrays(rec.columns["base_acc"], z, rec.fs, mass=mass, source=rec.meta["source"], meta=meta,
+        return from_arrays(rec.columns[inp], z, rec.fs, inp, mass=mass, source=rec.meta["source"], meta=meta,
                            **cols)  # fmt: skip
 
     def segment(self, start: int | None, stop: int | None) -> Measurement:

@@ -55,6 +55,12 @@ from negstiff.models import Model, laws
 from negstiff.models.device import NOMINAL
 from negstiff.models.effects import ROWS
 
+ALTERNATIONS = 10
+"""The most rounds of the MAP search and the windows' start-state refinement, alternately (``point_estimate``)."""
+ALTERNATION_TOL = 1e-3
+"""A round that lowers the MAP search's cost by less than this share (the same windows kept) ends the alternation."""
+RING_DOWN_KINDS = ("impact", "decay")
+"""The record kinds read as ring-downs (``record_kind``): their windows free decays between the pulses, no input."""
 FORCE_BAND_POINTS = 101
 """Displacements of the force band's grid over the record's stroke (``force_band``)."""
 FORCE_BAND_DRAWS = 400
@@ -485,31 +491,49 @@ class Posterior(Estimator):
         model at the sensor's variance ``sigma2`` (generalised least squares: the likelihood's own mode).
         """
         x_scale = np.maximum(np.abs(theta), 1e-6)
-        free = par.free()
         gls = sigma2 is not None and (win.noise_basis is not None or win.n_groups > 1)  # a joint fit: each record's
         reduced = gls and win.noise_basis is not None and win.proj is not None  # whitened in the projected basis
         n_rows = win.n_windows * (win.length - (win.proj.shape[-1] if reduced and win.proj is not None else 0))
 
-        def resid(x):
-            th = theta.copy()
-            th[free] = x * x_scale[free]
-            if not par.inside(th[None])[0]:
-                return np.full(n_rows, 1.0)
-            params = par.to_params(th[None])
-            if not np.all(np.isfinite(params)):
-                return np.full(n_rows, 1.0)
-            zsim, div = win.simulate(params, par.kind)
-            if div[0]:
-                return np.full(n_rows, 1.0)
-            if gls:
-                assert sigma2 is not None
-                return win.whitened_residuals(zsim[0], sigma2)
-            return win.residuals(zsim)[0].ravel()
+        def solve(start: np.ndarray, free: np.ndarray):
+            def resid(x):
+                th = start.copy()
+                th[free] = x * x_scale[free]
+                if not par.inside(th[None])[0]:
+                    return np.full(n_rows, 1.0)
+                params = par.to_params(th[None])
+                if not np.all(np.isfinite(params)):
+                    return np.full(n_rows, 1.0)
+                zsim, div = win.simulate(params, par.kind)
+                if div[0]:
+                    return np.full(n_rows, 1.0)
+                if gls:
+                    assert sigma2 is not None
+                    return win.whitened_residuals(zsim[0], sigma2)
+                return win.residuals(zsim)[0].ravel()
 
-        x0 = theta[free] / x_scale[free]
-        sol = optimize.least_squares(resid, x0, method="lm", x_scale="jac", max_nfev=400)
-        th = theta.copy()
-        th[free] = sol.x * x_scale[free]
+            sol = optimize.least_squares(resid, start[free] / x_scale[free], method="lm", x_scale="jac", max_nfev=400)
+            th = start.copy()
+            th[free] = sol.x * x_scale[free]
+            return th, sol
+
+        free = par.free()
+        th, sol = solve(theta, free)
+        # The prior's support is a wall for Levenberg-Marquardt (a constant residual outside it): a parameter whose
+        # optimum lies on its bound (c_nl of a device without cubic damping: 0) stops the search where a step
+        # first meets the wall, the others short of their optimum (a cross-well hammer record: k1 419.50 for 420,
+        # 2.6 sd, its cost 23 % above the truth's; measured). Such a parameter is held just inside its bound while the
+        # others are solved, then all are solved from there; the lower cost is kept.
+        span = par.upper - par.lower
+        edge = 1e-3 * span
+        near = free & ((th - par.lower < edge) | (par.upper - th < edge))
+        if near.any():
+            held = th.copy()
+            held[near] = np.clip(th[near], (par.lower + 1e-6 * span)[near], (par.upper - 1e-6 * span)[near])
+            held, _ = solve(held, free & ~near)
+            th2, sol2 = solve(held, free)
+            if sol2.cost < sol.cost:
+                th, sol = th2, sol2
         return th, sol
 
     def point_estimate(self, rec: Measurement | list[Measurement]):
@@ -529,7 +553,7 @@ class Posterior(Estimator):
         recs = list(rec) if isinstance(rec, (list, tuple)) else [rec]
         kinds = [record_kind(r) for r in recs]
         self.record_kind_ = kinds[0].kind
-        ring_down = kinds[0].kind in ("impact", "decay")
+        ring_down = kinds[0].kind in RING_DOWN_KINDS
         if ring_down:  # a hammer's force windowed, a decay's input zero; the windows between the pulses
             recs = [identification_record(r, k) for r, k in zip(recs, kinds, strict=True)]
         parts = [Windows.cut(r, self.window_s, self.max_windows, oversample=self.oversample, free=ring_down)
@@ -541,14 +565,24 @@ class Posterior(Estimator):
         zsim, div = win.simulate(par.to_params(theta[None]), par.kind)
         if div[0]:
             raise PosteriorError(f"{rec.source}: the start model diverges on the record's windows")
-        for it in range(3):
+        # the MAP point and the windows' start states alternately, until the cost stops falling (three rounds at
+        # least, ALTERNATIONS at most): three rounds alone stopped short on a cross-well hammer record (its cost 42 %
+        # above the truth's, c 0.486 +- 0.005 for 0.5 with a variance inflation of 684; three more rounds reached
+        # the truth's cost; measured)
+        cost = math.inf
+        for it in range(ALTERNATIONS):
             p_ = par.to_params(theta[None])[:, 0]
             win.refine_states(p_, par.kind)
+            n_before = win.n_windows
             win.drop_unmatched(p_, par.kind)
             win.set_sensitivities(p_, par.kind)
             theta, sol = self._map(par, win, theta)
             if it == 0 and win.resolve_substeps(par.to_params(theta[None]), par.kind, sol.jac):
                 theta, sol = self._map(par, win, theta)
+            settled = win.n_windows == n_before and sol.cost > (1 - ALTERNATION_TOL) * cost
+            cost = float(sol.cost)
+            if it >= 2 and settled:
+                break
         # at the MAP point the model matches every window it can follow to the noise (rms within ~10 % of
         # the median window's): a window 3x above the median is not followed (it turns back near the
         # saddle); measured on the as-built device, one such window held 90 % of the score's variance.
@@ -642,8 +676,8 @@ class Posterior(Estimator):
     def check(self, data):
         """``Estimator.check``; a list or tuple of records (a lab's runs of one device, fitted together: the
         device's parameters shared, each record its own windows, input noise and sensor noise) is checked record by
-        record and as a set: single-DOF records of one kind (base, force, hammer or decay) with the same sampling
-        rate, input and mass. Returns the list (one record: that record).
+        record and as a set: single-DOF records of one kind (base, force, or ring-downs: hammer and decay together)
+        with the same sampling rate, input and mass. Returns the list (one record: that record).
         """
         if not isinstance(data, (list, tuple)):
             return super().check(data)
@@ -669,9 +703,12 @@ class Posterior(Estimator):
             if (r.mass is None) != (first.mass is None) or (r.mass is not None and first.mass is not None
                                                              and abs(r.mass / first.mass - 1) > 1e-6):  # fmt: skip
                 raise PosteriorError(f"{name}: its mass ({r.mass}) is not the first's ({first.mass}): one device")
-            if (other := record_kind(r).kind) != kind:
+            other = record_kind(r).kind
+            # a hammer's record and a free decay are read alike (windows of free decay between the pulses): a lab's
+            # hammer test and its release test are fitted together; a forced record's windows carry its input
+            if other != kind and not {other, kind} <= set(RING_DOWN_KINDS):
                 raise PosteriorError(f"{name}: a {other} record, the first a {kind} record: records of one kind are "
-                                     "fitted together")  # fmt: skip
+                                     "fitted together (or a hammer's with free decays)")  # fmt: skip
         return recs
 
     def fit(self, rec: Measurement | list[Measurement]) -> Posterior:
