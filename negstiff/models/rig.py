@@ -101,7 +101,7 @@ class Sensors:
     @classmethod
     def noiseless(cls) -> Sensors:
         """Perfect sensors (no noise, no bias): for checks that need the exact response."""
-        return cls(laser_noise=0.0, acc_noise=0.0, acc_bias=0.0, velocity_noise=0.0)
+        return cls(laser_noise=0.0, acc_noise=0.0, acc_bias=0.0, velocity_noise=0.0, force_noise=0.0)
 
 
 def system_from_dict(d: dict[str, Any]) -> Device | Model:
@@ -333,6 +333,9 @@ class Rig:
         if not all(_real(v) and v > 0 and math.isfinite(v) for v in (peak, duration, width)):
             raise RigError(f"a hammer test needs peak > 0 [N], duration > 0 and width > 0 [s]; got {peak!r}, "
                            f"{duration!r}, {width!r}")  # fmt: skip
+        if width * self.fs < 2:
+            raise RigError(f"a {1e3 * width:g} ms hit spans {width * self.fs:.2g} samples at {self.fs:g} Hz: the load "
+                           f"cell's record would miss it (at least 2 samples: {2 / width:g} Hz)")  # fmt: skip
         if width * hits >= 0.5 * duration:
             raise RigError(f"{hits} pulses of {width:g} s fill half of the {duration:g} s record or more: no ring-down "
                            "between them")  # fmt: skip

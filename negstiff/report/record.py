@@ -350,9 +350,9 @@ minute); ``negstiff design`` on the report's posterior searches further."""
 
 
 def _check_design(rec) -> None:
-    from negstiff.inference.analysis.record_kind import record_kind
+    from negstiff.inference.analysis.record_kind import RING_DOWN_KINDS, record_kind
 
-    if rec.input_name != "base_acc" and record_kind(rec).kind not in ("impact", "decay"):
+    if rec.input_name != "base_acc" and record_kind(rec).kind not in RING_DOWN_KINDS:
         raise InputError(f"{rec.source}: a shaker's force record: the design plans shaker-table tests from a "
                          "base-excited record's posterior, hammer hits and releases from a hammer's or a "
                          "decay's")  # fmt: skip

@@ -680,7 +680,8 @@ def design_section(res: dict[str, Any], label: str = "") -> Section:
                 else [r["cost"]["peak_force_n"], 1e3 * r["cost"]["peak_travel_m"]])  # fmt: skip
         rows.append([name, r["score"], *[r["predicted_width"][n] for n in targets], *cost,
                      r["cost"]["draws_visiting_both_wells"]])  # fmt: skip
-    heads = ["peak table acc [m/s^2]", "table stroke [mm]"] if table else ["peak force [N]", "travel from rest [mm]"]
+    heads = (["peak table acc [m/s^2]", "table stroke [mm]"] if table
+             else ["peak force [N]", "travel from the saddle [mm]"])  # fmt: skip
     sec.table(["test", "shrinkage", *[f"{n} {pct:g} % width" for n in targets], *heads,
                "draws visiting both wells"], rows)  # fmt: skip
     sec.figure(f"design_{_slug(label or 'record')}", design_figure(res),

@@ -42,6 +42,7 @@ from typing import Any
 import numpy as np
 
 from negstiff.errors import InputError, NegstiffWarning
+from negstiff.inference.analysis.record_kind import RING_DOWN_KINDS
 from negstiff.inference.estimators.posterior.windows import PosteriorError
 
 COEFFICIENTS = ("k1", "k2", "k3", "c", "c_nl")
@@ -60,11 +61,13 @@ CAMPAIGN_STEPS = 4
 between their records, as the reference study stepped its harmonic campaign."""
 SINUSOIDAL = ("harmonic", "campaign")
 """The kinds set by an amplitude and a frequency (searched over both; drawn over both)."""
-RING_DOWN = ("hammer", "release")
+RING_DOWN_TESTS = ("hammer", "release")
 """The tests of a device fixed to the ground, read as ring-downs (a hammer's hits, a release from a held position):
 the candidates of a hammer's or a free decay's posterior, whose joint fit reads windows of free decay."""
 HAMMER_WIDTH_S = 0.004
 """A hammer hit's half-sine duration [s]: a modal hammer's medium tip on a light structure (1-5 ms)."""
+HAMMER_MIN_N = 2.0
+"""The lightest hit [N] a design plans: the rig's load cell (0.05 N of noise) tells a hit from its floor at 30x it."""
 HAMMER_HITS = (2, 4, 8)
 """A hammer test's hit counts on the grid (evenly spread over the record)."""
 
@@ -99,17 +102,16 @@ class Candidate:
     freq: float | None = None
     hits: int | None = None
     """A hammer test's hits (``level`` their peak force [N]); a release's ``level`` is its start's offset [m]
-    from the well the device rests in (positive away from the saddle, negative towards it or past it)."""
+    from the plus well the device rests in (positive above it, away from any saddle; negative below it, towards the
+    saddle or past it)."""
 
     def run(self, rig, duration: float):
         """The rig's record of this test, ``duration`` seconds long (a harmonic: whole periods)."""
         if self.kind == "hammer":
             assert self.hits is not None
             return rig.hammer(peak=self.level, hits=self.hits, duration=duration, width=HAMMER_WIDTH_S)
-        if self.kind == "release":
-            rest = rig.equilibria.z_plus
-            outwards = 1.0 if rig.equilibria.z_0 is None or rest > rig.equilibria.z_0 else -1.0
-            return rig.release(rest + outwards * self.level, duration=duration)
+        if self.kind == "release":  # from the plus well (``Equilibria``: above its saddle, where there is one)
+            return rig.release(rig.equilibria.z_plus + self.level, duration=duration)
         if self.kind == "random":
             return rig.random(duration=duration, rms=self.level, band=BAND, settle=2.0)
         if self.kind == "sweep":
@@ -137,7 +139,7 @@ class Candidate:
 
     def table_disp_bound(self) -> float:
         """The table's peak displacement [m] a sinusoidal test asks for (its lowest frequency's A / w^2)."""
-        if self.kind in ("random", *RING_DOWN):
+        if self.kind in ("random", *RING_DOWN_TESTS):
             return 0.0  # a random run's is read from its record (``evaluate``); a hammer's or release's table is still
         f = self.freq if self.kind in SINUSOIDAL and self.freq is not None else BAND[0]
         return self.level / (2 * math.pi * f) ** 2
@@ -147,8 +149,8 @@ class Candidate:
         if self.kind == "hammer":
             return f"{self.hits} hammer hits of {self.level:.3g} N ({1e3 * HAMMER_WIDTH_S:g} ms half-sine)"
         if self.kind == "release":
-            where = "away from the saddle" if self.level > 0 else "towards the saddle"
-            return f"free decay released {1e3 * abs(self.level):.3g} mm from rest, {where}"
+            where = "above" if self.level > 0 else "below"  # the plus well: above it, away from any saddle
+            return f"free decay released {1e3 * abs(self.level):.3g} mm {where} rest"
         if self.kind == "random":
             return f"random {self.level:.3g} m/s^2 rms, {BAND[0]:g}-{BAND[1]:g} Hz"
         if self.kind == "sweep":
@@ -196,7 +198,7 @@ class PosteriorState:
     bench: str = "table"
     """Which tests the lab's next run is chosen from: ``"table"`` (a base-excited record's posterior: the shaking
     table's random, harmonic, swept and stepped tests) or ``"ring-down"`` (a hammer's or a free decay's posterior:
-    hammer hits and releases, ``RING_DOWN``)."""
+    hammer hits and releases, ``RING_DOWN_TESTS``)."""
     information: np.ndarray | None = None
     """The first record's model information H over ``NAMES`` (the posterior's ``settings.laplace``), or None
     (a posterior written before it was kept: the records' adjusted informations are then added instead)."""
@@ -221,7 +223,7 @@ class PosteriorState:
         kind = s.get("record_kind")
         if kind is None:
             raise InputError(f"{where}: written before posteriors recorded their record's kind: sample it again")
-        ring_down = kind in ("impact", "decay")
+        ring_down = kind in RING_DOWN_KINDS
         if not ring_down and (kind != "base" or s.get("input") != "base_acc"):
             raise InputError(f"{where}: a posterior of a {kind} record ({s.get('input')}); the design plans "
                              "shaker-table tests from a base-excited record's posterior, and hammer hits and "
@@ -238,6 +240,12 @@ class PosteriorState:
         rms = s.get("input_noise", {}).get("rms", 0.0)
         rms = float(rms[0] if isinstance(rms, list) else rms or 0.0)
         dur = s.get("duration_s")
+        if ring_down and not float(s.get("fs", 0.0)) * HAMMER_WIDTH_S >= 2:
+            raise InputError(f"{where}: a record at {s.get('fs')} Hz: a hammer's {1e3 * HAMMER_WIDTH_S:g} ms hit needs "
+                             f"{2 / HAMMER_WIDTH_S:g} Hz at least (two samples of the load cell)")  # fmt: skip
+        if ring_down and not (s.get("model_mass") or s.get("mass")):
+            raise InputError(f"{where}: a ring-down's posterior without the device's mass (its coefficients per unit "
+                             "mass): a hammer's force in N needs it (weigh the device: --mass)")  # fmt: skip
         if not ring_down and not float(s.get("fs", 0.0)) > 2.5 * BAND[1]:
             raise InputError(f"{where}: a record at {s.get('fs')} Hz: the rig's tests reach {BAND[1]:g} Hz, which "
                              f"needs a record above {2.5 * BAND[1]:g} Hz")  # fmt: skip
@@ -306,7 +314,7 @@ class PosteriorState:
             if th[2] > 0 and th[3] >= 0 and th[4] >= 0:
                 try:
                     eq = self.model_at(th).equilibria()
-                    if (eq.z_minus if self.bench == "table" else eq.z_plus) is not None:
+                    if self.bench != "table" or eq.z_minus is not None:
                         out.append(th)
                 except (ValueError, ArithmeticError):
                     continue
@@ -374,7 +382,8 @@ def record_cost(state: PosteriorState, model, recs: list) -> dict[str, float]:
         cost["peak_table_acc_m_s2"] = max(float(np.max(np.abs(r.true["base_acc"]))) for r in recs)
         cost["peak_table_disp_m"] = max(float(np.max(np.abs(b))) for b in table)
     else:
-        cost["peak_force_n"] = max(float(np.max(np.abs(r.true["force"]))) for r in recs)
+        # the hits' set peak (the load cell's samples may fall either side of it: 8 % low at 1 kHz, measured)
+        cost["peak_force_n"] = max(float(r.truth["excitation"].get("peak_n", 0.0)) for r in recs)
     cost["peak_travel_m"] = float(np.max(np.abs(z_all - centre)))
     # the span the laser on the moving part reads (the device's motion and the table's)
     cost["sensor_span_m"] = max(float(np.ptp(z + b)) for z, b in zip(zs, table, strict=True))
@@ -528,9 +537,9 @@ def evaluate(state: PosteriorState, candidate: Candidate, limits: Limits, target
         except PosteriorError as exc:  # too short for the posterior's windows (a harmonic's whole periods)
             return Evaluation(candidate, state.cov, dict(state.widths), 1.0, 0.0, {},
                               [*problems, f"its record cannot be read: {exc}"])  # fmt: skip
-        except RigError as exc:  # a hit or a release that throws a draw of the posterior out of every well
+        except RigError as exc:  # a hit or a release that throws a draw out of every well, or a test the rig refuses
             return Evaluation(candidate, state.cov, dict(state.widths), 1.0, 0.0, {},
-                              [*problems, f"the model diverges under this test ({exc})"])  # fmt: skip
+                              [*problems, f"the rig cannot run it: {exc}"])  # fmt: skip
         costs.append(cost)
         if info is None:
             problems.append("the model diverges under this test (a draw of the posterior leaves every well)")
@@ -595,7 +604,7 @@ def _ring_down_levels(state: PosteriorState, limits: Limits, kind: str) -> tuple
         if limits.max_force is not None:
             hi = min(hi, limits.max_force)
             lo = min(lo, hi / 4)
-        return lo, hi
+        return max(lo, HAMMER_MIN_N), max(hi, HAMMER_MIN_N)
     return 0.1 * scale, 3.0 * scale
 
 
@@ -656,7 +665,7 @@ def _search(state, limits, targets, draws, seed, start: Evaluation, budget: int,
         return -ev.score if ev.feasible else 0.0
 
     c0 = start.candidate
-    if c0.kind in RING_DOWN:  # the level's magnitude (a release keeps its side of the rest well)
+    if c0.kind in RING_DOWN_TESTS:  # the level's magnitude (a release keeps its side of the rest well)
         lo, hi = _ring_down_levels(state, limits, c0.kind)
         sign = math.copysign(1.0, c0.level)
         optimize.minimize_scalar(lambda lg: run(replace(c0, level=sign * float(math.exp(lg)))), method="bounded",
@@ -694,8 +703,8 @@ def design(posterior, *, targets=None, duration: float | None = None, max_table_
     ----------
     posterior : Posterior, dict, path or PosteriorState
         A fitted coefficient ``Posterior`` of a base-excited record (the table's tests are ranked), or of a
-        hammer's record or a free decay (hammer hits and releases are ranked: ``RING_DOWN``); its ``result()``, its
-        JSON file, or the state ``prepared`` read from one.
+        hammer's record or a free decay (hammer hits and releases are ranked: ``RING_DOWN_TESTS``); its
+        ``result()``, its JSON file, or the state ``prepared`` read from one.
     targets : sequence of str, optional
         The parameters to pin down (among k1, k2, k3, c, c_nl; default all).
     duration : float, optional
@@ -760,8 +769,9 @@ def design(posterior, *, targets=None, duration: float | None = None, max_table_
     }  # a setting the search met again: once
     ranked = sorted(unique.values(), key=lambda e: (not e.feasible, -e.score))
     if not ranked[0].feasible:
-        raise InputError("no candidate test lies within the limits (every one " + ranked[0].problems[0] + "): "
-                         "widen the table's limits or the device's stroke")  # fmt: skip
+        what = "the table's limits" if state.bench == "table" else "the hammer's force"
+        raise InputError("no candidate test lies within the limits (the best one: " + ranked[0].problems[0] + "): "
+                         f"widen {what} or the device's stroke")  # fmt: skip
     rows = [e.to_json(state.widths) for e in ranked]
     risks = _risks(rows[0], limits)
     for text in risks:
@@ -857,10 +867,10 @@ def _risks(best: dict[str, Any], limits: Limits) -> list[str]:
     if limits.max_table_disp is None and disp is not None and disp > UNSTATED_TABLE_STROKE:
         out.append(f"the chosen test moves the table {1e3 * disp:.3g} mm (peak) and no table stroke was stated: "
                    "give the shaker's (max_table_disp, --table-stroke) if it has less")  # fmt: skip
-    if best["kind"] in RING_DOWN and limits.stroke is None:
-        out.append(f"the chosen test moves the device {1e3 * cost['peak_travel_m']:.3g} mm from rest and no stroke was "
-                   "stated: a larger motion teaches more until a stop, so give the device's (stroke, --stroke) if "
-                   "it has less")  # fmt: skip
+    if best["kind"] in RING_DOWN_TESTS and limits.stroke is None:
+        out.append(f"the chosen test moves the device {1e3 * cost['peak_travel_m']:.3g} mm from its saddle (or its "
+                   "single well's rest) and no stroke was stated: a larger motion teaches more until a stop, so "
+                   "give the device's (stroke, --stroke) if it has less")  # fmt: skip
     return out
 
 
@@ -899,7 +909,7 @@ def design_figure(result: dict[str, Any]):
 
     rows = [r for r in result["ranked"] if r["feasible"]]
     fig, (a, b) = plt.subplots(1, 2, figsize=(10.5, 4.0), constrained_layout=True)
-    if any(r["kind"] in RING_DOWN for r in result["ranked"]):
+    if any(r["kind"] in RING_DOWN_TESTS for r in result["ranked"]):
         _ring_down_panels(a, b, rows, result)
         return fig
     h = [r for r in rows if r["kind"] in SINUSOIDAL]
@@ -950,7 +960,7 @@ def _ring_down_panels(a, b, rows: list[dict[str, Any]], result: dict[str, Any]) 
         r = sorted((x for x in rows if x["kind"] == "hammer" and x["hits"] == k), key=lambda x: x["peak_force_n"])
         if r:
             a.plot([x["peak_force_n"] for x in r], [x["score"] for x in r], "o-", ms=4, label=f"{k} hits")
-    for sign, name in ((1, "away from the saddle"), (-1, "towards the saddle")):
+    for sign, name in ((1, "above rest (away from any saddle)"), (-1, "below rest (towards the saddle)")):
         r = sorted((x for x in rows if x["kind"] == "release" and sign * x["release_offset_m"] > 0),
                    key=lambda x: abs(x["release_offset_m"]))  # fmt: skip
         if r:
@@ -1021,6 +1031,9 @@ def _limits(state: PosteriorState, duration, max_acc, max_disp, stroke, sensor_r
             raise InputError(f"{name} must be a positive number, got {v!r}")
     if dur < 4 * state.window_s:
         raise InputError(f"duration {dur:g} s: shorter than 4 of the posterior's {state.window_s:g} s windows")
+    if max_force is not None and max_force < HAMMER_MIN_N:
+        raise InputError(f"max_force {max_force:g} N: below the lightest hit the load cell tells from its noise "
+                         f"({HAMMER_MIN_N:g} N)")  # fmt: skip
     if max_acc <= 3 * state.input_noise:
         raise InputError(f"max_table_acc {max_acc:g} m/s^2: within 3x the accelerometer's noise "
                          f"({state.input_noise:.3g} m/s^2 rms): no test the record could read")  # fmt: skip

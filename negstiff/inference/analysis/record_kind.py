@@ -67,6 +67,8 @@ def record_kind(rec: Measurement, decay: bool | None = None) -> RecordKind:
     return RecordKind("impact", f"{hits.count} hammer hit(s) in the force channel (floor {hits.floor:.3g} N)", hits)
 
 
+RING_DOWN_KINDS = ("impact", "decay")
+"""The kinds read as ring-downs: their windows free decays between a hammer's pulses (a decay's: all of it)."""
 RING_DOWN = 10.0
 """A free decay's response must ring down: its first tenth's rms about the rest (the last tenth's median) at
 least this many times the last tenth's (a record at rest with a constant input is no decay: a dead input)."""

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import numbers
 import os
 import time
 import warnings
@@ -105,7 +106,7 @@ def separation(posterior, discrepancy=None, *, hypotheses: dict[str, Any] | None
     hyp = _hypotheses(discrepancy, hypotheses)
     limits = _limits(state, duration, max_table_acc, max_table_disp, stroke, sensor_range)
     _counts(records=records, seed=seed)
-    if not levels or any(isinstance(v, bool) or not isinstance(v, (int, float)) or not (math.isfinite(v) and v > 0)
+    if not levels or any(isinstance(v, bool) or not isinstance(v, numbers.Real) or not (math.isfinite(v) and v > 0)
                          for v in levels):  # fmt: skip
         raise InputError(f"levels {levels!r}: random tests' rms levels must be positive numbers [m/s^2]")
     base = state.model_at(state.mean)
@@ -113,8 +114,13 @@ def separation(posterior, discrepancy=None, *, hypotheses: dict[str, Any] | None
     # the workflow's own length check on one record of the quietest test (a fraction of a second, no fit): a record
     # it refuses makes every verdict a refusal and every test worth 0 bits
     lead, lead_size = next(iter(hyp.items()))
-    first = Candidate("random", compared[0]).run(state.rig(dataclasses.replace(base, extra={lead: lead_size}), seed),
-                                                 limits.duration_s)  # fmt: skip
+    lead_model = dataclasses.replace(base, extra={lead: lead_size})
+    quietest = Candidate("random", compared[0])
+    first = quietest.run(state.rig(lead_model, seed), limits.duration_s)
+    beyond = limit_problems(quietest, record_cost(state, lead_model, [first]), limits)
+    if beyond:  # the quietest test already beyond a limit: every louder one too
+        raise InputError(f"no random test lies within the limits (the quietest, {quietest.describe()}: {beyond[0]}): "
+                         "widen the table's limits or the device's stroke")  # fmt: skip
     try:
         Discrepancy(offer_laws=False).check_length(Measurement.from_rig(first))
     except InputError as exc:
@@ -162,8 +168,8 @@ def separation(posterior, discrepancy=None, *, hypotheses: dict[str, Any] | None
 
     rows.sort(key=rank)
     if not rows[0]["feasible"]:
-        raise InputError("no random test lies within the limits (every one " + rows[0]["problems"][0] + "): widen "
-                         "the table's limits or the device's stroke")  # fmt: skip
+        raise InputError("no random test lies within the limits (the best one: " + rows[0]["problems"][0] + "): "
+                         "widen the table's limits or the device's stroke")  # fmt: skip
     default = next(r for r in rows if r["rms_m_s2"] == DEFAULT_RANDOM_RMS)
     notes = _warnings(rows, records)
     for text in notes:
@@ -244,7 +250,7 @@ def _hypotheses(discrepancy, hypotheses) -> dict[str, Any]:
     if bad or len(hypotheses) != 2:
         raise InputError(f"hypotheses {list(hypotheses)}: two of the catalogue's effects ({', '.join(sorted(known))})")
     for h, size in hypotheses.items():
-        if isinstance(size, bool) or not isinstance(size, (int, float)) or not math.isfinite(size):
+        if isinstance(size, bool) or not isinstance(size, numbers.Real) or not math.isfinite(size):
             raise InputError(f"hypotheses: the size of {h} must be a finite number, got {size!r}")
     return dict(hypotheses)
 

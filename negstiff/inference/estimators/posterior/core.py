@@ -14,6 +14,7 @@ import numpy as np
 from scipy import optimize
 
 from negstiff.errors import ConvergenceWarning, InputError, MeasurementError, issue
+from negstiff.inference.analysis.record_kind import RING_DOWN_KINDS
 from negstiff.inference.estimators.base import Estimator
 from negstiff.inference.estimators.parameters import (
     RANDOM_STATE,
@@ -59,8 +60,6 @@ ALTERNATIONS = 10
 """The most rounds of the MAP search and the windows' start-state refinement, alternately (``point_estimate``)."""
 ALTERNATION_TOL = 1e-3
 """A round that lowers the MAP search's cost by less than this share (the same windows kept) ends the alternation."""
-RING_DOWN_KINDS = ("impact", "decay")
-"""The record kinds read as ring-downs (``record_kind``): their windows free decays between the pulses, no input."""
 FORCE_BAND_POINTS = 101
 """Displacements of the force band's grid over the record's stroke (``force_band``)."""
 FORCE_BAND_DRAWS = 400
@@ -523,11 +522,12 @@ class Posterior(Estimator):
         # optimum lies on its bound (c_nl of a device without cubic damping: 0) stops the search where a step
         # first meets the wall, the others short of their optimum (a cross-well hammer record: k1 419.50 for 420,
         # 2.6 sd, its cost 23 % above the truth's; measured). Such a parameter is held just inside its bound while the
-        # others are solved, then all are solved from there; the lower cost is kept.
+        # others are solved, then all are solved from there; the lower cost is kept. (Held where the first search
+        # left it, within 1e-3 of the prior's span from the bound, and at least 1e-6 of it inside.)
         span = par.upper - par.lower
         edge = 1e-3 * span
         near = free & ((th - par.lower < edge) | (par.upper - th < edge))
-        if near.any():
+        if near.any() and (free & ~near).any():
             held = th.copy()
             held[near] = np.clip(th[near], (par.lower + 1e-6 * span)[near], (par.upper - 1e-6 * span)[near])
             held, _ = solve(held, free & ~near)
@@ -651,7 +651,7 @@ class Posterior(Estimator):
         else:
             rec.require_excitation("the posterior")
         rec.require_motion("the posterior")
-        if kind.kind in ("impact", "decay") and self.input_noise:
+        if kind.kind in RING_DOWN_KINDS and self.input_noise:
             raise PosteriorError(f"{type(self).__name__}(input_noise={self.input_noise!r}): a {kind.kind} "
                                  "record's windows are free decays between the pulses: no input's noise reaches "
                                  "them")  # fmt: skip
@@ -933,7 +933,7 @@ def k2_frame_warning(rec: Measurement, summary: dict[str, Any]) -> list[str]:
     """
     from negstiff.inference.analysis.record_kind import record_kind
 
-    if "k2" not in summary or "k3" not in summary or rec.n_dof != 1 or record_kind(rec).kind not in ("impact", "decay"):
+    if "k2" not in summary or "k3" not in summary or rec.n_dof != 1 or record_kind(rec).kind not in RING_DOWN_KINDS:
         return []
     noise = math.sqrt(max(float(rec.noise_floor()[0]), 0.0))
     k2, k3 = summary["k2"], float(summary["k3"]["mean"])
