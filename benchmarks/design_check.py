@@ -270,7 +270,7 @@ def separation_section(res: dict) -> list[str]:
         f"The first record: {res['duration_s']:g} s of the rig's default random test on the polynomial truth with a "
         f"hidden {res['friction_n']:g} N Coulomb friction; its posterior and `Discrepancy(offer_laws=False)`, whose "
         "first two ranked effects (with the sizes their fits gave) are the hypotheses. `separation` runs each "
-        "hypothesis through random tests at 3-28 m/s^2 rms on the rig (4 records each) and ranks them by the "
+        "hypothesis through random tests at 3-28 m/s^2 rms on the rig (8 records each) and ranks them by the "
         "information the workflow's verdict carries about which is present; the chosen test and the default one "
         "are then run on the rig (another seed) and read by the workflow."
     )

@@ -596,7 +596,8 @@ def coefficient_blocks(estimates: dict[str, dict[str, float]], intervals: dict[s
             n = sum(1 for k in keys if k in iv and est.get(k) is not None)
             parts.append(f"{col} {len(inside)} of {n}" + (f" ({', '.join(inside)})" if inside else ""))
         which = "" if lab == "posterior" else f" ({lab})"
-        lines.append(f"Estimates inside the posterior's credible intervals{which}: {'; '.join(parts)}.")
+        if parts:  # no method's estimate beside the posterior (a report of the posterior alone): nothing to say
+            lines.append(f"Estimates inside the posterior's credible intervals{which}: {'; '.join(parts)}.")
     return blocks, {"coefficients_forest.png": buf.getvalue()}, lines
 
 

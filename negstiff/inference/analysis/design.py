@@ -937,12 +937,8 @@ def design_figure(result: dict[str, Any]):
     b.set(xscale="log", yscale="log", xlabel="level [m/s$^2$]", ylabel="expected shrinkage",
           title=f"random and swept tests; targets {', '.join(result['targets'])}")  # fmt: skip
     b.legend(fontsize=8)
+    _plain_log_ticks(a, b)
     plain = matplotlib.ticker.FuncFormatter(lambda v, _: f"{v:g}")
-    for ax in (a, b):  # plain numbers on the log axes (not 4x10^0), the minor ticks unlabelled
-        for axis in (ax.xaxis, ax.yaxis):
-            axis.set_major_locator(matplotlib.ticker.LogLocator(subs=(1.0, 2.0, 5.0)))
-            axis.set_major_formatter(plain)
-            axis.set_minor_formatter(matplotlib.ticker.NullFormatter())
     if h:
         sc.colorbar.ax.yaxis.set_major_formatter(plain)
         sc.colorbar.ax.yaxis.set_minor_formatter(plain)
@@ -965,26 +961,28 @@ def _ring_down_panels(a, b, rows: list[dict[str, Any]], result: dict[str, Any]) 
                    key=lambda x: abs(x["release_offset_m"]))  # fmt: skip
         if r:
             b.plot([1e3 * abs(x["release_offset_m"]) for x in r], [x["score"] for x in r], "s-", ms=4, label=name)
-    for row, mark, what in ((result["best"], "r*", "chosen"), (result["default_test"], "kx", "default")):
+    for row, mark, what in ((result["best"], "r*", "chosen"), (result["default_test"], "kx", "reference")):
         ax, x = (a, row["peak_force_n"]) if row["kind"] == "hammer" else (b, 1e3 * abs(row["release_offset_m"]))
         ax.plot(x, row["score"], mark, ms=14 if what == "chosen" else 10, mew=2, label=f"{what}: {row['test']}")
     a.set(xscale="log", yscale="log", xlabel="peak force [N]", ylabel="expected shrinkage",
           title="hammer hits")  # fmt: skip
     b.set(xscale="log", yscale="log", xlabel="release from rest [mm]", ylabel="expected shrinkage",
           title=f"free decays; targets {', '.join(result['targets'])}")  # fmt: skip
-    plain = matplotlib_plain()
+    _plain_log_ticks(a, b)
     for ax in (a, b):
         ax.legend(fontsize=8)
-        for axis in (ax.xaxis, ax.yaxis):
-            axis.set_major_formatter(plain)
-            axis.set_minor_formatter(plain)
 
 
-def matplotlib_plain():
-    """A tick formatter writing plain numbers (4, not 4x10^0) on log axes."""
+def _plain_log_ticks(*axes) -> None:
+    """Plain numbers on log axes (4, not 4x10^0) at 1, 2 and 5 per decade, the minor ticks unlabelled."""
     import matplotlib.ticker
 
-    return matplotlib.ticker.FuncFormatter(lambda v, _: f"{v:g}")
+    plain = matplotlib.ticker.FuncFormatter(lambda v, _: f"{v:g}")
+    for ax in axes:
+        for axis in (ax.xaxis, ax.yaxis):
+            axis.set_major_locator(matplotlib.ticker.LogLocator(subs=(1.0, 2.0, 5.0)))
+            axis.set_major_formatter(plain)
+            axis.set_minor_formatter(matplotlib.ticker.NullFormatter())
 
 
 def _state_of(posterior) -> PosteriorState:
