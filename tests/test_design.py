@@ -305,3 +305,14 @@ def test_the_test_chosen_to_separate_two_effects_names_the_true_one():
     designed = sum(r["designed"] == ["coulomb_friction"] for r in rows)
     default = sum(r["default"] == ["coulomb_friction"] for r in rows)
     assert designed >= 4 and default < designed
+
+
+def test_the_report_shows_a_reference_test_whose_record_could_not_be_read(designed):
+    # a test whose simulated record the posterior's windows cannot read has no cost (``evaluate``: its row says why
+    # in ``problems``); the report's table leaves its cost cells blank instead of failing
+    from negstiff.report.sections import design_section
+
+    ref = {**designed["default_test"], "cost": {}, "feasible": False,
+           "problems": ["its record cannot be read: too short"]}  # fmt: skip
+    sec = design_section({**designed, "default_test": ref, "ranked": [*designed["ranked"], ref]})
+    assert sec.json["default_test"]["cost"] == {}

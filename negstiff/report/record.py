@@ -114,12 +114,12 @@ def report_records(
         )
     if forcing_hz is not None:
         check_forcing(rec, forcing_hz)
-    from negstiff.inference.analysis.record_kind import check_decay, record_kind
+    from negstiff.inference.analysis.record_kind import RING_DOWN_KINDS, check_decay, record_kind
 
     what = record_kind(rec)
     if what.kind == "decay":
         check_decay(rec, "the report")  # a dead input on a record at rest: nothing to report, said before any work
-    f_h = None if what.kind in ("impact", "decay") and forcing_hz is None else forcing_hz or harmonic_frequency(rec)
+    f_h = None if what.kind in RING_DOWN_KINDS and forcing_hz is None else forcing_hz or harmonic_frequency(rec)
     if f_h is not None and forcing_hz is None and f_h < 2 / rec.duration:
         f_h = None  # a 'line' under two cycles in the record is its drift or its offset, no forcing
     kind = {"impact": IMPACT, "decay": DECAY}.get(what.kind, HARMONIC if f_h else BROADBAND)
@@ -132,7 +132,7 @@ def report_records(
     except InputError:
         pass
     rep.add(rec)
-    if what.kind in ("impact", "decay"):
+    if what.kind in RING_DOWN_KINDS:
         rep.add_text(f"Read as {'a hammer' if what.kind == 'impact' else 'a free decay'}'s record: {what.how}.")
     failed: list[str] = []
     for name, title, run, _ in runs:

@@ -677,10 +677,12 @@ def design_section(res: dict[str, Any], label: str = "") -> Section:
     for r in shown:
         name = r["test"] + ((" (the rig's default)" if table else " (the reference)") if r["test"] == ref["test"]
                             else "")  # fmt: skip
-        cost = ([r["cost"]["peak_table_acc_m_s2"], 1e3 * r["cost"]["peak_table_disp_m"]] if table
-                else [r["cost"]["peak_force_n"], 1e3 * r["cost"]["peak_travel_m"]])  # fmt: skip
+        # a test whose record could not be read has no cost (its row says why in ``problems``): blank cells
+        keys = ((("peak_table_acc_m_s2", 1.0), ("peak_table_disp_m", 1e3)) if table
+                else (("peak_force_n", 1.0), ("peak_travel_m", 1e3)))  # fmt: skip
+        cost = [r["cost"][k] * f if k in r["cost"] else "" for k, f in keys]
         rows.append([name, r["score"], *[r["predicted_width"][n] for n in targets], *cost,
-                     r["cost"]["draws_visiting_both_wells"]])  # fmt: skip
+                     r["cost"].get("draws_visiting_both_wells", "")])  # fmt: skip
     heads = (["peak table acc [m/s^2]", "table stroke [mm]"] if table
              else ["peak force [N]", "travel from the saddle [mm]"])  # fmt: skip
     sec.table(["test", "shrinkage", *[f"{n} {pct:g} % width" for n in targets], *heads,

@@ -863,11 +863,11 @@ class Discrepancy(StructureResults, Estimator):
             if self.unnamed:
                 raise DiscrepancyError("Discrepancy(unnamed=True): the non-parametric force is a single DOF's (a "
                                        f"record of {rec.n_dof} DOFs)")  # fmt: skip
-        from negstiff.inference.analysis.record_kind import check_decay, record_kind
+        from negstiff.inference.analysis.record_kind import RING_DOWN_KINDS, check_decay, record_kind
         from negstiff.inference.estimators.identification import refuse_one_orbit
 
         kind = record_kind(rec).kind
-        if kind in ("impact", "decay") and at is not None:
+        if kind in RING_DOWN_KINDS and at is not None:
             # a structure's ring-down is read raw by ``structure_id.discrepancy`` (its windows across the hits, no
             # ring-down blocks: a clean 2-DOF hammer record's held-out gap 12 %, measured): refused as before
             what = "a hammer's record" if kind == "impact" else "a free decay"
@@ -891,7 +891,7 @@ class Discrepancy(StructureResults, Estimator):
         [n_fit, n_id)) with one ``DiscrepancyError``, before any work (``sindy.selection_blocks``: the record's
         spectrum, no fit); a structure's record is checked by its fit.
         """
-        from negstiff.inference.analysis.record_kind import identification_record, record_kind
+        from negstiff.inference.analysis.record_kind import RING_DOWN_KINDS, identification_record, record_kind
         from negstiff.inference.estimators.sindy import ring_down_window, selection_blocks
 
         kind = record_kind(rec)
@@ -900,7 +900,7 @@ class Discrepancy(StructureResults, Estimator):
         # a ring-down's test functions there, wider than its noisy input's (it passed, and the fit then refused)
         read = identification_record(rec, kind)
         blocks, need_s = selection_blocks(read, self.validation_fraction, self.selection_fraction, window)
-        if blocks < 2 and kind.kind in ("impact", "decay"):  # a longer record would not help
+        if blocks < 2 and kind.kind in RING_DOWN_KINDS:  # a longer record would not help
             raise DiscrepancyError(
                 f"{rec.source}: the discrepancy workflow cannot score its candidate effects on this ring-down: the "
                 f"part that scores them ({100 * self.selection_fraction:.0f} % of the record, before the held-out "

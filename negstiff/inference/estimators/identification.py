@@ -519,11 +519,11 @@ class Identifier(Estimator):
         (``Measurement.require_response``), and its quick cubic does not soften (``refuse_softening``). A
         vibrometer reading its own noise was refused by NSI's subspace step, after its progress line.
         """
-        from negstiff.inference.analysis.record_kind import identification_record, record_kind
+        from negstiff.inference.analysis.record_kind import RING_DOWN_KINDS, identification_record, record_kind
 
         if rec.n_dof == 1 and getattr(self, "element", None) is None:
             kind = record_kind(rec)
-            if kind.kind not in ("impact", "decay"):
+            if kind.kind not in RING_DOWN_KINDS:
                 rec.require_response(type(self).__name__)
                 refuse_one_orbit(rec, type(self).__name__)
             read = identification_record(rec, kind)

@@ -31,7 +31,7 @@ from typing import Any
 import numpy as np
 
 from negstiff.errors import InputError
-from negstiff.inference.analysis.record_kind import check_decay, identification_record, record_kind
+from negstiff.inference.analysis.record_kind import RING_DOWN_KINDS, check_decay, identification_record, record_kind
 from negstiff.inference.estimators.identification import Estimate, Identifier
 from negstiff.inference.estimators.parameters import (
     DAMPING_LAW,
@@ -113,7 +113,7 @@ def ring_down_window(rec: Measurement, validation_fraction: float, selection_fra
     (four a column).
     """
     kind = record_kind(rec)
-    if kind.kind not in ("impact", "decay"):
+    if kind.kind not in RING_DOWN_KINDS:
         return float(window_s)
     rec = identification_record(rec, kind)  # as the fit reads it (the same weak form's test functions)
     n_id, n_fit, half, stride = _selection_rows(rec, validation_fraction, selection_fraction)
@@ -313,10 +313,10 @@ class SINDy(StructureResults, Identifier):
         kind = record_kind(rec)
         # counted on the record as the fit reads it (a decay named so whose force channel holds noise, a hammer's
         # force windowed), as the discrepancy workflow's check counts it
-        read = identification_record(rec, kind) if kind.kind in ("impact", "decay") else rec
+        read = identification_record(rec, kind) if kind.kind in RING_DOWN_KINDS else rec
         blocks, need_s = selection_blocks(read, self.validation_fraction, self.selection_fraction, window)
         if blocks < 2:
-            if kind.kind in ("impact", "decay"):  # a longer record of the same ring-down would not help
+            if kind.kind in RING_DOWN_KINDS:  # a longer record of the same ring-down would not help
                 raise SINDyError(
                     f"{rec.source}: SINDy cannot score its candidate models on this ring-down: the part that scores "
                     f"them ({100 * self.selection_fraction:.0f} % of the record, before the held-out tail) holds "
@@ -462,7 +462,7 @@ class SINDy(StructureResults, Identifier):
         # a ring-down (a decay, a hammer's record) dissipates by what it is: its viscous term is in every support.
         # The equation error cannot weigh it: c z' is 2 zeta of the inertia's size (3 % at 1.5 %), under the
         # selection's margin, so a double well's hammer record selected no damping at all (measured)
-        dissipates = record_kind(rec).kind in ("impact", "decay")
+        dissipates = record_kind(rec).kind in RING_DOWN_KINDS
         supports: dict[tuple[bool, ...], list[float]] = {}
         for weight in self.weights:
             phys = fit_support(sys_fit, gain, weight)

@@ -561,13 +561,13 @@ def _split(est, rec: Measurement) -> tuple[int, int]:
     return n_id, n_fit
 
 
-def ring_down(rec: Measurement, kinds: tuple[str, ...] = ("impact", "decay")) -> bool:
+def ring_down(rec: Measurement, kinds: tuple[str, ...] | None = None) -> bool:
     """Whether ``rec`` is a hammer's record or a free decay (``record_kind``; ``kinds``: of those): a response that
     rings down.
     """
-    from negstiff.inference.analysis.record_kind import record_kind
+    from negstiff.inference.analysis.record_kind import RING_DOWN_KINDS, record_kind
 
-    return record_kind(rec).kind in kinds
+    return record_kind(rec).kind in (RING_DOWN_KINDS if kinds is None else kinds)
 
 
 def _systems(est, rec: Measurement, at, extra_of=None):

@@ -70,13 +70,13 @@ def window_starts(rec: Measurement, window_s: float, max_windows: int | None,
 
 def fit_structure(est, rec: Measurement, at: tuple[int, int], seed: int) -> tuple[PosteriorResult, list[str], Any]:
     """The element's posterior on ``rec`` for the ``Posterior`` ``est``: (the result, its warnings, the windows)."""
-    from negstiff.inference.analysis.record_kind import identification_record, record_kind
+    from negstiff.inference.analysis.record_kind import RING_DOWN_KINDS, identification_record, record_kind
     from negstiff.inference.estimators.sindy import SINDy
 
     ident = SINDy(element=at).fit(rec)
     start, offsets = ident.structure_, np.asarray(ident.offsets_, float)
     kind = record_kind(rec)
-    ring_down = kind.kind in ("impact", "decay")
+    ring_down = kind.kind in RING_DOWN_KINDS
     if ring_down:  # a hammer's force windowed (zero between its pulses), a decay's input zero: as the fit read it
         rec = identification_record(rec, kind)
     starts, L = window_starts(rec, est.window_s, est.max_windows, free=ring_down)
