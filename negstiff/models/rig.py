@@ -301,7 +301,7 @@ class Rig:
         """
         self.check_hammer(peak, hits, duration, width, start)
         n = int(round(duration * self.fs))
-        q = max(self.oversample, math.ceil(16 / (width * self.fs)))
+        q = self._hammer_oversample(width)
         t_fine = np.arange(n * q) / (self.fs * q)
         times = [0.05 * duration + k * 0.95 * duration / hits for k in range(hits)]
         force = np.zeros(t_fine.size)
@@ -340,14 +340,21 @@ class Rig:
             raise RigError(f"{hits} pulses of {width:g} s fill half of the {duration:g} s record or more: no ring-down "
                            "between them")  # fmt: skip
         self._check_start([start])
-        q = max(self.oversample, math.ceil(16 / (width * self.fs)))
-        self._require_memory([duration * self.fs * q], "a hammer record")
+        self._well(start)
+        self._require_memory([duration * self.fs * self._hammer_oversample(width)], "a hammer record")
+
+    def _hammer_oversample(self, width: float) -> int:
+        """The simulation's samples per output sample for a hit of ``width`` [s]: the rig's ``oversample``, or
+        more so that a pulse spans 16 of them.
+        """
+        return max(self.oversample, math.ceil(16 / (width * self.fs)))
 
     def _well(self, start: str) -> float:
-        z = getattr(self.equilibria, f"z_{start}", None)
-        if z is None:
-            raise RigError(f"the device has no {start} well to rest in")
-        return float(z)
+        """The rest position [m] of the ``start`` well (``Equilibria.well``), a ``RigError`` where there is none."""
+        try:
+            return float(self.equilibria.well(start))
+        except ValueError:
+            raise RigError(f"the device has no {start} well to rest in") from None
 
     def _force_record(self, force: np.ndarray, q: int, z0: float, excitation: dict[str, Any]) -> RigRecord:
         """The record of the device driven by ``force`` [N] (on the grid ``q`` times ``fs``) from rest at ``z0``,
