@@ -124,6 +124,21 @@ def test_every_law_is_a_composition_of_registered_parts():
         laws.get("quartic_only", "restoring")
 
 
+
+
+def test_every_law_keeps_a_scalars_shape():
+    # A model of any law evaluated at one z gives one number: its force, stiffness and potential (a backbone's
+    # energy levels read the potential at single points; a spline's gave an array of one and the report's backbone
+    # of FrID's decay failed with a TypeError)
+    for law in laws.names("restoring"):
+        lw = laws.get(law)
+        shape = lw.shape_guesses((-0.03, 0.03))[0]
+        n = len(lw.column_list(shape))
+        model = laws.compose(lw, laws.get("viscous"), np.r_[np.linspace(-2.0, -1.0, n), 0.5], 1.0, shape)
+        for z in (0.01, np.float64(0.01), np.array(0.01)):
+            for f in (model.restoring_force, model.stiffness, model.potential):
+                assert np.shape(f(z)) == (), (law, f.__name__)
+        assert np.shape(model.potential(np.zeros((2, 3)))) == (2, 3), law
 def test_an_unknown_law_and_a_law_on_a_structure_are_refused_in_one_line(tmp_path):
     # An unknown name is refused by the parameter's declaration (the CLI reads the same), naming the known laws;
     # a law on a structure's record (an element's own basis) is refused before any work.

@@ -446,7 +446,7 @@ class Spline(ShapedLaw):
         z = np.asarray(z, float)
         knots = np.asarray(value["knots"], float)
         coef = np.asarray(value["coef"], float)
-        return np.sum(coef * (self._integrals(knots, z) - self._integrals(knots, np.zeros(1))), axis=-1)
+        return np.sum(coef * (self._integrals(knots, z) - self._integrals(knots, 0.0)), axis=-1)  # z's own shape
 
     def check(self, name, value):
         """At least two knots, increasing, and len(knots) + 2 coefficients."""
