@@ -124,8 +124,6 @@ def test_every_law_is_a_composition_of_registered_parts():
         laws.get("quartic_only", "restoring")
 
 
-
-
 def test_every_law_keeps_a_scalars_shape():
     # A model of any law evaluated at one z gives one number: its force, stiffness and potential (a backbone's
     # energy levels read the potential at single points; a spline's gave an array of one and the report's backbone
@@ -139,6 +137,8 @@ def test_every_law_keeps_a_scalars_shape():
             for f in (model.restoring_force, model.stiffness, model.potential):
                 assert np.shape(f(z)) == (), (law, f.__name__)
         assert np.shape(model.potential(np.zeros((2, 3)))) == (2, 3), law
+
+
 def test_an_unknown_law_and_a_law_on_a_structure_are_refused_in_one_line(tmp_path):
     # An unknown name is refused by the parameter's declaration (the CLI reads the same), naming the known laws;
     # a law on a structure's record (an element's own basis) is refused before any work.

@@ -255,6 +255,52 @@ def test_the_coefficient_posterior_reads_the_real_decay():
     assert post.result()["parameters"]["c"]["hdi_high"] < 100  # the viscous c where the data put it, not at 5000
 
 
+def test_a_damping_that_rises_then_falls_has_a_posterior_holding_nsis_estimate():
+    # The decay's damping ratio rises with amplitude and falls back (the backbone: 0.3 -> 0.7 -> 0.5 %), which
+    # c z' + c_nl z'|z'| + c3 z'^3 follows with c3 < 0. The posterior's prior had held every damping term >= 0, so
+    # its start (c3 < 0) had no point of positive density and no posterior was made; now the law's damping as a
+    # whole dissipates at every speed the record reached, and c3's sign is the data's. A short run (two ensembles,
+    # 150 steps: its intervals to within a few % Monte Carlo error) puts c3 below zero and holds NSI's c, c_nl and
+    # c3 (its refined estimate with the same laws) inside its 90 % intervals (measured: NSI's c 0.870 in
+    # 0.75-1.08, c_nl 196.5 in 172-213, c3 -3351 in -3840 to -3009)
+    from negstiff import NSI, Posterior
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        post = Posterior(law="spline", damping="polynomial_damping", n_ensembles=2, min_steps=100, max_steps=150)
+        par = post.fit(_record()).result()["parameters"]
+        nsi = NSI(law="spline", damping="polynomial_damping").fit(_record()).model_
+    assert par["cubic_damping"]["hdi_high"] < 0
+    for name, value in (("c", nsi.c), ("c_nl", nsi.c_nl), ("cubic_damping", nsi.extra["cubic_damping"])):
+        assert par[name]["hdi_low"] <= value <= par[name]["hdi_high"], (name, value, par[name])
+
+
+def test_the_laws_model_follows_the_decays_damping_as_it_rises_and_falls():
+    # The measured damping ratio rises from 0.3 % to 0.7 % with amplitude and falls back to 0.58 % (the Hilbert
+    # backbone): c z' + c_nl z'|z'| can only rise, so the cubic with the reference study's damping misses it by
+    # 0.18 % rms over 0.0135-0.19 mm (measured 0.177 %). The spline with polynomial damping (c3 < 0) follows it
+    # within 0.030 % rms, about the measured curve's own scatter from one Hilbert point to the next (0.02-0.04 %),
+    # and its frequency within 0.13 % (the cubic's 0.61 %)
+    from negstiff import NSI
+    from negstiff.inference.analysis.backbone import measure_backbone, on_amplitudes, predict_backbone
+
+    rec = _record()
+    measured = measure_backbone(rec)
+    amplitudes = np.geomspace(0.0135e-3, 0.19e-3, 30)
+    rms = {}
+    for law, damping in (("spline", "polynomial_damping"), ("cubic", "quadratic")):
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            model = NSI(law=law, damping=damping).fit(rec).model_
+        predicted = predict_backbone(model, rec, measured)
+        dz = on_amplitudes(measured["hilbert"], amplitudes, "zeta") - on_amplitudes(predicted["hilbert"], amplitudes,
+                                                                                     "zeta")  # fmt: skip
+        assert np.isfinite(dz).sum() >= 25, law
+        rms[law] = float(np.sqrt(np.nanmean(dz**2)))
+    assert rms["spline"] < 0.0006 < 0.0012 < rms["cubic"], rms
+    assert rms["spline"] < rms["cubic"] / 3, rms
+
+
 def test_the_reports_identification_says_what_its_held_out_error_is_made_of(tmp_path):
     # on the real decay NSI's one free run over the held-out tail errs by 42 % of the tail's rms (the tail rings at
     # 1e-6 against the gauge's 3.3e-7 of noise); over half of that squared error is a constant offset between the

@@ -72,6 +72,10 @@ class Law:
         One line for people: the law's formula.
     reference : str
         Where the form comes from.
+    signed : tuple of str
+        A damping law's parts whose coefficient the data may give either sign: the law's damping as a whole must
+        dissipate at every speed the record reached, not each term (``polynomial_damping``'s z'^3 term, negative
+        where the damping ratio falls again at large amplitude). Every other dissipative part is >= 0.
     """
 
     name: str
@@ -80,6 +84,7 @@ class Law:
     parts: tuple[str, ...] = ()
     title: str = ""
     reference: str = ""
+    signed: tuple[str, ...] = ()
 
     def __post_init__(self):
         if self.kind not in ("restoring", "damping"):
@@ -89,6 +94,8 @@ class Law:
                 raise ValueError(f"law {self.name}: {f!r} is not a base field ({', '.join(effects.BASE_TERMS)})")
         for p in self.parts:
             effects.get(p)  # raises for an unknown part
+        if set(self.signed) - set(self.parts) or (self.signed and self.kind != "damping"):
+            raise ValueError(f"law {self.name}: signed parts are some of a damping law's parts")
 
     # --- its parts ------------------------------------------------------------------------------------
     def shaped(self) -> dict[str, ShapedLaw]:
@@ -199,7 +206,8 @@ LAWS: list[Law] = [
     Law("friction", "damping", ("c",), ("coulomb_friction",), "D = c z' + F tanh(z' / v_s)",
         "viscous and Coulomb friction, smoothed"),
     Law("polynomial_damping", "damping", ("c", "c_nl"), ("cubic_damping",), "D = c z' + c_nl z'|z'| + c3 z'^3",
-        "a damping ratio that may rise and then fall with amplitude (an eddy current's, a joint's)"),
+        "a damping ratio that may rise and then fall with amplitude (an eddy current's, a joint's)",
+        signed=("cubic_damping",)),
 ]  # fmt: skip
 """The laws, in the order the CLI lists them."""
 

@@ -20,6 +20,7 @@ from pathlib import Path
 from typing import Any
 
 import matplotlib
+import numpy as np
 
 matplotlib.use("Agg")
 
@@ -130,6 +131,8 @@ class Report(Blocks):
         models = {col: m for s in secs for col, m in s.models.items()}
         band = next((s.band for s in secs if s.band), None)
         strokes = [s.stroke for s in secs if s.stroke]
+        if band and models:
+            summary[1:1] = [band_line(models, band)]
         if strokes and (band or any(m.extra for m in models.values())):  # a law beyond the cubic: its force drawn
             from .figures import force_figure
 
@@ -350,3 +353,22 @@ def run_study(section, title: str, default_out: str, doc: str | None, argv=None)
     rep.write(a.out, results)
     print(f"wrote {a.out}", file=sys.stderr)
     return 0
+
+
+def band_line(models: dict[str, Any], band: dict[str, Any]) -> str:
+    """The summary's line on each method's restoring force against the posterior's band: the share of the band's
+    displacements (evenly over the stroke) where the method's K(z) lies inside it. A law's force is what its
+    estimates say together (a spline's coefficients mean other functions on other knots: ``compared_by_force``).
+    """
+    z = np.asarray(band["z_m"], float)
+    lo, hi = np.asarray(band["low_n"], float), np.asarray(band["high_n"], float)
+    parts = []
+    for col, model in models.items():
+        with np.errstate(all="ignore"):
+            k = np.asarray(model.restoring_force(z), float)
+        parts.append(f"{col} over {100 * float(np.mean((k >= lo) & (k <= hi))):.0f} %")
+    return (
+        f"The restoring force inside the posterior's {100 * band['prob']:g} % band (share of the stroke): "
+        + "; ".join(parts)
+        + "."
+    )

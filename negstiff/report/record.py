@@ -294,6 +294,11 @@ def _plan(rec, chosen, forcing_hz, wells, seed, options) -> list[Run]:
             if name in ("sindy", "posterior"):
                 opts.setdefault("seed", seed)
             duration = opts.pop("duration", None)
+            # the posterior samples a named law: asked for the law the record asks for (--law auto), it samples the
+            # one the identification chose (``_chosen_law``)
+            auto = name == "posterior" and opts.get("law") == "auto"
+            if auto:
+                opts = {**opts, "law": None}
             est = cls(**opts)
             est._validate_params()
             est._validate()
@@ -305,7 +310,9 @@ def _plan(rec, chosen, forcing_hz, wells, seed, options) -> list[Run]:
                     return r
                 return r.segment(0, int(round(duration * r.fs)))
 
-            def run(r, est=est, part=part, name=name):
+            def run(r, est=est, part=part, name=name, auto=auto):
+                if auto:
+                    est.set_params(law=_chosen_law(part(r), fitted, est.damping))
                 fitted[name] = est.fit(part(r))
                 return fitted[name]
 
@@ -330,6 +337,20 @@ def _plan(rec, chosen, forcing_hz, wells, seed, options) -> list[Run]:
             runs.append((name, "the characterisation", lambda r: characterise(r, forcing_hz, wells or "auto"),
                          lambda r: check_harmonic(r, forcing_hz)))  # fmt: skip
     return runs
+
+
+def _chosen_law(rec, fitted: dict[str, Any], damping: str) -> str:
+    """The restoring law the record asks for (``law="auto"``): the one the first identification made chose (NSI's,
+    else SINDy's), else NSI's choice made now (every law compared on what it predicts: ``law_choice``).
+    """
+    from negstiff.inference.estimators.nsi import NSI
+    from negstiff.models import laws
+
+    for name in ("nsi", "sindy"):
+        law = fitted[name].result_.settings.get("law") if name in fitted else None
+        if law in laws.names("restoring"):  # (SINDy's own catalogue is no law)
+            return str(law)
+    return str(NSI(law="auto", damping=damping, refine=False).fit(rec).result_.settings["law"])
 
 
 def _interval(rec, fitted: dict[str, Any]) -> dict[str, Any]:

@@ -33,8 +33,13 @@ UNITS = {"k1": "N/m", "k2": "N/m^2", "k3": "N/m^3", "c": "N s/m", "c_nl": "N s^2
 
 
 def coefficient_units(per_kg: bool = False) -> dict[str, str]:
-    """Each coefficient's unit: SI, or per kilogram of moving mass for a model identified without a mass (m = 1)."""
-    return {k: f"{u} per kg" if per_kg else u for k, u in UNITS.items()}
+    """Each coefficient's unit (the base fields' and every scalar part's of the effect registry): SI, or per
+    kilogram of moving mass for a model identified without a mass (m = 1).
+    """
+    from negstiff.models import effects
+
+    units = {**{e.name: e.units for e in effects.REGISTRY if e.scalar and e.units}, **UNITS}
+    return {k: f"{u} per kg" if per_kg else u for k, u in units.items()}
 
 
 class Blocks:
@@ -107,12 +112,39 @@ def effective(model) -> dict[str, float]:
     for name, value in (d.get("extra") or {}).items():
         law = effects.get(name).law
         if isinstance(law, ShapedLaw):
-            out |= {f"{name}.{p}": v for p, v in law.parameters(value).items()}
+            if not compared_by_force(name):
+                out |= {f"{name}.{p}": v for p, v in law.parameters(value).items()}
             continue
         field = effects.get(name).folds_into
         if field in out and not isinstance(value, dict):
             out[field] += float(value)
+        elif not isinstance(value, dict) and not name.startswith(effects.AUX_PREFIX):
+            out[name] = float(value)  # a law's scalar part of its own (polynomial damping's z'^3 term)
     return out
+
+
+def _part_parameters(model) -> dict[str, float]:
+    """Every shaped part's parameters of ``model`` (``PART.NAME``), a spline's coefficients among them."""
+    from negstiff.models import effects
+    from negstiff.models.shaped import ShapedLaw
+
+    out: dict[str, float] = {}
+    for name, value in model.extra.items():
+        law = effects.get(name).law
+        if isinstance(law, ShapedLaw):
+            out |= {f"{name}.{p}": v for p, v in law.parameters(value).items()}
+    return out
+
+
+def compared_by_force(name: str) -> bool:
+    """Whether a part's parameters are compared between methods by its force rather than one by one: a spline's
+    coefficients weigh basis functions on knots each method chooses from its own data, so the same coefficient
+    name means another function in another fit (its force over the stroke is compared: the posterior's band).
+    """
+    from negstiff.models import effects
+    from negstiff.models.shaped import Spline
+
+    return name in effects.names() and isinstance(effects.get(name).law, Spline)
 
 
 def coefficient_keys(estimates: dict[str, dict[str, float]], intervals: dict[str, dict[str, tuple]]) -> list[str]:
@@ -288,13 +320,14 @@ def _law_blocks(sec: Section, r, name: str) -> None:
         damping = r.settings.get("damping_law")
         sec.text(f"Restoring-force law: {law.name}, {law.title} ({law.reference})"
                  + (f"; damping law: {damping}." if damping and damping != "catalogue" else "."))  # fmt: skip
-        final, own = effective(r.model), effective(r.initial_model)
-        rows = [[k, final[k], own.get(k)] for k in final if "." in k]
+        final, own = _part_parameters(r.model), _part_parameters(r.initial_model)
+        rows = [[k, final[k], own.get(k)] for k in final if "." in k]  # one fit's: a spline's knots are its own
+        parts = set(law.parts) | (set(laws.get(damping).parts) if damping in laws.names("damping") else set())
         rows += [
             [k, float(v), r.initial_model.extra.get(k)]
             for k, v in r.model.extra.items()
-            if k in law.parts and not isinstance(v, Mapping)
-        ]  # the law's monomials (z^4 ... z^7)
+            if k in parts and not isinstance(v, Mapping)
+        ]  # the laws' monomials (z^4 ... z^7, the damping's z'^3)
         if rows:
             sec.table(["the law's part", "final (SI)", "own estimate (SI)"], rows)
         if r.settings.get("shape"):
@@ -315,13 +348,17 @@ def _law_blocks(sec: Section, r, name: str) -> None:
 
 def posterior_section(post, label: str = "") -> Section:
     """A fitted ``Posterior``: the summary table with diagnostics, the credible intervals."""
+    from negstiff.models import effects
+
     res = post.result()
     pct = 100 * res["hdi_prob"]
     sec = Section("posterior", label, _with_label("Posterior (emcee)", label))
     rows = []
     for n, s in res["parameters"].items():
         rows.append([n, s["mean"], s["sd"], s["hdi_low"], s["hdi_high"], s["r_hat"], s["ess_bulk"]])
-        if n in COEFFICIENTS or "." in n:  # a base coefficient, or a law's part's parameter (PART.NAME)
+        part = n.partition(".")[0]
+        if n in COEFFICIENTS or ("." in n and not compared_by_force(part)) or n in effects.names():
+            # a base coefficient, a law's part's parameter (PART.NAME) or a scalar part (the z'^3 term's)
             sec.interval[n] = (s["mean"], s["hdi_low"], s["hdi_high"])
     sec.table(["parameter", "mean", "sd", f"{pct:g} % low", f"{pct:g} % high", "R-hat", "ESS bulk"], rows)
     st = res["settings"]

@@ -39,6 +39,7 @@ from negstiff.inference.estimators.posterior.parametrisation import (
     coefficient_parametrisation,
     device_parametrisation,
     law_parametrisation,
+    support_failures,
 )
 from negstiff.inference.estimators.posterior.sampling import (
     MOVES,
@@ -442,12 +443,16 @@ class Posterior(Estimator):
         _, v, _, _ = rec.states("state")
         z = np.asarray(rec.z, float)
         reach = (float(np.min(z)), float(np.max(z)))
-        par = law_parametrisation(start, restoring, damping, reach, float(np.std(z)), float(np.std(v)))
+        par = law_parametrisation(
+            start, restoring, damping, reach, float(np.std(z)), float(np.std(v)), float(np.max(np.abs(v)))
+        )
         assert par.law is not None
         theta = par.law.start_values()
         if par.support is not None and not par.inside(moved_inside(par, theta)[None])[0]:
-            raise PosteriorError(f"{rec.source}: the {restoring.name} law's deterministic fit lies outside the "
-                                 f"prior's support ({'; '.join(par.description[1:])})")  # fmt: skip
+            failed = support_failures(par, moved_inside(par, theta))
+            raise PosteriorError(f"{rec.source}: the {restoring.name} and {damping.name} laws' deterministic fit "
+                                 "lies outside the prior's support: it fails "
+                                 + ("; ".join(failed) or "; ".join(par.description[1:])))  # fmt: skip
         return par, theta
 
     def _refined_start(self, rec: Measurement, weak: Model, held: tuple[str, ...] = ()) -> Model:

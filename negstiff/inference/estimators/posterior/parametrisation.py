@@ -339,6 +339,29 @@ class LawMap:
             K += np.broadcast_to(law.force(value, z), K.shape)
         return K
 
+    def damping_force(self, theta: np.ndarray, v) -> np.ndarray:
+        """D(v) [N] of each row of ``theta`` (B, d) at velocities ``v`` [m/s] (V,): (B, V). The base c v +
+        c_nl v|v| and the scalar velocity parts (their start's values where no parameter moves them).
+        """
+        theta = np.atleast_2d(theta)
+        v = np.asarray(v, float)[None, :]
+        coef = {k: np.full(theta.shape[0], float(getattr(self.start, k) or 0.0)) for k in ("c", "c_nl")}
+        sizes = {n: np.full(theta.shape[0], float(val)) for n, val in self.start.extra.items()
+                 if not n.startswith(effects.AUX_PREFIX)
+                 and isinstance(effects.get(n).law, effects.Monomial | effects.SmoothSign)
+                 and not effects.get(n).law.displacement_only}  # fmt: skip
+        for i, n in enumerate(self.names):
+            if n in coef:
+                coef[n] = theta[:, i]
+            elif n in sizes:
+                sizes[n] = theta[:, i]
+        D = coef["c"][:, None] * v + coef["c_nl"][:, None] * v * np.abs(v)
+        for n, size in sizes.items():
+            law = effects.get(n).law
+            assert isinstance(law, effects.Monomial | effects.SmoothSign)  # a velocity part of its own
+            D = D + law.force(cast(Any, size[:, None]), 0.0, v)
+        return D
+
     def model(self, row: np.ndarray) -> Model:
         """The model of one row of parameters (the start's with them set: ``refine.with_values``); with a ``SHIFT``,
         the law's model in its parts' own frame (the record's z less the shift).
@@ -349,25 +372,49 @@ class LawMap:
         return with_values(self.start, [self.names[i] for i in keep], np.asarray(row, float)[keep])
 
 
-def _law_support(lawmap: LawMap, reach: tuple[float, float], tails: tuple[str, ...], theta: np.ndarray) -> np.ndarray:
-    """Each row's admissibility beyond the box (``law_parametrisation``): every shaped part's span covers the
-    record's ``reach`` [m] (its table holds every z the record visited), and each spline named in ``tails`` rises
-    outward at both ends of its knots (its straight lines beyond them: a bounded potential).
+def _law_checks(lawmap: LawMap, reach: tuple[float, float], tails: tuple[str, ...], speeds: np.ndarray | None,
+                theta: np.ndarray) -> dict[str, np.ndarray]:  # fmt: skip
+    """Each check of the support beyond the box (``law_parametrisation``), by what it asks, each row's verdict:
+    every shaped part's span covers the record's ``reach`` [m] (its table holds every z the record visited), each
+    spline named in ``tails`` rises outward at both ends of its knots (its straight lines beyond them: a bounded
+    potential), and, given ``speeds`` [m/s] (a damping law with signed parts), the damping force's power D(v) v is
+    >= 0 at each.
     """
+    out = {}
     ok = np.ones(theta.shape[0], bool)
     s = theta[:, lawmap.shift] if lawmap.shift >= 0 else 0.0  # the parts' centre in the record's frame
     for law, value in lawmap._values(theta):
         lo, hi = law.span(value)
         ok &= np.ravel(np.broadcast_to(lo, (theta.shape[0], 1))) + s < reach[0]
         ok &= np.ravel(np.broadcast_to(hi, (theta.shape[0], 1))) + s > reach[1]
+    out["the shaped parts' tables span the record's stroke"] = ok
     for name in tails:
         spline = effects.get(name).law
         assert isinstance(spline, Spline)
         value = spline.batch(lawmap.start.extra[name], {f: theta[:, i] for f, i in dict(lawmap.parts)[name]})
         knots = np.asarray(value["knots"], float)
         k = spline.stiffness(value, knots[[0, -1]])
-        ok &= np.all(np.reshape(k, (theta.shape[0], 2)) > 0, axis=1)
-    return ok
+        out[f"{name} rises outward at its end knots"] = np.all(np.reshape(k, (theta.shape[0], 2)) > 0, axis=1)
+    if speeds is not None:
+        out[f"the damping dissipates at every speed up to {float(np.max(speeds)):.3g} m/s"] = np.all(
+            lawmap.damping_force(theta, speeds) * speeds >= 0.0, axis=1
+        )
+    return out
+
+
+def _law_support(lawmap: LawMap, reach: tuple[float, float], tails: tuple[str, ...], speeds: np.ndarray | None,
+                 theta: np.ndarray) -> np.ndarray:  # fmt: skip
+    """Each row's admissibility beyond the box: every check of ``_law_checks`` passed."""
+    return np.logical_and.reduce(list(_law_checks(lawmap, reach, tails, speeds, theta).values()))
+
+
+def support_failures(par: Parametrisation, theta: np.ndarray) -> list[str]:
+    """What one row of parameters ``theta`` (d,) fails of a law parametrisation's support (``_law_checks``)."""
+    if not isinstance(par.support, functools.partial) or par.support.func is not _law_support:
+        return []
+    lawmap, reach, tails, speeds = par.support.args
+    checks = _law_checks(lawmap, reach, tails, speeds, np.atleast_2d(theta))
+    return [what for what, ok in checks.items() if not ok[0]]
 
 
 SHIFT = "z_shift"
@@ -392,7 +439,7 @@ def _top_power(restoring: laws.Law) -> tuple[str, int] | None:
 
 
 def law_parametrisation(start: Model, restoring: laws.Law, damping: laws.Law, reach: tuple[float, float],
-                        z_rms: float, v_rms: float) -> Parametrisation:  # fmt: skip
+                        z_rms: float, v_rms: float, v_max: float | None = None) -> Parametrisation:  # fmt: skip
     """Every parameter of a restoring and a damping law about the deterministic start ``start`` (the laws' model:
     the weak form at the law's shape, refined by output error), with uniform priors cut by physics (module
     docstring; ``description`` states each).
@@ -407,6 +454,9 @@ def law_parametrisation(start: Model, restoring: laws.Law, damping: laws.Law, re
         The record's lowest and highest z [m]: the shaped parts must be tabulated over it (their span covers it).
     z_rms, v_rms : float
         The record's rms displacement [m] and velocity [m/s]: each parameter's natural scale (``refine``'s).
+    v_max : float, optional
+        The record's largest speed [m/s] (default: 3 ``v_rms``): a damping law with ``signed`` parts dissipates at
+        every speed up to it.
 
     Returns
     -------
@@ -415,6 +465,7 @@ def law_parametrisation(start: Model, restoring: laws.Law, damping: laws.Law, re
     """
     from negstiff.inference.steps.refine import parameter_names, parameter_scales, values_of
 
+    v_max = 3.0 * v_rms if v_max is None else v_max
     free = set(restoring.fields) | set(damping.fields)
     held = tuple(f for f in ("k0", "k1", "k2", "k3", "c", "c_nl") if f not in free)
     names = parameter_names(start, False, held)
@@ -434,7 +485,10 @@ def law_parametrisation(start: Model, restoring: laws.Law, damping: laws.Law, re
             "a spline's coefficients: the largest one's), cut by physics:"]  # fmt: skip
     for i, n in enumerate(names):
         part, _, fld = n.partition(".")
-        if not fld and n in ("c", "c_nl") or (not fld and n not in effects.BASE_TERMS and effects.get(n).dissipative):
+        if n in damping.signed:  # its sign the data's: the law's damping as a whole dissipates (the support)
+            desc.append(f"{n}: either sign, the {damping.name} law's damping force dissipating at every speed up to "
+                        f"the record's largest, {v_max:.3g} m/s")  # fmt: skip
+        elif not fld and n in ("c", "c_nl") or (not fld and n not in effects.BASE_TERMS and effects.get(n).dissipative):
             lower[i] = max(lower[i], 0.0)
             desc.append(f"{n}: > 0 (dissipative)")
         if fld:
@@ -476,7 +530,8 @@ def law_parametrisation(start: Model, restoring: laws.Law, damping: laws.Law, re
     if lawmap.parts:
         desc.append(f"the shaped parts ({', '.join(n for n, _ in lawmap.parts)}) tabulated over every z the record "
                     f"visited, [{1e3 * reach[0]:.4g}, {1e3 * reach[1]:.4g}] mm: their span covers it")  # fmt: skip
-    support = functools.partial(_law_support, lawmap, (float(reach[0]), float(reach[1])), tails)
+    speeds = np.linspace(-v_max, v_max, 41) if damping.signed else None
+    support = functools.partial(_law_support, lawmap, (float(reach[0]), float(reach[1])), tails, speeds)
     desc.append(f"restoring law {restoring.name} ({restoring.title}); damping law {damping.name} ({damping.title})")
     return Parametrisation(tuple(names), start.kind, lawmap.params, lower, upper, {}, desc, support=support,
                            law=lawmap)  # fmt: skip
