@@ -301,6 +301,49 @@ def test_the_laws_model_follows_the_decays_damping_as_it_rises_and_falls():
     assert rms["spline"] < rms["cubic"] / 3, rms
 
 
+def test_the_report_of_a_law_compares_each_force_with_the_posteriors_band(tmp_path):
+    # a spline is compared by its force (its coefficients weigh basis functions on knots each fit chooses) and the
+    # damping law's z'^3 term by its value: NSI's c, c_nl and c3 inside the posterior's intervals (a short run), its
+    # force inside the posterior's band over most of the stroke (measured 76-81 %)
+    import json
+
+    from negstiff.cli import main
+
+    out = tmp_path / "out"
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        assert main(["report", str(RECORD), "--columns", COLUMNS, "--gravity", "0", "--only", "nsi,posterior",
+                     "--law", "spline", "--damping", "polynomial_damping", "--max-steps", "150", "--ensembles", "2",
+                     "--quiet", "-o", str(out)]) == 0  # fmt: skip
+    res = json.loads((out / "results.json").read_text())
+    summary = res["summary"]
+    assert any(line.startswith("Estimates inside") and "NSI 3 of 3 (c, c_nl, cubic_damping)" in line
+               for line in summary), summary  # fmt: skip
+    band = next(line for line in summary if line.startswith("The restoring force inside the posterior's 90 % band"))
+    assert int(band.split("NSI over ")[1].split(" %")[0]) >= 60, band
+    assert not any(k.startswith("spline.") for k in res["coefficients"])
+
+
+def test_the_reports_posterior_of_the_law_the_record_asks_for_is_the_identifications_choice(tmp_path):
+    # report --law auto: the posterior (which samples a named law) samples the law NSI chose (it refused 'auto',
+    # and the report failed in a second)
+    import json
+
+    from negstiff.cli import main
+
+    out = tmp_path / "out"
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        assert main(["report", str(RECORD), "--columns", COLUMNS, "--gravity", "0", "--only", "nsi,posterior",
+                     "--law", "auto", "--max-steps", "150", "--ensembles", "2", "--quiet",
+                     "-o", str(out)]) == 0  # fmt: skip
+    sections = {s["kind"]: s["result"] for s in json.loads((out / "results.json").read_text())["sections"]}
+    chosen = sections["identification"]["law_choice"]["chosen"]
+    assert (
+        sections["posterior"]["settings"]["law"]["restoring"] == chosen == sections["identification"]["settings"]["law"]
+    )
+
+
 def test_the_reports_identification_says_what_its_held_out_error_is_made_of(tmp_path):
     # on the real decay NSI's one free run over the held-out tail errs by 42 % of the tail's rms (the tail rings at
     # 1e-6 against the gauge's 3.3e-7 of noise); over half of that squared error is a constant offset between the

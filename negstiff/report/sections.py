@@ -257,7 +257,7 @@ def identification_section(est, label: str = "") -> Section:
     mass_col = [] if per_kg else ["m [kg]"]
     own = effective(r.initial_model)
     keys = coefficient_keys({"final": effective(r.model), **({"own": own} if refined else {})}, {})
-    cols = [k for k in keys if k in units]  # the base coefficients; a law's parts' parameters in their own table
+    cols = [k for k in keys if k in UNITS]  # the base coefficients; a law's parts' parameters in their own table
     sec.table(
         ["model", *[f"{k} [{units[k]}]" for k in cols], *mass_col],
         [["final" + (" (output-error refined)" if refined else ""), *[getattr(r.model, k) for k in cols],
