@@ -7,6 +7,7 @@ import signal
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -240,7 +241,14 @@ def test_ctrl_c_ends_with_one_line_and_exit_130(tmp_path):
     out = tmp_path / "study"
     cmd = [sys.executable, "-m", "negstiff", "reproduce", "-o", str(out), "--quiet"]
     p = subprocess.Popen(cmd, stderr=subprocess.PIPE, text=True)
-    time.sleep(8)  # past the imports, inside the work
+    # past the imports, inside the work: its section processes started (Linux's /proc shows them; elsewhere 8 s)
+    children = Path(f"/proc/{p.pid}/task")
+    deadline = time.monotonic() + (60 if children.exists() else 8)
+    while p.poll() is None and time.monotonic() < deadline:
+        if children.exists() and any((t / "children").read_text().split() for t in children.glob("*")):
+            time.sleep(0.5)
+            break
+        time.sleep(0.05)
     p.send_signal(signal.SIGINT)
     _, err = p.communicate(timeout=60)
     assert p.returncode == 130, err
