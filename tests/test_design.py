@@ -194,7 +194,9 @@ def test_the_report_of_a_base_excited_record_says_what_to_test_next(tmp_path):
     rec = write_csv(tmp_path / "run.csv", {"t": c["t"], "base_acc": c["base_acc"], "z": c["z"]},
                     {"mass": rig.meta["mass"]})  # fmt: skip
     out = tmp_path / "rep"
-    assert main(["report", str(rec), "--only", "design", "-o", str(out), "--quiet"]) == 0
+    # a short posterior (two ensembles, 200 steps at most): the section is the point, not converged chains
+    assert main(["report", str(rec), "--only", "design", "--ensembles", "2", "--max-steps", "200", "-o", str(out),
+                 "--quiet"]) == 0  # fmt: skip
     res = json.loads((out / "results.json").read_text())
     kinds = [s["kind"] for s in res["sections"]]
     assert "posterior" in kinds and "design" in kinds  # the design reads the posterior, which runs first
