@@ -77,7 +77,7 @@ real = compare(decay, "FrID magneto-mechanical decay (strain units)")
 # Which damping: a ratio that rises, then falls
 # ---------------------------------------------
 # The decay's damping ratio, read from its Hilbert backbone, rises from 0.3 % to 0.7 % with amplitude and falls
-# back. The reference study's damping, c z' + c_nl z'|z'|, can only rise; ``polynomial_damping`` adds c3 z'^3,
+# back. The reference study's damping, ``c z' + c_nl z'|z'|``, can only rise; ``polynomial_damping`` adds ``c3 z'^3``,
 # which the data give a negative sign. Each model's own free decay, read by the same estimator, against the
 # record's:
 from negstiff.inference.analysis.backbone import measure_backbone, predict_backbone  # noqa: E402
