@@ -199,3 +199,13 @@ def test_the_law_chosen_is_the_truths_or_as_good(records, name, method):
         assert abs(got - (z + offset)) < 0.02 * scale, (well, got, z + offset)
         assert res.modal[well]["f_hz"] == pytest.approx(truth.f_hz[well], rel=0.02)
         assert res.modal[well]["zeta"] == pytest.approx(truth.zeta[well], rel=0.10)
+
+
+def test_a_laws_numerical_failure_is_said_as_the_fits():
+    # numpy's bare "SVD did not converge in Linear Least Squares" stood in the law comparison's table on FrID's decay
+    # (the rod frame's columns at a strain gauge's scale), read as a fault of negstiff's
+    from negstiff.inference.steps.law_choice import said
+
+    text = said(np.linalg.LinAlgError("SVD did not converge in Linear Least Squares"))
+    assert text.startswith("its least-squares fit failed on this record") and "SVD did not converge" in text
+    assert said(ValueError("a  plain\n message")) == "a plain message"

@@ -201,6 +201,16 @@ ESTIMATE_ERRORS = (MeasurementError, ValueError, ArithmeticError)
 """What an estimate of a law may raise on a record it cannot explain (said as the candidate's problem)."""
 
 
+def said(exc: Exception) -> str:
+    """What a law's failed estimate tells a reader: its error on one line; a linear-algebra failure named as the
+    fit's (numpy's "SVD did not converge" alone read as negstiff's own fault).
+    """
+    text = " ".join(str(exc).split())
+    if isinstance(exc, np.linalg.LinAlgError):
+        return f"its least-squares fit failed on this record ({text}: its columns are degenerate or not finite here)"
+    return text
+
+
 def choose(rec: Measurement, n_id: int, names, estimate: Callable[[Measurement, int, str], Any],
            model_of: Callable[[Any], Model], why: str | None = None) -> Choice:  # fmt: skip
     """The law ``rec`` asks for among ``names`` (module docstring), for any estimator: each law estimated on the
@@ -224,7 +234,7 @@ def choose(rec: Measurement, n_id: int, names, estimate: Callable[[Measurement, 
             cand.model = model_of(estimate(fitting, n_fit, name))
             cand.problems = problems(cand.model, rec, n_fit)
         except ESTIMATE_ERRORS as exc:
-            cand.problems = [" ".join(str(exc).split())]
+            cand.problems = [said(exc)]
         candidates.append(cand)
     windows = score(candidates, rec, n_fit, n_id)
     # the best on the selection part, estimated on the whole identification part and judged again there: where it
@@ -234,7 +244,7 @@ def choose(rec: Measurement, n_id: int, names, estimate: Callable[[Measurement, 
             est = estimate(rec, n_id, best.law)
             failed = problems(model_of(est), rec, n_id)
         except ESTIMATE_ERRORS as exc:
-            failed = [" ".join(str(exc).split())]
+            failed = [said(exc)]
         if not failed:
             return Choice(est, best, candidates, windows)
         best.problems = [f"on the whole identification part: {failed[0]}"]
