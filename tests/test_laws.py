@@ -209,3 +209,19 @@ def test_a_laws_numerical_failure_is_said_as_the_fits():
     text = said(np.linalg.LinAlgError("SVD did not converge in Linear Least Squares"))
     assert text.startswith("its least-squares fit failed on this record") and "SVD did not converge" in text
     assert said(ValueError("a  plain\n message")) == "a plain message"
+
+
+def test_a_law_whose_identified_parts_are_not_physical_is_said_so():
+    # NSI's rod frame on FrID's strain-gauge decay (a beam between magnets, no rod frame): the frame's stiffness it
+    # identifies is negative; the model's own check ("rod_frame needs k_f, D0, L > 0 ...") reached the user bare
+    from pathlib import Path
+
+    from negstiff import load
+    from negstiff.inference.estimators.nsi import NSIError
+
+    frid = Path(__file__).parent / "data" / "frid_magneto_mechanical_decay" / "decay_f_42p05_ampl_2p0_0_12p1-19p1s.lvm"
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        rec = load(frid, columns="force=Sine with Gaussian Noise,z=Strain_0", gravity=0.0)
+        with pytest.raises(NSIError, match="the geometric law's identified parameters are not physical"):
+            NSI(law="geometric").fit(rec)

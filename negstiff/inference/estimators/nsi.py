@@ -600,8 +600,12 @@ class NSI(StructureResults, Identifier):
             mass, mass_source = mass_of(rec, known_input_gain(rec), float(np.mean(gains)), what="the FRF level")
         stroke = (float(zs.min()), float(zs.max()))
         frames = [self._z_frame(w, basis, stroke) for w in wells.values()]
-        models = [laws.compose(restoring, damping, f, mass, basis.shape) for f in frames]
-        model = laws.compose(restoring, damping, np.mean(frames, axis=0), mass, basis.shape)
+        try:
+            models = [laws.compose(restoring, damping, f, mass, basis.shape) for f in frames]
+            model = laws.compose(restoring, damping, np.mean(frames, axis=0), mass, basis.shape)
+        except InputError as exc:  # a law's part outside its physical range (a rod frame's negative stiffness)
+            raise NSIError(f"{rec.source}: the {restoring.name} law's identified parameters are not physical for "
+                           f"this record ({' '.join(str(exc).split())})") from None  # fmt: skip
         try:
             model.equilibria()  # usable: a bistable or single-well restoring force
         except ValueError as exc:  # a well's fit that is no bistable oscillator: the record's verdict, not a bug
