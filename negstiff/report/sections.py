@@ -109,12 +109,11 @@ def effective(model) -> dict[str, float]:
 
     d = model if isinstance(model, dict) else model.to_dict()
     out = {k: float(d[k]) for k in COEFFICIENTS}
-    for name, value in (d.get("extra") or {}).items():
-        law = effects.get(name).law
-        if isinstance(law, ShapedLaw):
-            if not compared_by_force(name):
-                out |= {f"{name}.{p}": v for p, v in law.parameters(value).items()}
-            continue
+    extra = d.get("extra") or {}
+    out |= {k: v for k, v in _part_parameters(extra).items() if not compared_by_force(k.partition(".")[0])}
+    for name, value in extra.items():
+        if isinstance(effects.get(name).law, ShapedLaw):
+            continue  # its parameters above
         field = effects.get(name).folds_into
         if field in out and not isinstance(value, dict):
             out[field] += float(value)
@@ -123,13 +122,15 @@ def effective(model) -> dict[str, float]:
     return out
 
 
-def _part_parameters(model) -> dict[str, float]:
-    """Every shaped part's parameters of ``model`` (``PART.NAME``), a spline's coefficients among them."""
+def _part_parameters(extra: Mapping[str, Any]) -> dict[str, float]:
+    """Every shaped part's parameters among a model's ``extra`` effects (``PART.NAME``), a spline's coefficients
+    among them.
+    """
     from negstiff.models import effects
     from negstiff.models.shaped import ShapedLaw
 
     out: dict[str, float] = {}
-    for name, value in model.extra.items():
+    for name, value in extra.items():
         law = effects.get(name).law
         if isinstance(law, ShapedLaw):
             out |= {f"{name}.{p}": v for p, v in law.parameters(value).items()}
@@ -320,7 +321,7 @@ def _law_blocks(sec: Section, r, name: str) -> None:
         damping = r.settings.get("damping_law")
         sec.text(f"Restoring-force law: {law.name}, {law.title} ({law.reference})"
                  + (f"; damping law: {damping}." if damping and damping != "catalogue" else "."))  # fmt: skip
-        final, own = _part_parameters(r.model), _part_parameters(r.initial_model)
+        final, own = _part_parameters(r.model.extra), _part_parameters(r.initial_model.extra)
         rows = [[k, final[k], own.get(k)] for k in final if "." in k]  # one fit's: a spline's knots are its own
         parts = set(law.parts) | (set(laws.get(damping).parts) if damping in laws.names("damping") else set())
         rows += [
