@@ -313,6 +313,19 @@ def test_the_report_of_a_law_compares_each_force_with_the_posteriors_band(tmp_pa
     assert res["coefficients"]["cubic_damping"]["posterior"]["hdi_high"] < 0
 
 
+def test_a_laws_start_outside_the_posteriors_support_is_refused_naming_the_check_it_fails():
+    # the cubic with polynomial damping: the deterministic start's c3 outgrows c and c_nl within the record's speeds
+    # (its damping feeds energy in near 0.06 m/s), refused before any sampling with the check named (the message had
+    # listed every prior)
+    from negstiff import Posterior
+    from negstiff.inference.estimators.posterior.windows import PosteriorError
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        with pytest.raises(PosteriorError, match="it fails the damping dissipates at every speed up to"):
+            Posterior(law="cubic", damping="polynomial_damping").fit(_record())
+
+
 def test_the_reports_posterior_of_the_law_the_record_asks_for_is_the_identifications_choice(tmp_path):
     # report --law auto: the posterior (which samples a named law) samples the law NSI chose (it refused 'auto',
     # and the report failed in a second)

@@ -56,6 +56,8 @@ class Parametrisation:
     # a prior's support beyond its box (a law's: a spline's tail rising outward, the parts tabulated over the
     # record's stroke): (B, d) physical parameters -> (B,) bool; None: the box alone
     support: Callable[[np.ndarray], np.ndarray] | None = None
+    # the support's checks by what each asks: (B, d) -> {what: (B,) bool}, to say which one a point fails; None: one
+    checks: Callable[[np.ndarray], dict[str, np.ndarray]] | None = None
     # a law's parametrisation: its map (names, kernel rows, forces, models of parameters); None otherwise
     law: LawMap | None = None
 
@@ -402,19 +404,16 @@ def _law_checks(lawmap: LawMap, reach: tuple[float, float], tails: tuple[str, ..
     return out
 
 
-def _law_support(lawmap: LawMap, reach: tuple[float, float], tails: tuple[str, ...], speeds: np.ndarray | None,
-                 theta: np.ndarray) -> np.ndarray:  # fmt: skip
-    """Each row's admissibility beyond the box: every check of ``_law_checks`` passed."""
-    return np.logical_and.reduce(list(_law_checks(lawmap, reach, tails, speeds, theta).values()))
+def _law_support(checks: Callable[[np.ndarray], dict[str, np.ndarray]], theta: np.ndarray) -> np.ndarray:
+    """Each row's admissibility beyond the box: every one of the ``checks`` (``_law_checks``) passed."""
+    return np.logical_and.reduce(list(checks(theta).values()))
 
 
 def support_failures(par: Parametrisation, theta: np.ndarray) -> list[str]:
-    """What one row of parameters ``theta`` (d,) fails of a law parametrisation's support (``_law_checks``)."""
-    if not isinstance(par.support, functools.partial) or par.support.func is not _law_support:
+    """What one row of parameters ``theta`` (d,) fails of a parametrisation's support (its ``checks``)."""
+    if par.checks is None:
         return []
-    lawmap, reach, tails, speeds = par.support.args
-    checks = _law_checks(lawmap, reach, tails, speeds, np.atleast_2d(theta))
-    return [what for what, ok in checks.items() if not ok[0]]
+    return [what for what, ok in par.checks(np.atleast_2d(theta)).items() if not ok[0]]
 
 
 SHIFT = "z_shift"
@@ -531,7 +530,8 @@ def law_parametrisation(start: Model, restoring: laws.Law, damping: laws.Law, re
         desc.append(f"the shaped parts ({', '.join(n for n, _ in lawmap.parts)}) tabulated over every z the record "
                     f"visited, [{1e3 * reach[0]:.4g}, {1e3 * reach[1]:.4g}] mm: their span covers it")  # fmt: skip
     speeds = np.linspace(-v_max, v_max, 41) if damping.signed else None
-    support = functools.partial(_law_support, lawmap, (float(reach[0]), float(reach[1])), tails, speeds)
+    checks = functools.partial(_law_checks, lawmap, (float(reach[0]), float(reach[1])), tails, speeds)
+    support = functools.partial(_law_support, checks)
     desc.append(f"restoring law {restoring.name} ({restoring.title}); damping law {damping.name} ({damping.title})")
     return Parametrisation(tuple(names), start.kind, lawmap.params, lower, upper, {}, desc, support=support,
-                           law=lawmap)  # fmt: skip
+                           checks=checks, law=lawmap)  # fmt: skip
