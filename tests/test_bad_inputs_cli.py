@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from processes import descendants
 from records import refused
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -54,17 +55,6 @@ def test_ctrl_c_during_the_imports_is_one_line_and_exit_130(command, tmp_path):
     assert not out.exists()
 
 
-def _descendants(pid: int) -> list[int]:
-    """The processes below ``pid`` (its children's children too), from /proc."""
-    kids = []
-    for task in Path(f"/proc/{pid}/task").glob("*"):
-        try:
-            kids += [int(k) for k in (task / "children").read_text().split()]
-        except OSError:
-            pass
-    return kids + [g for k in kids for g in _descendants(k)]
-
-
 def _running_in_group(pgid: int) -> list[int]:
     """The processes of process group ``pgid`` that are alive (not zombies waiting to be reaped)."""
     alive = []
@@ -88,7 +78,7 @@ def _reproduce_with_its_processes(tmp_path):
                          stderr=subprocess.PIPE, stdout=subprocess.DEVNULL, text=True, cwd=tmp_path, env=env,
                          start_new_session=True)  # fmt: skip
     deadline = time.monotonic() + 120
-    while len(_descendants(p.pid)) < 3 and p.poll() is None and time.monotonic() < deadline:
+    while len(descendants(p.pid)) < 3 and p.poll() is None and time.monotonic() < deadline:
         time.sleep(0.05)  # the resource tracker and two section processes
     assert p.poll() is None, p.communicate()[1]
     time.sleep(1.5)

@@ -11,6 +11,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from processes import descendants
 from records import refused
 
 from negstiff.cli import build_parser, main
@@ -242,13 +243,10 @@ def test_ctrl_c_ends_with_one_line_and_exit_130(tmp_path):
     cmd = [sys.executable, "-m", "negstiff", "reproduce", "-o", str(out), "--quiet"]
     p = subprocess.Popen(cmd, stderr=subprocess.PIPE, text=True)
     # past the imports, inside the work: its section processes started (Linux's /proc shows them; elsewhere 8 s)
-    children = Path(f"/proc/{p.pid}/task")
-    deadline = time.monotonic() + (60 if children.exists() else 8)
-    while p.poll() is None and time.monotonic() < deadline:
-        if children.exists() and any((t / "children").read_text().split() for t in children.glob("*")):
-            time.sleep(0.5)
-            break
+    deadline = time.monotonic() + (60 if Path("/proc/self/task").exists() else 8)
+    while p.poll() is None and time.monotonic() < deadline and not descendants(p.pid):
         time.sleep(0.05)
+    time.sleep(0.5)
     p.send_signal(signal.SIGINT)
     _, err = p.communicate(timeout=60)
     assert p.returncode == 130, err
