@@ -499,8 +499,9 @@ class Posterior(Estimator):
 
     def _pilot_whitened(self, logpost: LogPosterior, nd: int, seed: int) -> LogPosterior:
         """``logpost`` as it is where a short pilot run finds the posterior close to the Laplace approximation the
-        sampler whitens with (``PILOT_STEPS`` of one ensemble: the second half's mean within ``PILOT_TOLERANCE`` of
-        the origin, each sd within that factor of 1); else re-whitened by the pilot's mean and covariance.
+        sampler whitens with (``PILOT_STEPS`` of one ensemble, at most the run's ``max_steps``: the second half's mean
+        within ``PILOT_TOLERANCE`` of the origin, each sd within that factor of 1); else re-whitened by the pilot's
+        mean and covariance.
 
         Where a parameter's posterior leans on its bound (c_nl of a device without quadratic damping: its MAP on
         the bound 0), the Laplace approximation at the MAP point misses the posterior: on a cross-well hammer
@@ -508,13 +509,14 @@ class Posterior(Estimator):
         autocorrelation reached 50-96 steps (25 s for a 10 s record; measured). The pilot's samples are not kept
         (an adaptation before the run, which then samples with its whitening fixed).
         """
+        steps = min(PILOT_STEPS, self.max_steps)  # never longer than the run it prepares (a quick look's few steps)
         pilot = sample_ensembles(logpost, nd, n_walkers=self.walkers(nd), n_ensembles=1, seed=seed + PILOT_SEED,
-                                 tau_multiple=self.tau_multiple, min_steps=PILOT_STEPS, max_steps=PILOT_STEPS,
-                                 chunk=PILOT_STEPS, progress=False, chain_file=None)  # fmt: skip
+                                 tau_multiple=self.tau_multiple, min_steps=steps, max_steps=steps, chunk=steps,
+                                 progress=False, chain_file=None)  # fmt: skip
         y = np.asarray(pilot["chains"][0]).reshape(-1, nd)  # its second half (``sample_ensembles``' burn-in)
         mean, cov = y.mean(axis=0), np.cov(y.T)
         sd = np.sqrt(np.diag(cov))
-        self.whitening_ = {"pilot_steps": PILOT_STEPS, "pilot_mean_max_sd": float(np.max(np.abs(mean))),
+        self.whitening_ = {"pilot_steps": steps, "pilot_mean_max_sd": float(np.max(np.abs(mean))),
                            "pilot_sd_range": [float(sd.min()), float(sd.max())], "rewhitened": False}  # fmt: skip
         if np.max(np.abs(mean)) <= PILOT_TOLERANCE and np.all((sd >= 1 / PILOT_TOLERANCE) & (sd <= PILOT_TOLERANCE)):
             return logpost
