@@ -87,6 +87,9 @@ class ShapedLaw:
     centred: ClassVar[bool] = False
     """Whether the part's force is odd about its own z = 0, a centre a record's frame need not share (facing
     magnets, a pair of oblique springs: their centre is where the lab's z is zero only by construction)."""
+    parameters_compared: ClassVar[bool] = True
+    """Whether two fits' parameters of the part mean the same thing, to be compared one by one (a spline's do not:
+    its coefficients weigh basis functions on knots each fit chooses; its force is compared instead)."""
 
     # --- the part's algebra (subclasses) ------------------------------------------------------------
     def columns(self, shape: Mapping[str, Any], z) -> list[np.ndarray]:
@@ -355,6 +358,7 @@ class Spline(ShapedLaw):
     "coef": (...) N}``: the interior and end knots, evenly spaced; len(coef) = len(knots) + 2).
     """
 
+    parameters_compared: ClassVar[bool] = False
     fields: ClassVar[tuple[str, ...]] = ("knots", "coef")
     shape: ClassVar[tuple[str, ...]] = ("knots",)
     DEGREE: ClassVar[int] = 3

@@ -138,14 +138,13 @@ def _part_parameters(extra: Mapping[str, Any]) -> dict[str, float]:
 
 
 def compared_by_force(name: str) -> bool:
-    """Whether a part's parameters are compared between methods by its force rather than one by one: a spline's
-    coefficients weigh basis functions on knots each method chooses from its own data, so the same coefficient
-    name means another function in another fit (its force over the stroke is compared: the posterior's band).
+    """Whether a part's parameters are compared between methods by its force rather than one by one (its law's
+    ``ShapedLaw.parameters_compared`` false: a spline's coefficients weigh basis functions on knots each method
+    chooses from its own data; its force over the stroke is compared, in the posterior's band).
     """
     from negstiff.models import effects
-    from negstiff.models.shaped import Spline
 
-    return name in effects.names() and isinstance(effects.get(name).law, Spline)
+    return name in effects.names() and not getattr(effects.get(name).law, "parameters_compared", True)
 
 
 def coefficient_keys(estimates: dict[str, dict[str, float]], intervals: dict[str, dict[str, tuple]]) -> list[str]:
