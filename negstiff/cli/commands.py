@@ -248,7 +248,8 @@ def _identify_structure(args, est, rec) -> int:
     warn(args, result["warnings"])
     write_json(args.out, result)
     rms = result["validation"]["rms_percent"]
-    say(args, f"wrote {args.out} ({modes_summary(est.modal_)}; validation {rms:.1f} % rms)")
+    said = est.result_.summary() if result.get("linear_part") == "state_space" else modes_summary(est.modal_)
+    say(args, f"wrote {args.out} ({said}; validation {rms:.1f} % rms)")
     return 0
 
 

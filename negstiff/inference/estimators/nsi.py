@@ -44,6 +44,7 @@ from negstiff.errors import InputError, MeasurementError
 from negstiff.inference.analysis.record_kind import check_decay, identification_record, record_kind
 from negstiff.inference.estimators.identification import Estimate, Identifier, visited_well
 from negstiff.inference.estimators.parameters import DAMPING_LAW, FRACTION, RESTORING_LAW, Boolean, Interval, Pair
+from negstiff.inference.estimators.state_space_id import identify_state_space
 from negstiff.inference.estimators.structure_id import (
     ElementPlace,
     StructureResults,
@@ -352,6 +353,8 @@ class NSI(StructureResults, Identifier):
     """
 
     method = "nsi"
+    reads_sensors_without_masses = True
+    """A structure's record without masses is read through a state-space linear part (``state_space_id``)."""
     _parameter_constraints = {
         "order": Interval(int, 2, 20, even=True),  # two states per mode: an odd order splits one
         "block_rows": Interval(int, 2, 500),
@@ -565,7 +568,12 @@ class NSI(StructureResults, Identifier):
                 f"{type(self).__name__}(law={self.law!r}): a law is read on a single DOF's record; a "
                 "structure's element has its own basis (element=): give no law"
             )
-        self.result_ = identify_nsi(self, identification_record(rec, kind), at)
+        if rec.masses is None:
+            # the masses unknown: the linear part a state-space model of the order the record shows, the element
+            # sized through the measured driving point (``state_space_id``)
+            self.result_ = identify_state_space(self, rec, at)
+        else:
+            self.result_ = identify_nsi(self, identification_record(rec, kind), at)
         return self
 
     def _estimate(self, rec: Measurement, n_id: int, law: laws.Law | None = None) -> Estimate:

@@ -165,7 +165,10 @@ def element_of(est, rec: Measurement) -> tuple[int, int] | None:
         raise InputError(f"{rec.source}: a record of {rec.n_dof} DOFs needs the element's place "
                          f"({name}(element='I-J'), --element I-J)")  # fmt: skip
     at = parse_element(est.element, rec.n_dof)
-    rec.dof_masses  # noqa: B018 - one MeasurementError without them, before any work
+    if rec.masses is None and not getattr(est, "reads_sensors_without_masses", False):
+        # NSI reads such a record through a state-space linear part (``state_space_id``); the weak form's equations
+        # per DOF need each DOF's mass
+        rec.dof_masses  # noqa: B018 - one MeasurementError without them, before any work
     if getattr(est, "refine", None) is True:
         # defined on the element's coordinate and tried: on a 2-DOF record written by another integrator it moved
         # k2 by -11 to -18 % while the held-out error fell 5 %, the true element scoring worse than the refined one
@@ -299,6 +302,11 @@ class StructureResults:
         """A structure's result JSON (``"structure"`` and ``"dofs"`` in it) rebuilt as its
         ``StructureIdentification`` (``from_json``); a single DOF's by the estimator's own ``_restore``.
         """
+        if result.get("linear_part") == "state_space":
+            from negstiff.inference.estimators.state_space_id import StateSpaceIdentification
+
+            self.result_ = StateSpaceIdentification.from_json(result)
+            return
         if "structure" in result and "dofs" in result:
             self.result_ = StructureIdentification.from_json(result)
             if not isinstance(getattr(type(self), "model_", None), property):  # Discrepancy's own attribute
@@ -308,7 +316,7 @@ class StructureResults:
 
     def _summary(self) -> str:
         r = self.result_
-        if isinstance(r, StructureIdentification):
+        if isinstance(r, StructureIdentification) or type(r).__name__ == "StateSpaceIdentification":
             return r.summary()
         return super()._summary()  # type: ignore[misc]
 

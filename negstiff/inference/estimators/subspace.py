@@ -249,6 +249,29 @@ def _po_moesp(
     return A, C, s, taken
 
 
+def poles_by_order(u: np.ndarray, y: np.ndarray, dt: float, i: int, orders) -> dict[int, np.ndarray]:
+    """The continuous-time poles (rad/s, Im > 0 kept with the real ones) of the PO-MOESP model at each order of
+    ``orders``, from one LQ factor and one SVD with ``i`` block rows: a stabilisation diagram's columns at the
+    cost of one fit (the A of each order is a least squares on the same extended observability matrix). No B or D
+    is estimated, so an order whose model has an unstable spurious pole still gives its poles.
+    """
+    m, l_out = u.shape[1], y.shape[1]
+    L, _ = lq_factor_route(u, y, i)
+    a, b = i * m, i * m + i * (m + l_out)
+    uu, s, _ = np.linalg.svd(L[b:, a:b], full_matrices=False)
+    out = {}
+    for order in orders:
+        if order > s.size:
+            break
+        gamma = uu[:, :order] * np.sqrt(s[:order])
+        A = np.linalg.lstsq(gamma[:-l_out], gamma[l_out:], rcond=None)[0]
+        mu = np.linalg.eigvals(A).astype(complex)
+        with np.errstate(divide="ignore"):
+            lam = np.log(mu) / dt
+        out[int(order)] = lam[np.isfinite(lam) & (lam.imag >= 0)]
+    return out
+
+
 def estimate_bd(
     A: np.ndarray, C: np.ndarray, u: np.ndarray, y: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -1,0 +1,372 @@
+"""NSI on a structure read through its sensors, its masses unknown and its modes more than its sensors.
+
+A lab's record of a structure (a shaker's measured force at one sensed point, a few sensors, two of them either side
+of a nonlinear joint) holds more modes than channels, and nothing gives the masses. Its linear part is then a
+state-space model (``models.state_space``) whose order the record shows: the stabilisation diagram (the poles of
+the PO-MOESP model of every even order from one LQ factor, ``subspace.poles_by_order``), a pole stable when the
+next two orders hold one within ``F_TOL`` in frequency and ``ZETA_TOL`` in damping; the model's order is the
+lowest that holds every mode stable at some order (Peeters & De Roeck 2001; the stabilisation of
+Marchesiello, Fasana & Garibaldi 2016).
+
+The element's basis functions of the relative motion r = y_J - y_I about its mean r* (low-passed at the force's band
+top, ``element_motion``) are the model's feedback inputs beside the force
+(Marchesiello & Garibaldi 2008), and the element's coefficients come from the extended FRF: the input column of
+basis function j is mu_j G l (G the structure's compliance, l its place) and the force's is G e_p (p the sensor the
+force acts at), so by reciprocity (G symmetric) its row p is mu_j (l . G e_p) = mu_j times the relative motion's
+FRF to the force. mu_j is the least-squares ratio of the two over the modes' band (weighted by |l . G e_p|^2, so
+an antiresonance of the relative motion weighs nothing), in newtons per unit of its basis function with no mass
+known: the driving point, measured, sets the scale (Noel & Kerschen 2013 extract the coefficients from the extended
+FRF alike). |Im/Re| of the ratio is the quality index; the standard errors are batch means over ``BLOCKS`` blocks.
+
+The model is judged on the held-out tail: windows restarted every ``window_s`` from the state the model's own
+least squares reads off the measured stretch before each (``StateSpaceStructure.initial_state``), run free under
+the measured force, beside the underlying-linear part alone under the same protocol.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from scipy import signal
+
+from negstiff.errors import InputError, issue
+from negstiff.errors import NegstiffWarning as _Warning
+from negstiff.inference.record.derivatives import band_limited, smooth_and_differentiate
+from negstiff.inference.record.measurement import Measurement
+from negstiff.models.state_space import BASIS, StateSpaceStructure, basis_inputs, coupling_row
+from negstiff.models.structure import Mode
+
+from . import subspace
+
+F_TOL = 0.01
+"""A pole is stable when the next order holds one within this share of its frequency ..."""
+ZETA_TOL = 0.2
+"""... and within this share of its damping ratio (or ``ZETA_ABS`` absolute, for lightly damped modes whose
+estimate scatters by more than a share)."""
+ZETA_ABS = 0.002
+STABLE_RUN = 3
+"""A mode is physical when it is stable at this many consecutive orders."""
+MAX_ZETA = 0.3
+"""Poles damped above this are left out of the diagram (the noise's)."""
+PHYSICAL_ZETA = 0.1
+"""A stable pole is a mode when damped below this: a ground vibration test's modes are damped below a few percent
+(a bolted joint's up to about 5 %), the noise's stable-looking poles above 10 %."""
+MAX_ORDER = 40
+BLOCKS = 4
+"""Batch means' blocks of the identification part, for the element's standard errors."""
+FORCE_POWER_SHARE = 0.99
+"""The share of the force's power below the band's top (``force_band_top``)."""
+QUALITY_WARNING = 0.3
+"""|Im/Re| of an element coefficient's ratio above which it is said to be poorly determined."""
+
+
+class StateSpaceIdentificationError(InputError):
+    """The record does not allow a state-space structure's identification (a refusal, exit 2 at the CLI)."""
+
+
+@dataclass(frozen=True, repr=False)
+class StateSpaceIdentification:
+    """NSI's result on a structure read through its sensors (``NSI(element="I-J").fit(rec)`` on a record of
+    N > 1 sensors without masses); ``to_json()`` is the contract's JSON (``linear_part: "state_space"``).
+
+    Attributes
+    ----------
+    model : StateSpaceStructure
+    modal : dict
+        ``{"linear": [Mode, ...]}``: the underlying-linear modes the stabilisation diagram holds, shapes over the
+        sensors.
+    element : dict
+        Each basis coefficient about r* (``k2_tilde``, ``k3``, ``c_nl``), its standard error and quality.
+    validation : dict
+        The held-out windows' error of the model and of its linear part alone.
+    """
+
+    method: str
+    model: StateSpaceStructure
+    modal: dict[str, list[Mode]]
+    element: dict[str, Any]
+    validation: dict[str, Any]
+    stabilisation: list[dict[str, Any]]
+    frf: dict[str, Any]
+    warnings: tuple[str, ...]
+    settings: dict[str, Any] = field(default_factory=dict)
+
+    def to_json(self) -> dict[str, Any]:
+        """The contract's JSON of ``identify`` on a structure read through its sensors."""
+        return {
+            "method": self.method,
+            "linear_part": "state_space",
+            "dofs": self.model.n_sensors,
+            "element_at": list(self.model.at),
+            "order": self.model.order,
+            "modal": {w: [m.to_json() for m in ms] for w, ms in self.modal.items()},
+            "element": self.element,
+            "validation": self.validation,
+            "frf": self.frf,
+            "stabilisation": self.stabilisation,
+            "model": self.model.to_dict(),
+            "warnings": list(self.warnings),
+            "settings": self.settings,
+        }
+
+    @classmethod
+    def from_json(cls, data) -> StateSpaceIdentification:
+        """The identification a result JSON holds (``to_json()``, its text or a file path)."""
+        from negstiff.inference.estimators.persistence import json_source
+
+        d = json_source(data, "state-space identify result JSON")
+        try:
+            modal = {w: [Mode(float(m["f_hz"]), float(m["zeta"]), tuple(float(x) for x in m["shape"])) for m in ms]
+                     for w, ms in d["modal"].items()}  # fmt: skip
+            return cls(d["method"], StateSpaceStructure.from_dict(d["model"]), modal, dict(d["element"]),
+                       dict(d["validation"]), list(d["stabilisation"]), dict(d["frf"]), tuple(d.get("warnings") or ()),
+                       dict(d.get("settings") or {}))  # fmt: skip
+        except (KeyError, TypeError, ValueError) as exc:
+            raise InputError(f"not a state-space identify result JSON: {type(exc).__name__} {exc}") from None
+
+    def summary(self) -> str:
+        """One line: the sensors, the order, the element's k3 and the modes."""
+        k3 = self.element["k3"]
+        modes = "; ".join(f"{m.f_hz:.3f} Hz {100 * m.zeta:.2f} %" for m in self.modal["linear"])
+        m = self.model
+        return f"{m.n_sensors} sensors, order {m.order}, element k3={k3['value']:.4g} +- {k3['se']:.2g}; {modes}"
+
+    def __repr__(self) -> str:
+        return f"StateSpaceIdentification({self.summary()}; held-out {self.validation['rms_percent']:.3g} %)"
+
+
+def check_record(rec: Measurement, at: tuple[int, int], block_rows: int) -> int:
+    """The refusals that need no work: a force input at a sensed point (the coefficients' scale without masses), a
+    record long enough. Returns the driving point's sensor (1-based).
+    """
+    if rec.input_name != "force":
+        raise StateSpaceIdentificationError(
+            f"{rec.source}: without the masses a structure's element is sized by a measured force at a sensed point "
+            f"(the driving point); this record's input is {rec.input_name}: give the masses ('# masses:', --masses)"
+        )
+    p = rec.force_dof or at[1]
+    rec.require(max(2000, 40 * block_rows), "NSI")
+    return int(p)
+
+
+def force_band_top(u: np.ndarray, fs: float, share: float = FORCE_POWER_SHARE) -> float:
+    """The frequency below which ``share`` of the force's power lies (Welch), at most 0.45 fs: the band where the
+    record tells the structure's response from noise (a pole above it models the sensors' noise: a 260 Hz pole at
+    4 % stable over orders on a chain forced to 150 Hz, with 1 % sensor noise).
+    """
+    freqs, pxx = signal.welch(u - np.mean(u), fs, nperseg=min(u.size, int(4 * fs)))
+    cum = np.cumsum(pxx)
+    top = float(freqs[min(int(np.searchsorted(cum, share * cum[-1])), freqs.size - 1)])
+    return min(top, 0.45 * fs)
+
+
+def _stable(pole: tuple[float, float], others: list[tuple[float, float]]) -> bool:
+    f, z = pole
+    return any(abs(f / g - 1) < F_TOL and abs(z - y) < max(ZETA_TOL * abs(y), ZETA_ABS) for g, y in others)
+
+
+def stabilisation(w: np.ndarray, y: np.ndarray, dt: float, block_rows: int, f_max: float,
+                  max_order: int = MAX_ORDER) -> tuple[list[dict[str, Any]], list[float], int]:  # fmt: skip
+    """The stabilisation diagram's rows (order, poles with ``stable``), the physical modes' frequencies and the
+    lowest order holding them all (module docstring).
+    """
+    orders = list(range(2, min(max_order, block_rows * y.shape[1]) + 1, 2))
+    lam = subspace.poles_by_order(w, y, dt, block_rows, orders)
+    poles = {n: sorted((float(abs(q) / (2 * math.pi)), float(-q.real / abs(q))) for q in p
+                       if q.imag > 0 and 0 < -q.real / abs(q) < MAX_ZETA and abs(q) / (2 * math.pi) < f_max)
+             for n, p in lam.items()}  # fmt: skip
+    ns = sorted(poles)
+    rows, run = [], {}
+    for k, n in enumerate(ns):
+        later = [poles[m] for m in ns[k + 1 : k + STABLE_RUN]]
+        marks = [len(later) == STABLE_RUN - 1 and all(_stable(p, q) for q in later) for p in poles[n]]
+        rows.append({"order": n, "poles": [{"f_hz": f, "zeta": z, "stable": s} for (f, z), s in
+                                           zip(poles[n], marks, strict=True)]})  # fmt: skip
+        run[n] = [p for p, s in zip(poles[n], marks, strict=True) if s]
+    # a mode is physical when it is marked stable at STABLE_RUN orders or more with a damping ratio a structure's mode
+    # has (below PHYSICAL_ZETA): the noise's poles, heavily damped, also meet the next orders' now and then (a chain
+    # record with 1 % sensor noise: a 145 Hz pole at 11 % marked at 3 orders; noise-free, 288 Hz at 37 % at one),
+    # while a lightly damped mode seen weakly by the sensors may lose its mark at some orders (27.9 Hz at 3 % noise:
+    # marked at 6 of 13 orders)
+    clusters: list[list[tuple[float, float]]] = []
+    for n in ns:
+        for f, z in run[n]:
+            home = next((c for c in clusters if abs(f / c[0][0] - 1) < F_TOL), None)
+            if home is None:
+                clusters.append([(f, z)])
+            else:
+                home.append((f, z))
+    physical = sorted(float(np.median([f for f, _ in c])) for c in clusters
+                      if len(c) >= STABLE_RUN and np.median([z for _, z in c]) < PHYSICAL_ZETA)  # fmt: skip
+    if not physical:
+        raise StateSpaceIdentificationError("no mode is stable over the stabilisation diagram's orders")
+    chosen = (
+        next(n for n in ns if all(any(abs(f / g - 1) < F_TOL for g, _ in poles[n]) for f in physical))
+        if any(all(any(abs(f / g - 1) < F_TOL for g, _ in poles[n]) for f in physical) for n in ns)
+        else ns[-1]
+    )
+    return rows, physical, chosen
+
+
+def element_motion(rec: Measurement, at: tuple[int, int], cut_hz: float) -> tuple[np.ndarray, np.ndarray]:
+    """The element's relative motion r and r' for its basis: the sensors' difference low-passed without phase at
+    the force's band top ``cut_hz`` (``derivatives.band_limited``; the response lives below it, the sensors' noise
+    everywhere) and differentiated spectrally (exact on a band-limited signal). The sensor noise a basis function
+    carries is an error in an input, which biases the subspace step: on the chain record with 1 % noise the modes
+    came out 0.08-0.21 % low with the record's Savitzky-Golay states (its window for the channels allowed no
+    smoothing), 0.02-0.05 % with this, and k3 -0.35 % against +0.05 %.
+    """
+    r = band_limited(coupling_row(rec.n_dof, at) @ rec.channels, rec.fs, cut_hz)
+    return smooth_and_differentiate(r, rec.fs, (0, 0))
+
+
+def _channels(rec: Measurement, at: tuple[int, int], cut_hz: float, r_ref: float | None = None):
+    """The extended input [f, basis] and the sensors' outputs of ``rec``, unscaled, and r*."""
+    r, vr = element_motion(rec, at, cut_hz)
+    r_ref = float(np.mean(r)) if r_ref is None else r_ref
+    return np.column_stack([rec.u, basis_inputs(r - r_ref, vr)]), rec.channels.T, r_ref
+
+
+def _fit(w: np.ndarray, y: np.ndarray, dt: float, order: int, block_rows: int):
+    """The state-space fit at ``order`` on scaled channels, back in SI units: (A, B, C, means)."""
+    wm, ws = w.mean(axis=0), w.std(axis=0)
+    ym, ys = y.mean(axis=0), y.std(axis=0)
+    if np.any(ws == 0) or np.any(ys == 0):
+        raise StateSpaceIdentificationError("the force, a basis function or a sensor is constant")
+    ss = subspace.identify((w - wm) / ws, (y - ym) / ys, dt, order, block_rows)
+    assert ss.Ad is not None and ss.Bd is not None
+    return ss.Ad, ss.Bd / ws[None, :], ys[:, None] * ss.C, wm, ym
+
+
+def _coefficients(model: StateSpaceStructure, p: int, band: tuple[float, float]) -> tuple[np.ndarray, np.ndarray]:
+    """mu_j and |Im/Re| from the extended FRF's row p against the relative motion's FRF to the force."""
+    freqs = np.linspace(band[0], band[1], 512)
+    q = np.exp(2j * np.pi * freqs * model.dt)
+    eye = np.eye(model.order)
+    he = np.array([model.C @ np.linalg.solve(qk * eye - model.A, model.B) for qk in q])  # (F, sensors, inputs)
+    a = he[:, :, 0] @ coupling_row(model.n_sensors, model.at)
+    b = he[:, p - 1, 1:]
+    mu = (np.conj(a)[:, None] * b).sum(axis=0) / (np.abs(a) ** 2).sum()
+    return mu.real, np.abs(mu.imag) / np.maximum(np.abs(mu.real), 1e-300)
+
+
+def _held_out(model: StateSpaceStructure, rec: Measurement, start: int, window_s: float, cut_hz: float
+              ) -> dict[str, Any]:  # fmt: skip
+    """The held-out windows (module docstring): the model's and its linear part's error, % of the sensors' rms."""
+    r, vr = element_motion(rec, model.at, cut_hz)
+    n_win = max(int(round(window_s * rec.fs)), 4 * model.order)
+    y = rec.channels
+    out: dict[str, Any] = {"window_s": n_win / rec.fs, "starts_s": []}
+    errs: dict[bool, list[float]] = {True: [], False: []}
+    scale = []
+    diverged = {True: 0, False: 0}
+    for s0 in range(max(start, n_win), rec.n - n_win + 1, n_win):
+        out["starts_s"].append(s0 / rec.fs)
+        seg = y[:, s0 : s0 + n_win]
+        scale.append(((seg - seg.mean(axis=1, keepdims=True)) ** 2).sum())
+        for element in (True, False):
+            lead = slice(s0 - n_win, s0)
+            x0 = model.initial_state(rec.u[lead], y[:, lead], r[lead], vr[lead], element)
+            run, gone = model.run(rec.u[s0 : s0 + n_win], x0, element)
+            diverged[element] += gone
+            errs[element].append(np.inf if gone else float(((run - seg) ** 2).sum()))
+    if not scale:
+        raise StateSpaceIdentificationError(f"{rec.source}: the held-out tail is shorter than one window")
+    total = float(np.sum(scale))
+    for element, key in ((True, "rms_percent"), (False, "linear_rms_percent")):
+        e = np.asarray(errs[element])
+        out[key] = float(100 * math.sqrt(e.sum() / total)) if np.all(np.isfinite(e)) else math.inf
+        out[key.replace("rms", "median_window")] = float(np.median(100 * np.sqrt(e / np.asarray(scale))))
+    out["diverged_windows"] = diverged[True]
+    out["linear_diverged_windows"] = diverged[False]
+    out["windows"] = len(scale)
+    return out
+
+
+def _nearest(modes: list[Mode], f_hz: float) -> Mode | None:
+    """The mode of ``modes`` within ``F_TOL`` of ``f_hz`` (the nearest), or None."""
+    near = [m for m in modes if abs(m.f_hz / f_hz - 1) < F_TOL]
+    return min(near, key=lambda m: abs(m.f_hz - f_hz)) if near else None
+
+
+def identify_state_space(est, rec: Measurement, at: tuple[int, int]) -> StateSpaceIdentification:
+    """NSI on ``rec`` (N sensors, no masses, a measured force at a sensed point) with the element at ``at``
+    (module docstring).
+    """
+    p = check_record(rec, at, est.block_rows)
+    n_id = int(round(rec.n * (1 - est.validation_fraction)))
+    ident = rec.segment(0, n_id)
+    f_max = force_band_top(ident.u, rec.fs)
+    w, y, r_ref = _channels(ident, at, f_max)
+    wm, ws = w.mean(axis=0), w.std(axis=0)
+    ym, ys = y.mean(axis=0), y.std(axis=0)
+    rows, physical, order = stabilisation((w - wm) / ws, (y - ym) / ys, rec.dt, est.block_rows, f_max)
+    fitted, errors = None, []
+    for n in range(order, min(MAX_ORDER, est.block_rows * y.shape[1]) + 1, 2):
+        try:
+            fitted = _fit(w, y, rec.dt, n, est.block_rows)
+            order = n
+            break
+        except (ValueError, np.linalg.LinAlgError) as exc:
+            errors.append(f"order {n}: {exc}")
+    if fitted is None:
+        raise StateSpaceIdentificationError(f"{rec.source}: no state-space model from order {order} up ({errors[-1]})")
+    A, B, C, wm, ym = fitted
+    model = StateSpaceStructure(A, B, C, rec.dt, at, r_ref, wm, ym)
+    modes = [m for m in model.modes() if any(abs(m.f_hz / f - 1) < F_TOL for f in physical)]
+    if not modes:
+        raise StateSpaceIdentificationError(f"{rec.source}: the order-{order} model holds none of the stable modes")
+    band = (0.5 * modes[0].f_hz, min(1.5 * modes[-1].f_hz, f_max))
+    mu, quality = _coefficients(model, p, band)
+    # batch means: each block's own fit at the chosen order, about the same r*
+    edges = np.linspace(0, n_id, BLOCKS + 1).round().astype(int)
+    per_block: list[np.ndarray] = []
+    block_modes: list[list[Mode | None]] = []
+    for a, b in zip(edges[:-1], edges[1:], strict=True):
+        part = ident.segment(int(a), int(b))
+        try:
+            wb, yb, _ = _channels(part, at, f_max, r_ref)
+            Ab, Bb, Cb, wmb, ymb = _fit(wb, yb, rec.dt, order, est.block_rows)
+            block = StateSpaceStructure(Ab, Bb, Cb, rec.dt, at, r_ref, wmb, ymb)
+            per_block.append(_coefficients(block, p, band)[0])
+            block_modes.append([_nearest(block.modes(), m.f_hz) for m in modes])
+        except (ValueError, np.linalg.LinAlgError, InputError):
+            continue
+    se = np.std(per_block, axis=0, ddof=1) / math.sqrt(len(per_block)) if len(per_block) >= 2 else np.full(3, np.nan)
+    modes_se = []
+    for k in range(len(modes)):
+        seen = [bm[k] for bm in block_modes if bm[k] is not None]
+        modes_se.append({key: float(np.std([getattr(m, key) for m in seen], ddof=1) / math.sqrt(len(seen)))
+                         if len(seen) >= 2 else None for key in ("f_hz", "zeta")})  # fmt: skip
+    names = ("k2_tilde", "k3", "c_nl")
+    element: dict[str, Any] = {n: {"value": float(mu[j]), "se": float(se[j]), "quality_im_over_re": float(quality[j])}
+               for j, n in enumerate(names)}  # fmt: skip
+    element["r_ref_m"] = r_ref
+    element["units"] = {"k2_tilde": "N/m^2", "k3": "N/m^3", "c_nl": "N s^2/m^2"}
+    window_s = max(0.25, 4.0 / modes[0].f_hz)
+    validation = _held_out(model, rec, n_id, window_s, f_max)
+    freqs = np.linspace(band[0], band[1], 256)
+    H = model.frf(freqs)
+    lines = [f"{rec.source}: the element's {n} is poorly determined (|Im/Re| {quality[j]:.2g} of its FRF ratio)"
+             for j, n in enumerate(names) if quality[j] > QUALITY_WARNING and abs(mu[j]) > 2 * se[j]]  # fmt: skip
+    if not validation["rms_percent"] < validation["linear_rms_percent"]:
+        lines.append(f"{rec.source}: the element's terms do not improve the held-out prediction "
+                     f"({validation['rms_percent']:.3g} % against the linear part's "
+                     f"{validation['linear_rms_percent']:.3g} %)")  # fmt: skip
+    issue([(_Warning, x) for x in lines])
+    return StateSpaceIdentification(
+        method="nsi", model=model, modal={"linear": modes}, element=element, validation=validation,
+        stabilisation=rows, warnings=tuple(lines),
+        frf={"f_hz": freqs.tolist(), "real": H.real.T.tolist(), "imag": H.imag.T.tolist(), "units": "m/N",
+             "input": f"force at sensor {p}"},
+        settings={"block_rows": est.block_rows, "order": order, "order_from": "stabilisation diagram",
+                  "physical_modes_hz": physical, "modes_se": modes_se, "driving_point": p,
+                  "identification_samples": n_id,
+                  "basis": list(BASIS),
+                  "element_motion": f"the sensors' difference low-passed at {f_max:.4g} Hz (the force's band top), "
+                                    "its derivative spectral",
+                  "standard_error": f"batch means over {len(per_block)} blocks of the identification part"},
+    )  # fmt: skip

@@ -1,0 +1,149 @@
+"""A structure read through its sensors: a linear part of any order and one nonlinear element between two sensors.
+
+A lab's structure has more modes in its band than the lab has sensors (a wing's seven modes, two accelerometers
+beside a joint), and its masses are not known. Its underlying-linear part is then not physical M, C, K over the
+sensors (``models.structure``) but a state-space model of the order the record shows (the stabilisation diagram's),
+x_{k+1} = A x_k + B w_k, y_k = C x_k + y_mean, whose outputs are the sensors' displacements and whose inputs w are
+the measured force and the element's basis functions of the relative motion r = y_J - y_I (I = 0: the ground) as
+feedback forces, [f, -(r - r*)^2, -(r - r*)^3, -r'|r'|], each less the mean it had in the identification
+(Marchesiello & Garibaldi 2008; the extended input of Noel & Kerschen 2013's FNSI, here in the time domain). The
+model is the identified discrete-time one, in the record's own sampling, so a free run replays exactly what was
+fitted; its continuous-time state matrix gives the modes and r' (r' = l.C A_c x: a displacement output has no
+feedthrough of a force, C B = 0).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from scipy import linalg
+
+from negstiff.models.structure import Mode, modes_of_state_matrix
+
+BASIS = ("x2", "x3", "vabsv")
+"""The element's basis about the reference r*: (r - r*)^2, (r - r*)^3, r'|r'| (the single DOF's names)."""
+
+
+def basis_inputs(x: np.ndarray, vr: np.ndarray) -> np.ndarray:
+    """The element's basis functions as feedback inputs, (T, 3): [-x^2, -x^3, -r'|r'|], x = r - r*."""
+    x, vr = np.asarray(x, float), np.asarray(vr, float)
+    return np.column_stack([-(x**2), -(x**3), -vr * np.abs(vr)])
+
+
+def coupling_row(n_sensors: int, at: tuple[int, int]) -> np.ndarray:
+    """L with r = l . y: +1 at sensor J, -1 at sensor I (none for I = 0, the ground)."""
+    out = np.zeros(n_sensors)
+    out[at[1] - 1] = 1.0
+    if at[0]:
+        out[at[0] - 1] = -1.0
+    return out
+
+
+@dataclass(frozen=True, eq=False)
+class StateSpaceStructure:
+    """The identified model of a structure read through its sensors (module docstring): the discrete-time linear
+    part (A, B, C) with inputs [f, -x^2, -x^3, -r'|r'|] in SI units, the element's place ``at`` = (I, J) over the
+    sensors, its reference r* and the channels' means in the identification.
+    """
+
+    A: np.ndarray
+    B: np.ndarray
+    C: np.ndarray
+    dt: float
+    at: tuple[int, int]
+    r_ref: float
+    input_mean: np.ndarray
+    output_mean: np.ndarray
+
+    @property
+    def order(self) -> int:
+        """The linear part's order (states)."""
+        return int(self.A.shape[0])
+
+    @property
+    def n_sensors(self) -> int:
+        """The sensors (outputs)."""
+        return int(self.C.shape[0])
+
+    def continuous_state_matrix(self) -> np.ndarray:
+        """A_c = logm(A) / dt."""
+        return linalg.logm(self.A).real / self.dt
+
+    def modes(self) -> list[Mode]:
+        """The underlying-linear modes (every underdamped pole pair), their shapes over the sensors."""
+        return modes_of_state_matrix(self.continuous_state_matrix(), self.C)
+
+    def frf(self, freqs_hz: np.ndarray) -> np.ndarray:
+        """The underlying-linear FRF [m/N] from the force to each sensor, (F, sensors), of the identified
+        discrete-time model (its level is right below Nyquist for a band-limited force: ``subspace``).
+        """
+        q = np.exp(2j * np.pi * np.asarray(freqs_hz, float) * self.dt)
+        eye = np.eye(self.order)
+        return np.array([self.C @ np.linalg.solve(qk * eye - self.A, self.B[:, 0]) for qk in q])
+
+    def _inputs(self, u: float, r: float, vr: float, element: bool) -> np.ndarray:
+        x = r - self.r_ref
+        w = np.array([u, -x * x, -x * x * x, -vr * abs(vr)]) - self.input_mean
+        if not element:
+            w[1:] = 0.0
+        return w
+
+    def initial_state(self, u: np.ndarray, y: np.ndarray, r: np.ndarray, vr: np.ndarray,
+                      element: bool = True) -> np.ndarray:  # fmt: skip
+        """The state at the end of a measured stretch (force ``u``, sensors ``y`` (sensors, L), the element's
+        smoothed r and r'), by least squares of the outputs on the state at its start through the model driven
+        by the measured inputs (the element's basis the measured one: no free run inside the stretch).
+        """
+        n, L = self.order, u.size
+        w = np.column_stack([u, basis_inputs(r - self.r_ref, vr)]) - self.input_mean
+        if not element:
+            w[:, 1:] = 0.0
+        forced = np.zeros((L, self.n_sensors))
+        free = np.zeros((L, self.n_sensors, n))
+        xf = np.zeros(n)
+        P = np.eye(n)
+        for k in range(L):
+            forced[k] = self.C @ xf
+            free[k] = self.C @ P
+            xf = self.A @ xf + self.B @ w[k]
+            P = self.A @ P
+        rhs = (y.T - self.output_mean - forced).reshape(-1)
+        x0 = np.linalg.lstsq(free.reshape(-1, n), rhs, rcond=None)[0]
+        return P @ x0 + xf  # the state after the stretch: A^L x0 plus the forced part
+
+    def run(self, u: np.ndarray, x0: np.ndarray, element: bool = True) -> tuple[np.ndarray, bool]:
+        """A free run from state ``x0`` under the force ``u``: the sensors' displacements (sensors, T) and
+        whether it diverged (the element's relative motion beyond 100x its reference's scale; the rest NaN).
+        ``element=False``: the underlying-linear part alone.
+        """
+        lc = coupling_row(self.n_sensors, self.at) @ self.C
+        lcv = lc @ self.continuous_state_matrix()
+        r_off = float(coupling_row(self.n_sensors, self.at) @ self.output_mean)
+        out = np.full((self.n_sensors, u.size), np.nan)
+        x = np.asarray(x0, float).copy()
+        bound = 100.0 * max(abs(self.r_ref), float(np.max(np.abs(self.C @ x))) if x.any() else 0.0, 1e-3)
+        for k in range(u.size):
+            y = self.C @ x
+            out[:, k] = y + self.output_mean
+            r = float(lc @ x) + r_off
+            if not math.isfinite(r) or abs(r) > bound:
+                out[:, k] = np.nan
+                return out, True
+            x = self.A @ x + self.B @ self._inputs(float(u[k]), r, float(lcv @ x), element)
+        return out, False
+
+    def to_dict(self) -> dict[str, Any]:
+        """The model in JSON terms (lists), read back by ``from_dict``."""
+        return {"A": self.A.tolist(), "B": self.B.tolist(), "C": self.C.tolist(), "dt": self.dt,
+                "element_at": list(self.at), "r_ref_m": self.r_ref, "inputs": ["force", *BASIS],
+                "input_mean": self.input_mean.tolist(), "output_mean": self.output_mean.tolist()}  # fmt: skip
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> StateSpaceStructure:
+        """The model ``to_dict`` wrote."""
+        return cls(np.asarray(d["A"], float), np.asarray(d["B"], float), np.asarray(d["C"], float), float(d["dt"]),
+                   (int(d["element_at"][0]), int(d["element_at"][1])), float(d["r_ref_m"]),
+                   np.asarray(d["input_mean"], float), np.asarray(d["output_mean"], float))  # fmt: skip
