@@ -35,6 +35,7 @@ _EXPORTS = {
     "Model": "negstiff.models.equation",
     "Device": "negstiff.models.device",
     "Structure": "negstiff.models.structure",
+    "StateSpaceStructure": "negstiff.models.state_space",  # a structure read through its sensors, masses unknown
     "load_system": "negstiff.models.device",
     "simulate": "negstiff.models.simulator",
     "Rig": "negstiff.models.rig",

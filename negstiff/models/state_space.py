@@ -44,9 +44,39 @@ def coupling_row(n_sensors: int, at: tuple[int, int]) -> np.ndarray:
 
 @dataclass(frozen=True, eq=False)
 class StateSpaceStructure:
-    """The identified model of a structure read through its sensors (module docstring): the discrete-time linear
-    part (A, B, C) with inputs [f, -x^2, -x^3, -r'|r'|] in SI units, the element's place ``at`` = (I, J) over the
-    sensors, its reference r* and the channels' means in the identification.
+    """The identified model of a structure read through its sensors (module docstring), as
+    ``NSI(element="I-J").fit(rec).result_.model`` gives it on a record without masses.
+
+    Attributes
+    ----------
+    A, B, C : ndarray
+        The discrete-time linear part: ``x[k+1] = A x[k] + B w[k]``, ``y[k] = C x[k] + output_mean``,
+        ``w = [f, -x^2, -x^3, -r' abs(r')] - input_mean`` (x = r - r*), B in SI units per input.
+    dt : float
+        The sampling interval [s].
+    at : tuple of int
+        The element's place (I, J) over the sensors (I = 0: the ground): r = y_J - y_I.
+    r_ref : float
+        The reference r* [m] the basis is expanded about.
+    input_mean, output_mean : ndarray
+        The inputs' and the sensors' means in the identification.
+
+    Examples
+    --------
+    One mass on a spring (10 Hz, 2 % damping, 1 kg) read by one sensor, its element on the ground and zero:
+
+    >>> import numpy as np
+    >>> from scipy import signal
+    >>> from negstiff import StateSpaceStructure
+    >>> w, zeta, dt = 2 * np.pi * 10.0, 0.02, 1e-3
+    >>> Ac = np.array([[0.0, 1.0], [-w**2, -2 * zeta * w]])
+    >>> Bc = np.array([[0.0, 0, 0, 0], [1.0, 0, 0, 0]])
+    >>> A, B, C, _, _ = signal.cont2discrete((Ac, Bc, np.array([[1.0, 0.0]]), np.zeros((1, 4))), dt)
+    >>> model = StateSpaceStructure(A, B, C, dt, (0, 1), 0.0, np.zeros(4), np.zeros(1))
+    >>> [(round(m.f_hz, 3), round(m.zeta, 4)) for m in model.modes()]
+    [(10.0, 0.02)]
+    >>> round(float(abs(model.frf(np.array([0.1]))[0, 0])) * w**2, 3)  # the static compliance 1/k
+    1.0
     """
 
     A: np.ndarray
