@@ -14,7 +14,7 @@ import pytest
 from records import write_csv
 from scipy import linalg, signal
 
-from negstiff import NSI, InputError, load
+from negstiff import NSI, InputError, NegstiffWarning, load
 from negstiff.cli import main
 from negstiff.inference.record.measurement import from_arrays
 
@@ -212,3 +212,23 @@ def test_the_command_line_writes_the_librarys_numbers(record, tmp_path, capsys):
                                                                         rel=1e-9)  # fmt: skip
     said = capsys.readouterr().err
     assert "order 10" in said and "7.6" in said, said
+
+
+def test_a_sweeps_tail_outside_the_identified_band_is_said_not_to_measure_the_model():
+    # a 60 -> 3 Hz linear sweep over 40 s: its last 20 % drives the chain below 14 Hz, where the identification part
+    # had no force, and its lowest mode (7.65 Hz) is only there. The held-out error then measures the missing mode,
+    # not the model: the result gives the tail's unseen share and warns; a random test's tail has none
+    t = np.arange(int(40 * FS)) / FS
+    f = 5.0 * signal.chirp(t, 60.0, t[-1], 3.0)
+    K, C = chain_matrices()
+    z = _rk4_chain(f, 1 / FS, 8, K, C, 1 / MASSES, K3)[0][SENSED]
+    z = z + NOISE * z.std(axis=1, keepdims=True) * np.random.default_rng(1).standard_normal(z.shape)
+    with pytest.warns(NegstiffWarning, match="sine sweep"):
+        r = NSI(element="2-3").fit(from_arrays(f, z, FS, input_name="force", force_dof=1, source="sweep")).result_
+    assert r.validation["tail_unseen_band_share"] > 0.9
+    assert all(m.f_hz > 10.0 for m in r.modal["linear"])  # the 7.65 Hz mode is not claimed
+
+
+def test_a_random_tests_tail_is_in_the_identified_band(fitted):
+    assert fitted.result_.validation["tail_unseen_band_share"] < 0.05
+    assert not any("sine sweep" in w for w in fitted.result_.warnings)

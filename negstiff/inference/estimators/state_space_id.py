@@ -59,6 +59,9 @@ BLOCKS = 4
 """Batch means' blocks of the identification part, for the element's standard errors."""
 FORCE_POWER_SHARE = 0.99
 """The share of the force's power below the band's top (``force_band_top``)."""
+UNSEEN_WARNING = 0.5
+"""The held-out tail's force power share outside the identification part's band (``unseen_share``) above which
+the held-out error is said not to measure the model."""
 QUALITY_WARNING = 0.3
 """|Im/Re| of an element coefficient's ratio above which it is said to be poorly determined."""
 
@@ -161,6 +164,17 @@ def force_band_top(u: np.ndarray, fs: float, share: float = FORCE_POWER_SHARE) -
     cum = np.cumsum(pxx)
     top = float(freqs[min(int(np.searchsorted(cum, share * cum[-1])), freqs.size - 1)])
     return min(top, 0.45 * fs)
+
+
+def unseen_share(u_ident: np.ndarray, u_tail: np.ndarray, fs: float) -> float:
+    """The share of the held-out tail's force power at frequencies where the identification part's force has less
+    than 1 % of its peak power (Welch): near 0 for a random test, near 1 for a sine sweep's tail, which drives the
+    structure in a band (and at modes) the identification never saw.
+    """
+    n = min(u_ident.size, u_tail.size, int(4 * fs))
+    _, p_id = signal.welch(u_ident - np.mean(u_ident), fs, nperseg=n)
+    _, p_tail = signal.welch(u_tail - np.mean(u_tail), fs, nperseg=n)
+    return float(p_tail[p_id < 0.01 * p_id.max()].sum() / max(p_tail.sum(), 1e-300))
 
 
 def _stable(pole: tuple[float, float], others: list[tuple[float, float]]) -> bool:
@@ -348,10 +362,17 @@ def identify_state_space(est, rec: Measurement, at: tuple[int, int]) -> StateSpa
     element["units"] = {"k2_tilde": "N/m^2", "k3": "N/m^3", "c_nl": "N s^2/m^2"}
     window_s = max(0.25, 4.0 / modes[0].f_hz)
     validation = _held_out(model, rec, n_id, window_s, f_max)
+    validation["tail_unseen_band_share"] = unseen = unseen_share(ident.u, rec.u[n_id:], rec.fs)
     freqs = np.linspace(band[0], band[1], 256)
     H = model.frf(freqs)
     lines = [f"{rec.source}: the element's {n} is poorly determined (|Im/Re| {quality[j]:.2g} of its FRF ratio)"
              for j, n in enumerate(names) if quality[j] > QUALITY_WARNING and abs(mu[j]) > 2 * se[j]]  # fmt: skip
+    if unseen > UNSEEN_WARNING:
+        lines.append(
+            f"{rec.source}: {100 * unseen:.0f} % of the held-out tail's force lies where the identification part's "
+            "has none (a sine sweep's tail?): its modes there are not in the model, and the held-out error says so, "
+            "not how good the model is where it was fitted; validate on another record"
+        )
     if not validation["rms_percent"] < validation["linear_rms_percent"]:
         lines.append(f"{rec.source}: the element's terms do not improve the held-out prediction "
                      f"({validation['rms_percent']:.3g} % against the linear part's "
