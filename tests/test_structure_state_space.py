@@ -210,6 +210,10 @@ def test_the_command_line_writes_the_librarys_numbers(record, tmp_path, capsys):
     assert got["element"]["k3"]["value"] == pytest.approx(mine["element"]["k3"]["value"], rel=1e-9)
     assert [m["f_hz"] for m in got["modal"]["linear"]] == pytest.approx([m["f_hz"] for m in mine["modal"]["linear"]],
                                                                         rel=1e-9)  # fmt: skip
+    # the JSON rebuilds the fitted estimator: the same result, the same model's free run
+    back = NSI.from_json(out)
+    assert back.result_.to_json() == got
+    assert np.array_equal(back.result_.model.A, np.asarray(got["model"]["A"]))
     said = capsys.readouterr().err
     assert "order 10" in said and "7.6" in said, said
 
