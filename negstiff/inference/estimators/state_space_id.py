@@ -8,8 +8,8 @@ next two orders hold one within ``F_TOL`` in frequency and ``ZETA_TOL`` in dampi
 lowest that holds every mode stable at some order (Peeters & De Roeck 2001; the stabilisation of
 Marchesiello, Fasana & Garibaldi 2016).
 
-The element's basis functions of the relative motion r = y_J - y_I about its mean r* (low-passed at the force's band
-top, ``element_motion``) are the model's feedback inputs beside the force
+The element's basis functions of the relative motion r = y_J - y_I about its mean r* (low-passed at 1.5 times the
+force's band top, ``element_motion``) are the model's feedback inputs beside the force
 (Marchesiello & Garibaldi 2008), and the element's coefficients come from the extended FRF: the input column of
 basis function j is mu_j G l (G the structure's compliance, l its place) and the force's is G e_p (p the sensor the
 force acts at), so by reciprocity (G symmetric) its row p is mu_j (l . G e_p) = mu_j times the relative motion's
@@ -30,7 +30,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-from scipy import signal
+from scipy import signal, stats
 
 from negstiff.errors import InputError, issue
 from negstiff.errors import NegstiffWarning as _Warning
@@ -62,6 +62,15 @@ FORCE_POWER_SHARE = 0.99
 UNSEEN_WARNING = 0.5
 """The held-out tail's force power share outside the identification part's band (``unseen_share``) above which
 the held-out error is said not to measure the model."""
+BASIS_BAND_FACTOR = 1.5
+"""The element's motion is low-passed at this many times the force's band top (``element_motion``): the joint's
+harmonics reach beyond the force's band (a cubic's to three times it) and the sensors' noise is everywhere. Measured:
+at 1x a 3-DOF chain's k3 came out +0.33 % with lasers of 2 um, at 1.5x -0.09 %, at 2x and 3x -0.1 %; on the 5-mode
+chain with 1 % sensor noise the modes were within 0.05 % at 1x and 1.5x, 0.08 % at 2x, 0.21 % at 3x (unfiltered,
+the noise in the basis biases them low)."""
+BAND_CHOICES = (1.0, 2.0)
+"""The basis bands (times the force's band top) whose fits' spread about ``BASIS_BAND_FACTOR``'s is the band's
+part of the element's standard error."""
 QUALITY_WARNING = 0.3
 """|Im/Re| of an element coefficient's ratio above which it is said to be poorly determined."""
 
@@ -227,11 +236,10 @@ def stabilisation(w: np.ndarray, y: np.ndarray, dt: float, block_rows: int, f_ma
 
 def element_motion(rec: Measurement, at: tuple[int, int], cut_hz: float) -> tuple[np.ndarray, np.ndarray]:
     """The element's relative motion r and r' for its basis: the sensors' difference low-passed without phase at
-    the force's band top ``cut_hz`` (``derivatives.band_limited``; the response lives below it, the sensors' noise
-    everywhere) and differentiated spectrally (exact on a band-limited signal). The sensor noise a basis function
-    carries is an error in an input, which biases the subspace step: on the chain record with 1 % noise the modes
-    came out 0.08-0.21 % low with the record's Savitzky-Golay states (its window for the channels allowed no
-    smoothing), 0.02-0.05 % with this, and k3 -0.35 % against +0.05 %.
+    ``cut_hz`` (``BASIS_BAND_FACTOR`` times the force's band top; ``derivatives.band_limited``) and differentiated
+    spectrally (exact on a band-limited signal). The sensor noise a basis function carries is an error in an input,
+    which biases the subspace step: on the 5-mode chain with 1 % noise the modes came out 0.08-0.21 % low with the
+    record's Savitzky-Golay states (its window allowed no smoothing), 0.02-0.05 % with this.
     """
     r = band_limited(coupling_row(rec.n_dof, at) @ rec.channels, rec.fs, cut_hz)
     return smooth_and_differentiate(r, rec.fs, (0, 0))
@@ -314,7 +322,8 @@ def identify_state_space(est, rec: Measurement, at: tuple[int, int]) -> StateSpa
     n_id = int(round(rec.n * (1 - est.validation_fraction)))
     ident = rec.segment(0, n_id)
     f_max = force_band_top(ident.u, rec.fs)
-    w, y, r_ref = _channels(ident, at, f_max)
+    cut = min(BASIS_BAND_FACTOR * f_max, 0.45 * rec.fs)
+    w, y, r_ref = _channels(ident, at, cut)
     wm, ws = w.mean(axis=0), w.std(axis=0)
     ym, ys = y.mean(axis=0), y.std(axis=0)
     rows, physical, order = stabilisation((w - wm) / ws, (y - ym) / ys, rec.dt, est.block_rows, f_max)
@@ -342,26 +351,49 @@ def identify_state_space(est, rec: Measurement, at: tuple[int, int]) -> StateSpa
     for a, b in zip(edges[:-1], edges[1:], strict=True):
         part = ident.segment(int(a), int(b))
         try:
-            wb, yb, _ = _channels(part, at, f_max, r_ref)
+            wb, yb, _ = _channels(part, at, cut, r_ref)
             Ab, Bb, Cb, wmb, ymb = _fit(wb, yb, rec.dt, order, est.block_rows)
             block = StateSpaceStructure(Ab, Bb, Cb, rec.dt, at, r_ref, wmb, ymb)
             per_block.append(_coefficients(block, p, band)[0])
             block_modes.append([_nearest(block.modes(), m.f_hz) for m in modes])
         except (ValueError, np.linalg.LinAlgError, InputError):
             continue
-    se = np.std(per_block, axis=0, ddof=1) / math.sqrt(len(per_block)) if len(per_block) >= 2 else np.full(3, np.nan)
+    se_blocks = (np.std(per_block, axis=0, ddof=1) / math.sqrt(len(per_block)) if len(per_block) >= 2
+                 else np.full(3, np.nan))  # fmt: skip
+    # the basis's band is a choice the data do not pin (its harmonics against the sensors' noise): the same fit with
+    # the band at BAND_CHOICES' ends, half their spread an error of its own, added in quadrature. On a 3-DOF chain
+    # with lasers of 2 um the blocks' standard error of k3 was 0.024 % and its error 0.12 %; the band's spread 0.2 %
+    by_band = []
+    for factor in BAND_CHOICES:
+        try:
+            cut_b = min(factor * f_max, 0.45 * rec.fs)
+            wb, yb, _ = _channels(ident, at, cut_b, r_ref)
+            Ab, Bb, Cb, wmb, ymb = _fit(wb, yb, rec.dt, order, est.block_rows)
+            by_band.append(_coefficients(StateSpaceStructure(Ab, Bb, Cb, rec.dt, at, r_ref, wmb, ymb), p, band)[0])
+        except (ValueError, np.linalg.LinAlgError, InputError):
+            continue
+    se_band = 0.5 * np.ptp(np.vstack([mu, *by_band]), axis=0) if by_band else np.zeros(3)
+    se = np.sqrt(se_blocks**2 + se_band**2)
     modes_se = []
     for k in range(len(modes)):
         seen = [bm[k] for bm in block_modes if bm[k] is not None]
         modes_se.append({key: float(np.std([getattr(m, key) for m in seen], ddof=1) / math.sqrt(len(seen)))
                          if len(seen) >= 2 else None for key in ("f_hz", "zeta")})  # fmt: skip
     names = ("k2_tilde", "k3", "c_nl")
-    element: dict[str, Any] = {n: {"value": float(mu[j]), "se": float(se[j]), "quality_im_over_re": float(quality[j])}
-               for j, n in enumerate(names)}  # fmt: skip
+    # the 90 % interval from the blocks' Student t (len(per_block) - 1 degrees of freedom: four blocks give
+    # +-2.35 standard errors), on the standard error with the band's part
+    t90 = float(stats.t.ppf(0.95, len(per_block) - 1)) if len(per_block) >= 2 else math.nan
+    element: dict[str, Any] = {
+        n: {"value": float(mu[j]), "se": float(se[j]), "se_blocks": float(se_blocks[j]), "se_band": float(se_band[j]),
+            "interval_90": [float(mu[j] - t90 * se[j]), float(mu[j] + t90 * se[j])],
+            "quality_im_over_re": float(quality[j])}
+        for j, n in enumerate(names)
+    }  # fmt: skip
+
     element["r_ref_m"] = r_ref
     element["units"] = {"k2_tilde": "N/m^2", "k3": "N/m^3", "c_nl": "N s^2/m^2"}
     window_s = max(0.25, 4.0 / modes[0].f_hz)
-    validation = _held_out(model, rec, n_id, window_s, f_max)
+    validation = _held_out(model, rec, n_id, window_s, cut)
     validation["tail_unseen_band_share"] = unseen = unseen_share(ident.u, rec.u[n_id:], rec.fs)
     freqs = np.linspace(band[0], band[1], 256)
     H = model.frf(freqs)
@@ -387,7 +419,9 @@ def identify_state_space(est, rec: Measurement, at: tuple[int, int]) -> StateSpa
                   "physical_modes_hz": physical, "modes_se": modes_se, "driving_point": p,
                   "identification_samples": n_id,
                   "basis": list(BASIS),
-                  "element_motion": f"the sensors' difference low-passed at {f_max:.4g} Hz (the force's band top), "
-                                    "its derivative spectral",
-                  "standard_error": f"batch means over {len(per_block)} blocks of the identification part"},
+                  "element_motion": f"the sensors' difference low-passed at {cut:.4g} Hz ({BASIS_BAND_FACTOR:g}x the "
+                                    "force's band top), its derivative spectral",
+                  "standard_error": f"batch means over {len(per_block)} blocks of the identification part, and half "
+                                    f"the spread of the fits with the basis's band at {BAND_CHOICES} x the force's "
+                                    "band top (in quadrature)"},
     )  # fmt: skip
