@@ -253,3 +253,66 @@ def registered(*laws: Law):
     """Add laws for the duration of a ``with`` block (tests, experiments)."""
     with effects.registered_in(LAWS, laws, names(), "a law"):
         yield laws
+
+
+@dataclass(frozen=True)
+class FeedbackBasis:
+    """NSI's nonlinear basis about a reference z* for a restoring and a damping law at a shape:
+    the law's columns with their value and slope at z* taken off (they are the ULS's constant and stiffness),
+    so each basis function vanishes to first order at x = z - z* = 0.
+
+    A column that is a power of z (a polynomial law's z^2, z^3, ...) is re-expanded about z* as the powers of x
+    (reference study Eq. 7: the same span, exact); any other column (a magnet's, the rod frame's, a spline's)
+    enters as its remainder R(x) = C(z* + x) - C(z*) - C'(z*) x. The damping law's columns but the viscous one
+    are functions of x' alone and enter as they are. Where the remainders are linearly dependent (a spline
+    holds every straight line), only their independent combinations are kept (``reduce``).
+    """
+
+    restoring: Law
+    damping: Law
+    shape: Shape
+
+    def names(self) -> tuple[str, ...]:
+        """The basis functions' names: x2, x3, ... for powers, ``LABEL~`` for remainders, the damping's labels
+        (``vabsv`` for x'|x'|, as the reference study's basis).
+        """
+        disp = [self._name(c) for c in self.restoring.column_list(self.shape) if self._kind(c) != "linear"]
+        vel = ["vabsv" if c.label == "v|v|" else c.label for c in self.damping.column_list(self.shape)
+               if c.label != "v"]  # fmt: skip
+        return tuple(disp + vel)
+
+    @staticmethod
+    def _kind(col: Column) -> str:
+        if col.label in ("1", "z"):
+            return "linear"
+        if col.label.startswith("z^") and col.label[2:].isdigit():
+            return "power"
+        return "remainder"
+
+    def _name(self, col: Column) -> str:
+        return f"x{col.label[2:]}" if self._kind(col) == "power" else f"{col.label}~"
+
+    def displacement(self, x: np.ndarray, z_ref: float) -> np.ndarray:
+        """The displacement basis functions at x = z - z* (samples, functions)."""
+        x = np.asarray(x, float)
+        cols = [c for c in self.restoring.column_list(self.shape)]
+        out = []
+        if any(self._kind(c) == "remainder" for c in cols):
+            h = 1e-6 * max(abs(z_ref), float(np.std(x)), 1e-6)
+            at = self.restoring.columns(np.array([z_ref - h, z_ref, z_ref + h]), np.zeros(3), self.shape)
+            here = self.restoring.columns(z_ref + x, np.zeros_like(x), self.shape)
+        for j, c in enumerate(cols):
+            kind = self._kind(c)
+            if kind == "power":
+                out.append(x ** int(c.label[2:]))
+            elif kind == "remainder":
+                slope = (at[2, j] - at[0, j]) / (2 * h)
+                out.append(here[:, j] - at[1, j] - slope * x)
+        return np.column_stack(out) if out else np.zeros((x.size, 0))
+
+    def velocity(self, v: np.ndarray, velocity_noise: float = 0.0) -> np.ndarray:
+        """The damping basis functions at x' (samples, functions)."""
+        v = np.asarray(v, float)
+        cols = self.damping.columns(np.zeros_like(v), v, self.shape, velocity_noise)
+        keep = [j for j, c in enumerate(self.damping.column_list(self.shape)) if c.label != "v"]
+        return cols[:, keep]

@@ -5,7 +5,8 @@ beside a joint), and its masses are not known. Its underlying-linear part is the
 sensors (``models.structure``) but a state-space model of the order the record shows (the stabilisation diagram's),
 x_{k+1} = A x_k + B w_k, y_k = C x_k + y_mean, whose outputs are the sensors' displacements and whose inputs w are
 the measured force and the element's basis functions of the relative motion r = y_J - y_I (I = 0: the ground) as
-feedback forces, [f, -(r - r*)^2, -(r - r*)^3, -r'|r'|], each less the mean it had in the identification
+feedback forces (its laws' basis, ``laws.FeedbackBasis``; the cubic's [f, -(r - r*)^2, -(r - r*)^3, -r'|r'|]),
+each less the mean it had in the identification
 (Marchesiello & Garibaldi 2008; the extended input of Noel & Kerschen 2013's FNSI, here in the time domain). The
 model is the identified discrete-time one, in the record's own sampling, so a free run replays exactly what was
 fitted; its continuous-time state matrix gives the modes and r' (r' = l.C A_c x: a displacement output has no
@@ -21,16 +22,32 @@ from typing import Any
 import numpy as np
 from scipy import linalg
 
+from negstiff.models import laws
 from negstiff.models.structure import Mode, modes_of_state_matrix
 
-BASIS = ("x2", "x3", "vabsv")
-"""The element's basis about the reference r*: (r - r*)^2, (r - r*)^3, r'|r'| (the single DOF's names)."""
+
+def element_basis(restoring: str = laws.DEFAULT_RESTORING, damping: str = laws.DEFAULT_DAMPING) -> laws.FeedbackBasis:
+    """The element's basis about a reference for a restoring and a damping law (``laws.FeedbackBasis``; the cubic
+    with quadratic damping: x^2, x^3, r'|r'|). A shaped law's shape is fitted on a single DOF's record only: one
+    ``InputError`` here.
+    """
+    from negstiff.errors import InputError
+
+    law, damp = laws.get(restoring, "restoring"), laws.get(damping, "damping")
+    if law.shaped() or damp.shaped():
+        raise InputError(
+            f"law {law.name!r}: a shaped law's shape is fitted on a single DOF's record; a structure's element reads "
+            "the laws linear in their parameters (polynomials, the damping laws)"
+        )
+    return laws.FeedbackBasis(law, damp, {})
 
 
-def basis_inputs(x: np.ndarray, vr: np.ndarray) -> np.ndarray:
-    """The element's basis functions as feedback inputs, (T, 3): [-x^2, -x^3, -r'|r'|], x = r - r*."""
-    x, vr = np.asarray(x, float), np.asarray(vr, float)
-    return np.column_stack([-(x**2), -(x**3), -vr * np.abs(vr)])
+def feedback_inputs(
+    basis: laws.FeedbackBasis, r: np.ndarray | float, vr: np.ndarray | float, r_ref: float
+) -> np.ndarray:
+    """The element's basis functions of (r, r') about ``r_ref`` as feedback inputs, (T, J): their negatives."""
+    r, vr = np.atleast_1d(np.asarray(r, float)), np.atleast_1d(np.asarray(vr, float))
+    return -np.column_stack([basis.displacement(r - r_ref, r_ref), basis.velocity(vr)])
 
 
 def coupling_row(n_sensors: int, at: tuple[int, int]) -> np.ndarray:
@@ -51,7 +68,8 @@ class StateSpaceStructure:
     ----------
     A, B, C : ndarray
         The discrete-time linear part: ``x[k+1] = A x[k] + B w[k]``, ``y[k] = C x[k] + output_mean``,
-        ``w = [f, -x^2, -x^3, -r' abs(r')] - input_mean`` (x = r - r*), B in SI units per input.
+        ``w = [f, -g_1, ..., -g_J] - input_mean``, g the element's basis about r* (``element_basis``; the cubic's
+        ``x^2, x^3, r' abs(r')``, x = r - r*), B in SI units per input.
     dt : float
         The sampling interval [s].
     at : tuple of int
@@ -60,6 +78,8 @@ class StateSpaceStructure:
         The reference r* [m] the basis is expanded about.
     input_mean, output_mean : ndarray
         The inputs' and the sensors' means in the identification.
+    restoring, damping : str
+        The element's laws (``models.laws``), whose basis the inputs hold.
 
     Examples
     --------
@@ -87,6 +107,13 @@ class StateSpaceStructure:
     r_ref: float
     input_mean: np.ndarray
     output_mean: np.ndarray
+    restoring: str = laws.DEFAULT_RESTORING
+    damping: str = laws.DEFAULT_DAMPING
+
+    @property
+    def basis(self) -> laws.FeedbackBasis:
+        """The element's basis (``element_basis`` of its laws)."""
+        return element_basis(self.restoring, self.damping)
 
     @property
     def order(self) -> int:
@@ -114,9 +141,8 @@ class StateSpaceStructure:
         eye = np.eye(self.order)
         return np.array([self.C @ np.linalg.solve(qk * eye - self.A, self.B[:, 0]) for qk in q])
 
-    def _inputs(self, u: float, r: float, vr: float, element: bool) -> np.ndarray:
-        x = r - self.r_ref
-        w = np.array([u, -x * x, -x * x * x, -vr * abs(vr)]) - self.input_mean
+    def _inputs(self, basis: laws.FeedbackBasis, u: float, r: float, vr: float, element: bool) -> np.ndarray:
+        w = np.concatenate([[u], feedback_inputs(basis, r, vr, self.r_ref)[0]]) - self.input_mean
         if not element:
             w[1:] = 0.0
         return w
@@ -128,7 +154,7 @@ class StateSpaceStructure:
         by the measured inputs (the element's basis the measured one: no free run inside the stretch).
         """
         n, L = self.order, u.size
-        w = np.column_stack([u, basis_inputs(r - self.r_ref, vr)]) - self.input_mean
+        w = np.column_stack([u, feedback_inputs(self.basis, r, vr, self.r_ref)]) - self.input_mean
         if not element:
             w[:, 1:] = 0.0
         forced = np.zeros((L, self.n_sensors))
@@ -149,6 +175,7 @@ class StateSpaceStructure:
         whether it diverged (the element's relative motion beyond 100x its reference's scale; the rest NaN).
         ``element=False``: the underlying-linear part alone.
         """
+        basis = self.basis
         lc = coupling_row(self.n_sensors, self.at) @ self.C
         lcv = lc @ self.continuous_state_matrix()
         r_off = float(coupling_row(self.n_sensors, self.at) @ self.output_mean)
@@ -162,13 +189,14 @@ class StateSpaceStructure:
             if not math.isfinite(r) or abs(r) > bound:
                 out[:, k] = np.nan
                 return out, True
-            x = self.A @ x + self.B @ self._inputs(float(u[k]), r, float(lcv @ x), element)
+            x = self.A @ x + self.B @ self._inputs(basis, float(u[k]), r, float(lcv @ x), element)
         return out, False
 
     def to_dict(self) -> dict[str, Any]:
         """The model in JSON terms (lists), read back by ``from_dict``."""
         return {"A": self.A.tolist(), "B": self.B.tolist(), "C": self.C.tolist(), "dt": self.dt,
-                "element_at": list(self.at), "r_ref_m": self.r_ref, "inputs": ["force", *BASIS],
+                "element_at": list(self.at), "r_ref_m": self.r_ref, "inputs": ["force", *self.basis.names()],
+                "restoring": self.restoring, "damping": self.damping,
                 "input_mean": self.input_mean.tolist(), "output_mean": self.output_mean.tolist()}  # fmt: skip
 
     @classmethod
@@ -176,4 +204,6 @@ class StateSpaceStructure:
         """The model ``to_dict`` wrote."""
         return cls(np.asarray(d["A"], float), np.asarray(d["B"], float), np.asarray(d["C"], float), float(d["dt"]),
                    (int(d["element_at"][0]), int(d["element_at"][1])), float(d["r_ref_m"]),
-                   np.asarray(d["input_mean"], float), np.asarray(d["output_mean"], float))  # fmt: skip
+                   np.asarray(d["input_mean"], float), np.asarray(d["output_mean"], float),
+                   str(d.get("restoring", laws.DEFAULT_RESTORING)),
+                   str(d.get("damping", laws.DEFAULT_DAMPING)))  # fmt: skip

@@ -58,75 +58,13 @@ from negstiff.inference.steps.shape import fit_shape
 from negstiff.inference.steps.weak import free_decay, known_input_gain, mass_of
 from negstiff.inference.steps.wells import well_guesses
 from negstiff.models import Model, laws
+from negstiff.models.laws import FeedbackBasis
 
 from . import subspace
 
 BASIS_NAMES = ("x2", "x3", "vabsv")
 """The cubic law's nonlinear basis with the reference study's damping: x^2, x^3, x'|x'| (their coefficients are
-k2~, k3, c_nl); any other law's is ``Basis``'s."""
-
-
-@dataclass(frozen=True)
-class Basis:
-    """NSI's nonlinear basis about a reference z* for a restoring and a damping law (``models.laws``) at a shape:
-    the law's columns with their value and slope at z* taken off (they are the ULS's constant and stiffness),
-    so each basis function vanishes to first order at x = z - z* = 0.
-
-    A column that is a power of z (a polynomial law's z^2, z^3, ...) is re-expanded about z* as the powers of x
-    (reference study Eq. 7: the same span, exact); any other column (a magnet's, the rod frame's, a spline's)
-    enters as its remainder R(x) = C(z* + x) - C(z*) - C'(z*) x. The damping law's columns but the viscous one
-    are functions of x' alone and enter as they are. Where the remainders are linearly dependent (a spline
-    holds every straight line), only their independent combinations are kept (``reduce``).
-    """
-
-    restoring: laws.Law
-    damping: laws.Law
-    shape: laws.Shape
-
-    def names(self) -> tuple[str, ...]:
-        """The basis functions' names: x2, x3, ... for powers, ``LABEL~`` for remainders, the damping's labels
-        (``vabsv`` for x'|x'|, as the reference study's basis).
-        """
-        disp = [self._name(c) for c in self.restoring.column_list(self.shape) if self._kind(c) != "linear"]
-        vel = ["vabsv" if c.label == "v|v|" else c.label for c in self.damping.column_list(self.shape)
-               if c.label != "v"]  # fmt: skip
-        return tuple(disp + vel)
-
-    @staticmethod
-    def _kind(col: laws.Column) -> str:
-        if col.label in ("1", "z"):
-            return "linear"
-        if col.label.startswith("z^") and col.label[2:].isdigit():
-            return "power"
-        return "remainder"
-
-    def _name(self, col: laws.Column) -> str:
-        return f"x{col.label[2:]}" if self._kind(col) == "power" else f"{col.label}~"
-
-    def displacement(self, x: np.ndarray, z_ref: float) -> np.ndarray:
-        """The displacement basis functions at x = z - z* (samples, functions)."""
-        x = np.asarray(x, float)
-        cols = [c for c in self.restoring.column_list(self.shape)]
-        out = []
-        if any(self._kind(c) == "remainder" for c in cols):
-            h = 1e-6 * max(abs(z_ref), float(np.std(x)), 1e-6)
-            at = self.restoring.columns(np.array([z_ref - h, z_ref, z_ref + h]), np.zeros(3), self.shape)
-            here = self.restoring.columns(z_ref + x, np.zeros_like(x), self.shape)
-        for j, c in enumerate(cols):
-            kind = self._kind(c)
-            if kind == "power":
-                out.append(x ** int(c.label[2:]))
-            elif kind == "remainder":
-                slope = (at[2, j] - at[0, j]) / (2 * h)
-                out.append(here[:, j] - at[1, j] - slope * x)
-        return np.column_stack(out) if out else np.zeros((x.size, 0))
-
-    def velocity(self, v: np.ndarray, velocity_noise: float = 0.0) -> np.ndarray:
-        """The damping basis functions at x' (samples, functions)."""
-        v = np.asarray(v, float)
-        cols = self.damping.columns(np.zeros_like(v), v, self.shape, velocity_noise)
-        keep = [j for j, c in enumerate(self.damping.column_list(self.shape)) if c.label != "v"]
-        return cols[:, keep]
+k2~, k3, c_nl); any other law's is ``FeedbackBasis``'s."""
 
 
 def reduce(basis: np.ndarray, tol: float = 1e-9) -> np.ndarray:
@@ -175,10 +113,10 @@ def decay_feedback(ss: subspace.StateSpace, freqs: np.ndarray, wn: float, zeta: 
 @dataclass(frozen=True)
 class _WellForce:
     """An identified restoring force per unit mass about a reference z_g: const + wn^2 x + sum_j c_j D_j(x),
-    x = z - z_g, D_j the law's displacement basis (``Basis.displacement``).
+    x = z - z_g, D_j the law's displacement basis (``FeedbackBasis.displacement``).
     """
 
-    basis: Basis
+    basis: FeedbackBasis
     z_g: float
     const: float
     wn2: float
@@ -394,14 +332,16 @@ class NSI(StructureResults, Identifier):
         self.progress = progress
 
     # --- one well ----------------------------------------------------------------------------
-    def extended_input(self, rec: Measurement, zs: np.ndarray, v: np.ndarray, z_ref: float, basis: Basis | None = None):
+    def extended_input(
+        self, rec: Measurement, zs: np.ndarray, v: np.ndarray, z_ref: float, basis: FeedbackBasis | None = None
+    ):
         """The subspace step's problem about ``z_ref``: x = z - z_ref, the standardised input channels (the
-        input and the basis functions' negatives, ``Basis``; a free decay's: the basis functions alone), their
+        input and the basis functions' negatives, ``FeedbackBasis``; a free decay's: the basis functions alone), their
         scales and means, and the map from the channels' combinations back to the basis functions (``reduce``).
         ``zs`` and ``v`` are the record's band states (``states("band")``); the basis is built from them
         low-passed (``Measurement.basis_states``). ``basis`` None: the cubic's with the reference study's damping.
         """
-        basis = Basis(laws.get("cubic"), laws.get("quadratic"), {}) if basis is None else basis
+        basis = FeedbackBasis(laws.get("cubic"), laws.get("quadratic"), {}) if basis is None else basis
         x = zs - z_ref
         zb, vb = rec.basis_states()  # the band states without the noise's band, computed once per record
         xb = zb - z_ref
@@ -426,16 +366,16 @@ class NSI(StructureResults, Identifier):
         return x, w, scale, means, combine
 
     def fit_well(self, rec: Measurement, zs: np.ndarray, v: np.ndarray, z_ref: float, bar=None,
-                 basis: Basis | None = None) -> WellFit:  # fmt: skip
+                 basis: FeedbackBasis | None = None) -> WellFit:  # fmt: skip
         """Identify the ULS and the nonlinear coefficients around ``z_ref``.
 
         Each pass identifies about the current reference z_g, then moves the reference to the identified
         restoring force's stable root r nearest z_g. The reported ULS (f, zeta) is the last pass's pole; the
         shifted coefficients (k1~, k2~, k3: the force's derivatives at the root) are the last pass's force's at r
         (reference study Eq. 7 for the cubic), so that K(z*) = 0 there. ``bar`` (a tqdm bar, optional) is
-        advanced by ``passes`` over the well, one per pass. ``basis``: the law's (``Basis``; None: the cubic's).
+        advanced by ``passes`` over the well, one per pass. ``basis``: the law's (``FeedbackBasis``; None: the cubic's).
         """
-        basis = Basis(laws.get("cubic"), laws.get("quadratic"), {}) if basis is None else basis
+        basis = FeedbackBasis(laws.get("cubic"), laws.get("quadratic"), {}) if basis is None else basis
         names = basis.names()
         n_disp = len(names) - basis.velocity(np.zeros(1)).shape[1]
         routes = []
@@ -563,15 +503,18 @@ class NSI(StructureResults, Identifier):
         self.record_kind_ = kind
         if at is None:
             return super().fit(identification_record(rec, kind))
-        if self.law is not None:
-            raise InputError(
-                f"{type(self).__name__}(law={self.law!r}): a law is read on a single DOF's record; a "
-                "structure's element has its own basis (element=): give no law"
-            )
         if rec.masses is None:
             # the masses unknown: the linear part a state-space model of the order the record shows, the element
-            # sized through the measured driving point (``state_space_id``)
+            # sized through the measured driving point (``state_space_id``), its basis the law's
+            if self.law == "auto":
+                raise InputError(f"{type(self).__name__}(law='auto'): a structure's element reads a named law "
+                                 f"({', '.join(laws.names('restoring'))}); no comparison yet")  # fmt: skip
             self.result_ = identify_state_space(self, rec, at)
+        elif self.law is not None:
+            raise InputError(
+                f"{type(self).__name__}(law={self.law!r}): a structure with its masses reads the cubic element "
+                "(element=); give no law, or leave the masses out (its element then reads the law)"
+            )
         else:
             self.result_ = identify_nsi(self, identification_record(rec, kind), at)
         return self
@@ -579,15 +522,15 @@ class NSI(StructureResults, Identifier):
     def _estimate(self, rec: Measurement, n_id: int, law: laws.Law | None = None) -> Estimate:
         """NSI's own estimate: each well's underlying-linear system and nonlinear coefficients from the
         identification part, averaged into one z-frame model (the shared stages follow: ``Identifier``); the
-        nonlinear basis is ``law``'s (None: the cubic) and the damping law's (``Basis``), a shaped part's shape the
-        record's (``shape.fit_shape``).
+        nonlinear basis is ``law``'s (None: the cubic) and the damping law's (``FeedbackBasis``), a shaped part's
+        shape the record's (``shape.fit_shape``).
         """
         ident = rec.segment(0, n_id)
         restoring, damping = laws.get(law or laws.DEFAULT_RESTORING, "restoring"), laws.get(self.damping, "damping")
         shape_fit = None
         if restoring.shaped():
             shape_fit = fit_shape(ident, restoring, damping, n_fit=int(round(0.75 * n_id)), n_id=n_id)
-        basis = self.basis_ = Basis(restoring, damping, {} if shape_fit is None else shape_fit.shape)
+        basis = self.basis_ = FeedbackBasis(restoring, damping, {} if shape_fit is None else shape_fit.shape)
         zs, v, _, band = ident.states("band")
         z_minus, z_plus = well_guesses(ident, restoring, damping, basis.shape)
         bar = tqdm(
@@ -718,7 +661,7 @@ class NSI(StructureResults, Identifier):
         return rows
 
     @staticmethod
-    def _z_frame(w: WellFit, basis: Basis, stroke: tuple[float, float]) -> np.ndarray:
+    def _z_frame(w: WellFit, basis: FeedbackBasis, stroke: tuple[float, float]) -> np.ndarray:
         """A well's model as the law's z'' coefficients per unit mass (``models.laws``' column order, restoring then
         damping): the law's restoring columns fitted by least squares to the well's identified force over the
         stroke (exact where the law holds the force: the cubic's re-expansion, reference study Eq. 7), its damping

@@ -25,6 +25,7 @@ the measured force, beside the underlying-linear part alone under the same proto
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass, field
 from typing import Any
@@ -36,7 +37,8 @@ from negstiff.errors import InputError, issue
 from negstiff.errors import NegstiffWarning as _Warning
 from negstiff.inference.record.derivatives import band_limited, smooth_and_differentiate
 from negstiff.inference.record.measurement import Measurement
-from negstiff.models.state_space import BASIS, StateSpaceStructure, basis_inputs, coupling_row
+from negstiff.models import laws
+from negstiff.models.state_space import StateSpaceStructure, coupling_row, element_basis, feedback_inputs
 from negstiff.models.structure import Mode
 
 from . import subspace
@@ -140,11 +142,12 @@ class StateSpaceIdentification:
             raise InputError(f"not a state-space identify result JSON: {type(exc).__name__} {exc}") from None
 
     def summary(self) -> str:
-        """One line: the sensors, the order, the element's k3 and the modes."""
-        k3 = self.element["k3"]
+        """One line: the sensors, the order, the element's top stiffness coefficient and the modes."""
+        top = max((k for k in self.element if k[:1] == "k" and k[1:].isdigit()), key=lambda k: int(k[1:]))
+        k3 = self.element[top]
         modes = "; ".join(f"{m.f_hz:.3f} Hz {100 * m.zeta:.2f} %" for m in self.modal["linear"])
         m = self.model
-        return f"{m.n_sensors} sensors, order {m.order}, element k3={k3['value']:.4g} +- {k3['se']:.2g}; {modes}"
+        return f"{m.n_sensors} sensors, order {m.order}, element {top}={k3['value']:.4g} +- {k3['se']:.2g}; {modes}"
 
     def __repr__(self) -> str:
         return f"StateSpaceIdentification({self.summary()}; held-out {self.validation['rms_percent']:.3g} %)"
@@ -245,11 +248,32 @@ def element_motion(rec: Measurement, at: tuple[int, int], cut_hz: float) -> tupl
     return smooth_and_differentiate(r, rec.fs, (0, 0))
 
 
-def _channels(rec: Measurement, at: tuple[int, int], cut_hz: float, r_ref: float | None = None):
-    """The extended input [f, basis] and the sensors' outputs of ``rec``, unscaled, and r*."""
+def _channels(rec: Measurement, at: tuple[int, int], cut_hz: float, basis: laws.FeedbackBasis,
+              r_ref: float | None = None):  # fmt: skip
+    """The extended input [f, -basis] and the sensors' outputs of ``rec``, unscaled, and r*."""
     r, vr = element_motion(rec, at, cut_hz)
     r_ref = float(np.mean(r)) if r_ref is None else r_ref
-    return np.column_stack([rec.u, basis_inputs(r - r_ref, vr)]), rec.channels.T, r_ref
+    return np.column_stack([rec.u, feedback_inputs(basis, r, vr, r_ref)]), rec.channels.T, r_ref
+
+
+def coefficient_names(basis: laws.FeedbackBasis) -> list[tuple[str, str]]:
+    """Each basis function's coefficient name and units: a power x^n's is k{n}, about r* (``k{n}_tilde``) but for
+    the law's highest power, which the shift leaves alone; r'|r'|'s is c_nl; any other keeps its basis name.
+    """
+    names = basis.names()
+    top = max((int(n[1:]) for n in names if n[:1] == "x" and n[1:].isdigit()), default=0)
+    out = []
+    for n in names:
+        if n[:1] == "x" and n[1:].isdigit():
+            k = int(n[1:])
+            out.append((f"k{k}" if k == top else f"k{k}_tilde", f"N/m^{k}"))
+        elif n == "vabsv":
+            out.append(("c_nl", "N s^2/m^2"))
+        elif n.startswith("v^") and n[2:].isdigit():
+            out.append((n, f"N s^{n[2:]}/m^{n[2:]}"))
+        else:
+            out.append((n, "N per unit of its basis function"))
+    return out
 
 
 def _fit(w: np.ndarray, y: np.ndarray, dt: float, order: int, block_rows: int):
@@ -323,7 +347,8 @@ def identify_state_space(est, rec: Measurement, at: tuple[int, int]) -> StateSpa
     ident = rec.segment(0, n_id)
     f_max = force_band_top(ident.u, rec.fs)
     cut = min(BASIS_BAND_FACTOR * f_max, 0.45 * rec.fs)
-    w, y, r_ref = _channels(ident, at, cut)
+    basis = element_basis(est.law or laws.DEFAULT_RESTORING, est.damping)
+    w, y, r_ref = _channels(ident, at, cut, basis)
     wm, ws = w.mean(axis=0), w.std(axis=0)
     ym, ys = y.mean(axis=0), y.std(axis=0)
     rows, physical, order = stabilisation((w - wm) / ws, (y - ym) / ys, rec.dt, est.block_rows, f_max)
@@ -338,7 +363,7 @@ def identify_state_space(est, rec: Measurement, at: tuple[int, int]) -> StateSpa
     if fitted is None:
         raise StateSpaceIdentificationError(f"{rec.source}: no state-space model from order {order} up ({errors[-1]})")
     A, B, C, wm, ym = fitted
-    model = StateSpaceStructure(A, B, C, rec.dt, at, r_ref, wm, ym)
+    model = StateSpaceStructure(A, B, C, rec.dt, at, r_ref, wm, ym, basis.restoring.name, basis.damping.name)
     modes = [m for m in model.modes() if any(abs(m.f_hz / f - 1) < F_TOL for f in physical)]
     if not modes:
         raise StateSpaceIdentificationError(f"{rec.source}: the order-{order} model holds none of the stable modes")
@@ -351,15 +376,15 @@ def identify_state_space(est, rec: Measurement, at: tuple[int, int]) -> StateSpa
     for a, b in zip(edges[:-1], edges[1:], strict=True):
         part = ident.segment(int(a), int(b))
         try:
-            wb, yb, _ = _channels(part, at, cut, r_ref)
+            wb, yb, _ = _channels(part, at, cut, basis, r_ref)
             Ab, Bb, Cb, wmb, ymb = _fit(wb, yb, rec.dt, order, est.block_rows)
-            block = StateSpaceStructure(Ab, Bb, Cb, rec.dt, at, r_ref, wmb, ymb)
+            block = dataclasses.replace(model, A=Ab, B=Bb, C=Cb, input_mean=wmb, output_mean=ymb)
             per_block.append(_coefficients(block, p, band)[0])
             block_modes.append([_nearest(block.modes(), m.f_hz) for m in modes])
         except (ValueError, np.linalg.LinAlgError, InputError):
             continue
     se_blocks = (np.std(per_block, axis=0, ddof=1) / math.sqrt(len(per_block)) if len(per_block) >= 2
-                 else np.full(3, np.nan))  # fmt: skip
+                 else np.full(mu.size, np.nan))  # fmt: skip
     # the basis's band is a choice the data do not pin (its harmonics against the sensors' noise): the same fit with
     # the band at BAND_CHOICES' ends, half their spread an error of its own, added in quadrature. On a 3-DOF chain
     # with lasers of 2 um the blocks' standard error of k3 was 0.024 % and its error 0.12 %; the band's spread 0.2 %
@@ -367,19 +392,21 @@ def identify_state_space(est, rec: Measurement, at: tuple[int, int]) -> StateSpa
     for factor in BAND_CHOICES:
         try:
             cut_b = min(factor * f_max, 0.45 * rec.fs)
-            wb, yb, _ = _channels(ident, at, cut_b, r_ref)
+            wb, yb, _ = _channels(ident, at, cut_b, basis, r_ref)
             Ab, Bb, Cb, wmb, ymb = _fit(wb, yb, rec.dt, order, est.block_rows)
-            by_band.append(_coefficients(StateSpaceStructure(Ab, Bb, Cb, rec.dt, at, r_ref, wmb, ymb), p, band)[0])
+            by_band.append(_coefficients(dataclasses.replace(model, A=Ab, B=Bb, C=Cb, input_mean=wmb, output_mean=ymb),
+                                         p, band)[0])  # fmt: skip
         except (ValueError, np.linalg.LinAlgError, InputError):
             continue
-    se_band = 0.5 * np.ptp(np.vstack([mu, *by_band]), axis=0) if by_band else np.zeros(3)
+    se_band = 0.5 * np.ptp(np.vstack([mu, *by_band]), axis=0) if by_band else np.zeros(mu.size)
     se = np.sqrt(se_blocks**2 + se_band**2)
     modes_se = []
     for k in range(len(modes)):
         seen = [bm[k] for bm in block_modes if bm[k] is not None]
         modes_se.append({key: float(np.std([getattr(m, key) for m in seen], ddof=1) / math.sqrt(len(seen)))
                          if len(seen) >= 2 else None for key in ("f_hz", "zeta")})  # fmt: skip
-    names = ("k2_tilde", "k3", "c_nl")
+    named = coefficient_names(basis)
+    names = [n for n, _ in named]
     # the 90 % interval from the blocks' Student t (len(per_block) - 1 degrees of freedom: four blocks give
     # +-2.35 standard errors), on the standard error with the band's part
     t90 = float(stats.t.ppf(0.95, len(per_block) - 1)) if len(per_block) >= 2 else math.nan
@@ -391,7 +418,8 @@ def identify_state_space(est, rec: Measurement, at: tuple[int, int]) -> StateSpa
     }  # fmt: skip
 
     element["r_ref_m"] = r_ref
-    element["units"] = {"k2_tilde": "N/m^2", "k3": "N/m^3", "c_nl": "N s^2/m^2"}
+    element["units"] = dict(named)
+    element["laws"] = {"restoring": basis.restoring.name, "damping": basis.damping.name}
     window_s = max(0.25, 4.0 / modes[0].f_hz)
     validation = _held_out(model, rec, n_id, window_s, cut)
     validation["tail_unseen_band_share"] = unseen = unseen_share(ident.u, rec.u[n_id:], rec.fs)
@@ -418,7 +446,7 @@ def identify_state_space(est, rec: Measurement, at: tuple[int, int]) -> StateSpa
         settings={"block_rows": est.block_rows, "order": order, "order_from": "stabilisation diagram",
                   "physical_modes_hz": physical, "modes_se": modes_se, "driving_point": p,
                   "identification_samples": n_id,
-                  "basis": list(BASIS),
+                  "basis": list(basis.names()),
                   "element_motion": f"the sensors' difference low-passed at {cut:.4g} Hz ({BASIS_BAND_FACTOR:g}x the "
                                     "force's band top), its derivative spectral",
                   "standard_error": f"batch means over {len(per_block)} blocks of the identification part, and half "
