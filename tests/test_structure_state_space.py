@@ -168,21 +168,21 @@ def test_the_underlying_linear_frf_has_the_structures_level(fitted):
         assert abs(np.median(np.abs(h[keep]) / mag[keep]) - 1) < 0.05
 
 
-def _accelerometer_fit(record, tmp_path):
+@pytest.fixture(scope="module")
+def accelerometer_fit(record, tmp_path_factory):
     rec, acc = record
-    path = write_csv(tmp_path / "gvt.csv", {"t": np.arange(rec.n) / FS, "force": rec.u,
-                                            **{f"y{k + 1}_acc": acc[k] for k in range(3)}},
-                     {"force_dof": 1})  # fmt: skip
+    cols = {"t": np.arange(rec.n) / FS, "force": rec.u, **{f"y{k + 1}_acc": acc[k] for k in range(3)}}
+    path = write_csv(tmp_path_factory.mktemp("gvt") / "gvt.csv", cols, {"force_dof": 1})
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         return NSI(element="2-3").fit(load(path)).result_
 
 
-def test_accelerometers_give_the_same_modes(record, tmp_path):
+def test_accelerometers_give_the_same_modes(accelerometer_fit):
     # the same test read by accelerometers (the lab's usual sensors), through a file: each channel's displacement
     # derived by the loader; the five modes as from the displacements, within 0.5 % (measured within 0.2 %), and a
     # warning that the joint's coefficients are not sized by accelerometers (test_accelerometers_size_the_joint)
-    r = _accelerometer_fit(record, tmp_path)
+    r = accelerometer_fit
     f_true, _ = chain_modes()
     assert any("comes from accelerometers" in w for w in r.warnings)  # the joint's coefficients are not believed
     assert len(r.modal["linear"]) == 5
@@ -198,8 +198,8 @@ def test_accelerometers_give_the_same_modes(record, tmp_path):
     "not mend it and spoils the lasers' fit (held-out 2 % -> 11-16 %). Next: the slow relative motion from the "
     "model itself (as the single DOF's drift by physics), or accelerations as the outputs",
 )
-def test_accelerometers_size_the_joint(record, tmp_path):
-    el = _accelerometer_fit(record, tmp_path).element["k3"]
+def test_accelerometers_size_the_joint(accelerometer_fit):
+    el = accelerometer_fit.element["k3"]
     assert abs(el["value"] / K3 - 1) < 0.05 and el["se"] < 0.02 * K3, el
 
 
