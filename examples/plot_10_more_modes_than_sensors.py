@@ -29,8 +29,8 @@ joint = Model(m=0.8, k0=0.0, k1=0.0, k2=0.0, k3=2e9, c=0.0, c_nl=0.0)  # a cubic
 chain = Structure.chain(masses, springs, [2e-4 * k for k in springs], joint, (4, 5))  # dampers beside the springs
 
 rng = np.random.default_rng(3)
-b, a = signal.butter(4, [2, 150], btype="band", fs=FS)
-force = signal.lfilter(b, a, rng.standard_normal(int(40 * FS)))
+sos = signal.butter(4, [2, 150], btype="band", fs=FS, output="sos")
+force = signal.sosfilt(sos, rng.standard_normal(int(40 * FS)))
 force *= 20.0 / force.std()
 z = chain.simulate(force, 1 / FS, z0=0.0, input_kind="force", force_dof=1).z[0]
 sensed = z[[0, 3, 4]]
