@@ -47,7 +47,7 @@ def cached_fit(estimator, record, cache):
     parameters, record (its input, response, rate and mass) and negstiff version is there (a pickle), else
     fitted and kept there: a pytest file that checks facts about slow fits pays for them once, not every
     session (``cache``: e.g. ``request.config.cache.mkdir("negstiff-fits")``). A pickle is read only from a
-    folder of your own.
+    folder of your own; one that no longer loads (kept by an older negstiff, or cut short) is refitted and replaced.
     """
     import hashlib
     import json
@@ -68,7 +68,10 @@ def cached_fit(estimator, record, cache):
     h.update(repr((float(record.fs), record.mass, record.input_name)).encode())
     path = Path(cache) / f"{type(estimator).__name__}-{h.hexdigest()[:24]}.pkl"
     if path.is_file():
-        return pickle.loads(path.read_bytes())
+        try:
+            return pickle.loads(path.read_bytes())
+        except Exception:  # noqa: BLE001 - a stale entry (a class moved since it was kept) or a broken one is refitted
+            pass
     fitted = estimator.fit(record)
     path.parent.mkdir(parents=True, exist_ok=True)
     with atomic_path(path) as tmp:

@@ -180,3 +180,34 @@ def test_models_drawn_from_a_posterior_carry_its_draws_and_its_seed(posterior):
         Posterior.from_json(json.dumps(posterior.to_json())).draw_models(5)
     with pytest.raises(InputError, match="n must be"):
         posterior.draw_models(0)
+
+
+def test_an_nsi_pickled_before_its_basis_moved_still_loads(fits):
+    # NSI's law basis moved from the NSI module to the laws (``laws.FeedbackBasis``); a fit pickled before names
+    # the old place: it loads, its basis and result the same
+    old = pickle.dumps(fits["nsi"], protocol=0)
+    assert b"cnegstiff.models.laws\nFeedbackBasis\n" in old
+    old = old.replace(b"cnegstiff.models.laws\nFeedbackBasis\n", b"cnegstiff.inference.estimators.nsi\nBasis\n")
+    back = pickle.loads(old)
+    assert back.basis_ == fits["nsi"].basis_
+    assert text(back.result()) == text(fits["nsi"].result())
+
+
+def test_a_cached_fit_that_no_longer_loads_is_refitted(fits, record, tmp_path, monkeypatch):
+    # negstiff.testing.cached_fit: a kept pickle that does not load (an older negstiff's, or cut short) is refitted
+    # and replaced, never an error in the user's test session
+    from negstiff.testing import cached_fit
+
+    made = []
+
+    def fit(self, data):
+        made.append(1)
+        return fits["nsi"]
+
+    monkeypatch.setattr(NSI, "fit", fit)
+    cached_fit(NSI(), record, tmp_path)
+    (kept,) = tmp_path.glob("NSI-*.pkl")
+    kept.write_bytes(b"\x80\x05not a pickle")
+    again = cached_fit(NSI(), record, tmp_path)
+    assert len(made) == 2 and text(again.result()) == text(fits["nsi"].result())
+    assert text(pickle.loads(kept.read_bytes()).result()) == text(fits["nsi"].result())

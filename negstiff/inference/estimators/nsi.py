@@ -62,6 +62,10 @@ from negstiff.models.laws import FeedbackBasis
 
 from . import subspace
 
+Basis = FeedbackBasis
+"""The name NSI's law basis had here (``laws.FeedbackBasis`` now): an NSI fitted and pickled before the move (its
+``basis_``) still loads."""
+
 BASIS_NAMES = ("x2", "x3", "vabsv")
 """The cubic law's nonlinear basis with the reference study's damping: x^2, x^3, x'|x'| (their coefficients are
 k2~, k3, c_nl); any other law's is ``FeedbackBasis``'s."""
