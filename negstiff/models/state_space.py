@@ -23,7 +23,7 @@ import numpy as np
 from scipy import linalg
 
 from negstiff.models import laws
-from negstiff.models.structure import Mode, modes_of_state_matrix
+from negstiff.models.structure import Mode, coupling, modes_of_state_matrix
 
 
 def element_basis(restoring: str = laws.DEFAULT_RESTORING, damping: str = laws.DEFAULT_DAMPING) -> laws.FeedbackBasis:
@@ -48,15 +48,6 @@ def feedback_inputs(
     """The element's basis functions of (r, r') about ``r_ref`` as feedback inputs, (T, J): their negatives."""
     r, vr = np.atleast_1d(np.asarray(r, float)), np.atleast_1d(np.asarray(vr, float))
     return -np.column_stack([basis.displacement(r - r_ref, r_ref), basis.velocity(vr)])
-
-
-def coupling_row(n_sensors: int, at: tuple[int, int]) -> np.ndarray:
-    """L with r = l . y: +1 at sensor J, -1 at sensor I (none for I = 0, the ground)."""
-    out = np.zeros(n_sensors)
-    out[at[1] - 1] = 1.0
-    if at[0]:
-        out[at[0] - 1] = -1.0
-    return out
 
 
 @dataclass(frozen=True, eq=False)
@@ -133,13 +124,20 @@ class StateSpaceStructure:
         """The underlying-linear modes (every underdamped pole pair), their shapes over the sensors."""
         return modes_of_state_matrix(self.continuous_state_matrix(), self.C)
 
-    def frf(self, freqs_hz: np.ndarray) -> np.ndarray:
-        """The underlying-linear FRF [m/N] from the force to each sensor, (F, sensors), of the identified
-        discrete-time model (its level is right below Nyquist for a band-limited force: ``subspace``).
+    def extended_frf(self, freqs_hz: np.ndarray) -> np.ndarray:
+        """The identified discrete-time model's FRF from every input (the force, then the element's feedback
+        inputs) to each sensor, (F, sensors, inputs): its level is right below Nyquist for a band-limited force
+        (``subspace``).
         """
         q = np.exp(2j * np.pi * np.asarray(freqs_hz, float) * self.dt)
         eye = np.eye(self.order)
-        return np.array([self.C @ np.linalg.solve(qk * eye - self.A, self.B[:, 0]) for qk in q])
+        return np.array([self.C @ np.linalg.solve(qk * eye - self.A, self.B) for qk in q])
+
+    def frf(self, freqs_hz: np.ndarray) -> np.ndarray:
+        """The underlying-linear FRF [m/N] from the force to each sensor, (F, sensors) (``extended_frf``'s first
+        input).
+        """
+        return self.extended_frf(freqs_hz)[:, :, 0]
 
     def _inputs(self, basis: laws.FeedbackBasis, u: float, r: float, vr: float, element: bool) -> np.ndarray:
         w = np.concatenate([[u], feedback_inputs(basis, r, vr, self.r_ref)[0]]) - self.input_mean
@@ -176,9 +174,10 @@ class StateSpaceStructure:
         ``element=False``: the underlying-linear part alone.
         """
         basis = self.basis
-        lc = coupling_row(self.n_sensors, self.at) @ self.C
+        lvec = coupling(self.n_sensors, self.at)
+        lc = lvec @ self.C
         lcv = lc @ self.continuous_state_matrix()
-        r_off = float(coupling_row(self.n_sensors, self.at) @ self.output_mean)
+        r_off = float(lvec @ self.output_mean)
         out = np.full((self.n_sensors, u.size), np.nan)
         x = np.asarray(x0, float).copy()
         bound = 100.0 * max(abs(self.r_ref), float(np.max(np.abs(self.C @ x))) if x.any() else 0.0, 1e-3)

@@ -38,8 +38,8 @@ from negstiff.errors import NegstiffWarning as _Warning
 from negstiff.inference.record.derivatives import band_limited, basis_band_hz, smooth_and_differentiate
 from negstiff.inference.record.measurement import Measurement
 from negstiff.models import laws
-from negstiff.models.state_space import StateSpaceStructure, coupling_row, element_basis, feedback_inputs
-from negstiff.models.structure import Mode
+from negstiff.models.state_space import StateSpaceStructure, element_basis, feedback_inputs
+from negstiff.models.structure import Mode, coupling, relative
 
 from . import subspace
 
@@ -229,11 +229,7 @@ def stabilisation(w: np.ndarray, y: np.ndarray, dt: float, block_rows: int, f_ma
                       if len(c) >= STABLE_RUN and np.median([z for _, z in c]) < PHYSICAL_ZETA)  # fmt: skip
     if not physical:
         raise StateSpaceIdentificationError("no mode is stable over the stabilisation diagram's orders")
-    chosen = (
-        next(n for n in ns if all(any(abs(f / g - 1) < F_TOL for g, _ in poles[n]) for f in physical))
-        if any(all(any(abs(f / g - 1) < F_TOL for g, _ in poles[n]) for f in physical) for n in ns)
-        else ns[-1]
-    )
+    chosen = next((n for n in ns if all(any(abs(f / g - 1) < F_TOL for g, _ in poles[n]) for f in physical)), ns[-1])
     return rows, physical, chosen
 
 
@@ -244,7 +240,7 @@ def element_motion(rec: Measurement, at: tuple[int, int], cut_hz: float) -> tupl
     which biases the subspace step: on the 5-mode chain with 1 % noise the modes came out 0.08-0.21 % low with the
     record's Savitzky-Golay states (its window allowed no smoothing), 0.02-0.05 % with this.
     """
-    r = band_limited(coupling_row(rec.n_dof, at) @ rec.channels, rec.fs, cut_hz)
+    r = band_limited(relative(rec.channels, at), rec.fs, cut_hz)
     return smooth_and_differentiate(r, rec.fs, (0, 0))
 
 
@@ -276,24 +272,39 @@ def coefficient_names(basis: laws.FeedbackBasis) -> list[tuple[str, str]]:
     return out
 
 
-def _fit(w: np.ndarray, y: np.ndarray, dt: float, order: int, block_rows: int):
-    """The state-space fit at ``order`` on scaled channels, back in SI units: (A, B, C, means)."""
+def _standardised(w: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray, tuple[np.ndarray, ...]]:
+    """The extended input and the outputs made zero-mean and unit-variance per channel, and their (means,
+    standard deviations); one refusal where a channel is constant.
+    """
     wm, ws = w.mean(axis=0), w.std(axis=0)
     ym, ys = y.mean(axis=0), y.std(axis=0)
     if np.any(ws == 0) or np.any(ys == 0):
         raise StateSpaceIdentificationError("the force, a basis function or a sensor is constant")
-    ss = subspace.identify((w - wm) / ws, (y - ym) / ys, dt, order, block_rows)
+    return (w - wm) / ws, (y - ym) / ys, (wm, ws, ym, ys)
+
+
+def _fit(w: np.ndarray, y: np.ndarray, dt: float, order: int, block_rows: int):
+    """The state-space fit at ``order`` on standardised channels, back in SI units: (A, B, C, means)."""
+    wn, yn, (wm, ws, ym, ys) = _standardised(w, y)
+    ss = subspace.identify(wn, yn, dt, order, block_rows)
     assert ss.Ad is not None and ss.Bd is not None
     return ss.Ad, ss.Bd / ws[None, :], ys[:, None] * ss.C, wm, ym
 
 
+def _refitted(model: StateSpaceStructure, rec: Measurement, cut_hz: float, basis: laws.FeedbackBasis,
+              block_rows: int) -> StateSpaceStructure:  # fmt: skip
+    """``model``'s identification again on ``rec`` (a block of the record, or another basis band ``cut_hz``), at
+    its order and about its r*: the batch means' and the band's fits.
+    """
+    w, y, _ = _channels(rec, model.at, cut_hz, basis, model.r_ref)
+    A, B, C, wm, ym = _fit(w, y, rec.dt, model.order, block_rows)
+    return dataclasses.replace(model, A=A, B=B, C=C, input_mean=wm, output_mean=ym)
+
+
 def _coefficients(model: StateSpaceStructure, p: int, band: tuple[float, float]) -> tuple[np.ndarray, np.ndarray]:
     """mu_j and |Im/Re| from the extended FRF's row p against the relative motion's FRF to the force."""
-    freqs = np.linspace(band[0], band[1], 512)
-    q = np.exp(2j * np.pi * freqs * model.dt)
-    eye = np.eye(model.order)
-    he = np.array([model.C @ np.linalg.solve(qk * eye - model.A, model.B) for qk in q])  # (F, sensors, inputs)
-    a = he[:, :, 0] @ coupling_row(model.n_sensors, model.at)
+    he = model.extended_frf(np.linspace(band[0], band[1], 512))  # (F, sensors, inputs)
+    a = he[:, :, 0] @ coupling(model.n_sensors, model.at)
     b = he[:, p - 1, 1:]
     mu = (np.conj(a)[:, None] * b).sum(axis=0) / (np.abs(a) ** 2).sum()
     return mu.real, np.abs(mu.imag) / np.maximum(np.abs(mu.real), 1e-300)
@@ -349,13 +360,11 @@ def identify_state_space(est, rec: Measurement, at: tuple[int, int]) -> StateSpa
     # the basis's band: 1.5x the force's band top, but no wider than the response stands above the sensors' noise
     # (``derivatives.basis_band_hz``, the ring-downs' rule): a hammer's pulse spreads the force to 425 Hz while the
     # chain's response leaves its noise at 220 Hz, and the noise in the basis put k3 2.4 % low (0.4 % with this)
-    cut = min(BASIS_BAND_FACTOR * f_max, basis_band_hz(coupling_row(rec.n_dof, at) @ ident.channels, rec.fs),
-              0.45 * rec.fs)  # fmt: skip
+    cut = min(BASIS_BAND_FACTOR * f_max, basis_band_hz(relative(ident.channels, at), rec.fs), 0.45 * rec.fs)
     basis = element_basis(est.law or laws.DEFAULT_RESTORING, est.damping)
     w, y, r_ref = _channels(ident, at, cut, basis)
-    wm, ws = w.mean(axis=0), w.std(axis=0)
-    ym, ys = y.mean(axis=0), y.std(axis=0)
-    rows, physical, order = stabilisation((w - wm) / ws, (y - ym) / ys, rec.dt, est.block_rows, f_max)
+    wn, yn, _ = _standardised(w, y)
+    rows, physical, order = stabilisation(wn, yn, rec.dt, est.block_rows, f_max)
     fitted, errors = None, []
     for n in range(order, min(MAX_ORDER, est.block_rows * y.shape[1]) + 1, 2):
         try:
@@ -378,11 +387,8 @@ def identify_state_space(est, rec: Measurement, at: tuple[int, int]) -> StateSpa
     per_block: list[np.ndarray] = []
     block_modes: list[list[Mode | None]] = []
     for a, b in zip(edges[:-1], edges[1:], strict=True):
-        part = ident.segment(int(a), int(b))
         try:
-            wb, yb, _ = _channels(part, at, cut, basis, r_ref)
-            Ab, Bb, Cb, wmb, ymb = _fit(wb, yb, rec.dt, order, est.block_rows)
-            block = dataclasses.replace(model, A=Ab, B=Bb, C=Cb, input_mean=wmb, output_mean=ymb)
+            block = _refitted(model, ident.segment(int(a), int(b)), cut, basis, est.block_rows)
             per_block.append(_coefficients(block, p, band)[0])
             block_modes.append([_nearest(block.modes(), m.f_hz) for m in modes])
         except (ValueError, np.linalg.LinAlgError, InputError):
@@ -395,11 +401,8 @@ def identify_state_space(est, rec: Measurement, at: tuple[int, int]) -> StateSpa
     by_band = []
     for factor in BAND_CHOICES:
         try:
-            cut_b = min(factor * cut, 0.45 * rec.fs)
-            wb, yb, _ = _channels(ident, at, cut_b, basis, r_ref)
-            Ab, Bb, Cb, wmb, ymb = _fit(wb, yb, rec.dt, order, est.block_rows)
-            by_band.append(_coefficients(dataclasses.replace(model, A=Ab, B=Bb, C=Cb, input_mean=wmb, output_mean=ymb),
-                                         p, band)[0])  # fmt: skip
+            other = _refitted(model, ident, min(factor * cut, 0.45 * rec.fs), basis, est.block_rows)
+            by_band.append(_coefficients(other, p, band)[0])
         except (ValueError, np.linalg.LinAlgError, InputError):
             continue
     se_band = 0.5 * np.ptp(np.vstack([mu, *by_band]), axis=0) if by_band else np.zeros(mu.size)

@@ -61,6 +61,7 @@ from scipy import optimize
 from negstiff.errors import InputError, issue
 from negstiff.errors import NegstiffWarning as _Warning
 from negstiff.inference.estimators.parameters import Constraint
+from negstiff.inference.estimators.state_space_id import StateSpaceIdentification
 from negstiff.inference.record.derivatives import band_limited, basis_band_hz
 from negstiff.inference.record.measurement import Measurement
 from negstiff.inference.steps.selection import block_rows, block_scores, compare, indistinguishable
@@ -303,8 +304,6 @@ class StructureResults:
         ``StructureIdentification`` (``from_json``); a single DOF's by the estimator's own ``_restore``.
         """
         if result.get("linear_part") == "state_space":
-            from negstiff.inference.estimators.state_space_id import StateSpaceIdentification
-
             self.result_ = StateSpaceIdentification.from_json(result)
             return
         if "structure" in result and "dofs" in result:
@@ -316,7 +315,7 @@ class StructureResults:
 
     def _summary(self) -> str:
         r = self.result_
-        if isinstance(r, StructureIdentification) or type(r).__name__ == "StateSpaceIdentification":
+        if isinstance(r, (StructureIdentification, StateSpaceIdentification)):
             return r.summary()
         return super()._summary()  # type: ignore[misc]
 

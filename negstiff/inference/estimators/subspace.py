@@ -236,17 +236,30 @@ def _po_moesp(
     u: np.ndarray, y: np.ndarray, i: int, order: int, route: str = "auto"
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, str]:
     """``po_moesp`` and the route its LQ factor took."""
+    uu, s, taken = _observability(u, y, i, route)
+    if order > s.size:
+        raise ValueError(f"order {order} exceeds the {s.size} available singular values")
+    A, C = _state_matrices(uu, s, order, y.shape[1])
+    return A, C, s, taken
+
+
+def _observability(u: np.ndarray, y: np.ndarray, i: int, route: str = "auto") -> tuple[np.ndarray, np.ndarray, str]:
+    """The left singular vectors and singular values of PO-MOESP's projected block (the extended observability
+    matrix's column space, every order's), and the route of its LQ factor.
+    """
     m, l_out = u.shape[1], y.shape[1]
     L, taken = lq_factor_route(u, y, i, route=route)
     a, b = i * m, i * m + i * (m + l_out)
-    l32 = L[b:, a:b]
-    uu, s, _ = np.linalg.svd(l32, full_matrices=False)
-    if order > s.size:
-        raise ValueError(f"order {order} exceeds the {s.size} available singular values")
+    uu, s, _ = np.linalg.svd(L[b:, a:b], full_matrices=False)
+    return uu, s, taken
+
+
+def _state_matrices(uu: np.ndarray, s: np.ndarray, order: int, l_out: int) -> tuple[np.ndarray, np.ndarray]:
+    """Discrete A and C of ``order`` states from ``_observability``'s singular vectors and values."""
     gamma = uu[:, :order] * np.sqrt(s[:order])
     C = gamma[:l_out]
     A = np.linalg.lstsq(gamma[:-l_out], gamma[l_out:], rcond=None)[0]
-    return A, C, s, taken
+    return A, C
 
 
 def poles_by_order(u: np.ndarray, y: np.ndarray, dt: float, i: int, orders) -> dict[int, np.ndarray]:
@@ -255,17 +268,12 @@ def poles_by_order(u: np.ndarray, y: np.ndarray, dt: float, i: int, orders) -> d
     cost of one fit (the A of each order is a least squares on the same extended observability matrix). No B or D
     is estimated, so an order whose model has an unstable spurious pole still gives its poles.
     """
-    m, l_out = u.shape[1], y.shape[1]
-    L, _ = lq_factor_route(u, y, i)
-    a, b = i * m, i * m + i * (m + l_out)
-    uu, s, _ = np.linalg.svd(L[b:, a:b], full_matrices=False)
+    uu, s, _ = _observability(u, y, i)
     out = {}
     for order in orders:
         if order > s.size:
             break
-        gamma = uu[:, :order] * np.sqrt(s[:order])
-        A = np.linalg.lstsq(gamma[:-l_out], gamma[l_out:], rcond=None)[0]
-        mu = np.linalg.eigvals(A).astype(complex)
+        mu = np.linalg.eigvals(_state_matrices(uu, s, order, y.shape[1])[0]).astype(complex)
         with np.errstate(divide="ignore"):
             lam = np.log(mu) / dt
         out[int(order)] = lam[np.isfinite(lam) & (lam.imag >= 0)]
