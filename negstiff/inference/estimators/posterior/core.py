@@ -457,7 +457,7 @@ class Posterior(Estimator):
         )
         assert par.law is not None
         theta = par.law.start_values()
-        if par.support is not None and not par.inside(moved_inside(par, theta)[None])[0]:
+        if par.checks is not None and not par.inside(moved_inside(par, theta)[None])[0]:
             failed = support_failures(par, moved_inside(par, theta))
             raise PosteriorError(f"{rec.source}: the {restoring.name} and {damping.name} laws' deterministic fit "
                                  "lies outside the prior's support: it fails "

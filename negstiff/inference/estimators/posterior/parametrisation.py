@@ -54,9 +54,8 @@ class Parametrisation:
     log_jacobian: Callable[[np.ndarray], np.ndarray] | None = None
     reduce: Callable[[np.ndarray], np.ndarray] | None = None
     # a prior's support beyond its box (a law's: a spline's tail rising outward, the parts tabulated over the
-    # record's stroke): (B, d) physical parameters -> (B,) bool; None: the box alone
-    support: Callable[[np.ndarray], np.ndarray] | None = None
-    # the support's checks by what each asks: (B, d) -> {what: (B,) bool}, to say which one a point fails; None: one
+    # record's stroke), by what each check asks: (B, d) physical parameters -> {what: (B,) bool}, the support their
+    # conjunction (``inside``), each named where a point fails (``support_failures``); None: the box alone
     checks: Callable[[np.ndarray], dict[str, np.ndarray]] | None = None
     # a law's parametrisation: its map (names, kernel rows, forces, models of parameters); None otherwise
     law: LawMap | None = None
@@ -85,8 +84,8 @@ class Parametrisation:
     def inside(self, theta: np.ndarray) -> np.ndarray:
         """Whether each row of physical parameters ``theta`` (B, d) lies in the prior's support: (B,) bool."""
         ok = np.all((theta > self.lower) & (theta < self.upper), axis=1)
-        if self.support is not None and ok.any():
-            ok[ok] = self.support(theta[ok])
+        if self.checks is not None and ok.any():
+            ok[ok] = np.logical_and.reduce(list(self.checks(theta[ok]).values()))
         return ok
 
     def log_prior(self, theta: np.ndarray, log_sigma: np.ndarray) -> np.ndarray:
@@ -404,11 +403,6 @@ def _law_checks(lawmap: LawMap, reach: tuple[float, float], tails: tuple[str, ..
     return out
 
 
-def _law_support(checks: Callable[[np.ndarray], dict[str, np.ndarray]], theta: np.ndarray) -> np.ndarray:
-    """Each row's admissibility beyond the box: every one of the ``checks`` (``_law_checks``) passed."""
-    return np.logical_and.reduce(list(checks(theta).values()))
-
-
 def support_failures(par: Parametrisation, theta: np.ndarray) -> list[str]:
     """What one row of parameters ``theta`` (d,) fails of a parametrisation's support (its ``checks``)."""
     if par.checks is None:
@@ -531,7 +525,6 @@ def law_parametrisation(start: Model, restoring: laws.Law, damping: laws.Law, re
                     f"visited, [{1e3 * reach[0]:.4g}, {1e3 * reach[1]:.4g}] mm: their span covers it")  # fmt: skip
     speeds = np.linspace(-v_max, v_max, 41) if damping.signed else None
     checks = functools.partial(_law_checks, lawmap, (float(reach[0]), float(reach[1])), tails, speeds)
-    support = functools.partial(_law_support, checks)
     desc.append(f"restoring law {restoring.name} ({restoring.title}); damping law {damping.name} ({damping.title})")
-    return Parametrisation(tuple(names), start.kind, lawmap.params, lower, upper, {}, desc, support=support,
-                           checks=checks, law=lawmap)  # fmt: skip
+    return Parametrisation(tuple(names), start.kind, lawmap.params, lower, upper, {}, desc, checks=checks,
+                           law=lawmap)  # fmt: skip
