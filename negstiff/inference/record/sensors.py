@@ -646,6 +646,7 @@ def derive(
         "trim_s": TRIM_S,
         "acceleration_noise_m_s2": sigma_a,
         "integration_error_m": _double_integral_error(sigma_a, HIGHPASS_HZ, fs),
+        "highpass_hz": HIGHPASS_HZ,
         "z_constant_known": False,
         "warnings": [
             f"z was derived from an accelerometer on the moving part: its content below {HIGHPASS_HZ:g} Hz is lost "
