@@ -35,8 +35,8 @@ def force(kind, coulomb, z, v, q):
     """Total non-inertial force D + K + extra [N] for one member's parameter tuple ``q``.
 
     polynomial: q[1..4] = k0, k1, k2, k3; device: q[1] = k_f, q[2] = L cos(alpha), q[3] = sin(alpha),
-    q[4] = D0, q[5] = g (exact rod-frame geometry; NaN where the rods cannot reach z). ``kind`` and
-    ``coulomb`` are compile-time constants in each specialised kernel, so their branches vanish.
+    q[4] = D0, q[5] = g (exact rod-frame geometry; NaN where the rods cannot reach z). ``kind`` (a literal) and
+    ``coulomb`` (None: no smoothed sign) are constants of each kernel (``_integrate``), so their branches vanish.
     """
     if kind == KIND_POLYNOMIAL:
         k = ((q[4] * z + q[3]) * z - q[2]) * z + q[1]
@@ -50,7 +50,7 @@ def force(kind, coulomb, z, v, q):
     dz = z - q[P_STOP_Z]
     k += 0.5 * q[P_STOP_K] * (dz + math.copysign(1.0, q[P_STOP_Z]) * abs(dz))
     d = v * (q[P_C] + q[P_CNL] * abs(v) + q[P_V3] * v * v)
-    if coulomb:
+    if coulomb is not None:
         d += q[P_SIGN] * math.tanh(v / COULOMB_VELOCITY_SCALE)
     return k + d
 
@@ -106,15 +106,15 @@ def member_tables(p, ts):
 
 @numba.njit(inline="always", **JIT)
 def total_force(kind, coulomb, generic, table, z, v, q, p, b, mono, ts, tab):
-    """``force`` plus, in the kernels compiled with ``generic``, the extra monomial rows, and in those compiled with
-    ``table``, the shaped parts' table (``ts`` its first row in ``p``, -1: none; ``tab`` the members' tables,
-    ``member_tables``).
+    """``force`` plus, in the kernels compiled with ``generic`` (not None), the extra monomial rows, and in those
+    compiled with ``table``, the shaped parts' table (``ts`` its first row in ``p``, -1: none; ``tab`` the members'
+    tables, ``member_tables``).
     """
     f = force(kind, coulomb, z, v, q)
-    if generic:
+    if generic is not None:
         f += monomials(z, v, p, b, mono)
-    if table:  # a member without a table (ts -1) reads a table of zeros: a branch on ts here, in the stage loop,
-        f += tabled(z, tab, b)  # made a law's record 2.8x the polynomial's time against 1.4x without (measured)
+    if table is not None:  # a member without a table (ts -1) reads a table of zeros: a branch on ts here, in the stage
+        f += tabled(z, tab, b)  # loop, made a law's record 2.8x the polynomial's time against 1.4x without (measured)
     return f
 
 
@@ -183,11 +183,11 @@ def _accelerations(kind, coulomb, generic, table, extra, linear, q, mono, ts, ta
             r[b] = zs[ej, b]
             rv[b] = vs[ej, b]
     for b in range(nb):  # vectorised over the batch: the table's look-up is a loop of its own (a gather)
-        f[b] = total_force(kind, coulomb, generic, False, r[b], rv[b], _column(q, b), q, b, mono, ts, tab)
-    if table:
+        f[b] = total_force(kind, coulomb, generic, None, r[b], rv[b], _column(q, b), q, b, mono, ts, tab)
+    if table is not None:
         for b in range(nb):
             f[b] += tabled(r[b], tab, b)
-    if extra:
+    if extra is not None:
         for b in range(nb):
             f[b] += extra_term(r[b], rv[b], ur[b], hw, ha, hzc, hvc, huc, hiz, hiv, hiu, bz, bv)
     for d in range(nd):
@@ -234,7 +234,7 @@ def _fused_step(kind, coulomb, generic, table, extra, q, mono, ts, tab, im, h, z
         a1 = a2 = a3 = a4 = v2 = v3 = v4 = 0.0
         for s in range(4):  # one call site of the force law (each inlined copy is compile time; LLVM unrolls this)
             f = total_force(kind, coulomb, generic, table, zs, vs, qb, q, b, mono, ts, tab)
-            if extra:
+            if extra is not None:
                 f += extra_term(zs, vs, ra[b] if s == 0 else (rb[b] if s == 3 else rm[b]), hw, ha, hzc, hvc, huc, hiz,
                                 hiv, hiu, bz, bv)  # fmt: skip
             acc = (wa[b] if s == 0 else (wb[b] if s == 3 else wm[b])) - f * im[b]
@@ -278,18 +278,15 @@ def _integrate(kind, coulomb, generic, table, extra, fused, p, mono, ts, ei, ej,
     in z, z', u and the inverse widths) to the element's force.
 
     ``fused``: the fused step of one DOF on the base without a linear structure (``_fused_step``), else the
-    stage-wise loops of any structure; the caller chooses (``simulator.integrate``). Every flag is a literal of the
-    kernel calling this (``numba.literally``): numba compiles one specialisation per kernel with the branches on
-    the flags pruned before it inlines the force law and the steps, so a kernel compiles only the step it runs
-    (the polynomial's fused kernel 7.6 s against 11.8 s when this was inlined in each kernel with both steps,
-    measured on an empty cache), at the same speed (a 300 s record 11.7 ms against 13.0).
+    stage-wise loops of any structure; the caller chooses (``simulator.integrate``). The flags are constants of the
+    kernel calling this, so a kernel compiles only the code it runs: ``kind`` a literal (``numba.literally``), the
+    others None (off) or 1 (on), tested as ``flag is not None``. numba's dead-branch pruning resolves an argument's
+    None before it types and inlines anything, while a branch on a literal's value it leaves to LLVM: with the flags
+    literal booleans every kernel typed, inlined and lowered both steps and every optional term (the 18 kernels
+    compiled in 141 s on an empty cache, the polynomial's fused kernel in 6.8-8.2 s; with None for off, 99.5 s and
+    4.0-4.3 s, at the same speed, a 300 s record in 11.5 ms). The stage-wise kernels still compile in 6.5-7.8 s.
     """
     numba.literally(kind)
-    numba.literally(coulomb)
-    numba.literally(generic)
-    numba.literally(table)
-    numba.literally(extra)
-    numba.literally(fused)
     nb = p.shape[1]
     nd = minv.shape[0]
     n = out_z.shape[0]
@@ -303,7 +300,7 @@ def _integrate(kind, coulomb, generic, table, extra, fused, p, mono, ts, ei, ej,
     h = dt / nsub
     q = converted(p, kind)
     tab = member_tables(p, ts)
-    if fused and (nd != 1 or ei >= 0 or linear):
+    if fused is not None and (nd != 1 or ei >= 0 or linear):
         raise ValueError("the fused step runs one DOF on the base without a linear structure")
     z = z0.copy()
     v = v0.copy()
@@ -362,7 +359,7 @@ def _integrate(kind, coulomb, generic, table, extra, fused, p, mono, ts, ei, ej,
                         wa[d, b] = ua[d, b] + fa * du
                         wm[d, b] = ua[d, b] + fm * du
                         wb[d, b] = ua[d, b] + fb * du
-            if fused:
+            if fused is not None:
                 _fused_step(kind, coulomb, generic, table, extra, q, mono, ts, tab, minv[0], h, z[0], v[0], wa[0],
                             wm[0], wb[0], ra, rm, rb, hook, scratch)  # fmt: skip
                 continue
@@ -440,21 +437,21 @@ _NO_V = np.zeros(0)
 # fmt: off
 @numba.njit(**JIT)
 def _kernel_poly(p, mono, ts, ei, ej, minv, lk, lc, gain, u, uidx, dt, nsub, z0, v0, zl, vl, oz, ov, sv, st, fs):
-    return _integrate(KIND_POLYNOMIAL, False, False, False, False, True, p, mono, ts, ei, ej, minv, lk, lc, gain, u,
+    return _integrate(KIND_POLYNOMIAL, None, None, None, None, 1, p, mono, ts, ei, ej, minv, lk, lc, gain, u,
                       uidx, dt, nsub, z0, v0, zl, vl, oz, ov, sv, st, fs,
                       (_NO_W, _NO_V, _NO_V, _NO_V, _NO_V, 1.0, 1.0, 1.0))
 
 
 @numba.njit(**JIT)
 def _kernel_poly_staged(p, mono, ts, ei, ej, minv, lk, lc, gain, u, uidx, dt, nsub, z0, v0, zl, vl, oz, ov, sv, st, fs):
-    return _integrate(KIND_POLYNOMIAL, False, False, False, False, False, p, mono, ts, ei, ej, minv, lk, lc, gain, u,
+    return _integrate(KIND_POLYNOMIAL, None, None, None, None, None, p, mono, ts, ei, ej, minv, lk, lc, gain, u,
                       uidx, dt, nsub, z0, v0, zl, vl, oz, ov, sv, st, fs,
                       (_NO_W, _NO_V, _NO_V, _NO_V, _NO_V, 1.0, 1.0, 1.0))
 
 
 @numba.njit(**JIT)
 def _kernel_poly_sign(p, mono, ts, ei, ej, minv, lk, lc, gain, u, uidx, dt, nsub, z0, v0, zl, vl, oz, ov, sv, st, fs):
-    return _integrate(KIND_POLYNOMIAL, True, False, False, False, True, p, mono, ts, ei, ej, minv, lk, lc, gain, u,
+    return _integrate(KIND_POLYNOMIAL, 1, None, None, None, 1, p, mono, ts, ei, ej, minv, lk, lc, gain, u,
                       uidx, dt, nsub, z0, v0, zl, vl, oz, ov, sv, st, fs,
                       (_NO_W, _NO_V, _NO_V, _NO_V, _NO_V, 1.0, 1.0, 1.0))
 
@@ -462,14 +459,14 @@ def _kernel_poly_sign(p, mono, ts, ei, ej, minv, lk, lc, gain, u, uidx, dt, nsub
 @numba.njit(**JIT)
 def _kernel_poly_sign_staged(p, mono, ts, ei, ej, minv, lk, lc, gain, u, uidx, dt, nsub, z0, v0, zl, vl, oz, ov, sv, st,
                              fs):
-    return _integrate(KIND_POLYNOMIAL, True, False, False, False, False, p, mono, ts, ei, ej, minv, lk, lc, gain, u,
+    return _integrate(KIND_POLYNOMIAL, 1, None, None, None, None, p, mono, ts, ei, ej, minv, lk, lc, gain, u,
                       uidx, dt, nsub, z0, v0, zl, vl, oz, ov, sv, st, fs,
                       (_NO_W, _NO_V, _NO_V, _NO_V, _NO_V, 1.0, 1.0, 1.0))
 
 
 @numba.njit(**JIT)
 def _kernel_device(p, mono, ts, ei, ej, minv, lk, lc, gain, u, uidx, dt, nsub, z0, v0, zl, vl, oz, ov, sv, st, fs):
-    return _integrate(KIND_DEVICE, False, False, False, False, True, p, mono, ts, ei, ej, minv, lk, lc, gain, u, uidx,
+    return _integrate(KIND_DEVICE, None, None, None, None, 1, p, mono, ts, ei, ej, minv, lk, lc, gain, u, uidx,
                       dt, nsub, z0, v0, zl, vl, oz, ov, sv, st, fs,
                       (_NO_W, _NO_V, _NO_V, _NO_V, _NO_V, 1.0, 1.0, 1.0))
 
@@ -477,14 +474,14 @@ def _kernel_device(p, mono, ts, ei, ej, minv, lk, lc, gain, u, uidx, dt, nsub, z
 @numba.njit(**JIT)
 def _kernel_device_staged(p, mono, ts, ei, ej, minv, lk, lc, gain, u, uidx, dt, nsub, z0, v0, zl, vl, oz, ov, sv, st,
                           fs):
-    return _integrate(KIND_DEVICE, False, False, False, False, False, p, mono, ts, ei, ej, minv, lk, lc, gain, u, uidx,
+    return _integrate(KIND_DEVICE, None, None, None, None, None, p, mono, ts, ei, ej, minv, lk, lc, gain, u, uidx,
                       dt, nsub, z0, v0, zl, vl, oz, ov, sv, st, fs,
                       (_NO_W, _NO_V, _NO_V, _NO_V, _NO_V, 1.0, 1.0, 1.0))
 
 
 @numba.njit(**JIT)
 def _kernel_device_sign(p, mono, ts, ei, ej, minv, lk, lc, gain, u, uidx, dt, nsub, z0, v0, zl, vl, oz, ov, sv, st, fs):
-    return _integrate(KIND_DEVICE, True, False, False, False, True, p, mono, ts, ei, ej, minv, lk, lc, gain, u, uidx,
+    return _integrate(KIND_DEVICE, 1, None, None, None, 1, p, mono, ts, ei, ej, minv, lk, lc, gain, u, uidx,
                       dt, nsub, z0, v0, zl, vl, oz, ov, sv, st, fs,
                       (_NO_W, _NO_V, _NO_V, _NO_V, _NO_V, 1.0, 1.0, 1.0))
 
@@ -492,14 +489,14 @@ def _kernel_device_sign(p, mono, ts, ei, ej, minv, lk, lc, gain, u, uidx, dt, ns
 @numba.njit(**JIT)
 def _kernel_device_sign_staged(p, mono, ts, ei, ej, minv, lk, lc, gain, u, uidx, dt, nsub, z0, v0, zl, vl, oz, ov, sv,
                                st, fs):
-    return _integrate(KIND_DEVICE, True, False, False, False, False, p, mono, ts, ei, ej, minv, lk, lc, gain, u, uidx,
+    return _integrate(KIND_DEVICE, 1, None, None, None, None, p, mono, ts, ei, ej, minv, lk, lc, gain, u, uidx,
                       dt, nsub, z0, v0, zl, vl, oz, ov, sv, st, fs,
                       (_NO_W, _NO_V, _NO_V, _NO_V, _NO_V, 1.0, 1.0, 1.0))
 
 
 @numba.njit(**JIT)
 def _kernel_poly_table(p, mono, ts, ei, ej, minv, lk, lc, gain, u, uidx, dt, nsub, z0, v0, zl, vl, oz, ov, sv, st, fs):
-    return _integrate(KIND_POLYNOMIAL, False, False, True, False, True, p, mono, ts, ei, ej, minv, lk, lc, gain, u,
+    return _integrate(KIND_POLYNOMIAL, None, None, 1, None, 1, p, mono, ts, ei, ej, minv, lk, lc, gain, u,
                       uidx, dt, nsub, z0, v0, zl, vl, oz, ov, sv, st, fs,
                       (_NO_W, _NO_V, _NO_V, _NO_V, _NO_V, 1.0, 1.0, 1.0))
 
@@ -507,7 +504,7 @@ def _kernel_poly_table(p, mono, ts, ei, ej, minv, lk, lc, gain, u, uidx, dt, nsu
 @numba.njit(**JIT)
 def _kernel_poly_table_staged(p, mono, ts, ei, ej, minv, lk, lc, gain, u, uidx, dt, nsub, z0, v0, zl, vl, oz, ov, sv,
                               st, fs):
-    return _integrate(KIND_POLYNOMIAL, False, False, True, False, False, p, mono, ts, ei, ej, minv, lk, lc, gain, u,
+    return _integrate(KIND_POLYNOMIAL, None, None, 1, None, None, p, mono, ts, ei, ej, minv, lk, lc, gain, u,
                       uidx, dt, nsub, z0, v0, zl, vl, oz, ov, sv, st, fs,
                       (_NO_W, _NO_V, _NO_V, _NO_V, _NO_V, 1.0, 1.0, 1.0))
 
@@ -515,7 +512,7 @@ def _kernel_poly_table_staged(p, mono, ts, ei, ej, minv, lk, lc, gain, u, uidx, 
 @numba.njit(**JIT)
 def _kernel_poly_generic(p, mono, ts, ei, ej, minv, lk, lc, gain, u, uidx, dt, nsub, z0, v0, zl, vl, oz, ov, sv, st,
                          fs):
-    return _integrate(KIND_POLYNOMIAL, True, True, True, False, True, p, mono, ts, ei, ej, minv, lk, lc, gain, u, uidx,
+    return _integrate(KIND_POLYNOMIAL, 1, 1, 1, None, 1, p, mono, ts, ei, ej, minv, lk, lc, gain, u, uidx,
                       dt, nsub, z0, v0, zl, vl, oz, ov, sv, st, fs,
                       (_NO_W, _NO_V, _NO_V, _NO_V, _NO_V, 1.0, 1.0, 1.0))
 
@@ -523,7 +520,7 @@ def _kernel_poly_generic(p, mono, ts, ei, ej, minv, lk, lc, gain, u, uidx, dt, n
 @numba.njit(**JIT)
 def _kernel_poly_generic_staged(p, mono, ts, ei, ej, minv, lk, lc, gain, u, uidx, dt, nsub, z0, v0, zl, vl, oz, ov, sv,
                                 st, fs):
-    return _integrate(KIND_POLYNOMIAL, True, True, True, False, False, p, mono, ts, ei, ej, minv, lk, lc, gain, u, uidx,
+    return _integrate(KIND_POLYNOMIAL, 1, 1, 1, None, None, p, mono, ts, ei, ej, minv, lk, lc, gain, u, uidx,
                       dt, nsub, z0, v0, zl, vl, oz, ov, sv, st, fs,
                       (_NO_W, _NO_V, _NO_V, _NO_V, _NO_V, 1.0, 1.0, 1.0))
 
@@ -531,7 +528,7 @@ def _kernel_poly_generic_staged(p, mono, ts, ei, ej, minv, lk, lc, gain, u, uidx
 @numba.njit(**JIT)
 def _kernel_device_generic(p, mono, ts, ei, ej, minv, lk, lc, gain, u, uidx, dt, nsub, z0, v0, zl, vl, oz, ov, sv, st,
                            fs):
-    return _integrate(KIND_DEVICE, True, True, True, False, True, p, mono, ts, ei, ej, minv, lk, lc, gain, u, uidx, dt,
+    return _integrate(KIND_DEVICE, 1, 1, 1, None, 1, p, mono, ts, ei, ej, minv, lk, lc, gain, u, uidx, dt,
                       nsub, z0, v0, zl, vl, oz, ov, sv, st, fs,
                       (_NO_W, _NO_V, _NO_V, _NO_V, _NO_V, 1.0, 1.0, 1.0))
 
@@ -539,7 +536,7 @@ def _kernel_device_generic(p, mono, ts, ei, ej, minv, lk, lc, gain, u, uidx, dt,
 @numba.njit(**JIT)
 def _kernel_device_generic_staged(p, mono, ts, ei, ej, minv, lk, lc, gain, u, uidx, dt, nsub, z0, v0, zl, vl, oz, ov,
                                   sv, st, fs):
-    return _integrate(KIND_DEVICE, True, True, True, False, False, p, mono, ts, ei, ej, minv, lk, lc, gain, u, uidx, dt,
+    return _integrate(KIND_DEVICE, 1, 1, 1, None, None, p, mono, ts, ei, ej, minv, lk, lc, gain, u, uidx, dt,
                       nsub, z0, v0, zl, vl, oz, ov, sv, st, fs,
                       (_NO_W, _NO_V, _NO_V, _NO_V, _NO_V, 1.0, 1.0, 1.0))
 
@@ -547,28 +544,28 @@ def _kernel_device_generic_staged(p, mono, ts, ei, ej, minv, lk, lc, gain, u, ui
 @numba.njit(**JIT)
 def _kernel_poly_extra(p, mono, ts, ei, ej, minv, lk, lc, gain, u, uidx, dt, nsub, z0, v0, zl, vl, oz, ov, sv, st, fs,
                        hw, ha, hzc, hvc, huc, hiz, hiv, hiu):
-    return _integrate(KIND_POLYNOMIAL, True, True, True, True, True, p, mono, ts, ei, ej, minv, lk, lc, gain, u, uidx,
+    return _integrate(KIND_POLYNOMIAL, 1, 1, 1, 1, 1, p, mono, ts, ei, ej, minv, lk, lc, gain, u, uidx,
                       dt, nsub, z0, v0, zl, vl, oz, ov, sv, st, fs, (hw, ha, hzc, hvc, huc, hiz, hiv, hiu))
 
 
 @numba.njit(**JIT)
 def _kernel_poly_extra_staged(p, mono, ts, ei, ej, minv, lk, lc, gain, u, uidx, dt, nsub, z0, v0, zl, vl, oz, ov, sv,
                               st, fs, hw, ha, hzc, hvc, huc, hiz, hiv, hiu):
-    return _integrate(KIND_POLYNOMIAL, True, True, True, True, False, p, mono, ts, ei, ej, minv, lk, lc, gain, u, uidx,
+    return _integrate(KIND_POLYNOMIAL, 1, 1, 1, 1, None, p, mono, ts, ei, ej, minv, lk, lc, gain, u, uidx,
                       dt, nsub, z0, v0, zl, vl, oz, ov, sv, st, fs, (hw, ha, hzc, hvc, huc, hiz, hiv, hiu))
 
 
 @numba.njit(**JIT)
 def _kernel_device_extra(p, mono, ts, ei, ej, minv, lk, lc, gain, u, uidx, dt, nsub, z0, v0, zl, vl, oz, ov, sv, st, fs,
                          hw, ha, hzc, hvc, huc, hiz, hiv, hiu):
-    return _integrate(KIND_DEVICE, True, True, True, True, True, p, mono, ts, ei, ej, minv, lk, lc, gain, u, uidx, dt,
+    return _integrate(KIND_DEVICE, 1, 1, 1, 1, 1, p, mono, ts, ei, ej, minv, lk, lc, gain, u, uidx, dt,
                       nsub, z0, v0, zl, vl, oz, ov, sv, st, fs, (hw, ha, hzc, hvc, huc, hiz, hiv, hiu))
 
 
 @numba.njit(**JIT)
 def _kernel_device_extra_staged(p, mono, ts, ei, ej, minv, lk, lc, gain, u, uidx, dt, nsub, z0, v0, zl, vl, oz, ov, sv,
                                 st, fs, hw, ha, hzc, hvc, huc, hiz, hiv, hiu):
-    return _integrate(KIND_DEVICE, True, True, True, True, False, p, mono, ts, ei, ej, minv, lk, lc, gain, u, uidx, dt,
+    return _integrate(KIND_DEVICE, 1, 1, 1, 1, None, p, mono, ts, ei, ej, minv, lk, lc, gain, u, uidx, dt,
                       nsub, z0, v0, zl, vl, oz, ov, sv, st, fs, (hw, ha, hzc, hvc, huc, hiz, hiv, hiu))
 # fmt: on
 

@@ -123,18 +123,18 @@ def _benettin(kind, p, mono, ts, gain, u, dt, nsub, z0, v0, renorm):
                     ddv = dv + c * h * st[s - 1, 3]
                 frac = (j + c) / nsub
                 w = u0 + frac * du
-                f = total_force(kind, False, True, True, zz, vv, q, p, 0, mono, ts, tab) + q[P_SIGN] * math.tanh(
+                f = total_force(kind, None, 1, 1, zz, vv, q, p, 0, mono, ts, tab) + q[P_SIGN] * math.tanh(
                     vv / COULOMB_VELOCITY_SCALE
                 )
                 ez = 1e-7 * max(1e-3, abs(zz))
                 ev = 1e-6 * max(1e-2, abs(vv))
                 fz = (
-                    total_force(kind, False, True, True, zz + ez, vv, q, p, 0, mono, ts, tab)
-                    - total_force(kind, False, True, True, zz - ez, vv, q, p, 0, mono, ts, tab)
+                    total_force(kind, None, 1, 1, zz + ez, vv, q, p, 0, mono, ts, tab)
+                    - total_force(kind, None, 1, 1, zz - ez, vv, q, p, 0, mono, ts, tab)
                 ) / (2 * ez)
                 fv = (
-                    total_force(kind, False, True, True, zz, vv + ev, q, p, 0, mono, ts, tab)
-                    - total_force(kind, False, True, True, zz, vv - ev, q, p, 0, mono, ts, tab)
+                    total_force(kind, None, 1, 1, zz, vv + ev, q, p, 0, mono, ts, tab)
+                    - total_force(kind, None, 1, 1, zz, vv - ev, q, p, 0, mono, ts, tab)
                 ) / (2 * ev)
                 fv += q[P_SIGN] / COULOMB_VELOCITY_SCALE / math.cosh(vv / COULOMB_VELOCITY_SCALE) ** 2
                 st[s, 0] = vv
