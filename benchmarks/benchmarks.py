@@ -701,7 +701,7 @@ def _ring_down_design_section(quick: bool) -> tuple[list[str], dict]:
 
 
 SECTIONS: dict[str, Any] = {
-    "waits": lambda quick, out: (waits_section(quick), None),
+    "waits": lambda quick, out: waits_section(quick),
     "simulator": lambda quick, out: _simulator_section(quick),
     "nsi": lambda quick, out: _nsi_section(quick),
     "bifurcation": lambda quick, out: _bifurcation_section(quick),

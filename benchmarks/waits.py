@@ -6,6 +6,8 @@ Each command runs in its own process, as installed (``python -m negstiff``), on 
 ``negstiff rig random`` to a temporary folder, with the environment's PYTHONDONTWRITEBYTECODE removed (a
 user's Python caches its bytecode). Timings are wall clock, from the process's start to its exit:
 
+- ``identify nsi`` and ``identify sindy`` on a 300 s record on an empty numba cache (a fresh install's first run:
+  the kernels they need compiled), and ``identify sindy`` once more on that cache;
 - ``identify nsi`` on a 300 s record: one untimed run (bytecode and numba caches), then 5 timed;
 - ``posterior`` with its defaults on the same record: 2 timed runs;
 - ``reproduce`` with its section cache off: once on an empty numba cache (a fresh install's first run,
@@ -30,6 +32,8 @@ import time
 from pathlib import Path
 from typing import Any
 
+FIRST_RUN_MARGIN_S = 3.0
+"""A fresh install's first ``identify`` may take this much longer than a later run (speed round three)."""
 TARGETS = {"identify nsi": 1.5, "posterior": 10.0, "reproduce (fresh install)": 130.0,
            "reproduce (kernels cached)": 120.0, "identify nsi, bench record": 180.0,
            "identify sindy, bench record": 180.0}  # fmt: skip
@@ -122,6 +126,11 @@ def measure(quick: bool = False) -> dict[str, Any]:
         duration = "60" if quick else "300"
         timed(["rig", "random", "--duration", duration, "--seed", "3", "-o", str(d / "rec.csv")])
         nsi = ["identify", "nsi", str(d / "rec.csv"), "-o", str(d / "nsi.json")]
+        sindy = ["identify", "sindy", str(d / "rec.csv"), "-o", str(d / "sindy.json")]
+        out["identify nsi (fresh install)"] = [timed(nsi, _env(NUMBA_CACHE_DIR=str(d / "numba-nsi")))]
+        fresh = _env(NUMBA_CACHE_DIR=str(d / "numba-sindy"))
+        out["identify sindy (fresh install)"] = [timed(sindy, fresh)]
+        out["identify sindy"] = [timed(sindy, fresh)]
         timed(nsi)  # bytecode and the kernels cached, as on any run but a fresh install's first
         out["identify nsi"] = [timed(nsi) for _ in range(5)]
         post = ["posterior", str(d / "rec.csv"), "-o", str(d / "post.json"), "--quiet"]
@@ -163,16 +172,31 @@ def _row(name: str, times: list[float], quick: bool) -> list[str]:
     return [name, str(len(s)), f"{med:.2f} s", spread, verdict]
 
 
-def waits_section(quick: bool) -> list[str]:
-    """The waits as a benchmarks.md section (measured now)."""
+def waits_section(quick: bool) -> tuple[list[str], dict[str, Any]]:
+    """The waits as a benchmarks.md section (measured now) and the figures measured (wall times [s])."""
     from .peers import section
 
     print("waits (the commands as installed)...", file=sys.stderr)
     res = measure(quick)
     mach = res["machine"]
-    keys = ["identify nsi", "posterior", "reproduce (fresh install)", "reproduce (kernels cached)"]
+    keys = [
+        "identify nsi",
+        "identify nsi (fresh install)",
+        "identify sindy",
+        "identify sindy (fresh install)",
+        "posterior",
+        "reproduce (fresh install)",
+        "reproduce (kernels cached)",
+    ]
     keys += [f"identify {m}, bench record{x}" for m in ("nsi", "sindy") for x in ("", ", beside 2 busy processes")]
     rows = [_row(k, res[k], quick) for k in keys]
+    for method in ("nsi", "sindy"):  # a fresh install's first run: within FIRST_RUN_MARGIN_S of a later run
+        later = sorted(res[f"identify {method}"])[len(res[f"identify {method}"]) // 2]
+        first = res[f"identify {method} (fresh install)"][0]
+        rows[keys.index(f"identify {method} (fresh install)")][4] = (
+            f"<= later run + {FIRST_RUN_MARGIN_S:g} s: +{first - later:.1f} s, "
+            + ("met" if first - later <= FIRST_RUN_MARGIN_S else "**not met**")
+        )
     for method in ("nsi", "sindy"):  # beside other work: within 3x of its own time
         own = res[f"identify {method}, bench record"][0]
         loaded = res[f"identify {method}, bench record, beside 2 busy processes"][0]
@@ -186,12 +210,13 @@ def waits_section(quick: bool) -> list[str]:
         "its "
         f"reference in this run, a fresh process importing scipy.signal, took "
         f"{res['reference_import_scipy_signal_s']:.2f} s. reproduce ran "
-        "with its section cache off, first on an empty numba cache (a fresh install's first run), then on it. "
+        "with its section cache off, first on an empty numba cache (a fresh install's first run), then on it; the "
+        "first identify nsi and identify sindy likewise on empty numba caches. "
         f"The bench record: {'120' if quick else '396'} s at 2048 Hz of a horizontal bistable harvester in chaos, "
         "its velocity from a vibrometer of unknown sensitivity whose integral drifts by 43 mm (`bench_record`)."
         + (" A --quick run (reproduce --fast): not the targets' conditions." if quick else "")
     )
-    return section("Waits (issue 18)", intro, ["command", "runs", "median", "range", "target"], rows)
+    return section("Waits (issue 18)", intro, ["command", "runs", "median", "range", "target"], rows), res
 
 
 def main(argv=None) -> int:
@@ -200,7 +225,7 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--quick", action="store_true", help="a 60 s record, reproduce --fast")
     a = ap.parse_args(argv)
-    print("\n".join(waits_section(a.quick)))
+    print("\n".join(waits_section(a.quick)[0]))
     return 0
 
 
