@@ -271,7 +271,7 @@ def accelerometer_noise(rec: Measurement, at: tuple[int, int]) -> tuple[float, f
 
 
 def quasi_static_motion(r: np.ndarray, u: np.ndarray, fs: float, basis: laws.FeedbackBasis, cut_hz: float,
-                        corner_hz: float, top_hz: float, noise: float
+                        corner_hz: float, top_hz: float, noise: float, below_hz: float | None = None
                         ) -> tuple[np.ndarray, dict[str, Any]]:  # fmt: skip
     """The relative motion of two accelerometers ``r`` with its slow part from the structure's quasi-static law.
 
@@ -286,8 +286,8 @@ def quasi_static_motion(r: np.ndarray, u: np.ndarray, fs: float, basis: laws.Fee
     The law's real coefficients are fitted by least squares over the bins of [``corner_hz``, ``top_hz``], where the
     integral is exact and the form holds, and the law replaces r below the crossover: the first ``SLOW_BIN_HZ`` bin
     whose residual exceeds ``SLOW_RESIDUAL_RATIO`` times the integral's expected noise power (below it the
-    integral's noise is the larger error, above it the law's). Iterated to its fixed point (G is of r). Returns the
-    motion and what was done.
+    integral's noise is the larger error, above it the law's), or ``below_hz`` where given. Iterated to its fixed
+    point (G is of r). Returns the motion and what was done.
     """
     n = r.size
     fq = np.fft.rfftfreq(n, 1 / fs)
@@ -311,13 +311,15 @@ def quasi_static_motion(r: np.ndarray, u: np.ndarray, fs: float, basis: laws.Fee
             est = np.fft.irfft(spec, n) + r.mean()
         return est, np.abs(measured - law) ** 2
 
-    _, residual = solve(top_hz)  # the law over its whole band: its residual against the integral, bin by bin
-    edges = np.arange(corner_hz, top_hz, SLOW_BIN_HZ)
-    ratios = []
-    for a in edges:
-        b = (fq >= a) & (fq < a + SLOW_BIN_HZ)
-        ratios.append(float(residual[b].mean() / noise_power[b].mean()) if b.any() else math.nan)
-    cross = next((float(a) for a, q in zip(edges, ratios, strict=True) if q > SLOW_RESIDUAL_RATIO), float(top_hz))
+    ratios: list[float] = []
+    if below_hz is None:
+        _, residual = solve(top_hz)  # the law over its whole band: its residual against the integral, bin by bin
+        edges = np.arange(corner_hz, top_hz, SLOW_BIN_HZ)
+        for a in edges:
+            b = (fq >= a) & (fq < a + SLOW_BIN_HZ)
+            ratios.append(float(residual[b].mean() / noise_power[b].mean()) if b.any() else math.nan)
+        below_hz = next((float(a) for a, q in zip(edges, ratios, strict=True) if q > SLOW_RESIDUAL_RATIO), top_hz)
+    cross = float(below_hz)
     out, _ = solve(cross)
     return out, {"below_hz": cross, "law_fitted_hz": [float(corner_hz), float(top_hz)],
                  "residual_over_noise": [round(q, 3) for q in ratios], "bin_hz": SLOW_BIN_HZ}  # fmt: skip
@@ -500,7 +502,22 @@ def identify_state_space(est, rec: Measurement, at: tuple[int, int]) -> StateSpa
         except (ValueError, np.linalg.LinAlgError, InputError):
             continue
     se_band = 0.5 * np.ptp(np.vstack([mu, *by_band]), axis=0) if by_band else np.zeros(mu.size)
-    se = np.sqrt(se_blocks**2 + se_band**2)
+    # the accelerometers' slow part: its crossover is a choice too (the bin where the law's residual passes the
+    # integral's noise): the fits with it a bin lower and a bin higher, half their spread an error of its own
+    by_slow = []
+    if r_el is not None and slow is not None and acc is not None:
+        for other_hz in (slow["below_hz"] - SLOW_BIN_HZ, slow["below_hz"] + SLOW_BIN_HZ):
+            if not acc[1] <= other_hz <= slow["law_fitted_hz"][1]:
+                continue
+            r_other, _ = quasi_static_motion(relative(rec.channels, at), rec.u, rec.fs, basis, cut, acc[1],
+                                             slow["law_fitted_hz"][1], acc[0], other_hz)  # fmt: skip
+            try:
+                other = _refitted(model, ident, cut, basis, est.block_rows, r_other[:n_id])
+                by_slow.append(_coefficients(other, p, band)[0])
+            except (ValueError, np.linalg.LinAlgError, InputError):
+                continue
+    se_slow = 0.5 * np.ptp(np.vstack([mu, *by_slow]), axis=0) if by_slow else np.zeros(mu.size)
+    se = np.sqrt(se_blocks**2 + se_band**2 + se_slow**2)
     modes_se = []
     for k in range(len(modes)):
         seen = [bm[k] for bm in block_modes if bm[k] is not None]
@@ -513,6 +530,7 @@ def identify_state_space(est, rec: Measurement, at: tuple[int, int]) -> StateSpa
     t90 = float(stats.t.ppf(0.95, len(per_block) - 1)) if len(per_block) >= 2 else math.nan
     element: dict[str, Any] = {
         n: {"value": float(mu[j]), "se": float(se[j]), "se_blocks": float(se_blocks[j]), "se_band": float(se_band[j]),
+            "se_slow_part": float(se_slow[j]),
             "interval_90": [float(mu[j] - t90 * se[j]), float(mu[j] + t90 * se[j])],
             "quality_im_over_re": float(quality[j])}
         for j, n in enumerate(names)
@@ -569,6 +587,7 @@ def identify_state_space(est, rec: Measurement, at: tuple[int, int]) -> StateSpa
                   "element_motion": f"the sensors' difference low-passed at {cut:.4g} Hz (the force's band top "
                                     f"{f_max:.4g} Hz), its derivative spectral",
                   "standard_error": f"batch means over {len(per_block)} blocks of the identification part, and half "
-                                    "the spread of the fits with the basis's band at 2/3 and 4/3 of its own (in "
-                                    "quadrature)"},
+                                    "the spread of the fits with the basis's band at 2/3 and 4/3 of its own, and "
+                                    "through accelerometers half the spread of the fits with the slow part's "
+                                    "crossover a bin lower and higher (in quadrature)"},
     )  # fmt: skip
