@@ -381,7 +381,7 @@ def test_three_modes_two_accelerometers_and_the_force_cell(chain3, tmp_path):
     # the lasers' test. The loader's double integrals leave 30 um of error below 2 Hz on the joint's 0.75 mm, which
     # put k3 14 % low (with a spurious fourth pole) until the slow part came from the structure's quasi-static law
     # (``quasi_static_motion``, below 4.0 Hz here). Measured: modes within 0.05 %, damping within 8 %, k3 -0.39 %
-    # with a standard error of 0.20 % (interval -0.86 % to +0.08 %)
+    # with a standard error of 0.21 % (interval -0.88 % to +0.11 %)
     t, f, _, acc, modes = chain3
     a = acc[1:] + ACC_NOISE * acc[1:].std(axis=1, keepdims=True) * np.random.default_rng(5).standard_normal((2, t.size))
     path = write_csv(tmp_path / "gvt.csv", {"t": t, "force": f, "y1_acc": a[0], "y2_acc": a[1]}, {"force_dof": 2})
