@@ -967,7 +967,9 @@ def stabilisation(est, rec: Measurement, orders=(4, 6, 8, 10), block_rows=(20, 3
     """Stabilisation diagram (Marchesiello, Fasana & Garibaldi 2016) around each well a structure's NSI found: for
     every (order, block rows), the identified poles (f_hz, zeta) with the feedback channels of that well's
     reference, each marked ``stable`` when a pole of the next lower order lies within 1 % in frequency and 5 % in
-    damping. Physical modes stay put as the order grows; spurious ones wander. Run after ``fit``.
+    damping. Physical modes stay put as the order grows; spurious ones wander. Run after ``fit``. Each (well, block
+    rows) takes every order's poles from one LQ factor (``subspace.poles_by_order``): an order whose model has an
+    unstable spurious pole still shows its poles.
     """
     n_id = est.result_.settings["identification_samples"]
     at = est.result_.structure.place
@@ -983,14 +985,18 @@ def stabilisation(est, rec: Measurement, orders=(4, 6, 8, 10), block_rows=(20, 3
         w = (chans - chans.mean(axis=0)) / chans.std(axis=0)
         for i in block_rows:
             previous: list[tuple[float, float]] = []
+            try:  # every order's poles from one LQ factor (as the state-space route's diagram)
+                by_order = subspace.poles_by_order(w, y, ident.dt, i, orders)
+            except (ValueError, np.linalg.LinAlgError) as exc:
+                rows += [{"well": name, "order": n, "block_rows": i, "error": str(exc)} for n in orders]
+                continue
             for n in orders:
-                try:
-                    ss = subspace.identify(w, y, ident.dt, n, i)
-                except (ValueError, np.linalg.LinAlgError) as exc:
-                    rows.append({"well": name, "order": n, "block_rows": i, "error": str(exc)})
+                if n not in by_order:
+                    rows.append({"well": name, "order": n, "block_rows": i,
+                                 "error": f"order {n} exceeds the {i} block rows' rank"})  # fmt: skip
                     continue
-                lam = np.linalg.eigvals(ss.A)
-                poles = sorted((float(abs(q) / (2 * math.pi)), float(-q.real / abs(q))) for q in lam if q.imag > 0)
+                poles = sorted((float(abs(q) / (2 * math.pi)), float(-q.real / abs(q))) for q in by_order[n]
+                               if q.imag > 0)  # fmt: skip
                 rows.append({"well": name, "order": n, "block_rows": i, "poles": [
                     {"f_hz": f, "zeta": z, "stable": any(abs(f / pf - 1) < 0.01 and abs(z - pz) < 0.05 * abs(pz)
                                                          for pf, pz in previous)} for f, z in poles]})  # fmt: skip
