@@ -316,10 +316,11 @@ K3_3 = 5e9
 """A cubic spring between masses 2 and 3 (sensors 1 and 2), 28 % of the linear spring's force at the rms motion."""
 
 
-def dop853_chain3(duration=80.0, seed=2):
+def dop853_chain3(duration=80.0, seed=2, c_nl=0.0):
     """(t, force, displacements (3, T), accelerations (3, T)) of the 3-DOF chain under a multisine force (2-120 Hz,
     0.5 Hz apart, random phases, 5 N rms) at mass 3, by scipy's DOP853 (rtol 1e-9): the force is analytic, so the
-    integrator's steps follow the response, not a sampled input's kinks."""
+    integrator's steps follow the response, not a sampled input's kinks. ``c_nl``: the joint's quadratic damping
+    c_nl r'|r'| [N s^2/m^2] beside its cubic."""
     K = np.array([[SPRINGS3[0] + SPRINGS3[1], -SPRINGS3[1], 0], [-SPRINGS3[1], SPRINGS3[1] + SPRINGS3[2], -SPRINGS3[2]],
                   [0, -SPRINGS3[2], SPRINGS3[2]]])  # fmt: skip
     C = 1e-4 * K + 0.3 * np.diag(M3)
@@ -332,7 +333,7 @@ def dop853_chain3(duration=80.0, seed=2):
 
     def rhs(t, s):
         x, v = s[:3], s[3:]
-        g = K3_3 * (x[2] - x[1]) ** 3
+        g = K3_3 * (x[2] - x[1]) ** 3 + c_nl * (v[2] - v[1]) * abs(v[2] - v[1])
         F = -K @ x - C @ v
         F[2] += force(t) - g
         F[1] += g
@@ -415,6 +416,49 @@ def test_the_joints_slow_motion_is_the_structures_quasi_static_answer(record, ac
         return float(np.std(signal.sosfiltfilt(low, (x - x.mean()) - (truth - truth.mean()))))
 
     assert slow_error(r) < 0.5 * slow_error(relative(read.channels, (2, 3))), (slow_error(r), info)
+
+
+C_NL = 20.0
+"""The damped joint's quadratic damping [N s^2/m^2] (``chain3_damped``)."""
+
+
+@pytest.fixture(scope="module")
+def chain3_damped():
+    return dop853_chain3(c_nl=C_NL)
+
+
+@pytest.mark.slow
+def test_a_joints_quadratic_damping_is_read_through_lasers(chain3_damped):
+    # the 3-DOF chain whose joint also damps as c_nl r'|r'|: through the lasers (2 um) both the cubic and the damping
+    # law's coefficient (measured: k3 -0.05 %, se 0.11 %; c_nl 20.3, se 0.41), each within three standard errors
+    t, f, x, _, _ = chain3_damped
+    z = x[1:] + 0.001 * x[1:].std(axis=1, keepdims=True) * np.random.default_rng(5).standard_normal((2, t.size))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        el = NSI(element="1-2").fit(from_arrays(f, z, FS, input_name="force", force_dof=2, source="damped")).result_
+    k3, c_nl = el.element["k3"], el.element["c_nl"]
+    assert abs(k3["value"] - K3_3) < 3 * k3["se"] and abs(c_nl["value"] - C_NL) < 3 * c_nl["se"], (k3, c_nl)
+
+
+@pytest.mark.slow
+@pytest.mark.xfail(
+    strict=True,
+    reason="open: the damped joint read by two accelerometers (0.1 % noise) gives k3 15 % low (se 7 %) and c_nl 42 "
+    "for 20, its held-out runs diverging; with the damping law's slow part in the quasi-static law as well, k3 -16 %, "
+    "c_nl 26 (se 19); through lasers both hold (test_a_joints_quadratic_damping_is_read_through_lasers). Not yet "
+    "located; a suspect: the joint's r' is the corrected double integral's derivative, whose error r'|r'| mixes into "
+    "the band (2 |r'| dr') as the cubic did r's. Next: measure that (the true r' in the basis), then r' from the "
+    "single integral",
+)
+def test_a_joints_quadratic_damping_is_read_through_accelerometers(chain3_damped, tmp_path):
+    t, f, _, acc, _ = chain3_damped
+    a = acc[1:] + ACC_NOISE * acc[1:].std(axis=1, keepdims=True) * np.random.default_rng(5).standard_normal((2, t.size))
+    path = write_csv(tmp_path / "damped.csv", {"t": t, "force": f, "y1_acc": a[0], "y2_acc": a[1]}, {"force_dof": 2})
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        el = NSI(element="1-2").fit(load(path)).result_
+    k3, c_nl = el.element["k3"], el.element["c_nl"]
+    assert abs(k3["value"] / K3_3 - 1) < 0.05 and abs(c_nl["value"] - C_NL) < 3 * c_nl["se"], (k3, c_nl)
 
 
 def test_quiet_accelerometers_on_a_stiffening_structure_are_not_read_as_a_cross_well_device(tmp_path):
