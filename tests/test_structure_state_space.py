@@ -353,6 +353,17 @@ def chain3():
     return dop853_chain3()
 
 
+def _read_by_two_accelerometers(chain, path):
+    """The NSI result of a 3-DOF chain record (``dop853_chain3``) read by two accelerometers on masses 2 and 3
+    (ACC_NOISE of their rms) and the force cell at mass 3, through a lab's file at ``path``."""
+    t, f, _, acc, _ = chain
+    a = acc[1:] + ACC_NOISE * acc[1:].std(axis=1, keepdims=True) * np.random.default_rng(5).standard_normal((2, t.size))
+    write_csv(path, {"t": t, "force": f, "y1_acc": a[0], "y2_acc": a[1]}, {"force_dof": 2})
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return NSI(element="1-2").fit(load(path)).result_
+
+
 def _check_chain3(r, modes):
     f_true, zeta_true = modes
     assert len(r.modal["linear"]) == 3
@@ -383,12 +394,7 @@ def test_three_modes_two_accelerometers_and_the_force_cell(chain3, tmp_path):
     # put k3 14 % low (with a spurious fourth pole) until the slow part came from the structure's quasi-static law
     # (``quasi_static_motion``, below 4.0 Hz here). Measured: modes within 0.05 %, damping within 8 %, k3 -0.39 %
     # with a standard error of 0.21 % (interval -0.88 % to +0.11 %)
-    t, f, _, acc, modes = chain3
-    a = acc[1:] + ACC_NOISE * acc[1:].std(axis=1, keepdims=True) * np.random.default_rng(5).standard_normal((2, t.size))
-    path = write_csv(tmp_path / "gvt.csv", {"t": t, "force": f, "y1_acc": a[0], "y2_acc": a[1]}, {"force_dof": 2})
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        _check_chain3(NSI(element="1-2").fit(load(path)).result_, modes)
+    _check_chain3(_read_by_two_accelerometers(chain3, tmp_path / "gvt.csv"), chain3[4])
 
 
 def test_the_joints_slow_motion_is_the_structures_quasi_static_answer(record, accelerometer_fit, tmp_path):
@@ -452,12 +458,7 @@ def test_a_joints_quadratic_damping_is_read_through_lasers(chain3_damped):
     "slow part that holds with damping (the identified model's own), or the joint's slow part from both",
 )
 def test_a_joints_quadratic_damping_is_read_through_accelerometers(chain3_damped, tmp_path):
-    t, f, _, acc, _ = chain3_damped
-    a = acc[1:] + ACC_NOISE * acc[1:].std(axis=1, keepdims=True) * np.random.default_rng(5).standard_normal((2, t.size))
-    path = write_csv(tmp_path / "damped.csv", {"t": t, "force": f, "y1_acc": a[0], "y2_acc": a[1]}, {"force_dof": 2})
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        el = NSI(element="1-2").fit(load(path)).result_
+    el = _read_by_two_accelerometers(chain3_damped, tmp_path / "damped.csv")
     k3, c_nl = el.element["k3"], el.element["c_nl"]
     assert abs(k3["value"] / K3_3 - 1) < 0.05 and abs(c_nl["value"] - C_NL) < 3 * c_nl["se"], (k3, c_nl)
 

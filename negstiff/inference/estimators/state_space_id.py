@@ -37,7 +37,6 @@ from negstiff.errors import InputError, issue
 from negstiff.errors import NegstiffWarning as _Warning
 from negstiff.inference.record.derivatives import band_limited, basis_band_hz, smooth_and_differentiate
 from negstiff.inference.record.measurement import Measurement
-from negstiff.inference.record.sensors import HIGHPASS_HZ
 from negstiff.models import laws
 from negstiff.models.state_space import StateSpaceStructure, element_basis, feedback_inputs
 from negstiff.models.structure import Mode, coupling, relative
@@ -254,20 +253,25 @@ def element_motion(rec: Measurement, at: tuple[int, int], cut_hz: float,
     return smooth_and_differentiate(band_limited(r, rec.fs, cut_hz), rec.fs, (0, 0))
 
 
+def sensor_channels(rec: Measurement) -> dict[int, dict[str, Any]]:
+    """Each sensor's channel as the loader derived it (``rec.info["response"]["channels"]``), by its number."""
+    return {c["dof"]: c for c in (rec.info.get("response") or {}).get("channels") or [] if "dof" in c}
+
+
 def accelerometer_noise(rec: Measurement, at: tuple[int, int]) -> tuple[float, float] | None:
-    """When the element's motion comes from accelerometers: their acceleration noise together (the root sum of
-    squares) [m/s^2] and the corner [Hz] above which the loader's double integrals are exact; else None (I = 0, the
-    ground, has no sensor).
+    """When the element's motion comes from accelerometers whose double integrals were high-passed: their
+    acceleration noise together (the root sum of squares) [m/s^2] and the corner [Hz] above which the integrals are
+    exact; else None (I = 0, the ground, has no sensor; a cross-well integral's slow part, its stays in the wells, is
+    kept by the loader, not high-passed).
     """
-    chans = {c.get("dof"): c for c in (rec.info.get("response") or {}).get("channels") or []}
-    sensed = [c for c in (chans.get(k) for k in at if k) if c is not None and c.get("measured") == "y_acc"]
-    if not sensed or len(sensed) < sum(1 for k in at if k):
+    chans = sensor_channels(rec)
+    sensed = [chans.get(k) or {} for k in at if k]
+    if not sensed or any(c.get("measured") != "y_acc" or c.get("highpass_hz") is None for c in sensed):
         return None
-    noise = [c.get("acceleration_noise_m_s2") for c in sensed]
-    if any(x is None or not x > 0 for x in noise):
+    noise = [float(c.get("acceleration_noise_m_s2") or 0.0) for c in sensed]
+    if not all(x > 0 for x in noise):
         return None
-    corner = max(float(c.get("highpass_hz", HIGHPASS_HZ)) for c in sensed)
-    return float(math.sqrt(sum(x * x for x in noise))), corner
+    return float(math.sqrt(sum(x * x for x in noise))), max(float(c["highpass_hz"]) for c in sensed)
 
 
 def quasi_static_motion(r: np.ndarray, u: np.ndarray, fs: float, basis: laws.FeedbackBasis, cut_hz: float,
@@ -311,18 +315,20 @@ def quasi_static_motion(r: np.ndarray, u: np.ndarray, fs: float, basis: laws.Fee
             est = np.fft.irfft(spec, n) + r.mean()
         return est, np.abs(measured - law) ** 2
 
-    ratios: list[float] = []
-    if below_hz is None:
-        _, residual = solve(top_hz)  # the law over its whole band: its residual against the integral, bin by bin
-        edges = np.arange(corner_hz, top_hz, SLOW_BIN_HZ)
-        for a in edges:
-            b = (fq >= a) & (fq < a + SLOW_BIN_HZ)
-            ratios.append(float(residual[b].mean() / noise_power[b].mean()) if b.any() else math.nan)
-        below_hz = next((float(a) for a, q in zip(edges, ratios, strict=True) if q > SLOW_RESIDUAL_RATIO), top_hz)
-    cross = float(below_hz)
-    out, _ = solve(cross)
-    return out, {"below_hz": cross, "law_fitted_hz": [float(corner_hz), float(top_hz)],
-                 "residual_over_noise": [round(q, 3) for q in ratios], "bin_hz": SLOW_BIN_HZ}  # fmt: skip
+    def done(out: np.ndarray, cross: float, ratios: list[float]) -> tuple[np.ndarray, dict[str, Any]]:
+        return out, {"below_hz": float(cross), "law_fitted_hz": [float(corner_hz), float(top_hz)],
+                     "residual_over_noise": [round(q, 3) for q in ratios], "bin_hz": SLOW_BIN_HZ}  # fmt: skip
+
+    if below_hz is not None:
+        return done(solve(below_hz)[0], below_hz, [])
+    whole, residual = solve(top_hz)  # the law over its whole band: its residual against the integral, bin by bin
+    edges = np.arange(corner_hz, top_hz, SLOW_BIN_HZ)
+    ratios = []
+    for a in edges:
+        b = (fq >= a) & (fq < a + SLOW_BIN_HZ)
+        ratios.append(float(residual[b].mean() / noise_power[b].mean()) if b.any() else math.nan)
+    cross = next((float(a) for a, q in zip(edges, ratios, strict=True) if q > SLOW_RESIDUAL_RATIO), float(top_hz))
+    return done(whole if cross == top_hz else solve(cross)[0], cross, ratios)  # no bin passed: the whole band's
 
 
 def _channels(rec: Measurement, at: tuple[int, int], cut_hz: float, basis: laws.FeedbackBasis,
@@ -505,7 +511,7 @@ def identify_state_space(est, rec: Measurement, at: tuple[int, int]) -> StateSpa
     # the accelerometers' slow part: its crossover is a choice too (the bin where the law's residual passes the
     # integral's noise): the fits with it a bin lower and a bin higher, half their spread an error of its own
     by_slow = []
-    if r_el is not None and slow is not None and acc is not None:
+    if slow is not None and acc is not None:
         for other_hz in (slow["below_hz"] - SLOW_BIN_HZ, slow["below_hz"] + SLOW_BIN_HZ):
             if not acc[1] <= other_hz <= slow["law_fitted_hz"][1]:
                 continue
@@ -546,15 +552,16 @@ def identify_state_space(est, rec: Measurement, at: tuple[int, int]) -> StateSpa
     H = model.frf(freqs)
     lines = [f"{rec.source}: the element's {n} is poorly determined (|Im/Re| {quality[j]:.2g} of its FRF ratio)"
              for j, n in enumerate(names) if quality[j] > QUALITY_WARNING and abs(mu[j]) > 2 * se[j]]  # fmt: skip
-    acc_sensors = [c["dof"] for c in (rec.info.get("response") or {}).get("channels") or []
-                   if c.get("measured") == "y_acc"]  # fmt: skip
-    if acc_sensors and slow is None and any(k in at for k in acc_sensors):
+    acc_sensors = [k for k, c in sensor_channels(rec).items() if c.get("measured") == "y_acc"]
+    if slow is None and any(k in at for k in acc_sensors):
+        why = ("the record has no band between their double integral's exact band and the lowest mode "
+               f"({physical[0]:.3g} Hz) to fit its slow part on" if acc is not None else
+               "its slow part is not from the structure's quasi-static law (that needs both of the element's sensors "
+               "accelerometers whose integrals were high-passed, their noise measured)")  # fmt: skip
         lines.append(
-            f"{rec.source}: the element's relative motion comes from accelerometers and the record has no band "
-            f"between their double integral's exact band and the lowest mode ({physical[0]:.3g} Hz) to fit its slow "
-            "part on: its slow error is mixed into the band by the element's law (on a test chain at 0.1 % noise "
-            "the joint's k3 was lost while the modes held within 0.2 %): read the modes, and size the joint from "
-            "displacement sensors"
+            f"{rec.source}: the element's relative motion comes from accelerometers and {why}: its slow error is mixed "
+            "into the band by the element's law (on a test chain at 0.1 % noise the joint's k3 was lost while the "
+            "modes held within 0.2 %): read the modes, and size the joint from displacement sensors"
         )
     elif [k for k in acc_sensors if k not in at]:
         lines.append(
