@@ -352,6 +352,70 @@ def _rk4_fixture_polynomial(acc, h, oversample, z2, p):  # pragma: no cover (com
     return out
 
 
+@numba.njit(cache=True)
+def _stepped_sweep_polynomial(p, amps, f_hz, state, periods, steps):  # pragma: no cover (compiled)
+    """``fixture_rk4_step``'s RK4 (operation for operation, as ``_rk4_fixture_polynomial``) under b'' = A sin(2 pi f
+    t), A stepped through ``amps`` each going on from the last state: per amplitude (spread of r = z2 - z1 over the
+    last 8 periods at phase 0, min r and max r over the last period) and the state after each amplitude."""
+    m1, k_f, c_f, m2, k0, k1, k2, k3, c, cn = p
+    h = 1.0 / (f_hz * steps)
+    sines = np.sin(np.pi * np.arange(2 * steps + 1) / steps)  # at every half step of a period
+    z1, z2, v1, v2 = state[0], state[1], state[2], state[3]
+    rows = np.empty((amps.size, 3))
+    states = np.empty((amps.size, 4))
+    for j in range(amps.size):
+        A = amps[j]
+        lo, hi, sec_lo, sec_hi = np.inf, -np.inf, np.inf, -np.inf
+        for period in range(periods):
+            for k in range(steps):
+                a0, am, a1 = A * sines[2 * k], A * sines[2 * k + 1], A * sines[2 * k + 2]
+                r, vr = z2 - z1, v2 - v1
+                f = ((k3 * r + k2) * r - k1) * r + k0 + c * vr + cn * vr * abs(vr)
+                p1, q1 = (-k_f * z1 - c_f * v1 + f) / m1 - a0, -f / m2 - a0
+                s1, s2 = v1 + 0.5 * h * p1, v2 + 0.5 * h * q1
+                y1, y2 = z1 + 0.5 * h * v1, z2 + 0.5 * h * v2
+                r, vr = y2 - y1, s2 - s1
+                f = ((k3 * r + k2) * r - k1) * r + k0 + c * vr + cn * vr * abs(vr)
+                p2, q2 = (-k_f * y1 - c_f * s1 + f) / m1 - am, -f / m2 - am
+                t1, t2 = v1 + 0.5 * h * p2, v2 + 0.5 * h * q2
+                y1, y2 = z1 + 0.5 * h * s1, z2 + 0.5 * h * s2
+                r, vr = y2 - y1, t2 - t1
+                f = ((k3 * r + k2) * r - k1) * r + k0 + c * vr + cn * vr * abs(vr)
+                p3, q3 = (-k_f * y1 - c_f * t1 + f) / m1 - am, -f / m2 - am
+                w1, w2 = v1 + h * p3, v2 + h * q3
+                y1, y2 = z1 + h * t1, z2 + h * t2
+                r, vr = y2 - y1, w2 - w1
+                f = ((k3 * r + k2) * r - k1) * r + k0 + c * vr + cn * vr * abs(vr)
+                p4, q4 = (-k_f * y1 - c_f * w1 + f) / m1 - a1, -f / m2 - a1
+                z1, z2, v1, v2 = (
+                    z1 + h / 6 * (v1 + 2 * s1 + 2 * t1 + w1),
+                    z2 + h / 6 * (v2 + 2 * s2 + 2 * t2 + w2),
+                    v1 + h / 6 * (p1 + 2 * p2 + 2 * p3 + p4),
+                    v2 + h / 6 * (q1 + 2 * q2 + 2 * q3 + q4),
+                )
+                if period == periods - 1:
+                    lo, hi = min(lo, z2 - z1), max(hi, z2 - z1)
+            if period >= periods - 8:
+                sec_lo, sec_hi = min(sec_lo, z2 - z1), max(sec_hi, z2 - z1)
+        rows[j, 0], rows[j, 1], rows[j, 2] = sec_hi - sec_lo, lo, hi
+        states[j, 0], states[j, 1], states[j, 2], states[j, 3] = z1, z2, v1, v2
+    return rows, states
+
+
+def stepped_sweep(amps, f_hz, state, device=None, fixture=FIXTURE, periods=120, steps=128):
+    """``device`` (TRUTH by default) on the sprung fixture under b'' = A sin(2 pi f t), A stepped through ``amps``
+    (each step going on from the last state, as a shaker test does), by ``fixture_rk4_step``'s plain RK4 compiled
+    (``steps`` a period; in Python floats it took 4 s a sweep): per amplitude (spread of r = z2 - z1 over the last 8
+    periods at phase 0, min r, max r over the last period, the state after it)."""
+    dev = TRUTH if device is None else device
+    m1 = fixture["m"]
+    k_f = m1 * (2 * np.pi * fixture["f_hz"]) ** 2
+    p = (m1, k_f, 2 * fixture["zeta"] * np.sqrt(k_f * m1), dev.m, dev.k0, dev.k1, dev.k2, dev.k3, dev.c, dev.c_nl)
+    rows, states = _stepped_sweep_polynomial(p, np.asarray(amps, float), float(f_hz), np.asarray(state, float),
+                                             int(periods), int(steps))  # fmt: skip
+    return [(float(r[0]), float(r[1]), float(r[2]), tuple(map(float, s))) for r, s in zip(rows, states, strict=True)]
+
+
 def rk4_fixture_record(duration=60.0, rms=12.0, band=(2.0, 40.0), seed=1, oversample=8, settle=5.0, noise=1e-6,
                        device=None, fixture=FIXTURE, fs=FS, hidden=None, velocity=False):  # fmt: skip
     """(base_acc, z (2, T)) of ``device`` (TRUTH by default) on a sprung fixture, as another lab's code writes it: a

@@ -6,7 +6,7 @@ import warnings
 
 import numpy as np
 import pytest
-from records import FIXTURE, TRUTH, fixture_rk4_step, rk4_fixture_record, write_csv
+from records import FIXTURE, TRUTH, rk4_fixture_record, stepped_sweep, write_csv
 
 from negstiff import NSI, Discrepancy, InputError, Model, SINDy
 from negstiff.inference.estimators.structure_id import free_run_error
@@ -141,24 +141,10 @@ def test_structure_record_file(tmp_path):
 
 def _stepped_sweep(amps, f_hz, state, periods=120, steps=128, full=False):
     """The device on the fixture under b'' = A sin(2 pi f t), A stepped through ``amps`` (each step going on from the
-    last state, as a shaker test does), the tests' plain RK4 on floats (``records.fixture_rk4_step``, ``steps`` a
-    period); per amplitude, the spread of r = z2 - z1 over the last 8 forcing periods at phase 0 (0 on a period-1
-    orbit); ``full``: per amplitude (spread, min r, max r over the last period, the final state)."""
-    step = fixture_rk4_step(TRUTH)
-    h = 1.0 / (f_hz * steps)
-    sines = [float(np.sin(np.pi * k / steps)) for k in range(2 * steps + 1)]  # at every half step of a period
-    z1, z2, v1, v2 = state
-    rows = []
-    for A in amps:
-        section, last = [], []
-        for p in range(periods):
-            for k in range(steps):
-                z1, z2, v1, v2 = step(z1, z2, v1, v2, h, A * sines[2 * k], A * sines[2 * k + 1], A * sines[2 * k + 2])
-                if p == periods - 1:
-                    last.append(z2 - z1)
-            if p >= periods - 8:
-                section.append(z2 - z1)
-        rows.append((float(np.ptp(section)), min(last), max(last), (z1, z2, v1, v2)))
+    last state, as a shaker test does), the tests' plain RK4 (``records.stepped_sweep``: ``fixture_rk4_step``'s,
+    compiled; ``steps`` a period); per amplitude, the spread of r = z2 - z1 over the last 8 forcing periods at phase 0
+    (0 on a period-1 orbit); ``full``: per amplitude (spread, min r, max r over the last period, the final state)."""
+    rows = stepped_sweep(amps, f_hz, state, periods=periods, steps=steps)
     return rows if full else np.array([row[0] for row in rows])
 
 
