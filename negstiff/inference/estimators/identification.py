@@ -568,7 +568,7 @@ class Identifier(Estimator):
         """
         rec = self.check(data)
         n_id = int(round(rec.n * (1 - self.validation_fraction)))
-        est, _ = self._estimate_law(rec, n_id)
+        est, comparison = self._estimate_law(rec, n_id)
         stroke = stroke_quantiles(rec.z[:n_id])
         validation = validate(est.model, rec, n_id)
         model, refinement, mass_source = est.model, None, est.mass_source
@@ -584,7 +584,7 @@ class Identifier(Estimator):
         # one well visited: one name for it, by the final and the method's own model alike (``visited_well``)
         est = self._name_own_well(est, visited_well(rec, float(np.median(rec.z[:n_id])), (model, est.model), span))
         equilibria, modal, eq_warnings = equilibria_and_modes(model, rec, span, (est.model,))
-        judged = judgement(model, rec, validation, modal, est.modal)
+        judged = judgement(model, rec, validation, modal, est.modal, laws_compared=comparison is not None)
         details = dict(self._final_details(rec, model, est.details))
         details["modal_of_model"] = modal  # the final (refined) model's linearisation
         # ``modal`` is the method's own estimate (what method-vs-method checks compare): NSI's subspace pole,

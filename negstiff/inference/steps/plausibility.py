@@ -140,14 +140,23 @@ def input_power(rec) -> tuple[float, float]:
     return float(p.mean()), float(means.std(ddof=1) / np.sqrt(nb))
 
 
-def judgement(model, rec, validation: dict, modal: dict | None, own_modal: dict | None) -> list[str]:
+def judgement(
+    model, rec, validation: dict, modal: dict | None, own_modal: dict | None, laws_compared: bool = True
+) -> list[str]:
     """What a physicist checks before believing an identified model, each a warning: negative viscous
     damping; a model that dissipates nothing (or gains energy) over a record whose input does work on it (the
     energy balance <D(z') z'> = input power, ``input_power``); a held-out free run erring by more than the
     record's rms (``HELD_OUT_LIMIT_PERCENT``); a method's own modal values that contradict its model's
-    linearisation (``MODAL_CONTRADICTION``).
+    linearisation (``MODAL_CONTRADICTION``), where the laws were not compared (``laws_compared`` False) with the
+    comparison named as what to try.
     """
     out: list[str] = []
+    causes = (
+        "(the record's frame or drift, or a model order too low?)"
+        if laws_compared
+        else "(the record's frame or drift, a model order too low, or a restoring law that is not the record's? "
+        "law='auto', --law auto, compares the laws on what they predict)"
+    )
     if model.c < 0:
         out.append(
             f"negative viscous damping c = {model.c:.3g} N s/m: the model feeds energy into small motion, which no "
@@ -182,8 +191,7 @@ def judgement(model, rec, validation: dict, modal: dict | None, own_modal: dict 
             if f_own and f_lin and abs(f_own / f_lin - 1) > MODAL_CONTRADICTION:
                 out.append(
                     f"the {well} well's modal frequency {f_own:.3g} Hz contradicts the model's own linearisation "
-                    f"sqrt(K'(z*)/m) = {f_lin:.3g} Hz: the subspace step and the restoring force disagree "
-                    "(the record's frame or drift, or a model order too low?)"
+                    f"sqrt(K'(z*)/m) = {f_lin:.3g} Hz: the subspace step and the restoring force disagree " + causes
                 )
             elif f_own and not f_lin:
                 out.append(
