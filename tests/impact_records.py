@@ -3,6 +3,7 @@ two oscillators they share: a hardening Duffing and the seed-like asymmetric dou
 as ``from impact_records import ...``."""
 
 import numpy as np
+from records import memoised
 from scipy.integrate import solve_ivp
 
 from negstiff import Model, from_arrays
@@ -56,6 +57,7 @@ def _piecewise(rhs, x0, t, hits, width_s, duration):
     return out
 
 
+@memoised
 def hammer_record(model, z_rest, fs, hits, peak_n, width_s, duration):
     """(t, force, z, z_dot) of ``model`` at rest at ``z_rest`` hit at the times ``hits`` [s] by half-sine pulses
     of ``peak_n`` [N] lasting ``width_s``: DOP853 piece by piece (short steps inside each pulse, none imposed
@@ -71,6 +73,7 @@ def hammer_record(model, z_rest, fs, hits, peak_n, width_s, duration):
     return t, pulse(t), z, v
 
 
+@memoised
 def decay_record(model, z0, fs, duration, v0=0.0):
     """(t, z, z_dot) of ``model`` released at ``z0`` [m] with ``v0`` [m/s] (DOP853, noise-free)."""
     law = _force_law(model)

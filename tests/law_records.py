@@ -43,7 +43,7 @@ from pathlib import Path
 
 import numba
 import numpy as np
-from records import write_csv
+from records import memoised, write_csv
 from scipy.integrate import solve_ivp
 from scipy.optimize import brentq
 
@@ -385,6 +385,7 @@ def _multisine(rng, lines, band, rms):
     return rms * math.sqrt(2.0 / lines), 2 * np.pi * f, rng.uniform(0, 2 * np.pi, lines)
 
 
+@memoised
 def _dop853(law, c, c_nl, amp, w, ph, t, z0):
     sol = solve_ivp(_rhs, (0.0, t[-1]), [z0, 0.0], t_eval=t, method="DOP853", rtol=1e-9, atol=1e-12,
                     args=(law.code, np.array(law.p), c, c_nl, amp, w, ph))  # fmt: skip

@@ -1,8 +1,11 @@
 """Records written in the tests themselves with numpy and scipy (not with negstiff's rig or simulator), and
 what they share: the test utility module (imported as ``from records import ...``)."""
 
+import dataclasses
+import functools
 import hashlib
 import os
+from collections.abc import Mapping
 from pathlib import Path
 
 import numba
@@ -16,6 +19,56 @@ TRUTH = Model(m=0.2, k1=426.0, k2=-3060.0, k3=7.77e5, c=0.35, c_nl=0.1)
 FS = 512.0
 
 
+class _Unkeyed(Exception):
+    """An argument ``memoised`` cannot key by value (a function, an object without fields): the call is not kept."""
+
+
+def _value_key(x):
+    """A hashable key of ``x`` by its value: arrays by their shape, type and bytes, dataclasses (a ``Model``, a law)
+    by their fields, containers item by item; a callable or another object raises ``_Unkeyed``."""
+    if x is None or isinstance(x, (bool, int, float, str, complex, np.generic)):
+        return (type(x).__name__, x)
+    if isinstance(x, np.ndarray):
+        return ("array", x.shape, x.dtype.str, hashlib.sha1(np.ascontiguousarray(x).tobytes()).hexdigest())
+    if isinstance(x, (tuple, list)):
+        return (type(x).__name__, tuple(_value_key(i) for i in x))
+    if isinstance(x, Mapping):
+        return ("mapping", tuple((k, _value_key(v)) for k, v in sorted(x.items())))
+    if dataclasses.is_dataclass(x) and not isinstance(x, type):
+        return (type(x).__qualname__, tuple((f.name, _value_key(getattr(x, f.name))) for f in dataclasses.fields(x)
+                                            if not callable(getattr(x, f.name))))  # fmt: skip
+    raise _Unkeyed(type(x).__name__)
+
+
+def _copied(out):
+    return (
+        tuple(_copied(o) for o in out)
+        if isinstance(out, tuple)
+        else (out.copy() if isinstance(out, np.ndarray) else out)
+    )
+
+
+def memoised(writer):
+    """Keep a deterministic record writer's output for the test process, keyed by its arguments' values: a record
+    asked for again (another module's fixture on the same pytest-xdist worker) is not integrated again (22 s of
+    DOP853 a full run repeated, measured). Each caller gets its own copies of the arrays; a call with an argument that
+    has no value key (a hidden force given as a function) is not kept."""
+    store: dict = {}
+
+    @functools.wraps(writer)
+    def wrapper(*args, **kwargs):
+        try:
+            key = (_value_key(args), _value_key(dict(kwargs)))
+        except _Unkeyed:
+            return writer(*args, **kwargs)
+        if key not in store:
+            store[key] = writer(*args, **kwargs)
+        return _copied(store[key])
+
+    return wrapper
+
+
+@memoised
 def dop853_record(duration=60.0, rms=8.0, seed=7, start=0.024, fs=FS, rtol=1e-9, model=None, hidden=None):
     """(t, base_acc, z, z_dot) of ``model`` (TRUTH by default) under a multisine base acceleration (2-30 Hz),
     integrated by scipy's DOP853 (``rtol``, 1e-9 by default) from rest at ``start``: a record negstiff's
