@@ -359,11 +359,53 @@ def fixture_rk4_step(device, fixture=FIXTURE, hidden=None):
     return step
 
 
+def _fixture_params(device, fixture) -> tuple[float, ...]:
+    """The compiled steps' parameters (``_fixture_step``): the fixture's mass, spring and damper, the device's mass
+    and polynomial element."""
+    m1 = fixture["m"]
+    k_f = m1 * (2 * np.pi * fixture["f_hz"]) ** 2
+    return (m1, k_f, 2 * fixture["zeta"] * np.sqrt(k_f * m1), device.m, device.k0, device.k1, device.k2, device.k3,
+            device.c, device.c_nl)  # fmt: skip
+
+
+@numba.njit(inline="always")
+def _fixture_step(z1, z2, v1, v2, h, a0, am, a1, p):  # pragma: no cover (compiled)
+    """``fixture_rk4_step``'s step, operation for operation, compiled (an element without a hidden force): the
+    state after h under the base acceleration a0, am, a1 at the step's start, middle and end."""
+    m1, k_f, c_f, m2, k0, k1, k2, k3, c, cn = p
+    # stage 1
+    r, vr = z2 - z1, v2 - v1
+    f = ((k3 * r + k2) * r - k1) * r + k0 + c * vr + cn * vr * abs(vr)
+    p1, q1 = (-k_f * z1 - c_f * v1 + f) / m1 - a0, -f / m2 - a0
+    s1, s2 = v1 + 0.5 * h * p1, v2 + 0.5 * h * q1
+    # stage 2
+    y1, y2 = z1 + 0.5 * h * v1, z2 + 0.5 * h * v2
+    r, vr = y2 - y1, s2 - s1
+    f = ((k3 * r + k2) * r - k1) * r + k0 + c * vr + cn * vr * abs(vr)
+    p2, q2 = (-k_f * y1 - c_f * s1 + f) / m1 - am, -f / m2 - am
+    t1, t2 = v1 + 0.5 * h * p2, v2 + 0.5 * h * q2
+    # stage 3
+    y1, y2 = z1 + 0.5 * h * s1, z2 + 0.5 * h * s2
+    r, vr = y2 - y1, t2 - t1
+    f = ((k3 * r + k2) * r - k1) * r + k0 + c * vr + cn * vr * abs(vr)
+    p3, q3 = (-k_f * y1 - c_f * t1 + f) / m1 - am, -f / m2 - am
+    w1, w2 = v1 + h * p3, v2 + h * q3
+    # stage 4
+    y1, y2 = z1 + h * t1, z2 + h * t2
+    r, vr = y2 - y1, w2 - w1
+    f = ((k3 * r + k2) * r - k1) * r + k0 + c * vr + cn * vr * abs(vr)
+    p4, q4 = (-k_f * y1 - c_f * w1 + f) / m1 - a1, -f / m2 - a1
+    return (
+        z1 + h / 6 * (v1 + 2 * s1 + 2 * t1 + w1),
+        z2 + h / 6 * (v2 + 2 * s2 + 2 * t2 + w2),
+        v1 + h / 6 * (p1 + 2 * p2 + 2 * p3 + p4),
+        v2 + h / 6 * (q1 + 2 * q2 + 2 * q3 + q4),
+    )
+
+
 @numba.njit(cache=True)
 def _rk4_fixture_polynomial(acc, h, oversample, z2, p):  # pragma: no cover (compiled)
-    """``rk4_fixture_record``'s RK4 (``fixture_rk4_step``'s, operation for operation) compiled, for an element
-    without a hidden force."""
-    m1, k_f, c_f, m2, k0, k1, k2, k3, c, cn = p
+    """``rk4_fixture_record``'s RK4 (``_fixture_step``) compiled, for an element without a hidden force."""
     n = acc.size
     out = np.empty((4, n // oversample))  # z1, z2, v1, v2
     z1, v1, v2 = 0.0, 0.0, 0.0
@@ -373,44 +415,15 @@ def _rk4_fixture_polynomial(acc, h, oversample, z2, p):  # pragma: no cover (com
             out[2, i // oversample], out[3, i // oversample] = v1, v2
         a0 = acc[i]
         a1 = acc[i + 1] if i + 1 < n else a0
-        am = 0.5 * (a0 + a1)
-        # stage 1
-        r, vr = z2 - z1, v2 - v1
-        f = ((k3 * r + k2) * r - k1) * r + k0 + c * vr + cn * vr * abs(vr)
-        p1, q1 = (-k_f * z1 - c_f * v1 + f) / m1 - a0, -f / m2 - a0
-        s1, s2 = v1 + 0.5 * h * p1, v2 + 0.5 * h * q1
-        # stage 2
-        y1, y2 = z1 + 0.5 * h * v1, z2 + 0.5 * h * v2
-        r, vr = y2 - y1, s2 - s1
-        f = ((k3 * r + k2) * r - k1) * r + k0 + c * vr + cn * vr * abs(vr)
-        p2, q2 = (-k_f * y1 - c_f * s1 + f) / m1 - am, -f / m2 - am
-        t1, t2 = v1 + 0.5 * h * p2, v2 + 0.5 * h * q2
-        # stage 3
-        y1, y2 = z1 + 0.5 * h * s1, z2 + 0.5 * h * s2
-        r, vr = y2 - y1, t2 - t1
-        f = ((k3 * r + k2) * r - k1) * r + k0 + c * vr + cn * vr * abs(vr)
-        p3, q3 = (-k_f * y1 - c_f * t1 + f) / m1 - am, -f / m2 - am
-        w1, w2 = v1 + h * p3, v2 + h * q3
-        # stage 4
-        y1, y2 = z1 + h * t1, z2 + h * t2
-        r, vr = y2 - y1, w2 - w1
-        f = ((k3 * r + k2) * r - k1) * r + k0 + c * vr + cn * vr * abs(vr)
-        p4, q4 = (-k_f * y1 - c_f * w1 + f) / m1 - a1, -f / m2 - a1
-        z1, z2, v1, v2 = (
-            z1 + h / 6 * (v1 + 2 * s1 + 2 * t1 + w1),
-            z2 + h / 6 * (v2 + 2 * s2 + 2 * t2 + w2),
-            v1 + h / 6 * (p1 + 2 * p2 + 2 * p3 + p4),
-            v2 + h / 6 * (q1 + 2 * q2 + 2 * q3 + q4),
-        )
+        z1, z2, v1, v2 = _fixture_step(z1, z2, v1, v2, h, a0, 0.5 * (a0 + a1), a1, p)
     return out
 
 
 @numba.njit(cache=True)
 def _stepped_sweep_polynomial(p, amps, f_hz, state, periods, steps):  # pragma: no cover (compiled)
-    """``fixture_rk4_step``'s RK4 (operation for operation, as ``_rk4_fixture_polynomial``) under b'' = A sin(2 pi f
-    t), A stepped through ``amps`` each going on from the last state: per amplitude (spread of r = z2 - z1 over the
-    last 8 periods at phase 0, min r and max r over the last period) and the state after each amplitude."""
-    m1, k_f, c_f, m2, k0, k1, k2, k3, c, cn = p
+    """``_fixture_step`` under b'' = A sin(2 pi f t), A stepped through ``amps`` each going on from the last state:
+    per amplitude (spread of r = z2 - z1 over the last 8 periods at phase 0, min r and max r over the last period)
+    and the state after each amplitude."""
     h = 1.0 / (f_hz * steps)
     sines = np.sin(np.pi * np.arange(2 * steps + 1) / steps)  # at every half step of a period
     z1, z2, v1, v2 = state[0], state[1], state[2], state[3]
@@ -421,31 +434,8 @@ def _stepped_sweep_polynomial(p, amps, f_hz, state, periods, steps):  # pragma: 
         lo, hi, sec_lo, sec_hi = np.inf, -np.inf, np.inf, -np.inf
         for period in range(periods):
             for k in range(steps):
-                a0, am, a1 = A * sines[2 * k], A * sines[2 * k + 1], A * sines[2 * k + 2]
-                r, vr = z2 - z1, v2 - v1
-                f = ((k3 * r + k2) * r - k1) * r + k0 + c * vr + cn * vr * abs(vr)
-                p1, q1 = (-k_f * z1 - c_f * v1 + f) / m1 - a0, -f / m2 - a0
-                s1, s2 = v1 + 0.5 * h * p1, v2 + 0.5 * h * q1
-                y1, y2 = z1 + 0.5 * h * v1, z2 + 0.5 * h * v2
-                r, vr = y2 - y1, s2 - s1
-                f = ((k3 * r + k2) * r - k1) * r + k0 + c * vr + cn * vr * abs(vr)
-                p2, q2 = (-k_f * y1 - c_f * s1 + f) / m1 - am, -f / m2 - am
-                t1, t2 = v1 + 0.5 * h * p2, v2 + 0.5 * h * q2
-                y1, y2 = z1 + 0.5 * h * s1, z2 + 0.5 * h * s2
-                r, vr = y2 - y1, t2 - t1
-                f = ((k3 * r + k2) * r - k1) * r + k0 + c * vr + cn * vr * abs(vr)
-                p3, q3 = (-k_f * y1 - c_f * t1 + f) / m1 - am, -f / m2 - am
-                w1, w2 = v1 + h * p3, v2 + h * q3
-                y1, y2 = z1 + h * t1, z2 + h * t2
-                r, vr = y2 - y1, w2 - w1
-                f = ((k3 * r + k2) * r - k1) * r + k0 + c * vr + cn * vr * abs(vr)
-                p4, q4 = (-k_f * y1 - c_f * w1 + f) / m1 - a1, -f / m2 - a1
-                z1, z2, v1, v2 = (
-                    z1 + h / 6 * (v1 + 2 * s1 + 2 * t1 + w1),
-                    z2 + h / 6 * (v2 + 2 * s2 + 2 * t2 + w2),
-                    v1 + h / 6 * (p1 + 2 * p2 + 2 * p3 + p4),
-                    v2 + h / 6 * (q1 + 2 * q2 + 2 * q3 + q4),
-                )
+                z1, z2, v1, v2 = _fixture_step(z1, z2, v1, v2, h, A * sines[2 * k], A * sines[2 * k + 1],
+                                               A * sines[2 * k + 2], p)  # fmt: skip
                 if period == periods - 1:
                     lo, hi = min(lo, z2 - z1), max(hi, z2 - z1)
             if period >= periods - 8:
@@ -460,10 +450,7 @@ def stepped_sweep(amps, f_hz, state, device=None, fixture=FIXTURE, periods=120, 
     (each step going on from the last state, as a shaker test does), by ``fixture_rk4_step``'s plain RK4 compiled
     (``steps`` a period; in Python floats it took 4 s a sweep): per amplitude (spread of r = z2 - z1 over the last 8
     periods at phase 0, min r, max r over the last period, the state after it)."""
-    dev = TRUTH if device is None else device
-    m1 = fixture["m"]
-    k_f = m1 * (2 * np.pi * fixture["f_hz"]) ** 2
-    p = (m1, k_f, 2 * fixture["zeta"] * np.sqrt(k_f * m1), dev.m, dev.k0, dev.k1, dev.k2, dev.k3, dev.c, dev.c_nl)
+    p = _fixture_params(TRUTH if device is None else device, fixture)
     rows, states = _stepped_sweep_polynomial(p, np.asarray(amps, float), float(f_hz), np.asarray(state, float),
                                              int(periods), int(steps))  # fmt: skip
     return [(float(r[0]), float(r[1]), float(r[2]), tuple(map(float, s))) for r, s in zip(rows, states, strict=True)]
@@ -497,10 +484,7 @@ def rk4_fixture_record(duration=60.0, rms=12.0, band=(2.0, 40.0), seed=1, oversa
     z1, v1, v2 = 0.0, 0.0, 0.0
     out = np.empty((2, n // oversample))
     if hidden is None:  # the same steps, compiled (a 300 s record took 16 s)
-        m1 = fixture["m"]
-        k_f = m1 * (2 * np.pi * fixture["f_hz"]) ** 2
-        p = (m1, k_f, 2 * fixture["zeta"] * np.sqrt(k_f * m1), dev.m, k0, k1, k2, k3, dev.c, dev.c_nl)
-        out = _rk4_fixture_polynomial(np.asarray(acc), h, oversample, z2, p)
+        out = _rk4_fixture_polynomial(np.asarray(acc), h, oversample, z2, _fixture_params(dev, fixture))
     elif velocity:
         raise ValueError("velocity=True: the compiled route only (no hidden force)")
     velocities = out[2:] if hidden is None else None

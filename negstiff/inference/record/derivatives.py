@@ -58,12 +58,11 @@ def noise_floor(z: np.ndarray, fs: float) -> tuple[float, np.ndarray, np.ndarray
     return floor * fs / 2, f, np.where(p > 4 * floor, p - floor, 0.0)
 
 
-@functools.lru_cache(maxsize=1024)
 def _filter_response(w: int, order: int, d: int, fs: float, nf: int, df: float) -> tuple[np.ndarray, float]:
     """Frequency response of the Savitzky-Golay d-th derivative filter (window w, order) on the Welch
-    grid f = k df, k < nf (centred), and the sum of its squared taps. Cached: the responses depend on
-    the rate and the grid only, and every fit asks for the same 150 of them (3456 freqz calls a fit
-    of NSI and SINDy on one record, 2 s of its 17, measured).
+    grid f = k df, k < nf (centred), and the sum of its squared taps. Not cached itself: ``_filter_errors``
+    keeps what the search reads of every candidate's response, per rate and grid (the responses depend on them
+    only; 3456 freqz calls a fit of NSI and SINDy on one record had taken 2 s of its 17, measured).
     """
     f = np.arange(nf) * df
     h = signal.savgol_coeffs(w, order, deriv=d, delta=1.0 / fs, use="conv")
@@ -74,7 +73,6 @@ def _filter_response(w: int, order: int, d: int, fs: float, nf: int, df: float) 
         H = np.fft.rfft(h, n_dft)[:nf] * np.exp(1j * 2 * np.pi * f * (w // 2) / fs)
     else:
         H = signal.freqz(h, worN=f, fs=fs)[1] * np.exp(1j * 2 * np.pi * f * (w // 2) / fs)
-    H.setflags(write=False)
     return H, float(np.sum(h**2))
 
 
