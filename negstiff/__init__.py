@@ -27,7 +27,7 @@ __version__ = "0.1.0"
 
 _EXPORTS = {
     # records
-    "load": "negstiff.inference.record.measurement",
+    "load": "negstiff.inference.record.reading",
     "from_arrays": "negstiff.inference.record.measurement",
     "Measurement": "negstiff.inference.record.measurement",
     "pin_frame": "negstiff.inference.steps.frame",

@@ -87,7 +87,7 @@ def silverbox():
     >>> train.n
     65062
     """
-    from negstiff.inference.record.measurement import load
+    from negstiff.inference.record.reading import load
 
     return load(silverbox_path(), columns="force=V1,z=V2", fs=SILVERBOX_FS)
 

@@ -236,7 +236,7 @@ def test_lab_files_that_contradict_their_own_header_are_refused(lab_files, capsy
 def test_a_two_segment_lvm_is_read_whole(lab_files):
     # LabVIEW's multi-segment files (a header per segment, the same channels, time going on) are one record:
     # every segment is read, in order, to the 9 significant digits LabVIEW printed
-    from negstiff.inference.record.measurement import load
+    from negstiff.inference.record.reading import load
 
     truth = np.load(lab_files / "truth.npz")
     rec = load(lab_files / "two_segments.lvm", mass=0.2)
@@ -285,7 +285,7 @@ def records(tmp_path_factory) -> Path:
 def test_a_unix_epoch_time_column_is_read_by_its_spacing(records, name):
     # only the spacing of t matters: at 1.7e9 s float64 resolves 2.4e-7 s, a ten-thousandth of the 1.953 ms
     # step; the record is the one stamped from zero (its rate exactly, its start kept)
-    from negstiff.inference.record.measurement import load
+    from negstiff.inference.record.reading import load
 
     rec, ref = load(records / name), load(records / "rec.csv")
     assert rec.n == ref.n and rec.fs == pytest.approx(FS, rel=1e-9)

@@ -271,7 +271,7 @@ def test_the_installed_command_flushes_its_lines_and_keeps_its_exit_codes(tmp_pa
     p = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
     assert p.returncode == 0, p.stderr
     assert f"wrote {out}" in p.stderr + p.stdout
-    from negstiff.inference.record.measurement import load
+    from negstiff.inference.record.reading import load
 
     assert load(out).n == 1024
     bad = subprocess.run([*cmd[:3], "identify", "nsi", str(tmp_path / "none.csv"), "-o", str(tmp_path / "o.json")],

@@ -23,7 +23,7 @@ from law_records import WRITERS, rod_frame_record
 from negstiff.cli import main
 from negstiff.errors import InputError
 from negstiff.inference.estimators.discrepancy import LINEAR_BASELINE, Discrepancy
-from negstiff.inference.record.measurement import load
+from negstiff.inference.record.reading import load
 from negstiff.models import laws
 
 FORCE_TOLERANCE = 0.03

@@ -17,7 +17,7 @@ from scipy import signal
 from negstiff import OutputError, Report
 from negstiff.cli import main
 from negstiff.files import MANIFEST, atomic_dir, check_folder
-from negstiff.inference.record.measurement import load
+from negstiff.inference.record.reading import load
 
 FS = 256.0
 """Samples per second of the test record: 20 s of an 8 Hz oscillator is 160 periods, 5120 samples."""

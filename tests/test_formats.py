@@ -9,7 +9,7 @@ import pytest
 
 from negstiff.cli import main
 from negstiff.errors import MeasurementError
-from negstiff.inference.record.measurement import load
+from negstiff.inference.record.reading import load
 from negstiff.models.device import SEED_LIKE_CUBIC
 from negstiff.models.rig import Rig
 

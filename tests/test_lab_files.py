@@ -133,7 +133,7 @@ def test_a_labview_file_as_labview_writes_it_loads_with_its_values(labview_recor
     # (Samples 1) is of another rate than the record: neither stops the record from loading. The values are the
     # file's to its printed precision (%.6E: 5e-7 relative, i.e. 5e-7 of each channel's amplitude at most), and
     # the channel set aside is named in the record's info with why.
-    from negstiff.inference.record.measurement import load
+    from negstiff.inference.record.reading import load
 
     path, data = labview_record
     rec = load(path, columns="base_acc=Accel,z=Laser")

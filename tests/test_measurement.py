@@ -6,7 +6,7 @@ import scipy.io
 
 from negstiff.datasets import silverbox, silverbox_path
 from negstiff.errors import MeasurementError
-from negstiff.inference.record.measurement import load
+from negstiff.inference.record.reading import load
 from negstiff.io.schema import parse_column_map
 
 

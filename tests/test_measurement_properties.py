@@ -10,7 +10,8 @@ from hypothesis import strategies as st
 from scipy.io import savemat
 
 from negstiff.errors import MeasurementError
-from negstiff.inference.record.measurement import Measurement, load
+from negstiff.inference.record.measurement import Measurement
+from negstiff.inference.record.reading import load
 from negstiff.io.schema import KNOWN
 
 NAMES = st.sampled_from([*KNOWN, "V1", "V2", "time", "", "meta", "fs", "mass"])

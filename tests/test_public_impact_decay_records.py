@@ -38,7 +38,7 @@ from negstiff import NSI, SINDy
 from negstiff.inference.analysis.backbone import backbone, on_amplitudes
 from negstiff.inference.analysis.frf import frf
 from negstiff.inference.record.impacts import find_impacts
-from negstiff.inference.record.measurement import load
+from negstiff.inference.record.reading import load
 
 FRID = Path(__file__).parent / "data" / "frid_magneto_mechanical_decay"
 RECORD = FRID / "decay_f_42p05_ampl_2p0_0_12p1-19p1s.lvm"

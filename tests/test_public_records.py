@@ -47,7 +47,7 @@ def test_the_harvesters_chaotic_run_keeps_its_wells_and_its_forcing(tmp_path):
     # integral drifts by some 45 mm over 396 s; with the drift separated, z's histogram has two modes
     # (the wells) and the regime is cross-well (it read "in-well-minus" before).
     from negstiff.inference.analysis.characterise import characterise
-    from negstiff.inference.record.measurement import load
+    from negstiff.inference.record.reading import load
 
     path = _chaos_record(tmp_path)
     rec = load(path, columns="base_acc=ACC*9.80665,z_dot=VEL*?", gravity=0.0)
@@ -92,7 +92,7 @@ def test_the_vibrometer_reads_the_absolute_velocity(tmp_path):
     # equation error), and the base's motion left out of z (two wells, cross-well)
     from scipy.io import loadmat
 
-    from negstiff.inference.record.measurement import load
+    from negstiff.inference.record.reading import load
 
     sweeps = sorted((Path(ROOT) / SWEEPS).glob("*/*_eq_point.mat"))
     if not sweeps:
@@ -145,7 +145,7 @@ def test_the_harvesters_chaotic_run_is_identified(tmp_path, method):
     # and which predicts held-out windows better than zero does. The vibrometer stands on the ground: its
     # velocity is absolute (test_the_vibrometer_reads_the_absolute_velocity)
     from negstiff import NSI, SINDy
-    from negstiff.inference.record.measurement import load
+    from negstiff.inference.record.reading import load
 
     rec = load(_chaos_record(tmp_path), columns="base_acc=ACC*9.80665,y_dot=VEL*?", gravity=0.0)
     est = (NSI() if method == "nsi" else SINDy()).fit(rec)

@@ -127,7 +127,7 @@ def test_a_free_decays_report_gives_the_posterior_and_its_backbone_band(tmp_path
     # true cubic in its 90 % interval, and the backbone's band of posterior draws holds the true model's backbone
     # (measured alike) over most of the measured range: the band is the posterior's, 24 draws
     from negstiff.inference.analysis.backbone import backbone
-    from negstiff.inference.record.measurement import load
+    from negstiff.inference.record.reading import load
 
     t, z, _ = decay_record(LIGHT_DUFFING, 0.008, FS, 10.0)
     zm = z + 5e-6 * np.random.default_rng(2).standard_normal(t.size)

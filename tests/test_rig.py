@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from scipy import signal
 
-from negstiff.inference.record.measurement import load
+from negstiff.inference.record.reading import load
 from negstiff.models import AS_BUILT, Model
 from negstiff.models.records import RigError
 from negstiff.models.rig import Rig, Sensors

@@ -258,7 +258,7 @@ def _accelerometer_file(tmp_path, model):
 
 
 def _load_warned(path):
-    from negstiff.inference.record.measurement import load
+    from negstiff.inference.record.reading import load
 
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")

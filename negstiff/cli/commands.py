@@ -117,7 +117,7 @@ def write_campaign(rig, args) -> None:
 
 def cmd_simulate(args) -> int:
     from negstiff.files import atomic_path
-    from negstiff.inference.record.measurement import load
+    from negstiff.inference.record.reading import load
     from negstiff.inference.steps.validation import simulate_measured
     from negstiff.models.device import load_system
     from negstiff.models.effects import measured_channels
@@ -147,7 +147,7 @@ def cmd_simulate(args) -> int:
 def _simulate_structure(args, structure) -> int:
     """``simulate STRUCTURE.json``: the structure under the record's input, every DOF's z and z_dot written."""
     from negstiff.files import atomic_path
-    from negstiff.inference.record.measurement import load
+    from negstiff.inference.record.reading import load
     from negstiff.inference.steps.validation import check_structure_run
 
     for option, given in (("--v0", args.v0), ("--aux", args.aux)):
@@ -181,7 +181,7 @@ def refinement(args) -> bool | None:
 
 def cmd_identify(args) -> int:
     from negstiff.inference.analysis.frf import compare_with_frf, read_frf_results
-    from negstiff.inference.record.measurement import load
+    from negstiff.inference.record.reading import load
 
     masses = parse_amplitudes(args.masses, "--masses") if args.masses else None
     rec = load(args.data, columns=args.columns, fs=args.fs, mass=args.mass, gravity=args.gravity, aux=args.aux,
@@ -255,7 +255,7 @@ def _identify_structure(args, est, rec) -> int:
 
 def cmd_posterior(args) -> int:
     from negstiff.inference.estimators.posterior import Posterior
-    from negstiff.inference.record.measurement import load
+    from negstiff.inference.record.reading import load
     from negstiff.models import Model
     from negstiff.models.device import load_system
 
@@ -320,7 +320,7 @@ def cmd_posterior(args) -> int:
 
 def cmd_discrepancy(args) -> int:
     from negstiff.inference.estimators.discrepancy import CUBIC_BASELINE, LINEAR_BASELINE, Discrepancy
-    from negstiff.inference.record.measurement import load
+    from negstiff.inference.record.reading import load
 
     rec = load(args.data, columns=args.columns, fs=args.fs, mass=args.mass, gravity=args.gravity, aux=args.aux,
                decay=args.decay)  # fmt: skip
@@ -391,7 +391,7 @@ def parse_wells(text: str | None) -> tuple[float, ...] | None:
 
 def cmd_characterise(args) -> int:
     from negstiff.inference.analysis.characterise import characterise, check_harmonic
-    from negstiff.inference.record.measurement import load
+    from negstiff.inference.record.reading import load
     from negstiff.report.record import check_forcing
 
     given = parse_wells(args.wells)  # the options before any work
@@ -423,7 +423,7 @@ def cmd_characterise(args) -> int:
 
 def cmd_frf(args) -> int:
     from negstiff.inference.analysis.frf import check_frf, frf
-    from negstiff.inference.record.measurement import load
+    from negstiff.inference.record.reading import load
     from negstiff.report.figures import frf_figure
 
     band = parse_band(args.band)
@@ -476,7 +476,7 @@ def _frf_structure(args, band, rec) -> int:
 
 def cmd_backbone(args) -> int:
     from negstiff.inference.analysis.backbone import backbone
-    from negstiff.inference.record.measurement import load
+    from negstiff.inference.record.reading import load
     from negstiff.models.device import load_system
     from negstiff.report.figures import backbone_figure
 

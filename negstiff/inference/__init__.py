@@ -19,7 +19,7 @@ from __future__ import annotations
 import importlib
 
 _EXPORTS = {
-    "load": "record.measurement",
+    "load": "record.reading",
     "from_arrays": "record.measurement",
     "Measurement": "record.measurement",
     "pin_frame": "steps.frame",

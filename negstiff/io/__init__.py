@@ -6,7 +6,7 @@
   (LabVIEW TDMS, npTDMS), ``lvm`` (LabVIEW measurement files, lvm_read; read only).
 
 ``read(path)`` returns a file's raw channels and metadata as the file names them; turning them into a
-record (the column map, units to SI, the time base, the checks) is ``negstiff.inference.record.measurement.load``.
+record (the column map, units to SI, the time base, the checks) is ``negstiff.inference.record.reading.load``.
 ``write(path, columns, fs, meta)`` writes a record's columns in the format of the path's suffix (the virtual
 rig's records, ``models.records``). Both refuse with one ``MeasurementError`` line.
 """

@@ -11,7 +11,7 @@ A format module holds its file type's reader and, where a lab writes it, its wri
 * ``write(path, columns, fs, meta)`` (optional): the columns (SI, or ``<name>_g`` in g) as that format holds
   them, to ``path`` (the caller writes atomically).
 
-Nothing here converts units or checks what a record is: ``negstiff.inference.record.measurement.load`` does, by the
+Nothing here converts units or checks what a record is: ``negstiff.inference.record.reading.load`` does, by the
 schema (``negstiff.io.schema``).
 """
 

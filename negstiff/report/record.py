@@ -100,7 +100,7 @@ def report_records(
             )
             raise InputError(f"{option}; give one record")
         return _campaign_report(data, columns, fs, forcing_hz, wells, nfrc, _only(only, CAMPAIGN), say, gravity)
-    from negstiff.inference.record.measurement import load
+    from negstiff.inference.record.reading import load
     from negstiff.inference.steps.frame import pin_frame
 
     if nfrc:

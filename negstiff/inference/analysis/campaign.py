@@ -23,7 +23,8 @@ import numpy as np
 from negstiff.errors import MeasurementError
 from negstiff.files import read_json
 from negstiff.inference.analysis.characterise import check_harmonic, first_period_2, jump, map_point, map_sequence
-from negstiff.inference.record.measurement import Measurement, load
+from negstiff.inference.record.measurement import Measurement
+from negstiff.inference.record.reading import load
 
 MEASUREMENT_SUFFIXES = (".csv", ".txt", ".npz", ".mat", ".uff", ".unv", ".tdms", ".lvm")
 

@@ -36,7 +36,8 @@ from negstiff.errors import InputError, NotFittedError
 from negstiff.inference.estimators.parameters import Constraint
 from negstiff.inference.estimators.persistence import decode_param, encode_param, json_source
 from negstiff.inference.estimators.prediction import ModelPredictions
-from negstiff.inference.record.measurement import Measurement, load
+from negstiff.inference.record.measurement import Measurement
+from negstiff.inference.record.reading import load
 from negstiff.inference.steps.frame import pin_frame
 
 _CHECKED: weakref.WeakValueDictionary[tuple[int, str, str], Measurement] = weakref.WeakValueDictionary()

@@ -88,7 +88,8 @@ class Prediction:
 
 def as_record(data, who: str):
     """A ``Measurement`` of ``data`` (a record or a file path), in the physical frame (``frame.pin_frame``)."""
-    from negstiff.inference.record.measurement import Measurement, load
+    from negstiff.inference.record.measurement import Measurement
+    from negstiff.inference.record.reading import load
     from negstiff.inference.steps.frame import pin_frame
 
     if isinstance(data, (str, PathLike)):

@@ -1,6 +1,6 @@
-"""Records: ``Measurement`` (one uniformly sampled record in SI units), ``load`` (a file read through
-``negstiff.io``, its columns mapped, converted to SI and checked) and ``from_arrays`` (the same checks for
-arrays in memory).
+"""Records: ``Measurement`` (one uniformly sampled record in SI units) and ``from_arrays`` (a record made from
+arrays in memory, checked as a file is: ``Measurement.from_rig`` makes the virtual rig's through it). A file is
+read by ``reading.load``; the checks both share are ``checks``'.
 
 A measurement is one uniformly sampled record with exactly one input column (``base_acc`` [m/s^2]
 or ``force`` [N]), the output ``z`` [m], and a time base (``t`` [s], or ``fs`` [Hz] from the
@@ -17,17 +17,14 @@ map (``force=V1,z=V2``; an entry may scale, ``base_acc=X1*9.81``). Every problem
 from __future__ import annotations
 
 import copy
-import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from negstiff import io as record_io
 from negstiff.constants import G
-from negstiff.errors import MeasurementError, RecordWarning, issue
+from negstiff.errors import MeasurementError
 from negstiff.inference.record.derivatives import (
     band_limited,
     basis_band_hz,
@@ -36,31 +33,20 @@ from negstiff.inference.record.derivatives import (
     state_derivatives,
     velocity_window,
 )
-from negstiff.io.base import RESOLUTION, SET_ASIDE
-from negstiff.io.schema import (
-    AUX_MAGNITUDE_LIMIT,
-    GRAVITY_RANGE,
-    INPUTS,
-    KNOWN,
-    MAGNITUDE_LIMITS,
-    MASS_RANGE_KG,
-    OPTIONAL,
-    SAMPLING_RATE_RANGE_HZ,
-    TIME_STEP_RESOLUTION,
-    UNITS,
-    channel_sensor,
-    dimension,
-    header_name,
-    in_si,
-    parse_column_map,
-)
+from negstiff.io.schema import INPUTS, MASS_RANGE_KG, OPTIONAL
 from negstiff.models.effects import measured_channels
 
 from . import channels, sensors
-
-TIME_JITTER_FRACTION = 0.01
-"""A time column's samples may sit this fraction of a step off a uniform grid (or by their printed
-precision, whichever is larger) and still be uniform: lab exports round time."""
+from .checks import (
+    aux_channels,
+    check_sampling_rate,
+    check_values,
+    checked_force_dof,
+    checked_gravity,
+    checked_masses,
+    checked_unknown_scale,
+    is_constant,
+)
 
 
 @dataclass(frozen=True)
@@ -183,7 +169,7 @@ class Measurement:
                 raise MeasurementError(f"{source}: mass {m!r} kg is not a moving mass "
                                        f"({MASS_RANGE_KG[0]:g} to {MASS_RANGE_KG[1]:g} kg)")  # fmt: skip
         if self.masses is not None:
-            object.__setattr__(self, "masses", _checked_masses(source, self.masses, self.n_dof))
+            object.__setattr__(self, "masses", checked_masses(source, self.masses, self.n_dof))
 
     @property
     def n(self) -> int:
@@ -407,7 +393,7 @@ class Measurement:
         """The same record with the gravity along its motion given by the caller (overrides the metadata)."""
         if gravity is None:
             return self
-        return replace(self, meta={**self.meta, "gravity": repr(_checked_gravity(self.source, gravity))})
+        return replace(self, meta={**self.meta, "gravity": repr(checked_gravity(self.source, gravity))})
 
     def require(self, n_min: int, what: str) -> None:
         """Raise ``MeasurementError`` unless the record has at least ``n_min`` samples for ``what``."""
@@ -435,7 +421,7 @@ class Measurement:
         """
         if masses is None:
             return self
-        masses = _checked_masses(self.source, masses, self.n_dof)
+        masses = checked_masses(self.source, masses, self.n_dof)
         return self.with_mass(masses[0]) if self.n_dof == 1 else replace(self, masses=masses)
 
     def require_motion(self, what: str) -> None:
@@ -445,7 +431,7 @@ class Measurement:
         if self.z is None:
             return
         for k, zk in enumerate(np.atleast_2d(self.z)):
-            if _constant(zk):
+            if is_constant(zk):
                 name = "z" if self.n_dof == 1 else f"z{k + 1}"
                 raise MeasurementError(
                     f"{self.source}: the response {name} is constant ({zk[0]:.6g} m over {self.n} samples): a dead "
@@ -454,7 +440,7 @@ class Measurement:
 
     def require_excitation(self, what: str) -> None:
         """Raise ``MeasurementError`` when the input does not vary (a dead sensor, or no excitation)."""
-        if _constant(self.u):
+        if is_constant(self.u):
             raise MeasurementError(
                 f"{self.source}: the input {self.input_name} is constant ({self.u[0]:.6g} over {self.n} samples): a "
                 f"dead sensor, or no excitation? {what} needs an input that moves"
@@ -471,7 +457,7 @@ class Measurement:
         """
         from scipy import signal
 
-        if self.z is None or self.n_dof != 1 or _constant(self.u) or _constant(self.z):
+        if self.z is None or self.n_dof != 1 or is_constant(self.u) or is_constant(self.z):
             return
         nper = int(min(self.n // 16, round(self.fs)))
         if nper < 64:
@@ -495,7 +481,7 @@ class Measurement:
         is a constant, which the restoring force's k0 cannot be told from (``what`` offers each as a term).
         """
         for name, a in self.aux.items():
-            if _constant(a):
+            if is_constant(a):
                 raise MeasurementError(
                     f"{self.source}: the auxiliary channel {name!r} is constant ({a[0]:.6g} over {self.n} samples): a "
                     f"dead or disconnected sensor? {what} offers it as a term, which needs a channel that moves"
@@ -505,265 +491,6 @@ class Measurement:
 RESPONSE_TRACE_P = 0.01
 """A response whose best coherence with the input is not significant at this level (over the band's bins) carries
 no trace of the input (``Measurement.require_response``)."""
-
-
-def _checked_masses(source, masses, n_dof: int) -> tuple[float, ...]:
-    """``n_dof`` masses [kg] within ``MASS_RANGE_KG`` (a string "m1,...,mN" too), or one ``MeasurementError``."""
-    if isinstance(masses, str):
-        try:
-            masses = [float(x) for x in masses.split(",")]
-        except ValueError:
-            raise MeasurementError(f"{source}: masses must be numbers separated by commas, got {masses!r}") from None
-    try:
-        out = tuple(float(m) for m in np.atleast_1d(np.asarray(masses, dtype=float)))
-    except (TypeError, ValueError):
-        raise MeasurementError(f"{source}: masses must be numbers, got {masses!r}") from None
-    lo, hi = MASS_RANGE_KG
-    if len(out) != n_dof or not all(lo <= m <= hi for m in out):
-        raise MeasurementError(f"{source}: masses must be {n_dof} masses of {lo:g} to {hi:g} kg (one per DOF, "
-                               f"'# masses: m1,...,mN'), got {list(out)}")  # fmt: skip
-    return out
-
-
-def _force_dof(source, value, n_dof: int) -> int | None:
-    """The metadata's ``force_dof`` (the DOF a force acts on, 1..N), checked; None when not given."""
-    if value is None:
-        return None
-    try:
-        k = int(value)
-    except (TypeError, ValueError):
-        raise MeasurementError(f"{source}: force_dof {value!r} is not a DOF number (1..{n_dof})") from None
-    if not 1 <= k <= n_dof:
-        raise MeasurementError(f"{source}: force_dof {k} is not a DOF of the record (1..{n_dof})")
-    return k
-
-
-def _checked_gravity(source, g) -> float:
-    try:
-        g = float(g)
-    except (TypeError, ValueError):
-        raise MeasurementError(f"{source}: gravity {g!r} is not a number (m/s^2 along the motion: 0 for a "
-                               "horizontal device, 9.81 for a vertical one)") from None  # fmt: skip
-    if not (GRAVITY_RANGE[0] <= g <= GRAVITY_RANGE[1]):
-        lo, hi = GRAVITY_RANGE
-        raise MeasurementError(f"{source}: gravity {g:g} m/s^2 along the motion is outside {lo:g}-{hi:g} (0 for a "
-                               "horizontal device, 9.81 for a vertical one)")  # fmt: skip
-    return g
-
-
-SCALABLE = {"base_acc": ("z", "z_dot"), "force": ("z", "z_dot", "y", "y_dot", "y_acc")}
-"""Response channels whose unknown scale (``*?``) the record's dynamics can estimate: those z is linear in
-(a base-excited record's y, y_dot, y_acc mix the unknown scale with the base's known motion). One more: a
-base-excited record's y_dot when it is the response, an absolute velocity of unknown gain (a vibrometer on the
-ground): the base's known motion in z = integral of (g y_dot - b') says g (``sensors.absolute_velocity_gain``)."""
-
-
-def _unknown_scale(source, name: str | None, input_name: str, mass: float | None, present) -> dict | None:
-    """``info["scale"]`` for a response channel marked ``*?`` (None without one), after checking that the
-    record can identify it: the input's coefficient must be known (-1 for a base acceleration; 1/m for a
-    force, so a force-driven record needs its mass).
-    """
-    if name is None:
-        return None
-    absolute = input_name == "base_acc" and name == "y_dot" and not any(k in present for k in ("z", "z_dot", "y"))
-    if name not in SCALABLE[input_name] and not absolute:
-        what = (
-            "the input's scale is what makes a response's scale identifiable: it must be known"
-            if name in INPUTS
-            else f"only {', '.join(SCALABLE[input_name])} of a {input_name} record can be"
-        )
-        raise MeasurementError(f"{source}: {name}'s scale is marked unknown (*?): {what}")  # fmt: skip
-    if name not in present:
-        raise MeasurementError(f"{source}: {name}'s scale is marked unknown (*?), but the record has no {name}")
-    if input_name == "force" and mass is None:
-        raise MeasurementError(
-            f"{source}: {name}'s scale is marked unknown (*?), but a force-driven record without a mass cannot "
-            "identify it (z'' = force / m - ...: scale and mass trade off); give the mass (--mass or '# mass:')"
-        )
-    if absolute:  # its gain is estimated with z (``sensors.absolute_velocity_gain``); z's scale then as z_dot's
-        status = ("unknown: y_dot's gain estimated as z was derived (the base's known motion in z), the measured "
-                  "point's participation in the input from the record's dynamics when analysed")  # fmt: skip
-        return {"channel": name, "value": None, "status": status}
-    return {"channel": name, "value": None, "status": "unknown: estimated from the record's dynamics when analysed"}
-
-
-def _aux_channels(source, raw: dict[str, np.ndarray], names, n: int) -> dict[str, np.ndarray]:
-    """The auxiliary channels ``names`` (the file's own column names: a piezo's voltage, a coil's current),
-    checked finite and of the record's length; refused when absent or a contract column.
-    """
-    out = {}
-    for name in names or ():
-        name = str(name).strip()
-        if name in KNOWN:
-            raise MeasurementError(f"{source}: --aux {name}: {name} is a measurement column, not an auxiliary channel")
-        if name not in raw:
-            raise MeasurementError(f"{source}: --aux {name}: no such column (columns: {', '.join(raw) or 'none'})")
-        v = np.asarray(raw[name], float)
-        if v.ndim != 1 or v.size != n:
-            raise MeasurementError(f"{source}: auxiliary channel {name} has {v.size} samples, the record {n}")
-        check_values(source, {name: v})  # finite (a channel of its own: no contract magnitude)
-        big = np.flatnonzero(np.abs(v) > AUX_MAGNITUDE_LIMIT)
-        if big.size:
-            raise MeasurementError(
-                f"{source}: auxiliary channel {name} is {v[big[0]]:.3g} at row {big[0] + 1}, beyond any lab "
-                f"instrument's reading (|{name}| <= {AUX_MAGNITUDE_LIMIT:g} in its units): scale it to its units"
-            )
-        out[name] = v
-    return out
-
-
-def _constant(x: np.ndarray) -> bool:
-    """No variation beyond the values' own floating-point resolution."""
-    span = float(np.ptp(x))
-    return bool(span <= 64 * np.finfo(float).eps * float(np.max(np.abs(x))) or span < 1e-15)
-
-
-def load(
-    path: str | Path,
-    columns: str | dict | None = None,
-    fs: float | None = None,
-    mass: float | None = None,
-    response: bool = True,
-    gravity: float | None = None,
-    aux: Sequence[str] | str | None = None,
-    masses: Sequence[float] | str | None = None,
-    decay: bool = False,
-) -> Measurement:
-    """Read a measurement file, checked as the command line checks it.
-
-    The response is z, or z derived from z_dot, y (with the base's motion), y_dot or y_acc
-    (``sensors.derive``); what was done is in ``info["response"]``. A derived z's constant is unknown:
-    the analyses that need z's frame pin it (``pin_frame``); ``load`` fits nothing.
-
-    Parameters
-    ----------
-    path : str or pathlib.Path
-        A .csv, .npz, .mat, .uff/.unv, .tdms or .lvm file.
-    columns : str or dict, optional
-        Column map for foreign files (``"force=V1,z=V2"``, ``"base_acc=ACC*9.81,z_dot=LDV*?"``, or its
-        parsed dict); ``*?`` marks a response of unknown sensitivity.
-    fs : float, optional
-        Sampling rate [Hz]; replaces the time column when given (the column then only sets t0).
-    mass : float, optional
-        Moving mass [kg] (overrides the metadata's ``mass``).
-    response : bool, default True
-        False for an input-only record (``negstiff simulate``): no response column needed.
-    gravity : float, optional
-        The gravity along the motion [m/s^2] (overrides the metadata's ``gravity``; 0 for a horizontal
-        device).
-    aux : str or sequence of str, optional
-        Measured auxiliary channels to keep, by the file's column names (``"voltage"``): candidate terms
-        of the discrepancy workflow and SINDy (``aux:NAME``).
-    masses : sequence of float or str, optional
-        A structure's DOF masses m1 ... mN [kg] (overrides the metadata's ``masses``); its responses are the
-        file's (or the map's) ``z1 ... zN``.
-    decay : bool, default False
-        The record is a free decay whatever its input column holds (a force channel left connected that reads only
-        its noise): the analyses read it as one (``record_kind``; ``info["decay"]``). A constant input is a decay
-        without saying so.
-
-    Returns
-    -------
-    Measurement
-        The record in SI units, with how it was read in ``info``.
-
-    Raises
-    ------
-    MeasurementError
-        A file, column, unit or number that cannot be read as a record: one line naming the file, the
-        column or row, and the problem.
-
-    Examples
-    --------
-    >>> import tempfile, pathlib
-    >>> from negstiff import Rig, load
-    >>> path = Rig(seed=1).random(duration=10.0).write(pathlib.Path(tempfile.mkdtemp()) / "rec.csv")
-    >>> rec = load(path)
-    >>> rec.fs, rec.input_name, rec.n
-    (512.0, 'base_acc', 5120)
-    """
-    path = Path(path)
-    mass_given = mass is not None
-    raw, meta = record_io.read(path)
-    resolution = raw.pop(RESOLUTION, None)
-    cmap = parse_column_map(columns) if isinstance(columns, (str, type(None))) else dict(columns)
-    cmap = {name: (header_name(src, raw), scale) for name, (src, scale) in cmap.items()}
-    _refuse_set_aside(path, meta, [src for src, _ in cmap.values()] if cmap else [k for k in KNOWN if k not in raw])
-    cols, channel_info = in_si(path, _mapped_columns(path, raw, cmap), meta, cmap)
-    if any(name == "t" and (src != "t" or scale != 1.0) for name, (src, scale) in cmap.items()):
-        resolution = None  # the printed precision was read for a column named t only
-    if resolution is not None:  # a time column in ms: its printed precision in s too
-        resolution = resolution * channel_info.get("channels", {}).get("t", {}).get("to_si", 1.0)
-    input_name, n = _checked_input(path, raw, cols)
-    fs, t0, time_info = _time_base(path, cols, meta, fs, resolution)
-    if mass is None and "mass" in meta:
-        try:
-            mass = float(meta["mass"])
-        except ValueError:
-            raise MeasurementError(f"{path}: metadata mass = {meta['mass']!r} is not a number") from None
-    if "gravity" in meta:
-        meta = {**meta, "gravity": repr(_checked_gravity(f"{path}: metadata", meta["gravity"]))}
-    unknown = [name for name, (_, scale) in cmap.items() if scale is None]
-    if len(unknown) > 1:
-        raise MeasurementError(f"{path}: scales of {' and '.join(unknown)} marked unknown (*?): one channel at most")
-    scale_info = _unknown_scale(path, unknown[0] if unknown else None, input_name, mass, cols)
-    aux_names = [a for a in (aux.split(",") if isinstance(aux, str) else aux or ()) if str(a).strip()]
-    _refuse_set_aside(path, meta, aux_names)
-    aux_cols = _aux_channels(path, raw, aux_names, n)
-    dofs = channels.response_channels(path, cols)
-    if len(dofs) == 1:  # one DOF: a single DOF's response (z1 its z, z1_dot its z_dot, ...)
-        cols[channel_sensor(dofs[1])[1]] = cols.pop(dofs[1])  # type: ignore[index]
-    masses = masses if masses is not None else meta.get("masses")
-    dof_masses = None if masses is None else _checked_masses(path, masses, max(1, len(dofs)))
-    if len(dofs) <= 1 and dof_masses is not None and mass is None:
-        mass = dof_masses[0]
-    force_dof = _force_dof(path, meta.get("force_dof"), max(1, len(dofs)))
-    z: np.ndarray | None = None
-    resp: dict[str, Any] = {"measured": None}
-    if len(dofs) > 1:
-        if mass_given:
-            raise MeasurementError(f"{path}: a record of {len(dofs)} DOFs (z1 ... z{len(dofs)}) takes its DOFs' "
-                                   "masses (masses=, --masses, '# masses:'), not one mass")  # fmt: skip
-        z, resp = channels.derive_channels(path, cols, dofs, input_name, fs, units_known=not unknown)
-        mass = None  # a structure's are its masses
-    elif response or any(k in cols for k in sensors.RESPONSES):
-        z, resp = sensors.derive(cols, input_name, fs, str(path), units_known=not unknown)
-    k = int(round(resp.get("trim_s", 0.0) * fs))
-    if k and z is not None:
-        if n <= 4 * k:
-            raise MeasurementError(
-                f"{path}: too few samples ({n}) to derive z from {resp['measured']}: the integral of an "
-                f"accelerometer loses {resp['trim_s']:g} s at each end"
-            )
-        cols = {c: v[k:-k] for c, v in cols.items()}
-        aux_cols = {c: v[k:-k] for c, v in aux_cols.items()}
-        z, t0 = z[..., k:-k], t0 + k / fs
-        resp["derived"] += f"; {resp['trim_s']:g} s cut at each end (the integral's end effects)"
-    aside = {k[len(SET_ASIDE) :]: v for k, v in meta.items() if k.startswith(SET_ASIDE)}
-    rec = Measurement(
-        fs=fs,
-        input_name=input_name,
-        u=cols[input_name],
-        z=z,
-        z_dot=cols.get("z_dot"),
-        y=cols.get("y"),
-        base_disp=cols.get("base_disp"),
-        meta=meta,
-        source=str(path),
-        t0=t0,
-        info={
-            "time": time_info,
-            "response": resp,
-            **channel_info,
-            **({"scale": scale_info} if scale_info else {}),
-            **({"set_aside": aside} if aside else {}),  # channels of other rates, each with why
-            **({"decay": True} if decay else {}),
-        },
-        aux=aux_cols,
-        masses=dof_masses if len(dofs) > 1 else None,
-        force_dof=force_dof,
-    )
-    return _warned(rec.with_mass(mass).with_gravity(gravity))
 
 
 def per_unit_mass_warning(rec: Measurement) -> str | None:
@@ -779,196 +506,6 @@ def per_unit_mass_warning(rec: Measurement) -> str | None:
         f"{rec.source}: no mass given (--mass, '# mass:' or from_arrays(..., mass=)): the coefficients are per unit "
         "mass (m = 1, mass_normalised): k0-k3, c and c_nl are the device's divided by its moving mass"
     )
-
-
-def _warned(rec: Measurement) -> Measurement:
-    """The record with what looks wrong in it alone (units: mm read as m, an acceleration in mm/s^2; the
-    sensor's derivation) in ``info["warnings"]``, each issued as a ``RecordWarning`` at once: a user learns
-    it when loading, whatever comes next (``Measurement.unit_warnings``).
-    """
-    new = [w for w in rec.unit_warnings() if w not in rec.info.get("warnings", [])]
-    lines = [*rec.info.get("warnings", []), *rec.info.get("response", {}).get("warnings", []), *new]
-    issue([(RecordWarning, w) for w in lines])
-    return replace(rec, info={**rec.info, "warnings": [*rec.info.get("warnings", []), *new]}) if new else rec
-
-
-def _refuse_set_aside(path: Path, meta: dict[str, str], wanted) -> None:
-    """One ``MeasurementError`` line for a wanted channel the reader set aside (``SET_ASIDE``: another rate than
-    the record's), naming it and why (the others are listed in the record's ``info["set_aside"]``).
-    """
-    for name in wanted:
-        why = meta.get(SET_ASIDE + str(name))
-        if why is not None:
-            raise MeasurementError(f"{path}: channel {name!r} {why}")
-
-
-def _mapped_columns(path: Path, raw: dict[str, np.ndarray], cmap: dict) -> dict[str, np.ndarray]:
-    """The contract's columns: mapped (and scaled) from the file's, plus unmapped contract names."""
-    if not cmap:
-        return {k: v for k, v in raw.items() if k in KNOWN or channel_sensor(k) is not None}
-    cols: dict[str, np.ndarray] = {}
-    for name, (src, scale) in cmap.items():
-        if src not in raw:
-            raise MeasurementError(
-                f"{path}: column map refers to {src!r}, which is not in the file (columns: {', '.join(raw) or 'none'})"
-            )
-        cols[name] = raw[src] * (1.0 if scale is None else scale)  # an unknown scale (*?): as read
-    for name in [*KNOWN, *(k for k in raw if channel_sensor(k) is not None)]:  # unmapped contract columns count
-        if name in raw and name not in cols and all(src != name for src, _ in cmap.values()):
-            cols[name] = raw[name]
-    return cols
-
-
-def _checked_input(path: Path, raw: dict, cols: dict[str, np.ndarray]) -> tuple[str, int]:
-    """The one input column's name and the record's length; equal lengths, finite values."""
-    inputs = [k for k in INPUTS if k in cols]
-    if len(inputs) != 1:
-        what = "no input column" if not inputs else "two input columns"
-        raise MeasurementError(
-            f"{path}: {what}; exactly one of base_acc, force is needed "
-            f"(columns: {', '.join(raw) or 'none'}; map foreign names with --columns)"
-        )
-    n = cols[inputs[0]].size
-    if n < 2:
-        raise MeasurementError(f"{path}: too few samples ({n}) for a record")
-    for k, v in cols.items():
-        if v.size != n:
-            raise MeasurementError(f"{path}: column {k} has {v.size} samples, {inputs[0]} has {n}")
-    check_values(path, cols)
-    return inputs[0], n
-
-
-def check_values(source, cols: dict[str, np.ndarray]) -> None:
-    """Every value finite and, for a contract column, within the magnitude no shaker-table record in SI
-    exceeds (``units.MAGNITUDE_LIMITS``); one ``MeasurementError`` naming the column, the row and the unit.
-    """
-    for k, v in cols.items():
-        bad = np.flatnonzero(~np.isfinite(v))
-        if bad.size:
-            raise MeasurementError(f"{source}: column {k} is NaN or inf at row {bad[0] + 1}")
-        dim = dimension(k)
-        if dim is None or not v.size:
-            continue
-        if dim == "time":  # its magnitude does not matter (Unix time), its steps do
-            _check_time_steps(source, k, v)
-            continue
-        limit = MAGNITUDE_LIMITS[dim]
-        big = np.flatnonzero(np.abs(v) > limit)
-        if big.size:
-            unit = next(iter(UNITS[dim]))
-            raise MeasurementError(
-                f"{source}: column {k} is {v[big[0]]:.3g} {unit} at row {big[0] + 1}, beyond any shaker-table record "
-                f"(|{k}| <= {limit:g} {unit}): is it in SI units? scale it with --columns {k}=COL*FACTOR"
-            )
-
-
-def _check_time_steps(source, k: str, v: np.ndarray) -> None:
-    """A time column float64 resolves: its spacing at the column's largest value within
-    ``TIME_STEP_RESOLUTION`` of the median step (steps that are not there, none or not finite, are the
-    time base's to refuse).
-    """
-    if v.size < 2:
-        return
-    with np.errstate(over="ignore", invalid="ignore"):
-        step = float(np.median(np.abs(np.diff(v))))
-    top = float(np.max(np.abs(v)))
-    ulp = float(np.spacing(top))
-    if np.isfinite(step) and step > 0 and not ulp <= TIME_STEP_RESOLUTION * step:
-        raise MeasurementError(
-            f"{source}: column {k} reaches {top:.3g} s, where float64 resolves steps of {ulp:.2g} s, not its step "
-            f"of {step:.3g} s: subtract the start time from it (or give the rate, fs, instead)"
-        )
-
-
-def check_sampling_rate(source, fs: float, where: str) -> float:
-    """A sampling rate [Hz] within ``units.SAMPLING_RATE_RANGE_HZ``, or one ``MeasurementError`` naming
-    where it came from.
-    """
-    lo, hi = SAMPLING_RATE_RANGE_HZ
-    if isinstance(fs, bool) or not isinstance(fs, (int, float, np.integer, np.floating)) or not lo <= fs <= hi:
-        raise MeasurementError(f"{source}: sampling rate {fs!r} Hz ({where}) is not a rate a record has "
-                               f"({lo:g} to {hi:g} Hz)")  # fmt: skip
-    return float(fs)
-
-
-def _time_base(path: Path, cols: dict, meta: dict, fs: float | None, resolution) -> tuple[float, float, dict]:
-    """(fs [Hz], t0 [s], how it was found): the caller's fs (replacing any column t), else column t
-    (``time_base``: uniform within its printed precision), else the metadata's fs.
-    """
-    if fs is not None:
-        fs = check_sampling_rate(path, fs, "given by the caller")
-        source = f"fs = {fs:g} Hz given by the caller" + (" (replaces column t)" if "t" in cols else "")
-        return float(fs), float(cols["t"][0]) if "t" in cols else 0.0, {"source": source}
-    fs_meta = meta.get("fs")
-    if fs_meta is not None:
-        try:
-            fs = float(fs_meta)
-        except ValueError:
-            raise MeasurementError(f"{path}: metadata fs = {fs_meta!r} is not a number") from None
-        fs = check_sampling_rate(path, fs, "the metadata's fs")
-    if "t" in cols:
-        dt, jitter, res = time_base(cols["t"], resolution, path)
-        check_sampling_rate(path, 1.0 / dt if dt > 0 else math.inf, "from column t")
-        if fs is not None and abs(fs * dt - 1) > TIME_JITTER_FRACTION:
-            raise MeasurementError(
-                f"{path}: fs = {fs:g} Hz disagrees with column t (1/dt = {1 / dt:.6g} Hz); "
-                "--fs replaces the time column"
-            )
-        return (
-            1.0 / dt,
-            float(cols["t"][0]),
-            {"source": "column t (mean step)", "jitter_s": jitter, "resolution_s": res},
-        )
-    if fs is None:
-        raise MeasurementError(f"{path}: no time base: give a column t, '# fs: ...' metadata or --fs")
-    return fs, 0.0, {"source": "metadata fs"}
-
-
-def time_base(t: np.ndarray, resolution: np.ndarray | None, path) -> tuple[float, float, float]:
-    """The step of a time column that is uniform within its printed precision (or 1 % of a step).
-
-    Returns (mean step [s], largest deviation from the uniform grid [s], coarsest printed
-    resolution [s]). A step that is not positive, or a gap, dropout or repeated block, raises
-    ``MeasurementError`` naming the first bad row (1-based data row).
-    """
-    n = t.size
-    d = np.diff(t)
-    if np.any(d <= 0):
-        r = int(np.flatnonzero(d <= 0)[0]) + 2
-        raise MeasurementError(
-            f"{path}: column t is not increasing at row {r} (t = {t[r - 1]:.9g} s after {t[r - 2]:.9g} s)"
-        )
-    res = np.zeros(n) if resolution is None else np.asarray(resolution, float)
-    res = res + 4 * np.spacing(np.abs(t))  # the column's own floating-point resolution
-    # the typical step: the median of the printed steps, itself off by up to one printed unit
-    k = int(np.argsort(d)[d.size // 2])
-    step = float(d[k])
-    # a step may deviate by the rounding of its two ends (half a printed unit each) plus the median's own
-    # rounding, or by 1 % of a step from each end's grid position
-    tol_d = np.maximum(0.5 * (res[1:] + res[:-1]) + res[k : k + 2].max(), 2 * TIME_JITTER_FRACTION * step)
-    # a step half a typical step off is a gap or a repeat whatever the printing: rounding explains it only
-    # where the column is printed too coarsely to show its own sampling (then --fs is the way)
-    tol_d = np.minimum(tol_d, 0.5 * step)
-    bad = np.flatnonzero(np.abs(d - step) > tol_d * (1 + 1e-9))
-    if bad.size:
-        r = int(bad[0]) + 2
-        raise MeasurementError(
-            f"{path}: column t is not uniformly sampled at row {r} (step {d[r - 2]:.6g} s, typical {step:.6g} s: "
-            "a gap, dropout or repeated block; only rounding of the printed time is tolerated)"
-        )
-    i = np.arange(n) - (n - 1) / 2  # the clock's step: least squares over every sample (rounding averages out)
-    dt = float(i @ (t - t.mean()) / (i @ i))
-    dev = np.abs(t - (t.mean() + dt * i))
-    # half a printed unit (or 1 % of a step), plus the fitted grid's own error (~ resolution / sqrt(n))
-    tol = np.maximum(0.5 * res, TIME_JITTER_FRACTION * dt) + 1e-3 * res.max() + 1e-12 * dt
-    slow = np.flatnonzero(dev > tol)
-    if slow.size:
-        r = int(slow[0]) + 1
-        raise MeasurementError(
-            f"{path}: column t is not uniformly sampled at row {r} (t = {t[r - 1]:.9g} s, {dev[r - 1]:.3g} s off "
-            f"the uniform grid of step {dt:.6g} s; the clock drifts)"
-        )
-    return float(dt), float(dev.max()), float(res.max())
 
 
 def from_arrays(
@@ -1071,14 +608,14 @@ def from_arrays(
             z = None
     n_dof = 1 if responses is None else len(responses)
     if masses is not None:
-        masses = _checked_masses(source, masses, n_dof)
+        masses = checked_masses(source, masses, n_dof)
         if n_dof == 1:
             if kw.get("mass") is None:
                 kw["mass"] = masses[0]
             masses = None
     if n_dof > 1 and kw.get("mass") is not None:
         raise MeasurementError(f"{source}: a record of {n_dof} DOFs takes its DOFs' masses (masses=), not one mass")
-    force_dof = _force_dof(source, force_dof, n_dof)
+    force_dof = checked_force_dof(source, force_dof, n_dof)
     cols: dict[str, np.ndarray] = {}
     for name, values in ((input_name, u), ("z", z), *(responses or {}).items(),
                          *((k, kw[k]) for k in OPTIONAL if kw.get(k) is not None)):  # fmt: skip
@@ -1109,11 +646,11 @@ def from_arrays(
             raise MeasurementError(f"{source}: z from {what} needs the file's route (an integral's ends cut): "
                                    "derive z yourself, or write the record to a file")  # fmt: skip
     mass = kw.get("mass")
-    scale_info = _unknown_scale(source, unknown_scale, input_name, mass, cols)
+    scale_info = checked_unknown_scale(source, unknown_scale, input_name, mass, cols)
     if scale_info:
         info["scale"] = scale_info
     aux = kw.pop("aux", None) or {}
-    aux = _aux_channels(source, dict(aux), list(aux), n)
+    aux = aux_channels(source, dict(aux), list(aux), n)
     kw = {**kw, **{k: cols[k] for k in OPTIONAL if k in cols}, "aux": aux}
     if responses is not None:
         z, info["response"] = channels.derive_channels(source, cols, dict(enumerate(responses, 1)), input_name, fs)
@@ -1125,6 +662,7 @@ def from_arrays(
 STROKE_LIMIT_M = 1.0
 """A shaker-table device's relative displacement stays far below this [m]; beyond it, the record is
 not in metres."""
+
 
 ACC_LIMIT_M_S2 = 2000.0
 """Table accelerations beyond this rms [m/s^2] (200 g) are not in m/s^2."""
