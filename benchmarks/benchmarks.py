@@ -423,12 +423,12 @@ def refinement_benchmark(quick: bool = False) -> tuple[list[list[str]], dict]:
     the sparsity); each with its evaluations and its end error over the best of the three.
     """
     from negstiff.datasets import silverbox
+    from negstiff.experiments.silverbox import TRAIN
     from negstiff.inference.estimators.nsi import NSI
     from negstiff.inference.record.measurement import from_arrays
     from negstiff.inference.steps.refine import SOLVERS, refine, refine_stage
     from negstiff.models import SEED_LIKE_CROSS_WELL_RMS, SEED_LIKE_CUBIC
     from negstiff.models.rig import Rig
-    from negstiff.study.silverbox import TRAIN
 
     duration = 60.0 if quick else 300.0
     r = Rig(SEED_LIKE_CUBIC, seed=4).random(duration=duration, rms=SEED_LIKE_CROSS_WELL_RMS)

@@ -257,11 +257,11 @@ def end_to_end_peers() -> tuple[list[list[str]], dict]:
     FRF peak and k2 = k3 = c_nl = 0): time and the test part's simulation error.
     """
     from negstiff.datasets import silverbox
+    from negstiff.experiments.silverbox import TEST, TRAIN, prediction_error_mv
     from negstiff.inference.analysis.frf import frf
     from negstiff.inference.estimators.nsi import NSI
     from negstiff.inference.estimators.sindy import SINDy
     from negstiff.inference.steps.refine import refine
-    from negstiff.study.silverbox import TEST, TRAIN, prediction_error_mv
 
     m = silverbox()
     train = m.segment(*TRAIN)

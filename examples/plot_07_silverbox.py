@@ -11,7 +11,7 @@ import matplotlib.pyplot as plt
 
 from negstiff import SINDy
 from negstiff.datasets import silverbox
-from negstiff.study.silverbox import PUBLISHED_MV, TEST, TRAIN, prediction_error_mv
+from negstiff.experiments.silverbox import PUBLISHED_MV, TEST, TRAIN, prediction_error_mv
 
 rec = silverbox()
 sindy = SINDy().fit(rec.segment(*TRAIN))

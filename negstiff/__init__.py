@@ -13,7 +13,7 @@ command line's ``--help`` does not pay for the compiled simulator)::
 The parts, each a folder of this package: ``negstiff.io`` (the lab's file formats), ``negstiff.models``
 (the physics: device, equation of motion, simulator, virtual rig), ``negstiff.inference`` (learning from
 data: records, identification, updating, posteriors), ``negstiff.report`` (reports from results, the
-``negstiff report`` engine), ``negstiff.cli`` (the command line) and ``negstiff.study`` (the reference
+``negstiff report`` engine), ``negstiff.cli`` (the command line) and ``negstiff.experiments`` (the reference
 study reproduced, which only the command line's ``reproduce`` imports). The developers' benchmarks are
 outside the package (``benchmarks/`` of the repository).
 """

@@ -17,7 +17,7 @@ message that says what was compared, the numbers and the tolerance.
   record's measured states follow it within ``factor`` times a reference model's error (the truth, or the
   best model at hand: the floor a record's noise sets is measured, not assumed).
 
-Example (a pytest consistency check of a lab's record; ``tests/test_testing.py`` runs it)::
+Example (a pytest consistency check of a lab's record; ``tests/contract/test_testing.py`` runs it)::
 
     from negstiff import Posterior, SINDy, load
     from negstiff.testing import assert_predicts, assert_wells_agree

@@ -1,4 +1,12 @@
-"""Shared fixtures: small rig records (seconds, not minutes) reused across tests."""
+"""Shared fixtures: small rig records (seconds, not minutes) reused across tests.
+
+The tests are grouped by what they check: ``contract/`` (the estimator contract, persistence, the package's
+structure, the docs), ``models/`` (the physics: equation, device, laws, simulator, rig, continuation),
+``records/`` (records as labs write them, read and checked), ``methods/`` (each identification, posterior and
+workflow on records negstiff did not make, single DOFs and structures), ``cli/`` (the command line, its refusals
+and outputs, the reports). The records they share are written by the helper modules here (``records``,
+``impact_records``, ``law_records``) with plain numpy and scipy; ``data/`` holds the real public records.
+"""
 
 import os
 
@@ -6,9 +14,9 @@ import numpy as np
 import pytest
 
 from negstiff import datasets
+from negstiff.experiments import silverbox as silverbox_study
 from negstiff.models import AS_BUILT, Model
 from negstiff.models.rig import Rig
-from negstiff.study import silverbox as silverbox_study
 
 
 @pytest.fixture(scope="session")
@@ -83,7 +91,7 @@ def pytest_configure(config):
         # each worker compiles its share of the kernels first (or loads them from numba's cache), in place of
         # each compiling every kernel its first tests need, the two at times the same one (on an empty cache the
         # suite took 423 s against 448 s, measured)
-        from negstiff.study.reproduce import ALL_KERNELS, warm_kernel
+        from negstiff.experiments.reproduce import ALL_KERNELS, warm_kernel
 
         index = int(config.workerinput["workerid"].removeprefix("gw"))
         for name in ALL_KERNELS[index::workers]:

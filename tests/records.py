@@ -13,7 +13,7 @@ import numpy as np
 
 from negstiff import Model
 from negstiff.cli import main
-from negstiff.study import silverbox as _silverbox
+from negstiff.experiments import silverbox as _silverbox
 
 TRUTH = Model(m=0.2, k1=426.0, k2=-3060.0, k3=7.77e5, c=0.35, c_nl=0.1)
 FS = 512.0

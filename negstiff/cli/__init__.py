@@ -1,5 +1,5 @@
 """The ``negstiff`` command line: a thin shell over ``negstiff.models``, ``negstiff.inference`` and
-``negstiff.report`` and ``negstiff.study`` (``docs/contract.md`` is its specification): ``parser`` (the
+``negstiff.report`` and ``negstiff.experiments`` (``docs/contract.md`` is its specification): ``parser`` (the
 arguments), ``commands`` (one function per command), ``common`` (input errors, system files, result
 JSON, the checks made before any work).
 

@@ -1,5 +1,5 @@
 """The commands: each reads its inputs, calls ``negstiff.models``, ``negstiff.inference`` or
-``negstiff.report`` and ``negstiff.study``, and writes its output atomically (``docs/contract.md``).
+``negstiff.report`` and ``negstiff.experiments``, and writes its output atomically (``docs/contract.md``).
 """
 
 from __future__ import annotations
@@ -695,7 +695,7 @@ def cmd_report(args) -> int:
 
 
 def cmd_reproduce(args) -> int:
-    from negstiff.study.reproduce import reproduce
+    from negstiff.experiments.reproduce import reproduce
 
     reproduce(Path(args.out), fast=args.fast, seed=args.seed, progress=wants_progress(args), workers=args.workers)
     return 0

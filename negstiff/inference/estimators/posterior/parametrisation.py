@@ -173,7 +173,8 @@ def device_parametrisation(start: Device, mass_prior: tuple[float, float] | None
     gravity's constant, K = m g + 2 k_f (s + D0) s'(z)) read in the device's physical parameters: k_f = 3 E I / l^3
     from Young's modulus and the arms' drawings, the frame angle alpha, the mass m, and L, D0 at the drawings'
     values (``docs/device-model.md``); ``law_parametrisation`` of the geometric law samples k_f, D0, L, alpha and
-    k0 themselves, the mass held. At the same values both give the same force (``tests/test_posterior_laws.py``).
+    k0 themselves, the mass held. At the same values both give the same force
+    (``tests/methods/test_posterior_laws.py``).
     """
     names = ("E", "alpha_deg", "m", "c", "c_nl", "g_offset")
     lower = np.array([100e9, 2.0, 0.05, 0.0, 0.0, -0.5])
