@@ -10,6 +10,7 @@ from pathlib import Path
 
 import numba
 import numpy as np
+from scipy.integrate import solve_ivp
 
 from negstiff import Model
 from negstiff.cli import main
@@ -526,3 +527,106 @@ def refused(lab: Path, capsys, argv, outputs=()) -> str:
     assert snapshot(lab) == before, "an input was modified"
     assert not [p for p in lab.rglob("*.part")], "a temporary file was left behind"
     return lines[0]
+
+
+CHAIN_FIXTURE = ((1.0, 25.0, 0.02), (0.5, 40.0, 0.02))
+"""The chain's linear DOFs below the device, from the ground up: (mass [kg], its frequency on its own spring
+alone [Hz], damping ratio) of each."""
+
+
+def _chain_rhs(n_dof, device, input_kind, excitation, force_dof):
+    """The equations of motion of a chain of ``n_dof`` DOFs, written here with numpy: DOFs 1 .. N-1 the linear
+    ``CHAIN_FIXTURE`` (each on its spring and damper to the DOF below, DOF 1 to the ground), DOF N the device's mass
+    on the element ``device`` (a polynomial law, k0 included) between DOF N - 1 (the base for N = 1) and N;
+    ``excitation(t)`` the base's acceleration (z relative to the base) or a force on DOF ``force_dof``."""
+    lin = CHAIN_FIXTURE[: n_dof - 1]
+    m = np.array([f[0] for f in lin] + [device.m])
+    k = np.array([f[0] * (2 * np.pi * f[1]) ** 2 for f in lin])
+    c = np.array([2 * f[2] * np.sqrt(kk * f[0]) for f, kk in zip(lin, k, strict=True)])
+
+    k0, k1, k2, k3, cd, cn = device.k0, device.k1, device.k2, device.k3, device.c, device.c_nl
+    ks, cs, ms = k.tolist(), c.tolist(), m.tolist()
+    base = input_kind == "base_acc"
+
+    def rhs(t, x):  # on Python floats: a chain of a few DOFs, called ~10^5 times a record
+        xs = x.tolist()
+        z, v = xs[:n_dof], xs[n_dof:]
+        links = []  # the force of the link below each DOF, on it (DOF 1's: the ground's)
+        zb = vb = 0.0
+        for j in range(n_dof):
+            r, vr = z[j] - zb, v[j] - vb
+            if j < n_dof - 1:
+                links.append(ks[j] * r + cs[j] * vr)
+            else:
+                links.append(((k3 * r + k2) * r - k1) * r + k0 + cd * vr + cn * vr * abs(vr))
+            zb, vb = z[j], v[j]
+        e = excitation(t)
+        acc = []
+        for j in range(n_dof):
+            f = -links[j] + (links[j + 1] if j + 1 < n_dof else 0.0)  # the link above pulls it up
+            a = f / ms[j]
+            if base:
+                a -= e
+            elif j == force_dof - 1:
+                a += e / ms[j]
+            acc.append(a)
+        return v + acc
+
+    return rhs, m
+
+
+@memoised
+def chain_record(n_dof, device, kind, fs, duration, seed=1, level=8.0, release_m=0.006, hits=(0.5, 3.0, 5.5, 8.0)):
+    """(input, z (N, T), masses, force_dof) of the chain of ``_chain_rhs`` as scipy's DOP853 writes it (not negstiff's
+    simulator), from rest with the element unloaded: ``kind`` ``"base"`` (band-limited random base acceleration of
+    ``level`` m/s^2 rms, 64 sines over 3-50 Hz of random phases), ``"force"`` (the same on DOF 1, ``level`` times
+    the chain's mass in N rms), ``"hammer"`` (40 N half-sine hits of 4 ms on the device's mass, DOF N, at ``hits``
+    s) or ``"decay"`` (the device's mass released at rest ``release_m`` from its rest, the rest of the chain at
+    rest). Noise-free."""
+    rng = np.random.default_rng(seed)
+    f_j = np.linspace(3.0, 50.0, 64)
+    phase = rng.uniform(0.0, 2 * np.pi, f_j.size)
+    amp = np.full(f_j.size, np.sqrt(2.0 / f_j.size))
+    w = 2 * np.pi * f_j
+    width = 0.004
+    t = np.arange(int(round(duration * fs))) / fs
+    force_dof = None
+    if kind in ("base", "force"):
+        scale = level if kind == "base" else level * sum(f[0] for f in CHAIN_FIXTURE[: n_dof - 1]) + level * device.m
+
+        def excitation(tt):
+            return scale * float(np.dot(amp, np.sin(w * tt + phase)))
+
+        u = scale * (amp[None, :] * np.sin(np.outer(t, w) + phase[None, :])).sum(axis=1)
+        force_dof = 1 if kind == "force" else None
+    elif kind == "hammer":
+
+        def excitation(tt):
+            for h in hits:
+                if h <= tt < h + width:
+                    return 40.0 * np.sin(np.pi * (tt - h) / width)
+            return 0.0
+
+        u = np.array([excitation(tt) for tt in t])
+        force_dof = n_dof
+    else:
+
+        def excitation(tt):
+            return 0.0
+
+        u = np.zeros(t.size)
+    rhs, m = _chain_rhs(n_dof, device, "base_acc" if kind == "base" else "force", excitation, force_dof or 1)
+    x0 = np.zeros(2 * n_dof)
+    if kind == "decay":
+        x0[n_dof - 1] = release_m
+    edges = sorted({0.0, float(t[-1]), *(x for h in hits if kind == "hammer" for x in (h, h + width) if x < t[-1])})
+    z = np.empty((n_dof, t.size))
+    for a, b in zip(edges[:-1], edges[1:], strict=True):  # piece by piece: short steps inside a pulse only
+        sel = (t >= a) & ((t <= b) if b == edges[-1] else (t < b))
+        te = t[sel] if sel.any() and t[sel][-1] == b else np.append(t[sel], b)
+        pulse = kind == "hammer" and any(h <= a < h + width for h in hits)
+        sol = solve_ivp(rhs, (a, b), x0, t_eval=te, method="DOP853", rtol=1e-8, atol=1e-11,
+                        max_step=width / 8 if pulse else np.inf)  # fmt: skip
+        z[:, sel] = sol.y[:n_dof, : int(sel.sum())]
+        x0 = sol.y[:, -1]
+    return u, z, tuple(float(x) for x in m), force_dof

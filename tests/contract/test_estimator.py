@@ -212,5 +212,67 @@ def test_a_fit_at_one_dof_round_trips_its_json(cls, one_dof_record):
             warnings.simplefilter("ignore")  # the short posterior's ConvergenceWarning; the record's notes
             est = cls(**SHORT.get(cls, {})).fit(one_dof_record)
     again = assert_json_round_trip(est)
+    # a fitted estimator prints its headline, fitted or rebuilt from its JSON (a single DOF's Discrepancy raised
+    # NotFittedError in repr: its headline was read from a structure's result it does not have)
+    assert "[fitted" in repr(est) and repr(again) == repr(est)
     if cls is not GAUpdater:
         assert again.model_ == est.model_
+
+
+KINDS = {"base": ("base_acc", 512.0, 30.0, "base"), "force": ("force", 512.0, 30.0, "force"),
+         "hammer": ("force", 1000.0, 10.0, "impact"), "decay": ("force", 1000.0, 12.0, "decay")}  # fmt: skip
+"""The record kinds of the contract across N: (input, rate [Hz], duration [s], what ``record_kind`` calls it)."""
+
+
+def chain_measurement(n_dof: int, kind: str):
+    """A chain of ``n_dof`` DOFs (``records.chain_record``: scipy's DOP853, not negstiff's simulator) with the
+    tests' hardening Duffing (``impact_records.DUFFING``; ``LIGHT_DUFFING``, 0.5 % damping, for a decay) as the
+    element between DOFs N - 1 and N, read as a lab's record: each displacement with 1 um of white noise, a force
+    channel with 0.02 N, the masses stated."""
+    from impact_records import DUFFING, LIGHT_DUFFING
+    from records import chain_record
+
+    input_name, fs, duration, _ = KINDS[kind]
+    device = LIGHT_DUFFING if kind == "decay" else DUFFING  # a decay that rings for seconds, above the noise
+    u, z, masses, force_dof = chain_record(n_dof, device, kind, fs, duration)
+    rng = np.random.default_rng(n_dof)
+    zm = z + 1e-6 * rng.standard_normal(z.shape)
+    if kind in ("force", "hammer"):
+        u = u + 0.02 * rng.standard_normal(u.size)
+    extra = {} if force_dof is None or n_dof == 1 else {"force_dof": force_dof}
+    return from_arrays(u, zm, fs, input_name=input_name, masses=masses, gravity=0.0,
+                       source=f"{kind} record of {n_dof} DOFs", **extra)  # fmt: skip
+
+
+STRUCTURE_RING_DOWN = pytest.mark.xfail(
+    strict=True,
+    raises=InputError,
+    reason="open (issue 'One path for any structure'): the discrepancy workflow refuses a structure's hammer record "
+    "and free decay ('reads a single DOF's ring-down, not a structure's yet'): its N > 1 branch "
+    "(structure_id.discrepancy) reads a record raw, its windows across the hits (a clean 2-DOF hammer record's "
+    "held-out gap 12 %), where the single DOF's reads the ring-downs between them",
+)
+CASES_ACROSS_N = [
+    pytest.param(cls, n, kind, id=f"{cls.__name__}-{n}dof-{kind}",
+                 marks=[STRUCTURE_RING_DOWN] if cls is Discrepancy and n > 1 and kind in ("hammer", "decay") else [])
+    for cls in STRUCTURE_ESTIMATORS for n in (1, 2, 3) for kind in KINDS
+]  # fmt: skip
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("cls, n_dof, kind", CASES_ACROSS_N)
+def test_the_contract_holds_at_every_n_and_record_kind(cls, n_dof, kind):
+    # every estimator of a method, with the element's place given (0-1: on the base, the single DOF), fits a record
+    # of N = 1, 2 and 3 DOFs driven by the base, by a force, by a hammer, or left to decay, prints its headline and
+    # keeps its fit through its JSON (48 fits, 40 s on 2 cores: a long study). What it found when first run: the
+    # single DOF's Discrepancy raised NotFittedError in repr, the single DOF's posterior stopped on the prior's wall
+    # on a clean input, and a structure's posterior on a record driven from rest was 2.6x off in k3 (each now a
+    # test of its own in the default suite)
+    rec = chain_measurement(n_dof, kind)
+    est = cls(element=f"{n_dof - 1}-{n_dof}", **SHORT.get(cls, {}))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # the short posterior's ConvergenceWarning; the record's notes
+        est.fit(rec)
+    assert est.fitted and repr(est).startswith(f"{cls.__name__}(")
+    assert_json_round_trip(est)
+    assert est.to_json().get("dofs", 1) == n_dof

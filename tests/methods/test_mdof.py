@@ -483,3 +483,28 @@ def test_a_force_on_the_device_identifies_the_same_structure():
             assert est.element_[k3] == pytest.approx(getattr(TRUTH, k3), rel=0.01), (method.__name__, k3)
         for got, true in zip(est.modal_["plus"], ON_FIXTURE.modes("plus"), strict=True):
             assert got.f_hz == pytest.approx(true.f_hz, rel=0.005)
+
+
+def test_a_structures_posterior_on_a_record_that_starts_under_a_force():
+    # a chain driven from rest by a force on its fixture (DOF 1: 1 kg at 25 Hz; DOF 2 the hardening Duffing's mass
+    # on the element), written by scipy's DOP853: the first window once started at the record's first samples,
+    # whose input at the stage times the interpolating filter reads partly from beyond the record; its run missed
+    # by 3.5 mm rms against 1 um in the others and moved k3 to 2.6 times the truth, with no word. The windows start
+    # past that edge, and the element's posterior holds the truth within 4 of its standard deviations (measured
+    # within 1.2)
+    from impact_records import DUFFING
+    from records import chain_record
+
+    from negstiff import Posterior
+
+    u, z, masses, force_dof = chain_record(2, DUFFING, "force", 512.0, 30.0)
+    rng = np.random.default_rng(2)
+    rec = from_arrays(u + 0.02 * rng.standard_normal(u.size), z + 1e-6 * rng.standard_normal(z.shape), 512.0,
+                      input_name="force", masses=masses, force_dof=force_dof, gravity=0.0,
+                      source="driven chain")  # fmt: skip
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # the short run's ConvergenceWarning
+        post = Posterior(element="1-2", n_ensembles=2, min_steps=50, max_steps=100, max_windows=12).fit(rec)
+    p = post.result()["parameters"]
+    for k in ("k1", "k3", "c"):
+        assert abs(p[k]["mean"] - getattr(DUFFING, k)) < 4 * p[k]["sd"], (k, p[k])

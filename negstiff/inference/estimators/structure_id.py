@@ -314,7 +314,7 @@ class StructureResults:
         super()._restore(result)  # type: ignore[misc]
 
     def _summary(self) -> str:
-        r = self.result_
+        r = vars(self).get("result_")  # a single DOF's fit need not have one (Discrepancy's)
         if isinstance(r, (StructureIdentification, StateSpaceIdentification)):
             return r.summary()
         return super()._summary()  # type: ignore[misc]

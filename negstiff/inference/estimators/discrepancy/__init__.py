@@ -521,6 +521,16 @@ class Discrepancy(StructureResults, Intervals):
         }
 
     @override
+    def _summary(self) -> str:
+        """The effects named and the held-out gap before and after them (a structure's: its identification's)."""
+        if "result_" in vars(self):
+            return super()._summary()
+        r = self.result()  # a fitted workflow's, or the JSON it was rebuilt from
+        before, after = r.get("gap_before_percent"), r.get("gap_after_percent")
+        gap = "" if before is None or after is None else f"; held-out gap {before:.3g} -> {after:.3g} % (median window)"
+        return f"effects: {', '.join(r.get('effects') or ['none'])}{gap}"
+
+    @override
     def result(self) -> dict[str, Any]:
         if "result_" in vars(self):  # a structure's (N > 1 DOFs)
             return self.result_.to_json()

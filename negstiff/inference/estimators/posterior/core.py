@@ -70,6 +70,12 @@ ALTERNATIONS = 10
 """The most rounds of the MAP search and the windows' start-state refinement, alternately (``point_estimate``)."""
 ALTERNATION_TOL = 1e-3
 """A round that lowers the MAP search's cost by less than this share (the same windows kept) ends the alternation."""
+WALL_RESIDUAL = 1e3
+"""The MAP search's residual, per row, outside the prior's support or where the model diverges: a wall far above any
+fit's residual, in metres or whitened. Whitened by the noise model at the profiled sensor variance every residual has
+unit variance, so a wall of 1 cost what the best fit costs: the search stepped onto it (c_nl just below its bound 0
+on a clean record, the input's noise 1e-8 m/s^2) and stopped there, its Jacobian zero, and the posterior's curvature
+with it (numpy's "Eigenvalues did not converge"; measured)."""
 FORCE_BAND_POINTS = 101
 """Displacements of the force band's grid over the record's stroke (``force_band``)."""
 FORCE_BAND_DRAWS = 400
@@ -545,13 +551,13 @@ class Posterior(Estimator):
                 th = start.copy()
                 th[free] = x * x_scale[free]
                 if not par.inside(th[None])[0]:
-                    return np.full(n_rows, 1.0)
+                    return np.full(n_rows, WALL_RESIDUAL)
                 params = par.to_params(th[None])
                 if not np.all(np.isfinite(params)):
-                    return np.full(n_rows, 1.0)
+                    return np.full(n_rows, WALL_RESIDUAL)
                 zsim, div = win.simulate(params, par.kind)
                 if div[0]:
-                    return np.full(n_rows, 1.0)
+                    return np.full(n_rows, WALL_RESIDUAL)
                 if gls:
                     assert sigma2 is not None
                     return win.whitened_residuals(zsim[0], sigma2)
@@ -672,7 +678,8 @@ class Posterior(Estimator):
 
     # --- the run --------------------------------------------------------------------------------
     def _check_record(self, rec: Measurement) -> None:
-        if element_of(self, rec) is not None:
+        at = element_of(self, rec)
+        if at is not None:
             from negstiff.inference.estimators.posterior.structure import window_starts
 
             name = type(self).__name__
@@ -687,7 +694,7 @@ class Posterior(Estimator):
             if self.input_noise:
                 raise PosteriorError(f"{name}(input_noise={self.input_noise!r}): the input's noise is not carried "
                                      "through a structure (None or 0 there)")  # fmt: skip
-            window_starts(rec, self.window_s, self.max_windows)
+            window_starts(rec, self.window_s, self.max_windows, at)
             return
         from negstiff.inference.analysis.record_kind import check_decay, record_kind
 
