@@ -244,17 +244,8 @@ def chain_measurement(n_dof: int, kind: str):
                        source=f"{kind} record of {n_dof} DOFs", **extra)  # fmt: skip
 
 
-STRUCTURE_RING_DOWN = pytest.mark.xfail(
-    strict=True,
-    raises=InputError,
-    reason="open (issue 'One path for any structure'): the discrepancy workflow refuses a structure's hammer record "
-    "and free decay ('reads a single DOF's ring-down, not a structure's yet'): its N > 1 branch "
-    "(structure_id.discrepancy) reads a record raw, its windows across the hits (a clean 2-DOF hammer record's "
-    "held-out gap 12 %), where the single DOF's reads the ring-downs between them",
-)
 CASES_ACROSS_N = [
-    pytest.param(cls, n, kind, id=f"{cls.__name__}-{n}dof-{kind}",
-                 marks=[STRUCTURE_RING_DOWN] if cls is Discrepancy and n > 1 and kind in ("hammer", "decay") else [])
+    pytest.param(cls, n, kind, id=f"{cls.__name__}-{n}dof-{kind}")
     for cls in STRUCTURE_ESTIMATORS for n in (1, 2, 3) for kind in KINDS
 ]  # fmt: skip
 

@@ -18,10 +18,12 @@ import numpy as np
 import pytest
 from impact_records import (
     DOUBLE_WELL,
+    DUFFING,
     LIGHT_DUFFING,
     MASS,
     decay_record_with_force,
     fixture_decay_record,
+    fixture_hammer_record,
     hammer_record_with_force,
 )
 
@@ -277,15 +279,39 @@ def test_the_command_line_names_a_decay_with_its_noisy_force_channel(tmp_path, c
     assert res["record_kind"]["kind"] == "decay" and res["effects"] == ["none"]
 
 
-def test_a_structures_ring_down_is_refused_in_one_line():
-    # a 2-DOF decay (the device on a sprung fixture, released from rest): the structure's workflow would read it raw
-    # (its windows across the hits, no ring-down blocks: a clean hammer record's held-out gap 12 %, measured), so it
-    # is refused as before, before any work, pointing at NSI and SINDy
-    from negstiff.inference.estimators.discrepancy import DiscrepancyError
+@pytest.mark.parametrize("kind", ["hammer", "decay"])
+def test_a_structures_ring_down_is_read_as_a_single_dofs(kind):
+    # a 2-DOF hammer record and free decay (the Duffing on a sprung fixture, 1 kg at 25 Hz; scipy's DOP853), read as
+    # NSI and SINDy read them (the force windowed, the blocks shortened to the ring-down) and judged on the held-out
+    # windows between the pulses, each a free decay from a state no pulse smoothed: on a clean record nothing is
+    # named, and the final model misses those windows by less than twice what the truth misses there (measured
+    # 1.6x on the hammer record: its damping from the weak form 5-25 % off, as NSI's and SINDy's). Before, refused:
+    # read raw, its windows across the hits, where the truth itself misses 4.2 % against 1.2 % between them
+    from negstiff.inference.analysis.record_kind import identification_record, record_kind
+    from negstiff.inference.steps.validation import restarted_structure_runs
+    from negstiff.models.structure import Structure
 
     fixture = {"fixture_mass": 1.0, "fixture_hz": 25.0, "fixture_zeta": 0.02}
-    _, z = fixture_decay_record(LIGHT_DUFFING, fixture, (0.0, 0.008), FS, 5.0)
-    rec = from_arrays(np.zeros(z.shape[1]), z, FS, input_name="force", masses=(1.0, MASS), source="fixture decay")
-    with pytest.raises(DiscrepancyError, match="a free decay of 2 DOFs: .* not a structure's yet; NSI and SINDy") as e:
-        Discrepancy(element="1-2").check(rec)
-    assert len(str(e.value).splitlines()) == 1
+    rng = np.random.default_rng(4)
+    device = DUFFING if kind == "hammer" else LIGHT_DUFFING
+    if kind == "hammer":
+        _, f, z = fixture_hammer_record(device, fixture, FS, HITS, 40.0, 0.004, 10.0, force_dof=2)
+        f = f + 0.5 + 0.05 * rng.standard_normal(f.size)
+    else:
+        _, z = fixture_decay_record(device, fixture, (0.0, 0.008), FS, 8.0)
+        f = np.zeros(z.shape[1])
+    z = z + LASER_HAMMER_M * rng.standard_normal(z.shape)
+    rec = from_arrays(f, z, FS, input_name="force", masses=(1.0, MASS), force_dof=2, gravity=0.0,
+                      source=f"fixture {kind}")  # fmt: skip
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        d = Discrepancy(element="1-2").fit(rec)
+    out = d.result()
+    assert d.effects_ == ["none"], out["ranking"]
+    read, n_id = identification_record(rec, record_kind(rec)), out["settings"]["identification_samples"]
+    truth = Structure.on_fixture(device, **fixture)
+    right = restarted_structure_runs(truth, read, n_id, out["validation"]["window_s"], between_pulses=True)
+    assert out["validation"]["rms_percent"] <= 2 * right["rms_percent"], (out["validation"], right)
+    if kind == "hammer":
+        across = restarted_structure_runs(truth, read, n_id, out["validation"]["window_s"])
+        assert across["rms_percent"] > 3 * right["rms_percent"]

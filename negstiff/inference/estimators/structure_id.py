@@ -472,7 +472,7 @@ def held_out_floor(structure: Structure, rec: Measurement, start: int, offsets, 
         z = res.z[0] + o[:, None] + rec.channel_noise()[:, None] * rng.standard_normal(res.z[0].shape)
         own = Measurement(rec.fs, rec.input_name, rec.u[start:], z, masses=rec.dof_masses, force_dof=rec.force_dof,
                           source=f"{rec.source} (the model's own)")  # fmt: skip
-        out.append(free_run_error(structure, own, 0, WINDOW_S, o)["rms_percent"])
+        out.append(free_run_error(structure, own, 0, WINDOW_S, o, ring_down(rec, ("impact",)))["rms_percent"])
     floor = float(np.median(out))
     return floor if math.isfinite(floor) else None
 
@@ -492,7 +492,7 @@ def _finish(method: str, rec: Measurement, structure: Structure, offsets: np.nda
     linear: dict[str, Any] = {w: {"K": structure.linear(w)[0].tolist(), "C": structure.linear(w)[1].tolist()}
                               for w in eq}  # fmt: skip
     linear["structure"] = {"K": np.asarray(structure.stiffness).tolist(), "C": np.asarray(structure.damping).tolist()}
-    validation = free_run_error(structure, rec, n_id, WINDOW_S, offsets)
+    validation = free_run_error(structure, rec, n_id, WINDOW_S, offsets, ring_down(rec, ("impact",)))
     validation["floor_percent"] = held_out_floor(structure, rec, n_id, offsets)
     lines = list(own_warnings)
     floor = validation["floor_percent"]
@@ -1060,8 +1060,9 @@ def discrepancy(est, rec: Measurement, at: tuple[int, int]) -> StructureIdentifi
         theta = _lstsq(X[:, base_cols + [n_base + k]], y)
         s, b = _assemble(theta[:-1], rec.n_dof, at, masses, {named: float(theta[-1])})
         structure, offsets = physical_frame(s, b, rec.gravity, unknown_zeros(rec))
-    gap_before = free_run_error(baseline, rec, n_id, WINDOW_S, base_offsets)
-    gap_after = free_run_error(structure, rec, n_id, WINDOW_S, offsets)
+    hits = ring_down(rec, ("impact",))  # a hammer's record: the windows between its pulses
+    gap_before = free_run_error(baseline, rec, n_id, WINDOW_S, base_offsets, hits)
+    gap_after = free_run_error(structure, rec, n_id, WINDOW_S, offsets, hits)
     est.effects_ = [named] if named else ["none"]
     est.gap_before_, est.gap_after_ = gap_before, gap_after
     est.baseline_structure_ = baseline

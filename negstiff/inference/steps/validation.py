@@ -494,21 +494,34 @@ STRUCTURE_WINDOW_S = 0.25
 
 
 def restarted_structure_runs(structure: Structure, rec: Measurement, start: int, window_s: float = STRUCTURE_WINDOW_S,
-                             offsets=None) -> dict[str, Any]:  # fmt: skip
+                             offsets=None, between_pulses: bool = False) -> dict[str, Any]:  # fmt: skip
     """The restarted windows of a structure of N >= 1 DOFs (a single DOF as ``Structure.single(model)``; the
     estimators' ``free_run_error``): free runs of ``structure`` over the record from sample ``start`` on,
     restarted every ``window_s`` from the record's band-smoothed states: rms error over every DOF in % of the
     responses' rms, and per DOF, with the same measure of the channels' sensor noise alone
     (``noise_floor_percent``: what a perfect model misses). The record's channels are ``offsets`` [m] (each
-    channel's zero, default none) above the structure's frame.
+    channel's zero, default none) above the structure's frame. ``between_pulses``: a hammer's record, its force
+    windowed (zero between the pulses, ``record_kind.identification_record``): only the windows whose input is zero
+    from half the states' smoothing window before their start to their end, each a free decay from a state no
+    pulse smoothed (a pulse of a few samples is not resolved by the runs' input between samples, as the single
+    DOF's windows restart after it).
     """
     z_all = rec.channels
     o = np.zeros(rec.n_dof) if offsets is None else np.asarray(offsets, float)
-    zs, v, _ = rec.channel_states(structure.place)
+    zs, v, smoother = rec.channel_states(structure.place)
     # windows of L + 1 samples, each ending on the next one's start (the structure's input is linear between them)
     windows = restart_windows(rec.n, rec.fs, window_s, start=start, extra=1, min_step=8)
+    if between_pulses:
+        lead = smoother[0] // 2
+        busy = np.concatenate([[0], np.cumsum(np.asarray(rec.u) != 0)])
+        lo = np.maximum(windows.starts - lead, 0)
+        quiet = busy[windows.starts + windows.length] == busy[lo]
+        windows = RestartWindows.at(windows.starts[quiet], windows.length)
     starts = windows.starts
     if not starts.size:
+        if between_pulses:
+            raise MeasurementError(f"{rec.source}: the held-out part holds no {window_s} s window between the hammer's "
+                                   "pulses")  # fmt: skip
         raise MeasurementError(f"{rec.source}: the held-out part is shorter than one {window_s} s window")
     u = windows.measured(rec.u)
     x0 = windows.start_states(zs - o[:, None], v)

@@ -267,17 +267,10 @@ class Discrepancy(StructureResults, Intervals):
             if self.unnamed:
                 raise DiscrepancyError("Discrepancy(unnamed=True): the non-parametric force is a single DOF's (a "
                                        f"record of {rec.n_dof} DOFs)")  # fmt: skip
-        from negstiff.inference.analysis.record_kind import RING_DOWN_KINDS, check_decay, record_kind
+        from negstiff.inference.analysis.record_kind import check_decay, record_kind
         from negstiff.inference.estimators.identification import refuse_one_orbit
 
         kind = record_kind(rec).kind
-        if kind in RING_DOWN_KINDS and at is not None:
-            # a structure's ring-down is read raw by ``structure_id.discrepancy`` (its windows across the hits, no
-            # ring-down blocks: a clean 2-DOF hammer record's held-out gap 12 %, measured): refused as before
-            what = "a hammer's record" if kind == "impact" else "a free decay"
-            raise DiscrepancyError(f"{rec.source}: {what} of {rec.n_dof} DOFs: the discrepancy workflow reads a single "
-                                   "DOF's ring-down, not a structure's yet; NSI and SINDy identify this record "
-                                   "(element=)")  # fmt: skip
         rec.require(4000, "the discrepancy workflow")
         if kind != "decay":  # a free decay has no input: its response must ring down instead
             rec.require_excitation("the discrepancy workflow")
@@ -324,7 +317,11 @@ class Discrepancy(StructureResults, Intervals):
         rec = self.check(rec)
         at = element_of(self, rec)
         if at is not None:
-            self.result_ = structure_discrepancy(self, rec, at)
+            # a structure's ring-down read as NSI and SINDy read it (``record_kind``): a hammer's force windowed, a
+            # decay's input zero; its blocks shortened to the ring-down and its held-out windows between the pulses
+            from negstiff.inference.analysis.record_kind import identification_record, record_kind
+
+            self.result_ = structure_discrepancy(self, identification_record(rec, record_kind(rec)), at)
             self.model_ = self.result_.model
             return self
         # a ring-down, read as NSI and SINDy read it (``record_kind``): a hammer's force windowed (each hit's offset
