@@ -91,15 +91,6 @@ def antialias_fir(q: int) -> np.ndarray:
     return signal.firwin(numtaps | 1, 0.9 / q, window=("kaiser", beta))
 
 
-def staged_edge(substeps: int = DEFAULT_SUBSTEPS) -> int:
-    """Samples at either end of a record whose input at the stage times (``stage_input``) the interpolating filter
-    reads partly from beyond the record (its ends extended along a fitted line, not measured): half the filter's
-    length, in samples of the record.
-    """
-    r = 2 * int(substeps)
-    return antialias_fir(r).size // (2 * r) + 1
-
-
 def stage_input(u: np.ndarray, substeps: int = DEFAULT_SUBSTEPS) -> np.ndarray:
     """The sampled input at every Runge-Kutta stage time (``simulate_batch(..., staged=True)``):
     band-limited interpolation by 2 ``substeps`` (``scipy.signal.resample_poly`` with the acquisition's

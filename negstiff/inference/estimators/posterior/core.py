@@ -694,7 +694,7 @@ class Posterior(Estimator):
             if self.input_noise:
                 raise PosteriorError(f"{name}(input_noise={self.input_noise!r}): the input's noise is not carried "
                                      "through a structure (None or 0 there)")  # fmt: skip
-            window_starts(rec, self.window_s, self.max_windows, at)
+            window_starts(rec, self.window_s, self.max_windows)
             return
         from negstiff.inference.analysis.record_kind import check_decay, record_kind
 
