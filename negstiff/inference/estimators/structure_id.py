@@ -449,13 +449,15 @@ def _barrier_frame(K: np.ndarray, lvec: np.ndarray, P, b: np.ndarray, k0: float,
     return x0[:n] + real[len(real) // 2] * x1[:n]
 
 
-def held_out_floor(structure: Structure, rec: Measurement, start: int, offsets, draws: int = 5) -> float | None:
+def held_out_floor(structure: Structure, rec: Measurement, start: int, offsets, draws: int = 5,
+                   between_pulses: bool = False) -> float | None:  # fmt: skip
     """What a right model misses on the held-out windows of a record like ``rec`` (the floor noise, smoothing and
     chaos leave any model; % of rms z, ``free_run_error``'s measure): ``structure`` run once over the held-out
     input from the record's state, each channel given its zero and white noise of the channel's sensor-noise rms
     (``Measurement.channel_noise``), and its own restarted windows measured on that record; the median over
     ``draws`` noise draws (seeds 0, 1, ...: over cross-well chaos one draw's floor varies by 2x, measured on the
-    tests' fixture record). None when the run escapes (no floor to compare with).
+    tests' fixture record). None when the run escapes (no floor to compare with). ``between_pulses``: a
+    hammer's record, its windows between the pulses (``free_run_error``'s).
     """
     o = np.asarray(offsets, float)
     zs, v, _ = rec.channel_states(structure.place)
@@ -472,7 +474,7 @@ def held_out_floor(structure: Structure, rec: Measurement, start: int, offsets, 
         z = res.z[0] + o[:, None] + rec.channel_noise()[:, None] * rng.standard_normal(res.z[0].shape)
         own = Measurement(rec.fs, rec.input_name, rec.u[start:], z, masses=rec.dof_masses, force_dof=rec.force_dof,
                           source=f"{rec.source} (the model's own)")  # fmt: skip
-        out.append(free_run_error(structure, own, 0, WINDOW_S, o, ring_down(rec, ("impact",)))["rms_percent"])
+        out.append(free_run_error(structure, own, 0, WINDOW_S, o, between_pulses)["rms_percent"])
     floor = float(np.median(out))
     return floor if math.isfinite(floor) else None
 
@@ -492,8 +494,9 @@ def _finish(method: str, rec: Measurement, structure: Structure, offsets: np.nda
     linear: dict[str, Any] = {w: {"K": structure.linear(w)[0].tolist(), "C": structure.linear(w)[1].tolist()}
                               for w in eq}  # fmt: skip
     linear["structure"] = {"K": np.asarray(structure.stiffness).tolist(), "C": np.asarray(structure.damping).tolist()}
-    validation = free_run_error(structure, rec, n_id, WINDOW_S, offsets, ring_down(rec, ("impact",)))
-    validation["floor_percent"] = held_out_floor(structure, rec, n_id, offsets)
+    hits = ring_down(rec, ("impact",))  # a hammer's record: the held-out windows between its pulses
+    validation = free_run_error(structure, rec, n_id, WINDOW_S, offsets, hits)
+    validation["floor_percent"] = held_out_floor(structure, rec, n_id, offsets, between_pulses=hits)
     lines = list(own_warnings)
     floor = validation["floor_percent"]
     if floor is not None and not validation["rms_percent"] <= NOISE_FLOOR_FACTOR * floor:

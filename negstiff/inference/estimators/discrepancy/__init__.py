@@ -314,13 +314,13 @@ class Discrepancy(StructureResults, Intervals):
 
     def fit(self, rec: Measurement) -> Discrepancy:
         """Locate, name, add and refit on ``rec`` (a ``Measurement`` or a path); returns ``self``."""
+        from negstiff.inference.analysis.record_kind import identification_record, record_kind
+
         rec = self.check(rec)
         at = element_of(self, rec)
         if at is not None:
             # a structure's ring-down read as NSI and SINDy read it (``record_kind``): a hammer's force windowed, a
             # decay's input zero; its blocks shortened to the ring-down and its held-out windows between the pulses
-            from negstiff.inference.analysis.record_kind import identification_record, record_kind
-
             self.result_ = structure_discrepancy(self, identification_record(rec, record_kind(rec)), at)
             self.model_ = self.result_.model
             return self
@@ -328,7 +328,6 @@ class Discrepancy(StructureResults, Intervals):
         # off, zero between its pulses), a free decay's input zero (a decay from the record's own initial state);
         # its blocks and restarted windows shortened as SINDy's (``sindy.ring_down_window``: a ring-down lasts
         # seconds), every window of the workflow alike for the fit's duration (the parameter is given back after)
-        from negstiff.inference.analysis.record_kind import identification_record, record_kind
         from negstiff.inference.estimators.sindy import ring_down_window
 
         self.record_kind_ = kind = record_kind(rec)
