@@ -43,9 +43,10 @@ def _rig(sub, common: argparse.ArgumentParser, data_opts: argparse.ArgumentParse
         "rig",
         parents=[common],
         help="virtual test rig: records as the reference study's laboratory measures them",
-        description="Virtual shaking table with the as-built device (exact geometry) or a model on it. "
-        "Records: t, base_acc (accelerometer), y (laser), base_disp (double-integrated), "
-        "z = y - base_disp.",
+        description="Virtual shaking table with the as-built device (exact geometry), a model or a structure of N "
+        "DOFs on it. Records: t, base_acc (accelerometer), y (laser), base_disp (double-integrated), "
+        "z = y - base_disp; a structure's: t, base_acc and each DOF's z1 ... zN (or zK_dot, yK, yK_acc by --sensor), "
+        "its masses and element in the header.",
         epilog=EPILOG_RIG,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
@@ -54,7 +55,9 @@ def _rig(sub, common: argparse.ArgumentParser, data_opts: argparse.ArgumentParse
         "-o", "--out", required=True, help="record file (.csv, .npz, .uff/.unv, .tdms); for campaign, a folder"
     )
     rig.add_argument(
-        "--model", help="drive a model JSON (polynomial truth) or device JSON instead of the as-built device"
+        "--model",
+        help="drive a model JSON (polynomial truth), a device JSON or a structure JSON (masses, element, "
+        "at, stiffness, damping; or a structure's identify result) instead of the as-built device",
     )
     rig.add_argument(
         "--effect",

@@ -1,7 +1,7 @@
 """The report's fixture section: what a single-DOF identification of the moving mass gets wrong when the shaker
 fixture is not rigid, and the 2-DOF identification that mends it (issue "Beyond one degree of freedom").
 
-The virtual structure rig (``models.structure_rig``) carries the seed-like cubic device on a 1 kg fixture sprung
+The virtual rig (``models.rig``) carries the seed-like cubic device on a 1 kg fixture sprung
 to the table at 25 Hz, 2 % (the reference study's device on a fixture that is not rigid); one 300 s random
 cross-well record, measured as the reference study measures (a laser per DOF, the table's accelerometer double
 integrated). The single-DOF route is what a user without the fixture's laser does: z = z2 (the moving mass
@@ -22,8 +22,8 @@ from negstiff.inference.estimators.sindy import SINDy
 from negstiff.inference.record.measurement import from_arrays
 from negstiff.inference.steps.validation import restarted_structure_runs as free_run_error
 from negstiff.models.device import SEED_LIKE_CUBIC
+from negstiff.models.rig import Rig
 from negstiff.models.structure import Structure
-from negstiff.models.structure_rig import StructureRig
 from negstiff.report.numbers import fmt
 
 COEFS = ("k1", "k2", "k3", "c", "c_nl")
@@ -38,7 +38,8 @@ FIXTURE = {"fixture_mass": 1.0, "fixture_hz": 25.0, "fixture_zeta": 0.02}
 class FixtureStudy:
     """Everything the section shows: the truth, the record, the four identifications and their times."""
 
-    rig: StructureRig
+    rig: Rig
+    structure: Structure
     record: Any
     single: dict[str, Any]
     double: dict[str, Any]
@@ -48,11 +49,13 @@ class FixtureStudy:
 
 def compute_fixture(fast: bool, seed: int) -> FixtureStudy:
     """The record and the four identifications (single-DOF NSI and SINDy on z2; the structure's NSI and SINDy)."""
-    rig = StructureRig.device_on_fixture(SEED_LIKE_CUBIC, seed=seed + 31, **FIXTURE)
+    rig = Rig.device_on_fixture(SEED_LIKE_CUBIC, seed=seed + 31, **FIXTURE)
+    structure = rig.system
+    assert isinstance(structure, Structure)  # the rig carries the structure ``device_on_fixture`` built
     rec = rig.random(duration=120.0 if fast else 300.0, rms=14.0)
     u = rec.columns["base_acc"]
-    srec = from_arrays(u, rec.z, rec.fs, masses=rig.structure.masses, source="fixture record")
-    one = from_arrays(u, rec.z[1], rec.fs, mass=rig.structure.masses[1], source="fixture record, z2 alone")
+    srec = from_arrays(u, rec.z, rec.fs, masses=structure.masses, source="fixture record")
+    one = from_arrays(u, rec.z[1], rec.fs, mass=structure.masses[1], source="fixture record, z2 alone")
     seconds: dict[str, float] = {}
     single, double = {}, {}
     for name, est in (("NSI", NSI()), ("SINDy", SINDy(seed=seed))):
@@ -63,20 +66,20 @@ def compute_fixture(fast: bool, seed: int) -> FixtureStudy:
         t0 = time.perf_counter()
         double[name] = sest.fit(srec)
         seconds[f"2-DOF {name}"] = time.perf_counter() - t0
-    floor = free_run_error(rig.structure, srec, int(0.8 * srec.n))
-    return FixtureStudy(rig, rec, single, double, floor, seconds)
+    floor = free_run_error(structure, srec, int(0.8 * srec.n))
+    return FixtureStudy(rig, structure, rec, single, double, floor, seconds)
 
 
 def fixture_section(rep, results: dict[str, Any], fast: bool, seed: int = 0) -> None:
     """Compute (``compute_fixture``), then render: the coefficient table, the wells' modes, the held-out runs."""
     study = compute_fixture(fast, seed)
-    truth, s = SEED_LIKE_CUBIC, study.rig.structure
+    truth, s = SEED_LIKE_CUBIC, study.structure
     rep.heading("A fixture that is not rigid: single-DOF against 2-DOF identification")
     duration = study.record.truth["excitation"]["duration_s"]
     rep.text(
         f"The device (the seed-like cubic, {fmt(truth.m, 3)} kg) stands on a {fmt(FIXTURE['fixture_mass'], 2)} kg "
         f"shaker fixture sprung to the table at {fmt(FIXTURE['fixture_hz'], 3)} Hz, "
-        f"{fmt(100 * FIXTURE['fixture_zeta'], 2)} % (the virtual structure rig: a laser on each mass, the table's "
+        f"{fmt(100 * FIXTURE['fixture_zeta'], 2)} % (the virtual rig: a laser on each mass, the table's "
         f"accelerometer double-integrated as in the reference study; {fmt(duration, 3)} s "
         "of random cross-well motion at 14 m/s^2 rms). A single-DOF identification of the moving mass alone takes "
         "z = z2 - b and the table's acceleration as the device's input, though the device's base is the fixture, "

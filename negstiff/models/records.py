@@ -54,6 +54,23 @@ class RigRecord:
     truth: dict[str, Any]
     true: dict[str, np.ndarray] = field(repr=False, default_factory=dict)
 
+    @property
+    def z(self) -> np.ndarray:
+        """The measured displacements z (N, T): a structure's ``z1 ... zN`` by DOF, a single DOF's ``z`` as one
+        row (a ``RigError`` for a record whose sensor measured no z: derive it with ``Measurement.from_rig``).
+        """
+        from negstiff.io.schema import channel_sensor
+
+        rows = {cs: v for k, v in self.columns.items() if (cs := channel_sensor(k)) is not None}
+        if "z" in self.columns:
+            return np.atleast_2d(self.columns["z"])
+        if rows and all(sensor == "z" for _, sensor in rows):
+            return np.array([rows[key] for key in sorted(rows)])
+        raise RigError(
+            f"{self.meta.get('source', 'the record')}: no measured z (its response is "
+            f"{', '.join(k for k in self.columns if k not in ('t', 'base_acc', 'force'))})"
+        )
+
     def export_columns(self, acc_unit: str = "m/s^2") -> dict[str, np.ndarray]:
         """The columns as written: accelerations in g are named ``<name>_g`` (a lab's export; map
         them back with ``--columns base_acc=base_acc_g*9.81``).

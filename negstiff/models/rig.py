@@ -5,10 +5,13 @@ What the laboratory of the reference study (section 3) measures, and how this ri
 * the table moves the frame's base by b(t); the true table motion is band-limited (no content
   below ``Sensors.table_min_hz``), and its acceleration b'' is what drives the device;
 * the device (the as-built ``Device`` with its exact geometric K(z), or a polynomial ``Model`` when
-  the coefficients must exist exactly) is simulated at ``oversample`` times the output rate, with the
-  suite's one input convention (linear interpolation between the fine samples);
+  the coefficients must exist exactly), or a ``Structure`` of N DOFs carrying the device as its element (on a
+  fixture, under a payload: ``Rig.device_on_fixture``, ``Rig.device_with_payload``), is simulated at
+  ``oversample`` times the output rate, with the suite's one input convention (linear interpolation between the
+  fine samples);
 * an accelerometer measures b'' (white noise, a small DC bias); a laser vibrometer measures the
-  absolute displacement y = z + b (white noise);
+  absolute displacement y = z + b (white noise), one per DOF on a structure (each DOF its own sensor, of the
+  kind ``Sensors.response`` names);
 * a delta-sigma acquisition front end low-passes every channel with the same linear-phase FIR
   anti-aliasing filter (delay compensated) and decimates to ``fs``;
 * as in the reference study, the base displacement is not measured: it is the double integral of the measured
@@ -35,10 +38,11 @@ from scipy import signal
 from negstiff.errors import InputError
 
 from . import effects as effect_registry
-from .device import AS_BUILT, Device
+from .device import AS_BUILT, SEED_LIKE_CUBIC, Device
 from .equation import Model
 from .records import RigError, RigRecord
 from .simulator import antialias_fir, simulate_batch
+from .structure import Structure, simulate_structures
 from .table import integrate_twice, table_motion
 
 TAIL_S = 4.0
@@ -104,9 +108,21 @@ class Sensors:
         return cls(laser_noise=0.0, acc_noise=0.0, acc_bias=0.0, velocity_noise=0.0, force_noise=0.0)
 
 
-def system_from_dict(d: dict[str, Any]) -> Device | Model:
-    """Rebuild the truth's system (``{"kind": "device"|"polynomial", "parameters": {...}}``)."""
+def system_from_dict(d: dict[str, Any]) -> Device | Model | Structure:
+    """Rebuild the truth's system (``{"kind": "device"|"polynomial"|"structure", "parameters": {...}}``)."""
+    if d["kind"] == "structure":
+        return Structure.from_dict(d["parameters"])
     return Device.from_dict(d["parameters"]) if d["kind"] == "device" else Model.from_dict(d["parameters"])
+
+
+def response_column(sensor: str, dof: int, n_dof: int) -> str:
+    """The contract's column of a response ``sensor`` (``z``, ``z_dot``, ``y``, ``y_acc``) of DOF ``dof`` (1..N):
+    a single DOF's own name, a structure's with its DOF's number (``z2``, ``y1_acc``).
+    """
+    if n_dof == 1:
+        return sensor
+    head, _, tail = sensor.partition("_")
+    return f"{head}{dof}" + (f"_{tail}" if tail else "")
 
 
 def _smooth_steps(levels: Sequence[float], step_samples, ramp_samples, start: float = 0.0) -> np.ndarray:
@@ -144,6 +160,21 @@ BYTES_PER_SAMPLE = 200
 channels at the simulation rate, and their FFTs): measured 200 on a 300 s random record, 72 on a campaign."""
 
 
+def _element(system: Device | Model | Structure) -> Device | Model:
+    """The system's nonlinear part: a single DOF's law, a structure's element."""
+    return system.element if isinstance(system, Structure) else system
+
+
+def _with_effects(system: Device | Model | Structure, effects: Mapping[str, Any]) -> Device | Model | Structure:
+    """``system`` with the extra ``effects`` added to its nonlinear part (``_element``)."""
+    if isinstance(system, Structure):
+        el = system.element
+        return system.with_element(Model.from_dict({**el.to_dict(), "extra": {**dict(el.extra), **effects}}))
+    if isinstance(system, Model):
+        return type(system).from_dict({**system.to_dict(), "extra": {**dict(system.extra), **effects}})
+    return system.with_(extra={**dict(system.extra), **effects})
+
+
 def _real(x) -> bool:
     """A real number (not a flag, not text)."""
     return not isinstance(x, bool) and isinstance(x, (int, float, np.integer, np.floating))
@@ -154,10 +185,13 @@ class Rig:
 
     Parameters
     ----------
-    system : Device or Model, default AS_BUILT
-        The truth: a ``Device`` (the as-built device, exact geometry) or a polynomial ``Model``.
+    system : Device, Model or Structure, default AS_BUILT
+        The truth: a ``Device`` (the as-built device, exact geometry), a polynomial ``Model``, or a ``Structure`` of
+        N DOFs (its element a polynomial ``Model``): every excitation drives any of them, and each DOF of a
+        structure carries its own response sensor (columns ``z1 ... zN``, or ``zK_dot``, ``yK``, ``yK_acc``).
     effects : dict, optional
-        Hidden extra effects added to the truth (``models.effects`` names and values).
+        Hidden extra effects added to the truth (``models.effects`` names and values; a structure's: its
+        element's).
     sensors : Sensors, optional
         The measurement chain: noise, bias, integration, the response sensor (``models.rig.Sensors``).
     fs : float, default 512
@@ -178,11 +212,14 @@ class Rig:
     >>> h = Rig(seed=1).harmonic(freq=9.0, amplitude=5.0)         # a steady-state 9 Hz response
     >>> rec.truth["system"]["kind"]
     'device'
+    >>> fixture = Rig.device_on_fixture(seed=1).random(duration=10.0)     # the device on a sprung fixture
+    >>> sorted(fixture.columns), fixture.meta["masses"]
+    (['base_acc', 't', 'z1', 'z2'], '1,0.212')
     """
 
     def __init__(
         self,
-        system: Device | Model = AS_BUILT,
+        system: Device | Model | Structure = AS_BUILT,
         *,
         effects: dict[str, Any] | None = None,
         sensors: Sensors = Sensors(),
@@ -195,14 +232,10 @@ class Rig:
             raise RigError(f"effects must map effect names to values ({{'coulomb_friction': 0.1}}), got {effects!r}")
         if effects:
             try:  # the registry names a wrong effect or value; a program gets the rig's error for it
-                system = (
-                    type(system).from_dict({**system.to_dict(), "extra": {**dict(system.extra), **effects}})
-                    if isinstance(system, Model)
-                    else system.with_(extra={**dict(system.extra), **effects})
-                )
+                system = _with_effects(system, effects)
             except (TypeError, ValueError, KeyError) as exc:
                 raise RigError(f"effects {effects!r}: {' '.join(str(exc).split())}") from None
-        for name, value in system.extra.items():
+        for name, value in _element(system).extra.items():
             effect = effect_registry.get(name)
             if effect.dissipative and value < 0:
                 raise RigError(f"effect {name} = {value:g} {effect.units}: a {name.replace('_', ' ')} dissipates "
@@ -223,7 +256,54 @@ class Rig:
         self.oversample = int(oversample)
         self.seed = int(seed)
         self.weigh_resolution = weigh_resolution
-        self.equilibria = system.equilibria()
+        self.equilibria = system.element_equilibria() if isinstance(system, Structure) else system.equilibria()
+        """The equilibria of the element's relative displacement (a single DOF's z)."""
+
+    @classmethod
+    def device_on_fixture(cls, device: Model = SEED_LIKE_CUBIC, *, fixture_mass: float = 1.0,
+                          fixture_hz: float = 25.0, fixture_zeta: float = 0.02, **kw) -> Rig:  # fmt: skip
+        """The device on a shaker fixture that is not rigid (DOF 1, sprung to the table; the device's mass DOF 2):
+        ``fixture_hz`` and ``fixture_zeta`` of the fixture alone on its spring. ``kw``: the rig's parameters.
+        """
+        s = Structure.on_fixture(device, fixture_mass=fixture_mass, fixture_hz=fixture_hz, fixture_zeta=fixture_zeta)
+        return cls(s, **kw)
+
+    @classmethod
+    def device_with_payload(cls, device: Model = SEED_LIKE_CUBIC, *, payload_mass: float = 0.1,
+                            payload_hz: float = 30.0, payload_zeta: float = 0.01, **kw) -> Rig:  # fmt: skip
+        """The device (DOF 1, the element on the table) carrying a payload on a spring and damper (DOF 2):
+        ``payload_hz`` and ``payload_zeta`` of the payload alone on its spring. ``kw``: the rig's parameters.
+        """
+        k = payload_mass * (2 * math.pi * payload_hz) ** 2
+        c = 2 * payload_zeta * math.sqrt(k * payload_mass)
+        s = Structure.chain((device.m, payload_mass), (0.0, k), (0.0, c), device, (0, 1))
+        return cls(s, **kw)
+
+    @property
+    def n_dof(self) -> int:
+        """The DOFs on the table (1: a single DOF)."""
+        return self.system.n_dof if isinstance(self.system, Structure) else 1
+
+    def _positions(self, r: float) -> np.ndarray:
+        """Every DOF's static position [m] with the element's relative displacement at ``r`` (the single DOF's z)."""
+        return self.system.static_positions(r) if isinstance(self.system, Structure) else np.array([float(r)])
+
+    def _batch(self, inputs: np.ndarray, dt: float, x0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The system under each row of ``inputs`` (base accelerations) from the states ``x0`` (B, 2N), in one
+        batch: z and z' of shape (B, N, T), a ``RigError`` if a run left the stroke.
+        """
+        rows = np.arange(len(inputs))
+        if isinstance(self.system, Structure):
+            sim = simulate_structures(self.system, inputs, dt, x0, input_index=rows, store_velocity=True)
+        else:
+            params = np.repeat(self.system.kernel_params()[:, None], len(inputs), axis=1)
+            sim = simulate_batch(params, self.system.kind, inputs, dt, x0, input_index=rows, store_velocity=True)
+        if sim.diverged.any():
+            raise RigError(
+                f"the device did not survive the excitation: {sim.describe_failures()}; lower the excitation level"
+            )
+        assert sim.z_dot is not None  # stored above
+        return sim.z.reshape(len(inputs), self.n_dof, -1), sim.z_dot.reshape(len(inputs), self.n_dof, -1)
 
     def __repr__(self) -> str:
         system = "the as-built device" if self.system == AS_BUILT else repr(self.system)
@@ -289,17 +369,19 @@ class Rig:
         duration: float = 10.0,
         width: float = 0.004,
         start: str = "plus",
+        dof: int | None = None,
     ) -> RigRecord:
         """The device hit by an impact hammer with the table held still: ``hits`` half-sine pulses of ``peak`` [N]
         lasting ``width`` [s], evenly spread (the first at 5 % of the record, each next after an equal share of the
-        rest), from rest in the ``start`` well.
+        rest), from rest in the ``start`` well; on a structure, DOF ``dof`` is hit (default: the DOF the element
+        moves; the record's ``force_dof``).
 
         The laser reads z (no base motion), the hammer's load cell the force (``Sensors.force_noise``). The device
         is simulated at the rig's ``oversample`` times ``fs``, or finer so that a pulse spans 16 samples, the force
         sampled on that grid (a pulse of a few output samples is not resolved by the band-limited input), and read
-        at ``fs``. Columns ``t, force, z``.
+        at ``fs``. Columns ``t, force, z`` (a structure's: ``z1 ... zN``).
         """
-        self.check_hammer(peak, hits, duration, width, start)
+        self.check_hammer(peak, hits, duration, width, start, dof)
         n = int(round(duration * self.fs))
         q = self._hammer_oversample(width)
         t_fine = np.arange(n * q) / (self.fs * q)
@@ -310,12 +392,15 @@ class Rig:
             force[inside] += peak * np.sin(np.pi * (t_fine[inside] - h) / width)
         excitation = {"type": "hammer", "duration_s": duration, "peak_n": peak, "hits": hits, "width_s": width,
                       "hit_times_s": times}  # fmt: skip
+        if self.n_dof > 1:
+            excitation["force_dof"] = self._hit_dof(dof)
         return self._force_record(force, q, self._well(start), excitation)
 
     def release(self, z0: float, duration: float = 10.0) -> RigRecord:
-        """A free decay: the moving part held at ``z0`` [m] and released from rest at t = 0, the table still. The
-        laser reads z; the record's force column is zero (no input: a free decay, read as one). Columns ``t,
-        force, z``.
+        """A free decay: the moving part held at ``z0`` [m] and released from rest at t = 0, the table still (a
+        structure's element held at the relative displacement ``z0``, every DOF where the structure rests under that
+        hold). The laser reads z; the record's force column is zero (no input: a free decay, read as one). Columns
+        ``t, force, z`` (a structure's: ``z1 ... zN``).
         """
         if not (_real(z0) and math.isfinite(z0)):
             raise RigError(f"release position must be a finite number [m], got {z0!r}")
@@ -326,8 +411,9 @@ class Rig:
         excitation = {"type": "release", "duration_s": duration, "z0_m": float(z0)}
         return self._force_record(np.zeros(n * self.oversample), self.oversample, float(z0), excitation)
 
-    def check_hammer(self, peak=20.0, hits=4, duration=10.0, width=0.004, start="plus") -> None:
+    def check_hammer(self, peak=20.0, hits=4, duration=10.0, width=0.004, start="plus", dof=None) -> None:
         """Everything ``hammer`` refuses (``RigError``, one line), before any work."""
+        self._hit_dof(dof)
         if isinstance(hits, bool) or not isinstance(hits, (int, np.integer)) or hits < 1:
             raise RigError(f"hits must be a whole number >= 1, got {hits!r}")
         if not all(_real(v) and v > 0 and math.isfinite(v) for v in (peak, duration, width)):
@@ -342,6 +428,14 @@ class Rig:
         self._check_start([start])
         self._well(start)
         self._require_memory([duration * self.fs * self._hammer_oversample(width)], "a hammer record")
+
+    def _hit_dof(self, dof: int | None) -> int:
+        """The DOF a hammer hits (1..N; default: the DOF the element moves), a ``RigError`` for any other."""
+        if dof is None:
+            return self.system.place[1] if isinstance(self.system, Structure) else 1
+        if isinstance(dof, bool) or not isinstance(dof, (int, np.integer)) or not 1 <= dof <= self.n_dof:
+            raise RigError(f"the hammer hits a DOF 1..{self.n_dof}, got {dof!r}")
+        return int(dof)
 
     def _hammer_oversample(self, width: float) -> int:
         """The simulation's samples per output sample for a hit of ``width`` [s]: the rig's ``oversample``, or
@@ -366,18 +460,22 @@ class Rig:
         if self.sensors.response not in ("displacement", "absolute"):
             raise RigError(f"a hammer or release test is read by the laser on the moving part (response "
                            f"'displacement' or 'absolute'), not {self.sensors.response!r}")  # fmt: skip
-        res = simulate(self.system, force, 1.0 / (self.fs * q), z0=z0, v0=0.0, input_kind="force")
+        res = simulate(self.system, force, 1.0 / (self.fs * q), z0=z0, v0=0.0, input_kind="force",
+                       force_dof=excitation.get("force_dof"))  # fmt: skip
         if res.diverged[0]:
             raise RigError(f"the device left every well under the {excitation['type']} test "
                            f"({res.describe_failures()})")  # fmt: skip
         assert res.z_dot is not None  # ``simulate`` stores the velocity
-        z, z_dot, f = res.z[0][::q], res.z_dot[0][::q], force[::q]
+        n = self.n_dof
+        z, z_dot, f = res.z[0].reshape(n, -1)[:, ::q], res.z_dot[0].reshape(n, -1)[:, ::q], force[::q]
         _, sens_rng = self._streams()
         s = self.sensors
-        laser = s.laser_noise * sens_rng.standard_normal(z.size)  # the laser's noise first, the load cell's after
+        # each laser's noise first (DOF by DOF), the load cell's after
+        lasers = [z[k] + s.response_offset + s.laser_noise * sens_rng.standard_normal(f.size) for k in range(n)]
         cell = s.force_noise * sens_rng.standard_normal(f.size) if excitation["type"] == "hammer" else 0.0
-        cols = {"t": np.arange(z.size) / self.fs, "force": f + cell, "z": z + s.response_offset + laser}
-        true = {"z": z, "z_dot": z_dot, "force": f}
+        cols = {"t": np.arange(f.size) / self.fs, "force": f + cell,
+                **{response_column("z", k + 1, n): lasers[k] for k in range(n)}}  # fmt: skip
+        true = {"z": z[0] if n == 1 else z, "z_dot": z_dot[0] if n == 1 else z_dot, "force": f}
         return self._record(cols, true, excitation)
 
     def sine_sweep(
@@ -622,42 +720,24 @@ class Rig:
         s = self.sensors
         n = max(a.size for a in accs)
         motions = [table_motion(np.pad(a, (0, n - a.size)), fsim, s.table_min_hz) for a in accs]
-        x0 = []
-        for st in starts:
-            if st not in ("plus", "minus"):
-                raise RigError(f"starting well must be 'plus' or 'minus', got {st!r}")
-            x0.append([self.equilibria.well(st), 0.0])
-        kind = self.system.kind
-        params = np.repeat(self.system.kernel_params()[:, None], len(accs), axis=1)
-        sim = simulate_batch(
-            params,
-            kind,
-            np.array([m[1] for m in motions]),
-            1 / fsim,
-            np.array(x0),
-            input_index=np.arange(len(accs)),
-            store_velocity=True,
-        )
-        if sim.diverged.any():
-            raise RigError(
-                f"the device did not survive the excitation: {sim.describe_failures()}; lower the excitation level"
-            )
+        self._check_start(starts)
+        nd = self.n_dof
+        x0 = np.array([np.r_[self._positions(self._well(st)), np.zeros(nd)] for st in starts])
+        z, z_dot = self._batch(np.array([m[1] for m in motions]), 1 / fsim, x0)
         q = self.oversample
         out = []
         for i, ((b_true, acc_true), st) in enumerate(zip(motions, starts, strict=False)):
             acc_meas = acc_true + s.acc_bias + s.acc_noise * math.sqrt(q) * sens_rng.standard_normal(n)
-            y_meas = sim.z[i] + b_true + s.laser_noise * math.sqrt(q) * sens_rng.standard_normal(n)
-            if s.response in ("displacement", "absolute"):
-                y_meas = y_meas + s.response_offset  # the laser's zero away from the rods-horizontal position
-            chans = {
-                "base_acc": acc_meas,
-                "y": y_meas,
-                **self._response_channels(sim.z_dot[i], acc_true, fsim, sens_rng),
-                "z_true": sim.z[i],
-                "z_dot_true": sim.z_dot[i],
-                "acc_true": acc_true,
-                "b_true": b_true,
-            }
+            chans = {"base_acc": acc_meas}
+            for k in range(nd):  # each DOF's laser (a single DOF's: y), drawn after the table's accelerometer
+                y_meas = z[i, k] + b_true + s.laser_noise * math.sqrt(q) * sens_rng.standard_normal(n)
+                if s.response in ("displacement", "absolute"):
+                    y_meas = y_meas + s.response_offset  # the laser's zero away from the rods-horizontal position
+                chans[response_column("y", k + 1, nd)] = y_meas
+            for k in range(nd):
+                chans |= self._response_channels(z_dot[i, k], acc_true, fsim, sens_rng, k + 1)
+            chans |= {f"z_true{k}": z[i, k] for k in range(nd)} | {f"z_dot_true{k}": z_dot[i, k] for k in range(nd)}
+            chans |= {"acc_true": acc_true, "b_true": b_true}
             if q > 1:  # delta-sigma front end: linear-phase FIR anti-aliasing, delay compensated
                 b = antialias_fir(q)
                 chans = {k: signal.resample_poly(v, 1, q, window=b) for k, v in chans.items()}
@@ -669,16 +749,23 @@ class Rig:
                 k1 = k0 + int(round(last * self.fs))
                 sl = slice(k0, k1)
                 cols = {"t": np.arange(k1 - k0) / self.fs, "base_acc": chans["base_acc"][sl]}
-                if s.response == "displacement":
-                    cols |= {"y": chans["y"][sl], "base_disp": b_est[sl], "z": chans["y"][sl] - b_est[sl]}
-                elif s.response == "absolute":
-                    cols["y"] = chans["y"][sl]
-                else:
-                    name = "z_dot" if s.response == "velocity" else "y_acc"
-                    cols[name] = chans[name][sl]
+                for k in range(1, nd + 1):
+                    y = chans[response_column("y", k, nd)][sl]
+                    if s.response == "displacement":
+                        # the reference study's columns: a single DOF's laser, the integrated base and their z; a
+                        # structure's record holds one response per DOF (``load``'s rule), each DOF's z
+                        cols |= {"y": y, "base_disp": b_est[sl]} if nd == 1 else {}
+                        cols[response_column("z", k, nd)] = y - b_est[sl]
+                    elif s.response == "absolute":
+                        cols[response_column("y", k, nd)] = y
+                    else:
+                        name = response_column("z_dot" if s.response == "velocity" else "y_acc", k, nd)
+                        cols[name] = chans[name][sl]
+                zt = np.array([chans[f"z_true{k}"][sl] for k in range(nd)])
+                vt = np.array([chans[f"z_dot_true{k}"][sl] for k in range(nd)])
                 true = {
-                    "z": chans["z_true"][sl],
-                    "z_dot": chans["z_dot_true"][sl],
+                    "z": zt[0] if nd == 1 else zt,
+                    "z_dot": vt[0] if nd == 1 else vt,
                     "base_acc": chans["acc_true"][sl],
                     "base_disp": chans["b_true"][sl],
                 }
@@ -687,18 +774,18 @@ class Rig:
             out.append(sweep_out)
         return out if steps is not None else [r[0] for r in out]
 
-    def _response_channels(self, z_dot, acc_true, fsim, rng) -> dict[str, np.ndarray]:
-        """The vibrometer's relative velocity or the moving part's accelerometer, at the fine rate
-        (drawn after the reference study's two sensors, so a displacement record is the same bit for bit).
+    def _response_channels(self, z_dot, acc_true, fsim, rng, dof: int = 1) -> dict[str, np.ndarray]:
+        """DOF ``dof``'s vibrometer (relative velocity) or accelerometer, at the fine rate (drawn after the
+        reference study's sensors, so a displacement record is the same bit for bit).
         """
         s, q = self.sensors, self.oversample
         if s.response == "velocity":
             noise = s.velocity_noise * math.sqrt(q) * rng.standard_normal(z_dot.size)
-            return {"z_dot": z_dot + s.response_offset + noise}
+            return {response_column("z_dot", dof, self.n_dof): z_dot + s.response_offset + noise}
         if s.response == "accelerometer":
             z_ddot = np.gradient(z_dot, 1 / fsim, edge_order=2)
             noise = s.acc_noise * math.sqrt(q) * rng.standard_normal(z_dot.size)
-            return {"y_acc": z_ddot + acc_true + s.response_offset + noise}
+            return {response_column("y_acc", dof, self.n_dof): z_ddot + acc_true + s.response_offset + noise}
         if s.response not in ("displacement", "absolute"):
             raise RigError(
                 f"response sensor must be displacement, velocity, absolute or accelerometer, got {s.response!r}"
@@ -711,20 +798,26 @@ class Rig:
             "units": "SI (s, m/s^2, m)",
             "source": f"negstiff virtual rig ({excitation['type']}, seed {self.seed})",
         }
-        # the rest positions, measured with the laser before the test (0.01 mm resolution)
         eq = self.equilibria
-        for name in ("z_minus", "z_plus"):
-            if getattr(eq, name) is not None:
-                meta[f"{name}_rest"] = f"{round(getattr(eq, name), 5):.5f}"
-        if self.weigh_resolution:
-            meta["mass"] = f"{round(self.system.m / self.weigh_resolution) * self.weigh_resolution:.6g}"
+        if isinstance(self.system, Structure):  # the contract's multi-DOF header: each DOF's mass, the element's place
+            meta["masses"] = ",".join(f"{m:g}" for m in self.system.masses)
+            meta["element"] = "-".join(map(str, self.system.place))
+            if "force_dof" in excitation:
+                meta["force_dof"] = str(excitation["force_dof"])
+        else:
+            # the rest positions, measured with the laser before the test (0.01 mm resolution)
+            for name in ("z_minus", "z_plus"):
+                if getattr(eq, name) is not None:
+                    meta[f"{name}_rest"] = f"{round(getattr(eq, name), 5):.5f}"
+            if self.weigh_resolution:
+                meta["mass"] = f"{round(self.system.m / self.weigh_resolution) * self.weigh_resolution:.6g}"
         if excitation["type"] == "harmonic":
             meta["forcing_hz"] = f"{excitation['freq_hz']:g}"
             meta["amplitude_m_s2"] = f"{excitation['amplitude_m_s2']:g}"
-        eq = self.equilibria
+        kind = "structure" if isinstance(self.system, Structure) else self.system.kind
         truth = {
-            "system": {"kind": self.system.kind, "parameters": self.system.to_dict()},
-            "effects": effect_registry.plain(self.system.extra),
+            "system": {"kind": kind, "parameters": self.system.to_dict()},
+            "effects": effect_registry.plain(_element(self.system).extra),
             "equilibria": eq.as_dict(),
             "sensors": asdict(self.sensors),
             "fs": self.fs,
@@ -734,4 +827,7 @@ class Rig:
         }
         if isinstance(self.system, Device) and eq.z_minus is not None:  # a double well's features
             truth["features"] = self.system.features()
+        if isinstance(self.system, Structure):
+            truth["structure"] = self.system.to_dict()
+            truth["rest_positions_m"] = {w: list(map(float, z)) for w, z in self.system.equilibria().items()}
         return RigRecord(self.fs, cols, meta, truth, true)

@@ -315,6 +315,7 @@ def simulate(
     substeps: int = DEFAULT_SUBSTEPS,
     z_limit: float = DEFAULT_Z_LIMIT,
     v_limit: float = DEFAULT_V_LIMIT,
+    force_dof: int | None = None,
 ) -> SimulationResult:
     """Simulate one ``Model`` or ``Device`` under a sampled input.
 
@@ -340,6 +341,8 @@ def simulate(
         Runge-Kutta steps per sample.
     z_limit, v_limit : float
         Bounds [m, m/s] beyond which a run counts as diverged.
+    force_dof : int, optional
+        The DOF a force acts on (1..N; default: the DOF the element moves; a single DOF's is 1).
 
     Returns
     -------
@@ -359,8 +362,10 @@ def simulate(
     if hasattr(system, "n_dof"):  # a structure of N DOFs simulates itself (``Structure.simulate``)
         if v0:
             raise InputError("a structure starts from rest (v0 = 0); give z0, the element's relative displacement")
-        return system.simulate(u, dt, z0=z0, input_kind=input_kind, substeps=substeps, z_limit=z_limit,
-                               v_limit=v_limit)  # fmt: skip
+        return system.simulate(u, dt, z0=z0, input_kind=input_kind, force_dof=force_dof, substeps=substeps,
+                               z_limit=z_limit, v_limit=v_limit)  # fmt: skip
+    if force_dof not in (None, 1):
+        raise InputError(f"a single DOF's force acts on DOF 1, got force_dof={force_dof!r}")
     if z0 is None:
         z0 = system.equilibria().z_plus
     return simulate_batch(

@@ -263,22 +263,22 @@ def test_command_line_posterior_reads_the_dofs_from_the_file(tmp_path, capsys):
 
 
 def test_structure_rig_records_are_seeded_and_read_back(tmp_path):
-    from negstiff.models.structure_rig import StructureRig
+    from negstiff import Rig
 
-    rig = StructureRig.device_on_fixture(TRUTH, seed=5)
+    rig = Rig.device_on_fixture(TRUTH, seed=5)
     a, b = rig.random(duration=6.0, rms=10.0), rig.random(duration=6.0, rms=10.0)
-    assert np.array_equal(a.z, b.z) and not np.array_equal(a.z, StructureRig.device_on_fixture(TRUTH, seed=6)
+    assert np.array_equal(a.z, b.z) and not np.array_equal(a.z, Rig.device_on_fixture(TRUTH, seed=6)
                                                            .random(duration=6.0, rms=10.0).z)  # fmt: skip
     # the lasers' noise and the double-integrated table: z off the truth by about the laser's 30 um, not more
-    err = a.z - np.array([a.true["z1"], a.true["z2"]])
+    err = a.z - a.true["z"]
     assert 10e-6 < np.sqrt(np.mean(err[:, 512:-512] ** 2)) < 100e-6
     rec = load(a.write(tmp_path / "fixture.csv"))
-    assert rec.n_dof == 2 and rec.masses == pytest.approx(rig.structure.masses) and rec.fs == pytest.approx(FS)
+    assert rec.n_dof == 2 and rec.masses == pytest.approx(rig.system.masses) and rec.fs == pytest.approx(FS)
     assert np.allclose(rec.z, a.z, rtol=1e-8, atol=1e-12)
     # the payload campaign: the element on the table moves DOF 1, the payload rides on it (DOF 2)
-    pay = StructureRig.device_with_payload(TRUTH, payload_mass=0.05, payload_hz=30.0, seed=1)
-    assert pay.structure.at == (0, 1) and pay.structure.masses == (TRUTH.m, 0.05)
-    plus = pay.structure.modes("plus")
+    pay = Rig.device_with_payload(TRUTH, payload_mass=0.05, payload_hz=30.0, seed=1).system
+    assert pay.at == (0, 1) and pay.masses == (TRUTH.m, 0.05)
+    plus = pay.modes("plus")
     assert plus[0].f_hz < TRUTH.uls("plus").f_hz and abs(plus[1].shape[1]) == pytest.approx(1.0)
 
 
@@ -428,10 +428,9 @@ def test_frf_of_a_structure_finds_both_modes_of_the_well(tmp_path):
     import subprocess
     import sys
 
-    from negstiff.models.rig import Sensors
-    from negstiff.models.structure_rig import StructureRig
+    from negstiff.models.rig import Rig, Sensors
 
-    rig = StructureRig.device_on_fixture(TRUTH, seed=2, sensors=Sensors(laser_noise=1e-6))
+    rig = Rig.device_on_fixture(TRUTH, seed=2, sensors=Sensors(laser_noise=1e-6))
     path = rig.random(duration=120.0, rms=0.3, start="plus").write(tmp_path / "low.csv")
     out = tmp_path / "frf.json"
     done = subprocess.run([sys.executable, "-m", "negstiff", "frf", str(path), "--dofs", "2", "-o", str(out)],

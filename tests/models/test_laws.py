@@ -142,15 +142,14 @@ def test_every_law_keeps_a_scalars_shape():
 def test_an_unknown_law_and_a_law_on_a_structure_are_refused_in_one_line(tmp_path):
     # An unknown name is refused by the parameter's declaration (the CLI reads the same), naming the known laws;
     # a law on a structure's record (an element's own basis) is refused before any work.
-    from negstiff import load
+    from negstiff import Rig, load
     from negstiff.errors import InputError
-    from negstiff.models.structure_rig import StructureRig
 
     with pytest.raises(InputError, match="law must be one of 'cubic'"):
         NSI(law="parabola")._validate_params()
     with pytest.raises(InputError, match="damping must be one of 'viscous'"):
         SINDy(law="magnet", damping="cubic")._validate_params()
-    rec = load(StructureRig.device_on_fixture(seed=1).random(duration=8.0).write(tmp_path / "fixture.csv"))
+    rec = load(Rig.device_on_fixture(seed=1).random(duration=8.0).write(tmp_path / "fixture.csv"))
     # a structure with its masses: SINDy's element has its own library, NSI's the cubic (NSI reads a law on a
     # structure without masses: test_structure_state_space)
     for method, said in ((NSI, "a structure with its masses reads the cubic element"),
