@@ -684,9 +684,11 @@ def cmd_report(args) -> int:
             options.setdefault(name, {}).update(law=args.law, damping=args.damping)
     if args.max_effects is not None:
         options["discrepancy"]["max_effects"] = args.max_effects
+    masses = parse_amplitudes(args.masses, "--masses") if args.masses else None
     rep = report_records(args.data, args.columns, args.fs, args.mass, args.forcing_hz, parse_wells(args.wells),
                          args.nfrc, args.only, args.seed, options, progress=lambda line: say(args, line),
-                         gravity=args.gravity, aux=args.aux, decay=args.decay)  # fmt: skip
+                         gravity=args.gravity, aux=args.aux, decay=args.decay, element=args.element,
+                         masses=masses)  # fmt: skip
     rep.write(args.out)
     for w in rep.results()["summary"]:
         say(args, f"  {w}")

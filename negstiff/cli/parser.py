@@ -662,7 +662,8 @@ def _report(sub, common: argparse.ArgumentParser, data_opts: argparse.ArgumentPa
         help="the study on your own record: every analysis that fits it, as one report",
         description="A report of a record (or of a stepped campaign: several files, or a folder): what the record "
         "is decides what is run. A broadband record: NSI around each well it visited, SINDy, the coefficient "
-        "posterior, the discrepancy workflow and the FRF; a harmonic record (its input one spectral line, or "
+        "posterior, the discrepancy workflow and the FRF (a structure's record, z1 ... zN, with its element's place: "
+        "each read as the estimators read it); a harmonic record (its input one spectral line, or "
         "--forcing-hz): the characterisation; a campaign: the bifurcation map, with --nfrc results over it. The "
         "report opens with a summary and a table of contents, the record (sensor, derivation, frame, warnings), one "
         "table of every coefficient with each method's estimate beside the posterior's mean and credible interval "
@@ -673,6 +674,9 @@ def _report(sub, common: argparse.ArgumentParser, data_opts: argparse.ArgumentPa
     rp.add_argument("-o", "--out", required=True, help="report folder (index.html, index.md, results.json, figures)")
     rp.add_argument("--decay", action="store_true", help=DECAY_HELP + " (a single record)")
     rp.add_argument("--mass", type=mass_option(), help="moving mass [kg] (default: the file's metadata)")
+    rp.add_argument("--element", help="a structure's record (z1 ... zN): where the nonlinear element acts, I-J (it "
+                    "moves DOF J relative to DOF I, 0: the base; default: the file's '# element:')")  # fmt: skip
+    rp.add_argument("--masses", help="a structure's DOF masses m1,...,mN [kg] (default: the file's '# masses:')")
     rp.add_argument(
         "--aux",
         help="measured auxiliary channels of the record, by the file's column names (e.g. voltage): SINDy and the "

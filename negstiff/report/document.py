@@ -123,7 +123,8 @@ class Report(Blocks):
         estimates = {col: v for s in secs for col, v in s.estimates.items()}
         intervals = {f"{s.label or 'posterior'}": s.interval for s in secs if s.interval}
         if estimates or intervals:
-            per_kg = any(s.kind == "record" and "mass" in s.json and s.json["mass"] is None for s in secs)
+            per_kg = any(s.kind == "record" and "mass" in s.json and s.json["mass"] is None and not s.json.get("masses")
+                         for s in secs)  # fmt: skip
             blocks, figures, lines = coefficient_blocks(estimates, intervals, per_kg)
             self.figures.update(figures)
             head += blocks
@@ -146,9 +147,10 @@ class Report(Blocks):
         held = {k: v for s in secs for k, v in s.heldout.items()}
         if len(held) > 1:
             head += [("h", (2, "Held-out prediction")),
-                     ("p", "Each model's free runs (restarted at measured states, 2 s each) over the part of the "
-                           "record not used to identify it, as a share of rms z, beside the record's sensor-noise "
-                           "floor (a perfect model's error also carries the input's noise and its start states')."),
+                     ("p", "Each model's free runs (restarted at measured states; each section says for how long) "
+                           "over the part of the record not used to identify it, as a share of rms z, beside the "
+                           "record's sensor-noise floor (a perfect model's error also carries the input's noise and "
+                           "its start states')."),
                      ("table", (["model", "held-out error [% of rms z]"],
                                 [[k, fmt(v, 3)] for k, v in held.items()]))]  # fmt: skip
         out: list[tuple[str, Any]] = list(head)

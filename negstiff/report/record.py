@@ -6,8 +6,10 @@ record (its input one spectral line, or ``forcing_hz`` given) gets the character
 (``analysis.record_kind``) the FRF, NSI, SINDy and the posterior; a free decay NSI, SINDy and the backbone
 (measured and the identified model's); several records or
 a folder (a stepped campaign) get the bifurcation map, with continuations drawn over it. ``only`` chooses
-among them. Every input is read and checked before any work (one ``InputError``); each analysis that then
-cannot be made is shown in its place with the reason, and the rest of the report is still written.
+among them. A structure's record (N DOFs) takes the same plan, each analysis reading it as its estimator reads
+it (the element's place from ``element`` or the file's ``# element:``). Every input is read and checked before any
+work (one ``InputError``); each analysis that then cannot be made is shown in its place with the reason, and the
+rest of the report is still written.
 
 The report opens with the summary and a table of contents, then the record (sensor, derivation, frame,
 warnings), one table of every coefficient with each method's estimate beside the posterior's mean and
@@ -79,6 +81,8 @@ def report_records(
     gravity: float | None = None,
     aux: Sequence[str] | str | None = None,
     decay: bool = False,
+    element: str | None = None,
+    masses: Sequence[float] | None = None,
 ) -> Report:
     """The report of ``data`` (one record, or a campaign's records or folder): every input read and checked
     first (one ``InputError``), then each analysis that fits it; ``options`` per analysis (``{"posterior":
@@ -86,7 +90,10 @@ def report_records(
     ``Report`` (``write(folder)`` writes it). ``gravity`` [m/s^2] along the motion overrides the records'
     metadata (0 for a horizontal device); ``aux`` names measured auxiliary channels of a single record (SINDy
     and the discrepancy workflow offer each as a term); ``decay``: a single record is a free decay whatever its
-    input column holds (``load``'s).
+    input column holds (``load``'s). A structure's record (N DOFs, ``z1 ... zN``) is reported as a single DOF's is,
+    each analysis reading it as its estimator does: ``element`` its place (``"I-J"``; default: the file's
+    ``# element:``), ``masses`` its DOFs' (default: the file's ``# masses:``); an analysis that reads a single DOF's
+    record only is shown with its reason.
     """
     say = progress or (lambda text: None)
     options = {k: dict(v) for k, v in (options or {}).items()}
@@ -107,11 +114,15 @@ def report_records(
         raise InputError("--nfrc: a single record's report draws no NFRC (a campaign's bifurcation map overlays "
                          "them); give a campaign's records or folder")  # fmt: skip
     rec = load(paths[0], columns=columns, fs=fs, mass=mass, gravity=gravity, aux=aux, decay=decay)
-    if rec.n_dof > 1:  # before any work: the sections read one response (they crashed on a structure's z1 ... zN)
-        raise InputError(
-            f"{rec.source}: a record of {rec.n_dof} DOFs (z1 ... z{rec.n_dof}): the report reads a single DOF's; "
-            "identify a structure with `negstiff identify nsi|sindy DATA --element I-J` (and posterior, frf --dofs)"
-        )
+    if masses is not None:
+        rec = rec.with_masses(masses)
+    place = element if element is not None else rec.meta.get("element")
+    if rec.n_dof > 1 and place is None:  # before any work: every identification of a structure needs it
+        raise InputError(f"{rec.source}: a record of {rec.n_dof} DOFs (z1 ... z{rec.n_dof}): give the element's "
+                         "place (--element I-J, or '# element: I-J' in the file's header)")  # fmt: skip
+    if place is not None:  # the estimators check it against the record (a single DOF's: 0-1 only)
+        options = {**options, **{n: {**options.get(n, {}), "element": place}
+                                 for n in ("nsi", "sindy", "posterior", "discrepancy")}}  # fmt: skip
     if forcing_hz is not None:
         check_forcing(rec, forcing_hz)
     from negstiff.inference.analysis.record_kind import RING_DOWN_KINDS, check_decay, record_kind
@@ -135,6 +146,7 @@ def report_records(
     if what.kind in RING_DOWN_KINDS:
         rep.add_text(f"Read as {'a hammer' if what.kind == 'impact' else 'a free decay'}'s record: {what.how}.")
     failed: list[str] = []
+    made: dict[str, Any] = {}
     for name, title, run, _ in runs:
         start = time.perf_counter()
         say(f"report: {title} ...")
@@ -154,7 +166,8 @@ def report_records(
             failed.append(f"{title}: {type(exc).__name__}: {' '.join(str(exc).split())}")
             continue
         rep.add(result)
-        if name == "frf" and _crosses_wells(rec):
+        made[name] = result
+        if name == "frf" and _crosses_wells(rec, made):
             rep.warning("The record crosses between the wells: its FRF is not an underlying-linear system's (the "
                         "FRF of a low-level record around one well is; NSI gives each well's here).")  # fmt: skip
         say(f"report: {title} done ({time.perf_counter() - start:.1f} s)")
@@ -223,13 +236,23 @@ def harmonic_next_steps(forcing_hz: float):
     return sec
 
 
-def _crosses_wells(rec) -> bool:
+def _crosses_wells(rec, made: dict[str, Any] | None = None) -> bool:
     """Whether the record visits both wells (``periodicity.classify_regime`` against its metadata's rest
-    positions, else the wells of a cubic fitted to it).
+    positions, else the wells of a cubic fitted to it); a structure's: whether the element's relative motion (in
+    the frame an identification found) visits both of the identified element's wells (False before any).
     """
     from negstiff.inference.analysis.periodicity import classify_regime
     from negstiff.inference.steps.wells import well_guesses
 
+    if rec.n_dof > 1:
+        for est in (made or {}).values():
+            structure = getattr(getattr(est, "result_", None), "structure", None)
+            if structure is None:
+                continue
+            eq = structure.element_equilibria()
+            r = structure.coupling @ (np.asarray(rec.z) - np.asarray(est.result_.offsets_m)[:, None])
+            return eq.z_minus is not None and classify_regime(r, (eq.z_minus, eq.z_plus)) == "cross-well"
+        return False
     rest = rec.rest_positions
     try:
         wells = (rest["minus"], rest["plus"]) if len(rest) == 2 else well_guesses(rec)
@@ -359,6 +382,9 @@ def _interval(rec, fitted: dict[str, Any]) -> dict[str, Any]:
     """
     from negstiff.inference.analysis.record_kind import identification_record, record_kind
 
+    if rec.n_dof > 1:
+        raise InputError(f"{rec.source}: the blocks' interval is a single DOF's own estimate's; a structure's element "
+                         "has its posterior's interval")  # fmt: skip
     for name in ("nsi", "sindy"):
         if name in fitted:
             return fitted[name].own_estimate(identification_record(rec, record_kind(rec)), blocks=3)
@@ -373,6 +399,9 @@ minute); ``negstiff design`` on the report's posterior searches further."""
 def _check_design(rec) -> None:
     from negstiff.inference.analysis.record_kind import RING_DOWN_KINDS, record_kind
 
+    if rec.n_dof > 1:
+        raise InputError(f"{rec.source}: the test design plans a single DOF's next test from its posterior; a "
+                         "structure's is not written yet")  # fmt: skip
     if rec.input_name != "base_acc" and record_kind(rec).kind not in RING_DOWN_KINDS:
         raise InputError(f"{rec.source}: a shaker's force record: the design plans shaker-table tests from a "
                          "base-excited record's posterior, hammer hits and releases from a hammer's or a "

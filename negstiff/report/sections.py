@@ -194,9 +194,20 @@ def record_section(rec, label: str = "") -> Section:
     resp = info.get("response", {})
     # the file's name in the heading (a lab's path ran off the page there and in the title), its path in the table
     sec = Section("record", label, _with_label(f"The record: {Path(rec.source).name}", label))
-    noise_pct = None
+    noise_pct, per_dof = None, []
     if rec.z is not None and rec.z.size > 64:
-        noise_pct = 100 * float(np.sqrt(noise_floor(rec.z, rec.fs)[0])) / float(np.sqrt(np.mean(rec.z**2)))
+        # each channel's white-noise floor in % of its rms; a structure's pooled as its held-out errors are
+        rows_z = np.atleast_2d(rec.z)
+        var = [float(noise_floor(z, rec.fs)[0]) for z in rows_z]
+        per_dof = [100 * float(np.sqrt(v / np.mean(z**2))) for v, z in zip(var, rows_z, strict=True)]
+        noise_pct = float(np.sqrt(np.mean(np.square(per_dof))))  # as a structure's held-out error pools its DOFs
+    masses = getattr(rec, "masses", None)
+    if masses is not None:  # a structure's: each DOF's mass
+        mass_row = ["masses [kg]", ", ".join(f"{m:g}" for m in masses)]
+    else:
+        mass_row = ["mass [kg]", rec.mass if rec.mass is not None else "not given: coefficients per unit mass"]
+    if rec.n_dof > 1 and masses is None:
+        mass_row = ["masses [kg]", "not given: NSI reads the structure through its sensors (a state-space part)"]
     rows = [
         ["file", rec.source],
         ["samples", rec.n],
@@ -208,9 +219,12 @@ def record_section(rec, label: str = "") -> Section:
         ["how z was derived", resp.get("derived") or "measured"],
         ["frame", resp.get("frame", "as measured" if resp.get("z_constant_known", True) else "not pinned")],
         ["frame offset [mm]", "none" if resp.get("frame_offset_m") is None else 1e3 * resp["frame_offset_m"]],
-        ["mass [kg]", rec.mass if rec.mass is not None else "not given: coefficients per unit mass"],
-        ["sensor-noise floor [% of rms z]", noise_pct],
-    ]
+        mass_row,
+        ["sensor-noise floor [% of rms z]", noise_pct if len(per_dof) < 2 else
+         f"{fmt(noise_pct, 3)} (by DOF: {', '.join(fmt(x, 3) for x in per_dof)})"],
+    ]  # fmt: skip
+    if rec.n_dof > 1:
+        rows.insert(4, ["degrees of freedom", rec.n_dof])
     sec.table(["", "value"], rows)
     for w in [*info.get("warnings", []), *resp.get("warnings", [])]:
         sec.warning(w)
@@ -222,7 +236,75 @@ def record_section(rec, label: str = "") -> Section:
         + f"; {len(info.get('warnings', [])) + len(resp.get('warnings', []))} warning(s) about it."
     )  # fmt: skip
     sec.json = {"source": rec.source, "n": rec.n, "fs": rec.fs, "info": info, "noise_floor_percent": noise_pct,
-                "mass": rec.mass}  # fmt: skip
+                "mass": rec.mass, **({"dofs": rec.n_dof, "masses": None if masses is None else list(masses),
+                                      "noise_floor_percent_by_dof": per_dof} if rec.n_dof > 1 else {})}  # fmt: skip
+    return sec
+
+
+def structure_section(est, label: str = "") -> Section:
+    """A structure's identification (``NSI``/``SINDy`` fitted on a record of N DOFs, or its result): each well's
+    modes, the element's law and each channel's zero; read through the sensors (no masses: a state-space linear
+    part), the modes in band and the element's coefficients with their standard errors.
+    """
+    r = getattr(est, "result_", est)
+    name = {"nsi": "NSI", "sindy": "SINDy", "discrepancy": "the discrepancy workflow"}.get(r.method, r.method)
+    col = _with_label(name if r.method != "discrepancy" else "discrepancy", label)
+    j = r.to_json()
+    i, k = j["element_at"]
+    place = f"element {i}-{k}: between DOF {i} and DOF {k}" if i else f"element 0-{k}: between the base and DOF {k}"
+    sec = Section("identification", label, _with_label(f"{name}: the structure ({j['dofs']} DOFs, {place})", label))
+    rows = [[w, n + 1, m.f_hz, 100 * m.zeta, ", ".join(fmt(x, 3) for x in m.shape)]
+            for w, ms in r.modal.items() for n, m in enumerate(ms)]  # fmt: skip
+    v = j["validation"]
+    if j.get("linear_part") == "state_space":
+        sec.text(f"No masses: the linear part is a state-space model of order {j['order']} (its stabilisation "
+                 "diagram's), every mode in the force's band; the element's coefficients through the measured "
+                 "driving point (reciprocity), each with its standard error.")  # fmt: skip
+        sec.table(["", "mode", "f [Hz]", "zeta [%]", "shape (by sensor)"], rows)
+        coefs = [[c, e.get("value"), e.get("se")] for c, e in j["element"].items() if isinstance(e, dict)]
+        sec.table(["coefficient", "value", "standard error"], coefs)
+        held = v.get("rms_percent")
+        sec.text(f"Held-out windows: the model misses them by {fmt(held, 3)} % of their rms, its linear part "
+                 f"alone by {fmt(v.get('linear_rms_percent'), 3)} %.")  # fmt: skip
+        coefficients = {c: e["value"] for c, e in j["element"].items() if isinstance(e, dict) and "value" in e}
+        top = max((c for c in coefficients if c[:1] == "k" and c[1:].isdigit()), key=lambda c: int(c[1:]), default=None)
+        said = "" if top is None else f"{top} = {fmt(coefficients[top])} +- {fmt(j['element'][top].get('se'), 2)}"
+    else:
+        el = r.structure.element
+        sec.estimates[col] = effective(el)
+        sec.text("Each well's underlying-linear modes (the element linearised at the well; shapes by DOF, the "
+                 "largest 1):")  # fmt: skip
+        sec.table(["well", "mode", "f [Hz]", "zeta [%]", "shape (by DOF)"], rows)
+        units = coefficient_units()
+        r_is = f"z{k}" + (f" - z{i}" if i else "")
+        sec.text(
+            f"The element's law, its force across {i}-{k} as the relative motion r = {r_is} and r' drive it "
+            "(F = k3 r^3 + k2 r^2 - k1 r + k0 + c r' + c_nl r'|r'|):"
+        )
+        sec.table([f"{c} [{units[c]}]" for c in COEFFICIENTS], [[getattr(el, c) for c in COEFFICIENTS]])
+        sec.text(
+            "The linear structure (the element's part excluded), stiffness K [N/m] and damping C [N s/m] by DOF: "
+            + "; ".join(f"K row {n + 1}: {', '.join(fmt(x, 4) for x in row)}" for n, row in enumerate(r.structure.K))
+            + ". " + "; ".join(f"C row {n + 1}: {', '.join(fmt(x, 3) for x in row)}"
+                               for n, row in enumerate(r.structure.C))
+            + ". Each channel's zero found (measured = physical + offset): "
+            + ", ".join(f"z{n + 1} {fmt(1e3 * o, 3)} mm" for n, o in enumerate(j["offsets_m"])) + "."
+        )  # fmt: skip
+        held = v.get("rms_percent")
+        sec.text(f"Held-out validation (the last part of the record, not used to identify): free runs of "
+                 f"{fmt(v.get('window_s'), 2)} s restarted at the measured states miss it by {fmt(held, 3)} % of "
+                 f"rms z over every DOF (by DOF: {', '.join(fmt(x, 3) for x in v.get('per_dof_percent', []))} %); "
+                 f"a right model misses a record like this by about {fmt(v.get('floor_percent'), 3)} % (the fitted "
+                 "structure run on its own record with the channels' noise: what noise, smoothing and chaos leave "
+                 "any model).")  # fmt: skip
+        said = f"k3 = {fmt(el.k3)} N/m^3"
+    sec.heldout[col] = held
+    for w in r.warnings:
+        sec.warning(w)
+    modes = "; ".join(f"{w}: " + ", ".join(f"{m.f_hz:.4g} Hz ({100 * m.zeta:.3g} %)" for m in ms)
+                      for w, ms in r.modal.items())  # fmt: skip
+    sec.summary.append(f"{col}'s structure: element {said}; modes {modes}; held-out error {fmt(held, 3)} %.")
+    sec.json = j
     return sec
 
 
@@ -374,7 +456,8 @@ def posterior_section(post, label: str = "") -> Section:
         sec.stroke = (float(sec.band["z_m"][0]), float(sec.band["z_m"][-1]))
     if "k3" in sec.interval:
         mean, lo, hi = sec.interval["k3"]
-        unit = coefficient_units(st.get("mass") is None and st.get("model") == "coefficients")["k3"]
+        per_kg = st.get("mass") is None and not st.get("masses") and st.get("model") == "coefficients"
+        unit = coefficient_units(per_kg)["k3"]
         sec.summary.append(
             f"The posterior puts k3 at {fmt(mean)} {unit} ({pct:g} % interval {' to '.join(fmt_interval(lo, hi))})"
             + ("." if res["converged"] else "; its chains did not converge (warnings).")
@@ -422,6 +505,8 @@ def interval_section(own: dict[str, Any], label: str = "", prob: float = 0.95) -
 def discrepancy_section(d, label: str = "") -> Section:
     """A fitted ``Discrepancy``: what it named, its size, where the baseline erred, the gap before and after."""
     res = d.result()
+    if "dofs" in res:  # a structure's: its final model is a structure (``structure_section``), its account details
+        return _structure_discrepancy_section(d, res, label)
     sec = Section("discrepancy", label, _with_label("Discrepancy: where model and data disagree", label))
     col = _with_label("discrepancy", label)
     sec.estimates[col] = effective(res["model"])
@@ -449,8 +534,38 @@ def discrepancy_section(d, label: str = "") -> Section:
     return sec
 
 
+def _structure_discrepancy_section(d, res: dict[str, Any], label: str) -> Section:
+    """A structure's discrepancy workflow: each registered effect scored on the held-out weak residual beside the
+    element's base law, the one named (if any) and the held-out gap before and after, then its final structure.
+    """
+    det = res["details"]
+    named = det["effect"] if det["effect"] != "none" else None
+    title = _with_label("Discrepancy: where the structure's model and data disagree", label)
+    sec = Section("discrepancy", label, title)
+    sec.table(["effect", "held-out weak residual score [%]"], [[r["effect"], r["score"]] for r in det["ranking"][:6]])
+    size = "" if named is None else f" ({named} = {fmt(det['candidates'][named]['value'])})"
+    sec.text((f"Named: {named}{size}." if named else "No registered effect passed its margin.")
+             + f" Held-out gap (restarted free runs): {fmt(det['gap_before_percent'], 3)} % before, "
+             f"{fmt(det['gap_after_percent'], 3)} % after. The final structure:")  # fmt: skip
+    final = structure_section(d, label)
+    sec.blocks += final.blocks
+    sec.estimates, sec.heldout = final.estimates, final.heldout
+    sec.summary = [
+        (
+            f"The discrepancy workflow names {named}{size}"
+            if named
+            else "The discrepancy workflow names no missing effect of the structure's element"
+        )
+        + f"; held-out gap {fmt(det['gap_before_percent'], 3)} % -> {fmt(det['gap_after_percent'], 3)} %."
+    ]
+    sec.json = res
+    return sec
+
+
 def frf_section(res: dict[str, Any], label: str = "", title: str = "") -> Section:
     """An ``frf`` result (its spectra ``_curves`` drawn where it holds them)."""
+    if "dofs" in res:  # a structure's: every DOF's FRF, the modes merged
+        return _frf_dofs_section(res, label, title)
     sec = Section("frf", label, _with_label("Frequency response (H1, H2, coherence)", label))
     curves = res.get("_curves")
     if curves is not None:
@@ -467,6 +582,28 @@ def frf_section(res: dict[str, Any], label: str = "", title: str = "") -> Sectio
     top = "no peak" if res["f_hz"] is None else f"{res['f_hz']:.4g} Hz, zeta {100 * res['zeta']:.3g} %"
     sec.summary.append(f"The FRF's dominant peak: {top} ({len(res['peaks'])} peak(s) in {res['band'][0]:.3g}-"
                        f"{res['band'][1]:.3g} Hz).")  # fmt: skip
+    sec.json = {k: v for k, v in res.items() if k != "_curves"}
+    return sec
+
+
+def _frf_dofs_section(res: dict[str, Any], label: str, title: str) -> Section:
+    """A structure's ``frf`` result: every DOF's |H1| and coherence, the merged modes and the DOFs that show each."""
+    sec = Section("frf", label, _with_label("Frequency response of every DOF (H1, coherence)", label))
+    curves = res.get("_curves")
+    if curves is not None:
+        from .figures import frf_figure_dofs
+
+        input_name = "base_acc" if "base_acc" in res["dofs"][0].get("response_per_input", "") else "force"
+        fig = frf_figure_dofs(res, curves, input_name, title or "FRFs")
+        sec.figure(f"frf_{_slug(label or 'record')}", fig, "|H1| from the input to each DOF, the modes found marked; "
+                   "coherence below.")  # fmt: skip
+    sec.table(["mode", "f [Hz]", "zeta [%]", "seen on"],
+              [[i + 1, m["f_hz"], 100 * m["zeta"], ", ".join(f"z{d}" for d in m["seen_on"])]
+               for i, m in enumerate(res["modes"])])  # fmt: skip
+    for w in res.get("warnings", []):
+        sec.warning(w)
+    said = ", ".join(f"{m['f_hz']:.4g} Hz ({100 * m['zeta']:.3g} %)" for m in res["modes"]) or "no peak"
+    sec.summary.append(f"The FRFs show {len(res['modes'])} mode(s): {said}.")
     sec.json = {k: v for k, v in res.items() if k != "_curves"}
     return sec
 
@@ -749,23 +886,27 @@ def section_for(result, label: str = "") -> Section:
     from negstiff.inference.estimators.discrepancy import Discrepancy
     from negstiff.inference.estimators.identification import Identification, Identifier
     from negstiff.inference.estimators.posterior.core import Posterior
+    from negstiff.inference.estimators.state_space_id import StateSpaceIdentification
+    from negstiff.inference.estimators.structure_id import StructureIdentification
     from negstiff.inference.record.measurement import Measurement
 
     if isinstance(result, Section):
         return result
     if isinstance(result, Measurement):
         return record_section(result, label)
+    if isinstance(result, Discrepancy):
+        return discrepancy_section(result, label)
+    if isinstance(getattr(result, "result_", result), (StructureIdentification, StateSpaceIdentification)):
+        return structure_section(result, label)
     if isinstance(result, (Identifier, Identification)):
         return identification_section(result, label)
     if isinstance(result, Posterior):
         return posterior_section(result, label)
-    if isinstance(result, Discrepancy):
-        return discrepancy_section(result, label)
     if isinstance(result, dict) and "standard_error" in result and "blocks" in result:
         return interval_section(result, label)
     if isinstance(result, dict) and "measured" in result and "decay" in result:
         return backbone_section(result, label, result.get("model_name", ""))
-    if isinstance(result, dict) and "peaks" in result:
+    if isinstance(result, dict) and ("peaks" in result or ("modes" in result and "dofs" in result)):
         return frf_section(result, label)
     if isinstance(result, dict) and "regime" in result and "period" in result:
         return characterisation_section(result, label)

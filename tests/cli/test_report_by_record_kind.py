@@ -153,9 +153,10 @@ def test_a_free_decays_report_gives_the_posterior_and_its_backbone_band(tmp_path
     assert inside.mean() >= 0.9, inside.mean()
 
 
-def test_a_structures_record_is_refused_in_one_line_before_any_work(tmp_path, capsys):
-    # a 2-DOF hammer record (z1, z2 and the masses): the report's sections read one response, and the command
-    # crashed with a traceback in its record section; now one line says what reads a structure, exit 2, no output
+def test_a_structures_record_without_its_elements_place_is_refused_in_one_line_before_any_work(tmp_path, capsys):
+    # a 2-DOF hammer record (z1, z2 and the masses, no '# element:'): once it crashed with a traceback in its record
+    # section; a structure's report (tests/cli/test_report_structure.py) needs the element's place, and without it
+    # one line asks for it, exit 2, no output
     t, f, z, _ = hammer_record(DUFFING, 0.0, FS, (0.5,), 40.0, 0.004, 3.0)
     path = tmp_path / "structure.csv"
     with open(path, "w") as fh:

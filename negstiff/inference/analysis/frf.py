@@ -176,7 +176,8 @@ def check_frf(rec: Measurement, band: tuple[float, float] | None = None) -> None
 
 
 def frf(rec: Measurement, band: tuple[float, float] | None = None, segment_s: float | None = None) -> dict[str, Any]:
-    """Frequency response functions (H1, H2, coherence) with every resonance peak fitted.
+    """Frequency response functions (H1, H2, coherence) with every resonance peak fitted; a structure's record
+    (N DOFs): every DOF's, the modes merged (``frf_structure``).
 
     Peaks are local maxima of ``|H1|`` standing 6 dB above the band's median level at coherence above
     0.5, each fitted with a single-degree-of-freedom receptance (``docs/methods/frf.md``). The dominant peak
@@ -212,6 +213,8 @@ def frf(rec: Measurement, band: tuple[float, float] | None = None, segment_s: fl
     from negstiff.inference.steps.frame import calibrate_scale
 
     check_frf(rec, band)
+    if rec.n_dof > 1:  # each DOF's response read as a single DOF's (``frf_structure``), the modes merged
+        return frf_structure(rec, band=band, segment_s=segment_s)
     rec = calibrate_scale(rec)
     hits = find_impacts(rec.u, rec.fs) if rec.input_name == "force" else None
     period = input_period(rec) if segment_s is None and hits is None else None
