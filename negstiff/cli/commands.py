@@ -52,19 +52,36 @@ def cmd_rig(args) -> int:
         return 0
     out = out_path(args)
     start = "plus" if args.start == "both" else args.start
-    if args.mode == "random":
-        kw = {"duration": args.duration, "rms": args.rms, "band": tuple(args.band), "start": start}
+    ring_down = args.mode in ("hammer", "release")
+    duration = args.duration if args.duration is not None else (10.0 if ring_down else 300.0)
+    if args.mode == "hammer":
+        kw = {"peak": args.peak, "hits": args.hits, "duration": duration, "width": args.width, "start": start,
+              "dof": args.dof}  # fmt: skip
+        rig.check_hammer(**kw)
+        check_written(out)  # the suffix, before the simulation
+        say(args, f"rig hammer: {args.hits} hit(s) of {args.peak:g} N over {duration:g} s")
+        rec = rig.hammer(**kw)
+        what = f"{args.hits} hit(s) of {args.peak:g} N, {duration:g} s"
+    elif args.mode == "release":
+        if args.z0 is None:
+            raise InputError("rig release: give --z0, where the moving part is held before it is let go [m]")
+        check_written(out)
+        say(args, f"rig release: from z = {1e3 * args.z0:g} mm over {duration:g} s")
+        rec = rig.release(args.z0, duration)
+        what = f"a free decay from {1e3 * args.z0:g} mm, {duration:g} s"
+    elif args.mode == "random":
+        kw = {"duration": duration, "rms": args.rms, "band": tuple(args.band), "start": start}
         rig.check_random(**kw)
         check_written(out)  # the suffix, before the simulation
-        say(args, f"rig random: {args.duration:g} s at {rig.fs:g} Hz, {args.rms:g} m/s^2 rms")
+        say(args, f"rig random: {duration:g} s at {rig.fs:g} Hz, {args.rms:g} m/s^2 rms")
         rec = rig.random(**kw)
         what = f"{rec.columns['t'].size} samples at {rig.fs:g} Hz"
     elif args.mode == "sweep":
-        kw = {"f_start": args.f_start, "f_stop": args.f_stop, "amplitude": args.amplitude, "duration": args.duration,
+        kw = {"f_start": args.f_start, "f_stop": args.f_stop, "amplitude": args.amplitude, "duration": duration,
               "mode": args.sweep_mode, "start": start}  # fmt: skip
         rig.check_sine_sweep(**kw)
         check_written(out)  # the suffix, before the simulation
-        say(args, f"rig sweep: {args.f_start:g}-{args.f_stop:g} Hz over {args.duration:g} s")
+        say(args, f"rig sweep: {args.f_start:g}-{args.f_stop:g} Hz over {duration:g} s")
         rec = rig.sine_sweep(**kw)
         what = f"sine sweep {args.f_start:g}-{args.f_stop:g} Hz, {args.amplitude:g} m/s^2"
     else:

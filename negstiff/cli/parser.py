@@ -23,6 +23,9 @@ EPILOG_RIG = """examples:
   negstiff rig harmonic --freq 9 --amplitude 15 -o h.csv          steady-state harmonic response
   negstiff rig campaign --amplitudes 4:30:0.5 --start both --direction both -o campaign/
   negstiff rig campaign --freqs 5:11:0.1 --amplitude 3 --direction both -o nfrc_test/   stepped sine
+  negstiff rig hammer --peak 20 --hits 4 --duration 10 -o hit.csv  an impact hammer's test, the table still
+  negstiff rig release --z0 0.03 --duration 10 -o decay.csv        a free decay from 30 mm
+  negstiff rig hammer --model fixture.json --dof 1 -o hit.csv      a structure hit on its DOF 1
 Every record is written with <name>.truth.json beside it (the truth behind the record)."""
 
 
@@ -50,7 +53,7 @@ def _rig(sub, common: argparse.ArgumentParser, data_opts: argparse.ArgumentParse
         epilog=EPILOG_RIG,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    rig.add_argument("mode", choices=["random", "harmonic", "sweep", "campaign"])
+    rig.add_argument("mode", choices=["random", "harmonic", "sweep", "campaign", "hammer", "release"])
     rig.add_argument(
         "-o", "--out", required=True, help="record file (.csv, .npz, .uff/.unv, .tdms); for campaign, a folder"
     )
@@ -96,7 +99,8 @@ def _rig(sub, common: argparse.ArgumentParser, data_opts: argparse.ArgumentParse
         help="write accelerations in g, as base_acc_g / y_acc_g (read back with --columns base_acc=base_acc_g*9.81)",
     )
     g = rig.add_argument_group("random")
-    g.add_argument("--duration", type=number(float, 1.0, 1e5), default=300.0, help="record length [s] (default 300)")
+    g.add_argument("--duration", type=number(float, 1.0, 1e5), default=None,
+                   help="record length [s] (default 300; a hammer's or release's: 10)")  # fmt: skip
     g.add_argument(
         "--rms",
         type=acceleration_option(),
@@ -141,6 +145,14 @@ def _rig(sub, common: argparse.ArgumentParser, data_opts: argparse.ArgumentParse
     )
     g.add_argument(
         "--periods", type=number(int, 1, 10**6), default=100, help="forcing periods recorded per step (default 100)"
+    )
+    g = rig.add_argument_group("hammer and release (the table still; --duration, --start too)")
+    g.add_argument("--peak", type=POSITIVE, default=20.0, help="a hit's peak force [N] (default 20)")
+    g.add_argument("--hits", type=number(int, 1, 10**4), default=4, help="hits, evenly spread (default 4)")
+    g.add_argument("--width", type=POSITIVE, default=0.004, help="a hit's duration [s] (a half-sine; default 0.004)")
+    g.add_argument("--dof", type=number(int, 1, 50), help="a structure's DOF the hammer hits (default: the element's)")
+    g.add_argument(
+        "--z0", type=number(float), help="release: where the moving part is held [m] (a structure's element)"
     )
     rig.set_defaults(func=c.cmd_rig)
 

@@ -406,6 +406,7 @@ class Rig:
             raise RigError(f"release position must be a finite number [m], got {z0!r}")
         if not (_real(duration) and duration > 0 and math.isfinite(duration)):
             raise RigError(f"a release needs a positive duration, got {duration!r}")
+        self._check_laser()
         self._require_memory([duration * self.fs * self.oversample], "a release record")
         n = int(round(duration * self.fs))
         excitation = {"type": "release", "duration_s": duration, "z0_m": float(z0)}
@@ -413,6 +414,7 @@ class Rig:
 
     def check_hammer(self, peak=20.0, hits=4, duration=10.0, width=0.004, start="plus", dof=None) -> None:
         """Everything ``hammer`` refuses (``RigError``, one line), before any work."""
+        self._check_laser()
         self._hit_dof(dof)
         if isinstance(hits, bool) or not isinstance(hits, (int, np.integer)) or hits < 1:
             raise RigError(f"hits must be a whole number >= 1, got {hits!r}")
@@ -428,6 +430,12 @@ class Rig:
         self._check_start([start])
         self._well(start)
         self._require_memory([duration * self.fs * self._hammer_oversample(width)], "a hammer record")
+
+    def _check_laser(self) -> None:
+        """A hammer or release test is read by the laser on the moving part: a ``RigError`` for another sensor."""
+        if self.sensors.response not in ("displacement", "absolute"):
+            raise RigError(f"a hammer or release test is read by the laser on the moving part (response "
+                           f"'displacement' or 'absolute'), not {self.sensors.response!r}")  # fmt: skip
 
     def _hit_dof(self, dof: int | None) -> int:
         """The DOF a hammer hits (1..N; default: the DOF the element moves), a ``RigError`` for any other."""
@@ -457,9 +465,7 @@ class Rig:
         """
         from .simulator import simulate
 
-        if self.sensors.response not in ("displacement", "absolute"):
-            raise RigError(f"a hammer or release test is read by the laser on the moving part (response "
-                           f"'displacement' or 'absolute'), not {self.sensors.response!r}")  # fmt: skip
+        self._check_laser()
         res = simulate(self.system, force, 1.0 / (self.fs * q), z0=z0, v0=0.0, input_kind="force",
                        force_dof=excitation.get("force_dof"))  # fmt: skip
         if res.diverged[0]:

@@ -28,6 +28,36 @@ def test_rig_and_simulate_write_the_contract_files(workdir):
     assert (workdir / "rec.truth.json").exists()
 
 
+def test_rig_writes_a_hammer_test_and_a_free_decay_a_lab_would_read(workdir, capsys):
+    # the rig's hammer and release tests from the command line (they were the library's only): the hammer's record
+    # is read as a hammer's (its hits found), the release's as a free decay; a structure's hammer names the DOF hit.
+    # What the test cannot be is refused in one line before any work (no file, no progress line first)
+    from negstiff import load
+    from negstiff.inference.analysis.record_kind import record_kind
+    from negstiff.models.device import SEED_LIKE_CUBIC
+    from negstiff.models.structure import Structure
+
+    hit, decay = workdir / "hit.csv", workdir / "decay.csv"
+    assert main(["rig", "hammer", "--hits", "2", "--duration", "4", "-o", str(hit), "--quiet"]) == 0
+    assert main(["rig", "release", "--z0", "0.03", "--duration", "4", "-o", str(decay), "--quiet"]) == 0
+    assert record_kind(load(hit)).kind == "impact" and record_kind(load(decay)).kind == "decay"
+    fixture = workdir / "fixture.json"
+    s = Structure.on_fixture(SEED_LIKE_CUBIC, fixture_mass=1.0, fixture_hz=25.0, fixture_zeta=0.02)
+    fixture.write_text(json.dumps(s.to_dict()))
+    two = workdir / "hit2.csv"
+    assert main(["rig", "hammer", "--model", str(fixture), "--dof", "1", "--duration", "3", "-o", str(two),
+                 "--quiet"]) == 0  # fmt: skip
+    rec = load(two)
+    assert rec.n_dof == 2 and rec.force_dof == 1 and rec.input_name == "force"
+    capsys.readouterr()
+    for argv, says in ((["release"], "--z0"), (["hammer", "--sensor", "velocity"], "laser"),
+                       (["hammer", "--model", str(fixture), "--dof", "3"], "DOF 1..2")):  # fmt: skip
+        out = workdir / "refused.csv"
+        assert main(["rig", *argv, "-o", str(out)]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and says in err[0] and not out.exists(), err
+
+
 def test_harmonic_and_campaign(workdir):
     assert (
         main(

@@ -119,6 +119,23 @@ def test_time_rounded_as_labs_export_it_is_uniform(tmp_path, fmt):
     assert m.info["time"]["jitter_s"] <= 0.5 * m.info["time"]["resolution_s"] * (1 + 1e-3)
 
 
+def test_a_records_time_base_is_the_same_whatever_the_callers_blas_threads(tmp_path):
+    # Fact: reading a file is arithmetic, not a function of the process's thread pools. The clock's step is a
+    # least-squares slope over every sample (a dot product), and OpenBLAS splits a long one over its threads, adding
+    # the parts in another order: a script (two BLAS threads) read 511.99999999997783 Hz where the command (one)
+    # read 511.9999999999777, and a structure's k3 then differed by 4.5e-9 between them (measured). The loader now
+    # runs its linear algebra on the estimators' fixed thread count: the same bits from either
+    from threadpoolctl import threadpool_limits
+
+    fs, n = 512.0, 512 * 30  # the measured case: 30 s at 512 Hz, printed to 10 digits (larger n rounded alike)
+    p = _lab_csv(tmp_path, [f"{x:.10g}" for x in np.arange(n) / fs], n)
+    with threadpool_limits(limits=1, user_api="blas"):
+        one = load(p)
+    with threadpool_limits(limits=2, user_api="blas"):
+        two = load(p)
+    assert one.fs == two.fs and one.info["time"] == two.info["time"]  # the same computation: the same bits
+
+
 def test_a_real_gap_is_named_at_its_row(tmp_path):
     # Fact: 100 samples missing after row 1001 is a gap, not rounding; the first bad row is 1002.
     fs = 2048.0

@@ -210,15 +210,9 @@ class Estimator(ModelPredictions):
 
 def _on_fit_threads(fit):
     """``fit`` with its linear algebra on ``resources.FIT_BLAS_THREADS`` BLAS threads, whatever the caller's pool."""
+    from negstiff.resources import on_fit_threads
 
-    @functools.wraps(fit)
-    def on_fit_threads(self, *args, **kwargs):
-        from negstiff.resources import fit_threads
-
-        with fit_threads():
-            return fit(self, *args, **kwargs)
-
-    return on_fit_threads
+    return on_fit_threads(fit)
 
 
 def _answering_stored(result):

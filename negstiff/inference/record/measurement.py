@@ -35,6 +35,7 @@ from negstiff.inference.record.derivatives import (
 )
 from negstiff.io.schema import INPUTS, MASS_RANGE_KG, OPTIONAL, channel_sensor
 from negstiff.models.effects import measured_channels
+from negstiff.resources import on_fit_threads
 
 from . import channels, sensors
 from .checks import (
@@ -518,6 +519,7 @@ def per_unit_mass_warning(rec: Measurement) -> str | None:
     )
 
 
+@on_fit_threads  # the same numbers from a script and the command (``resources.on_fit_threads``)
 def from_arrays(
     u: np.ndarray,
     z: np.ndarray | None,

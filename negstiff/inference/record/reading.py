@@ -18,6 +18,7 @@ from negstiff import io as record_io
 from negstiff.errors import MeasurementError, RecordWarning, issue
 from negstiff.io.base import RESOLUTION, SET_ASIDE
 from negstiff.io.schema import INPUTS, KNOWN, channel_sensor, header_name, in_si, parse_column_map
+from negstiff.resources import on_fit_threads
 
 from . import channels, sensors
 from .checks import (
@@ -34,6 +35,7 @@ from .checks import (
 from .measurement import Measurement
 
 
+@on_fit_threads  # the same numbers from a script and the command (``resources.on_fit_threads``)
 def load(
     path: str | Path,
     columns: str | dict | None = None,
