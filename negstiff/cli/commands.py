@@ -259,7 +259,8 @@ def _identify_structure(args, est, rec) -> int:
     """``identify`` on a structure's record (N > 1 DOFs, ``--element I-J``): the same estimator, its result."""
     from negstiff.inference.estimators.structure_id import modes_summary
 
-    say(args, f"identify {args.method}: {rec.n_dof} DOFs, element {args.element}, {rec.n} samples at {rec.fs:g} Hz")
+    place = args.element or rec.meta.get("element")
+    say(args, f"identify {args.method}: {rec.n_dof} DOFs, element {place}, {rec.n} samples at {rec.fs:g} Hz")
     est.fit(rec)
     result = est.result()
     warn(args, result["warnings"])
@@ -315,7 +316,7 @@ def cmd_posterior(args) -> int:
     )
     checked = post.check(recs if len(recs) > 1 else recs[0])  # every refusal before the progress line and bar
     rec = checked[0] if isinstance(checked, list) else checked
-    where = f", {rec.n_dof} DOFs, element {args.element}" if rec.n_dof > 1 else ""
+    where = f", {rec.n_dof} DOFs, element {args.element or rec.meta.get('element')}" if rec.n_dof > 1 else ""
     pair = post.law_pair()
     what = args.model if pair is None else f"laws {pair[0].name} and {pair[1].name}"
     n = sum(r.n for r in checked) if isinstance(checked, list) else rec.n

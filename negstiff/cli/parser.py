@@ -37,7 +37,7 @@ def _structure_options(p: argparse.ArgumentParser, element_help: str) -> None:
         help="degrees of freedom the record must measure (a check of the file: its responses z1 ... zN and "
         "'# masses: m1,...,mN' give N; N > 1 needs --element)",
     )
-    p.add_argument("--element", help=element_help)
+    p.add_argument("--element", help=element_help + " (default: the record's '# element: I-J')")
     p.add_argument("--masses", help="the DOFs' masses m1,...,mN [kg] (default: the record's '# masses:')")
 
 

@@ -128,3 +128,24 @@ def test_the_one_rig_refuses_for_a_structure_what_it_cannot_do():
         _ = acc.z
     with pytest.raises(MeasurementError, match="is read from its file"):
         Measurement.from_rig(acc)
+
+
+def test_a_structures_record_states_its_element_and_the_estimators_read_it(tmp_path, capsys):
+    # the rig's header names the element's place ('# element: 1-2') as it names the masses: identify reads it as it
+    # reads '# masses:' (no --element needed), the estimators likewise; a header naming a place the record's DOFs
+    # cannot hold is refused in one line naming the file
+    import json
+
+    from negstiff import NSI
+    from negstiff.cli import main
+    from negstiff.errors import InputError
+
+    path = Rig.device_on_fixture(DEVICE, seed=1).random(duration=20.0, rms=14.0).write(tmp_path / "fixture.csv")
+    out = tmp_path / "nsi.json"
+    assert main(["identify", "nsi", str(path), "-o", str(out), "--quiet"]) == 0
+    assert json.loads(out.read_text())["element_at"] == [1, 2]
+    assert NSI().fit(load(path)).result_.structure.place == (1, 2)
+    bad = tmp_path / "bad.csv"
+    bad.write_text(path.read_text().replace("# element: 1-2", "# element: 3-1"))
+    with pytest.raises(InputError, match="bad.csv: '# element: 3-1'"):
+        NSI().fit(load(bad))

@@ -153,19 +153,25 @@ def parse_element(text: str | tuple[int, int], n_dof: int) -> tuple[int, int]:
 
 
 def element_of(est, rec: Measurement) -> tuple[int, int] | None:
-    """The element's place on ``rec`` for estimator ``est`` (its ``element``): None for a record of one DOF (the
-    single-DOF algorithms; its element can only be on the base), else (I, J), checked, with the record's masses.
-    One ``InputError`` before any work otherwise.
+    """The element's place on ``rec`` for estimator ``est`` (its ``element``, else the record's ``# element:`` as
+    its ``masses`` come from ``# masses:``): None for a record of one DOF (the single-DOF algorithms; its element
+    can only be on the base), else (I, J), checked, with the record's masses. One ``InputError`` before any work
+    otherwise.
     """
     name = type(est).__name__
+    given = est.element if est.element is not None else (rec.meta or {}).get("element")
+    said = f"{name}(element={given!r})" if est.element is not None else f"{rec.source}: '# element: {given}'"
     if rec.n_dof == 1:
-        if est.element is not None and parse_element(est.element, 1) != (0, 1):
-            raise InputError(f"{name}(element={est.element!r}): a record of one DOF has its element on the base (0-1)")
+        if given is not None and parse_element(given, 1) != (0, 1):
+            raise InputError(f"{said}: a record of one DOF has its element on the base (0-1)")
         return None
-    if est.element is None:
+    if given is None:
         raise InputError(f"{rec.source}: a record of {rec.n_dof} DOFs needs the element's place "
-                         f"({name}(element='I-J'), --element I-J)")  # fmt: skip
-    at = parse_element(est.element, rec.n_dof)
+                         f"({name}(element='I-J'), --element I-J, or '# element: I-J' in its header)")  # fmt: skip
+    try:
+        at = parse_element(given, rec.n_dof)
+    except InputError as exc:
+        raise InputError(f"{said}: {exc}" if est.element is None else str(exc)) from None
     if rec.masses is None and not getattr(est, "reads_sensors_without_masses", False):
         # NSI reads such a record through a state-space linear part (``state_space_id``); the weak form's equations
         # per DOF need each DOF's mass
