@@ -52,47 +52,49 @@ def cmd_rig(args) -> int:
         return 0
     out = out_path(args)
     start = "plus" if args.start == "both" else args.start
-    ring_down = args.mode in ("hammer", "release")
-    duration = args.duration if args.duration is not None else (10.0 if ring_down else 300.0)
-    if args.mode == "hammer":
-        kw = {"peak": args.peak, "hits": args.hits, "duration": duration, "width": args.width, "start": start,
-              "dof": args.dof}  # fmt: skip
-        rig.check_hammer(**kw)
-        check_written(out)  # the suffix, before the simulation
-        say(args, f"rig hammer: {args.hits} hit(s) of {args.peak:g} N over {duration:g} s")
-        rec = rig.hammer(**kw)
-        what = f"{args.hits} hit(s) of {args.peak:g} N, {duration:g} s"
-    elif args.mode == "release":
-        if args.z0 is None:
-            raise InputError("rig release: give --z0, where the moving part is held before it is let go [m]")
-        check_written(out)
-        say(args, f"rig release: from z = {1e3 * args.z0:g} mm over {duration:g} s")
-        rec = rig.release(args.z0, duration)
-        what = f"a free decay from {1e3 * args.z0:g} mm, {duration:g} s"
-    elif args.mode == "random":
-        kw = {"duration": duration, "rms": args.rms, "band": tuple(args.band), "start": start}
-        rig.check_random(**kw)
-        check_written(out)  # the suffix, before the simulation
-        say(args, f"rig random: {duration:g} s at {rig.fs:g} Hz, {args.rms:g} m/s^2 rms")
-        rec = rig.random(**kw)
-        what = f"{rec.columns['t'].size} samples at {rig.fs:g} Hz"
-    elif args.mode == "sweep":
-        kw = {"f_start": args.f_start, "f_stop": args.f_stop, "amplitude": args.amplitude, "duration": duration,
-              "mode": args.sweep_mode, "start": start}  # fmt: skip
-        rig.check_sine_sweep(**kw)
-        check_written(out)  # the suffix, before the simulation
-        say(args, f"rig sweep: {args.f_start:g}-{args.f_stop:g} Hz over {duration:g} s")
-        rec = rig.sine_sweep(**kw)
-        what = f"sine sweep {args.f_start:g}-{args.f_stop:g} Hz, {args.amplitude:g} m/s^2"
-    else:
-        rig.check_sweeps(args.freq, [[args.amplitude]], [args.start], args.settle_periods, args.periods)
-        check_written(out)  # the suffix, before the simulation
-        say(args, f"rig harmonic: {args.freq:g} Hz, {args.amplitude:g} m/s^2")
-        rec = rig.harmonic(args.freq, args.amplitude, args.start, args.settle_periods, args.periods)
-        what = f"{args.periods} periods at {args.freq:g} Hz, {args.amplitude:g} m/s^2"
+    duration = args.duration if args.duration is not None else (10.0 if args.mode in ("hammer", "release") else 300.0)
+    # each mode: (its check before any work, the run, its settings, the progress line, what the record holds)
+    plans = {
+        "hammer": (rig.check_hammer, rig.hammer,
+                   {"peak": args.peak, "hits": args.hits, "duration": duration, "width": args.width, "start": start,
+                    "dof": args.dof},
+                   f"{args.hits} hit(s) of {args.peak:g} N over {duration:g} s",
+                   lambda rec: f"{args.hits} hit(s) of {args.peak:g} N, {duration:g} s"),
+        "release": (lambda **kw: _check_release(rig, **kw), rig.release, {"z0": args.z0, "duration": duration},
+                    f"from z = {1e3 * (args.z0 or 0.0):g} mm over {duration:g} s",
+                    lambda rec: f"a free decay from {1e3 * args.z0:g} mm, {duration:g} s"),
+        "random": (rig.check_random, rig.random,
+                   {"duration": duration, "rms": args.rms, "band": tuple(args.band), "start": start},
+                   f"{duration:g} s at {rig.fs:g} Hz, {args.rms:g} m/s^2 rms",
+                   lambda rec: f"{rec.columns['t'].size} samples at {rig.fs:g} Hz"),
+        "sweep": (rig.check_sine_sweep, rig.sine_sweep,
+                  {"f_start": args.f_start, "f_stop": args.f_stop, "amplitude": args.amplitude, "duration": duration,
+                   "mode": args.sweep_mode, "start": start},
+                  f"{args.f_start:g}-{args.f_stop:g} Hz over {duration:g} s",
+                  lambda rec: f"sine sweep {args.f_start:g}-{args.f_stop:g} Hz, {args.amplitude:g} m/s^2"),
+        "harmonic": (lambda **kw: rig.check_sweeps(kw["freq"], [[kw["amplitude"]]], [kw["start"]],
+                                                   kw["settle_periods"], kw["record_periods"]), rig.harmonic,
+                     {"freq": args.freq, "amplitude": args.amplitude, "start": args.start,
+                      "settle_periods": args.settle_periods, "record_periods": args.periods},
+                     f"{args.freq:g} Hz, {args.amplitude:g} m/s^2",
+                     lambda rec: f"{args.periods} periods at {args.freq:g} Hz, {args.amplitude:g} m/s^2"),
+    }  # fmt: skip
+    check, run, kw, said, what_of = plans[args.mode]
+    check(**kw)
+    check_written(out)  # the suffix, before the simulation
+    say(args, f"rig {args.mode}: {said}")
+    rec = run(**kw)
+    what = what_of(rec)
     rec.write(out, **export_options(args))
     say(args, f"wrote {out} ({what}) and its truth")
     return 0
+
+
+def _check_release(rig, z0: float | None, duration: float) -> None:
+    """Everything ``rig release`` refuses, before any work: no position to let go from (``--z0``), and the rig's."""
+    if z0 is None:
+        raise InputError("rig release: give --z0, where the moving part is held before it is let go [m]")
+    rig.check_release(z0, duration)
 
 
 def write_campaign(rig, args) -> None:

@@ -402,15 +402,19 @@ class Rig:
         hold). The laser reads z; the record's force column is zero (no input: a free decay, read as one). Columns
         ``t, force, z`` (a structure's: ``z1 ... zN``).
         """
+        self.check_release(z0, duration)
+        n = int(round(duration * self.fs))
+        excitation = {"type": "release", "duration_s": duration, "z0_m": float(z0)}
+        return self._force_record(np.zeros(n * self.oversample), self.oversample, float(z0), excitation)
+
+    def check_release(self, z0: float, duration: float = 10.0) -> None:
+        """Everything ``release`` refuses (``RigError``, one line), before any work."""
         if not (_real(z0) and math.isfinite(z0)):
             raise RigError(f"release position must be a finite number [m], got {z0!r}")
         if not (_real(duration) and duration > 0 and math.isfinite(duration)):
             raise RigError(f"a release needs a positive duration, got {duration!r}")
         self._check_laser()
         self._require_memory([duration * self.fs * self.oversample], "a release record")
-        n = int(round(duration * self.fs))
-        excitation = {"type": "release", "duration_s": duration, "z0_m": float(z0)}
-        return self._force_record(np.zeros(n * self.oversample), self.oversample, float(z0), excitation)
 
     def check_hammer(self, peak=20.0, hits=4, duration=10.0, width=0.004, start="plus", dof=None) -> None:
         """Everything ``hammer`` refuses (``RigError``, one line), before any work."""

@@ -539,11 +539,14 @@ def _structure_discrepancy_section(d, res: dict[str, Any], label: str) -> Sectio
     element's base law, the one named (if any) and the held-out gap before and after, then its final structure.
     """
     det = res["details"]
-    named = det["effect"] if det["effect"] != "none" else None
+    effects = [e for e in det.get("effects", [det["effect"]]) if e != "none"]
     title = _with_label("Discrepancy: where the structure's model and data disagree", label)
     sec = Section("discrepancy", label, title)
-    sec.table(["effect", "held-out weak residual score [%]"], [[r["effect"], r["score"]] for r in det["ranking"][:6]])
-    size = "" if named is None else f" ({named} = {fmt(det['candidates'][named]['value'])})"
+    sec.table(["effect", "held-out weak residual score [%] (first round)"],
+              [[r["effect"], r["score"]] for r in det["ranking"][:6]])  # fmt: skip
+    extra = res["structure"]["element"].get("extra") or {}
+    size = "" if not effects else " (" + ", ".join(f"{e} = {fmt(extra.get(e))}" for e in effects) + ")"
+    named = ", ".join(effects) or None
     sec.text((f"Named: {named}{size}." if named else "No registered effect passed its margin.")
              + f" Held-out gap (restarted free runs): {fmt(det['gap_before_percent'], 3)} % before, "
              f"{fmt(det['gap_after_percent'], 3)} % after. The final structure:")  # fmt: skip

@@ -51,6 +51,7 @@ def test_rig_writes_a_hammer_test_and_a_free_decay_a_lab_would_read(workdir, cap
     assert rec.n_dof == 2 and rec.force_dof == 1 and rec.input_name == "force"
     capsys.readouterr()
     for argv, says in ((["release"], "--z0"), (["hammer", "--sensor", "velocity"], "laser"),
+                       (["release", "--z0", "0.03", "--sensor", "accelerometer"], "laser"),
                        (["hammer", "--model", str(fixture), "--dof", "3"], "DOF 1..2")):  # fmt: skip
         out = workdir / "refused.csv"
         assert main(["rig", *argv, "-o", str(out)]) == 2

@@ -377,6 +377,36 @@ def test_discrepancy_names_friction_in_the_element_on_its_fixture(friction):
     assert d.gap_after_["rms_percent"] <= 1.1 * floor, (d.gap_after_, floor)
 
 
+def test_discrepancy_names_each_missing_effect_of_the_element_in_turn():
+    # an element with two effects beside its model, a quintic stiffness (k5 r^5, 10 % of the cubic's force at the
+    # stroke's end) and Coulomb friction (0.05 N): as the single DOF's workflow, the structure's names the effect that
+    # lowers the held-out score most, adds it to the base and offers the rest again: the quintic first (its value
+    # within 1 %: measured +0.03 %), the friction next (within 25 %, as alone: the sign's smoothing and the viscous
+    # terms share it; measured +15 %), then nothing; the held-out error falls with each (measured 11.3 % -> 2.1 %,
+    # 2.9 % with the quintic alone)
+    import math
+
+    from negstiff.models.effects import COULOMB_VELOCITY_SCALE
+
+    k5, friction = 3e7, 0.05
+
+    def hidden(r, v):
+        return friction * math.tanh(v / COULOMB_VELOCITY_SCALE) + k5 * r**5
+
+    u, z = rk4_fixture_record(duration=120.0, seed=7, noise=3e-6, hidden=hidden)
+    rec = from_arrays(u, z, FS, masses=(FIXTURE["m"], TRUTH.m))
+    d = Discrepancy(element="1-2").fit(rec)
+    assert d.effects_ == ["quintic_stiffness", "coulomb_friction"]
+    extra = d.structure_.element.extra
+    assert extra["quintic_stiffness"] == pytest.approx(k5, rel=0.01)
+    assert extra["coulomb_friction"] == pytest.approx(friction, rel=0.25)
+    rounds = d.result()["details"]["iterations"]
+    assert [r["named"] for r in rounds] == ["quintic_stiffness", "coulomb_friction", "none"]
+    one = Discrepancy(element="1-2", max_effects=1).fit(rec)  # the first round alone
+    assert one.effects_ == ["quintic_stiffness"]
+    assert d.gap_after_["rms_percent"] < one.gap_after_["rms_percent"] < 0.5 * d.gap_before_["rms_percent"]
+
+
 def test_stabilisation_diagram_keeps_both_modes_of_each_well():
     # over orders 4..8 (2..4 per DOF) and two Hankel depths, each well's two physical modes recur within 1 % / 5 %
     u, z = rk4_fixture_record(duration=60.0, seed=4)

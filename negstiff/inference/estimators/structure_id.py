@@ -1026,7 +1026,8 @@ def stabilisation(est, rec: Measurement, orders=(4, 6, 8, 10), block_rows=(20, 3
 # --- the discrepancy workflow ------------------------------------------------------------------------------------
 def discrepancy(est, rec: Measurement, at: tuple[int, int]) -> StructureIdentification:
     """The discrepancy workflow on a record of N > 1 DOFs (module docstring): the element's base law with the
-    linear structure, each registered effect added in turn, named by the paired block rule.
+    linear structure, each registered effect added in turn, named by the paired block rule; the named one joins the
+    base and the rest are offered again, until none is named (at most ``max_effects`` rounds: ``iterations``).
     """
     from negstiff.models import effects
 
@@ -1053,40 +1054,58 @@ def discrepancy(est, rec: Measurement, at: tuple[int, int]) -> StructureIdentifi
         theta = _lstsq(Xf_all[:, cols], yf)
         return theta, _block_scores(ys - Xs_all[:, cols] @ theta, ys, per_sel, rec.n_dof, rows)
 
+    fields = [t.field for t in terms]
     base_cols = list(range(n_base))
-    _, base_blocks = scored(base_cols)
-    ranking: list[dict[str, Any]] = [{"effect": "none", "score": float(100 * np.sqrt(base_blocks.mean()))}]
-    named, best_gain = None, 0.0
-    candidates: dict[str, dict[str, float]] = {}
-    for k, t in enumerate(terms) if est.max_effects > 0 else ():
-        theta, blocks = scored(base_cols + [n_base + k])
-        value = float(theta[-1])
-        cmp = compare(base_blocks, blocks, est.margin, base_blocks)
-        physical = not (effects.get(t.field).dissipative and value < 0)  # a feed of energy is no candidate
-        candidates[t.field] = {"value": value, "score": float(100 * np.sqrt(blocks.mean())), "gain": cmp.gain,
-                               "se": cmp.se, "physical": physical}  # fmt: skip
-        ranking.append({"effect": t.field, "score": candidates[t.field]["score"]})
-        if physical and cmp.significant and cmp.gain > best_gain:
-            named, best_gain = t.field, cmp.gain
-    ranking.sort(key=lambda e: e["score"])
+    named_all: list[str] = []
+    iterations: list[dict[str, Any]] = []
+    # as the single DOF's workflow: each round adds the effect that lowers the held-out score most, beyond the margin
+    # rule, to the base the next round scores against; until no effect passes (at most ``max_effects``)
+    for _ in range(est.max_effects):
+        _, base_blocks = scored(base_cols)
+        ranking: list[dict[str, Any]] = [{"effect": "none", "score": float(100 * np.sqrt(base_blocks.mean()))}]
+        named, best_gain = None, 0.0
+        candidates: dict[str, dict[str, float]] = {}
+        for k, t in enumerate(terms):
+            if t.field in named_all:
+                continue
+            theta, blocks = scored(base_cols + [n_base + k])
+            value = float(theta[-1])
+            cmp = compare(base_blocks, blocks, est.margin, base_blocks)
+            physical = not (effects.get(t.field).dissipative and value < 0)  # a feed of energy is no candidate
+            candidates[t.field] = {"value": value, "score": float(100 * np.sqrt(blocks.mean())), "gain": cmp.gain,
+                                   "se": cmp.se, "physical": physical}  # fmt: skip
+            ranking.append({"effect": t.field, "score": candidates[t.field]["score"]})
+            if physical and cmp.significant and cmp.gain > best_gain:
+                named, best_gain = t.field, cmp.gain
+        ranking.sort(key=lambda e: e["score"])
+        iterations.append({"named": named or "none", "ranking": ranking, "candidates": candidates})
+        if named is None:
+            break
+        named_all.append(named)
+        base_cols.append(n_base + fields.index(named))
+    if not iterations:  # max_effects = 0: the base law's own score, nothing offered
+        score = float(100 * np.sqrt(scored(base_cols)[1].mean()))
+        iterations.append({"named": "none", "ranking": [{"effect": "none", "score": score}], "candidates": {}})
+    first = iterations[0]
     y, X = whole[0], whole[1]
-    base_s, base_b = _assemble(_lstsq(X[:, base_cols], y), rec.n_dof, at, masses)
+    base_s, base_b = _assemble(_lstsq(X[:, :n_base], y), rec.n_dof, at, masses)
     baseline, base_offsets = physical_frame(base_s, base_b, rec.gravity, unknown_zeros(rec))
-    if named is None:
+    if not named_all:
         structure, offsets = baseline, base_offsets
     else:
-        k = [t.field for t in terms].index(named)
-        theta = _lstsq(X[:, base_cols + [n_base + k]], y)
-        s, b = _assemble(theta[:-1], rec.n_dof, at, masses, {named: float(theta[-1])})
+        theta = _lstsq(X[:, base_cols], y)
+        extra = {name: float(theta[n_base + i]) for i, name in enumerate(named_all)}
+        s, b = _assemble(theta[:n_base], rec.n_dof, at, masses, extra)
         structure, offsets = physical_frame(s, b, rec.gravity, unknown_zeros(rec))
     hits = ring_down(rec, ("impact",))  # a hammer's record: the windows between its pulses
     gap_before = free_run_error(baseline, rec, n_id, WINDOW_S, base_offsets, hits)
     gap_after = free_run_error(structure, rec, n_id, WINDOW_S, offsets, hits)
-    est.effects_ = [named] if named else ["none"]
+    est.effects_ = named_all or ["none"]
     est.gap_before_, est.gap_after_ = gap_before, gap_after
     est.baseline_structure_ = baseline
     return _finish("discrepancy", rec, structure, offsets, n_id, None, [], {
-        "effect": named or "none", "ranking": ranking, "candidates": candidates,
+        "effect": first["named"], "effects": named_all or ["none"], "ranking": first["ranking"],
+        "candidates": first["candidates"], "iterations": iterations,
         "gap_before_percent": gap_before["rms_percent"], "gap_after_percent": gap_after["rms_percent"],
         "velocity_noise_for_sign": ident_states.get("v_noise"),
     }, {"velocity": f"Savitzky-Golay (window, order) = {window}",

@@ -141,8 +141,8 @@ class Discrepancy(StructureResults, Intervals):
         Add a non-parametric force for what no catalogue effect names (the hybrid model; a single DOF's).
     element : str or (int, int), optional
         Where the element acts on a record of N > 1 DOFs: ``"I-J"`` (``structure_id.discrepancy``: the element's
-        base law with the linear structure as the baseline, one round of the catalogue, the same paired block
-        rule). None: the single DOF.
+        base law with the linear structure as the baseline, the catalogue offered round after round up to
+        ``max_effects``, the same paired block rule). None: the record's ``# element:``, else the single DOF.
 
     Attributes
     ----------
