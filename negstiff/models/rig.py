@@ -710,7 +710,7 @@ class Rig:
         """
         from negstiff.resources import require_memory
 
-        total = BYTES_PER_SAMPLE * len(samples) * max(samples)
+        total = BYTES_PER_SAMPLE * self.n_dof * len(samples) * max(samples)  # a structure's: every DOF's channels
         try:
             require_memory(total, f"{what} ({max(samples) / (self.fs * self.oversample):.4g} s x {len(samples)} "
                                   f"at {self.fs * self.oversample:g} Hz)")  # fmt: skip

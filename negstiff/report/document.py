@@ -125,7 +125,8 @@ class Report(Blocks):
         if estimates or intervals:
             per_kg = any(s.kind == "record" and "mass" in s.json and s.json["mass"] is None and not s.json.get("masses")
                          for s in secs)  # fmt: skip
-            blocks, figures, lines = coefficient_blocks(estimates, intervals, per_kg)
+            element = any(s.kind == "record" and s.json.get("dofs", 1) > 1 for s in secs)  # a structure's
+            blocks, figures, lines = coefficient_blocks(estimates, intervals, per_kg, element)
             self.figures.update(figures)
             head += blocks
             summary[1:1] = lines

@@ -712,10 +712,11 @@ def map_section(res: dict[str, Any], overlays=(), label: str = "") -> Section:
 
 
 def coefficient_blocks(estimates: dict[str, dict[str, float]], intervals: dict[str, dict[str, tuple]],
-                       per_kg: bool = False):  # fmt: skip
+                       per_kg: bool = False, element: bool = False):  # fmt: skip
     """The report's coefficient table (each method's estimate of k1-k3, c, c_nl beside each posterior's mean
     and interval) and its forest plot; and the summary's lines on whether the estimates lie inside. ``per_kg``: the
-    record states no mass, the coefficients are per kilogram of moving mass.
+    record states no mass, the coefficients are per kilogram of moving mass; ``element``: a structure's, the
+    coefficients its element's, on the relative motion r across it.
     """
     import matplotlib.pyplot as plt
 
@@ -733,9 +734,11 @@ def coefficient_blocks(estimates: dict[str, dict[str, float]], intervals: dict[s
         rows.append(row)
     blocks: list[tuple[str, Any]] = [
         ("h", (2, "Coefficients: every method beside the posterior")),
-        ("p", "Each method's estimate of the z-frame coefficients (K = k3 z^3 + k2 z^2 - k1 z + k0, D = c z' + "
-              "c_nl z'|z'|; a law's parts by their parameters, PART.NAME), beside the posterior's mean and credible "
-              "interval; the forest plot below draws the same."
+        ("p", ("Each method's estimate of the structure's element, its force on the relative motion r across it "
+               "(F = k3 r^3 + k2 r^2 - k1 r + k0 + c r' + c_nl r'|r'|)" if element else
+               "Each method's estimate of the z-frame coefficients (K = k3 z^3 + k2 z^2 - k1 z + k0, D = c z' + "
+               "c_nl z'|z'|; a law's parts by their parameters, PART.NAME)")
+              + ", beside the posterior's mean and credible interval; the forest plot below draws the same."
               + (" No mass was given: they are per kilogram of moving mass." if per_kg else "")),
         ("table", (header, [[fmt(c) for c in r] for r in rows])),
     ]  # fmt: skip
