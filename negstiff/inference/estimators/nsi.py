@@ -48,6 +48,7 @@ from negstiff.inference.estimators.state_space_id import identify_state_space
 from negstiff.inference.estimators.structure_id import (
     ElementPlace,
     StructureResults,
+    check_ring_down_scores,
     element_of,
     identify_nsi,
 )
@@ -484,13 +485,15 @@ class NSI(StructureResults, Identifier):
         )
 
     def _check_record(self, rec: Measurement) -> None:
-        element_of(self, rec)
+        at = element_of(self, rec)
         rec.require(max(2000, 40 * self.block_rows), "NSI")
         if record_kind(rec).kind != "decay":
             rec.require_excitation("NSI")
         else:
             check_decay(rec, "NSI")
         rec.require_motion("NSI")
+        if at is not None:
+            check_ring_down_scores(self, rec)
         self._check_response(rec)
 
     def fit(self, data) -> NSI:

@@ -43,7 +43,13 @@ from negstiff.inference.estimators.parameters import (
     Several,
     seed_of,
 )
-from negstiff.inference.estimators.structure_id import ElementPlace, StructureResults, element_of, identify_sindy
+from negstiff.inference.estimators.structure_id import (
+    ElementPlace,
+    StructureResults,
+    check_ring_down_scores,
+    element_of,
+    identify_sindy,
+)
 from negstiff.inference.record.measurement import Measurement, per_unit_mass_warning
 from negstiff.inference.steps.selection import block_rows, block_scores, indistinguishable
 from negstiff.inference.steps.shape import fit_shape
@@ -302,6 +308,8 @@ class SINDy(StructureResults, Identifier):
         if at is None:
             self.check_length(rec)
             self._check_response(rec)
+        else:
+            check_ring_down_scores(self, rec)
 
     def check_length(self, rec: Measurement) -> None:
         """Refuse a single DOF's record too short for the selection's scoring blocks (two ``window_s`` blocks

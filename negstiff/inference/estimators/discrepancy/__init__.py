@@ -53,7 +53,12 @@ import numpy as np
 
 from negstiff.errors import InputError, issue
 from negstiff.inference.estimators.parameters import FRACTION, RESTORING_LAW, Boolean, Interval, LawName
-from negstiff.inference.estimators.structure_id import ElementPlace, StructureResults, element_of
+from negstiff.inference.estimators.structure_id import (
+    ElementPlace,
+    StructureResults,
+    check_ring_down_scores,
+    element_of,
+)
 from negstiff.inference.estimators.structure_id import discrepancy as structure_discrepancy
 from negstiff.inference.record.measurement import Measurement
 from negstiff.inference.steps.plausibility import classified
@@ -282,6 +287,8 @@ class Discrepancy(StructureResults, Intervals):
         rec.require_live_aux("the discrepancy workflow")
         if at is None:
             self.check_length(rec)
+        else:
+            check_ring_down_scores(self, rec)
 
     def check_length(self, rec: Measurement) -> None:
         """Refuse a single DOF's record too short to score an effect (two ``window_s`` blocks of the part

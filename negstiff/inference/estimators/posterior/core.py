@@ -695,6 +695,9 @@ class Posterior(Estimator):
                 raise PosteriorError(f"{name}(input_noise={self.input_noise!r}): the input's noise is not carried "
                                      "through a structure (None or 0 there)")  # fmt: skip
             window_starts(rec, self.window_s, self.max_windows)
+            from negstiff.inference.estimators.sindy import SINDy
+
+            SINDy(element=self.element).check(rec)  # its start's checks, before any work (a decay gone to noise)
             return
         from negstiff.inference.analysis.record_kind import check_decay, record_kind
 
