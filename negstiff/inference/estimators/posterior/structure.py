@@ -45,7 +45,9 @@ from negstiff.models.structure import Structure
 ELEMENT_NAMES = ("k1", "k2", "k3", "c", "c_nl")
 SUBSTEPS = 2
 IDENTIFICATION_SHARE = 0.8
-"""The windows are cut from the record's first 80 % (the identification part of every estimator)."""
+"""The windows are cut from the record's first 80 % (the identification part of every estimator). Not the whole
+record as the single DOF's: over the tests' 12 fixture records the whole record's windows narrowed the intervals
+about a k1 whose bias stays (k1's rms z 1.41 -> 1.69, k2 0.86 -> 1.26, coverage 67-83 %; measured 2026-11-30)."""
 
 
 UNFOLLOWED_FACTOR = 100.0
