@@ -43,7 +43,7 @@ def base_report(tmp_path_factory):
     tmp = tmp_path_factory.mktemp("structure_report")
     path, masses = chain_file(tmp, "base", 30.0)
     out = tmp / "report"
-    argv = ["report", path, "--only", "nsi,sindy,posterior,design", "--max-steps", "200", "--ensembles", "2",
+    argv = ["report", path, "--only", "nsi,sindy,posterior,design", "--max-steps", "100", "--ensembles", "2",
             "-o", out, "--quiet"]  # fmt: skip
     assert main([str(a) for a in argv]) == 0
     return path, masses, json.loads((out / "results.json").read_text()), (out / "index.html").read_text()
