@@ -259,10 +259,11 @@ def check_dofs(args, rec, path=None) -> None:
 
 def _identify_structure(args, est, rec) -> int:
     """``identify`` on a structure's record (N > 1 DOFs, ``--element I-J``): the same estimator, its result."""
-    from negstiff.inference.estimators.structure_id import modes_summary
+    from negstiff.inference.estimators.structure_id import element_of, modes_summary
 
-    place = args.element or rec.meta.get("element")
-    say(args, f"identify {args.method}: {rec.n_dof} DOFs, element {place}, {rec.n} samples at {rec.fs:g} Hz")
+    at = element_of(est, rec)  # the estimator's own reading (--element, else the file's '# element:')
+    assert at is not None  # a structure's record (N > 1): its place, or element_of refused it
+    say(args, f"identify {args.method}: {rec.n_dof} DOFs, element {at[0]}-{at[1]}, {rec.n} samples at {rec.fs:g} Hz")
     est.fit(rec)
     result = est.result()
     warn(args, result["warnings"])
@@ -275,6 +276,7 @@ def _identify_structure(args, est, rec) -> int:
 
 def cmd_posterior(args) -> int:
     from negstiff.inference.estimators.posterior import Posterior
+    from negstiff.inference.estimators.structure_id import element_of
     from negstiff.inference.record.reading import load
     from negstiff.models import Model
     from negstiff.models.device import load_system
@@ -318,7 +320,8 @@ def cmd_posterior(args) -> int:
     )
     checked = post.check(recs if len(recs) > 1 else recs[0])  # every refusal before the progress line and bar
     rec = checked[0] if isinstance(checked, list) else checked
-    where = f", {rec.n_dof} DOFs, element {args.element or rec.meta.get('element')}" if rec.n_dof > 1 else ""
+    at = element_of(post, rec)  # the estimator's own reading (--element, else the file's '# element:')
+    where = f", {rec.n_dof} DOFs, element {at[0]}-{at[1]}" if at is not None else ""
     pair = post.law_pair()
     what = args.model if pair is None else f"laws {pair[0].name} and {pair[1].name}"
     n = sum(r.n for r in checked) if isinstance(checked, list) else rec.n

@@ -116,12 +116,11 @@ def report_records(
     rec = load(paths[0], columns=columns, fs=fs, mass=mass, gravity=gravity, aux=aux, decay=decay)
     if masses is not None:
         rec = rec.with_masses(masses)
-    place = element if element is not None else rec.meta.get("element")
-    if rec.n_dof > 1 and place is None:  # before any work: every identification of a structure needs it
+    if rec.n_dof > 1 and element is None and "element" not in rec.meta:  # before any work: a structure's needs it
         raise InputError(f"{rec.source}: a record of {rec.n_dof} DOFs (z1 ... z{rec.n_dof}): give the element's "
                          "place (--element I-J, or '# element: I-J' in the file's header)")  # fmt: skip
-    if place is not None:  # the estimators check it against the record (a single DOF's: 0-1 only)
-        options = {**options, **{n: {**options.get(n, {}), "element": place}
+    if element is not None:  # given here; else the estimators read the file's own (``element_of``), as its masses
+        options = {**options, **{n: {**options.get(n, {}), "element": element}
                                  for n in ("nsi", "sindy", "posterior", "discrepancy")}}  # fmt: skip
     if forcing_hz is not None:
         check_forcing(rec, forcing_hz)

@@ -188,26 +188,24 @@ def _frame_words(resp: dict) -> str:
 
 def record_section(rec, label: str = "") -> Section:
     """The record as negstiff read it: time base, sensor, derivation, frame and its anchor, warnings."""
-    from negstiff.inference.record.derivatives import noise_floor
-
     info = rec.info
     resp = info.get("response", {})
     # the file's name in the heading (a lab's path ran off the page there and in the title), its path in the table
     sec = Section("record", label, _with_label(f"The record: {Path(rec.source).name}", label))
     noise_pct, per_dof = None, []
     if rec.z is not None and rec.z.size > 64:
-        # each channel's white-noise floor in % of its rms; a structure's pooled as its held-out errors are
-        rows_z = np.atleast_2d(rec.z)
-        var = [float(noise_floor(z, rec.fs)[0]) for z in rows_z]
-        per_dof = [100 * float(np.sqrt(v / np.mean(z**2))) for v, z in zip(var, rows_z, strict=True)]
-        noise_pct = float(np.sqrt(np.mean(np.square(per_dof))))  # as a structure's held-out error pools its DOFs
-    masses = getattr(rec, "masses", None)
+        # each channel's white-noise floor (``channel_noise``, kept with the record) in % of its rms; a structure's
+        # pooled as its held-out errors are (over its DOFs)
+        per_dof = [100 * float(n) / float(np.sqrt(np.mean(z**2))) for n, z in zip(rec.channel_noise(), rec.channels,
+                                                                                      strict=True)]  # fmt: skip
+        noise_pct = float(np.sqrt(np.mean(np.square(per_dof))))
+    masses = rec.masses
     if masses is not None:  # a structure's: each DOF's mass
         mass_row = ["masses [kg]", ", ".join(f"{m:g}" for m in masses)]
+    elif rec.n_dof > 1:
+        mass_row = ["masses [kg]", "not given: NSI reads the structure through its sensors (a state-space part)"]
     else:
         mass_row = ["mass [kg]", rec.mass if rec.mass is not None else "not given: coefficients per unit mass"]
-    if rec.n_dof > 1 and masses is None:
-        mass_row = ["masses [kg]", "not given: NSI reads the structure through its sensors (a state-space part)"]
     rows = [
         ["file", rec.source],
         ["samples", rec.n],

@@ -74,14 +74,36 @@ RING_DOWN = 10.0
 least this many times the last tenth's (a record at rest with a constant input is no decay: a dead input)."""
 
 
+RINGING_FACTOR = 3.0
+"""A decay's channel still rings in a 0.25 s window while its rms about the rest exceeds this many times the
+channel's white sensor noise (``Measurement.channel_noise``): below it, the window holds the sensor's noise."""
+
+
+def _about_rest(rec: Measurement) -> tuple[np.ndarray, int]:
+    """Each channel of a decay about its rest, (N, T), the rest its last tenth's median; and that tenth's length."""
+    z = np.asarray(rec.channels, float)
+    tenth = max(8, z.shape[1] // 10)
+    return z - np.median(z[:, -tenth:], axis=1, keepdims=True), tenth
+
+
+def rings_until(rec: Measurement, window_s: float = 0.25) -> int:
+    """The sample where a decay has rung down into its sensors' noise: the end of the last ``window_s`` window in
+    which a channel's rms about its rest exceeds ``RINGING_FACTOR`` times its white noise (0: none does).
+    """
+    x, _ = _about_rest(rec)
+    win = max(8, int(round(window_s * rec.fs)))
+    count = x.shape[1] // win
+    rms = np.sqrt(np.mean(x[:, : count * win].reshape(x.shape[0], count, win) ** 2, axis=2))
+    ringing = np.any(rms > RINGING_FACTOR * rec.channel_noise()[:, None], axis=0)
+    return (int(np.flatnonzero(ringing).max(initial=-1)) + 1) * win
+
+
 def check_decay(rec: Measurement, what: str) -> None:
     """Raise ``MeasurementError`` when a free decay's response does not ring down (``RING_DOWN``); a structure's
     when none of its channels does (each channel's ratio, the largest read).
     """
-    z = np.atleast_2d(np.asarray(rec.displacement, float))
-    tenth = max(8, z.shape[1] // 10)
-    rest = np.median(z[:, -tenth:], axis=1, keepdims=True)
-    starts, ends = np.std(z[:, :tenth] - rest, axis=1), np.std(z[:, -tenth:] - rest, axis=1)
+    x, tenth = _about_rest(rec)
+    starts, ends = np.std(x[:, :tenth], axis=1), np.std(x[:, -tenth:], axis=1)
     best = int(np.argmax(starts / np.maximum(ends, 1e-300)))
     start, end = float(starts[best]), float(ends[best])
     if not start > RING_DOWN * end and rec.info.get("decay"):

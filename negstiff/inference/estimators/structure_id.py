@@ -586,33 +586,24 @@ def ring_down(rec: Measurement, kinds: tuple[str, ...] | None = None) -> bool:
     return record_kind(rec).kind in (RING_DOWN_KINDS if kinds is None else kinds)
 
 
-RINGING_FACTOR = 3.0
-"""A decay's channel still rings in a 0.25 s window while its rms about the rest exceeds this many times the
-channel's white sensor noise (``Measurement.channel_noise``): below it, the window holds the sensor's noise."""
-
-
 def check_ring_down_scores(est, rec: Measurement) -> None:
     """Refuse (``StructureIdentificationError``, one line, before any work) a structure's free decay that rings down
-    into its sensors' noise before the part that scores the candidate models (``_split``: from ``n_fit`` on): every
-    channel's rms about its rest within ``RINGING_FACTOR`` of its noise from there on. As the single DOF's check
-    (``SINDy.check_length``), which its widening test functions make; the structure's blocks were shortened to fit
-    that part instead, and scored noise: the seed-like device on its fixture released 6 mm past its well rings for
-    one of its 12 s, and SINDy's k3 came out 28x the truth, the posterior's windows all unmatched (measured).
+    into its sensors' noise before the part that scores the candidate models (``_split``: from ``n_fit`` on):
+    ``record_kind.rings_until``, every channel's rms about its rest within ``RINGING_FACTOR`` of its noise from
+    there on. As the single DOF's check (``SINDy.check_length``), which its widening test functions make; the
+    structure's blocks were shortened to fit that part instead, and scored noise: the seed-like device on its fixture
+    released 6 mm past its well rings for one of its 12 s, and SINDy's k3 came out 28x the truth, the posterior's
+    windows all unmatched (measured).
     """
+    from negstiff.inference.analysis.record_kind import rings_until
+
     if not ring_down(rec, ("decay",)):
         return
     _, n_fit = _split(est, rec)
-    z = np.asarray(rec.channels, float)
-    tenth = max(8, z.shape[1] // 10)
-    rest = np.median(z[:, -tenth:], axis=1, keepdims=True)
-    win = max(8, int(round(0.25 * rec.fs)))
-    count = z.shape[1] // win
-    rms = np.sqrt(np.mean((z[:, : count * win] - rest).reshape(z.shape[0], count, win) ** 2, axis=2))
-    ringing = np.any(rms > RINGING_FACTOR * rec.channel_noise()[:, None], axis=0)
-    last = int(np.flatnonzero(ringing).max(initial=-1))
-    if (last + 1) * win <= n_fit:
+    end = rings_until(rec)
+    if end <= n_fit:
         raise StructureIdentificationError(
-            f"{rec.source}: a free decay that rings down into its sensors' noise by {(last + 1) * win / rec.fs:.3g} "
+            f"{rec.source}: a free decay that rings down into its sensors' noise by {end / rec.fs:.3g} "
             f"s, before the part of it that judges {type(est).__name__}'s models ({n_fit / rec.fs:.3g} s on): cut "
             "the record where it meets the noise, or release it again before it does"
         )

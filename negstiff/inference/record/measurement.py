@@ -249,14 +249,14 @@ class Measurement:
         z = cols.pop("z", None)
         if z is not None:  # a measured z is the response (the laser's y and the base's, already in it, stay out)
             cols = {}
-        dofs = {cs: v for k, v in cols.items() if (cs := channel_sensor(k)) is not None}
-        if dofs:  # a structure's record: each DOF's z, its masses and the DOF a hammer hit, as its file states them
-            if any(sensor != "z" for _, sensor in dofs):
+        sensed = {cs[1] for k in cols if (cs := channel_sensor(k)) is not None}
+        if sensed:  # a structure's record: each DOF's z, its masses and the DOF a hammer hit, as its file states them
+            if sensed != {"z"}:
                 raise MeasurementError(
                     f"{rec.meta['source']}: a structure's record of {', '.join(cols)} is read "
                     "from its file (write it, then load it): each channel's z is derived there"
                 )
-            z = np.array([dofs[key] for key in sorted(dofs)])
+            z = rec.z  # its z1 ... zN by DOF (``RigRecord.z``)
             cols = {"masses": rec.meta["masses"].split(","), **({"force_dof": int(rec.meta["force_dof"])}
                                                                 if "force_dof" in rec.meta else {})}  # fmt: skip
         return from_arrays(rec.columns[inp], z, rec.fs, inp, mass=mass, source=rec.meta["source"], meta=meta,
