@@ -85,10 +85,20 @@ def dop853_record(duration=60.0, rms=8.0, seed=7, start=0.024, fs=FS, rtol=1e-9,
     def acc(t):
         return a * np.cos(np.multiply.outer(t, w) + ph).sum(axis=-1)
 
+    # the right-hand side on Python floats (the solver calls it some 5,000 times per second of record): the same
+    # operations in the same order as the arrays' (K(z) as Model.restoring_force writes it, the multisine's sum over
+    # its lines), so the record is the same to the bit, in a third of the time
+    m, c, c_nl = float(model.m), float(model.c), float(model.c_nl)
+    k0, k1, k2, k3 = (float(model.k0), float(model.k1), float(model.k2), float(model.k3))
+    polynomial = type(model) is Model and not model.extra
+
+    def restoring(z):
+        return ((k3 * z + k2) * z - k1) * z + k0 if polynomial else model.restoring_force(z)
+
     def rhs(t, x):
-        z, v = x
+        z, v = float(x[0]), float(x[1])
         extra = 0.0 if hidden is None else hidden(z, v)
-        return [v, (-model.c * v - model.c_nl * v * abs(v) - model.restoring_force(z) - extra) / model.m - acc(t)]
+        return [v, (-c * v - c_nl * v * abs(v) - restoring(z) - extra) / m - float(a * np.cos(w * t + ph).sum())]
 
     t = np.arange(int(duration * fs)) / fs
     sol = solve_ivp(rhs, (0, t[-1]), [start, 0.0], t_eval=t, method="DOP853", rtol=rtol, atol=1e-3 * rtol)

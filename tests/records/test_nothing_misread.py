@@ -45,14 +45,14 @@ TRUTH_HZ = {w: math.sqrt(TRUTH.stiffness(TRUTH_WELLS.well(w)) / TRUTH.m) / (2 * 
 
 @pytest.fixture(scope="module")
 def one_well_files(tmp_path_factory):
-    """Two 60 s records of the reference device (``records.TRUTH``: wells 11.410 Hz at -23.7 mm, 9.188 Hz at
+    """Two 30 s records of the reference device (``records.TRUTH``: wells 11.410 Hz at -23.7 mm, 9.188 Hz at
     +23.0 mm) that stay in one well each, under a 2-30 Hz multisine (3 m/s^2 rms from the minus well, 2 from the
     shallower plus well), with an accelerometer's and a laser's noise; written as a lab's CSV, which states no
     rest positions."""
     d = tmp_path_factory.mktemp("one_well")
     files = {}
     for well, rms in (("minus", 3.0), ("plus", 2.0)):
-        t, u, z, _ = dop853_record(duration=60.0, rms=rms, seed=1, start=TRUTH_WELLS.well(well))
+        t, u, z, _ = dop853_record(duration=30.0, rms=rms, seed=1, start=TRUTH_WELLS.well(well))
         assert (z < TRUTH_WELLS.z_0).all() if well == "minus" else (z > TRUTH_WELLS.z_0).all(), "left its well"
         rng = np.random.default_rng(1)
         cols = {"t": t, "base_acc": u + 0.02 * rng.standard_normal(t.size), "z": z + 2e-5 * rng.standard_normal(t.size)}
@@ -303,7 +303,7 @@ STRUCTURE = {"masses": [1.0, 0.2], "element": {"m": 0.2, "k1": 426.0, "k2": 1000
 @pytest.fixture(scope="module")
 def bad_lab(lab, one_well_files):
     """The probe's records, each written with numpy from the lab's: a structure's of 3 samples and one whose
-    input is dead, a 60 s record with a dead auxiliary channel, a vibrometer reading its noise alone, a 3-row
+    input is dead, a 30 s record with a dead auxiliary channel, a vibrometer reading its noise alone, a 3-row
     record; a model of another mass; structures with a huge mass and with a spring of negative stiffness."""
     raw = np.loadtxt(lab / "rec.csv", delimiter=",", skiprows=2)
     t, u, z = raw.T
