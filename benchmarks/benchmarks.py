@@ -36,7 +36,7 @@ from negstiff.models.structure import Structure, simulate_structures
 from .baselines import build_c_rk4, median_time, solve_ivp_run
 from .peers import peak, peers_section, scaling, scaling_section
 from .peers import section as _section
-from .waits import waits_section
+from .waits import profile_section, waits_section
 
 
 def simulator_benchmark(quick: bool = False) -> tuple[list[list[str]], dict]:
@@ -702,6 +702,7 @@ def _ring_down_design_section(quick: bool) -> tuple[list[str], dict]:
 
 SECTIONS: dict[str, Any] = {
     "waits": lambda quick, out: waits_section(quick),
+    "profile": lambda quick, out: profile_section(quick),
     "simulator": lambda quick, out: _simulator_section(quick),
     "nsi": lambda quick, out: _nsi_section(quick),
     "bifurcation": lambda quick, out: _bifurcation_section(quick),

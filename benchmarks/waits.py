@@ -231,3 +231,99 @@ def main(argv=None) -> int:
 
 if __name__ == "__main__":
     sys.exit(main())
+
+
+PHASES_SCRIPT = r"""
+import cProfile, json, pstats, sys, time, warnings
+t0 = time.perf_counter()
+out = {}
+import numpy
+out["import numpy"] = time.perf_counter() - t0
+t = time.perf_counter()
+import scipy.signal
+out["import scipy.signal (and scipy.stats, optimize, interpolate it imports)"] = time.perf_counter() - t
+t = time.perf_counter()
+import negstiff.cli
+from negstiff import NSI, load
+from negstiff.inference.record import reading
+out["import negstiff (numba among it)"] = time.perf_counter() - t
+t = time.perf_counter()
+from negstiff.models import SEED_LIKE_CUBIC, simulate_batch
+simulate_batch(SEED_LIKE_CUBIC.kernel_params(), "polynomial", numpy.zeros(8), 1e-3, numpy.zeros(2))
+out["the simulator's kernel loaded from numba's cache"] = time.perf_counter() - t
+warnings.simplefilter("ignore")
+t = time.perf_counter()
+rec = load(sys.argv[1])
+out["reading the record (load: CSV, time base, checks)"] = time.perf_counter() - t
+pr = cProfile.Profile()
+t = time.perf_counter()
+pr.enable()
+est = NSI().fit(rec)
+pr.disable()
+fit = time.perf_counter() - t
+t = time.perf_counter()
+open(sys.argv[2], "w").write(json.dumps(est.result(), default=str))
+out["writing the result"] = time.perf_counter() - t
+stats = pstats.Stats(pr).stats
+stages = {"record checks": "_check_record", "subspace estimation (each law tried)": "_estimate",
+          "held-out validation": "predictable_validation", "output-error refinement": "refine_stage",
+          "plausibility checks": "classified"}
+parts = {}
+for label, name in stages.items():
+    cum = [v[3] for (f, _, fn), v in stats.items() if fn == name and "negstiff" in f]
+    parts[label] = max(cum) if cum else 0.0
+scale = fit / max(sum(v[2] for v in stats.values()), 1e-9)  # the profiler's own overhead taken out, pro rata
+out["fit"] = fit
+out["fit stages"] = {k: v * scale for k, v in parts.items()}
+print(json.dumps(out))
+"""
+"""Run in a fresh process on a record (argv 1): the wall time of each phase of ``identify nsi``, as the command
+runs them, and the fit's stages (cProfile's cumulative time of each, scaled to the unprofiled fit)."""
+
+
+def phases(record: Path, runs: int = 3) -> dict[str, Any]:
+    """Where ``identify nsi``'s time goes on ``record``: ``PHASES_SCRIPT`` in ``runs`` fresh processes (after one
+    untimed, for the bytecode and numba caches); each phase's median.
+    """
+    import json
+    import statistics
+
+    def one() -> dict[str, Any]:
+        with tempfile.TemporaryDirectory() as tmp:
+            p = subprocess.run([sys.executable, "-c", PHASES_SCRIPT, str(record), str(Path(tmp) / "nsi.json")],
+                               env=_env(), capture_output=True, text=True, check=True)  # fmt: skip
+        return json.loads(p.stdout.strip().splitlines()[-1])
+
+    one()
+    got = [one() for _ in range(runs)]
+    out: dict[str, Any] = {k: statistics.median(g[k] for g in got) for k in got[0] if k != "fit stages"}
+    out["fit stages"] = {k: statistics.median(g["fit stages"][k] for g in got) for k in got[0]["fit stages"]}
+    return out
+
+
+def profile_section(quick: bool) -> tuple[list[str], dict[str, Any]]:
+    """Where the wait for ``identify nsi`` goes, phase by phase (``phases``), on the 300 s rig record."""
+    from .peers import section
+
+    print("profile of identify nsi...", file=sys.stderr)
+    with tempfile.TemporaryDirectory(prefix="negstiff-phases-") as tmp:
+        rec = Path(tmp) / "rec.csv"
+        timed(["rig", "random", "--duration", "60" if quick else "300", "--seed", "3", "-o", str(rec)])
+        res = phases(rec, 1 if quick else 3)
+    total = sum(v for k, v in res.items() if k != "fit stages")
+    rows = [[k, f"{v:.2f} s", f"{100 * v / total:.0f} %"] for k, v in res.items() if k != "fit stages"]
+    stages = res["fit stages"]
+    rows += [[f"fit: {k}", f"{v:.2f} s", f"{100 * v / total:.0f} %"] for k, v in stages.items()]
+    rows.append(["fit: the rest", f"{res['fit'] - sum(stages.values()):.2f} s", ""])
+    imports = sum(v for k, v in res.items() if k.startswith("import"))
+    intro = (
+        f"`identify nsi` on the {'60' if quick else '300'} s rig record, phase by phase, each timed in a fresh "
+        f"process as the command runs it (the median of {1 if quick else 3}, after an untimed run for the bytecode "
+        "and numba caches; `benchmarks/waits.py`, `phases`); the fit's stages are cProfile's cumulative times scaled "
+        "to the "
+        f"unprofiled fit. The imports take {imports:.2f} s of the {total:.2f} s, scipy.signal's the most of them (it "
+        "imports scipy.stats, scipy.optimize and scipy.interpolate, which NSI's checks use too: no lazy import takes "
+        f"them off the command's path). Outside the fit the command spends {total - res['fit']:.2f} s: the 1.5 s "
+        f"target leaves the fit {TARGETS['identify nsi'] - (total - res['fit']):.2f} s of its {res['fit']:.2f} s."
+    )
+    return section("Waits: where identify nsi's time goes", intro, ["phase", "wall time", "share"], rows), res
