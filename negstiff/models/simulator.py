@@ -20,9 +20,7 @@ geometric device, a displacement the rods cannot reach) is stopped; its remainin
 from __future__ import annotations
 
 import functools
-import hashlib
 import math
-import threading
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
@@ -105,30 +103,11 @@ def stage_input(u: np.ndarray, substeps: int = DEFAULT_SUBSTEPS) -> np.ndarray:
     2.67 mV rms error under linearly interpolated input and 0.25 mV under this one (measured).
     ``u``: (N,) or (R, N); returns (2 substeps (N - 1) + 1,) or (R, ...).
     """
-    u = np.ascontiguousarray(u, dtype=np.float64)
+    u = np.asarray(u, dtype=np.float64)
     r = 2 * int(substeps)
-    key = (u.shape, r, hashlib.sha1(u.data).digest())
-    with _STAGED_LOCK:
-        kept = _STAGED.pop(key, None)
-        if kept is not None:
-            _STAGED[key] = kept  # the most recently used last
-    if kept is None:
-        n = u.shape[-1]
-        fine = signal.resample_poly(u, r, 1, axis=-1, window=antialias_fir(r), padtype="line")
-        kept = np.ascontiguousarray(fine[..., : r * (n - 1) + 1])
-        with _STAGED_LOCK:
-            _STAGED[key] = kept
-            while len(_STAGED) > STAGED_KEPT:
-                _STAGED.pop(next(iter(_STAGED)))
-    return kept.copy()
-
-
-STAGED_KEPT = 8
-"""The staged inputs ``stage_input`` keeps (the most recent, keyed by the input's bytes): a fit stages the same
-record again for each candidate, restart and check (NSI 11 calls on 5 inputs, SINDy 17 on 6, the discrepancy
-workflow 25 on 4, measured), and a key's SHA-1 costs a tenth of the interpolation. Each caller gets its own copy."""
-_STAGED: dict = {}
-_STAGED_LOCK = threading.Lock()
+    n = u.shape[-1]
+    fine = signal.resample_poly(u, r, 1, axis=-1, window=antialias_fir(r), padtype="line")
+    return np.ascontiguousarray(fine[..., : r * (n - 1) + 1])
 
 
 def input_gain(input_kind: str, masses: np.ndarray) -> np.ndarray:

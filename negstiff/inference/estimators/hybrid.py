@@ -164,7 +164,7 @@ class Hybrid:
         """Z of a free run over ``rec`` from ``x0`` (NaN after a divergence)."""
         sub = record_substeps(self.model, rec)
         zs, vs, _, _ = rec.states("state")
-        us = stage_input(rec.driving(self.model), sub)[None]  # with any measured channel's term (its u)
+        us = rec.staged(self.model, sub)[None]  # with any measured channel's term (its u)
         x = np.asarray(x0, float)[None]
         oz, _ = simulate_hybrid(self.model, self.basis, self.theta, us, rec.dt, x, sub, rec.input_name,
                                 **divergence_limits(rec.displacement, vs))  # fmt: skip

@@ -46,7 +46,6 @@ from negstiff.inference.steps.validation import (
     validate,
 )
 from negstiff.models import Model, effects, simulate_batch
-from negstiff.models.simulator import stage_input
 
 PREDICTABLE_GROWTH = 5.0
 """A stage of longer windows is fitted only while its error at the current model stays within this
@@ -216,7 +215,7 @@ def refine(
     limits = divergence_limits(rec.z, vs)
     sub = record_substeps(model, rec)
     r = 2 * sub
-    u_staged = stage_input(rec.driving(model), sub)  # a measured channel's term held at its start value
+    u_staged = rec.staged(model, sub)  # a measured channel's term held at its start value
     x_scale = np.array([max(np.abs(rec.z).max(), 1e-12), max(np.abs(vs).max(), 1e-12)])
     start_model, current = model, model
     stages: list[dict[str, Any]] = []

@@ -26,7 +26,6 @@ from negstiff.models.simulator import (
     DEFAULT_Z_LIMIT,
     SimulationResult,
     input_gain,
-    stage_input,
 )
 from negstiff.models.structure import Structure, simulate_structures
 
@@ -147,7 +146,7 @@ def simulate_record(
     if not limits and rec.z is not None:
         _, vs, _, _ = rec.states("state")
         limits = divergence_limits(rec.z, vs)
-    return simulate_batch(system.kernel_params(), system.kind, stage_input(rec.driving(system), sub), rec.dt,
+    return simulate_batch(system.kernel_params(), system.kind, rec.staged(system, sub), rec.dt,
                           np.asarray(x0, float), input_kind=rec.input_name, substeps=sub, staged=True,
                           store_velocity=True, **limits)  # fmt: skip
 
@@ -397,7 +396,7 @@ def staged_windows(system, rec: Measurement, starts: np.ndarray, length: int) ->
     sub = record_substeps(system, rec)
     r = 2 * sub
     lo, hi = int(np.min(starts)), int(np.max(starts)) + length
-    us = stage_input(rec.driving(system)[lo:hi], sub)  # the input plus any measured channel's term
+    us = rec.staged(system, sub, lo, hi)  # the input plus any measured channel's term
     return np.stack([us[r * (s - lo) : r * (s - lo + length - 1) + 1] for s in starts]), sub
 
 
