@@ -380,31 +380,40 @@ def _fixture_params(device, fixture) -> tuple[float, ...]:
 
 
 @numba.njit(inline="always")
-def _fixture_step(z1, z2, v1, v2, h, a0, am, a1, p):  # pragma: no cover (compiled)
-    """``fixture_rk4_step``'s step, operation for operation, compiled (an element without a hidden force): the
-    state after h under the base acceleration a0, am, a1 at the step's start, middle and end."""
+def _fixture_step(z1, z2, v1, v2, h, a0, am, a1, p, hidden=None):  # pragma: no cover (compiled)
+    """``fixture_rk4_step``'s step, operation for operation, compiled: the state after h under the base acceleration
+    a0, am, a1 at the step's start, middle and end; ``hidden(r, r')`` a compiled force beside the element's (None:
+    none, its branch pruned)."""
     m1, k_f, c_f, m2, k0, k1, k2, k3, c, cn = p
     # stage 1
     r, vr = z2 - z1, v2 - v1
     f = ((k3 * r + k2) * r - k1) * r + k0 + c * vr + cn * vr * abs(vr)
+    if hidden is not None:
+        f += hidden(r, vr)
     p1, q1 = (-k_f * z1 - c_f * v1 + f) / m1 - a0, -f / m2 - a0
     s1, s2 = v1 + 0.5 * h * p1, v2 + 0.5 * h * q1
     # stage 2
     y1, y2 = z1 + 0.5 * h * v1, z2 + 0.5 * h * v2
     r, vr = y2 - y1, s2 - s1
     f = ((k3 * r + k2) * r - k1) * r + k0 + c * vr + cn * vr * abs(vr)
+    if hidden is not None:
+        f += hidden(r, vr)
     p2, q2 = (-k_f * y1 - c_f * s1 + f) / m1 - am, -f / m2 - am
     t1, t2 = v1 + 0.5 * h * p2, v2 + 0.5 * h * q2
     # stage 3
     y1, y2 = z1 + 0.5 * h * s1, z2 + 0.5 * h * s2
     r, vr = y2 - y1, t2 - t1
     f = ((k3 * r + k2) * r - k1) * r + k0 + c * vr + cn * vr * abs(vr)
+    if hidden is not None:
+        f += hidden(r, vr)
     p3, q3 = (-k_f * y1 - c_f * t1 + f) / m1 - am, -f / m2 - am
     w1, w2 = v1 + h * p3, v2 + h * q3
     # stage 4
     y1, y2 = z1 + h * t1, z2 + h * t2
     r, vr = y2 - y1, w2 - w1
     f = ((k3 * r + k2) * r - k1) * r + k0 + c * vr + cn * vr * abs(vr)
+    if hidden is not None:
+        f += hidden(r, vr)
     p4, q4 = (-k_f * y1 - c_f * w1 + f) / m1 - a1, -f / m2 - a1
     return (
         z1 + h / 6 * (v1 + 2 * s1 + 2 * t1 + w1),
@@ -415,8 +424,8 @@ def _fixture_step(z1, z2, v1, v2, h, a0, am, a1, p):  # pragma: no cover (compil
 
 
 @numba.njit(cache=True)
-def _rk4_fixture_polynomial(acc, h, oversample, z2, p):  # pragma: no cover (compiled)
-    """``rk4_fixture_record``'s RK4 (``_fixture_step``) compiled, for an element without a hidden force."""
+def _rk4_fixture_polynomial(acc, h, oversample, z2, p, hidden=None):  # pragma: no cover (compiled)
+    """``rk4_fixture_record``'s RK4 (``_fixture_step``) compiled; ``hidden`` a compiled force beside the element's."""
     n = acc.size
     out = np.empty((4, n // oversample))  # z1, z2, v1, v2
     z1, v1, v2 = 0.0, 0.0, 0.0
@@ -426,7 +435,7 @@ def _rk4_fixture_polynomial(acc, h, oversample, z2, p):  # pragma: no cover (com
             out[2, i // oversample], out[3, i // oversample] = v1, v2
         a0 = acc[i]
         a1 = acc[i + 1] if i + 1 < n else a0
-        z1, z2, v1, v2 = _fixture_step(z1, z2, v1, v2, h, a0, 0.5 * (a0 + a1), a1, p)
+        z1, z2, v1, v2 = _fixture_step(z1, z2, v1, v2, h, a0, 0.5 * (a0 + a1), a1, p, hidden)
     return out
 
 
@@ -468,7 +477,8 @@ def stepped_sweep(amps, f_hz, state, device=None, fixture=FIXTURE, periods=120, 
 
 
 def rk4_fixture_record(duration=60.0, rms=12.0, band=(2.0, 40.0), seed=1, oversample=8, settle=5.0, noise=1e-6,
-                       device=None, fixture=FIXTURE, fs=FS, hidden=None, velocity=False):  # fmt: skip
+                       device=None, fixture=FIXTURE, fs=FS, hidden=None, velocity=False,
+                       compile_hidden=False):  # fmt: skip
     """(base_acc, z (2, T)) of ``device`` (TRUTH by default) on a sprung fixture, as another lab's code writes it: a
     plain fixed-step RK4 on Python floats at ``oversample`` x fs (not negstiff's kernel), the base acceleration
     band-limited Gaussian noise made by FFT at the fine rate (linear between fine steps), ``settle`` s dropped,
@@ -476,7 +486,10 @@ def rk4_fixture_record(duration=60.0, rms=12.0, band=(2.0, 40.0), seed=1, oversa
     the table), DOF 2 the device's mass on the element between them; z relative to the table, from the springs'
     loaded rest (the element's force, k0 included, acts on DOF 2 and oppositely on DOF 1). ``hidden(r, r')``: a
     force [N] the element has beside its model (friction), acting like the element's. ``velocity``: also the
-    integrator's own velocities (2, T) relative to the table, noise-free (a model without a hidden force)."""
+    integrator's own velocities (2, T) relative to the table, noise-free (a model without a hidden force).
+    ``compile_hidden``: the hidden force compiled with the steps (``numba.njit(hidden)``; a 120 s record 10 s -> 0.5
+    s), the same record to the last bit where the force's operations compile to the same (a tanh: hashed equal; a
+    power r**5 is libm's pow on Python floats, products compiled, and a chaotic record's realisation moves)."""
     dev = TRUTH if device is None else device
     step = fixture_rk4_step(dev, fixture, hidden)
     h = 1.0 / (fs * oversample)
@@ -494,8 +507,10 @@ def rk4_fixture_record(duration=60.0, rms=12.0, band=(2.0, 40.0), seed=1, oversa
     z2 = float(max(roots[np.abs(roots.imag) < 1e-9].real))
     z1, v1, v2 = 0.0, 0.0, 0.0
     out = np.empty((2, n // oversample))
-    if hidden is None:  # the same steps, compiled (a 300 s record took 16 s)
-        out = _rk4_fixture_polynomial(np.asarray(acc), h, oversample, z2, _fixture_params(dev, fixture))
+    if hidden is None or compile_hidden:  # the same steps, compiled (a 300 s record took 16 s)
+        out = _rk4_fixture_polynomial(np.asarray(acc), h, oversample, z2, _fixture_params(dev, fixture),
+                                      None if hidden is None else numba.njit(hidden))  # fmt: skip
+        hidden = None  # done
     elif velocity:
         raise ValueError("velocity=True: the compiled route only (no hidden force)")
     velocities = out[2:] if hidden is None else None
