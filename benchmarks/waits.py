@@ -245,7 +245,7 @@ out["import scipy.signal (and scipy.stats, optimize, interpolate it imports)"] =
 t = time.perf_counter()
 import negstiff.cli
 from negstiff import NSI, load
-from negstiff.inference.record import reading
+from negstiff.cli.common import write_json
 out["import negstiff (numba among it)"] = time.perf_counter() - t
 t = time.perf_counter()
 from negstiff.models import SEED_LIKE_CUBIC, simulate_batch
@@ -262,7 +262,7 @@ est = NSI().fit(rec)
 pr.disable()
 fit = time.perf_counter() - t
 t = time.perf_counter()
-open(sys.argv[2], "w").write(json.dumps(est.result(), default=str))
+write_json(sys.argv[2], est.result())  # as the command writes it
 out["writing the result"] = time.perf_counter() - t
 stats = pstats.Stats(pr).stats
 stages = {"record checks": "_check_record", "subspace estimation (each law tried)": "_estimate",

@@ -103,22 +103,17 @@ def _load_blas() -> None:
     import scipy.linalg  # noqa: F401
 
 
-_CONTROLLER: list = []
-"""The process's threadpoolctl controller of the BLAS libraries (``_blas_controller``), made once."""
-
-
+@functools.cache
 def _blas_controller():
     """The threadpoolctl controller of numpy's and scipy's BLAS (both loaded first: ``_load_blas``), made once per
     process. ``threadpool_limits`` makes a new controller at every call, which finds the process's thread pools by
     walking its loaded libraries: 1.7 ms a call, and a fit, a record read and each subspace step call it (a 9 Hz
     bifurcation map's 444 records spent 0.8 s in it, measured). The limits set through it are threadpoolctl's own.
     """
-    if not _CONTROLLER:
-        from threadpoolctl import ThreadpoolController
+    from threadpoolctl import ThreadpoolController
 
-        _load_blas()
-        _CONTROLLER.append(ThreadpoolController().select(user_api="blas"))
-    return _CONTROLLER[0]
+    _load_blas()
+    return ThreadpoolController().select(user_api="blas")
 
 
 def limit_threads(n: int, own: int | None = None):

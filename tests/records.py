@@ -491,7 +491,6 @@ def rk4_fixture_record(duration=60.0, rms=12.0, band=(2.0, 40.0), seed=1, oversa
     s), the same record to the last bit where the force's operations compile to the same (a tanh: hashed equal; a
     power r**5 is libm's pow on Python floats, products compiled, and a chaotic record's realisation moves)."""
     dev = TRUTH if device is None else device
-    step = fixture_rk4_step(dev, fixture, hidden)
     h = 1.0 / (fs * oversample)
     n = int(round((duration + settle) * fs)) * oversample
     rng = np.random.default_rng(seed)
@@ -506,16 +505,18 @@ def rk4_fixture_record(duration=60.0, rms=12.0, band=(2.0, 40.0), seed=1, oversa
     roots = np.roots([k3, k2, -k1, k0])
     z2 = float(max(roots[np.abs(roots.imag) < 1e-9].real))
     z1, v1, v2 = 0.0, 0.0, 0.0
-    out = np.empty((2, n // oversample))
-    if hidden is None or compile_hidden:  # the same steps, compiled (a 300 s record took 16 s)
+    compiled = hidden is None or compile_hidden
+    if compiled:  # the same steps, compiled (a 300 s record took 16 s)
         out = _rk4_fixture_polynomial(np.asarray(acc), h, oversample, z2, _fixture_params(dev, fixture),
                                       None if hidden is None else numba.njit(hidden))  # fmt: skip
-        hidden = None  # done
     elif velocity:
-        raise ValueError("velocity=True: the compiled route only (no hidden force)")
-    velocities = out[2:] if hidden is None else None
+        raise ValueError("velocity=True: the compiled route only (no hidden force, or compile_hidden)")
+    else:
+        out = np.empty((2, n // oversample))
+        step = fixture_rk4_step(dev, fixture, hidden)
+    velocities = out[2:] if compiled else None
     out = out[:2]
-    for i in range(n if hidden is not None else 0):
+    for i in range(0 if compiled else n):
         if i % oversample == 0:
             out[0, i // oversample], out[1, i // oversample] = z1, z2
         a0 = acc[i]
