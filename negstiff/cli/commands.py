@@ -194,7 +194,7 @@ def _simulate_structure(args, structure) -> int:
 
 
 def refinement(args) -> bool | None:
-    """The estimators' ``refine`` from ``--no-refine``: False, else None (where defined: a single DOF's record)."""
+    """The estimators' ``refine`` from ``--no-refine``: False, else None (the estimator's default)."""
     return False if args.no_refine else None
 
 
@@ -266,6 +266,7 @@ def _identify_structure(args, est, rec) -> int:
     say(args, f"identify {args.method}: {rec.n_dof} DOFs, element {at[0]}-{at[1]}, {rec.n} samples at {rec.fs:g} Hz")
     est.fit(rec)
     result = est.result()
+    say_refinement(args, result.get("refinement"))
     warn(args, result["warnings"])
     write_json(args.out, result)
     rms = result["validation"]["rms_percent"]

@@ -397,12 +397,16 @@ def simulate_structures(
     x0 = np.broadcast_to(x0, (nb, 2 * nd))
     if not np.all(np.isfinite(x0)):
         raise InputError("initial state contains NaN or inf")
-    parts = [s.arrays(input_kind, force_dof) for s in group]
-    p = np.ascontiguousarray(np.stack([q[0] for q in parts], axis=1))
-    minv = np.ascontiguousarray(np.stack([q[1] for q in parts], axis=1))
-    lk = np.ascontiguousarray(np.stack([q[2] for q in parts], axis=2))
-    lc = np.ascontiguousarray(np.stack([q[3] for q in parts], axis=2))
-    gain = np.ascontiguousarray(np.stack([q[4] for q in parts], axis=1))
+    # each distinct structure's arrays made once and spread over its members (a refinement's point over its windows)
+    unique = list({id(s): s for s in group}.values())
+    where = {id(s): i for i, s in enumerate(unique)}
+    member = np.fromiter((where[id(s)] for s in group), dtype=np.intp, count=nb)
+    parts = [s.arrays(input_kind, force_dof) for s in unique]
+    p = np.ascontiguousarray(np.stack([q[0] for q in parts], axis=1)[:, member])
+    minv = np.ascontiguousarray(np.stack([q[1] for q in parts], axis=1)[:, member])
+    lk = np.ascontiguousarray(np.stack([q[2] for q in parts], axis=2)[:, :, member])
+    lc = np.ascontiguousarray(np.stack([q[3] for q in parts], axis=2)[:, :, member])
+    gain = np.ascontiguousarray(np.stack([q[4] for q in parts], axis=1)[:, member])
     u2, uidx, n = checked_input(u, dt, substeps, input_index, nb, staged)
     oz, ov, status, fail = integrate(
         KINDS[group[0].element.kind], p, minv, lk, lc, gain, u2, uidx, n, dt, substeps, x0[:, :nd].T, x0[:, nd:].T,

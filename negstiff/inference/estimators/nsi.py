@@ -247,15 +247,16 @@ class NSI(StructureResults, Identifier):
         Identification passes per well at most (each at the z* refined by the previous one; the loop
         stops when the shift falls below 0.1 % of the motion's spread).
     refine : bool or None, default None
-        Finish by output-error refinement (kept only if it predicts the held-out tail no worse). None: where it is
-        defined, a single DOF's record. On a structure's record (``element``) it is not defined yet, and
-        ``refine=True`` there is one ``InputError``.
+        Finish by output-error refinement (kept only if it predicts the held-out tail no worse; a structure's over
+        every channel, its channels' zeros with it: ``structure_id``). None: run it, but on a structure read
+        through its sensors without masses (a state-space linear part, not refined: ``refine=True`` there is one
+        ``InputError``).
     progress : bool, default False
         A progress bar over the identification passes on stderr, shown once they take more than 2 s.
     element : str or (int, int), optional
         Where the element acts on a record of N > 1 DOFs: ``"I-J"``, it moves DOF J relative to DOF I (0: the
         base). None: the single DOF (on the base). A structure's result is a ``StructureIdentification``
-        (``structure_``, ``element_``, ``offsets_``; no output-error refinement: ``refine``).
+        (``structure_``, ``element_``, ``offsets_``).
 
     law : str or None, default None
         The restoring-force law (``models.laws``: ``"cubic"``, ``"quintic"``, ``"septic"``, ``"magnet"``,

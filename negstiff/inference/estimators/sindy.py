@@ -159,9 +159,8 @@ class SINDy(StructureResults, Identifier):
         Seeds the ensemble's bagging (same seed, same ensemble); None: fresh entropy; a Generator: its next draw
         (scikit-learn's ``random_state``). The integer used is ``seed_`` and the result's ``settings["seed"]``.
     refine : bool or None, default None
-        Finish by output-error refinement (kept only if it predicts the held-out tail no worse). None: where it is
-        defined, a single DOF's record. On a structure's record (``element``) it is not defined yet, and
-        ``refine=True`` there is one ``InputError``.
+        Finish by output-error refinement (kept only if it predicts the held-out tail no worse; a structure's over
+        every channel, its channels' zeros with it: ``structure_id``). None: run it.
     element : str or (int, int), optional
         Where the element acts on a record of N > 1 DOFs: ``"I-J"``, it moves DOF J relative to DOF I (0: the
         base). None: the single DOF. A structure's result is a ``StructureIdentification``.

@@ -291,6 +291,20 @@ class Measurement:
         zs, v, a, info = hit
         return zs.copy(), v.copy(), a.copy(), copy.deepcopy(info)
 
+    def free_run_states(self) -> tuple[np.ndarray, np.ndarray]:
+        """(N, T) z and z' of every channel as a free run starts from: ``states("state")``'s least-error velocity,
+        channel by channel, each with its own noise floor (one channel's are ``states("state")``'s, shared with it).
+        Kept with the record; copies are returned.
+        """
+        hit = self.derived.get("free_run_states")
+        if hit is None:
+            z = self.displacement
+            pairs = ([self.states("state")[:2]] if z.ndim == 1 else
+                     [state_derivatives(zi, self.fs, "state", floor=noise_floor(zi, self.fs))[:2]
+                      for zi in z])  # fmt: skip
+            hit = self.derived["free_run_states"] = (np.array([p[0] for p in pairs]), np.array([p[1] for p in pairs]))
+        return hit[0].copy(), hit[1].copy()
+
     def basis_states(self) -> tuple[np.ndarray, np.ndarray]:
         """NSI's band states (``states("band")``) low-passed where the record holds its sensor's noise alone
         (``derivatives.basis_band_hz``, ``band_limited``): the z and z' a nonlinear basis is built from (their noise,

@@ -22,6 +22,11 @@ Identification*, 2nd ed., 7.3, the output-error model; multiple shooting after B
   batched simulator call. ``scipy.optimize.least_squares`` given the same sparsity (the solver before)
   took inexact steps that stopped short of the optimum within its evaluation budget (``shooting``).
 
+The system refined is a structure of N DOFs (``models.structure``): its element's parameters (as above) and each
+nonzero entry of its linear structure's stiffness and damping matrices, every DOF's channel in the residuals and
+every DOF's z0, z0' a window's start state. The single-DOF ``Model`` is the structure of one DOF on the base (no
+linear entries, one channel): the same code, the same numbers.
+
 The result keeps the start model (``initial_model``) beside the refined one, with the simulation
 error of each stage.
 """
@@ -30,6 +35,7 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -38,14 +44,15 @@ from scipy import optimize, sparse
 
 from negstiff.errors import MeasurementError
 from negstiff.inference.record.measurement import Measurement
-from negstiff.inference.steps.shooting import shooting_least_squares
+from negstiff.inference.steps.shooting import ShootingFit, parameter_covariance, shooting_least_squares
 from negstiff.inference.steps.validation import (
     boundedness,
     divergence_limits,
     record_substeps,
     validate,
 )
-from negstiff.models import Model, effects, simulate_batch
+from negstiff.models import Model, effects
+from negstiff.models.structure import Structure, simulate_structures
 
 PREDICTABLE_GROWTH = 5.0
 """A stage of longer windows is fitted only while its error at the current model stays within this
@@ -63,22 +70,31 @@ def scalar_effects() -> tuple[str, ...]:
 
 @dataclass(frozen=True)
 class Refinement:
-    """What ``refine`` found: the refined model, the start model, the names refined and, per stage,
-    the window length, count and the rms simulation error (m) at its start and end.
+    """What ``refine`` found: the refined system (a ``Model`` or a ``Structure``, as given), the start one, the
+    names refined and, per stage, the window length, count and the rms simulation error (m) at its start and end.
     """
 
-    model: Model
-    initial_model: Model
+    model: Any
+    initial_model: Any
     parameters: tuple[str, ...]
     stages: list[dict[str, Any]] = field(default_factory=list)
+    offsets: np.ndarray | None = None
+    """A structure's channels' zeros as refined [m] (None: a single DOF's z frame, not refined)."""
+    standard_errors: dict[str, float] | None = None
+    """Each refined parameter's local standard error (``_standard_errors``), in its own unit."""
 
     def to_json(self) -> dict[str, Any]:
         """The refinement's account as JSON: parameters, stages, held-out errors and why it was kept."""
-        return {
+        out = {
             "parameters": list(self.parameters),
             "stages": self.stages,
             "initial_model": self.initial_model.to_dict(),
         }
+        if self.offsets is not None:
+            out["offsets_m"] = self.offsets.tolist()
+        if self.standard_errors is not None:
+            out["standard_errors"] = self.standard_errors
+        return out
 
 
 def field_effects(model: Model) -> tuple[str, ...]:
@@ -158,14 +174,76 @@ def parameter_scales(model: Model, names, z_rms: float, v_rms: float) -> np.ndar
     return np.asarray(out, float)
 
 
-def shooting_sparsity(n_win: int, length: int, dense: int, penalty: tuple[int, int] | None = None) -> sparse.csr_matrix:
+LINEAR_MATRICES = ("K", "C")
+"""A structure's linear matrices ``refine`` moves, by the names of its parameters (``K[i,j]``, ``C[i,j]``)."""
+
+
+@dataclass(frozen=True)
+class SystemParameters:
+    """The parameters ``refine`` moves in a system of N DOFs: its element's (``parameter_names``: the base fields
+    but those held, its named effects, the mass when free), then each nonzero entry of its linear structure's
+    stiffness and damping matrices on and above the diagonal, named ``K[i,j]`` and ``C[i,j]`` (the matrices stay
+    symmetric; a zero entry, no spring or damper there, stays zero). A single-DOF ``Model`` is the structure of one
+    DOF on the base: no linear entries, and the system built is a ``Model`` again.
+    """
+
+    system: Any
+    element_names: tuple[str, ...]
+    linear: tuple[tuple[str, int, int], ...]
+
+    @classmethod
+    def of(cls, system: Model | Structure, free_mass: bool = False, held=()) -> SystemParameters:
+        """The parameters of ``system``: the mass too when ``free_mass``, none of those named in ``held``."""
+        structure = as_structure(system)
+        entries = tuple((name, int(i), int(j)) for name in LINEAR_MATRICES
+                        for i, j in zip(*np.triu_indices(structure.n_dof), strict=True)
+                        if getattr(structure, name)[i, j] != 0 and f"{name}[{i + 1},{j + 1}]" not in held)  # fmt: skip
+        return cls(system, parameter_names(structure.element, free_mass, held), entries)
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        """Every parameter's name, in the order of ``values``."""
+        return self.element_names + tuple(f"{name}[{i + 1},{j + 1}]" for name, i, j in self.linear)
+
+    def values(self) -> np.ndarray:
+        """The parameters' current values."""
+        structure = as_structure(self.system)
+        linear = [getattr(structure, name)[i, j] for name, i, j in self.linear]
+        return np.concatenate([values_of(structure.element, self.element_names), np.asarray(linear, float)])
+
+    def scales(self, z_rms: float, v_rms: float) -> np.ndarray:
+        """The element's ``parameter_scales``, and each linear entry's own size (nonzero by construction)."""
+        element = parameter_scales(as_structure(self.system).element, self.element_names, z_rms, v_rms)
+        return np.concatenate([element, np.abs(self.values()[element.size :])])
+
+    def build(self, values) -> Any:
+        """The system with these values (a ``Model`` for a ``Model``)."""
+        values = np.asarray(values, float)
+        p = len(self.element_names)
+        if isinstance(self.system, Model):
+            return with_values(self.system, self.element_names, values)
+        s = self.system
+        matrices = {name: np.array(getattr(s, name), float) for name in LINEAR_MATRICES}
+        for (name, i, j), v in zip(self.linear, values[p:], strict=True):
+            matrices[name][i, j] = matrices[name][j, i] = v
+        return Structure(s.masses, with_values(s.element, self.element_names, values[:p]), matrices["K"],
+                         matrices["C"], s.place)  # fmt: skip
+
+
+def as_structure(system: Model | Structure) -> Structure:
+    """A ``Structure`` as itself, a single-DOF ``Model`` as the structure of one DOF on the base."""
+    return system if isinstance(system, Structure) else Structure.single(system)
+
+
+def shooting_sparsity(n_win: int, length: int, dense: int, penalty: tuple[int, int] | None = None,
+                      states: int = 2) -> sparse.csr_matrix:  # fmt: skip
     """The Jacobian's sparsity for multiple shooting: ``dense`` leading parameter columns touch every
-    residual, each window's two start-state columns only its own ``length`` residuals; ``penalty``
+    residual, each window's ``states`` start-state columns only its own ``length`` residuals; ``penalty``
     (first column, count) appends one ridge row per penalised column. Built from blocks (a row-wise
     ``lil_matrix`` cost 1.3 s per refinement of a 150 s record, measured).
     """
     rows = n_win * length
-    states = sparse.kron(sparse.identity(n_win, dtype=np.int8, format="csr"), np.ones((length, 2), np.int8))
+    states = sparse.kron(sparse.identity(n_win, dtype=np.int8, format="csr"), np.ones((length, states), np.int8))
     out = sparse.hstack([sparse.csr_matrix(np.ones((rows, dense), dtype=np.int8)), states], format="csr")
     if penalty is not None:
         first, count = penalty
@@ -182,7 +260,7 @@ region) given the Jacobian's sparsity or not."""
 
 
 def refine(
-    model: Model,
+    model: Model | Structure,
     rec: Measurement,
     windows_s: tuple[float, ...] = (0.05, 0.25, 1.0),
     max_windows: int = 240,
@@ -190,63 +268,87 @@ def refine(
     max_nfev: int = 60,
     solver: str = "schur",
     held: tuple[str, ...] = (),
+    offsets=None,
 ) -> Refinement:
     """Minimise the simulation error of ``model`` on ``rec`` (the identification part: pass a segment).
 
     Parameters
     ----------
-    model : the start model (a method's equation-error estimate), z frame
+    model : the start system (a method's equation-error estimate): a single DOF's ``Model`` (z frame) or a
+        ``Structure`` of N DOFs (its physical frame, ``offsets`` the record's channels' zeros)
     rec : the record to fit (its held-out part excluded by the caller)
     windows_s : the schedule of window lengths [s]; a length of at least the record's gives one free run
     max_windows : windows per stage at most, spread evenly over the record
     free_mass : refine the mass too (a force input without a weighed mass: the input's gain)
     max_nfev : residual evaluations per stage at most
-    held : base fields held at their start value (a sparse method's unselected terms stay zero)
+    held : parameters held at their start value (a sparse method's unselected terms stay zero; a structure's
+        element constant, pinned by its frame: ``k0``)
     solver : one of ``SOLVERS``
+    offsets : each channel's zero [m] (measured = physical + offset), refined with the system where given (a
+        structure's frame: a zero off by 25 um moved the seed-like element's k2 by 5 % through its cubic re-expanded
+        about it, 3 k3 dz, measured with the zeros held); default none, a single DOF's z frame (pinned before, its
+        constant force k0 refined)
+
+    Every channel's error counts in the units of the element's DOF's motion (divided by its channel's rms over
+    the element's channel's): a stiff fixture's channel, moving a tenth of the device's, weighs as much.
     """
     if rec.z is None:
         raise MeasurementError(f"{rec.source}: refinement needs a response")
     if solver not in SOLVERS:
         raise ValueError(f"solver must be one of {SOLVERS}, got {solver!r}")
-    names = parameter_names(model, free_mass, held)
-    zs, vs, _, _ = rec.states("state")
-    scale = parameter_scales(model, names, float(np.std(rec.z)), float(np.std(vs)))
-    q = values_of(model, names) / scale
-    limits = divergence_limits(rec.z, vs)
+    params = SystemParameters.of(model, free_mass, held)
+    structure = as_structure(model)
+    nd = structure.n_dof
+    n_off = 0 if offsets is None else nd  # the channels' zeros refined where the caller has them
+    names = params.names + tuple(f"offset[{i + 1}]" for i in range(n_off))
+    p_sys = len(params.names)
+    o = np.zeros(nd) if offsets is None else np.asarray(offsets, float)
+    raw = rec.channels
+    z_all = raw - o[:, None]
+    zs, vs = rec.free_run_states()
+    zs = zs - o[:, None]
+    j = structure.place[1] - 1
+    rms = np.sqrt(np.mean((z_all - z_all.mean(axis=1, keepdims=True)) ** 2, axis=1))
+    scale = np.concatenate([params.scales(float(np.std(z_all[j])), float(np.std(vs[j]))),
+                            np.maximum(rms[:n_off], 1e-12)])  # fmt: skip
+    weight = (rms[j] / np.where(rms > 0, rms, rms[j]))[:, None]  # (N, 1); a single DOF's is 1.0 exactly
+    q = np.concatenate([params.values(), o[:n_off]]) / scale
+    limits = divergence_limits(z_all, vs)
     sub = record_substeps(model, rec)
     r = 2 * sub
-    u_staged = rec.staged(model, sub)  # a measured channel's term held at its start value
-    x_scale = np.array([max(np.abs(rec.z).max(), 1e-12), max(np.abs(vs).max(), 1e-12)])
+    u_staged = rec.staged(structure.element, sub)  # a measured channel's term held at its start value
+    x_scale = np.concatenate([np.maximum(np.abs(z_all).max(axis=1), 1e-12), np.maximum(np.abs(vs).max(axis=1), 1e-12)])
     start_model, current = model, model
     stages: list[dict[str, Any]] = []
+    last = None
     for w_s in windows_s:
         length = min(rec.n, max(8, int(round(w_s * rec.fs))))
         n_win = min(max_windows, max(1, rec.n // length))
         starts = np.linspace(0, rec.n - length, n_win).astype(int)
-        meas = np.stack([rec.z[s : s + length] for s in starts])
+        meas = np.stack([raw[:, s : s + length] for s in starts])  # (W, N, L), as measured
         u = np.stack([u_staged[r * s : r * (s + length - 1) + 1] for s in starts])
-        x0 = np.column_stack([zs[starts], vs[starts]]) / x_scale
+        x0 = np.hstack([zs[:, starts].T, vs[:, starts].T]) / x_scale
         penalty = 10 * np.abs(meas).max()
 
-        def residuals(Q, X):
-            """(k, n_win, length) simulation errors of k parameter points and start states, one batch."""
+        def residuals(Q, X, meas=meas, u=u, n_win=n_win, length=length):  # this stage's windows, kept by the fit
+            """(k, n_win, N length) simulation errors of k parameter points and start states, one batch."""
             k = Q.shape[0]
-            params = np.concatenate(
-                [np.repeat(with_values(model, names, qq * scale).kernel_params()[:, None], n_win, axis=1) for qq in Q],
-                axis=1,
-            )
-            res = simulate_batch(
-                params, model.kind, u, rec.dt, (X * x_scale).reshape(-1, 2), input_kind=rec.input_name,
-                input_index=np.tile(np.arange(n_win), k), substeps=sub, staged=True, **limits,
+            points = [as_structure(params.build(qq[:p_sys] * scale[:p_sys])) for qq in Q]
+            zeros = np.zeros((k, nd))
+            zeros[:, :n_off] = Q[:, p_sys:] * scale[p_sys:]
+            res = simulate_structures(
+                [s for s in points for _ in range(n_win)], u, rec.dt, (X * x_scale).reshape(-1, 2 * nd),
+                input_kind=rec.input_name, force_dof=rec.force_dof, input_index=np.tile(np.arange(n_win), k),
+                substeps=sub, staged=True, **limits,
             )  # fmt: skip
-            out = res.z.reshape(k, n_win, length) - meas
+            out = (res.z.reshape(k, n_win, nd, length) + zeros[:, None, :, None] - meas) * weight
             out[res.diverged.reshape(k, n_win)] = penalty  # a diverging window: a large, finite penalty
-            return out
+            return out.reshape(k, n_win, nd * length)
 
         if stages:
             # the start states alone first, the model held: the windows' best error at the current model
             # is what the predictability test compares (measured start states carry the smoothing's error)
-            x0 = _solve(residuals, q, x0, 10, solver, length, states_only=True)[1]
+            x0 = _solve(residuals, q, x0, 10, solver, nd * length, states_only=True)[1]
         r0 = residuals(q[None], x0[None])[0]
         rms0 = float(np.sqrt(np.mean(r0**2)))
         if stages and rms0 > PREDICTABLE_GROWTH * stages[-1]["rms_end_m"]:
@@ -254,8 +356,10 @@ def refine(
             reason = f"not predictable over this window (error grew {growth:.3g}x): kept the shorter windows' fit"
             stages.append({"window_s": length / rec.fs, "windows": int(n_win), "rms_start_m": rms0, "skipped": reason})
             break
-        q, _, fun, nfev = _solve(residuals, q, x0, max_nfev, solver, length)
-        current = with_values(model, names, q * scale)
+        q, x_fit, fun, nfev = _solve(residuals, q, x0, max_nfev, solver, nd * length)
+        last = (residuals, q, x_fit, fun)
+        current = params.build(q[:p_sys] * scale[:p_sys])
+        o = q[p_sys:] * scale[p_sys:] if n_off else o
         stages.append(
             {
                 "window_s": length / rec.fs,
@@ -265,7 +369,26 @@ def refine(
                 "evaluations": int(nfev),
             }
         )
-    return Refinement(current, start_model, names, stages)
+    se = None if last is None else _standard_errors(*last) * scale
+    return Refinement(current, start_model, names, stages, None if offsets is None else np.asarray(o, float),
+                      None if se is None else dict(zip(names, se.tolist(), strict=True)))  # fmt: skip
+
+
+def _standard_errors(residuals, q: np.ndarray, x: np.ndarray, fun: np.ndarray) -> np.ndarray:
+    """The last stage's local standard errors of the scaled parameters: the Gauss-Newton covariance with the
+    windows' start states marginalised (``shooting.parameter_covariance``), times the residuals' variance. Local and
+    conditional on the windows: a chaotic record's windows err alike over a window (correlated residuals), so
+    these are lower bounds, and a direction the output error hardly sees shows as a large one (a structure's
+    element k2 beside its channels' zeros: measured, 4 % on the tests' fixture record).
+    """
+    dof = fun.size - q.size - x.size
+    if dof <= 0 or not q.size:
+        return np.full(q.size, np.nan)
+    try:
+        cov = parameter_covariance(residuals, ShootingFit(q, x, fun, 0, 0, "solved"))
+    except np.linalg.LinAlgError:
+        return np.full(q.size, np.nan)
+    return np.sqrt(np.clip(np.diag(cov), 0.0, None) * float(np.sum(fun**2)) / dof)
 
 
 def _solve(residuals, q, x0, max_nfev: int, solver: str, length: int, states_only: bool = False):
@@ -277,18 +400,18 @@ def _solve(residuals, q, x0, max_nfev: int, solver: str, length: int, states_onl
             return q, fit.x, fit.fun, fit.nfev
         fit = shooting_least_squares(residuals, q, x0, max_nfev)
         return fit.q, fit.x, fit.fun, fit.nfev
-    p, n_win = (0 if states_only else q.size), x0.shape[0]
+    p, (n_win, n_state) = (0 if states_only else q.size), x0.shape
 
     def flat(theta):
         qq = q if states_only else theta[:p]
-        return residuals(qq[None], theta[p:].reshape(1, n_win, 2))[0].ravel()
+        return residuals(qq[None], theta[p:].reshape(1, n_win, n_state))[0].ravel()
 
-    pattern = shooting_sparsity(n_win, length, p) if solver == "scipy" else None
+    pattern = shooting_sparsity(n_win, length, p, states=n_state) if solver == "scipy" else None
     theta0 = x0.ravel() if states_only else np.concatenate([q, x0.ravel()])
     sol = optimize.least_squares(flat, theta0, jac="2-point", jac_sparsity=pattern, method="trf", x_scale=1.0,
                                  max_nfev=max_nfev, diff_step=1e-7)  # fmt: skip
     qq = q if states_only else sol.x[:p]
-    return qq, sol.x[p:].reshape(n_win, 2), sol.fun, sol.nfev
+    return qq, sol.x[p:].reshape(n_win, n_state), sol.fun.reshape(n_win, -1), sol.nfev
 
 
 def stroke_quantiles(z: np.ndarray, n: int = 41) -> np.ndarray:
@@ -313,31 +436,42 @@ def _heldout_error(validation: dict[str, Any]) -> float:
 
 
 def refine_stage(
-    model: Model, rec: Measurement, n_id: int, validation: dict[str, Any], held: tuple[str, ...] = ()
-) -> tuple[Model, dict[str, Any], dict[str, Any]]:
+    model: Model | Structure,
+    rec: Measurement,
+    n_id: int,
+    validation: dict[str, Any],
+    held: tuple[str, ...] = (),
+    offsets=None,
+    judge: Callable[[Any, Any], dict[str, Any]] | None = None,
+) -> tuple[Any, dict[str, Any], dict[str, Any]]:
     """Output-error refinement as the last stage of an identification (NSI, SINDy, the discrepancy
-    workflow): ``model`` refined on the identification part ``[0, n_id)`` of ``rec``, validated on the
-    held-out tail like the start model was (``validation``). The mass is refined when the input is a
-    force and no mass was given (the input's gain is then unknown). Returns the model to keep, its
-    validation and the stage's account for the result JSON (``refinement``): what was refined, each
+    workflow): ``model`` (a single DOF's ``Model`` or a ``Structure``) refined on the identification part
+    ``[0, n_id)`` of ``rec``, validated on the held-out tail like the start model was (``validation``, by
+    ``judge(system, offsets)``: a system's held-out validation, default ``validate`` from ``n_id``). The mass is
+    refined when the input is a force and no mass was given (the input's gain is then unknown). Returns the system
+    to keep, its validation and the stage's account for the result JSON (``refinement``): what was refined, each
     stage's simulation error, the held-out errors of both models and whether the refined one was kept.
-    ``held``: base fields that stay at their start value (the terms a sparse method did not select).
+    ``held``: parameters that stay at their start value (the terms a sparse method did not select; a structure's
+    element constant, pinned by its frame); ``offsets``: a structure's channels' zeros, refined with it (the
+    account's ``offsets_m``).
     """
     start = time.perf_counter()
+    if judge is None:
+        judge = lambda system, _offsets: validate(system, rec, n_id)  # noqa: E731
     # a force without a weighed mass: the input's gain; a free decay (no input) cannot weigh it (per unit mass)
-    free_mass = rec.input_name == "force" and rec.mass is None and bool(np.any(rec.u))
+    free_mass = rec.input_name == "force" and rec.mass is None and rec.masses is None and bool(np.any(rec.u))
     info: dict[str, Any] = {"applied": False, "initial_model": model.to_dict()}
     try:
-        r = refine(model, rec.segment(0, n_id), free_mass=free_mass, held=held)
-        new_validation = validate(r.model, rec, n_id)
+        r = refine(model, rec.segment(0, n_id), free_mass=free_mass, held=held, offsets=offsets)
+        new_validation = judge(r.model, r.offsets)
     except (ValueError, MeasurementError) as exc:
         info["reason"] = f"refinement failed, the equation-error model is kept: {exc}"
         return model, validation, info
     before, after = _heldout_error(validation), _heldout_error(new_validation)
     keep = after <= before * (1 + ACCEPT_TOLERANCE)
     ident = rec.segment(0, n_id)
-    bounded = boundedness(r.model, ident)
-    if keep and not bounded["ok"] and boundedness(model, ident)["ok"]:
+    bounded = boundedness(r.model, ident, offsets=r.offsets)
+    if keep and not bounded["ok"] and boundedness(model, ident, offsets=offsets)["ok"]:
         keep = False
         verdict = f"rejected: {bounded['warning'].replace('the model', 'the refined model')}"
     elif keep:

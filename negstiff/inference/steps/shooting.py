@@ -1,30 +1,31 @@
 """Least squares for multiple shooting: Levenberg-Marquardt with the windows' start states eliminated.
 
 A multiple-shooting fit (``refine``; Bock & Plitt 1984) has p model parameters q that move every
-residual and, per window i, a start state x_i (z0, z0') that moves only that window's L residuals r_i.
-Its Jacobian is [A | B] with B block-diagonal (one L x 2 block B_i per window). The damped
+residual and, per window i, a start state x_i (s components: z0, z0' of each of a structure's N DOFs, s = 2N) that
+moves only that window's L residuals r_i. Its Jacobian is [A | B] with B block-diagonal (one L x s block B_i per
+window). The damped
 Gauss-Newton (Levenberg-Marquardt) step solves
 
     (J^T J + lam D) d = -J^T r,   D = diag(J^T J) (Marquardt's scaling, floored),
 
 and with B block-diagonal the start states are eliminated window by window (the Schur complement, as
 in bundle adjustment: Triggs et al. 2000, section 6.1): with U = sum A_i^T A_i + lam D_q,
-W_i = A_i^T B_i, V_i = B_i^T B_i + lam D_i (2 x 2),
+W_i = A_i^T B_i, V_i = B_i^T B_i + lam D_i (s x s),
 
     (U - sum W_i V_i^-1 W_i^T) dq = -(g_q - sum W_i V_i^-1 g_i),   dx_i = -V_i^-1 (g_i + W_i^T dq),
 
-with g_q = sum A_i^T r_i, g_i = B_i^T r_i: a p x p solve and n 2 x 2 ones, exact at every step. The
+with g_q = sum A_i^T r_i, g_i = B_i^T r_i: a p x p solve and n s x s ones, exact at every step. The
 step's damping follows Nielsen (1999): lam *= max(1/3, 1 - (2 rho - 1)^3) on success, doubling growth on
 failure, rho the actual over the predicted reduction.
 
 Why it is written here: ``scipy.optimize.least_squares`` takes the Jacobian's sparsity (and groups
-the start-state columns, so a Jacobian costs p + 2 simulations too), but its trust-region solver on a
+the start-state columns, so a Jacobian costs p + s simulations too), but its trust-region solver on a
 sparse Jacobian takes inexact LSMR steps that crawl along the weakly determined directions of the
 model: on a 300 s rig record's 240 windows it stopped at its 60-evaluation budget with c_nl still
 0.4 % from the optimum it reached after 174 (measured). No maintained Python package (scipy, lmfit,
 pymoo) solves the block-eliminated normal equations; the elimination is the textbook one.
 
-The residuals come from one callable evaluating a batch of points at once, so the p + 2 perturbed
+The residuals come from one callable evaluating a batch of points at once, so the p + s perturbed
 points of a Jacobian are one batched simulator call. A ridge on the parameters (``penalty``: rows
 w_j q_j appended to the residuals, as a penalised fit writes them) adds w^2 to U's diagonal and w^2 q to
 g_q: it touches no start state, so the elimination is unchanged.
@@ -38,12 +39,12 @@ from dataclasses import dataclass
 import numpy as np
 
 Residuals = Callable[[np.ndarray, np.ndarray], np.ndarray]
-"""fun(Q, X) -> R: Q (k, p) parameter points, X (k, n, 2) start states, R (k, n, L) residuals."""
+"""fun(Q, X) -> R: Q (k, p) parameter points, X (k, n, s) start states, R (k, n, L) residuals."""
 
 
 @dataclass(frozen=True)
 class ShootingFit:
-    """The solution: parameters ``q`` (p,), start states ``x`` (n, 2), residuals ``fun`` (n, L), the
+    """The solution: parameters ``q`` (p,), start states ``x`` (n, s), residuals ``fun`` (n, L), the
     residual evaluations (``nfev``, Jacobians not counted, as scipy counts them), the Jacobians
     (``njev``), and why it stopped (``status``: "ftol", "xtol", "max_nfev" or "nonfinite").
     """
@@ -67,35 +68,45 @@ def _steps(values: np.ndarray, rel: float) -> np.ndarray:
 
 
 def _jacobian(fun: Residuals, q: np.ndarray, x: np.ndarray, r: np.ndarray, rel: float):
-    """A (n, L, p) and B (n, L, 2) by forward differences, from one batch of p + 2 points: one per
+    """A (n, L, p) and B (n, L, s) by forward differences, from one batch of p + s points: one per
     parameter, and one per start-state component moved in every window at once (the windows are
     independent, so each window's residual answers its own start state).
     """
-    p = q.size
+    p, s = q.size, x.shape[1]
     hq = _steps(q, rel)
-    hx = _steps(x, rel)  # (n, 2)
-    Q = np.repeat(q[None], p + 2, axis=0)
+    hx = _steps(x, rel)  # (n, s)
+    Q = np.repeat(q[None], p + s, axis=0)
     Q[np.arange(p), np.arange(p)] += hq
-    X = np.repeat(x[None], p + 2, axis=0)
-    X[p, :, 0] += hx[:, 0]
-    X[p + 1, :, 1] += hx[:, 1]
+    X = np.repeat(x[None], p + s, axis=0)
+    for j in range(s):
+        X[p + j, :, j] += hx[:, j]
     R = fun(Q, X) - r[None]
     A = np.moveaxis(R[:p], 0, -1) / hq
-    B = np.stack([R[p] / hx[:, 0, None], R[p + 1] / hx[:, 1, None]], axis=-1)
+    B = np.stack([R[p + j] / hx[:, j, None] for j in range(s)], axis=-1)
     return A, B
 
 
-def _inv2(V: np.ndarray) -> np.ndarray:
-    """Inverses of a stack of symmetric positive definite 2 x 2 matrices (n, 2, 2)."""
-    a, b, d = V[:, 0, 0], V[:, 0, 1], V[:, 1, 1]
-    det = a * d - b * b
-    return np.stack([np.stack([d, -b], -1), np.stack([-b, a], -1)], -2) / det[:, None, None]
+def _inverses(V: np.ndarray) -> np.ndarray:
+    """Inverses of a stack of symmetric positive definite s x s matrices (n, s, s): by LAPACK, but 2 x 2 blocks (a
+    single DOF's start state) by their adjugate, the solver's arithmetic before it took structures: LAPACK's inverse
+    moved a refined k2 by 2e-9 relative on a 60 s rig record (measured), which ``reproduce``'s results would show.
+    """
+    if V.shape[1] == 2:
+        a, b, d = V[:, 0, 0], V[:, 0, 1], V[:, 1, 1]
+        det = a * d - b * b
+        return np.stack([np.stack([d, -b], -1), np.stack([-b, a], -1)], -2) / det[:, None, None]
+    return np.linalg.inv(V)
+
+
+def _diagonal(V: np.ndarray) -> np.ndarray:
+    """(n, s) the diagonals of a stack of s x s matrices (a view)."""
+    return np.einsum("nii->ni", V)
 
 
 @dataclass(frozen=True)
 class _Normal:
-    """The undamped normal equations' blocks at one Jacobian (module docstring): U (p, p), W (n, p, 2),
-    V (n, 2, 2), g_q (p,), g_x (n, 2), and the diagonal of J^T J's floor for the damping.
+    """The undamped normal equations' blocks at one Jacobian (module docstring): U (p, p), W (n, p, s),
+    V (n, s, s), g_q (p,), g_x (n, s), and the diagonal of J^T J's floor for the damping.
     """
 
     U: np.ndarray
@@ -110,7 +121,7 @@ class _Normal:
         U = np.einsum("nlp,nlq->pq", A, A)
         U[np.diag_indices_from(U)] += w2
         V = np.einsum("nlk,nlj->nkj", B, B)
-        top = max(float(np.max(np.diag(U), initial=0.0)), float(V[:, [0, 1], [0, 1]].max()), 1e-300)
+        top = max(float(np.max(np.diag(U), initial=0.0)), float(_diagonal(V).max()), 1e-300)
         return cls(U, np.einsum("nlp,nlk->npk", A, B), V, np.einsum("nlp,nl->p", A, r) + w2 * q,
                    np.einsum("nlk,nl->nk", B, r), 1e-12 * top)  # fmt: skip
 
@@ -121,8 +132,8 @@ def _step(A, B, ne: _Normal, lam: float, w2: np.ndarray):
     difference of two nearly equal costs).
     """
     Vd = ne.V.copy()
-    Vd[:, [0, 1], [0, 1]] += lam * np.maximum(ne.V[:, [0, 1], [0, 1]], ne.floor)
-    Vi = _inv2(Vd)
+    _diagonal(Vd)[...] += lam * np.maximum(_diagonal(ne.V), ne.floor)
+    Vi = _inverses(Vd)
     if A.shape[2]:
         S = ne.U.copy()
         S[np.diag_indices_from(S)] += lam * np.maximum(np.diag(ne.U), ne.floor)
@@ -157,7 +168,7 @@ def shooting_least_squares(
     ----------
     fun : residuals of a batch of points (``Residuals``); q and x in scaled units (order one)
     q0 : (p,) start parameters (p may be 0: the start states alone)
-    x0 : (n, 2) start states
+    x0 : (n, s) start states
     max_nfev : residual evaluations at most (the Jacobians' batches not counted)
     diff_step : relative forward-difference step (scipy's ``diff_step``)
     ftol, xtol : scipy's ``least_squares`` tolerances, with its meanings: the cost's relative fall on
@@ -220,11 +231,11 @@ def parameter_covariance(fun: Residuals, fit: ShootingFit, penalty: np.ndarray |
                          diff_step: float = 1e-7) -> np.ndarray:  # fmt: skip
     """(J^T J)^-1's parameter block at ``fit``'s solution, the start states marginalised (the inverse of
     the Schur complement U - sum W_i V_i^-1 W_i^T), with the ``penalty`` rows in J; multiply by the
-    residual variance for the parameters' covariance. One more Jacobian (p + 2 simulations).
+    residual variance for the parameters' covariance. One more Jacobian (p + s simulations).
     """
     q = fit.q
     w2 = np.zeros(q.size) if penalty is None else np.asarray(penalty, float) ** 2
     A, B = _jacobian(fun, q, fit.x, fit.fun, diff_step)
     ne = _Normal.of(A, B, fit.fun, w2, q)
-    S = ne.U - np.einsum("npk,nkj,nqj->pq", ne.W, _inv2(ne.V), ne.W)
+    S = ne.U - np.einsum("npk,nkj,nqj->pq", ne.W, _inverses(ne.V), ne.W)
     return np.linalg.inv(S)

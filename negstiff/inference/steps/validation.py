@@ -26,8 +26,9 @@ from negstiff.models.simulator import (
     DEFAULT_Z_LIMIT,
     SimulationResult,
     input_gain,
+    stage_input,
 )
-from negstiff.models.structure import Structure, simulate_structures
+from negstiff.models.structure import Structure, relative, simulate_structures
 
 
 class Limits(TypedDict, total=False):
@@ -116,8 +117,12 @@ def check_structure_run(structure: Structure, z0: float | None, z_limit: float =
 
 def stiffest(system, rec: Measurement) -> tuple[float, float]:
     """The system's stiffest linear angular frequency [rad/s] over the range the record visits (the model's wells
-    and what lies between for an input-only record), and that |K'(z)| [N/m].
+    and what lies between for an input-only record), and that |K'(z)| [N/m]. A structure's: the highest of its
+    tangent modes with the element's |K'(r)| over the relative motion the record's channels show
+    (``structure_stiffest``).
     """
+    if isinstance(system, Structure):
+        return structure_stiffest(system, relative(rec.channels, system.place))
     if rec.z is not None:
         lo, hi = float(np.min(rec.z)), float(np.max(rec.z))
     else:  # an input-only record: the model's wells and what lies between
@@ -133,6 +138,23 @@ def stiffest(system, rec: Measurement) -> tuple[float, float]:
         k = k[np.isfinite(k)]
         k_max = float(k.max()) if k.size else 0.0
         return float(np.sqrt(np.float64(k_max) / system.m)), k_max
+
+
+def structure_stiffest(structure: Structure, r: np.ndarray) -> tuple[float, float]:
+    """A structure's stiffest tangent angular frequency [rad/s] over the element's relative motion ``r`` (the
+    square root of the largest eigenvalue of M^-1 (K + l l^T |K_e'(r)|), the element's tangent stiffness taken
+    positive as ``stiffest`` takes a single DOF's), and the largest |K_e'(r)| [N/m].
+    """
+    grid = np.linspace(float(np.min(r)), float(np.max(r)), 65)
+    with np.errstate(all="ignore"):
+        k = np.abs(np.asarray(structure.element.stiffness(grid), float))
+    k = k[np.isfinite(k)]
+    k_max = float(k.max()) if k.size else 0.0
+    inv_sqrt_m = 1.0 / np.sqrt(np.asarray(structure.masses, float))
+    lvec = structure.coupling
+    tangent = np.asarray(structure.K, float) + k_max * np.outer(lvec, lvec)
+    top = float(np.linalg.eigvalsh(inv_sqrt_m[:, None] * tangent * inv_sqrt_m[None, :]).max())
+    return math.sqrt(max(top, 0.0)), k_max
 
 
 def simulate_record(
@@ -561,8 +583,12 @@ INPUT_MARGIN = 1.2
 
 
 def boundedness(system, rec: Measurement, margin: float = STROKE_MARGIN, input_margin: float = INPUT_MARGIN,
-                free_run: bool = True) -> dict[str, Any]:  # fmt: skip
+                free_run: bool = True, offsets=None) -> dict[str, Any]:  # fmt: skip
     """Whether ``system`` stays bounded where ``rec`` took it, and a little beyond.
+
+    A structure's (``Structure``: ``offsets`` its channels' zeros) is its element's: the stroke is the element's
+    relative motion, the force its law, the input's static part that on the element's DOF, and the free run the
+    structure's from the record's start state (``element_motion``).
 
     * ``over_stroke``: beyond the stroke the record visited [z_lo, z_hi], over ``margin`` of its span on
       each side, the effective potential (the restoring force less the input's static part, integrated)
@@ -576,13 +602,13 @@ def boundedness(system, rec: Measurement, margin: float = STROKE_MARGIN, input_m
 
     ``ok`` is ``over_stroke and not diverged``.
     """
-    z = np.asarray(rec.z, float)
+    law, z = element_motion(system, rec, offsets)
     lo, hi = float(np.min(z)), float(np.max(z))
     span = max(hi - lo, 1e-12)
-    mass = float(getattr(system, "m", 1.0))
+    mass = float(getattr(law, "m", 1.0))
     f_static = float(mass * input_gain_of(rec.input_name, mass) * np.mean(rec.u))
     grid = np.linspace(lo - margin * span, hi + margin * span, 2001)
-    k = _force_or_nan(system, grid) - f_static
+    k = _force_or_nan(law, grid) - f_static
     inside = (grid >= lo) & (grid <= hi)
     escape = None
     reach = np.isfinite(k)  # a device's rods reach only so far: beyond them nothing escapes
@@ -600,7 +626,7 @@ def boundedness(system, rec: Measurement, margin: float = STROKE_MARGIN, input_m
         if hits.size:
             escape = float(hits[np.argmin(np.abs(hits - 0.5 * (lo + hi)))])
     far = 0.5 * (lo + hi) + np.array([-1.0, 1.0]) * 1e3 * span
-    kf = _force_or_nan(system, far) - f_static
+    kf = _force_or_nan(law, far) - f_static
     out: dict[str, Any] = {
         "stroke_m": [lo, hi],
         "margin": margin,
@@ -611,9 +637,17 @@ def boundedness(system, rec: Measurement, margin: float = STROKE_MARGIN, input_m
     }
     diverged = False
     if free_run:
-        zs, vs, _, _ = rec.states("state")
         scaled = dataclasses.replace(rec, u=input_margin * np.asarray(rec.u, float))
-        res = simulate_record(system, scaled, (zs[0], vs[0]), **divergence_limits(z, vs))
+        if isinstance(system, Structure):
+            o = _offsets(system, offsets)
+            zs, vs = rec.free_run_states()
+            x0 = np.concatenate([zs[:, 0] - o, vs[:, 0]])[None, :]
+            res = simulate_structures(system, stage_input(scaled.u)[None], rec.dt, x0, input_kind=rec.input_name,
+                                      force_dof=rec.force_dof, staged=True,
+                                      **divergence_limits(rec.channels - o[:, None], vs))  # fmt: skip
+        else:
+            zs1, vs1, _, _ = rec.states("state")
+            res = simulate_record(system, scaled, (zs1[0], vs1[0]), **divergence_limits(z, vs1))
         diverged = bool(res.diverged[0])
         out.update(input_margin=input_margin, diverged_at_margin=diverged)
     out["ok"] = bool(out["over_stroke"] and not diverged)
@@ -627,6 +661,19 @@ def boundedness(system, rec: Measurement, margin: float = STROKE_MARGIN, input_m
             why.append(f"it diverges under the record's input scaled by {input_margin:g}")
         out["warning"] = "the model is not bounded where the record went: " + "; ".join(why)
     return out
+
+
+def _offsets(structure: Structure, offsets) -> np.ndarray:
+    return np.zeros(structure.n_dof) if offsets is None else np.asarray(offsets, float)
+
+
+def element_motion(system, rec: Measurement, offsets=None) -> tuple[Any, np.ndarray]:
+    """The force law whose stroke bounds ``system`` and the motion it acts on over ``rec``: a single DOF's model
+    and z; a structure's element and its relative motion z_J - z_I (the channels less their zeros ``offsets``).
+    """
+    if isinstance(system, Structure):
+        return system.element, relative(rec.channels - _offsets(system, offsets)[:, None], system.place)
+    return system, np.asarray(rec.z, float)
 
 
 def input_gain_of(input_kind: str, mass: float) -> float:

@@ -139,9 +139,9 @@ class Discrepancy(StructureResults, Intervals):
         Restarted free runs and residual blocks [s]; on a hammer's record or a free decay shortened to what gives
         the scoring part two blocks (``sindy.ring_down_window``: ``window_s_``).
     refine : bool or None, default None
-        Refine each model by output error (an effect is kept only if it then predicts better). None: where it is
-        defined, a single DOF's record other than a hammer's (its windows would cross the pulses); ``refine=True``
-        on a structure's record is one ``InputError``.
+        Refine each model by output error (an effect is kept only if it then predicts better). None: on any record
+        but a hammer's (its windows would cross the pulses); a structure's baseline and final structure are
+        refined alike, so its gap before and after the effects compares refined models.
     unnamed : bool, default False
         Add a non-parametric force for what no catalogue effect names (the hybrid model; a single DOF's).
     element : str or (int, int), optional
