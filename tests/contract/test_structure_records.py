@@ -110,6 +110,42 @@ def test_output_error_refinement_of_a_structure_finds_the_truth_from_a_start_off
     assert np.allclose(r.offsets, OFFSETS, atol=1e-6), r.offsets
 
 
+def test_a_structure_is_judged_as_a_single_dof_is(offset_record):
+    # the one judgement (plausibility.judgement, model_warnings), a single DOF's model being the structure of one
+    # DOF on the base: the truth passes it without a line; its element's damping negative, a damper matrix that
+    # feeds energy in, a structure with no damping on a record its random input does work on (the energy balance),
+    # a held-out error beyond the record's rms, a method's own modes 20 % off the structure's (each of both wells'
+    # two modes) and an element whose wells lie ten times beyond the relative motion's stroke are each said
+    from negstiff.inference.steps.plausibility import judgement, model_warnings
+    from negstiff.models.structure import Mode
+
+    rec = offset_record
+    fine = {"rms_percent": 1.0}
+    modal = {w: TRUTH.modes(w) for w in ("minus", "plus")}
+    assert judgement(TRUTH, rec, fine, modal, modal, offsets=OFFSETS) == []
+    assert model_warnings(TRUTH, rec, OFFSETS) == []
+
+    def said(structure, validation=fine, own=None):
+        return " | ".join(judgement(structure, rec, validation, modal, own, offsets=OFFSETS))
+
+    def element(**kw):
+        return TRUTH.with_element(Model(**{**DEVICE.to_dict(), **kw}))
+
+    assert "negative viscous damping c = -0.1" in said(element(c=-0.1))
+    feeding = np.array(TRUTH.C)
+    feeding[0, 0] = -1.0
+    assert "damping matrix has the eigenvalue -1" in said(
+        Structure(TRUTH.masses, DEVICE, TRUTH.K, feeding, TRUTH.place)
+    )
+    undamped = Structure(TRUTH.masses, Model(**{**DEVICE.to_dict(), "c": 0.0, "c_nl": 0.0}), TRUTH.K, None, TRUTH.place)
+    assert "the model has no damping, but the record dissipates" in said(undamped)
+    assert "worse than predicting zero" in said(TRUTH, {"rms_percent": 150.0})
+    off = {w: [Mode(1.2 * m.f_hz, m.zeta, m.shape) for m in ms] for w, ms in modal.items()}
+    assert said(TRUTH, own=off).count("contradicts the model's own linearisation") == 4
+    far = model_warnings(TRUTH.with_element(Model(**{**DEVICE.to_dict(), "k3": DEVICE.k3 / 100})), rec, OFFSETS)
+    assert len(far) == 2 and all("beyond the stroke" in w for w in far), far
+
+
 def test_a_model_that_misses_the_held_out_windows_warns(offset_record):
     # a stiffness 3 % off misses the held-out windows by many times what a right model misses on a record of its
     # own (measured ~20 % against ~2 %): one warning, in the result and through Python's warnings

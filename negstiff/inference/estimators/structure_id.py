@@ -71,6 +71,7 @@ from negstiff.inference.estimators.parameters import Constraint
 from negstiff.inference.estimators.state_space_id import StateSpaceIdentification
 from negstiff.inference.record.derivatives import band_limited, basis_band_hz
 from negstiff.inference.record.measurement import Measurement
+from negstiff.inference.steps.plausibility import judgement, model_warnings
 from negstiff.inference.steps.refine import refine_stage
 from negstiff.inference.steps.selection import block_rows, block_scores, compare, indistinguishable
 from negstiff.inference.steps.validation import restarted_structure_runs as free_run_error
@@ -520,6 +521,7 @@ def _finish(method: str, rec: Measurement, structure: Structure, offsets: np.nda
     held-out free runs against the noise floor, warnings (issued as ``NegstiffWarning`` and kept in the result).
     """
     hits = ring_down(rec, ("impact",))  # a hammer's record: the held-out windows between its pulses
+    own_modal = modal  # the method's own modes (NSI's wells'), judged against the final structure's
 
     def judge(system: Structure, zeros) -> dict[str, Any]:
         return free_run_error(system, rec, n_id, WINDOW_S, zeros, hits)
@@ -541,7 +543,10 @@ def _finish(method: str, rec: Measurement, structure: Structure, offsets: np.nda
                               for w in eq}  # fmt: skip
     linear["structure"] = {"K": np.asarray(structure.stiffness).tolist(), "C": np.asarray(structure.damping).tolist()}
     validation["floor_percent"] = held_out_floor(structure, rec, n_id, offsets, between_pulses=hits)
-    lines = list(own_warnings)
+    # judged as a single DOF's model is (``plausibility``): damping that feeds energy in, the energy balance, a
+    # held-out error beyond the record's rms, the method's own modes against the structure's, wells beyond the stroke
+    lines = [*own_warnings, *judgement(structure, rec, validation, modal, own_modal, offsets=offsets),
+             *model_warnings(structure, rec, offsets)]  # fmt: skip
     floor = validation["floor_percent"]
     if floor is not None and not validation["rms_percent"] <= NOISE_FLOOR_FACTOR * floor:
         lines.append(

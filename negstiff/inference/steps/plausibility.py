@@ -19,7 +19,10 @@ from negstiff.errors import (
     RecordWarning,
 )
 from negstiff.inference.steps.frame import frame_offset
+from negstiff.inference.steps.refine import as_structure
+from negstiff.inference.steps.validation import element_motion
 from negstiff.inference.steps.weak import input_coefficient
+from negstiff.models.structure import relative
 
 FRAME_WARN_M = 2e-3
 """A measured z whose zero sits this far [m] from where the record's physics carries the weight is
@@ -94,15 +97,18 @@ def input_warnings(rec) -> list[str]:
     ]
 
 
-def model_warnings(model, rec) -> list[str]:
-    """Wells of an identified model beyond the stroke the record visited are extrapolations."""
+def model_warnings(model, rec, offsets=None) -> list[str]:
+    """Wells of an identified model beyond the stroke the record visited are extrapolations (a structure's: its
+    element's wells beyond the relative motion the record's channels show, ``validation.element_motion``).
+    """
     out: list[str] = []
     if rec.z is None:
         return out
-    lo, hi = float(rec.z.min()), float(rec.z.max())
+    law, z = element_motion(model, rec, offsets)
+    lo, hi = float(z.min()), float(z.max())
     span = hi - lo
     try:
-        eq = model.equilibria()
+        eq = law.equilibria()
     except ValueError:
         return out
     for name in ("z_minus", "z_plus"):
@@ -126,13 +132,21 @@ HELD_OUT_LIMIT_PERCENT = 100.0
 """A held-out free run erring by more than the record's own rms predicts worse than zero."""
 
 
-def input_power(rec) -> tuple[float, float]:
+def input_power(rec, v: np.ndarray | None = None) -> tuple[float, float]:
     """The input's mean power per unit mass over the record [W/kg] and its batch-means standard error (20
-    batches): -<u z'> for a base acceleration, <F z'> / m for a force (1/kg unknown: per newton). Over a long
-    record the kinetic and potential energies average out, so this is what the device dissipates.
+    batches): -<u z'> for a base acceleration, <F z'> / m for a force (1/kg unknown: per newton); a structure's
+    over its DOFs, -<u sum m_i z_i'> / M or <F z_k'> / M (M their total mass, k the DOF the force acts on). Over a
+    long record the kinetic and potential energies average out, so this is what the device dissipates. ``v``: the
+    channels' velocities (N, T) (default: ``Measurement.free_run_states``').
     """
-    _, v, _, _ = rec.states()
-    p = -rec.u * v if rec.input_name == "base_acc" else rec.u * v / (rec.mass or 1.0)
+    v = np.atleast_2d(rec.free_run_states()[1] if v is None else v)
+    if rec.input_name == "base_acc":
+        masses = np.asarray(rec.masses if rec.masses is not None else [rec.mass or 1.0], float)
+        weights = masses / masses.sum()  # a single DOF's 1.0
+        p = -rec.u * (weights @ v)
+    else:
+        k = (rec.force_dof or v.shape[0]) - 1
+        p = rec.u * v[k] / (sum(rec.masses) if rec.masses is not None else (rec.mass or 1.0))
     nb = 20
     if p.size < 10 * nb:
         return float(p.mean()), float("inf")
@@ -140,15 +154,41 @@ def input_power(rec) -> tuple[float, float]:
     return float(p.mean()), float(means.std(ddof=1) / np.sqrt(nb))
 
 
+def dissipated_power(system, rec, offsets=None) -> float:
+    """The mean power [W/kg] ``system``'s damping draws from the record's motion (its channels, their velocities
+    ``free_run_states``; a
+    structure's: its element's damping force on the relative motion and its dampers, over its total mass, the
+    channels less their zeros ``offsets``).
+    """
+    structure = as_structure(system)
+    v = rec.free_run_states()[1]
+    zs = rec.channels - (np.zeros(structure.n_dof) if offsets is None else np.asarray(offsets, float))[:, None]
+    el, at = structure.element, structure.place
+    r, vr = relative(zs, at), relative(v, at)
+    damping = (el.total_force(r, vr) - el.restoring_force(r)) * vr + np.einsum("it,ij,jt->t", v, structure.C, v)
+    return float(np.mean(damping)) / float(sum(structure.masses))
+
+
+def _modes(modal: dict | None, well: str) -> list[float | None]:
+    """A well's modal frequencies, a single DOF's ``{"f_hz"}`` or a structure's list of ``Mode``, by frequency."""
+    entry = (modal or {}).get(well)
+    if isinstance(entry, list):
+        return [m.f_hz for m in entry]
+    return [(entry or {}).get("f_hz")]
+
+
 def judgement(
-    model, rec, validation: dict, modal: dict | None, own_modal: dict | None, laws_compared: bool = True
-) -> list[str]:
+    model, rec, validation: dict, modal: dict | None, own_modal: dict | None, laws_compared: bool = True,
+    offsets=None,
+) -> list[str]:  # fmt: skip
     """What a physicist checks before believing an identified model, each a warning: negative viscous
-    damping; a model that dissipates nothing (or gains energy) over a record whose input does work on it (the
-    energy balance <D(z') z'> = input power, ``input_power``); a held-out free run erring by more than the
-    record's rms (``HELD_OUT_LIMIT_PERCENT``); a method's own modal values that contradict its model's
-    linearisation (``MODAL_CONTRADICTION``), where the laws were not compared (``laws_compared`` False) with the
-    comparison named as what to try.
+    damping (a structure's: its element's, or a damper matrix that feeds energy in); a model that dissipates
+    nothing (or gains energy) over a record whose input does work on it (the energy balance <D(z') z'> = input
+    power, ``input_power`` and ``dissipated_power``); a held-out free run erring by more than the record's rms
+    (``HELD_OUT_LIMIT_PERCENT``); a method's own modal values that contradict its model's linearisation
+    (``MODAL_CONTRADICTION``; a structure's mode by mode), where the laws were not compared (``laws_compared``
+    False) with the comparison named as what to try. A structure (``offsets``: its channels' zeros) is judged as
+    a single DOF is, the single DOF being the structure of one DOF on the base.
     """
     out: list[str] = []
     causes = (
@@ -157,17 +197,22 @@ def judgement(
         else "(the record's frame or drift, a model order too low, or a restoring law that is not the record's? "
         "law='auto', --law auto, compares the laws on what they predict)"
     )
-    if model.c < 0:
+    structure = as_structure(model)
+    if structure.element.c < 0:
         out.append(
-            f"negative viscous damping c = {model.c:.3g} N s/m: the model feeds energy into small motion, which no "
-            "passive device does (the record's drift, a wrong frame or a missing effect bent the fit?)"
+            f"negative viscous damping c = {structure.element.c:.3g} N s/m: the model feeds energy into small motion, "
+            "which no passive device does (the record's drift, a wrong frame or a missing effect bent the fit?)"
+        )
+    lowest = float(np.linalg.eigvalsh(np.asarray(structure.C, float)).min())
+    if lowest < -1e-12 * max(1.0, float(np.abs(structure.C).max())):
+        out.append(
+            f"the linear structure's damping matrix has the eigenvalue {lowest:.3g} N s/m: its dampers feed energy "
+            "into a motion, which no passive structure does (a wrong mass or frame, or a missing effect, bent the fit?)"
         )
     if rec.z is not None and rec.n >= 200:
         try:
             p, se = input_power(rec)
-            _, v, _, _ = rec.states()
-            zs = rec.z
-            dissipated = float(np.mean((model.total_force(zs, v) - model.restoring_force(zs)) * v)) / model.m
+            dissipated = dissipated_power(structure, rec, offsets)
         except Exception:  # a record or model the check cannot evaluate: nothing to say
             p, se, dissipated = 0.0, float("inf"), 0.0
         if p > POWER_SIGMAS * se and dissipated <= 0:
@@ -187,23 +232,23 @@ def judgement(
         )
     if own_modal is not None and modal is not None:
         for well in ("minus", "plus"):
-            f_own, f_lin = (own_modal.get(well) or {}).get("f_hz"), (modal.get(well) or {}).get("f_hz")
-            if f_own and f_lin and abs(f_own / f_lin - 1) > MODAL_CONTRADICTION:
-                out.append(
-                    f"the {well} well's modal frequency {f_own:.3g} Hz contradicts the model's own linearisation "
-                    f"sqrt(K'(z*)/m) = {f_lin:.3g} Hz: the subspace step and the restoring force disagree " + causes
-                )
-            elif f_own and not f_lin:
-                out.append(
-                    f"the {well} well has a modal frequency by the method ({f_own:.3g} Hz) but none by the model's own "
-                    "linearisation (the model has no stable equilibrium there): the subspace step and the restoring "
-                    "force disagree"
-                )
-            elif f_lin and not f_own:
-                out.append(
-                    f"the {well} well has a modal frequency by the model's linearisation ({f_lin:.3g} Hz) but none by "
-                    "the method: the subspace step and the restoring force disagree"
-                )
+            for f_own, f_lin in zip(_modes(own_modal, well), _modes(modal, well), strict=False):
+                if f_own and f_lin and abs(f_own / f_lin - 1) > MODAL_CONTRADICTION:
+                    out.append(
+                        f"the {well} well's modal frequency {f_own:.3g} Hz contradicts the model's own linearisation "
+                        f"sqrt(K'(z*)/m) = {f_lin:.3g} Hz: the subspace step and the restoring force disagree " + causes
+                    )
+                elif f_own and not f_lin:
+                    out.append(
+                        f"the {well} well has a modal frequency by the method ({f_own:.3g} Hz) but none by the model's "
+                        "own linearisation (the model has no stable equilibrium there): the subspace step and the "
+                        "restoring force disagree"
+                    )
+                elif f_lin and not f_own:
+                    out.append(
+                        f"the {well} well has a modal frequency by the model's linearisation ({f_lin:.3g} Hz) but "
+                        "none by the method: the subspace step and the restoring force disagree"
+                    )
     return out
 
 
