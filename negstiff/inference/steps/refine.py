@@ -356,8 +356,8 @@ def refine(
             reason = f"not predictable over this window (error grew {growth:.3g}x): kept the shorter windows' fit"
             stages.append({"window_s": length / rec.fs, "windows": int(n_win), "rms_start_m": rms0, "skipped": reason})
             break
-        q, x_fit, fun, nfev = _solve(residuals, q, x0, max_nfev, solver, nd * length)
-        last = (residuals, q, x_fit, fun)
+        q, x_fit, fun, nfev, cov = _solve(residuals, q, x0, max_nfev, solver, nd * length)
+        last = (residuals, q, x_fit, fun, cov)
         current = params.build(q[:p_sys] * scale[:p_sys])
         o = q[p_sys:] * scale[p_sys:] if n_off else o
         stages.append(
@@ -374,9 +374,10 @@ def refine(
                       None if se is None else dict(zip(names, se.tolist(), strict=True)))  # fmt: skip
 
 
-def _standard_errors(residuals, q: np.ndarray, x: np.ndarray, fun: np.ndarray) -> np.ndarray:
+def _standard_errors(residuals, q: np.ndarray, x: np.ndarray, fun: np.ndarray, cov=None) -> np.ndarray:
     """The last stage's local standard errors of the scaled parameters: the Gauss-Newton covariance with the
-    windows' start states marginalised (``shooting.parameter_covariance``), times the residuals' variance. Local and
+    windows' start states marginalised (``cov``, the fit's own at its last Jacobian; else
+    ``shooting.parameter_covariance``, one more Jacobian), times the residuals' variance. Local and
     conditional on the windows: a chaotic record's windows err alike over a window (correlated residuals), so
     these are lower bounds, and a direction the output error hardly sees shows as a large one (a structure's
     element k2 beside its channels' zeros: measured, 4 % on the tests' fixture record).
@@ -384,22 +385,25 @@ def _standard_errors(residuals, q: np.ndarray, x: np.ndarray, fun: np.ndarray) -
     dof = fun.size - q.size - x.size
     if dof <= 0 or not q.size:
         return np.full(q.size, np.nan)
-    try:
-        cov = parameter_covariance(residuals, ShootingFit(q, x, fun, 0, 0, "solved"))
-    except np.linalg.LinAlgError:
-        return np.full(q.size, np.nan)
+    if cov is None:
+        try:
+            cov = parameter_covariance(residuals, ShootingFit(q, x, fun, 0, 0, "solved"))
+        except np.linalg.LinAlgError:
+            return np.full(q.size, np.nan)
     return np.sqrt(np.clip(np.diag(cov), 0.0, None) * float(np.sum(fun**2)) / dof)
 
 
 def _solve(residuals, q, x0, max_nfev: int, solver: str, length: int, states_only: bool = False):
-    """One stage's least squares over (q, x0), or x0 alone: (q, x, residuals, evaluations)."""
+    """One stage's least squares over (q, x0), or x0 alone: (q, x, residuals, evaluations, the parameters'
+    unscaled covariance where the solver gives it).
+    """
     if solver == "schur":
         if states_only:
             held = lambda Q, X: residuals(np.repeat(q[None], len(X), 0), X)  # noqa: E731 (the model held)
             fit = shooting_least_squares(held, np.zeros(0), x0, max_nfev)
-            return q, fit.x, fit.fun, fit.nfev
+            return q, fit.x, fit.fun, fit.nfev, None
         fit = shooting_least_squares(residuals, q, x0, max_nfev)
-        return fit.q, fit.x, fit.fun, fit.nfev
+        return fit.q, fit.x, fit.fun, fit.nfev, fit.unscaled_covariance
     p, (n_win, n_state) = (0 if states_only else q.size), x0.shape
 
     def flat(theta):
@@ -411,7 +415,7 @@ def _solve(residuals, q, x0, max_nfev: int, solver: str, length: int, states_onl
     sol = optimize.least_squares(flat, theta0, jac="2-point", jac_sparsity=pattern, method="trf", x_scale=1.0,
                                  max_nfev=max_nfev, diff_step=1e-7)  # fmt: skip
     qq = q if states_only else sol.x[:p]
-    return qq, sol.x[p:].reshape(n_win, n_state), sol.fun.reshape(n_win, -1), sol.nfev
+    return qq, sol.x[p:].reshape(n_win, n_state), sol.fun.reshape(n_win, -1), sol.nfev, None
 
 
 def stroke_quantiles(z: np.ndarray, n: int = 41) -> np.ndarray:

@@ -55,6 +55,10 @@ class ShootingFit:
     nfev: int
     njev: int
     status: str
+    unscaled_covariance: np.ndarray | None = None
+    """(J^T J)^-1's parameter block at the last Jacobian the fit evaluated (the start states marginalised, as
+    ``parameter_covariance`` gives it at the solution, without its extra Jacobian; the last accepted step is
+    below ``xtol`` or ``ftol`` of the solution): None where there was none, or it is singular."""
 
     @property
     def cost(self) -> float:
@@ -188,13 +192,14 @@ def shooting_least_squares(
     if not np.isfinite(cost):
         return ShootingFit(q, x, r, nfev, njev, "nonfinite")
     lam, nu, status = 1e-3, 2.0, "max_nfev"
+    last = None
     while nfev < max_nfev and status == "max_nfev":
         A, B = _jacobian(fun, q, x, r, diff_step)
         njev += 1
         if not (np.all(np.isfinite(A)) and np.all(np.isfinite(B))):
             status = "nonfinite"
             break
-        ne = _Normal.of(A, B, r, w2, q)
+        ne = last = _Normal.of(A, B, r, w2, q)
         while nfev < max_nfev:
             dq, dx, predicted = _step(A, B, ne, lam, w2)
             r_new, new_cost = None, np.inf
@@ -224,7 +229,17 @@ def shooting_least_squares(
             if lam > 1e16:  # steps shrunk to nothing and none lowers the cost: at the minimum to rounding
                 status = "xtol"
                 break
-    return ShootingFit(q, x, r, nfev, njev, status)
+    return ShootingFit(q, x, r, nfev, njev, status, None if last is None else _marginal_covariance(last))
+
+
+def _marginal_covariance(ne: _Normal) -> np.ndarray | None:
+    """The inverse of the undamped Schur complement U - sum W_i V_i^-1 W_i^T (None: singular, or no parameter)."""
+    if not ne.U.size:
+        return None
+    try:
+        return np.linalg.inv(ne.U - np.einsum("npk,nkj,nqj->pq", ne.W, _inverses(ne.V), ne.W))
+    except np.linalg.LinAlgError:
+        return None
 
 
 def parameter_covariance(fun: Residuals, fit: ShootingFit, penalty: np.ndarray | None = None,
