@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
-from records import refused
+from records import refused, write_csv
 
 import negstiff.cli.commands as commands
 from negstiff.cli import build_parser, main
@@ -38,10 +38,7 @@ def _columns(path: Path) -> dict:
 
 
 def _csv(path: Path, cols: dict, meta: dict | None = None) -> Path:
-    head = "".join(f"# {k}: {v}\n" for k, v in (meta or {}).items()) + ",".join(cols) + "\n"
-    rows = np.column_stack(list(cols.values()))
-    path.write_text(head + "".join(",".join(f"{x:.10g}" for x in r) + "\n" for r in rows))
-    return path
+    return write_csv(path, cols, meta)
 
 
 @pytest.fixture(scope="module")
