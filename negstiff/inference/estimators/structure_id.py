@@ -56,6 +56,7 @@ noise alone explains is warned about.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import re
 import warnings
@@ -502,6 +503,10 @@ def held_out_floor(structure: Structure, rec: Measurement, start: int, offsets, 
     return floor if math.isfinite(floor) else None
 
 
+REFINEMENT_SETTING = "output error over every channel, the element's constant held (refine.refine_stage)"
+"""The settings' account of a structure's refinement."""
+
+
 def weight_pinned(structure: Structure, gravity: float) -> Structure:
     """``structure`` with its element's constant at the weight it carries, m_J g (the physical frame's convention,
     ``physical_frame``), which the output-error refinement holds while it moves the channels' zeros: held anywhere
@@ -560,8 +565,7 @@ def _finish(method: str, rec: Measurement, structure: Structure, offsets: np.nda
         equilibria={w: z.tolist() for w, z in eq.items()}, offsets_m=tuple(float(x) for x in offsets),
         validation=Bunch(validation), warnings=tuple(lines), details=details,
         settings={**settings, "identification_samples": n_id,
-                  "refinement": "output error over every channel, the element's constant held (refine.refine_stage)"
-                                if refine else "none (refine=False)",
+                  "refinement": REFINEMENT_SETTING if refine else "none (refine=False)",
                   "frame": "each channel's zero estimated (a constant force per DOF), the element's constant pinned at "
                            "the weight it carries (m_J g, g the record's gravity)"},
         refinement=None if refinement is None else Bunch(refinement),
@@ -1179,7 +1183,7 @@ def discrepancy(est, rec: Measurement, at: tuple[int, int]) -> StructureIdentifi
         )  # fmt: skip
         if account["applied"]:
             base_offsets = np.asarray(account["offsets_m"])
-        if not named_all:
+        if not named_all:  # the baseline is the result, refined once
             structure, offsets = baseline, base_offsets
     est.effects_ = named_all or ["none"]
     est.baseline_structure_ = baseline
@@ -1190,10 +1194,40 @@ def discrepancy(est, rec: Measurement, at: tuple[int, int]) -> StructureIdentifi
         "velocity_noise_for_sign": ident_states.get("v_noise"),
     }, {"velocity": f"Savitzky-Golay (window, order) = {window}",
         "score": f"held-out weak residual in blocks of {est.window_s:g} s; named only above max(1 SE, "
-                 f"{100 * est.margin:g} %)"}, refine=refine)  # fmt: skip
+                 f"{100 * est.margin:g} %)"}, refine=refine and bool(named_all))  # fmt: skip
+    if refine and not named_all:
+        out = dataclasses.replace(out, refinement=Bunch(account),
+                                  settings={**out.settings, "refinement": REFINEMENT_SETTING})  # fmt: skip
     gap_after = {k: v for k, v in out.validation.items() if k != "floor_percent"}
     out.details["gap_after_percent"] = gap_after["rms_percent"]
+    out.details["effect_interval"] = effect_intervals(out, named_all)
     est.gap_before_, est.gap_after_ = gap_before, gap_after
+    return out
+
+
+def effect_intervals(result: StructureIdentification, named: list[str], prob: float = 0.9) -> dict[str, Any]:
+    """Each named effect's value with its interval (probability ``prob``): the refinement's window-robust standard
+    error of the effect's coefficient (``refine._standard_errors``, the structure's other parameters and the
+    channels' zeros free), a Gaussian interval about the refined value; None without a kept refinement (the weak
+    form's value stands alone). Conditional on the model's form, as the single DOF's Laplace interval is.
+    """
+    from scipy import stats
+
+    zq = float(stats.norm.ppf(0.5 + prob / 2))
+    account: dict[str, Any] = dict(result.refinement or {})
+    se_all = account.get("standard_errors") or {}
+    out: dict[str, Any] = {}
+    for e in named:
+        value = result.structure.element.extra.get(e)
+        se = se_all.get(e)
+        if not account.get("applied") or se is None or not isinstance(value, (int, float)) or not math.isfinite(se):
+            out[e] = {"value": value, "interval": None, "prob": prob,
+                      "method": "not available: no refinement kept, or the effect is not one coefficient"}  # fmt: skip
+            continue
+        out[e] = {"value": float(value), "standard_error": float(se),
+                  "interval": [float(value - zq * se), float(value + zq * se)], "prob": prob,
+                  "method": "the output-error refinement's window-robust standard error (its last stage's restarted "
+                            "windows, every parameter and the channels' zeros free), a Gaussian interval"}  # fmt: skip
     return out
 
 

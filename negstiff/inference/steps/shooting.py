@@ -59,6 +59,10 @@ class ShootingFit:
     """(J^T J)^-1's parameter block at the last Jacobian the fit evaluated (the start states marginalised, as
     ``parameter_covariance`` gives it at the solution, without its extra Jacobian; the last accepted step is
     below ``xtol`` or ``ftol`` of the solution): None where there was none, or it is singular."""
+    robust_covariance: np.ndarray | None = None
+    """The parameters' covariance robust over windows (``_covariances``: a sandwich whose meat is the windows'
+    scores, the start states eliminated; each window one cluster, its samples' errors correlated as a chaotic or
+    smoothed record's are), in the parameters' units: no residual variance to multiply by."""
 
     @property
     def cost(self) -> float:
@@ -199,7 +203,8 @@ def shooting_least_squares(
         if not (np.all(np.isfinite(A)) and np.all(np.isfinite(B))):
             status = "nonfinite"
             break
-        ne = last = _Normal.of(A, B, r, w2, q)
+        ne = _Normal.of(A, B, r, w2, q)
+        last = (ne, A, r)
         while nfev < max_nfev:
             dq, dx, predicted = _step(A, B, ne, lam, w2)
             r_new, new_cost = None, np.inf
@@ -229,17 +234,25 @@ def shooting_least_squares(
             if lam > 1e16:  # steps shrunk to nothing and none lowers the cost: at the minimum to rounding
                 status = "xtol"
                 break
-    return ShootingFit(q, x, r, nfev, njev, status, None if last is None else _marginal_covariance(last))
+    return ShootingFit(q, x, r, nfev, njev, status, *(_covariances(*last) if last is not None else (None, None)))
 
 
-def _marginal_covariance(ne: _Normal) -> np.ndarray | None:
-    """The inverse of the undamped Schur complement U - sum W_i V_i^-1 W_i^T (None: singular, or no parameter)."""
-    if not ne.U.size:
-        return None
+def _covariances(ne: _Normal, A: np.ndarray, r: np.ndarray) -> tuple[np.ndarray | None, np.ndarray | None]:
+    """At one Jacobian: the inverse of the undamped Schur complement S = U - sum W_i V_i^-1 W_i^T, and the
+    window-robust covariance S^-1 (sum_i s_i s_i^T) S^-1 n / (n - p), s_i = A_i^T r_i - W_i V_i^-1 B_i^T r_i window
+    i's score with its start state eliminated (a sandwich with each window one cluster, as ``discrepancy``'s effect
+    intervals and the posterior's curvature adjustment read windows). (None, None): singular, or no parameter.
+    """
+    n, p = A.shape[0], A.shape[2]
+    if not p:
+        return None, None
+    Vi = _inverses(ne.V)
     try:
-        return np.linalg.inv(ne.U - np.einsum("npk,nkj,nqj->pq", ne.W, _inverses(ne.V), ne.W))
+        bread = np.linalg.inv(ne.U - np.einsum("npk,nkj,nqj->pq", ne.W, Vi, ne.W))
     except np.linalg.LinAlgError:
-        return None
+        return None, None
+    scores = np.einsum("nlp,nl->np", A, r) - np.einsum("npk,nkj,nj->np", ne.W, Vi, ne.gx)
+    return bread, bread @ (scores.T @ scores) @ bread * n / max(n - p, 1)
 
 
 def parameter_covariance(fun: Residuals, fit: ShootingFit, penalty: np.ndarray | None = None,
