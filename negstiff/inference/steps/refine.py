@@ -190,6 +190,8 @@ class SystemParameters:
     system: Any
     element_names: tuple[str, ...]
     linear: tuple[tuple[str, int, int], ...]
+    base: Structure
+    """``system`` as a structure (``as_structure``), made once."""
 
     @classmethod
     def of(cls, system: Model | Structure, free_mass: bool = False, held=()) -> SystemParameters:
@@ -198,7 +200,7 @@ class SystemParameters:
         entries = tuple((name, int(i), int(j)) for name in LINEAR_MATRICES
                         for i, j in zip(*np.triu_indices(structure.n_dof), strict=True)
                         if getattr(structure, name)[i, j] != 0 and f"{name}[{i + 1},{j + 1}]" not in held)  # fmt: skip
-        return cls(system, parameter_names(structure.element, free_mass, held), entries)
+        return cls(system, parameter_names(structure.element, free_mass, held), entries, structure)
 
     @property
     def names(self) -> tuple[str, ...]:
@@ -207,14 +209,28 @@ class SystemParameters:
 
     def values(self) -> np.ndarray:
         """The parameters' current values."""
-        structure = as_structure(self.system)
+        structure = self.base
         linear = [getattr(structure, name)[i, j] for name, i, j in self.linear]
         return np.concatenate([values_of(structure.element, self.element_names), np.asarray(linear, float)])
 
     def scales(self, z_rms: float, v_rms: float) -> np.ndarray:
         """The element's ``parameter_scales``, and each linear entry's own size (nonzero by construction)."""
-        element = parameter_scales(as_structure(self.system).element, self.element_names, z_rms, v_rms)
+        element = parameter_scales(self.base.element, self.element_names, z_rms, v_rms)
         return np.concatenate([element, np.abs(self.values()[element.size :])])
+
+    def structure(self, values) -> Structure:
+        """The system with these values as a structure (``Structure.unchecked``: ``system`` was checked, and the
+        values keep its matrices symmetric and its masses).
+        """
+        values = np.asarray(values, float)
+        p = len(self.element_names)
+        s = self.base
+        element = with_values(s.element, self.element_names, values[:p])
+        matrices = {name: np.array(getattr(s, name), float) for name in LINEAR_MATRICES}
+        for (name, i, j), v in zip(self.linear, values[p:], strict=True):
+            matrices[name][i, j] = matrices[name][j, i] = v
+        masses = (element.m,) if isinstance(self.system, Model) else s.masses
+        return Structure.unchecked(masses, element, matrices["K"], matrices["C"], s.place)
 
     def build(self, values) -> Any:
         """The system with these values (a ``Model`` for a ``Model``)."""
@@ -314,6 +330,7 @@ def refine(
     scale = np.concatenate([params.scales(float(np.std(z_all[j])), float(np.std(vs[j]))),
                             np.maximum(rms[:n_off], 1e-12)])  # fmt: skip
     weight = (rms[j] / np.where(rms > 0, rms, rms[j]))[:, None]  # (N, 1); a single DOF's is 1.0 exactly
+    weighted = bool(np.any(weight != 1.0))
     q = np.concatenate([params.values(), o[:n_off]]) / scale
     limits = divergence_limits(z_all, vs)
     sub = record_substeps(model, rec)
@@ -335,15 +352,18 @@ def refine(
         def residuals(Q, X, meas=meas, u=u, n_win=n_win, length=length):  # this stage's windows, kept by the fit
             """(k, n_win, N length) simulation errors of k parameter points and start states, one batch."""
             k = Q.shape[0]
-            points = [as_structure(params.build(qq[:p_sys] * scale[:p_sys])) for qq in Q]
+            points = [params.structure(qq[:p_sys] * scale[:p_sys]) for qq in Q]
             zeros = np.zeros((k, nd))
             zeros[:, :n_off] = Q[:, p_sys:] * scale[p_sys:]
             res = simulate_structures(
-                [s for s in points for _ in range(n_win)], u, rec.dt, (X * x_scale).reshape(-1, 2 * nd),
-                input_kind=rec.input_name, force_dof=rec.force_dof, input_index=np.tile(np.arange(n_win), k),
-                substeps=sub, staged=True, **limits,
+                points, u, rec.dt, (X * x_scale).reshape(-1, 2 * nd), input_kind=rec.input_name,
+                force_dof=rec.force_dof, input_index=np.tile(np.arange(n_win), k),
+                structure_index=np.repeat(np.arange(k), n_win), substeps=sub, staged=True, **limits,
             )  # fmt: skip
-            out = (res.z.reshape(k, n_win, nd, length) + zeros[:, None, :, None] - meas) * weight
+            z = res.z.reshape(k, n_win, nd, length)
+            out = (z + zeros[:, None, :, None] if n_off else z) - meas  # (adding 0 and weighing by 1: skipped)
+            if weighted:
+                out *= weight
             out[res.diverged.reshape(k, n_win)] = penalty  # a diverging window: a large, finite penalty
             return out.reshape(k, n_win, nd * length)
 

@@ -126,12 +126,17 @@ class _Normal:
 
     @classmethod
     def of(cls, A: np.ndarray, B: np.ndarray, r: np.ndarray, w2: np.ndarray, q: np.ndarray) -> _Normal:
-        U = np.einsum("nlp,nlq->pq", A, A)
+        # by BLAS's matrix products, not einsum's loops: 11x faster on a 300 s record's 240 one-second windows
+        # (1.3 against 14.5 ms a Jacobian, measured), the sums in another order (1e-14 relative)
+        p = A.shape[2]
+        flat = A.reshape(A.shape[0] * A.shape[1], p)
+        U = flat.T @ flat
         U[np.diag_indices_from(U)] += w2
-        V = np.einsum("nlk,nlj->nkj", B, B)
+        Bt = B.transpose(0, 2, 1)
+        V = Bt @ B
         top = max(float(np.max(np.diag(U), initial=0.0)), float(_diagonal(V).max()), 1e-300)
-        return cls(U, np.einsum("nlp,nlk->npk", A, B), V, np.einsum("nlp,nl->p", A, r) + w2 * q,
-                   np.einsum("nlk,nl->nk", B, r), 1e-12 * top)  # fmt: skip
+        return cls(U, A.transpose(0, 2, 1) @ B, V, flat.T @ r.reshape(-1) + w2 * q, (Bt @ r[:, :, None])[:, :, 0],
+                   1e-12 * top)  # fmt: skip
 
 
 def _step(A, B, ne: _Normal, lam: float, w2: np.ndarray):
@@ -251,7 +256,7 @@ def _covariances(ne: _Normal, A: np.ndarray, r: np.ndarray) -> tuple[np.ndarray 
         bread = np.linalg.inv(ne.U - np.einsum("npk,nkj,nqj->pq", ne.W, Vi, ne.W))
     except np.linalg.LinAlgError:
         return None, None
-    scores = np.einsum("nlp,nl->np", A, r) - np.einsum("npk,nkj,nj->np", ne.W, Vi, ne.gx)
+    scores = (A.transpose(0, 2, 1) @ r[:, :, None])[:, :, 0] - np.einsum("npk,nkj,nj->np", ne.W, Vi, ne.gx)
     return bread, bread @ (scores.T @ scores) @ bread * n / max(n - p, 1)
 
 
