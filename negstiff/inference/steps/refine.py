@@ -233,17 +233,11 @@ class SystemParameters:
         return Structure.unchecked(masses, element, matrices["K"], matrices["C"], s.place)
 
     def build(self, values) -> Any:
-        """The system with these values (a ``Model`` for a ``Model``)."""
-        values = np.asarray(values, float)
-        p = len(self.element_names)
+        """The system with these values (a ``Model`` for a ``Model``; a structure checked as a user's is)."""
         if isinstance(self.system, Model):
-            return with_values(self.system, self.element_names, values)
-        s = self.system
-        matrices = {name: np.array(getattr(s, name), float) for name in LINEAR_MATRICES}
-        for (name, i, j), v in zip(self.linear, values[p:], strict=True):
-            matrices[name][i, j] = matrices[name][j, i] = v
-        return Structure(s.masses, with_values(s.element, self.element_names, values[:p]), matrices["K"],
-                         matrices["C"], s.place)  # fmt: skip
+            return with_values(self.system, self.element_names, np.asarray(values, float))
+        s = self.structure(values)
+        return Structure(s.masses, s.element, s.K, s.C, s.place)
 
 
 def as_structure(system: Model | Structure) -> Structure:
