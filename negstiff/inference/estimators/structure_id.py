@@ -517,6 +517,23 @@ def weight_pinned(structure: Structure, gravity: float) -> Structure:
     return structure.with_element(Model(**{**element.to_dict(), "k0": element.m * gravity}))
 
 
+def refined(structure: Structure, offsets: np.ndarray, rec: Measurement, n_id: int, validation: dict[str, Any],
+            hits: bool) -> tuple[Structure, np.ndarray, dict[str, Any], dict[str, Any]]:  # fmt: skip
+    """A structure's output-error refinement (``refine.refine_stage``), judged on the held-out windows as it was
+    (``free_run_error``; ``hits``: a hammer's record, its windows between the pulses), its element's constant held at
+    the weight its frame pins (``weight_pinned``) while the channels' zeros move: the structure, zeros and
+    validation to keep (the given ones where the refinement was not), and the stage's account.
+    """
+    start = weight_pinned(structure, rec.gravity)
+    kept, kept_validation, account = refine_stage(
+        start, rec, n_id, validation, held=("k0",), offsets=offsets,
+        judge=lambda system, zeros: free_run_error(system, rec, n_id, WINDOW_S, zeros, hits),
+    )  # fmt: skip
+    if not account["applied"]:
+        return structure, offsets, validation, account
+    return kept, np.asarray(account["offsets_m"]), kept_validation, account
+
+
 def _finish(method: str, rec: Measurement, structure: Structure, offsets: np.ndarray, n_id: int,
             modal: dict[str, list[Mode]] | None, own_warnings: list[str], details: dict, settings: dict,
             refine: bool = False) -> StructureIdentification:  # fmt: skip
@@ -527,17 +544,12 @@ def _finish(method: str, rec: Measurement, structure: Structure, offsets: np.nda
     """
     hits = ring_down(rec, ("impact",))  # a hammer's record: the held-out windows between its pulses
     own_modal = modal  # the method's own modes (NSI's wells'), judged against the final structure's
-
-    def judge(system: Structure, zeros) -> dict[str, Any]:
-        return free_run_error(system, rec, n_id, WINDOW_S, zeros, hits)
-
-    validation = judge(structure, offsets)
+    validation = free_run_error(structure, rec, n_id, WINDOW_S, offsets, hits)
     refinement = None
     if refine:
-        refined, validation, refinement = refine_stage(weight_pinned(structure, rec.gravity), rec, n_id, validation,
-                                                       held=("k0",), offsets=offsets, judge=judge)  # fmt: skip
+        structure, offsets, validation, refinement = refined(structure, offsets, rec, n_id, validation, hits)
         if refinement["applied"]:
-            structure, modal, offsets = refined, None, np.asarray(refinement["offsets_m"])
+            modal = None  # the refined structure's own
     try:
         eq = structure.equilibria()
         if modal is None:
@@ -1177,12 +1189,7 @@ def discrepancy(est, rec: Measurement, at: tuple[int, int]) -> StructureIdentifi
     refine = est.refine is True or (est.refine is None and not hits)
     gap_before = free_run_error(baseline, rec, n_id, WINDOW_S, base_offsets, hits)
     if refine:
-        baseline, gap_before, account = refine_stage(
-            weight_pinned(baseline, rec.gravity), rec, n_id, gap_before, held=("k0",), offsets=base_offsets,
-            judge=lambda system, zeros: free_run_error(system, rec, n_id, WINDOW_S, zeros, hits),
-        )  # fmt: skip
-        if account["applied"]:
-            base_offsets = np.asarray(account["offsets_m"])
+        baseline, base_offsets, gap_before, account = refined(baseline, base_offsets, rec, n_id, gap_before, hits)
         if not named_all:  # the baseline is the result, refined once
             structure, offsets = baseline, base_offsets
     est.effects_ = named_all or ["none"]

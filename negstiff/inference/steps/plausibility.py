@@ -132,14 +132,14 @@ HELD_OUT_LIMIT_PERCENT = 100.0
 """A held-out free run erring by more than the record's own rms predicts worse than zero."""
 
 
-def input_power(rec, v: np.ndarray | None = None) -> tuple[float, float]:
+def input_power(rec) -> tuple[float, float]:
     """The input's mean power per unit mass over the record [W/kg] and its batch-means standard error (20
     batches): -<u z'> for a base acceleration, <F z'> / m for a force (1/kg unknown: per newton); a structure's
     over its DOFs, -<u sum m_i z_i'> / M or <F z_k'> / M (M their total mass, k the DOF the force acts on). Over a
-    long record the kinetic and potential energies average out, so this is what the device dissipates. ``v``: the
-    channels' velocities (N, T) (default: ``Measurement.free_run_states``').
+    long record the kinetic and potential energies average out, so this is what the device dissipates. The channels'
+    velocities are ``Measurement.free_run_states``'.
     """
-    v = np.atleast_2d(rec.free_run_states()[1] if v is None else v)
+    v = rec.free_run_states()[1]
     if rec.input_name == "base_acc":
         masses = np.asarray(rec.masses if rec.masses is not None else [rec.mass or 1.0], float)
         weights = masses / masses.sum()  # a single DOF's 1.0
@@ -156,9 +156,8 @@ def input_power(rec, v: np.ndarray | None = None) -> tuple[float, float]:
 
 def dissipated_power(system, rec, offsets=None) -> float:
     """The mean power [W/kg] ``system``'s damping draws from the record's motion (its channels, their velocities
-    ``free_run_states``; a
-    structure's: its element's damping force on the relative motion and its dampers, over its total mass, the
-    channels less their zeros ``offsets``).
+    ``free_run_states``; a structure's: its element's damping force on the relative motion and its dampers, over its
+    total mass, the channels less their zeros ``offsets``).
     """
     structure = as_structure(system)
     v = rec.free_run_states()[1]

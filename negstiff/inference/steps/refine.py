@@ -309,7 +309,7 @@ def refine(
     if solver not in SOLVERS:
         raise ValueError(f"solver must be one of {SOLVERS}, got {solver!r}")
     params = SystemParameters.of(model, free_mass, held)
-    structure = as_structure(model)
+    structure = params.base
     nd = structure.n_dof
     n_off = 0 if offsets is None else nd  # the channels' zeros refined where the caller has them
     names = params.names + tuple(f"offset[{i + 1}]" for i in range(n_off))
@@ -392,7 +392,7 @@ def refine(
 
 def _standard_errors(residuals, q: np.ndarray, x: np.ndarray, fun: np.ndarray, robust=None) -> np.ndarray:
     """The last stage's standard errors of the scaled parameters: ``robust``, the fit's own window-robust
-    covariance at its last Jacobian (``shooting._covariances``: each window one cluster, its samples' errors
+    covariance at its last Jacobian (``shooting._robust_covariance``: each window one cluster, its samples' errors
     correlated as a chaotic record's are, the start states eliminated); else (the scipy solvers, the benchmarks'
     baselines) the Gauss-Newton covariance (``shooting.parameter_covariance``, one more Jacobian) times the
     residuals' variance, which treats the samples as independent and so is a lower bound. Local and conditional on

@@ -55,14 +55,11 @@ class ShootingFit:
     nfev: int
     njev: int
     status: str
-    unscaled_covariance: np.ndarray | None = None
-    """(J^T J)^-1's parameter block at the last Jacobian the fit evaluated (the start states marginalised, as
-    ``parameter_covariance`` gives it at the solution, without its extra Jacobian; the last accepted step is
-    below ``xtol`` or ``ftol`` of the solution): None where there was none, or it is singular."""
     robust_covariance: np.ndarray | None = None
-    """The parameters' covariance robust over windows (``_covariances``: a sandwich whose meat is the windows'
-    scores, the start states eliminated; each window one cluster, its samples' errors correlated as a chaotic or
-    smoothed record's are), in the parameters' units: no residual variance to multiply by."""
+    """The parameters' covariance at the last Jacobian the fit evaluated, robust over windows
+    (``_robust_covariance``: a sandwich whose meat is the windows' scores, the start states eliminated; each window
+    one cluster, its samples' errors correlated as a chaotic or smoothed record's are), in the parameters' units: no
+    residual variance to multiply by. None where there was no Jacobian, or it is singular."""
 
     @property
     def cost(self) -> float:
@@ -239,25 +236,25 @@ def shooting_least_squares(
             if lam > 1e16:  # steps shrunk to nothing and none lowers the cost: at the minimum to rounding
                 status = "xtol"
                 break
-    return ShootingFit(q, x, r, nfev, njev, status, *(_covariances(*last) if last is not None else (None, None)))
+    return ShootingFit(q, x, r, nfev, njev, status, None if last is None else _robust_covariance(*last))
 
 
-def _covariances(ne: _Normal, A: np.ndarray, r: np.ndarray) -> tuple[np.ndarray | None, np.ndarray | None]:
-    """At one Jacobian: the inverse of the undamped Schur complement S = U - sum W_i V_i^-1 W_i^T, and the
-    window-robust covariance S^-1 (sum_i s_i s_i^T) S^-1 n / (n - p), s_i = A_i^T r_i - W_i V_i^-1 B_i^T r_i window
-    i's score with its start state eliminated (a sandwich with each window one cluster, as ``discrepancy``'s effect
-    intervals and the posterior's curvature adjustment read windows). (None, None): singular, or no parameter.
+def _robust_covariance(ne: _Normal, A: np.ndarray, r: np.ndarray) -> np.ndarray | None:
+    """At one Jacobian, the window-robust covariance S^-1 (sum_i s_i s_i^T) S^-1 n / (n - p): S = U - sum W_i V_i^-1
+    W_i^T the undamped Schur complement, s_i = A_i^T r_i - W_i V_i^-1 B_i^T r_i window i's score with its start state
+    eliminated (a sandwich with each window one cluster, as ``discrepancy``'s effect intervals and the posterior's
+    curvature adjustment read windows). None: singular, or no parameter.
     """
     n, p = A.shape[0], A.shape[2]
     if not p:
-        return None, None
+        return None
     Vi = _inverses(ne.V)
     try:
         bread = np.linalg.inv(ne.U - np.einsum("npk,nkj,nqj->pq", ne.W, Vi, ne.W))
     except np.linalg.LinAlgError:
-        return None, None
+        return None
     scores = (A.transpose(0, 2, 1) @ r[:, :, None])[:, :, 0] - np.einsum("npk,nkj,nj->np", ne.W, Vi, ne.gx)
-    return bread, bread @ (scores.T @ scores) @ bread * n / max(n - p, 1)
+    return bread @ (scores.T @ scores) @ bread * n / max(n - p, 1)
 
 
 def parameter_covariance(fun: Residuals, fit: ShootingFit, penalty: np.ndarray | None = None,
