@@ -642,8 +642,9 @@ def boundedness(system, rec: Measurement, margin: float = STROKE_MARGIN, input_m
             o = _offsets(system, offsets)
             zs, vs = rec.free_run_states()
             x0 = np.concatenate([zs[:, 0] - o, vs[:, 0]])[None, :]
-            res = simulate_structures(system, stage_input(scaled.u)[None], rec.dt, x0, input_kind=rec.input_name,
-                                      force_dof=rec.force_dof, staged=True,
+            sub = record_substeps(system, rec)  # the step refined for a fast mode, as a single DOF's run is
+            res = simulate_structures(system, stage_input(scaled.u, sub)[None], rec.dt, x0, input_kind=rec.input_name,
+                                      force_dof=rec.force_dof, substeps=sub, staged=True,
                                       **divergence_limits(rec.channels - o[:, None], vs))  # fmt: skip
         else:
             zs1, vs1, _, _ = rec.states("state")
