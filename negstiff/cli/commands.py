@@ -501,18 +501,29 @@ def _frf_structure(args, band, rec) -> int:
 def cmd_backbone(args) -> int:
     from negstiff.inference.analysis.backbone import backbone
     from negstiff.inference.record.reading import load
+    from negstiff.models import Model
     from negstiff.models.device import load_system
+    from negstiff.models.structure import Structure
     from negstiff.report.figures import backbone_figure
 
     model = load_system(args.model) if args.model else None
-    if model is not None and not hasattr(model, "k3"):
-        raise InputError(f"--model {args.model}: a backbone's prediction needs a model file (coefficients), not a "
-                         "device file")  # fmt: skip
+    if model is not None and not isinstance(model, (Model, Structure)):
+        raise InputError(f"--model {args.model}: a backbone's prediction needs a model file (coefficients) or a "
+                         "structure file, not a device file")  # fmt: skip
+    band = parse_band(args.band)
+    if band is not None and band[0] <= 0:
+        raise InputError(f"--band {args.band}: a backbone's band-pass starts above 0 Hz")
     rec = load(args.data, columns=args.columns, fs=args.fs, gravity=args.gravity, mass=args.mass, decay=args.decay)
-    if rec.n_dof > 1:
-        raise InputError(f"{args.data}: a backbone is a single DOF's; this record has {rec.n_dof} DOFs")
+    dof = args.dof
+    if dof is not None and dof > rec.n_dof:
+        raise InputError(f"--dof {dof}: one of the record's DOFs, 1..{rec.n_dof}")
+    if band is not None and band[1] >= rec.fs / 2:
+        raise InputError(f"--band {args.band}: beyond the Nyquist frequency of {args.data} ({rec.fs / 2:g} Hz)")
+    n_model = model.n_dof if isinstance(model, Structure) else 1
+    if model is not None and n_model != rec.n_dof:
+        raise InputError(f"--model {args.model}: a model of {n_model} DOF(s) for a record of {rec.n_dof}")
     say(args, f"backbone: {rec.n} samples at {rec.fs:g} Hz, input {rec.input_name}")
-    res = backbone(rec, model=model)
+    res = backbone(rec, model=model, dof=dof, band=band)
     res["figure"] = write_figure(backbone_figure(res, f"Backbone of {Path(args.data).name}"), args.out)
     write_json(args.out, res)
     warn(args, res["warnings"])
@@ -521,7 +532,9 @@ def cmd_backbone(args) -> int:
     pred = res.get("predicted")
     say(
         args,
-        f"wrote {args.out} and {res['figure']}: decay from {res['decay']['start_s']:.4g} s, amplitudes "
+        f"wrote {args.out} and {res['figure']}: decay from {res['decay']['start_s']:.4g} s"
+        + (f", DOF {res['dof']} in {res['band_hz'][0]:.3g}-{res['band_hz'][1]:.3g} Hz" if rec.n_dof > 1 else "")
+        + ", amplitudes "
         f"{1e3 * hi:.3g} to {1e3 * lo:.3g} mm, small-amplitude {lin['f_hz']:.4f} Hz, zeta "
         f"{100 * lin['zeta']:.2f} %"
         + (

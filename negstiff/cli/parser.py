@@ -350,6 +350,10 @@ def _backbone(sub, common: argparse.ArgumentParser, data_opts: argparse.Argument
     bb.add_argument("data", help="measurement file (a force or base_acc column, silent after the release)")
     bb.add_argument("--model", help="model file (JSON): its predicted backbone beside the measured one")
     bb.add_argument("--mass", type=mass_option(), help="moving mass [kg] (default: the file's '# mass:')")
+    bb.add_argument("--dof", type=number(int, 1, 50), help="a structure's channel whose backbone is measured, "
+                    "1..N (default: the one whose decay moves most)")  # fmt: skip
+    bb.add_argument("--band", help="the band-pass F1:F2 [Hz] (default: around the mode that dominates the channel; "
+                    "another mode's band reads that mode's backbone)")  # fmt: skip
     bb.add_argument("-o", "--out", required=True, help="result JSON (the figure beside it, .png)")
     bb.add_argument("--decay", action="store_true", help=DECAY_HELP)
     bb.set_defaults(func=c.cmd_backbone)

@@ -432,7 +432,8 @@ def _backbone(rec, fitted: dict[str, Any]) -> dict[str, Any]:
     draws = post.draw_models(min(BACKBONE_DRAWS, post.result_.samples[..., 0].size)) if post is not None else None
     for name, label in (("nsi", "NSI"), ("sindy", "SINDy"), ("posterior", "the posterior mean")):
         if name in fitted:
-            model = fitted[name].model_
+            # a structure's fit: the identified structure (its element in ``model_``) decays from the record's state
+            model = getattr(fitted[name], "structure_", None) or fitted[name].model_
             return {**backbone(_last_well(rec, model), model=model, draws=draws), "model_name": f"{label}'s model"}
     return backbone(rec)
 
@@ -444,13 +445,16 @@ def _last_well(rec, model):
     minus well; over the whole record the Hilbert backbone read 2.27 Hz, from the crossing on 11.238 Hz (the well's
     11.240 Hz).
     """
+    from negstiff.models.structure import Structure
+
+    structure = model if isinstance(model, Structure) else Structure.single(model)
     try:
-        z0 = model.equilibria().z_0
+        z0 = structure.element_equilibria().z_0
     except ValueError:
         return rec
     if z0 is None:
         return rec
-    side = np.sign(np.asarray(rec.displacement) - z0)
+    side = np.sign(structure.coupling @ np.asarray(rec.channels) - z0)  # the element's relative motion
     crossed = np.flatnonzero(side != side[-1])
     return rec if crossed.size == 0 else rec.segment(int(crossed[-1]) + 1, rec.n)
 

@@ -629,6 +629,11 @@ def backbone_section(res: dict[str, Any], label: str = "", model_name: str = "")
     sec.text(f"The decay from {fmt(d.get('start_s'), 4)} s ({d.get('found', '')}); amplitudes {fmt(1e3 * lo, 3)} to "
              f"{fmt(1e3 * hi, 3)} mm. At its smallest amplitudes: {fmt(lin['f_hz'], 5)} Hz, zeta "
              f"{fmt(100 * lin['zeta'], 3)} %. {res.get('estimator', '')}.")  # fmt: skip
+    modes = res.get("modes_hz") or []
+    if len(modes) > 1:  # a structure's decay: which of its modes this backbone is
+        sec.text(f"The decay rings at {', '.join(fmt(f, 4) for f in modes)} Hz (its channels' periodogram peaks); this "
+                 f"is the backbone of the mode DOF {res['dof']}'s channel shows most, band-passed between its "
+                 "neighbours.")  # fmt: skip
     hil = res["measured"]["hilbert"]
     a = np.asarray(hil["amplitude_m"])
     rows = []
@@ -653,8 +658,9 @@ def backbone_section(res: dict[str, Any], label: str = "", model_name: str = "")
                      "zeta^2 below).")  # fmt: skip
     for w in res.get("warnings", []):
         sec.warning(w)
+    on = f" (DOF {res['dof']}, the mode it shows most)" if len(modes) > 1 else ""
     sec.summary.append(
-        f"The decay's backbone: {fmt(lin['f_hz'], 5)} Hz at small amplitude, over {fmt(1e3 * lo, 3)}-"
+        f"The decay's backbone{on}: {fmt(lin['f_hz'], 5)} Hz at small amplitude, over {fmt(1e3 * lo, 3)}-"
         f"{fmt(1e3 * hi, 3)} mm"
         + (f"; {model_name or 'the model'}'s within {fmt(pred.get('difference_percent'), 3)} %." if pred else ".")
     )

@@ -48,6 +48,7 @@ from scipy import optimize, signal
 from negstiff.errors import MeasurementError
 from negstiff.inference.record.impacts import MAD_TO_SIGMA
 from negstiff.inference.record.measurement import Measurement
+from negstiff.models.structure import Structure
 
 QUIET_DEVIATIONS = 10.0
 """The input is active where it stands more than this many floor deviations from its tail's median."""
@@ -207,39 +208,108 @@ def hilbert_backbone(x: np.ndarray, fs: float, band: tuple[float, float] | None 
             "band_hz": [float(band[0]), float(band[1])]}  # fmt: skip
 
 
-def _decay_part(rec: Measurement) -> tuple[np.ndarray, int, float, str]:
-    """(the decay about its rest [m], its first sample, the rest [m], how the start was found)."""
+def _decay_part(rec: Measurement) -> tuple[np.ndarray, int, np.ndarray, str]:
+    """(every channel's decay about its rest (N, T) [m], its first sample, each channel's rest (N,) [m], how the
+    start was found).
+    """
     start, how = decay_start(rec)
-    z = np.asarray(rec.displacement, float)[start:]
-    if z.size < 16:
+    z = np.asarray(rec.channels, float)[:, start:]
+    if z.shape[1] < 16:
         raise MeasurementError(f"{rec.source}: no free decay after the input's last activity ({how})")
-    rest = float(np.median(z[-max(8, z.size // 10) :]))
-    return z - rest, start, rest, how
+    rest = np.median(z[:, -max(8, z.shape[1] // 10) :], axis=1)
+    return z - rest[:, None], start, rest, how
+
+
+NEIGHBOUR_MARGIN = 1.25
+"""On a side where another mode rings, a mode's band reaches this factor beyond the frequencies its cycles span (not
+the single DOF's 1.5, nor midway to the neighbour): the zero-phase band-pass's gain there is 0.86 (divided out), and
+a neighbour twice as far off is 50 times down. With the edge midway (1.49 times it off), the tests' fixture's 25.7 Hz
+mode leaked 4 % of itself into the 11.7 Hz mode's band, whose small-amplitude frequency read 0.18 % low (11.640 Hz
+for the truth's 11.662; with this margin 11.661), and the other way 0.16 % high (measured)."""
+
+
+def decay_modes(x: np.ndarray, fs: float, count: int) -> np.ndarray:
+    """The frequencies [Hz] of the ``count`` strongest resonances of the decays ``x`` (N, T) about their rests, by
+    frequency: the local maxima of the channels' summed periodograms (Hann window, each channel's normalised to
+    its own power, so a stiff DOF's small motion counts as much as the device's), the strongest ``count`` of them
+    (a structure of N DOFs rings in N modes at most; beyond them a nonlinear decay's peaks are its harmonics).
+    """
+    w = signal.windows.hann(x.shape[1])
+    p = np.abs(np.fft.rfft(x * w, axis=1)) ** 2
+    p = (p / np.maximum(p.sum(axis=1, keepdims=True), 1e-300)).sum(axis=0)
+    f = np.fft.rfftfreq(x.shape[1], 1.0 / fs)
+    peaks, _ = signal.find_peaks(p[1:])  # the rest's residual at 0 Hz is no resonance
+    peaks = peaks + 1
+    top = peaks[np.argsort(p[peaks])[::-1][:count]]
+    return np.sort(f[top])
+
+
+def mode_band(x: np.ndarray, fs: float, noise_rms: float, modes_hz: np.ndarray) -> tuple[float, float]:
+    """The band-pass of the backbone of the mode that dominates ``x`` (one channel's decay about its rest), among
+    the decay's resonances ``modes_hz`` (``decay_modes``): ``_band`` of the cycles of ``x`` band-passed between
+    the geometric means of that mode's frequency and its neighbours', kept inside them. With one resonance (a
+    single DOF's decay) there is no neighbour: ``_band`` of ``x`` itself.
+    """
+    if modes_hz.size < 2:
+        return _band(x, fs, noise_rms)
+    spec = np.abs(np.fft.rfft(x * signal.windows.hann(x.size)))
+    f = np.fft.rfftfreq(x.size, 1.0 / fs)
+    k = int(np.argmax([spec[int(np.argmin(np.abs(f - fm)))] for fm in modes_hz]))
+    lo = math.sqrt(modes_hz[k - 1] * modes_hz[k]) if k > 0 else 0.0
+    hi = math.sqrt(modes_hz[k] * modes_hz[k + 1]) if k + 1 < modes_hz.size else 0.45 * fs
+    sos = signal.butter(4, [lo, hi] if lo > 0 else hi, btype="bandpass" if lo > 0 else "lowpass", fs=fs,
+                        output="sos")  # fmt: skip
+    xf = signal.sosfiltfilt(sos, x)
+    b_lo, b_hi = _band(xf, fs, noise_rms)
+    f = peak_backbone(xf, fs, floor=NOISE_MARGIN * noise_rms)["f_hz"]
+    if k > 0:
+        b_lo = max(b_lo, lo, float(np.min(f)) / NEIGHBOUR_MARGIN)
+    if k + 1 < modes_hz.size:
+        b_hi = min(b_hi, hi, float(np.max(f)) * NEIGHBOUR_MARGIN)
+    return b_lo, b_hi
 
 
 def _curves(d: dict[str, Any]) -> dict[str, Any]:
     return {k: (np.asarray(v).tolist() if isinstance(v, np.ndarray) else v) for k, v in d.items()}
 
 
-def measure_backbone(rec: Measurement) -> dict[str, Any]:
-    """The measured backbones of a free-decay record (Hilbert, and peaks as a cross-check), arrays.
+def measure_backbone(rec: Measurement, dof: int | None = None,
+                     band: tuple[float, float] | None = None) -> dict[str, Any]:  # fmt: skip
+    """The measured backbones of a free-decay record (Hilbert, and peaks as a cross-check), arrays: of DOF ``dof``'s
+    channel (1-based; default: the channel whose decay moves most), in the band of the mode that dominates it
+    (``mode_band``; or ``band`` [Hz] as given: another mode's). A single DOF's decay rings in one mode; a
+    structure's in up to N, each read where it dominates: after the higher modes' faster decay, a band-passed
+    mode rings as a single DOF on its own backbone (the modes well apart and lightly damped).
 
     Returns
     -------
     dict
         ``hilbert`` and ``peaks`` (each ``t_s``, ``amplitude_m``, ``f_hz``, ``zeta`` arrays; the peaks' cut to the
-        Hilbert's amplitude range), ``decay`` (its start [s], how it was found, the rest [m], the initial state).
+        Hilbert's amplitude range), ``decay`` (its start [s], how it was found, the channel's rest [m] and initial
+        state, every channel's in ``rests_m``, ``z0s_m``, ``v0s_m_s``), ``dof``, ``modes_hz`` (the decay's
+        resonances, ``decay_modes``).
     """
-    if rec.n_dof > 1:
-        raise MeasurementError(f"{rec.source}: a backbone is a single DOF's (this record has {rec.n_dof} DOFs)")
-    x, start, rest, how = _decay_part(rec)
-    noise = math.sqrt(max(rec.noise_floor()[0], 0.0)) if rec.n >= 256 else 0.0
-    hil = hilbert_backbone(x, rec.fs, noise_rms=noise)
-    pk = peak_backbone(x, rec.fs, floor=NOISE_MARGIN * noise)
+    xs, start, rests, how = _decay_part(rec)
+    n_dof = xs.shape[0]
+    if dof is None:
+        dof = int(np.argmax(np.std(xs, axis=1))) + 1
+    elif isinstance(dof, bool) or not isinstance(dof, (int, np.integer)) or not 1 <= dof <= n_dof:
+        raise MeasurementError(f"{rec.source}: the backbone's DOF is one of 1..{n_dof}, got {dof!r}")
+    x = xs[dof - 1]
+    noise = float(rec.channel_noise()[dof - 1]) if rec.n >= 256 else 0.0
+    modes_hz = decay_modes(xs, rec.fs, n_dof)
+    if band is not None and not (0 < band[0] < band[1] < 0.5 * rec.fs):
+        raise MeasurementError(f"{rec.source}: a backbone's band is 0 < low < high < {0.5 * rec.fs:g} Hz (the "
+                               f"record's Nyquist frequency), got {band[0]:g}-{band[1]:g}")  # fmt: skip
+    band = mode_band(x, rec.fs, noise, modes_hz) if band is None else (float(band[0]), float(band[1]))
+    hil = hilbert_backbone(x, rec.fs, band=band, noise_rms=noise)
+    cycles = x if modes_hz.size < 2 else signal.sosfiltfilt(signal.butter(4, band, "bandpass", fs=rec.fs,
+                                                                          output="sos"), x)  # fmt: skip
+    pk = peak_backbone(cycles, rec.fs, floor=NOISE_MARGIN * noise)
     lo, hi = float(np.min(hil["amplitude_m"])), float(np.max(hil["amplitude_m"]))
     inside = (pk["t_s"] >= hil["t_s"][0]) & (pk["t_s"] <= hil["t_s"][-1])
     pk = {k: v[inside] for k, v in pk.items()}
-    z_s, v_s, _, _ = rec.states("state")
+    z_s, v_s = rec.free_run_states()
     return {
         "hilbert": hil,
         "peaks": pk,
@@ -247,51 +317,73 @@ def measure_backbone(rec: Measurement) -> dict[str, Any]:
             "start_s": rec.t0 + start / rec.fs,
             "found": how,
             "duration_s": x.size / rec.fs,
-            "rest_m": rest,
-            "z0_m": float(rec.displacement[start]),
-            "v0_m_s": float(v_s[start]),
+            "rest_m": float(rests[dof - 1]),
+            "z0_m": float(rec.channels[dof - 1, start]),
+            "v0_m_s": float(v_s[dof - 1, start]),
             "noise_m": noise,
+            "rests_m": rests.tolist(),
+            "z0s_m": rec.channels[:, start].tolist(),
+            "v0s_m_s": v_s[:, start].tolist(),
         },  # fmt: skip
         "amplitude_range_m": [lo, hi],
+        "dof": dof,
+        "modes_hz": modes_hz.tolist(),
     }
 
 
-def _model_decay(model, z0: float, v0: float, fs: float, n: int) -> np.ndarray:
-    """The model's free decay from (z0, v0), n samples at fs (``negstiff.models.simulate``, zero force)."""
-    from negstiff.models.simulator import simulate
+def _as_structure(model) -> Structure:
+    """The model as a structure (a single DOF's ``Model``: the structure of one DOF on the base)."""
+    return model if isinstance(model, Structure) else Structure.single(model)
 
-    res = simulate(model, np.zeros(n), 1.0 / fs, z0=z0, v0=v0, input_kind="force")
+
+def _model_decay(model, x0: np.ndarray, fs: float, n: int, dof: int) -> np.ndarray:
+    """DOF ``dof``'s channel of the model's free decay from the state ``x0`` (2N,), n samples at fs (zero force)."""
+    from negstiff.models.structure import simulate_structures
+
+    res = simulate_structures(_as_structure(model), np.zeros(n), 1.0 / fs, x0, input_kind="force")
     if res.diverged[0]:
-        raise MeasurementError(f"the model's free decay from z0 = {z0:.4g} m diverged ({res.describe_failures()})")
-    return np.asarray(res.z[0], float)
+        raise MeasurementError(f"the model's free decay from z0 = {x0[dof - 1]:.4g} m diverged "
+                               f"({res.describe_failures()})")  # fmt: skip
+    return np.asarray(res.z[0, dof - 1], float)
 
 
-def _model_start(model, measured: dict[str, Any], rec: Measurement) -> tuple[float, float, str]:
-    """The model's initial state for the record's decay: the record's (z0, v0) when its z is in the model's frame
-    (a measured z); a derived z's constant unknown, the record's rest put on the model's well nearest to it.
+def _model_start(model, measured: dict[str, Any], rec: Measurement) -> tuple[np.ndarray, str]:
+    """The model's initial state [z_1..z_N, z_1'..z_N'] for the record's decay: the record's when its z is in the
+    model's frame (a measured z); a derived z's constant unknown, the record's rests put on the model's static
+    positions at the well of the nearest frequency.
     """
     d = measured["decay"]
+    z0, v0 = np.asarray(d["z0s_m"]), np.asarray(d["v0s_m_s"])
     if _z_constant_known(rec):
-        return d["z0_m"], d["v0_m_s"], "the record's state at the decay's start"
-    well = model.equilibria().well(_rest_well(model, measured, rec))
+        return np.r_[z0, v0], "the record's state at the decay's start"
+    s = _as_structure(model)
+    static = s.static_positions(s.element_equilibria().well(_rest_well(model, measured, rec)))
     return (
-        well + d["z0_m"] - d["rest_m"],
-        d["v0_m_s"],
+        np.r_[static + z0 - np.asarray(d["rests_m"]), v0],
         "the record's z (its constant unknown) about its rest, put on the model's well of the nearest frequency",
     )
 
 
 def predict_backbone(model, rec: Measurement, measured: dict[str, Any] | None = None) -> dict[str, Any]:
-    """The backbone ``model`` predicts for ``rec``'s decay: its free decay from the record's initial state,
-    measured by the same estimators (``hilbert``, ``peaks``) and the same band-pass as the record's.
+    """The backbone ``model`` (a ``Model``, or a ``Structure`` on a structure's record) predicts for ``rec``'s
+    decay: its free decay from the record's initial state, the same DOF's channel measured by the same estimators
+    (``hilbert``, ``peaks``) and the same band-pass as the record's.
     """
     measured = measure_backbone(rec) if measured is None else measured
-    z0, v0, how = _model_start(model, measured, rec)
+    dof = measured["dof"]
+    n_model = _as_structure(model).n_dof
+    if n_model != rec.n_dof:
+        raise MeasurementError(f"{rec.source}: the model has {n_model} DOF(s) and the record {rec.n_dof}")
+    x0, how = _model_start(model, measured, rec)
     n = int(round(measured["decay"]["duration_s"] * rec.fs))
-    z = _model_decay(model, z0, v0, rec.fs, n)
+    z = _model_decay(model, x0, rec.fs, n, dof)
     x = z - float(np.median(z[-max(8, n // 10) :]))
-    hil = hilbert_backbone(x, rec.fs, band=tuple(measured["hilbert"]["band_hz"]))
-    return {"hilbert": hil, "peaks": peak_backbone(x, rec.fs), "initial": {"z0_m": z0, "v0_m_s": v0, "from": how}}
+    band = tuple(measured["hilbert"]["band_hz"])
+    hil = hilbert_backbone(x, rec.fs, band=band)
+    cycles = x if len(measured["modes_hz"]) < 2 else signal.sosfiltfilt(signal.butter(4, band, "bandpass", fs=rec.fs,
+                                                                                      output="sos"), x)  # fmt: skip
+    return {"hilbert": hil, "peaks": peak_backbone(cycles, rec.fs),
+            "initial": {"z0_m": float(x0[dof - 1]), "v0_m_s": float(x0[n_model + dof - 1]), "from": how}}  # fmt: skip
 
 
 def on_amplitudes(curve: dict[str, Any], amplitudes: np.ndarray, key: str = "f_hz") -> np.ndarray:
@@ -367,16 +459,24 @@ def _z_constant_known(rec: Measurement) -> bool:
 
 
 def _rest_well(model, measured: dict[str, Any], rec: Measurement) -> str:
-    """The model's well the record's decay rests in: the nearest to the record's rest where z is in the model's
-    frame, else the one whose linear frequency is nearest the decay's at its smallest amplitude.
+    """The model's well the record's decay rests in: the one whose static positions are nearest the record's rests
+    where z is in the model's frame, else the one with a linear frequency nearest the decay's at its smallest
+    amplitude.
     """
-    eq = model.equilibria()
+    s = _as_structure(model)
+    eq = s.element_equilibria()
     wells = {n: w for n, w in (("minus", eq.z_minus), ("plus", eq.z_plus)) if w is not None}
     if _z_constant_known(rec):
-        return min(wells, key=lambda n: abs(wells[n] - measured["decay"]["rest_m"]))
+        rests = np.asarray(measured["decay"]["rests_m"])
+        return min(wells, key=lambda n: float(np.linalg.norm(s.static_positions(wells[n]) - rests)))
     f_small = measured["hilbert"]["f_hz"][-1]
-    return min(wells, key=lambda n: abs(math.sqrt(max(model.stiffness(wells[n]), 0.0) / model.m) / (2 * np.pi)
-                                        - f_small))  # fmt: skip
+
+    def distance(well: str) -> float:
+        K, _ = s.linear(well)
+        w2 = np.linalg.eigvals(np.linalg.solve(np.diag(s.masses), K)).real
+        return float(np.min(np.abs(np.sqrt(np.maximum(w2, 0.0)) / (2 * np.pi) - f_small)))
+
+    return min(wells, key=distance)
 
 
 def _resonant_force(model, z_well: float, amplitude: float, cons: dict[str, Any], nodes: int = 256) -> float | None:
@@ -494,20 +594,29 @@ def credible_band(curves: Sequence[dict[str, Any]], amplitudes: np.ndarray, prob
 
 
 def backbone(rec: Measurement, model=None, draws: Sequence | None = None, prob: float = 0.9,
-             forced: bool = True) -> dict[str, Any]:  # fmt: skip
+             forced: bool = True, dof: int | None = None,
+             band: tuple[float, float] | None = None) -> dict[str, Any]:  # fmt: skip
     """Backbone curves of a free-decay record, measured and (with ``model``, ``draws``) predicted.
 
     Parameters
     ----------
     rec : Measurement
-        A single DOF's record whose input is at its floor after a release (``decay_start``): a free decay, the
-        ring-down after a hammer's last hit or a shaker switched off.
-    model : negstiff.models.Model, optional
-        A model whose free decay from the record's initial state is measured alike (``predict_backbone``).
+        A record whose input is at its floor after a release (``decay_start``): a free decay, the ring-down after a
+        hammer's last hit or a shaker switched off; a single DOF's, or a structure's of N DOFs (the backbone of the
+        mode that dominates channel ``dof``, ``measure_backbone``).
+    model : negstiff.models.Model or Structure, optional
+        A model whose free decay from the record's initial state is measured alike (``predict_backbone``): a
+        structure of the record's DOFs on a structure's record.
     draws : sequence of Model, optional
         A posterior's draws: the predicted backbone's credible band (``prob``).
     forced : bool, default True
-        With a model, also its forced responses about the well the decay rests in (``forced_response``).
+        With a single DOF's model, also its forced responses about the well the decay rests in
+        (``forced_response``; a structure's are not drawn: their force levels are sized on a single DOF's
+        conservative backbone, and a warning says so).
+    dof : int, optional
+        The channel whose backbone is measured (1-based; default: the one whose decay moves most).
+    band : (float, float), optional
+        The band-pass [Hz] (default: around the mode that dominates the channel, ``mode_band``): another mode's.
 
     Returns
     -------
@@ -528,7 +637,7 @@ def backbone(rec: Measurement, model=None, draws: Sequence | None = None, prob: 
     >>> round(r["linear"]["f_hz"], 2), round(100 * r["linear"]["zeta"], 2)   # 0.6 / (2 pi 10) = 0.955 %
     (10.0, 0.96)
     """
-    measured = measure_backbone(rec)
+    measured = measure_backbone(rec, dof=dof, band=band)
     hil = measured["hilbert"]
     small = np.argsort(hil["amplitude_m"])[: max(3, hil["amplitude_m"].size // 5)]
     out: dict[str, Any] = {
@@ -539,6 +648,8 @@ def backbone(rec: Measurement, model=None, draws: Sequence | None = None, prob: 
         "decay": measured["decay"],
         "amplitude_range_m": measured["amplitude_range_m"],
         "band_hz": hil["band_hz"],
+        "dof": measured["dof"],
+        "modes_hz": measured["modes_hz"],
         "linear": {
             "f_hz": float(np.median(hil["f_hz"][small])),
             "zeta": float(np.median(hil["zeta"][small])),
@@ -561,7 +672,10 @@ def backbone(rec: Measurement, model=None, draws: Sequence | None = None, prob: 
         if out["predicted"]["covered_share"] < 0.8:
             out["warnings"].append(f"the model's decay covers {100 * out['predicted']['covered_share']:.0f} % of the "
                                    "measured amplitude range")  # fmt: skip
-        if forced:
+        if forced and isinstance(model, Structure):
+            out["warnings"].append("no forced response drawn for a structure: its force levels are sized on a single "
+                                   "DOF's conservative backbone")  # fmt: skip
+        elif forced:
             well = _rest_well(model, measured, rec)
             f_all = np.concatenate([hil["f_hz"], pred["hilbert"]["f_hz"]])
             f_range = (FORCED_SPAN[0] * float(np.min(f_all)), FORCED_SPAN[1] * float(np.max(f_all)))
@@ -569,7 +683,10 @@ def backbone(rec: Measurement, model=None, draws: Sequence | None = None, prob: 
             out["forced"] = forced_response(model, well, a_max, f_range, force_unit=force_unit_of(model, rec))
             out["warnings"] += out["forced"]["warnings"]
     if draws:
-        curves = [predict_backbone(d, rec, measured)["hilbert"] for d in draws]
+        # a structure's posterior draws its element's coefficients: each draw is the structure with that element
+        systems = [model.with_element(d) if isinstance(model, Structure) and not isinstance(d, Structure) else d
+                   for d in draws]  # fmt: skip
+        curves = [predict_backbone(d, rec, measured)["hilbert"] for d in systems]
         lo, hi = measured["amplitude_range_m"]
         grid = np.geomspace(lo, hi, 40)
         out["credible"] = credible_band(curves, grid, prob)
