@@ -140,6 +140,10 @@ def test_a_structure_is_judged_as_a_single_dof_is(offset_record):
     undamped = Structure(TRUTH.masses, Model(**{**DEVICE.to_dict(), "c": 0.0, "c_nl": 0.0}), TRUTH.K, None, TRUTH.place)
     assert "the model has no damping, but the record dissipates" in said(undamped)
     assert "worse than predicting zero" in said(TRUTH, {"rms_percent": 150.0})
+    # where a right model misses the held-out part as much (a decay rung down into its noise), the part judges nothing
+    at_noise = said(TRUTH, {"rms_percent": 150.0, "floor_percent": 200.0})
+    assert "at the sensors' noise" in at_noise and "worse than predicting zero" not in at_noise
+    assert "worse than predicting zero" in said(TRUTH, {"rms_percent": 150.0, "floor_percent": 20.0})
     off = {w: [Mode(1.2 * m.f_hz, m.zeta, m.shape) for m in ms] for w, ms in modal.items()}
     assert said(TRUTH, own=off).count("contradicts the model's own linearisation") == 4
     far = model_warnings(TRUTH.with_element(Model(**{**DEVICE.to_dict(), "k3": DEVICE.k3 / 100})), rec, OFFSETS)

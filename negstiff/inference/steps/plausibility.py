@@ -223,12 +223,21 @@ def judgement(
     # the restarted runs where there are any: one long free run of a chaotic record errs by ~140 % for the truth
     key = "restarted_rms_percent" if validation.get("restarted_rms_percent") is not None else "rms_percent"
     worst = validation.get(key)
+    floor = validation.get("floor_percent")  # what a right model misses on a record like this (its own noise)
     if worst is not None and np.isfinite(worst) and worst > HELD_OUT_LIMIT_PERCENT:
         what = "restarted free runs err" if key.startswith("restarted") else "free run errs"
-        out.append(
-            f"the model's held-out {what} by {worst:.3g} % of the record's rms: worse than predicting zero, "
-            "so it explains nothing of the held-out part"
-        )
+        if floor is not None and worst <= floor:  # the held-out part is the sensors' noise: it judges nothing
+            out.append(
+                f"the held-out part is at the sensors' noise: the model's held-out {what} by {worst:.3g} % of the "
+                f"record's rms there, and a right model misses a record like this by {floor:.3g} % (its own run "
+                "under the channels' noise): the held-out error cannot judge the model; hold out a part that rings "
+                "above the noise (cut the record where it meets it)"
+            )
+        else:
+            out.append(
+                f"the model's held-out {what} by {worst:.3g} % of the record's rms: worse than predicting zero, "
+                "so it explains nothing of the held-out part"
+            )
     if own_modal is not None and modal is not None:
         for well in ("minus", "plus"):
             for f_own, f_lin in zip(_modes(own_modal, well), _modes(modal, well), strict=False):
