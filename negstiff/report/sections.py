@@ -540,6 +540,8 @@ def _structure_discrepancy_section(d, res: dict[str, Any], label: str) -> Sectio
     effects = [e for e in det.get("effects", [det["effect"]]) if e != "none"]
     title = _with_label("Discrepancy: where the structure's model and data disagree", label)
     sec = Section("discrepancy", label, title)
+    if det.get("where"):  # on the element's relative motion
+        sec.text(f"Where (the element's relative motion): {det['where']}.")
     sec.table(["effect", "held-out weak residual score [%] (first round)"],
               [[r["effect"], r["score"]] for r in det["ranking"][:6]])  # fmt: skip
     extra = res["structure"]["element"].get("extra") or {}

@@ -1115,6 +1115,7 @@ def discrepancy(est, rec: Measurement, at: tuple[int, int]) -> StructureIdentifi
     linear structure, each registered effect added in turn, named by the paired block rule; the named one joins the
     base and the rest are offered again, until none is named (at most ``max_effects`` rounds: ``iterations``).
     """
+    from negstiff.inference.estimators.discrepancy._locating import where_words
     from negstiff.models import effects
 
     ident_states: dict[str, Any] = {}
@@ -1131,7 +1132,7 @@ def discrepancy(est, rec: Measurement, at: tuple[int, int]) -> StructureIdentifi
         ident_states["v_noise"] = v_noise_of(vr)
         return [(t.field, t.law.column(r, vr, ident_states["v_noise"])) for t in terms]
 
-    fit, sel, whole, rows, window, _, (n_id, _), _ = _systems(est, rec, at, extras)
+    fit, sel, whole, rows, window, form, (n_id, _), states = _systems(est, rec, at, extras)
     (yf, Xf_all, names_all, _), (ys, Xs_all, _, per_sel) = fit[:4], sel[:4]
     n_base = len(names_all) - len(terms)
     masses = rec.dof_masses
@@ -1174,12 +1175,16 @@ def discrepancy(est, rec: Measurement, at: tuple[int, int]) -> StructureIdentifi
         iterations.append({"named": "none", "ranking": [{"effect": "none", "score": score}], "candidates": {}})
     first = iterations[0]
     y, X = whole[0], whole[1]
-    base_s, base_b = _assemble(_lstsq(X[:, :n_base], y), rec.n_dof, at, masses)
+    theta_base = _lstsq(X[:, :n_base], y)
+    base_s, base_b = _assemble(theta_base, rec.n_dof, at, masses)
     baseline, base_offsets = physical_frame(base_s, base_b, rec.gravity, unknown_zeros(rec))
+    located = {"before": locate(y - X[:, :n_base] @ theta_base, y, whole[3], form, states, at, baseline, base_offsets)}
     if not named_all:
         structure, offsets = baseline, base_offsets
+        located["after"] = located["before"]
     else:
         theta = _lstsq(X[:, base_cols], y)
+        located["after"] = locate(y - X[:, base_cols] @ theta, y, whole[3], form, states, at, baseline, base_offsets)
         extra = {name: float(theta[n_base + i]) for i, name in enumerate(named_all)}
         s, b = _assemble(theta[:n_base], rec.n_dof, at, masses, extra)
         structure, offsets = physical_frame(s, b, rec.gravity, unknown_zeros(rec))
@@ -1198,6 +1203,8 @@ def discrepancy(est, rec: Measurement, at: tuple[int, int]) -> StructureIdentifi
         "effect": first["named"], "effects": named_all or ["none"], "ranking": first["ranking"],
         "candidates": first["candidates"], "iterations": iterations,
         "gap_before_percent": gap_before["rms_percent"],
+        "where": where_words(located["before"]), "regimes_before": located["before"],
+        "regimes_after": located["after"],
         "velocity_noise_for_sign": ident_states.get("v_noise"),
     }, {"velocity": f"Savitzky-Golay (window, order) = {window}",
         "score": f"held-out weak residual in blocks of {est.window_s:g} s; named only above max(1 SE, "
@@ -1210,6 +1217,32 @@ def discrepancy(est, rec: Measurement, at: tuple[int, int]) -> StructureIdentifi
     out.details["effect_interval"] = effect_intervals(out, named_all)
     est.gap_before_, est.gap_after_ = gap_before, gap_after
     return out
+
+
+def locate(residual: np.ndarray, y: np.ndarray, per_dof: int, form: _Weak, states, at: tuple[int, int],
+           structure: Structure, offsets: np.ndarray) -> dict[str, dict[str, float]]:  # fmt: skip
+    """Where a structure's weak residual (``weak_system``'s rows over the identification part) lives, by the regimes
+    of the element's relative motion (the single DOF's ``regime_shares`` on the element's relative displacement and
+    velocity at each test function's centre, in the physical frame of ``structure`` and its channels' ``offsets``,
+    its wells the element's): each test function's squared residual of every DOF, divided by that DOF's target's
+    variance and averaged over the DOFs (``_block_scores``' measure).
+    """
+    from negstiff.inference.estimators.discrepancy._locating import regime_shares
+
+    zs, v = states
+    n_dof = zs.shape[0]
+    r2 = (residual.reshape(n_dof, per_dof) ** 2 / y.reshape(n_dof, per_dof).var(axis=1, keepdims=True)).mean(axis=0)
+    centres = np.clip(np.arange(per_dof) * form.stride + form.phi.size // 2, 0, zs.shape[1] - 1)
+    o = np.asarray(offsets, float)
+    r_all = relative(zs - o[:, None], at)
+    rv_all = relative(v, at)
+    wells: tuple[float | None, ...] = (None, None, None)
+    try:
+        eq = structure.element_equilibria()
+        wells = (eq.z_minus, eq.z_0, eq.z_plus)
+    except ValueError:
+        pass
+    return regime_shares(r_all[centres], rv_all[centres], np.sqrt(r2), wells, r_all, rv_all)
 
 
 def effect_intervals(result: StructureIdentification, named: list[str], prob: float = 0.9) -> dict[str, Any]:

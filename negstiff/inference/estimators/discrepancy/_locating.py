@@ -32,49 +32,65 @@ class Locating(Baselines):
             wells = (eq.z_minus, eq.z_0, eq.z_plus)
         except ValueError:
             wells = (None, None, None)
-        regimes = {}
-        v_rms = float(np.sqrt(np.mean(self._v**2)))
-        stroke = np.percentile(np.abs(self._zs - np.median(self._zs)), 90)
-        masks = {
-            "near zero velocity": np.abs(v) < 0.1 * v_rms,
-            "large stroke": np.abs(z - np.median(self._zs)) > stroke,
-        }
-        if wells[1] is not None:
-            zm, z0, zp = wells
-            masks["crossing the barrier"] = np.abs(z - z0) < 0.25 * (zp - zm) / 2
-            masks["in the minus well"] = (z < z0) & ~masks["crossing the barrier"]
-            masks["in the plus well"] = (z >= z0) & ~masks["crossing the barrier"]
-        total = float(np.sum(r**2))
-        for name, m in masks.items():
-            if m.any():
-                share_r = float(np.sum(r[m] ** 2) / total)
-                share_t = float(np.mean(m))
-                regimes[name] = {"residual_share": share_r, "time_share": share_t, "ratio": share_r / share_t}
+        regimes = regime_shares(z, v, r, wells, self._zs, self._v)
         worst = max(regimes.items(), key=lambda kv: kv[1]["ratio"]) if regimes else None
         return {"regimes": regimes, "worst": worst[0] if worst else None, "z": z, "v": v, "r": r, "wells": wells}
 
     def where_text(self) -> str:
         """Where the baseline's equation error concentrates, in words (the result's ``where``)."""
-        loc = self.locate_before_
-        if not loc["regimes"]:
-            return "no regime could be told apart"
-        parts = sorted(loc["regimes"].items(), key=lambda kv: -kv[1]["ratio"])
-        worst, w = parts[0]
-        if w["ratio"] < 1.5:
-            return (
-                "the baseline's equation error is spread evenly: no regime carries more than 1.5x its share of the "
-                f"record (largest: {worst}, {w['ratio']:.1f}x)"
-            )
+        return where_words(self.locate_before_["regimes"])
 
-        def where(regime: str) -> str:  # "concentrated at large stroke", "... crossing the barrier"
-            return f"at {regime}" if regime == "large stroke" else regime
 
-        txt = (
-            f"the baseline's equation error is concentrated {where(worst)} "
-            f"({share_text(w['residual_share'])} % of the squared "
-            f"residual in {share_text(w['time_share'])} % of the record, {w['ratio']:.1f}x its share)"
+def regime_shares(z: np.ndarray, v: np.ndarray, r: np.ndarray, wells, z_all: np.ndarray,
+                  v_all: np.ndarray) -> dict[str, dict[str, float]]:  # fmt: skip
+    """Each regime's share of the squared residual ``r`` against its share of the record (``ratio``: > 1 where the
+    error concentrates), the residual's rows at the states (``z``, ``v``) of their test functions' centres: near zero
+    velocity (a tenth of the rms ``v_all``), at large stroke (beyond the 90th percentile of |z - median| over
+    ``z_all``), and with the wells (``wells``: z_minus, z_0, z_plus, or Nones) crossing the barrier and in each
+    well. A single DOF's z; a structure's element's relative displacement.
+    """
+    regimes = {}
+    v_rms = float(np.sqrt(np.mean(v_all**2)))
+    stroke = np.percentile(np.abs(z_all - np.median(z_all)), 90)
+    masks = {
+        "near zero velocity": np.abs(v) < 0.1 * v_rms,
+        "large stroke": np.abs(z - np.median(z_all)) > stroke,
+    }
+    if wells[1] is not None:
+        zm, z0, zp = wells
+        masks["crossing the barrier"] = np.abs(z - z0) < 0.25 * (zp - zm) / 2
+        masks["in the minus well"] = (z < z0) & ~masks["crossing the barrier"]
+        masks["in the plus well"] = (z >= z0) & ~masks["crossing the barrier"]
+    total = float(np.sum(r**2))
+    for name, m in masks.items():
+        if m.any():
+            share_r = float(np.sum(r[m] ** 2) / total)
+            share_t = float(np.mean(m))
+            regimes[name] = {"residual_share": share_r, "time_share": share_t, "ratio": share_r / share_t}
+    return regimes
+
+
+def where_words(regimes: dict[str, dict[str, float]]) -> str:
+    """Where a baseline's equation error concentrates (``regime_shares``), in words."""
+    if not regimes:
+        return "no regime could be told apart"
+    parts = sorted(regimes.items(), key=lambda kv: -kv[1]["ratio"])
+    worst, w = parts[0]
+    if w["ratio"] < 1.5:
+        return (
+            "the baseline's equation error is spread evenly: no regime carries more than 1.5x its share of the "
+            f"record (largest: {worst}, {w['ratio']:.1f}x)"
         )
-        if len(parts) > 1:
-            n2, w2 = parts[1]
-            txt += f"; next {where(n2)} ({w2['ratio']:.1f}x)"
-        return txt
+
+    def where(regime: str) -> str:  # "concentrated at large stroke", "... crossing the barrier"
+        return f"at {regime}" if regime == "large stroke" else regime
+
+    txt = (
+        f"the baseline's equation error is concentrated {where(worst)} "
+        f"({share_text(w['residual_share'])} % of the squared "
+        f"residual in {share_text(w['time_share'])} % of the record, {w['ratio']:.1f}x its share)"
+    )
+    if len(parts) > 1:
+        n2, w2 = parts[1]
+        txt += f"; next {where(n2)} ({w2['ratio']:.1f}x)"
+    return txt
