@@ -1215,6 +1215,7 @@ def discrepancy(est, rec: Measurement, at: tuple[int, int]) -> StructureIdentifi
     gap_after = {k: v for k, v in out.validation.items() if k != "floor_percent"}
     out.details["gap_after_percent"] = gap_after["rms_percent"]
     out.details["effect_interval"] = effect_intervals(out, named_all)
+    out.details["bayesian"] = bayesian_opinions(out, rec, n_id, named_all, hits)
     est.gap_before_, est.gap_after_ = gap_before, gap_after
     return out
 
@@ -1268,6 +1269,53 @@ def effect_intervals(result: StructureIdentification, named: list[str], prob: fl
                   "interval": [float(value - zq * se), float(value + zq * se)], "prob": prob,
                   "method": "the output-error refinement's window-robust standard error (its last stage's restarted "
                             "windows, every parameter and the channels' zeros free), a Gaussian interval"}  # fmt: skip
+    return out
+
+
+def bayesian_opinions(result: StructureIdentification, rec: Measurement, n_id: int, named: list[str],
+                      between_pulses: bool = False, draws: int = 64) -> dict[str, Any]:  # fmt: skip
+    """A Bayesian second opinion on each named effect, beside the paired rule that named it (the single DOF's
+    ``_loo_compare``): the held-out tail's restarted windows (``free_run_error``'s) predicted by the final structure
+    with the effect (its size drawn ``draws`` times from the refinement's standard error where one was kept, else at
+    its value) and without it (the rest held), compared by ``arviz.compare`` (PSIS-LOO over the windows). A window's
+    mean-square error is every DOF's divided by that channel's held-out variance (the validation's measure); a
+    diverged run's is the measured motion's own.
+    """
+    from negstiff.inference.estimators.discrepancy._candidates import _admissible_sizes, _with_size, _without
+    from negstiff.inference.estimators.discrepancy._opinions import _loo_compare
+    from negstiff.inference.steps.validation import structure_window_errors, structure_windows
+
+    if not named:
+        return {}
+    structure, offsets = result.structure, np.asarray(result.offsets_m, float)
+    windows, zs, v = structure_windows(rec, structure.place, n_id, WINDOW_S, between_pulses)
+    held = rec.channels[:, n_id:]
+    scale = np.sqrt(np.mean((held - held.mean(axis=1, keepdims=True)) ** 2, axis=1))[None, None, :, None]
+    worst = float(np.mean((windows.measured(rec.channels) / scale[0]) ** 2))
+    account: dict[str, Any] = dict(result.refinement or {})
+    se_all = (account.get("standard_errors") or {}) if account.get("applied") else {}
+    element = structure.element
+    out: dict[str, Any] = {}
+    for e in named:
+        rng = np.random.default_rng(0)
+        value, se = float(element.extra[e]), float(se_all.get(e) or math.nan)
+        drawn = math.isfinite(se) and se > 0
+        sizes = (_admissible_sizes(element, e, [None], rng.multivariate_normal, np.array([value]),
+                                   np.array([[se**2]]), draws) if drawn else [value] * draws)  # fmt: skip
+        systems = [structure.with_element(_with_size(element, e, size)) for size in sizes]
+        systems += [structure, structure.with_element(_without(element, e))]
+        err, diverged = structure_window_errors(systems, rec, windows, zs, v, offsets)
+        norm = err / scale
+        ms = np.where(diverged, worst, np.mean(norm**2, axis=(2, 3)))
+        rows = [r for k in (-2, -1) for r in norm[k].reshape(-1, norm.shape[-1])]
+        opinion = _loo_compare(ms[:-2], np.repeat(ms[-1][None], len(sizes), axis=0), rows, windows.length, rng)
+        opinion["method"] = (
+            f"arviz.compare (PSIS-LOO) over the held-out tail's {windows.starts.size} restarted {WINDOW_S:g} s runs of "
+            f"every DOF, {draws} draws of the noise variance"
+            + (" and of the effect's size from the refinement's standard error" if drawn else
+               " (the effect at its value: no refinement's standard error was kept)")
+        )  # fmt: skip
+        out[e] = opinion
     return out
 
 

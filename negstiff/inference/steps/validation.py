@@ -514,6 +514,46 @@ STRUCTURE_WINDOW_S = 0.25
 """A structure's restarted windows [s] (``restarted_structure_runs``; ``structure_id.WINDOW_S``)."""
 
 
+def structure_windows(rec: Measurement, place: tuple[int, int], start: int, window_s: float = STRUCTURE_WINDOW_S,
+                      between_pulses: bool = False) -> tuple[RestartWindows, np.ndarray, np.ndarray]:  # fmt: skip
+    """A structure's restarted windows over the record from sample ``start`` on (``restarted_structure_runs``'), and
+    the channels' band-smoothed displacements and velocities (N, T) the runs start from (``channel_states`` of the
+    element at ``place``); one ``MeasurementError`` where the part holds no window.
+    """
+    zs, v, smoother = rec.channel_states(place)
+    # windows of L + 1 samples, each ending on the next one's start (the structure's input is linear between them)
+    windows = restart_windows(rec.n, rec.fs, window_s, start=start, extra=1, min_step=8)
+    if between_pulses:
+        lead = smoother[0] // 2
+        busy = np.concatenate([[0], np.cumsum(np.asarray(rec.u) != 0)])
+        lo = np.maximum(windows.starts - lead, 0)
+        quiet = busy[windows.starts + windows.length] == busy[lo]
+        windows = RestartWindows.at(windows.starts[quiet], windows.length)
+    if not windows.starts.size:
+        if between_pulses:
+            raise MeasurementError(f"{rec.source}: the held-out part holds no {window_s} s window between the hammer's "
+                                   "pulses")  # fmt: skip
+        raise MeasurementError(f"{rec.source}: the held-out part is shorter than one {window_s} s window")
+    return windows, zs, v
+
+
+def structure_window_errors(structures, rec: Measurement, windows: RestartWindows, zs: np.ndarray, v: np.ndarray,
+                            offsets=None) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+    """Each of ``structures``' run errors in every window (``structure_windows``), (S, W, N, L + 1) [m] in the
+    record's frame (``offsets``: each channel's zero), and which runs diverged (S, W): one batch of S x W runs.
+    """
+    structures = list(structures)
+    o = np.zeros(rec.n_dof) if offsets is None else np.asarray(offsets, float)
+    n_s, n_w = len(structures), windows.starts.size
+    x0 = windows.start_states(zs - o[:, None], v)
+    res = simulate_structures(structures, windows.measured(rec.u), rec.dt, np.tile(x0, (n_s, 1)),
+                              input_kind=rec.input_name, force_dof=rec.force_dof,
+                              input_index=np.tile(np.arange(n_w), n_s),
+                              structure_index=np.repeat(np.arange(n_s), n_w))  # fmt: skip
+    z = res.z.reshape(n_s, n_w, rec.n_dof, -1)
+    return z + o[None, None, :, None] - windows.measured(rec.channels)[None], res.diverged.reshape(n_s, n_w)
+
+
 def restarted_structure_runs(structure: Structure, rec: Measurement, start: int, window_s: float = STRUCTURE_WINDOW_S,
                              offsets=None, between_pulses: bool = False) -> dict[str, Any]:  # fmt: skip
     """The restarted windows of a structure of N >= 1 DOFs (a single DOF as ``Structure.single(model)``; the
@@ -529,21 +569,8 @@ def restarted_structure_runs(structure: Structure, rec: Measurement, start: int,
     """
     z_all = rec.channels
     o = np.zeros(rec.n_dof) if offsets is None else np.asarray(offsets, float)
-    zs, v, smoother = rec.channel_states(structure.place)
-    # windows of L + 1 samples, each ending on the next one's start (the structure's input is linear between them)
-    windows = restart_windows(rec.n, rec.fs, window_s, start=start, extra=1, min_step=8)
-    if between_pulses:
-        lead = smoother[0] // 2
-        busy = np.concatenate([[0], np.cumsum(np.asarray(rec.u) != 0)])
-        lo = np.maximum(windows.starts - lead, 0)
-        quiet = busy[windows.starts + windows.length] == busy[lo]
-        windows = RestartWindows.at(windows.starts[quiet], windows.length)
+    windows, zs, v = structure_windows(rec, structure.place, start, window_s, between_pulses)
     starts = windows.starts
-    if not starts.size:
-        if between_pulses:
-            raise MeasurementError(f"{rec.source}: the held-out part holds no {window_s} s window between the hammer's "
-                                   "pulses")  # fmt: skip
-        raise MeasurementError(f"{rec.source}: the held-out part is shorter than one {window_s} s window")
     u = windows.measured(rec.u)
     x0 = windows.start_states(zs - o[:, None], v)
     res = simulate_structures(structure, u, rec.dt, x0, input_kind=rec.input_name, force_dof=rec.force_dof,
