@@ -199,15 +199,13 @@ def refinement(args) -> bool | None:
 
 
 def cmd_identify(args) -> int:
-    from negstiff.inference.analysis.frf import compare_with_frf, read_frf_results
+    from negstiff.inference.analysis.frf import read_frf_results
     from negstiff.inference.record.reading import load
 
     masses = parse_amplitudes(args.masses, "--masses") if args.masses else None
     rec = load(args.data, columns=args.columns, fs=args.fs, mass=args.mass, gravity=args.gravity, aux=args.aux,
                masses=masses, decay=args.decay)  # fmt: skip
     check_dofs(args, rec)
-    if rec.n_dof > 1 and args.frf:
-        raise InputError(f"--frf compares a single DOF's wells; {args.data} is a record of {rec.n_dof} DOFs")
     frfs = read_frf_results(args.frf)
     if args.method == "nsi":
         from negstiff.inference.estimators.nsi import NSI
@@ -223,7 +221,7 @@ def cmd_identify(args) -> int:
                     law=args.law, damping=args.damping)  # fmt: skip
     rec = est.check(rec)  # every refusal before the progress line
     if rec.n_dof > 1:
-        return _identify_structure(args, est, rec)
+        return _identify_structure(args, est, rec, frfs)
     say(args, f"identify {args.method}: {rec.n} samples at {rec.fs:g} Hz, input {rec.input_name}")
     est.fit(rec)
     result = est.result()
@@ -231,10 +229,7 @@ def cmd_identify(args) -> int:
     if kind.get("kind") in ("impact", "decay"):
         say(args, f"read as {'a hammer' if kind['kind'] == 'impact' else 'a free decay'}'s record: {kind['how']}")
     if args.frf:
-        result["frf_comparison"] = compare_with_frf(result["modal"], frfs)
-        for c in result["frf_comparison"]:
-            say(args, f"{c['well']} well: identified {c['identified_f_hz']:.4f} Hz, FRF {c['frf_f_hz']:.4f} Hz "
-                       f"({c['difference_percent']:+.2f} %)")  # fmt: skip
+        compared(args, result, frfs)
     say_refinement(args, result.get("refinement"))
     v = result["validation"]
     warn(args, result["warnings"])
@@ -257,7 +252,21 @@ def check_dofs(args, rec, path=None) -> None:
         raise InputError(f"{path or args.data}: --dofs {args.dofs}, but the record has responses {have}")
 
 
-def _identify_structure(args, est, rec) -> int:
+def compared(args, result: dict, frfs) -> None:
+    """``--frf``: each FRF peak beside the identified underlying-linear frequency nearest it, in the result and said."""
+    from negstiff.inference.analysis.frf import compare_with_frf
+
+    result["frf_comparison"] = compare_with_frf(result["modal"], frfs)
+    for c in result["frf_comparison"]:
+        if c["identified_f_hz"] is None:
+            say(args, f"FRF {c['frf_f_hz']:.4f} Hz: no identified frequency to compare with")
+            continue
+        mode = f" mode {c['mode']}" if "mode" in c else ""
+        say(args, f"{c['well']} well{mode}: identified {c['identified_f_hz']:.4f} Hz, FRF {c['frf_f_hz']:.4f} Hz "
+                  f"({c['difference_percent']:+.2f} %)")  # fmt: skip
+
+
+def _identify_structure(args, est, rec, frfs) -> int:
     """``identify`` on a structure's record (N > 1 DOFs, ``--element I-J``): the same estimator, its result."""
     from negstiff.inference.estimators.structure_id import element_of, modes_summary
 
@@ -266,6 +275,8 @@ def _identify_structure(args, est, rec) -> int:
     say(args, f"identify {args.method}: {rec.n_dof} DOFs, element {at[0]}-{at[1]}, {rec.n} samples at {rec.fs:g} Hz")
     est.fit(rec)
     result = est.result()
+    if args.frf:
+        compared(args, result, frfs)
     say_refinement(args, result.get("refinement"))
     warn(args, result["warnings"])
     write_json(args.out, result)

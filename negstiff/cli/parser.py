@@ -300,7 +300,7 @@ def _identify(sub, common: argparse.ArgumentParser, data_opts: argparse.Argument
         action="append",
         metavar="R.json",
         help="an frf result of a low-level test around a well: its peak beside the identified well frequency "
-        "(repeatable, one per well)",
+        "(repeatable, one per well); a structure's: each of its modes beside the identified mode nearest it",
     )
     _structure_options(idf, "where the nonlinear element acts, I-J: it moves DOF J relative to DOF I (0: the base), "
                        "e.g. 1-2 for a device on a fixture")  # fmt: skip

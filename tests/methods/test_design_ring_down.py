@@ -30,9 +30,9 @@ def hammer_posterior(tmp_path_factory):
     rec = measured_hammer(DOUBLE_WELL, seed=1, laser_m=1e-6)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        # two ensembles of 2000 steps at most: c_nl's optimum lies on its bound (0), where the sampler mixes slowly
+        # two ensembles of 1000 steps at most: c_nl's optimum lies on its bound (0), where the sampler mixes slowly
         # (its autocorrelation time 96 steps, the default fit 26 s); the design reads the posterior's moments
-        res = Posterior(seed=0, n_ensembles=2, max_steps=2000).fit(rec).result()
+        res = Posterior(seed=0, n_ensembles=2, max_steps=1000).fit(rec).result()
     path = tmp_path_factory.mktemp("ring_down") / "hammer_post.json"
     path.write_text(json.dumps(res))
     return path

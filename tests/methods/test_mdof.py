@@ -213,11 +213,18 @@ def test_command_line_identifies_a_structure_and_refuses_a_wrong_one(tmp_path, c
         return code, capsys.readouterr().err
 
     out = tmp_path / "r.json"
-    code, err = run("nsi", data, "--dofs", 2, "--element", "1-2", "-o", out)
+    # a structure's low-level FRFs (``negstiff frf --dofs 2``'s result: its modes, here the plus well's as a lab's
+    # 0.3 m/s^2 test measured them: 0.1 % low) beside the identified modes (``--frf``): each mode to the nearest
+    modes = [m.f_hz for m in ON_FIXTURE.modes("plus")]
+    frf = tmp_path / "frf.json"
+    frf.write_text(json.dumps({"dofs": [{"dof": 1}, {"dof": 2}], "modes": [{"f_hz": 0.999 * f} for f in modes]}))
+    code, err = run("nsi", data, "--dofs", 2, "--element", "1-2", "--frf", frf, "-o", out)
     assert code == 0, err
     result = json.loads(out.read_text())
-    assert [m["f_hz"] for m in result["modal"]["plus"]] == pytest.approx([m.f_hz for m in ON_FIXTURE.modes("plus")],
-                                                                          rel=0.01)  # fmt: skip
+    assert [m["f_hz"] for m in result["modal"]["plus"]] == pytest.approx(modes, rel=0.01)
+    compared = result["frf_comparison"]
+    assert [(c["well"], c["mode"]) for c in compared] == [("plus", 1), ("plus", 2)]
+    assert all(abs(c["difference_percent"]) < 1.2 for c in compared) and "plus well mode 2: identified" in err
     assert result["element"]["k3"] == pytest.approx(TRUTH.k3, rel=0.05) and result["element_at"] == [1, 2]
     for bad, says in ((("--dofs", 3, "--element", "1-2"), "z1 ... z2"), (("--dofs", 2), "--element"),
                       (("--dofs", 2, "--element", "3-2"), "J must be")):  # fmt: skip

@@ -430,40 +430,50 @@ def _peaks(rec: Measurement, est: dict[str, Any], band: tuple[float, float], min
 
 
 def read_frf_results(paths: Sequence[str] | None) -> list[tuple[str, float, str | None]]:
-    """(path, peak frequency [Hz], well) of each ``frf`` result file, checked (one ``MeasurementError``)."""
+    """(path, peak frequency [Hz], well) of each ``frf`` result file, checked (one ``MeasurementError``): a single
+    DOF's FRF its peak (and the well its record rested in, where it says); a structure's (``frf_structure``) each of
+    its modes.
+    """
     out = []
     for p in paths or []:
         try:
             r = read_json(p)
-            f_frf, well = r["f_hz"], r.get("well")
+            peaks = ([(m["f_hz"], None) for m in r["modes"]] if "modes" in r and "dofs" in r
+                     else [(r["f_hz"], r.get("well"))])  # fmt: skip
         except (ValueError, KeyError, TypeError, AttributeError):
-            raise MeasurementError(f"--frf {p}: not an frf result (needs f_hz)") from None
-        if not isinstance(f_frf, (int, float)) or isinstance(f_frf, bool):
-            raise MeasurementError(f"--frf {p}: the FRF found no peak to compare with (f_hz is {f_frf!r})")
-        out.append((p, float(f_frf), well))
+            raise MeasurementError(f"--frf {p}: not an frf result (needs f_hz, or a structure's modes)") from None
+        if not peaks:
+            raise MeasurementError(f"--frf {p}: the FRFs found no mode to compare with")
+        for f_frf, well in peaks:
+            if not isinstance(f_frf, (int, float)) or isinstance(f_frf, bool):
+                raise MeasurementError(f"--frf {p}: the FRF found no peak to compare with (f_hz is {f_frf!r})")
+            out.append((p, float(f_frf), well))
     return out
 
 
 def compare_with_frf(modal: dict, frfs: list[tuple[str, float, str | None]]) -> list[dict]:
-    """Each well's identified underlying-linear frequency (an identification's ``modal``) beside a low-level
-    FRF's (``read_frf_results``; ``identify --frf``): the FRF's well from its record's rest positions, else the
-    identified well of the nearest frequency.
+    """Each low-level FRF peak (``read_frf_results``; ``identify --frf``) beside the identified underlying-linear
+    frequency nearest it (an identification's ``modal``: a single DOF's ``{well: {"f_hz", ...}}``, a structure's
+    ``{well: [{"f_hz", ...}, ...]}``, whose ``mode`` is then named, 1 the lowest): within the FRF's well where its
+    record's rest positions say which, else over every well.
     """
+    found: list[tuple[str, int | None, float]] = []  # (well, mode or None, f)
+    for w, m in modal.items():
+        if isinstance(m, dict):
+            if m.get("f_hz"):
+                found.append((w, None, float(m["f_hz"])))
+        else:
+            found += [(w, i + 1, float(x["f_hz"])) for i, x in enumerate(m) if x.get("f_hz")]
     out = []
     for p, f_frf, well in frfs:
-        modal = {w: m["f_hz"] for w, m in modal.items() if m.get("f_hz")}
-        if well not in modal:  # no rest positions in the FRF's record: the nearest well frequency
-            well = min(modal, key=lambda w: abs(modal[w] - f_frf)) if modal else None
-        f_id = modal.get(well)
-        out.append(
-            {
-                "frf": str(p),
-                "well": well,
-                "frf_f_hz": f_frf,
-                "identified_f_hz": f_id,
-                "difference_percent": None if f_id is None else 100 * (f_id / f_frf - 1),
-            }
-        )
+        pool = [c for c in found if c[0] == well] or found
+        best = min(pool, key=lambda c: abs(c[2] - f_frf)) if pool else (None, None, None)
+        diff = None if best[2] is None else 100 * (best[2] / f_frf - 1)
+        row: dict[str, Any] = {"frf": str(p), "well": best[0], "frf_f_hz": f_frf, "identified_f_hz": best[2],
+                               "difference_percent": diff}  # fmt: skip
+        if best[1] is not None:
+            row["mode"] = best[1]
+        out.append(row)
     return out
 
 
