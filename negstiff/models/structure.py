@@ -381,6 +381,13 @@ class Structure:
         return self.element.kernel_params(), 1.0 / mass, self.K, self.C, gain
 
 
+def as_structure(system) -> Structure:
+    """A ``Structure`` as itself, a single-DOF ``Model`` as the structure of one DOF on the base
+    (``Structure.single``): what reads any N reads a single DOF's model through this.
+    """
+    return system if isinstance(system, Structure) else Structure.single(system)
+
+
 def simulate_structures(
     structures: Structure | Sequence[Structure],
     u: np.ndarray,

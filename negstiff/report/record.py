@@ -445,9 +445,9 @@ def _last_well(rec, model):
     minus well; over the whole record the Hilbert backbone read 2.27 Hz, from the crossing on 11.238 Hz (the well's
     11.240 Hz).
     """
-    from negstiff.models.structure import Structure
+    from negstiff.models.structure import as_structure
 
-    structure = model if isinstance(model, Structure) else Structure.single(model)
+    structure = as_structure(model)
     try:
         z0 = structure.element_equilibria().z_0
     except ValueError:

@@ -48,7 +48,7 @@ from scipy import optimize, signal
 from negstiff.errors import MeasurementError
 from negstiff.inference.record.impacts import MAD_TO_SIGMA
 from negstiff.inference.record.measurement import Measurement
-from negstiff.models.structure import Structure
+from negstiff.models.structure import Structure, as_structure
 
 QUIET_DEVIATIONS = 10.0
 """The input is active where it stands more than this many floor deviations from its tail's median."""
@@ -331,16 +331,11 @@ def measure_backbone(rec: Measurement, dof: int | None = None,
     }
 
 
-def _as_structure(model) -> Structure:
-    """The model as a structure (a single DOF's ``Model``: the structure of one DOF on the base)."""
-    return model if isinstance(model, Structure) else Structure.single(model)
-
-
 def _model_decay(model, x0: np.ndarray, fs: float, n: int, dof: int) -> np.ndarray:
     """DOF ``dof``'s channel of the model's free decay from the state ``x0`` (2N,), n samples at fs (zero force)."""
     from negstiff.models.structure import simulate_structures
 
-    res = simulate_structures(_as_structure(model), np.zeros(n), 1.0 / fs, x0, input_kind="force")
+    res = simulate_structures(as_structure(model), np.zeros(n), 1.0 / fs, x0, input_kind="force")
     if res.diverged[0]:
         raise MeasurementError(f"the model's free decay from z0 = {x0[dof - 1]:.4g} m diverged "
                                f"({res.describe_failures()})")  # fmt: skip
@@ -356,7 +351,7 @@ def _model_start(model, measured: dict[str, Any], rec: Measurement) -> tuple[np.
     z0, v0 = np.asarray(d["z0s_m"]), np.asarray(d["v0s_m_s"])
     if _z_constant_known(rec):
         return np.r_[z0, v0], "the record's state at the decay's start"
-    s = _as_structure(model)
+    s = as_structure(model)
     static = s.static_positions(s.element_equilibria().well(_rest_well(model, measured, rec)))
     return (
         np.r_[static + z0 - np.asarray(d["rests_m"]), v0],
@@ -371,7 +366,7 @@ def predict_backbone(model, rec: Measurement, measured: dict[str, Any] | None = 
     """
     measured = measure_backbone(rec) if measured is None else measured
     dof = measured["dof"]
-    n_model = _as_structure(model).n_dof
+    n_model = as_structure(model).n_dof
     if n_model != rec.n_dof:
         raise MeasurementError(f"{rec.source}: the model has {n_model} DOF(s) and the record {rec.n_dof}")
     x0, how = _model_start(model, measured, rec)
@@ -463,7 +458,7 @@ def _rest_well(model, measured: dict[str, Any], rec: Measurement) -> str:
     where z is in the model's frame, else the one with a linear frequency nearest the decay's at its smallest
     amplitude.
     """
-    s = _as_structure(model)
+    s = as_structure(model)
     eq = s.element_equilibria()
     wells = {n: w for n, w in (("minus", eq.z_minus), ("plus", eq.z_plus)) if w is not None}
     if _z_constant_known(rec):

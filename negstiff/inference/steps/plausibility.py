@@ -19,10 +19,9 @@ from negstiff.errors import (
     RecordWarning,
 )
 from negstiff.inference.steps.frame import frame_offset
-from negstiff.inference.steps.refine import as_structure
 from negstiff.inference.steps.validation import element_motion
 from negstiff.inference.steps.weak import input_coefficient
-from negstiff.models.structure import relative
+from negstiff.models.structure import as_structure, relative
 
 FRAME_WARN_M = 2e-3
 """A measured z whose zero sits this far [m] from where the record's physics carries the weight is

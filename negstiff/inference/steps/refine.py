@@ -52,7 +52,7 @@ from negstiff.inference.steps.validation import (
     validate,
 )
 from negstiff.models import Model, effects
-from negstiff.models.structure import Structure, simulate_structures
+from negstiff.models.structure import Structure, as_structure, simulate_structures
 
 PREDICTABLE_GROWTH = 5.0
 """A stage of longer windows is fitted only while its error at the current model stays within this
@@ -238,11 +238,6 @@ class SystemParameters:
             return with_values(self.system, self.element_names, np.asarray(values, float))
         s = self.structure(values)
         return Structure(s.masses, s.element, s.K, s.C, s.place)
-
-
-def as_structure(system: Model | Structure) -> Structure:
-    """A ``Structure`` as itself, a single-DOF ``Model`` as the structure of one DOF on the base."""
-    return system if isinstance(system, Structure) else Structure.single(system)
 
 
 def shooting_sparsity(n_win: int, length: int, dense: int, penalty: tuple[int, int] | None = None,

@@ -83,6 +83,31 @@ FORCE_BAND_DRAWS = 400
 about 0.02 posterior sd from draw to draw of the band (the order statistics' spread), far below the band's width."""
 
 
+def check_map_point(logpost: LogPosterior, nd: int) -> None:
+    """Refuse (one ``PosteriorError``) a posterior whose MAP point lies outside the prior's support or whose windows
+    diverge there, naming which, before the sampler looks for a start about it (it had searched 50 times and said
+    only that no start point was found).
+    """
+    from negstiff.inference.estimators.posterior.windows import SIGMA_BOUNDS
+
+    origin = np.zeros((1, nd))
+    if np.isfinite(logpost(origin)[0][0]):
+        return
+    q = logpost.unwhiten(origin)
+    theta, log_sigma = logpost.split(q)
+    par = logpost.par
+    phys = par.physical(theta)[0]
+    why = [f"{n} = {v:.4g} outside ({lo:.4g}, {hi:.4g})" for n, v, lo, hi in
+           zip(par.names, phys, par.lower, par.upper, strict=True) if not lo < v < hi]  # fmt: skip
+    why += support_failures(par, phys)
+    why += [f"the sensor noise it reads, {np.exp(ls):.3g} m, outside the prior's ({SIGMA_BOUNDS[0]:g}, "
+            f"{SIGMA_BOUNDS[1]:g}) m" for ls in np.atleast_1d(log_sigma[0])
+            if not math.log(SIGMA_BOUNDS[0]) < ls < math.log(SIGMA_BOUNDS[1])]  # fmt: skip
+    if not why:
+        why = ["its windows' runs diverge there"]
+    raise PosteriorError(f"the posterior's MAP point has no density: {'; '.join(why)}")
+
+
 class Posterior(Estimator):
     """The Bayesian posterior of a record's model parameters, sampled with emcee and diagnosed with arviz.
 
@@ -818,6 +843,7 @@ class Posterior(Estimator):
         logpost = LogPosterior(par, win, q0, scale, (theta, A_theta, free) if self.adjust else None)
 
         nd = q0.size
+        check_map_point(logpost, nd)
         logpost = self._pilot_whitened(logpost, nd, seed)
         run = sample_ensembles(
             logpost,
