@@ -425,12 +425,19 @@ def parse_wells(text: str | None) -> tuple[float, ...] | None:
 
 
 def cmd_characterise(args) -> int:
-    from negstiff.inference.analysis.characterise import characterise, check_harmonic
+    from negstiff.inference.analysis.characterise import characterise, check_harmonic, response_for
     from negstiff.inference.record.reading import load
     from negstiff.report.record import check_forcing
 
     given = parse_wells(args.wells)  # the options before any work
+    if args.element is not None and args.dof is not None:
+        raise InputError("--element and --dof each name the one response analysed: give one")
     rec = load(args.data, columns=args.columns, fs=args.fs, gravity=args.gravity)
+    if rec.n_dof > 1 or args.element is not None or args.dof is not None:
+        if args.signal != "z":
+            raise InputError(f"--signal {args.signal} reads a single DOF's columns; a structure's response is named "
+                             "by --element I-J or --dof K")  # fmt: skip
+        rec = response_for(rec, args.element, args.dof)
     if args.signal != "z":
         col = getattr(rec, args.signal, None)
         if col is None:

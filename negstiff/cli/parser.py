@@ -563,6 +563,9 @@ def _characterise(sub, common: argparse.ArgumentParser, data_opts: argparse.Argu
     chz.add_argument("data", help="measurement file")
     chz.add_argument("--forcing-hz", type=POSITIVE, required=True, help="forcing frequency [Hz]")
     chz.add_argument("--signal", default="z", choices=["z", "y", "z_dot", "base_disp"], help="column to analyse")
+    chz.add_argument("--element", help="a structure's element I-J: its relative displacement is analysed (default: "
+                     "the file's '# element:')")  # fmt: skip
+    chz.add_argument("--dof", type=number(int, 1, 50), help="a structure's channel zK analysed instead")
     chz.add_argument(
         "--wells",
         help="z_minus,z_plus (or z_minus,z_0,z_plus) [m]; default: the file's rest positions, "

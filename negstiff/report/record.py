@@ -19,6 +19,7 @@ and a section per analysis (``negstiff.report.sections``).
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
@@ -122,6 +123,9 @@ def report_records(
     if element is not None:  # given here; else the estimators read the file's own (``element_of``), as its masses
         options = {**options, **{n: {**options.get(n, {}), "element": element}
                                  for n in ("nsi", "sindy", "posterior", "discrepancy")}}  # fmt: skip
+        if rec.n_dof > 1:  # and the analyses that read the element's relative motion (the characterisation)
+            text = element if isinstance(element, str) else f"{element[0]}-{element[1]}"
+            rec = dataclasses.replace(rec, meta={**rec.meta, "element": text})
     if forcing_hz is not None:
         check_forcing(rec, forcing_hz)
     from negstiff.inference.analysis.record_kind import RING_DOWN_KINDS, check_decay, record_kind

@@ -124,14 +124,12 @@ def lyapunov(rec: Measurement, forcing_hz: float, noise: float | None) -> dict[s
 
 def check_harmonic(rec: Measurement, forcing_hz: float) -> None:
     """Refuse (``MeasurementError``, one line) a harmonic record no characterisation can use: a structure's
-    record (N > 1 responses: a characterisation reads one), a forcing at or above the Nyquist frequency, fewer
+    record whose one response is not named (``response_for``), a forcing at or above the Nyquist frequency, fewer
     than 10 forcing cycles, a response or an input that does not move (the forcing's phase is read from the
     input), a stated forcing frequency that is not the input's (``periodicity.check_forcing_line``: its line
     carries under 10 % of the input's rms while another line dominates).
     """
-    if rec.n_dof > 1:  # its z (N, T) crashed the regime's indexing, or a least squares of 42 GiB
-        raise MeasurementError(f"{rec.source}: a characterisation reads a single DOF's response z; this record holds "
-                               f"a structure's responses of {rec.n_dof} DOFs (z1 ... z{rec.n_dof})")  # fmt: skip
+    rec = response_for(rec)
     if not 0 < forcing_hz < rec.fs / 2:
         raise MeasurementError(
             f"{rec.source}: forcing frequency {forcing_hz:g} Hz must lie below the Nyquist frequency {rec.fs / 2:g} Hz"
@@ -144,6 +142,39 @@ def check_harmonic(rec: Measurement, forcing_hz: float) -> None:
     rec.require_motion("a characterisation")
     rec.require_excitation("a characterisation (the forcing's phase is read from the input)")
     check_forcing_line(rec, forcing_hz)
+
+
+def response_for(rec: Measurement, element: str | tuple[int, int] | None = None, dof: int | None = None) -> Measurement:
+    """The one response a characterisation reads, as a single DOF's record: a single DOF's as it is; a structure's
+    (N > 1), the element's relative displacement z_J - z_I (the motion whose wells the regime is of: ``element``,
+    else the record's ``# element: I-J``) or DOF ``dof``'s channel, under the record's input. One
+    ``MeasurementError`` where a structure's record names neither (the z of N channels had crashed the regime's
+    indexing, or asked a least squares of 42 GiB).
+    """
+    from negstiff.inference.estimators.structure_id import parse_element
+    from negstiff.models.structure import relative
+
+    if rec.n_dof == 1 and element is None and dof in (None, 1):
+        return rec
+    if dof is not None:
+        if isinstance(dof, bool) or not isinstance(dof, (int, np.integer)) or not 1 <= dof <= rec.n_dof:
+            raise MeasurementError(f"{rec.source}: a characterisation's channel is one of DOFs 1..{rec.n_dof}, "
+                                   f"got {dof!r}")  # fmt: skip
+        signal_, what = rec.channels[dof - 1], f"z{dof}"
+    else:
+        text = element if element is not None else rec.meta.get("element")
+        if text is None:
+            raise MeasurementError(
+                f"{rec.source}: a structure's record of {rec.n_dof} DOFs (z1 ... z{rec.n_dof}): a characterisation "
+                "reads one response: name the element (--element I-J, or '# element: I-J' in the header), whose "
+                "relative motion it reads, or a channel (--dof K)"
+            )
+        i, j = parse_element(text, rec.n_dof)
+        signal_ = relative(rec.channels, (i, j))
+        what = f"the element's relative displacement z{j}" + (f" - z{i}" if i else "")
+    meta = {k: v for k, v in rec.meta.items() if not k.endswith("_rest")}  # a structure's rests are its DOFs'
+    return replace(rec, z=np.ascontiguousarray(signal_, float), z_dot=None, y=None, masses=None, force_dof=None,
+                   meta=meta, source=f"{rec.source} ({what})")  # fmt: skip
 
 
 def wells_for(rec: Measurement, wells="auto") -> tuple[float | None, ...] | None:
@@ -175,7 +206,8 @@ def characterise(
     Parameters
     ----------
     rec : Measurement
-        A steady-state response to a harmonic input.
+        A steady-state response to a harmonic input; a structure's, its element's relative displacement (the
+        record's ``# element: I-J``; another response: ``response_for``).
     forcing_hz : float
         The forcing frequency [Hz].
     wells : "auto" or (float, float), default "auto"
@@ -208,7 +240,7 @@ def characterise(
     (1, 'in-well-plus')
     """
     check_harmonic(rec, forcing_hz)
-    rec = pin_frame(rec)  # the regime is judged against wells in the physical frame
+    rec = pin_frame(response_for(rec))  # the regime is judged against wells in the physical frame
     wells = wells_for(rec, wells)
     out: dict[str, Any] = {"reasons": {}}
     work, q = upsampled(rec, forcing_hz)
