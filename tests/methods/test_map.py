@@ -207,3 +207,23 @@ def test_a_folder_without_an_index_is_read_in_its_files_natural_order(tmp_path):
     (tmp_path / "step1.truth.json").write_text("{}")
     names = [Path(p["file"]).name for p in campaign_records([str(tmp_path)])]
     assert names == ["step1.csv", "step2.csv", "step10.csv", "step11.csv"]
+
+
+def test_a_structures_campaign_is_mapped_by_its_elements_relative_motion(tmp_path):
+    # a stepped campaign of the device on a 25 Hz fixture (the rig's structure records: z1, z2, the element's place in
+    # their headers) is mapped as a single DOF's is, each point the element's relative displacement z2 - z1: at 2 and
+    # 4 m/s^2 around its plus well, period 1 at both, the larger response at the larger step; it had been refused
+    from negstiff.models.structure import Structure
+
+    fixture = tmp_path / "fixture.json"
+    s = Structure.on_fixture(SEED_LIKE_CUBIC, fixture_mass=1.0, fixture_hz=25.0, fixture_zeta=0.02)
+    fixture.write_text(json.dumps(s.to_dict()))
+    camp = tmp_path / "camp"
+    assert main(["rig", "campaign", "--model", str(fixture), "--freq", "9", "--amplitudes", "2,4", "--start", "plus",
+                 "--direction", "up", "--periods", "40", "-o", str(camp), "--quiet"]) == 0  # fmt: skip
+    eq = s.element_equilibria()
+    out = tmp_path / "map.json"
+    assert main(["map", str(camp), f"--wells={eq.z_minus},{eq.z_0},{eq.z_plus}", "-o", str(out), "--quiet"]) == 0
+    points = json.loads(out.read_text())["points"]
+    assert [p["period"] for p in points] == [1, 1] and all(p["regime"] == "in-well-plus" for p in points)
+    assert points[0]["amplitudes"][0] < points[1]["amplitudes"][0]
