@@ -458,17 +458,17 @@ def test_a_vibrometers_displacement_quieter_than_the_old_noise_floor_has_its_pos
     # a record read by a laser vibrometer (its velocity with 1 um/s of white noise, DOP853 in the test:
     # ``dop853_record``): the displacement the loader integrates carries far less white noise than a laser
     # triangulation sensor's (the integral's noise falls with frequency), and the noise the MAP point reads lies below
-    # the 0.1 um floor the noise prior had (measured 35 nm here, 45 nm on the benchmark's 396 s vibrometer record,
+    # the 0.1 um floor the noise prior had (measured 32 nm here, 45 nm on the benchmark's 396 s vibrometer record,
     # whose posterior was refused with no point to start from). The prior's floor is now 0.1 nm: the coefficients'
-    # posterior holds the truth within 4 of its standard deviations (measured within 0.8); under the old floor the
-    # refusal names what fails, in one line, before the sampler searches
+    # posterior holds the truth within 4 of its standard deviations (measured within 2.3 over 8 s); under the old
+    # floor the refusal names what fails, in one line, before the sampler searches
     from records import TRUTH, dop853_record, write_csv
 
     from negstiff.inference.estimators.posterior import parametrisation, windows
     from negstiff.inference.estimators.posterior.windows import PosteriorError
     from negstiff.inference.record.reading import load
 
-    t, u, _, v = dop853_record(duration=12.0, rms=8.0, seed=3, fs=512.0)
+    t, u, _, v = dop853_record(duration=8.0, rms=8.0, seed=3, fs=512.0)
     vm = v + 1e-6 * np.random.default_rng(3).standard_normal(v.size)
     path = write_csv(tmp_path / "ldv.csv", {"t": t, "base_acc": u, "z_dot": vm}, {"mass": TRUTH.m})
     rec = load(path)
