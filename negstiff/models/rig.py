@@ -812,6 +812,11 @@ class Rig:
         if isinstance(self.system, Structure):  # the contract's multi-DOF header: each DOF's mass, the element's place
             meta["masses"] = ",".join(f"{m:g}" for m in self.system.masses)
             meta["element"] = "-".join(map(str, self.system.place))
+            # the element's relative displacement at rest in each well, as the lasers read it before the test (the
+            # single DOF's z rests, for what reads the element's relative motion: ``characterise.response_for``)
+            for name in ("z_minus", "z_plus"):
+                if getattr(eq, name) is not None:
+                    meta[f"element_{name.removeprefix('z_')}_rest"] = f"{round(getattr(eq, name), 5):.5f}"
             if "force_dof" in excitation:
                 meta["force_dof"] = str(excitation["force_dof"])
         else:

@@ -210,9 +210,10 @@ def test_a_folder_without_an_index_is_read_in_its_files_natural_order(tmp_path):
 
 
 def test_a_structures_campaign_is_mapped_by_its_elements_relative_motion(tmp_path):
-    # a stepped campaign of the device on a 25 Hz fixture (the rig's structure records: z1, z2, the element's place in
-    # their headers) is mapped as a single DOF's is, each point the element's relative displacement z2 - z1: at 2 and
-    # 4 m/s^2 around its plus well, period 1 at both, the larger response at the larger step; it had been refused
+    # a stepped campaign of the device on a 25 Hz fixture (the rig's structure records: z1, z2, the element's place and
+    # its relative rests in their headers) is mapped as a single DOF's is, each point the element's relative
+    # displacement z2 - z1, its wells the headers' rests: at 2 and 4 m/s^2 around its plus well, period 1 at both, the
+    # larger response at the larger step; it had been refused
     from negstiff.models.structure import Structure
 
     fixture = tmp_path / "fixture.json"
@@ -223,7 +224,10 @@ def test_a_structures_campaign_is_mapped_by_its_elements_relative_motion(tmp_pat
                  "--direction", "up", "--periods", "40", "-o", str(camp), "--quiet"]) == 0  # fmt: skip
     eq = s.element_equilibria()
     out = tmp_path / "map.json"
-    assert main(["map", str(camp), f"--wells={eq.z_minus},{eq.z_0},{eq.z_plus}", "-o", str(out), "--quiet"]) == 0
-    points = json.loads(out.read_text())["points"]
+    assert main(["map", str(camp), "-o", str(out), "--quiet"]) == 0
+    res = json.loads(out.read_text())
+    assert res["wells_used"] == pytest.approx([eq.z_minus, eq.z_plus], abs=1e-5)
+    assert not any("no rest positions" in w for w in res["warnings"])
+    points = res["points"]
     assert [p["period"] for p in points] == [1, 1] and all(p["regime"] == "in-well-plus" for p in points)
     assert points[0]["amplitudes"][0] < points[1]["amplitudes"][0]

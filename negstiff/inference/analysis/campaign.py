@@ -22,7 +22,14 @@ import numpy as np
 
 from negstiff.errors import MeasurementError
 from negstiff.files import read_json
-from negstiff.inference.analysis.characterise import check_harmonic, first_period_2, jump, map_point, map_sequence
+from negstiff.inference.analysis.characterise import (
+    check_harmonic,
+    first_period_2,
+    jump,
+    map_point,
+    map_sequence,
+    response_for,
+)
 from negstiff.inference.record.measurement import Measurement
 from negstiff.inference.record.reading import load
 
@@ -205,7 +212,7 @@ class Campaign:
                     f"{e['file']}: input {rec.input_name}, the campaign's first record's: {recs[0].input_name}"
                 )
             check_harmonic(rec, f)
-        rests = (r.rest_positions for r in recs)
+        rests = (response_for(r).rest_positions for r in recs)  # a structure's: its element's relative rests
         wells = wells or next(((w["minus"], w["plus"]) for w in rests if len(w) == 2), None)
         return cls(entries, recs, freqs, axis, overlays, wells)
 

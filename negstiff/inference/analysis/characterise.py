@@ -147,7 +147,8 @@ def check_harmonic(rec: Measurement, forcing_hz: float) -> None:
 def response_for(rec: Measurement, element: str | tuple[int, int] | None = None, dof: int | None = None) -> Measurement:
     """The one response a characterisation reads, as a single DOF's record: a single DOF's as it is; a structure's
     (N > 1), the element's relative displacement z_J - z_I (the motion whose wells the regime is of: ``element``,
-    else the record's ``# element: I-J``) or DOF ``dof``'s channel, under the record's input. One
+    else the record's ``# element: I-J``; its rests the header's ``element_minus_rest``, ``element_plus_rest``) or
+    DOF ``dof``'s channel, under the record's input. One
     ``MeasurementError`` where a structure's record names neither (the z of N channels had crashed the regime's
     indexing, or asked a least squares of 42 GiB).
     """
@@ -173,6 +174,9 @@ def response_for(rec: Measurement, element: str | tuple[int, int] | None = None,
         signal_ = relative(rec.channels, (i, j))
         what = f"the element's relative displacement z{j}" + (f" - z{i}" if i else "")
     meta = {k: v for k, v in rec.meta.items() if not k.endswith("_rest")}  # a structure's rests are its DOFs'
+    if dof is None:  # the element's relative rests, where the header states them, are the response's
+        meta |= {f"z_{w}_rest": rec.meta[f"element_{w}_rest"] for w in ("minus", "plus")
+                 if f"element_{w}_rest" in rec.meta}  # fmt: skip
     return replace(rec, z=np.ascontiguousarray(signal_, float), z_dot=None, y=None, masses=None, force_dof=None,
                    meta=meta, source=f"{rec.source} ({what})")  # fmt: skip
 
