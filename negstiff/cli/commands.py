@@ -207,6 +207,9 @@ def cmd_identify(args) -> int:
                masses=masses, decay=args.decay)  # fmt: skip
     check_dofs(args, rec)
     frfs = read_frf_results(args.frf)
+    for path, _, _, n_dofs in frfs:  # before any work: a structure's FRFs do not read a single DOF's wells
+        if rec.n_dof == 1 and n_dofs > 1:
+            raise InputError(f"--frf {path}: a structure's FRFs ({n_dofs} DOFs) beside a single DOF's record")
     if args.method == "nsi":
         from negstiff.inference.estimators.nsi import NSI
 
@@ -540,8 +543,12 @@ def cmd_backbone(args) -> int:
     n_model = model.n_dof if isinstance(model, Structure) else 1
     if model is not None and n_model != rec.n_dof:
         raise InputError(f"--model {args.model}: a model of {n_model} DOF(s) for a record of {rec.n_dof}")
+    offsets = None  # a structure's identify result: each channel's zero it found (measured = physical + offset)
+    if isinstance(model, Structure):
+        found = json.loads(Path(args.model).read_text()).get("offsets_m")
+        offsets = [float(o) for o in found] if isinstance(found, list) and len(found) == rec.n_dof else None
     say(args, f"backbone: {rec.n} samples at {rec.fs:g} Hz, input {rec.input_name}")
-    res = backbone(rec, model=model, dof=dof, band=band)
+    res = backbone(rec, model=model, dof=dof, band=band, offsets=offsets)
     res["figure"] = write_figure(backbone_figure(res, f"Backbone of {Path(args.data).name}"), args.out)
     write_json(args.out, res)
     warn(args, res["warnings"])

@@ -437,17 +437,20 @@ def _backbone(rec, fitted: dict[str, Any]) -> dict[str, Any]:
     for name, label in (("nsi", "NSI"), ("sindy", "SINDy"), ("posterior", "the posterior mean")):
         if name in fitted:
             # a structure's fit: the identified structure (its element in ``model_``) decays from the record's state
+            # less each channel's zero the identification found (``offsets_``)
             model = getattr(fitted[name], "structure_", None) or fitted[name].model_
-            return {**backbone(_last_well(rec, model), model=model, draws=draws), "model_name": f"{label}'s model"}
+            offsets = getattr(fitted[name], "offsets_", None) if hasattr(model, "n_dof") else None
+            return {**backbone(_last_well(rec, model, offsets), model=model, draws=draws, offsets=offsets),
+                    "model_name": f"{label}'s model"}  # fmt: skip
     return backbone(rec)
 
 
-def _last_well(rec, model):
+def _last_well(rec, model, offsets=None):
     """The record from its last crossing of the model's barrier z_0 on (a double well's decay that crossed between
     the wells rings down in the last one; a backbone is a well's), or the record where it never crosses.
     Measured: the seed-like double well released 12 mm beyond its plus well crosses once and rings down in the
     minus well; over the whole record the Hilbert backbone read 2.27 Hz, from the crossing on 11.238 Hz (the well's
-    11.240 Hz).
+    11.240 Hz). A structure's: its element's relative motion, each channel less its zero (``offsets``).
     """
     from negstiff.models.structure import as_structure
 
@@ -458,7 +461,8 @@ def _last_well(rec, model):
         return rec
     if z0 is None:
         return rec
-    side = np.sign(structure.coupling @ np.asarray(rec.channels) - z0)  # the element's relative motion
+    o = np.zeros(rec.n_dof) if offsets is None else np.asarray(offsets, float)  # each channel's zero
+    side = np.sign(structure.coupling @ (np.asarray(rec.channels) - o[:, None]) - z0)  # the element's relative motion
     crossed = np.flatnonzero(side != side[-1])
     return rec if crossed.size == 0 else rec.segment(int(crossed[-1]) + 1, rec.n)
 

@@ -104,3 +104,18 @@ def test_a_structures_record_without_its_elements_place_is_refused_before_any_wo
     assert not out.exists()
     # given on the command line, the same record is read
     assert main([str(a) for a in ["report", path, "--only", "nsi", "--element", "1-2", "-o", out, "--quiet"]]) == 0
+
+
+def test_a_structures_decay_reports_the_backbone_of_its_mode_with_the_identified_structure(tmp_path):
+    # a structure's free decay (the chain's device released 6 mm from rest): the report's backbone is the mode the
+    # channel that moves most shows (the device's, DOF 2), measured, and NSI's identified structure decayed from the
+    # record's state less each channel's zero it found: its backbone within 1 % of the measured one (the single DOF's
+    # tolerance); before, a structure's record had no backbone ("a single DOF's")
+    path, _ = chain_file(tmp_path, "decay", 8.0)
+    out = tmp_path / "report"
+    assert main(["report", str(path), "--only", "nsi,backbone", "--quiet", "-o", str(out)]) == 0
+    res = json.loads((out / "results.json").read_text())
+    sec = next(s for s in res["sections"] if s["kind"] == "backbone")["result"]
+    assert sec["dof"] == 2 and len(sec["modes_hz"]) == 2
+    assert sec["predicted"]["difference_percent"] < 1.0
+    assert "less each channel's zero" in sec["predicted"]["initial"]["from"]

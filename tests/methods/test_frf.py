@@ -88,6 +88,11 @@ def test_frf_around_each_well_gives_its_underlying_linear_system(well, tmp_path)
     assert main(["identify", "nsi", str(big), "-o", str(tmp_path / "n.json"), "--frf", str(out), "--quiet"]) == 0
     c = json.loads((tmp_path / "n.json").read_text())["frf_comparison"][0]
     assert c["well"] == well and abs(c["difference_percent"]) < 2.0
+    # a structure's FRFs (its modes) do not read a single DOF's wells: one line, exit 2, before any work
+    two = tmp_path / "two.json"
+    two.write_text(json.dumps({"dofs": [{"dof": 1}, {"dof": 2}], "modes": [{"f_hz": 9.0}, {"f_hz": 25.0}]}))
+    assert main(["identify", "nsi", str(big), "-o", str(tmp_path / "x.json"), "--frf", str(two), "--quiet"]) == 2
+    assert not (tmp_path / "x.json").exists()
 
 
 def test_a_swept_sine_from_pyexsi_gives_the_same_well(tmp_path):

@@ -48,7 +48,7 @@ from scipy import optimize, signal
 from negstiff.errors import MeasurementError
 from negstiff.inference.record.impacts import MAD_TO_SIGMA
 from negstiff.inference.record.measurement import Measurement
-from negstiff.models.structure import Structure, as_structure
+from negstiff.models.structure import Structure, as_structure, simulate_structures
 
 QUIET_DEVIATIONS = 10.0
 """The input is active where it stands more than this many floor deviations from its tail's median."""
@@ -247,8 +247,9 @@ def decay_modes(x: np.ndarray, fs: float, count: int) -> np.ndarray:
 def mode_band(x: np.ndarray, fs: float, noise_rms: float, modes_hz: np.ndarray) -> tuple[float, float]:
     """The band-pass of the backbone of the mode that dominates ``x`` (one channel's decay about its rest), among
     the decay's resonances ``modes_hz`` (``decay_modes``): ``_band`` of the cycles of ``x`` band-passed between
-    the geometric means of that mode's frequency and its neighbours', kept inside them. With one resonance (a
-    single DOF's decay) there is no neighbour: ``_band`` of ``x`` itself.
+    the geometric means of that mode's frequency and its neighbours', kept inside them and, on a neighbour's side,
+    within ``NEIGHBOUR_MARGIN`` of the cycles' frequencies. With one resonance (a single DOF's decay) there is no
+    neighbour: ``_band`` of ``x`` itself. One ``MeasurementError`` where no band is left (modes near Nyquist).
     """
     if modes_hz.size < 2:
         return _band(x, fs, noise_rms)
@@ -257,6 +258,9 @@ def mode_band(x: np.ndarray, fs: float, noise_rms: float, modes_hz: np.ndarray) 
     k = int(np.argmax([spec[int(np.argmin(np.abs(f - fm)))] for fm in modes_hz]))
     lo = math.sqrt(modes_hz[k - 1] * modes_hz[k]) if k > 0 else 0.0
     hi = math.sqrt(modes_hz[k] * modes_hz[k + 1]) if k + 1 < modes_hz.size else 0.45 * fs
+    if not lo < hi:
+        raise MeasurementError(f"the decay's mode at {modes_hz[k]:.4g} Hz lies too near the Nyquist frequency "
+                               f"({fs / 2:g} Hz) for its band (give --band)")  # fmt: skip
     sos = signal.butter(4, [lo, hi] if lo > 0 else hi, btype="bandpass" if lo > 0 else "lowpass", fs=fs,
                         output="sos")  # fmt: skip
     xf = signal.sosfiltfilt(sos, x)
@@ -266,6 +270,9 @@ def mode_band(x: np.ndarray, fs: float, noise_rms: float, modes_hz: np.ndarray) 
         b_lo = max(b_lo, lo, float(np.min(f)) / NEIGHBOUR_MARGIN)
     if k + 1 < modes_hz.size:
         b_hi = min(b_hi, hi, float(np.max(f)) * NEIGHBOUR_MARGIN)
+    if not b_lo < b_hi:
+        raise MeasurementError(f"no band is left for the decay's mode at {modes_hz[k]:.4g} Hz between its neighbours "
+                               "(give --band)")  # fmt: skip
     return b_lo, b_hi
 
 
@@ -333,8 +340,6 @@ def measure_backbone(rec: Measurement, dof: int | None = None,
 
 def _model_decay(model, x0: np.ndarray, fs: float, n: int, dof: int) -> np.ndarray:
     """DOF ``dof``'s channel of the model's free decay from the state ``x0`` (2N,), n samples at fs (zero force)."""
-    from negstiff.models.structure import simulate_structures
-
     res = simulate_structures(as_structure(model), np.zeros(n), 1.0 / fs, x0, input_kind="force")
     if res.diverged[0]:
         raise MeasurementError(f"the model's free decay from z0 = {x0[dof - 1]:.4g} m diverged "
@@ -342,15 +347,18 @@ def _model_decay(model, x0: np.ndarray, fs: float, n: int, dof: int) -> np.ndarr
     return np.asarray(res.z[0, dof - 1], float)
 
 
-def _model_start(model, measured: dict[str, Any], rec: Measurement) -> tuple[np.ndarray, str]:
-    """The model's initial state [z_1..z_N, z_1'..z_N'] for the record's decay: the record's when its z is in the
-    model's frame (a measured z); a derived z's constant unknown, the record's rests put on the model's static
+def _model_start(model, measured: dict[str, Any], rec: Measurement, offsets=None) -> tuple[np.ndarray, str]:
+    """The model's initial state [z_1..z_N, z_1'..z_N'] for the record's decay: the record's, less each channel's
+    zero (``offsets``: measured = physical + offset, a structure's identification's ``offsets_``), when its z is in
+    the model's frame (a measured z); a derived z's constant unknown, the record's rests put on the model's static
     positions at the well of the nearest frequency.
     """
     d = measured["decay"]
     z0, v0 = np.asarray(d["z0s_m"]), np.asarray(d["v0s_m_s"])
     if _z_constant_known(rec):
-        return np.r_[z0, v0], "the record's state at the decay's start"
+        o = np.zeros(z0.size) if offsets is None else np.asarray(offsets, float)
+        how = "the record's state at the decay's start" + (", less each channel's zero" if np.any(o) else "")
+        return np.r_[z0 - o, v0], how
     s = as_structure(model)
     static = s.static_positions(s.element_equilibria().well(_rest_well(model, measured, rec)))
     return (
@@ -359,17 +367,23 @@ def _model_start(model, measured: dict[str, Any], rec: Measurement) -> tuple[np.
     )
 
 
-def predict_backbone(model, rec: Measurement, measured: dict[str, Any] | None = None) -> dict[str, Any]:
-    """The backbone ``model`` (a ``Model``, or a ``Structure`` on a structure's record) predicts for ``rec``'s
-    decay: its free decay from the record's initial state, the same DOF's channel measured by the same estimators
-    (``hilbert``, ``peaks``) and the same band-pass as the record's.
-    """
-    measured = measure_backbone(rec) if measured is None else measured
-    dof = measured["dof"]
+def _check_dofs(model, rec: Measurement) -> None:
     n_model = as_structure(model).n_dof
     if n_model != rec.n_dof:
         raise MeasurementError(f"{rec.source}: the model has {n_model} DOF(s) and the record {rec.n_dof}")
-    x0, how = _model_start(model, measured, rec)
+
+
+def predict_backbone(model, rec: Measurement, measured: dict[str, Any] | None = None,
+                     offsets=None) -> dict[str, Any]:  # fmt: skip
+    """The backbone ``model`` (a ``Model``, or a ``Structure`` on a structure's record, ``offsets`` its channels'
+    zeros) predicts for ``rec``'s decay: its free decay from the record's initial state, the same DOF's channel
+    measured by the same estimators (``hilbert``, ``peaks``) and the same band-pass as the record's.
+    """
+    _check_dofs(model, rec)
+    measured = measure_backbone(rec) if measured is None else measured
+    dof = measured["dof"]
+    n_model = as_structure(model).n_dof
+    x0, how = _model_start(model, measured, rec, offsets)
     n = int(round(measured["decay"]["duration_s"] * rec.fs))
     z = _model_decay(model, x0, rec.fs, n, dof)
     x = z - float(np.median(z[-max(8, n // 10) :]))
@@ -453,16 +467,16 @@ def _z_constant_known(rec: Measurement) -> bool:
     return (rec.info.get("response") or {}).get("z_constant_known", True)
 
 
-def _rest_well(model, measured: dict[str, Any], rec: Measurement) -> str:
+def _rest_well(model, measured: dict[str, Any], rec: Measurement, offsets=None) -> str:
     """The model's well the record's decay rests in: the one whose static positions are nearest the record's rests
-    where z is in the model's frame, else the one with a linear frequency nearest the decay's at its smallest
-    amplitude.
+    (less each channel's zero, ``offsets``) where z is in the model's frame, else the one with a linear frequency
+    nearest the decay's at its smallest amplitude.
     """
     s = as_structure(model)
     eq = s.element_equilibria()
     wells = {n: w for n, w in (("minus", eq.z_minus), ("plus", eq.z_plus)) if w is not None}
     if _z_constant_known(rec):
-        rests = np.asarray(measured["decay"]["rests_m"])
+        rests = np.asarray(measured["decay"]["rests_m"]) - (0.0 if offsets is None else np.asarray(offsets, float))
         return min(wells, key=lambda n: float(np.linalg.norm(s.static_positions(wells[n]) - rests)))
     f_small = measured["hilbert"]["f_hz"][-1]
 
@@ -589,8 +603,8 @@ def credible_band(curves: Sequence[dict[str, Any]], amplitudes: np.ndarray, prob
 
 
 def backbone(rec: Measurement, model=None, draws: Sequence | None = None, prob: float = 0.9,
-             forced: bool = True, dof: int | None = None,
-             band: tuple[float, float] | None = None) -> dict[str, Any]:  # fmt: skip
+             forced: bool = True, dof: int | None = None, band: tuple[float, float] | None = None,
+             offsets=None) -> dict[str, Any]:  # fmt: skip
     """Backbone curves of a free-decay record, measured and (with ``model``, ``draws``) predicted.
 
     Parameters
@@ -612,15 +626,18 @@ def backbone(rec: Measurement, model=None, draws: Sequence | None = None, prob: 
         The channel whose backbone is measured (1-based; default: the one whose decay moves most).
     band : (float, float), optional
         The band-pass [Hz] (default: around the mode that dominates the channel, ``mode_band``): another mode's.
+    offsets : sequence of float, optional
+        A structure's channels' zeros [m] (measured = physical + offset: its identification's ``offsets_``): the
+        model's decay starts from the record's state less them.
 
     Returns
     -------
     dict
         ``measured`` (``hilbert`` and ``peaks``: ``amplitude_m``, ``f_hz``, ``zeta``, ``t_s`` lists), ``decay``,
         ``amplitude_range_m``, ``linear`` (the Hilbert backbone at its smallest amplitude: ``f_hz``, ``zeta``),
-        ``band_hz``; with a model ``predicted`` (the same, and ``difference_percent``: the largest
-        |f_predicted / f_measured - 1| over the measured range, Hilbert) and ``forced`` (``forced_response``), with
-        draws ``credible``; ``warnings``.
+        ``band_hz``, ``dof`` (the channel read), ``modes_hz`` (the decay's resonances); with a model ``predicted``
+        (the same, and ``difference_percent``: the largest |f_predicted / f_measured - 1| over the measured range,
+        Hilbert) and ``forced`` (``forced_response``), with draws ``credible``; ``warnings``.
 
     Examples
     --------
@@ -632,6 +649,8 @@ def backbone(rec: Measurement, model=None, draws: Sequence | None = None, prob: 
     >>> round(r["linear"]["f_hz"], 2), round(100 * r["linear"]["zeta"], 2)   # 0.6 / (2 pi 10) = 0.955 %
     (10.0, 0.96)
     """
+    if model is not None:
+        _check_dofs(model, rec)
     measured = measure_backbone(rec, dof=dof, band=band)
     hil = measured["hilbert"]
     small = np.argsort(hil["amplitude_m"])[: max(3, hil["amplitude_m"].size // 5)]
@@ -657,7 +676,7 @@ def backbone(rec: Measurement, model=None, draws: Sequence | None = None, prob: 
         "warnings": [],
     }
     if model is not None:
-        pred = predict_backbone(model, rec, measured)
+        pred = predict_backbone(model, rec, measured, offsets)
         f_pred = on_amplitudes(pred["hilbert"], np.asarray(hil["amplitude_m"]))
         diff = np.abs(f_pred / np.asarray(hil["f_hz"]) - 1)
         out["predicted"] = {"hilbert": _curves({k: v for k, v in pred["hilbert"].items() if k != "band_hz"}),
@@ -671,7 +690,7 @@ def backbone(rec: Measurement, model=None, draws: Sequence | None = None, prob: 
             out["warnings"].append("no forced response drawn for a structure: its force levels are sized on a single "
                                    "DOF's conservative backbone")  # fmt: skip
         elif forced:
-            well = _rest_well(model, measured, rec)
+            well = _rest_well(model, measured, rec, offsets)
             f_all = np.concatenate([hil["f_hz"], pred["hilbert"]["f_hz"]])
             f_range = (FORCED_SPAN[0] * float(np.min(f_all)), FORCED_SPAN[1] * float(np.max(f_all)))
             a_max = float(np.max(measured["peaks"]["amplitude_m"], initial=measured["amplitude_range_m"][1]))
@@ -681,7 +700,7 @@ def backbone(rec: Measurement, model=None, draws: Sequence | None = None, prob: 
         # a structure's posterior draws its element's coefficients: each draw is the structure with that element
         systems = [model.with_element(d) if isinstance(model, Structure) and not isinstance(d, Structure) else d
                    for d in draws]  # fmt: skip
-        curves = [predict_backbone(d, rec, measured)["hilbert"] for d in systems]
+        curves = [predict_backbone(d, rec, measured, offsets)["hilbert"] for d in systems]
         lo, hi = measured["amplitude_range_m"]
         grid = np.geomspace(lo, hi, 40)
         out["credible"] = credible_band(curves, grid, prob)

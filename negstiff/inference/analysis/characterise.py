@@ -155,8 +155,8 @@ def response_for(rec: Measurement, element: str | tuple[int, int] | None = None,
     from negstiff.inference.estimators.structure_id import parse_element
     from negstiff.models.structure import relative
 
-    if rec.n_dof == 1 and element is None and dof in (None, 1):
-        return rec
+    if rec.n_dof == 1 and dof in (None, 1) and (element is None or parse_element(element, 1) == (0, 1)):
+        return rec  # a single DOF's record (its element on the base): its z and its rests as they are
     if dof is not None:
         if isinstance(dof, bool) or not isinstance(dof, (int, np.integer)) or not 1 <= dof <= rec.n_dof:
             raise MeasurementError(f"{rec.source}: a characterisation's channel is one of DOFs 1..{rec.n_dof}, "

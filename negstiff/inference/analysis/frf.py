@@ -429,17 +429,18 @@ def _peaks(rec: Measurement, est: dict[str, Any], band: tuple[float, float], min
     }
 
 
-def read_frf_results(paths: Sequence[str] | None) -> list[tuple[str, float, str | None]]:
-    """(path, peak frequency [Hz], well) of each ``frf`` result file, checked (one ``MeasurementError``): a single
-    DOF's FRF its peak (and the well its record rested in, where it says); a structure's (``frf_structure``) each of
-    its modes.
+def read_frf_results(paths: Sequence[str] | None) -> list[tuple[str, float, str | None, int]]:
+    """(path, peak frequency [Hz], well, the FRF's DOFs) of each ``frf`` result file, checked (one
+    ``MeasurementError``): a single DOF's FRF its peak (and the well its record rested in, where it says); a
+    structure's (``frf_structure``) each of its modes.
     """
     out = []
     for p in paths or []:
         try:
             r = read_json(p)
-            peaks = ([(m["f_hz"], None) for m in r["modes"]] if "modes" in r and "dofs" in r
-                     else [(r["f_hz"], r.get("well"))])  # fmt: skip
+            structure = "modes" in r and "dofs" in r
+            peaks = [(m["f_hz"], None) for m in r["modes"]] if structure else [(r["f_hz"], r.get("well"))]
+            n_dofs = len(r["dofs"]) if structure else 1
         except (ValueError, KeyError, TypeError, AttributeError):
             raise MeasurementError(f"--frf {p}: not an frf result (needs f_hz, or a structure's modes)") from None
         if not peaks:
@@ -447,15 +448,17 @@ def read_frf_results(paths: Sequence[str] | None) -> list[tuple[str, float, str 
         for f_frf, well in peaks:
             if not isinstance(f_frf, (int, float)) or isinstance(f_frf, bool):
                 raise MeasurementError(f"--frf {p}: the FRF found no peak to compare with (f_hz is {f_frf!r})")
-            out.append((p, float(f_frf), well))
+            out.append((p, float(f_frf), well, n_dofs))
     return out
 
 
-def compare_with_frf(modal: dict, frfs: list[tuple[str, float, str | None]]) -> list[dict]:
+def compare_with_frf(modal: dict, frfs: list[tuple[str, float, str | None, int]]) -> list[dict]:
     """Each low-level FRF peak (``read_frf_results``; ``identify --frf``) beside the identified underlying-linear
     frequency nearest it (an identification's ``modal``: a single DOF's ``{well: {"f_hz", ...}}``, a structure's
     ``{well: [{"f_hz", ...}, ...]}``, whose ``mode`` is then named, 1 the lowest): within the FRF's well where its
-    record's rest positions say which, else over every well.
+    record's rest positions say which; a structure's FRF file, one low-level test, within the one well whose modes
+    lie nearest its modes altogether. A structure's FRF given to a single DOF's identification is one
+    ``MeasurementError``.
     """
     found: list[tuple[str, int | None, float]] = []  # (well, mode or None, f)
     for w, m in modal.items():
@@ -464,16 +467,33 @@ def compare_with_frf(modal: dict, frfs: list[tuple[str, float, str | None]]) -> 
                 found.append((w, None, float(m["f_hz"])))
         else:
             found += [(w, i + 1, float(x["f_hz"])) for i, x in enumerate(m) if x.get("f_hz")]
+    single = all(isinstance(m, dict) for m in modal.values())
+    by_file: dict[str, list[tuple[float, str | None, int]]] = {}
+    for p, f_frf, well, n_dofs in frfs:
+        if single and n_dofs > 1:
+            raise MeasurementError(f"--frf {p}: a structure's FRFs ({n_dofs} DOFs) beside a single DOF's "
+                                   "identification")  # fmt: skip
+        by_file.setdefault(str(p), []).append((f_frf, well, n_dofs))
+
+    def nearest(pool, f_frf):
+        return min(pool, key=lambda c: abs(c[2] - f_frf)) if pool else (None, None, None)
+
     out = []
-    for p, f_frf, well in frfs:
-        pool = [c for c in found if c[0] == well] or found
-        best = min(pool, key=lambda c: abs(c[2] - f_frf)) if pool else (None, None, None)
-        diff = None if best[2] is None else 100 * (best[2] / f_frf - 1)
-        row: dict[str, Any] = {"frf": str(p), "well": best[0], "frf_f_hz": f_frf, "identified_f_hz": best[2],
-                               "difference_percent": diff}  # fmt: skip
-        if best[1] is not None:
-            row["mode"] = best[1]
-        out.append(row)
+    for p, rows in by_file.items():
+        well_of_file = None
+        if rows[0][2] > 1 and found:  # one test: the well whose modes lie nearest its modes altogether
+            wells = sorted({c[0] for c in found})
+            well_of_file = min(wells, key=lambda w: sum(abs(nearest([c for c in found if c[0] == w], f)[2] - f)
+                                                         for f, _, _ in rows))  # fmt: skip
+        for f_frf, well, _ in rows:
+            target = well_of_file or well
+            best = nearest([c for c in found if c[0] == target] or found, f_frf)
+            diff = None if best[2] is None else 100 * (best[2] / f_frf - 1)
+            row: dict[str, Any] = {"frf": p, "well": best[0], "frf_f_hz": f_frf, "identified_f_hz": best[2],
+                                   "difference_percent": diff}  # fmt: skip
+            if best[1] is not None:
+                row["mode"] = best[1]
+            out.append(row)
     return out
 
 

@@ -1184,10 +1184,10 @@ def discrepancy(est, rec: Measurement, at: tuple[int, int]) -> StructureIdentifi
         located["after"] = located["before"]
     else:
         theta = _lstsq(X[:, base_cols], y)
-        located["after"] = locate(y - X[:, base_cols] @ theta, y, whole[3], form, states, at, baseline, base_offsets)
         extra = {name: float(theta[n_base + i]) for i, name in enumerate(named_all)}
         s, b = _assemble(theta[:n_base], rec.n_dof, at, masses, extra)
         structure, offsets = physical_frame(s, b, rec.gravity, unknown_zeros(rec))
+        located["after"] = locate(y - X[:, base_cols] @ theta, y, whole[3], form, states, at, structure, offsets)
     hits = ring_down(rec, ("impact",))  # a hammer's record: the windows between its pulses
     # refined as the single DOF's workflow refines (a hammer's record only when asked): the baseline here, the
     # final structure by ``_finish``, so the gap before and after the effects is measured on refined models alike
@@ -1298,17 +1298,22 @@ def bayesian_opinions(result: StructureIdentification, rec: Measurement, n_id: i
     out: dict[str, Any] = {}
     for e in named:
         rng = np.random.default_rng(0)
-        value, se = float(element.extra[e]), float(se_all.get(e) or math.nan)
+        raw = element.extra.get(e)
+        if not isinstance(raw, (int, float)):  # an effect of several values (none in a structure's catalogue yet)
+            out[e] = {"error": "not one coefficient: no opinion drawn"}
+            continue
+        value, se = float(raw), float(se_all.get(e) or math.nan)
         drawn = math.isfinite(se) and se > 0
         sizes = (_admissible_sizes(element, e, [None], rng.multivariate_normal, np.array([value]),
-                                   np.array([[se**2]]), draws) if drawn else [value] * draws)  # fmt: skip
+                                   np.array([[se**2]]), draws) if drawn else [value])  # fmt: skip
         systems = [structure.with_element(_with_size(element, e, size)) for size in sizes]
         systems += [structure, structure.with_element(_without(element, e))]
         err, diverged = structure_window_errors(systems, rec, windows, zs, v, offsets)
         norm = err / scale
         ms = np.where(diverged, worst, np.mean(norm**2, axis=(2, 3)))
         rows = [r for k in (-2, -1) for r in norm[k].reshape(-1, norm.shape[-1])]
-        opinion = _loo_compare(ms[:-2], np.repeat(ms[-1][None], len(sizes), axis=0), rows, windows.length, rng)
+        ms_with = ms[:-2] if drawn else np.repeat(ms[:1], draws, axis=0)  # at its value: one run, each draw's
+        opinion = _loo_compare(ms_with, np.repeat(ms[-1][None], draws, axis=0), rows, windows.length, rng)
         opinion["method"] = (
             f"arviz.compare (PSIS-LOO) over the held-out tail's {windows.starts.size} restarted {WINDOW_S:g} s runs of "
             f"every DOF, {draws} draws of the noise variance"

@@ -239,11 +239,11 @@ class Measurement:
         """A virtual-rig record (``models.rig.RigRecord``) as negstiff reads a lab's: the measured base
         acceleration as input (a hammer's or release's record: the force), the response its sensor measured (z,
         or z_dot, y, y_dot, y_acc, from which z
-        is derived as ``load`` derives it), the weighed mass (``weighed``), its source and the wells' rest
-        positions its metadata states (as a file of it holds them).
+        is derived as ``load`` derives it), the weighed mass (``weighed``), its source, the wells' rest
+        positions its metadata states and a structure's element's place (as a file of it holds them).
         """
         mass = float(rec.meta["mass"]) if weighed and rec.meta.get("mass") is not None else None
-        meta = {k: str(v) for k, v in rec.meta.items() if k.endswith("_rest")}
+        meta = {k: str(v) for k, v in rec.meta.items() if k.endswith("_rest") or k == "element"}
         inp = "force" if "force" in rec.columns else "base_acc"  # a hammer's or release's record: the load cell's
         cols = {k: v for k, v in rec.columns.items() if k not in ("t", inp)}
         z = cols.pop("z", None)

@@ -571,13 +571,8 @@ def restarted_structure_runs(structure: Structure, rec: Measurement, start: int,
     o = np.zeros(rec.n_dof) if offsets is None else np.asarray(offsets, float)
     windows, zs, v = structure_windows(rec, structure.place, start, window_s, between_pulses)
     starts = windows.starts
-    u = windows.measured(rec.u)
-    x0 = windows.start_states(zs - o[:, None], v)
-    res = simulate_structures(structure, u, rec.dt, x0, input_kind=rec.input_name, force_dof=rec.force_dof,
-                              input_index=np.arange(starts.size))  # fmt: skip
-    meas = windows.measured(z_all)  # (W, N, L+1)
-    err = res.z + o[None, :, None] - meas
-    ok = ~res.diverged
+    err, diverged = structure_window_errors([structure], rec, windows, zs, v, o)
+    err, ok = err[0], ~diverged[0]
     centred = z_all[:, start:] - z_all[:, start:].mean(axis=1, keepdims=True)
     scale = np.sqrt(np.mean(centred**2, axis=1))
     noise = rec.channel_noise()
