@@ -434,6 +434,9 @@ def _backbone(rec, fitted: dict[str, Any]) -> dict[str, Any]:
 
     post = fitted.get("posterior")
     draws = post.draw_models(min(BACKBONE_DRAWS, post.result_.samples[..., 0].size)) if post is not None else None
+    own = getattr(post, "structure_", None) if post is not None else None
+    if draws and own is not None:  # a structure's element draws in the structure the posterior sampled them with
+        draws = [own.with_element(d) for d in draws]
     for name, label in (("nsi", "NSI"), ("sindy", "SINDy"), ("posterior", "the posterior mean")):
         if name in fitted:
             # a structure's fit: the identified structure (its element in ``model_``) decays from the record's state
