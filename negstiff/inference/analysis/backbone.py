@@ -276,6 +276,15 @@ def mode_band(x: np.ndarray, fs: float, noise_rms: float, modes_hz: np.ndarray) 
     return b_lo, b_hi
 
 
+def _mode_cycles(x: np.ndarray, fs: float, band, several: bool) -> np.ndarray:
+    """The cycles the peak-to-peak estimator reads: ``x`` itself where the decay rings in one mode; among
+    ``several`` modes, ``x`` band-passed to the mode's ``band`` (zero-phase Butterworth, as ``hilbert_backbone``'s).
+    """
+    if not several:
+        return x
+    return signal.sosfiltfilt(signal.butter(4, band, "bandpass", fs=fs, output="sos"), x)
+
+
 def _curves(d: dict[str, Any]) -> dict[str, Any]:
     return {k: (np.asarray(v).tolist() if isinstance(v, np.ndarray) else v) for k, v in d.items()}
 
@@ -310,9 +319,7 @@ def measure_backbone(rec: Measurement, dof: int | None = None,
                                f"record's Nyquist frequency), got {band[0]:g}-{band[1]:g}")  # fmt: skip
     band = mode_band(x, rec.fs, noise, modes_hz) if band is None else (float(band[0]), float(band[1]))
     hil = hilbert_backbone(x, rec.fs, band=band, noise_rms=noise)
-    cycles = x if modes_hz.size < 2 else signal.sosfiltfilt(signal.butter(4, band, "bandpass", fs=rec.fs,
-                                                                          output="sos"), x)  # fmt: skip
-    pk = peak_backbone(cycles, rec.fs, floor=NOISE_MARGIN * noise)
+    pk = peak_backbone(_mode_cycles(x, rec.fs, band, modes_hz.size > 1), rec.fs, floor=NOISE_MARGIN * noise)
     lo, hi = float(np.min(hil["amplitude_m"])), float(np.max(hil["amplitude_m"]))
     inside = (pk["t_s"] >= hil["t_s"][0]) & (pk["t_s"] <= hil["t_s"][-1])
     pk = {k: v[inside] for k, v in pk.items()}
@@ -389,8 +396,7 @@ def predict_backbone(model, rec: Measurement, measured: dict[str, Any] | None = 
     x = z - float(np.median(z[-max(8, n // 10) :]))
     band = tuple(measured["hilbert"]["band_hz"])
     hil = hilbert_backbone(x, rec.fs, band=band)
-    cycles = x if len(measured["modes_hz"]) < 2 else signal.sosfiltfilt(signal.butter(4, band, "bandpass", fs=rec.fs,
-                                                                                      output="sos"), x)  # fmt: skip
+    cycles = _mode_cycles(x, rec.fs, band, len(measured["modes_hz"]) > 1)
     return {"hilbert": hil, "peaks": peak_backbone(cycles, rec.fs),
             "initial": {"z0_m": float(x0[dof - 1]), "v0_m_s": float(x0[n_model + dof - 1]), "from": how}}  # fmt: skip
 

@@ -198,7 +198,8 @@ class Campaign:
         any analysis; ``gravity`` [m/s^2] along the motion overrides the records' metadata (0: horizontal).
         """
         entries = campaign_records(data)
-        recs = [load(e["file"], columns=columns, fs=fs, gravity=gravity) for e in entries]
+        # each record's one response (a structure's: its element's relative motion), built once for every analysis
+        recs = [response_for(load(e["file"], columns=columns, fs=fs, gravity=gravity)) for e in entries]
         freqs = forcing_frequencies(entries, recs, forcing_hz)
         axis = "f_hz" if max(freqs) / min(freqs) - 1 > 1e-9 else "amplitude"  # the campaign steps f, or A at one f
         overlays = read_nfrc_results(nfrc, axis, freqs[0])
@@ -212,7 +213,7 @@ class Campaign:
                     f"{e['file']}: input {rec.input_name}, the campaign's first record's: {recs[0].input_name}"
                 )
             check_harmonic(rec, f)
-        rests = (response_for(r).rest_positions for r in recs)  # a structure's: its element's relative rests
+        rests = (r.rest_positions for r in recs)  # a structure's: its element's relative rests
         wells = wells or next(((w["minus"], w["plus"]) for w in rests if len(w) == 2), None)
         return cls(entries, recs, freqs, axis, overlays, wells)
 

@@ -243,8 +243,9 @@ def characterise(
     >>> c["period"], c["regime"]
     (1, 'in-well-plus')
     """
+    rec = response_for(rec)  # built once: the checks and the analyses read the same record (its derived states kept)
     check_harmonic(rec, forcing_hz)
-    rec = pin_frame(response_for(rec))  # the regime is judged against wells in the physical frame
+    rec = pin_frame(rec)  # the regime is judged against wells in the physical frame
     wells = wells_for(rec, wells)
     out: dict[str, Any] = {"reasons": {}}
     work, q = upsampled(rec, forcing_hz)

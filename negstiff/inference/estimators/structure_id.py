@@ -1283,14 +1283,13 @@ def bayesian_opinions(result: StructureIdentification, rec: Measurement, n_id: i
     """
     from negstiff.inference.estimators.discrepancy._candidates import _admissible_sizes, _with_size, _without
     from negstiff.inference.estimators.discrepancy._opinions import _loo_compare
-    from negstiff.inference.steps.validation import structure_window_errors, structure_windows
+    from negstiff.inference.steps.validation import channel_scales, structure_window_errors, structure_windows
 
     if not named:
         return {}
     structure, offsets = result.structure, np.asarray(result.offsets_m, float)
     windows, zs, v = structure_windows(rec, structure.place, n_id, WINDOW_S, between_pulses)
-    held = rec.channels[:, n_id:]
-    scale = np.sqrt(np.mean((held - held.mean(axis=1, keepdims=True)) ** 2, axis=1))[None, None, :, None]
+    scale = channel_scales(rec, n_id)[None, None, :, None]
     worst = float(np.mean((windows.measured(rec.channels) / scale[0]) ** 2))
     account: dict[str, Any] = dict(result.refinement or {})
     se_all = (account.get("standard_errors") or {}) if account.get("applied") else {}
@@ -1305,14 +1304,14 @@ def bayesian_opinions(result: StructureIdentification, rec: Measurement, n_id: i
         value, se = float(raw), float(se_all.get(e) or math.nan)
         drawn = math.isfinite(se) and se > 0
         sizes = (_admissible_sizes(element, e, [None], rng.multivariate_normal, np.array([value]),
-                                   np.array([[se**2]]), draws) if drawn else [value])  # fmt: skip
+                                   np.array([[se**2]]), draws) if drawn else [])  # fmt: skip
         systems = [structure.with_element(_with_size(element, e, size)) for size in sizes]
-        systems += [structure, structure.with_element(_without(element, e))]
+        systems += [structure, structure.with_element(_without(element, e))]  # at its value; without it
         err, diverged = structure_window_errors(systems, rec, windows, zs, v, offsets)
         norm = err / scale
         ms = np.where(diverged, worst, np.mean(norm**2, axis=(2, 3)))
         rows = [r for k in (-2, -1) for r in norm[k].reshape(-1, norm.shape[-1])]
-        ms_with = ms[:-2] if drawn else np.repeat(ms[:1], draws, axis=0)  # at its value: one run, each draw's
+        ms_with = ms[:-2] if drawn else np.repeat(ms[-2:-1], draws, axis=0)  # at its value: its one run, each draw's
         opinion = _loo_compare(ms_with, np.repeat(ms[-1][None], draws, axis=0), rows, windows.length, rng)
         opinion["method"] = (
             f"arviz.compare (PSIS-LOO) over the held-out tail's {windows.starts.size} restarted {WINDOW_S:g} s runs of "

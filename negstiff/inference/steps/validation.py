@@ -554,6 +554,15 @@ def structure_window_errors(structures, rec: Measurement, windows: RestartWindow
     return z + o[None, None, :, None] - windows.measured(rec.channels)[None], res.diverged.reshape(n_s, n_w)
 
 
+def channel_scales(rec: Measurement, start: int) -> np.ndarray:
+    """Each channel's rms about its mean from sample ``start`` on (N,) [m]: the measure a structure's held-out errors
+    are given in (``restarted_structure_runs``, the discrepancy's opinions).
+    """
+    z_all = rec.channels
+    centred = z_all[:, start:] - z_all[:, start:].mean(axis=1, keepdims=True)
+    return np.sqrt(np.mean(centred**2, axis=1))
+
+
 def restarted_structure_runs(structure: Structure, rec: Measurement, start: int, window_s: float = STRUCTURE_WINDOW_S,
                              offsets=None, between_pulses: bool = False) -> dict[str, Any]:  # fmt: skip
     """The restarted windows of a structure of N >= 1 DOFs (a single DOF as ``Structure.single(model)``; the
@@ -567,14 +576,12 @@ def restarted_structure_runs(structure: Structure, rec: Measurement, start: int,
     pulse smoothed (a pulse of a few samples is not resolved by the runs' input between samples, as the single
     DOF's windows restart after it).
     """
-    z_all = rec.channels
     o = np.zeros(rec.n_dof) if offsets is None else np.asarray(offsets, float)
     windows, zs, v = structure_windows(rec, structure.place, start, window_s, between_pulses)
     starts = windows.starts
     err, diverged = structure_window_errors([structure], rec, windows, zs, v, o)
     err, ok = err[0], ~diverged[0]
-    centred = z_all[:, start:] - z_all[:, start:].mean(axis=1, keepdims=True)
-    scale = np.sqrt(np.mean(centred**2, axis=1))
+    scale = channel_scales(rec, start)
     noise = rec.channel_noise()
     floor = 100 * float(np.sqrt(np.mean((noise / scale) ** 2)))
     if not ok.any():
