@@ -50,6 +50,7 @@ _EXPORTS = {
     "characterise": "negstiff.inference.analysis.characterise",
     "characterize": "negstiff.inference.analysis.characterise",  # the first spelling, kept: ``characterise``
     "frf": "negstiff.inference.analysis.frf",
+    "backbone": "negstiff.inference.analysis.backbone",  # a decay's backbones, measured and a model's
     "design": "negstiff.inference.analysis.design",  # the test to run next, from a posterior
     "separation": "negstiff.inference.analysis.separation",  # the test that tells two effects apart
     "Report": "negstiff.report.document",

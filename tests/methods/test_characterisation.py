@@ -253,6 +253,11 @@ def test_a_structures_harmonic_record_is_characterised_by_its_elements_relative_
     res = characterise(rec, F, lle=False)
     assert res["period"] == 1 and res["regime"] == "in-well-minus"
     assert res["amplitudes"][0] == pytest.approx(0.5 * np.ptp(r_true), rel=0.01)
+    # from Python as from the command line: a record whose header names no element is read by the one given
+    from dataclasses import replace
+
+    named = characterise(replace(rec, meta={}), F, lle=False, element="1-2")
+    assert named["period"] == 1 and named["amplitudes"][0] == pytest.approx(res["amplitudes"][0], rel=1e-9)
     # the command line: the library's numbers; a structure's file that names no element, a channel beyond its DOFs
     # and a single DOF's column are one line each (exit 2) before any work
     from impact_records import DOUBLE_WELL

@@ -624,6 +624,8 @@ def backbone(rec: Measurement, model=None, draws: Sequence | None = None, prob: 
         structure of the record's DOFs on a structure's record.
     draws : sequence of Model, optional
         A posterior's draws: the predicted backbone's credible band (``prob``).
+    prob : float, default 0.9
+        The credible band's probability.
     forced : bool, default True
         With a single DOF's model, also its forced responses about the well the decay rests in
         (``forced_response``; a structure's are not drawn: their force levels are sized on a single DOF's
@@ -642,13 +644,13 @@ def backbone(rec: Measurement, model=None, draws: Sequence | None = None, prob: 
         ``measured`` (``hilbert`` and ``peaks``: ``amplitude_m``, ``f_hz``, ``zeta``, ``t_s`` lists), ``decay``,
         ``amplitude_range_m``, ``linear`` (the Hilbert backbone at its smallest amplitude: ``f_hz``, ``zeta``),
         ``band_hz``, ``dof`` (the channel read), ``modes_hz`` (the decay's resonances); with a model ``predicted``
-        (the same, and ``difference_percent``: the largest |f_predicted / f_measured - 1| over the measured range,
+        (the same, and ``difference_percent``: the largest ``|f_predicted / f_measured - 1|`` over the measured range,
         Hilbert) and ``forced`` (``forced_response``), with draws ``credible``; ``warnings``.
 
     Examples
     --------
     >>> import numpy as np
-    >>> from negstiff import from_arrays
+    >>> from negstiff import backbone, from_arrays
     >>> t = np.arange(8192) / 1024.0
     >>> z = 1e-3 * np.exp(-0.6 * t) * np.cos(2 * np.pi * 10 * t)   # a linear 10 Hz, ~1 % decay
     >>> r = backbone(from_arrays(np.zeros_like(t), z, 1024.0, input_name="force"))

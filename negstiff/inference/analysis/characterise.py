@@ -203,15 +203,16 @@ def wells_for(rec: Measurement, wells="auto") -> tuple[float | None, ...] | None
 
 
 def characterise(
-    rec: Measurement, forcing_hz: float, wells="auto", lle: bool = True, poincare: bool = False
-) -> dict[str, Any]:
+    rec: Measurement, forcing_hz: float, wells="auto", lle: bool = True, poincare: bool = False,
+    element: str | tuple[int, int] | None = None, dof: int | None = None,
+) -> dict[str, Any]:  # fmt: skip
     """Period, regime, amplitudes and the largest Lyapunov exponent of one harmonic-forced record.
 
     Parameters
     ----------
     rec : Measurement
-        A steady-state response to a harmonic input; a structure's, its element's relative displacement (the
-        record's ``# element: I-J``; another response: ``response_for``).
+        A steady-state response to a harmonic input; a structure's, its element's relative displacement (``element``,
+        else the record's ``# element: I-J``) or one channel (``dof``).
     forcing_hz : float
         The forcing frequency [Hz].
     wells : "auto" or (float, float), default "auto"
@@ -221,6 +222,11 @@ def characterise(
         Estimate the largest Lyapunov exponent (Wolf, with Rosenstein beside it).
     poincare : bool, default False
         Also return the Poincare z of every forcing cycle.
+    element : str or (int, int), optional
+        A structure's element ``"I-J"`` whose relative displacement is read (default: the record's
+        ``# element:``; ``response_for``).
+    dof : int, optional
+        A structure's channel read instead (1-based).
 
     Returns
     -------
@@ -243,7 +249,7 @@ def characterise(
     >>> c["period"], c["regime"]
     (1, 'in-well-plus')
     """
-    rec = response_for(rec)  # built once: the checks and the analyses read the same record (its derived states kept)
+    rec = response_for(rec, element, dof)  # built once: the checks and the analyses read the same record
     check_harmonic(rec, forcing_hz)
     rec = pin_frame(rec)  # the regime is judged against wells in the physical frame
     wells = wells_for(rec, wells)
