@@ -271,7 +271,8 @@ def compared(args, result: dict, frfs) -> None:
 
 def _identify_structure(args, est, rec, frfs) -> int:
     """``identify`` on a structure's record (N > 1 DOFs, ``--element I-J``): the same estimator, its result."""
-    from negstiff.inference.estimators.structure_id import element_of, modes_summary
+    from negstiff.inference.estimators.base import element_of
+    from negstiff.inference.estimators.results import modes_summary
 
     at = element_of(est, rec)  # the estimator's own reading (--element, else the file's '# element:')
     assert at is not None  # a structure's record (N > 1): its place, or element_of refused it
@@ -290,8 +291,8 @@ def _identify_structure(args, est, rec, frfs) -> int:
 
 
 def cmd_posterior(args) -> int:
+    from negstiff.inference.estimators.base import element_of
     from negstiff.inference.estimators.posterior import Posterior
-    from negstiff.inference.estimators.structure_id import element_of
     from negstiff.inference.record.reading import load
     from negstiff.models import Model
     from negstiff.models.device import load_system

@@ -898,8 +898,7 @@ def section_for(result, label: str = "") -> Section:
     from negstiff.inference.estimators.discrepancy import Discrepancy
     from negstiff.inference.estimators.identification import Identification, Identifier
     from negstiff.inference.estimators.posterior.core import Posterior
-    from negstiff.inference.estimators.state_space_id import StateSpaceIdentification
-    from negstiff.inference.estimators.structure_id import StructureIdentification
+    from negstiff.inference.estimators.results import StateSpaceIdentification, StructureIdentification
     from negstiff.inference.record.measurement import Measurement
 
     if isinstance(result, Section):

@@ -10,8 +10,9 @@ import pytest
 from records import FIXTURE, rk4_fixture_record, write_csv
 
 from negstiff import NSI, InputError, Model, NegstiffWarning, SINDy, from_arrays, load
-from negstiff.inference.estimators.structure_id import _finish, free_run_error
+from negstiff.inference.estimators.identification import structure_result
 from negstiff.inference.steps.refine import refine
+from negstiff.inference.steps.validation import restarted_structure_runs as free_run_error
 from negstiff.models import SEED_LIKE_CUBIC
 from negstiff.models.structure import Structure
 
@@ -157,7 +158,7 @@ def test_a_model_that_misses_the_held_out_windows_warns(offset_record):
     wrong = TRUTH.with_element(Model(**{**DEVICE.to_dict(), "k3": 1.03 * DEVICE.k3}))
     n_id = int(0.8 * rec.n)
     with pytest.warns(NegstiffWarning, match="misses its own record's held-out windows"):
-        res = _finish("sindy", rec, wrong, OFFSETS, n_id, None, [], {}, {})
+        res = structure_result("sindy", rec, wrong, OFFSETS, n_id, None, [], {}, {})
     assert any("held-out windows" in w for w in res.warnings)
     right = free_run_error(TRUTH, rec, n_id, offsets=OFFSETS)["rms_percent"]
     assert res.validation["rms_percent"] > 2 * right

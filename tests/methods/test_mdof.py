@@ -9,9 +9,9 @@ import pytest
 from records import FIXTURE, TRUTH, rk4_fixture_record, stepped_sweep, write_csv
 
 from negstiff import NSI, Discrepancy, InputError, Model, SINDy
-from negstiff.inference.estimators.structure_id import free_run_error
 from negstiff.inference.record.measurement import from_arrays
 from negstiff.inference.record.reading import load
+from negstiff.inference.steps.validation import restarted_structure_runs as free_run_error
 from negstiff.models.simulator import simulate_batch, stage_input
 from negstiff.models.structure import Structure, simulate_structures
 

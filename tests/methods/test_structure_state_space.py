@@ -16,7 +16,7 @@ from scipy import integrate, linalg, signal
 
 from negstiff import NSI, InputError, NegstiffWarning, load
 from negstiff.cli import main
-from negstiff.inference.estimators.state_space_id import accelerometer_noise, quasi_static_motion
+from negstiff.inference.estimators.nsi._state_space import accelerometer_noise, quasi_static_motion
 from negstiff.inference.record.measurement import from_arrays
 from negstiff.models.state_space import element_basis
 from negstiff.models.structure import relative

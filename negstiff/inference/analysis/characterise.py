@@ -152,7 +152,7 @@ def response_for(rec: Measurement, element: str | tuple[int, int] | None = None,
     ``MeasurementError`` where a structure's record names neither (the z of N channels had crashed the regime's
     indexing, or asked a least squares of 42 GiB).
     """
-    from negstiff.inference.estimators.structure_id import parse_element
+    from negstiff.inference.estimators.base import parse_element
     from negstiff.models.structure import relative
 
     if rec.n_dof == 1 and dof in (None, 1) and (element is None or parse_element(element, 1) == (0, 1)):

@@ -86,6 +86,13 @@ def _about_rest(rec: Measurement) -> tuple[np.ndarray, int]:
     return z - np.median(z[:, -tenth:], axis=1, keepdims=True), tenth
 
 
+def ring_down(rec: Measurement, kinds: tuple[str, ...] | None = None) -> bool:
+    """Whether ``rec`` is a hammer's record or a free decay (``record_kind``; ``kinds``: of those): a response that
+    rings down.
+    """
+    return record_kind(rec).kind in (RING_DOWN_KINDS if kinds is None else kinds)
+
+
 def rings_until(rec: Measurement, window_s: float = 0.25) -> int:
     """The sample where a decay has rung down into its sensors' noise: the end of the last ``window_s`` window in
     which a channel's rms about its rest exceeds ``RINGING_FACTOR`` times its white noise (0: none does).

@@ -28,9 +28,13 @@ from __future__ import annotations
 import copy
 import functools
 import inspect
+import re
 import weakref
+from dataclasses import dataclass
 from os import PathLike
-from typing import Any, ClassVar, Self
+from typing import Any, ClassVar, Self, override
+
+import numpy as np
 
 from negstiff.errors import InputError, NotFittedError
 from negstiff.inference.estimators.parameters import Constraint
@@ -224,3 +228,85 @@ def _answering_stored(result):
         return copy.deepcopy(stored) if stored is not None else result(self)
 
     return answer
+
+
+# --- where a structure's element acts (the estimators' ``element``) ----------------------------------------------
+_PLACE = re.compile(r"^\s*(\d+)\s*-\s*(\d+)\s*$")
+
+
+@dataclass(frozen=True)
+class ElementPlace(Constraint):
+    """Where the nonlinear element acts: None (the single DOF, on the base), ``"I-J"`` or a pair (I, J) of
+    integers, J >= 1 the DOF it moves, I >= 0 the one it is attached to (0: the base), I != J.
+    """
+
+    @override
+    def accepts(self, value) -> bool:
+        if value is None:
+            return True
+        if isinstance(value, str):
+            m = _PLACE.match(value)
+            if not m:
+                return False
+            i, j = int(m.group(1)), int(m.group(2))
+        elif (
+            isinstance(value, (tuple, list))
+            and len(value) == 2
+            and all(isinstance(x, (int, np.integer)) and not isinstance(x, bool) for x in value)
+        ):
+            i, j = (int(x) for x in value)
+        else:
+            return False
+        return i >= 0 and j >= 1 and i != j
+
+    @override
+    def describe(self) -> str:
+        return "None (the single DOF) or I-J: the DOF J >= 1 the element moves and the DOF I >= 0 it is attached to "
+        "(0: the base), I != J"
+
+
+def parse_element(text: str | tuple[int, int], n_dof: int) -> tuple[int, int]:
+    """``"I-J"`` (J the DOF the element moves, I the one it is attached to, 0 the base) as (I, J), checked."""
+    if isinstance(text, str):
+        m = _PLACE.match(text)
+        if not m:
+            raise InputError(f"element must be I-J (e.g. 1-2; 0 is the base), got {text!r}")
+        i, j = int(m.group(1)), int(m.group(2))
+    else:
+        i, j = (int(x) for x in text)
+    if not (0 <= i <= n_dof and 1 <= j <= n_dof and i != j):
+        raise InputError(f"element {i}-{j}: J must be a DOF 1..{n_dof}, I one of 0..{n_dof} (0: the base), I != J")
+    return i, j
+
+
+def element_of(est, rec: Measurement) -> tuple[int, int] | None:
+    """The element's place on ``rec`` for estimator ``est`` (its ``element``, else the record's ``# element:`` as
+    its ``masses`` come from ``# masses:``): None for a record of one DOF (the single-DOF algorithms; its element
+    can only be on the base), else (I, J), checked, with the record's masses. One ``InputError`` before any work
+    otherwise.
+    """
+    name = type(est).__name__
+    given = est.element if est.element is not None else (rec.meta or {}).get("element")
+    said = f"{name}(element={given!r})" if est.element is not None else f"{rec.source}: '# element: {given}'"
+    if rec.n_dof == 1:
+        if given is not None and parse_element(given, 1) != (0, 1):
+            raise InputError(f"{said}: a record of one DOF has its element on the base (0-1)")
+        return None
+    if given is None:
+        raise InputError(f"{rec.source}: a record of {rec.n_dof} DOFs needs the element's place "
+                         f"({name}(element='I-J'), --element I-J, or '# element: I-J' in its header)")  # fmt: skip
+    try:
+        at = parse_element(given, rec.n_dof)
+    except InputError as exc:
+        raise InputError(f"{said}: {exc}" if est.element is None else str(exc)) from None
+    if rec.masses is None and not getattr(est, "reads_sensors_without_masses", False):
+        # NSI reads such a record through a state-space linear part (``nsi._state_space``); the weak form's equations
+        # per DOF need each DOF's mass
+        rec.dof_masses  # noqa: B018 - one MeasurementError without them, before any work
+    if rec.masses is None and getattr(est, "refine", None) is True:
+        # the state-space linear part (``nsi._state_space``) is judged on held-out windows, not refined: output error
+        # over a state-space model's A, B, C, D is a prediction-error method of its own, not written yet
+        raise InputError(f"{name}(refine=True): a structure read through its sensors without masses (a state-space "
+                         "linear part) is not refined by output error; give the masses ('# masses:', --masses) to "
+                         "refine its physical model, or leave refine unset")  # fmt: skip
+    return at

@@ -26,13 +26,22 @@ free-run validation, which is the same as NSI's (contract keys match key for key
 from __future__ import annotations
 
 import math
+import re
+import warnings
 from typing import Any
 
 import numpy as np
 
 from negstiff.errors import InputError
-from negstiff.inference.analysis.record_kind import RING_DOWN_KINDS, check_decay, identification_record, record_kind
-from negstiff.inference.estimators.identification import Estimate, Identifier
+from negstiff.inference.analysis.record_kind import (
+    RING_DOWN_KINDS,
+    check_decay,
+    identification_record,
+    record_kind,
+    ring_down,
+)
+from negstiff.inference.estimators.base import ElementPlace, element_of
+from negstiff.inference.estimators.identification import Estimate, Identifier, check_ring_down_scores, structure_result
 from negstiff.inference.estimators.parameters import (
     DAMPING_LAW,
     FRACTION,
@@ -43,14 +52,17 @@ from negstiff.inference.estimators.parameters import (
     Several,
     seed_of,
 )
-from negstiff.inference.estimators.structure_id import (
-    ElementPlace,
-    StructureResults,
-    check_ring_down_scores,
-    element_of,
-    identify_sindy,
-)
+from negstiff.inference.estimators.results import StructureIdentification, StructureResults
 from negstiff.inference.record.measurement import Measurement, per_unit_mass_warning
+from negstiff.inference.steps.equations import (
+    StructureIdentificationError,
+    _assemble,
+    _block_scores,
+    _lstsq,
+    _systems,
+    physical_frame,
+    unknown_zeros,
+)
 from negstiff.inference.steps.selection import block_rows, block_scores, indistinguishable
 from negstiff.inference.steps.shape import fit_shape
 from negstiff.inference.steps.validation import boundedness, restarted_free_runs
@@ -131,7 +143,7 @@ def ring_down_window(rec: Measurement, validation_fraction: float, selection_fra
 
 class SINDy(StructureResults, Identifier):
     """Weak-form SINDy: which terms of the equation of motion the record asks for, and their sizes, for a single
-    DOF or a structure of N DOFs carrying the element between DOFs I-J (``element``; ``structure_id``: one
+    DOF or a structure of N DOFs carrying the element between DOFs I-J (``element``; ``identify_sindy``: one
     equation per DOF, the element's terms shared by the DOFs it joins, the same selection rule and ensemble).
 
     The library holds polynomial stiffness, viscous and quadratic damping, the extra effects and a
@@ -160,7 +172,7 @@ class SINDy(StructureResults, Identifier):
         (scikit-learn's ``random_state``). The integer used is ``seed_`` and the result's ``settings["seed"]``.
     refine : bool or None, default None
         Finish by output-error refinement (kept only if it predicts the held-out tail no worse; a structure's over
-        every channel, its channels' zeros with it: ``structure_id``). None: run it.
+        every channel, its channels' zeros with it: ``structure_result``). None: run it.
     element : str or (int, int), optional
         Where the element acts on a record of N > 1 DOFs: ``"I-J"``, it moves DOF J relative to DOF I (0: the
         base). None: the single DOF. A structure's result is a ``StructureIdentification``.
@@ -276,7 +288,7 @@ class SINDy(StructureResults, Identifier):
 
     def fit(self, data) -> SINDy:
         """Identify from ``data`` (a ``Measurement`` or a file path): a single DOF's record through the shared
-        stages (``Identifier.fit``), a structure's (N > 1 DOFs) through ``structure_id.identify_sindy``.
+        stages (``Identifier.fit``), a structure's (N > 1 DOFs) through ``identify_sindy`` (below).
         """
         rec = self.check(data)
         self.seed_ = seed_of(self.seed)  # None or a Generator: the integer drawn here, recorded in the settings
@@ -529,3 +541,90 @@ class SINDy(StructureResults, Identifier):
                 return p
         best["selected"] = True  # pragma: no cover - best always qualifies
         return best
+
+
+# --- a structure's (N > 1 DOFs): its stacked weak form (``equations``) ----------------------------------------
+def identify_sindy(est, rec: Measurement, at: tuple[int, int]) -> StructureIdentification:
+    """SINDy on a record of N > 1 DOFs (module docstring): the single DOF's sparsity path, one-standard-error
+    selection on held-out blocks and bagging ensemble, on the structure's stacked weak form.
+    """
+    import pysindy as ps
+
+    from negstiff.inference.steps.weak import _seeded_global_rng
+
+    fit, sel, whole, rows, window, form, (n_id, _), _ = _systems(
+        est, rec, at, ring_down(rec), ring_down(rec, ("decay",))
+    )
+    (yf, Xf, names, _), (ys, Xs, _, per_sel) = fit[:4], sel[:4]
+    masses = rec.dof_masses
+    colscale = np.sqrt(np.mean(Xf**2, axis=0))
+    colscale[colscale == 0] = 1.0
+    ystd = float(yf.std()) or 1.0
+    supports: dict[tuple[bool, ...], list[float]] = {}
+    # a ring-down (a hammer's record, a free decay) dissipates by what it is: every damper of the structure and the
+    # element's viscous term in every support, as the single DOF's (the equation error cannot weigh them: c r' is
+    # 2 zeta of the inertia's size, under the selection's margin; measured: a 2-DOF hammer record selected none)
+    dampers = np.array([bool(re.fullmatch(r"c\d+", n)) or n == "element v" for n in names]) if ring_down(rec) else None
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        for weight in est.weights:
+            opt = ps.STLSQ(threshold=math.sqrt(2 * weight), alpha=0.0, max_iter=50)
+            opt.fit(Xf / colscale, yf / ystd)
+            on = np.abs(opt.coef_[0]) > 0
+            if dampers is not None:
+                on |= dampers
+            support = tuple(bool(c) for c in on)
+            if any(support):
+                supports.setdefault(support, []).append(weight)
+    path: list[dict[str, Any]] = []
+    for support, weights in supports.items():
+        theta = _lstsq(Xf, yf, support)
+        try:
+            s, b = _assemble(theta, rec.n_dof, at, masses)
+            physical_frame(s, b, rec.gravity, unknown_zeros(rec))[0].equilibria()
+            usable = True
+        except (ValueError, InputError):
+            usable = False
+        path.append({"support": support, "terms": [n for n, on in zip(names, support, strict=True) if on],
+                     "n_terms": int(sum(support)), "weight": float(np.sqrt(min(weights) * max(weights))),
+                     "block_ms": _block_scores(ys - Xs @ theta, ys, per_sel, rec.n_dof, rows),
+                     "usable": usable})  # fmt: skip
+    if not path:
+        raise StructureIdentificationError(f"{rec.source}: every weight removed every term")
+    for p in path:
+        p["heldout_residual_percent"] = float(100 * np.sqrt(p["block_ms"].mean()))
+    path.sort(key=lambda p: (p["n_terms"], p["heldout_residual_percent"]))
+    admissible = [p for p in path if p["usable"]] or path
+    best = min(admissible, key=lambda p: p["heldout_residual_percent"])
+    chosen = next(p for p in admissible if indistinguishable(p["block_ms"], best["block_ms"], est.margin))
+    y, X = whole[0], whole[1]
+    theta = _lstsq(X, y, chosen["support"])
+    scale_all = np.sqrt(np.mean(X**2, axis=0))
+    scale_all[scale_all == 0] = 1.0
+    with warnings.catch_warnings(), _seeded_global_rng(est.seed_):
+        warnings.simplefilter("ignore")
+        ens = ps.EnsembleOptimizer(
+            ps.STLSQ(threshold=math.sqrt(2 * chosen["weight"]), alpha=0.0, max_iter=50),
+            bagging=True,
+            n_models=est.n_models,
+            n_subset=int(est.subset_fraction * y.size),
+        )
+        ens.fit(X / scale_all, (y / (float(y.std()) or 1.0))[:, None])
+    coefs = np.array(ens.coef_list)[:, 0, :] * (float(y.std()) or 1.0) / scale_all
+    ensemble = {n: {"inclusion_probability": float(np.mean(coefs[:, i] != 0)), "median": float(np.median(coefs[:, i])),
+                    "sd": float(np.std(coefs[:, i]))} for i, n in enumerate(names)}  # fmt: skip
+    s_m, b = _assemble(theta, rec.n_dof, at, masses)
+    structure, offsets = physical_frame(s_m, b, rec.gravity, unknown_zeros(rec))
+    return structure_result("sindy", rec, structure, offsets, n_id, None, [], {
+        "terms": {nm: float(t) for nm, t in zip(names, theta, strict=True)},
+        "selected_terms": chosen["terms"],
+        "ensemble": ensemble,
+        "path": [{k: v for k, v in p.items() if k not in ("block_ms", "support")} for p in path],
+    }, {
+        "velocity": f"Savitzky-Golay (window, order) = {window}",
+        "form": f"weak: test functions (1 - (s/T)^2)^4, T = {form.half} samples, every {form.stride}",
+        "selection": f"sparsest support whose held-out weak residual (blocks of {est.window_s:g} s) is within "
+                     f"max(one standard error, {100 * est.margin:g} %) of the best",
+        "weight": chosen["weight"], "n_models": est.n_models, "seed": est.seed_,
+        "newtons_third_law": "the element's terms are one coefficient each, acting on J and, opposite, on I",
+    }, refine=est.refine is not False)  # fmt: skip

@@ -226,7 +226,7 @@ def judgement(
     if worst is not None and np.isfinite(worst) and worst > HELD_OUT_LIMIT_PERCENT:
         what = "restarted free runs err" if key.startswith("restarted") else "free run errs"
         if floor is not None and floor >= HELD_OUT_LIMIT_PERCENT:  # a right model misses it as badly: the held-out
-            # part is the sensors' noise and judges nothing (a model beyond the floor: ``_finish``'s own warning)
+            # part is the sensors' noise and judges nothing (beyond the floor: ``structure_result``'s own warning)
             out.append(
                 f"the held-out part is at the sensors' noise: the model's held-out {what} by {worst:.3g} % of the "
                 f"record's rms there, and a right model misses a record like this by {floor:.3g} % (its own run "

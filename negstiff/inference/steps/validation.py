@@ -511,7 +511,7 @@ def restarted_free_runs(
 
 
 STRUCTURE_WINDOW_S = 0.25
-"""A structure's restarted windows [s] (``restarted_structure_runs``; ``structure_id.WINDOW_S``)."""
+"""A structure's restarted windows [s] (``restarted_structure_runs``; ``identification.WINDOW_S``)."""
 
 
 def structure_windows(rec: Measurement, place: tuple[int, int], start: int, window_s: float = STRUCTURE_WINDOW_S,

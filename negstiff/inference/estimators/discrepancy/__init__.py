@@ -52,14 +52,9 @@ from typing import Any, override
 import numpy as np
 
 from negstiff.errors import InputError, issue
+from negstiff.inference.estimators.base import ElementPlace, element_of
 from negstiff.inference.estimators.parameters import FRACTION, RESTORING_LAW, Boolean, Interval, LawName
-from negstiff.inference.estimators.structure_id import (
-    ElementPlace,
-    StructureResults,
-    check_ring_down_scores,
-    element_of,
-)
-from negstiff.inference.estimators.structure_id import discrepancy as structure_discrepancy
+from negstiff.inference.estimators.results import StructureResults
 from negstiff.inference.record.measurement import Measurement
 from negstiff.inference.steps.plausibility import classified
 from negstiff.inference.steps.refine import refine_stage
@@ -85,6 +80,7 @@ from ._candidates import (
     share_text,
 )
 from ._intervals import Intervals
+from ._rounds import structure_rounds
 
 __all__ = [
     "CUBIC_BASELINE",
@@ -145,7 +141,7 @@ class Discrepancy(StructureResults, Intervals):
     unnamed : bool, default False
         Add a non-parametric force for what no catalogue effect names (the hybrid model; a single DOF's).
     element : str or (int, int), optional
-        Where the element acts on a record of N > 1 DOFs: ``"I-J"`` (``structure_id.discrepancy``: the element's
+        Where the element acts on a record of N > 1 DOFs: ``"I-J"`` (``_rounds.structure_rounds``: the element's
         base law with the linear structure as the baseline, the catalogue offered round after round up to
         ``max_effects``, the same paired block rule). None: the record's ``# element:``, else the single DOF.
 
@@ -273,7 +269,7 @@ class Discrepancy(StructureResults, Intervals):
                 raise DiscrepancyError("Discrepancy(unnamed=True): the non-parametric force is a single DOF's (a "
                                        f"record of {rec.n_dof} DOFs)")  # fmt: skip
         from negstiff.inference.analysis.record_kind import check_decay, record_kind
-        from negstiff.inference.estimators.identification import refuse_one_orbit
+        from negstiff.inference.estimators.identification import check_ring_down_scores, refuse_one_orbit
 
         kind = record_kind(rec).kind
         rec.require(4000, "the discrepancy workflow")
@@ -328,7 +324,7 @@ class Discrepancy(StructureResults, Intervals):
         if at is not None:
             # a structure's ring-down read as NSI and SINDy read it (``record_kind``): a hammer's force windowed, a
             # decay's input zero; its blocks shortened to the ring-down and its held-out windows between the pulses
-            self.result_ = structure_discrepancy(self, identification_record(rec, record_kind(rec)), at)
+            self.result_ = structure_rounds(self, identification_record(rec, record_kind(rec)), at)
             self.model_ = self.result_.model
             return self
         # a ring-down, read as NSI and SINDy read it (``record_kind``): a hammer's force windowed (each hit's offset

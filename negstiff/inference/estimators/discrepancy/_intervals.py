@@ -4,11 +4,13 @@ output error over the record's restarted windows.
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import numpy as np
 
 from negstiff.errors import NotFittedError
+from negstiff.inference.estimators.results import StructureIdentification
 from negstiff.inference.record.measurement import Measurement
 from negstiff.inference.steps.refine import parameter_names, parameter_scales, values_of, with_values
 from negstiff.inference.steps.validation import RestartWindows, restart_windows
@@ -158,3 +160,30 @@ class Intervals(Judging):
             ran = RestartWindows.at(windows.starts[ok], length)
             self.bayesian_[e] = self._bayesian_opinion(rec, e, ran, theta, cov, keys, where)
         return out
+
+
+# --- a structure's -------------------------------------------------------------------------------------------------
+def effect_intervals(result: StructureIdentification, named: list[str], prob: float = 0.9) -> dict[str, Any]:
+    """Each named effect's value with its interval (probability ``prob``): the refinement's window-robust standard
+    error of the effect's coefficient (``refine._standard_errors``, the structure's other parameters and the
+    channels' zeros free), a Gaussian interval about the refined value; None without a kept refinement (the weak
+    form's value stands alone). Conditional on the model's form, as the single DOF's Laplace interval is.
+    """
+    from scipy import stats
+
+    zq = float(stats.norm.ppf(0.5 + prob / 2))
+    account: dict[str, Any] = dict(result.refinement or {})
+    se_all = account.get("standard_errors") or {}
+    out: dict[str, Any] = {}
+    for e in named:
+        value = result.structure.element.extra.get(e)
+        se = se_all.get(e)
+        if not account.get("applied") or se is None or not isinstance(value, (int, float)) or not math.isfinite(se):
+            out[e] = {"value": value, "interval": None, "prob": prob,
+                      "method": "not available: no refinement kept, or the effect is not one coefficient"}  # fmt: skip
+            continue
+        out[e] = {"value": float(value), "standard_error": float(se),
+                  "interval": [float(value - zq * se), float(value + zq * se)], "prob": prob,
+                  "method": "the output-error refinement's window-robust standard error (its last stage's restarted "
+                            "windows, every parameter and the channels' zeros free), a Gaussian interval"}  # fmt: skip
+    return out

@@ -9,6 +9,8 @@ from typing import Any
 import numpy as np
 
 from negstiff.inference.record.measurement import Measurement
+from negstiff.inference.steps.equations import _Weak
+from negstiff.models.structure import Structure, relative
 
 from ._baseline import Baselines
 from ._candidates import share_text
@@ -94,3 +96,28 @@ def where_words(regimes: dict[str, dict[str, float]]) -> str:
         n2, w2 = parts[1]
         txt += f"; next {where(n2)} ({w2['ratio']:.1f}x)"
     return txt
+
+
+# --- a structure's: on the element's relative motion ---------------------------------------------------------------
+def locate(residual: np.ndarray, y: np.ndarray, per_dof: int, form: _Weak, states, at: tuple[int, int],
+           structure: Structure, offsets: np.ndarray) -> dict[str, dict[str, float]]:  # fmt: skip
+    """Where a structure's weak residual (``weak_system``'s rows over the identification part) lives, by the regimes
+    of the element's relative motion (the single DOF's ``regime_shares`` on the element's relative displacement and
+    velocity at each test function's centre, in the physical frame of ``structure`` and its channels' ``offsets``,
+    its wells the element's): each test function's squared residual of every DOF, divided by that DOF's target's
+    variance and averaged over the DOFs (``_block_scores``' measure).
+    """
+    zs, v = states
+    n_dof = zs.shape[0]
+    r2 = (residual.reshape(n_dof, per_dof) ** 2 / y.reshape(n_dof, per_dof).var(axis=1, keepdims=True)).mean(axis=0)
+    centres = np.clip(np.arange(per_dof) * form.stride + form.phi.size // 2, 0, zs.shape[1] - 1)
+    o = np.asarray(offsets, float)
+    r_all = relative(zs - o[:, None], at)
+    rv_all = relative(v, at)
+    wells: tuple[float | None, ...] = (None, None, None)
+    try:
+        eq = structure.element_equilibria()
+        wells = (eq.z_minus, eq.z_0, eq.z_plus)
+    except ValueError:
+        pass
+    return regime_shares(r_all[centres], rv_all[centres], np.sqrt(r2), wells, r_all, rv_all)

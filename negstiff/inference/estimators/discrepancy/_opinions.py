@@ -10,6 +10,8 @@ from typing import Any
 
 import numpy as np
 
+from negstiff.inference.estimators.identification import WINDOW_S
+from negstiff.inference.estimators.results import StructureIdentification
 from negstiff.inference.record.measurement import Measurement
 from negstiff.inference.steps.validation import RestartWindows
 from negstiff.models import Model
@@ -129,3 +131,55 @@ class Opinions(Runs):
             "draws of the effect's size from its Laplace approximation and of the noise variance"
         )
         return out
+
+
+# --- a structure's -------------------------------------------------------------------------------------------------
+def bayesian_opinions(result: StructureIdentification, rec: Measurement, n_id: int, named: list[str],
+                      between_pulses: bool = False, draws: int = 64) -> dict[str, Any]:  # fmt: skip
+    """A Bayesian second opinion on each named effect, beside the paired rule that named it (the single DOF's
+    ``_loo_compare``): the held-out tail's restarted windows (``free_run_error``'s) predicted by the final structure
+    with the effect (its size drawn ``draws`` times from the refinement's standard error where one was kept, else at
+    its value) and without it (the rest held), compared by ``arviz.compare`` (PSIS-LOO over the windows). A window's
+    mean-square error is every DOF's divided by that channel's held-out variance (the validation's measure); a
+    diverged run's is the measured motion's own.
+    """
+    from negstiff.inference.steps.validation import channel_scales, structure_window_errors, structure_windows
+
+    from ._candidates import _admissible_sizes, _with_size, _without
+
+    if not named:
+        return {}
+    structure, offsets = result.structure, np.asarray(result.offsets_m, float)
+    windows, zs, v = structure_windows(rec, structure.place, n_id, WINDOW_S, between_pulses)
+    scale = channel_scales(rec, n_id)[None, None, :, None]
+    worst = float(np.mean((windows.measured(rec.channels) / scale[0]) ** 2))
+    account: dict[str, Any] = dict(result.refinement or {})
+    se_all = (account.get("standard_errors") or {}) if account.get("applied") else {}
+    element = structure.element
+    out: dict[str, Any] = {}
+    for e in named:
+        rng = np.random.default_rng(0)
+        raw = element.extra.get(e)
+        if not isinstance(raw, (int, float)):  # an effect of several values (none in a structure's catalogue yet)
+            out[e] = {"error": "not one coefficient: no opinion drawn"}
+            continue
+        value, se = float(raw), float(se_all.get(e) or math.nan)
+        drawn = math.isfinite(se) and se > 0
+        sizes = (_admissible_sizes(element, e, [None], rng.multivariate_normal, np.array([value]),
+                                   np.array([[se**2]]), draws) if drawn else [])  # fmt: skip
+        systems = [structure.with_element(_with_size(element, e, size)) for size in sizes]
+        systems += [structure, structure.with_element(_without(element, e))]  # at its value; without it
+        err, diverged = structure_window_errors(systems, rec, windows, zs, v, offsets)
+        norm = err / scale
+        ms = np.where(diverged, worst, np.mean(norm**2, axis=(2, 3)))
+        rows = [r for k in (-2, -1) for r in norm[k].reshape(-1, norm.shape[-1])]
+        ms_with = ms[:-2] if drawn else np.repeat(ms[-2:-1], draws, axis=0)  # at its value: its one run, each draw's
+        opinion = _loo_compare(ms_with, np.repeat(ms[-1][None], draws, axis=0), rows, windows.length, rng)
+        opinion["method"] = (
+            f"arviz.compare (PSIS-LOO) over the held-out tail's {windows.starts.size} restarted {WINDOW_S:g} s runs of "
+            f"every DOF, {draws} draws of the noise variance"
+            + (" and of the effect's size from the refinement's standard error" if drawn else
+               " (the effect at its value: no refinement's standard error was kept)")
+        )  # fmt: skip
+        out[e] = opinion
+    return out

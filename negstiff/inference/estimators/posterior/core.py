@@ -16,7 +16,7 @@ from scipy import optimize
 
 from negstiff.errors import ConvergenceWarning, InputError, MeasurementError, issue
 from negstiff.inference.analysis.record_kind import RING_DOWN_KINDS
-from negstiff.inference.estimators.base import Estimator
+from negstiff.inference.estimators.base import ElementPlace, Estimator, element_of
 from negstiff.inference.estimators.parameters import (
     RANDOM_STATE,
     Boolean,
@@ -50,7 +50,6 @@ from negstiff.inference.estimators.posterior.sampling import (
     sample_ensembles,
 )
 from negstiff.inference.estimators.posterior.windows import DROP_FACTOR_AT_MAP, PosteriorError, Windows
-from negstiff.inference.estimators.structure_id import ElementPlace, element_of
 from negstiff.inference.record.derivatives import noise_floor
 from negstiff.inference.record.measurement import Measurement
 from negstiff.inference.steps.plausibility import classified

@@ -27,7 +27,6 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -35,13 +34,13 @@ from scipy import signal, stats
 
 from negstiff.errors import InputError, issue
 from negstiff.errors import NegstiffWarning as _Warning
+from negstiff.inference.estimators import subspace
+from negstiff.inference.estimators.results import StateSpaceIdentification
 from negstiff.inference.record.derivatives import band_limited, basis_band_hz, smooth_and_differentiate
 from negstiff.inference.record.measurement import Measurement
 from negstiff.models import laws
 from negstiff.models.state_space import StateSpaceStructure, element_basis, feedback_inputs
 from negstiff.models.structure import Mode, coupling, relative
-
-from . import subspace
 
 F_TOL = 0.01
 """A pole is stable when the next order holds one within this share of its frequency ..."""
@@ -86,78 +85,6 @@ SLOW_ITERATIONS = 10
 
 class StateSpaceIdentificationError(InputError):
     """The record does not allow a state-space structure's identification (a refusal, exit 2 at the CLI)."""
-
-
-@dataclass(frozen=True, repr=False)
-class StateSpaceIdentification:
-    """NSI's result on a structure read through its sensors (``NSI(element="I-J").fit(rec)`` on a record of
-    N > 1 sensors without masses); ``to_json()`` is the contract's JSON (``linear_part: "state_space"``).
-
-    Attributes
-    ----------
-    model : StateSpaceStructure
-    modal : dict
-        ``{"linear": [Mode, ...]}``: the underlying-linear modes the stabilisation diagram holds, shapes over the
-        sensors.
-    element : dict
-        Each basis coefficient about r* (``k2_tilde``, ``k3``, ``c_nl``), its standard error and quality.
-    validation : dict
-        The held-out windows' error of the model and of its linear part alone.
-    """
-
-    method: str
-    model: StateSpaceStructure
-    modal: dict[str, list[Mode]]
-    element: dict[str, Any]
-    validation: dict[str, Any]
-    stabilisation: list[dict[str, Any]]
-    frf: dict[str, Any]
-    warnings: tuple[str, ...]
-    settings: dict[str, Any] = field(default_factory=dict)
-
-    def to_json(self) -> dict[str, Any]:
-        """The contract's JSON of ``identify`` on a structure read through its sensors."""
-        return {
-            "method": self.method,
-            "linear_part": "state_space",
-            "dofs": self.model.n_sensors,
-            "element_at": list(self.model.at),
-            "order": self.model.order,
-            "modal": {w: [m.to_json() for m in ms] for w, ms in self.modal.items()},
-            "element": self.element,
-            "validation": self.validation,
-            "frf": self.frf,
-            "stabilisation": self.stabilisation,
-            "model": self.model.to_dict(),
-            "warnings": list(self.warnings),
-            "settings": self.settings,
-        }
-
-    @classmethod
-    def from_json(cls, data) -> StateSpaceIdentification:
-        """The identification a result JSON holds (``to_json()``, its text or a file path)."""
-        from negstiff.inference.estimators.persistence import json_source
-
-        d = json_source(data, "state-space identify result JSON")
-        try:
-            modal = {w: [Mode(float(m["f_hz"]), float(m["zeta"]), tuple(float(x) for x in m["shape"])) for m in ms]
-                     for w, ms in d["modal"].items()}  # fmt: skip
-            return cls(d["method"], StateSpaceStructure.from_dict(d["model"]), modal, dict(d["element"]),
-                       dict(d["validation"]), list(d["stabilisation"]), dict(d["frf"]), tuple(d.get("warnings") or ()),
-                       dict(d.get("settings") or {}))  # fmt: skip
-        except (KeyError, TypeError, ValueError) as exc:
-            raise InputError(f"not a state-space identify result JSON: {type(exc).__name__} {exc}") from None
-
-    def summary(self) -> str:
-        """One line: the sensors, the order, the element's top stiffness coefficient and the modes."""
-        top = max((k for k in self.element if k[:1] == "k" and k[1:].isdigit()), key=lambda k: int(k[1:]))
-        k3 = self.element[top]
-        modes = "; ".join(f"{m.f_hz:.3f} Hz {100 * m.zeta:.2f} %" for m in self.modal["linear"])
-        m = self.model
-        return f"{m.n_sensors} sensors, order {m.order}, element {top}={k3['value']:.4g} +- {k3['se']:.2g}; {modes}"
-
-    def __repr__(self) -> str:
-        return f"StateSpaceIdentification({self.summary()}; held-out {self.validation['rms_percent']:.3g} %)"
 
 
 def check_record(rec: Measurement, at: tuple[int, int], block_rows: int) -> int:

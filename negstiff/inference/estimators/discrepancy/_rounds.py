@@ -1,0 +1,140 @@
+"""The discrepancy workflow's rounds on a structure (N > 1 DOFs): the element's base law with the linear structure
+is the baseline; each registered effect with a column of its own is added as a term of the element and scored like
+SINDy's supports, on held-out blocks of the structure's weak form (``equations``). An effect is named when it lowers
+the held-out weak residual by more than max(one standard error of the paired block differences, ``margin``)
+(``selection.compare``, the single DOF's rule); among those, the largest gain. The named one joins the base and the
+rest are offered again; then where the gap lay (``_locating.locate``), each named effect's interval
+(``_intervals.effect_intervals``) and its Bayesian second opinion (``_opinions.bayesian_opinions``).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from typing import Any
+
+import numpy as np
+
+from negstiff.inference.analysis.record_kind import ring_down
+from negstiff.inference.estimators.identification import REFINEMENT_SETTING, WINDOW_S, refined, structure_result
+from negstiff.inference.estimators.results import Bunch, StructureIdentification
+from negstiff.inference.record.measurement import Measurement
+from negstiff.inference.steps.equations import _assemble, _block_scores, _lstsq, _systems, physical_frame, unknown_zeros
+from negstiff.inference.steps.selection import compare
+from negstiff.inference.steps.validation import restarted_structure_runs as free_run_error
+from negstiff.models import effects
+from negstiff.models.structure import relative
+
+from ._intervals import effect_intervals
+from ._locating import locate, where_words
+from ._opinions import bayesian_opinions
+
+
+def structure_rounds(est, rec: Measurement, at: tuple[int, int]) -> StructureIdentification:
+    """The discrepancy workflow on a record of N > 1 DOFs (module docstring): the element's base law with the
+    linear structure, each registered effect added in turn, named by the paired block rule; the named one joins the
+    base and the rest are offered again, until none is named (at most ``max_effects`` rounds: ``iterations``).
+    """
+    ident_states: dict[str, Any] = {}
+
+    def v_noise_of(vr: np.ndarray) -> float:
+        # the smoothed sign's velocity scale: the relative velocity's noise, read as its rough part (first differences
+        # of a white-noise-dominated tail), never below 1e-4 of its spread
+        return max(float(np.std(np.diff(vr)) / math.sqrt(2)), 1e-4 * float(vr.std()))
+
+    terms = [t for t in effects.library_terms() if t.field not in ("k0", "k1", "k2", "k3", "c", "c_nl")]
+
+    def extras(zs, v):
+        r, vr = relative(zs, at), relative(v, at)
+        ident_states["v_noise"] = v_noise_of(vr)
+        return [(t.field, t.law.column(r, vr, ident_states["v_noise"])) for t in terms]
+
+    fit, sel, whole, rows, window, form, (n_id, _), states = _systems(
+        est, rec, at, ring_down(rec), ring_down(rec, ("decay",)), extras
+    )
+    (yf, Xf_all, names_all, _), (ys, Xs_all, _, per_sel) = fit[:4], sel[:4]
+    n_base = len(names_all) - len(terms)
+    masses = rec.dof_masses
+
+    def scored(cols: list[int]) -> tuple[np.ndarray, np.ndarray]:
+        theta = _lstsq(Xf_all[:, cols], yf)
+        return theta, _block_scores(ys - Xs_all[:, cols] @ theta, ys, per_sel, rec.n_dof, rows)
+
+    fields = [t.field for t in terms]
+    base_cols = list(range(n_base))
+    named_all: list[str] = []
+    iterations: list[dict[str, Any]] = []
+    # as the single DOF's workflow: each round adds the effect that lowers the held-out score most, beyond the margin
+    # rule, to the base the next round scores against; until no effect passes (at most ``max_effects``)
+    for _ in range(est.max_effects):
+        _, base_blocks = scored(base_cols)
+        ranking: list[dict[str, Any]] = [{"effect": "none", "score": float(100 * np.sqrt(base_blocks.mean()))}]
+        named, best_gain = None, 0.0
+        candidates: dict[str, dict[str, float]] = {}
+        for k, t in enumerate(terms):
+            if t.field in named_all:
+                continue
+            theta, blocks = scored(base_cols + [n_base + k])
+            value = float(theta[-1])
+            cmp = compare(base_blocks, blocks, est.margin, base_blocks)
+            physical = not (effects.get(t.field).dissipative and value < 0)  # a feed of energy is no candidate
+            candidates[t.field] = {"value": value, "score": float(100 * np.sqrt(blocks.mean())), "gain": cmp.gain,
+                                   "se": cmp.se, "physical": physical}  # fmt: skip
+            ranking.append({"effect": t.field, "score": candidates[t.field]["score"]})
+            if physical and cmp.significant and cmp.gain > best_gain:
+                named, best_gain = t.field, cmp.gain
+        ranking.sort(key=lambda e: e["score"])
+        iterations.append({"named": named or "none", "ranking": ranking, "candidates": candidates})
+        if named is None:
+            break
+        named_all.append(named)
+        base_cols.append(n_base + fields.index(named))
+    if not iterations:  # max_effects = 0: the base law's own score, nothing offered
+        score = float(100 * np.sqrt(scored(base_cols)[1].mean()))
+        iterations.append({"named": "none", "ranking": [{"effect": "none", "score": score}], "candidates": {}})
+    first = iterations[0]
+    y, X = whole[0], whole[1]
+    theta_base = _lstsq(X[:, :n_base], y)
+    base_s, base_b = _assemble(theta_base, rec.n_dof, at, masses)
+    baseline, base_offsets = physical_frame(base_s, base_b, rec.gravity, unknown_zeros(rec))
+    located = {"before": locate(y - X[:, :n_base] @ theta_base, y, whole[3], form, states, at, baseline, base_offsets)}
+    if not named_all:
+        structure, offsets = baseline, base_offsets
+        located["after"] = located["before"]
+    else:
+        theta = _lstsq(X[:, base_cols], y)
+        extra = {name: float(theta[n_base + i]) for i, name in enumerate(named_all)}
+        s, b = _assemble(theta[:n_base], rec.n_dof, at, masses, extra)
+        structure, offsets = physical_frame(s, b, rec.gravity, unknown_zeros(rec))
+        located["after"] = locate(y - X[:, base_cols] @ theta, y, whole[3], form, states, at, structure, offsets)
+    hits = ring_down(rec, ("impact",))  # a hammer's record: the windows between its pulses
+    # refined as the single DOF's workflow refines (a hammer's record only when asked): the baseline here, the
+    # final structure by ``structure_result``, so the gap before and after the effects is measured on refined
+    # models alike
+    refine = est.refine is True or (est.refine is None and not hits)
+    gap_before = free_run_error(baseline, rec, n_id, WINDOW_S, base_offsets, hits)
+    if refine:
+        baseline, base_offsets, gap_before, account = refined(baseline, base_offsets, rec, n_id, gap_before, hits)
+        if not named_all:  # the baseline is the result, refined once
+            structure, offsets = baseline, base_offsets
+    est.effects_ = named_all or ["none"]
+    est.baseline_structure_ = baseline
+    out = structure_result("discrepancy", rec, structure, offsets, n_id, None, [], {
+        "effect": first["named"], "effects": named_all or ["none"], "ranking": first["ranking"],
+        "candidates": first["candidates"], "iterations": iterations,
+        "gap_before_percent": gap_before["rms_percent"],
+        "where": where_words(located["before"]), "regimes_before": located["before"],
+        "regimes_after": located["after"],
+        "velocity_noise_for_sign": ident_states.get("v_noise"),
+    }, {"velocity": f"Savitzky-Golay (window, order) = {window}",
+        "score": f"held-out weak residual in blocks of {est.window_s:g} s; named only above max(1 SE, "
+                 f"{100 * est.margin:g} %)"}, refine=refine and bool(named_all))  # fmt: skip
+    if refine and not named_all:
+        out = dataclasses.replace(out, refinement=Bunch(account),
+                                  settings={**out.settings, "refinement": REFINEMENT_SETTING})  # fmt: skip
+    gap_after = {k: v for k, v in out.validation.items() if k != "floor_percent"}
+    out.details["gap_after_percent"] = gap_after["rms_percent"]
+    out.details["effect_interval"] = effect_intervals(out, named_all)
+    out.details["bayesian"] = bayesian_opinions(out, rec, n_id, named_all, hits)
+    est.gap_before_, est.gap_after_ = gap_before, gap_after
+    return out
