@@ -118,26 +118,52 @@ def total_force(kind, coulomb, generic, table, z, v, q, p, b, mono, ts, tab):
     return f
 
 
-@numba.njit(**JIT)  # called, not inlined in numba's IR (as ``monomials``; inlining it gained nothing, measured)
-def extra_term(z, v, u, w, a, zc, vc, uc, iz, iv, iu, bz, bv):
-    """The extra force hook: g(z, z', u), a weighted sum of tensor-product Gaussian bumps over (z, z') and of
-    bumps over u (the hybrid model's non-parametric term, ``inference.hybrid``; bz, bv: scratch).
+@numba.njit(inline="always", **JIT)
+def _bumps(x, c, g, out):
+    """Gaussian bumps exp(-(x - c_i)^2 / (2 w^2)) on an even grid of centres ``c`` into ``out`` (its first c.size
+    entries), ``g`` the grid's ``grid_constants``: the first centre's bump, then each next one by the ratio of
+    neighbouring bumps, e_(i+1) = e_i exp(d s) exp(-(2i + 1) s^2 / 2) (d = (x - c_0) / w, s the step over the
+    width), so two exponentials a grid, not one a bump (they were most of a hybrid free run's time; measured in
+    ``reports/benchmarks.md``). d is capped where exp(d s) would overflow (every bump is zero there).
     """
-    for i in range(zc.size):
-        d = (z - zc[i]) * iz
-        bz[i] = math.exp(-0.5 * d * d)
-    for j in range(vc.size):
-        d = (v - vc[j]) * iv
-        bv[j] = math.exp(-0.5 * d * d)
+    d = min((x - c[0]) * g[0], g[4])
+    e = math.exp(-0.5 * d * d)
+    r = math.exp(d * g[1]) * g[2]
+    for i in range(c.size):
+        out[i] = e
+        e *= r
+        r *= g[3]
+
+
+def grid_constants(centres: np.ndarray, width: float) -> np.ndarray:
+    """What ``_bumps`` reads of bumps of ``width`` on an even grid of ``centres``: (1 / width, s, exp(-s^2 / 2),
+    exp(-s^2), the cap of d), s the grid's step over the width. One ``ValueError`` for an uneven grid.
+    """
+    c = np.asarray(centres, float)
+    step = float(c[1] - c[0]) if c.size > 1 else float(width)
+    if c.size > 2 and not np.allclose(np.diff(c), step, rtol=1e-9, atol=0.0):
+        raise ValueError("the bumps' centres are not an even grid")
+    s = step / float(width)
+    return np.array([1.0 / float(width), s, math.exp(-0.5 * s * s), math.exp(-s * s), 700.0 / max(abs(s), 1e-300)])
+
+
+@numba.njit(inline="always", **JIT)  # inlined: as a call (13 arguments, 7 of them arrays) it took half its time
+def extra_term(z, v, u, w, a, zc, vc, uc, gz, gv, gu, bz, bv):
+    """The extra force hook: g(z, z', u), a weighted sum of tensor-product Gaussian bumps over (z, z') and of
+    bumps over u (the hybrid model's non-parametric term, ``inference.hybrid``), each grid's bumps by ``_bumps``
+    (``gz``, ``gv``, ``gu``: the grids' ``grid_constants``; bz, bv: scratch, bz at least as long as uc).
+    """
+    _bumps(z, zc, gz, bz)
+    _bumps(v, vc, gv, bv)
     g = 0.0
     for i in range(zc.size):
         s = 0.0
         for j in range(vc.size):
             s += w[i, j] * bv[j]
         g += s * bz[i]
+    _bumps(u, uc, gu, bz)
     for k in range(uc.size):
-        d = (u - uc[k]) * iu
-        g += a[k] * math.exp(-0.5 * d * d)
+        g += a[k] * bz[k]
     return g
 
 
@@ -171,7 +197,7 @@ def _accelerations(kind, coulomb, generic, table, extra, linear, q, mono, ts, ta
     more than 30 arguments is a ``*args`` call in Python 3.12's bytecode, which numba's inliner refuses.
     """
     r, rv, f, lin, bz, bv = scratch
-    hw, ha, hzc, hvc, huc, hiz, hiv, hiu = hook
+    hw, ha, hzc, hvc, huc, hgz, hgv, hgu = hook
     nb = q.shape[1]
     nd = zs.shape[0]
     if ei >= 0:
@@ -189,7 +215,7 @@ def _accelerations(kind, coulomb, generic, table, extra, linear, q, mono, ts, ta
             f[b] += tabled(r[b], tab, b)
     if extra is not None:
         for b in range(nb):
-            f[b] += extra_term(r[b], rv[b], ur[b], hw, ha, hzc, hvc, huc, hiz, hiv, hiu, bz, bv)
+            f[b] += extra_term(r[b], rv[b], ur[b], hw, ha, hzc, hvc, huc, hgz, hgv, hgu, bz, bv)
     for d in range(nd):
         if linear:
             for b in range(nb):
@@ -224,7 +250,7 @@ def _fused_step(kind, coulomb, generic, table, extra, q, mono, ts, tab, im, h, z
     operations in the same order (the same numbers to the last bit, tested), the state in registers. The
     stage-wise loops cost 2-4x at one DOF (each loop's set-up, paid some twenty times per step, measured).
     """
-    hw, ha, hzc, hvc, huc, hiz, hiv, hiu = hook
+    hw, ha, hzc, hvc, huc, hgz, hgv, hgu = hook
     bz, bv = scratch[4], scratch[5]
     for b in range(z.size):
         qb = _column(q, b)
@@ -235,8 +261,8 @@ def _fused_step(kind, coulomb, generic, table, extra, q, mono, ts, tab, im, h, z
         for s in range(4):  # one call site of the force law (each inlined copy is compile time; LLVM unrolls this)
             f = total_force(kind, coulomb, generic, table, zs, vs, qb, q, b, mono, ts, tab)
             if extra is not None:
-                f += extra_term(zs, vs, ra[b] if s == 0 else (rb[b] if s == 3 else rm[b]), hw, ha, hzc, hvc, huc, hiz,
-                                hiv, hiu, bz, bv)  # fmt: skip
+                f += extra_term(zs, vs, ra[b] if s == 0 else (rb[b] if s == 3 else rm[b]), hw, ha, hzc, hvc, huc, hgz,
+                                hgv, hgu, bz, bv)  # fmt: skip
             acc = (wa[b] if s == 0 else (wb[b] if s == 3 else wm[b])) - f * im[b]
             if s == 0:
                 a1 = acc
@@ -275,7 +301,7 @@ def _integrate(kind, coulomb, generic, table, extra, fused, p, mono, ts, ei, ej,
     The input row holds either the T samples (linearly interpolated inside each interval) or, when it has
     2 ``nsub`` (T - 1) + 1 columns, the input at every Runge-Kutta stage time (``stage_input``), read as it is.
     ``extra`` (a staged input) adds the hook ``extra_term`` with its weights and bumps (``hook``: w, a, the centres
-    in z, z', u and the inverse widths) to the element's force.
+    in z, z', u and each grid's ``grid_constants``) to the element's force.
 
     ``fused``: the fused step of one DOF on the base without a linear structure (``_fused_step``), else the
     stage-wise loops of any structure; the caller chooses (``simulator.integrate``). The flags are constants of the
@@ -324,7 +350,7 @@ def _integrate(kind, coulomb, generic, table, extra, fused, p, mono, ts, ei, ej,
     rv = np.empty(nb)
     f = np.empty(nb)
     lin = np.empty(nb)
-    scratch = (r, rv, f, lin, np.empty(hook[2].size), np.empty(hook[3].size))
+    scratch = (r, rv, f, lin, np.empty(max(hook[2].size, hook[4].size)), np.empty(hook[3].size))
     alive = np.ones(nb, dtype=np.bool_)
     for d in range(nd):
         for b in range(nb):
@@ -439,21 +465,21 @@ _NO_V = np.zeros(0)
 def _kernel_poly(p, mono, ts, ei, ej, minv, lk, lc, gain, u, uidx, dt, nsub, z0, v0, zl, vl, oz, ov, sv, st, fs):
     return _integrate(KIND_POLYNOMIAL, None, None, None, None, 1, p, mono, ts, ei, ej, minv, lk, lc, gain, u,
                       uidx, dt, nsub, z0, v0, zl, vl, oz, ov, sv, st, fs,
-                      (_NO_W, _NO_V, _NO_V, _NO_V, _NO_V, 1.0, 1.0, 1.0))
+                      (_NO_W, _NO_V, _NO_V, _NO_V, _NO_V, _NO_V, _NO_V, _NO_V))
 
 
 @numba.njit(**JIT)
 def _kernel_poly_staged(p, mono, ts, ei, ej, minv, lk, lc, gain, u, uidx, dt, nsub, z0, v0, zl, vl, oz, ov, sv, st, fs):
     return _integrate(KIND_POLYNOMIAL, None, None, None, None, None, p, mono, ts, ei, ej, minv, lk, lc, gain, u,
                       uidx, dt, nsub, z0, v0, zl, vl, oz, ov, sv, st, fs,
-                      (_NO_W, _NO_V, _NO_V, _NO_V, _NO_V, 1.0, 1.0, 1.0))
+                      (_NO_W, _NO_V, _NO_V, _NO_V, _NO_V, _NO_V, _NO_V, _NO_V))
 
 
 @numba.njit(**JIT)
 def _kernel_poly_sign(p, mono, ts, ei, ej, minv, lk, lc, gain, u, uidx, dt, nsub, z0, v0, zl, vl, oz, ov, sv, st, fs):
     return _integrate(KIND_POLYNOMIAL, 1, None, None, None, 1, p, mono, ts, ei, ej, minv, lk, lc, gain, u,
                       uidx, dt, nsub, z0, v0, zl, vl, oz, ov, sv, st, fs,
-                      (_NO_W, _NO_V, _NO_V, _NO_V, _NO_V, 1.0, 1.0, 1.0))
+                      (_NO_W, _NO_V, _NO_V, _NO_V, _NO_V, _NO_V, _NO_V, _NO_V))
 
 
 @numba.njit(**JIT)
@@ -461,14 +487,14 @@ def _kernel_poly_sign_staged(p, mono, ts, ei, ej, minv, lk, lc, gain, u, uidx, d
                              fs):
     return _integrate(KIND_POLYNOMIAL, 1, None, None, None, None, p, mono, ts, ei, ej, minv, lk, lc, gain, u,
                       uidx, dt, nsub, z0, v0, zl, vl, oz, ov, sv, st, fs,
-                      (_NO_W, _NO_V, _NO_V, _NO_V, _NO_V, 1.0, 1.0, 1.0))
+                      (_NO_W, _NO_V, _NO_V, _NO_V, _NO_V, _NO_V, _NO_V, _NO_V))
 
 
 @numba.njit(**JIT)
 def _kernel_device(p, mono, ts, ei, ej, minv, lk, lc, gain, u, uidx, dt, nsub, z0, v0, zl, vl, oz, ov, sv, st, fs):
     return _integrate(KIND_DEVICE, None, None, None, None, 1, p, mono, ts, ei, ej, minv, lk, lc, gain, u, uidx,
                       dt, nsub, z0, v0, zl, vl, oz, ov, sv, st, fs,
-                      (_NO_W, _NO_V, _NO_V, _NO_V, _NO_V, 1.0, 1.0, 1.0))
+                      (_NO_W, _NO_V, _NO_V, _NO_V, _NO_V, _NO_V, _NO_V, _NO_V))
 
 
 @numba.njit(**JIT)
@@ -476,14 +502,14 @@ def _kernel_device_staged(p, mono, ts, ei, ej, minv, lk, lc, gain, u, uidx, dt, 
                           fs):
     return _integrate(KIND_DEVICE, None, None, None, None, None, p, mono, ts, ei, ej, minv, lk, lc, gain, u, uidx,
                       dt, nsub, z0, v0, zl, vl, oz, ov, sv, st, fs,
-                      (_NO_W, _NO_V, _NO_V, _NO_V, _NO_V, 1.0, 1.0, 1.0))
+                      (_NO_W, _NO_V, _NO_V, _NO_V, _NO_V, _NO_V, _NO_V, _NO_V))
 
 
 @numba.njit(**JIT)
 def _kernel_device_sign(p, mono, ts, ei, ej, minv, lk, lc, gain, u, uidx, dt, nsub, z0, v0, zl, vl, oz, ov, sv, st, fs):
     return _integrate(KIND_DEVICE, 1, None, None, None, 1, p, mono, ts, ei, ej, minv, lk, lc, gain, u, uidx,
                       dt, nsub, z0, v0, zl, vl, oz, ov, sv, st, fs,
-                      (_NO_W, _NO_V, _NO_V, _NO_V, _NO_V, 1.0, 1.0, 1.0))
+                      (_NO_W, _NO_V, _NO_V, _NO_V, _NO_V, _NO_V, _NO_V, _NO_V))
 
 
 @numba.njit(**JIT)
@@ -491,14 +517,14 @@ def _kernel_device_sign_staged(p, mono, ts, ei, ej, minv, lk, lc, gain, u, uidx,
                                st, fs):
     return _integrate(KIND_DEVICE, 1, None, None, None, None, p, mono, ts, ei, ej, minv, lk, lc, gain, u, uidx,
                       dt, nsub, z0, v0, zl, vl, oz, ov, sv, st, fs,
-                      (_NO_W, _NO_V, _NO_V, _NO_V, _NO_V, 1.0, 1.0, 1.0))
+                      (_NO_W, _NO_V, _NO_V, _NO_V, _NO_V, _NO_V, _NO_V, _NO_V))
 
 
 @numba.njit(**JIT)
 def _kernel_poly_table(p, mono, ts, ei, ej, minv, lk, lc, gain, u, uidx, dt, nsub, z0, v0, zl, vl, oz, ov, sv, st, fs):
     return _integrate(KIND_POLYNOMIAL, None, None, 1, None, 1, p, mono, ts, ei, ej, minv, lk, lc, gain, u,
                       uidx, dt, nsub, z0, v0, zl, vl, oz, ov, sv, st, fs,
-                      (_NO_W, _NO_V, _NO_V, _NO_V, _NO_V, 1.0, 1.0, 1.0))
+                      (_NO_W, _NO_V, _NO_V, _NO_V, _NO_V, _NO_V, _NO_V, _NO_V))
 
 
 @numba.njit(**JIT)
@@ -506,7 +532,7 @@ def _kernel_poly_table_staged(p, mono, ts, ei, ej, minv, lk, lc, gain, u, uidx, 
                               st, fs):
     return _integrate(KIND_POLYNOMIAL, None, None, 1, None, None, p, mono, ts, ei, ej, minv, lk, lc, gain, u,
                       uidx, dt, nsub, z0, v0, zl, vl, oz, ov, sv, st, fs,
-                      (_NO_W, _NO_V, _NO_V, _NO_V, _NO_V, 1.0, 1.0, 1.0))
+                      (_NO_W, _NO_V, _NO_V, _NO_V, _NO_V, _NO_V, _NO_V, _NO_V))
 
 
 @numba.njit(**JIT)
@@ -514,7 +540,7 @@ def _kernel_poly_generic(p, mono, ts, ei, ej, minv, lk, lc, gain, u, uidx, dt, n
                          fs):
     return _integrate(KIND_POLYNOMIAL, 1, 1, 1, None, 1, p, mono, ts, ei, ej, minv, lk, lc, gain, u, uidx,
                       dt, nsub, z0, v0, zl, vl, oz, ov, sv, st, fs,
-                      (_NO_W, _NO_V, _NO_V, _NO_V, _NO_V, 1.0, 1.0, 1.0))
+                      (_NO_W, _NO_V, _NO_V, _NO_V, _NO_V, _NO_V, _NO_V, _NO_V))
 
 
 @numba.njit(**JIT)
@@ -522,7 +548,7 @@ def _kernel_poly_generic_staged(p, mono, ts, ei, ej, minv, lk, lc, gain, u, uidx
                                 st, fs):
     return _integrate(KIND_POLYNOMIAL, 1, 1, 1, None, None, p, mono, ts, ei, ej, minv, lk, lc, gain, u, uidx,
                       dt, nsub, z0, v0, zl, vl, oz, ov, sv, st, fs,
-                      (_NO_W, _NO_V, _NO_V, _NO_V, _NO_V, 1.0, 1.0, 1.0))
+                      (_NO_W, _NO_V, _NO_V, _NO_V, _NO_V, _NO_V, _NO_V, _NO_V))
 
 
 @numba.njit(**JIT)
@@ -530,7 +556,7 @@ def _kernel_device_generic(p, mono, ts, ei, ej, minv, lk, lc, gain, u, uidx, dt,
                            fs):
     return _integrate(KIND_DEVICE, 1, 1, 1, None, 1, p, mono, ts, ei, ej, minv, lk, lc, gain, u, uidx, dt,
                       nsub, z0, v0, zl, vl, oz, ov, sv, st, fs,
-                      (_NO_W, _NO_V, _NO_V, _NO_V, _NO_V, 1.0, 1.0, 1.0))
+                      (_NO_W, _NO_V, _NO_V, _NO_V, _NO_V, _NO_V, _NO_V, _NO_V))
 
 
 @numba.njit(**JIT)
@@ -538,35 +564,49 @@ def _kernel_device_generic_staged(p, mono, ts, ei, ej, minv, lk, lc, gain, u, ui
                                   sv, st, fs):
     return _integrate(KIND_DEVICE, 1, 1, 1, None, None, p, mono, ts, ei, ej, minv, lk, lc, gain, u, uidx, dt,
                       nsub, z0, v0, zl, vl, oz, ov, sv, st, fs,
-                      (_NO_W, _NO_V, _NO_V, _NO_V, _NO_V, 1.0, 1.0, 1.0))
+                      (_NO_W, _NO_V, _NO_V, _NO_V, _NO_V, _NO_V, _NO_V, _NO_V))
 
 
 @numba.njit(**JIT)
 def _kernel_poly_extra(p, mono, ts, ei, ej, minv, lk, lc, gain, u, uidx, dt, nsub, z0, v0, zl, vl, oz, ov, sv, st, fs,
-                       hw, ha, hzc, hvc, huc, hiz, hiv, hiu):
+                       hw, ha, hzc, hvc, huc, hgz, hgv, hgu):
     return _integrate(KIND_POLYNOMIAL, 1, 1, 1, 1, 1, p, mono, ts, ei, ej, minv, lk, lc, gain, u, uidx,
-                      dt, nsub, z0, v0, zl, vl, oz, ov, sv, st, fs, (hw, ha, hzc, hvc, huc, hiz, hiv, hiu))
+                      dt, nsub, z0, v0, zl, vl, oz, ov, sv, st, fs, (hw, ha, hzc, hvc, huc, hgz, hgv, hgu))
 
 
 @numba.njit(**JIT)
 def _kernel_poly_extra_staged(p, mono, ts, ei, ej, minv, lk, lc, gain, u, uidx, dt, nsub, z0, v0, zl, vl, oz, ov, sv,
-                              st, fs, hw, ha, hzc, hvc, huc, hiz, hiv, hiu):
+                              st, fs, hw, ha, hzc, hvc, huc, hgz, hgv, hgu):
     return _integrate(KIND_POLYNOMIAL, 1, 1, 1, 1, None, p, mono, ts, ei, ej, minv, lk, lc, gain, u, uidx,
-                      dt, nsub, z0, v0, zl, vl, oz, ov, sv, st, fs, (hw, ha, hzc, hvc, huc, hiz, hiv, hiu))
+                      dt, nsub, z0, v0, zl, vl, oz, ov, sv, st, fs, (hw, ha, hzc, hvc, huc, hgz, hgv, hgu))
+
+
+@numba.njit(**JIT)
+def _kernel_poly_extra_lean(p, mono, ts, ei, ej, minv, lk, lc, gain, u, uidx, dt, nsub, z0, v0, zl, vl, oz, ov, sv, st,
+                            fs, hw, ha, hzc, hvc, huc, hgz, hgv, hgu):
+    return _integrate(KIND_POLYNOMIAL, None, None, None, 1, 1, p, mono, ts, ei, ej, minv, lk, lc, gain, u, uidx,
+                      dt, nsub, z0, v0, zl, vl, oz, ov, sv, st, fs, (hw, ha, hzc, hvc, huc, hgz, hgv, hgu))
+
+
+@numba.njit(**JIT)
+def _kernel_poly_extra_lean_staged(p, mono, ts, ei, ej, minv, lk, lc, gain, u, uidx, dt, nsub, z0, v0, zl, vl, oz, ov,
+                                   sv, st, fs, hw, ha, hzc, hvc, huc, hgz, hgv, hgu):
+    return _integrate(KIND_POLYNOMIAL, None, None, None, 1, None, p, mono, ts, ei, ej, minv, lk, lc, gain, u, uidx,
+                      dt, nsub, z0, v0, zl, vl, oz, ov, sv, st, fs, (hw, ha, hzc, hvc, huc, hgz, hgv, hgu))
 
 
 @numba.njit(**JIT)
 def _kernel_device_extra(p, mono, ts, ei, ej, minv, lk, lc, gain, u, uidx, dt, nsub, z0, v0, zl, vl, oz, ov, sv, st, fs,
-                         hw, ha, hzc, hvc, huc, hiz, hiv, hiu):
+                         hw, ha, hzc, hvc, huc, hgz, hgv, hgu):
     return _integrate(KIND_DEVICE, 1, 1, 1, 1, 1, p, mono, ts, ei, ej, minv, lk, lc, gain, u, uidx, dt,
-                      nsub, z0, v0, zl, vl, oz, ov, sv, st, fs, (hw, ha, hzc, hvc, huc, hiz, hiv, hiu))
+                      nsub, z0, v0, zl, vl, oz, ov, sv, st, fs, (hw, ha, hzc, hvc, huc, hgz, hgv, hgu))
 
 
 @numba.njit(**JIT)
 def _kernel_device_extra_staged(p, mono, ts, ei, ej, minv, lk, lc, gain, u, uidx, dt, nsub, z0, v0, zl, vl, oz, ov, sv,
-                                st, fs, hw, ha, hzc, hvc, huc, hiz, hiv, hiu):
+                                st, fs, hw, ha, hzc, hvc, huc, hgz, hgv, hgu):
     return _integrate(KIND_DEVICE, 1, 1, 1, 1, None, p, mono, ts, ei, ej, minv, lk, lc, gain, u, uidx, dt,
-                      nsub, z0, v0, zl, vl, oz, ov, sv, st, fs, (hw, ha, hzc, hvc, huc, hiz, hiv, hiu))
+                      nsub, z0, v0, zl, vl, oz, ov, sv, st, fs, (hw, ha, hzc, hvc, huc, hgz, hgv, hgu))
 # fmt: on
 
 
@@ -577,11 +617,15 @@ def kernel(kind: int, p: np.ndarray, mono: np.ndarray, hook: bool = False, table
     common ones), and whether it runs the stage-wise loops of a structure (``staged``) or the fused step of one DOF
     on the base (``_integrate``'s ``fused``).
     """
+    sign = bool(np.any(p[P_SIGN] != 0.0))
     if hook:
+        if kind == KIND_POLYNOMIAL and not (sign or table or mono.shape[0]):
+            # the hook's polynomial physics without a smoothed sign, extra monomials or tables (the hybrid's
+            # usual physics): those terms' code, evaluated at zero, had cost a third of a free run (measured)
+            return (_kernel_poly_extra_lean, _kernel_poly_extra_lean_staged)[staged]
         pick = (_kernel_poly_extra, _kernel_poly_extra_staged) if kind == KIND_POLYNOMIAL else (
             _kernel_device_extra, _kernel_device_extra_staged)  # fmt: skip
         return pick[staged]
-    sign = bool(np.any(p[P_SIGN] != 0.0))
     if table and kind == KIND_POLYNOMIAL and not sign and not mono.shape[0]:  # a shaped law: the table alone
         return (_kernel_poly_table, _kernel_poly_table_staged)[staged]
     if mono.shape[0] or table:

@@ -160,3 +160,34 @@ def test_discrepancy_unnamed_reports_what_no_catalogue_effect_names(tmp_path):
     gap = un["gap"]
     assert gap["physics_median_window_percent"] > 4 * 100 * NOISE, gap
     assert gap["hybrid_median_window_percent"] < 1.5 * 100 * NOISE, gap
+
+
+def test_the_kernels_bumps_are_the_gaussians_they_stand_for():
+    # the hybrid's free runs evaluate its bumps by the ratio of neighbours (``kernel._bumps``: two exponentials a
+    # grid): each must be exp(-(x - c)^2 / (2 w^2)) to rounding (the products accumulate an ulp or two a step and the
+    # first bump's argument carries d^2 ulps), inside the grid, beside it and far beyond, where it is zero; a
+    # diverged state stays NaN; an uneven grid is refused
+    from negstiff.inference.estimators.hybrid import Basis
+    from negstiff.models.kernel import _bumps, grid_constants
+
+    rng = np.random.default_rng(3)
+    basis = Basis.over(rng.normal(0.0, 1e-3, 5000), rng.normal(0.0, 0.05, 5000), rng.normal(0.0, 2.0, 5000), 7, 5, 5)
+    for centres, width in ((basis.zc, basis.wz), (basis.vc, basis.wv), (basis.uc, basis.wu)):
+        g = grid_constants(centres, width)
+        span = centres[-1] - centres[0]
+        out = np.empty(centres.size)
+        for x in np.concatenate([np.linspace(centres[0] - 2 * span, centres[-1] + 2 * span, 401),
+                                 centres[0] + np.array([-1e3, 1e3, 1e6]) * span]):  # fmt: skip
+            _bumps(x, centres, g, out)
+            d = (x - centres) / width
+            exact = np.exp(-0.5 * d * d)
+            # relative error from the first bump's argument (-d0^2 / 2 to an ulp of itself) and the steps' products
+            d0 = (x - centres[0]) / width
+            tol = 1e-15 * (4 * centres.size + 0.5 * min(d0 * d0, 1e3))
+            big = exact > 1e-280
+            assert np.all(np.abs(out[big] - exact[big]) <= tol * exact[big] + 1e-300), (x, out, exact)
+            assert np.all(np.abs(out[~big]) <= 1e-270), (x, out)
+        _bumps(np.nan, centres, g, out)
+        assert np.all(np.isnan(out))
+    with pytest.raises(ValueError, match="even grid"):
+        grid_constants(np.array([0.0, 1.0, 3.0]), 1.0)

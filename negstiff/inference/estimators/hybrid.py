@@ -37,6 +37,7 @@ from negstiff.inference.steps.refine import parameter_names, parameter_scales, v
 from negstiff.inference.steps.shooting import parameter_covariance, shooting_least_squares
 from negstiff.inference.steps.validation import divergence_limits, record_substeps, restart_windows, staged_windows
 from negstiff.models import Model
+from negstiff.models.kernel import grid_constants
 from negstiff.models.simulator import simulate_batch, stage_input
 
 
@@ -127,8 +128,9 @@ def simulate_hybrid(
         np.repeat(model.kernel_params()[:, None], nb, axis=1), model.kind, u2, dt, x0, input_kind=input_kind,
         input_index=np.arange(nb), substeps=substeps, store_velocity=True, z_limit=z_limit, v_limit=v_limit,
         threads=1, staged=True,
-        hook=(np.ascontiguousarray(w), np.ascontiguousarray(a), basis.zc, basis.vc, basis.uc, 1.0 / basis.wz,
-              1.0 / basis.wv, 1.0 / basis.wu),
+        hook=(np.ascontiguousarray(w), np.ascontiguousarray(a), basis.zc, basis.vc, basis.uc,
+              grid_constants(basis.zc, basis.wz), grid_constants(basis.vc, basis.wv),
+              grid_constants(basis.uc, basis.wu)),
     )  # fmt: skip
     assert res.z_dot is not None
     return res.z.T, res.z_dot.T
