@@ -670,3 +670,18 @@ def chain_record(n_dof, device, kind, fs, duration, seed=1, level=8.0, release_m
         z[:, sel] = sol.y[:n_dof, : int(sel.sum())]
         x0 = sol.y[:, -1]
     return u, z, tuple(float(x) for x in m), force_dof
+
+
+def assert_result_answers_alike(est):
+    """A fitted identification's result answers as every result does (``estimators.results``): ``validation`` a
+    read-only bunch (``validation.rms_percent``), ``refinement`` None or a bunch, ``summary()`` one line that the
+    estimator's repr shows, the JSON round trip through ``from_json`` exact."""
+    res = est.result_
+    assert res.validation.rms_percent == res.validation["rms_percent"]
+    with np.testing.assert_raises(TypeError):
+        res.validation["rms_percent"] = 0.0  # read-only
+    assert res.refinement is None or res.refinement.applied in (True, False)
+    line = res.summary()
+    assert isinstance(line, str) and "\n" not in line and line in repr(est), (line, repr(est))
+    assert type(res).from_json(res.to_json()).to_json() == res.to_json()
+    assert isinstance(res.warnings, tuple) and res.method in ("nsi", "sindy", "discrepancy")

@@ -6,7 +6,7 @@ import warnings
 
 import numpy as np
 import pytest
-from records import FIXTURE, TRUTH, rk4_fixture_record, stepped_sweep, write_csv
+from records import FIXTURE, TRUTH, assert_result_answers_alike, rk4_fixture_record, stepped_sweep, write_csv
 
 from negstiff import NSI, Discrepancy, InputError, Model, SINDy
 from negstiff.inference.record.measurement import from_arrays
@@ -120,6 +120,7 @@ def test_device_on_a_flexible_fixture_is_identified(fixture_record, method):
     assert est.validation_["rms_percent"] <= 2 * floor["rms_percent"]
     out = est.result()
     assert set(out["modal"]) == {"minus", "plus"} and len(out["modal"]["plus"]) == 2
+    assert_result_answers_alike(est)  # as a single DOF's and a state-space structure's result do
     assert {"k1", "k2", "k3", "c", "c_nl", "extra"} <= set(out["element"]) and "linear" in out
 
 

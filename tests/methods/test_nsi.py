@@ -2,7 +2,7 @@
 
 import numpy as np
 import pytest
-from records import SILVERBOX_TEST, silverbox_prediction_mv
+from records import SILVERBOX_TEST, assert_result_answers_alike, silverbox_prediction_mv
 from scipy import linalg, signal
 
 from negstiff.errors import MeasurementError
@@ -280,3 +280,4 @@ def test_silverbox_nsi_finds_the_hardening_and_predicts_the_test(silverbox, silv
     assert est.model_.k3 > 0 and est.initial_model_.k3 > 0, "Silverbox is a hardening Duffing oscillator"
     assert silverbox_prediction_mv(est.model_, silverbox, SILVERBOX_TEST) <= 0.85
     assert est.bounded_["ok"]
+    assert_result_answers_alike(est)  # as a structure's result does

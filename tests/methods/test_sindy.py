@@ -2,7 +2,7 @@
 
 import numpy as np
 import pytest
-from records import SILVERBOX_TEST, silverbox_prediction_mv
+from records import SILVERBOX_TEST, assert_result_answers_alike, silverbox_prediction_mv
 from scipy import signal
 
 from negstiff.cli import main
@@ -131,6 +131,7 @@ def test_silverbox_finds_the_cubic_hardening_and_predicts_the_test(silverbox, si
     assert est.ensemble_["z^3"]["inclusion_probability"] == 1.0
     assert silverbox_prediction_mv(est.model_, silverbox, SILVERBOX_TEST) <= 0.85
     assert est.bounded_["ok"] and est.bounded_["over_stroke"]
+    assert_result_answers_alike(est)  # as a structure's result does
 
 
 @pytest.mark.filterwarnings("ignore:Target format constraints")

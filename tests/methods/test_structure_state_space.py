@@ -11,7 +11,7 @@ import warnings
 import numba
 import numpy as np
 import pytest
-from records import write_csv
+from records import assert_result_answers_alike, write_csv
 from scipy import integrate, linalg, signal
 
 from negstiff import NSI, InputError, NegstiffWarning, load
@@ -128,6 +128,13 @@ def test_every_mode_in_band_is_read_from_three_sensors(fitted):
     for m, f, z, se in zip(modes, f_true, zeta_true, r.settings["modes_se"], strict=True):
         assert abs(m.f_hz / f - 1) < 0.001 and se["f_hz"] < 0.001 * f, (m, f, se)
         assert abs(m.zeta / z - 1) < 0.2 and se["zeta"] < 0.1 * z, (m, z, se)
+
+
+def test_a_state_space_result_answers_as_every_result_does(fitted):
+    # the same questions of a state-space structure's result as of a single DOF's and a structure's with masses
+    # (``estimators.results``): its validation a read-only bunch, no refinement, a one-line summary, its JSON
+    assert_result_answers_alike(fitted)
+    assert fitted.result_.refinement is None
 
 
 def test_the_joints_cubic_is_sized_through_the_driving_point_without_masses(fitted, record):

@@ -514,12 +514,7 @@ class Identifier(Estimator):
         self.result_ = Identification.from_json(result)
 
     def _summary(self) -> str:
-        r = self.result_
-        wells = ", ".join(f"{w} {m['f_hz']:.4g} Hz" for w, m in r.modal.items() if m.get("f_hz"))
-        v = r.validation.get("median_window_percent", r.validation.get("rms_percent", math.nan))
-        q = r.validation.get("window_percent_quartiles")
-        spread = f" (quartiles {q[0]:.3g}-{q[1]:.3g} %)" if q else ""
-        return f"k3={r.model.k3:.4g}, wells {wells or 'none'}, held-out median window {v:.3g} %{spread}"
+        return self.result_.summary()
 
 
 # --- a structure's shared stages (N > 1 DOFs with their masses) -----------------------------------------------

@@ -8,7 +8,10 @@ back (``from_json``), after ``scipy.integrate.solve_ivp``'s result bunch.
 - ``StateSpaceIdentification``: a structure read through its sensors without masses (NSI's state-space linear
   part, ``nsi._state_space``).
 
-``StructureResults`` gives an estimator the structure's learned attributes under scikit-learn's names.
+Every result answers alike: ``method``, ``modal``, ``validation`` (a read-only ``Bunch``: ``validation.rms_percent``),
+``refinement`` (None where the model was not refined), ``warnings``, ``settings``, ``summary()`` (one line) and
+``to_json()`` / ``from_json``. ``StructureResults`` gives an estimator the structure's learned attributes under
+scikit-learn's names.
 """
 
 from __future__ import annotations
@@ -195,6 +198,14 @@ class Identification:
         except (KeyError, TypeError, ValueError) as exc:
             raise InputError(f"not an identify result JSON: {type(exc).__name__} {exc}") from None
 
+    def summary(self) -> str:
+        """One line: k3, the wells' frequencies and the held-out median window's error (with its quartiles)."""
+        wells = ", ".join(f"{w} {m['f_hz']:.4g} Hz" for w, m in self.modal.items() if m.get("f_hz"))
+        v = self.validation.get("median_window_percent", self.validation.get("rms_percent", math.nan))
+        q = self.validation.get("window_percent_quartiles")
+        spread = f" (quartiles {q[0]:.3g}-{q[1]:.3g} %)" if q else ""
+        return f"k3={self.model.k3:.4g}, wells {wells or 'none'}, held-out median window {v:.3g} %{spread}"
+
     def __repr__(self) -> str:
         wells = ", ".join(
             f"{w} {m['f_hz']:.4g} Hz / {100 * (m['zeta'] or 0.0):.3g} %" for w, m in self.modal.items() if m.get("f_hz")
@@ -220,7 +231,7 @@ class StateSpaceIdentification:
         sensors.
     element : dict
         Each basis coefficient about r* (``k2_tilde``, ``k3``, ``c_nl``), its standard error and quality.
-    validation : dict
+    validation : Bunch
         The held-out windows' error of the model and of its linear part alone.
     """
 
@@ -228,7 +239,7 @@ class StateSpaceIdentification:
     model: StateSpaceStructure
     modal: dict[str, list[Mode]]
     element: dict[str, Any]
-    validation: dict[str, Any]
+    validation: Bunch
     stabilisation: list[dict[str, Any]]
     frf: dict[str, Any]
     warnings: tuple[str, ...]
@@ -244,7 +255,7 @@ class StateSpaceIdentification:
             "order": self.model.order,
             "modal": {w: [m.to_json() for m in ms] for w, ms in self.modal.items()},
             "element": self.element,
-            "validation": self.validation,
+            "validation": dict(self.validation),
             "frf": self.frf,
             "stabilisation": self.stabilisation,
             "model": self.model.to_dict(),
@@ -262,10 +273,15 @@ class StateSpaceIdentification:
             modal = {w: [Mode(float(m["f_hz"]), float(m["zeta"]), tuple(float(x) for x in m["shape"])) for m in ms]
                      for w, ms in d["modal"].items()}  # fmt: skip
             return cls(d["method"], StateSpaceStructure.from_dict(d["model"]), modal, dict(d["element"]),
-                       dict(d["validation"]), list(d["stabilisation"]), dict(d["frf"]), tuple(d.get("warnings") or ()),
+                       Bunch(d["validation"]), list(d["stabilisation"]), dict(d["frf"]), tuple(d.get("warnings") or ()),
                        dict(d.get("settings") or {}))  # fmt: skip
         except (KeyError, TypeError, ValueError) as exc:
             raise InputError(f"not a state-space identify result JSON: {type(exc).__name__} {exc}") from None
+
+    @property
+    def refinement(self) -> None:
+        """None: a state-space linear part is not refined by output error (its held-out windows judge it)."""
+        return None
 
     def summary(self) -> str:
         """One line: the sensors, the order, the element's top stiffness coefficient and the modes."""
@@ -412,7 +428,7 @@ class StructureResults:
 
     def _summary(self) -> str:
         r = vars(self).get("result_")  # a single DOF's fit need not have one (Discrepancy's)
-        if isinstance(r, (StructureIdentification, StateSpaceIdentification)):
+        if r is not None:
             return r.summary()
         return super()._summary()  # type: ignore[misc]
 

@@ -35,7 +35,7 @@ from scipy import signal, stats
 from negstiff.errors import InputError, issue
 from negstiff.errors import NegstiffWarning as _Warning
 from negstiff.inference.estimators import subspace
-from negstiff.inference.estimators.results import StateSpaceIdentification
+from negstiff.inference.estimators.results import Bunch, StateSpaceIdentification
 from negstiff.inference.record.derivatives import band_limited, basis_band_hz, smooth_and_differentiate
 from negstiff.inference.record.measurement import Measurement
 from negstiff.models import laws
@@ -509,7 +509,7 @@ def identify_state_space(est, rec: Measurement, at: tuple[int, int]) -> StateSpa
                      f"{validation['linear_rms_percent']:.3g} %)")  # fmt: skip
     issue([(_Warning, x) for x in lines])
     return StateSpaceIdentification(
-        method="nsi", model=model, modal={"linear": modes}, element=element, validation=validation,
+        method="nsi", model=model, modal={"linear": modes}, element=element, validation=Bunch(validation),
         stabilisation=rows, warnings=tuple(lines),
         frf={"f_hz": freqs.tolist(), "real": H.real.T.tolist(), "imag": H.imag.T.tolist(), "units": "m/N",
              "input": f"force at sensor {p}"},
