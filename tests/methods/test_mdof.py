@@ -121,6 +121,10 @@ def test_device_on_a_flexible_fixture_is_identified(fixture_record, method):
     out = est.result()
     assert set(out["modal"]) == {"minus", "plus"} and len(out["modal"]["plus"]) == 2
     assert_result_answers_alike(est)  # as a single DOF's and a state-space structure's result do
+    if method is SINDy:  # its support chosen among the admissible ones, as a single DOF's (``selection.choose``)
+        path = est.result_.details["path"]
+        chosen = next(p for p in path if p["terms"] == est.result_.details["selected_terms"])
+        assert chosen["restarted_diverged"] == 0 and chosen["escape_z"] is None and chosen["usable"]
     assert {"k1", "k2", "k3", "c", "c_nl", "extra"} <= set(out["element"]) and "linear" in out
 
 

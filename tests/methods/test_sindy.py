@@ -166,3 +166,22 @@ def test_library_columns_and_unpenalised_fit_match_pysindy():
     ours = weak.fit_support(system, -1.0, support=support)
     on = np.append(support, True)
     assert np.allclose(ours[on], sr3[on], rtol=1e-6, atol=0)
+
+
+def test_the_selection_passes_over_an_unbounded_support_for_a_structure_as_for_a_single_dof():
+    # ``selection.choose``, the rule SINDy's path uses on one DOF and on N: the sparsest support within one standard
+    # error (or the margin) of the best, among those whose free runs stay bounded with no escape past the stroke.
+    # Three supports scored on 40 blocks: the two-term one is indistinguishable from the best but escapes, so the
+    # three-term one is chosen; with none admissible, the rule falls back to every candidate
+    from negstiff.inference.steps.selection import choose
+
+    rng = np.random.default_rng(0)
+    base = 1.0 + 0.01 * rng.standard_normal(40)
+    path = [
+        {"n_terms": 1, "heldout_residual_percent": 40.0, "block_ms": 1.6 * base, "bounded": True},
+        {"n_terms": 2, "heldout_residual_percent": 10.0, "block_ms": base + 1e-4, "bounded": False},
+        {"n_terms": 3, "heldout_residual_percent": 10.0, "block_ms": base, "bounded": True},
+    ]
+    assert choose(path, 0.02, lambda p: p["bounded"]) is path[2]
+    assert choose(path, 0.02, lambda p: True) is path[1]
+    assert choose(path, 0.02, lambda p: False) is path[1]

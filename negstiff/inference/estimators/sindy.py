@@ -41,7 +41,13 @@ from negstiff.inference.analysis.record_kind import (
     ring_down,
 )
 from negstiff.inference.estimators.base import ElementPlace, element_of
-from negstiff.inference.estimators.identification import Estimate, Identifier, check_ring_down_scores, structure_result
+from negstiff.inference.estimators.identification import (
+    WINDOW_S,
+    Estimate,
+    Identifier,
+    check_ring_down_scores,
+    structure_result,
+)
 from negstiff.inference.estimators.parameters import (
     DAMPING_LAW,
     FRACTION,
@@ -63,9 +69,10 @@ from negstiff.inference.steps.equations import (
     physical_frame,
     unknown_zeros,
 )
-from negstiff.inference.steps.selection import block_rows, block_scores, indistinguishable
+from negstiff.inference.steps.selection import block_rows, block_scores, choose
 from negstiff.inference.steps.shape import fit_shape
 from negstiff.inference.steps.validation import boundedness, restarted_free_runs
+from negstiff.inference.steps.validation import restarted_structure_runs as free_run_error
 from negstiff.inference.steps.weak import (
     BASE_FIELDS,
     Bagging,
@@ -533,14 +540,9 @@ class SINDy(StructureResults, Identifier):
         potential opens no escape just past the stroke (``validation.boundedness``); a term that buys
         equation error at the price of an unbounded model is not selected.
         """
-        admissible = [p for p in path if np.isfinite(p["free_run_percent"])] or path
-        best = min(admissible, key=lambda p: p["heldout_residual_percent"])
-        for p in admissible:  # sorted by number of terms, then residual
-            if indistinguishable(p["block_ms"], best["block_ms"], self.margin):
-                p["selected"] = True
-                return p
-        best["selected"] = True  # pragma: no cover - best always qualifies
-        return best
+        chosen = choose(path, self.margin, lambda p: np.isfinite(p["free_run_percent"]))
+        chosen["selected"] = True
+        return chosen
 
 
 # --- a structure's (N > 1 DOFs): its stacked weak form (``equations``) ----------------------------------------
@@ -552,7 +554,7 @@ def identify_sindy(est, rec: Measurement, at: tuple[int, int]) -> StructureIdent
 
     from negstiff.inference.steps.weak import _seeded_global_rng
 
-    fit, sel, whole, rows, window, form, (n_id, _), _ = _systems(
+    fit, sel, whole, rows, window, form, (n_id, n_fit), _ = _systems(
         est, rec, at, ring_down(rec), ring_down(rec, ("decay",))
     )
     (yf, Xf, names, _), (ys, Xs, _, per_sel) = fit[:4], sel[:4]
@@ -577,26 +579,32 @@ def identify_sindy(est, rec: Measurement, at: tuple[int, int]) -> StructureIdent
             if any(support):
                 supports.setdefault(support, []).append(weight)
     path: list[dict[str, Any]] = []
+    ident = rec.segment(0, n_id)
+    hits = ring_down(rec, ("impact",))  # a hammer's record: its windows between the pulses
     for support, weights in supports.items():
         theta = _lstsq(Xf, yf, support)
+        # admissible as a single DOF's support is (``selection.choose``): a usable element (equilibria in the
+        # physical frame), its restarted windows over the selection part all bounded, no escape past the stroke
         try:
             s, b = _assemble(theta, rec.n_dof, at, masses)
-            physical_frame(s, b, rec.gravity, unknown_zeros(rec))[0].equilibria()
-            usable = True
+            candidate, zeros = physical_frame(s, b, rec.gravity, unknown_zeros(rec))
+            candidate.equilibria()
+            runs = free_run_error(candidate, ident, n_fit, WINDOW_S, zeros, hits)
+            escape = boundedness(candidate, ident, free_run=False, offsets=zeros)["escape_z"]
+            usable, diverged = True, int(runs["diverged"])
         except (ValueError, InputError):
-            usable = False
+            usable, diverged, escape, runs = False, None, None, {}
         path.append({"support": support, "terms": [n for n, on in zip(names, support, strict=True) if on],
                      "n_terms": int(sum(support)), "weight": float(np.sqrt(min(weights) * max(weights))),
                      "block_ms": _block_scores(ys - Xs @ theta, ys, per_sel, rec.n_dof, rows),
-                     "usable": usable})  # fmt: skip
+                     "usable": usable, "restarted_diverged": diverged, "escape_z": escape,
+                     "free_run_percent": runs.get("rms_percent")})  # fmt: skip
     if not path:
         raise StructureIdentificationError(f"{rec.source}: every weight removed every term")
     for p in path:
         p["heldout_residual_percent"] = float(100 * np.sqrt(p["block_ms"].mean()))
     path.sort(key=lambda p: (p["n_terms"], p["heldout_residual_percent"]))
-    admissible = [p for p in path if p["usable"]] or path
-    best = min(admissible, key=lambda p: p["heldout_residual_percent"])
-    chosen = next(p for p in admissible if indistinguishable(p["block_ms"], best["block_ms"], est.margin))
+    chosen = choose(path, est.margin, lambda p: p["usable"] and p["restarted_diverged"] == 0 and p["escape_z"] is None)
     y, X = whole[0], whole[1]
     theta = _lstsq(X, y, chosen["support"])
     scale_all = np.sqrt(np.mean(X**2, axis=0))

@@ -1,5 +1,5 @@
-"""Model selection by blocked held-out residuals: the one rule SINDy's sparsity path and the discrepancy
-catalogue share.
+"""Model selection by blocked held-out residuals: the one rule SINDy's sparsity path (a single DOF's and a
+structure's, ``choose``) and the discrepancy catalogue share.
 
 A candidate is fitted on one part of the record and scored on the following part in blocks of a few
 seconds (``block_scores``): the block means are nearly independent where the record decorrelates
@@ -61,3 +61,15 @@ def compare(worse: np.ndarray, better: np.ndarray, margin: float, reference: np.
 def indistinguishable(candidate: np.ndarray, best: np.ndarray, margin: float) -> bool:
     """Whether ``candidate`` scores within max(1 SE, margin x best) of ``best`` (not significantly worse)."""
     return not compare(candidate, best, margin, best).significant
+
+
+def choose(path: list[dict], margin: float, admissible) -> dict:
+    """The sparsest candidate of ``path`` (sorted by number of terms, then held-out residual) whose block scores
+    (``block_ms``) are within max(one standard error, ``margin`` x the best's) of the best candidate's, among the
+    ``admissible`` ones (a predicate: a model whose free runs stay bounded and whose potential opens no escape just
+    past the stroke; every candidate where none is): a term that buys equation error at the price of an unbounded
+    model is not selected, for a single DOF as for a structure.
+    """
+    allowed = [p for p in path if admissible(p)] or path
+    best = min(allowed, key=lambda p: p["heldout_residual_percent"])
+    return next(p for p in allowed if indistinguishable(p["block_ms"], best["block_ms"], margin))
