@@ -89,21 +89,12 @@ class Judging(Opinions):
                        f"fell {txt}, not beyond its uncertainty"), evidence  # fmt: skip
 
     def _paired(self, rec: Measurement, a, b, worst: float | None = None) -> dict[str, Any] | None:
-        """Paired comparison of two models' per-window mean-square errors (the same windows) by their logs:
-        the rms error's fall in % (geometric mean), its standard error, whether it exceeds one standard error.
+        """``paired_windows`` of two models' per-window mean-square errors, a diverged run counting as an error the
+        size of the held-out tail's signal unless ``worst`` says otherwise.
         """
-        if a is None or b is None or len(a) != len(b) or len(a) < 2:
-            return None
-        if worst is None:  # a diverged run counts as an error the size of the signal (the tail's, by default)
+        if worst is None:
             worst = float(np.mean(rec.displacement[self.n_id_ :] ** 2))
-        a, b = (np.log(np.maximum(np.where(np.isfinite(x), x, worst), 1e-300)) for x in (a, b))
-        gain = compare(a, b, 0.0, a)
-        return {
-            "windows": int(len(a)),
-            "gain_percent": float(100 * (1 - math.exp(-gain.gain / 2))),  # the windows' rms error, geometric mean
-            "gain_interval_percent": [float(100 * (1 - math.exp(-(gain.gain + k * gain.se) / 2))) for k in (-1, 1)],
-            "significant": bool(gain.significant),
-        }
+        return paired_windows(a, b, worst)
 
     def _effect_force(self, model: Model, effect: str, z: np.ndarray, v: np.ndarray) -> np.ndarray | None:
         """The named effect's force [N] in ``model`` at the states (z, v); None for a measured channel's term and
@@ -224,3 +215,21 @@ class Judging(Opinions):
         out["acting"] = self._paired(rec, b, a, worst)
         out["folds"] = sizes
         return out
+
+
+def paired_windows(a, b, worst: float) -> dict[str, Any] | None:
+    """Paired comparison of two models' per-window mean-square errors (the same windows) by their logs: the rms
+    error's fall in % (geometric mean), its standard error, whether it exceeds one standard error (None for fewer
+    than two windows). A diverged run's (not finite) counts as ``worst``. A single DOF's judging and a structure's
+    (``_rounds``) read it alike.
+    """
+    if a is None or b is None or len(a) != len(b) or len(a) < 2:
+        return None
+    a, b = (np.log(np.maximum(np.where(np.isfinite(x), x, worst), 1e-300)) for x in (a, b))
+    gain = compare(a, b, 0.0, a)
+    return {
+        "windows": int(len(a)),
+        "gain_percent": float(100 * (1 - math.exp(-gain.gain / 2))),  # the windows' rms error, geometric mean
+        "gain_interval_percent": [float(100 * (1 - math.exp(-(gain.gain + k * gain.se) / 2))) for k in (-1, 1)],
+        "significant": bool(gain.significant),
+    }

@@ -3,8 +3,10 @@ is the baseline; each registered effect with a column of its own is added as a t
 SINDy's supports, on held-out blocks of the structure's weak form (``equations``). An effect is named when it lowers
 the held-out weak residual by more than max(one standard error of the paired block differences, ``margin``)
 (``selection.compare``, the single DOF's rule); among those, the largest gain. The named one joins the base and the
-rest are offered again; then where the gap lay (``_locating.locate``), each named effect's interval
-(``_intervals.effect_intervals``) and its Bayesian second opinion (``_opinions.bayesian_opinions``).
+rest are offered again. The named effects are kept only if the structure with them predicts the held-out windows
+better than the baseline beyond one standard error (``judged``: the single DOF's pooled rule); then where the gap
+lay (``_locating.locate``), each named effect's interval (``_intervals.effect_intervals``) and its Bayesian second
+opinion (``_opinions.bayesian_opinions``).
 """
 
 from __future__ import annotations
@@ -21,11 +23,13 @@ from negstiff.inference.estimators.results import Bunch, StructureIdentification
 from negstiff.inference.record.measurement import Measurement
 from negstiff.inference.steps.equations import _assemble, _block_scores, _lstsq, _systems, physical_frame, unknown_zeros
 from negstiff.inference.steps.selection import compare
+from negstiff.inference.steps.validation import channel_scales, structure_window_errors, structure_windows
 from negstiff.inference.steps.validation import restarted_structure_runs as free_run_error
 from negstiff.models import effects
 from negstiff.models.structure import relative
 
 from ._intervals import effect_intervals
+from ._judging import paired_windows
 from ._locating import locate, where_words
 from ._opinions import bayesian_opinions
 
@@ -108,6 +112,13 @@ def structure_rounds(est, rec: Measurement, at: tuple[int, int]) -> StructureIde
         structure, offsets = physical_frame(s, b, rec.gravity, unknown_zeros(rec))
         located["after"] = locate(y - X[:, base_cols] @ theta, y, whole[3], form, states, at, structure, offsets)
     hits = ring_down(rec, ("impact",))  # a hammer's record: the windows between its pulses
+    judgement: dict[str, Any] = {}
+    if named_all:
+        judgement = judged(rec, at, n_id, hits, (baseline, base_offsets), (structure, offsets), named_all)
+        if not judgement["kept"]:  # named by the equation error, not helping the prediction: said, and left out
+            named_all = []
+            structure, offsets = baseline, base_offsets
+            located["after"] = located["before"]
     # refined as the single DOF's workflow refines (a hammer's record only when asked): the baseline here, the
     # final structure by ``structure_result``, so the gap before and after the effects is measured on refined
     # models alike
@@ -125,7 +136,7 @@ def structure_rounds(est, rec: Measurement, at: tuple[int, int]) -> StructureIde
         "gap_before_percent": gap_before["rms_percent"],
         "where": where_words(located["before"]), "regimes_before": located["before"],
         "regimes_after": located["after"],
-        "velocity_noise_for_sign": ident_states.get("v_noise"),
+        "velocity_noise_for_sign": ident_states.get("v_noise"), "judgement": judgement,
     }, {"velocity": f"Savitzky-Golay (window, order) = {window}",
         "score": f"held-out weak residual in blocks of {est.window_s:g} s; named only above max(1 SE, "
                  f"{100 * est.margin:g} %)"}, refine=refine and bool(named_all))  # fmt: skip
@@ -138,3 +149,36 @@ def structure_rounds(est, rec: Measurement, at: tuple[int, int]) -> StructureIde
     out.details["bayesian"] = bayesian_opinions(out, rec, n_id, named_all, hits)
     est.gap_before_, est.gap_after_ = gap_before, gap_after
     return out
+
+
+def judged(rec: Measurement, at: tuple[int, int], n_id: int, hits: bool, before, after, named: list[str]
+           ) -> dict[str, Any]:  # fmt: skip
+    """Whether the named effects are kept: the single DOF's pooled rule (``_judging.paired_windows``), the
+    structure's restarted windows over the held-out tail run from the same states by the baseline and by the
+    structure with the effects (each ``(structure, offsets)``, the equation-error fits), the windows' mean-square
+    errors over every channel (each in its rms) compared paired by their logs: kept when the error falls beyond one
+    standard error. The effects named in rounds are judged together. ``hits``: a hammer's record, its windows
+    between the pulses.
+    """
+    windows, zs, v = structure_windows(rec, at, n_id, WINDOW_S, hits)
+    scale = channel_scales(rec, n_id)
+    ms = []
+    for structure, offsets in (before, after):
+        err, diverged = structure_window_errors([structure], rec, windows, zs, v, offsets)
+        with np.errstate(invalid="ignore", over="ignore"):
+            w = np.mean((err[0] / scale[None, :, None]) ** 2, axis=(1, 2))
+        ms.append(np.where(diverged[0], np.inf, w))
+    pooled = paired_windows(ms[0], ms[1], worst=1.0)  # a diverged window: an error the size of the signal
+    what = ", ".join(named)
+    if pooled is None:
+        return {"kept": False, "pooled": None,
+                "text": f"{what}: not kept: the held-out tail has too few windows to tell if it helps"}  # fmt: skip
+    gain = pooled["gain_percent"]
+    lo, hi = pooled["gain_interval_percent"]
+    change = (f"fell {gain:.3g} % (one standard error: {lo:.3g} to {hi:.3g} %, geometric mean)" if gain >= 0 else
+              f"rose {1 - gain / 100:.3g}x (geometric mean)")  # fmt: skip
+    kept = bool(pooled["significant"] and gain > 0)
+    text = (f"{what}: kept: the held-out windows' rms error {change}" if kept else
+            f"{what}: named by the equation error but not kept: with it the held-out windows' rms error {change}, "
+            + ("not beyond its uncertainty" if gain >= 0 else "a worse prediction"))  # fmt: skip
+    return {"kept": kept, "pooled": pooled, "text": text}
