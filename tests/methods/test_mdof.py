@@ -465,10 +465,12 @@ def test_discrepancy_names_each_missing_effect_of_the_element_in_turn():
         assert lo <= truth <= hi, (name, intervals[name])
     rounds = d.result()["details"]["iterations"]
     assert [r["named"] for r in rounds] == ["quintic_stiffness", "coulomb_friction", "none"]
-    # kept because they predict the held-out windows better, as a single DOF's effects are kept (the pooled rule,
-    # paired windows beyond one standard error; measured: their rms error fell 72 %, 69-75 % within one se)
+    # each kept because it predicts the held-out windows better, as a single DOF's round's effect is kept (the pooled
+    # rule, paired windows beyond one standard error; measured: the quintic lowers their rms error 64 %, 61-67 %
+    # within one se, the friction then 22 %, 17-27 %)
     judgement = details["judgement"]
-    assert judgement["kept"] and judgement["pooled"]["significant"] and judgement["pooled"]["gain_percent"] > 30
+    assert [j["effect"] for j in judgement] == ["quintic_stiffness", "coulomb_friction"], judgement
+    assert all(j["kept"] and j["pooled"]["significant"] and j["pooled"]["gain_percent"] > 0 for j in judgement)
     one = Discrepancy(element="1-2", max_effects=1).fit(rec)  # the first round alone
     assert one.effects_ == ["quintic_stiffness"]
     assert d.gap_after_["rms_percent"] < one.gap_after_["rms_percent"] < 0.5 * d.gap_before_["rms_percent"]

@@ -3,8 +3,8 @@ is the baseline; each registered effect with a column of its own is added as a t
 SINDy's supports, on held-out blocks of the structure's weak form (``equations``). An effect is named when it lowers
 the held-out weak residual by more than max(one standard error of the paired block differences, ``margin``)
 (``selection.compare``, the single DOF's rule); among those, the largest gain. The named one joins the base and the
-rest are offered again. The named effects are kept only if the structure with them predicts the held-out windows
-better than the baseline beyond one standard error (``judged``: the single DOF's pooled rule); then where the gap
+rest are offered again. Each round's effect is kept only if the structure with it predicts the held-out windows
+better than without it beyond one standard error (``judged``: the single DOF's pooled rule); then where the gap
 lay (``_locating.locate``), each named effect's interval (``_intervals.effect_intervals``) and its Bayesian second
 opinion (``_opinions.bayesian_opinions``).
 """
@@ -68,6 +68,18 @@ def structure_rounds(est, rec: Measurement, at: tuple[int, int]) -> StructureIde
     base_cols = list(range(n_base))
     named_all: list[str] = []
     iterations: list[dict[str, Any]] = []
+    y, X = whole[0], whole[1]
+    hits = ring_down(rec, ("impact",))  # a hammer's record: the windows between its pulses
+
+    def fitted(cols: list[int], names: list[str]):
+        # the structure with the base terms and the named effects ``names`` (columns ``cols``) from the whole
+        # identification part's weak form, in its physical frame, with each channel's zero and its coefficients
+        theta = _lstsq(X[:, cols], y)
+        extra = {name: float(theta[n_base + i]) for i, name in enumerate(names)}
+        s, b = _assemble(theta[:n_base], rec.n_dof, at, masses, extra)
+        return (*physical_frame(s, b, rec.gravity, unknown_zeros(rec)), theta)
+
+    judgement: list[dict[str, Any]] = []
     # as the single DOF's workflow: each round adds the effect that lowers the held-out score most, beyond the margin
     # rule, to the base the next round scores against; until no effect passes (at most ``max_effects``)
     for _ in range(est.max_effects):
@@ -91,34 +103,29 @@ def structure_rounds(est, rec: Measurement, at: tuple[int, int]) -> StructureIde
         iterations.append({"named": named or "none", "ranking": ranking, "candidates": candidates})
         if named is None:
             break
+        # kept only if it predicts the held-out windows better, as a single DOF's round's effect (``judged``)
+        trial_cols = base_cols + [n_base + fields.index(named)]
+        verdict = judged(rec, at, n_id, hits, fitted(base_cols, named_all)[:2],
+                         fitted(trial_cols, [*named_all, named])[:2], [named])  # fmt: skip
+        judgement.append({"effect": named, **verdict})
+        iterations[-1].update(kept=verdict["kept"], verdict=verdict["text"])
+        if not verdict["kept"]:  # named by the equation error, not helping the prediction: said, and left out
+            iterations[-1]["named"] = "none"
+            break
         named_all.append(named)
-        base_cols.append(n_base + fields.index(named))
+        base_cols = trial_cols
     if not iterations:  # max_effects = 0: the base law's own score, nothing offered
         score = float(100 * np.sqrt(scored(base_cols)[1].mean()))
         iterations.append({"named": "none", "ranking": [{"effect": "none", "score": score}], "candidates": {}})
     first = iterations[0]
-    y, X = whole[0], whole[1]
-    theta_base = _lstsq(X[:, :n_base], y)
-    base_s, base_b = _assemble(theta_base, rec.n_dof, at, masses)
-    baseline, base_offsets = physical_frame(base_s, base_b, rec.gravity, unknown_zeros(rec))
+    baseline, base_offsets, theta_base = fitted(list(range(n_base)), [])
     located = {"before": locate(y - X[:, :n_base] @ theta_base, y, whole[3], form, states, at, baseline, base_offsets)}
     if not named_all:
         structure, offsets = baseline, base_offsets
         located["after"] = located["before"]
     else:
-        theta = _lstsq(X[:, base_cols], y)
-        extra = {name: float(theta[n_base + i]) for i, name in enumerate(named_all)}
-        s, b = _assemble(theta[:n_base], rec.n_dof, at, masses, extra)
-        structure, offsets = physical_frame(s, b, rec.gravity, unknown_zeros(rec))
+        structure, offsets, theta = fitted(base_cols, named_all)
         located["after"] = locate(y - X[:, base_cols] @ theta, y, whole[3], form, states, at, structure, offsets)
-    hits = ring_down(rec, ("impact",))  # a hammer's record: the windows between its pulses
-    judgement: dict[str, Any] = {}
-    if named_all:
-        judgement = judged(rec, at, n_id, hits, (baseline, base_offsets), (structure, offsets), named_all)
-        if not judgement["kept"]:  # named by the equation error, not helping the prediction: said, and left out
-            named_all = []
-            structure, offsets = baseline, base_offsets
-            located["after"] = located["before"]
     # refined as the single DOF's workflow refines (a hammer's record only when asked): the baseline here, the
     # final structure by ``structure_result``, so the gap before and after the effects is measured on refined
     # models alike
@@ -153,12 +160,11 @@ def structure_rounds(est, rec: Measurement, at: tuple[int, int]) -> StructureIde
 
 def judged(rec: Measurement, at: tuple[int, int], n_id: int, hits: bool, before, after, named: list[str]
            ) -> dict[str, Any]:  # fmt: skip
-    """Whether the named effects are kept: the single DOF's pooled rule (``_judging.paired_windows``), the
-    structure's restarted windows over the held-out tail run from the same states by the baseline and by the
-    structure with the effects (each ``(structure, offsets)``, the equation-error fits), the windows' mean-square
-    errors over every channel (each in its rms) compared paired by their logs: kept when the error falls beyond one
-    standard error. The effects named in rounds are judged together. ``hits``: a hammer's record, its windows
-    between the pulses.
+    """Whether a round's named effects are kept: the single DOF's pooled rule (``_judging.paired_windows``), the
+    structure's restarted windows over the held-out tail run from the same states by the structure without and with
+    them (each ``(structure, offsets)``, the equation-error fits), the windows' mean-square errors over every channel
+    (each in its rms) compared paired by their logs: kept when the error falls beyond one standard error. ``hits``: a
+    hammer's record, its windows between the pulses.
     """
     windows, zs, v = structure_windows(rec, at, n_id, WINDOW_S, hits)
     scale = channel_scales(rec, n_id)
