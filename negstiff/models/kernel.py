@@ -126,6 +126,8 @@ def _bumps(x, c, g, out):
     width), so two exponentials a grid, not one a bump (they were most of a hybrid free run's time; measured in
     ``reports/benchmarks.md``). d is capped where exp(d s) would overflow (every bump is zero there).
     """
+    if c.size == 0:  # a hybrid without input bumps: nothing to read (c[0] is no element)
+        return
     d = min((x - c[0]) * g[0], g[4])
     e = math.exp(-0.5 * d * d)
     r = math.exp(d * g[1]) * g[2]

@@ -189,5 +189,8 @@ def test_the_kernels_bumps_are_the_gaussians_they_stand_for():
             assert np.all(np.abs(out[~big]) <= 1e-270), (x, out)
         _bumps(np.nan, centres, g, out)
         assert np.all(np.isnan(out))
+    untouched = np.full(1, 7.0)
+    _bumps(0.3, np.empty(0), grid_constants(np.empty(0), 1.0), untouched)  # a hybrid without input bumps
+    assert untouched[0] == 7.0
     with pytest.raises(ValueError, match="even grid"):
         grid_constants(np.array([0.0, 1.0, 3.0]), 1.0)

@@ -80,6 +80,10 @@ def structure_rounds(est, rec: Measurement, at: tuple[int, int]) -> StructureIde
         return (*physical_frame(s, b, rec.gravity, unknown_zeros(rec)), theta)
 
     judgement: list[dict[str, Any]] = []
+    # the structure the rounds have reached (the baseline first), and its held-out windows' errors once judged
+    current = base_fit = fitted(base_cols, [])
+    window_ms = None
+    current_ms: np.ndarray | None = None
     # as the single DOF's workflow: each round adds the effect that lowers the held-out score most, beyond the margin
     # rule, to the base the next round scores against; until no effect passes (at most ``max_effects``)
     for _ in range(est.max_effects):
@@ -105,26 +109,30 @@ def structure_rounds(est, rec: Measurement, at: tuple[int, int]) -> StructureIde
             break
         # kept only if it predicts the held-out windows better, as a single DOF's round's effect (``judged``)
         trial_cols = base_cols + [n_base + fields.index(named)]
-        verdict = judged(rec, at, n_id, hits, fitted(base_cols, named_all)[:2],
-                         fitted(trial_cols, [*named_all, named])[:2], [named])  # fmt: skip
+        trial = fitted(trial_cols, [*named_all, named])
+        if window_ms is None:  # the held-out windows read once, where a round first names an effect
+            window_ms = held_out_errors(rec, at, n_id, hits)
+        if current_ms is None:
+            current_ms = window_ms(*current[:2])
+        trial_ms = window_ms(*trial[:2])
+        verdict = verdict_of(current_ms, trial_ms, [named])
         judgement.append({"effect": named, **verdict})
         iterations[-1].update(kept=verdict["kept"], verdict=verdict["text"])
         if not verdict["kept"]:  # named by the equation error, not helping the prediction: said, and left out
             iterations[-1]["named"] = "none"
             break
         named_all.append(named)
-        base_cols = trial_cols
+        base_cols, current, current_ms = trial_cols, trial, trial_ms
     if not iterations:  # max_effects = 0: the base law's own score, nothing offered
         score = float(100 * np.sqrt(scored(base_cols)[1].mean()))
         iterations.append({"named": "none", "ranking": [{"effect": "none", "score": score}], "candidates": {}})
     first = iterations[0]
-    baseline, base_offsets, theta_base = fitted(list(range(n_base)), [])
+    baseline, base_offsets, theta_base = base_fit
     located = {"before": locate(y - X[:, :n_base] @ theta_base, y, whole[3], form, states, at, baseline, base_offsets)}
+    structure, offsets, theta = current  # the baseline where no effect was kept
     if not named_all:
-        structure, offsets = baseline, base_offsets
         located["after"] = located["before"]
     else:
-        structure, offsets, theta = fitted(base_cols, named_all)
         located["after"] = locate(y - X[:, base_cols] @ theta, y, whole[3], form, states, at, structure, offsets)
     # refined as the single DOF's workflow refines (a hammer's record only when asked): the baseline here, the
     # final structure by ``structure_result``, so the gap before and after the effects is measured on refined
@@ -158,23 +166,38 @@ def structure_rounds(est, rec: Measurement, at: tuple[int, int]) -> StructureIde
     return out
 
 
+def held_out_errors(rec: Measurement, at: tuple[int, int], n_id: int, hits: bool):
+    """The structure's restarted windows over the held-out tail (``hits``: a hammer's record, its windows between
+    the pulses), as a function of a ``(structure, offsets)``: each window's mean-square error over every channel
+    (each in its rms), infinite where the run diverged. The windows and their start states are read once.
+    """
+    windows, zs, v = structure_windows(rec, at, n_id, WINDOW_S, hits)
+    scale = channel_scales(rec, n_id)
+
+    def errors(structure, offsets) -> np.ndarray:
+        err, diverged = structure_window_errors([structure], rec, windows, zs, v, offsets)
+        with np.errstate(invalid="ignore", over="ignore"):
+            w = np.mean((err[0] / scale[None, :, None]) ** 2, axis=(1, 2))
+        return np.where(diverged[0], np.inf, w)
+
+    return errors
+
+
 def judged(rec: Measurement, at: tuple[int, int], n_id: int, hits: bool, before, after, named: list[str]
            ) -> dict[str, Any]:  # fmt: skip
     """Whether a round's named effects are kept: the single DOF's pooled rule (``_judging.paired_windows``), the
     structure's restarted windows over the held-out tail run from the same states by the structure without and with
-    them (each ``(structure, offsets)``, the equation-error fits), the windows' mean-square errors over every channel
-    (each in its rms) compared paired by their logs: kept when the error falls beyond one standard error. ``hits``: a
-    hammer's record, its windows between the pulses.
+    them (each ``(structure, offsets)``, the equation-error fits; ``held_out_errors``) compared paired by their logs
+    (``verdict_of``): kept when the error falls beyond one standard error. ``hits``: a hammer's record, its windows
+    between the pulses.
     """
-    windows, zs, v = structure_windows(rec, at, n_id, WINDOW_S, hits)
-    scale = channel_scales(rec, n_id)
-    ms = []
-    for structure, offsets in (before, after):
-        err, diverged = structure_window_errors([structure], rec, windows, zs, v, offsets)
-        with np.errstate(invalid="ignore", over="ignore"):
-            w = np.mean((err[0] / scale[None, :, None]) ** 2, axis=(1, 2))
-        ms.append(np.where(diverged[0], np.inf, w))
-    pooled = paired_windows(ms[0], ms[1], worst=1.0)  # a diverged window: an error the size of the signal
+    errors = held_out_errors(rec, at, n_id, hits)
+    return verdict_of(errors(*before), errors(*after), named)
+
+
+def verdict_of(before_ms: np.ndarray, after_ms: np.ndarray, named: list[str]) -> dict[str, Any]:
+    """The pooled rule on two structures' held-out window errors (``held_out_errors``), and what it says."""
+    pooled = paired_windows(before_ms, after_ms, worst=1.0)  # a diverged window: an error the size of the signal
     what = ", ".join(named)
     if pooled is None:
         return {"kept": False, "pooled": None,
