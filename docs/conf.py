@@ -55,6 +55,7 @@ sphinx_gallery_conf = {
     "within_subsection_order": "FileNameSortKey",
     "show_memory": False,
     "matplotlib_animations": False,
+    "parallel": True,  # the examples in as many processes as sphinx-build -j gives
 }
 
 html_theme = "pydata_sphinx_theme"

@@ -492,7 +492,7 @@ def stepped_sweep(amps, f_hz, state, device=None, fixture=FIXTURE, periods=120, 
 
 def rk4_fixture_record(duration=60.0, rms=12.0, band=(2.0, 40.0), seed=1, oversample=8, settle=5.0, noise=1e-6,
                        device=None, fixture=FIXTURE, fs=FS, hidden=None, velocity=False,
-                       compile_hidden=False):  # fmt: skip
+                       compile_hidden=False, envelope=None):  # fmt: skip
     """(base_acc, z (2, T)) of ``device`` (TRUTH by default) on a sprung fixture, as another lab's code writes it: a
     plain fixed-step RK4 on Python floats at ``oversample`` x fs (not negstiff's kernel), the base acceleration
     band-limited Gaussian noise made by FFT at the fine rate (linear between fine steps), ``settle`` s dropped,
@@ -503,7 +503,8 @@ def rk4_fixture_record(duration=60.0, rms=12.0, band=(2.0, 40.0), seed=1, oversa
     integrator's own velocities (2, T) relative to the table, noise-free (a model without a hidden force).
     ``compile_hidden``: the hidden force compiled with the steps (``numba.njit(hidden)``; a 120 s record 10 s -> 0.5
     s), the same record to the last bit where the force's operations compile to the same (a tanh: hashed equal; a
-    power r**5 is libm's pow on Python floats, products compiled, and a chaotic record's realisation moves)."""
+    power r**5 is libm's pow on Python floats, products compiled, and a chaotic record's realisation moves).
+    ``envelope(t)``: the base acceleration's level over time (t [s] from the start, settle included; a burst test)."""
     dev = TRUTH if device is None else device
     h = 1.0 / (fs * oversample)
     n = int(round((duration + settle) * fs)) * oversample
@@ -512,7 +513,10 @@ def rk4_fixture_record(duration=60.0, rms=12.0, band=(2.0, 40.0), seed=1, oversa
     f = np.fft.rfftfreq(n, h)
     spec[(f < band[0]) | (f > band[1])] = 0
     a = np.fft.irfft(spec, n)
-    acc = (a * rms / a.std()).tolist()
+    a = a * rms / a.std()
+    if envelope is not None:
+        a = a * envelope(np.arange(n) * h)
+    acc = a.tolist()
     k0, k1, k2, k3 = dev.k0, dev.k1, dev.k2, dev.k3
 
     # start at rest in the positive well of the element (F(r) = 0, the fixture's spring unloaded)

@@ -4,7 +4,8 @@ SINDy's supports, on held-out blocks of the structure's weak form (``equations``
 the held-out weak residual by more than max(one standard error of the paired block differences, ``margin``)
 (``selection.compare``, the single DOF's rule); among those, the largest gain. The named one joins the base and the
 rest are offered again. Each round's effect is kept only if the structure with it predicts the held-out windows
-better than without it beyond one standard error (``judged``: the single DOF's pooled rule); then where the gap
+where it acts better than without it beyond one standard error, and the rest not worse (``verdict_of``: the single
+DOF's rule; the pooled rule where fewer than three windows hold it); then where the gap
 lay (``_locating.locate``), each named effect's interval (``_intervals.effect_intervals``) and its Bayesian second
 opinion (``_opinions.bayesian_opinions``).
 """
@@ -32,6 +33,7 @@ from ._intervals import effect_intervals
 from ._judging import paired_windows
 from ._locating import locate, where_words
 from ._opinions import bayesian_opinions
+from ._runs import acting_mask
 
 
 def structure_rounds(est, rec: Measurement, at: tuple[int, int]) -> StructureIdentification:
@@ -82,7 +84,7 @@ def structure_rounds(est, rec: Measurement, at: tuple[int, int]) -> StructureIde
     judgement: list[dict[str, Any]] = []
     # the structure the rounds have reached (the baseline first), and its held-out windows' errors once judged
     current = base_fit = fitted(base_cols, [])
-    window_ms = None
+    held: HeldOut | None = None
     current_ms: np.ndarray | None = None
     # as the single DOF's workflow: each round adds the effect that lowers the held-out score most, beyond the margin
     # rule, to the base the next round scores against; until no effect passes (at most ``max_effects``)
@@ -110,12 +112,15 @@ def structure_rounds(est, rec: Measurement, at: tuple[int, int]) -> StructureIde
         # kept only if it predicts the held-out windows better, as a single DOF's round's effect (``judged``)
         trial_cols = base_cols + [n_base + fields.index(named)]
         trial = fitted(trial_cols, [*named_all, named])
-        if window_ms is None:  # the held-out windows read once, where a round first names an effect
-            window_ms = held_out_errors(rec, at, n_id, hits)
+        if held is None:  # the held-out windows read once, where a round first names an effect
+            held = HeldOut(rec, at, n_id, hits)
         if current_ms is None:
-            current_ms = window_ms(*current[:2])
-        trial_ms = window_ms(*trial[:2])
-        verdict = verdict_of(current_ms, trial_ms, [named])
+            current_ms = held.errors(*current[:2])
+        trial_ms = held.errors(*trial[:2])
+        # where it acts: the effect's force in the structure with it, at the tail's measured relative motion
+        r, vr = (relative(x, at)[n_id:] for x in (held.zs - np.asarray(trial[1], float)[:, None], held.v))
+        force = float(trial[2][-1]) * terms[fields.index(named)].law.column(r, vr, ident_states["v_noise"])
+        verdict = verdict_of(current_ms, trial_ms, [named], acting_evidence(held, current_ms, trial_ms, force))
         judgement.append({"effect": named, **verdict})
         iterations[-1].update(kept=verdict["kept"], verdict=verdict["text"])
         if not verdict["kept"]:  # named by the equation error, not helping the prediction: said, and left out
@@ -166,48 +171,98 @@ def structure_rounds(est, rec: Measurement, at: tuple[int, int]) -> StructureIde
     return out
 
 
-def held_out_errors(rec: Measurement, at: tuple[int, int], n_id: int, hits: bool):
-    """The structure's restarted windows over the held-out tail (``hits``: a hammer's record, its windows between
-    the pulses), as a function of a ``(structure, offsets)``: each window's mean-square error over every channel
-    (each in its rms), infinite where the run diverged. The windows and their start states are read once.
+class HeldOut:
+    """A structure's restarted windows over the held-out tail, read once with their start states and the channels'
+    scales (``hits``: a hammer's record, its windows between the pulses): each window's mean-square error over every
+    channel (each in its rms; infinite where the run diverged) of a ``(structure, offsets)`` (``errors``).
     """
-    windows, zs, v = structure_windows(rec, at, n_id, WINDOW_S, hits)
-    scale = channel_scales(rec, n_id)
 
-    def errors(structure, offsets) -> np.ndarray:
-        err, diverged = structure_window_errors([structure], rec, windows, zs, v, offsets)
+    def __init__(self, rec: Measurement, at: tuple[int, int], n_id: int, hits: bool):
+        self.rec, self.n_id = rec, n_id
+        self.windows, self.zs, self.v = structure_windows(rec, at, n_id, WINDOW_S, hits)
+        self.scale = channel_scales(rec, n_id)
+
+    def errors(self, structure, offsets) -> np.ndarray:
+        """Each window's mean-square error over every channel, in each channel's rms."""
+        err, diverged = structure_window_errors([structure], self.rec, self.windows, self.zs, self.v, offsets)
         with np.errstate(invalid="ignore", over="ignore"):
-            w = np.mean((err[0] / scale[None, :, None]) ** 2, axis=(1, 2))
-        return np.where(diverged[0], np.inf, w)
-
-    return errors
+            ms = np.mean((err[0] / self.scale[None, :, None]) ** 2, axis=(1, 2))
+        return np.where(diverged[0], np.inf, ms)
 
 
-def judged(rec: Measurement, at: tuple[int, int], n_id: int, hits: bool, before, after, named: list[str]
-           ) -> dict[str, Any]:  # fmt: skip
-    """Whether a round's named effects are kept: the single DOF's pooled rule (``_judging.paired_windows``), the
-    structure's restarted windows over the held-out tail run from the same states by the structure without and with
-    them (each ``(structure, offsets)``, the equation-error fits; ``held_out_errors``) compared paired by their logs
-    (``verdict_of``): kept when the error falls beyond one standard error. ``hits``: a hammer's record, its windows
-    between the pulses.
+def acting_evidence(held: HeldOut, before_ms: np.ndarray, after_ms: np.ndarray, force: np.ndarray) -> dict[str, Any]:
+    """The held-out windows where an effect acts, judged on their own as a single DOF's are (``_judging._regime``):
+    the tail's windows that hold a sample where the effect's ``force`` (over the tail) is large (``_runs.acting_mask``),
+    the structure's errors without and with it (``before_ms``, ``after_ms``: ``HeldOut.errors``) paired (``acting``),
+    and the windows that hold none (``rest``). The gaps are the median window's rms error in % of the channels' rms.
+    A single DOF's windows are restarted before each episode, no longer than the motion there stays predictable (its
+    tail's are 2 s long); a structure's tail windows are short (``WINDOW_S``, 0.25 s), each episode in one is within
+    that of its restart, so they are the tail's own: an effect acting in most of the tail (a friction, at every
+    speed but the turning points) is judged on most of its windows, not on fewer placed anew.
     """
-    errors = held_out_errors(rec, at, n_id, hits)
-    return verdict_of(errors(*before), errors(*after), named)
+    acting = acting_mask(force)
+    holds = held.windows.measured(np.concatenate([np.zeros(held.n_id, bool), acting])).any(axis=1)
+    out: dict[str, Any] = {"window_s": WINDOW_S, "windows": int(holds.sum()),
+                           "acting_share_of_tail": float(np.mean(acting))}  # fmt: skip
+    if holds.sum() >= 2:
+        b, a = before_ms[holds], after_ms[holds]
+        out["gap_before_percent"], out["gap_after_percent"] = (
+            float(100 * np.sqrt(np.median(np.where(np.isfinite(m), m, 1.0)))) for m in (b, a)
+        )
+        out["acting"] = paired_windows(b, a, worst=1.0)
+    if (~holds).sum() >= 2:
+        out["rest"] = paired_windows(before_ms[~holds], after_ms[~holds], worst=1.0)
+    return out
 
 
-def verdict_of(before_ms: np.ndarray, after_ms: np.ndarray, named: list[str]) -> dict[str, Any]:
-    """The pooled rule on two structures' held-out window errors (``held_out_errors``), and what it says."""
+def judged(rec: Measurement, at: tuple[int, int], n_id: int, hits: bool, before, after, named: list[str],
+           force: np.ndarray | None = None) -> dict[str, Any]:  # fmt: skip
+    """Whether a round's named effects are kept (``verdict_of``): the structure's restarted windows over the held-out
+    tail run from the same states by the structure without and with them (each ``(structure, offsets)``, the
+    equation-error fits; ``HeldOut``) compared paired by their logs, pooled and, given the effect's ``force`` over
+    the tail, where it acts (``acting_evidence``). ``hits``: a hammer's record, its windows between the pulses.
+    """
+    held = HeldOut(rec, at, n_id, hits)
+    b, a = held.errors(*before[:2]), held.errors(*after[:2])
+    return verdict_of(b, a, named, None if force is None else acting_evidence(held, b, a, force))
+
+
+def _change(c: dict[str, Any]) -> str:
+    gain, (lo, hi) = c["gain_percent"], c["gain_interval_percent"]
+    return (f"fell {gain:.3g} % (one standard error: {lo:.3g} to {hi:.3g} %, geometric mean)" if gain >= 0 else
+            f"rose {1 - gain / 100:.3g}x (geometric mean)")  # fmt: skip
+
+
+def verdict_of(before_ms: np.ndarray, after_ms: np.ndarray, named: list[str],
+               regime: dict[str, Any] | None = None) -> dict[str, Any]:  # fmt: skip
+    """The single DOF's rule on two structures' held-out window errors (``HeldOut.errors``), and what it says: with
+    three or more held-out windows where the effect acts (``regime``, ``acting_evidence``), kept when it predicts
+    them better beyond one standard error and the rest of the tail not worse beyond theirs; else the pooled rule,
+    kept when the tail's windows' error falls beyond one standard error. A single DOF's effect the tail barely
+    reaches is judged in cross-validated folds of the record; a structure's is not yet.
+    """
     pooled = paired_windows(before_ms, after_ms, worst=1.0)  # a diverged window: an error the size of the signal
     what = ", ".join(named)
+    out: dict[str, Any] = {"pooled": pooled}
+    if regime is not None:
+        out["regime"] = regime
+    if regime is not None and regime.get("windows", 0) >= 3 and regime.get("acting") is not None:
+        acts, rest = regime["acting"], regime.get("rest")
+        worse = rest is not None and rest["gain_percent"] < 0 and rest["significant"]
+        kept = bool(acts["significant"] and acts["gain_percent"] > 0 and not worse)
+        where = f"the {regime['windows']} held-out windows where it acts: rms error {_change(acts)}"
+        why = ("the rest predicted worse" if worse else
+               "not a fall beyond its uncertainty" if acts["gain_percent"] >= 0 else "a worse prediction")  # fmt: skip
+        rest_text = "the rest not worse" if rest is not None else "too few windows where it does not act to judge"
+        text = (f"{what}: kept: {where}; {rest_text}" if kept else
+                f"{what}: named by the equation error but not kept: {where}: {why}")  # fmt: skip
+        return {"kept": kept, **out, "text": text}
     if pooled is None:
-        return {"kept": False, "pooled": None,
+        return {"kept": False, **out,
                 "text": f"{what}: not kept: the held-out tail has too few windows to tell if it helps"}  # fmt: skip
-    gain = pooled["gain_percent"]
-    lo, hi = pooled["gain_interval_percent"]
-    change = (f"fell {gain:.3g} % (one standard error: {lo:.3g} to {hi:.3g} %, geometric mean)" if gain >= 0 else
-              f"rose {1 - gain / 100:.3g}x (geometric mean)")  # fmt: skip
-    kept = bool(pooled["significant"] and gain > 0)
+    kept = bool(pooled["significant"] and pooled["gain_percent"] > 0)
+    change = _change(pooled)
     text = (f"{what}: kept: the held-out windows' rms error {change}" if kept else
             f"{what}: named by the equation error but not kept: with it the held-out windows' rms error {change}, "
-            + ("not beyond its uncertainty" if gain >= 0 else "a worse prediction"))  # fmt: skip
-    return {"kept": kept, "pooled": pooled, "text": text}
+            + ("not beyond its uncertainty" if pooled["gain_percent"] >= 0 else "a worse prediction"))  # fmt: skip
+    return {"kept": kept, **out, "text": text}

@@ -142,8 +142,7 @@ class Runs(Scoring):
         most) restarted a quarter window before each episode (no two overlapping); ``force`` is given from sample
         ``lo`` on. Returns (acting mask from ``lo`` on, the windows).
         """
-        nz = np.abs(force) > 0
-        acting = np.abs(force) > 0.25 * np.sqrt(np.mean(force[nz] ** 2)) if nz.any() else nz
+        acting = acting_mask(force)
         length = self._window_length(rec) if length is None else length
         lead = length // 4
         starts: list[int] = []
@@ -178,3 +177,11 @@ class Runs(Scoring):
             acting, windows = self._episodes(rec, force, lo, length)
             info["horizon_s"] = length / rec.fs
         return acting, windows, info
+
+
+def acting_mask(force: np.ndarray) -> np.ndarray:
+    """Where a force acts: the samples where it exceeds a quarter of its rms over those where it acts at all (a single
+    DOF's episodes, ``Runs._episodes``; a structure's windows where an effect acts, ``_rounds.acting_evidence``).
+    """
+    nz = np.abs(force) > 0
+    return np.abs(force) > 0.25 * np.sqrt(np.mean(force[nz] ** 2)) if nz.any() else nz
