@@ -24,7 +24,12 @@ from negstiff.inference.estimators.results import Bunch, StructureIdentification
 from negstiff.inference.record.measurement import Measurement
 from negstiff.inference.steps.equations import _assemble, _block_scores, _lstsq, _systems, physical_frame, unknown_zeros
 from negstiff.inference.steps.selection import compare
-from negstiff.inference.steps.validation import channel_scales, structure_window_errors, structure_windows
+from negstiff.inference.steps.validation import (
+    RestartWindows,
+    channel_scales,
+    structure_window_errors,
+    structure_windows,
+)
 from negstiff.inference.steps.validation import restarted_structure_runs as free_run_error
 from negstiff.models import effects
 from negstiff.models.structure import relative
@@ -73,10 +78,11 @@ def structure_rounds(est, rec: Measurement, at: tuple[int, int]) -> StructureIde
     y, X = whole[0], whole[1]
     hits = ring_down(rec, ("impact",))  # a hammer's record: the windows between its pulses
 
-    def fitted(cols: list[int], names: list[str]):
+    def fitted(cols: list[int], names: list[str], keep: np.ndarray | None = None):
         # the structure with the base terms and the named effects ``names`` (columns ``cols``) from the whole
-        # identification part's weak form, in its physical frame, with each channel's zero and its coefficients
-        theta = _lstsq(X[:, cols], y)
+        # identification part's weak form (its rows ``keep``: a fold's), in its physical frame, with each channel's
+        # zero and its coefficients
+        theta = _lstsq(X[:, cols], y) if keep is None else _lstsq(X[keep][:, cols], y[keep])
         extra = {name: float(theta[n_base + i]) for i, name in enumerate(names)}
         s, b = _assemble(theta[:n_base], rec.n_dof, at, masses, extra)
         return (*physical_frame(s, b, rec.gravity, unknown_zeros(rec)), theta)
@@ -117,10 +123,16 @@ def structure_rounds(est, rec: Measurement, at: tuple[int, int]) -> StructureIde
         if current_ms is None:
             current_ms = held.errors(*current[:2])
         trial_ms = held.errors(*trial[:2])
-        # where it acts: the effect's force in the structure with it, at the tail's measured relative motion
-        r, vr = (relative(x, at)[n_id:] for x in (held.zs - np.asarray(trial[1], float)[:, None], held.v))
+        # where it acts: the effect's force in the structure with it, at the record's measured relative motion
+        r, vr = (relative(x, at) for x in (held.zs - np.asarray(trial[1], float)[:, None], held.v))
         force = float(trial[2][-1]) * terms[fields.index(named)].law.column(r, vr, ident_states["v_noise"])
-        verdict = verdict_of(current_ms, trial_ms, [named], acting_evidence(held, current_ms, trial_ms, force))
+        acting = acting_mask(force)  # by its force over the record: a quiet tail is not where it acts
+        regime = acting_evidence(held, current_ms, trial_ms, acting[n_id:])
+        folds = None
+        if regime["windows"] < 3:  # the tail barely reaches it: the record's windows where it acts, cross-validated
+            folds = fold_evidence(held, acting, fitted, (base_cols, list(named_all)), (trial_cols, [*named_all, named]),
+                                  form, whole[3])  # fmt: skip
+        verdict = verdict_of(current_ms, trial_ms, [named], regime, folds)
         judgement.append({"effect": named, **verdict})
         iterations[-1].update(kept=verdict["kept"], verdict=verdict["text"])
         if not verdict["kept"]:  # named by the equation error, not helping the prediction: said, and left out
@@ -178,21 +190,29 @@ class HeldOut:
     """
 
     def __init__(self, rec: Measurement, at: tuple[int, int], n_id: int, hits: bool):
-        self.rec, self.n_id = rec, n_id
+        self.rec, self.at, self.n_id, self.hits = rec, at, n_id, hits
         self.windows, self.zs, self.v = structure_windows(rec, at, n_id, WINDOW_S, hits)
         self.scale = channel_scales(rec, n_id)
 
-    def errors(self, structure, offsets) -> np.ndarray:
-        """Each window's mean-square error over every channel, in each channel's rms."""
-        err, diverged = structure_window_errors([structure], self.rec, self.windows, self.zs, self.v, offsets)
+    def record_windows(self) -> RestartWindows:
+        """The same windows over the whole record (the folds' where the tail barely reaches an effect)."""
+        return structure_windows(self.rec, self.at, 0, WINDOW_S, self.hits)[0]
+
+    def errors(self, structure, offsets, windows: RestartWindows | None = None) -> np.ndarray:
+        """Each window's mean-square error over every channel, in each channel's rms (``windows``: by default the
+        tail's).
+        """
+        w = self.windows if windows is None else windows
+        err, diverged = structure_window_errors([structure], self.rec, w, self.zs, self.v, offsets)
         with np.errstate(invalid="ignore", over="ignore"):
             ms = np.mean((err[0] / self.scale[None, :, None]) ** 2, axis=(1, 2))
         return np.where(diverged[0], np.inf, ms)
 
 
-def acting_evidence(held: HeldOut, before_ms: np.ndarray, after_ms: np.ndarray, force: np.ndarray) -> dict[str, Any]:
+def acting_evidence(held: HeldOut, before_ms: np.ndarray, after_ms: np.ndarray, acting: np.ndarray) -> dict[str, Any]:
     """The held-out windows where an effect acts, judged on their own as a single DOF's are (``_judging._regime``):
-    the tail's windows that hold a sample where the effect's ``force`` (over the tail) is large (``_runs.acting_mask``),
+    the tail's windows that hold a sample where the effect acts (``acting`` over the tail: ``_runs.acting_mask`` of its
+    force over the record, so that a quiet tail is not where it acts; a single DOF's mask is its tail's own),
     the structure's errors without and with it (``before_ms``, ``after_ms``: ``HeldOut.errors``) paired (``acting``),
     and the windows that hold none (``rest``). The gaps are the median window's rms error in % of the channels' rms.
     A single DOF's windows are restarted before each episode, no longer than the motion there stays predictable (its
@@ -200,7 +220,6 @@ def acting_evidence(held: HeldOut, before_ms: np.ndarray, after_ms: np.ndarray, 
     that of its restart, so they are the tail's own: an effect acting in most of the tail (a friction, at every
     speed but the turning points) is judged on most of its windows, not on fewer placed anew.
     """
-    acting = acting_mask(force)
     holds = held.windows.measured(np.concatenate([np.zeros(held.n_id, bool), acting])).any(axis=1)
     out: dict[str, Any] = {"window_s": WINDOW_S, "windows": int(holds.sum()),
                            "acting_share_of_tail": float(np.mean(acting))}  # fmt: skip
@@ -215,16 +234,62 @@ def acting_evidence(held: HeldOut, before_ms: np.ndarray, after_ms: np.ndarray, 
     return out
 
 
+def fold_evidence(held: HeldOut, acting: np.ndarray, fitted, without: tuple[list[int], list[str]],
+                  with_it: tuple[list[int], list[str]], form, per_dof: int,
+                  folds: int = 5) -> dict[str, Any]:  # fmt: skip
+    """The windows where an effect acts anywhere in the record, judged by blocked cross-validation as a single DOF's
+    are (``_judging._regime_folds``): the record's windows (``HeldOut.record_windows``) that hold a sample where it
+    acts (``acting``, over the record), split into ``folds`` contiguous blocks in time; for each block the structure
+    without and with the effect (``fitted(columns, names, keep)`` of ``without`` and ``with_it``: each a
+    ``(structure, offsets, theta)``) fitted on the identification part's weak rows (``per_dof`` a DOF, ``form``'s
+    test functions) whose test function touches none of the block's samples (its windows, and where the effect acts
+    between them), and run from the block's windows. Every window is thus predicted by fits that never saw it.
+    Returns the windows, the gaps (the median window's rms error in % of the channels' rms), the paired comparison
+    ``acting`` and each fold's span.
+    """
+    windows = held.record_windows()
+    holds = windows.measured(acting).any(axis=1)
+    starts = windows.starts[holds]
+    out: dict[str, Any] = {"windows": int(starts.size), "window_s": WINDOW_S,
+                           "acting_share_of_record": float(np.mean(acting))}  # fmt: skip
+    if starts.size < 3:
+        return out
+    n_id, length = held.n_id, windows.length
+    row_lo = np.arange(per_dof) * form.stride  # row k's test function spans [row_lo, row_lo + phi.size)
+    hi = np.minimum(row_lo + form.phi.size, n_id)
+    before_ms, after_ms, spans = [], [], []
+    for idx in np.array_split(starts, min(folds, starts.size)):
+        block = RestartWindows.at(idx, length)
+        mask = np.zeros(held.rec.n, bool)  # the block's samples: its windows and where the effect acts between them
+        mask[block.index] = True
+        span = slice(int(idx[0]), int(idx[-1]) + length)
+        mask[span] |= acting[span]
+        cum = np.concatenate([[0], np.cumsum(mask[:n_id])])
+        keep = np.tile((cum[hi] - cum[np.minimum(row_lo, n_id)]) == 0, held.rec.n_dof)
+        b_fit, a_fit = fitted(*without, keep), fitted(*with_it, keep)
+        before_ms.append(held.errors(b_fit[0], b_fit[1], block))
+        after_ms.append(held.errors(a_fit[0], a_fit[1], block))
+        spans.append({"from_s": float(idx[0] / held.rec.fs), "to_s": float((idx[-1] + length) / held.rec.fs),
+                      "windows": int(idx.size), "size": float(a_fit[2][-1])})  # fmt: skip
+    b, a = np.concatenate(before_ms), np.concatenate(after_ms)
+    out["gap_before_percent"], out["gap_after_percent"] = (
+        float(100 * np.sqrt(np.median(np.where(np.isfinite(m), m, 1.0)))) for m in (b, a)
+    )
+    out["acting"] = paired_windows(b, a, worst=1.0)
+    out["folds"] = spans
+    return out
+
+
 def judged(rec: Measurement, at: tuple[int, int], n_id: int, hits: bool, before, after, named: list[str],
            force: np.ndarray | None = None) -> dict[str, Any]:  # fmt: skip
     """Whether a round's named effects are kept (``verdict_of``): the structure's restarted windows over the held-out
     tail run from the same states by the structure without and with them (each ``(structure, offsets)``, the
     equation-error fits; ``HeldOut``) compared paired by their logs, pooled and, given the effect's ``force`` over
-    the tail, where it acts (``acting_evidence``). ``hits``: a hammer's record, its windows between the pulses.
+    the record, where it acts (``acting_evidence``). ``hits``: a hammer's record, its windows between the pulses.
     """
     held = HeldOut(rec, at, n_id, hits)
     b, a = held.errors(*before[:2]), held.errors(*after[:2])
-    return verdict_of(b, a, named, None if force is None else acting_evidence(held, b, a, force))
+    return verdict_of(b, a, named, None if force is None else acting_evidence(held, b, a, acting_mask(force)[n_id:]))
 
 
 def _change(c: dict[str, Any]) -> str:
@@ -233,24 +298,32 @@ def _change(c: dict[str, Any]) -> str:
             f"rose {1 - gain / 100:.3g}x (geometric mean)")  # fmt: skip
 
 
-def verdict_of(before_ms: np.ndarray, after_ms: np.ndarray, named: list[str],
-               regime: dict[str, Any] | None = None) -> dict[str, Any]:  # fmt: skip
+def verdict_of(before_ms: np.ndarray, after_ms: np.ndarray, named: list[str], regime: dict[str, Any] | None = None,
+               folds: dict[str, Any] | None = None) -> dict[str, Any]:  # fmt: skip
     """The single DOF's rule on two structures' held-out window errors (``HeldOut.errors``), and what it says: with
     three or more held-out windows where the effect acts (``regime``, ``acting_evidence``), kept when it predicts
-    them better beyond one standard error and the rest of the tail not worse beyond theirs; else the pooled rule,
-    kept when the tail's windows' error falls beyond one standard error. A single DOF's effect the tail barely
-    reaches is judged in cross-validated folds of the record; a structure's is not yet.
+    them better beyond one standard error and the rest of the tail not worse beyond theirs; with fewer, the windows
+    where it acts anywhere in the record predicted by fits without them (``folds``, ``fold_evidence``) where three or
+    more; else the pooled rule, kept when the tail's windows' error falls beyond one standard error.
     """
     pooled = paired_windows(before_ms, after_ms, worst=1.0)  # a diverged window: an error the size of the signal
     what = ", ".join(named)
     out: dict[str, Any] = {"pooled": pooled}
     if regime is not None:
         out["regime"] = regime
+    if folds is not None:
+        out["folds"] = folds
+    judged_on = None
     if regime is not None and regime.get("windows", 0) >= 3 and regime.get("acting") is not None:
-        acts, rest = regime["acting"], regime.get("rest")
+        judged_on = regime, "held-out windows"
+    elif folds is not None and folds.get("windows", 0) >= 3 and folds.get("acting") is not None:
+        judged_on = folds, (f"windows of the record (in {len(folds['folds'])} blocks, each predicted by fits "
+                            "without it)")  # fmt: skip
+    if judged_on is not None:
+        acts, rest = judged_on[0]["acting"], (regime or {}).get("rest")
         worse = rest is not None and rest["gain_percent"] < 0 and rest["significant"]
         kept = bool(acts["significant"] and acts["gain_percent"] > 0 and not worse)
-        where = f"the {regime['windows']} held-out windows where it acts: rms error {_change(acts)}"
+        where = f"the {judged_on[0]['windows']} {judged_on[1]} where it acts: rms error {_change(acts)}"
         why = ("the rest predicted worse" if worse else
                "not a fall beyond its uncertainty" if acts["gain_percent"] >= 0 else "a worse prediction")  # fmt: skip
         rest_text = "the rest not worse" if rest is not None else "too few windows where it does not act to judge"
