@@ -114,18 +114,17 @@ class Judging(Opinions):
                 model_before: Model, model_after: Model) -> dict[str, Any]:  # fmt: skip
         """The held-out windows where ``effect`` acts, scored on their own: free runs restarted a quarter window
         before each episode of the tail where the effect's force (the model's with it, at the measured states)
-        exceeds a quarter of its rms over the samples where it acts at all, no longer than the motion there stays
-        predictable by either model (``_episode_windows``: ``window_s / 2`` at most); and the tail's ``window_s``
-        windows that hold no such sample (the rest). Gaps in % of the windows' rms z, before and after, and the
-        paired comparisons.
+        exceeds a quarter of its rms over the record's samples where it acts at all (a quiet tail is not where it
+        acts), no longer than the motion there stays predictable by either model (``_episode_windows``:
+        ``window_s / 2`` at most); and the tail's ``window_s`` windows that hold no such sample (the rest). Gaps in %
+        of the windows' rms z, before and after, and the paired comparisons.
         """
-        z, v = self._z0, self._v0
-        force = self._effect_force(model_after, effect, z[self.n_id_ :], v[self.n_id_ :])
+        force = self._effect_force(model_after, effect, self._z0, self._v0)  # over the record (``_episodes``)
         if force is None:
             return {"windows": 0, "reason": "a law replaces the restoring force at every state: judged on every "
                     "held-out window" if law_of(effect) is not None else "a measured channel's term acts wherever "
                     "the channel does"}  # fmt: skip
-        if not np.any(np.abs(force) > 0):
+        if not np.any(np.abs(force[self.n_id_ :]) > 0):
             return {"windows": 0, "reason": "the effect does not act in the held-out tail"}
         acting, windows, horizon = self._episode_windows(rec, force, self.n_id_, (model_before, model_after))
         out: dict[str, Any] = {"window_s": windows.length / rec.fs, "windows": len(windows),

@@ -139,10 +139,12 @@ class Runs(Scoring):
                   length: int | None = None) -> tuple[np.ndarray, RestartWindows]:  # fmt: skip
         """Where a force acts (above a quarter of its rms over the samples where it acts at all) and windows of
         ``length`` samples (by default the record's predictable span, ``_window_length``: ``window_s / 2`` at
-        most) restarted a quarter window before each episode (no two overlapping); ``force`` is given from sample
-        ``lo`` on. Returns (acting mask from ``lo`` on, the windows).
+        most) restarted a quarter window before each episode from sample ``lo`` on (no two overlapping); ``force``
+        is given over the whole record, so that where it acts is read against its size over the record (a quiet
+        held-out tail is not where it acts, as a structure's, ``_rounds.acting_evidence``). Returns (acting mask from
+        ``lo`` on, the windows).
         """
-        acting = acting_mask(force)
+        acting = acting_mask(force)[lo:]
         length = self._window_length(rec) if length is None else length
         lead = length // 4
         starts: list[int] = []
