@@ -212,7 +212,7 @@ class HeldOut:
 def acting_evidence(held: HeldOut, before_ms: np.ndarray, after_ms: np.ndarray, acting: np.ndarray) -> dict[str, Any]:
     """The held-out windows where an effect acts, judged on their own as a single DOF's are (``_judging._regime``):
     the tail's windows that hold a sample where the effect acts (``acting`` over the tail: ``_runs.acting_mask`` of its
-    force over the record, so that a quiet tail is not where it acts; a single DOF's mask is its tail's own),
+    force over the record, so that a quiet tail is not where it acts, as a single DOF's),
     the structure's errors without and with it (``before_ms``, ``after_ms``: ``HeldOut.errors``) paired (``acting``),
     and the windows that hold none (``rest``). The gaps are the median window's rms error in % of the channels' rms.
     A single DOF's windows are restarted before each episode, no longer than the motion there stays predictable (its
