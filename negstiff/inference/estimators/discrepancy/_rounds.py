@@ -5,7 +5,8 @@ the held-out weak residual by more than max(one standard error of the paired blo
 (``selection.compare``, the single DOF's rule); among those, the largest gain. The named one joins the base and the
 rest are offered again. Each round's effect is kept only if the structure with it predicts the held-out windows
 where it acts better than without it beyond one standard error, and the rest not worse (``verdict_of``: the single
-DOF's rule; the pooled rule where fewer than three windows hold it); then where the gap
+DOF's rule; where fewer than three tail windows hold it, the record's windows where it acts in cross-validated
+blocks, ``fold_evidence``; else the pooled rule); then where the gap
 lay (``_locating.locate``), each named effect's interval (``_intervals.effect_intervals``) and its Bayesian second
 opinion (``_opinions.bayesian_opinions``).
 """
@@ -115,7 +116,7 @@ def structure_rounds(est, rec: Measurement, at: tuple[int, int]) -> StructureIde
         iterations.append({"named": named or "none", "ranking": ranking, "candidates": candidates})
         if named is None:
             break
-        # kept only if it predicts the held-out windows better, as a single DOF's round's effect (``judged``)
+        # kept only if it predicts better where it acts, as a single DOF's round's effect (``verdict_of``)
         trial_cols = base_cols + [n_base + fields.index(named)]
         trial = fitted(trial_cols, [*named_all, named])
         if held is None:  # the held-out windows read once, where a round first names an effect
@@ -198,14 +199,16 @@ class HeldOut:
         """The same windows over the whole record (the folds' where the tail barely reaches an effect)."""
         return structure_windows(self.rec, self.at, 0, WINDOW_S, self.hits)[0]
 
-    def errors(self, structure, offsets, windows: RestartWindows | None = None) -> np.ndarray:
+    def errors(self, structure, offsets, windows: RestartWindows | None = None,
+               scale: np.ndarray | None = None) -> np.ndarray:  # fmt: skip
         """Each window's mean-square error over every channel, in each channel's rms (``windows``: by default the
-        tail's).
+        tail's; ``scale``: the channels' rms they are given in, by default the tail's).
         """
         w = self.windows if windows is None else windows
+        s = self.scale if scale is None else scale
         err, diverged = structure_window_errors([structure], self.rec, w, self.zs, self.v, offsets)
         with np.errstate(invalid="ignore", over="ignore"):
-            ms = np.mean((err[0] / self.scale[None, :, None]) ** 2, axis=(1, 2))
+            ms = np.mean((err[0] / s[None, :, None]) ** 2, axis=(1, 2))
         return np.where(diverged[0], np.inf, ms)
 
 
@@ -244,8 +247,8 @@ def fold_evidence(held: HeldOut, acting: np.ndarray, fitted, without: tuple[list
     ``(structure, offsets, theta)``) fitted on the identification part's weak rows (``per_dof`` a DOF, ``form``'s
     test functions) whose test function touches none of the block's samples (its windows, and where the effect acts
     between them), and run from the block's windows. Every window is thus predicted by fits that never saw it.
-    Returns the windows, the gaps (the median window's rms error in % of the channels' rms), the paired comparison
-    ``acting`` and each fold's span.
+    Returns the windows, the gaps (the median window's rms error in % of the channels' rms over the record), the
+    paired comparison ``acting`` and each fold's span.
     """
     windows = held.record_windows()
     holds = windows.measured(acting).any(axis=1)
@@ -255,6 +258,9 @@ def fold_evidence(held: HeldOut, acting: np.ndarray, fitted, without: tuple[list
     if starts.size < 3:
         return out
     n_id, length = held.n_id, windows.length
+    # the errors in the record's channels' rms: the folds run where the tail is quiet, whose rms would inflate the
+    # gaps and shrink a diverged window's count (an error the size of the signal) below a loud block's ordinary one
+    scale = channel_scales(held.rec, 0)
     row_lo = np.arange(per_dof) * form.stride  # row k's test function spans [row_lo, row_lo + phi.size)
     hi = np.minimum(row_lo + form.phi.size, n_id)
     before_ms, after_ms, spans = [], [], []
@@ -267,8 +273,8 @@ def fold_evidence(held: HeldOut, acting: np.ndarray, fitted, without: tuple[list
         cum = np.concatenate([[0], np.cumsum(mask[:n_id])])
         keep = np.tile((cum[hi] - cum[np.minimum(row_lo, n_id)]) == 0, held.rec.n_dof)
         b_fit, a_fit = fitted(*without, keep), fitted(*with_it, keep)
-        before_ms.append(held.errors(b_fit[0], b_fit[1], block))
-        after_ms.append(held.errors(a_fit[0], a_fit[1], block))
+        before_ms.append(held.errors(b_fit[0], b_fit[1], block, scale))
+        after_ms.append(held.errors(a_fit[0], a_fit[1], block, scale))
         spans.append({"from_s": float(idx[0] / held.rec.fs), "to_s": float((idx[-1] + length) / held.rec.fs),
                       "windows": int(idx.size), "size": float(a_fit[2][-1])})  # fmt: skip
     b, a = np.concatenate(before_ms), np.concatenate(after_ms)
@@ -310,9 +316,7 @@ def verdict_of(before_ms: np.ndarray, after_ms: np.ndarray, named: list[str], re
     what = ", ".join(named)
     out: dict[str, Any] = {"pooled": pooled}
     if regime is not None:
-        out["regime"] = regime
-    if folds is not None:
-        out["folds"] = folds
+        out["regime"], out["folds"] = regime, folds  # folds None: the tail's windows decided
     judged_on = None
     if regime is not None and regime.get("windows", 0) >= 3 and regime.get("acting") is not None:
         judged_on = regime, "held-out windows"
