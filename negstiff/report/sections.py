@@ -521,6 +521,7 @@ def discrepancy_section(d, label: str = "") -> Section:
         f"{fmt(res['gap_after_percent'], 3)} % after."
     )  # fmt: skip
     sec.heldout[col] = res["gap_after_percent"]
+    _verdicts(sec, res.get("iterations") or [])
     for w in res["warnings"]:
         sec.warning(w)
     sec.summary.append(
@@ -549,7 +550,9 @@ def _structure_discrepancy_section(d, res: dict[str, Any], label: str) -> Sectio
     named = ", ".join(effects) or None
     sec.text((f"Named: {named}{size}." if named else "No registered effect passed its margin.")
              + f" Held-out gap (restarted free runs): {fmt(det['gap_before_percent'], 3)} % before, "
-             f"{fmt(det['gap_after_percent'], 3)} % after. The final structure:")  # fmt: skip
+             f"{fmt(det['gap_after_percent'], 3)} % after.")  # fmt: skip
+    _verdicts(sec, det.get("iterations") or [])
+    sec.text("The final structure:")
     final = structure_section(d, label)
     sec.blocks += final.blocks
     sec.estimates, sec.heldout = final.estimates, final.heldout
@@ -563,6 +566,15 @@ def _structure_discrepancy_section(d, res: dict[str, Any], label: str) -> Sectio
     ]
     sec.json = res
     return sec
+
+
+def _verdicts(sec: Section, iterations: list[dict[str, Any]]) -> None:
+    """Each round's verdict on the effect the equation error named (kept or left out, and on which windows: where
+    it acts, its cross-validated blocks, or the whole held-out tail), a table, where any round judged one.
+    """
+    rows = [[k + 1, it["verdict"]] for k, it in enumerate(iterations) if it.get("verdict")]
+    if rows:
+        sec.table(["round", "verdict: the prediction without and with the named effect"], rows)
 
 
 def frf_section(res: dict[str, Any], label: str = "", title: str = "") -> Section:
