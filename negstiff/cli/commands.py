@@ -378,8 +378,9 @@ def cmd_discrepancy(args) -> int:
     say_refinement(args, result.get("refinement"))
     write_json(args.out, result)
     warn(args, result["warnings"])
-    say(args, f"where: {result['where']}")
-    un = result.get("unnamed")
+    acc = result["details"] if "dofs" in result else result  # a structure's workflow account is its details
+    say(args, f"where: {acc['where']}")
+    un = acc.get("unnamed")
     if un and "gap" not in un:  # not fitted (a hammer's record): why
         say(args, f"unnamed: {un['reason']}")
     elif un:
@@ -387,11 +388,11 @@ def cmd_discrepancy(args) -> int:
         say(args, f"unnamed: a non-parametric term of {un['term_percent_of_restoring_force']:.3g} % of the "
                    f"restoring force; held-out gap {g.get('physics_median_window_percent', float('nan')):.3g} % -> "
                    f"{g.get('hybrid_median_window_percent', float('nan')):.3g} % with it")  # fmt: skip
-    for i, it in enumerate(result.get("iterations", [])):
+    for i, it in enumerate(acc.get("iterations", [])):
         first = it.get("first") or {}
         if first.get("why") and first.get("effect") != "none":
             say(args, f"round {i + 1}: {first['effect']} ranked first, not named: {first['why']}")
-    for effect, iv in result.get("effect_interval", {}).items():
+    for effect, iv in acc.get("effect_interval", {}).items():
         if effect.startswith("law:"):
             size = iv.get("value") or {}
             say(args, f"{effect}: the restoring force is the {effect[4:]} law's ("
@@ -401,7 +402,7 @@ def cmd_discrepancy(args) -> int:
             [("", iv)] if iv.get("interval") else [])  # fmt: skip
         sizes = ", ".join(f"{k + ' ' if k else ''}{v['value']:.4g} [{v['interval'][0]:.4g}, {v['interval'][1]:.4g}]"
                           for k, v in parts)  # fmt: skip
-        b = result.get("bayesian", {}).get(effect, {})
+        b = acc.get("bayesian", {}).get(effect, {})
         opinion = (f"; LOO over {b['windows']} windows prefers the model {b['prefers']} it (elpd difference "
                    f"{b['elpd_diff']:.3g} +- {b['dse']:.3g}"
                    + ("; PSIS's Pareto k is high for some: LOO is rough there" if b.get("pareto_k_high") else "")
@@ -409,8 +410,8 @@ def cmd_discrepancy(args) -> int:
         say(args, f"{effect}: {sizes or 'no interval'} ({100 * iv['prob']:g} % interval){opinion}")
     say(
         args,
-        f"wrote {args.out}: named {', '.join(result['effects'])}; held-out gap (restarted free runs) "
-        f"{result['gap_before_percent']:.3g} % -> {result['gap_after_percent']:.3g} %",
+        f"wrote {args.out}: named {', '.join(acc['effects'])}; held-out gap (restarted free runs) "
+        f"{acc['gap_before_percent']:.3g} % -> {acc['gap_after_percent']:.3g} %",
     )
     return 0
 

@@ -404,13 +404,18 @@ def simulate_structures(
     v_limit: float = DEFAULT_V_LIMIT,
     threads: int | None = None,
     staged: bool = False,
+    hook: tuple | None = None,
 ) -> SimulationResult:
     """Integrate B structures (one, repeated for every start state, or one per member; same N and element
     DOFs) from states ``x0`` (B, 2N) = [z_1..z_N, z_1'..z_N'] under the input rows ``u`` (the conventions of
     ``simulate_batch``: linear interpolation between samples, or the input at the stage times).
     ``structure_index`` (B,): member b runs ``structures[structure_index[b]]`` (a refinement's parameter points
-    over its windows: each structure's arrays made once).
+    over its windows: each structure's arrays made once). ``hook``: the extra force on the element
+    (``kernel.extra_term``'s arguments: a hybrid term of the element's relative motion and the input; with a
+    staged input, whose stage values it reads), shared by the batch.
     """
+    if hook is not None and not staged:
+        raise InputError("the extra force hook reads the input at the stage times: give it staged (staged=True)")
     x0 = np.atleast_2d(np.asarray(x0, dtype=np.float64))
     unique: list[Structure] = [structures] if isinstance(structures, Structure) else list(structures)
     if structure_index is not None:
@@ -438,6 +443,7 @@ def simulate_structures(
     oz, ov, status, fail = integrate(
         KINDS[unique[0].element.kind], p, minv, lk, lc, gain, u2, uidx, n, dt, substeps, x0[:, :nd].T, x0[:, nd:].T,
         place=unique[0].place, store_velocity=store_velocity, z_limit=z_limit, v_limit=v_limit, threads=threads,
+        hook=hook,
     )  # fmt: skip
     t = np.arange(n) * dt
     return SimulationResult(

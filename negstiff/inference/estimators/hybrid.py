@@ -39,6 +39,7 @@ from negstiff.inference.steps.validation import divergence_limits, record_subste
 from negstiff.models import Model
 from negstiff.models.kernel import grid_constants
 from negstiff.models.simulator import simulate_batch, stage_input
+from negstiff.models.structure import Structure, relative, simulate_structures
 
 
 @dataclass(frozen=True)
@@ -122,15 +123,11 @@ def simulate_hybrid(
     u2 = np.atleast_2d(np.asarray(u_staged, float))
     x0 = np.atleast_2d(np.asarray(x0, float))
     nb = x0.shape[0]
-    w, a = basis.split(np.asarray(theta, float))
     # the simulator's own Runge-Kutta loop, with g as its extra force (``kernel.extra_term``)
     res = simulate_batch(
         np.repeat(model.kernel_params()[:, None], nb, axis=1), model.kind, u2, dt, x0, input_kind=input_kind,
         input_index=np.arange(nb), substeps=substeps, store_velocity=True, z_limit=z_limit, v_limit=v_limit,
-        threads=1, staged=True,
-        hook=(np.ascontiguousarray(w), np.ascontiguousarray(a), basis.zc, basis.vc, basis.uc,
-              grid_constants(basis.zc, basis.wz), grid_constants(basis.vc, basis.wv),
-              grid_constants(basis.uc, basis.wu)),
+        threads=1, staged=True, hook=_hook(basis, theta),
     )  # fmt: skip
     assert res.z_dot is not None
     return res.z.T, res.z_dot.T
@@ -355,3 +352,141 @@ def fit_hybrid(
                   "weights_N": weights.tolist()}  # fmt: skip
     held = {"model": model.to_dict(), "weights_N": theta.tolist(), "stages": stages}
     return Hybrid(joint_model, basis, weights, {"ridge": ridge, "joint": joint_info, "held": held})
+
+
+# --- a structure's: the element's term ------------------------------------------------------------------------------
+def _hook(basis: Basis, theta: np.ndarray) -> tuple:
+    """The kernel's extra force hook (``kernel.extra_term``'s arguments) of ``basis`` at weights ``theta`` [N]."""
+    w, a = basis.split(np.asarray(theta, float))
+    return (np.ascontiguousarray(w), np.ascontiguousarray(a), basis.zc, basis.vc, basis.uc,
+            grid_constants(basis.zc, basis.wz), grid_constants(basis.vc, basis.wv),
+            grid_constants(basis.uc, basis.wu))  # fmt: skip
+
+
+@dataclass
+class ElementTerm:
+    """A structure's hybrid term: the element's non-parametric force g(r, r', u) [N] over its relative motion r (in
+    the structure's physical frame, the channels' ``offsets`` off) and the input, added to the element's force (on
+    DOF J, opposite on DOF I), fitted by output error with the structure held (``fit_element_term``).
+    """
+
+    structure: Structure
+    offsets: np.ndarray
+    basis: Basis
+    theta: np.ndarray
+    info: dict[str, Any] = field(default_factory=dict)
+
+    def term(self, r, rv, u=None) -> np.ndarray:
+        """g(r, r', u) [N] at the given relative states (and input)."""
+        return self.basis.evaluate(self.theta, r, rv, u)
+
+    def window_errors(self, rec: Measurement, starts: np.ndarray, length: int, theta=None) -> np.ndarray:
+        """Each window's mean-square error over every channel, each in its rms over the record (W,), the structure
+        with the term at weights ``theta`` (default its own; zeros: the physics alone) run from the measured state
+        at each start under the staged input; infinite where the run diverged.
+        """
+        s, o = self.structure, np.asarray(self.offsets, float)
+        sub = record_substeps(s, rec)
+        zs, vs = rec.free_run_states()
+        zs = zs - o[:, None]
+        u = rec.staged(s.element, sub)
+        r = 2 * sub
+        U = np.stack([u[r * k : r * (k + length - 1) + 1] for k in starts])
+        x0 = np.hstack([zs[:, starts].T, vs[:, starts].T])
+        res = simulate_structures(s, U, rec.dt, x0, input_kind=rec.input_name, force_dof=rec.force_dof,
+                                  input_index=np.arange(len(starts)), substeps=sub, staged=True,
+                                  hook=_hook(self.basis, self.theta if theta is None else theta),
+                                  **divergence_limits(rec.channels - o[:, None], vs))  # fmt: skip
+        meas = np.stack([rec.channels[:, k : k + length] for k in starts])
+        raw = rec.channels
+        scale = np.sqrt(np.mean((raw - raw.mean(axis=1, keepdims=True)) ** 2, axis=1))
+        with np.errstate(invalid="ignore", over="ignore"):
+            ms = np.mean(((res.z + o[None, :, None] - meas) / scale[None, :, None]) ** 2, axis=(1, 2))
+        return np.where(res.diverged, np.inf, ms)
+
+    def restarted_gap(self, rec: Measurement, start: int, window_s: float) -> dict[str, Any]:
+        """The median restarted window's rms error over [start, N) in % of the channels' rms (windows of ``window_s``
+        restarted from the measured states, the input staged), of the structure with the term and of its physics
+        alone (the term's weights at zero), and their paired comparison (``_judging.paired_windows``).
+        """
+        from negstiff.inference.estimators.discrepancy._judging import paired_windows
+
+        windows = restart_windows(rec.n, rec.fs, window_s, start=start, min_step=8)
+        if len(windows) < 2:
+            return {}
+        phys = self.window_errors(rec, windows.starts, windows.length, np.zeros_like(self.theta))
+        hybrid = self.window_errors(rec, windows.starts, windows.length)
+        out: dict[str, Any] = {"windows": len(windows), "window_s": windows.length / rec.fs}
+        for name, ms in (("physics", phys), ("hybrid", hybrid)):
+            ok = np.isfinite(ms)
+            out[f"{name}_median_window_percent"] = float(100 * np.sqrt(np.median(ms[ok]))) if ok.any() else math.inf
+        out["paired"] = paired_windows(phys, hybrid, worst=1.0)
+        return out
+
+    def to_json(self) -> dict[str, Any]:
+        """The term as JSON: its basis and weights [N], and the fit's account."""
+        return {"basis": self.basis.to_json(), "weights_N": self.theta.tolist(), **self.info}
+
+
+def fit_element_term(structure: Structure, offsets, rec: Measurement, window_s: float = 0.25, max_windows: int = 120,
+                     ridge: float = 1e-2, shape: tuple[int, int, int] = (6, 4, 3),
+                     max_nfev: int = 20) -> ElementTerm:  # fmt: skip
+    """The single DOF's hybrid term (``fit_hybrid``'s held fit) on a structure's element: bumps over the element's
+    relative displacement and velocity and the input, kept orthogonal over the states the record visits to every
+    force the element's law can make (1, r, r^2, r^3, r', r'|r'|), their weights fitted by the simulation error of
+    every channel (each weighed to the element's channel's rms, as the structure's refinement weighs them) on
+    ``window_s`` windows over ``rec`` (the identification part: pass a segment), their start states fitted first,
+    with the structure held and the ridge penalty of ``fit_hybrid``. The joint refit of structure and term
+    (``fit_hybrid``'s second stage) is not made for a structure.
+    """
+    nd, at = structure.n_dof, structure.place
+    o = np.asarray(offsets, float)
+    zs, vs = rec.free_run_states()
+    zs = zs - o[:, None]
+    r, rv = relative(zs, at), relative(vs, at)
+    drive = np.asarray(rec.u, float)
+    basis = Basis.over(r, rv, drive, *shape)
+    N = _orthogonal_weights(basis, r, rv, drive)
+    P = N.shape[1]
+    raw = rec.channels
+    z_all = raw - o[:, None]
+    rms = np.sqrt(np.mean((z_all - z_all.mean(axis=1, keepdims=True)) ** 2, axis=1))
+    j = at[1] - 1
+    weight = (rms[j] / np.where(rms > 0, rms, rms[j]))[:, None]
+    el = structure.element
+    force = max(abs(el.k1) * float(np.std(r)), abs(el.c) * float(np.std(rv)), 1e-300)
+    sub = record_substeps(structure, rec)
+    u_staged = rec.staged(el, sub)
+    k_step = 2 * sub
+    limits = divergence_limits(z_all, vs)
+    x_scale = np.concatenate([np.maximum(np.abs(z_all).max(axis=1), 1e-12), np.maximum(np.abs(vs).max(axis=1), 1e-12)])
+    length = min(rec.n, max(8, int(round(window_s * rec.fs))))
+    n_win = min(max(1, max_windows // nd), max(1, rec.n // length))
+    starts = np.linspace(0, rec.n - length, n_win).astype(int)
+    meas = np.stack([raw[:, s : s + length] for s in starts])  # (W, N, L), as measured
+    u = np.stack([u_staged[k_step * s : k_step * (s + length - 1) + 1] for s in starts])
+    x0 = np.hstack([zs[:, starts].T, vs[:, starts].T]) / x_scale
+    big = 10 * float(np.abs(meas).max())
+    pen = math.sqrt(ridge) * float(rms[j])  # a weight of size ``force`` costs ridge * rms^2 in the sum of squares
+
+    def residuals(Q, X):
+        """(k, W, N L) the channels' simulation errors of k weight points (scaled) from start states X (scaled)."""
+        out = np.empty((Q.shape[0], n_win, nd * length))
+        for k, (t, xs) in enumerate(zip(Q, X, strict=True)):
+            res = simulate_structures(structure, u, rec.dt, xs * x_scale, input_kind=rec.input_name,
+                                      force_dof=rec.force_dof, input_index=np.arange(n_win), substeps=sub,
+                                      staged=True, hook=_hook(basis, N @ t * force), **limits)  # fmt: skip
+            e = (res.z + o[None, :, None] - meas) * weight
+            e[res.diverged] = big  # a diverging window: large, finite
+            out[k] = e.reshape(n_win, -1)
+        return out
+
+    t0 = np.zeros(P)
+    st = shooting_least_squares(lambda Q, X: residuals(np.repeat(t0[None], len(X), 0), X), np.zeros(0), x0, 10)
+    rms0 = float(np.sqrt(np.mean(st.fun**2)))
+    sol = shooting_least_squares(residuals, t0, st.x, max_nfev, penalty=np.full(P, pen))
+    theta = N @ sol.q * force
+    info = {"ridge": ridge, "window_s": length / rec.fs, "windows": int(n_win), "rms_start_m": rms0,
+            "rms_end_m": float(np.sqrt(np.mean(sol.fun**2))), "evaluations": int(sol.nfev), "stop": sol.status,
+            "fit": "structure held", "joint": None}  # fmt: skip
+    return ElementTerm(structure, o, basis, theta, info)

@@ -139,7 +139,8 @@ class Discrepancy(StructureResults, Intervals):
         but a hammer's (its windows would cross the pulses); a structure's baseline and final structure are
         refined alike, so its gap before and after the effects compares refined models.
     unnamed : bool, default False
-        Add a non-parametric force for what no catalogue effect names (the hybrid model; a single DOF's).
+        Add a non-parametric force for what no catalogue effect names (the hybrid model; a structure's on its
+        element's relative motion, fitted with the structure held: ``_rounds.unnamed_term``).
     element : str or (int, int), optional
         Where the element acts on a record of N > 1 DOFs: ``"I-J"`` (``_rounds.structure_rounds``: the element's
         base law with the linear structure as the baseline, the catalogue offered round after round up to
@@ -265,9 +266,6 @@ class Discrepancy(StructureResults, Intervals):
                 raise DiscrepancyError(f"Discrepancy(law={self.law!r}, damping={self.damping!r}): a structure's "
                                        "baseline is its element's cubic law with the linear structure (give no "
                                        "law)")  # fmt: skip
-            if self.unnamed:
-                raise DiscrepancyError("Discrepancy(unnamed=True): the non-parametric force is a single DOF's (a "
-                                       f"record of {rec.n_dof} DOFs)")  # fmt: skip
         from negstiff.inference.analysis.record_kind import check_decay, record_kind
         from negstiff.inference.estimators.identification import check_ring_down_scores, refuse_one_orbit
 

@@ -180,8 +180,35 @@ def structure_rounds(est, rec: Measurement, at: tuple[int, int]) -> StructureIde
     out.details["gap_after_percent"] = gap_after["rms_percent"]
     out.details["effect_interval"] = effect_intervals(out, named_all)
     out.details["bayesian"] = bayesian_opinions(out, rec, n_id, named_all, hits)
+    if est.unnamed:
+        out.details["unnamed"] = unnamed_term(out, rec, n_id, hits)
     est.gap_before_, est.gap_after_ = gap_before, gap_after
     return out
+
+
+def unnamed_term(result, rec: Measurement, n_id: int, hits: bool) -> dict[str, Any]:
+    """What no registered effect names in the structure's element (``Discrepancy(unnamed=True)``): the hybrid term
+    g(r, r', u) fitted on the identification part with the final structure held (``hybrid.fit_element_term``), its
+    size against the element's restoring force, and the held-out tail's restarted windows with and without it.
+    Not on a hammer's record (as a single DOF's: its windows would cross the pulses).
+    """
+    from negstiff.inference.estimators.hybrid import fit_element_term
+
+    if hits:
+        return {"reason": "not fitted on a hammer's record: the non-parametric force is fitted and judged by output "
+                "error on windows that would cross the pulses"}  # fmt: skip
+    structure, offsets = result.structure, np.asarray(result.offsets_m, float)
+    term = fit_element_term(structure, offsets, rec.segment(0, n_id))
+    zs, vs = rec.segment(0, n_id).free_run_states()
+    r, rv = relative(zs - offsets[:, None], structure.place), relative(vs, structure.place)
+    g = term.term(r, rv, rec.u[:n_id])
+    force = structure.element.restoring_force(r)
+    return {
+        "term_rms_N": float(np.sqrt(np.mean(g**2))),
+        "term_percent_of_restoring_force": float(100 * np.sqrt(np.mean(g**2) / np.mean(force**2))),
+        "gap": term.restarted_gap(rec, n_id, WINDOW_S),
+        **term.to_json(),
+    }
 
 
 class HeldOut:
