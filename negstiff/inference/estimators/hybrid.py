@@ -432,19 +432,23 @@ def fit_element_term(structure: Structure, offsets, rec: Measurement, window_s: 
                      ridge: float = 1e-2, shape: tuple[int, int, int] = (6, 4, 3),
                      max_nfev: int = 20) -> ElementTerm:  # fmt: skip
     """The single DOF's hybrid term (``fit_hybrid``'s held fit) on a structure's element: bumps over the element's
-    relative displacement and velocity and the input, kept orthogonal over the states the record visits to every
-    force the element's law can make (1, r, r^2, r^3, r', r'|r'|), their weights fitted by the simulation error of
+    relative displacement and velocity and the input (its driving input, ``Measurement.driving``), kept orthogonal
+    over the states the record visits to the cubic law's forces (1, r, r^2, r^3, r', r'|r'|, as the single DOF's),
+    their weights fitted by the simulation error of
     every channel (each weighed to the element's channel's rms, as the structure's refinement weighs them) on
     ``window_s`` windows over ``rec`` (the identification part: pass a segment), their start states fitted first,
     with the structure held and the ridge penalty of ``fit_hybrid``. The joint refit of structure and term
-    (``fit_hybrid``'s second stage) is not made for a structure.
+    (``fit_hybrid``'s second stage) is not made for a structure. The term is a force pair across the element: what
+    the held structure misses elsewhere (a fixture's spring, a mass) it takes in where that projects onto the
+    element's relative motion and the input, so calling it the element's is an attribution the fit assumes.
     """
     nd, at = structure.n_dof, structure.place
     o = np.asarray(offsets, float)
     zs, vs = rec.free_run_states()
     zs = zs - o[:, None]
     r, rv = relative(zs, at), relative(vs, at)
-    drive = np.asarray(rec.u, float)
+    el = structure.element
+    drive = np.asarray(rec.driving(el), float)  # what the hook reads, staged (``Measurement.staged``)
     basis = Basis.over(r, rv, drive, *shape)
     N = _orthogonal_weights(basis, r, rv, drive)
     P = N.shape[1]
@@ -453,7 +457,6 @@ def fit_element_term(structure: Structure, offsets, rec: Measurement, window_s: 
     rms = np.sqrt(np.mean((z_all - z_all.mean(axis=1, keepdims=True)) ** 2, axis=1))
     j = at[1] - 1
     weight = (rms[j] / np.where(rms > 0, rms, rms[j]))[:, None]
-    el = structure.element
     force = max(abs(el.k1) * float(np.std(r)), abs(el.c) * float(np.std(rv)), 1e-300)
     sub = record_substeps(structure, rec)
     u_staged = rec.staged(el, sub)

@@ -189,8 +189,10 @@ def structure_rounds(est, rec: Measurement, at: tuple[int, int]) -> StructureIde
 def unnamed_term(result, rec: Measurement, n_id: int, hits: bool) -> dict[str, Any]:
     """What no registered effect names in the structure's element (``Discrepancy(unnamed=True)``): the hybrid term
     g(r, r', u) fitted on the identification part with the final structure held (``hybrid.fit_element_term``), its
-    size against the element's restoring force, and the held-out tail's restarted windows with and without it.
-    Not on a hammer's record (as a single DOF's: its windows would cross the pulses).
+    size against the element's restoring force, and the held-out tail's restarted windows with and without it (the
+    median window in % of the record's channels' rms, the runs from the free-run states under the staged input: not
+    the measure of ``gap_after_percent``). Not on a hammer's record (as a single DOF's: its windows would cross the
+    pulses).
     """
     from negstiff.inference.estimators.hybrid import fit_element_term
 
@@ -201,10 +203,10 @@ def unnamed_term(result, rec: Measurement, n_id: int, hits: bool) -> dict[str, A
     term = fit_element_term(structure, offsets, rec.segment(0, n_id))
     zs, vs = rec.segment(0, n_id).free_run_states()
     r, rv = relative(zs - offsets[:, None], structure.place), relative(vs, structure.place)
-    g = term.term(r, rv, rec.u[:n_id])
+    g = term.term(r, rv, rec.segment(0, n_id).driving(structure.element))
     force = structure.element.restoring_force(r)
     return {
-        "term_rms_N": float(np.sqrt(np.mean(g**2))),
+        "term_rms": float(np.sqrt(np.mean(g**2))),
         "term_percent_of_restoring_force": float(100 * np.sqrt(np.mean(g**2) / np.mean(force**2))),
         "gap": term.restarted_gap(rec, n_id, WINDOW_S),
         **term.to_json(),
