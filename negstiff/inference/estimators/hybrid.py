@@ -33,7 +33,7 @@ from scipy import linalg
 
 from negstiff.errors import MeasurementError
 from negstiff.inference.record.measurement import Measurement
-from negstiff.inference.steps.refine import parameter_names, parameter_scales, values_of, with_values
+from negstiff.inference.steps.refine import channel_windows, parameter_names, parameter_scales, values_of, with_values
 from negstiff.inference.steps.shooting import parameter_covariance, shooting_least_squares
 from negstiff.inference.steps.validation import divergence_limits, record_substeps, restart_windows, staged_windows
 from negstiff.models import Model
@@ -459,16 +459,9 @@ def fit_element_term(structure: Structure, offsets, rec: Measurement, window_s: 
     weight = (rms[j] / np.where(rms > 0, rms, rms[j]))[:, None]
     force = max(abs(el.k1) * float(np.std(r)), abs(el.c) * float(np.std(rv)), 1e-300)
     sub = record_substeps(structure, rec)
-    u_staged = rec.staged(el, sub)
-    k_step = 2 * sub
     limits = divergence_limits(z_all, vs)
     x_scale = np.concatenate([np.maximum(np.abs(z_all).max(axis=1), 1e-12), np.maximum(np.abs(vs).max(axis=1), 1e-12)])
-    length = min(rec.n, max(8, int(round(window_s * rec.fs))))
-    n_win = min(max(1, max_windows // nd), max(1, rec.n // length))
-    starts = np.linspace(0, rec.n - length, n_win).astype(int)
-    meas = np.stack([raw[:, s : s + length] for s in starts])  # (W, N, L), as measured
-    u = np.stack([u_staged[k_step * s : k_step * (s + length - 1) + 1] for s in starts])
-    x0 = np.hstack([zs[:, starts].T, vs[:, starts].T]) / x_scale
+    length, n_win, meas, u, x0 = channel_windows(rec, rec.staged(el, sub), zs, vs, x_scale, window_s, max_windows, sub)
     big = 10 * float(np.abs(meas).max())
     pen = math.sqrt(ridge) * float(rms[j])  # a weight of size ``force`` costs ridge * rms^2 in the sum of squares
 

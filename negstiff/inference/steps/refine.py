@@ -323,19 +323,13 @@ def refine(
     q = np.concatenate([params.values(), o[:n_off]]) / scale
     limits = divergence_limits(z_all, vs)
     sub = record_substeps(model, rec)
-    r = 2 * sub
     u_staged = rec.staged(structure.element, sub)  # a measured channel's term held at its start value
     x_scale = np.concatenate([np.maximum(np.abs(z_all).max(axis=1), 1e-12), np.maximum(np.abs(vs).max(axis=1), 1e-12)])
     start_model, current = model, model
     stages: list[dict[str, Any]] = []
     last = None
     for w_s in windows_s:
-        length = min(rec.n, max(8, int(round(w_s * rec.fs))))
-        n_win = min(max(1, max_windows // nd), max(1, rec.n // length))
-        starts = np.linspace(0, rec.n - length, n_win).astype(int)
-        meas = np.stack([raw[:, s : s + length] for s in starts])  # (W, N, L), as measured
-        u = np.stack([u_staged[r * s : r * (s + length - 1) + 1] for s in starts])
-        x0 = np.hstack([zs[:, starts].T, vs[:, starts].T]) / x_scale
+        length, n_win, meas, u, x0 = channel_windows(rec, u_staged, zs, vs, x_scale, w_s, max_windows, sub)
         penalty = 10 * np.abs(meas).max()
 
         def residuals(Q, X, meas=meas, u=u, n_win=n_win, length=length):  # this stage's windows, kept by the fit
@@ -383,6 +377,24 @@ def refine(
     se = None if last is None else _standard_errors(*last) * scale
     return Refinement(current, start_model, names, stages, None if offsets is None else np.asarray(o, float),
                       None if se is None else dict(zip(names, se.tolist(), strict=True)))  # fmt: skip
+
+
+def channel_windows(rec: Measurement, u_staged: np.ndarray, zs: np.ndarray, vs: np.ndarray, x_scale: np.ndarray,
+                    window_s: float, max_windows: int, substeps: int):  # fmt: skip
+    """A structure's multiple-shooting windows over ``rec``: ``window_s`` long (at least 8 samples), at most
+    ``max_windows`` / N of them spread evenly; returns (samples per window, windows, the channels as measured
+    (W, N, L), each window's staged input rows (``u_staged``'s, ``substeps`` a sample), the start states from
+    ``zs``, ``vs`` (N, T) scaled by ``x_scale``). The refinement's and the element's unnamed term's
+    (``hybrid.fit_element_term``).
+    """
+    nd, r = zs.shape[0], 2 * substeps
+    length = min(rec.n, max(8, int(round(window_s * rec.fs))))
+    n_win = min(max(1, max_windows // nd), max(1, rec.n // length))
+    starts = np.linspace(0, rec.n - length, n_win).astype(int)
+    meas = np.stack([rec.channels[:, s : s + length] for s in starts])  # (W, N, L), as measured
+    u = np.stack([u_staged[r * s : r * (s + length - 1) + 1] for s in starts])
+    x0 = np.hstack([zs[:, starts].T, vs[:, starts].T]) / x_scale
+    return length, n_win, meas, u, x0
 
 
 def _standard_errors(residuals, q: np.ndarray, x: np.ndarray, fun: np.ndarray, robust=None) -> np.ndarray:
