@@ -544,8 +544,7 @@ def _discrepancy(sub, common: argparse.ArgumentParser, data_opts: argparse.Argum
         action="store_true",
         help="also fit a non-parametric force g(z, z', u) to what no catalogue effect names (output error, the "
         "final model held) and report its size, the held-out gap with it, and how far it would move the physical "
-        "coefficients (result key 'unnamed'; a structure's: on its element's relative motion, the structure held, "
-        "in 'details')",
+        "coefficients (result key 'unnamed'; a structure's: on its element's relative motion, in 'details')",
     )
     dsc.set_defaults(func=c.cmd_discrepancy)
 

@@ -532,12 +532,13 @@ def test_what_no_registered_effect_names_in_the_element_is_the_unnamed_term(tmp_
     # the element has a stiffness bump at its barrier beside its cubic, a r exp(-(r / w)^2) (100 N/m over 1 cm; the
     # cubic's k1 is 426 N/m), which no registered effect is: the rounds name the quintic stiffness, the nearest, and
     # the unnamed term (``discrepancy --unnamed``, the single DOF's hybrid term on the element's relative motion and
-    # the input, fitted with the structure held) carries part of the rest: with it the held-out tail's restarted
-    # windows are predicted better beyond one standard error (measured: their rms error 20 % lower, 7-32 %; the
-    # median window 3.4 % -> 2.3 % of the channels' rms) by a term of about 2 % of the restoring force (measured
-    # 1.8 %; 1.7 % with the sensors' zeros at zero). Held, it cannot undo what the quintic bent (the structure's
-    # joint refit with the term is not made). Through the command line, whose account of a structure's workflow had
-    # failed after writing its JSON.
+    # the input) carries the rest. Fitted with the structure held, the held-out tail's restarted windows are predicted
+    # better beyond one standard error (measured: their rms error 20 % lower, 7-32 %; the median window 3.4 % -> 2.3 %
+    # of the channels' rms); fitted jointly with the structure, better still (37 %, 26-46 %; 2.0 %), by a term of
+    # about 2 % of the restoring force (measured 2.2 %), and the joint refit undoes what the quintic had bent: the
+    # element's k1, 5.7 % under the truth's 426 N/m with the quintic, comes back within 0.2 % (moved by 42 of its
+    # standard errors). Through the command line, whose account of a structure's workflow had failed after writing
+    # its JSON.
     import json
     import math
 
@@ -556,10 +557,14 @@ def test_what_no_registered_effect_names_in_the_element_is_the_unnamed_term(tmp_
     assert details["effects"] == ["quintic_stiffness"], details["effects"]
     un = details["unnamed"]
     gap = un["gap"]
-    assert gap["paired"]["significant"] and gap["paired"]["gain_percent"] > 0, gap
-    assert gap["hybrid_median_window_percent"] < gap["physics_median_window_percent"], gap
+    for paired in (gap["paired_held"], gap["paired"]):
+        assert paired["significant"] and paired["gain_percent"] > 0, gap
+    medians = [gap[f"{k}_median_window_percent"] for k in ("hybrid", "held", "physics")]
+    assert medians == sorted(medians), gap
     assert 0.5 < un["term_percent_of_restoring_force"] < 5.0, un["term_percent_of_restoring_force"]
-    assert un["fit"] == "structure held" and un["joint"] is None
+    k1 = un["joint"]["coefficients"]["k1"]
+    assert abs(k1["held"] / TRUTH.k1 - 1) > 0.03 and abs(k1["joint"] / TRUTH.k1 - 1) < 0.02, k1
+    assert k1["shift_in_se"] > 3, k1
     said = capsys.readouterr().err  # the command's account of its work
     assert f"unnamed: a non-parametric term of {un['term_percent_of_restoring_force']:.3g} % of the" in said, said
 
@@ -589,9 +594,10 @@ def test_a_structures_extra_force_hook_at_zero_weights_is_the_structure_itself()
 
 @pytest.mark.slow  # a second record and kernel (the element's plain cubic with the term): the fact's other side
 def test_an_element_missing_nothing_leaves_the_unnamed_term_at_the_noise():
-    # the truth on its fixture, nothing missing: the term stays below 0.1 % of the restoring force (measured
-    # 0.014 %, its rms 1.1 mN against the 1.3 mN the element's stiffness makes of the lasers' 3 um) and the median
-    # held-out window is predicted no worse than by the structure alone (measured 0.129 % against 0.132 %)
+    # the truth on its fixture, nothing missing: the term stays below 0.1 % of the restoring force and the median
+    # held-out window is predicted no worse than by the structure alone beyond 2 % (measured: 0.017 %; jointly
+    # 0.134 % against 0.132 %, with the structure held 0.129 %). (The joint refit moved c by 3.1 of its standard
+    # errors and the rest by 2.5 at most: not asserted, the single DOF's moved none beyond 1.4.)
     u, z = rk4_fixture_record(duration=60.0, seed=7, noise=3e-6)
     d = Discrepancy(element="1-2", unnamed=True).fit(from_arrays(u, z, FS, masses=(FIXTURE["m"], TRUTH.m)))
     un = d.result()["details"]["unnamed"]

@@ -33,7 +33,14 @@ from scipy import linalg
 
 from negstiff.errors import MeasurementError
 from negstiff.inference.record.measurement import Measurement
-from negstiff.inference.steps.refine import channel_windows, parameter_names, parameter_scales, values_of, with_values
+from negstiff.inference.steps.refine import (
+    SystemParameters,
+    channel_windows,
+    parameter_names,
+    parameter_scales,
+    values_of,
+    with_values,
+)
 from negstiff.inference.steps.shooting import parameter_covariance, shooting_least_squares
 from negstiff.inference.steps.validation import divergence_limits, record_substeps, restart_windows, staged_windows
 from negstiff.models import Model
@@ -367,7 +374,8 @@ def _hook(basis: Basis, theta: np.ndarray) -> tuple:
 class ElementTerm:
     """A structure's hybrid term: the element's non-parametric force g(r, r', u) [N] over its relative motion r (in
     the structure's physical frame, the channels' ``offsets`` off) and the input, added to the element's force (on
-    DOF J, opposite on DOF I), fitted by output error with the structure held (``fit_element_term``).
+    DOF J, opposite on DOF I), fitted by output error with the structure (``fit_element_term``: jointly with the
+    structure's parameters; ``held()``, with the structure held).
     """
 
     structure: Structure
@@ -375,6 +383,14 @@ class ElementTerm:
     basis: Basis
     theta: np.ndarray
     info: dict[str, Any] = field(default_factory=dict)
+
+    def held(self) -> ElementTerm:
+        """The held fit: the structure as it was given plus the term fitted with it held (``fit_hybrid``'s
+        ``Hybrid.held``).
+        """
+        h = self.info["held"]
+        return ElementTerm(Structure.from_dict(h["structure"]), self.offsets, self.basis,
+                           np.asarray(h["weights_N"], float), {"fit": "structure held"})  # fmt: skip
 
     def term(self, r, rv, u=None) -> np.ndarray:
         """g(r, r', u) [N] at the given relative states (and input)."""
@@ -406,21 +422,25 @@ class ElementTerm:
 
     def restarted_gap(self, rec: Measurement, start: int, window_s: float) -> dict[str, Any]:
         """The median restarted window's rms error over [start, N) in % of the channels' rms (windows of ``window_s``
-        restarted from the measured states, the input staged), of the structure with the term and of its physics
-        alone (the term's weights at zero), and their paired comparison (``_judging.paired_windows``).
+        restarted from the measured states, the input staged): the structure as it was given alone (``physics``),
+        with the term fitted with it held (``held``), and the joint fit (``hybrid``); each fit's paired comparison
+        with the structure alone (``paired_held``, ``paired``: ``_judging.paired_windows``).
         """
         from negstiff.inference.estimators.discrepancy._judging import paired_windows
 
         windows = restart_windows(rec.n, rec.fs, window_s, start=start, min_step=8)
         if len(windows) < 2:
             return {}
-        phys = self.window_errors(rec, windows.starts, windows.length, np.zeros_like(self.theta))
-        hybrid = self.window_errors(rec, windows.starts, windows.length)
+        base = self.held() if "held" in self.info else self
+        runs = {"physics": base.window_errors(rec, windows.starts, windows.length, np.zeros_like(self.theta)),
+                "held": base.window_errors(rec, windows.starts, windows.length),
+                "hybrid": self.window_errors(rec, windows.starts, windows.length)}  # fmt: skip
         out: dict[str, Any] = {"windows": len(windows), "window_s": windows.length / rec.fs}
-        for name, ms in (("physics", phys), ("hybrid", hybrid)):
+        for name, ms in runs.items():
             ok = np.isfinite(ms)
             out[f"{name}_median_window_percent"] = float(100 * np.sqrt(np.median(ms[ok]))) if ok.any() else math.inf
-        out["paired"] = paired_windows(phys, hybrid, worst=1.0)
+        out["paired"] = paired_windows(runs["physics"], runs["hybrid"], worst=1.0)
+        out["paired_held"] = paired_windows(runs["physics"], runs["held"], worst=1.0)
         return out
 
     def to_json(self) -> dict[str, Any]:
@@ -437,8 +457,9 @@ def fit_element_term(structure: Structure, offsets, rec: Measurement, window_s: 
     their weights fitted by the simulation error of
     every channel (each weighed to the element's channel's rms, as the structure's refinement weighs them) on
     ``window_s`` windows over ``rec`` (the identification part: pass a segment), their start states fitted first,
-    with the structure held and the ridge penalty of ``fit_hybrid``. The joint refit of structure and term
-    (``fit_hybrid``'s second stage) is not made for a structure. The term is a force pair across the element: what
+    with the structure held and the ridge penalty of ``fit_hybrid``; then, as ``fit_hybrid``'s second stage, the
+    structure's parameters and the term together from there (the joint fit, returned; ``held()`` the first). The
+    term is a force pair across the element: what
     the held structure misses elsewhere (a fixture's spring, a mass) it takes in where that projects onto the
     element's relative motion and the input, so calling it the element's is an attribution the fit assumes.
     """
@@ -465,24 +486,50 @@ def fit_element_term(structure: Structure, offsets, rec: Measurement, window_s: 
     big = 10 * float(np.abs(meas).max())
     pen = math.sqrt(ridge) * float(rms[j])  # a weight of size ``force`` costs ridge * rms^2 in the sum of squares
 
-    def residuals(Q, X):
-        """(k, W, N L) the channels' simulation errors of k weight points (scaled) from start states X (scaled)."""
-        out = np.empty((Q.shape[0], n_win, nd * length))
-        for k, (t, xs) in enumerate(zip(Q, X, strict=True)):
-            res = simulate_structures(structure, u, rec.dt, xs * x_scale, input_kind=rec.input_name,
-                                      force_dof=rec.force_dof, input_index=np.arange(n_win), substeps=sub,
-                                      staged=True, hook=_hook(basis, N @ t * force), **limits)  # fmt: skip
-            e = (res.z + o[None, :, None] - meas) * weight
-            e[res.diverged] = big  # a diverging window: large, finite
-            out[k] = e.reshape(n_win, -1)
-        return out
+    def residuals(system_of):
+        """The batched residuals (``shooting.Residuals``) of points (q, X): q's structure and term weights
+        (``system_of``), every window's run of every channel from its start states (scaled) X.
+        """
 
+        def fun(Q, X):
+            out = np.empty((Q.shape[0], n_win, nd * length))
+            for k, (q, xs) in enumerate(zip(Q, X, strict=True)):
+                s, t = system_of(q)
+                res = simulate_structures(s, u, rec.dt, xs * x_scale, input_kind=rec.input_name,
+                                          force_dof=rec.force_dof, input_index=np.arange(n_win), substeps=sub,
+                                          staged=True, hook=_hook(basis, N @ t * force), **limits)  # fmt: skip
+                e = (res.z + o[None, :, None] - meas) * weight
+                e[res.diverged] = big  # a diverging window: large, finite
+                out[k] = e.reshape(n_win, -1)
+            return out
+
+        return fun
+
+    held_fun = residuals(lambda q: (structure, q))
     t0 = np.zeros(P)
-    st = shooting_least_squares(lambda Q, X: residuals(np.repeat(t0[None], len(X), 0), X), np.zeros(0), x0, 10)
+    st = shooting_least_squares(lambda Q, X: held_fun(np.repeat(t0[None], len(X), 0), X), np.zeros(0), x0, 10)
     rms0 = float(np.sqrt(np.mean(st.fun**2)))
-    sol = shooting_least_squares(residuals, t0, st.x, max_nfev, penalty=np.full(P, pen))
-    theta = N @ sol.q * force
-    info = {"ridge": ridge, "window_s": length / rec.fs, "windows": int(n_win), "rms_start_m": rms0,
-            "rms_end_m": float(np.sqrt(np.mean(sol.fun**2))), "evaluations": int(sol.nfev), "stop": sol.status,
-            "fit": "structure held", "joint": None}  # fmt: skip
-    return ElementTerm(structure, o, basis, theta, info)
+    sol = shooting_least_squares(held_fun, t0, st.x, max_nfev, penalty=np.full(P, pen))
+    held_theta = N @ sol.q * force
+    held = {"structure": structure.to_dict(), "weights_N": held_theta.tolist(), "rms_start_m": rms0,
+            "rms_end_m": float(np.sqrt(np.mean(sol.fun**2))), "evaluations": int(sol.nfev),
+            "stop": sol.status}  # fmt: skip
+    # the joint refit, as the single DOF's: the structure's parameters (its element's, its linear entries; the
+    # element's constant held at the weight its frame pins, the channels' zeros held) and the term together, from
+    # the held fit, on the same windows; how far each parameter moved in its standard errors says whether the
+    # structure had bent to cover the missing force
+    params = SystemParameters.of(structure, held=("k0",))
+    names = params.names
+    p = len(names)
+    pscale = params.scales(float(np.std(z_all[j])), float(np.std(vs[j])))
+    q0 = params.values() / pscale
+    joint_fun = residuals(lambda q: (params.structure(q[:p] * pscale), q[p:]))
+    penalty = np.concatenate([np.zeros(p), np.full(P, pen)])
+    solj = shooting_least_squares(joint_fun, np.concatenate([q0, sol.q]), sol.x, max_nfev, penalty=penalty)
+    shifts, tau = _coefficient_shifts(solj, parameter_covariance(joint_fun, solj, penalty), names, q0, pscale)
+    joint_structure, weights = params.structure(solj.q[:p] * pscale), N @ solj.q[p:] * force
+    joint = {"rms_end_m": float(np.sqrt(np.mean(solj.fun**2))), "evaluations": int(solj.nfev), "stop": solj.status,
+             "residual_correlation_samples": tau, "coefficients": shifts, "structure": joint_structure.to_dict(),
+             "weights_N": weights.tolist()}  # fmt: skip
+    info = {"ridge": ridge, "window_s": length / rec.fs, "windows": int(n_win), "joint": joint, "held": held}
+    return ElementTerm(joint_structure, o, basis, weights, info)

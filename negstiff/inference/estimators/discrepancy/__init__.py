@@ -140,7 +140,7 @@ class Discrepancy(StructureResults, Intervals):
         refined alike, so its gap before and after the effects compares refined models.
     unnamed : bool, default False
         Add a non-parametric force for what no catalogue effect names (the hybrid model; a structure's on its
-        element's relative motion, fitted with the structure held: ``_rounds.unnamed_term``).
+        element's relative motion, held and jointly with the structure: ``_rounds.unnamed_term``).
     element : str or (int, int), optional
         Where the element acts on a record of N > 1 DOFs: ``"I-J"`` (``_rounds.structure_rounds``: the element's
         base law with the linear structure as the baseline, the catalogue offered round after round up to

@@ -188,8 +188,9 @@ def structure_rounds(est, rec: Measurement, at: tuple[int, int]) -> StructureIde
 
 def unnamed_term(result, rec: Measurement, n_id: int, hits: bool) -> dict[str, Any]:
     """What no registered effect names in the structure's element (``Discrepancy(unnamed=True)``): the hybrid term
-    g(r, r', u) fitted on the identification part with the final structure held (``hybrid.fit_element_term``), its
-    size against the element's restoring force, and the held-out tail's restarted windows with and without it (the
+    g(r, r', u) fitted on the identification part with the final structure held, then jointly with the structure
+    (``hybrid.fit_element_term``), its size against the element's restoring force, and the held-out tail's restarted
+    windows with and without it (the
     median window in % of the record's channels' rms, the runs from the free-run states under the staged input: not
     the measure of ``gap_after_percent``). Not on a hammer's record (as a single DOF's: its windows would cross the
     pulses).
