@@ -522,6 +522,7 @@ def discrepancy_section(d, label: str = "") -> Section:
     )  # fmt: skip
     sec.heldout[col] = res["gap_after_percent"]
     _verdicts(sec, res.get("iterations") or [])
+    _unnamed(sec, res.get("unnamed"))
     for w in res["warnings"]:
         sec.warning(w)
     sec.summary.append(
@@ -552,6 +553,7 @@ def _structure_discrepancy_section(d, res: dict[str, Any], label: str) -> Sectio
              + f" Held-out gap (restarted free runs): {fmt(det['gap_before_percent'], 3)} % before, "
              f"{fmt(det['gap_after_percent'], 3)} % after.")  # fmt: skip
     _verdicts(sec, det.get("iterations") or [])
+    _unnamed(sec, det.get("unnamed"))
     sec.text("The final structure:")
     final = structure_section(d, label)
     sec.blocks += final.blocks
@@ -575,6 +577,27 @@ def _verdicts(sec: Section, iterations: list[dict[str, Any]]) -> None:
     rows = [[k + 1, it["verdict"]] for k, it in enumerate(iterations) if it.get("verdict")]
     if rows:
         sec.table(["round", "verdict: the prediction without and with the named effect"], rows)
+
+
+def _unnamed(sec: Section, un: dict[str, Any] | None) -> None:
+    """What no effect names (``Discrepancy(unnamed=True)``): the non-parametric term's size and the held-out windows
+    without and with it (the joint fit; a structure's with the term held too), or why it was not fitted.
+    """
+    if not un:
+        return
+    if "gap" not in un:
+        sec.text(f"Unnamed term: not fitted ({un.get('reason', 'no reason given')}).")
+        return
+    g = un["gap"]
+    without, with_it = (fmt(g.get(f"{k}_median_window_percent"), 3) for k in ("physics", "hybrid"))
+    held = g.get("held_median_window_percent")
+    sec.text(
+        f"Unnamed term (what no effect names, a non-parametric force fitted jointly with the physics): "
+        f"{fmt(un['term_percent_of_restoring_force'], 2)} % of the restoring force; held-out median window "
+        f"{without} % without it, {with_it} % with it"
+        + (f" ({fmt(held, 3)} % with the physics held)" if held is not None else "")
+        + "."
+    )
 
 
 def frf_section(res: dict[str, Any], label: str = "", title: str = "") -> Section:

@@ -605,6 +605,11 @@ def test_an_element_missing_nothing_leaves_the_unnamed_term_at_the_noise():
     assert un["term_percent_of_restoring_force"] < 0.1, un["term_percent_of_restoring_force"]
     gap = un["gap"]
     assert gap["hybrid_median_window_percent"] <= 1.02 * gap["physics_median_window_percent"], gap
+    # the report says it
+    from negstiff.report.sections import discrepancy_section
+
+    said = [b for kind, b in discrepancy_section(d).blocks if kind == "p" and b.startswith("Unnamed term")]
+    assert said and "% of the restoring force; held-out median window" in said[0], said
 
 
 def test_discrepancy_names_each_missing_effect_of_the_element_in_turn():
