@@ -38,6 +38,7 @@ from negstiff.inference.steps.refine import (
     channel_windows,
     parameter_names,
     parameter_scales,
+    spread_windows,
     values_of,
     with_values,
 )
@@ -405,15 +406,11 @@ class ElementTerm:
         sub = record_substeps(s, rec)
         zs, vs = rec.free_run_states()
         zs = zs - o[:, None]
-        u = rec.staged(s.element, sub)
-        r = 2 * sub
-        U = np.stack([u[r * k : r * (k + length - 1) + 1] for k in starts])
-        x0 = np.hstack([zs[:, starts].T, vs[:, starts].T])
+        meas, U, x0 = channel_windows(rec, rec.staged(s.element, sub), zs, vs, starts, length, sub)
         res = simulate_structures(s, U, rec.dt, x0, input_kind=rec.input_name, force_dof=rec.force_dof,
                                   input_index=np.arange(len(starts)), substeps=sub, staged=True,
                                   hook=_hook(self.basis, self.theta if theta is None else theta),
                                   **divergence_limits(rec.channels - o[:, None], vs))  # fmt: skip
-        meas = np.stack([rec.channels[:, k : k + length] for k in starts])
         raw = rec.channels
         scale = np.sqrt(np.mean((raw - raw.mean(axis=1, keepdims=True)) ** 2, axis=1))
         with np.errstate(invalid="ignore", over="ignore"):
@@ -482,7 +479,10 @@ def fit_element_term(structure: Structure, offsets, rec: Measurement, window_s: 
     sub = record_substeps(structure, rec)
     limits = divergence_limits(z_all, vs)
     x_scale = np.concatenate([np.maximum(np.abs(z_all).max(axis=1), 1e-12), np.maximum(np.abs(vs).max(axis=1), 1e-12)])
-    length, n_win, meas, u, x0 = channel_windows(rec, rec.staged(el, sub), zs, vs, x_scale, window_s, max_windows, sub)
+    length, starts = spread_windows(rec, window_s, max_windows, nd)
+    n_win = starts.size
+    meas, u, x0 = channel_windows(rec, rec.staged(el, sub), zs, vs, starts, length, sub)
+    x0 = x0 / x_scale
     big = 10 * float(np.abs(meas).max())
     pen = math.sqrt(ridge) * float(rms[j])  # a weight of size ``force`` costs ridge * rms^2 in the sum of squares
 

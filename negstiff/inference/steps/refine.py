@@ -329,7 +329,10 @@ def refine(
     stages: list[dict[str, Any]] = []
     last = None
     for w_s in windows_s:
-        length, n_win, meas, u, x0 = channel_windows(rec, u_staged, zs, vs, x_scale, w_s, max_windows, sub)
+        length, starts = spread_windows(rec, w_s, max_windows, nd)
+        n_win = starts.size
+        meas, u, x0 = channel_windows(rec, u_staged, zs, vs, starts, length, sub)
+        x0 = x0 / x_scale
         penalty = 10 * np.abs(meas).max()
 
         def residuals(Q, X, meas=meas, u=u, n_win=n_win, length=length):  # this stage's windows, kept by the fit
@@ -379,22 +382,25 @@ def refine(
                       None if se is None else dict(zip(names, se.tolist(), strict=True)))  # fmt: skip
 
 
-def channel_windows(rec: Measurement, u_staged: np.ndarray, zs: np.ndarray, vs: np.ndarray, x_scale: np.ndarray,
-                    window_s: float, max_windows: int, substeps: int):  # fmt: skip
-    """A structure's multiple-shooting windows over ``rec``: ``window_s`` long (at least 8 samples), at most
-    ``max_windows`` / N of them spread evenly; returns (samples per window, windows, the channels as measured
-    (W, N, L), each window's staged input rows (``u_staged``'s, ``substeps`` a sample), the start states from
-    ``zs``, ``vs`` (N, T) scaled by ``x_scale``). The refinement's and the element's unnamed term's
-    (``hybrid.fit_element_term``).
+def spread_windows(rec: Measurement, window_s: float, max_windows: int, n_dof: int) -> tuple[int, np.ndarray]:
+    """A structure's multiple-shooting windows over ``rec``: their samples (``window_s``, at least 8) and starts, at
+    most ``max_windows`` / N of them spread evenly (the N channels share the residuals a single DOF's hold).
     """
-    nd, r = zs.shape[0], 2 * substeps
     length = min(rec.n, max(8, int(round(window_s * rec.fs))))
-    n_win = min(max(1, max_windows // nd), max(1, rec.n // length))
-    starts = np.linspace(0, rec.n - length, n_win).astype(int)
+    n_win = min(max(1, max_windows // n_dof), max(1, rec.n // length))
+    return length, np.linspace(0, rec.n - length, n_win).astype(int)
+
+
+def channel_windows(rec: Measurement, u_staged: np.ndarray, zs: np.ndarray, vs: np.ndarray, starts: np.ndarray,
+                    length: int, substeps: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:  # fmt: skip
+    """The windows of ``length`` samples at ``starts``: the channels as measured (W, N, L), each window's staged
+    input rows (``u_staged``'s, ``substeps`` a sample) and the start states (W, 2N) from ``zs``, ``vs`` (N, T). The
+    refinement's and the element's unnamed term's (``hybrid.fit_element_term``, ``ElementTerm.window_errors``).
+    """
+    r = 2 * substeps
     meas = np.stack([rec.channels[:, s : s + length] for s in starts])  # (W, N, L), as measured
     u = np.stack([u_staged[r * s : r * (s + length - 1) + 1] for s in starts])
-    x0 = np.hstack([zs[:, starts].T, vs[:, starts].T]) / x_scale
-    return length, n_win, meas, u, x0
+    return meas, u, np.hstack([zs[:, starts].T, vs[:, starts].T])
 
 
 def _standard_errors(residuals, q: np.ndarray, x: np.ndarray, fun: np.ndarray, robust=None) -> np.ndarray:

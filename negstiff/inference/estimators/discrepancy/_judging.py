@@ -17,6 +17,7 @@ from negstiff.models import Model, effects
 
 from ._candidates import Candidate, _positional, _size_of, law_of
 from ._opinions import Opinions
+from ._runs import rows_clear_of
 
 
 class Judging(Opinions):
@@ -184,13 +185,7 @@ class Judging(Opinions):
         pos = _positional()
         for idx in groups:
             block = RestartWindows.at(idx, length)
-            mask = np.zeros(rec.n, bool)  # the block's samples: its windows and its contacts between them
-            mask[block.index] = True
-            span = slice(int(idx[0]), int(idx[-1]) + length)
-            mask[span] |= acting[span]
-            cum = np.concatenate([[0], np.cumsum(mask[: self.n_id_])])
-            hi = np.minimum(row_lo + support, self.n_id_)
-            keep = (cum[hi] - cum[np.minimum(row_lo, self.n_id_)]) == 0
+            keep = rows_clear_of(block, acting, row_lo, support, self.n_id_)  # its windows and contacts between
             models = []
             for cand in (before, best):
                 stop = cand.stop

@@ -39,7 +39,7 @@ from ._intervals import effect_intervals
 from ._judging import paired_windows
 from ._locating import locate, where_words
 from ._opinions import bayesian_opinions
-from ._runs import acting_mask
+from ._runs import acting_mask, rows_clear_of
 
 
 def structure_rounds(est, rec: Measurement, at: tuple[int, int]) -> StructureIdentification:
@@ -201,10 +201,11 @@ def unnamed_term(result, rec: Measurement, n_id: int, hits: bool) -> dict[str, A
         return {"reason": "not fitted on a hammer's record: the non-parametric force is fitted and judged by output "
                 "error on windows that would cross the pulses"}  # fmt: skip
     structure, offsets = result.structure, np.asarray(result.offsets_m, float)
-    term = fit_element_term(structure, offsets, rec.segment(0, n_id))
-    zs, vs = rec.segment(0, n_id).free_run_states()
+    ident = rec.segment(0, n_id)  # one segment: the states the fit derives are kept with it
+    term = fit_element_term(structure, offsets, ident)
+    zs, vs = ident.free_run_states()
     r, rv = relative(zs - offsets[:, None], structure.place), relative(vs, structure.place)
-    g = term.term(r, rv, rec.segment(0, n_id).driving(structure.element))
+    g = term.term(r, rv, ident.driving(structure.element))
     force = structure.element.restoring_force(r)
     return {
         "term_rms": float(np.sqrt(np.mean(g**2))),
@@ -258,9 +259,7 @@ def acting_evidence(held: HeldOut, before_ms: np.ndarray, after_ms: np.ndarray, 
                            "acting_share_of_tail": float(np.mean(acting))}  # fmt: skip
     if holds.sum() >= 2:
         b, a = before_ms[holds], after_ms[holds]
-        out["gap_before_percent"], out["gap_after_percent"] = (
-            float(100 * np.sqrt(np.median(np.where(np.isfinite(m), m, 1.0)))) for m in (b, a)
-        )
+        out["gap_before_percent"], out["gap_after_percent"] = _median_percent(b), _median_percent(a)
         out["acting"] = paired_windows(b, a, worst=1.0)
     if (~holds).sum() >= 2:
         out["rest"] = paired_windows(before_ms[~holds], after_ms[~holds], worst=1.0)
@@ -292,28 +291,27 @@ def fold_evidence(held: HeldOut, acting: np.ndarray, fitted, without: tuple[list
     # gaps and shrink a diverged window's count (an error the size of the signal) below a loud block's ordinary one
     scale = channel_scales(held.rec, 0)
     row_lo = np.arange(per_dof) * form.stride  # row k's test function spans [row_lo, row_lo + phi.size)
-    hi = np.minimum(row_lo + form.phi.size, n_id)
     before_ms, after_ms, spans = [], [], []
     for idx in np.array_split(starts, min(folds, starts.size)):
         block = RestartWindows.at(idx, length)
-        mask = np.zeros(held.rec.n, bool)  # the block's samples: its windows and where the effect acts between them
-        mask[block.index] = True
-        span = slice(int(idx[0]), int(idx[-1]) + length)
-        mask[span] |= acting[span]
-        cum = np.concatenate([[0], np.cumsum(mask[:n_id])])
-        keep = np.tile((cum[hi] - cum[np.minimum(row_lo, n_id)]) == 0, held.rec.n_dof)
+        keep = np.tile(rows_clear_of(block, acting, row_lo, form.phi.size, n_id), held.rec.n_dof)
         b_fit, a_fit = fitted(*without, keep), fitted(*with_it, keep)
         before_ms.append(held.errors(b_fit[0], b_fit[1], block, scale))
         after_ms.append(held.errors(a_fit[0], a_fit[1], block, scale))
         spans.append({"from_s": float(idx[0] / held.rec.fs), "to_s": float((idx[-1] + length) / held.rec.fs),
                       "windows": int(idx.size), "size": float(a_fit[2][-1])})  # fmt: skip
     b, a = np.concatenate(before_ms), np.concatenate(after_ms)
-    out["gap_before_percent"], out["gap_after_percent"] = (
-        float(100 * np.sqrt(np.median(np.where(np.isfinite(m), m, 1.0)))) for m in (b, a)
-    )
+    out["gap_before_percent"], out["gap_after_percent"] = _median_percent(b), _median_percent(a)
     out["acting"] = paired_windows(b, a, worst=1.0)
     out["folds"] = spans
     return out
+
+
+def _median_percent(ms: np.ndarray) -> float:
+    """The median window's rms error in % of the channels' rms (``HeldOut.errors``' units), a diverged window's
+    counted as an error the size of the signal.
+    """
+    return float(100 * np.sqrt(np.median(np.where(np.isfinite(ms), ms, 1.0))))
 
 
 def judged(rec: Measurement, at: tuple[int, int], n_id: int, hits: bool, before, after, named: list[str],

@@ -187,3 +187,18 @@ def acting_mask(force: np.ndarray) -> np.ndarray:
     """
     nz = np.abs(force) > 0
     return np.abs(force) > 0.25 * np.sqrt(np.mean(force[nz] ** 2)) if nz.any() else nz
+
+
+def rows_clear_of(block: RestartWindows, acting: np.ndarray, row_lo: np.ndarray, support: int, n_id: int) -> np.ndarray:
+    """The weak rows of the identification part [0, ``n_id``) (row k's test function over samples [``row_lo[k]``,
+    ``row_lo[k]`` + ``support``)) that touch none of a cross-validation block's samples: its windows and, between its
+    first and its last, where the effect acts (``acting``, over the record). A single DOF's folds
+    (``Judging._regime_folds``) and a structure's (``_rounds.fold_evidence``, each DOF's rows alike).
+    """
+    mask = np.zeros(acting.size, bool)
+    mask[block.index] = True
+    span = slice(int(block.starts[0]), int(block.starts[-1]) + block.length)
+    mask[span] |= acting[span]
+    cum = np.concatenate([[0], np.cumsum(mask[:n_id])])
+    hi = np.minimum(row_lo + support, n_id)
+    return (cum[hi] - cum[np.minimum(row_lo, n_id)]) == 0
