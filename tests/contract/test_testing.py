@@ -16,7 +16,7 @@ from negstiff.testing import assert_agree, assert_covers, assert_predicts, asser
 @pytest.fixture(scope="module")
 def fitted():
     # the device within reach of its barrier (4 m/s^2 rms, one crossing in 40 s), not in cross-well chaos: a chaotic
-    # record is another record on each machine (the multisine's cosines differ in their last bits between CPUs and
+    # record is another record on each machine (the multisine's cosines differ in their last bits between machines and
     # libms, and chaos makes that the whole motion within 10 s), so a 99 % interval's check on it fails on some
     # machines (at 8 m/s^2 rms k1's mean was 2.7 sd off on one, inside on another). This one's motion moves by 3.5e-8 m
     # when DOP853's tolerance goes from 1e-9 to 1e-10 (0.07 m at 8 m/s^2): the same record everywhere (measured)

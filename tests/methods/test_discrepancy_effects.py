@@ -66,7 +66,7 @@ def _record(seed: int, stop: float | None = None, friction: bool = False, c_nl: 
 def _covers(interval: dict, truth: float, z: float = 3.0) -> bool:
     """The truth within ``z`` of the interval's standard errors of its centre (its half-width over the normal's
     quantile at its ``prob``; 3: 99.7 %). These records are cross-well chaos, so each machine writes another motion
-    (the multisine's cosines differ in their last bits between CPUs, and chaos makes that the whole motion within
+    (the multisine's cosines differ in their last bits between machines, and chaos makes that the whole motion within
     seconds): a 90 % interval misses its truth on one such record in ten, and a test holding three of them would fail
     on about a quarter of machines (it did on one: the stop's k 3006.6 N/m, 1.8 standard errors above 3000). An
     interval half as wide as it should be still fails here (a truth 1.8 true standard errors off is 3.6 of its own).
