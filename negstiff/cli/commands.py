@@ -284,9 +284,11 @@ def _identify_structure(args, est, rec, frfs) -> int:
     say_refinement(args, result.get("refinement"))
     warn(args, result["warnings"])
     write_json(args.out, result)
-    rms = result["validation"]["rms_percent"]
+    v = result["validation"]
     said = est.result_.summary() if result.get("linear_part") == "state_space" else modes_summary(est.modal_)
-    say(args, f"wrote {args.out} ({said}; validation {rms:.1f} % rms)")
+    best = v.get("best_linear_rms_percent")  # a state-space model's: the best linear model of its order, judged alike
+    against = "" if best is None else f", the best linear model of its order {best:.1f} %"
+    say(args, f"wrote {args.out} ({said}; validation {v['rms_percent']:.1f} % rms{against})")
     return 0
 
 

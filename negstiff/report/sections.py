@@ -262,8 +262,11 @@ def structure_section(est, label: str = "") -> Section:
         coefs = [[c, e.get("value"), e.get("se")] for c, e in j["element"].items() if isinstance(e, dict)]
         sec.table(["coefficient", "value", "standard error"], coefs)
         held = v.get("rms_percent")
+        best = v.get("best_linear_rms_percent")
         sec.text(f"Held-out windows: the model misses them by {fmt(held, 3)} % of their rms, its linear part "
-                 f"alone by {fmt(v.get('linear_rms_percent'), 3)} %.")  # fmt: skip
+                 f"alone by {fmt(v.get('linear_rms_percent'), 3)} %"
+                 + ("." if best is None else f", the best linear model of its order (the force its only input, "
+                    f"the element's equivalent stiffness and damping taken in) by {fmt(best, 3)} %."))  # fmt: skip
         coefficients = {c: e["value"] for c, e in j["element"].items() if isinstance(e, dict) and "value" in e}
         top = max((c for c in coefficients if c[:1] == "k" and c[1:].isdigit()), key=lambda c: int(c[1:]), default=None)
         said = "" if top is None else f"{top} = {fmt(coefficients[top])} +- {fmt(j['element'][top].get('se'), 2)}"

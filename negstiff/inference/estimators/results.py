@@ -292,7 +292,10 @@ class StateSpaceIdentification:
         return f"{m.n_sensors} sensors, order {m.order}, element {top}={k3['value']:.4g} +- {k3['se']:.2g}; {modes}"
 
     def __repr__(self) -> str:
-        return f"StateSpaceIdentification({self.summary()}; held-out {self.validation['rms_percent']:.3g} %)"
+        v = self.validation
+        best = v.get("best_linear_rms_percent")
+        against = "" if best is None else f", the best linear model of its order {best:.3g} %"
+        return f"StateSpaceIdentification({self.summary()}; held-out {v['rms_percent']:.3g} %{against})"
 
 
 @dataclass(frozen=True, repr=False)

@@ -20,7 +20,9 @@ FRF alike). |Im/Re| of the ratio is the quality index; the standard errors are b
 
 The model is judged on the held-out tail: windows restarted every ``window_s`` from the state the model's own
 least squares reads off the measured stretch before each (``StateSpaceStructure.initial_state``), run free under
-the measured force, beside the underlying-linear part alone under the same protocol.
+the measured force, beside the underlying-linear part alone and the best linear model of the same order (the
+force its only input, fitted by the same subspace step on the same channels: it takes in the element's equivalent
+stiffness and damping, so it is the linear model a lab would fit instead) under the same protocol.
 """
 
 from __future__ import annotations
@@ -327,35 +329,52 @@ def _coefficients(model: StateSpaceStructure, p: int, band: tuple[float, float])
     return mu.real, np.abs(mu.imag) / np.maximum(np.abs(mu.real), 1e-300)
 
 
+def best_linear(w: np.ndarray, y: np.ndarray, dt: float, order: int, block_rows: int, like: StateSpaceStructure
+                ) -> StateSpaceStructure:  # fmt: skip
+    """The best linear model of ``order`` on the identification's channels (``_channels``' w and y): the same
+    subspace step with the force (w's first column) its only input. As a ``StateSpaceStructure`` like ``like`` whose
+    element's input columns are zero, so it runs and reads its start states as any (``element`` makes no difference).
+    """
+    A, B, C, wm, ym = _fit(w[:, :1], y, dt, order, block_rows)
+    nb = w.shape[1] - 1
+    return dataclasses.replace(like, A=A, B=np.hstack([B, np.zeros((order, nb))]), C=C,
+                               input_mean=np.concatenate([wm, np.zeros(nb)]), output_mean=ym)  # fmt: skip
+
+
 def _held_out(model: StateSpaceStructure, rec: Measurement, start: int, window_s: float, cut_hz: float,
-              r: np.ndarray | None = None) -> dict[str, Any]:  # fmt: skip
-    """The held-out windows (module docstring): the model's and its linear part's error, % of the sensors' rms."""
+              r: np.ndarray | None = None, linear: StateSpaceStructure | None = None) -> dict[str, Any]:  # fmt: skip
+    """The held-out windows (module docstring): the model's error, its linear part's and the best linear model's
+    (``linear``, ``best_linear``; None: not judged), % of the sensors' rms, each window's start state read by the
+    model run in it from the stretch before.
+    """
     r, vr = element_motion(rec, model.at, cut_hz, r)
     n_win = max(int(round(window_s * rec.fs)), 4 * model.order)
     y = rec.channels
     out: dict[str, Any] = {"window_s": n_win / rec.fs, "starts_s": []}
-    errs: dict[bool, list[float]] = {True: [], False: []}
+    runs = {"": (model, True), "linear_": (model, False)}
+    if linear is not None:
+        runs["best_linear_"] = (linear, False)
+    errs: dict[str, list[float]] = {key: [] for key in runs}
     scale = []
-    diverged = {True: 0, False: 0}
+    diverged = dict.fromkeys(runs, 0)
     for s0 in range(max(start, n_win), rec.n - n_win + 1, n_win):
         out["starts_s"].append(s0 / rec.fs)
         seg = y[:, s0 : s0 + n_win]
         scale.append(((seg - seg.mean(axis=1, keepdims=True)) ** 2).sum())
-        for element in (True, False):
-            lead = slice(s0 - n_win, s0)
-            x0 = model.initial_state(rec.u[lead], y[:, lead], r[lead], vr[lead], element)
-            run, gone = model.run(rec.u[s0 : s0 + n_win], x0, element)
-            diverged[element] += gone
-            errs[element].append(np.inf if gone else float(((run - seg) ** 2).sum()))
+        lead = slice(s0 - n_win, s0)
+        for key, (m, element) in runs.items():
+            x0 = m.initial_state(rec.u[lead], y[:, lead], r[lead], vr[lead], element)
+            run, gone = m.run(rec.u[s0 : s0 + n_win], x0, element)
+            diverged[key] += gone
+            errs[key].append(np.inf if gone else float(((run - seg) ** 2).sum()))
     if not scale:
         raise StateSpaceIdentificationError(f"{rec.source}: the held-out tail is shorter than one window")
     total = float(np.sum(scale))
-    for element, key in ((True, "rms_percent"), (False, "linear_rms_percent")):
-        e = np.asarray(errs[element])
-        out[key] = float(100 * math.sqrt(e.sum() / total)) if np.all(np.isfinite(e)) else math.inf
-        out[key.replace("rms", "median_window")] = float(np.median(100 * np.sqrt(e / np.asarray(scale))))
-    out["diverged_windows"] = diverged[True]
-    out["linear_diverged_windows"] = diverged[False]
+    for key in runs:
+        e = np.asarray(errs[key])
+        out[f"{key}rms_percent"] = float(100 * math.sqrt(e.sum() / total)) if np.all(np.isfinite(e)) else math.inf
+        out[f"{key}median_window_percent"] = float(np.median(100 * np.sqrt(e / np.asarray(scale))))
+        out[f"{key}diverged_windows"] = diverged[key]
     out["windows"] = len(scale)
     return out
 
@@ -473,7 +492,12 @@ def identify_state_space(est, rec: Measurement, at: tuple[int, int]) -> StateSpa
     element["units"] = dict(named)
     element["laws"] = {"restoring": basis.restoring.name, "damping": basis.damping.name}
     window_s = max(0.25, 4.0 / modes[0].f_hz)
-    validation = _held_out(model, rec, n_id, window_s, cut, r_el)
+    try:
+        linear = best_linear(w, y, rec.dt, order, est.block_rows, model)
+    except (ValueError, np.linalg.LinAlgError):
+        linear = None  # no linear model of this order on these channels: the tail judges the model and its part
+    validation = _held_out(model, rec, n_id, window_s, cut, r_el, linear)
+    validation["best_linear_order"] = order if linear is not None else None
     validation["tail_unseen_band_share"] = unseen = unseen_share(ident.u, rec.u[n_id:], rec.fs)
     freqs = np.linspace(band[0], band[1], 256)
     H = model.frf(freqs)
@@ -507,6 +531,11 @@ def identify_state_space(est, rec: Measurement, at: tuple[int, int]) -> StateSpa
         lines.append(f"{rec.source}: the element's terms do not improve the held-out prediction "
                      f"({validation['rms_percent']:.3g} % against the linear part's "
                      f"{validation['linear_rms_percent']:.3g} %)")  # fmt: skip
+    elif linear is not None and not validation["rms_percent"] < validation["best_linear_rms_percent"]:
+        lines.append(f"{rec.source}: the model predicts the held-out tail no better than the best linear model of "
+                     f"its order ({validation['rms_percent']:.3g} % against {validation['best_linear_rms_percent']:.3g}"
+                     " %): the element's law is not what the record shows beyond its equivalent linear stiffness "
+                     "and damping")  # fmt: skip
     issue([(_Warning, x) for x in lines])
     return StateSpaceIdentification(
         method="nsi", model=model, modal={"linear": modes}, element=element, validation=Bunch(validation),
