@@ -110,6 +110,46 @@ def read(path: Path) -> tuple[dict[str, np.ndarray], dict[str, str]]:
     try:
         data = np.loadtxt(body, delimiter=sep, usecols=use, ndmin=2, dtype=float)
     except ValueError:
+        header_values = _first_row_only(body, sep, use)
+        # a value written on the first data row only (the F-16 benchmark's "Fs" column, 400 on its first row and
+        # empty below): metadata, as a '# key: value' line is (an "fs" column the sampling rate); every other
+        # column must be numeric on every row (an empty cell in a signal is a lost sample: refused, named)
+        for j, value in header_values.items():
+            key = "fs" if names[j].lower() == "fs" else names[j]
+            if meta.get(key, value) != value:
+                raise MeasurementError(f"{path}: {key} is {meta[key]} in the header's lines and {value} in column "
+                                       f"{names[j]!r}'s first row: which is it?") from None  # fmt: skip
+            meta[key] = value
+        use = [j for j in use if j not in header_values]
+        data = _numeric(path, body, sep, use, header_line)
+    cols = {names[j]: data[:, k] for k, j in enumerate(use)}
+    if "t" in names:  # the printed precision of each time value (lab exports round time)
+        j = names.index("t")
+        tokens = [line.partition(sep)[0] for line in body] if j == 0 and sep else [line.split(sep)[j] for line in body]
+        cols[RESOLUTION] = printed_resolution(tokens, cols["t"])
+    return cols, meta
+
+
+def _first_row_only(body: list[str], sep: str | None, use: list[int]) -> dict[int, str]:
+    """The columns of ``use`` holding a value on the first data row and nothing on any other: {column: its value}."""
+    if len(body) < 2:
+        return {}
+    rows = [line.split(sep) for line in body]
+    first = rows[0]
+    return {
+        j: first[j].strip().strip('"')
+        for j in use
+        if j < len(first) and first[j].strip().strip('"') and all(j >= len(r) or not r[j].strip() for r in rows[1:])
+    }
+
+
+def _numeric(path: Path, body: list[str], sep: str | None, use: list[int], header_line: int) -> np.ndarray:
+    """The ``use`` columns of the data rows as floats, or one ``MeasurementError`` naming the first row that is not
+    numeric in every one of them.
+    """
+    try:
+        return np.loadtxt(body, delimiter=sep, usecols=use, ndmin=2, dtype=float)
+    except ValueError:
         for r, line in enumerate(body):
             parts = line.split(sep)
             try:
@@ -119,12 +159,6 @@ def read(path: Path) -> tuple[dict[str, np.ndarray], dict[str, str]]:
                     f"{path}: row {r + 1} (line {header_line + r + 1}) is not numeric in every column: {line[:60]!r}"
                 ) from None
         raise MeasurementError(f"{path}: rows are not all numeric") from None
-    cols = {names[j]: data[:, k] for k, j in enumerate(use)}
-    if "t" in names:  # the printed precision of each time value (lab exports round time)
-        j = names.index("t")
-        tokens = [line.partition(sep)[0] for line in body] if j == 0 and sep else [line.split(sep)[j] for line in body]
-        cols[RESOLUTION] = printed_resolution(tokens, cols["t"])
-    return cols, meta
 
 
 def _check_no_line_skipped(path: Path, body: list[str], header_line: int) -> None:

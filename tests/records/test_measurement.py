@@ -58,6 +58,9 @@ def test_silverbox_loads_with_a_column_map(fmt, tmp_path):
         ("t,base_acc,z\n0,1,1\n0.1,1,1\n0.25,1,1\n0.3,1,1\n", {}, "not uniformly sampled at row 3"),
         ("base_acc,z\n1,1\n2,2\n", {}, "no time base"),
         ("t,base_acc,z\n0,1,1\n0.1,x,1\n", {}, "row 2 .* is not numeric"),
+        # a signal's empty cell below its first row is a lost sample, not a header value (those are first-row only)
+        ("t,base_acc,z\n0,1,1\n0.1,,1\n0.2,1,1\n", {}, "row 2 .* is not numeric"),
+        ("# fs: 10\nbase_acc,z,Fs\n1,1,20\n2,2,\n", {}, "fs is 10 in the header's lines and 20 in column 'Fs'"),
         ("a,b\n1,2\n", {"columns": "force=a,z=c", "fs": 10.0}, "refers to 'c'"),
         ("a,b\n1,2\n", {"columns": "forse=a,z=b", "fs": 10.0}, "not a measurement column"),
         ("t,base_acc,z\n", {}, "no data rows"),
@@ -69,6 +72,20 @@ def test_bad_files_give_one_clear_line(tmp_path, text, kwargs, message):
         load(p, **kwargs)
     assert str(p) in str(exc.value) or "column map" in str(exc.value)
     assert "\n" not in str(exc.value)
+
+
+def test_a_benchmarks_csv_with_its_rate_on_the_first_row_is_read_as_written(tmp_path):
+    # the F-16 ground vibration test benchmark's CSV layout (nonlinearbenchmark.org, Noel & Schoukens 2017): quoted
+    # names, a trailing separator on every line, and its rate in a column "Fs" written on the first data row only
+    # (empty below). The rate is read from it as a '# fs:' line would be; "Fs" is not a channel; every sample kept
+    rng = np.random.default_rng(0)
+    force, z = rng.standard_normal((2, 64))
+    rows = [f"{f:.8g},{x:.8g},{'400' if k == 0 else ''}," for k, (f, x) in enumerate(zip(force, z, strict=True))]
+    path = _write(tmp_path, '"Force","Displacement","Fs",\n' + "\n".join(rows) + "\n")
+    rec = load(path, columns="force=Force,z=Displacement")
+    assert rec.fs == 400.0 and rec.n == 64 and rec.input_name == "force"
+    assert np.array_equal(rec.u, np.array([float(f"{f:.8g}") for f in force]))
+    assert np.array_equal(rec.z, np.array([float(f"{x:.8g}") for x in z]))
 
 
 def test_unreadable_files(tmp_path):

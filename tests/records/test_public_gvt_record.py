@@ -1,0 +1,63 @@
+"""A real aircraft ground vibration test, run on request: the F-16 benchmark (J. P. Noel and M. Schoukens, "F-16
+aircraft benchmark based on ground vibration test data", 2017 Workshop on Nonlinear System Identification
+Benchmarks; https://www.nonlinearbenchmark.org, data at https://data.4tu.nl/articles/_/12954911). A shaker's force
+under the right wing, accelerometers at the shaker (1), on the wing beside the wing-to-payload joint (2) and on the
+payload beside it (3), 400 Hz; the joint's clearance and friction are the nonlinearity. The file is not in this
+repository (its terms are the benchmark's): point ``NEGSTIFF_F16`` at ``F16Data_FullMSine_Level1.csv`` (the full
+multisine, 2-15 Hz, 12.4 N rms, 9 periods of 8192 samples) as published, then ``python -m pytest -m slow
+tests/records/test_public_gvt_record.py``.
+"""
+
+import os
+import warnings
+
+import pytest
+
+from negstiff import NSI, load
+from negstiff.inference.analysis.frf import frf
+
+PATH = os.environ.get("NEGSTIFF_F16")
+pytestmark = [
+    pytest.mark.slow,
+    pytest.mark.skipif(not PATH, reason="NEGSTIFF_F16 (the F-16 benchmark's full multisine CSV) not set"),
+]
+COLUMNS = "force=Force,y1_acc=Acceleration1,y2_acc=Acceleration2,y3_acc=Acceleration3"
+
+
+@pytest.fixture(scope="module")
+def record():
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return load(PATH, columns=COLUMNS)  # the rate from the file's own "Fs" column (first row only)
+
+
+def test_the_file_is_read_as_published_and_every_accelerometer_alike(record):
+    # 400 Hz from its "Fs" column; the three accelerometers' double integrals each read as a structure's (above
+    # 1 Hz): the wing's had been read as a cross-well device's, its wander's histogram having two modes (the slow
+    # parts' dips 0.91 and 0.76, against 0.29 for a cross-well harvester's)
+    assert record.fs == 400.0 and record.input_name == "force" and record.n_dof == 3
+    for c in record.info["response"]["channels"]:
+        assert c["derived"].endswith("above 1 Hz"), c
+
+
+def test_the_frf_finds_the_modes_in_the_band(record):
+    # the driving point's and the joint's FRFs: six peaks between 3 and 10 Hz (measured 3.47, 3.97, 5.19, 6.60,
+    # 7.32 and 9.17 Hz, damped 0.6-1.7 %)
+    peaks = sorted(m["f_hz"] for m in frf(record).get("modes", []))
+    assert len([f for f in peaks if 3.0 < f < 10.0]) >= 6, peaks
+
+
+@pytest.mark.xfail(
+    strict=True,
+    reason="open: NSI's state-space step refuses this record ('no state-space model from order 16 up: the identified "
+    "discrete-time system is unstable'): its stabilisation diagram holds 2 of the FRF's 6 modes (3.46, 7.23 Hz), and "
+    "every order from 18 to 40 has a pole outside the unit circle, most below 2.5 Hz where the force has no power "
+    "(the integrals' slow error; order 16's least squares did not converge); every channel high-passed at 1-1.5 Hz "
+    "(3 modes), or decimated to 200 or 100 Hz (none, 2), it still refuses (measured 2026-11-30). Next: the "
+    "accelerations as the outputs (a feedthrough term), not their integrals",
+)
+def test_nsi_reads_the_joint_between_the_wing_and_the_payload(record):
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        r = NSI(element="2-3").fit(record).result_
+    assert r.validation["rms_percent"] < r.validation["best_linear_rms_percent"]
