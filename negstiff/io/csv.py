@@ -14,7 +14,7 @@ import numpy as np
 from negstiff.errors import MeasurementError
 
 from .base import RESOLUTION, check_memory
-from .schema import UNIT_IN_NAME
+from .schema import CHANNEL_SENSOR, KNOWN, UNIT_IN_NAME
 
 SUFFIXES = (".csv", ".txt")
 
@@ -110,16 +110,14 @@ def read(path: Path) -> tuple[dict[str, np.ndarray], dict[str, str]]:
     try:
         data = np.loadtxt(body, delimiter=sep, usecols=use, ndmin=2, dtype=float)
     except ValueError:
-        header_values = _first_row_only(body, sep, use)
         # a value written on the first data row only (the F-16 benchmark's "Fs" column, 400 on its first row and
-        # empty below): metadata, as a '# key: value' line is (an "fs" column the sampling rate); every other
-        # column must be numeric on every row (an empty cell in a signal is a lost sample: refused, named)
+        # empty below): metadata, as a '# key: value' line is (an "fs" column the sampling rate); a contract column
+        # (t, z, force, ... ) never is, and every other column must be numeric on every row (an empty cell in a
+        # signal is a lost sample: refused, named)
+        signals = {j for j in use if names[j] in KNOWN or CHANNEL_SENSOR.match(names[j])}
+        header_values = {j: v for j, v in _first_row_only(body, sep, use).items() if j not in signals}
         for j, value in header_values.items():
-            key = "fs" if names[j].lower() == "fs" else names[j]
-            if meta.get(key, value) != value:
-                raise MeasurementError(f"{path}: {key} is {meta[key]} in the header's lines and {value} in column "
-                                       f"{names[j]!r}'s first row: which is it?") from None  # fmt: skip
-            meta[key] = value
+            _header_value(path, meta, names[j], value)
         use = [j for j in use if j not in header_values]
         data = _numeric(path, body, sep, use, header_line)
     cols = {names[j]: data[:, k] for k, j in enumerate(use)}
@@ -131,16 +129,39 @@ def read(path: Path) -> tuple[dict[str, np.ndarray], dict[str, str]]:
 
 
 def _first_row_only(body: list[str], sep: str | None, use: list[int]) -> dict[int, str]:
-    """The columns of ``use`` holding a value on the first data row and nothing on any other: {column: its value}."""
+    """The columns of ``use`` holding a value on the first data row and nothing on any other (an empty quoted
+    cell counts as nothing): {column: its value}.
+    """
     if len(body) < 2:
         return {}
-    rows = [line.split(sep) for line in body]
+    rows = [[c.strip().strip('"').strip() for c in line.split(sep)] for line in body]
     first = rows[0]
-    return {
-        j: first[j].strip().strip('"')
-        for j in use
-        if j < len(first) and first[j].strip().strip('"') and all(j >= len(r) or not r[j].strip() for r in rows[1:])
-    }
+    return {j: first[j] for j in use if j < len(first) and first[j] and all(j >= len(r) or not r[j] for r in rows[1:])}
+
+
+def _header_value(path: Path, meta: dict[str, str], name: str, value: str) -> None:
+    """A column's first-row value into ``meta`` under its name (a rate column, any case of "fs", as "fs", in Hz:
+    another unit in its header is refused); one ``MeasurementError`` where the header's lines say otherwise.
+    """
+    key = "fs" if name.lower() == "fs" else name
+    unit = meta.get(f"unit:{name}")
+    if key == "fs" and unit is not None and unit.lower() != "hz":
+        raise MeasurementError(f"{path}: column {name!r} states the rate in {unit!r}: give it in Hz (or --fs)")
+    said = next((meta[k] for k in meta if k.lower() == key.lower()), None)
+    if said is not None and not _same_number(said, value):
+        raise MeasurementError(
+            f"{path}: {key} is {said} in the header's '# {key}:' line and {value} in column {name!r}'s first row: "
+            "which is it?"
+        )
+    meta[key] = value
+
+
+def _same_number(a: str, b: str) -> bool:
+    """Whether two metadata values are the same: as numbers where both read as numbers, else as text."""
+    try:
+        return float(a) == float(b)
+    except ValueError:
+        return a.strip() == b.strip()
 
 
 def _numeric(path: Path, body: list[str], sep: str | None, use: list[int], header_line: int) -> np.ndarray:

@@ -60,7 +60,9 @@ def test_silverbox_loads_with_a_column_map(fmt, tmp_path):
         ("t,base_acc,z\n0,1,1\n0.1,x,1\n", {}, "row 2 .* is not numeric"),
         # a signal's empty cell below its first row is a lost sample, not a header value (those are first-row only)
         ("t,base_acc,z\n0,1,1\n0.1,,1\n0.2,1,1\n", {}, "row 2 .* is not numeric"),
-        ("# fs: 10\nbase_acc,z,Fs\n1,1,20\n2,2,\n", {}, "fs is 10 in the header's lines and 20 in column 'Fs'"),
+        ("# fs: 10\nbase_acc,z,Fs\n1,1,20\n2,2,\n", {}, "fs is 10 in the header's '# fs:' line and 20 in column"),
+        ("base_acc,z,Fs [kHz]\n1,1,0.4\n2,2,\n", {}, "column 'Fs' states the rate in 'kHz'"),
+        ("t,base_acc,z\n0,1,1\n,1,1\n", {}, "row 2 .* is not numeric"),  # a contract column is never a header value
         ("a,b\n1,2\n", {"columns": "force=a,z=c", "fs": 10.0}, "refers to 'c'"),
         ("a,b\n1,2\n", {"columns": "forse=a,z=b", "fs": 10.0}, "not a measurement column"),
         ("t,base_acc,z\n", {}, "no data rows"),
@@ -86,6 +88,10 @@ def test_a_benchmarks_csv_with_its_rate_on_the_first_row_is_read_as_written(tmp_
     assert rec.fs == 400.0 and rec.n == 64 and rec.input_name == "force"
     assert np.array_equal(rec.u, np.array([float(f"{f:.8g}") for f in force]))
     assert np.array_equal(rec.z, np.array([float(f"{x:.8g}") for x in z]))
+    # the same rate said twice, as an integer and as a decimal, is one rate
+    text = "# fs: 400\n" + '"Force","Displacement","Fs",\n' + "\n".join(rows).replace(",400,", ",400.0,") + "\n"
+    both = _write(tmp_path, text, name="both.csv")
+    assert load(both, columns="force=Force,z=Displacement").fs == 400.0
 
 
 def test_unreadable_files(tmp_path):
