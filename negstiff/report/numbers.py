@@ -14,6 +14,8 @@ def fmt(x: Any, digits: int = 4) -> str:
         return "-"
     if isinstance(x, bool):
         return str(x)
+    if isinstance(x, int):  # a count is exact: every digit (a record's 40000 samples had read "4e+04")
+        return str(x)
     if isinstance(x, (int, float)):
         if not math.isfinite(x):
             return str(x)

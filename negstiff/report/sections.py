@@ -259,7 +259,7 @@ def structure_section(est, label: str = "") -> Section:
                  "diagram's), every mode in the force's band; the element's coefficients through the measured "
                  "driving point (reciprocity), each with its standard error.")  # fmt: skip
         sec.table(["", "mode", "f [Hz]", "zeta [%]", "shape (by sensor)"], rows)
-        coefs = [[c, e.get("value"), e.get("se")] for c, e in j["element"].items() if isinstance(e, dict)]
+        coefs = [[c, e["value"], e.get("se")] for c, e in j["element"].items() if isinstance(e, dict) and "value" in e]
         sec.table(["coefficient", "value", "standard error"], coefs)
         held = v.get("rms_percent")
         best = v.get("best_linear_rms_percent")
@@ -267,6 +267,9 @@ def structure_section(est, label: str = "") -> Section:
                  f"alone by {fmt(v.get('linear_rms_percent'), 3)} %"
                  + ("." if best is None else f", the best linear model of its order (the force its only input, "
                     f"the element's equivalent stiffness and damping taken in) by {fmt(best, 3)} %."))  # fmt: skip
+        sec.heldout[col] = held
+        if best is not None:  # after the model in the report's held-out table: the baseline it must beat
+            sec.heldout[f"the best linear model of {col}'s order"] = best
         coefficients = {c: e["value"] for c, e in j["element"].items() if isinstance(e, dict) and "value" in e}
         top = max((c for c in coefficients if c[:1] == "k" and c[1:].isdigit()), key=lambda c: int(c[1:]), default=None)
         said = "" if top is None else f"{top} = {fmt(coefficients[top])} +- {fmt(j['element'][top].get('se'), 2)}"

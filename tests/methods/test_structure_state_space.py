@@ -303,6 +303,25 @@ def test_the_command_line_writes_the_librarys_numbers(record, tmp_path, capsys):
     assert f"the best linear model of its order {best:.1f} %" in said, said
 
 
+def test_the_report_sets_the_model_beside_the_best_linear_model_of_its_order(record, tmp_path):
+    # the report of a structure read without masses: its held-out table holds the model and the best linear model of
+    # its order (the baseline the element's terms must beat), the library's numbers; its coefficient table holds the
+    # element's coefficients only (not the units' and laws' entries of the result)
+    rec, _ = record
+    path = write_csv(tmp_path / "gvt.csv", {"t": np.arange(rec.n) / FS, "force": rec.u,
+                                            **{f"z{k + 1}": rec.channels[k] for k in range(3)}},
+                     {"force_dof": 1, "element": "2-3"})  # fmt: skip
+    assert main(["report", str(path), "--only", "nsi", "-o", str(tmp_path / "rep"), "--quiet"]) == 0
+    text = (tmp_path / "rep" / "index.md").read_text()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        v = NSI(element="2-3").fit(load(path)).result_.validation
+    held = text[text.index("## 1. Held-out prediction") :].split("\n## ")[0]
+    assert f"| NSI | {v['rms_percent']:.3g} |" in held, held
+    assert f"| the best linear model of NSI's order | {v['best_linear_rms_percent']:.3g} |" in held, held
+    assert "| units |" not in text and "| laws |" not in text
+
+
 def test_a_sweeps_tail_outside_the_identified_band_is_said_not_to_measure_the_model():
     # a 60 -> 3 Hz linear sweep over 40 s: its last 20 % drives the chain below 14 Hz, where the identification part
     # had no force, and its lowest mode (7.65 Hz) is only there. The held-out error then measures the missing mode,
