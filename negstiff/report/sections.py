@@ -261,6 +261,7 @@ def structure_section(est, label: str = "") -> Section:
         sec.table(["", "mode", "f [Hz]", "zeta [%]", "shape (by sensor)"], rows)
         coefs = [[c, e["value"], e.get("se")] for c, e in j["element"].items() if isinstance(e, dict) and "value" in e]
         sec.table(["coefficient", "value", "standard error"], coefs)
+        coefficients = {c: value for c, value, _ in coefs}
         held = v.get("rms_percent")
         best = v.get("best_linear_rms_percent")
         sec.text(f"Held-out windows: the model misses them by {fmt(held, 3)} % of their rms, its linear part "
@@ -270,7 +271,6 @@ def structure_section(est, label: str = "") -> Section:
         sec.heldout[col] = held
         if best is not None:  # after the model in the report's held-out table: the baseline it must beat
             sec.heldout[f"the best linear model of {col}'s order"] = best
-        coefficients = {c: e["value"] for c, e in j["element"].items() if isinstance(e, dict) and "value" in e}
         top = max((c for c in coefficients if c[:1] == "k" and c[1:].isdigit()), key=lambda c: int(c[1:]), default=None)
         said = "" if top is None else f"{top} = {fmt(coefficients[top])} +- {fmt(j['element'][top].get('se'), 2)}"
     else:

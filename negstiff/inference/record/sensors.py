@@ -232,8 +232,8 @@ def _modes(y: np.ndarray) -> int:
 
 
 STAYS_OVER_ERROR = 5.0
-"""A double integral's two-mode histogram is read as stays in two wells only when its slow part (``slow_rms``) is
-this many times what the acceleration's noise alone leaves in it (``_double_integral_error`` above the drift's
+"""A double integral's two-mode histogram is read as stays in two wells only when its well level's rms (``well_level``)
+is this many times what the acceleration's noise alone leaves in it (``_double_integral_error`` above the drift's
 corner): a cross-well device on the bench record 16.5; a stiffening structure's quiet accelerometers (0.01 % noise)
 0.9-2.2, whose histogram after the drift's separation had two modes by the integral's leftover wander, and read as
 cross-well their z erred by 0.1-0.25 mm."""
@@ -250,11 +250,6 @@ def well_level(z: np.ndarray, fs: float, dominant_hz: float) -> np.ndarray:
     return signal.sosfiltfilt(signal.butter(2, cut, fs=fs, output="sos"), z - np.mean(z))
 
 
-def slow_rms(z: np.ndarray, fs: float, dominant_hz: float) -> float:
-    """The rms of ``z``'s well level (``well_level``)."""
-    return float(np.std(well_level(z, fs, dominant_hz)))
-
-
 CROSSING_OSCILLATION = 1.0 / 3.0
 """Stays in two wells: the oscillation about the well (``z`` less its ``well_level``) has an rms at least this share of
 the well level's. To leave a well a motion oscillates up to the barrier, about half the wells' separation away, which
@@ -265,11 +260,10 @@ their low-frequency error's wander, five times the structure's motion in the for
 two modes, and was read as a cross-well device's)."""
 
 
-def oscillation_share(z: np.ndarray, fs: float, dominant_hz: float) -> float:
-    """The rms of ``z``'s oscillation about its well level over the well level's rms (``CROSSING_OSCILLATION``;
-    inf where the well level is zero).
+def oscillation_share(z: np.ndarray, level: np.ndarray) -> float:
+    """The rms of ``z``'s oscillation about its well level (``well_level``) over the well level's rms
+    (``CROSSING_OSCILLATION``; inf where the well level is zero).
     """
-    level = well_level(z, fs, dominant_hz)
     spread = float(np.std(level))
     return float(np.std(z - np.mean(z) - level)) / spread if spread > 0 else math.inf
 
@@ -638,9 +632,10 @@ def derive(
         # double integral's drift separated from the stays in either well as a vibrometer's is
         zc, vinfo = velocity_to_z(integrate_exact(a - a.mean(), fs), fs, f"{whole} (twice)", units_known, always=True)
         drift = vinfo.get("drift") or {}
-        two = drift.get("modes_after") == 2 and slow_rms(zc, fs, drift["dominant_hz"]) >= STAYS_OVER_ERROR * (
+        level = well_level(zc, fs, drift["dominant_hz"]) if drift.get("modes_after") == 2 else None
+        two = level is not None and float(np.std(level)) >= STAYS_OVER_ERROR * (
             _double_integral_error(sigma_a, drift["cutoff_hz"], fs))  # fmt: skip
-        share = oscillation_share(zc, fs, drift["dominant_hz"]) if two else math.nan
+        share = oscillation_share(zc, level) if two and level is not None else math.nan
         stays = two and share >= CROSSING_OSCILLATION
         if two and not stays:  # two modes, but an oscillation too small to cross a barrier: the integral's wander
             wander = (f"{whole}'s double integral has two modes in its histogram, but its oscillation about them is "
