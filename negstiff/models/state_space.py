@@ -11,6 +11,12 @@ each less the mean it had in the identification
 model is the identified discrete-time one, in the record's own sampling, so a free run replays exactly what was
 fitted; its continuous-time state matrix gives the modes and r' (r' = l.C A_c x: a displacement output has no
 feedthrough of a force, C B = 0).
+
+Where the sensors are accelerometers the outputs are their accelerations, y_k = C x_k + D w_k + y_mean (an
+acceleration answers a force at once: the feedthrough D): what they measured, not its double integral, whose slow
+error no model of the structure holds. The displacement and the velocity are then read from the same state,
+C A_c^-2 x and C A_c^-1 x (a structure's accelerance is s^2 times its compliance), r's constant being r* (no
+acceleration holds it).
 """
 
 from __future__ import annotations
@@ -71,6 +77,11 @@ class StateSpaceStructure:
         The inputs' and the sensors' means in the identification.
     restoring, damping : str
         The element's laws (``models.laws``), whose basis the inputs hold.
+    output : {"displacement", "acceleration"}
+        What the outputs are: the sensors' displacements [m] or their accelerations [m/s^2] (accelerometers').
+    D : ndarray or None
+        The feedthrough (sensors, inputs) of acceleration outputs: ``y[k] = C x[k] + D w[k] + output_mean``; None
+        for displacements (no feedthrough).
 
     Examples
     --------
@@ -100,6 +111,8 @@ class StateSpaceStructure:
     output_mean: np.ndarray
     restoring: str = laws.DEFAULT_RESTORING
     damping: str = laws.DEFAULT_DAMPING
+    output: str = "displacement"
+    D: np.ndarray | None = None
 
     @property
     def basis(self) -> laws.FeedbackBasis:
@@ -120,24 +133,39 @@ class StateSpaceStructure:
         """A_c = logm(A) / dt."""
         return linalg.logm(self.A).real / self.dt
 
+    def motion_rows(self) -> tuple[np.ndarray, np.ndarray]:
+        """The rows reading the sensors' displacements and velocities from the state, (sensors, states) each:
+        C and C A_c for displacement outputs, C A_c^-2 and C A_c^-1 for accelerations (module docstring).
+        """
+        Ac = self.continuous_state_matrix()
+        if self.output == "acceleration":
+            return self.C @ np.linalg.inv(Ac @ Ac), self.C @ np.linalg.inv(Ac)
+        return self.C, self.C @ Ac
+
     def modes(self) -> list[Mode]:
         """The underlying-linear modes (every underdamped pole pair), their shapes over the sensors."""
-        return modes_of_state_matrix(self.continuous_state_matrix(), self.C)
+        return modes_of_state_matrix(self.continuous_state_matrix(), self.motion_rows()[0])
+
+    def _feedthrough(self) -> np.ndarray:
+        return np.zeros((self.n_sensors, self.B.shape[1])) if self.D is None else self.D
 
     def extended_frf(self, freqs_hz: np.ndarray) -> np.ndarray:
         """The identified discrete-time model's FRF from every input (the force, then the element's feedback
-        inputs) to each sensor, (F, sensors, inputs): its level is right below Nyquist for a band-limited force
-        (``subspace``).
+        inputs) to each sensor's output (``output``), (F, sensors, inputs): its level is right below Nyquist for a
+        band-limited force (``subspace``).
         """
         q = np.exp(2j * np.pi * np.asarray(freqs_hz, float) * self.dt)
         eye = np.eye(self.order)
-        return np.array([self.C @ np.linalg.solve(qk * eye - self.A, self.B) for qk in q])
+        D = self._feedthrough()
+        return np.array([self.C @ np.linalg.solve(qk * eye - self.A, self.B) + D for qk in q])
 
     def frf(self, freqs_hz: np.ndarray) -> np.ndarray:
         """The underlying-linear FRF [m/N] from the force to each sensor, (F, sensors) (``extended_frf``'s first
-        input).
+        input; an accelerance over -(2 pi f)^2).
         """
-        return self.extended_frf(freqs_hz)[:, :, 0]
+        freqs_hz = np.asarray(freqs_hz, float)
+        H = self.extended_frf(freqs_hz)[:, :, 0]
+        return -H / (2 * np.pi * freqs_hz[:, None]) ** 2 if self.output == "acceleration" else H
 
     def _inputs(self, basis: laws.FeedbackBasis, u: float, r: float, vr: float, element: bool) -> np.ndarray:
         w = np.concatenate([[u], feedback_inputs(basis, r, vr, self.r_ref)[0]]) - self.input_mean
@@ -155,12 +183,12 @@ class StateSpaceStructure:
         w = np.column_stack([u, feedback_inputs(self.basis, r, vr, self.r_ref)]) - self.input_mean
         if not element:
             w[:, 1:] = 0.0
-        forced = np.zeros((L, self.n_sensors))
+        forced = w @ self._feedthrough().T
         free = np.zeros((L, self.n_sensors, n))
         xf = np.zeros(n)
         P = np.eye(n)
         for k in range(L):
-            forced[k] = self.C @ xf
+            forced[k] += self.C @ xf
             free[k] = self.C @ P
             xf = self.A @ xf + self.B @ w[k]
             P = self.A @ P
@@ -169,26 +197,26 @@ class StateSpaceStructure:
         return P @ x0 + xf  # the state after the stretch: A^L x0 plus the forced part
 
     def run(self, u: np.ndarray, x0: np.ndarray, element: bool = True) -> tuple[np.ndarray, bool]:
-        """A free run from state ``x0`` under the force ``u``: the sensors' displacements (sensors, T) and
-        whether it diverged (the element's relative motion beyond 100x its reference's scale; the rest NaN).
+        """A free run from state ``x0`` under the force ``u``: the sensors' outputs (sensors, T) and whether it
+        diverged (the element's relative motion beyond 100x its reference's scale; the rest NaN).
         ``element=False``: the underlying-linear part alone.
         """
         basis = self.basis
         lvec = coupling(self.n_sensors, self.at)
-        lc = lvec @ self.C
-        lcv = lc @ self.continuous_state_matrix()
-        r_off = float(lvec @ self.output_mean)
+        rows, vel = self.motion_rows()
+        lc, lcv = lvec @ rows, lvec @ vel
+        r_off = self.r_ref if self.output == "acceleration" else float(lvec @ self.output_mean)
+        D = self._feedthrough()
         out = np.full((self.n_sensors, u.size), np.nan)
         x = np.asarray(x0, float).copy()
-        bound = 100.0 * max(abs(self.r_ref), float(np.max(np.abs(self.C @ x))) if x.any() else 0.0, 1e-3)
+        bound = 100.0 * max(abs(self.r_ref), float(np.max(np.abs(rows @ x))) if x.any() else 0.0, 1e-3)
         for k in range(u.size):
-            y = self.C @ x
-            out[:, k] = y + self.output_mean
             r = float(lc @ x) + r_off
             if not math.isfinite(r) or abs(r) > bound:
-                out[:, k] = np.nan
                 return out, True
-            x = self.A @ x + self.B @ self._inputs(basis, float(u[k]), r, float(lcv @ x), element)
+            w = self._inputs(basis, float(u[k]), r, float(lcv @ x), element)
+            out[:, k] = self.C @ x + D @ w + self.output_mean
+            x = self.A @ x + self.B @ w
         return out, False
 
     def to_dict(self) -> dict[str, Any]:
@@ -196,7 +224,8 @@ class StateSpaceStructure:
         return {"A": self.A.tolist(), "B": self.B.tolist(), "C": self.C.tolist(), "dt": self.dt,
                 "element_at": list(self.at), "r_ref_m": self.r_ref, "inputs": ["force", *self.basis.names()],
                 "restoring": self.restoring, "damping": self.damping,
-                "input_mean": self.input_mean.tolist(), "output_mean": self.output_mean.tolist()}  # fmt: skip
+                "input_mean": self.input_mean.tolist(), "output_mean": self.output_mean.tolist(),
+                "output": self.output, "D": None if self.D is None else self.D.tolist()}  # fmt: skip
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> StateSpaceStructure:
@@ -205,4 +234,5 @@ class StateSpaceStructure:
                    (int(d["element_at"][0]), int(d["element_at"][1])), float(d["r_ref_m"]),
                    np.asarray(d["input_mean"], float), np.asarray(d["output_mean"], float),
                    str(d.get("restoring", laws.DEFAULT_RESTORING)),
-                   str(d.get("damping", laws.DEFAULT_DAMPING)))  # fmt: skip
+                   str(d.get("damping", laws.DEFAULT_DAMPING)), str(d.get("output", "displacement")),
+                   None if d.get("D") is None else np.asarray(d["D"], float))  # fmt: skip

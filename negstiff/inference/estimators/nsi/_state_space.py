@@ -18,6 +18,14 @@ an antiresonance of the relative motion weighs nothing), in newtons per unit of 
 known: the driving point, measured, sets the scale (Noel & Kerschen 2013 extract the coefficients from the extended
 FRF alike). |Im/Re| of the ratio is the quality index; the standard errors are batch means over ``BLOCKS`` blocks.
 
+The subspace step reads the record at about ``SAMPLES_PER_CUT`` samples per cycle of the basis's band top: every
+input and output low-passed there (the basis's own filter) and decimated. A ground vibration test sampled at 400 Hz
+for modes of 3-16 Hz puts its poles in a sliver of the unit circle by 1 (the F-16 benchmark's record: every order
+from 16 to 40 had a pole outside it at 400 Hz and at 100 Hz; at 57 Hz none). Where every sensor is an
+accelerometer the outputs are the accelerations themselves with a feedthrough (``StateSpaceStructure``'s
+``output``): on their double integrals the same record's diagram held two of its six modes, on the accelerations
+all of them within 1 % of its FRF's peaks.
+
 The model is judged on the held-out tail: windows restarted every ``window_s`` from the state the model's own
 least squares reads off the measured stretch before each (``StateSpaceStructure.initial_state``), run free under
 the measured force, beside the underlying-linear part alone and the best linear model of the same order (the
@@ -83,6 +91,12 @@ SLOW_RESIDUAL_RATIO = 2.0
 against the double integral exceeds this many times the integral's own noise power (``quasi_static_motion``)."""
 SLOW_ITERATIONS = 10
 """Fixed-point iterations of ``quasi_static_motion`` (its basis functions are of the motion it corrects)."""
+SAMPLES_PER_CUT = 2.5
+"""The subspace step's record is decimated to at least this many samples per cycle of the basis's band top (its
+Nyquist 1.25 times it; ``decimation``). The F-16 benchmark's record (400 Hz, the force to 15 Hz, the band top
+22.5 Hz): decimated 7x (57 Hz) every order of its diagram from 16 up is stable and its 7 modes are read; 4x
+(100 Hz) or not at all, every order has an unstable pole. The empty band between the band top and Nyquist is what
+the subspace step cannot place poles in."""
 
 
 class StateSpaceIdentificationError(InputError):
@@ -187,6 +201,35 @@ def sensor_channels(rec: Measurement) -> dict[int, dict[str, Any]]:
     return {c["dof"]: c for c in (rec.info.get("response") or {}).get("channels") or [] if "dof" in c}
 
 
+def output_kind(rec: Measurement) -> str:
+    """The model's outputs: "acceleration" where every sensor is an accelerometer (what they measured), else
+    "displacement".
+    """
+    chans = sensor_channels(rec)
+    every = all(chans.get(k, {}).get("measured") == "y_acc" for k in range(1, rec.n_dof + 1))
+    return "acceleration" if every else "displacement"
+
+
+def decimation(fs: float, cut_hz: float) -> int:
+    """The decimation factor that leaves ``SAMPLES_PER_CUT`` samples or more per cycle of ``cut_hz`` (module
+    docstring), at least 1.
+    """
+    return max(1, int(fs // (SAMPLES_PER_CUT * cut_hz)))
+
+
+def sensor_outputs(rec: Measurement, kind: str) -> np.ndarray:
+    """The model's outputs (T, sensors): the channels, or for accelerometers their accelerations, the channels'
+    second derivative (each a double integral above its corner, this is the measured acceleration there). By
+    the five-point stencil (``scipy.signal.savgol_filter``, a quartic through five samples: error (2 pi f dt)^4 / 90,
+    5e-5 at a tenth of the rate; its ends by the same quartic): on the F-16 benchmark's record 0.15-0.25 % of the
+    low-passed rms from the file's own accelerations, all of it their content below the integral's 1 Hz corner. A
+    spectral derivative is exact inside but rings at a record's ends (there 70 times the rms).
+    """
+    if kind == "displacement":
+        return rec.channels.T
+    return signal.savgol_filter(rec.channels, 5, 4, deriv=2, delta=rec.dt, axis=1, mode="interp").T
+
+
 def accelerometer_noise(rec: Measurement, at: tuple[int, int]) -> tuple[float, float] | None:
     """When the element's motion comes from accelerometers whose double integrals were high-passed: their
     acceleration noise together (the root sum of squares) [m/s^2] and the corner [Hz] above which the integrals are
@@ -260,14 +303,40 @@ def quasi_static_motion(r: np.ndarray, u: np.ndarray, fs: float, basis: laws.Fee
     return done(whole if cross == top_hz else solve(cross)[0], cross, ratios)  # no bin passed: the whole band's
 
 
-def _channels(rec: Measurement, at: tuple[int, int], cut_hz: float, basis: laws.FeedbackBasis,
-              r_ref: float | None = None, r: np.ndarray | None = None):  # fmt: skip
-    """The extended input [f, -basis] and the sensors' outputs of ``rec``, unscaled, and r* (``r``: the element's
-    motion given, ``element_motion``).
+@dataclasses.dataclass(frozen=True)
+class Sampling:
+    """How the subspace step reads a record: its outputs (``output_kind``), the record's rate [Hz], the basis's
+    band top [Hz] and the decimation factor (``decimation``; module docstring).
     """
-    r, vr = element_motion(rec, at, cut_hz, r)
+
+    output: str
+    fs: float
+    cut_hz: float
+    q: int
+
+    @classmethod
+    def of(cls, rec: Measurement, cut_hz: float) -> Sampling:
+        return cls(output_kind(rec), rec.fs, cut_hz, decimation(rec.fs, cut_hz))
+
+    @property
+    def dt(self) -> float:
+        """The model's sampling interval [s]."""
+        return self.q / self.fs
+
+    def apply(self, x: np.ndarray) -> np.ndarray:
+        """``x`` (T, ...) low-passed at the band top and decimated (itself where the factor is 1)."""
+        return x if self.q == 1 else band_limited(x.T, self.fs, self.cut_hz).T[:: self.q]
+
+
+def _channels(rec: Measurement, at: tuple[int, int], sampling: Sampling, basis: laws.FeedbackBasis,
+              r_ref: float | None = None, r: np.ndarray | None = None):  # fmt: skip
+    """The extended input [f, -basis] and the model's outputs of ``rec``, unscaled, as ``sampling`` reads them, and
+    r* (``r``: the element's motion given, ``element_motion``).
+    """
+    r, vr = element_motion(rec, at, sampling.cut_hz, r)
     r_ref = float(np.mean(r)) if r_ref is None else r_ref
-    return np.column_stack([rec.u, feedback_inputs(basis, r, vr, r_ref)]), rec.channels.T, r_ref
+    w = np.column_stack([rec.u, feedback_inputs(basis, r, vr, r_ref)])
+    return sampling.apply(w), sampling.apply(sensor_outputs(rec, sampling.output)), r_ref
 
 
 def coefficient_names(basis: laws.FeedbackBasis) -> list[tuple[str, str]]:
@@ -301,23 +370,26 @@ def _standardised(w: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray,
     return (w - wm) / ws, (y - ym) / ys, (wm, ws, ym, ys)
 
 
-def _fit(w: np.ndarray, y: np.ndarray, dt: float, order: int, block_rows: int):
-    """The state-space fit at ``order`` on standardised channels, back in SI units: (A, B, C, means)."""
-    wn, yn, (wm, ws, ym, ys) = _standardised(w, y)
-    ss = subspace.identify(wn, yn, dt, order, block_rows)
-    assert ss.Ad is not None and ss.Bd is not None
-    return ss.Ad, ss.Bd / ws[None, :], ys[:, None] * ss.C, wm, ym
-
-
-def _refitted(model: StateSpaceStructure, rec: Measurement, cut_hz: float, basis: laws.FeedbackBasis,
-              block_rows: int, r: np.ndarray | None = None) -> StateSpaceStructure:  # fmt: skip
-    """``model``'s identification again on ``rec`` (a block of the record, or another basis band ``cut_hz``), at
-    its order and about its r* (``r``: the element's motion over ``rec``, as ``_channels``): the batch means' and
-    the band's fits.
+def _fit(w: np.ndarray, y: np.ndarray, sampling: Sampling, order: int, block_rows: int):
+    """The state-space fit at ``order`` on standardised channels, back in SI units: (A, B, C, D, means), D None for
+    displacement outputs (they have no feedthrough).
     """
-    w, y, _ = _channels(rec, model.at, cut_hz, basis, model.r_ref, r)
-    A, B, C, wm, ym = _fit(w, y, rec.dt, model.order, block_rows)
-    return dataclasses.replace(model, A=A, B=B, C=C, input_mean=wm, output_mean=ym)
+    wn, yn, (wm, ws, ym, ys) = _standardised(w, y)
+    ss = subspace.identify(wn, yn, sampling.dt, order, block_rows)
+    assert ss.Ad is not None and ss.Bd is not None
+    D = ys[:, None] * ss.D / ws[None, :] if sampling.output == "acceleration" else None
+    return ss.Ad, ss.Bd / ws[None, :], ys[:, None] * ss.C, D, wm, ym
+
+
+def _refitted(model: StateSpaceStructure, rec: Measurement, sampling: Sampling, basis: laws.FeedbackBasis,
+              block_rows: int, r: np.ndarray | None = None) -> StateSpaceStructure:  # fmt: skip
+    """``model``'s identification again on ``rec`` (a block of the record, or another basis band in
+    ``sampling``), at its order and about its r* (``r``: the element's motion over ``rec``, as ``_channels``): the
+    batch means' and the band's fits.
+    """
+    w, y, _ = _channels(rec, model.at, sampling, basis, model.r_ref, r)
+    A, B, C, D, wm, ym = _fit(w, y, sampling, model.order, block_rows)
+    return dataclasses.replace(model, A=A, B=B, C=C, D=D, input_mean=wm, output_mean=ym)
 
 
 def _coefficients(model: StateSpaceStructure, p: int, band: tuple[float, float]) -> tuple[np.ndarray, np.ndarray]:
@@ -329,42 +401,45 @@ def _coefficients(model: StateSpaceStructure, p: int, band: tuple[float, float])
     return mu.real, np.abs(mu.imag) / np.maximum(np.abs(mu.real), 1e-300)
 
 
-def best_linear(w: np.ndarray, y: np.ndarray, dt: float, order: int, block_rows: int, like: StateSpaceStructure
-                ) -> StateSpaceStructure:  # fmt: skip
+def best_linear(w: np.ndarray, y: np.ndarray, sampling: Sampling, order: int, block_rows: int,
+                like: StateSpaceStructure) -> StateSpaceStructure:  # fmt: skip
     """The best linear model of ``order`` on the identification's channels (``_channels``' w and y): the same
     subspace step with the force (w's first column) its only input. As a ``StateSpaceStructure`` like ``like`` whose
     element's input columns are zero, so it runs and reads its start states as any (``element`` makes no difference).
     """
-    A, B, C, wm, ym = _fit(w[:, :1], y, dt, order, block_rows)
+    A, B, C, D, wm, ym = _fit(w[:, :1], y, sampling, order, block_rows)
     nb = w.shape[1] - 1
-    return dataclasses.replace(like, A=A, B=np.hstack([B, np.zeros((order, nb))]), C=C,
+    D = None if D is None else np.hstack([D, np.zeros((D.shape[0], nb))])
+    return dataclasses.replace(like, A=A, B=np.hstack([B, np.zeros((order, nb))]), C=C, D=D,
                                input_mean=np.concatenate([wm, np.zeros(nb)]), output_mean=ym)  # fmt: skip
 
 
-def _held_out(model: StateSpaceStructure, rec: Measurement, start: int, window_s: float, cut_hz: float,
+def _held_out(model: StateSpaceStructure, rec: Measurement, start: int, window_s: float, sampling: Sampling,
               r: np.ndarray | None = None, linear: StateSpaceStructure | None = None) -> dict[str, Any]:  # fmt: skip
     """The held-out windows (module docstring): the model's error, its linear part's and the best linear model's
-    (``linear``, ``best_linear``; None: not judged), % of the sensors' rms, each window's start state read by the
-    model run in it from the stretch before.
+    (``linear``, ``best_linear``; None: not judged), % of the sensors' rms (of the model's outputs as ``sampling``
+    reads them), each window's start state read by the model run in it from the stretch before.
     """
-    r, vr = element_motion(rec, model.at, cut_hz, r)
-    n_win = max(int(round(window_s * rec.fs)), 4 * model.order)
-    y = rec.channels
-    out: dict[str, Any] = {"window_s": n_win / rec.fs, "starts_s": []}
+    r, vr = element_motion(rec, model.at, sampling.cut_hz, r)
+    r, vr, u = r[:: sampling.q], vr[:: sampling.q], sampling.apply(rec.u)
+    y = sampling.apply(sensor_outputs(rec, sampling.output)).T
+    fs, start, n = rec.fs / sampling.q, -(-start // sampling.q), u.size
+    n_win = max(int(round(window_s * fs)), 4 * model.order)
+    out: dict[str, Any] = {"window_s": n_win / fs, "starts_s": []}
     runs = {"": (model, True), "linear_": (model, False)}
     if linear is not None:
         runs["best_linear_"] = (linear, False)
     errs: dict[str, list[float]] = {key: [] for key in runs}
     scale = []
     diverged = dict.fromkeys(runs, 0)
-    for s0 in range(max(start, n_win), rec.n - n_win + 1, n_win):
-        out["starts_s"].append(s0 / rec.fs)
+    for s0 in range(max(start, n_win), n - n_win + 1, n_win):
+        out["starts_s"].append(s0 / fs)
         seg = y[:, s0 : s0 + n_win]
         scale.append(((seg - seg.mean(axis=1, keepdims=True)) ** 2).sum())
         lead = slice(s0 - n_win, s0)
         for key, (m, element) in runs.items():
-            x0 = m.initial_state(rec.u[lead], y[:, lead], r[lead], vr[lead], element)
-            run, gone = m.run(rec.u[s0 : s0 + n_win], x0, element)
+            x0 = m.initial_state(u[lead], y[:, lead], r[lead], vr[lead], element)
+            run, gone = m.run(u[s0 : s0 + n_win], x0, element)
             diverged[key] += gone
             errs[key].append(np.inf if gone else float(((run - seg) ** 2).sum()))
     if not scale:
@@ -398,9 +473,10 @@ def identify_state_space(est, rec: Measurement, at: tuple[int, int]) -> StateSpa
     # chain's response leaves its noise at 220 Hz, and the noise in the basis put k3 2.4 % low (0.4 % with this)
     cut = min(BASIS_BAND_FACTOR * f_max, basis_band_hz(relative(ident.channels, at), rec.fs), 0.45 * rec.fs)
     basis = element_basis(est.law or laws.DEFAULT_RESTORING, est.damping)
-    w, y, r_ref = _channels(ident, at, cut, basis)
+    sampling = Sampling.of(rec, cut)
+    w, y, r_ref = _channels(ident, at, sampling, basis)
     wn, yn, _ = _standardised(w, y)
-    rows, physical, order = stabilisation(wn, yn, rec.dt, est.block_rows, f_max)
+    rows, physical, order = stabilisation(wn, yn, sampling.dt, est.block_rows, f_max)
     # accelerometers across the element: its motion's slow part from the structure's quasi-static law below the
     # lowest mode (``quasi_static_motion``), and the diagram again on the basis of that motion
     r_el, slow = None, None
@@ -408,21 +484,22 @@ def identify_state_space(est, rec: Measurement, at: tuple[int, int]) -> StateSpa
     if acc is not None and physical[0] / 2 >= acc[1] + 2 * SLOW_BIN_HZ:
         r_el, slow = quasi_static_motion(relative(rec.channels, at), rec.u, rec.fs, basis, cut, acc[1],
                                          physical[0] / 2, acc[0])  # fmt: skip
-        w, y, r_ref = _channels(ident, at, cut, basis, r=r_el[:n_id])
+        w, y, r_ref = _channels(ident, at, sampling, basis, r=r_el[:n_id])
         wn, yn, _ = _standardised(w, y)
-        rows, physical, order = stabilisation(wn, yn, rec.dt, est.block_rows, f_max)
+        rows, physical, order = stabilisation(wn, yn, sampling.dt, est.block_rows, f_max)
     fitted, errors = None, []
     for n in range(order, min(MAX_ORDER, est.block_rows * y.shape[1]) + 1, 2):
         try:
-            fitted = _fit(w, y, rec.dt, n, est.block_rows)
+            fitted = _fit(w, y, sampling, n, est.block_rows)
             order = n
             break
         except (ValueError, np.linalg.LinAlgError) as exc:
             errors.append(f"order {n}: {exc}")
     if fitted is None:
         raise StateSpaceIdentificationError(f"{rec.source}: no state-space model from order {order} up ({errors[-1]})")
-    A, B, C, wm, ym = fitted
-    model = StateSpaceStructure(A, B, C, rec.dt, at, r_ref, wm, ym, basis.restoring.name, basis.damping.name)
+    A, B, C, D, wm, ym = fitted
+    model = StateSpaceStructure(A, B, C, sampling.dt, at, r_ref, wm, ym, basis.restoring.name, basis.damping.name,
+                                sampling.output, D)  # fmt: skip
     modes = [m for m in model.modes() if any(abs(m.f_hz / f - 1) < F_TOL for f in physical)]
     if not modes:
         raise StateSpaceIdentificationError(f"{rec.source}: the order-{order} model holds none of the stable modes")
@@ -435,7 +512,7 @@ def identify_state_space(est, rec: Measurement, at: tuple[int, int]) -> StateSpa
     for a, b in zip(edges[:-1], edges[1:], strict=True):
         try:
             r_block = None if r_el is None else r_el[int(a) : int(b)]
-            block = _refitted(model, ident.segment(int(a), int(b)), cut, basis, est.block_rows, r_block)
+            block = _refitted(model, ident.segment(int(a), int(b)), sampling, basis, est.block_rows, r_block)
             per_block.append(_coefficients(block, p, band)[0])
             block_modes.append([_nearest(block.modes(), m.f_hz) for m in modes])
         except (ValueError, np.linalg.LinAlgError, InputError):
@@ -449,7 +526,9 @@ def identify_state_space(est, rec: Measurement, at: tuple[int, int]) -> StateSpa
     for factor in BAND_CHOICES:
         try:
             r_ident = None if r_el is None else r_el[:n_id]
-            other = _refitted(model, ident, min(factor * cut, 0.45 * rec.fs), basis, est.block_rows, r_ident)
+            band_cut = min(factor * cut, 0.45 * rec.fs / sampling.q)  # within the model's own Nyquist
+            other = _refitted(model, ident, dataclasses.replace(sampling, cut_hz=band_cut), basis, est.block_rows,
+                              r_ident)  # fmt: skip
             by_band.append(_coefficients(other, p, band)[0])
         except (ValueError, np.linalg.LinAlgError, InputError):
             continue
@@ -464,7 +543,7 @@ def identify_state_space(est, rec: Measurement, at: tuple[int, int]) -> StateSpa
             r_other, _ = quasi_static_motion(relative(rec.channels, at), rec.u, rec.fs, basis, cut, acc[1],
                                              slow["law_fitted_hz"][1], acc[0], other_hz)  # fmt: skip
             try:
-                other = _refitted(model, ident, cut, basis, est.block_rows, r_other[:n_id])
+                other = _refitted(model, ident, sampling, basis, est.block_rows, r_other[:n_id])
                 by_slow.append(_coefficients(other, p, band)[0])
             except (ValueError, np.linalg.LinAlgError, InputError):
                 continue
@@ -493,10 +572,10 @@ def identify_state_space(est, rec: Measurement, at: tuple[int, int]) -> StateSpa
     element["laws"] = {"restoring": basis.restoring.name, "damping": basis.damping.name}
     window_s = max(0.25, 4.0 / modes[0].f_hz)
     try:
-        linear = best_linear(w, y, rec.dt, order, est.block_rows, model)
+        linear = best_linear(w, y, sampling, order, est.block_rows, model)
     except (ValueError, np.linalg.LinAlgError):
         linear = None  # no linear model of this order on these channels: the tail judges the model and its part
-    validation = _held_out(model, rec, n_id, window_s, cut, r_el, linear)
+    validation = _held_out(model, rec, n_id, window_s, sampling, r_el, linear)
     validation["best_linear_order"] = order if linear is not None else None
     validation["tail_unseen_band_share"] = unseen = unseen_share(ident.u, rec.u[n_id:], rec.fs)
     freqs = np.linspace(band[0], band[1], 256)
@@ -514,7 +593,8 @@ def identify_state_space(est, rec: Measurement, at: tuple[int, int]) -> StateSpa
             "into the band by the element's law (on a test chain at 0.1 % noise the joint's k3 was lost while the "
             "modes held within 0.2 %): read the modes, and size the joint from displacement sensors"
         )
-    elif [k for k in acc_sensors if k not in at]:
+    elif sampling.output == "displacement" and [k for k in acc_sensors if k not in at]:
+        # (where every sensor is an accelerometer the outputs are their accelerations, which hold no slow error)
         lines.append(
             f"{rec.source}: sensor(s) {', '.join(str(k) for k in acc_sensors if k not in at)} are accelerometers "
             "away from the element: their double integrals keep their slow error in the outputs (on a test chain "
@@ -549,6 +629,10 @@ def identify_state_space(est, rec: Measurement, at: tuple[int, int]) -> StateSpa
                   "basis": list(basis.names()),
                   "element_motion": f"the sensors' difference low-passed at {cut:.4g} Hz (the force's band top "
                                     f"{f_max:.4g} Hz), its derivative spectral",
+                  "outputs": sampling.output, "model_fs_hz": rec.fs / sampling.q,
+                  "sampling": f"the sensors' {sampling.output}s" + (
+                      f", every input and output low-passed at {cut:.4g} Hz and decimated {sampling.q}x"
+                      if sampling.q > 1 else ""),
                   "standard_error": f"batch means over {len(per_block)} blocks of the identification part, and half "
                                     "the spread of the fits with the basis's band at 2/3 and 4/3 of its own, and "
                                     "through accelerometers half the spread of the fits with the slow part's "
