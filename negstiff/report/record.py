@@ -273,6 +273,8 @@ Run = tuple[str, str, Callable[[Any], Any], Callable[[Any], None] | None]
 
 DEPENDS = {"interval": ("nsi", "sindy"), "design": ("posterior",)}
 """Sections made from another's fit: not made where every one they read was refused."""
+TITLES = {"nsi": "NSI's identification", "sindy": "SINDy's identification", "posterior": "the coefficient posterior"}
+"""How a refused section names the sections it is made from."""
 
 
 def _preflight(rec, runs: list[Run]) -> dict[str, InputError]:
@@ -293,7 +295,8 @@ def _preflight(rec, runs: list[Run]) -> dict[str, InputError]:
             refused[name] = exc
     for name, needs in DEPENDS.items():
         if any(n == name for n, *_ in runs) and all(n in refused or n not in [r[0] for r in runs] for n in needs):
-            refused[name] = InputError(f"{rec.source}: no identification was made, so it has no interval")
+            made_from = " or ".join(TITLES.get(n, n) for n in needs)
+            refused[name] = InputError(f"{rec.source}: it is made from {made_from}, which was not made")
     if runs and len(refused) == len(runs):
         first = runs[0]
         msg = " ".join(str(refused[first[0]]).split())

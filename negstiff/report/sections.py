@@ -224,14 +224,15 @@ def record_section(rec, label: str = "") -> Section:
     if rec.n_dof > 1:
         rows.insert(4, ["degrees of freedom", rec.n_dof])
     sec.table(["", "value"], rows)
-    for w in [*info.get("warnings", []), *resp.get("warnings", [])]:
+    said = list(dict.fromkeys([*info.get("warnings", []), *resp.get("warnings", [])]))  # each once: a structure's
+    for w in said:  # sensors of one kind say the same
         sec.warning(w)
     sec.heldout["the record's sensor-noise floor"] = noise_pct
     sec.summary.append(
         f"Record {Path(rec.source).name}: {rec.duration:.4g} s at {rec.fs:g} Hz, input {rec.input_name}, response "
         f"{resp.get('measured') or 'z'}" + (f" ({resp['derived']})" if resp.get("derived") else "")
         + _frame_words(resp)
-        + f"; {len(info.get('warnings', [])) + len(resp.get('warnings', []))} warning(s) about it."
+        + f"; {len(said)} warning(s) about it."
     )  # fmt: skip
     sec.json = {"source": rec.source, "n": rec.n, "fs": rec.fs, "info": info, "noise_floor_percent": noise_pct,
                 "mass": rec.mass, **({"dofs": rec.n_dof, "masses": None if masses is None else list(masses),
@@ -255,9 +256,13 @@ def structure_section(est, label: str = "") -> Section:
             for w, ms in r.modal.items() for n, m in enumerate(ms)]  # fmt: skip
     v = j["validation"]
     if j.get("linear_part") == "state_space":
+        settings = j.get("settings") or {}
+        accelerations = settings.get("outputs") == "acceleration"
         sec.text(f"No masses: the linear part is a state-space model of order {j['order']} (its stabilisation "
                  "diagram's), every mode in the force's band; the element's coefficients through the measured "
-                 "driving point (reciprocity), each with its standard error.")  # fmt: skip
+                 "driving point (reciprocity), each with its standard error. Its outputs: "
+                 + (str(settings["sampling"]) if settings.get("sampling") else "the sensors' displacements")
+                 + (" (the held-out errors are of their rms, not of z's)" if accelerations else "") + ".")  # fmt: skip
         sec.table(["", "mode", "f [Hz]", "zeta [%]", "shape (by sensor)"], rows)
         coefs = [[c, e["value"], e.get("se")] for c, e in j["element"].items() if isinstance(e, dict) and "value" in e]
         sec.table(["coefficient", "value", "standard error"], coefs)
@@ -268,9 +273,7 @@ def structure_section(est, label: str = "") -> Section:
                  f"alone by {fmt(v.get('linear_rms_percent'), 3)} %"
                  + ("." if best is None else f", the best linear model of its order (the force its only input, "
                     f"the element's equivalent stiffness and damping taken in) by {fmt(best, 3)} %."))  # fmt: skip
-        sec.heldout[col] = held
-        if best is not None:  # after the model in the report's held-out table: the baseline it must beat
-            sec.heldout[f"the best linear model of {col}'s order"] = best
+        of = " [% of rms acceleration]" if accelerations else ""
         top = max((c for c in coefficients if c[:1] == "k" and c[1:].isdigit()), key=lambda c: int(c[1:]), default=None)
         said = "" if top is None else f"{top} = {fmt(coefficients[top])} +- {fmt(j['element'][top].get('se'), 2)}"
     else:
@@ -302,12 +305,16 @@ def structure_section(est, label: str = "") -> Section:
                  "structure run on its own record with the channels' noise: what noise, smoothing and chaos leave "
                  "any model).")  # fmt: skip
         said = f"k3 = {fmt(el.k3)} N/m^3"
-    sec.heldout[col] = held
+        of, best = "", None
+    sec.heldout[col + of] = held
+    if best is not None:  # after the model in the report's held-out table: the baseline it must beat
+        sec.heldout[f"the best linear model of {col}'s order{of}"] = best
     for w in r.warnings:
         sec.warning(w)
     modes = "; ".join(f"{w}: " + ", ".join(f"{m.f_hz:.4g} Hz ({100 * m.zeta:.3g} %)" for m in ms)
                       for w, ms in r.modal.items())  # fmt: skip
-    sec.summary.append(f"{col}'s structure: element {said}; modes {modes}; held-out error {fmt(held, 3)} %.")
+    sec.summary.append(f"{col}'s structure: element {said}; modes {modes}; held-out error {fmt(held, 3)} %"
+                       + (" of the accelerations' rms." if of else "."))  # fmt: skip
     sec.json = j
     return sec
 
