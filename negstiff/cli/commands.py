@@ -204,7 +204,7 @@ def cmd_identify(args) -> int:
 
     masses = parse_amplitudes(args.masses, "--masses") if args.masses else None
     rec = load(args.data, columns=args.columns, fs=args.fs, mass=args.mass, gravity=args.gravity, aux=args.aux,
-               masses=masses, decay=args.decay)  # fmt: skip
+               masses=masses, decay=args.decay, force_dof=args.force_dof)  # fmt: skip
     check_dofs(args, rec)
     frfs = read_frf_results(args.frf)
     for path, _, _, n_dofs in frfs:  # before any work: a structure's FRFs do not read a single DOF's wells
@@ -310,7 +310,7 @@ def cmd_posterior(args) -> int:
     recs = []
     for path in args.data:  # several: records of one device, fitted together
         rec = load(path, columns=args.columns, fs=args.fs, mass=args.mass, gravity=args.gravity, masses=masses,
-                   decay=args.decay)  # fmt: skip
+                   decay=args.decay, force_dof=args.force_dof)  # fmt: skip
         check_dofs(args, rec, path)  # N from the file; --dofs a check
         if args.duration is not None:
             rec = rec.segment(0, rec.n if not args.duration * rec.fs < rec.n else int(round(args.duration * rec.fs)))
@@ -754,7 +754,7 @@ def cmd_report(args) -> int:
     rep = report_records(args.data, args.columns, args.fs, args.mass, args.forcing_hz, parse_wells(args.wells),
                          args.nfrc, args.only, args.seed, options, progress=lambda line: say(args, line),
                          gravity=args.gravity, aux=args.aux, decay=args.decay, element=args.element,
-                         masses=masses)  # fmt: skip
+                         masses=masses, force_dof=args.force_dof)  # fmt: skip
     rep.write(args.out)
     for w in rep.results()["summary"]:
         say(args, f"  {w}")

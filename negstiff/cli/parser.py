@@ -39,6 +39,11 @@ def _structure_options(p: argparse.ArgumentParser, element_help: str) -> None:
     )
     p.add_argument("--element", help=element_help + " (default: the record's '# element: I-J')")
     p.add_argument("--masses", help="the DOFs' masses m1,...,mN [kg] (default: the record's '# masses:')")
+    p.add_argument("--force-dof", type=number(int, 1, 50), help=FORCE_DOF_HELP)
+
+
+FORCE_DOF_HELP = ("a structure's DOF (sensor) the measured force acts on, 1..N (default: the record's '# force_dof:'; "
+                  "NSI without masses sizes the element through it)")  # fmt: skip
 
 
 def _rig(sub, common: argparse.ArgumentParser, data_opts: argparse.ArgumentParser) -> None:
@@ -696,6 +701,7 @@ def _report(sub, common: argparse.ArgumentParser, data_opts: argparse.ArgumentPa
     rp.add_argument("--element", help="a structure's record (z1 ... zN): where the nonlinear element acts, I-J (it "
                     "moves DOF J relative to DOF I, 0: the base; default: the file's '# element:')")  # fmt: skip
     rp.add_argument("--masses", help="a structure's DOF masses m1,...,mN [kg] (default: the file's '# masses:')")
+    rp.add_argument("--force-dof", type=number(int, 1, 50), help=FORCE_DOF_HELP)
     rp.add_argument(
         "--aux",
         help="measured auxiliary channels of the record, by the file's column names (e.g. voltage): SINDy and the "

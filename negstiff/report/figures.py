@@ -62,6 +62,41 @@ def frf_figure_dofs(res: dict[str, Any], curves: list[dict[str, np.ndarray]], in
     return fig
 
 
+def state_space_figure(j: dict[str, Any], title: str):
+    """A structure read through its sensors (``identify nsi`` without masses, its JSON ``j``): the stabilisation
+    diagram (each order's poles, the stable ones filled, the chosen order dashed, the modes read grey) and the
+    model's underlying-linear FRF from the force to each sensor [m/N].
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, (ax, bx) = plt.subplots(1, 2, figsize=(11, 4.2))
+    for row in j["stabilisation"]:
+        f = [p["f_hz"] for p in row["poles"]]
+        filled = ["C0" if p["stable"] else "none" for p in row["poles"]]
+        ax.scatter(f, [row["order"]] * len(f), s=12, c=filled, edgecolors="C0", linewidths=0.7)
+    modes = [m["f_hz"] for m in j["modal"]["linear"]]
+    for f in modes:
+        ax.axvline(f, color="0.75", lw=0.8, zorder=0)
+    ax.axhline(j["order"], color="C3", lw=0.8, ls="--")
+    top = max([p["f_hz"] for row in j["stabilisation"] for p in row["poles"]] + modes + [1.0])
+    ax.set(xlabel="frequency [Hz]", ylabel="model order", xlim=(0, 1.05 * top),
+           title=f"stabilisation diagram (order {j['order']} chosen: dashed)")  # fmt: skip
+    frf = j["frf"]
+    freqs = np.asarray(frf["f_hz"])
+    for k, (re, im) in enumerate(zip(frf["real"], frf["imag"], strict=True)):
+        bx.semilogy(freqs, np.abs(np.asarray(re) + 1j * np.asarray(im)), label=f"sensor {k + 1}")
+    for m in modes:
+        bx.axvline(m, color="0.75", lw=0.8, zorder=0)
+    bx.set(xlabel="frequency [Hz]", ylabel="|H| [m/N]", title=f"underlying-linear FRF ({frf['input']})")
+    bx.legend(fontsize=8)
+    fig.suptitle(title)
+    fig.tight_layout()
+    return fig
+
+
 def backbone_figure(res: dict[str, Any], title: str):
     """The backbone figure of a ``backbone`` result: frequency and damping ratio against amplitude [mm], the
     measured Hilbert curve, its peak-to-peak cross-check, the model's prediction, its forced responses (half the

@@ -84,6 +84,7 @@ def report_records(
     decay: bool = False,
     element: str | None = None,
     masses: Sequence[float] | None = None,
+    force_dof: int | None = None,
 ) -> Report:
     """The report of ``data`` (one record, or a campaign's records or folder): every input read and checked
     first (one ``InputError``), then each analysis that fits it; ``options`` per analysis (``{"posterior":
@@ -93,8 +94,9 @@ def report_records(
     and the discrepancy workflow offer each as a term); ``decay``: a single record is a free decay whatever its
     input column holds (``load``'s). A structure's record (N DOFs, ``z1 ... zN``) is reported as a single DOF's is,
     each analysis reading it as its estimator does: ``element`` its place (``"I-J"``; default: the file's
-    ``# element:``), ``masses`` its DOFs' (default: the file's ``# masses:``); an analysis that reads a single DOF's
-    record only is shown with its reason.
+    ``# element:``), ``masses`` its DOFs' (default: the file's ``# masses:``), ``force_dof`` the DOF its force acts
+    on (default: the file's ``# force_dof:``); an analysis that reads a single DOF's record only is shown with its
+    reason.
     """
     say = progress or (lambda text: None)
     options = {k: dict(v) for k, v in (options or {}).items()}
@@ -114,7 +116,7 @@ def report_records(
     if nfrc:
         raise InputError("--nfrc: a single record's report draws no NFRC (a campaign's bifurcation map overlays "
                          "them); give a campaign's records or folder")  # fmt: skip
-    rec = load(paths[0], columns=columns, fs=fs, mass=mass, gravity=gravity, aux=aux, decay=decay)
+    rec = load(paths[0], columns=columns, fs=fs, mass=mass, gravity=gravity, aux=aux, decay=decay, force_dof=force_dof)
     if masses is not None:
         rec = rec.with_masses(masses)
     if rec.n_dof > 1 and element is None and "element" not in rec.meta:  # before any work: a structure's needs it

@@ -263,6 +263,12 @@ def structure_section(est, label: str = "") -> Section:
                  "driving point (reciprocity), each with its standard error. Its outputs: "
                  + (str(settings["sampling"]) if settings.get("sampling") else "the sensors' displacements")
                  + (" (the held-out errors are of their rms, not of z's)" if accelerations else "") + ".")  # fmt: skip
+        from .figures import state_space_figure
+
+        sec.figure(f"state_space_{_slug(label or col)}", state_space_figure(j, f"{col}: the linear part"),
+                   "Left, the stabilisation diagram: each order's poles (filled where the next orders hold them), "
+                   "the modes read (grey) and the order chosen (dashed). Right, the model's underlying-linear FRF "
+                   "from the measured force to each sensor.")  # fmt: skip
         sec.table(["", "mode", "f [Hz]", "zeta [%]", "shape (by sensor)"], rows)
         coefs = [[c, e["value"], e.get("se")] for c, e in j["element"].items() if isinstance(e, dict) and "value" in e]
         sec.table(["coefficient", "value", "standard error"], coefs)

@@ -4,6 +4,7 @@ spring (a joint) between masses 4 and 5, three sensors: the drive point and eith
 are written here with a plain RK4 (the force held over each sample, 8 substeps), not negstiff's simulator; the
 truth's modes are the chain's own (scipy's eigh)."""
 
+import dataclasses
 import json
 import time
 import warnings
@@ -273,6 +274,32 @@ def test_a_base_excited_structure_without_masses_is_refused_before_the_work(reco
     assert time.perf_counter() - t0 < 2.0
 
 
+def test_a_record_that_does_not_name_its_driving_point_is_refused_before_the_work(record, tmp_path):
+    # the element's coefficients are sized through the sensor the force acts at; a record that does not say which is
+    # not guessed (the element's J had been taken: the F-16 benchmark's force acts at neither of the joint's
+    # sensors): one line, exit 2, before the work; the command's --force-dof names it
+    rec, _ = record
+    path = write_csv(tmp_path / "unnamed.csv", {"t": np.arange(rec.n) / FS, "force": rec.u,
+                                                **{f"z{k + 1}": rec.channels[k] for k in range(3)}}, {})  # fmt: skip
+    t0 = time.perf_counter()
+    with pytest.raises(InputError, match="force_dof"):
+        NSI(element="2-3").fit(load(path))
+    assert main(["identify", "nsi", str(path), "--element", "2-3", "-o", str(tmp_path / "r.json"), "--quiet"]) == 2
+    assert time.perf_counter() - t0 < 5.0 and not (tmp_path / "r.json").exists()
+    assert load(path, force_dof=1).force_dof == 1
+
+
+def test_a_driving_point_is_told_by_its_frf(fitted, record):
+    # a structure's compliance at the point the force acts on has a negative imaginary part at every mode, another
+    # point's changes sign with the modes' shapes: the chain's drive point (sensor 1) alone reads as one, and a
+    # record that names another sensor is warned about
+    assert fitted.result_.settings["driving_point_like"] == [1]
+    rec, _ = record
+    with pytest.warns(NegstiffWarning, match="sensor 1's does: is the force there"):
+        r = NSI(element="2-3").fit(dataclasses.replace(rec, force_dof=3)).result_
+    assert r.settings["driving_point"] == 3 and r.settings["driving_point_like"] == [1]
+
+
 def test_the_command_line_writes_the_librarys_numbers(record, tmp_path, capsys):
     rec, _ = record
     path = write_csv(tmp_path / "gvt.csv", {"t": np.arange(rec.n) / FS, "force": rec.u,
@@ -316,6 +343,8 @@ def test_the_report_sets_the_model_beside_the_best_linear_model_of_its_order(rec
     assert f"| NSI | {v['rms_percent']:.3g} |" in held, held
     assert f"| the best linear model of NSI's order | {v['best_linear_rms_percent']:.3g} |" in held, held
     assert "| units |" not in text and "| laws |" not in text
+    # the stabilisation diagram and the model's FRF drawn: a PNG the page shows
+    assert "](state_space_nsi.png)" in text and (tmp_path / "rep" / "state_space_nsi.png").stat().st_size > 10_000
 
 
 def test_a_sweeps_tail_outside_the_identified_band_is_said_not_to_measure_the_model():

@@ -46,6 +46,7 @@ def load(
     aux: Sequence[str] | str | None = None,
     masses: Sequence[float] | str | None = None,
     decay: bool = False,
+    force_dof: int | None = None,
 ) -> Measurement:
     """Read a measurement file, checked as the command line checks it.
 
@@ -79,6 +80,9 @@ def load(
         The record is a free decay whatever its input column holds (a force channel left connected that reads only
         its noise): the analyses read it as one (``record_kind``; ``info["decay"]``). A constant input is a decay
         without saying so.
+    force_dof : int, optional
+        A structure's DOF (sensor) the measured force acts on, 1..N (overrides the metadata's ``force_dof``): NSI
+        sizes the element of a structure read without masses through that driving point.
 
     Returns
     -------
@@ -135,7 +139,8 @@ def load(
     dof_masses = None if masses is None else checked_masses(path, masses, max(1, len(dofs)))
     if len(dofs) <= 1 and dof_masses is not None and mass is None:
         mass = dof_masses[0]
-    force_dof = checked_force_dof(path, meta.get("force_dof"), max(1, len(dofs)))
+    force_dof = checked_force_dof(path, force_dof if force_dof is not None else meta.get("force_dof"),
+                                  max(1, len(dofs)))  # fmt: skip
     z: np.ndarray | None = None
     resp: dict[str, Any] = {"measured": None}
     if len(dofs) > 1:

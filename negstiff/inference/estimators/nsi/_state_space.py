@@ -104,17 +104,25 @@ class StateSpaceIdentificationError(InputError):
 
 
 def check_record(rec: Measurement, at: tuple[int, int], block_rows: int) -> int:
-    """The refusals that need no work: a force input at a sensed point (the coefficients' scale without masses), a
-    record long enough. Returns the driving point's sensor (1-based).
+    """The refusals that need no work: a force input at a sensed point the record names (the coefficients' scale
+    without masses), a record long enough. Returns the driving point's sensor (1-based).
     """
     if rec.input_name != "force":
         raise StateSpaceIdentificationError(
             f"{rec.source}: without the masses a structure's element is sized by a measured force at a sensed point "
             f"(the driving point); this record's input is {rec.input_name}: give the masses ('# masses:', --masses)"
         )
-    p = rec.force_dof or at[1]
+    if rec.force_dof is None:
+        # not guessed: the element's coefficients are the ratio of two rows of the extended FRF at the driving point,
+        # and at another sensor they are another number (the F-16 benchmark's force acts at sensor 1, beside neither
+        # of the joint's sensors)
+        raise StateSpaceIdentificationError(
+            f"{rec.source}: without the masses a structure's element is sized through the sensor the force acts at "
+            f"(the driving point), which the record does not name: give it ('# force_dof: K' in the header, "
+            f"--force-dof K, load(..., force_dof=K)), 1..{rec.n_dof}"
+        )
     rec.require(max(2000, 40 * block_rows), "NSI")
-    return int(p)
+    return int(rec.force_dof)
 
 
 def force_band_top(u: np.ndarray, fs: float, share: float = FORCE_POWER_SHARE) -> float:
@@ -454,6 +462,16 @@ def _held_out(model: StateSpaceStructure, rec: Measurement, start: int, window_s
     return out
 
 
+def driving_points(model: StateSpaceStructure, modes: list[Mode]) -> list[int]:
+    """The sensors (1-based) whose FRF to the force reads as a driving point's: a structure's compliance at the
+    point the force acts on has a negative imaginary part at every mode (its residues phi_p^2 / (2 j m_r w_r), one
+    sign), another point's changes sign with the modes' shapes. On the F-16 benchmark's record with the force at
+    sensor 1, sensor 1 alone (the joint's sensors flip at 12.3 Hz); on the five-mass chain, sensor 1 alone.
+    """
+    H = model.frf(np.array([m.f_hz for m in modes]))  # (modes, sensors)
+    return [k + 1 for k in range(H.shape[1]) if np.all(H[:, k].imag < 0)]
+
+
 def _nearest(modes: list[Mode], f_hz: float) -> Mode | None:
     """The mode of ``modes`` within ``F_TOL`` of ``f_hz`` (the nearest), or None."""
     near = [m for m in modes if abs(m.f_hz / f_hz - 1) < F_TOL]
@@ -505,6 +523,7 @@ def identify_state_space(est, rec: Measurement, at: tuple[int, int]) -> StateSpa
         raise StateSpaceIdentificationError(f"{rec.source}: the order-{order} model holds none of the stable modes")
     band = (0.5 * modes[0].f_hz, min(1.5 * modes[-1].f_hz, f_max))
     mu, quality = _coefficients(model, p, band)
+    looks_driven = driving_points(model, modes)
     # batch means: each block's own fit at the chosen order, about the same r*
     edges = np.linspace(0, n_id, BLOCKS + 1).round().astype(int)
     per_block: list[np.ndarray] = []
@@ -582,6 +601,15 @@ def identify_state_space(est, rec: Measurement, at: tuple[int, int]) -> StateSpa
     H = model.frf(freqs)
     lines = [f"{rec.source}: the element's {n} is poorly determined (|Im/Re| {quality[j]:.2g} of its FRF ratio)"
              for j, n in enumerate(names) if quality[j] > QUALITY_WARNING and abs(mu[j]) > 2 * se[j]]  # fmt: skip
+    if p not in looks_driven:
+        at_modes = model.frf(np.array([mode.f_hz for mode in modes]))[:, p - 1]
+        off = [f"{mode.f_hz:.3g}" for mode, h in zip(modes, at_modes, strict=True) if not h.imag < 0]
+        there = f"; sensor {', '.join(map(str, looks_driven))}'s does: is the force there?" if looks_driven else ""
+        lines.append(
+            f"{rec.source}: the force is said to act at sensor {p}, but its FRF does not read as a driving point's "
+            f"(its imaginary part is positive at {', '.join(off)} Hz, where a driving point's compliance is negative "
+            f"at every mode){there or '.'} The element's coefficients are sized through sensor {p}"
+        )
     acc_sensors = [k for k, c in sensor_channels(rec).items() if c.get("measured") == "y_acc"]
     if slow is None and any(k in at for k in acc_sensors):
         why = ("the record has no band between their double integral's exact band and the lowest mode "
@@ -624,6 +652,7 @@ def identify_state_space(est, rec: Measurement, at: tuple[int, int]) -> StateSpa
              "input": f"force at sensor {p}"},
         settings={"block_rows": est.block_rows, "order": order, "order_from": "stabilisation diagram",
                   "physical_modes_hz": physical, "modes_se": modes_se, "driving_point": p,
+                  "driving_point_like": looks_driven,
                   "identification_samples": n_id,
                   "element_slow_part": slow,
                   "basis": list(basis.names()),
