@@ -82,6 +82,9 @@ class StateSpaceStructure:
     D : ndarray or None
         The feedthrough (sensors, inputs) of acceleration outputs: ``y[k] = C x[k] + D w[k] + output_mean``; None
         for displacements (no feedthrough).
+    cut_hz : float or None
+        The band [Hz] a record is read within (every input and output low-passed there before its decimation to
+        ``dt``, and the element's motion): how ``predict`` reads another record; None where not kept.
 
     Examples
     --------
@@ -113,6 +116,7 @@ class StateSpaceStructure:
     damping: str = laws.DEFAULT_DAMPING
     output: str = "displacement"
     D: np.ndarray | None = None
+    cut_hz: float | None = None
 
     @property
     def basis(self) -> laws.FeedbackBasis:
@@ -225,7 +229,8 @@ class StateSpaceStructure:
                 "element_at": list(self.at), "r_ref_m": self.r_ref, "inputs": ["force", *self.basis.names()],
                 "restoring": self.restoring, "damping": self.damping,
                 "input_mean": self.input_mean.tolist(), "output_mean": self.output_mean.tolist(),
-                "output": self.output, "D": None if self.D is None else self.D.tolist()}  # fmt: skip
+                "output": self.output, "D": None if self.D is None else self.D.tolist(),
+                "cut_hz": self.cut_hz}  # fmt: skip
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> StateSpaceStructure:
@@ -235,4 +240,5 @@ class StateSpaceStructure:
                    np.asarray(d["input_mean"], float), np.asarray(d["output_mean"], float),
                    str(d.get("restoring", laws.DEFAULT_RESTORING)),
                    str(d.get("damping", laws.DEFAULT_DAMPING)), str(d.get("output", "displacement")),
-                   None if d.get("D") is None else np.asarray(d["D"], float))  # fmt: skip
+                   None if d.get("D") is None else np.asarray(d["D"], float),
+                   None if d.get("cut_hz") is None else float(d["cut_hz"]))  # fmt: skip

@@ -63,9 +63,10 @@ class Prediction:
     t : numpy.ndarray
         Time of each predicted sample [s], (windows, samples per window), from the record's start.
     z : numpy.ndarray
-        The predicted z [m], same shape (NaN after a run diverged).
+        The predicted z [m], same shape (NaN after a run diverged); a structure's, (windows, channels, samples):
+        its channels' z, or a state-space model's outputs (the sensors' displacements or accelerations).
     measured : numpy.ndarray
-        The record's z over the same samples [m].
+        The record's z (a structure's channels or outputs) over the same samples.
     starts : numpy.ndarray
         Each window's first sample in the record.
     window_s : float
@@ -124,6 +125,71 @@ def restarted_runs(model, rec, window_s: float, start: int = 0) -> Prediction:
                       score_percent=errors["median_window_percent"], errors=errors)  # fmt: skip
 
 
+def structure_runs(structure, rec, window_s: float, offsets=None) -> Prediction:
+    """A structure's restarted free runs over ``rec`` (``predict``): windows of ``window_s``, each from the
+    record's band-smoothed state of every channel at its start (``validation.structure_windows``, the held-out
+    validation's runs), the channels ``offsets`` [m] above the structure's frame; each window's error as a share of
+    the channels' rms about their means.
+    """
+    from negstiff.inference.steps.validation import channel_scales, structure_window_errors, structure_windows
+
+    if rec.n_dof != structure.n_dof:
+        raise InputError(f"{rec.source}: {rec.n_dof} channel(s), the structure {structure.n_dof} DOFs")
+    windows, zs, v = structure_windows(rec, structure.place, 0, window_s)
+    err, diverged = structure_window_errors([structure], rec, windows, zs, v, offsets)
+    measured = windows.measured(rec.channels)
+    z = err[0] + measured
+    z[diverged[0]] = np.nan
+    scale = channel_scales(rec, 0)
+    ms = np.where(diverged[0], np.nan, np.mean((err[0] / scale[None, :, None]) ** 2, axis=(1, 2)))
+    metric = (
+        "median over restarted free-run windows of the window's rms error over every channel, % of each "
+        "channel's rms about its mean (windows restarted from the record's measured states)"
+    )
+    errors = {**window_errors(ms, np.ones(1)), "score_metric": metric}  # the errors already shares of each rms
+    t = (windows.starts[:, None] + np.arange(windows.length)[None, :]) / rec.fs
+    return Prediction(t=t, z=z, measured=measured, starts=windows.starts, window_s=float(window_s),
+                      score_percent=errors["median_window_percent"], errors=errors, metric=metric)  # fmt: skip
+
+
+def state_space_runs(model, rec, window_s: float) -> Prediction:
+    """The model's restarted free runs over ``rec`` (``predict``): windows of ``window_s`` (at least four times
+    its order in samples), each from the state the model reads off the window before it, the record read as the
+    identification read its own (``model.cut_hz``, its rate decimated to the model's). Another record of the
+    same structure (another level, a validation record) is read so: the benchmarks' way of judging a model.
+    """
+    from negstiff.inference.estimators.nsi._state_space import Sampling, read_record, window_run
+
+    q = rec.fs * model.dt
+    if model.cut_hz is None or rec.input_name != "force" or rec.n_dof != model.n_sensors or not (
+            round(q) >= 1 and abs(q - round(q)) < 1e-6):  # fmt: skip
+        raise InputError(
+            f"{rec.source}: a structure's state-space model predicts a record of its own kind: a measured force, "
+            f"{model.n_sensors} sensors, a rate that decimates to its {1 / model.dt:.6g} Hz"
+            + ("" if model.cut_hz is not None else " (and a model that keeps its band: identify it again)")
+            + f"; this record: {rec.input_name}, {rec.n_dof} sensors, {rec.fs:.6g} Hz"
+        )
+    sampling = Sampling(model.output, rec.fs, model.cut_hz, int(round(q)))
+    u, y, r, vr = read_record(rec, model.at, sampling)
+    n_win = max(int(round(window_s * rec.fs / sampling.q)), 4 * model.order)
+    starts = np.arange(n_win, u.size - n_win + 1, n_win)
+    if not starts.size:
+        raise InputError(f"{rec.source}: shorter than two windows of {n_win * sampling.q / rec.fs:.3g} s (the first "
+                         "is the stretch the start state is read from)")  # fmt: skip
+    runs = [window_run(model, True, u, y, r, vr, int(s0), n_win) for s0 in starts]
+    z = np.array([run for run, _ in runs])
+    measured = np.array([y[:, s0 : s0 + n_win] for s0 in starts])
+    gone = np.array([g for _, g in runs])
+    centred = measured - y.mean(axis=1)[None, :, None]
+    ms = np.where(gone, np.nan, np.nanmean((z - measured) ** 2, axis=(1, 2)))
+    metric = (f"median over restarted free-run windows of the window's rms error, % of the rms of the model's "
+              f"outputs (the sensors' {model.output}s)")  # fmt: skip
+    errors = {**window_errors(ms, centred), "score_metric": metric}
+    t = (starts[:, None] + np.arange(n_win)[None, :]) * sampling.q / rec.fs
+    return Prediction(t=t, z=z, measured=measured, starts=starts * sampling.q, window_s=n_win * sampling.q / rec.fs,
+                      score_percent=errors["median_window_percent"], errors=errors, metric=metric)  # fmt: skip
+
+
 def _term(coef: float, name: str, digits: int) -> str:
     sign = "-" if coef < 0 else "+"
     return f" {sign} {abs(coef):.{digits}g}{' ' + name if name else ''}"
@@ -163,10 +229,18 @@ class ModelPredictions:
         Prediction
             The predicted z per window, the measured z beside it, and the score (``SCORE_METRIC``).
         """
-        model = self.model_  # type: ignore[attr-defined]
         if not (isinstance(window_s, (int, float)) and math.isfinite(window_s) and window_s > 0):
             raise InputError(f"predict(window_s={window_s!r}): a window is a positive number of seconds")
-        return restarted_runs(model, as_record(record, f"{type(self).__name__}.predict"), float(window_s))
+        rec = as_record(record, f"{type(self).__name__}.predict")
+        # the whole model the fit learned: a structure's (its element's ``model_`` is a part of it), else ``model_``
+        result = vars(self).get("result_")
+        structure = getattr(result, "structure", None)
+        if structure is not None:
+            return structure_runs(structure, rec, float(window_s), getattr(result, "offsets_m", None))
+        model = self.model_  # type: ignore[attr-defined]
+        if hasattr(model, "initial_state"):  # a structure read through its sensors (``StateSpaceStructure``)
+            return state_space_runs(model, rec, float(window_s))
+        return restarted_runs(model, rec, float(window_s))
 
     def score(self, record, window_s: float = 2.0) -> float:
         """The fitted model's score on ``record`` [%]: the median over ``window_s`` restarted free-run windows

@@ -422,15 +422,31 @@ def best_linear(w: np.ndarray, y: np.ndarray, sampling: Sampling, order: int, bl
                                input_mean=np.concatenate([wm, np.zeros(nb)]), output_mean=ym)  # fmt: skip
 
 
+def read_record(rec: Measurement, at: tuple[int, int], sampling: Sampling, r: np.ndarray | None = None):
+    """The force, the model's outputs (sensors, T), the element's r and r' of ``rec`` as ``sampling`` reads them
+    (``r``: the element's motion given, ``element_motion``).
+    """
+    r, vr = element_motion(rec, at, sampling.cut_hz, r)
+    y = sampling.apply(sensor_outputs(rec, sampling.output)).T
+    return sampling.apply(rec.u), y, r[:: sampling.q], vr[:: sampling.q]
+
+
+def window_run(model: StateSpaceStructure, element: bool, u, y, r, vr, s0: int, n_win: int):
+    """The model's free run over the window [s0, s0 + n_win) from the state its least squares reads off the stretch
+    of the same length before it (``StateSpaceStructure.initial_state``): (outputs, diverged).
+    """
+    lead = slice(s0 - n_win, s0)
+    x0 = model.initial_state(u[lead], y[:, lead], r[lead], vr[lead], element)
+    return model.run(u[s0 : s0 + n_win], x0, element)
+
+
 def _held_out(model: StateSpaceStructure, rec: Measurement, start: int, window_s: float, sampling: Sampling,
               r: np.ndarray | None = None, linear: StateSpaceStructure | None = None) -> dict[str, Any]:  # fmt: skip
     """The held-out windows (module docstring): the model's error, its linear part's and the best linear model's
     (``linear``, ``best_linear``; None: not judged), % of the sensors' rms (of the model's outputs as ``sampling``
     reads them), each window's start state read by the model run in it from the stretch before.
     """
-    r, vr = element_motion(rec, model.at, sampling.cut_hz, r)
-    r, vr, u = r[:: sampling.q], vr[:: sampling.q], sampling.apply(rec.u)
-    y = sampling.apply(sensor_outputs(rec, sampling.output)).T
+    u, y, r, vr = read_record(rec, model.at, sampling, r)
     fs, start, n = rec.fs / sampling.q, -(-start // sampling.q), u.size
     n_win = max(int(round(window_s * fs)), 4 * model.order)
     out: dict[str, Any] = {"window_s": n_win / fs, "starts_s": []}
@@ -444,10 +460,8 @@ def _held_out(model: StateSpaceStructure, rec: Measurement, start: int, window_s
         out["starts_s"].append(s0 / fs)
         seg = y[:, s0 : s0 + n_win]
         scale.append(((seg - seg.mean(axis=1, keepdims=True)) ** 2).sum())
-        lead = slice(s0 - n_win, s0)
         for key, (m, element) in runs.items():
-            x0 = m.initial_state(u[lead], y[:, lead], r[lead], vr[lead], element)
-            run, gone = m.run(u[s0 : s0 + n_win], x0, element)
+            run, gone = window_run(m, element, u, y, r, vr, s0, n_win)
             diverged[key] += gone
             errs[key].append(np.inf if gone else float(((run - seg) ** 2).sum()))
     if not scale:
@@ -517,7 +531,7 @@ def identify_state_space(est, rec: Measurement, at: tuple[int, int]) -> StateSpa
         raise StateSpaceIdentificationError(f"{rec.source}: no state-space model from order {order} up ({errors[-1]})")
     A, B, C, D, wm, ym = fitted
     model = StateSpaceStructure(A, B, C, sampling.dt, at, r_ref, wm, ym, basis.restoring.name, basis.damping.name,
-                                sampling.output, D)  # fmt: skip
+                                sampling.output, D, cut)  # fmt: skip
     modes = [m for m in model.modes() if any(abs(m.f_hz / f - 1) < F_TOL for f in physical)]
     if not modes:
         raise StateSpaceIdentificationError(f"{rec.source}: the order-{order} model holds none of the stable modes")
