@@ -62,6 +62,10 @@ def test_a_structures_fit_predicts_a_record_by_the_structures_own_runs(fits, off
     truth = structure_runs(TRUTH, offset_record, 0.25, OFFSETS)
     assert pred.score_percent <= 2 * truth.score_percent + 0.05, (pred.score_percent, truth.score_percent)
     assert est.score(offset_record, window_s=0.25) == pred.score_percent and "every channel" in pred.metric
+    # simulate runs the structure too, from every channel's measured state at the record's first sample
+    run = est.simulate(offset_record.segment(0, 256))
+    assert run.z.shape == (1, 2, 256) and not run.diverged[0]
+    assert np.all(np.abs(run.z[0, :, 0] + OFFSETS - offset_record.channels[:, 0]) < 20 * NOISE)
 
 
 @pytest.mark.parametrize("method", [NSI, SINDy])

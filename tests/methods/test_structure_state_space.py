@@ -284,6 +284,8 @@ def test_a_state_space_model_predicts_another_record_of_its_structure(fitted, re
     assert pred.z.shape == pred.measured.shape and pred.z.shape[1] == 3 and pred.errors["windows_diverged"] == 0
     assert pred.score_percent < 2 * fitted.result_.validation["median_window_percent"], pred.errors
     assert fitted.score(other, window_s=0.25) == pred.score_percent and "displacements" in pred.metric
+    with pytest.raises(InputError, match="predict"):  # its start state is read off a measured stretch
+        fitted.simulate(other)
     with pytest.raises(InputError, match="decimates to"):
         fitted.predict(from_arrays(f[::2], z[:, ::2], FS / 2, input_name="force", force_dof=1, source="half rate"))
 

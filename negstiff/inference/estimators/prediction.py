@@ -263,7 +263,27 @@ class ModelPredictions:
         from negstiff.inference.record.measurement import Measurement
         from negstiff.models.simulator import simulate
 
+        result = vars(self).get("result_")
+        structure = getattr(result, "structure", None)
         model = self.model_  # type: ignore[attr-defined]
+        if hasattr(model, "initial_state"):  # a state-space model reads its start state off a record's stretch
+            raise InputError(
+                f"{type(self).__name__}.simulate: a structure read through its sensors (a state-space "
+                "model) starts from the state it reads off a measured stretch; predict(record) runs it"
+            )
+        if structure is not None and isinstance(input, (Measurement, str, PathLike)):
+            # the whole structure, from every channel's measured state at the first sample (the fit's channel zeros)
+            from negstiff.models.structure import simulate_structures
+
+            rec = as_record(input, f"{type(self).__name__}.simulate")
+            zs, vs, _ = rec.channel_states(structure.place)
+            offsets = getattr(result, "offsets_m", None)
+            o = np.zeros(rec.n_dof) if offsets is None else np.array(offsets, dtype=float)
+            x0 = np.concatenate([zs[:, 0] - o, vs[:, 0]])[None]
+            return simulate_structures(structure, rec.u[None], rec.dt, x0, input_kind=input_kind or rec.input_name,
+                                       force_dof=rec.force_dof, store_velocity=True)  # fmt: skip
+        if structure is not None:
+            model = structure  # from rest, the element's relative displacement at z0 (``simulator.simulate``)
         if isinstance(input, (Measurement, str, PathLike)):
             rec = as_record(input, f"{type(self).__name__}.simulate")
             if z0 is None and rec.z is not None:
