@@ -66,6 +66,12 @@ def test_a_structures_fit_predicts_a_record_by_the_structures_own_runs(fits, off
     run = est.simulate(offset_record.segment(0, 256))
     assert run.z.shape == (1, 2, 256) and not run.diverged[0]
     assert np.all(np.abs(run.z[0, :, 0] + OFFSETS - offset_record.channels[:, 0]) < 20 * NOISE)
+    # and its equations are the structure's: one line per DOF, the element's force +g on DOF 2 and -g on DOF 1, then
+    # g's law of r = z2 - z1 with the element's own numbers
+    lines = est.equations(digits=6)
+    assert len(lines) == 3 and lines[0].startswith(f"{FIXTURE['m']:.6g} z1''") and " - g = " in lines[0]
+    assert " + g = " in lines[1] and lines[2].startswith("g = ") and lines[2].endswith("r = z2 - z1")
+    assert f"{est.structure_.element.k3:.6g} r^3" in lines[2]
 
 
 @pytest.mark.parametrize("method", [NSI, SINDy])

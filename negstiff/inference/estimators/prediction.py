@@ -214,6 +214,37 @@ def equation_of(model, digits: int = 4, input_name: str = "base_acc") -> str:
     return f"{lhs.replace('+ -', '- ')} = {rhs}"
 
 
+def structure_equations(structure, digits: int = 4, input_name: str = "base_acc",
+                        force_dof: int | None = None) -> list[str]:  # fmt: skip
+    """A structure's equations of motion, one line per DOF (``m_i z_i'' + sum_j C_ij z_j' + sum_j K_ij z_j +- g =
+    input``, the element's force g on J and, opposite, on I), and g's law of r = z_J - z_I (the single DOF's form,
+    ``equation_of``); a force acts on ``force_dof`` (default: the element's J).
+    """
+    i_el, j_el = structure.place
+    el = structure.element
+    out = []
+    for i in range(structure.n_dof):
+        terms = [f"{structure.masses[i]:.{digits}g} z{i + 1}''"]
+        terms += [_term(float(c), f"z{j + 1}'", digits) for j, c in enumerate(structure.C[i]) if c]
+        terms += [_term(float(k), f"z{j + 1}", digits) for j, k in enumerate(structure.K[i]) if k]
+        if i + 1 == j_el:
+            terms.append(" + g")
+        elif i + 1 == i_el:
+            terms.append(" - g")
+        if input_name == "base_acc":
+            rhs = f"-{structure.masses[i]:.{digits}g} base_acc"
+        else:
+            rhs = "force" if i + 1 == (force_dof or j_el) else "0"
+        out.append(f"{terms[0]}{''.join(terms[1:])} = {rhs}".replace("+ -", "- "))
+    r = f"z{j_el}" + (f" - z{i_el}" if i_el else "")
+    law = (_term(el.k3, "r^3", digits) + _term(el.k2, "r^2", digits) + _term(-el.k1, "r", digits)
+           + _term(el.k0, "", digits) + _term(el.c, "r'", digits) + _term(el.c_nl, "r'|r'|", digits))  # fmt: skip
+    extra = "".join(f" + {name}({value if not isinstance(value, float) else f'{value:.{digits}g}'})"
+                    for name, value in dict(getattr(el, "extra", {}) or {}).items())  # fmt: skip
+    out.append(f"g = {law.strip().removeprefix('+ ')}{extra}, r = {r}")
+    return out
+
+
 class ModelPredictions:
     """``predict``, ``score``, ``simulate``, ``equations`` and ``print`` of a fitted ``model_`` (module
     docstring); mixed into every estimator (``base.Estimator``).
@@ -299,7 +330,11 @@ class ModelPredictions:
         """The fitted equation of motion, one line per DOF (pysindy's ``equations``): numbers to ``digits``
         significant figures, SI units, the contract's signs (``equation_of``).
         """
-        settings = getattr(self.__dict__.get("result_"), "settings", None) or {}
+        result = self.__dict__.get("result_")
+        settings = getattr(result, "settings", None) or {}
+        structure = getattr(result, "structure", None)
+        if structure is not None:  # a structure's: one line per DOF and its element's law
+            return structure_equations(structure, digits, settings.get("input", "base_acc"), settings.get("force_dof"))
         input_name = settings.get("input", "base_acc")
         return [equation_of(self.model_, digits, input_name)]  # type: ignore[attr-defined]
 
