@@ -169,6 +169,10 @@ def test_the_contract_holds_at_two_dofs(cls, two_dof_record, record):
     out = est.to_json()
     assert out["dofs"] == 2 and out["element_at"] == [1, 2] and set(out["modal"]) == {"minus", "plus"}
     assert est.structure_.n_dof == 2 and len(est.offsets_) == 2
+    # it predicts, scores and writes its equations as the structure it learned, not as its element alone
+    pred = est.predict(two_dof_record, window_s=0.25)
+    assert pred.z.shape[1] == 2 and math.isfinite(est.score(two_dof_record, window_s=0.25))
+    assert len(est.equations()) == 3 and est.equations()[-1].startswith("g = ")
     # kept through its JSON as at N = 1: the same result(), structure and channels' zeros
     again = assert_json_round_trip(est)
     assert canonical(again.structure_.to_dict()) == canonical(est.structure_.to_dict())
@@ -267,3 +271,5 @@ def test_the_contract_holds_at_every_n_and_record_kind(cls, n_dof, kind):
     assert est.fitted and repr(est).startswith(f"{cls.__name__}(")
     assert_json_round_trip(est)
     assert est.to_json().get("dofs", 1) == n_dof
+    pred = est.predict(rec, window_s=0.25)  # every channel's restarted runs (a single DOF's z alone)
+    assert (pred.z.shape[1] == n_dof if n_dof > 1 else pred.z.ndim == 2) and pred.score_percent >= 0

@@ -250,6 +250,22 @@ class ModelPredictions:
     docstring); mixed into every estimator (``base.Estimator``).
     """
 
+    def _structure(self):
+        """The structure a fit on a structure's record learned (``structure_``: NSI's, SINDy's, the discrepancy
+        workflow's, the posterior mean's) and each channel's zero (``offsets_``), or (None, None).
+        """
+        try:
+            structure = self.structure_
+        except AttributeError:  # a single DOF's fit (also NotFittedError), or a structure read through its sensors
+            return None, None
+        if structure is None:
+            return None, None
+        try:
+            offsets = self.offsets_
+        except AttributeError:
+            offsets = None
+        return structure, offsets
+
     def predict(self, record, window_s: float = 2.0) -> Prediction:
         """Restarted free runs of the fitted model over ``record`` (a ``Measurement`` or a path): the record
         cut into ``window_s`` windows, each simulated from the record's measured state at its start under
@@ -264,10 +280,9 @@ class ModelPredictions:
             raise InputError(f"predict(window_s={window_s!r}): a window is a positive number of seconds")
         rec = as_record(record, f"{type(self).__name__}.predict")
         # the whole model the fit learned: a structure's (its element's ``model_`` is a part of it), else ``model_``
-        result = vars(self).get("result_")
-        structure = getattr(result, "structure", None)
+        structure, offsets = self._structure()
         if structure is not None:
-            return structure_runs(structure, rec, float(window_s), getattr(result, "offsets_m", None))
+            return structure_runs(structure, rec, float(window_s), offsets)
         model = self.model_  # type: ignore[attr-defined]
         if hasattr(model, "initial_state"):  # a structure read through its sensors (``StateSpaceStructure``)
             return state_space_runs(model, rec, float(window_s))
@@ -294,8 +309,7 @@ class ModelPredictions:
         from negstiff.inference.record.measurement import Measurement
         from negstiff.models.simulator import simulate
 
-        result = vars(self).get("result_")
-        structure = getattr(result, "structure", None)
+        structure, offsets = self._structure()
         model = self.model_  # type: ignore[attr-defined]
         if hasattr(model, "initial_state"):  # a state-space model reads its start state off a record's stretch
             raise InputError(
@@ -308,7 +322,6 @@ class ModelPredictions:
 
             rec = as_record(input, f"{type(self).__name__}.simulate")
             zs, vs, _ = rec.channel_states(structure.place)
-            offsets = getattr(result, "offsets_m", None)
             o = np.zeros(rec.n_dof) if offsets is None else np.array(offsets, dtype=float)
             x0 = np.concatenate([zs[:, 0] - o, vs[:, 0]])[None]
             return simulate_structures(structure, rec.u[None], rec.dt, x0, input_kind=input_kind or rec.input_name,
@@ -330,9 +343,8 @@ class ModelPredictions:
         """The fitted equation of motion, one line per DOF (pysindy's ``equations``): numbers to ``digits``
         significant figures, SI units, the contract's signs (``equation_of``).
         """
-        result = self.__dict__.get("result_")
-        settings = getattr(result, "settings", None) or {}
-        structure = getattr(result, "structure", None)
+        settings = getattr(self.__dict__.get("result_"), "settings", None) or {}
+        structure, _ = self._structure()
         if structure is not None:  # a structure's: one line per DOF and its element's law
             return structure_equations(structure, digits, settings.get("input", "base_acc"), settings.get("force_dof"))
         input_name = settings.get("input", "base_acc")
