@@ -34,9 +34,10 @@ def frf_figure(res: dict[str, Any], curves: dict[str, np.ndarray], input_name: s
     return fig
 
 
-def frf_figure_dofs(res: dict[str, Any], curves: list[dict[str, np.ndarray]], input_name: str, title: str):
+def frf_figure_dofs(res: dict[str, Any], curves: list[dict[str, np.ndarray]], input_name: str, title: str,
+                    model: dict[str, Any] | None = None):  # fmt: skip
     """The FRF figure of a structure's record: |H1| from the input to every DOF, the coherence below, the merged
-    modes marked.
+    modes marked; ``model`` (``{"label", "curves": [{"f", "H"}, ...]}``): a model's FRF at each DOF, dashed.
     """
     import matplotlib
 
@@ -48,8 +49,13 @@ def frf_figure_dofs(res: dict[str, Any], curves: list[dict[str, np.ndarray]], in
     for i, c in enumerate(curves):
         f = c["f"]
         sel = (f >= lo) & (f <= hi)
-        a1.semilogy(f[sel], np.abs(c["H1"][sel]), label=f"z{i + 1}")
-        a2.plot(f[sel], c["coherence"][sel], label=f"z{i + 1}")
+        a1.semilogy(f[sel], np.abs(c["H1"][sel]), label=f"z{i + 1}", color=f"C{i}")
+        a2.plot(f[sel], c["coherence"][sel], label=f"z{i + 1}", color=f"C{i}")
+        if model is not None:
+            m = model["curves"][i]
+            inside = (m["f"] >= lo) & (m["f"] <= hi)
+            a1.semilogy(m["f"][inside], np.abs(m["H"][inside]), "--", color=f"C{i}", lw=1.0,
+                        label=model["label"] if i == 0 else None)  # fmt: skip
     for m in res["modes"]:
         a1.axvline(m["f_hz"], color="0.6", lw=0.8)
     a1.set_ylabel(f"|H1| [m per {'m/s^2' if input_name == 'base_acc' else 'N'}]")

@@ -310,7 +310,7 @@ def _preflight(rec, runs: list[Run]) -> dict[str, InputError]:
 def _plan(rec, chosen, forcing_hz, wells, seed, options) -> list[Run]:
     """Each chosen analysis as (name, title, run(record), check(record)), its estimator's parameters checked now."""
     from negstiff.inference.analysis.characterise import characterise, check_harmonic
-    from negstiff.inference.analysis.frf import check_frf, frf
+    from negstiff.inference.analysis.frf import check_frf
     from negstiff.inference.estimators.discrepancy import Discrepancy
     from negstiff.inference.estimators.nsi import NSI
     from negstiff.inference.estimators.posterior.core import Posterior
@@ -357,7 +357,8 @@ def _plan(rec, chosen, forcing_hz, wells, seed, options) -> list[Run]:
 
             runs.append((name, titles[name], run, check))
         elif name == "frf":
-            runs.append((name, "the frequency response", lambda r: frf(r, **options.get("frf", {})), check_frf))
+            runs.append((name, "the frequency response",
+                         lambda r: _frf_beside_models(r, fitted, options.get("frf", {})), check_frf))  # fmt: skip
         elif name == "interval":
             runs.append((name, "the identification's interval", lambda r: _interval(r, fitted), None))
         elif name == "backbone":
@@ -368,6 +369,28 @@ def _plan(rec, chosen, forcing_hz, wells, seed, options) -> list[Run]:
             runs.append((name, "the characterisation", lambda r: characterise(r, forcing_hz, wells or "auto"),
                          lambda r: check_harmonic(r, forcing_hz)))  # fmt: skip
     return runs
+
+
+def _frf_beside_models(rec, fitted: dict[str, Any], options: dict[str, Any]) -> dict[str, Any]:
+    """The record's FRFs (``frf``), with the underlying-linear FRF of NSI's state-space model where it was identified
+    (a structure read through its sensors): ``_model_frf``, each DOF's at its own frequencies within the model's band
+    and Nyquist, drawn over the measured H1 (the model against the data, the lab's first look).
+    """
+    from negstiff.inference.analysis.frf import frf
+
+    res = frf(rec, **options)
+    nsi = fitted.get("nsi")
+    model = vars(nsi).get("result_") if nsi is not None else None
+    model = getattr(model, "model", None)
+    if model is None or not hasattr(model, "initial_state") or "_curves" not in res:
+        return res
+    top = 0.45 / model.dt
+    per_dof = []
+    for k, c in enumerate(res["_curves"]):
+        f = np.asarray(c["f"])
+        keep = (f > 0) & (f < top)
+        per_dof.append({"f": f[keep], "H": model.frf(f[keep])[:, k]})
+    return {**res, "_model_frf": {"label": "NSI's state-space model", "curves": per_dof}}
 
 
 def _chosen_law(rec, fitted: dict[str, Any], damping: str) -> str:

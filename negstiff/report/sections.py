@@ -651,9 +651,11 @@ def _frf_dofs_section(res: dict[str, Any], label: str, title: str) -> Section:
         from .figures import frf_figure_dofs
 
         input_name = "base_acc" if "base_acc" in res["dofs"][0].get("response_per_input", "") else "force"
-        fig = frf_figure_dofs(res, curves, input_name, title or "FRFs")
+        model = res.get("_model_frf")
+        fig = frf_figure_dofs(res, curves, input_name, title or "FRFs", model)
         sec.figure(f"frf_{_slug(label or 'record')}", fig, "|H1| from the input to each DOF, the modes found marked; "
-                   "coherence below.")  # fmt: skip
+                   "coherence below" + (f"; dashed, {model['label']}'s underlying-linear FRF at each DOF"
+                                        if model else "") + ".")  # fmt: skip
     sec.table(["mode", "f [Hz]", "zeta [%]", "seen on"],
               [[i + 1, m["f_hz"], 100 * m["zeta"], ", ".join(f"z{d}" for d in m["seen_on"])]
                for i, m in enumerate(res["modes"])])  # fmt: skip
@@ -661,7 +663,7 @@ def _frf_dofs_section(res: dict[str, Any], label: str, title: str) -> Section:
         sec.warning(w)
     said = ", ".join(f"{m['f_hz']:.4g} Hz ({100 * m['zeta']:.3g} %)" for m in res["modes"]) or "no peak"
     sec.summary.append(f"The FRFs show {len(res['modes'])} mode(s): {said}.")
-    sec.json = {k: v for k, v in res.items() if k != "_curves"}
+    sec.json = {k: v for k, v in res.items() if not k.startswith("_")}
     return sec
 
 

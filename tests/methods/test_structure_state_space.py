@@ -350,7 +350,7 @@ def test_the_report_sets_the_model_beside_the_best_linear_model_of_its_order(rec
     path = write_csv(tmp_path / "gvt.csv", {"t": np.arange(rec.n) / FS, "force": rec.u,
                                             **{f"z{k + 1}": rec.channels[k] for k in range(3)}},
                      {"force_dof": 1, "element": "2-3"})  # fmt: skip
-    assert main(["report", str(path), "--only", "nsi", "-o", str(tmp_path / "rep"), "--quiet"]) == 0
+    assert main(["report", str(path), "--only", "nsi,frf", "-o", str(tmp_path / "rep"), "--quiet"]) == 0
     text = (tmp_path / "rep" / "index.md").read_text()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
@@ -361,6 +361,10 @@ def test_the_report_sets_the_model_beside_the_best_linear_model_of_its_order(rec
     assert "| units |" not in text and "| laws |" not in text
     # the stabilisation diagram and the model's FRF drawn: a PNG the page shows
     assert "](state_space_nsi.png)" in text and (tmp_path / "rep" / "state_space_nsi.png").stat().st_size > 10_000
+    # and the measured FRFs with the model's underlying-linear FRF over them (the model against the data); the
+    # arrays drawn are not in the results
+    assert "dashed, NSI's state-space model's underlying-linear FRF at each DOF" in text
+    assert "_model_frf" not in (tmp_path / "rep" / "results.json").read_text()
 
 
 def test_a_sweeps_tail_outside_the_identified_band_is_said_not_to_measure_the_model():
