@@ -242,11 +242,11 @@ def test_a_hammer_test_on_the_structure_sizes_the_joint():
 
 def test_a_hammer_test_read_by_accelerometers_sizes_the_joint(tmp_path):
     # the same hammer test (a hit every 2 s at mass 1) read by three accelerometers (0.1 % noise) through a file, as a
-    # lab's impact test is: the model's outputs are their accelerations, its five modes within 0.5 % and the
-    # joint's k3 within 3 % (measured: within 0.3 %; k3 -0.97 %, se 0.32 %), its held-out response predicted far
-    # better than by the best linear model of its order (8.8 % against 88 %). Through the accelerometers' double
-    # integrals as the outputs the same record gave k3 -102 % and a held-out error of 112 %. The lowest mode's
-    # damping comes out 1.85 % for 0.57 % (docs/limitations.md)
+    # lab's impact test is: the model's outputs are their accelerations, its five modes within 0.5 % and their
+    # damping within 25 %, the joint's k3 within 3 % (measured: within 0.03 % and 15 %; k3 -0.57 %), its held-out
+    # response predicted far better than by the best linear model of its order. Through the accelerometers' double
+    # integrals as the outputs the same record gave k3 -102 % and a held-out error of 112 %; undecimated (the
+    # Nyquist 2.47 times the band top) the lowest mode's damping came out 1.85 % for 0.57 %
     t = np.arange(int(40 * FS)) / FS
     f = np.zeros(t.size)
     rng = np.random.default_rng(2)
@@ -260,9 +260,10 @@ def test_a_hammer_test_read_by_accelerometers_sizes_the_joint(tmp_path):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         r = NSI(element="2-3").fit(load(write_csv(tmp_path / "hits.csv", cols, {"force_dof": 1}))).result_
-    f_true, _ = chain_modes()
+    f_true, zeta_true = chain_modes()
     assert r.settings["outputs"] == "acceleration" and len(r.modal["linear"]) == 5
-    assert all(abs(m.f_hz / q - 1) < 0.005 for m, q in zip(r.modal["linear"], f_true, strict=True))
+    for m, q, z in zip(r.modal["linear"], f_true, zeta_true, strict=True):
+        assert abs(m.f_hz / q - 1) < 0.005 and abs(m.zeta / z - 1) < 0.25, (m, q, z)
     k3, v = r.element["k3"], r.validation
     assert abs(k3["value"] / K3 - 1) < 0.03, k3
     assert v["diverged_windows"] == 0 and v["rms_percent"] < 0.5 * v["best_linear_rms_percent"], v
