@@ -37,7 +37,7 @@ from negstiff.models.laws import FeedbackBasis
 from .. import subspace
 from ._physical import identify_nsi
 from ._physical import stabilisation as structure_stabilisation
-from ._state_space import identify_state_space
+from ._state_space import choose_state_space_law, identify_state_space
 from ._well import (
     BASIS_NAMES,
     NSIError,
@@ -345,10 +345,8 @@ class NSI(StructureResults, Identifier):
         if rec.masses is None:
             # the masses unknown: the linear part a state-space model of the order the record shows, the element
             # sized through the measured driving point (``_state_space``), its basis the law's
-            if self.law == "auto":
-                raise InputError(f"{type(self).__name__}(law='auto'): a structure's element reads a named law "
-                                 f"({', '.join(laws.names('restoring'))}); no comparison yet")  # fmt: skip
-            self.result_ = identify_state_space(self, rec, at)
+            self.result_ = (choose_state_space_law(self, rec, at) if self.law == "auto"
+                            else identify_state_space(self, rec, at))  # fmt: skip
         elif self.law is not None:
             raise InputError(
                 f"{type(self).__name__}(law={self.law!r}): a structure with its masses reads the cubic element "

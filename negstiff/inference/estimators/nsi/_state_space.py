@@ -37,6 +37,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import warnings
 from typing import Any
 
 import numpy as np
@@ -492,6 +493,63 @@ def _nearest(modes: list[Mode], f_hz: float) -> Mode | None:
     """The mode of ``modes`` within ``F_TOL`` of ``f_hz`` (the nearest), or None."""
     near = [m for m in modes if abs(m.f_hz / f_hz - 1) < F_TOL]
     return min(near, key=lambda m: abs(m.f_hz - f_hz)) if near else None
+
+
+CANDIDATE_LAWS = ("cubic", "quintic", "septic")
+"""The restoring laws ``law="auto"`` compares on a structure read through its sensors: the polynomials, linear in
+their parameters (a shaped law's shape is fitted on a single DOF's record only)."""
+
+
+def choose_state_space_law(est, rec: Measurement, at: tuple[int, int]) -> StateSpaceIdentification:
+    """``NSI(law="auto")`` on a structure without masses: each of ``CANDIDATE_LAWS`` (with the estimator's damping
+    law) identified on the identification part less its last ``law_choice.SELECTION_FRACTION`` of the record, and
+    its restarted windows over that selection part (the held-out protocol, never the held-out tail) scored; a
+    candidate whose selection runs diverge, or whose element predicts no better than its linear part, is not
+    chosen. The least median window error wins; the chosen law is identified again on the whole identification part
+    and judged on the tail. The comparison is ``settings["law_choice"]``.
+    """
+    from types import SimpleNamespace
+
+    from negstiff.inference.steps.law_choice import SELECTION_FRACTION
+
+    n_id = int(round(rec.n * (1 - est.validation_fraction)))
+    n_sel = int(round(SELECTION_FRACTION * rec.n))
+    if n_id - n_sel < n_id // 2:
+        raise InputError(f"{rec.source}: too short to compare laws (the selection part would exceed the fit)")
+    ident = rec.segment(0, n_id)
+    rows = []
+    for law in CANDIDATE_LAWS:
+        part = SimpleNamespace(block_rows=est.block_rows, validation_fraction=n_sel / n_id, law=law,
+                               damping=est.damping)  # fmt: skip
+        row: dict[str, Any] = {"law": law, "damping": est.damping}
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")  # each candidate's notes; the chosen one's are said again
+                v = identify_state_space(part, ident, at).validation
+        except (InputError, ValueError, np.linalg.LinAlgError) as exc:
+            rows.append({**row, "problems": [" ".join(str(exc).split())]})
+            continue
+        problems = [f"{v['diverged_windows']} of its selection windows diverged"] if v["diverged_windows"] else []
+        if not v["rms_percent"] < v["linear_rms_percent"]:
+            problems.append("its element predicts the selection part no better than its linear part")
+        rows.append({**row, "median_window_percent": v["median_window_percent"], "rms_percent": v["rms_percent"],
+                     "windows": v["windows"], "problems": problems})  # fmt: skip
+    admissible = [r for r in rows if not r["problems"]]
+    if not admissible:
+        raise StateSpaceIdentificationError(
+            f"{rec.source}: no law passes on the selection part ("
+            + "; ".join(f"{r['law']}: {r['problems'][0]}" for r in rows)
+            + ")"
+        )
+    best = min(admissible, key=lambda r: (r["median_window_percent"], r["rms_percent"]))
+    chosen = SimpleNamespace(block_rows=est.block_rows, validation_fraction=est.validation_fraction, law=best["law"],
+                             damping=est.damping)  # fmt: skip
+    result = identify_state_space(chosen, rec, at)
+    choice = {"chosen": best["law"], "candidates": rows,
+              "selection": f"samples {n_id - n_sel}-{n_id} (the identification part's last "
+                           f"{100 * SELECTION_FRACTION:.0f} % of the record), each candidate fitted before it",
+              "criterion": "the least median window error over the selection part's restarted windows"}  # fmt: skip
+    return dataclasses.replace(result, settings={**result.settings, "law_choice": choice})
 
 
 def identify_state_space(est, rec: Measurement, at: tuple[int, int]) -> StateSpaceIdentification:
