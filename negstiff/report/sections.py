@@ -270,6 +270,12 @@ def structure_section(est, label: str = "") -> Section:
                    "the modes read (grey) and the order chosen (dashed). Right, the model's underlying-linear FRF "
                    "from the measured force to each sensor.")  # fmt: skip
         sec.table(["", "mode", "f [Hz]", "zeta [%]", "shape (by sensor)"], rows)
+        choice = settings.get("law_choice")
+        if choice:  # law="auto": the laws compared on the selection part
+            sec.text(f"The element's law, {choice['chosen']}, chosen by {choice['criterion']} ({choice['selection']}):")
+            sec.table(["law", "selection median window [%]", "selection rms [%]", "why not"],
+                      [[c["law"], c.get("median_window_percent"), c.get("rms_percent"), "; ".join(c["problems"][:1])]
+                       for c in choice["candidates"]])  # fmt: skip
         coefs = [[c, e["value"], e.get("se")] for c, e in j["element"].items() if isinstance(e, dict) and "value" in e]
         sec.table(["coefficient", "value", "standard error"], coefs)
         coefficients = {c: value for c, value, _ in coefs}

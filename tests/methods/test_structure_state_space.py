@@ -21,6 +21,7 @@ from negstiff.inference.estimators.nsi._state_space import accelerometer_noise, 
 from negstiff.inference.record.measurement import from_arrays
 from negstiff.models.state_space import element_basis
 from negstiff.models.structure import relative
+from negstiff.report.sections import structure_section
 
 FS = 1000.0
 MASSES = np.array([2.0, 1.5, 1.2, 1.0, 0.8])
@@ -308,6 +309,10 @@ def test_the_law_a_structures_record_asks_for_is_chosen_by_what_it_predicts(reco
     assert choice["chosen"] == "quintic" and r.model.restoring == "quintic"
     assert {c["law"]: bool(c["problems"]) for c in choice["candidates"]}["cubic"]  # its runs diverge
     assert cubic.settings["law_choice"]["chosen"] == "cubic"
+    # the report says the choice and its comparison
+    blocks = structure_section(r).blocks
+    assert any(kind == "p" and "The element's law, quintic, chosen by" in str(b) for kind, b in blocks), blocks
+    assert any(kind == "table" and b[0][0] == "law" and len(b[1]) == 3 for kind, b in blocks), blocks
 
 
 def test_a_base_excited_structure_without_masses_is_refused_before_the_work(record):
