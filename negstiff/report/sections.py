@@ -186,6 +186,24 @@ def _frame_words(resp: dict) -> str:
     return f"; z's frame pinned by {method}"
 
 
+def _accelerometer_floor(rec) -> tuple[float, list[float]] | None:
+    """Where NSI reads a structure through its accelerometers (no masses, every sensor an accelerometer: its outputs
+    the accelerations), each accelerometer's white noise (as the loader measured it) in % of its acceleration's rms,
+    and their pooled value (as the held-out errors are pooled); else None.
+    """
+    from negstiff.inference.estimators.nsi._state_space import output_kind, sensor_channels, sensor_outputs
+
+    if rec.n_dof < 2 or rec.masses is not None or output_kind(rec) != "acceleration":
+        return None
+    chans = sensor_channels(rec)
+    noise = [float(chans[k].get("acceleration_noise_m_s2") or np.nan) for k in range(1, rec.n_dof + 1)]
+    if not np.all(np.isfinite(noise)):
+        return None
+    acc = sensor_outputs(rec, "acceleration")
+    per = [100 * n / float(np.std(acc[:, k])) for k, n in enumerate(noise)]
+    return float(np.sqrt(np.mean(np.square(per)))), per
+
+
 def record_section(rec, label: str = "") -> Section:
     """The record as negstiff read it: time base, sensor, derivation, frame and its anchor, warnings."""
     info = rec.info
@@ -223,11 +241,17 @@ def record_section(rec, label: str = "") -> Section:
     ]  # fmt: skip
     if rec.n_dof > 1:
         rows.insert(4, ["degrees of freedom", rec.n_dof])
+    acc_floor = _accelerometer_floor(rec)
+    if acc_floor is not None:  # NSI's outputs are the accelerations: their floor beside its errors
+        rows.append(["accelerometers' noise floor [% of rms acceleration]",
+                     f"{fmt(acc_floor[0], 3)} (by sensor: {', '.join(fmt(x, 3) for x in acc_floor[1])})"])  # fmt: skip
     sec.table(["", "value"], rows)
     said = list(dict.fromkeys([*info.get("warnings", []), *resp.get("warnings", [])]))  # each once: a structure's
     for w in said:  # sensors of one kind say the same
         sec.warning(w)
     sec.heldout["the record's sensor-noise floor"] = noise_pct
+    if acc_floor is not None:
+        sec.heldout["the accelerometers' noise floor [% of rms acceleration]"] = acc_floor[0]
     sec.summary.append(
         f"Record {Path(rec.source).name}: {rec.duration:.4g} s at {rec.fs:g} Hz, input {rec.input_name}, response "
         f"{resp.get('measured') or 'z'}" + (f" ({resp['derived']})" if resp.get("derived") else "")

@@ -21,7 +21,7 @@ from negstiff.inference.estimators.nsi._state_space import accelerometer_noise, 
 from negstiff.inference.record.measurement import from_arrays
 from negstiff.models.state_space import element_basis
 from negstiff.models.structure import relative
-from negstiff.report.sections import structure_section
+from negstiff.report.sections import record_section, structure_section
 
 FS = 1000.0
 MASSES = np.array([2.0, 1.5, 1.2, 1.0, 0.8])
@@ -206,6 +206,21 @@ def test_accelerometers_give_the_same_modes(accelerometer_fit):
     assert r.settings["element_slow_part"]["below_hz"] > 1.0  # the element's slow part from its quasi-static law
     assert len(r.modal["linear"]) == 5
     assert all(abs(m.f_hz / f - 1) < 0.005 for m, f in zip(r.modal["linear"], f_true, strict=True))
+
+
+def test_the_report_sets_the_accelerometers_noise_beside_errors_of_accelerations(record, tmp_path):
+    # NSI's outputs are the accelerations, so its held-out errors are shares of their rms: the report's floor beside
+    # them is the accelerometers' own noise in the same measure (written at 0.1 % of each channel's rms; the loader's
+    # estimate of it read within a factor 1.5), not z's
+    rec, acc = record
+    cols = {"t": np.arange(rec.n) / FS, "force": rec.u, **{f"y{k + 1}_acc": acc[k] for k in range(3)}}
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        read = load(write_csv(tmp_path / "acc.csv", cols, {"force_dof": 1}))
+    sec = record_section(read)
+    floor = sec.heldout["the accelerometers' noise floor [% of rms acceleration]"]
+    assert 100 * ACC_NOISE / 1.5 < floor < 1.5 * 100 * ACC_NOISE, floor
+    assert "the accelerometers' noise floor [% of rms acceleration]" not in record_section(rec).heldout  # lasers
 
 
 def test_accelerometers_size_the_joint(accelerometer_fit):
