@@ -379,9 +379,7 @@ def _frf_beside_models(rec, fitted: dict[str, Any], options: dict[str, Any]) -> 
     from negstiff.inference.analysis.frf import frf
 
     res = frf(rec, **options)
-    nsi = fitted.get("nsi")
-    model = vars(nsi).get("result_") if nsi is not None else None
-    model = getattr(model, "model", None)
+    model = getattr(fitted.get("nsi"), "model_", None)  # a fit in ``fitted`` has one
     if model is None or not hasattr(model, "initial_state") or "_curves" not in res:
         return res
     top = 0.45 / model.dt

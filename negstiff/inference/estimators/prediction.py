@@ -158,7 +158,7 @@ def state_space_runs(model, rec, window_s: float) -> Prediction:
     identification read its own (``model.cut_hz``, its rate decimated to the model's). Another record of the
     same structure (another level, a validation record) is read so: the benchmarks' way of judging a model.
     """
-    from negstiff.inference.estimators.nsi._state_space import Sampling, read_record, window_run
+    from negstiff.inference.estimators.nsi._state_space import Sampling, read_record, window_plan, window_run
 
     q = rec.fs * model.dt
     if model.cut_hz is None or rec.input_name != "force" or rec.n_dof != model.n_sensors or not (
@@ -171,8 +171,8 @@ def state_space_runs(model, rec, window_s: float) -> Prediction:
         )
     sampling = Sampling(model.output, rec.fs, model.cut_hz, int(round(q)))
     u, y, r, vr = read_record(rec, model.at, sampling)
-    n_win = max(int(round(window_s * rec.fs / sampling.q)), 4 * model.order)
-    starts = np.arange(n_win, u.size - n_win + 1, n_win)
+    n_win, plan = window_plan(model, u.size, rec.fs / sampling.q, window_s)
+    starts = np.array(plan, dtype=int)
     if not starts.size:
         raise InputError(f"{rec.source}: shorter than two windows of {n_win * sampling.q / rec.fs:.3g} s (the first "
                          "is the stretch the start state is read from)")  # fmt: skip
@@ -201,17 +201,26 @@ def equation_of(model, digits: int = 4, input_name: str = "base_acc") -> str:
     A ``Device``: its geometric restoring force named with its E and alpha.
     """
     m = float(model.m)
-    lhs = f"{m:.{digits}g} z''"
-    lhs += _term(model.c, "z'", digits) + _term(model.c_nl, "z'|z'|", digits)
-    if getattr(model, "kind", "") == "device":
-        lhs += f" + K_device(z; E={model.E:.{digits}g} Pa, alpha={model.alpha_deg:.{digits}g} deg)"
-    else:
-        lhs += _term(model.k3, "z^3", digits) + _term(model.k2, "z^2", digits) + _term(-model.k1, "z", digits)
-        lhs += _term(model.k0, "", digits)
-    for name, value in dict(getattr(model, "extra", {}) or {}).items():
-        lhs += f" + {name}({value if not isinstance(value, float) else f'{value:.{digits}g}'})"
+    restoring, damping, extra = _law_terms(model, "z", digits)
+    lhs = f"{m:.{digits}g} z''" + damping + restoring + extra
     rhs = f"-{m:.{digits}g} base_acc" if input_name == "base_acc" else "force"
     return f"{lhs.replace('+ -', '- ')} = {rhs}"
+
+
+def _law_terms(model, x: str, digits: int) -> tuple[str, str, str]:
+    """The terms of ``model``'s law in the variable ``x`` (z, or an element's r): its restoring force (k3 x^3 + k2 x^2
+    - k1 x + k0, or a ``Device``'s geometric force named with its E and alpha), its damping (c x' + c_nl x'|x'|) and
+    its extra effects, each string starting with its sign.
+    """
+    if getattr(model, "kind", "") == "device":
+        restoring = f" + K_device({x}; E={model.E:.{digits}g} Pa, alpha={model.alpha_deg:.{digits}g} deg)"
+    else:
+        restoring = (_term(model.k3, f"{x}^3", digits) + _term(model.k2, f"{x}^2", digits)
+                     + _term(-model.k1, x, digits) + _term(model.k0, "", digits))  # fmt: skip
+    damping = _term(model.c, f"{x}'", digits) + _term(model.c_nl, f"{x}'|{x}'|", digits)
+    extra = "".join(f" + {name}({value if not isinstance(value, float) else f'{value:.{digits}g}'})"
+                    for name, value in dict(getattr(model, "extra", {}) or {}).items())  # fmt: skip
+    return restoring, damping, extra
 
 
 def structure_equations(structure, digits: int = 4, input_name: str = "base_acc",
@@ -221,7 +230,6 @@ def structure_equations(structure, digits: int = 4, input_name: str = "base_acc"
     ``equation_of``); a force acts on ``force_dof`` (default: the element's J).
     """
     i_el, j_el = structure.place
-    el = structure.element
     out = []
     for i in range(structure.n_dof):
         terms = [f"{structure.masses[i]:.{digits}g} z{i + 1}''"]
@@ -237,11 +245,8 @@ def structure_equations(structure, digits: int = 4, input_name: str = "base_acc"
             rhs = "force" if i + 1 == (force_dof or j_el) else "0"
         out.append(f"{terms[0]}{''.join(terms[1:])} = {rhs}".replace("+ -", "- "))
     r = f"z{j_el}" + (f" - z{i_el}" if i_el else "")
-    law = (_term(el.k3, "r^3", digits) + _term(el.k2, "r^2", digits) + _term(-el.k1, "r", digits)
-           + _term(el.k0, "", digits) + _term(el.c, "r'", digits) + _term(el.c_nl, "r'|r'|", digits))  # fmt: skip
-    extra = "".join(f" + {name}({value if not isinstance(value, float) else f'{value:.{digits}g}'})"
-                    for name, value in dict(getattr(el, "extra", {}) or {}).items())  # fmt: skip
-    out.append(f"g = {law.strip().removeprefix('+ ')}{extra}, r = {r}")
+    restoring, damping, extra = _law_terms(structure.element, "r", digits)
+    out.append(f"g = {(restoring + damping).strip().removeprefix('+ ')}{extra}, r = {r}")
     return out
 
 

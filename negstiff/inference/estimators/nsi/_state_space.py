@@ -434,6 +434,15 @@ def read_record(rec: Measurement, at: tuple[int, int], sampling: Sampling, r: np
     return sampling.apply(rec.u), y, r[:: sampling.q], vr[:: sampling.q]
 
 
+def window_plan(model: StateSpaceStructure, n: int, fs: float, window_s: float, start: int = 0) -> tuple[int, range]:
+    """The restarted windows over samples [start, n) of a record read at ``fs`` (the model's rate): their length
+    (``window_s``, at least four times the model's order) and their starts, the first a window in (the stretch
+    before each is where its start state is read, ``window_run``).
+    """
+    n_win = max(int(round(window_s * fs)), 4 * model.order)
+    return n_win, range(max(start, n_win), n - n_win + 1, n_win)
+
+
 def window_run(model: StateSpaceStructure, element: bool, u, y, r, vr, s0: int, n_win: int):
     """The model's free run over the window [s0, s0 + n_win) from the state its least squares reads off the stretch
     of the same length before it (``StateSpaceStructure.initial_state``): (outputs, diverged).
@@ -450,8 +459,8 @@ def _held_out(model: StateSpaceStructure, rec: Measurement, start: int, window_s
     reads them), each window's start state read by the model run in it from the stretch before.
     """
     u, y, r, vr = read_record(rec, model.at, sampling, r)
-    fs, start, n = rec.fs / sampling.q, -(-start // sampling.q), u.size
-    n_win = max(int(round(window_s * fs)), 4 * model.order)
+    fs = rec.fs / sampling.q
+    n_win, starts = window_plan(model, u.size, fs, window_s, -(-start // sampling.q))
     out: dict[str, Any] = {"window_s": n_win / fs, "starts_s": []}
     runs = {"": (model, True), "linear_": (model, False)}
     if linear is not None:
@@ -459,7 +468,7 @@ def _held_out(model: StateSpaceStructure, rec: Measurement, start: int, window_s
     errs: dict[str, list[float]] = {key: [] for key in runs}
     scale = []
     diverged = dict.fromkeys(runs, 0)
-    for s0 in range(max(start, n_win), n - n_win + 1, n_win):
+    for s0 in starts:
         out["starts_s"].append(s0 / fs)
         seg = y[:, s0 : s0 + n_win]
         scale.append(((seg - seg.mean(axis=1, keepdims=True)) ** 2).sum())
@@ -479,14 +488,16 @@ def _held_out(model: StateSpaceStructure, rec: Measurement, start: int, window_s
     return out
 
 
-def driving_points(model: StateSpaceStructure, modes: list[Mode]) -> list[int]:
-    """The sensors (1-based) whose FRF to the force reads as a driving point's: a structure's compliance at the
-    point the force acts on has a negative imaginary part at every mode (its residues phi_p^2 / (2 j m_r w_r), one
-    sign), another point's changes sign with the modes' shapes. On the F-16 benchmark's record with the force at
-    sensor 1, sensor 1 alone (the joint's sensors flip at 12.3 Hz); on the five-mass chain, sensor 1 alone.
+def driving_point_misses(model: StateSpaceStructure, modes: list[Mode]) -> dict[int, list[float]]:
+    """Each sensor's (1-based) modes [Hz] at which its FRF to the force does not read as a driving point's: a
+    structure's compliance at the point the force acts on has a negative imaginary part at every mode (its residues
+    phi_p^2 / (2 j m_r w_r), one sign), another point's changes sign with the modes' shapes; a driving point's list
+    is empty. On the F-16 benchmark's record with the force at sensor 1, sensor 1's alone (the joint's sensors flip
+    at 12.3 Hz); on the five-mass chain, sensor 1's alone.
     """
-    H = model.frf(np.array([m.f_hz for m in modes]))  # (modes, sensors)
-    return [k + 1 for k in range(H.shape[1]) if np.all(H[:, k].imag < 0)]
+    f = np.array([m.f_hz for m in modes])
+    H = model.frf(f)  # (modes, sensors)
+    return {k + 1: f[~(H[:, k].imag < 0)].tolist() for k in range(H.shape[1])}
 
 
 def _nearest(modes: list[Mode], f_hz: float) -> Mode | None:
@@ -597,7 +608,8 @@ def identify_state_space(est, rec: Measurement, at: tuple[int, int]) -> StateSpa
         raise StateSpaceIdentificationError(f"{rec.source}: the order-{order} model holds none of the stable modes")
     band = (0.5 * modes[0].f_hz, min(1.5 * modes[-1].f_hz, f_max))
     mu, quality = _coefficients(model, p, band)
-    looks_driven = driving_points(model, modes)
+    misses = driving_point_misses(model, modes)
+    looks_driven = [k for k, off in misses.items() if not off]
     # batch means: each block's own fit at the chosen order, about the same r*
     edges = np.linspace(0, n_id, BLOCKS + 1).round().astype(int)
     per_block: list[np.ndarray] = []
@@ -675,9 +687,8 @@ def identify_state_space(est, rec: Measurement, at: tuple[int, int]) -> StateSpa
     H = model.frf(freqs)
     lines = [f"{rec.source}: the element's {n} is poorly determined (|Im/Re| {quality[j]:.2g} of its FRF ratio)"
              for j, n in enumerate(names) if quality[j] > QUALITY_WARNING and abs(mu[j]) > 2 * se[j]]  # fmt: skip
-    if p not in looks_driven:
-        at_modes = model.frf(np.array([mode.f_hz for mode in modes]))[:, p - 1]
-        off = [f"{mode.f_hz:.3g}" for mode, h in zip(modes, at_modes, strict=True) if not h.imag < 0]
+    if misses[p]:
+        off = [f"{f:.3g}" for f in misses[p]]
         there = f"; sensor {', '.join(map(str, looks_driven))}'s does: is the force there?" if looks_driven else ""
         lines.append(
             f"{rec.source}: the force is said to act at sensor {p}, but its FRF does not read as a driving point's "
