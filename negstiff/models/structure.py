@@ -445,11 +445,10 @@ def simulate_structures(
         place=unique[0].place, store_velocity=store_velocity, z_limit=z_limit, v_limit=v_limit, threads=threads,
         hook=hook,
     )  # fmt: skip
-    t = np.arange(n) * dt
     return SimulationResult(
-        t,
         np.transpose(oz, (2, 1, 0)),
         None if ov is None else np.transpose(ov, (2, 1, 0)),
         status,
         np.where(fail >= 0, fail * dt, np.nan),
+        dt,
     )
