@@ -31,14 +31,15 @@ JIT: dict[str, Any] = {"cache": True, "nogil": True, "error_model": "numpy"}  # 
 
 
 @numba.njit(inline="always", **JIT)
-def force(kind, coulomb, z, v, q):
+def force(device, coulomb, z, v, q):
     """Total non-inertial force D + K + extra [N] for one member's parameter tuple ``q``.
 
     polynomial: q[1..4] = k0, k1, k2, k3; device: q[1] = k_f, q[2] = L cos(alpha), q[3] = sin(alpha),
-    q[4] = D0, q[5] = g (exact rod-frame geometry; NaN where the rods cannot reach z). ``kind`` (a literal) and
-    ``coulomb`` (None: no smoothed sign) are constants of each kernel (``_integrate``), so their branches vanish.
+    q[4] = D0, q[5] = g (exact rod-frame geometry; NaN where the rods cannot reach z). ``device`` (None: the
+    polynomial) and ``coulomb`` (None: no smoothed sign) are constants of each kernel (``_integrate``), so their
+    branches vanish.
     """
-    if kind == KIND_POLYNOMIAL:
+    if device is None:
         k = ((q[4] * z + q[3]) * z - q[2]) * z + q[1]
     else:
         bb = q[2] - z * q[3]
@@ -105,12 +106,12 @@ def member_tables(p, ts):
 
 
 @numba.njit(inline="always", **JIT)
-def total_force(kind, coulomb, generic, table, z, v, q, p, b, mono, ts, tab):
+def total_force(device, coulomb, generic, table, z, v, q, p, b, mono, ts, tab):
     """``force`` plus, in the kernels compiled with ``generic`` (not None), the extra monomial rows, and in those
     compiled with ``table``, the shaped parts' table (``ts`` its first row in ``p``, -1: none; ``tab`` the members'
     tables, ``member_tables``).
     """
-    f = force(kind, coulomb, z, v, q)
+    f = force(device, coulomb, z, v, q)
     if generic is not None:
         f += monomials(z, v, p, b, mono)
     if table is not None:  # a member without a table (ts -1) reads a table of zeros: a branch on ts here, in the stage
@@ -177,12 +178,12 @@ def _column(q, b):
 
 
 @numba.njit(inline="always", **JIT)
-def converted(p, kind):
+def converted(p, device):
     """The parameter array with the device's angle rows turned into L cos(a), sin(a), once per call (not per step);
     ``_column`` reads one member's tuple from it.
     """
     q = p.copy()
-    if kind == KIND_DEVICE:
+    if device is not None:
         for b in range(p.shape[1]):
             q[2, b] = p[2, b] * math.cos(p[3, b])
             q[3, b] = math.sin(p[3, b])
@@ -190,8 +191,8 @@ def converted(p, kind):
 
 
 @numba.njit(inline="always", **JIT)
-def _accelerations(kind, coulomb, generic, table, extra, linear, q, mono, ts, tab, ei, ej, minv, lk, lc, zs, vs, w, ur,
-                   scratch, acc, hook):  # fmt: skip
+def _accelerations(device, coulomb, generic, table, extra, linear, q, mono, ts, tab, ei, ej, minv, lk, lc, zs, vs, w,
+                   ur, scratch, acc, hook):  # fmt: skip
     """Every member's accelerations at one Runge-Kutta stage, one loop over the batch per operation (the batch is
     the inner loop everywhere, which is what LLVM vectorises): the element's force law on the relative motion r
     of DOF ``ej`` and DOF ``ei`` (-1: the base), plus the extra hook; the linear structure ``lk``, ``lc``
@@ -211,7 +212,7 @@ def _accelerations(kind, coulomb, generic, table, extra, linear, q, mono, ts, ta
             r[b] = zs[ej, b]
             rv[b] = vs[ej, b]
     for b in range(nb):  # vectorised over the batch: the table's look-up is a loop of its own (a gather)
-        f[b] = total_force(kind, coulomb, generic, None, r[b], rv[b], _column(q, b), q, b, mono, ts, tab)
+        f[b] = total_force(device, coulomb, generic, None, r[b], rv[b], _column(q, b), q, b, mono, ts, tab)
     if table is not None:
         for b in range(nb):
             f[b] += tabled(r[b], tab, b)
@@ -245,7 +246,7 @@ def _accelerations(kind, coulomb, generic, table, extra, linear, q, mono, ts, ta
 
 
 @numba.njit(inline="always", **JIT)
-def _fused_step(kind, coulomb, generic, table, extra, q, mono, ts, tab, im, h, z, v, wa, wm, wb, ra, rm, rb, hook,
+def _fused_step(device, coulomb, generic, table, extra, q, mono, ts, tab, im, h, z, v, wa, wm, wb, ra, rm, rb, hook,
                 scratch):  # fmt: skip
     """One Runge-Kutta step of every member of one DOF on the base without a linear structure (the single-DOF
     model): ``_integrate``'s stage-wise step with its four stages fused in one loop over the batch, the same
@@ -261,7 +262,7 @@ def _fused_step(kind, coulomb, generic, table, extra, q, mono, ts, tab, im, h, z
         zs, vs = zb, vb
         a1 = a2 = a3 = a4 = v2 = v3 = v4 = 0.0
         for s in range(4):  # one call site of the force law (each inlined copy is compile time; LLVM unrolls this)
-            f = total_force(kind, coulomb, generic, table, zs, vs, qb, q, b, mono, ts, tab)
+            f = total_force(device, coulomb, generic, table, zs, vs, qb, q, b, mono, ts, tab)
             if extra is not None:
                 f += extra_term(zs, vs, ra[b] if s == 0 else (rb[b] if s == 3 else rm[b]), hw, ha, hzc, hvc, huc, hgz,
                                 hgv, hgu, bz, bv)  # fmt: skip
@@ -288,8 +289,8 @@ def _fused_step(kind, coulomb, generic, table, extra, q, mono, ts, tab, im, h, z
 
 
 @numba.njit(**JIT)
-def _integrate(kind, coulomb, generic, table, extra, fused, p, mono, ts, ei, ej, minv, lk, lc, gain, u, uidx, dt, nsub,
-               z0, v0, z_limit, v_limit, out_z, out_v, store_v, status, fail_step, hook):  # fmt: skip
+def _integrate(device, coulomb, generic, table, extra, fused, stagewise, p, mono, ts, ei, ej, minv, lk, lc, gain, u,
+               uidx, dt, nsub, z0, v0, z_limit, v_limit, out_z, out_v, store_v, status, fail_step, hook):  # fmt: skip
     """RK4 of B systems of N degrees of freedom over the T - 1 sample intervals of each member's input row
     ``u[uidx[b]]`` (state z, z' of each DOF, relative to the base): the package's one Runge-Kutta loop, every
     simulation of negstiff runs here, the single-DOF model as N = 1 (one DOF on the base, no linear structure).
@@ -305,16 +306,17 @@ def _integrate(kind, coulomb, generic, table, extra, fused, p, mono, ts, ei, ej,
     ``extra`` (a staged input) adds the hook ``extra_term`` with its weights and bumps (``hook``: w, a, the centres
     in z, z', u and each grid's ``grid_constants``) to the element's force.
 
-    ``fused``: the fused step of one DOF on the base without a linear structure (``_fused_step``), else the
-    stage-wise loops of any structure; the caller chooses (``simulator.integrate``). The flags are constants of the
-    kernel calling this, so a kernel compiles only the code it runs: ``kind`` a literal (``numba.literally``), the
-    others None (off) or 1 (on), tested as ``flag is not None``. numba's dead-branch pruning resolves an argument's
-    None before it types and inlines anything, while a branch on a literal's value it leaves to LLVM: with the flags
-    literal booleans every kernel typed, inlined and lowered both steps and every optional term (the 18 kernels
-    compiled in 141 s on an empty cache, the polynomial's fused kernel in 6.8-8.2 s; with None for off, 99.5 s and
-    4.0-4.3 s, at the same speed, a 300 s record in 11.5 ms). The stage-wise kernels still compile in 6.5-7.8 s.
+    ``fused``: the fused step of one DOF on the base without a linear structure (``_fused_step``); ``stagewise``: the
+    stage-wise loops of any structure; one of the two, the caller chooses (``simulator.integrate``). The seven flags
+    (``device``: the rod frame's exact geometry, else the polynomial) are None (off) or 1 (on), so each combination
+    is a signature of its own, compiled once and cached (``kernel`` chooses them). numba's dead-branch pruning
+    resolves an argument's None before it types and inlines anything, so a branch under a flag that is None is
+    never compiled; an int argument's branch it keeps (hence a flag for each of the two steps: under one flag's
+    None and not-None both steps were compiled, 4.6 s against 2.6 s). Called directly from Python, not through a
+    compiled wrapper per combination: a wrapper linked and optimised the loop's code a second time (the
+    polynomial's kernel compiled in 3.1 s through its wrapper), and a literal argument (``numba.literally``) made
+    every call from Python retype the loop (2 s a call).
     """
-    numba.literally(kind)
     nb = p.shape[1]
     nd = minv.shape[0]
     n = out_z.shape[0]
@@ -326,7 +328,7 @@ def _integrate(kind, coulomb, generic, table, extra, fused, p, mono, ts, ei, ej,
                 if lk[d, e, b] != 0.0 or lc[d, e, b] != 0.0:
                     linear = True
     h = dt / nsub
-    q = converted(p, kind)
+    q = converted(p, device)
     tab = member_tables(p, ts)
     if fused is not None and (nd != 1 or ei >= 0 or linear):
         raise ValueError("the fused step runs one DOF on the base without a linear structure")
@@ -388,41 +390,41 @@ def _integrate(kind, coulomb, generic, table, extra, fused, p, mono, ts, ei, ej,
                         wm[d, b] = ua[d, b] + fm * du
                         wb[d, b] = ua[d, b] + fb * du
             if fused is not None:
-                _fused_step(kind, coulomb, generic, table, extra, q, mono, ts, tab, minv[0], h, z[0], v[0], wa[0],
+                _fused_step(device, coulomb, generic, table, extra, q, mono, ts, tab, minv[0], h, z[0], v[0], wa[0],
                             wm[0], wb[0], ra, rm, rb, hook, scratch)  # fmt: skip
-                continue
-            # the four stages through one call site: numba inlines a function by copying its IR, and four copies of
-            # the stage (each with the force law inlined) took minutes to compile; with one, a kernel compiles in ~9 s
-            for s in range(4):
-                if s == 0:
-                    zs, vs, w, ur, acc = z, v, wa, ra, a1
-                elif s == 1:
-                    zs, vs, w, ur, acc = zt, v2, wm, rm, a2
-                elif s == 2:
-                    zs, vs, w, ur, acc = zt, v3, wm, rm, a3
-                else:
-                    zs, vs, w, ur, acc = zt, vt, wb, rb, a4
-                _accelerations(kind, coulomb, generic, table, extra, linear, q, mono, ts, tab, ei, ej, minv, lk, lc,
-                               zs, vs, w, ur, scratch, acc, hook)  # fmt: skip
-                if s == 0:
-                    for d in range(nd):
-                        for b in range(nb):
-                            zt[d, b] = z[d, b] + 0.5 * h * v[d, b]
-                            v2[d, b] = v[d, b] + 0.5 * h * a1[d, b]
-                elif s == 1:
-                    for d in range(nd):
-                        for b in range(nb):
-                            zt[d, b] = z[d, b] + 0.5 * h * v2[d, b]
-                            v3[d, b] = v[d, b] + 0.5 * h * a2[d, b]
-                elif s == 2:
-                    for d in range(nd):
-                        for b in range(nb):
-                            zt[d, b] = z[d, b] + h * v3[d, b]
-                            vt[d, b] = v[d, b] + h * a3[d, b]
-            for d in range(nd):
-                for b in range(nb):
-                    z[d, b] = z[d, b] + h / 6.0 * (v[d, b] + 2.0 * v2[d, b] + 2.0 * v3[d, b] + vt[d, b])
-                    v[d, b] = v[d, b] + h / 6.0 * (a1[d, b] + 2.0 * a2[d, b] + 2.0 * a3[d, b] + a4[d, b])
+            if stagewise is not None:
+                # the four stages through one call site: numba inlines a function by copying its IR, and four copies
+                # of the stage (each with the force law inlined) took minutes to compile; with one, ~9 s
+                for s in range(4):
+                    if s == 0:
+                        zs, vs, w, ur, acc = z, v, wa, ra, a1
+                    elif s == 1:
+                        zs, vs, w, ur, acc = zt, v2, wm, rm, a2
+                    elif s == 2:
+                        zs, vs, w, ur, acc = zt, v3, wm, rm, a3
+                    else:
+                        zs, vs, w, ur, acc = zt, vt, wb, rb, a4
+                    _accelerations(device, coulomb, generic, table, extra, linear, q, mono, ts, tab, ei, ej, minv, lk,
+                                   lc, zs, vs, w, ur, scratch, acc, hook)  # fmt: skip
+                    if s == 0:
+                        for d in range(nd):
+                            for b in range(nb):
+                                zt[d, b] = z[d, b] + 0.5 * h * v[d, b]
+                                v2[d, b] = v[d, b] + 0.5 * h * a1[d, b]
+                    elif s == 1:
+                        for d in range(nd):
+                            for b in range(nb):
+                                zt[d, b] = z[d, b] + 0.5 * h * v2[d, b]
+                                v3[d, b] = v[d, b] + 0.5 * h * a2[d, b]
+                    elif s == 2:
+                        for d in range(nd):
+                            for b in range(nb):
+                                zt[d, b] = z[d, b] + h * v3[d, b]
+                                vt[d, b] = v[d, b] + h * a3[d, b]
+                for d in range(nd):
+                    for b in range(nb):
+                        z[d, b] = z[d, b] + h / 6.0 * (v[d, b] + 2.0 * v2[d, b] + 2.0 * v3[d, b] + vt[d, b])
+                        v[d, b] = v[d, b] + h / 6.0 * (a1[d, b] + 2.0 * a2[d, b] + 2.0 * a3[d, b] + a4[d, b])
         bad = False
         for d in range(nd):
             for b in range(nb):
@@ -440,7 +442,7 @@ def _integrate(kind, coulomb, generic, table, extra, fused, p, mono, ts, ei, ej,
                 if alive[b] and not ok:
                     alive[b] = False
                     fail_step[b] = k + 1
-                    status[b] = STATUS_GEOMETRY if (kind == KIND_DEVICE and nonfinite) else STATUS_DIVERGED
+                    status[b] = STATUS_GEOMETRY if (device is not None and nonfinite) else STATUS_DIVERGED
                 if not alive[b]:
                     for d in range(nd):
                         z[d, b] = math.nan
@@ -459,184 +461,30 @@ _NO_V = np.zeros(0)
 """The extra force hook's arguments in the kernels without it: empty, never read (``extra`` is False)."""
 
 
-# One compiled kernel per (restoring-force kind, smoothed sign present, extra monomials present, extra hook): the
-# flags are constants inside each, so the batch loops have no data-dependent branches. (A factory of closures
-# would repeat less, but numba's on-disk cache cannot tell such closures apart.)
-# fmt: off
-@numba.njit(**JIT)
-def _kernel_poly(p, mono, ts, ei, ej, minv, lk, lc, gain, u, uidx, dt, nsub, z0, v0, zl, vl, oz, ov, sv, st, fs):
-    return _integrate(KIND_POLYNOMIAL, None, None, None, None, 1, p, mono, ts, ei, ej, minv, lk, lc, gain, u,
-                      uidx, dt, nsub, z0, v0, zl, vl, oz, ov, sv, st, fs,
-                      (_NO_W, _NO_V, _NO_V, _NO_V, _NO_V, _NO_V, _NO_V, _NO_V))
-
-
-@numba.njit(**JIT)
-def _kernel_poly_staged(p, mono, ts, ei, ej, minv, lk, lc, gain, u, uidx, dt, nsub, z0, v0, zl, vl, oz, ov, sv, st, fs):
-    return _integrate(KIND_POLYNOMIAL, None, None, None, None, None, p, mono, ts, ei, ej, minv, lk, lc, gain, u,
-                      uidx, dt, nsub, z0, v0, zl, vl, oz, ov, sv, st, fs,
-                      (_NO_W, _NO_V, _NO_V, _NO_V, _NO_V, _NO_V, _NO_V, _NO_V))
-
-
-@numba.njit(**JIT)
-def _kernel_poly_sign(p, mono, ts, ei, ej, minv, lk, lc, gain, u, uidx, dt, nsub, z0, v0, zl, vl, oz, ov, sv, st, fs):
-    return _integrate(KIND_POLYNOMIAL, 1, None, None, None, 1, p, mono, ts, ei, ej, minv, lk, lc, gain, u,
-                      uidx, dt, nsub, z0, v0, zl, vl, oz, ov, sv, st, fs,
-                      (_NO_W, _NO_V, _NO_V, _NO_V, _NO_V, _NO_V, _NO_V, _NO_V))
-
-
-@numba.njit(**JIT)
-def _kernel_poly_sign_staged(p, mono, ts, ei, ej, minv, lk, lc, gain, u, uidx, dt, nsub, z0, v0, zl, vl, oz, ov, sv, st,
-                             fs):
-    return _integrate(KIND_POLYNOMIAL, 1, None, None, None, None, p, mono, ts, ei, ej, minv, lk, lc, gain, u,
-                      uidx, dt, nsub, z0, v0, zl, vl, oz, ov, sv, st, fs,
-                      (_NO_W, _NO_V, _NO_V, _NO_V, _NO_V, _NO_V, _NO_V, _NO_V))
-
-
-@numba.njit(**JIT)
-def _kernel_device(p, mono, ts, ei, ej, minv, lk, lc, gain, u, uidx, dt, nsub, z0, v0, zl, vl, oz, ov, sv, st, fs):
-    return _integrate(KIND_DEVICE, None, None, None, None, 1, p, mono, ts, ei, ej, minv, lk, lc, gain, u, uidx,
-                      dt, nsub, z0, v0, zl, vl, oz, ov, sv, st, fs,
-                      (_NO_W, _NO_V, _NO_V, _NO_V, _NO_V, _NO_V, _NO_V, _NO_V))
-
-
-@numba.njit(**JIT)
-def _kernel_device_staged(p, mono, ts, ei, ej, minv, lk, lc, gain, u, uidx, dt, nsub, z0, v0, zl, vl, oz, ov, sv, st,
-                          fs):
-    return _integrate(KIND_DEVICE, None, None, None, None, None, p, mono, ts, ei, ej, minv, lk, lc, gain, u, uidx,
-                      dt, nsub, z0, v0, zl, vl, oz, ov, sv, st, fs,
-                      (_NO_W, _NO_V, _NO_V, _NO_V, _NO_V, _NO_V, _NO_V, _NO_V))
-
-
-@numba.njit(**JIT)
-def _kernel_device_sign(p, mono, ts, ei, ej, minv, lk, lc, gain, u, uidx, dt, nsub, z0, v0, zl, vl, oz, ov, sv, st, fs):
-    return _integrate(KIND_DEVICE, 1, None, None, None, 1, p, mono, ts, ei, ej, minv, lk, lc, gain, u, uidx,
-                      dt, nsub, z0, v0, zl, vl, oz, ov, sv, st, fs,
-                      (_NO_W, _NO_V, _NO_V, _NO_V, _NO_V, _NO_V, _NO_V, _NO_V))
-
-
-@numba.njit(**JIT)
-def _kernel_device_sign_staged(p, mono, ts, ei, ej, minv, lk, lc, gain, u, uidx, dt, nsub, z0, v0, zl, vl, oz, ov, sv,
-                               st, fs):
-    return _integrate(KIND_DEVICE, 1, None, None, None, None, p, mono, ts, ei, ej, minv, lk, lc, gain, u, uidx,
-                      dt, nsub, z0, v0, zl, vl, oz, ov, sv, st, fs,
-                      (_NO_W, _NO_V, _NO_V, _NO_V, _NO_V, _NO_V, _NO_V, _NO_V))
-
-
-@numba.njit(**JIT)
-def _kernel_poly_table(p, mono, ts, ei, ej, minv, lk, lc, gain, u, uidx, dt, nsub, z0, v0, zl, vl, oz, ov, sv, st, fs):
-    return _integrate(KIND_POLYNOMIAL, None, None, 1, None, 1, p, mono, ts, ei, ej, minv, lk, lc, gain, u,
-                      uidx, dt, nsub, z0, v0, zl, vl, oz, ov, sv, st, fs,
-                      (_NO_W, _NO_V, _NO_V, _NO_V, _NO_V, _NO_V, _NO_V, _NO_V))
-
-
-@numba.njit(**JIT)
-def _kernel_poly_table_staged(p, mono, ts, ei, ej, minv, lk, lc, gain, u, uidx, dt, nsub, z0, v0, zl, vl, oz, ov, sv,
-                              st, fs):
-    return _integrate(KIND_POLYNOMIAL, None, None, 1, None, None, p, mono, ts, ei, ej, minv, lk, lc, gain, u,
-                      uidx, dt, nsub, z0, v0, zl, vl, oz, ov, sv, st, fs,
-                      (_NO_W, _NO_V, _NO_V, _NO_V, _NO_V, _NO_V, _NO_V, _NO_V))
-
-
-@numba.njit(**JIT)
-def _kernel_poly_generic(p, mono, ts, ei, ej, minv, lk, lc, gain, u, uidx, dt, nsub, z0, v0, zl, vl, oz, ov, sv, st,
-                         fs):
-    return _integrate(KIND_POLYNOMIAL, 1, 1, 1, None, 1, p, mono, ts, ei, ej, minv, lk, lc, gain, u, uidx,
-                      dt, nsub, z0, v0, zl, vl, oz, ov, sv, st, fs,
-                      (_NO_W, _NO_V, _NO_V, _NO_V, _NO_V, _NO_V, _NO_V, _NO_V))
-
-
-@numba.njit(**JIT)
-def _kernel_poly_generic_staged(p, mono, ts, ei, ej, minv, lk, lc, gain, u, uidx, dt, nsub, z0, v0, zl, vl, oz, ov, sv,
-                                st, fs):
-    return _integrate(KIND_POLYNOMIAL, 1, 1, 1, None, None, p, mono, ts, ei, ej, minv, lk, lc, gain, u, uidx,
-                      dt, nsub, z0, v0, zl, vl, oz, ov, sv, st, fs,
-                      (_NO_W, _NO_V, _NO_V, _NO_V, _NO_V, _NO_V, _NO_V, _NO_V))
-
-
-@numba.njit(**JIT)
-def _kernel_device_generic(p, mono, ts, ei, ej, minv, lk, lc, gain, u, uidx, dt, nsub, z0, v0, zl, vl, oz, ov, sv, st,
-                           fs):
-    return _integrate(KIND_DEVICE, 1, 1, 1, None, 1, p, mono, ts, ei, ej, minv, lk, lc, gain, u, uidx, dt,
-                      nsub, z0, v0, zl, vl, oz, ov, sv, st, fs,
-                      (_NO_W, _NO_V, _NO_V, _NO_V, _NO_V, _NO_V, _NO_V, _NO_V))
-
-
-@numba.njit(**JIT)
-def _kernel_device_generic_staged(p, mono, ts, ei, ej, minv, lk, lc, gain, u, uidx, dt, nsub, z0, v0, zl, vl, oz, ov,
-                                  sv, st, fs):
-    return _integrate(KIND_DEVICE, 1, 1, 1, None, None, p, mono, ts, ei, ej, minv, lk, lc, gain, u, uidx, dt,
-                      nsub, z0, v0, zl, vl, oz, ov, sv, st, fs,
-                      (_NO_W, _NO_V, _NO_V, _NO_V, _NO_V, _NO_V, _NO_V, _NO_V))
-
-
-@numba.njit(**JIT)
-def _kernel_poly_extra(p, mono, ts, ei, ej, minv, lk, lc, gain, u, uidx, dt, nsub, z0, v0, zl, vl, oz, ov, sv, st, fs,
-                       hw, ha, hzc, hvc, huc, hgz, hgv, hgu):
-    return _integrate(KIND_POLYNOMIAL, 1, 1, 1, 1, 1, p, mono, ts, ei, ej, minv, lk, lc, gain, u, uidx,
-                      dt, nsub, z0, v0, zl, vl, oz, ov, sv, st, fs, (hw, ha, hzc, hvc, huc, hgz, hgv, hgu))
-
-
-@numba.njit(**JIT)
-def _kernel_poly_extra_staged(p, mono, ts, ei, ej, minv, lk, lc, gain, u, uidx, dt, nsub, z0, v0, zl, vl, oz, ov, sv,
-                              st, fs, hw, ha, hzc, hvc, huc, hgz, hgv, hgu):
-    return _integrate(KIND_POLYNOMIAL, 1, 1, 1, 1, None, p, mono, ts, ei, ej, minv, lk, lc, gain, u, uidx,
-                      dt, nsub, z0, v0, zl, vl, oz, ov, sv, st, fs, (hw, ha, hzc, hvc, huc, hgz, hgv, hgu))
-
-
-@numba.njit(**JIT)
-def _kernel_poly_extra_lean(p, mono, ts, ei, ej, minv, lk, lc, gain, u, uidx, dt, nsub, z0, v0, zl, vl, oz, ov, sv, st,
-                            fs, hw, ha, hzc, hvc, huc, hgz, hgv, hgu):
-    return _integrate(KIND_POLYNOMIAL, None, None, None, 1, 1, p, mono, ts, ei, ej, minv, lk, lc, gain, u, uidx,
-                      dt, nsub, z0, v0, zl, vl, oz, ov, sv, st, fs, (hw, ha, hzc, hvc, huc, hgz, hgv, hgu))
-
-
-@numba.njit(**JIT)
-def _kernel_poly_extra_lean_staged(p, mono, ts, ei, ej, minv, lk, lc, gain, u, uidx, dt, nsub, z0, v0, zl, vl, oz, ov,
-                                   sv, st, fs, hw, ha, hzc, hvc, huc, hgz, hgv, hgu):
-    return _integrate(KIND_POLYNOMIAL, None, None, None, 1, None, p, mono, ts, ei, ej, minv, lk, lc, gain, u, uidx,
-                      dt, nsub, z0, v0, zl, vl, oz, ov, sv, st, fs, (hw, ha, hzc, hvc, huc, hgz, hgv, hgu))
-
-
-@numba.njit(**JIT)
-def _kernel_device_extra(p, mono, ts, ei, ej, minv, lk, lc, gain, u, uidx, dt, nsub, z0, v0, zl, vl, oz, ov, sv, st, fs,
-                         hw, ha, hzc, hvc, huc, hgz, hgv, hgu):
-    return _integrate(KIND_DEVICE, 1, 1, 1, 1, 1, p, mono, ts, ei, ej, minv, lk, lc, gain, u, uidx, dt,
-                      nsub, z0, v0, zl, vl, oz, ov, sv, st, fs, (hw, ha, hzc, hvc, huc, hgz, hgv, hgu))
-
-
-@numba.njit(**JIT)
-def _kernel_device_extra_staged(p, mono, ts, ei, ej, minv, lk, lc, gain, u, uidx, dt, nsub, z0, v0, zl, vl, oz, ov, sv,
-                                st, fs, hw, ha, hzc, hvc, huc, hgz, hgv, hgu):
-    return _integrate(KIND_DEVICE, 1, 1, 1, 1, None, p, mono, ts, ei, ej, minv, lk, lc, gain, u, uidx, dt,
-                      nsub, z0, v0, zl, vl, oz, ov, sv, st, fs, (hw, ha, hzc, hvc, huc, hgz, hgv, hgu))
-# fmt: on
-
-
-def kernel(kind: int, p: np.ndarray, mono: np.ndarray, hook: bool = False, table: bool = False, staged: bool = False):
-    """The compiled kernel for a batch: its restoring-force kind, whether any member has a smoothed sign, whether
-    the batch uses extra monomial rows or a table of shaped parts (``table``; then one general kernel, sign
-    included), whether the extra force hook is used (``hook``: the kernels that take its arguments after the
-    common ones), and whether it runs the stage-wise loops of a structure (``staged``) or the fused step of one DOF
-    on the base (``_integrate``'s ``fused``).
+def kernel(kind: int, p: np.ndarray, mono: np.ndarray, hook: bool = False, table: bool = False, staged: bool = False
+           ) -> tuple[int | None, ...]:  # fmt: skip
+    """The compiled kernel for a batch, as ``_integrate``'s seven leading flags (None: off, 1: on): its
+    restoring-force kind (``device``), whether any member has a smoothed sign (``coulomb``), whether the batch
+    uses extra monomial rows (``generic``) or a table of shaped parts (``table``; then one general kernel, sign
+    included), whether the extra force hook is used (``extra``), and whether it runs the fused step of one DOF on
+    the base (``fused``) or the stage-wise loops of a structure (``stagewise``; asked by ``staged``).
     """
+    on = lambda flag: 1 if flag else None  # noqa: E731
+    device = on(kind == KIND_DEVICE)
     sign = bool(np.any(p[P_SIGN] != 0.0))
+    steps = (None, 1) if staged else (1, None)  # (fused, stagewise)
     if hook:
         if kind == KIND_POLYNOMIAL and not (sign or table or mono.shape[0]):
             # the hook's polynomial physics without a smoothed sign, extra monomials or tables (the hybrid's
             # usual physics): those terms' code, evaluated at zero, had cost a third of a free run (measured)
-            return (_kernel_poly_extra_lean, _kernel_poly_extra_lean_staged)[staged]
-        pick = (_kernel_poly_extra, _kernel_poly_extra_staged) if kind == KIND_POLYNOMIAL else (
-            _kernel_device_extra, _kernel_device_extra_staged)  # fmt: skip
-        return pick[staged]
+            return (None, None, None, None, 1, *steps)
+        return (device, 1, 1, 1, 1, *steps)
     if table and kind == KIND_POLYNOMIAL and not sign and not mono.shape[0]:  # a shaped law: the table alone
-        return (_kernel_poly_table, _kernel_poly_table_staged)[staged]
+        return (None, None, None, 1, None, *steps)
     if mono.shape[0] or table:
-        pick = (_kernel_poly_generic, _kernel_poly_generic_staged) if kind == KIND_POLYNOMIAL else (
-            _kernel_device_generic, _kernel_device_generic_staged)  # fmt: skip
-        return pick[staged]
-    return {
-        (KIND_POLYNOMIAL, False): (_kernel_poly, _kernel_poly_staged),
-        (KIND_POLYNOMIAL, True): (_kernel_poly_sign, _kernel_poly_sign_staged),
-        (KIND_DEVICE, False): (_kernel_device, _kernel_device_staged),
-        (KIND_DEVICE, True): (_kernel_device_sign, _kernel_device_sign_staged),
-    }[(kind, sign)][staged]
+        return (device, 1, 1, 1, None, *steps)
+    return (device, on(sign), None, None, None, *steps)
+
+
+NO_HOOK = (_NO_W, _NO_V, _NO_V, _NO_V, _NO_V, _NO_V, _NO_V, _NO_V)
+"""The extra force hook's arguments of a kernel without it (``extra`` None: never read)."""

@@ -14,7 +14,6 @@ import numpy as np
 from . import effects
 from .effects import COULOMB_VELOCITY_SCALE
 from .kernel import (
-    KINDS,
     P_C,
     P_CNL,
     P_M,
@@ -94,12 +93,12 @@ def reference_solution(
 
 
 @numba.njit(cache=True, error_model="numpy")
-def _benettin(kind, p, mono, ts, gain, u, dt, nsub, z0, v0, renorm):
+def _benettin(device, p, mono, ts, gain, u, dt, nsub, z0, v0, renorm):
     """RK4 of the state and one tangent vector; the tangent is renormalised every ``renorm`` samples
     and its log growth accumulated (Benettin et al. 1980). Jacobian of the force by central
     differences of the same force law the simulator integrates.
     """
-    q = _column(converted(p, kind), 0)
+    q = _column(converted(p, device), 0)
     tab = member_tables(p, ts)
     im = 1.0 / q[P_M]
     h = dt / nsub
@@ -123,18 +122,18 @@ def _benettin(kind, p, mono, ts, gain, u, dt, nsub, z0, v0, renorm):
                     ddv = dv + c * h * st[s - 1, 3]
                 frac = (j + c) / nsub
                 w = u0 + frac * du
-                f = total_force(kind, None, 1, 1, zz, vv, q, p, 0, mono, ts, tab) + q[P_SIGN] * math.tanh(
+                f = total_force(device, None, 1, 1, zz, vv, q, p, 0, mono, ts, tab) + q[P_SIGN] * math.tanh(
                     vv / COULOMB_VELOCITY_SCALE
                 )
                 ez = 1e-7 * max(1e-3, abs(zz))
                 ev = 1e-6 * max(1e-2, abs(vv))
                 fz = (
-                    total_force(kind, None, 1, 1, zz + ez, vv, q, p, 0, mono, ts, tab)
-                    - total_force(kind, None, 1, 1, zz - ez, vv, q, p, 0, mono, ts, tab)
+                    total_force(device, None, 1, 1, zz + ez, vv, q, p, 0, mono, ts, tab)
+                    - total_force(device, None, 1, 1, zz - ez, vv, q, p, 0, mono, ts, tab)
                 ) / (2 * ez)
                 fv = (
-                    total_force(kind, None, 1, 1, zz, vv + ev, q, p, 0, mono, ts, tab)
-                    - total_force(kind, None, 1, 1, zz, vv - ev, q, p, 0, mono, ts, tab)
+                    total_force(device, None, 1, 1, zz, vv + ev, q, p, 0, mono, ts, tab)
+                    - total_force(device, None, 1, 1, zz, vv - ev, q, p, 0, mono, ts, tab)
                 ) / (2 * ev)
                 fv += q[P_SIGN] / COULOMB_VELOCITY_SCALE / math.cosh(vv / COULOMB_VELOCITY_SCALE) ** 2
                 st[s, 0] = vv
@@ -177,7 +176,7 @@ def lyapunov_benettin(
     gain = -1.0 if input_kind == "base_acc" else 1.0 / p[P_M]
     lay = effects.layout()
     logs = _benettin(
-        KINDS[system.kind],
+        None if system.kind == "polynomial" else 1,  # the kernel's ``device`` flag (``kernel._integrate``)
         np.ascontiguousarray(p[:, None]),
         lay.monomials,
         lay.size if p.size > lay.size else -1,

@@ -30,7 +30,7 @@ from scipy import signal
 from negstiff.errors import InputError
 
 from . import effects
-from .kernel import KINDS, P_M, STATUS_DIVERGED, STATUS_GEOMETRY, STATUS_OK, kernel
+from .kernel import KINDS, NO_HOOK, P_M, STATUS_DIVERGED, STATUS_GEOMETRY, STATUS_OK, _integrate, kernel
 
 STATUS_TEXT = {
     STATUS_DIVERGED: "diverged (|z| or |z_dot| beyond its limit, or non-finite)",
@@ -284,7 +284,8 @@ def integrate(kind: int, p: np.ndarray, minv: np.ndarray, lk: np.ndarray, lc: np
     ts = lay.size if table else -1
     # one DOF on the base without a linear structure runs the fused step; anything else the stage-wise loops
     staged = not (nd == 1 and place[0] == 0 and not (np.any(lk) or np.any(lc)))
-    run_kernel = kernel(kind, p, mono, hook is not None, table, staged)
+    flags = kernel(kind, p, mono, hook is not None, table, staged)
+    hook_args = NO_HOOK if hook is None else tuple(hook)
 
     def c_(a):
         # one array type per kernel argument (C-contiguous, writable), whatever the caller passed: each distinct
@@ -296,10 +297,10 @@ def integrate(kind: int, p: np.ndarray, minv: np.ndarray, lk: np.ndarray, lc: np
         sl = slice(c[0], c[-1] + 1)
         oz = np.empty((n, nd, c.size))
         ov = np.empty((n, nd, c.size)) if store_velocity else np.empty((1, nd, c.size))
-        run_kernel(c_(p[:, sl]), mono, ts, place[0] - 1, place[1] - 1, c_(minv[:, sl]),
+        _integrate(*flags, c_(p[:, sl]), mono, ts, place[0] - 1, place[1] - 1, c_(minv[:, sl]),
                    c_(lk[:, :, sl]), c_(lc[:, :, sl]), c_(gain[:, sl]), u2, c_(uidx[sl]), float(dt), int(substeps),
                    c_(z0[:, sl]), c_(v0[:, sl]), float(z_limit), float(v_limit), oz, ov, store_velocity, status[sl],
-                   fail[sl], *(hook or ()))  # fmt: skip
+                   fail[sl], hook_args)  # fmt: skip
         return oz, ov
 
     outs = [run(chunks[0])] if len(chunks) == 1 else list(_pool(len(chunks)).map(run, chunks))
