@@ -356,6 +356,25 @@ class NSI(StructureResults, Identifier):
             self.result_ = identify_nsi(self, identification_record(rec, kind), at)
         return self
 
+    def _fit_wells(self, rec: Measurement, zs: np.ndarray, v: np.ndarray, refs: dict[str, float | None], bar,
+                   basis: FeedbackBasis) -> dict[str, WellFit]:  # fmt: skip
+        """``fit_well`` about each reference of ``refs`` that is not None, in its order; two wells on two threads
+        where the command's budget has two cores (``resources.thread_budget``): each well's subspace steps are its own
+        (BLAS on one thread each, ``fit_threads``), so the numbers are those of one thread, and their linear algebra
+        releases the interpreter.
+        """
+        from negstiff.resources import thread_budget
+
+        todo = {name: ref for name, ref in refs.items() if ref is not None}
+        rec.basis_states()  # made once, before the threads read it
+        if len(todo) < 2 or thread_budget() < 2:
+            return {name: self.fit_well(rec, zs, v, ref, bar, basis) for name, ref in todo.items()}
+        from concurrent.futures import ThreadPoolExecutor
+
+        with ThreadPoolExecutor(len(todo)) as pool:
+            futures = {name: pool.submit(self.fit_well, rec, zs, v, ref, bar, basis) for name, ref in todo.items()}
+            return {name: f.result() for name, f in futures.items()}
+
     def _estimate(self, rec: Measurement, n_id: int, law: laws.Law | None = None) -> Estimate:
         """NSI's own estimate: each well's underlying-linear system and nonlinear coefficients from the
         identification part, averaged into one z-frame model (the shared stages follow: ``Identifier``); the
@@ -375,9 +394,7 @@ class NSI(StructureResults, Identifier):
             disable=not self.progress, delay=2.0,
         )  # fmt: skip
         with bar:
-            wells = {"plus": self.fit_well(ident, zs, v, z_plus, bar, basis)}
-            if z_minus is not None:
-                wells["minus"] = self.fit_well(ident, zs, v, z_minus, bar, basis)
+            wells = self._fit_wells(ident, zs, v, {"plus": z_plus, "minus": z_minus}, bar, basis)
         gains = [w.coefficients["input_gain"] for w in wells.values()]
         # the one mass rule (``weak.mass_of``): a force record without a mass gets it from the FRF level (b = 1/m);
         # a free decay has no input to scale by: the mass given, else per unit mass
