@@ -363,11 +363,14 @@ def cmd_discrepancy(args) -> int:
     from negstiff.inference.estimators.discrepancy import CUBIC_BASELINE, LINEAR_BASELINE, Discrepancy
     from negstiff.inference.record.reading import load
 
+    masses = parse_amplitudes(args.masses, "--masses") if args.masses else None
     rec = load(args.data, columns=args.columns, fs=args.fs, mass=args.mass, gravity=args.gravity, aux=args.aux,
-               decay=args.decay)  # fmt: skip
+               masses=masses, decay=args.decay, force_dof=args.force_dof)  # fmt: skip
+    check_dofs(args, rec)
     base = CUBIC_BASELINE if args.baseline == "cubic" else LINEAR_BASELINE
     d = Discrepancy(baseline=base, max_effects=args.max_effects, refine=refinement(args), unnamed=args.unnamed,
-                    law=args.law, damping=args.damping, offer_laws=False if args.no_laws else None)  # fmt: skip
+                    law=args.law, damping=args.damping, offer_laws=False if args.no_laws else None,
+                    element=args.element)  # fmt: skip
     rec = d.check(rec)  # every refusal before the progress line
     what = f"law {args.law}" if args.law else f"baseline {args.baseline}"
     say(args, f"discrepancy: {rec.n} samples at {rec.fs:g} Hz, input {rec.input_name}, {what}"

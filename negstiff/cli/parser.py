@@ -551,6 +551,8 @@ def _discrepancy(sub, common: argparse.ArgumentParser, data_opts: argparse.Argum
         "final model held) and report its size, the held-out gap with it, and how far it would move the physical "
         "coefficients (result key 'unnamed'; a structure's: on its element's relative motion, in 'details')",
     )
+    _structure_options(dsc, "a structure's record: where the nonlinear element acts, I-J (it moves DOF J relative "
+                       "to DOF I, 0: the base); the effects are offered to its law, round after round")  # fmt: skip
     dsc.set_defaults(func=c.cmd_discrepancy)
 
 

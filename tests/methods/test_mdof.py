@@ -853,3 +853,43 @@ def test_a_structures_decay_gone_to_its_noise_before_the_judging_part_is_refused
             est.check(rec)
     cut = rec.segment(0, int(9.0 * FS))
     assert SINDy(element="1-2").fit(cut).structure_.element.k3 == pytest.approx(DUFFING.k3, rel=0.01)
+
+
+def test_command_line_discrepancy_reads_a_structure_from_its_options(tmp_path, capsys):
+    # negstiff discrepancy on a lab's structure file whose header says nothing of it: --masses and --element give
+    # what '# masses:' and '# element:' would (before, only the header could, and the file was refused); the
+    # command's numbers are the library's on the same record, and a wrong --dofs or a missing --element is one line
+    # and exit 2 before any work, no output written
+    import json
+    import warnings
+
+    from negstiff import Discrepancy, load
+    from negstiff.cli import main
+
+    u, z = rk4_fixture_record(duration=30.0, seed=3)
+    t = np.arange(u.size) / FS
+    data = write_csv(tmp_path / "two.csv", {"t": t, "base_acc": u, "z1": z[0], "z2": z[1]})
+    masses = f"{FIXTURE['m']},{TRUTH.m}"
+
+    def run(*args):
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # the CLI says them on stderr
+            code = main(["discrepancy", *map(str, args)])
+        return code, capsys.readouterr().err
+
+    out = tmp_path / "d.json"
+    code, err = run(data, "--masses", masses, "--element", "1-2", "--max-effects", 1, "--quiet", "-o", out)
+    assert code == 0, err
+    result = json.loads(out.read_text())
+    assert result["dofs"] == 2 and result["element_at"] == [1, 2]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        library = Discrepancy(element="1-2", max_effects=1).fit(load(data, masses=(FIXTURE["m"], TRUTH.m))).result()
+    for key in ("effects", "gap_before_percent", "gap_after_percent"):
+        assert result["details"][key] == library["details"][key], key
+    assert result["element"] == library["element"]
+    for bad, says in ((("--dofs", 3, "--masses", masses, "--element", "1-2"), "z1 ... z2"),
+                      (("--masses", masses), "element")):  # fmt: skip
+        code, err = run(data, *bad, "-o", tmp_path / "no.json")
+        assert code == 2 and says in err and len(err.strip().splitlines()) == 1
+        assert not (tmp_path / "no.json").exists()
