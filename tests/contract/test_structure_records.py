@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from records import FIXTURE, rk4_fixture_record, write_csv
 
-from negstiff import NSI, InputError, Model, NegstiffWarning, SINDy, from_arrays, load
+from negstiff import NSI, Discrepancy, InputError, Model, NegstiffWarning, Posterior, SINDy, from_arrays, load
 from negstiff.inference.estimators.identification import structure_result
 from negstiff.inference.estimators.prediction import structure_runs
 from negstiff.inference.steps.refine import refine
@@ -210,5 +210,11 @@ def test_a_structures_file_is_read_through_the_one_reader(tmp_path):
         NSI().fit(from_arrays(u, z, FS, masses=(1.0, 0.2)))
     with pytest.raises(InputError, match="masses"):
         SINDy(element="1-2").fit(from_arrays(u, z, FS))
+    # a force record of a structure without masses: the refusal names what reads it (NSI through its sensors),
+    # not only how to give masses a lab may not know (a ground vibration test's)
+    forced = from_arrays(u, z, FS, input_name="force", force_dof=1)
+    for refuses in (SINDy(element="1-2"), Posterior(element="1-2"), Discrepancy(element="1-2")):
+        with pytest.raises(InputError, match=r"masses are not given .*only NSI reads a structure, through its sensors"):
+            refuses.check(forced)
     with pytest.raises(InputError, match=r"NSI\(refine=True\): .*without masses.*not refined by output error"):
         NSI(element="1-2", refine=True).fit(from_arrays(u, z, FS))  # a state-space structure's: refused, not ignored

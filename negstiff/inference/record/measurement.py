@@ -206,8 +206,15 @@ class Measurement:
             return self.masses
         if self.n_dof == 1 and self.mass is not None:
             return (self.mass,)
+        through_sensors = (
+            "; without them only NSI reads a structure, through its sensors (identify nsi --element I-J --force-dof K: "
+            "a state-space model of the order the record shows)"
+            if self.n_dof > 1 and self.input_name == "force"
+            else ""
+        )
         raise MeasurementError(
             f"{self.source}: the masses are not given ('# masses: m1,...,mN' in the header, or --masses)"
+            + through_sensors
         )
 
     @property
