@@ -288,20 +288,32 @@ def _knots(t_end: float, spacing: float) -> np.ndarray:
     return np.linspace(0.0, t_end, max(2, int(round(t_end / spacing)) + 1))
 
 
-def _hats(t: np.ndarray, knots: np.ndarray) -> np.ndarray:
-    """Piecewise-linear hat functions of time on ``knots``, evaluated at ``t`` (rows) -- a partition of unity:
-    their sum is one everywhere; ``_hats(t, knots) @ values`` is ``np.interp(t, knots, values)``.
+def _hats(t: np.ndarray, knots: np.ndarray):
+    """Piecewise-linear hat functions of time on ``knots``, evaluated at ``t`` (rows), as a sparse matrix (two entries
+    a row) -- a partition of unity: their sum is one everywhere; ``_hats(t, knots) @ values`` is
+    ``np.interp(t, knots, values)``. Sparse (``scipy.sparse``): a 396 s record's hats at 2048 Hz, dense, were 160,000
+    rows by 258 columns (330 MB) for 320,000 nonzero entries.
     """
-    return np.column_stack([np.interp(t, knots, np.eye(knots.size)[j]) for j in range(knots.size)])
+    from scipy import sparse
+
+    i = np.clip(np.searchsorted(knots, t, side="right") - 1, 0, knots.size - 2)
+    f = np.clip((t - knots[i]) / (knots[i + 1] - knots[i]), 0.0, 1.0)
+    rows = np.repeat(np.arange(t.size), 2)
+    return sparse.csr_matrix((np.column_stack([1.0 - f, f]).ravel(), (rows, np.column_stack([i, i + 1]).ravel())),
+                             shape=(t.size, knots.size))  # fmt: skip
 
 
-def _contrasts(H: np.ndarray) -> np.ndarray:
+def _contrasts(H):
     """Hat functions less the last one (rows: times; k - 1 columns): coefficients on them are the values at the
     first k - 1 knots of a curve whose values at the knots sum to zero (the last is minus their sum). A drift's
     constant is no drift (it moves z's frame, which the frame's step pins) and, as d K'(z), it is almost the
-    restoring force's own change of frame: left free, it would make the fit ill-conditioned.
+    restoring force's own change of frame: left free, it would make the fit ill-conditioned. Sparse, as ``H``: only
+    the last interval's rows are full.
     """
-    return H[:, :-1] - H[:, -1:]
+    from scipy import sparse
+
+    last = H[:, -1:]
+    return (H[:, :-1] - sparse.csr_matrix(last) @ sparse.csr_matrix(np.ones((1, H.shape[1] - 1)))).tocsr()
 
 
 GRAM_MAX_CONDITION = 1e8
@@ -309,27 +321,33 @@ GRAM_MAX_CONDITION = 1e8
 solution's relative error then below ~1e-8), else by numpy's SVD route."""
 
 
-def _least_squares(A: np.ndarray, y: np.ndarray) -> np.ndarray:
-    """The x minimising |A x - y| for a tall, column-scaled ``A``: by the normal equations (Cholesky, scipy) where they
-    are well conditioned, else ``numpy.linalg.lstsq``. The drift's step is a tall system (a 396 s record at 2048 Hz:
-    162,186 rows by 185 columns, condition number 34, measured) on which numpy's SVD route took 1.1 s a step and the
-    Gram matrix with its Cholesky factor 0.2 s; the two agree to ~cond^2 eps (1e-13 there).
+def _least_squares(G: np.ndarray, b: np.ndarray, dense) -> np.ndarray:
+    """The x minimising |A x - y| for a tall, column-scaled ``A`` given by its normal equations ``G`` = A^T A and
+    ``b`` = A^T y: by their Cholesky factor (scipy) where they are well conditioned, else ``numpy.linalg.lstsq`` on
+    ``dense()`` = (A, y), formed only then. The drift's step is a tall system (a 396 s record at 2048 Hz: 162,186 rows
+    by 185 columns, condition number 34, measured) on which numpy's SVD route took 1.1 s a step and the Gram matrix
+    with its Cholesky factor 0.2 s; the two agree to ~cond^2 eps (1e-13 there).
     """
     from scipy import linalg
 
-    G = A.T @ A
     w = np.linalg.eigvalsh(G)
     if w[0] > 0.0 and w[-1] < GRAM_MAX_CONDITION * w[0]:
-        return linalg.cho_solve(linalg.cho_factor(G, check_finite=False), A.T @ y, check_finite=False)
+        return linalg.cho_solve(linalg.cho_factor(G, check_finite=False), b, check_finite=False)
+    A, y = dense()
     return np.linalg.lstsq(A, y, rcond=None)[0]
 
 
-def _drift_step(form: WeakForm, rec: Measurement, drift: np.ndarray, C: np.ndarray,
-                knots: np.ndarray) -> tuple[float, np.ndarray]:  # fmt: skip
+def _drift_step(form: WeakForm, rec: Measurement, drift: np.ndarray, C, knots: np.ndarray) -> tuple[float, np.ndarray]:
     """One Gauss-Newton step of the drift (``drift_by_physics``) from ``drift`` [z's unit, per sample]: the relative
     residual of the restoring force's fit with the drift taken off (the spline over the stroke of z - d), and the
     step at the time knots ``knots``.
+
+    The step's system is [W, C K'] (the force's columns and the drift's, ``C`` the sparse contrasts), solved by its
+    normal equations assembled block by block, the drift's columns kept sparse: formed densely, each step built and
+    scaled a 160,000 by 250 matrix (1.2 s of a 396 s record's 1.3 s step, measured).
     """
+    from scipy import sparse
+
     library = stroke_library(rec, rec.z - drift)
     system = form.system(rec, library=library, drift=drift)
     assert library.shape is not None
@@ -342,10 +360,16 @@ def _drift_step(form: WeakForm, rec: Measurement, drift: np.ndarray, C: np.ndarr
     zs = form.zs - drift
     slope = form.project((stroke_spline.slopes(zs, np.asarray(library.shape["spline"]["knots"])) @ spline)[:, None],
                          rec.dt)[:, 0]  # fmt: skip
-    A = np.column_stack([W, C * slope[:, None]])
-    scale = A.std(axis=0)
+    D = sparse.diags(slope) @ C  # the drift's columns: each knot's contrast times K'(z)
+    n = W.shape[0]
+    mean_d = np.asarray(D.sum(axis=0)).ravel() / n
+    var_d = np.asarray(D.multiply(D).sum(axis=0)).ravel() / n - mean_d**2
+    scale = np.concatenate([W.std(axis=0), np.sqrt(np.maximum(var_d, 0.0))])
     scale[scale == 0] = 1.0
-    theta = _least_squares(A / scale, y) / scale
+    WtD = np.asarray((D.T @ W).T)
+    G = np.block([[W.T @ W, WtD], [WtD.T, (D.T @ D).toarray()]]) / np.outer(scale, scale)
+    b = np.concatenate([W.T @ y, D.T @ y]) / scale
+    theta = _least_squares(G, b, lambda: (np.column_stack([W, D.toarray()]) / scale, y)) / scale
     gamma = theta[W.shape[1] :]  # z'' holds B(z - d) a ~ B(z) a - d B'(z) a: gamma = -d (at the knots)
     if not np.all(np.isfinite(gamma)):
         raise ValueError("the drift's step is not finite")
