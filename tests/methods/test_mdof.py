@@ -15,6 +15,17 @@ from negstiff.inference.steps.validation import restarted_structure_runs as free
 from negstiff.models.simulator import simulate_batch, stage_input
 from negstiff.models.structure import Structure, simulate_structures
 
+
+def _command(capsys, name, *args):
+    """``negstiff NAME ARGS`` in this process: its exit code and what it said on stderr (its warnings among it)."""
+    from negstiff.cli import main
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # the CLI says them on stderr
+        code = main([name, *map(str, args)])
+    return code, capsys.readouterr().err
+
+
 FS = 512.0
 ON_FIXTURE = Structure.on_fixture(TRUTH, fixture_mass=FIXTURE["m"], fixture_hz=FIXTURE["f_hz"],
                                   fixture_zeta=FIXTURE["zeta"])  # fmt: skip
@@ -203,19 +214,13 @@ def test_minus_wells_first_period_doubling_against_a_tapped_stepped_test():
 
 def test_command_line_identifies_a_structure_and_refuses_a_wrong_one(tmp_path, capsys):
     import json
-    import warnings
-
-    from negstiff.cli import main
 
     u, z = rk4_fixture_record(duration=60.0, seed=4)
     t = np.arange(u.size) / FS
     data = write_csv(tmp_path / "two.csv", {"t": t, "base_acc": u, "z1": z[0], "z2": z[1]}, {"masses": "1.0,0.2"})
 
     def run(*args):
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")  # the CLI says them on stderr, read below
-            code = main(["identify", *map(str, args)])
-        return code, capsys.readouterr().err
+        return _command(capsys, "identify", *args)
 
     out = tmp_path / "r.json"
     # a structure's low-level FRFs (``negstiff frf --dofs 2``'s result: its modes, here the plus well's as a lab's
@@ -247,9 +252,6 @@ def test_command_line_posterior_reads_the_dofs_from_the_file(tmp_path, capsys):
     # sampled with each channel's zero read (0.3 mm on z1 here, within 20 um); a wrong --dofs and a missing
     # --element are one line and exit 2 before any work, no output written
     import json
-    import warnings
-
-    from negstiff.cli import main
 
     u, z = rk4_fixture_record(duration=30.0, seed=3)
     t = np.arange(u.size) / FS
@@ -257,10 +259,7 @@ def test_command_line_posterior_reads_the_dofs_from_the_file(tmp_path, capsys):
                      {"masses": f"{FIXTURE['m']},{TRUTH.m}"})  # fmt: skip
 
     def run(*args):
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")  # the CLI says them on stderr
-            code = main(["posterior", *map(str, args)])
-        return code, capsys.readouterr().err
+        return _command(capsys, "posterior", *args)
 
     out = tmp_path / "p.json"
     code, err = run(data, "--element", "1-2", "--ensembles", 2, "--max-steps", 100, "--max-windows", 12, "-o", out)
@@ -864,7 +863,6 @@ def test_command_line_discrepancy_reads_a_structure_from_its_options(tmp_path, c
     import warnings
 
     from negstiff import Discrepancy, load
-    from negstiff.cli import main
 
     u, z = rk4_fixture_record(duration=30.0, seed=3)
     t = np.arange(u.size) / FS
@@ -872,10 +870,7 @@ def test_command_line_discrepancy_reads_a_structure_from_its_options(tmp_path, c
     masses = f"{FIXTURE['m']},{TRUTH.m}"
 
     def run(*args):
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")  # the CLI says them on stderr
-            code = main(["discrepancy", *map(str, args)])
-        return code, capsys.readouterr().err
+        return _command(capsys, "discrepancy", *args)
 
     out = tmp_path / "d.json"
     code, err = run(data, "--masses", masses, "--element", "1-2", "--max-effects", 1, "--quiet", "-o", out)
