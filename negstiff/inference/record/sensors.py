@@ -344,14 +344,16 @@ GAIN_SHARPNESS = 1.02
 motion is too small beside the response for the record to say the gain (refused)."""
 
 
-def _normal_least_squares(A: np.ndarray, y: np.ndarray) -> np.ndarray:
-    """The least-squares solution of A x = y through the normal equations (A's columns scaled to unit spread, so
-    their Gram matrix's condition is modest), solved by SVD in the small space (rank-deficient columns get the
-    minimum-norm answer, as ``lstsq``'s): a tall A of 40 columns costs one matrix product, where LAPACK's tall
-    least squares (SVD or QR) took ten times longer (measured on a 41k-row gain fit).
+def _normal_least_squares(A: np.ndarray, scale: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """The least-squares solution of A x = y through the normal equations of A's columns divided by ``scale`` (their
+    spread: the Gram matrix's condition is then modest; the scaled matrix itself is never formed), solved by SVD in
+    the small space (rank-deficient columns get the minimum-norm answer, as ``lstsq``'s): a tall A of 40 columns
+    costs one matrix product, where LAPACK's tall least squares (SVD or QR) took ten times longer (measured on a
+    41k-row gain fit).
     """
     with one_blas_thread():  # a 40-column product: a second thread does not pay (and waits on a busy machine)
-        return np.linalg.lstsq(A.T @ A, A.T @ y, rcond=None)[0]
+        G = (A.T @ A) / np.outer(scale, scale)
+        return np.linalg.lstsq(G, (A.T @ y) / scale, rcond=None)[0] / scale
 
 
 def absolute_velocity_gain(
@@ -421,11 +423,19 @@ def absolute_velocity_gain(
         # in z (the read channel's zero off) shifts it by -d K'(z): its first order, the spline's slopes times t
         # (they sum to zero: one left out)
         knots = stroke_spline.knots(zc)
-        A = np.column_stack([stroke_spline.basis(zc, knots), t_rows[:, None] * stroke_spline.slopes(zc, knots)[:, 1:],
-                             vz, vz * np.abs(vz), ab[rows]])  # fmt: skip
+        basis = stroke_spline.basis(zc, knots)
+        n = basis.shape[1]
+        # the columns written into one column-major matrix (each column contiguous: its spread and the products
+        # below read it in one pass; stacked row-major they took half of each trial's time, measured)
+        A = np.empty((zc.size, 2 * n + 2), order="F")
+        A[:, :n] = basis
+        np.multiply(t_rows[:, None], stroke_spline.slopes(zc, knots)[:, 1:], out=A[:, n : 2 * n - 1])
+        A[:, -3] = vz
+        np.multiply(vz, np.abs(vz), out=A[:, -2])
+        A[:, -1] = ab[rows]
         scale = A.std(axis=0)
         scale[scale == 0] = 1.0
-        theta = _normal_least_squares(A / scale, acc) / scale
+        theta = _normal_least_squares(A, scale, acc)
         r = acc - A @ theta
         # relative to the measured channel's own part (g v_read'): a small g's z is the base's motion, which the
         # base acceleration's free coefficient fits exactly, so the residual relative to z'' would favour it
