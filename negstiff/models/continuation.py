@@ -51,6 +51,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+from scipy import fft as sp_fft
 
 from negstiff.errors import InputError
 
@@ -239,7 +240,7 @@ class Shooting:
               z: np.ndarray) -> Point:  # fmt: skip
         """The orbit from ``x`` (its z samples ``z``, N + 1 over the period) with its monodromy ``M``."""
         z = z[:-1]
-        spec = np.fft.rfft(z) / z.size
+        spec = sp_fft.rfft(z) / z.size
         harm = 2 * np.abs(spec[self.period :: self.period][:5])  # amplitudes at f, 2f, ... [m]
         mu = np.linalg.eigvals(M)
         state = tuple(float(q) for q in x)

@@ -339,10 +339,10 @@ class Rig:
             n = sp_fft.next_fast_len(n + self.oversample, real=True)
             n -= n % self.oversample
         exc_rng, sens_rng = self._streams()
-        spec = np.fft.rfft(exc_rng.standard_normal(n))
+        spec = sp_fft.rfft(exc_rng.standard_normal(n))
         f = np.fft.rfftfreq(n, 1 / fsim)
         spec[(f < band[0]) | (f > band[1])] = 0.0
-        acc = np.fft.irfft(spec, n)
+        acc = sp_fft.irfft(spec, n)
         acc *= rms / acc.std()
         excitation = {
             "type": "random",

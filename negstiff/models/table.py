@@ -6,6 +6,7 @@ table motion of a target acceleration (``table_motion``) and the band-limited in
 from __future__ import annotations
 
 import numpy as np
+from scipy import fft as sp_fft
 from scipy import signal
 from scipy.integrate import cumulative_trapezoid
 
@@ -17,13 +18,13 @@ def table_motion(acc_target: np.ndarray, fs: float, min_hz: float) -> tuple[np.n
     twice in the frequency domain, so b'' is exactly the second derivative of b.
     """
     n = acc_target.size
-    spec = np.fft.rfft(acc_target)
+    spec = sp_fft.rfft(acc_target)
     f = np.fft.rfftfreq(n, 1 / fs)
     spec[f < min_hz] = 0.0
     w = 2 * np.pi * f
     disp_spec = np.zeros_like(spec)
     disp_spec[f >= min_hz] = -spec[f >= min_hz] / w[f >= min_hz] ** 2
-    return np.fft.irfft(disp_spec, n), np.fft.irfft(spec, n)
+    return sp_fft.irfft(disp_spec, n), sp_fft.irfft(spec, n)
 
 
 def integrate_fft(x: np.ndarray, fs: float, highpass_hz: float, order: int = 2) -> np.ndarray:
@@ -33,7 +34,7 @@ def integrate_fft(x: np.ndarray, fs: float, highpass_hz: float, order: int = 2) 
     grows as 1/f^order).
     """
     n = x.size
-    spec = np.fft.rfft(x - x.mean())
+    spec = sp_fft.rfft(x - x.mean())
     f = np.fft.rfftfreq(n, 1 / fs)
     gain = np.zeros(f.size, dtype=complex if order % 2 else float)
     band = f >= highpass_hz
@@ -42,7 +43,7 @@ def integrate_fft(x: np.ndarray, fs: float, highpass_hz: float, order: int = 2) 
     ft = f[taper]
     w = 0.5 * (1 - np.cos(np.pi * (ft / (highpass_hz / 2) - 1)))
     gain[taper] = w / (2j * np.pi * ft) ** order if order % 2 else -w / (2 * np.pi * ft) ** order
-    return np.fft.irfft(spec * gain, n)
+    return sp_fft.irfft(spec * gain, n)
 
 
 def integrate_twice(acc: np.ndarray, fs: float, highpass_hz: float, method: str = "fft") -> np.ndarray:

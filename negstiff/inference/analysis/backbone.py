@@ -43,6 +43,7 @@ from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
+from scipy import fft as sp_fft
 from scipy import optimize, signal
 
 from negstiff.errors import MeasurementError
@@ -235,7 +236,7 @@ def decay_modes(x: np.ndarray, fs: float, count: int) -> np.ndarray:
     (a structure of N DOFs rings in N modes at most; beyond them a nonlinear decay's peaks are its harmonics).
     """
     w = signal.windows.hann(x.shape[1])
-    p = np.abs(np.fft.rfft(x * w, axis=1)) ** 2
+    p = np.abs(sp_fft.rfft(x * w, axis=1)) ** 2
     p = (p / np.maximum(p.sum(axis=1, keepdims=True), 1e-300)).sum(axis=0)
     f = np.fft.rfftfreq(x.shape[1], 1.0 / fs)
     peaks, _ = signal.find_peaks(p[1:])  # the rest's residual at 0 Hz is no resonance
@@ -253,7 +254,7 @@ def mode_band(x: np.ndarray, fs: float, noise_rms: float, modes_hz: np.ndarray) 
     """
     if modes_hz.size < 2:
         return _band(x, fs, noise_rms)
-    spec = np.abs(np.fft.rfft(x * signal.windows.hann(x.size)))
+    spec = np.abs(sp_fft.rfft(x * signal.windows.hann(x.size)))
     f = np.fft.rfftfreq(x.size, 1.0 / fs)
     k = int(np.argmax([spec[int(np.argmin(np.abs(f - fm)))] for fm in modes_hz]))
     lo = math.sqrt(modes_hz[k - 1] * modes_hz[k]) if k > 0 else 0.0

@@ -27,6 +27,7 @@ from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
+from scipy import fft as sp_fft
 from scipy import optimize, signal
 
 from negstiff.errors import MeasurementError, issue
@@ -56,8 +57,8 @@ def input_period(rec: Measurement) -> int | None:
     n = u.size
     if n < 64 or not np.any(u):
         return None
-    spec = np.fft.rfft(u, 2 * n)
-    acf = np.fft.irfft(np.abs(spec) ** 2)[: n // 3 + 1]
+    spec = sp_fft.rfft(u, 2 * n)
+    acf = sp_fft.irfft(np.abs(spec) ** 2)[: n // 3 + 1]
     acf = acf / acf[0] * n / (n - np.arange(acf.size))  # unbiased: each lag over the samples it has
     lo = max(1, int(0.25 * rec.fs))
     if acf.size <= lo + 1:

@@ -41,6 +41,7 @@ import math
 from typing import Any
 
 import numpy as np
+from scipy import fft as sp_fft
 
 from negstiff.errors import MeasurementError
 from negstiff.inference.record.impacts import MIN_PRETRIGGER, Impacts
@@ -116,8 +117,8 @@ def impact_spectra(rec: Measurement, hits: Impacts) -> dict[str, Any]:
         window = f"response: none (rectangular; its ring-down is {100 * ratio:.2g} % of its peak at the block's end)"
     window = f"force: rectangular over each pulse ({(hits.pulse_ends - hits.starts).max() / rec.fs * 1e3:.3g} ms), " \
         + window  # fmt: skip
-    F = np.fft.rfft(fk, nfft, axis=1) / rec.fs
-    X = np.fft.rfft(xk, nfft, axis=1) / rec.fs
+    F = sp_fft.rfft(fk, nfft, axis=1) / rec.fs
+    X = sp_fft.rfft(xk, nfft, axis=1) / rec.fs
     f = np.fft.rfftfreq(nfft, 1 / rec.fs)
     gxx = np.sum(np.abs(F) ** 2, axis=0)
     gyy = np.sum(np.abs(X) ** 2, axis=0)

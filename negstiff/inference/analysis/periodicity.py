@@ -46,6 +46,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+from scipy import fft as sp_fft
 from scipy import ndimage, optimize, signal
 from scipy.interpolate import CubicSpline
 
@@ -90,7 +91,7 @@ def measured_forcing(rec: Measurement, f_hz: float) -> dict[str, float]:
     """
     u, t = rec.u - rec.u.mean(), rec.t - rec.t0
     pad = 8 * rec.n
-    spec = np.abs(np.fft.rfft(u * np.hanning(rec.n), pad))
+    spec = np.abs(sp_fft.rfft(u * np.hanning(rec.n), pad))
     freqs = np.fft.rfftfreq(pad, rec.dt)
     band = np.flatnonzero(np.abs(freqs - f_hz) <= FREQUENCY_SEARCH * f_hz)
     if band.size < 3:
@@ -137,7 +138,7 @@ def check_forcing_line(rec: Measurement, f_hz: float) -> dict[str, float]:
     u, t = rec.u - rec.u.mean(), rec.t - rec.t0
     u_rms = float(u.std())
     pad = 8 * rec.n
-    spec = np.abs(np.fft.rfft(u * np.hanning(rec.n), pad))
+    spec = np.abs(sp_fft.rfft(u * np.hanning(rec.n), pad))
     freqs = np.fft.rfftfreq(pad, rec.dt)
     above = freqs > max(4.0 / rec.duration, 0.05 * f_hz)  # not the accelerometer's bias or drift
     if not above.any() or u_rms == 0:
@@ -463,7 +464,7 @@ def line_fraction(z: np.ndarray, fs: float, f_hz: float, q: int, acquired_fs: fl
     """
     acquired_fs = fs if acquired_fs is None else acquired_fs
     x = (z - z.mean()) * np.hanning(z.size)
-    spec = np.abs(np.fft.rfft(x)) ** 2
+    spec = np.abs(sp_fft.rfft(x)) ** 2
     freqs = np.fft.rfftfreq(z.size, 1.0 / fs)
     counted = freqs >= f_hz / (4 * q)
     total = float(spec[counted].sum())
@@ -492,7 +493,7 @@ def subharmonic_lines(z: np.ndarray, fs: float, f_hz: float) -> dict[str, Any]:
     such lines to speak of; the check is the periodicity's, not chaos's.
     """
     x = (z - z.mean()) * np.hanning(z.size)
-    spec = np.abs(np.fft.rfft(x)) ** 2
+    spec = np.abs(sp_fft.rfft(x)) ** 2
     df = fs / z.size
     ratios = {}
     for q in PERIODS[1:]:
@@ -698,7 +699,7 @@ def harmonic_frequency(rec) -> float | None:
     refined by least squares), else None.
     """
     u = rec.u - rec.u.mean()
-    spec = np.abs(np.fft.rfft(u * np.hanning(u.size))) ** 2
+    spec = np.abs(sp_fft.rfft(u * np.hanning(u.size))) ** 2
     if spec.sum() <= 0:
         return None
     k = int(np.argmax(spec[1:])) + 1

@@ -21,6 +21,7 @@ import functools
 import math
 
 import numpy as np
+from scipy import fft as sp_fft
 from scipy import signal
 
 WELCH_SEGMENT = 4096
@@ -70,7 +71,7 @@ def _filter_response(w: int, order: int, d: int, fs: float, nf: int, df: float) 
     # h (freqz's polynomial evaluation at nf points took 2/3 of this function's time)
     n_dft = int(round(fs / df))
     if n_dft >= w and abs(n_dft * df - fs) <= 1e-9 * fs:
-        H = np.fft.rfft(h, n_dft)[:nf] * np.exp(1j * 2 * np.pi * f * (w // 2) / fs)
+        H = sp_fft.rfft(h, n_dft)[:nf] * np.exp(1j * 2 * np.pi * f * (w // 2) / fs)
     else:
         H = signal.freqz(h, worN=f, fs=fs)[1] * np.exp(1j * 2 * np.pi * f * (w // 2) / fs)
     return H, float(np.sum(h**2))
@@ -196,9 +197,9 @@ def state_derivatives(
     n = z.size
     ext = np.concatenate([z, z[::-1]]) - z.mean()
     jw = 2j * np.pi * np.fft.rfftfreq(2 * n, 1 / fs)
-    spec = np.fft.rfft(ext)
+    spec = sp_fft.rfft(ext)
     info["method"] = "spectral differentiation (the band leaves no room for smoothing)"
-    return z.copy(), np.fft.irfft(jw * spec, 2 * n)[:n], np.fft.irfft(jw**2 * spec, 2 * n)[:n], info
+    return z.copy(), sp_fft.irfft(jw * spec, 2 * n)[:n], sp_fft.irfft(jw**2 * spec, 2 * n)[:n], info
 
 
 def response_band_hz(z: np.ndarray, fs: float) -> float:
@@ -277,6 +278,6 @@ def smooth_and_differentiate(
     if w:
         return (signal.savgol_filter(z, w, order), signal.savgol_filter(z, w, order, deriv=1, delta=1.0 / fs))
     zm = z.mean()
-    spec = np.fft.rfft(z - zm)
-    v = np.fft.irfft(2j * np.pi * np.fft.rfftfreq(z.size, 1 / fs) * spec, z.size)
+    spec = sp_fft.rfft(z - zm)
+    v = sp_fft.irfft(2j * np.pi * np.fft.rfftfreq(z.size, 1 / fs) * spec, z.size)
     return z.copy(), v

@@ -40,6 +40,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+from scipy import fft as sp_fft
 from scipy import signal
 
 from negstiff.errors import MeasurementError
@@ -168,7 +169,7 @@ def test_function(half: int, dt: float, pad_factor: int = 3) -> tuple[np.ndarray
     x = np.arange(-half, half + 1) / half
     phi = np.pad((1 - x**2) ** 4, pad_factor * half)
     w = 2 * np.pi * np.fft.rfftfreq(phi.size, dt)
-    return phi, np.fft.irfft(-(w**2) * np.fft.rfft(phi), phi.size)
+    return phi, sp_fft.irfft(-(w**2) * sp_fft.rfft(phi), phi.size)
 
 
 def test_function_half_width(
@@ -196,7 +197,7 @@ def test_function_half_width(
     ff = np.fft.rfftfreq(nfft, 1 / fs)
     for half in range(min_half, max_half + 1):
         x = np.arange(-half, half + 1) / half
-        spec = np.abs(np.fft.rfft((1 - x**2) ** 4, nfft))
+        spec = np.abs(sp_fft.rfft((1 - x**2) ** 4, nfft))
         if spec[ff >= f_c].max() < tol * spec[0]:
             return half, f_c
     return max_half, f_c

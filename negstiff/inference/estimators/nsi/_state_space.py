@@ -41,6 +41,7 @@ import warnings
 from typing import Any
 
 import numpy as np
+from scipy import fft as sp_fft
 from scipy import signal, stats
 
 from negstiff.errors import InputError, issue
@@ -278,8 +279,8 @@ def quasi_static_motion(r: np.ndarray, u: np.ndarray, fs: float, basis: laws.Fee
     """
     n = r.size
     fq = np.fft.rfftfreq(n, 1 / fs)
-    measured = np.fft.rfft(r - r.mean())
-    force = np.fft.rfft(u - u.mean())
+    measured = sp_fft.rfft(r - r.mean())
+    force = sp_fft.rfft(u - u.mean())
     fit = (fq >= corner_hz) & (fq <= top_hz)
     noise_power = n * noise**2 / np.maximum(2 * np.pi * fq, 1e-300) ** 4  # E|FFT|^2 of the integral's error per bin
 
@@ -287,7 +288,7 @@ def quasi_static_motion(r: np.ndarray, u: np.ndarray, fs: float, basis: laws.Fee
         est, law = r, measured
         for _ in range(SLOW_ITERATIONS):
             x = band_limited(est, fs, cut_hz)
-            g = np.fft.rfft(-basis.displacement(x - np.mean(x), float(np.mean(x))), axis=0)
+            g = sp_fft.rfft(-basis.displacement(x - np.mean(x), float(np.mean(x))), axis=0)
             X = np.column_stack([force, fq**2 * force, g, fq[:, None] ** 2 * g])
             coef = np.linalg.lstsq(np.vstack([X[fit].real, X[fit].imag]),
                                    np.concatenate([measured[fit].real, measured[fit].imag]), rcond=None)[0]  # fmt: skip
@@ -295,7 +296,7 @@ def quasi_static_motion(r: np.ndarray, u: np.ndarray, fs: float, basis: laws.Fee
             spec = measured.copy()
             spec[fq < cross] = law[fq < cross]
             spec[0] = 0.0
-            est = np.fft.irfft(spec, n) + r.mean()
+            est = sp_fft.irfft(spec, n) + r.mean()
         return est, np.abs(measured - law) ** 2
 
     def done(out: np.ndarray, cross: float, ratios: list[float]) -> tuple[np.ndarray, dict[str, Any]]:

@@ -7,6 +7,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
+from scipy import fft as sp_fft
 from scipy.optimize import minimize_scalar
 
 from negstiff.errors import MeasurementError
@@ -181,7 +182,7 @@ class Windows:
             f = np.fft.rfftfreq(rec.n, rec.dt)
             x = np.pi * f * rec.dt
             gain = np.where(f < 0.4 * rec.fs, (2 + np.cos(x)) / (3 * np.cos(x)), 1.0)
-            u = np.fft.irfft(np.fft.rfft(rec.u) * gain, rec.n)[idx]
+            u = sp_fft.irfft(sp_fft.rfft(rec.u) * gain, rec.n)[idx]
         else:
             from scipy import signal
 
