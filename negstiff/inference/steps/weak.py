@@ -125,14 +125,13 @@ class Library:
     def columns(self, z: np.ndarray, v: np.ndarray, u: np.ndarray, velocity_noise: float,
                 aux: Mapping[str, np.ndarray] | None = None) -> np.ndarray:  # fmt: skip
         """The library evaluated pointwise (samples, columns + 1), the input u last."""
-        if not self.by_law:
-            F = library_columns(z, v, u, velocity_noise)[:, :-1]
-        else:
-            assert self.restoring is not None and self.damping is not None
-            F = np.column_stack([self.restoring.columns(z, v, self.shape, velocity_noise),
-                                 self.damping.columns(z, v, self.shape, velocity_noise)])  # fmt: skip
         extra = [np.asarray((aux or {})[a], float) for a in self.aux]
-        return np.column_stack([F, *extra, u])
+        if not self.by_law:
+            return np.column_stack([library_columns(z, v, u, velocity_noise)[:, :-1], *extra, u])
+        assert self.restoring is not None and self.damping is not None
+        # every column stacked once (the same matrix as the laws' matrices stacked again: a copy of it less)
+        return np.column_stack([*self.restoring.column_arrays(z, v, self.shape, velocity_noise),
+                                *self.damping.column_arrays(z, v, self.shape, velocity_noise), *extra, u])  # fmt: skip
 
     def model(self, phys: np.ndarray, mass: float) -> Model:
         """The model of the columns' z'' coefficients (per unit mass; the input's last) and the mass."""
