@@ -33,6 +33,7 @@ from negstiff.inference.steps.weak import free_decay, known_input_gain, mass_of
 from negstiff.inference.steps.wells import well_guesses
 from negstiff.models import Model, laws
 from negstiff.models.laws import FeedbackBasis
+from negstiff.resources import on_fit_threads
 
 from .. import subspace
 from ._physical import identify_nsi
@@ -480,6 +481,8 @@ class NSI(StructureResults, Identifier):
             for name, w in self.wells_.items()
         }
 
+    @on_fit_threads  # its subspace steps are ``fit``'s: BLAS on ``fit``'s threads, whatever the process's pool (on
+    # the pool's, one reproduce's diagram differed from another's in one entry, at 1e-15)
     def stabilisation(self, rec: Measurement, orders=(2, 4, 6, 8), block_rows=(10, 20, 30, 40)) -> list[dict]:
         """Stabilisation diagram (Marchesiello, Fasana & Garibaldi 2016; algorithms.md A.5): for each
         (order, block rows) and each well found by ``fit``, every identified pole and the physical
