@@ -50,6 +50,27 @@ OUTPUT_ERRNOS = {errno.ENOSPC, errno.EDQUOT, errno.EFBIG, errno.EROFS, errno.EIO
 """What a file system says when an output cannot be written: turned into one ``OutputError`` line."""
 
 
+@contextlib.contextmanager
+def _signals_held():
+    """Ctrl-C and a kill (SIGINT, SIGTERM) held back while a temporary output is made and registered as pending:
+    delivered between the two, the command's handler (``remove_pending``) did not know the temporary yet and
+    left it behind (seen once in CI: a campaign's folder, its kill sent the moment the folder appeared). Held at
+    the operating system (``signal.pthread_sigmask``, POSIX; elsewhere a no-op) and delivered on release.
+    """
+    import signal
+    import threading
+
+    if not hasattr(signal, "pthread_sigmask") or threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    held = {signal.SIGINT, signal.SIGTERM}
+    before = signal.pthread_sigmask(signal.SIG_BLOCK, held)
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, before)
+
+
 def remove_pending() -> None:
     """Delete every temporary output still being written (an interrupted command leaves nothing)."""
     for p in list(_PENDING):
@@ -147,13 +168,13 @@ def atomic_path(path: str | os.PathLike):
     left untouched; a file system's refusal (full disk, ...) is an ``OutputError``.
     """
     path = Path(path)
-    with _output_errors(path):
+    with _output_errors(path), _signals_held():  # made and registered as pending before a signal's handler runs
         path.parent.mkdir(parents=True, exist_ok=True)
         fd, tmp_name = tempfile.mkstemp(prefix=_temp_prefix(path), suffix=".part", dir=path.parent)
         os.close(fd)
-    tmp = Path(tmp_name)
+        tmp = Path(tmp_name)
+        _PENDING.add(tmp)
     os.chmod(tmp, 0o666 & ~_umask())  # mkstemp makes 0600; give the file the usual permissions
-    _PENDING.add(tmp)
     try:
         with _output_errors(path):
             yield tmp
@@ -185,11 +206,11 @@ def atomic_dir(path: str | os.PathLike):
     its work (``check_folder``, ``check_outputs``), this is the last look.
     """
     path = Path(path)
-    with _output_errors(path):
+    with _output_errors(path), _signals_held():  # made and registered as pending before a signal's handler runs
         path.parent.mkdir(parents=True, exist_ok=True)
         tmp = Path(tempfile.mkdtemp(prefix=_temp_prefix(path), suffix=".part", dir=path.parent))
+        _PENDING.add(tmp)
     os.chmod(tmp, 0o777 & ~_umask())
-    _PENDING.add(tmp)
     try:
         with _output_errors(path):
             yield tmp

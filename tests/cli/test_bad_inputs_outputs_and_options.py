@@ -307,6 +307,38 @@ def test_sigterm_during_a_campaign_leaves_nothing(lab, tmp_path):
     assert list(tmp_path.iterdir()) == []
 
 
+KILLED_WHILE_MADE = """
+import os, signal, sys, tempfile
+from pathlib import Path
+from negstiff import files
+maker = sys.argv[1]
+seen = []
+real = getattr(tempfile, maker)
+def made_then_killed(*args, **kwargs):
+    out = real(*args, **kwargs)
+    os.kill(os.getpid(), signal.SIGTERM)
+    return out
+signal.signal(signal.SIGTERM, lambda signum, frame: seen.append(set(files._PENDING)))
+setattr(tempfile, maker, made_then_killed)
+making = files.atomic_dir if maker == "mkdtemp" else files.atomic_path
+with making(Path(sys.argv[2]) / "out") as tmp:
+    print("registered" if seen and tmp in seen[0] else f"not registered: {seen}")
+"""
+"""A process (its main thread: a command's, where signal handlers run) whose temporary output's maker is killed the
+moment it has made it (``test_a_kill_the_moment_a_temporary_output_appears_finds_it_pending``)."""
+
+
+@pytest.mark.parametrize("maker", ["mkdtemp", "mkstemp"])
+def test_a_kill_the_moment_a_temporary_output_appears_finds_it_pending(tmp_path, maker):
+    # the command's kill handler removes the outputs pending (``files.remove_pending``): a kill delivered the moment
+    # a temporary output exists on disk, before it is registered as pending, left it behind (CI, once: the test
+    # above, its kill sent when the campaign's folder appeared). Here the kill comes from inside the maker, just
+    # after the temporary is made, in a process's main thread as the command's: its handler must already find it
+    # pending
+    p = subprocess.run([sys.executable, "-c", KILLED_WHILE_MADE, maker, str(tmp_path)], capture_output=True, text=True)
+    assert p.returncode == 0 and p.stdout.strip() == "registered", (p.stdout, p.stderr)
+
+
 # --- 4. bad data accepted ----------------------------------------------------------------------------------
 def _truncated(lab, tmp_path, suffix, keep):
     rec = tmp_path / f"full{suffix}"
