@@ -309,7 +309,7 @@ def _integrate(device, coulomb, generic, table, extra, fused, stagewise, p, mono
     ``fused``: the fused step of one DOF on the base without a linear structure (``_fused_step``); ``stagewise``: the
     stage-wise loops of any structure; one of the two, the caller chooses (``simulator.integrate``). The seven flags
     (``device``: the rod frame's exact geometry, else the polynomial) are None (off) or 1 (on), so each combination
-    is a signature of its own, compiled once and cached (``kernel`` chooses them). numba's dead-branch pruning
+    is a signature of its own, compiled once and cached (``kernel_flags`` chooses them). numba's dead-branch pruning
     resolves an argument's None before it types and inlines anything, so a branch under a flag that is None is
     never compiled; an int argument's branch it keeps (hence a flag for each of the two steps: under one flag's
     None and not-None both steps were compiled, 4.6 s against 2.6 s). Called directly from Python, not through a
@@ -456,21 +456,26 @@ def _integrate(device, coulomb, generic, table, extra, fused, stagewise, p, mono
     return 0
 
 
-_NO_W = np.zeros((0, 0))
-_NO_V = np.zeros(0)
-"""The extra force hook's arguments in the kernels without it: empty, never read (``extra`` is False)."""
+NO_HOOK = (np.zeros((0, 0)), *(np.zeros(0) for _ in range(7)))
+"""The extra force hook's arguments of a kernel without it: empty, never read (``extra`` None)."""
 
 
-def kernel(kind: int, p: np.ndarray, mono: np.ndarray, hook: bool = False, table: bool = False, staged: bool = False
-           ) -> tuple[int | None, ...]:  # fmt: skip
+def device_flag(kind: int) -> int | None:
+    """``_integrate``'s ``device`` flag of a restoring-force kind (``KINDS``): 1 for the rod frame's exact
+    geometry, None for the polynomial.
+    """
+    return 1 if kind == KIND_DEVICE else None
+
+
+def kernel_flags(kind: int, p: np.ndarray, mono: np.ndarray, hook: bool = False, table: bool = False,
+                 staged: bool = False) -> tuple[int | None, ...]:  # fmt: skip
     """The compiled kernel for a batch, as ``_integrate``'s seven leading flags (None: off, 1: on): its
     restoring-force kind (``device``), whether any member has a smoothed sign (``coulomb``), whether the batch
     uses extra monomial rows (``generic``) or a table of shaped parts (``table``; then one general kernel, sign
     included), whether the extra force hook is used (``extra``), and whether it runs the fused step of one DOF on
     the base (``fused``) or the stage-wise loops of a structure (``stagewise``; asked by ``staged``).
     """
-    on = lambda flag: 1 if flag else None  # noqa: E731
-    device = on(kind == KIND_DEVICE)
+    device = device_flag(kind)
     sign = bool(np.any(p[P_SIGN] != 0.0))
     steps = (None, 1) if staged else (1, None)  # (fused, stagewise)
     if hook:
@@ -483,8 +488,4 @@ def kernel(kind: int, p: np.ndarray, mono: np.ndarray, hook: bool = False, table
         return (None, None, None, 1, None, *steps)
     if mono.shape[0] or table:
         return (device, 1, 1, 1, None, *steps)
-    return (device, on(sign), None, None, None, *steps)
-
-
-NO_HOOK = (_NO_W, _NO_V, _NO_V, _NO_V, _NO_V, _NO_V, _NO_V, _NO_V)
-"""The extra force hook's arguments of a kernel without it (``extra`` None: never read)."""
+    return (device, 1 if sign else None, None, None, None, *steps)

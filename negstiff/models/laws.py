@@ -140,7 +140,8 @@ class Law:
 
     def column_arrays(self, z, v, shape: Shape | None = None, velocity_noise: float = 0.0) -> list[np.ndarray]:
         """``columns``, one array each: a library of several laws stacks all of theirs once (stacked law by law and
-        again, a 396 s record's library was copied three times over: 1.4 s, measured).
+        then again, every sample was copied three times: on a 396 s record at 2048 Hz the column stacking of a
+        refused identification took 1.4 s, 0.9 s once, measured).
         """
         z, v = np.asarray(z, float), np.asarray(v, float)
         out = [effects.BASE_TERMS[f][0].column(z, v, velocity_noise) for f in self.fields]

@@ -14,6 +14,7 @@ import numpy as np
 from . import effects
 from .effects import COULOMB_VELOCITY_SCALE
 from .kernel import (
+    KINDS,
     P_C,
     P_CNL,
     P_M,
@@ -27,6 +28,7 @@ from .kernel import (
     P_Z5,
     _column,
     converted,
+    device_flag,
     member_tables,
     total_force,
 )
@@ -176,7 +178,7 @@ def lyapunov_benettin(
     gain = -1.0 if input_kind == "base_acc" else 1.0 / p[P_M]
     lay = effects.layout()
     logs = _benettin(
-        None if system.kind == "polynomial" else 1,  # the kernel's ``device`` flag (``kernel._integrate``)
+        device_flag(KINDS[system.kind]),
         np.ascontiguousarray(p[:, None]),
         lay.monomials,
         lay.size if p.size > lay.size else -1,

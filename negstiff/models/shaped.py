@@ -371,12 +371,14 @@ class Spline(ShapedLaw):
     def columns(self, shape, z):
         """The B-spline basis at z, each function continued linearly beyond the end knots (so the force is)."""
         z = np.asarray(z, float)
-        cols = self._basis(shape, z, order="F")  # each column contiguous: a library stacks them (3x faster, measured)
+        # each column contiguous: a library stacks them (19 columns of 794,624 samples: 31 ms from contiguous ones,
+        # 52 ms from the strided columns of a row-major matrix, measured)
+        cols = self._basis(shape, z, order="F")
         return list(np.moveaxis(cols.reshape(*z.shape, cols.shape[1]), -1, 0))
 
     def column_matrix(self, shape, z) -> np.ndarray:
-        """The columns as a matrix (T, n), made as one (the columns one by one and stacked again took as long as
-        making them, measured on a vibrometer's gain search).
+        """The columns as a matrix (T, n), made as one (split into columns and stacked again, it was one of the two
+        stackings that took 0.3 s of a vibrometer's 1.5 s gain search, measured).
         """
         return self._basis(shape, np.asarray(z, float).reshape(-1))
 

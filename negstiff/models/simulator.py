@@ -30,7 +30,7 @@ from scipy import signal
 from negstiff.errors import InputError
 
 from . import effects
-from .kernel import KINDS, NO_HOOK, P_M, STATUS_DIVERGED, STATUS_GEOMETRY, STATUS_OK, _integrate, kernel
+from .kernel import KINDS, NO_HOOK, P_M, STATUS_DIVERGED, STATUS_GEOMETRY, STATUS_OK, _integrate, kernel_flags
 
 STATUS_TEXT = {
     STATUS_DIVERGED: "diverged (|z| or |z_dot| beyond its limit, or non-finite)",
@@ -284,7 +284,7 @@ def integrate(kind: int, p: np.ndarray, minv: np.ndarray, lk: np.ndarray, lc: np
     ts = lay.size if table else -1
     # one DOF on the base without a linear structure runs the fused step; anything else the stage-wise loops
     staged = not (nd == 1 and place[0] == 0 and not (np.any(lk) or np.any(lc)))
-    flags = kernel(kind, p, mono, hook is not None, table, staged)
+    flags = kernel_flags(kind, p, mono, hook is not None, table, staged)
     hook_args = NO_HOOK if hook is None else tuple(hook)
 
     def c_(a):

@@ -112,7 +112,7 @@ def test_one_compiled_signature_whatever_the_callers_arrays(rng):
     # sees one array type per argument, so a fresh install compiles each kernel once (every extra
     # signature is another 5-10 s compile; the old code compiled three here)
     from negstiff.models import SEED_LIKE_CUBIC
-    from negstiff.models.kernel import _integrate, kernel
+    from negstiff.models.kernel import _integrate, kernel_flags
 
     p = SEED_LIKE_CUBIC.kernel_params()
     u = rng.standard_normal((3, 40))
@@ -125,6 +125,6 @@ def test_one_compiled_signature_whatever_the_callers_arrays(rng):
     simulate_batch(np.column_stack([p, p]), "polynomial", u.T.T[:, ::2], 1e-3, np.zeros((2, 2)), input_index=[0, 2])
     simulate_batch(p, "polynomial", np.asfortranarray(u), 1e-3, x0, input_index=[1])
     # the polynomial's fused kernel (its seven flags, ``kernel``) in one signature, whatever else this process compiled
-    flags = [numba.typeof(f) for f in kernel(0, p[:, None], np.zeros((0, 5), np.int64))]
+    flags = [numba.typeof(f) for f in kernel_flags(0, p[:, None], np.zeros((0, 5), np.int64))]
     polynomial = [sig for sig in _integrate.signatures if list(sig[:7]) == flags]
     assert len(polynomial) == 1, polynomial

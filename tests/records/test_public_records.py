@@ -23,22 +23,13 @@ pytestmark = [
 ]
 
 
-def _chaos_record(tmp_path: Path, blocks=range(1, 100)) -> Path:
+def _chaos_record(tmp_path: Path) -> Path:
     """The asymmetric chaotic run as one CSV: blocks DPsv00001-00099 (4 s each, contiguous: each block's
-    first velocity sample continues the last one's), 396 s at 2048 Hz, written as the lab's columns."""
-    from scipy.io import loadmat
+    first velocity sample continues the last one's), 396 s at 2048 Hz, written as the lab's columns (the waits
+    benchmark's reader, which times its refusals)."""
+    from benchmarks.waits import harvester_record
 
-    folder = Path(ROOT) / "DataExperimental" / "poincare_analysis" / "chaos_asymmetric"
-    acc, vel = [], []
-    for i in blocks:
-        d = loadmat(folder / f"DPsv{i:05d}.mat")
-        acc.append(d["X1"][:, 1])
-        vel.append(d["X3"][:, 1])
-    path = tmp_path / "bistablex_chaos_asymmetric.csv"
-    with path.open("w") as f:
-        f.write("# fs: 2048\nACC,VEL\n")
-        np.savetxt(f, np.column_stack([np.concatenate(acc), np.concatenate(vel)]), delimiter=",", fmt="%.8g")
-    return path
+    return harvester_record(Path(ROOT), tmp_path / "bistablex_chaos_asymmetric.csv")
 
 
 def test_the_harvesters_chaotic_run_keeps_its_wells_and_its_forcing(tmp_path):

@@ -33,7 +33,7 @@ from negstiff.inference.steps.weak import free_decay, known_input_gain, mass_of
 from negstiff.inference.steps.wells import well_guesses
 from negstiff.models import Model, laws
 from negstiff.models.laws import FeedbackBasis
-from negstiff.resources import on_fit_threads
+from negstiff.resources import on_fit_threads, thread_budget
 
 from .. import subspace
 from ._physical import identify_nsi
@@ -364,8 +364,6 @@ class NSI(StructureResults, Identifier):
         (BLAS on one thread each, ``fit_threads``), so the numbers are those of one thread, and their linear algebra
         releases the interpreter.
         """
-        from negstiff.resources import thread_budget
-
         todo = {name: ref for name, ref in refs.items() if ref is not None}
         rec.basis_states()  # made once, before the threads read it
         if len(todo) < 2 or thread_budget() < 2:
