@@ -26,6 +26,7 @@ from negstiff.files import check_folder
 from negstiff.models import AS_BUILT, simulate
 from negstiff.models.reference import reference_solution
 from negstiff.models.rig import Rig
+from negstiff.models.warm_kernels import warm
 from negstiff.report.document import Report
 from negstiff.report.numbers import fmt
 from negstiff.resources import worker_initializer
@@ -129,9 +130,7 @@ KERNELS = ("polynomial", "device", "polynomial_sign", "hybrid", "benettin", "str
 """The compiled kernels a full run uses, in the order the sections first need them."""
 
 ALL_KERNELS = (*KERNELS, "table", "generic", "device_sign")
-"""Every kernel ``warm_kernel`` compiles: ``KERNELS`` (among them ``structure``, the stage-wise kernel of the
-polynomial element on a sprung fixture), a law's table (``table``), the general kernel (extra monomial rows, or a
-table with a smoothed sign: ``generic``) and the device's with a smoothed sign (``device_sign``)."""
+"""Every kernel ``warm_kernel`` compiles: the models' (``models.warm_kernels.KERNELS``) and the hybrid model's."""
 
 
 def warm_kernel(name: str) -> None:
@@ -140,42 +139,15 @@ def warm_kernel(name: str) -> None:
     taking some, instead of by every section process that reaches it first (~6 s a kernel alone; the
     fresh run took 31 s longer than a cached one, measured).
     """
-    from negstiff.models import SEED_LIKE_CUBIC, simulate_batch
-    from negstiff.models.kernel import P_SIGN
-    from negstiff.models.reference import lyapunov_benettin
+    if name != "hybrid":
+        warm(name)
+        return
+    from negstiff.inference.estimators.hybrid import Basis, simulate_hybrid
+    from negstiff.models import SEED_LIKE_CUBIC
 
-    u = np.zeros(64)
-    if name in ("polynomial", "polynomial_sign"):
-        p = SEED_LIKE_CUBIC.kernel_params()
-        if name == "polynomial_sign":
-            p[P_SIGN] = 1e-3
-        simulate_batch(p, "polynomial", u, 1e-3, np.zeros(2))
-    elif name in ("device", "device_sign"):
-        p = AS_BUILT.kernel_params()
-        if name == "device_sign":
-            p[P_SIGN] = 1e-3
-        simulate_batch(p, "device", u, 1e-3, np.array([AS_BUILT.equilibria().z_plus, 0.0]))
-    elif name in ("table", "generic"):  # the device's geometric law as a law's table; with a sign: the general one
-        p = AS_BUILT.law_model().kernel_params()
-        if name == "generic":
-            p[P_SIGN] = 1e-3
-        simulate_batch(p, "polynomial", u, 1e-3, np.array([AS_BUILT.equilibria().z_plus, 0.0]))
-    elif name == "hybrid":
-        from negstiff.inference.estimators.hybrid import Basis, simulate_hybrid
-
-        basis = Basis.over(np.linspace(-1, 1, 9), np.linspace(-1, 1, 9), np.linspace(-1, 1, 9), 2, 2, 2)
-        simulate_hybrid(SEED_LIKE_CUBIC, basis, np.zeros(basis.size), np.zeros((1, 9)), 1e-3, np.zeros((1, 2)), 2,
-                        "base_acc", 1.0, 100.0)  # fmt: skip
-    elif name == "structure":  # the polynomial element on a sprung fixture: two DOFs, the stage-wise loops
-        from negstiff.models.structure import Structure, simulate_structures
-
-        fixture = Structure.on_fixture(SEED_LIKE_CUBIC, fixture_mass=1.0, fixture_hz=25.0, fixture_zeta=0.02)
-        x0 = np.r_[fixture.static_positions(fixture.element_equilibria().z_plus), 0.0, 0.0]
-        simulate_structures([fixture], u, 1e-3, x0)
-    elif name == "benettin":
-        lyapunov_benettin(SEED_LIKE_CUBIC, u, 1e-3, SEED_LIKE_CUBIC.equilibria().z_plus, transient_s=0.0)
-    else:
-        raise ValueError(f"unknown kernel {name!r}: one of {ALL_KERNELS}")
+    basis = Basis.over(np.linspace(-1, 1, 9), np.linspace(-1, 1, 9), np.linspace(-1, 1, 9), 2, 2, 2)
+    simulate_hybrid(SEED_LIKE_CUBIC, basis, np.zeros(basis.size), np.zeros((1, 9)), 1e-3, np.zeros((1, 2)), 2,
+                    "base_acc", 1.0, 100.0)  # fmt: skip
 
 
 WORKER_MEMORY_BYTES = 2 * 1024**3

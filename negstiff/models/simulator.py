@@ -25,11 +25,10 @@ from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import signal
 
 from negstiff.errors import InputError
 
-from . import effects
+from . import compile_ahead, effects
 from .kernel import KINDS, NO_HOOK, P_M, STATUS_DIVERGED, STATUS_GEOMETRY, STATUS_OK, _integrate, kernel_flags
 
 STATUS_TEXT = {
@@ -94,6 +93,8 @@ def antialias_fir(q: int) -> np.ndarray:
     response turns into 0.07-0.7 % biases of k3, c and c_nl for any model fitted to the records
     (measured with the posterior's forward model on noise-free records).
     """
+    from scipy import signal  # imported where used: a kernel's compile-ahead helper (``compile_ahead``) needs none
+
     numtaps, beta = signal.kaiserord(100.0, 0.2 / q)
     return signal.firwin(numtaps | 1, 0.9 / q, window=("kaiser", beta))
 
@@ -110,6 +111,8 @@ def stage_input(u: np.ndarray, substeps: int = DEFAULT_SUBSTEPS) -> np.ndarray:
     2.67 mV rms error under linearly interpolated input and 0.25 mV under this one (measured).
     ``u``: (N,) or (R, N); returns (2 substeps (N - 1) + 1,) or (R, ...).
     """
+    from scipy import signal
+
     u = np.asarray(u, dtype=np.float64)
     r = 2 * int(substeps)
     n = u.shape[-1]
@@ -286,6 +289,7 @@ def integrate(kind: int, p: np.ndarray, minv: np.ndarray, lk: np.ndarray, lc: np
     staged = not (nd == 1 and place[0] == 0 and not (np.any(lk) or np.any(lc)))
     flags = kernel_flags(kind, p, mono, hook is not None, table, staged)
     hook_args = NO_HOOK if hook is None else tuple(hook)
+    compile_ahead.wait_for(flags)  # a helper compiling this kernel (a fresh install's first fit): its cache entry
 
     def c_(a):
         # one array type per kernel argument (C-contiguous, writable), whatever the caller passed: each distinct

@@ -47,7 +47,7 @@ from negstiff.inference.steps.plausibility import classified, judgement, model_w
 from negstiff.inference.steps.refine import refine_stage, stroke_quantiles
 from negstiff.inference.steps.validation import boundedness, predictability, restarted_free_runs, validate
 from negstiff.inference.steps.validation import restarted_structure_runs as free_run_error
-from negstiff.models import Model, laws
+from negstiff.models import Model, compile_ahead, laws
 from negstiff.models.equation import Equilibria
 from negstiff.models.simulator import stage_input
 from negstiff.models.structure import Mode, Structure, simulate_structures
@@ -275,6 +275,12 @@ class Identifier(Estimator):
         outside = tuple(f for f in ("k0", "k1", "k2", "k3", "c", "c_nl") if f not in free and f not in est.held)
         return replace(est, held=(*est.held, *outside))
 
+    def _kernels_ahead(self) -> tuple[str, ...]:
+        """The simulator's kernels to compile ahead of this fit on a fresh install (``compile_ahead``), beside
+        the one the fit compiles itself at its first simulation: none by default (one kernel, needed at once).
+        """
+        return ()
+
     def _estimate_law(self, rec: Measurement, n_id: int) -> tuple[Estimate, dict[str, Any] | None]:
         """The estimate of the law asked for, or of the law the record asks for (``law_choice``): a named law
         as it is; None the method's default, the other laws compared where it fails its checks (and said);
@@ -394,6 +400,7 @@ class Identifier(Estimator):
         shared stages (module docstring); the result is ``result_`` (an ``Identification``).
         """
         rec = self.check(data)
+        compile_ahead.start(self._kernels_ahead())  # a fresh install's kernels compile beside the fit's first steps
         n_id = int(round(rec.n * (1 - self.validation_fraction)))
         est, comparison = self._estimate_law(rec, n_id)
         stroke = stroke_quantiles(rec.z[:n_id])
