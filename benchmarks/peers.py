@@ -140,11 +140,17 @@ def sindy_peers(duration: float = 300.0, seed: int = 1) -> tuple[list[list[str]]
     def errors(get) -> dict[str, float]:
         return {k: 100 * (get(k) / v - 1) for k, v in want.items()}
 
+    # both timed warm, as pysindy is (imported, its first call's costs paid by the scan below): our first fit in a
+    # process also loads the compiled kernels and the modules its stages import, which the waits section times as
+    # a user meets them (``identify sindy``); it is timed here too, as the first fit
+    t0 = time.perf_counter()
+    SINDy(seed=seed).fit(m)
+    t_first = time.perf_counter() - t0
     t0 = time.perf_counter()
     ours = SINDy(seed=seed).fit(m)
     t_ours = time.perf_counter() - t0
     ours_row = _sindy_truth_row(ours.model_)
-    res: dict[str, Any] = {"negstiff": {"s": t_ours, "errors_percent": errors(ours_row.get)}}
+    res: dict[str, Any] = {"negstiff": {"s": t_ours, "first_fit_s": t_first, "errors_percent": errors(ours_row.get)}}
 
     # pysindy, as its documentation shows for a forced oscillator: state [z, z'] (z' by the suite's own
     # Savitzky-Golay route, the best a user has at hand), the documented weak-form call, STLSQ with
@@ -155,15 +161,17 @@ def sindy_peers(duration: float = 300.0, seed: int = 1) -> tuple[list[list[str]]
     x = np.column_stack([zs, v])
     t = np.arange(m.n) * m.dt
     best = None
+    scan = 0.0
     for thr in (1e-3, 1e-2, 1e-1, 1.0):
+        np.random.seed(seed)  # noqa: NPY002 - WeakPDELibrary places its K subdomains with the global numpy generator
         t0 = time.perf_counter()
         lib = ps.WeakPDELibrary(
             function_library=ps.PolynomialLibrary(degree=3), spatiotemporal_grid=t, K=400, p=4, H_xt=[0.05]
         )
         model = ps.SINDy(feature_library=lib, optimizer=ps.STLSQ(threshold=thr, alpha=1e-8, normalize_columns=True))
-        np.random.seed(seed)  # noqa: NPY002 - WeakPDELibrary places its K subdomains with the global numpy generator
         model.fit(x, t=t, u=m.u[:, None])
         elapsed = time.perf_counter() - t0
+        scan += elapsed
         coef = dict(zip(model.get_feature_names(), model.coefficients()[1], strict=False))
         err = errors(lambda k: coef.get(k, 0.0))
         score = max(abs(e) for e in err.values())
@@ -171,7 +179,7 @@ def sindy_peers(duration: float = 300.0, seed: int = 1) -> tuple[list[list[str]]
             best = (score, thr, err, sum(abs(c) > 0 for c in coef.values()), elapsed)
     assert best is not None  # the thresholds are not empty
     _, thr, err, n_terms, t_peer = best
-    res["pysindy"] = {"s": t_peer, "threshold": thr, "errors_percent": err, "terms": int(n_terms)}
+    res["pysindy"] = {"s": t_peer, "scan_s": scan, "threshold": thr, "errors_percent": err, "terms": int(n_terms)}
     rows = []
     for name, r, note in (
         ("negstiff SINDy (weak form, selection path, ensemble, output-error stage)", res["negstiff"],
@@ -329,10 +337,15 @@ def peers_section(quick: bool) -> list[str]:
         ["record", "method", "wall time", "k1 error", "k2 error", "k3 error", "c error", "terms"],
         yrows,
     )
-    ratio = yres["negstiff"]["s"] / yres["pysindy"]["s"]
-    lines += ["", f"negstiff's SINDy takes {ratio:.0f}x pysindy's time: it runs a selection path over held-out data, "
-              "a 50-model ensemble for inclusion probabilities, a free-run validation and the output-error stage, "
-              "each absent from the peer's one fit; the coefficient errors say what that buys."]  # fmt: skip
+    ours, peer = yres["negstiff"], yres["pysindy"]
+    lines += ["", f"Both timed warm (a second fit in the process; our first took {ours['first_fit_s']:.2f} s, loading "
+              "the compiled kernels and its stages' modules). negstiff's SINDy takes "
+              f"{ours['s'] / peer['s']:.1f}x pysindy's one fit at its best threshold and "
+              f"{ours['s'] / peer['scan_s']:.2f}x the scan of four thresholds that finding it took "
+              f"({peer['scan_s']:.2f} s; the peer's best chosen with the truth, which a user lacks). Ours runs a "
+              "selection path over held-out data, a 50-model ensemble for inclusion probabilities, a free-run "
+              "validation and the output-error stage, each absent from the peer's one fit; the coefficient errors "
+              "say what that buys."]  # fmt: skip
     print("peers: posterior...", file=sys.stderr)
     prows, pres = posterior_peers(30.0 if quick else 300.0, 1.0)
     lines += section(
