@@ -345,3 +345,22 @@ def test_silverbox_override_and_its_clear_error(tmp_path, monkeypatch):
     monkeypatch.setenv("NEGSTIFF_SILVERBOX", str(tmp_path / "missing.mat"))
     with pytest.raises(InputError, match="NEGSTIFF_SILVERBOX=.*is not a file"):
         silverbox()
+
+
+def test_the_response_checks_coherence_is_scipys():
+    # the coherence the response check reads (``derivatives.coherence``, the segments as one matrix) is scipy's
+    # with its defaults: a lagged, filtered and noisy copy of a random input, an offset on the response, lengths
+    # that leave a partial last segment; rounding alone apart (1e-12: products of unit-scale spectra)
+    from scipy import signal
+
+    from negstiff.inference.record.derivatives import coherence
+
+    rng = np.random.default_rng(4)
+    for n, fs in ((153_600, 512.0), (40_001, 1000.0), (5000, 100.0)):
+        u = rng.standard_normal(n)
+        z = 1e-3 * (np.convolve(u, np.hanning(9), "same") + 0.5 * rng.standard_normal(n)) + 0.02
+        nper = int(min(n // 16, round(fs)))
+        f_ref, c_ref = signal.coherence(u, z, fs=fs, nperseg=nper)
+        f, c = coherence(u, z, fs, nper)
+        assert np.array_equal(f, f_ref) and c.shape == c_ref.shape
+        assert np.max(np.abs(c - c_ref)) < 1e-12

@@ -29,6 +29,27 @@ WELCH_SEGMENT = 4096
 (the whole record when shorter): ``weak.noise_excursion`` counts its averages from it."""
 
 
+def coherence(u: np.ndarray, z: np.ndarray, fs: float, nperseg: int) -> tuple[np.ndarray, np.ndarray]:
+    """``scipy.signal.coherence(u, z, fs=fs, nperseg=nperseg)`` with its defaults (Hann segments overlapping by
+    half, each segment's mean removed), the segments transformed as one matrix: (f [Hz], coherence). The same
+    numbers to 1e-14; scipy's own detrends and transforms segment by segment in Python (2,883 calls on a 300 s record
+    at 512 Hz: 40 ms against 7 ms here, measured; 121 against 55 ms on 396 s at 2048 Hz), and every record's check
+    of its response (``Measurement.require_response``) reads one.
+    """
+    step = nperseg - nperseg // 2
+    window = signal.get_window("hann", nperseg)
+
+    def spectra(x: np.ndarray) -> np.ndarray:
+        seg = np.lib.stride_tricks.sliding_window_view(np.asarray(x, float), nperseg)[::step]
+        return sp_fft.rfft((seg - seg.mean(axis=1, keepdims=True)) * window, axis=1)
+
+    X, Z = spectra(u), spectra(z)
+    pxz = np.mean(np.conj(X) * Z, axis=0)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        coh = np.abs(pxz) ** 2 / (np.mean(np.abs(X) ** 2, axis=0) * np.mean(np.abs(Z) ** 2, axis=0))
+    return sp_fft.rfftfreq(nperseg, 1 / fs), coh
+
+
 def noise_floor(z: np.ndarray, fs: float) -> tuple[float, np.ndarray, np.ndarray]:
     """White sensor-noise variance of ``z`` and the signal's own PSD: (sigma^2, f, S).
 

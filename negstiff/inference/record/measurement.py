@@ -28,6 +28,7 @@ from negstiff.errors import MeasurementError
 from negstiff.inference.record.derivatives import (
     band_limited,
     basis_band_hz,
+    coherence,
     noise_floor,
     smooth_and_differentiate,
     state_derivatives,
@@ -503,14 +504,12 @@ class Measurement:
         (a cross-well record's best bin: coherence 0.56 over 31 averages, p = 4e-9; a vibrometer's noise: 0.044 over
         119, p = 0.97). A record without an input (a free decay) or a hammer's is not judged here.
         """
-        from scipy import signal
-
         if self.z is None or self.n_dof != 1 or is_constant(self.u) or is_constant(self.z):
             return
         nper = int(min(self.n // 16, round(self.fs)))
         if nper < 64:
             return
-        f, coh = signal.coherence(self.u, self.z, fs=self.fs, nperseg=nper)
+        f, coh = coherence(self.u, self.z, self.fs, nper)
         band = (f > 0) & (f < 0.8 * self.fs / 2)
         if not band.any():
             return
