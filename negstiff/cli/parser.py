@@ -262,7 +262,7 @@ def _identify(sub, common: argparse.ArgumentParser, data_opts: argparse.Argument
         "parameters of each underlying-linear system, the z-frame cubic restoring force and damping. sindy: weak-form "
         "sparse regression over 1, z..z^5, z', z'|z'|, z'^3, sgn(z') with the input's coefficient fixed by physics, "
         "terms selected by held-out residual, ensemble inclusion probabilities. Both: equilibria, modal parameters "
-        "and a free-run validation over the held-out last 20 %%.",
+        "and a free-run validation over the held-out last 20 %.",
     )
     idf.add_argument("method", choices=["nsi", "sindy"], help="identification method")
     idf.add_argument(
@@ -318,7 +318,7 @@ def _frf(sub, common: argparse.ArgumentParser, data_opts: argparse.ArgumentParse
         parents=[common, data_opts],
         help="H1/H2 frequency response with coherence, modal fit of the peaks",
         description="Frequency response of a (low-level) record from its input to z: H1 and H2 with the coherence "
-        "(Welch, Hann, 50 %% overlap), every resonance peak fitted by a single-degree-of-freedom receptance "
+        "(Welch, Hann, 50 % overlap), every resonance peak fitted by a single-degree-of-freedom receptance "
         "(frequency, damping ratio). Around one well at low level, the peak is that well's underlying-linear "
         "frequency: compare it with 'identify ... --frf R.json'. Writes R.json and R.png.",
     )
@@ -394,7 +394,7 @@ def _posterior(sub, common: argparse.ArgumentParser, data_opts: argparse.Argumen
         description="emcee posterior with a multiple-shooting output-error likelihood (short windows simulated "
         "from measured states, start states profiled out, sensor noise sigma sampled). coefficients: k1, k2, k3, c, "
         "c_nl, sigma (mass fixed: --mass, the file's metadata, or per unit mass). device: E, alpha, m, c, c_nl, "
-        "sigma with the exact geometric restoring force; --mass-prior weighed (N(m, 2 %%)) or free (shows the E-m "
+        "sigma with the exact geometric restoring force; --mass-prior weighed (N(m, 2 %)) or free (shows the E-m "
         "ridge). R-hat across independent ensembles, bulk/tail ESS, autocorrelation times; a run that does not "
         "converge is reported with a warning in the result.",
     )
@@ -616,7 +616,7 @@ def _design(sub, common: argparse.ArgumentParser, data_opts: argparse.ArgumentPa
         help="the test to run next: candidate tests ranked by how much they would narrow the posterior",
         description="Rank the tests the rig can run next (random at a level, a harmonic at an amplitude and "
         "frequency, a linear sine sweep at an amplitude), within the limits given, by the expected shrinkage of the "
-        "targeted parameters' 90 %% intervals: the posterior's draws run through each candidate on the virtual rig "
+        "targeted parameters' 90 % intervals: the posterior's draws run through each candidate on the virtual rig "
         "with the record's noise, each simulated record read as the posterior reads one (Laplace approximation of "
         "the expected posterior covariance). The grid's best candidates are searched further in their level and "
         "frequency. POSTERIOR is a coefficient posterior of a base-excited record (negstiff posterior ... -o); of a "

@@ -300,13 +300,18 @@ class Structure:
         """The DOFs' static positions with relative displacement r across the element."""
         return self._static(r)[:-1]
 
+    def element_law(self) -> Model:
+        """The element's law as the relative displacement r across it sees the structure at rest: F(r) - kappa r
+        (``_series_stiffness``; a spring k in parallel with the element has kappa = -k): the cubic's -k1 r becomes
+        -(k1 + kappa) r. The element itself for N = 1.
+        """
+        return replace(self.element, k1=self.element.k1 + self._series_stiffness())
+
     def element_equilibria(self) -> Equilibria:
-        """Equilibria of the relative displacement r across the element: F(r) = kappa r
-        (``_series_stiffness``; a spring k in parallel with the element has kappa = -k), the element's own
+        """Equilibria of the relative displacement r across the element (``element_law``'s), the element's own
         equilibria for N = 1.
         """
-        kappa = self._series_stiffness()  # F(r) - kappa r = 0: the cubic's -k1 r becomes -(k1 + kappa) r
-        return replace(self.element, k1=self.element.k1 + kappa).equilibria()
+        return self.element_law().equilibria()
 
     def equilibria(self) -> dict[str, np.ndarray]:
         """Static positions of every DOF [m] at each stable equilibrium (``"minus"``, ``"plus"``)."""

@@ -428,9 +428,6 @@ minute); ``negstiff design`` on the report's posterior searches further."""
 def _check_design(rec) -> None:
     from negstiff.inference.analysis.record_kind import RING_DOWN_KINDS, record_kind
 
-    if rec.n_dof > 1:
-        raise InputError(f"{rec.source}: the test design plans a single DOF's next test from its posterior; a "
-                         "structure's is not written yet")  # fmt: skip
     if rec.input_name != "base_acc" and record_kind(rec).kind not in RING_DOWN_KINDS:
         raise InputError(f"{rec.source}: a shaker's force record: the design plans shaker-table tests from a "
                          "base-excited record's posterior, hammer hits and releases from a hammer's or a "

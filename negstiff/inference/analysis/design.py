@@ -72,6 +72,167 @@ HAMMER_HITS = (2, 4, 8)
 """A hammer test's hit counts on the grid (evenly spread over the record)."""
 
 
+class CoefficientReading:
+    """How a single DOF's coefficient posterior reads a record (``Windows.cut``, the start states profiled, k0 a
+    nuisance): the parameters ``NAMES``, the polynomial model, its motion and the information one record carries.
+    The design's part for that posterior; ``ElementReading`` is a structure's element posterior's (the posterior's
+    two likelihoods, ``posterior.core`` and ``posterior.structure``: the design reads a record as its posterior
+    would, through this part, and is otherwise the same for both).
+    """
+
+    names: tuple[str, ...] = NAMES
+    sensors = "a laser on the moving part"
+
+    def system(self, theta: np.ndarray, mass: float):
+        """The polynomial model of the parameters ``theta`` (over ``NAMES``) with the posterior's mass."""
+        from negstiff.models import Model
+
+        return Model(m=mass, **{n: float(v) for n, v in zip(NAMES, theta, strict=True)})
+
+    def element(self, system):
+        """The law whose equilibria are the wells (the model itself)."""
+        return system
+
+    def frequencies(self, system) -> list[float]:
+        """The wells' underlying-linear frequencies [Hz]."""
+        return [system.uls(w).f_hz for w in ("minus", "plus")]
+
+    def motion(self, rec) -> tuple[np.ndarray, np.ndarray]:
+        """A rig record's true motion across the element (z) and every moving part's, (channels, T)."""
+        z = np.asarray(rec.true["z"])
+        return z, z[None, :]
+
+    def information(self, state: PosteriorState, model, m) -> tuple[np.ndarray, np.ndarray] | None:
+        """The model information H and the windows' score covariance M (over ``NAMES``, in the parameters' units) of
+        a record ``m`` (a ``Measurement``) of ``model`` as the posterior reads it (``likelihood.information_parts``; a
+        hammer's or release's record as a ring-down, its windows the free decays between the pulses), or None where a
+        run diverges.
+        """
+        from negstiff.inference.analysis.record_kind import identification_record, record_kind
+        from negstiff.inference.estimators.posterior.likelihood import information_parts
+        from negstiff.inference.estimators.posterior.parametrisation import coefficient_parametrisation
+        from negstiff.inference.estimators.posterior.windows import Windows
+
+        ring_down = state.bench == "ring-down"
+        if ring_down:  # as the posterior reads a hammer's record or a decay (``Posterior.point_estimate``)
+            m = identification_record(m, record_kind(m))
+        win = Windows.cut(m, state.window_s, state.max_windows, free=ring_down)
+        par = coefficient_parametrisation(model)
+        th = np.array([getattr(model, n) for n in par.names])
+        kind = par.kind
+        p0 = par.to_params(th[None])[:, 0]
+        win.refine_states(p0, kind)
+        win.set_sensitivities(p0, kind)
+        x_scale = np.maximum(np.abs(th), 1e-6)
+        h = 1e-5 * x_scale
+
+        def projected(point: np.ndarray):
+            """The projected residuals at ``point`` and their Jacobian (x coordinates), one batched simulation of
+            the point and its finite-difference neighbours; None where a run diverges.
+            """
+            thetas = np.vstack([point, point + np.diag(h)])
+            zsim, div = win.simulate(par.to_params(thetas), kind)
+            if div.any():
+                return None
+            res = win.residuals(zsim).reshape(len(thetas), -1)  # (1 + p, W L)
+            return res[0], np.stack([(res[0] - res[1 + i]) / (h[i] / x_scale[i]) for i in range(len(point))], axis=1)
+
+        at = projected(th)
+        if at is None:
+            return None
+        # The sensor's noise alone: the posterior's likelihood also carries the input's noise through each window's
+        # response (``Windows.set_input_noise``), which changed the predicted widths by 0.2 % on a 20 s record
+        # (measured) and cost three times the rest of the evaluation.
+        sigma = math.sqrt(win.mean_square(at[0]))
+        # The sandwich read where the posterior reads it, at the record's MAP point (one Gauss-Newton step from the
+        # draw): there the parameters have taken up what the sensor chain's systematic error (the integrated
+        # accelerometer's) resembles, and the windows' scores are smaller. Read at the draw itself, the inflation was
+        # twice the posterior's (10.3 against 4.9 on one 20 s record) and the predicted widths 1.2-1.7x the
+        # posterior's.
+        step = np.linalg.lstsq(at[1], at[0], rcond=None)[0] * x_scale
+        res0, J = projected(th + step) or at
+        H_x, M_x = information_parts(J, res0, win.n_windows, sigma)
+        per = 1.0 / np.outer(x_scale, x_scale)
+        order = np.ix_(*[[par.names.index(n) for n in NAMES]] * 2)
+        return (H_x * per)[order], (H_x if M_x is None else M_x * per)[order]
+
+
+@dataclass(frozen=True)
+class ElementReading:
+    """How a structure's element posterior reads a record (``posterior.structure``: every channel's windows, each
+    started from the record's smoothed state, its start-state directions projected off; the masses, the linear
+    structure and each channel's zero held at the start structure's): the parameters ``COEFFICIENTS`` of the
+    element, the structure, its motion and the information one record carries (``CoefficientReading``'s
+    counterpart).
+    """
+
+    structure: dict[str, Any]
+    """The structure the posterior holds fixed but its element's coefficients (``Structure.to_dict``)."""
+    names: tuple[str, ...] = COEFFICIENTS
+
+    @property
+    def sensors(self) -> str:
+        """The sensor chain the next record is read by, in words."""
+        return f"a laser on each of the {len(self.structure['masses'])} DOFs"
+
+    def system(self, theta: np.ndarray, mass: float):
+        """The structure with the element's coefficients ``theta`` (over ``COEFFICIENTS``)."""
+        from negstiff.models.structure import Structure
+
+        s = Structure.from_dict(self.structure)
+        values: dict[str, Any] = {n: float(v) for n, v in zip(self.names, theta, strict=True)}
+        return s.with_element(replace(s.element, **values))
+
+    def element(self, system):
+        """The element's law as its wells see it (``Structure.element_law``)."""
+        return system.element_law()
+
+    def frequencies(self, system) -> list[float]:
+        """Every underlying-linear mode's frequency [Hz] at each well."""
+        wells = system.element_equilibria()
+        return [m.f_hz for w in ("minus", "plus") if getattr(wells, f"z_{w}") is not None for m in system.modes(w)]
+
+    def motion(self, rec) -> tuple[np.ndarray, np.ndarray]:
+        """A rig record's true motion across the element (r = z_J - z_I) and every DOF's, (N, T)."""
+        from negstiff.models.structure import relative
+
+        z = np.atleast_2d(np.asarray(rec.true["z"]))
+        return relative(z, tuple(self.structure["at"])), z
+
+    def information(self, state: PosteriorState, structure, m) -> tuple[np.ndarray, np.ndarray] | None:
+        """H and M (over ``COEFFICIENTS``) of a record ``m`` (a ``Measurement``) of ``structure`` as its posterior reads
+        it (``posterior.structure.record_windows``; a ring-down's windows between its pulses), at the record's MAP
+        point one Gauss-Newton step from the draw (as ``CoefficientReading``'s), or None where a window diverges.
+        """
+        from negstiff.inference.analysis.record_kind import identification_record, record_kind
+        from negstiff.inference.estimators.posterior.likelihood import information_parts
+        from negstiff.inference.estimators.posterior.structure import (
+            element_values,
+            followed_windows,
+            record_windows,
+            residuals_and_jacobian,
+        )
+
+        ring_down = state.bench == "ring-down"
+        if ring_down:
+            m = identification_record(m, record_kind(m))
+        sim, data, starts, L = record_windows(structure, m, np.zeros(m.n_dof), state.window_s, state.max_windows,
+                                              ring_down)  # fmt: skip
+        theta = element_values(structure)
+        # the windows the posterior would leave out, left out (one ``PosteriorError`` where it would refuse)
+        sim, data, _ = followed_windows(sim, data, starts, L, structure, m, theta)
+        r0, J = residuals_and_jacobian(sim, data, theta)
+        if not (np.all(np.isfinite(r0)) and np.all(np.isfinite(J))):
+            return None
+        r1, J1 = residuals_and_jacobian(sim, data, theta + np.linalg.lstsq(J, -r0, rcond=None)[0])
+        if np.all(np.isfinite(r1)) and np.all(np.isfinite(J1)):
+            r0, J = r1, J1
+        n_obs = data.size - sim.W * 2 * m.n_dof  # the start states profiled out
+        sigma = math.sqrt(float(np.sum(r0**2)) / n_obs)
+        H, M = information_parts(J, r0, sim.W, sigma)
+        return H, (H if M is None else M)
+
+
 @dataclass(frozen=True)
 class Limits:
     """What the lab's rig can do: the record's duration [s], the peak table acceleration [m/s^2] and displacement
@@ -179,7 +340,7 @@ class Candidate:
 
 @dataclass
 class PosteriorState:
-    """What a design needs of a coefficient posterior's JSON: the Gaussian over ``NAMES`` (means, sds,
+    """What a design needs of a coefficient posterior's JSON: the Gaussian over ``names`` (means, sds,
     correlations), the 90 % widths now, the noise levels, the mass and the windows the posterior read.
     """
 
@@ -200,10 +361,18 @@ class PosteriorState:
     table's random, harmonic, swept and stepped tests) or ``"ring-down"`` (a hammer's or a free decay's posterior:
     hammer hits and releases, ``RING_DOWN_TESTS``)."""
     information: np.ndarray | None = None
-    """The first record's model information H over ``NAMES`` (the posterior's ``settings.laplace``), or None
+    """The first record's model information H over ``names`` (the posterior's ``settings.laplace``), or None
     (a posterior written before it was kept: the records' adjusted informations are then added instead)."""
     score_covariance: np.ndarray | None = None
-    """The first record's windows' score covariance over ``NAMES`` (the sandwich's meat), or None."""
+    """The first record's windows' score covariance over ``names`` (the sandwich's meat), or None."""
+    reading: Any = field(default_factory=lambda: CoefficientReading())
+    """How the posterior reads a record (``CoefficientReading``, a structure's ``ElementReading``): its parameters,
+    its system and the information a record carries."""
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        """The parameters the Gaussian is over (``reading.names``)."""
+        return tuple(self.reading.names)
 
     @classmethod
     def from_json(cls, res: dict[str, Any], source: str = "") -> PosteriorState:
@@ -214,8 +383,12 @@ class PosteriorState:
             raise InputError(f"{source or 'the posterior'}: not a posterior result (no parameters and settings)")
         s = res["settings"]
         where = source or "the posterior"
-        if "element_at" in s:
-            raise InputError(f"{where}: a structure's posterior; the design reads a single DOF's coefficient posterior")
+        reading: CoefficientReading | ElementReading = CoefficientReading()
+        if "element_at" in s:  # a structure's element posterior (``posterior.structure``): its start structure held
+            if not isinstance(s.get("start"), dict) or "structure" not in s["start"]:
+                raise InputError(f"{where}: a structure's posterior without its start structure")
+            reading = ElementReading(dict(s["start"]["structure"]))
+        names = reading.names
         if s.get("model") != "coefficients" or "law" in s:
             what = f"law {s['law']['restoring']}" if "law" in s else f"model {s.get('model')}"
             raise InputError(f"{where}: a posterior of the {what}; the design reads the coefficient posterior "
@@ -229,15 +402,17 @@ class PosteriorState:
                              "shaker-table tests from a base-excited record's posterior, and hammer hits and "
                              "releases from a hammer's or a free decay's")  # fmt: skip
         params = {**res.get("nuisance_parameters", {}), **res["parameters"]}
-        missing = [n for n in NAMES if n not in params]
+        missing = [n for n in names if n not in params]
         if missing:
             raise InputError(f"{where}: no {', '.join(missing)} among its parameters")
-        sd = np.array([params[n]["sd"] for n in NAMES], float)
+        sd = np.array([params[n]["sd"] for n in names], float)
         corr = res.get("correlation") or {}
-        C = np.array([[corr.get(a, {}).get(b, 1.0 if a == b else 0.0) for b in NAMES] for a in NAMES], float)
+        C = np.array([[corr.get(a, {}).get(b, 1.0 if a == b else 0.0) for b in names] for a in names], float)
         cov = C * np.outer(sd, sd)
         noise = "sigma" if "sigma" in params else "sigma_1"
-        rms = s.get("input_noise", {}).get("rms", 0.0)
+        said = s.get("input_noise", {})
+        rms = said.get("rms")  # a structure's posterior does not carry it: the record's reading of it (``record_rms``)
+        rms = said.get("record_rms", 0.0) if rms is None else rms
         rms = float(rms[0] if isinstance(rms, list) else rms or 0.0)
         dur = s.get("duration_s")
         if ring_down and not float(s.get("fs", 0.0)) * HAMMER_WIDTH_S >= 2:
@@ -250,7 +425,7 @@ class PosteriorState:
             raise InputError(f"{where}: a record at {s.get('fs')} Hz: the rig's tests reach {BAND[1]:g} Hz, which "
                              f"needs a record above {2.5 * BAND[1]:g} Hz")  # fmt: skip
         out = cls(
-            mean=np.array([params[n]["mean"] for n in NAMES], float),
+            mean=np.array([params[n]["mean"] for n in names], float),
             cov=0.5 * (cov + cov.T),
             widths={n: float(params[n]["hdi_high"] - params[n]["hdi_low"]) for n in COEFFICIENTS},
             hdi_prob=float(res.get("hdi_prob", 0.9)),
@@ -263,10 +438,11 @@ class PosteriorState:
             duration_s=float(dur[0] if isinstance(dur, list) else dur),
             source=source,
             bench="ring-down" if ring_down else "table",
-            **_laplace_parts(s.get("laplace")),
+            **_laplace_parts(s.get("laplace"), names),
+            reading=reading,
         )
         try:
-            eq = out.model_at(out.mean).equilibria()
+            eq = out.wells(out.mean)
         except (ValueError, ArithmeticError) as exc:
             raise InputError(f"{where}: its mean model has no usable well ({exc})") from None
         if eq.z_minus is None and not ring_down:
@@ -288,32 +464,38 @@ class PosteriorState:
         are laid: the distance to the saddle of a double well; of a single well, the amplitude at which the cubic
         doubles its stiffness, sqrt(k_lin / (3 k3)).
         """
-        model = self.model_at(self.mean)
-        eq = model.equilibria()
+        law = self.reading.element(self.model_at(self.mean))
+        eq = law.equilibria()
         if eq.z_0 is not None:
             return abs(eq.z_plus - eq.z_0)
-        return math.sqrt(max(model.uls("plus").k1_tilde, 1e-12) / (3 * model.k3))
+        return math.sqrt(max(law.uls("plus").k1_tilde, 1e-12) / (3 * law.k3))
 
     def model_at(self, theta: np.ndarray):
-        """The polynomial model of the parameters ``theta`` (over ``NAMES``) with the posterior's mass."""
-        from negstiff.models import Model
+        """The system of the parameters ``theta`` (over ``names``): the polynomial model with the posterior's mass,
+        or a structure's with the element's coefficients (``reading.system``).
+        """
+        return self.reading.system(theta, self.mass)
 
-        return Model(m=self.mass, **{n: float(v) for n, v in zip(NAMES, theta, strict=True)})
+    def wells(self, theta: np.ndarray):
+        """The equilibria of the element's motion at the parameters ``theta`` (a single DOF's: its z)."""
+        return self.reading.element(self.model_at(theta)).equilibria()
 
     def draws(self, n: int, seed: int) -> np.ndarray:
         """``n`` draws of the Gaussian posterior, each a usable model (k3, c, c_nl >= 0; two wells for a table's
         tests, a plus well to rest in for a ring-down's); the first is the mean.
         """
         rng = np.random.default_rng(seed)
-        L = np.linalg.cholesky(self.cov + 1e-30 * np.eye(len(NAMES)))
+        names = self.names
+        L = np.linalg.cholesky(self.cov + 1e-30 * np.eye(len(names)))
+        k3, c, c_nl = (names.index(n) for n in ("k3", "c", "c_nl"))
         out = [self.mean]
         for _ in range(100 * n):
             if len(out) >= n:
                 break
-            th = self.mean + L @ rng.standard_normal(len(NAMES))
-            if th[2] > 0 and th[3] >= 0 and th[4] >= 0:
+            th = self.mean + L @ rng.standard_normal(len(names))
+            if th[k3] > 0 and th[c] >= 0 and th[c_nl] >= 0:
                 try:
-                    eq = self.model_at(th).equilibria()
+                    eq = self.wells(th)
                     if self.bench != "table" or eq.z_minus is not None:
                         out.append(th)
                 except (ValueError, ArithmeticError):
@@ -349,9 +531,11 @@ class Evaluation:
 
 
 def _information(state: PosteriorState, candidate: Candidate, limits: Limits, theta: np.ndarray, seed: int):
-    """The information (over ``NAMES``) the records of ``candidate`` under the parameters ``theta`` would carry, as
-    the posterior reads them (module docstring), and what the run costs.
+    """The information (over ``state.names``) the records of ``candidate`` under the parameters ``theta`` would
+    carry, as the posterior reads them (module docstring), and what the run costs.
     """
+    from negstiff.inference.record.measurement import Measurement
+
     model = state.model_at(theta)
     recs = candidate.records(state.rig(model, seed), limits.duration_s)
     cost = record_cost(state, model, recs)
@@ -359,7 +543,7 @@ def _information(state: PosteriorState, candidate: Candidate, limits: Limits, th
     # with its own windows, and its sandwich sums both parts over all windows)
     H = M = None
     for rec in recs:
-        parts = _record_information(state, model, rec)
+        parts = state.reading.information(state, model, Measurement.from_rig(rec))
         if parts is None:
             return None, cost
         H = parts[0] if H is None else H + parts[0]
@@ -372,10 +556,10 @@ def record_cost(state: PosteriorState, model, recs: list) -> dict[str, float]:
     displacement, the device's travel from its saddle, the span the displacement sensor reads, and the share of
     the time spent in the other well.
     """
-    eq = model.equilibria()
+    eq = state.reading.element(model).equilibria()
     centre = eq.z_0 if eq.z_0 is not None else eq.z_plus
-    zs = [np.asarray(r.true["z"]) for r in recs]
-    z_all = np.concatenate(zs)
+    motions = [state.reading.motion(r) for r in recs]  # the element's motion (a single DOF's z), every DOF's
+    z_all = np.concatenate([m[0] for m in motions])
     table = [np.asarray(r.true["base_disp"]) if "base_disp" in r.true else 0.0 for r in recs]  # still: a hammer's
     cost = {"duration_s": float(z_all.size / state.fs)}
     if "base_acc" in recs[0].true:
@@ -385,8 +569,8 @@ def record_cost(state: PosteriorState, model, recs: list) -> dict[str, float]:
         # the hits' set peak (the load cell's samples may fall either side of it: 8 % low at 1 kHz, measured)
         cost["peak_force_n"] = max(float(r.truth["excitation"].get("peak_n", 0.0)) for r in recs)
     cost["peak_travel_m"] = float(np.max(np.abs(z_all - centre)))
-    # the span the laser on the moving part reads (the device's motion and the table's)
-    cost["sensor_span_m"] = max(float(np.ptp(z + b)) for z, b in zip(zs, table, strict=True))
+    # the span a laser on a moving part reads (its motion and the table's), the widest of them
+    cost["sensor_span_m"] = max(float(np.max(np.ptp(m[1] + b, axis=-1))) for m, b in zip(motions, table, strict=True))
     # of a single well (a ring-down's draw): no other well to visit
     other = np.sign(z_all - centre) != np.sign(eq.z_plus - centre)
     cost["other_well_share"] = 0.0 if eq.z_0 is None else float(np.mean(other))
@@ -417,77 +601,22 @@ def limit_problems(candidate: Candidate, cost: dict[str, float], limits: Limits)
     return problems
 
 
-def _record_information(state: PosteriorState, model, rec) -> tuple[np.ndarray, np.ndarray] | None:
-    """The model information H and the windows' score covariance M (over ``NAMES``, in the parameters' units) of
-    one simulated record of ``model`` as the posterior reads it (``likelihood.information_parts``; a hammer's or
-    release's record as a ring-down, its windows the free decays between the pulses), or None where a run diverges.
-    """
-    from negstiff.inference.analysis.record_kind import identification_record, record_kind
-    from negstiff.inference.estimators.posterior.likelihood import information_parts
-    from negstiff.inference.estimators.posterior.parametrisation import coefficient_parametrisation
-    from negstiff.inference.estimators.posterior.windows import Windows
-    from negstiff.inference.record.measurement import Measurement
-
-    m = Measurement.from_rig(rec)
-    ring_down = state.bench == "ring-down"
-    if ring_down:  # as the posterior reads a hammer's record or a decay (``Posterior.point_estimate``)
-        m = identification_record(m, record_kind(m))
-    win = Windows.cut(m, state.window_s, state.max_windows, free=ring_down)
-    par = coefficient_parametrisation(model)
-    th = np.array([getattr(model, n) for n in par.names])
-    kind = par.kind
-    p0 = par.to_params(th[None])[:, 0]
-    win.refine_states(p0, kind)
-    win.set_sensitivities(p0, kind)
-    x_scale = np.maximum(np.abs(th), 1e-6)
-    h = 1e-5 * x_scale
-
-    def projected(point: np.ndarray):
-        """The projected residuals at ``point`` and their Jacobian (x coordinates), one batched simulation of the
-        point and its finite-difference neighbours; None where a run diverges.
-        """
-        thetas = np.vstack([point, point + np.diag(h)])
-        zsim, div = win.simulate(par.to_params(thetas), kind)
-        if div.any():
-            return None
-        res = win.residuals(zsim).reshape(len(thetas), -1)  # (1 + p, W L)
-        return res[0], np.stack([(res[0] - res[1 + i]) / (h[i] / x_scale[i]) for i in range(len(point))], axis=1)
-
-    at = projected(th)
-    if at is None:
-        return None
-    # The sensor's noise alone: the posterior's likelihood also carries the input's noise through each window's
-    # response (``Windows.set_input_noise``), which changed the predicted widths by 0.2 % on a 20 s record
-    # (measured) and cost three times the rest of the evaluation.
-    sigma = math.sqrt(win.mean_square(at[0]))
-    # The sandwich read where the posterior reads it, at the record's MAP point (one Gauss-Newton step from the
-    # draw): there the parameters have taken up what the sensor chain's systematic error (the integrated
-    # accelerometer's) resembles, and the windows' scores are smaller. Read at the draw itself, the inflation was
-    # twice the posterior's (10.3 against 4.9 on one 20 s record) and the predicted widths 1.2-1.7x the posterior's.
-    step = np.linalg.lstsq(at[1], at[0], rcond=None)[0] * x_scale
-    res0, J = projected(th + step) or at
-    H_x, M_x = information_parts(J, res0, win.n_windows, sigma)
-    per = 1.0 / np.outer(x_scale, x_scale)
-    order = np.ix_(*[[par.names.index(n) for n in NAMES]] * 2)
-    return (H_x * per)[order], (H_x if M_x is None else M_x * per)[order]
-
-
-def _laplace_parts(laplace: Any) -> dict[str, np.ndarray]:
-    """The first record's model information and score covariance over ``NAMES`` from a posterior's
-    ``settings.laplace``; empty where the posterior has none (or a parameter set other than ``NAMES``).
+def _laplace_parts(laplace: Any, names: tuple[str, ...] = NAMES) -> dict[str, np.ndarray]:
+    """The first record's model information and score covariance over ``names`` from a posterior's
+    ``settings.laplace``; empty where the posterior has none (or another parameter set).
     """
     if not isinstance(laplace, dict) or laplace.get("score_covariance") is None:
         return {}
-    names = list(laplace.get("parameters", []))
-    if sorted(names) != sorted(NAMES):
+    kept = list(laplace.get("parameters", []))
+    if sorted(kept) != sorted(names):
         return {}
-    order = np.ix_(*[[names.index(n) for n in NAMES]] * 2)
+    order = np.ix_(*[[kept.index(n) for n in names]] * 2)
     return {"information": np.asarray(laplace["information"], float)[order],
             "score_covariance": np.asarray(laplace["score_covariance"], float)[order]}  # fmt: skip
 
 
 def _after(state: PosteriorState, parts: tuple[np.ndarray, np.ndarray], P0inv: np.ndarray) -> np.ndarray:
-    """The posterior covariance (over ``NAMES``) expected after a test whose records carry ``parts`` (H, M).
+    """The posterior covariance (over ``state.names``) expected after a test whose records carry ``parts`` (H, M).
 
     The joint posterior's Laplace covariance is the sandwich of the summed parts, sandwich(H_1 + H, M_1 + M)
     (``likelihood.sandwich``): the joint estimate weights the records by their model information H, not by what
@@ -530,7 +659,7 @@ def evaluate(state: PosteriorState, candidate: Candidate, limits: Limits, target
                         f"{1e3 * limits.max_table_disp:g} mm")  # fmt: skip
     P0inv = np.linalg.pinv(state.cov, hermitian=True)
     covs, costs, eigs = [], [], []
-    idx = [NAMES.index(n) for n in targets]
+    idx = [state.names.index(n) for n in targets]
     for d, th in enumerate(draws):
         try:
             info, cost = _information(state, candidate, limits, th, seed + d)
@@ -560,7 +689,7 @@ def evaluate(state: PosteriorState, candidate: Candidate, limits: Limits, target
     # the Laplace sd's shrinkage): the width a run of the test is expected to give. (The width of the mean
     # covariance, dominated by the draws that teach least, was 25-40 % wider than the realised on the rig's
     # 20 s records: docs/methods/design.md.)
-    i = [NAMES.index(n) for n in targets]
+    i = [state.names.index(n) for n in targets]
     ratio = np.sqrt(np.maximum(np.array([np.diag(c)[i] for c in covs]), 0.0) / np.diag(state.cov)[i])  # (D, T)
     widths = {n: state.widths[n] * float(np.mean(ratio[:, k])) for k, n in enumerate(targets)}
     cost["width_spread"] = {n: [state.widths[n] * float(np.min(ratio[:, k])), state.widths[n] *
@@ -577,20 +706,19 @@ def _peak_acc_problems(peak: float, limits: Limits) -> list[str]:
 
 
 def _harmonic_band(state: PosteriorState) -> tuple[float, float]:
-    """The harmonics' frequencies [Hz]: half the lower well's underlying-linear frequency to 2.5 times the higher's
-    (within fs / 8).
+    """The harmonics' frequencies [Hz]: half the lowest underlying-linear frequency of the wells to 2.5 times the
+    highest (a structure's: of every mode at each well; within fs / 8).
     """
-    model = state.model_at(state.mean)
-    f_wells = [model.uls(w).f_hz for w in ("minus", "plus")]
+    f_wells = state.reading.frequencies(state.model_at(state.mean))
     return max(1.0, 0.5 * min(f_wells)), min(state.fs / 8, 2.5 * max(f_wells))
 
 
 def _hammer_force(state: PosteriorState, amplitude: float) -> float:
     """The peak force [N] of a ``HAMMER_WIDTH_S`` half-sine hit that sets the mean model ringing at about
-    ``amplitude`` [m] in its plus well: impulse 2 F w / pi = m v0, v0 = amplitude x the well's angular frequency.
+    ``amplitude`` [m] in its plus well: impulse 2 F w / pi = m v0, v0 = amplitude x the well's angular frequency (a
+    structure's: its element's well, the hit on the DOF the element moves, of its mass).
     """
-    model = state.model_at(state.mean)
-    w = 2 * math.pi * model.uls("plus").f_hz
+    w = 2 * math.pi * state.reading.element(state.model_at(state.mean)).uls("plus").f_hz
     return amplitude * w * state.mass * math.pi / (2 * HAMMER_WIDTH_S)
 
 
@@ -809,11 +937,11 @@ def design(posterior, *, targets=None, duration: float | None = None, max_table_
         },  # fmt: skip
         "assumptions": [
             (
-                "the next record is read by a sensor chain like the rig's (a laser on the moving part, the table's "
+                f"the next record is read by a sensor chain like the rig's ({state.reading.sensors}, the table's "
                 f"accelerometer integrated twice), laser noise {state.sigma:.3g} m and accelerometer noise "
                 f"{state.input_noise:.3g} m/s^2 (the posterior's)"
                 if state.bench == "table"
-                else f"the next record is read by a laser on the moving part with the posterior's noise "
+                else f"the next record is read by {state.reading.sensors} with the posterior's noise "
                 f"({state.sigma:.3g} m), the device at rest in its plus well before the test, the table still; a hit "
                 f"is a {1e3 * HAMMER_WIDTH_S:g} ms half-sine; the default test compared with is "
                 f"'{default.describe()}' (the first record's own test is not in the posterior's file)"
@@ -1041,7 +1169,7 @@ def _limits(state: PosteriorState, duration, max_acc, max_disp, stroke, sensor_r
         if stroke <= 3 * state.sigma:
             raise InputError(f"stroke {stroke:g} m: within 3x the laser's noise ({state.sigma:.3g} m): no motion "
                              "the record could read")  # fmt: skip
-        eq = state.model_at(state.mean).equilibria()
+        eq = state.wells(state.mean)
         centre = eq.z_0 if eq.z_0 is not None else eq.z_plus
         if stroke <= abs(eq.z_plus - centre):
             raise InputError(f"stroke {1e3 * stroke:g} mm: inside the well the device rests in "

@@ -33,7 +33,12 @@ from negstiff.inference.estimators.posterior.diagnostics import (
     result_json,
     summarise,
 )
-from negstiff.inference.estimators.posterior.likelihood import LogPosterior, information_parts, sandwich
+from negstiff.inference.estimators.posterior.likelihood import (
+    LogPosterior,
+    information_parts,
+    input_noise_rms,
+    sandwich,
+)
 from negstiff.inference.estimators.posterior.parametrisation import (
     SHIFT,
     Parametrisation,
@@ -50,7 +55,6 @@ from negstiff.inference.estimators.posterior.sampling import (
     sample_ensembles,
 )
 from negstiff.inference.estimators.posterior.windows import DROP_FACTOR_AT_MAP, PosteriorError, Windows
-from negstiff.inference.record.derivatives import noise_floor
 from negstiff.inference.record.measurement import Measurement
 from negstiff.inference.steps.plausibility import classified
 from negstiff.models import Model, laws
@@ -1028,30 +1032,6 @@ def k2_frame_warning(rec: Measurement, summary: dict[str, Any]) -> list[str]:
         f"the restoring force's curvature there (2 k2 + 6 k3 z*), and a zero off by the displacement's own noise "
         f"({1e6 * noise:.2g} um) moves k2 by 3 k3 d = {shift:.3g}, beyond its standard deviation"
     ]
-
-
-INPUT_BAND_FILLED = 0.5
-"""An input whose spectrum stands above its floor in more than this share of the top fifth of the band fills
-the band: its floor is signal, not the sensor's noise, and is not read as noise (``input_noise_rms``)."""
-
-
-INPUT_NOISE_SHARE = 0.1
-"""A white floor holding more than this share of the input's variance is the excitation itself (a
-broadband input is flat over the band too), not its sensor's noise (``input_noise_rms``)."""
-
-
-def input_noise_rms(rec: Measurement) -> tuple[float, str]:
-    """The input sensor's white noise rms [input units], read from the input's own spectrum: the white
-    plateau above the excitation's band (``derivatives.noise_floor``, the same reading as the displacement's),
-    and how it was read. 0 when the excitation fills the band: its spectrum stands above the floor up to the
-    Nyquist frequency, or the "floor" holds more than ``INPUT_NOISE_SHARE`` of the input's variance (a flat
-    broadband excitation is a plateau too): nothing to read the noise from.
-    """
-    sigma2, f, S = noise_floor(rec.u, rec.fs)
-    top = f > 0.8 * rec.fs / 2
-    if not top.any() or np.mean(S[top] > 0) > INPUT_BAND_FILLED or sigma2 > INPUT_NOISE_SHARE * np.var(rec.u):
-        return 0.0, "not read: the excitation fills the band (its spectral floor is signal); the input taken as exact"
-    return math.sqrt(sigma2), "the input's spectral floor"
 
 
 def one_convergence_warning(lines: list[tuple[type, str]]) -> list[tuple[type, str]]:

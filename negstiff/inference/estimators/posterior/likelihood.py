@@ -2,12 +2,15 @@
 
 from __future__ import annotations
 
+import math
 import threading
 
 import numpy as np
 
 from negstiff.inference.estimators.posterior.parametrisation import Parametrisation
 from negstiff.inference.estimators.posterior.windows import Windows
+from negstiff.inference.record.derivatives import noise_floor
+from negstiff.inference.record.measurement import Measurement
 
 
 def curvature_adjustment(J: np.ndarray, r: np.ndarray, n_windows: int, sigma: float, adjust: bool = True):
@@ -149,3 +152,27 @@ class LogPosterior:
         ll = self.loglik(q, lp=lp)
         post = np.where(np.isfinite(ll), ll + lp, -np.inf)
         return list(zip(post, ll, strict=False))
+
+
+INPUT_BAND_FILLED = 0.5
+"""An input whose spectrum stands above its floor in more than this share of the top fifth of the band fills
+the band: its floor is signal, not the sensor's noise, and is not read as noise (``input_noise_rms``)."""
+
+
+INPUT_NOISE_SHARE = 0.1
+"""A white floor holding more than this share of the input's variance is the excitation itself (a
+broadband input is flat over the band too), not its sensor's noise (``input_noise_rms``)."""
+
+
+def input_noise_rms(rec: Measurement) -> tuple[float, str]:
+    """The input sensor's white noise rms [input units], read from the input's own spectrum: the white
+    plateau above the excitation's band (``derivatives.noise_floor``, the same reading as the displacement's),
+    and how it was read. 0 when the excitation fills the band: its spectrum stands above the floor up to the
+    Nyquist frequency, or the "floor" holds more than ``INPUT_NOISE_SHARE`` of the input's variance (a flat
+    broadband excitation is a plateau too): nothing to read the noise from.
+    """
+    sigma2, f, S = noise_floor(rec.u, rec.fs)
+    top = f > 0.8 * rec.fs / 2
+    if not top.any() or np.mean(S[top] > 0) > INPUT_BAND_FILLED or sigma2 > INPUT_NOISE_SHARE * np.var(rec.u):
+        return 0.0, "not read: the excitation fills the band (its spectral floor is signal); the input taken as exact"
+    return math.sqrt(sigma2), "the input's spectral floor"

@@ -34,7 +34,11 @@ from typing import Any
 import numpy as np
 
 from negstiff.inference.estimators.posterior.diagnostics import PosteriorResult, convergence_warnings, summarise
-from negstiff.inference.estimators.posterior.likelihood import curvature_adjustment
+from negstiff.inference.estimators.posterior.likelihood import (
+    curvature_adjustment,
+    information_parts,
+    input_noise_rms,
+)
 from negstiff.inference.estimators.posterior.sampling import MOVES, sample_ensembles
 from negstiff.inference.estimators.posterior.windows import PosteriorError, between_pulses
 from negstiff.inference.record.measurement import Measurement
@@ -89,36 +93,16 @@ def fit_structure(est, rec: Measurement, at: tuple[int, int], seed: int) -> tupl
     ring_down = kind.kind in RING_DOWN_KINDS
     if ring_down:  # a hammer's force windowed (zero between its pulses), a decay's input zero: as the fit read it
         rec = identification_record(rec, kind)
-    starts, L = window_starts(rec, est.window_s, est.max_windows, free=ring_down)
-    zs, v, _ = rec.channel_states(at)
-    idx = starts[:, None] + np.arange(L + 1)[None, :]
-    # the record in the structure's frame: each channel's zero (measured = physical + offset) taken off
-    physical = rec.channels - offsets[:, None]
-    data = np.transpose(physical[:, idx], (1, 0, 2))  # (W, N, L+1)
-    x0 = np.hstack([(zs[:, starts] - offsets[:, None]).T, v[:, starts].T])
-    sim = StructureWindows(start, rec, idx, x0)
-    theta0 = np.array([getattr(start.element, k) for k in ELEMENT_NAMES])
-    sim.start_sensitivity(theta0)
-    # a window SINDy's element misses by far more than any other is left out (``UNFOLLOWED_FACTOR``): on a chain
-    # driven from rest by a force, the first window's input at the stage times is read partly from beyond the record
-    # (the interpolating filter's padding), and its run missed by 3.5 mm rms against 1 um in the others, which moved
-    # k3 to 2.6 times the truth with no word (measured)
-    rms = np.sqrt(np.mean(sim.residuals(theta0[None], data)[0].reshape(sim.W, -1) ** 2, axis=1))
-    bad = ~(rms <= UNFOLLOWED_FACTOR * np.median(rms))
-    if bad.any():
-        if bad.sum() > sim.W // 4 or sim.W - bad.sum() < 4:
-            raise PosteriorError(f"{rec.source}: {bad.sum()} of {sim.W} windows are not matched by SINDy's element "
-                                 f"(residual above {UNFOLLOWED_FACTOR:g}x the median window's): the model or the "
-                                 "record is far off")  # fmt: skip
-        starts, idx, data, x0 = starts[~bad], idx[~bad], data[~bad], x0[~bad]
-        sim = StructureWindows(start, rec, idx, x0)
-        sim.start_sensitivity(theta0)
+    sim, data, starts, L = record_windows(start, rec, offsets, est.window_s, est.max_windows, ring_down)
+    theta0 = element_values(start)
+    sim, data, starts = followed_windows(sim, data, starts, L, start, rec, theta0)
     n_obs = data.size - sim.W * 2 * rec.n_dof  # the start states profiled out
     theta, cov, sigma, J, r0 = _gauss_newton(sim, data, theta0, n_obs)
     # the single DOF's curvature adjustment by the windows' sandwich covariance (module docstring)
     s_gn = np.sqrt(np.diag(cov))
     A, V_a, inflation = curvature_adjustment(J * s_gn[None, :], r0, sim.W, sigma, adjust=est.adjust)
     tau_res = _correlation_time(r0.reshape(sim.W, rec.n_dof, -1))
+    H, M = information_parts(J, r0, sim.W, sigma)
     scale = np.r_[s_gn * np.sqrt(np.diag(V_a)), 1.0 / math.sqrt(2 * n_obs)]
     centre = np.r_[theta, math.log(sigma)]
     # the walkers' start ball inside the dampers' support (c, c_nl >= 0): a ring-down's c_nl at its bound (the
@@ -145,6 +129,11 @@ def fit_structure(est, rec: Measurement, at: tuple[int, int], seed: int) -> tupl
     res.thin = max(1, int(np.ceil(tau_max / 2))) if np.isfinite(tau_max) else 1
     res.settings = {
         "model": "coefficients",
+        "record_kind": kind.kind,
+        "input": rec.input_name,
+        "fs": rec.fs,
+        "duration_s": rec.duration,
+        "max_windows": est.max_windows,
         "dofs": rec.n_dof,
         "element_at": list(at),
         "masses": list(rec.dof_masses),
@@ -153,11 +142,20 @@ def fit_structure(est, rec: Measurement, at: tuple[int, int], seed: int) -> tupl
         "substeps": SUBSTEPS,
         "curvature_adjustment": est.adjust,
         "variance_inflation": [round(float(x), 3) for x in inflation],
+        # the record's model information and windows' score covariance at the MAP point (the sandwich's parts, as the
+        # single DOF's posterior keeps them): a design joins a next test's to them as a joint fit would
+        "laplace": {
+            "parameters": list(ELEMENT_NAMES),
+            "information": H.tolist(),
+            "score_covariance": None if M is None else M.tolist(),
+        },  # fmt: skip
         "residual_correlation_time": tau_res,
         "input_noise": {
             "rms": None,
             "source": "not carried through a structure (the curvature adjustment widens "
             "for what the input's noise leaves in the residual)",
+            # what the input's own spectrum shows of its sensor's noise: a design's simulated records carry it
+            "record_rms": input_noise_rms(rec)[0] if not ring_down else 0.0,
         },
         "samples_used": int(data.size),
         "walkers": est.n_walkers,
@@ -176,6 +174,75 @@ def fit_structure(est, rec: Measurement, at: tuple[int, int], seed: int) -> tupl
     }
     res.build_idata = functools.partial(_idata, res, data)
     return res, list(res.warnings), sim
+
+
+def record_windows(
+    structure: Structure,
+    rec: Measurement,
+    offsets: np.ndarray,
+    window_s: float,
+    max_windows: int | None,
+    ring_down: bool,
+) -> tuple[StructureWindows, np.ndarray, np.ndarray, int]:
+    """The windows a structure's posterior reads ``rec`` through (``window_starts``; a ring-down's between its
+    pulses), each started from the record's band-smoothed state (``Measurement.channel_states``): (their simulator
+    for ``structure``, the measured windows (W, N, L+1) in the structure's frame (each channel's zero ``offsets``
+    taken off: measured = physical + offset), their first samples, the samples per window less one).
+    """
+    starts, L = window_starts(rec, window_s, max_windows, free=ring_down)
+    zs, v, _ = rec.channel_states(structure.place)
+    idx = starts[:, None] + np.arange(L + 1)[None, :]
+    physical = rec.channels - offsets[:, None]
+    data = np.transpose(physical[:, idx], (1, 0, 2))  # (W, N, L+1)
+    x0 = np.hstack([(zs[:, starts] - offsets[:, None]).T, v[:, starts].T])
+    return StructureWindows(structure, rec, idx, x0), data, starts, L
+
+
+def followed_windows(
+    sim: StructureWindows,
+    data: np.ndarray,
+    starts: np.ndarray,
+    L: int,
+    structure: Structure,
+    rec: Measurement,
+    theta: np.ndarray,
+) -> tuple[StructureWindows, np.ndarray, np.ndarray]:
+    """``record_windows``' windows with those the element ``theta`` misses by far more than any other left out
+    (``UNFOLLOWED_FACTOR`` x the median window's rms residual), their start-state directions set
+    (``StructureWindows.start_sensitivity``); one ``PosteriorError`` when over a quarter of them (or all but 3) are.
+    On a chain driven from rest by a force, the first window's input at the stage times is read partly from beyond the
+    record (the interpolating filter's padding), and its run missed by 3.5 mm rms against 1 um in the others, which
+    moved k3 to 2.6 times the truth with no word (measured).
+    """
+    sim.start_sensitivity(theta)
+    rms = np.sqrt(np.mean(sim.residuals(theta[None], data)[0].reshape(sim.W, -1) ** 2, axis=1))
+    bad = ~(rms <= UNFOLLOWED_FACTOR * np.median(rms))
+    if not bad.any():
+        return sim, data, starts
+    if bad.sum() > sim.W // 4 or sim.W - bad.sum() < 4:
+        raise PosteriorError(f"{rec.source}: {bad.sum()} of {sim.W} windows are not matched by the element "
+                             f"(residual above {UNFOLLOWED_FACTOR:g}x the median window's): the model or the "
+                             "record is far off")  # fmt: skip
+    kept = starts[~bad]
+    sim = StructureWindows(structure, rec, kept[:, None] + np.arange(L + 1)[None, :], sim.x0[~bad])
+    sim.start_sensitivity(theta)
+    return sim, data[~bad], kept
+
+
+def element_values(structure: Structure) -> np.ndarray:
+    """The element's coefficients the posterior samples (``ELEMENT_NAMES``)."""
+    return np.array([getattr(structure.element, k) for k in ELEMENT_NAMES], float)
+
+
+def residuals_and_jacobian(sim: StructureWindows, data: np.ndarray,
+                           theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+    """The windows' residuals at the element's coefficients ``theta`` and their Jacobian (central differences,
+    one batched call): (n_obs,), (n_obs, p).
+    """
+    p = theta.size
+    h = 1e-4 * np.maximum(np.abs(theta), 1e-3)
+    res = sim.residuals(np.vstack([theta, theta + np.diag(h), theta - np.diag(h)]), data)
+    return res[0], ((res[1 : p + 1] - res[p + 1 : 2 * p + 1]) / (2 * h[:, None])).T
 
 
 def mean_structure(settings: dict[str, Any], summary: dict[str, dict[str, float]]) -> Structure:
@@ -313,20 +380,14 @@ def _gauss_newton(sim: StructureWindows, data: np.ndarray, theta: np.ndarray, n_
     """
     theta = theta.astype(float).copy()
     for _ in range(iterations):
-        h = 1e-4 * np.maximum(np.abs(theta), 1e-3)
-        pts = np.vstack([theta, theta + np.diag(h), theta - np.diag(h)])
-        res = sim.residuals(pts, data)
-        if not np.all(np.isfinite(res[0])):
+        r0, J = residuals_and_jacobian(sim, data, theta)
+        if not np.all(np.isfinite(r0)):
             raise PosteriorError("SINDy's element does not survive the record's windows")
-        J = ((res[1:6] - res[6:11]) / (2 * h[:, None])).T
-        step = np.linalg.lstsq(J, -res[0], rcond=None)[0]
+        step = np.linalg.lstsq(J, -r0, rcond=None)[0]
         theta = theta + step
         if np.all(np.abs(step) < 1e-6 * np.maximum(np.abs(theta), 1e-9)):
             break
-    h = 1e-4 * np.maximum(np.abs(theta), 1e-3)  # the Jacobian at the point itself (the scores pair it with r0)
-    res = sim.residuals(np.vstack([theta, theta + np.diag(h), theta - np.diag(h)]), data)
-    J = ((res[1:6] - res[6:11]) / (2 * h[:, None])).T
-    r0 = res[0]
+    r0, J = residuals_and_jacobian(sim, data, theta)  # the Jacobian at the point itself (the scores pair it with r0)
     sigma = float(np.sqrt(np.sum(r0**2) / n_obs))
     cov = sigma**2 * np.linalg.inv(J.T @ J)
     return theta, cov, sigma, J, r0
