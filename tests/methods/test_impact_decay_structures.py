@@ -164,6 +164,26 @@ def test_the_elements_posterior_reads_a_structures_free_decay():
     assert "linear structure" in res["settings"]["fixed"]
 
 
+def test_a_structures_ring_down_posterior_plans_its_next_hits_and_releases():
+    # the test design reads a structure's free-decay posterior as a single DOF's: the candidates are hammer hits on
+    # the DOF the element moves and releases of the element (the table still), simulated on the structure, each
+    # record read as the element's posterior reads one (windows of free decay); the first-ranked within the limits
+    # and at least as good as the default four hits; a hammer's force limit bounds every hit planned
+    from negstiff.inference.analysis.design import design
+
+    rec = _decay(DOUBLE_WELL, DOUBLE_WELL_RELEASE, seed=1, duration=4.0)
+    post = _posterior(rec, n_ensembles=2, min_steps=200, max_steps=400, max_windows=24)
+    quick = {"candidates": 8, "draws": 2, "search": 0, "seed": 0}
+    plan = design(post, **quick)
+    assert plan["settings"]["bench"] == "ring-down"
+    assert {r["kind"] for r in plan["ranked"]} == {"hammer", "release"}
+    assert plan["best"]["feasible"] and plan["best"]["score"] >= plan["default_test"]["score"] - 1e-9
+    assert plan["default_test"]["test"].startswith("4 hammer hits")
+    light = design(post, **quick, max_force=5.0)
+    hits = [r for r in light["ranked"] if r["kind"] == "hammer" and r["feasible"]]
+    assert hits and all(r["peak_force_n"] <= 5.0 + 1e-9 for r in hits)
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("kind", ["hammer", "decay"])
 def test_the_elements_posterior_on_a_structures_ring_down_holds_the_cubic(kind):
