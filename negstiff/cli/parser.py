@@ -505,8 +505,8 @@ def _posterior(sub, common: argparse.ArgumentParser, data_opts: argparse.Argumen
         + "; ".join(f"{law.name}: {law.title}" for law in laws.LAWS if law.kind == "damping"),
     )  # fmt: skip
     _structure_options(pst, "a structure's record: where the nonlinear element acts, I-J (it moves DOF J relative "
-                       "to DOF I, 0: the base); its coefficients are sampled, the linear structure and each channel's "
-                       "zero fixed at SINDy's")  # fmt: skip
+                       "to DOF I, 0: the base); its coefficients are sampled, each channel's zero and the linear "
+                       "structure's springs and dampers with them (nuisances, from SINDy's)")  # fmt: skip
     pst.set_defaults(func=c.cmd_posterior)
 
 

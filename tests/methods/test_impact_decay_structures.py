@@ -149,11 +149,11 @@ def _posterior(rec, **kw):
 
 def test_the_elements_posterior_reads_a_structures_free_decay():
     # the element's posterior on the double well's decay on a fixture: the windows are free decays from their own
-    # states, the linear structure fixed at SINDy's. A short run (two ensembles, 400 steps: not converged, and it
-    # says so) is enough for the facts: the record is read as a decay, the posterior mean's k3 is the truth's
-    # within 0.1 % (measured -0.002 %; 1 um on a 12 mm release) and its modes the truth's within 1 %. Before, it
-    # failed after the work ("no start point of positive posterior density": c_nl's least squares at -2.4e-4 put
-    # the walkers' start ball across the dampers' bound)
+    # states, the linear structure and the channels' zeros sampled from SINDy's as nuisances. A short run (two
+    # ensembles, 400 steps: not converged, and it says so) is enough for the facts: the record is read as a decay, the
+    # posterior mean's k3 is the truth's within 0.1 % (measured -0.002 %; 1 um on a 12 mm release) and its modes the
+    # truth's within 1 %. Before, it failed after the work ("no start point of positive posterior density": c_nl's least
+    # squares at -2.4e-4 put the walkers' start ball across the dampers' bound)
     rec = _decay(DOUBLE_WELL, DOUBLE_WELL_RELEASE, seed=1, duration=4.0)
     post = _posterior(rec, n_ensembles=2, min_steps=200, max_steps=400, max_windows=24)
     res = post.result()
@@ -161,7 +161,7 @@ def test_the_elements_posterior_reads_a_structures_free_decay():
     assert res["parameters"]["c_nl"]["hdi_low"] >= 0.0
     for got, true in zip(post.structure_.modes("minus"), _structure(DOUBLE_WELL).modes("minus"), strict=True):
         assert got.f_hz == pytest.approx(true.f_hz, rel=0.01)
-    assert "linear structure" in res["settings"]["fixed"]
+    assert {"offset_1", "offset_2", "spring_0-1", "damper_0-1"} <= set(res["nuisance_parameters"])
 
 
 def test_a_structures_ring_down_posterior_plans_its_next_hits_and_releases():
@@ -188,14 +188,19 @@ def test_a_structures_ring_down_posterior_plans_its_next_hits_and_releases():
 @pytest.mark.parametrize("kind", ["hammer", "decay"])
 def test_the_elements_posterior_on_a_structures_ring_down_holds_the_cubic(kind):
     # the default sampler on the Duffing's hammer record (windows between the hits only: a 4 ms pulse is not
-    # resolved by the simulator's staged input) and on the double well's decay: the 90 % interval of k3 holds the
-    # truth. Measured: hammer k3 3.0017e6 [2.9998e6, 3.0035e6], decay 1.49998e6 [1.49994e6, 1.50002e6]. The
-    # intervals are conditional on the linear structure fixed at SINDy's: k1 and c read 0.003-3 % off with
-    # intervals narrower than that (hammer c 0.465 [0.464, 0.465] against 0.452), which the result's settings say
+    # resolved by the simulator's staged input) and on the double well's decay: every coefficient of the element
+    # within 3 posterior sd of the truth (a calibrated posterior misses it 0.3 % of the time). Its windows start where
+    # the element follows them best and the linear structure and channels' zeros are sampled with it (nuisances):
+    # measured z of k1, k2, k3, c, c_nl on the decay, seeds 1-4: k3 -1.75 / -0.86 / -0.21 / +1.13, all within 1.9; on
+    # the hammer record, seeds 1-2, within 1.6. (Held at SINDy's, the linear structure had put the hammer's c at
+    # 0.465 [0.464, 0.465] for 0.452, and the windows' smoothed starts had inflated the intervals enough to hide it:
+    # this test asked only that k3's 90 % interval hold the truth, which a calibrated posterior misses 10 % of the
+    # time; seed 1's decay does, at z = -1.75.)
     device, rec = ((DUFFING, _hammer(DUFFING, seed=1)) if kind == "hammer"
                    else (DOUBLE_WELL, _decay(DOUBLE_WELL, DOUBLE_WELL_RELEASE, seed=1, duration=4.0)))  # fmt: skip
-    k3 = _posterior(rec).result()["parameters"]["k3"]
-    assert k3["hdi_low"] <= device.k3 <= k3["hdi_high"], k3
+    par = _posterior(rec).result()["parameters"]
+    for k in ("k1", "k2", "k3", "c", "c_nl"):
+        assert abs(par[k]["mean"] - getattr(device, k)) < 3 * par[k]["sd"], (k, par[k])
 
 
 def test_a_decay_whose_held_out_tail_is_its_noise_is_said_to_judge_nothing():

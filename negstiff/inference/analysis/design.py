@@ -160,15 +160,24 @@ class CoefficientReading:
 @dataclass(frozen=True)
 class ElementReading:
     """How a structure's element posterior reads a record (``posterior.structure``: every channel's windows, each
-    started from the record's smoothed state, its start-state directions projected off; the masses, the linear
-    structure and each channel's zero held at the start structure's): the parameters ``COEFFICIENTS`` of the
-    element, the structure, its motion and the information one record carries (``CoefficientReading``'s
-    counterpart).
+    started where the element follows it best, its start-state directions projected off; each channel's zero and the
+    linear structure's springs and dampers nuisances, the masses given): its parameters (``names``), the structure,
+    its motion and the information one record carries (``CoefficientReading``'s counterpart).
     """
 
     structure: dict[str, Any]
     """The structure the posterior holds fixed but its element's coefficients (``Structure.to_dict``)."""
-    names: tuple[str, ...] = COEFFICIENTS
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        """The element's coefficients and, nuisances, each channel's zero and the linear structure's springs and
+        dampers (the structure's posterior's: ``posterior.structure.zero_names``, ``linear_parts``).
+        """
+        from negstiff.inference.estimators.posterior.structure import linear_parts, zero_names
+        from negstiff.models.structure import Structure
+
+        parts = linear_parts(Structure.from_dict(self.structure))
+        return (*COEFFICIENTS, *zero_names(len(self.structure["masses"])), *(n for n, _, _ in parts))
 
     @property
     def sensors(self) -> str:
@@ -176,12 +185,17 @@ class ElementReading:
         return f"a laser on each of the {len(self.structure['masses'])} DOFs"
 
     def system(self, theta: np.ndarray, mass: float):
-        """The structure with the element's coefficients ``theta`` (over ``COEFFICIENTS``)."""
+        """The structure of the parameters ``theta`` (over ``names``): its element's coefficients and its springs and
+        dampers (the channels' zeros do not change it).
+        """
+        from negstiff.inference.estimators.posterior.structure import linear_parts, with_linear_parts
         from negstiff.models.structure import Structure
 
         s = Structure.from_dict(self.structure)
-        values: dict[str, Any] = {n: float(v) for n, v in zip(self.names, theta, strict=True)}
-        return s.with_element(replace(s.element, **values))
+        values: dict[str, Any] = {n: float(v) for n, v in zip(COEFFICIENTS, theta, strict=False)}
+        parts = linear_parts(s)
+        s = s.with_element(replace(s.element, **values))
+        return with_linear_parts(s, parts, theta[len(theta) - len(parts) :]) if parts else s
 
     def element(self, system):
         """The element's law as its wells see it (``Structure.element_law``)."""
@@ -200,15 +214,17 @@ class ElementReading:
         return relative(z, tuple(self.structure["at"])), z
 
     def information(self, state: PosteriorState, structure, m) -> tuple[np.ndarray, np.ndarray] | None:
-        """H and M (over ``COEFFICIENTS``) of a record ``m`` (a ``Measurement``) of ``structure`` as its posterior reads
-        it (``posterior.structure.record_windows``; a ring-down's windows between its pulses), at the record's MAP
-        point one Gauss-Newton step from the draw (as ``CoefficientReading``'s), or None where a window diverges.
+        """H and M (over ``names``: the element's coefficients and its nuisances) of a record ``m`` (a
+        ``Measurement``) of ``structure`` as its posterior reads it (``posterior.structure.record_windows``; a
+        ring-down's windows between its pulses), at the record's MAP point one Gauss-Newton step from the draw (as
+        ``CoefficientReading``'s), or None where a window diverges.
         """
         from negstiff.inference.analysis.record_kind import identification_record, record_kind
         from negstiff.inference.estimators.posterior.likelihood import information_parts
         from negstiff.inference.estimators.posterior.structure import (
             element_values,
             followed_windows,
+            linear_parts,
             record_windows,
             residuals_and_jacobian,
         )
@@ -218,9 +234,10 @@ class ElementReading:
             m = identification_record(m, record_kind(m))
         sim, data, starts, L = record_windows(structure, m, np.zeros(m.n_dof), state.window_s, state.max_windows,
                                               ring_down)  # fmt: skip
-        theta = element_values(structure)
         # the windows the posterior would leave out, left out (one ``PosteriorError`` where it would refuse)
-        sim, data, _ = followed_windows(sim, data, starts, L, structure, m, theta)
+        sim, data, _ = followed_windows(sim, data, starts, L, structure, m, element_values(structure))
+        # the zeros the simulated record's own (none), the springs and dampers the structure's
+        theta = np.r_[element_values(structure), np.zeros(m.n_dof), [v for _, _, v in linear_parts(structure)]]
         r0, J = residuals_and_jacobian(sim, data, theta)
         if not (np.all(np.isfinite(r0)) and np.all(np.isfinite(J))):
             return None

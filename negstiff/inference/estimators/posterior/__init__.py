@@ -39,9 +39,9 @@ emcee docs' rule) or ``max_steps`` is reached (then a loud warning). R-hat (rank
 is computed across ensembles, each ensemble one chain (walkers of one ensemble are not independent);
 ESS bulk and tail across all walkers, and capped by the emcee estimate N / tau.
 
-A structure's record (N > 1 DOFs, ``Posterior(element="I-J")``): the element's coefficients are sampled with the
-masses, the linear structure and each channel's zero fixed at ``SINDy(element=...)``'s (``structure.py``), under the
-same curvature adjustment, sampler and summaries.
+A structure's record (N > 1 DOFs, ``Posterior(element="I-J")``): the element's coefficients are sampled with each
+channel's zero and the linear structure's springs and dampers as nuisances, started from ``SINDy(element=...)``'s,
+the masses given (``structure.py``), under the same curvature adjustment, sampler and summaries.
 """
 
 from negstiff.inference.estimators.posterior.core import Posterior

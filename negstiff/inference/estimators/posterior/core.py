@@ -166,9 +166,9 @@ class Posterior(Estimator):
     element : str or (int, int), optional
         Where the element acts on a record of N > 1 DOFs: ``"I-J"``, it moves DOF J relative to DOF I (0: the
         base). None: the single DOF. On a structure's record the element's k1-k3, c, c_nl and the sensors'
-        sigma are sampled, the masses, the linear structure and each channel's zero fixed at
-        ``SINDy(element=...)``'s (``posterior.structure``); ``model="coefficients"``, no ``start`` and no
-        ``input_noise`` there.
+        sigma are sampled, each channel's zero and the linear structure's springs and dampers with them as nuisances
+        (from ``SINDy(element=...)``'s; ``posterior.structure``), the masses given; ``model="coefficients"``, no
+        ``start`` and no ``input_noise`` there.
     chain_file : str or os.PathLike, optional
         An HDF5 file (``.h5``, ``.hdf5``) the emcee chains are saved to as they run (emcee's ``HDFBackend``,
         each ensemble's chain, log probability and random state in its group ``ensemble_E``): a long run kept

@@ -223,7 +223,8 @@ def result_json(res: PosteriorResult, hdi_prob: float) -> dict[str, Any]:
     nuisance: dict[str, dict[str, float]] = {}
     for n, s in res.summary.items():
         key = "alpha_deg" if n == "alpha_deg" else n
-        (nuisance if n in ("k0", "g_offset", "z_shift") else params)[key] = s
+        nuisance_name = n in ("k0", "g_offset", "z_shift") or n.startswith(("offset_", "spring_", "damper_"))
+        (nuisance if nuisance_name else params)[key] = s
     return {
         "hdi_prob": hdi_prob,
         "parameters": params,
