@@ -31,6 +31,7 @@ Gaussian with its reported means, standard deviations and correlations (its JSON
 
 from __future__ import annotations
 
+import functools
 import math
 import numbers
 import os
@@ -168,7 +169,7 @@ class ElementReading:
     structure: dict[str, Any]
     """The structure the posterior holds fixed but its element's coefficients (``Structure.to_dict``)."""
 
-    @property
+    @functools.cached_property
     def names(self) -> tuple[str, ...]:
         """The element's coefficients and, nuisances, each channel's zero and the linear structure's springs and
         dampers (the structure's posterior's: ``posterior.structure.zero_names``, ``linear_parts``).

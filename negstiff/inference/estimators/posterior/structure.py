@@ -18,10 +18,9 @@ within a window, and the spread of the windows' scores says how much the data re
 of the tests' fixture records (0.1 s windows, 40 of them): rms z-score of the truth 0.74 / 1.08 / 0.80 / 0.67 / 0.77
 for k1, k2, k3, c, c_nl, 90 % intervals covering 92-100 % (with smoothed starts and the nuisances held: 1.48 / 1.20
 / 1.14 / 1.33 / 1.24, coverage 67-100 %, intervals 1-20x wider, k1 biased by -1.4 sd). The input's sensor noise is
-not carried
-through the structure (the curvature adjustment widens for what it leaves). Flat priors on the coefficients (c,
-c_nl >= 0: the element dissipates), on the nuisances and on log sigma. Sampling: the
-single DOF's ensembles (``sampling.sample_ensembles``) started around the least-squares point (Gauss-Newton from
+not carried through the structure (the curvature adjustment widens for what it leaves). Flat priors on the
+coefficients (c, c_nl >= 0: the element dissipates), on the nuisances and on log sigma. Sampling: the single DOF's
+ensembles (``sampling.sample_ensembles``) started around the least-squares point (Gauss-Newton from
 SINDy's element) in coordinates scaled by the adjusted covariance; summaries, R-hat and ESS by arviz
 (``diagnostics.summarise``).
 """
@@ -106,9 +105,10 @@ def fit_structure(est, rec: Measurement, at: tuple[int, int], seed: int) -> tupl
     sim, data, starts, L = record_windows(start, rec, offsets, est.window_s, est.max_windows, ring_down)
     sim, data, starts = followed_windows(sim, data, starts, L, start, rec, element_values(start))
     n_obs = data.size - sim.W * 2 * rec.n_dof  # the start states profiled out
-    # the element's coefficients and each channel's zero, as a correction of SINDy's (a nuisance): held at SINDy's,
-    # a zero's error d shifts the element's relative motion and its k2 by 3 k3 d (1-3 um of SINDy's zeros moved
-    # k2 by 4-7 of its sd over the fixture records once the windows' starts were refined, measured)
+    # the element's coefficients, then the nuisances from SINDy's: each channel's zero as a correction of SINDy's (held
+    # there, a zero's error d shifted the element's relative motion and its k2 by 3 k3 d: 1-3 um moved k2 by 4-7 of
+    # its sd over the fixture records once the windows' starts were refined, measured) and the linear structure's
+    # springs and dampers
     parts = linear_parts(start)
     theta0 = np.r_[element_values(start), np.zeros(rec.n_dof), [v for _, _, v in parts]]
     p = theta0.size
@@ -281,8 +281,8 @@ def element_values(structure: Structure) -> np.ndarray:
 
 def residuals_and_jacobian(sim: StructureWindows, data: np.ndarray,
                            theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
-    """The windows' residuals at the element's coefficients ``theta`` and their Jacobian (central differences,
-    one batched call): (n_obs,), (n_obs, p).
+    """The windows' residuals at the parameters ``theta`` (the element's coefficients, and the nuisances where given:
+    ``StructureWindows.simulate``) and their Jacobian (central differences, one batched call): (n_obs,), (n_obs, p).
     """
     p = theta.size
     h = 1e-4 * np.maximum(np.abs(theta), 1e-3)
@@ -388,14 +388,18 @@ class StructureWindows:
         self.T = idx.shape[1]
         p, minv, K, C, gain = structure.arrays(rec.input_name, rec.force_dof)
         self.p, self.minv, self.K, self.C, self.gain = p, minv, K, C, gain
-        self.parts = linear_parts(structure)
+        parts = linear_parts(structure)
+        # each spring's and damper's unit matrix, (S, N, N), and which are springs: read by every simulation
+        self.part_matrices = np.stack([e for _, e, _ in parts]) if parts else np.zeros((0,) + K.shape)
+        self.is_spring = np.array([n.startswith("spring") for n, _, _ in parts], dtype=bool)
         from negstiff.models.effects import POLYNOMIAL_ROWS, ROWS
 
         self.rows = [POLYNOMIAL_ROWS["k1"], POLYNOMIAL_ROWS["k2"], POLYNOMIAL_ROWS["k3"], ROWS["c"], ROWS["c_nl"]]
 
     def simulate(self, thetas: np.ndarray) -> np.ndarray:
-        """(B, W, N, T) responses for B coefficient sets (k1, k2, k3, c, c_nl), each with its channels' zero
-        corrections (N more columns; none: zero) taken off the windows' start states.
+        """(B, W, N, T) responses for B parameter sets: the element's k1, k2, k3, c, c_nl, then optionally its
+        channels' zero corrections (N columns, taken off the windows' start states) and the linear structure's springs
+        and dampers (``linear_parts``' order; without them the structure's own K and C).
         """
         B, W, nd = thetas.shape[0], self.W, self.structure.n_dof
         nb = B * W
@@ -410,13 +414,11 @@ class StructureWindows:
         K, C = tile(self.K), tile(self.C)
         first = len(self.rows) + nd
         if thetas.shape[1] > first:  # each set's springs and dampers (``linear_parts``)
-            lin = thetas[:, first:]
-            is_spring = np.array([n.startswith("spring") for n, _, _ in self.parts])
-            E = np.stack([e for _, e, _ in self.parts])  # (S, N, N)
+            lin, E = thetas[:, first:], self.part_matrices
             per = lambda keep: np.ascontiguousarray(  # noqa: E731 - (N, N, B W), each set's matrix W times
                 np.repeat(np.einsum("bs,sij->ijb", lin[:, keep], E[keep]), W, axis=2)
             )
-            K, C = per(is_spring), per(~is_spring)
+            K, C = per(self.is_spring), per(~self.is_spring)
         oz, _, status, _ = integrate(
             KINDS[self.structure.element.kind], np.ascontiguousarray(p), tile(self.minv), K, C,
             tile(self.gain), self.u, np.tile(np.arange(W), B), self.T, self.dt, SUBSTEPS, z0, v0,
