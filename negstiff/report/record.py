@@ -251,8 +251,9 @@ def _crosses_wells(rec, made: dict[str, Any] | None = None) -> bool:
 
     if rec.n_dof > 1:
         for est in (made or {}).values():
-            structure = getattr(getattr(est, "result_", None), "structure", None)
-            if structure is None:
+            result = getattr(est, "result_", None)
+            structure = getattr(result, "structure", None)
+            if structure is None or getattr(result, "linear_part", "physical") != "physical":
                 continue
             eq = structure.element_equilibria()
             r = structure.coupling @ (np.asarray(rec.z) - np.asarray(est.result_.offsets_m)[:, None])

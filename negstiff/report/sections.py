@@ -984,7 +984,6 @@ def section_for(result, label: str = "") -> Section:
     from negstiff.inference.estimators.discrepancy import Discrepancy
     from negstiff.inference.estimators.identification import Identification, Identifier
     from negstiff.inference.estimators.posterior.core import Posterior
-    from negstiff.inference.estimators.results import StateSpaceIdentification, StructureIdentification
     from negstiff.inference.record.measurement import Measurement
 
     if isinstance(result, Section):
@@ -993,7 +992,7 @@ def section_for(result, label: str = "") -> Section:
         return record_section(result, label)
     if isinstance(result, Discrepancy):
         return discrepancy_section(result, label)
-    if isinstance(getattr(result, "result_", result), (StructureIdentification, StateSpaceIdentification)):
+    if getattr(getattr(result, "result_", result), "linear_part", "none") != "none":
         return structure_section(result, label)
     if isinstance(result, (Identifier, Identification)):
         return identification_section(result, label)

@@ -39,7 +39,7 @@ from negstiff.errors import NegstiffWarning as _Warning
 from negstiff.inference.analysis.record_kind import ring_down, rings_until
 from negstiff.inference.estimators.base import Estimator
 from negstiff.inference.estimators.prediction import window_errors
-from negstiff.inference.estimators.results import Bunch, Identification, StructureIdentification, _plain
+from negstiff.inference.estimators.results import Bunch, Identification, _plain
 from negstiff.inference.record.measurement import Measurement
 from negstiff.inference.steps import law_choice
 from negstiff.inference.steps.equations import StructureIdentificationError, _split
@@ -432,8 +432,9 @@ class Identifier(Estimator):
         issue(lines)
         self.result_ = Identification(
             method=self.method,
-            model=model,
-            initial_model=est.model,
+            system=Structure.single(model),
+            initial_system=Structure.single(est.model),
+            linear_part="none",
             equilibria=equilibria,
             modal=modal,
             validation=Bunch(validation),
@@ -619,7 +620,7 @@ def check_ring_down_scores(est, rec: Measurement) -> None:
 
 def structure_result(method: str, rec: Measurement, structure: Structure, offsets: np.ndarray, n_id: int,
             modal: dict[str, list[Mode]] | None, own_warnings: list[str], details: dict, settings: dict,
-            refine: bool = False) -> StructureIdentification:  # fmt: skip
+            refine: bool = False) -> Identification:  # fmt: skip
     """The shared stages of a structure's identification: the output-error refinement (``refine``: the one
     ``refine.refine_stage``, the element's constant held at the weight its frame pins, kept only if the held-out
     windows are predicted no worse; the modes are then the refined structure's), equilibria, linear matrices, modes,
@@ -655,13 +656,13 @@ def structure_result(method: str, rec: Measurement, structure: Structure, offset
             "misses on a record of its own with the channels' sensor noise (the floor of a right model)"
         )
     issue([(_Warning, w) for w in lines])
-    return StructureIdentification(
-        method=method, structure=structure, modal=modal, linear=linear,
+    return Identification(
+        method=method, system=structure, modal=modal, linear=linear, linear_part="physical",
         equilibria={w: z.tolist() for w, z in eq.items()}, offsets_m=tuple(float(x) for x in offsets),
         validation=Bunch(validation), warnings=tuple(lines), details=details,
         settings={**settings, "identification_samples": n_id,
                   "refinement": REFINEMENT_SETTING if refine else "none (refine=False)",
                   "frame": "each channel's zero estimated (a constant force per DOF), the element's constant pinned at "
                            "the weight it carries (m_J g, g the record's gravity)"},
-        refinement=None if refinement is None else Bunch(refinement),
+        refinement=None if refinement is None else Bunch(refinement), identification_samples=n_id,
     )  # fmt: skip

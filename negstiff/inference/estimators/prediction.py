@@ -259,9 +259,13 @@ class ModelPredictions:
         """The structure a fit on a structure's record learned (``structure_``: NSI's, SINDy's, the discrepancy
         workflow's, the posterior mean's) and each channel's zero (``offsets_``), or (None, None).
         """
+        if getattr(vars(self).get("result_"), "linear_part", "physical") != "physical":
+            # the device on its base runs as its model (``restarted_runs``), a state-space model from the state it
+            # reads off each window (``state_space_runs``)
+            return None, None
         try:
             structure = self.structure_
-        except AttributeError:  # a single DOF's fit (also NotFittedError), or a structure read through its sensors
+        except AttributeError:  # not fitted (NotFittedError), or a posterior of the device's coefficients
             return None, None
         if structure is None:
             return None, None

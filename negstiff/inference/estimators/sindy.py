@@ -58,7 +58,7 @@ from negstiff.inference.estimators.parameters import (
     Several,
     seed_of,
 )
-from negstiff.inference.estimators.results import StructureIdentification, StructureResults
+from negstiff.inference.estimators.results import Identification, StructureResults
 from negstiff.inference.record.measurement import Measurement, per_unit_mass_warning
 from negstiff.inference.steps.equations import (
     StructureIdentificationError,
@@ -182,7 +182,7 @@ class SINDy(StructureResults, Identifier):
         every channel, its channels' zeros with it: ``structure_result``). None: run it.
     element : str or (int, int), optional
         Where the element acts on a record of N > 1 DOFs: ``"I-J"``, it moves DOF J relative to DOF I (0: the
-        base). None: the single DOF. A structure's result is a ``StructureIdentification``.
+        base). None: the single DOF. Its result is an ``Identification`` for any N.
 
     law : str or None, default None
         The restoring-force law (``models.laws``: ``"cubic"``, ``"quintic"``, ``"septic"``, ``"magnet"``,
@@ -553,7 +553,7 @@ class SINDy(StructureResults, Identifier):
 
 
 # --- a structure's (N > 1 DOFs): its stacked weak form (``equations``) ----------------------------------------
-def identify_sindy(est, rec: Measurement, at: tuple[int, int]) -> StructureIdentification:
+def identify_sindy(est, rec: Measurement, at: tuple[int, int]) -> Identification:
     """SINDy on a record of N > 1 DOFs (module docstring): the single DOF's sparsity path, one-standard-error
     selection on held-out blocks and bagging ensemble, on the structure's stacked weak form.
     """

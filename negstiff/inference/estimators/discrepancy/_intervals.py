@@ -10,11 +10,12 @@ from typing import Any
 import numpy as np
 
 from negstiff.errors import NotFittedError
-from negstiff.inference.estimators.results import StructureIdentification
+from negstiff.inference.estimators.results import Identification
 from negstiff.inference.record.measurement import Measurement
 from negstiff.inference.steps.refine import parameter_names, parameter_scales, values_of, with_values
 from negstiff.inference.steps.validation import RestartWindows, restart_windows
 from negstiff.models import effects
+from negstiff.models.structure import Structure
 
 from ._candidates import _held, _size_of, law_of, law_parameters
 from ._judging import Judging
@@ -163,7 +164,7 @@ class Intervals(Judging):
 
 
 # --- a structure's -------------------------------------------------------------------------------------------------
-def effect_intervals(result: StructureIdentification, named: list[str], prob: float = 0.9) -> dict[str, Any]:
+def effect_intervals(result: Identification, named: list[str], prob: float = 0.9) -> dict[str, Any]:
     """Each named effect's value with its interval (probability ``prob``): the refinement's window-robust standard
     error of the effect's coefficient (``refine._standard_errors``, the structure's other parameters and the
     channels' zeros free), a Gaussian interval about the refined value; None without a kept refinement (the weak
@@ -175,8 +176,10 @@ def effect_intervals(result: StructureIdentification, named: list[str], prob: fl
     account: dict[str, Any] = dict(result.refinement or {})
     se_all = account.get("standard_errors") or {}
     out: dict[str, Any] = {}
+    structure = result.system
+    assert isinstance(structure, Structure)  # the discrepancy workflow reads a structure with its masses
     for e in named:
-        value = result.structure.element.extra.get(e)
+        value = structure.element.extra.get(e)
         se = se_all.get(e)
         if not account.get("applied") or se is None or not isinstance(value, (int, float)) or not math.isfinite(se):
             out[e] = {"value": value, "interval": None, "prob": prob,

@@ -11,10 +11,11 @@ from typing import Any
 import numpy as np
 
 from negstiff.inference.estimators.identification import WINDOW_S
-from negstiff.inference.estimators.results import StructureIdentification
+from negstiff.inference.estimators.results import Identification
 from negstiff.inference.record.measurement import Measurement
 from negstiff.inference.steps.validation import RestartWindows
 from negstiff.models import Model
+from negstiff.models.structure import Structure
 
 from ._candidates import _admissible_sizes, _with_size, _without
 from ._runs import Runs
@@ -134,7 +135,7 @@ class Opinions(Runs):
 
 
 # --- a structure's -------------------------------------------------------------------------------------------------
-def bayesian_opinions(result: StructureIdentification, rec: Measurement, n_id: int, named: list[str],
+def bayesian_opinions(result: Identification, rec: Measurement, n_id: int, named: list[str],
                       between_pulses: bool = False, draws: int = 64) -> dict[str, Any]:  # fmt: skip
     """A Bayesian second opinion on each named effect, beside the paired rule that named it (the single DOF's
     ``_loo_compare``): the held-out tail's restarted windows (``free_run_error``'s) predicted by the final structure
@@ -149,7 +150,8 @@ def bayesian_opinions(result: StructureIdentification, rec: Measurement, n_id: i
 
     if not named:
         return {}
-    structure, offsets = result.structure, np.asarray(result.offsets_m, float)
+    structure, offsets = result.system, np.asarray(result.offsets_m, float)
+    assert isinstance(structure, Structure)  # the discrepancy workflow reads a structure with its masses
     windows, zs, v = structure_windows(rec, structure.place, n_id, WINDOW_S, between_pulses)
     scale = channel_scales(rec, n_id)[None, None, :, None]
     worst = float(np.mean((windows.measured(rec.channels) / scale[0]) ** 2))

@@ -21,7 +21,7 @@ import numpy as np
 
 from negstiff.inference.analysis.record_kind import ring_down
 from negstiff.inference.estimators.identification import REFINEMENT_SETTING, WINDOW_S, refined, structure_result
-from negstiff.inference.estimators.results import Bunch, StructureIdentification
+from negstiff.inference.estimators.results import Bunch, Identification
 from negstiff.inference.record.measurement import Measurement
 from negstiff.inference.steps.equations import _assemble, _block_scores, _lstsq, _systems, physical_frame, unknown_zeros
 from negstiff.inference.steps.selection import compare
@@ -42,7 +42,7 @@ from ._opinions import bayesian_opinions
 from ._runs import acting_mask, rows_clear_of
 
 
-def structure_rounds(est, rec: Measurement, at: tuple[int, int]) -> StructureIdentification:
+def structure_rounds(est, rec: Measurement, at: tuple[int, int]) -> Identification:
     """The discrepancy workflow on a record of N > 1 DOFs (module docstring): the element's base law with the
     linear structure, each registered effect added in turn, named by the paired block rule; the named one joins the
     base and the rest are offered again, until none is named (at most ``max_effects`` rounds: ``iterations``).

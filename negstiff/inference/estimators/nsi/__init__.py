@@ -87,7 +87,7 @@ class NSI(StructureResults, Identifier):
         A progress bar over the identification passes on stderr, shown once they take more than 2 s.
     element : str or (int, int), optional
         Where the element acts on a record of N > 1 DOFs: ``"I-J"``, it moves DOF J relative to DOF I (0: the
-        base). None: the single DOF (on the base). A structure's result is a ``StructureIdentification``
+        base). None: the single DOF (on the base). Its result is an ``Identification`` for any N
         (``structure_``, ``element_``, ``offsets_``).
 
     law : str or None, default None

@@ -26,7 +26,7 @@ from negstiff.errors import InputError
 from negstiff.inference.analysis.record_kind import ring_down
 from negstiff.inference.estimators import subspace
 from negstiff.inference.estimators.identification import structure_result
-from negstiff.inference.estimators.results import StructureIdentification
+from negstiff.inference.estimators.results import Identification
 from negstiff.inference.record.derivatives import band_limited, basis_band_hz
 from negstiff.inference.record.measurement import Measurement
 from negstiff.inference.steps.equations import (
@@ -87,7 +87,7 @@ class WellFit:
     offsets: np.ndarray
 
 
-def identify_nsi(est, rec: Measurement, at: tuple[int, int]) -> StructureIdentification:
+def identify_nsi(est, rec: Measurement, at: tuple[int, int]) -> Identification:
     """NSI on a record of N > 1 DOFs (module docstring): each well's ULS and element, averaged."""
     n_id = int(round(rec.n * (1 - est.validation_fraction)))
     ident = rec.segment(0, n_id)

@@ -47,7 +47,7 @@ from scipy import signal, stats
 from negstiff.errors import InputError, issue
 from negstiff.errors import NegstiffWarning as _Warning
 from negstiff.inference.estimators import subspace
-from negstiff.inference.estimators.results import Bunch, StateSpaceIdentification
+from negstiff.inference.estimators.results import Bunch, Identification
 from negstiff.inference.record.derivatives import band_limited, basis_band_hz, smooth_and_differentiate
 from negstiff.inference.record.measurement import Measurement
 from negstiff.models import laws
@@ -512,7 +512,7 @@ CANDIDATE_LAWS = ("cubic", "quintic", "septic")
 their parameters (a shaped law's shape is fitted on a single DOF's record only)."""
 
 
-def choose_state_space_law(est, rec: Measurement, at: tuple[int, int]) -> StateSpaceIdentification:
+def choose_state_space_law(est, rec: Measurement, at: tuple[int, int]) -> Identification:
     """``NSI(law="auto")`` on a structure without masses: each of ``CANDIDATE_LAWS`` (with the estimator's damping
     law) identified on the identification part less its last ``law_choice.SELECTION_FRACTION`` of the record, and
     its restarted windows over that selection part (the held-out protocol, never the held-out tail) scored; a
@@ -564,7 +564,7 @@ def choose_state_space_law(est, rec: Measurement, at: tuple[int, int]) -> StateS
     return dataclasses.replace(result, settings={**result.settings, "law_choice": choice})
 
 
-def identify_state_space(est, rec: Measurement, at: tuple[int, int]) -> StateSpaceIdentification:
+def identify_state_space(est, rec: Measurement, at: tuple[int, int]) -> Identification:
     """NSI on ``rec`` (N sensors, no masses, a measured force at a sensed point) with the element at ``at``
     (module docstring).
     """
@@ -731,8 +731,9 @@ def identify_state_space(est, rec: Measurement, at: tuple[int, int]) -> StateSpa
                      " %): the element's law is not what the record shows beyond its equivalent linear stiffness "
                      "and damping")  # fmt: skip
     issue([(_Warning, x) for x in lines])
-    return StateSpaceIdentification(
-        method="nsi", model=model, modal={"linear": modes}, element=element, validation=Bunch(validation),
+    return Identification(
+        method="nsi", system=model, linear_part="state_space", modal={"linear": modes}, element_estimate=element,
+        validation=Bunch(validation),
         stabilisation=rows, warnings=tuple(lines),
         frf={"f_hz": freqs.tolist(), "real": H.real.T.tolist(), "imag": H.imag.T.tolist(), "units": "m/N",
              "input": f"force at sensor {p}"},
