@@ -689,3 +689,11 @@ def assert_result_answers_alike(est):
     assert isinstance(line, str) and "\n" not in line and line in repr(est), (line, repr(est))
     assert type(res).from_json(res.to_json()).to_json() == res.to_json()
     assert isinstance(res.warnings, tuple) and res.method in ("nsi", "sindy", "discrepancy")
+    # one result class for any structure: the same class at every N and linear part, read back from its JSON as such,
+    # the identified system's DOFs and the element's place read alike
+    from negstiff import Identification
+
+    assert type(res) is Identification and type(Identification.from_json(res.to_json())) is Identification
+    assert res.linear_part in ("none", "physical", "state_space")
+    assert res.dofs == res.to_json().get("dofs", 1) and len(res.element_at) == 2
+    assert (res.linear_part == "none") == (res.element_at == (0, 1) and res.dofs == 1)

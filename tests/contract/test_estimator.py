@@ -18,6 +18,7 @@ from negstiff import (
     NSI,
     Discrepancy,
     GAUpdater,
+    Identification,
     InputError,
     NotFittedError,
     Posterior,
@@ -271,5 +272,8 @@ def test_the_contract_holds_at_every_n_and_record_kind(cls, n_dof, kind):
     assert est.fitted and repr(est).startswith(f"{cls.__name__}(")
     assert_json_round_trip(est)
     assert est.to_json().get("dofs", 1) == n_dof
+    if cls in (NSI, SINDy):  # one result class at every N (Discrepancy's single DOF keeps its workflow's attributes)
+        assert type(est.result_) is Identification and est.result_.dofs == n_dof
+        assert est.result_.element_at == (n_dof - 1, n_dof)
     pred = est.predict(rec, window_s=0.25)  # every channel's restarted runs (a single DOF's z alone)
     assert (pred.z.shape[1] == n_dof if n_dof > 1 else pred.z.ndim == 2) and pred.score_percent >= 0
