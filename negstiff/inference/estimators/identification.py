@@ -159,15 +159,20 @@ QUICK_TERMS = ("1", "z", "z^2", "z^3", "v", "v|v|")
 """The quick fit's library: the model file's own polynomial and damping."""
 
 
-def refuse_one_orbit(rec: Measurement, method: str) -> None:
-    """Refuse (``InputError``, one line, before any work) a harmonic record whose response is one nearly sinusoidal
-    periodic orbit (``periodicity.steady_orbit``): its restoring force's nonlinearity shows only through small
-    harmonics, and a fit's coefficients would be numbers the record does not hold.
+def refuse_one_orbit(rec: Measurement, method: str, at: tuple[int, int] = (0, 1)) -> None:
+    """Refuse (``InputError``, one line, before any work) a harmonic record whose element's motion (its relative
+    displacement between the points ``at`` it joins: the device's z on its base) is one nearly sinusoidal periodic
+    orbit (``periodicity.steady_orbit``): its restoring force's nonlinearity shows only through small harmonics, and
+    a fit's coefficients would be numbers the record does not hold.
     """
+    from negstiff.inference.analysis.characterise import response_for
     from negstiff.inference.analysis.periodicity import steady_orbit
 
-    orbit = steady_orbit(rec)
+    orbit = steady_orbit(response_for(rec, at))
     if orbit is not None:
+        if at != (0, 1):
+            motion = f"whose element's relative motion z{at[1]}" + (f" - z{at[0]}" if at[0] else "")
+            orbit = orbit.replace("whose response", motion)
         raise InputError(
             f"{rec.source}: {method} refused before its work: {orbit}: such an orbit shows the restoring force and "
             "damping near one amplitude alone, not their coefficients apart; identify a random or swept record of "
@@ -347,18 +352,21 @@ class Identifier(Estimator):
         ), account
 
     def _check_response(self, rec: Measurement) -> None:
-        """A single DOF's record as the fit reads it (``identification_record``) checked in the record's check,
-        before any progress line: a broadband record's response carries a trace of its input
-        (``Measurement.require_response``), and its quick cubic does not soften (``refuse_softening``). A
-        vibrometer reading its own noise was refused by NSI's subspace step, after its progress line.
+        """The record as the fit reads it checked in the record's check, before any progress line: a forced
+        record's every response channel carries a trace of its input (``Measurement.require_response``), its
+        element's motion is not one nearly sinusoidal orbit (``refuse_one_orbit``), and the device's quick cubic does
+        not soften (``refuse_softening``: the device's own weak form, on its base). A vibrometer reading its own noise
+        was refused by NSI's subspace step, after its progress line; a structure's, after its whole fit.
         """
         from negstiff.inference.analysis.record_kind import RING_DOWN_KINDS, identification_record, record_kind
+        from negstiff.inference.estimators.base import element_of
 
+        at = element_of(self, rec) or (0, 1)
+        kind = record_kind(rec)
+        if kind.kind not in RING_DOWN_KINDS:
+            rec.require_response(type(self).__name__)
+            refuse_one_orbit(rec, type(self).__name__, at)
         if rec.n_dof == 1 and getattr(self, "element", None) is None:
-            kind = record_kind(rec)
-            if kind.kind not in RING_DOWN_KINDS:
-                rec.require_response(type(self).__name__)
-                refuse_one_orbit(rec, type(self).__name__)
             read = identification_record(rec, kind)
             n_id = int(round(read.n * (1 - self.validation_fraction)))
             # a softening quick cubic refuses here where the cubic is asked for, or where no law could hold the

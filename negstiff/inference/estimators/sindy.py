@@ -323,9 +323,9 @@ class SINDy(StructureResults, Identifier):
             check_decay(rec, "SINDy")
         rec.require_motion("SINDy")
         rec.require_live_aux("SINDy")
+        self._check_response(rec)
         if at is None:
             self.check_length(rec)
-            self._check_response(rec)
         else:
             check_ring_down_scores(self, rec)
 

@@ -481,10 +481,9 @@ class Measurement:
             return
         for k, zk in enumerate(np.atleast_2d(self.z)):
             if is_constant(zk):
-                name = "z" if self.n_dof == 1 else f"z{k + 1}"
                 raise MeasurementError(
-                    f"{self.source}: the response {name} is constant ({zk[0]:.6g} m over {self.n} samples): a dead "
-                    f"or disconnected sensor? {what} needs motion"
+                    f"{self.source}: the response {self.channel_name(k)} is constant ({zk[0]:.6g} m over {self.n} "
+                    f"samples): a dead or disconnected sensor? {what} needs motion"
                 )
 
     def require_excitation(self, what: str) -> None:
@@ -495,33 +494,42 @@ class Measurement:
                 f"dead sensor, or no excitation? {what} needs an input that moves"
             )
 
+    def channel_name(self, k: int) -> str:
+        """The name of response channel ``k`` (0-based) as the record's columns write it: ``z``, or ``z1``..``zN``."""
+        return "z" if self.z is not None and np.ndim(self.z) == 1 else f"z{k + 1}"
+
     def require_response(self, what: str) -> None:
-        """Raise ``MeasurementError`` when the response carries no trace of the input: its coherence with the input
-        stays, in every bin below 0.8 of the Nyquist frequency, where two independent signals' reaches by chance
-        (the largest of K bins is significant at ``RESPONSE_TRACE_P`` when K (1 - gamma^2)^(n_d - 1) is below it,
-        n_d the Welch averages of segments of about a second: Bendat & Piersol 9.2.3): a sensor reading its own
+        """Raise ``MeasurementError`` when a response channel carries no trace of the input: its coherence with the
+        input stays, in every bin below 0.8 of the Nyquist frequency, where two independent signals' reaches by
+        chance (the largest of K bins is significant at ``RESPONSE_TRACE_P`` when K (1 - gamma^2)^(n_d - 1) is below
+        it, n_d the Welch averages of segments of about a second: Bendat & Piersol 9.2.3): a sensor reading its own
         noise (a vibrometer off its target). A nonlinear response, chaotic too, keeps a linear part of its input
         (a cross-well record's best bin: coherence 0.56 over 31 averages, p = 4e-9; a vibrometer's noise: 0.044 over
-        119, p = 0.97). A record without an input (a free decay) or a hammer's is not judged here.
+        119, p = 0.97); every DOF of a structure the input drives moves with it. Each channel is judged, the first
+        without a trace named. A record without an input (a free decay) or a hammer's is not judged here.
         """
-        if self.z is None or self.n_dof != 1 or is_constant(self.u) or is_constant(self.z):
+        if self.z is None or is_constant(self.u):
             return
         nper = int(min(self.n // 16, round(self.fs)))
         if nper < 64:
             return
-        f, coh = coherence(self.u, self.z, self.fs, nper)
-        band = (f > 0) & (f < 0.8 * self.fs / 2)
-        if not band.any():
-            return
-        best = float(np.nan_to_num(coh[band]).max())
         averages = 2 * self.n // nper - 1
-        p = band.sum() * (1 - best) ** (averages - 1)
-        if p > RESPONSE_TRACE_P:
-            raise MeasurementError(
-                f"{self.source}: the response carries no trace of the input {self.input_name}: its coherence with it "
-                f"reaches {best:.2g} at most over {averages} averages, which independent signals reach by chance (p = "
-                f"{min(p, 1.0):.2g}); is its sensor reading its own noise? {what} needs the response to this input"
-            )
+        for k, zk in enumerate(self.channels):
+            if is_constant(zk):
+                continue  # a dead channel is ``require_motion``'s to name
+            f, coh = coherence(self.u, zk, self.fs, nper)
+            band = (f > 0) & (f < 0.8 * self.fs / 2)
+            if not band.any():
+                return
+            best = float(np.nan_to_num(coh[band]).max())
+            p = band.sum() * (1 - best) ** (averages - 1)
+            if p > RESPONSE_TRACE_P:
+                raise MeasurementError(
+                    f"{self.source}: the response {self.channel_name(k)} carries no trace of the input "
+                    f"{self.input_name}: its coherence with it reaches {best:.2g} at most over {averages} averages, "
+                    f"which independent signals reach by chance (p = {min(p, 1.0):.2g}); is its sensor reading its "
+                    f"own noise? {what} needs the response to this input"
+                )
 
     def require_live_aux(self, what: str) -> None:
         """Raise ``MeasurementError`` when a measured auxiliary channel does not vary (a dead sensor): a term in it

@@ -273,8 +273,7 @@ class Discrepancy(StructureResults, Intervals):
         rec.require(4000, "the discrepancy workflow")
         if kind != "decay":  # a free decay has no input: its response must ring down instead
             rec.require_excitation("the discrepancy workflow")
-            if at is None:
-                refuse_one_orbit(rec, "the discrepancy workflow")
+            refuse_one_orbit(rec, "the discrepancy workflow", at or (0, 1))
         else:
             check_decay(rec, "the discrepancy workflow")
         rec.require_motion("the discrepancy workflow")
