@@ -225,10 +225,10 @@ def _modal(identification) -> Mapping[str, Mapping[str, Any]]:
 
 
 def assert_methods_agree(a, b, record=None, k: float = 3.0, blocks: int = 3) -> None:
-    """Assert that two methods' own estimates of each well's frequency agree within ``k`` combined standard
-    errors. ``a``, ``b``: fitted identifications (NSI, SINDy; their ``own_estimate`` on ``record``, the
-    record they were fitted on, in ``blocks`` blocks) or ``own_estimate`` results. The refined models are not
-    compared: both methods refine to the same output-error optimum, so their agreement says nothing.
+    """Assert that two methods' own estimates of each well's frequency (a structure's: each of its modes) agree
+    within ``k`` combined standard errors. ``a``, ``b``: fitted identifications (NSI, SINDy; their ``own_estimate``
+    on ``record``, the record they were fitted on, in ``blocks`` blocks) or ``own_estimate`` results. The refined
+    models are not compared: both methods refine to the same output-error optimum, so their agreement says nothing.
     """
     own = []
     for est in (a, b):
@@ -239,16 +239,21 @@ def assert_methods_agree(a, b, record=None, k: float = 3.0, blocks: int = 3) -> 
                 raise AssertionError("assert_methods_agree: the record the estimators were fitted on is needed")
             own.append(est.own_estimate(record, blocks=blocks))
     compared = 0
-    for well, ma in own[0]["modal"].items():
-        mb = own[1]["modal"].get(well, {})
-        if ma.get("f_hz") is None or mb.get("f_hz") is None:
-            continue
-        if ma.get("f_hz_se") is None or mb.get("f_hz_se") is None:
-            raise AssertionError(f"the {well} well's frequency has no standard error (a block missed the well)")
-        names = f"{own[0].get('method', 'first')}, {own[1].get('method', 'second')}"
-        assert_agree(ma["f_hz"], mb["f_hz"], ma["f_hz_se"], mb["f_hz_se"], k,
-                     what=f"the {well} well's own frequencies [Hz] ({names})")  # fmt: skip
-        compared += 1
+    names = f"{own[0].get('method', 'first')}, {own[1].get('method', 'second')}"
+    for well, ms_a in own[0]["modal"].items():
+        ms_b = own[1]["modal"].get(well, {})
+        # a structure's well holds its modes by frequency (each compared with the other's of the same rank)
+        listed = isinstance(ms_a, list) and isinstance(ms_b, list)
+        pairs = list(zip(ms_a, ms_b, strict=False)) if listed else [(ms_a, ms_b)]  # modes one found, the other not
+        for i, (ma, mb) in enumerate(pairs):
+            what = f"the {well} well's" + (f" mode {i + 1}" if isinstance(ms_a, list) else "")
+            if ma.get("f_hz") is None or mb.get("f_hz") is None:
+                continue
+            if ma.get("f_hz_se") is None or mb.get("f_hz_se") is None:
+                raise AssertionError(f"{what} frequency has no standard error (a block missed the well)")
+            assert_agree(ma["f_hz"], mb["f_hz"], ma["f_hz_se"], mb["f_hz_se"], k,
+                         what=f"{what} own frequencies [Hz] ({names})")  # fmt: skip
+            compared += 1
     if not compared:
         raise AssertionError("no well both methods estimated")
 

@@ -408,13 +408,11 @@ def _chosen_law(rec, fitted: dict[str, Any], damping: str) -> str:
 
 def _interval(rec, fitted: dict[str, Any]) -> dict[str, Any]:
     """The first identification's own estimate with its batch-means standard error (``own_estimate``) over
-    three blocks of the record as the identification read it (a hammer's force windowed).
+    three blocks of the record as the identification read it (a hammer's force windowed); a structure's: its element's
+    coefficients and every mode of every well, each block identified alone.
     """
     from negstiff.inference.analysis.record_kind import identification_record, record_kind
 
-    if rec.n_dof > 1:
-        raise InputError(f"{rec.source}: the blocks' interval is a single DOF's own estimate's; a structure's element "
-                         "has its posterior's interval")  # fmt: skip
     for name in ("nsi", "sindy"):
         if name in fitted:
             return fitted[name].own_estimate(identification_record(rec, record_kind(rec)), blocks=3)

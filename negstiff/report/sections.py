@@ -525,20 +525,26 @@ def interval_section(own: dict[str, Any], label: str = "", prob: float = 0.95) -
     t = float(stats.t.ppf(0.5 + prob / 2, blocks - 1))
     sec = Section("interval", label, _with_label(f"{name}: its estimate's interval ({blocks} blocks)", label))
     rows = []
-    for well, m in own["modal"].items():
-        if m.get("f_hz") is None:
-            continue
-        for key, unit, scale in (("f_hz", "Hz", 1.0), ("zeta", "%", 100.0)):
-            se = m.get(f"{key}_se")
-            half = None if se is None else t * se * scale
-            rows.append([f"{key} ({well}) [{unit}]", scale * m[key], half])
-    for key in COEFFICIENTS:
+    for well, ms in own["modal"].items():
+        modes = ms if isinstance(ms, list) else [ms]  # a structure's: every mode of the well
+        for i, m in enumerate(modes):
+            if m.get("f_hz") is None:
+                continue
+            where = f"{well}, mode {i + 1}" if isinstance(ms, list) else well
+            for key, unit, scale in (("f_hz", "Hz", 1.0), ("zeta", "%", 100.0)):
+                se = m.get(f"{key}_se")
+                half = None if se is None else t * se * scale
+                rows.append([f"{key} ({where}) [{unit}]", scale * m[key], half])
+    others = [k for k in own["model"] if k not in (*COEFFICIENTS, "k0")]  # a state-space element's (k2_tilde, ...)
+    for key in [k for k in COEFFICIENTS if k in own["model"]] + others:
         mean, se = own["model"].get(key), own["model_se"].get(key)
         rows.append([key, mean, None if se is None else t * se])
     sec.table(["quantity", "estimate", f"+- ({100 * prob:g} %)"], rows)
-    sec.text(f"The identification part cut into {blocks} blocks, each identified alone by {name}'s own step (no "
-             f"refinement); {100 * prob:g} % interval: Student's t ({blocks - 1} degrees of freedom) times the blocks' "
-             "standard error (their scatter over sqrt(blocks)). The estimate is the whole record's.")  # fmt: skip
+    element = f" (a structure's: its element's, at {'-'.join(map(str, own['element_at']))})" if "dofs" in own else ""
+    sec.text(f"The identification part cut into {blocks} blocks, each identified alone by {name}'s own "
+             f"step{element} (no refinement); {100 * prob:g} % interval: Student's t ({blocks - 1} degrees of "
+             "freedom) times the blocks' standard error (their scatter over sqrt(blocks)). The estimate is the whole "
+             "record's.")  # fmt: skip
     # not the coefficient table's ``interval`` (a posterior's credible interval): a batch-means interval of its own
     mean, se = own["model"].get("k3"), own["model_se"].get("k3")
     if mean is not None and se is not None:

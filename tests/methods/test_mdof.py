@@ -139,6 +139,38 @@ def test_device_on_a_flexible_fixture_is_identified(fixture_record, method):
     assert {"k1", "k2", "k3", "c", "c_nl", "extra"} <= set(out["element"]) and "linear" in out
 
 
+def test_a_structures_own_estimates_agree_within_their_standard_errors_and_a_bias_is_caught():
+    # as a single DOF's (tests/contract/test_predict.py): each method's own estimate of the device on its fixture
+    # (110 s, 20 um of laser noise: the blocks of a third of the identification part long enough for SINDy's
+    # selection) with its batch-means standard error, every block identified alone: NSI's and SINDy's every mode of
+    # both wells agree within three combined standard errors (measured within 0.2), and a lab's sampling rate
+    # mislabelled 3 % high moves SINDy's modes by 3 %: caught (the first mode 50 standard errors off, measured)
+    from negstiff.report.sections import interval_section
+    from negstiff.testing import assert_methods_agree
+
+    u, z = rk4_fixture_record(duration=110.0, rms=12.0, seed=3, noise=2e-5)
+    rec = from_arrays(u, z, FS, masses=(FIXTURE["m"], TRUTH.m), source="noisy fixture")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        nsi, sindy = NSI(element="1-2").fit(rec), SINDy(element="1-2").fit(rec)
+        own_nsi, own_sindy = nsi.own_estimate(rec), sindy.own_estimate(rec)
+        biased = from_arrays(u, z, FS * 1.03, masses=(FIXTURE["m"], TRUTH.m), source="noisy fixture, fs mislabelled")
+        own_biased = SINDy(element="1-2").fit(biased).own_estimate(biased)
+    for own, est in ((own_nsi, nsi), (own_sindy, sindy)):
+        # the estimate is the fit's own (before its refinement), every mode and coefficient with its standard error
+        assert own["model"]["k3"] == est.result_.initial_model.k3 and own["dofs"] == 2
+        assert [len(own["modal"][w]) for w in ("minus", "plus")] == [2, 2]
+        assert all(m["f_hz_se"] > 0 for w in own["modal"] for m in own["modal"][w])
+        assert all(own["model_se"][k] > 0 for k in ("k1", "k2", "k3", "c"))
+    assert_methods_agree(own_nsi, own_sindy, k=3)
+    with pytest.raises(AssertionError, match="mode 1 own frequencies"):
+        assert_methods_agree(own_nsi, own_biased, k=3)
+    # the report's interval section holds each well's every mode and the element's coefficients
+    ((_, (_, table)),) = [b for b in interval_section(own_nsi).blocks if b[0] == "table"]
+    rows = [r[0] for r in table]
+    assert "f_hz (minus, mode 2) [Hz]" in rows and "k3" in rows
+
+
 def test_structure_record_file(tmp_path):
     u, z = rk4_fixture_record(duration=2.0, seed=2)
     t = np.arange(u.size) / FS
