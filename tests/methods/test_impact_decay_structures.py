@@ -206,12 +206,19 @@ def test_the_elements_posterior_on_a_structures_ring_down_holds_the_cubic(kind):
 def test_a_decay_whose_held_out_tail_is_its_noise_is_said_to_judge_nothing():
     # the hardening Duffing on its fixture, both released 3 mm from rest (8 s): it rings above its 1 um noise for
     # about 6 s, so the part that scores the candidates rings (the structure is read: k3 within 1 %, measured
-    # +0.01 %) while the held-out tail (6.4 s on) is the sensors' noise, where the truth's own run under that noise
-    # misses by more than the fit (measured 401 % and 319 %): the held-out error judges nothing there, and the
-    # result says so instead of "explains nothing"
+    # +0.01 %) while the held-out tail (6.4 s on) is the sensors' noise (78.7 % of its rms), where the truth's own
+    # runs on the same windows miss as much as the fit's (measured 90.85 % and 90.80 %; 319 % both when the windows
+    # started from the band-smoothed states): the held-out error judges nothing there, and the result says so instead
+    # of "explains nothing"
+    from negstiff.inference.analysis.record_kind import identification_record, record_kind
+    from negstiff.inference.steps.validation import restarted_structure_runs
+
     rec = _decay(DUFFING, (0.003, -0.003), 4, 8.0)
     est = _fit(NSI(element="1-2"), rec)
     assert est.element_["k3"] == pytest.approx(DUFFING.k3, rel=0.01)
-    assert est.result_.validation["rms_percent"] <= est.result_.validation["floor_percent"]
+    v, n_id = est.result_.validation, est.result_.settings["identification_samples"]
+    truth = restarted_structure_runs(_structure(DUFFING), identification_record(rec, record_kind(rec)), n_id,
+                                     v["window_s"])  # fmt: skip
+    assert v["rms_percent"] <= truth["rms_percent"] * (1 + 0.01) and v["noise_floor_percent"] >= 50
     assert any("at the sensors' noise" in w for w in est.result_.warnings)
     assert not any("explains nothing" in w for w in est.result_.warnings)

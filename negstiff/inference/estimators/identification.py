@@ -657,12 +657,18 @@ def refined(structure: Structure, offsets: np.ndarray, rec: Measurement, n_id: i
     validation to keep (the given ones where the refinement was not), and the stage's account.
     """
     start = weight_pinned(structure, rec.gravity)
-    kept, kept_validation, account = refine_stage(
-        start, rec, n_id, validation, held=("k0",), offsets=offsets,
-        judge=lambda system, zeros: free_run_error(system, rec, n_id, WINDOW_S, zeros, hits),
-    )  # fmt: skip
+
+    # the held-out windows' errors window by window, both models', for the paired comparison (``refine_stage``)
+    def judge(system, zeros) -> dict[str, Any]:
+        runs = free_run_error(system, rec, n_id, WINDOW_S, zeros, hits, True)
+        per_window = runs.pop("window_ms")
+        return {**runs, "paired_window_ms": per_window}
+
+    paired = {**validation, "paired_window_ms": judge(structure, offsets)["paired_window_ms"]}
+    kept, kept_validation, account = refine_stage(start, rec, n_id, paired, held=("k0",), offsets=offsets, judge=judge)
     if not account["applied"]:
         return structure, offsets, validation, account
+    kept_validation = {k: v for k, v in kept_validation.items() if k != "paired_window_ms"}  # an array: not the JSON's
     return kept, np.asarray(account["offsets_m"]), kept_validation, account
 
 

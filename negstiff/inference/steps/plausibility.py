@@ -130,6 +130,12 @@ contradicts the model."""
 HELD_OUT_LIMIT_PERCENT = 100.0
 """A held-out free run erring by more than the record's own rms predicts worse than zero."""
 
+NOISE_TAIL_PERCENT = 50.0
+"""A held-out part whose channels' sensor noise alone reaches this share of their rms there (``noise_floor_percent``,
+a structure's runs give it) is read mostly as noise: its held-out error judges nothing, whatever it is. A free decay's
+tail rung into its noise (78.7 % noise) was missed by the fit and by the truth alike (90.80 and 90.85 %), under the
+100 % that said so before its windows started from least-error states (measured)."""
+
 
 def input_power(rec) -> tuple[float, float]:
     """The input's mean power per unit mass over the record [W/kg] and its batch-means standard error (20
@@ -223,15 +229,18 @@ def judgement(
     key = "restarted_rms_percent" if validation.get("restarted_rms_percent") is not None else "rms_percent"
     worst = validation.get(key)
     floor = validation.get("floor_percent")  # what a right model misses on a record like this (its own noise)
-    if worst is not None and np.isfinite(worst) and worst > HELD_OUT_LIMIT_PERCENT:
+    noise = validation.get("noise_floor_percent")  # the channels' sensor noise alone there (a structure's runs)
+    noise_tail = noise is not None and noise >= NOISE_TAIL_PERCENT
+    if worst is not None and np.isfinite(worst) and (worst > HELD_OUT_LIMIT_PERCENT or noise_tail):
         what = "restarted free runs err" if key.startswith("restarted") else "free run errs"
-        if floor is not None and floor >= HELD_OUT_LIMIT_PERCENT:  # a right model misses it as badly: the held-out
-            # part is the sensors' noise and judges nothing (beyond the floor: ``structure_result``'s own warning)
+        if noise_tail or floor is not None and floor >= HELD_OUT_LIMIT_PERCENT:  # a right model misses it as badly:
+            # the held-out part is the sensors' noise and judges nothing (beyond the floor: ``structure_result``'s own)
+            right = (f"a right model misses a record like this by {floor:.3g} % (its own run under the channels' "
+                     "noise)" if floor is not None else f"the sensors' noise alone is {noise:.3g} % of it")  # fmt: skip
             out.append(
                 f"the held-out part is at the sensors' noise: the model's held-out {what} by {worst:.3g} % of the "
-                f"record's rms there, and a right model misses a record like this by {floor:.3g} % (its own run "
-                "under the channels' noise): the held-out error cannot judge the model; hold out a part that rings "
-                "above the noise (cut the record where it meets it)"
+                f"record's rms there, and {right}: the held-out error cannot judge the model; hold out a part that "
+                "rings above the noise (cut the record where it meets it)"
             )
         else:
             out.append(

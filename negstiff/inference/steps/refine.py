@@ -467,6 +467,32 @@ this fraction (restarted free-run error): at the noise floor both predict alike,
 error estimate, the maximum-likelihood one under sensor noise, is then preferred."""
 
 
+PAIRED_SE = 2.0
+"""A refined model predicting the held-out windows worse than ``ACCEPT_TOLERANCE`` allows is still kept when the
+windows do not tell it apart: its windows' mean square errors exceed the start model's, window by window, by less
+than this many standard errors of their mean difference (a paired comparison over the same windows, where the judge
+offers them: ``paired_window_ms``, a structure's judge). Near the floor the windows' own scatter is wider than 2 %:
+on a 120 s fixture record with a quintic and friction named, the element's equation-error estimate missed the
+held-out windows by 0.786 %, its refinement by 0.827 % and the truth by 0.819 % (measured). The single DOF's judge
+keeps the 2 % rule alone: on the tests' clean record the paired rule kept a refinement that moved SINDy's c_nl by
+6e-4 of itself (beyond the test's 5e-4), not yet studied."""
+
+
+def worse_beyond_noise(before_ms, after_ms) -> bool:
+    """Whether the per-window mean square errors ``after_ms`` exceed ``before_ms`` (the same windows) by more than
+    ``PAIRED_SE`` standard errors of their mean difference; a window only the second diverges in (NaN) is worse
+    beyond doubt, and fewer than 8 windows both ran tell nothing apart (True: the relative rule alone decides).
+    """
+    a, b = np.asarray(before_ms, float), np.asarray(after_ms, float)
+    if a.shape != b.shape or np.any(np.isnan(b) & np.isfinite(a)):
+        return True
+    both = np.isfinite(a) & np.isfinite(b)
+    if both.sum() < 8:
+        return True
+    d = b[both] - a[both]
+    return bool(d.mean() > PAIRED_SE * d.std(ddof=1) / math.sqrt(d.size))
+
+
 def _heldout_error(validation: dict[str, Any]) -> float:
     e = validation.get("restarted_rms_percent")
     if e is None or not np.isfinite(e):
@@ -507,12 +533,21 @@ def refine_stage(
         info["reason"] = f"refinement failed, the equation-error model is kept: {exc}"
         return model, validation, info
     before, after = _heldout_error(validation), _heldout_error(new_validation)
-    keep = after <= before * (1 + ACCEPT_TOLERANCE)
+    within = after <= before * (1 + ACCEPT_TOLERANCE)
+    paired = "paired_window_ms" in validation and "paired_window_ms" in new_validation
+    keep = within or (
+        paired and not worse_beyond_noise(validation["paired_window_ms"], new_validation["paired_window_ms"])
+    )
     ident = rec.segment(0, n_id)
     bounded = boundedness(r.model, ident, offsets=r.offsets)
     if keep and not bounded["ok"] and boundedness(model, ident, offsets=offsets)["ok"]:
         keep = False
         verdict = f"rejected: {bounded['warning'].replace('the model', 'the refined model')}"
+    elif keep and not within:
+        verdict = (
+            f"kept: it misses the held-out part by {after:.3g} % against {before:.3g} %, a difference its windows "
+            f"do not tell apart (within {PAIRED_SE:g} standard errors, window by window)"
+        )
     elif keep:
         verdict = "kept: it predicts the held-out part at least as well"
     else:

@@ -17,6 +17,7 @@ import numpy as np
 from scipy import optimize, signal
 
 from negstiff.errors import MeasurementError
+from negstiff.inference.record.derivatives import derivative_window, noise_floor
 from negstiff.inference.record.measurement import Measurement
 from negstiff.inference.steps.frame import pin_frame
 from negstiff.models import Model, simulate, simulate_batch
@@ -520,11 +521,15 @@ def structure_windows(rec: Measurement, place: tuple[int, int], start: int, wind
     the channels' band-smoothed displacements and velocities (N, T) the runs start from (``channel_states`` of the
     element at ``place``); one ``MeasurementError`` where the part holds no window.
     """
-    zs, v, smoother = rec.channel_states(place)
-    # windows of L + 1 samples, each ending on the next one's start (the structure's input is linear between them)
+    # each channel's least-error state, as the single DOF's runs start from (``free_run_states``): the band-smoothed
+    # states (``channel_states``, NSI's) started the device on its base as a structure of one DOF 2.5x further off
+    # its record than its own runs (0.5 s windows of a 30 s rig record: median 1.03 % against 0.42 %; measured)
+    zs, v = rec.free_run_states()
+    # windows of L + 1 samples, each ending on the next one's start
     windows = restart_windows(rec.n, rec.fs, window_s, start=start, extra=1, min_step=8)
     if between_pulses:
-        lead = smoother[0] // 2
+        lead = max(derivative_window(zi, rec.fs, "state", floor=noise_floor(zi, rec.fs))[0] for zi in rec.channels)
+        lead = max(lead, rec.channel_states(place)[2][0]) // 2
         busy = np.concatenate([[0], np.cumsum(np.asarray(rec.u) != 0)])
         lo = np.maximum(windows.starts - lead, 0)
         quiet = busy[windows.starts + windows.length] == busy[lo]
@@ -546,10 +551,16 @@ def structure_window_errors(structures, rec: Measurement, windows: RestartWindow
     o = np.zeros(rec.n_dof) if offsets is None else np.asarray(offsets, float)
     n_s, n_w = len(structures), windows.starts.size
     x0 = windows.start_states(zs - o[:, None], v)
-    res = simulate_structures(structures, windows.measured(rec.u), rec.dt, np.tile(x0, (n_s, 1)),
+    # the input at every stage time, band-limited as a lab's record's is (``stage_input``), as the single DOF's runs
+    # read it (``staged_windows``)
+    r, length = 2 * DEFAULT_SUBSTEPS, windows.measured(rec.u).shape[1]
+    lo, hi = int(windows.starts.min()), int(windows.starts.max()) + length
+    us = rec.staged(structures[0], DEFAULT_SUBSTEPS, lo, hi)
+    U = np.stack([us[r * (s - lo) : r * (s - lo + length - 1) + 1] for s in windows.starts])
+    res = simulate_structures(structures, U, rec.dt, np.tile(x0, (n_s, 1)),
                               input_kind=rec.input_name, force_dof=rec.force_dof,
                               input_index=np.tile(np.arange(n_w), n_s),
-                              structure_index=np.repeat(np.arange(n_s), n_w))  # fmt: skip
+                              structure_index=np.repeat(np.arange(n_s), n_w), staged=True)  # fmt: skip
     z = res.z.reshape(n_s, n_w, rec.n_dof, -1)
     return z + o[None, None, :, None] - windows.measured(rec.channels)[None], res.diverged.reshape(n_s, n_w)
 
@@ -564,7 +575,8 @@ def channel_scales(rec: Measurement, start: int) -> np.ndarray:
 
 
 def restarted_structure_runs(structure: Structure, rec: Measurement, start: int, window_s: float = STRUCTURE_WINDOW_S,
-                             offsets=None, between_pulses: bool = False) -> dict[str, Any]:  # fmt: skip
+                             offsets=None, between_pulses: bool = False,
+                             per_window: bool = False) -> dict[str, Any]:  # fmt: skip
     """The restarted windows of a structure of N >= 1 DOFs (a single DOF as ``Structure.single(model)``; the
     estimators' ``free_run_error``): free runs of ``structure`` over the record from sample ``start`` on,
     restarted every ``window_s`` from the record's band-smoothed states: rms error over every DOF in % of the
@@ -574,7 +586,9 @@ def restarted_structure_runs(structure: Structure, rec: Measurement, start: int,
     windowed (zero between the pulses, ``record_kind.identification_record``): only the windows whose input is zero
     from half the states' smoothing window before their start to their end, each a free decay from a state no
     pulse smoothed (a pulse of a few samples is not resolved by the runs' input between samples, as the single
-    DOF's windows restart after it).
+    DOF's windows restart after it). ``per_window``: also each window's mean square error in those units
+    (``window_ms``, NaN where its run diverged: an array, not for a result's JSON), as the single DOF's ``validate``
+    gives them (the refinement's paired comparison, ``refine.refine_stage``).
     """
     o = np.zeros(rec.n_dof) if offsets is None else np.asarray(offsets, float)
     windows, zs, v = structure_windows(rec, structure.place, start, window_s, between_pulses)
@@ -584,13 +598,16 @@ def restarted_structure_runs(structure: Structure, rec: Measurement, start: int,
     scale = channel_scales(rec, start)
     noise = rec.channel_noise()
     floor = 100 * float(np.sqrt(np.mean((noise / scale) ** 2)))
+    window_ms = np.full(starts.size, np.nan)
+    window_ms[ok] = np.mean((err[ok] / scale[None, :, None]) ** 2, axis=(1, 2))
+    extra = {"window_ms": window_ms} if per_window else {}
     if not ok.any():
         return {"rms_percent": math.inf, "per_dof_percent": [math.inf] * rec.n_dof, "windows": int(starts.size),
-                "diverged": int(starts.size), "window_s": window_s, "noise_floor_percent": floor}  # fmt: skip
+                "diverged": int(starts.size), "window_s": window_s, "noise_floor_percent": floor, **extra}  # fmt: skip
     per = np.sqrt(np.mean(err[ok] ** 2, axis=(0, 2))) / scale
     total = float(np.sqrt(np.mean((err[ok] / scale[None, :, None]) ** 2)))
     return {"rms_percent": 100 * total, "per_dof_percent": (100 * per).tolist(), "windows": int(starts.size),
-            "diverged": int((~ok).sum()), "window_s": window_s, "noise_floor_percent": floor}  # fmt: skip
+            "diverged": int((~ok).sum()), "window_s": window_s, "noise_floor_percent": floor, **extra}  # fmt: skip
 
 
 def residual_psd(rec: Measurement, model: Model, start: int, window_s: float = 2.0):
