@@ -243,15 +243,21 @@ def structure_harmonic(amp: float = 3.0, f_hz: float = 9.0, duration: float = 40
     return t[keep] - settle, amp * np.sin(w * t[keep]), z
 
 
+@pytest.fixture(scope="module")
+def structure_orbit():
+    """``structure_harmonic``'s record at 9 Hz and 3 m/s^2, written once for the three commands."""
+    return structure_harmonic()
+
+
 @pytest.mark.parametrize("command", [["identify", "nsi"], ["identify", "sindy"], ["discrepancy"]])
-def test_a_structures_steady_orbit_is_refused_before_any_fit(lab, capsys, command):
+def test_a_structures_steady_orbit_is_refused_before_any_fit(lab, capsys, command, structure_orbit):
     # the reference device on its fixture at 9 Hz and 3 m/s^2 in its plus well: the element's relative motion is one
     # nearly sinusoidal orbit, as the single DOF's above, and the same numbers not held by the record would come of
     # it; a structure's fit ran whole on it (its weak form, its refinement). Refused in one line from its element's
     # motion, before the work, from Python and the command
     from negstiff import Discrepancy, InputError, from_arrays
 
-    t, u, z = structure_harmonic()
+    t, u, z = structure_orbit
     rec = from_arrays(u, z, FS, masses=(1.0, TRUTH.m), gravity=0.0, source="fixture at 9 Hz")
     estimator = {"nsi": NSI, "sindy": SINDy, "discrepancy": Discrepancy}[command[-1]]
     with pytest.raises(InputError, match="relative motion z2 - z1 is one nearly sinusoidal orbit .period 1") as info:
