@@ -478,6 +478,13 @@ keeps the 2 % rule alone: on the tests' clean record the paired rule kept a refi
 6e-4 of itself (beyond the test's 5e-4), not yet studied."""
 
 
+PAIRED_CAP = 0.10
+"""The paired comparison (``PAIRED_SE``) keeps a refinement at most this much worse on the held-out windows: few or
+heavy-tailed windows make its standard error wide. Tried on the single DOF's 2 s windows of the reference study's
+records (not applied there), it would have kept NSI's refinement of the polynomial truth at 1.27 % against its
+start's 0.579 % (measured)."""
+
+
 def worse_beyond_noise(before_ms, after_ms) -> bool:
     """Whether the per-window mean square errors ``after_ms`` exceed ``before_ms`` (the same windows) by more than
     ``PAIRED_SE`` standard errors of their mean difference; a window only the second diverges in (NaN) is worse
@@ -536,7 +543,9 @@ def refine_stage(
     within = after <= before * (1 + ACCEPT_TOLERANCE)
     paired = "paired_window_ms" in validation and "paired_window_ms" in new_validation
     keep = within or (
-        paired and not worse_beyond_noise(validation["paired_window_ms"], new_validation["paired_window_ms"])
+        paired
+        and after <= before * (1 + PAIRED_CAP)
+        and not worse_beyond_noise(validation["paired_window_ms"], new_validation["paired_window_ms"])
     )
     ident = rec.segment(0, n_id)
     bounded = boundedness(r.model, ident, offsets=r.offsets)
