@@ -518,9 +518,7 @@ class Identifier(Estimator):
         for well, m in own.modal.items():
             row: dict[str, float | None] = {"f_hz": m.get("f_hz"), "zeta": m.get("zeta")}
             for key in ("f_hz", "zeta"):
-                vals = [blk["modal"].get(well, {}).get(key) for blk in per_block]
-                ok = [float(v) for v in vals if v is not None and math.isfinite(v)]
-                row[f"{key}_se"] = float(np.std(ok, ddof=1) / math.sqrt(len(ok))) if len(ok) >= 2 else None
+                row[f"{key}_se"] = _batch_se([blk["modal"].get(well, {}).get(key) for blk in per_block])
             out_modal[well] = row
         names = ("k0", "k1", "k2", "k3", "c", "c_nl")
         model_se = {n: float(np.std([blk["model"][n] for blk in per_block], ddof=1) / math.sqrt(blocks)) for n in names}
@@ -563,8 +561,7 @@ class Identifier(Estimator):
                 row: dict[str, float | None] = {"f_hz": mode.f_hz, "zeta": mode.zeta}
                 for key in ("f_hz", "zeta"):
                     vals = [blk["modal"][well][i][key] for blk in per_block if len(blk["modal"].get(well, ())) > i]
-                    ok = [float(v) for v in vals if v is not None and math.isfinite(v)]
-                    row[f"{key}_se"] = float(np.std(ok, ddof=1) / math.sqrt(len(ok))) if len(ok) >= 2 else None
+                    row[f"{key}_se"] = _batch_se(vals)
                 rows.append(row)
             out_modal[well] = rows
         values = _element_values(own, initial=True)
@@ -580,6 +577,14 @@ class Identifier(Estimator):
 
     def _summary(self) -> str:
         return self.result_.summary()
+
+
+def _batch_se(values) -> float | None:
+    """The batch-means standard error of the blocks' ``values`` (those given and finite): their scatter over the
+    square root of their number; None below two.
+    """
+    ok = [float(v) for v in values if v is not None and math.isfinite(v)]
+    return float(np.std(ok, ddof=1) / math.sqrt(len(ok))) if len(ok) >= 2 else None
 
 
 def _element_values(result: Identification, initial: bool = False) -> dict[str, float]:
@@ -657,19 +662,29 @@ def refined(structure: Structure, offsets: np.ndarray, rec: Measurement, n_id: i
     validation to keep (the given ones where the refinement was not), and the stage's account.
     """
     start = weight_pinned(structure, rec.gravity)
-
-    # the held-out windows' errors window by window, both models', for the paired comparison (``refine_stage``)
-    def judge(system, zeros) -> dict[str, Any]:
-        runs = free_run_error(system, rec, n_id, WINDOW_S, zeros, hits, True)
-        per_window = runs.pop("window_ms")
-        return {**runs, "paired_window_ms": per_window}
-
-    paired = {**validation, "paired_window_ms": judge(structure, offsets)["paired_window_ms"]}
+    judge = lambda system, zeros: held_out_runs(system, rec, n_id, zeros, hits, paired=True)  # noqa: E731
+    paired = validation if "paired_window_ms" in validation else judge(structure, offsets)
     kept, kept_validation, account = refine_stage(start, rec, n_id, paired, held=("k0",), offsets=offsets, judge=judge)
     if not account["applied"]:
-        return structure, offsets, validation, account
-    kept_validation = {k: v for k, v in kept_validation.items() if k != "paired_window_ms"}  # an array: not the JSON's
-    return kept, np.asarray(account["offsets_m"]), kept_validation, account
+        return structure, offsets, _without_windows(validation), account
+    return kept, np.asarray(account["offsets_m"]), _without_windows(kept_validation), account
+
+
+def held_out_runs(structure: Structure, rec: Measurement, n_id: int, offsets, hits: bool,
+                  paired: bool = False) -> dict[str, Any]:  # fmt: skip
+    """A structure's held-out windows (``free_run_error`` over [n_id, end) in ``WINDOW_S`` windows; ``hits``: a
+    hammer's, between its pulses); ``paired``: with each window's mean square error (``paired_window_ms``, an array
+    the refinement's paired comparison reads: ``refine.refine_stage``; ``_without_windows`` takes it off).
+    """
+    runs = free_run_error(structure, rec, n_id, WINDOW_S, offsets, hits, paired)
+    if paired:
+        runs["paired_window_ms"] = runs.pop("window_ms")
+    return runs
+
+
+def _without_windows(validation: dict[str, Any]) -> dict[str, Any]:
+    """``validation`` without its per-window array (not the result's JSON)."""
+    return {k: v for k, v in validation.items() if k != "paired_window_ms"}
 
 
 def check_ring_down_scores(est, rec: Measurement) -> None:
@@ -703,7 +718,7 @@ def structure_result(method: str, rec: Measurement, structure: Structure, offset
     """
     hits = ring_down(rec, ("impact",))  # a hammer's record: the held-out windows between its pulses
     own_modal = modal  # the method's own modes (NSI's wells'), judged against the final structure's
-    validation = free_run_error(structure, rec, n_id, WINDOW_S, offsets, hits)
+    validation = held_out_runs(structure, rec, n_id, offsets, hits, paired=refine)  # one run, the refinement's too
     refinement = None
     if refine:
         structure, offsets, validation, refinement = refined(structure, offsets, rec, n_id, validation, hits)

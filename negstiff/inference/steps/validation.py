@@ -411,12 +411,14 @@ def predictability(model: Model, rec: Measurement, n_id: int, window_s: float, z
     return out
 
 
-def staged_windows(system, rec: Measurement, starts: np.ndarray, length: int) -> tuple[np.ndarray, int]:
+def staged_windows(system, rec: Measurement, starts: np.ndarray, length: int,
+                   substeps: int | None = None) -> tuple[np.ndarray, int]:  # fmt: skip
     """The input of windows [s, s + length) of ``rec`` at every stage time (rows for
-    ``simulate_batch(..., staged=True)``) and the substeps they are staged for. The span the windows
-    cover is interpolated as one signal (no edge effect at a window's start).
+    ``simulate_batch(..., staged=True)``) and the substeps they are staged for (``substeps``, else
+    ``record_substeps``'). The span the windows cover is interpolated as one signal (no edge effect at a
+    window's start).
     """
-    sub = record_substeps(system, rec)
+    sub = record_substeps(system, rec) if substeps is None else int(substeps)
     r = 2 * sub
     lo, hi = int(np.min(starts)), int(np.max(starts)) + length
     us = rec.staged(system, sub, lo, hi)  # the input plus any measured channel's term
@@ -553,10 +555,7 @@ def structure_window_errors(structures, rec: Measurement, windows: RestartWindow
     x0 = windows.start_states(zs - o[:, None], v)
     # the input at every stage time, band-limited as a lab's record's is (``stage_input``), as the single DOF's runs
     # read it (``staged_windows``)
-    r, length = 2 * DEFAULT_SUBSTEPS, windows.measured(rec.u).shape[1]
-    lo, hi = int(windows.starts.min()), int(windows.starts.max()) + length
-    us = rec.staged(structures[0], DEFAULT_SUBSTEPS, lo, hi)
-    U = np.stack([us[r * (s - lo) : r * (s - lo + length - 1) + 1] for s in windows.starts])
+    U, _ = staged_windows(structures[0], rec, windows.starts, windows.measured(rec.u).shape[1], DEFAULT_SUBSTEPS)
     res = simulate_structures(structures, U, rec.dt, np.tile(x0, (n_s, 1)),
                               input_kind=rec.input_name, force_dof=rec.force_dof,
                               input_index=np.tile(np.arange(n_w), n_s),

@@ -20,7 +20,13 @@ from typing import Any
 import numpy as np
 
 from negstiff.inference.analysis.record_kind import ring_down
-from negstiff.inference.estimators.identification import REFINEMENT_SETTING, WINDOW_S, refined, structure_result
+from negstiff.inference.estimators.identification import (
+    REFINEMENT_SETTING,
+    WINDOW_S,
+    held_out_runs,
+    refined,
+    structure_result,
+)
 from negstiff.inference.estimators.results import Bunch, Identification
 from negstiff.inference.record.measurement import Measurement
 from negstiff.inference.steps.equations import _assemble, _block_scores, _lstsq, _systems, physical_frame, unknown_zeros
@@ -31,7 +37,6 @@ from negstiff.inference.steps.validation import (
     structure_window_errors,
     structure_windows,
 )
-from negstiff.inference.steps.validation import restarted_structure_runs as free_run_error
 from negstiff.models import effects
 from negstiff.models.structure import relative
 
@@ -156,7 +161,7 @@ def structure_rounds(est, rec: Measurement, at: tuple[int, int]) -> Identificati
     # final structure by ``structure_result``, so the gap before and after the effects is measured on refined
     # models alike
     refine = est.refine is True or (est.refine is None and not hits)
-    gap_before = free_run_error(baseline, rec, n_id, WINDOW_S, base_offsets, hits)
+    gap_before = held_out_runs(baseline, rec, n_id, base_offsets, hits, paired=refine)  # the refinement's too
     if refine:
         baseline, base_offsets, gap_before, account = refined(baseline, base_offsets, rec, n_id, gap_before, hits)
         if not named_all:  # the baseline is the result, refined once
