@@ -681,9 +681,12 @@ def assert_result_answers_alike(est):
     read-only bunch (``validation.rms_percent``), ``refinement`` None or a bunch, ``summary()`` one line that the
     estimator's repr shows, the JSON round trip through ``from_json`` exact."""
     res = est.result_
-    assert res.validation.rms_percent == res.validation["rms_percent"]
+    # the held-out headline: an identification's one free run over the tail; the discrepancy workflow's on the device
+    # runs none (cross-well motion diverges), its gap is the restarted windows' median
+    key = "median_window_percent" if res.layout == "workflow" else "rms_percent"
+    assert getattr(res.validation, key) == res.validation[key] and res.validation[key] > 0
     with np.testing.assert_raises(TypeError):
-        res.validation["rms_percent"] = 0.0  # read-only
+        res.validation[key] = 0.0  # read-only
     assert res.refinement is None or res.refinement.applied in (True, False)
     line = res.summary()
     assert isinstance(line, str) and "\n" not in line and line in repr(est), (line, repr(est))

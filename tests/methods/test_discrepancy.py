@@ -5,7 +5,13 @@ data are generated here; the workflow sees only the measured columns."""
 import dataclasses
 
 import pytest
-from records import SILVERBOX_ARROW, SILVERBOX_TEST, SILVERBOX_TRAIN, silverbox_prediction_mv
+from records import (
+    SILVERBOX_ARROW,
+    SILVERBOX_TEST,
+    SILVERBOX_TRAIN,
+    assert_result_answers_alike,
+    silverbox_prediction_mv,
+)
 
 from negstiff.inference.estimators.discrepancy import LINEAR_BASELINE, Discrepancy
 from negstiff.inference.record.measurement import from_arrays
@@ -69,6 +75,11 @@ def test_nothing_missing_gives_none(seed):
     assert r["effect"] == "none" and r["effects"] == ["none"]
     assert r["ranking"][0]["effect"] in {e["effect"] for e in r["ranking"]}
     assert "spread evenly" in r["where"] or r["regimes_before"]
+    # the workflow's result is an identification's (one result class): its JSON is the command's, its model the one
+    # the workflow kept, its validation the held-out gap
+    assert_result_answers_alike(d)
+    assert d.result_.to_json() == r and d.result_.model is d.model_ and d.result_.layout == "workflow"
+    assert d.result_.validation.median_window_percent == r["gap_after_percent"]
 
 
 def test_the_device_model_form_gap_points_at_higher_order_stiffness():

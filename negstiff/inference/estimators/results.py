@@ -89,9 +89,11 @@ class Identification:
         The identified system (the final one: output-error refined where that predicted the held-out tail no worse).
     modal : dict
         Each well's underlying-linear modes: ``{well: {"f_hz", "zeta"}}`` for the device on its base, ``{well:
-        [Mode, ...]}`` by frequency for a structure (``{"linear": [...]}`` for a state-space linear part).
+        [Mode, ...]}`` by frequency for a structure (``{"linear": [...]}`` for a state-space linear part); empty for
+        the discrepancy workflow on the device (it names effects; its JSON gives no modes).
     validation : Bunch
-        Free runs over the held-out tail (``rms_percent``, ``restarted_rms_percent``, ...).
+        Free runs over the held-out tail (``rms_percent``, ``restarted_rms_percent``, ...; the discrepancy workflow on
+        the device its gap, restarted windows only: ``median_window_percent``, ``workflow_validation``).
     warnings : tuple of str
         Every warning about the record and the result (also issued as ``NegstiffWarning``).
     details, settings : dict
@@ -205,9 +207,19 @@ class Identification:
         s = self.system
         return tuple(s.at) if isinstance(s, StateSpaceStructure) else s.place  # type: ignore[return-value]
 
+    @property
+    def layout(self) -> str:
+        """Which of the contract's JSON layouts ``to_json()`` writes: the linear part's (``LINEAR_PARTS``), or
+        ``"workflow"``: the discrepancy workflow's on the device on its base (its effects, rankings and gaps, the
+        command's own JSON; a structure's workflow writes the structure's layout, its account in ``details``).
+        """
+        return "workflow" if self.method == "discrepancy" and self.linear_part == "none" else self.linear_part
+
     def to_json(self) -> dict[str, Any]:
-        """The contract's identify JSON of the linear part (``negstiff identify`` writes exactly this)."""
-        return _WRITERS[self.linear_part](self)
+        """The contract's JSON of the result's ``layout`` (``negstiff identify`` and ``negstiff discrepancy`` write
+        exactly this).
+        """
+        return _WRITERS[self.layout](self)
 
     @classmethod
     def from_json(cls, data) -> Identification:
@@ -222,11 +234,13 @@ class Identification:
             return _state_space_from_json(d)
         if "structure" in d and "dofs" in d:
             return _physical_from_json(d)
+        if "effects" in d and "gap_after_percent" in d:
+            return _workflow_from_json(d)
         return _device_from_json(d)
 
     def summary(self) -> str:
         """One line: the element's top stiffness coefficient, the modes, the held-out error."""
-        return _SUMMARIES[self.linear_part](self)
+        return _SUMMARIES[self.layout](self)
 
     def __repr__(self) -> str:
         v = self.validation.get("median_window_percent", self.validation.get("rms_percent"))
@@ -302,7 +316,46 @@ def _state_space_json(r: Identification) -> dict[str, Any]:
     }
 
 
-_WRITERS = {"none": _device_json, "physical": _physical_json, "state_space": _state_space_json}
+_WORKFLOW_HEAD = ("effect", "effects", "ranking", "gap_before_percent", "gap_after_percent", "gap_pooled_percent",
+                  "gap_median_window_um", "where", "gap_regime_percent", "predictability", "regimes_before",
+                  "regimes_after")  # fmt: skip
+"""The discrepancy workflow's own keys its JSON writes first (what it named and the gap), as the contract lists
+them; its other own keys follow the final model's."""
+
+
+def _workflow_json(r: Identification) -> dict[str, Any]:
+    """The discrepancy workflow on the device (``layout`` ``"workflow"``): what it named and the held-out gap, the
+    final model, then the rest of its account (``details``: the baseline, the rankings, the effects' sizes).
+    """
+    own = dict(r.details)
+    head = {k: own.pop(k) for k in _WORKFLOW_HEAD if k in own}
+    return {
+        **head,
+        "model": r.model.to_dict(),
+        "initial_model": r.initial_model.to_dict(),
+        "refinement": None if r.refinement is None else dict(r.refinement),
+        "bounded": dict(r.bounded),
+        "warnings": list(r.warnings),
+        "record": dict(r.record),
+        **own,
+        "settings": dict(r.settings),
+    }
+
+
+def workflow_validation(account: Mapping[str, Any]) -> Bunch:
+    """The held-out validation of the discrepancy workflow's final model from its account (``details``): its gap,
+    restarted free runs over the held-out tail (the median window's and the pooled rms error, % of rms z; the median
+    window's in um), the baseline's beside it.
+    """
+    pooled = account.get("gap_pooled_percent") or {}
+    um = account.get("gap_median_window_um") or {}
+    return Bunch({"median_window_percent": account.get("gap_after_percent"),
+                  "restarted_rms_percent": pooled.get("after"), "median_window_rms_um": um.get("after"),
+                  "baseline_median_window_percent": account.get("gap_before_percent")})  # fmt: skip
+
+
+_WRITERS = {"none": _device_json, "physical": _physical_json, "state_space": _state_space_json,
+            "workflow": _workflow_json}  # fmt: skip
 
 
 def _modes(modal: Mapping[str, Any]) -> dict[str, list[Mode]]:
@@ -343,6 +396,26 @@ def _device_from_json(d: dict[str, Any]) -> Identification:
         )
     except (KeyError, TypeError, ValueError) as exc:
         raise InputError(f"not an identify result JSON: {type(exc).__name__} {exc}") from None
+
+
+def _workflow_from_json(d: dict[str, Any]) -> Identification:
+    """The discrepancy workflow's JSON on the device (``_workflow_json``)."""
+    d = dict(d)
+    d.pop("estimator", None)
+    kept = ("model", "initial_model", "refinement", "bounded", "warnings", "record", "settings")
+    details = {k: v for k, v in d.items() if k not in kept}
+    try:
+        settings = dict(d.get("settings") or {})
+        return Identification(
+            method="discrepancy", system=Structure.single(Model.from_dict(d["model"])),
+            initial_system=Structure.single(Model.from_dict(d.get("initial_model") or d["model"])), linear_part="none",
+            modal={}, validation=workflow_validation(details), refinement=_plain(d.get("refinement")),
+            bounded=Bunch(d.get("bounded") or {}), warnings=tuple(d.get("warnings") or ()),
+            record=dict(d.get("record") or {}), details=details, settings=settings,
+            identification_samples=int(settings.get("identification_samples", 0)),
+        )  # fmt: skip
+    except (KeyError, TypeError, ValueError) as exc:
+        raise InputError(f"not a discrepancy result JSON: {type(exc).__name__} {exc}") from None
 
 
 def _physical_from_json(d: dict[str, Any]) -> Identification:
@@ -398,7 +471,15 @@ def _state_space_summary(r: Identification) -> str:
     return f"{s.n_sensors} sensors, order {s.order}, element {top}={k3['value']:.4g} +- {k3['se']:.2g}; {modes}"
 
 
-_SUMMARIES = {"none": _device_summary, "physical": _physical_summary, "state_space": _state_space_summary}
+def _workflow_summary(r: Identification) -> str:
+    """The effects named and the held-out gap before and after them."""
+    before, after = r.details.get("gap_before_percent"), r.details.get("gap_after_percent")
+    gap = "" if before is None or after is None else f"; held-out gap {before:.3g} -> {after:.3g} % (median window)"
+    return f"effects: {', '.join(r.details.get('effects') or ['none'])}{gap}"
+
+
+_SUMMARIES = {"none": _device_summary, "physical": _physical_summary, "state_space": _state_space_summary,
+              "workflow": _workflow_summary}  # fmt: skip
 
 
 class StructureResults:
@@ -430,10 +511,12 @@ class StructureResults:
             if not isinstance(getattr(type(self), "model_", None), property):  # Discrepancy's own attribute
                 self.model_ = self.result_.model
             return
+        if "effects" in result and "gap_after_percent" in result:  # the discrepancy workflow's on the device
+            self.result_ = Identification.from_json(result)
         super()._restore(result)  # type: ignore[misc]
 
     def _summary(self) -> str:
-        r = vars(self).get("result_")  # a single DOF's fit need not have one (Discrepancy's)
+        r = vars(self).get("result_")  # a JSON rebuilt as its estimator need not have one (NSI's, SINDy's)
         if r is not None:
             return r.summary()
         return super()._summary()  # type: ignore[misc]

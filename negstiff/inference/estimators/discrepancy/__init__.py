@@ -54,7 +54,7 @@ import numpy as np
 from negstiff.errors import InputError, issue
 from negstiff.inference.estimators.base import ElementPlace, element_of
 from negstiff.inference.estimators.parameters import FRACTION, RESTORING_LAW, Boolean, Interval, LawName
-from negstiff.inference.estimators.results import StructureResults
+from negstiff.inference.estimators.results import Bunch, Identification, StructureResults, workflow_validation
 from negstiff.inference.record.measurement import Measurement
 from negstiff.inference.steps.plausibility import classified
 from negstiff.inference.steps.refine import refine_stage
@@ -62,6 +62,7 @@ from negstiff.inference.steps.selection import compare
 from negstiff.inference.steps.validation import boundedness, validate
 from negstiff.inference.steps.weak import aux_terms
 from negstiff.models import effects, laws
+from negstiff.models.structure import Structure
 
 from ._candidates import (
     _READ,
@@ -148,6 +149,11 @@ class Discrepancy(StructureResults, Intervals):
 
     Attributes
     ----------
+    result_ : Identification
+        The result, as every identification's (``estimators.results``): the final model as a structure of one DOF
+        (``result_.model`` is ``model_``), its held-out gap as its ``validation``, the workflow's own account
+        (below) in its ``details``; ``to_json()`` is the ``discrepancy`` command's JSON (``layout`` "workflow"). On a
+        structure's record the structure's (``_rounds.structure_rounds``).
     model_ : Model
         The final model, named effects in ``model_.extra``.
     baseline_model_ : Model
@@ -354,6 +360,7 @@ class Discrepancy(StructureResults, Intervals):
             why = ("not fitted on a hammer's record: the non-parametric force is fitted and judged by output error on "
                    "windows that would cross the pulses")  # fmt: skip
             self.unnamed_: dict[str, Any] | None = {"reason": why}
+        self.result_ = self._workflow_result()
         return self
 
     def _fit_one(self, rec: Measurement) -> Discrepancy:
@@ -517,19 +524,27 @@ class Discrepancy(StructureResults, Intervals):
         }
 
     @override
-    def _summary(self) -> str:
-        """The effects named and the held-out gap before and after them (a structure's: its identification's)."""
-        if "result_" in vars(self):
-            return super()._summary()
-        r = self.result()  # a fitted workflow's, or the JSON it was rebuilt from
-        before, after = r.get("gap_before_percent"), r.get("gap_after_percent")
-        gap = "" if before is None or after is None else f"; held-out gap {before:.3g} -> {after:.3g} % (median window)"
-        return f"effects: {', '.join(r.get('effects') or ['none'])}{gap}"
-
-    @override
     def result(self) -> dict[str, Any]:
-        if "result_" in vars(self):  # a structure's (N > 1 DOFs)
-            return self.result_.to_json()
+        """The contract's discrepancy JSON (``result_.to_json()``: a structure's layout on a structure's record)."""
+        return self.result_.to_json()
+
+    def _workflow_result(self) -> Identification:
+        """The workflow's result on the device on its base: its final model as a structure of one DOF, its held-out
+        gap as the validation (``workflow_validation``), its own account (what it named, the rankings, the gaps, the
+        sizes) in ``details``; ``to_json()`` writes the contract's discrepancy JSON.
+        """
+        account = self._account()
+        return Identification(
+            method="discrepancy", system=Structure.single(self.model_),
+            initial_system=Structure.single(self.initial_model_), linear_part="none", modal={},
+            validation=workflow_validation(account), refinement=None if self.refinement_ is None else Bunch(
+                self.refinement_), bounded=Bunch(self.bounded_), warnings=tuple(self.warnings_),
+            record=dict(self.record_), details=account, settings=self._settings(),
+            identification_samples=self.n_id_,
+        )  # fmt: skip
+
+    def _account(self) -> dict[str, Any]:
+        """The workflow's own keys of its JSON (``_workflow_result``' details), in the contract's order."""
         last = self.iterations_[0] if self.iterations_ else {"ranking": []}  # max_effects = 0: the baseline only
         before = self.gap_before_.get("median_window_percent", math.inf)
         after = self.gap_after_.get("median_window_percent", math.inf)
@@ -552,12 +567,6 @@ class Discrepancy(StructureResults, Intervals):
             "predictability": dict(self.predictability_),
             "regimes_before": self.locate_before_["regimes"],
             "regimes_after": self.locate_after_["regimes"],
-            "model": self.model_.to_dict(),
-            "initial_model": self.initial_model_.to_dict(),
-            "refinement": self.refinement_,
-            "bounded": self.bounded_,
-            "warnings": list(self.warnings_),
-            "record": self.record_,
             "baseline_model": self.baseline_model_.to_dict(),
             "baseline_law": self.baseline_law_,
             "laws_offered": list(self.laws_offered_),
@@ -575,14 +584,17 @@ class Discrepancy(StructureResults, Intervals):
                 "how": self.record_kind_.how,
                 "read": _READ[self.record_kind_.kind],
             },  # fmt: skip
-            "settings": {
-                "identification_samples": self.n_id_,
-                "window_s": self.window_s_,  # ``window_s``, shortened on a ring-down (``sindy.ring_down_window``)
-                "baseline_terms": list(self.baseline),
-                "score": "held-out weak residual (rms, % of the target) over samples "
-                f"[{self.n_fit_}, {self.n_id_}); named only above max(1 SE, {100 * self.margin:g} %)",
-                "gap": f"restarted {self.window_s_:g} s free runs over the held-out tail [{self.n_id_}, end): "
-                "the median window's rms error, % of rms(z) (pooled over all windows in gap_pooled_percent; one "
-                "window that diverges near the barrier, chaos, can dominate the pool)",
-            },
+        }
+
+    def _settings(self) -> dict[str, Any]:
+        """The workflow's settings as its JSON writes them."""
+        return {
+            "identification_samples": self.n_id_,
+            "window_s": self.window_s_,  # ``window_s``, shortened on a ring-down (``sindy.ring_down_window``)
+            "baseline_terms": list(self.baseline),
+            "score": "held-out weak residual (rms, % of the target) over samples "
+            f"[{self.n_fit_}, {self.n_id_}); named only above max(1 SE, {100 * self.margin:g} %)",
+            "gap": f"restarted {self.window_s_:g} s free runs over the held-out tail [{self.n_id_}, end): "
+            "the median window's rms error, % of rms(z) (pooled over all windows in gap_pooled_percent; one "
+            "window that diverges near the barrier, chaos, can dominate the pool)",
         }
