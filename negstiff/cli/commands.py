@@ -8,6 +8,7 @@ import dataclasses
 import json
 import sys
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -299,13 +300,20 @@ def cmd_posterior(args) -> int:
     from negstiff.models import Model
     from negstiff.models.device import load_system
 
-    start = None
+    start: Any = None
     if args.start is not None:
-        start = load_system(args.start)
-        if args.model != "coefficients" or not isinstance(start, Model):
-            raise InputError(
-                f"--start {args.start}: a polynomial model, for the coefficient posterior (--model coefficients)"
-            )
+        from negstiff.files import read_json
+        from negstiff.inference.estimators.results import Identification
+        from negstiff.models.structure import Structure
+
+        held = read_json(args.start, "start model")
+        if isinstance(held, dict) and "structure" in held and "dofs" in held:
+            start = Identification.from_json(held)  # a structure's identify result: its channels' zeros kept
+        else:
+            start = load_system(args.start)
+        if args.model != "coefficients" or not isinstance(start, Model | Structure | Identification):
+            raise InputError(f"--start {args.start}: a polynomial model, a structure or an identify result, for the "
+                             "coefficient posterior (--model coefficients)")  # fmt: skip
     masses = parse_amplitudes(args.masses, "--masses") if args.masses else None
     recs = []
     for path in args.data:  # several: records of one device, fitted together

@@ -428,7 +428,8 @@ def _posterior(sub, common: argparse.ArgumentParser, data_opts: argparse.Argumen
     pst.add_argument(
         "--start",
         help="coefficients: an identify result (its refined model) or a model file the MAP search starts from "
-        "(default: weak-form least squares of the record, refined by simulation error)",
+        "(default: weak-form least squares of the record, refined by simulation error); on a structure's record a "
+        "structure's identify result (its structure and channel zeros) or structure file (default: SINDy's)",
     )
     pst.add_argument(
         "--no-refine",

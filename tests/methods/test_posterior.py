@@ -285,6 +285,18 @@ def test_posterior_starts_from_an_identified_model(tmp_path):
     for bad in (["--start", str(tmp_path / "dev.json")], ["--model", "device", "--start", str(tmp_path / "id.json")]):
         assert main(["posterior", str(path), "-o", str(tmp_path / "x.json"), "--quiet", *bad]) == 2
         assert not (tmp_path / "x.json").exists()
+    # from Python the identification itself starts it, or its model as a structure of one DOF (the device on its
+    # base); a structure of two DOFs is refused in the record's check, before any work
+    from negstiff import Identification, InputError, Posterior
+    from negstiff.models.structure import Structure
+
+    ident = Identification.from_json(tmp_path / "id.json")
+    for start in (ident, ident.structure):
+        assert Posterior(start=start)._device_start() == ident.model
+        Posterior(start=start).check(path)
+    two = Structure.on_fixture(ident.model, fixture_mass=1.0, fixture_hz=25.0, fixture_zeta=0.02)
+    with pytest.raises(InputError, match="starts a structure's posterior"):
+        Posterior(start=two).check(path)
 
 
 def test_likelihood_sum_of_squares_is_the_projected_residuals_norm():

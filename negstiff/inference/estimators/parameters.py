@@ -195,6 +195,22 @@ class Instance(Constraint):
         return f"a {self.name}" + (" or None" if self.none else "")
 
 
+@dataclass(frozen=True)
+class AnyOf(Constraint):
+    """Any one of ``options`` (constraints: ``Instance``'s of several classes), or None with ``none``."""
+
+    options: tuple[Constraint, ...]
+    none: bool = False
+
+    @override
+    def accepts(self, value: Any) -> bool:
+        return self.none if value is None else any(o.accepts(value) for o in self.options)
+
+    @override
+    def describe(self) -> str:
+        return ", ".join(o.describe() for o in self.options) + (" or None" if self.none else "")
+
+
 SEED = Interval(int, 0, 2**32 - 1)
 """A random seed: numpy's SeedSequence takes any non-negative integer; the command line's 32 bits."""
 

@@ -63,14 +63,18 @@ def _class_path(obj: Any) -> str:
 
 
 def encode_param(value: Any) -> Any:
-    """An estimator parameter as JSON: numbers, strings, None, sequences as they are; a ``Model`` as its
-    model-file fields; a frozen dataclass (``Device``, ``Bounds``) as ``{"__class__", "fields"}``; a
-    ``numpy.random.Generator`` (not reproducible from JSON) as None.
+    """An estimator parameter as JSON: numbers, strings, None, sequences as they are; a ``Model`` or a ``Structure``
+    as its model-file fields; an ``Identification`` as its result JSON; a frozen dataclass (``Device``, ``Bounds``) as
+    ``{"__class__", "fields"}``; a ``numpy.random.Generator`` (not reproducible from JSON) as None.
     """
     from negstiff.models import Model
+    from negstiff.models.structure import Structure
 
-    if isinstance(value, Model):
+    if isinstance(value, Model | Structure):
         return {"__class__": _class_path(value), "model": value.to_dict()}
+    if dataclasses.is_dataclass(value) and callable(getattr(type(value), "from_json", None)):
+        # a result with its contract JSON (an ``Identification``: ``results`` imports this module, so not by name)
+        return {"__class__": _class_path(value), "json": getattr(value, "to_json")()}  # noqa: B009
     if dataclasses.is_dataclass(value) and not isinstance(value, type):
         fields = {f.name: encode_param(getattr(value, f.name)) for f in dataclasses.fields(value) if f.init}
         return {"__class__": _class_path(value), "fields": fields}
@@ -101,6 +105,8 @@ def decode_param(value: Any) -> Any:
             cls = getattr(importlib.import_module(module), name)
             if "model" in value:
                 return cls.from_dict(value["model"])
+            if "json" in value:
+                return cls.from_json(value["json"])
             return cls(**{k: decode_param(v) for k, v in value["fields"].items()})
         return {k: decode_param(v) for k, v in value.items()}
     return value

@@ -19,6 +19,7 @@ from negstiff.inference.analysis.record_kind import RING_DOWN_KINDS
 from negstiff.inference.estimators.base import ElementPlace, Estimator, element_of
 from negstiff.inference.estimators.parameters import (
     RANDOM_STATE,
+    AnyOf,
     Boolean,
     Instance,
     Interval,
@@ -159,16 +160,20 @@ class Posterior(Estimator):
         (scikit-learn's ``random_state``). The integer used is ``settings["seed"]``.
     progress : bool, default False
         A progress bar over emcee's steps.
-    start : Model, optional
-        Coefficient posterior only: the model the MAP search starts from (e.g. an identification's).
+    start : Model, Structure or Identification, optional
+        Coefficient posterior only: the model the MAP search starts from (e.g. an identification's); on a
+        structure's record (``element``) the structure it starts from: an ``Identification`` of the structure on
+        this record (``NSI(element=...).fit(rec).result_``: its structure and each channel's zero) or a
+        ``Structure`` (its channels' zeros then read from the record: ``equations.weak_frame``). None: a single DOF's
+        weak-form estimate, refined; a structure's ``SINDy(element=...)``.
     refine_start : bool, default True
         Without ``start``: refine the weak-form estimate by output error before the MAP search.
     element : str or (int, int), optional
         Where the element acts on a record of N > 1 DOFs: ``"I-J"``, it moves DOF J relative to DOF I (0: the
         base). None: the single DOF. On a structure's record the element's k1-k3, c, c_nl and the sensors'
         sigma are sampled, each channel's zero and the linear structure's springs and dampers with them as nuisances
-        (from ``SINDy(element=...)``'s; ``posterior.structure``), the masses given; ``model="coefficients"``, no
-        ``start`` and no ``input_noise`` there.
+        (from the start's, ``SINDy(element=...)``'s by default; ``posterior.structure``), the masses given;
+        ``model="coefficients"`` and no ``input_noise`` there.
     chain_file : str or os.PathLike, optional
         An HDF5 file (``.h5``, ``.hdf5``) the emcee chains are saved to as they run (emcee's ``HDFBackend``,
         each ensemble's chain, log probability and random state in its group ``ensemble_E``): a long run kept
@@ -224,7 +229,14 @@ class Posterior(Estimator):
         "threads": Interval(int, 1, 1024, none=True),
         "seed": RANDOM_STATE,
         "progress": Boolean(),
-        "start": Instance("negstiff.models.equation", "Model", none=True),
+        "start": AnyOf(
+            (
+                Instance("negstiff.models.equation", "Model"),
+                Instance("negstiff.models.structure", "Structure"),
+                Instance("negstiff.inference.estimators.results", "Identification"),
+            ),
+            none=True,
+        ),  # fmt: skip
         "refine_start": Boolean(),
         "element": ElementPlace(),
         "chain_file": ChainFilePath(),
@@ -423,9 +435,10 @@ class Posterior(Estimator):
         if self.model == "coefficients":
             from negstiff.inference.steps.weak import weak_least_squares
 
-            if self.start is not None:  # an identified (output-error refined) model: the MAP search starts there
+            given = self._device_start()
+            if given is not None:  # an identified (output-error refined) model: the MAP search starts there
                 self._check_start_mass(rec)
-                start = self.start
+                start = given
                 self.start_info_ = {"source": "given", "model": start.to_dict()}
             else:
                 start = self._refined_start(rec, weak_least_squares(rec, ("1", "z", "z^2", "z^3", "v", "v|v|")))
@@ -464,15 +477,16 @@ class Posterior(Estimator):
 
         free = set(restoring.fields) | set(damping.fields)
         held = tuple(f for f in ("k0", "k1", "k2", "k3", "c", "c_nl") if f not in free)
-        if self.start is not None:
-            missing = [p for p in (*restoring.parts, *damping.parts) if p not in self.start.extra]
+        given = self._device_start()
+        if given is not None:
+            start = given
+            missing = [p for p in (*restoring.parts, *damping.parts) if p not in start.extra]
             if missing:
                 raise PosteriorError(f"the start model lacks the {restoring.name} and {damping.name} laws' "
                                      f"part(s) {', '.join(missing)}")  # fmt: skip
-            if rec.mass is not None and abs(self.start.m / rec.mass - 1) > 1e-6:
-                raise PosteriorError(f"{rec.source}: the start model's mass ({self.start.m:g} kg) is not the "
+            if rec.mass is not None and abs(start.m / rec.mass - 1) > 1e-6:
+                raise PosteriorError(f"{rec.source}: the start model's mass ({start.m:g} kg) is not the "
                                      f"record's ({rec.mass:g} kg)")  # fmt: skip
-            start = self.start
             self.start_info_ = {"source": "given", "model": start.to_dict()}
         else:
             shape = fit_shape(rec, restoring, damping)
@@ -715,7 +729,9 @@ class Posterior(Estimator):
                 raise PosteriorError(f"{name}(model={self.model!r}): a structure's posterior samples its element's "
                                      "coefficients (model='coefficients')")  # fmt: skip
             if self.start is not None:
-                raise PosteriorError(f"{name}(start=...): a structure's posterior starts from SINDy(element=...)")
+                from negstiff.inference.estimators.posterior.structure import given_start
+
+                given_start(self.start, rec, at, name)  # a structure of this record's DOFs, masses and element
             if self.law_pair() is not None:
                 raise PosteriorError(f"{name}(law={self.law!r}, damping={self.damping!r}): a structure's posterior "
                                      "samples its element's cubic coefficients (no law read yet)")  # fmt: skip
@@ -752,10 +768,34 @@ class Posterior(Estimator):
         """Refuse a start model (``start``) of another mass than the record's (in the record's check, before the
         progress line and the bar; ``point_estimate`` checks it too).
         """
-        if (self.model == "coefficients" and self.start is not None and rec.mass is not None
-                and abs(self.start.m / rec.mass - 1) > 1e-6):  # fmt: skip
-            raise PosteriorError(f"{rec.source}: the start model's mass ({self.start.m:g} kg) is not the record's "
+        start = self._device_start()
+        if (
+            self.model == "coefficients"
+            and start is not None
+            and rec.mass is not None
+            and abs(start.m / rec.mass - 1) > 1e-6
+        ):
+            raise PosteriorError(f"{rec.source}: the start model's mass ({start.m:g} kg) is not the record's "
                                  f"({rec.mass:g} kg)")  # fmt: skip
+
+    def _device_start(self) -> Model | None:
+        """The single DOF's start model: ``start`` (a ``Model``, or the device's as a structure of one DOF or its
+        identification). A structure's start on a single DOF's record is refused (one line, in the record's check).
+        """
+        from negstiff.inference.estimators.results import Identification
+        from negstiff.models.structure import Structure
+
+        s = self.start
+        if isinstance(s, Identification) and s.linear_part == "none":
+            return s.model
+        if isinstance(s, Structure) and s.n_dof == 1 and tuple(s.place) == (0, 1):
+            return s.element
+        if s is None or isinstance(s, Model):
+            return s
+        what = f"an identification of a structure ({s.linear_part} linear part)" if isinstance(s, Identification) \
+            else "a structure"  # fmt: skip
+        raise PosteriorError(f"{type(self).__name__}(start=...): {what} starts a structure's posterior (element=); "
+                             "a single DOF's starts from a Model or the device's identification")  # fmt: skip
 
     def check(self, data):
         """``Estimator.check``; a list or tuple of records (a lab's runs of one device, fitted together: the

@@ -91,13 +91,59 @@ def window_starts(rec: Measurement, window_s: float, max_windows: int | None,
     return starts, L
 
 
+def given_start(start, rec: Measurement, at: tuple[int, int], name: str = "Posterior") -> tuple[Structure, np.ndarray,
+                                                                                                str]:  # fmt: skip
+    """The structure a posterior's search starts from (``Posterior.start`` on a structure's record), each channel's
+    zero (measured = physical + offset) and where it came from: an ``Identification`` of the structure (its structure
+    and zeros, ``offsets_m``), or a ``Structure`` (its zeros read from the record by the weak form's least squares
+    over the structure's whole library, pinned as an identification pins them: ``equations.weak_frame``). One
+    ``PosteriorError`` (before any work) for a start that is not this record's structure: another number of DOFs,
+    other masses (the posterior holds the record's), the element elsewhere, or a state-space model (no masses).
+    """
+    from negstiff.inference.estimators.results import Identification
+    from negstiff.inference.steps.equations import weak_frame
+
+    source = "given"
+    if isinstance(start, Identification):
+        if start.linear_part != "physical":
+            what = "the device on its base" if start.linear_part == "none" else "a structure read through its sensors"
+            raise PosteriorError(f"{name}(start=...): an identification of {what} ({start.linear_part} linear part): a "
+                                 "structure's posterior starts from a structure with its masses")  # fmt: skip
+        structure, offsets = start.structure, np.asarray(start.offsets_m, float)
+        source = f"given: {start.method}'s identification"
+    elif isinstance(start, Structure):
+        structure, offsets = start, None
+    else:
+        raise PosteriorError(f"{name}(start=...): a structure's posterior starts from a Structure or a structure's "
+                             f"Identification, got a {type(start).__name__}")  # fmt: skip
+    assert isinstance(structure, Structure)
+    if structure.n_dof != rec.n_dof or tuple(structure.place) != tuple(at):
+        raise PosteriorError(f"{name}(start=...): a structure of {structure.n_dof} DOFs with its element at "
+                             f"{structure.place[0]}-{structure.place[1]}; the record has {rec.n_dof} DOFs, the element "
+                             f"at {at[0]}-{at[1]}")  # fmt: skip
+    if not np.allclose(structure.masses, rec.dof_masses, rtol=1e-6, atol=0.0):
+        raise PosteriorError(f"{name}(start=...): the start structure's masses {list(structure.masses)} kg are not the "
+                             f"record's {list(rec.dof_masses)} kg (the posterior holds the record's)")  # fmt: skip
+    if offsets is None:
+        zs, v, _ = rec.channel_states(at)
+        offsets = weak_frame(rec, at, zs, v, rec.gravity)
+        source = "given: a structure, its channels' zeros from the record's weak form"
+    if offsets.shape != (rec.n_dof,):
+        raise PosteriorError(f"{name}(start=...): {offsets.size} channel zeros for {rec.n_dof} channels")
+    return structure, offsets, source
+
+
 def fit_structure(est, rec: Measurement, at: tuple[int, int], seed: int) -> tuple[PosteriorResult, list[str], Any]:
     """The element's posterior on ``rec`` for the ``Posterior`` ``est``: (the result, its warnings, the windows)."""
     from negstiff.inference.analysis.record_kind import RING_DOWN_KINDS, identification_record, record_kind
     from negstiff.inference.estimators.sindy import SINDy
 
-    ident = SINDy(element=at).fit(rec)
-    start, offsets = ident.structure_, np.asarray(ident.offsets_, float)
+    if est.start is None:
+        ident = SINDy(element=at).fit(rec)
+        start, offsets = ident.structure_, np.asarray(ident.offsets_, float)
+        source = f"SINDy(element='{at[0]}-{at[1]}')"
+    else:
+        start, offsets, source = given_start(est.start, rec, at, type(est).__name__)
     kind = record_kind(rec)
     ring_down = kind.kind in RING_DOWN_KINDS
     if ring_down:  # a hammer's force windowed (zero between its pulses), a decay's input zero: as the fit read it
@@ -204,8 +250,8 @@ def fit_structure(est, rec: Measurement, at: tuple[int, int], seed: int) -> tupl
         "resumed_steps": run["resumed_steps"],
         "moves": MOVES,
         "fixed": "the masses; each channel's zero (offset_K) and the linear structure's springs and dampers "
-        "(spring_I-J, damper_I-J) sampled from SINDy's as nuisances",
-        "start": {"source": f"SINDy(element='{at[0]}-{at[1]}')", "structure": start.to_dict()},
+        f"(spring_I-J, damper_I-J) sampled from {'SINDy' if est.start is None else 'the start'}'s as nuisances",
+        "start": {"source": source, "structure": start.to_dict()},
         "offsets_m": [float(res.summary[n]["mean"]) for n in zero_names(rec.n_dof)],
         "start_offsets_m": [float(o) for o in offsets],
         "model_mass": float(start.element.m),
