@@ -161,17 +161,24 @@ def structure_stiffest(structure: Structure, r: np.ndarray) -> tuple[float, floa
 
 
 def simulate_record(
-    system, rec: Measurement, x0, substeps: int | None = None, **limits: Unpack[Limits]
+    system,
+    rec: Measurement,
+    x0,
+    substeps: int | None = None,
+    staged_input: np.ndarray | None = None,
+    **limits: Unpack[Limits],
 ) -> SimulationResult:
     """A free run of ``system`` under ``rec``'s input from the state ``x0``: the input at every
-    Runge-Kutta stage time by band-limited interpolation (``stage_input``), the step refined where the
-    system is fast for the sampling rate (``record_substeps``). The velocity is stored.
+    Runge-Kutta stage time by band-limited interpolation (``stage_input``; ``staged_input``: the caller's,
+    staged for ``substeps``), the step refined where the system is fast for the sampling rate
+    (``record_substeps``). The velocity is stored.
     """
     sub = record_substeps(system, rec) if substeps is None else int(substeps)
     if not limits and rec.z is not None:
         _, vs, _, _ = rec.states("state")
         limits = divergence_limits(rec.z, vs)
-    return simulate_batch(system.kernel_params(), system.kind, rec.staged(system, sub), rec.dt,
+    u = rec.staged(system, sub) if staged_input is None else staged_input
+    return simulate_batch(system.kernel_params(), system.kind, u, rec.dt,
                           np.asarray(x0, float), input_kind=rec.input_name, substeps=sub, staged=True,
                           store_velocity=True, **limits)  # fmt: skip
 
@@ -717,9 +724,7 @@ def _boundedness(system, rec: Measurement, margin: float, input_margin: float, f
             else:
                 sub = record_substeps(system, rec)
                 u = _scaled_staged(rec, system, sub, input_margin)
-                res = simulate_batch(system.kernel_params(), system.kind, u, rec.dt, np.array([zs1[0], vs1[0]]),
-                                     input_kind=rec.input_name, substeps=sub, staged=True, store_velocity=True,
-                                     **limits)  # fmt: skip
+                res = simulate_record(system, rec, (zs1[0], vs1[0]), substeps=sub, staged_input=u, **limits)
         diverged = bool(res.diverged[0])
         out.update(input_margin=input_margin, diverged_at_margin=diverged)
     out["ok"] = bool(out["over_stroke"] and not diverged)

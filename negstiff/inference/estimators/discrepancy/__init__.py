@@ -54,7 +54,13 @@ import numpy as np
 from negstiff.errors import InputError, issue
 from negstiff.inference.estimators.base import ElementPlace, element_of
 from negstiff.inference.estimators.parameters import FRACTION, RESTORING_LAW, Boolean, Interval, LawName
-from negstiff.inference.estimators.results import Bunch, Identification, StructureResults, workflow_validation
+from negstiff.inference.estimators.results import (
+    Bunch,
+    Identification,
+    StructureResults,
+    _plain,
+    workflow_validation,
+)
 from negstiff.inference.record.measurement import Measurement
 from negstiff.inference.steps.plausibility import classified
 from negstiff.inference.steps.refine import refine_stage
@@ -537,8 +543,8 @@ class Discrepancy(StructureResults, Intervals):
         return Identification(
             method="discrepancy", system=Structure.single(self.model_),
             initial_system=Structure.single(self.initial_model_), linear_part="none", modal={},
-            validation=workflow_validation(account), refinement=None if self.refinement_ is None else Bunch(
-                self.refinement_), bounded=Bunch(self.bounded_), warnings=tuple(self.warnings_),
+            validation=workflow_validation(account), refinement=_plain(self.refinement_),
+            bounded=Bunch(self.bounded_), warnings=tuple(self.warnings_),
             record=dict(self.record_), details=account, settings=self._settings(),
             identification_samples=self.n_id_,
         )  # fmt: skip
