@@ -107,6 +107,15 @@ def test_damped_oscillations_recover_frequency_and_damping_from_wrong_start_stat
     # the residual is the noise: rms within 10 % of 0.01 (n L - 2 n - 2 degrees of freedom)
     assert np.sqrt(np.sum(fit.fun**2) / (n * L - 2 * n - 2)) == pytest.approx(0.01, rel=0.1)
 
+    # settled (``settle``): the fit stops once a step moves each parameter by under 1 % of its standard error and
+    # lowers the cost by under the noise's chi-square unit; the steps ftol still takes after that move the estimate
+    # by a small fraction of its uncertainty (the steps shrink geometrically: 0.05 of a standard error allowed)
+    settled = shooting_least_squares(fun, np.array([1.05, 1.5]), start_x, max_nfev=100, ftol=1e-14, settle=0.01)
+    tight = shooting_least_squares(fun, np.array([1.05, 1.5]), start_x, max_nfev=100, ftol=1e-14)
+    assert settled.status == "settled" and settled.nfev < tight.nfev
+    se = np.sqrt(np.diag(tight.robust_covariance))
+    assert np.all(np.abs(settled.q - tight.q) < 0.05 * se)
+
 
 def test_refinement_solver_finds_the_dense_least_squares_optimum():
     # Fact: on a noisy cross-well rig record started off the truth, the eliminated Levenberg-Marquardt

@@ -170,6 +170,7 @@ def shooting_least_squares(
     ftol: float = 1e-8,
     xtol: float = 1e-8,
     penalty: np.ndarray | None = None,
+    settle: float | None = None,
 ) -> ShootingFit:
     """Minimise 0.5 |r(q, x)|^2 (+ 0.5 |w q|^2 with a ``penalty`` w) over the parameters q and the
     windows' start states x.
@@ -188,6 +189,13 @@ def shooting_least_squares(
         point ``fun`` refuses (ValueError) counts as a failed step
     penalty : (p,) ridge weights w >= 0 on the parameters (the rows w q added to the residuals; ``fun``
         and the returned ``fun`` hold the windows' residuals alone)
+    settle : stop ("settled") after an accepted step that lowered the cost by less than one unit of chi-square (the
+        residuals' variance, 2 cost / their number) and moved every parameter by less than this fraction of its
+        standard error (the window-robust one at the step's Jacobian, ``_robust_covariance``); with no parameter,
+        every window's start state by less than this fraction of its own (the Gauss-Newton one, the residuals'
+        variance pooled). A fit is then as good as the data can tell: the steps left would move it by a few
+        hundredths of its uncertainty at most (they shrink geometrically), while ``ftol`` on a long record's sum of
+        squares asks for digits its noise does not hold. None (default): ``ftol`` and ``xtol`` alone
     """
     q, x = np.array(q0, float), np.array(x0, float)
     w2 = np.zeros(q.size) if penalty is None else np.asarray(penalty, float) ** 2
@@ -207,6 +215,7 @@ def shooting_least_squares(
             break
         ne = _Normal.of(A, B, r, w2, q)
         last = (ne, A, r)
+        sd_q, sd_x = (None, None) if settle is None else _standard_deviations(ne, A, r, cost)
         while nfev < max_nfev:
             dq, dx, predicted = _step(A, B, ne, lam, w2)
             r_new, new_cost = None, np.inf
@@ -227,6 +236,15 @@ def shooting_least_squares(
                 nu = 2.0
                 if fall < ftol * cost and rho > 0.25:
                     status = "ftol"
+                elif (
+                    settle is not None
+                    and sd_q is not None
+                    and sd_x is not None
+                    and fall < 2 * cost / r.size  # the step's fall under one unit of chi-square: the noise's
+                    and np.all(np.abs(dq) < settle * sd_q)
+                    and (q.size or np.all(np.abs(dx) < settle * sd_x))
+                ):
+                    status = "settled"
                 elif step_norm < xtol * (xtol + point_norm):
                     status = "xtol"
                 break
@@ -237,6 +255,20 @@ def shooting_least_squares(
                 status = "xtol"
                 break
     return ShootingFit(q, x, r, nfev, njev, status, None if last is None else _robust_covariance(*last))
+
+
+def _standard_deviations(ne: _Normal, A: np.ndarray, r: np.ndarray, cost: float) -> tuple[np.ndarray, np.ndarray]:
+    """The standard errors ``settle`` compares a step with, at one Jacobian: the parameters' window-robust ones
+    (``_robust_covariance``; infinite where it is singular: no parameter then stops the fit) and each window's start
+    state's by Gauss-Newton, sigma^2 diag(V_i^-1) with sigma^2 the residuals' pooled variance.
+    """
+    n, length, p = A.shape
+    cov = _robust_covariance(ne, A, r) if p else None
+    sd_q = np.full(p, np.inf) if cov is None else np.sqrt(np.clip(np.diag(cov), 0.0, None))
+    s = ne.V.shape[1]
+    sigma2 = 2.0 * cost / max(n * length - p - n * s, 1)
+    sd_x = np.sqrt(np.clip(sigma2 * _diagonal(_inverses(ne.V)), 0.0, None))
+    return sd_q, sd_x
 
 
 def _robust_covariance(ne: _Normal, A: np.ndarray, r: np.ndarray) -> np.ndarray | None:
