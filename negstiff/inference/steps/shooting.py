@@ -240,7 +240,7 @@ def shooting_least_squares(
                     settle is not None
                     and sd_q is not None
                     and sd_x is not None
-                    and fall < 2 * cost / r.size  # the step's fall under one unit of chi-square: the noise's
+                    and fall < 2 * cost / (A.shape[0] * A.shape[1])  # under one unit of the noise's chi-square
                     and np.all(np.abs(dq) < settle * sd_q)
                     and (q.size or np.all(np.abs(dx) < settle * sd_x))
                 ):
