@@ -42,6 +42,23 @@ def test_linear_block_problem_reaches_numpys_least_squares_solution():
     assert np.allclose(tight.x.ravel(), exact[p:], rtol=1e-8, atol=1e-8)
 
 
+def test_a_fit_whose_uncertainty_cannot_be_sized_is_not_called_settled():
+    # Fact: two parameters moving the residuals identically have no finite standard errors (a singular Schur
+    # complement); ``settle`` compares each step with them, so it must not stop such a fit: ftol or xtol does
+    rng = np.random.default_rng(2)
+    n, L = 20, 10
+    a = rng.standard_normal((n, L, 1))
+    A = np.concatenate([a, a], axis=2)
+    B = rng.standard_normal((n, L, 2))
+    y = rng.standard_normal((n, L))
+
+    def fun(Q, X):
+        return np.einsum("nlp,kp->knl", A, Q) + np.einsum("nlj,knj->knl", B, X) - y[None]
+
+    fit = shooting_least_squares(fun, np.zeros(2), np.zeros((n, 2)), max_nfev=50, settle=0.01)
+    assert fit.status in ("ftol", "xtol")
+
+
 def test_a_ridge_on_the_parameters_reaches_the_ridge_solution_and_its_covariance():
     # Fact: with rows w q appended, the linear problem's minimum solves (J^T J + diag(w^2, 0)) theta =
     # J^T y, and the parameters' block of that matrix's inverse is the marginal covariance the solver's

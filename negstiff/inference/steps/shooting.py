@@ -259,12 +259,13 @@ def shooting_least_squares(
 
 def _standard_deviations(ne: _Normal, A: np.ndarray, r: np.ndarray, cost: float) -> tuple[np.ndarray, np.ndarray]:
     """The standard errors ``settle`` compares a step with, at one Jacobian: the parameters' window-robust ones
-    (``_robust_covariance``; infinite where it is singular: no parameter then stops the fit) and each window's start
-    state's by Gauss-Newton, sigma^2 diag(V_i^-1) with sigma^2 the residuals' pooled variance.
+    (``_robust_covariance``; zero where it is singular or not finite, so that ``settle`` never stops a fit whose
+    uncertainty it cannot size: ``ftol`` and ``xtol`` do) and each window's start state's by Gauss-Newton,
+    sigma^2 diag(V_i^-1) with sigma^2 the residuals' pooled variance.
     """
     n, length, p = A.shape
     cov = _robust_covariance(ne, A, r) if p else None
-    sd_q = np.full(p, np.inf) if cov is None else np.sqrt(np.clip(np.diag(cov), 0.0, None))
+    sd_q = np.zeros(p) if cov is None else np.sqrt(np.clip(np.nan_to_num(np.diag(cov), nan=0.0), 0.0, None))
     s = ne.V.shape[1]
     sigma2 = 2.0 * cost / max(n * length - p - n * s, 1)
     sd_x = np.sqrt(np.clip(sigma2 * _diagonal(_inverses(ne.V)), 0.0, None))
