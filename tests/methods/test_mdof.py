@@ -4,6 +4,7 @@ fixture that is not rigid from a record written here with plain numpy (``records
 
 import dataclasses
 import json
+import math
 import warnings
 
 import numpy as np
@@ -400,6 +401,57 @@ def test_the_element_posterior_starts_where_it_is_told(offset_posterior, tmp_pat
                  "500", "--max-windows", "24", "-o", str(tmp_path / "p.json"), "--quiet"]) == 0  # fmt: skip
     written = json.loads((tmp_path / "p.json").read_text())["settings"]
     assert written["start"]["source"] == start["source"] and written["start_offsets_m"] == list(nsi.offsets_)
+
+
+def test_records_of_one_structure_are_fitted_together(offset_posterior, tmp_path):
+    # two records of the fixture (another seed; its lasers 4x noisier, 1 -> 4 um, and their zeros elsewhere) fitted
+    # together: the element and the linear structure shared, each record its own channels' zeros and sensor noise.
+    # Each record's zeros come out as its own (within 20 um, as one record's) and each sigma as its lasers' noise
+    # (within 10 %: the windows' model error adds little at 1 um, measured 1.0017 and 3.968 um); the records are
+    # independent, so their information adds: the joint sd of each coefficient is 1 / sqrt(sum of 1 / sd^2) of the
+    # records' alone, within 20 % (each sd an MCMC estimate of a few hundred effective draws, ~5 % each; measured
+    # 0.90-0.95 of it). Records of two structures (other masses) are refused before any work; the design, which reads
+    # one record's zeros, refuses the joint posterior with one line; the command fits the records it is given together
+    from negstiff import InputError, Posterior
+    from negstiff.cli import main
+    from negstiff.inference.analysis.design import PosteriorState
+
+    rec_a, offsets_a, post_a = offset_posterior
+    u, z = rk4_fixture_record(duration=30.0, seed=5, noise=4e-6)
+    offsets_b = np.array([-1e-4, 4e-4])
+    rec_b = from_arrays(u, z + offsets_b[:, None], FS, masses=(FIXTURE["m"], TRUTH.m))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # a 300-step run has not converged: said, not the point here
+        post_b = Posterior(**OFFSET_POSTERIOR).fit(rec_b)
+        joint = Posterior(**OFFSET_POSTERIOR).fit([rec_a, rec_b])
+    out = joint.result()
+    par, nuisance = out["parameters"], out["nuisance_parameters"]
+    for r, offsets in ((1, offsets_a), (2, offsets_b)):
+        got = [nuisance[f"offset_{k}_r{r}"]["mean"] for k in (1, 2)]
+        assert np.abs(np.array(got) - offsets).max() < 20e-6, (r, got)
+    assert par["sigma_1"]["mean"] == pytest.approx(1e-6, rel=0.1)
+    assert par["sigma_2"]["mean"] == pytest.approx(4e-6, rel=0.1)
+    alone = [p.result()["parameters"] for p in (post_a, post_b)]
+    for k in ("k1", "k2", "k3", "c", "c_nl"):
+        added = 1 / math.sqrt(sum(1 / a[k]["sd"] ** 2 for a in alone))
+        assert par[k]["sd"] == pytest.approx(added, rel=0.2), (k, par[k]["sd"], added)
+        assert par[k]["mean"] == pytest.approx(getattr(TRUTH, k), rel=0.01 if k.startswith("k") else 0.05), k
+    records = out["settings"]["records"]
+    assert [r["windows"] for r in records] == [24, 24] and out["settings"]["windows"] == 48
+    assert out["offsets_m"] == records[0]["offsets_m"]  # the structure's own zeros: the first record's
+    other = from_arrays(u, z, FS, masses=(2 * FIXTURE["m"], TRUTH.m))
+    with pytest.raises(InputError, match="masses"):
+        Posterior(element="1-2").check([rec_a, other])
+    with pytest.raises(InputError, match="joint posterior of 2 records of a structure"):
+        PosteriorState.from_json(out)
+    paths = [tmp_path / "a.csv", tmp_path / "b.csv"]
+    for path, rec in zip(paths, (rec_a, rec_b), strict=True):
+        write_csv(path, {"t": np.arange(rec.n) / FS, "base_acc": rec.u, "z1": rec.channels[0], "z2": rec.channels[1]},
+                  {"masses": f"{FIXTURE['m']},{TRUTH.m}"})  # fmt: skip
+    assert main(["posterior", *map(str, paths), "--element", "1-2", "--ensembles", "2", "--max-steps", "300",
+                 "--max-windows", "24", "--seed", "1", "-o", str(tmp_path / "p.json"), "--quiet"]) == 0  # fmt: skip
+    written = json.loads((tmp_path / "p.json").read_text())
+    assert set(written["parameters"]) == set(par) and len(written["settings"]["records"]) == 2
 
 
 # a long study: emcee over the element; the test above keeps the structure's posterior running by default

@@ -405,6 +405,10 @@ class PosteriorState:
         if "element_at" in s:  # a structure's element posterior (``posterior.structure``): its start structure held
             if not isinstance(s.get("start"), dict) or "structure" not in s["start"]:
                 raise InputError(f"{where}: a structure's posterior without its start structure")
+            if "records" in s:
+                raise InputError(f"{where}: a joint posterior of {len(s['records'])} records of a structure; the "
+                                 "design reads one record's element posterior (its channels' zeros are that "
+                                 "record's)")  # fmt: skip
             reading = ElementReading(dict(s["start"]["structure"]))
         names = reading.names
         if s.get("model") != "coefficients" or "law" in s:

@@ -31,6 +31,8 @@ from negstiff.inference.estimators.persistence import provenance
 from negstiff.inference.estimators.posterior.diagnostics import (
     PosteriorResult,
     convergence_warnings,
+    is_noise,
+    noise_names,
     result_json,
     summarise,
 )
@@ -800,8 +802,9 @@ class Posterior(Estimator):
     def check(self, data):
         """``Estimator.check``; a list or tuple of records (a lab's runs of one device, fitted together: the
         device's parameters shared, each record its own windows, input noise and sensor noise) is checked record by
-        record and as a set: single-DOF records of one kind (base, force, or ring-downs: hammer and decay together)
-        with the same sampling rate, input and mass. Returns the list (one record: that record).
+        record and as a set: records of one kind (base, force, or ring-downs: hammer and decay together) with the
+        same sampling rate, input and mass, and a structure's of the same DOFs, masses and element place (each record
+        its own channels' zeros and sensor noise). Returns the list (one record: that record).
         """
         if not isinstance(data, (list, tuple)):
             return super().check(data)
@@ -813,12 +816,15 @@ class Posterior(Estimator):
         from negstiff.inference.analysis.record_kind import record_kind
 
         first, kind = recs[0], record_kind(recs[0]).kind
-        structure = element_of(self, first) is not None
+        at = element_of(self, first)
         for r in recs[1:]:
             name = f"{r.source} (fitted with {first.source})"
-            if structure or element_of(self, r) is not None:
-                raise PosteriorError(f"{name}: several records of a structure are not fitted together yet: one "
-                                     "record")  # fmt: skip
+            if element_of(self, r) != at or r.n_dof != first.n_dof:
+                raise PosteriorError(f"{name}: {r.n_dof} DOF(s), the element at {element_of(self, r)}; the first "
+                                     f"{first.n_dof}, at {at}: one structure's records")  # fmt: skip
+            if at is not None and not np.allclose(r.dof_masses, first.dof_masses, rtol=1e-6, atol=0.0):
+                raise PosteriorError(f"{name}: its masses {list(r.dof_masses)} kg are not the first's "
+                                     f"{list(first.dof_masses)} kg: one structure")  # fmt: skip
             if abs(r.fs / first.fs - 1) > 1e-9:
                 raise PosteriorError(f"{name}: sampled at {r.fs:g} Hz, the first at {first.fs:g} Hz: the records "
                                      "fitted together share the windows' length (resample one)")  # fmt: skip
@@ -841,9 +847,8 @@ class Posterior(Estimator):
         """
         rec = self.check(rec)
         seed = seed_of(self.seed)  # None or a Generator: the integer drawn here, recorded in the settings
-        at = None if isinstance(rec, list) else element_of(self, rec)
+        at = element_of(self, rec[0] if isinstance(rec, list) else rec)
         if at is not None:
-            assert not isinstance(rec, list)
             return self._fit_structure(rec, at, seed)
 
         t_start = time.perf_counter()
@@ -983,33 +988,24 @@ class Posterior(Estimator):
         self.record_ = dict(rec.info) if R == 1 else {"records": [dict(r.info) for r in recs]}
         return self
 
-    def _fit_structure(self, rec: Measurement, at: tuple[int, int], seed: int) -> Posterior:
-        """The element's posterior on a structure's record (``posterior.structure``)."""
+    def _fit_structure(self, data: Measurement | list[Measurement], at: tuple[int, int], seed: int) -> Posterior:
+        """The element's posterior on a structure's record, or on several records of one structure fitted together
+        (``posterior.structure``).
+        """
         from negstiff.inference.estimators.posterior.structure import fit_structure
 
+        recs = list(data) if isinstance(data, list) else [data]
         t_start = time.perf_counter()
-        res, _, sim = fit_structure(self, rec, at, seed)
+        res, _, sim = fit_structure(self, recs, at, seed)
         res.settings["elapsed_s"] = time.perf_counter() - t_start
-        res.provenance = provenance(rec.source, res.settings)
+        res.provenance = provenance(" + ".join(str(r.source) for r in recs), res.settings)
         self.result_, self.windows_ = res, sim
         self.input_noise_ = dict(res.settings["input_noise"])
-        lines = classified(rec, None, res.warnings)
+        lines = classified(recs[0], None, res.warnings)
         issue(one_convergence_warning(lines))
         self.warnings_ = [text for _, text in lines]
-        self.record_ = dict(rec.info)
+        self.record_ = dict(recs[0].info) if len(recs) == 1 else {"records": [dict(r.info) for r in recs]}
         return self
-
-
-def noise_names(n_records: int) -> tuple[str, ...]:
-    """The sensor noise's parameter names: ``sigma`` for one record, ``sigma_1`` .. ``sigma_R`` for a joint fit's R
-    records (in the order given).
-    """
-    return ("sigma",) if n_records == 1 else tuple(f"sigma_{i + 1}" for i in range(n_records))
-
-
-def is_noise(name: str) -> bool:
-    """Whether a posterior's parameter is a record's sensor noise (``noise_names``)."""
-    return name == "sigma" or (name.startswith("sigma_") and name[6:].isdigit())
 
 
 def stroke_of(rec: Measurement) -> tuple[float, float]:

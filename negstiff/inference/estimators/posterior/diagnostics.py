@@ -217,6 +217,18 @@ def convergence_warnings(summary: dict[str, dict[str, float]], n_ensembles: int)
     return out
 
 
+def noise_names(n_records: int) -> tuple[str, ...]:
+    """The sensor noise's parameter names: ``sigma`` for one record, ``sigma_1`` .. ``sigma_R`` for a joint fit's R
+    records (in the order given).
+    """
+    return ("sigma",) if n_records == 1 else tuple(f"sigma_{i + 1}" for i in range(n_records))
+
+
+def is_noise(name: str) -> bool:
+    """Whether a posterior's parameter is a record's sensor noise (``noise_names``)."""
+    return name == "sigma" or (name.startswith("sigma_") and name[6:].isdigit())
+
+
 def result_json(res: PosteriorResult, hdi_prob: float) -> dict[str, Any]:
     """The contract's posterior JSON (plus diagnostics; a law's posterior adds its ``force_band``)."""
     params: dict[str, dict[str, float]] = {}

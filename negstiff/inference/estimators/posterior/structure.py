@@ -34,7 +34,12 @@ from typing import Any
 
 import numpy as np
 
-from negstiff.inference.estimators.posterior.diagnostics import PosteriorResult, convergence_warnings, summarise
+from negstiff.inference.estimators.posterior.diagnostics import (
+    PosteriorResult,
+    convergence_warnings,
+    noise_names,
+    summarise,
+)
 from negstiff.inference.estimators.posterior.likelihood import (
     curvature_adjustment,
     information_parts,
@@ -133,69 +138,101 @@ def given_start(start, rec: Measurement, at: tuple[int, int], name: str = "Poste
     return structure, offsets, source
 
 
-def fit_structure(est, rec: Measurement, at: tuple[int, int], seed: int) -> tuple[PosteriorResult, list[str], Any]:
-    """The element's posterior on ``rec`` for the ``Posterior`` ``est``: (the result, its warnings, the windows)."""
+def fit_structure(est, recs: list[Measurement], at: tuple[int, int],
+                  seed: int) -> tuple[PosteriorResult, list[str], Any]:  # fmt: skip
+    """The element's posterior on ``recs`` (one record, or several of one structure fitted together: the element and
+    the linear structure shared, each record its own windows, channels' zeros and sensor noise) for the ``Posterior``
+    ``est``: (the result, its warnings, the windows).
+    """
     from negstiff.inference.analysis.record_kind import RING_DOWN_KINDS, identification_record, record_kind
     from negstiff.inference.estimators.sindy import SINDy
 
+    rec, R, nd = recs[0], len(recs), recs[0].n_dof
     if est.start is None:
         ident = SINDy(element=at).fit(rec)
-        start, offsets = ident.structure_, np.asarray(ident.offsets_, float)
+        start, first_offsets = ident.structure_, np.asarray(ident.offsets_, float)
         source = f"SINDy(element='{at[0]}-{at[1]}')"
     else:
-        start, offsets, source = given_start(est.start, rec, at, type(est).__name__)
-    kind = record_kind(rec)
-    ring_down = kind.kind in RING_DOWN_KINDS
-    if ring_down:  # a hammer's force windowed (zero between its pulses), a decay's input zero: as the fit read it
-        rec = identification_record(rec, kind)
-    sim, data, starts, L = record_windows(start, rec, offsets, est.window_s, est.max_windows, ring_down)
-    sim, data, starts = followed_windows(sim, data, starts, L, start, rec, element_values(start))
-    n_obs = data.size - sim.W * 2 * rec.n_dof  # the start states profiled out
-    # the element's coefficients, then the nuisances from SINDy's: each channel's zero as a correction of SINDy's (held
-    # there, a zero's error d shifted the element's relative motion and its k2 by 3 k3 d: 1-3 um moved k2 by 4-7 of
-    # its sd over the fixture records once the windows' starts were refined, measured) and the linear structure's
-    # springs and dampers
+        start, first_offsets, source = given_start(est.start, rec, at, type(est).__name__)
+    # the other records' zeros read by their own weak form about the same structure (``given_start``): sampled as
+    # nuisances, corrections of these, as the first's are of its start's
+    offsets = [first_offsets, *(given_start(start, r, at, type(est).__name__)[1] for r in recs[1:])]
+    kinds = [record_kind(r) for r in recs]
+    kind = kinds[0]
+    # a hammer's force windowed (zero between its pulses), a decay's input zero: as the fit read it
+    read = [
+        identification_record(r, rk) if rk.kind in RING_DOWN_KINDS else r for r, rk in zip(recs, kinds, strict=True)
+    ]
+    sims, datas, n_starts, L = [], [], [], 0
+    for r, rk, o in zip(read, kinds, offsets, strict=True):
+        one, d, starts, L = record_windows(start, r, o, est.window_s, est.max_windows, rk.kind in RING_DOWN_KINDS)
+        one, d, starts = followed_windows(one, d, starts, L, start, r, element_values(start))
+        sims.append(one)
+        datas.append(d)
+        n_starts.append(int(starts.size))
+    rec = read[0]
+    sim: StructureWindows | JointWindows = sims[0] if R == 1 else JointWindows(sims)
+    data = datas[0] if R == 1 else np.concatenate(datas)
+    n_obs_r = [d.size - one.W * 2 * nd for d, one in zip(datas, sims, strict=True)]  # the start states profiled out
+    n_obs = sum(n_obs_r)
     parts = linear_parts(start)
-    theta0 = np.r_[element_values(start), np.zeros(rec.n_dof), [v for _, _, v in parts]]
+    theta0 = np.r_[element_values(start), np.zeros(R * nd), [v for _, _, v in parts]]
     p = theta0.size
+    sizes = [d.size for d in datas]  # each record's residuals (``JointWindows.residuals`` in the records' order)
+    # one record: its residuals as they are; several: each record's whitened by its own sensor noise (a least-squares
+    # point of unequal records' noise weighs each by it), the noise read from the previous round's residuals
+    weights = None
     theta, cov, sigma, J, r0 = _gauss_newton(sim, data, theta0, n_obs)
+    if R > 1:
+        weights = _record_weights(r0, sizes, n_obs_r)
+        theta, cov, sigma, J, r0 = _gauss_newton(sim, data, theta, n_obs, weights=weights)
     # the element and the windows' start states alternately, each a profile over the other (as the single DOF's MAP
     # point and its windows' states): starts refined for SINDy's element alone hold part of its error (k2's rms z
     # over the 12 fixture records 2.7 with one round, measured)
     for _ in range(ALTERNATIONS - 1):
         sim.refine_starts(theta, data)
         sim.start_sensitivity(theta)
-        again = _gauss_newton(sim, data, theta, n_obs)
+        if weights is not None:
+            weights = _record_weights(r0 / weights, sizes, n_obs_r)
+        again = _gauss_newton(sim, data, theta, n_obs, weights=weights)
         moved = float(np.max(np.abs(again[0] - theta) / np.sqrt(np.diag(again[1]))))
         theta, cov, sigma, J, r0 = again
         if moved < ALTERNATION_TOL_SD:
             break
+    # each record's sensor noise at the point (one record: ``sigma`` itself; several: J and r0 are whitened, sigma ~ 1)
+    raw = r0 if weights is None else r0 / weights
+    edges = np.cumsum([0, *sizes])
+    sigmas = [sigma] if R == 1 else [float(np.sqrt(np.sum(raw[a:b] ** 2) / n)) for a, b, n in
+                                     zip(edges[:-1], edges[1:], n_obs_r, strict=True)]  # fmt: skip
     # the single DOF's curvature adjustment by the windows' sandwich covariance (module docstring)
     s_gn = np.sqrt(np.diag(cov))
     A, V_a, inflation = curvature_adjustment(J * s_gn[None, :], r0, sim.W, sigma, adjust=est.adjust)
-    tau_res = _correlation_time(r0.reshape(sim.W, rec.n_dof, -1))
+    tau_res = _correlation_time(raw.reshape(sim.W, nd, -1))
     H, M = information_parts(J, r0, sim.W, sigma)
-    scale = np.r_[s_gn * np.sqrt(np.diag(V_a)), 1.0 / math.sqrt(2 * n_obs)]
-    centre = np.r_[theta, math.log(sigma)]
+    scale = np.r_[s_gn * np.sqrt(np.diag(V_a)), [1.0 / math.sqrt(2 * n) for n in n_obs_r]]
+    centre = np.r_[theta, [math.log(x) for x in sigmas]]
     # the walkers' start ball inside the dampers' support (c, c_nl >= 0): a ring-down's c_nl at its bound (the
     # double well's decay on a fixture: -2.4e-4 +- 2.6e-4, measured) left 19 % of the ball where the density is
     # positive and no start was found; the start's place is burnt in, the posterior is the same
     centre[3:5] = np.maximum(centre[3:5], 2 * scale[3:5])
-    log_prob = functools.partial(_log_prob, sim, data, theta, s_gn, A, centre, scale, n_obs)
-    run = sample_ensembles(log_prob, p + 1, n_walkers=est.walkers(p + 1), n_ensembles=est.n_ensembles, seed=seed,
+    noise = tuple(zip(sizes, n_obs_r, strict=True))
+    log_prob = functools.partial(_log_prob, sim, data, theta, s_gn, A, centre, scale, noise)
+    d = p + R
+    run = sample_ensembles(log_prob, d, n_walkers=est.walkers(d), n_ensembles=est.n_ensembles, seed=seed,
                            tau_multiple=est.tau_multiple, min_steps=est.min_steps, max_steps=est.max_steps,
                            chunk=est.chunk, progress=est.progress,
-                           chain_file=est.chains_to(centre, scale, p + 1, seed))  # fmt: skip
+                           chain_file=est.chains_to(centre, scale, d, seed))  # fmt: skip
     S = min(c.shape[0] for c in run["chains"])
     chains = np.stack([c[-S:] for c in run["chains"]])  # (E, S, walkers, d) scaled
     phys = centre + chains * scale
-    phys[..., p] = np.exp(phys[..., p])
-    zeros = slice(len(ELEMENT_NAMES), len(ELEMENT_NAMES) + rec.n_dof)
-    phys[..., zeros] += offsets  # each channel's zero itself (measured = physical + offset)
-    names = (*ELEMENT_NAMES, *zero_names(rec.n_dof), *(n for n, _, _ in parts), "sigma")
+    phys[..., p:] = np.exp(phys[..., p:])
+    point = np.r_[theta, sigmas]
+    e = len(ELEMENT_NAMES)
+    for k, o in enumerate(offsets):  # each channel's zero itself (measured = physical + offset)
+        phys[..., e + k * nd : e + (k + 1) * nd] += o
+        point[e + k * nd : e + (k + 1) * nd] += o
+    names = (*ELEMENT_NAMES, *zero_names(nd, R), *(n for n, _, _ in parts), *noise_names(R))
     tau = np.array(run["tau"]) * 1.0
-    point = np.r_[theta, sigma]
-    point[zeros] += offsets
     map_point = {n: float(x) for n, x in zip(names, point, strict=True)}
     res = PosteriorResult(names=names, samples=phys, summary={}, tau=tau, warnings=list(run["warnings"]),
                           settings={}, map_point=map_point)  # fmt: skip
@@ -203,25 +240,29 @@ def fit_structure(est, rec: Measurement, at: tuple[int, int], seed: int) -> tupl
     res.warnings += convergence_warnings(res.summary, est.n_ensembles)
     tau_max = np.nanmax(tau) if np.isfinite(tau).any() else np.nan
     res.thin = max(1, int(np.ceil(tau_max / 2))) if np.isfinite(tau_max) else 1
+    zeros_of = [zero_names(nd, R)[k * nd : (k + 1) * nd] for k in range(R)]
+    input_rms = [
+        0.0 if rk.kind in RING_DOWN_KINDS else input_noise_rms(r)[0] for r, rk in zip(read, kinds, strict=True)
+    ]
     res.settings = {
         "model": "coefficients",
         "record_kind": kind.kind,
         "input": rec.input_name,
         "fs": rec.fs,
-        "duration_s": rec.duration,
+        "duration_s": rec.duration if R == 1 else [r.duration for r in read],
         "max_windows": est.max_windows,
-        "dofs": rec.n_dof,
+        "dofs": nd,
         "element_at": list(at),
         "masses": list(rec.dof_masses),
         "window_s": L / rec.fs,
-        "windows": int(starts.size),
+        "windows": int(sum(n_starts)),
         "substeps": SUBSTEPS,
         "curvature_adjustment": est.adjust,
         "variance_inflation": [round(float(x), 3) for x in inflation],
         # the record's model information and windows' score covariance at the MAP point (the sandwich's parts, as the
         # single DOF's posterior keeps them): a design joins a next test's to them as a joint fit would
         "laplace": {
-            "parameters": list(names[:-1]),
+            "parameters": list(names[:-R]),
             "information": H.tolist(),
             "score_covariance": None if M is None else M.tolist(),
         },  # fmt: skip
@@ -231,10 +272,10 @@ def fit_structure(est, rec: Measurement, at: tuple[int, int], seed: int) -> tupl
             "source": "not carried through a structure (the curvature adjustment widens "
             "for what the input's noise leaves in the residual)",
             # what the input's own spectrum shows of its sensor's noise: a design's simulated records carry it
-            "record_rms": input_noise_rms(rec)[0] if not ring_down else 0.0,
+            "record_rms": input_rms[0] if R == 1 else input_rms,
         },
         "samples_used": int(data.size),
-        "walkers": est.walkers(p + 1),
+        "walkers": est.walkers(d),
         "ensembles": est.n_ensembles,
         "kept_steps_per_ensemble": int(S),
         "tau_max_steps": float(tau_max) if np.isfinite(tau_max) else None,
@@ -243,7 +284,7 @@ def fit_structure(est, rec: Measurement, at: tuple[int, int], seed: int) -> tupl
             "c, c_nl: flat on [0, inf): the element dissipates",
             "each channel's zero: flat",
             "the linear structure's springs and dampers: flat",
-            "log sigma: flat",
+            "log sigma: flat" if R == 1 else "each record's log sigma: flat",
         ],
         "seed": seed,
         "chain_file": None if est.chain_file is None else str(est.chain_file),
@@ -252,10 +293,18 @@ def fit_structure(est, rec: Measurement, at: tuple[int, int], seed: int) -> tupl
         "fixed": "the masses; each channel's zero (offset_K) and the linear structure's springs and dampers "
         f"(spring_I-J, damper_I-J) sampled from {'SINDy' if est.start is None else 'the start'}'s as nuisances",
         "start": {"source": source, "structure": start.to_dict()},
-        "offsets_m": [float(res.summary[n]["mean"]) for n in zero_names(rec.n_dof)],
-        "start_offsets_m": [float(o) for o in offsets],
+        # the first record's (a joint fit's every record's: ``records``)
+        "offsets_m": [float(res.summary[n]["mean"]) for n in zeros_of[0]],
+        "start_offsets_m": [float(o) for o in offsets[0]],
         "model_mass": float(start.element.m),
     }
+    if R > 1:
+        res.settings["records"] = [
+            {"source": str(r.source), "samples": int(r.n), "duration_s": r.duration, "windows": n_starts[k],
+             "offsets_m": [float(res.summary[n]["mean"]) for n in zeros_of[k]],
+             "start_offsets_m": [float(o) for o in offsets[k]]}
+            for k, r in enumerate(read)
+        ]  # fmt: skip
     res.build_idata = functools.partial(_idata, res, data)
     return res, list(res.warnings), sim
 
@@ -315,9 +364,13 @@ def followed_windows(
     return sim, data[~bad], kept
 
 
-def zero_names(n_dof: int) -> tuple[str, ...]:
-    """The names of the channels' zeros a structure's posterior samples (nuisance parameters)."""
-    return tuple(f"offset_{k + 1}" for k in range(n_dof))
+def zero_names(n_dof: int, n_records: int = 1) -> tuple[str, ...]:
+    """The names of the channels' zeros a structure's posterior samples (nuisance parameters): ``offset_K`` for one
+    record, ``offset_K_rR`` for record R of a joint fit's (record by record).
+    """
+    if n_records == 1:
+        return tuple(f"offset_{k + 1}" for k in range(n_dof))
+    return tuple(f"offset_{k + 1}_r{r + 1}" for r in range(n_records) for k in range(n_dof))
 
 
 def element_values(structure: Structure) -> np.ndarray:
@@ -325,7 +378,7 @@ def element_values(structure: Structure) -> np.ndarray:
     return np.array([getattr(structure.element, k) for k in ELEMENT_NAMES], float)
 
 
-def residuals_and_jacobian(sim: StructureWindows, data: np.ndarray,
+def residuals_and_jacobian(sim: StructureWindows | JointWindows, data: np.ndarray,
                            theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
     """The windows' residuals at the parameters ``theta`` (the element's coefficients, and the nuisances where given:
     ``StructureWindows.simulate``) and their Jacobian (central differences, one batched call): (n_obs,), (n_obs, p).
@@ -383,9 +436,10 @@ def with_linear_parts(structure: Structure, parts: list[tuple[str, np.ndarray, f
     return replace(structure, stiffness=K, damping=C)
 
 
-def _log_prob(sim: StructureWindows, data, theta, s_gn, A, centre, scale, n_obs, xs: np.ndarray):
+def _log_prob(sim: StructureWindows | JointWindows, data, theta, s_gn, A, centre, scale, noise, xs: np.ndarray):
     """The log posterior at scaled points ``xs`` (one row each): emcee's vectorised callable (a module function
-    bound by ``functools.partial``: the fitted estimator pickles).
+    bound by ``functools.partial``: the fitted estimator pickles). ``noise``: each record's (residuals, degrees of
+    freedom), in the residuals' order, its log sigma a column after the ``theta``'s.
     """
     pts = centre[None, :] + xs * scale[None, :]
     out = [(-math.inf, 0.0)] * len(pts)
@@ -394,7 +448,12 @@ def _log_prob(sim: StructureWindows, data, theta, s_gn, A, centre, scale, n_obs,
     if ok.any():
         adjusted = theta + ((pts[ok, :p] - theta) / s_gn) @ A.T * s_gn  # the likelihood's point
         res = sim.residuals(adjusted, data)  # (B, n_obs)
-        lp = -0.5 * np.sum(res**2, axis=1) / np.exp(2 * pts[ok, p]) - n_obs * pts[ok, p]
+        lp = np.zeros(len(res))
+        at = 0
+        for k, (size, n) in enumerate(noise):
+            log_sigma = pts[ok, p + k]
+            lp += -0.5 * np.sum(res[:, at : at + size] ** 2, axis=1) / np.exp(2 * log_sigma) - n * log_sigma
+            at += size
         for k, i in enumerate(np.flatnonzero(ok)):
             out[i] = (float(lp[k]) if np.isfinite(lp[k]) else -math.inf, 0.0)
     return out
@@ -569,20 +628,78 @@ def _correlation_time(res: np.ndarray) -> float:
     return tau
 
 
-def _gauss_newton(sim: StructureWindows, data: np.ndarray, theta: np.ndarray, n_obs: int, iterations: int = 6):
+def _gauss_newton(sim: StructureWindows | JointWindows, data: np.ndarray, theta: np.ndarray, n_obs: int,
+                  iterations: int = 6, weights: np.ndarray | None = None):  # fmt: skip
     """Least squares of the windows' residuals from ``theta`` (central-difference Jacobian, one batched call per
     iteration): the point, its covariance sigma^2 (J^T J)^-1, sigma, the last Jacobian and the point's residuals.
+    ``weights``: each residual's (a joint fit's 1 / its record's sigma), the Jacobian and residuals returned weighted.
     """
     theta = theta.astype(float).copy()
     for _ in range(iterations):
-        r0, J = residuals_and_jacobian(sim, data, theta)
+        r0, J = _weighted(*residuals_and_jacobian(sim, data, theta), weights)
         if not np.all(np.isfinite(r0)):
             raise PosteriorError("SINDy's element does not survive the record's windows")
         step = np.linalg.lstsq(J, -r0, rcond=None)[0]
         theta = theta + step
         if np.all(np.abs(step) < 1e-6 * np.maximum(np.abs(theta), 1e-9)):
             break
-    r0, J = residuals_and_jacobian(sim, data, theta)  # the Jacobian at the point itself (the scores pair it with r0)
+    # the Jacobian at the point itself (the scores pair it with r0)
+    r0, J = _weighted(*residuals_and_jacobian(sim, data, theta), weights)
     sigma = float(np.sqrt(np.sum(r0**2) / n_obs))
     cov = sigma**2 * np.linalg.inv(J.T @ J)
     return theta, cov, sigma, J, r0
+
+
+def _weighted(r: np.ndarray, J: np.ndarray, weights: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+    """Residuals (n,) and Jacobian (n, p) times each residual's weight (None: as they are)."""
+    return (r, J) if weights is None else (r * weights, J * weights[:, None])
+
+
+def _record_weights(r: np.ndarray, sizes: list[int], n_obs: list[int]) -> np.ndarray:
+    """Each residual's weight in a joint fit: 1 / its record's sensor noise, sqrt(sum r^2 / degrees of freedom) over the
+    record's residuals (``sizes``, in order; ``n_obs`` their degrees of freedom, the start states profiled out).
+    """
+    edges = np.cumsum([0, *sizes])
+    return np.concatenate([np.full(b - a, math.sqrt(n / np.sum(r[a:b] ** 2)))
+                           for a, b, n in zip(edges[:-1], edges[1:], n_obs, strict=True)])  # fmt: skip
+
+
+class JointWindows:
+    """Several records' windows of one structure read as one (a joint posterior: ``fit_structure``): the element's
+    coefficients and the linear structure's springs and dampers shared, each record its own channels' zeros. The
+    parameters are the element's, every record's zeros (record by record), then the springs and dampers; each
+    record's ``StructureWindows`` reads its own, and the residuals follow in the records' order.
+    """
+
+    def __init__(self, sims: list[StructureWindows]):
+        self.sims = sims
+        self.n_dof = sims[0].structure.n_dof
+        self.W = sum(s.W for s in sims)
+        self.bounds = np.cumsum([0, *(s.W for s in sims)])
+
+    def _thetas(self, thetas: np.ndarray, k: int) -> np.ndarray:
+        """Record ``k``'s parameter sets (B, p_k): the element's, its own zeros, the shared springs and dampers."""
+        e, nd, R = len(ELEMENT_NAMES), self.n_dof, len(self.sims)
+        return np.hstack([thetas[:, :e], thetas[:, e + k * nd : e + (k + 1) * nd], thetas[:, e + R * nd :]])
+
+    def _data(self, data: np.ndarray, k: int) -> np.ndarray:
+        return data[self.bounds[k] : self.bounds[k + 1]]
+
+    def residuals(self, thetas: np.ndarray, data: np.ndarray) -> np.ndarray:
+        """(B, n_obs) every record's residuals (``StructureWindows.residuals``), record after record."""
+        return np.hstack([s.residuals(self._thetas(thetas, k), self._data(data, k)) for k, s in enumerate(self.sims)])
+
+    def misfit(self, thetas: np.ndarray, data: np.ndarray) -> np.ndarray:
+        """(B, W, N T) every record's windows' misfits (``StructureWindows.misfit``), record after record."""
+        return np.concatenate([s.misfit(self._thetas(thetas, k), self._data(data, k))
+                               for k, s in enumerate(self.sims)], axis=1)  # fmt: skip
+
+    def refine_starts(self, theta: np.ndarray, data: np.ndarray) -> None:
+        """Each record's windows' start states (``StructureWindows.refine_starts``) at its parameters."""
+        for k, s in enumerate(self.sims):
+            s.refine_starts(self._thetas(theta[None], k)[0], self._data(data, k))
+
+    def start_sensitivity(self, theta: np.ndarray) -> None:
+        """Each record's windows' start-state directions (``StructureWindows.start_sensitivity``)."""
+        for k, s in enumerate(self.sims):
+            s.start_sensitivity(self._thetas(theta[None], k)[0])
